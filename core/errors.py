@@ -1,0 +1,34 @@
+"""The one exception root of avard, and its specific subclasses.
+
+Every error a user can cause (bad data, a bad config, a missing sensor, a corrupt file) is an
+``AvardError`` whose message names what is wrong and what to do about it. The command line turns
+it into a one-line message and a non-zero exit; the service logs it.
+"""
+
+
+class AvardError(Exception):
+    """Root of every error avard raises on purpose."""
+
+
+class DataError(AvardError, ValueError):
+    """Input arrays or measured-data files that cannot be used (shape, NaN, rate, too short)."""
+
+
+class FormatError(AvardError):
+    """A recording, frame or message that does not decode (corrupt, truncated, wrong version)."""
+
+
+class ConfigError(AvardError):
+    """A configuration key that is unknown, of the wrong type or out of range."""
+
+
+class FitError(AvardError):
+    """A noise-model fit that cannot be made from the data given."""
+
+
+class HardwareError(AvardError):
+    """A bus or device problem: no device, wrong device, bus errors."""
+
+
+class SensorMissingError(HardwareError):
+    """A sensor that was expected and is not there."""

@@ -1,0 +1,37 @@
+"""Shared test configuration: markers for slow statistical runs and real hardware."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+# w1thermsensor runs modprobe on import unless told not to; tests never load kernel modules.
+os.environ.setdefault("W1THERMSENSOR_NO_KERNEL_MODULE", "1")
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+IMUDATA = SHARED / "data" / "imudata"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--runslow", action="store_true", help="run tests marked slow")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    skip_slow = pytest.mark.skip(reason="slow: run with --runslow")
+    hw = os.environ.get("AVARD_HARDWARE") == "1" and Path("/dev/spidev0.0").exists()
+    skip_hw = pytest.mark.skip(reason="hardware: set AVARD_HARDWARE=1 with a real /dev/spidev0.0")
+    for item in items:
+        if "slow" in item.keywords and not config.getoption("--runslow"):
+            item.add_marker(skip_slow)
+        if "hardware" in item.keywords and not hw:
+            item.add_marker(skip_hw)
+
+
+@pytest.fixture(scope="session")
+def imudata_dir() -> Path:
+    """The real ADIS16405 runs in ../shared/data/imudata (never copied into the repo)."""
+    if not (IMUDATA / "adis16405_run1.npz").exists():
+        pytest.skip(f"real data not present at {IMUDATA}")
+    return IMUDATA
