@@ -32,3 +32,15 @@ class HardwareError(AvardError):
 
 class SensorMissingError(HardwareError):
     """A sensor that was expected and is not there."""
+
+
+class BusError(HardwareError):
+    """A transfer on the SPI or I2C bus failed (OSError from the kernel, e.g. EIO)."""
+
+    def __init__(self, message: str, errno: int | None = None) -> None:
+        super().__init__(message)
+        self.errno = errno
+
+
+class DeviceStalledError(HardwareError):
+    """The device answers on the bus but has stopped producing samples."""
