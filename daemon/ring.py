@@ -1,0 +1,181 @@
+"""A fixed-size ring of raw samples (counts, sample index, monotonic time) with many readers.
+
+One writer (the reader thread that owns the bus) pushes drained blocks; every consumer (the
+Allan accumulators, the recorder, the publisher) has its own cursor and reads at its own pace.
+The writer never waits for a consumer: a consumer that falls more than ``capacity`` samples
+behind loses the oldest samples, and the next :meth:`Consumer.read` says exactly which ones
+(``lost_samples`` and the index range), so the loss becomes a recorded gap, never a silent one.
+
+Beside the samples the ring carries *marks*: temperature readings, overrun gaps and events,
+each stamped with the ring position at which it happened, so a consumer sees them in the same
+order relative to the samples as the writer produced them.
+
+Memory is fixed at construction (``capacity`` × (channels·4 + 16) bytes); the lock is held only
+for the copy in or out, never while a consumer works.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+from itertools import islice
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Chunk:
+    """What one consumer read: samples ``[pos0, pos0 + n)`` of the ring and the marks between."""
+
+    counts: np.ndarray        # (n, C) int32 raw counts
+    index: np.ndarray         # (n,) int64 sample index (jumps where the sensor overran)
+    t_mono: np.ndarray        # (n,) float64 CLOCK_MONOTONIC seconds from the time base
+    pos0: int                 # ring position of the first sample
+    marks: list[tuple[int, dict[str, Any]]] = field(default_factory=list)  # (pos, mark)
+    lost_samples: int = 0     # samples overwritten before this consumer read them
+    lost_index: tuple[int, int] | None = None   # [first, end) sample index of the lost run
+    lost_marks: int = 0
+
+    @property
+    def n(self) -> int:
+        return int(self.counts.shape[0])
+
+
+class Ring:
+    """Fixed-capacity sample ring; single writer, any number of independent consumers."""
+
+    def __init__(self, capacity: int, channels: int = 3, *, mark_capacity: int = 16384) -> None:
+        if capacity < 1:
+            raise ValueError("ring capacity must be at least one sample")
+        self.capacity = int(capacity)
+        self.channels = int(channels)
+        self._counts = np.zeros((self.capacity, self.channels), dtype=np.int32)
+        self._index = np.zeros(self.capacity, dtype=np.int64)
+        self._time = np.zeros(self.capacity, dtype=np.float64)
+        self._head = 0                    # samples ever pushed
+        self._marks: deque[tuple[int, int, dict[str, Any]]] = deque(maxlen=mark_capacity)
+        self._mark_head = 0               # marks ever pushed
+        self._lock = threading.Lock()
+        self._consumers: list[Consumer] = []
+
+    # -- writer side --------------------------------------------------------------------
+    @property
+    def head(self) -> int:
+        """Samples ever pushed (the ring position of the next sample)."""
+        return self._head
+
+    def push(self, counts: np.ndarray, index: np.ndarray, t_mono: np.ndarray) -> None:
+        """Append a drained block. Never blocks beyond the copy; overwrites the oldest."""
+        counts = np.asarray(counts)
+        n = counts.shape[0]
+        if n == 0:
+            return
+        if n > self.capacity:  # keep only what fits; consumers will see the loss
+            counts, index, t_mono = counts[-self.capacity:], index[-self.capacity:], \
+                t_mono[-self.capacity:]
+            with self._lock:
+                self._head += n - self.capacity
+            n = self.capacity
+        with self._lock:
+            start = self._head % self.capacity
+            first = min(n, self.capacity - start)
+            self._counts[start:start + first] = counts[:first]
+            self._index[start:start + first] = index[:first]
+            self._time[start:start + first] = t_mono[:first]
+            if first < n:
+                rest = n - first
+                self._counts[:rest] = counts[first:]
+                self._index[:rest] = index[first:]
+                self._time[:rest] = t_mono[first:]
+            self._head += n
+
+    def mark(self, item: dict[str, Any]) -> None:
+        """Insert a mark (temperature, gap, event) after every sample pushed so far."""
+        with self._lock:
+            self._marks.append((self._mark_head, self._head, item))
+            self._mark_head += 1
+
+    # -- reader side --------------------------------------------------------------------
+    def consumer(self, name: str, *, from_start: bool = False) -> Consumer:
+        """A new independent cursor; by default it starts at the current head."""
+        with self._lock:
+            c = Consumer(self, name, 0 if from_start else self._head,
+                         0 if from_start else self._mark_head)
+        self._consumers.append(c)
+        return c
+
+    @property
+    def consumers(self) -> list[Consumer]:
+        return list(self._consumers)
+
+    def recent(self, n: int) -> Chunk:
+        """The newest ``n`` samples still held (for late joiners), without a cursor."""
+        with self._lock:
+            n = max(0, min(int(n), self.capacity, self._head))
+            p0 = self._head - n
+            return self._copy(p0, self._head, [])
+
+    def _copy(self, p0: int, p1: int, marks: list) -> Chunk:
+        n = p1 - p0
+        idx = (np.arange(p0, p1) % self.capacity) if n else np.zeros(0, dtype=np.int64)
+        return Chunk(self._counts[idx].copy(), self._index[idx].copy(), self._time[idx].copy(),
+                     p0, marks)
+
+    def _read(self, c: Consumer, max_samples: int | None) -> Chunk:
+        with self._lock:
+            head = self._head
+            lost = 0
+            lost_index: tuple[int, int] | None = None
+            oldest = head - self.capacity
+            if c.pos < oldest:
+                lost = oldest - c.pos
+                # The lost samples' indices are gone too; the first retained sample and the
+                # last one this consumer saw bound them.
+                first_kept = int(self._index[oldest % self.capacity])
+                lost_index = (c.last_index + 1 if c.last_index is not None
+                              else first_kept - lost, first_kept)
+                c.pos = oldest
+            p1 = head if max_samples is None else min(head, c.pos + max_samples)
+            marks: list[tuple[int, dict[str, Any]]] = []
+            lost_marks = 0
+            if self._marks:
+                first_seq = self._marks[0][0]
+                if c.mark_pos < first_seq:
+                    lost_marks = first_seq - c.mark_pos
+                    c.mark_pos = first_seq
+                for seq, pos, item in islice(self._marks, c.mark_pos - first_seq, None):
+                    if pos > p1:
+                        break
+                    marks.append((pos, item))
+                    c.mark_pos = seq + 1
+            chunk = self._copy(c.pos, p1, marks)
+            chunk.lost_samples, chunk.lost_index, chunk.lost_marks = lost, lost_index, lost_marks
+            c.pos = p1
+            if chunk.n:
+                c.last_index = int(chunk.index[-1])
+            return chunk
+
+
+class Consumer:
+    """One reader's cursor into a :class:`Ring`."""
+
+    def __init__(self, ring: Ring, name: str, pos: int, mark_pos: int) -> None:
+        self.ring = ring
+        self.name = name
+        self.pos = pos
+        self.mark_pos = mark_pos
+        self.last_index: int | None = None
+        self.lost_total = 0
+
+    def read(self, max_samples: int | None = None) -> Chunk:
+        """Everything pushed since the last read (at most ``max_samples`` samples)."""
+        chunk = self.ring._read(self, max_samples)
+        self.lost_total += chunk.lost_samples
+        return chunk
+
+    @property
+    def backlog(self) -> int:
+        """Samples pushed but not yet read by this consumer."""
+        return self.ring.head - self.pos
