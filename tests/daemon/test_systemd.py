@@ -1,0 +1,306 @@
+"""The systemd unit, sysusers and tmpfiles files and their installer, checked with systemd's tools.
+
+systemd cannot run as PID 1 here, so what can be checked is checked: `systemd-analyze verify`,
+`systemd-analyze security --offline=true` (exposure ≤ 2.0, parsed from its output), sysusers and
+tmpfiles applied to a scratch root, the installer's dry run, and the settings the service relies
+on, named one by one, and the ExecStart line run outside systemd.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+SYSTEMD = REPO / "systemd"
+UNIT = SYSTEMD / "avard.service"
+VENV_AVARD = Path(sys.executable).with_name("avard")
+MAX_EXPOSURE = 2.0
+
+needs_analyze = pytest.mark.skipif(
+    shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed"
+)
+
+
+def parse_unit(text: str) -> dict[str, dict[str, list[str]]]:
+    """Sections → key → every value in order (systemd keys may repeat and accumulate)."""
+    sections: dict[str, dict[str, list[str]]] = {}
+    current: dict[str, list[str]] | None = None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line[0] in "#;":
+            continue
+        if line.startswith("[") and line.endswith("]"):
+            current = sections.setdefault(line[1:-1], {})
+            continue
+        assert current is not None, f"setting outside a section: {line!r}"
+        key, _, value = line.partition("=")
+        current.setdefault(key.strip(), []).append(value.strip())
+    return sections
+
+
+@pytest.fixture(scope="module")
+def unit() -> dict[str, dict[str, list[str]]]:
+    return parse_unit(UNIT.read_text())
+
+
+@pytest.fixture(scope="module")
+def local_unit(tmp_path_factory) -> Path:
+    """The unit with ExecStart pointed at this venv's `avard` (verify checks it exists)."""
+    text = UNIT.read_text().replace("/opt/avard/bin/avard", str(VENV_AVARD))
+    assert str(VENV_AVARD) in text
+    path = tmp_path_factory.mktemp("unit") / "avard.service"
+    path.write_text(text)
+    return path
+
+
+def _one(unit, section: str, key: str) -> str:
+    values = unit[section].get(key)
+    assert values, f"[{section}] {key}= missing from {UNIT.name}"
+    return values[-1]
+
+
+def _seconds(value: str) -> float:
+    """systemd time span ('30s', '30min', '1h 5s', '5') in seconds."""
+    scale = {"": 1, "s": 1, "sec": 1, "ms": 1e-3, "min": 60, "m": 60, "h": 3600, "hr": 3600}
+    total = 0.0
+    for number, unit_name in re.findall(r"(\d+(?:\.\d+)?)\s*([a-z]*)", value):
+        total += float(number) * scale[unit_name]
+    return total
+
+
+# ---------------------------------------------------------------- systemd-analyze
+
+
+@needs_analyze
+def test_systemd_analyze_verify_passes(local_unit):
+    proc = subprocess.run(
+        ["systemd-analyze", "verify", str(local_unit)], capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    # verify reports unknown keys and bad values as warnings with exit 0: there must be none.
+    complaints = [line for line in proc.stderr.splitlines() if "avard.service" in line]
+    assert complaints == []
+
+
+def _security(path: Path) -> tuple[float, dict[str, tuple[bool, str]]]:
+    proc = subprocess.run(
+        ["systemd-analyze", "security", "--offline=true", "--no-pager", str(path)],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    match = re.search(r"Overall exposure level for \S+: (\d+(?:\.\d+)?)", proc.stdout)
+    assert match, f"no exposure line in:\n{proc.stdout}"
+    checks: dict[str, tuple[bool, str]] = {}
+    for line in proc.stdout.splitlines():
+        mark = line[:1]
+        if mark and mark in "✓✗":
+            name = line[1:].split()[0]
+            checks[name] = (mark == "✓", line)
+    return float(match.group(1)), checks
+
+
+@needs_analyze
+def test_security_exposure_at_most_two(local_unit):
+    exposure, checks = _security(local_unit)
+    assert exposure <= MAX_EXPOSURE, f"exposure {exposure} > {MAX_EXPOSURE}"
+    # The settings the score relies on, each rated as applied by systemd itself.
+    relied_on = [
+        "User=/DynamicUser=",
+        "NoNewPrivileges=",
+        "ProtectSystem=",
+        "ProtectHome=",
+        "PrivateTmp=",
+        "ProtectKernelTunables=",
+        "ProtectKernelModules=",
+        "ProtectKernelLogs=",
+        "ProtectControlGroups=",
+        "ProtectClock=",
+        "ProtectHostname=",
+        "ProtectProc=",
+        "ProcSubset=",
+        "PrivateMounts=",
+        "MemoryDenyWriteExecute=",
+        "RestrictNamespaces=~user",
+        "RestrictAddressFamilies=~AF_NETLINK",
+        "RestrictAddressFamilies=~AF_PACKET",
+        "SystemCallArchitectures=",
+        "SystemCallFilter=~@privileged",
+        "SystemCallFilter=~@clock",
+        "CapabilityBoundingSet=~CAP_SYS_ADMIN",
+        "CapabilityBoundingSet=~CAP_SYS_RAWIO",
+        "RestrictSUIDSGID=",
+        "LockPersonality=",
+        "RestrictRealtime=",
+        "NotifyAccess=",
+    ]
+    failed = [checks.get(name, (False, f"{name} not rated"))[1] for name in relied_on
+              if not checks.get(name, (False, ""))[0]]
+    assert failed == []
+
+
+@needs_analyze
+def test_exposure_score_reacts_to_the_hardening(local_unit, tmp_path):
+    # The parse is real: stripping the sandbox must push the same tool's score far up.
+    keep = ("Type=", "ExecStart=", "User=", "Group=", "[", "Description=", "WantedBy=")
+    bare = "\n".join(
+        line for line in local_unit.read_text().splitlines()
+        if line.startswith(keep)
+    )
+    path = tmp_path / "avard.service"
+    path.write_text(bare + "\n")
+    hardened, _ = _security(local_unit)
+    stripped, _ = _security(path)
+    assert stripped > hardened + 4.0
+
+
+# ---------------------------------------------------------------- the settings, by name
+
+
+def test_runs_as_its_own_user_with_the_bus_groups(unit):
+    svc = unit["Service"]
+    assert _one(unit, "Service", "User") == "avard"
+    assert "DynamicUser" not in svc  # a static user keeps ownership of /var/lib/avard stable
+    groups = " ".join(svc["SupplementaryGroups"]).split()
+    assert sorted(groups) == ["gpio", "i2c", "spi"]
+
+
+def test_only_the_bus_devices_are_allowed(unit):
+    svc = unit["Service"]
+    assert _one(unit, "Service", "DevicePolicy") == "closed"
+    # PrivateDevices=yes would hide /dev/spidev* and /dev/i2c-*: it must not be set.
+    assert svc.get("PrivateDevices", ["no"])[-1] in {"no", "false", "0"}
+    allowed = {value.split()[0]: value.split()[1] for value in svc["DeviceAllow"]}
+    assert allowed == {"char-spi": "rw", "char-i2c": "rw", "char-gpiochip": "rw"}
+
+
+def test_privileges_and_filesystem(unit):
+    for key, value in {
+        "NoNewPrivileges": "yes",
+        "ProtectSystem": "strict",
+        "ProtectHome": "yes",
+        "StateDirectory": "avard",
+        "MemoryDenyWriteExecute": "yes",
+        "SystemCallArchitectures": "native",
+    }.items():
+        assert _one(unit, "Service", key) == value, key
+    assert unit["Service"]["CapabilityBoundingSet"] == [""]  # empty: every capability dropped
+    assert _one(unit, "Service", "WorkingDirectory") == "/var/lib/avard"
+    filters = unit["Service"]["SystemCallFilter"]
+    assert filters[0] == "@system-service"
+    assert all(f.startswith("~") for f in filters[1:])
+
+
+def test_network_is_tcp_and_unix_only_and_localhost_unless_configured(unit):
+    families = set(_one(unit, "Service", "RestrictAddressFamilies").split())
+    assert families == {"AF_UNIX", "AF_INET", "AF_INET6"}  # no AF_NETLINK: not needed
+    assert _one(unit, "Service", "IPAddressDeny") == "any"
+    assert _one(unit, "Service", "IPAddressAllow") == "localhost"
+
+
+def test_notify_watchdog_and_restart_policy_fit_a_60_hour_run(unit):
+    assert _one(unit, "Service", "Type") == "notify"
+    assert _one(unit, "Service", "NotifyAccess") == "main"
+    watchdog = _seconds(_one(unit, "Service", "WatchdogSec"))
+    assert 5 <= watchdog <= 120  # long enough for an fsync on a slow SD card, short enough to act
+    assert _one(unit, "Service", "Restart") == "on-failure"
+    restart_s = _seconds(_one(unit, "Service", "RestartSec"))
+    burst = int(_one(unit, "Unit", "StartLimitBurst"))
+    interval = _seconds(_one(unit, "Unit", "StartLimitIntervalSec"))
+    # A crash loop trips the limit (burst restarts fit easily in the interval) ...
+    assert burst * (restart_s + 1) < interval
+    # ... while one crash an hour, for 60 hours, never does.
+    assert interval < 3600 * burst
+    assert burst >= 3
+    assert _one(unit, "Service", "ExecReload").endswith("-HUP $MAINPID")  # SIGHUP reopens files
+
+
+def test_exec_start_reads_the_config_from_etc_avard(unit):
+    argv = _one(unit, "Service", "ExecStart").split()
+    assert argv[:2] == ["/opt/avard/bin/avard", "run"]
+    assert argv[argv.index("--config") + 1] == "/etc/avard/avard.toml"
+    assert "--simulate" not in argv
+
+
+# ---------------------------------------------------------------- sysusers, tmpfiles, install.sh
+
+
+def _scratch_root(tmp_path: Path) -> Path:
+    root = tmp_path / "root"
+    (root / "etc").mkdir(parents=True)
+    return root
+
+
+@pytest.mark.skipif(shutil.which("systemd-sysusers") is None, reason="no systemd-sysusers")
+def test_sysusers_makes_the_user_and_the_bus_groups(tmp_path):
+    root = _scratch_root(tmp_path)
+    subprocess.run(
+        ["systemd-sysusers", f"--root={root}", str(SYSTEMD / "avard.sysusers")],
+        check=True, capture_output=True,
+    )
+    passwd_lines = (root / "etc/passwd").read_text().splitlines()
+    passwd = {line.split(":")[0]: line.split(":") for line in passwd_lines}
+    groups = {line.split(":")[0] for line in (root / "etc/group").read_text().splitlines()}
+    assert {"avard", "spi", "i2c", "gpio"} <= groups
+    user = passwd["avard"]
+    assert int(user[2]) < 1000  # a system user
+    assert user[5] == "/var/lib/avard" and user[6].endswith("nologin")
+
+
+@pytest.mark.skipif(shutil.which("systemd-tmpfiles") is None, reason="no systemd-tmpfiles")
+def test_tmpfiles_make_etc_avard_readable_only_by_the_group(tmp_path):
+    root = _scratch_root(tmp_path)
+    subprocess.run(
+        ["systemd-sysusers", f"--root={root}", str(SYSTEMD / "avard.sysusers")],
+        check=True, capture_output=True,
+    )
+    proc = subprocess.run(
+        ["systemd-tmpfiles", f"--root={root}", "--create", str(SYSTEMD / "avard.tmpfiles")],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    avard_gid = next(
+        int(line.split(":")[2]) for line in (root / "etc/group").read_text().splitlines()
+        if line.startswith("avard:")
+    )
+    for sub in ("etc/avard", "etc/avard/curve"):
+        st = (root / sub).stat()
+        assert st.st_mode & 0o777 == 0o750, sub
+        assert st.st_gid == avard_gid and st.st_uid == 0, sub
+
+
+def test_install_script_dry_run_lists_every_step_and_changes_nothing(tmp_path):
+    script = SYSTEMD / "install.sh"
+    subprocess.run(["bash", "-n", str(script)], check=True)
+    proc = subprocess.run(
+        ["bash", str(script), "--dry-run", "--prefix", str(tmp_path / "venv"), "--no-start"],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    for step in (
+        f"{tmp_path}/venv/bin/python -m pip install -q {REPO}",
+        "systemd-sysusers avard.conf",
+        "systemd-tmpfiles --create avard.conf",
+        "check-config /etc/avard/avard.toml",
+        "systemd-analyze verify /etc/systemd/system/avard.service",
+        "systemctl enable avard.service",
+    ):
+        assert step in out, step
+    assert "enable --now" not in out
+    assert not (tmp_path / "venv").exists()
+
+
+def test_install_script_refuses_a_relative_prefix():
+    proc = subprocess.run(
+        ["bash", str(SYSTEMD / "install.sh"), "--dry-run", "--prefix", "opt/avard"],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode == 2
+    assert "absolute path" in proc.stderr
