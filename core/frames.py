@@ -359,7 +359,7 @@ def header_record(run: str, *, rate_hz: float, t_mono: float, t_real: float, i0:
                   seq: int = 0, channels: Sequence[str] = ("x", "y", "z"),
                   scale_m_s2_per_count: float | None = None, range_g: float | None = None,
                   sensor: Mapping[str, Any] | None = None,
-                  temperature_sensors: Sequence[str] = (), software: str = "",
+                  temperature_channels: Sequence[str] = (), software: str = "",
                   config: Mapping[str, Any] | None = None, **extra: Any) -> dict[str, Any]:
     """Everything needed to interpret a run: rates, scale, sensors, software, config."""
     rec = _base("header", run, seq)
@@ -367,7 +367,7 @@ def header_record(run: str, *, rate_hz: float, t_mono: float, t_real: float, i0:
     rec.update(
         rate_hz=float(rate_hz), i0=int(i0), channels=list(channels),
         scale_m_s2_per_count=scale_m_s2_per_count, range_g=range_g,
-        sensor=dict(sensor or {}), temperature_sensors=list(temperature_sensors),
+        sensor=dict(sensor or {}), temperature_channels=list(temperature_channels),
         software=software, config=dict(config or {}),
     )
     rec.update(extra)

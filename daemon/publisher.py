@@ -1,0 +1,360 @@
+"""ZeroMQ publishing of the service's records, and the request socket for late joiners.
+
+``Publisher`` owns one PUB socket. ``publish(topic, record)`` stamps the run id and a per-topic
+sequence number into the record and sends ``[topic, msgpack]`` without blocking: PUB drops
+messages for a subscriber whose queue is at the high-water mark (HWM), so a slow or stalled
+subscriber costs the service a bounded amount of memory and never stalls acquisition; the
+subscriber sees what it lost as holes in the sequence numbers.
+
+``RequestServer`` owns one ROUTER socket in its own thread and answers requests
+``{"op", "args", "id"}`` through a table of handlers (``snapshot``, ``status``, ``recent``,
+``header``). Malformed, oversized and unknown requests get an error reply; nothing a peer sends
+can raise out of the server thread.
+
+Both bind to 127.0.0.1 unless told otherwise, and both take an optional CURVE configuration
+(daemon/curve.py). The wire format is in docs/wire-format.md.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import zmq
+from avard.core import frames
+from avard.core.errors import AvardError, ConfigError, FormatError
+from zmq.utils.monitor import parse_monitor_message
+
+from .curve import CurveServer, CurveServerConfig
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PUB_ENDPOINT = "tcp://127.0.0.1:5556"
+DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5557"
+#: PUB queue per subscriber, in messages. At 32-sample raw blocks and 4 kHz that is ~80 s.
+DEFAULT_HWM = 10000
+#: Shutdown never waits longer than this for queued messages (ms).
+LINGER_MS = 200
+_LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1", "[::1]"}
+
+Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
+
+
+def endpoint_host(endpoint: str) -> str | None:
+    """Host part of a ``tcp://HOST:PORT`` endpoint; None for ipc/inproc endpoints."""
+    if not endpoint.startswith("tcp://"):
+        return None
+    hostport = endpoint[len("tcp://"):]
+    host, sep, _port = hostport.rpartition(":")
+    if not sep:
+        raise ConfigError(f"endpoint {endpoint!r} lacks a port; write tcp://HOST:PORT")
+    return host
+
+
+def is_loopback(endpoint: str) -> bool:
+    """True for tcp endpoints on the loopback interface and for local ipc/inproc endpoints."""
+    host = endpoint_host(endpoint)
+    return host is None or host in _LOOPBACK_HOSTS
+
+
+def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool) -> str:
+    """Bind and return the actual endpoint (ephemeral ``:*`` or ``:0`` ports resolved)."""
+    if endpoint.endswith(":0"):
+        endpoint = endpoint[:-2] + ":*"
+    if not is_loopback(endpoint):
+        # an explicit choice of the operator; say loudly when it is not authenticated
+        if secured:
+            log.info("%s binds %s (CURVE on)", what, endpoint)
+        else:
+            log.warning("%s binds %s without CURVE: anyone who reaches this interface can "
+                        "read the stream (configure [network.curve])", what, endpoint)
+    try:
+        sock.bind(endpoint)
+    except zmq.ZMQError as exc:
+        raise ConfigError(f"{what} cannot bind {endpoint}: {exc.strerror}; choose another "
+                          "endpoint or stop the process that holds it") from None
+    return sock.getsockopt_string(zmq.LAST_ENDPOINT)
+
+
+class Publisher:
+    """PUB socket with per-topic sequence numbers; never blocks the caller.
+
+    Thread-safe: a lock serialises sends so the service loop and the temperature threads may
+    share one publisher.
+    """
+
+    def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
+                 hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
+                 check: bool = True) -> None:
+        if hwm < 1:
+            raise ConfigError(f"publisher hwm={hwm}: must be at least 1 message")
+        self.run_id = str(run_id)
+        self.check = check
+        self._ctx = zmq.Context()
+        self._curve: CurveServer | None = None
+        self._lock = threading.Lock()
+        self._seq: dict[str, int] = {}
+        self.sent = 0
+        self.dropped = 0
+        self.peers = 0
+        self.auth_failures = 0
+        try:
+            if curve is not None:
+                self._curve = CurveServer(self._ctx, curve)
+            self._sock = self._ctx.socket(zmq.PUB)
+            self._sock.setsockopt(zmq.SNDHWM, hwm)
+            self._sock.setsockopt(zmq.LINGER, LINGER_MS)
+            if self._curve is not None:
+                self._curve.apply(self._sock)
+            # connection events, so STATUS can say how many subscribers are connected
+            self._monitor = self._sock.get_monitor_socket(
+                zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED | zmq.EVENT_HANDSHAKE_FAILED_AUTH
+            )
+            self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None)
+        except BaseException:
+            self._teardown()
+            raise
+        log.info("publishing on %s (run %s, hwm %d)", self.endpoint, self.run_id, hwm)
+
+    def next_seq(self, topic: str) -> int:
+        """The sequence number the next message on ``topic`` will carry."""
+        return self._seq.get(topic, 0)
+
+    def publish(self, topic: str | None, record: Mapping[str, Any]) -> int:
+        """Send ``record`` on ``topic`` (default: its kind's topic); return its sequence number.
+
+        The record is copied with ``run`` and ``seq`` filled in. A full local queue (zmq.Again)
+        counts as dropped; the sequence number is used up either way, so subscribers see it.
+        """
+        if topic is None:
+            topic = frames.topic_of(record)
+        rec = dict(record)
+        rec["run"] = self.run_id
+        with self._lock:
+            seq = self._seq.get(topic, 0)
+            self._seq[topic] = seq + 1
+            rec["seq"] = seq
+            data = frames.encode(rec, check=self.check)
+            try:
+                self._sock.send_multipart([topic.encode("ascii"), data], flags=zmq.NOBLOCK,
+                                          copy=len(data) < 65536)
+                self.sent += 1
+            except zmq.Again:
+                self.dropped += 1
+            self._poll_monitor()
+        return seq
+
+    def _poll_monitor(self) -> None:
+        while self._monitor.poll(0):
+            try:
+                event = parse_monitor_message(self._monitor.recv_multipart(zmq.NOBLOCK))
+            except (zmq.Again, ValueError):
+                return
+            ev = event["event"]
+            if ev == zmq.EVENT_ACCEPTED:
+                self.peers += 1
+            elif ev == zmq.EVENT_DISCONNECTED:
+                self.peers = max(0, self.peers - 1)
+            elif ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
+                self.auth_failures += 1
+                log.warning("publisher refused a peer that failed CURVE authentication")
+
+    def stats(self) -> dict[str, Any]:
+        """Counters for STATUS: sent, dropped locally, connected peers, refused peers, seqs."""
+        with self._lock:
+            self._poll_monitor()
+            return {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
+                    "peers": self.peers, "auth_failures": self.auth_failures,
+                    "seq": dict(self._seq)}
+
+    def close(self) -> None:
+        """Close the socket (LINGER bounds the wait) and stop the authenticator."""
+        with self._lock:
+            self._teardown()
+
+    def _teardown(self) -> None:
+        sock = getattr(self, "_sock", None)
+        if sock is not None and not sock.closed:
+            try:
+                sock.disable_monitor()
+            except zmq.ZMQError:
+                pass
+        mon = getattr(self, "_monitor", None)
+        if mon is not None:
+            mon.close(linger=0)
+        if sock is not None:
+            sock.close(linger=LINGER_MS)
+        if self._curve is not None:
+            self._curve.stop()
+            self._curve = None
+        self._ctx.term()
+
+    def __enter__(self) -> Publisher:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RequestServer:
+    """ROUTER socket answering ``snapshot``/``status``/``recent``/``header`` in its own thread.
+
+    ``handlers`` maps an op name to ``fn(args) -> result map``; handlers run in the server
+    thread, so they must be thread-safe. A handler raising AvardError sends its message back
+    as the error; any other exception is logged with its traceback and answered with
+    "internal error". Requests larger than ``max_request_bytes`` get an error reply; messages
+    beyond ``hard_cap_bytes`` are dropped by libzmq before they are buffered (the peer is
+    disconnected), which bounds the memory a hostile peer can make the service use.
+    """
+
+    def __init__(self, endpoint: str = DEFAULT_REQUEST_ENDPOINT,
+                 handlers: Mapping[str, Handler] | None = None, *,
+                 curve: CurveServerConfig | None = None, max_request_bytes: int = 65536,
+                 max_reply_bytes: int = frames.DEFAULT_MAX_BYTES,
+                 hard_cap_bytes: int | None = None) -> None:
+        self.handlers: dict[str, Handler] = dict(handlers or {})
+        self._requested_endpoint = endpoint
+        self._curve_config = curve
+        self.max_request_bytes = int(max_request_bytes)
+        self.max_reply_bytes = int(max_reply_bytes)
+        self.hard_cap_bytes = int(hard_cap_bytes or max(1 << 20, 4 * self.max_request_bytes))
+        self.endpoint = endpoint
+        self.answered = 0
+        self.errors = 0
+        self._ctx: zmq.Context | None = None
+        self._curve: CurveServer | None = None
+        self._sock: zmq.Socket | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def start(self) -> RequestServer:
+        """Bind (errors raise here, in the caller's thread) and start answering."""
+        if self._thread is not None:
+            return self
+        self._ctx = zmq.Context()
+        try:
+            if self._curve_config is not None:
+                self._curve = CurveServer(self._ctx, self._curve_config)
+            sock = self._ctx.socket(zmq.ROUTER)
+            self._sock = sock
+            sock.setsockopt(zmq.LINGER, LINGER_MS)
+            sock.setsockopt(zmq.MAXMSGSIZE, self.hard_cap_bytes)
+            sock.setsockopt(zmq.SNDHWM, 1000)
+            sock.setsockopt(zmq.RCVHWM, 1000)
+            if self._curve is not None:
+                self._curve.apply(sock)
+            self.endpoint = _bind(sock, self._requested_endpoint, "request server",
+                                  self._curve is not None)
+        except BaseException:
+            self._close_all()
+            raise
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name="avard-request", daemon=True)
+        self._thread.start()
+        log.info("answering requests on %s (ops: %s)", self.endpoint,
+                 ", ".join(sorted(self.handlers)))
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the thread and close the socket; returns within about ``timeout`` seconds."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            if self._thread.is_alive():
+                log.warning("request server thread did not stop within %.1f s", timeout)
+            self._thread = None
+        self._close_all()
+
+    def _close_all(self) -> None:
+        if self._sock is not None:
+            self._sock.close(linger=LINGER_MS)
+            self._sock = None
+        if self._curve is not None:
+            self._curve.stop()
+            self._curve = None
+        if self._ctx is not None:
+            self._ctx.term()
+            self._ctx = None
+
+    def __enter__(self) -> RequestServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # ---- the server thread ----------------------------------------------------------------
+
+    def _serve(self) -> None:
+        sock = self._sock
+        assert sock is not None
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        while not self._stop.is_set():
+            try:
+                if not poller.poll(100):
+                    continue
+                msg = sock.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                continue
+            except zmq.ZMQError as exc:
+                if self._stop.is_set():
+                    break
+                log.error("request socket error: %s", exc)
+                continue
+            try:
+                reply_frames = self.handle_frames(msg)
+            except Exception:  # never let anything a peer sends end the thread
+                log.exception("request handling failed")
+                continue
+            if reply_frames is None:
+                continue
+            try:
+                sock.send_multipart(reply_frames, flags=zmq.NOBLOCK)
+            except zmq.ZMQError as exc:  # peer gone or its queue full: its problem, not ours
+                log.debug("reply not sent: %s", exc)
+
+    def handle_frames(self, msg: list[bytes]) -> list[bytes] | None:
+        """Route one ROUTER message (REQ or DEALER peer) to a reply; None when unanswerable."""
+        if len(msg) < 2:
+            return None  # no identity and payload: nothing to answer
+        identity = msg[0]
+        if msg[1] == b"":  # a REQ peer puts an empty delimiter before the payload
+            envelope, payloads = [identity, b""], msg[2:]
+        else:
+            envelope, payloads = [identity], msg[1:]
+        if len(payloads) != 1:
+            self.errors += 1
+            return [*envelope, frames.encode_reply(
+                "?", error=f"expected one request frame, got {len(payloads)}")]
+        return [*envelope, self.handle(payloads[0])]
+
+    def handle(self, payload: bytes) -> bytes:
+        """Answer one request payload with reply bytes; every failure becomes an error reply."""
+        op, rid = "?", 0
+        try:
+            if len(payload) > self.max_request_bytes:
+                raise FormatError(f"request of {len(payload)} bytes exceeds the "
+                                  f"{self.max_request_bytes}-byte limit")
+            req = frames.decode_request(payload, max_bytes=self.max_request_bytes)
+            op, rid = req["op"], req["id"]
+            handler = self.handlers.get(op)
+            if handler is None:
+                raise FormatError(f"unknown op {op[:40]!r}; this server answers "
+                                  f"{', '.join(sorted(self.handlers)) or 'nothing'}")
+            result = handler(req["args"])
+            reply = frames.encode_reply(op, result=result, id=rid)
+            if len(reply) > self.max_reply_bytes:
+                raise FormatError(f"reply of {len(reply)} bytes exceeds the "
+                                  f"{self.max_reply_bytes}-byte limit; ask for less")
+            self.answered += 1
+            return reply
+        except AvardError as exc:
+            self.errors += 1
+            return frames.encode_reply(op, error=str(exc), id=rid)
+        except Exception as exc:
+            self.errors += 1
+            log.exception("handler for %r failed", op)
+            return frames.encode_reply(op, error=f"internal error ({type(exc).__name__})",
+                                       id=rid)
