@@ -44,3 +44,7 @@ class BusError(HardwareError):
 
 class DeviceStalledError(HardwareError):
     """The device answers on the bus but has stopped producing samples."""
+
+
+class NetworkError(AvardError):
+    """A ZeroMQ peer that does not answer, refuses us, or answers with an error."""
