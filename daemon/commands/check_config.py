@@ -1,0 +1,41 @@
+"""Check a service configuration file without starting anything.
+
+Reads the TOML file exactly as ``avard run`` does and reports every unknown key, wrong type
+and out-of-range value with the key's name, the value and what is allowed. Exit 0 when the
+file is valid, 2 when it is not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from avard.daemon.config import effective_poll_hz, load_config
+
+NAME = "check-config"
+HELP = "check a config file (unknown keys, types, ranges) without starting"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("config", help="TOML configuration file (see config/avard.toml)")
+    parser.add_argument("--show", action="store_true",
+                        help="print the effective configuration (defaults filled in)")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config)
+    out = sys.stdout
+    out.write(f"{args.config}: valid\n")
+    out.write(f"  ADXL355 at {cfg['sensor']['odr_hz']:g} Hz ODR, ±{cfg['sensor']['range_g']} g, "
+              f"drained at {effective_poll_hz(cfg):g} Hz\n")
+    if cfg["recording"]["enabled"]:
+        out.write(f"  recording into {cfg['recording']['data_dir']}\n")
+    if cfg["publish"]["enabled"]:
+        out.write(f"  publishing on {cfg['publish']['endpoint']}, requests on "
+                  f"{cfg['publish']['request_endpoint']}\n")
+    if args.show:
+        for sec, table in cfg.items():
+            out.write(f"[{sec}]\n")
+            for key, value in table.items():
+                out.write(f"{key} = {value!r}\n")
+    return 0

@@ -1,0 +1,281 @@
+"""The service configuration: one schema, TOML in, a checked nested dict out.
+
+Every key has a type, a default, a unit and what is allowed (a range or a set of choices).
+Unknown sections or keys, wrong types and out-of-range values are refused *before* anything
+starts, with the key's name, the value found and what is allowed, all problems at once
+(:class:`ConfigError`). ``avard check-config FILE`` runs exactly this.
+
+Paths the service writes (the data directory) must lie under an allowed root: the systemd
+state directory (``$STATE_DIRECTORY``), /var/lib/avard, the user's home, the system temporary
+directory or the current directory. This keeps a typo or a hostile config from pointing the
+recorder (which deletes old segments for retention) at /etc or /.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import tempfile
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from avard.core.errors import ConfigError
+
+#: Output data rates of the ADXL355 (Hz, datasheet FILTER register table).
+ODR_CHOICES = (4000.0, 2000.0, 1000.0, 500.0, 250.0, 125.0, 62.5, 31.25, 15.625, 7.8125, 3.90625)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration key: its type, default, unit and what is allowed."""
+
+    type: type | tuple[type, ...]
+    default: Any
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[Any, ...] | None = None
+    doc: str = ""
+    path: bool = False       # a directory the service writes: restricted to allowed roots
+
+    def allowed(self) -> str:
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        parts = [self._type_name()]
+        if self.lo is not None and self.hi is not None:
+            parts.append(f"from {self.lo:g} to {self.hi:g}")
+        elif self.lo is not None:
+            parts.append(f"at least {self.lo:g}")
+        if self.unit:
+            parts.append(self.unit)
+        return " ".join(parts)
+
+    def _type_name(self) -> str:
+        types = self.type if isinstance(self.type, tuple) else (self.type,)
+        names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+                 list: "a list of strings"}
+        return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
+
+
+_NUM = (int, float)
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "sensor": {
+        "bus": Key(str, "spi", choices=("spi", "i2c"), doc="how the ADXL355 is wired"),
+        "spi_bus": Key(int, 0, lo=0, hi=7, doc="/dev/spidevB.D: B"),
+        "spi_device": Key(int, 0, lo=0, hi=7, doc="/dev/spidevB.D: D (chip select)"),
+        "spi_speed_hz": Key(int, 5_000_000, "Hz", 100_000, 10_000_000, doc="SPI clock"),
+        "i2c_bus": Key(int, 1, lo=0, hi=31, doc="/dev/i2c-N"),
+        "i2c_address": Key(int, 0x1D, choices=(0x1D, 0x53), doc="ASEL low 0x1D, high 0x53"),
+        "range_g": Key(int, 2, "g", choices=(2, 4, 8), doc="full scale ±range_g"),
+        "odr_hz": Key(_NUM, 125.0, "Hz", choices=ODR_CHOICES, doc="output data rate"),
+        "poll_hz": Key(_NUM, 100.0, "Hz", 1.0, 2000.0,
+                       doc="FIFO drain rate; raised automatically to drain a FIFO third"),
+    },
+    "temperature": {
+        "ds18b20": Key(bool, True, doc="read DS18B20 sensors on the 1-Wire bus"),
+        "ids": Key(list, [], doc="DS18B20 IDs to use ('28-...'); empty: all found"),
+        "required": Key(bool, False, doc="refuse to start when a listed DS18B20 is missing"),
+        "interval_s": Key(_NUM, 1.0, "s", 0.75, 3600.0, doc="DS18B20 read interval"),
+        "chip_interval_s": Key(_NUM, 1.0, "s", 0.01, 3600.0,
+                               doc="ADXL355 on-chip temperature read interval"),
+    },
+    "allan": {
+        "overlap": Key(int, 8, lo=1, hi=64, doc="differences kept per octave (stride m/overlap)"),
+        "snapshot_interval_s": Key(_NUM, 10.0, "s", 0.1, 86400.0,
+                                   doc="publish and record an Allan snapshot this often"),
+        "checkpoint_interval_s": Key(_NUM, 60.0, "s", 1.0, 86400.0,
+                                     doc="save the accumulators for restart this often"),
+        "restore": Key(bool, True, doc="restore the accumulators from the last checkpoint"),
+    },
+    "recording": {
+        "enabled": Key(bool, True, doc="write the recording"),
+        "data_dir": Key(str, "/var/lib/avard", path=True, doc="segment files go here"),
+        "segment_s": Key(_NUM, 3600.0, "s", 10.0, 86400.0, doc="start a new segment this often"),
+        "fsync_interval_s": Key(_NUM, 5.0, "s", 0.05, 3600.0,
+                                doc="fsync this often: a power cut loses at most this much"),
+        "block_s": Key(_NUM, 1.0, "s", 0.01, 10.0, doc="raw samples per record, in seconds"),
+        "retention_days": Key(_NUM, 0.0, "days", 0.0, 36500.0,
+                              doc="delete segments older than this; 0 keeps all"),
+        "retention_max_bytes": Key(int, 0, "bytes", 0, None,
+                                   doc="delete oldest segments above this total; 0 = no limit"),
+        "min_free_bytes": Key(int, 64 * 1024 * 1024, "bytes", 0, None,
+                              doc="pause writing (disk full) below this much free space"),
+    },
+    "publish": {
+        "enabled": Key(bool, True, doc="publish over ZeroMQ"),
+        "endpoint": Key(str, "tcp://127.0.0.1:5555", doc="PUB socket (raw, temp, avar, ...)"),
+        "request_endpoint": Key(str, "tcp://127.0.0.1:5556",
+                                doc="request socket (snapshot, status, recent)"),
+        "allow_remote": Key(bool, False, doc="needed to bind anything but loopback"),
+        "hwm": Key(int, 10000, "messages", 10, 10_000_000, doc="PUB send high-water mark"),
+        "status_interval_s": Key(_NUM, 5.0, "s", 0.1, 3600.0, doc="publish status this often"),
+        "recent_max_s": Key(_NUM, 10.0, "s", 0.0, 600.0, doc="longest 'recent' reply"),
+    },
+    "curve": {
+        "enabled": Key(bool, False, doc="CURVE-encrypt and authenticate both sockets"),
+        "server_secret_file": Key(str, "", doc="server secret key (from `avard keys`)"),
+        "authorized_keys_dir": Key(str, "", doc="directory of authorised client public keys"),
+    },
+    "service": {
+        "ring_s": Key(_NUM, 30.0, "s", 1.0, 3600.0, doc="ring buffer length in seconds"),
+        "status_log_interval_s": Key(_NUM, 60.0, "s", 1.0, 86400.0,
+                                     doc="log a status line this often"),
+    },
+}
+
+
+def default_config() -> dict[str, dict[str, Any]]:
+    """Every key at its default value."""
+    return {sec: {k: _copy(key.default) for k, key in keys.items()}
+            for sec, keys in SCHEMA.items()}
+
+
+def _copy(v: Any) -> Any:
+    return list(v) if isinstance(v, list) else v
+
+
+def allowed_roots() -> list[Path]:
+    """Directories under which the service may write."""
+    roots = [Path("/var/lib/avard"), Path(tempfile.gettempdir()), Path.cwd()]
+    if os.environ.get("STATE_DIRECTORY"):
+        roots += [Path(p) for p in os.environ["STATE_DIRECTORY"].split(":")]
+    if os.environ.get("HOME"):
+        roots.append(Path(os.environ["HOME"]))
+    return [r.resolve() for r in roots]
+
+
+def _check_value(name: str, key: Key, value: Any) -> tuple[Any, str | None]:
+    types = key.type if isinstance(key.type, tuple) else (key.type,)
+    # TOML booleans are not numbers here, whatever Python thinks of bool ⊂ int.
+    ok = isinstance(value, types) and not (isinstance(value, bool) and bool not in types)
+    if not ok:
+        return value, f"{name} = {value!r}: wrong type, allowed is {key.allowed()}"
+    if list in types:
+        if not all(isinstance(v, str) for v in value):
+            return value, f"{name} = {value!r}: allowed is {key.allowed()}"
+        return list(value), None
+    if float in types:
+        value = float(value)
+    if key.choices is not None and value not in key.choices:
+        return value, f"{name} = {value!r}: out of range, allowed is {key.allowed()}"
+    if (key.lo is not None and value < key.lo) or (key.hi is not None and value > key.hi):
+        return value, f"{name} = {value!r}: out of range, allowed is {key.allowed()}"
+    if key.path and value:
+        resolved = Path(value).expanduser().resolve()
+        roots = allowed_roots()
+        if not any(resolved == r or r in resolved.parents for r in roots):
+            return value, (f"{name} = {value!r}: not under an allowed directory "
+                           f"({', '.join(str(r) for r in roots)}); choose a path below one "
+                           "of them (systemd: StateDirectory=)")
+        value = str(resolved)
+    return value, None
+
+
+def _check_endpoints(cfg: dict[str, dict[str, Any]], problems: list[str]) -> None:
+    pub = cfg["publish"]
+    for key in ("endpoint", "request_endpoint"):
+        ep = pub[key]
+        parts = urlsplit(ep)
+        if parts.scheme not in ("tcp", "ipc", "inproc"):
+            problems.append(f"publish.{key} = {ep!r}: allowed is a ZeroMQ endpoint "
+                            "tcp://HOST:PORT, ipc://PATH or inproc://NAME")
+            continue
+        if parts.scheme != "tcp":
+            continue
+        host = parts.hostname or ""
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if not port:
+            problems.append(f"publish.{key} = {ep!r}: a tcp endpoint needs a port "
+                            "(tcp://127.0.0.1:5555)")
+        if host in ("localhost",):
+            continue
+        try:
+            loopback = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            loopback = False
+        if not loopback and not pub["allow_remote"]:
+            problems.append(f"publish.{key} = {ep!r}: binds beyond loopback; set "
+                            "publish.allow_remote = true to do that on purpose (and consider "
+                            "[curve] enabled = true)")
+    if pub["endpoint"] == pub["request_endpoint"]:
+        problems.append("publish.endpoint and publish.request_endpoint are the same; "
+                        "give the request socket its own port")
+    if cfg["curve"]["enabled"]:
+        for key in ("server_secret_file", "authorized_keys_dir"):
+            if not cfg["curve"][key]:
+                problems.append(f"curve.{key} is empty: with curve.enabled = true it must "
+                                "name the file/directory made by `avard keys`")
+
+
+def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str, dict[str, Any]]:
+    """Merge ``raw`` over the defaults and check every key; ConfigError lists all problems."""
+    cfg = default_config()
+    problems: list[str] = []
+    for sec, table in raw.items():
+        if sec not in SCHEMA:
+            problems.append(f"[{sec}]: unknown section; known sections are "
+                            f"{', '.join(SCHEMA)}")
+            continue
+        if not isinstance(table, Mapping):
+            problems.append(f"{sec} = {table!r}: must be a [{sec}] table")
+            continue
+        for name, value in table.items():
+            key = SCHEMA[sec].get(name)
+            if key is None:
+                problems.append(f"{sec}.{name}: unknown key; known keys in [{sec}] are "
+                                f"{', '.join(SCHEMA[sec])}")
+                continue
+            checked, problem = _check_value(f"{sec}.{name}", key, value)
+            if problem:
+                problems.append(problem)
+            else:
+                cfg[sec][name] = checked
+    if not problems:
+        _check_endpoints(cfg, problems)
+        if cfg["recording"]["enabled"] and not cfg["recording"]["data_dir"]:
+            problems.append("recording.data_dir is empty: name a directory or set "
+                            "recording.enabled = false")
+    if problems:
+        raise ConfigError(f"{source}: " + "; ".join(problems))
+    return cfg
+
+
+def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str, Any]]:
+    """Read and check a TOML config file (None: the defaults), then apply dotted overrides
+    such as ``{"recording.data_dir": "/tmp/x"}`` (checked like the file's own keys)."""
+    raw: dict[str, Any] = {}
+    source = "defaults"
+    if path is not None:
+        p = Path(path)
+        source = str(p)
+        try:
+            raw = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{p}: no such config file; copy config/avard.toml and "
+                              "edit it") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{p}: not valid TOML ({exc}); fix the syntax at that "
+                              "line") from None
+    for dotted, value in overrides.items():
+        if value is None:
+            continue
+        sec, _, name = dotted.partition(".")
+        raw.setdefault(sec, {})
+        if isinstance(raw[sec], dict):
+            raw[sec][name] = value
+    return validate_config(raw, source)
+
+
+def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
+    """The FIFO drain rate: the configured one, raised so that the 32-set FIFO is drained at
+    least three times per fill (it lasts 32/ODR seconds; an overrun loses samples)."""
+    odr = float(cfg["sensor"]["odr_hz"])
+    return max(float(cfg["sensor"]["poll_hz"]), 3.0 * odr / 32.0)
