@@ -1,0 +1,102 @@
+"""Subscriber: loss accounting from sequences and indices, join snapshot, over loopback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from avard.core import frames as F
+from avard.core.errors import ConfigError, NetworkError
+from avard.daemon.publisher import Publisher, RequestServer
+from avard.daemon.subscriber import LossTracker, Subscriber, request_endpoint_for
+
+LOCAL = "tcp://127.0.0.1:*"
+
+
+def _raw(run: str, seq: int, i0: int, n: int = 32) -> dict:
+    return F.raw_record(run, seq, i0, np.zeros((n, 3), dtype=np.int32), 0.0, 0.0)
+
+
+def test_tracker_counts_transport_loss_service_gaps_and_restarts() -> None:
+    t = LossTracker()
+    assert t.observe("raw", _raw("a", 5, 160)).new_run          # joined late: no loss yet
+    assert t.observe("raw", _raw("a", 6, 192)).lost == 0
+    m = t.observe("raw", _raw("a", 9, 288))                      # seq 7, 8 lost in transport
+    assert (m.lost, m.missing) == (2, (224, 64))
+    t.observe("event", F.gap_record("a", 0, 320, 100, 0.0, 0.0, "overrun"))
+    m = t.observe("raw", _raw("a", 10, 420))                     # the service's own gap
+    assert (m.lost, m.missing) == (0, None)
+    m = t.observe("raw", _raw("a", 11, 500))                     # unannounced hole
+    s = t.stats
+    assert (s.samples_received, s.samples_lost, s.samples_service_gap,
+            s.samples_unexplained) == (5 * 32, 64, 100, 48)
+    assert s.topics["raw"].lost == 2 and s.messages_lost == 2
+    m = t.observe("raw", _raw("b", 0, 0))                        # restart: a new run
+    assert m.new_run and t.stats.runs == 2 and t.stats.topics["raw"].received == 1
+    t.observe("raw", _raw("b", 1, 0))                            # repeated block
+    assert t.stats.samples_repeated == 32
+
+
+def test_request_endpoint_default_is_port_plus_one() -> None:
+    assert request_endpoint_for("tcp://10.0.0.2:5556") == "tcp://10.0.0.2:5557"
+    with pytest.raises(ConfigError):
+        request_endpoint_for("ipc:///tmp/x")
+    with pytest.raises(ConfigError, match="unknown topic"):
+        Subscriber("tcp://127.0.0.1:1", topics=["raw", "secrets"])
+
+
+def test_stream_end_to_end_with_join_snapshot() -> None:
+    """Every message arrives once, a service gap is attributed to the service, and the join
+    snapshot arrives with its arrays as numpy."""
+    snapshot = {"tau": np.array([0.008, 0.016, 0.032]), "avar": np.ones((3, 3)) * 1e-8,
+                "n_samples": 4096}
+    handlers = {"snapshot": lambda a: snapshot, "header": lambda a: {"rate_hz": 125.0}}
+    with Publisher(LOCAL, "run-e") as pub, RequestServer(LOCAL, handlers) as srv:
+        sub = Subscriber(pub.endpoint, request_endpoint=srv.endpoint).connect()
+        try:
+            np.testing.assert_array_equal(sub.snapshot["tau"], snapshot["tau"])
+            assert sub.snapshot["avar"].shape == (3, 3) and sub.header == {"rate_hz": 125.0}
+            for _ in range(500):  # PUB drops until the subscription has arrived
+                pub.publish("status", F.status_record("", 0, {}, 0.0, 0.0))
+                if sub.recv(0.01) is not None:
+                    break
+            i0 = 0
+            for k in range(100):
+                if k == 50:
+                    pub.publish(None, F.gap_record("", 0, i0, 40, 0.0, 0.0, "bus_error"))
+                    i0 += 40
+                pub.publish(None, _raw("", 0, i0))
+                if k % 10 == 0:
+                    pub.publish(None, F.temp_record("", 0, i0, ["plate"], [21.5], 0.0, 0.0))
+                i0 += 32
+            raw = 0
+            while raw < 100:
+                m = sub.recv(3.0)
+                assert m is not None
+                raw += m.topic == "raw"
+            s = sub.stats
+            assert s.samples_received == 3200 and s.samples_service_gap == 40
+            assert s.samples_lost == 0 == s.samples_unexplained == s.messages_lost
+            assert s.topics["temp"].received == 10 and s.bad_messages == 0
+            assert s.to_dict()["messages_lost"] == 0
+        finally:
+            sub.close()
+
+
+def test_request_timeout_and_error_replies() -> None:
+    with RequestServer(LOCAL, {"status": lambda a: {}}) as srv:
+        sub = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint)
+        try:
+            with pytest.raises(NetworkError, match=r"refused.*unknown op"):
+                sub.request("snapshot")
+            assert sub.request("status") == {}
+        finally:
+            sub.close()
+    dead = Subscriber("tcp://127.0.0.1:1", request_endpoint="tcp://127.0.0.1:9",
+                      request_timeout_s=0.2)
+    try:
+        with pytest.raises(NetworkError, match="no reply"):
+            dead.request("status")
+        dead.connect()  # joining a dead service only warns
+        assert dead.snapshot is None
+    finally:
+        dead.close()
