@@ -1,0 +1,205 @@
+"""The reader thread: the only code that talks to the ADXL355 bus.
+
+It does nothing slow: wait for the next poll tick, drain the FIFO, give each sample its index
+and a time from the fitted time base, push the block into the ring, and (every
+``chip_interval_s``) read the chip's temperature. Everything it learns about loss goes into the
+ring as a mark, in order with the samples:
+
+- an overrun (STATUS.FIFO_OVR) becomes a ``gap`` record; the number of lost sets is estimated
+  from the elapsed time and the fitted rate (the chip does not say), and the sample index
+  jumps by that estimate so that index and time stay aligned;
+- a failed transfer (BusError) becomes a ``bus_error`` event; the FIFO keeps filling, so a
+  short bus fault costs nothing, and a long one shows up as an overrun gap;
+- a device that stops producing samples becomes a ``stalled`` event (and the watchdog is no
+  longer fed, see service.py); ``resumed`` when samples flow again.
+
+Temperatures of other sources (DS18B20 threads) are marked with :meth:`Acquisition.stamp`,
+which gives the index of the next sample, so the time base of every channel is the sample
+index.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from avard.core import frames
+from avard.core.errors import AvardError
+
+from .ring import Ring
+from .timebase import TimeBase
+
+log = logging.getLogger(__name__)
+
+
+class Acquisition:
+    """Drain loop over an ``Adxl355``-like driver (``drain()``, ``read_temperature_c()``).
+
+    ``clock`` provides ``monotonic()``, ``realtime()`` and ``sleep()``; under simulation it is
+    a stepped virtual clock and ``speed`` caps how much faster than real time the loop runs
+    (None: as fast as the CPU allows).
+    """
+
+    def __init__(self, sensor: Any, ring: Ring, timebase: TimeBase, clock: Any, *,
+                 poll_hz: float, chip_interval_s: float = 1.0, run_id: str = "",
+                 speed: float | None = None, stall_s: float = 2.0,
+                 on_tick: Callable[[float], None] | None = None,
+                 start_index: int = 0) -> None:
+        self.sensor = sensor
+        self.ring = ring
+        self.tb = timebase
+        self.clock = clock
+        self.period = 1.0 / float(poll_hz)
+        self.chip_interval_s = float(chip_interval_s)
+        self.run_id = run_id
+        self.speed = speed
+        self.stall_s = float(stall_s)
+        self.on_tick = on_tick          # called with t_mono after each poll (simulated temps)
+        self.next_index = int(start_index)
+        self.samples = 0
+        self.overruns = 0
+        self.lost_estimate = 0
+        self.bus_errors = 0
+        self.stalled = False
+        self.last_sample_t: float | None = None
+        self._last_drain_t: float | None = None
+        self._next_chip = 0.0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+        self.first_samples = threading.Event()
+
+    # -- control ------------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def stamp(self) -> int:
+        """Index of the next sample: where a reading taken now belongs on the sample grid."""
+        return self.next_index
+
+    def mark(self, record: dict[str, Any]) -> None:
+        self.ring.mark(record)
+
+    # -- loop ---------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            wall0 = time.monotonic()
+            t0 = self.clock.monotonic()
+            next_t = t0
+            while not self._stop.is_set():
+                self.poll_once()
+                next_t += self.period
+                now = self.clock.monotonic()
+                if next_t < now - 10 * self.period:
+                    next_t = now  # fell far behind (a slow machine): do not try to catch up
+                self.clock.sleep(max(0.0, next_t - now))
+                if self.speed:
+                    # Cap the pace at speed × real time (the virtual clock is stepped).
+                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
+                    if ahead > 0:
+                        self._stop.wait(ahead)
+        except BaseException as exc:  # the service sees it and stops with an error
+            log.exception("reader thread died")
+            self.error = exc
+
+    def poll_once(self) -> int:
+        """One drain; returns the number of samples pushed."""
+        try:
+            d = self.sensor.drain()
+        except AvardError as exc:
+            self.bus_errors += 1
+            t = self.clock.monotonic()
+            name = "stalled" if "no samples" in str(exc) else "bus_error"
+            if self.bus_errors <= 10 or self.bus_errors % 1000 == 0:
+                log.warning("%s #%d while draining: %s", name, self.bus_errors, exc)
+            self.mark(frames.event_record(self.run_id, 0, name, t, self.clock.realtime(),
+                                          i0=self.next_index,
+                                          detail={"error": str(exc), "count": self.bus_errors}))
+            self._check_stall(t)
+            self._try_recover(t)
+            return 0
+        counts = np.asarray(d.counts, dtype=np.int32)
+        n = int(counts.shape[0])
+        t_mono = float(getattr(d, "t_mono", self.clock.monotonic()))
+        t_real = float(getattr(d, "t_real", self.clock.realtime()))
+        if getattr(d, "overrun", False):
+            self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun")
+        if n:
+            i0 = self.next_index
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(getattr(d, "overrun", False)))
+            times = self.tb.timestamps(i0, n)
+            self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
+            self.next_index += n
+            self.samples += n
+            self.last_sample_t = t_mono
+            if self.stalled:
+                self.stalled = False
+                log.warning("samples flow again")
+                self.mark(frames.event_record(self.run_id, 0, "resumed", t_mono, t_real,
+                                              i0=i0))
+            self.first_samples.set()
+        else:
+            self._check_stall(t_mono)
+        self._last_drain_t = t_mono
+        if t_mono >= self._next_chip:
+            self._next_chip = t_mono + self.chip_interval_s
+            self._chip_temperature(t_mono, t_real)
+        if self.on_tick is not None:
+            self.on_tick(t_mono)
+        return n
+
+    def _try_recover(self, t: float) -> None:
+        """After a failed drain, re-probe and restart the part (at most once a second)."""
+        recover = getattr(self.sensor, "recover", None)
+        if recover is None or t < getattr(self, "_next_recover", 0.0):
+            return
+        self._next_recover = t + 1.0
+        try:
+            recover()
+            log.warning("ADXL355 recovered (probed, reset, reconfigured, restarted)")
+        except AvardError as exc:
+            log.debug("recovery failed: %s", exc)
+
+    def _overrun(self, n_read: int, t_mono: float, t_real: float, reason: str) -> None:
+        """A gap of unknown size: estimate the lost sets from the time since the last drain."""
+        self.overruns += 1
+        elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
+        expected = round(elapsed * self.tb.odr_hz)
+        lost = max(1, expected - n_read)
+        i0 = self.next_index
+        self.next_index += lost
+        self.lost_estimate += lost
+        log.warning("gap (%s): about %d samples lost at index %d", reason, lost, i0)
+        self.mark(frames.gap_record(self.run_id, 0, i0, lost, t_mono, t_real, reason,
+                                    estimated=True))
+
+    def _check_stall(self, t: float) -> None:
+        last = self.last_sample_t
+        if last is not None and not self.stalled and t - last > self.stall_s:
+            self.stalled = True
+            log.error("no samples for %.1f s: the ADXL355 stopped producing", t - last)
+            self.mark(frames.event_record(self.run_id, 0, "stalled", t, self.clock.realtime(),
+                                          i0=self.next_index, detail={"since_s": t - last}))
+
+    def _chip_temperature(self, t_mono: float, t_real: float) -> None:
+        try:
+            value = float(self.sensor.read_temperature_c())
+        except AvardError as exc:
+            log.debug("chip temperature read failed: %s", exc)
+            return
+        self.mark(frames.temp_record(self.run_id, 0, self.next_index, ["chip"], [value],
+                                     t_mono, t_real, source="adxl355"))
