@@ -185,7 +185,7 @@ def validate(record: Mapping[str, Any]) -> None:
     if not isinstance(record, Mapping):
         raise FormatError(f"a record must be a map, got {type(record).__name__}")
     kind = record.get("kind")
-    if kind not in SCHEMA:
+    if not isinstance(kind, str) or kind not in SCHEMA:  # a list/map kind is unhashable
         raise FormatError(f"unknown record kind {kind!r}; known kinds are {', '.join(KINDS)}")
     if record.get("v") != FORMAT_VERSION:
         raise FormatError(
@@ -209,7 +209,7 @@ def validate(record: Mapping[str, Any]) -> None:
         shape = counts.shape if isinstance(counts, np.ndarray) else counts["shape"]
         if not (isinstance(shape, list | tuple) and len(shape) == 2 and shape[0] == record["n"]):
             raise FormatError(
-                f"raw record: counts shape {list(shape)} does not match n={record['n']}"
+                f"raw record: counts shape {_short(shape)} does not match n={record['n']}"
             )
     if kind == "temp" and len(record["names"]) != len(record["values_c"]):
         raise FormatError("temp record: names and values_c differ in length")
