@@ -120,7 +120,7 @@ def load_secret_key(path: str | os.PathLike[str]) -> tuple[bytes, bytes]:
 
 @dataclass(frozen=True)
 class CurveServerConfig:
-    """The ``[network.curve]`` config section of the service.
+    """The ``[curve]`` config section of the service (daemon/config.py).
 
     server_secret_key_file: the service's ``.key_secret`` file (mode 0600).
     authorized_keys_dir: directory of client public ``*.key`` files allowed to connect.
@@ -131,21 +131,30 @@ class CurveServerConfig:
 
     @classmethod
     def from_mapping(cls, section: dict[str, Any]) -> CurveServerConfig:
-        """Build from a parsed ``[network.curve]`` table; ConfigError names a missing key."""
+        """Build from a parsed ``[curve]`` table; ConfigError names a missing key."""
         try:
             return cls(Path(section["server_secret_key_file"]),
                        Path(section["authorized_keys_dir"]))
         except KeyError as exc:
             raise ConfigError(
-                f"[network.curve] needs the key {exc.args[0]!r} (see config/avard.toml)"
+                f"[curve] needs the key {exc.args[0]!r} (see config/avard.toml)"
             ) from None
+
+    @classmethod
+    def from_config(cls, cfg: Any) -> CurveServerConfig | None:
+        """The ``[curve]`` section of a validated config; None unless ``enabled = true``."""
+        section = cfg.get("curve", {})
+        if not section.get("enabled"):
+            return None
+        return cls.from_mapping(section)
 
     def check(self) -> None:
         """Refuse unreadable/unsafe secret keys and a missing or empty authorised directory."""
         load_secret_key(self.server_secret_key_file)
         d = self.authorized_keys_dir
         if not d.is_dir():
-            raise ConfigError(f"[network.curve] authorized_keys_dir {d} is not a directory")
+            raise ConfigError(f"[curve] authorized_keys_dir {d} is not a directory; make it "
+                              "and put the clients' NAME.key files in it")
         if not any(d.glob("*.key")):
             log.warning("no authorised client keys (*.key) in %s: nobody can connect", d)
 

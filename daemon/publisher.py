@@ -31,8 +31,9 @@ from .curve import CurveServer, CurveServerConfig
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PUB_ENDPOINT = "tcp://127.0.0.1:5556"
-DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5557"
+# the [publish] defaults of daemon/config.py; the request socket is the PUB port + 1
+DEFAULT_PUB_ENDPOINT = "tcp://127.0.0.1:5555"
+DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5556"
 #: PUB queue per subscriber, in messages. At 32-sample raw blocks and 4 kHz that is ~80 s.
 DEFAULT_HWM = 10000
 #: Shutdown never waits longer than this for queued messages (ms).
@@ -59,17 +60,25 @@ def is_loopback(endpoint: str) -> bool:
     return host is None or host in _LOOPBACK_HOSTS
 
 
-def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool) -> str:
-    """Bind and return the actual endpoint (ephemeral ``:*`` or ``:0`` ports resolved)."""
+def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool,
+          allow_remote: bool) -> str:
+    """Bind and return the actual endpoint (ephemeral ``:*`` or ``:0`` ports resolved).
+
+    Anything but loopback needs ``allow_remote`` (``[publish] allow_remote = true``).
+    """
     if endpoint.endswith(":0"):
         endpoint = endpoint[:-2] + ":*"
     if not is_loopback(endpoint):
+        if not allow_remote:
+            raise ConfigError(f"{what}: {endpoint} binds beyond loopback; set "
+                              "[publish] allow_remote = true to do that on purpose (and "
+                              "enable [curve])")
         # an explicit choice of the operator; say loudly when it is not authenticated
         if secured:
             log.info("%s binds %s (CURVE on)", what, endpoint)
         else:
             log.warning("%s binds %s without CURVE: anyone who reaches this interface can "
-                        "read the stream (configure [network.curve])", what, endpoint)
+                        "read the stream (enable [curve])", what, endpoint)
     try:
         sock.bind(endpoint)
     except zmq.ZMQError as exc:
@@ -87,7 +96,7 @@ class Publisher:
 
     def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
                  hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
-                 check: bool = True) -> None:
+                 check: bool = True, allow_remote: bool = False) -> None:
         if hwm < 1:
             raise ConfigError(f"publisher hwm={hwm}: must be at least 1 message")
         self.run_id = str(run_id)
@@ -112,11 +121,20 @@ class Publisher:
             self._monitor = self._sock.get_monitor_socket(
                 zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED | zmq.EVENT_HANDSHAKE_FAILED_AUTH
             )
-            self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None)
+            self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None,
+                                  allow_remote)
         except BaseException:
             self._teardown()
             raise
         log.info("publishing on %s (run %s, hwm %d)", self.endpoint, self.run_id, hwm)
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], run_id: str) -> Publisher:
+        """From the validated config of daemon/config.py (``[publish]`` and ``[curve]``)."""
+        pub = cfg["publish"]
+        return cls(pub["endpoint"], run_id, hwm=pub["hwm"],
+                   curve=CurveServerConfig.from_config(cfg),
+                   allow_remote=pub["allow_remote"])
 
     def next_seq(self, topic: str) -> int:
         """The sequence number the next message on ``topic`` will carry."""
@@ -213,7 +231,8 @@ class RequestServer:
                  handlers: Mapping[str, Handler] | None = None, *,
                  curve: CurveServerConfig | None = None, max_request_bytes: int = 65536,
                  max_reply_bytes: int = frames.DEFAULT_MAX_BYTES,
-                 hard_cap_bytes: int | None = None) -> None:
+                 hard_cap_bytes: int | None = None, allow_remote: bool = False) -> None:
+        self.allow_remote = allow_remote
         self.handlers: dict[str, Handler] = dict(handlers or {})
         self._requested_endpoint = endpoint
         self._curve_config = curve
@@ -228,6 +247,14 @@ class RequestServer:
         self._sock: zmq.Socket | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], handlers: Mapping[str, Handler]
+                    ) -> RequestServer:
+        """From the validated config of daemon/config.py (``[publish]`` and ``[curve]``)."""
+        pub = cfg["publish"]
+        return cls(pub["request_endpoint"], handlers, curve=CurveServerConfig.from_config(cfg),
+                   allow_remote=pub["allow_remote"])
 
     def start(self) -> RequestServer:
         """Bind (errors raise here, in the caller's thread) and start answering."""
@@ -246,7 +273,7 @@ class RequestServer:
             if self._curve is not None:
                 self._curve.apply(sock)
             self.endpoint = _bind(sock, self._requested_endpoint, "request server",
-                                  self._curve is not None)
+                                  self._curve is not None, self.allow_remote)
         except BaseException:
             self._close_all()
             raise

@@ -111,10 +111,28 @@ def test_bind_conflict_is_a_config_error() -> None:
         Publisher(pub.endpoint, "b")
 
 
-def test_non_loopback_bind_without_curve_warns(caplog: pytest.LogCaptureFixture) -> None:
-    with caplog.at_level(logging.WARNING), Publisher("tcp://0.0.0.0:*", "a") as pub:
+def test_non_loopback_bind_is_explicit_and_warns_without_curve(
+        caplog: pytest.LogCaptureFixture) -> None:
+    with pytest.raises(ConfigError, match="allow_remote"):
+        Publisher("tcp://0.0.0.0:*", "a")
+    with pytest.raises(ConfigError, match="allow_remote"):
+        RequestServer("tcp://0.0.0.0:*", {}).start()
+    with caplog.at_level(logging.WARNING), \
+            Publisher("tcp://0.0.0.0:*", "a", allow_remote=True) as pub:
         assert pub.endpoint.startswith("tcp://0.0.0.0:")
     assert "without CURVE" in caplog.text
+
+
+def test_from_config_uses_publish_and_curve_sections() -> None:
+    from avard.daemon.config import default_config
+
+    cfg = default_config()
+    cfg["publish"]["endpoint"] = LOCAL
+    cfg["publish"]["request_endpoint"] = LOCAL
+    with Publisher.from_config(cfg, "run-x") as pub:
+        assert pub.run_id == "run-x" and is_loopback(pub.endpoint)
+    with RequestServer.from_config(cfg, {"status": lambda a: {}}) as srv:
+        assert srv.endpoint.startswith("tcp://127.0.0.1:")
 
 
 def test_invalid_records_are_refused_before_sending() -> None:
