@@ -169,6 +169,7 @@ class SelfTestResult:
     passed: bool
     n_samples: int
     range_g: int
+    saturated: bool = False  # an axis hit full scale: the delta is meaningless, use ±4/±8 g
 
 
 @dataclass
@@ -246,10 +247,13 @@ class Adxl355:
         assert last is not None
         raise last
 
-    def _note_gap(self, reason: str) -> None:
+    def _note_gap(self, reason: str, *, keep_carry: bool = False) -> None:
         if reason not in self._gap_reasons:
             self._gap_reasons.append(reason)
-        self._carry = b""  # an unfinished set cannot be completed across a gap
+        if not keep_carry:
+            # After an overrun or a failed transfer the FIFO may resume anywhere: joining the
+            # carried X (and Y) with entries of another set would invent a sample.
+            self._carry = b""
 
     # -- identification and setup ------------------------------------------------------------
     def probe(self) -> DeviceInfo:
@@ -390,11 +394,13 @@ class Adxl355:
         """Read every whole XYZ set in the FIFO (at most ``max_sets``). See :class:`Drain`."""
         t_mono = self.clock.monotonic()
         t_real = self.clock.realtime()
-        status, entries = self._read(A["STATUS"], 2, in_drain=True)
+        status, entries_reg = self._read(A["STATUS"], 2, in_drain=True)
+        entries = entries_reg & 0x7F
         if entries > R.FIFO_LOCATIONS:
             raise HardwareError(
                 f"ADXL355: FIFO_ENTRIES reads {entries} (> 96) and STATUS 0x{status:02X}: the "
-                "bus returns garbage (all ones: device unplugged or MISO floating)")
+                "bus returns garbage (all ones: device unplugged or MISO floating); check the "
+                "wiring, then recover()")
         if status & R.STATUS_FIFO_OVR:
             self.overruns += 1
             self._note_gap("fifo_overrun")
@@ -405,12 +411,12 @@ class Adxl355:
             n_read = min(n_read, max(3 * max_sets - c, 0))
         data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True) if n_read > 0 else b""
         dec = decode_fifo(self._carry + data)
-        self._carry = dec.carry
         if dec.dropped or dec.empty:
             self.realignments += 1
-            self._note_gap("realigned")
+            self._note_gap("realigned", keep_carry=True)
             log.warning("ADXL355 FIFO misaligned: %d entries dropped, %d empty; realigned on "
                         "the X marker", dec.dropped, dec.empty)
+        self._carry = dec.carry
         t_end = self.clock.monotonic()
         n = dec.counts.shape[0]
         reasons = self._gap_reasons
@@ -533,14 +539,19 @@ class Adxl355:
             self._write(A["SELF_TEST"], 0x00)
             self.clock.sleep(settle_s)
         delta = (on - off) / R.sensitivity_lsb_per_g(self.config.range_g)
-        passed = all(lo <= d <= hi for d, (lo, hi) in zip(delta, limits_g, strict=True))
+        # 1 g of gravity plus the 1.5 g Z deflection exceeds ±2 g: a clipped axis cannot pass.
+        saturated = bool(np.any(np.abs(np.concatenate([on, off])) >= 0.99 * R.DATA_MAX))
+        passed = not saturated and all(
+            lo <= d <= hi for d, (lo, hi) in zip(delta, limits_g, strict=True))
         if was:
             self._note_gap("self_test")
         else:
             self.standby()
         result = SelfTestResult((float(delta[0]), float(delta[1]), float(delta[2])),
-                                tuple(limits_g), passed, n_samples, self.config.range_g)
+                                tuple(limits_g), passed, n_samples, self.config.range_g,
+                                saturated)
         (log.info if passed else log.error)(
-            "ADXL355 self-test %s: Δ = %.3f, %.3f, %.3f g (limits %s)",
-            "passed" if passed else "FAILED", *result.delta_g, limits_g)
+            "ADXL355 self-test %s: Δ = %.3f, %.3f, %.3f g (limits %s)%s",
+            "passed" if passed else "FAILED", *result.delta_g, limits_g,
+            " — output saturated: run the self-test at ±4 g or ±8 g" if saturated else "")
         return result

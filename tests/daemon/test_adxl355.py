@@ -1,0 +1,381 @@
+"""The ADXL355 driver over the register-level emulator (SPI and I2C)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from avard.core.errors import BusError, ConfigError, DeviceStalledError, HardwareError
+from avard.daemon import registers as R
+from avard.daemon.adxl355 import Adxl355, decode_counts, decode_counts_naive, decode_fifo
+from avard.daemon.emulator import (
+    EmulatedAdxl355,
+    FakeSMBus,
+    FakeSpiDev,
+    VirtualClock,
+    constant_source,
+    counter_source,
+    encode_entries,
+)
+from avard.daemon.transport import I2cBus, SpiBus
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+def rig(kind: str = "spi", odr_hz: float = 1000.0, start: bool = True, **kw):
+    clock = VirtualClock()
+    emu = EmulatedAdxl355(kw.pop("source", counter_source()), clock, **kw)
+    bus = SpiBus(FakeSpiDev(emu)) if kind == "spi" else I2cBus(FakeSMBus(emu))
+    dev = Adxl355(bus, clock=clock)
+    if start:
+        dev.probe()
+        dev.reset()
+        dev.configure(range_g=2, odr_hz=odr_hz)
+        dev.start()
+    return dev, emu, clock
+
+
+# -- decoding ---------------------------------------------------------------------------------
+def test_decode_test_vectors_from_the_datasheet():
+    raw = bytes([0x7F, 0xFF, 0xF0, 0x80, 0x00, 0x00, 0xFF, 0xFF, 0xF0, 0x00, 0x00, 0x10])
+    assert decode_counts(raw).tolist() == [524287, -524288, -1, 1]
+    assert decode_counts_naive(raw) == [524287, -524288, -1, 1]
+    assert decode_counts(raw).dtype == np.int32
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.integers(-(1 << 19), (1 << 19) - 1), min_size=3, max_size=300))
+def test_decode_inverts_encode(values):
+    vals = np.array(values[: len(values) - len(values) % 3]).reshape(-1, 3)
+    out = decode_fifo(encode_entries(vals))
+    assert np.array_equal(out.counts, vals) and out.dropped == 0 and out.carry == b""
+
+
+def test_decode_fifo_realigns_on_the_x_marker_and_carries_an_unfinished_set():
+    sets = np.arange(30).reshape(10, 3)
+    buf = encode_entries(sets)
+    out = decode_fifo(buf[6:-3])  # starts at Z of set 0, ends after Y of set 9
+    assert out.counts[:, 0].tolist() == list(range(3, 27, 3))  # sets 1..8
+    assert out.dropped == 1  # the lone Z of set 0
+    assert out.carry == buf[-9:-3]  # X, Y of set 9: their Z is still in the FIFO
+    again = decode_fifo(out.carry + buf[-3:])
+    assert again.counts.tolist() == [[27, 28, 29]]
+
+
+def test_decode_fifo_drops_empty_entries_and_broken_sets():
+    sets = np.arange(12).reshape(4, 3)
+    buf = bytearray(encode_entries(sets))
+    del buf[3:6]  # set 0 lost its Y entry
+    buf += bytes([0, 0, R.FIFO_MARK_EMPTY]) * 3
+    out = decode_fifo(bytes(buf))
+    assert out.counts[:, 0].tolist() == [3, 6, 9]
+    assert out.dropped == 2 and out.empty == 3 and out.carry == b""
+
+
+# -- probe, reset, configure -------------------------------------------------------------------
+@pytest.mark.parametrize("kind", ["spi", "i2c"])
+def test_probe_reads_ids(kind):
+    dev, _, _ = rig(kind, start=False)
+    info = dev.probe()
+    assert (info.devid_ad, info.devid_mst, info.partid, info.name) == (0xAD, 0x1D, 0xED,
+                                                                        "ADXL355")
+
+
+@pytest.mark.parametrize("level,words", [(0xFF, "all ones"), (0x00, "all zeros")])
+def test_probe_on_an_unplugged_bus_says_so(level, words):
+    dev, emu, _ = rig(start=False)
+    emu.faults.unplug(level)
+    with pytest.raises(HardwareError, match=words):
+        dev.probe()
+
+
+def test_probe_wrong_spi_mode_is_recognised_as_a_bit_shift():
+    dev, _, _ = rig(start=False)
+    dev.bus.spi.mode = 3  # someone changed the mode behind the transport's back
+    with pytest.raises(HardwareError, match="shifted by one bit"):
+        dev.probe()
+
+
+def test_probe_wrong_part_and_adxl359(caplog):
+    dev, _, _ = rig(start=False, partid=0x42)
+    with pytest.raises(HardwareError, match="PARTID reads 0x42"):
+        dev.probe()
+    dev, _emu, _ = rig(start=False, partid=R.PARTID_ADXL359)
+    with caplog.at_level(logging.WARNING):
+        assert dev.probe().name == "ADXL359"
+    assert "ADXL359" in caplog.text
+
+
+def test_probe_bus_failure_mentions_another_driver():
+    dev, emu, _ = rig(start=False)
+    emu.faults.fail_always()
+    with pytest.raises(HardwareError, match="another driver"):
+        dev.probe()
+
+
+def test_reset_polls_nvm_busy_and_gives_up_with_advice():
+    dev, _, clock = rig(start=False, nvm_busy_s=0.030)
+    t0 = clock.monotonic()
+    dev.reset()
+    assert clock.monotonic() - t0 >= 0.030  # it waited for NVM_BUSY, using the clock
+    dev, _emu, clock = rig(start=False, nvm_busy_s=10.0)
+    with pytest.raises(HardwareError, match="NVM_BUSY"):
+        dev.reset(timeout_s=0.05)
+
+
+def test_configure_programs_registers_in_standby():
+    dev, emu, _ = rig(start=False)
+    dev.configure(range_g=8, odr_hz=125, watermark=30)
+    assert emu.regs[R.ADDR["FILTER"]] == 0x05
+    assert emu.regs[R.ADDR["RANGE"]] == 0x83  # I2C_HS bit kept
+    assert emu.regs[R.ADDR["FIFO_SAMPLES"]] == 30
+    assert dev.scale_mps2 == pytest.approx(9.80665 / 64000)
+    dev.start()
+    dev.configure(range_g=2, odr_hz=4000)  # from measurement mode: standby first
+    assert emu.regs[R.ADDR["FILTER"]] == 0x00 and not emu.ignored_writes
+
+
+def test_configure_refuses_rates_ranges_watermarks_the_chip_lacks():
+    dev, _, _ = rig(start=False)
+    with pytest.raises(ConfigError, match=r"nearest: 125 Hz and 62\.5 Hz"):
+        dev.configure(odr_hz=100)
+    with pytest.raises(ConfigError):
+        dev.configure(range_g=3)
+    with pytest.raises(ConfigError, match="watermark"):
+        dev.configure(watermark=97)
+
+
+def test_configure_detects_a_write_that_did_not_stick():
+    dev, _emu, _ = rig(start=False)
+
+    class Deaf:
+        def __init__(self, bus):
+            self.bus = bus
+
+        def read(self, addr, n):
+            return self.bus.read(addr, n)
+
+        def write(self, addr, data):
+            if addr != R.ADDR["FILTER"]:
+                self.bus.write(addr, data)
+
+        def close(self):
+            pass
+
+    dev.bus = Deaf(dev.bus)
+    with pytest.raises(HardwareError, match="read back"):
+        dev.configure(odr_hz=500)
+
+
+# -- draining -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("kind", ["spi", "i2c"])
+def test_drains_deliver_every_set_in_order(kind):
+    dev, emu, clock = rig(kind, odr_hz=4000)
+    got, idx = [], 0
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        clock.advance(rng.uniform(0.0005, 0.0075))  # never longer than the FIFO lasts
+        d = dev.drain()
+        assert not d.overrun and d.index0 == idx and d.counts.dtype == np.int32
+        assert d.t_mono <= d.t_mono_end and d.t_real - d.t_mono == pytest.approx(1.7e9)
+        idx += d.n_sets
+        got.append(d.counts)
+    c = np.concatenate(got)
+    assert len(c) == emu.produced - emu.fifo_entries // 3
+    assert np.array_equal(c[:, 0], np.arange(len(c)))
+    assert np.array_equal(c[:, 2], np.arange(len(c)) + 7)
+
+
+def test_max_sets_leaves_the_rest_for_the_next_drain():
+    dev, _emu, clock = rig()
+    clock.advance(0.020)
+    a = dev.drain(max_sets=5)
+    b = dev.drain()
+    assert a.n_sets == 5 and b.index0 == 5 and b.n_sets == 15
+    assert b.counts[0, 0] == 5
+
+
+def test_overrun_is_reported_once_as_a_gap_of_unknown_size():
+    dev, _emu, clock = rig()
+    clock.advance(0.010)
+    first = dev.drain()
+    clock.advance(0.100)  # 100 sets at 1 kHz: the FIFO holds 33
+    d = dev.drain()
+    assert d.overrun and d.gap_reason == "fifo_overrun"
+    assert d.index0 == first.n_sets  # indices count received sets only
+    assert d.counts[0, 0] > first.counts[-1, 0] + 1  # the data really jumped
+    assert np.all(np.diff(d.counts[:, 0]) == 1)
+    clock.advance(0.010)
+    assert not dev.drain().overrun and dev.overruns == 1
+
+
+def test_misaligned_fifo_is_realigned_and_costs_one_set_once():
+    dev, emu, clock = rig()
+    clock.advance(0.005)
+    emu.drop_fifo_entries(1)  # someone popped an X entry
+    d = dev.drain()
+    assert d.overrun and "realigned" in d.gap_reason
+    assert d.counts[0, 0] == 1 and np.all(np.diff(d.counts[:, 0]) == 1)
+    for _ in range(5):
+        clock.advance(0.0037)
+        d2 = dev.drain()
+        assert not d2.overrun
+        assert d2.counts[0, 0] == d.counts[-1, 0] + 1
+        d = d2
+
+
+def test_partial_set_in_the_fifo_is_carried_not_lost():
+    dev, _emu, clock = rig()
+    clock.advance(0.004)
+    # Read two entries by hand (X, Y of set 0) as a foreign reader would; then the driver's
+    # drain starts on a Z entry, drops it, and everything after is intact.
+    dev.bus.read(R.ADDR["FIFO_DATA"], 6)
+    d = dev.drain()
+    assert d.dropped_entries == 1 and d.counts[0, 0] == 1
+
+
+def test_eio_once_during_a_drain_is_retried_and_flagged():
+    dev, emu, clock = rig()
+    clock.advance(0.010)
+    emu.faults.fail_next(1)
+    d = dev.drain()
+    # the retry waited 1 ms on the (virtual) clock, so a set may have arrived meanwhile
+    assert d.n_sets >= 10 and d.overrun and d.gap_reason == "bus_error"
+    assert np.array_equal(d.counts[:, 0], np.arange(d.n_sets))  # nothing was really lost
+    assert dev.bus_errors == 1
+    clock.advance(0.010)
+    assert not dev.drain().overrun
+
+
+def test_eio_always_raises_bus_error_after_the_retries():
+    dev, emu, clock = rig()
+    emu.faults.fail_always()
+    with pytest.raises(BusError):
+        dev.drain()
+    assert dev.bus_errors == dev.retries + 1
+    emu.faults.clear()
+    clock.advance(0.005)
+    d = dev.drain()
+    assert d.overrun and "bus_error" in d.gap_reason and d.n_sets >= 5
+
+
+def test_unplugged_all_ones_raises_and_recovers_after_replug():
+    dev, emu, clock = rig()
+    clock.advance(0.005)
+    dev.drain()
+    emu.faults.unplug(0xFF)
+    clock.advance(0.005)
+    with pytest.raises(HardwareError, match="FIFO_ENTRIES reads 127"):
+        dev.drain()
+    emu.faults.replug()
+    emu.power_cycle()  # it came back after losing power: standby, defaults
+    dev.recover()
+    assert emu.measuring and emu.regs[R.ADDR["FILTER"]] == 0x02
+    clock.advance(0.005)
+    d = dev.drain()
+    assert d.overrun and "recovered" in d.gap_reason and d.n_sets == 5
+
+
+def test_unplugged_all_zeros_is_found_by_the_stall_check():
+    dev, emu, clock = rig()
+    emu.faults.unplug(0x00)
+    clock.advance(0.1)
+    assert dev.drain().n_sets == 0  # zeros look like an empty FIFO at first
+    clock.advance(1.0)
+    with pytest.raises(HardwareError, match="all zeros"):
+        dev.drain()
+
+
+def test_device_that_stops_producing_raises_stalled_and_recover_restarts_it():
+    dev, emu, clock = rig()
+    clock.advance(0.01)
+    dev.drain()
+    emu.stop_producing()
+    for _ in range(4):
+        clock.advance(0.1)
+        assert dev.drain().n_sets == 0
+    clock.advance(0.2)
+    with pytest.raises(DeviceStalledError, match="no samples"):
+        dev.drain()
+    emu.resume_producing()
+    dev.recover()
+    clock.advance(0.01)
+    d = dev.drain()
+    assert d.n_sets == 10 and d.overrun
+
+
+def test_reset_by_someone_else_is_reported_as_standby():
+    dev, emu, clock = rig()
+    emu.power_cycle()
+    clock.advance(2.0)
+    with pytest.raises(DeviceStalledError, match="standby"):
+        dev.drain()
+
+
+def test_restart_after_standby_is_a_gap_and_indices_continue():
+    dev, _emu, clock = rig()
+    clock.advance(0.01)
+    n = dev.drain().n_sets
+    dev.standby()
+    dev.start()
+    clock.advance(0.01)
+    d = dev.drain()
+    assert d.overrun and d.index0 == n and "standby" in d.gap_reason
+
+
+# -- temperature, offsets, self-test -------------------------------------------------------------
+def test_temperature_and_intercept():
+    dev, _emu, _ = rig(temperature=31.0)
+    assert dev.read_temperature_c() == pytest.approx(31.0, abs=0.06)
+    dev.temp_intercept_lsb = R.TEMP_INTERCEPT_REV0
+    # the same raw value read with the Rev. 0 intercept is 33 LSB / 9.05 LSB/°C cooler
+    assert dev.read_temperature_c() == pytest.approx(31.0 - 33 / 9.05, abs=0.06)
+
+
+def test_temperature_is_reread_when_temp2_changes():
+    # raw 0x6FF → 0x700 between the burst and the TEMP2 check: the driver must read again.
+    raws = iter([0x6FF, 0x700, 0x700, 0x700])
+    temps = [R.temperature_from_raw(r) for r in (0x6FF, 0x700, 0x700, 0x700)]
+    it = iter(temps)
+    dev, _emu, _ = rig(temperature=lambda: next(it))
+    assert dev.read_temperature_raw() == 0x700
+    del raws
+
+
+def test_offsets_round_trip_and_shift_the_output():
+    dev, _emu, clock = rig(source=constant_source((1000, -500, 256000)))
+    assert dev.set_offsets(-1000, 480, -256000) == (-62, 30, -16000)
+    assert dev.get_offsets() == (-992, 480, -256000)
+    clock.advance(0.003)
+    d = dev.drain()
+    assert d.overrun  # the restart through standby cleared the FIFO
+    assert d.counts[-1].tolist() == [8, -20, 0]
+    with pytest.raises(ConfigError):
+        dev.set_offsets(1e7, 0, 0)
+
+
+def test_self_test_passes_on_a_good_part_and_fails_on_a_dead_axis():
+    dev, emu, _ = rig(source=constant_source((0, 0, 64000)))  # 1 g on Z at ±8 g
+    dev.configure(range_g=8, odr_hz=1000)
+    res = dev.self_test()
+    assert res.passed and not res.saturated
+    assert res.delta_g == pytest.approx((0.3, 0.3, 1.5), abs=1e-4)
+    assert emu.regs[R.ADDR["SELF_TEST"]] == 0
+    dev, emu, _ = rig(source=constant_source((0, 0, 0)), self_test_g=(0.3, 0.0, 1.5))
+    res = dev.self_test()
+    assert not res.passed and abs(res.delta_g[1]) < 1e-5
+
+
+def test_self_test_at_2g_with_gravity_on_z_saturates_and_says_so():
+    dev, _emu, _ = rig(source=constant_source((0, 0, 256000)))
+    res = dev.self_test()
+    assert res.saturated and not res.passed
+
+
+def test_self_test_from_standby_returns_to_standby():
+    dev, emu, _ = rig(start=False)
+    dev.probe()
+    dev.configure(range_g=4, odr_hz=500)
+    assert dev.self_test(n_samples=4).passed
+    assert not emu.measuring
