@@ -83,7 +83,7 @@ class Message:
 
 @dataclass
 class StreamStats:
-    """What the subscriber has seen of the current run, in sample and message counts."""
+    """What the subscriber has seen, in sample and message counts (summed over runs)."""
 
     run: str | None = None
     runs: int = 0
@@ -132,7 +132,8 @@ class LossTracker:
             if st.run is not None:
                 log.info("run changed from %s to %s", st.run, run)
             st.run, st.runs = run, st.runs + 1
-            st.topics.clear()
+            for ts in st.topics.values():  # counts stay cumulative over runs
+                ts.last_seq = None
             st.next_index = None
             msg.new_run = True
         ts = st.topics.setdefault(topic, TopicStats())
@@ -339,3 +340,37 @@ class Subscriber:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+# ---- command-line plumbing shared by `avard watch` and `avard record` ------------------------
+
+
+def add_client_arguments(parser: Any) -> None:
+    """ENDPOINT, --request, --server-key, --client-key, --timeout (argparse)."""
+    parser.add_argument("endpoint", metavar="ENDPOINT",
+                        help="the service's PUB endpoint, e.g. tcp://raspberrypi.local:5555")
+    parser.add_argument("--request", metavar="ENDPOINT", default=None,
+                        help="the service's request endpoint (default: PUB port + 1)")
+    parser.add_argument("--server-key", metavar="FILE", default=None,
+                        help="the service's public CURVE key (SERVER.key) when CURVE is on")
+    parser.add_argument("--client-key", metavar="FILE", default=None,
+                        help="this client's secret CURVE key file (NAME.key_secret)")
+    parser.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                        help="seconds to wait for a request reply (default 2)")
+
+
+def subscriber_from_args(args: Any, topics: Iterable[str] = frames.TOPICS) -> Subscriber:
+    """A (not yet connected) Subscriber from the arguments of :func:`add_client_arguments`."""
+    from pathlib import Path
+
+    if (args.server_key is None) != (args.client_key is None):
+        raise ConfigError("CURVE needs both --server-key (the service's NAME.key) and "
+                          "--client-key (your NAME.key_secret), or neither")
+    curve = None
+    if args.server_key is not None:
+        curve = CurveClientConfig(Path(args.server_key), Path(args.client_key))
+    request = args.request
+    if request is None and args.endpoint.startswith("tcp://"):
+        request = request_endpoint_for(args.endpoint)
+    return Subscriber(args.endpoint, topics, request_endpoint=request, curve=curve,
+                      request_timeout_s=args.timeout)

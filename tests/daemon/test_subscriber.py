@@ -31,7 +31,8 @@ def test_tracker_counts_transport_loss_service_gaps_and_restarts() -> None:
             s.samples_unexplained) == (5 * 32, 64, 100, 48)
     assert s.topics["raw"].lost == 2 and s.messages_lost == 2
     m = t.observe("raw", _raw("b", 0, 0))                        # restart: a new run
-    assert m.new_run and t.stats.runs == 2 and t.stats.topics["raw"].received == 1
+    assert m.new_run and t.stats.runs == 2 and t.stats.topics["raw"].received == 6
+    assert (m.lost, t.stats.topics["raw"].first_seq) == (0, 0)  # sequences start afresh
     t.observe("raw", _raw("b", 1, 0))                            # repeated block
     assert t.stats.samples_repeated == 32
 

@@ -1,0 +1,133 @@
+"""`avard record`: a remote stream archived in the recording format, with gaps for losses.
+
+A fake service (an XPUB socket, so the test knows when the subscription has arrived, and a
+real RequestServer answering ``header``) sends records with chosen sequence numbers, so a lost
+message is a deliberate hole, over real loopback TCP.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zmq
+from avard.core import frames as F
+from avard.core.errors import FormatError
+from avard.core.recording import RecordingReader
+from avard.daemon import cli
+from avard.daemon.publisher import RequestServer
+
+SCALE = 3.9e-6 * 9.80665
+
+
+def _header(run: str) -> dict:
+    return F.header_record(run, rate_hz=125.0, t_mono=0.0, t_real=1.7e9,
+                           scale_m_s2_per_count=SCALE, range_g=2.0, software="test")
+
+
+class FakeService:
+    def __init__(self) -> None:
+        self.ctx = zmq.Context()
+        self.pub = self.ctx.socket(zmq.XPUB)
+        self.pub.setsockopt(zmq.LINGER, 0)
+        self.pub.bind("tcp://127.0.0.1:*")
+        self.endpoint = self.pub.getsockopt_string(zmq.LAST_ENDPOINT)
+        self.run = "run-1"
+        self.server = RequestServer("tcp://127.0.0.1:*",
+                                    {"header": lambda a: _header(self.run)}).start()
+
+    def wait_subscribed(self, topics: int = 5) -> None:
+        for _ in range(topics):
+            assert self.pub.poll(10_000), "the recorder never subscribed"
+            assert self.pub.recv()[0] == 1
+
+    def send(self, topic: str, rec: dict) -> None:
+        self.pub.send_multipart([topic.encode(), F.encode(rec)])
+
+    def close(self) -> None:
+        self.server.stop()
+        self.pub.close()
+        self.ctx.term()
+
+
+def _raw(run: str, seq: int, i0: int) -> dict:
+    counts = np.full((32, 3), seq, dtype=np.int32)
+    return F.raw_record(run, seq, i0, counts, i0 / 125.0, 1.7e9 + i0 / 125.0)
+
+
+@pytest.fixture
+def service():
+    s = FakeService()
+    yield s
+    s.close()
+
+
+def _read(out: Path) -> list[dict]:
+    try:
+        return list(RecordingReader(out))
+    except FormatError:  # no segment yet
+        return []
+
+
+def _record(service: FakeService, out: Path, duration: float) -> tuple[threading.Thread, dict]:
+    result: dict = {}
+
+    def go() -> None:
+        result["rc"] = cli.main(["record", service.endpoint, "--request", service.server.endpoint,
+                                 "--out", str(out), "--duration", str(duration)])
+
+    t = threading.Thread(target=go)
+    t.start()
+    return t, result
+
+
+def test_record_archives_stream_with_gaps(service: FakeService, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "archive"
+    thread, result = _record(service, out, duration=2.5)
+    service.wait_subscribed()
+    i0 = 0
+    for seq in range(10):
+        if seq == 6:  # the service's own gap: announced, then the next block after it
+            service.send("event", F.gap_record("run-1", 0, i0, 50, 0.0, 0.0, "overrun"))
+            i0 += 50
+        if seq != 4:  # seq 4 "lost in transport"
+            service.send("raw", _raw("run-1", seq, i0))
+        if seq == 2:
+            service.send("temp", F.temp_record("run-1", 0, i0, ["plate"], [21.5], 0.0, 0.0))
+        i0 += 32
+    # wait until the archive holds run 1 (the header op answers for the current run only)
+    while sum(r["kind"] == "raw" for r in _read(out)) < 9:
+        assert thread.is_alive(), "record ended early"
+        time.sleep(0.02)
+    # the service restarts: a new run, a new header, sequences from 0
+    service.run = "run-2"
+    service.send("raw", _raw("run-2", 0, 0))
+    service.send("raw", _raw("run-2", 1, 32))
+    thread.join(30)
+    assert result["rc"] == 0
+    text = capsys.readouterr().out
+    assert "lost in transport: 1 messages, 32 samples (1 gap records)" in text
+
+    recs = list(RecordingReader(out))
+    kinds = [(r["run"], r["kind"]) for r in recs]
+    assert kinds[0] == ("run-1", "header")
+    assert ("run-2", "header") in kinds
+    gaps = [r for r in recs if r["kind"] == "gap"]
+    assert [(g["i0"], g["n"], g["reason"]) for g in gaps] == [(128, 32, "subscriber_loss"),
+                                                              (192, 50, "overrun")]
+    raws = [r for r in recs if r["kind"] == "raw"]
+    assert [int(r["counts"][0, 0]) for r in raws] == [0, 1, 2, 3, 5, 6, 7, 8, 9, 0, 1]
+    assert sum(r["kind"] == "temp" for r in recs) == 1
+    headers = [r for r in recs if r["kind"] == "header"]
+    assert all(h["scale_m_s2_per_count"] == SCALE for h in headers)
+
+
+def test_record_without_a_service_fails_clearly(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture) -> None:
+    rc = cli.main(["record", "tcp://127.0.0.1:9", "--out", str(tmp_path), "--wait", "0.3"])
+    assert rc == 2
+    assert "nothing received from tcp://127.0.0.1:9" in capsys.readouterr().err
