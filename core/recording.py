@@ -80,7 +80,10 @@ def _valid_at(buf: memoryview, pos: int, max_bytes: int) -> int | None:
         return None
     n, crc = FRAME_HEADER.unpack_from(buf, pos)
     end = pos + FRAME_HEADER.size + n
-    if n > max_bytes or end > len(buf):
+    # n == 0 is never a record (the smallest is a msgpack map of a dozen bytes), but eight zero
+    # bytes have a matching CRC: without this a zero-filled tail (ext4 after a power cut) would
+    # read as thousands of "valid" empty frames instead of one truncated tail.
+    if n == 0 or n > max_bytes or end > len(buf):
         return None
     if zlib.crc32(buf[pos + FRAME_HEADER.size:end]) & 0xFFFFFFFF != crc:
         return None
@@ -190,8 +193,8 @@ class RecordingReader:
             try:
                 rec = wire.decode(fr.payload, max_bytes=self.max_bytes)
             except FormatError as exc:
-                self._report([Problem(fr.file, fr.offset, "undecodable", len(fr.payload),
-                                      str(exc))])
+                size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
+                self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
                 continue
             yield rec
 
@@ -332,9 +335,10 @@ def replay_allan(path: str | Path, *, streaming_cls: Any = None,
             if allan is None:
                 allan = streaming_cls(3 + len(names), float(rec["rate_hz"]),
                                       names=["x", "y", "z", *names])
-            if feed is not None:
-                feed.gap()
             if rec["run"] != run or feed is None:
+                # A new run (a restart) is a segment break; a new file of the same run is not.
+                if feed is not None:
+                    feed.gap()
                 feed = AllanFeed(allan, _scale_of(rec), names)
             run = rec["run"]
         elif feed is None:
