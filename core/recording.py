@@ -291,6 +291,20 @@ class AllanFeed:
 
 
 @dataclass
+class _FallbackRecord:
+    """The fields of ``avard.core.readers.Record`` (used only if readers is unavailable)."""
+
+    accel: np.ndarray
+    rate_hz: float
+    names: list[str]
+    temperature_c: np.ndarray | None
+    temperature_names: list[str]
+    source: str
+    gyro: np.ndarray | None
+    meta: dict[str, Any]
+
+
+@dataclass
 class Block:
     """Consecutive raw samples of one raw record, converted to SI units."""
 
@@ -364,7 +378,10 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     skipped or truncated frame (``meta["problems"]``) are in ``meta``; nothing lost passes
     silently.
     """
-    from .readers import Record
+    try:
+        from .readers import Record
+    except ImportError:  # readers.py not present (partial install): same fields, plain class
+        Record = _FallbackRecord
 
     reader = RecordingReader(path, strict=strict)
     headers: list[dict[str, Any]] = []
