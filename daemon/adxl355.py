@@ -148,6 +148,11 @@ class Drain:
     fifo_entries: int = 0
     dropped_entries: int = 0
     t_mono_end: float = 0.0
+    #: True when the newest set in the FIFO at ``t_mono`` is ``counts[-1]``: all counted sets
+    #: were read and FIFO_ENTRIES was below 96 (at 96 the sync buffer may hold one more set,
+    #: so the stamp may lag the newest set read by a period). Only such drains feed the
+    #: time-base fit.
+    complete: bool = True
 
     @property
     def n_sets(self) -> int:
@@ -406,9 +411,10 @@ class Adxl355:
             self._note_gap("fifo_overrun")
             log.warning("ADXL355 FIFO overrun: an unknown number of sets was lost")
         c = len(self._carry) // 3
-        n_read = entries - (entries + c) % 3
+        n_all = entries - (entries + c) % 3
+        n_read = n_all
         if max_sets is not None:
-            n_read = min(n_read, max(3 * max_sets - c, 0))
+            n_read = min(n_all, max(3 * max_sets - c, 0))
         data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True) if n_read > 0 else b""
         dec = decode_fifo(self._carry + data)
         if dec.dropped or dec.empty:
@@ -423,7 +429,8 @@ class Adxl355:
         drain = Drain(counts=dec.counts, overrun=bool(reasons), t_mono=t_mono, t_real=t_real,
                       index0=self._next_index, gap_reason=",".join(reasons) or None,
                       status=status, fifo_entries=entries,
-                      dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end)
+                      dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end,
+                      complete=n_read == n_all and entries < R.FIFO_LOCATIONS)
         if n:
             self._next_index += n
             self._gap_reasons = []

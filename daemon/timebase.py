@@ -157,6 +157,20 @@ class TimeBase:
         self._last_t = t_mono
         self.n_points += 1
 
+    def add_drain(self, drain: object) -> bool:
+        """Feed one :class:`~avard.daemon.adxl355.Drain`; returns whether it was used.
+
+        A drain with ``overrun`` starts a new segment. A drain that is not ``complete`` (the
+        FIFO was full, so its newest set may still sit in the sync buffer, or ``max_sets``
+        left sets behind) does not give a tight index ↔ stamp pair and is skipped, as is an
+        empty one; a gap they carry is kept for the next point."""
+        self._pending_gap = getattr(self, "_pending_gap", False) or bool(drain.overrun)
+        if drain.n_sets == 0 or not getattr(drain, "complete", True):
+            return False
+        self.update(drain.last_index, drain.t_mono, gap=self._pending_gap)
+        self._pending_gap = False
+        return True
+
     def realtime_step(self, t_mono: float, t_real: float, threshold_s: float = 0.05
                       ) -> float | None:
         """Track CLOCK_REALTIME − CLOCK_MONOTONIC; return the step in s when it jumped by more
