@@ -1,0 +1,314 @@
+"""Live terminal view of a running service: rate, loss, temperatures, ADEV, fit, time to target.
+
+Subscribes to ENDPOINT (every topic), asks the request socket for the latest Allan snapshot on
+join, and redraws every ``--interval`` seconds:
+
+* rate: the service's fitted ODR and the rate at which samples arrive here;
+* samples received, lost in transport (sequence and index holes), lost in the service (gap
+  records), per-topic message counts;
+* the latest temperatures (DS18B20 and the ADXL355's own sensor), °C;
+* ADEV at a few τ with its confidence interval (from the streamed Allan snapshot);
+* the noise-term fit with intervals — the service's when its ``avar`` record carries one,
+  otherwise fitted here from the snapshot (``avard.core.fit``) — and for every coefficient an
+  estimate of how long until its interval is narrower than ``--target`` (relative half-width).
+
+Time to target: an interval's relative width scales as 1/√EDF, and the EDF at a fixed τ grows
+in proportion to the record duration T (NIST SP 1065 §5.2: EDF ≈ N/m × const for the
+overlapping estimators), so a coefficient with relative half-width w after T seconds reaches
+w_target after about T·(w / w_target)². It is an estimate: the long-τ terms (bias instability,
+rate random walk) are read at τ values whose EDF grows this way only once τ ≪ T.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import time
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+from avard.core.errors import AvardError, NetworkError
+from avard.daemon.subscriber import Message, StreamStats, add_client_arguments, subscriber_from_args
+
+log = logging.getLogger(__name__)
+
+NAME = "watch"
+HELP = "live view of a service: rate, loss, temperatures, ADEV, fit and time to target"
+
+ACCEL_CHANNELS = ("x", "y", "z")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_client_arguments(parser)
+    parser.add_argument("--interval", type=float, default=2.0, metavar="S",
+                        help="redraw every S seconds (default 2)")
+    parser.add_argument("--once", action="store_true",
+                        help="print one view as soon as an Allan snapshot is known, then exit")
+    parser.add_argument("--count", type=int, default=None, metavar="N",
+                        help="print N views, then exit")
+    parser.add_argument("--target", type=float, default=0.1, metavar="REL",
+                        help="target relative half-width of each coefficient's interval "
+                             "(default 0.1 = ±10 %%)")
+    parser.add_argument("--taus", default="0.1,1,10,100,1000", metavar="LIST",
+                        help="τ values in s to show ADEV at (nearest octave; default "
+                             "0.1,1,10,100,1000)")
+    parser.add_argument("--no-fit", action="store_true",
+                        help="do not fit here when the service sends no fit")
+    parser.add_argument("--wait", type=float, default=10.0, metavar="S",
+                        help="with --once/--count: give up when no snapshot arrives within S s")
+
+
+def fmt_duration(seconds: float) -> str:
+    """Seconds as a short human duration (s, min, h, d)."""
+    if not math.isfinite(seconds):
+        return "never"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 172800:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.1f} d"
+
+
+def time_to_target(value: float | None, lo: float | None, hi: float | None,
+                   duration_s: float, target: float) -> float | None:
+    """Seconds more until the interval's relative half-width is ≤ ``target``.
+
+    Width ∝ 1/√EDF and EDF ∝ duration, so the duration needed is T·(w/target)² with
+    w = (hi − lo) / (2·value). 0 when reached, None when it cannot be estimated.
+    """
+    if value is None or lo is None or hi is None or not value or duration_s <= 0:
+        return None
+    w = (hi - lo) / (2.0 * abs(value))
+    if not math.isfinite(w) or w < 0:
+        return None
+    return max(0.0, duration_s * (w / target) ** 2 - duration_s)
+
+
+def _unit(name: str) -> str:
+    return "m/s²" if name in ACCEL_CHANNELS else "°C"
+
+
+class WatchView:
+    """The state behind the terminal view, updated message by message."""
+
+    def __init__(self, *, target: float = 0.1, taus: tuple[float, ...] = (0.1, 1, 10, 100),
+                 fit_locally: bool = True, clock: Any = time.monotonic) -> None:
+        self.target = target
+        self.taus = taus
+        self.fit_locally = fit_locally
+        self.clock = clock
+        self.run: str | None = None
+        self.odr_hz: float | None = None
+        self.temps: dict[str, float | None] = {}
+        self.chip_temp_c: float | None = None
+        self.snapshot: dict[str, Any] | None = None
+        self.fits: dict[str, dict[str, Any]] = {}
+        self.fit_source = ""
+        self.status: dict[str, Any] = {}
+        self.events: list[str] = []
+        self._rate_t0: float | None = None
+        self._rate_n0 = 0
+        self._rate: float | None = None
+        self._samples = 0
+
+    # ---- updates --------------------------------------------------------------------------
+
+    def set_snapshot(self, snapshot: dict[str, Any] | None, fit: Any = None) -> None:
+        """A new Allan snapshot (dict of AllanSnapshot.to_dict()) and optional service fit."""
+        if not snapshot:
+            return
+        self.snapshot = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
+                         for k, v in snapshot.items()}
+        self.odr_hz = self.odr_hz or _num(snapshot.get("rate_hz"))
+        self.fits = {}
+        if isinstance(fit, dict) and fit:
+            self.fits = {"x": fit} if "terms" in fit else {
+                k: v for k, v in fit.items() if isinstance(v, dict) and "terms" in v}
+            self.fit_source = "service"
+        elif self.fit_locally:
+            self.fits = self._fit_here()
+            self.fit_source = "fitted here"
+
+    def update(self, msg: Message) -> None:
+        rec = msg.record
+        self.run = rec["run"]
+        kind = rec["kind"]
+        if kind == "raw":
+            now = self.clock()
+            self._samples += rec["n"]
+            if self._rate_t0 is None:
+                self._rate_t0, self._rate_n0 = now, self._samples
+            elif now - self._rate_t0 >= 1.0:
+                self._rate = (self._samples - self._rate_n0) / (now - self._rate_t0)
+                self._rate_t0, self._rate_n0 = now, self._samples
+            self.odr_hz = _num(rec.get("rate_hz")) or self.odr_hz
+            if rec.get("chip_temp_c") is not None:
+                self.chip_temp_c = float(rec["chip_temp_c"])
+        elif kind == "temp":
+            for name, value in zip(rec["names"], rec["values_c"], strict=False):
+                self.temps[str(name)] = value
+        elif kind == "avar":
+            self.set_snapshot(rec["snapshot"], rec.get("fit"))
+        elif kind == "status":
+            self.status = rec["status"]
+            self.odr_hz = _num(self.status.get("rate_hz")) or self.odr_hz
+        elif kind in ("event", "gap"):
+            what = rec.get("name") or f"gap of {rec.get('n')} samples ({rec.get('reason')})"
+            self.events = [*self.events[-4:], str(what)]
+
+    def _fit_here(self) -> dict[str, dict[str, Any]]:
+        """Fit each acceleration channel of the snapshot with avard.core.fit (if available)."""
+        snap = self.snapshot
+        if snap is None:
+            return {}
+        try:
+            from avard.core.fit import fit_noise
+        except ImportError:  # the analysis side is optional for a watcher
+            return {}
+        names = [str(n) for n in snap.get("names", ACCEL_CHANNELS)]
+        out = {}
+        for c, name in enumerate(names):
+            if name not in ACCEL_CHANNELS:
+                continue
+            try:
+                res = SimpleNamespace(
+                    tau=snap["tau"], m=snap["m"], stride=snap["stride"], n=snap["n"],
+                    var=snap["avar"][:, c], edf=snap["edf"][:, c], lo=snap["lo"][:, c],
+                    hi=snap["hi"][:, c], rate_hz=float(snap["rate_hz"]),
+                    ci=float(snap.get("ci", 0.683)), kind="pavar")
+                out[name] = fit_noise(res, ci=float(snap.get("ci", 0.683))).to_dict()
+            except (AvardError, KeyError, IndexError, ValueError) as exc:
+                log.debug("no fit for %s: %s", name, exc)
+        return out
+
+    # ---- rendering ------------------------------------------------------------------------
+
+    def duration_s(self) -> float:
+        snap = self.snapshot or {}
+        n, rate = _num(snap.get("n_samples")), _num(snap.get("rate_hz")) or self.odr_hz
+        return n / rate if n and rate else 0.0
+
+    def render(self, stats: StreamStats, endpoint: str = "") -> str:
+        lines = [f"avard watch {endpoint}  run {self.run or '?'}  (SI units: s, Hz, m/s², °C)"]
+        odr = f"{self.odr_hz:.4f} Hz fitted ODR" if self.odr_hz else "ODR unknown"
+        here = f"{self._rate:.1f} samples/s arriving" if self._rate else "arrival rate pending"
+        lines.append(f"rate      {odr}; {here}")
+        lines.append(
+            f"samples   {stats.samples_received} received; lost in transport "
+            f"{stats.samples_lost}; service gaps {stats.samples_service_gap}; unexplained "
+            f"{stats.samples_unexplained}")
+        lines.append("messages  " + ", ".join(
+            f"{t} {s.received} ({s.lost} lost)" for t, s in sorted(stats.topics.items()))
+            + (f"; {stats.bad_messages} undecodable" if stats.bad_messages else ""))
+        temps = [f"{k} {'—' if v is None else f'{v:.2f}'} °C" for k, v in self.temps.items()]
+        if self.chip_temp_c is not None:
+            temps.append(f"chip {self.chip_temp_c:.1f} °C")
+        lines.append("temps     " + (", ".join(temps) if temps else "none yet"))
+        if self.events:
+            lines.append("events    " + "; ".join(self.events))
+        lines.extend(self._render_adev())
+        lines.extend(self._render_fit())
+        return "\n".join(lines) + "\n"
+
+    def _render_adev(self) -> list[str]:
+        snap = self.snapshot
+        if snap is None or len(snap.get("tau", [])) == 0:
+            return ["ADEV      no Allan snapshot yet"]
+        tau = np.asarray(snap["tau"], dtype=float)
+        avar = np.atleast_2d(np.asarray(snap["avar"], dtype=float).T).T
+        lo = np.atleast_2d(np.asarray(snap.get("lo", avar), dtype=float).T).T
+        hi = np.atleast_2d(np.asarray(snap.get("hi", avar), dtype=float).T).T
+        names = [str(n) for n in snap.get("names", [f"ch{i}" for i in range(avar.shape[1])])]
+        ci = float(snap.get("ci", 0.683))
+        lines = [f"ADEV      {int(snap.get('n_samples', 0))} samples = "
+                 f"{fmt_duration(self.duration_s())}; value [{100 * ci:.1f} % interval]",
+                 "  τ [s]    " + "".join(f"{n + ' [' + _unit(n) + ']':<31}" for n in names)]
+        shown = []
+        for want in self.taus:
+            k = int(np.argmin(np.abs(np.log(tau / want))))
+            if k in shown or not 0.5 <= tau[k] / want <= 2.0:
+                continue
+            shown.append(k)
+            cells = []
+            for c in range(avar.shape[1]):
+                v, a, b = (math.sqrt(x) if x >= 0 and math.isfinite(x) else float("nan")
+                           for x in (avar[k, c], lo[k, c], hi[k, c]))
+                cells.append(f"{v:.3e} [{a:.2e}, {b:.2e}]".ljust(31))
+            lines.append(f"  {tau[k]:<9.4g}" + "".join(cells))
+        return lines
+
+    def _render_fit(self) -> list[str]:
+        if not self.fits:
+            return ["fit       none yet"]
+        T = self.duration_s()
+        lines = [f"fit       ({self.fit_source}; value [interval]; more time until ±"
+                 f"{100 * self.target:.0f} %, assuming width ∝ 1/√duration)"]
+        for ch, fit in self.fits.items():
+            lines.append(f"  {ch}:")
+            for term, est in fit.get("terms", {}).items():
+                if not isinstance(est, dict):
+                    continue
+                unit = est.get("unit", "")
+                if not est.get("present") or est.get("value") is None:
+                    hi = est.get("hi")
+                    bound = f" (< {hi:.3e} {unit})" if isinstance(hi, int | float) else ""
+                    lines.append(f"    {term:<22} not resolved{bound}")
+                    continue
+                v, a, b = est["value"], est.get("lo"), est.get("hi")
+                more = time_to_target(v, a, b, T, self.target)
+                when = ("?" if more is None else "reached" if more == 0
+                        else f"~{fmt_duration(more)} more")
+                interval = (f"[{a:.3e}, {b:.3e}]" if a is not None and b is not None
+                            else "[?]")
+                lines.append(f"    {term:<22} {v:.3e} {interval} {unit:<14} {when}")
+        return lines
+
+
+def _num(x: Any) -> float | None:
+    return float(x) if isinstance(x, int | float) and math.isfinite(x) and x > 0 else None
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        taus = tuple(float(t) for t in args.taus.split(",") if t.strip())
+    except ValueError:
+        from avard.core.errors import ConfigError
+        raise ConfigError(f"--taus {args.taus!r}: give comma-separated seconds, "
+                          "e.g. 0.1,1,10") from None
+    limit = 1 if args.once else args.count
+    view = WatchView(target=args.target, taus=taus, fit_locally=not args.no_fit)
+    sub = subscriber_from_args(args)
+    out = sys.stdout
+    clear = out.isatty() and limit is None
+    printed = 0
+    try:
+        sub.connect()
+        view.set_snapshot(sub.snapshot)
+        start = time.monotonic()
+        next_draw = start + (0 if limit else args.interval)
+        while limit is None or printed < limit:
+            msg = sub.recv(0.1)
+            if msg is not None:
+                view.update(msg)
+            now = time.monotonic()
+            if limit is not None and view.snapshot is None:
+                if now - start > args.wait:
+                    raise NetworkError(f"no Allan snapshot from {args.endpoint} within "
+                                       f"{args.wait:g} s (is the service running?)")
+                continue
+            if now >= next_draw:
+                out.write(("\x1b[H\x1b[2J" if clear else "")
+                          + view.render(sub.stats, args.endpoint) + ("" if clear else "\n"))
+                out.flush()
+                printed += 1
+                next_draw = now + args.interval
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sub.close()
+    return 0

@@ -1,0 +1,112 @@
+"""`avard watch`: the view's numbers, time-to-target, and one view over a real stream."""
+
+from __future__ import annotations
+
+import math
+import re
+import threading
+
+import numpy as np
+import pytest
+import zmq
+from avard.core import frames as F
+from avard.core.streaming import StreamingAllan
+from avard.daemon import cli
+from avard.daemon.commands.watch import WatchView, fmt_duration, time_to_target
+from avard.daemon.publisher import RequestServer
+from avard.daemon.subscriber import StreamStats
+
+RATE = 125.0
+SIGMA = 1e-3  # m/s² white noise per sample → VRW = σ/√rate
+
+
+def _snapshot(n: int = 1 << 15, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    sa = StreamingAllan(4, RATE, names=["x", "y", "z", "plate"])
+    y = rng.normal(0.0, SIGMA, size=(n, 4))
+    y[:, 3] += 21.0
+    sa.update(y)
+    return sa.snapshot().to_dict()
+
+
+def test_time_to_target_scales_with_duration() -> None:
+    # ±20 % after 1000 s: ±10 % needs 4× the duration, i.e. 3000 s more
+    assert time_to_target(1.0, 0.8, 1.2, 1000.0, 0.1) == pytest.approx(3000.0)
+    assert time_to_target(1.0, 0.95, 1.05, 1000.0, 0.1) == 0.0
+    assert time_to_target(None, None, None, 1000.0, 0.1) is None
+    assert time_to_target(1.0, 0.8, 1.2, 0.0, 0.1) is None
+    assert fmt_duration(3000.0) == "50 min" and fmt_duration(90) == "90 s"
+    assert fmt_duration(7.2e4) == "20.0 h" and fmt_duration(math.inf) == "never"
+
+
+def test_view_with_a_service_fit() -> None:
+    snap = _snapshot(1 << 12)
+    T = snap["n_samples"] / RATE
+    fit = {"terms": {
+        "velocity_random_walk": {"value": 1e-4, "lo": 0.8e-4, "hi": 1.2e-4,
+                                 "unit": "m/s/sqrt(s)", "present": True},
+        "bias_instability": {"value": None, "lo": None, "hi": 3e-6, "unit": "m/s^2",
+                             "present": False}}}
+    view = WatchView(target=0.1, taus=(0.1, 1.0))
+    view.set_snapshot(snap, fit)
+    text = view.render(StreamStats(), "tcp://h:1")
+    line = next(ln for ln in text.splitlines() if "velocity_random_walk" in ln)
+    assert f"~{fmt_duration(3 * T)} more" in line and "1.000e-04 [8.000e-05, 1.200e-04]" in line
+    assert re.search(r"bias_instability\s+not resolved \(< 3\.000e-06 m/s\^2\)", text)
+    assert "(service;" in text
+    # ADEV rows at the octaves nearest 0.1 s and 1 s, with the snapshot's numbers
+    tau = np.asarray(snap["tau"])
+    k = int(np.argmin(np.abs(np.log(tau / 1.0))))
+    adev_x = math.sqrt(snap["avar"][k][0])
+    row = next(ln for ln in text.splitlines() if ln.strip().startswith(f"{tau[k]:.4g} "))
+    assert f"{adev_x:.3e}" in row
+
+
+def test_view_fits_locally_without_a_service_fit() -> None:
+    view = WatchView(target=0.1)
+    view.set_snapshot(_snapshot())
+    vrw = view.fits["x"]["terms"]["velocity_random_walk"]
+    assert vrw["present"]
+    expected = SIGMA / math.sqrt(RATE)
+    assert vrw["lo"] < vrw["value"] < vrw["hi"]
+    assert abs(vrw["value"] - expected) / expected < 0.05
+    assert "(fitted here;" in view.render(StreamStats())
+
+
+def test_watch_once_over_a_real_stream(capsys: pytest.CaptureFixture) -> None:
+    ctx = zmq.Context()
+    pub = ctx.socket(zmq.XPUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    pub.bind("tcp://127.0.0.1:*")
+    endpoint = pub.getsockopt_string(zmq.LAST_ENDPOINT)
+    srv = RequestServer("tcp://127.0.0.1:*", {"header": lambda a: {}}).start()
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.setdefault("rc", cli.main(
+        ["watch", endpoint, "--request", srv.endpoint, "--once", "--timeout", "0.5",
+         "--wait", "20", "--target", "0.05"])))
+    thread.start()
+    try:
+        for _ in range(5):
+            assert pub.poll(10_000), "watch never subscribed"
+            pub.recv()
+        send = lambda topic, rec: pub.send_multipart([topic.encode(), F.encode(rec)])  # noqa: E731
+        for seq in range(4):
+            if seq != 2:
+                counts = np.zeros((32, 3), dtype=np.int32)
+                send("raw", F.raw_record("run-w", seq, 32 * seq, counts, 0.0, 0.0,
+                                         rate_hz=125.0007, chip_temp_c=24.25))
+        send("temp", F.temp_record("run-w", 0, 100, ["plate", "air"], [21.5, None], 0.0, 0.0))
+        send("avar", F.avar_record("run-w", 0, 128, 1 << 15, _snapshot(), 0.0, 0.0))
+        thread.join(60)
+    finally:
+        srv.stop()
+        pub.close()
+        ctx.term()
+    assert result["rc"] == 0
+    out = capsys.readouterr().out
+    assert "run run-w" in out and "125.0007 Hz fitted ODR" in out
+    assert "96 received; lost in transport 32" in out
+    assert "raw 3 (1 lost)" in out
+    assert "plate 21.50 °C, air — °C, chip 24.2 °C" in out
+    assert "x [m/s²]" in out and "plate [°C]" in out
+    assert re.search(r"velocity_random_walk\s+\d\.\d{3}e-05 \[", out)
