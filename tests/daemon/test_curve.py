@@ -132,3 +132,20 @@ def test_request_server_with_curve(keys: dict) -> None:
         finally:
             good.close()
             bad.close()
+
+
+def test_keys_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from avard.daemon import cli
+
+    out = tmp_path / "k"
+    assert cli.main(["keys", "--out", str(out), "--name", "pi", "--name", "laptop"]) == 0
+    text = capsys.readouterr().out
+    for name in ("pi", "laptop"):
+        public, secret = load_secret_key(out / f"{name}.key_secret")
+        assert _mode(out / f"{name}.key_secret") == 0o600
+        assert public.decode() not in text and secret.decode() not in text
+        assert str(out / f"{name}.key") in text
+    assert 'server_secret_key_file = "' in text
+    # a second run refuses to overwrite and says so
+    assert cli.main(["keys", "--out", str(out), "--name", "pi"]) == 2
+    assert "never overwrites" in capsys.readouterr().err
