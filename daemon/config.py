@@ -118,7 +118,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "curve": {
         "enabled": Key(bool, False, doc="CURVE-encrypt and authenticate both sockets"),
-        "server_secret_file": Key(str, "", doc="server secret key (from `avard keys`)"),
+        "server_secret_key_file": Key(str, "", doc="server secret key (from `avard keys`)"),
         "authorized_keys_dir": Key(str, "", doc="directory of authorised client public keys"),
     },
     "service": {
@@ -188,11 +188,9 @@ def _check_endpoints(cfg: dict[str, dict[str, Any]], problems: list[str]) -> Non
         if parts.scheme != "tcp":
             continue
         host = parts.hostname or ""
-        try:
-            port = parts.port
-        except ValueError:
-            port = None
-        if not port:
+        port_text = parts.netloc.rpartition(":")[2]
+        # "*" or 0: an ephemeral port chosen at bind time (tests, several instances)
+        if not (port_text == "*" or (port_text.isdigit() and int(port_text) < 65536)):
             problems.append(f"publish.{key} = {ep!r}: a tcp endpoint needs a port "
                             "(tcp://127.0.0.1:5555)")
         if host in ("localhost",):
@@ -205,11 +203,11 @@ def _check_endpoints(cfg: dict[str, dict[str, Any]], problems: list[str]) -> Non
             problems.append(f"publish.{key} = {ep!r}: binds beyond loopback; set "
                             "publish.allow_remote = true to do that on purpose (and consider "
                             "[curve] enabled = true)")
-    if pub["endpoint"] == pub["request_endpoint"]:
+    if pub["endpoint"] == pub["request_endpoint"] and not pub["endpoint"].endswith((":0", ":*")):
         problems.append("publish.endpoint and publish.request_endpoint are the same; "
                         "give the request socket its own port")
     if cfg["curve"]["enabled"]:
-        for key in ("server_secret_file", "authorized_keys_dir"):
+        for key in ("server_secret_key_file", "authorized_keys_dir"):
             if not cfg["curve"][key]:
                 problems.append(f"curve.{key} is empty: with curve.enabled = true it must "
                                 "name the file/directory made by `avard keys`")

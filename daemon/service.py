@@ -421,7 +421,10 @@ class Service:
         if self.recorder is not None:
             st["disk"] = self.recorder.status()
         if self.publisher is not None:
-            ps = self.publisher.stats()
+            try:
+                ps = self.publisher.stats()
+            except Exception:  # closing under us at shutdown: no numbers, no crash
+                ps = {}
             st["subscribers"] = ps.get("peers", 0)
             st["published"] = ps.get("sent", 0)
             st["publish_dropped"] = ps.get("dropped", 0)
@@ -541,7 +544,9 @@ class Service:
         return feed.fed - n0
 
     # -- lifecycle ----------------------------------------------------------------------
-    def start(self) -> None:
+    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+        """Build the consumers and start every thread; ``before_acquisition`` runs once the
+        sockets are bound and before the first drain (a subscriber can connect then)."""
         cfg = self.cfg
         self._restart_gap: tuple[int, int, float] | None = None
         if cfg["recording"]["enabled"]:
@@ -586,6 +591,8 @@ class Service:
                                   name=f"avard-ds18b20-{src.name}", daemon=True)
             th.start()
             self._temp_threads.append(th)
+        if before_acquisition is not None:
+            before_acquisition()
         self.acq.start()
         log.info("run %s started: ADXL355 %g Hz, ±%d g, drained at %g Hz; temperature "
                  "channels %s", self.run_id, self.odr, cfg["sensor"]["range_g"], poll,
@@ -629,9 +636,10 @@ class Service:
             if w.error is not None:
                 raise AvardError(f"the {w.name} thread stopped: {w.error}")
 
-    def run(self, duration_s: float | None = None, *, tick_s: float = 0.05) -> int:
+    def run(self, duration_s: float | None = None, *, tick_s: float = 0.05,
+            before_acquisition: Callable[[], None] | None = None) -> int:
         """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop."""
-        self.start()
+        self.start(before_acquisition)
         n = self.notifier
         wd = n.watchdog_interval_s() if n is not None else None
         next_wd = time.monotonic()
@@ -678,11 +686,13 @@ class Service:
             th.join(2.0)
         for w in self.workers:  # Allan first: its final snapshot/checkpoint are ring marks
             w.stop()
+        self.final_status = self.status()
+        log.info("run %s stopped: %s", self.run_id, self.status_line())
         if self.request_server is not None:
             self.request_server.stop()
         if self.publisher is not None:
             self.publisher.close()
-        log.info("run %s stopped: %s", self.run_id, self.status_line())
+            self.publisher = None
 
     def install_signals(self) -> None:
         """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording (main thread only)."""
