@@ -431,9 +431,9 @@ class Adxl355:
                       status=status, fifo_entries=entries,
                       dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end,
                       complete=n_read == n_all and entries < R.FIFO_LOCATIONS)
+        self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:
             self._next_index += n
-            self._gap_reasons = []
             self._last_data_t = t_mono
         elif self._measuring and self._last_data_t is not None \
                 and t_mono - self._last_data_t > self.stall_timeout_s:

@@ -130,10 +130,20 @@ class TimeBase:
         self._last_index = 0.0
         self._last_t: float | None = None
         self._last_real_offset: float | None = None
+        self._pending_gap = False
         self.n_points = 0
 
     # -- feeding ----------------------------------------------------------------------------
-    def update(self, last_index: int, t_mono: float, *, gap: bool = False) -> None:
+    def update(self, last_index: int, t_mono: float, *, gap: bool = False,
+               exact: bool = True) -> bool:
+        """Add the pair (index of the newest set read, drain stamp); returns whether it was
+        used. ``exact=False`` (``Drain.complete`` false: the FIFO was full, so a newer set may
+        have been left in the sync buffer) skips the point but keeps ``gap`` for the next."""
+        gap = gap or self._pending_gap
+        if not exact and self._seg is not None:  # the very first point is used regardless
+            self._pending_gap = gap
+            return False
+        self._pending_gap = False
         if self._last_t is not None and self.memory_s:
             f = math.exp(-max(t_mono - self._last_t, 0.0) / self.memory_s)
             if self._seg is not None:
@@ -156,6 +166,7 @@ class TimeBase:
         self._last_index = float(last_index)
         self._last_t = t_mono
         self.n_points += 1
+        return True
 
     def add_drain(self, drain: object) -> bool:
         """Feed one :class:`~avard.daemon.adxl355.Drain`; returns whether it was used.
@@ -164,12 +175,11 @@ class TimeBase:
         FIFO was full, so its newest set may still sit in the sync buffer, or ``max_sets``
         left sets behind) does not give a tight index ↔ stamp pair and is skipped, as is an
         empty one; a gap they carry is kept for the next point."""
-        self._pending_gap = getattr(self, "_pending_gap", False) or bool(drain.overrun)
-        if drain.n_sets == 0 or not getattr(drain, "complete", True):
+        if drain.n_sets == 0:
+            self._pending_gap = self._pending_gap or bool(drain.overrun)
             return False
-        self.update(drain.last_index, drain.t_mono, gap=self._pending_gap)
-        self._pending_gap = False
-        return True
+        return self.update(drain.last_index, drain.t_mono, gap=bool(drain.overrun),
+                           exact=bool(getattr(drain, "complete", True)))
 
     def realtime_step(self, t_mono: float, t_real: float, threshold_s: float = 0.05
                       ) -> float | None:
