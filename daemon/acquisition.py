@@ -140,7 +140,8 @@ class Acquisition:
             self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun")
         if n:
             i0 = self.next_index
-            self.tb.update(i0 + n - 1, t_mono, gap=bool(getattr(d, "overrun", False)))
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(getattr(d, "overrun", False)),
+                           exact=bool(getattr(d, "complete", True)))
             times = self.tb.timestamps(i0, n)
             self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
             self.next_index += n
