@@ -48,6 +48,7 @@ __all__ = [
     "chi2_interval",
     "edf_greenhall",
     "finish_result",
+    "grid_sums",
     "identify_alpha",
     "oavar",
     "ohvar",
@@ -170,15 +171,62 @@ class DifferenceSums:
         self.lag += other.lag
 
 
+def grid_sums(q: NDArray, sp: int, h: int, sums: Sequence[DifferenceSums], d: int) -> None:
+    """Add the sums of phase differences of orders 1 … d taken on one stride grid.
+
+    ``q`` (L, C) holds phase points X on a grid of constant stride (consecutive rows are
+    ``stride`` samples apart), int64 (exact) or float64; rows from index ``h`` on are new.
+    With sp = m / stride, the order-o difference is computed recursively,
+    E_j = q[j+sp] − q[j] (o = 1, m times the m-average of the rate) and
+    Q^o_j = Q^{o−1}_{j+sp} − Q^{o−1}_j, for j ∈ [0, L − o·sp). A difference is added to
+    ``sums[o−1]`` when it is new (its last point j + o·sp ≥ h), and so is the lag-m product
+    Q^o_{j−sp}·Q^o_j of a new Q^o_j with j ≥ sp. The recursion gives the same numbers for any
+    split of the grid into blocks, which is what makes streaming equal batch.
+    Works in chunks of j so that memory stays bounded on long records.
+    """
+    length = q.shape[0]
+    n_e = length - sp  # number of first differences E
+    if n_e <= 0:
+        return
+    chunk = max(_CHUNK, sp)
+    a = max(0, h - d * sp)
+    while a < n_e:
+        b = min(n_e, a + chunk)
+        lo = max(0, a - sp)  # lag partners of the chunk's first differences
+        hi = min(n_e, b + (d - 1) * sp)  # E needed to build order d up to b
+        arr = q[lo + sp : hi + sp] - q[lo:hi]
+        if arr.dtype != np.float64:
+            arr = arr.astype(np.float64)  # exact: integer differences are far below 2**53
+        ones = np.ones(b - lo)
+        for o in range(1, d + 1):
+            if o > 1:
+                arr = arr[sp:] - arr[:-sp]  # covers j ∈ [lo, hi − (o−1)·sp)
+            s = sums[o - 1]
+            new0 = max(a, h - o * sp, 0)
+            new1 = min(b, length - o * sp)
+            if new1 <= new0:
+                continue
+            rows = arr[new0 - lo : new1 - lo]
+            s.n += new1 - new0
+            s.s1 += ones[: new1 - new0] @ rows
+            s.s2 += rows.T @ rows
+            l0 = max(new0, sp)
+            if l0 < new1:
+                s.nl += new1 - l0
+                s.lag += arr[l0 - sp - lo : new1 - sp - lo].T @ arr[l0 - lo : new1 - lo]
+        a = b
+
+
 def difference_sums(
     p: NDArray, spacing: int, step: int, d: int, first: int, lag: int,
     out: DifferenceSums,
 ) -> None:
     """Add the sums of d-th differences D_j = Σ_k c_k p[j + k·spacing] to ``out``.
 
+    The general (slower) form of ``grid_sums`` for a stride that does not divide m:
     j runs over first, first+step, … while j + d·spacing < len(p); entries of the same grid
-    before ``first`` (already counted) only serve as lag partners. Lagged pairs are
-    (D_j, D_{j+lag·step}). ``p`` is (L, C), int64 (exact differences) or float64.
+    before ``first`` only serve as lag partners. Lagged pairs are (D_j, D_{j+lag·step}).
+    ``p`` is (L, C), int64 (exact differences) or float64.
     """
     length = p.shape[0]
     last = length - 1 - d * spacing
@@ -201,7 +249,7 @@ def difference_sums(
         dd = diff.astype(np.float64, copy=False)
         new = dd[back:]
         out.n += new.shape[0]
-        out.s1 += new.sum(axis=0)
+        out.s1 += np.ones(new.shape[0]) @ new
         out.s2 += new.T @ new
         u0 = max(back, lag)
         if u0 < dd.shape[0]:
@@ -375,9 +423,12 @@ def allan_variance(
         p = segment_phase(seg, is_int)
         for k, m in enumerate(ms):
             st = int(strides[k])
-            lag = max(1, round(int(m) / st))
-            for order in range(1, d + 1):
-                difference_sums(p, int(m), st, order, 0, lag, sums[k][order - 1])
+            if int(m) % st == 0:
+                grid_sums(p[::st], int(m) // st, 0, sums[k], d)
+            else:  # lag-1 ACF pairs then sit round(m/stride) strides apart
+                lag = max(1, round(int(m) / st))
+                for order in range(1, d + 1):
+                    difference_sums(p, int(m), st, order, 0, lag, sums[k][order - 1])
     return finish_result(kind, rate_hz, ms, strides, sums, ci=ci, alpha=alpha,
                          one_d=one_d, names=names)
 
