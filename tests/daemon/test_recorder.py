@@ -1,0 +1,167 @@
+"""The segment writer: rotation, fsync, disk full (injected ENOSPC), retention, SIGHUP."""
+
+from __future__ import annotations
+
+import errno
+import os
+from pathlib import Path
+
+import numpy as np
+from avard.core import frames
+from avard.core.recording import RecordingReader
+from avard.daemon.recorder import FileOps, Recorder
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class FaultyOps(FileOps):
+    """Real files, with a switchable full disk and counted fsyncs."""
+
+    def __init__(self) -> None:
+        self.full = False
+        self.fsyncs = 0
+        self.partial = True
+
+    def write(self, f, data: bytes) -> None:  # type: ignore[no-untyped-def]
+        if self.full:
+            if self.partial:  # a real ENOSPC can leave part of the write behind
+                f.write(data[: len(data) // 2])
+                f.flush()
+            raise OSError(errno.ENOSPC, "No space left on device")
+        super().write(f, data)
+
+    def fsync(self, f) -> None:  # type: ignore[no-untyped-def]
+        self.fsyncs += 1
+        super().fsync(f)
+
+    def free_bytes(self, directory: Path) -> int:
+        return 0 if self.full else 10**12
+
+
+def _header() -> dict:
+    return frames.header_record("run1", rate_hz=125.0, t_mono=0.0, t_real=1.7e9,
+                                scale_m_s2_per_count=1e-5)
+
+
+def _raw(i0: int, n: int = 10) -> dict:
+    counts = np.arange(i0 * 3, (i0 + n) * 3, dtype=np.int32).reshape(n, 3)
+    return frames.raw_record("x", 0, i0, counts, i0 / 125, 1.7e9 + i0 / 125)
+
+
+def _make(tmp: Path, clock: Clock, wall: Clock, ops: FileOps | None = None, **kw) -> Recorder:
+    return Recorder(tmp, "run1", _header, clock=clock, wall=wall,
+                    realtime=lambda: 1.7e9 + clock.t, fileops=ops, **kw)
+
+
+def test_rotation_each_segment_self_describing(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    rec = _make(tmp_path, clock, wall, segment_s=10.0)
+    for k in range(30):
+        clock.t = k
+        assert rec.write(_raw(10 * k))
+    rec.close()
+    segs = sorted(tmp_path.glob("*.avr"))
+    assert len(segs) == 3
+    for seg in segs:
+        kinds = [r["kind"] for r in RecordingReader(seg)]
+        assert kinds[0] == "header" and kinds.count("header") == 1
+    idx = [r["i0"] for r in RecordingReader(tmp_path) if r["kind"] == "raw"]
+    assert idx == [10 * k for k in range(30)]
+
+
+def test_fsync_at_the_configured_interval(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    ops = FaultyOps()
+    rec = _make(tmp_path, clock, wall, ops, fsync_interval_s=5.0)
+    for k in range(101):
+        wall.t = k * 0.1          # 10 s of wall time
+        rec.write(_raw(10 * k))
+    assert ops.fsyncs == 2          # at 5 s and 10 s, not per record
+    wall.t = 10.05
+    rec.write(_raw(2000))
+    assert ops.fsyncs == 2
+    rec.close()
+    assert ops.fsyncs == 3          # and on close, so nothing written is left unsynced
+
+
+def test_disk_full_pauses_then_resumes_with_a_gap(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    ops = FaultyOps()
+    rec = _make(tmp_path, clock, wall, ops, retry_s=1.0)
+    for k in range(5):
+        assert rec.write(_raw(10 * k))
+    ops.full = True
+    for k in range(5, 12):
+        wall.t += 0.5
+        assert not rec.write(_raw(10 * k))
+    assert rec.disk_full and rec.status()["state"] == "disk_full"
+    assert rec.samples_lost == 70
+    ops.full = False
+    wall.t += 2.0
+    for k in range(12, 15):
+        assert rec.write(_raw(10 * k))
+    rec.close()
+    reader = RecordingReader(tmp_path)
+    recs = list(reader)
+    assert reader.problems == []      # the half-written frame was cut off again
+    gaps = [r for r in recs if r["kind"] == "gap"]
+    assert [(g["i0"], g["n"], g["reason"]) for g in gaps] == [(50, 70, "disk_full")]
+    raw = [r["i0"] for r in recs if r["kind"] == "raw"]
+    assert raw == [0, 10, 20, 30, 40, 120, 130, 140]
+    assert len(list(tmp_path.glob("*.avr"))) == 2   # resumed in a new segment
+
+
+def test_min_free_bytes_counts_as_full(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+
+    class Low(FileOps):
+        def free_bytes(self, directory: Path) -> int:
+            return 1000
+
+    rec = _make(tmp_path, clock, wall, Low(), min_free_bytes=1 << 20)
+    assert not rec.write(_raw(0))
+    assert rec.disk_full
+
+
+def test_retention_by_size_and_age_never_deletes_open_segment(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    old = tmp_path / "20000101T000000Z_old_0000.avr"
+    old.write_bytes(b"x" * 100)
+    os.utime(old, (1.0, 1.0))
+    rec = _make(tmp_path, clock, wall, segment_s=10.0, retention_days=1.0)
+    rec.write(_raw(0))
+    assert not old.exists() and rec.deleted == [old.name]
+    rec.close()
+    clock2, wall2 = Clock(), Clock()
+    rec2 = Recorder(tmp_path / "b", "r", _header, segment_s=1.0, retention_max_bytes=3000,
+                    clock=clock2, wall=wall2, realtime=lambda: 1.7e9 + clock2.t)
+    for k in range(40):
+        clock2.t = float(k)
+        rec2.write(_raw(10 * k))
+    total = sum(p.stat().st_size for p in (tmp_path / "b").glob("*.avr"))
+    assert total <= 3000 + 2 * len(frames.encode(_raw(0))) + 400
+    assert rec2.path is not None and rec2.path.exists()
+    assert rec2.deleted
+    rec2.close()
+
+
+def test_reopen_starts_a_new_segment(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    rec = _make(tmp_path, clock, wall)
+    rec.write(_raw(0))
+    first = rec.path
+    assert first is not None
+    moved = tmp_path / "rotated.old"
+    first.rename(moved)           # logrotate moves the file away, then sends SIGHUP
+    rec.reopen()
+    clock.t = 1.0
+    rec.write(_raw(10))
+    rec.close()
+    assert rec.path is not None and rec.path.exists() and rec.path != first
+    assert [r["kind"] for r in RecordingReader(rec.path)] == ["header", "raw"]
