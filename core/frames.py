@@ -19,7 +19,7 @@ index (``i0``, ``n``: the half-open range ``[i0, i0 + n)``) is the truth for ord
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import msgpack
@@ -61,8 +61,8 @@ MAX_DEPTH = 32
 MAX_NODES = 1_000_000
 
 _ARRAY_KEYS = frozenset({"dtype", "shape", "data"})
+_MISSING = object()
 _INT = int
-_NUM = (int, float)
 
 
 # --------------------------------------------------------------------------------------------
@@ -160,24 +160,32 @@ OPTIONAL: dict[str, dict[str, str]] = {
 }
 
 
-def _check_type(value: Any, kind: str) -> bool:
-    if kind == "int":
-        return type(value) is int and value >= 0
-    if kind == "num":
-        return type(value) in (int, float)
-    if kind == "num|none":
-        return value is None or type(value) in (int, float)
-    if kind == "str":
-        return isinstance(value, str)
-    if kind == "map":
-        return isinstance(value, dict)
-    if kind == "map|none":
-        return value is None or isinstance(value, dict)
-    if kind == "list":
-        return isinstance(value, list)
-    if kind == "array":
-        return is_packed_array(value) or isinstance(value, np.ndarray)
-    raise AssertionError(kind)
+def _is_array(v: Any) -> bool:
+    return isinstance(v, np.ndarray) or is_packed_array(v)
+
+
+# One predicate per type name; validate() runs on every published record, so these stay cheap.
+_TYPE_CHECKS: dict[str, Callable[[Any], bool]] = {
+    # numpy scalars are accepted on the way out (msgpack gets them as plain numbers); bool is
+    # never a number here
+    "int": lambda v: (type(v) is int or isinstance(v, np.integer)) and v >= 0,
+    "num": lambda v: (type(v) is int or isinstance(v, float | np.integer | np.floating)),
+    "num|none": lambda v: v is None or isinstance(v, float | np.integer | np.floating)
+    or type(v) is int,
+    "str": lambda v: type(v) is str,
+    "map": lambda v: isinstance(v, dict),
+    "map|none": lambda v: v is None or isinstance(v, dict),
+    "list": lambda v: isinstance(v, list),
+    "array": _is_array,
+}
+# (field, predicate, type name, required) per kind, common fields first
+_CHECKS: dict[str, list[tuple[str, Callable[[Any], bool], str, bool]]] = {
+    kind: [(name, _TYPE_CHECKS[typ], typ, req)
+           for fields, req in ((_COMMON, True), (SCHEMA[kind], True),
+                               (OPTIONAL.get(kind, {}), False))
+           for name, typ in fields.items()]
+    for kind in SCHEMA
+}
 
 
 def validate(record: Mapping[str, Any]) -> None:
@@ -192,18 +200,17 @@ def validate(record: Mapping[str, Any]) -> None:
             f"{kind} record has format version {record.get('v')!r}; this avard reads "
             f"version {FORMAT_VERSION} (upgrade avard to read newer recordings)"
         )
-    checks = ((_COMMON, True), (SCHEMA[kind], True), (OPTIONAL.get(kind, {}), False))
-    for fields, required in checks:
-        for name, typ in fields.items():
-            if name not in record:
-                if required:
-                    raise FormatError(f"{kind} record lacks the required field {name!r}")
-                continue
-            if not _check_type(record[name], typ):
-                raise FormatError(
-                    f"{kind} record field {name!r} should be {typ}, "
-                    f"got {type(record[name]).__name__} {_short(record[name])}"
-                )
+    for name, ok, typ, required in _CHECKS[kind]:
+        value = record.get(name, _MISSING)
+        if value is _MISSING:
+            if required:
+                raise FormatError(f"{kind} record lacks the required field {name!r}")
+            continue
+        if not ok(value):
+            raise FormatError(
+                f"{kind} record field {name!r} should be {typ}, "
+                f"got {type(value).__name__} {_short(value)}"
+            )
     if kind == "raw":
         counts = record["counts"]
         shape = counts.shape if isinstance(counts, np.ndarray) else counts["shape"]
@@ -211,8 +218,27 @@ def validate(record: Mapping[str, Any]) -> None:
             raise FormatError(
                 f"raw record: counts shape {_short(shape)} does not match n={record['n']}"
             )
-    if kind == "temp" and len(record["names"]) != len(record["values_c"]):
-        raise FormatError("temp record: names and values_c differ in length")
+        # Readers stack raw blocks as (n, 3) integer ADXL355 counts; anything else would only
+        # fail later, far from the record that caused it.
+        dtype = counts.dtype.str if isinstance(counts, np.ndarray) else counts["dtype"]
+        if not isinstance(dtype, str) or dtype not in ALLOWED_DTYPES:
+            raise FormatError(f"raw.counts: dtype {_short(dtype)} is not allowed "
+                              f"({sorted(ALLOWED_DTYPES)})")
+        if shape[1] != 3 or dtype[1] not in ("i", "u"):
+            raise FormatError(
+                f"raw record: counts must be (n, 3) integer ADXL355 counts, got dtype "
+                f"{_short(dtype)} shape {_short(shape)}"
+            )
+    if kind == "temp":
+        names, values = record["names"], record["values_c"]
+        if len(names) != len(values):
+            raise FormatError("temp record: names and values_c differ in length")
+        if not all(isinstance(n, str) for n in names) or not all(
+                v is None or type(v) in (int, float) for v in values):
+            raise FormatError(
+                f"temp record: names must be strings and values_c numbers in °C or None, got "
+                f"{_short(names)} and {_short(values)}"
+            )
 
 
 def _short(value: Any) -> str:

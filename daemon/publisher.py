@@ -109,6 +109,7 @@ class Publisher:
         self.dropped = 0
         self.peers = 0
         self.auth_failures = 0
+        self._since_monitor = 0
         try:
             if curve is not None:
                 self._curve = CurveServer(self._ctx, curve)
@@ -161,10 +162,13 @@ class Publisher:
                 self.sent += 1
             except zmq.Again:
                 self.dropped += 1
-            self._poll_monitor()
+            self._since_monitor += 1
+            if self._since_monitor >= 64:  # connection events are rare; skip the syscall
+                self._poll_monitor()
         return seq
 
     def _poll_monitor(self) -> None:
+        self._since_monitor = 0
         while self._monitor.poll(0):
             try:
                 event = parse_monitor_message(self._monitor.recv_multipart(zmq.NOBLOCK))
