@@ -122,6 +122,8 @@ class WatchView:
         """A new Allan snapshot (dict of AllanSnapshot.to_dict()) and optional service fit."""
         if not snapshot:
             return
+        if "snapshot" in snapshot:  # the request socket answers with the whole avar record
+            snapshot, fit = snapshot["snapshot"], snapshot.get("fit", fit)
         self.snapshot = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
                          for k, v in snapshot.items()}
         self.odr_hz = self.odr_hz or _num(snapshot.get("rate_hz"))

@@ -71,6 +71,11 @@ def test_view_fits_locally_without_a_service_fit() -> None:
     assert vrw["lo"] < vrw["value"] < vrw["hi"]
     assert abs(vrw["value"] - expected) / expected < 0.05
     assert "(fitted here;" in view.render(StreamStats())
+    # the request socket's answer (a whole avar record) is unwrapped the same way
+    other = WatchView()
+    other.set_snapshot(F.avar_record("r", 0, 1, 1, _snapshot(1 << 12), 0.0, 0.0,
+                                     fit={"terms": {}}))
+    assert other.fit_source == "service" and other.snapshot["n_samples"] == 1 << 12
 
 
 def test_watch_once_over_a_real_stream(capsys: pytest.CaptureFixture) -> None:
