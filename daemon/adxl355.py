@@ -415,7 +415,20 @@ class Adxl355:
         n_read = n_all
         if max_sets is not None:
             n_read = min(n_all, max(3 * max_sets - c, 0))
-        data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True) if n_read > 0 else b""
+        data = b""
+        if n_read > 0:
+            data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True)
+            # If this thread was preempted between the STATUS read and the burst, the FIFO
+            # may have overrun in between: the oldest entries (the ones just read were to
+            # follow the carried set and the previous drain) were overwritten. STATUS again
+            # tells; then the gap precedes this drain's first set and the carry is void.
+            post = self._read(A["STATUS"], 1, in_drain=True)[0]
+            if post & R.STATUS_FIFO_OVR:
+                self.overruns += 1
+                self._note_gap("fifo_overrun")
+                status |= post
+                log.warning("ADXL355 FIFO overrun during the drain: an unknown number of sets "
+                            "was lost")
         dec = decode_fifo(self._carry + data)
         if dec.dropped or dec.empty:
             self.realignments += 1

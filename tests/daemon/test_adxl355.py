@@ -379,3 +379,54 @@ def test_self_test_from_standby_returns_to_standby():
     dev.configure(range_g=4, odr_hz=500)
     assert dev.self_test(n_samples=4).passed
     assert not emu.measuring
+
+
+class Preempted:
+    """A bus that 'loses the CPU' for ``pause_s`` right after the STATUS/FIFO_ENTRIES read,
+    as a reader thread on a loaded host does."""
+
+    def __init__(self, bus, clock, pause_s):
+        self.bus, self.clock, self.pause_s = bus, clock, pause_s
+        self.armed = False
+
+    def read(self, addr, n):
+        out = self.bus.read(addr, n)
+        if self.armed and addr == R.ADDR["STATUS"] and n == 2:
+            self.clock.advance(self.pause_s)
+            self.armed = False
+        return out
+
+    def write(self, addr, data):
+        self.bus.write(addr, data)
+
+    def close(self):
+        pass
+
+
+def test_overrun_between_status_read_and_burst_is_reported_and_voids_the_carry():
+    dev, emu, clock = rig()
+    dev.bus = Preempted(dev.bus, clock, 0.2)
+    clock.advance(0.005)
+    emu.drop_fifo_entries(2)  # leaves Z of set 0 first ...
+    clock.advance(0.0005)  # ... so the drain carries X (and Y) of the newest, unfinished set
+    first = dev.drain()
+    assert first.overrun and dev._carry  # realigned, carry pending
+    clock.advance(0.004)
+    dev.bus.armed = True  # preempted for 200 ms after reading STATUS: the FIFO overruns
+    d = dev.drain()
+    assert d.overrun and "fifo_overrun" in d.gap_reason
+    assert np.all(np.diff(d.counts[:, 0]) == 1)  # the carried X was not glued to a later Y, Z
+    assert d.counts[0, 0] > first.counts[-1, 0] + 1
+    assert np.array_equal(d.counts[:, 1], -d.counts[:, 0])  # every set is a real set
+
+
+def test_a_gap_is_reported_once_even_on_a_drain_without_sets():
+    dev, _, clock = rig()
+    clock.advance(0.01)
+    dev.drain()
+    dev.standby()
+    dev.start()
+    empty = dev.drain()  # no time has passed: no sets, but the gap is said now
+    assert empty.n_sets == 0 and empty.overrun
+    clock.advance(0.01)
+    assert not dev.drain().overrun

@@ -117,3 +117,13 @@ def test_system_clock():
     a = c.monotonic()
     c.sleep(0.001)
     assert c.monotonic() > a and c.realtime() > 1.5e9
+
+
+def test_inexact_points_are_skipped_but_their_gap_is_kept():
+    tb = TimeBase(1000.0, min_span_s=0.0)
+    assert tb.update(0, 0.0)
+    assert tb.update(1000, 1.0)
+    assert not tb.update(5000, 3.0, gap=True, exact=False)  # full FIFO: stamp may lag
+    assert tb.update(6000, 4.0)  # starts the new segment the skipped point announced
+    assert tb.n_points == 3 and tb._old_segments == 1
+    assert tb.time_of(6000) == pytest.approx(4.0 - 0.5e-3)
