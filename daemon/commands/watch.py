@@ -89,7 +89,13 @@ def time_to_target(value: float | None, lo: float | None, hi: float | None,
     return max(0.0, duration_s * (w / target) ** 2 - duration_s)
 
 
-def _unit(name: str) -> str:
+_PRETTY_UNITS = {"m/s^2": "m/s²", "degC": "°C"}
+
+
+def _unit(name: str, declared: str | None = None) -> str:
+    """The channel's unit: as the snapshot declares it, else m/s² for x/y/z and °C."""
+    if declared:
+        return _PRETTY_UNITS.get(declared, declared)
     return "m/s²" if name in ACCEL_CHANNELS else "°C"
 
 
@@ -227,9 +233,13 @@ class WatchView:
         hi = np.atleast_2d(np.asarray(snap.get("hi", avar), dtype=float).T).T
         names = [str(n) for n in snap.get("names", [f"ch{i}" for i in range(avar.shape[1])])]
         ci = float(snap.get("ci", 0.683))
+        declared = [str(u) for u in snap.get("units", [])]
+        units = [_unit(n, declared[i] if i < len(declared) else None)
+                 for i, n in enumerate(names)]
         lines = [f"ADEV      {int(snap.get('n_samples', 0))} samples = "
                  f"{fmt_duration(self.duration_s())}; value [{100 * ci:.1f} % interval]",
-                 "  τ [s]    " + "".join(f"{n + ' [' + _unit(n) + ']':<31}" for n in names)]
+                 "  τ [s]    " + "".join(f"{n + ' [' + u + ']':<31}"
+                                         for n, u in zip(names, units, strict=True))]
         shown = []
         for want in self.taus:
             k = int(np.argmin(np.abs(np.log(tau / want))))
