@@ -101,3 +101,32 @@ def test_request_timeout_and_error_replies() -> None:
         assert dead.snapshot is None
     finally:
         dead.close()
+
+
+def test_garbage_from_a_publisher_is_counted_not_fatal() -> None:
+    import zmq
+
+    ctx = zmq.Context()
+    pub = ctx.socket(zmq.XPUB)
+    pub.setsockopt(zmq.LINGER, 0)
+    pub.bind(LOCAL)
+    sub = Subscriber(pub.getsockopt_string(zmq.LAST_ENDPOINT)).connect(join=False)
+    try:
+        for _ in frames_topics():
+            assert pub.poll(5000)
+            pub.recv()
+        pub.send_multipart([b"raw", b"\xc1garbage"])
+        pub.send_multipart([b"raw", b"a", b"b"])
+        pub.send_multipart([b"raw", F.encode(F.status_record("r", 0, {}, 0.0, 0.0))[:-3]])
+        pub.send_multipart([b"raw", F.encode(_raw("r", 0, 0))])
+        m = sub.recv(5.0)
+        assert m is not None and m.record["kind"] == "raw"
+        assert sub.stats.bad_messages == 3 and sub.stats.samples_received == 32
+    finally:
+        sub.close()
+        pub.close()
+        ctx.term()
+
+
+def frames_topics() -> tuple[str, ...]:
+    return F.TOPICS
