@@ -64,6 +64,7 @@ class Acquisition:
         self.overruns = 0
         self.lost_estimate = 0
         self.bus_errors = 0
+        self._consecutive_errors = 0
         self.stalled = False
         self.last_sample_t: float | None = None
         self._last_drain_t: float | None = None
@@ -130,8 +131,13 @@ class Acquisition:
                                           i0=self.next_index,
                                           detail={"error": str(exc), "count": self.bus_errors}))
             self._check_stall(t)
-            self._try_recover(t)
+            self._consecutive_errors += 1
+            # A single failed transfer costs nothing (the FIFO keeps the data); only a
+            # persistent failure or a stalled part is worth a reset, which loses the FIFO.
+            if self._consecutive_errors >= 3 or name == "stalled":
+                self._try_recover(t)
             return 0
+        self._consecutive_errors = 0
         counts = np.asarray(d.counts, dtype=np.int32)
         n = int(counts.shape[0])
         t_mono = float(getattr(d, "t_mono", self.clock.monotonic()))
@@ -180,7 +186,11 @@ class Acquisition:
         self.overruns += 1
         elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
         expected = round(elapsed * self.tb.odr_hz)
-        lost = max(1, expected - n_read)
+        # An overrun lost at least one set by definition; other gaps (a failed transfer,
+        # a realignment) may have lost none: then the gap has n = 0 but still ends the
+        # Allan segment, because continuity cannot be proven.
+        floor = 1 if "overrun" in reason else 0
+        lost = max(floor, expected - n_read)
         i0 = self.next_index
         self.next_index += lost
         self.lost_estimate += lost

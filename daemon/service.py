@@ -326,7 +326,7 @@ class Service:
 
     def __init__(self, cfg: dict[str, dict[str, Any]], sensor: Any, clock: Any, *,
                  run_id: str | None = None, speed: float | None = None,
-                 temperature_sources: list[Any] | None = None,
+                 temperature_bank: Any = None,
                  simulate: str | None = None, notifier: Any = None,
                  recorder_factory: Callable[..., Any] | None = None,
                  publisher_factory: Callable[..., Any] | None = None,
@@ -340,7 +340,8 @@ class Service:
         self.run_id = run_id or time.strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(3)
         self.speed = speed
         self.simulate = simulate
-        self.temps = list(temperature_sources or [])
+        self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
+        self._temp_ok: dict[str, bool] = {}
         self.sensor_info = dict(sensor_info or {})
         self.notifier = notifier
         self.stop_requested = threading.Event()
@@ -355,7 +356,7 @@ class Service:
         self.scale = float(getattr(sensor, "scale_mps2", 9.80665 / 256000))
         # Channels: the chip's own sensor, the DS18B20 threads, and sources that mark their
         # readings themselves (the simulated DS18B20 of --simulate).
-        self.temp_names = ["chip", *[t.name for t in self.temps],
+        self.temp_names = ["chip", *(self.bank.names if self.bank is not None else []),
                            *(extra_temperature_names or [])]
         self.data_dir = Path(cfg["recording"]["data_dir"])
         if streaming_cls is None:
@@ -375,7 +376,6 @@ class Service:
         self.request_server = None
         self.acq: Acquisition | None = None
         self.workers: list[Worker] = []
-        self._temp_threads: list[threading.Thread] = []
         self._on_tick = on_tick
         self.t_start = clock.monotonic()
         self.ready = False
@@ -586,11 +586,9 @@ class Service:
                                          "restored": self.restored or {}}))
         for w in self.workers:
             w.start()
-        for src in self.temps:
-            th = threading.Thread(target=self._temperature_loop, args=(src,),
-                                  name=f"avard-ds18b20-{src.name}", daemon=True)
-            th.start()
-            self._temp_threads.append(th)
+        if self.bank is not None:
+            self.bank.sink = self._on_temperature
+            self.bank.start()
         if before_acquisition is not None:
             before_acquisition()
         self.acq.start()
@@ -598,35 +596,25 @@ class Service:
                  "channels %s", self.run_id, self.odr, cfg["sensor"]["range_g"], poll,
                  ", ".join(self.temp_names))
 
-    def _temperature_loop(self, src: Any) -> None:
-        """One DS18B20: read (blocks ~0.75 s), stamp with the next sample index, mark."""
-        interval = float(self.cfg["temperature"]["interval_s"])
-        ok = True
-        while not self.stop_requested.is_set():
-            t0 = time.monotonic()
-            try:
-                value = src.read()
-            except AvardError as exc:
-                value = None
-                if ok:
-                    log.warning("DS18B20 %s dropped out: %s", src.name, exc)
-            t = self.clock.monotonic()
-            assert self.acq is not None
-            i0 = self.acq.stamp()
-            if value is None and ok:
-                ok = False
-                self.ring.mark(frames.event_record(self.run_id, 0, "sensor_lost", t,
-                                                   t + self.real_offset, i0=i0,
-                                                   detail={"sensor": src.name}))
-            elif value is not None and not ok:
-                ok = True
-                log.warning("DS18B20 %s is back", src.name)
-                self.ring.mark(frames.event_record(self.run_id, 0, "sensor_back", t,
-                                                   t + self.real_offset, i0=i0,
-                                                   detail={"sensor": src.name}))
-            self.ring.mark(frames.temp_record(self.run_id, 0, i0, [src.name], [value], t,
-                                              t + self.real_offset, source="ds18b20"))
-            self.stop_requested.wait(max(0.0, interval - (time.monotonic() - t0)))
+    def _on_temperature(self, reading: Any) -> None:
+        """A DS18B20 reading (from its bank thread): stamp it with the next sample index so
+        it joins the sample time base, and mark drop-outs and returns as events."""
+        if self.acq is None:
+            return
+        i0 = self.acq.stamp()
+        t = self.clock.monotonic()
+        name = reading.name
+        ok = bool(reading.ok)
+        was = self._temp_ok.get(name, True)
+        if was != ok:
+            self._temp_ok[name] = ok
+            self.ring.mark(frames.event_record(
+                self.run_id, 0, "sensor_back" if ok else "sensor_lost", t,
+                t + self.real_offset, i0=i0,
+                detail={"sensor": name, "status": reading.status, "detail": reading.detail}))
+        self.ring.mark(frames.temp_record(self.run_id, 0, i0, [name],
+                                          [reading.value_c if ok else None], t,
+                                          t + self.real_offset, source="ds18b20"))
 
     def check_threads(self) -> None:
         """Raise when a thread died (the service must stop with an error, not limp on)."""
@@ -682,8 +670,8 @@ class Service:
         self.stop_requested.set()
         if self.acq is not None:
             self.acq.stop()
-        for th in self._temp_threads:
-            th.join(2.0)
+        if self.bank is not None:
+            self.bank.stop()
         for w in self.workers:  # Allan first: its final snapshot/checkpoint are ring marks
             w.stop()
         self.final_status = self.status()
@@ -760,11 +748,13 @@ def _default_publisher(svc: Service) -> Any:
     from .publisher import Publisher
 
     p = svc.cfg["publish"]
-    return Publisher(p["endpoint"], svc.run_id, hwm=p["hwm"], curve=_curve(svc))
+    return Publisher(p["endpoint"], svc.run_id, hwm=p["hwm"], curve=_curve(svc),
+                     allow_remote=p["allow_remote"])
 
 
 def _default_request_server(svc: Service) -> Any:
     from .publisher import RequestServer
 
     return RequestServer(svc.cfg["publish"]["request_endpoint"], svc.handlers(),
-                         curve=_curve(svc)).start()
+                         curve=_curve(svc),
+                         allow_remote=svc.cfg["publish"]["allow_remote"]).start()

@@ -11,6 +11,7 @@ reader thread's sleeps, so ``--speed`` never causes overruns from host schedulin
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,6 +38,7 @@ class SimulatedSensors:
     service: Any = None
     _next: float = field(default=0.0)
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
+    _lost: set[str] = field(default_factory=set)
 
     batch: int = 4096
     _buf: Any = None
@@ -69,10 +71,15 @@ class SimulatedSensors:
             return
         self._next = t_mono + self.interval_s
         values = []
-        for name, v in zip(self.names, (self.plate_c, self.ambient_c), strict=True):
-            values.append(None if name in self.fail
-                          else round(v / DS18B20_LSB_C) * DS18B20_LSB_C)
         i0 = svc.acq.stamp()
+        for name, v in zip(self.names, (self.plate_c, self.ambient_c), strict=True):
+            lost = name in self.fail
+            values.append(None if lost else round(v / DS18B20_LSB_C) * DS18B20_LSB_C)
+            if lost != (name in self._lost):
+                (self._lost.add if lost else self._lost.discard)(name)
+                svc.ring.mark(frames.event_record(
+                    svc.run_id, 0, "sensor_lost" if lost else "sensor_back", t_mono,
+                    t_mono + svc.real_offset, i0=i0, detail={"sensor": name}))
         svc.ring.mark(frames.temp_record(svc.run_id, 0, i0, list(self.names), values, t_mono,
                                          t_mono + svc.real_offset, source="ds18b20-sim"))
 
@@ -88,7 +95,9 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
     sim_cfg = make_config(preset, odr_hz=float(s["odr_hz"]), range_g=int(s["range_g"]))
     sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
                             interval_s=float(cfg["temperature"]["interval_s"]))
-    clock = VirtualClock()
+    # CLOCK_REALTIME of the simulation starts at the host's real time, so that restarts of a
+    # simulated service see the real time between them.
+    clock = VirtualClock(epoch=time.time() - 1000.0)
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)

@@ -82,30 +82,33 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
     dev.reset()
     dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
     dev.start()
-    temps = _ds18b20_sources(cfg)
-    return Service(cfg, dev, SystemClock(), temperature_sources=temps, notifier=notifier,
+    bank = _ds18b20_bank(cfg)
+    return Service(cfg, dev, SystemClock(), temperature_bank=bank, notifier=notifier,
                    sensor_info={"device": info.name, "partid": info.partid,
                                 "revid": info.revid, "bus": s["bus"]}, **service_kw)
 
 
-def _ds18b20_sources(cfg: dict[str, dict[str, Any]]) -> list[Any]:
+def _ds18b20_bank(cfg: dict[str, dict[str, Any]]) -> Any:
+    """The DS18B20 reader threads for the configured (or every present) sensor."""
     t = cfg["temperature"]
     if not t["ds18b20"]:
-        return []
-    try:
-        from avard.daemon import ds18b20
-    except ImportError:
-        log.warning("DS18B20 support is not installed; temperatures from the chip only")
-        return []
-    found = ds18b20.discover(t["ids"] or None)
-    missing = sorted(set(t["ids"]) - {s.name for s in found})
+        return None
+    from avard.daemon import ds18b20
+
+    present = ds18b20.discover()
+    wanted = [ds18b20.normalise_id(i) for i in t["ids"]]
+    missing = sorted(set(wanted) - set(present))
     if missing and t["required"]:
         raise HardwareError(f"DS18B20 {', '.join(missing)} not found on the 1-Wire bus; check "
                             "the wiring and dtoverlay=w1-gpio, or set temperature.required = "
                             "false")
     if missing:
-        log.warning("DS18B20 %s not found; starting without them", ", ".join(missing))
-    return found
+        log.warning("DS18B20 %s not found now; reading them anyway (they may appear)",
+                    ", ".join(missing))
+    ids = wanted or present
+    if not ids:
+        return None
+    return ds18b20.Ds18b20Bank([f"28-{i}" for i in ids], interval_s=float(t["interval_s"]))
 
 
 def run(args: argparse.Namespace) -> int:
