@@ -195,7 +195,11 @@ class AllanWorker(Worker):
                                            self._t, self._t + self.svc.real_offset)
             rec["feed"] = feed_state(self.feed)
         self.svc.ring.mark(rec)
-        self.svc.save_state(rec)
+        if not self.svc.cfg["recording"]["enabled"]:
+            self.svc.save_state(rec)
+        # With a recording, the recorder saves the state file once the checkpoint record
+        # (and every sample before it) is written and fsynced: a checkpoint never covers
+        # samples the recording lost in a crash, so restore + replay equals the recording.
 
     def finish(self) -> None:
         self.svc.ring.mark(self.snapshot_record())
@@ -251,7 +255,10 @@ class RecorderWorker(Worker):
         for kind, val in _split(chunk):
             if kind == "mark":
                 self._flush()
-                self.rec.write(val)
+                written = self.rec.write(val)
+                if val["kind"] == "checkpoint" and written:
+                    self.rec.flush()
+                    self.svc.save_state(val)
                 continue
             a, b = val
             i0 = int(chunk.index[a])
