@@ -14,6 +14,7 @@ recorder (which deletes old segments for retention) at /etc or /.
 from __future__ import annotations
 
 import ipaddress
+import math
 import os
 import tempfile
 import tomllib
@@ -159,14 +160,26 @@ def _check_value(name: str, key: Key, value: Any) -> tuple[Any, str | None]:
         if not all(isinstance(v, str) for v in value):
             return value, f"{name} = {value!r}: allowed is {key.allowed()}"
         return list(value), None
+    if isinstance(value, float) and not math.isfinite(value):
+        # TOML has nan and inf; every comparison with NaN is False, so the range check below
+        # would let it through
+        return value, f"{name} = {value!r}: not a finite number, allowed is {key.allowed()}"
     if float in types:
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # TOML integers are unbounded
+            return value, (f"{name}: an integer of {value.bit_length()} bits is too large, "
+                           f"allowed is {key.allowed()}")
     if key.choices is not None and value not in key.choices:
         return value, f"{name} = {value!r}: out of range, allowed is {key.allowed()}"
     if (key.lo is not None and value < key.lo) or (key.hi is not None and value > key.hi):
         return value, f"{name} = {value!r}: out of range, allowed is {key.allowed()}"
     if key.path and value:
-        resolved = Path(value).expanduser().resolve()
+        try:
+            resolved = Path(value).expanduser().resolve()
+        except (ValueError, RuntimeError, OSError) as exc:  # NUL byte, ~nosuchuser, loops
+            return value, (f"{name} = {value!r}: not a usable path ({exc}); name a directory "
+                           "such as /var/lib/avard")
         roots = allowed_roots()
         if not any(resolved == r or r in resolved.parents for r in roots):
             return value, (f"{name} = {value!r}: not under an allowed directory "
@@ -180,7 +193,13 @@ def _check_endpoints(cfg: dict[str, dict[str, Any]], problems: list[str]) -> Non
     pub = cfg["publish"]
     for key in ("endpoint", "request_endpoint"):
         ep = pub[key]
-        parts = urlsplit(ep)
+        try:
+            parts = urlsplit(ep)
+            parts.hostname  # noqa: B018  (raises ValueError for a malformed [IPv6] host)
+        except ValueError as exc:
+            problems.append(f"publish.{key} = {ep!r}: not a valid endpoint ({exc}); write "
+                            "tcp://HOST:PORT")
+            continue
         if parts.scheme not in ("tcp", "ipc", "inproc"):
             problems.append(f"publish.{key} = {ep!r}: allowed is a ZeroMQ endpoint "
                             "tcp://HOST:PORT, ipc://PATH or inproc://NAME")
@@ -262,6 +281,20 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"{p}: not valid TOML ({exc}); fix the syntax at that "
                               "line") from None
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{p}: not UTF-8 text (bad byte at offset {exc.start}); save "
+                              "the file as UTF-8") from None
+        except IsADirectoryError:
+            raise ConfigError(f"{p}: is a directory; name the config file itself, e.g. "
+                              f"{p / 'avard.toml'}") from None
+        except OSError as exc:
+            raise ConfigError(f"{p}: cannot read the config file ({exc.strerror}); check its "
+                              "permissions") from None
+        except RecursionError:  # tomllib recurses once per nested array or inline table
+            raise ConfigError(f"{p}: values nested too deeply for a config file; fix the "
+                              "file") from None
+        except ValueError as exc:  # e.g. an integer beyond Python's 4300-digit str limit
+            raise ConfigError(f"{p}: a value cannot be read ({exc}); fix the file") from None
     for dotted, value in overrides.items():
         if value is None:
             continue
