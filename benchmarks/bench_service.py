@@ -1,0 +1,145 @@
+"""CPU cost of the whole service per simulated second, at 125 Hz and 4 kHz in real time.
+
+``python -m benchmarks service [--seconds S] [--rates 125,4000]``
+
+For each ODR the service runs on the emulated ADXL355 (preset quiet-lab) at ``--speed 1`` for
+``--seconds`` (default 10; the report uses 60): reader thread draining at the default poll rate,
+streaming Allan accumulators over 3 axes + 3 temperature channels, recording into a temporary
+directory, publishing on loopback with a real subscriber counting every sample. Measured:
+
+- CPU seconds of the process (all threads, ``time.process_time``) per simulated second;
+- overruns (must be 0) and samples lost anywhere (subscriber index continuity);
+- sample-to-subscriber latency p50/p99: from when a raw block's last sample was due (sample
+  time mapped to wall time through the run's start) to when the subscriber decoded it.
+
+Reference, measured in the same run at the same rate and poll period: the drain loop alone
+(driver over emulator over simulator, no ring consumers, no disk, no sockets). The ratio says
+what the service adds on top of reading the (emulated) sensor; on a Pi the emulator and the
+simulator are replaced by spidev, so the service's own share is the difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import tempfile
+import threading
+import time
+from typing import Any
+
+import numpy as np
+from avard.daemon.acquisition import Acquisition
+from avard.daemon.config import effective_poll_hz, load_config
+from avard.daemon.ring import Ring
+from avard.daemon.service import Service
+from avard.daemon.simulation import build_simulated
+from avard.daemon.subscriber import Subscriber
+from avard.daemon.timebase import TimeBase
+
+
+def _cfg(odr: float, data_dir: str) -> dict:
+    return load_config(None, **{
+        "sensor.odr_hz": odr, "recording.data_dir": data_dir,
+        "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0",
+        "publish.hwm": 1_000_000, "service.status_log_interval_s": 3600.0})
+
+
+def _service_run(odr: float, seconds: float) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory(prefix="avard-bench-") as d:
+        cfg = _cfg(odr, d)
+        dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=1)
+        svc = Service(cfg, dev, clock, speed=1.0, simulate="quiet-lab", on_tick=sims.on_tick,
+                      extra_temperature_names=list(sims.names))
+        sims.service = svc
+        lat: list[float] = []
+        got = {"samples": 0, "next": None, "ok": True}
+        stop = threading.Event()
+        origin: dict[str, float] = {}
+
+        def listen(sub: Subscriber) -> None:
+            while not stop.is_set() or sub._sub.poll(200):
+                msg = sub.recv(timeout_s=0.2)
+                if msg is None or msg.topic != "raw":
+                    continue
+                now = time.monotonic()
+                r = msg.record
+                if got["next"] is not None and r["i0"] != got["next"]:
+                    got["ok"] = False
+                got["next"] = r["i0"] + r["n"]
+                got["samples"] += r["n"]
+                t_last = r["t_mono"] + (r["n"] - 1) / r.get("rate_hz", odr)
+                lat.append(now - (origin["wall"] + (t_last - origin["virt"])))
+
+        def before() -> None:
+            sub = Subscriber(svc.publisher.endpoint).connect(join=False)
+            th = threading.Thread(target=listen, args=(sub,), daemon=True)
+            th.start()
+            origin["th"] = th  # type: ignore[assignment]
+            origin["sub"] = sub  # type: ignore[assignment]
+            deadline = time.monotonic() + 5
+            while svc.publisher.stats()["peers"] < 1 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            time.sleep(0.2)
+            origin["wall"] = time.monotonic()
+            origin["virt"] = clock.monotonic()
+            origin["cpu"] = time.process_time()
+
+        svc.run(seconds, before_acquisition=before)
+        cpu = time.process_time() - origin["cpu"]
+        wall = time.monotonic() - origin["wall"]
+        stop.set()
+        origin["th"].join(5)  # type: ignore[attr-defined]
+        origin["sub"].close()  # type: ignore[attr-defined]
+        st = svc.final_status
+        lat_ms = np.array(lat) * 1e3 if lat else np.array([np.nan])
+        return {"cpu": cpu, "wall": wall, "sim": st["sim_time_s"], "samples": st["samples"],
+                "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
+                "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
+                "poll": effective_poll_hz(cfg)}
+
+
+def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
+    """Reference: the reader's drain loop over the emulator alone, same poll period."""
+    cfg = _cfg(odr, tempfile.gettempdir())
+    dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=1)
+    acq = Acquisition(dev, Ring(int(odr * 30)), TimeBase(odr), clock,
+                      poll_hz=effective_poll_hz(cfg), speed=1.0)
+    cpu0 = time.process_time()
+    t0 = clock.monotonic()
+    acq.start()
+    time.sleep(seconds)
+    acq.stop()
+    return {"cpu": time.process_time() - cpu0, "sim": clock.monotonic() - t0,
+            "overruns": acq.overruns, "samples": acq.samples}
+
+
+def main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks service", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--seconds", type=float, default=10.0, help="real seconds per rate")
+    p.add_argument("--rates", default="125,4000", help="ODRs in Hz, comma separated")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    rows = []
+    for odr in (float(r) for r in args.rates.split(",")):
+        ref = _drain_only(odr, args.seconds)
+        res = _service_run(odr, args.seconds)
+        rows.append((odr, res, ref))
+    print(f"service at --speed 1 for {args.seconds:g} s per rate (emulated ADXL355, quiet-lab); "
+          "CPU = process CPU s (all threads) per simulated s")
+    hdr = (f"{'ODR Hz':>7} {'poll Hz':>7} {'sim s':>6} {'samples':>8} {'overruns':>8} "
+           f"{'recv ok':>7} {'CPU/sim s':>9} {'ref CPU/s':>9} {'ratio':>6} "
+           f"{'lat p50 ms':>10} {'p99 ms':>7}")
+    print(hdr)
+    print("-" * len(hdr))
+    for odr, r, ref in rows:
+        cps = r["cpu"] / r["sim"]
+        ref_cps = ref["cpu"] / ref["sim"]
+        ok = "yes" if r["continuous"] and r["received"] == r["samples"] else "NO"
+        print(f"{odr:7g} {r['poll']:7.1f} {r['sim']:6.1f} {r['samples']:8d} {r['overruns']:8d} "
+              f"{ok:>7} {cps:9.3f} {ref_cps:9.3f} {cps / ref_cps:6.2f} {r['p50']:10.1f} "
+              f"{r['p99']:7.1f}")
+    print("ref = drain loop alone (driver + emulator + simulator) at the same poll rate; "
+          "ratio = service / ref")
+    bad = any(r["overruns"] for odr, r, _ in rows if odr >= 4000)
+    return 1 if bad else 0
