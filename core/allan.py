@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from .edf import chi2_interval, edf_greenhall
 from .errors import DataError
 from .noise_id import MIN_POINTS, alpha_from_lag1, alpha_from_slope, identify_alpha
+from .scratch import ones, scratch
 
 __all__ = [
     "KINDS",
@@ -53,6 +54,7 @@ __all__ = [
     "oavar",
     "ohvar",
     "pavar",
+    "strided_sums",
     "tau_grid",
 ]
 
@@ -147,42 +149,73 @@ class AllanResult:
 
 @dataclass
 class DifferenceSums:
-    """Running sums of the differences at one (m, stride, d), for C channels.
+    """Running sums of the order-o phase differences Q at one (m, stride), for C channels.
 
-    n: number of differences; s1 (C,): Σ D; s2 (C, C): Σ D Dᵀ; nl: number of lagged pairs;
-    lag (C, C): Σ D_i D_{i+m}ᵀ (pairs m samples apart, for the lag-1 ACF noise identification).
+    Full grid (every difference, used for the variance of the highest order only):
+    n, the number of differences, and s2 (C, C) = Σ Q Qᵀ.
+    Non-overlapping subgrid (differences whose start is a multiple of m samples from the
+    segment start, i.e. built from non-overlapping m-averages as NIST SP 1065 §5.6 asks; used
+    for the lag-1 ACF noise identification): na, s1 (C,) = Σ Q, sa (C, C) = Σ Q Qᵀ, and nl
+    pairs m samples apart with lag (C, C) = Σ Q_i Q_{i+m}ᵀ.
     """
 
     n: int
-    s1: NDArray[np.float64]
     s2: NDArray[np.float64]
+    na: int
+    s1: NDArray[np.float64]
+    sa: NDArray[np.float64]
     nl: int
     lag: NDArray[np.float64]
 
     @classmethod
     def zeros(cls, c: int) -> DifferenceSums:
-        return cls(0, np.zeros(c), np.zeros((c, c)), 0, np.zeros((c, c)))
+        return cls(0, np.zeros((c, c)), 0, np.zeros(c), np.zeros((c, c)), 0, np.zeros((c, c)))
+
+    FIELDS = ("n", "s2", "na", "s1", "sa", "nl", "lag")
 
     def add(self, other: DifferenceSums) -> None:
-        self.n += other.n
-        self.s1 += other.s1
-        self.s2 += other.s2
-        self.nl += other.nl
-        self.lag += other.lag
+        for f in self.FIELDS:
+            setattr(self, f, getattr(self, f) + getattr(other, f))
+
+    def add_subgrid(
+        self, sel: NDArray, prev: NDArray | None, gram: NDArray | None = None
+    ) -> None:
+        """Add non-overlapping differences ``sel`` and, if given, their lag partners ``prev``
+        (``gram``: sel.T @ sel when the caller has it already)."""
+        # Row-strided views would send matmul down numpy's slow non-BLAS loop: copy them
+        # (into reused buffers, see avard.core.scratch).
+        sel = _contiguous(sel, "sel")
+        if sel.shape[0]:
+            self.na += sel.shape[0]
+            self.s1 += ones(sel.shape[0]) @ sel
+            self.sa += sel.T @ sel if gram is None else gram
+        if prev is not None and prev.shape[0]:
+            prev = _contiguous(prev, "prev")
+            self.nl += prev.shape[0]
+            self.lag += prev.T @ sel[sel.shape[0] - prev.shape[0] :]
 
 
-def grid_sums(q: NDArray, sp: int, h: int, sums: Sequence[DifferenceSums], d: int) -> None:
+def _contiguous(a: NDArray, key: str) -> NDArray:
+    if a.flags.c_contiguous:
+        return a
+    out = scratch(key, a.shape[0], a.shape[1], a.dtype)
+    np.copyto(out, a)
+    return out
+
+
+def grid_sums(
+    q: NDArray, sp: int, h: int, sums: Sequence[DifferenceSums], d: int, base: int = 0
+) -> None:
     """Add the sums of phase differences of orders 1 … d taken on one stride grid.
 
     ``q`` (L, C) holds phase points X on a grid of constant stride (consecutive rows are
-    ``stride`` samples apart), int64 (exact) or float64; rows from index ``h`` on are new.
-    With sp = m / stride, the order-o difference is computed recursively,
-    E_j = q[j+sp] − q[j] (o = 1, m times the m-average of the rate) and
-    Q^o_j = Q^{o−1}_{j+sp} − Q^{o−1}_j, for j ∈ [0, L − o·sp). A difference is added to
-    ``sums[o−1]`` when it is new (its last point j + o·sp ≥ h), and so is the lag-m product
-    Q^o_{j−sp}·Q^o_j of a new Q^o_j with j ≥ sp. The recursion gives the same numbers for any
-    split of the grid into blocks, which is what makes streaming equal batch.
-    Works in chunks of j so that memory stays bounded on long records.
+    ``stride`` samples apart), int64 (exact) or float64; rows from index ``h`` on are new, and
+    q[0] is grid point number ``base`` of its segment. With sp = m / stride the order-o
+    difference is computed recursively, E_j = q[j+sp] − q[j] (o = 1; m times an m-average of
+    the rate) and Q^o_j = Q^{o−1}_{j+sp} − Q^{o−1}_j, for j ∈ [0, L − o·sp). A difference is
+    counted when it is new (its last point j + o·sp ≥ h). The recursion gives the same numbers
+    for any split of the grid into blocks, which is what makes streaming equal batch. Works
+    in chunks of j so that memory stays bounded on long records.
     """
     length = q.shape[0]
     n_e = length - sp  # number of first differences E
@@ -192,70 +225,67 @@ def grid_sums(q: NDArray, sp: int, h: int, sums: Sequence[DifferenceSums], d: in
     a = max(0, h - d * sp)
     while a < n_e:
         b = min(n_e, a + chunk)
-        lo = max(0, a - sp)  # lag partners of the chunk's first differences
+        lo = max(0, a - sp)  # room for the lag partners of the chunk's first differences
         hi = min(n_e, b + (d - 1) * sp)  # E needed to build order d up to b
-        arr = q[lo + sp : hi + sp] - q[lo:hi]
+        c = q.shape[1]
+        arr = np.subtract(q[lo + sp : hi + sp], q[lo:hi], out=scratch("e", hi - lo, c, q.dtype))
         if arr.dtype != np.float64:
-            arr = arr.astype(np.float64)  # exact: integer differences are far below 2**53
-        ones = np.ones(b - lo)
+            as_float = scratch("ef", hi - lo, c, np.float64)
+            np.copyto(as_float, arr)  # exact: integer differences are far below 2**53
+            arr = as_float
         for o in range(1, d + 1):
-            if o > 1:
-                arr = arr[sp:] - arr[:-sp]  # covers j ∈ [lo, hi − (o−1)·sp)
+            if o > 1:  # covers j ∈ [lo, hi − (o−1)·sp)
+                out = scratch(f"q{o}", max(0, arr.shape[0] - sp), c, np.float64)
+                arr = np.subtract(arr[sp:], arr[:-sp], out=out)
             s = sums[o - 1]
             new0 = max(a, h - o * sp, 0)
             new1 = min(b, length - o * sp)
             if new1 <= new0:
                 continue
-            rows = arr[new0 - lo : new1 - lo]
-            s.n += new1 - new0
-            s.s1 += ones[: new1 - new0] @ rows
-            s.s2 += rows.T @ rows
-            l0 = max(new0, sp)
-            if l0 < new1:
-                s.nl += new1 - l0
-                s.lag += arr[l0 - sp - lo : new1 - sp - lo].T @ arr[l0 - lo : new1 - lo]
+            gram = None
+            if o == d:
+                rows = arr[new0 - lo : new1 - lo]
+                s.n += new1 - new0
+                gram = rows.T @ rows
+                s.s2 += gram
+            first = new0 + (-(new0 + base)) % sp  # first new j on the non-overlapping subgrid
+            if first >= new1:
+                continue
+            sel = arr[first - lo : new1 - lo : sp]
+            f_lag = first if first - sp >= 0 else first + sp
+            prev = arr[f_lag - sp - lo : new1 - sp - lo : sp] if f_lag < new1 else None
+            # at sp = 1 the subgrid is the full grid: reuse its Gram matrix
+            s.add_subgrid(sel, prev, gram if sp == 1 else None)
         a = b
 
 
-def difference_sums(
-    p: NDArray, spacing: int, step: int, d: int, first: int, lag: int,
-    out: DifferenceSums,
-) -> None:
-    """Add the sums of d-th differences D_j = Σ_k c_k p[j + k·spacing] to ``out``.
+def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: Sequence[DifferenceSums]) -> None:
+    """``grid_sums`` for a stride that does not divide m (batch only, whole segment).
 
-    The general (slower) form of ``grid_sums`` for a stride that does not divide m:
-    j runs over first, first+step, … while j + d·spacing < len(p); entries of the same grid
-    before ``first`` only serve as lag partners. Lagged pairs are (D_j, D_{j+lag·step}).
-    ``p`` is (L, C), int64 (exact differences) or float64.
+    Differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …; the noise-
+    identification subgrid takes every round(m/stride)-th of them.
     """
     length = p.shape[0]
-    last = length - 1 - d * spacing
-    if last < first:
-        return
-    n_new = (last - first) // step + 1
-    n_old = min(lag, first // step)  # earlier grid points usable as lag partners
-    coefs = COEFS[d]
-    t = 0
-    while t < n_new:
-        t_end = min(n_new, t + _CHUNK)
-        back = min(lag, t + n_old)
-        j0 = first + (t - back) * step
-        count = t_end - t + back
-        stop = j0 + (count - 1) * step + 1
-        diff = coefs[0] * p[j0:stop:step]
-        for k in range(1, d + 1):
-            o = k * spacing
-            diff = diff + coefs[k] * p[j0 + o : stop + o : step]
-        dd = diff.astype(np.float64, copy=False)
-        new = dd[back:]
-        out.n += new.shape[0]
-        out.s1 += np.ones(new.shape[0]) @ new
-        out.s2 += new.T @ new
-        u0 = max(back, lag)
-        if u0 < dd.shape[0]:
-            out.nl += dd.shape[0] - u0
-            out.lag += dd[u0 - lag : dd.shape[0] - lag].T @ dd[u0:]
-        t = t_end
+    every = max(1, round(m / stride))
+    for o in range(1, d + 1):
+        last = length - 1 - o * m
+        if last < 0:
+            continue
+        coefs = COEFS[o]
+        s = sums[o - 1]
+        if o == d:
+            count = last // stride + 1
+            for t in range(0, count, _CHUNK):
+                j0 = t * stride
+                stop = (min(count, t + _CHUNK) - 1) * stride + 1
+                dd = sum(c * p[j0 + k * m : stop + k * m : stride] for k, c in enumerate(coefs))
+                dd = np.asarray(dd, dtype=np.float64)
+                s.n += dd.shape[0]
+                s.s2 += dd.T @ dd
+        step = every * stride
+        sub = np.asarray(sum(c * p[k * m : last + 1 + k * m : step]
+                             for k, c in enumerate(coefs)), dtype=np.float64)
+        s.add_subgrid(sub, sub[:-1] if sub.shape[0] > 1 else None)
 
 
 def tau_grid(n_samples: int, rate_hz: float, taus: str | ArrayLike, d: int) -> NDArray[np.int64]:
@@ -425,10 +455,8 @@ def allan_variance(
             st = int(strides[k])
             if int(m) % st == 0:
                 grid_sums(p[::st], int(m) // st, 0, sums[k], d)
-            else:  # lag-1 ACF pairs then sit round(m/stride) strides apart
-                lag = max(1, round(int(m) / st))
-                for order in range(1, d + 1):
-                    difference_sums(p, int(m), st, order, 0, lag, sums[k][order - 1])
+            else:
+                strided_sums(p, int(m), st, d, sums[k])
     return finish_result(kind, rate_hz, ms, strides, sums, ci=ci, alpha=alpha,
                          one_d=one_d, names=names)
 
@@ -456,32 +484,29 @@ def finish_result(
     d = KINDS[kind]
     norm = NORM[d]
     k_count = len(ms)
-    # stacked[q] = (n, s1, s2, nl, lag) of difference order q+1, arrays over τ
+    # stacked[q][field] = array over τ of DifferenceSums field, for difference order q+1
     stacked = []
     for q in range(d):
         col = [s[q] for s in sums]
-        stacked.append((
-            np.array([s.n for s in col], dtype=np.int64).reshape(k_count),
-            np.array([s.s1 for s in col], dtype=np.float64),
-            np.array([s.s2 for s in col], dtype=np.float64),
-            np.array([s.nl for s in col], dtype=np.int64).reshape(k_count),
-            np.array([s.lag for s in col], dtype=np.float64),
-        ))
-    c = stacked[0][2].shape[1] if k_count else 0
+        stacked.append({
+            f: np.array([getattr(s, f) for s in col],
+                        dtype=np.int64 if f in ("n", "na", "nl") else np.float64)
+            for f in DifferenceSums.FIELDS
+        })
+    c = stacked[0]["s2"].shape[1] if k_count else 0
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (c,) or not np.all(np.isfinite(w)):
             raise DataError(f"weights must be {c} finite numbers, one per channel; got {w!r}")
-        stacked = [
-            (nn, (a1 @ w)[:, None], np.einsum("i,kij,j->k", w, a2, w)[:, None, None], nnl,
-             np.einsum("i,kij,j->k", w, lg, w)[:, None, None])
-            for nn, a1, a2, nnl, lg in stacked
-        ]
+        for st in stacked:
+            st["s1"] = (st["s1"] @ w)[:, None]
+            for f in ("s2", "sa", "lag"):
+                st[f] = np.einsum("i,kij,j->k", w, st[f], w)[:, None, None]
         c = 1
         one_d = True
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
-    n, _, s2 = stacked[d - 1][:3]
+    n, s2 = stacked[d - 1]["n"], stacked[d - 1]["s2"]
     scale = norm * ms.astype(np.float64) ** 2 * np.maximum(n, 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         cov = np.where((n > 0)[:, None, None], s2 / scale[:, None, None], np.nan)
@@ -562,12 +587,12 @@ def _alphas(
 def _ladder(stacked: list, k: int, ch: int, m: int, stride: int, d: int) -> float:
     """alpha from the lag-1 ACF ladder at τ index k, channel ch; NaN if the data are too few."""
     for q in range(d):
-        n, s1, s2, nl, lag = (x[k] for x in stacked[q])
-        # Independent m-averages behind the sums; the ACF needs about 30 (Riley & Greenhall).
-        if n == 0 or nl == 0 or n * stride / m < MIN_POINTS:
+        na, s1, sa, nl, lag = (stacked[q][f][k] for f in ("na", "s1", "sa", "nl", "lag"))
+        # Non-overlapping m-averages behind the sums; the ACF needs about 30 (Riley & Greenhall).
+        if na < MIN_POINTS or nl == 0:
             return math.nan
-        mean = s1[ch] / n
-        v = s2[ch, ch] / n - mean**2
+        mean = s1[ch] / na
+        v = sa[ch, ch] / na - mean**2
         if not v > 0:
             return math.nan
         r1 = (lag[ch, ch] / nl - mean**2) / v

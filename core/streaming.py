@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .allan import AllanResult, DifferenceSums, finish_result, grid_sums
 from .errors import DataError, FormatError
+from .scratch import scratch
 
 __all__ = ["AllanSnapshot", "StreamingAllan"]
 
@@ -48,6 +49,8 @@ _D = 2  # Allan variance: second differences
 # Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
 # numpy's per-call overhead would otherwise dominate. Results never depend on it.
 _FLUSH_SAMPLES = 4096
+# Largest piece processed at once (working memory ≈ 4 × this × C × 8 bytes).
+_MAX_BLOCK = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,7 @@ class AllanSnapshot:
 class _Level:
     """Sums and phase history of one octave level (m = 2^k, stride s)."""
 
-    __slots__ = ("hist", "m", "spacing", "stride", "sums")
+    __slots__ = ("base", "hist", "m", "spacing", "stride", "sums")
 
     def __init__(self, m: int, stride: int, c: int, dtype: type) -> None:
         self.m = m
@@ -93,17 +96,23 @@ class _Level:
         self.spacing = m // stride
         self.sums = [DifferenceSums.zeros(c) for _ in range(_D)]
         self.hist: NDArray = np.zeros((0, c), dtype=dtype)
+        self.base = 0  # grid index, within the segment, of hist[0]
 
     def push(self, points: NDArray) -> None:
         """Append new phase points (on this level's grid) and add every completed difference."""
         if points.shape[0] == 0:
             return
         h = self.hist.shape[0]
-        arr = np.concatenate((self.hist, points)) if h else points
+        arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
+        arr[:h] = self.hist
+        arr[h:] = points
         sp = self.spacing
-        grid_sums(arr, sp, h, self.sums, _D)
+        grid_sums(arr, sp, h, self.sums, _D, self.base)
         keep = (_D + 1) * sp  # enough for the lag partner of the next block's first D
-        self.hist = arr[-keep:] if arr.shape[0] > keep else arr
+        if arr.shape[0] > keep:
+            self.base += arr.shape[0] - keep
+            arr = arr[-keep:]
+        self.hist = arr.copy()  # the scratch buffer is reused by the next level
 
 
 class StreamingAllan:
@@ -162,6 +171,7 @@ class StreamingAllan:
         self._carry: NDArray | None = None  # phase X at the segment's last sample
         for lev in self._levels:
             lev.hist = lev.hist[:0]
+            lev.base = 0
 
     def _dtype(self) -> type:
         return np.int64 if self._integer else np.float64
@@ -217,7 +227,9 @@ class StreamingAllan:
         if n == 0:
             return
         if n >= _FLUSH_SAMPLES and not self._pending:
-            self._process(a)
+            # bounded pieces keep the working memory independent of the caller's block size
+            for i in range(0, n, _MAX_BLOCK):
+                self._process(a[i : i + _MAX_BLOCK])
         else:
             # copy: the caller may reuse its buffer (a FIFO drain) after we return
             self._pending.append(np.array(a, copy=True))
@@ -244,7 +256,7 @@ class StreamingAllan:
         n = a.shape[0]
         # X continues from the carried value; cumsum over [carry, block] adds in the same order
         # as the batch cumsum over the whole segment, so float phases are bit-identical.
-        work = np.empty((n + 1, self.n_channels), dtype=dtype)
+        work = scratch("work", n + 1, self.n_channels, dtype)
         work[0] = self._carry
         np.subtract(a, self._offset, out=work[1:], casting="unsafe")
         np.cumsum(work, axis=0, out=work)
@@ -352,8 +364,10 @@ class StreamingAllan:
                 "m": lev.m,
                 "stride": lev.stride,
                 "hist": _pack(lev.hist),
-                "sums": [{"n": s.n, "s1": _pack(s.s1), "s2": _pack(s.s2), "nl": s.nl,
-                          "lag": _pack(s.lag)} for s in lev.sums],
+                "base": lev.base,
+                "sums": [{f: (_pack(v) if isinstance(v, np.ndarray) else int(v))
+                          for f in DifferenceSums.FIELDS for v in [getattr(s, f)]}
+                         for s in lev.sums],
             })
         return {
             "kind": "streaming_allan",
@@ -396,9 +410,11 @@ class StreamingAllan:
                     raise FormatError(f"level {k} of the state has m/stride inconsistent "
                                       "with its overlap")
                 lev.hist = _unpack(lv["hist"])
+                lev.base = int(lv["base"])
                 for s, sv in zip(lev.sums, lv["sums"], strict=True):
-                    s.n, s.nl = int(sv["n"]), int(sv["nl"])
-                    s.s1, s.s2, s.lag = _unpack(sv["s1"]), _unpack(sv["s2"]), _unpack(sv["lag"])
+                    for f in DifferenceSums.FIELDS:
+                        v = sv[f]
+                        setattr(s, f, _unpack(v) if isinstance(v, dict) else int(v))
         except (KeyError, TypeError, ValueError) as exc:
             raise FormatError(f"StreamingAllan state is incomplete or malformed: {exc}; "
                               "start a new accumulator") from exc
