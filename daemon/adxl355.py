@@ -112,6 +112,25 @@ def decode_fifo(buf: bytes | bytearray) -> FifoDecode:
     return FifoDecode(np.ascontiguousarray(sets, dtype=np.int32), int(dropped), n_empty, carry)
 
 
+def fit_temperature_intercept(raw: Any, reference_c: Any) -> tuple[float, float]:
+    """Calibrate the TEMP intercept against a reference thermometer (a DS18B20 on the plate).
+
+    With the datasheet slope fixed, T = 25 + (raw − b)/(−9.05) gives for each pair
+    b_i = raw_i + 9.05·(T_i − 25); the estimate is their mean and its 1σ standard error
+    s/√n (LSB). Pairs with a NaN reference (missing DS18B20 readings) are ignored. Use pairs
+    taken in thermal equilibrium: the die runs warmer than the plate while measuring.
+    """
+    r = np.asarray(raw, dtype=float).ravel()
+    t = np.asarray(reference_c, dtype=float).ravel()
+    if r.shape != t.shape:
+        raise ConfigError(f"{r.size} TEMP values but {t.size} reference temperatures")
+    ok = np.isfinite(r) & np.isfinite(t)
+    if ok.sum() < 2:
+        raise ConfigError("need at least two (TEMP, reference °C) pairs to fit the intercept")
+    b = r[ok] - R.TEMP_SLOPE_LSB_PER_C * (t[ok] - 25.0)
+    return float(b.mean()), float(b.std(ddof=1) / np.sqrt(b.size))
+
+
 # -- results -------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class DeviceInfo:

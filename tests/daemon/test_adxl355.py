@@ -461,3 +461,25 @@ def test_drains_never_invent_samples_and_report_every_jump(steps):
                 assert gap_said
             last = int(c[-1, 0])
             gap_said = False
+
+
+def test_temperature_intercept_calibration_against_a_reference():
+    from avard.daemon.adxl355 import fit_temperature_intercept
+
+    rng = np.random.default_rng(3)
+    state = {"t": 25.0}
+    # this part's intercept is 1871 LSB, not the datasheet's 1885
+    dev, _, _ = rig(temperature=lambda: state["t"], temp_intercept_lsb=1871.0)
+    raws, refs = [], []
+    for t in rng.uniform(18, 32, 200):
+        state["t"] = t
+        raws.append(dev.read_temperature_raw())
+        refs.append(t + rng.normal(0, 0.03))  # DS18B20 reading
+    assert abs(dev.read_temperature_c() - state["t"]) > 1.0  # uncalibrated: off by ~1.5 °C
+    refs[::17] = [np.nan] * len(refs[::17])  # DS18B20 dropouts are skipped
+    b, u = fit_temperature_intercept(raws, refs)
+    assert abs(b - 1871.0) < max(4 * u, 0.05) and u < 0.1
+    dev.temp_intercept_lsb = b
+    assert abs(dev.read_temperature_c() - state["t"]) < 0.1
+    with pytest.raises(ConfigError):
+        fit_temperature_intercept([1, 2], [np.nan, 3.0])
