@@ -292,6 +292,15 @@ class EmulatedAdxl355:
             self.stalled = False
             self._t_start = self.clock.monotonic() - self.produced / self.true_odr_hz
 
+    def set_odr_error_ppm(self, ppm: float) -> None:
+        """Change the oscillator error from now on (a temperature-driven drift), without
+        producing or losing samples at the change."""
+        with self.lock:
+            self._update()
+            self.odr_error_ppm = float(ppm)
+            if self._measuring:
+                self._t_start = self.clock.monotonic() - self.produced / self.true_odr_hz
+
     def drop_fifo_entries(self, k: int = 1) -> None:
         """Remove the ``k`` oldest FIFO entries, leaving the FIFO mid-set (as after a partial
         read by someone else); the driver must realign on the X marker."""

@@ -307,3 +307,15 @@ def test_virtual_clock_manual_and_real_time():
     fast.sleep(1.0)  # 1 virtual second = 20 ms of real time
     assert fast.monotonic() >= 1.0
     assert time.monotonic() - t0 < 1.0
+
+
+def test_odr_error_can_drift_without_a_jump():
+    emu, bus, clock = make(odr_code=2)  # 1 kHz
+    start(bus)
+    clock.advance(1.0)
+    entries(bus)
+    assert emu.produced == 1000
+    emu.set_odr_error_ppm(5000.0)
+    clock.advance(2.0)
+    entries(bus)
+    assert emu.produced == 1000 + 2010
