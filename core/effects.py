@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from . import model
-from .causes import CAUSES
+from .causes import CAUSES, oavar
 from .errors import DataError
 
 #: Cases cycle through these so that every cause (and the null record) appears.
@@ -128,8 +128,12 @@ def _draw(rng: np.random.Generator, cause: str | None, n: int, rate_hz: float,
     if cause == "temperature":
         ch = int(rng.integers(0, 2))
         lag = float(rng.uniform(60.0, 300.0))
-        # the swing c·std(T) is 6–20× the base ADEV at 300 s
-        c = sign * rng.uniform(6.0, 20.0) * adev(300.0) / float(np.std(temps_true[:, ch]))
+        # the coupled ADEV c·ADEV_T(τ) is 2–6× the base ADEV at τ = T/32 (where the Allan
+        # covariance regression still has ~30 independent differences)
+        tau = T / 32.0
+        m = np.array([max(1, round(tau * rate_hz))])
+        adev_t = math.sqrt(float(oavar(temps_true[:, ch], rate_hz, m)[0]))
+        c = sign * rng.uniform(2.0, 6.0) * adev(tau) / adev_t
         return {"coefficient": c, "lag_s": lag, "channel": ch}
     if cause == "sinusoid":
         f0 = float(math.exp(rng.uniform(math.log(40.0 / T), math.log(rate_hz / 20.0))))
