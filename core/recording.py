@@ -139,7 +139,8 @@ def _resync(buf: memoryview, start: int, max_bytes: int) -> int | None:
 
 def segment_files(path: str | Path) -> list[Path]:
     """The segment files of a recording: the file itself, or a directory's ``*.avr`` files in
-    name order (names begin with the segment's UTC start time, so name order is time order)."""
+    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with the run's UTC start
+    time, so name order is data order)."""
     p = Path(path)
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file())

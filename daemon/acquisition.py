@@ -48,7 +48,7 @@ class Acquisition:
                  poll_hz: float, chip_interval_s: float = 1.0, run_id: str = "",
                  speed: float | None = None, stall_s: float = 2.0,
                  on_tick: Callable[[float], None] | None = None,
-                 start_index: int = 0) -> None:
+                 start_index: int = 0, backpressure: bool = False) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
@@ -60,6 +60,10 @@ class Acquisition:
         self.stall_s = float(stall_s)
         self.on_tick = on_tick          # called with t_mono after each poll (simulated temps)
         self.next_index = int(start_index)
+        # Simulation only: time is virtual, so waiting for a slow consumer costs nothing and
+        # keeps "as fast as possible" from outrunning the recorder. On hardware the reader
+        # never waits (the sensor does not), and a consumer that falls behind gets a gap.
+        self.backpressure = bool(backpressure)
         self.samples = 0
         self.overruns = 0
         self.lost_estimate = 0
@@ -117,8 +121,15 @@ class Acquisition:
             log.exception("reader thread died")
             self.error = exc
 
+    def _wait_for_consumers(self) -> None:
+        limit = self.ring.capacity // 2
+        while not self._stop.is_set() and any(c.backlog > limit for c in self.ring.consumers):
+            self._stop.wait(0.002)
+
     def poll_once(self) -> int:
         """One drain; returns the number of samples pushed."""
+        if self.backpressure:
+            self._wait_for_consumers()
         try:
             d = self.sensor.drain()
         except AvardError as exc:

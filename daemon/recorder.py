@@ -231,7 +231,10 @@ class Recorder:
         self._close_file()
         t_real = self.realtime()
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
-        name = f"{stamp}_{self.run_id}_{self._segment_no:04d}{SEGMENT_SUFFIX}"
+        # Run id first (it starts with the run's real UTC start time), then the segment
+        # number: name order is data order even when a simulated clock runs ahead of real
+        # time. The segment's own start time is for humans.
+        name = f"{self.run_id}_{self._segment_no:04d}_{stamp}{SEGMENT_SUFFIX}"
         path = self.dir / name
         try:
             self._f = self.ops.open_append(path)

@@ -344,7 +344,8 @@ class Service:
         self.cfg = cfg
         self.sensor = sensor
         self.clock = clock
-        self.run_id = run_id or time.strftime("%Y%m%dT%H%M%S") + "-" + secrets.token_hex(3)
+        self.run_id = run_id or (time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()) + "-"
+                                 + secrets.token_hex(3))
         self.speed = speed
         self.simulate = simulate
         self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
@@ -534,7 +535,7 @@ class Service:
         run = ckpt["run"]
         start = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
         n0 = feed.fed
-        segs = [s for s in sorted(self.data_dir.glob("*.avr")) if f"_{run}_" in s.name]
+        segs = [s for s in sorted(self.data_dir.glob("*.avr")) if s.name.startswith(f"{run}_")]
         if not segs:
             return 0
         for seg in segs:
@@ -563,7 +564,8 @@ class Service:
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
                                poll_hz=poll, chip_interval_s=cfg["temperature"]["chip_interval_s"],
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
-                               start_index=self.start_index)
+                               start_index=self.start_index,
+                               backpressure=self.simulate is not None)
         acfg = cfg["allan"]
         self.workers.append(AllanWorker(
             self.ring.consumer("allan"), self.allan, self.feed, self,
