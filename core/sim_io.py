@@ -106,6 +106,9 @@ def write_npz(
             for key, value in record_meta(config, seed).items():
                 with zf.open(f"{key}.npy", "w") as member:
                     np.lib.format.write_array(member, np.asarray(value), allow_pickle=False)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_zip, 0o666 & ~umask)    # mkstemp makes 0600; a record is an ordinary file
         os.replace(tmp_zip, out)
     finally:
         for p in (tmp_zip, tmp_temp):

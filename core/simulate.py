@@ -160,7 +160,9 @@ class SensorSimulator:
         levels: dict[int, list[Source]] = {}
 
         # Gauss–Markov components: the flicker ladder and the per-axis GM term
-        tmin = c.flicker_tmin_s if c.flicker_tmin_s is not None else dt / 4.0
+        # default: the fastest corner 1/(2πT) sits at the Nyquist frequency, so the ladder
+        # covers the band without folding extra power into it
+        tmin = c.flicker_tmin_s if c.flicker_tmin_s is not None else dt / math.pi
         ladder = flicker_ladder(c.bias_instability, tmin, c.flicker_tmax_s, c.flicker_per_decade)
         gm_term = [(T, np.where(np.arange(3) == a, s, 0.0))
                    for a, (T, s) in enumerate(zip(c.gm_tau_s, c.gm_sigma_mps2, strict=True))]
