@@ -95,6 +95,7 @@ def bench_realtime(seconds: float, poll_s: float, odr_hz: float) -> dict[str, fl
     stop = threading.Event()
     stats = {"sets": 0, "overruns": 0, "drains": 0, "max_gap_s": 0.0, "bad_sequence": 0,
              "silent_breaks": 0}
+    lateness: list[float] = []  # how much later than asked the OS woke the reader, s
 
     def reader() -> None:
         last_t = None
@@ -115,7 +116,9 @@ def bench_realtime(seconds: float, poll_s: float, odr_hz: float) -> dict[str, fl
             if last_t is not None:
                 stats["max_gap_s"] = max(stats["max_gap_s"], d.t_mono - last_t)
             last_t = d.t_mono
+            t0 = time.monotonic()
             time.sleep(poll_s)
+            lateness.append(time.monotonic() - t0 - poll_s)
 
     dev.start()
     th = threading.Thread(target=reader, name="bench-reader")
@@ -126,6 +129,10 @@ def bench_realtime(seconds: float, poll_s: float, odr_hz: float) -> dict[str, fl
     stats["produced"] = emu.produced
     stats["lost"] = emu.lost
     stats["fifo_s"] = 32 / odr_hz
+    late = np.asarray(lateness)
+    stats["late_p99_s"] = float(np.percentile(late, 99)) if late.size else 0.0
+    stats["late_max_s"] = float(late.max()) if late.size else 0.0
+    stats["late_over_fifo"] = int(np.sum(late + poll_s > stats["fifo_s"]))
     return stats
 
 
@@ -165,6 +172,9 @@ def main(argv: list[str]) -> int:
     print(f"{'data jumps the driver did not report':<40}{s['silent_breaks']:>14d}")
     print(f"{'longest time between drains, ms':<40}{s['max_gap_s'] * 1e3:>14.2f}")
     print(f"{'host load average (1 min), start/end':<40}{f'{load0:.2f}/{load1:.2f}':>14}")
+    late = f"{s['late_p99_s'] * 1e3:.2f}/{s['late_max_s'] * 1e3:.1f}"
+    print(f"{'reader wake-up lateness p99 / max, ms':<40}{late:>14}")
+    print(f"{'sleeps longer than the FIFO lasts':<40}{s['late_over_fifo']:>14d}")
     ok = s["overruns"] == 0 and s["lost"] == 0 and s["bad_sequence"] == 0
     print("\nzero overruns: " + ("yes" if ok else
           "NO (the reader thread was not scheduled in time; see the load average)"))
