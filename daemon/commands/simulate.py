@@ -44,10 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the preset's parameters (after --set) and exit")
 
 
-def _progress(started: float, stream=sys.stderr):
+def _progress(started: float):
+    """Progress on a terminal (one rewritten line), or log lines when stderr is not one."""
     last = [0.0]
 
     def report(done: int, total: int) -> None:
+        stream = sys.stderr
         now = time.monotonic()
         if now - last[0] < 1.0 and done < total:
             return
