@@ -168,9 +168,9 @@ class Drain:
     dropped_entries: int = 0
     t_mono_end: float = 0.0
     #: True when the newest set in the FIFO at ``t_mono`` is ``counts[-1]``: all counted sets
-    #: were read and FIFO_ENTRIES was below 96 (at 96 the sync buffer may hold one more set,
-    #: so the stamp may lag the newest set read by a period). Only such drains feed the
-    #: time-base fit.
+    #: were read, FIFO_ENTRIES was below 96 (at 96 the sync buffer may hold one more set),
+    #: the STATUS/FIFO_ENTRIES read finished within one sample period of ``t_mono`` and no
+    #: overrun happened during the drain. Only such drains feed the time-base fit.
     complete: bool = True
 
     @property
@@ -419,6 +419,9 @@ class Adxl355:
         t_mono = self.clock.monotonic()
         t_real = self.clock.realtime()
         status, entries_reg = self._read(A["STATUS"], 2, in_drain=True)
+        # FIFO_ENTRIES was sampled somewhere between t_mono and now: if that window is longer
+        # than a sample period (preempted, retried), t_mono no longer dates the newest set.
+        tight = self.clock.monotonic() - t_mono < 1.0 / self.odr_hz
         entries = entries_reg & 0x7F
         if entries > R.FIFO_LOCATIONS:
             raise HardwareError(
@@ -443,6 +446,7 @@ class Adxl355:
             # tells; then the gap precedes this drain's first set and the carry is void.
             post = self._read(A["STATUS"], 1, in_drain=True)[0]
             if post & R.STATUS_FIFO_OVR:
+                tight = False  # the sets read were produced after t_mono
                 self.overruns += 1
                 self._note_gap("fifo_overrun")
                 status |= post
@@ -462,7 +466,7 @@ class Adxl355:
                       index0=self._next_index, gap_reason=",".join(reasons) or None,
                       status=status, fifo_entries=entries,
                       dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end,
-                      complete=n_read == n_all and entries < R.FIFO_LOCATIONS)
+                      complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS)
         self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:
             self._next_index += n

@@ -483,3 +483,17 @@ def test_temperature_intercept_calibration_against_a_reference():
     assert abs(dev.read_temperature_c() - state["t"]) < 0.1
     with pytest.raises(ConfigError):
         fit_temperature_intercept([1, 2], [np.nan, 3.0])
+
+
+def test_drains_with_an_unreliable_stamp_are_not_complete():
+    dev, emu, clock = rig()
+    clock.advance(0.005)
+    assert dev.drain().complete
+    clock.advance(0.005)
+    emu.faults.fail_next(2)  # two retries wait 2 ms = two periods at 1 kHz after t_mono
+    assert not dev.drain().complete
+    clock.advance(0.040)  # FIFO full (96 locations): a newer set may sit in the sync buffer
+    d = dev.drain()
+    assert d.fifo_entries == 96 and not d.complete
+    clock.advance(0.005)
+    assert not dev.drain(max_sets=2).complete  # sets were left behind
