@@ -344,6 +344,32 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
     return active, z_all
 
 
+def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int],
+                   measured: NDArray, drop_sigma: float, max_drop: int) -> int:
+    """Number of shortest τ to leave out because the sensor's low-pass bends them.
+
+    A monotone low-pass can only *remove* variance, so a filter-bent point lies below the
+    model; quantization can only add. The shortest remaining point is therefore dropped while
+    it lies more than ``drop_sigma`` standard deviations *below* the model without Q fitted to
+    the longer τ (the standard deviation includes the prediction's own uncertainty), and at
+    most ``max_drop`` points go.
+    """
+    base = [j for j, a in enumerate(fitted) if comps[a].cause != "quantization"]
+    K = len(measured)
+    start = 0
+    while start < max_drop and K - start - 1 >= len(base) + 2:
+        idx = np.arange(start + 1, K)
+        theta, cov, _, _ = _fit_active(p, idx, base)
+        x0 = p.X[start, base]
+        pred = x0 @ theta[base] + p.fixed[start]
+        sd = math.sqrt(_avar_cov(p, theta, np.array([start]))[0, 0] + x0 @ cov @ x0)
+        if pred - measured[start] > drop_sigma * sd:
+            start += 1
+        else:
+            break
+    return start
+
+
 def fit_noise(
     result: Any,
     *,
@@ -411,16 +437,7 @@ def fit_noise(
     A = len(fitted)
     start = 0
     if filter_corner_hz is None:
-        # drop filter-bent shortest τ: compare each with the model fitted to longer τ
-        while start < max_drop and K - start - 1 >= A + 2:
-            idx = np.arange(start + 1, K)
-            theta, _, _, _ = _fit_active(p, idx, list(range(A)))
-            pred = p.X[start] @ theta + p.fixed[start]
-            sd = math.sqrt(_avar_cov(p, theta, np.array([start]))[0, 0])
-            if abs(var[keep[start]] - pred) > drop_sigma * sd:
-                start += 1
-            else:
-                break
+        start = _short_tau_cut(p, comps, fitted, var[keep], drop_sigma, max_drop)
     idx = np.arange(start, K)
 
     active, z_all = _select_terms(p, idx, A, z_present)

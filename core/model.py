@@ -115,11 +115,12 @@ def gauss_markov_avar(tau: ArrayLike, sigma: float, T: float) -> NDArray[np.floa
     if T <= 0:
         raise FitError("Gauss-Markov correlation time T must be > 0 s")
     x = t / float(T)
-    # for x → 0 the bracket cancels catastrophically; its series is x/3 − x²/12 + …
-    small = x < 1e-3
+    # for x → 0 the bracket cancels catastrophically; its series is x²/3 − x³/4 + 7x⁴/60 − …
+    # (so σ²(τ) → 2σ²τ/(3T): a rate random walk with K² = 2σ²/T, as it must)
+    small = x < 1e-2
     br = np.empty_like(x)
     xs = x[small]
-    br[small] = xs / 3.0 - xs**2 / 12.0 + xs**3 / 60.0
+    br[small] = xs**2 / 3.0 - xs**3 / 4.0 + 7.0 * xs**4 / 60.0
     xl = x[~small]
     br[~small] = 1.0 - (3.0 - 4.0 * np.exp(-xl) + np.exp(-2.0 * xl)) / (2.0 * xl)
     return 2.0 * float(sigma) ** 2 * float(T) / t * br
@@ -300,6 +301,7 @@ def _mean_sin4_product(r: float) -> float:
     return float(np.mean(np.sin(x) ** 4 * np.sin(r * x) ** 4))
 
 
+@lru_cache(maxsize=4096)
 def _pair_quadrature(mk: int, ml: int, c: float = 4.0) -> tuple[NDArray, NDArray]:
     """Nodes ν and weights w with Σ w·g(ν) ≈ ∫₀^½ g(ν)|H_mk(ν)|²|H_ml(ν)|² dν for a slowly
     varying g. Below c/ml both oscillations are resolved; between c/ml and c/mk the fast one is
@@ -357,12 +359,16 @@ def avar_covariance_kernels(m: ArrayLike, psds: list[PsdFn | None]) -> NDArray[n
     """
     mm = np.asarray(m, dtype=np.int64)
     K, A = len(mm), len(psds)
+    pairs = [(k, j) for k in range(K) for j in range(k, K)]
+    quads = [_pair_quadrature(int(mm[k]), int(mm[j])) for k, j in pairs]
+    nu = np.concatenate([q[0] for q in quads])
+    w = np.concatenate([q[1] for q in quads])
+    starts = np.cumsum([0] + [len(q[0]) for q in quads[:-1]])
+    s = np.array([p(nu) if p is not None else np.zeros_like(nu) for p in psds])
     G = np.zeros((K, K, A, A))
-    for k in range(K):
-        for j in range(k, K):
-            nu, w = _pair_quadrature(int(mm[k]), int(mm[j]))
-            s = np.array([p(nu) if p is not None else np.zeros_like(nu) for p in psds])
-            g = 2.0 * np.einsum("i,ai,bi->ab", w, s, s)
-            G[k, j] = g
-            G[j, k] = g
+    for a in range(A):
+        for b in range(a, A):
+            g = 2.0 * np.add.reduceat(w * s[a] * s[b], starts)
+            for (k, j), val in zip(pairs, g, strict=True):
+                G[k, j, a, b] = G[j, k, a, b] = G[k, j, b, a] = G[j, k, b, a] = val
     return G
