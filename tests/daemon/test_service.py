@@ -193,3 +193,34 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
     assert answers["recent"]["n"] == 250 and answers["recent"]["counts"].shape == (250, 3)
     assert np.all(np.diff(answers["recent"]["index"]) == 1)
     assert answers["snapshot"]["kind"] == "avar"
+
+
+def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> None:
+    """Real w1thermsensor over a fake sysfs tree, in the bank's own threads."""
+    from avard.daemon.ds18b20 import Ds18b20Bank
+    from avard.daemon.w1_sysfs import SysfsTree
+
+    tree = SysfsTree(tmp_path / "w1")
+    sid = tree.add("0316a2797cff", 21.5)
+    bank = Ds18b20Bank({"plate": sid}, interval_s=0.05, base_directory=tree.base)
+    cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
+    dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
+    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", temperature_bank=bank)
+    timers = [threading.Timer(1.0, tree.remove, args=(sid,)),
+              threading.Timer(1.6, tree.restore, args=(sid,)),
+              threading.Timer(2.4, svc.stop_requested.set)]
+    for t in timers:
+        t.start()
+    svc.run(None)
+    recs = list(RecordingReader(tmp_path / "rec"))
+    assert svc.temp_names == ["chip", "plate"]
+    events = [(r["name"], r["detail"].get("sensor")) for r in recs if r["kind"] == "event"]
+    assert ("sensor_lost", "plate") in events and ("sensor_back", "plate") in events
+    values = [v for r in recs if r["kind"] == "temp" and r["names"] == ["plate"]
+              for v in r["values_c"]]
+    assert None in values
+    assert {v for v in values if v is not None} == {21.5}
+    # The Allan feed held 21.5 °C through the drop-out instead of inventing a value.
+    rec = load_recording(tmp_path / "rec")
+    col = rec.temperature_c[:, rec.temperature_names.index("plate")]
+    assert set(np.unique(col[~np.isnan(col)])) == {21.5}

@@ -1,0 +1,32 @@
+"""`avard demo` end to end on a short run: service, subscriber, recording, fit, plot, report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from avard.daemon.cli import main
+
+
+def test_demo_short_run_writes_report_and_plot(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--hours", "0.05", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "index continuity ok, 0 messages lost" in text
+    assert "max relative difference" in text
+    assert "velocity_random_walk" in text and "m/s/sqrt(s)" in text
+    report = (out / "report.md").read_text()
+    assert "recording vs streamed Allan variance" in report
+    assert (out / "adev.png").stat().st_size > 10_000
+    assert len(list((out / "recording").glob("*.avr"))) >= 1
+    # Running again replaces the demo's own recording instead of appending to it.
+    assert main(["demo", "--hours", "0.01", "--out", str(out), "--no-plot"]) == 0
+    runs = {p.name.split("_")[0] for p in (out / "recording").glob("*.avr")}
+    assert len(runs) == 1
+
+
+def test_demo_refuses_nonpositive_hours(tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--hours", "0", "--out", str(tmp_path)]) == 2
+    assert "--hours" in capsys.readouterr().err
