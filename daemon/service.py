@@ -716,7 +716,37 @@ class Service:
         allan = next((w for w in self.workers if isinstance(w, AllanWorker)), None)
         if allan is None or allan.latest is None:
             raise AvardError("no Allan snapshot yet; ask again after snapshot_interval_s")
-        return allan.latest
+        latest = allan.latest
+        if latest.get("fit") is None:
+            # Fitted on demand (a request is rare; a fit per snapshot would cost the Pi CPU
+            # every few seconds) and kept with the snapshot it belongs to.
+            latest = dict(latest, fit=self._fit(latest))
+            allan.latest = latest
+        return latest
+
+    def _fit(self, rec: dict[str, Any]) -> dict[str, Any]:
+        """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
+        try:
+            from avard.core.allan import AllanResult
+            from avard.core.fit import fit_noise
+        except ImportError:
+            return {}
+        snap = rec["snapshot"]
+        out: dict[str, Any] = {}
+        try:
+            var = np.asarray(snap["avar"], dtype=float)
+            base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
+            for c, axis in enumerate(("x", "y", "z")):
+                res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
+                                  edf=np.asarray(snap["edf"], dtype=float)[:, c],
+                                  lo=np.asarray(snap["lo"], dtype=float)[:, c],
+                                  hi=np.asarray(snap["hi"], dtype=float)[:, c],
+                                  alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
+                                  ci=float(snap["ci"]), **base)
+                out[axis] = fit_noise(res, filter_corner_hz=self.odr / 4).to_dict()
+        except (AvardError, KeyError, TypeError, ValueError) as exc:
+            log.info("no fit for the snapshot yet: %s", exc)
+        return out
 
     def _req_recent(self, args: dict[str, Any]) -> dict[str, Any]:
         seconds = args.get("seconds", 1.0)

@@ -193,6 +193,10 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
     assert answers["recent"]["n"] == 250 and answers["recent"]["counts"].shape == (250, 3)
     assert np.all(np.diff(answers["recent"]["index"]) == 1)
     assert answers["snapshot"]["kind"] == "avar"
+    fit = answers["snapshot"]["fit"]
+    assert set(fit) == {"x", "y", "z"}
+    vrw = fit["x"]["terms"]["velocity_random_walk"]
+    assert vrw["unit"] == "m/s/sqrt(s)" and vrw["lo"] <= vrw["value"] <= vrw["hi"]
 
 
 def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> None:
