@@ -48,7 +48,8 @@ class Acquisition:
                  poll_hz: float, chip_interval_s: float = 1.0, run_id: str = "",
                  speed: float | None = None, stall_s: float = 2.0,
                  on_tick: Callable[[float], None] | None = None,
-                 start_index: int = 0, backpressure: bool = False) -> None:
+                 start_index: int = 0, backpressure: bool = False,
+                 on_clock_step: Callable[[float], None] | None = None) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
@@ -59,6 +60,9 @@ class Acquisition:
         self.speed = speed
         self.stall_s = float(stall_s)
         self.on_tick = on_tick          # called with t_mono after each poll (simulated temps)
+        # called with the new CLOCK_REALTIME − CLOCK_MONOTONIC offset after a realtime step
+        self.on_clock_step = on_clock_step
+        self.clock_steps = 0
         self.next_index = int(start_index)
         # Simulation only: time is virtual, so waiting for a slow consumer costs nothing and
         # keeps "as fast as possible" from outrunning the recorder. On hardware the reader
@@ -153,6 +157,7 @@ class Acquisition:
         n = int(counts.shape[0])
         t_mono = float(getattr(d, "t_mono", self.clock.monotonic()))
         t_real = float(getattr(d, "t_real", self.clock.realtime()))
+        self._check_clock_step(t_mono, t_real)
         if getattr(d, "overrun", False):
             self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun")
         if n:
@@ -179,6 +184,22 @@ class Acquisition:
         if self.on_tick is not None:
             self.on_tick(t_mono)
         return n
+
+    def _check_clock_step(self, t_mono: float, t_real: float) -> None:
+        """CLOCK_REALTIME jumped (NTP step, a date change, a Pi without RTC getting its time):
+        record a ``clock_step`` event. Sample order and times stay on CLOCK_MONOTONIC; only
+        the wall-clock times written beside them follow the new offset from here on."""
+        step = self.tb.realtime_step(t_mono, t_real)
+        if step is None:
+            return
+        self.clock_steps += 1
+        log.warning("CLOCK_REALTIME stepped by %+.3f s; sample times stay on CLOCK_MONOTONIC",
+                    step)
+        self.mark(frames.event_record(self.run_id, 0, "clock_step", t_mono, t_real,
+                                      i0=self.next_index,
+                                      detail={"step_s": step, "t_real_after": t_real}))
+        if self.on_clock_step is not None:
+            self.on_clock_step(t_real - t_mono)
 
     def _try_recover(self, t: float) -> None:
         """After a failed drain, re-probe and restart the part (at most once a second)."""
