@@ -421,6 +421,7 @@ class Service:
             "overruns": acq.overruns if acq else 0,
             "lost_samples_estimate": acq.lost_estimate if acq else 0,
             "bus_errors": acq.bus_errors if acq else 0,
+            "clock_steps": acq.clock_steps if acq else 0,
             "stalled": bool(acq.stalled) if acq else False,
             "allan_samples": int(self.allan.n_samples),
             "consumers_lost": {c.name: c.lost_total for c in self.ring.consumers},
@@ -565,6 +566,7 @@ class Service:
                                poll_hz=poll, chip_interval_s=cfg["temperature"]["chip_interval_s"],
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
                                start_index=self.start_index,
+                               on_clock_step=self._on_clock_step,
                                backpressure=self.simulate is not None)
         acfg = cfg["allan"]
         self.workers.append(AllanWorker(
@@ -604,6 +606,11 @@ class Service:
         log.info("run %s started: ADXL355 %g Hz, ±%d g, drained at %g Hz; temperature "
                  "channels %s", self.run_id, self.odr, cfg["sensor"]["range_g"], poll,
                  ", ".join(self.temp_names))
+
+    def _on_clock_step(self, real_offset: float) -> None:
+        """The reader saw CLOCK_REALTIME step (and recorded it): wall-clock times written from
+        now on follow the new offset (one float assignment, safe across threads)."""
+        self.real_offset = real_offset
 
     def _on_temperature(self, reading: Any) -> None:
         """A DS18B20 reading (from its bank thread): stamp it with the next sample index so
@@ -653,7 +660,7 @@ class Service:
                         n.ready()
                         n.status(self.status_line())
                 now = time.monotonic()
-                if n is not None and wd and now >= next_wd:
+                if n is not None and wd and self.ready and now >= next_wd:
                     # WATCHDOG=1 only while samples advance: a stuck sensor lets systemd act.
                     if self.acq.samples != last_samples and not self.acq.stalled:
                         n.watchdog()
