@@ -334,7 +334,7 @@ class Adxl355:
         self._stopped("reset")
 
     def _stopped(self, reason: str) -> None:
-        if self._measuring or self._next_index:
+        if self._next_index:  # a gap only means something after delivered samples
             self._note_gap(reason)
         self._measuring = False
         self._carry = b""
@@ -586,7 +586,7 @@ class Adxl355:
         saturated = bool(np.any(np.abs(np.concatenate([on, off])) >= 0.99 * R.DATA_MAX))
         passed = not saturated and all(
             lo <= d <= hi for d, (lo, hi) in zip(delta, limits_g, strict=True))
-        if was:
+        if was and self._next_index:
             self._note_gap("self_test")
         else:
             self.standby()

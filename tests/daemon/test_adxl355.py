@@ -345,6 +345,8 @@ def test_temperature_is_reread_when_temp2_changes():
 
 def test_offsets_round_trip_and_shift_the_output():
     dev, _emu, clock = rig(source=constant_source((1000, -500, 256000)))
+    clock.advance(0.002)
+    assert dev.drain().n_sets == 2
     assert dev.set_offsets(-1000, 480, -256000) == (-62, 30, -16000)
     assert dev.get_offsets() == (-992, 480, -256000)
     clock.advance(0.003)

@@ -1,0 +1,154 @@
+"""Check the sensor hardware before running the service.
+
+Opens the bus of the configuration (``[sensor]``: SPI or I2C), probes the ADXL355 and explains
+a wrong answer, resets and configures it, optionally runs the self-test (at ±8 g, where gravity
+plus the deflection cannot clip), then acquires for ``--seconds`` and reports the real output
+rate fitted against CLOCK_MONOTONIC (Hz and ppm off nominal, 1σ), the mean acceleration per
+axis (m/s², ± standard error of the mean), the chip temperature (°C, uncalibrated) and every
+DS18B20 on the 1-Wire bus. ``--emulate`` does the same against the register-level emulator.
+Exit status 0 when everything looked right, 1 when a check failed, 2 when the hardware could
+not be used at all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+import numpy as np
+from avard.core.errors import ConfigError
+
+NAME = "probe"
+HELP = "check the ADXL355 (IDs, self-test, real ODR, 1 g) and the DS18B20 sensors"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", metavar="FILE", help="TOML configuration ([sensor] bus "
+                        "settings, odr_hz, range_g); default: the built-in defaults")
+    parser.add_argument("--seconds", type=float, default=5.0,
+                        help="acquisition time for the rate fit, s (default 5)")
+    parser.add_argument("--self-test", action="store_true", help="run the electrostatic "
+                        "self-test (at ±8 g)")
+    parser.add_argument("--no-ds18b20", action="store_true", help="skip the 1-Wire sensors")
+    parser.add_argument("--emulate", action="store_true", help="no hardware: use the "
+                        "register-level emulator (1 g on Z)")
+    parser.add_argument("--ppm", type=float, default=2500.0,
+                        help="with --emulate: the emulated oscillator error, ppm")
+
+
+def _open(args: argparse.Namespace, s: dict[str, Any]) -> tuple[Any, Any]:
+    from avard.daemon.adxl355 import Adxl355
+    from avard.daemon.registers import sensitivity_lsb_per_g
+
+    if args.emulate:
+        from avard.daemon.emulator import (
+            EmulatedAdxl355,
+            FakeSpiDev,
+            VirtualClock,
+            constant_source,
+        )
+        from avard.daemon.transport import SpiBus
+
+        clock = VirtualClock()
+        one_g = round(sensitivity_lsb_per_g(int(s["range_g"])))
+        emu = EmulatedAdxl355(constant_source((0, 0, one_g)), clock,
+                              odr_error_ppm=args.ppm, temperature=24.0)
+        return Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock), clock
+    from avard.daemon.timebase import SystemClock
+    from avard.daemon.transport import open_bus
+
+    bus = open_bus(s["bus"], bus=s["spi_bus"] if s["bus"] == "spi" else s["i2c_bus"],
+                   device=s["spi_device"], address=s["i2c_address"],
+                   speed_hz=s["spi_speed_hz"])
+    clock = SystemClock()
+    return Adxl355(bus, clock=clock), clock
+
+
+def run(args: argparse.Namespace) -> int:
+    from avard.daemon.config import load_config
+    from avard.daemon.timebase import TimeBase
+
+    if not 0.5 <= args.seconds <= 3600:
+        raise ConfigError(f"--seconds {args.seconds}: use 0.5 to 3600 s")
+    cfg = load_config(args.config)
+    s = cfg["sensor"]
+    out = sys.stdout
+    ok = True
+    dev, clock = _open(args, s)
+    try:
+        info = dev.probe()
+        out.write(f"{info.name} found: DEVID_AD 0x{info.devid_ad:02X}, DEVID_MST "
+                  f"0x{info.devid_mst:02X}, PARTID 0x{info.partid:02X}, REVID {info.revid}\n")
+        dev.reset()
+        odr, rng = float(s["odr_hz"]), int(s["range_g"])
+        if args.self_test:
+            dev.configure(range_g=8, odr_hz=odr)
+            st = dev.self_test()
+            g = 9.80665
+            deltas = ", ".join(f"{a} {d:.3f} g ({d * g:.2f} m/s²)"
+                               for a, d in zip("XYZ", st.delta_g, strict=True))
+            out.write(f"self-test {'passed' if st.passed else 'FAILED'}: {deltas}\n")
+            ok &= st.passed
+        dev.configure(range_g=rng, odr_hz=odr)
+        dev.start()
+        tb = TimeBase(odr, group_delay_samples=dev.group_delay_samples,
+                      min_span_s=min(1.0, args.seconds / 2))
+        poll_s = min(0.25 * 32 / odr, 0.1)  # four polls per FIFO fill
+        t_end = clock.monotonic() + args.seconds
+        blocks, gaps = [], 0
+        while clock.monotonic() < t_end:
+            clock.sleep(poll_s)
+            d = dev.drain()
+            gaps += int(d.overrun)
+            tb.add_drain(d)
+            if d.n_sets:
+                blocks.append(d.counts)
+        temp_c = dev.read_temperature_c()
+        dev.standby()
+        a = np.concatenate(blocks) * dev.scale_mps2 if blocks else np.empty((0, 3))
+        r = tb.rate()
+        out.write(f"{len(a)} samples in {args.seconds:g} s at nominal {odr:g} Hz, "
+                  f"±{rng} g; gaps: {gaps}\n")
+        out.write(f"real output rate {r.odr_hz:.4f} ± {r.odr_u_hz:.4f} Hz "
+                  f"({r.ppm:+.0f} ± {r.ppm_u:.0f} ppm off nominal, 1σ)\n")
+        if len(a) > 1:
+            mean = a.mean(axis=0)
+            sem = a.std(axis=0, ddof=1) / math.sqrt(len(a))
+            out.write("mean acceleration (m/s², ± standard error): " + ", ".join(
+                f"{ax} {m:+.5f} ± {e:.5f}" for ax, m, e in zip("XYZ", mean, sem, strict=True))
+                + f"; |a| = {np.linalg.norm(mean):.4f} m/s²\n")
+            if not 0.9 * 9.80665 < np.linalg.norm(mean) < 1.1 * 9.80665:
+                out.write("  |a| is not 1 g: the sensor is moving, or its sensitivity or "
+                          "wiring is wrong\n")
+                ok = False
+        else:
+            out.write("no samples arrived\n")
+            ok = False
+        out.write(f"chip temperature {temp_c:.2f} °C (uncalibrated intercept "
+                  f"{dev.temp_intercept_lsb:g} LSB)\n")
+        ok &= gaps == 0
+    finally:
+        dev.bus.close()
+    if not (args.no_ds18b20 or args.emulate):
+        ok &= _ds18b20(out)
+    out.write("all checks passed\n" if ok else "some checks FAILED\n")
+    return 0 if ok else 1
+
+
+def _ds18b20(out: Any) -> bool:
+    from avard.daemon import ds18b20
+
+    ids = ds18b20.discover()
+    if not ids:
+        out.write("no DS18B20 on the 1-Wire bus\n")
+        return True
+    good = True
+    for rd in ds18b20.Ds18b20Bank(ids).read_all():
+        if rd.ok:
+            out.write(f"DS18B20 28-{rd.sensor_id}: {rd.value_c:.4f} °C ({rd.read_s:.2f} s)\n")
+        else:
+            out.write(f"DS18B20 28-{rd.sensor_id}: {rd.status} ({rd.detail})\n")
+            good = False
+    return good
