@@ -206,6 +206,15 @@ class AllanWorker(Worker):
         self.checkpoint()
 
 
+def offset_after_mark(record: dict[str, Any], offset: float) -> float:
+    """The CLOCK_REALTIME − CLOCK_MONOTONIC offset in force after a ring mark: a clock_step
+    event changes it. Workers apply it in sample order, so blocks before a step keep the old
+    wall-clock times even when written after the reader already saw the step."""
+    if record.get("kind") == "event" and record.get("name") == "clock_step":
+        return float(record["detail"]["t_real_after"]) - float(record["t_mono"])
+    return offset
+
+
 def feed_state(feed: AllanFeed) -> dict[str, Any]:
     """What an AllanFeed needs to continue exactly: held temperatures, pending readings."""
     return {"next_index": feed.next_index, "held": [float(v) for v in feed._held],
@@ -231,6 +240,7 @@ class RecorderWorker(Worker):
         self.rec = recorder
         self.svc = service
         self.block_samples = max(1, int(block_samples))
+        self.real_offset = service.real_offset
         self._parts: list[np.ndarray] = []
         self._i0 = 0
         self._t0 = 0.0
@@ -241,7 +251,7 @@ class RecorderWorker(Worker):
             return
         counts = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
         self.rec.write(frames.raw_record(self.svc.run_id, 0, self._i0, counts, self._t0,
-                                         self._t0 + self.svc.real_offset,
+                                         self._t0 + self.real_offset,
                                          rate_hz=self.svc.timebase.odr_hz))
         self._parts, self._n = [], 0
 
@@ -255,6 +265,7 @@ class RecorderWorker(Worker):
         for kind, val in _split(chunk):
             if kind == "mark":
                 self._flush()
+                self.real_offset = offset_after_mark(val, self.real_offset)
                 written = self.rec.write(val)
                 if val["kind"] == "checkpoint" and written:
                     self.rec.flush()
@@ -294,6 +305,7 @@ class PublisherWorker(Worker):
         self.pub = publisher
         self.svc = service
         self.status_interval_s = status_interval_s
+        self.real_offset = service.real_offset
         self._next_status = 0.0
 
     def handle(self, chunk: Chunk) -> None:
@@ -305,6 +317,7 @@ class PublisherWorker(Worker):
         rate = self.svc.timebase.odr_hz
         for kind, val in _split(chunk):
             if kind == "mark":
+                self.real_offset = offset_after_mark(val, self.real_offset)
                 if val["kind"] in frames.TOPIC_OF_KIND:
                     self.pub.publish(None, val)
                 continue
@@ -312,7 +325,7 @@ class PublisherWorker(Worker):
             t0 = float(chunk.t_mono[a])
             self.pub.publish("raw", frames.raw_record(
                 self.svc.run_id, 0, int(chunk.index[a]), chunk.counts[a:b], t0,
-                t0 + self.svc.real_offset, rate_hz=rate))
+                t0 + self.real_offset, rate_hz=rate))
         now = time.monotonic()
         if now >= self._next_status:
             self._next_status = now + self.status_interval_s
