@@ -7,16 +7,16 @@ queue that the service drains. What can go wrong on a 1-Wire bus is reported, no
 ======================  ============================================  ==================
 what                    how it shows                                  reading
 ======================  ============================================  ==================
-sensor gone / back      w1_slave missing (``NoSensorFoundError``)     NaN, "missing"
-disturbed read          CRC line says NO (``SensorNotReadyError``)    NaN, "crc"
+sensor gone / back      w1_slave missing                              NaN, "missing"
+disturbed read          CRC line says NO                              NaN, "crc"
 CRC wrong but "YES"     our own CRC-8 check of the 9 bytes            NaN, "crc"
-nothing read            all-zero bytes (``SensorNotReadyError``)       NaN, "not_ready"
-power-on value          exactly 85 °C (``ResetValueError``)           NaN, "reset_value"
+nothing read            all-zero scratchpad bytes                     NaN, "not_ready"
+power-on value          exactly 85 °C (w1thermsensor ResetValueError)  NaN, "reset_value"
 ======================  ============================================  ==================
 
-Each change of a sensor's state is logged once (not every read). The temperature comes from
-w1thermsensor's own conversion of the scratchpad bytes, from one read of ``w1_slave`` (a second
-read would start a second 750 ms conversion).
+Each change of a sensor's state is logged once (not every read). w1thermsensor finds the
+sensors and converts the scratchpad bytes; ``w1_slave`` is read once per reading (each read
+starts a 750 ms conversion), with w1thermsensor's own validity checks plus a CRC-8 check.
 
 w1thermsensor runs ``modprobe`` when imported unless ``W1THERMSENSOR_NO_KERNEL_MODULE=1``;
 :func:`import_w1thermsensor` sets that when asked (tests, simulation, a system that loads the
@@ -139,15 +139,26 @@ class SensorReader:
         w1 = self._w1
         try:
             sensor = self._open()
-            lines = sensor.get_raw_sensor_strings()
         except w1.NoSensorFoundError:
+            return math.nan, MISSING, "w1_slave not present"
+        # One read of w1_slave = one 750 ms conversion on the bus. w1thermsensor's
+        # get_raw_sensor_strings() raises the same SensorNotReadyError for "CRC NO" and for
+        # "no answer", and telling them apart would need a second read (a second conversion),
+        # so the file is read here once, with the same checks, and converted by w1thermsensor.
+        try:
+            lines = sensor.sensorpath.read_text().splitlines()
+        except OSError:
             self._sensor = None  # build it again when the sensor is back
             return math.nan, MISSING, "w1_slave not present"
-        except w1.SensorNotReadyError:
-            return math.nan, *self._not_ready_kind()
+        if len(lines) < 2:
+            return math.nan, NOT_READY, f"short w1_slave ({len(lines)} lines)"
+        if not lines[0].strip().endswith("YES"):
+            return math.nan, CRC, "kernel reports CRC NO"
+        if "00 00 00 00 00 00 00 00 00" in lines[0]:
+            return math.nan, NOT_READY, "all-zero scratchpad: the sensor did not answer"
         try:
             pad = bytes.fromhex("".join(lines[0].split(":")[0].split()))
-        except (ValueError, IndexError):
+        except ValueError:
             return math.nan, ERROR, f"unparsable w1_slave line {lines[0]!r}"
         if len(pad) != 9 or crc8_maxim(pad[:8]) != pad[8]:
             return math.nan, CRC, f"scratchpad {pad.hex()} fails CRC-8"
@@ -160,16 +171,6 @@ class SensorReader:
         except (ValueError, IndexError) as exc:
             return math.nan, ERROR, f"unparsable w1_slave: {exc}"
         return float(value), OK, ""
-
-    def _not_ready_kind(self) -> tuple[str, str]:
-        """Tell a CRC failure (kernel says NO) from an all-zero read, from the file itself."""
-        try:
-            first = self._sensor.sensorpath.read_text().splitlines()[0]
-        except (OSError, IndexError, AttributeError):
-            return NOT_READY, "sensor not ready"
-        if first.strip().endswith("NO"):
-            return CRC, "kernel reports CRC NO"
-        return NOT_READY, "all-zero scratchpad: the sensor did not answer"
 
     def read(self) -> TemperatureReading:
         t0 = self.clock.monotonic()
