@@ -15,7 +15,8 @@ emulated part has
 * samples produced at the configured ODR, off by ``odr_error_ppm`` like a real part's internal
   clock, from a pluggable ``source(n) -> (n, 3) int`` of raw counts, against a clock that is a
   :class:`VirtualClock` (advanced by the test, or running at ``speed`` × real time);
-* the TEMP registers following a temperature source ``() -> °C``; offsets (1 offset LSB = 16
+* the TEMP registers following a temperature source ``() -> °C``, read per register (not
+  double-buffered, so a burst can tear as on the part); offsets (1 offset LSB = 16
   data LSB, added to the output); self-test (ST1+ST2 adds the electrostatic deflection);
 * faults on demand (:class:`BusFaults`): EIO once or always, a bus stuck at 0xFF/0x00
   (unplugged) and coming back, a device that stops producing samples, a FIFO that starts
@@ -222,6 +223,7 @@ class EmulatedAdxl355:
                  temp_intercept_lsb: float = R.TEMP_INTERCEPT_LATER,
                  nvm_busy_s: float = 0.002,
                  self_test_g: Sequence[float] = R.SELF_TEST_TYPICAL_G,
+                 temp_double_buffered: bool = False,
                  chunk: int = 1 << 16) -> None:
         self.source: Source = source if source is not None else constant_source()
         self.clock = clock if clock is not None else VirtualClock()
@@ -232,6 +234,7 @@ class EmulatedAdxl355:
         self.temp_intercept_lsb = float(temp_intercept_lsb)
         self.nvm_busy_s = float(nvm_busy_s)
         self.self_test_g = tuple(float(g) for g in self_test_g)
+        self.temp_double_buffered = bool(temp_double_buffered)
         self.chunk = int(chunk)
         self.faults = BusFaults()
         self.lock = threading.RLock()
@@ -426,7 +429,10 @@ class EmulatedAdxl355:
         if a == R.ADDR["FIFO_ENTRIES"]:
             return min(self.fifo_entries, R.FIFO_LOCATIONS)
         if a in (R.ADDR["TEMP2"], R.ADDR["TEMP1"]):
-            if "temp" not in snap:
+            # TEMP2/TEMP1 are not double-buffered on the part: each register shows the
+            # temperature of the moment it is read, so a burst can tear across a change of
+            # TEMP2 (e.g. 0x6FF → 0x700 read as 0x600). ``temp_double_buffered`` turns that off.
+            if "temp" not in snap or not self.temp_double_buffered:
                 snap["temp"] = self._temp_raw()
             raw = snap["temp"]
             return (raw >> 8) & 0x0F if a == R.ADDR["TEMP2"] else raw & 0xFF

@@ -334,13 +334,18 @@ def test_temperature_and_intercept():
 
 
 def test_temperature_is_reread_when_temp2_changes():
-    # raw 0x6FF → 0x700 between the burst and the TEMP2 check: the driver must read again.
-    raws = iter([0x6FF, 0x700, 0x700, 0x700])
-    temps = [R.temperature_from_raw(r) for r in (0x6FF, 0x700, 0x700, 0x700)]
-    it = iter(temps)
-    dev, _emu, _ = rig(temperature=lambda: next(it))
+    # raw 0x6FF → 0x700 between the TEMP2 and TEMP1 reads of one burst: the pair tears into
+    # 0x600 (28 °C off); TEMP2 read again differs, so the driver reads the pair again.
+    first = [0x6FF]  # the first register read sees 0x6FF, every later one 0x700
+
+    def temperature():
+        return R.temperature_from_raw(first.pop() if first else 0x700)
+
+    dev, emu, _ = rig(temperature=temperature)
     assert dev.read_temperature_raw() == 0x700
-    del raws
+    first.append(0x6FF)
+    hi, lo = emu.read(R.ADDR["TEMP2"], 2)
+    assert (hi << 8 | lo) == 0x600  # what a driver without the re-read would have used
 
 
 def test_offsets_round_trip_and_shift_the_output():

@@ -187,11 +187,18 @@ def test_odr_error_in_ppm(ppm):
 
 def test_temperature_registers_follow_the_source():
     temps = iter([25.0, 35.0])
-    _emu, bus, _ = make(temperature=lambda: next(temps))
+    _emu, bus, _ = make(temperature=lambda: next(temps), temp_double_buffered=True)
     hi, lo = bus.read(A["TEMP2"], 2)
     assert ((hi << 8) | lo) == 1885
     hi, lo = bus.read(A["TEMP2"], 2)
     assert ((hi & 0x0F) << 8 | lo) == round(1885 - 90.5)
+
+
+def test_temperature_registers_are_not_double_buffered():
+    raws = iter([0x6FF, 0x700])
+    _emu, bus, _ = make(temperature=lambda: R.temperature_from_raw(next(raws)))
+    hi, lo = bus.read(A["TEMP2"], 2)  # TEMP2 sampled at 0x6FF, TEMP1 at 0x700
+    assert (hi << 8 | lo) == 0x600
 
 
 def test_offsets_are_added_in_units_of_16_counts():
