@@ -360,6 +360,12 @@ class Adxl355:
                     f"ADXL355 configure: wrote 0x{value:02X} to {name}, read back 0x{back:02X};"
                     " the chip refused the write (not in standby?) or the bus corrupts data")
         self.config = _Config(int(range_g), rate, wm)
+        max_odr = getattr(self.bus, "max_odr_hz", None)
+        if max_odr is not None and rate.odr_hz > max_odr():
+            log.warning("ODR %g Hz needs %.0f kbit/s of FIFO data; the %g kHz I2C bus carries "
+                        "about %g Hz: expect overruns. Use SPI, a lower ODR, or "
+                        "dtparam=i2c_arm_baudrate=400000", rate.odr_hz,
+                        rate.odr_hz * 81 / 1e3, self.bus.bitrate_hz / 1e3, max_odr())
         log.info("ADXL355 configured: ±%d g, ODR %g Hz (low-pass %g Hz), watermark %d",
                  range_g, rate.odr_hz, rate.lowpass_hz, wm)
 

@@ -112,13 +112,24 @@ class I2cBus:
     limited to the 32 bytes of SMBus block reads.
     """
 
-    def __init__(self, smbus: Any, address: int = 0x1D) -> None:
+    #: Bits on the wire per data byte (8 + ACK).
+    BITS_PER_BYTE = 9
+
+    def __init__(self, smbus: Any, address: int = 0x1D, *, bitrate_hz: int = 100_000) -> None:
+        """``bitrate_hz`` is the bus clock set in the device tree (Raspberry Pi default
+        100 kHz; ``dtparam=i2c_arm_baudrate=400000`` for fast mode). The driver only uses it to
+        warn when a rate cannot be carried."""
         if address not in I2C_ADDRESSES:
             raise ConfigError(f"I2C address 0x{address:02X} is not an ADXL355 address; use 0x1D "
                               "(ASEL low) or 0x53 (ASEL high)")
         self.smbus = smbus
         self.address = address
+        self.bitrate_hz = int(bitrate_hz)
         self.transfers = 0
+
+    def max_odr_hz(self) -> float:
+        """Highest ODR whose FIFO data (9 bytes per set) fits in 60 % of the bus time, Hz."""
+        return 0.6 * self.bitrate_hz / (9 * self.BITS_PER_BYTE)
 
     def read(self, addr: int, n: int) -> bytes:
         if n <= 0:
@@ -152,10 +163,13 @@ class I2cBus:
 
 
 def open_bus(kind: str = "spi", *, bus: int | None = None, device: int = 0,
-             address: int = 0x1D, speed_hz: int = SPI_DEFAULT_SPEED_HZ) -> SpiBus | I2cBus:
+             address: int = 0x1D, speed_hz: int = SPI_DEFAULT_SPEED_HZ,
+             i2c_bitrate_hz: int = 100_000) -> SpiBus | I2cBus:
     """Open a real bus: ``"spi"`` → /dev/spidev{bus}.{device}, ``"i2c"`` → /dev/i2c-{bus}.
 
     Defaults: SPI bus 0, I2C bus 1 (the Raspberry Pi header). Errors say what to fix.
+    ``i2c_bitrate_hz`` tells the driver the I2C clock the device tree set (it cannot be set
+    from user space).
     """
     if kind == "spi":
         n = 0 if bus is None else bus
@@ -179,7 +193,7 @@ def open_bus(kind: str = "spi", *, bus: int | None = None, device: int = 0,
             smb = SMBus(n)
         except OSError as exc:
             raise HardwareError(_open_advice(path, exc, "i2c")) from exc
-        return I2cBus(smb, address)
+        return I2cBus(smb, address, bitrate_hz=i2c_bitrate_hz)
     raise ConfigError(f"unknown bus kind {kind!r}; use 'spi' or 'i2c'")
 
 

@@ -505,3 +505,14 @@ def test_drains_with_an_unreliable_stamp_are_not_complete():
     assert d.fifo_entries == 96 and not d.complete
     clock.advance(0.005)
     assert not dev.drain(max_sets=2).complete  # sets were left behind
+
+
+def test_configure_warns_when_the_i2c_bus_cannot_carry_the_rate(caplog):
+    dev, _, _ = rig("i2c", start=False)
+    assert dev.bus.max_odr_hz() == pytest.approx(0.6 * 100_000 / 81)
+    with caplog.at_level(logging.WARNING):
+        dev.configure(odr_hz=500)
+    assert "expect overruns" not in caplog.text
+    with caplog.at_level(logging.WARNING):
+        dev.configure(odr_hz=1000)
+    assert "expect overruns" in caplog.text
