@@ -324,14 +324,20 @@ REPEATABLE = ("sinusoid", "bias_step")
 MAX_FINDINGS = 8
 
 
-def _detect_all(seg: Segment, rate_hz: float, temp_names: list[str], m: NDArray
-                ) -> tuple[Accepted, list[cz.Candidate]]:
+def _detect_all(seg: Segment, rate_hz: float, temp_names: list[str], m: NDArray,
+                raw: Measured) -> tuple[Accepted, list[cz.Candidate], Measured]:
+    """Run the detectors until none passes; returns the accepted causes, the last test of
+    every cause, and the AVAR of the data with the accepted causes removed."""
     acc = Accepted()
     tested: dict[str, cz.Candidate] = {}
     record_s = len(seg.y) / rate_hz
-    for _ in range(MAX_FINDINGS):
+    meas = raw
+    for it in range(MAX_FINDINGS + 1):
         work = seg.y - acc.removed_signal(seg, rate_hz)
-        meas = measure(work, rate_hz, m)
+        if it > 0 and any(c.cause in cz.REMOVED for c in acc.causes):
+            meas = measure(work, rate_hz, m)
+        if it == MAX_FINDINGS:
+            break
         extra, filt, fixed, _npar = acc.model_parts(rate_hz)
         cur = fit_terms(meas, extra=extra, filter_hz=filt, fixed_fn=fixed)
         cur_v = cur.avar(meas.tau)
@@ -344,7 +350,7 @@ def _detect_all(seg: Segment, rate_hz: float, temp_names: list[str], m: NDArray
             if cause == "quantization":
                 cand = cz.detect_quantization(seg.y, rate_hz)
             elif cause == "sinusoid":
-                ex = tuple(c.params["frequency_hz"] for c in acc.causes if c.cause == "sinusoid")
+                ex = tuple(c.detail["band_hz"] for c in acc.causes if c.cause == "sinusoid")
                 cand = cz.detect_sinusoid(work, rate_hz, meas.tau, cur_v, meas.edf, ex)
             elif cause == "filter":
                 fixed_v = fixed(meas.tau) + sum(
@@ -378,7 +384,7 @@ def _detect_all(seg: Segment, rate_hz: float, temp_names: list[str], m: NDArray
             break
         log.info("accepted %s %s", found.cause, found.params)
         acc.causes.append(found)
-    return acc, list(tested.values())
+    return acc, list(tested.values()), meas
 
 
 # --------------------------------------------------------------------------------------------
@@ -400,7 +406,6 @@ class ChannelExplanation:
     holdout_gain: float | None
     holdout_chi2: dict[str, float] = field(default_factory=dict)
     dropped: list[str] = field(default_factory=list)
-    temperature_avar: dict[str, Measured] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {
@@ -490,7 +495,7 @@ def explain_channel(y: NDArray, rate_hz: float, temps: NDArray | None, temp_name
     base_v = base.avar(meas.tau)
     misfit = misfit_ranges(meas, base_v)
 
-    acc, tests = _detect_all(whole, rate_hz, temp_names, m)
+    acc, tests, _ = _detect_all(whole, rate_hz, temp_names, m, meas)
 
     # held-out evaluation (and the claim rule)
     if holdout is not None:
@@ -559,15 +564,10 @@ def explain_channel(y: NDArray, rate_hz: float, temps: NDArray | None, temp_name
                          "tau_range_s": [float(meas.tau[idx[0]]), float(meas.tau[idx[-1]])],
                          "evidence": c.evidence})
 
-    t_avar = {}
-    if temps is not None:
-        for j, tn in enumerate(temp_names):
-            if np.ptp(temps[:, j]) > 0:
-                t_avar[tn] = measure(temps[:, j], rate_hz, m)
     return ChannelExplanation(
         name, meas, base, base_v, misfit, findings, tests, ext, ext_v, gain,
         None if ho is None else ho[0] / max(ho[1], 1e-300),
-        {} if ho is None else {"base": ho[0], "extended": ho[1]}, dropped, t_avar)
+        {} if ho is None else {"base": ho[0], "extended": ho[1]}, dropped)
 
 
 def explain(record: Any, *, holdout: Any | None = None,
