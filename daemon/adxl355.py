@@ -395,6 +395,16 @@ class Adxl355:
         self.start()
         return info
 
+    def close(self) -> None:
+        """Put the part in standby (best effort: the bus may be gone) and close the bus."""
+        try:
+            if self._measuring:
+                self.standby()
+        except HardwareError as exc:
+            log.warning("ADXL355 standby on close failed: %s", exc)
+        finally:
+            self.bus.close()
+
     # -- properties --------------------------------------------------------------------------
     @property
     def odr_hz(self) -> float:

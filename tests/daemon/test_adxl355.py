@@ -516,3 +516,13 @@ def test_configure_warns_when_the_i2c_bus_cannot_carry_the_rate(caplog):
     with caplog.at_level(logging.WARNING):
         dev.configure(odr_hz=1000)
     assert "expect overruns" in caplog.text
+
+
+def test_close_puts_the_part_in_standby_and_survives_a_dead_bus():
+    dev, emu, _ = rig()
+    dev.close()
+    assert not emu.measuring and dev.bus.spi.closed
+    dev, emu, _ = rig()
+    emu.faults.fail_always()
+    dev.close()  # logged, not raised
+    assert dev.bus.spi.closed
