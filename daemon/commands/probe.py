@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{dev.temp_intercept_lsb:g} LSB)\n")
         ok &= gaps == 0
     finally:
-        dev.bus.close()
+        dev.close()
     if not (args.no_ds18b20 or args.emulate):
         ok &= _ds18b20(out)
     out.write("all checks passed\n" if ok else "some checks FAILED\n")
