@@ -369,6 +369,30 @@ def replay_allan(path: str | Path, *, streaming_cls: Any = None,
     return allan
 
 
+def _hold_on_grid(idx: np.ndarray, tnames: list[str],
+                  temps: list[tuple[int, list[str], list[Any]]]) -> np.ndarray:
+    """Temperature channels on the sample grid: each reading held from its index on
+    (zero-order hold, NaN before a channel's first reading); O(N log R), not O(N·R)."""
+    out = np.full((idx.shape[0], len(tnames)), np.nan)
+    col = {n: i for i, n in enumerate(tnames)}
+    per: list[tuple[list[int], list[float]]] = [([], []) for _ in tnames]
+    for i0, names, values in temps:
+        for name, value in zip(names, values, strict=True):
+            if name in col and value is not None:
+                per[col[name]][0].append(int(i0))
+                per[col[name]][1].append(float(value))
+    for c, (starts, vals) in enumerate(per):
+        if not starts:
+            continue
+        st = np.asarray(starts, dtype=np.int64)
+        order = np.argsort(st, kind="stable")      # later records win at equal index
+        st, v = st[order], np.asarray(vals)[order]
+        k = np.searchsorted(st, idx, side="right") - 1
+        have = k >= 0
+        out[have, c] = v[k[have]]
+    return out
+
+
 def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     """Load a whole recording as an :class:`avard.core.readers.Record` in SI units.
 
@@ -422,13 +446,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
                 tnames.append(name)
     temperature = None
     if tnames:
-        temperature = np.full((accel.shape[0], len(tnames)), np.nan)
-        col = {n: i for i, n in enumerate(tnames)}
-        for i0, names, values in temps:
-            start = int(np.searchsorted(idx, i0))
-            for name, value in zip(names, values, strict=True):
-                if name in col and value is not None:
-                    temperature[start:, col[name]] = value
+        temperature = _hold_on_grid(idx, tnames, temps)
     rates = [float(h["rate_hz"]) for h in headers]
     meta = {
         "format": "avard-recording",

@@ -228,3 +228,57 @@ def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> 
     rec = load_recording(tmp_path / "rec")
     col = rec.temperature_c[:, rec.temperature_names.index("plate")]
     assert set(np.unique(col[~np.isnan(col)])) == {21.5}
+
+
+def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
+        tmp_path: Path) -> None:
+    import socket
+
+    from avard.daemon.sdnotify import Notifier
+
+    path = str(tmp_path / "notify.sock")
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(path)
+    sock.settimeout(0.05)
+    notifier = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "100000"})  # ping every 50 ms
+    cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
+    dev, clock, sims, emu = build_simulated(cfg, "quiet-lab", seed=9)
+    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", on_tick=sims.on_tick,
+                  extra_temperature_names=list(sims.names), notifier=notifier)
+    sims.service = svc
+    stall_at: list[float] = []
+
+    def stall() -> None:
+        stall_at.append(time.monotonic())
+        emu.stop_producing()
+
+    timers = [threading.Timer(1.0, stall), threading.Timer(2.0, svc.stop_requested.set)]
+    for t in timers:
+        t.start()
+    text: list[str] = []
+    done = threading.Event()
+
+    def receive() -> None:  # like systemd: read as they come (the queue is short)
+        while not done.is_set():
+            try:
+                text.append(sock.recv(4096).decode())
+            except TimeoutError:
+                continue
+
+    rx = threading.Thread(target=receive)
+    rx.start()
+    svc.run(None)
+    time.sleep(0.2)
+    done.set()
+    rx.join()
+    sock.close()
+    assert text[0].startswith("READY=1")
+    assert sum(m.startswith("READY=1") for m in text) == 1
+    watchdogs = [i for i, m in enumerate(text) if m.startswith("WATCHDOG=1")]
+    assert len(watchdogs) >= 5                           # fed while samples advanced
+    assert any("samples" in m and "Hz" in m for m in text if m.startswith("STATUS="))
+    assert text[-1].startswith("STOPPING=1")
+    # After the sensor stopped producing, no more WATCHDOG=1: systemd would restart us.
+    tail = text[watchdogs[-1] + 1:]
+    assert sum(m.startswith("STATUS=") for m in tail) >= 5
+    assert svc.final_status["stalled"]
