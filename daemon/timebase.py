@@ -250,8 +250,9 @@ class TimeBase:
         if seg is None:
             raise ValueError("TimeBase has no drain yet: call update() first")
         b = self.period_s
-        a = (seg.y0 + seg.y_mean) - b * (seg.x0 + seg.x_mean)
-        return a + b * (float(index) - 0.5 - self.group_delay_samples)
+        # Relative to the segment's centroid, so that 10¹⁰-sized indices lose no precision.
+        di = (float(index) - seg.x0) - seg.x_mean
+        return seg.y0 + seg.y_mean + b * (di - 0.5 - self.group_delay_samples)
 
     def timestamps(self, index0: int, n: int) -> np.ndarray:
         """CLOCK_MONOTONIC times, s, of samples ``index0 … index0 + n − 1`` (float64)."""
