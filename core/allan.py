@@ -153,10 +153,13 @@ class DifferenceSums:
 
     Full grid (every difference, used for the variance of the highest order only):
     n, the number of differences, and s2 (C, C) = Σ Q Qᵀ.
-    Non-overlapping subgrid (differences whose start is a multiple of m samples from the
-    segment start, i.e. built from non-overlapping m-averages as NIST SP 1065 §5.6 asks; used
-    for the lag-1 ACF noise identification): na, s1 (C,) = Σ Q, sa (C, C) = Σ Q Qᵀ, and nl
-    pairs m samples apart with lag (C, C) = Σ Q_i Q_{i+m}ᵀ.
+    Subgrid for the lag-1 ACF noise identification (differences Q_j whose start j is a
+    multiple of ``id_period`` grid points from the segment start): na, s1 (C,) = Σ Q_j,
+    sa (C, C) = Σ Q_j Q_jᵀ, and nl pairs with lag (C, C) = Σ Q_{j−m} Q_jᵀ, Q_{j−m} being the
+    difference one τ earlier. Q_{j−m} and Q_j are built from adjacent, non-overlapping
+    m-averages as NIST SP 1065 §5.6 asks; the subgrid takes one such pair in every
+    max(m, 8) samples, which keeps the cost of the identification at short τ below that of
+    the variance itself (there are millions of pairs there; the ACF needs about 30).
     """
 
     n: int
@@ -177,18 +180,15 @@ class DifferenceSums:
         for f in self.FIELDS:
             setattr(self, f, getattr(self, f) + getattr(other, f))
 
-    def add_subgrid(
-        self, sel: NDArray, prev: NDArray | None, gram: NDArray | None = None
-    ) -> None:
-        """Add non-overlapping differences ``sel`` and, if given, their lag partners ``prev``
-        (``gram``: sel.T @ sel when the caller has it already)."""
+    def add_subgrid(self, sel: NDArray, prev: NDArray | None) -> None:
+        """Add subgrid differences ``sel`` and, if given, their lag partners ``prev``."""
         # Row-strided views would send matmul down numpy's slow non-BLAS loop: copy them
         # (into reused buffers, see avard.core.scratch).
         sel = _contiguous(sel, "sel")
         if sel.shape[0]:
             self.na += sel.shape[0]
             self.s1 += ones(sel.shape[0]) @ sel
-            self.sa += sel.T @ sel if gram is None else gram
+            self.sa += sel.T @ sel
         if prev is not None and prev.shape[0]:
             prev = _contiguous(prev, "prev")
             self.nl += prev.shape[0]
@@ -196,11 +196,26 @@ class DifferenceSums:
 
 
 def _contiguous(a: NDArray, key: str) -> NDArray:
+    """A C-contiguous copy of a row-strided (k, C) view, in a reused buffer."""
     if a.flags.c_contiguous:
         return a
     out = scratch(key, a.shape[0], a.shape[1], a.dtype)
-    np.copyto(out, a)
+    if a.strides[1] == a.itemsize:
+        # Copy whole rows as opaque items: numpy's 2-D copy loop pays per row of C values,
+        # which made this copy cost twice the Gram matrix computed from it.
+        row = np.dtype((np.void, a.itemsize * a.shape[1]))
+        np.copyto(out.view(row)[:, 0], a.view(row)[:, 0])
+    else:
+        np.copyto(out, a)
     return out
+
+
+ID_MIN_PERIOD = 8  # grid points between noise-identification pairs, at least
+
+
+def id_period(sp: int) -> int:
+    """Subgrid period (grid points) for the noise-identification sums: a multiple of sp ≥ 8."""
+    return sp * -(-ID_MIN_PERIOD // sp)
 
 
 def grid_sums(
@@ -222,6 +237,7 @@ def grid_sums(
     if n_e <= 0:
         return
     chunk = max(_CHUNK, sp)
+    period = id_period(sp)
     a = max(0, h - d * sp)
     while a < n_e:
         b = min(n_e, a + chunk)
@@ -242,20 +258,18 @@ def grid_sums(
             new1 = min(b, length - o * sp)
             if new1 <= new0:
                 continue
-            gram = None
             if o == d:
                 rows = arr[new0 - lo : new1 - lo]
                 s.n += new1 - new0
-                gram = rows.T @ rows
-                s.s2 += gram
-            first = new0 + (-(new0 + base)) % sp  # first new j on the non-overlapping subgrid
+                s.s2 += rows.T @ rows
+            # noise-identification subgrid: every `period`-th grid point of the segment
+            first = new0 + (-(new0 + base)) % period
             if first >= new1:
                 continue
-            sel = arr[first - lo : new1 - lo : sp]
-            f_lag = first if first - sp >= 0 else first + sp
-            prev = arr[f_lag - sp - lo : new1 - sp - lo : sp] if f_lag < new1 else None
-            # at sp = 1 the subgrid is the full grid: reuse its Gram matrix
-            s.add_subgrid(sel, prev, gram if sp == 1 else None)
+            sel = arr[first - lo : new1 - lo : period]
+            f_lag = first if first - sp >= 0 else first + period
+            prev = arr[f_lag - sp - lo : new1 - sp - lo : period] if f_lag < new1 else None
+            s.add_subgrid(sel, prev)
         a = b
 
 
@@ -263,10 +277,11 @@ def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: Sequence[Differe
     """``grid_sums`` for a stride that does not divide m (batch only, whole segment).
 
     Differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …; the noise-
-    identification subgrid takes every round(m/stride)-th of them.
+    identification pairs are (D_i, D_{i+q·stride}) with q = round(m/stride), at every
+    id_period(q)-th grid point.
     """
     length = p.shape[0]
-    every = max(1, round(m / stride))
+    every = id_period(max(1, round(m / stride)))
     for o in range(1, d + 1):
         last = length - 1 - o * m
         if last < 0:
@@ -283,9 +298,12 @@ def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: Sequence[Differe
                 s.n += dd.shape[0]
                 s.s2 += dd.T @ dd
         step = every * stride
+        lag_step = max(1, round(m / stride)) * stride  # one τ later, on the stride grid
         sub = np.asarray(sum(c * p[k * m : last + 1 + k * m : step]
                              for k, c in enumerate(coefs)), dtype=np.float64)
-        s.add_subgrid(sub, sub[:-1] if sub.shape[0] > 1 else None)
+        lagged = np.asarray(sum(c * p[k * m + lag_step : last + 1 + k * m : step]
+                                for k, c in enumerate(coefs)), dtype=np.float64)
+        s.add_subgrid(lagged, sub[: lagged.shape[0]])
 
 
 def tau_grid(n_samples: int, rate_hz: float, taus: str | ArrayLike, d: int) -> NDArray[np.int64]:

@@ -23,11 +23,11 @@ velocity random walk, flicker FM is bias instability, random-walk FM is rate ran
 from __future__ import annotations
 
 import math
+from math import comb
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import binom
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from .errors import DataError
 
@@ -78,7 +78,7 @@ def _sz(t: NDArray[np.float64], f: float, alpha: int, d: int) -> NDArray[np.floa
     t = np.asarray(t, dtype=np.float64)
     out = np.zeros_like(t)
     for k in range(-d, d + 1):
-        out += (-1) ** abs(k) * binom(2 * d, d + k) * _sx(t + k, f, alpha)
+        out += (-1) ** abs(k) * comb(2 * d, d + k) * _sx(t + k, f, alpha)
     return out
 
 
@@ -163,7 +163,7 @@ def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> floa
     if j_terms <= _J_MAX:
         sz0 = float(_sz(np.zeros(1), float(m), 2, d)[0])
         return sz0**2 * m_count / _basic_sum(j_terms, m_count, s_factor, float(m), 2, d)
-    a0 = binom(4 * d, 2 * d) / binom(2 * d, d) ** 2
+    a0 = comb(4 * d, 2 * d) / comb(2 * d, d) ** 2
     a1 = d / 2.0
     return 1.0 / ((a0 - a1 / r) / m_count)
 
@@ -187,6 +187,15 @@ def chi2_interval(
     e = np.broadcast_to(np.asarray(edf, dtype=np.float64), v.shape)
     ok = np.isfinite(e) & (e > 0)
     e_safe = np.where(ok, e, 1.0)
-    lo = np.where(ok, e_safe * v / chi2.ppf(0.5 + ci / 2, e_safe), np.nan)
-    hi = np.where(ok, e_safe * v / chi2.ppf(0.5 - ci / 2, e_safe), np.nan)
+    lo = np.where(ok, e_safe * v / _chi2_ppf(0.5 + ci / 2, e_safe), np.nan)
+    hi = np.where(ok, e_safe * v / _chi2_ppf(0.5 - ci / 2, e_safe), np.nan)
     return lo, hi
+
+
+def _chi2_ppf(p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Chi-squared quantile: χ²_k(p) = 2·P⁻¹(k/2, p), P the regularised lower incomplete gamma.
+
+    (scipy.special instead of scipy.stats: the latter costs ~45 MB of resident memory on
+    import, which matters on a 512 MB Raspberry Pi.)
+    """
+    return 2.0 * gammaincinv(k / 2.0, p)

@@ -51,6 +51,7 @@ _D = 2  # Allan variance: second differences
 _FLUSH_SAMPLES = 4096
 # Largest piece processed at once (working memory ≈ 4 × this × C × 8 bytes).
 _MAX_BLOCK = 1 << 16
+_EXACT_FLOAT = 2.0**53  # integers below this are exact in float64
 
 
 @dataclass(frozen=True)
@@ -86,33 +87,46 @@ class AllanSnapshot:
 
 
 class _Level:
-    """Sums and phase history of one octave level (m = 2^k, stride s)."""
+    """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""
 
-    __slots__ = ("base", "hist", "m", "spacing", "stride", "sums")
+    __slots__ = ("m", "spacing", "stride", "sums")
 
-    def __init__(self, m: int, stride: int, c: int, dtype: type) -> None:
+    def __init__(self, m: int, stride: int, c: int) -> None:
         self.m = m
         self.stride = stride
         self.spacing = m // stride
         self.sums = [DifferenceSums.zeros(c) for _ in range(_D)]
-        self.hist: NDArray = np.zeros((0, c), dtype=dtype)
+
+
+class _Grid:
+    """Phase history on one stride grid, shared by the levels that use that stride.
+
+    Stride 1 serves every m ≤ S (fully overlapping); each stride s = m/S > 1 serves one level.
+    ``hist`` holds the last (d+1)·max(sp) points (enough for the lag partner of the next
+    block's first second difference), in the accumulator's dtype (int64 counts stay exact).
+    """
+
+    __slots__ = ("base", "hist", "keep", "stride")
+
+    def __init__(self, stride: int, keep: int, c: int, dtype: type) -> None:
+        self.stride = stride
+        self.keep = keep
+        self.hist: NDArray = np.zeros((1, c), dtype=dtype)  # X_0 = 0 of the segment
         self.base = 0  # grid index, within the segment, of hist[0]
 
-    def push(self, points: NDArray) -> None:
-        """Append new phase points (on this level's grid) and add every completed difference."""
-        if points.shape[0] == 0:
-            return
+    def push(self, points: NDArray, levels: Sequence[_Level]) -> None:
+        """Append new grid points and add every completed difference to the levels' sums."""
         h = self.hist.shape[0]
         arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
-        arr[:h] = self.hist
+        arr[:h] = self.hist  # int64 → float64 is exact below 2**53 (checked by the caller)
         arr[h:] = points
-        sp = self.spacing
-        grid_sums(arr, sp, h, self.sums, _D, self.base)
-        keep = (_D + 1) * sp  # enough for the lag partner of the next block's first D
-        if arr.shape[0] > keep:
-            self.base += arr.shape[0] - keep
-            arr = arr[-keep:]
-        self.hist = arr.copy()  # the scratch buffer is reused by the next level
+        for lev in levels:
+            grid_sums(arr, lev.spacing, h, lev.sums, _D, self.base)
+        if arr.shape[0] > self.keep:
+            self.base += arr.shape[0] - self.keep
+            arr = arr[-self.keep :]
+        # a copy in the stored dtype: the scratch buffer is reused by the next grid
+        self.hist = arr.astype(self.hist.dtype)
 
 
 class StreamingAllan:
@@ -160,6 +174,8 @@ class StreamingAllan:
         self.n_segments = 0  # segments started (a gap or merge adds to it)
         self._integer: bool | None = None  # decided by the first block
         self._levels: list[_Level] = []
+        self._grids: list[_Grid] = []
+        self._log2s = self.overlap.bit_length() - 1
         self._pending: list[NDArray] = []
         self._pending_n = 0
         self._reset_segment()
@@ -169,9 +185,10 @@ class StreamingAllan:
         self._seg_count = 0  # samples in the current segment
         self._offset: NDArray | None = None  # first sample of the segment (removed)
         self._carry: NDArray | None = None  # phase X at the segment's last sample
-        for lev in self._levels:
-            lev.hist = lev.hist[:0]
-            lev.base = 0
+        self._big = False  # has |X| reached 2**53 in this segment (integer input)?
+        for g in self._grids:
+            g.hist = np.zeros((1, self.n_channels), dtype=self._dtype())
+            g.base = 0
 
     def _dtype(self) -> type:
         return np.int64 if self._integer else np.float64
@@ -179,10 +196,28 @@ class StreamingAllan:
     def _level(self, k: int) -> _Level:
         while len(self._levels) <= k:
             j = len(self._levels)
-            m = 1 << j
-            stride = 1 if m <= self.overlap else m // self.overlap
-            self._levels.append(_Level(m, stride, self.n_channels, self._dtype()))
+            self._levels.append(_Level(1 << j, self._stride(j), self.n_channels))
         return self._levels[k]
+
+    def _stride(self, k: int) -> int:
+        m = 1 << k
+        return 1 if m <= self.overlap else m // self.overlap
+
+    def _grid_levels(self, g: int) -> list[_Level]:
+        """Levels on grid g (stride 2^g): all m ≤ S for g = 0, else the one m = 2^g·S."""
+        ks = range(min(self._log2s + 1, self.max_octaves)) if g == 0 else \
+            ([self._log2s + g] if self._log2s + g < self.max_octaves else [])
+        return [self._level(k) for k in ks]
+
+    def _grid(self, g: int) -> _Grid:
+        while len(self._grids) <= g:
+            # Grids are created when the segment first reaches their stride, so the segment's
+            # only earlier point on them is X_0 = 0, which a new grid starts with.
+            keep = (_D + 1) * (self.overlap if len(self._grids) else
+                               min(self.overlap, 1 << (self.max_octaves - 1)))
+            self._grids.append(_Grid(1 << len(self._grids), keep, self.n_channels,
+                                     self._dtype()))
+        return self._grids[g]
 
     def _check_block(self, block: ArrayLike) -> NDArray:
         a = np.asarray(block)
@@ -200,8 +235,8 @@ class StreamingAllan:
             raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
         if self._integer is None and a.shape[0]:
             self._integer = a.dtype.kind in "iu"
-            for lev in self._levels:
-                lev.hist = lev.hist.astype(self._dtype())
+            for g in self._grids:
+                g.hist = g.hist.astype(self._dtype())
         if a.dtype.kind == "f":
             bad = ~np.isfinite(a)
             if bad.any():
@@ -218,7 +253,13 @@ class StreamingAllan:
                     )
                 return a.astype(np.int64)
             return a.astype(np.float64, copy=False)
-        return a.astype(np.int64) if self._integer else a.astype(np.float64)
+        if not self._integer:
+            return a.astype(np.float64)
+        if a.dtype.kind == "u" and a.dtype.itemsize >= 8:
+            if a.size and a.max() >= 2**62:
+                raise DataError("unsigned 64-bit samples this large cannot be summed in int64")
+            return a.astype(np.int64)
+        return a  # narrower integers are widened to int64 while the offset is removed
 
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
@@ -263,17 +304,31 @@ class StreamingAllan:
         phase = work[1:]  # X at segment indices seg_count+1 … seg_count+n
         first_index = self._seg_count + 1
         self._carry = phase[-1].copy()
+        if self._integer and not self._big:
+            self._big = bool(np.abs(phase).max(initial=0) >= _EXACT_FLOAT)
+        if self._integer and not self._big:
+            # Every X of this segment so far is an integer below 2**53, so float64 holds it
+            # exactly: one conversion here instead of one per level. Once a segment's phase
+            # has gone beyond, its grids work in int64 (slower, still exact).
+            phase_f = scratch("work_f", n, self.n_channels, np.float64)
+            np.copyto(phase_f, phase)
+            phase = phase_f
         if self._seg_count == 0:
-            for k in range(self.max_octaves):
-                self._level(k).hist = np.zeros((1, self.n_channels), dtype=dtype)  # X_0 = 0
+            for g in self._grids:
+                g.hist = np.zeros((1, self.n_channels), dtype=dtype)  # X_0 = 0
+                g.base = 0
         self._seg_count += n
-        for k in range(self.max_octaves):
-            lev = self._level(k)
-            s = lev.stride
-            off = (-first_index) % s  # first new index on this level's grid
-            if off >= n:
-                continue
-            lev.push(phase[off::s])
+        for gi in range(self.max_octaves):
+            s = 1 << gi
+            if s > self._seg_count:
+                break  # no point beyond X_0 on this grid yet, nor on any coarser one
+            levels = self._grid_levels(gi)
+            if not levels:
+                break
+            grid = self._grid(gi)
+            off = (-first_index) % s  # first new index on this grid
+            if off < n:
+                grid.push(phase[off::s], levels)
 
     def gap(self) -> None:
         """End the current segment: later differences never reach back across this point."""
@@ -358,17 +413,22 @@ class StreamingAllan:
         as in avard's frame format.
         """
         self._flush()
-        levels = []
-        for lev in self._levels:
-            levels.append({
-                "m": lev.m,
-                "stride": lev.stride,
-                "hist": _pack(lev.hist),
-                "base": lev.base,
-                "sums": [{f: (_pack(v) if isinstance(v, np.ndarray) else int(v))
-                          for f in DifferenceSums.FIELDS for v in [getattr(s, f)]}
-                         for s in lev.sums],
-            })
+        c = self.n_channels
+        levs = self._levels
+        sums: dict = {}
+        for f in DifferenceSums.FIELDS:
+            vals = [[getattr(x, f) for x in lev.sums] for lev in levs]
+            if f in ("n", "na", "nl"):
+                sums[f] = [[int(v) for v in row] for row in vals]
+            else:
+                shape = (len(levs), _D) + ((c,) if f == "s1" else (c, c))
+                sums[f] = _pack(np.array(vals, dtype=np.float64).reshape(shape))
+        grids = self._grids
+        hist = (np.concatenate([g.hist for g in grids]) if grids
+                else np.zeros((0, c), dtype=self._dtype()))
+        levels = {"count": len(levs), "sums": sums, "grids": len(grids), "hist": _pack(hist),
+                  "hist_len": [int(g.hist.shape[0]) for g in grids],
+                  "base": [int(g.base) for g in grids]}
         return {
             "kind": "streaming_allan",
             "v": STATE_VERSION,
@@ -381,6 +441,7 @@ class StreamingAllan:
             "n_samples": self.n_samples,
             "n_segments": self.n_segments,
             "seg_count": self._seg_count,
+            "big": self._big,
             "offset": None if self._offset is None else _pack(self._offset),
             "carry": None if self._carry is None else _pack(self._carry),
             "levels": levels,
@@ -402,20 +463,28 @@ class StreamingAllan:
             self.n_samples = int(state["n_samples"])
             self.n_segments = int(state["n_segments"])
             self._seg_count = int(state["seg_count"])
+            self._big = bool(state["big"])
             self._offset = None if state["offset"] is None else _unpack(state["offset"])
             self._carry = None if state["carry"] is None else _unpack(state["carry"])
-            for k, lv in enumerate(state["levels"]):
+            lv = state["levels"]
+            count = int(lv["count"])
+            if count > self.max_octaves:
+                raise FormatError(f"state has {count} levels, more than max_octaves")
+            hist = _unpack(lv["hist"])
+            ends = np.cumsum([0, *lv["hist_len"]])
+            for g in range(int(lv["grids"])):
+                grid = self._grid(g)
+                grid.hist = hist[ends[g] : ends[g + 1]].copy()
+                grid.base = int(lv["base"][g])
+            arrays = {f: _unpack(lv["sums"][f]) for f in ("s1", "s2", "sa", "lag")}
+            for k in range(count):
                 lev = self._level(k)
-                if lev.m != lv["m"] or lev.stride != lv["stride"]:
-                    raise FormatError(f"level {k} of the state has m/stride inconsistent "
-                                      "with its overlap")
-                lev.hist = _unpack(lv["hist"])
-                lev.base = int(lv["base"])
-                for s, sv in zip(lev.sums, lv["sums"], strict=True):
-                    for f in DifferenceSums.FIELDS:
-                        v = sv[f]
-                        setattr(s, f, _unpack(v) if isinstance(v, dict) else int(v))
-        except (KeyError, TypeError, ValueError) as exc:
+                for o, x in enumerate(lev.sums):
+                    for f in ("n", "na", "nl"):
+                        setattr(x, f, int(lv["sums"][f][k][o]))
+                    for f, arr in arrays.items():
+                        setattr(x, f, arr[k, o].copy())
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FormatError(f"StreamingAllan state is incomplete or malformed: {exc}; "
                               "start a new accumulator") from exc
         return self
