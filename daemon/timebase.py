@@ -218,7 +218,13 @@ class TimeBase:
 
     @property
     def odr_hz(self) -> float:
+        """Fitted output data rate, Hz."""
         return 1.0 / self.period_s
+
+    @property
+    def ppm(self) -> float:
+        """Fitted rate's offset from nominal, ppm (see :meth:`rate` for its uncertainty)."""
+        return (self.odr_hz / self.nominal_odr_hz - 1.0) * 1e6
 
     def rate(self) -> RateEstimate:
         """The fitted rate with its 1σ uncertainty (ordinary least-squares standard error of

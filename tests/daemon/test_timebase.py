@@ -88,6 +88,7 @@ def test_large_indices_and_times_keep_full_precision():
     for k in range(0, 400_000, 100):
         tb.update(x0 + k, 1e6 + k / odr)
     assert tb.rate().ppm == pytest.approx(1234.0, abs=0.01)
+    assert tb.ppm == pytest.approx(1234.0, abs=0.01)
 
 
 def test_memory_follows_a_drifting_oscillator():
