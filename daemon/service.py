@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 from avard.core import frames
-from avard.core.errors import AvardError, FormatError
+from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.recording import AllanFeed, RecordingReader, frame, scan_frames
 
 from . import __version__
@@ -572,7 +572,15 @@ class Service:
         cfg = self.cfg
         self._restart_gap: tuple[int, int, float] | None = None
         if cfg["recording"]["enabled"]:
-            self.data_dir.mkdir(parents=True, exist_ok=True)
+            try:
+                self.data_dir.mkdir(parents=True, exist_ok=True)
+                if not os.access(self.data_dir, os.W_OK | os.X_OK):
+                    raise PermissionError(13, "not writable")
+            except OSError as exc:
+                raise ConfigError(
+                    f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
+                    f"({exc.strerror}); under systemd StateDirectory= provides it, by hand "
+                    "use --data-dir DIR or `sudo install -d -o $USER /var/lib/avard`") from None
             self.restore()
         poll = effective_poll_hz(cfg)
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
