@@ -131,3 +131,62 @@ def test_record_without_a_service_fails_clearly(tmp_path: Path,
     rc = cli.main(["record", "tcp://127.0.0.1:9", "--out", str(tmp_path), "--wait", "0.3"])
     assert rc == 2
     assert "nothing received from tcp://127.0.0.1:9" in capsys.readouterr().err
+
+
+def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) -> None:
+    """The service over the emulated sensor; `avard record`'s archiver as a remote subscriber.
+    The archive holds the same samples as the service's recording, and its offline Allan
+    variance equals the recording's."""
+    from avard.core.recording import load_recording, replay_allan
+    from avard.daemon.commands.record import StreamArchiver
+    from avard.daemon.config import load_config
+    from avard.daemon.service import Service
+    from avard.daemon.simulation import build_simulated
+    from avard.daemon.subscriber import Subscriber
+
+    cfg = load_config(None, **{
+        "recording.data_dir": str(tmp_path / "rec"),
+        "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0",
+        "publish.hwm": 1_000_000, "sensor.poll_hz": 1.0, "allan.snapshot_interval_s": 10.0})
+    dev, clock, sims, _ = build_simulated(cfg, "quiet-lab", seed=3)
+    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=sims.on_tick,
+                  extra_temperature_names=list(sims.names))
+    sims.service = svc
+    box: dict = {}
+
+    def listen() -> None:
+        sub = Subscriber(svc.publisher.endpoint,
+                         request_endpoint=svc.request_server.endpoint).connect(join=False)
+        arch = StreamArchiver(sub, tmp_path / "archive", segment_s=3600.0, fsync_s=5.0)
+        stop = threading.Event()
+
+        def loop() -> None:
+            while not stop.is_set():
+                if (m := sub.recv(0.1)) is not None:
+                    arch.handle(m)
+            while (m := sub.recv(0.3)) is not None:
+                arch.handle(m)
+            arch.close()
+            sub.close()
+
+        t = threading.Thread(target=loop)
+        t.start()
+        box.update(thread=t, stop=stop, sub=sub)
+        deadline = time.monotonic() + 10.0  # the service waits for us before acquiring
+        while svc.publisher.stats()["peers"] < 1:
+            assert time.monotonic() < deadline, "the archiver never connected"
+            time.sleep(0.01)
+        time.sleep(0.2)  # the subscription itself travels after the TCP connect
+
+    svc.run(60.0, before_acquisition=listen)
+    box["stop"].set()
+    box["thread"].join(30)
+    stats = box["sub"].stats
+    assert stats.messages_lost == 0 and stats.samples_lost == 0 == stats.samples_unexplained
+
+    ours, theirs = load_recording(tmp_path / "archive"), load_recording(tmp_path / "rec")
+    assert ours.accel.shape == theirs.accel.shape and ours.accel.shape[0] > 60 * 120
+    np.testing.assert_array_equal(ours.accel, theirs.accel)
+    a = replay_allan(tmp_path / "archive").snapshot().avar
+    b = replay_allan(tmp_path / "rec").snapshot().avar
+    np.testing.assert_allclose(a, b, rtol=1e-12)
