@@ -152,13 +152,22 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=sims.on_tick,
                   extra_temperature_names=list(sims.names))
     sims.service = svc
-    box: dict = {}
+    box: dict = {"stop": threading.Event()}
 
     def listen() -> None:
         sub = Subscriber(svc.publisher.endpoint,
                          request_endpoint=svc.request_server.endpoint).connect(join=False)
+        box["sub"] = sub
+        # PUB drops until the subscription has travelled: probe until one arrives, so the
+        # archive starts with the first sample however loaded the machine is
+        deadline = time.monotonic() + 20.0
+        while sub.recv(0.05) is None:
+            assert time.monotonic() < deadline, "the archiver never connected"
+            svc.publisher.publish("status", F.status_record("", 0, {"probe": 1}, 0.0, 0.0))
+        while sub.recv(0.1) is not None:
+            pass
         arch = StreamArchiver(sub, tmp_path / "archive", segment_s=3600.0, fsync_s=5.0)
-        stop = threading.Event()
+        stop = box["stop"]
 
         def loop() -> None:
             while not stop.is_set():
@@ -169,18 +178,15 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
             arch.close()
             sub.close()
 
-        t = threading.Thread(target=loop)
-        t.start()
-        box.update(thread=t, stop=stop, sub=sub)
-        deadline = time.monotonic() + 10.0  # the service waits for us before acquiring
-        while svc.publisher.stats()["peers"] < 1:
-            assert time.monotonic() < deadline, "the archiver never connected"
-            time.sleep(0.01)
-        time.sleep(0.2)  # the subscription itself travels after the TCP connect
+        box["thread"] = threading.Thread(target=loop, daemon=True)
+        box["thread"].start()
 
-    svc.run(60.0, before_acquisition=listen)
-    box["stop"].set()
-    box["thread"].join(30)
+    try:
+        svc.run(60.0, before_acquisition=listen)
+    finally:
+        box["stop"].set()
+        if "thread" in box:
+            box["thread"].join(30)
     stats = box["sub"].stats
     assert stats.messages_lost == 0 and stats.samples_lost == 0 == stats.samples_unexplained
 
