@@ -1,0 +1,88 @@
+"""Greenhall–Riley EDF with a stride, and chi-squared intervals."""
+
+from __future__ import annotations
+
+import allantools.ci as atci
+import numpy as np
+import pytest
+from avard.core.allan import oavar
+from avard.core.edf import chi2_interval, edf_greenhall
+from avard.core.errors import DataError
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("alpha", [2, 1, 0, -1, -2])
+def test_matches_allantools_for_full_and_no_overlap(alpha: int, d: int) -> None:
+    """Independent implementation of the same paper: identical for stride 1 and stride m."""
+    for m in (1, 2, 8, 64, 512):
+        for n_phase in (1001, 100001):
+            if n_phase < 1 + d * m:
+                continue
+            for overlapping in (True, False):
+                try:
+                    ref = atci.edf_greenhall(alpha, d, m, n_phase, overlapping=overlapping)
+                except NotImplementedError:  # allantools lacks GR's small-K white-PM case
+                    continue
+                got = edf_greenhall(alpha, d, m, 1 if overlapping else m, n_phase)
+                assert got == pytest.approx(ref, rel=1e-9), (m, n_phase, overlapping)
+
+
+@pytest.mark.parametrize("alpha", [0, -1, -2])
+def test_stride_m_over_8_keeps_98_percent_of_full_overlap(alpha: int) -> None:
+    """The streaming cascade's claim (../shared/notes/allan.md), for white, flicker and
+    random-walk rate noise, and the non-overlapping estimator's loss for white noise."""
+    for m in (64, 1024, 8192):
+        full = edf_greenhall(alpha, 2, m, 1, 200_000)
+        part = edf_greenhall(alpha, 2, m, m // 8, 200_000)
+        assert part >= 0.98 * full
+    white_non = edf_greenhall(0, 2, 1024, 1024, 200_000) / edf_greenhall(0, 2, 1024, 1, 200_000)
+    assert 0.40 < white_non < 0.50
+
+
+def test_edf_grows_with_data_and_shrinks_with_stride() -> None:
+    for alpha in (1, 0, -1, -2):
+        edfs = [edf_greenhall(alpha, 2, 16, 1, n) for n in (200, 2000, 20000)]
+        assert edfs[0] < edfs[1] < edfs[2]
+        by_stride = [edf_greenhall(alpha, 2, 16, s, 20000) for s in (1, 4, 16)]
+        assert by_stride[0] >= by_stride[1] >= by_stride[2]
+
+
+def test_too_short_is_nan_and_bad_arguments_raise() -> None:
+    assert np.isnan(edf_greenhall(0, 2, 100, 1, 150))
+    with pytest.raises(DataError, match="alpha"):
+        edf_greenhall(-3, 2, 4, 1, 1000)  # AVAR does not converge for alpha <= -3
+    with pytest.raises(DataError, match="difference order"):
+        edf_greenhall(0, 4, 4, 1, 1000)
+    with pytest.raises(DataError, match="stride"):
+        edf_greenhall(0, 2, 4, 0, 1000)
+    with pytest.raises(DataError, match="confidence"):
+        chi2_interval(1.0, 10.0, ci=1.5)
+
+
+def test_chi2_interval_values() -> None:
+    lo, hi = chi2_interval(np.array([2.0, 2.0]), np.array([10.0, np.nan]), ci=0.9)
+    # χ²_10(0.95) = 18.307, χ²_10(0.05) = 3.9403 (standard tables)
+    assert lo[0] == pytest.approx(2.0 * 10 / 18.307, rel=1e-4)
+    assert hi[0] == pytest.approx(2.0 * 10 / 3.9403, rel=1e-4)
+    assert np.isnan(lo[1]) and np.isnan(hi[1])
+
+
+def _coverage(trials: int, seed: int) -> float:
+    rng = np.random.default_rng(seed)
+    sigma, m = 0.5, 8
+    truth = sigma**2 / m  # white rate noise: AVAR(τ) = σ²·τ0/τ
+    hits = 0
+    for _ in range(trials):
+        res = oavar(rng.normal(0.0, sigma, 2000), 1.0, [m])
+        hits += bool(res.lo[0] <= truth <= res.hi[0])
+    return hits / trials
+
+
+def test_68_percent_interval_covers_the_truth_about_68_percent() -> None:
+    # 300 trials: standard error of the coverage ≈ 0.027
+    assert 0.58 < _coverage(300, seed=1) < 0.78
+
+
+@pytest.mark.slow
+def test_68_percent_interval_coverage_precise() -> None:
+    assert 0.65 < _coverage(4000, seed=2) < 0.715
