@@ -172,6 +172,9 @@ class Drain:
     #: the STATUS/FIFO_ENTRIES read finished within one sample period of ``t_mono`` and no
     #: overrun happened during the drain. Only such drains feed the time-base fit.
     complete: bool = True
+    #: CLOCK_MONOTONIC seconds since the previous drain's stamp (None for the first): with the
+    #: fitted rate, ``since_last_s × odr − n_sets`` estimates the sets an overrun lost.
+    since_last_s: float | None = None
 
     @property
     def n_sets(self) -> int:
@@ -238,6 +241,7 @@ class Adxl355:
         self._gap_reasons: list[str] = []
         self._measuring = False
         self._last_data_t: float | None = None
+        self._last_drain_t: float | None = None
 
     # -- bus access with retries -----------------------------------------------------------
     def _read(self, addr: int, n: int, *, in_drain: bool = False) -> bytes:
@@ -482,7 +486,10 @@ class Adxl355:
                       index0=self._next_index, gap_reason=",".join(reasons) or None,
                       status=status, fifo_entries=entries,
                       dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end,
-                      complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS)
+                      complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS,
+                      since_last_s=None if self._last_drain_t is None
+                      else t_mono - self._last_drain_t)
+        self._last_drain_t = t_mono
         self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:
             self._next_index += n

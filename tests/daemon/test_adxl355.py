@@ -197,12 +197,15 @@ def test_max_sets_leaves_the_rest_for_the_next_drain():
 
 
 def test_overrun_is_reported_once_as_a_gap_of_unknown_size():
-    dev, _emu, clock = rig()
+    dev, emu, clock = rig()
     clock.advance(0.010)
     first = dev.drain()
     clock.advance(0.100)  # 100 sets at 1 kHz: the FIFO holds 33
     d = dev.drain()
     assert d.overrun and d.gap_reason == "fifo_overrun"
+    assert first.since_last_s is None and d.since_last_s == pytest.approx(0.100)
+    # what the gap cost, up to the set still waiting in the sync buffer
+    assert round(d.since_last_s * 1000) - d.n_sets - emu.lost in (0, 1)
     assert d.index0 == first.n_sets  # indices count received sets only
     assert d.counts[0, 0] > first.counts[-1, 0] + 1  # the data really jumped
     assert np.all(np.diff(d.counts[:, 0]) == 1)
