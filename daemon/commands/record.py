@@ -142,10 +142,11 @@ class StreamArchiver:
 def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     sub = subscriber_from_args(args)
-    stop = {"now": False}
+    # set by SIGTERM, or by an embedding program/test through ``args.stop_event``
+    stop: threading.Event = getattr(args, "stop_event", None) or threading.Event()
 
     def _stop(signum: int, frame: Any) -> None:
-        stop["now"] = True
+        stop.set()
 
     # SIGTERM ends the archive cleanly (flushed, closed); only the main thread may set it
     in_main = threading.current_thread() is threading.main_thread()
@@ -154,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     archiver = StreamArchiver(sub, out, segment_s=args.segment, fsync_s=args.fsync)
     start = time.monotonic()
     try:
-        while not stop["now"]:
+        while not stop.is_set():
             elapsed = time.monotonic() - start
             if args.duration is not None and elapsed >= args.duration:
                 break
@@ -165,6 +166,9 @@ def run(args: argparse.Namespace) -> int:
             msg = sub.recv(0.2)
             if msg is not None:
                 archiver.handle(msg)
+        # what has already arrived is archived too, so stopping never drops received data
+        while (msg := sub.recv(0.05)) is not None:
+            archiver.handle(msg)
     except KeyboardInterrupt:
         pass
     finally:

@@ -7,6 +7,7 @@ message is a deliberate hole, over real loopback TCP.
 
 from __future__ import annotations
 
+import argparse
 import threading
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from avard.core import frames as F
 from avard.core.errors import FormatError
 from avard.core.recording import RecordingReader
 from avard.daemon import cli
+from avard.daemon.commands import record
 from avard.daemon.publisher import RequestServer
 
 SCALE = 3.9e-6 * 9.80665
@@ -72,14 +74,20 @@ def _read(out: Path) -> list[dict]:
         return []
 
 
-def _record(service: FakeService, out: Path, duration: float) -> tuple[threading.Thread, dict]:
-    result: dict = {}
+def _record(service: FakeService, out: Path) -> tuple[threading.Thread, dict]:
+    """`avard record` (its run() with the parsed arguments) in a thread, stopped by the test
+    through ``args.stop_event`` once the archive holds what was sent: no wall-clock race."""
+    parser = argparse.ArgumentParser()
+    record.add_arguments(parser)
+    args = parser.parse_args([service.endpoint, "--request", service.server.endpoint,
+                              "--out", str(out), "--wait", "60"])
+    args.stop_event = threading.Event()
+    result: dict = {"stop": args.stop_event}
 
     def go() -> None:
-        result["rc"] = cli.main(["record", service.endpoint, "--request", service.server.endpoint,
-                                 "--out", str(out), "--duration", str(duration)])
+        result["rc"] = record.run(args)
 
-    t = threading.Thread(target=go)
+    t = threading.Thread(target=go, daemon=True)
     t.start()
     return t, result
 
@@ -87,7 +95,7 @@ def _record(service: FakeService, out: Path, duration: float) -> tuple[threading
 def test_record_archives_stream_with_gaps(service: FakeService, tmp_path: Path,
                                           capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "archive"
-    thread, result = _record(service, out, duration=2.5)
+    thread, result = _record(service, out)
     service.wait_subscribed()
     i0 = 0
     for seq in range(10):
@@ -107,6 +115,10 @@ def test_record_archives_stream_with_gaps(service: FakeService, tmp_path: Path,
     service.run = "run-2"
     service.send("raw", _raw("run-2", 0, 0))
     service.send("raw", _raw("run-2", 1, 32))
+    while sum(r["run"] == "run-2" for r in _read(out)) < 3:  # header + 2 raw
+        assert thread.is_alive(), "record ended early"
+        time.sleep(0.02)
+    result["stop"].set()
     thread.join(30)
     assert result["rc"] == 0
     text = capsys.readouterr().out
