@@ -260,3 +260,25 @@ def test_integer_accumulator_refuses_fractional_samples() -> None:
     acc.update(np.array([3.0, 4.0]))  # integral floats are fine
     with pytest.raises(DataError, match="integer counts"):
         acc.update(np.array([0.5]))
+
+
+def test_phase_beyond_2_pow_53_falls_back_to_exact_int64_grids() -> None:
+    """int64 samples so large that the running sum passes 2**53: the accumulator switches
+    that segment to int64 grids and still equals the batch estimator (which is int64 always)."""
+    rng = np.random.default_rng(10)
+    y = rng.integers(-(2**40), 2**40, size=(30000, 1)) + 2**48
+    y[0] = 0  # the segment's first sample is removed, so the sum grows by ~2**48 per sample
+    acc = StreamingAllan(1, 10.0)
+    for blk in np.array_split(y, 7):
+        acc.update(blk)
+    ref = pavar(y[:, 0], 10.0)
+    np.testing.assert_allclose(acc.result().var, ref.var, rtol=1e-12)
+    assert acc.state()["big"] is True
+
+
+def test_constant_input_gives_zero_and_nan_free_snapshot() -> None:
+    acc = StreamingAllan(2, 100.0)
+    acc.update(np.full((5000, 2), 256000, dtype=np.int32))
+    snap = acc.snapshot()
+    np.testing.assert_array_equal(snap.avar, 0.0)
+    assert np.all(np.isfinite(snap.edf))
