@@ -300,9 +300,12 @@ class EmulatedAdxl355:
         producing or losing samples at the change."""
         with self.lock:
             self._update()
+            now = self.clock.monotonic()
+            # keep the phase within the current sample period across the change
+            done = (now - self._t_start) * self.true_odr_hz if self._measuring else 0.0
             self.odr_error_ppm = float(ppm)
             if self._measuring:
-                self._t_start = self.clock.monotonic() - self.produced / self.true_odr_hz
+                self._t_start = now - done / self.true_odr_hz
 
     def drop_fifo_entries(self, k: int = 1) -> None:
         """Remove the ``k`` oldest FIFO entries, leaving the FIFO mid-set (as after a partial
