@@ -122,7 +122,8 @@ def test_only_the_authorised_subscriber_gets_the_stream(
 
 def test_request_server_with_curve(keys: dict) -> None:
     with RequestServer(LOCAL, {"status": lambda a: {"ok": 1}}, curve=keys["server"]) as srv:
-        good = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint, curve=keys["good"])
+        good = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint, curve=keys["good"],
+                          request_timeout_s=20.0)  # generous: the machine may be loaded
         bad = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint, curve=keys["bad"],
                          request_timeout_s=0.5)
         try:

@@ -52,7 +52,8 @@ def test_stream_end_to_end_with_join_snapshot() -> None:
                 "n_samples": 4096}
     handlers = {"snapshot": lambda a: snapshot, "header": lambda a: {"rate_hz": 125.0}}
     with Publisher(LOCAL, "run-e") as pub, RequestServer(LOCAL, handlers) as srv:
-        sub = Subscriber(pub.endpoint, request_endpoint=srv.endpoint).connect()
+        sub = Subscriber(pub.endpoint, request_endpoint=srv.endpoint,
+                         request_timeout_s=20.0).connect()
         try:
             np.testing.assert_array_equal(sub.snapshot["tau"], snapshot["tau"])
             assert sub.snapshot["avar"].shape == (3, 3) and sub.header == {"rate_hz": 125.0}
@@ -85,7 +86,8 @@ def test_stream_end_to_end_with_join_snapshot() -> None:
 
 def test_request_timeout_and_error_replies() -> None:
     with RequestServer(LOCAL, {"status": lambda a: {}}) as srv:
-        sub = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint)
+        sub = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint,
+                         request_timeout_s=20.0)
         try:
             with pytest.raises(NetworkError, match=r"refused.*unknown op"):
                 sub.request("snapshot")
