@@ -184,6 +184,7 @@ class CurveServer:
     def reload(self) -> None:
         """Re-read the authorised client keys (after adding or removing a file)."""
         self._auth.configure_curve(domain="*", location=str(self._dir))
+        log.info("CURVE client keys reloaded from %s", self._dir)
 
     def apply(self, sock: zmq.Socket) -> None:
         """Make ``sock`` a CURVE server; call before bind."""

@@ -183,6 +183,11 @@ class Publisher:
                 self.auth_failures += 1
                 log.warning("publisher refused a peer that failed CURVE authentication")
 
+    def reload_keys(self) -> None:
+        """Re-read the authorised client keys (call on SIGHUP); no-op without CURVE."""
+        if self._curve is not None:
+            self._curve.reload()
+
     def stats(self) -> dict[str, Any]:
         """Counters for STATUS: sent, dropped locally, connected peers, refused peers, seqs."""
         with self._lock:
@@ -287,6 +292,11 @@ class RequestServer:
         log.info("answering requests on %s (ops: %s)", self.endpoint,
                  ", ".join(sorted(self.handlers)))
         return self
+
+    def reload_keys(self) -> None:
+        """Re-read the authorised client keys (call on SIGHUP); no-op without CURVE."""
+        if self._curve is not None:
+            self._curve.reload()
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the thread and close the socket; returns within about ``timeout`` seconds."""

@@ -150,3 +150,23 @@ def test_keys_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     # a second run refuses to overwrite and says so
     assert cli.main(["keys", "--out", str(out), "--name", "pi"]) == 2
     assert "never overwrites" in capsys.readouterr().err
+
+
+def test_reload_keys_admits_a_newly_authorised_client(keys: dict, tmp_path: Path) -> None:
+    with RequestServer(LOCAL, {"status": lambda a: {"ok": 1}}, curve=keys["server"]) as srv:
+        bad = Subscriber("tcp://127.0.0.1:1", request_endpoint=srv.endpoint, curve=keys["bad"],
+                         request_timeout_s=0.5)
+        try:
+            with pytest.raises(NetworkError):
+                bad.request("status")
+            # authorise the "bad" client's public key, reload, and it gets in
+            public, _ = load_secret_key(keys["bad"].client_secret_key_file)
+            pub_file = keys["bad"].client_secret_key_file.with_suffix(".key")
+            assert load_public_key(pub_file) == public
+            target = keys["server"].authorized_keys_dir / "newcomer.key"
+            target.write_text(pub_file.read_text())
+            srv.reload_keys()
+            bad.request_timeout_s = 20.0
+            assert bad.request("status") == {"ok": 1}
+        finally:
+            bad.close()
