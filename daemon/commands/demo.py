@@ -208,10 +208,10 @@ def _plot(path: Path, result: Any, fits: dict[str, Any]) -> Path | None:
         ch = result.channel(c)
         ax.errorbar(ch.tau, np.sqrt(ch.var), yerr=[np.sqrt(ch.var) - np.sqrt(ch.lo),
                                                    np.sqrt(ch.hi) - np.sqrt(ch.var)],
-                    fmt="o", ms=3, label=f"{axis} measured")
+                    fmt="o", ms=3, color=f"C{c}", label=f"{axis} measured")
         if axis in fits:
             ax.plot(ch.tau, np.sqrt(fits[axis].model_avar(ch.tau)), "-", lw=1,
-                    label=f"{axis} fit")
+                    color=f"C{c}", label=f"{axis} fit")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("averaging time τ (s)")
