@@ -54,12 +54,13 @@ __all__ = [
     "oavar",
     "ohvar",
     "pavar",
+    "phvar",
     "strided_sums",
     "tau_grid",
 ]
 
 # kind → order d of the phase difference (2 Allan, 3 Hadamard)
-KINDS = {"avar": 2, "oavar": 2, "pavar": 2, "ohvar": 3}
+KINDS = {"avar": 2, "oavar": 2, "pavar": 2, "ohvar": 3, "phvar": 3}
 # Normalisation of the mean squared d-th difference of m-averages (SP 1065 eqs. 12 and 18).
 NORM = {2: 2.0, 3: 6.0}
 # Coefficients of the d-th phase difference X_{i+km}, k = 0 … d.
@@ -347,13 +348,14 @@ def tau_grid(n_samples: int, rate_hz: float, taus: str | ArrayLike, d: int) -> N
 def default_stride(kind: str, m: int, stride: int | None, overlap: int = DEFAULT_OVERLAP) -> int:
     """Stride for an estimator: 1 overlapping, m non-overlapping, else partially overlapping.
 
-    ``pavar`` without an explicit stride uses the streaming cascade's choice: 1 for
+    ``pavar``/``phvar`` without an explicit stride use the streaming cascade's choice: 1 for
     m ≤ overlap, else m // overlap (so there are ``overlap`` differences per τ).
     """
     if kind == "avar":
         return m
     if kind in ("oavar", "ohvar") and stride is None:
         return 1
+    # pavar / phvar (and ohvar with an explicit stride)
     if stride is None:
         return 1 if m <= overlap else m // overlap
     return max(1, min(int(stride), m))
@@ -430,9 +432,10 @@ def allan_variance(
         See ``tau_grid``.
     kind : "oavar" (overlapping, default) | "avar" (non-overlapping) | "pavar" (stride given
         by ``stride``, default the streaming cascade's m/overlap) | "ohvar" (overlapping
-        Hadamard).
+        Hadamard) | "phvar" (Hadamard with the cascade's stride, as streamed).
     stride : int, optional
-        Samples between successive differences for "pavar"/"ohvar" (clipped to [1, m]).
+        Samples between successive differences for "pavar"/"ohvar"/"phvar" (clipped to
+        [1, m]).
     ci : float
         Confidence level of ``lo``/``hi`` (0.683 = 1σ).
     alpha : int or (K,) or (K, C) array, optional
@@ -656,6 +659,11 @@ def oavar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) 
 def pavar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) -> AllanResult:
     """Partially overlapping Allan variance (stride between 1 and m); see ``allan_variance``."""
     return allan_variance(y, rate_hz, taus, kind="pavar", **kw)
+
+
+def phvar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) -> AllanResult:
+    """Hadamard variance with a stride (default the cascade's m/8); see ``allan_variance``."""
+    return allan_variance(y, rate_hz, taus, kind="phvar", **kw)
 
 
 def ohvar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) -> AllanResult:

@@ -45,7 +45,6 @@ from .scratch import scratch
 __all__ = ["AllanSnapshot", "StreamingAllan"]
 
 STATE_VERSION = 1
-_D = 2  # Allan variance: second differences
 # Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
 # numpy's per-call overhead would otherwise dominate. Results never depend on it.
 _FLUSH_SAMPLES = 4096
@@ -91,11 +90,11 @@ class _Level:
 
     __slots__ = ("m", "spacing", "stride", "sums")
 
-    def __init__(self, m: int, stride: int, c: int) -> None:
+    def __init__(self, m: int, stride: int, c: int, d: int) -> None:
         self.m = m
         self.stride = stride
         self.spacing = m // stride
-        self.sums = [DifferenceSums.zeros(c) for _ in range(_D)]
+        self.sums = [DifferenceSums.zeros(c) for _ in range(d)]
 
 
 class _Grid:
@@ -114,14 +113,14 @@ class _Grid:
         self.hist: NDArray = np.zeros((1, c), dtype=dtype)  # X_0 = 0 of the segment
         self.base = 0  # grid index, within the segment, of hist[0]
 
-    def push(self, points: NDArray, levels: Sequence[_Level]) -> None:
+    def push(self, points: NDArray, levels: Sequence[_Level], d: int) -> None:
         """Append new grid points and add every completed difference to the levels' sums."""
         h = self.hist.shape[0]
         arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
         arr[:h] = self.hist  # int64 → float64 is exact below 2**53 (checked by the caller)
         arr[h:] = points
         for lev in levels:
-            grid_sums(arr, lev.spacing, h, lev.sums, _D, self.base)
+            grid_sums(arr, lev.spacing, h, lev.sums, d, self.base)
         if arr.shape[0] > self.keep:
             self.base += arr.shape[0] - self.keep
             arr = arr[-self.keep :]
@@ -143,6 +142,9 @@ class StreamingAllan:
     max_octaves : int
         Largest m is 2^(max_octaves − 1).
     names : channel names.
+    hadamard : bool
+        Accumulate the Hadamard variance (third differences, NIST SP 1065 eq. 18; insensitive
+        to a linear rate drift) instead of the Allan variance; results have kind "phvar".
     """
 
     def __init__(
@@ -153,6 +155,7 @@ class StreamingAllan:
         overlap: int = 8,
         max_octaves: int = 40,
         names: Sequence[str] | None = None,
+        hadamard: bool = False,
     ) -> None:
         if not isinstance(n_channels, (int, np.integer)) or n_channels < 1:
             raise DataError(f"n_channels={n_channels!r} must be a positive integer")
@@ -169,6 +172,9 @@ class StreamingAllan:
         self.rate_hz = float(rate_hz)
         self.overlap = int(overlap)
         self.max_octaves = int(max_octaves)
+        self.hadamard = bool(hadamard)
+        self.kind = "phvar" if self.hadamard else "pavar"
+        self._d = 3 if self.hadamard else 2  # order of the phase difference
         self.names = list(names) if names is not None else [f"ch{i}" for i in range(n_channels)]
         self.n_samples = 0  # all samples accepted, over all segments
         self.n_segments = 0  # segments started (a gap or merge adds to it)
@@ -196,7 +202,7 @@ class StreamingAllan:
     def _level(self, k: int) -> _Level:
         while len(self._levels) <= k:
             j = len(self._levels)
-            self._levels.append(_Level(1 << j, self._stride(j), self.n_channels))
+            self._levels.append(_Level(1 << j, self._stride(j), self.n_channels, self._d))
         return self._levels[k]
 
     def _stride(self, k: int) -> int:
@@ -213,7 +219,7 @@ class StreamingAllan:
         while len(self._grids) <= g:
             # Grids are created when the segment first reaches their stride, so the segment's
             # only earlier point on them is X_0 = 0, which a new grid starts with.
-            keep = (_D + 1) * (self.overlap if len(self._grids) else
+            keep = (self._d + 1) * (self.overlap if len(self._grids) else
                                min(self.overlap, 1 << (self.max_octaves - 1)))
             self._grids.append(_Grid(1 << len(self._grids), keep, self.n_channels,
                                      self._dtype()))
@@ -328,7 +334,7 @@ class StreamingAllan:
             grid = self._grid(gi)
             off = (-first_index) % s  # first new index on this grid
             if off < n:
-                grid.push(phase[off::s], levels)
+                grid.push(phase[off::s], levels, self._d)
 
     def gap(self) -> None:
         """End the current segment: later differences never reach back across this point."""
@@ -337,10 +343,10 @@ class StreamingAllan:
 
     # ------------------------------------------------------------------------ results
     def _active(self) -> list[_Level]:
-        return [lev for lev in self._levels if lev.sums[_D - 1].n > 0]
+        return [lev for lev in self._levels if lev.sums[self._d - 1].n > 0]
 
     def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
-        """The accumulated Allan variance as an ``AllanResult`` (kind "pavar").
+        """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
 
         ``weights`` (C,) gives the single channel Σ w_c y_c from the covariance. A one-channel
         accumulator, or a weighted result, has 1-D arrays; otherwise (K, C).
@@ -355,7 +361,7 @@ class StreamingAllan:
         ms = np.array([lev.m for lev in levels], dtype=np.int64)
         strides = np.array([lev.stride for lev in levels], dtype=np.int64)
         return finish_result(
-            "pavar", self.rate_hz, ms, strides, [lev.sums for lev in levels], ci=ci,
+            self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels], ci=ci,
             one_d=self.n_channels == 1, names=self.names, weights=weights,
         )
 
@@ -371,7 +377,7 @@ class StreamingAllan:
                                  empty, empty, empty, empty, self.n_samples,
                                  tuple(self.names), ci, self.rate_hz)
         res = finish_result(
-            "pavar", self.rate_hz,
+            self.kind, self.rate_hz,
             np.array([lev.m for lev in self._active()], dtype=np.int64),
             np.array([lev.stride for lev in self._active()], dtype=np.int64),
             [lev.sums for lev in self._active()], ci=ci, names=self.names,
@@ -385,17 +391,17 @@ class StreamingAllan:
     def merge(self, other: StreamingAllan) -> None:
         """Add the sums of another accumulator (other segments of the same channels).
 
-        Both must have the same channels, rate and overlap. ``other``'s open segment counts as
+        Both must have the same channels, rate, overlap and kind. ``other``'s open segment counts as
         ended; this accumulator's open segment continues.
         """
         if not isinstance(other, StreamingAllan):
             raise DataError("merge takes another StreamingAllan")
         if (other.n_channels != self.n_channels or other.overlap != self.overlap
-                or other.rate_hz != self.rate_hz):
+                or other.rate_hz != self.rate_hz or other.kind != self.kind):
             raise DataError(
-                "cannot merge accumulators with different channels, rate or overlap: "
-                f"({self.n_channels}, {self.rate_hz} Hz, S={self.overlap}) vs "
-                f"({other.n_channels}, {other.rate_hz} Hz, S={other.overlap})"
+                "cannot merge accumulators with different channels, rate, overlap or kind: "
+                f"({self.n_channels}, {self.rate_hz} Hz, S={self.overlap}, {self.kind}) vs "
+                f"({other.n_channels}, {other.rate_hz} Hz, S={other.overlap}, {other.kind})"
             )
         self._flush()
         other._flush()
@@ -421,7 +427,7 @@ class StreamingAllan:
             if f in ("n", "na", "nl"):
                 sums[f] = [[int(v) for v in row] for row in vals]
             else:
-                shape = (len(levs), _D) + ((c,) if f == "s1" else (c, c))
+                shape = (len(levs), self._d) + ((c,) if f == "s1" else (c, c))
                 sums[f] = _pack(np.array(vals, dtype=np.float64).reshape(shape))
         grids = self._grids
         hist = (np.concatenate([g.hist for g in grids]) if grids
@@ -436,6 +442,7 @@ class StreamingAllan:
             "rate_hz": self.rate_hz,
             "overlap": self.overlap,
             "max_octaves": self.max_octaves,
+            "hadamard": self.hadamard,
             "names": list(self.names),
             "integer": self._integer,
             "n_samples": self.n_samples,
@@ -458,6 +465,7 @@ class StreamingAllan:
                 )
             self = cls(int(state["n_channels"]), float(state["rate_hz"]),
                        overlap=int(state["overlap"]), max_octaves=int(state["max_octaves"]),
+                       hadamard=bool(state.get("hadamard", False)),
                        names=list(state["names"]))
             self._integer = state["integer"]
             self.n_samples = int(state["n_samples"])

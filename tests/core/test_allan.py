@@ -198,3 +198,14 @@ def test_result_is_frozen_and_serialisable() -> None:
         res.kind = "avar"  # type: ignore[misc]
     d = res.to_dict()
     assert d["kind"] == "oavar" and len(d["var"]) == res.tau.size
+
+
+def test_hadamard_ignores_a_linear_rate_drift_exactly_for_counts() -> None:
+    """A rate ramp y = a + b·k makes the phase quadratic: its third differences vanish, so the
+    Hadamard variance of integer counts is unchanged bit for bit, while AVAR grows as τ²."""
+    rng = np.random.default_rng(13)
+    counts = rng.integers(-50, 50, size=20000)
+    ramp = counts + 3 * np.arange(20000)
+    np.testing.assert_array_equal(ohvar(ramp, 100.0).var, ohvar(counts, 100.0).var)
+    a_ramp, a_flat = oavar(ramp, 100.0), oavar(counts, 100.0)
+    assert a_ramp.var[-1] > 100 * a_flat.var[-1]

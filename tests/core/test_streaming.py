@@ -282,3 +282,24 @@ def test_constant_input_gives_zero_and_nan_free_snapshot() -> None:
     snap = acc.snapshot()
     np.testing.assert_array_equal(snap.avar, 0.0)
     assert np.all(np.isfinite(snap.edf))
+
+
+@pytest.mark.parametrize("integer", [True, False])
+def test_streaming_hadamard_equals_batch_phvar(integer: bool) -> None:
+    y = random_record(7000, 2, seed=11, integer=integer)
+    acc = StreamingAllan(2, 50.0, hadamard=True)
+    feed(acc, y, [1, 31, 999, 4097, 5])
+    got = acc.result()
+    ref = allan_variance(y, 50.0, kind="phvar")
+    assert got.kind == "phvar"
+    np.testing.assert_array_equal(got.n, ref.n)
+    np.testing.assert_allclose(got.var, ref.var, rtol=1e-12)
+    np.testing.assert_array_equal(got.alpha, ref.alpha)
+    # the first levels are fully overlapping: the ordinary OHVAR
+    np.testing.assert_allclose(got.var[:4], allan_variance(y, 50.0, got.tau[:4],
+                                                           kind="ohvar").var, rtol=1e-12)
+    again = StreamingAllan.from_state(msgpack.unpackb(msgpack.packb(acc.state())))
+    assert again.kind == "phvar"
+    np.testing.assert_array_equal(again.result().var, got.var)
+    with pytest.raises(DataError, match="kind"):
+        acc.merge(StreamingAllan(2, 50.0))
