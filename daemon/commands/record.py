@@ -6,8 +6,10 @@ the service's segment writer (daemon/recorder.py): ``avard analyze DIR`` reads t
 a recording made on the Pi.
 
 Nothing lost passes silently: raw blocks that the network lost (a hole in the sequence numbers
-and in the sample indices) are written as ``gap`` records with reason ``subscriber_loss``;
-other lost messages as an ``event`` naming the topic and count. Gaps the service itself
+and in the sample indices) are first asked back from the service's ring buffer (request
+``recent``); what the ring still holds is written as raw records, the rest as ``gap`` records
+with reason ``subscriber_loss`` (``--no-backfill``: gaps only). Other lost messages become an
+``event`` naming the topic and count. Gaps the service itself
 announced are recorded as it sent them. A restart of the service (new run id) starts a new
 segment with the new header.
 """
@@ -23,6 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from avard.core import frames
 from avard.core.errors import FormatError, NetworkError
 from avard.daemon.recorder import Recorder
@@ -35,6 +38,8 @@ HELP = "archive a remote stream (ENDPOINT) into recording segments, with gaps fo
 
 #: Records kept while waiting for the header (about 80 s of raw blocks at 125 Hz).
 MAX_PENDING = 4096
+#: Longest stretch asked back from the service's ring after a loss (its ring is ~30 s).
+MAX_BACKFILL_S = 60.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="start a new segment file every S seconds (default 3600)")
     parser.add_argument("--fsync", type=float, default=5.0, metavar="S",
                         help="fsync at most every S seconds (default 5)")
+    parser.add_argument("--no-backfill", action="store_true",
+                        help="do not ask the service's ring for samples lost in transport "
+                             "(they are then only recorded as gaps)")
     parser.add_argument("--wait", type=float, default=10.0, metavar="S",
                         help="give up when nothing arrives within S seconds of the start "
                              "(default 10)")
@@ -54,8 +62,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 class StreamArchiver:
     """Turns received messages into recorder writes (header first, gaps for losses)."""
 
-    def __init__(self, sub: Subscriber, out: Path, *, segment_s: float, fsync_s: float) -> None:
+    def __init__(self, sub: Subscriber, out: Path, *, segment_s: float, fsync_s: float,
+                 backfill: bool = True) -> None:
         self.sub = sub
+        self.backfill = backfill
+        self.recovered_samples = 0
         self.out = out
         self.segment_s = segment_s
         self.fsync_s = fsync_s
@@ -121,17 +132,70 @@ class StreamArchiver:
         rec = msg.record
         if msg.missing is not None:
             i0, n = msg.missing
-            self.recorder.write(frames.gap_record(
-                rec["run"], 0, i0, n, rec["t_mono"], rec["t_real"], "subscriber_loss",
-                lost_messages=msg.lost, topic=msg.topic))
-            self.gaps_written += 1
-            self.gap_samples += n
+            for r in self._recover(msg, i0, n):
+                self.recorder.write(r)
         elif msg.lost:
             self.recorder.write(frames.event_record(
                 rec["run"], 0, "subscriber_loss", rec.get("t_mono", 0.0),
                 rec.get("t_real", 0.0), detail={"topic": msg.topic, "lost_messages": msg.lost}))
         if self.recorder.write(rec):
             self.written += 1
+
+    def _recover(self, msg: Message, i0: int, n: int) -> list[dict[str, Any]]:
+        """Records for the lost samples ``[i0, i0 + n)``: raw blocks fetched back from the
+        service's ring (``recent``) where it still holds them, gap records for the rest."""
+        rec = msg.record
+        got: list[tuple[int, np.ndarray, float]] = []  # (first index, counts, t_mono)
+        if self.backfill and self.sub.request_endpoint:
+            got = self._fetch_recent(rec, i0, n)
+        out: list[dict[str, Any]] = []
+        offset = rec["t_real"] - rec["t_mono"]  # realtime − monotonic, as the block says
+        cursor = i0
+        for first, counts, t_mono in got:
+            if first > cursor:
+                out.append(self._gap(rec, msg, cursor, first - cursor))
+            out.append(frames.raw_record(rec["run"], 0, first, counts, t_mono,
+                                         t_mono + offset, rate_hz=rec.get("rate_hz")))
+            self.recovered_samples += counts.shape[0]
+            cursor = first + counts.shape[0]
+        if cursor < i0 + n:
+            out.append(self._gap(rec, msg, cursor, i0 + n - cursor))
+        return out
+
+    def _gap(self, rec: dict[str, Any], msg: Message, i0: int, n: int) -> dict[str, Any]:
+        self.gaps_written += 1
+        self.gap_samples += n
+        return frames.gap_record(rec["run"], 0, i0, n, rec["t_mono"], rec["t_real"],
+                                 "subscriber_loss", lost_messages=msg.lost, topic=msg.topic)
+
+    def _fetch_recent(self, rec: dict[str, Any], i0: int, n: int
+                      ) -> list[tuple[int, np.ndarray, float]]:
+        """Contiguous runs of samples inside ``[i0, i0 + n)`` that the ring still holds."""
+        rate = float(rec.get("rate_hz") or (self.header or {}).get("rate_hz") or 0.0)
+        if rate <= 0:
+            return []
+        # from the first lost sample to now, with a little margin for what arrived since
+        seconds = min((rec["i0"] + rec["n"] - i0) / rate + 0.5, MAX_BACKFILL_S)
+        try:
+            reply = self.sub.request("recent", {"seconds": seconds})
+            index = np.asarray(reply["index"], dtype=np.int64)
+            counts = np.asarray(reply["counts"])
+            t_mono = np.asarray(reply["t_mono"], dtype=float)
+            if counts.ndim != 2 or not index.shape[0] == counts.shape[0] == t_mono.shape[0]:
+                raise FormatError("recent: index, counts and t_mono differ in length")
+        except (NetworkError, FormatError, KeyError, TypeError, ValueError) as exc:
+            log.warning("cannot fetch lost samples [%d, %d) back: %s", i0, i0 + n, exc)
+            return []
+        sel = np.flatnonzero((index >= i0) & (index < i0 + n))
+        if sel.size == 0:
+            return []
+        # split where the index does not advance by one (the ring's own gaps)
+        breaks = np.flatnonzero(np.diff(index[sel]) != 1) + 1
+        runs = []
+        for part in np.split(sel, breaks):
+            runs.append((int(index[part[0]]), np.ascontiguousarray(counts[part]),
+                         float(t_mono[part[0]])))
+        return runs
 
     def close(self) -> None:
         if self.recorder is not None:
@@ -152,7 +216,8 @@ def run(args: argparse.Namespace) -> int:
     in_main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, _stop) if in_main else None
     sub.connect(join=False)
-    archiver = StreamArchiver(sub, out, segment_s=args.segment, fsync_s=args.fsync)
+    archiver = StreamArchiver(sub, out, segment_s=args.segment, fsync_s=args.fsync,
+                              backfill=not args.no_backfill)
     start = time.monotonic()
     try:
         while not stop.is_set():
@@ -179,10 +244,14 @@ def run(args: argparse.Namespace) -> int:
     s = sub.stats
     sys.stdout.write(
         f"recorded {archiver.written} records ({s.samples_received} samples) into {out}\n"
-        f"lost in transport: {s.messages_lost} messages, {s.samples_lost} samples "
-        f"({archiver.gaps_written} gap records)\n"
+        f"lost in transport: {s.messages_lost} messages, {s.samples_lost} samples; "
+        f"{archiver.recovered_samples} samples fetched back from the service's ring, "
+        f"{archiver.gap_samples} recorded as gaps ({archiver.gaps_written} gap records)\n"
         f"service gaps: {s.samples_service_gap} samples; unexplained holes: "
         f"{s.samples_unexplained} samples\n")
+    if archiver.dropped_waiting:
+        sys.stdout.write(f"{archiver.dropped_waiting} early records were dropped while "
+                         "waiting for the run header\n")
     if archiver.header is None:
         sys.stdout.write("no header was obtained: nothing could be written (is the request "
                          "socket reachable? see --request)\n")

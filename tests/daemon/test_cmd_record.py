@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import zmq
 from avard.core import frames as F
-from avard.core.errors import FormatError
+from avard.core.errors import DataError, FormatError
 from avard.core.recording import RecordingReader
 from avard.daemon import cli
 from avard.daemon.commands import record
@@ -38,8 +38,23 @@ class FakeService:
         self.pub.bind("tcp://127.0.0.1:*")
         self.endpoint = self.pub.getsockopt_string(zmq.LAST_ENDPOINT)
         self.run = "run-1"
-        self.server = RequestServer("tcp://127.0.0.1:*",
-                                    {"header": lambda a: _header(self.run)}).start()
+        self.ring: dict[int, tuple[np.ndarray, float]] | None = None  # index → (counts, t)
+        handlers = {"header": lambda a: _header(self.run), "recent": self._recent}
+        self.server = RequestServer("tcp://127.0.0.1:*", handlers).start()
+
+    def _recent(self, args: dict) -> dict:
+        """Like the service's ring: the samples it still holds, with their indices."""
+        if self.ring is None:
+            raise DataError("no ring in this fake service")
+        idx = sorted(self.ring)
+        return {"index": np.array(idx, dtype=np.int64),
+                "counts": np.array([self.ring[i][0] for i in idx], dtype=np.int32).reshape(-1, 3),
+                "t_mono": np.array([self.ring[i][1] for i in idx])}
+
+    def keep(self, rec: dict) -> None:
+        assert self.ring is not None
+        for k in range(rec["n"]):
+            self.ring[rec["i0"] + k] = (rec["counts"][k], (rec["i0"] + k) / 125.0)
 
     def wait_subscribed(self, topics: int = 5) -> None:
         for _ in range(topics):
@@ -122,7 +137,8 @@ def test_record_archives_stream_with_gaps(service: FakeService, tmp_path: Path,
     thread.join(30)
     assert result["rc"] == 0
     text = capsys.readouterr().out
-    assert "lost in transport: 1 messages, 32 samples (1 gap records)" in text
+    assert ("lost in transport: 1 messages, 32 samples; 0 samples fetched back from the "
+            "service's ring, 32 recorded as gaps (1 gap records)") in text
 
     recs = list(RecordingReader(out))
     kinds = [(r["run"], r["kind"]) for r in recs]
@@ -208,3 +224,41 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     a = replay_allan(tmp_path / "archive").snapshot().avar
     b = replay_allan(tmp_path / "rec").snapshot().avar
     np.testing.assert_allclose(a, b, rtol=1e-12)
+
+
+def test_record_fetches_lost_blocks_back_from_the_ring(service: FakeService,
+                                                       tmp_path: Path) -> None:
+    """Block 4 lost in transport but still in the ring: recovered as a raw record. Block 7
+    lost and half forgotten by the ring: 16 samples recovered, 16 written as a gap."""
+    service.ring = {}
+    out = tmp_path / "archive"
+    thread, result = _record(service, out)
+    service.wait_subscribed()
+    for seq in range(10):
+        rec = _raw("run-1", seq, 32 * seq)
+        rec["counts"] = rec["counts"] + np.arange(32, dtype=np.int32)[:, None]
+        service.keep(rec)
+        if seq == 7:
+            for i in range(32 * 7, 32 * 7 + 16):
+                del service.ring[i]
+        if seq not in (4, 7):
+            service.send("raw", rec)
+    while sum(r["kind"] == "raw" for r in _read(out)) < 10:
+        assert thread.is_alive(), "record ended early"
+        time.sleep(0.02)
+    result["stop"].set()
+    thread.join(30)
+    assert result["rc"] == 0
+    recs = list(RecordingReader(out))
+    raws = [r for r in recs if r["kind"] == "raw"]
+    spans = [(r["i0"], r["n"]) for r in raws]
+    assert spans == [(0, 32), (32, 32), (64, 32), (96, 32), (128, 32), (160, 32), (192, 32),
+                     (240, 16), (256, 32), (288, 32)]
+    lost = next(r for r in raws if r["i0"] == 128)
+    np.testing.assert_array_equal(lost["counts"][:, 0], 4 + np.arange(32))
+    assert lost["t_mono"] == pytest.approx(128 / 125.0)
+    assert lost["t_real"] == pytest.approx(1.7e9 + 128 / 125.0)
+    half = next(r for r in raws if r["i0"] == 240)
+    np.testing.assert_array_equal(half["counts"][:, 1], 7 + np.arange(16, 32))
+    gaps = [(g["i0"], g["n"], g["reason"]) for g in recs if g["kind"] == "gap"]
+    assert gaps == [(224, 16, "subscriber_loss")]
