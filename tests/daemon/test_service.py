@@ -282,3 +282,59 @@ def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
     tail = text[watchdogs[-1] + 1:]
     assert sum(m.startswith("STATUS=") for m in tail) >= 5
     assert svc.final_status["stalled"]
+
+
+def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: Path) -> None:
+    import errno
+
+    from avard.daemon.recorder import FileOps, Recorder
+
+    class Disk(FileOps):
+        full = False
+
+        def write(self, f, data: bytes) -> None:  # type: ignore[no-untyped-def]
+            if self.full:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            super().write(f, data)
+
+        def free_bytes(self, directory: Path) -> int:
+            return 0 if self.full else 10**12
+
+    disk = Disk()
+    seen_full: list[str] = []
+
+    def recorder(svc: Service) -> Recorder:
+        return Recorder(svc.data_dir, svc.run_id, svc.header, clock=svc.clock.monotonic,
+                        realtime=svc.clock.realtime, fileops=disk, retry_s=0.01)
+
+    def inject(ctx: dict, t: float) -> None:
+        disk.full = 20 < t < 40
+        if disk.full and ctx["svc"].recorder.disk_full:
+            seen_full.append(ctx["svc"].status()["disk"]["state"])
+
+    cfg = _cfg(tmp_path / "rec")
+    dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=11)
+
+    def tick(t: float) -> None:
+        sims.on_tick(t)
+        inject(ctx, t - svc.t_start)
+
+    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=tick,
+                  extra_temperature_names=list(sims.names), recorder_factory=recorder)
+    sims.service = svc
+    ctx = {"svc": svc}
+    box: dict[str, Listener] = {}
+    svc.run(60.0, before_acquisition=lambda: box.setdefault("l", Listener(svc)))
+    box["l"].finish()
+    assert "disk_full" in seen_full
+    # Publishing never stopped: the subscriber has every sample.
+    raw = [r for t, r in box["l"].records if t == "raw"]
+    assert sum(r["n"] for r in raw) == svc.final_status["samples"]
+    # The recording has a disk_full gap exactly over what it is missing.
+    recs = list(RecordingReader(tmp_path / "rec"))
+    gap = next(r for r in recs if r["kind"] == "gap")
+    assert gap["reason"] == "disk_full" and 15 * 125 < gap["n"] < 25 * 125
+    rraw = [r for r in recs if r["kind"] == "raw"]
+    ends = [(a["i0"] + a["n"], b["i0"]) for a, b in itertools.pairwise(rraw)
+            if b["i0"] != a["i0"] + a["n"]]
+    assert ends == [(gap["i0"], gap["i0"] + gap["n"])]
