@@ -38,8 +38,9 @@ HELP = "archive a remote stream (ENDPOINT) into recording segments, with gaps fo
 
 #: Records kept while waiting for the header (about 80 s of raw blocks at 125 Hz).
 MAX_PENDING = 4096
-#: Longest stretch asked back from the service's ring after a loss (its ring is ~30 s).
-MAX_BACKFILL_S = 60.0
+#: Longest stretch asked back from the service's ring after a loss: the service's default
+#: ``[publish] recent_max_s`` (a service that allows less refuses, and the loss stays a gap).
+MAX_BACKFILL_S = 10.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
