@@ -159,7 +159,8 @@ class Acquisition:
         t_real = float(getattr(d, "t_real", self.clock.realtime()))
         self._check_clock_step(t_mono, t_real)
         if getattr(d, "overrun", False):
-            self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun")
+            self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun",
+                          getattr(d, "since_last_s", None))
         if n:
             i0 = self.next_index
             self.tb.update(i0 + n - 1, t_mono, gap=bool(getattr(d, "overrun", False)),
@@ -213,10 +214,15 @@ class Acquisition:
         except AvardError as exc:
             log.debug("recovery failed: %s", exc)
 
-    def _overrun(self, n_read: int, t_mono: float, t_real: float, reason: str) -> None:
-        """A gap of unknown size: estimate the lost sets from the time since the last drain."""
+    def _overrun(self, n_read: int, t_mono: float, t_real: float, reason: str,
+                 since_last_s: float | None = None) -> None:
+        """A gap of unknown size: estimate the lost sets from the time since the last drain
+        (the driver's ``since_last_s`` when it knows it) × the fitted rate."""
         self.overruns += 1
-        elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
+        if since_last_s is not None:
+            elapsed = float(since_last_s)
+        else:
+            elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
         expected = round(elapsed * self.tb.odr_hz)
         # An overrun lost at least one set by definition; other gaps (a failed transfer,
         # a realignment) may have lost none: then the gap has n = 0 but still ends the
