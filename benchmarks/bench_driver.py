@@ -85,7 +85,8 @@ def bench_full_drain(n: int = 2000) -> list[tuple[str, float, float]]:
     return rows
 
 
-def bench_realtime(seconds: float, poll_s: float, odr_hz: float) -> dict[str, float]:
+def bench_realtime(seconds: float, poll_s: float, odr_hz: float,
+                   rt_priority: int = 0) -> dict[str, float]:
     clock = VirtualClock(speed=1.0)
     emu = EmulatedAdxl355(counter_source(), clock)
     dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock)
@@ -98,6 +99,10 @@ def bench_realtime(seconds: float, poll_s: float, odr_hz: float) -> dict[str, fl
     lateness: list[float] = []  # how much later than asked the OS woke the reader, s
 
     def reader() -> None:
+        if rt_priority:
+            # Linux scheduling policies are per thread: pid 0 is this thread only. This is
+            # what CPUSchedulingPolicy=fifo in a systemd unit gives the service.
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt_priority))
         last_t = None
         expect = 0
         while not stop.is_set():
@@ -142,6 +147,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--seconds", type=float, default=60.0, help="real-time run length, s")
     p.add_argument("--poll-ms", type=float, default=2.0, help="reader sleep between drains, ms")
     p.add_argument("--odr", type=float, default=4000.0, help="ODR of the real-time run, Hz")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run the reader thread SCHED_FIFO at priority N (1-99; needs "
+                   "CAP_SYS_NICE); 0: normal scheduling (default)")
     args = p.parse_args(argv)
     # Overruns are counted in the table; one warning line each would drown it.
     logging.getLogger("avard.daemon.adxl355").setLevel(logging.ERROR)
@@ -156,10 +164,16 @@ def main(argv: list[str]) -> int:
     for name, us, ratio in bench_full_drain():
         print(f"{name:<50}{us:>10.1f}{ratio:>13.4f}")
 
+    sched = f"SCHED_FIFO {args.rt_priority}" if args.rt_priority else "normal scheduling"
     print(f"\n3. Real time, {args.odr:g} Hz ODR, {args.seconds:g} s, reader polls every "
-          f"{args.poll_ms:g} ms (FIFO lasts {32 / args.odr * 1e3:g} ms)")
+          f"{args.poll_ms:g} ms (FIFO lasts {32 / args.odr * 1e3:g} ms), {sched}")
     load0 = os.getloadavg()[0]
-    s = bench_realtime(args.seconds, args.poll_ms / 1e3, args.odr)
+    try:
+        s = bench_realtime(args.seconds, args.poll_ms / 1e3, args.odr, args.rt_priority)
+    except PermissionError:
+        print("--rt-priority needs CAP_SYS_NICE (root, or the systemd unit's "
+              "CPUSchedulingPolicy=fifo)")
+        return 2
     load1 = os.getloadavg()[0]
     print(f"{'quantity':<40}{'value':>14}")
     print(f"{'sets produced by the chip (reference)':<40}{s['produced']:>14d}")
