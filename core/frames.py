@@ -311,28 +311,36 @@ def _refuse_ext(code: int, data: bytes) -> Any:
     raise FormatError(f"msgpack extension type {code} is not allowed in avard records")
 
 
+_LEAF_TYPES = frozenset({type(None), bool, int, float, str, bytes})
+
+
 def _check_structure(obj: Any, what: str) -> None:
     """Bound depth and node count, and allow only plain msgpack types (no Timestamp/ExtType).
 
-    Iterative on purpose: a deeply nested hostile message must not hit Python's recursion limit.
+    Iterative on purpose: a deeply nested hostile message must not hit Python's recursion
+    limit. Only containers go on the stack (leaves are checked in place): this runs on every
+    received message.
     """
+    if type(obj) not in (dict, list):
+        if type(obj) not in _LEAF_TYPES:
+            raise FormatError(f"{what}: value of type {type(obj).__name__} is not allowed")
+        return
     stack: list[tuple[Any, int]] = [(obj, 0)]
-    nodes = 0
+    nodes = 1
     while stack:
         item, depth = stack.pop()
-        nodes += 1
+        if depth >= MAX_DEPTH:
+            raise FormatError(f"{what}: nested deeper than {MAX_DEPTH} levels")
+        values = item.values() if type(item) is dict else item
+        nodes += len(values)
         if nodes > MAX_NODES:
             raise FormatError(f"{what}: more than {MAX_NODES} values")
-        if depth > MAX_DEPTH:
-            raise FormatError(f"{what}: nested deeper than {MAX_DEPTH} levels")
-        if isinstance(item, dict):
-            stack.extend((v, depth + 1) for v in item.values())
-        elif isinstance(item, list):
-            stack.extend((v, depth + 1) for v in item)
-        elif item is None or type(item) in (bool, int, float, str, bytes):
-            continue
-        else:
-            raise FormatError(f"{what}: value of type {type(item).__name__} is not allowed")
+        for v in values:
+            t = type(v)
+            if t is dict or t is list:
+                stack.append((v, depth + 1))
+            elif t not in _LEAF_TYPES:
+                raise FormatError(f"{what}: value of type {t.__name__} is not allowed")
 
 
 def decode(data: bytes | bytearray | memoryview, *, max_bytes: int = DEFAULT_MAX_BYTES,
