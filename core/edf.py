@@ -23,6 +23,7 @@ velocity random walk, flicker FM is bias instability, random-walk FM is rate ran
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from math import comb
 
 import numpy as np
@@ -83,12 +84,29 @@ def _sz(t: NDArray[np.float64], f: float, alpha: int, d: int) -> NDArray[np.floa
 
 
 def _basic_sum(j_terms: int, m_count: float, s: float, f: float, alpha: int, d: int) -> float:
-    """GR eq. 10: sz(0)² + 2 Σ_{j=1}^{J−1} (1 − j/M) sz(j/S)² + (1 − J/M) sz(J/S)²."""
+    """GR eq. 10: sz(0)² + 2 Σ_{j=1}^{J−1} (1 − j/M) sz(j/S)² + (1 − J/M) sz(J/S)².
+
+    Written as A − B/M with A, B depending only on (J, S, F, alpha, d), which are cached: a
+    snapshot every few seconds then costs no sz evaluations, only the new M.
+    """
+    a_sum, b_sum = _basic_terms(int(j_terms), float(s), float(f), int(alpha), int(d))
+    return a_sum - b_sum / m_count
+
+
+@lru_cache(maxsize=4096)
+def _basic_terms(j_terms: int, s: float, f: float, alpha: int, d: int) -> tuple[float, float]:
     j = np.arange(1, j_terms, dtype=np.float64)
-    first = float(_sz(np.zeros(1), f, alpha, d)[0]) ** 2
-    middle = float(np.sum(2.0 * (1.0 - j / m_count) * _sz(j / s, f, alpha, d) ** 2))
-    last = (1.0 - j_terms / m_count) * float(_sz(np.array([j_terms / s]), f, alpha, d)[0]) ** 2
-    return first + middle + last
+    sz_j = _sz(j / s, f, alpha, d) ** 2
+    sz_0 = float(_sz(np.zeros(1), f, alpha, d)[0]) ** 2
+    sz_last = float(_sz(np.array([j_terms / s]), f, alpha, d)[0]) ** 2
+    a_sum = sz_0 + 2.0 * float(np.sum(sz_j)) + sz_last
+    b_sum = 2.0 * float(np.sum(j * sz_j)) + j_terms * sz_last
+    return a_sum, b_sum
+
+
+@lru_cache(maxsize=256)
+def _sz0_squared(f: float, alpha: int, d: int) -> float:
+    return float(_sz(np.zeros(1), f, alpha, d)[0]) ** 2
 
 
 def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> float:
@@ -136,19 +154,19 @@ def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> floa
     if alpha <= 0:  # GR case 2: unmodified, alpha <= 0
         if j_terms <= _J_MAX:
             f = float(m) if m * (d + 1) <= _J_MAX else math.inf
-            sz0 = float(_sz(np.zeros(1), f, alpha, d)[0])
-            return sz0**2 * m_count / _basic_sum(j_terms, m_count, s_factor, f, alpha, d)
+            return _sz0_squared(f, alpha, d) * m_count / _basic_sum(
+                j_terms, m_count, s_factor, f, alpha, d)
         if r > d + 1:
             a0, a1 = _TABLE2[alpha][d - 1]
             return 1.0 / ((a0 - a1 / r) / r)
         m_prime = _J_MAX / r
-        sz0 = float(_sz(np.zeros(1), math.inf, alpha, d)[0])
-        return sz0**2 * _J_MAX / _basic_sum(_J_MAX, _J_MAX, m_prime, math.inf, alpha, d)
+        return _sz0_squared(math.inf, alpha, d) * _J_MAX / _basic_sum(
+            _J_MAX, _J_MAX, m_prime, math.inf, alpha, d)
 
     if alpha == 1:  # GR case 3: flicker PM, the averaging factor enters through ln m
         if j_terms <= _J_MAX:
-            sz0 = float(_sz(np.zeros(1), float(m), 1, d)[0])
-            return sz0**2 * m_count / _basic_sum(j_terms, m_count, s_factor, float(m), 1, d)
+            return _sz0_squared(float(m), 1, d) * m_count / _basic_sum(
+                j_terms, m_count, s_factor, float(m), 1, d)
         b0, b1 = _TABLE3[d - 1]
         if r > d + 1:
             a0, a1 = _TABLE2[1][d - 1]
@@ -161,8 +179,8 @@ def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> floa
     # GR case 4: white PM (alpha = +2). Differences further apart than d·m are uncorrelated,
     # so the basic sum is exact whenever it is short; otherwise GR's asymptotic form.
     if j_terms <= _J_MAX:
-        sz0 = float(_sz(np.zeros(1), float(m), 2, d)[0])
-        return sz0**2 * m_count / _basic_sum(j_terms, m_count, s_factor, float(m), 2, d)
+        return _sz0_squared(float(m), 2, d) * m_count / _basic_sum(
+            j_terms, m_count, s_factor, float(m), 2, d)
     a0 = comb(4 * d, 2 * d) / comb(2 * d, d) ** 2
     a1 = d / 2.0
     return 1.0 / ((a0 - a1 / r) / m_count)
