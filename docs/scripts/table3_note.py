@@ -1,0 +1,257 @@
+"""Write docs/table3.md: what simulating Table 3 of the paper exposes about the table.
+
+    .venv/bin/python docs/scripts/table3_note.py [--hours 60] [--seed 1] [--out docs/table3.md]
+        [--literal-hours 6] [--plot docs/table3_adev.png]
+
+1. Closed forms on the printed numbers (no simulation): the N+B+K ADEV minimum against the
+   reported floor in both readings of K's unit, K_X against 0.6643·B_X, N against the datasheet.
+2. The ``paper-table3`` preset (K read per √hour) simulated for ``--hours`` and analysed with
+   ``fit_noise`` (chip filter modelled) and with the paper's slope method.
+3. The literal reading (K per √s) simulated for ``--literal-hours``: what the slope method
+   would have printed for B from such a record.
+Everything is computed when the script runs; the text only says what the numbers show.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from avard.core.model import BI_FACTOR
+from avard.core.presets import TABLE3_K_PRINTED, make_config
+from avard.core.table3 import (
+    DATASHEET_N_RANGE,
+    PAPER_MAX_ERROR,
+    analyse_record,
+    consistency_facts,
+    kx_over_bx,
+    relative_errors,
+)
+
+TERM_ROWS = (("velocity_random_walk", "N", "m/s/√s"), ("bias_instability", "B", "m/s²"),
+             ("rate_random_walk", "K", "m/s²/√s"))
+
+
+def _e(x: float | None) -> str:
+    return "–" if x is None else f"{x:.4g}"
+
+
+def _pct(x: float | None) -> str:
+    if x is None:
+        return "–"
+    return f"{100 * x:+.1f} %" if abs(x) < 9 else f"{x + 1:.3g}×"
+
+
+def _closed_form_section() -> list[str]:
+    facts = consistency_facts()
+    lines = [
+        "## 1. The table against its own model (closed forms, no simulation)",
+        "",
+        "AVAR of the three printed terms: N²/τ + (2 ln 2/π)·B² + K²τ/3 (IEEE 952 Annex C). "
+        "The slope method reads B as the ADEV minimum / 0.6643, so the minimum of this curve "
+        "should be the floor 0.6643·B. It is not, unless K is read per √hour:",
+        "",
+        "| axis | N (m/s/√s) | B (m/s²) | K as printed | floor 0.6643·B (m/s²) | "
+        "min ADEV, K per √s | ratio | min ADEV, K per √h | ratio |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for f in facts:
+        k = _e(f.k_printed) if f.k_printed else "–"
+        lines.append(
+            f"| {f.axis.upper()} | {f.n:.4e} | {f.b:.4e} | {k} | {f.floor:.4e} | "
+            f"{f.min_k_per_s[1]:.4e} | {f.ratio_per_s:.2f}× | {f.min_k_per_h[1]:.4e} | "
+            f"{f.ratio_per_h:.2f}× |")
+    fx = facts[0]
+    fz = facts[2]
+    r = kx_over_bx()
+    lo, hi = DATASHEET_N_RANGE
+    lines += [
+        "",
+        f"- With K in m/s²/√s as printed, the curve's minimum (at τ = "
+        f"{fx.min_k_per_s[0]:.2g} s on X) is {fx.ratio_per_s:.2f}× the reported floor on X "
+        f"and {fz.ratio_per_s:.2f}× on Z: a record with these N and K could not have shown the "
+        "printed B. Read per √hour (K/60 in SI), the minimum is "
+        f"{fx.ratio_per_h:.2f}× the floor on X and {fz.ratio_per_h:.2f}× on Z, and B dominates "
+        "from seconds to about 10⁴ s, as the paper's text says. The `paper-table3` preset "
+        "therefore uses K/60 m/s²/√s (K per √h), and says so.",
+        f"- K_X / B_X = {r:.5f}, against √(2 ln 2/π) = {BI_FACTOR:.5f}: the printed K_X "
+        f"({TABLE3_K_PRINTED[0]:.4e}) is the floor 0.6643·B_X ({fx.floor:.4e}) itself, the "
+        "ADEV minimum, not a reading on a +½ line.",
+        f"- The ADXL355 datasheet's noise density, 22.5–25 µg/√Hz one-sided, gives N = ND/√2 = "
+        f"{lo:.2e}–{hi:.2e} m/s/√s. The printed X and Y values are "
+        f"{facts[0].n / hi:.2f}–{facts[0].n / lo:.2f}× and "
+        f"{facts[1].n / hi:.2f}–{facts[1].n / lo:.2f}× of that (about ten times lower than "
+        f"the part can be); Z is {facts[2].n / hi:.2f}–{facts[2].n / lo:.2f}×. A factor √100 "
+        "is what a τ in samples instead of seconds at ≈100 Hz would make; the paper does not "
+        "give enough to decide.",
+        "- The table prints the quantization unit as m/s²; Q is in m/s (3Q²/τ²).",
+        "- The paper samples at \"about 100 Hz\", which the ADXL355 cannot do (its rates are "
+        "4000/2^k Hz). The preset uses 125 Hz, the nearest rate.",
+        "",
+    ]
+    return lines
+
+
+def _analysis_table(analyses, title: str) -> list[str]:
+    lines = [
+        title, "",
+        "| axis | term | simulated (SI) | fit value | 68 % interval | fit error | "
+        "slope method | slope error |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for an in analyses:
+        errs = relative_errors(an)
+        for term, sym, unit in TERM_ROWS:
+            te = an.fit.terms[term]
+            true = an.truth[term]
+            slope = an.slope.get(term)
+            s_err = None if (slope is None or true == 0) else slope / true - 1.0
+            interval = (f"[{te.lo:.4g}, {te.hi:.4g}]" if te.present else "absent")
+            lines.append(
+                f"| {an.axis.upper()} | {sym} ({unit}) | {_e(true) if true else '0'} | "
+                f"{_e(te.value) if te.present else 'absent'} | {interval} | "
+                f"{_pct(errs[term])} | {_e(slope)} | {_pct(s_err)} |")
+    lines.append("")
+    for an in analyses:
+        lines.append(f"- {an.axis.upper()}: fitted τ {an.fit.tau_min_s:.3g}–"
+                     f"{an.fit.tau_max_s:.3g} s, χ²/dof {an.fit.chi2_dof:.2f}.")
+    lines.append("")
+    return lines
+
+
+def _plot(path: Path, analyses, literal) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from avard.core.model import lowpass_white_avar
+    from avard.core.table3 import model_adev
+
+    fig, axs = plt.subplots(1, 3, figsize=(13, 4.2), sharey=True)
+    for a, (an, lit) in enumerate(zip(analyses, literal, strict=True)):
+        ax = axs[a]
+        r = an.result
+        ax.errorbar(r.tau, r.dev, yerr=[r.dev - r.dev_lo, r.dev_hi - r.dev], fmt=".",
+                    ms=3, lw=0.8, label="simulated paper-table3 (K per √h)")
+        lr = lit.result
+        ax.plot(lr.tau, lr.dev, "x", ms=3, color="C3", label="simulated, K per √s (literal)")
+        # the filtered model is exact at whole numbers of samples only
+        t = np.unique(np.rint(np.geomspace(1, r.tau[-1] * 3 * r.rate_hz, 300))) / r.rate_hz
+        tr = an.truth
+        # the Table 3 model as the chip delivers it: white noise through the ODR/4 filter
+        filt = lowpass_white_avar(t, tr["velocity_random_walk"], r.rate_hz, r.rate_hz / 4)
+        rest = model_adev(t, 0.0, tr["bias_instability"], tr["rate_random_walk"]) ** 2
+        ax.plot(t, np.sqrt(filt + rest), "k-", lw=0.8, label="Table 3 model (+ chip filter)")
+        ax.axhline(BI_FACTOR * tr["bias_instability"], color="grey", ls=":", lw=0.8,
+                   label="reported floor 0.6643·B")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("τ (s)")
+        ax.set_title(f"{an.axis.upper()} axis")
+        ax.grid(True, which="both", alpha=0.3)
+    axs[0].set_ylabel("Allan deviation (m/s²)")
+    axs[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _progress(label: str):
+    last = [0.0]
+
+    def report(done: int, total: int) -> None:
+        now = time.monotonic()
+        if now - last[0] > 5 or done == total:
+            last[0] = now
+            print(f"{label}: {done / total:.0%}", file=sys.stderr)
+
+    return report
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hours", type=float, default=60.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--literal-hours", type=float, default=6.0)
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "table3.md"))
+    ap.add_argument("--plot", default=None, help="also write an ADEV figure (needs matplotlib)")
+    args = ap.parse_args(argv)
+
+    cfg = make_config("paper-table3")
+    t0 = time.monotonic()
+    analyses = analyse_record(cfg, args.hours, args.seed, progress=_progress("paper-table3"))
+    literal_cfg = make_config("paper-table3", rate_random_walk=TABLE3_K_PRINTED)
+    literal = analyse_record(literal_cfg, args.literal_hours, args.seed,
+                             progress=_progress("literal K"))
+    took = time.monotonic() - t0
+
+    lines = [
+        "# Table 3 of the paper, simulated",
+        "",
+        f"Made by `docs/scripts/table3_note.py --hours {args.hours:g} --seed {args.seed} "
+        f"--literal-hours {args.literal_hours:g}` ({took:.0f} s). The paper (Section 4) "
+        "measured an ADXL355 for 60 h on a granite bed in a ±1 °C room and printed the noise "
+        "terms below. Simulating exactly those terms and analysing the result shows what the "
+        "table can and cannot be. All units SI.",
+        "",
+    ]
+    lines += _closed_form_section()
+    lines += _analysis_table(
+        analyses,
+        f"## 2. The `paper-table3` record ({args.hours:g} h, 125 Hz, K per √h), analysed")
+    worst = max(abs(e) for an in analyses for t, e in relative_errors(an).items()
+                if e is not None and t != "rate_random_walk")
+    kx = analyses[0].fit.terms["rate_random_walk"]
+    lines += [
+        f"- N and B come back within {100 * worst:.1f} % on every axis (the paper claims "
+        f"{100 * PAPER_MAX_ERROR:.1f} %), with 68 % intervals from the fit. The fit models "
+        f"the chip's low-pass and starts at τ = {analyses[0].fit.tau_min_s:.3g} s.",
+        "- K is the hard one: read per √hour, K_X = 3.6e-7 m/s²/√s crosses the floor only at "
+        "τ ≈ 3 h, and a 60 h record holds few independent averages there. The fit reports K_X "
+        + ("present, " + f"{kx.value:.3g} [{kx.lo:.3g}, {kx.hi:.3g}] m/s²/√s"
+           if kx.present else "absent")
+        + " for this seed; over seeds it is found in some 60 h records and not in others, so "
+        "a printed K_X with five digits and a 4.7 % error is more than such a record supports.",
+        "- The slope method reads the same curves with errors it cannot report: B from the "
+        "minimum is biased wherever N or K still contribute there, and K read at τ = 3 s on a "
+        "+½ line has nothing to do with a K that appears only after hours.",
+        "",
+    ]
+    lines += _analysis_table(
+        literal,
+        f"## 3. The literal reading (K per √s), {args.literal_hours:g} h simulated")
+    bx = literal[0].slope["bias_instability"] / literal[0].truth["bias_instability"]
+    bz = literal[2].slope["bias_instability"] / literal[2].truth["bias_instability"]
+    lines += [
+        f"- Had K been per √s, the paper's own reading (B = min ADEV / 0.6643) of such a record "
+        f"would have printed B {bx:.2f}× larger on X and {bz:.2f}× on Z than Table 3 does, and "
+        "ADEV would rise as √τ from a few seconds on, to "
+        f"{math.sqrt(TABLE3_K_PRINTED[0] ** 2 * 216000 / 3):.1e} m/s² at 60 h on X. The table's "
+        "B and K cannot both be right in the printed units.",
+        "",
+        "## What this note does not show",
+        "",
+        "- It cannot say which reading the authors meant; it shows that only one is "
+        "consistent.",
+        "- The simulator's bias instability is a sum of Gauss–Markov processes; its floor is "
+        "within about 1–2.5 % (in AVAR) of 0.6643·B (tests/core/test_simulate.py), which a "
+        "60 h fit resolves: B recovered 0.5–1 % low is the simulator, not the fit.",
+        f"- Below τ ≈ {analyses[0].fit.tau_min_s:.2g} s the chip filter also shapes the "
+        "bias-instability part and the 20-bit rounding adds white noise after the filter "
+        "(LSB²/12 per sample); the fit models neither, so those τ are left out.",
+        "",
+    ]
+    if args.plot:
+        _plot(Path(args.plot), analyses, literal)
+        lines += [f"![ADEV of the simulated records]({Path(args.plot).name})", ""]
+    Path(args.out).write_text("\n".join(lines), encoding="utf-8")
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
