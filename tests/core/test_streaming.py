@@ -303,3 +303,30 @@ def test_streaming_hadamard_equals_batch_phvar(integer: bool) -> None:
     np.testing.assert_array_equal(again.result().var, got.var)
     with pytest.raises(DataError, match="kind"):
         acc.merge(StreamingAllan(2, 50.0))
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    cuts=st.lists(st.integers(0, 5000), min_size=1, max_size=8),
+    gap_after=st.lists(st.booleans(), min_size=8, max_size=8),
+    integer=st.booleans(),
+)
+def test_streaming_with_gaps_equals_batch_segments(cuts, gap_after, integer) -> None:
+    """Random block boundaries, a gap after some of them: same sums as batch with gaps=."""
+    y = random_record(5000, 2, seed=sum(cuts) % 97, integer=integer)
+    edges = sorted(set(cuts))
+    acc = StreamingAllan(2, 20.0)
+    gaps, start = [], 0
+    for i, e in enumerate(edges):
+        acc.update(y[start:e])
+        if gap_after[i] and 0 < e < 5000:
+            acc.gap()
+            gaps.append(e)
+        start = e
+    acc.update(y[start:])
+    ref = pavar(y, 20.0, gaps=gaps)
+    got = acc.result()
+    k = got.n.size
+    np.testing.assert_array_equal(got.n, ref.n[:k])
+    assert np.all(ref.n[k:] == 0)
+    np.testing.assert_allclose(got.var, ref.var[:k], rtol=1e-12)
