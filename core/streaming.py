@@ -9,20 +9,20 @@ only ever sees the phase every m/S samples). Greenhall & Riley's EDF shows that 
 accumulator holds the statistical information of the whole history in kilobytes:
 O(C² · S · octaves) numbers, whatever the duration.
 
-Per level it keeps, for the first and second phase differences E_i = X_{i+m} − X_i and
-D_i = X_{i+2m} − 2X_{i+m} + X_i (X the running sum of the rate, i on the stride grid of the
-current segment):
-
-* n, Σ D, Σ D Dᵀ (C×C: the Allan covariance, so the AVAR of any linear combination of
-  channels, e.g. an axis minus k × temperature, is available afterwards via ``weights``),
-* Σ D_i D_{i+m}ᵀ and the same three sums for E (for the lag-1 ACF noise identification),
-* the last 3·m/stride phase points (to continue the differences in the next block).
+Per level it keeps, for the second phase differences D_i = X_{i+2m} − 2X_{i+m} + X_i (X the
+running sum of the rate, i on the stride grid of the current segment), n and Σ D Dᵀ (C×C: the
+Allan covariance, so the AVAR of any linear combination of channels, e.g. an axis minus
+k × temperature, is available afterwards via ``weights``); and for the first and second
+differences the sums of the lag-1 ACF noise identification on a subgrid (see
+``avard.core.allan.DifferenceSums``). Per stride grid it keeps the last 3·S phase points, to
+continue the differences in the next block (levels m ≤ S share the stride-1 grid).
+With ``hadamard=True`` third differences take the place of D (Hadamard variance).
 
 Integer blocks (raw counts) are summed in int64, so every difference is exact for any record
 length; float blocks are summed in float64 after subtracting the segment's first sample. The
 stride grid and the offset are those of the batch estimator, so ``result()`` equals
-``allan_variance(y, rate, kind="pavar", overlap=S)`` to rounding of the final sums, for any
-split into blocks.
+``allan_variance(y, rate, kind="pavar", overlap=S)`` (``"phvar"`` for Hadamard) to rounding of
+the final sums, for any split into blocks.
 
 A ``gap()`` ends the segment: the phase history is dropped (no difference straddles the gap)
 and the sums carry on. ``merge`` adds another accumulator's sums. ``state()`` is a plain dict
