@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from pathlib import Path
 
 import pytest
 from avard.core.errors import ConfigError
@@ -32,7 +33,7 @@ def test_w1thermsensor_itself_reads_the_fake_tree(tmp_path):
     s = cls(w1.Sensor.DS18B20, tree.ids["plate"].split("-")[1])
     assert s.get_temperature() == 24.5625
     assert cls.BASE_DIRECTORY == tree.base
-    assert w1.W1ThermSensor.BASE_DIRECTORY == D.Path("/sys/bus/w1/devices")  # untouched
+    assert w1.W1ThermSensor.BASE_DIRECTORY == Path("/sys/bus/w1/devices")  # untouched
 
 
 def test_discover_finds_only_ds18b20_and_tolerates_no_bus(tmp_path, caplog):
