@@ -189,7 +189,10 @@ class WatchView:
                     var=snap["avar"][:, c], edf=snap["edf"][:, c], lo=snap["lo"][:, c],
                     hi=snap["hi"][:, c], rate_hz=float(snap["rate_hz"]),
                     ci=float(snap.get("ci", 0.683)), kind="pavar")
-                out[name] = fit_noise(res, ci=float(snap.get("ci", 0.683))).to_dict()
+                # the ADXL355's digital low-pass sits at ODR/4; the service's on-demand fit
+                # (request "snapshot") models it the same way, so both agree
+                out[name] = fit_noise(res, ci=float(snap.get("ci", 0.683)),
+                                      filter_corner_hz=res.rate_hz / 4).to_dict()
             except (AvardError, KeyError, IndexError, ValueError) as exc:
                 log.debug("no fit for %s: %s", name, exc)
         return out
