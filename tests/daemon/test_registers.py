@@ -64,3 +64,22 @@ def test_temperature_formula_and_inverse():
     for t in (-20.0, 0.0, 25.0, 61.3):
         assert abs(R.temperature_from_raw(R.raw_from_temperature(t)) - t) <= 0.5 / 9.05 + 1e-12
     assert R.raw_from_temperature(1e6) == 0 and R.raw_from_temperature(-1e6) == 0xFFF
+
+
+def test_importing_the_hardware_layer_touches_no_hardware():
+    """No spidev, smbus2 or w1thermsensor import (w1thermsensor would run modprobe) until a
+    bus or sensor is actually opened."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "import avard.daemon.registers, avard.daemon.transport, avard.daemon.adxl355\n"
+            "import avard.daemon.timebase, avard.daemon.emulator, avard.daemon.ds18b20\n"
+            "import avard.daemon.w1_sysfs, avard.daemon.thread_priority\n"
+            "import avard.daemon.commands.probe\n"
+            "print(sorted(m for m in ('spidev', 'smbus2', 'w1thermsensor') if m in sys.modules))")
+    env = {k: v for k, v in os.environ.items() if k != "W1THERMSENSOR_NO_KERNEL_MODULE"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True, timeout=60)
+    assert out.stdout.strip() == "[]"
