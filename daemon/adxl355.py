@@ -40,6 +40,12 @@ log = logging.getLogger(__name__)
 A = R.ADDR
 
 
+def _often(count: int) -> bool:
+    """Whether the ``count``-th repeat of a problem is worth a WARNING line: the first ten, then
+    one in a thousand (a bus fault at 100 polls/s must not flood the journal)."""
+    return count <= 10 or count % 1000 == 0
+
+
 # -- decoding ----------------------------------------------------------------------------------
 def decode_counts(data: bytes | bytearray | np.ndarray) -> np.ndarray:
     """Raw 20-bit values of 3-byte entries, vectorised: ``(b0 << 12) | (b1 << 4) | (b2 >> 4)``
@@ -254,8 +260,9 @@ class Adxl355:
                 self.bus_errors += 1
                 if in_drain:
                     self._note_gap("bus_error")
-                log.warning("ADXL355 read at 0x%02X failed (attempt %d of %d): %s", addr,
-                            attempt + 1, self.retries + 1, exc)
+                (log.warning if _often(self.bus_errors) else log.debug)(
+                    "ADXL355 read at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
+                    addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
                 self.clock.sleep(self.retry_delay_s)
         assert last is not None
         raise last
@@ -269,8 +276,9 @@ class Adxl355:
             except BusError as exc:
                 last = exc
                 self.bus_errors += 1
-                log.warning("ADXL355 write at 0x%02X failed (attempt %d of %d): %s", addr,
-                            attempt + 1, self.retries + 1, exc)
+                (log.warning if _often(self.bus_errors) else log.debug)(
+                    "ADXL355 write at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
+                    addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
                 self.clock.sleep(self.retry_delay_s)
         assert last is not None
         raise last
@@ -451,7 +459,8 @@ class Adxl355:
         if status & R.STATUS_FIFO_OVR:
             self.overruns += 1
             self._note_gap("fifo_overrun")
-            log.warning("ADXL355 FIFO overrun: an unknown number of sets was lost")
+            (log.warning if _often(self.overruns) else log.debug)(
+                "ADXL355 FIFO overrun #%d: an unknown number of sets was lost", self.overruns)
         c = len(self._carry) // 3
         n_all = entries - (entries + c) % 3
         n_read = n_all
@@ -470,14 +479,16 @@ class Adxl355:
                 self.overruns += 1
                 self._note_gap("fifo_overrun")
                 status |= post
-                log.warning("ADXL355 FIFO overrun during the drain: an unknown number of sets "
-                            "was lost")
+                (log.warning if _often(self.overruns) else log.debug)(
+                    "ADXL355 FIFO overrun #%d during the drain: an unknown number of sets was "
+                    "lost", self.overruns)
         dec = decode_fifo(self._carry + data)
         if dec.dropped or dec.empty:
             self.realignments += 1
             self._note_gap("realigned", keep_carry=True)
-            log.warning("ADXL355 FIFO misaligned: %d entries dropped, %d empty; realigned on "
-                        "the X marker", dec.dropped, dec.empty)
+            (log.warning if _often(self.realignments) else log.debug)(
+                "ADXL355 FIFO misaligned (#%d): %d entries dropped, %d empty; realigned on the "
+                "X marker", self.realignments, dec.dropped, dec.empty)
         self._carry = dec.carry
         t_end = self.clock.monotonic()
         n = dec.counts.shape[0]

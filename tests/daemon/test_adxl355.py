@@ -529,3 +529,14 @@ def test_close_puts_the_part_in_standby_and_survives_a_dead_bus():
     emu.faults.fail_always()
     dev.close()  # logged, not raised
     assert dev.bus.spi.closed
+
+
+def test_repeated_faults_do_not_flood_the_log(caplog):
+    dev, emu, _ = rig()
+    emu.faults.fail_always()
+    with caplog.at_level(logging.WARNING, logger="avard.daemon.adxl355"):
+        for _ in range(200):
+            with pytest.raises(BusError):
+                dev.drain()
+    assert dev.bus_errors == 600
+    assert 10 <= len(caplog.records) <= 12
