@@ -304,3 +304,129 @@ def test_install_script_refuses_a_relative_prefix():
     )
     assert proc.returncode == 2
     assert "absolute path" in proc.stderr
+
+
+# ---------------------------------------------------------------- the ExecStart line, run
+
+
+PR_SET_MDWE, PR_MDWE_REFUSE_EXEC_GAIN = 65, 1
+# Applies MemoryDenyWriteExecute's rule to the process (and, across execve, to avard): the
+# kernel refuses writable+executable mappings, as systemd's seccomp filter does.
+MDWE_EXEC = (
+    "import ctypes, os, sys\n"
+    "libc = ctypes.CDLL(None, use_errno=True)\n"
+    f"if libc.prctl({PR_SET_MDWE}, {PR_MDWE_REFUSE_EXEC_GAIN}, 0, 0, 0) != 0:\n"
+    "    sys.exit(f'prctl(PR_SET_MDWE) failed: errno {ctypes.get_errno()}')\n"
+    "os.execv(sys.argv[1], sys.argv[1:])\n"
+)
+
+
+def _mdwe_supported() -> bool:
+    proc = subprocess.run(
+        [sys.executable, "-c", MDWE_EXEC, "/bin/true"], capture_output=True, text=True
+    )
+    return proc.returncode == 0
+
+
+def _exec_start_argv(unit, config: Path) -> list[str]:
+    argv = _one(unit, "Service", "ExecStart").split()
+    argv[0] = str(VENV_AVARD)
+    argv[argv.index("--config") + 1] = str(config)
+    return argv
+
+
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="setpriv (util-linux) not installed")
+def test_exec_start_runs_unprivileged_with_no_new_privs_and_mdwe(unit, tmp_path):
+    """The unit's ExecStart line (plus --simulate, no hardware here) started the way the
+    hardening starts it: as an unprivileged user, no new privileges, every capability
+    dropped, W^X memory enforced by the kernel, sd_notify socket and watchdog set; it gets
+    READY=1, feeds the watchdog, records, and stops cleanly on SIGTERM within TimeoutStopSec."""
+    import os
+    import signal
+    import socket
+    import tempfile
+    import threading
+    import time
+
+    from avard.core.recording import RecordingReader
+
+    if not _mdwe_supported():
+        pytest.skip("kernel without PR_SET_MDWE (Linux < 6.3)")
+    # Outside pytest's 0700 tmp tree, so that the unprivileged user can reach it.
+    base = Path(tempfile.mkdtemp(prefix="avard-exec-", dir="/tmp"))
+    base.chmod(0o755)
+    data = base / "data"
+    data.mkdir()
+    cfg_text = (REPO / "config" / "avard.toml").read_text()
+    cfg_text = re.sub(r'(?m)^data_dir = .*$', f'data_dir = "{data}"', cfg_text)
+    cfg_text = re.sub(r"tcp://127\.0\.0\.1:555[56]", "tcp://127.0.0.1:0", cfg_text)
+    config = base / "avard.toml"
+    config.write_text(cfg_text)
+    config.chmod(0o644)
+    notify_path = base / "notify.sock"
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify.bind(str(notify_path))
+    notify_path.chmod(0o666)
+    notify.settimeout(0.05)
+    got: list[str] = []
+    stop = threading.Event()
+
+    def collect() -> None:
+        while not stop.is_set():
+            try:
+                got.append(notify.recv(4096).decode())
+            except TimeoutError:
+                continue
+
+    reader = threading.Thread(target=collect, daemon=True)
+    reader.start()
+
+    wrapper = ["setpriv", "--no-new-privs", "--inh-caps=-all", "--bounding-set=-all"]
+    as_nobody = ["--reuid=65534", "--regid=65534", "--clear-groups"]
+    # Root here: become nobody, as User=avard would, if nobody can execute this venv's avard
+    # at all (not when its interpreter lies under /root; the rest of the sandbox still holds).
+    unprivileged = os.geteuid() == 0 and subprocess.run(
+        [*wrapper, *as_nobody, sys.executable, "-c", MDWE_EXEC, str(VENV_AVARD), "--version"],
+        capture_output=True
+    ).returncode == 0
+    if unprivileged:
+        os.chown(data, 65534, 65534)
+        wrapper += as_nobody
+    argv = [*wrapper, sys.executable, "-c", MDWE_EXEC,
+            *_exec_start_argv(unit, config), "--simulate", "quiet-lab", "--speed", "20"]
+    env = dict(os.environ, NOTIFY_SOCKET=str(notify_path), WATCHDOG_USEC="1000000",
+               HOME=str(base), PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(argv, cwd=base, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while not any("READY=1" in m for m in got):
+            assert proc.poll() is None, proc.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "no READY=1 within 90 s"
+            time.sleep(0.05)
+        time.sleep(1.5)  # watchdog pings every WATCHDOG_USEC/2 = 0.5 s while samples advance
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+        stop_s = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        stop.set()
+        reader.join(2)
+        notify.close()
+    assert proc.returncode == 0, err[-3000:]
+    assert stop_s < _seconds(_one(unit, "Service", "TimeoutStopSec"))
+    assert any("WATCHDOG=1" in m for m in got)
+    assert any("STOPPING=1" in m for m in got)
+    status = [m for m in got if "STATUS=" in m]
+    assert status and re.search(r"\d+ samples", status[-1])
+    assert "prctl" not in err  # W^X held: numpy, msgpack, pyzmq never asked for it
+    segs = list(data.glob("*.avr"))
+    assert segs
+    if unprivileged:
+        assert all(s.stat().st_uid == 65534 for s in segs)
+    reader_ = RecordingReader(data)
+    recs = list(reader_)
+    assert reader_.problems == [] and any(r["kind"] == "raw" for r in recs)
+    shutil.rmtree(base, ignore_errors=True)
