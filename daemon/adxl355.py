@@ -19,6 +19,7 @@ driver, ADI's no-OS driver). The parts that bite and how they are handled:
 
 from __future__ import annotations
 
+import errno
 import logging
 from dataclasses import dataclass, field
 from typing import Any
@@ -298,6 +299,12 @@ class Adxl355:
         try:
             ids = self._read(A["DEVID_AD"], 4)
         except BusError as exc:
+            if exc.errno in (errno.EREMOTEIO, errno.ENXIO):
+                addr = getattr(self.bus, "address", None)
+                where = f" at I2C address 0x{addr:02X}" if addr is not None else ""
+                raise HardwareError(
+                    f"ADXL355 probe: nothing acknowledges{where} ({exc}); check power, SDA/SCL "
+                    "wiring and the ASEL pin (low: 0x1D, high: 0x53)") from exc
             raise HardwareError(
                 f"ADXL355 probe: the bus transfer failed ({exc}); is another driver (the "
                 "kernel's adxl355 overlay) bound to the device, or is it unpowered?") from exc

@@ -540,3 +540,11 @@ def test_repeated_faults_do_not_flood_the_log(caplog):
                 dev.drain()
     assert dev.bus_errors == 600
     assert 10 <= len(caplog.records) <= 12
+
+
+def test_probe_on_i2c_with_no_ack_names_the_address_and_asel():
+    clock = VirtualClock()
+    emu = EmulatedAdxl355(clock=clock)
+    dev = Adxl355(I2cBus(FakeSMBus(emu, address=0x1D), 0x53), clock=clock)
+    with pytest.raises(HardwareError, match=r"0x53.*ASEL"):
+        dev.probe()
