@@ -367,6 +367,7 @@ class Service:
         self.notifier = notifier
         self.stop_requested = threading.Event()
         self.reopen_requested = threading.Event()
+        self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
         odr = float(cfg["sensor"]["odr_hz"])
         self.odr = odr
         self.timebase = TimeBase(odr, group_delay_samples=float(
@@ -688,6 +689,18 @@ class Service:
                         last_samples = self.acq.samples
                     n.status(self.status_line())
                     next_wd = now + wd
+                if self._reload_keys.is_set():
+                    # Not in the signal handler: zmq calls belong in a normal thread context.
+                    self._reload_keys.clear()
+                    log.info("SIGHUP: reopening the recording files, re-reading client keys")
+                    if n is not None:
+                        n.reloading()
+                    for sock in (self.publisher, self.request_server):
+                        reload = getattr(sock, "reload_keys", None)
+                        if reload is not None:
+                            reload()
+                    if n is not None:
+                        n.ready()   # reload finished (Type=notify protocol)
                 if now >= next_status_log:
                     next_status_log = now + self.cfg["service"]["status_log_interval_s"]
                     log.info("status: %s", self.status_line())
@@ -702,6 +715,8 @@ class Service:
 
     def stop(self) -> None:
         """Flush and close everything, in data order: reader, Allan, recorder, publisher."""
+        if getattr(self, "stop_signal", None):
+            log.info("signal %d: stopping", self.stop_signal)
         if self.notifier is not None:
             self.notifier.stopping()
         self.stop_requested.set()
@@ -722,14 +737,14 @@ class Service:
     def install_signals(self) -> None:
         """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording (main thread only)."""
         def _term(signum: int, _frame: Any) -> None:
-            log.info("signal %d: stopping", signum)
+            self.stop_signal = signum      # logged by the main loop, not here (locks)
             self.stop_requested.set()
 
         def _hup(_signum: int, _frame: Any) -> None:
-            log.info("SIGHUP: reopening the recording files")
-            if self.notifier is not None:
-                self.notifier.reloading()
+            # Only flags here: the handler runs in the main thread, which may be inside the
+            # notifier's or a socket's lock at this moment.
             self.reopen_requested.set()
+            self._reload_keys.set()
 
         signal.signal(signal.SIGTERM, _term)
         signal.signal(signal.SIGINT, _term)
