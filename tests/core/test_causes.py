@@ -8,10 +8,9 @@ import math
 import allantools
 import numpy as np
 import pytest
-from scipy import signal
-
 from avard.core import causes as cz
 from avard.core import model
+from scipy import signal
 
 FS = 50.0
 N = 1 << 16
@@ -61,7 +60,7 @@ def test_sinusoid_frequency_and_amplitude():
     y = white(3)
     t = np.arange(N) / FS
     f0, amp = 0.8123, 4e-4
-    tau, v, edf = measured(y + amp * np.sin(2 * np.pi * f0 * t + 0.3))
+    tau, _v, edf = measured(y + amp * np.sin(2 * np.pi * f0 * t + 0.3))
     c = cz.detect_sinusoid(y + amp * np.sin(2 * np.pi * f0 * t + 0.3), FS, tau,
                            model.term_avar("velocity_random_walk", tau, 1e-3 / math.sqrt(FS)),
                            edf)

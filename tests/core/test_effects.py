@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from avard.core import effects
 from avard.core.causes import CAUSES, PARAMS
 from avard.core.errors import DataError

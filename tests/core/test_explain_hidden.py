@@ -7,7 +7,6 @@ come back with no findings."""
 from __future__ import annotations
 
 import pytest
-
 from avard.core import effects, explain
 
 CI_SEEDS = (101, 202, 303)  # 3 × 9 kinds = 27 cases in CI (records of 2^18 samples, 50 Hz)
