@@ -79,6 +79,8 @@ def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool,
         else:
             log.warning("%s binds %s without CURVE: anyone who reaches this interface can "
                         "read the stream (enable [curve])", what, endpoint)
+    if (endpoint_host(endpoint) or "").startswith("["):
+        sock.setsockopt(zmq.IPV6, 1)  # libzmq needs it for tcp://[::1]:PORT
     try:
         sock.bind(endpoint)
     except zmq.ZMQError as exc:

@@ -55,6 +55,12 @@ def request_endpoint_for(pub_endpoint: str) -> str:
     return f"tcp://{host}:{int(port) + 1}"
 
 
+def _ipv6_if_needed(sock: zmq.Socket, endpoint: str) -> None:
+    """libzmq only speaks IPv6 when told: needed for tcp://[::1]:PORT and v6 host names."""
+    if endpoint.startswith("tcp://["):
+        sock.setsockopt(zmq.IPV6, 1)
+
+
 @dataclass
 class TopicStats:
     """Per-topic counts: messages received and messages missing from the sequence."""
@@ -229,6 +235,7 @@ class Subscriber:
         for t in self.topics:
             sub.setsockopt(zmq.SUBSCRIBE, t.encode("ascii"))
         try:
+            _ipv6_if_needed(sub, self.endpoint)
             sub.connect(self.endpoint)
         except zmq.ZMQError as exc:
             self.close()
@@ -261,6 +268,7 @@ class Subscriber:
             req.setsockopt(zmq.MAXMSGSIZE, self.max_bytes + 1024)
             if self.curve is not None:
                 apply_client(req, self.curve)
+            _ipv6_if_needed(req, self.request_endpoint)
             req.connect(self.request_endpoint)
             self._req = req
         return self._req

@@ -248,3 +248,47 @@ def test_random_requests_over_the_socket(ctx: zmq.Context, server: RequestServer
         assert rep["ok"] == (rep["op"] == "status")
     s.close()
     assert server.errors > 0
+
+
+def test_ipv6_loopback() -> None:
+    from avard.daemon.subscriber import Subscriber
+
+    try:
+        pub = Publisher("tcp://[::1]:*", "v6")
+    except ConfigError as exc:
+        pytest.skip(f"no IPv6 loopback here: {exc}")
+    with pub:
+        assert is_loopback(pub.endpoint)
+        sub = Subscriber(pub.endpoint).connect(join=False)
+        try:
+            for _ in range(500):
+                pub.publish("status", _status())
+                if (m := sub.recv(0.01)) is not None:
+                    break
+            assert m is not None and m.record["run"] == "v6"
+        finally:
+            sub.close()
+
+
+def test_concurrent_publishers_share_one_sequence(ctx: zmq.Context) -> None:
+    """The service loop and temperature threads may publish at once: every sequence number
+    is used exactly once and every message arrives whole."""
+    import threading
+
+    with Publisher(LOCAL, "run-t") as pub:
+        sub = _sub(ctx, pub.endpoint)
+        _until_connected(pub, sub)
+        seqs: list[int] = []
+
+        def worker(k: int) -> None:
+            got = [pub.publish("raw", _raw(10_000 * k + 32 * i)) for i in range(300)]
+            seqs.extend(got)
+
+        threads = [threading.Thread(target=worker, args=(k,)) for k in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert sorted(seqs) == list(range(1200))
+        received = [F.decode(sub.recv_multipart()[1])["seq"] for _ in range(1200)]
+        assert received == list(range(1200))  # sent in sequence order, none interleaved
