@@ -1,6 +1,7 @@
 """Publish throughput and sample-to-subscriber latency over loopback TCP.
 
-``python -m benchmarks publish [--messages N] [--latency N] [--rate HZ]``
+``python -m benchmarks publish [--messages N] [--latency N] [--rate HZ]
+[--service-seconds S] [--odr 125,4000]``
 
 Throughput: N raw blocks of 32 samples × 3 axes (int32 counts, the service's block) go from
 ``Publisher.publish(record)`` to a ``Subscriber`` in another thread that decodes and checks
@@ -8,10 +9,15 @@ every one (sequence and index continuity); messages/s and samples/s until the la
 Reference, measured in the same run: plain pyzmq PUB→SUB of the same number of pre-encoded
 messages of the same size (no record building, no validation, no decoding).
 
-Latency: messages paced at ``--rate`` (default 1 kHz, far above the service's 4–125 blocks/s,
-so the queue stays empty); the latency of a message is from just before ``publish`` is
-called to just after the subscriber has decoded it (same clock, CLOCK_MONOTONIC). p50 and
+Latency: messages paced at ``--rate`` (default 1 kHz, far above the service's ~100
+blocks/s, so the queue stays empty); the latency of a message is from just before ``publish``
+is called to just after the subscriber has decoded it (same clock, CLOCK_MONOTONIC). p50 and
 p99 against the same measurement for plain pyzmq bytes.
+
+Sample age: the whole service (``avard run --simulate quiet-lab`` at speed 1, i.e. real
+time) at each ODR with a subscriber in a thread; for every raw block, the age of its newest
+sample when the subscriber has decoded it, on the service's clock. Reference: the drain poll
+period, the floor of this pipeline (a sample waits in the FIFO until the next drain).
 """
 
 from __future__ import annotations
@@ -167,6 +173,58 @@ def zmq_latency(n: int, rate: float, payload: bytes) -> np.ndarray:
     return lat
 
 
+# ---- the whole service: sample age when it reaches a subscriber ----------------------------
+
+
+def service_latency(odr_hz: float, seconds: float) -> tuple[np.ndarray, dict]:
+    """Run the service on the emulated sensor in real time (speed 1) with a subscriber in a
+    thread; for every raw block, the age of its newest sample when decoded at the subscriber,
+    on the service's own clock (newest sample time = t_mono + (n − 1)/rate)."""
+    import tempfile
+
+    from avard.daemon.config import load_config
+    from avard.daemon.service import Service
+    from avard.daemon.simulation import build_simulated
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = load_config(None, **{"recording.data_dir": tmp, "sensor.odr_hz": odr_hz,
+                                   "publish.endpoint": "tcp://127.0.0.1:0",
+                                   "publish.request_endpoint": "tcp://127.0.0.1:0"})
+        dev, clock, sims, _ = build_simulated(cfg, "quiet-lab", seed=1)
+        svc = Service(cfg, dev, clock, speed=1.0, simulate="quiet-lab", on_tick=sims.on_tick,
+                      extra_temperature_names=list(sims.names))
+        sims.service = svc
+        ages: list[float] = []
+        box: dict = {"stop": threading.Event()}
+
+        def listen() -> None:
+            sub = Subscriber(svc.publisher.endpoint, ["raw", "status"]).connect(join=False)
+            box["sub"] = sub
+            while sub.recv(0.05) is None:  # probe until the subscription is through
+                svc.publisher.publish("status", frames.status_record("", 0, {}, 0.0, 0.0))
+
+            def loop() -> None:
+                while not box["stop"].is_set():
+                    m = sub.recv(0.1)
+                    if m is not None and m.topic == "raw" and m.record["n"]:
+                        r = m.record
+                        rate = r.get("rate_hz") or odr_hz
+                        ages.append(clock.monotonic() - (r["t_mono"] + (r["n"] - 1) / rate))
+                sub.close()
+
+            box["thread"] = threading.Thread(target=loop, daemon=True)
+            box["thread"].start()
+
+        try:
+            svc.run(seconds, before_acquisition=listen)
+        finally:
+            box["stop"].set()
+            if "thread" in box:
+                box["thread"].join(10)
+        stats = box["sub"].stats.to_dict()
+    return np.asarray(ages), stats
+
+
 # ---- main ----------------------------------------------------------------------------------
 
 
@@ -175,6 +233,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--messages", type=int, default=20000, help="throughput messages")
     ap.add_argument("--latency", type=int, default=2000, help="latency messages")
     ap.add_argument("--rate", type=float, default=1000.0, help="latency pacing, messages/s")
+    ap.add_argument("--service-seconds", type=float, default=15.0,
+                    help="real-time seconds of the whole service per ODR (0: skip)")
+    ap.add_argument("--odr", default="125,4000", help="ODRs (Hz) for the service latency")
     args = ap.parse_args(argv)
 
     payload = frames.encode(dict(_raw(0), run="bench", seq=0))
@@ -200,6 +261,21 @@ def main(argv: list[str]) -> int:
     print(f"{'pyzmq bytes PUB→SUB (reference)':<46}{zp50:>10.0f}{zp99:>10.0f}{1:>11.2f}{1:>11.2f}")
     print(f"{'Publisher.publish → Subscriber.recv':<46}{ap50:>10.0f}{ap99:>10.0f}"
           f"{ap50 / zp50:>11.2f}{ap99 / zp99:>11.2f}")
+    if args.service_seconds > 0:
+        print(f"\nsample age at the subscriber: the service on the emulated sensor in real "
+              f"time, {args.service_seconds:g} s per ODR (ms; the drain poll period is the "
+              "floor of this pipeline)")
+        print(f"{'case':<30}{'blocks':>8}{'p50':>9}{'p99':>9}{'poll':>9}{'p50/poll':>10}"
+              f"{'lost':>6}")
+        from avard.daemon.config import effective_poll_hz, load_config
+
+        for odr in (float(x) for x in args.odr.split(",")):
+            ages, st = service_latency(odr, args.service_seconds)
+            poll_ms = 1e3 / effective_poll_hz(load_config(None, **{"sensor.odr_hz": odr}))
+            p50, p99 = np.percentile(ages * 1e3, [50, 99]) if ages.size else (np.nan, np.nan)
+            print(f"{f'service at {odr:g} Hz ODR':<30}{ages.size:>8}{p50:>9.1f}{p99:>9.1f}"
+                  f"{poll_ms:>9.1f}{p50 / poll_ms:>10.2f}{st['samples_lost']:>6}")
+
     need = 4000 / BLOCK
     print(f"\nheadroom: the service at 4 kHz sends {need:.0f} raw blocks/s; measured "
           f"{ours:,.0f}/s = {ours / need:,.0f}× that")
