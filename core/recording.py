@@ -153,6 +153,70 @@ def segment_files(path: str | Path) -> list[Path]:
     return [p]
 
 
+def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
+    """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
+    decoding): fast for finding the tail of an hour-long segment at start-up. A truncated
+    last frame is left out. None when a length field is implausible (damage): then read the
+    file with :class:`RecordingReader`."""
+    offsets = []
+    with open(path, "rb") as f:
+        size = f.seek(0, 2)
+        pos = 0
+        while pos + FRAME_HEADER.size <= size:
+            f.seek(pos)
+            n, _crc = FRAME_HEADER.unpack(f.read(FRAME_HEADER.size))
+            if n > max_bytes:
+                return None
+            end = pos + FRAME_HEADER.size + n
+            if end > size:
+                break
+            offsets.append(pos)
+            pos = end
+    return offsets
+
+
+def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
+    """Decode the frame at ``offset`` if its CRC and record are valid, else None."""
+    from . import frames as wire
+
+    with open(path, "rb") as f:
+        f.seek(offset)
+        head = f.read(FRAME_HEADER.size)
+        if len(head) < FRAME_HEADER.size:
+            return None
+        n, crc = FRAME_HEADER.unpack(head)
+        if n > MAX_FRAME_BYTES:
+            return None
+        payload = f.read(n)
+    if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
+        return None
+    try:
+        return wire.decode(payload)
+    except FormatError:
+        return None
+
+
+def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
+    """The last valid record of ``kind`` in one segment file, reading from the end."""
+    offsets = frame_offsets(path)
+    if offsets is None:
+        found = None
+        for rec in RecordingReader(path):
+            if rec["kind"] == kind:
+                found = rec
+        return found
+    for off in reversed(offsets):
+        rec = read_frame_at(path, off)
+        if rec is not None and rec["kind"] == kind:
+            return rec
+    return None
+
+
+def first_record(path: str | Path) -> dict[str, Any] | None:
+    """The first record of a segment (its header), or None if it is unreadable."""
+    return read_frame_at(path, 0)
+
+
 @dataclass
 class RecordingReader:
     """Iterate over the decoded records of a recording (a segment file or a directory).

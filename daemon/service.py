@@ -37,7 +37,14 @@ from typing import Any
 import numpy as np
 from avard.core import frames
 from avard.core.errors import AvardError, ConfigError, FormatError
-from avard.core.recording import AllanFeed, RecordingReader, frame, scan_frames
+from avard.core.recording import (
+    AllanFeed,
+    RecordingReader,
+    first_record,
+    frame,
+    last_record,
+    scan_frames,
+)
 
 from . import __version__
 from .acquisition import Acquisition
@@ -528,21 +535,18 @@ class Service:
             self._restart_gap = (i_end, self.start_index - i_end, t_real_end)
 
     def _last_recorded(self) -> tuple[int, float] | None:
-        """(index after the last recorded sample, its CLOCK_REALTIME) of the newest segment."""
+        """(index after the last recorded sample, its CLOCK_REALTIME) of the newest segment
+        that holds samples; read from the file's end, so an hour-long segment costs little."""
         if not self.cfg["recording"]["enabled"] or not self.data_dir.is_dir():
             return None
-        segs = sorted(self.data_dir.glob("*.avr"))
-        for seg in reversed(segs):
-            last = None
+        for seg in reversed(sorted(self.data_dir.glob("*.avr"))):
             try:
-                for rec in RecordingReader(seg):
-                    if rec["kind"] == "raw":
-                        rate = float(rec.get("rate_hz") or self.odr)
-                        last = (rec["i0"] + rec["n"], rec["t_real"] + rec["n"] / rate)
-            except FormatError:
+                rec = last_record(seg, "raw")
+            except (OSError, FormatError):
                 continue
-            if last is not None:
-                return last
+            if rec is not None:
+                rate = float(rec.get("rate_hz") or self.odr)
+                return rec["i0"] + rec["n"], rec["t_real"] + rec["n"] / rate
         return None
 
     def _replay_after(self, ckpt: dict[str, Any], feed: AllanFeed) -> int:
@@ -551,6 +555,14 @@ class Service:
         start = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
         n0 = feed.fed
         segs = [s for s in sorted(self.data_dir.glob("*.avr")) if s.name.startswith(f"{run}_")]
+        # Only the segment the checkpoint falls in and the later ones (headers carry the
+        # index their segment starts at): a 60-hour run is not read again at every restart.
+        keep = 0
+        for k, seg in enumerate(segs):
+            head = first_record(seg)
+            if head is not None and head.get("kind") == "header" and head["i0"] <= start:
+                keep = k
+        segs = segs[keep:]
         if not segs:
             return 0
         for seg in segs:

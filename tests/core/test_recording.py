@@ -143,3 +143,23 @@ def test_allan_feed_holds_temperatures_from_their_index_and_waits_for_all() -> N
     np.testing.assert_array_equal(block[:, 4], 20.0)
     feed.raw(20, np.ones((2, 3), np.int32))           # index jump → segment break
     assert sink.gaps == 1
+
+
+def test_last_record_reads_from_the_end_and_survives_damage(tmp_path: Path) -> None:
+    from avard.core.recording import first_record, frame_offsets, last_record
+
+    recs = [_header()] + [frames.raw_record("r1", k, 10 * k, np.full((10, 3), k, np.int32),
+                                            0.0, 0.0) for k in range(5)]
+    recs.append(frames.event_record("r1", 0, "start", 0.0, 0.0))
+    seg = tmp_path / "s.avr"
+    _write_segment(seg, recs)
+    seg.write_bytes(seg.read_bytes() + b"\x10\x00\x00\x00trunc")    # a power cut mid-frame
+    assert len(frame_offsets(seg) or []) == len(recs)
+    assert last_record(seg, "raw")["i0"] == 40
+    assert first_record(seg)["kind"] == "header"
+    data = bytearray(seg.read_bytes())
+    off = frame_offsets(seg)[2]
+    data[off:off + 4] = (1 << 30).to_bytes(4, "little")             # damaged length field
+    seg.write_bytes(bytes(data))
+    assert frame_offsets(seg) is None
+    assert last_record(seg, "raw")["i0"] == 40                      # falls back to a full scan
