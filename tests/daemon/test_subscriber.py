@@ -128,3 +128,22 @@ def test_garbage_from_a_publisher_is_counted_not_fatal() -> None:
         sub.close()
         pub.close()
         ctx.term()
+
+
+def test_command_line_client_arguments(tmp_path) -> None:
+    import argparse
+
+    from avard.daemon.subscriber import add_client_arguments, subscriber_from_args
+
+    parser = argparse.ArgumentParser()
+    add_client_arguments(parser)
+    sub = subscriber_from_args(parser.parse_args(["tcp://10.1.2.3:7000"]))
+    assert sub.request_endpoint == "tcp://10.1.2.3:7001" and sub.curve is None
+    with pytest.raises(ConfigError, match="both --server-key"):
+        subscriber_from_args(parser.parse_args(["tcp://h:1", "--server-key", "s.key"]))
+    args = parser.parse_args(["ipc:///run/avard/pub", "--request", "ipc:///run/avard/req",
+                              "--server-key", "s.key", "--client-key", "c.key_secret",
+                              "--timeout", "7"])
+    sub = subscriber_from_args(args)
+    assert sub.request_endpoint == "ipc:///run/avard/req" and sub.request_timeout_s == 7
+    assert sub.curve is not None and sub.curve.client_secret_key_file.name == "c.key_secret"
