@@ -53,6 +53,31 @@ def flicker_ladder(
     return [(tmin_s * r**k, sigma.copy()) for k in range(n)]
 
 
+def reinject_interpolation_loss(
+    ladder: list[tuple[float, NDArray[np.float64]]], steps_s: Sequence[float]
+) -> list[tuple[float, NDArray[np.float64]]]:
+    """Give back what grid interpolation takes from the flicker ladder.
+
+    A Gauss–Markov process of time constant T sampled every Δ and linearly interpolated keeps
+    on average (2 + φ)/3 of its variance (φ = e^(−Δ/T)); the lost σ²(1 − φ)/3 is its
+    spectrum above the grid's Nyquist frequency, i.e. time scales ≈ Δ/π. That variance is
+    added to the ladder member whose time constant is nearest Δ/π (which lives on a finer
+    grid), so the sum keeps the 1/f level at short τ. ``steps_s[k]`` is member k's grid step
+    (0 for members generated at full rate, which lose nothing).
+    """
+    t = np.array([T for T, _ in ladder])
+    var = [np.asarray(s, dtype=float) ** 2 for _, s in ladder]
+    add = [np.zeros_like(v) for v in var]
+    for k, (T, _) in enumerate(ladder):
+        step = steps_s[k]
+        if step <= 0:
+            continue
+        lost = var[k] * (1.0 - math.exp(-step / T)) / 3.0
+        j = int(np.argmin(np.abs(np.log(t / (step / math.pi)))))
+        add[j] = add[j] + lost
+    return [(T, np.sqrt(v + a)) for (T, _), v, a in zip(ladder, var, add, strict=True)]
+
+
 def level_for(tau_s: float, rate_hz: float, h_max: int) -> int:
     """Grid step (samples, power of two) for a process of time constant ``tau_s``."""
     points = tau_s * rate_hz / GM_POINTS_PER_TAU

@@ -40,6 +40,7 @@ from .noise_gen import (
     flicker_ladder,
     lerp,
     level_for,
+    reinject_interpolation_loss,
 )
 from .presets import PRESETS, SimConfig, make_config
 from .thermal import ThermalSource, ds18b20_readings
@@ -164,6 +165,10 @@ class SensorSimulator:
         # covers the band without folding extra power into it
         tmin = c.flicker_tmin_s if c.flicker_tmin_s is not None else dt / math.pi
         ladder = flicker_ladder(c.bias_instability, tmin, c.flicker_tmax_s, c.flicker_per_decade)
+        if REINJECT:
+            steps = [0.0 if (h := level_for(T, fs, h_slow)) <= FAST_MAX_H else h * dt
+                     for T, _ in ladder]
+            ladder = reinject_interpolation_loss(ladder, steps)
         gm_term = [(T, np.where(np.arange(3) == a, s, 0.0))
                    for a, (T, s) in enumerate(zip(c.gm_tau_s, c.gm_sigma_mps2, strict=True))]
         fast: list[tuple[float, NDArray]] = []
@@ -248,6 +253,7 @@ RW_STEP_S = 0.05
 
 #: Gauss–Markov processes that would sit on grids up to this step join the white stream.
 FAST_MAX_H = 4
+REINJECT = True
 
 
 def simulate_record(config: SimConfig, hours: float, seed: int | None,

@@ -238,8 +238,8 @@ def main(argv: list[str] | None = None) -> int:
         "- It cannot say which reading the authors meant; it shows that only one is "
         "consistent.",
         "- The simulator's bias instability is a sum of Gauss–Markov processes; its floor is "
-        "within about 1–2.5 % (in AVAR) of 0.6643·B (tests/core/test_simulate.py), which a "
-        "60 h fit resolves: B recovered 0.5–1 % low is the simulator, not the fit.",
+        "within about 1 % (ADEV) of 0.6643·B (docs/simulator.md). A 60 h fit resolves B to "
+        "±0.2–1 %, so B differences of that size here are the simulator, not the fit.",
         f"- Below τ ≈ {analyses[0].fit.tau_min_s:.2g} s the chip filter also shapes the "
         "bias-instability part and the 20-bit rounding adds white noise after the filter "
         "(LSB²/12 per sample); the fit models neither, so those τ are left out.",
