@@ -58,7 +58,8 @@ class AllanSnapshot:
     """What the service publishes every few seconds.
 
     tau (K,) s; m, stride, n (K,); avar, edf, lo, hi, alpha (K, C) with avar in (input unit)²;
-    cov (K, C, C) the Allan covariance; n_samples; names; ci; rate_hz.
+    cov (K, C, C) the Allan covariance; n_samples; names; ci; rate_hz; kind (the estimator,
+    "pavar", or "phvar" whose ``avar`` holds the Hadamard variance).
     """
 
     tau: NDArray[np.float64]
@@ -75,11 +76,12 @@ class AllanSnapshot:
     names: tuple[str, ...]
     ci: float
     rate_hz: float
+    kind: str = "pavar"  # "phvar" for a Hadamard accumulator
 
     def to_dict(self) -> dict:
         """Plain lists/numbers, msgpack- and JSON-able (units: s, (input unit)²)."""
         out: dict = {"n_samples": int(self.n_samples), "names": list(self.names),
-                     "ci": float(self.ci), "rate_hz": float(self.rate_hz)}
+                     "ci": float(self.ci), "rate_hz": float(self.rate_hz), "kind": self.kind}
         for key in ("tau", "m", "stride", "avar", "cov", "n", "edf", "lo", "hi", "alpha"):
             out[key] = np.asarray(getattr(self, key)).tolist()
         return out
@@ -375,7 +377,7 @@ class StreamingAllan:
             return AllanSnapshot(np.zeros(0), ints, ints, empty,
                                  np.zeros((k, self.n_channels, self.n_channels)), ints,
                                  empty, empty, empty, empty, self.n_samples,
-                                 tuple(self.names), ci, self.rate_hz)
+                                 tuple(self.names), ci, self.rate_hz, self.kind)
         res = finish_result(
             self.kind, self.rate_hz,
             np.array([lev.m for lev in self._active()], dtype=np.int64),
@@ -385,7 +387,7 @@ class StreamingAllan:
         assert res.cov is not None
         return AllanSnapshot(res.tau, res.m, res.stride, res.var, res.cov, res.n, res.edf,
                              res.lo, res.hi, res.alpha, self.n_samples, tuple(self.names),
-                             ci, self.rate_hz)
+                             ci, self.rate_hz, self.kind)
 
     # ------------------------------------------------------------- merge and persistence
     def merge(self, other: StreamingAllan) -> None:

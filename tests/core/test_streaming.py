@@ -184,6 +184,7 @@ def test_snapshot_contents_and_to_dict() -> None:
     np.testing.assert_allclose(np.diagonal(snap.cov, axis1=1, axis2=2), snap.avar)
     d = msgpack.unpackb(msgpack.packb(snap.to_dict()))
     assert d["n_samples"] == 3000 and d["names"] == ["x", "t"] and d["ci"] == 0.9
+    assert d["kind"] == "pavar"
 
 
 def counts_stay_exact(n_total: int, offset: int) -> None:
