@@ -626,6 +626,14 @@ def detect_gauss_markov(tau: NDArray, v: NDArray, edf: NDArray, fit_fn, record_s
         c = chi2(v, mv, edf)
         if c < best[0]:
             best = (c, float(T), float(coef[-1]), mv)
+    # refine between the neighbouring grid points (the grid steps by ~25 %)
+    step = (t_hi / t_lo) ** (1.0 / 35.0)
+    for T in np.geomspace(best[1] / step, best[1] * step, 13):
+        col = model.gauss_markov_avar(tau, 1.0, T)
+        mv, coef = fit_fn([col])
+        c = chi2(v, mv, edf)
+        if c < best[0]:
+            best = (c, float(T), float(coef[-1]), mv)
     c_gm, T, s2, mv = best
     sigma = math.sqrt(max(s2, 0.0))
     if sigma == 0.0 or mv is None:
