@@ -152,6 +152,9 @@ SCHEMA: dict[str, dict[str, str]] = {
 }
 #: Optional fields that are type-checked when present.
 OPTIONAL: dict[str, dict[str, str]] = {
+    "header": {"channels": "list", "temperature_channels": "list",
+               "scale_m_s2_per_count": "num|none", "range_g": "num|none", "sensor": "map",
+               "config": "map"},
     "raw": {"rate_hz": "num", "chip_temp_c": "num|none"},
     "temp": {"source": "str"},
     "gap": {"lost_messages": "int", "topic": "str"},
@@ -239,6 +242,14 @@ def validate(record: Mapping[str, Any]) -> None:
                 f"temp record: names must be strings and values_c numbers in °C or None, got "
                 f"{_short(names)} and {_short(values)}"
             )
+
+
+    if kind == "header":
+        for key in ("channels", "temperature_channels"):
+            names = record.get(key, [])
+            if not all(isinstance(n, str) for n in names):
+                raise FormatError(f"header record: {key} must be a list of strings, got "
+                                  f"{_short(names)}")
 
 
 def _short(value: Any) -> str:

@@ -219,3 +219,18 @@ def test_request_and_reply_messages() -> None:
     assert not err["ok"] and err["error"] == "nope"
     with pytest.raises(FormatError):
         F.decode_reply(msgpack.packb({"ok": True}))
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"temperature_channels": ["plate", 3]}, "list of strings"),
+        ({"temperature_channels": "plate"}, "should be list"),
+        ({"scale_m_s2_per_count": "big"}, "should be num"),
+        ({"config": []}, "should be map"),
+    ],
+)
+def test_header_fields_that_readers_use_are_checked(changes: dict, match: str) -> None:
+    rec = dict(_examples()[0], **changes)
+    with pytest.raises(FormatError, match=match):
+        F.decode(msgpack.packb(rec, use_bin_type=True))
