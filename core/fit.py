@@ -52,7 +52,8 @@ __all__ = ["NoiseFit", "TermEstimate", "fit_noise", "slope_method"]
 class TermEstimate:
     """One coefficient: value with its interval [lo, hi] at the fit's confidence level, in
     ``unit`` (SI). ``present`` False means the data do not support the term: value/lo/hi None.
-    ``z`` is the Wald statistic θ̂/se(θ̂) of the squared coefficient (None if not fitted)."""
+    ``z`` is the presence test's statistic √Δχ² (None if not fitted); ``upper`` for an absent
+    term is its one-sided upper limit at the test's level (the data exclude larger values)."""
 
     value: float | None
     lo: float | None
@@ -60,6 +61,7 @@ class TermEstimate:
     unit: str
     present: bool
     z: float | None = None
+    upper: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit,
@@ -184,6 +186,8 @@ def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz
                 raise FitError(f"sinusoid needs 0 < frequency_hz <= {rate_hz / 2} Hz; got {f0}")
             label = f"sinusoid {f0:.6g} Hz"
         elif cause == "gauss_markov":
+            if "time_constant_s" in params:  # the explain pipeline's name for T
+                params["T"] = params.pop("time_constant_s")
             if params.get("T", 0) <= 0:
                 raise FitError("gauss_markov needs a correlation time T > 0 s in params")
             label = f"gauss_markov T={params['T']:.4g} s"
@@ -286,7 +290,7 @@ def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 
 
 
 def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
-                  ) -> tuple[list[int], NDArray[np.float64]]:
+                  ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
     """Stepwise selection by the likelihood-ratio test on the correlated, EDF-weighted
     residuals: a component is kept when removing it raises χ² by at least z_present²
     (3.84: one-sided 2.5 % for a coefficient on the boundary θ = 0).
@@ -295,8 +299,9 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
     candidate term fitted), so that a deterministic term (rate ramp, which adds no estimator
     variance of its own) cannot look significant merely by shrinking its own error bars.
     Forward steps add the candidate that lowers χ² most while the drop passes the test; then
-    backward steps remove any term that no longer passes. Returns the selected components and
-    √Δχ² of each (the signed z of its test; NaN where not computed).
+    backward steps remove any term that no longer passes. Returns the selected components,
+    √Δχ² of each (the z of its test) and, for the terms left out, the one-sided upper limit
+    θ̂ + z_present·se of θ when fitted with the selected ones (a "not detected, below" bound).
     """
     _, _, C_star, _ = _fit_active(p, idx, list(range(A)))
     T = _whitener(C_star)
@@ -337,11 +342,16 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
             break
         active.remove(a)
         cur, _ = chi2(active)
+    upper = np.full(A, np.nan)
     for a in range(A):
         if a not in active:
-            c2, th = chi2(sorted([*active, a]))
+            cand = sorted([*active, a])
+            c2, th = chi2(cand)
             z_all[a] = math.sqrt(max(cur - c2, 0.0))
-    return active, z_all
+            TX = T @ p.X[np.ix_(idx, cand)]
+            se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[cand.index(a), cand.index(a)], 0.0))
+            upper[a] = th[cand.index(a)] + z_present * se
+    return active, z_all, upper
 
 
 def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int],
@@ -440,7 +450,7 @@ def fit_noise(
         start = _short_tau_cut(p, comps, fitted, var[keep], drop_sigma, max_drop)
     idx = np.arange(start, K)
 
-    active, z_all = _select_terms(p, idx, A, z_present)
+    active, z_all, upper = _select_terms(p, idx, A, z_present)
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
     else:
@@ -473,7 +483,8 @@ def fit_noise(
         else:
             theta_all[a] = 0.0
             te = TermEstimate(None, None, None, comp.unit, False,
-                              None if np.isnan(z_all[j]) else float(z_all[j]))
+                              None if np.isnan(z_all[j]) else float(z_all[j]),
+                              None if np.isnan(upper[j]) else math.sqrt(max(upper[j], 0.0)))
         if comp.label in TERMS:
             est[comp.label] = te
         else:

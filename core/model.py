@@ -219,7 +219,8 @@ def component_avar(cause: str, tau: ArrayLike, params: Mapping[str, float], *,
     if cause == "sinusoid":
         return sinusoid_avar(tau, params["amplitude"], params["frequency_hz"])
     if cause == "gauss_markov":
-        return gauss_markov_avar(tau, params["sigma"], params["T"])
+        T = params["T"] if "T" in params else params["time_constant_s"]
+        return gauss_markov_avar(tau, params["sigma"], T)
     if cause in ("filter", "lowpass_white"):
         if rate_hz is None:
             raise FitError("the filter component needs the sample rate (rate_hz)")
