@@ -130,8 +130,14 @@ class WatchView:
             return
         if "snapshot" in snapshot:  # the request socket answers with the whole avar record
             snapshot, fit = snapshot["snapshot"], snapshot.get("fit", fit)
-        self.snapshot = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
-                         for k, v in snapshot.items()}
+        if not isinstance(snapshot, dict):
+            return
+        try:
+            self.snapshot = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
+                             for k, v in snapshot.items()}
+        except ValueError as exc:  # ragged lists: not a snapshot this avard understands
+            log.warning("ignoring an unreadable Allan snapshot: %s", exc)
+            return
         self.odr_hz = self.odr_hz or _num(snapshot.get("rate_hz"))
         self.fits = {}
         if isinstance(fit, dict) and fit:
@@ -193,7 +199,7 @@ class WatchView:
                 # (request "snapshot") models it the same way, so both agree
                 out[name] = fit_noise(res, ci=float(snap.get("ci", 0.683)),
                                       filter_corner_hz=res.rate_hz / 4).to_dict()
-            except (AvardError, KeyError, IndexError, ValueError) as exc:
+            except (AvardError, KeyError, IndexError, ValueError, TypeError) as exc:
                 log.debug("no fit for %s: %s", name, exc)
         return out
 
@@ -222,8 +228,12 @@ class WatchView:
         lines.append("temps     " + (", ".join(temps) if temps else "none yet"))
         if self.events:
             lines.append("events    " + "; ".join(self.events))
-        lines.extend(self._render_adev())
-        lines.extend(self._render_fit())
+        # a snapshot or fit from a newer or broken service must not end the view
+        for part, render in (("ADEV", self._render_adev), ("fit", self._render_fit)):
+            try:
+                lines.extend(render())
+            except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
+                lines.append(f"{part:<10}unreadable ({type(exc).__name__}: {exc})")
         return "\n".join(lines) + "\n"
 
     def _render_adev(self) -> list[str]:

@@ -115,3 +115,20 @@ def test_watch_once_over_a_real_stream(capsys: pytest.CaptureFixture) -> None:
     assert "plate 21.50 °C, air — °C, chip 24.2 °C" in out
     assert "x [m/s²]" in out and "plate [°C]" in out
     assert re.search(r"velocity_random_walk\s+\d\.\d{3}e-05 \[", out)
+
+
+@pytest.mark.parametrize(
+    "snapshot",
+    [
+        {"tau": [1, [2, 3]], "avar": [[1.0]]},                 # ragged
+        {"tau": ["a", "b"], "avar": [[1.0], [2.0]]},           # strings
+        {"tau": [1.0, 2.0], "avar": {"x": 1}},                 # wrong type
+        {"tau": [1.0, 2.0], "avar": [[1.0]], "names": 5},      # short arrays, bad names
+        "not a map",
+    ],
+)
+def test_view_survives_hostile_snapshots(snapshot: object) -> None:
+    view = WatchView(fit_locally=True)
+    view.set_snapshot({"snapshot": snapshot, "fit": {"terms": {"quantization": 5}}})
+    text = view.render(StreamStats())
+    assert text.startswith("avard watch")
