@@ -150,6 +150,12 @@ class Ring:
                         break
                     marks.append((pos, item))
                     c.mark_pos = seq + 1
+            # Marks every consumer has read are of no use to anyone: free them now instead of
+            # when mark_capacity newer ones push them out (snapshots and checkpoints are
+            # large; keeping 16384 consumed marks costs tens of MB of RSS).
+            done = min(x.mark_pos for x in self._consumers) if self._consumers else 0
+            while self._marks and self._marks[0][0] < done:
+                self._marks.popleft()
             chunk = self._copy(c.pos, p1, marks)
             chunk.lost_samples, chunk.lost_index, chunk.lost_marks = lost, lost_index, lost_marks
             c.pos = p1
