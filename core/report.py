@@ -1,0 +1,363 @@
+"""``avard analyze`` as a library: stream a record once, fit every channel, and write it out.
+
+One pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
+channel: the streaming Allan cascade (``streaming.StreamingAllan``, partially overlapping
+AVAR at octave τ with stride m/8, ≥ 98 % of the full-overlap EDF) and a Welch spectrum used to
+find sinusoids. Lines found in the spectrum enter the noise fit as fixed components (their
+amplitude is measured far more precisely by the spectrum than by the AVAR bump), so they do
+not bias N, B or K; then ``fit.fit_noise`` fits the IEEE terms.
+
+Outputs: a text table, the ``--json`` dictionary (shape fixed by issue 4), a kalibr IMU yaml
+(written by hand: no yaml dependency) and a csv of the ADEV table. All values SI.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from .errors import DataError, FitError
+from .fit import NoiseFit, fit_noise
+from .model import SYMBOLS, TERMS, UNITS
+from .readers import iter_blocks
+
+__all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "find_lines"]
+
+ProgressFn = Callable[[int, int | None], None]
+
+
+# ---------------------------------------------------------------------------------------------
+# spectrum and sinusoid detection
+
+
+class WelchAccumulator:
+    """Streaming Welch PSD (Hann window, 50 % overlap, mean removed per segment), one-sided
+    density in (unit)²/Hz. Memory: one segment per channel."""
+
+    def __init__(self, n_channels: int, rate_hz: float, nperseg: int) -> None:
+        self.c = n_channels
+        self.rate = float(rate_hz)
+        self.L = int(nperseg)
+        self.win = np.hanning(self.L + 1)[:-1]  # periodic Hann
+        self.scale = 1.0 / (self.rate * np.sum(self.win**2))
+        self.sum = np.zeros((self.L // 2 + 1, n_channels))
+        self.n_seg = 0
+        self._buf = np.zeros((0, n_channels))
+
+    def update(self, block: NDArray) -> None:
+        a = np.concatenate([self._buf, np.asarray(block, dtype=float).reshape(-1, self.c)])
+        step = self.L // 2
+        start = 0
+        while start + self.L <= len(a):
+            seg = a[start:start + self.L]
+            seg = (seg - seg.mean(axis=0)) * self.win[:, None]
+            self.sum += np.abs(np.fft.rfft(seg, axis=0)) ** 2
+            self.n_seg += 1
+            start += step
+        self._buf = a[start:]
+
+    def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(f in Hz, PSD (F, C)); empty when no full segment was seen."""
+        f = np.fft.rfftfreq(self.L, 1.0 / self.rate)
+        if self.n_seg == 0:
+            return f, np.full((len(f), self.c), np.nan)
+        psd = self.sum / self.n_seg * self.scale
+        psd[1:-1] *= 2.0  # one-sided
+        return f, psd
+
+
+def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
+               max_lines: int = 8, half_width: int = 32) -> list[dict[str, float]]:
+    """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
+    more than chance allows.
+
+    Background: running median over ±``half_width`` bins, divided by the median/mean ratio of
+    the averaged periodogram's χ² distribution. Test: each bin is χ²(ν)/ν × background with
+    ν ≈ 1.8·segments (Hann, 50 % overlap; Welch 1967); the threshold keeps the chance of one
+    false line per spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P),
+    P = Σ (PSD − background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines``
+    lines {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
+    """
+    from scipy.ndimage import median_filter
+
+    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
+        return []
+    nu = max(2.0, 1.8 * n_seg)
+    med_ratio = chi2.median(nu) / nu
+    bg = median_filter(psd, size=2 * half_width + 1, mode="nearest") / med_ratio
+    thr = chi2.isf(p_false / len(f), nu) / nu
+    ratio = psd / np.where(bg > 0, bg, np.inf)
+    df = f[1] - f[0]
+    lines = []
+    k = 3
+    while k < len(f) - 3:
+        if ratio[k] > thr and ratio[k] >= ratio[k - 1] and ratio[k] >= ratio[k + 1]:
+            sl = slice(k - 2, k + 3)
+            excess = np.clip(psd[sl] - bg[sl], 0.0, None)
+            power = float(np.sum(excess) * df)
+            if power > 0:
+                freq = float(np.sum(excess * f[sl]) / np.sum(excess))
+                lines.append({"frequency_hz": freq, "amplitude": math.sqrt(2.0 * power)})
+            k += 3
+        else:
+            k += 1
+    lines.sort(key=lambda d: -d["amplitude"])
+    return lines[:max_lines]
+
+
+# ---------------------------------------------------------------------------------------------
+# the analysis
+
+
+@dataclass
+class ChannelAnalysis:
+    """One channel: its Allan result (AllanResult, one channel), the fit, the lines found."""
+
+    name: str
+    allan: Any
+    fit: NoiseFit
+    lines: list[dict[str, float]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        a = self.allan
+        d = {"tau_s": _list(a.tau), "adev": _list(a.dev), "adev_lo": _list(a.dev_lo),
+             "adev_hi": _list(a.dev_hi), "edf": _list(a.edf)}
+        fd = self.fit.to_dict()
+        d["terms"] = fd["terms"]
+        d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
+                          for s in self.lines]
+        d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
+        return d
+
+
+@dataclass
+class Analysis:
+    """The whole ``avard analyze`` result: source, rate (Hz), sample count, channels."""
+
+    source: str
+    rate_hz: float
+    n_samples: int
+    channels: dict[str, ChannelAnalysis]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
+        return {"source": self.source, "rate_hz": float(self.rate_hz),
+                "n_samples": int(self.n_samples),
+                "channels": {k: c.to_dict() for k, c in self.channels.items()}}
+
+
+def _num(v: Any) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _list(a: Any) -> list[float | None]:
+    return [_num(v) for v in np.asarray(a, dtype=float).ravel()]
+
+
+def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
+    if not channels:
+        return list(range(len(names)))
+    out = []
+    for ch in channels:
+        if ch in names:
+            out.append(names.index(ch))
+        elif ch.isdigit() and int(ch) < len(names):
+            out.append(int(ch))
+        else:
+            raise DataError(f"channel {ch!r} is not in this record; its channels are "
+                            f"{', '.join(names)} (or their numbers 0..{len(names) - 1})")
+    return sorted(set(out))
+
+
+def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
+    """The ADXL355 low-pass corner (ODR/4) when the record says it comes from one: a service
+    recording or a simulated record (which carries odr_nominal_hz). Other sensors' filters are
+    unknown, and the fit then leaves out the short τ they bend (a data-driven cut)."""
+    if meta.get("format") == "recording" or "odr_nominal_hz" in meta:
+        return rate_hz / 4.0
+    return None
+
+
+def analyze(
+    path: str,
+    *,
+    rate_hz: float | None = None,
+    channels: Sequence[str] | None = None,
+    filter_corner_hz: float | str | None = "auto",
+    find_sinusoids: bool = True,
+    progress: ProgressFn | None = None,
+    block: int = 1 << 16,
+    fit_kwargs: dict[str, Any] | None = None,
+) -> Analysis:
+    """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
+
+    ``filter_corner_hz``: "auto" (ADXL355 ODR/4 for avard's own records, else not modelled),
+    a number in Hz, or None (not modelled: the bent shortest τ are left out instead).
+    """
+    from .streaming import StreamingAllan
+
+    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz)
+    rate = float(meta["rate_hz"])
+    names = list(meta["names"])
+    sel = _select(names, channels)
+    total = meta.get("n_samples")
+    sa = StreamingAllan(len(sel), rate, names=[names[i] for i in sel])
+    welch: WelchAccumulator | None = None
+    if find_sinusoids and (total is None or total >= 1024):
+        # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
+        nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
+        welch = WelchAccumulator(len(sel), rate, nper)
+    n = 0
+    for accel, _temp in blocks:
+        a = accel[:, sel]
+        sa.update(a)
+        if welch is not None:
+            welch.update(a)
+        n += len(a)
+        if progress is not None:
+            progress(n, total)
+    if n < 16:
+        raise DataError(f"{path}: only {n} samples; the Allan variance needs a record of at "
+                        "least a few hundred samples")
+    res = sa.result()
+    f, psd = (welch.result() if welch is not None else (None, None))
+    corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
+              else filter_corner_hz)
+    out: dict[str, ChannelAnalysis] = {}
+    for j, i in enumerate(sel):
+        one = res.channel(j)
+        lines = []
+        if welch is not None and f is not None:
+            lines = find_lines(f, psd[:, j], welch.n_seg)
+        extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
+        try:
+            fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **(fit_kwargs or {}))
+        except FitError as exc:
+            raise FitError(f"{path}, channel {names[i]}: {exc}") from exc
+        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines)
+    return Analysis(source=str(meta.get("source", path)), rate_hz=rate, n_samples=n,
+                    channels=out, meta={**meta, "filter_corner_hz": corner})
+
+
+# ---------------------------------------------------------------------------------------------
+# text, csv, kalibr
+
+
+def _fmt(v: float | None) -> str:
+    return "—" if v is None else f"{v:.4g}"
+
+
+def format_table(an: Analysis) -> str:
+    """Human-readable report: per channel the five terms (value, 68 % interval, SI unit, or
+    'absent'), the sinusoids, the τ range used and the fit quality."""
+    lines = [f"{an.source}: {an.n_samples} samples at {an.rate_hz:g} Hz "
+             f"({an.n_samples / an.rate_hz / 3600:.3g} h). Units SI; intervals 68.3 %."]
+    fc = an.meta.get("filter_corner_hz")
+    lines.append("sensor low-pass modelled at " + (f"{fc:g} Hz" if fc else
+                 "— (not modelled: filter-bent short τ left out)"))
+    for name, ch in an.channels.items():
+        fit = ch.fit
+        lines.append("")
+        lines.append(f"channel {name}")
+        lines.append(f"  {'term':<24}{'value':>12}  {'68 % interval':<25}{'unit'}")
+        for t in TERMS:
+            e = fit.terms[t]
+            label = f"{t} ({SYMBOLS[t]})"
+            if e.present:
+                lines.append(f"  {label:<24}{_fmt(e.value):>12}  "
+                             f"{'[' + _fmt(e.lo) + ', ' + _fmt(e.hi) + ']':<25}{UNITS[t]}")
+            else:
+                ub = f"absent (< {_fmt(e.upper)} {UNITS[t]})" if e.upper else "absent"
+                lines.append(f"  {label:<24}{ub:>12}")
+        if ch.lines:
+            s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"
+                          for ln in ch.lines)
+            lines.append(f"  sinusoids: {s}")
+        else:
+            lines.append("  sinusoids: none found")
+        chi = "n/a" if not math.isfinite(fit.chi2_dof) else f"{fit.chi2_dof:.2f}"
+        lines.append(f"  fitted τ {fit.tau_min_s:.4g} s … {fit.tau_max_s:.4g} s "
+                     f"({fit.n_points} points), χ²/dof = {chi} (dof {fit.dof})")
+        if math.isfinite(fit.chi2_dof) and fit.dof > 0:
+            p = float(chi2.sf(fit.chi2_dof * fit.dof, fit.dof))
+            if p < 0.001:
+                lines.append(f"  note: the five-term model does not describe this curve "
+                             f"(p = {p:.1g}); see `avard explain` for what else is in it")
+    return "\n".join(lines)
+
+
+def adev_csv(an: Analysis) -> str:
+    """The ADEV table as csv: channel, tau_s, adev, adev_lo, adev_hi (m/s²), edf, model (m/s²:
+    the fitted model's ADEV), used (1 if the point was in the fit)."""
+    rows = ["channel,tau_s,adev_mps2,adev_lo_mps2,adev_hi_mps2,edf,model_adev_mps2,used"]
+    for name, ch in an.channels.items():
+        a = ch.allan
+        model = np.sqrt(ch.fit.model_avar(a.tau))
+        for k in range(len(a.tau)):
+            used = int(ch.fit.tau_min_s * (1 - 1e-9) <= a.tau[k] <= ch.fit.tau_max_s * (1 + 1e-9))
+            vals = [a.tau[k], a.dev[k], a.dev_lo[k], a.dev_hi[k], a.edf[k], model[k]]
+            rows.append(",".join([name] + [("" if not math.isfinite(v) else f"{v:.9g}")
+                                           for v in vals] + [str(used)]))
+    return "\n".join(rows) + "\n"
+
+
+def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
+    """kalibr's IMU noise file: accelerometer_noise_density = N (m/s²/√Hz), _random_walk = K
+    (m/s³/√Hz), update_rate (Hz). kalibr takes one value for all axes: the largest over the
+    channels (conservative). An axis without a detected K contributes its upper limit; if no
+    channel gives anything, a comment says so and the value is 0."""
+    ns = [c.fit.terms["velocity_random_walk"].value for c in an.channels.values()]
+    ks = []
+    for c in an.channels.values():
+        e = c.fit.terms["rate_random_walk"]
+        ks.append(e.value if e.present else e.upper)
+    n_val = max((v for v in ns if v is not None), default=None)
+    k_val = max((v for v in ks if v is not None), default=None)
+    if n_val is None:
+        raise FitError("no channel has a velocity random walk N; kalibr needs one")
+    k_note = ("largest K over the axes" if any(c.fit.terms["rate_random_walk"].present
+                                                for c in an.channels.values())
+              else "K not detected: the largest 97.5 % upper limit over the axes")
+    out = [
+        f"# accelerometer noise from avard analyze of {an.source}",
+        f"# channels: {', '.join(an.channels)}; largest value over them; SI units",
+        f"accelerometer_noise_density: {n_val:.6e}   # N, m/s^2/sqrt(Hz)",
+        f"accelerometer_random_walk: {0.0 if k_val is None else k_val:.6e}   # {k_note}, "
+        "m/s^3/sqrt(Hz)",
+        f"rostopic: {rostopic}",
+        f"update_rate: {an.rate_hz:.6g}   # Hz",
+    ]
+    return "\n".join(out) + "\n"
+
+
+def progress_printer(stream: Any = None) -> ProgressFn | None:
+    """A progress callback writing to stderr, or None when stderr is not a terminal."""
+    stream = stream or sys.stderr
+    if not getattr(stream, "isatty", lambda: False)():
+        return None
+    last = [-1]
+
+    def show(done: int, total: int | None) -> None:
+        pct = -1 if not total else int(100 * done / total)
+        if pct == last[0] and total:
+            return
+        last[0] = pct
+        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples)" if total else \
+            f"\ranalyze: {done} samples"
+        stream.write(msg)
+        if total and done >= total:
+            stream.write("\n")
+        stream.flush()
+
+    return show
