@@ -275,7 +275,8 @@ class StreamingAllan:
         n = a.shape[0]
         if n == 0:
             return
-        if n >= _FLUSH_SAMPLES and not self._pending:
+        if n >= _FLUSH_SAMPLES:
+            self._flush()  # pending small blocks come first, in order
             # bounded pieces keep the working memory independent of the caller's block size
             for i in range(0, n, _MAX_BLOCK):
                 self._process(a[i : i + _MAX_BLOCK])
