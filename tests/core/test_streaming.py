@@ -31,13 +31,15 @@ def random_record(n: int, c: int, seed: int, integer: bool = False) -> np.ndarra
 
 @settings(max_examples=25, deadline=None)
 @given(
-    sizes=st.lists(st.integers(0, 3000), min_size=0, max_size=12),
+    # below and above the 4096-set threshold where small blocks are collected first
+    sizes=st.lists(st.one_of(st.integers(0, 40), st.integers(0, 9000)), min_size=0,
+                   max_size=12),
     rate=st.sampled_from([1.0, 100.0, 125.0, 3.7]),
     integer=st.booleans(),
     overlap=st.sampled_from([1, 4, 8]),
 )
 def test_streaming_equals_batch_for_any_block_split(sizes, rate, integer, overlap) -> None:
-    y = random_record(6000, 2, seed=len(sizes), integer=integer)
+    y = random_record(20000, 2, seed=len(sizes), integer=integer)
     acc = StreamingAllan(2, rate, overlap=overlap)
     feed(acc, y, sizes)
     got = acc.result()
