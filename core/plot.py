@@ -1,0 +1,105 @@
+"""The analysis figure: log-log Allan deviation per channel with its 68 % intervals, the fitted
+model and each term's own line. matplotlib is the optional ``plot`` extra: imported here only
+when a figure is asked for, with a clear message when it is missing."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import AvardError
+from .model import SYMBOLS, TERMS, UNITS
+
+_COLOURS = {"quantization": "#9467bd", "velocity_random_walk": "#1f77b4",
+            "bias_instability": "#2ca02c", "rate_random_walk": "#d62728",
+            "rate_ramp": "#8c564b"}
+
+
+def _pyplot() -> Any:
+    try:
+        import matplotlib
+    except ImportError as exc:
+        raise AvardError("plotting needs matplotlib: pip install 'avard[plot]'") from exc
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _label(term: str, e: Any) -> str:
+    return (f"{SYMBOLS[term]} = {e.value:.3g} [{e.lo:.3g}, {e.hi:.3g}] "
+            f"{UNITS[term].replace('^2', '²').replace('sqrt(s)', '√s')}")
+
+
+def plot_analysis(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
+    """Write the figure for an ``report.Analysis`` to ``path`` (png/pdf/svg by suffix)."""
+    plt = _pyplot()
+    names = list(an.channels)
+    n = len(names)
+    cols = min(n, 3)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 6.2 * rows), squeeze=False,
+                             sharey=False)
+    for ax, name in zip(axes.ravel(), names, strict=False):
+        _panel(ax, an.channels[name])
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    fig.suptitle(f"{Path(an.source).name}: Allan deviation, {an.n_samples} samples at "
+                 f"{an.rate_hz:g} Hz (68 % intervals)", fontsize=11)
+    fig.tight_layout()
+    out = Path(path)
+    try:
+        fig.savefig(out, dpi=dpi)
+    except (OSError, ValueError) as exc:
+        raise AvardError(f"cannot write the plot to {out}: {exc}") from exc
+    finally:
+        plt.close(fig)
+    return out
+
+
+def _panel(ax: Any, ch: Any) -> None:
+    a, fit = ch.allan, ch.fit
+    ok = np.isfinite(a.dev) & (a.dev > 0)
+    tau, dev = a.tau[ok], a.dev[ok]
+    lo = np.where(np.isfinite(a.dev_lo[ok]), a.dev_lo[ok], dev)
+    hi = np.where(np.isfinite(a.dev_hi[ok]), a.dev_hi[ok], dev)
+    used = (tau >= fit.tau_min_s * (1 - 1e-9)) & (tau <= fit.tau_max_s * (1 + 1e-9))
+    ax.errorbar(tau[used], dev[used], yerr=[dev[used] - lo[used], hi[used] - dev[used]],
+                fmt="o", ms=4, color="k", capsize=2, lw=1, label="measured ADEV (fitted)",
+                zorder=5)
+    if (~used).any():
+        ax.errorbar(tau[~used], dev[~used], yerr=[dev[~used] - lo[~used], hi[~used] - dev[~used]],
+                    fmt="o", ms=4, mfc="white", color="0.5", capsize=2, lw=1,
+                    label="measured (not fitted)", zorder=4)
+    t = np.geomspace(tau.min(), tau.max(), 300)
+    ax.loglog(t, np.sqrt(fit.model_avar(t)), color="#ff7f0e", lw=2, label="fitted model",
+              zorder=3)
+    parts = fit.component_avars(t)
+    for term in TERMS:
+        e = fit.terms[term]
+        if e.present and term in parts:
+            ax.loglog(t, np.sqrt(parts[term]), "--", lw=1.2, color=_COLOURS[term],
+                      label=_label(term, e))
+    other = {lab: v for lab, v in parts.items() if lab not in TERMS}
+    if other:
+        # the extra components (sinusoids, Gauss–Markov) as one line: their sum
+        freqs = [f"{float(lab.split()[1]):.3g}" for lab in other if lab.startswith("sinusoid")]
+        lab = (f"sinusoids at {', '.join(freqs[:3])}{' …' if len(freqs) > 3 else ''} Hz"
+               if len(freqs) == len(other) else "extra components")
+        ax.loglog(t, np.sqrt(sum(other.values())), ":", lw=1.2, color="0.35", label=lab)
+    ax.axvspan(fit.tau_min_s, fit.tau_max_s, color="#ff7f0e", alpha=0.06, lw=0)
+    ymin = max(dev.min() / 3, np.nanmin(lo) / 1.5)
+    ax.set_ylim(ymin, hi.max() * 2)
+    ax.set_xlim(tau.min() / 1.5, tau.max() * 1.5)
+    absent = [SYMBOLS[t] for t in TERMS if not fit.terms[t].present]
+    chi = f"{fit.chi2_dof:.2f}" if math.isfinite(fit.chi2_dof) else "n/a"
+    ax.set_title(f"channel {ch.name}: χ²/dof = {chi}"
+                 + (f"; absent: {', '.join(absent)}" if absent else ""), fontsize=10)
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("Allan deviation σ(τ) (m/s²)")
+    ax.grid(True, which="major", alpha=0.35)
+    ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
+              frameon=False)

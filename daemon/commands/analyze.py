@@ -1,0 +1,94 @@
+"""Fit the IEEE noise terms to a record and print them with their 68 % intervals.
+
+Examples:
+
+    avard analyze lab.npz                       # table per axis, SI units
+    avard analyze data.csv --rate 125 --channels x z
+    avard analyze lab.npz --json > lab.json     # machine-readable (shape in docs/analysis.md)
+    avard analyze lab.npz --plot lab.png --export kalibr imu.yaml --export csv adev.csv
+
+DATA is an .npz (accel in m/s², rate_hz), a .csv (header row; t column or --rate), or an avard
+recording (directory or .avr segment). The record is streamed, so its size is not limited by
+memory; progress goes to stderr when it is a terminal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from avard.core.errors import DataError
+from avard.core.report import adev_csv, analyze, format_table, kalibr_yaml, progress_printer
+
+NAME = "analyze"
+HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"
+
+
+def _corner(text: str) -> float | str | None:
+    if text == "auto":
+        return "auto"
+    if text == "none":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a corner in Hz, 'auto' or 'none'") \
+            from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"filter corner {text} Hz must be > 0")
+    return v
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("data", metavar="DATA", help=".npz, .csv, or a recording (dir/.avr)")
+    parser.add_argument("--rate", type=float, default=None, metavar="HZ",
+                        help="sample rate in Hz (overrides the file's; needed for a csv "
+                             "without a t column)")
+    parser.add_argument("--channels", nargs="+", metavar="NAME",
+                        help="channels to analyse (names or numbers; default all)")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    parser.add_argument("--plot", metavar="FILE.png", help="write the ADEV figure (needs the "
+                        "plot extra: matplotlib)")
+    parser.add_argument("--export", nargs=2, action="append", default=[],
+                        metavar=("FORMAT", "FILE"),
+                        help="write 'kalibr FILE.yaml' (noise density, random walk, rate) or "
+                             "'csv FILE.csv' (the ADEV table); repeatable")
+    parser.add_argument("--filter-corner", type=_corner, default="auto", metavar="HZ",
+                        help="sensor low-pass corner to model on the white noise: a number in "
+                             "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
+                             "(leave out the short τ it bends; default auto)")
+
+
+def _write(path: str, text: str) -> None:
+    p = Path(path)
+    if not p.parent.exists():
+        raise DataError(f"cannot write {p}: folder {p.parent} does not exist")
+    try:
+        p.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise DataError(f"cannot write {p}: {exc.strerror}") from exc
+
+
+def run(args: argparse.Namespace) -> int:
+    for fmt, _ in args.export:
+        if fmt not in ("kalibr", "csv"):
+            raise DataError(f"--export {fmt}: unknown format; use 'kalibr FILE.yaml' or "
+                            "'csv FILE.csv'")
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
+    an = analyze(args.data, rate_hz=args.rate, channels=args.channels,
+                 filter_corner_hz=args.filter_corner, progress=progress_printer())
+    if args.json:
+        sys.stdout.write(json.dumps(an.to_dict(), indent=1, allow_nan=False) + "\n")
+    else:
+        sys.stdout.write(format_table(an) + "\n")
+    for fmt, path in args.export:
+        _write(path, kalibr_yaml(an) if fmt == "kalibr" else adev_csv(an))
+    if args.plot:
+        from avard.core.plot import plot_analysis
+
+        plot_analysis(an, args.plot)
+    return 0
