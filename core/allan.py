@@ -579,7 +579,14 @@ def _alphas(
     """
     lowest = 2 - 2 * d  # alpha + 2d > 1
     if alpha is not None:
-        a = np.broadcast_to(np.asarray(alpha), var.shape).astype(np.float64)
+        given = np.asarray(alpha, dtype=np.float64)
+        if given.ndim == 1 and var.ndim == 2 and given.shape[0] == var.shape[0]:
+            given = given[:, None]  # one alpha per τ, the same for every channel
+        try:
+            a = np.broadcast_to(given, var.shape).astype(np.float64)
+        except ValueError as exc:
+            raise DataError(f"alpha has shape {given.shape}; give one value, one per τ "
+                            f"({var.shape[0]}), or one per τ and channel {var.shape}") from exc
         if not np.all(np.isfinite(a)) or np.any(np.rint(a) != a):
             raise DataError("alpha must be integers (2 white PM … -2 random-walk FM)")
         if np.any(a > 2) or np.any(a < lowest):

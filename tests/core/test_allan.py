@@ -209,3 +209,13 @@ def test_hadamard_ignores_a_linear_rate_drift_exactly_for_counts() -> None:
     np.testing.assert_array_equal(ohvar(ramp, 100.0).var, ohvar(counts, 100.0).var)
     a_ramp, a_flat = oavar(ramp, 100.0), oavar(counts, 100.0)
     assert a_ramp.var[-1] > 100 * a_flat.var[-1]
+
+
+def test_alpha_can_be_imposed_per_tau() -> None:
+    y = np.random.default_rng(14).normal(size=(5000, 2))
+    res = oavar(y, 1.0, [1, 2, 4], alpha=[0, -1, -2])
+    np.testing.assert_array_equal(res.alpha, [[0, 0], [-1, -1], [-2, -2]])
+    with pytest.raises(DataError, match="alpha"):
+        oavar(y, 1.0, [1, 2, 4], alpha=[0, 1, 0, 1])
+    with pytest.raises(DataError, match="alpha"):
+        oavar(y, 1.0, [1, 2], alpha=-3)  # AVAR does not converge there
