@@ -121,3 +121,17 @@ def test_temperature_channels_with_gaps_are_filled():
     t[1::50, :] = np.nan  # a DS18B20 reading only every so often, NaN between (as sim_io)
     ch = explain.explain(replace(rec, temperature_c=t)).channels["x"]
     assert effects.check_case(truth, ch.findings)[0]
+
+
+def test_measurement_is_the_allan_module_estimator_where_strides_agree():
+    """explain measures with its own strided pass (speed); at m = 2^k its stride is the
+    partially overlapping estimator's m/8, and the numbers must be the same."""
+    from avard.core import allan
+    from avard.core import causes as cz
+
+    y = np.random.default_rng(3).standard_normal(1 << 16) * 1e-3
+    ours = explain.measure(y, 50.0)
+    ref = allan.allan_variance(y, 50.0, ours.tau, kind="pavar")
+    p2 = (ours.m & (ours.m - 1)) == 0
+    assert np.all(ref.stride[p2] == [cz.stride_for(int(k)) for k in ours.m[p2]])
+    np.testing.assert_allclose(ours.var[p2], ref.var[p2], rtol=1e-9)
