@@ -433,6 +433,8 @@ class Explanation:
     rate_hz: float
     source: str
     holdout_source: str | None
+    #: AVAR of each temperature channel (K²), for the report: the witness's own stability
+    temperature: dict[str, Measured] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {"channels": {k: v.to_json() for k, v in self.channels.items()}}
@@ -637,5 +639,10 @@ def explain(record: Any, *, holdout: Any | None = None,
             hol = (ho[0][:, hj], ho[2])
         log.info("explaining channel %s", c)
         out[c] = explain_channel(accel[:, j], rate, temps, tnames, c, hol)
+    t_avar = {}
+    if temps is not None:
+        for j, tn in enumerate(tnames):
+            if np.ptp(temps[:, j]) > 0:
+                t_avar[tn] = measure(temps[:, j], rate)
     return Explanation(out, rate, str(getattr(record, "source", "")),
-                       None if holdout is None else str(getattr(holdout, "source", "")))
+                       None if holdout is None else str(getattr(holdout, "source", "")), t_avar)

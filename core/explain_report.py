@@ -125,6 +125,24 @@ def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
     plt.close(fig)
 
 
+def _plot_temperature(ex: Explanation, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.0))
+    for name, m in ex.temperature.items():
+        ax.loglog(m.tau, np.sqrt(m.var), "o-", ms=3, label=name)
+    ax.set_xlabel("averaging time tau (s)")
+    ax.set_ylabel("Allan deviation (K)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def write_report(ex: Explanation, outdir: str | Path) -> Path:
     """Write ``report.md`` and one pair of PNG plots per channel into ``outdir``."""
     out = Path(outdir)
@@ -180,6 +198,11 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
                "| term | base | extended |", "|---|---|---|"]
         md += [f"| {SYMBOLS[t]} {t} | {b} | {e} |" for t, b, e in term_changes(ch)]
         md.append("")
+    if ex.temperature:
+        _plot_temperature(ex, out / "temperature_adev.png")
+        md += ["## Temperature channels", "",
+               "Allan deviation of each temperature channel (K): the witness the temperature "
+               "cause is tested against.", "", "![temperature ADEV](temperature_adev.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(md), encoding="utf-8")
     return path

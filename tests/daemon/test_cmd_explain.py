@@ -53,7 +53,7 @@ def test_summary_report_and_holdout(files, tmp_path, capsys):
     assert "FOUND sinusoid" in text and "held out" in text and "m/s" in text
     md = (rep / "report.md").read_text()
     assert "## Channel x" in md and "sinusoid" in md and "Evidence per cause" in md
-    for png in ("adev_x.png", "misfit_x.png"):
+    for png in ("adev_x.png", "misfit_x.png", "temperature_adev.png"):
         assert (rep / png).stat().st_size > 1000
 
 
