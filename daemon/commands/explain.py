@@ -22,7 +22,6 @@ import logging
 import math
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -44,51 +43,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", metavar="DIR",
                         help="write report.md with plots into DIR (needs matplotlib)")
     parser.add_argument("--channels", help="comma-separated channel names (default: all)")
-    parser.add_argument("--rate-hz", type=float, default=None,
+    parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
 
 
-def _load_npz(path: Path, rate_hz: float | None) -> Any:
-    """Minimal .npz reader (accel, rate_hz, axes/names, temperature_c, temperature_names)
-    for when avard.core.readers is not available."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            keys = set(z.files)
-            if "accel" not in keys:
-                raise DataError(f"{path} has no 'accel' array; an explain input needs accel "
-                                "(N, C) in m/s^2")
-            accel = np.asarray(z["accel"], dtype=np.float64)
-            rate = rate_hz if rate_hz is not None else (
-                float(z["rate_hz"]) if "rate_hz" in keys else None)
-            names = [str(a) for a in z["axes"]] if "axes" in keys else (
-                [str(a) for a in z["names"]] if "names" in keys else None)
-            temps = np.asarray(z["temperature_c"], dtype=np.float64) \
-                if "temperature_c" in keys else None
-            tnames = [str(a) for a in z["temperature_names"]] \
-                if "temperature_names" in keys else []
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {path}: {exc}; give an .npz with an 'accel' array") \
-            from exc
-    if rate is None:
-        raise DataError(f"{path} does not say its sample rate; pass --rate-hz")
-    if accel.ndim == 1:
-        accel = accel[:, None]
-    if names is None or len(names) != accel.shape[1]:
-        names = ["x", "y", "z"][: accel.shape[1]] if accel.shape[1] <= 3 else \
-            [f"ch{i}" for i in range(accel.shape[1])]
-    return SimpleNamespace(accel=accel, rate_hz=rate, names=names, temperature_c=temps,
-                           temperature_names=tnames, source=str(path))
-
-
 def load(path: str, rate_hz: float | None = None) -> Any:
-    """Load a record through avard.core.readers when present, else the .npz reader here."""
+    """Load a record through the one reader every command uses (avard.core.readers)."""
+    from avard.core.readers import load_record
+
     p = Path(path)
     if not p.exists():
         raise DataError(f"{path} does not exist; give the path of a recorded or simulated file")
-    try:
-        from avard.core.readers import load_record
-    except ImportError:
-        return _load_npz(p, rate_hz)
     return load_record(p, rate_hz=rate_hz)
 
 
