@@ -16,9 +16,9 @@ The method (one channel, overlapping or partially overlapping AVAR):
    least-squares solution and its covariance is the sandwich (XᵀWX)⁻¹XᵀWCWX(XᵀWX)⁻¹.
 4. **τ range from the data.** Points with too few differences (EDF < ``min_edf``, or fewer
    than ``min_averages`` independent τ-averages in the record) are left out at long τ. At short
-   τ, unless the filter is modelled, the shortest point is dropped while it lies more than
-   ``drop_sigma`` standard deviations from the model fitted to the longer τ (the ADXL355's
-   low-pass bends the curve below the white line there), up to ``max_drop`` points.
+   τ, unless the filter is modelled, the shortest point is left out while the curve still
+   shows a significant filter bend (a negative τ⁻² deficit below the white line, more than
+   ``drop_z`` standard errors; see ``_short_tau_cut``), up to ``max_drop`` points.
 5. **Presence.** Backward elimination: while some fitted term has a one-sided Wald statistic
    z = θ̂/se(θ̂) below ``z_present`` (1.96: a 2.5 % false-presence level), the weakest is
    removed and the rest refitted. Removed terms are reported absent (value None).
@@ -216,6 +216,7 @@ class _Problem:
     theta_fixed: NDArray[np.float64]
     M: NDArray[np.float64]  # (K,) number of difference positions
     edf_floor: NDArray[np.float64]
+    m_tau: NDArray[np.float64]  # (K,) τ of the points (s)
 
 
 def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
@@ -354,26 +355,31 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
     return active, z_all, upper
 
 
-def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int],
-                   measured: NDArray, drop_sigma: float, max_drop: int) -> int:
+def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
+                   drop_z: float, max_drop: int) -> int:
     """Number of shortest τ to leave out because the sensor's low-pass bends them.
 
-    A monotone low-pass can only *remove* variance, so a filter-bent point lies below the
-    model; quantization can only add. The shortest remaining point is therefore dropped while
-    it lies more than ``drop_sigma`` standard deviations *below* the model without Q fitted to
-    the longer τ (the standard deviation includes the prediction's own uncertainty), and at
-    most ``max_drop`` points go.
+    A low-pass on white noise lowers the AVAR at a few samples by an amount falling like
+    1/m (the bend of ``model.lowpass_white_avar`` is ≈ −c·N²τ0/τ²): a *negative* τ⁻² term,
+    which quantization (positive τ⁻²) cannot produce. So while the remaining curve, fitted
+    with the terms other than Q plus a free-signed τ⁻² "bend" column (GLS with the modelled
+    covariance), shows a bend below zero by more than ``drop_z`` standard errors, the
+    shortest point is left out; at most ``max_drop`` points go.
     """
     base = [j for j, a in enumerate(fitted) if comps[a].cause != "quantization"]
-    K = len(measured)
+    K = p.X.shape[0]
     start = 0
-    while start < max_drop and K - start - 1 >= len(base) + 2:
-        idx = np.arange(start + 1, K)
-        theta, cov, _, _ = _fit_active(p, idx, base)
-        x0 = p.X[start, base]
-        pred = x0 @ theta[base] + p.fixed[start]
-        sd = math.sqrt(_avar_cov(p, theta, np.array([start]))[0, 0] + x0 @ cov @ x0)
-        if pred - measured[start] > drop_sigma * sd:
+    while start < max_drop and K - start >= len(base) + 3:
+        idx = np.arange(start, K)
+        _, _, C, _ = _fit_active(p, idx, base)
+        T = _whitener(C)
+        tau = p.m_tau[idx]
+        X = np.column_stack([p.X[np.ix_(idx, base)], 1.0 / (tau * rate_hz) ** 2])
+        TX = T @ X
+        coef, *_ = np.linalg.lstsq(TX, T @ p.y[idx], rcond=None)
+        cov = np.linalg.pinv(TX.T @ TX)
+        se = math.sqrt(max(cov[-1, -1], 0.0))
+        if se > 0 and coef[-1] / se < -drop_z:
             start += 1
         else:
             break
@@ -391,7 +397,7 @@ def fit_noise(
     z_present: float = 1.96,
     min_edf: float = 3.0,
     min_averages: float = 8.0,
-    drop_sigma: float = 4.0,
+    drop_z: float = 2.0,
     max_drop: int = 8,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
@@ -441,13 +447,13 @@ def fit_noise(
     psds = [comps[i].psd(rate) for i in fitted] + [comps[i].psd(rate) for i in fixed]
     G = mdl.avar_covariance_kernels(m[keep], psds)
     p = _Problem(y=var[keep] - fixed_avar, X=X, fixed=fixed_avar, G=G,
-                 theta_fixed=theta_fixed, M=M[keep], edf_floor=100.0 * M[keep])
+                 theta_fixed=theta_fixed, M=M[keep], edf_floor=100.0 * M[keep], m_tau=t_k)
 
     K = len(keep)
     A = len(fitted)
     start = 0
     if filter_corner_hz is None:
-        start = _short_tau_cut(p, comps, fitted, var[keep], drop_sigma, max_drop)
+        start = _short_tau_cut(p, comps, fitted, rate, drop_z, max_drop)
     idx = np.arange(start, K)
 
     active, z_all, upper = _select_terms(p, idx, A, z_present)
