@@ -155,9 +155,10 @@ class Publisher:
         rec["run"] = self.run_id
         with self._lock:
             seq = self._seq.get(topic, 0)
-            self._seq[topic] = seq + 1
             rec["seq"] = seq
+            # encode first: a record that cannot be encoded raises and uses up no number
             data = frames.encode(rec, check=self.check)
+            self._seq[topic] = seq + 1
             try:
                 self._sock.send_multipart([topic.encode("ascii"), data], flags=zmq.NOBLOCK,
                                           copy=len(data) < 65536)

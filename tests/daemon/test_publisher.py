@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import zmq
 from avard.core import frames as F
-from avard.core.errors import ConfigError, DataError
+from avard.core.errors import ConfigError, DataError, FormatError
 from avard.daemon.publisher import (
     DEFAULT_PUB_ENDPOINT,
     DEFAULT_REQUEST_ENDPOINT,
@@ -139,8 +139,9 @@ def test_invalid_records_are_refused_before_sending() -> None:
     with Publisher(LOCAL, "a") as pub:
         bad = _raw(0)
         del bad["t_mono"]
-        with pytest.raises(Exception, match="t_mono"):
+        with pytest.raises(FormatError, match="t_mono"):
             pub.publish("raw", bad)
+        assert pub.next_seq("raw") == 0  # no number used up: subscribers see no false loss
 
 
 # ---- request server -------------------------------------------------------------------------
