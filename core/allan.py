@@ -189,11 +189,18 @@ class DifferenceSums:
         if sel.shape[0]:
             self.na += sel.shape[0]
             self.s1 += ones(sel.shape[0]) @ sel
-            self.sa += sel.T @ sel
+            self.sa += gram(sel)
         if prev is not None and prev.shape[0]:
             prev = _contiguous(prev, "prev")
             self.nl += prev.shape[0]
             self.lag += prev.T @ sel[sel.shape[0] - prev.shape[0] :]
+
+
+def gram(a: NDArray) -> NDArray[np.float64]:
+    """aᵀa made exactly symmetric (BLAS may round the two triangles differently), so that a
+    state can store one triangle and still restore bit for bit."""
+    g = a.T @ a
+    return 0.5 * (g + g.T)
 
 
 def _contiguous(a: NDArray, key: str) -> NDArray:
@@ -262,7 +269,7 @@ def grid_sums(
             if o == d:
                 rows = arr[new0 - lo : new1 - lo]
                 s.n += new1 - new0
-                s.s2 += rows.T @ rows
+                s.s2 += gram(rows)
             # noise-identification subgrid: every `period`-th grid point of the segment
             first = new0 + (-(new0 + base)) % period
             if first >= new1:
@@ -297,7 +304,7 @@ def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: Sequence[Differe
                 dd = sum(c * p[j0 + k * m : stop + k * m : stride] for k, c in enumerate(coefs))
                 dd = np.asarray(dd, dtype=np.float64)
                 s.n += dd.shape[0]
-                s.s2 += dd.T @ dd
+                s.s2 += gram(dd)
         step = every * stride
         lag_step = max(1, round(m / stride)) * stride  # one τ later, on the stride grid
         sub = np.asarray(sum(c * p[k * m : last + 1 + k * m : step]

@@ -44,7 +44,7 @@ from .scratch import scratch
 
 __all__ = ["AllanSnapshot", "StreamingAllan"]
 
-STATE_VERSION = 1
+STATE_VERSION = 2
 # Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
 # numpy's per-call overhead would otherwise dominate. Results never depend on it.
 _FLUSH_SAMPLES = 4096
@@ -423,15 +423,22 @@ class StreamingAllan:
         """
         self._flush()
         c = self.n_channels
-        levs = self._levels
-        sums: dict = {}
-        for f in DifferenceSums.FIELDS:
-            vals = [[getattr(x, f) for x in lev.sums] for lev in levs]
-            if f in ("n", "na", "nl"):
-                sums[f] = [[int(v) for v in row] for row in vals]
-            else:
-                shape = (len(levs), self._d) + ((c,) if f == "s1" else (c, c))
-                sums[f] = _pack(np.array(vals, dtype=np.float64).reshape(shape))
+        d = self._d
+        # Levels past the last one with any sums are recreated empty on restore.
+        count = max((k + 1 for k, lev in enumerate(self._levels)
+                     if any(x.n or x.na or x.nl for x in lev.sums)), default=0)
+        levs = self._levels[:count]
+        iu = np.triu_indices(c)  # s2 and sa are symmetric: one triangle is stored
+        sums: dict = {f: [[int(getattr(x, f)) for x in lev.sums] for lev in levs]
+                      for f in ("n", "na", "nl")}
+        sums["s1"] = _pack(np.array([[x.s1 for x in lev.sums] for lev in levs],
+                                    dtype=np.float64).reshape(count, d, c))
+        sums["s2"] = _pack(np.array([lev.sums[d - 1].s2[iu] for lev in levs],
+                                    dtype=np.float64).reshape(count, len(iu[0])))
+        sums["sa"] = _pack(np.array([[x.sa[iu] for x in lev.sums] for lev in levs],
+                                    dtype=np.float64).reshape(count, d, len(iu[0])))
+        sums["lag"] = _pack(np.array([[x.lag for x in lev.sums] for lev in levs],
+                                     dtype=np.float64).reshape(count, d, c, c))
         grids = self._grids
         hist = (np.concatenate([g.hist for g in grids]) if grids
                 else np.zeros((0, c), dtype=self._dtype()))
@@ -487,18 +494,30 @@ class StreamingAllan:
                 grid = self._grid(g)
                 grid.hist = hist[ends[g] : ends[g + 1]].copy()
                 grid.base = int(lv["base"][g])
-            arrays = {f: _unpack(lv["sums"][f]) for f in ("s1", "s2", "sa", "lag")}
+            sums = lv["sums"]
+            c, d = self.n_channels, self._d
+            s1, s2 = _unpack(sums["s1"]), _unpack(sums["s2"])
+            sa, lag = _unpack(sums["sa"]), _unpack(sums["lag"])
             for k in range(count):
                 lev = self._level(k)
                 for o, x in enumerate(lev.sums):
                     for f in ("n", "na", "nl"):
-                        setattr(x, f, int(lv["sums"][f][k][o]))
-                    for f, arr in arrays.items():
-                        setattr(x, f, arr[k, o].copy())
+                        setattr(x, f, int(sums[f][k][o]))
+                    x.s1 = s1[k, o].copy()
+                    x.sa = _symmetric(sa[k, o], c)
+                    x.lag = lag[k, o].copy()
+                    x.s2 = _symmetric(s2[k], c) if o == d - 1 else np.zeros((c, c))
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FormatError(f"StreamingAllan state is incomplete or malformed: {exc}; "
                               "start a new accumulator") from exc
         return self
+
+
+def _symmetric(tri: NDArray, c: int) -> NDArray:
+    """The symmetric (c, c) matrix whose upper triangle (row-major) is ``tri``."""
+    out = np.zeros((c, c))
+    out[np.triu_indices(c)] = tri
+    return out + np.triu(out, 1).T
 
 
 def _pack(a: NDArray) -> dict:

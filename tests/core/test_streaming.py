@@ -135,6 +135,7 @@ def test_state_round_trip_through_msgpack_continues_exactly(integer: bool) -> No
     blob = msgpack.packb(first.state())
     resumed = StreamingAllan.from_state(msgpack.unpackb(blob))
     assert resumed.names == ["x", "y", "z"] and resumed.n_samples == 7010
+    assert msgpack.packb(resumed.state()) == blob  # every sum and history point, bit for bit
     np.testing.assert_array_equal(resumed.result().var, first.result().var)
     resumed.update(y[7010:])
     np.testing.assert_allclose(resumed.result().var, straight.result().var, rtol=1e-12)
@@ -142,8 +143,8 @@ def test_state_round_trip_through_msgpack_continues_exactly(integer: bool) -> No
 
 
 def test_state_is_small_and_bad_state_is_format_error() -> None:
-    acc = StreamingAllan(4, 100.0)
-    acc.update(random_record(50000, 4, seed=6))
+    acc = StreamingAllan(6, 100.0)  # 3 axes + chip + 2 DS18B20
+    acc.update(random_record(50000, 6, seed=6))
     assert len(msgpack.packb(acc.state())) <= 64 * 1024
     bad = acc.state()
     bad["v"] = 99
