@@ -251,6 +251,8 @@ class Subscriber:
                 result = self.request(op)
             except NetworkError as exc:
                 log.warning("no %s on join: %s", op, exc)
+                if self._req is None:
+                    break  # timed out: the next op would only wait as long again
                 continue
             if op == "snapshot":
                 self.snapshot = result

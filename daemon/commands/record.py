@@ -125,6 +125,8 @@ class StreamArchiver:
             for m in waiting:
                 if m.record["run"] == header["run"]:
                     self._write(m)
+                else:  # an earlier run whose header never came
+                    self.dropped_waiting += 1
         if rec["kind"] != "header":
             self._write(msg)
 
