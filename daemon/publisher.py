@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 # the [publish] defaults of daemon/config.py; the request socket is the PUB port + 1
 DEFAULT_PUB_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5556"
-#: PUB queue per subscriber, in messages. At 32-sample raw blocks and 4 kHz that is ~80 s.
+#: PUB queue per subscriber, in messages: ~100 s of the service's ≤ 100 raw blocks/s.
 DEFAULT_HWM = 10000
 #: Shutdown never waits longer than this for queued messages (ms).
 LINGER_MS = 200

@@ -37,7 +37,7 @@ from .curve import CurveClientConfig, apply_client
 
 log = logging.getLogger(__name__)
 
-#: Messages a subscriber buffers before libzmq drops (~40 min of raw blocks at 125 Hz).
+#: Messages a subscriber buffers before libzmq drops (~15 min of the service's ≤ 100 blocks/s).
 DEFAULT_RCVHWM = 100000
 
 

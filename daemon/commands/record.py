@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 NAME = "record"
 HELP = "archive a remote stream (ENDPOINT) into recording segments, with gaps for what was lost"
 
-#: Records kept while waiting for the header (about 80 s of raw blocks at 125 Hz).
+#: Records kept while waiting for the header (~40 s of the service's ≤ 100 raw blocks/s).
 MAX_PENDING = 4096
 #: Longest stretch asked back from the service's ring after a loss: the service's default
 #: ``[publish] recent_max_s`` (a service that allows less refuses, and the loss stays a gap).
