@@ -192,8 +192,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
                "| cause | passed | statistic | threshold | evidence |", "|---|---|---|---|---|"]
         for t in ch.tests:
             stat = f"{t.statistic:.3g}" if math.isfinite(t.statistic) else "–"
+            ev = t.evidence.replace("|", "\\|")  # |z| and |t| would end the table cell
             md.append(f"| {t.cause} | {'yes' if t.passed else 'no'} | {stat} | "
-                      f"{t.threshold:g} | {t.evidence} |")
+                      f"{t.threshold:g} | {ev} |")
         md += ["", "### IEEE coefficients (68.3 % interval)", "",
                "| term | base | extended |", "|---|---|---|"]
         md += [f"| {SYMBOLS[t]} {t} | {b} | {e} |" for t, b, e in term_changes(ch)]
