@@ -338,3 +338,52 @@ def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: 
     ends = [(a["i0"] + a["n"], b["i0"]) for a, b in itertools.pairwise(rraw)
             if b["i0"] != a["i0"] + a["n"]]
     assert ends == [(gap["i0"], gap["i0"] + gap["n"])]
+
+
+def test_curve_section_secures_both_sockets_of_the_service(tmp_path: Path) -> None:
+    from avard.daemon.curve import CurveClientConfig, make_keypair
+
+    server_pub, server_sec = make_keypair(tmp_path / "server", "server")
+    auth = tmp_path / "authorized"
+    auth.mkdir()
+    client_pub, client_sec = make_keypair(tmp_path / "client", "client")
+    (auth / "client.key").write_text(client_pub.read_text())
+    cfg = _cfg(tmp_path / "rec", **{"curve.enabled": True,
+                                    "curve.server_secret_key_file": str(server_sec),
+                                    "curve.authorized_keys_dir": str(auth)})
+    dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=4)
+    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", on_tick=sims.on_tick,
+                  extra_temperature_names=list(sims.names))
+    sims.service = svc
+    got: dict[str, Any] = {}
+
+    def clients() -> None:
+        try:
+            _clients()
+        except Exception as exc:  # reported by the assertions below
+            got["error"] = repr(exc)
+        finally:
+            svc.stop_requested.set()
+
+    def _clients() -> None:
+        client = CurveClientConfig(server_pub, client_sec)
+        good = Subscriber(svc.publisher.endpoint, request_endpoint=svc.request_server.endpoint,
+                          curve=client, request_timeout_s=10.0).connect(join=False)
+        plain = Subscriber(svc.publisher.endpoint).connect(join=False)
+        deadline = time.monotonic() + 20
+        while "raw" not in got and time.monotonic() < deadline:
+            m = good.recv(0.2)
+            if m is not None and m.topic == "raw":
+                got["raw"] = m.record
+        got["status"] = good.request("status")
+        got["plain"] = plain.recv(0.5)
+        good.close()
+        plain.close()
+
+    th = threading.Thread(target=clients)
+    svc.run(None, before_acquisition=th.start)
+    th.join()
+    assert "error" not in got, got.get("error")
+    assert got["raw"]["counts"].shape[1] == 3
+    assert got["status"]["samples"] > 0
+    assert got["plain"] is None
