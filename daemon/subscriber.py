@@ -76,14 +76,15 @@ class Message:
     """One decoded message and what the subscriber learnt from it.
 
     lost: messages missing on this topic right before this one (sequence hole).
-    missing: (i0, n) sample index range lost in transport right before this raw block.
+    missing: (i0, n) sample index ranges lost in transport before this raw block (several
+        when a gap record arrived between them), in index order; empty when none.
     new_run: this message starts a run the subscriber had not seen (first, or a restart).
     """
 
     topic: str
     record: dict[str, Any]
     lost: int = 0
-    missing: tuple[int, int] | None = None
+    missing: list[tuple[int, int]] = field(default_factory=list)
     new_run: bool = False
 
 
@@ -128,6 +129,7 @@ class LossTracker:
 
     def __init__(self) -> None:
         self.stats = StreamStats()
+        self._holes: list[tuple[int, int]] = []
 
     def observe(self, topic: str, record: dict[str, Any]) -> Message:
         st = self.stats
@@ -141,6 +143,7 @@ class LossTracker:
             for ts in st.topics.values():  # counts stay cumulative over runs
                 ts.last_seq = None
             st.next_index = None
+            self._holes = []
             msg.new_run = True
         ts = st.topics.setdefault(topic, TopicStats())
         seq = record["seq"]
@@ -163,27 +166,46 @@ class LossTracker:
         i0, n = record["i0"], record["n"]
         if st.first_index is None:
             st.first_index = i0
+        # holes seen at gap records, and the one right before this block
+        holes, self._holes = self._holes, []
         if st.next_index is not None:
             if i0 > st.next_index:
-                hole = i0 - st.next_index
-                if msg.lost:
-                    st.samples_lost += hole
-                    msg.missing = (st.next_index, hole)
-                else:
-                    st.samples_unexplained += hole
-                    log.warning("samples [%d, %d) missing without a gap record or a lost "
-                                "message", st.next_index, i0)
+                holes.append((st.next_index, i0 - st.next_index))
             elif i0 < st.next_index:
                 st.samples_repeated += min(n, st.next_index - i0)
+        for start, count in holes:
+            # raw blocks travel in index order on one pipe: a hole with a lost raw message is
+            # transport loss; a hole without one, the service never announced
+            if msg.lost:
+                st.samples_lost += count
+                msg.missing.append((start, count))
+            else:
+                st.samples_unexplained += count
+                log.warning("samples [%d, %d) missing without a gap record or a lost "
+                            "message", start, start + count)
         st.samples_received += n
         st.next_index = max(i0 + n, st.next_index or 0)
 
     def _gap(self, record: dict[str, Any]) -> None:
         st = self.stats
         i0, n = record["i0"], record["n"]
-        st.samples_service_gap += n
-        if st.next_index is None or i0 >= st.next_index:
+        if st.next_index is None:
+            st.samples_service_gap += n
             st.next_index = i0 + n
+            return
+        if i0 > st.next_index:
+            # samples between the last block and this gap: their raw messages were lost (or
+            # never sent); the next raw block's sequence number tells which
+            self._holes.append((st.next_index, i0 - st.next_index))
+        end = i0 + n
+        if end > st.next_index:
+            st.samples_service_gap += end - max(i0, st.next_index)  # never count twice
+            st.next_index = end
+
+    @property
+    def pending_samples(self) -> int:
+        """Samples missing before a gap record, not yet attributed (awaiting the next raw)."""
+        return sum(c for _, c in self._holes)
 
 
 class Subscriber:

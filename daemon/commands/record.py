@@ -133,10 +133,10 @@ class StreamArchiver:
     def _write(self, msg: Message) -> None:
         assert self.recorder is not None
         rec = msg.record
-        if msg.missing is not None:
-            i0, n = msg.missing
-            for r in self._recover(msg, i0, n):
-                self.recorder.write(r)
+        if msg.missing:
+            for i0, n in msg.missing:
+                for r in self._recover(msg, i0, n):
+                    self.recorder.write(r)
         elif msg.lost:
             self.recorder.write(frames.event_record(
                 rec["run"], 0, "subscriber_loss", rec.get("t_mono", 0.0),
