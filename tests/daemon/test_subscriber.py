@@ -8,6 +8,8 @@ from avard.core import frames as F
 from avard.core.errors import ConfigError, NetworkError
 from avard.daemon.publisher import Publisher, RequestServer
 from avard.daemon.subscriber import LossTracker, Subscriber, request_endpoint_for
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 LOCAL = "tcp://127.0.0.1:*"
 
@@ -161,10 +163,6 @@ def _stream(sizes: list[int], gaps: dict[int, int]) -> list[tuple[str, dict]]:
         seq_raw += 1
         i0 += n
     return out
-
-
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=150, deadline=None)
