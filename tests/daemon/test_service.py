@@ -148,7 +148,8 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
     assert "sensor_lost" in events and "sensor_back" in events
     assert any("overrun" in g["reason"] for g in gaps)
     # The overrun gap's size is estimated from elapsed time × rate: about 3 s of samples.
-    g = next(g for g in gaps if "overrun" in g["reason"])
+    # (A failed drain at the simulation's tight poll margin may overrun a little too.)
+    g = max((g for g in gaps if "overrun" in g["reason"]), key=lambda g: g["n"])
     assert 2.5 * 125 < g["n"] < 3.5 * 125
     # The raw index jumps exactly over the announced gap.
     rraw = [r for r in recs if r["kind"] == "raw"]
