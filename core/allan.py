@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .edf import chi2_interval, edf_greenhall
-from .errors import DataError
+from .errors import DataError, FormatError
 from .noise_id import MIN_POINTS, alpha_from_lag1, alpha_from_slope, identify_alpha
 from .scratch import ones, scratch
 
@@ -146,6 +146,32 @@ class AllanResult:
             out[key] = np.asarray(getattr(self, key)).tolist()
         out["cov"] = None if self.cov is None else self.cov.tolist()
         return out
+
+    @classmethod
+    def from_dict(cls, d: dict) -> AllanResult:
+        """Inverse of ``to_dict``; also reads ``AllanSnapshot.to_dict()`` (its "avar" is
+        ``var``; kind "pavar" when absent). Raises ``FormatError`` naming a missing key."""
+        try:
+            var = np.asarray(d["var"] if "var" in d else d["avar"], dtype=np.float64)
+            cov = d.get("cov")
+            return cls(
+                kind=str(d.get("kind", "pavar")),
+                rate_hz=float(d["rate_hz"]),
+                tau=np.asarray(d["tau"], dtype=np.float64),
+                m=np.asarray(d["m"], dtype=np.int64),
+                stride=np.asarray(d["stride"], dtype=np.int64),
+                var=var,
+                n=np.asarray(d["n"], dtype=np.int64),
+                edf=np.asarray(d["edf"], dtype=np.float64),
+                lo=np.asarray(d["lo"], dtype=np.float64),
+                hi=np.asarray(d["hi"], dtype=np.float64),
+                alpha=np.asarray(d["alpha"], dtype=np.float64),
+                ci=float(d.get("ci", 0.683)),
+                cov=None if cov is None else np.asarray(cov, dtype=np.float64),
+                names=tuple(d.get("names", ())),
+            )
+        except KeyError as exc:
+            raise FormatError(f"Allan result/snapshot dict lacks {exc}; it is not one") from exc
 
 
 @dataclass

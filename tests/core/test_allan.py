@@ -219,3 +219,23 @@ def test_alpha_can_be_imposed_per_tau() -> None:
         oavar(y, 1.0, [1, 2, 4], alpha=[0, 1, 0, 1])
     with pytest.raises(DataError, match="alpha"):
         oavar(y, 1.0, [1, 2], alpha=-3)  # AVAR does not converge there
+
+
+def test_result_and_snapshot_dicts_round_trip() -> None:
+    import msgpack
+    from avard.core.errors import FormatError
+    from avard.core.streaming import StreamingAllan
+
+    y = np.random.default_rng(15).normal(size=(3000, 2))
+    res = oavar(y, 10.0, names=["a", "b"])
+    back = AllanResult.from_dict(msgpack.unpackb(msgpack.packb(res.to_dict())))
+    np.testing.assert_array_equal(back.var, res.var)
+    np.testing.assert_array_equal(back.cov, res.cov)
+    assert back.names == ("a", "b") and back.kind == "oavar"
+    acc = StreamingAllan(2, 10.0)
+    acc.update(y)
+    from_snap = AllanResult.from_dict(acc.snapshot().to_dict())
+    np.testing.assert_array_equal(from_snap.var, acc.result().var)
+    assert from_snap.kind == "pavar" and from_snap.channel(1).var.ndim == 1
+    with pytest.raises(FormatError, match="tau"):
+        AllanResult.from_dict({"var": [1.0], "rate_hz": 1.0})
