@@ -12,6 +12,7 @@ the duration). The issue's target: 60 h × 3 axes at 125 Hz in ≤ 20 s.
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import time
 
@@ -24,14 +25,16 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # Linux: KiB
 
 
-def _time_chunks(step, n_total: int, chunk: int) -> float:
-    t0 = time.perf_counter()
+def _time_chunks(step, n_total: int, chunk: int) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of this process): on a shared machine the CPU time is what
+    the code costs, the wall time what it took under the current load."""
+    t0, c0 = time.perf_counter(), time.process_time()
     done = 0
     while done < n_total:
         k = min(chunk, n_total - done)
         step(k)
         done += k
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main(argv: list[str]) -> int:
@@ -53,12 +56,17 @@ def main(argv: list[str]) -> int:
     t_sim = _time_chunks(sim.next, n, args.chunk)
     rss_sim = _peak_rss_mb() - rss1
 
+    load = os.getloadavg()[0]
     print(f"{args.hours:g} h × 3 axes at {cfg.rate_hz:g} Hz = {n} samples, preset "
-          f"{args.preset}, chunk {args.chunk}")
-    print(f"{'generator':<34} {'seconds':>8} {'Msamples/s':>11} {'ratio':>7} {'+peak RSS MB':>13}")
-    for name, t, rss in (("numpy standard_normal (reference)", t_ref, rss_ref),
-                         ("SensorSimulator.next", t_sim, rss_sim)):
-        print(f"{name:<34} {t:8.2f} {n / t / 1e6:11.2f} {t / t_ref:7.2f} {rss:13.1f}")
-    verdict = "meets" if t_sim <= 20.0 * args.hours / 60.0 else "misses"
-    print(f"target ≤ 20 s per 60 h: {verdict} ({t_sim * 60.0 / args.hours:.1f} s per 60 h)")
+          f"{args.preset}, chunk {args.chunk}; load average {load:.1f} on {os.cpu_count()} CPUs")
+    print(f"{'generator':<34} {'wall s':>7} {'CPU s':>7} {'Msamples/s':>11} {'CPU ratio':>9} "
+          f"{'+peak RSS MB':>13}")
+    for name, (wall, cpu), rss in (("numpy standard_normal (reference)", t_ref, rss_ref),
+                                   ("SensorSimulator.next", t_sim, rss_sim)):
+        print(f"{name:<34} {wall:7.2f} {cpu:7.2f} {n / wall / 1e6:11.2f} "
+              f"{cpu / t_ref[1]:9.2f} {rss:13.1f}")
+    per60 = 60.0 / args.hours
+    verdict = "meets" if t_sim[1] * per60 <= 20.0 else "misses"
+    print(f"target ≤ 20 s per 60 h: {verdict} on CPU time ({t_sim[1] * per60:.1f} CPU s, "
+          f"{t_sim[0] * per60:.1f} wall s per 60 h)")
     return 0

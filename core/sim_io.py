@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from .errors import DataError
 from .presets import SimConfig
 from .simulate import SensorSimulator, n_samples
-from .thermal import ds18b20_aligned
+from .thermal import DS18B20_STEP_C, ds18b20_schedule
 
 
 def record_meta(config: SimConfig, seed: int | None) -> dict[str, object]:
@@ -57,8 +57,11 @@ def iter_record_blocks(
     done = 0
     while done < n_total:
         c = sim.next(min(chunk, n_total - done))
-        temp = ds18b20_aligned(c.temp_c, config.rate_hz, config.ds18b20_conversion_s,
-                               index0=c.index0, offset_c=offsets)
+        # the DS18B20s need the temperatures at their conversion times only
+        idx = ds18b20_schedule(c.index0, len(c), config.rate_hz, config.ds18b20_conversion_s)
+        temp = np.full((len(c), 2), np.nan)
+        vals = c.temperatures_at(idx - c.index0)[:, :2] + offsets
+        temp[idx - c.index0] = np.round(vals / DS18B20_STEP_C) * DS18B20_STEP_C
         yield c.index0, c.counts * config.lsb_mps2, temp
         done += len(c)
 

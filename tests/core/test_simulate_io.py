@@ -70,3 +70,15 @@ def test_ds18b20_one_reading_per_conversion_in_sixteenths() -> None:
     assert np.array_equal(whole, parts, equal_nan=True)
     assert np.count_nonzero(np.isfinite(whole[:, 0])) == len(t)
     assert np.allclose(whole[np.isfinite(whole[:, 0]), 0], vals[:, 0] + 0.5)
+
+
+def test_temperatures_at_a_few_samples_equal_the_full_arrays() -> None:
+    sim = SensorSimulator(make_config("quiet-lab", hvac_period_s=60.0), seed=3)
+    sim.next(777)
+    c = sim.next(5000)
+    rel = np.array([0, 1, 93, 2048, 4999])
+    full = np.column_stack([c.temp_c, c.chip_temp_c])
+    assert np.allclose(c.temperatures_at(rel), full[rel], rtol=0, atol=1e-12)
+    # and the npz layout built from them matches the array path
+    aligned = ds18b20_aligned(c.temp_c, 124.9, 0.75, index0=c.index0)
+    assert np.count_nonzero(np.isfinite(aligned[:, 0])) > 0
