@@ -139,6 +139,9 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
         if t > 80 and "back" not in done:
             done.add("back")
             ctx["sims"].fail.clear()
+        if t > 90 and "ntp" not in done:
+            done.add("ntp")
+            ctx["clock"].step_realtime(100.0)       # NTP steps the wall clock
 
     svc, lst, _ = _run(tmp_path, 110.0, inject=inject)
     recs = list(RecordingReader(tmp_path / "rec"))
@@ -146,6 +149,11 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
     gaps = [r for r in recs if r["kind"] == "gap"]
     assert "bus_error" in events
     assert "sensor_lost" in events and "sensor_back" in events
+    step = next(r for r in recs if r["kind"] == "event" and r["name"] == "clock_step")
+    assert abs(step["detail"]["step_s"] - 100.0) < 0.01
+    # Records after the step carry the new wall time; order stays on the monotonic clock.
+    offsets = [r["t_real"] - r["t_mono"] for r in recs if r["kind"] == "raw"]
+    assert abs((offsets[-1] - offsets[0]) - 100.0) < 0.01
     assert any("overrun" in g["reason"] for g in gaps)
     # The overrun gap's size is estimated from elapsed time × rate: about 3 s of samples.
     # (A failed drain at the simulation's tight poll margin may overrun a little too.)
