@@ -312,14 +312,25 @@ def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: 
     disk = Disk()
     seen_full: list[str] = []
 
+    class DataTimedRecorder(Recorder):
+        """The disk is full while the records of samples 20 s..40 s arrive (by sample index,
+        not by the reader's clock: the recorder thread may lag it by many seconds)."""
+
+        def write(self, record: dict) -> bool:
+            if record["kind"] == "raw":   # the only records in strict index order
+                disk.full = 20 * 125 < record["i0"] < 40 * 125
+            ok = super().write(record)
+            if self.disk_full:
+                seen_full.append(svc.status()["disk"]["state"])
+            return ok
+
     def recorder(svc: Service) -> Recorder:
-        return Recorder(svc.data_dir, svc.run_id, svc.header, clock=svc.clock.monotonic,
-                        realtime=svc.clock.realtime, fileops=disk, retry_s=0.01)
+        return DataTimedRecorder(svc.data_dir, svc.run_id, svc.header,
+                                 clock=svc.clock.monotonic, realtime=svc.clock.realtime,
+                                 fileops=disk, retry_s=0.0)
 
     def inject(ctx: dict, t: float) -> None:
-        disk.full = 20 < t < 40
-        if disk.full and ctx["svc"].recorder.disk_full:
-            seen_full.append(ctx["svc"].status()["disk"]["state"])
+        return None
 
     cfg = _cfg(tmp_path / "rec")
     dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=11)
