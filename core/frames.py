@@ -129,7 +129,11 @@ def unpack_array(obj: Any, *, max_bytes: int = MAX_ARRAY_BYTES, where: str = "ar
             f"{where}: shape {shape} × {itemsize} bytes = {count * itemsize} bytes, "
             f"but data holds {len(data)}"
         )
-    return np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+    try:
+        return np.frombuffer(data, dtype=np.dtype(dtype)).reshape(shape)
+    except ValueError:  # e.g. [2**62, 0, 2**62]: no data, but numpy refuses the shape
+        raise FormatError(f"{where}: shape {_short(shape)} is beyond what an array can "
+                          "have") from None
 
 
 # --------------------------------------------------------------------------------------------
