@@ -328,7 +328,7 @@ def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
         raise FitError("no channel has a velocity random walk N; kalibr needs one")
     k_note = ("largest K over the axes" if any(c.fit.terms["rate_random_walk"].present
                                                 for c in an.channels.values())
-              else "K not detected: the largest 97.5 % upper limit over the axes")
+              else "K not detected: the largest 99 % upper limit over the axes")
     out = [
         f"# accelerometer noise from avard analyze of {an.source}",
         f"# channels: {', '.join(an.channels)}; largest value over them; SI units",
