@@ -1,0 +1,167 @@
+"""One reader for .npz, .csv and recordings: values, streaming, and clear errors."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from avard.core.errors import DataError, FormatError
+from avard.core.readers import Record, iter_blocks, load_record, record_info
+
+
+def _npz(path: Path, compressed: bool = False, **arrays) -> Path:
+    (np.savez_compressed if compressed else np.savez)(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+@pytest.mark.parametrize("fortran", [False, True])
+def test_npz_round_trip_and_streaming(tmp_path: Path, compressed: bool, fortran: bool) -> None:
+    rng = np.random.default_rng(0)
+    accel = rng.normal(size=(10_001, 3))
+    temp = np.full((10_001, 2), np.nan)
+    temp[::100] = 21.5
+    if fortran:
+        accel = np.asfortranarray(accel)
+    p = _npz(tmp_path / "r.npz", compressed, accel=accel, rate_hz=125.0,
+             axes=np.array(["X", "Y", "Z"]), temperature_c=temp,
+             temperature_names=np.array(["plate", "air"]), gyro=accel * 0.1)
+    rec = load_record(p)
+    assert isinstance(rec, Record)
+    assert np.array_equal(rec.accel, accel) and rec.rate_hz == 125.0
+    assert rec.names == ["X", "Y", "Z"] and rec.temperature_names == ["plate", "air"]
+    assert np.array_equal(rec.temperature_c, temp, equal_nan=True)
+    assert np.array_equal(rec.gyro, accel * 0.1)
+    assert rec.duration_s == pytest.approx(10_001 / 125.0)
+    meta, blocks = iter_blocks(p, block=4096)
+    parts = list(blocks)
+    assert [len(a) for a, _ in parts] == [4096, 4096, 1809]
+    assert np.array_equal(np.concatenate([a for a, _ in parts]), accel)
+    assert meta["n_samples"] == 10_001 and meta["names"] == ["X", "Y", "Z"]
+
+
+def test_npz_one_channel_integer_and_rate_override(tmp_path: Path) -> None:
+    p = _npz(tmp_path / "one.npz", accel=np.arange(100, dtype=np.int32))
+    with pytest.raises(DataError, match="--rate"):
+        load_record(p)
+    rec = load_record(p, rate_hz=10.0)
+    assert rec.accel.shape == (100, 1) and rec.accel.dtype == np.float64
+    assert rec.names == ["ch0"] and rec.rate_hz == 10.0
+
+
+@pytest.mark.parametrize("rate", [0.0, -5.0, float("nan"), float("inf"), 1e9])
+def test_impossible_rate_is_refused(tmp_path: Path, rate: float) -> None:
+    p = _npz(tmp_path / "r.npz", accel=np.zeros((10, 3)), rate_hz=rate)
+    with pytest.raises(DataError, match="Hz"):
+        load_record(p)
+
+
+def test_npz_errors_name_the_problem(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="no 'accel'"):
+        load_record(_npz(tmp_path / "a.npz", acc=np.zeros(3), rate_hz=1.0))
+    bad = np.zeros((50, 3))
+    bad[17, 1] = np.nan
+    with pytest.raises(DataError, match="sample 17"):
+        load_record(_npz(tmp_path / "b.npz", accel=bad, rate_hz=1.0))
+    with pytest.raises(DataError, match="temperature_c"):
+        load_record(_npz(tmp_path / "c.npz", accel=np.zeros((5, 3)), rate_hz=1.0,
+                         temperature_c=np.zeros(4)))
+    with pytest.raises(DataError, match="axis names"):
+        load_record(_npz(tmp_path / "d.npz", accel=np.zeros((5, 3)), rate_hz=1.0,
+                         axes=np.array(["x", "y"])))
+    np.savez(tmp_path / "e.npz", accel=np.array([object(), 1], dtype=object), rate_hz=1.0)
+    with pytest.raises(FormatError, match="objects"):
+        load_record(tmp_path / "e.npz")
+    (tmp_path / "f.npz").write_bytes(b"this is not a zip")
+    with pytest.raises(FormatError, match=r"not a readable \.npz"):
+        load_record(tmp_path / "f.npz")
+    with pytest.raises(DataError, match="no such file"):
+        load_record(tmp_path / "missing.npz")
+    (tmp_path / "g.dat").write_text("x")
+    with pytest.raises(FormatError, match="unknown data format"):
+        load_record(tmp_path / "g.dat")
+
+
+def test_truncated_npz_member_is_reported(tmp_path: Path) -> None:
+    p = _npz(tmp_path / "t.npz", accel=np.zeros((1000, 3)), rate_hz=1.0)
+    with zipfile.ZipFile(p) as zf:
+        data = zf.read("accel.npy")
+    with zipfile.ZipFile(tmp_path / "short.npz", "w") as zf:
+        zf.writestr("accel.npy", data[:-240])
+        zf.writestr("rate_hz.npy", _npy(1.0))
+    with pytest.raises(FormatError, match="truncated"):
+        load_record(tmp_path / "short.npz")
+
+
+def _npy(v: float) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, np.float64(v))
+    return buf.getvalue()
+
+
+def test_csv_with_time_column_and_temperatures(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(3000, 2))
+    t = np.arange(3000) / 62.5
+    lines = ["t,ax,az,temp_plate,gyro_x"] + [
+        f"{t[i]:.6f},{float(a[i, 0])!r},{float(a[i, 1])!r},{20 + i * 1e-3:.4f},0.0"
+        for i in range(3000)]
+    p = tmp_path / "r.csv"
+    p.write_text("\n".join(lines) + "\n")
+    rec = load_record(p)
+    assert rec.rate_hz == pytest.approx(62.5, rel=1e-6)
+    assert rec.names == ["ax", "az"] and rec.temperature_names == ["temp_plate"]
+    assert np.allclose(rec.accel, a, rtol=0, atol=0)
+    assert rec.temperature_c.shape == (3000, 1)
+    meta, blocks = iter_blocks(p, block=1000)
+    assert meta["n_samples"] is None and len(list(blocks)) == 3
+
+
+def test_csv_without_time_needs_rate_and_semicolons_work(tmp_path: Path) -> None:
+    p = tmp_path / "r.csv"
+    p.write_text("x;y;z\n" + "".join(f"{i};{-i};0.5\n" for i in range(20)))
+    with pytest.raises(DataError, match="--rate"):
+        load_record(p)
+    rec = load_record(p, rate_hz=4.0)
+    assert rec.accel.shape == (20, 3) and rec.accel[3, 1] == -3.0
+    assert record_info(p, rate_hz=4.0)["names"] == ["x", "y", "z"]
+
+
+def test_csv_errors_name_the_problem(tmp_path: Path) -> None:
+    p = tmp_path / "a.csv"
+    p.write_text("1,2,3\n4,5,6\n")
+    with pytest.raises(DataError, match="header"):
+        load_record(p, rate_hz=1.0)
+    p.write_text("t,temp_a\n0,1\n1,2\n")
+    with pytest.raises(DataError, match="no acceleration column"):
+        load_record(p)
+    p.write_text("t,x\n0,1\n1,2\n0.5,3\n")
+    with pytest.raises(DataError, match="increas"):
+        load_record(p)
+    p.write_text("t,x,y\n0,1,2\n1,2\n")
+    with pytest.raises(DataError, match=r"fields|number"):
+        load_record(p)
+    p.write_text("x,y\n1,abc\n")
+    with pytest.raises(DataError, match="number"):
+        load_record(p, rate_hz=1.0)
+
+
+def test_recording_dispatch_is_lazy_and_reads_avard_recordings(tmp_path: Path) -> None:
+    """A directory or .avr goes to avard.core.recording; a directory without a recording
+    says so."""
+    empty = tmp_path / "rec"
+    empty.mkdir()
+    with pytest.raises((FormatError, DataError)):
+        load_record(empty)
+
+
+def test_real_imudata_reads(imudata_dir: Path) -> None:
+    rec = load_record(imudata_dir / "adis16405_run1.npz")
+    assert rec.accel.shape == (1_000_000, 3) and rec.rate_hz == 100.0
+    assert rec.names == ["x", "y", "z"]
+    assert rec.accel[:, 2].mean() == pytest.approx(-1.017 * 9.80665, rel=0.01)
+    assert rec.gyro is not None and rec.gyro.shape == (1_000_000, 3)
