@@ -305,14 +305,9 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
     return validate_config(raw, source)
 
 
-def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]], *,
-                      jitter_free: bool = False) -> float:
+def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
     """The FIFO drain rate: the configured one, raised so that the 32-set FIFO is drained at
-    least three times per fill (it lasts 32/ODR seconds; an overrun loses samples).
-
-    ``jitter_free``: the simulated rig's stepped virtual clock wakes the reader exactly on
-    time, so 1.2 drains per fill (30 of the 32 sets) are safe there; hardware keeps the
-    factor 3 against scheduling delays."""
+    least three times per fill (it lasts 32/ODR seconds; an overrun loses samples). The same
+    margin under simulation: fewer drains would thin out the time-base fit after a gap."""
     odr = float(cfg["sensor"]["odr_hz"])
-    margin = 1.2 if jitter_free else 3.0
-    return max(float(cfg["sensor"]["poll_hz"]), margin * odr / 32.0)
+    return max(float(cfg["sensor"]["poll_hz"]), 3.0 * odr / 32.0)

@@ -595,7 +595,7 @@ class Service:
                     f"({exc.strerror}); under systemd StateDirectory= provides it, by hand "
                     "use --data-dir DIR or `sudo install -d -o $USER /var/lib/avard`") from None
             self.restore()
-        poll = effective_poll_hz(cfg, jitter_free=self.simulate is not None)
+        poll = effective_poll_hz(cfg)
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
                                poll_hz=poll, chip_interval_s=cfg["temperature"]["chip_interval_s"],
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
