@@ -1,0 +1,86 @@
+"""`avard analyze` end to end through the CLI dispatcher: outputs, exports, and failures that
+exit non-zero with a message naming the problem."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from avard.daemon.cli import main
+
+
+@pytest.fixture(scope="module")
+def npz(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    rng = np.random.default_rng(8)
+    n = 1 << 16
+    accel = 1e-3 * rng.standard_normal((n, 3)) + np.cumsum(
+        3e-6 * rng.standard_normal((n, 3)), axis=0)
+    p = tmp_path_factory.mktemp("cli") / "rec.npz"
+    np.savez(p, accel=accel, rate_hz=100.0)
+    return p
+
+
+def test_table_goes_to_stdout(npz: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", str(npz)]) == 0
+    out, err = capsys.readouterr()
+    for ch in ("channel x", "channel y", "channel z"):
+        assert ch in out
+    assert "velocity_random_walk (N)" in out and "absent" in out and "fitted τ" in out
+    assert "\r" not in err  # no progress when stderr is not a terminal
+
+
+def test_json_exports_and_plot(npz: Path, tmp_path: Path,
+                               capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("matplotlib")
+    y, c, png = tmp_path / "imu.yaml", tmp_path / "adev.csv", tmp_path / "adev.png"
+    rc = main(["analyze", str(npz), "--json", "--channels", "x", "z", "--export", "kalibr",
+               str(y), "--export", "csv", str(c), "--plot", str(png)])
+    assert rc == 0
+    d = json.loads(capsys.readouterr().out)
+    assert list(d["channels"]) == ["x", "z"] and d["rate_hz"] == 100.0
+    n = d["channels"]["x"]["terms"]["velocity_random_walk"]
+    assert n["present"] and n["lo"] <= 1e-3 / np.sqrt(100.0) <= n["hi"] * 1.01
+    assert "accelerometer_noise_density:" in y.read_text()
+    assert c.read_text().startswith("channel,tau_s,adev_mps2")
+    assert png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["/nonexistent/x.npz"], "no such file"),
+    (["{bad}"], "not a readable .npz"),
+    (["{nokey}"], "no 'accel'"),
+    (["{npz}", "--rate", "-3"], "positive"),
+    (["{npz}", "--channels", "w"], "channel 'w'"),
+    (["{npz}", "--export", "yaml", "out.yaml"], "unknown format"),
+    (["{csv}"], "--rate"),
+])
+def test_failures_exit_nonzero_with_a_message(npz: Path, tmp_path: Path, args: list[str],
+                                              message: str,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"garbage")
+    nokey = tmp_path / "nokey.npz"
+    np.savez(nokey, acceleration=np.zeros((10, 3)), rate_hz=1.0)
+    csv = tmp_path / "r.csv"
+    csv.write_text("x,y\n1,2\n3,4\n")
+    argv = [a.format(npz=npz, bad=bad, nokey=nokey, csv=csv) for a in args]
+    rc = main(["analyze", *argv])
+    err = capsys.readouterr().err
+    assert rc != 0
+    assert message in err and "error" in err
+
+
+def test_real_imudata_through_the_console_script(imudata_dir: Path) -> None:
+    exe = Path(sys.executable).with_name("avard")
+    r = subprocess.run([str(exe), "analyze", str(imudata_dir / "adis16405_run3.npz"),
+                        "--json"], capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(r.stdout)
+    assert d["n_samples"] == 1_000_000 and set(d["channels"]) == {"x", "y", "z"}
+    for ch in d["channels"].values():
+        assert ch["terms"]["velocity_random_walk"]["present"]
+        assert ch["fit"]["tau_min_s"] < ch["fit"]["tau_max_s"]
