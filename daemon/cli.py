@@ -42,7 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for mod in _command_modules():
-        p = sub.add_parser(mod.NAME, help=getattr(mod, "HELP", None), description=mod.__doc__)
+        # HELP is plain text ("68 % intervals"); argparse would read its % as a format.
+        help_text = getattr(mod, "HELP", None)
+        if help_text is not None:
+            help_text = help_text.replace("%", "%%")
+        p = sub.add_parser(mod.NAME, help=help_text, description=mod.__doc__)
         if hasattr(mod, "add_arguments"):
             mod.add_arguments(p)
         p.set_defaults(_run=mod.run)
