@@ -533,13 +533,15 @@ def detect_warmup(y: NDArray, rate_hz: float, fits: dict | None = None) -> Candi
     yb, dt = fits["yb"], fits["dt"]
     M = len(yb)
     warm_sse, T, size = fits["warmup"]
-    w = max(2, round(T / dt))
+    # at most M/16 blocks per window, so that ≥ 14 independent contrasts set the robust σ
+    # (with a handful, overlapping windows under random walk make the MAD meaningless)
+    w = max(2, min(round(T / dt), M // 16))
     if 2 * w >= M:
         return Candidate("warmup", False, evidence="settling time too long for the record")
     d = _window_contrast(yb, w)
     s = _robust_std(d)
-    z0 = abs(float(np.mean(yb[:w]) - np.mean(yb[w: 2 * w])) - float(np.median(d))) / s \
-        if s > 0 else 0.0
+    # d[0] is the contrast at k = w: mean(yb[w:2w]) − mean(yb[:w]), same sign as all d_k
+    z0 = abs(float(d[0]) - float(np.median(d))) / s if s > 0 else 0.0
     better = warm_sse < fits["step"][0]
     passed = z0 >= Z_STEP and better
     ev = (f"the first {w * dt:.4g} s differ from the next by {z0:.3g} robust sigma "
