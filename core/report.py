@@ -13,9 +13,10 @@ Outputs: a text table, the ``--json`` dictionary (shape fixed by issue 4), a kal
 
 from __future__ import annotations
 
+import itertools
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,7 +27,7 @@ from scipy.stats import chi2
 from .errors import DataError, FitError
 from .fit import NoiseFit, fit_noise
 from .model import SYMBOLS, TERMS, UNITS
-from .readers import iter_blocks
+from .readers import iter_blocks, load_record
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "find_lines"]
 
@@ -62,6 +63,10 @@ class WelchAccumulator:
             self.n_seg += 1
             start += step
         self._buf = a[start:]
+
+    def gap(self) -> None:
+        """A break in the data: the partial segment is dropped, none spans the gap."""
+        self._buf = np.zeros((0, self.c))
 
     def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(f in Hz, PSD (F, C)); empty when no full segment was seen."""
@@ -180,6 +185,38 @@ def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
     return sorted(set(out))
 
 
+def _segments(path: str, block: int, rate_hz: float | None
+              ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
+    """Metadata and (accel block, ends-a-segment) pairs. Files are one segment, streamed; a
+    recording of the service is loaded (``recording.load_recording``) and split where its
+    sample index jumps (recorded gaps, restarts), so nothing is averaged across a gap."""
+    from pathlib import Path
+
+    p = Path(path)
+    if p.is_dir() or p.suffix == ".avr":
+        rec = load_record(p, rate_hz=rate_hz)
+        idx = np.asarray(rec.meta.get("index", np.arange(rec.n_samples)))
+        cuts = [0, *(np.flatnonzero(np.diff(idx) != 1) + 1).tolist(), rec.n_samples]
+        meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
+                "names": list(rec.names), "temperature_names": list(rec.temperature_names),
+                "source": rec.source, "gaps": rec.meta.get("gaps", []),
+                "n_segments": len(cuts) - 1}
+
+        def gen_rec() -> Iterator[tuple[NDArray[np.float64], bool]]:
+            for s0, s1 in itertools.pairwise(cuts):
+                for i in range(s0, s1, block):
+                    yield rec.accel[i:min(i + block, s1)], i + block >= s1
+
+        return meta, gen_rec()
+    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz)
+
+    def gen() -> Iterator[tuple[NDArray[np.float64], bool]]:
+        for a, _t in blocks:
+            yield a, False
+
+    return meta, gen()
+
+
 def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
     """The ADXL355 low-pass corner (ODR/4) when the record says it comes from one: a service
     recording or a simulated record (which carries odr_nominal_hz). Other sensors' filters are
@@ -207,7 +244,7 @@ def analyze(
     """
     from .streaming import StreamingAllan
 
-    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz)
+    meta, segments = _segments(path, block, rate_hz)
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     sel = _select(names, channels)
@@ -219,12 +256,17 @@ def analyze(
         nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
         welch = WelchAccumulator(len(sel), rate, nper)
     n = 0
-    for accel, _temp in blocks:
+    for accel, segment_end in segments:
         a = accel[:, sel]
         sa.update(a)
         if welch is not None:
             welch.update(a)
         n += len(a)
+        if segment_end:
+            # a gap in the recording: no Allan difference and no spectrum segment spans it
+            sa.gap()
+            if welch is not None:
+                welch.gap()
         if progress is not None:
             progress(n, total)
     if n < 16:

@@ -154,3 +154,41 @@ def test_real_imudata_analysis(imudata_dir: Path) -> None:
     assert n.present and 1e-3 < n.value < 1e-2  # ADIS16405: a few mm/s/√s
     assert fit.tau_min_s > 0.01  # its own filter bends the shortest τ: left out
     assert fit.chi2_dof > 1  # real data: the five terms are not the whole story
+
+
+def test_recording_of_the_service_is_analysed_with_its_gap(tmp_path: Path) -> None:
+    """An avard recording (header + raw count blocks + a gap record, as the service writes it)
+    is read through the recording reader, split at the gap, and modelled with the ADXL355
+    filter (ODR/4) because it is the chip's own data."""
+    from avard.core import frames, recording
+    from scipy import signal
+
+    rng = np.random.default_rng(21)
+    rate, scale, n_blk = 125.0, 3.83e-5, 2048
+    b, a = signal.butter(2, 0.5)
+    white = signal.lfilter(b, a, 2e-4 * np.sqrt(rate) * rng.standard_normal((40 * n_blk, 3)),
+                           axis=0)
+    counts = np.rint(white / scale).astype(np.int32)
+    recs = [frames.header_record("run-1", rate_hz=rate, t_mono=0.0, t_real=1.7e9,
+                                 scale_m_s2_per_count=scale)]
+    i0, seq = 0, 1
+    for k in range(40):
+        if k == 20:  # 1000 samples lost to an overrun
+            recs.append(frames.gap_record("run-1", seq, i0, 1000, 1.0, 1.0, "overrun"))
+            i0 += 1000
+            seq += 1
+        recs.append(frames.raw_record("run-1", seq, i0, counts[k * n_blk:(k + 1) * n_blk],
+                                      float(k), 1.7e9 + k))
+        i0 += n_blk
+        seq += 1
+    seg = tmp_path / "rec" / "run-1_0000.avr"
+    seg.parent.mkdir()
+    seg.write_bytes(b"".join(recording.frame(frames.encode(r)) for r in recs))
+    an = analyze(str(seg.parent))
+    assert an.meta["format"] == "recording" and an.meta["n_segments"] == 2
+    assert an.meta["filter_corner_hz"] == pytest.approx(rate / 4)
+    assert an.n_samples == 40 * n_blk
+    fit = an.channels["x"].fit
+    assert fit.tau_min_s == pytest.approx(1 / rate)  # filter modelled: nothing cut
+    n = fit.terms["velocity_random_walk"]
+    assert abs(n.value - 2e-4) < 4 * (n.hi - n.lo) / 2
