@@ -20,18 +20,30 @@ from . import __version__, commands
 log = logging.getLogger("avard")
 
 
-def _command_modules() -> list:
+def _module_names() -> list[str]:
+    return sorted(
+        i.name for i in pkgutil.iter_modules(commands.__path__) if not i.name.startswith("_")
+    )
+
+
+def _command_modules(only: str | None = None) -> list:
+    """Import the command modules, or only the one ``only`` names (as typed, "check-config").
+
+    Importing one command instead of all keeps ``avard run`` from paying for scipy and
+    matplotlib imports that only the analysis commands need (seconds on a Raspberry Pi).
+    """
+    names = _module_names()
+    if only is not None and only.replace("-", "_") in names:
+        names = [only.replace("-", "_")]
     mods = []
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name):
-        if info.name.startswith("_"):
-            continue
-        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+    for name in names:
+        mod = importlib.import_module(f"{commands.__name__}.{name}")
         if hasattr(mod, "NAME") and hasattr(mod, "run"):
             mods.append(mod)
     return mods
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="avard",
         description="ADXL355/DS18B20 acquisition with streaming Allan variance and noise analysis.",
@@ -41,7 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
         "-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)"
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for mod in _command_modules():
+    for mod in _command_modules(only):
         # HELP is plain text ("68 % intervals"); argparse would read its % as a format.
         help_text = getattr(mod, "HELP", None)
         if help_text is not None:
@@ -65,7 +77,10 @@ def setup_logging(verbosity: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # The first word that is not an option names the command; build only its parser.
+    first = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(first)
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
     if not getattr(args, "_run", None):
