@@ -30,8 +30,12 @@ def _pyplot() -> Any:
 
 
 def _label(term: str, e: Any) -> str:
-    return (f"{SYMBOLS[term]} = {e.value:.3g} [{e.lo:.3g}, {e.hi:.3g}] "
-            f"{UNITS[term].replace('^2', '²').replace('sqrt(s)', '√s')}")
+    # enough significant digits that the interval's ends differ from the value
+    width = max(e.hi - e.lo, 1e-300)
+    digits = max(3, min(8, math.ceil(-math.log10(width / e.value)) + 2)) if e.value else 3
+    f = f"{{:.{digits}g}}"
+    return (f"{SYMBOLS[term]} = {f.format(e.value)} [{f.format(e.lo)}, {f.format(e.hi)}] "
+            f"{UNITS[term].replace('^2', '²').replace('^3', '³').replace('sqrt(s)', '√s')}")
 
 
 def plot_analysis(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
@@ -74,7 +78,9 @@ def _panel(ax: Any, ch: Any) -> None:
         ax.errorbar(tau[~used], dev[~used], yerr=[dev[~used] - lo[~used], hi[~used] - dev[~used]],
                     fmt="o", ms=4, mfc="white", color="0.5", capsize=2, lw=1,
                     label="measured (not fitted)", zorder=4)
-    t = np.geomspace(tau.min(), tau.max(), 300)
+    # whole numbers of samples: the filtered-white curve is defined at integer m only
+    rate = fit.rate_hz
+    t = np.unique(np.rint(np.geomspace(tau.min(), tau.max(), 400) * rate)) / rate
     ax.loglog(t, np.sqrt(fit.model_avar(t)), color="#ff7f0e", lw=2, label="fitted model",
               zorder=3)
     parts = fit.component_avars(t)
