@@ -76,6 +76,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "odr_hz": Key(_NUM, 125.0, "Hz", choices=ODR_CHOICES, doc="output data rate"),
         "poll_hz": Key(_NUM, 100.0, "Hz", 1.0, 2000.0,
                        doc="FIFO drain rate; raised automatically to drain a FIFO third"),
+        "temp_intercept_lsb": Key(_NUM, 1885.0, "LSB", 1700.0, 2100.0,
+                                  doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)"),
     },
     "temperature": {
         "ds18b20": Key(bool, True, doc="read DS18B20 sensors on the 1-Wire bus"),

@@ -101,7 +101,10 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)
-    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock)
+    # The emulated chip has the later revision's intercept; the driver uses the configured one,
+    # as on hardware, so a wrong intercept shows up as the chip-vs-DS18B20 offset it causes.
+    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock,
+                  temp_intercept_lsb=float(s["temp_intercept_lsb"]))
     dev.probe()
     dev.reset()
     dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))

@@ -77,7 +77,7 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
     bus = open_bus(s["bus"], bus=s["spi_bus"] if s["bus"] == "spi" else s["i2c_bus"],
                    device=s["spi_device"], address=s["i2c_address"],
                    speed_hz=s["spi_speed_hz"])
-    dev = Adxl355(bus)
+    dev = Adxl355(bus, temp_intercept_lsb=float(s["temp_intercept_lsb"]))
     info = dev.probe()
     dev.reset()
     dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))

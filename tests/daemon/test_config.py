@@ -92,3 +92,10 @@ def test_check_config_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     broken.write_text("[sensor\n")
     assert main(["check-config", str(broken)]) == 2
     assert "not valid TOML" in capsys.readouterr().err
+
+
+def test_temperature_intercept_is_configurable_and_bounded() -> None:
+    cfg = validate_config({"sensor": {"temp_intercept_lsb": 1852}})
+    assert cfg["sensor"]["temp_intercept_lsb"] == 1852
+    with pytest.raises(ConfigError, match="temp_intercept_lsb"):
+        validate_config({"sensor": {"temp_intercept_lsb": 9000}})
