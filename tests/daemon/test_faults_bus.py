@@ -98,7 +98,7 @@ Inject = Callable[[dict[str, Any], float], None]
 def run_rig(tmp_path: Path, seconds: float, *, inject: Inject | None = None, seed: int = 7,
             speed: float | None = None, bank: Any = None, recorder_factory: Any = None,
             listener_factory: Callable[[Service], Any] | None = None,
-            **cfg_extra: Any) -> Rig:
+            notifier: Any = None, **cfg_extra: Any) -> Rig:
     """Run the service over the emulator for ``seconds`` of virtual time with a subscriber.
 
     ``inject(ctx, t)`` is called by the reader thread before every drain with the time since
@@ -134,6 +134,8 @@ def run_rig(tmp_path: Path, seconds: float, *, inject: Inject | None = None, see
     kw: dict[str, Any] = {}
     if recorder_factory is not None:
         kw["recorder_factory"] = recorder_factory
+    if notifier is not None:
+        kw["notifier"] = notifier
     svc = Service(cfg, dev, clock, speed=speed, simulate="quiet-lab", on_tick=sims.on_tick,
                   extra_temperature_names=list(sims.names) if bank is None else [],
                   temperature_bank=bank, **kw)

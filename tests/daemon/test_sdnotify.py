@@ -180,3 +180,55 @@ def test_concurrent_senders_each_deliver_whole_datagrams(path_socket):
     assert len(got) == n.sent > 0
     assert set(got) <= sent_all and len(set(got)) == len(got)
     n.close()
+
+
+def test_service_feeds_the_watchdog_only_while_samples_advance(tmp_path, path_socket):
+    # The whole service with a Notifier on a real socket: WATCHDOG=1 stops while the sensor
+    # produces nothing (so systemd's WatchdogSec= restarts a stuck service) and comes back
+    # with the samples; READY=1 once samples flow; STOPPING=1 at the end.
+    import time
+
+    from .test_faults_bus import run_rig
+
+    sock, path = path_socket
+    sock.settimeout(0.05)
+    got: list[tuple[float, dict[str, str]]] = []
+    stop = threading.Event()
+    box: dict = {}
+
+    def collect() -> None:
+        while not stop.is_set():
+            try:
+                fields = _recv_fields(sock)
+            except TimeoutError:
+                continue
+            clock = box.get("clock")
+            got.append((clock.monotonic() - box["t0"] if clock else -1.0, fields))
+
+    def inject(ctx: dict, t: float) -> None:
+        box.setdefault("clock", ctx["clock"])
+        box.setdefault("t0", ctx["svc"].t_start)
+        if t > 6 and ctx["once"]("stop"):
+            ctx["emu"].stop_producing()
+        if t > 14 and ctx["once"]("resume"):
+            ctx["emu"].resume_producing()
+
+    reader = threading.Thread(target=collect, daemon=True)
+    reader.start()
+    notifier = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "200000"})  # ping each 0.1 s
+    try:
+        rig = run_rig(tmp_path, 22.0, inject=inject, speed=10.0, notifier=notifier)
+    finally:
+        time.sleep(0.2)
+        stop.set()
+        reader.join(2)
+        notifier.close()
+    pings = [t for t, f in got if f.get("WATCHDOG") == "1"]
+    assert any(f.get("READY") == "1" for _, f in got)
+    assert any(f.get("STOPPING") == "1" for _, f in got)
+    # Pings before the stall, none while it lasted (after the 2 s stall detection), again after.
+    assert any(t < 6 for t in pings)
+    assert not any(8.5 < t < 14 for t in pings), pings
+    assert any(t > 15 for t in pings)
+    events = [r["name"] for r in rig.kinds("event")]
+    assert "stalled" in events and "resumed" in events
