@@ -400,7 +400,7 @@ def fit_noise(
     ci: float = 0.683,
     z_present: float = 2.33,
     min_edf: float = 3.0,
-    min_averages: float = 16.0,
+    min_averages: float = 8.0,
     drop_z: float = 3.0,
     max_drop: int = 8,
     birge_scale: bool = True,
