@@ -104,13 +104,17 @@ def main(argv: list[str] | None = None) -> int:
         record_s = len(runs[RUNS[0]].accel) / runs[RUNS[0]].rate_hz
         together = sorted({f"{r[-4:]} {a1}/{a2} at {t1:.0f}/{t2:.0f} s"
                            for r, a1, t1 in steps for r2, a2, t2 in steps
-                           if r == r2 and a1 < a2 and abs(t1 - t2) < 0.02 * record_s})
+                           if r == r2 and a1 < a2 and abs(t1 - t2) < 0.005 * record_s})
+        sizes = [abs(f["params"]["size"]) for r in RUNS for ch in own[r].values()
+                 for f in ch.findings if f["cause"] == "bias_step"]
         md += ["", f"Bias steps ({len(steps)} on {len({(r, a) for r, a, _ in steps})} of 9 "
-               "axis-runs, sizes below one 3.3 mg LSB) are weaker claims: they pass their test "
+               f"axis-runs, sizes {min(sizes):.3g}–{max(sizes):.3g} m/s², below one "
+               "quantization step) are weaker claims: they pass their test "
                "(≥ 6 robust σ of the window contrasts) and do not hurt on held-out data, but "
                "the coarse quantization and the wandering line make the contrasts less "
                "Gaussian than the test assumes. "
-               + (f"Steps on two axes of one run within 2 % of the record ({'; '.join(together)})"
+               + (f"Steps on two axes of one run within 0.5 % of the record "
+                  f"({record_s * 0.005:.0f} s: {'; '.join(together)})"
                   " point to a real event in that run; the others are candidates to look at "
                   "in the time series, not established causes." if together else
                   "No two axes of a run step together; treat them as candidates to look at in "
