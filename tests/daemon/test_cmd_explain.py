@@ -68,3 +68,25 @@ def test_user_errors_exit_2(tmp_path, capsys):
     np.savez(tmp_path / "short.npz", accel=np.zeros((100, 1)), rate_hz=50.0)
     assert cli.main(["explain", str(tmp_path / "short.npz")]) == 2
     assert "too few" in capsys.readouterr().err
+
+
+def test_finds_the_simulators_own_filter(tmp_path, capsys):
+    """Across modules: a record from `avard simulate` (quiet-lab: the ADXL355 low-pass at
+    ODR/4) must come back with the filter named at its corner, and nothing claimed that the
+    preset does not put in the record."""
+    out = tmp_path / "ql.npz"
+    assert cli.main(["simulate", "--preset", "quiet-lab", "--hours", "0.5", "--seed", "3",
+                     "--out", str(out)]) == 0
+    capsys.readouterr()
+    with np.load(out, allow_pickle=False) as z:
+        cfg = json.loads(str(z["sim_config"]))
+        rate = float(z["rate_hz"])
+    assert cli.main(["explain", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)["channels"]
+    in_preset = {"filter", "temperature", "warmup"}
+    if any(s > 0 for s in cfg.get("gm_sigma_mps2", [0.0])):
+        in_preset.add("gauss_markov")
+    for axis, ch in res.items():
+        found = {f["cause"]: f["params"] for f in ch["findings"]}
+        assert set(found) <= in_preset, (axis, found)
+        assert found["filter"]["bandwidth_hz"] == pytest.approx(rate / 4, rel=0.3)
