@@ -24,6 +24,7 @@ demo: $(VENV)/.installed-run
 	$(VENV)/bin/avard demo
 
 test: $(VENV)/.installed-test
+	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -n 2 -q
 
 lint: $(VENV)/.installed-test
