@@ -56,8 +56,9 @@ class SimConfig:
       rate_random_walk (K, m/s²/√s), rate_ramp (R, m/s³), a first-order Gauss–Markov
       (gm_sigma_mps2, gm_tau_s), sinusoids ((axis, amplitude m/s², frequency Hz, phase rad)).
     Flicker (bias instability) is a sum of Gauss–Markov processes with time constants spaced
-    ``flicker_per_decade`` per decade from ``flicker_tmin_s`` (None: 1/(π·ODR)) to
-    ``flicker_tmax_s``.
+    ``flicker_per_decade`` per decade from ``flicker_tmin_s`` (None: 1/ODR) to
+    ``flicker_tmax_s``; the lowest members' variances are refitted to the sampled 1/f level
+    (``noise_gen.flicker_ladder``).
     """
 
     preset: str = "custom"

@@ -188,10 +188,12 @@ class SensorSimulator:
         levels: dict[int, list[Source]] = {}
 
         # Gauss–Markov components: the flicker ladder and the per-axis GM term
-        # default: the fastest corner 1/(2πT) sits at the Nyquist frequency, so the ladder
-        # covers the band without folding extra power into it
-        tmin = c.flicker_tmin_s if c.flicker_tmin_s is not None else dt / math.pi
-        ladder = flicker_ladder(c.bias_instability, tmin, c.flicker_tmax_s, c.flicker_per_decade)
+        # default: the fastest member at one sample; flicker_ladder refits the variances of
+        # the lowest members to the sampled 1/f level (AVAR flat from m = 2 up, before the
+        # chip filter), which a ladder cut at any tmin is not
+        tmin = c.flicker_tmin_s if c.flicker_tmin_s is not None else dt
+        ladder = flicker_ladder(c.bias_instability, tmin, c.flicker_tmax_s, c.flicker_per_decade,
+                                dt_s=dt)
         if REINJECT:
             steps = [0.0 if (h := level_for(T, fs, h_slow)) <= FAST_MAX_H else h * dt
                      for T, _ in ladder]

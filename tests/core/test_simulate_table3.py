@@ -3,8 +3,6 @@ giving the table's values back (N, B within the paper's 4.7 %; K where the recor
 
 from __future__ import annotations
 
-import math
-
 import pytest
 from avard.core.model import BI_FACTOR
 from avard.core.presets import TABLE3_B, TABLE3_K_PRINTED, TABLE3_N, make_config
@@ -14,6 +12,7 @@ from avard.core.table3 import (
     analyse_record,
     consistency_facts,
     kx_over_bx,
+    record_white,
     relative_errors,
 )
 
@@ -70,17 +69,42 @@ def test_short_paper_table3_record_gives_n_and_b_back() -> None:
 
 @pytest.mark.slow
 def test_60_hour_paper_table3_record_recovers_table3() -> None:
-    """The full 60 h record: N and B within 4.7 %, K found on Z with the Table 3 value inside
-    the fit's 95 % interval (and on X, where it is at the edge of detection, inside it when
-    found); no K on Y."""
+    """The full 60 h record through fit_noise over StreamingAllan (as `avard analyze`, with the
+    short-τ start at 0.05 s, see below), 68 % intervals:
+
+    - B on Y and Z, and K on Z (present), inside the reported 68 % intervals; K on X inside
+      when found; no K on Y.
+    - B on X within 0.5 %, not asserted inside its ±0.2 % interval: over seeds 1–4 it came back
+      +0.27, +0.32, +0.02, +0.44 %. The ladder's AVAR is within ±0.35 % of the floor
+      (test_simulate.py), ±0.2 % in B, and K_X (per √h) is at the edge of detection: when the
+      fit calls it absent, B takes its share at the longest τ.
+    - N within 0.25 % of Table 3 and near the white level the record holds (N with the 20-bit
+      rounding, ``record_white``), not inside its ±0.03–0.05 % interval: the rounding is white
+      noise added after the chip filter, the fit's white term is filtered, and at that
+      precision the two differ.
+    Why not the fit's own start at τ = 1/ODR (`avard analyze` default): there χ²/dof is ~700 on
+    X because the model applies the chip filter to the white term only, while the chip (and the
+    simulator) filters the flicker too (its AVAR is 0.38× the floor at m = 1, 0.80× at m = 2)
+    and rounds after the filter; that is core/fit.py + core/model.py, not the simulator."""
     cfg = make_config("paper-table3")
-    analyses = analyse_record(cfg, 60.0, seed=1, ci=0.95)
-    _check_n_b(analyses)
+    analyses = analyse_record(cfg, 60.0, seed=1)
+    white = record_white(cfg)
+    for a, an in enumerate(analyses):
+        te = an.fit.terms
+        assert te["velocity_random_walk"].present and te["bias_instability"].present
+        n = te["velocity_random_walk"].value
+        assert abs(n / cfg.velocity_random_walk[a] - 1) < 0.0025, (an.axis, n)
+        assert abs(n / white[a] - 1) < 0.0012, (an.axis, n, white[a])
+        b = te["bias_instability"]
+        if a == 0:
+            assert abs(b.value / cfg.bias_instability[a] - 1) < 0.005, (an.axis, b)
+        else:
+            assert b.lo <= cfg.bias_instability[a] <= b.hi, (an.axis, b)
+        assert an.fit.chi2_dof < 2.0, (an.axis, an.fit.chi2_dof)
     for a in (0, 2):
-        te = analyses[a].fit.terms["rate_random_walk"]
+        k = analyses[a].fit.terms["rate_random_walk"]
         if a == 2:
-            assert te.present
-        if te.present:
-            assert te.lo <= cfg.rate_random_walk[a] <= te.hi
+            assert k.present
+        if k.present:
+            assert k.lo <= cfg.rate_random_walk[a] <= k.hi, (a, k)
     assert not analyses[1].fit.terms["rate_random_walk"].present
-    assert math.isfinite(analyses[0].fit.chi2_dof)
