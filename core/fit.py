@@ -18,7 +18,11 @@ The method (one channel, overlapping or partially overlapping AVAR):
    than ``min_averages`` independent τ-averages in the record) are left out at long τ. At short
    τ, unless the filter is modelled, the shortest point is left out while the curve still
    shows a significant filter bend (a negative τ⁻² deficit below the white line, more than
-   ``drop_z`` standard errors; see ``_short_tau_cut``), up to ``max_drop`` points.
+   ``drop_z`` standard errors; see ``_short_tau_cut``), up to ``max_drop`` points. With the
+   filter modelled, its white-noise model is exact, but the chip filters the bias-instability
+   (flicker) noise as well; when B is present the shortest τ where that changes the flicker
+   AVAR by more than ``flicker_tol`` (``model.lowpass_flicker_ratio``; m < 8 at ODR/4) are
+   left out rather than fitted with a wrong model.
 5. **Presence.** Stepwise likelihood-ratio selection (``_select_terms``): a term is present
    when removing it raises the generalised χ² by at least ``z_present``² (z_present = 2.33:
    a one-sided 1 % level for a coefficient on its boundary θ = 0). Terms left out are
@@ -404,12 +408,16 @@ def fit_noise(
     drop_z: float = 3.0,
     max_drop: int = 8,
     birge_scale: bool = True,
+    flicker_tol: float = 0.02,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
     ``result``: a single-channel ``AllanResult`` (tau, m, stride, var, n, edf, rate_hz) of
     rate data in m/s². ``filter_corner_hz``: model the sensor's low-pass on the white noise
-    (ADXL355: ODR/4) instead of excluding the bent short τ. ``extra``: dicts
+    (ADXL355: ODR/4) instead of excluding the bent short τ; the model filters only the white
+    term, so when bias instability is present the shortest τ where the filter changes the
+    flicker AVAR by more than ``flicker_tol`` (2 %: m < 8 at ODR/4) are left out instead.
+    ``extra``: dicts
     ``{"cause": "sinusoid"|"gauss_markov"|"filter", "params": {...}}``; the nonlinear
     parameter (frequency_hz, T, corner_hz) is fixed, the amplitude-like one (amplitude,
     sigma, N) is fitted unless given. ``tau_range``: (min, max) seconds to restrict the
@@ -462,6 +470,19 @@ def fit_noise(
     idx = np.arange(start, K)
 
     active, z_all, upper = _select_terms(p, idx, A, z_present)
+    if filter_corner_hz is not None:
+        # The modelled filter acts on the white term only, but the chip filters the flicker
+        # (bias-instability) noise too: at one sample its AVAR is ≈ 0.35× the floor, 0.79× at
+        # two, 0.96× at four. Where B is present, leave out the shortest τ at which the filter
+        # changes the flicker AVAR by more than ``flicker_tol`` (model.lowpass_flicker_ratio).
+        b = [j for j in active if comps[fitted[j]].cause == "bias_instability"]
+        if b:
+            ratio = mdl.lowpass_flicker_ratio(m[keep][:max_drop + 1], rate, filter_corner_hz)
+            start = int(np.argmax(np.append(np.abs(1.0 - ratio) <= flicker_tol, True)))
+            start = min(start, max_drop)
+            if start and K - start >= A + 2:
+                idx = np.arange(start, K)
+                active, z_all, upper = _select_terms(p, idx, A, z_present)
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
     else:
