@@ -80,7 +80,10 @@ def test_stalled_subscriber_costs_the_service_nothing_and_sees_its_loss(tmp_path
     # nothing unexplained (whether it lost any depends on the kernel's socket buffers; the
     # test below fills them).
     sst = lst.stalled.tracker.stats
-    published = sum(t.received for t in st.topics.values())  # what the healthy one counted
+    # what the publisher sent (its own counter): the healthy subscriber stops listening after
+    # a short quiet period and may miss the very last message under load
+    published = svc.final_status["published"]
+    assert published >= sum(t.received for t in st.topics.values())
     assert 0 < sst.messages_received + sst.messages_lost <= published
     assert sst.samples_unexplained == 0 and sst.samples_repeated == 0
 
