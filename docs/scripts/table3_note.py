@@ -230,12 +230,14 @@ def main(argv: list[str] | None = None) -> int:
         "separate from N. B on X and Y is resolved to ±0.2–0.25 %, about the flicker "
         "generator's own accuracy (±0.35 % in AVAR, so ±0.2 % in B; docs/simulator.md), and "
         "K_X, at the edge of detection, leaves its share to B when the fit calls it absent.",
-        f"- This uses the fit over τ ≥ {FIT_TAU_MIN_S:g} s. `avard analyze` lets the fit start "
-        f"at one sample: on the same X curve that gives χ²/dof {full.chi2_dof:.0f} and B_X = "
-        f"{full.terms['bias_instability'].value:.4g} m/s² ({_pct(full_err)}), because the "
-        "fit's model applies the chip filter to the white term only, while the chip (and the "
-        "simulator) filters the flicker too (0.38× its floor at one sample, 0.80× at two; "
-        "docs/simulator.md) and rounds after the filter.",
+        f"- This uses the fit over τ ≥ {FIT_TAU_MIN_S:g} s. `avard analyze`'s own τ choice "
+        f"gives, on the same X curve, χ²/dof {full.chi2_dof:.2g} and B_X = "
+        f"{full.terms['bias_instability'].value:.4g} m/s² ({_pct(full_err)}), starting at "
+        f"τ = {full.tau_min_s:.3g} s: the fit's filter model covers the white term only, and "
+        "the chip (and the simulator) filters the flicker too (0.35× its floor at one sample, "
+        "0.79× at two, < 2 % off from 8 samples: core/model.lowpass_flicker_ratio), so the "
+        "fit leaves out the shorter τ when B is present. The rounding after the filter is not "
+        "modelled (the N excess above).",
         "- K is the hard one: read per √hour, K_X = 3.6e-7 m/s²/√s crosses the floor only at "
         "τ ≈ 3 h, and a 60 h record holds few independent averages there. The fit reports K_X "
         + ("present, " + f"{kx.value:.3g} [{kx.lo:.3g}, {kx.hi:.3g}] m/s²/√s"
