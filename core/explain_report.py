@@ -16,6 +16,7 @@ import numpy as np
 
 from .explain import ChannelExplanation, Explanation, band
 from .model import SYMBOLS, TERMS
+from .plot import pyplot, save_figure
 
 
 def _fmt_term(t: dict) -> str:
@@ -70,11 +71,7 @@ def summary(ex: Explanation) -> str:
 
 
 def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     m = ch.measured
     lo_b, hi_b = band(m, ch.base_model)
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
@@ -96,17 +93,11 @@ def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
     ax.set_title(f"channel {ch.name}: measurement, base and extended model")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     m = ch.measured
     s = np.sqrt(2.0 / m.edf)
     zb = (m.var - ch.base_model) / (ch.base_model * s)
@@ -120,17 +111,11 @@ def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
     ax.set_yscale("symlog", linthresh=3)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def _plot_temperature(ex: Explanation, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.0))
     for name, m in ex.temperature.items():
         ax.loglog(m.tau, np.sqrt(m.var), "o-", ms=3, label=name)
@@ -138,9 +123,7 @@ def _plot_temperature(ex: Explanation, path: Path) -> None:
     ax.set_ylabel("Allan deviation (K)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def write_report(ex: Explanation, outdir: str | Path) -> Path:

@@ -18,7 +18,9 @@ _COLOURS = {"quantization": "#9467bd", "velocity_random_walk": "#1f77b4",
             "rate_ramp": "#8c564b"}
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
+    """matplotlib.pyplot on the file-only Agg backend (no display on a Pi or in CI); an
+    ``AvardError`` saying how to install the ``plot`` extra when matplotlib is missing."""
     try:
         import matplotlib
     except ImportError as exc:
@@ -40,7 +42,7 @@ def _label(term: str, e: Any) -> str:
 
 def plot_analysis(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
     """Write the figure for an ``report.Analysis`` to ``path`` (png/pdf/svg by suffix)."""
-    plt = _pyplot()
+    plt = pyplot()
     names = list(an.channels)
     n = len(names)
     cols = min(n, 3)
@@ -53,6 +55,12 @@ def plot_analysis(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
         ax.set_visible(False)
     fig.suptitle(f"{Path(an.source).name}: Allan deviation, {an.n_samples} samples at "
                  f"{an.rate_hz:g} Hz (68 % intervals)", fontsize=11)
+    return save_figure(fig, path, dpi=dpi)
+
+
+def save_figure(fig: Any, path: str | Path, *, dpi: int) -> Path:
+    """Lay out, write (format by suffix) and close ``fig``; a path that cannot be written is
+    an ``AvardError`` naming it."""
     fig.tight_layout()
     out = Path(path)
     try:
@@ -60,7 +68,7 @@ def plot_analysis(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
     except (OSError, ValueError) as exc:
         raise AvardError(f"cannot write the plot to {out}: {exc}") from exc
     finally:
-        plt.close(fig)
+        pyplot().close(fig)
     return out
 
 

@@ -195,13 +195,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _plot(path: Path, result: Any, fits: dict[str, Any]) -> Path | None:
-    try:
-        import matplotlib
+    from avard.core.plot import pyplot, save_figure
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        log.warning("matplotlib is not installed (pip install 'avard[plot]'): no plot")
+    try:
+        plt = pyplot()
+    except AvardError as exc:
+        log.warning("%s: no plot", exc)
         return None
     fig, ax = plt.subplots(figsize=(7, 5))
     for c, axis in enumerate(("x", "y", "z")):
@@ -219,10 +218,7 @@ def _plot(path: Path, result: Any, fits: dict[str, Any]) -> Path | None:
     ax.set_title("avard demo: emulated ADXL355, streamed Allan deviation and fit")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def _report(path: Path, args: argparse.Namespace, st: dict[str, Any], lst: _Listener,
