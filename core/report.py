@@ -16,20 +16,22 @@ from __future__ import annotations
 import itertools
 import math
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
+from scipy.stats import f as fdist
 
 from .errors import DataError, FitError
 from .fit import NoiseFit, fit_noise
 from .model import SYMBOLS, TERMS, UNITS
 from .readers import iter_blocks, load_record
 
-__all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "find_lines"]
+__all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
+           "find_lines"]
 
 ProgressFn = Callable[[int, int | None], None]
 
@@ -83,27 +85,58 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
     more than chance allows.
 
-    Background: running median over ±``half_width`` bins, divided by the median/mean ratio of
-    the averaged periodogram's χ² distribution. Test: each bin is χ²(ν)/ν × background with
-    ν ≈ 1.8·segments (Hann, 50 % overlap; Welch 1967); the threshold keeps the chance of one
-    false line per spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P),
-    P = Σ (PSD − background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines``
-    lines {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
+    Background: the median of the bins within ±``half_width`` of each bin, leaving out the
+    bin's own main lobe (±2 bins), divided by the median/mean ratio of the averaged
+    periodogram's χ² distribution. The window is always symmetric: near 0 Hz it shrinks to
+    the bins available on both sides (DC excluded). A one-sided or padded window there is
+    biased low on a red spectrum (flicker, random walk), and with thousands of averaged
+    segments that bias alone passes the test: a 60 h record's 1/f rise at 0.05 Hz read as two
+    lines; at Nyquist the un-doubled last bin does the same. The median of a symmetric window
+    is unbiased for any monotonic background. Bins with fewer than 4 background bins on each
+    side are not tested (the lowest and highest 7).
+    Test: each bin is χ²(ν)/ν × background with ν ≈ 1.8·segments (Hann, 50 % overlap; Welch
+    1967), the background an estimate with ≈ (2/π)·ν per bin it is the median of, so the
+    ratio is F(ν, ν_bg)-distributed; the threshold keeps the chance of one false line per
+    spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P), P = Σ (PSD −
+    background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
+    {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
     """
-    from scipy.ndimage import median_filter
-
+    lobe, min_side = 2, 4
     if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
         return []
     nu = max(2.0, 1.8 * n_seg)
     med_ratio = chi2.median(nu) / nu
-    bg = median_filter(psd, size=2 * half_width + 1, mode="nearest") / med_ratio
-    thr = chi2.isf(p_false / len(f), nu) / nu
+    ring = np.ones(2 * half_width + 1, dtype=bool)
+    ring[half_width - lobe:half_width + lobe + 1] = False
+    # median of the ring around every bin whose full window fits (np.median averages the two
+    # middle values of the even count; a single rank would be biased on a sloping spectrum)
+    bg = np.full(len(f), np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(psd, 2 * half_width + 1)
+    bg[half_width:len(f) - half_width] = np.median(win[:, ring], axis=1)
+    n_bg = np.full(len(f), 2.0 * (half_width - lobe))
+    # bins near either end: the widest symmetric window that fits between the bin and DC or
+    # Nyquist (both excluded: DC is emptied by the mean removal, Nyquist is not doubled)
+    first = lobe + min_side + 1
+    last = len(f) - 1 - first
+    for k in [*range(first, half_width + 1), *range(len(f) - 1 - half_width, last + 1)]:
+        w = min(k - 1, len(f) - 2 - k, half_width)
+        sides = np.r_[psd[k - w:k - lobe], psd[k + lobe + 1:k + w + 1]]
+        bg[k] = np.median(sides)
+        n_bg[k] = len(sides)
+    bg[:first] = bg[first]          # only used for the main lobe of a line at the first bin
+    bg[last + 1:] = bg[last]
+    bg /= med_ratio
+    # The background is itself an estimate: a median of n_bg bins carries about 2/π of their
+    # degrees of freedom, so bin/background is F(ν, ν_bg)-distributed, not χ²(ν)/ν. That
+    # matters where the window is short (low bins) and few segments were averaged.
+    nu_bg = np.maximum(2.0, n_bg * nu * 2.0 / math.pi)
+    thr = fdist.isf(p_false / len(f), nu, nu_bg)
     ratio = psd / np.where(bg > 0, bg, np.inf)
     df = f[1] - f[0]
     lines = []
-    k = 3
-    while k < len(f) - 3:
-        if ratio[k] > thr and ratio[k] >= ratio[k - 1] and ratio[k] >= ratio[k + 1]:
+    k = first
+    while k <= last:
+        if ratio[k] > thr[k] and ratio[k] >= ratio[k - 1] and ratio[k] >= ratio[k + 1]:
             sl = slice(k - 2, k + 3)
             excess = np.clip(psd[sl] - bg[sl], 0.0, None)
             power = float(np.sum(excess) * df)
@@ -197,7 +230,9 @@ def _segments(path: str, block: int, rate_hz: float | None
         rec = load_record(p, rate_hz=rate_hz)
         idx = np.asarray(rec.meta.get("index", np.arange(rec.n_samples)))
         cuts = [0, *(np.flatnonzero(np.diff(idx) != 1) + 1).tolist(), rec.n_samples]
+        scales = {h.get("scale_m_s2_per_count") for h in rec.meta.get("headers", [])}
         meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
+                "lsb_mps2": scales.pop() if len(scales) == 1 else None,
                 "names": list(rec.names), "temperature_names": list(rec.temperature_names),
                 "source": rec.source, "gaps": rec.meta.get("gaps", []),
                 "n_segments": len(cuts) - 1}
@@ -242,9 +277,28 @@ def analyze(
     ``filter_corner_hz``: "auto" (ADXL355 ODR/4 for avard's own records, else not modelled),
     a number in Hz, or None (not modelled: the bent shortest τ are left out instead).
     """
+    meta, segments = _segments(path, block, rate_hz)
+    return analyze_stream(meta, segments, source=path, channels=channels,
+                          filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
+                          progress=progress, fit_kwargs=fit_kwargs)
+
+
+def analyze_stream(
+    meta: dict[str, Any],
+    segments: Iterable[tuple[NDArray[np.float64], bool]],
+    *,
+    source: str = "stream",
+    channels: Sequence[str] | None = None,
+    filter_corner_hz: float | str | None = "auto",
+    find_sinusoids: bool = True,
+    progress: ProgressFn | None = None,
+    fit_kwargs: dict[str, Any] | None = None,
+) -> Analysis:
+    """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
+    ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
+    in m/s², True where a segment ends: no difference or spectrum spans what follows)."""
     from .streaming import StreamingAllan
 
-    meta, segments = _segments(path, block, rate_hz)
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     sel = _select(names, channels)
@@ -270,12 +324,16 @@ def analyze(
         if progress is not None:
             progress(n, total)
     if n < 16:
-        raise DataError(f"{path}: only {n} samples; the Allan variance needs a record of at "
+        raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
     res = sa.result()
     f, psd = (welch.result() if welch is not None else (None, None))
     corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
               else filter_corner_hz)
+    # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
+    # fit holds as a fixed term (simulated records and recordings carry the LSB)
+    lsb = meta.get("lsb_mps2")
+    lsb = float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0 else None
     out: dict[str, ChannelAnalysis] = {}
     for j, i in enumerate(sel):
         one = res.channel(j)
@@ -283,12 +341,15 @@ def analyze(
         if welch is not None and f is not None:
             lines = find_lines(f, psd[:, j], welch.n_seg)
         extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
+        kw = dict(fit_kwargs or {})
+        if corner is not None and lsb is not None:
+            kw.setdefault("rounding_lsb", lsb)
         try:
-            fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **(fit_kwargs or {}))
+            fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **kw)
         except FitError as exc:
-            raise FitError(f"{path}, channel {names[i]}: {exc}") from exc
+            raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
         out[names[i]] = ChannelAnalysis(names[i], one, fit, lines)
-    return Analysis(source=str(meta.get("source", path)), rate_hz=rate, n_samples=n,
+    return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
                     channels=out, meta={**meta, "filter_corner_hz": corner})
 
 

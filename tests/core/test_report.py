@@ -65,6 +65,33 @@ def test_find_lines_recovers_frequency_and_amplitude() -> None:
     assert found <= 1
 
 
+def test_find_lines_no_false_lines_on_a_red_spectrum_and_finds_a_low_line() -> None:
+    """8191 averaged segments make the test tight (threshold ≈ 1.05 × background), so the
+    background near 0 Hz must follow a rising 1/f spectrum: a window padded at DC read a 60 h
+    record's flicker rise as lines at 0.05 and 0.09 Hz (and reads this one as a line). A real
+    line 12 bins up is found, with its amplitude."""
+    rng = np.random.default_rng(8)
+    fs, n, L = 100.0, 1 << 23, 1 << 11
+    spec = np.fft.rfft(rng.normal(size=n))
+    fr = np.fft.rfftfreq(n, 1 / fs)
+    fr[0] = fr[1]
+    red = rng.normal(size=n) + 0.3 * np.fft.irfft(spec / np.sqrt(fr), n)   # white + 1/f
+    f = np.fft.rfftfreq(L, 1 / fs)
+    f_line = f[12] + 0.3 * f[1]
+    line = 0.05 * np.sin(2 * np.pi * f_line * np.arange(n) / fs)
+    for y, expect in ((red, 0), (red + line, 1)):
+        w = WelchAccumulator(1, fs, L)
+        w.update(y)
+        f, psd = w.result()
+        assert w.n_seg > 8000
+        assert psd[4, 0] > 1.3 * psd[60, 0]   # red at the low end
+        lines = find_lines(f, psd[:, 0], w.n_seg)
+        assert len(lines) == expect, lines
+        if expect:
+            assert lines[0]["frequency_hz"] == pytest.approx(f_line, abs=f[1])
+            assert lines[0]["amplitude"] == pytest.approx(0.05, rel=0.2)
+
+
 def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     an = analyze(str(lab_npz))
     d = json.loads(json.dumps(an.to_dict(), allow_nan=False))
