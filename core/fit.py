@@ -19,10 +19,10 @@ The method (one channel, overlapping or partially overlapping AVAR):
    τ, unless the filter is modelled, the shortest point is left out while the curve still
    shows a significant filter bend (a negative τ⁻² deficit below the white line, more than
    ``drop_z`` standard errors; see ``_short_tau_cut``), up to ``max_drop`` points. With the
-   filter modelled, its white-noise model is exact, but the chip filters the bias-instability
-   (flicker) noise as well; when B is present the shortest τ where that changes the flicker
-   AVAR by more than ``flicker_tol`` (``model.lowpass_flicker_ratio``; m < 8 at ODR/4) are
-   left out rather than fitted with a wrong model.
+   filter modelled (``filter_corner_hz``), the model is exact from one sample on: the chip
+   filters its white noise (``model.lowpass_white_avar``) and its bias-instability (flicker)
+   noise (``model.lowpass_flicker_avar``: 0.38× the floor at one sample, 0.80× at two), and
+   nothing is left out at short τ.
 5. **Presence.** Stepwise likelihood-ratio selection (``_select_terms``): a term is present
    when removing it raises the generalised χ² by at least ``z_present``² (z_present = 2.33:
    a one-sided 1 % level for a coefficient on its boundary θ = 0). Terms left out are
@@ -99,6 +99,11 @@ class Component:
             return mdl.term_psd(self.cause, rate_hz)
         if self.cause == "gauss_markov":
             return mdl.gauss_markov_psd(rate_hz, self.params["T"])
+        if self.cause == "white":
+            return mdl.term_psd("velocity_random_walk", rate_hz)
+        if self.cause == "lowpass_flicker":
+            return mdl.lowpass_flicker_psd(rate_hz, self.params["corner_hz"],
+                                           int(self.params.get("order", 2)))
         if self.cause in ("filter", "lowpass_white"):
             return mdl.lowpass_white_psd(rate_hz, self.params["corner_hz"],
                                          int(self.params.get("order", 2)))
@@ -167,7 +172,10 @@ class NoiseFit:
 
 
 _VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/s^2"),
-               "filter": ("N", "m/s/sqrt(s)"), "lowpass_white": ("N", "m/s/sqrt(s)")}
+               "filter": ("N", "m/s/sqrt(s)"), "lowpass_white": ("N", "m/s/sqrt(s)"),
+               "white": ("N", "m/s/sqrt(s)")}
+#: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
+ROUNDING = "rounding"
 
 
 def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz: float | None,
@@ -179,6 +187,9 @@ def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz
         if t == "velocity_random_walk" and filter_corner_hz is not None:
             comps.append(Component(t, "filter", {"corner_hz": float(filter_corner_hz)}, "N",
                                    UNITS[t]))
+        elif t == "bias_instability" and filter_corner_hz is not None:
+            comps.append(Component(t, "lowpass_flicker", {"corner_hz": float(filter_corner_hz)},
+                                   "value", UNITS[t]))
         else:
             comps.append(Component(t, t, {}, "value", UNITS[t]))
     for e in extra:
@@ -193,6 +204,8 @@ def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz
             if f0 is None or not 0 < f0 <= rate_hz / 2:
                 raise FitError(f"sinusoid needs 0 < frequency_hz <= {rate_hz / 2} Hz; got {f0}")
             label = f"sinusoid {f0:.6g} Hz"
+        elif cause == "white":
+            label = str(e.get("label", "white"))
         elif cause == "gauss_markov":
             if "time_constant_s" in params:  # the explain pipeline's name for T
                 params["T"] = params.pop("time_constant_s")
@@ -408,20 +421,23 @@ def fit_noise(
     drop_z: float = 3.0,
     max_drop: int = 8,
     birge_scale: bool = True,
-    flicker_tol: float = 0.02,
+    rounding_lsb: float | None = None,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
     ``result``: a single-channel ``AllanResult`` (tau, m, stride, var, n, edf, rate_hz) of
-    rate data in m/s². ``filter_corner_hz``: model the sensor's low-pass on the white noise
-    (ADXL355: ODR/4) instead of excluding the bent short τ; the model filters only the white
-    term, so when bias instability is present the shortest τ where the filter changes the
-    flicker AVAR by more than ``flicker_tol`` (2 %: m < 8 at ODR/4) are left out instead.
+    rate data in m/s². ``filter_corner_hz``: model the sensor's low-pass (ADXL355: ODR/4) on
+    the white and the flicker (bias-instability) noise, so the fit starts at one sample,
+    instead of excluding the bent short τ.
     ``extra``: dicts
     ``{"cause": "sinusoid"|"gauss_markov"|"filter", "params": {...}}``; the nonlinear
     parameter (frequency_hz, T, corner_hz) is fixed, the amplitude-like one (amplitude,
     sigma, N) is fitted unless given. ``tau_range``: (min, max) seconds to restrict the
-    automatic range further. See the module docstring for the method and the tests.
+    automatic range further. ``rounding_lsb``: the record's LSB (m/s²) when it is known to be
+    rounded after the sensor's filter (ADXL355 output): the rounding adds unfiltered white
+    noise of LSB²/12 per sample, a fixed component; N is then reported as the white level of
+    the output, √(N_filtered² + LSB²/(12·fs)), the N a datasheet or the slope method gives.
+    See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
     if var.ndim != 1:
@@ -443,6 +459,13 @@ def fit_noise(
     if tau_range is not None:
         ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
     keep = np.flatnonzero(ok)
+    extra = list(extra)
+    n_q2 = 0.0
+    if rounding_lsb is not None:
+        if not (math.isfinite(rounding_lsb) and rounding_lsb > 0):
+            raise FitError(f"rounding_lsb {rounding_lsb} m/s² is not a positive number")
+        n_q2 = rounding_lsb**2 / (12.0 * rate)
+        extra.append({"cause": "white", "label": ROUNDING, "params": {"N": math.sqrt(n_q2)}})
     comps = _components(terms, extra, filter_corner_hz, rate)
     fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
     fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
@@ -470,19 +493,6 @@ def fit_noise(
     idx = np.arange(start, K)
 
     active, z_all, upper = _select_terms(p, idx, A, z_present)
-    if filter_corner_hz is not None:
-        # The modelled filter acts on the white term only, but the chip filters the flicker
-        # (bias-instability) noise too: at one sample its AVAR is ≈ 0.35× the floor, 0.79× at
-        # two, 0.96× at four. Where B is present, leave out the shortest τ at which the filter
-        # changes the flicker AVAR by more than ``flicker_tol`` (model.lowpass_flicker_ratio).
-        b = [j for j in active if comps[fitted[j]].cause == "bias_instability"]
-        if b:
-            ratio = mdl.lowpass_flicker_ratio(m[keep][:max_drop + 1], rate, filter_corner_hz)
-            start = int(np.argmax(np.append(np.abs(1.0 - ratio) <= flicker_tol, True)))
-            start = min(start, max_drop)
-            if start and K - start >= A + 2:
-                idx = np.arange(start, K)
-                active, z_all, upper = _select_terms(p, idx, A, z_present)
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
     else:
@@ -514,9 +524,11 @@ def fit_noise(
         present = j in active and theta[j] > 0
         if present:
             s = se_active[active.index(j)]
-            val = math.sqrt(theta[j])
-            lo = math.sqrt(max(theta[j] - zci * s, 0.0))
-            hi = math.sqrt(theta[j] + zci * s)
+            # the white level of the output includes the (known, fixed) rounding noise
+            q = n_q2 if comp.label == "velocity_random_walk" else 0.0
+            val = math.sqrt(theta[j] + q)
+            lo = math.sqrt(max(theta[j] - zci * s, 0.0) + q)
+            hi = math.sqrt(theta[j] + zci * s + q)
             te = TermEstimate(val, lo, hi, comp.unit, True, float(z_all[j]))
         else:
             theta_all[a] = 0.0

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .errors import AvardError
+from .fit import ROUNDING
 from .model import SYMBOLS, TERMS, UNITS
 
 _COLOURS = {"quantization": "#9467bd", "velocity_random_walk": "#1f77b4",
@@ -92,12 +93,15 @@ def _panel(ax: Any, ch: Any) -> None:
     ax.loglog(t, np.sqrt(fit.model_avar(t)), color="#ff7f0e", lw=2, label="fitted model",
               zorder=3)
     parts = fit.component_avars(t)
+    if ROUNDING in parts and "velocity_random_walk" in parts:
+        # N is reported as the output's white level: the filtered part plus the rounding
+        parts["velocity_random_walk"] = parts["velocity_random_walk"] + parts.pop(ROUNDING)
     for term in TERMS:
         e = fit.terms[term]
         if e.present and term in parts:
             ax.loglog(t, np.sqrt(parts[term]), "--", lw=1.2, color=_COLOURS[term],
                       label=_label(term, e))
-    other = {lab: v for lab, v in parts.items() if lab not in TERMS}
+    other = {lab: v for lab, v in parts.items() if lab not in TERMS and lab != ROUNDING}
     if other:
         # the extra components (sinusoids, Gauss–Markov) as one line: their sum
         freqs = [f"{float(lab.split()[1]):.3g}" for lab in other if lab.startswith("sinusoid")]

@@ -6,7 +6,10 @@
 What one sample is made of, in the order the chip would see it (all in m/s², SI time):
 
 1. white noise, per-sample σ = N·√fs (one-sided PSD 2N², so AVAR = N²/τ), together with the
-   fastest flicker components (one ARMA stream, see ``noise_gen.FastNoise``);
+   fastest flicker components (one ARMA stream, see ``noise_gen.FastNoise``). N is the white
+   level of the *output*, as a datasheet or an Allan analysis of a record reports it: the
+   rounding in step 6 adds white noise of LSB²/12 per sample, so the analog white noise is
+   drawn with σ² = N²·fs − LSB²/12 (``analog_white_sigma``);
 2. bias instability as a sum of Gauss–Markov processes spaced in log time constant,
    a Gauss–Markov term, rate random walk (AVAR K²τ/3), rate ramp (R·t), sinusoids, Poisson
    bias steps, a warm-up transient, and the temperature coupling (``thermal``), on a pyramid of
@@ -29,7 +32,7 @@ import math
 from functools import cached_property
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from .noise_gen import (
@@ -64,6 +67,21 @@ def adxl355_lowpass_sos() -> NDArray[np.float64]:
     """The ADXL355 output low-pass in sample units: 2nd-order Butterworth at ODR/4 (the corner
     is half the Nyquist frequency at any ODR), unit DC gain."""
     return signal.butter(2, 0.5, output="sos")
+
+
+def analog_white_sigma(n: ArrayLike, rate_hz: float, lsb: float) -> NDArray[np.float64]:
+    """Per-sample σ of the white noise before the filter and the rounding, per axis, such
+    that the quantized output has white level N (m/s/√s).
+
+    Rounding a signal whose noise spans at least half an LSB adds an error that is uniform on
+    ±LSB/2 and independent of the signal (Sheppard; Widrow & Kollár ch. 4): white noise of
+    variance LSB²/12 per sample, N_q² = LSB²/(12·fs) in Allan terms. On the paper's X and Y
+    axes that is 0.35 % of N² (N 0.17 % high if ignored). It is subtracted where the
+    requested per-sample σ is at least LSB/2; below that rounding is not an additive white
+    term and N is taken as the analog level unchanged."""
+    sigma = np.asarray(n, dtype=float) * math.sqrt(rate_hz)
+    var_q = lsb * lsb / 12.0
+    return np.where(sigma >= 0.5 * lsb, np.sqrt(np.maximum(sigma**2 - var_q, 0.0)), sigma)
 
 
 class SimChunk:
@@ -211,7 +229,7 @@ class SensorSimulator:
                 (fast if h <= FAST_MAX_H else by_level.setdefault(h, [])).append((T, sig))
             for h, group in sorted(by_level.items()):
                 levels.setdefault(h, []).append(AR1Bank(group, h * dt, seq(stream, h)))
-        sigma_w = np.asarray(c.velocity_random_walk) * math.sqrt(fs)
+        sigma_w = analog_white_sigma(c.velocity_random_walk, fs, self.lsb)
         levels.setdefault(1, []).insert(0, FastNoise(sigma_w, fast, dt, seq(0)))
         # rate random walk on a ≈50 ms grid: increments K·√Δ (discrete AVAR K²τ/3 + O(Δ²/τ))
         if any(k > 0 for k in c.rate_random_walk):

@@ -214,23 +214,29 @@ def test_errors_name_the_problem() -> None:
         fit_noise(res, extra=[{"cause": "hum"}])
 
 
-def test_filtered_flicker_is_left_out_where_the_white_filter_model_is_wrong() -> None:
-    """The chip's low-pass filters the bias-instability (flicker) noise too; the fit models
-    the filter on the white term only, so with B present it starts where the filter changes
-    the flicker AVAR by less than 2 % (m = 8 at ODR/4) instead of fitting a wrong model."""
+def test_filter_is_modelled_on_the_flicker_too_so_the_fit_starts_at_one_sample() -> None:
+    """The chip's low-pass filters the bias-instability (flicker) noise as well as the white:
+    its AVAR is 0.38× the floor at one sample and 0.80× at two. The fit's B component carries
+    that factor when the filter is modelled, so it fits from τ0 with nothing left out."""
     ratio = M.lowpass_flicker_ratio([1, 2, 4, 8, 16, 1024], 125.0, 125.0 / 4)
     assert 0.3 < ratio[0] < 0.4 and 0.75 < ratio[1] < 0.85  # strongly filtered at 1–2 samples
     assert np.all(np.diff(ratio) > 0) and abs(1 - ratio[-1]) < 1e-4
-    assert abs(1 - ratio[2]) > 0.02 > abs(1 - ratio[3])
+    tau = np.array([1, 2, 16, 8192]) / 125.0
+    floor = M.term_avar("bias_instability", tau, 1e-4)
+    got = M.lowpass_flicker_avar(tau, 1e-4, 125.0, 125.0 / 4)
+    assert got[:3] == pytest.approx(floor[:3] * ratio[[0, 1, 4]], rel=1e-9)
+    assert got[3] == pytest.approx(floor[3], rel=1e-7)
     rng = np.random.default_rng(21)
     rate, N, B = 125.0, 2e-5, 1e-4
     b, a = signal.butter(2, 0.5)
     res = octave_oavar(signal.lfilter(b, a, record(1 << 18, rate, rng, N=N, B=B)), rate)
     fit = fit_noise(res, filter_corner_hz=rate / 4, terms=TERMS[:4])
-    assert fit.tau_min_s == pytest.approx(8 / rate)
+    assert fit.tau_min_s == pytest.approx(1 / rate)
     assert _inside(fit.terms["velocity_random_walk"], N)
     assert _inside(fit.terms["bias_instability"], B)
     assert fit.chi2_dof < 3.0
-    # fitting the short τ with the white-only filter model misfits them
-    wrong = fit_noise(res, filter_corner_hz=rate / 4, terms=TERMS[:4], flicker_tol=math.inf)
+    # a model that leaves the flicker unfiltered misfits the first samples: a free white-only
+    # filter component plus the plain flicker term, fitted from τ0, is far worse
+    wrong = fit_noise(res, terms=("bias_instability",), max_drop=0,
+                      extra=[{"cause": "filter", "params": {"corner_hz": rate / 4}}])
     assert wrong.tau_min_s == pytest.approx(1 / rate) and wrong.chi2_dof > 10 * fit.chi2_dof
