@@ -240,3 +240,27 @@ def test_filter_is_modelled_on_the_flicker_too_so_the_fit_starts_at_one_sample()
     wrong = fit_noise(res, terms=("bias_instability",), max_drop=0,
                       extra=[{"cause": "filter", "params": {"corner_hz": rate / 4}}])
     assert wrong.tau_min_s == pytest.approx(1 / rate) and wrong.chi2_dof > 10 * fit.chi2_dof
+
+
+def test_rounding_after_the_filter_is_a_fixed_term_and_n_is_the_output_level() -> None:
+    """The ADXL355 rounds to its LSB after its filter: unfiltered white noise of LSB²/12 per
+    sample under the filtered white. Held as a fixed term (rounding_lsb), the fit finds no
+    quantization term and reports N as the output's white level; left out, the misfit at
+    one to four samples reads as a quantization term that is not there."""
+    rng = np.random.default_rng(4)
+    rate, lsb = 125.0, 3.9e-5
+    sigma = 2.0 * lsb                                   # analog noise per sample
+    b, a = signal.butter(2, 0.5)
+    analog = signal.lfilter(b, a, sigma * rng.standard_normal(1 << 20))
+    y = np.rint(analog / lsb) * lsb
+    res = octave_oavar(y, rate)
+    n_out = math.sqrt(sigma**2 / rate + lsb**2 / (12 * rate))
+    fit = fit_noise(res, filter_corner_hz=rate / 4, rounding_lsb=lsb)
+    assert not fit.terms["quantization"].present
+    n = fit.terms["velocity_random_walk"]
+    assert n.present and _inside(n, n_out)
+    assert fit.chi2_dof < 3.0
+    plain = fit_noise(res, filter_corner_hz=rate / 4)
+    assert plain.terms["quantization"].present
+    with pytest.raises(FitError, match="rounding_lsb"):
+        fit_noise(res, filter_corner_hz=rate / 4, rounding_lsb=-1.0)

@@ -11,7 +11,13 @@ from avard.core.errors import ConfigError
 from avard.core.model import BI_FACTOR, lowpass_white_avar
 from avard.core.noise_gen import ar1_avar, flicker_ladder, lerp, white_plus_ar1_filter
 from avard.core.presets import G0, PRESETS, make_config, parse_override
-from avard.core.simulate import COUNTS_MAX, COUNTS_MIN, SensorSimulator, adxl355_lowpass_sos
+from avard.core.simulate import (
+    COUNTS_MAX,
+    COUNTS_MIN,
+    SensorSimulator,
+    adxl355_lowpass_sos,
+    analog_white_sigma,
+)
 from scipy import signal
 
 QUIET = dict(velocity_random_walk=0.0, bias_instability=0.0, bias_tempco_mps2_per_k=0.0,
@@ -83,6 +89,26 @@ def test_white_noise_matches_filtered_white_model() -> None:
     assert np.all((r.lo <= model[:, None]) & (model[:, None] <= r.hi))
     # and the filter matters at one sample: well below N²/τ
     assert np.all(r.var[0] < 0.8 * n_coef**2 / r.tau[0])
+
+
+def test_output_white_level_is_n_with_the_lsb_rounding_included() -> None:
+    """N is the white level of the rounded output (what a datasheet or an analysis reports):
+    the simulator draws the analog noise with σ² = N²fs − LSB²/12, so the counts' AVAR is
+    N²/τ. Here σ = 1.5 LSB, where ignoring the rounding would make it 3.7 % high."""
+    cfg0 = make_config("adxl355-datasheet")
+    lsb = cfg0.lsb_mps2
+    n_coef = 1.5 * lsb / math.sqrt(cfg0.rate_hz)
+    assert analog_white_sigma([n_coef], cfg0.rate_hz, lsb)[0] == pytest.approx(
+        math.sqrt((1.5 * lsb) ** 2 - lsb**2 / 12))
+    # below half an LSB the rounding is no additive white term: N is left as it is
+    assert analog_white_sigma([0.4 * lsb / math.sqrt(125.0)], 125.0, lsb)[0] == pytest.approx(
+        0.4 * lsb)
+    cfg = make_config("adxl355-datasheet", **{**QUIET, "velocity_random_walk": n_coef})
+    counts = SensorSimulator(cfg, seed=5).next(1 << 20).counts
+    taus = np.array([32, 64, 128, 256]) / cfg.rate_hz
+    r = oavar(counts * lsb, cfg.rate_hz, taus)
+    ratio = float(np.mean(r.var * r.tau[:, None]) / n_coef**2)
+    assert abs(ratio - 1) < 0.012, ratio
 
 
 def _pooled_ok(r, model, k: float = 4.0, slack: float = 0.0) -> np.ndarray:
