@@ -10,13 +10,13 @@ well below the floor; the minimum of the three-term model is the number to compa
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .allan import AllanResult
-from .fit import NoiseFit, fit_noise, slope_method
+from .fit import NoiseFit, slope_method
 from .model import BI_FACTOR
 from .presets import (
     DATASHEET_N,
@@ -26,8 +26,8 @@ from .presets import (
     TABLE3_N,
     SimConfig,
 )
+from .report import analyze_stream
 from .simulate import SensorSimulator, n_samples
-from .streaming import StreamingAllan
 
 AXES = ("x", "y", "z")
 #: The paper's reported maximum estimation error (Section 4): 4.7 % at long cluster times.
@@ -35,9 +35,6 @@ PAPER_MAX_ERROR = 0.047
 #: Datasheet noise density range (µg/√Hz, one-sided) and the white coefficient it implies.
 DATASHEET_ND_UG = (22.5, 25.0)
 DATASHEET_N_RANGE = tuple(nd * 1e-6 * G0 / math.sqrt(2.0) for nd in DATASHEET_ND_UG)
-#: Shortest τ given to the fit: below ≈6 samples the chip filter also bends the flicker part
-#: and the LSB rounding adds unfiltered white noise, neither of which the fit's model holds.
-FIT_TAU_MIN_S = 0.05
 
 
 def adev_minimum(n: float, b: float, k: float) -> tuple[float, float]:
@@ -103,42 +100,84 @@ class AxisAnalysis:
 
 def analyse_record(
     config: SimConfig, hours: float, seed: int | None, *, chunk: int = 1 << 17,
-    tau_min_s: float = FIT_TAU_MIN_S, ci: float = 0.683,
-    progress: Callable[[int, int], None] | None = None,
+    ci: float = 0.683, find_sinusoids: bool = True,
+    progress: Callable[[int, int | None], None] | None = None,
 ) -> list[AxisAnalysis]:
-    """Simulate ``hours`` of ``config`` into a bounded-memory streaming Allan accumulator
-    (partially overlapping, stride m/8), then fit each axis with the chip filter modelled
-    (corner ODR/4) over τ ≥ ``tau_min_s``, and read it with the slope method too."""
+    """Simulate ``hours`` of ``config`` and analyse it exactly as ``avard analyze`` does a
+    simulated record (``report.analyze_stream``: streaming Allan accumulator, line search,
+    fit with the chip filter modelled at ODR/4 from one sample on), without writing the
+    record to disk; read each axis with the slope method too."""
     sim = SensorSimulator(config, seed)
-    acc = StreamingAllan(3, config.rate_hz, names=list(config.axes))
     total = n_samples(config, hours)
-    done = 0
-    while done < total:
-        c = sim.next(min(chunk, total - done))
-        acc.update(c.counts * config.lsb_mps2)        # what the sensor reports, m/s²
-        done += len(c)
-        if progress is not None:
-            progress(done, total)
-    res = acc.result(ci=ci)
+
+    def blocks() -> Iterator[tuple[np.ndarray, bool]]:
+        done = 0
+        while done < total:
+            c = sim.next(min(chunk, total - done))
+            done += len(c)
+            yield c.counts * config.lsb_mps2, False       # what the sensor reports, m/s²
+
+    meta = {"rate_hz": config.rate_hz, "names": list(config.axes), "n_samples": total,
+            "odr_nominal_hz": config.odr_hz, "lsb_mps2": config.lsb_mps2,
+            "source": f"simulated {config.preset}"}
+    an = analyze_stream(meta, blocks(), find_sinusoids=find_sinusoids, progress=progress,
+                        fit_kwargs={"ci": ci})
     out = []
     for a, axis in enumerate(config.axes):
-        ch = res.channel(a)
+        ca = an.channels[axis]
         truth = {"velocity_random_walk": config.velocity_random_walk[a],
                  "bias_instability": config.bias_instability[a],
                  "rate_random_walk": config.rate_random_walk[a]}
-        fit = fit_noise(ch, filter_corner_hz=config.rate_hz / 4.0,
-                        tau_range=(tau_min_s, math.inf), ci=ci)
-        out.append(AxisAnalysis(axis, truth, fit, slope_method(ch), ch))
+        out.append(AxisAnalysis(axis, truth, ca.fit, slope_method(ca.allan), ca.allan))
     return out
 
 
-def record_white(config: SimConfig) -> tuple[float, ...]:
-    """The white coefficient the output record holds per axis (m/s/√s): N plus the 20-bit
-    rounding, white noise of LSB²/12 per sample added after the chip filter, √(N² + LSB²/(12·fs)).
-    At τ ≫ 1/fs the fit cannot tell the two apart; on X and Y of ``paper-table3`` the rounding
-    raises N by 0.17 %, several times the 60 h record's 68 % interval on N (±0.03–0.05 %)."""
-    q = config.lsb_mps2**2 / (12.0 * config.rate_hz)
-    return tuple(math.sqrt(n * n + q) for n in config.velocity_random_walk)
+@dataclass
+class TermOutcome:
+    """One term of one axis of one analysed record against its truth."""
+
+    seed: int
+    axis: str
+    term: str
+    truth: float
+    present: bool
+    value: float | None
+    lo: float | None
+    hi: float | None
+    upper: float | None              # one-sided upper limit when absent
+
+    @property
+    def inside(self) -> bool:
+        """The reported interval holds the truth (present terms with a non-zero truth)."""
+        return bool(self.present and self.lo is not None and self.hi is not None
+                    and self.lo <= self.truth <= self.hi)
+
+    @property
+    def z(self) -> float | None:
+        """(value − truth) in units of the interval's half-width."""
+        if not self.present or self.value is None or self.lo is None or self.hi is None:
+            return None
+        half = 0.5 * (self.hi - self.lo)
+        return (self.value - self.truth) / half if half > 0 else None
+
+
+def outcomes_over_seeds(
+    config: SimConfig, hours: float, seeds: Sequence[int],
+    progress: Callable[[int, int], None] | None = None,
+) -> list[TermOutcome]:
+    """Analyse one record per seed and compare every term with the truth: the check that the
+    reported 68 % intervals hold the truth as often as they claim (one record can only say
+    whether one draw fell inside)."""
+    out = []
+    for i, seed in enumerate(seeds):
+        for an in analyse_record(config, hours, seed):
+            for term, true in an.truth.items():
+                te = an.fit.terms[term]
+                out.append(TermOutcome(seed, an.axis, term, true, te.present, te.value, te.lo,
+                                       te.hi, te.upper))
+        if progress is not None:
+            progress(i + 1, len(seeds))
+    return out
 
 
 def relative_errors(analysis: AxisAnalysis) -> dict[str, float | None]:

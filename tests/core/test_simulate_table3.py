@@ -12,7 +12,7 @@ from avard.core.table3 import (
     analyse_record,
     consistency_facts,
     kx_over_bx,
-    record_white,
+    outcomes_over_seeds,
     relative_errors,
 )
 
@@ -68,43 +68,26 @@ def test_short_paper_table3_record_gives_n_and_b_back() -> None:
 
 
 @pytest.mark.slow
-def test_60_hour_paper_table3_record_recovers_table3() -> None:
-    """The full 60 h record through fit_noise over StreamingAllan (as `avard analyze`, with the
-    short-τ start at 0.05 s, see below), 68 % intervals:
+def test_60_hour_paper_table3_records_recover_table3_within_their_intervals() -> None:
+    """Six 60 h ``paper-table3`` records (seeds 1–6), each analysed as `avard analyze` does
+    (line search, chip filter modelled on white and flicker noise, LSB rounding as a fixed
+    term, fit from one sample on). A 68 % interval misses the truth one time in three by
+    design, so one record cannot show more than one draw; over the six the intervals must
+    hold N and B about as often as they claim, nothing may be far off, and K must be found
+    where the record holds it (Z) and not where the table has none (Y).
 
-    - B on Y and Z, and K on Z (present), inside the reported 68 % intervals; K on X inside
-      when found; no K on Y.
-    - B on X within 0.5 %, not asserted inside its ±0.2 % interval: over seeds 1–4 it came back
-      +0.27, +0.32, +0.02, +0.44 %. The ladder's AVAR is within ±0.35 % of the floor
-      (test_simulate.py), ±0.2 % in B, and K_X (per √h) is at the edge of detection: when the
-      fit calls it absent, B takes its share at the longest τ.
-    - N within 0.25 % of Table 3 and near the white level the record holds (N with the 20-bit
-      rounding, ``record_white``), not inside its ±0.03–0.05 % interval: the rounding is white
-      noise added after the chip filter, the fit's white term is filtered, and at that
-      precision the two differ.
-    Why not the fit's own start at τ = 1/ODR (`avard analyze` default): there χ²/dof is ~700 on
-    X because the model applies the chip filter to the white term only, while the chip (and the
-    simulator) filters the flicker too (its AVAR is 0.38× the floor at m = 1, 0.80× at m = 2)
-    and rounds after the filter; that is core/fit.py + core/model.py, not the simulator."""
+    Measured (docs/table3.md, 12 seeds): N and B inside in 55/72, K_Z in 8/11, all |z| ≤ 2.5."""
     cfg = make_config("paper-table3")
-    analyses = analyse_record(cfg, 60.0, seed=1)
-    white = record_white(cfg)
-    for a, an in enumerate(analyses):
-        te = an.fit.terms
-        assert te["velocity_random_walk"].present and te["bias_instability"].present
-        n = te["velocity_random_walk"].value
-        assert abs(n / cfg.velocity_random_walk[a] - 1) < 0.0025, (an.axis, n)
-        assert abs(n / white[a] - 1) < 0.0012, (an.axis, n, white[a])
-        b = te["bias_instability"]
-        if a == 0:
-            assert abs(b.value / cfg.bias_instability[a] - 1) < 0.005, (an.axis, b)
-        else:
-            assert b.lo <= cfg.bias_instability[a] <= b.hi, (an.axis, b)
-        assert an.fit.chi2_dof < 2.0, (an.axis, an.fit.chi2_dof)
-    for a in (0, 2):
-        k = analyses[a].fit.terms["rate_random_walk"]
-        if a == 2:
-            assert k.present
-        if k.present:
-            assert k.lo <= cfg.rate_random_walk[a] <= k.hi, (a, k)
-    assert not analyses[1].fit.terms["rate_random_walk"].present
+    out = outcomes_over_seeds(cfg, 60.0, range(1, 7))
+    nb = [o for o in out if o.term in ("velocity_random_walk", "bias_instability")]
+    assert all(o.present for o in nb)
+    assert all(abs(o.value / o.truth - 1) <= PAPER_MAX_ERROR for o in nb)
+    inside = sum(o.inside for o in nb) / len(nb)
+    assert 0.5 <= inside <= 0.95, inside          # 36 draws at 68 %: 0.53–0.83 holds 95 %
+    assert all(abs(o.z) < 3.0 for o in nb), [(o.seed, o.axis, o.term, o.z) for o in nb]
+    k = {(o.seed, o.axis): o for o in out if o.term == "rate_random_walk"}
+    assert not any(k[s, "y"].present for s in range(1, 7))
+    assert sum(k[s, "z"].present for s in range(1, 7)) >= 5
+    for o in k.values():
+        if o.present and o.truth > 0:
+            assert abs(o.z) < 3.0, (o.seed, o.axis, o.z)
