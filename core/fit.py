@@ -22,7 +22,8 @@ The method (one channel, overlapping or partially overlapping AVAR):
    filter modelled (``filter_corner_hz``), the model is exact from one sample on: the chip
    filters its white noise (``model.lowpass_white_avar``) and its bias-instability (flicker)
    noise (``model.lowpass_flicker_avar``: 0.38× the floor at one sample, 0.80× at two), and
-   nothing is left out at short τ.
+   the fit starts at two samples (``filter_min_m``): the one-sample point depends on the
+   spectrum right at Nyquist, which neither model pins down.
 5. **Presence.** Stepwise likelihood-ratio selection (``_select_terms``): a term is present
    when removing it raises the generalised χ² by at least ``z_present``² (z_present = 2.33:
    a one-sided 1 % level for a coefficient on its boundary θ = 0). Terms left out are
@@ -422,13 +423,14 @@ def fit_noise(
     max_drop: int = 8,
     birge_scale: bool = True,
     rounding_lsb: float | None = None,
+    filter_min_m: int = 2,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
     ``result``: a single-channel ``AllanResult`` (tau, m, stride, var, n, edf, rate_hz) of
     rate data in m/s². ``filter_corner_hz``: model the sensor's low-pass (ADXL355: ODR/4) on
-    the white and the flicker (bias-instability) noise, so the fit starts at one sample,
-    instead of excluding the bent short τ.
+    the white and the flicker (bias-instability) noise, so the fit starts at
+    ``filter_min_m`` samples (2), instead of excluding the bent short τ.
     ``extra``: dicts
     ``{"cause": "sinusoid"|"gauss_markov"|"filter", "params": {...}}``; the nonlinear
     parameter (frequency_hz, T, corner_hz) is fixed, the amplitude-like one (amplitude,
@@ -490,6 +492,12 @@ def fit_noise(
     start = 0
     if filter_corner_hz is None:
         start = _short_tau_cut(p, comps, fitted, rate, drop_z, max_drop)
+    else:
+        # The one-sample point hangs on the spectrum right at Nyquist, where neither the
+        # chip's filter (the datasheet gives only its corner) nor the 1/f model is pinned
+        # down; fitted, it turned a 0.1 % difference there into a false quantization term
+        # on 10 of 10 X/Y axes of 60 h paper-table3 records, none from two samples on.
+        start = int(np.searchsorted(m[keep], filter_min_m))
     idx = np.arange(start, K)
 
     active, z_all, upper = _select_terms(p, idx, A, z_present)

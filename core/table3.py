@@ -127,7 +127,9 @@ def analyse_record(
         ca = an.channels[axis]
         truth = {"velocity_random_walk": config.velocity_random_walk[a],
                  "bias_instability": config.bias_instability[a],
-                 "rate_random_walk": config.rate_random_walk[a]}
+                 "rate_random_walk": config.rate_random_walk[a],
+                 "quantization": config.quantization[a],
+                 "rate_ramp": config.rate_ramp[a]}
         out.append(AxisAnalysis(axis, truth, ca.fit, slope_method(ca.allan), ca.allan))
     return out
 

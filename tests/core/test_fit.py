@@ -128,7 +128,7 @@ def test_filter_bent_short_tau_is_cut_or_modelled() -> None:
     assert _inside(cut.terms["velocity_random_walk"], N)
     assert not cut.terms["quantization"].present
     modelled = fit_noise(res, filter_corner_hz=rate / 4)
-    assert modelled.tau_min_s == pytest.approx(1 / rate)  # with the filter modelled, all kept
+    assert modelled.tau_min_s == pytest.approx(2 / rate)  # filter modelled: from two samples
     assert _inside(modelled.terms["velocity_random_walk"], N)
     assert [k for k, v in modelled.terms.items() if v.present] == ["velocity_random_walk"]
     assert modelled.chi2_dof < 3.0
@@ -214,10 +214,11 @@ def test_errors_name_the_problem() -> None:
         fit_noise(res, extra=[{"cause": "hum"}])
 
 
-def test_filter_is_modelled_on_the_flicker_too_so_the_fit_starts_at_one_sample() -> None:
+def test_filter_is_modelled_on_the_flicker_too_so_the_fit_starts_at_two_samples() -> None:
     """The chip's low-pass filters the bias-instability (flicker) noise as well as the white:
     its AVAR is 0.38× the floor at one sample and 0.80× at two. The fit's B component carries
-    that factor when the filter is modelled, so it fits from τ0 with nothing left out."""
+    that factor when the filter is modelled, so it fits from two samples (the one-sample
+    point hangs on the spectrum at Nyquist, which neither model pins down)."""
     ratio = M.lowpass_flicker_ratio([1, 2, 4, 8, 16, 1024], 125.0, 125.0 / 4)
     assert 0.3 < ratio[0] < 0.4 and 0.75 < ratio[1] < 0.85  # strongly filtered at 1–2 samples
     assert np.all(np.diff(ratio) > 0) and abs(1 - ratio[-1]) < 1e-4
@@ -231,15 +232,19 @@ def test_filter_is_modelled_on_the_flicker_too_so_the_fit_starts_at_one_sample()
     b, a = signal.butter(2, 0.5)
     res = octave_oavar(signal.lfilter(b, a, record(1 << 18, rate, rng, N=N, B=B)), rate)
     fit = fit_noise(res, filter_corner_hz=rate / 4, terms=TERMS[:4])
-    assert fit.tau_min_s == pytest.approx(1 / rate)
+    assert fit.tau_min_s == pytest.approx(2 / rate)
     assert _inside(fit.terms["velocity_random_walk"], N)
     assert _inside(fit.terms["bias_instability"], B)
     assert fit.chi2_dof < 3.0
-    # a model that leaves the flicker unfiltered misfits the first samples: a free white-only
-    # filter component plus the plain flicker term, fitted from τ0, is far worse
+    # from one sample on, where the filter takes 62 % of the flicker AVAR, the model still
+    # fits; one that leaves the flicker unfiltered (a free white-only filter component plus
+    # the plain flicker term) is far worse there
+    one = fit_noise(res, filter_corner_hz=rate / 4, terms=TERMS[:4], filter_min_m=1)
+    assert one.tau_min_s == pytest.approx(1 / rate) and one.chi2_dof < 3.0
+    assert _inside(one.terms["bias_instability"], B)
     wrong = fit_noise(res, terms=("bias_instability",), max_drop=0,
                       extra=[{"cause": "filter", "params": {"corner_hz": rate / 4}}])
-    assert wrong.tau_min_s == pytest.approx(1 / rate) and wrong.chi2_dof > 10 * fit.chi2_dof
+    assert wrong.tau_min_s == pytest.approx(1 / rate) and wrong.chi2_dof > 10 * one.chi2_dof
 
 
 def test_rounding_after_the_filter_is_a_fixed_term_and_n_is_the_output_level() -> None:

@@ -216,6 +216,6 @@ def test_recording_of_the_service_is_analysed_with_its_gap(tmp_path: Path) -> No
     assert an.meta["filter_corner_hz"] == pytest.approx(rate / 4)
     assert an.n_samples == 40 * n_blk
     fit = an.channels["x"].fit
-    assert fit.tau_min_s == pytest.approx(1 / rate)  # filter modelled: nothing cut
+    assert fit.tau_min_s == pytest.approx(2 / rate)  # filter modelled: from two samples
     n = fit.terms["velocity_random_walk"]
     assert abs(n.value - 2e-4) < 4 * (n.hi - n.lo) / 2
