@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import AvardError
+from avard.core.presets import make_config
 from avard.daemon.config import load_config
 
 NAME = "demo"
@@ -170,10 +171,15 @@ def run(args: argparse.Namespace) -> int:
     result = replay.result()
     odr = float(cfg["sensor"]["odr_hz"])
     fits = {}
-    lines = ["", "IEEE noise terms per axis (68 % intervals, SI units):", ""]
+    truth = make_config(args.preset).to_dict()
+    scales = {h.get("scale_m_s2_per_count") for h in record.meta.get("headers", [])}
+    lsb = scales.pop() if len(scales) == 1 else None   # the rounding after the chip filter
+    lines = ["", "IEEE noise terms per axis (68 % intervals, SI units; the simulator's true "
+             "value after each):", ""]
     for c, axis in enumerate(("x", "y", "z")):
         try:
-            fits[axis] = fit_noise(result.channel(c), filter_corner_hz=odr / 4)
+            fits[axis] = fit_noise(result.channel(c), filter_corner_hz=odr / 4,
+                                   rounding_lsb=lsb)
         except AvardError as exc:
             lines.append(f"  {axis}: fit failed: {exc}")
             continue
@@ -181,11 +187,12 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"  axis {axis} (τ {f.tau_min_s:.3g}–{f.tau_max_s:.3g} s, "
                      f"χ²/dof {f.chi2_dof:.2f}):")
         for name, t in f.terms.items():
+            true = _fmt(float(truth[name][c])) if name in truth else "?"
             if t.present:
                 lines.append(f"    {name:22s} {_fmt(t.value)} [{_fmt(t.lo)}, {_fmt(t.hi)}] "
-                             f"{t.unit}")
+                             f"{t.unit}   (simulated {true})")
             else:
-                lines.append(f"    {name:22s} not supported by the data")
+                lines.append(f"    {name:22s} not supported by the data   (simulated {true})")
     say("\n".join(lines) + "\n")
     plot = None if args.no_plot else _plot(out / "adev.png", result, fits)
     _report(out / "report.md", args, st, lst, wall, seconds, rel, lines, record, plot)

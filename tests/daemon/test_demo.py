@@ -16,6 +16,13 @@ def test_demo_short_run_writes_report_and_plot(tmp_path: Path,
     assert "index continuity ok, 0 messages lost" in text
     assert "max relative difference" in text
     assert "velocity_random_walk" in text and "m/s/sqrt(s)" in text
+    # each term is shown next to the simulator's true value, and N comes back within 2 %
+    from avard.core.presets import make_config
+
+    n_true = make_config("quiet-lab").velocity_random_walk[0]
+    n_line = next(ln for ln in text.splitlines() if ln.strip().startswith("velocity_random_walk"))
+    assert f"(simulated {n_true:.3e})" in n_line
+    assert abs(float(n_line.split()[1]) / n_true - 1) < 0.02, n_line
     report = (out / "report.md").read_text()
     assert "recording vs streamed Allan variance" in report
     assert (out / "adev.png").stat().st_size > 10_000
