@@ -512,6 +512,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     if tnames:
         temperature = _hold_on_grid(idx, tnames, temps)
     rates = [float(h["rate_hz"]) for h in headers]
+    scales = {_scale_of(h) for h in headers}
     meta = {
         "format": "avard-recording",
         "files": [str(f) for f in reader.files],
@@ -523,6 +524,8 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "problems": [str(p) for p in reader.problems],
         "dropped_bytes": reader.dropped_bytes,
         "rates_hz": rates,
+        # one LSB for the whole record (m/s²), or None when runs used different ranges
+        "lsb_mps2": scales.pop() if len(scales) == 1 else None,
         "last_avar": last_avar,
         "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
     }

@@ -230,9 +230,8 @@ def _segments(path: str, block: int, rate_hz: float | None
         rec = load_record(p, rate_hz=rate_hz)
         idx = np.asarray(rec.meta.get("index", np.arange(rec.n_samples)))
         cuts = [0, *(np.flatnonzero(np.diff(idx) != 1) + 1).tolist(), rec.n_samples]
-        scales = {h.get("scale_m_s2_per_count") for h in rec.meta.get("headers", [])}
         meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
-                "lsb_mps2": scales.pop() if len(scales) == 1 else None,
+                "lsb_mps2": rec.meta.get("lsb_mps2"),
                 "names": list(rec.names), "temperature_names": list(rec.temperature_names),
                 "source": rec.source, "gaps": rec.meta.get("gaps", []),
                 "n_segments": len(cuts) - 1}

@@ -105,7 +105,7 @@ def analyse_record(
 ) -> list[AxisAnalysis]:
     """Simulate ``hours`` of ``config`` and analyse it exactly as ``avard analyze`` does a
     simulated record (``report.analyze_stream``: streaming Allan accumulator, line search,
-    fit with the chip filter modelled at ODR/4 from one sample on), without writing the
+    fit with the chip filter modelled at ODR/4 from two samples on), without writing the
     record to disk; read each axis with the slope method too."""
     sim = SensorSimulator(config, seed)
     total = n_samples(config, hours)

@@ -172,8 +172,7 @@ def run(args: argparse.Namespace) -> int:
     odr = float(cfg["sensor"]["odr_hz"])
     fits = {}
     truth = make_config(args.preset).to_dict()
-    scales = {h.get("scale_m_s2_per_count") for h in record.meta.get("headers", [])}
-    lsb = scales.pop() if len(scales) == 1 else None   # the rounding after the chip filter
+    lsb = record.meta.get("lsb_mps2")   # the rounding after the chip filter
     lines = ["", "IEEE noise terms per axis (68 % intervals, SI units; the simulator's true "
              "value after each):", ""]
     for c, axis in enumerate(("x", "y", "z")):

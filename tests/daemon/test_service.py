@@ -120,6 +120,8 @@ def test_every_sample_published_and_recorded_once_and_allan_matches(tmp_path: Pa
     record = load_recording(tmp_path / "rec")
     assert record.accel.shape == (st["samples"], 3)
     assert abs(np.mean(record.accel[:, 2]) - 9.80665) < 0.05
+    # one range for the whole run: its LSB, for the analysis's rounding term (±2 g, 20 bit)
+    assert record.meta["lsb_mps2"] == pytest.approx(9.80665 / 256000, rel=0.02)
     assert record.temperature_names == ["chip", *svc.temp_names[1:]]
 
 
