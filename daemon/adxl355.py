@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import errno
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from avard.core.errors import (
@@ -37,6 +38,7 @@ from .timebase import SystemClock
 from .transport import RegisterBus
 
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 A = R.ADDR
 
@@ -252,34 +254,28 @@ class Adxl355:
 
     # -- bus access with retries -----------------------------------------------------------
     def _read(self, addr: int, n: int, *, in_drain: bool = False) -> bytes:
+        return self._retried("read", addr, lambda: self.bus.read(addr, n), in_drain=in_drain)
+
+    def _write(self, addr: int, data: bytes | int) -> None:
+        self._retried("write", addr, lambda: self.bus.write(addr, data))
+
+    def _retried(self, what: str, addr: int, op: Callable[[], _T], *,
+                 in_drain: bool = False) -> _T:
+        """Run one bus transfer, retrying ``self.retries`` times after a BusError; every
+        failure is counted and logged (a drain's failure also marks a gap), the last one is
+        raised."""
         last: BusError | None = None
         for attempt in range(self.retries + 1):
             try:
-                return self.bus.read(addr, n)
+                return op()
             except BusError as exc:
                 last = exc
                 self.bus_errors += 1
                 if in_drain:
                     self._note_gap("bus_error")
                 (log.warning if _often(self.bus_errors) else log.debug)(
-                    "ADXL355 read at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
-                    addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
-                self.clock.sleep(self.retry_delay_s)
-        assert last is not None
-        raise last
-
-    def _write(self, addr: int, data: bytes | int) -> None:
-        last: BusError | None = None
-        for attempt in range(self.retries + 1):
-            try:
-                self.bus.write(addr, data)
-                return
-            except BusError as exc:
-                last = exc
-                self.bus_errors += 1
-                (log.warning if _often(self.bus_errors) else log.debug)(
-                    "ADXL355 write at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
-                    addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
+                    "ADXL355 %s at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
+                    what, addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
                 self.clock.sleep(self.retry_delay_s)
         assert last is not None
         raise last
