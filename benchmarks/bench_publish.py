@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import zmq
@@ -84,23 +85,30 @@ def avard_throughput(n: int, check: bool) -> float:
     return n / dt
 
 
+def _paced(n: int, rate: float) -> Iterator[int]:
+    """0 … n−1, each yielded no earlier than its slot of a fixed ``rate`` (busy wait: a
+    sleep's wake-up jitter would be measured as latency)."""
+    period = 1.0 / rate
+    next_t = time.monotonic()
+    for i in range(n):
+        while time.monotonic() < next_t:
+            pass
+        yield i
+        next_t += period
+
+
 def avard_latency(n: int, rate: float) -> np.ndarray:
     with Publisher(LOCAL, "bench") as pub:
         sub = Subscriber(pub.endpoint, ["raw", "status"]).connect(join=False)
         _connect(pub, sub)
         lat = np.empty(n)
-        period = 1.0 / rate
-        next_t = time.monotonic()
-        for i in range(n):
-            while time.monotonic() < next_t:
-                pass
+        for i in _paced(n, rate):
             rec = _raw(BLOCK * i)
             t_send = time.monotonic()
             pub.publish("raw", rec)
             m = sub.recv(5.0)
             lat[i] = time.monotonic() - t_send
             assert m is not None and m.record["i0"] == BLOCK * i
-            next_t += period
         sub.close()
     return lat
 
@@ -157,16 +165,11 @@ def zmq_throughput(n: int, payload: bytes) -> float:
 def zmq_latency(n: int, rate: float, payload: bytes) -> np.ndarray:
     ctx, pub, sub = _zmq_pair(1000)
     lat = np.empty(n)
-    period = 1.0 / rate
-    next_t = time.monotonic()
-    for i in range(n):
-        while time.monotonic() < next_t:
-            pass
+    for i in _paced(n, rate):
         t_send = time.monotonic()
         pub.send_multipart([b"raw", payload])
         sub.recv_multipart()
         lat[i] = time.monotonic() - t_send
-        next_t += period
     pub.close()
     sub.close()
     ctx.term()
