@@ -186,17 +186,14 @@ def service_latency(odr_hz: float, seconds: float) -> tuple[np.ndarray, dict]:
     import tempfile
 
     from avard.daemon.config import load_config
-    from avard.daemon.service import Service
-    from avard.daemon.simulation import build_simulated
+    from avard.daemon.simulation import simulated_service
 
     with tempfile.TemporaryDirectory() as tmp:
         cfg = load_config(None, **{"recording.data_dir": tmp, "sensor.odr_hz": odr_hz,
                                    "publish.endpoint": "tcp://127.0.0.1:0",
                                    "publish.request_endpoint": "tcp://127.0.0.1:0"})
-        dev, clock, sims, _ = build_simulated(cfg, "quiet-lab", seed=1)
-        svc = Service(cfg, dev, clock, speed=1.0, simulate="quiet-lab", on_tick=sims.on_tick,
-                      extra_temperature_names=list(sims.names))
-        sims.service = svc
+        svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, speed=1.0)
+        clock = svc.clock
         ages: list[float] = []
         box: dict = {"stop": threading.Event()}
 

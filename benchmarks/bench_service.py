@@ -31,8 +31,7 @@ import numpy as np
 from avard.daemon.acquisition import Acquisition
 from avard.daemon.config import effective_poll_hz, load_config
 from avard.daemon.ring import Ring
-from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated
+from avard.daemon.simulation import build_simulated, simulated_service
 from avard.daemon.subscriber import Subscriber
 from avard.daemon.timebase import TimeBase
 
@@ -47,10 +46,8 @@ def _cfg(odr: float, data_dir: str) -> dict:
 def _service_run(odr: float, seconds: float) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as d:
         cfg = _cfg(odr, d)
-        dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=1)
-        svc = Service(cfg, dev, clock, speed=1.0, simulate="quiet-lab", on_tick=sims.on_tick,
-                      extra_temperature_names=list(sims.names))
-        sims.service = svc
+        svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, speed=1.0)
+        clock = svc.clock
         lat: list[float] = []
         got = {"samples": 0, "next": None, "ok": True}
         stop = threading.Event()

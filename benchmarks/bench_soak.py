@@ -162,7 +162,7 @@ def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: 
     from avard.daemon.publisher import Publisher
     from avard.daemon.recorder import FileOps, Recorder
     from avard.daemon.service import Service
-    from avard.daemon.simulation import build_simulated
+    from avard.daemon.simulation import simulated_service
 
     logging.getLogger("avard").setLevel(log_level)
     res = SoakResult(hours=hours)
@@ -189,7 +189,6 @@ def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: 
             return 0 if self.full else super().free_bytes(directory)
 
     disk = Disk() if disk_full else None
-    dev, clock, sims, emu = build_simulated(cfg, "quiet-lab", seed=seed)
     schedule = _Schedule(fault_every_h * 3600.0, end_s, disk)
     published = [0]
 
@@ -210,10 +209,10 @@ def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: 
                         clock=svc.clock.monotonic, wall=svc.clock.monotonic,
                         realtime=svc.clock.realtime, fileops=disk or FileOps())
 
-    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names),
-                  publisher_factory=publisher_factory, recorder_factory=recorder_factory)
-    sims.service = svc
+    svc, sims, emu = simulated_service(cfg, "quiet-lab", seed=seed, speed=None,
+                                       publisher_factory=publisher_factory,
+                                       recorder_factory=recorder_factory)
+    dev, clock = svc.sensor, svc.clock
     ctx = {"svc": svc, "emu": emu, "clock": clock, "sims": sims}
     drain = dev.drain
 

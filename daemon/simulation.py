@@ -12,8 +12,9 @@ reader thread's sleeps, so ``--speed`` never causes overruns from host schedulin
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from avard.core import frames
@@ -21,6 +22,9 @@ from avard.core import frames
 from .adxl355 import Adxl355
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from .transport import SpiBus
+
+if TYPE_CHECKING:
+    from .service import Service
 
 DS18B20_LSB_C = 0.0625
 
@@ -110,3 +114,27 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
     dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
     dev.start()
     return dev, clock, sims, emu
+
+
+def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
+                      after_tick: Callable[[float], None] | None = None,
+                      **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
+    """The service over the simulated rig (``build_simulated``), wired both ways: the reader
+    thread's ticks drive the simulated DS18B20 conversions (then ``after_tick``, a test's or
+    benchmark's hook, if given), and those readings go into this service's ring. The driver
+    and the virtual clock are ``svc.sensor`` and ``svc.clock``. ``service_kw`` go to
+    ``Service`` (speed, notifier, factories, …)."""
+    from .service import Service
+
+    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed)
+
+    def tick(t_mono: float) -> None:
+        sims.on_tick(t_mono)
+        if after_tick is not None:
+            after_tick(t_mono)
+
+    svc = Service(cfg, dev, clock, simulate=preset,
+                  on_tick=sims.on_tick if after_tick is None else tick,
+                  extra_temperature_names=list(sims.names), **service_kw)
+    sims.service = svc
+    return svc, sims, emu

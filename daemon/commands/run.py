@@ -55,19 +55,16 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
     """The service for these arguments: simulated rig or real hardware."""
     if args.simulate:
         from avard.core.presets import PRESETS
-        from avard.daemon.simulation import build_simulated
+        from avard.daemon.simulation import simulated_service
 
         if args.simulate not in PRESETS:
             raise ConfigError(f"--simulate {args.simulate!r}: unknown preset; choose one of "
                               f"{', '.join(sorted(PRESETS))}")
-        dev, clock, sims, _emu = build_simulated(cfg, args.simulate, seed=args.seed)
         speed = 1.0 if args.speed is None else (args.speed or None)
-        svc = Service(cfg, dev, clock, speed=speed, simulate=args.simulate,
-                      on_tick=sims.on_tick, extra_temperature_names=list(sims.names),
-                      notifier=notifier, sensor_info={"device": "ADXL355 (emulated)",
-                                                      "preset": args.simulate},
-                      **service_kw)
-        sims.service = svc
+        svc, _sims, _emu = simulated_service(
+            cfg, args.simulate, seed=args.seed, speed=speed, notifier=notifier,
+            sensor_info={"device": "ADXL355 (emulated)", "preset": args.simulate},
+            **service_kw)
         return svc
     from avard.daemon.adxl355 import Adxl355
     from avard.daemon.timebase import SystemClock

@@ -168,18 +168,14 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     from avard.core.recording import load_recording, replay_allan
     from avard.daemon.commands.record import StreamArchiver
     from avard.daemon.config import load_config
-    from avard.daemon.service import Service
-    from avard.daemon.simulation import build_simulated
+    from avard.daemon.simulation import simulated_service
     from avard.daemon.subscriber import Subscriber
 
     cfg = load_config(None, **{
         "recording.data_dir": str(tmp_path / "rec"),
         "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0",
         "publish.hwm": 1_000_000, "sensor.poll_hz": 1.0, "allan.snapshot_interval_s": 10.0})
-    dev, clock, sims, _ = build_simulated(cfg, "quiet-lab", seed=3)
-    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names))
-    sims.service = svc
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3, speed=None)
     box: dict = {"stop": threading.Event()}
 
     def listen() -> None:

@@ -20,7 +20,7 @@ import pytest
 from avard.core.recording import RecordingReader, load_recording, replay_allan
 from avard.daemon.config import load_config
 from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated
+from avard.daemon.simulation import build_simulated, simulated_service
 from avard.daemon.subscriber import Subscriber
 
 
@@ -64,17 +64,12 @@ class Listener:
 def _run(tmp_path: Path, seconds: float, *, inject: Callable[[Any, float], None] | None = None,
          **cfg_extra: Any) -> tuple[Service, Listener, Any]:
     cfg = _cfg(tmp_path / "rec", **cfg_extra)
-    dev, clock, sims, emu = build_simulated(cfg, "quiet-lab", seed=7)
-
     def tick(t: float) -> None:
-        sims.on_tick(t)
-        if inject is not None:
-            inject(ctx, t - svc.t_start)
+        inject(ctx, t - svc.t_start)
 
-    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=tick,
-                  extra_temperature_names=list(sims.names))
-    sims.service = svc
-    ctx = {"svc": svc, "sims": sims, "emu": emu, "clock": clock}
+    svc, sims, emu = simulated_service(cfg, "quiet-lab", seed=7, speed=None,
+                                       after_tick=None if inject is None else tick)
+    ctx = {"svc": svc, "sims": sims, "emu": emu, "clock": svc.clock}
     box: dict[str, Listener] = {}
     svc.run(seconds, before_acquisition=lambda: box.setdefault("l", Listener(svc)))
     box["l"].finish()
@@ -181,10 +176,7 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
 
 def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
     cfg = _cfg(tmp_path / "rec")
-    dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=3)
-    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names))
-    sims.service = svc
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3, speed=20.0)
     answers: dict[str, Any] = {}
 
     def ask() -> None:
@@ -253,10 +245,7 @@ def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
     sock.settimeout(0.05)
     notifier = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "100000"})  # ping every 50 ms
     cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
-    dev, clock, sims, emu = build_simulated(cfg, "quiet-lab", seed=9)
-    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names), notifier=notifier)
-    sims.service = svc
+    svc, _sims, emu = simulated_service(cfg, "quiet-lab", seed=9, speed=20.0, notifier=notifier)
     stall_at: list[float] = []
 
     def stall() -> None:
@@ -335,15 +324,11 @@ def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: 
         return None
 
     cfg = _cfg(tmp_path / "rec")
-    dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=11)
-
     def tick(t: float) -> None:
-        sims.on_tick(t)
         inject(ctx, t - svc.t_start)
 
-    svc = Service(cfg, dev, clock, speed=None, simulate="quiet-lab", on_tick=tick,
-                  extra_temperature_names=list(sims.names), recorder_factory=recorder)
-    sims.service = svc
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=11, speed=None, after_tick=tick,
+                                         recorder_factory=recorder)
     ctx = {"svc": svc}
     box: dict[str, Listener] = {}
     svc.run(60.0, before_acquisition=lambda: box.setdefault("l", Listener(svc)))
@@ -373,10 +358,7 @@ def test_curve_section_secures_both_sockets_of_the_service(tmp_path: Path) -> No
     cfg = _cfg(tmp_path / "rec", **{"curve.enabled": True,
                                     "curve.server_secret_key_file": str(server_sec),
                                     "curve.authorized_keys_dir": str(auth)})
-    dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=4)
-    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names))
-    sims.service = svc
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=4, speed=20.0)
     got: dict[str, Any] = {}
 
     def clients() -> None:
