@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.systemd.unit_file import parse_unit
+
 REPO = Path(__file__).resolve().parents[2]
 SYSTEMD = REPO / "systemd"
 UNIT = SYSTEMD / "avard.service"
@@ -26,23 +28,6 @@ MAX_EXPOSURE = 2.0
 needs_analyze = pytest.mark.skipif(
     shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed"
 )
-
-
-def parse_unit(text: str) -> dict[str, dict[str, list[str]]]:
-    """Sections → key → every value in order (systemd keys may repeat and accumulate)."""
-    sections: dict[str, dict[str, list[str]]] = {}
-    current: dict[str, list[str]] | None = None
-    for raw in text.splitlines():
-        line = raw.strip()
-        if not line or line[0] in "#;":
-            continue
-        if line.startswith("[") and line.endswith("]"):
-            current = sections.setdefault(line[1:-1], {})
-            continue
-        assert current is not None, f"setting outside a section: {line!r}"
-        key, _, value = line.partition("=")
-        current.setdefault(key.strip(), []).append(value.strip())
-    return sections
 
 
 @pytest.fixture(scope="module")
