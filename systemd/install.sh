@@ -13,7 +13,9 @@
 #   4. /etc/avard/avard.toml from config/avard.toml, only if there is none yet (yours is kept),
 #      with the data directory set to the unit's StateDirectory /var/lib/avard;
 #   5. `avard check-config` on that file, as the avard user, before anything starts;
-#   6. the unit in /etc/systemd/system, daemon-reload, enable (and start unless --no-start).
+#   6. the unit in /etc/systemd/system, daemon-reload, enable (and start unless --no-start);
+#   7. unless --no-start: wait until the unit is active and still up a few seconds later, else
+#      print the last lines of its journal and exit 1.
 # Remove with: systemctl disable --now avard; rm /etc/systemd/system/avard.service
 #   /usr/lib/sysusers.d/avard.conf /usr/lib/tmpfiles.d/avard.conf; rm -r PREFIX
 # (the recording in /var/lib/avard and the config in /etc/avard are left for you).
@@ -22,7 +24,7 @@ set -euo pipefail
 PREFIX=/opt/avard
 START=1
 DRY=0
-usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --prefix) PREFIX="${2:?--prefix needs a directory}"; shift 2 ;;
@@ -103,10 +105,32 @@ if [ "$DRY" -eq 0 ]; then
 fi
 run systemd-analyze verify "$UNIT"
 run systemctl daemon-reload
-if [ "$START" -eq 1 ]; then
-    run systemctl enable --now avard.service
-    echo "avard is running: 'systemctl status avard', 'journalctl -u avard -f'"
-else
-    run systemctl enable avard.service
-    echo "avard is enabled: start it with 'systemctl start avard'"
+run systemctl enable avard.service
+if [ "$DRY" -eq 1 ]; then
+    if [ "$START" -eq 1 ]; then
+        printf '+ %s\n' "systemctl restart avard.service, then check it stays active"
+    fi
+    echo "dry run: nothing was installed, changed or started"
+    exit 0
 fi
+if [ "$START" -eq 0 ]; then
+    echo "avard is enabled: start it with 'systemctl start avard'"
+    exit 0
+fi
+
+# 7. Start and make sure it stays up. Type=notify: `systemctl start` returns once avard sent
+#    READY=1 (samples flow) or failed; a unit that dies right after is caught by the second look.
+start_failed() {
+    echo "install.sh: avard did not start ($1). Last lines of its journal:" >&2
+    journalctl -u avard.service -n 15 --no-pager >&2 || true
+    echo "install.sh: see more with 'journalctl -u avard -b' and 'systemctl status avard'" >&2
+    exit 1
+}
+# A restart (with avard already running) picks up the new venv and unit.
+run systemctl restart avard.service || start_failed "systemctl restart failed"
+main_pid=$(systemctl show -p MainPID --value avard.service)
+sleep 3
+systemctl is-active --quiet avard.service || start_failed "it stopped right after starting"
+[ "$(systemctl show -p MainPID --value avard.service)" = "$main_pid" ] ||
+    start_failed "it was restarted right after starting"
+echo "avard is running: 'systemctl status avard', 'journalctl -u avard -f'"

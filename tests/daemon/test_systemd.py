@@ -302,8 +302,22 @@ def test_install_script_dry_run_lists_every_step_and_changes_nothing(tmp_path):
         "systemctl enable avard.service",
     ):
         assert step in out, step
-    assert "enable --now" not in out
+    assert "systemctl restart" not in out and "enable --now" not in out
+    assert out.rstrip().endswith("dry run: nothing was installed, changed or started")
+    assert "avard is" not in out  # neither "running" nor "enabled": nothing happened
     assert not (tmp_path / "venv").exists()
+
+
+def test_install_script_dry_run_lists_the_start_and_its_check(tmp_path):
+    proc = subprocess.run(
+        ["bash", str(SYSTEMD / "install.sh"), "--dry-run", "--prefix", str(tmp_path / "venv")],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[-2] == "+ systemctl restart avard.service, then check it stays active"
+    assert lines[-1] == "dry run: nothing was installed, changed or started"
+    assert "avard is running" not in proc.stdout
 
 
 def test_install_script_refuses_a_relative_prefix():
