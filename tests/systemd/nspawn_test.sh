@@ -65,8 +65,13 @@ fi
 # The checkout as a user has it (tracked and new files, not .venv or build outputs).
 WORK="$(mktemp -d /tmp/avard-nspawn.XXXXXX)"
 mkdir "$WORK/src"
-git -C "$REPO" ls-files -co --exclude-standard -z |
-    (cd "$REPO" && tar --null -T - -cf -) | tar -xf - -C "$WORK/src"
+if git -C "$REPO" rev-parse --git-dir >/dev/null 2>&1; then
+    git -C "$REPO" ls-files -co --exclude-standard -z |
+        (cd "$REPO" && tar --null -T - -cf -) | tar -xf - -C "$WORK/src"
+else  # an unpacked release, not a git checkout
+    tar -C "$REPO" --exclude=./.venv --exclude=./build --exclude='*.egg-info' \
+        --exclude=__pycache__ -cf - . | tar -xf - -C "$WORK/src"
+fi
 
 MACHINE="avard-test-$$"
 NSPAWN_PID=""

@@ -89,10 +89,3 @@ def spec_from_unit(unit: Unit) -> dict[str, object]:
 def wrap(spec_path: Path, argv: list[str]) -> list[str]:
     """argv run under the sandbox described by the JSON file at spec_path."""
     return [sys.executable, str(SECCOMP_EXEC), str(spec_path), *argv]
-
-
-def mdwe_supported() -> bool:
-    """Whether this kernel has PR_SET_MDWE (Linux ≥ 6.3), which stands in for systemd's
-    MemoryDenyWriteExecute filter."""
-    probe = "import ctypes, sys; sys.exit(ctypes.CDLL(None).prctl(65, 1, 0, 0, 0) != 0)"
-    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0

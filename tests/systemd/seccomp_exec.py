@@ -99,7 +99,12 @@ def apply(spec: dict[str, object]) -> None:
         # The kernel's own W^X rule (Linux ≥ 6.3) does what systemd's mmap/mprotect filter does.
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.prctl(PR_SET_MDWE, PR_MDWE_REFUSE_EXEC_GAIN, 0, 0, 0) != 0:
-            raise OSError(ctypes.get_errno(), "prctl(PR_SET_MDWE)")
+            code = ctypes.get_errno()
+            if code != errno.EINVAL:
+                raise OSError(code, "prctl(PR_SET_MDWE)")
+            # Linux < 6.3: the system-call filters still apply; say what is not checked.
+            print("seccomp_exec: no PR_SET_MDWE in this kernel, W^X not enforced",
+                  file=sys.stderr)
     lib = load_libseccomp()
     filters: list[Filter] = []
 
