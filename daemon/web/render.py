@@ -382,8 +382,6 @@ def temperatures_html(state: RunState) -> str:
 def status_html(state: RunState) -> str:
     st, stats = state.status, state.stats
     ppm = state.rate_ppm
-    tb = state.header.get("timebase") if isinstance(state.header.get("timebase"), dict) else {}
-    ppm_u = tb.get("ppm_u") if isinstance(tb, dict) else None
     rate = st.get("rate_hz")
     disk = st.get("disk") if isinstance(st.get("disk"), dict) else {}
     gaps = sum(state.gaps_by_reason.values())
@@ -393,12 +391,11 @@ def status_html(state: RunState) -> str:
          + (f" <small>({len(state.runs)} runs seen)</small>" if len(state.runs) > 1 else "")),
         ("samples", f"{st.get('samples', '—')} in this run; {stats.samples_received} "
                     f"received here"),
-        ("rate", (f"{rate:.6g} Hz fitted ODR, {ppm:+.1f}"
-                  + (f" ± {ppm_u:.1g}" if isinstance(ppm_u, int | float) else "")
-                  + " ppm from nominal") if isinstance(rate, int | float) and ppm is not None
-         else "pending"),
-        ("gaps", f'<span class="{"bad" if gaps else "good"}">{gaps} gaps, {gap_s:.3g} s '
-                 f"lost in the service</span>; overruns {st.get('overruns', '—')}, bus errors "
+        ("rate", f"{rate:.6g} Hz fitted ODR, {ppm:+.1f} ppm from nominal"
+         if isinstance(rate, int | float) and ppm is not None else "pending"),
+        ("gaps", f'<span class="{"bad" if gaps else "good"}">{gaps} '
+                 f'gap{"" if gaps == 1 else "s"}, {gap_s:.3g} s of samples missing</span>; '
+                 "overruns {st.get('overruns', '—')}, bus errors "
                  f"{st.get('bus_errors', '—')}, clock steps {st.get('clock_steps', '—')}"),
         ("this link", f"{stats.messages_lost} messages and {stats.samples_lost} samples lost "
                       f"between service and this page; {stats.samples_unexplained} "

@@ -125,6 +125,8 @@ class RunState:
     version: int = 0           # bumped on every change a viewer should see
     stats: StreamStats = field(default_factory=StreamStats)
     _next_chip_t: float = -math.inf
+    _prev_run_end: int | None = None      # the old run's last index, until the new run's
+    _restart_gap_seen: bool = False       # first raw block (or gap record) settles it
 
     # ---- the run's clock --------------------------------------------------------------------
 
@@ -186,10 +188,14 @@ class RunState:
                 self.stats = stats
             self._note_run(str(rec.get("run", "")))
             kind = rec.get("kind")
+            if kind == "gap" and rec.get("reason") == "restart":
+                self._restart_gap_seen = True
             i0 = rec.get("i0")
             if isinstance(i0, int):
                 end = i0 + int(rec.get("n", 0) or 0) if kind in ("raw", "gap") else i0
                 self.last_index = max(self.last_index, end)
+            if kind == "raw" and self._prev_run_end is not None:
+                self._restart_between_runs(rec)
             if kind == "raw":
                 chip = rec.get("chip_temp_c")
                 if isinstance(chip, int | float):
@@ -220,7 +226,24 @@ class RunState:
                 self.timeline.append(TimelineItem("event", "new run", self.run_time(None),
                                                   run=run, detail=f"run {run}"))
                 self.events_by_name["new run"] += 1
+                self._prev_run_end, self._restart_gap_seen = self.last_index, False
             self.runs.append(run)
+
+    def _restart_between_runs(self, rec: dict[str, Any]) -> None:
+        """The first raw block of a new run: if the service's ``restart`` gap record did not
+        reach us (it is published the moment the new run's socket binds, before a subscriber
+        can reconnect), the samples between the runs become a ``restart`` gap here."""
+        prev, self._prev_run_end = self._prev_run_end, None
+        if self._restart_gap_seen or prev is None or rec["i0"] < prev:
+            return
+        n = int(rec["i0"]) - prev
+        self.gaps_by_reason["restart"] += 1
+        self.gap_samples_by_reason["restart"] += n
+        self.timeline.append(TimelineItem(
+            "gap", "restart", self.run_time(prev), samples=n, run=str(rec.get("run", "")),
+            detail=f"{n} samples ({n / (self.nominal_odr_hz or 1.0):.3g} s) between the "
+                   "runs not seen here (service restart; its gap record came before this "
+                   "server reconnected)"))
 
     def _temperature(self, name: str, t: float, value: Any) -> None:
         ok = isinstance(value, int | float) and math.isfinite(value)
