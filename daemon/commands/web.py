@@ -91,6 +91,11 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     from avard.daemon.web.feed import Feed
     from avard.daemon.web.state import RunState
 
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
     state = RunState()
     feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,  # type: ignore[arg-type]
                 fit_interval_s=args.fit_interval)
@@ -113,11 +118,6 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
         log.warning("serving http://%s:%d/ on %s as asked: reachable from the network, "
                     "read-only, no authentication", shown, bound, host)
     feed.start()
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        with contextlib.suppress(NotImplementedError, RuntimeError):
-            loop.add_signal_handler(sig, stop.set)
     try:
         while not stop.is_set():
             if feed.error is not None:

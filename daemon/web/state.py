@@ -53,16 +53,16 @@ class Series:
         self.x: list[float] = []
         self.y: list[float] = []
         self._stride = 1
-        self._skip = 0
+        self._count = 0     # points offered so far; point k is kept while k % stride == 0
 
     def append(self, x: float, y: float) -> None:
-        self._skip += 1
-        if self._skip < self._stride:
+        k, self._count = self._count, self._count + 1
+        if k % self._stride:
             return
-        self._skip = 0
         self.x.append(x)
         self.y.append(y)
         if len(self.x) >= self.max_points:
+            # the kept points are k = 0, s, 2s, …: every other one is k = 0, 2s, 4s, …
             self.x, self.y = self.x[::2], self.y[::2]
             self._stride *= 2
 
