@@ -67,7 +67,7 @@ class Hub:
     viewers: int = 0
     seq: int = 0
     _seen_version: int = -1
-    _common: dict[str, str] = field(default_factory=dict)
+    common: dict[str, str] = field(default_factory=dict)
     _by_target: dict[float, bytes] = field(default_factory=dict)
     _cond: asyncio.Condition | None = None
     closing: bool = False
@@ -83,10 +83,7 @@ class Hub:
             if self.state.version == self._seen_version:
                 return False
             self._seen_version = self.state.version
-            self._common = {"status": render.status_html(self.state),
-                            "adev": render.adev_html(self.state),
-                            "temps": render.temperatures_html(self.state),
-                            "timeline": render.timeline_html(self.state)}
+            self.common = render.common_fragments(self.state)
             self._by_target = {}
             self.seq += 1
             return True
@@ -95,11 +92,10 @@ class Hub:
         """The SSE ``update`` event of the current version for this target."""
         data = self._by_target.get(target)
         if data is None:
-            if not self._common:
+            if not self.common:
                 self.refresh()
             with self.state.lock:
-                parts = dict(self._common, fit=render.fit_html(self.state, target),
-                             targets=render.targets_html(self.state, target))
+                parts = {**self.common, **render.target_fragments(self.state, target)}
             data = f"event: update\ndata: {json.dumps(parts)}\n\n".encode()
             self._by_target[target] = data
         return data
@@ -134,8 +130,7 @@ class Hub:
 def page_html(state: RunState, hub: Hub, target: float, endpoint: str) -> str:
     hub.payload(target)  # renders what is missing
     with state.lock:
-        parts = dict(hub._common, fit=render.fit_html(state, target),
-                     targets=render.targets_html(state, target))
+        parts = {**hub.common, **render.target_fragments(state, target)}
     sections = [
         ("status", "Status", ""),
         ("adev", "Allan deviation", ""),
@@ -166,6 +161,12 @@ def _target_form(target: float) -> str:
     return (f'<form class="target" method="get" action="/"><label>target ±<input '
             f'name="target" type="number" min="0.1" max="100" step="any" '
             f'value="{100 * target:.3g}"> %</label> <button type="submit">set</button></form>')
+
+
+def _report_end(task: asyncio.Task[None]) -> None:
+    """The hub's timer must not die unnoticed (pages would silently stop updating)."""
+    if not task.cancelled() and task.exception() is not None:
+        log.error("live updates stopped: %r", task.exception())
 
 
 @web.middleware
@@ -236,6 +237,7 @@ def make_app(state: RunState, hub: Hub, *, endpoint: str = "") -> web.Applicatio
 
     async def start_hub(_app: web.Application) -> Any:
         task = asyncio.create_task(hub.run())
+        task.add_done_callback(_report_end)
         yield
         await hub.close()
         task.cancel()

@@ -13,9 +13,10 @@ element they fill.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from html import escape
 from typing import Any
 
@@ -24,6 +25,8 @@ from avard.core.model import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 
 from .state import RunState, Series, Snapshot
+
+log = logging.getLogger(__name__)
 
 AXES = ("x", "y", "z")
 #: Colour per channel (colour-blind-safe Okabe–Ito palette).
@@ -37,9 +40,32 @@ ML, MR, MT, MB = 74, 16, 14, 46  # margins: left, right, top, bottom
 
 def fragments(state: RunState, target: float) -> dict[str, str]:
     """Every fragment of the page (id → HTML)."""
-    return {"status": status_html(state), "adev": adev_html(state),
-            "fit": fit_html(state, target), "targets": targets_html(state, target),
-            "temps": temperatures_html(state), "timeline": timeline_html(state)}
+    return {**common_fragments(state), **target_fragments(state, target)}
+
+
+def common_fragments(state: RunState) -> dict[str, str]:
+    """The fragments every viewer shares."""
+    return {"status": guarded(status_html, state), "adev": guarded(adev_html, state),
+            "temps": guarded(temperatures_html, state),
+            "timeline": guarded(timeline_html, state)}
+
+
+def target_fragments(state: RunState, target: float) -> dict[str, str]:
+    """The fragments that depend on the viewer's target."""
+    return {"fit": guarded(fit_html, state, target),
+            "targets": guarded(targets_html, state, target)}
+
+
+def guarded(part: Callable[..., str], *args: Any) -> str:
+    """One fragment; data from a newer or broken service must not end the page (the other
+    fragments and later updates go on), so a failure becomes a line in its place."""
+    try:
+        return part(*args)
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError,
+            ArithmeticError) as exc:
+        log.warning("cannot draw %s: %s: %s", part.__name__, type(exc).__name__, exc)
+        return (f'<p class="waiting">Cannot draw this from the data received '
+                f"({escape(type(exc).__name__)}: {escape(str(exc))}).</p>")
 
 
 # ---- numbers ------------------------------------------------------------------------------

@@ -168,8 +168,9 @@ class RunState:
     def set_snapshot(self, record: dict[str, Any]) -> None:
         """An ``avar`` record (or the request socket's answer, the same record)."""
         snap = record.get("snapshot")
-        if not isinstance(snap, dict) or "tau" not in snap:
-            return
+        if not isinstance(snap, dict) or not isinstance(snap.get("tau"), list | np.ndarray) \
+                or len(snap["tau"]) == 0:
+            return  # not a snapshot, or one without any τ yet (the service's first)
         with self.lock:
             try:
                 self.snapshot = _snapshot(snap, self.clock())

@@ -128,6 +128,25 @@ def test_an_unreadable_snapshot_is_ignored_not_fatal():
     assert state.snapshot is not None and state.snapshot.n_samples == 20000
 
 
+def test_the_services_first_snapshot_without_any_tau_is_not_drawn():
+    state = RunState()
+    first = StreamingAllan(4, RATE, names=["x", "y", "z", "chip"])
+    first.update(np.zeros((1, 4)))
+    state.set_snapshot({"snapshot": first.snapshot().to_dict()})
+    assert state.snapshot is None
+    assert "No Allan snapshot yet" in render.adev_html(state)
+
+
+def test_a_fragment_that_cannot_be_drawn_says_so_and_the_rest_of_the_page_stays():
+    state = RunState()
+    snap = snapshot_dict()
+    snap["avar"] = [row[:2] for row in snap["avar"]]  # two columns for x, y, z, chip
+    state.set_snapshot({"snapshot": snap})
+    parts = render.fragments(state, 0.1)
+    assert "Cannot draw this" in parts["adev"] and "IndexError" in parts["adev"]
+    assert "Cannot draw this" not in parts["status"] + parts["timeline"]
+
+
 # ---- rendering -------------------------------------------------------------------------------
 
 
