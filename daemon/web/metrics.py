@@ -29,7 +29,7 @@ class _Writer:
         self.lines: list[str] = []
 
     def metric(self, name: str, kind: str, help_text: str,
-               samples: list[tuple[dict[str, Any], float]]) -> None:
+               samples: list[tuple[dict[str, Any], Any]]) -> None:
         samples = [(lab, float(v)) for lab, v in samples
                    if isinstance(v, int | float) and math.isfinite(v)]
         if not samples:

@@ -421,7 +421,7 @@ def status_html(state: RunState) -> str:
          if isinstance(rate, int | float) and ppm is not None else "pending"),
         ("gaps", f'<span class="{"bad" if gaps else "good"}">{gaps} '
                  f'gap{"" if gaps == 1 else "s"}, {gap_s:.3g} s of samples missing</span>; '
-                 "overruns {st.get('overruns', '—')}, bus errors "
+                 f"overruns {st.get('overruns', '—')}, bus errors "
                  f"{st.get('bus_errors', '—')}, clock steps {st.get('clock_steps', '—')}"),
         ("this link", f"{stats.messages_lost} messages and {stats.samples_lost} samples lost "
                       f"between service and this page; {stats.samples_unexplained} "

@@ -147,6 +147,23 @@ def test_a_fragment_that_cannot_be_drawn_says_so_and_the_rest_of_the_page_stays(
     assert "Cannot draw this" not in parts["status"] + parts["timeline"]
 
 
+def test_status_shows_the_services_counts_and_the_rate_offset():
+    state = RunState()
+    state.join({"run": RUN, "nominal_odr_hz": RATE}, None)
+    feed(state, [("status", frames.status_record(
+        RUN, 0, {"run": RUN, "samples": 12345, "rate_hz": 124.9, "overruns": 3,
+                 "bus_errors": 4, "clock_steps": 5, "subscribers": 6, "sim_time_s": 7200.0,
+                 "disk": {"state": "writing", "free_bytes": 2.5e9, "bytes": 1.2e6}},
+        0.0, 1e9)),
+        ("event", frames.gap_record(RUN, 0, 100, 250, 0.0, 1e9, "overrun"))])
+    text = re.sub(r"<[^>]+>", " ", render.status_html(state))
+    for want in ("12345 in this run", "-800.0 ppm from nominal", "overruns 3", "bus errors 4",
+                 "clock steps 5", "6 on the service", "2.5 GB free", "service 2.0 h",
+                 "1 gap, 2 s of samples missing"):
+        assert want in text, (want, text)
+    assert "{" not in text
+
+
 # ---- rendering -------------------------------------------------------------------------------
 
 
