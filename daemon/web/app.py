@@ -6,7 +6,8 @@ Routes (GET/HEAD only — the page controls nothing; any other method gets 405):
   JavaScript) sees the run so far at once; ``?target=P`` sets the target interval half-width
   in percent for the time-to-target tables;
 * ``/events``: server-sent events; every ``refresh_s`` with news, one ``update`` event whose
-  data is a JSON map fragment id → HTML (``static/app.js`` swaps them in);
+  data is a JSON map fragment id → HTML (``static/app.js`` swaps them in): all fragments
+  first, then those that changed;
 * ``/metrics``: Prometheus text format (:mod:`.metrics`);
 * ``/state.json``: a few numbers for scripts and tests;
 * ``/static/…``: the page's own script and style (nothing is loaded from elsewhere; the
@@ -60,17 +61,25 @@ def parse_target(query: Any) -> float:
 
 @dataclass
 class Hub:
-    """Renders the state's fragments when it changed and hands them to every viewer."""
+    """Renders the state's fragments when it changed and hands them to every viewer.
+
+    A viewer that has the previous version gets only the fragments that changed since (the
+    ADEV plot and the tables change with a snapshot, every 10 s by default; status and
+    temperatures every second); one that joined or fell behind gets them all.
+    """
 
     state: RunState
     refresh_s: float = 1.0
     viewers: int = 0
     seq: int = 0
-    _seen_version: int = -1
     common: dict[str, str] = field(default_factory=dict)
-    _by_target: dict[float, bytes] = field(default_factory=dict)
-    _cond: asyncio.Condition | None = None
     closing: bool = False
+    _seen_version: int = -1
+    _changed: set[str] = field(default_factory=set)
+    # target → (seq it was rendered at, its fragments, which of them changed from seq − 1)
+    _targets: dict[float, tuple[int, dict[str, str], set[str]]] = field(default_factory=dict)
+    _cache: dict[tuple[float, bool], bytes] = field(default_factory=dict)
+    _cond: asyncio.Condition | None = None
 
     def condition(self) -> asyncio.Condition:
         if self._cond is None:
@@ -83,21 +92,43 @@ class Hub:
             if self.state.version == self._seen_version:
                 return False
             self._seen_version = self.state.version
-            self.common = render.common_fragments(self.state)
-            self._by_target = {}
-            self.seq += 1
-            return True
+            new = render.common_fragments(self.state)
+        self._changed = {k for k, v in new.items() if self.common.get(k) != v}
+        self.common = new
+        self._cache = {}
+        self.seq += 1
+        # targets nobody asked for since the previous version are forgotten (bounded memory)
+        self._targets = {t: v for t, v in self._targets.items() if v[0] >= self.seq - 1}
+        return True
 
-    def payload(self, target: float) -> bytes:
-        """The SSE ``update`` event of the current version for this target."""
-        data = self._by_target.get(target)
+    def target_parts(self, target: float) -> tuple[dict[str, str], set[str]]:
+        """This version's fragments for ``target`` and those that changed from the last."""
+        seq, parts, changed = self._targets.get(target, (-1, {}, set()))
+        if seq != self.seq:
+            with self.state.lock:
+                new = render.target_fragments(self.state, target)
+            changed = ({k for k, v in new.items() if parts.get(k) != v}
+                       if seq == self.seq - 1 else set(new))
+            parts = new
+            self._targets[target] = (self.seq, parts, changed)
+        return parts, changed
+
+    def payload(self, target: float, *, delta: bool = False) -> bytes:
+        """The SSE ``update`` event of the current version for this target: every fragment,
+        or (``delta``) those changed since the previous version; b"" when none did."""
+        key = (target, delta)
+        data = self._cache.get(key)
         if data is None:
             if not self.common:
                 self.refresh()
-            with self.state.lock:
-                parts = {**self.common, **render.target_fragments(self.state, target)}
-            data = f"event: update\ndata: {json.dumps(parts)}\n\n".encode()
-            self._by_target[target] = data
+            tparts, tchanged = self.target_parts(target)
+            if delta:
+                parts = {**{k: self.common[k] for k in self._changed},
+                         **{k: tparts[k] for k in tchanged}}
+            else:
+                parts = {**self.common, **tparts}
+            data = f"event: update\ndata: {json.dumps(parts)}\n\n".encode() if parts else b""
+            self._cache[key] = data
         return data
 
     async def run(self) -> None:
@@ -129,8 +160,7 @@ class Hub:
 
 def page_html(state: RunState, hub: Hub, target: float, endpoint: str) -> str:
     hub.payload(target)  # renders what is missing
-    with state.lock:
-        parts = {**hub.common, **render.target_fragments(state, target)}
+    parts = {**hub.common, **hub.target_parts(target)[0]}
     sections = [
         ("status", "Status", ""),
         ("adev", "Allan deviation", ""),
@@ -200,8 +230,10 @@ def make_app(state: RunState, hub: Hub, *, endpoint: str = "") -> web.Applicatio
             seen = -1
             while not hub.closing:
                 if hub.seq != seen:
-                    seen = hub.seq
-                    await resp.write(hub.payload(target))
+                    delta, seen = seen == hub.seq - 1, hub.seq
+                    data = hub.payload(target, delta=delta)
+                    if data:
+                        await resp.write(data)
                 elif not await hub.wait(seen, KEEPALIVE_S):
                     await resp.write(b": keep-alive\n\n")
         except (ConnectionResetError, ConnectionError):

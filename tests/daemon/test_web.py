@@ -327,6 +327,7 @@ def test_http_routes_are_read_only_self_contained_and_stream_updates():
         feed(state, [("event", frames.gap_record(RUN, 0, 250, 9, 0.0, 1e9, "overrun"))])
         second = await _next_event(resp)
         assert "overrun" in second["timeline"] and "overrun" not in first["timeline"]
+        assert "adev" not in second and "targets" not in second  # only what changed
         resp.close()
 
     _serve(state, check)
