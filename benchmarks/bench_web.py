@@ -180,9 +180,15 @@ def main(argv: list[str]) -> int:
                     help="simulated time per real second (default 1: real time)")
     ap.add_argument("--warmup", type=float, default=15.0,
                     help="seconds before measuring (first snapshot and fit; default 15)")
+    ap.add_argument("--fit-interval", type=float, default=10.0, metavar="S",
+                    help="avard web --fit-interval (default 10: every snapshot, so both "
+                         "phases fit equally often)")
+    ap.add_argument("--no-fit", action="store_true",
+                    help="avard web --no-fit: what the viewers cost, without the fits")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="avard-bench-web-") as tmp:
-        rig = WebRig(Path(tmp), speed=args.speed, web_args=("--fit-interval", "60"))
+        web_args = ("--no-fit",) if args.no_fit else ("--fit-interval", str(args.fit_interval))
+        rig = WebRig(Path(tmp), speed=args.speed, web_args=web_args)
         sub = Subscriber(f"tcp://127.0.0.1:{rig.pub}",
                          request_endpoint=f"tcp://127.0.0.1:{rig.req}", request_timeout_s=15)
         try:
@@ -196,7 +202,8 @@ def main(argv: list[str]) -> int:
             sub.close()
             rig.close()
     print(f"avard web under load: {args.seconds:g} s per phase, service at {args.speed:g}× "
-          f"real time (quiet-lab, 125 Hz); CPU in s per s of wall time (1.0 = one core)")
+          f"real time (quiet-lab, 125 Hz), web {' '.join(web_args)}; CPU in s per s of wall "
+          "time (1.0 = one core)")
     print(format_table(phases))
     load = phases[-1]
     print(f"page size {load.page_bytes} bytes; viewer errors: {load.errors or 'none'}")

@@ -32,6 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_client_arguments(parser)
     # joining asks the service for its snapshot, which it fits on demand (seconds on a Pi)
     parser.set_defaults(timeout=15.0)
+    for action in parser._actions:  # argparse has no public way to change a shared help
+        if action.dest == "timeout":
+            action.help = ("seconds to wait for a request reply (default 15: the service "
+                           "fits the snapshot it is asked for)")
     parser.add_argument("--listen", default="127.0.0.1:8080", metavar="HOST:PORT",
                         help="address to serve on (default 127.0.0.1:8080: this machine only; "
                              "0.0.0.0:8080 serves the lab network)")
