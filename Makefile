@@ -17,7 +17,7 @@ $(VENV)/.installed-run: pyproject.toml | $(VENV)/bin/python
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(VENV)/bin/python
-	$(PY) -m pip install -q -e '.[test,plot]'
+	$(PY) -m pip install -q -e '.[test,plot,web]'
 	@touch $@ $(VENV)/.installed-run
 
 demo: $(VENV)/.installed-run

@@ -1,0 +1,121 @@
+"""The threads behind the page: the subscriber that fills :class:`RunState`, and the fitter.
+
+:class:`Feed` owns one :class:`~avard.daemon.subscriber.Subscriber` (the same one ``avard
+watch`` and ``avard record`` use; ZeroMQ sockets stay in this one thread) and hands every
+decoded message to the state. A second thread fits the newest Allan snapshot with
+:func:`avard.daemon.commands.watch.fit_snapshot` — seconds of CPU for three axes, so at most
+every ``fit_interval_s`` and never on the web server's event loop. Both threads wait on
+work (a socket poll, an event), never spin.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from avard.core.errors import NetworkError
+from avard.daemon.subscriber import Subscriber
+
+from .state import RunState, Snapshot
+
+log = logging.getLogger(__name__)
+
+#: Seconds between asks for the run header while the service has not given one.
+HEADER_RETRY_S = 10.0
+
+FitFn = Callable[[dict[str, Any]], dict[str, Any]]
+
+
+class Feed:
+    """Subscriber thread + fitter thread over one :class:`RunState`."""
+
+    def __init__(self, sub: Subscriber, state: RunState, *, fit: FitFn | None,
+                 fit_interval_s: float = 60.0) -> None:
+        self.sub = sub
+        self.state = state
+        self.fit = fit
+        self.fit_interval_s = fit_interval_s
+        self._stop = threading.Event()
+        self._snapshot_arrived = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self.error: BaseException | None = None
+
+    def start(self) -> None:
+        self._threads = [threading.Thread(target=self._read, name="avard-web-sub", daemon=True)]
+        if self.fit is not None:
+            self._threads.append(threading.Thread(target=self._fit_loop, name="avard-web-fit",
+                                                  daemon=True))
+        for t in self._threads:
+            t.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        self._snapshot_arrived.set()
+        for t in self._threads:
+            t.join(timeout)
+
+    # ---- subscriber thread --------------------------------------------------------------
+
+    def _read(self) -> None:
+        try:
+            self.sub.connect()  # subscribes, then asks for snapshot and header (logged if not)
+            self.state.join(self.sub.header, self.sub.snapshot)
+            if self.sub.snapshot:
+                self._snapshot_arrived.set()
+            next_header: float | None = None if self.sub.header else time.monotonic()
+            while not self._stop.is_set():
+                msg = self.sub.recv(0.2)
+                if msg is not None:
+                    self.state.update(msg, self.sub.stats)
+                    if msg.record.get("kind") == "avar":
+                        self._snapshot_arrived.set()
+                    if msg.new_run and self.state.runs and len(self.state.runs) > 1:
+                        next_header = 0.0  # a restarted service has a new header
+                if next_header is not None and time.monotonic() >= next_header:
+                    next_header = self._ask_header()
+        except Exception as exc:  # any failure: the server reports it and exits 1
+            log.exception("the subscriber thread stopped")
+            self.error = exc
+        finally:
+            self.sub.close()
+
+    def _ask_header(self) -> float | None:
+        """Ask for the run header; None when done, else the time to ask again."""
+        if self.state.header and self.state.header.get("run") == self.sub.stats.run:
+            return None
+        try:
+            header = self.sub.request("header")
+        except NetworkError as exc:
+            log.info("no run header yet: %s", exc)
+            return time.monotonic() + HEADER_RETRY_S
+        self.state.join(header, None)
+        return None
+
+    # ---- fitter thread ------------------------------------------------------------------
+
+    def _fit_loop(self) -> None:
+        assert self.fit is not None
+        last = -float("inf")
+        while not self._stop.is_set():
+            self._snapshot_arrived.wait()
+            if self._stop.is_set():
+                break
+            wait = last + self.fit_interval_s - time.monotonic()
+            if wait > 0 and self._stop.wait(wait):
+                break
+            self._snapshot_arrived.clear()
+            snap: Snapshot | None = self.state.fit_due()
+            if snap is None:
+                continue
+            last = time.monotonic()
+            try:
+                fits = self.fit(snap.data)
+            except (ArithmeticError, ValueError) as exc:  # a failed fit must not end the page
+                log.warning("fitting the snapshot of %d samples failed: %s", snap.n_samples,
+                            exc)
+                continue
+            log.debug("fitted %d samples in %.2f s", snap.n_samples, time.monotonic() - last)
+            self.state.set_fits(fits, snap)
