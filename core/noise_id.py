@@ -28,8 +28,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataError
 
-__all__ = ["Lag1Ladder", "alpha_from_b1", "alpha_from_lag1", "alpha_from_slope", "b1_theory",
-           "identify_alpha", "lag1_acf"]
+__all__ = [
+    "Lag1Ladder",
+    "alpha_from_b1",
+    "alpha_from_lag1",
+    "alpha_from_slope",
+    "b1_theory",
+    "identify_alpha",
+    "lag1_acf",
+    "row_products",
+]
 
 # Riley & Greenhall: below this many (averaged) points the lag-1 ACF is too noisy to use.
 MIN_POINTS = 30
@@ -167,6 +175,24 @@ def alpha_from_b1(b1: float, n: int) -> int | None:
     return None
 
 
+def row_products(a: NDArray, b: NDArray, cross: bool = True) -> NDArray[np.float64]:
+    """(C, C) matrix of Σ_t a[i, t]·b[j, t] for channel-major (C, L) arrays, as dot products of
+    rows: for a few channels this is several times faster than a (C×L)·(L×C) matrix product
+    (measured 30 µs against 100 µs for 3 × 8192), and exactly symmetric when a is b. With
+    ``cross=False`` only the diagonal is computed (zeros elsewhere)."""
+    c = a.shape[0]
+    if not cross:
+        return np.diag([float(np.dot(a[i], b[i])) for i in range(c)])
+    out = np.empty((c, c))
+    for i in range(c):
+        for j in range(c):
+            if a is b and j < i:
+                out[i, j] = out[j, i]
+            else:
+                out[i, j] = float(np.dot(a[i], b[j]))
+    return out
+
+
 class Lag1Ladder:
     """Running sums for Stable32's noise identification of one τ, C channels at once.
 
@@ -183,10 +209,11 @@ class Lag1Ladder:
 
     FIELDS = ("n", "s", "s2", "np", "p", "left", "right")
 
-    def __init__(self, n_channels: int, dmax: int = 2) -> None:
+    def __init__(self, n_channels: int, dmax: int = 2, *, cross: bool = True) -> None:
         c = int(n_channels)
         self.c = c
         self.dmax = int(dmax)
+        self.cross = bool(cross)  # keep channel cross products (needed by ``weighted``)
         orders = self.dmax + 1
         self.n = np.zeros(orders, dtype=np.int64)
         self.np = np.zeros(orders, dtype=np.int64)
@@ -201,26 +228,45 @@ class Lag1Ladder:
     def push(self, values: NDArray) -> None:
         """Add the next averages (k, C) of the current segment, oldest first."""
         z = np.asarray(values, dtype=np.float64).reshape(-1, self.c)
-        if z.shape[0] == 0:
+        self.push_rows(np.ascontiguousarray(z.T))
+
+    def push_rows(self, values: NDArray) -> None:
+        """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
+        sums of products are dot products of rows (the cheapest form for small C)."""
+        z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
+        if z.shape[1] == 0:
             return
         if self.ref is None:
-            self.ref = z[0].copy()
-        z = z - self.ref
+            self.ref = z[:, 0].copy()
+        z = z - self.ref[:, None]
         for k in range(self.dmax + 1):
-            if z.shape[0] == 0:
+            count = z.shape[1]
+            if count == 0:
                 return
             tail = self._tail[k]
-            full = z if tail is None else np.concatenate([tail[None, :], z])
-            self.n[k] += z.shape[0]
-            self.s[k] += z.sum(axis=0)
-            self.s2[k] += z.T @ z
-            if full.shape[0] > 1:
-                self.np[k] += full.shape[0] - 1
-                self.p[k] += full[:-1].T @ full[1:]
-                self.left[k] += full[:-1].sum(axis=0)
-                self.right[k] += full[1:].sum(axis=0)
-            self._tail[k] = full[-1].copy()
-            z = np.diff(full, axis=0)
+            total = z.sum(axis=1)
+            self.n[k] += count
+            self.s[k] += total
+            self.s2[k] += row_products(z, z, self.cross)
+            # adjacent pairs of [tail, z] without building it: those inside z, and (tail, z0)
+            pairs = count - 1 + (tail is not None)
+            if pairs:
+                self.np[k] += pairs
+                self.right[k] += total if tail is not None else total - z[:, 0]
+                self.left[k] += total - z[:, -1] + (tail if tail is not None else 0.0)
+                if count > 1:
+                    self.p[k] += row_products(z[:, :-1], z[:, 1:], self.cross)
+                if tail is not None:
+                    self.p[k] += (np.outer(tail, z[:, 0]) if self.cross
+                                  else np.diag(tail * z[:, 0]))
+            self._tail[k] = z[:, -1].copy()
+            if k == self.dmax:
+                return
+            nxt = np.empty((self.c, pairs))
+            if tail is not None:
+                nxt[:, 0] = z[:, 0] - tail
+            np.subtract(z[:, 1:], z[:, :-1], out=nxt[:, pairs - (count - 1):])
+            z = nxt
 
     def gap(self) -> None:
         """End the segment: no pair and no difference spans what follows."""
@@ -232,10 +278,11 @@ class Lag1Ladder:
             # re-reference the other's order-0 sums: z' = z + (ref_o − ref_s) = z + h
             h = other.ref - self.ref
             n, np_ = other.n[0], other.np[0]
-            self.s2[0] += (other.s2[0] + np.outer(other.s[0], h) + np.outer(h, other.s[0])
-                           + n * np.outer(h, h))
-            self.p[0] += (other.p[0] + np.outer(other.left[0], h)
-                          + np.outer(h, other.right[0]) + np_ * np.outer(h, h))
+            keep = np.ones((self.c, self.c)) if self.cross else np.eye(self.c)
+            self.s2[0] += keep * (other.s2[0] + np.outer(other.s[0], h)
+                                  + np.outer(h, other.s[0]) + n * np.outer(h, h))
+            self.p[0] += keep * (other.p[0] + np.outer(other.left[0], h)
+                                 + np.outer(h, other.right[0]) + np_ * np.outer(h, h))
             self.s[0] += other.s[0] + n * h
             self.left[0] += other.left[0] + np_ * h
             self.right[0] += other.right[0] + np_ * h
@@ -251,6 +298,9 @@ class Lag1Ladder:
 
     def weighted(self, w: NDArray) -> Lag1Ladder:
         """The ladder of the single channel Σ w_c z_c (its sums, without the segment tails)."""
+        if not self.cross:
+            raise DataError("this ladder keeps no cross-channel sums; create it with "
+                            "cross=True to weight channels")
         w = np.asarray(w, dtype=np.float64)
         out = Lag1Ladder(1, self.dmax)
         out.n, out.np = self.n.copy(), self.np.copy()
@@ -330,14 +380,14 @@ class Lag1Ladder:
 
     def state(self) -> dict:
         """Plain numbers and lists (msgpack/JSON-able); ``from_state`` restores it."""
-        return {"c": self.c, "dmax": self.dmax,
+        return {"c": self.c, "dmax": self.dmax, "cross": self.cross,
                 **{f: getattr(self, f).tolist() for f in self.FIELDS},
                 "ref": None if self.ref is None else self.ref.tolist(),
                 "tail": [None if t is None else t.tolist() for t in self._tail]}
 
     @classmethod
     def from_state(cls, d: dict) -> Lag1Ladder:
-        self = cls(int(d["c"]), int(d["dmax"]))
+        self = cls(int(d["c"]), int(d["dmax"]), cross=bool(d.get("cross", True)))
         for f in cls.FIELDS:
             cur = getattr(self, f)
             setattr(self, f, np.asarray(d[f], dtype=cur.dtype).reshape(cur.shape))

@@ -12,7 +12,8 @@ are summed in int64 and every difference is exact; float samples are summed in f
 subtracting the segment's first sample (a constant moves X by a straight line, which no second
 difference sees, and it keeps the sums small).
 
-Per τ it keeps n and Σ D Dᵀ (C×C, the Allan covariance, as the batch estimator), and the
+Per τ it keeps n and Σ D² per channel (with ``covariance=True`` Σ D Dᵀ, C×C, the Allan
+covariance, as the batch estimator), and the
 non-overlapping m-averages of the segment go to a ``noise_id.Lag1Ladder``: the noise exponent
 alpha is identified as Stable32 does it, on the same data for every Allan estimator at that τ.
 ``result()`` is an ``AllanResult`` of kind "oavar", equal to ``allan.allan_variance(y, rate,
@@ -26,13 +27,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .allan import AllanResult, alphas_from_ladders, gram, result_from_sums
+from .allan import AllanResult, alphas_from_ladders, result_from_sums
 from .errors import DataError
-from .noise_id import Lag1Ladder
+from .noise_id import Lag1Ladder, row_products
 
 __all__ = ["OverlappingAllan"]
 
@@ -53,10 +55,14 @@ class OverlappingAllan:
         Averaging factors (≥ 1). The largest fixes the memory: a ring of 2·max(ms) + PIECE
         points per channel (8 bytes each).
     names : channel names, kept in the result.
+    covariance : bool
+        Also accumulate the cross-channel sums: the result's ``cov`` (the Allan covariance,
+        AVAR of any weighted sum of channels). Off by default: for C channels it costs
+        (C + 1)/2 times the arithmetic of the variances alone.
     """
 
     def __init__(self, n_channels: int, rate_hz: float, ms: Sequence[int] | NDArray,
-                 *, names: Sequence[str] | None = None) -> None:
+                 *, names: Sequence[str] | None = None, covariance: bool = False) -> None:
         if not isinstance(n_channels, int | np.integer) or n_channels < 1:
             raise DataError(f"n_channels={n_channels!r} must be a positive integer")
         if not (isinstance(rate_hz, int | float | np.integer | np.floating)
@@ -77,13 +83,26 @@ class OverlappingAllan:
         self._ring: NDArray | None = None  # allocated with the first block's dtype
         self._n = np.zeros(grid.size, dtype=np.int64)
         self._s2 = np.zeros((grid.size, c, c))
-        self._ladders = [Lag1Ladder(c, dmax=2) for _ in grid]
+        self.covariance = bool(covariance)
+        self._ladders = [Lag1Ladder(c, dmax=2, cross=self.covariance) for _ in grid]
+        # averages waiting for their ladder: pushed in batches, since at long τ each piece
+        # brings only a few and a push costs tens of numpy calls whatever its size
+        self._pending: list[list[NDArray]] = [[] for _ in grid]
+        self._pending_n = [0] * grid.size
         self.n_samples = 0
         self.n_segments = 0
         self._reset_segment()
 
     # ------------------------------------------------------------------------ input
+    def _flush_ladders(self) -> None:
+        for k, lad in enumerate(self._ladders):
+            if self._pending[k]:
+                lad.push_rows(np.concatenate(self._pending[k], axis=1))
+                self._pending[k] = []
+                self._pending_n[k] = 0
+
     def _reset_segment(self) -> None:
+        self._flush_ladders()
         self._pos = 0  # phase points of this segment written so far (X_0 included)
         self._offset: NDArray | None = None
         self._carry: NDArray | None = None
@@ -104,7 +123,8 @@ class OverlappingAllan:
             raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
         if self._integer is None and a.shape[0]:
             self._integer = a.dtype.kind in "iu"
-            self._ring = np.zeros((self._cap, c), np.int64 if self._integer else np.float64)
+            # channel-major: each channel's running sum is a contiguous row
+            self._ring = np.zeros((c, self._cap), np.int64 if self._integer else np.float64)
         if a.dtype.kind == "f":
             if not np.all(np.isfinite(a)):
                 i = int(np.argwhere(~np.isfinite(a))[0][0])
@@ -133,12 +153,13 @@ class OverlappingAllan:
 
     # ------------------------------------------------------------------------ kernel
     def _span(self, start: int, length: int) -> NDArray:
-        """Phase points of segment positions [start, start + length) from the ring."""
+        """Phase points (C, length) of segment positions [start, start + length)."""
         assert self._ring is not None
         i = start % self._cap
         if i + length <= self._cap:
-            return self._ring[i:i + length]
-        return np.concatenate([self._ring[i:], self._ring[:i + length - self._cap]])
+            return self._ring[:, i:i + length]
+        return np.concatenate([self._ring[:, i:], self._ring[:, :i + length - self._cap]],
+                              axis=1)
 
     def _process(self, a: NDArray) -> None:
         ring = self._ring
@@ -148,7 +169,7 @@ class OverlappingAllan:
         if self._offset is None:
             self._offset = a[0].copy()
             self._carry = np.zeros(c, dtype=ring.dtype)
-            ring[0] = 0  # X_0
+            ring[:, 0] = 0  # X_0
             self._pos = 1
             self.n_segments += 1
         work = np.empty((n + 1, c), dtype=ring.dtype)
@@ -159,36 +180,46 @@ class OverlappingAllan:
         p0 = self._pos  # segment position of the first new phase point
         i = p0 % self._cap
         first = min(n, self._cap - i)
-        ring[i:i + first] = work[1:1 + first]
-        ring[:n - first] = work[1 + first:]
+        ring[:, i:i + first] = work[1:1 + first].T
+        ring[:, :n - first] = work[1 + first:].T
         self._pos = p1 = p0 + n
+        buf = np.empty((c, n), dtype=ring.dtype)  # D in the ring's dtype (int64: exact)
+        as_float = np.empty((c, n)) if buf.dtype != np.float64 else buf
         for k, m in enumerate(self.ms.tolist()):
             lo = max(0, p0 - 2 * m)  # first new difference D_lo (its last point ≥ p0)
             hi = p1 - 2 * m  # differences D_i, i < hi
             if hi > lo:
-                x0 = self._span(lo, hi - lo)
-                x1 = self._span(lo + m, hi - lo)
-                x2 = self._span(lo + 2 * m, hi - lo)
-                d = x2 - 2 * x1
-                d += x0
+                count = hi - lo
+                d = buf[:, :count]
+                mid = self._span(lo + m, count)
+                np.subtract(self._span(lo + 2 * m, count), mid, out=d)
+                np.subtract(d, mid, out=d)
+                np.add(d, self._span(lo, count), out=d)
                 if d.dtype != np.float64:
-                    d = d.astype(np.float64)  # exact: int64 differences are far below 2**53
-                self._n[k] += hi - lo
-                self._s2[k] += gram(d)
+                    np.copyto(as_float[:, :count], d)  # exact: differences are far below 2**53
+                    d = as_float[:, :count]
+                self._n[k] += count
+                self._s2[k] += row_products(d, d, self.covariance)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
-                ends = np.arange(q0, p1, m)
-                idx = ends % self._cap
-                prev = (ends - m) % self._cap
-                self._ladders[k].push((ring[idx] - ring[prev]).astype(np.float64))
+                last = q0 + ((p1 - 1 - q0) // m) * m
+                ends = self._span(q0 - m, last - q0 + m + 1)[:, ::m]
+                self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
+                self._pending_n[k] += ends.shape[1] - 1
+                if self._pending_n[k] >= PIECE:
+                    self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1))
+                    self._pending[k] = []
+                    self._pending_n[k] = 0
 
     # ------------------------------------------------------------------------ results
     def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
         """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
         channel, else (K, C)); τ with no complete difference have NaN variance and n = 0."""
-        return result_from_sums(
+        self._flush_ladders()
+        res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
             alpha_id=alphas_from_ladders(self._ladders, 2), ci=ci,
             one_d=self.n_channels == 1, names=self.names)
+        return res if self.covariance else replace(res, cov=None)

@@ -4,6 +4,7 @@ identification against Stable32's own."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -35,10 +36,10 @@ STABLE32_PHASE_DAT_OADEV = {1: 2.9223e-01, 2: 2.0102e-01, 4: 1.4479e-01, 8: 1.05
 
 
 def _stream(y: np.ndarray, rate: float, ms: np.ndarray, block: int,
-            gaps: tuple[int, ...] = ()) -> OverlappingAllan:
-    acc = OverlappingAllan(1 if y.ndim == 1 else y.shape[1], rate, ms)
+            gaps: tuple[int, ...] = (), covariance: bool = False) -> OverlappingAllan:
+    acc = OverlappingAllan(1 if y.ndim == 1 else y.shape[1], rate, ms, covariance=covariance)
     edges = [0, *gaps, len(y)]
-    for s0, s1 in zip(edges[:-1], edges[1:], strict=True):
+    for s0, s1 in itertools.pairwise(edges):
         for i in range(s0, s1, block):
             acc.update(y[i:min(i + block, s1)])
         acc.gap()
@@ -67,12 +68,16 @@ def test_integer_counts_exact_multichannel_with_gaps() -> None:
     y = rng.integers(-(1 << 19), 1 << 19, size=(40000, 3))
     y[:, 2] += 1 << 30  # a large offset: int64 sums stay exact
     ms = 2 ** np.arange(12)
-    acc = _stream(y, 4.0, ms, 4093, gaps=(12345,))
+    acc = _stream(y, 4.0, ms, 4093, gaps=(12345,), covariance=True)
     res = acc.result()
     batch = oavar(y, 4.0, ms / 4.0, gaps=[12345])
     np.testing.assert_allclose(res.var, batch.var, rtol=1e-13)
     assert res.cov is not None and batch.cov is not None
     np.testing.assert_allclose(res.cov, batch.cov, rtol=1e-12, atol=1e-9)
+    no_cov = _stream(y, 4.0, ms, 4093, gaps=(12345,)).result()
+    assert no_cov.cov is None
+    np.testing.assert_array_equal(no_cov.var, res.var)
+    np.testing.assert_array_equal(no_cov.alpha, res.alpha)
     # the exact sum for one channel and one τ, straight from the definition
     m = 64
     k = int(np.flatnonzero(ms == m)[0])
@@ -86,7 +91,7 @@ def test_integer_counts_exact_multichannel_with_gaps() -> None:
 def test_memory_is_a_ring_of_two_m_max() -> None:
     acc = OverlappingAllan(2, 100.0, [1, 8, 512])
     acc.update(np.zeros((100000, 2)))
-    assert acc._ring is not None and acc._ring.shape == (2 * 512 + PIECE, 2)
+    assert acc._ring is not None and acc._ring.shape == (2, 2 * 512 + PIECE)
 
 
 def test_bad_input_is_a_data_error() -> None:
@@ -147,9 +152,10 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
         assert float(f"{ch['adev'][tau.index(m)]:.4e}") == ref
     assert float(f"{ch['adev'][tau.index(128)]:.4e}") == STABLE32[128][0]
     assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA.get(m, 1) for m in tau]
-    # bounds: within 5e-5 at m = 64, about one unit of the last printed digit (Stable32's bounds
-    # imply an EDF 0.1 % above GR's there: 21.26 vs 21.24); at m = 1 and 8 Stable32's bounds imply an EDF 1.2 % above GR's algorithm (791 vs 782,
-    # 168 vs 166; allantools computes 782 and 166 too), 1.4e-4 to 3.7e-4 relative.
+    # bounds: within 5e-5 at m = 64, about one unit of the last printed digit (Stable32's
+    # bounds imply an EDF 0.1 % above GR's there: 21.26 vs 21.24); at m = 1 and 8 they imply
+    # an EDF 1.2 % above GR's algorithm (791 vs 782, 168 vs 166; allantools computes 782 and
+    # 166 too), 1.4e-4 to 3.7e-4 relative.
     k = tau.index(64)
     np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[64][1:],
                                rtol=5e-5)  # 4.4e-5: about one unit of the last digit
