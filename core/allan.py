@@ -37,8 +37,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .edf import chi2_interval, edf_greenhall
 from .errors import DataError, FormatError
-from .noise_id import MIN_POINTS, alpha_from_lag1, alpha_from_slope, identify_alpha
-from .scratch import ones, scratch
+from .noise_id import Lag1Ladder, alpha_from_slope, identify_alpha
+from .scratch import scratch
 
 __all__ = [
     "KINDS",
@@ -176,50 +176,23 @@ class AllanResult:
 
 @dataclass
 class DifferenceSums:
-    """Running sums of the order-o phase differences Q at one (m, stride), for C channels.
-
-    Full grid (every difference, used for the variance of the highest order only):
-    n, the number of differences, and s2 (C, C) = Σ Q Qᵀ.
-    Subgrid for the lag-1 ACF noise identification (differences Q_j whose start j is a
-    multiple of ``id_period`` grid points from the segment start): na, s1 (C,) = Σ Q_j,
-    sa (C, C) = Σ Q_j Q_jᵀ, and nl pairs with lag (C, C) = Σ Q_{j−m} Q_jᵀ, Q_{j−m} being the
-    difference one τ earlier. Q_{j−m} and Q_j are built from adjacent, non-overlapping
-    m-averages as NIST SP 1065 §5.6 asks; the subgrid takes one such pair in every
-    max(m, 8) samples, which keeps the cost of the identification at short τ below that of
-    the variance itself (there are millions of pairs there; the ACF needs about 30).
-    """
+    """Running sums of the order-d phase differences Q at one (m, stride), for C channels:
+    n, the number of differences, and s2 (C, C) = Σ Q Qᵀ (the Allan covariance, unscaled).
+    The noise identification has its own sums (``noise_id.Lag1Ladder``, fed the
+    non-overlapping m-averages), shared by every estimator at that τ."""
 
     n: int
     s2: NDArray[np.float64]
-    na: int
-    s1: NDArray[np.float64]
-    sa: NDArray[np.float64]
-    nl: int
-    lag: NDArray[np.float64]
 
     @classmethod
     def zeros(cls, c: int) -> DifferenceSums:
-        return cls(0, np.zeros((c, c)), 0, np.zeros(c), np.zeros((c, c)), 0, np.zeros((c, c)))
+        return cls(0, np.zeros((c, c)))
 
-    FIELDS = ("n", "s2", "na", "s1", "sa", "nl", "lag")
+    FIELDS = ("n", "s2")
 
     def add(self, other: DifferenceSums) -> None:
         for f in self.FIELDS:
             setattr(self, f, getattr(self, f) + getattr(other, f))
-
-    def add_subgrid(self, sel: NDArray, prev: NDArray | None) -> None:
-        """Add subgrid differences ``sel`` and, if given, their lag partners ``prev``."""
-        # Row-strided views would send matmul down numpy's slow non-BLAS loop: copy them
-        # (into reused buffers, see avard.core.scratch).
-        sel = _contiguous(sel, "sel")
-        if sel.shape[0]:
-            self.na += sel.shape[0]
-            self.s1 += ones(sel.shape[0]) @ sel
-            self.sa += gram(sel)
-        if prev is not None and prev.shape[0]:
-            prev = _contiguous(prev, "prev")
-            self.nl += prev.shape[0]
-            self.lag += prev.T @ sel[sel.shape[0] - prev.shape[0] :]
 
 
 def gram(a: NDArray) -> NDArray[np.float64]:
@@ -229,115 +202,56 @@ def gram(a: NDArray) -> NDArray[np.float64]:
     return 0.5 * (g + g.T)
 
 
-def _contiguous(a: NDArray, key: str) -> NDArray:
-    """A C-contiguous copy of a row-strided (k, C) view, in a reused buffer."""
-    if a.flags.c_contiguous:
-        return a
-    out = scratch(key, a.shape[0], a.shape[1], a.dtype)
-    if a.strides[1] == a.itemsize:
-        # Copy whole rows as opaque items: numpy's 2-D copy loop pays per row of C values,
-        # which made this copy cost twice the Gram matrix computed from it.
-        row = np.dtype((np.void, a.itemsize * a.shape[1]))
-        np.copyto(out.view(row)[:, 0], a.view(row)[:, 0])
-    else:
-        np.copyto(out, a)
-    return out
-
-
-ID_MIN_PERIOD = 8  # grid points between noise-identification pairs, at least
-
-
-def id_period(sp: int) -> int:
-    """Subgrid period (grid points) for the noise-identification sums: a multiple of sp ≥ 8."""
-    return sp * -(-ID_MIN_PERIOD // sp)
-
-
-def grid_sums(
-    q: NDArray, sp: int, h: int, sums: Sequence[DifferenceSums], d: int, base: int = 0
-) -> None:
-    """Add the sums of phase differences of orders 1 … d taken on one stride grid.
+def grid_sums(q: NDArray, sp: int, h: int, sums: DifferenceSums, d: int) -> None:
+    """Add the sums of the order-d phase differences taken on one stride grid.
 
     ``q`` (L, C) holds phase points X on a grid of constant stride (consecutive rows are
-    ``stride`` samples apart), int64 (exact) or float64; rows from index ``h`` on are new, and
-    q[0] is grid point number ``base`` of its segment. With sp = m / stride the order-o
-    difference is computed recursively, E_j = q[j+sp] − q[j] (o = 1; m times an m-average of
-    the rate) and Q^o_j = Q^{o−1}_{j+sp} − Q^{o−1}_j, for j ∈ [0, L − o·sp). A difference is
-    counted when it is new (its last point j + o·sp ≥ h). The recursion gives the same numbers
-    for any split of the grid into blocks, which is what makes streaming equal batch. Works
-    in chunks of j so that memory stays bounded on long records.
+    ``stride`` samples apart), int64 (exact) or float64; rows from index ``h`` on are new.
+    With sp = m / stride the difference is computed recursively, E_j = q[j+sp] − q[j]
+    (m times an m-average of the rate) and Q^o_j = Q^{o−1}_{j+sp} − Q^{o−1}_j up to o = d,
+    for j ∈ [0, L − d·sp). A difference is counted when it is new (its last point
+    j + d·sp ≥ h). The recursion gives the same numbers for any split of the grid into
+    blocks, which is what makes streaming equal batch. Works in chunks of j so that memory
+    stays bounded on long records.
     """
     length = q.shape[0]
-    n_e = length - sp  # number of first differences E
-    if n_e <= 0:
+    n_d = length - d * sp  # number of order-d differences
+    if n_d <= 0:
         return
     chunk = max(_CHUNK, sp)
-    period = id_period(sp)
+    c = q.shape[1]
     a = max(0, h - d * sp)
-    while a < n_e:
-        b = min(n_e, a + chunk)
-        lo = max(0, a - sp)  # room for the lag partners of the chunk's first differences
-        hi = min(n_e, b + (d - 1) * sp)  # E needed to build order d up to b
-        c = q.shape[1]
-        arr = np.subtract(q[lo + sp : hi + sp], q[lo:hi], out=scratch("e", hi - lo, c, q.dtype))
+    while a < n_d:
+        b = min(n_d, a + chunk)
+        hi = b + (d - 1) * sp  # E needed to build order d on [a, b)
+        arr = np.subtract(q[a + sp : hi + sp], q[a:hi], out=scratch("e", hi - a, c, q.dtype))
         if arr.dtype != np.float64:
-            as_float = scratch("ef", hi - lo, c, np.float64)
+            as_float = scratch("ef", hi - a, c, np.float64)
             np.copyto(as_float, arr)  # exact: integer differences are far below 2**53
             arr = as_float
-        for o in range(1, d + 1):
-            if o > 1:  # covers j ∈ [lo, hi − (o−1)·sp)
-                out = scratch(f"q{o}", max(0, arr.shape[0] - sp), c, np.float64)
-                arr = np.subtract(arr[sp:], arr[:-sp], out=out)
-            s = sums[o - 1]
-            new0 = max(a, h - o * sp, 0)
-            new1 = min(b, length - o * sp)
-            if new1 <= new0:
-                continue
-            if o == d:
-                rows = arr[new0 - lo : new1 - lo]
-                s.n += new1 - new0
-                s.s2 += gram(rows)
-            # noise-identification subgrid: every `period`-th grid point of the segment
-            first = new0 + (-(new0 + base)) % period
-            if first >= new1:
-                continue
-            sel = arr[first - lo : new1 - lo : period]
-            f_lag = first if first - sp >= 0 else first + period
-            prev = arr[f_lag - sp - lo : new1 - sp - lo : period] if f_lag < new1 else None
-            s.add_subgrid(sel, prev)
+        for o in range(2, d + 1):
+            out = scratch(f"q{o}", max(0, arr.shape[0] - sp), c, np.float64)
+            arr = np.subtract(arr[sp:], arr[:-sp], out=out)
+        sums.n += b - a
+        sums.s2 += gram(arr[: b - a])
         a = b
 
 
-def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: Sequence[DifferenceSums]) -> None:
-    """``grid_sums`` for a stride that does not divide m (batch only, whole segment).
-
-    Differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …; the noise-
-    identification pairs are (D_i, D_{i+q·stride}) with q = round(m/stride), at every
-    id_period(q)-th grid point.
-    """
-    length = p.shape[0]
-    every = id_period(max(1, round(m / stride)))
-    for o in range(1, d + 1):
-        last = length - 1 - o * m
-        if last < 0:
-            continue
-        coefs = COEFS[o]
-        s = sums[o - 1]
-        if o == d:
-            count = last // stride + 1
-            for t in range(0, count, _CHUNK):
-                j0 = t * stride
-                stop = (min(count, t + _CHUNK) - 1) * stride + 1
-                dd = sum(c * p[j0 + k * m : stop + k * m : stride] for k, c in enumerate(coefs))
-                dd = np.asarray(dd, dtype=np.float64)
-                s.n += dd.shape[0]
-                s.s2 += gram(dd)
-        step = every * stride
-        lag_step = max(1, round(m / stride)) * stride  # one τ later, on the stride grid
-        sub = np.asarray(sum(c * p[k * m : last + 1 + k * m : step]
-                             for k, c in enumerate(coefs)), dtype=np.float64)
-        lagged = np.asarray(sum(c * p[k * m + lag_step : last + 1 + k * m : step]
-                                for k, c in enumerate(coefs)), dtype=np.float64)
-        s.add_subgrid(lagged, sub[: lagged.shape[0]])
+def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: DifferenceSums) -> None:
+    """``grid_sums`` for a stride that does not divide m (batch only, whole segment):
+    differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …"""
+    last = p.shape[0] - 1 - d * m
+    if last < 0:
+        return
+    coefs = COEFS[d]
+    count = last // stride + 1
+    for t in range(0, count, _CHUNK):
+        j0 = t * stride
+        stop = (min(count, t + _CHUNK) - 1) * stride + 1
+        dd = sum(c * p[j0 + k * m : stop + k * m : stride] for k, c in enumerate(coefs))
+        dd = np.asarray(dd, dtype=np.float64)
+        sums.n += dd.shape[0]
+        sums.s2 += gram(dd)
 
 
 def tau_grid(n_samples: int, rate_hz: float, taus: str | ArrayLike, d: int) -> NDArray[np.int64]:
@@ -472,8 +386,10 @@ def allan_variance(
     ci : float
         Confidence level of ``lo``/``hi`` (0.683 = 1σ).
     alpha : int or (K,) or (K, C) array, optional
-        Noise exponent for the EDF; by default identified per τ and channel from the lag-1
-        autocorrelation of the differences (≥ 30 independent averages), else the local slope.
+        Noise exponent for the EDF; by default identified per τ and channel as Stable32 does
+        (``noise_id.Lag1Ladder``): lag-1 autocorrelation of the non-overlapping m-averages
+        with their mean removed (≥ 30 averages), Barnes' B1 ratio with 4–29, else the local
+        slope. The same α for every estimator at that τ (batch, streaming, cascade).
     gaps : sample indices at which a new segment starts; no difference straddles a gap.
     names : channel names, kept in the result.
 
@@ -499,7 +415,8 @@ def allan_variance(
     if ms.size == 0:
         raise DataError(f"the longest segment ({longest} samples) is too short for {kind}")
     strides = np.array([default_stride(kind, int(m), stride, overlap) for m in ms], np.int64)
-    sums = [[DifferenceSums.zeros(c) for _ in range(d)] for _ in ms]
+    sums = [DifferenceSums.zeros(c) for _ in ms]
+    ladders = [Lag1Ladder(c, dmax=d) for _ in ms]
     for s0, s1 in bounds:
         seg = a[s0:s1]
         if seg.shape[0] < 1:
@@ -511,7 +428,10 @@ def allan_variance(
                 grid_sums(p[::st], int(m) // st, 0, sums[k], d)
             else:
                 strided_sums(p, int(m), st, d, sums[k])
-    return finish_result(kind, rate_hz, ms, strides, sums, ci=ci, alpha=alpha,
+            # noise identification: the segment's non-overlapping m-averages (as sums)
+            ladders[k].push(np.diff(p[::int(m)], axis=0).astype(np.float64))
+            ladders[k].gap()
+    return finish_result(kind, rate_hz, ms, strides, sums, ladders, ci=ci, alpha=alpha,
                          one_d=one_d, names=names)
 
 
@@ -520,7 +440,8 @@ def finish_result(
     rate_hz: float,
     ms: NDArray[np.int64],
     strides: NDArray[np.int64],
-    sums: Sequence[Sequence[DifferenceSums]],
+    sums: Sequence[DifferenceSums],
+    ladders: Sequence[Lag1Ladder],
     *,
     ci: float = 0.683,
     alpha: int | ArrayLike | None = None,
@@ -530,50 +451,80 @@ def finish_result(
 ) -> AllanResult:
     """Turn difference sums into an ``AllanResult`` (shared by batch and streaming).
 
-    ``sums[k][q]`` holds the sums of the (q+1)-th phase differences at ``ms[k]``; the last
-    order (d) gives the variance, all orders feed the lag-1 ACF noise identification.
+    ``sums[k]`` holds the sums of the d-th phase differences at ``ms[k]`` (the variance),
+    ``ladders[k]`` those of the non-overlapping averages (the noise identification).
     With ``weights`` (C,), the result is the single channel Σ w_c y_c, computed from the
     covariance sums.
     """
     d = KINDS[kind]
-    norm = NORM[d]
-    k_count = len(ms)
-    # stacked[q][field] = array over τ of DifferenceSums field, for difference order q+1
-    stacked = []
-    for q in range(d):
-        col = [s[q] for s in sums]
-        stacked.append({
-            f: np.array([getattr(s, f) for s in col],
-                        dtype=np.int64 if f in ("n", "na", "nl") else np.float64)
-            for f in DifferenceSums.FIELDS
-        })
-    c = stacked[0]["s2"].shape[1] if k_count else 0
+    n = np.array([x.n for x in sums], dtype=np.int64)
+    s2 = np.array([x.s2 for x in sums], dtype=np.float64)
+    c = s2.shape[1] if len(ms) else 0
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (c,) or not np.all(np.isfinite(w)):
             raise DataError(f"weights must be {c} finite numbers, one per channel; got {w!r}")
-        for st in stacked:
-            st["s1"] = (st["s1"] @ w)[:, None]
-            for f in ("s2", "sa", "lag"):
-                st[f] = np.einsum("i,kij,j->k", w, st[f], w)[:, None, None]
-        c = 1
+        s2 = np.einsum("i,kij,j->k", w, s2, w)[:, None, None]
+        ladders = [lad.weighted(w) for lad in ladders]
         one_d = True
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
-    n, s2 = stacked[d - 1]["n"], stacked[d - 1]["s2"]
+    n_phase = (np.maximum(n, 1) - 1) * strides + d * ms + 1
+    alpha_id = alphas_from_ladders(ladders, d) if alpha is None else None
+    return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
+                            alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names)
+
+
+def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int) -> NDArray[np.float64]:
+    """(K, C) noise exponents identified as Stable32 does (``Lag1Ladder.alpha``): lag-1 ACF
+    of the non-overlapping averages with ≥ 30 of them, B1 below; NaN where neither applies."""
+    lowest = 2 - 2 * d
+    if not ladders:
+        return np.zeros((0, 0))
+    return np.array([lad.alpha(lowest) for lad in ladders], dtype=np.float64)
+
+
+def result_from_sums(
+    kind: str,
+    rate_hz: float,
+    ms: NDArray[np.int64],
+    strides: NDArray[np.int64],
+    n: NDArray[np.int64],
+    s2: NDArray[np.float64],
+    *,
+    n_phase: NDArray[np.int64],
+    ci: float = 0.683,
+    alpha: int | ArrayLike | None = None,
+    alpha_id: NDArray[np.float64] | None = None,
+    one_d: bool = False,
+    names: Sequence[str] | None = None,
+) -> AllanResult:
+    """The ``AllanResult`` of difference sums: n (K,) differences, s2 (K, C, C) = Σ D Dᵀ.
+
+    ``alpha``: integers given by the user (validated); else ``alpha_id``, the identified
+    exponents (K, C), whose NaN (too few averages) are filled from the local slope of the
+    variance curve. EDF by Greenhall–Riley for ``n_phase`` phase points (SP 1065 §5.3).
+    """
+    d = KINDS[kind]
+    norm = NORM[d]
+    k_count = len(ms)
+    c = s2.shape[1] if s2.ndim == 3 else 1
     scale = norm * ms.astype(np.float64) ** 2 * np.maximum(n, 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         cov = np.where((n > 0)[:, None, None], s2 / scale[:, None, None], np.nan)
     var = np.diagonal(cov, axis1=1, axis2=2).copy() if k_count else np.zeros((0, c))
-    alphas = _alphas(alpha, var, ms, strides, stacked, d)
+    if alpha is not None:
+        alphas = _given_alphas(alpha, var, d)
+    else:
+        ident = np.full(var.shape, np.nan) if alpha_id is None else alpha_id
+        alphas = _fill_alphas(np.asarray(ident, dtype=np.float64).reshape(var.shape), var, ms, d)
     edf = np.full_like(var, np.nan)
     for k in range(k_count):
         if n[k] == 0:
             continue
-        n_phase = (int(n[k]) - 1) * int(strides[k]) + d * int(ms[k]) + 1
         for ch in range(c):
             edf[k, ch] = edf_greenhall(int(alphas[k, ch]), d, int(ms[k]), int(strides[k]),
-                                       n_phase)
+                                       int(n_phase[k]))
     lo, hi = chi2_interval(var, edf, ci)
     squeeze = (lambda x: x[:, 0]) if one_d else (lambda x: x)
     return AllanResult(
@@ -594,75 +545,37 @@ def finish_result(
     )
 
 
-def _alphas(
-    alpha: int | ArrayLike | None,
-    var: NDArray[np.float64],
-    ms: NDArray[np.int64],
-    strides: NDArray[np.int64],
-    stacked: list,
-    d: int,
-) -> NDArray[np.int64]:
-    """Noise exponent per (τ, channel): given, else lag-1 ACF of the differences, else slope.
-
-    The lag-1 ACF ladder of Riley & Greenhall (2004) on m-averages of the rate: k = 0 uses
-    the averages themselves (first phase differences), k = 1 their first differences (second
-    phase differences), …; stop at the first k whose δ = r1/(1+r1) is below 0.25, or at
-    k = d − 1, and take alpha = −2(δ + k). The means are removed; a linear rate drift is
-    not, so it pushes the ladder one step further, where it becomes a constant.
-    """
-    lowest = 2 - 2 * d  # alpha + 2d > 1
-    if alpha is not None:
-        given = np.asarray(alpha, dtype=np.float64)
-        if given.ndim == 1 and var.ndim == 2 and given.shape[0] == var.shape[0]:
-            given = given[:, None]  # one alpha per τ, the same for every channel
-        try:
-            a = np.broadcast_to(given, var.shape).astype(np.float64)
-        except ValueError as exc:
-            raise DataError(f"alpha has shape {given.shape}; give one value, one per τ "
-                            f"({var.shape[0]}), or one per τ and channel {var.shape}") from exc
-        if not np.all(np.isfinite(a)) or np.any(np.rint(a) != a):
-            raise DataError("alpha must be integers (2 white PM … -2 random-walk FM)")
-        if np.any(a > 2) or np.any(a < lowest):
-            raise DataError(f"alpha must lie in [{lowest}, 2] for this estimator")
-        return a.astype(np.int64)
-    k_count, c = var.shape
-    out = np.zeros((k_count, c), dtype=np.int64)
-    have = np.zeros((k_count, c), dtype=bool)
-    for k in range(k_count):
-        for ch in range(c):
-            a = _ladder(stacked, k, ch, int(ms[k]), int(strides[k]), d)
-            if math.isfinite(a):
-                out[k, ch] = int(min(2, max(lowest, round(a))))
-                have[k, ch] = True
+def _fill_alphas(ident: NDArray[np.float64], var: NDArray[np.float64], ms: NDArray[np.int64],
+                 d: int) -> NDArray[np.int64]:
+    """Identified exponents with their NaN filled from the local slope of the curve."""
+    out = np.zeros(var.shape, dtype=np.int64)
+    have = np.isfinite(ident)
+    out[have] = ident[have].astype(np.int64)
     if not have.all():
         logv = np.log(np.where(var > 0, var, np.nan))
         logt = np.log(ms.astype(np.float64))
-        for k in range(k_count):
-            for ch in range(c):
-                if have[k, ch]:
-                    continue
-                out[k, ch] = alpha_from_slope(_local_slope(logt, logv[:, ch], k), d)
+        for k, ch in zip(*np.nonzero(~have), strict=True):
+            out[k, ch] = alpha_from_slope(_local_slope(logt, logv[:, ch], int(k)), d)
     return out
 
 
-def _ladder(stacked: list, k: int, ch: int, m: int, stride: int, d: int) -> float:
-    """alpha from the lag-1 ACF ladder at τ index k, channel ch; NaN if the data are too few."""
-    for q in range(d):
-        na, s1, sa, nl, lag = (stacked[q][f][k] for f in ("na", "s1", "sa", "nl", "lag"))
-        # Non-overlapping m-averages behind the sums; the ACF needs about 30 (Riley & Greenhall).
-        if na < MIN_POINTS or nl == 0:
-            return math.nan
-        mean = s1[ch] / na
-        v = sa[ch, ch] / na - mean**2
-        if not v > 0:
-            return math.nan
-        r1 = (lag[ch, ch] / nl - mean**2) / v
-        if not math.isfinite(r1) or r1 <= -1.0:
-            return math.nan
-        delta = r1 / (1.0 + r1)
-        if delta < 0.25 or q == d - 1:
-            return alpha_from_lag1(r1, q)
-    return math.nan
+def _given_alphas(alpha: int | ArrayLike, var: NDArray[np.float64], d: int
+                  ) -> NDArray[np.int64]:
+    """A user's noise exponents, one value, one per τ or one per (τ, channel), validated."""
+    lowest = 2 - 2 * d  # alpha + 2d > 1
+    given = np.asarray(alpha, dtype=np.float64)
+    if given.ndim == 1 and var.ndim == 2 and given.shape[0] == var.shape[0]:
+        given = given[:, None]  # one alpha per τ, the same for every channel
+    try:
+        a = np.broadcast_to(given, var.shape).astype(np.float64)
+    except ValueError as exc:
+        raise DataError(f"alpha has shape {given.shape}; give one value, one per τ "
+                        f"({var.shape[0]}), or one per τ and channel {var.shape}") from exc
+    if not np.all(np.isfinite(a)) or np.any(np.rint(a) != a):
+        raise DataError("alpha must be integers (2 white PM … -2 random-walk FM)")
+    if np.any(a > 2) or np.any(a < lowest):
+        raise DataError(f"alpha must lie in [{lowest}, 2] for this estimator")
+    return a.astype(np.int64)
 
 
 def _local_slope(logt: NDArray[np.float64], logv: NDArray[np.float64], k: int) -> float:

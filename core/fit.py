@@ -73,8 +73,10 @@ class TermEstimate:
     upper: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        # "upper": an absent term's one-sided upper limit (null when present or not tested)
         return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit,
-                "present": self.present}
+                "present": self.present,
+                "upper": None if self.present or self.upper is None else float(self.upper)}
 
 
 @dataclass

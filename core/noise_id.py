@@ -20,14 +20,24 @@ difference used, whatever the record length and without keeping the data.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataError
 
-__all__ = ["alpha_from_lag1", "alpha_from_slope", "identify_alpha", "lag1_acf"]
+__all__ = [
+    "Lag1Ladder",
+    "alpha_from_b1",
+    "alpha_from_lag1",
+    "alpha_from_slope",
+    "b1_theory",
+    "identify_alpha",
+    "lag1_acf",
+    "row_products",
+]
 
 # Riley & Greenhall: below this many (averaged) points the lag-1 ACF is too noisy to use.
 MIN_POINTS = 30
@@ -137,3 +147,250 @@ def _detrend(x: np.ndarray, deg: int) -> np.ndarray:
         return x - x.mean()
     coef = np.polyfit(t, x, deg)
     return x - np.polyval(coef, t)
+
+
+# ---------------------------------------------------------------------------------------------
+# Stable32's identification on running sums: one implementation for every estimator
+
+
+def b1_theory(n: int, mu: int) -> float:
+    """Barnes' expected B1 ratio (N-sample over two-sample variance) for N averages and a
+    variance exponent μ (AVAR ∝ τ^μ): N(1 − N^μ) / (2(N − 1)(1 − 2^μ)), and its limit
+    N ln N / (2(N − 1) ln 2) at μ = 0 (NBS TN 375; NIST SP 1065 §5.2)."""
+    if n < 2:
+        raise DataError(f"B1 needs at least 2 averages, got {n}")
+    if mu == 0:
+        return n * math.log(n) / (2.0 * (n - 1) * math.log(2.0))
+    return n * (1.0 - float(n) ** mu) / (2.0 * (n - 1) * (1.0 - 2.0**mu))
+
+
+def alpha_from_b1(b1: float, n: int) -> int | None:
+    """Noise exponent from a measured B1 ratio of n averages: the μ whose expected B1 is
+    nearest on a log scale (boundaries at the geometric means, as Stable32), mapped to
+    alpha = −μ − 1. μ = −2 (white or flicker PM) returns None: B1 cannot tell them apart."""
+    mus = (1, 0, -1, -2)  # random-walk FM, flicker FM, white FM, PM
+    for hi, lo in itertools.pairwise(mus):
+        if b1 > math.sqrt(b1_theory(n, hi) * b1_theory(n, lo)):
+            return -hi - 1
+    return None
+
+
+def row_products(a: NDArray, b: NDArray, cross: bool = True) -> NDArray[np.float64]:
+    """(C, C) matrix of Σ_t a[i, t]·b[j, t] for channel-major (C, L) arrays, as dot products of
+    rows: for a few channels this is several times faster than a (C×L)·(L×C) matrix product
+    (measured 30 µs against 100 µs for 3 × 8192), and exactly symmetric when a is b. With
+    ``cross=False`` only the diagonal is computed (zeros elsewhere)."""
+    c = a.shape[0]
+    if not cross:
+        return np.diag([float(np.dot(a[i], b[i])) for i in range(c)])
+    out = np.empty((c, c))
+    for i in range(c):
+        for j in range(c):
+            if a is b and j < i:
+                out[i, j] = out[j, i]
+            else:
+                out[i, j] = float(np.dot(a[i], b[j]))
+    return out
+
+
+class Lag1Ladder:
+    """Running sums for Stable32's noise identification of one τ, C channels at once.
+
+    Fed the non-overlapping m-averages of the rate, in order (any unit: sums of m samples
+    work as well as means), it keeps, for the averages and their differences of order
+    k = 0 … ``dmax``: the count n, Σz, Σ z zᵀ (C×C), and over adjacent pairs (z_i, z_{i+1})
+    within a segment their number, Σ z_i z_{i+1}ᵀ (C×C), Σ z_i and Σ z_{i+1}. From these the
+    lag-1 autocorrelation about the series' mean is exact (NIST SP 1065 §5.6; Riley &
+    Greenhall 2004, eq. 2), whatever constant offset the averages carry, and the C×C products
+    give it for any weighted sum of channels (``weighted``). No data are kept, only the last
+    value of each order. The order-0 values are taken relative to the first average seen,
+    which keeps the sums well conditioned (an axis reading 9.81 m/s² with 1e-5 noise).
+    """
+
+    FIELDS = ("n", "s", "s2", "np", "p", "left", "right")
+
+    def __init__(self, n_channels: int, dmax: int = 2, *, cross: bool = True) -> None:
+        c = int(n_channels)
+        self.c = c
+        self.dmax = int(dmax)
+        self.cross = bool(cross)  # keep channel cross products (needed by ``weighted``)
+        orders = self.dmax + 1
+        self.n = np.zeros(orders, dtype=np.int64)
+        self.np = np.zeros(orders, dtype=np.int64)
+        self.s = np.zeros((orders, c))
+        self.s2 = np.zeros((orders, c, c))
+        self.p = np.zeros((orders, c, c))
+        self.left = np.zeros((orders, c))
+        self.right = np.zeros((orders, c))
+        self.ref: NDArray[np.float64] | None = None
+        self._tail: list[NDArray[np.float64] | None] = [None] * orders
+
+    def push(self, values: NDArray) -> None:
+        """Add the next averages (k, C) of the current segment, oldest first."""
+        z = np.asarray(values, dtype=np.float64).reshape(-1, self.c)
+        self.push_rows(np.ascontiguousarray(z.T))
+
+    def push_rows(self, values: NDArray) -> None:
+        """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
+        sums of products are dot products of rows (the cheapest form for small C)."""
+        z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
+        if z.shape[1] == 0:
+            return
+        if self.ref is None:
+            self.ref = z[:, 0].copy()
+        z = z - self.ref[:, None]
+        for k in range(self.dmax + 1):
+            count = z.shape[1]
+            if count == 0:
+                return
+            tail = self._tail[k]
+            total = z.sum(axis=1)
+            self.n[k] += count
+            self.s[k] += total
+            self.s2[k] += row_products(z, z, self.cross)
+            # adjacent pairs of [tail, z] without building it: those inside z, and (tail, z0)
+            pairs = count - 1 + (tail is not None)
+            if pairs:
+                self.np[k] += pairs
+                self.right[k] += total if tail is not None else total - z[:, 0]
+                self.left[k] += total - z[:, -1] + (tail if tail is not None else 0.0)
+                if count > 1:
+                    self.p[k] += row_products(z[:, :-1], z[:, 1:], self.cross)
+                if tail is not None:
+                    self.p[k] += (np.outer(tail, z[:, 0]) if self.cross
+                                  else np.diag(tail * z[:, 0]))
+            self._tail[k] = z[:, -1].copy()
+            if k == self.dmax:
+                return
+            nxt = np.empty((self.c, pairs))
+            if tail is not None:
+                nxt[:, 0] = z[:, 0] - tail
+            np.subtract(z[:, 1:], z[:, :-1], out=nxt[:, pairs - (count - 1):])
+            z = nxt
+
+    def gap(self) -> None:
+        """End the segment: no pair and no difference spans what follows."""
+        self._tail = [None] * (self.dmax + 1)
+
+    def add(self, other: Lag1Ladder) -> None:
+        """Add another ladder's sums (other segments of the same channels)."""
+        if other.ref is not None and self.ref is not None:
+            # re-reference the other's order-0 sums: z' = z + (ref_o − ref_s) = z + h
+            h = other.ref - self.ref
+            n, np_ = other.n[0], other.np[0]
+            keep = np.ones((self.c, self.c)) if self.cross else np.eye(self.c)
+            self.s2[0] += keep * (other.s2[0] + np.outer(other.s[0], h)
+                                  + np.outer(h, other.s[0]) + n * np.outer(h, h))
+            self.p[0] += keep * (other.p[0] + np.outer(other.left[0], h)
+                                 + np.outer(h, other.right[0]) + np_ * np.outer(h, h))
+            self.s[0] += other.s[0] + n * h
+            self.left[0] += other.left[0] + np_ * h
+            self.right[0] += other.right[0] + np_ * h
+            self.n[0] += n
+            self.np[0] += np_
+            lo = 1
+        else:
+            if self.ref is None:
+                self.ref = None if other.ref is None else other.ref.copy()
+            lo = 0
+        for f in self.FIELDS:
+            getattr(self, f)[lo:] += getattr(other, f)[lo:]
+
+    def weighted(self, w: NDArray) -> Lag1Ladder:
+        """The ladder of the single channel Σ w_c z_c (its sums, without the segment tails)."""
+        if not self.cross:
+            raise DataError("this ladder keeps no cross-channel sums; create it with "
+                            "cross=True to weight channels")
+        w = np.asarray(w, dtype=np.float64)
+        out = Lag1Ladder(1, self.dmax)
+        out.n, out.np = self.n.copy(), self.np.copy()
+        for f in ("s", "left", "right"):
+            setattr(out, f, (getattr(self, f) @ w)[:, None])
+        for f in ("s2", "p"):
+            setattr(out, f, np.einsum("i,kij,j->k", w, getattr(self, f), w)[:, None, None])
+        out.ref = None if self.ref is None else np.array([float(self.ref @ w)])
+        return out
+
+    def r1(self, k: int) -> NDArray[np.float64]:
+        """Lag-1 autocorrelation about the mean of the order-k series, per channel (NaN when
+        there are fewer than 3 values or no spread)."""
+        n = float(self.n[k])
+        out = np.full(self.c, np.nan)
+        if n < 3 or self.np[k] < 1:
+            return out
+        mean = self.s[k] / n
+        den = np.diagonal(self.s2[k]) - self.s[k] * mean
+        num = (np.diagonal(self.p[k]) - mean * (self.left[k] + self.right[k])
+               + self.np[k] * mean**2)
+        ok = den > 0
+        out[ok] = num[ok] / den[ok]
+        return out
+
+    def lag1_alpha(self, lowest: int) -> NDArray[np.float64]:
+        """alpha per channel by the lag-1 ladder (Riley & Greenhall 2004): difference until
+        δ = r1/(1+r1) < 0.25 or k = dmax, alpha = −round(2δ) − 2k, clipped to [lowest, 2];
+        NaN where the sums cannot give it."""
+        out = np.full(self.c, np.nan)
+        todo = np.ones(self.c, dtype=bool)
+        for k in range(self.dmax + 1):
+            r1 = self.r1(k)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                delta = r1 / (1.0 + r1)
+            bad = ~np.isfinite(delta) | (r1 <= -1.0)
+            todo &= ~(bad & todo)  # stays NaN
+            stop = todo & ((delta < 0.25) | (k == self.dmax))
+            out[stop] = np.clip(-np.round(2.0 * delta[stop]) - 2 * k, lowest, 2)
+            todo &= ~stop
+            if not todo.any():
+                break
+        return out
+
+    def b1(self) -> NDArray[np.float64]:
+        """Measured B1 per channel: sample variance of the averages over their two-sample
+        (non-overlapping Allan) variance; NaN with fewer than 2 averages."""
+        n = float(self.n[0])
+        out = np.full(self.c, np.nan)
+        if n < 2 or self.n[1] < 1:
+            return out
+        var = (np.diagonal(self.s2[0]) - self.s[0] ** 2 / n) / (n - 1.0)
+        # order-1 values are differences: the order-0 reference cancels in them
+        avar = np.diagonal(self.s2[1]) / (2.0 * float(self.n[1]))
+        ok = avar > 0
+        out[ok] = var[ok] / avar[ok]
+        return out
+
+    def alpha(self, lowest: int) -> NDArray[np.float64]:
+        """Stable32's choice per channel: the lag-1 ladder with at least ``MIN_POINTS``
+        averages; below, Barnes' B1 ratio (with at least 4 averages). Where B1 says 'PM',
+        Stable32 separates white from flicker PM by R(n) = MVAR/AVAR, which these sums do
+        not hold: flicker PM (alpha = 1) is taken, the smaller EDF of the two, so the
+        interval is never the narrower white-PM one on a guess. NaN where neither applies."""
+        n = int(self.n[0])
+        if n >= MIN_POINTS:
+            return self.lag1_alpha(lowest)
+        out = np.full(self.c, np.nan)
+        if n < 4:
+            return out
+        b1 = self.b1()
+        for ch in range(self.c):
+            if math.isfinite(b1[ch]):
+                a = alpha_from_b1(float(b1[ch]), n)
+                out[ch] = max(lowest, 1 if a is None else a)
+        return out
+
+    def state(self) -> dict:
+        """Plain numbers and lists (msgpack/JSON-able); ``from_state`` restores it."""
+        return {"c": self.c, "dmax": self.dmax, "cross": self.cross,
+                **{f: getattr(self, f).tolist() for f in self.FIELDS},
+                "ref": None if self.ref is None else self.ref.tolist(),
+                "tail": [None if t is None else t.tolist() for t in self._tail]}
+
+    @classmethod
+    def from_state(cls, d: dict) -> Lag1Ladder:
+        self = cls(int(d["c"]), int(d["dmax"]), cross=bool(d.get("cross", True)))
+        for f in cls.FIELDS:
+            cur = getattr(self, f)
+            setattr(self, f, np.asarray(d[f], dtype=cur.dtype).reshape(cur.shape))
+        self.ref = None if d["ref"] is None else np.asarray(d["ref"], dtype=np.float64)
+        self._tail = [None if t is None else np.asarray(t, dtype=np.float64) for t in d["tail"]]
+        return self

@@ -1,9 +1,12 @@
 """``avard analyze`` as a library: stream a record once, fit every channel, and write it out.
 
 One pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
-channel: the streaming Allan cascade (``streaming.StreamingAllan``, partially overlapping
-AVAR at octave τ with stride m/8, ≥ 98 % of the full-overlap EDF) and a Welch spectrum used to
-find sinusoids. Lines found in the spectrum enter the noise fit as fixed components (their
+channel: the fully overlapping Allan variance (``overlapping.OverlappingAllan``, OADEV as
+Stable32 and allantools compute it, NIST SP 1065 eq. 12, at octave τ; memory a ring of 2·m_max
+running-sum points) and a Welch spectrum used to find sinusoids. ``estimator="cascade"``
+gives the service's streaming cascade instead (``streaming.StreamingAllan``, stride m/8 above
+m = 8: partially overlapping, a different estimator with ≥ 98 % of the OADEV's EDF).
+Lines found in the spectrum enter the noise fit as fixed components (their
 amplitude is measured far more precisely by the spectrum than by the AVAR bump), so they do
 not bias N, B or K; then ``fit.fit_noise`` fits the IEEE terms.
 
@@ -34,6 +37,15 @@ __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyz
            "find_lines"]
 
 ProgressFn = Callable[[int, int | None], None]
+
+#: Estimator names as they appear in the table, the JSON and the csv.
+ESTIMATORS = {
+    "oadev": "fully overlapping ADEV (OADEV, NIST SP 1065 eq. 12; Stable32 'Overlapping Allan')",
+    "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
+}
+# OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
+# default range), and while the running-sum ring (2·m_max points per channel) fits this budget.
+RING_BUDGET_BYTES = 96 << 20
 
 
 # ---------------------------------------------------------------------------------------------
@@ -162,11 +174,13 @@ class ChannelAnalysis:
     allan: Any
     fit: NoiseFit
     lines: list[dict[str, float]] = field(default_factory=list)
+    estimator: str = "oadev"
 
     def to_dict(self) -> dict[str, Any]:
         a = self.allan
-        d = {"tau_s": _list(a.tau), "adev": _list(a.dev), "adev_lo": _list(a.dev_lo),
-             "adev_hi": _list(a.dev_hi), "edf": _list(a.edf)}
+        d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
+             "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
+             "alpha": _list(a.alpha)}
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -184,11 +198,13 @@ class Analysis:
     n_samples: int
     channels: dict[str, ChannelAnalysis]
     meta: dict[str, Any] = field(default_factory=dict)
+    estimator: str = "oadev"
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
         return {"source": self.source, "rate_hz": float(self.rate_hz),
-                "n_samples": int(self.n_samples),
+                "n_samples": int(self.n_samples), "estimator": self.estimator,
+                "estimator_description": ESTIMATORS[self.estimator],
                 "channels": {k: c.to_dict() for k, c in self.channels.items()}}
 
 
@@ -270,16 +286,57 @@ def analyze(
     progress: ProgressFn | None = None,
     block: int = 1 << 16,
     fit_kwargs: dict[str, Any] | None = None,
+    estimator: str = "oadev",
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
     ``filter_corner_hz``: "auto" (ADXL355 ODR/4 for avard's own records, else not modelled),
     a number in Hz, or None (not modelled: the bent shortest τ are left out instead).
+    ``estimator``: "oadev" (fully overlapping, default) or "cascade" (see ``ESTIMATORS``).
     """
     meta, segments = _segments(path, block, rate_hz)
+    if meta.get("n_samples") is None and estimator == "oadev":
+        meta = {**meta, "n_samples": _count_rows(path)}
     return analyze_stream(meta, segments, source=path, channels=channels,
                           filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                          progress=progress, fit_kwargs=fit_kwargs)
+                          progress=progress, fit_kwargs=fit_kwargs, estimator=estimator)
+
+
+def _count_rows(path: str) -> int:
+    """Upper bound on the data rows of a text record (lines after the header), read in 1 MiB
+    pieces: the OADEV grid is fixed before the data arrive. An overestimate only adds τ that
+    end up without differences, which are dropped."""
+    lines = 0
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            lines += chunk.count(b"\n")
+    return max(0, lines)
+
+
+def oadev_grid(n_samples: int, n_channels: int) -> NDArray[np.int64]:
+    """Octave m for the OADEV of a record: ≥ 4 non-overlapping intervals (m ≤ N/4, where
+    Stable32's tables stop), and a ring of 2·m_max points per channel within
+    ``RING_BUDGET_BYTES``; m = 1 at least."""
+    from .overlapping import PIECE
+
+    m_max = max(1, n_samples // 4)
+    ring_max = RING_BUDGET_BYTES // (8 * max(1, n_channels)) - PIECE
+    m_max = max(1, min(m_max, ring_max // 2))
+    return 2 ** np.arange(int(math.log2(m_max)) + 1, dtype=np.int64)
+
+
+def _with_differences(res: Any) -> Any:
+    """The result without the τ that got no difference (NaN variance, n = 0)."""
+    from dataclasses import replace
+
+    keep = np.asarray(res.n) > 0
+    if keep.all():
+        return res
+    cut = {k: getattr(res, k)[keep] for k in ("tau", "m", "stride", "var", "n", "edf", "lo",
+                                               "hi", "alpha")}
+    if res.cov is not None:
+        cut["cov"] = res.cov[keep]
+    return replace(res, **cut)
 
 
 def analyze_stream(
@@ -292,17 +349,30 @@ def analyze_stream(
     find_sinusoids: bool = True,
     progress: ProgressFn | None = None,
     fit_kwargs: dict[str, Any] | None = None,
+    estimator: str = "oadev",
 ) -> Analysis:
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
-    in m/s², True where a segment ends: no difference or spectrum spans what follows)."""
+    in m/s², True where a segment ends: no difference or spectrum spans what follows).
+    ``estimator="oadev"`` needs ``n_samples`` (an upper bound will do) to fix its τ grid."""
+    from .overlapping import OverlappingAllan
     from .streaming import StreamingAllan
 
+    if estimator not in ESTIMATORS:
+        raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     sel = _select(names, channels)
     total = meta.get("n_samples")
-    sa = StreamingAllan(len(sel), rate, names=[names[i] for i in sel])
+    chosen = [names[i] for i in sel]
+    sa: OverlappingAllan | StreamingAllan
+    if estimator == "oadev":
+        if total is None:
+            raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
+                            "cannot be fixed; give n_samples or use estimator='cascade'")
+        sa = OverlappingAllan(len(sel), rate, oadev_grid(int(total), len(sel)), names=chosen)
+    else:
+        sa = StreamingAllan(len(sel), rate, names=chosen)
     welch: WelchAccumulator | None = None
     if find_sinusoids and (total is None or total >= 1024):
         # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
@@ -325,7 +395,7 @@ def analyze_stream(
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
-    res = sa.result()
+    res = _with_differences(sa.result())
     f, psd = (welch.result() if welch is not None else (None, None))
     corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
               else filter_corner_hz)
@@ -347,9 +417,10 @@ def analyze_stream(
             fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **kw)
         except FitError as exc:
             raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
-        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines)
+        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines, estimator)
     return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
-                    channels=out, meta={**meta, "filter_corner_hz": corner})
+                    channels=out, meta={**meta, "filter_corner_hz": corner},
+                    estimator=estimator)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -368,6 +439,8 @@ def format_table(an: Analysis) -> str:
     fc = an.meta.get("filter_corner_hz")
     lines.append("sensor low-pass modelled at " + (f"{fc:g} Hz" if fc else
                  "— (not modelled: filter-bent short τ left out)"))
+    lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
+                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32)")
     for name, ch in an.channels.items():
         fit = ch.fit
         lines.append("")
@@ -401,16 +474,21 @@ def format_table(an: Analysis) -> str:
 
 def adev_csv(an: Analysis) -> str:
     """The ADEV table as csv: channel, tau_s, adev, adev_lo, adev_hi (m/s²), edf, model (m/s²:
-    the fitted model's ADEV), used (1 if the point was in the fit)."""
-    rows = ["channel,tau_s,adev_mps2,adev_lo_mps2,adev_hi_mps2,edf,model_adev_mps2,used"]
+    the fitted model's ADEV), used (1 if the point was in the fit), alpha (noise exponent the
+    interval assumes), estimator ("oadev" or "cascade", see ``ESTIMATORS``)."""
+    rows = ["channel,tau_s,adev_mps2,adev_lo_mps2,adev_hi_mps2,edf,model_adev_mps2,used,alpha,"
+            "estimator"]
     for name, ch in an.channels.items():
         a = ch.allan
         model = np.sqrt(ch.fit.model_avar(a.tau))
         for k in range(len(a.tau)):
             used = int(ch.fit.tau_min_s * (1 - 1e-9) <= a.tau[k] <= ch.fit.tau_max_s * (1 + 1e-9))
             vals = [a.tau[k], a.dev[k], a.dev_lo[k], a.dev_hi[k], a.edf[k], model[k]]
+            alpha = a.alpha[k]
             rows.append(",".join([name] + [("" if not math.isfinite(v) else f"{v:.9g}")
-                                           for v in vals] + [str(used)]))
+                                           for v in vals]
+                                 + [str(used), "" if not math.isfinite(alpha) else
+                                    str(int(alpha)), ch.estimator]))
     return "\n".join(rows) + "\n"
 
 

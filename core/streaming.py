@@ -12,10 +12,11 @@ O(C² · S · octaves) numbers, whatever the duration.
 Per level it keeps, for the second phase differences D_i = X_{i+2m} − 2X_{i+m} + X_i (X the
 running sum of the rate, i on the stride grid of the current segment), n and Σ D Dᵀ (C×C: the
 Allan covariance, so the AVAR of any linear combination of channels, e.g. an axis minus
-k × temperature, is available afterwards via ``weights``); and for the first and second
-differences the sums of the lag-1 ACF noise identification on a subgrid (see
-``avard.core.allan.DifferenceSums``). Per stride grid it keeps the last 3·S phase points, to
-continue the differences in the next block (levels m ≤ S share the stride-1 grid).
+k × temperature, is available afterwards via ``weights``); and the sums of Stable32's noise
+identification over the non-overlapping m-averages (``avard.core.noise_id.Lag1Ladder``, the
+same α as the batch and the fully overlapping estimators at that τ). Per stride grid it
+keeps the last 3·S phase points, to continue the differences in the next block (levels
+m ≤ S share the stride-1 grid).
 With ``hadamard=True`` third differences take the place of D (Hadamard variance).
 
 Integer blocks (raw counts) are summed in int64, so every difference is exact for any record
@@ -40,11 +41,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from .allan import AllanResult, DifferenceSums, finish_result, grid_sums
 from .errors import DataError, FormatError
+from .noise_id import Lag1Ladder
 from .scratch import scratch
 
 __all__ = ["AllanSnapshot", "StreamingAllan"]
 
-STATE_VERSION = 2
+STATE_VERSION = 3  # 3: noise identification by Lag1Ladder sums
 # Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
 # numpy's per-call overhead would otherwise dominate. Results never depend on it.
 _FLUSH_SAMPLES = 4096
@@ -90,13 +92,15 @@ class AllanSnapshot:
 class _Level:
     """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""
 
-    __slots__ = ("m", "spacing", "stride", "sums")
+    __slots__ = ("ladder", "m", "spacing", "stride", "sums")
 
     def __init__(self, m: int, stride: int, c: int, d: int) -> None:
         self.m = m
         self.stride = stride
         self.spacing = m // stride
-        self.sums = [DifferenceSums.zeros(c) for _ in range(d)]
+        self.sums = DifferenceSums.zeros(c)
+        # non-overlapping m-averages: every spacing-th first difference of the grid
+        self.ladder = Lag1Ladder(c, dmax=d)
 
 
 class _Grid:
@@ -121,8 +125,15 @@ class _Grid:
         arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
         arr[:h] = self.hist  # int64 → float64 is exact below 2**53 (checked by the caller)
         arr[h:] = points
+        length = arr.shape[0]
         for lev in levels:
-            grid_sums(arr, lev.spacing, h, lev.sums, d, self.base)
+            sp = lev.spacing
+            grid_sums(arr, sp, h, lev.sums, d)
+            # averages ending at a new grid point that is a multiple of m in the segment
+            e0 = max(h, sp)
+            e0 += (-(self.base + e0)) % sp
+            if e0 < length:
+                lev.ladder.push((arr[e0::sp] - arr[e0 - sp:length - sp:sp]).astype(np.float64))
         if arr.shape[0] > self.keep:
             self.base += arr.shape[0] - self.keep
             arr = arr[-self.keep :]
@@ -197,6 +208,8 @@ class StreamingAllan:
         for g in self._grids:
             g.hist = np.zeros((1, self.n_channels), dtype=self._dtype())
             g.base = 0
+        for lev in self._levels:
+            lev.ladder.gap()
 
     def _dtype(self) -> type:
         return np.int64 if self._integer else np.float64
@@ -346,7 +359,7 @@ class StreamingAllan:
 
     # ------------------------------------------------------------------------ results
     def _active(self) -> list[_Level]:
-        return [lev for lev in self._levels if lev.sums[self._d - 1].n > 0]
+        return [lev for lev in self._levels if lev.sums.n > 0]
 
     def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
         """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
@@ -364,8 +377,9 @@ class StreamingAllan:
         ms = np.array([lev.m for lev in levels], dtype=np.int64)
         strides = np.array([lev.stride for lev in levels], dtype=np.int64)
         return finish_result(
-            self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels], ci=ci,
-            one_d=self.n_channels == 1, names=self.names, weights=weights,
+            self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels],
+            [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
+            weights=weights,
         )
 
     def snapshot(self, ci: float = 0.683) -> AllanSnapshot:
@@ -383,7 +397,8 @@ class StreamingAllan:
             self.kind, self.rate_hz,
             np.array([lev.m for lev in self._active()], dtype=np.int64),
             np.array([lev.stride for lev in self._active()], dtype=np.int64),
-            [lev.sums for lev in self._active()], ci=ci, names=self.names,
+            [lev.sums for lev in self._active()], [lev.ladder for lev in self._active()],
+            ci=ci, names=self.names,
         )
         assert res.cov is not None
         return AllanSnapshot(res.tau, res.m, res.stride, res.var, res.cov, res.n, res.edf,
@@ -410,8 +425,8 @@ class StreamingAllan:
         other._flush()
         for k, lev in enumerate(other._levels):
             mine = self._level(k)
-            for a, b in zip(mine.sums, lev.sums, strict=True):
-                a.add(b)
+            mine.sums.add(lev.sums)
+            mine.ladder.add(lev.ladder)
         self.n_samples += other.n_samples
         self.n_segments += other.n_segments
 
@@ -423,22 +438,15 @@ class StreamingAllan:
         """
         self._flush()
         c = self.n_channels
-        d = self._d
         # Levels past the last one with any sums are recreated empty on restore.
         count = max((k + 1 for k, lev in enumerate(self._levels)
-                     if any(x.n or x.na or x.nl for x in lev.sums)), default=0)
+                     if lev.sums.n or lev.ladder.n[0]), default=0)
         levs = self._levels[:count]
-        iu = np.triu_indices(c)  # s2 and sa are symmetric: one triangle is stored
-        sums: dict = {f: [[int(getattr(x, f)) for x in lev.sums] for lev in levs]
-                      for f in ("n", "na", "nl")}
-        sums["s1"] = _pack(np.array([[x.s1 for x in lev.sums] for lev in levs],
-                                    dtype=np.float64).reshape(count, d, c))
-        sums["s2"] = _pack(np.array([lev.sums[d - 1].s2[iu] for lev in levs],
+        iu = np.triu_indices(c)  # s2 is symmetric: one triangle is stored
+        sums: dict = {"n": [int(lev.sums.n) for lev in levs]}
+        sums["s2"] = _pack(np.array([lev.sums.s2[iu] for lev in levs],
                                     dtype=np.float64).reshape(count, len(iu[0])))
-        sums["sa"] = _pack(np.array([[x.sa[iu] for x in lev.sums] for lev in levs],
-                                    dtype=np.float64).reshape(count, d, len(iu[0])))
-        sums["lag"] = _pack(np.array([[x.lag for x in lev.sums] for lev in levs],
-                                     dtype=np.float64).reshape(count, d, c, c))
+        sums["ladders"] = [lev.ladder.state() for lev in levs]
         grids = self._grids
         hist = (np.concatenate([g.hist for g in grids]) if grids
                 else np.zeros((0, c), dtype=self._dtype()))
@@ -495,18 +503,13 @@ class StreamingAllan:
                 grid.hist = hist[ends[g] : ends[g + 1]].copy()
                 grid.base = int(lv["base"][g])
             sums = lv["sums"]
-            c, d = self.n_channels, self._d
-            s1, s2 = _unpack(sums["s1"]), _unpack(sums["s2"])
-            sa, lag = _unpack(sums["sa"]), _unpack(sums["lag"])
+            c = self.n_channels
+            s2 = _unpack(sums["s2"])
             for k in range(count):
                 lev = self._level(k)
-                for o, x in enumerate(lev.sums):
-                    for f in ("n", "na", "nl"):
-                        setattr(x, f, int(sums[f][k][o]))
-                    x.s1 = s1[k, o].copy()
-                    x.sa = _symmetric(sa[k, o], c)
-                    x.lag = lag[k, o].copy()
-                    x.s2 = _symmetric(s2[k], c) if o == d - 1 else np.zeros((c, c))
+                lev.sums.n = int(sums["n"][k])
+                lev.sums.s2 = _symmetric(s2[k], c)
+                lev.ladder = Lag1Ladder.from_state(sums["ladders"][k])
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FormatError(f"StreamingAllan state is incomplete or malformed: {exc}; "
                               "start a new accumulator") from exc

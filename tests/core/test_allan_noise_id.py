@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from avard.core.allan import oavar
 from avard.core.errors import DataError
-from avard.core.noise_id import alpha_from_lag1, alpha_from_slope, identify_alpha, lag1_acf
+from avard.core.noise_id import (
+    Lag1Ladder,
+    alpha_from_b1,
+    alpha_from_lag1,
+    alpha_from_slope,
+    b1_theory,
+    identify_alpha,
+    lag1_acf,
+)
 
 
 def power_law(alpha: int, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -61,3 +69,62 @@ def test_identify_alpha_rejects_bad_input() -> None:
         identify_alpha(np.ones((100, 2)), 1)
     with pytest.raises(DataError, match="data_type"):
         identify_alpha(np.ones(100), 1, data_type="volts")
+
+
+def _pooled_r1(segments: list[np.ndarray]) -> float:
+    """Lag-1 ACF about the pooled mean, pairs only within a segment (the ladder's definition;
+    for one segment it is NIST SP 1065's r1)."""
+    allv = np.concatenate(segments)
+    mu = allv.mean()
+    num = sum(float(np.dot(s[:-1] - mu, s[1:] - mu)) for s in segments)
+    return num / float(np.dot(allv - mu, allv - mu))
+
+
+def test_lag1_ladder_sums_are_exact_for_any_split_gap_and_merge() -> None:
+    rng = np.random.default_rng(12)
+    # a huge offset (as an axis carrying 1 g) must not leak into r1
+    z = 9.81 + 1e-4 * np.cumsum(rng.normal(size=(3000, 2)), axis=0) * [1.0, 0.01] \
+        + 1e-4 * rng.normal(size=(3000, 2))
+    one = Lag1Ladder(2, dmax=2)
+    for part in np.array_split(z, [1, 2, 500, 1700]):
+        one.push(part)
+    for k in range(3):
+        series = np.diff(z, n=k, axis=0)
+        for ch in range(2):
+            assert one.r1(k)[ch] == pytest.approx(lag1_acf(series[:, ch]), abs=1e-9)
+    # two segments: fed with a gap, or as two ladders added, give the same sums
+    gapped, a = Lag1Ladder(2), Lag1Ladder(2)
+    gapped.push(z[:1200])
+    gapped.gap()
+    gapped.push(z[1200:])
+    a.push(z[:1200])
+    c = Lag1Ladder(2)
+    c.push(z[1200:])  # its reference is its own first value: the merge re-references it
+    c.add(Lag1Ladder(2))  # adding an empty ladder changes nothing
+    a.add(c)
+    for k in range(3):
+        segs = [np.diff(z[:1200], n=k, axis=0), np.diff(z[1200:], n=k, axis=0)]
+        for ch in range(2):
+            want = _pooled_r1([s[:, ch] for s in segs])
+            assert gapped.r1(k)[ch] == pytest.approx(want, abs=1e-9)
+            assert a.r1(k)[ch] == pytest.approx(want, abs=1e-9)
+    # a weighted channel, and a state round trip
+    w = np.array([1.0, -3.0])
+    wl = one.weighted(w)
+    assert wl.r1(0)[0] == pytest.approx(lag1_acf(z @ w), abs=1e-9)
+    back = Lag1Ladder.from_state(one.state())
+    np.testing.assert_array_equal(back.r1(1), one.r1(1))
+    np.testing.assert_array_equal(back.alpha(-2), one.alpha(-2))
+
+
+def test_b1_theory_and_classes() -> None:
+    """Barnes' B1: 1 for white FM, N/2 for random-walk FM, (N+1)/(1.5 N) for PM; the
+    measured ratio is classified at the geometric means between neighbours."""
+    assert b1_theory(10, -1) == pytest.approx(1.0)
+    assert b1_theory(10, 1) == pytest.approx(5.0)
+    assert b1_theory(10, -2) == pytest.approx(11 / 15)
+    assert b1_theory(10, 0) == pytest.approx(10 * np.log(10) / (18 * np.log(2)))
+    assert alpha_from_b1(1.0, 10) == 0
+    assert alpha_from_b1(5.0, 10) == -2
+    assert alpha_from_b1(b1_theory(10, 0), 10) == -1
+    assert alpha_from_b1(0.7, 10) is None  # PM: B1 cannot say which

@@ -95,22 +95,28 @@ def test_find_lines_no_false_lines_on_a_red_spectrum_and_finds_a_low_line() -> N
 def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     an = analyze(str(lab_npz))
     d = json.loads(json.dumps(an.to_dict(), allow_nan=False))
-    assert set(d) == {"source", "rate_hz", "n_samples", "channels"}
+    assert set(d) == {"source", "rate_hz", "n_samples", "estimator", "estimator_description",
+                      "channels"}
+    assert d["estimator"] == "oadev" and "OADEV" in d["estimator_description"]
     assert d["rate_hz"] == RATE and d["n_samples"] == 1 << 17
     assert list(d["channels"]) == ["x", "z"]
-    for ch in d["channels"].values():
-        assert set(ch) == {"tau_s", "adev", "adev_lo", "adev_hi", "edf", "terms", "sinusoids",
-                           "fit"}
+    for cname, ch in d["channels"].items():
+        assert set(ch) == {"estimator", "tau_s", "adev", "adev_lo", "adev_hi", "edf", "alpha",
+                           "terms", "sinusoids", "fit"}
+        assert ch["estimator"] == "oadev"
         k = len(ch["tau_s"])
-        assert all(len(ch[key]) == k for key in ("adev", "adev_lo", "adev_hi", "edf"))
+        assert all(len(ch[key]) == k for key in ("adev", "adev_lo", "adev_hi", "edf", "alpha"))
         assert set(ch["terms"]) == set(TERMS)
         for name, t in ch["terms"].items():
-            assert set(t) == {"value", "lo", "hi", "unit", "present"}
+            assert set(t) == {"value", "lo", "hi", "unit", "present", "upper"}
             assert t["unit"] == UNITS[name]
             if t["present"]:
-                assert t["lo"] <= t["value"] <= t["hi"]
+                assert t["lo"] <= t["value"] <= t["hi"] and t["upper"] is None
             else:
                 assert t["value"] is None and t["lo"] is None and t["hi"] is None
+                # the table's "absent (< upper)" is in the JSON too
+                upper = an.channels[cname].fit.terms[name].upper
+                assert upper is not None and t["upper"] == pytest.approx(upper) and upper > 0
         assert set(ch["fit"]) == {"tau_min_s", "tau_max_s", "chi2_dof"}
         for s in ch["sinusoids"]:
             assert set(s) == {"frequency_hz", "amplitude"}
@@ -132,7 +138,10 @@ def test_table_csv_and_kalibr(lab_npz: Path) -> None:
     assert "absent" in text and "2.5 Hz" in text and "χ²/dof" in text
     rows = adev_csv(an).strip().splitlines()
     assert rows[0].split(",") == ["channel", "tau_s", "adev_mps2", "adev_lo_mps2",
-                                  "adev_hi_mps2", "edf", "model_adev_mps2", "used"]
+                                  "adev_hi_mps2", "edf", "model_adev_mps2", "used", "alpha",
+                                  "estimator"]
+    assert all(r.endswith(",oadev") for r in rows[1:])
+    assert "fully overlapping ADEV (OADEV" in text
     assert len(rows) == 1 + len(an.channels["z"].allan.tau)
     first = rows[1].split(",")
     assert first[0] == "z" and float(first[1]) == pytest.approx(1 / RATE)

@@ -4,6 +4,7 @@ exit non-zero with a message naming the problem."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -84,3 +85,20 @@ def test_real_imudata_through_the_console_script(imudata_dir: Path) -> None:
     for ch in d["channels"].values():
         assert ch["terms"]["velocity_random_walk"]["present"]
         assert ch["fit"]["tau_min_s"] < ch["fit"]["tau_max_s"]
+
+
+def test_cli_holds_blas_to_one_thread_before_numpy_loads() -> None:
+    """The `avard` process sets one BLAS thread before numpy is first imported (a user's own
+    setting wins)."""
+    code = ("import os, sys; import avard.daemon.cli; "
+            "print('numpy' in sys.modules, os.environ['OPENBLAS_NUM_THREADS'], "
+            "os.environ['OMP_NUM_THREADS'])")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert out == ["False", "1", "1"]
+    env["OMP_NUM_THREADS"] = "3"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    assert out == ["False", "1", "3"]
