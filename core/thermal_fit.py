@@ -1,0 +1,273 @@
+"""Which logged temperature drives an axis, through what first-order lag, with what
+coefficient; and the temperature-compensated Allan variance. For ``avard explain`` (and
+``avard analyze --temperature``).
+
+Physics: heat reaches the sensor die from the logged channel (plate, ambient or the chip's own)
+through a thermal mass, a first-order lag: dT_s/dt = (T − T_s)/τ_L. The output moves by
+c·T_s (bias and sensitivity tempco, m/s²/K). Both act on seconds to hours, so the fit runs on
+the slow view (block means of ≈ 1 s; ``explain.SlowView``).
+
+Estimator. For a trial lag τ_L the logged channel is passed through the lag (exact
+discretisation for a linearly interpolated input, ``thermal.lag_coefficients``) and the
+streaming Allan accumulator (``streaming.StreamingAllan``, analyze's estimator at its octave τ)
+gives the Allan covariance of axis y and lagged temperature u. At each τ_k the regression of
+Allan differences of y on those of u is c_k = Cov_A(y, u)/AVAR(u), with variance
+r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: the number of
+independent differences). Differencing removes the offset and whitens flicker and random walk,
+so the regression is valid under the axis's own noise. The c_k are combined with inverse-
+variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
+combined variance includes (ρ_kl = 0.5^|k−l|). z = ĉ/se. The lag maximises z² over a log grid
+refined around the best point; its 68 % interval is the profile {τ_L : z² ≥ z²_max − 1}.
+Every channel is tried; the one with the largest z drives. Test: z ≥ ``Z_TEMPERATURE``
+(5: the lag and channel search look at ≈ 50 correlated trials).
+
+Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
+ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
+thermal share falls as τ³: a smooth signal's AVAR ∝ τ², white noise's ∝ 1/τ).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal as sps
+
+from .streaming import StreamingAllan
+from .thermal import lag_coefficients
+
+__all__ = ["Z_TEMPERATURE", "ThermalFit", "allan2", "compensated_avar", "fit_thermal", "lag_filter",
+           "min_detectable_tempco", "signal_avar_on", "tempco_from_cov"]
+
+Z_TEMPERATURE = 5.0
+#: DS18B20 conversion time (s): the temperature says nothing faster than this.
+DS18B20_CONVERSION_S = 0.75
+#: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
+_RHO = 0.5
+
+
+def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """T seen through a first-order lag of time constant ``lag_s`` (s), starting in steady
+    state at T[0]; ``lag_s`` = 0 returns T."""
+    T = np.asarray(T, dtype=float)
+    if lag_s <= 0:
+        return T.copy()
+    b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
+    zi = sps.lfilter_zi(b, a) * T[0]
+    out, _ = sps.lfilter(b, a, T, zi=zi)
+    return np.asarray(out, dtype=float)
+
+
+def allan2(y: NDArray, u: NDArray, rate_hz: float) -> Any:
+    """Allan variances and covariance of (y, u) with the streaming estimator."""
+    sa = StreamingAllan(2, rate_hz)
+    sa.update(np.column_stack([y, u]))
+    return sa.result()
+
+
+def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
+                    ) -> tuple[float, float, int]:
+    """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
+    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc)."""
+    cov = np.asarray(res.cov, dtype=float)
+    tau = np.asarray(res.tau, dtype=float)
+    edf = np.asarray(res.edf, dtype=float)
+    edf_y = edf[:, 0] if edf.ndim == 2 else edf
+    vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    ok = (np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (tau >= min_tau_s)
+          & np.isfinite(edf_y) & (edf_y >= 3))
+    k = np.flatnonzero(ok)
+    if len(k) == 0:
+        return 0.0, math.inf, 0
+    c = cyu[k] / vu[k]
+    r = np.maximum(vy[k] - cyu[k] ** 2 / vu[k], 1e-300)
+    se = np.sqrt(r / (vu[k] * edf_y[k]))
+    w = 1.0 / se**2
+    chat = float(np.sum(w * c) / np.sum(w))
+    rho = _RHO ** np.abs(np.subtract.outer(np.arange(len(k)), np.arange(len(k))))
+    ws = w * se
+    var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
+    return chat, math.sqrt(var), len(k)
+
+
+def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
+    """AVAR ((m/s²)²) a slow signal ``d`` (sampled at ``rate_hz``) puts into a record, at the
+    averaging times ``tau`` of the full-rate analysis: measured by the streaming estimator on
+    ``d``, log-log interpolated; below its first τ it falls as τ² (a smooth signal)."""
+    sa = StreamingAllan(1, rate_hz)
+    sa.update(np.asarray(d, dtype=float)[:, None])
+    res = sa.result()
+    ts, vs = np.asarray(res.tau, float), np.maximum(np.asarray(res.var, float), 1e-300)
+    ok = np.isfinite(vs)
+    ts, vs = ts[ok], vs[ok]
+    t = np.asarray(tau, dtype=float)
+    out = np.exp(np.interp(np.log(t), np.log(ts), np.log(vs)))
+    low = t < ts[0]
+    out[low] = vs[0] * (t[low] / ts[0]) ** 2
+    return out
+
+
+def compensated_avar(var: NDArray, tau: NDArray, res: Any, coefficient: float
+                     ) -> NDArray[np.float64]:
+    """``var`` (the axis's full-rate AVAR at ``tau``) with the thermal part ĉ·u removed, from
+    the two-channel Allan covariance ``res`` (axis, lagged temperature): see module doc."""
+    cov = np.asarray(res.cov, dtype=float)
+    ts = np.asarray(res.tau, dtype=float)
+    vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    comp = vy - 2 * coefficient * cyu + coefficient**2 * vu
+    ok = np.isfinite(comp) & (vy > 0)
+    ts = ts[ok]
+    ratio = np.clip(comp[ok] / vy[ok], 1e-6, None)
+    t = np.asarray(tau, dtype=float)
+    r = np.exp(np.interp(np.log(t), np.log(ts), np.log(ratio)))
+    low = t < ts[0]
+    r[low] = 1.0 - (1.0 - ratio[0]) * (t[low] / ts[0]) ** 3
+    return np.asarray(var, dtype=float) * r
+
+
+@dataclass
+class ThermalFit:
+    """The thermal model of one axis (SI units). ``channel`` drives it through a first-order
+    lag ``lag_s`` [lag_lo, lag_hi] with ``coefficient`` [coef_lo, coef_hi] m/s²/K (68 %);
+    ``z`` its test statistic; ``others``: the best z and lag of every other channel."""
+
+    channel: str
+    channel_index: int
+    coefficient: float
+    coef_se: float
+    lag_s: float
+    lag_lo: float
+    lag_hi: float
+    z: float
+    rate_hz: float
+    others: dict[str, dict[str, float]] = field(default_factory=dict)
+    allan: Any = field(default=None, repr=False)
+
+    threshold: float = Z_TEMPERATURE
+
+    @property
+    def passed(self) -> bool:
+        return self.z >= self.threshold
+
+    @property
+    def coef_interval(self) -> tuple[float, float]:
+        return self.coefficient - self.coef_se, self.coefficient + self.coef_se
+
+    def signal(self, temps: NDArray) -> NDArray[np.float64]:
+        """ĉ·(lagged driving channel − its mean) on the slow view (m/s²)."""
+        u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
+        return self.coefficient * (u - u.mean())
+
+    def compensated_avar(self, var: NDArray, tau: NDArray) -> NDArray[np.float64]:
+        return compensated_avar(var, tau, self.allan, self.coefficient)
+
+    def evidence(self) -> str:
+        lo, hi = self.coef_interval
+        txt = (f"the axis follows temperature '{self.channel}' through a first-order lag of "
+               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}] with "
+               f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
+               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
+        if self.others:
+            txt += "; other channels: " + ", ".join(
+                f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
+                for k, v in self.others.items())
+        return txt
+
+    def finding(self) -> Any:
+        from .causes import Finding
+
+        lo, hi = self.coef_interval
+        return Finding("temperature", False,
+                       {"coefficient": self.coefficient, "lag_s": self.lag_s},
+                       {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},
+                       self.z, self.threshold, self.evidence(), channel=self.channel)
+
+    def to_dict(self) -> dict[str, Any]:
+        lo, hi = self.coef_interval
+        return {"channel": self.channel, "coefficient_mps2_per_k": self.coefficient,
+                "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
+                "lag_interval_s": [self.lag_lo, self.lag_hi], "z": self.z,
+                "threshold": self.threshold, "passed": self.passed, "others": self.others}
+
+
+def _lag_grid(record_s: float, rate_hz: float) -> NDArray[np.float64]:
+    lo = max(4.0 / rate_hz, 4.0)
+    hi = max(record_s / 4.0, 2 * lo)
+    return np.concatenate([[0.0], np.geomspace(lo, hi, 28)])
+
+
+def _scan(y: NDArray, T: NDArray, lags: NDArray, rate_hz: float
+          ) -> list[tuple[float, float, float, float]]:
+    """(lag, ĉ, se, z) for every lag."""
+    out = []
+    for L in lags:
+        u = lag_filter(T, float(L), rate_hz)
+        c, se, _n = tempco_from_cov(allan2(y, u, rate_hz))
+        z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
+        out.append((float(L), c, se, z))
+    return out
+
+
+def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) -> ThermalFit:
+    """The thermal model of axis ``y`` (slow view at ``rate_hz``) against the temperature
+    channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
+    y = np.asarray(y, dtype=float)
+    record_s = len(y) / rate_hz
+    grid = _lag_grid(record_s, rate_hz)
+    best: dict[int, list[tuple[float, float, float, float]]] = {}
+    for j in range(temps.shape[1]):
+        scan = _scan(y, temps[:, j], grid, rate_hz)
+        i = int(np.argmax([s[3] for s in scan]))
+        # refine between the neighbouring grid points
+        if 0 < i < len(grid) - 1 and grid[i] > 0:
+            fine = np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1], 13)
+            scan = scan + _scan(y, temps[:, j], fine, rate_hz)
+        best[j] = sorted(scan)
+    zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
+    jb = max(zmax, key=lambda j: zmax[j])
+    scan = best[jb]
+    k = int(np.argmax([s[3] for s in scan]))
+    L, c, se, z = scan[k]
+    # profile interval: lags whose z² is within 1 of the best
+    inside = [s[0] for s in scan if s[3] ** 2 >= z**2 - 1.0]
+    lo_i, hi_i = min(inside), max(inside)
+    lags = [s[0] for s in scan]
+    pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
+    lag_lo = lo_i if pos_lo == 0 else math.sqrt(max(lags[pos_lo - 1], 1e-9) * lo_i) \
+        if lags[pos_lo - 1] > 0 else lo_i / 2
+    lag_hi = hi_i if pos_hi == len(lags) - 1 else math.sqrt(lags[pos_hi + 1] * max(hi_i, 1e-9))
+    others = {}
+    for j, sc in best.items():
+        if j != jb:
+            kk = int(np.argmax([s[3] for s in sc]))
+            others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
+    res = allan2(y, lag_filter(temps[:, jb], L, rate_hz), rate_hz)
+    return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
+                      others, res)
+
+
+def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                          amplitude_c: float, period_s: float, lag_s: float,
+                          z: float = Z_TEMPERATURE) -> float:
+    """Smallest coefficient (m/s²/K) the temperature test detects (z ≥ ``z`` on average) for a
+    logged ±``amplitude_c`` sinusoid of ``period_s`` reaching the sensor through a first-order
+    lag ``lag_s``, on noise N (m/s/√s), B (m/s²), K (m/s²·√s) over ``record_s``.
+
+    Derivation: the sensor sees a = c·A/√(1 + ω²L²); at τ its Allan variance is
+    a²·sin⁴(πτ/P)/(πτ/P)² (IEEE 952 eq. C.21), the noise's N²/τ + (0.664 B)² + K²τ/3. The
+    Allan-difference regression at τ has z ≈ √(ν·AVAR_signal/AVAR_noise) with ν ≈ T/τ
+    independent differences; the test uses the best τ (the octave combination adds little).
+    So c_min = z / max_τ √(ν·g(τ)/AVAR_noise(τ)), g the signal AVAR per unit c.
+    """
+    from .model import BI_FACTOR
+
+    tau = np.geomspace(2.0, record_s / 8.0, 200)
+    x = np.pi * tau / period_s
+    att = amplitude_c / math.hypot(1.0, 2 * math.pi * lag_s / period_s)
+    g = att**2 * np.sin(x) ** 4 / x**2
+    noise = n_white**2 / tau + (BI_FACTOR * b_inst) ** 2 + k_rrw**2 * tau / 3.0
+    nu = record_s / tau
+    return float(z / np.max(np.sqrt(nu * g / noise)))
