@@ -137,6 +137,16 @@ class ChannelExplanation:
     thermal: ThermalFit | None = None
     compensated_var: NDArray[np.float64] | None = None
     contributions: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    #: AVAR with only the temperature part removed (the thermal fit's compensated curve)
+    thermal_compensated_var: NDArray[np.float64] | None = None
+
+    def compensation_dict(self) -> dict[str, Any] | None:
+        """The temperature compensation (``avard analyze --temperature``): the thermal fit
+        and the compensated ADEV at the channel's τ (m/s²), or None."""
+        if self.thermal is None or self.thermal_compensated_var is None:
+            return None
+        return {**self.thermal.to_dict(),
+                "compensated_adev": np.sqrt(self.thermal_compensated_var).tolist()}
 
     @property
     def claimed(self) -> list[Finding]:
@@ -271,22 +281,31 @@ def _source(path: str, block: int, rate_hz: float | None
 
 def explain_file(path: str, *, rate_hz: float | None = None,
                  channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
-                 stage: StageFn | None = None, block: int = 1 << 16) -> Explanation:
-    """Explain the record at ``path`` (.npz, .csv or a recording), streamed once."""
+                 stage: StageFn | None = None, block: int = 1 << 16,
+                 filter_corner_hz: float | str | None = "auto",
+                 temperature: str | None = None) -> Explanation:
+    """Explain the record at ``path`` (.npz, .csv or a recording), streamed once.
+    ``filter_corner_hz`` as for ``report.analyze``; ``temperature`` names the one temperature
+    channel to use (its compensation is then reported whatever its test says)."""
     meta, blocks = _source(path, block, rate_hz)
     meta.setdefault("source", path)
-    return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage)
+    return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
+                          filter_corner_hz=filter_corner_hz, temperature=temperature)
 
 
 def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                    channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
-                   stage: StageFn | None = None) -> Explanation:
+                   stage: StageFn | None = None, filter_corner_hz: float | str | None = "auto",
+                   temperature: str | None = None) -> Explanation:
     """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
     (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
     segment end)."""
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     tnames = list(meta.get("temperature_names") or [])
+    if temperature is not None and temperature not in tnames:
+        raise DataError(f"temperature channel {temperature!r} is not in this record; its "
+                        "temperature channels are " + (", ".join(tnames) or "none"))
     b = block_size(rate, meta.get("n_samples"))
     slow = SlowView(b, len(names), len(tnames))
 
@@ -300,12 +319,13 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
             yield a, end
 
     an = analyze_stream(meta, tee(), source=str(meta.get("source", "stream")),
-                        channels=channels, progress=progress)
+                        channels=channels, progress=progress,
+                        filter_corner_hz=filter_corner_hz)
     y_slow, t_slow = slow.finish()
     rate_b = rate / b
     t_ok = [j for j in range(len(tnames))
             if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
-            and np.ptp(t_slow[:, j]) > 0]
+            and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
     temperature: dict[str, Any] = {}
     if t_slow is not None and t_ok and len(t_slow) >= 16:
         sa = StreamingAllan(len(t_ok), rate_b, names=[tnames[j] for j in t_ok])
@@ -320,13 +340,15 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         j = names.index(name)
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
-                                     [tnames[k] for k in t_ok], an, meta)
+                                     [tnames[k] for k in t_ok], an, meta,
+                                     always_compensate=temperature is not None)
     return Explanation(an, out, temperature, b / rate)
 
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                      temps: NDArray | None, tnames: list[str], an: Analysis,
-                     meta: dict[str, Any]) -> ChannelExplanation:
+                     meta: dict[str, Any], always_compensate: bool = False
+                     ) -> ChannelExplanation:
     allan = ch.allan
     tau = np.asarray(allan.tau, dtype=float)
     base = ch.fit
@@ -338,6 +360,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     signal = np.zeros(len(y_slow))
     thermal: ThermalFit | None = None
     comp_var: NDArray[np.float64] | None = None
+    thermal_only: NDArray[np.float64] | None = None
     if len(y_slow) >= MIN_SLOW_POINTS:
         if temps is not None and temps.shape[1] > 0:
             thermal = fit_thermal(y_slow, temps, tnames, rate_b)
@@ -348,6 +371,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 d = thermal.signal(temps)
                 signal += d
                 curves["temperature"] = signal_avar_on(d, rate_b, tau)
+            elif always_compensate:
+                thermal_only = thermal.compensated_avar(allan.var, tau)
         work = y_slow - signal
         fits = cz.transient_fits(work, rate_b)
         for cand in (cz.detect_warmup(work, rate_b, fits),
@@ -359,6 +384,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 signal += d
                 curves[cand.cause] = signal_avar_on(d, rate_b, tau)
     ext = base
+    if thermal is not None and thermal.passed:
+        thermal_only = thermal.compensated_avar(allan.var, tau)
     if curves:
         # the record with every claimed signal removed, from the Allan covariance of the axis
         # and that signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)
@@ -381,7 +408,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                                    "amplitude": ln["amplitude"]}, {}, math.nan,
                                 math.nan, "line found by analyze's line finder "
                                 "(report.find_lines); part of the base model"))
-    return ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves)
+    return ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
+                              thermal_only)
 
 
 def _s(v: float | None) -> str:

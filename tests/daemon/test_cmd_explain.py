@@ -72,3 +72,23 @@ def test_user_errors_exit_2(tmp_path, capsys):
     assert cli.main(["explain", str(tmp_path / "short.npz"), "--report",
                      str(tmp_path / "no" / "such" / "dir")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_analyze_temperature_option(thermal_file, capsys):
+    """`avard analyze --temperature CH`: the same terms as plain analyze, plus the coefficient
+    and the compensated ADEV in the JSON."""
+    path, _ = thermal_file
+    assert cli.main(["analyze", str(path), "--json", "--channels", "x"]) == 0
+    assert cli.main(["analyze", str(path), "--json", "--channels", "x",
+                     "--temperature", "ambient"]) == 0
+    plain, comp = _two_json(capsys)
+    x = comp["channels"]["x"]
+    tc = x.pop("temperature_compensation")
+    assert x == plain["channels"]["x"]
+    assert tc["channel"] == "ambient"
+    assert tc["coefficient_mps2_per_k"] == pytest.approx(1e-3, rel=0.2)
+    assert len(tc["compensated_adev"]) == len(x["tau_s"])
+    k = min(range(len(x["tau_s"])), key=lambda i: abs(x["tau_s"][i] - 400.0))
+    assert tc["compensated_adev"][k] < 0.8 * x["adev"][k]
+    assert cli.main(["analyze", str(path), "--temperature", "plate"]) == 2
+    assert "not in this record" in capsys.readouterr().err
