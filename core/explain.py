@@ -48,7 +48,7 @@ from .fit import NoiseFit, fit_noise
 from .readers import iter_blocks, load_record
 from .report import Analysis, ChannelAnalysis, ProgressFn, analyze_stream
 from .streaming import StreamingAllan
-from .thermal_fit import ThermalFit, allan2, compensated_avar, fit_thermal, signal_avar_on
+from .thermal_fit import ThermalFit, allan2, compensated_avar, fit_thermal_axes, signal_avar_on
 
 __all__ = ["ChannelExplanation", "Explanation", "Finding", "SlowView", "block_size",
            "explain_file", "explain_stream", "misfit_ranges"]
@@ -333,20 +333,26 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         res = sa.result()
         for i, j in enumerate(t_ok):
             temperature[tnames[j]] = res.channel(i) if len(t_ok) > 1 else res
+    cols = [names.index(nm) for nm in an.channels]
+    th_fits: list[ThermalFit | None] = [None] * len(cols)
+    if t_slow is not None and t_ok and len(y_slow) >= MIN_SLOW_POINTS:
+        if stage is not None:
+            stage("fitting the thermal model")
+        th_fits = list(fit_thermal_axes(y_slow[:, cols], t_slow[:, t_ok],
+                                        [tnames[k] for k in t_ok], rate_b))
     out: dict[str, ChannelExplanation] = {}
-    for name, ch in an.channels.items():
+    for (name, ch), th in zip(an.channels.items(), th_fits, strict=True):
         if stage is not None:
             stage(f"explaining channel {name}")
         j = names.index(name)
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
-                                     [tnames[k] for k in t_ok], an, meta,
-                                     always_compensate=temperature is not None)
+                                     th, an, meta, always_compensate=temperature is not None)
     return Explanation(an, out, temperature, b / rate)
 
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
-                     temps: NDArray | None, tnames: list[str], an: Analysis,
+                     temps: NDArray | None, thermal: ThermalFit | None, an: Analysis,
                      meta: dict[str, Any], always_compensate: bool = False
                      ) -> ChannelExplanation:
     allan = ch.allan
@@ -358,12 +364,10 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     findings: list[Finding] = []
     curves: dict[str, NDArray[np.float64]] = {}
     signal = np.zeros(len(y_slow))
-    thermal: ThermalFit | None = None
     comp_var: NDArray[np.float64] | None = None
     thermal_only: NDArray[np.float64] | None = None
     if len(y_slow) >= MIN_SLOW_POINTS:
-        if temps is not None and temps.shape[1] > 0:
-            thermal = fit_thermal(y_slow, temps, tnames, rate_b)
+        if thermal is not None and temps is not None:
             f = thermal.finding()
             f.claimed = thermal.passed
             findings.append(f)

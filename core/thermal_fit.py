@@ -39,8 +39,18 @@ from scipy import signal as sps
 from .streaming import StreamingAllan
 from .thermal import lag_coefficients
 
-__all__ = ["Z_TEMPERATURE", "ThermalFit", "allan2", "compensated_avar", "fit_thermal", "lag_filter",
-           "min_detectable_tempco", "signal_avar_on", "tempco_from_cov"]
+__all__ = [
+    "Z_TEMPERATURE",
+    "ThermalFit",
+    "allan2",
+    "compensated_avar",
+    "fit_thermal",
+    "fit_thermal_axes",
+    "lag_filter",
+    "min_detectable_tempco",
+    "signal_avar_on",
+    "tempco_from_cov",
+]
 
 Z_TEMPERATURE = 5.0
 #: DS18B20 conversion time (s): the temperature says nothing faster than this.
@@ -199,33 +209,66 @@ def _lag_grid(record_s: float, rate_hz: float) -> NDArray[np.float64]:
     return np.concatenate([[0.0], np.geomspace(lo, hi, 28)])
 
 
-def _scan(y: NDArray, T: NDArray, lags: NDArray, rate_hz: float
-          ) -> list[tuple[float, float, float, float]]:
-    """(lag, ĉ, se, z) for every lag."""
-    out = []
+class _Pair:
+    """The (axis j, temperature) 2×2 slice of a multi-channel AllanResult."""
+
+    def __init__(self, res: Any, j: int) -> None:
+        sel = [j, -1]
+        self.tau = res.tau
+        self.cov = np.asarray(res.cov)[:, sel][:, :, sel]
+        self.edf = np.asarray(res.edf)[:, sel]
+
+
+def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
+          ) -> list[list[tuple[float, float, float, float]]]:
+    """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
+    per lag serves all axes."""
+    out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
-        c, se, _n = tempco_from_cov(allan2(y, u, rate_hz))
-        z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
-        out.append((float(L), c, se, z))
+        sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
+        sa.update(np.column_stack([Y, u]))
+        res = sa.result()
+        for j in range(Y.shape[1]):
+            c, se, _n = tempco_from_cov(_Pair(res, j))
+            z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
+            out[j].append((float(L), c, se, z))
     return out
 
 
 def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) -> ThermalFit:
-    """The thermal model of axis ``y`` (slow view at ``rate_hz``) against the temperature
-    channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
-    y = np.asarray(y, dtype=float)
-    record_s = len(y) / rate_hz
+    """The thermal model of one axis ``y``: :func:`fit_thermal_axes` for a single column."""
+    return fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps, names, rate_hz)[0]
+
+
+def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float
+                     ) -> list[ThermalFit]:
+    """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
+    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
+    Y = np.asarray(Y, dtype=float)
+    record_s = len(Y) / rate_hz
     grid = _lag_grid(record_s, rate_hz)
-    best: dict[int, list[tuple[float, float, float, float]]] = {}
+    scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
     for j in range(temps.shape[1]):
-        scan = _scan(y, temps[:, j], grid, rate_hz)
-        i = int(np.argmax([s[3] for s in scan]))
-        # refine between the neighbouring grid points
-        if 0 < i < len(grid) - 1 and grid[i] > 0:
-            fine = np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1], 13)
-            scan = scan + _scan(y, temps[:, j], fine, rate_hz)
-        best[j] = sorted(scan)
+        per_axis = _scan(Y, temps[:, j], grid, rate_hz)
+        # refine between the neighbouring grid points of each axis's best lag
+        fine: set[float] = set()
+        for sc in per_axis:
+            i = int(np.argmax([s[3] for s in sc]))
+            if 0 < i < len(grid) - 1 and grid[i] > 0:
+                fine.update(np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1],
+                                         13).tolist())
+        if fine:
+            extra = _scan(Y, temps[:, j], sorted(fine), rate_hz)
+            per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
+        scans[j] = [sorted(sc) for sc in per_axis]
+    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans})
+            for a in range(Y.shape[1])]
+
+
+def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+          best: dict[int, list[tuple[float, float, float, float]]]) -> ThermalFit:
+    """The driving channel and lag of one axis from its scans, with the profile interval."""
     zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
     jb = max(zmax, key=lambda j: zmax[j])
     scan = best[jb]
@@ -236,8 +279,12 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
     lo_i, hi_i = min(inside), max(inside)
     lags = [s[0] for s in scan]
     pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
-    lag_lo = lo_i if pos_lo == 0 else math.sqrt(max(lags[pos_lo - 1], 1e-9) * lo_i) \
-        if lags[pos_lo - 1] > 0 else lo_i / 2
+    if pos_lo == 0:
+        lag_lo = lo_i
+    elif lags[pos_lo - 1] > 0:
+        lag_lo = math.sqrt(lags[pos_lo - 1] * lo_i)
+    else:
+        lag_lo = lo_i / 2
     lag_hi = hi_i if pos_hi == len(lags) - 1 else math.sqrt(lags[pos_hi + 1] * max(hi_i, 1e-9))
     others = {}
     for j, sc in best.items():
