@@ -371,12 +371,12 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             f = thermal.finding()
             f.claimed = thermal.passed
             findings.append(f)
-            if thermal.passed:
-                d = thermal.signal(temps)
-                signal += d
-                curves["temperature"] = signal_avar_on(d, rate_b, tau)
-            elif always_compensate:
-                thermal_only = thermal.compensated_avar(allan.var, tau)
+            if thermal.passed or always_compensate:
+                d = thermal.signal(temps, y_slow)
+                thermal_only = compensated_avar(allan.var, tau, allan2(y_slow, d, rate_b), 1.0)
+                if thermal.passed:
+                    signal += d
+                    curves["temperature"] = signal_avar_on(d, rate_b, tau)
         work = y_slow - signal
         fits = cz.transient_fits(work, rate_b)
         for cand in (cz.detect_warmup(work, rate_b, fits),
@@ -388,8 +388,6 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 signal += d
                 curves[cand.cause] = signal_avar_on(d, rate_b, tau)
     ext = base
-    if thermal is not None and thermal.passed:
-        thermal_only = thermal.compensated_avar(allan.var, tau)
     if curves:
         # the record with every claimed signal removed, from the Allan covariance of the axis
         # and that signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)

@@ -16,10 +16,14 @@ r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: th
 independent differences). Differencing removes the offset and whitens flicker and random walk,
 so the regression is valid under the axis's own noise. The c_k are combined with inverse-
 variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
-combined variance includes (ρ_kl = 0.5^|k−l|). z = ĉ/se. The lag maximises z² over a log grid
-refined around the best point; its 68 % interval is the profile {τ_L : z² ≥ z²_max − 1}.
-Every channel is tried; the one with the largest z drives. Test: z ≥ ``Z_TEMPERATURE``
-(5: the lag and channel search look at ≈ 50 correlated trials).
+combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
+over a log grid refined around the best point) and the channel (largest z). Under red noise
+it is too optimistic (the noise differences are not independent across a slow regressor), so
+the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
+(``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
+shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
+interval is the analytic profile widened to the same scale: {τ_L : z² ≥ z²_max − (se/se_a)²}.
+Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
 ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
@@ -28,6 +32,7 @@ thermal share falls as τ³: a smooth signal's AVAR ∝ τ², white noise's ∝ 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -53,6 +58,8 @@ __all__ = [
 ]
 
 Z_TEMPERATURE = 5.0
+#: Contiguous parts of the record for the jackknife standard error of the coefficient.
+JACKKNIFE_GROUPS = 10
 #: DS18B20 conversion time (s): the temperature says nothing faster than this.
 DS18B20_CONVERSION_S = 0.75
 #: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
@@ -101,6 +108,37 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     ws = w * se
     var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
     return chat, math.sqrt(var), len(k)
+
+
+def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKKNIFE_GROUPS
+                     ) -> tuple[float, float]:
+    """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
+    error: the record in ``groups`` contiguous parts, each its own segment of the streaming
+    accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
+    se² = (G−1)/G·Σ(ĉ_(−g) − mean)². The analytic se of :func:`tempco_from_cov` treats the
+    Allan differences of the noise as independent across a slow regressor, which red noise
+    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it."""
+    M = len(y)
+    edges = np.linspace(0, M, groups + 1).astype(int)
+    parts = []
+    for a, b in itertools.pairwise(edges):
+        sa = StreamingAllan(2, rate_hz)
+        sa.update(np.column_stack([y[a:b], u[a:b]]))
+        parts.append(sa)
+    full = StreamingAllan.from_state(parts[0].state())
+    for sa in parts[1:]:
+        full.merge(sa)
+    c_all, _se, _n = tempco_from_cov(full.result())
+    cs = []
+    for g in range(groups):
+        rest = [sa for h, sa in enumerate(parts) if h != g]
+        acc = StreamingAllan.from_state(rest[0].state())
+        for sa in rest[1:]:
+            acc.merge(sa)
+        cs.append(tempco_from_cov(acc.result())[0])
+    c = np.asarray(cs)
+    se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
+    return c_all, se
 
 
 def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
@@ -166,13 +204,22 @@ class ThermalFit:
     def coef_interval(self) -> tuple[float, float]:
         return self.coefficient - self.coef_se, self.coefficient + self.coef_se
 
-    def signal(self, temps: NDArray) -> NDArray[np.float64]:
-        """ĉ·(lagged driving channel − its mean) on the slow view (m/s²)."""
+    def signal(self, temps: NDArray, y: NDArray | None = None) -> NDArray[np.float64]:
+        """ĉ·(lagged driving channel − its mean) on the slow view (m/s²). The sensor's
+        temperature at the record's start is unknown (the lag filter starts at T[0]); with
+        the axis ``y`` given, the start-up difference β·e^(−t/τ_L) is fitted to y − ĉu by
+        least squares (with an offset and a drift) and included, so it is not mistaken for
+        a warm-up."""
         u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
-        return self.coefficient * (u - u.mean())
+        d = self.coefficient * (u - u.mean())
+        if y is None or self.lag_s <= 0:
+            return d
+        t = np.arange(len(u)) / self.rate_hz
+        e = np.exp(-t / self.lag_s)
+        a = np.column_stack([np.ones_like(t), t, e])
+        coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
+        return d + coef[2] * (e - e.mean())
 
-    def compensated_avar(self, var: NDArray, tau: NDArray) -> NDArray[np.float64]:
-        return compensated_avar(var, tau, self.allan, self.coefficient)
 
     def evidence(self) -> str:
         lo, hi = self.coef_interval
@@ -273,9 +320,17 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     jb = max(zmax, key=lambda j: zmax[j])
     scan = best[jb]
     k = int(np.argmax([s[3] for s in scan]))
-    L, c, se, z = scan[k]
-    # profile interval: lags whose z² is within 1 of the best
-    inside = [s[0] for s in scan if s[3] ** 2 >= z**2 - 1.0]
+    L, c, se_fast, z_fast = scan[k]
+    u = lag_filter(temps[:, jb], L, rate_hz)
+    _c_parts, se_jk = jackknife_tempco(y, u, rate_hz)
+    # the larger of the two: the jackknife's parts may be shorter than the noise's
+    # correlation at the regressor's period, where it is too small itself
+    se = max(se_jk, se_fast)
+    z = abs(c) / se if se > 0 else 0.0
+    # profile interval of the lag: z² within (se/se_fast)² of the best, i.e. Δχ² = 1 on the
+    # scale of the jackknife error (the analytic z² curve has the right shape, too narrow)
+    widen = (se / se_fast) ** 2 if se_fast > 0 and math.isfinite(se_fast) else 1.0
+    inside = [s[0] for s in scan if s[3] ** 2 >= z_fast**2 - max(widen, 1.0)]
     lo_i, hi_i = min(inside), max(inside)
     lags = [s[0] for s in scan]
     pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
@@ -291,30 +346,30 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
         if j != jb:
             kk = int(np.argmax([s[3] for s in sc]))
             others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
-    res = allan2(y, lag_filter(temps[:, jb], L, rate_hz), rate_hz)
+    res = allan2(y, u, rate_hz)
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res)
 
 
 def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,
                           amplitude_c: float, period_s: float, lag_s: float,
-                          z: float = Z_TEMPERATURE) -> float:
+                          z: float = Z_TEMPERATURE, lag_rel: float | None = None) -> float:
     """Smallest coefficient (m/s²/K) the temperature test detects (z ≥ ``z`` on average) for a
     logged ±``amplitude_c`` sinusoid of ``period_s`` reaching the sensor through a first-order
-    lag ``lag_s``, on noise N (m/s/√s), B (m/s²), K (m/s²·√s) over ``record_s``.
+    lag ``lag_s``, on noise N (m/s/√s), B (m/s²), K (m/s²·√s) over ``record_s``. With
+    ``lag_rel``, the coefficient at which the lag's standard error is ``lag_rel``·lag instead.
 
-    Derivation: the sensor sees a = c·A/√(1 + ω²L²); at τ its Allan variance is
-    a²·sin⁴(πτ/P)/(πτ/P)² (IEEE 952 eq. C.21), the noise's N²/τ + (0.664 B)² + K²τ/3. The
-    Allan-difference regression at τ has z ≈ √(ν·AVAR_signal/AVAR_noise) with ν ≈ T/τ
-    independent differences; the test uses the best τ (the octave combination adds little).
-    So c_min = z / max_τ √(ν·g(τ)/AVAR_noise(τ)), g the signal AVAR per unit c.
+    Derivation: the sensor sees a sinusoid of amplitude a = c·A/√(1 + ω²L²). A sinusoid's
+    amplitude in noise of one-sided PSD S(f0) over T is known to σ_a = √(2·S(f0)/T), and with
+    NIST SP 1065 Table 5, S(f) = 2N² + B²/(πf) + K²/(2π²f²) (white, flicker, random-walk rate
+    noise whose AVAR is N²/τ, (2 ln2/π)B², K²τ/3). So z = a/σ_a and
+    c_min = z·σ_a·√(1 + ω²L²)/A. The phase −atan(ωL) carries the lag: σ_φ = 1/z, hence
+    σ_L/L = (1 + ω²L²)/(ωL·z).
     """
-    from .model import BI_FACTOR
-
-    tau = np.geomspace(2.0, record_s / 8.0, 200)
-    x = np.pi * tau / period_s
-    att = amplitude_c / math.hypot(1.0, 2 * math.pi * lag_s / period_s)
-    g = att**2 * np.sin(x) ** 4 / x**2
-    noise = n_white**2 / tau + (BI_FACTOR * b_inst) ** 2 + k_rrw**2 * tau / 3.0
-    nu = record_s / tau
-    return float(z / np.max(np.sqrt(nu * g / noise)))
+    f0 = 1.0 / period_s
+    s_f0 = 2 * n_white**2 + b_inst**2 / (math.pi * f0) + k_rrw**2 / (2 * math.pi**2 * f0**2)
+    sigma_a = math.sqrt(2 * s_f0 / record_s)
+    wl = 2 * math.pi * lag_s / period_s
+    if lag_rel is not None:
+        z = (1 + wl**2) / (wl * lag_rel) if wl > 0 else math.inf
+    return z * sigma_a * math.hypot(1.0, wl) / amplitude_c
