@@ -60,6 +60,8 @@ __all__ = [
 Z_TEMPERATURE = 5.0
 #: Contiguous parts of the record for the jackknife standard error of the coefficient.
 JACKKNIFE_GROUPS = 10
+#: Most block means the lag scan runs on.
+SCAN_POINTS = 1 << 15
 #: DS18B20 conversion time (s): the temperature says nothing faster than this.
 DS18B20_CONVERSION_S = 0.75
 #: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
@@ -294,10 +296,17 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
-    grid = _lag_grid(record_s, rate_hz)
+    # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
+    # lags sought are minutes); the chosen lag is then fitted on the whole slow view
+    f = 1 << max(0, math.ceil(math.log2(len(Y) / SCAN_POINTS)))
+    m = (len(Y) // f) * f
+    Ys = Y[:m].reshape(-1, f, Y.shape[1]).mean(axis=1)
+    Ts = temps[:m].reshape(-1, f, temps.shape[1]).mean(axis=1)
+    rate_s = rate_hz / f
+    grid = _lag_grid(record_s, rate_s)
     scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
     for j in range(temps.shape[1]):
-        per_axis = _scan(Y, temps[:, j], grid, rate_hz)
+        per_axis = _scan(Ys, Ts[:, j], grid, rate_s)
         # refine between the neighbouring grid points of each axis's best lag
         fine: set[float] = set()
         for sc in per_axis:
@@ -306,7 +315,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                 fine.update(np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1],
                                          13).tolist())
         if fine:
-            extra = _scan(Y, temps[:, j], sorted(fine), rate_hz)
+            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s)
             per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
         scans[j] = [sorted(sc) for sc in per_axis]
     return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans})
@@ -320,16 +329,19 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     jb = max(zmax, key=lambda j: zmax[j])
     scan = best[jb]
     k = int(np.argmax([s[3] for s in scan]))
-    L, c, se_fast, z_fast = scan[k]
+    L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
+    res = allan2(y, u, rate_hz)
+    c, se_a, _n = tempco_from_cov(res)
     _c_parts, se_jk = jackknife_tempco(y, u, rate_hz)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
-    se = max(se_jk, se_fast)
+    se = max(se_jk, se_a)
     z = abs(c) / se if se > 0 else 0.0
-    # profile interval of the lag: z² within (se/se_fast)² of the best, i.e. Δχ² = 1 on the
-    # scale of the jackknife error (the analytic z² curve has the right shape, too narrow)
-    widen = (se / se_fast) ** 2 if se_fast > 0 and math.isfinite(se_fast) else 1.0
+    # profile interval of the lag: the scan's z² within (se/se_scan)² of the best, i.e.
+    # Δχ² = 1 on the scale of the reported error (the analytic z² curve has the right shape
+    # but is too narrow)
+    widen = (se / se_scan) ** 2 if se_scan > 0 and math.isfinite(se_scan) else 1.0
     inside = [s[0] for s in scan if s[3] ** 2 >= z_fast**2 - max(widen, 1.0)]
     lo_i, hi_i = min(inside), max(inside)
     lags = [s[0] for s in scan]
@@ -346,7 +358,6 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
         if j != jb:
             kk = int(np.argmax([s[3] for s in sc]))
             others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
-    res = allan2(y, u, rate_hz)
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res)
 

@@ -127,3 +127,17 @@ def test_bias_step_found_where_it_is(tmp_path):
         assert set(claimed) == {"bias_step"}, [f.evidence for f in ch.claimed]
         assert claimed["bias_step"].params["time_s"] == pytest.approx(5000.0, rel=0.02)
         assert claimed["bias_step"].params["size"] == pytest.approx(4e-4, rel=0.2)
+
+
+def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
+    """Long records scan the lags on at most SCAN_POINTS block means; the result holds."""
+    from avard.core import thermal_fit
+
+    c = _three_times_minimum(AMBIENT, 600.0)
+    path, _ = _file(tmp_path, 31, Truth(coefficient=(c, 0.0, 0.0), lag_s=600.0),
+                    logged=("ambient",))
+    monkeypatch.setattr(thermal_fit, "SCAN_POINTS", 1024)
+    th = explain_file(path, channels=["x"]).channels["x"].thermal
+    assert th is not None and th.passed
+    assert th.coefficient == pytest.approx(c, rel=0.2)
+    assert th.lag_s == pytest.approx(600.0, rel=0.2)
