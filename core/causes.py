@@ -252,3 +252,29 @@ def cause_signal(cand: Candidate, n: int, rate_hz: float) -> NDArray:
     if cand.cause == "bias_step":
         return step_signal(n, rate_hz, p["time_s"], p["size"])
     raise ValueError(f"{cand.cause} is not a time-domain transient")  # a bug
+
+
+def _noise_avar(tau: float | NDArray, n_white: float, b_inst: float, k_rrw: float
+                ) -> NDArray:
+    """AVAR of white, flicker and random-walk rate noise (N²/τ + (0.664 B)² + K²τ/3)."""
+    t = np.asarray(tau, dtype=float)
+    return np.asarray(n_white**2 / t + (0.6643 * b_inst) ** 2 + k_rrw**2 * t / 3.0)
+
+
+def min_detectable_warmup(n_white: float, b_inst: float, k_rrw: float,
+                          time_constant_s: float) -> float:
+    """Smallest warm-up size (m/s²) the test passes on average: the contrast of the first
+    two windows of T is size·(1 − 2/e + 1/e²) = 0.40·size; the spread of such contrasts is
+    √(2·AVAR(T)) (NIST SP 1065 eq. 6); the test wants 6 of them."""
+    k = 1.0 - 2.0 * math.exp(-1.0) + math.exp(-2.0)
+    return float(Z_STEP * math.sqrt(2.0 * _noise_avar(time_constant_s, n_white, b_inst,
+                                                      k_rrw)) / k)
+
+
+def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: float
+                        ) -> float:
+    """Smallest bias step (m/s²) the test passes on average: the contrast of adjacent
+    windows of 1, 2 or 4 % of the record across the step is its size; their spread
+    √(2·AVAR(window)); the test wants 6 of them at the best window."""
+    w = np.array([0.01, 0.02, 0.04]) * record_s
+    return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from avard.core.causes import min_detectable_step, min_detectable_warmup
 from avard.core.explain import explain_file
 from avard.core.report import analyze
 from avard.core.thermal_fit import min_detectable_tempco
@@ -104,29 +105,42 @@ def test_null_record_is_clean(tmp_path):
         assert math.isclose(ch.gain, 1.0)
 
 
-@pytest.mark.xfail(strict=True, reason="the [1, t, e^(−t/T)] fit trades T against the drift "
-                   "term: T comes out 24 % long on one axis of this record")
-def test_warmup_found_with_its_time_constant(tmp_path):
-    truth = Truth(warmup=(1.5e-3, 900.0))
-    path, _ = _file(tmp_path, 7, truth)
-    ex = explain_file(path)
+def _warmup_case(tmp_path):
+    size = 3 * min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
+    path, _ = _file(tmp_path, 7, Truth(warmup=(size, 900.0)))
+    return size, explain_file(path)
+
+
+def test_warmup_found_with_its_size(tmp_path):
+    """A 15-minute warm-up at 3× its stated minimum size, on every axis: found, nothing
+    else claimed, its size within 20 %."""
+    size, ex = _warmup_case(tmp_path)
     for ch in ex.channels.values():
         claimed = {f.cause: f for f in ch.claimed}
         assert set(claimed) == {"warmup"}, [f.evidence for f in ch.claimed]
-        p = claimed["warmup"].params
+        assert claimed["warmup"].params["size"] == pytest.approx(size, rel=0.2)
+
+
+@pytest.mark.xfail(strict=True, reason="at 3× the detection minimum the time constant "
+                   "scatters ≈ 15 % (1 σ, 30 axes); 20 % on every axis needs a larger effect")
+def test_warmup_time_constant_within_20_percent(tmp_path):
+    _, ex = _warmup_case(tmp_path)
+    for ch in ex.channels.values():
+        p = {f.cause: f for f in ch.claimed}["warmup"].params
         assert p["time_constant_s"] == pytest.approx(900.0, rel=0.2)
-        assert p["size"] == pytest.approx(1.5e-3, rel=0.2)
 
 
 def test_bias_step_found_where_it_is(tmp_path):
-    truth = Truth(step=(5000.0, 4e-4))
+    """A bias step at 3× its stated minimum size, on every axis."""
+    size = 3 * min_detectable_step(1.6e-4, 2e-5, 2e-6, 4 * 3600.0)
+    truth = Truth(step=(5000.0, size))
     path, _ = _file(tmp_path, 8, truth)
     ex = explain_file(path)
     for ch in ex.channels.values():
         claimed = {f.cause: f for f in ch.claimed}
         assert set(claimed) == {"bias_step"}, [f.evidence for f in ch.claimed]
         assert claimed["bias_step"].params["time_s"] == pytest.approx(5000.0, rel=0.02)
-        assert claimed["bias_step"].params["size"] == pytest.approx(4e-4, rel=0.2)
+        assert claimed["bias_step"].params["size"] == pytest.approx(size, rel=0.2)
 
 
 def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
