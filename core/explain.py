@@ -326,13 +326,13 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
     t_ok = [j for j in range(len(tnames))
             if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
             and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
-    temperature: dict[str, Any] = {}
+    t_allan: dict[str, Any] = {}
     if t_slow is not None and t_ok and len(t_slow) >= 16:
         sa = StreamingAllan(len(t_ok), rate_b, names=[tnames[j] for j in t_ok])
         sa.update(t_slow[:, t_ok])
         res = sa.result()
         for i, j in enumerate(t_ok):
-            temperature[tnames[j]] = res.channel(i) if len(t_ok) > 1 else res
+            t_allan[tnames[j]] = res.channel(i) if len(t_ok) > 1 else res
     cols = [names.index(nm) for nm in an.channels]
     th_fits: list[ThermalFit | None] = [None] * len(cols)
     if t_slow is not None and t_ok and len(y_slow) >= MIN_SLOW_POINTS:
@@ -348,7 +348,7 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
                                      th, an, meta, always_compensate=temperature is not None)
-    return Explanation(an, out, temperature, b / rate)
+    return Explanation(an, out, t_allan, b / rate)
 
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,

@@ -78,7 +78,8 @@ def _write(path: str, text: str) -> None:
 
 def _comp_line(name: str, v: dict | None) -> str:
     if v is None:
-        return f"channel {name}: no temperature fit (record too short)"
+        return (f"channel {name}: no temperature fit (the channel is constant or the record "
+                "too short)")
     lo, hi = v["coefficient_interval"]
     return (f"channel {name}: {v['coefficient_mps2_per_k']:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] "
             f"(68 %) from '{v['channel']}' through a first-order lag of {v['lag_s']:.4g} s "
