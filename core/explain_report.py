@@ -1,95 +1,133 @@
-"""Terminal summary and Markdown report (with PNG plots) of an `avard explain` result.
+"""Terminal summary and Markdown report (with PNG plots) of an ``avard explain`` result.
 
-The report shows, per channel: the measured Allan deviation with its 68.3 % χ² interval and the
-band the base model says it should fall in (NIST SP 1065 eq. 40 with the estimator's EDF), the
-base and extended models, the misfit ranges in sigmas, and for every cause the test that was
-run, its statistic against its threshold and the evidence sentence. matplotlib is imported
-only when plots are written (it is the optional ``plot`` extra).
+Per channel: the measured Allan deviation with its 68 % interval, the band where the base
+model (analyze's fit) says it should fall (the model's χ² interval with the estimator's EDF,
+NIST SP 1065 §5.3), the base model, the extended model (the noise fitted with the found
+signals removed) and the temperature-compensated ADEV; the misfit in σ; and every cause's test.
+matplotlib is imported only when plots are written (the optional ``plot`` extra).
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2 as chi2_dist
 
-from .explain import ChannelExplanation, Explanation, band
-from .model import SYMBOLS, TERMS
+from .explain import ChannelExplanation, Explanation
+from .fit import NoiseFit, TermEstimate
+from .model import SYMBOLS, TERMS, UNITS
 from .plot import pyplot, save_figure
+from .thermal_fit import DS18B20_CONVERSION_S
+
+_UNICODE = (("^2", "²"), ("^3", "³"), ("sqrt(s)", "√s"), ("sqrt(Hz)", "√Hz"))
 
 
-def _fmt_term(t: dict) -> str:
-    if t["value"] is None:
-        return "–"
-    lo = t["lo"] if t["lo"] is not None else 0.0
-    return f"{t['value']:.4g} [{lo:.3g}, {t['hi']:.3g}] {t['unit']}"
+def unicode_unit(u: str) -> str:
+    """'m/s^2' → 'm/s²', 'm/s/sqrt(s)' → 'm/s/√s'."""
+    for a, b in _UNICODE:
+        u = u.replace(a, b)
+    return u
 
 
-def _fmt_gain(g: float | None) -> str:
-    if g is None:
-        return "n/a"
-    return f"{g:.3g}"
+def _fmt_term(t: TermEstimate, name: str) -> str:
+    unit = unicode_unit(UNITS[name])
+    if not t.present or t.value is None:
+        return f"absent (< {t.upper:.3g} {unit})" if t.upper else "absent"
+    return f"{t.value:.4g} [{t.lo:.4g}, {t.hi:.4g}] {unit}"
 
 
 def term_changes(ch: ChannelExplanation) -> list[tuple[str, str, str]]:
-    """(term, base, extended) per IEEE coefficient, formatted with units and intervals."""
-    b, e = ch.base.terms(), ch.extended.terms()
-    return [(name, _fmt_term(b[name]), _fmt_term(e[name])) for name in TERMS]
+    """(term, base, extended) per IEEE coefficient, with units and 68 % intervals."""
+    return [(n, _fmt_term(ch.base.fit.terms[n], n), _fmt_term(ch.extended.terms[n], n))
+            for n in TERMS]
+
+
+def _chi(fit: NoiseFit) -> str:
+    return f"{fit.chi2_dof:.3g}" if math.isfinite(fit.chi2_dof) else "n/a"
 
 
 def summary(ex: Explanation) -> str:
-    """Plain-text summary for the terminal (SI units)."""
-    lines = [f"avard explain: {ex.source or 'data'} at {ex.rate_hz:g} Hz"
-             + (f", held out: {ex.holdout_source}" if ex.holdout_source else
-                ", held out: second half of the record")]
+    """Plain-text summary for the terminal (SI units, 68 % intervals)."""
+    lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
+             f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
+             "intervals 68 %. Base model = avard analyze's fit."]
     for name, ch in ex.channels.items():
         lines.append("")
-        lines.append(f"channel {name}: base model chi2/dof {ch.base.chi2_dof:.3g}, extended "
-                     f"{ch.extended.chi2_dof:.3g}; gain {_fmt_gain(ch.gain)} on the fitted data, "
-                     f"{_fmt_gain(ch.holdout_gain)} held out")
+        lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
+                     f"{_chi(ch.extended)}; gain {ch.gain:.3g}")
         if ch.misfit:
             for r in ch.misfit:
-                lines.append(f"  misfit {r['direction']} the base model at tau "
-                             f"{r['tau_range_s'][0]:.3g}..{r['tau_range_s'][1]:.3g} s, "
-                             f"up to {r['max_sigma']:+.3g} sigma")
+                lines.append(f"  misfit {r['direction']} the base model at τ "
+                             f"{r['tau_range_s'][0]:.3g}…{r['tau_range_s'][1]:.3g} s, up to "
+                             f"{r['max_sigma']:+.3g} σ")
         else:
-            lines.append("  the base model fits within 3 sigma at every tau")
-        if not ch.findings:
+            lines.append("  the base model fits within 3 σ at every fitted τ")
+        claimed = ch.claimed
+        if not claimed:
             lines.append("  findings: none (no cause passed its test)")
-        for f in ch.findings:
-            params = ", ".join(f"{k} {v:.4g}" for k, v in f["params"].items())
-            lines.append(f"  FOUND {f['cause']}: {params} (SI units), tau "
-                         f"{f['tau_range_s'][0]:.3g}..{f['tau_range_s'][1]:.3g} s")
-            lines.append(f"        {f['evidence']}")
-        for d in ch.dropped:
-            lines.append(f"  rejected on held-out data: {d}")
-        lines.append("  IEEE coefficients (base -> extended, 68.3 % interval):")
+        for f in claimed:
+            params = ", ".join(
+                f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"
+                                  if k in f.intervals else "")
+                for k, v in f.params.items())
+            lines.append(f"  FOUND {f.cause}: {params} (SI units)")
+            lines.append(f"        {f.evidence}")
+        lines.append("  IEEE coefficients (base → extended, 68 % interval):")
         for term, b, e in term_changes(ch):
-            lines.append(f"    {SYMBOLS[term]} {term:21s} {b}  ->  {e}")
+            lines.append(f"    {SYMBOLS[term]} {term:21s} {b}  →  {e}")
     return "\n".join(lines)
+
+
+def band(var_model: NDArray, edf: NDArray, ci: float = 0.683) -> tuple[NDArray, NDArray]:
+    """Where a measurement with EDF ν falls with probability ``ci`` if the model is right:
+    σ²·χ²_ν(q)/ν (NIST SP 1065 eq. 40)."""
+    e = np.maximum(np.asarray(edf, dtype=float), 1e-3)
+    return (var_model * chi2_dist.ppf(0.5 - ci / 2, e) / e,
+            var_model * chi2_dist.ppf(0.5 + ci / 2, e) / e)
+
+
+def _log_ticks(ax: Any) -> None:
+    from matplotlib.ticker import LogLocator
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(LogLocator(base=10.0, numticks=12))
+    ax.tick_params(labelsize=8)
 
 
 def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
     plt = pyplot()
-    m = ch.measured
-    lo_b, hi_b = band(m, ch.base_model)
+    a = ch.base.allan
+    tau = np.asarray(a.tau, dtype=float)
+    ok = np.isfinite(a.var) & (a.var > 0)
+    mb = ch.base.fit.model_avar(tau)
+    lo_b, hi_b = band(mb, a.edf)
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
-    ax.fill_between(m.tau, np.sqrt(lo_b), np.sqrt(hi_b), color="0.85",
-                    label="base model band (68.3 %)")
-    ax.errorbar(m.tau, np.sqrt(m.var), yerr=[np.sqrt(m.var) - np.sqrt(m.lo),
-                                             np.sqrt(m.hi) - np.sqrt(m.var)],
-                fmt="o", ms=3, color="k", label="measured ADEV")
-    ax.loglog(m.tau, np.sqrt(ch.base_model), "-", color="C0", label="base model (5 IEEE terms)")
-    if ch.findings:
-        ax.loglog(m.tau, np.sqrt(ch.extended_model), "--", color="C3",
-                  label="extended model (" + ", ".join(f["cause"] for f in ch.findings) + ")")
+    ax.fill_between(tau[ok], np.sqrt(lo_b[ok]), np.sqrt(hi_b[ok]), color="0.85",
+                    label="base model, 68 % band")
+    ax.errorbar(tau[ok], a.dev[ok], yerr=[a.dev[ok] - a.dev_lo[ok], a.dev_hi[ok] - a.dev[ok]],
+                fmt="o", ms=3, color="k", label="measured ADEV, 68 % interval")
+    ax.plot(tau[ok], np.sqrt(mb[ok]), "-", color="C0", label="base model (avard analyze)")
+    if ch.claimed and ch.extended is not ch.base.fit:
+        me = ch.extended.model_avar(tau)
+        for v in ch.contributions.values():
+            me = me + v
+        ax.plot(tau[ok], np.sqrt(me[ok]), "--", color="C3",
+                label="extended model (" + ", ".join(f.cause for f in ch.claimed) + ")")
+    if ch.compensated_var is not None:
+        ax.plot(tau[ok], np.sqrt(ch.compensated_var[ok]), "s:", ms=3, color="C2",
+                label="found signals removed (compensated ADEV)")
     for r in ch.misfit:
-        ax.axvspan(r["tau_range_s"][0] / 1.2, r["tau_range_s"][1] * 1.2, color="C1", alpha=0.12)
+        ax.axvspan(r["tau_range_s"][0] / 1.2, r["tau_range_s"][1] * 1.2, color="C1",
+                   alpha=0.12, label="misfit > 3 σ" if r is ch.misfit[0] else None)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("averaging time tau (s)")
-    ax.set_ylabel("Allan deviation (m/s^2)")
+    _log_ticks(ax)
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("Allan deviation (m/s²)")
     ax.set_title(f"channel {ch.name}: measurement, base and extended model")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
@@ -98,17 +136,23 @@ def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
 
 def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
     plt = pyplot()
-    m = ch.measured
-    s = np.sqrt(2.0 / m.edf)
-    zb = (m.var - ch.base_model) / (ch.base_model * s)
-    ze = (m.var - ch.extended_model) / (ch.extended_model * s)
-    fig, ax = plt.subplots(figsize=(7.5, 3.2))
-    ax.semilogx(m.tau, zb, "o-", ms=3, label="base")
-    ax.semilogx(m.tau, ze, "s--", ms=3, label="extended")
-    ax.axhspan(-3, 3, color="0.9")
-    ax.set_xlabel("averaging time tau (s)")
-    ax.set_ylabel("misfit (sigma)")
+    a = ch.base.allan
+    tau = np.asarray(a.tau, dtype=float)
+    s = np.sqrt(2.0 / np.maximum(a.edf, 1e-3))
+    mb = ch.base.fit.model_avar(tau)
+    zb = (a.var - mb) / (mb * s)
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
+    ax.axhspan(-3, 3, color="0.9", label="±3 σ")
+    ax.semilogx(tau, zb, "o-", ms=3, label="base model (avard analyze)")
+    if ch.extended is not ch.base.fit and ch.compensated_var is not None:
+        me = ch.extended.model_avar(tau)
+        ze = (ch.compensated_var - me) / (me * s)
+        ax.semilogx(tau, ze, "s--", ms=3, label="extended model (found signals removed)")
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("misfit (σ)")
+    ax.set_title(f"channel {ch.name}: (measured − model) / σ of the estimate")
     ax.set_yscale("symlog", linthresh=3)
+    ax.tick_params(labelsize=8)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     save_figure(fig, path, dpi=110)
@@ -117,76 +161,65 @@ def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
 def _plot_temperature(ex: Explanation, path: Path) -> None:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.0))
-    for name, m in ex.temperature.items():
-        ax.loglog(m.tau, np.sqrt(m.var), "o-", ms=3, label=name)
-    ax.set_xlabel("averaging time tau (s)")
+    for name, r in ex.temperature.items():
+        tau = np.asarray(r.tau, dtype=float)
+        # below the DS18B20's conversion time the values are artefacts of its 0.75 s,
+        # 0.0625 K readings, not the temperature
+        ok = (tau >= DS18B20_CONVERSION_S) & np.isfinite(r.var) & (r.var > 0)
+        ax.loglog(tau[ok], np.sqrt(r.var[ok]), "o-", ms=3, label=name)
+    _log_ticks(ax)
+    ax.set_xlabel("averaging time τ (s)")
     ax.set_ylabel("Allan deviation (K)")
+    ax.set_title(f"temperature channels (τ ≥ {DS18B20_CONVERSION_S:g} s, the DS18B20 "
+                 "conversion time)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     save_figure(fig, path, dpi=110)
 
 
 def write_report(ex: Explanation, outdir: str | Path) -> Path:
-    """Write ``report.md`` and one pair of PNG plots per channel into ``outdir``."""
+    """Write ``report.md`` and the PNG plots into ``outdir``; returns the report's path."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     md = ["# avard explain report", "",
-          f"Data: `{ex.source or 'data'}`, {ex.rate_hz:g} Hz. Held out: "
-          + (f"`{ex.holdout_source}`." if ex.holdout_source else "the second half of the record."),
-          "",
-          "Units are SI: Allan deviation in m/s², averaging time τ in s. Gains are ratios of "
-          "EDF-weighted χ² per degree of freedom, base over extended (above 1: the extension "
-          "describes the data better). The band is the base model's 68.3 % χ² interval "
-          "with the estimator's equivalent degrees of freedom (Greenhall & Riley).", ""]
+          f"Data: `{ex.source}`, {ex.rate_hz:g} Hz, {ex.analysis.n_samples} samples.", "",
+          "Units are SI: Allan deviation in m/s², averaging time τ in s, intervals 68 %. "
+          "The base model is `avard analyze`'s fit of the same record. The band is the base "
+          "model's 68 % χ² interval with the estimator's EDF. The gain is the base fit's "
+          "χ²/dof over the extended fit's (above 1: the found causes describe the data "
+          "better).", ""]
     for name, ch in ex.channels.items():
         safe = "".join(c if c.isalnum() else "_" for c in name)
         adev_png, res_png = f"adev_{safe}.png", f"misfit_{safe}.png"
         _plot_channel(ch, out / adev_png)
         _plot_residuals(ch, out / res_png)
-        md += [f"## Channel {name}", "",
-               f"![ADEV of {name}]({adev_png})", "", f"![misfit of {name}]({res_png})", "",
-               "| | base | extended |", "|---|---|---|",
-               f"| χ²/dof on the fitted data | {ch.base.chi2_dof:.3g} | "
-               f"{ch.extended.chi2_dof:.3g} |"]
-        if ch.holdout_chi2:
-            md.append(f"| χ²/K held out | {ch.holdout_chi2['base']:.3g} | "
-                      f"{ch.holdout_chi2['extended']:.3g} |")
-        md += ["", f"Gain on the fitted data **{_fmt_gain(ch.gain)}**, held out "
-               f"**{_fmt_gain(ch.holdout_gain)}**.", "", "### Misfit of the base model", ""]
+        md += [f"## Channel {name}", "", f"![ADEV of {name}]({adev_png})", "",
+               f"![misfit of {name}]({res_png})", "",
+               f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
+               f"**{ch.gain:.3g}**.", "", "### Misfit of the base model", ""]
         if ch.misfit:
             md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]
             md += [f"| {r['tau_range_s'][0]:.3g} – {r['tau_range_s'][1]:.3g} | "
                    f"{r['direction']} | {r['max_sigma']:+.3g} |" for r in ch.misfit]
         else:
-            md.append("Within 3 σ at every τ.")
-        md += ["", "### Findings", ""]
-        if ch.findings:
-            md += ["| cause | parameters (SI) | τ range (s) |", "|---|---|---|"]
-            for f in ch.findings:
-                params = ", ".join(f"{k} = {v:.4g}" for k, v in f["params"].items())
-                md.append(f"| {f['cause']} | {params} | {f['tau_range_s'][0]:.3g} – "
-                          f"{f['tau_range_s'][1]:.3g} |")
-        else:
-            md.append("None: no cause passed its test.")
-        if ch.dropped:
-            md += ["", "Not claimed (the gain did not hold on held-out data):", ""]
-            md += [f"- {d}" for d in ch.dropped]
-        md += ["", "### Evidence per cause (every test that ran)", "",
-               "| cause | passed | statistic | threshold | evidence |", "|---|---|---|---|---|"]
-        for t in ch.tests:
-            stat = f"{t.statistic:.3g}" if math.isfinite(t.statistic) else "–"
-            ev = t.evidence.replace("|", "\\|")  # |z| and |t| would end the table cell
-            md.append(f"| {t.cause} | {'yes' if t.passed else 'no'} | {stat} | "
-                      f"{t.threshold:g} | {ev} |")
-        md += ["", "### IEEE coefficients (68.3 % interval)", "",
+            md.append("Within 3 σ at every fitted τ.")
+        md += ["", "### Every cause tested", "",
+               "| cause | claimed | statistic | threshold | evidence |", "|---|---|---|---|---|"]
+        for f in ch.findings:
+            stat = f"{f.statistic:.3g}" if math.isfinite(f.statistic) else "–"
+            thr = f"{f.threshold:g}" if math.isfinite(f.threshold) else "–"
+            ev = f.evidence.replace("|", "\\|")
+            md.append(f"| {f.cause} | {'yes' if f.claimed else 'no'} | {stat} | {thr} | {ev} |")
+        md += ["", "### IEEE coefficients (68 % interval)", "",
                "| term | base | extended |", "|---|---|---|"]
         md += [f"| {SYMBOLS[t]} {t} | {b} | {e} |" for t, b, e in term_changes(ch)]
         md.append("")
     if ex.temperature:
         _plot_temperature(ex, out / "temperature_adev.png")
         md += ["## Temperature channels", "",
-               "Allan deviation of each temperature channel (K): the witness the temperature "
-               "cause is tested against.", "", "![temperature ADEV](temperature_adev.png)", ""]
+               f"Allan deviation of each temperature channel (K), from τ = "
+               f"{DS18B20_CONVERSION_S:g} s (the DS18B20 conversion time) up.", "",
+               "![temperature ADEV](temperature_adev.png)", ""]
     path = out / "report.md"
     path.write_text("\n".join(md), encoding="utf-8")
     return path

@@ -25,7 +25,7 @@ from .presets import SimConfig
 DS18B20_STEP_C = 0.0625
 
 
-def _lag_coefficients(tau_s: float, step_s: float) -> tuple[list[float], list[float]]:
+def lag_coefficients(tau_s: float, step_s: float) -> tuple[list[float], list[float]]:
     """Exact discretisation of dp/dt = (u − p)/τ for u linear between grid points
     (first-order hold): p[j] = a·p[j−1] + b0·u[j] + b1·u[j−1], a = e^(−Δ/τ),
     b0 = 1 − (τ/Δ)(1 − a), b1 = (τ/Δ)(1 − a) − a. DC gain 1, no lag bias on a ramp."""
@@ -54,8 +54,8 @@ class ThermalSource:
         self.rng = rng
         self.j = 0
         self.omega = 2.0 * math.pi / cfg.hvac_period_s
-        self.b_plate, self.a_plate = _lag_coefficients(cfg.plate_tau_s, step_s)
-        self.b_chip, self.a_chip = _lag_coefficients(cfg.chip_tau_s, step_s)
+        self.b_plate, self.a_plate = lag_coefficients(cfg.plate_tau_s, step_s)
+        self.b_chip, self.a_chip = lag_coefficients(cfg.chip_tau_s, step_s)
         self.phi_w = math.exp(-step_s / cfg.room_wander_tau_s)
         self.wander = cfg.room_wander_c * rng.standard_normal()
         self.zi_plate: NDArray | None = None

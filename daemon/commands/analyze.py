@@ -60,6 +60,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sensor low-pass corner to model on the white noise: a number in "
                              "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
                              "(leave out the short τ it bends; default auto)")
+    parser.add_argument("--temperature", metavar="CHANNEL",
+                        help="temperature channel to compensate: fit its first-order lag and "
+                             "coefficient (m/s²/K) per axis and add the temperature-"
+                             "compensated ADEV (see docs/explain.md)")
 
 
 def _write(path: str, text: str) -> None:
@@ -72,6 +76,26 @@ def _write(path: str, text: str) -> None:
         raise DataError(f"cannot write {p}: {exc.strerror}") from exc
 
 
+def _comp_line(name: str, v: dict | None) -> str:
+    if v is None:
+        return (f"channel {name}: no temperature fit (the channel is constant or the record "
+                "too short)")
+    lo, hi = v["coefficient_interval"]
+    return (f"channel {name}: {v['coefficient_mps2_per_k']:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] "
+            f"(68 %) from '{v['channel']}' through a first-order lag of {v['lag_s']:.4g} s "
+            f"(z = {v['z']:.3g}); compensated ADEV in --json")
+
+
+def _finite(x: object) -> object:
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_finite(v) for v in x]
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    return x
+
+
 def run(args: argparse.Namespace) -> int:
     for fmt, _ in args.export:
         if fmt not in ("kalibr", "csv"):
@@ -79,12 +103,29 @@ def run(args: argparse.Namespace) -> int:
                             "'csv FILE.csv'")
     if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
         raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
-    an = analyze(args.data, rate_hz=args.rate, channels=args.channels,
-                 filter_corner_hz=args.filter_corner, progress=progress_printer())
+    if args.temperature:
+        # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
+        # fit on the named channel
+        from avard.core.explain import explain_file
+
+        ex = explain_file(args.data, rate_hz=args.rate, channels=args.channels,
+                          filter_corner_hz=args.filter_corner, progress=progress_printer(),
+                          temperature=args.temperature)
+        an = ex.analysis
+        comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
+    else:
+        an = analyze(args.data, rate_hz=args.rate, channels=args.channels,
+                     filter_corner_hz=args.filter_corner, progress=progress_printer())
+        comp = {}
     if args.json:
-        sys.stdout.write(json.dumps(an.to_dict(), indent=1, allow_nan=False) + "\n")
+        d = an.to_dict()
+        for k, v in comp.items():
+            d["channels"][k]["temperature_compensation"] = _finite(v)
+        sys.stdout.write(json.dumps(d, indent=1, allow_nan=False) + "\n")
     else:
         sys.stdout.write(format_table(an) + "\n")
+        for k, v in comp.items():
+            sys.stdout.write(_comp_line(k, v) + "\n")
     for fmt, path in args.export:
         _write(path, kalibr_yaml(an) if fmt == "kalibr" else adev_csv(an))
     if args.plot:

@@ -1,17 +1,16 @@
-"""Model versus measurement: where the five-term IEEE noise model disagrees with the data, the
-physical cause, the extended model and what it gains on held-out data.
+"""Model versus measurement: where avard analyze's fit of a record leaves the measurement,
+the physical cause (temperature through a first-order lag, warm-up, bias step), the model
+extended by it and the temperature-compensated Allan deviation.
 
 Examples:
 
-    avard explain run1.npz                        # terminal summary, held out: second half
-    avard explain run1.npz --holdout run2.npz     # the other run is the held-out data
+    avard explain run1.npz                        # terminal summary
     avard explain run1.npz --json                 # machine-readable, SI units
     avard explain run1.npz --report out/          # Markdown report with plots
     avard explain run1.npz --channels x,z
 
-Causes tested: temperature, sinusoid, bias_step, warmup, rate_ramp, gauss_markov,
-quantization, filter. A cause is reported only when it passes its stated test and its gain
-holds on held-out data. See docs/explain.md.
+The base model is exactly `avard analyze`'s fit of the same file. The record is streamed
+once; progress goes to stderr when it is a terminal. See docs/explain.md.
 """
 
 from __future__ import annotations
@@ -35,9 +34,6 @@ log = logging.getLogger("avard.explain")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", help="measured or simulated record (.npz, .csv or a recording)")
-    parser.add_argument("--holdout", metavar="FILE",
-                        help="held-out record of the same sensor (default: the second half of "
-                             "DATA)")
     parser.add_argument("--json", action="store_true",
                         help="print the result as JSON (SI units) instead of the summary")
     parser.add_argument("--report", metavar="DIR",
@@ -45,16 +41,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--channels", help="comma-separated channel names (default: all)")
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
-
-
-def load(path: str, rate_hz: float | None = None) -> Any:
-    """Load a record through the one reader every command uses (avard.core.readers)."""
-    from avard.core.readers import load_record
-
-    p = Path(path)
-    if not p.exists():
-        raise DataError(f"{path} does not exist; give the path of a recorded or simulated file")
-    return load_record(p, rate_hz=rate_hz)
 
 
 def _jsonable(x: Any) -> Any:
@@ -72,19 +58,47 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
+def _progress() -> tuple[Any, Any]:
+    """(sample progress, stage message) writers to stderr, or (None, None) off a terminal."""
+    if not sys.stderr.isatty():
+        return None, None
+    last = [-1]
+
+    def show(done: int, total: int | None) -> None:
+        pct = int(100 * done / total) if total else -1
+        if total and pct == last[0]:
+            return
+        last[0] = pct
+        sys.stderr.write(f"\rexplain: reading {pct:3d} %" if total else
+                         f"\rexplain: {done} samples")
+        sys.stderr.flush()
+
+    def stage(msg: str) -> None:
+        sys.stderr.write(f"\rexplain: {msg}\033[K\n")
+        sys.stderr.flush()
+
+    return show, stage
+
+
 def run(args: argparse.Namespace) -> int:
-    from avard.core.explain import explain
+    from avard.core.explain import explain_file
     from avard.core.explain_report import summary, write_report
 
-    rec = load(args.data, args.rate_hz)
-    ho = load(args.holdout, args.rate_hz) if args.holdout else None
+    if args.report and not Path(args.report).resolve().parent.exists():
+        raise DataError(f"--report {args.report}: folder {Path(args.report).parent} does not "
+                        "exist; create it or choose another")
+    if not Path(args.data).exists():
+        raise DataError(f"{args.data} does not exist; give the path of a recorded or "
+                        "simulated file")
     channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
-    ex = explain(rec, holdout=ho, channels=channels)
+    progress, stage = _progress()
+    ex = explain_file(args.data, rate_hz=args.rate_hz, channels=channels, progress=progress,
+                      stage=stage)
     if args.report:
         path = write_report(ex, args.report)
         log.info("report written to %s", path)
     if args.json:
-        json.dump(_jsonable(ex.to_json()), sys.stdout, indent=2)
+        json.dump(_jsonable(ex.to_dict()), sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")
     else:
         print(summary(ex))

@@ -21,9 +21,12 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests.support
+
 from avard.core.model import BI_FACTOR
 from avard.core.presets import TABLE3_K_PRINTED, make_config
-from avard.core.table3 import (
+
+from tests.support.table3 import (
     DATASHEET_N_RANGE,
     PAPER_MAX_ERROR,
     analyse_record,
@@ -194,7 +197,8 @@ def _plot(path: Path, analyses, literal) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
     from avard.core.model import lowpass_white_avar
-    from avard.core.table3 import model_adev
+
+    from tests.support.table3 import model_adev
 
     fig, axs = plt.subplots(1, 3, figsize=(13, 4.2), sharey=True)
     for a, (an, lit) in enumerate(zip(analyses, literal, strict=True)):

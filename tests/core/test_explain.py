@@ -1,137 +1,157 @@
-"""The explain pipeline's contract: JSON shape and units, held-out data (second half or another
-record), the claim rule, the misfit ranges, and errors the user can act on."""
+"""`avard explain` on analyze's engine: the base model is analyze's fit of the same file; the
+thermal model (first-order lag from the logged channel that drives the sensor) and the
+transients are found with their parameters on records from a generator written apart from
+the simulator (tests/support/hidden.py); null records stay clean."""
 
 from __future__ import annotations
 
-import json
-from dataclasses import replace
+import math
 
 import numpy as np
 import pytest
-from avard.core import effects, explain, model
-from avard.core.causes import CAUSES, PARAMS
-from avard.core.errors import DataError
+from avard.core.causes import min_detectable_step, min_detectable_warmup
+from avard.core.explain import explain_file
+from avard.core.report import analyze
+from avard.core.thermal_fit import min_detectable_tempco
 
-N = 1 << 18
-
-
-@pytest.fixture(scope="module")
-def sinusoid_case():
-    """One long record with a sinusoid, cut into two records of the same sensor."""
-    rec, truth = effects.make_case(11, "sinusoid", n=2 * N)
-    first = replace(rec, accel=rec.accel[:N], temperature_c=rec.temperature_c[:N])
-    second = replace(rec, accel=rec.accel[N:], temperature_c=rec.temperature_c[N:],
-                     source="second part")
-    return first, second, truth
+from tests.support.hidden import Truth, make_record, save
 
 
-def _check_shape(out: dict) -> None:
-    assert set(out) == {"channels"}
-    for ch in out["channels"].values():
-        assert set(ch) == {"base", "findings", "extended", "gain", "holdout_gain"}
-        assert set(ch["base"]) == {"terms", "chi2_dof"}
-        assert set(ch["extended"]) == {"terms", "extra", "chi2_dof"}
-        for part in ("base", "extended"):
-            assert set(ch[part]["terms"]) == set(model.TERMS)
-            for name, t in ch[part]["terms"].items():
-                assert t["unit"] == model.UNITS[name]
-                assert {"value", "lo", "hi", "unit", "present"} <= set(t)
-        for f in ch["findings"]:
-            assert set(f) == {"cause", "params", "tau_range_s", "evidence"}
-            assert f["cause"] in CAUSES
-            assert set(f["params"]) == set(PARAMS[f["cause"]])
-            assert len(f["tau_range_s"]) == 2 and f["tau_range_s"][0] <= f["tau_range_s"][1]
-            assert isinstance(f["evidence"], str) and "test" in f["evidence"]
-        for e in ch["extended"]["extra"]:
-            assert set(e) == {"cause", "params"} and set(e["params"]) == set(PARAMS[e["cause"]])
+def _file(tmp_path, seed, truth=None, **kw):
+    rec, truth = make_record(seed, truth=truth, **kw)
+    return str(save(rec, tmp_path / f"h{seed}.npz")), truth
 
 
-def test_json_shape_and_gain(sinusoid_case):
-    first, _, truth = sinusoid_case
-    ex = explain.explain(first)
-    out = json.loads(json.dumps(ex.to_json()))
-    _check_shape(out)
-    ch = out["channels"]["x"]
-    assert [f["cause"] for f in ch["findings"]] == ["sinusoid"]
-    assert ch["gain"] > 2 and ch["holdout_gain"] > 2
-    assert ch["extended"]["chi2_dof"] < ch["base"]["chi2_dof"]
-    # the base model misfits around the Allan bump τ ≈ 0.371/f0, and says so in sigmas
-    tau_peak = 0.371 / truth.params["frequency_hz"]
-    rng = [r for r in ex.channels["x"].misfit
-           if r["tau_range_s"][0] / 2 <= tau_peak <= 2 * r["tau_range_s"][1]]
-    assert rng and max(abs(r["max_sigma"]) for r in rng) > 3
+def test_base_model_is_analyzes_fit_of_the_same_file(tmp_path):
+    path, _ = _file(tmp_path, 3, Truth(coefficient=(3e-4, 0, 0), lag_s=600.0), hours=2.0)
+    an = analyze(path)
+    ex = explain_file(path)
+    assert list(ex.channels) == list(an.channels)
+    for name, ch in an.channels.items():
+        mine = ex.channels[name].base
+        # same τ, same AVAR, same terms: values, intervals, presence and upper limits
+        assert mine.to_dict() == ch.to_dict()
+        for t, e in ch.fit.terms.items():
+            assert mine.fit.terms[t] == e
+        assert mine.fit.chi2_dof == ch.fit.chi2_dof
 
 
-def test_holdout_record_that_shares_the_cause(sinusoid_case):
-    first, second, _truth = sinusoid_case
-    ex = explain.explain(first, holdout=second)
-    ch = ex.channels["x"]
-    assert ex.holdout_source == "second part"
-    assert [f["cause"] for f in ch.findings] == ["sinusoid"]
-    assert ch.holdout_gain > 10
+def _three_times_minimum(logged_amp: float, lag_s: float) -> float:
+    """3× the stated minimum coefficient for the lag to 10 % (1 σ) and detection, for the
+    generator's noise on a 4 h record and its 30-minute cycle (docs/explain.md)."""
+    args = (1.6e-4, 2e-5, 2e-6, 4 * 3600.0, logged_amp, 1800.0, lag_s)
+    return 3 * max(min_detectable_tempco(*args), min_detectable_tempco(*args, lag_rel=0.1))
 
 
-def test_cause_whose_gain_does_not_hold_is_not_claimed(sinusoid_case):
-    first, _, _ = sinusoid_case
-    null, _ = effects.make_case(12, None, n=N)
-    ex = explain.explain(first, holdout=null)
-    ch = ex.channels["x"]
-    assert ch.findings == []
-    assert ch.dropped and ch.dropped[0].startswith("sinusoid")
+AMBIENT = 0.5
+PLATE = 0.5 / math.hypot(1.0, 2 * math.pi * 600.0 / 1800.0)  # the plate lags 10 min
 
 
-def test_effect_in_first_half_only_is_not_claimed():
-    rec, _truth = effects.make_case(13, None, n=N)
-    t = np.arange(N) / rec.rate_hz
-    y = rec.accel[:, 0].copy()
-    half = t < t[-1] / 2
-    y[half] += 5e-4 * np.sin(2 * np.pi * 0.3 * t[half])
-    ex = explain.explain(replace(rec, accel=y[:, None]))
-    ch = ex.channels["x"]
-    assert all(f["cause"] != "sinusoid" for f in ch.findings)
-    assert any(d.startswith("sinusoid") for d in ch.dropped)
+@pytest.mark.parametrize(("logged", "drive", "lag_s"), [
+    (("ambient",), "ambient", 120.0),
+    (("ambient",), "ambient", 600.0),
+    (("plate",), "plate", 300.0),
+    (("plate", "ambient"), "ambient", 120.0),
+    (("plate", "ambient"), "plate", 300.0),
+])
+def test_thermal_lag_coefficient_and_driving_channel(tmp_path, logged, drive, lag_s):
+    """±0.5 °C ambient, 30-minute HVAC cycle, 4 h at 10 Hz, lags 2–20 min, plate- or
+    ambient-logged, at 3× the stated minimum: lag and coefficient within 20 %, intervals
+    holding the truth at 3 σ, the driving channel named."""
+    c = _three_times_minimum(AMBIENT if drive == "ambient" else PLATE, lag_s)
+    truth = Truth(coefficient=(c, 0.0, -c), lag_s=lag_s, drive=drive)
+    path, _ = _file(tmp_path, 11 + int(lag_s), truth, logged=logged)
+    ex = explain_file(path)
+    for axis, coef in (("x", c), ("z", -c)):
+        ch = ex.channels[axis]
+        th = ch.thermal
+        assert th is not None and th.passed, th
+        # with both channels logged, the one that drives is named (the other is the same
+        # signal through one more lag, which a single first-order lag cannot match)
+        assert th.channel == drive
+        assert th.coefficient == pytest.approx(coef, rel=0.2)
+        assert abs(th.coefficient - coef) < 3 * th.coef_se
+        assert th.lag_s == pytest.approx(lag_s, rel=0.2)
+        assert th.lag_lo <= th.lag_s <= th.lag_hi
+        assert [f.cause for f in ch.claimed] == ["temperature"]
+        # the compensated ADEV is below the measured one where the HVAC cycle shows
+        tau = ch.base.allan.tau
+        k = int(np.argmin(np.abs(tau - 400.0)))
+        assert ch.compensated_var is not None
+        assert ch.compensated_var[k] < 0.7 * ch.base.allan.var[k]
+        assert ch.gain > 1.0
+    y = ex.channels["y"]
+    assert not [f for f in y.claimed if f.cause != "sinusoid"], [f.evidence for f in y.claimed]
 
 
-def test_null_record_has_no_findings_and_unit_gain():
-    rec, _ = effects.make_case(14, None, n=N)
-    ch = explain.explain(rec).channels["x"]
-    assert ch.findings == [] and ch.tests and not any(t.passed for t in ch.tests)
-    # nothing accepted: the extended model is the base model
-    assert ch.gain == pytest.approx(1.0)
-    assert ch.holdout_gain == pytest.approx(1.0)
+@pytest.mark.parametrize("logged", [("ambient",), ("plate", "ambient")])
+def test_long_lag_is_found_on_its_channel(tmp_path, logged):
+    """A 20-minute lag (ωτ ≈ 4 at the 30-minute cycle): detected on the right channel. Its
+    lag and coefficient are nearly degenerate there (the lag acts as an integrator:
+    σ_L/L ≈ (1 + ω²L²)/(ωL·z)), so they are not held to 20 % at this effect size."""
+    truth = Truth(coefficient=(1e-3, 0.0, 0.0), lag_s=1200.0, drive="ambient")
+    path, _ = _file(tmp_path, 21, truth, logged=logged)
+    th = explain_file(path, channels=["x"]).channels["x"].thermal
+    assert th is not None and th.passed and th.channel == "ambient"
+    assert th.coefficient > 0
 
 
-def test_channel_selection_and_errors():
-    rec, _ = effects.make_case(15, None, n=1 << 15)
-    with pytest.raises(DataError, match="unknown channel"):
-        explain.explain(rec, channels=["q"])
-    bad = replace(rec, accel=np.full((1 << 15, 1), np.nan))
-    with pytest.raises(DataError, match="NaN"):
-        explain.explain(bad)
-    with pytest.raises(DataError, match="too few"):
-        explain.explain(replace(rec, accel=rec.accel[:1000], temperature_c=None))
-    other = replace(rec, rate_hz=100.0)
-    with pytest.raises(DataError, match="same rate"):
-        explain.explain(rec, holdout=other)
+def test_null_record_is_clean(tmp_path):
+    path, _ = _file(tmp_path, 5)
+    ex = explain_file(path)
+    for ch in ex.channels.values():
+        assert not ch.claimed, [f.evidence for f in ch.claimed]
+        assert ch.extended is ch.base.fit
+        assert math.isclose(ch.gain, 1.0)
 
 
-def test_temperature_channels_with_gaps_are_filled():
-    rec, truth = effects.make_case(16, "temperature", n=N)
-    t = rec.temperature_c.copy()
-    t[1::50, :] = np.nan  # a DS18B20 reading only every so often, NaN between (as sim_io)
-    ch = explain.explain(replace(rec, temperature_c=t)).channels["x"]
-    assert effects.check_case(truth, ch.findings)[0]
+def _warmup_case(tmp_path):
+    size = 3 * min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
+    path, _ = _file(tmp_path, 7, Truth(warmup=(size, 900.0)))
+    return size, explain_file(path)
 
 
-def test_measurement_is_the_allan_module_estimator_where_strides_agree():
-    """explain measures with its own strided pass (speed); at m = 2^k its stride is the
-    partially overlapping estimator's m/8, and the numbers must be the same."""
-    from avard.core import allan
-    from avard.core import causes as cz
+def test_warmup_found_with_its_size(tmp_path):
+    """A 15-minute warm-up at 3× its stated minimum size, on every axis: found, nothing
+    else claimed, its size within 20 %."""
+    size, ex = _warmup_case(tmp_path)
+    for ch in ex.channels.values():
+        claimed = {f.cause: f for f in ch.claimed}
+        assert set(claimed) == {"warmup"}, [f.evidence for f in ch.claimed]
+        assert claimed["warmup"].params["size"] == pytest.approx(size, rel=0.2)
 
-    y = np.random.default_rng(3).standard_normal(1 << 16) * 1e-3
-    ours = explain.measure(y, 50.0)
-    ref = allan.allan_variance(y, 50.0, ours.tau, kind="pavar")
-    p2 = (ours.m & (ours.m - 1)) == 0
-    assert np.all(ref.stride[p2] == [cz.stride_for(int(k)) for k in ours.m[p2]])
-    np.testing.assert_allclose(ours.var[p2], ref.var[p2], rtol=1e-9)
+
+@pytest.mark.xfail(strict=True, reason="at 3× the detection minimum the time constant "
+                   "scatters ≈ 15 % (1 σ, 30 axes); 20 % on every axis needs a larger effect")
+def test_warmup_time_constant_within_20_percent(tmp_path):
+    _, ex = _warmup_case(tmp_path)
+    for ch in ex.channels.values():
+        p = {f.cause: f for f in ch.claimed}["warmup"].params
+        assert p["time_constant_s"] == pytest.approx(900.0, rel=0.2)
+
+
+def test_bias_step_found_where_it_is(tmp_path):
+    """A bias step at 3× its stated minimum size, on every axis."""
+    size = 3 * min_detectable_step(1.6e-4, 2e-5, 2e-6, 4 * 3600.0)
+    truth = Truth(step=(5000.0, size))
+    path, _ = _file(tmp_path, 8, truth)
+    ex = explain_file(path)
+    for ch in ex.channels.values():
+        claimed = {f.cause: f for f in ch.claimed}
+        assert set(claimed) == {"bias_step"}, [f.evidence for f in ch.claimed]
+        assert claimed["bias_step"].params["time_s"] == pytest.approx(5000.0, rel=0.02)
+        assert claimed["bias_step"].params["size"] == pytest.approx(size, rel=0.2)
+
+
+def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
+    """Long records scan the lags on at most SCAN_POINTS block means; the result holds."""
+    from avard.core import thermal_fit
+
+    c = _three_times_minimum(AMBIENT, 600.0)
+    path, _ = _file(tmp_path, 31, Truth(coefficient=(c, 0.0, 0.0), lag_s=600.0),
+                    logged=("ambient",))
+    monkeypatch.setattr(thermal_fit, "SCAN_POINTS", 1024)
+    th = explain_file(path, channels=["x"]).channels["x"].thermal
+    assert th is not None and th.passed
+    assert th.coefficient == pytest.approx(c, rel=0.2)
+    assert th.lag_s == pytest.approx(600.0, rel=0.2)

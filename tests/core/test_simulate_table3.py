@@ -6,7 +6,8 @@ from __future__ import annotations
 import pytest
 from avard.core.model import BI_FACTOR
 from avard.core.presets import TABLE3_B, TABLE3_K_PRINTED, TABLE3_N, make_config
-from avard.core.table3 import (
+
+from tests.support.table3 import (
     PAPER_MAX_ERROR,
     adev_minimum,
     analyse_record,

@@ -14,11 +14,10 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from .allan import AllanResult
-from .fit import NoiseFit, slope_method
-from .model import BI_FACTOR
-from .presets import (
+from avard.core.allan import AllanResult
+from avard.core.fit import NoiseFit, slope_method
+from avard.core.model import BI_FACTOR
+from avard.core.presets import (
     DATASHEET_N,
     G0,
     TABLE3_B,
@@ -26,8 +25,8 @@ from .presets import (
     TABLE3_N,
     SimConfig,
 )
-from .report import analyze_stream
-from .simulate import SensorSimulator, n_samples
+from avard.core.report import analyze_stream
+from avard.core.simulate import SensorSimulator, n_samples
 
 AXES = ("x", "y", "z")
 #: The paper's reported maximum estimation error (Section 4): 4.7 % at long cluster times.
