@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import AvardError
+from avard.core.outputs import check_output_dir, require_plot_extra
 from avard.core.presets import make_config
 from avard.daemon.config import load_config
 
@@ -118,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.hours <= 0:
         raise AvardError(f"--hours {args.hours}: must be positive")
+    check_output_dir(args.out, what=f"--out {args.out}", create=True)
+    if not args.no_plot:
+        require_plot_extra("the demo's figure (--no-plot to leave it out)")
     out = Path(args.out).resolve()
     rec_dir = out / "recording"
     if rec_dir.exists():

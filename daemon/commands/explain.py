@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import DataError
+from avard.core.outputs import check_output_dir, require_plot_extra
+from avard.daemon.commands._options import add_channels_argument, split_channels
 
 NAME = "explain"
 HELP = "find where the noise model misfits the data, name the cause, measure the gain"
@@ -42,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the result as JSON (SI units) instead of the summary")
     parser.add_argument("--report", metavar="DIR",
                         help="write report.md with plots into DIR (needs matplotlib)")
-    parser.add_argument("--channels", help="comma-separated channel names (default: all)")
+    add_channels_argument(parser)
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
 
@@ -76,9 +78,12 @@ def run(args: argparse.Namespace) -> int:
     from avard.core.explain import explain
     from avard.core.explain_report import summary, write_report
 
+    if args.report:  # before the analysis: a bad folder costs a second, not minutes
+        check_output_dir(args.report, what=f"--report {args.report}", create=True)
+        require_plot_extra(f"--report {args.report}")
     rec = load(args.data, args.rate_hz)
     ho = load(args.holdout, args.rate_hz) if args.holdout else None
-    channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
+    channels = split_channels(args.channels)
     ex = explain(rec, holdout=ho, channels=channels)
     if args.report:
         path = write_report(ex, args.report)
