@@ -61,10 +61,10 @@ def iter_record_blocks(
         c = sim.next(min(chunk, n_total - done))
         # the DS18B20s need the temperatures at their conversion times only
         idx = ds18b20_schedule(c.index0, len(c), config.rate_hz, config.ds18b20_conversion_s)
-        temp = np.full((len(c), 2), np.nan)
+        temp: NDArray[np.float64] = np.full((len(c), 2), np.nan, dtype=np.float64)
         vals = c.temperatures_at(idx - c.index0)[:, :2] + offsets
         temp[idx - c.index0] = np.round(vals / DS18B20_STEP_C) * DS18B20_STEP_C
-        yield c.index0, c.counts * config.lsb_mps2, temp
+        yield c.index0, np.asarray(c.counts * config.lsb_mps2, dtype=np.float64), temp
         done += len(c)
 
 

@@ -98,3 +98,32 @@ def test_unreadable_input_and_unwritable_output_end_in_one_line(
     assert names in line.split(": error: ", 1)[1], line
     if output_case:  # the output was refused before any work was done or printed
         assert r.stdout == "", r.stdout
+
+
+@pytest.mark.parametrize("argv", [
+    ["analyze", "{ok}", "--plot", "{tmp}/adev.png"],
+    ["explain", "{ok}", "--report", "{tmp}/report"],
+    ["demo", "--out", "{tmp}/demo", "--hours", "0.01"],
+])
+def test_a_missing_plot_extra_is_said_before_the_work(files: dict[str, Path], tmp_path: Path,
+                                                      argv: list[str]) -> None:
+    """As on a Pi installed by systemd/install.sh, which leaves the plot extra out."""
+    args = [a.format(tmp=tmp_path, **files) for a in argv]
+    code = ("import sys; sys.modules['matplotlib'] = None; from avard.daemon.cli import main; "
+            f"sys.exit(main({args!r}))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, check=False)
+    assert r.returncode == 2, r.stderr
+    assert "needs matplotlib" in r.stderr and "avard[plot]" in r.stderr
+    assert "Traceback" not in r.stderr and r.stdout == ""
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("suffix", "option"), [(".jpgg", "--plot"), (".txt", "--plot")])
+def test_an_unknown_figure_suffix_is_refused_before_the_work(
+        files: dict[str, Path], tmp_path: Path, suffix: str, option: str) -> None:
+    r = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(files["ok"]),
+                        option, str(tmp_path / f"adev{suffix}")], capture_output=True,
+                       text=True, timeout=120, check=False)
+    assert r.returncode == 2 and r.stdout == ""
+    assert f"unknown suffix '{suffix}'" in r.stderr and ".png" in r.stderr
