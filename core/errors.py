@@ -61,9 +61,9 @@ def describe_os_error(exc: OSError) -> str:
     ``AvardError`` itself, so that none ends in a traceback."""
     import errno
 
-    name = exc.filename if exc.filename is not None else "a file"
+    name = "" if exc.filename is None else f"{exc.filename}: "
     if exc.filename2 is not None:
-        name = f"{name} → {exc.filename2}"
+        name = f"{exc.filename} → {exc.filename2}: "
     what = exc.strerror or str(exc)
     advice = {
         errno.EACCES: "run as a user allowed to use it (for the service's recordings: a "
@@ -81,4 +81,4 @@ def describe_os_error(exc: OSError) -> str:
         errno.EIO: "the storage reported an input/output error; check the disk (dmesg)",
     }.get(exc.errno if exc.errno is not None else -1,
           "check the path and its permissions")
-    return f"{name}: {what}; {advice}"
+    return f"{name}{what}; {advice}"

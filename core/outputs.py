@@ -36,8 +36,9 @@ def _probe_write(folder: Path, what: str) -> None:
     try:
         fd, tmp = tempfile.mkstemp(prefix=".avard-write-check-", dir=folder)
     except OSError as exc:
+        exc.filename = None  # the probe file's random name would only confuse
         raise OutputError(f"{what}: cannot write into folder {folder}: "
-                          f"{describe_os_error(exc).split(': ', 1)[1]}") from exc
+                          f"{describe_os_error(exc)}") from exc
     os.close(fd)
     os.unlink(tmp)
 

@@ -29,7 +29,7 @@ from typing import IO
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import DataError
+from .errors import DataError, OutputError, describe_os_error
 from .presets import SimConfig
 from .simulate import SensorSimulator, n_samples
 from .thermal import DS18B20_STEP_C, ds18b20_schedule
@@ -147,6 +147,8 @@ def write_npz(
         os.umask(umask)
         os.chmod(tmp_zip, 0o666 & ~umask)    # mkstemp makes 0600; a record is an ordinary file
         os.replace(tmp_zip, out)
+    except OSError as exc:  # a full disk, a folder removed under us: one line, the path named
+        raise OutputError(f"writing {out}: {describe_os_error(exc)}") from exc
     finally:
         # also reached on Ctrl-C and (through avard.daemon.stop_signals) SIGTERM and SIGHUP
         for p in (tmp_zip, tmp_temp):
