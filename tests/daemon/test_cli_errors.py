@@ -42,18 +42,20 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     locked_dir = d / "recording"           # like /var/lib/avard/... of another group
     locked_dir.mkdir()
     (locked_dir / "run_0000.avr").write_bytes(b"")
+    locked_csv = d / "locked.csv"
+    locked_csv.write_text("t,x\n0,1\n0.01,2\n")
     locked_toml = d / "locked.toml"
     locked_toml.write_text("[sensor]\n")
     locked_key = d / "locked.key"
     locked_key.write_text("not a key\n")
     ro = d / "nowrite"
     ro.mkdir()
-    for p in (locked, locked_toml, locked_key):
+    for p in (locked, locked_csv, locked_toml, locked_key):
         p.chmod(0)
     locked_dir.chmod(0)
     ro.chmod(0o555)
-    yield {"ok": ok, "locked": locked, "locked_dir": locked_dir, "locked_toml": locked_toml,
-           "locked_key": locked_key, "nowrite": ro}
+    yield {"ok": ok, "locked": locked, "locked_csv": locked_csv, "locked_dir": locked_dir,
+           "locked_toml": locked_toml, "locked_key": locked_key, "nowrite": ro}
     locked_dir.chmod(0o755)
     ro.chmod(0o755)
 
@@ -62,6 +64,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 CASES = [
     (["analyze", "{locked}"], "locked.npz", False),
     (["analyze", "{locked_dir}"], "recording", False),
+    (["analyze", "{locked_csv}"], "locked.csv", False),
+    (["explain", "{locked_dir}"], "recording", False),
     (["analyze", "{ok}", "--plot", "{nowrite}/adev.png"], "nowrite", True),
     (["analyze", "{ok}", "--export", "csv", "{nowrite}/adev.csv"], "nowrite", True),
     (["analyze", "{ok}", "--export", "kalibr", "{nowrite}/imu.yaml"], "nowrite", True),
