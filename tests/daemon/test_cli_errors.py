@@ -107,7 +107,6 @@ def test_unreadable_input_and_unwritable_output_end_in_one_line(
 @pytest.mark.parametrize("argv", [
     ["analyze", "{ok}", "--plot", "{tmp}/adev.png"],
     ["explain", "{ok}", "--report", "{tmp}/report"],
-    ["demo", "--out", "{tmp}/demo", "--hours", "0.01"],
 ])
 def test_a_missing_plot_extra_is_said_before_the_work(files: dict[str, Path], tmp_path: Path,
                                                       argv: list[str]) -> None:
@@ -131,3 +130,16 @@ def test_an_unknown_figure_suffix_is_refused_before_the_work(
                        text=True, timeout=120, check=False)
     assert r.returncode == 2 and r.stdout == ""
     assert f"unknown suffix '{suffix}'" in r.stderr and ".png" in r.stderr
+
+
+def test_the_demo_without_the_plot_extra_says_so_first_and_runs(tmp_path: Path) -> None:
+    args = ["demo", "--out", str(tmp_path / "demo"), "--hours", "0.01"]
+    code = ("import sys; sys.modules['matplotlib'] = None; from avard.daemon.cli import main; "
+            f"sys.exit(main({args!r}))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300, check=False)
+    assert r.returncode == 0, r.stderr
+    first = r.stderr.splitlines()[0]
+    assert "needs matplotlib" in first and "runs without adev.png" in first
+    assert (tmp_path / "demo" / "report.md").exists()
+    assert not (tmp_path / "demo" / "adev.png").exists()
