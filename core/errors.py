@@ -79,6 +79,10 @@ def describe_os_error(exc: OSError) -> str:
         errno.ENAMETOOLONG: "use a shorter path",
         errno.EMFILE: "too many open files; raise the limit (ulimit -n) and try again",
         errno.EIO: "the storage reported an input/output error; check the disk (dmesg)",
+        errno.ECONNREFUSED: "nothing listens there; check the address and that the service runs",
+        errno.EHOSTUNREACH: "the host cannot be reached; check the address and the network",
+        errno.ENETUNREACH: "the network cannot be reached; check the address and the network",
+        errno.ETIMEDOUT: "no answer in time; check the address and the network",
     }.get(exc.errno if exc.errno is not None else -1,
           "check the path and its permissions")
     return f"{name}{what}; {advice}"

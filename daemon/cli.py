@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -100,6 +101,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except AvardError as exc:
         return _fail(args.command, str(exc))
+    except BrokenPipeError:
+        # `avard analyze x.npz | head`: the reader left; end quietly, as cat does
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except OSError as exc:
         # Raised by the file system under any command (EACCES on a recording of the service's
         # group, ENOSPC, EROFS): the user's to fix, so one line, never a traceback.

@@ -69,3 +69,28 @@ def test_run_without_config_says_which_it_uses(capsys) -> None:
     assert "no --config: using the built-in defaults" in err
     assert "/var/lib/avard does not exist" in err and "--data-dir" in err
     assert not Path("/var/lib/avard").exists()
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    """`avard simulate --list | head -1`: the reader leaving is not an error to report."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "avard.daemon.cli", "simulate", "--list"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before anything is written: the first write meets EPIPE
+    err = p.stderr.read().decode()
+    assert p.wait(60) == 141, err
+    assert "Traceback" not in err and "Exception ignored" not in err
+
+
+def test_a_refused_connection_gets_network_advice() -> None:
+    import errno
+    import os
+
+    from avard.core.errors import describe_os_error
+
+    text = describe_os_error(ConnectionRefusedError(errno.ECONNREFUSED,
+                                                    os.strerror(errno.ECONNREFUSED)))
+    assert "check the address and that the service runs" in text
