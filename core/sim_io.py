@@ -85,8 +85,15 @@ class NpzSize:
 
 
 def npz_size(config: SimConfig, hours: float) -> NpzSize:
-    """What :func:`write_npz` will put on disk for ``hours`` of ``config``."""
+    """What :func:`write_npz` will put on disk for ``hours`` of ``config``; a DataError when
+    that is not a whole, countable number of samples."""
+    if not (0 < hours * 3600.0 * config.rate_hz < 1e18):   # 1e18 samples: 40 EB
+        raise DataError(f"{hours:g} h at {config.rate_hz:g} Hz is not a record that can be "
+                        "written; ask for between one sample and a few years (--hours)")
     n = n_samples(config, hours)
+    if n < 1:
+        raise DataError(f"{hours:g} h at {config.rate_hz:g} Hz is less than one sample; ask "
+                        "for a longer record (--hours)")
     final = n * _BYTES_PER_SAMPLE + _FIXED_BYTES
     return NpzSize(n, final, final + n * 8 * 2)
 

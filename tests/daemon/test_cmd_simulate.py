@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from avard.daemon.cli import main
 
 
@@ -142,3 +143,13 @@ def test_sighup_removes_the_temporary_files(tmp_path) -> None:
     import signal
 
     _signal_leaves_no_temporary_files(tmp_path, signal.SIGHUP)
+
+
+@pytest.mark.parametrize(("hours", "message"), [
+    ("1e308", "not a record that can be written"), ("1e-12", "less than one sample"),
+    ("inf", "positive number"), ("nan", "positive number"), ("-1", "positive number"),
+])
+def test_impossible_lengths_are_one_line(tmp_path, capsys, hours: str, message: str) -> None:
+    assert main(["simulate", "--hours", hours, "--out", str(tmp_path / "x.npz")]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
