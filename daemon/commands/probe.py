@@ -76,6 +76,9 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0.5 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds}: use 0.5 to 3600 s")
+    if not abs(args.ppm) <= 1e5:   # the datasheet's oscillator is within a few 1000 ppm
+        raise ConfigError(f"--ppm {args.ppm:g}: an emulated oscillator error must be within "
+                          "±100000 ppm (±10 %)")
     cfg = load_config(args.config)
     s = cfg["sensor"]
     out = sys.stdout

@@ -28,6 +28,12 @@ def test_probe_refuses_a_silly_duration(capsys):
     assert "--seconds" in capsys.readouterr().err
 
 
+def test_probe_refuses_an_impossible_emulated_oscillator(capsys):
+    for ppm in ("1e9", "nan"):
+        assert main(["probe", "--emulate", "--ppm", ppm]) == 2
+        assert "--ppm" in capsys.readouterr().err
+
+
 def _rate(out: str) -> tuple[float, float]:
     m = re.search(r"\(([+-]\d+) ± (\d+) ppm off nominal", out)
     assert m is not None, out
