@@ -430,7 +430,7 @@ def run(args: argparse.Namespace) -> int:
             if now >= next_draw:
                 # on a terminal: its size now (it may have been resized); one line is kept
                 # free so the cursor line does not scroll the view's first line away
-                size = shutil.get_terminal_size() if clear else None
+                size = shutil.get_terminal_size() if out.isatty() else None
                 text = view.render(sub.stats, args.endpoint,
                                    width=size.columns if size else None,
                                    height=size.lines - 1 if size else None)
