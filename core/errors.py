@@ -48,3 +48,41 @@ class DeviceStalledError(HardwareError):
 
 class NetworkError(AvardError):
     """A ZeroMQ peer that does not answer, refuses us, or answers with an error."""
+
+
+class OutputError(AvardError):
+    """An output path that cannot be written (missing folder, no permission, unknown suffix,
+    no space), found before the work that would fill it starts."""
+
+
+def describe_os_error(exc: OSError) -> str:
+    """One line for an ``OSError`` from the file system: the file it concerns, what happened
+    and what to do. Used by the command line for every ``OSError`` no command turned into an
+    ``AvardError`` itself, so that none ends in a traceback."""
+    import errno
+
+    name = "" if exc.filename is None else f"{exc.filename}: "
+    if exc.filename2 is not None:
+        name = f"{exc.filename} → {exc.filename2}: "
+    what = exc.strerror or str(exc)
+    advice = {
+        errno.EACCES: "run as a user allowed to use it (for the service's recordings: a "
+                      "member of group avard, or sudo), or choose another path",
+        errno.EPERM: "run as a user allowed to use it, or choose another path",
+        errno.ENOENT: "check the path; a folder to write into must exist first",
+        errno.ENOTDIR: "a part of the path is a file, not a folder; check the path",
+        errno.EISDIR: "give a file name, not a folder",
+        errno.ENOSPC: "free some space on that disk, or write somewhere else",
+        errno.EDQUOT: "your disk quota is used up; free some space or write somewhere else",
+        errno.EROFS: "that file system is mounted read-only; write somewhere else",
+        errno.EEXIST: "remove it or choose another name",
+        errno.ENAMETOOLONG: "use a shorter path",
+        errno.EMFILE: "too many open files; raise the limit (ulimit -n) and try again",
+        errno.EIO: "the storage reported an input/output error; check the disk (dmesg)",
+        errno.ECONNREFUSED: "nothing listens there; check the address and that the service runs",
+        errno.EHOSTUNREACH: "the host cannot be reached; check the address and the network",
+        errno.ENETUNREACH: "the network cannot be reached; check the address and the network",
+        errno.ETIMEDOUT: "no answer in time; check the address and the network",
+    }.get(exc.errno if exc.errno is not None else -1,
+          "check the path and its permissions")
+    return f"{name}{what}; {advice}"

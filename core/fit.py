@@ -473,6 +473,10 @@ def fit_noise(
     comps = _components(terms, extra, filter_corner_hz, rate)
     fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
     fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
+    if not np.any(np.isfinite(var) & (var > 0)):
+        # zero Allan variance at every τ: a longer record would not help
+        raise FitError("the Allan variance is zero at every τ: the channel is constant (no "
+                       "noise to fit); check the sensor, or leave the channel out (--channels)")
     if len(keep) < len(fitted) + 2:
         raise FitError(
             f"only {len(keep)} usable averaging times for {len(fitted)} model terms; record "

@@ -108,7 +108,8 @@ def _panel(ax: Any, ch: Any) -> None:
         lab = (f"sinusoids at {', '.join(freqs[:3])}{' …' if len(freqs) > 3 else ''} Hz"
                if len(freqs) == len(other) else "extra components")
         ax.loglog(t, np.sqrt(sum(other.values())), ":", lw=1.2, color="0.35", label=lab)
-    ax.axvspan(fit.tau_min_s, fit.tau_max_s, color="#ff7f0e", alpha=0.06, lw=0)
+    ax.axvspan(fit.tau_min_s, fit.tau_max_s, color="#ff7f0e", alpha=0.06, lw=0,
+               label=f"fitted τ range ({fit.tau_min_s:.3g}–{fit.tau_max_s:.3g} s)")
     ymin = max(dev.min() / 3, np.nanmin(lo) / 1.5)
     ax.set_ylim(ymin, hi.max() * 2)
     ax.set_xlim(tau.min() / 1.5, tau.max() * 1.5)

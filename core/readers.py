@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import io
 import itertools
+import logging
 import math
 import zipfile
 from collections.abc import Iterator
@@ -34,6 +35,8 @@ from numpy.typing import NDArray
 from .errors import DataError, FormatError
 
 __all__ = ["Record", "iter_blocks", "load_record", "record_info"]
+
+log = logging.getLogger(__name__)
 
 _TIME_COLUMNS = ("t", "time", "t_s", "time_s")
 
@@ -91,7 +94,12 @@ def _kind(path: str | Path) -> tuple[Path, str]:
     suffix = p.suffix.lower()
     if suffix == ".npz":
         return p, "npz"
-    if suffix in (".csv", ".txt"):
+    if suffix == ".csv":
+        return p, "csv"
+    if suffix == ".txt":
+        # a .txt is often a CSV export under another name; say how it is read
+        log.warning("%s: reading it as CSV (a header row, then comma, semicolon or tab "
+                    "separated numbers); rename it .csv to silence this", p)
         return p, "csv"
     raise FormatError(f"{p}: unknown data format {suffix or '(no suffix)'!r}; avard reads .npz, "
                       ".csv, or a recording directory / .avr segment")
@@ -175,9 +183,11 @@ def _small(zf: zipfile.ZipFile, key: str, where: str) -> Any:
 def _open_npz(p: Path) -> zipfile.ZipFile:
     try:
         return zipfile.ZipFile(p)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise FormatError(f"{p}: not a readable .npz file ({exc}); write it with numpy.savez")\
-            from exc
+    except zipfile.BadZipFile as exc:
+        # an .npz is a zip archive; one that is not (or whose end is missing) was cut short
+        # while being copied or written, or is another format under an .npz name
+        raise FormatError(f"{p}: not a complete .npz (zip) archive ({exc}); it is truncated "
+                          "or not an .npz: copy or write it again") from exc
 
 
 def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, Any]:

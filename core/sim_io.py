@@ -17,17 +17,19 @@ one go) and are then copied in. The file appears under its name only when comple
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import tempfile
 import zipfile
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import DataError
+from .errors import DataError, OutputError, describe_os_error
 from .presets import SimConfig
 from .simulate import SensorSimulator, n_samples
 from .thermal import DS18B20_STEP_C, ds18b20_schedule
@@ -59,11 +61,47 @@ def iter_record_blocks(
         c = sim.next(min(chunk, n_total - done))
         # the DS18B20s need the temperatures at their conversion times only
         idx = ds18b20_schedule(c.index0, len(c), config.rate_hz, config.ds18b20_conversion_s)
-        temp = np.full((len(c), 2), np.nan)
+        temp: NDArray[np.float64] = np.full((len(c), 2), np.nan, dtype=np.float64)
         vals = c.temperatures_at(idx - c.index0)[:, :2] + offsets
         temp[idx - c.index0] = np.round(vals / DS18B20_STEP_C) * DS18B20_STEP_C
-        yield c.index0, c.counts * config.lsb_mps2, temp
+        yield c.index0, np.asarray(c.counts * config.lsb_mps2, dtype=np.float64), temp
         done += len(c)
+
+
+#: Bytes per sample of the written record: accel (3 × float64) and temperature_c (2 × float64).
+_BYTES_PER_SAMPLE = 8 * (3 + 2)
+#: Zip and .npy headers and the small members: a generous bound, they are a few kB.
+_FIXED_BYTES = 1 << 16
+
+
+@dataclass(frozen=True)
+class NpzSize:
+    """Disk space of a simulated record, in bytes: the finished file, and the most in use
+    while it is written (the temperatures sit in a temporary .npy until they are copied in)."""
+
+    n_samples: int
+    final_bytes: int
+    peak_bytes: int
+
+
+def npz_size(config: SimConfig, hours: float) -> NpzSize:
+    """What :func:`write_npz` will put on disk for ``hours`` of ``config``; a DataError when
+    that is not a whole, countable number of samples."""
+    if not (0 < hours * 3600.0 * config.rate_hz < 1e18):   # 1e18 samples: 40 EB
+        raise DataError(f"{hours:g} h at {config.rate_hz:g} Hz is not a record that can be "
+                        "written; ask for between one sample and a few years (--hours)")
+    n = n_samples(config, hours)
+    if n < 1:
+        raise DataError(f"{hours:g} h at {config.rate_hz:g} Hz is less than one sample; ask "
+                        "for a longer record (--hours)")
+    final = n * _BYTES_PER_SAMPLE + _FIXED_BYTES
+    return NpzSize(n, final, final + n * 8 * 2)
+
+
+def draw_seed() -> int:
+    """A fresh seed for a record asked for without one, so that the record can still say
+    how to make it again (32 bits: short enough to type back, and SeedSequence-ready)."""
+    return secrets.randbits(32)
 
 
 def _npy_header(fp: IO[bytes], shape: tuple[int, ...], dtype: np.dtype) -> None:
@@ -87,11 +125,14 @@ def write_npz(
         raise DataError(f"output {out} must end in .npz")
     if not out.parent.exists():
         raise DataError(f"output folder {out.parent} does not exist; create it first")
-    fd, tmp_zip = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
-    os.close(fd)
-    fd, tmp_temp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".temp.npy", dir=out.parent)
-    os.close(fd)
+    tmp_zip = tmp_temp = ""
     try:
+        # both inside the try: a second mkstemp that fails must not leave the first behind
+        fd, tmp_zip = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
+        os.close(fd)
+        fd, tmp_temp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".temp.npy",
+                                        dir=out.parent)
+        os.close(fd)
         with zipfile.ZipFile(tmp_zip, "w", compression=zipfile.ZIP_STORED,
                              allowZip64=True) as zf, open(tmp_temp, "wb") as tf:
             _npy_header(tf, (n_total, 2), np.dtype("<f8"))
@@ -113,8 +154,11 @@ def write_npz(
         os.umask(umask)
         os.chmod(tmp_zip, 0o666 & ~umask)    # mkstemp makes 0600; a record is an ordinary file
         os.replace(tmp_zip, out)
+    except OSError as exc:  # a full disk, a folder removed under us: one line, the path named
+        raise OutputError(f"writing {out}: {describe_os_error(exc)}") from exc
     finally:
+        # also reached on Ctrl-C and (through avard.daemon.stop_signals) SIGTERM and SIGHUP
         for p in (tmp_zip, tmp_temp):
-            if os.path.exists(p):
+            if p and os.path.exists(p):
                 os.unlink(p)
     return n_total

@@ -49,7 +49,8 @@ class Acquisition:
                  speed: float | None = None, stall_s: float = 2.0,
                  on_tick: Callable[[float], None] | None = None,
                  start_index: int = 0, backpressure: bool = False,
-                 on_clock_step: Callable[[float], None] | None = None) -> None:
+                 on_clock_step: Callable[[float], None] | None = None,
+                 stop_at: float | None = None) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
@@ -81,6 +82,11 @@ class Acquisition:
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self.first_samples = threading.Event()
+        # The reader itself ends at clock time ``stop_at`` (a --duration): a supervisor that
+        # looks at a fast virtual clock every few wall milliseconds would stop at a
+        # thread-timing-dependent sample, and the same seed would give different records.
+        self.stop_at = stop_at
+        self.finished = threading.Event()
 
     # -- control ------------------------------------------------------------------------
     def start(self) -> None:
@@ -110,6 +116,9 @@ class Acquisition:
             t0 = self.clock.monotonic()
             next_t = t0
             while not self._stop.is_set():
+                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
+                    self.finished.set()
+                    break
                 self.poll_once()
                 next_t += self.period
                 now = self.clock.monotonic()

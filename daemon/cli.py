@@ -1,7 +1,9 @@
 """The ``avard`` command line: finds the subcommands in ``avard.daemon.commands``.
 
-Errors the user can fix (``AvardError``) become one clear line on stderr and exit status 2;
-anything else is a bug and keeps its traceback.
+Errors the user can fix become one clear line on stderr and exit status 2: every ``AvardError``
+(bad data, config, output path, hardware, network) and every ``OSError`` a command did not turn
+into one itself (permission, missing folder, full disk, read-only file system), named with its
+file and what to do. Anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ from collections.abc import Sequence
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-from avard.core.errors import AvardError  # noqa: E402  (after the BLAS setting)
+from avard.core.errors import AvardError, describe_os_error  # noqa: E402  (after BLAS)
 
 from . import __version__, commands  # noqa: E402
+from .stop_signals import StopSignal  # noqa: E402
 
 log = logging.getLogger("avard")
 
@@ -83,6 +86,13 @@ def setup_logging(verbosity: int) -> None:
     root.setLevel(level)
 
 
+def _fail(command: str, message: str) -> int:
+    """Print the one line the README promises (messages never span lines) and return 2."""
+    one_line = " ".join(message.split())
+    print(f"avard {command}: error: {one_line}", file=sys.stderr)
+    return 2
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # The first word that is not an option names the command; build only its parser.
@@ -96,10 +106,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args._run(args) or 0)
     except AvardError as exc:
-        print(f"avard {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(args.command, str(exc))
+    except BrokenPipeError:
+        # `avard analyze x.npz | head`: the reader left; end quietly, as cat does
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
+    except OSError as exc:
+        # Raised by the file system under any command (EACCES on a recording of the service's
+        # group, ENOSPC, EROFS): the user's to fix, so one line, never a traceback.
+        log.debug("OSError in %s", args.command, exc_info=True)
+        return _fail(args.command, describe_os_error(exc))
     except KeyboardInterrupt:
         return 130
+    except StopSignal as exc:  # SIGTERM/SIGHUP inside a command that unwinds on them
+        print(f"avard {args.command}: {exc}", file=sys.stderr)
+        return 128 + exc.signum
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -601,7 +601,8 @@ class Service:
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
-                               backpressure=self.simulate is not None)
+                               backpressure=self.simulate is not None,
+                               stop_at=getattr(self, "_stop_at", None))
         acfg = cfg["allan"]
         self.workers.append(AllanWorker(
             self.ring.consumer("allan"), self.allan, self.feed, self,
@@ -676,7 +677,10 @@ class Service:
 
     def run(self, duration_s: float | None = None, *, tick_s: float = 0.05,
             before_acquisition: Callable[[], None] | None = None) -> int:
-        """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop."""
+        """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
+        The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
+        of a given seed always holds the same samples."""
+        self._stop_at = None if duration_s is None else self.t_start + duration_s
         self.start(before_acquisition)
         n = self.notifier
         wd = n.watchdog_interval_s() if n is not None else None
@@ -716,8 +720,7 @@ class Service:
                 if now >= next_status_log:
                     next_status_log = now + self.cfg["service"]["status_log_interval_s"]
                     log.info("status: %s", self.status_line())
-                if duration_s is not None and \
-                        self.clock.monotonic() - self.t_start >= duration_s:
+                if duration_s is not None and self.acq.finished.is_set():
                     break
                 self.stop_requested.wait(tick_s)
         finally:

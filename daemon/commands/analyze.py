@@ -21,7 +21,9 @@ import sys
 from pathlib import Path
 
 from avard.core.errors import DataError
+from avard.core.outputs import check_output_file, check_plot_output
 from avard.core.report import adev_csv, analyze, format_table, kalibr_yaml, progress_printer
+from avard.daemon.commands._options import add_channels_argument, split_channels
 
 NAME = "analyze"
 HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"
@@ -47,8 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz (overrides the file's; needed for a csv "
                              "without a t column)")
-    parser.add_argument("--channels", nargs="+", metavar="NAME",
-                        help="channels to analyse (names or numbers; default all)")
+    add_channels_argument(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--plot", metavar="FILE.png", help="write the ADEV figure (needs the "
                         "plot extra: matplotlib)")
@@ -103,18 +104,24 @@ def run(args: argparse.Namespace) -> int:
                             "'csv FILE.csv'")
     if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
         raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
+    # outputs before the analysis, so a bad path costs a second, not the whole run
+    for fmt, path in args.export:
+        check_output_file(path, what=f"--export {fmt} {path}",
+                          suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
+    if args.plot:
+        check_plot_output(args.plot, what=f"--plot {args.plot}")
     if args.temperature:
         # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
         # fit on the named channel
         from avard.core.explain import explain_file
 
-        ex = explain_file(args.data, rate_hz=args.rate, channels=args.channels,
+        ex = explain_file(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                           filter_corner_hz=args.filter_corner, progress=progress_printer(),
                           temperature=args.temperature)
         an = ex.analysis
         comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
     else:
-        an = analyze(args.data, rate_hz=args.rate, channels=args.channels,
+        an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                      filter_corner_hz=args.filter_corner, progress=progress_printer())
         comp = {}
     if args.json:

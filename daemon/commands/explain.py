@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import DataError
+from avard.core.outputs import check_output_dir, require_plot_extra
+from avard.daemon.commands._options import add_channels_argument, split_channels
 
 NAME = "explain"
 HELP = "find where the noise model misfits the data, name the cause, measure the gain"
@@ -38,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print the result as JSON (SI units) instead of the summary")
     parser.add_argument("--report", metavar="DIR",
                         help="write report.md with plots into DIR (needs matplotlib)")
-    parser.add_argument("--channels", help="comma-separated channel names (default: all)")
+    add_channels_argument(parser)
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
 
@@ -84,13 +86,13 @@ def run(args: argparse.Namespace) -> int:
     from avard.core.explain import explain_file
     from avard.core.explain_report import summary, write_report
 
-    if args.report and not Path(args.report).resolve().parent.exists():
-        raise DataError(f"--report {args.report}: folder {Path(args.report).parent} does not "
-                        "exist; create it or choose another")
+    if args.report:  # before the analysis: a bad folder costs a second, not minutes
+        check_output_dir(args.report, what=f"--report {args.report}", create=True)
+        require_plot_extra(f"--report {args.report}")
     if not Path(args.data).exists():
         raise DataError(f"{args.data} does not exist; give the path of a recorded or "
                         "simulated file")
-    channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
+    channels = split_channels(args.channels)
     progress, stage = _progress()
     ex = explain_file(args.data, rate_hz=args.rate_hz, channels=channels, progress=progress,
                       stage=stage)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from avard.core.outputs import check_output_dir
 from avard.daemon.curve import make_keypair
 
 NAME = "keys"
@@ -29,6 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     names = args.name or ["server", "client"]
+    check_output_dir(args.out, what=f"--out {args.out}", create=True)
     out = sys.stdout
     for name in names:
         public, secret = make_keypair(args.out, name)

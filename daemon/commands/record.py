@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 from avard.core import frames
-from avard.core.errors import FormatError, NetworkError
+from avard.core.errors import FormatError, NetworkError, OutputError
+from avard.core.outputs import check_output_dir
 from avard.daemon.recorder import Recorder
 from avard.daemon.subscriber import Message, Subscriber, add_client_arguments, subscriber_from_args
 
@@ -206,8 +207,22 @@ class StreamArchiver:
             self.recorder = None
 
 
+#: Suffixes of single files: an --out ending in one is a file name where a folder is needed.
+FILE_SUFFIXES = (".npz", ".csv", ".txt", ".avr", ".json", ".h5", ".hdf5", ".bin", ".dat")
+
+
+def check_out(path: str) -> Path:
+    """The recording folder, checked before anything connects: a folder (segments rotate, so
+    a recording is several files), writable, or creatable."""
+    out = Path(path)
+    if not out.exists() and out.suffix.lower() in FILE_SUFFIXES:
+        raise OutputError(f"--out {path}: a recording is a folder of segment files, not one "
+                          f"{out.suffix} file; give a folder, e.g. --out {out.with_suffix('')}")
+    return check_output_dir(out, what=f"--out {path}", create=True)
+
+
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
+    out = check_out(args.out)
     sub = subscriber_from_args(args)
     # set by SIGTERM, or by an embedding program/test through ``args.stop_event``
     stop: threading.Event = getattr(args, "stop_event", None) or threading.Event()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 from typing import Any
 
 from avard.core.errors import ConfigError, HardwareError
@@ -108,10 +109,31 @@ def _ds18b20_bank(cfg: dict[str, dict[str, Any]]) -> Any:
     return ds18b20.Ds18b20Bank([f"28-{i}" for i in ids], interval_s=float(t["interval_s"]))
 
 
+#: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,
+#: never as a side effect of trying the service by hand.
+SYSTEM_PREFIXES = ("/var/", "/etc/", "/usr/", "/opt/", "/srv/", "/run/")
+
+
+def _check_system_folder(cfg: dict[str, dict[str, Any]], environ: Any = os.environ) -> None:
+    """Refuse to create a missing system data folder unless systemd started us (it sets
+    $INVOCATION_ID for every unit it runs)."""
+    data_dir = str(cfg["recording"]["data_dir"])
+    if (cfg["recording"]["enabled"] and not os.path.exists(data_dir)
+            and data_dir.startswith(SYSTEM_PREFIXES) and not environ.get("INVOCATION_ID")):
+        raise ConfigError(
+            f"recording.data_dir {data_dir} does not exist and avard run does not create "
+            "system folders unless systemd starts it (StateDirectory= makes it); by hand, "
+            "record elsewhere with --data-dir DIR, or create it first")
+
+
 def run(args: argparse.Namespace) -> int:
     _check_args(args)
     overrides = {"recording.data_dir": args.data_dir}
     cfg = load_config(args.config, **overrides)
+    if args.config is None:
+        log.warning("no --config: using the built-in defaults (as in config/avard.toml); "
+                    "recording into %s", cfg["recording"]["data_dir"])
+    _check_system_folder(cfg)
     notifier = Notifier()
     svc = build(args, cfg, notifier=notifier)
     svc.install_signals()

@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 import time
 
-from avard.core.errors import DataError
+from avard.core.errors import DataError, OutputError
+from avard.core.outputs import check_output_file, free_bytes
 from avard.core.presets import PRESETS, make_config, parse_override
-from avard.core.sim_io import write_npz
+from avard.core.sim_io import draw_seed, npz_size, write_npz
+from avard.daemon.stop_signals import stop_signals_unwind
 
 NAME = "simulate"
 HELP = "simulate a sensor record (preset + overrides) into an .npz file"
@@ -34,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="starting parameter set (default quiet-lab)")
     parser.add_argument("--hours", type=float, default=1.0, help="record length in hours")
     parser.add_argument("--seed", type=int, default=None,
-                        help="random seed (same seed and parameters: same record)")
+                        help="random seed (same seed and parameters: same record; default: a "
+                             "fresh one, printed and stored in the record)")
     parser.add_argument("--out", help="output file, .npz")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE",
@@ -74,13 +78,34 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise DataError("say where to write the record: --out FILE.npz")
-    if not args.hours > 0:
-        raise DataError(f"--hours must be > 0, got {args.hours}")
+    if not (args.hours > 0 and math.isfinite(args.hours)):
+        raise DataError(f"--hours must be a positive number, got {args.hours}")
+    check_output_file(args.out, what=f"--out {args.out}", suffixes=(".npz",))
+    size = npz_size(cfg, args.hours)
+    free = free_bytes(args.out)
+    if size.peak_bytes > free:
+        raise OutputError(
+            f"--out {args.out}: {args.hours:g} h is {size.n_samples} samples, "
+            f"{_gb(size.final_bytes)} (up to {_gb(size.peak_bytes)} while writing), but only "
+            f"{_gb(free)} are free there; ask for fewer --hours or write to a bigger disk")
+    seed = draw_seed() if args.seed is None else args.seed
+    log.info("writing %s: %d samples, %s (%s free), seed %d%s", args.out, size.n_samples,
+             _gb(size.final_bytes), _gb(free), seed,
+             "" if args.seed is not None else " (drawn; stored in the record)")
     started = time.monotonic()
-    n = write_npz(args.out, cfg, args.hours, args.seed, progress=_progress(started))
+    with stop_signals_unwind():  # SIGTERM/SIGHUP remove the temporary files as Ctrl-C does
+        n = write_npz(args.out, cfg, args.hours, seed, progress=_progress(started))
     took = time.monotonic() - started
     sys.stdout.write(
         f"{args.out}: {n} samples × 3 axes ({args.hours:g} h at {cfg.rate_hz:.6f} Hz, preset "
-        f"{cfg.preset}, seed {args.seed}), accel in m/s², DS18B20 plate/ambient in °C; "
-        f"{took:.1f} s\n")
+        f"{cfg.preset}, seed {seed}), {_gb(size.final_bytes)}, accel in m/s², DS18B20 "
+        f"plate/ambient in °C; {took:.1f} s\n")
     return 0
+
+
+def _gb(n: int) -> str:
+    """Bytes in the unit that reads best (SI prefixes, as df -H shows them)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} B"

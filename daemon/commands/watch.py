@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import shutil
 import sys
 import time
 from types import SimpleNamespace
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import AvardError, NetworkError
+from avard.core.model import SYMBOLS
 from avard.daemon.subscriber import Message, StreamStats, add_client_arguments, subscriber_from_args
 
 log = logging.getLogger(__name__)
@@ -188,36 +190,66 @@ class WatchView:
         n, rate = _num(snap.get("n_samples")), _num(snap.get("rate_hz")) or self.odr_hz
         return n / rate if n and rate else 0.0
 
-    def render(self, stats: StreamStats, endpoint: str = "") -> str:
-        lines = [f"avard watch {endpoint}  run {self.run or '?'}  (SI units: s, Hz, m/s², °C)"]
+    def render(self, stats: StreamStats, endpoint: str = "", *, width: int | None = None,
+               height: int | None = None) -> str:
+        """The view as text. With a terminal's ``width`` × ``height`` it fits: no line is
+        longer than ``width`` (nothing wraps) and there are at most ``height`` lines, the
+        essentials first (rate, loss, temperatures, ADEV at a few τ with intervals, the fit
+        with the time to the target interval). Each of the ADEV and fit sections has a full
+        form (value [interval] per channel) and a compact one (value −lo/+hi % per channel,
+        side by side); the full form is used where it fits, the compact one where it does not.
+        Without a size (output not a terminal) every line is shown in full."""
+        w = width if width is not None else 10_000
+        h = height if height is not None else 10_000
+        head = [f"avard watch {endpoint}  run {self.run or '?'}  (SI units)"]
         odr = f"{self.odr_hz:.4f} Hz fitted ODR" if self.odr_hz else "ODR unknown"
         here = f"{self._rate:.1f} samples/s arriving" if self._rate else "arrival rate pending"
-        lines.append(f"rate      {odr}; {here}")
-        lines.append(
+        head.append(f"rate      {odr}; {here}")
+        head.append(
             f"samples   {stats.samples_received} received; lost in transport "
             f"{stats.samples_lost}; service gaps {stats.samples_service_gap}; unexplained "
             f"{stats.samples_unexplained}")
-        lines.append("messages  " + ", ".join(
-            f"{t} {s.received} ({s.lost} lost)" for t, s in sorted(stats.topics.items()))
-            + (f"; {stats.bad_messages} undecodable" if stats.bad_messages else ""))
         temps = [f"{k} {'—' if v is None else f'{v:.2f}'} °C" for k, v in self.temps.items()]
         if self.chip_temp_c is not None:
             temps.append(f"chip {self.chip_temp_c:.1f} °C")
-        lines.append("temps     " + (", ".join(temps) if temps else "none yet"))
+        head.append("temps     " + (", ".join(temps) if temps else "none yet"))
+        extra = ["messages  " + ", ".join(
+            f"{t} {s.received} ({s.lost} lost)" for t, s in sorted(stats.topics.items()))
+            + (f"; {stats.bad_messages} undecodable" if stats.bad_messages else "")]
         if self.events:
-            lines.append("events    " + "; ".join(self.events))
+            extra.append("events    " + "; ".join(self.events))
         # a snapshot or fit from a newer or broken service must not end the view
-        for part, render in (("ADEV", self._render_adev), ("fit", self._render_fit)):
-            try:
-                lines.extend(render())
-            except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
-                lines.append(f"{part:<10}unreadable ({type(exc).__name__}: {exc})")
-        return "\n".join(lines) + "\n"
+        adev = self._section("ADEV", self._render_adev, w)
+        fit = self._section("fit", self._render_fit, w)
+        # the full forms first; then compact ones until the essentials fit the height
+        for a, f in ((0, 0), (0, -1), (-1, -1)):
+            body = adev[a] + fit[f]
+            if len(head) + len(body) <= h:
+                break
+        lines = head + body
+        # the message counts and events where there is room: after the essentials if the
+        # terminal is short, in their usual place (under the loss line) otherwise
+        if len(lines) + len(extra) <= h:
+            lines = head[:3] + extra + head[3:] + body
+        if len(lines) > h:
+            lines = [*lines[:max(h - 1, 0)], "… (a taller terminal shows more)"][:h]
+        return "\n".join(_clip(ln, w) for ln in lines) + "\n"
 
-    def _render_adev(self) -> list[str]:
+    def _section(self, part: str, render: Any, width: int) -> list[list[str]]:
+        """The variants of a section that fit ``width``, full first (at least one)."""
+        try:
+            variants = render(width)
+        except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
+            return [[f"{part:<10}unreadable ({type(exc).__name__}: {exc})"]]
+        fitting = [v for v in variants if all(len(ln) <= width for ln in v)]
+        return fitting or variants[-1:]
+
+    def _render_adev(self, width: int = 10_000) -> list[list[str]]:
+        """ADEV at the chosen τ: full rows (value [lo, hi] per channel; accelerometer
+        channels alone when all do not fit) and compact rows (value −lo/+hi %)."""
         snap = self.snapshot
         if snap is None or len(snap.get("tau", [])) == 0:
-            return ["ADEV      no Allan snapshot yet"]
+            return [["ADEV      no Allan snapshot yet"]]
         tau = np.asarray(snap["tau"], dtype=float)
         avar = np.atleast_2d(np.asarray(snap["avar"], dtype=float).T).T
         lo = np.atleast_2d(np.asarray(snap.get("lo", avar), dtype=float).T).T
@@ -227,32 +259,48 @@ class WatchView:
         declared = [str(u) for u in snap.get("units", [])]
         units = [_unit(n, declared[i] if i < len(declared) else None)
                  for i, n in enumerate(names)]
-        lines = [f"ADEV      {int(snap.get('n_samples', 0))} samples = "
-                 f"{fmt_duration(self.duration_s())}; value [{100 * ci:.1f} % interval]",
-                 "  τ [s]    " + "".join(f"{n + ' [' + u + ']':<31}"
-                                         for n, u in zip(names, units, strict=True))]
-        shown = []
+        if avar.shape[1] != len(names):
+            raise ValueError(f"{len(names)} names for {avar.shape[1]} channels")
+        rows = []
         for want in self.taus:
             k = int(np.argmin(np.abs(np.log(tau / want))))
-            if k in shown or not 0.5 <= tau[k] / want <= 2.0:
+            if k in rows or not 0.5 <= tau[k] / want <= 2.0:
                 continue
-            shown.append(k)
-            cells = []
-            for c in range(avar.shape[1]):
-                v, a, b = (math.sqrt(x) if x >= 0 and math.isfinite(x) else float("nan")
-                           for x in (avar[k, c], lo[k, c], hi[k, c]))
-                cells.append(f"{v:.3e} [{a:.2e}, {b:.2e}]".ljust(31))
-            lines.append(f"  {tau[k]:<9.4g}" + "".join(cells))
-        return lines
+            rows.append(k)
+        title = (f"ADEV      {int(snap.get('n_samples', 0))} samples = "
+                 f"{fmt_duration(self.duration_s())}; value [{100 * ci:.1f} % interval]")
+        accel = [c for c, n in enumerate(names) if n in ACCEL_CHANNELS] or list(range(len(names)))
 
-    def _render_fit(self) -> list[str]:
+        def table(cols: list[int], full: bool) -> list[str]:
+            cw = 31 if full else 21
+            out = [title if full else title.replace("value [", "value −lo/+hi [", 1),
+                   "  τ [s]    " + "".join(f"{names[c] + ' [' + units[c] + ']':<{cw}}"
+                                           for c in cols).rstrip()]
+            for k in rows:
+                cells = []
+                for c in cols:
+                    v, a, b = (math.sqrt(x) if x >= 0 and math.isfinite(x) else float("nan")
+                               for x in (avar[k, c], lo[k, c], hi[k, c]))
+                    cells.append((f"{v:.3e} [{a:.2e}, {b:.2e}]" if full
+                                  else f"{v:.3e} {_pct_pair(v, a, b)}").ljust(cw))
+                out.append((f"  {tau[k]:<9.4g}" + "".join(cells)).rstrip())
+            return out
+
+        every = list(range(len(names)))
+        return [table(every, True), table(accel, True), table(every, False),
+                table(accel, False)]
+
+    def _render_fit(self, width: int = 10_000) -> list[list[str]]:
+        """The fit: full (one line per channel and term) and compact (one line per term,
+        the accelerometer channels side by side: value ±half-width %, time to target)."""
         if not self.fits:
-            return ["fit       none yet"]
+            return [["fit       none yet"]]
         T = self.duration_s()
-        lines = [f"fit       ({self.fit_source}; value [interval]; more time until ±"
-                 f"{100 * self.target:.0f} %, assuming width ∝ 1/√duration)"]
+        target = f"±{100 * self.target:.0f} %"
+        full = [f"fit       ({self.fit_source}; value [interval]; more time until "
+                f"{target}, assuming width ∝ 1/√duration)"]
         for ch, fit in self.fits.items():
-            lines.append(f"  {ch}:")
+            full.append(f"  {ch}:")
             for term, est in fit.get("terms", {}).items():
                 if not isinstance(est, dict):
                     continue
@@ -260,16 +308,69 @@ class WatchView:
                 if not est.get("present") or est.get("value") is None:
                     hi = est.get("hi")
                     bound = f" (< {hi:.3e} {unit})" if isinstance(hi, int | float) else ""
-                    lines.append(f"    {term:<22} not resolved{bound}")
+                    full.append(f"    {term:<22} not resolved{bound}")
                     continue
                 v, a, b = est["value"], est.get("lo"), est.get("hi")
-                more = time_to_target(v, a, b, T, self.target)
-                when = ("?" if more is None else "reached" if more == 0
-                        else f"~{fmt_duration(more)} more")
                 interval = (f"[{a:.3e}, {b:.3e}]" if a is not None and b is not None
                             else "[?]")
-                lines.append(f"    {term:<22} {v:.3e} {interval} {unit:<14} {when}")
-        return lines
+                full.append(f"    {term:<22} {v:.3e} {interval} {unit:<14} "
+                            f"{self._when(v, a, b, T, long=True)}")
+        chans = list(self.fits)
+        terms: list[str] = []
+        for fit in self.fits.values():
+            terms += [t for t, e in fit.get("terms", {}).items()
+                      if isinstance(e, dict) and t not in terms]
+        compact = [f"fit       ({self.fit_source}) value ±half-width, time until {target}",
+                   "  " + f"{'term':<15}" + "".join(f"{c:<21}" for c in chans).rstrip()]
+        for term in terms:
+            unit = ""
+            cells = []
+            for ch in chans:
+                est = self.fits[ch].get("terms", {}).get(term)
+                if not isinstance(est, dict):
+                    cells.append("—".ljust(21))
+                    continue
+                unit = unit or _pretty(str(est.get("unit", "")))
+                v, a, b = est.get("value"), est.get("lo"), est.get("hi")
+                if not est.get("present") or v is None:
+                    cell = f"< {b:.2e}" if isinstance(b, int | float) else "absent"
+                else:
+                    half = (f"±{_pct((b - a) / (2 * abs(v)) * 100)}%"
+                            if a is not None and b is not None and v else "±?")
+                    cell = f"{v:.3e} {half} {self._when(v, a, b, T, long=False)}"
+                cells.append(cell.ljust(21))
+            label = f"{SYMBOLS.get(term, term[:1].upper())} [{unit}]"
+            compact.append("  " + f"{label:<15}" + "".join(cells).rstrip())
+        return [full, compact]
+
+    def _when(self, v: float, a: float | None, b: float | None, T: float, *,
+              long: bool) -> str:
+        more = time_to_target(v, a, b, T, self.target)
+        if more is None:
+            return "?"
+        if more == 0:
+            return "reached" if long else "ok"
+        return f"~{fmt_duration(more)} more" if long else fmt_duration(more).replace(" ", "")
+
+
+def _pretty(unit: str) -> str:
+    return unit.replace("^2", "²").replace("^3", "³").replace("sqrt(s)", "√s")
+
+
+def _pct(p: float) -> str:
+    return f"{p:.1f}" if p < 9.95 else f"{p:.0f}"
+
+
+def _pct_pair(v: float, a: float, b: float) -> str:
+    """An interval [a, b] around v as −x/+y % (asymmetric at long τ, where EDF is small)."""
+    if not (v > 0 and math.isfinite(a) and math.isfinite(b)):
+        return "[?]"
+    return f"-{_pct((v - a) / v * 100)}/+{_pct((b - v) / v * 100)}%"
+
+
+def _clip(line: str, width: int) -> str:
+    """A line cut to the terminal's width (a wrapped line would push the view off screen)."""
+    return line if len(line) <= width else line[:max(width - 1, 0)] + "…"
 
 
 def _num(x: Any) -> float | None:
@@ -335,8 +436,14 @@ def run(args: argparse.Namespace) -> int:
                                        f"{args.wait:g} s (is the service running?)")
                 continue
             if now >= next_draw:
-                out.write(("\x1b[H\x1b[2J" if clear else "")
-                          + view.render(sub.stats, args.endpoint) + ("" if clear else "\n"))
+                # on a terminal: its size now (it may have been resized); one line is kept
+                # free so the cursor line does not scroll the view's first line away
+                size = shutil.get_terminal_size() if out.isatty() else None
+                text = view.render(sub.stats, args.endpoint,
+                                   width=size.columns if size else None,
+                                   height=size.lines - 1 if size else None)
+                out.write(("\x1b[H\x1b[2J" if clear else "") + text
+                          + ("" if clear else "\n"))
                 out.flush()
                 printed += 1
                 next_draw = now + args.interval

@@ -75,7 +75,7 @@ def test_npz_errors_name_the_problem(tmp_path: Path) -> None:
     with pytest.raises(FormatError, match="objects"):
         load_record(tmp_path / "e.npz")
     (tmp_path / "f.npz").write_bytes(b"this is not a zip")
-    with pytest.raises(FormatError, match=r"not a readable \.npz"):
+    with pytest.raises(FormatError, match=r"not a complete \.npz"):
         load_record(tmp_path / "f.npz")
     with pytest.raises(DataError, match="no such file"):
         load_record(tmp_path / "missing.npz")

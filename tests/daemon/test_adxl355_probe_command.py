@@ -26,3 +26,44 @@ def test_probe_reports_ids_self_test_rate_and_one_g(capsys, tmp_path):
 def test_probe_refuses_a_silly_duration(capsys):
     assert main(["probe", "--emulate", "--seconds", "0.1"]) == 2
     assert "--seconds" in capsys.readouterr().err
+
+
+def test_probe_refuses_an_impossible_emulated_oscillator(capsys):
+    for ppm in ("1e9", "nan"):
+        assert main(["probe", "--emulate", "--ppm", ppm]) == 2
+        assert "--ppm" in capsys.readouterr().err
+
+
+def _rate(out: str) -> tuple[float, float]:
+    m = re.search(r"\(([+-]\d+) ± (\d+) ppm off nominal", out)
+    assert m is not None, out
+    return float(m.group(1)), float(m.group(2))
+
+
+def test_the_short_rate_fit_is_unbiased_and_says_it_is_short(capsys):
+    """Fixed-period polls aliased against the ODR biased a 5 s fit by 4σ (+2372 ± 156 ppm
+    for +3000 ppm). Over several oscillator errors the z-scores now scatter around zero,
+    and a fit too short for ±50 ppm says so and how long would do."""
+    zs = []
+    for true in (-3000.0, -1200.0, 400.0, 1700.0, 3000.0, 4500.0):
+        assert main(["probe", "--emulate", "--no-self-test", "--seconds", "5",
+                     "--ppm", str(true)]) == 0
+        out = capsys.readouterr().out
+        ppm, u = _rate(out)
+        assert u > 0, out  # a fit that aliases can even report zero uncertainty
+        zs.append((ppm - true) / u)
+        assert "too short to measure the rate to ±50 ppm; run --seconds" in out
+    assert max(abs(z) for z in zs) < 3, zs
+    assert abs(sum(zs)) / len(zs) ** 0.5 < 3, zs     # no common bias
+
+
+def test_probe_says_what_it_checked_and_what_it_skipped(capsys):
+    assert main(["probe", "--emulate", "--seconds", "20", "--ppm", "3000"]) == 0
+    out = capsys.readouterr().out
+    ppm, u = _rate(out)
+    assert u < 50 and abs(ppm - 3000) < 3 * u
+    assert "too short" not in out
+    assert "checked: IDs, self-test, output rate, 1 g, chip temperature" in out
+    assert "skipped: DS18B20s (--emulate has no 1-Wire bus)" in out
+    assert main(["probe", "--emulate", "--no-self-test", "--seconds", "1"]) == 0
+    assert "skipped: self-test (--no-self-test); DS18B20s" in capsys.readouterr().out

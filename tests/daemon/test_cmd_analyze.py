@@ -52,7 +52,7 @@ def test_json_exports_and_plot(npz: Path, tmp_path: Path,
 
 @pytest.mark.parametrize(("args", "message"), [
     (["/nonexistent/x.npz"], "no such file"),
-    (["{bad}"], "not a readable .npz"),
+    (["{bad}"], "not a complete .npz"),
     (["{nokey}"], "no 'accel'"),
     (["{npz}", "--rate", "-3"], "positive"),
     (["{npz}", "--channels", "w"], "channel 'w'"),

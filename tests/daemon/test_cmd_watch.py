@@ -132,3 +132,67 @@ def test_view_survives_hostile_snapshots(snapshot: object) -> None:
     view.set_snapshot({"snapshot": snapshot, "fit": {"terms": {"quantization": 5}}})
     text = view.render(StreamStats())
     assert text.startswith("avard watch")
+
+
+def _full_view() -> WatchView:
+    view = WatchView(target=0.1, taus=(0.1, 1, 10, 100, 1000))
+    view.set_snapshot(_snapshot(1 << 16))
+    view.temps = {"plate": 21.5, "air": 22.125}
+    view.chip_temp_c = 24.3
+    view.odr_hz = 125.0007
+    view.run = "20261123T2000Z-ab12"
+    view.events = ["gap of 32 samples (overrun)"]
+    return view
+
+
+@pytest.mark.parametrize(("width", "height"), [(80, 24), (120, 40)])
+def test_the_view_fits_the_terminal_with_the_essentials_on_it(width: int, height: int) -> None:
+    view = _full_view()
+    stats = StreamStats()
+    stats.samples_received, stats.samples_lost = 4096, 64
+    lines = view.render(stats, "tcp://raspberrypi.local:5555", width=width,
+                        height=height).splitlines()
+    assert len(lines) <= height and max(map(len, lines)) <= width
+    text = "\n".join(lines)
+    assert "125.0007 Hz fitted ODR" in text
+    assert "4096 received; lost in transport 64" in text
+    assert "plate 21.50 °C, air 22.12 °C, chip 24.3 °C" in text
+    # ADEV at every shown τ, each accelerometer channel with its interval
+    snap = view.snapshot
+    tau = np.asarray(snap["tau"])
+    for want in (0.1, 1.0, 10.0, 100.0):
+        k = int(np.argmin(np.abs(np.log(tau / want))))
+        row = next(ln for ln in lines if ln.strip().startswith(f"{tau[k]:.4g} "))
+        for c in range(3):
+            v = math.sqrt(snap["avar"][k][c])
+            lo, hi = math.sqrt(snap["lo"][k][c]), math.sqrt(snap["hi"][k][c])
+            if width >= 120:   # room for the interval's ends
+                assert f"{v:.3e} [{lo:.2e}, {hi:.2e}]" in row
+            else:              # the interval as −/+ percent of the value
+                m = re.search(rf"{v:.3e} -([\d.]+)/\+([\d.]+)%", row)
+                assert m is not None, row
+                assert float(m.group(1)) == pytest.approx((v - lo) / v * 100, rel=0.05, abs=0.06)
+                assert float(m.group(2)) == pytest.approx((hi - v) / v * 100, rel=0.05, abs=0.06)
+    # the fit with its time to the target interval, for every accelerometer channel
+    vrw = {ch: f["terms"]["velocity_random_walk"] for ch, f in view.fits.items()}
+    assert set(vrw) == {"x", "y", "z"}
+    for est in vrw.values():
+        assert f"{est['value']:.3e}" in text
+    if width >= 120:
+        assert re.search(r"velocity_random_walk\s+\S+ \[\S+, \S+\] m/s/sqrt\(s\)\s+reached",
+                         text)
+    else:
+        n_row = next(ln for ln in lines if ln.strip().startswith("N [m/s/√s]"))
+        assert n_row.count(" ok") == 3 and n_row.count("±") == 3
+    assert "gap of 32 samples" in text
+
+
+def test_a_short_terminal_keeps_the_first_lines_and_says_there_is_more() -> None:
+    lines = _full_view().render(StreamStats(), "tcp://h:1", width=80, height=10).splitlines()
+    assert len(lines) == 10
+    assert lines[1].startswith("rate") and lines[-1].startswith("…")
+
+
+def test_without_a_terminal_nothing_is_cut() -> None:
+    text = _full_view().render(StreamStats(), "tcp://h:1")
+    assert "…" not in text and "plate [°C]" in text   # every channel, full intervals

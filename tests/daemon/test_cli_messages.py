@@ -1,0 +1,96 @@
+"""The messages the issue found misleading now say what is really wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from avard.core.errors import ConfigError
+from avard.daemon.cli import main
+
+
+def _err(capsys: pytest.CaptureFixture[str]) -> str:
+    return capsys.readouterr().err
+
+
+def test_a_constant_channel_is_called_constant_not_too_short(tmp_path: Path, capsys) -> None:
+    p = tmp_path / "const.npz"
+    rng = np.random.default_rng(2)
+    np.savez(p, accel=np.column_stack([np.full(20000, 9.81), rng.normal(0, 1e-3, (20000, 2))]),
+             rate_hz=100.0)
+    assert main(["analyze", str(p)]) == 2
+    err = _err(capsys)
+    assert "channel x" in err and "constant" in err and "longer" not in err
+
+
+def test_a_truncated_npz_is_called_truncated(tmp_path: Path, capsys) -> None:
+    good = tmp_path / "good.npz"
+    np.savez(good, accel=np.zeros((1000, 3)), rate_hz=100.0)
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(good.read_bytes()[:5000])
+    assert main(["analyze", str(cut)]) == 2
+    err = _err(capsys)
+    assert "cut.npz" in err and "truncated" in err and "numpy.savez" not in err
+
+
+def test_a_txt_file_is_read_as_csv_and_says_so(tmp_path: Path, capsys) -> None:
+    rng = np.random.default_rng(3)
+    p = tmp_path / "export.txt"
+    p.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.6e}" for v in row)
+                                       for row in rng.normal(0, 1e-3, (4000, 3))))
+    assert main(["analyze", str(p), "--rate", "100"]) == 0
+    assert "export.txt: reading it as CSV" in _err(capsys)
+
+
+def test_record_refuses_a_file_name_for_its_folder(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "x.npz"
+    assert main(["record", "tcp://127.0.0.1:9", "--out", str(out), "--wait", "1"]) == 2
+    err = _err(capsys)
+    assert "a recording is a folder" in err and "--out" in err and str(out.with_suffix("")) in err
+    assert not out.exists()
+
+
+def test_run_by_hand_does_not_create_a_system_folder(capsys) -> None:
+    from avard.daemon.commands.run import _check_system_folder
+
+    cfg = {"recording": {"enabled": True, "data_dir": "/var/lib/avard-test-not-there"}}
+    with pytest.raises(ConfigError, match="does not create system folders"):
+        _check_system_folder(cfg, environ={})
+    _check_system_folder(cfg, environ={"INVOCATION_ID": "abc"})  # systemd: StateDirectory=
+
+
+def test_run_without_config_says_which_it_uses(capsys) -> None:
+    # the default /var/lib/avard is missing here: the run stops before starting anything
+    if Path("/var/lib/avard").exists():
+        pytest.skip("/var/lib/avard exists on this machine")
+    assert main(["run", "--simulate", "quiet-lab", "--duration", "1"]) == 2
+    err = _err(capsys)
+    assert "no --config: using the built-in defaults" in err
+    assert "/var/lib/avard does not exist" in err and "--data-dir" in err
+    assert not Path("/var/lib/avard").exists()
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    """`avard simulate --list | head -1`: the reader leaving is not an error to report."""
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "avard.daemon.cli", "simulate", "--list"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before anything is written: the first write meets EPIPE
+    err = p.stderr.read().decode()
+    assert p.wait(60) == 141, err
+    assert "Traceback" not in err and "Exception ignored" not in err
+
+
+def test_a_refused_connection_gets_network_advice() -> None:
+    import errno
+    import os
+
+    from avard.core.errors import describe_os_error
+
+    text = describe_os_error(ConnectionRefusedError(errno.ECONNREFUSED,
+                                                    os.strerror(errno.ECONNREFUSED)))
+    assert "check the address and that the service runs" in text
