@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     from avard.core.explain_report import summary, write_report
 
     if args.report:  # before the analysis: a bad folder costs a second, not minutes
+        # DIR itself is made, as `mkdir DIR` would; a missing parent is more likely a typo
+        check_output_dir(Path(args.report).resolve().parent, what=f"--report {args.report}")
         check_output_dir(args.report, what=f"--report {args.report}", create=True)
         require_plot_extra(f"--report {args.report}")
     if not Path(args.data).exists():
