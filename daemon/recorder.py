@@ -38,20 +38,35 @@ _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
 class FileOps:
-    """The recorder's file-system layer (real files); subclass it to inject faults."""
+    """The recorder's file-system layer (real files); subclass it to inject faults.
+
+    Segments are opened unbuffered: a buffered file would flush its buffer again inside
+    ``truncate()`` and hit ENOSPC a second time, leaving the torn frame in the file."""
+
+    #: Attempts (and the pause between them) to cut a torn frame off after a failed write.
+    truncate_attempts = 3
+    truncate_pause_s = 0.01
 
     def open_append(self, path: Path) -> IO[bytes]:
-        return open(path, "ab")
+        return open(path, "ab", buffering=0)
 
     def write(self, f: IO[bytes], data: bytes) -> None:
-        f.write(data)
-        f.flush()
+        view = memoryview(data)
+        while view:
+            # A raw file may write only part (the disk filled up under it); the next call
+            # then raises the error that says why.
+            done = f.write(view)
+            if not done:
+                raise OSError(errno.EIO, "write wrote nothing")
+            view = view[done:]
 
     def fsync(self, f: IO[bytes]) -> None:
         os.fsync(f.fileno())
 
     def truncate(self, f: IO[bytes], size: int) -> None:
-        f.truncate(size)
+        # ftruncate on the descriptor: no buffer to flush first, and shrinking a file needs
+        # no free blocks, so this works on a full disk.
+        os.ftruncate(f.fileno(), size)
         f.seek(size)
 
     def free_bytes(self, directory: Path) -> int:
@@ -127,6 +142,7 @@ class Recorder:
         self.samples_lost = 0
         self.deleted: list[str] = []
         self.errors = 0
+        self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
 
     # -- public -------------------------------------------------------------------------
     @property
@@ -143,7 +159,8 @@ class Recorder:
                 "segment": self.path.name if self.path else None,
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
-                "samples_lost": self.samples_lost, "free_bytes": free}
+                "samples_lost": self.samples_lost, "torn_frames": self.torn_frames,
+                "free_bytes": free}
 
     def write(self, record: dict[str, Any]) -> bool:
         """Write one record (its ``run``/``seq`` are set here). False when it was lost to a
@@ -204,11 +221,7 @@ class Recorder:
         try:
             self.ops.write(self._f, data)
         except OSError as exc:
-            # Cut a partly written frame off again so the file stays a clean frame sequence.
-            try:
-                self.ops.truncate(self._f, self._size)
-            except OSError:
-                pass
+            self._cut_torn_frame()
             self._failed(exc, "write")
             return False
         self._size += len(data)
@@ -216,6 +229,27 @@ class Recorder:
         self.records += 1
         self._dirty = True
         return True
+
+    def _cut_torn_frame(self) -> None:
+        """Cut a partly written frame off again so the file stays a clean frame sequence.
+
+        Retried: a truncate can fail transiently (EINTR, a busy NFS server). If it still
+        fails, the torn frame stays at the end of this segment, which is never appended to
+        again (writing resumes in a new segment), so the reader reports it as that segment's
+        truncated tail and loses nothing else; the lost records are in the resume gap."""
+        assert self._f is not None
+        last: OSError | None = None
+        for attempt in range(self.ops.truncate_attempts):
+            try:
+                self.ops.truncate(self._f, self._size)
+                return
+            except OSError as exc:
+                last = exc
+                if attempt + 1 < self.ops.truncate_attempts:
+                    time.sleep(self.ops.truncate_pause_s)
+        self.torn_frames += 1
+        log.error("cannot cut the torn frame off %s at byte %d (%s); the segment is closed "
+                  "and the reader will skip its truncated tail", self.path, self._size, last)
 
     def _free(self) -> int:
         try:
@@ -365,3 +399,19 @@ class Recorder:
             log.info("deleted %s (%s)", path.name, why)
         except OSError as exc:
             log.error("retention: cannot delete %s: %s", path, exc)
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` by ``data`` all at once (write a temporary file, fsync, rename).
+
+    On any failure (a full disk) the temporary file is removed again and the error raised:
+    the old file stays whole and no partial ``.tmp`` is left behind."""
+    tmp = path.with_suffix(".tmp")
+    try:
+        with open(tmp, "wb", buffering=0) as f:
+            FileOps().write(f, data)
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise

@@ -472,15 +472,11 @@ class Service:
     def save_state(self, rec: dict[str, Any]) -> None:
         if not self.cfg["recording"]["enabled"]:
             return
+        from .recorder import write_atomic
+
         path = self.data_dir / STATE_FILE
-        tmp = path.with_suffix(".tmp")
         try:
-            data = frame(frames.encode(dict(rec, seq=0)))
-            with open(tmp, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
+            write_atomic(path, frame(frames.encode(dict(rec, seq=0))))
         except OSError as exc:
             log.error("cannot save the Allan checkpoint to %s: %s", path, exc)
 
