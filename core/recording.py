@@ -96,14 +96,16 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
 
     A frame whose length runs past the end of the data and after which no valid frame follows
     is a truncated tail (the normal result of a power cut): it ends the scan. A frame that
-    fails its CRC in the middle is reported as corrupt; the scan resynchronises by searching
-    byte by byte for the next offset where a frame with a valid CRC starts.
+    fails its CRC in the middle is reported as corrupt; the scan resynchronises on the next
+    offset where a frame with a valid CRC starts (every offset is a candidate; the search is
+    linear in the bytes searched, see ``_resync``).
     """
     problems = problems if problems is not None else []
     buf = memoryview(data)
     pos = 0
     size = len(buf)
     hdr = FRAME_HEADER.size
+    prefix: _PrefixCrc | None = None      # built at the first damage, kept for the file
     while pos < size:
         n = _valid_at(buf, pos, max_bytes)
         if n is not None:
@@ -111,7 +113,8 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
             pos += hdr + n
             continue
         # Not a valid frame here. Find where the next valid one starts, if any.
-        nxt = _resync(buf, pos + 1, max_bytes)
+        prefix = prefix or _PrefixCrc(buf)
+        nxt = _resync(buf, pos + 1, max_bytes, prefix)
         if nxt is None:
             claimed = FRAME_HEADER.unpack_from(buf, pos)[0] if pos + hdr <= size else None
             if claimed is not None and claimed <= max_bytes and pos + hdr + claimed > size:
@@ -127,13 +130,162 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
         pos = nxt
 
 
-def _resync(buf: memoryview, start: int, max_bytes: int) -> int | None:
-    """Offset of the next position at or after ``start`` where a valid frame begins."""
-    pos = start
+# --------------------------------------------------------------------------------------------
+# resynchronisation in time linear in the file size
+#
+# Checking one candidate frame costs its claimed length (a CRC over the payload), so trying
+# every byte offset in turn is quadratic on a crafted file where every offset claims a frame to
+# the end of the file. Instead the CRC of any byte range comes from two prefix CRCs:
+#
+#     crc32(buf[a:b]) = P(b) XOR Z_{b-a}(P(a)),     P(k) = crc32(buf[base:k])
+#
+# where Z_L is the GF(2)-linear map "append L zero bytes to the raw CRC register" (the
+# operator of zlib's crc32_combine). Z_L is applied with one 4 × 256 lookup table per bit of L,
+# vectorised over all candidates of a window, and the prefix CRCs are taken in one forward
+# pass over the sorted candidate ends: bounded work per byte of the file.
+
+_CRC_BITS = 25                  # Z_{2^j} for j < 25 covers payload lengths up to 2^25 - 1
+_ZERO_TABLES: np.ndarray | None = None
+_WINDOW0 = 1 << 14              # first resync window (candidate offsets), doubled up to
+_WINDOW_MAX = 1 << 20           # this, so memory stays bounded on any file
+
+
+def _zero_byte_tables() -> np.ndarray:
+    """(25, 4, 256) uint32: entry [j, k, v] is Z_{2^j} applied to the register ``v << 8k``."""
+    global _ZERO_TABLES
+    if _ZERO_TABLES is None:
+        crc_table = [zlib.crc32(bytes([b]), 0xFFFFFFFF) ^ 0xFFFFFFFF for b in range(256)]
+        # raw register update by one zero byte, on each of the 32 basis vectors
+        cols = [((1 << i) >> 8) ^ crc_table[(1 << i) & 0xFF] for i in range(32)]
+        tables = np.zeros((_CRC_BITS, 4, 256), dtype=np.uint32)
+        for j in range(_CRC_BITS):
+            for k in range(4):
+                for bit in range(8):
+                    step = 1 << bit
+                    # entries v with this bit set get the image of basis vector 8k + bit
+                    tables[j, k, step:2 * step] = tables[j, k, :step] ^ np.uint32(cols[8 * k
+                                                                                  + bit])
+            # cols[i] = Z_{2^j}(e_i), so Z_{2^j}(cols[i]) = Z_{2^(j+1)}(e_i)
+            cols = [_apply_zero(tables[j], c) for c in cols]
+        _ZERO_TABLES = tables
+    return _ZERO_TABLES
+
+
+def _apply_zero(t: np.ndarray, v: Any) -> Any:
+    """Z (given as its (4, 256) byte tables) applied to a uint32 register or array of them."""
+    if isinstance(v, np.ndarray):
+        return t[0][v & 0xFF] ^ t[1][(v >> 8) & 0xFF] ^ t[2][(v >> 16) & 0xFF] ^ t[3][v >> 24]
+    return int(t[0][v & 0xFF] ^ t[1][(v >> 8) & 0xFF] ^ t[2][(v >> 16) & 0xFF]
+               ^ t[3][v >> 24])
+
+
+_CRC_TABLE: np.ndarray | None = None
+_STRIDE = 16                    # prefix CRCs are kept at every 16th byte
+
+
+def _crc_table() -> np.ndarray:
+    """The reflected CRC-32 byte table (256 uint32): raw register update by one byte."""
+    global _CRC_TABLE
+    if _CRC_TABLE is None:
+        _CRC_TABLE = np.array([zlib.crc32(bytes([b]), 0xFFFFFFFF) ^ 0xFFFFFFFF
+                               for b in range(256)], dtype=np.uint32)
+    return _CRC_TABLE
+
+
+class _PrefixCrc:
+    """``crc32(buf[:q])`` for arrays of offsets q, with work linear in the bytes covered.
+
+    Keeps the prefix CRC at every ``_STRIDE``-th byte (filled by zlib as far as asked, once per
+    buffer); an arbitrary q steps on from the stride point before it, at most ``_STRIDE - 1``
+    bytes, vectorised over all q at once."""
+
+    def __init__(self, buf: memoryview) -> None:
+        self.buf = buf
+        self.bytes = np.frombuffer(buf, dtype=np.uint8)
+        self.stride = np.zeros(1, dtype=np.uint32)      # crc32(buf[:k * _STRIDE])
+
+    def _extend(self, upto: int) -> np.ndarray:
+        """The stride CRCs up to offset ``upto`` (computed once, then kept)."""
+        k = self.stride.size - 1
+        if k * _STRIDE >= upto:
+            return self.stride
+        buf, crc32 = self.buf, zlib.crc32
+        crc = int(self.stride[-1])
+        more: list[int] = []
+        append = more.append
+        while k * _STRIDE < upto:
+            crc = crc32(buf[k * _STRIDE:(k + 1) * _STRIDE], crc)
+            append(crc)
+            k += 1
+        self.stride = np.concatenate([self.stride, np.array(more, dtype=np.uint32)])
+        return self.stride
+
+    def at(self, q: np.ndarray) -> np.ndarray:
+        top = int(q.max())
+        strides = self._extend(top - top % _STRIDE)
+        k0 = q // _STRIDE
+        reg = ~strides[k0]                     # the raw register (zlib inverts in and out)
+        rest = q - k0 * _STRIDE
+        table = _crc_table()
+        for t in range(int(rest.max()) if rest.size else 0):
+            live = rest > t
+            byte = self.bytes[np.minimum(k0 * _STRIDE + t, len(self.bytes) - 1)]
+            step = (reg >> np.uint32(8)) ^ table[(reg ^ byte) & np.uint32(0xFF)]
+            reg = np.where(live, step, reg)
+        return ~reg
+
+
+def _crc_of_ranges(prefix: _PrefixCrc, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """crc32(buf[s:e]) for every pair, from the prefix CRCs at both ends."""
+    p_start, p_end = prefix.at(starts), prefix.at(ends)
+    length = ends - starts
+    tables = _zero_byte_tables()
+    v = p_start
+    for j in range(int(length.max()).bit_length()):
+        sel = ((length >> j) & 1).astype(bool)
+        if sel.any():
+            v[sel] = _apply_zero(tables[j], v[sel])
+    return p_end ^ v
+
+
+def _valid_in(buf: memoryview, lo: int, hi: int, max_bytes: int,
+              prefix: _PrefixCrc) -> np.ndarray:
+    """Offsets in ``[lo, hi)`` where a frame with a matching CRC starts (as ``_valid_at``)."""
+    size = len(buf)
+    hdr = FRAME_HEADER.size
+    hi = min(hi, size - hdr + 1)
+    if hi <= lo:
+        return np.zeros(0, dtype=np.int64)
+    raw = np.frombuffer(buf, dtype=np.uint8, count=hi - lo + hdr - 1, offset=lo)
+    m = hi - lo
+    b = [raw[i:i + m].astype(np.int64) for i in range(4)]
+    n = b[0] | (b[1] << 8) | (b[2] << 16) | (b[3] << 24)
+    pos = np.arange(lo, hi, dtype=np.int64)
+    end = pos + hdr + n
+    ok = np.flatnonzero((n > 0) & (n <= max_bytes) & (end <= size))
+    if not ok.size:
+        return np.zeros(0, dtype=np.int64)
+    pos, end = pos[ok], end[ok]
+    c = [raw[ok + i].astype(np.uint32) for i in range(4, 8)]
+    crc = c[0] | (c[1] << 8) | (c[2] << 16) | (c[3] << 24)
+    good = _crc_of_ranges(prefix, pos + hdr, end) == crc
+    return pos[good]
+
+
+def _resync(buf: memoryview, start: int, max_bytes: int,
+            prefix: _PrefixCrc | None = None) -> int | None:
+    """Offset of the next position at or after ``start`` where a valid frame begins.
+
+    Same answer as trying ``_valid_at`` at every offset in turn, in time linear in the bytes
+    searched (windows of candidate offsets that double in size)."""
+    prefix = prefix or _PrefixCrc(buf)
+    pos, window = start, _WINDOW0
     while pos + FRAME_HEADER.size <= len(buf):
-        if _valid_at(buf, pos, max_bytes) is not None:
-            return pos
-        pos += 1
+        found = _valid_in(buf, pos, pos + window, max_bytes, prefix)
+        if found.size:
+            return int(found[0])
+        pos += window
+        window = min(2 * window, _WINDOW_MAX)
     return None
 
 
