@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -421,7 +421,211 @@ class RecordingReader:
 
 
 # --------------------------------------------------------------------------------------------
+# one walk over a recording: headers recovered, losses in samples, duplicates counted once
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Samples ``[i0, i0 + n)`` of run ``run`` that the recording lacks because of damage (a
+    corrupt or truncated frame, or no surviving header): not a recorded gap."""
+
+    run: str
+    i0: int
+    n: int
+    cause: str
+
+    def __str__(self) -> str:
+        return f"samples [{self.i0}, {self.i0 + self.n}) of run {self.run} lost: {self.cause}"
+
+
+@dataclass
+class WalkReport:
+    """What :func:`walk` had to repair or drop, in samples: losses (damage), duplicates (index
+    ranges met more than once: counted once, reported here), header copies used in place of a
+    damaged header."""
+
+    losses: list[Loss] = field(default_factory=list)
+    duplicates: list[tuple[int, int]] = field(default_factory=list)   # (i0, n) dropped
+    recovered_headers: list[str] = field(default_factory=list)        # runs
+
+    @property
+    def samples_lost(self) -> int:
+        return sum(loss.n for loss in self.losses)
+
+    @property
+    def samples_duplicated(self) -> int:
+        return sum(n for _, n in self.duplicates)
+
+
+class _IndexSet:
+    """Disjoint sorted ``[lo, hi)`` ranges of sample indices already seen (merged as they
+    grow), so a duplicated or overlapping raw block is found in O(log ranges)."""
+
+    def __init__(self) -> None:
+        self.lo: list[int] = []
+        self.hi: list[int] = []
+
+    def unseen(self, i0: int, i1: int) -> list[tuple[int, int]]:
+        """The parts of ``[i0, i1)`` not seen yet (and marks all of it seen)."""
+        import bisect
+
+        if not self.hi or i0 >= self.hi[-1]:          # the common case: data in order
+            self._add(i0, i1)
+            return [(i0, i1)]
+        out, at = [], i0
+        k = bisect.bisect_right(self.hi, i0)
+        while at < i1 and k < len(self.lo):
+            if self.lo[k] > at:
+                out.append((at, min(i1, self.lo[k])))
+            at = max(at, self.hi[k])
+            k += 1
+        if at < i1:
+            out.append((at, i1))
+        for a, b in out:
+            self._add(a, b)
+        return out
+
+    def _add(self, a: int, b: int) -> None:
+        import bisect
+
+        k = bisect.bisect_left(self.lo, a)
+        self.lo.insert(k, a)
+        self.hi.insert(k, b)
+        # merge with neighbours that touch
+        if k + 1 < len(self.lo) and self.lo[k + 1] <= self.hi[k]:
+            self.hi[k] = max(self.hi[k], self.hi.pop(k + 1))
+            self.lo.pop(k + 1)
+        if k > 0 and self.hi[k - 1] >= self.lo[k]:
+            self.hi[k - 1] = max(self.hi[k - 1], self.hi.pop(k))
+            self.lo.pop(k)
+
+
+def walk(reader: RecordingReader, report: WalkReport | None = None
+         ) -> Iterator[dict[str, Any]]:
+    """The records of a recording as its readers should see them: the one walk used by the
+    offline Allan replay, the service's restore, ``load_recording`` and so ``avard analyze``.
+
+    - Every record follows a header of its own run: a header is yielded once per run change
+      (a header copy of the same run is not repeated). Records whose segment header is damaged
+      wait for the run's header from another segment or a later copy in the same segment; if
+      none survives their samples are reported lost.
+    - Raw samples whose indices were met before (a segment copied twice, overlapping runs) are
+      dropped and reported in ``report.duplicates``: every sample index counts once. Other
+      records met twice (same run, kind and sequence number) are dropped too.
+    - A jump in a run's sample index after a corrupt or truncated frame is reported in
+      ``report.losses`` as the index range it cost.
+    """
+    report = report if report is not None else WalkReport()
+    headers: dict[str, dict[str, Any]] = {}
+    pending: dict[str, list[dict[str, Any]]] = {}
+    seen_idx = _IndexSet()
+    seen_seq: set[tuple[str, str, int]] = set()
+    expect: dict[str, int] = {}              # next sample index of each run
+    run_now: str | None = None
+    n_problems = 0
+    damage: str | None = None                # the first problem since the last raw block
+
+    def emit(rec: dict[str, Any]) -> Iterator[dict[str, Any]]:
+        nonlocal run_now, damage
+        run = rec["run"]
+        if run != run_now:
+            run_now = run
+            yield headers[run]
+        kind = rec["kind"]
+        if kind != "raw":
+            key = (run, kind, int(rec["seq"]))
+            if key in seen_seq:
+                return
+            seen_seq.add(key)
+            yield rec
+            return
+        i0, n = int(rec["i0"]), int(rec["n"])
+        if damage is not None and run in expect and i0 > expect[run]:
+            report.losses.append(Loss(run, expect[run], i0 - expect[run], damage))
+            log.warning("%s", report.losses[-1])
+        damage = None
+        expect[run] = max(expect.get(run, 0), i0 + n)
+        parts = seen_idx.unseen(i0, i0 + n)
+        if parts == [(i0, i0 + n)]:
+            yield rec
+            return
+        kept = sum(b - a for a, b in parts)
+        if kept < n:
+            report.duplicates.append((i0, n - kept))
+            log.warning("samples [%d, %d) of run %s were already read; counted once",
+                        i0, i0 + n, run)
+        for a, b in parts:
+            yield dict(rec, i0=a, n=b - a, counts=rec["counts"][a - i0:b - i0])
+
+    for rec in reader:
+        if len(reader.problems) > n_problems:
+            if damage is None:
+                damage = str(reader.problems[n_problems])
+            n_problems = len(reader.problems)
+        run = rec["run"]
+        if rec["kind"] == "header":
+            if run in headers:
+                continue                      # a header copy: the run is already known
+            headers[run] = rec
+            if run in pending:
+                report.recovered_headers.append(run)
+            for late in pending.pop(run, []):
+                yield from emit(late)
+            if run_now is None or run_now != run:
+                run_now = run
+                yield rec
+            continue
+        if run not in headers:
+            pending.setdefault(run, []).append(rec)
+            continue
+        yield from emit(rec)
+    for run, recs in pending.items():
+        for rec in recs:
+            if rec["kind"] == "raw":
+                report.losses.append(Loss(run, int(rec["i0"]), int(rec["n"]),
+                                          f"no header of run {run} survived"))
+                log.warning("%s", report.losses[-1])
+
+
+# --------------------------------------------------------------------------------------------
 # the Allan feed: one definition of "what the accumulators saw", shared by service and replay
+
+
+class Segmenter:
+    """The one rule for where the accumulators' segments end: at every gap record, every run
+    change (a header of another run) and every jump in the sample index. :class:`AllanFeed`
+    breaks its segments by it; ``load_recording`` records the same breaks for ``avard
+    analyze`` (``meta["segment_bounds"]``), so both average over exactly the same stretches."""
+
+    def __init__(self) -> None:
+        self.run: str | None = None
+        self.next_index: int | None = None
+        self.n = 0                      # raw samples seen
+        self.bounds: list[int] = [0]    # sample counts where a segment starts, then the end
+
+    def starts_segment(self, rec: dict[str, Any]) -> bool:
+        """Whether ``rec`` ends the current segment (before its own samples, if any)."""
+        kind = rec["kind"]
+        cut = False
+        if kind == "header" and rec["run"] != self.run:
+            self.run, cut = rec["run"], True
+        elif kind == "gap":
+            cut = True
+        elif kind == "raw":
+            i0 = int(rec["i0"])
+            cut = self.next_index is not None and i0 != self.next_index
+        if cut:
+            self.next_index = None
+            if self.bounds[-1] != self.n:
+                self.bounds.append(self.n)
+        if kind == "raw":
+            self.next_index = int(rec["i0"]) + int(rec["n"])
+            self.n += int(rec["n"])
+        return cut
+
+    def segment_bounds(self) -> list[int]:
+        """0, every break, N: consecutive pairs are the segments' [start, stop) in samples."""
+        return self.bounds + ([self.n] if self.bounds[-1] != self.n else [])
 
 
 class AllanFeed:
@@ -432,8 +636,8 @@ class AllanFeed:
     temperature channels in °C, each held at its last reading (zero-order hold) from the
     sample index the reading was stamped with. Feeding starts only once every temperature
     channel has a first reading (a hold needs a value to hold); samples before that are
-    counted in ``skipped``. A jump in the sample index or an explicit gap ends the segment
-    (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
+    counted in ``skipped``. A jump in the sample index, an explicit gap or a new run ends the
+    segment (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
 
     ``sink`` is anything with ``update(block)`` and ``gap()`` (a StreamingAllan).
     """
@@ -449,10 +653,75 @@ class AllanFeed:
         self.fed = 0
         self.skipped = 0
         self._open = False          # samples fed since the last gap()
+        self.run: str | None = None
+        self._segments = Segmenter()
 
     @property
     def channels(self) -> list[str]:
         return ["x", "y", "z", *self.temp_names]
+
+    # -- state for checkpoints -------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """What the feed needs to continue exactly: held temperatures, pending readings."""
+        return {"next_index": self.next_index, "held": [float(v) for v in self._held],
+                "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
+                "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
+                "run": self.run}
+
+    @classmethod
+    def from_state(cls, sink: Any, state: dict[str, Any]) -> AllanFeed:
+        """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
+        feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
+        feed.next_index = state["next_index"]
+        feed._held = np.array(state["held"], dtype=float)
+        feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
+        feed._open = bool(state.get("open", False))
+        feed.run = feed._segments.run = state.get("run")
+        feed._segments.next_index = feed.next_index
+        return feed
+
+    # -- records -------------------------------------------------------------------------
+    def apply(self, rec: dict[str, Any]) -> None:
+        """Feed one record as the service did: a new run's header starts a new segment with
+        that run's scale and temperature channels (held values start unknown, as in a freshly
+        started service); raw, temp and gap records go to :meth:`raw`, :meth:`temp`,
+        :meth:`gap`; other kinds are not data."""
+        kind = rec["kind"]
+        if self._segments.starts_segment(rec):
+            self.gap()
+        if kind == "header":
+            if rec["run"] != self.run:
+                self.run = rec["run"]
+                self.scale = _scale_of(rec)
+                self.temp_names = list(rec.get("temperature_channels", []))
+                self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
+                self._held = np.full(len(self.temp_names), np.nan)
+                self._pending = []
+        elif kind == "raw":
+            self.raw(int(rec["i0"]), rec["counts"])
+        elif kind == "temp":
+            self.temp(int(rec["i0"]), rec["names"], rec["values_c"])
+        elif kind == "gap":
+            self.gap()
+
+    def replay(self, records: Iterable[dict[str, Any]], *, after: int | None = None) -> int:
+        """Feed every record of ``records`` (as :func:`walk` yields them), skipping samples
+        and readings before index ``after`` (what a checkpoint already holds), whatever run
+        wrote them. Returns the number of samples fed."""
+        n0 = self.fed
+        for rec in records:
+            kind = rec["kind"]
+            if after is not None and kind in ("raw", "temp", "gap"):
+                i0 = int(rec["i0"])
+                if kind == "raw" and i0 + int(rec["n"]) <= after:
+                    continue
+                if kind == "raw" and i0 < after:
+                    rec = dict(rec, i0=after, n=i0 + int(rec["n"]) - after,
+                               counts=rec["counts"][after - i0:])
+                elif kind != "raw" and i0 < after:
+                    continue
+            self.apply(rec)
+        return self.fed - n0
 
     def temp(self, i0: int, names: list[str], values_c: list[float | None]) -> None:
         """A temperature reading valid from sample index ``i0`` on (None = failed read)."""
@@ -547,42 +816,26 @@ def iter_records(path: str | Path, *, strict: bool = False,
 
 
 def replay_allan(path: str | Path, *, streaming_cls: Any = None,
-                 reader: RecordingReader | None = None) -> Any:
+                 reader: RecordingReader | None = None,
+                 report: WalkReport | None = None) -> Any:
     """Recompute the service's streaming Allan accumulators offline from a recording.
 
-    Feeds exactly what the service fed (:class:`AllanFeed`), with a segment break at every
-    gap record, index jump and run change, so the result equals the service's own snapshot.
-    Returns the StreamingAllan.
+    Feeds exactly what the service fed (:meth:`AllanFeed.replay` over :func:`walk`), with a
+    segment break at every gap record, index jump and run change, so the result equals the
+    service's own snapshot. Returns the StreamingAllan.
     """
     if streaming_cls is None:
         from .streaming import StreamingAllan as streaming_cls
-    allan = None
-    feed: AllanFeed | None = None
-    run = None
-    for rec in reader or RecordingReader(path):
-        kind = rec["kind"]
-        if kind == "header":
-            names = list(rec.get("temperature_channels", []))
-            if allan is None:
-                allan = streaming_cls(3 + len(names), float(rec["rate_hz"]),
-                                      names=["x", "y", "z", *names])
-            if rec["run"] != run or feed is None:
-                # A new run (a restart) is a segment break; a new file of the same run is not.
-                if feed is not None:
-                    feed.gap()
-                feed = AllanFeed(allan, _scale_of(rec), names)
-            run = rec["run"]
-        elif feed is None:
-            continue
-        elif kind == "raw":
-            feed.raw(rec["i0"], rec["counts"])
-        elif kind == "temp":
-            feed.temp(rec["i0"], rec["names"], rec["values_c"])
-        elif kind == "gap":
-            feed.gap()
-    if allan is None:
-        raise FormatError(f"{path}: no header record found; not an avard recording")
-    return allan
+    records = walk(reader or RecordingReader(path), report)
+    for first in records:
+        names = list(first.get("temperature_channels", []))
+        allan = streaming_cls(3 + len(names), float(first["rate_hz"]),
+                              names=["x", "y", "z", *names])
+        feed = AllanFeed(allan, _scale_of(first), names)
+        feed.apply(first)
+        feed.replay(records)
+        return allan
+    raise FormatError(f"{path}: no header record found; not an avard recording")
 
 
 def _hold_on_grid(idx: np.ndarray, tnames: list[str],
@@ -613,11 +866,13 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     """Load a whole recording as an :class:`avard.core.readers.Record` in SI units.
 
     ``accel`` is (N, 3) m/s² (raw counts × the header's ``scale_m_s2_per_count``) of every
-    recorded sample in index order; ``temperature_c`` holds the temperature channels held at
-    their last reading on the sample grid (NaN before a channel's first reading). The sample
-    indices, gaps (``meta["gaps"]``: first index, count, reason), events, headers and every
-    skipped or truncated frame (``meta["problems"]``) are in ``meta``; nothing lost passes
-    silently.
+    recorded sample in recording order (each sample index once); ``temperature_c`` holds the
+    temperature channels held at their last reading on the sample grid (NaN before a
+    channel's first reading). In ``meta``: the sample indices, gaps (first index, count,
+    reason), events, headers, every skipped or truncated frame (``problems``), the samples
+    damage cost (``losses``: index ranges), duplicated index ranges counted once
+    (``duplicates``), and ``segment_bounds``: where the service's accumulators broke their
+    segments (every gap record, run change and index jump); nothing lost passes silently.
     """
     try:
         from .readers import Record
@@ -625,21 +880,22 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         Record = _FallbackRecord
 
     reader = RecordingReader(path, strict=strict)
+    report = WalkReport()
+    cuts = Segmenter()
     headers: list[dict[str, Any]] = []
     blocks: list[np.ndarray] = []
     index: list[np.ndarray] = []
     temps: list[tuple[int, list[str], list[Any]]] = []
     gaps: list[dict[str, Any]] = []
     events: list[dict[str, Any]] = []
-    scale = None
+    scale = 0.0
     last_avar = None
-    for rec in reader:
+    for rec in walk(reader, report):
         kind = rec["kind"]
+        cuts.starts_segment(rec)
         if kind == "header":
             headers.append(rec)
             scale = _scale_of(rec)
-        elif scale is None:
-            continue
         elif kind == "raw":
             blocks.append(np.asarray(rec["counts"], dtype=np.float64) * scale)
             index.append(rec["i0"] + np.arange(rec["n"], dtype=np.int64))
@@ -652,7 +908,9 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         elif kind == "avar":
             last_avar = rec
     if not headers:
-        raise FormatError(f"{path}: no header record found; not an avard recording")
+        lost = f" ({report.samples_lost} samples without a header)" if report.losses else ""
+        raise FormatError(f"{path}: no header record found{lost}; not an avard recording, or "
+                          "every header copy of it is damaged")
     accel = np.concatenate(blocks) if blocks else np.zeros((0, 3))
     idx = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
     tnames: list[str] = []
@@ -669,12 +927,18 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "format": "avard-recording",
         "files": [str(f) for f in reader.files],
         "index": idx,
+        "segment_bounds": cuts.segment_bounds(),
         "gaps": gaps,
         "events": events,
         "headers": [{k: v for k, v in h.items() if k != "config"} for h in headers],
         "config": headers[0].get("config", {}),
         "problems": [str(p) for p in reader.problems],
         "dropped_bytes": reader.dropped_bytes,
+        "losses": [{"run": x.run, "i0": x.i0, "n": x.n, "cause": x.cause}
+                   for x in report.losses],
+        "samples_lost": report.samples_lost,
+        "duplicates": [{"i0": a, "n": n} for a, n in report.duplicates],
+        "samples_duplicated": report.samples_duplicated,
         "rates_hz": rates,
         # one LSB for the whole record (m/s²), or None when runs used different ranges
         "lsb_mps2": scales.pop() if len(scales) == 1 else None,
@@ -684,3 +948,23 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     return Record(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
+
+
+def replay_after(directory: str | Path, feed: AllanFeed, after: int) -> int:
+    """Feed ``feed`` every sample a recording holds from index ``after`` on, whatever run
+    wrote it (the service's restore: a checkpoint, then everything recorded after it, also by
+    runs killed before their first checkpoint). Reads only from the newest segment whose
+    header starts at or before ``after``, so a long recording is not read again at every
+    restart. Returns the number of samples fed."""
+    try:
+        files = segment_files(directory)
+    except FormatError:
+        return 0
+    keep = 0
+    for k, seg in enumerate(files):
+        head = first_record(seg)
+        if head is not None and head.get("kind") == "header" and int(head["i0"]) <= after:
+            keep = k
+    reader = RecordingReader(directory)
+    reader.files = files[keep:]
+    return feed.replay(walk(reader), after=after)

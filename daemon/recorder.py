@@ -1,6 +1,8 @@
 """The segment writer: CRC-framed records appended to rotating segment files.
 
-- Every segment starts with the run's header, so each file can be read on its own.
+- Every segment starts with the run's header, so each file can be read on its own, and
+  repeats it every ``header_every_s`` of data time: a damaged first header then costs no
+  samples (the reader interprets the records before the copy with it).
 - Rotation every ``segment_s`` of *data* time (the service clock, virtual under ``--speed``),
   and on SIGHUP (:meth:`Recorder.reopen`), so log rotation tools can move files away.
 - ``fsync`` at most every ``fsync_interval_s`` of wall time: a power cut loses at most that.
@@ -106,7 +108,7 @@ class Recorder:
                  header: Callable[[], dict[str, Any]], *,
                  segment_s: float = 3600.0, fsync_interval_s: float = 5.0,
                  retention_days: float = 0.0, retention_max_bytes: int = 0,
-                 min_free_bytes: int = 0, retry_s: float = 5.0,
+                 min_free_bytes: int = 0, retry_s: float = 5.0, header_every_s: float = 60.0,
                  clock: Callable[[], float] = time.monotonic,
                  wall: Callable[[], float] = time.monotonic,
                  realtime: Callable[[], float] = time.time,
@@ -121,6 +123,8 @@ class Recorder:
         self.retention_max_bytes = int(retention_max_bytes)
         self.min_free_bytes = int(min_free_bytes)
         self.retry_s = float(retry_s)
+        self.header_every_s = float(header_every_s)
+        self._header_at = 0.0
         self.clock, self.wall, self.realtime = clock, wall, realtime
         self.ops = fileops or FileOps()
         self._lock = threading.RLock()
@@ -172,6 +176,11 @@ class Recorder:
                 return False
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
+                    self._remember_lost(record)
+                    return False
+            if self.header_every_s and now - self._header_at >= self.header_every_s:
+                self._header_at = now
+                if not self._append(self._header()):
                     self._remember_lost(record)
                     return False
             if not self._append(record):
@@ -281,6 +290,7 @@ class Recorder:
         self._opened_at = now
         self.segments_written += 1
         log.info("recording into %s", path)
+        self._header_at = now
         if not self._append(self._header()):
             return False
         if self.lost is not None:

@@ -39,10 +39,9 @@ from avard.core import frames
 from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.recording import (
     AllanFeed,
-    RecordingReader,
-    first_record,
     frame,
     last_record,
+    replay_after,
     scan_frames,
 )
 
@@ -173,6 +172,8 @@ class AllanWorker(Worker):
             if chunk.n:
                 self._t = float(chunk.t_mono[-1])
         if self._next_snap is None:
+            if not chunk.n:
+                return  # the timers start with the first samples, not at t = 0
             self._next_snap = self._t + self.snapshot_interval_s
             self._next_ckpt = self._t + self.checkpoint_interval_s
         if self._t >= self._next_snap:
@@ -224,16 +225,7 @@ def offset_after_mark(record: dict[str, Any], offset: float) -> float:
 
 def feed_state(feed: AllanFeed) -> dict[str, Any]:
     """What an AllanFeed needs to continue exactly: held temperatures, pending readings."""
-    return {"next_index": feed.next_index, "held": [float(v) for v in feed._held],
-            "pending": [[int(i), [float(v) for v in h]] for i, h in feed._pending],
-            "temp_names": feed.temp_names, "scale": feed.scale, "open": feed._open}
-
-
-def restore_feed(feed: AllanFeed, state: dict[str, Any]) -> None:
-    feed.next_index = state["next_index"]
-    feed._held = np.array(state["held"], dtype=float)
-    feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
-    feed._open = bool(state.get("open", False))
+    return feed.state()
 
 
 class RecorderWorker(Worker):
@@ -395,6 +387,7 @@ class Service:
                                    overlap=int(cfg["allan"]["overlap"]),
                                    names=["x", "y", "z", *self.temp_names])
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
+        self.feed.run = self.run_id
         self.start_index = 0
         self.restored: dict[str, Any] | None = None
         self._recorder_factory = recorder_factory
@@ -509,12 +502,14 @@ class Service:
                 allan = None
             if allan is not None and list(allan.names) == list(self.allan.names) \
                     and float(allan.rate_hz) == float(self.allan.rate_hz):
-                feed = AllanFeed(allan, ckpt["feed"]["scale"], ckpt["feed"]["temp_names"])
-                restore_feed(feed, ckpt["feed"])
-                replayed = self._replay_after(ckpt, feed)
+                feed = AllanFeed.from_state(allan, {"run": ckpt["run"], **ckpt["feed"]})
+                # every sample recorded after the checkpoint, whatever run wrote it
+                after = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
+                replayed = replay_after(self.data_dir, feed, after)
                 feed.gap()
                 self.allan = allan
                 self.feed = AllanFeed(allan, self.scale, self.temp_names)
+                self.feed.run = self.run_id
                 self.restored = {"run": ckpt["run"], "i_end": ckpt["i_end"],
                                  "n_samples": int(allan.n_samples), "replayed": replayed}
                 log.warning("restored the Allan accumulators of run %s (%d samples, %d "
@@ -544,35 +539,6 @@ class Service:
                 rate = float(rec.get("rate_hz") or self.odr)
                 return rec["i0"] + rec["n"], rec["t_real"] + rec["n"] / rate
         return None
-
-    def _replay_after(self, ckpt: dict[str, Any], feed: AllanFeed) -> int:
-        """Feed what run ``ckpt['run']`` recorded after the checkpoint (crash window)."""
-        run = ckpt["run"]
-        start = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
-        n0 = feed.fed
-        segs = [s for s in sorted(self.data_dir.glob("*.avr")) if s.name.startswith(f"{run}_")]
-        # Only the segment the checkpoint falls in and the later ones (headers carry the
-        # index their segment starts at): a 60-hour run is not read again at every restart.
-        keep = 0
-        for k, seg in enumerate(segs):
-            head = first_record(seg)
-            if head is not None and head.get("kind") == "header" and head["i0"] <= start:
-                keep = k
-        segs = segs[keep:]
-        if not segs:
-            return 0
-        for seg in segs:
-            for rec in RecordingReader(seg):
-                kind = rec["kind"]
-                if kind == "raw" and rec["i0"] + rec["n"] > start:
-                    cut = max(0, start - rec["i0"])
-                    feed.raw(rec["i0"] + cut, np.asarray(rec["counts"])[cut:])
-                    start = rec["i0"] + rec["n"]
-                elif kind == "temp" and rec["i0"] >= start:
-                    feed.temp(rec["i0"], rec["names"], rec["values_c"])
-                elif kind == "gap" and rec["i0"] >= start:
-                    feed.gap()
-        return feed.fed - n0
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
