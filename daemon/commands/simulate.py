@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 import time
 
 from avard.core.errors import DataError
 from avard.core.presets import PRESETS, make_config, parse_override
 from avard.core.sim_io import write_npz
+from avard.daemon.config import check_seed
 
 NAME = "simulate"
 HELP = "simulate a sensor record (preset + overrides) into an .npz file"
@@ -74,8 +76,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise DataError("say where to write the record: --out FILE.npz")
-    if not args.hours > 0:
-        raise DataError(f"--hours must be > 0, got {args.hours}")
+    if not (math.isfinite(args.hours) and args.hours > 0):
+        raise DataError(f"--hours must be a finite number > 0, got {args.hours}")
+    check_seed(args.seed)
     started = time.monotonic()
     n = write_npz(args.out, cfg, args.hours, args.seed, progress=_progress(started))
     took = time.monotonic() - started
