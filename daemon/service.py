@@ -90,6 +90,22 @@ def _split(chunk: Chunk) -> list[tuple[str, Any]]:
     return out
 
 
+def lost_marks_records(run_id: str, chunk: Chunk, consumer: str,
+                       t_real: float) -> list[dict[str, Any]]:
+    """Marks (temperatures, gaps, events) dropped by the ring before ``consumer`` read them:
+    a ``marks_lost`` event, and a zero-length ``marks_lost`` gap before the chunk's first
+    sample, so the Allan feed and every reader of the recording break their segment there (a
+    lost mark may have been a gap)."""
+    i0 = int(chunk.index[0]) if chunk.n else 0
+    t = float(chunk.t_mono[0]) if chunk.n else 0.0
+    log.warning("the %s worker lost %d ring marks before sample %d (the mark queue "
+                "overflowed)", consumer, chunk.lost_marks, i0)
+    return [frames.event_record(run_id, 0, "marks_lost", t, t_real, i0=i0,
+                                detail={"count": int(chunk.lost_marks), "consumer": consumer}),
+            frames.gap_record(run_id, 0, i0, 0, t, t_real, "marks_lost",
+                              marks=int(chunk.lost_marks))]
+
+
 class Worker:
     """A consumer thread: read the ring at its own pace, hand each chunk to ``handle``."""
 
@@ -159,7 +175,7 @@ class AllanWorker(Worker):
 
     def handle(self, chunk: Chunk) -> None:
         with self.lock:
-            if chunk.lost_samples:
+            if chunk.lost_samples or chunk.lost_marks:
                 self.feed.gap()
             for kind, val in _split(chunk):
                 if kind == "samples":
@@ -261,6 +277,11 @@ class RecorderWorker(Worker):
             self.rec.write(frames.gap_record(self.svc.run_id, 0, i0, max(0, i1 - i0),
                                              float(chunk.t_mono[0]) if chunk.n else 0.0,
                                              self.svc.real_now(), "recorder_behind"))
+        if chunk.lost_marks:
+            self._flush()
+            for rec in lost_marks_records(self.svc.run_id, chunk, "recorder",
+                                          self.svc.real_now()):
+                self.rec.write(rec)
         for kind, val in _split(chunk):
             if kind == "mark":
                 self._flush()
@@ -313,6 +334,10 @@ class PublisherWorker(Worker):
             self.pub.publish("event", frames.gap_record(
                 self.svc.run_id, 0, i0, max(0, i1 - i0), float(chunk.t_mono[0]),
                 self.svc.real_now(), "publisher_behind"))
+        if chunk.lost_marks:
+            for rec in lost_marks_records(self.svc.run_id, chunk, "publisher",
+                                          self.svc.real_now()):
+                self.pub.publish("event", rec)
         rate = self.svc.timebase.odr_hz
         for kind, val in _split(chunk):
             if kind == "mark":
