@@ -23,6 +23,8 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import re
+import secrets
 import shutil
 import threading
 import time
@@ -32,7 +34,8 @@ from pathlib import Path
 from typing import IO, Any
 
 from avard.core import frames
-from avard.core.recording import SEGMENT_SUFFIX, frame
+from avard.core.errors import FormatError
+from avard.core.recording import SEGMENT_SUFFIX, first_record, frame, last_record
 
 log = logging.getLogger(__name__)
 
@@ -425,3 +428,93 @@ def write_atomic(path: Path, data: bytes) -> None:
     except OSError:
         tmp.unlink(missing_ok=True)
         raise
+
+
+# --------------------------------------------------------------------------------------------
+# order that does not depend on the wall clock: run ids, restart gaps
+
+#: Run ids are ``nSSSSSSSS-YYYYMMDDTHHMMSSZ-xxxxxx``: a run sequence number taken from the
+#: recording itself (one more than the highest there), then the UTC start for humans. Name
+#: order is the sequence order, so it is data order even when CLOCK_REALTIME was wrong at
+#: boot (a Pi without RTC before NTP); the ``n`` sorts these after the older stamp-first ids.
+_RUN_SEQ = re.compile(r"n(\d{8})-")
+
+
+def new_run_id(data_dir: str | Path, t_real: float) -> str:
+    """The next run id for a recording directory (see ``_RUN_SEQ``)."""
+    seq = 0
+    d = Path(data_dir)
+    if d.is_dir():
+        for f in d.iterdir():
+            m = _RUN_SEQ.match(f.name)
+            if m:
+                seq = max(seq, int(m.group(1)))
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
+    return f"n{seq + 1:08d}-{stamp}-{secrets.token_hex(3)}"
+
+
+def kernel_boot_id() -> str | None:
+    """The kernel's boot id: CLOCK_MONOTONIC readings compare only within one boot."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text().strip() or None
+    except OSError:
+        return None
+
+
+@dataclass(frozen=True)
+class LastRecorded:
+    """Where the recording ends: the index after its last sample and that moment's clocks."""
+
+    i_end: int
+    t_mono: float
+    t_real: float
+    boot_id: str | None
+
+
+@dataclass(frozen=True)
+class RestartGap:
+    """Samples ``[i0, i0 + n)`` the service did not acquire across a restart, measured with
+    ``clock``: "monotonic" (same boot: exact up to the rate), "realtime" (another boot: as
+    good as the wall clock) or "unknown" (the wall clock went back: n = 0, said so)."""
+
+    i0: int
+    n: int
+    t_real: float
+    clock: str
+
+
+def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
+    """The end of the newest segment that holds samples (names sort in data order), read from
+    the file's end, so an hour-long segment costs little."""
+    d = Path(data_dir)
+    if not d.is_dir():
+        return None
+    for seg in sorted(d.glob("*" + SEGMENT_SUFFIX), reverse=True):
+        try:
+            rec = last_record(seg, "raw")
+            head = first_record(seg) if rec is not None else None
+        except (OSError, FormatError):
+            continue
+        if rec is not None:
+            span = rec["n"] / float(rec.get("rate_hz") or nominal_hz)
+            boot = head.get("boot_id") if head and head.get("run") == rec["run"] else None
+            return LastRecorded(int(rec["i0"]) + int(rec["n"]), float(rec["t_mono"]) + span,
+                                float(rec["t_real"]) + span,
+                                boot if isinstance(boot, str) else None)
+    return None
+
+
+def restart_gap(last: LastRecorded, *, boot_id: str | None, t_mono: float, t_real: float,
+                rate_hz: float) -> RestartGap:
+    """How many samples a restart lost: from CLOCK_MONOTONIC when the last run was in this
+    boot, else from CLOCK_REALTIME, and 0 (clock "unknown") when that went backwards."""
+    if boot_id is not None and boot_id == last.boot_id and t_mono >= last.t_mono:
+        elapsed, how = t_mono - last.t_mono, "monotonic"
+    elif t_real >= last.t_real:
+        elapsed, how = t_real - last.t_real, "realtime"
+    else:
+        elapsed, how = 0.0, "unknown"
+        log.warning("CLOCK_REALTIME is %.0f s behind the end of the recording and the last "
+                    "run was in another boot: the restart gap's length is unknown (recorded "
+                    "as 0 samples)", last.t_real - t_real)
+    return RestartGap(last.i_end, round(elapsed * rate_hz), last.t_real, how)

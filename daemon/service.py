@@ -26,7 +26,6 @@ from __future__ import annotations
 import itertools
 import logging
 import os
-import secrets
 import signal
 import threading
 import time
@@ -40,7 +39,6 @@ from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.recording import (
     AllanFeed,
     frame,
-    last_record,
     replay_after,
     scan_frames,
 )
@@ -48,8 +46,16 @@ from avard.core.recording import (
 from . import __version__
 from .acquisition import Acquisition
 from .config import effective_poll_hz
+from .recorder import (
+    LastRecorded,
+    RestartGap,
+    kernel_boot_id,
+    last_recorded,
+    new_run_id,
+    restart_gap,
+)
 from .ring import Chunk, Consumer, Ring
-from .timebase import TimeBase
+from .timebase import SystemClock, TimeBase
 
 log = logging.getLogger(__name__)
 
@@ -381,8 +387,12 @@ class Service:
         self.cfg = cfg
         self.sensor = sensor
         self.clock = clock
-        self.run_id = run_id or (time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()) + "-"
-                                 + secrets.token_hex(3))
+        # a run sequence number from the recording first: name order is data order even
+        # when CLOCK_REALTIME is wrong (recorder.new_run_id)
+        self.run_id = run_id or new_run_id(cfg["recording"]["data_dir"], clock.realtime())
+        self.boot_id: str | None = getattr(clock, "boot_id", None)
+        if self.boot_id is None and isinstance(clock, SystemClock):
+            self.boot_id = kernel_boot_id()
         self.speed = speed
         self.simulate = simulate
         self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
@@ -449,7 +459,7 @@ class Service:
             software=f"avard {__version__}", config=self.cfg,
             temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
             allan_rate_hz=float(self.allan.rate_hz), timebase=timebase,
-            simulate=self.simulate, restored=self.restored)
+            simulate=self.simulate, restored=self.restored, boot_id=self.boot_id)
 
     def status(self) -> dict[str, Any]:
         acq = self.acq
@@ -545,32 +555,24 @@ class Service:
                             "configuration; starting the accumulators afresh",
                             allan.names, allan.rate_hz)
         if last is not None:
-            i_end, t_real_end = last
-            elapsed = max(0.0, self.real_now() - t_real_end)
-            self.start_index = i_end + round(elapsed * self.odr)
-            self._restart_gap = (i_end, self.start_index - i_end, t_real_end)
+            # the index continues from the recording; the gap is measured on CLOCK_MONOTONIC
+            # within one boot, on CLOCK_REALTIME across boots (recorder.restart_gap)
+            self._restart_gap = restart_gap(last, boot_id=self.boot_id,
+                                            t_mono=self.clock.monotonic(),
+                                            t_real=self.real_now(), rate_hz=self.odr)
+            self.start_index = last.i_end + self._restart_gap.n
 
-    def _last_recorded(self) -> tuple[int, float] | None:
-        """(index after the last recorded sample, its CLOCK_REALTIME) of the newest segment
-        that holds samples; read from the file's end, so an hour-long segment costs little."""
-        if not self.cfg["recording"]["enabled"] or not self.data_dir.is_dir():
+    def _last_recorded(self) -> LastRecorded | None:
+        if not self.cfg["recording"]["enabled"]:
             return None
-        for seg in reversed(sorted(self.data_dir.glob("*.avr"))):
-            try:
-                rec = last_record(seg, "raw")
-            except (OSError, FormatError):
-                continue
-            if rec is not None:
-                rate = float(rec.get("rate_hz") or self.odr)
-                return rec["i0"] + rec["n"], rec["t_real"] + rec["n"] / rate
-        return None
+        return last_recorded(self.data_dir, self.odr)
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
         """Build the consumers and start every thread; ``before_acquisition`` runs once the
         sockets are bound and before the first drain (a subscriber can connect then)."""
         cfg = self.cfg
-        self._restart_gap: tuple[int, int, float] | None = None
+        self._restart_gap: RestartGap | None = None
         if cfg["recording"]["enabled"]:
             try:
                 self.data_dir.mkdir(parents=True, exist_ok=True)
@@ -609,9 +611,10 @@ class Service:
                 max_block=max(32, int(self.odr))))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
-            i0, n, t_real = self._restart_gap
-            self.ring.mark(frames.gap_record(self.run_id, 0, i0, n, t_real - self.real_offset,
-                                             t_real, "restart", estimated=True))
+            g = self._restart_gap
+            self.ring.mark(frames.gap_record(self.run_id, 0, g.i0, g.n,
+                                             g.t_real - self.real_offset, g.t_real, "restart",
+                                             estimated=True, clock=g.clock))
         self.ring.mark(frames.event_record(
             self.run_id, 0, "start", self.clock.monotonic(), self.real_now(),
             i0=self.start_index, detail={"software": f"avard {__version__}",
