@@ -358,9 +358,9 @@ def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
                 found = rec
         return found
     for off in reversed(offsets):
-        rec = read_frame_at(path, off)
-        if rec is not None and rec["kind"] == kind:
-            return rec
+        hit = read_frame_at(path, off)
+        if hit is not None and hit["kind"] == kind:
+            return hit
     return None
 
 
@@ -874,10 +874,11 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     (``duplicates``), and ``segment_bounds``: where the service's accumulators broke their
     segments (every gap record, run change and index jump); nothing lost passes silently.
     """
+    record_cls: Any
     try:
-        from .readers import Record
+        from .readers import Record as record_cls
     except ImportError:  # readers.py not present (partial install): same fields, plain class
-        Record = _FallbackRecord
+        record_cls = _FallbackRecord
 
     reader = RecordingReader(path, strict=strict)
     report = WalkReport()
@@ -945,7 +946,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "last_avar": last_avar,
         "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
     }
-    return Record(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
+    return record_cls(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
 
