@@ -537,6 +537,9 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
             if key in seen_seq:
                 return
             seen_seq.add(key)
+            if kind == "gap" and run in expect:
+                # a recorded gap explains its samples: they are not a loss to damage
+                expect[run] = max(expect[run], int(rec["i0"]) + int(rec["n"]))
             yield rec
             return
         i0, n = int(rec["i0"]), int(rec["n"])

@@ -20,7 +20,7 @@ from typing import IO, Any
 import numpy as np
 import pytest
 from avard.core import frames
-from avard.core.recording import RecordingReader
+from avard.core.recording import RecordingReader, load_recording
 from avard.daemon.recorder import FileOps, Recorder, write_atomic
 
 RATE = 125.0
@@ -168,3 +168,6 @@ def test_a_torn_frame_that_cannot_be_cut_off_costs_only_its_own_records(tmp_path
     assert [(g["i0"], g["n"]) for g in gaps] == [(10 * BLOCK, 2 * BLOCK)]
     expect = np.concatenate([np.arange(10 * BLOCK), np.arange(12 * BLOCK, 20 * BLOCK)])
     np.testing.assert_array_equal(idx, expect)
+    # the disk_full gap explains the missing samples: no loss is blamed on the torn tail
+    rec = load_recording(tmp_path)
+    assert rec.meta["samples_lost"] == 0 and len(rec.meta["problems"]) == 1
