@@ -500,6 +500,12 @@ class _IndexSet:
             self.lo.pop(k)
 
 
+#: Samples of one run held while waiting for a readable header of that run (the recorder
+#: repeats the header every 60 s of data: 240 000 samples at 4 kHz); older ones are reported
+#: lost beyond this, so memory stays bounded (about 50 MB of counts).
+MAX_HEADERLESS_SAMPLES = 1 << 22
+
+
 def walk(reader: RecordingReader, report: WalkReport | None = None
          ) -> Iterator[dict[str, Any]]:
     """The records of a recording as its readers should see them: the one walk used by the
@@ -518,6 +524,7 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
     report = report if report is not None else WalkReport()
     headers: dict[str, dict[str, Any]] = {}
     pending: dict[str, list[dict[str, Any]]] = {}
+    held: dict[str, int] = {}                # samples waiting in ``pending``, per run
     seen_idx = _IndexSet()
     seen_seq: set[tuple[str, str, int]] = set()
     expect: dict[str, int] = {}              # next sample index of each run
@@ -572,6 +579,7 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
             headers[run] = rec
             if run in pending:
                 report.recovered_headers.append(run)
+            held.pop(run, None)
             for late in pending.pop(run, []):
                 yield from emit(late)
             if run_now is None or run_now != run:
@@ -579,7 +587,18 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
                 yield rec
             continue
         if run not in headers:
-            pending.setdefault(run, []).append(rec)
+            waiting = pending.setdefault(run, [])
+            waiting.append(rec)
+            held[run] = held.get(run, 0) + int(rec.get("n", 0))
+            while held[run] > MAX_HEADERLESS_SAMPLES and waiting:
+                # memory stays bounded however long a run goes without a readable header
+                old = waiting.pop(0)
+                if old["kind"] == "raw":
+                    held[run] -= int(old["n"])
+                    report.losses.append(Loss(run, int(old["i0"]), int(old["n"]),
+                                              f"no header of run {run} within "
+                                              f"{MAX_HEADERLESS_SAMPLES} samples"))
+                    log.warning("%s", report.losses[-1])
             continue
         yield from emit(rec)
     for run, recs in pending.items():

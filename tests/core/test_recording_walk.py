@@ -172,3 +172,19 @@ def test_analyze_splits_at_restarts_exactly_as_the_service_accumulators(tmp_path
         theirs = service.channel(c)
         np.testing.assert_array_equal(ours.tau, theirs.tau)
         np.testing.assert_allclose(ours.dev, theirs.dev, rtol=1e-12)
+
+
+def test_records_waiting_for_a_header_are_bounded_and_reported(tmp_path, monkeypatch):
+    import avard.core.recording as recording
+
+    monkeypatch.setattr(recording, "MAX_HEADERLESS_SAMPLES", 10 * BLOCK)
+    _write_run(tmp_path, "20260101T000000Z-a", 0, 40, seed=9, header_every_s=8.0)
+    (seg,) = sorted(tmp_path.glob("*.avr"))
+    _flip(seg, 30)                         # the first header; the copy comes after 8 s (1000 samples)
+    report = WalkReport()
+    idx = np.concatenate([r["i0"] + np.arange(r["n"])
+                          for r in walk(RecordingReader(tmp_path), report)
+                          if r["kind"] == "raw"])
+    lost = [(x.i0, x.n) for x in report.losses]
+    assert lost == [(k * BLOCK, BLOCK) for k in range(len(lost))] and lost
+    np.testing.assert_array_equal(idx, np.arange(len(lost) * BLOCK, 40 * BLOCK))
