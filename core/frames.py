@@ -175,7 +175,7 @@ def _is_array(v: Any) -> bool:
 _TYPE_CHECKS: dict[str, Callable[[Any], bool]] = {
     # numpy scalars are accepted on the way out (msgpack gets them as plain numbers); bool is
     # never a number here
-    "int": lambda v: (type(v) is int or isinstance(v, np.integer)) and v >= 0,
+    "int": lambda v: (type(v) is int or isinstance(v, np.integer)) and bool(v >= 0),
     "num": lambda v: (type(v) is int or isinstance(v, float | np.integer | np.floating)),
     "num|none": lambda v: v is None or isinstance(v, float | np.integer | np.floating)
     or type(v) is int,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -96,14 +96,16 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
 
     A frame whose length runs past the end of the data and after which no valid frame follows
     is a truncated tail (the normal result of a power cut): it ends the scan. A frame that
-    fails its CRC in the middle is reported as corrupt; the scan resynchronises by searching
-    byte by byte for the next offset where a frame with a valid CRC starts.
+    fails its CRC in the middle is reported as corrupt; the scan resynchronises on the next
+    offset where a frame with a valid CRC starts (every offset is a candidate; the search is
+    linear in the bytes searched, see ``_resync``).
     """
     problems = problems if problems is not None else []
     buf = memoryview(data)
     pos = 0
     size = len(buf)
     hdr = FRAME_HEADER.size
+    prefix: _PrefixCrc | None = None      # built at the first damage, kept for the file
     while pos < size:
         n = _valid_at(buf, pos, max_bytes)
         if n is not None:
@@ -111,7 +113,8 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
             pos += hdr + n
             continue
         # Not a valid frame here. Find where the next valid one starts, if any.
-        nxt = _resync(buf, pos + 1, max_bytes)
+        prefix = prefix or _PrefixCrc(buf)
+        nxt = _resync(buf, pos + 1, max_bytes, prefix)
         if nxt is None:
             claimed = FRAME_HEADER.unpack_from(buf, pos)[0] if pos + hdr <= size else None
             if claimed is not None and claimed <= max_bytes and pos + hdr + claimed > size:
@@ -127,13 +130,162 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
         pos = nxt
 
 
-def _resync(buf: memoryview, start: int, max_bytes: int) -> int | None:
-    """Offset of the next position at or after ``start`` where a valid frame begins."""
-    pos = start
+# --------------------------------------------------------------------------------------------
+# resynchronisation in time linear in the file size
+#
+# Checking one candidate frame costs its claimed length (a CRC over the payload), so trying
+# every byte offset in turn is quadratic on a crafted file where every offset claims a frame to
+# the end of the file. Instead the CRC of any byte range comes from two prefix CRCs:
+#
+#     crc32(buf[a:b]) = P(b) XOR Z_{b-a}(P(a)),     P(k) = crc32(buf[base:k])
+#
+# where Z_L is the GF(2)-linear map "append L zero bytes to the raw CRC register" (the
+# operator of zlib's crc32_combine). Z_L is applied with one 4 × 256 lookup table per bit of L,
+# vectorised over all candidates of a window, and the prefix CRCs are taken in one forward
+# pass over the sorted candidate ends: bounded work per byte of the file.
+
+_CRC_BITS = 25                  # Z_{2^j} for j < 25 covers payload lengths up to 2^25 - 1
+_ZERO_TABLES: np.ndarray | None = None
+_WINDOW0 = 1 << 14              # first resync window (candidate offsets), doubled up to
+_WINDOW_MAX = 1 << 20           # this, so memory stays bounded on any file
+
+
+def _zero_byte_tables() -> np.ndarray:
+    """(25, 4, 256) uint32: entry [j, k, v] is Z_{2^j} applied to the register ``v << 8k``."""
+    global _ZERO_TABLES
+    if _ZERO_TABLES is None:
+        crc_table = [zlib.crc32(bytes([b]), 0xFFFFFFFF) ^ 0xFFFFFFFF for b in range(256)]
+        # raw register update by one zero byte, on each of the 32 basis vectors
+        cols = [((1 << i) >> 8) ^ crc_table[(1 << i) & 0xFF] for i in range(32)]
+        tables = np.zeros((_CRC_BITS, 4, 256), dtype=np.uint32)
+        for j in range(_CRC_BITS):
+            for k in range(4):
+                for bit in range(8):
+                    step = 1 << bit
+                    # entries v with this bit set get the image of basis vector 8k + bit
+                    tables[j, k, step:2 * step] = tables[j, k, :step] ^ np.uint32(cols[8 * k
+                                                                                  + bit])
+            # cols[i] = Z_{2^j}(e_i), so Z_{2^j}(cols[i]) = Z_{2^(j+1)}(e_i)
+            cols = [_apply_zero(tables[j], c) for c in cols]
+        _ZERO_TABLES = tables
+    return _ZERO_TABLES
+
+
+def _apply_zero(t: np.ndarray, v: Any) -> Any:
+    """Z (given as its (4, 256) byte tables) applied to a uint32 register or array of them."""
+    if isinstance(v, np.ndarray):
+        return t[0][v & 0xFF] ^ t[1][(v >> 8) & 0xFF] ^ t[2][(v >> 16) & 0xFF] ^ t[3][v >> 24]
+    return int(t[0][v & 0xFF] ^ t[1][(v >> 8) & 0xFF] ^ t[2][(v >> 16) & 0xFF]
+               ^ t[3][v >> 24])
+
+
+_CRC_TABLE: np.ndarray | None = None
+_STRIDE = 16                    # prefix CRCs are kept at every 16th byte
+
+
+def _crc_table() -> np.ndarray:
+    """The reflected CRC-32 byte table (256 uint32): raw register update by one byte."""
+    global _CRC_TABLE
+    if _CRC_TABLE is None:
+        _CRC_TABLE = np.array([zlib.crc32(bytes([b]), 0xFFFFFFFF) ^ 0xFFFFFFFF
+                               for b in range(256)], dtype=np.uint32)
+    return _CRC_TABLE
+
+
+class _PrefixCrc:
+    """``crc32(buf[:q])`` for arrays of offsets q, with work linear in the bytes covered.
+
+    Keeps the prefix CRC at every ``_STRIDE``-th byte (filled by zlib as far as asked, once per
+    buffer); an arbitrary q steps on from the stride point before it, at most ``_STRIDE - 1``
+    bytes, vectorised over all q at once."""
+
+    def __init__(self, buf: memoryview) -> None:
+        self.buf = buf
+        self.bytes = np.frombuffer(buf, dtype=np.uint8)
+        self.stride = np.zeros(1, dtype=np.uint32)      # crc32(buf[:k * _STRIDE])
+
+    def _extend(self, upto: int) -> np.ndarray:
+        """The stride CRCs up to offset ``upto`` (computed once, then kept)."""
+        k = self.stride.size - 1
+        if k * _STRIDE >= upto:
+            return self.stride
+        buf, crc32 = self.buf, zlib.crc32
+        crc = int(self.stride[-1])
+        more: list[int] = []
+        append = more.append
+        while k * _STRIDE < upto:
+            crc = crc32(buf[k * _STRIDE:(k + 1) * _STRIDE], crc)
+            append(crc)
+            k += 1
+        self.stride = np.concatenate([self.stride, np.array(more, dtype=np.uint32)])
+        return self.stride
+
+    def at(self, q: np.ndarray) -> np.ndarray:
+        top = int(q.max())
+        strides = self._extend(top - top % _STRIDE)
+        k0 = q // _STRIDE
+        reg = ~strides[k0]                     # the raw register (zlib inverts in and out)
+        rest = q - k0 * _STRIDE
+        table = _crc_table()
+        for t in range(int(rest.max()) if rest.size else 0):
+            live = rest > t
+            byte = self.bytes[np.minimum(k0 * _STRIDE + t, len(self.bytes) - 1)]
+            step = (reg >> np.uint32(8)) ^ table[(reg ^ byte) & np.uint32(0xFF)]
+            reg = np.where(live, step, reg)
+        return ~reg
+
+
+def _crc_of_ranges(prefix: _PrefixCrc, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """crc32(buf[s:e]) for every pair, from the prefix CRCs at both ends."""
+    p_start, p_end = prefix.at(starts), prefix.at(ends)
+    length = ends - starts
+    tables = _zero_byte_tables()
+    v = p_start
+    for j in range(int(length.max()).bit_length()):
+        sel = ((length >> j) & 1).astype(bool)
+        if sel.any():
+            v[sel] = _apply_zero(tables[j], v[sel])
+    return p_end ^ v
+
+
+def _valid_in(buf: memoryview, lo: int, hi: int, max_bytes: int,
+              prefix: _PrefixCrc) -> np.ndarray:
+    """Offsets in ``[lo, hi)`` where a frame with a matching CRC starts (as ``_valid_at``)."""
+    size = len(buf)
+    hdr = FRAME_HEADER.size
+    hi = min(hi, size - hdr + 1)
+    if hi <= lo:
+        return np.zeros(0, dtype=np.int64)
+    raw = np.frombuffer(buf, dtype=np.uint8, count=hi - lo + hdr - 1, offset=lo)
+    m = hi - lo
+    b = [raw[i:i + m].astype(np.int64) for i in range(4)]
+    n = b[0] | (b[1] << 8) | (b[2] << 16) | (b[3] << 24)
+    pos = np.arange(lo, hi, dtype=np.int64)
+    end = pos + hdr + n
+    ok = np.flatnonzero((n > 0) & (n <= max_bytes) & (end <= size))
+    if not ok.size:
+        return np.zeros(0, dtype=np.int64)
+    pos, end = pos[ok], end[ok]
+    c = [raw[ok + i].astype(np.uint32) for i in range(4, 8)]
+    crc = c[0] | (c[1] << 8) | (c[2] << 16) | (c[3] << 24)
+    good = _crc_of_ranges(prefix, pos + hdr, end) == crc
+    return pos[good]
+
+
+def _resync(buf: memoryview, start: int, max_bytes: int,
+            prefix: _PrefixCrc | None = None) -> int | None:
+    """Offset of the next position at or after ``start`` where a valid frame begins.
+
+    Same answer as trying ``_valid_at`` at every offset in turn, in time linear in the bytes
+    searched (windows of candidate offsets that double in size)."""
+    prefix = prefix or _PrefixCrc(buf)
+    pos, window = start, _WINDOW0
     while pos + FRAME_HEADER.size <= len(buf):
-        if _valid_at(buf, pos, max_bytes) is not None:
-            return pos
-        pos += 1
+        found = _valid_in(buf, pos, pos + window, max_bytes, prefix)
+        if found.size:
+            return int(found[0])
+        pos += window
+        window = min(2 * window, _WINDOW_MAX)
     return None
 
 
@@ -206,9 +358,9 @@ def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
                 found = rec
         return found
     for off in reversed(offsets):
-        rec = read_frame_at(path, off)
-        if rec is not None and rec["kind"] == kind:
-            return rec
+        hit = read_frame_at(path, off)
+        if hit is not None and hit["kind"] == kind:
+            return hit
     return None
 
 
@@ -269,7 +421,233 @@ class RecordingReader:
 
 
 # --------------------------------------------------------------------------------------------
+# one walk over a recording: headers recovered, losses in samples, duplicates counted once
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Samples ``[i0, i0 + n)`` of run ``run`` that the recording lacks because of damage (a
+    corrupt or truncated frame, or no surviving header): not a recorded gap."""
+
+    run: str
+    i0: int
+    n: int
+    cause: str
+
+    def __str__(self) -> str:
+        return f"samples [{self.i0}, {self.i0 + self.n}) of run {self.run} lost: {self.cause}"
+
+
+@dataclass
+class WalkReport:
+    """What :func:`walk` had to repair or drop, in samples: losses (damage), duplicates (index
+    ranges met more than once: counted once, reported here), header copies used in place of a
+    damaged header."""
+
+    losses: list[Loss] = field(default_factory=list)
+    duplicates: list[tuple[int, int]] = field(default_factory=list)   # (i0, n) dropped
+    recovered_headers: list[str] = field(default_factory=list)        # runs
+
+    @property
+    def samples_lost(self) -> int:
+        return sum(loss.n for loss in self.losses)
+
+    @property
+    def samples_duplicated(self) -> int:
+        return sum(n for _, n in self.duplicates)
+
+
+class _IndexSet:
+    """Disjoint sorted ``[lo, hi)`` ranges of sample indices already seen (merged as they
+    grow), so a duplicated or overlapping raw block is found in O(log ranges)."""
+
+    def __init__(self) -> None:
+        self.lo: list[int] = []
+        self.hi: list[int] = []
+
+    def unseen(self, i0: int, i1: int) -> list[tuple[int, int]]:
+        """The parts of ``[i0, i1)`` not seen yet (and marks all of it seen)."""
+        import bisect
+
+        if not self.hi or i0 >= self.hi[-1]:          # the common case: data in order
+            self._add(i0, i1)
+            return [(i0, i1)]
+        out, at = [], i0
+        k = bisect.bisect_right(self.hi, i0)
+        while at < i1 and k < len(self.lo):
+            if self.lo[k] > at:
+                out.append((at, min(i1, self.lo[k])))
+            at = max(at, self.hi[k])
+            k += 1
+        if at < i1:
+            out.append((at, i1))
+        for a, b in out:
+            self._add(a, b)
+        return out
+
+    def _add(self, a: int, b: int) -> None:
+        import bisect
+
+        k = bisect.bisect_left(self.lo, a)
+        self.lo.insert(k, a)
+        self.hi.insert(k, b)
+        # merge with neighbours that touch
+        if k + 1 < len(self.lo) and self.lo[k + 1] <= self.hi[k]:
+            self.hi[k] = max(self.hi[k], self.hi.pop(k + 1))
+            self.lo.pop(k + 1)
+        if k > 0 and self.hi[k - 1] >= self.lo[k]:
+            self.hi[k - 1] = max(self.hi[k - 1], self.hi.pop(k))
+            self.lo.pop(k)
+
+
+#: Samples of one run held while waiting for a readable header of that run (the recorder
+#: repeats the header every 60 s of data: 240 000 samples at 4 kHz); older ones are reported
+#: lost beyond this, so memory stays bounded (about 50 MB of counts).
+MAX_HEADERLESS_SAMPLES = 1 << 22
+
+
+def walk(reader: RecordingReader, report: WalkReport | None = None
+         ) -> Iterator[dict[str, Any]]:
+    """The records of a recording as its readers should see them: the one walk used by the
+    offline Allan replay, the service's restore, ``load_recording`` and so ``avard analyze``.
+
+    - Every record follows a header of its own run: a header is yielded once per run change
+      (a header copy of the same run is not repeated). Records whose segment header is damaged
+      wait for the run's header from another segment or a later copy in the same segment; if
+      none survives their samples are reported lost.
+    - Raw samples whose indices were met before (a segment copied twice, overlapping runs) are
+      dropped and reported in ``report.duplicates``: every sample index counts once. Other
+      records met twice (same run, kind and sequence number) are dropped too.
+    - A jump in a run's sample index after a corrupt or truncated frame is reported in
+      ``report.losses`` as the index range it cost.
+    """
+    report = report if report is not None else WalkReport()
+    headers: dict[str, dict[str, Any]] = {}
+    pending: dict[str, list[dict[str, Any]]] = {}
+    held: dict[str, int] = {}                # samples waiting in ``pending``, per run
+    seen_idx = _IndexSet()
+    seen_seq: set[tuple[str, str, int]] = set()
+    expect: dict[str, int] = {}              # next sample index of each run
+    run_now: str | None = None
+    n_problems = 0
+    damage: str | None = None                # the first problem since the last raw block
+
+    def emit(rec: dict[str, Any]) -> Iterator[dict[str, Any]]:
+        nonlocal run_now, damage
+        run = rec["run"]
+        if run != run_now:
+            run_now = run
+            yield headers[run]
+        kind = rec["kind"]
+        if kind != "raw":
+            key = (run, kind, int(rec["seq"]))
+            if key in seen_seq:
+                return
+            seen_seq.add(key)
+            if kind == "gap" and run in expect:
+                # a recorded gap explains its samples: they are not a loss to damage
+                expect[run] = max(expect[run], int(rec["i0"]) + int(rec["n"]))
+            yield rec
+            return
+        i0, n = int(rec["i0"]), int(rec["n"])
+        if damage is not None and run in expect and i0 > expect[run]:
+            report.losses.append(Loss(run, expect[run], i0 - expect[run], damage))
+            log.warning("%s", report.losses[-1])
+        damage = None
+        expect[run] = max(expect.get(run, 0), i0 + n)
+        parts = seen_idx.unseen(i0, i0 + n)
+        if parts == [(i0, i0 + n)]:
+            yield rec
+            return
+        kept = sum(b - a for a, b in parts)
+        if kept < n:
+            report.duplicates.append((i0, n - kept))
+            log.warning("samples [%d, %d) of run %s were already read; counted once",
+                        i0, i0 + n, run)
+        for a, b in parts:
+            yield dict(rec, i0=a, n=b - a, counts=rec["counts"][a - i0:b - i0])
+
+    for rec in reader:
+        if len(reader.problems) > n_problems:
+            if damage is None:
+                damage = str(reader.problems[n_problems])
+            n_problems = len(reader.problems)
+        run = rec["run"]
+        if rec["kind"] == "header":
+            if run in headers:
+                continue                      # a header copy: the run is already known
+            headers[run] = rec
+            if run in pending:
+                report.recovered_headers.append(run)
+            held.pop(run, None)
+            for late in pending.pop(run, []):
+                yield from emit(late)
+            if run_now is None or run_now != run:
+                run_now = run
+                yield rec
+            continue
+        if run not in headers:
+            waiting = pending.setdefault(run, [])
+            waiting.append(rec)
+            held[run] = held.get(run, 0) + int(rec.get("n", 0))
+            while held[run] > MAX_HEADERLESS_SAMPLES and waiting:
+                # memory stays bounded however long a run goes without a readable header
+                old = waiting.pop(0)
+                if old["kind"] == "raw":
+                    held[run] -= int(old["n"])
+                    report.losses.append(Loss(run, int(old["i0"]), int(old["n"]),
+                                              f"no header of run {run} within "
+                                              f"{MAX_HEADERLESS_SAMPLES} samples"))
+                    log.warning("%s", report.losses[-1])
+            continue
+        yield from emit(rec)
+    for run, recs in pending.items():
+        for rec in recs:
+            if rec["kind"] == "raw":
+                report.losses.append(Loss(run, int(rec["i0"]), int(rec["n"]),
+                                          f"no header of run {run} survived"))
+                log.warning("%s", report.losses[-1])
+
+
+# --------------------------------------------------------------------------------------------
 # the Allan feed: one definition of "what the accumulators saw", shared by service and replay
+
+
+class Segmenter:
+    """The one rule for where the accumulators' segments end: at every gap record, every run
+    change (a header of another run) and every jump in the sample index. :class:`AllanFeed`
+    breaks its segments by it; ``load_recording`` records the same breaks for ``avard
+    analyze`` (``meta["segment_bounds"]``), so both average over exactly the same stretches."""
+
+    def __init__(self) -> None:
+        self.run: str | None = None
+        self.next_index: int | None = None
+        self.n = 0                      # raw samples seen
+        self.bounds: list[int] = [0]    # sample counts where a segment starts, then the end
+
+    def starts_segment(self, rec: dict[str, Any]) -> bool:
+        """Whether ``rec`` ends the current segment (before its own samples, if any)."""
+        kind = rec["kind"]
+        cut = False
+        if kind == "header" and rec["run"] != self.run:
+            self.run, cut = rec["run"], True
+        elif kind == "gap":
+            cut = True
+        elif kind == "raw":
+            i0 = int(rec["i0"])
+            cut = self.next_index is not None and i0 != self.next_index
+        if cut:
+            self.next_index = None
+            if self.bounds[-1] != self.n:
+                self.bounds.append(self.n)
+        if kind == "raw":
+            self.next_index = int(rec["i0"]) + int(rec["n"])
+            self.n += int(rec["n"])
+        return cut
+
+    def segment_bounds(self) -> list[int]:
+        """0, every break, N: consecutive pairs are the segments' [start, stop) in samples."""
+        return self.bounds + ([self.n] if self.bounds[-1] != self.n else [])
 
 
 class AllanFeed:
@@ -280,8 +658,8 @@ class AllanFeed:
     temperature channels in °C, each held at its last reading (zero-order hold) from the
     sample index the reading was stamped with. Feeding starts only once every temperature
     channel has a first reading (a hold needs a value to hold); samples before that are
-    counted in ``skipped``. A jump in the sample index or an explicit gap ends the segment
-    (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
+    counted in ``skipped``. A jump in the sample index, an explicit gap or a new run ends the
+    segment (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
 
     ``sink`` is anything with ``update(block)`` and ``gap()`` (a StreamingAllan).
     """
@@ -297,10 +675,75 @@ class AllanFeed:
         self.fed = 0
         self.skipped = 0
         self._open = False          # samples fed since the last gap()
+        self.run: str | None = None
+        self._segments = Segmenter()
 
     @property
     def channels(self) -> list[str]:
         return ["x", "y", "z", *self.temp_names]
+
+    # -- state for checkpoints -------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        """What the feed needs to continue exactly: held temperatures, pending readings."""
+        return {"next_index": self.next_index, "held": [float(v) for v in self._held],
+                "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
+                "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
+                "run": self.run}
+
+    @classmethod
+    def from_state(cls, sink: Any, state: dict[str, Any]) -> AllanFeed:
+        """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
+        feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
+        feed.next_index = state["next_index"]
+        feed._held = np.array(state["held"], dtype=float)
+        feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
+        feed._open = bool(state.get("open", False))
+        feed.run = feed._segments.run = state.get("run")
+        feed._segments.next_index = feed.next_index
+        return feed
+
+    # -- records -------------------------------------------------------------------------
+    def apply(self, rec: dict[str, Any]) -> None:
+        """Feed one record as the service did: a new run's header starts a new segment with
+        that run's scale and temperature channels (held values start unknown, as in a freshly
+        started service); raw, temp and gap records go to :meth:`raw`, :meth:`temp`,
+        :meth:`gap`; other kinds are not data."""
+        kind = rec["kind"]
+        if self._segments.starts_segment(rec):
+            self.gap()
+        if kind == "header":
+            if rec["run"] != self.run:
+                self.run = rec["run"]
+                self.scale = _scale_of(rec)
+                self.temp_names = list(rec.get("temperature_channels", []))
+                self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
+                self._held = np.full(len(self.temp_names), np.nan)
+                self._pending = []
+        elif kind == "raw":
+            self.raw(int(rec["i0"]), rec["counts"])
+        elif kind == "temp":
+            self.temp(int(rec["i0"]), rec["names"], rec["values_c"])
+        elif kind == "gap":
+            self.gap()
+
+    def replay(self, records: Iterable[dict[str, Any]], *, after: int | None = None) -> int:
+        """Feed every record of ``records`` (as :func:`walk` yields them), skipping samples
+        and readings before index ``after`` (what a checkpoint already holds), whatever run
+        wrote them. Returns the number of samples fed."""
+        n0 = self.fed
+        for rec in records:
+            kind = rec["kind"]
+            if after is not None and kind in ("raw", "temp", "gap"):
+                i0 = int(rec["i0"])
+                if kind == "raw" and i0 + int(rec["n"]) <= after:
+                    continue
+                if kind == "raw" and i0 < after:
+                    rec = dict(rec, i0=after, n=i0 + int(rec["n"]) - after,
+                               counts=rec["counts"][after - i0:])
+                elif kind != "raw" and i0 < after:
+                    continue
+            self.apply(rec)
+        return self.fed - n0
 
     def temp(self, i0: int, names: list[str], values_c: list[float | None]) -> None:
         """A temperature reading valid from sample index ``i0`` on (None = failed read)."""
@@ -395,42 +838,26 @@ def iter_records(path: str | Path, *, strict: bool = False,
 
 
 def replay_allan(path: str | Path, *, streaming_cls: Any = None,
-                 reader: RecordingReader | None = None) -> Any:
+                 reader: RecordingReader | None = None,
+                 report: WalkReport | None = None) -> Any:
     """Recompute the service's streaming Allan accumulators offline from a recording.
 
-    Feeds exactly what the service fed (:class:`AllanFeed`), with a segment break at every
-    gap record, index jump and run change, so the result equals the service's own snapshot.
-    Returns the StreamingAllan.
+    Feeds exactly what the service fed (:meth:`AllanFeed.replay` over :func:`walk`), with a
+    segment break at every gap record, index jump and run change, so the result equals the
+    service's own snapshot. Returns the StreamingAllan.
     """
     if streaming_cls is None:
         from .streaming import StreamingAllan as streaming_cls
-    allan = None
-    feed: AllanFeed | None = None
-    run = None
-    for rec in reader or RecordingReader(path):
-        kind = rec["kind"]
-        if kind == "header":
-            names = list(rec.get("temperature_channels", []))
-            if allan is None:
-                allan = streaming_cls(3 + len(names), float(rec["rate_hz"]),
-                                      names=["x", "y", "z", *names])
-            if rec["run"] != run or feed is None:
-                # A new run (a restart) is a segment break; a new file of the same run is not.
-                if feed is not None:
-                    feed.gap()
-                feed = AllanFeed(allan, _scale_of(rec), names)
-            run = rec["run"]
-        elif feed is None:
-            continue
-        elif kind == "raw":
-            feed.raw(rec["i0"], rec["counts"])
-        elif kind == "temp":
-            feed.temp(rec["i0"], rec["names"], rec["values_c"])
-        elif kind == "gap":
-            feed.gap()
-    if allan is None:
-        raise FormatError(f"{path}: no header record found; not an avard recording")
-    return allan
+    records = walk(reader or RecordingReader(path), report)
+    for first in records:
+        names = list(first.get("temperature_channels", []))
+        allan = streaming_cls(3 + len(names), float(first["rate_hz"]),
+                              names=["x", "y", "z", *names])
+        feed = AllanFeed(allan, _scale_of(first), names)
+        feed.apply(first)
+        feed.replay(records)
+        return allan
+    raise FormatError(f"{path}: no header record found; not an avard recording")
 
 
 def _hold_on_grid(idx: np.ndarray, tnames: list[str],
@@ -461,33 +888,37 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     """Load a whole recording as an :class:`avard.core.readers.Record` in SI units.
 
     ``accel`` is (N, 3) m/s² (raw counts × the header's ``scale_m_s2_per_count``) of every
-    recorded sample in index order; ``temperature_c`` holds the temperature channels held at
-    their last reading on the sample grid (NaN before a channel's first reading). The sample
-    indices, gaps (``meta["gaps"]``: first index, count, reason), events, headers and every
-    skipped or truncated frame (``meta["problems"]``) are in ``meta``; nothing lost passes
-    silently.
+    recorded sample in recording order (each sample index once); ``temperature_c`` holds the
+    temperature channels held at their last reading on the sample grid (NaN before a
+    channel's first reading). In ``meta``: the sample indices, gaps (first index, count,
+    reason), events, headers, every skipped or truncated frame (``problems``), the samples
+    damage cost (``losses``: index ranges), duplicated index ranges counted once
+    (``duplicates``), and ``segment_bounds``: where the service's accumulators broke their
+    segments (every gap record, run change and index jump); nothing lost passes silently.
     """
+    record_cls: Any
     try:
-        from .readers import Record
+        from .readers import Record as record_cls
     except ImportError:  # readers.py not present (partial install): same fields, plain class
-        Record = _FallbackRecord
+        record_cls = _FallbackRecord
 
     reader = RecordingReader(path, strict=strict)
+    report = WalkReport()
+    cuts = Segmenter()
     headers: list[dict[str, Any]] = []
     blocks: list[np.ndarray] = []
     index: list[np.ndarray] = []
     temps: list[tuple[int, list[str], list[Any]]] = []
     gaps: list[dict[str, Any]] = []
     events: list[dict[str, Any]] = []
-    scale = None
+    scale = 0.0
     last_avar = None
-    for rec in reader:
+    for rec in walk(reader, report):
         kind = rec["kind"]
+        cuts.starts_segment(rec)
         if kind == "header":
             headers.append(rec)
             scale = _scale_of(rec)
-        elif scale is None:
-            continue
         elif kind == "raw":
             blocks.append(np.asarray(rec["counts"], dtype=np.float64) * scale)
             index.append(rec["i0"] + np.arange(rec["n"], dtype=np.int64))
@@ -500,7 +931,9 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         elif kind == "avar":
             last_avar = rec
     if not headers:
-        raise FormatError(f"{path}: no header record found; not an avard recording")
+        lost = f" ({report.samples_lost} samples without a header)" if report.losses else ""
+        raise FormatError(f"{path}: no header record found{lost}; not an avard recording, or "
+                          "every header copy of it is damaged")
     accel = np.concatenate(blocks) if blocks else np.zeros((0, 3))
     idx = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
     tnames: list[str] = []
@@ -517,18 +950,44 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "format": "avard-recording",
         "files": [str(f) for f in reader.files],
         "index": idx,
+        "segment_bounds": cuts.segment_bounds(),
         "gaps": gaps,
         "events": events,
         "headers": [{k: v for k, v in h.items() if k != "config"} for h in headers],
         "config": headers[0].get("config", {}),
         "problems": [str(p) for p in reader.problems],
         "dropped_bytes": reader.dropped_bytes,
+        "losses": [{"run": x.run, "i0": x.i0, "n": x.n, "cause": x.cause}
+                   for x in report.losses],
+        "samples_lost": report.samples_lost,
+        "duplicates": [{"i0": a, "n": n} for a, n in report.duplicates],
+        "samples_duplicated": report.samples_duplicated,
         "rates_hz": rates,
         # one LSB for the whole record (m/s²), or None when runs used different ranges
         "lsb_mps2": scales.pop() if len(scales) == 1 else None,
         "last_avar": last_avar,
         "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
     }
-    return Record(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
+    return record_cls(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
+
+
+def replay_after(directory: str | Path, feed: AllanFeed, after: int) -> int:
+    """Feed ``feed`` every sample a recording holds from index ``after`` on, whatever run
+    wrote it (the service's restore: a checkpoint, then everything recorded after it, also by
+    runs killed before their first checkpoint). Reads only from the newest segment whose
+    header starts at or before ``after``, so a long recording is not read again at every
+    restart. Returns the number of samples fed."""
+    try:
+        files = segment_files(directory)
+    except FormatError:
+        return 0
+    keep = 0
+    for k, seg in enumerate(files):
+        head = first_record(seg)
+        if head is not None and head.get("kind") == "header" and int(head["i0"]) <= after:
+            keep = k
+    reader = RecordingReader(directory)
+    reader.files = files[keep:]
+    return feed.replay(walk(reader), after=after)

@@ -237,15 +237,16 @@ def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
 def _segments(path: str, block: int, rate_hz: float | None
               ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
     """Metadata and (accel block, ends-a-segment) pairs. Files are one segment, streamed; a
-    recording of the service is loaded (``recording.load_recording``) and split where its
-    sample index jumps (recorded gaps, restarts), so nothing is averaged across a gap."""
+    recording of the service is loaded (``recording.load_recording``) and split where the
+    service split its accumulators (``meta["segment_bounds"]``: every gap record, run change
+    and index jump), so nothing is averaged across a gap or a restart."""
     from pathlib import Path
 
     p = Path(path)
     if p.is_dir() or p.suffix == ".avr":
         rec = load_record(p, rate_hz=rate_hz)
-        idx = np.asarray(rec.meta.get("index", np.arange(rec.n_samples)))
-        cuts = [0, *(np.flatnonzero(np.diff(idx) != 1) + 1).tolist(), rec.n_samples]
+        # the service's own segment breaks (every gap record, run change, index jump)
+        cuts = rec.meta.get("segment_bounds") or [0, rec.n_samples]
         meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
                 "lsb_mps2": rec.meta.get("lsb_mps2"),
                 "names": list(rec.names), "temperature_names": list(rec.temperature_names),

@@ -7,8 +7,18 @@ starts, with the key's name, the value found and what is allowed, all problems a
 
 Paths the service writes (the data directory) must lie under an allowed root: the systemd
 state directory (``$STATE_DIRECTORY``), /var/lib/avard, the user's home, the system temporary
-directory or the current directory. This keeps a typo or a hostile config from pointing the
-recorder (which deletes old segments for retention) at /etc or /.
+directory or the current directory, each resolved (symlinks followed) and never / or a system
+directory such as /etc (a service started from / or with HOME=/ gets no such root). This keeps
+a typo or a hostile config from pointing the recorder (which deletes old segments for
+retention) at /etc or /.
+
+Files are read only when they are regular files, and only up to a size limit: a FIFO, a
+device (/dev/zero) or a directory named as the config or a key file is refused at once
+instead of hanging or exhausting memory. A UTF-8 byte-order mark is accepted.
+
+:func:`check_runtime` adds what depends on the machine (the data directory writable, the
+CURVE key files and their modes, the authorised-keys directory). ``avard check-config`` and
+``avard run`` call the same two functions, so a config that passes check-config starts.
 """
 
 from __future__ import annotations
@@ -16,6 +26,8 @@ from __future__ import annotations
 import ipaddress
 import math
 import os
+import re
+import stat
 import tempfile
 import tomllib
 from collections.abc import Mapping
@@ -88,7 +100,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                doc="ADXL355 on-chip temperature read interval"),
     },
     "allan": {
-        "overlap": Key(int, 8, lo=1, hi=64, doc="differences kept per octave (stride m/overlap)"),
+        "overlap": Key(int, 8, choices=(1, 2, 4, 8, 16, 32, 64),
+                       doc="differences kept per octave (stride m/overlap): a power of two"),
         "snapshot_interval_s": Key(_NUM, 10.0, "s", 0.1, 86400.0,
                                    doc="publish and record an Allan snapshot this often"),
         "checkpoint_interval_s": Key(_NUM, 60.0, "s", 1.0, 86400.0,
@@ -132,6 +145,78 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 
 
+#: Largest config file read (bytes): a real one is a few kB.
+MAX_CONFIG_BYTES = 1 << 20
+#: Largest CURVE key file read (bytes): a real one is about 300 bytes.
+MAX_KEY_FILE_BYTES = 64 << 10
+#: Ring memory per sample (bytes): int32 counts × 3, int64 index, float64 time (daemon/ring.py).
+RING_BYTES_PER_SAMPLE = 3 * 4 + 8 + 8
+#: The ring may take at most this share of the machine's physical memory.
+RING_MEMORY_SHARE = 0.25
+#: Never an allowed root for data_dir, even as the current directory or $HOME.
+SYSTEM_DIRS = frozenset(Path(p) for p in ("/", "/bin", "/boot", "/dev", "/etc", "/lib",
+                                          "/lib64", "/proc", "/run", "/sbin", "/sys", "/usr",
+                                          "/var"))
+_DS18B20_ID = re.compile(r"(28-)?[0-9a-fA-F]{12}")
+
+
+def read_regular_file(path: str | Path, what: str, limit: int) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most ``limit`` bytes.
+
+    Opened non-blocking and checked with fstat before reading, so a FIFO (which would block
+    the open or the read forever), a device such as /dev/zero (endless) or a directory is
+    refused with one line instead of hanging or exhausting memory."""
+    p = Path(path)
+    try:
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such {what}") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what} ({exc.strerror}); check its "
+                          "permissions") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a directory" if stat.S_ISDIR(st.st_mode) else
+                    "a FIFO" if stat.S_ISFIFO(st.st_mode) else
+                    "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                    "a socket" if stat.S_ISSOCK(st.st_mode) else "not a file")
+            raise ConfigError(f"{p}: the {what} is {kind}, not a regular file; name the file "
+                              "itself")
+        if st.st_size > limit:
+            raise ConfigError(f"{p}: the {what} is {st.st_size} bytes, more than the "
+                              f"{limit}-byte limit; is this the right file?")
+        parts: list[bytes] = []
+        got = 0
+        while got <= limit:
+            chunk = os.read(fd, limit + 1 - got)
+            if not chunk:
+                break
+            parts.append(chunk)
+            got += len(chunk)
+        if got > limit:   # grew while we read it
+            raise ConfigError(f"{p}: the {what} is more than the {limit}-byte limit")
+        return b"".join(parts)
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the {what} ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+
+
+def machine_memory_bytes() -> int | None:
+    """Physical memory of this machine (bytes), None when unknown."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def ring_bytes(cfg: Mapping[str, Mapping[str, Any]]) -> int:
+    """Memory of the ring buffer for this config (bytes); the service sizes it the same way."""
+    capacity = int(cfg["service"]["ring_s"] * float(cfg["sensor"]["odr_hz"]) * 1.1) + 64
+    return capacity * RING_BYTES_PER_SAMPLE
+
+
 def default_config() -> dict[str, dict[str, Any]]:
     """Every key at its default value."""
     return {sec: {k: _copy(key.default) for k, key in keys.items()}
@@ -146,10 +231,19 @@ def allowed_roots() -> list[Path]:
     """Directories under which the service may write."""
     roots = [Path("/var/lib/avard"), Path(tempfile.gettempdir()), Path.cwd()]
     if os.environ.get("STATE_DIRECTORY"):
-        roots += [Path(p) for p in os.environ["STATE_DIRECTORY"].split(":")]
+        roots += [Path(p) for p in os.environ["STATE_DIRECTORY"].split(":") if p]
     if os.environ.get("HOME"):
         roots.append(Path(os.environ["HOME"]))
-    return [r.resolve() for r in roots]
+    out: list[Path] = []
+    for r in roots:
+        try:
+            resolved = r.resolve()
+        except (OSError, RuntimeError, ValueError):
+            continue
+        # a service started from / or with HOME=/ must not make all of / writable
+        if resolved not in SYSTEM_DIRS and resolved not in out:
+            out.append(resolved)
+    return out
 
 
 def _check_value(name: str, key: Key, value: Any) -> tuple[Any, str | None]:
@@ -257,8 +351,20 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
                 problems.append(problem)
             else:
                 cfg[sec][name] = checked
+    for sid in cfg["temperature"]["ids"]:
+        if not _DS18B20_ID.fullmatch(sid):
+            problems.append(f"temperature.ids: {sid!r} is not a DS18B20 id; write ids like "
+                            "'28-0316a2797cff' (as under /sys/bus/w1/devices)")
     if not problems:
         _check_endpoints(cfg, problems)
+        need, have = ring_bytes(cfg), machine_memory_bytes()
+        if have and need > RING_MEMORY_SHARE * have:
+            most = RING_MEMORY_SHARE * have / RING_BYTES_PER_SAMPLE / 1.1 / cfg["sensor"][
+                "odr_hz"]
+            problems.append(f"service.ring_s = {cfg['service']['ring_s']:g}: at "
+                            f"{cfg['sensor']['odr_hz']:g} Hz the ring takes {need / 2**20:.0f} "
+                            f"MiB, more than {RING_MEMORY_SHARE:.0%} of this machine's "
+                            f"{have / 2**20:.0f} MiB; use ring_s ≤ {math.floor(most):d}")
         if cfg["recording"]["enabled"] and not cfg["recording"]["data_dir"]:
             problems.append("recording.data_dir is empty: name a directory or set "
                             "recording.enabled = false")
@@ -275,23 +381,18 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
     if path is not None:
         p = Path(path)
         source = str(p)
+        data = read_regular_file(p, "config file", MAX_CONFIG_BYTES)
         try:
-            raw = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{p}: no such config file; copy config/avard.toml and "
-                              "edit it") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{p}: not valid TOML ({exc}); fix the syntax at that "
-                              "line") from None
+            text = data.decode("utf-8")
         except UnicodeDecodeError as exc:
             raise ConfigError(f"{p}: not UTF-8 text (bad byte at offset {exc.start}); save "
                               "the file as UTF-8") from None
-        except IsADirectoryError:
-            raise ConfigError(f"{p}: is a directory; name the config file itself, e.g. "
-                              f"{p / 'avard.toml'}") from None
-        except OSError as exc:
-            raise ConfigError(f"{p}: cannot read the config file ({exc.strerror}); check its "
-                              "permissions") from None
+        text = text.removeprefix("\ufeff")   # a byte-order mark (Windows editors) is harmless
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{p}: not valid TOML ({exc}); fix the syntax at that "
+                              "line") from None
         except RecursionError:  # tomllib recurses once per nested array or inline table
             raise ConfigError(f"{p}: values nested too deeply for a config file; fix the "
                               "file") from None
@@ -313,3 +414,86 @@ def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
     margin under simulation: fewer drains would thin out the time-base fit after a gap."""
     odr = float(cfg["sensor"]["odr_hz"])
     return max(float(cfg["sensor"]["poll_hz"]), 3.0 * odr / 32.0)
+
+
+# --------------------------------------------------------------------------------------------
+# what depends on this machine: checked by both `avard check-config` and `avard run`
+
+
+def check_runtime(cfg: Mapping[str, Mapping[str, Any]]) -> None:
+    """Check what ``avard run`` needs from the machine, all problems at once (ConfigError):
+    the data directory writable (or creatable), and with CURVE on the server's secret key file
+    (a regular file only its owner can read, holding a secret key, not a public one) and the
+    authorised-keys directory (a directory of regular ``*.key`` files)."""
+    problems: list[str] = []
+    rec = cfg["recording"]
+    if rec["enabled"]:
+        problem = _writable_dir(Path(rec["data_dir"]))
+        if problem:
+            problems.append(f"recording.data_dir = {rec['data_dir']!r}: {problem}; under "
+                            "systemd StateDirectory= provides it, by hand use --data-dir DIR "
+                            "or `sudo install -d -o $USER /var/lib/avard`")
+    if cfg["curve"]["enabled"]:
+        problems += _curve_problems(cfg["curve"])
+    if problems:
+        raise ConfigError("; ".join(problems))
+
+
+def _writable_dir(d: Path) -> str | None:
+    """None when the service can create and write ``d``, else why not."""
+    probe = d
+    while not probe.exists():
+        if probe.parent == probe:
+            return "no existing parent directory"
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{probe} is not a directory"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        what = "it" if probe == d else f"its parent {probe}"
+        return f"{what} is not writable by this user"
+    return None
+
+
+def _curve_problems(curve: Mapping[str, Any]) -> list[str]:
+    problems: list[str] = []
+    key = Path(curve["server_secret_key_file"])
+    try:
+        data = read_regular_file(key, "CURVE secret key file", MAX_KEY_FILE_BYTES)
+        mode = stat.S_IMODE(key.stat().st_mode)
+        if not re.search(rb"^\s*secret-key\s*=", data, re.MULTILINE):
+            problems.append(f"curve.server_secret_key_file {key} holds no secret key (a public "
+                            ".key file?); name the NAME.key_secret file made by `avard keys`")
+        elif mode & (stat.S_IRWXG | stat.S_IRWXO):
+            problems.append(f"curve.server_secret_key_file {key} is readable by others "
+                            f"(mode {mode:04o}); run `chmod 600 {key}`")
+    except ConfigError as exc:
+        problems.append(f"curve.server_secret_key_file: {exc}")
+    except OSError as exc:
+        problems.append(f"curve.server_secret_key_file {key}: {exc.strerror}")
+    d = Path(curve["authorized_keys_dir"])
+    if not d.is_dir():
+        problems.append(f"curve.authorized_keys_dir {d} is not a directory; make it and put the "
+                        "clients' NAME.key files in it")
+    else:
+        for f in sorted(d.glob("*.key")):
+            try:
+                read_regular_file(f, "client public key file", MAX_KEY_FILE_BYTES)
+            except ConfigError as exc:
+                problems.append(f"curve.authorized_keys_dir: {exc}")
+    return problems
+
+
+# --------------------------------------------------------------------------------------------
+# command-line numbers shared by run and simulate
+
+
+def check_seed(seed: int | None) -> None:
+    """A simulator seed: a non-negative integer (numpy's seed sequences take no others)."""
+    if seed is not None and not 0 <= seed < 2**64:
+        raise ConfigError(f"--seed {seed}: must be an integer from 0 to 2**64 - 1")
+
+
+def check_positive_seconds(flag: str, value: float | None) -> None:
+    """A duration on the command line: a finite number > 0."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{flag} {value}: must be a finite number > 0")

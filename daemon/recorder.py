@@ -1,6 +1,8 @@
 """The segment writer: CRC-framed records appended to rotating segment files.
 
-- Every segment starts with the run's header, so each file can be read on its own.
+- Every segment starts with the run's header, so each file can be read on its own, and
+  repeats it every ``header_every_s`` of data time: a damaged first header then costs no
+  samples (the reader interprets the records before the copy with it).
 - Rotation every ``segment_s`` of *data* time (the service clock, virtual under ``--speed``),
   and on SIGHUP (:meth:`Recorder.reopen`), so log rotation tools can move files away.
 - ``fsync`` at most every ``fsync_interval_s`` of wall time: a power cut loses at most that.
@@ -21,6 +23,8 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import re
+import secrets
 import shutil
 import threading
 import time
@@ -30,7 +34,8 @@ from pathlib import Path
 from typing import IO, Any
 
 from avard.core import frames
-from avard.core.recording import SEGMENT_SUFFIX, frame
+from avard.core.errors import FormatError
+from avard.core.recording import SEGMENT_SUFFIX, first_record, frame, last_record
 
 log = logging.getLogger(__name__)
 
@@ -38,20 +43,35 @@ _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
 class FileOps:
-    """The recorder's file-system layer (real files); subclass it to inject faults."""
+    """The recorder's file-system layer (real files); subclass it to inject faults.
+
+    Segments are opened unbuffered: a buffered file would flush its buffer again inside
+    ``truncate()`` and hit ENOSPC a second time, leaving the torn frame in the file."""
+
+    #: Attempts (and the pause between them) to cut a torn frame off after a failed write.
+    truncate_attempts = 3
+    truncate_pause_s = 0.01
 
     def open_append(self, path: Path) -> IO[bytes]:
-        return open(path, "ab")
+        return open(path, "ab", buffering=0)
 
     def write(self, f: IO[bytes], data: bytes) -> None:
-        f.write(data)
-        f.flush()
+        view = memoryview(data)
+        while view:
+            # A raw file may write only part (the disk filled up under it); the next call
+            # then raises the error that says why.
+            done = f.write(view)
+            if not done:
+                raise OSError(errno.EIO, "write wrote nothing")
+            view = view[done:]
 
     def fsync(self, f: IO[bytes]) -> None:
         os.fsync(f.fileno())
 
     def truncate(self, f: IO[bytes], size: int) -> None:
-        f.truncate(size)
+        # ftruncate on the descriptor: no buffer to flush first, and shrinking a file needs
+        # no free blocks, so this works on a full disk.
+        os.ftruncate(f.fileno(), size)
         f.seek(size)
 
     def free_bytes(self, directory: Path) -> int:
@@ -91,7 +111,7 @@ class Recorder:
                  header: Callable[[], dict[str, Any]], *,
                  segment_s: float = 3600.0, fsync_interval_s: float = 5.0,
                  retention_days: float = 0.0, retention_max_bytes: int = 0,
-                 min_free_bytes: int = 0, retry_s: float = 5.0,
+                 min_free_bytes: int = 0, retry_s: float = 5.0, header_every_s: float = 60.0,
                  clock: Callable[[], float] = time.monotonic,
                  wall: Callable[[], float] = time.monotonic,
                  realtime: Callable[[], float] = time.time,
@@ -106,6 +126,8 @@ class Recorder:
         self.retention_max_bytes = int(retention_max_bytes)
         self.min_free_bytes = int(min_free_bytes)
         self.retry_s = float(retry_s)
+        self.header_every_s = float(header_every_s)
+        self._header_at = 0.0
         self.clock, self.wall, self.realtime = clock, wall, realtime
         self.ops = fileops or FileOps()
         self._lock = threading.RLock()
@@ -127,6 +149,7 @@ class Recorder:
         self.samples_lost = 0
         self.deleted: list[str] = []
         self.errors = 0
+        self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
 
     # -- public -------------------------------------------------------------------------
     @property
@@ -143,7 +166,8 @@ class Recorder:
                 "segment": self.path.name if self.path else None,
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
-                "samples_lost": self.samples_lost, "free_bytes": free}
+                "samples_lost": self.samples_lost, "torn_frames": self.torn_frames,
+                "free_bytes": free}
 
     def write(self, record: dict[str, Any]) -> bool:
         """Write one record (its ``run``/``seq`` are set here). False when it was lost to a
@@ -155,6 +179,11 @@ class Recorder:
                 return False
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
+                    self._remember_lost(record)
+                    return False
+            if self.header_every_s and now - self._header_at >= self.header_every_s:
+                self._header_at = now
+                if not self._append(self._header()):
                     self._remember_lost(record)
                     return False
             if not self._append(record):
@@ -204,11 +233,7 @@ class Recorder:
         try:
             self.ops.write(self._f, data)
         except OSError as exc:
-            # Cut a partly written frame off again so the file stays a clean frame sequence.
-            try:
-                self.ops.truncate(self._f, self._size)
-            except OSError:
-                pass
+            self._cut_torn_frame()
             self._failed(exc, "write")
             return False
         self._size += len(data)
@@ -216,6 +241,27 @@ class Recorder:
         self.records += 1
         self._dirty = True
         return True
+
+    def _cut_torn_frame(self) -> None:
+        """Cut a partly written frame off again so the file stays a clean frame sequence.
+
+        Retried: a truncate can fail transiently (EINTR, a busy NFS server). If it still
+        fails, the torn frame stays at the end of this segment, which is never appended to
+        again (writing resumes in a new segment), so the reader reports it as that segment's
+        truncated tail and loses nothing else; the lost records are in the resume gap."""
+        assert self._f is not None
+        last: OSError | None = None
+        for attempt in range(self.ops.truncate_attempts):
+            try:
+                self.ops.truncate(self._f, self._size)
+                return
+            except OSError as exc:
+                last = exc
+                if attempt + 1 < self.ops.truncate_attempts:
+                    time.sleep(self.ops.truncate_pause_s)
+        self.torn_frames += 1
+        log.error("cannot cut the torn frame off %s at byte %d (%s); the segment is closed "
+                  "and the reader will skip its truncated tail", self.path, self._size, last)
 
     def _free(self) -> int:
         try:
@@ -247,6 +293,7 @@ class Recorder:
         self._opened_at = now
         self.segments_written += 1
         log.info("recording into %s", path)
+        self._header_at = now
         if not self._append(self._header()):
             return False
         if self.lost is not None:
@@ -365,3 +412,109 @@ class Recorder:
             log.info("deleted %s (%s)", path.name, why)
         except OSError as exc:
             log.error("retention: cannot delete %s: %s", path, exc)
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` by ``data`` all at once (write a temporary file, fsync, rename).
+
+    On any failure (a full disk) the temporary file is removed again and the error raised:
+    the old file stays whole and no partial ``.tmp`` is left behind."""
+    tmp = path.with_suffix(".tmp")
+    try:
+        with open(tmp, "wb", buffering=0) as f:
+            FileOps().write(f, data)
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# --------------------------------------------------------------------------------------------
+# order that does not depend on the wall clock: run ids, restart gaps
+
+#: Run ids are ``nSSSSSSSS-YYYYMMDDTHHMMSSZ-xxxxxx``: a run sequence number taken from the
+#: recording itself (one more than the highest there), then the UTC start for humans. Name
+#: order is the sequence order, so it is data order even when CLOCK_REALTIME was wrong at
+#: boot (a Pi without RTC before NTP); the ``n`` sorts these after the older stamp-first ids.
+_RUN_SEQ = re.compile(r"n(\d{8})-")
+
+
+def new_run_id(data_dir: str | Path, t_real: float) -> str:
+    """The next run id for a recording directory (see ``_RUN_SEQ``)."""
+    seq = 0
+    d = Path(data_dir)
+    if d.is_dir():
+        for f in d.iterdir():
+            m = _RUN_SEQ.match(f.name)
+            if m:
+                seq = max(seq, int(m.group(1)))
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
+    return f"n{seq + 1:08d}-{stamp}-{secrets.token_hex(3)}"
+
+
+def kernel_boot_id() -> str | None:
+    """The kernel's boot id: CLOCK_MONOTONIC readings compare only within one boot."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text().strip() or None
+    except OSError:
+        return None
+
+
+@dataclass(frozen=True)
+class LastRecorded:
+    """Where the recording ends: the index after its last sample and that moment's clocks."""
+
+    i_end: int
+    t_mono: float
+    t_real: float
+    boot_id: str | None
+
+
+@dataclass(frozen=True)
+class RestartGap:
+    """Samples ``[i0, i0 + n)`` the service did not acquire across a restart, measured with
+    ``clock``: "monotonic" (same boot: exact up to the rate), "realtime" (another boot: as
+    good as the wall clock) or "unknown" (the wall clock went back: n = 0, said so)."""
+
+    i0: int
+    n: int
+    t_real: float
+    clock: str
+
+
+def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
+    """The end of the newest segment that holds samples (names sort in data order), read from
+    the file's end, so an hour-long segment costs little."""
+    d = Path(data_dir)
+    if not d.is_dir():
+        return None
+    for seg in sorted(d.glob("*" + SEGMENT_SUFFIX), reverse=True):
+        try:
+            rec = last_record(seg, "raw")
+            head = first_record(seg) if rec is not None else None
+        except (OSError, FormatError):
+            continue
+        if rec is not None:
+            span = rec["n"] / float(rec.get("rate_hz") or nominal_hz)
+            boot = head.get("boot_id") if head and head.get("run") == rec["run"] else None
+            return LastRecorded(int(rec["i0"]) + int(rec["n"]), float(rec["t_mono"]) + span,
+                                float(rec["t_real"]) + span,
+                                boot if isinstance(boot, str) else None)
+    return None
+
+
+def restart_gap(last: LastRecorded, *, boot_id: str | None, t_mono: float, t_real: float,
+                rate_hz: float) -> RestartGap:
+    """How many samples a restart lost: from CLOCK_MONOTONIC when the last run was in this
+    boot, else from CLOCK_REALTIME, and 0 (clock "unknown") when that went backwards."""
+    if boot_id is not None and boot_id == last.boot_id and t_mono >= last.t_mono:
+        elapsed, how = t_mono - last.t_mono, "monotonic"
+    elif t_real >= last.t_real:
+        elapsed, how = t_real - last.t_real, "realtime"
+    else:
+        elapsed, how = 0.0, "unknown"
+        log.warning("CLOCK_REALTIME is %.0f s behind the end of the recording and the last "
+                    "run was in another boot: the restart gap's length is unknown (recorded "
+                    "as 0 samples)", last.t_real - t_real)
+    return RestartGap(last.i_end, round(elapsed * rate_hz), last.t_real, how)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import itertools
 import logging
 import os
-import secrets
 import signal
 import threading
 import time
@@ -39,18 +38,24 @@ from avard.core import frames
 from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.recording import (
     AllanFeed,
-    RecordingReader,
-    first_record,
     frame,
-    last_record,
+    replay_after,
     scan_frames,
 )
 
 from . import __version__
 from .acquisition import Acquisition
 from .config import effective_poll_hz
+from .recorder import (
+    LastRecorded,
+    RestartGap,
+    kernel_boot_id,
+    last_recorded,
+    new_run_id,
+    restart_gap,
+)
 from .ring import Chunk, Consumer, Ring
-from .timebase import TimeBase
+from .timebase import SystemClock, TimeBase
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +94,22 @@ def _split(chunk: Chunk) -> list[tuple[str, Any]]:
         edges = [a, *(a + brk).tolist(), b]
         out.extend(("samples", (x, y)) for x, y in itertools.pairwise(edges))
     return out
+
+
+def lost_marks_records(run_id: str, chunk: Chunk, consumer: str,
+                       t_real: float) -> list[dict[str, Any]]:
+    """Marks (temperatures, gaps, events) dropped by the ring before ``consumer`` read them:
+    a ``marks_lost`` event, and a zero-length ``marks_lost`` gap before the chunk's first
+    sample, so the Allan feed and every reader of the recording break their segment there (a
+    lost mark may have been a gap)."""
+    i0 = int(chunk.index[0]) if chunk.n else 0
+    t = float(chunk.t_mono[0]) if chunk.n else 0.0
+    log.warning("the %s worker lost %d ring marks before sample %d (the mark queue "
+                "overflowed)", consumer, chunk.lost_marks, i0)
+    return [frames.event_record(run_id, 0, "marks_lost", t, t_real, i0=i0,
+                                detail={"count": int(chunk.lost_marks), "consumer": consumer}),
+            frames.gap_record(run_id, 0, i0, 0, t, t_real, "marks_lost",
+                              marks=int(chunk.lost_marks))]
 
 
 class Worker:
@@ -160,7 +181,7 @@ class AllanWorker(Worker):
 
     def handle(self, chunk: Chunk) -> None:
         with self.lock:
-            if chunk.lost_samples:
+            if chunk.lost_samples or chunk.lost_marks:
                 self.feed.gap()
             for kind, val in _split(chunk):
                 if kind == "samples":
@@ -173,6 +194,8 @@ class AllanWorker(Worker):
             if chunk.n:
                 self._t = float(chunk.t_mono[-1])
         if self._next_snap is None:
+            if not chunk.n:
+                return  # the timers start with the first samples, not at t = 0
             self._next_snap = self._t + self.snapshot_interval_s
             self._next_ckpt = self._t + self.checkpoint_interval_s
         if self._t >= self._next_snap:
@@ -224,16 +247,7 @@ def offset_after_mark(record: dict[str, Any], offset: float) -> float:
 
 def feed_state(feed: AllanFeed) -> dict[str, Any]:
     """What an AllanFeed needs to continue exactly: held temperatures, pending readings."""
-    return {"next_index": feed.next_index, "held": [float(v) for v in feed._held],
-            "pending": [[int(i), [float(v) for v in h]] for i, h in feed._pending],
-            "temp_names": feed.temp_names, "scale": feed.scale, "open": feed._open}
-
-
-def restore_feed(feed: AllanFeed, state: dict[str, Any]) -> None:
-    feed.next_index = state["next_index"]
-    feed._held = np.array(state["held"], dtype=float)
-    feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
-    feed._open = bool(state.get("open", False))
+    return feed.state()
 
 
 class RecorderWorker(Worker):
@@ -269,6 +283,11 @@ class RecorderWorker(Worker):
             self.rec.write(frames.gap_record(self.svc.run_id, 0, i0, max(0, i1 - i0),
                                              float(chunk.t_mono[0]) if chunk.n else 0.0,
                                              self.svc.real_now(), "recorder_behind"))
+        if chunk.lost_marks:
+            self._flush()
+            for rec in lost_marks_records(self.svc.run_id, chunk, "recorder",
+                                          self.svc.real_now()):
+                self.rec.write(rec)
         for kind, val in _split(chunk):
             if kind == "mark":
                 self._flush()
@@ -321,6 +340,10 @@ class PublisherWorker(Worker):
             self.pub.publish("event", frames.gap_record(
                 self.svc.run_id, 0, i0, max(0, i1 - i0), float(chunk.t_mono[0]),
                 self.svc.real_now(), "publisher_behind"))
+        if chunk.lost_marks:
+            for rec in lost_marks_records(self.svc.run_id, chunk, "publisher",
+                                          self.svc.real_now()):
+                self.pub.publish("event", rec)
         rate = self.svc.timebase.odr_hz
         for kind, val in _split(chunk):
             if kind == "mark":
@@ -364,8 +387,12 @@ class Service:
         self.cfg = cfg
         self.sensor = sensor
         self.clock = clock
-        self.run_id = run_id or (time.strftime("%Y%m%dT%H%M%SZ", time.gmtime()) + "-"
-                                 + secrets.token_hex(3))
+        # a run sequence number from the recording first: name order is data order even
+        # when CLOCK_REALTIME is wrong (recorder.new_run_id)
+        self.run_id = run_id or new_run_id(cfg["recording"]["data_dir"], clock.realtime())
+        self.boot_id: str | None = getattr(clock, "boot_id", None)
+        if self.boot_id is None and isinstance(clock, SystemClock):
+            self.boot_id = kernel_boot_id()
         self.speed = speed
         self.simulate = simulate
         self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
@@ -395,6 +422,7 @@ class Service:
                                    overlap=int(cfg["allan"]["overlap"]),
                                    names=["x", "y", "z", *self.temp_names])
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
+        self.feed.run = self.run_id
         self.start_index = 0
         self.restored: dict[str, Any] | None = None
         self._recorder_factory = recorder_factory
@@ -431,7 +459,7 @@ class Service:
             software=f"avard {__version__}", config=self.cfg,
             temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
             allan_rate_hz=float(self.allan.rate_hz), timebase=timebase,
-            simulate=self.simulate, restored=self.restored)
+            simulate=self.simulate, restored=self.restored, boot_id=self.boot_id)
 
     def status(self) -> dict[str, Any]:
         acq = self.acq
@@ -472,15 +500,11 @@ class Service:
     def save_state(self, rec: dict[str, Any]) -> None:
         if not self.cfg["recording"]["enabled"]:
             return
+        from .recorder import write_atomic
+
         path = self.data_dir / STATE_FILE
-        tmp = path.with_suffix(".tmp")
         try:
-            data = frame(frames.encode(dict(rec, seq=0)))
-            with open(tmp, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
+            write_atomic(path, frame(frames.encode(dict(rec, seq=0))))
         except OSError as exc:
             log.error("cannot save the Allan checkpoint to %s: %s", path, exc)
 
@@ -513,12 +537,14 @@ class Service:
                 allan = None
             if allan is not None and list(allan.names) == list(self.allan.names) \
                     and float(allan.rate_hz) == float(self.allan.rate_hz):
-                feed = AllanFeed(allan, ckpt["feed"]["scale"], ckpt["feed"]["temp_names"])
-                restore_feed(feed, ckpt["feed"])
-                replayed = self._replay_after(ckpt, feed)
+                feed = AllanFeed.from_state(allan, {"run": ckpt["run"], **ckpt["feed"]})
+                # every sample recorded after the checkpoint, whatever run wrote it
+                after = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
+                replayed = replay_after(self.data_dir, feed, after)
                 feed.gap()
                 self.allan = allan
                 self.feed = AllanFeed(allan, self.scale, self.temp_names)
+                self.feed.run = self.run_id
                 self.restored = {"run": ckpt["run"], "i_end": ckpt["i_end"],
                                  "n_samples": int(allan.n_samples), "replayed": replayed}
                 log.warning("restored the Allan accumulators of run %s (%d samples, %d "
@@ -529,61 +555,24 @@ class Service:
                             "configuration; starting the accumulators afresh",
                             allan.names, allan.rate_hz)
         if last is not None:
-            i_end, t_real_end = last
-            elapsed = max(0.0, self.real_now() - t_real_end)
-            self.start_index = i_end + round(elapsed * self.odr)
-            self._restart_gap = (i_end, self.start_index - i_end, t_real_end)
+            # the index continues from the recording; the gap is measured on CLOCK_MONOTONIC
+            # within one boot, on CLOCK_REALTIME across boots (recorder.restart_gap)
+            self._restart_gap = restart_gap(last, boot_id=self.boot_id,
+                                            t_mono=self.clock.monotonic(),
+                                            t_real=self.real_now(), rate_hz=self.odr)
+            self.start_index = last.i_end + self._restart_gap.n
 
-    def _last_recorded(self) -> tuple[int, float] | None:
-        """(index after the last recorded sample, its CLOCK_REALTIME) of the newest segment
-        that holds samples; read from the file's end, so an hour-long segment costs little."""
-        if not self.cfg["recording"]["enabled"] or not self.data_dir.is_dir():
+    def _last_recorded(self) -> LastRecorded | None:
+        if not self.cfg["recording"]["enabled"]:
             return None
-        for seg in reversed(sorted(self.data_dir.glob("*.avr"))):
-            try:
-                rec = last_record(seg, "raw")
-            except (OSError, FormatError):
-                continue
-            if rec is not None:
-                rate = float(rec.get("rate_hz") or self.odr)
-                return rec["i0"] + rec["n"], rec["t_real"] + rec["n"] / rate
-        return None
-
-    def _replay_after(self, ckpt: dict[str, Any], feed: AllanFeed) -> int:
-        """Feed what run ``ckpt['run']`` recorded after the checkpoint (crash window)."""
-        run = ckpt["run"]
-        start = int(ckpt["feed"]["next_index"] or ckpt["i_end"])
-        n0 = feed.fed
-        segs = [s for s in sorted(self.data_dir.glob("*.avr")) if s.name.startswith(f"{run}_")]
-        # Only the segment the checkpoint falls in and the later ones (headers carry the
-        # index their segment starts at): a 60-hour run is not read again at every restart.
-        keep = 0
-        for k, seg in enumerate(segs):
-            head = first_record(seg)
-            if head is not None and head.get("kind") == "header" and head["i0"] <= start:
-                keep = k
-        segs = segs[keep:]
-        if not segs:
-            return 0
-        for seg in segs:
-            for rec in RecordingReader(seg):
-                kind = rec["kind"]
-                if kind == "raw" and rec["i0"] + rec["n"] > start:
-                    cut = max(0, start - rec["i0"])
-                    feed.raw(rec["i0"] + cut, np.asarray(rec["counts"])[cut:])
-                    start = rec["i0"] + rec["n"]
-                elif kind == "temp" and rec["i0"] >= start:
-                    feed.temp(rec["i0"], rec["names"], rec["values_c"])
-                elif kind == "gap" and rec["i0"] >= start:
-                    feed.gap()
-        return feed.fed - n0
+        return last_recorded(self.data_dir, self.odr)
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
         """Build the consumers and start every thread; ``before_acquisition`` runs once the
         sockets are bound and before the first drain (a subscriber can connect then)."""
         cfg = self.cfg
-        self._restart_gap: tuple[int, int, float] | None = None
+        self._restart_gap: RestartGap | None = None
         if cfg["recording"]["enabled"]:
             try:
                 self.data_dir.mkdir(parents=True, exist_ok=True)
@@ -623,9 +612,10 @@ class Service:
                 max_block=max(32, int(self.odr))))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
-            i0, n, t_real = self._restart_gap
-            self.ring.mark(frames.gap_record(self.run_id, 0, i0, n, t_real - self.real_offset,
-                                             t_real, "restart", estimated=True))
+            g = self._restart_gap
+            self.ring.mark(frames.gap_record(self.run_id, 0, g.i0, g.n,
+                                             g.t_real - self.real_offset, g.t_real, "restart",
+                                             estimated=True, clock=g.clock))
         self.ring.mark(frames.event_record(
             self.run_id, 0, "start", self.clock.monotonic(), self.real_now(),
             i0=self.start_index, detail={"software": f"avard {__version__}",

@@ -1,8 +1,10 @@
 """Check a service configuration file without starting anything.
 
 Reads the TOML file exactly as ``avard run`` does and reports every unknown key, wrong type
-and out-of-range value with the key's name, the value and what is allowed. Exit 0 when the
-file is valid, 2 when it is not.
+and out-of-range value with the key's name, the value and what is allowed, then what ``avard
+run`` needs from this machine (the data directory writable, CURVE key files and their modes,
+the authorised-keys directory): the same two checks as ``avard run``, so a config that passes
+here starts. Exit 0 when the file is valid, 2 when it is not.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from avard.daemon.config import effective_poll_hz, load_config
+from avard.daemon.config import check_runtime, effective_poll_hz, load_config
 
 NAME = "check-config"
 HELP = "check a config file (unknown keys, types, ranges) without starting"
@@ -24,6 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
+    check_runtime(cfg)
     out = sys.stdout
     out.write(f"{args.config}: valid\n")
     out.write(f"  ADXL355 at {cfg['sensor']['odr_hz']:g} Hz ODR, ±{cfg['sensor']['range_g']} g, "

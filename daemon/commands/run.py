@@ -16,7 +16,12 @@ import os
 from typing import Any
 
 from avard.core.errors import ConfigError, HardwareError
-from avard.daemon.config import load_config
+from avard.daemon.config import (
+    check_positive_seconds,
+    check_runtime,
+    check_seed,
+    load_config,
+)
 from avard.daemon.sdnotify import Notifier
 from avard.daemon.service import Service
 
@@ -45,10 +50,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _check_args(args: argparse.Namespace) -> None:
     if args.speed is not None and not args.simulate:
         raise ConfigError("--speed needs --simulate: real hardware runs in real time")
-    if args.speed is not None and args.speed < 0:
-        raise ConfigError(f"--speed {args.speed}: must be ≥ 0 (0 = as fast as possible)")
-    if args.duration is not None and args.duration <= 0:
-        raise ConfigError(f"--duration {args.duration}: must be a positive number of seconds")
+    if args.speed is not None and not (args.speed == 0 or 1e-3 <= args.speed <= 1e6):
+        raise ConfigError(f"--speed {args.speed}: must be 0 (as fast as possible) or from "
+                          "0.001 to 1e6 times real time")
+    check_positive_seconds("--duration", args.duration)
+    check_seed(args.seed)
 
 
 def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
@@ -134,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
         log.warning("no --config: using the built-in defaults (as in config/avard.toml); "
                     "recording into %s", cfg["recording"]["data_dir"])
     _check_system_folder(cfg)
+    check_runtime(cfg)          # the same checks as `avard check-config`
     notifier = Notifier()
     svc = build(args, cfg, notifier=notifier)
     svc.install_signals()

@@ -24,6 +24,7 @@ from avard.core.errors import DataError, OutputError
 from avard.core.outputs import check_output_file, free_bytes
 from avard.core.presets import PRESETS, make_config, parse_override
 from avard.core.sim_io import draw_seed, npz_size, write_npz
+from avard.daemon.config import check_seed
 from avard.daemon.stop_signals import stop_signals_unwind
 
 NAME = "simulate"
@@ -78,8 +79,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise DataError("say where to write the record: --out FILE.npz")
-    if not (args.hours > 0 and math.isfinite(args.hours)):
+    if not (math.isfinite(args.hours) and args.hours > 0):
         raise DataError(f"--hours must be a positive number, got {args.hours}")
+    check_seed(args.seed)
     check_output_file(args.out, what=f"--out {args.out}", suffixes=(".npz",))
     size = npz_size(cfg, args.hours)
     free = free_bytes(args.out)

@@ -1,0 +1,70 @@
+"""Resynchronisation after damage: the vectorised search equals the definition (try every
+offset with ``_valid_at``) and its CRC arithmetic equals zlib on every range."""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+from avard.core.recording import (
+    MAX_FRAME_BYTES,
+    _crc_of_ranges,
+    _PrefixCrc,
+    _resync,
+    _valid_at,
+    frame,
+    scan_frames,
+)
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+def _resync_by_definition(buf: memoryview, start: int, max_bytes: int) -> int | None:
+    pos = start
+    while pos + 8 <= len(buf):
+        if _valid_at(buf, pos, max_bytes) is not None:
+            return pos
+        pos += 1
+    return None
+
+
+def test_crc_of_any_range_from_prefix_crcs_equals_zlib() -> None:
+    rng = np.random.default_rng(7)
+    data = rng.bytes(5000)
+    starts = np.sort(rng.integers(0, 2500, 400))
+    ends = starts + rng.integers(1, 2500, 400)
+    got = _crc_of_ranges(_PrefixCrc(memoryview(data)), starts, ends)
+    want = [zlib.crc32(data[s:e]) for s, e in zip(starts.tolist(), ends.tolist(), strict=True)]
+    assert got.tolist() == want
+
+
+@settings(max_examples=150, deadline=None)
+@given(sizes=st.lists(st.integers(1, 300), min_size=1, max_size=12),
+       flips=st.lists(st.tuples(st.floats(0, 1, exclude_max=True), st.integers(0, 7)),
+                      max_size=4),
+       start=st.floats(0, 1, exclude_max=True), small_cap=st.booleans(), seed=st.integers(0, 99))
+def test_resync_finds_the_same_offset_as_trying_every_byte(sizes, flips, start, small_cap,
+                                                           seed) -> None:
+    rng = np.random.default_rng(seed)
+    buf = bytearray(b"".join(frame(rng.bytes(n)) for n in sizes))
+    for where, bit in flips:
+        buf[int(where * len(buf))] ^= 1 << bit
+    view = memoryview(bytes(buf))
+    cap = 100 if small_cap else MAX_FRAME_BYTES
+    at = int(start * len(buf))
+    assert _resync(view, at, cap) == _resync_by_definition(view, at, cap)
+
+
+def test_a_crafted_segment_where_every_offset_claims_the_rest_of_the_file_reads_whole() -> None:
+    """Every 4-byte-aligned offset claims a frame to the end (the issue's crafted file): no
+    frame is valid, so the whole of it is one truncated tail, found without trying each."""
+    size = 1 << 18
+    claims = size - np.arange(0, size, 4, dtype=np.int64) - 8
+    data = np.clip(claims, 0, None).astype("<u4").tobytes()
+    problems: list = []
+    assert list(scan_frames(data, "crafted", problems=problems)) == []
+    assert [(p.kind, p.offset, p.dropped_bytes) for p in problems] == [("truncated", 0, size)]
+    # and a real frame after 200 kB of such garbage is still found
+    good = frame(b"\x81\xa4kind\xa3raw")
+    got = list(scan_frames(data[:200_000] + good, "crafted", problems=problems))
+    assert [f.offset for f in got] == [200_000]

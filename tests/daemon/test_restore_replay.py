@@ -1,0 +1,124 @@
+"""Restore after restarts feeds back every recorded sample, whatever run wrote it (#16 item 1).
+
+Runs that record samples but are SIGKILLed before their first checkpoint leave the state
+file of an earlier run behind. The next start must replay everything recorded after that
+checkpoint, including the killed runs' samples; the final accumulators then equal the
+offline Allan of the whole recording and an independent numpy overlapping AVAR (NIST SP 1065
+eq. 12 with the stride of ``avard.core.streaming``), to 1e-12.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+from avard.core import frames
+from avard.core.recording import RecordingReader, replay_allan, scan_frames
+from avard.core.streaming import StreamingAllan
+
+from .test_faults_sigkill import NotifySocket, _spawn
+
+CONFIG = """
+[allan]
+snapshot_interval_s = 2.0
+checkpoint_interval_s = 3600.0
+[recording]
+fsync_interval_s = 0.5
+block_s = 0.5
+[publish]
+enabled = false
+[sensor]
+poll_hz = 4.0
+"""
+
+
+def _numpy_avar(path: Path, rate: float, overlap: int, ms: np.ndarray) -> tuple[int, np.ndarray]:
+    """Pooled partially overlapping AVAR of x, y, z from the raw records, written apart from
+    avard's readers: the samples the service fed are those of each run from the first index
+    at which every temperature channel of that run has a reading; segments end at every gap
+    record, run change and index jump."""
+    recs = list(RecordingReader(path))
+    runs: dict[str, dict] = {}
+    for r in recs:
+        if r["kind"] == "header" and r["run"] not in runs:
+            runs[r["run"]] = {"scale": r["scale_m_s2_per_count"],
+                              "names": list(r["temperature_channels"]), "first": {}}
+    for r in recs:
+        if r["kind"] == "temp":
+            first = runs[r["run"]]["first"]
+            for name, v in zip(r["names"], r["values_c"], strict=True):
+                if v is not None and name not in first:
+                    first[name] = r["i0"]
+    segments: list[list[np.ndarray]] = [[]]
+    run, nxt = None, None
+    for r in recs:
+        if r["kind"] == "gap" or (r["kind"] == "header" and r["run"] != run):
+            run = r["run"] if r["kind"] == "header" else run
+            segments.append([])
+            nxt = None
+        elif r["kind"] == "raw":
+            info = runs[r["run"]]
+            if nxt is not None and r["i0"] != nxt:
+                segments.append([])
+            nxt = r["i0"] + r["n"]
+            if len(info["first"]) < len(info["names"]):
+                continue
+            start = max(info["first"].values(), default=0)
+            keep = r["i0"] + np.arange(r["n"]) >= start
+            segments[-1].append(np.asarray(r["counts"], float)[keep] * info["scale"])
+    n_total = 0
+    sums, counts = np.zeros((len(ms), 3)), np.zeros(len(ms))
+    for seg in segments:
+        if not seg:
+            continue
+        y = np.concatenate(seg)
+        n_total += len(y)
+        x = np.concatenate([np.zeros((1, 3)), np.cumsum(y - y[0], axis=0)]) / rate
+        for k, m in enumerate(ms):
+            stride = max(1, m // overlap)
+            i = np.arange(0, len(x) - 2 * m, stride)
+            d = x[i + 2 * m] - 2 * x[i + m] + x[i]
+            sums[k] += (d**2).sum(axis=0)
+            counts[k] += len(i)
+    tau = ms / rate
+    return n_total, sums / (2 * tau[:, None] ** 2 * counts[:, None])
+
+
+def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_path):
+    (tmp_path / "avard.toml").write_text(CONFIG)
+    notify = NotifySocket(tmp_path / "notify.sock")
+    ckpt = tmp_path / "rec" / "allan-state.ckpt"
+    try:
+        p = _spawn(tmp_path, notify, 1, "--duration", "3")
+        assert p.wait(timeout=120) == 0
+        first_ckpt = ckpt.read_bytes()         # written at the clean stop
+        for k in range(3):
+            notify.drain()                     # READY=1 of this run, not of the last
+            p = _spawn(tmp_path, notify, 10 + k)
+            assert notify.wait_ready(), "no READY=1 within 60 s"
+            time.sleep(1.5)                    # samples are recorded; no checkpoint is due
+            p.send_signal(signal.SIGKILL)
+            p.wait(timeout=30)
+            assert ckpt.read_bytes() == first_ckpt   # killed before its first checkpoint
+        p = _spawn(tmp_path, notify, 20, "--duration", "3")
+        assert p.wait(timeout=120) == 0
+    finally:
+        notify.close()
+    log = (tmp_path / "stderr-20.log").read_text()
+    assert "restored the Allan accumulators" in log
+    runs = {r["run"] for r in RecordingReader(tmp_path / "rec") if r["kind"] == "raw"}
+    assert len(runs) == 5                      # every run recorded samples
+    state = frames.decode(next(scan_frames(ckpt.read_bytes())).payload)["state"]
+    final = StreamingAllan.from_state(state)
+    snap = final.snapshot()
+    offline = replay_allan(tmp_path / "rec").snapshot()
+    assert snap.n_samples == offline.n_samples
+    np.testing.assert_allclose(snap.avar, offline.avar, rtol=1e-12, atol=0)
+    ms = np.asarray(snap.m)
+    n, avar = _numpy_avar(tmp_path / "rec", final.rate_hz, final.overlap, ms)
+    assert n == snap.n_samples
+    ok = np.isfinite(avar[:, 0])               # levels with at least one difference
+    assert ok.sum() >= 6
+    np.testing.assert_allclose(np.asarray(snap.avar)[ok, :3], avar[ok], rtol=1e-12, atol=0)
