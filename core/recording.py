@@ -6,7 +6,8 @@ On disk every record is one frame::
 
 where the payload is the same msgpack record that goes on the wire (``avard.core.frames``).
 A segment file is a sequence of frames that starts with a ``header`` record; a recording is a
-file or a directory of segment files, read in name order (names start with the UTC start time).
+file or a directory of segment files, read in name order (names start with the run id, which
+starts with a run sequence number: see daemon/recorder.py ``new_run_id``).
 
 Why this framing: a power cut can only leave a *truncated* last frame (appends are the only
 writes), which the reader detects from the length and drops, saying how many bytes it dropped.
@@ -291,8 +292,8 @@ def _resync(buf: memoryview, start: int, max_bytes: int,
 
 def segment_files(path: str | Path) -> list[Path]:
     """The segment files of a recording: the file itself, or a directory's ``*.avr`` files in
-    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with the run's UTC start
-    time, so name order is data order)."""
+    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with a run sequence
+    number, ``nSSSSSSSS-``, so name order is data order whatever the wall clock said)."""
     p = Path(path)
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file())
