@@ -424,6 +424,7 @@ class Service:
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
         self.feed.run = self.run_id
         self.start_index = 0
+        self._restart_gap: RestartGap | None = None
         self.restored: dict[str, Any] | None = None
         self._recorder_factory = recorder_factory
         self._publisher_factory = publisher_factory
@@ -572,7 +573,7 @@ class Service:
         """Build the consumers and start every thread; ``before_acquisition`` runs once the
         sockets are bound and before the first drain (a subscriber can connect then)."""
         cfg = self.cfg
-        self._restart_gap: RestartGap | None = None
+        self._restart_gap = None
         if cfg["recording"]["enabled"]:
             try:
                 self.data_dir.mkdir(parents=True, exist_ok=True)
