@@ -195,9 +195,10 @@ class AllanWorker(Worker):
                 self._t = float(chunk.t_mono[-1])
         if self._next_snap is None:
             if not chunk.n:
-                return  # the timers start with the first samples, not at t = 0
-            self._next_snap = self._t + self.snapshot_interval_s
-            self._next_ckpt = self._t + self.checkpoint_interval_s
+                return  # the timers start with the first sample, not at t = 0
+            first = float(chunk.t_mono[0])
+            self._next_snap = first + self.snapshot_interval_s
+            self._next_ckpt = first + self.checkpoint_interval_s
         if self._t >= self._next_snap:
             self._next_snap = self._t + self.snapshot_interval_s
             self.svc.ring.mark(self.snapshot_record())

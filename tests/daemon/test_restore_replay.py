@@ -131,3 +131,24 @@ def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_p
     # avard analyze splits this killed-and-restarted recording where the service did
     bounds = load_recording(tmp_path / "rec").meta["segment_bounds"]
     assert len(lengths) >= 5 and np.diff(bounds).tolist() == lengths
+
+
+def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path):
+    """Not at once (the Allan worker's timers used to start at t = 0 when its first chunk held
+    only marks, so every run checkpointed immediately)."""
+    from avard.daemon.config import load_config
+    from avard.daemon.simulation import simulated_service
+
+    cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
+                               "publish.enabled": False, "sensor.poll_hz": 1.0,
+                               "allan.checkpoint_interval_s": 5.0})
+    # paced (4× real time): drains are then small, as on the device, and the timers act
+    # within one drain of their time
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=2, speed=4.0)
+    svc.run(17.0)
+    recs = list(RecordingReader(tmp_path / "rec"))
+    t0 = min(r["t_mono"] for r in recs if r["kind"] == "raw")
+    ckpts = [r["t_mono"] - t0 for r in recs if r["kind"] == "checkpoint"]
+    # every 5 s of data from the first sample (to a FIFO drain), then one at the clean stop
+    assert len(ckpts) == 4
+    np.testing.assert_allclose(ckpts[:3], [5.0, 10.0, 15.0], atol=1.0)
