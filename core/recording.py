@@ -6,7 +6,8 @@ On disk every record is one frame::
 
 where the payload is the same msgpack record that goes on the wire (``avard.core.frames``).
 A segment file is a sequence of frames that starts with a ``header`` record; a recording is a
-file or a directory of segment files, read in name order (names start with the UTC start time).
+file or a directory of segment files, read in name order (names start with the run id, which
+starts with a run sequence number: see daemon/recorder.py ``new_run_id``).
 
 Why this framing: a power cut can only leave a *truncated* last frame (appends are the only
 writes), which the reader detects from the length and drops, saying how many bytes it dropped.
@@ -291,8 +292,8 @@ def _resync(buf: memoryview, start: int, max_bytes: int,
 
 def segment_files(path: str | Path) -> list[Path]:
     """The segment files of a recording: the file itself, or a directory's ``*.avr`` files in
-    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with the run's UTC start
-    time, so name order is data order)."""
+    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with a run sequence
+    number, ``nSSSSSSSS-``, so name order is data order whatever the wall clock said)."""
     p = Path(path)
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file())
@@ -523,18 +524,22 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
     """
     report = report if report is not None else WalkReport()
     headers: dict[str, dict[str, Any]] = {}
-    pending: dict[str, list[dict[str, Any]]] = {}
+    # records waiting for their run's header, each with the damage read just before it
+    pending: dict[str, list[tuple[dict[str, Any], str | None]]] = {}
     held: dict[str, int] = {}                # samples waiting in ``pending``, per run
     seen_idx = _IndexSet()
     seen_seq: set[tuple[str, str, int]] = set()
     expect: dict[str, int] = {}              # next sample index of each run
+    started: set[str] = set()                # runs whose first raw block was read
     run_now: str | None = None
     n_problems = 0
-    damage: str | None = None                # the first problem since the last raw block
+    damage: dict[str, str] = {}              # per run: the first problem since its last block
 
-    def emit(rec: dict[str, Any]) -> Iterator[dict[str, Any]]:
-        nonlocal run_now, damage
+    def emit(rec: dict[str, Any], dmg: str | None) -> Iterator[dict[str, Any]]:
+        nonlocal run_now
         run = rec["run"]
+        if dmg is not None:
+            damage.setdefault(run, dmg)
         if run != run_now:
             run_now = run
             yield headers[run]
@@ -547,13 +552,17 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
             if kind == "gap" and run in expect:
                 # a recorded gap explains its samples: they are not a loss to damage
                 expect[run] = max(expect[run], int(rec["i0"]) + int(rec["n"]))
+            elif (kind == "event" and rec["name"] == "start" and "i0" in rec
+                  and run not in started):
+                expect[run] = int(rec["i0"])     # the run's first sample index, exactly
             yield rec
             return
+        started.add(run)
         i0, n = int(rec["i0"]), int(rec["n"])
-        if damage is not None and run in expect and i0 > expect[run]:
-            report.losses.append(Loss(run, expect[run], i0 - expect[run], damage))
+        why = damage.pop(run, None)
+        if why is not None and run in expect and i0 > expect[run]:
+            report.losses.append(Loss(run, expect[run], i0 - expect[run], why))
             log.warning("%s", report.losses[-1])
-        damage = None
         expect[run] = max(expect.get(run, 0), i0 + n)
         parts = seen_idx.unseen(i0, i0 + n)
         if parts == [(i0, i0 + n)]:
@@ -567,42 +576,48 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
         for a, b in parts:
             yield dict(rec, i0=a, n=b - a, counts=rec["counts"][a - i0:b - i0])
 
+    carry: str | None = None                 # a problem read since the last record used
     for rec in reader:
         if len(reader.problems) > n_problems:
-            if damage is None:
-                damage = str(reader.problems[n_problems])
+            carry = carry or str(reader.problems[n_problems])
             n_problems = len(reader.problems)
         run = rec["run"]
         if rec["kind"] == "header":
             if run in headers:
                 continue                      # a header copy: the run is already known
             headers[run] = rec
+            # where the run's samples start (the service's header may be a little ahead of
+            # its first block; the start event, when there is one, is exact)
+            expect.setdefault(run, int(rec["i0"]))
             if run in pending:
                 report.recovered_headers.append(run)
             held.pop(run, None)
-            for late in pending.pop(run, []):
-                yield from emit(late)
+            for late, dmg in pending.pop(run, []):
+                yield from emit(late, dmg)
             if run_now is None or run_now != run:
                 run_now = run
                 yield rec
             continue
         if run not in headers:
             waiting = pending.setdefault(run, [])
-            waiting.append(rec)
+            waiting.append((rec, carry))
+            carry = None
             held[run] = held.get(run, 0) + int(rec.get("n", 0))
             while held[run] > MAX_HEADERLESS_SAMPLES and waiting:
                 # memory stays bounded however long a run goes without a readable header
-                old = waiting.pop(0)
+                old, _ = waiting.pop(0)
                 if old["kind"] == "raw":
                     held[run] -= int(old["n"])
+                    expect[run] = max(expect.get(run, 0), int(old["i0"]) + int(old["n"]))
                     report.losses.append(Loss(run, int(old["i0"]), int(old["n"]),
                                               f"no header of run {run} within "
                                               f"{MAX_HEADERLESS_SAMPLES} samples"))
                     log.warning("%s", report.losses[-1])
             continue
-        yield from emit(rec)
+        yield from emit(rec, carry)
+        carry = None
     for run, recs in pending.items():
-        for rec in recs:
+        for rec, _ in recs:
             if rec["kind"] == "raw":
                 report.losses.append(Loss(run, int(rec["i0"]), int(rec["n"]),
                                           f"no header of run {run} survived"))

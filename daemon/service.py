@@ -195,9 +195,10 @@ class AllanWorker(Worker):
                 self._t = float(chunk.t_mono[-1])
         if self._next_snap is None:
             if not chunk.n:
-                return  # the timers start with the first samples, not at t = 0
-            self._next_snap = self._t + self.snapshot_interval_s
-            self._next_ckpt = self._t + self.checkpoint_interval_s
+                return  # the timers start with the first sample, not at t = 0
+            first = float(chunk.t_mono[0])
+            self._next_snap = first + self.snapshot_interval_s
+            self._next_ckpt = first + self.checkpoint_interval_s
         if self._t >= self._next_snap:
             self._next_snap = self._t + self.snapshot_interval_s
             self.svc.ring.mark(self.snapshot_record())
@@ -424,6 +425,7 @@ class Service:
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
         self.feed.run = self.run_id
         self.start_index = 0
+        self._restart_gap: RestartGap | None = None
         self.restored: dict[str, Any] | None = None
         self._recorder_factory = recorder_factory
         self._publisher_factory = publisher_factory
@@ -572,7 +574,7 @@ class Service:
         """Build the consumers and start every thread; ``before_acquisition`` runs once the
         sockets are bound and before the first drain (a subscriber can connect then)."""
         cfg = self.cfg
-        self._restart_gap: RestartGap | None = None
+        self._restart_gap = None
         if cfg["recording"]["enabled"]:
             try:
                 self.data_dir.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,8 @@ from avard.core.recording import (
 )
 from avard.core.report import analyze
 from avard.daemon.recorder import Recorder
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 RATE = 125.0
 SCALE = 3.9e-5
@@ -180,7 +182,7 @@ def test_records_waiting_for_a_header_are_bounded_and_reported(tmp_path, monkeyp
     monkeypatch.setattr(recording, "MAX_HEADERLESS_SAMPLES", 10 * BLOCK)
     _write_run(tmp_path, "20260101T000000Z-a", 0, 40, seed=9, header_every_s=8.0)
     (seg,) = sorted(tmp_path.glob("*.avr"))
-    _flip(seg, 30)                         # the first header; the copy comes after 8 s (1000 samples)
+    _flip(seg, 30)              # the first header; the copy comes after 8 s (1000 samples)
     report = WalkReport()
     idx = np.concatenate([r["i0"] + np.arange(r["n"])
                           for r in walk(RecordingReader(tmp_path), report)
@@ -188,3 +190,39 @@ def test_records_waiting_for_a_header_are_bounded_and_reported(tmp_path, monkeyp
     lost = [(x.i0, x.n) for x in report.losses]
     assert lost == [(k * BLOCK, BLOCK) for k in range(len(lost))] and lost
     np.testing.assert_array_equal(idx, np.arange(len(lost) * BLOCK, 40 * BLOCK))
+
+
+@pytest.fixture(scope="module")
+def three_segments(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("walk")
+    _write_run(d, "20260101T000000Z-a", 0, 60, seed=11, segment_s=8.0, header_every_s=3.0)
+    return d
+
+
+@settings(max_examples=150, deadline=None)
+@given(flips=st.lists(st.tuples(st.integers(0, 2), st.floats(0, 1, exclude_max=True),
+                                st.integers(0, 7)), min_size=1, max_size=4))
+def test_no_sample_goes_missing_silently_under_random_bit_flips(three_segments, tmp_path_factory,
+                                                                flips) -> None:
+    """Whatever single bits flip: every sample index below the last one read is either read
+    (once) or reported lost, never silently missing."""
+    d = tmp_path_factory.mktemp("flipped")
+    segs = sorted(three_segments.glob("*.avr"))
+    for seg in segs:
+        shutil.copy(seg, d / seg.name)
+    for which, where, bit in flips:
+        f = d / segs[which % len(segs)].name
+        data = bytearray(f.read_bytes())
+        data[int(where * len(data))] ^= 1 << bit
+        f.write_bytes(bytes(data))
+    report = WalkReport()
+    got = [r["i0"] + np.arange(r["n"]) for r in walk(RecordingReader(d), report)
+           if r["kind"] == "raw"]
+    read = np.concatenate(got) if got else np.zeros(0, dtype=np.int64)
+    assert np.unique(read).size == read.size                     # each index once
+    lost = np.concatenate([np.arange(x.i0, x.i0 + x.n) for x in report.losses]
+                          or [np.zeros(0, dtype=np.int64)])
+    assert np.intersect1d(read, lost).size == 0
+    top = int(read.max()) + 1 if read.size else 0
+    covered = np.union1d(read, lost)
+    assert np.setdiff1d(np.arange(top), covered).size == 0, report.losses

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from avard.core import frames
-from avard.core.recording import RecordingReader, replay_allan, scan_frames
+from avard.core.recording import RecordingReader, load_recording, replay_allan, scan_frames
 from avard.core.streaming import StreamingAllan
 
 from .test_faults_sigkill import NotifySocket, _spawn
@@ -34,7 +34,8 @@ poll_hz = 4.0
 """
 
 
-def _numpy_avar(path: Path, rate: float, overlap: int, ms: np.ndarray) -> tuple[int, np.ndarray]:
+def _numpy_avar(path: Path, rate: float, overlap: int,
+                ms: np.ndarray) -> tuple[int, np.ndarray, list[int]]:
     """Pooled partially overlapping AVAR of x, y, z from the raw records, written apart from
     avard's readers: the samples the service fed are those of each run from the first index
     at which every temperature channel of that run has a reading; segments end at every gap
@@ -52,17 +53,21 @@ def _numpy_avar(path: Path, rate: float, overlap: int, ms: np.ndarray) -> tuple[
                 if v is not None and name not in first:
                     first[name] = r["i0"]
     segments: list[list[np.ndarray]] = [[]]
+    lengths = [0]                              # every recorded sample, per segment
     run, nxt = None, None
     for r in recs:
         if r["kind"] == "gap" or (r["kind"] == "header" and r["run"] != run):
             run = r["run"] if r["kind"] == "header" else run
             segments.append([])
+            lengths.append(0)
             nxt = None
         elif r["kind"] == "raw":
             info = runs[r["run"]]
             if nxt is not None and r["i0"] != nxt:
                 segments.append([])
+                lengths.append(0)
             nxt = r["i0"] + r["n"]
+            lengths[-1] += r["n"]
             if len(info["first"]) < len(info["names"]):
                 continue
             start = max(info["first"].values(), default=0)
@@ -83,7 +88,8 @@ def _numpy_avar(path: Path, rate: float, overlap: int, ms: np.ndarray) -> tuple[
             sums[k] += (d**2).sum(axis=0)
             counts[k] += len(i)
     tau = ms / rate
-    return n_total, sums / (2 * tau[:, None] ** 2 * counts[:, None])
+    return (n_total, sums / (2 * tau[:, None] ** 2 * counts[:, None]),
+            [n for n in lengths if n])
 
 
 def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_path):
@@ -117,8 +123,32 @@ def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_p
     assert snap.n_samples == offline.n_samples
     np.testing.assert_allclose(snap.avar, offline.avar, rtol=1e-12, atol=0)
     ms = np.asarray(snap.m)
-    n, avar = _numpy_avar(tmp_path / "rec", final.rate_hz, final.overlap, ms)
+    n, avar, lengths = _numpy_avar(tmp_path / "rec", final.rate_hz, final.overlap, ms)
     assert n == snap.n_samples
     ok = np.isfinite(avar[:, 0])               # levels with at least one difference
     assert ok.sum() >= 6
     np.testing.assert_allclose(np.asarray(snap.avar)[ok, :3], avar[ok], rtol=1e-12, atol=0)
+    # avard analyze splits this killed-and-restarted recording where the service did
+    bounds = load_recording(tmp_path / "rec").meta["segment_bounds"]
+    assert len(lengths) >= 5 and np.diff(bounds).tolist() == lengths
+
+
+def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path):
+    """Not at once (the Allan worker's timers used to start at t = 0 when its first chunk held
+    only marks, so every run checkpointed immediately)."""
+    from avard.daemon.config import load_config
+    from avard.daemon.simulation import simulated_service
+
+    cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
+                               "publish.enabled": False, "sensor.poll_hz": 1.0,
+                               "allan.checkpoint_interval_s": 5.0})
+    # paced (4× real time): drains are then small, as on the device, and the timers act
+    # within one drain of their time
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=2, speed=4.0)
+    svc.run(17.0)
+    recs = list(RecordingReader(tmp_path / "rec"))
+    t0 = min(r["t_mono"] for r in recs if r["kind"] == "raw")
+    ckpts = [r["t_mono"] - t0 for r in recs if r["kind"] == "checkpoint"]
+    # every 5 s of data from the first sample (to a FIFO drain), then one at the clean stop
+    assert len(ckpts) == 4
+    np.testing.assert_allclose(ckpts[:3], [5.0, 10.0, 15.0], atol=1.0)
