@@ -1,6 +1,7 @@
 """The reader thread: the only code that talks to the ADXL355 bus.
 
-It does nothing slow: wait for the next poll tick, drain the FIFO, give each sample its index
+It does nothing slow: sleep until the FIFO is due to hold a useful block (pacing.py: from the
+fitted output rate and the FIFO depth, with margin), drain the FIFO, give each sample its index
 and a time from the fitted time base, push the block into the ring, and (every
 ``chip_interval_s``) read the chip's temperature. Everything it learns about loss goes into the
 ring as a mark, in order with the samples:
@@ -30,6 +31,7 @@ import numpy as np
 from avard.core import frames
 from avard.core.errors import AvardError
 
+from .pacing import drain_period_s
 from .ring import Ring
 from .timebase import TimeBase
 
@@ -54,7 +56,7 @@ class Acquisition:
         self.ring = ring
         self.tb = timebase
         self.clock = clock
-        self.period = 1.0 / float(poll_hz)
+        self.poll_hz = float(poll_hz)     # the least drain rate (sensor.poll_hz)
         self.chip_interval_s = float(chip_interval_s)
         self.run_id = run_id
         self.speed = speed
@@ -103,6 +105,11 @@ class Acquisition:
     def mark(self, record: dict[str, Any]) -> None:
         self.ring.mark(record)
 
+    @property
+    def period(self) -> float:
+        """Seconds between drains at the rate fitted so far."""
+        return drain_period_s(self.tb.odr_hz, self.poll_hz)
+
     # -- loop ---------------------------------------------------------------------------
     def _run(self) -> None:
         try:
@@ -111,9 +118,10 @@ class Acquisition:
             next_t = t0
             while not self._stop.is_set():
                 self.poll_once()
-                next_t += self.period
+                period = self.period
+                next_t += period
                 now = self.clock.monotonic()
-                if next_t < now - 10 * self.period:
+                if next_t < now - 10 * period:
                     next_t = now  # fell far behind (a slow machine): do not try to catch up
                 self.clock.sleep(max(0.0, next_t - now))
                 if self.speed:

@@ -55,6 +55,10 @@ from .timebase import TimeBase
 log = logging.getLogger(__name__)
 
 STATE_FILE = "allan-state.ckpt"
+#: Seconds of samples each consumer lets accumulate between reads (its added latency).
+ALLAN_BATCH_S = 0.25
+RECORDER_BATCH_S = 0.25
+PUBLISH_BATCH_S = 0.05
 
 
 def _runs_of(chunk: Chunk) -> list[tuple[int, int]]:
@@ -92,14 +96,21 @@ def _split(chunk: Chunk) -> list[tuple[str, Any]]:
 
 
 class Worker:
-    """A consumer thread: read the ring at its own pace, hand each chunk to ``handle``."""
+    """A consumer thread: block on the ring until it holds work, hand each chunk to ``handle``.
+
+    After handling a chunk the thread lets ``batch_s`` pass before it reads again, so that at
+    4 kHz it takes one larger chunk instead of waking at every drain (the per-wake cost is
+    fixed; ``batch_s`` is the latency this part adds). ``idle_s`` is the longest wait without
+    work before :meth:`idle` runs (a part with something to do on a timer, such as the status
+    record, does it there); the thread never wakes on a timer to look for samples."""
 
     name = "worker"
 
-    def __init__(self, consumer: Consumer, *, idle_s: float = 0.01,
+    def __init__(self, consumer: Consumer, *, idle_s: float = 5.0, batch_s: float = 0.0,
                  max_samples: int | None = None) -> None:
         self.consumer = consumer
         self.idle_s = idle_s
+        self.batch_s = batch_s
         self.max_samples = max_samples
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -113,6 +124,7 @@ class Worker:
     def stop(self, timeout: float = 10.0) -> None:
         """Finish what is in the ring, then stop."""
         self._stop.set()
+        self.consumer.ring.wake()
         if self._thread is not None:
             self._thread.join(timeout)
 
@@ -123,10 +135,13 @@ class Worker:
                 chunk = self.consumer.read(self.max_samples)
                 if chunk.n or chunk.marks or chunk.lost_samples:
                     self.handle(chunk)
+                    if self.batch_s and not stopping:
+                        self._stop.wait(self.batch_s)
                     continue
                 if stopping:
                     break
-                self._stop.wait(self.idle_s)
+                if not self.consumer.wait(self.idle_s):
+                    self.idle()
             self.finish()
         except BaseException as exc:
             log.exception("%s thread died", self.name)
@@ -134,6 +149,10 @@ class Worker:
 
     def handle(self, chunk: Chunk) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def idle(self) -> None:
+        """Called after ``idle_s`` without work."""
+        return None
 
     def finish(self) -> None:
         return None
@@ -145,8 +164,9 @@ class AllanWorker(Worker):
     name = "allan"
 
     def __init__(self, consumer: Consumer, allan: Any, feed: AllanFeed, service: Service,
-                 *, snapshot_interval_s: float, checkpoint_interval_s: float) -> None:
-        super().__init__(consumer)
+                 *, snapshot_interval_s: float, checkpoint_interval_s: float,
+                 batch_s: float = 0.0) -> None:
+        super().__init__(consumer, batch_s=batch_s)
         self.allan = allan
         self.feed = feed
         self.svc = service
@@ -242,8 +262,8 @@ class RecorderWorker(Worker):
     name = "recorder"
 
     def __init__(self, consumer: Consumer, recorder: Any, service: Service, *,
-                 block_samples: int) -> None:
-        super().__init__(consumer, idle_s=0.02)
+                 block_samples: int, batch_s: float = 0.0) -> None:
+        super().__init__(consumer, batch_s=batch_s)
         self.rec = recorder
         self.svc = service
         self.block_samples = max(1, int(block_samples))
@@ -307,8 +327,9 @@ class PublisherWorker(Worker):
     name = "publisher"
 
     def __init__(self, consumer: Consumer, publisher: Any, service: Service, *,
-                 status_interval_s: float, max_block: int) -> None:
-        super().__init__(consumer, idle_s=0.005, max_samples=max_block)
+                 status_interval_s: float, max_block: int, batch_s: float = 0.0) -> None:
+        super().__init__(consumer, idle_s=status_interval_s, batch_s=batch_s,
+                         max_samples=max_block)
         self.pub = publisher
         self.svc = service
         self.status_interval_s = status_interval_s
@@ -333,6 +354,9 @@ class PublisherWorker(Worker):
             self.pub.publish("raw", frames.raw_record(
                 self.svc.run_id, 0, int(chunk.index[a]), chunk.counts[a:b], t0,
                 t0 + self.real_offset, rate_hz=rate))
+        self.idle()
+
+    def idle(self) -> None:
         now = time.monotonic()
         if now >= self._next_status:
             self._next_status = now + self.status_interval_s
@@ -603,23 +627,28 @@ class Service:
                                on_clock_step=self._on_clock_step,
                                backpressure=self.simulate is not None)
         acfg = cfg["allan"]
+        # Consumers take what accumulated over a batch time instead of every drain; not when
+        # a simulation runs unpaced (its reader waits for them: batching would slow it).
+        paced = not (self.simulate is not None and self.speed is None)
         self.workers.append(AllanWorker(
             self.ring.consumer("allan"), self.allan, self.feed, self,
             snapshot_interval_s=acfg["snapshot_interval_s"],
-            checkpoint_interval_s=acfg["checkpoint_interval_s"]))
+            checkpoint_interval_s=acfg["checkpoint_interval_s"],
+            batch_s=ALLAN_BATCH_S if paced else 0.0))
         if cfg["recording"]["enabled"]:
             factory = self._recorder_factory or _default_recorder
             self.recorder = factory(self)
             self.workers.append(RecorderWorker(
                 self.ring.consumer("recorder"), self.recorder, self,
-                block_samples=int(cfg["recording"]["block_s"] * self.odr)))
+                block_samples=int(cfg["recording"]["block_s"] * self.odr),
+                batch_s=min(RECORDER_BATCH_S, cfg["recording"]["block_s"]) if paced else 0.0))
         if cfg["publish"]["enabled"]:
             self.publisher = (self._publisher_factory or _default_publisher)(self)
             self.request_server = (self._request_factory or _default_request_server)(self)
             self.workers.append(PublisherWorker(
                 self.ring.consumer("publisher"), self.publisher, self,
                 status_interval_s=cfg["publish"]["status_interval_s"],
-                max_block=max(32, int(self.odr))))
+                max_block=max(32, int(self.odr)), batch_s=PUBLISH_BATCH_S if paced else 0.0))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
             i0, n, t_real = self._restart_gap
@@ -674,7 +703,7 @@ class Service:
             if w.error is not None:
                 raise AvardError(f"the {w.name} thread stopped: {w.error}")
 
-    def run(self, duration_s: float | None = None, *, tick_s: float = 0.05,
+    def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
             before_acquisition: Callable[[], None] | None = None) -> int:
         """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop."""
         self.start(before_acquisition)
@@ -716,10 +745,16 @@ class Service:
                 if now >= next_status_log:
                     next_status_log = now + self.cfg["service"]["status_log_interval_s"]
                     log.info("status: %s", self.status_line())
-                if duration_s is not None and \
-                        self.clock.monotonic() - self.t_start >= duration_s:
-                    break
-                self.stop_requested.wait(tick_s)
+                wait = tick_s if self.ready else min(tick_s, 0.05)   # READY promptly
+                if duration_s is not None:
+                    left = duration_s - (self.clock.monotonic() - self.t_start)
+                    if left <= 0:
+                        break
+                    # virtual seconds → real seconds at this pace; unpaced: look often
+                    wait = min(wait, left / self.speed if self.speed else 0.05)
+                if n is not None and wd and self.ready:
+                    wait = min(wait, max(0.0, next_wd - time.monotonic()))
+                self.stop_requested.wait(wait)
         finally:
             self.stop()
         self.check_threads()
