@@ -135,7 +135,7 @@ class Worker:
                 chunk = self.consumer.read(self.max_samples)
                 if chunk.n or chunk.marks or chunk.lost_samples:
                     self.handle(chunk)
-                    if self.batch_s and not stopping:
+                    if self.batch_s and not stopping and not self.consumer.backlog:
                         self._stop.wait(self.batch_s)
                     continue
                 if stopping:
