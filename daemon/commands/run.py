@@ -15,6 +15,7 @@ import logging
 from typing import Any
 
 from avard.core.errors import ConfigError, HardwareError
+from avard.daemon import blas_threads  # noqa: F401  (first: before anything imports numpy)
 from avard.daemon.config import load_config
 from avard.daemon.sdnotify import Notifier
 from avard.daemon.service import Service
