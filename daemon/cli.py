@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from avard.core.errors import AvardError
 
 from . import __version__, commands
+from .logfmt import formatter_for
 
 log = logging.getLogger("avard")
 
@@ -70,7 +71,7 @@ def setup_logging(verbosity: int) -> None:
     (journald adds its own)."""
     level = logging.WARNING - 10 * min(verbosity + 1, 2)
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    handler.setFormatter(formatter_for(sys.stderr))   # <N> priority prefixes for journald
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)

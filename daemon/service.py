@@ -23,6 +23,7 @@ time × rate) and goes on: the 60-hour Allan result survives restarts.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import os
@@ -50,6 +51,7 @@ from . import __version__
 from .acquisition import Acquisition
 from .config import effective_poll_hz
 from .ring import Chunk, Consumer, Ring
+from .snapshots import SnapshotBoard
 from .timebase import TimeBase
 
 log = logging.getLogger(__name__)
@@ -59,6 +61,10 @@ STATE_FILE = "allan-state.ckpt"
 ALLAN_BATCH_S = 0.25
 RECORDER_BATCH_S = 0.25
 PUBLISH_BATCH_S = 0.05
+#: A `recent` reply: counts (3 × int32), index (int64), t_mono (float64) per sample; capped
+#: so that one reply stays well below the request socket's per-peer bound (publisher.py).
+RECENT_BYTES_PER_SAMPLE = 28
+RECENT_MAX_BYTES = 2 << 20
 
 
 def _runs_of(chunk: Chunk) -> list[tuple[int, int]]:
@@ -197,18 +203,25 @@ class AllanWorker(Worker):
             self._next_ckpt = self._t + self.checkpoint_interval_s
         if self._t >= self._next_snap:
             self._next_snap = self._t + self.snapshot_interval_s
-            self.svc.ring.mark(self.snapshot_record())
+            rec = self.snapshot_record()
+            if rec is not None:
+                self.svc.ring.mark(rec)
         if self._next_ckpt is not None and self._t >= self._next_ckpt:
             self._next_ckpt = self._t + self.checkpoint_interval_s
             self.checkpoint()
 
-    def snapshot_record(self) -> dict[str, Any]:
+    def snapshot_record(self) -> dict[str, Any] | None:
+        """The ``avar`` record of everything fed so far; None before the first τ point (a
+        snapshot without one would carry (0, C) arrays whose shape msgpack lists lose)."""
         with self.lock:
             snap = self.allan.snapshot().to_dict()
+            if not snap["m"]:
+                return None
+            relabel_tau(snap, float(self.svc.timebase.odr_hz))
             snap.update(channels=self.feed.channels,
                         units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
                         allan_rate_hz=float(self.allan.rate_hz),
-                        fitted_rate_hz=float(self.svc.timebase.odr_hz))
+                        fitted_rate_hz=snap["rate_hz"])
             rec = frames.avar_record(self.svc.run_id, 0, self.feed.next_index or 0,
                                      int(self.allan.n_samples), snap, self._t,
                                      self._t + self.svc.real_offset)
@@ -229,8 +242,20 @@ class AllanWorker(Worker):
         # samples the recording lost in a crash, so restore + replay equals the recording.
 
     def finish(self) -> None:
-        self.svc.ring.mark(self.snapshot_record())
+        rec = self.snapshot_record()
+        if rec is not None:
+            self.svc.ring.mark(rec)
         self.checkpoint()
+
+
+def relabel_tau(snap: dict[str, Any], odr_hz: float) -> None:
+    """τ = m / ODR with the *fitted* ODR (docs/architecture.md: τ0 = 1/fitted ODR).
+
+    The accumulators count in samples and were built with the nominal rate, which only labels
+    τ; the variances themselves (of sample averages) do not depend on the rate. ``rate_hz``
+    becomes the fitted rate too, so a client computing τ = m / rate_hz agrees."""
+    snap["tau"] = [float(m) / odr_hz for m in snap["m"]]
+    snap["rate_hz"] = float(odr_hz)
 
 
 def offset_after_mark(record: dict[str, Any], offset: float) -> float:
@@ -268,6 +293,7 @@ class RecorderWorker(Worker):
         self.svc = service
         self.block_samples = max(1, int(block_samples))
         self.real_offset = service.real_offset
+        self._header_version = service.run_header.version   # the segment's own header
         self._parts: list[np.ndarray] = []
         self._i0 = 0
         self._t0 = 0.0
@@ -276,6 +302,13 @@ class RecorderWorker(Worker):
     def _flush(self) -> None:
         if not self._n:
             return
+        hdr = self.svc.run_header
+        if hdr.version != self._header_version:
+            # The fitted rate moved: the recording gets the new header (load_recording takes
+            # each run's newest), before the block whose times use that fit.
+            rec = self.svc.segment_header()
+            self._header_version = hdr.version
+            self.rec.write(rec)
         counts = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
         self.rec.write(frames.raw_record(self.svc.run_id, 0, self._i0, counts, self._t0,
                                          self._t0 + self.real_offset,
@@ -335,6 +368,7 @@ class PublisherWorker(Worker):
         self.status_interval_s = status_interval_s
         self.real_offset = service.real_offset
         self._next_status = 0.0
+        self._header_version = -1
 
     def handle(self, chunk: Chunk) -> None:
         if chunk.lost_samples:
@@ -348,6 +382,8 @@ class PublisherWorker(Worker):
                 self.real_offset = offset_after_mark(val, self.real_offset)
                 if val["kind"] in frames.TOPIC_OF_KIND:
                     self.pub.publish(None, val)
+                if val["kind"] == "avar":
+                    self.svc.snapshots.publish(val)   # what `snapshot` requests answer
                 continue
             a, b = val
             t0 = float(chunk.t_mono[a])
@@ -363,12 +399,48 @@ class PublisherWorker(Worker):
             self.publish_status()
 
     def publish_status(self) -> None:
+        hdr = self.svc.run_header.current()
+        if self.svc.run_header.version != self._header_version:
+            self._header_version = self.svc.run_header.version
+            self.pub.publish("status", hdr)   # a new fit of the rate: on the status topic
         t = self.svc.clock.monotonic()
         self.pub.publish("status", frames.status_record(self.svc.run_id, 0, self.svc.status(),
                                                         t, t + self.svc.real_offset))
 
     def finish(self) -> None:
         self.publish_status()
+
+
+class RunHeader:
+    """The run's ``header`` record, built once and rebuilt only when the fitted rate has moved
+    by more than ``ppm`` (at most every ``min_interval_s``): the recorder writes each new one
+    (every segment starts with the current one), the publisher sends it on the ``status``
+    topic, and the ``header`` request returns it, so all three carry the same record."""
+
+    def __init__(self, build: Callable[[], dict[str, Any]], timebase: TimeBase,
+                 clock: Callable[[], float], *, ppm: float = 2.0,
+                 min_interval_s: float = 10.0) -> None:
+        self._build = build
+        self._tb = timebase
+        self._clock = clock
+        self.ppm = ppm
+        self.min_interval_s = min_interval_s
+        self._lock = threading.Lock()
+        self._rec: dict[str, Any] | None = None
+        self._rate = 0.0
+        self._t = 0.0
+        self.version = 0
+
+    def current(self) -> dict[str, Any]:
+        with self._lock:
+            rate = float(self._tb.odr_hz)
+            now = self._clock()
+            if self._rec is None or (abs(rate / self._rate - 1.0) * 1e6 > self.ppm
+                                     and now - self._t >= self.min_interval_s):
+                self._rec = self._build()
+                self._rate, self._t = rate, now
+                self.version += 1
+            return self._rec
 
 
 class Service:
@@ -432,12 +504,27 @@ class Service:
         self._on_tick = on_tick
         self.t_start = clock.monotonic()
         self.ready = False
+        self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic)
+        self.snapshots = SnapshotBoard(functools.partial(fit_snapshot,
+                                                         filter_corner_hz=odr / 4))
 
     # -- helpers ------------------------------------------------------------------------
     def real_now(self) -> float:
         return self.clock.realtime()
 
     def header(self) -> dict[str, Any]:
+        """The run's current header record (see :class:`RunHeader`)."""
+        return self.run_header.current()
+
+    def segment_header(self) -> dict[str, Any]:
+        """The header that starts a segment: the current one with ``i0`` at the reader's
+        next index (never behind the segment's first sample: restore skips the segments whose
+        header ``i0`` is at or before a checkpoint's end, so a stale one would skip data)."""
+        t = self.clock.monotonic()
+        return dict(self.run_header.current(), t_mono=t, t_real=t + self.real_offset,
+                    i0=self.acq.next_index if self.acq else self.start_index)
+
+    def _build_header(self) -> dict[str, Any]:
         tb = self.timebase
         try:
             rate = tb.rate()
@@ -470,6 +557,9 @@ class Service:
             "stalled": bool(acq.stalled) if acq else False,
             "allan_samples": int(self.allan.n_samples),
             "consumers_lost": {c.name: c.lost_total for c in self.ring.consumers},
+            # gap records so far: sensor overruns and consumers that fell behind the ring
+            "gaps": (acq.overruns if acq else 0)
+            + sum(1 for c in self.ring.consumers if c.lost_total),
             "sim_time_s": self.clock.monotonic() - self.t_start,
         }
         if self.recorder is not None:
@@ -487,8 +577,7 @@ class Service:
     def status_line(self) -> str:
         st = self.status()
         disk = st.get("disk", {})
-        gaps = st["overruns"] + sum(1 for v in st["consumers_lost"].values() if v)
-        return (f"{st['rate_hz']:.3f} Hz, {st['samples']} samples, {gaps} gaps, "
+        return (f"{st['rate_hz']:.3f} Hz, {st['samples']} samples, {st['gaps']} gaps, "
                 f"{st.get('subscribers', 0)} subscribers, disk "
                 f"{disk.get('state', 'off')}")
 
@@ -777,6 +866,7 @@ class Service:
         log.info("run %s stopped: %s", self.run_id, self.status_line())
         if self.request_server is not None:
             self.request_server.stop()
+        self.snapshots.stop()
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None
@@ -803,40 +893,10 @@ class Service:
                 "recent": self._req_recent, "header": lambda _a: self.header()}
 
     def _req_snapshot(self, _args: dict[str, Any]) -> dict[str, Any]:
-        allan = next((w for w in self.workers if isinstance(w, AllanWorker)), None)
-        if allan is None or allan.latest is None:
+        rec = self.snapshots.reply()
+        if rec is None:
             raise AvardError("no Allan snapshot yet; ask again after snapshot_interval_s")
-        latest = allan.latest
-        if latest.get("fit") is None:
-            # Fitted on demand (a request is rare; a fit per snapshot would cost the Pi CPU
-            # every few seconds) and kept with the snapshot it belongs to.
-            latest = dict(latest, fit=self._fit(latest))
-            allan.latest = latest
-        return latest
-
-    def _fit(self, rec: dict[str, Any]) -> dict[str, Any]:
-        """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
-        try:
-            from avard.core.allan import AllanResult
-            from avard.core.fit import fit_noise
-        except ImportError:
-            return {}
-        snap = rec["snapshot"]
-        out: dict[str, Any] = {}
-        try:
-            var = np.asarray(snap["avar"], dtype=float)
-            base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
-            for c, axis in enumerate(("x", "y", "z")):
-                res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
-                                  edf=np.asarray(snap["edf"], dtype=float)[:, c],
-                                  lo=np.asarray(snap["lo"], dtype=float)[:, c],
-                                  hi=np.asarray(snap["hi"], dtype=float)[:, c],
-                                  alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
-                                  ci=float(snap["ci"]), **base)
-                out[axis] = fit_noise(res, filter_corner_hz=self.odr / 4).to_dict()
-        except (AvardError, KeyError, TypeError, ValueError) as exc:
-            log.info("no fit for the snapshot yet: %s", exc)
-        return out
+        return rec
 
     def _req_recent(self, args: dict[str, Any]) -> dict[str, Any]:
         seconds = args.get("seconds", 1.0)
@@ -844,7 +904,13 @@ class Service:
                 self.cfg["publish"]["recent_max_s"]:
             raise AvardError(f"recent: seconds={seconds!r}; allowed is 0 to "
                              f"{self.cfg['publish']['recent_max_s']:g} s")
-        chunk = self.ring.recent(int(seconds * self.odr))
+        n = int(seconds * self.odr)
+        if n * RECENT_BYTES_PER_SAMPLE > RECENT_MAX_BYTES:
+            most = RECENT_MAX_BYTES / RECENT_BYTES_PER_SAMPLE / self.odr
+            raise AvardError(f"recent: seconds={seconds:g} at {self.odr:g} Hz is "
+                             f"{n * RECENT_BYTES_PER_SAMPLE} bytes; at most {most:.3g} s per "
+                             "request (the reply memory is bounded); ask for less")
+        chunk = self.ring.recent(n)
         i0 = int(chunk.index[0]) if chunk.n else 0
         return {"i0": i0, "n": chunk.n, "counts": frames.pack_array(chunk.counts),
                 "index": frames.pack_array(chunk.index),
@@ -852,11 +918,36 @@ class Service:
                 "scale_m_s2_per_count": self.scale, "rate_hz": float(self.timebase.odr_hz)}
 
 
+def fit_snapshot(rec: dict[str, Any], *, filter_corner_hz: float) -> dict[str, Any]:
+    """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
+    try:
+        from avard.core.allan import AllanResult
+        from avard.core.fit import fit_noise
+    except ImportError:
+        return {}
+    snap = rec["snapshot"]
+    out: dict[str, Any] = {}
+    try:
+        var = np.asarray(snap["avar"], dtype=float)
+        base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
+        for c, axis in enumerate(("x", "y", "z")):
+            res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
+                              edf=np.asarray(snap["edf"], dtype=float)[:, c],
+                              lo=np.asarray(snap["lo"], dtype=float)[:, c],
+                              hi=np.asarray(snap["hi"], dtype=float)[:, c],
+                              alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
+                              ci=float(snap["ci"]), **base)
+            out[axis] = fit_noise(res, filter_corner_hz=filter_corner_hz).to_dict()
+    except (AvardError, KeyError, TypeError, ValueError) as exc:
+        log.info("no fit for the snapshot yet: %s", exc)
+    return out
+
+
 def _default_recorder(svc: Service) -> Any:
     from .recorder import Recorder
 
     r = svc.cfg["recording"]
-    return Recorder(svc.data_dir, svc.run_id, svc.header, segment_s=r["segment_s"],
+    return Recorder(svc.data_dir, svc.run_id, svc.segment_header, segment_s=r["segment_s"],
                     fsync_interval_s=r["fsync_interval_s"], retention_days=r["retention_days"],
                     retention_max_bytes=r["retention_max_bytes"],
                     min_free_bytes=r["min_free_bytes"], clock=svc.clock.monotonic,

@@ -117,6 +117,7 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
 
 
 def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
+                      odr_error_ppm: float | None = None,
                       after_tick: Callable[[float], None] | None = None,
                       **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
     """The service over the simulated rig (``build_simulated``), wired both ways: the reader
@@ -126,7 +127,7 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     ``Service`` (speed, notifier, factories, …)."""
     from .service import Service
 
-    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed)
+    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed, odr_error_ppm=odr_error_ppm)
 
     def tick(t_mono: float) -> None:
         sims.on_tick(t_mono)
