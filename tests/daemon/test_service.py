@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from avard.core.errors import NetworkError
 from avard.core.recording import RecordingReader, load_recording, replay_allan
 from avard.daemon.config import load_config
 from avard.daemon.service import Service
@@ -175,7 +176,9 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
 
 
 def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
-    cfg = _cfg(tmp_path / "rec")
+    # A snapshot every 60 s of virtual time (3 s real at speed 20): the fit of one (its own
+    # thread) is done before the next replaces it.
+    cfg = _cfg(tmp_path / "rec", **{"allan.snapshot_interval_s": 60.0})
     svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3, speed=20.0)
     answers: dict[str, Any] = {}
 
@@ -184,10 +187,14 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
         time.sleep(1.0)
         answers["status"] = sub.request("status")
         answers["recent"] = sub.request("recent", {"seconds": 2.0})
-        first = sub.request("snapshot")
-        answers["first_snapshot"] = first
+        for _ in range(400):           # none before the first snapshot interval
+            try:
+                answers["first_snapshot"] = sub.request("snapshot")
+                break
+            except NetworkError:
+                time.sleep(0.05)
         # The fit is computed off the request thread; ask again until it is there.
-        for _ in range(200):
+        for _ in range(400):
             answers["snapshot"] = sub.request("snapshot")
             if not answers["snapshot"]["fit_pending"]:
                 break
