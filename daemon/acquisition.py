@@ -31,6 +31,7 @@ import numpy as np
 from avard.core import frames
 from avard.core.errors import AvardError
 
+from .interrupt import InterruptPin
 from .pacing import drain_period_s
 from .ring import Ring
 from .timebase import TimeBase
@@ -51,12 +52,15 @@ class Acquisition:
                  speed: float | None = None, stall_s: float = 2.0,
                  on_tick: Callable[[float], None] | None = None,
                  start_index: int = 0, backpressure: bool = False,
-                 on_clock_step: Callable[[float], None] | None = None) -> None:
+                 on_clock_step: Callable[[float], None] | None = None,
+                 interrupt: InterruptPin | None = None) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
         self.clock = clock
         self.poll_hz = float(poll_hz)     # the least drain rate (sensor.poll_hz)
+        # INT1 on the FIFO watermark (interrupt.py): wait on the pin, the timer as fallback
+        self.interrupt = interrupt
         self.chip_interval_s = float(chip_interval_s)
         self.run_id = run_id
         self.speed = speed
@@ -119,11 +123,21 @@ class Acquisition:
             while not self._stop.is_set():
                 self.poll_once()
                 period = self.period
-                next_t += period
-                now = self.clock.monotonic()
-                if next_t < now - 10 * period:
-                    next_t = now  # fell far behind (a slow machine): do not try to catch up
-                self.clock.sleep(max(0.0, next_t - now))
+                if self.interrupt is not None:
+                    # The pin rises at the watermark (FIFO half full); the timeout is the
+                    # timer's fallback (a pin that never rises costs latency, not data), and
+                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
+                    t_drain = self.clock.monotonic()
+                    self.interrupt.wait(1.5 * period)
+                    early = t_drain + 0.25 * period - self.clock.monotonic()
+                    if early > 0:
+                        self.clock.sleep(early)
+                else:
+                    next_t += period
+                    now = self.clock.monotonic()
+                    if next_t < now - 10 * period:
+                        next_t = now  # fell far behind (a slow machine): do not catch up
+                    self.clock.sleep(max(0.0, next_t - now))
                 if self.speed:
                     # Cap the pace at speed × real time (the virtual clock is stepped).
                     ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)

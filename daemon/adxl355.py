@@ -213,6 +213,7 @@ class _Config:
     range_g: int = 2
     rate: R.Rate = field(default_factory=lambda: R.RATES[0])
     watermark: int = R.FIFO_LOCATIONS
+    int1_watermark: bool = False
 
 
 # -- the driver ----------------------------------------------------------------------------------
@@ -355,10 +356,12 @@ class Adxl355:
         self._carry = b""
 
     def configure(self, range_g: int = 2, odr_hz: float = 4000.0,
-                  watermark: int | None = None) -> None:
+                  watermark: int | None = None, *, int1_watermark: bool = False) -> None:
         """Program range (±2/4/8 g), output rate (low-pass at ODR/4, high-pass off: an Allan
         variance needs the DC path) and the FIFO watermark in FIFO *locations* (1–96, one axis
-        each; default 96). Goes to standby first; every register is read back."""
+        each; default 96). ``int1_watermark``: route FIFO_FULL (the watermark reached) to the
+        INT1 pin, active high, for a reader that waits on the pin (interrupt.py). Goes to
+        standby first; every register is read back."""
         code = R.range_code(range_g)
         rate = R.rate_for(odr_hz)
         wm = R.FIFO_LOCATIONS if watermark is None else int(watermark)
@@ -367,14 +370,17 @@ class Adxl355:
         self.standby()
         rng = self._read(A["RANGE"], 1)[0]
         rng = R.REGISTERS["RANGE"].fields["RANGE"].put(rng, code)
-        for name, value in (("FILTER", rate.code), ("RANGE", rng), ("FIFO_SAMPLES", wm)):
+        rng = R.REGISTERS["RANGE"].fields["INT_POL"].put(rng, 1 if int1_watermark else 0)
+        int_map = R.INT_MAP_FULL_EN1 if int1_watermark else 0
+        for name, value in (("FILTER", rate.code), ("RANGE", rng), ("FIFO_SAMPLES", wm),
+                            ("INT_MAP", int_map)):
             self._write(A[name], value)
             back = self._read(A[name], 1)[0]
             if back != value:
                 raise HardwareError(
                     f"ADXL355 configure: wrote 0x{value:02X} to {name}, read back 0x{back:02X};"
                     " the chip refused the write (not in standby?) or the bus corrupts data")
-        self.config = _Config(int(range_g), rate, wm)
+        self.config = _Config(int(range_g), rate, wm, int1_watermark)
         max_odr = getattr(self.bus, "max_odr_hz", None)
         if max_odr is not None and rate.odr_hz > max_odr():
             log.warning("ODR %g Hz needs %.0f kbit/s of FIFO data; the %g kHz I2C bus carries "
@@ -405,7 +411,7 @@ class Adxl355:
         info = self.probe()
         self.reset()
         c = self.config
-        self.configure(c.range_g, c.rate.odr_hz, c.watermark)
+        self.configure(c.range_g, c.rate.odr_hz, c.watermark, int1_watermark=c.int1_watermark)
         self._note_gap("recovered")
         self.start()
         return info

@@ -76,6 +76,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "odr_hz": Key(_NUM, 125.0, "Hz", choices=ODR_CHOICES, doc="output data rate"),
         "poll_hz": Key(_NUM, 4.0, "Hz", 1.0, 2000.0,
                        doc="least FIFO drain rate; raised to drain the FIFO half full"),
+        "int1_gpio": Key(str, "", doc="GPIO of the INT1 pin as CHIP:LINE (e.g. gpiochip0:25): "
+                         "wait on the FIFO watermark instead of a timer; empty: timer"),
         "temp_intercept_lsb": Key(_NUM, 1885.0, "LSB", 1700.0, 2100.0,
                                   doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)"),
     },

@@ -285,6 +285,46 @@ class EmulatedAdxl355:
     def fifo_entries(self) -> int:
         return len(self.fifo) // 3
 
+    def int_level(self, pin: int = 1) -> bool:
+        """The INT1/INT2 pin's electrical level now: the sources INT_MAP routes to it (FIFO
+        watermark, data ready, overrun), driven active high or low by RANGE.INT_POL."""
+        with self.lock:
+            self._update()
+            status = self._status()
+            imap = self.regs[R.ADDR["INT_MAP"]] >> (4 if pin == 2 else 0)
+            active = bool((imap & R.INT_MAP_RDY_EN1 and status & R.STATUS_DATA_RDY)
+                          or (imap & R.INT_MAP_FULL_EN1 and status & R.STATUS_FIFO_FULL)
+                          or (imap & 0x04 and status & R.STATUS_FIFO_OVR))
+            high = bool(self.regs[R.ADDR["RANGE"]] & 0x40)
+            return active if high else not active
+
+    def seconds_to_int(self, pin: int = 1) -> float:
+        """When the pin will next assert from the FIFO watermark or data ready, the sources
+        this model schedules (inf when INT_MAP routes neither to it or nothing is produced)."""
+        with self.lock:
+            imap = self.regs[R.ADDR["INT_MAP"]] >> (4 if pin == 2 else 0)
+            if imap & R.INT_MAP_FULL_EN1:
+                return self.seconds_to_watermark()
+            if imap & R.INT_MAP_RDY_EN1 and self._measuring and not self.stalled:
+                self._update()
+                due = self._t_start + (self.produced + 1) / self.true_odr_hz
+                return max(0.0, due - self.clock.monotonic())
+            return math.inf
+
+    def seconds_to_watermark(self) -> float:
+        """When the FIFO will reach its FIFO_SAMPLES watermark (0 if it has; inf when the part
+        is not producing)."""
+        with self.lock:
+            self._update()
+            if not self._measuring or self.stalled:
+                return math.inf
+            wm = self.regs[R.ADDR["FIFO_SAMPLES"]] & 0x7F
+            missing_sets = -(-(wm - self.fifo_entries) // 3)
+            if missing_sets <= 0:
+                return 0.0
+            due = self.produced + missing_sets       # set number that completes the watermark
+            return max(0.0, self._t_start + due / self.true_odr_hz - self.clock.monotonic())
+
     def range_g(self) -> int:
         return R.RANGE_BY_CODE.get(self.regs[R.ADDR["RANGE"]] & 0x03, 2)
 

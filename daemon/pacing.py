@@ -11,6 +11,8 @@ ring and the subscribers).
 
 from __future__ import annotations
 
+from typing import Any
+
 from .registers import FIFO_LOCATIONS
 
 #: X/Y/Z sets the FIFO holds.
@@ -28,3 +30,10 @@ def drain_period_s(odr_hz: float, poll_hz: float) -> float:
 def watermark_sets() -> int:
     """FIFO_SAMPLES watermark for the interrupt-driven reader, in sets (same fill target)."""
     return max(1, round(FILL_TARGET * FIFO_SETS))
+
+
+def watermark_settings(use_int1: bool) -> dict[str, Any]:
+    """``Adxl355.configure`` arguments for a reader that waits on INT1 at this fill."""
+    if not use_int1:
+        return {}
+    return {"watermark": 3 * watermark_sets(), "int1_watermark": True}

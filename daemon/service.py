@@ -456,7 +456,8 @@ class Service:
                  request_factory: Callable[..., Any] | None = None,
                  streaming_cls: Any = None, on_tick: Callable[[float], None] | None = None,
                  sensor_info: dict[str, Any] | None = None,
-                 extra_temperature_names: list[str] | None = None) -> None:
+                 extra_temperature_names: list[str] | None = None,
+                 interrupt: Any = None) -> None:
         self.cfg = cfg
         self.sensor = sensor
         self.clock = clock
@@ -468,6 +469,7 @@ class Service:
         self._temp_ok: dict[str, bool] = {}
         self.sensor_info = dict(sensor_info or {})
         self.notifier = notifier
+        self.interrupt = interrupt        # interrupt.InterruptPin on the FIFO watermark
         self.stop_requested = threading.Event()
         self.reopen_requested = threading.Event()
         self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
@@ -714,7 +716,8 @@ class Service:
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
-                               backpressure=self.simulate is not None)
+                               backpressure=self.simulate is not None,
+                               interrupt=self.interrupt)
         acfg = cfg["allan"]
         # Consumers take what accumulated over a batch time instead of every drain; not when
         # a simulation runs unpaced (its reader waits for them: batching would slow it).

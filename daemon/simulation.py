@@ -21,6 +21,8 @@ from avard.core import frames
 
 from .adxl355 import Adxl355
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
+from .interrupt import EmulatedInterruptPin
+from .pacing import watermark_settings
 from .transport import SpiBus
 
 if TYPE_CHECKING:
@@ -111,9 +113,11 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
                   temp_intercept_lsb=float(s["temp_intercept_lsb"]))
     dev.probe()
     dev.reset()
-    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
+    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]),
+                  **watermark_settings(bool(s.get("int1_gpio"))))
     dev.start()
     return dev, clock, sims, emu
+
 
 
 def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
@@ -134,6 +138,8 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
         if after_tick is not None:
             after_tick(t_mono)
 
+    if cfg["sensor"].get("int1_gpio"):
+        service_kw.setdefault("interrupt", EmulatedInterruptPin(emu, clock))
     svc = Service(cfg, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)

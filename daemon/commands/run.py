@@ -68,6 +68,7 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
             **service_kw)
         return svc
     from avard.daemon.adxl355 import Adxl355
+    from avard.daemon.pacing import watermark_settings
     from avard.daemon.timebase import SystemClock
     from avard.daemon.transport import open_bus
 
@@ -78,10 +79,17 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
     dev = Adxl355(bus, temp_intercept_lsb=float(s["temp_intercept_lsb"]))
     info = dev.probe()
     dev.reset()
-    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
+    interrupt = None
+    if s["int1_gpio"]:
+        from avard.daemon.interrupt import GpiodPin
+
+        interrupt = GpiodPin(s["int1_gpio"])
+    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]),
+                  **watermark_settings(interrupt is not None))
     dev.start()
     bank = _ds18b20_bank(cfg)
     return Service(cfg, dev, SystemClock(), temperature_bank=bank, notifier=notifier,
+                   interrupt=interrupt,
                    sensor_info={"device": info.name, "partid": info.partid,
                                 "revid": info.revid, "bus": s["bus"]}, **service_kw)
 
