@@ -17,6 +17,9 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+from avard.core.errors import AvardError
+
 log = logging.getLogger(__name__)
 
 Fit = Callable[[dict[str, Any]], dict[str, Any]]
@@ -91,3 +94,28 @@ class SnapshotBoard:
                 self._fitted, self._fit_result = rec, result
                 self.fits += 1
                 self._cond.notify_all()
+
+
+def fit_snapshot(rec: dict[str, Any], *, filter_corner_hz: float) -> dict[str, Any]:
+    """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
+    try:
+        from avard.core.allan import AllanResult
+        from avard.core.fit import fit_noise
+    except ImportError:
+        return {}
+    snap = rec["snapshot"]
+    out: dict[str, Any] = {}
+    try:
+        var = np.asarray(snap["avar"], dtype=float)
+        base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
+        for c, axis in enumerate(("x", "y", "z")):
+            res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
+                              edf=np.asarray(snap["edf"], dtype=float)[:, c],
+                              lo=np.asarray(snap["lo"], dtype=float)[:, c],
+                              hi=np.asarray(snap["hi"], dtype=float)[:, c],
+                              alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
+                              ci=float(snap["ci"]), **base)
+            out[axis] = fit_noise(res, filter_corner_hz=filter_corner_hz).to_dict()
+    except (AvardError, KeyError, TypeError, ValueError) as exc:
+        log.info("no fit for the snapshot yet: %s", exc)
+    return out
