@@ -72,8 +72,10 @@ class AllanStage(Stage):
                 self.feed.gap()
         if chunk.n:
             self._t = float(chunk.t_mono[-1])
-        else:
-            return   # the timers run on sample time: nothing new, nothing due
+        # The timers start at the first chunk, which usually holds only the start marks
+        # (_t = 0): the first snapshot and checkpoint then come with the first samples. The
+        # restore relies on that early checkpoint (it replays only the checkpoint's own run;
+        # issue #16 makes it replay every run, after which this can become deliberate).
         if self._next_snap is None or self._next_ckpt is None:
             self._next_snap = self._t + self.snapshot_interval_s
             self._next_ckpt = self._t + self.checkpoint_interval_s
