@@ -34,6 +34,7 @@ from avard.core.errors import (
 )
 
 from . import registers as R
+from .source import GapReason, parse_reasons
 from .timebase import SystemClock
 from .transport import RegisterBus
 
@@ -190,6 +191,11 @@ class Drain:
         return int(self.counts.shape[0])
 
     @property
+    def gap_reasons(self) -> tuple[GapReason, ...]:
+        """``gap_reason`` as the typed reasons (source.py)."""
+        return parse_reasons(self.gap_reason)
+
+    @property
     def last_index(self) -> int:
         """Index of the newest set in this drain (``index0 − 1`` when empty)."""
         return self.index0 + self.n_sets - 1
@@ -248,7 +254,7 @@ class Adxl355:
         self.realignments = 0
         self._next_index = 0
         self._carry = b""
-        self._gap_reasons: list[str] = []
+        self._gap_reasons: list[GapReason] = []
         self._measuring = False
         self._last_data_t: float | None = None
         self._last_drain_t: float | None = None
@@ -273,7 +279,7 @@ class Adxl355:
                 last = exc
                 self.bus_errors += 1
                 if in_drain:
-                    self._note_gap("bus_error")
+                    self._note_gap(GapReason.BUS_ERROR)
                 (log.warning if _often(self.bus_errors) else log.debug)(
                     "ADXL355 %s at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
                     what, addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
@@ -281,7 +287,7 @@ class Adxl355:
         assert last is not None
         raise last
 
-    def _note_gap(self, reason: str, *, keep_carry: bool = False) -> None:
+    def _note_gap(self, reason: GapReason, *, keep_carry: bool = False) -> None:
         if reason not in self._gap_reasons:
             self._gap_reasons.append(reason)
         if not keep_carry:
@@ -347,9 +353,9 @@ class Adxl355:
                 raise HardwareError(f"ADXL355 reset: NVM_BUSY still set after {timeout_s} s "
                                     f"(STATUS 0x{status:02X}); power-cycle the sensor")
             self.clock.sleep(0.001)
-        self._stopped("reset")
+        self._stopped(GapReason.RESET)
 
-    def _stopped(self, reason: str) -> None:
+    def _stopped(self, reason: GapReason) -> None:
         if self._next_index:  # a gap only means something after delivered samples
             self._note_gap(reason)
         self._measuring = False
@@ -393,7 +399,7 @@ class Adxl355:
     def start(self) -> None:
         """Enter measurement mode (temperature on, DRDY on)."""
         if self._next_index:
-            self._note_gap("restart")
+            self._note_gap(GapReason.RESTART)
         self._write(A["POWER_CTL"], 0x00)
         self._measuring = True
         self._carry = b""
@@ -403,7 +409,7 @@ class Adxl355:
         """Enter standby (the chip clears its FIFO)."""
         ctl = self._read(A["POWER_CTL"], 1)[0]
         self._write(A["POWER_CTL"], ctl | R.POWER_STANDBY)
-        self._stopped("standby")
+        self._stopped(GapReason.STANDBY)
 
     def recover(self) -> DeviceInfo:
         """After a hardware error: probe, reset, reprogram the last configuration and start
@@ -412,7 +418,7 @@ class Adxl355:
         self.reset()
         c = self.config
         self.configure(c.range_g, c.rate.odr_hz, c.watermark, int1_watermark=c.int1_watermark)
-        self._note_gap("recovered")
+        self._note_gap(GapReason.RECOVERED)
         self.start()
         return info
 
@@ -467,7 +473,7 @@ class Adxl355:
                 "wiring, then recover()")
         if status & R.STATUS_FIFO_OVR:
             self.overruns += 1
-            self._note_gap("fifo_overrun")
+            self._note_gap(GapReason.FIFO_OVERRUN)
             (log.warning if _often(self.overruns) else log.debug)(
                 "ADXL355 FIFO overrun #%d: an unknown number of sets was lost", self.overruns)
         c = len(self._carry) // 3
@@ -486,7 +492,7 @@ class Adxl355:
             if post & R.STATUS_FIFO_OVR:
                 tight = False  # the sets read were produced after t_mono
                 self.overruns += 1
-                self._note_gap("fifo_overrun")
+                self._note_gap(GapReason.FIFO_OVERRUN)
                 status |= post
                 (log.warning if _often(self.overruns) else log.debug)(
                     "ADXL355 FIFO overrun #%d during the drain: an unknown number of sets was "
@@ -494,7 +500,7 @@ class Adxl355:
         dec = decode_fifo(self._carry + data)
         if dec.dropped or dec.empty:
             self.realignments += 1
-            self._note_gap("realigned", keep_carry=True)
+            self._note_gap(GapReason.REALIGNED, keep_carry=True)
             (log.warning if _often(self.realignments) else log.debug)(
                 "ADXL355 FIFO misaligned (#%d): %d entries dropped, %d empty; realigned on the "
                 "X marker", self.realignments, dec.dropped, dec.empty)
@@ -522,7 +528,7 @@ class Adxl355:
     def _diagnose_stall(self, silent_s: float) -> None:
         self.probe()  # raises HardwareError when the bus reads nonsense
         ctl = self._read(A["POWER_CTL"], 1)[0]
-        self._note_gap("stall")
+        self._note_gap(GapReason.STALL)
         if ctl & R.POWER_STANDBY:
             raise DeviceStalledError(
                 f"ADXL355 returned no samples for {silent_s:.2f} s and is in standby "
@@ -630,7 +636,7 @@ class Adxl355:
         passed = not saturated and all(
             lo <= d <= hi for d, (lo, hi) in zip(delta, limits_g, strict=True))
         if was and self._next_index:
-            self._note_gap("self_test")
+            self._note_gap(GapReason.SELF_TEST)
         else:
             self.standby()
         result = SelfTestResult((float(delta[0]), float(delta[1]), float(delta[2])),
