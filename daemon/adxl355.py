@@ -36,7 +36,7 @@ from avard.core.errors import (
 from . import registers as R
 from .source import GapReason, parse_reasons
 from .timebase import SystemClock
-from .transport import RegisterBus
+from .transport import I2cBus, RegisterBus
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -387,12 +387,12 @@ class Adxl355:
                     f"ADXL355 configure: wrote 0x{value:02X} to {name}, read back 0x{back:02X};"
                     " the chip refused the write (not in standby?) or the bus corrupts data")
         self.config = _Config(int(range_g), rate, wm, int1_watermark)
-        max_odr = getattr(self.bus, "max_odr_hz", None)
-        if max_odr is not None and rate.odr_hz > max_odr():
+        if isinstance(self.bus, I2cBus) and rate.odr_hz > self.bus.max_odr_hz():
             log.warning("ODR %g Hz needs %.0f kbit/s of FIFO data; the %g kHz I2C bus carries "
                         "about %g Hz: expect overruns. Use SPI, a lower ODR, or "
                         "dtparam=i2c_arm_baudrate=400000", rate.odr_hz,
-                        rate.odr_hz * 81 / 1e3, self.bus.bitrate_hz / 1e3, max_odr())
+                        rate.odr_hz * 81 / 1e3, self.bus.bitrate_hz / 1e3,
+                        self.bus.max_odr_hz())
         log.info("ADXL355 configured: ±%d g, ODR %g Hz (low-pass %g Hz), watermark %d",
                  range_g, rate.odr_hz, rate.lowpass_hz, wm)
 
