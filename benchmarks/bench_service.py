@@ -12,7 +12,12 @@ directory, publishing on loopback with a real subscriber counting every sample. 
 - sample-to-subscriber latency p50/p99: from when a raw block's last sample was due (sample
   time mapped to wall time through the run's start) to when the subscriber decoded it.
 
-Reference, measured in the same run at the same rate and poll period: the drain loop alone
+- peak RSS (VmHWM) of `avard run` as its own process, twice: ``--simulate quiet-lab`` (the
+  simulator needs scipy.signal, ~55 MB of it) and the hardware path, where the emulated
+  ADXL355 is fed by a numpy counter instead of the simulator (what `avard run` loads on a Pi:
+  no scipy, no matplotlib).
+
+Reference, measured in the same run at the same rate and drain period: the drain loop alone
 (driver over emulator over simulator, no ring consumers, no disk, no sockets). The ratio says
 what the service adds on top of reading the (emulated) sensor; on a Pi the emulator and the
 simulator are replaced by spidev, so the service's own share is the difference.
@@ -22,6 +27,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -100,7 +108,7 @@ def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
     cfg = _cfg(odr, tempfile.gettempdir())
     dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=1)
     acq = Acquisition(dev, Ring(int(odr * 30)), TimeBase(odr), clock,
-                      poll_hz=effective_poll_hz(cfg), speed=1.0)
+                      poll_hz=float(cfg["sensor"]["poll_hz"]), speed=1.0)
     cpu0 = time.process_time()
     t0 = clock.monotonic()
     acq.start()
@@ -108,6 +116,52 @@ def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
     acq.stop()
     return {"cpu": time.process_time() - cpu0, "sim": clock.monotonic() - t0,
             "overruns": acq.overruns, "samples": acq.samples}
+
+
+_RSS_HARDWARE_PATH = r"""
+import sys
+from avard.daemon import blas_threads
+from avard.daemon.adxl355 import Adxl355
+from avard.daemon.config import load_config
+from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.service import Service
+from avard.daemon.transport import SpiBus
+odr, seconds, data_dir = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+clock = VirtualClock(speed=1.0)
+dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
+dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
+cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
+    "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
+Service(cfg, dev, clock, speed=1.0).run(seconds)
+heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
+print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
+"""
+
+
+def _rss_mb(odr: float, seconds: float, simulate: bool) -> tuple[float, str]:
+    """Peak RSS (MB) of the service as its own process, and the heavy modules it loaded."""
+    with tempfile.TemporaryDirectory(prefix="avard-bench-rss-") as d:
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if simulate:
+            cfg = os.path.join(d, "avard.toml")
+            with open(cfg, "w") as f:
+                f.write(f"[sensor]\nodr_hz = {odr}\n[publish]\nendpoint = 'tcp://127.0.0.1:0'"
+                        "\nrequest_endpoint = 'tcp://127.0.0.1:0'\n")
+            code = ("import sys, runpy\nsys.argv = ['avard'] + sys.argv[1:]\n"
+                    "from avard.daemon.cli import main\nrc = main()\n"
+                    "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
+                    "{'scipy', 'matplotlib'})\n"
+                    "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0], "
+                    "','.join(heavy) or '-')")
+            args = [sys.executable, "-c", code, "run", "--config", cfg, "--simulate",
+                    "quiet-lab", "--duration", str(seconds), "--data-dir", d]
+        else:
+            args = [sys.executable, "-c", _RSS_HARDWARE_PATH, str(odr), str(seconds), d]
+        out = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+        if out.returncode != 0:
+            raise RuntimeError(out.stderr[-2000:])
+        kb, heavy = out.stdout.split()[-2:]
+        return int(kb) / 1024, heavy
 
 
 def main(argv: list[str]) -> int:
@@ -121,22 +175,27 @@ def main(argv: list[str]) -> int:
     for odr in (float(r) for r in args.rates.split(",")):
         ref = _drain_only(odr, args.seconds)
         res = _service_run(odr, args.seconds)
+        res["rss_sim"], res["heavy_sim"] = _rss_mb(odr, min(args.seconds, 10.0), True)
+        res["rss_hw"], res["heavy_hw"] = _rss_mb(odr, min(args.seconds, 10.0), False)
         rows.append((odr, res, ref))
     print(f"service at --speed 1 for {args.seconds:g} s per rate (emulated ADXL355, quiet-lab); "
-          "CPU = process CPU s (all threads) per simulated s")
-    hdr = (f"{'ODR Hz':>7} {'poll Hz':>7} {'sim s':>6} {'samples':>8} {'overruns':>8} "
+          "CPU = process CPU s (all threads, the bench's subscriber included) per simulated s")
+    hdr = (f"{'ODR Hz':>7} {'drain Hz':>8} {'sim s':>6} {'samples':>8} {'overruns':>8} "
            f"{'recv ok':>7} {'CPU/sim s':>9} {'ref CPU/s':>9} {'ratio':>6} "
-           f"{'lat p50 ms':>10} {'p99 ms':>7}")
+           f"{'lat p50 ms':>10} {'p99 ms':>7} {'RSS sim MB':>10} {'RSS hw MB':>9}")
     print(hdr)
     print("-" * len(hdr))
     for odr, r, ref in rows:
         cps = r["cpu"] / r["sim"]
         ref_cps = ref["cpu"] / ref["sim"]
         ok = "yes" if r["continuous"] and r["received"] == r["samples"] else "NO"
-        print(f"{odr:7g} {r['poll']:7.1f} {r['sim']:6.1f} {r['samples']:8d} {r['overruns']:8d} "
+        print(f"{odr:7g} {r['poll']:8.1f} {r['sim']:6.1f} {r['samples']:8d} {r['overruns']:8d} "
               f"{ok:>7} {cps:9.3f} {ref_cps:9.3f} {cps / ref_cps:6.2f} {r['p50']:10.1f} "
-              f"{r['p99']:7.1f}")
-    print("ref = drain loop alone (driver + emulator + simulator) at the same poll rate; "
+              f"{r['p99']:7.1f} {r['rss_sim']:10.1f} {r['rss_hw']:9.1f}")
+    print("ref = drain loop alone (driver + emulator + simulator) at the same drain period; "
           "ratio = service / ref")
+    print("RSS = peak resident memory of `avard run` as its own process: sim = --simulate "
+          f"(loads {rows[0][1]['heavy_sim']}), hw = the hardware path, emulator fed by a "
+          f"counter (loads {rows[0][1]['heavy_hw']} of scipy/matplotlib)")
     bad = any(r["overruns"] for odr, r, _ in rows if odr >= 4000)
     return 1 if bad else 0
