@@ -23,6 +23,7 @@ from .adxl355 import Adxl355
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from .interrupt import EmulatedInterruptPin
 from .pacing import watermark_settings
+from .source import MarkSink
 from .transport import SpiBus
 
 if TYPE_CHECKING:
@@ -41,7 +42,7 @@ class SimulatedSensors:
     chip_c: float = float("nan")
     names: tuple[str, str] = ("28-00000000plate", "28-0000000ambient")
     interval_s: float = 1.0
-    service: Any = None
+    sink: MarkSink | None = None      # where the simulated DS18B20 readings go
     _next: float = field(default=0.0)
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
     _lost: set[str] = field(default_factory=set)
@@ -72,22 +73,23 @@ class SimulatedSensors:
 
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
-        svc = self.service
-        if svc is None or t_mono < self._next or np.isnan(self.plate_c):
+        sink = self.sink
+        if sink is None or t_mono < self._next or np.isnan(self.plate_c):
             return
         self._next = t_mono + self.interval_s
         values = []
-        i0 = svc.acq.stamp()
+        i0 = sink.stamp()
+        t_real = t_mono + sink.real_offset()
         for name, v in zip(self.names, (self.plate_c, self.ambient_c), strict=True):
             lost = name in self.fail
             values.append(None if lost else round(v / DS18B20_LSB_C) * DS18B20_LSB_C)
             if lost != (name in self._lost):
                 (self._lost.add if lost else self._lost.discard)(name)
-                svc.ring.mark(frames.event_record(
-                    svc.run_id, 0, "sensor_lost" if lost else "sensor_back", t_mono,
-                    t_mono + svc.real_offset, i0=i0, detail={"sensor": name}))
-        svc.ring.mark(frames.temp_record(svc.run_id, 0, i0, list(self.names), values, t_mono,
-                                         t_mono + svc.real_offset, source="ds18b20-sim"))
+                sink.mark(frames.event_record(
+                    sink.run_id, 0, "sensor_lost" if lost else "sensor_back", t_mono, t_real,
+                    i0=i0, detail={"sensor": name}))
+        sink.mark(frames.temp_record(sink.run_id, 0, i0, list(self.names), values, t_mono,
+                                     t_real, source="ds18b20-sim"))
 
 
 def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
@@ -143,5 +145,5 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     svc = Service(cfg, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)
-    sims.service = svc
+    sims.sink = svc.mark_sink()
     return svc, sims, emu

@@ -37,6 +37,7 @@ from .. import __version__
 from ..acquisition import Acquisition
 from ..ring import Ring
 from ..snapshots import SnapshotBoard, fit_snapshot
+from ..source import MarkSink
 from ..timebase import TimeBase
 from .allan_stage import AllanStage
 from .checkpoint import last_recorded, restore_accumulators, save_state
@@ -132,6 +133,11 @@ class Service:
 
     def _next_index(self) -> int:
         return self.acq.next_index if self.acq else self.start_index
+
+    def mark_sink(self) -> MarkSink:
+        """What a source of readings beside the samples needs (daemon/source.py)."""
+        return MarkSink(self.run_id, self._next_index, self.ring.mark,
+                        lambda: self.real_offset)
 
     def header(self) -> dict[str, Any]:
         """The run's current header record (see :class:`RunHeader`)."""
