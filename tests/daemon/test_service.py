@@ -112,6 +112,17 @@ def test_every_sample_published_and_recorded_once_and_allan_matches(tmp_path: Pa
     assert avars[-1]["n_samples"] == offline.n_samples
     assert _rel(_snapshot_avar(avars[-1]), offline.avar) < 1e-12
     assert _rel(np.asarray(avars[-1]["snapshot"]["cov"]), offline.cov) < 1e-12
+    # The header travels on the status topic (first, then when the fitted rate moves), the
+    # same record the recording holds; status maps carry every documented field.
+    on_status = [r for t, r in lst.records if t == "status"]
+    headers = [r for r in on_status if r["kind"] == "header"]
+    assert headers and headers[0]["run"] == svc.run_id
+    recorded = {r["rate_hz"] for r in recs if r["kind"] == "header"}
+    assert {h["rate_hz"] for h in headers} <= recorded
+    status = [r["status"] for r in on_status if r["kind"] == "status"][-1]
+    assert {"run", "samples", "index", "rate_hz", "overruns", "lost_samples_estimate", "gaps",
+            "bus_errors", "clock_steps", "stalled", "allan_samples", "consumers_lost",
+            "sim_time_s", "disk", "subscribers", "published", "publish_dropped"} <= set(status)
     # And the SI conversion of the whole recording.
     record = load_recording(tmp_path / "rec")
     assert record.accel.shape == (st["samples"], 3)
