@@ -58,7 +58,34 @@ def _thread_cpu_s(tid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _service_run(odr: float, seconds: float) -> dict[str, Any]:
+_CLIENT = r"""
+import sys, time, zmq, msgpack
+endpoint, mode, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+ctx = zmq.Context()
+s = ctx.socket(zmq.DEALER); s.setsockopt(zmq.LINGER, 0); s.connect(endpoint)
+reqs = [msgpack.packb({"op": op, "args": a, "id": i}) for i, (op, a) in enumerate(
+    [("status", {}), ("snapshot", {}), ("recent", {"seconds": 1.0}), ("nosuch", {})])]
+reqs.append(b"\xc1garbage")
+end, n = time.monotonic() + seconds, 0
+if mode == "noread":   # asks for the biggest replies and never reads one
+    big = msgpack.packb({"op": "recent", "args": {"seconds": 5.0}, "id": 1})
+    s.setsockopt(zmq.RCVHWM, 1); s.setsockopt(zmq.RCVBUF, 4096)
+    while time.monotonic() < end:
+        s.send_multipart([b"", big]); n += 1; time.sleep(0.001)
+else:                  # as fast as it can, reading what comes back
+    while time.monotonic() < end:
+        s.send_multipart([b"", reqs[n % len(reqs)]]); n += 1
+        while s.poll(0):
+            s.recv_multipart()
+print(n / seconds)
+"""
+
+
+def _vm_rss_mb() -> float:
+    return int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) / 1024
+
+
+def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as d:
         cfg = _cfg(odr, d)
         svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, speed=1.0)
@@ -97,8 +124,26 @@ def _service_run(odr: float, seconds: float) -> dict[str, Any]:
             origin["virt"] = clock.monotonic()
             origin["cpu"] = time.process_time()
             origin["sub_cpu"] = _thread_cpu_s(int(origin["sub_tid"]))
+            origin["rss0"] = _vm_rss_mb()
+            if client is not None:   # a hostile request client, in its own process
+                origin["client"] = subprocess.Popen(  # type: ignore[assignment]
+                    [sys.executable, "-c", _CLIENT, svc.request_server.endpoint, client,
+                     str(seconds)], stdout=subprocess.PIPE, text=True)
 
+        rss = {"max": 0.0}
+
+        def watch_rss() -> None:
+            while not stop.is_set():
+                rss["max"] = max(rss["max"], _vm_rss_mb())
+                stop.wait(0.25)
+
+        threading.Thread(target=watch_rss, daemon=True).start()
         svc.run(seconds, before_acquisition=before)
+        drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
+        req_rate = float("nan")
+        if client is not None:
+            out, _ = origin["client"].communicate(timeout=60)  # type: ignore[attr-defined]
+            req_rate = float(out.split()[-1])
         # The bench's subscriber is a client, not the service: its thread's CPU is taken out.
         sub_cpu = _thread_cpu_s(int(origin["sub_tid"])) - origin["sub_cpu"]
         cpu = time.process_time() - origin["cpu"] - sub_cpu
@@ -108,7 +153,10 @@ def _service_run(odr: float, seconds: float) -> dict[str, Any]:
         origin["sub"].close()  # type: ignore[attr-defined]
         st = svc.final_status
         lat_ms = np.array(lat) * 1e3 if lat else np.array([np.nan])
-        return {"cpu": cpu, "sub_cpu": sub_cpu, "wall": wall, "sim": st["sim_time_s"],
+        return {"drain_max_s": drain_max, "rss_growth": rss["max"] - origin["rss0"],
+                "req_rate": req_rate, "answered": svc.request_server.answered
+                if svc.request_server else 0,
+                "cpu": cpu, "sub_cpu": sub_cpu, "wall": wall, "sim": st["sim_time_s"],
                 "samples": st["samples"],
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
@@ -181,6 +229,8 @@ def main(argv: list[str]) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seconds", type=float, default=10.0, help="real seconds per rate")
     p.add_argument("--rates", default="125,4000", help="ODRs in Hz, comma separated")
+    p.add_argument("--clients", action="store_true",
+                   help="also run each rate under a request flood and a never-reading client")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     rows = []
@@ -211,5 +261,27 @@ def main(argv: list[str]) -> int:
     print("RSS = peak resident memory of `avard run` as its own process: sim = --simulate "
           f"(loads {rows[0][1]['heavy_sim']}), hw = the hardware path, emulator fed by a "
           f"counter (loads {rows[0][1]['heavy_hw']} of scipy/matplotlib)")
+    if args.clients:
+        _client_table(rows, args.seconds)
     bad = any(r["overruns"] for odr, r, _ in rows if odr >= 4000)
     return 1 if bad else 0
+
+
+def _client_table(rows: list[tuple[float, dict[str, Any], dict[str, Any]]],
+                  seconds: float) -> None:
+    """The same service with a hostile request client in another process: a flood of
+    requests (status, snapshot, recent, unknown op, garbage) read as fast as it can, and a
+    client asking for the largest `recent` replies and never reading one."""
+    print()
+    print("request clients (another process) against the same service; FIFO time = 32/ODR")
+    hdr = (f"{'ODR Hz':>7} {'client':>8} {'req/s sent':>10} {'answered':>8} {'overruns':>8} "
+           f"{'max drain gap / FIFO time':>25} {'CPU/sim s':>9} {'RSS growth MB':>13}")
+    print(hdr)
+    print("-" * len(hdr))
+    for odr, quiet, _ref in rows:
+        for client in (None, "flood", "noread"):
+            r = quiet if client is None else _service_run(odr, seconds, client)
+            fifo_s = 32.0 / odr
+            print(f"{odr:7g} {client or 'none':>8} {r['req_rate']:10.0f} {r['answered']:8d} "
+                  f"{r['overruns']:8d} {r['drain_max_s'] / fifo_s:25.2f} "
+                  f"{r['cpu'] / r['sim']:9.3f} {r['rss_growth']:13.1f}")

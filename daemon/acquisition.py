@@ -85,6 +85,7 @@ class Acquisition:
         self._last_drain_t: float | None = None
         self._next_chip = 0.0
         self._next_recover = 0.0
+        self.max_drain_interval_s = 0.0   # longest drain-to-drain interval (benchmarks)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -211,6 +212,8 @@ class Acquisition:
                 self.mark(frames.event_record(self.run_id, 0, "resumed", t_mono, t_real,
                                               i0=i0))
             self.first_samples.set()
+        if self._last_drain_t is not None:
+            self.max_drain_interval_s = max(self.max_drain_interval_s, t_mono - self._last_drain_t)
         self._last_drain_t = t_mono
         if t_mono >= self._next_chip:
             self._next_chip = t_mono + self.chip_interval_s

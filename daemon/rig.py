@@ -93,7 +93,7 @@ def _simulated(cfg: dict[str, dict[str, Any]], preset: str, seed: int | None,
     pin = EmulatedInterruptPin(emu, clock) if cfg["sensor"]["int1_gpio"] else None
 
     def attach(svc: Any) -> None:
-        sims.sink = svc.mark_sink()
+        sims.deliver = svc.temperature_reading
 
     return Rig(dev, clock, {"device": "ADXL355 (emulated)", "preset": preset},
                simulate=preset, interrupt=pin, extra_temperature_names=list(sims.names),

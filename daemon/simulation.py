@@ -11,41 +11,52 @@ reader thread's sleeps, so ``--speed`` never causes overruns from host schedulin
 
 from __future__ import annotations
 
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from avard.core import frames
 
 from .adxl355 import Adxl355
+from .ds18b20 import Ds18b20Bank
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from .interrupt import EmulatedInterruptPin
 from .pacing import watermark_settings
-from .source import MarkSink
 from .transport import SpiBus
+from .w1_sysfs import SysfsTree
 
 if TYPE_CHECKING:
     from .service import Service
 
-DS18B20_LSB_C = 0.0625
 
 
 @dataclass
 class SimulatedSensors:
-    """The simulator behind the emulator, remembering the newest temperatures produced."""
+    """The simulator behind the emulator, remembering the newest temperatures produced.
+
+    Its two DS18B20s (plate, ambient) are served to the real :class:`Ds18b20Bank` through a
+    fake 1-Wire sysfs tree (w1_sysfs.py): at each conversion the simulated temperatures are
+    written as the kernel would present them, the bank reads and checks them with
+    w1thermsensor (12-bit quantisation, CRC), and the readings go to ``deliver`` (the
+    service's DS18B20 handler, which marks drop-outs and returns). A name in ``fail`` makes
+    that sensor vanish from the bus until it is taken out again."""
 
     sim: Any
     plate_c: float = float("nan")
     ambient_c: float = float("nan")
     chip_c: float = float("nan")
     names: tuple[str, str] = ("28-00000000plate", "28-0000000ambient")
+    ids: tuple[str, str] = ("00000000a001", "00000000a002")   # 1-Wire ids in the fake tree
     interval_s: float = 1.0
-    sink: MarkSink | None = None      # where the simulated DS18B20 readings go
+    clock: Any = None
+    deliver: Callable[[Any], None] | None = None   # the service's DS18B20 reading handler
     _next: float = field(default=0.0)
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
     _lost: set[str] = field(default_factory=set)
+    _bus: Any = None
 
     batch: int = 4096
     _buf: Any = None
@@ -71,25 +82,38 @@ class SimulatedSensors:
     def chip_temperature(self) -> float:
         return 25.0 if np.isnan(self.chip_c) else self.chip_c
 
+    def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
+        """The fake sysfs tree (in a temporary folder, removed with this object) and the
+        bank reading it, made at the first conversion."""
+        if self._bus is None:
+            tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
+            tree = SysfsTree(Path(tmp.name) / "devices")
+            bank = Ds18b20Bank(dict(zip(self.names, self.ids, strict=True)),
+                               interval_s=self.interval_s, base_directory=tree.base,
+                               clock=self.clock)
+            self._bus = (tmp, tree, bank)
+        return self._bus[1], self._bus[2]
+
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
-        sink = self.sink
-        if sink is None or t_mono < self._next or np.isnan(self.plate_c):
+        deliver = self.deliver
+        if deliver is None or t_mono < self._next or np.isnan(self.plate_c):
             return
         self._next = t_mono + self.interval_s
-        values = []
-        i0 = sink.stamp()
-        t_real = t_mono + sink.real_offset()
-        for name, v in zip(self.names, (self.plate_c, self.ambient_c), strict=True):
+        tree, bank = self._one_wire()
+        for name, sid, v in zip(self.names, self.ids, (self.plate_c, self.ambient_c),
+                                strict=True):
             lost = name in self.fail
-            values.append(None if lost else round(v / DS18B20_LSB_C) * DS18B20_LSB_C)
-            if lost != (name in self._lost):
-                (self._lost.add if lost else self._lost.discard)(name)
-                sink.mark(frames.event_record(
-                    sink.run_id, 0, "sensor_lost" if lost else "sensor_back", t_mono, t_real,
-                    i0=i0, detail={"sensor": name}))
-        sink.mark(frames.temp_record(sink.run_id, 0, i0, list(self.names), values, t_mono,
-                                     t_real, source="ds18b20-sim"))
+            if lost and name not in self._lost:
+                tree.remove(sid)
+                self._lost.add(name)
+            elif not lost and name in self._lost:
+                tree.restore(sid)
+                self._lost.discard(name)
+            if not lost:
+                tree.set_temperature(sid, v)
+        for reading in bank.read_all():
+            deliver(reading)
 
 
 def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
@@ -101,11 +125,11 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
 
     s = cfg["sensor"]
     sim_cfg = make_config(preset, odr_hz=float(s["odr_hz"]), range_g=int(s["range_g"]))
-    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
-                            interval_s=float(cfg["temperature"]["interval_s"]))
     # CLOCK_REALTIME of the simulation starts at the host's real time, so that restarts of a
     # simulated service see the real time between them.
     clock = VirtualClock(epoch=time.time() - 1000.0)
+    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
+                            interval_s=float(cfg["temperature"]["interval_s"]), clock=clock)
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)
@@ -145,5 +169,5 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     svc = Service(cfg, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)
-    sims.sink = svc.mark_sink()
+    sims.deliver = svc.temperature_reading
     return svc, sims, emu

@@ -10,10 +10,8 @@ a failed transfer or garbage on the bus. The reader catches them by type.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     from .adxl355 import Drain
@@ -62,16 +60,3 @@ class SampleSource(Protocol):
         """Probe, reset, reconfigure and restart after an error (the FIFO is lost)."""
         ...
 
-
-@dataclass(frozen=True)
-class MarkSink:
-    """Where a source of readings beside the samples (a temperature) puts them: ``stamp()``
-    gives the next sample's index (the reading's place on the sample grid), ``mark`` inserts
-    a record into the ring in sample order, ``real_offset()`` is CLOCK_REALTIME −
-    CLOCK_MONOTONIC now. Handed out by the service (``Service.mark_sink``), so a source holds
-    these three, not the service."""
-
-    run_id: str
-    stamp: Callable[[], int]
-    mark: Callable[[dict[str, Any]], None]
-    real_offset: Callable[[], float]

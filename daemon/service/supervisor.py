@@ -37,7 +37,6 @@ from .. import __version__
 from ..acquisition import Acquisition
 from ..ring import Ring
 from ..snapshots import SnapshotBoard, fit_snapshot
-from ..source import MarkSink
 from ..timebase import TimeBase
 from .allan_stage import AllanStage
 from .checkpoint import last_recorded, restore_accumulators, save_state
@@ -133,11 +132,6 @@ class Service:
 
     def _next_index(self) -> int:
         return self.acq.next_index if self.acq else self.start_index
-
-    def mark_sink(self) -> MarkSink:
-        """What a source of readings beside the samples needs (daemon/source.py)."""
-        return MarkSink(self.run_id, self._next_index, self.ring.mark,
-                        lambda: self.real_offset)
 
     def header(self) -> dict[str, Any]:
         """The run's current header record (see :class:`RunHeader`)."""
@@ -293,7 +287,7 @@ class Service:
         for w in self.workers:
             w.start()
         if self.bank is not None:
-            self.bank.sink = self._on_temperature
+            self.bank.sink = self.temperature_reading
             self.bank.start()
         if before_acquisition is not None:
             before_acquisition()
@@ -320,7 +314,7 @@ class Service:
         now on follow the new offset (one float assignment, safe across threads)."""
         self.real_offset = real_offset
 
-    def _on_temperature(self, reading: Any) -> None:
+    def temperature_reading(self, reading: Any) -> None:
         """A DS18B20 reading (from its bank thread): stamp it with the next sample index so
         it joins the sample time base, and mark drop-outs and returns as events."""
         if self.acq is None:
