@@ -4,8 +4,11 @@ The ADXL355 driver talks SPI to :class:`~avard.daemon.emulator.EmulatedAdxl355` 
 :class:`~avard.daemon.emulator.FakeSpiDev`, so every byte goes through the same decode, marker
 and overrun logic as on the Pi. The emulator's samples come from
 :class:`avard.core.simulate.SensorSimulator`; its chip temperature and two simulated DS18B20
-(plate and ambient, quantised to 0.0625 °C like the real part) follow the simulator's thermal
-model at the sample being produced. Time is a stepped :class:`VirtualClock` advanced by the
+(plate and ambient) follow the simulator's thermal model at the sample being produced. The
+DS18B20s reach the service the way real ones do: written into a fake 1-Wire sysfs tree
+(w1_sysfs.py) and read by the real :class:`~avard.daemon.ds18b20.Ds18b20Bank` (w1thermsensor,
+0.0625 °C quantisation, CRC checks), synchronously on the virtual clock. The backend is chosen
+in daemon/rig.py. Time is a stepped :class:`VirtualClock` advanced by the
 reader thread's sleeps, so ``--speed`` never causes overruns from host scheduling jitter.
 """
 
