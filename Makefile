@@ -25,10 +25,12 @@ demo: $(VENV)/.installed-run
 
 test: $(VENV)/.installed-test
 	$(VENV)/bin/ruff check .
+	$(PY) -m mypy core daemon
 	$(PY) -m pytest -n 2 -q
 
 lint: $(VENV)/.installed-test
 	$(VENV)/bin/ruff check .
+	$(PY) -m mypy core daemon
 
 bench: $(VENV)/.installed-test
 	$(PY) -m benchmarks

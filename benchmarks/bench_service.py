@@ -7,12 +7,18 @@ For each ODR the service runs on the emulated ADXL355 (preset quiet-lab) at ``--
 streaming Allan accumulators over 3 axes + 3 temperature channels, recording into a temporary
 directory, publishing on loopback with a real subscriber counting every sample. Measured:
 
-- CPU seconds of the process (all threads, ``time.process_time``) per simulated second;
+- CPU seconds of the service per simulated second: the process (all threads,
+  ``time.process_time``) minus the bench's own subscriber thread (a client; shown apart);
 - overruns (must be 0) and samples lost anywhere (subscriber index continuity);
 - sample-to-subscriber latency p50/p99: from when a raw block's last sample was due (sample
   time mapped to wall time through the run's start) to when the subscriber decoded it.
 
-Reference, measured in the same run at the same rate and poll period: the drain loop alone
+- peak RSS (VmHWM) of `avard run` as its own process, twice: ``--simulate quiet-lab`` (the
+  simulator needs scipy.signal, ~55 MB of it) and the hardware path, where the emulated
+  ADXL355 is fed by a numpy counter instead of the simulator (what `avard run` loads on a Pi:
+  no scipy, no matplotlib).
+
+Reference, measured in the same run at the same rate and drain period: the drain loop alone
 (driver over emulator over simulator, no ring consumers, no disk, no sockets). The ratio says
 what the service adds on top of reading the (emulated) sensor; on a Pi the emulator and the
 simulator are replaced by spidev, so the service's own share is the difference.
@@ -22,6 +28,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -43,7 +52,41 @@ def _cfg(odr: float, data_dir: str) -> dict:
         "publish.hwm": 1_000_000, "service.status_log_interval_s": 3600.0})
 
 
-def _service_run(odr: float, seconds: float) -> dict[str, Any]:
+def _thread_cpu_s(tid: int) -> float:
+    """CPU seconds (user + system) of one thread of this process, from /proc."""
+    fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+_CLIENT = r"""
+import sys, time, zmq, msgpack
+endpoint, mode, seconds = sys.argv[1], sys.argv[2], float(sys.argv[3])
+ctx = zmq.Context()
+s = ctx.socket(zmq.DEALER); s.setsockopt(zmq.LINGER, 0); s.connect(endpoint)
+reqs = [msgpack.packb({"op": op, "args": a, "id": i}) for i, (op, a) in enumerate(
+    [("status", {}), ("snapshot", {}), ("recent", {"seconds": 1.0}), ("nosuch", {})])]
+reqs.append(b"\xc1garbage")
+end, n = time.monotonic() + seconds, 0
+big = msgpack.packb({"op": "recent", "args": {"seconds": 5.0}, "id": 1})
+if mode == "noread":   # asks for the biggest replies and never reads one
+    s.setsockopt(zmq.RCVHWM, 1); s.setsockopt(zmq.RCVBUF, 4096)
+while time.monotonic() < end:
+    try:               # as fast as the socket takes them (never blocks past the end)
+        s.send_multipart([b"", big if mode == "noread" else reqs[n % len(reqs)]], zmq.NOBLOCK)
+        n += 1
+    except zmq.Again:
+        time.sleep(0.001)
+    while mode != "noread" and s.poll(0):
+        s.recv_multipart()
+print(n / seconds)
+"""
+
+
+def _vm_rss_mb() -> float:
+    return int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) / 1024
+
+
+def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as d:
         cfg = _cfg(odr, d)
         svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, speed=1.0)
@@ -54,6 +97,7 @@ def _service_run(odr: float, seconds: float) -> dict[str, Any]:
         origin: dict[str, float] = {}
 
         def listen(sub: Subscriber) -> None:
+            origin["sub_tid"] = threading.get_native_id()
             while not stop.is_set() or sub._sub.poll(200):
                 msg = sub.recv(timeout_s=0.2)
                 if msg is None or msg.topic != "raw":
@@ -80,16 +124,41 @@ def _service_run(odr: float, seconds: float) -> dict[str, Any]:
             origin["wall"] = time.monotonic()
             origin["virt"] = clock.monotonic()
             origin["cpu"] = time.process_time()
+            origin["sub_cpu"] = _thread_cpu_s(int(origin["sub_tid"]))
+            origin["rss0"] = _vm_rss_mb()
+            if client is not None:   # a hostile request client, in its own process
+                origin["client"] = subprocess.Popen(  # type: ignore[assignment]
+                    [sys.executable, "-c", _CLIENT, svc.request_server.endpoint, client,
+                     str(seconds)], stdout=subprocess.PIPE, text=True)
 
+        rss = {"max": 0.0}
+
+        def watch_rss() -> None:
+            while not stop.is_set():
+                rss["max"] = max(rss["max"], _vm_rss_mb())
+                stop.wait(0.25)
+
+        threading.Thread(target=watch_rss, daemon=True).start()
         svc.run(seconds, before_acquisition=before)
-        cpu = time.process_time() - origin["cpu"]
+        drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
+        req_rate = float("nan")
+        if client is not None:
+            out, _ = origin["client"].communicate(timeout=60)  # type: ignore[attr-defined]
+            req_rate = float(out.split()[-1])
+        # The bench's subscriber is a client, not the service: its thread's CPU is taken out.
+        sub_cpu = _thread_cpu_s(int(origin["sub_tid"])) - origin["sub_cpu"]
+        cpu = time.process_time() - origin["cpu"] - sub_cpu
         wall = time.monotonic() - origin["wall"]
         stop.set()
         origin["th"].join(5)  # type: ignore[attr-defined]
         origin["sub"].close()  # type: ignore[attr-defined]
         st = svc.final_status
         lat_ms = np.array(lat) * 1e3 if lat else np.array([np.nan])
-        return {"cpu": cpu, "wall": wall, "sim": st["sim_time_s"], "samples": st["samples"],
+        return {"drain_max_s": drain_max, "rss_growth": rss["max"] - origin["rss0"],
+                "req_rate": req_rate, "answered": svc.request_server.answered
+                if svc.request_server else 0,
+                "cpu": cpu, "sub_cpu": sub_cpu, "wall": wall, "sim": st["sim_time_s"],
+                "samples": st["samples"],
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
                 "poll": effective_poll_hz(cfg)}
@@ -100,7 +169,7 @@ def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
     cfg = _cfg(odr, tempfile.gettempdir())
     dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=1)
     acq = Acquisition(dev, Ring(int(odr * 30)), TimeBase(odr), clock,
-                      poll_hz=effective_poll_hz(cfg), speed=1.0)
+                      poll_hz=float(cfg["sensor"]["poll_hz"]), speed=1.0)
     cpu0 = time.process_time()
     t0 = clock.monotonic()
     acq.start()
@@ -110,33 +179,110 @@ def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
             "overruns": acq.overruns, "samples": acq.samples}
 
 
+_RSS_HARDWARE_PATH = r"""
+import sys
+from avard.daemon import blas_threads
+from avard.daemon.adxl355 import Adxl355
+from avard.daemon.config import load_config
+from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.service import Service
+from avard.daemon.transport import SpiBus
+odr, seconds, data_dir = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+clock = VirtualClock(speed=1.0)
+dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
+dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
+cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
+    "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
+Service(cfg, dev, clock, speed=1.0).run(seconds)
+heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
+print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
+"""
+
+
+def _rss_mb(odr: float, seconds: float, simulate: bool) -> tuple[float, str]:
+    """Peak RSS (MB) of the service as its own process, and the heavy modules it loaded."""
+    with tempfile.TemporaryDirectory(prefix="avard-bench-rss-") as d:
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        if simulate:
+            cfg = os.path.join(d, "avard.toml")
+            with open(cfg, "w") as f:
+                f.write(f"[sensor]\nodr_hz = {odr}\n[publish]\nendpoint = 'tcp://127.0.0.1:0'"
+                        "\nrequest_endpoint = 'tcp://127.0.0.1:0'\n")
+            code = ("import sys, runpy\nsys.argv = ['avard'] + sys.argv[1:]\n"
+                    "from avard.daemon.cli import main\nrc = main()\n"
+                    "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
+                    "{'scipy', 'matplotlib'})\n"
+                    "print(open('/proc/self/status').read().split('VmHWM:')[1].split()[0], "
+                    "','.join(heavy) or '-')")
+            args = [sys.executable, "-c", code, "run", "--config", cfg, "--simulate",
+                    "quiet-lab", "--duration", str(seconds), "--data-dir", d]
+        else:
+            args = [sys.executable, "-c", _RSS_HARDWARE_PATH, str(odr), str(seconds), d]
+        out = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+        if out.returncode != 0:
+            raise RuntimeError(out.stderr[-2000:])
+        kb, heavy = out.stdout.split()[-2:]
+        return int(kb) / 1024, heavy
+
+
 def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks service", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seconds", type=float, default=10.0, help="real seconds per rate")
     p.add_argument("--rates", default="125,4000", help="ODRs in Hz, comma separated")
+    p.add_argument("--clients", action="store_true",
+                   help="also run each rate under a request flood and a never-reading client")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     rows = []
     for odr in (float(r) for r in args.rates.split(",")):
         ref = _drain_only(odr, args.seconds)
         res = _service_run(odr, args.seconds)
+        res["rss_sim"], res["heavy_sim"] = _rss_mb(odr, min(args.seconds, 10.0), True)
+        res["rss_hw"], res["heavy_hw"] = _rss_mb(odr, min(args.seconds, 10.0), False)
         rows.append((odr, res, ref))
     print(f"service at --speed 1 for {args.seconds:g} s per rate (emulated ADXL355, quiet-lab); "
-          "CPU = process CPU s (all threads) per simulated s")
-    hdr = (f"{'ODR Hz':>7} {'poll Hz':>7} {'sim s':>6} {'samples':>8} {'overruns':>8} "
-           f"{'recv ok':>7} {'CPU/sim s':>9} {'ref CPU/s':>9} {'ratio':>6} "
-           f"{'lat p50 ms':>10} {'p99 ms':>7}")
+          "CPU = CPU s of the service (all its threads, emulator and simulator included) per "
+          "simulated s; sub = the bench's subscriber thread")
+    hdr = (f"{'ODR Hz':>7} {'drain Hz':>8} {'sim s':>6} {'samples':>8} {'overruns':>8} "
+           f"{'recv ok':>7} {'CPU/sim s':>9} {'sub':>6} {'ref CPU/s':>9} {'ratio':>6} "
+           f"{'lat p50 ms':>10} {'p99 ms':>7} {'RSS sim MB':>10} {'RSS hw MB':>9}")
     print(hdr)
     print("-" * len(hdr))
     for odr, r, ref in rows:
         cps = r["cpu"] / r["sim"]
         ref_cps = ref["cpu"] / ref["sim"]
         ok = "yes" if r["continuous"] and r["received"] == r["samples"] else "NO"
-        print(f"{odr:7g} {r['poll']:7.1f} {r['sim']:6.1f} {r['samples']:8d} {r['overruns']:8d} "
-              f"{ok:>7} {cps:9.3f} {ref_cps:9.3f} {cps / ref_cps:6.2f} {r['p50']:10.1f} "
-              f"{r['p99']:7.1f}")
-    print("ref = drain loop alone (driver + emulator + simulator) at the same poll rate; "
+        print(f"{odr:7g} {r['poll']:8.1f} {r['sim']:6.1f} {r['samples']:8d} {r['overruns']:8d} "
+              f"{ok:>7} {cps:9.3f} {r['sub_cpu'] / r['sim']:6.3f} {ref_cps:9.3f} "
+              f"{cps / ref_cps:6.2f} {r['p50']:10.1f} "
+              f"{r['p99']:7.1f} {r['rss_sim']:10.1f} {r['rss_hw']:9.1f}")
+    print("ref = drain loop alone (driver + emulator + simulator) at the same drain period; "
           "ratio = service / ref")
+    print("RSS = peak resident memory of `avard run` as its own process: sim = --simulate "
+          f"(loads {rows[0][1]['heavy_sim']}), hw = the hardware path, emulator fed by a "
+          f"counter (loads {rows[0][1]['heavy_hw']} of scipy/matplotlib)")
+    if args.clients:
+        _client_table(rows, args.seconds)
     bad = any(r["overruns"] for odr, r, _ in rows if odr >= 4000)
     return 1 if bad else 0
+
+
+def _client_table(rows: list[tuple[float, dict[str, Any], dict[str, Any]]],
+                  seconds: float) -> None:
+    """The same service with a hostile request client in another process: a flood of
+    requests (status, snapshot, recent, unknown op, garbage) read as fast as it can, and a
+    client asking for the largest `recent` replies and never reading one."""
+    print()
+    print("request clients (another process) against the same service; FIFO time = 32/ODR")
+    hdr = (f"{'ODR Hz':>7} {'client':>8} {'req/s sent':>10} {'answered':>8} {'overruns':>8} "
+           f"{'max drain gap / FIFO time':>25} {'CPU/sim s':>9} {'RSS growth MB':>13}")
+    print(hdr)
+    print("-" * len(hdr))
+    for odr, quiet, _ref in rows:
+        for client in (None, "flood", "noread"):
+            r = quiet if client is None else _service_run(odr, seconds, client)
+            fifo_s = 32.0 / odr
+            print(f"{odr:7g} {client or 'none':>8} {r['req_rate']:10.0f} {r['answered']:8d} "
+                  f"{r['overruns']:8d} {r['drain_max_s'] / fifo_s:25.2f} "
+                  f"{r['cpu'] / r['sim']:9.3f} {r['rss_growth']:13.1f}")

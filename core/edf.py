@@ -28,8 +28,8 @@ from math import comb
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import gammaincinv
 
+from .chi2 import chi2_ppf
 from .errors import DataError
 
 __all__ = ["chi2_interval", "edf_greenhall", "edf_simple"]
@@ -213,7 +213,7 @@ def chi2_interval(
 def _chi2_ppf(p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
     """Chi-squared quantile: χ²_k(p) = 2·P⁻¹(k/2, p), P the regularised lower incomplete gamma.
 
-    (scipy.special instead of scipy.stats: the latter costs ~45 MB of resident memory on
-    import, which matters on a 512 MB Raspberry Pi.)
+    (core/chi2.py, numpy only: the service computes intervals with every snapshot and must not
+    import scipy, ~30 MB of resident memory on a 512 MB Raspberry Pi.)
     """
-    return 2.0 * gammaincinv(k / 2.0, p)
+    return chi2_ppf(p, k)

@@ -983,7 +983,11 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "last_avar": last_avar,
         "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
     }
-    return record_cls(accel=accel, rate_hz=float(np.mean(rates)), names=["x", "y", "z"],
+    # Each run's newest header carries its best fit of the output rate (the service rewrites
+    # the header as the fit improves); runs are averaged.
+    fitted = {h["run"]: float(h["rate_hz"]) for h in headers}
+    return record_cls(accel=accel, rate_hz=float(np.mean(list(fitted.values()))),
+                  names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
 

@@ -1,6 +1,7 @@
 """The reader thread: the only code that talks to the ADXL355 bus.
 
-It does nothing slow: wait for the next poll tick, drain the FIFO, give each sample its index
+It does nothing slow: sleep until the FIFO is due to hold a useful block (pacing.py: from the
+fitted output rate and the FIFO depth, with margin), drain the FIFO, give each sample its index
 and a time from the fitted time base, push the block into the ring, and (every
 ``chip_interval_s``) read the chip's temperature. Everything it learns about loss goes into the
 ring as a mark, in order with the samples:
@@ -10,8 +11,9 @@ ring as a mark, in order with the samples:
   jumps by that estimate so that index and time stay aligned;
 - a failed transfer (BusError) becomes a ``bus_error`` event; the FIFO keeps filling, so a
   short bus fault costs nothing, and a long one shows up as an overrun gap;
-- a device that stops producing samples becomes a ``stalled`` event (and the watchdog is no
-  longer fed, see service.py); ``resumed`` when samples flow again.
+- a device that stops producing samples (the source raises DeviceStalledError: it owns that
+  detection) becomes one ``stalled`` event (and the watchdog is no longer fed, see
+  service/supervisor.py); ``resumed`` when samples flow again.
 
 Temperatures of other sources (DS18B20 threads) are marked with :meth:`Acquisition.stamp`,
 which gives the index of the next sample, so the time base of every channel is the sample
@@ -28,9 +30,12 @@ from typing import Any
 
 import numpy as np
 from avard.core import frames
-from avard.core.errors import AvardError
+from avard.core.errors import AvardError, DeviceStalledError, HardwareError
 
+from .interrupt import InterruptPin
+from .pacing import drain_period_s
 from .ring import Ring
+from .source import GapReason, SampleSource
 from .timebase import TimeBase
 
 log = logging.getLogger(__name__)
@@ -44,22 +49,24 @@ class Acquisition:
     (None: as fast as the CPU allows).
     """
 
-    def __init__(self, sensor: Any, ring: Ring, timebase: TimeBase, clock: Any, *,
+    def __init__(self, sensor: SampleSource, ring: Ring, timebase: TimeBase, clock: Any, *,
                  poll_hz: float, chip_interval_s: float = 1.0, run_id: str = "",
-                 speed: float | None = None, stall_s: float = 2.0,
+                 speed: float | None = None,
                  on_tick: Callable[[float], None] | None = None,
                  start_index: int = 0, backpressure: bool = False,
                  on_clock_step: Callable[[float], None] | None = None,
-                 stop_at: float | None = None) -> None:
+                 stop_at: float | None = None,
+                 interrupt: InterruptPin | None = None) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
         self.clock = clock
-        self.period = 1.0 / float(poll_hz)
+        self.poll_hz = float(poll_hz)     # the least drain rate (sensor.poll_hz)
+        # INT1 on the FIFO watermark (interrupt.py): wait on the pin, the timer as fallback
+        self.interrupt = interrupt
         self.chip_interval_s = float(chip_interval_s)
         self.run_id = run_id
         self.speed = speed
-        self.stall_s = float(stall_s)
         self.on_tick = on_tick          # called with t_mono after each poll (simulated temps)
         # called with the new CLOCK_REALTIME − CLOCK_MONOTONIC offset after a realtime step
         self.on_clock_step = on_clock_step
@@ -78,6 +85,8 @@ class Acquisition:
         self.last_sample_t: float | None = None
         self._last_drain_t: float | None = None
         self._next_chip = 0.0
+        self._next_recover = 0.0
+        self.max_drain_interval_s = 0.0   # longest drain-to-drain interval (benchmarks)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -109,6 +118,11 @@ class Acquisition:
     def mark(self, record: dict[str, Any]) -> None:
         self.ring.mark(record)
 
+    @property
+    def period(self) -> float:
+        """Seconds between drains at the rate fitted so far."""
+        return drain_period_s(self.tb.odr_hz, self.poll_hz)
+
     # -- loop ---------------------------------------------------------------------------
     def _run(self) -> None:
         try:
@@ -120,11 +134,22 @@ class Acquisition:
                     self.finished.set()
                     break
                 self.poll_once()
-                next_t += self.period
-                now = self.clock.monotonic()
-                if next_t < now - 10 * self.period:
-                    next_t = now  # fell far behind (a slow machine): do not try to catch up
-                self.clock.sleep(max(0.0, next_t - now))
+                period = self.period
+                if self.interrupt is not None:
+                    # The pin rises at the watermark (FIFO half full); the timeout is the
+                    # timer's fallback (a pin that never rises costs latency, not data), and
+                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
+                    t_drain = self.clock.monotonic()
+                    self.interrupt.wait(1.5 * period)
+                    early = t_drain + 0.25 * period - self.clock.monotonic()
+                    if early > 0:
+                        self.clock.sleep(early)
+                else:
+                    next_t += period
+                    now = self.clock.monotonic()
+                    if next_t < now - 10 * period:
+                        next_t = now  # fell far behind (a slow machine): do not catch up
+                    self.clock.sleep(max(0.0, next_t - now))
                 if self.speed:
                     # Cap the pace at speed × real time (the virtual clock is stepped).
                     ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
@@ -145,35 +170,46 @@ class Acquisition:
             self._wait_for_consumers()
         try:
             d = self.sensor.drain()
-        except AvardError as exc:
+        except DeviceStalledError as exc:
+            # The source owns stall detection (it knows its rate and FIFO): it raises once
+            # the part has produced nothing for its stall timeout. Recorded once per stall.
+            t = self.clock.monotonic()
+            self.bus_errors += 1
+            if not self.stalled:
+                self.stalled = True
+                log.error("the ADXL355 stopped producing: %s", exc)
+                self.mark(frames.event_record(
+                    self.run_id, 0, "stalled", t, self.clock.realtime(), i0=self.next_index,
+                    detail={"error": str(exc), "count": self.bus_errors,
+                            "since_s": None if self.last_sample_t is None
+                            else t - self.last_sample_t}))
+            self._try_recover(t)      # a reset loses the FIFO, but nothing flows anyway
+            return 0
+        except HardwareError as exc:
             self.bus_errors += 1
             t = self.clock.monotonic()
-            name = "stalled" if "no samples" in str(exc) else "bus_error"
             if self.bus_errors <= 10 or self.bus_errors % 1000 == 0:
-                log.warning("%s #%d while draining: %s", name, self.bus_errors, exc)
-            self.mark(frames.event_record(self.run_id, 0, name, t, self.clock.realtime(),
+                log.warning("bus_error #%d while draining: %s", self.bus_errors, exc)
+            self.mark(frames.event_record(self.run_id, 0, "bus_error", t, self.clock.realtime(),
                                           i0=self.next_index,
                                           detail={"error": str(exc), "count": self.bus_errors}))
-            self._check_stall(t)
             self._consecutive_errors += 1
             # A single failed transfer costs nothing (the FIFO keeps the data); only a
-            # persistent failure or a stalled part is worth a reset, which loses the FIFO.
-            if self._consecutive_errors >= 3 or name == "stalled":
+            # persistent failure is worth a reset, which loses the FIFO.
+            if self._consecutive_errors >= 3:
                 self._try_recover(t)
             return 0
         self._consecutive_errors = 0
         counts = np.asarray(d.counts, dtype=np.int32)
         n = int(counts.shape[0])
-        t_mono = float(getattr(d, "t_mono", self.clock.monotonic()))
-        t_real = float(getattr(d, "t_real", self.clock.realtime()))
+        t_mono, t_real = float(d.t_mono), float(d.t_real)
         self._check_clock_step(t_mono, t_real)
-        if getattr(d, "overrun", False):
-            self._overrun(n, t_mono, t_real, getattr(d, "gap_reason", None) or "overrun",
-                          getattr(d, "since_last_s", None))
+        if d.overrun:
+            self._overrun(n, t_mono, t_real, d.gap_reasons, d.gap_reason or "overrun",
+                          d.since_last_s)
         if n:
             i0 = self.next_index
-            self.tb.update(i0 + n - 1, t_mono, gap=bool(getattr(d, "overrun", False)),
-                           exact=bool(getattr(d, "complete", True)))
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun), exact=bool(d.complete))
             times = self.tb.timestamps(i0, n)
             self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
             self.next_index += n
@@ -185,8 +221,8 @@ class Acquisition:
                 self.mark(frames.event_record(self.run_id, 0, "resumed", t_mono, t_real,
                                               i0=i0))
             self.first_samples.set()
-        else:
-            self._check_stall(t_mono)
+        if self._last_drain_t is not None:
+            self.max_drain_interval_s = max(self.max_drain_interval_s, t_mono - self._last_drain_t)
         self._last_drain_t = t_mono
         if t_mono >= self._next_chip:
             self._next_chip = t_mono + self.chip_interval_s
@@ -213,17 +249,17 @@ class Acquisition:
 
     def _try_recover(self, t: float) -> None:
         """After a failed drain, re-probe and restart the part (at most once a second)."""
-        recover = getattr(self.sensor, "recover", None)
-        if recover is None or t < getattr(self, "_next_recover", 0.0):
+        if t < self._next_recover:
             return
         self._next_recover = t + 1.0
         try:
-            recover()
+            self.sensor.recover()
             log.warning("ADXL355 recovered (probed, reset, reconfigured, restarted)")
         except AvardError as exc:
             log.debug("recovery failed: %s", exc)
 
-    def _overrun(self, n_read: int, t_mono: float, t_real: float, reason: str,
+    def _overrun(self, n_read: int, t_mono: float, t_real: float,
+                 reasons: tuple[GapReason, ...], reason: str,
                  since_last_s: float | None = None) -> None:
         """A gap of unknown size: estimate the lost sets from the time since the last drain
         (the driver's ``since_last_s`` when it knows it) × the fitted rate."""
@@ -236,7 +272,7 @@ class Acquisition:
         # An overrun lost at least one set by definition; other gaps (a failed transfer,
         # a realignment) may have lost none: then the gap has n = 0 but still ends the
         # Allan segment, because continuity cannot be proven.
-        floor = 1 if "overrun" in reason else 0
+        floor = 1 if GapReason.FIFO_OVERRUN in reasons else 0
         lost = max(floor, expected - n_read)
         i0 = self.next_index
         self.next_index += lost
@@ -244,14 +280,6 @@ class Acquisition:
         log.warning("gap (%s): about %d samples lost at index %d", reason, lost, i0)
         self.mark(frames.gap_record(self.run_id, 0, i0, lost, t_mono, t_real, reason,
                                     estimated=True))
-
-    def _check_stall(self, t: float) -> None:
-        last = self.last_sample_t
-        if last is not None and not self.stalled and t - last > self.stall_s:
-            self.stalled = True
-            log.error("no samples for %.1f s: the ADXL355 stopped producing", t - last)
-            self.mark(frames.event_record(self.run_id, 0, "stalled", t, self.clock.realtime(),
-                                          i0=self.next_index, detail={"since_s": t - last}))
 
     def _chip_temperature(self, t_mono: float, t_real: float) -> None:
         try:

@@ -34,8 +34,9 @@ from avard.core.errors import (
 )
 
 from . import registers as R
+from .source import GapReason, parse_reasons
 from .timebase import SystemClock
-from .transport import RegisterBus
+from .transport import I2cBus, RegisterBus
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -190,6 +191,11 @@ class Drain:
         return int(self.counts.shape[0])
 
     @property
+    def gap_reasons(self) -> tuple[GapReason, ...]:
+        """``gap_reason`` as the typed reasons (source.py)."""
+        return parse_reasons(self.gap_reason)
+
+    @property
     def last_index(self) -> int:
         """Index of the newest set in this drain (``index0 − 1`` when empty)."""
         return self.index0 + self.n_sets - 1
@@ -213,6 +219,7 @@ class _Config:
     range_g: int = 2
     rate: R.Rate = field(default_factory=lambda: R.RATES[0])
     watermark: int = R.FIFO_LOCATIONS
+    int1_watermark: bool = False
 
 
 # -- the driver ----------------------------------------------------------------------------------
@@ -247,7 +254,7 @@ class Adxl355:
         self.realignments = 0
         self._next_index = 0
         self._carry = b""
-        self._gap_reasons: list[str] = []
+        self._gap_reasons: list[GapReason] = []
         self._measuring = False
         self._last_data_t: float | None = None
         self._last_drain_t: float | None = None
@@ -272,7 +279,7 @@ class Adxl355:
                 last = exc
                 self.bus_errors += 1
                 if in_drain:
-                    self._note_gap("bus_error")
+                    self._note_gap(GapReason.BUS_ERROR)
                 (log.warning if _often(self.bus_errors) else log.debug)(
                     "ADXL355 %s at 0x%02X failed (attempt %d of %d, bus error #%d): %s",
                     what, addr, attempt + 1, self.retries + 1, self.bus_errors, exc)
@@ -280,7 +287,7 @@ class Adxl355:
         assert last is not None
         raise last
 
-    def _note_gap(self, reason: str, *, keep_carry: bool = False) -> None:
+    def _note_gap(self, reason: GapReason, *, keep_carry: bool = False) -> None:
         if reason not in self._gap_reasons:
             self._gap_reasons.append(reason)
         if not keep_carry:
@@ -346,19 +353,21 @@ class Adxl355:
                 raise HardwareError(f"ADXL355 reset: NVM_BUSY still set after {timeout_s} s "
                                     f"(STATUS 0x{status:02X}); power-cycle the sensor")
             self.clock.sleep(0.001)
-        self._stopped("reset")
+        self._stopped(GapReason.RESET)
 
-    def _stopped(self, reason: str) -> None:
+    def _stopped(self, reason: GapReason) -> None:
         if self._next_index:  # a gap only means something after delivered samples
             self._note_gap(reason)
         self._measuring = False
         self._carry = b""
 
     def configure(self, range_g: int = 2, odr_hz: float = 4000.0,
-                  watermark: int | None = None) -> None:
+                  watermark: int | None = None, *, int1_watermark: bool = False) -> None:
         """Program range (±2/4/8 g), output rate (low-pass at ODR/4, high-pass off: an Allan
         variance needs the DC path) and the FIFO watermark in FIFO *locations* (1–96, one axis
-        each; default 96). Goes to standby first; every register is read back."""
+        each; default 96). ``int1_watermark``: route FIFO_FULL (the watermark reached) to the
+        INT1 pin, active high, for a reader that waits on the pin (interrupt.py). Goes to
+        standby first; every register is read back."""
         code = R.range_code(range_g)
         rate = R.rate_for(odr_hz)
         wm = R.FIFO_LOCATIONS if watermark is None else int(watermark)
@@ -367,27 +376,30 @@ class Adxl355:
         self.standby()
         rng = self._read(A["RANGE"], 1)[0]
         rng = R.REGISTERS["RANGE"].fields["RANGE"].put(rng, code)
-        for name, value in (("FILTER", rate.code), ("RANGE", rng), ("FIFO_SAMPLES", wm)):
+        rng = R.REGISTERS["RANGE"].fields["INT_POL"].put(rng, 1 if int1_watermark else 0)
+        int_map = R.INT_MAP_FULL_EN1 if int1_watermark else 0
+        for name, value in (("FILTER", rate.code), ("RANGE", rng), ("FIFO_SAMPLES", wm),
+                            ("INT_MAP", int_map)):
             self._write(A[name], value)
             back = self._read(A[name], 1)[0]
             if back != value:
                 raise HardwareError(
                     f"ADXL355 configure: wrote 0x{value:02X} to {name}, read back 0x{back:02X};"
                     " the chip refused the write (not in standby?) or the bus corrupts data")
-        self.config = _Config(int(range_g), rate, wm)
-        max_odr = getattr(self.bus, "max_odr_hz", None)
-        if max_odr is not None and rate.odr_hz > max_odr():
+        self.config = _Config(int(range_g), rate, wm, int1_watermark)
+        if isinstance(self.bus, I2cBus) and rate.odr_hz > self.bus.max_odr_hz():
             log.warning("ODR %g Hz needs %.0f kbit/s of FIFO data; the %g kHz I2C bus carries "
                         "about %g Hz: expect overruns. Use SPI, a lower ODR, or "
                         "dtparam=i2c_arm_baudrate=400000", rate.odr_hz,
-                        rate.odr_hz * 81 / 1e3, self.bus.bitrate_hz / 1e3, max_odr())
+                        rate.odr_hz * 81 / 1e3, self.bus.bitrate_hz / 1e3,
+                        self.bus.max_odr_hz())
         log.info("ADXL355 configured: ±%d g, ODR %g Hz (low-pass %g Hz), watermark %d",
                  range_g, rate.odr_hz, rate.lowpass_hz, wm)
 
     def start(self) -> None:
         """Enter measurement mode (temperature on, DRDY on)."""
         if self._next_index:
-            self._note_gap("restart")
+            self._note_gap(GapReason.RESTART)
         self._write(A["POWER_CTL"], 0x00)
         self._measuring = True
         self._carry = b""
@@ -397,7 +409,7 @@ class Adxl355:
         """Enter standby (the chip clears its FIFO)."""
         ctl = self._read(A["POWER_CTL"], 1)[0]
         self._write(A["POWER_CTL"], ctl | R.POWER_STANDBY)
-        self._stopped("standby")
+        self._stopped(GapReason.STANDBY)
 
     def recover(self) -> DeviceInfo:
         """After a hardware error: probe, reset, reprogram the last configuration and start
@@ -405,8 +417,8 @@ class Adxl355:
         info = self.probe()
         self.reset()
         c = self.config
-        self.configure(c.range_g, c.rate.odr_hz, c.watermark)
-        self._note_gap("recovered")
+        self.configure(c.range_g, c.rate.odr_hz, c.watermark, int1_watermark=c.int1_watermark)
+        self._note_gap(GapReason.RECOVERED)
         self.start()
         return info
 
@@ -461,7 +473,7 @@ class Adxl355:
                 "wiring, then recover()")
         if status & R.STATUS_FIFO_OVR:
             self.overruns += 1
-            self._note_gap("fifo_overrun")
+            self._note_gap(GapReason.FIFO_OVERRUN)
             (log.warning if _often(self.overruns) else log.debug)(
                 "ADXL355 FIFO overrun #%d: an unknown number of sets was lost", self.overruns)
         c = len(self._carry) // 3
@@ -480,7 +492,7 @@ class Adxl355:
             if post & R.STATUS_FIFO_OVR:
                 tight = False  # the sets read were produced after t_mono
                 self.overruns += 1
-                self._note_gap("fifo_overrun")
+                self._note_gap(GapReason.FIFO_OVERRUN)
                 status |= post
                 (log.warning if _often(self.overruns) else log.debug)(
                     "ADXL355 FIFO overrun #%d during the drain: an unknown number of sets was "
@@ -488,7 +500,7 @@ class Adxl355:
         dec = decode_fifo(self._carry + data)
         if dec.dropped or dec.empty:
             self.realignments += 1
-            self._note_gap("realigned", keep_carry=True)
+            self._note_gap(GapReason.REALIGNED, keep_carry=True)
             (log.warning if _often(self.realignments) else log.debug)(
                 "ADXL355 FIFO misaligned (#%d): %d entries dropped, %d empty; realigned on the "
                 "X marker", self.realignments, dec.dropped, dec.empty)
@@ -516,7 +528,7 @@ class Adxl355:
     def _diagnose_stall(self, silent_s: float) -> None:
         self.probe()  # raises HardwareError when the bus reads nonsense
         ctl = self._read(A["POWER_CTL"], 1)[0]
-        self._note_gap("stall")
+        self._note_gap(GapReason.STALL)
         if ctl & R.POWER_STANDBY:
             raise DeviceStalledError(
                 f"ADXL355 returned no samples for {silent_s:.2f} s and is in standby "
@@ -624,7 +636,7 @@ class Adxl355:
         passed = not saturated and all(
             lo <= d <= hi for d, (lo, hi) in zip(delta, limits_g, strict=True))
         if was and self._next_index:
-            self._note_gap("self_test")
+            self._note_gap(GapReason.SELF_TEST)
         else:
             self.standby()
         result = SelfTestResult((float(delta[0]), float(delta[1]), float(delta[2])),

@@ -25,6 +25,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 from avard.core.errors import AvardError, describe_os_error  # noqa: E402  (after BLAS)
 
 from . import __version__, commands  # noqa: E402
+from .logfmt import formatter_for  # noqa: E402
 from .stop_signals import StopSignal  # noqa: E402
 
 log = logging.getLogger("avard")
@@ -80,7 +81,7 @@ def setup_logging(verbosity: int) -> None:
     (journald adds its own)."""
     level = logging.WARNING - 10 * min(verbosity + 1, 2)
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    handler.setFormatter(formatter_for(sys.stderr))   # <N> priority prefixes for journald
     root = logging.getLogger()
     root.handlers[:] = [handler]
     root.setLevel(level)

@@ -86,8 +86,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "i2c_address": Key(int, 0x1D, choices=(0x1D, 0x53), doc="ASEL low 0x1D, high 0x53"),
         "range_g": Key(int, 2, "g", choices=(2, 4, 8), doc="full scale ±range_g"),
         "odr_hz": Key(_NUM, 125.0, "Hz", choices=ODR_CHOICES, doc="output data rate"),
-        "poll_hz": Key(_NUM, 100.0, "Hz", 1.0, 2000.0,
-                       doc="FIFO drain rate; raised automatically to drain a FIFO third"),
+        "poll_hz": Key(_NUM, 4.0, "Hz", 1.0, 2000.0,
+                       doc="least FIFO drain rate; raised to drain the FIFO half full"),
+        "int1_gpio": Key(str, "", doc="GPIO of the INT1 pin as CHIP:LINE (e.g. gpiochip0:25): "
+                         "wait on the FIFO watermark instead of a timer; empty: timer"),
         "temp_intercept_lsb": Key(_NUM, 1885.0, "LSB", 1700.0, 2100.0,
                                   doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)"),
     },
@@ -409,11 +411,11 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
 
 
 def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
-    """The FIFO drain rate: the configured one, raised so that the 32-set FIFO is drained at
-    least three times per fill (it lasts 32/ODR seconds; an overrun loses samples). The same
-    margin under simulation: fewer drains would thin out the time-base fit after a gap."""
-    odr = float(cfg["sensor"]["odr_hz"])
-    return max(float(cfg["sensor"]["poll_hz"]), 3.0 * odr / 32.0)
+    """The FIFO drain rate at the nominal ODR (daemon/pacing.py; the reader uses the fitted
+    one): the configured least rate, raised to drain the 32-set FIFO when half full."""
+    from .pacing import drain_period_s
+
+    return 1.0 / drain_period_s(float(cfg["sensor"]["odr_hz"]), float(cfg["sensor"]["poll_hz"]))
 
 
 # --------------------------------------------------------------------------------------------

@@ -92,7 +92,7 @@ def normalise_id(sensor_id: str) -> str:
     return s
 
 
-def sensor_class(base_directory: str | Path | None = None) -> type:
+def sensor_class(base_directory: str | Path | None = None) -> Any:
     """``W1ThermSensor`` whose ``BASE_DIRECTORY`` points at ``base_directory`` (a subclass, so
     no global state changes and two trees can coexist in one process)."""
     w1 = import_w1thermsensor()

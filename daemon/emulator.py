@@ -144,11 +144,17 @@ def counter_source(start: int = 0) -> Source:
     return source
 
 
+def _saturate(c: np.ndarray) -> np.ndarray:
+    """Counts held to the 20-bit output range (np.clip's per-call overhead is several times
+    this on the 16-set blocks of a drain)."""
+    return np.minimum(np.maximum(c, R.DATA_MIN), R.DATA_MAX)
+
+
 def encode_entries(counts: np.ndarray) -> bytes:
     """FIFO bytes for (k, 3) counts: 3 bytes per axis, left-justified 20-bit two's complement,
     MSB first; the X entry of each set carries the marker bit (third byte, bit 0)."""
     c = np.asarray(counts, dtype=np.int64).reshape(-1, 3)
-    v = (np.clip(c, R.DATA_MIN, R.DATA_MAX) & 0xFFFFF).astype(np.uint32)
+    v = (_saturate(c) & 0xFFFFF).astype(np.uint32)
     out = np.empty((*v.shape, 3), dtype=np.uint8)
     out[..., 0] = (v >> 12) & 0xFF
     out[..., 1] = (v >> 4) & 0xFF
@@ -279,6 +285,46 @@ class EmulatedAdxl355:
     def fifo_entries(self) -> int:
         return len(self.fifo) // 3
 
+    def int_level(self, pin: int = 1) -> bool:
+        """The INT1/INT2 pin's electrical level now: the sources INT_MAP routes to it (FIFO
+        watermark, data ready, overrun), driven active high or low by RANGE.INT_POL."""
+        with self.lock:
+            self._update()
+            status = self._status()
+            imap = self.regs[R.ADDR["INT_MAP"]] >> (4 if pin == 2 else 0)
+            active = bool((imap & R.INT_MAP_RDY_EN1 and status & R.STATUS_DATA_RDY)
+                          or (imap & R.INT_MAP_FULL_EN1 and status & R.STATUS_FIFO_FULL)
+                          or (imap & 0x04 and status & R.STATUS_FIFO_OVR))
+            high = bool(self.regs[R.ADDR["RANGE"]] & 0x40)
+            return active if high else not active
+
+    def seconds_to_int(self, pin: int = 1) -> float:
+        """When the pin will next assert from the FIFO watermark or data ready, the sources
+        this model schedules (inf when INT_MAP routes neither to it or nothing is produced)."""
+        with self.lock:
+            imap = self.regs[R.ADDR["INT_MAP"]] >> (4 if pin == 2 else 0)
+            if imap & R.INT_MAP_FULL_EN1:
+                return self.seconds_to_watermark()
+            if imap & R.INT_MAP_RDY_EN1 and self._measuring and not self.stalled:
+                self._update()
+                due = self._t_start + (self.produced + 1) / self.true_odr_hz
+                return max(0.0, due - self.clock.monotonic())
+            return math.inf
+
+    def seconds_to_watermark(self) -> float:
+        """When the FIFO will reach its FIFO_SAMPLES watermark (0 if it has; inf when the part
+        is not producing)."""
+        with self.lock:
+            self._update()
+            if not self._measuring or self.stalled:
+                return math.inf
+            wm = self.regs[R.ADDR["FIFO_SAMPLES"]] & 0x7F
+            missing_sets = -(-(wm - self.fifo_entries) // 3)
+            if missing_sets <= 0:
+                return 0.0
+            due = self.produced + missing_sets       # set number that completes the watermark
+            return max(0.0, self._t_start + due / self.true_odr_hz - self.clock.monotonic())
+
     def range_g(self) -> int:
         return R.RANGE_BY_CODE.get(self.regs[R.ADDR["RANGE"]] & 0x03, 2)
 
@@ -343,7 +389,7 @@ class EmulatedAdxl355:
             left -= n
         new = np.concatenate(tail)[-keep:].astype(np.int64)
         new = new + self._output_adjust()
-        new = np.clip(new, R.DATA_MIN, R.DATA_MAX)
+        new = _saturate(new)
         self._latest = new[-1].copy()
         self._data_rdy = True
         self.produced += k

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -41,6 +42,14 @@ LINGER_MS = 200
 _LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
+#: Unread replies queued per request peer, and requests queued per peer.
+REPLY_HWM = 2
+REQUEST_HWM = 16
+#: Largest reply (a `recent` is capped below it): with REPLY_HWM, ≤ 8 MiB per peer.
+MAX_REPLY_BYTES = 4 << 20
+#: Requests answered per second, all peers together: a flood costs the service at most this
+#: many handler calls (the reader shares the interpreter), the rest waits in libzmq's queues.
+MAX_REQUESTS_PER_S = 200.0
 
 
 def endpoint_host(endpoint: str) -> str | None:
@@ -228,6 +237,20 @@ class Publisher:
         self.close()
 
 
+def _readable_op_id(payload: bytes, max_bytes: int) -> tuple[str, int]:
+    """The ``op`` and ``id`` of a request as far as they are readable ("?" and 0 otherwise),
+    so that an error reply to a request that is otherwise invalid still names it."""
+    try:
+        req = frames.unpack_bounded(payload, max_bytes=max_bytes, what="request")
+    except FormatError:
+        return "?", 0
+    if not isinstance(req, dict):
+        return "?", 0
+    op, rid = req.get("op"), req.get("id")
+    return (op[:64] if isinstance(op, str) else "?",
+            rid if type(rid) is int and -(1 << 63) <= rid < (1 << 64) else 0)
+
+
 class RequestServer:
     """ROUTER socket answering ``snapshot``/``status``/``recent``/``header`` in its own thread.
 
@@ -242,7 +265,8 @@ class RequestServer:
     def __init__(self, endpoint: str = DEFAULT_REQUEST_ENDPOINT,
                  handlers: Mapping[str, Handler] | None = None, *,
                  curve: CurveServerConfig | None = None, max_request_bytes: int = 65536,
-                 max_reply_bytes: int = frames.DEFAULT_MAX_BYTES,
+                 max_reply_bytes: int = MAX_REPLY_BYTES,
+                 max_requests_per_s: float = MAX_REQUESTS_PER_S,
                  hard_cap_bytes: int | None = None, allow_remote: bool = False) -> None:
         self.allow_remote = allow_remote
         self.handlers: dict[str, Handler] = dict(handlers or {})
@@ -252,8 +276,10 @@ class RequestServer:
         self.max_reply_bytes = int(max_reply_bytes)
         self.hard_cap_bytes = int(hard_cap_bytes or max(1 << 20, 4 * self.max_request_bytes))
         self.endpoint = endpoint
+        self.max_requests_per_s = float(max_requests_per_s)
         self.answered = 0
         self.errors = 0
+        self.refused_replies = 0     # replies a peer's full queue refused (it does not read)
         self._ctx: zmq.Context | None = None
         self._curve: CurveServer | None = None
         self._sock: zmq.Socket | None = None
@@ -280,8 +306,12 @@ class RequestServer:
             self._sock = sock
             sock.setsockopt(zmq.LINGER, LINGER_MS)
             sock.setsockopt(zmq.MAXMSGSIZE, self.hard_cap_bytes)
-            sock.setsockopt(zmq.SNDHWM, 1000)
-            sock.setsockopt(zmq.RCVHWM, 1000)
+            # Bounded replies: at most REPLY_HWM unread replies queue per peer (a peer that
+            # never reads costs ≤ REPLY_HWM × max_reply_bytes, then its replies are refused),
+            # and at most REQUEST_HWM requests wait per peer (then libzmq stops reading it).
+            sock.setsockopt(zmq.SNDHWM, REPLY_HWM)
+            sock.setsockopt(zmq.RCVHWM, REQUEST_HWM)
+            sock.setsockopt(zmq.ROUTER_MANDATORY, 1)   # a full peer raises, it is counted
             if self._curve is not None:
                 self._curve.apply(sock)
             self.endpoint = _bind(sock, self._requested_endpoint, "request server",
@@ -335,7 +365,14 @@ class RequestServer:
         assert sock is not None
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
+        interval = 1.0 / self.max_requests_per_s
+        next_slot = time.monotonic()
         while not self._stop.is_set():
+            # Pace: one request per interval at most (bursts of up to a second's worth).
+            now = time.monotonic()
+            if next_slot > now:
+                self._stop.wait(next_slot - now)
+            next_slot = max(next_slot, now - 1.0) + interval
             try:
                 if not poller.poll(100):
                     continue
@@ -357,6 +394,7 @@ class RequestServer:
             try:
                 sock.send_multipart(reply_frames, flags=zmq.NOBLOCK)
             except zmq.ZMQError as exc:  # peer gone or its queue full: its problem, not ours
+                self.refused_replies += 1
                 log.debug("reply not sent: %s", exc)
 
     def handle_frames(self, msg: list[bytes]) -> list[bytes] | None:
@@ -375,12 +413,14 @@ class RequestServer:
         return [*envelope, self.handle(payloads[0])]
 
     def handle(self, payload: bytes) -> bytes:
-        """Answer one request payload with reply bytes; every failure becomes an error reply."""
+        """Answer one request payload with reply bytes; every failure becomes an error reply
+        that echoes the request's ``op`` and ``id`` when they could be read."""
         op, rid = "?", 0
         try:
             if len(payload) > self.max_request_bytes:
                 raise FormatError(f"request of {len(payload)} bytes exceeds the "
                                   f"{self.max_request_bytes}-byte limit")
+            op, rid = _readable_op_id(payload, self.max_request_bytes)
             req = frames.decode_request(payload, max_bytes=self.max_request_bytes)
             op, rid = req["op"], req["id"]
             handler = self.handlers.get(op)

@@ -11,7 +11,10 @@ each stamped with the ring position at which it happened, so a consumer sees the
 order relative to the samples as the writer produced them.
 
 Memory is fixed at construction (``capacity`` × (channels·4 + 16) bytes); the lock is held only
-for the copy in or out, never while a consumer works.
+for the copy in or out, never while a consumer works. Consumers with nothing to read block in
+:meth:`Consumer.wait` on the ring's condition, which every push and mark notifies: a consumer
+thread wakes when there is work (or when :meth:`Ring.wake` asks it to look, at shutdown), not
+on a timer.
 """
 
 from __future__ import annotations
@@ -58,6 +61,8 @@ class Ring:
         self._marks: deque[tuple[int, int, dict[str, Any]]] = deque(maxlen=mark_capacity)
         self._mark_head = 0               # marks ever pushed
         self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self._wakes = 0                   # Ring.wake() calls, so waiters can tell them apart
         self._consumers: list[Consumer] = []
 
     # -- writer side --------------------------------------------------------------------
@@ -90,12 +95,31 @@ class Ring:
                 self._index[:rest] = index[first:]
                 self._time[:rest] = t_mono[first:]
             self._head += n
+            self._cond.notify_all()
 
     def mark(self, item: dict[str, Any]) -> None:
         """Insert a mark (temperature, gap, event) after every sample pushed so far."""
         with self._lock:
             self._marks.append((self._mark_head, self._head, item))
             self._mark_head += 1
+            self._cond.notify_all()
+
+    def wake(self) -> None:
+        """Wake every consumer blocked in :meth:`Consumer.wait` (to see a stop request)."""
+        with self._cond:
+            self._wakes += 1
+            self._cond.notify_all()
+
+    def _pending(self, c: Consumer) -> bool:
+        return c.pos < self._head or c.mark_pos < self._mark_head
+
+    def _wait(self, c: Consumer, timeout: float | None) -> bool:
+        with self._cond:
+            if self._pending(c):
+                return True
+            wakes = self._wakes
+            return self._cond.wait_for(
+                lambda: self._pending(c) or self._wakes != wakes, timeout)
 
     # -- reader side --------------------------------------------------------------------
     def consumer(self, name: str, *, from_start: bool = False) -> Consumer:
@@ -174,6 +198,11 @@ class Consumer:
         self.mark_pos = mark_pos
         self.last_index: int | None = None
         self.lost_total = 0
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until there is something to read (samples or marks), :meth:`Ring.wake` is
+        called, or ``timeout`` seconds pass; False on a timeout with nothing to read."""
+        return self.ring._wait(self, timeout)
 
     def read(self, max_samples: int | None = None) -> Chunk:
         """Everything pushed since the last read (at most ``max_samples`` samples)."""

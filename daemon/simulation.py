@@ -4,45 +4,62 @@ The ADXL355 driver talks SPI to :class:`~avard.daemon.emulator.EmulatedAdxl355` 
 :class:`~avard.daemon.emulator.FakeSpiDev`, so every byte goes through the same decode, marker
 and overrun logic as on the Pi. The emulator's samples come from
 :class:`avard.core.simulate.SensorSimulator`; its chip temperature and two simulated DS18B20
-(plate and ambient, quantised to 0.0625 °C like the real part) follow the simulator's thermal
-model at the sample being produced. Time is a stepped :class:`VirtualClock` advanced by the
+(plate and ambient) follow the simulator's thermal model at the sample being produced. The
+DS18B20s reach the service the way real ones do: written into a fake 1-Wire sysfs tree
+(w1_sysfs.py) and read by the real :class:`~avard.daemon.ds18b20.Ds18b20Bank` (w1thermsensor,
+0.0625 °C quantisation, CRC checks), synchronously on the virtual clock. The backend is chosen
+in daemon/rig.py. Time is a stepped :class:`VirtualClock` advanced by the
 reader thread's sleeps, so ``--speed`` never causes overruns from host scheduling jitter.
 """
 
 from __future__ import annotations
 
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from avard.core import frames
 
 from .adxl355 import Adxl355
+from .ds18b20 import Ds18b20Bank
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
+from .interrupt import EmulatedInterruptPin
+from .pacing import watermark_settings
 from .transport import SpiBus
+from .w1_sysfs import SysfsTree
 
 if TYPE_CHECKING:
     from .service import Service
 
-DS18B20_LSB_C = 0.0625
 
 
 @dataclass
 class SimulatedSensors:
-    """The simulator behind the emulator, remembering the newest temperatures produced."""
+    """The simulator behind the emulator, remembering the newest temperatures produced.
+
+    Its two DS18B20s (plate, ambient) are served to the real :class:`Ds18b20Bank` through a
+    fake 1-Wire sysfs tree (w1_sysfs.py): at each conversion the simulated temperatures are
+    written as the kernel would present them, the bank reads and checks them with
+    w1thermsensor (12-bit quantisation, CRC), and the readings go to ``deliver`` (the
+    service's DS18B20 handler, which marks drop-outs and returns). A name in ``fail`` makes
+    that sensor vanish from the bus until it is taken out again."""
 
     sim: Any
     plate_c: float = float("nan")
     ambient_c: float = float("nan")
     chip_c: float = float("nan")
     names: tuple[str, str] = ("28-00000000plate", "28-0000000ambient")
+    ids: tuple[str, str] = ("00000000a001", "00000000a002")   # 1-Wire ids in the fake tree
     interval_s: float = 1.0
-    service: Any = None
+    clock: Any = None
+    deliver: Callable[[Any], None] | None = None   # the service's DS18B20 reading handler
     _next: float = field(default=0.0)
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
     _lost: set[str] = field(default_factory=set)
+    _bus: Any = None
 
     batch: int = 4096
     _buf: Any = None
@@ -68,24 +85,38 @@ class SimulatedSensors:
     def chip_temperature(self) -> float:
         return 25.0 if np.isnan(self.chip_c) else self.chip_c
 
+    def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
+        """The fake sysfs tree (in a temporary folder, removed with this object) and the
+        bank reading it, made at the first conversion."""
+        if self._bus is None:
+            tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
+            tree = SysfsTree(Path(tmp.name) / "devices")
+            bank = Ds18b20Bank(dict(zip(self.names, self.ids, strict=True)),
+                               interval_s=self.interval_s, base_directory=tree.base,
+                               clock=self.clock)
+            self._bus = (tmp, tree, bank)
+        return self._bus[1], self._bus[2]
+
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
-        svc = self.service
-        if svc is None or t_mono < self._next or np.isnan(self.plate_c):
+        deliver = self.deliver
+        if deliver is None or t_mono < self._next or np.isnan(self.plate_c):
             return
         self._next = t_mono + self.interval_s
-        values = []
-        i0 = svc.acq.stamp()
-        for name, v in zip(self.names, (self.plate_c, self.ambient_c), strict=True):
+        tree, bank = self._one_wire()
+        for name, sid, v in zip(self.names, self.ids, (self.plate_c, self.ambient_c),
+                                strict=True):
             lost = name in self.fail
-            values.append(None if lost else round(v / DS18B20_LSB_C) * DS18B20_LSB_C)
-            if lost != (name in self._lost):
-                (self._lost.add if lost else self._lost.discard)(name)
-                svc.ring.mark(frames.event_record(
-                    svc.run_id, 0, "sensor_lost" if lost else "sensor_back", t_mono,
-                    t_mono + svc.real_offset, i0=i0, detail={"sensor": name}))
-        svc.ring.mark(frames.temp_record(svc.run_id, 0, i0, list(self.names), values, t_mono,
-                                         t_mono + svc.real_offset, source="ds18b20-sim"))
+            if lost and name not in self._lost:
+                tree.remove(sid)
+                self._lost.add(name)
+            elif not lost and name in self._lost:
+                tree.restore(sid)
+                self._lost.discard(name)
+            if not lost:
+                tree.set_temperature(sid, v)
+        for reading in bank.read_all():
+            deliver(reading)
 
 
 def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
@@ -97,11 +128,11 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
 
     s = cfg["sensor"]
     sim_cfg = make_config(preset, odr_hz=float(s["odr_hz"]), range_g=int(s["range_g"]))
-    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
-                            interval_s=float(cfg["temperature"]["interval_s"]))
     # CLOCK_REALTIME of the simulation starts at the host's real time, so that restarts of a
     # simulated service see the real time between them.
     clock = VirtualClock(epoch=time.time() - 1000.0)
+    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
+                            interval_s=float(cfg["temperature"]["interval_s"]), clock=clock)
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)
@@ -111,12 +142,15 @@ def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | 
                   temp_intercept_lsb=float(s["temp_intercept_lsb"]))
     dev.probe()
     dev.reset()
-    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
+    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]),
+                  **watermark_settings(bool(s.get("int1_gpio"))))
     dev.start()
     return dev, clock, sims, emu
 
 
+
 def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
+                      odr_error_ppm: float | None = None,
                       after_tick: Callable[[float], None] | None = None,
                       **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
     """The service over the simulated rig (``build_simulated``), wired both ways: the reader
@@ -126,15 +160,17 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     ``Service`` (speed, notifier, factories, …)."""
     from .service import Service
 
-    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed)
+    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed, odr_error_ppm=odr_error_ppm)
 
     def tick(t_mono: float) -> None:
         sims.on_tick(t_mono)
         if after_tick is not None:
             after_tick(t_mono)
 
+    if cfg["sensor"].get("int1_gpio"):
+        service_kw.setdefault("interrupt", EmulatedInterruptPin(emu, clock))
     svc = Service(cfg, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)
-    sims.service = svc
+    sims.deliver = svc.temperature_reading
     return svc, sims, emu

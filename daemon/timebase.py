@@ -24,9 +24,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .adxl355 import Drain
 
 
 class Clock(Protocol):
@@ -168,7 +171,7 @@ class TimeBase:
         self.n_points += 1
         return True
 
-    def add_drain(self, drain: object) -> bool:
+    def add_drain(self, drain: Drain) -> bool:
         """Feed one :class:`~avard.daemon.adxl355.Drain`; returns whether it was used.
 
         A drain with ``overrun`` starts a new segment. A drain that is not ``complete`` (the
@@ -179,7 +182,7 @@ class TimeBase:
             self._pending_gap = self._pending_gap or bool(drain.overrun)
             return False
         return self.update(drain.last_index, drain.t_mono, gap=bool(drain.overrun),
-                           exact=bool(getattr(drain, "complete", True)))
+                           exact=bool(drain.complete))
 
     def realtime_step(self, t_mono: float, t_real: float, threshold_s: float = 0.05
                       ) -> float | None:

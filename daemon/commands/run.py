@@ -15,7 +15,8 @@ import logging
 import os
 from typing import Any
 
-from avard.core.errors import ConfigError, HardwareError
+from avard.core.errors import ConfigError
+from avard.daemon import blas_threads  # noqa: F401  (first: before anything imports numpy)
 from avard.daemon.config import (
     check_positive_seconds,
     check_runtime,
@@ -59,60 +60,16 @@ def _check_args(args: argparse.Namespace) -> None:
 
 def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
           notifier: Any = None, **service_kw: Any) -> Service:
-    """The service for these arguments: simulated rig or real hardware."""
-    if args.simulate:
-        from avard.core.presets import PRESETS
-        from avard.daemon.simulation import simulated_service
+    """The service for these arguments over the backend daemon/rig.py chooses (hardware, or
+    the simulated rig for --simulate / $AVARD_BACKEND)."""
+    from avard.daemon.rig import build_rig
 
-        if args.simulate not in PRESETS:
-            raise ConfigError(f"--simulate {args.simulate!r}: unknown preset; choose one of "
-                              f"{', '.join(sorted(PRESETS))}")
-        speed = 1.0 if args.speed is None else (args.speed or None)
-        svc, _sims, _emu = simulated_service(
-            cfg, args.simulate, seed=args.seed, speed=speed, notifier=notifier,
-            sensor_info={"device": "ADXL355 (emulated)", "preset": args.simulate},
-            **service_kw)
-        return svc
-    from avard.daemon.adxl355 import Adxl355
-    from avard.daemon.timebase import SystemClock
-    from avard.daemon.transport import open_bus
-
-    s = cfg["sensor"]
-    bus = open_bus(s["bus"], bus=s["spi_bus"] if s["bus"] == "spi" else s["i2c_bus"],
-                   device=s["spi_device"], address=s["i2c_address"],
-                   speed_hz=s["spi_speed_hz"])
-    dev = Adxl355(bus, temp_intercept_lsb=float(s["temp_intercept_lsb"]))
-    info = dev.probe()
-    dev.reset()
-    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]))
-    dev.start()
-    bank = _ds18b20_bank(cfg)
-    return Service(cfg, dev, SystemClock(), temperature_bank=bank, notifier=notifier,
-                   sensor_info={"device": info.name, "partid": info.partid,
-                                "revid": info.revid, "bus": s["bus"]}, **service_kw)
-
-
-def _ds18b20_bank(cfg: dict[str, dict[str, Any]]) -> Any:
-    """The DS18B20 reader threads for the configured (or every present) sensor."""
-    t = cfg["temperature"]
-    if not t["ds18b20"]:
-        return None
-    from avard.daemon import ds18b20
-
-    present = ds18b20.discover()
-    wanted = [ds18b20.normalise_id(i) for i in t["ids"]]
-    missing = sorted(set(wanted) - set(present))
-    if missing and t["required"]:
-        raise HardwareError(f"DS18B20 {', '.join(missing)} not found on the 1-Wire bus; check "
-                            "the wiring and dtoverlay=w1-gpio, or set temperature.required = "
-                            "false")
-    if missing:
-        log.warning("DS18B20 %s not found now; reading them anyway (they may appear)",
-                    ", ".join(missing))
-    ids = wanted or present
-    if not ids:
-        return None
-    return ds18b20.Ds18b20Bank([f"28-{i}" for i in ids], interval_s=float(t["interval_s"]))
+    rig = build_rig(cfg, simulate=getattr(args, "simulate", None),
+                    seed=getattr(args, "seed", None))
+    if rig.simulate is not None:
+        speed = getattr(args, "speed", None)
+        service_kw.setdefault("speed", 1.0 if speed is None else (speed or None))
+    return rig.service(cfg, notifier=notifier, **service_kw)
 
 
 #: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,

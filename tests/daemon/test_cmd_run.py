@@ -149,3 +149,39 @@ def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
     counts = np.concatenate([r["counts"] for r in recs if r["kind"] == "raw"])
     # counter_source: consecutive counts, so nothing was lost or repeated on the way.
     assert np.all(np.diff(counts[:, 0]) == 1)
+
+
+_LEAN = r"""
+import os, sys
+from avard.daemon.cli import build_parser
+build_parser("run")                       # what `avard run` imports before it runs
+from avard.daemon import blas_threads
+from avard.daemon.config import load_config
+from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.adxl355 import Adxl355
+from avard.daemon.service import Service
+from avard.daemon.transport import SpiBus
+clock = VirtualClock()
+dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
+dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=125.0); dev.start()
+cfg = load_config(None, **{"recording.data_dir": sys.argv[1], "publish.enabled": False,
+                           "allan.snapshot_interval_s": 1.0})
+svc = Service(cfg, dev, clock)
+svc.run(30.0)
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("scipy", "matplotlib"))
+print(blas_threads.LOADED_BEFORE_NUMPY, os.environ["OPENBLAS_NUM_THREADS"], heavy,
+      svc.final_status["allan_samples"])
+"""
+
+
+def test_the_service_path_loads_no_scipy_and_one_blas_thread(tmp_path: Path) -> None:
+    """`avard run` on hardware (here the emulator without the simulator, which needs
+    scipy.signal): BLAS held to one thread before numpy loads, and neither scipy nor
+    matplotlib imported through a run with snapshots (their intervals included)."""
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", _LEAN, str(tmp_path)], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    before, threads, heavy, n = out.stdout.split(maxsplit=3)
+    assert (before, threads, heavy) == ("True", "1", "[]")
+    assert int(n) > 3000

@@ -76,8 +76,8 @@ def test_remote_bind_allowed_when_explicit_and_overrides_apply(tmp_path: Path) -
 
 def test_poll_rate_rises_with_odr() -> None:
     cfg = validate_config({"sensor": {"odr_hz": 4000, "poll_hz": 10}})
-    assert effective_poll_hz(cfg) == pytest.approx(375.0)
-    assert effective_poll_hz(default_config()) == 100.0
+    assert effective_poll_hz(cfg) == pytest.approx(250.0)      # FIFO half full: 16 / 4000 s
+    assert effective_poll_hz(default_config()) == pytest.approx(125.0 / 16)
 
 
 def test_check_config_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -140,7 +140,7 @@ def run_rig(tmp_path: Path, seconds: float, *, inject: Inject | None = None, see
                   extra_temperature_names=list(sims.names) if bank is None else [],
                   temperature_bank=bank, **kw)
     if bank is None:
-        sims.service = svc
+        sims.deliver = svc.temperature_reading
     ctx: dict[str, Any] = {"svc": svc, "sims": sims, "emu": emu, "clock": clock, "dev": dev,
                            "once": once}
     box: dict[str, Any] = {}

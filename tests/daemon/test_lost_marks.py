@@ -13,7 +13,9 @@ import numpy as np
 from avard.core import frames
 from avard.core.recording import AllanFeed
 from avard.daemon.ring import Ring
-from avard.daemon.service import AllanWorker, RecorderWorker
+from avard.daemon.service.allan_stage import AllanStage
+from avard.daemon.service.header import RunHeader
+from avard.daemon.service.recorder_stage import RecorderStage
 
 
 class Sink:
@@ -40,11 +42,10 @@ class Written:
         pass
 
 
-def _svc(ring: Ring) -> SimpleNamespace:
-    return SimpleNamespace(run_id="run", real_offset=0.0, real_now=lambda: 1.0, ring=ring,
-                           timebase=SimpleNamespace(odr_hz=125.0),
-                           reopen_requested=threading.Event(),
-                           cfg={"recording": {"enabled": True}}, save_state=lambda rec: None)
+def _header() -> RunHeader:
+    return RunHeader(lambda: {"kind": "header", "run": "run"},
+                     SimpleNamespace(odr_hz=125.0), lambda: 0.0,  # type: ignore[arg-type]
+                     lambda: 0, lambda: 0.0)
 
 
 def _fill(ring: Ring) -> None:
@@ -58,7 +59,10 @@ def test_the_recorder_writes_an_event_and_a_gap_note_for_lost_marks() -> None:
     ring = Ring(100, mark_capacity=4)
     consumer = ring.consumer("recorder")
     out = Written()
-    worker = RecorderWorker(consumer, out, _svc(ring), block_samples=1000)  # type: ignore[arg-type]
+    worker = RecorderStage(consumer, out, run_id="run", real_offset=0.0,
+                           rate_hz=lambda: 125.0, real_now=lambda: 1.0, header=_header(),
+                           checkpoint_written=lambda rec: None, reopen=threading.Event(),
+                           block_samples=1000)
     _fill(ring)
     chunk = consumer.read()
     assert chunk.lost_marks == 2
@@ -77,8 +81,9 @@ def test_the_allan_feed_ends_its_segment_at_lost_marks() -> None:
     sink = Sink()
     feed = AllanFeed(sink, 1.0, [])
     ring.push(np.ones((10, 3), np.int32), np.arange(10), np.arange(10) / 125.0)
-    worker = AllanWorker(consumer, sink, feed, _svc(ring),  # type: ignore[arg-type]
-                         snapshot_interval_s=1e9, checkpoint_interval_s=1e9)
+    worker = AllanStage(consumer, sink, feed, run_id="run", real_offset=0.0,
+                        rate_hz=lambda: 125.0, emit=ring.mark, on_checkpoint=None,
+                        snapshot_interval_s=1e9, checkpoint_interval_s=1e9)
     worker.handle(consumer.read())
     assert sink.n == 10 and sink.gaps == 0
     for k in range(6):

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from avard.core.errors import NetworkError
 from avard.core.recording import RecordingReader, load_recording, replay_allan
 from avard.daemon.config import load_config
 from avard.daemon.service import Service
@@ -111,6 +112,17 @@ def test_every_sample_published_and_recorded_once_and_allan_matches(tmp_path: Pa
     assert avars[-1]["n_samples"] == offline.n_samples
     assert _rel(_snapshot_avar(avars[-1]), offline.avar) < 1e-12
     assert _rel(np.asarray(avars[-1]["snapshot"]["cov"]), offline.cov) < 1e-12
+    # The header travels on the status topic (first, then when the fitted rate moves), the
+    # same record the recording holds; status maps carry every documented field.
+    on_status = [r for t, r in lst.records if t == "status"]
+    headers = [r for r in on_status if r["kind"] == "header"]
+    assert headers and headers[0]["run"] == svc.run_id
+    recorded = {r["rate_hz"] for r in recs if r["kind"] == "header"}
+    assert {h["rate_hz"] for h in headers} <= recorded
+    status = [r["status"] for r in on_status if r["kind"] == "status"][-1]
+    assert {"run", "samples", "index", "rate_hz", "overruns", "lost_samples_estimate", "gaps",
+            "bus_errors", "clock_steps", "stalled", "allan_samples", "consumers_lost",
+            "sim_time_s", "disk", "subscribers", "published", "publish_dropped"} <= set(status)
     # And the SI conversion of the whole recording.
     record = load_recording(tmp_path / "rec")
     assert record.accel.shape == (st["samples"], 3)
@@ -175,7 +187,9 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
 
 
 def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
-    cfg = _cfg(tmp_path / "rec")
+    # A snapshot every 60 s of virtual time (3 s real at speed 20): the fit of one (its own
+    # thread) is done before the next replaces it.
+    cfg = _cfg(tmp_path / "rec", **{"allan.snapshot_interval_s": 60.0})
     svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3, speed=20.0)
     answers: dict[str, Any] = {}
 
@@ -184,7 +198,18 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
         time.sleep(1.0)
         answers["status"] = sub.request("status")
         answers["recent"] = sub.request("recent", {"seconds": 2.0})
-        answers["snapshot"] = sub.request("snapshot")
+        for _ in range(400):           # none before the first snapshot interval
+            try:
+                answers["first_snapshot"] = sub.request("snapshot")
+                break
+            except NetworkError:
+                time.sleep(0.05)
+        # The fit is computed off the request thread; ask again until it is there.
+        for _ in range(400):
+            answers["snapshot"] = sub.request("snapshot")
+            if not answers["snapshot"]["fit_pending"]:
+                break
+            time.sleep(0.05)
         with pytest.raises(Exception, match="seconds"):
             sub.request("recent", {"seconds": 1e9})
         sub.close()
@@ -196,6 +221,7 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
     assert answers["recent"]["n"] == 250 and answers["recent"]["counts"].shape == (250, 3)
     assert np.all(np.diff(answers["recent"]["index"]) == 1)
     assert answers["snapshot"]["kind"] == "avar"
+    assert answers["first_snapshot"]["kind"] == "avar"
     fit = answers["snapshot"]["fit"]
     assert set(fit) == {"x", "y", "z"}
     vrw = fit["x"]["terms"]["velocity_random_walk"]

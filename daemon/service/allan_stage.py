@@ -1,0 +1,122 @@
+"""The Allan stage: feeds the streaming accumulators, emits snapshots and checkpoints.
+
+Snapshots (``avar`` records) and checkpoints go out through ``emit`` (the ring's mark channel,
+so the recorder and the publisher see them in sample order, after every sample they cover).
+The stage never reads what it emits: marks are skipped by kind.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from avard.core import frames
+from avard.core.recording import AllanFeed
+
+from ..ring import Chunk, Consumer
+from .stage import Stage, offset_after_mark, split_chunk
+
+Record = dict[str, Any]
+
+
+def relabel_tau(snap: dict[str, Any], odr_hz: float) -> None:
+    """τ = m / ODR with the *fitted* ODR (docs/architecture.md: τ0 = 1/fitted ODR).
+
+    The accumulators count in samples and were built with the nominal rate, which only labels
+    τ; the variances themselves (of sample averages) do not depend on the rate. ``rate_hz``
+    becomes the fitted rate too, so a client computing τ = m / rate_hz agrees."""
+    snap["tau"] = [float(m) / odr_hz for m in snap["m"]]
+    snap["rate_hz"] = float(odr_hz)
+
+
+class AllanStage(Stage):
+    """Feeds ``feed`` (and so ``allan``) in sample order; every ``snapshot_interval_s`` of
+    sample time emits an ``avar`` record, every ``checkpoint_interval_s`` a ``checkpoint``
+    (handed to ``on_checkpoint`` too when nothing records it)."""
+
+    name = "allan"
+
+    def __init__(self, consumer: Consumer, allan: Any, feed: AllanFeed, *, run_id: str,
+                 real_offset: float, rate_hz: Callable[[], float],
+                 emit: Callable[[Record], None],
+                 on_checkpoint: Callable[[Record], None] | None,
+                 snapshot_interval_s: float, checkpoint_interval_s: float,
+                 batch_s: float = 0.0) -> None:
+        super().__init__(consumer, batch_s=batch_s)
+        self.allan = allan
+        self.feed = feed
+        self.run_id = run_id
+        self.real_offset = real_offset
+        self.rate_hz = rate_hz
+        self.emit = emit
+        self.on_checkpoint = on_checkpoint
+        self.snapshot_interval_s = snapshot_interval_s
+        self.checkpoint_interval_s = checkpoint_interval_s
+        self._next_snap: float | None = None
+        self._next_ckpt: float | None = None
+        self._t = 0.0
+
+    def handle(self, chunk: Chunk) -> None:
+        if chunk.lost_samples or chunk.lost_marks:
+            self.feed.gap()
+        for kind, val in split_chunk(chunk):
+            if kind == "samples":
+                a, b = val
+                self.feed.raw(int(chunk.index[a]), chunk.counts[a:b])
+                continue
+            self.real_offset = offset_after_mark(val, self.real_offset)
+            if val["kind"] == "temp":
+                self.feed.temp(val["i0"], val["names"], val["values_c"])
+            elif val["kind"] == "gap":
+                self.feed.gap()
+        if chunk.n:
+            self._t = float(chunk.t_mono[-1])
+        # The timers start with the first sample, deliberately: the first snapshot and
+        # checkpoint come one interval into the run (the restore replays every run recorded
+        # after a checkpoint, so an early one is not needed; docs/recording.md).
+        if self._next_snap is None or self._next_ckpt is None:
+            if not chunk.n:
+                return
+            first = float(chunk.t_mono[0])
+            self._next_snap = first + self.snapshot_interval_s
+            self._next_ckpt = first + self.checkpoint_interval_s
+        if self._t >= self._next_snap:
+            self._next_snap = self._t + self.snapshot_interval_s
+            rec = self.snapshot_record()
+            if rec is not None:
+                self.emit(rec)
+        if self._t >= self._next_ckpt:
+            self._next_ckpt = self._t + self.checkpoint_interval_s
+            self.checkpoint()
+
+    def snapshot_record(self) -> Record | None:
+        """The ``avar`` record of everything fed so far; None before the first τ point (a
+        snapshot without one would carry (0, C) arrays whose shape msgpack lists lose)."""
+        snap = self.allan.snapshot().to_dict()
+        if not snap["m"]:
+            return None
+        relabel_tau(snap, float(self.rate_hz()))
+        snap.update(channels=self.feed.channels,
+                    units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
+                    allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"])
+        return frames.avar_record(self.run_id, 0, self.feed.next_index or 0,
+                                  int(self.allan.n_samples), snap, self._t,
+                                  self._t + self.real_offset)
+
+    def checkpoint(self) -> None:
+        rec = frames.checkpoint_record(self.run_id, 0, self.feed.next_index or 0,
+                                       int(self.allan.n_samples), self.allan.state(),
+                                       self._t, self._t + self.real_offset)
+        rec["feed"] = self.feed.state()
+        self.emit(rec)
+        if self.on_checkpoint is not None:
+            self.on_checkpoint(rec)
+        # With a recording, the recorder saves the state file once the checkpoint record
+        # (and every sample before it) is written and fsynced: a checkpoint never covers
+        # samples the recording lost in a crash, so restore + replay equals the recording.
+
+    def finish(self) -> None:
+        rec = self.snapshot_record()
+        if rec is not None:
+            self.emit(rec)
+        self.checkpoint()

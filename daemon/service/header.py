@@ -1,0 +1,55 @@
+"""The run's ``header`` record: one object shared by the recorder, publisher and requests."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from ..timebase import TimeBase
+
+Record = dict[str, Any]
+
+
+class RunHeader:
+    """The run's ``header`` record, built once and rebuilt only when the fitted rate has moved
+    by more than ``ppm`` (at most every ``min_interval_s``): the recorder writes each new one
+    (and every segment starts with the current one, :meth:`for_segment`), the publisher sends
+    it on the ``status`` topic, and the ``header`` request returns it, so all three carry the
+    same record."""
+
+    def __init__(self, build: Callable[[], Record], timebase: TimeBase,
+                 clock: Callable[[], float], next_index: Callable[[], int],
+                 real_offset: Callable[[], float], *, ppm: float = 2.0,
+                 min_interval_s: float = 10.0) -> None:
+        self._build = build
+        self._tb = timebase
+        self._clock = clock
+        self._next_index = next_index
+        self._real_offset = real_offset
+        self.ppm = ppm
+        self.min_interval_s = min_interval_s
+        self._lock = threading.Lock()
+        self._rec: Record | None = None
+        self._rate = 0.0
+        self._t = 0.0
+        self.version = 0
+
+    def current(self) -> Record:
+        with self._lock:
+            rate = float(self._tb.odr_hz)
+            now = self._clock()
+            if self._rec is None or (abs(rate / self._rate - 1.0) * 1e6 > self.ppm
+                                     and now - self._t >= self.min_interval_s):
+                self._rec = self._build()
+                self._rate, self._t = rate, now
+                self.version += 1
+            return self._rec
+
+    def for_segment(self) -> Record:
+        """The header that starts a segment: the current one with ``i0`` at the reader's
+        next index (never behind the segment's first sample: restore skips the segments whose
+        header ``i0`` is at or before a checkpoint's end, so a stale one would skip data)."""
+        t = self._clock()
+        return dict(self.current(), t_mono=t, t_real=t + self._real_offset(),
+                    i0=self._next_index())

@@ -1,0 +1,139 @@
+"""The publisher stage (raw blocks, marks, status and header on the PUB socket) and the
+request handlers (``snapshot``, ``status``, ``recent``, ``header``) of the request socket."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from avard.core import frames
+from avard.core.errors import AvardError
+
+from ..ring import Chunk, Consumer, Ring
+from ..snapshots import SnapshotBoard
+from .header import RunHeader
+from .stage import Stage, lost_marks_records, offset_after_mark, split_chunk
+
+Record = dict[str, Any]
+
+#: A `recent` reply: counts (3 × int32), index (int64), t_mono (float64) per sample; capped
+#: so that one reply stays well below the request socket's per-peer bound (publisher.py).
+RECENT_BYTES_PER_SAMPLE = 28
+RECENT_MAX_BYTES = 2 << 20
+
+
+class PublisherStage(Stage):
+    """Publishes raw blocks and marks in sample order, hands each ``avar`` record to the
+    snapshot board (what ``snapshot`` requests answer), and every ``status_interval_s`` a
+    status record (and the header when it changed) on the ``status`` topic."""
+
+    name = "publisher"
+
+    def __init__(self, consumer: Consumer, publisher: Any, *, run_id: str, real_offset: float,
+                 rate_hz: Callable[[], float], clock: Any, status: Callable[[], Record],
+                 header: RunHeader, snapshots: SnapshotBoard, status_interval_s: float,
+                 max_block: int, batch_s: float = 0.0) -> None:
+        super().__init__(consumer, idle_s=status_interval_s, batch_s=batch_s,
+                         max_samples=max_block)
+        self.pub = publisher
+        self.run_id = run_id
+        self.real_offset = real_offset
+        self.rate_hz = rate_hz
+        self.clock = clock
+        self.status = status
+        self.header = header
+        self.snapshots = snapshots
+        self.status_interval_s = status_interval_s
+        self._next_status = 0.0
+        self._header_version = -1
+
+    def handle(self, chunk: Chunk) -> None:
+        if chunk.lost_samples:
+            i0, i1 = chunk.lost_index or (0, 0)
+            self.pub.publish("event", frames.gap_record(
+                self.run_id, 0, i0, max(0, i1 - i0), float(chunk.t_mono[0]),
+                self.clock.realtime(), "publisher_behind"))
+        if chunk.lost_marks:
+            for rec in lost_marks_records(self.run_id, chunk, "publisher",
+                                          self.clock.realtime()):
+                self.pub.publish("event", rec)
+        rate = self.rate_hz()
+        for kind, val in split_chunk(chunk):
+            if kind == "mark":
+                self.real_offset = offset_after_mark(val, self.real_offset)
+                if val["kind"] in frames.TOPIC_OF_KIND:
+                    self.pub.publish(None, val)
+                if val["kind"] == "avar":
+                    self.snapshots.publish(val)
+                continue
+            a, b = val
+            t0 = float(chunk.t_mono[a])
+            self.pub.publish("raw", frames.raw_record(
+                self.run_id, 0, int(chunk.index[a]), chunk.counts[a:b], t0,
+                t0 + self.real_offset, rate_hz=rate))
+        self.idle()
+
+    def idle(self) -> None:
+        now = time.monotonic()
+        if now >= self._next_status:
+            self._next_status = now + self.status_interval_s
+            self.publish_status()
+
+    def publish_status(self) -> None:
+        hdr = self.header.current()
+        if self.header.version != self._header_version:
+            self._header_version = self.header.version
+            self.pub.publish("status", hdr)   # a new fit of the rate: on the status topic
+        t = self.clock.monotonic()
+        self.pub.publish("status", frames.status_record(self.run_id, 0, self.status(), t,
+                                                        t + self.real_offset))
+
+    def finish(self) -> None:
+        self.publish_status()
+
+
+class RequestHandlers:
+    """The request socket's ops. Each answers from state it is handed, at once: the fit of a
+    snapshot is the board's thread's work, never a request's."""
+
+    def __init__(self, *, snapshots: SnapshotBoard, status: Callable[[], Record],
+                 header: RunHeader, ring: Ring, nominal_odr_hz: float,
+                 rate_hz: Callable[[], float], scale_m_s2_per_count: float,
+                 recent_max_s: float) -> None:
+        self.snapshots = snapshots
+        self.status = status
+        self.header = header
+        self.ring = ring
+        self.odr = nominal_odr_hz
+        self.rate_hz = rate_hz
+        self.scale = scale_m_s2_per_count
+        self.recent_max_s = recent_max_s
+
+    def table(self) -> dict[str, Callable[[dict[str, Any]], Record]]:
+        return {"snapshot": self.snapshot, "status": lambda _a: self.status(),
+                "recent": self.recent, "header": lambda _a: self.header.current()}
+
+    def snapshot(self, _args: dict[str, Any]) -> Record:
+        rec = self.snapshots.reply()
+        if rec is None:
+            raise AvardError("no Allan snapshot yet; ask again after snapshot_interval_s")
+        return rec
+
+    def recent(self, args: dict[str, Any]) -> Record:
+        seconds = args.get("seconds", 1.0)
+        if not isinstance(seconds, int | float) or not 0 <= seconds <= self.recent_max_s:
+            raise AvardError(f"recent: seconds={seconds!r}; allowed is 0 to "
+                             f"{self.recent_max_s:g} s")
+        n = int(seconds * self.odr)
+        if n * RECENT_BYTES_PER_SAMPLE > RECENT_MAX_BYTES:
+            most = RECENT_MAX_BYTES / RECENT_BYTES_PER_SAMPLE / self.odr
+            raise AvardError(f"recent: seconds={seconds:g} at {self.odr:g} Hz is "
+                             f"{n * RECENT_BYTES_PER_SAMPLE} bytes; at most {most:.3g} s per "
+                             "request (the reply memory is bounded); ask for less")
+        chunk = self.ring.recent(n)
+        i0 = int(chunk.index[0]) if chunk.n else 0
+        return {"i0": i0, "n": chunk.n, "counts": frames.pack_array(chunk.counts),
+                "index": frames.pack_array(chunk.index),
+                "t_mono": frames.pack_array(chunk.t_mono),
+                "scale_m_s2_per_count": self.scale, "rate_hz": float(self.rate_hz())}

@@ -1,0 +1,101 @@
+"""The recorder stage: raw blocks of about ``block_s`` seconds and every mark, in sample order,
+into the segment files (daemon/recorder.py)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from avard.core import frames
+
+from ..ring import Chunk, Consumer
+from .header import RunHeader
+from .stage import Stage, lost_marks_records, offset_after_mark, split_chunk
+
+Record = dict[str, Any]
+
+
+class RecorderStage(Stage):
+    """Writes through ``recorder`` (``write``, ``flush``, ``reopen``, ``close``); hands each
+    checkpoint record, once written and flushed, to ``checkpoint_written`` (the state file);
+    reopens the files when ``reopen`` is set (SIGHUP)."""
+
+    name = "recorder"
+
+    def __init__(self, consumer: Consumer, recorder: Any, *, run_id: str, real_offset: float,
+                 rate_hz: Callable[[], float], real_now: Callable[[], float],
+                 header: RunHeader, checkpoint_written: Callable[[Record], None],
+                 reopen: threading.Event, block_samples: int, batch_s: float = 0.0) -> None:
+        super().__init__(consumer, batch_s=batch_s)
+        self.rec = recorder
+        self.run_id = run_id
+        self.real_offset = real_offset
+        self.rate_hz = rate_hz
+        self.real_now = real_now
+        self.header = header
+        self.checkpoint_written = checkpoint_written
+        self.reopen = reopen
+        self.block_samples = max(1, int(block_samples))
+        self._header_version = header.version   # the first segment's own header
+        self._parts: list[np.ndarray] = []
+        self._i0 = 0
+        self._t0 = 0.0
+        self._n = 0
+
+    def _flush(self) -> None:
+        if not self._n:
+            return
+        if self.header.version != self._header_version:
+            # The fitted rate moved: the recording gets the new header (load_recording takes
+            # each run's newest), before the block whose times use that fit.
+            rec = self.header.for_segment()
+            self._header_version = self.header.version
+            self.rec.write(rec)
+        counts = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
+        self.rec.write(frames.raw_record(self.run_id, 0, self._i0, counts, self._t0,
+                                         self._t0 + self.real_offset, rate_hz=self.rate_hz()))
+        self._parts, self._n = [], 0
+
+    def handle(self, chunk: Chunk) -> None:
+        if chunk.lost_samples:
+            self._flush()
+            i0, i1 = chunk.lost_index or (0, 0)
+            self.rec.write(frames.gap_record(self.run_id, 0, i0, max(0, i1 - i0),
+                                             float(chunk.t_mono[0]) if chunk.n else 0.0,
+                                             self.real_now(), "recorder_behind"))
+        if chunk.lost_marks:
+            self._flush()
+            for rec in lost_marks_records(self.run_id, chunk, "recorder", self.real_now()):
+                self.rec.write(rec)
+        for kind, val in split_chunk(chunk):
+            if kind == "mark":
+                self._flush()
+                self.real_offset = offset_after_mark(val, self.real_offset)
+                written = self.rec.write(val)
+                if val["kind"] == "checkpoint" and written:
+                    self.rec.flush()
+                    self.checkpoint_written(val)
+                continue
+            a, b = val
+            i0 = int(chunk.index[a])
+            if self._n and i0 != self._i0 + self._n:
+                self._flush()
+            while a < b:
+                if not self._n:
+                    self._i0, self._t0 = int(chunk.index[a]), float(chunk.t_mono[a])
+                take = min(b - a, self.block_samples - self._n)
+                self._parts.append(chunk.counts[a:a + take])
+                self._n += take
+                a += take
+                if self._n >= self.block_samples:
+                    self._flush()
+        if self.reopen.is_set():
+            self.reopen.clear()
+            self._flush()
+            self.rec.reopen()
+
+    def finish(self) -> None:
+        self._flush()
+        self.rec.close()

@@ -1,0 +1,489 @@
+"""The supervisor of one acquisition run: builds the pipeline's parts, starts and stops them
+in data order, and talks to systemd (sd_notify READY/WATCHDOG/STATUS/STOPPING) and to signals.
+
+::
+
+    reader (acquisition.py) ──▶ Ring ──▶ AllanStage     ─ avar/checkpoint marks (outbound) ─┐
+       drain, stamp, push, marks │                                                       │
+    DS18B20 threads ──marks────▶ │ ──▶ RecorderStage  (segments, recorder.py)  ◀─────────┤
+                                 └──▶ PublisherStage (PUB, publisher.py)       ◀─────────┘
+                                      RequestHandlers (ROUTER, its own thread; fits: snapshots.py)
+    main thread (this module): start/stop order, signals, sd_notify, watchdog, duration
+
+Each stage has its own ring cursor and thread and is handed what it needs (no stage holds the
+service): a slow disk never delays publishing or the accumulators, and nothing ever waits for
+a stage: one that falls behind by more than the ring loses the oldest samples, and that loss is
+written and published as a ``gap``. Restart: see checkpoint.py.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from avard.core import frames
+from avard.core.errors import AvardError, ConfigError
+from avard.core.recording import AllanFeed
+
+from .. import __version__
+from ..acquisition import Acquisition
+from ..recorder import RestartGap, kernel_boot_id, last_recorded, new_run_id, restart_gap
+from ..ring import Ring
+from ..snapshots import SnapshotBoard, fit_snapshot
+from ..timebase import SystemClock, TimeBase
+from .allan_stage import AllanStage
+from .checkpoint import restore_accumulators, save_state
+from .header import RunHeader
+from .publisher_stage import PublisherStage, RequestHandlers
+from .recorder_stage import RecorderStage
+from .stage import Stage
+
+log = logging.getLogger("avard.daemon.service")
+
+#: Seconds of samples each stage lets accumulate between reads (its added latency).
+ALLAN_BATCH_S = 0.25
+RECORDER_BATCH_S = 0.25
+PUBLISH_BATCH_S = 0.05
+
+
+class Service:
+    """One acquisition run: builds nothing hardware-side itself (see daemon/rig.py and
+    ``commands/run.py``); owns the threads and their shutdown."""
+
+    def __init__(self, cfg: dict[str, dict[str, Any]], sensor: Any, clock: Any, *,
+                 run_id: str | None = None, speed: float | None = None,
+                 temperature_bank: Any = None,
+                 simulate: str | None = None, notifier: Any = None,
+                 recorder_factory: Callable[..., Any] | None = None,
+                 publisher_factory: Callable[..., Any] | None = None,
+                 request_factory: Callable[..., Any] | None = None,
+                 streaming_cls: Any = None, on_tick: Callable[[float], None] | None = None,
+                 sensor_info: dict[str, Any] | None = None,
+                 extra_temperature_names: list[str] | None = None,
+                 interrupt: Any = None) -> None:
+        self.cfg = cfg
+        self.sensor = sensor
+        self.clock = clock
+        # a run sequence number from the recording first: name order is data order even
+        # when CLOCK_REALTIME is wrong (recorder.new_run_id)
+        self.run_id = run_id or new_run_id(cfg["recording"]["data_dir"], clock.realtime())
+        self.boot_id: str | None = getattr(clock, "boot_id", None)
+        if self.boot_id is None and isinstance(clock, SystemClock):
+            self.boot_id = kernel_boot_id()
+        self.speed = speed
+        self.simulate = simulate
+        self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
+        self._temp_ok: dict[str, bool] = {}
+        self.sensor_info = dict(sensor_info or {})
+        self.notifier = notifier
+        self.interrupt = interrupt        # interrupt.InterruptPin on the FIFO watermark
+        self.stop_requested = threading.Event()
+        self.reopen_requested = threading.Event()
+        self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
+        self.stop_signal: int | None = None
+        odr = float(cfg["sensor"]["odr_hz"])
+        self.odr = odr
+        self.timebase = TimeBase(odr, group_delay_samples=float(
+            getattr(sensor, "group_delay_samples", 0.0)))
+        cap = int(cfg["service"]["ring_s"] * odr * 1.1) + 64
+        self.ring = Ring(cap)
+        self.real_offset = clock.realtime() - clock.monotonic()
+        self.scale = float(getattr(sensor, "scale_mps2", 9.80665 / 256000))
+        # Channels: the chip's own sensor, the DS18B20 threads, and sources that mark their
+        # readings themselves (the simulated DS18B20 of --simulate).
+        self.temp_names = ["chip", *(self.bank.names if self.bank is not None else []),
+                           *(extra_temperature_names or [])]
+        self.data_dir = Path(cfg["recording"]["data_dir"])
+        if streaming_cls is None:
+            from avard.core.streaming import StreamingAllan
+
+            streaming_cls = StreamingAllan
+        self.streaming_cls = streaming_cls
+        self.allan = streaming_cls(3 + len(self.temp_names), odr,
+                                   overlap=int(cfg["allan"]["overlap"]),
+                                   names=["x", "y", "z", *self.temp_names])
+        self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
+        self.feed.run = self.run_id
+        self.start_index = 0
+        self.restored: dict[str, Any] | None = None
+        self._restart_gap: RestartGap | None = None
+        self._stop_at: float | None = None
+        self._recorder_factory = recorder_factory
+        self._publisher_factory = publisher_factory
+        self._request_factory = request_factory
+        self.recorder: Any = None
+        self.publisher: Any = None
+        self.request_server: Any = None
+        self.acq: Acquisition | None = None
+        self.workers: list[Stage] = []
+        self._on_tick = on_tick
+        self.t_start = clock.monotonic()
+        self.ready = False
+        self.final_status: dict[str, Any] = {}
+        self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic,
+                                    self._next_index, lambda: self.real_offset)
+        self.snapshots = SnapshotBoard(functools.partial(fit_snapshot,
+                                                         filter_corner_hz=odr / 4))
+
+    # -- helpers ------------------------------------------------------------------------
+    def real_now(self) -> float:
+        return float(self.clock.realtime())
+
+    def _next_index(self) -> int:
+        return self.acq.next_index if self.acq else self.start_index
+
+    def header(self) -> dict[str, Any]:
+        """The run's current header record (see :class:`RunHeader`)."""
+        return self.run_header.current()
+
+    def _build_header(self) -> dict[str, Any]:
+        tb = self.timebase
+        try:
+            rate = tb.rate()
+            timebase = {"odr_hz": rate.odr_hz, "odr_u_hz": rate.odr_u_hz, "ppm": rate.ppm,
+                        "ppm_u": rate.ppm_u, "jitter_s": rate.jitter_s,
+                        "n_points": rate.n_points}
+        except (ValueError, ZeroDivisionError, AttributeError):
+            timebase = {"odr_hz": tb.odr_hz}
+        t = self.clock.monotonic()
+        return frames.header_record(
+            self.run_id, rate_hz=float(tb.odr_hz), t_mono=t, t_real=t + self.real_offset,
+            i0=self._next_index(),
+            scale_m_s2_per_count=self.scale, range_g=self.cfg["sensor"]["range_g"],
+            sensor=self.sensor_info, temperature_sensors=self.temp_names[1:],
+            software=f"avard {__version__}", config=self.cfg,
+            temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
+            allan_rate_hz=float(self.allan.rate_hz), timebase=timebase,
+            simulate=self.simulate, restored=self.restored, boot_id=self.boot_id)
+
+    def status(self) -> dict[str, Any]:
+        acq = self.acq
+        st: dict[str, Any] = {
+            "run": self.run_id, "samples": acq.samples if acq else 0,
+            "index": acq.next_index if acq else 0,
+            "rate_hz": float(self.timebase.odr_hz),
+            "overruns": acq.overruns if acq else 0,
+            "lost_samples_estimate": acq.lost_estimate if acq else 0,
+            "bus_errors": acq.bus_errors if acq else 0,
+            "clock_steps": acq.clock_steps if acq else 0,
+            "stalled": bool(acq.stalled) if acq else False,
+            "allan_samples": int(self.allan.n_samples),
+            "consumers_lost": {c.name: c.lost_total for c in self.ring.consumers},
+            # gap records so far: sensor overruns and consumers that fell behind the ring
+            "gaps": (acq.overruns if acq else 0)
+            + sum(1 for c in self.ring.consumers if c.lost_total),
+            "sim_time_s": self.clock.monotonic() - self.t_start,
+        }
+        if self.recorder is not None:
+            st["disk"] = self.recorder.status()
+        if self.publisher is not None:
+            try:
+                ps = self.publisher.stats()
+            except Exception:  # closing under us at shutdown: no numbers, no crash
+                ps = {}
+            st["subscribers"] = ps.get("peers", 0)
+            st["published"] = ps.get("sent", 0)
+            st["publish_dropped"] = ps.get("dropped", 0)
+        return st
+
+    def status_line(self) -> str:
+        st = self.status()
+        disk = st.get("disk", {})
+        return (f"{st['rate_hz']:.3f} Hz, {st['samples']} samples, {st['gaps']} gaps, "
+                f"{st.get('subscribers', 0)} subscribers, disk "
+                f"{disk.get('state', 'off')}")
+
+    def save_state(self, rec: dict[str, Any]) -> None:
+        """The state file for a checkpoint (only with a recording: it lives beside it)."""
+        if self.cfg["recording"]["enabled"]:
+            save_state(self.data_dir, rec)
+
+    def restore(self) -> None:
+        """Restore the accumulators from the last checkpoint (with what was recorded after
+        it replayed) and continue the sample index across the restart."""
+        if self.cfg["allan"]["restore"]:
+            got = restore_accumulators(self.data_dir, self.streaming_cls,
+                                       list(self.allan.names), float(self.allan.rate_hz))
+            if got is not None:
+                self.allan = got.allan
+                self.feed = AllanFeed(got.allan, self.scale, self.temp_names)
+                self.feed.run = self.run_id
+                self.restored = got.info
+        last = last_recorded(self.data_dir, self.odr)
+        if last is not None:
+            # the index continues from the recording; the gap is measured on CLOCK_MONOTONIC
+            # within one boot, on CLOCK_REALTIME across boots (recorder.restart_gap)
+            self._restart_gap = restart_gap(last, boot_id=self.boot_id,
+                                            t_mono=self.clock.monotonic(),
+                                            t_real=self.real_now(), rate_hz=self.odr)
+            self.start_index = last.i_end + self._restart_gap.n
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def _check_data_dir(self) -> None:
+        try:
+            self.data_dir.mkdir(parents=True, exist_ok=True)
+            if not os.access(self.data_dir, os.W_OK | os.X_OK):
+                raise PermissionError(13, "not writable")
+        except OSError as exc:
+            raise ConfigError(
+                f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
+                f"({exc.strerror}); under systemd StateDirectory= provides it, by hand "
+                "use --data-dir DIR or `sudo install -d -o $USER /var/lib/avard`") from None
+
+    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+        """Build the stages and start every thread, consumers before the reader;
+        ``before_acquisition`` runs once the sockets are bound and before the first drain
+        (a subscriber can connect then)."""
+        cfg = self.cfg
+        recording = bool(cfg["recording"]["enabled"])
+        if recording:
+            self._check_data_dir()
+            self.restore()
+        self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
+                               poll_hz=float(cfg["sensor"]["poll_hz"]),
+                               chip_interval_s=cfg["temperature"]["chip_interval_s"],
+                               run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
+                               start_index=self.start_index,
+                               on_clock_step=self._on_clock_step,
+                               backpressure=self.simulate is not None,
+                               interrupt=self.interrupt, stop_at=self._stop_at)
+        rate = self.timebase_rate
+        # Stages take what accumulated over a batch time instead of every drain; not when a
+        # simulation runs unpaced (its reader waits for them: batching would slow it).
+        paced = not (self.simulate is not None and self.speed is None)
+        acfg = cfg["allan"]
+        self.workers.append(AllanStage(
+            self.ring.consumer("allan"), self.allan, self.feed, run_id=self.run_id,
+            real_offset=self.real_offset, rate_hz=rate, emit=self.ring.mark,
+            on_checkpoint=None if recording else self.save_state,
+            snapshot_interval_s=acfg["snapshot_interval_s"],
+            checkpoint_interval_s=acfg["checkpoint_interval_s"],
+            batch_s=ALLAN_BATCH_S if paced else 0.0))
+        if recording:
+            self.recorder = (self._recorder_factory or _default_recorder)(self)
+            self.workers.append(RecorderStage(
+                self.ring.consumer("recorder"), self.recorder, run_id=self.run_id,
+                real_offset=self.real_offset, rate_hz=rate, real_now=self.real_now,
+                header=self.run_header, checkpoint_written=self.save_state,
+                reopen=self.reopen_requested,
+                block_samples=int(cfg["recording"]["block_s"] * self.odr),
+                batch_s=min(RECORDER_BATCH_S, cfg["recording"]["block_s"]) if paced else 0.0))
+        if cfg["publish"]["enabled"]:
+            self.publisher = (self._publisher_factory or _default_publisher)(self)
+            self.request_server = (self._request_factory or _default_request_server)(self)
+            self.workers.append(PublisherStage(
+                self.ring.consumer("publisher"), self.publisher, run_id=self.run_id,
+                real_offset=self.real_offset, rate_hz=rate, clock=self.clock,
+                status=self.status, header=self.run_header, snapshots=self.snapshots,
+                status_interval_s=cfg["publish"]["status_interval_s"],
+                max_block=max(32, int(self.odr)), batch_s=PUBLISH_BATCH_S if paced else 0.0))
+        # The first marks (restart gap, start event) for every consumer, in order.
+        if self._restart_gap is not None:
+            g = self._restart_gap
+            self.ring.mark(frames.gap_record(self.run_id, 0, g.i0, g.n,
+                                             g.t_real - self.real_offset, g.t_real, "restart",
+                                             estimated=True, clock=g.clock))
+        self.ring.mark(frames.event_record(
+            self.run_id, 0, "start", self.clock.monotonic(), self.real_now(),
+            i0=self.start_index, detail={"software": f"avard {__version__}",
+                                         "restored": self.restored or {}}))
+        for w in self.workers:
+            w.start()
+        if self.bank is not None:
+            self.bank.sink = self.temperature_reading
+            self.bank.start()
+        if before_acquisition is not None:
+            before_acquisition()
+        self.acq.start()
+        log.info("run %s started: ADXL355 %g Hz, ±%d g, drained every %.3g s (FIFO half "
+                 "full%s); temperature channels %s", self.run_id, self.odr,
+                 cfg["sensor"]["range_g"], self.acq.period,
+                 ", INT1 pin" if self.interrupt is not None else "",
+                 ", ".join(self.temp_names))
+
+    def timebase_rate(self) -> float:
+        """The fitted output rate, Hz (the nominal one until the fit has data)."""
+        return float(self.timebase.odr_hz)
+
+    def handlers(self) -> dict[str, Callable[[dict[str, Any]], dict[str, Any]]]:
+        return RequestHandlers(
+            snapshots=self.snapshots, status=self.status, header=self.run_header,
+            ring=self.ring, nominal_odr_hz=self.odr, rate_hz=self.timebase_rate,
+            scale_m_s2_per_count=self.scale,
+            recent_max_s=float(self.cfg["publish"]["recent_max_s"])).table()
+
+    def _on_clock_step(self, real_offset: float) -> None:
+        """The reader saw CLOCK_REALTIME step (and recorded it): wall-clock times written from
+        now on follow the new offset (one float assignment, safe across threads)."""
+        self.real_offset = real_offset
+
+    def temperature_reading(self, reading: Any) -> None:
+        """A DS18B20 reading (from its bank thread): stamp it with the next sample index so
+        it joins the sample time base, and mark drop-outs and returns as events."""
+        if self.acq is None:
+            return
+        i0 = self.acq.stamp()
+        t = self.clock.monotonic()
+        name = reading.name
+        ok = bool(reading.ok)
+        was = self._temp_ok.get(name, True)
+        if was != ok:
+            self._temp_ok[name] = ok
+            self.ring.mark(frames.event_record(
+                self.run_id, 0, "sensor_back" if ok else "sensor_lost", t,
+                t + self.real_offset, i0=i0,
+                detail={"sensor": name, "status": reading.status, "detail": reading.detail}))
+        self.ring.mark(frames.temp_record(self.run_id, 0, i0, [name],
+                                          [reading.value_c if ok else None], t,
+                                          t + self.real_offset, source="ds18b20"))
+
+    def check_threads(self) -> None:
+        """Raise when a thread died (the service must stop with an error, not limp on)."""
+        if self.acq is not None and self.acq.error is not None:
+            raise AvardError(f"the reader thread stopped: {self.acq.error}")
+        for w in self.workers:
+            if w.error is not None:
+                raise AvardError(f"the {w.name} thread stopped: {w.error}")
+
+    def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
+            before_acquisition: Callable[[], None] | None = None) -> int:
+        """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
+        The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
+        of a given seed always holds the same samples."""
+        self._stop_at = None if duration_s is None else self.t_start + duration_s
+        self.start(before_acquisition)
+        n = self.notifier
+        wd = n.watchdog_interval_s() if n is not None else None
+        next_wd = time.monotonic()
+        last_samples = -1
+        next_status_log = time.monotonic() + self.cfg["service"]["status_log_interval_s"]
+        try:
+            while not self.stop_requested.is_set():
+                self.check_threads()
+                assert self.acq is not None
+                if not self.ready and self.acq.first_samples.is_set():
+                    self.ready = True
+                    log.info("samples flow; ready")
+                    if n is not None:
+                        n.ready()
+                        n.status(self.status_line())
+                now = time.monotonic()
+                if n is not None and wd and self.ready and now >= next_wd:
+                    # WATCHDOG=1 only while samples advance: a stuck sensor lets systemd act.
+                    if self.acq.samples != last_samples and not self.acq.stalled:
+                        n.watchdog()
+                        last_samples = self.acq.samples
+                    n.status(self.status_line())
+                    next_wd = now + wd
+                if self._reload_keys.is_set():
+                    # Not in the signal handler: zmq calls belong in a normal thread context.
+                    self._reload_keys.clear()
+                    log.info("SIGHUP: reopening the recording files, re-reading client keys")
+                    if n is not None:
+                        n.reloading()
+                    for sock in (self.publisher, self.request_server):
+                        reload = getattr(sock, "reload_keys", None)
+                        if reload is not None:
+                            reload()
+                    if n is not None:
+                        n.ready()   # reload finished (Type=notify protocol)
+                if now >= next_status_log:
+                    next_status_log = now + self.cfg["service"]["status_log_interval_s"]
+                    log.info("status: %s", self.status_line())
+                wait = tick_s if self.ready else min(tick_s, 0.05)   # READY promptly
+                if duration_s is not None:
+                    if self.acq.finished.is_set():
+                        break
+                    left = max(0.0, duration_s - (self.clock.monotonic() - self.t_start))
+                    # virtual seconds → real seconds at this pace; past the end the reader
+                    # is finishing its last drain at stop_at: look again shortly
+                    wait = max(0.005, min(wait, left / self.speed if self.speed else 0.05))
+                if n is not None and wd and self.ready:
+                    wait = min(wait, max(0.0, next_wd - time.monotonic()))
+                self.stop_requested.wait(wait)
+        finally:
+            self.stop()
+        self.check_threads()
+        return 0
+
+    def stop(self) -> None:
+        """Flush and close everything, in data order: reader, Allan, recorder, publisher."""
+        if self.stop_signal:
+            log.info("signal %d: stopping", self.stop_signal)
+        if self.notifier is not None:
+            self.notifier.stopping()
+        self.stop_requested.set()
+        if self.acq is not None:
+            self.acq.stop()
+        if self.bank is not None:
+            self.bank.stop()
+        for w in self.workers:  # Allan first: its final snapshot/checkpoint are ring marks
+            w.stop()
+        self.final_status = self.status()
+        log.info("run %s stopped: %s", self.run_id, self.status_line())
+        if self.request_server is not None:
+            self.request_server.stop()
+        self.snapshots.stop()
+        if self.publisher is not None:
+            self.publisher.close()
+            self.publisher = None
+
+    def install_signals(self) -> None:
+        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording (main thread only)."""
+        def _term(signum: int, _frame: Any) -> None:
+            self.stop_signal = signum      # logged by the main loop, not here (locks)
+            self.stop_requested.set()
+
+        def _hup(_signum: int, _frame: Any) -> None:
+            # Only flags here: the handler runs in the main thread, which may be inside the
+            # notifier's or a socket's lock at this moment.
+            self.reopen_requested.set()
+            self._reload_keys.set()
+
+        signal.signal(signal.SIGTERM, _term)
+        signal.signal(signal.SIGINT, _term)
+        signal.signal(signal.SIGHUP, _hup)
+
+
+def _default_recorder(svc: Service) -> Any:
+    from ..recorder import Recorder
+
+    r = svc.cfg["recording"]
+    return Recorder(svc.data_dir, svc.run_id, svc.run_header.for_segment, segment_s=r["segment_s"],
+                    fsync_interval_s=r["fsync_interval_s"], retention_days=r["retention_days"],
+                    retention_max_bytes=r["retention_max_bytes"],
+                    min_free_bytes=r["min_free_bytes"], clock=svc.clock.monotonic,
+                    realtime=svc.clock.realtime)
+
+
+def _curve(svc: Service) -> Any:
+    if not svc.cfg["curve"]["enabled"]:
+        return None
+    from ..curve import CurveServerConfig
+
+    c = CurveServerConfig.from_mapping(svc.cfg["curve"])
+    c.check()
+    return c
+
+
+def _default_publisher(svc: Service) -> Any:
+    from ..publisher import Publisher
+
+    p = svc.cfg["publish"]
+    return Publisher(p["endpoint"], svc.run_id, hwm=p["hwm"], curve=_curve(svc),
+                     allow_remote=p["allow_remote"])
+
+
+def _default_request_server(svc: Service) -> Any:
+    from ..publisher import RequestServer
+
+    return RequestServer(svc.cfg["publish"]["request_endpoint"], svc.handlers(),
+                         curve=_curve(svc),
+                         allow_remote=svc.cfg["publish"]["allow_remote"]).start()

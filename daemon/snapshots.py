@@ -1,0 +1,121 @@
+"""The latest published Allan snapshot for the ``snapshot`` request, fitted off the request path.
+
+The publisher hands every ``avar`` record it sends to :meth:`SnapshotBoard.publish`; the
+``snapshot`` request returns exactly that record (never an older one, never one the
+subscribers have not been sent yet). Its noise fit (core/fit.py: NNLS and normal quantiles,
+0.1–2 s on a Pi, and the module that loads scipy) is computed by the board's own thread, not by
+the request thread, so ``status`` and ``recent`` are never queued behind a fit. The thread
+starts fitting only once a client has asked for a snapshot (a service nobody asks never loads
+scipy) and from then on fits each new record as it is published; a reply carries the fit of
+its own record when it is ready, else ``fit`` nil and ``fit_pending`` true.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from avard.core.errors import AvardError
+
+log = logging.getLogger(__name__)
+
+Fit = Callable[[dict[str, Any]], dict[str, Any]]
+
+
+class SnapshotBoard:
+    """Holds the newest published ``avar`` record and its fit; one fitting thread."""
+
+    def __init__(self, fit: Fit) -> None:
+        self._fit = fit
+        self._cond = threading.Condition()
+        self._latest: dict[str, Any] | None = None
+        self._fitted: dict[str, Any] | None = None    # the record the fit below belongs to
+        self._fit_result: dict[str, Any] | None = None
+        self._wanted = False
+        self._stopping = False
+        self._thread: threading.Thread | None = None
+        self.fits = 0
+
+    def publish(self, record: dict[str, Any]) -> None:
+        """A new ``avar`` record went out on the wire."""
+        with self._cond:
+            self._latest = record
+            self._cond.notify_all()
+
+    def reply(self) -> dict[str, Any] | None:
+        """The latest published record with its fit if ready (None before the first)."""
+        with self._cond:
+            if not self._wanted:
+                self._wanted = True
+                self._start()
+            self._cond.notify_all()
+            rec = self._latest
+            if rec is None:
+                return None
+            ready = self._fitted is rec
+            return dict(rec, fit=self._fit_result if ready else None, fit_pending=not ready)
+
+    def wait_fitted(self, timeout: float) -> bool:
+        """Block until the latest record has its fit (tests, and clients in-process)."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: self._latest is not None and self._fitted is self._latest, timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _start(self) -> None:
+        if self._thread is None and not self._stopping:
+            self._thread = threading.Thread(target=self._run, name="avard-fit", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._stopping or (
+                    self._latest is not None and self._fitted is not self._latest))
+                if self._stopping:
+                    return
+                rec = self._latest
+            assert rec is not None
+            try:
+                result = self._fit(rec)
+            except Exception:   # a fit must never end the thread; the reply says no fit
+                log.exception("fitting the snapshot failed")
+                result = {}
+            with self._cond:
+                self._fitted, self._fit_result = rec, result
+                self.fits += 1
+                self._cond.notify_all()
+
+
+def fit_snapshot(rec: dict[str, Any], *, filter_corner_hz: float) -> dict[str, Any]:
+    """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
+    try:
+        from avard.core.allan import AllanResult
+        from avard.core.fit import fit_noise
+    except ImportError:
+        return {}
+    snap = rec["snapshot"]
+    out: dict[str, Any] = {}
+    try:
+        var = np.asarray(snap["avar"], dtype=float)
+        base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
+        for c, axis in enumerate(("x", "y", "z")):
+            res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
+                              edf=np.asarray(snap["edf"], dtype=float)[:, c],
+                              lo=np.asarray(snap["lo"], dtype=float)[:, c],
+                              hi=np.asarray(snap["hi"], dtype=float)[:, c],
+                              alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
+                              ci=float(snap["ci"]), **base)
+            out[axis] = fit_noise(res, filter_corner_hz=filter_corner_hz).to_dict()
+    except (AvardError, KeyError, TypeError, ValueError) as exc:
+        log.info("no fit for the snapshot yet: %s", exc)
+    return out

@@ -1,0 +1,40 @@
+"""daemon/rig.py: one place chooses the backend (argument, then $AVARD_BACKEND, then hardware)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from avard.core.errors import ConfigError
+from avard.daemon.config import load_config
+from avard.daemon.rig import BACKEND_ENV, build_rig, choose_backend
+
+
+def test_backend_precedence_and_bad_values(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(BACKEND_ENV, raising=False)
+    assert choose_backend(None) is None                       # hardware by default
+    monkeypatch.setenv(BACKEND_ENV, "simulate:paper-table3")
+    assert choose_backend(None) == "paper-table3"
+    assert choose_backend("quiet-lab") == "quiet-lab"         # the argument wins
+    monkeypatch.setenv(BACKEND_ENV, "hardware")
+    assert choose_backend(None) is None
+    for bad in ("simulate", "simulate:", "emulator"):
+        monkeypatch.setenv(BACKEND_ENV, bad)
+        with pytest.raises(ConfigError, match="simulate:PRESET"):
+            choose_backend(None)
+
+
+def test_env_backend_builds_the_simulated_rig_and_its_service(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(BACKEND_ENV, "simulate:quiet-lab")
+    cfg = load_config(None, **{"recording.data_dir": str(tmp_path), "publish.enabled": False})
+    rig = build_rig(cfg, seed=4)
+    assert rig.simulate == "quiet-lab" and rig.sensor_info["device"] == "ADXL355 (emulated)"
+    svc = rig.service(cfg)
+    svc.run(30.0)
+    st = svc.final_status
+    assert st["samples"] > 30 * 120 and st["overruns"] == 0
+    # the simulated DS18B20s reached the service through the rig's wiring
+    assert svc.temp_names == ["chip", *rig.parts["sims"].names]
+    with pytest.raises(ConfigError, match="unknown preset"):
+        build_rig(cfg, simulate="no-such-preset")
