@@ -29,6 +29,11 @@ def relabel_tau(snap: dict[str, Any], odr_hz: float) -> None:
     snap["rate_hz"] = float(odr_hz)
 
 
+def _next_deadline(deadline: float, interval: float, now: float) -> float:
+    """The first ``deadline + k·interval`` (k ≥ 1) after ``now``."""
+    return deadline + interval * (1 + int((now - deadline) // interval))
+
+
 class AllanStage(Stage):
     """Feeds ``feed`` (and so ``allan``) in sample order; every ``snapshot_interval_s`` of
     sample time emits an ``avar`` record, every ``checkpoint_interval_s`` a ``checkpoint``
@@ -80,13 +85,16 @@ class AllanStage(Stage):
             first = float(chunk.t_mono[0])
             self._next_snap = first + self.snapshot_interval_s
             self._next_ckpt = first + self.checkpoint_interval_s
+        # Fixed deadlines from the first sample (not re-armed from a late chunk): a stage that
+        # reads in batches would otherwise drift one batch later at every interval.
         if self._t >= self._next_snap:
-            self._next_snap = self._t + self.snapshot_interval_s
+            self._next_snap = _next_deadline(self._next_snap, self.snapshot_interval_s, self._t)
             rec = self.snapshot_record()
             if rec is not None:
                 self.emit(rec)
         if self._t >= self._next_ckpt:
-            self._next_ckpt = self._t + self.checkpoint_interval_s
+            self._next_ckpt = _next_deadline(self._next_ckpt, self.checkpoint_interval_s,
+                                             self._t)
             self.checkpoint()
 
     def snapshot_record(self) -> Record | None:

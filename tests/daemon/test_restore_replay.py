@@ -142,9 +142,9 @@ def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path
     cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
                                "publish.enabled": False, "sensor.poll_hz": 1.0,
                                "allan.checkpoint_interval_s": 5.0})
-    # paced (4× real time): drains are then small, as on the device, and the timers act
-    # within one drain of their time
-    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=2, speed=4.0)
+    # paced (2× real time): drains are then small, as on the device, and the timers act
+    # within one read of the Allan stage (its 0.25 s batch, 0.5 s of data at 2×) of their time
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=2, speed=2.0)
     svc.run(17.0)
     recs = list(RecordingReader(tmp_path / "rec"))
     t0 = min(r["t_mono"] for r in recs if r["kind"] == "raw")
