@@ -98,4 +98,9 @@ class RecorderStage(Stage):
 
     def finish(self) -> None:
         self._flush()
+        if self.header.version != self._header_version:
+            # a newer fit of the rate after the last block (the publisher's final status may
+            # make one): the recording ends with the header that was published
+            self._header_version = self.header.version
+            self.rec.write(self.header.for_segment())
         self.rec.close()

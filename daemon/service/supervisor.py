@@ -424,7 +424,9 @@ class Service:
             self.acq.stop()
         if self.bank is not None:
             self.bank.stop()
-        for w in self.workers:  # Allan first: its final snapshot/checkpoint are ring marks
+        # Allan first (its final snapshot/checkpoint are ring marks), the recorder last (it
+        # records the header version the publisher's final status may have made)
+        for w in sorted(self.workers, key=lambda w: isinstance(w, RecorderStage)):
             w.stop()
         self.final_status = self.status()
         log.info("run %s stopped: %s", self.run_id, self.status_line())
