@@ -278,3 +278,4 @@ def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: f
     √(2·AVAR(window)); the test wants 6 of them at the best window."""
     w = np.array([0.01, 0.02, 0.04]) * record_s
     return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))
+
