@@ -29,15 +29,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
-CAUSES = ("temperature", "warmup", "bias_step", "sinusoid")
+CAUSES = ("temperature", "warmup", "bias_step", "gauss_markov", "sinusoid")
 PARAMS = {
     "temperature": ("coefficient", "lag_s"),
     "warmup": ("time_constant_s", "size"),
     "bias_step": ("time_s", "size"),
+    "gauss_markov": ("sigma", "time_constant_s"),
     "sinusoid": ("frequency_hz", "amplitude"),
 }
 UNITS = {"coefficient": "m/s²/K", "lag_s": "s", "time_constant_s": "s", "size": "m/s²",
-         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²"}
+         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²", "sigma": "m/s²"}
 
 Z_STEP = 6.0
 
