@@ -414,6 +414,13 @@ def _gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: list[dict[str, A
             f if passed else None)
 
 
+def _noise_levels(fit: NoiseFit) -> dict[str, float]:
+    """N, B, K of analyze's fit (0 where absent), for the time-domain GLS of the transients."""
+    v = fit.values()
+    return {"N": v.get("velocity_random_walk") or 0.0, "B": v.get("bias_instability") or 0.0,
+            "K": v.get("rate_random_walk") or 0.0}
+
+
 def _thermal_signal(thermal: ThermalFit, temps: NDArray, y: NDArray, rate_b: float
                     ) -> NDArray[np.float64]:
     """The thermal signal to remove. The lag filter's start state is unknown: a start-up
@@ -458,6 +465,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         fits = cz.transient_fits(work, rate_b)
         for cand in (cz.detect_warmup(work, rate_b, fits),
                      cz.detect_bias_step(work, rate_b, fits)):
+            if cand.cause == "warmup" and cand.passed:
+                cand = cz.refine_warmup(work, rate_b, cand, _noise_levels(base))
             findings.append(Finding(cand.cause, cand.passed, dict(cand.params), {},
                                     cand.statistic, cand.threshold, cand.evidence))
             if cand.passed:
