@@ -74,6 +74,9 @@ def test_thermal_lag_coefficient_and_driving_channel(tmp_path, logged, drive, la
         assert th.lag_s == pytest.approx(lag_s, rel=0.2)
         assert th.lag_lo <= th.lag_s <= th.lag_hi
         assert [f.cause for f in ch.claimed] == ["temperature"]
+        # the base model (analyze's) misfits where the cycle shows, and says so in σ
+        assert any(r["tau_range_s"][0] <= 800.0 and r["tau_range_s"][1] >= 100.0
+                   and r["max_sigma"] > 3 for r in ch.misfit), ch.misfit
         # the compensated ADEV is below the measured one where the HVAC cycle shows
         tau = ch.base.allan.tau
         k = int(np.argmin(np.abs(tau - 400.0)))
