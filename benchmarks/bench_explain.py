@@ -80,10 +80,12 @@ def power(cases: int, seed0: int) -> None:
     print(f"  temperature: ±{amp:g} °C {period / 60:g}-min cycle, lag {lag:g} s, minimum "
           f"{c_min:.3g} m/s²/K (lag to 10 %), hidden {3 * c_min:.3g}")
     print(f"  warmup: T {t_w:g} s, minimum {w_min:.3g} m/s², hidden {3 * w_min:.3g}")
+    print("  gauss_markov: σ 2e-4 m/s², T 120 s (no stated minimum yet)")
     print(f"  bias_step: at {t_step:g} s, minimum {s_min:.3g} m/s², hidden {3 * s_min:.3g}")
     kinds = {
         "temperature": Truth(coefficient=(3 * c_min, 0.0, 0.0), lag_s=lag),
         "warmup": Truth(warmup=(3 * w_min, t_w)),
+        "gauss_markov": Truth(gauss_markov=(2e-4, 120.0)),
         "bias_step": Truth(step=(t_step, 3 * s_min)),
         "null": Truth(),
     }
@@ -92,6 +94,9 @@ def power(cases: int, seed0: int) -> None:
         if kind == "temperature":
             return (math.isclose(p["coefficient"], 3 * c_min, rel_tol=0.2)
                     and math.isclose(p["lag_s"], lag, rel_tol=0.2))
+        if kind == "gauss_markov":
+            return (math.isclose(p["sigma"], 2e-4, rel_tol=0.2)
+                    and math.isclose(p["time_constant_s"], 120.0, rel_tol=0.2))
         if kind == "warmup":
             return (math.isclose(p["size"], 3 * w_min, rel_tol=0.2)
                     and math.isclose(p["time_constant_s"], t_w, rel_tol=0.2))

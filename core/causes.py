@@ -29,15 +29,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
-CAUSES = ("temperature", "warmup", "bias_step", "sinusoid")
+CAUSES = ("temperature", "warmup", "bias_step", "gauss_markov", "sinusoid")
 PARAMS = {
     "temperature": ("coefficient", "lag_s"),
     "warmup": ("time_constant_s", "size"),
     "bias_step": ("time_s", "size"),
+    "gauss_markov": ("sigma", "time_constant_s"),
     "sinusoid": ("frequency_hz", "amplitude"),
 }
 UNITS = {"coefficient": "m/s²/K", "lag_s": "s", "time_constant_s": "s", "size": "m/s²",
-         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²"}
+         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²", "sigma": "m/s²"}
 
 Z_STEP = 6.0
 
@@ -278,3 +279,60 @@ def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: f
     √(2·AVAR(window)); the test wants 6 of them at the best window."""
     w = np.array([0.01, 0.02, 0.04]) * record_s
     return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))
+
+
+
+def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw: float
+               ) -> NDArray:
+    """Covariance ((m/s²)²) of block means (length ``block_s``, centres ``t``) of white,
+    flicker and random-walk rate noise: N²/block on the diagonal; flicker as noise_gen's
+    ladder of Gauss–Markov processes (Σ σ_k² e^(−|Δt|/T_k)); random walk K²·min(t_i, t_j)
+    (its start value is the offset column)."""
+    from .noise_gen import flicker_ladder
+
+    dtt = np.abs(np.subtract.outer(t, t))
+    c = np.diag(np.full(len(t), n_white**2 / block_s))
+    if b_inst > 0:
+        for T, s in flicker_ladder([b_inst], block_s, 10 * float(t[-1] + block_s), 2.0):
+            c += float(np.asarray(s)[0]) ** 2 * np.exp(-dtt / T)
+    if k_rrw > 0:
+        c += k_rrw**2 * np.minimum.outer(t, t)
+    return c
+
+
+def refine_warmup(y: NDArray, rate_hz: float, cand: Candidate, noise: dict[str, float],
+                  max_blocks: int = 1024) -> Candidate:
+    """The warm-up's time constant and size by generalised least squares of [1, t, e^(−t/T)]
+    with the noise covariance of analyze's fitted N, B, K (``noise``), T on a grid within a
+    factor 2 of the detector's; the test (window contrast) is unchanged. Ordinary least
+    squares weighs every block alike, and the random walk's slow wander then pulls T."""
+    b = max(1, len(y) // max_blocks)
+    yb = block_means(y, b)
+    dt = b / rate_hz
+    t = (np.arange(len(yb)) + 0.5) * dt
+    C = _noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
+    from scipy.linalg import solve_triangular
+
+    try:
+        L = np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        return cand
+    T0 = cand.params["time_constant_s"]
+    Ts = np.geomspace(T0 / 2, T0 * 2, 41)
+    # whiten the data, the offset and drift, and every trial exponential in one solve
+    cols = np.column_stack([yb, np.ones_like(t), t, np.exp(-t[:, None] / Ts[None, :])])
+    w = solve_triangular(L, cols, lower=True)
+    wy, base = w[:, 0], w[:, 1:3]
+    best = (math.inf, T0, cand.params["size"])
+    for i, T in enumerate(Ts):
+        a = np.column_stack([base, w[:, 3 + i]])
+        coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
+        r = wy - a @ coef
+        chi = float(r @ r)
+        if chi < best[0]:
+            best = (chi, float(T), float(coef[2]))
+    _, T, size = best
+    return Candidate(cand.cause, cand.passed, {"time_constant_s": T, "size": size},
+                     cand.statistic, cand.threshold,
+                     cand.evidence + f"; generalised least squares with analyze's noise model: "
+                     f"time constant {T:.4g} s, size {size:.3g} m/s²")

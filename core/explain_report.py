@@ -152,6 +152,10 @@ def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
     ax.set_ylabel("misfit (σ)")
     ax.set_title(f"channel {ch.name}: (measured − model) / σ of the estimate")
     ax.set_yscale("symlog", linthresh=3)
+    top = max(3.0, float(np.nanmax(np.abs(zb))) if np.any(np.isfinite(zb)) else 3.0)
+    ticks = [t for t in (1, 3, 10, 30, 100, 300, 1000, 3000, 10000) if t <= 1.5 * top]
+    ax.set_yticks([-t for t in reversed(ticks)] + [0] + ticks)
+    ax.set_yticklabels([f"{-t:g}" for t in reversed(ticks)] + ["0"] + [f"{t:g}" for t in ticks])
     ax.tick_params(labelsize=8)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)

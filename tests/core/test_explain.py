@@ -74,6 +74,9 @@ def test_thermal_lag_coefficient_and_driving_channel(tmp_path, logged, drive, la
         assert th.lag_s == pytest.approx(lag_s, rel=0.2)
         assert th.lag_lo <= th.lag_s <= th.lag_hi
         assert [f.cause for f in ch.claimed] == ["temperature"]
+        # the base model (analyze's) misfits where the cycle shows, and says so in σ
+        assert any(r["tau_range_s"][0] <= 800.0 and r["tau_range_s"][1] >= 100.0
+                   and r["max_sigma"] > 3 for r in ch.misfit), ch.misfit
         # the compensated ADEV is below the measured one where the HVAC cycle shows
         tau = ch.base.allan.tau
         k = int(np.argmin(np.abs(tau - 400.0)))
@@ -121,9 +124,9 @@ def test_warmup_found_with_its_size(tmp_path):
         assert claimed["warmup"].params["size"] == pytest.approx(size, rel=0.2)
 
 
-@pytest.mark.xfail(strict=True, reason="at 3× the detection minimum the time constant "
-                   "scatters ≈ 15 % (1 σ, 30 axes); 20 % on every axis needs a larger effect")
 def test_warmup_time_constant_within_20_percent(tmp_path):
+    """Its time constant by generalised least squares with analyze's noise model (ordinary
+    least squares scattered 15 % here and missed 20 % on one axis)."""
     _, ex = _warmup_case(tmp_path)
     for ch in ex.channels.values():
         p = {f.cause: f for f in ch.claimed}["warmup"].params
@@ -155,3 +158,19 @@ def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
     assert th is not None and th.passed
     assert th.coefficient == pytest.approx(c, rel=0.2)
     assert th.lag_s == pytest.approx(600.0, rel=0.2)
+
+
+def test_gauss_markov_bump_as_a_component_of_the_gls_fit(tmp_path):
+    """A first-order Gauss–Markov process (σ 2e-4 m/s², T 2 min) on every axis: claimed as a
+    component of analyze's GLS fit, the fit improved. σ and T trade off along the bump and T
+    is only scanned on a grid, so they are held to 25 % and a factor 2 (the issue's 20 % is
+    not met for this cause; its σ interval is at the fitted T)."""
+    path, _ = _file(tmp_path, 41, Truth(gauss_markov=(2e-4, 120.0)))
+    ex = explain_file(path)
+    for ch in ex.channels.values():
+        gm = {f.cause: f for f in ch.claimed}.get("gauss_markov")
+        assert gm is not None, [f.evidence for f in ch.findings]
+        assert gm.params["sigma"] == pytest.approx(2e-4, rel=0.25)
+        assert 60.0 <= gm.params["time_constant_s"] <= 240.0
+        assert any(e["cause"] == "gauss_markov" and e["present"] for e in ch.extended.extra)
+        assert ch.gain > 1.0

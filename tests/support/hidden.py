@@ -39,6 +39,7 @@ class Truth:
     drive: str = "ambient"  # which channel the sensor follows: "ambient" or "plate"
     warmup: tuple[float, float] | None = None  # (size m/s², time constant s), all axes
     step: tuple[float, float] | None = None  # (time s, size m/s²), all axes
+    gauss_markov: tuple[float, float] | None = None  # (σ m/s², correlation time s), all axes
     noise: dict[str, float] = field(default_factory=dict)
 
 
@@ -109,6 +110,12 @@ def make_record(seed: int, *, hours: float = 4.0, rate_hz: float = 10.0,
     if truth.step is not None:
         ts, size = truth.step
         acc += np.where(t >= ts, size, 0.0)[:, None]
+    if truth.gauss_markov is not None:
+        sg, tg = truth.gauss_markov
+        phi_g = math.exp(-dt / tg)
+        wg = rng.standard_normal((n, 3)) * sg * math.sqrt(1 - phi_g * phi_g)
+        x0 = sg * rng.standard_normal(3)
+        acc += lfilter([1.0], [1.0, -phi_g], wg, axis=0, zi=(phi_g * x0)[None, :])[0]
     chans = {"plate": plate, "ambient": ambient}
     temps = np.full((n, len(logged)), np.nan)
     idx = np.arange(1, int(n * dt / DS18B20_CONVERSION_S)) * DS18B20_CONVERSION_S * rate_hz

@@ -1,0 +1,68 @@
+"""The pieces of explain's thermal model and slow view, against closed forms and direct
+computation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from avard.core.explain import SlowView, block_size
+from avard.core.thermal_fit import lag_filter, signal_avar_on
+
+
+@pytest.mark.parametrize("lag_s", [30.0, 300.0, 1200.0])
+def test_lag_filter_matches_the_first_order_response_of_a_sinusoid(lag_s):
+    """Steady state of dT_s/dt = (T − T_s)/τ for T = sin ωt: amplitude 1/√(1 + ω²τ²), phase
+    −atan(ωτ) (closed form, not the filter's own discretisation)."""
+    rate, period = 1.0, 1800.0
+    t = np.arange(int(20 * max(period, lag_s) * rate)) / rate
+    w = 2 * math.pi / period
+    out = lag_filter(np.sin(w * t), lag_s, rate)
+    tail = t > 10 * max(period, lag_s)
+    want = np.sin(w * t - math.atan(w * lag_s)) / math.hypot(1.0, w * lag_s)
+    assert np.max(np.abs(out[tail] - want[tail])) < 1e-3 / math.hypot(1.0, w * lag_s)
+
+
+def test_slow_view_block_means_whatever_the_blocks():
+    rng = np.random.default_rng(1)
+    a = rng.standard_normal((10_000, 3))
+    temp = np.full((10_000, 2), np.nan)
+    temp[::7, 0] = np.arange(len(temp[::7]))  # a reading every 7 samples
+    temp[::5, 1] = 3.0
+    sv = SlowView(16, 3, 2)
+    i = 0
+    for n in (1, 999, 4096, 17, 3000, 1887):
+        sv.update(a[i:i + n], temp[i:i + n])
+        i += n
+    acc, tmp = sv.finish()
+    m = 10_000 // 16
+    assert acc.shape == (m, 3)
+    np.testing.assert_allclose(acc, a[:m * 16].reshape(m, 16, 3).mean(axis=1), atol=1e-12)
+    assert tmp is not None and np.all(np.isfinite(tmp))
+    assert np.all(tmp[:, 1] == 3.0)
+    # the readings' mean per block, rising with the reading index
+    assert np.all(np.diff(tmp[:, 0]) > 0)
+
+
+def test_block_size_is_a_power_of_two_of_at_least_a_second():
+    for rate, n in ((125.0, 27_000_000), (10.0, 144_000), (4000.0, None)):
+        b = block_size(rate, n)
+        assert b & (b - 1) == 0 and b >= rate
+        if n is not None:
+            assert n / b <= 1 << 18
+
+
+def test_signal_avar_of_a_sinusoid_is_its_closed_form():
+    """The AVAR a slow sinusoid puts into the record (IEEE 952 eq. C.21:
+    A²·sin⁴(πτ/P)/(πτ/P)²) at the octave τ, and τ² below the slow view's first point."""
+    rate, period, amp = 1.0, 600.0, 2e-4
+    t = np.arange(200_000) / rate
+    d = amp * np.sin(2 * math.pi * t / period)
+    tau = np.array([0.25, 0.5, 4.0, 32.0, 128.0, 256.0])
+    got = signal_avar_on(d, rate, tau)
+    x = math.pi * tau / period
+    want = amp**2 * np.sin(x) ** 4 / x**2
+    np.testing.assert_allclose(got[2:], want[2:], rtol=0.05)
+    # below the first τ (1 s): a smooth signal's τ² law
+    np.testing.assert_allclose(got[:2], want[:2], rtol=0.05)
