@@ -256,7 +256,7 @@ def _legend(items: Sequence[tuple[str, str]], *, dashed_last: bool = False) -> s
         out.append(f'<line x1="{x}" y1="{MT + 12}" x2="{x + 18}" y2="{MT + 12}" '
                    f'stroke="{colour}" stroke-width="2.5"{dash}/><text class="tick" '
                    f'x="{x + 22}" y="{MT + 16}">{escape(name)}</text>')
-        x += 30 + 7 * len(name)
+        x += 34 + 11 * len(name)  # room for the larger phone font too
     out.append("</g>")
     return "".join(out)
 
@@ -440,7 +440,7 @@ def status_html(state: RunState) -> str:
 
 
 def timeline_svg(state: RunState) -> str:
-    h = 96
+    h = 112
     end = max(state.run_time(None), max((i.t_s for i in state.timeline), default=0.0), 1.0)
     unit, scale = _time_unit(end)
     frame = _Frame((0.0, end / scale), (0.0, 1.0), logx=False, logy=False, h=h)
