@@ -42,6 +42,7 @@ class Feed:
         self._snapshot_arrived = threading.Event()
         self._threads: list[threading.Thread] = []
         self.error: BaseException | None = None
+        self._header_retry_s = HEADER_RETRY_S / 2
 
     def start(self) -> None:
         self._threads = [threading.Thread(target=self._read, name="avard-web-sub", daemon=True)]
@@ -89,8 +90,11 @@ class Feed:
         try:
             header = self.sub.request("header")
         except NetworkError as exc:
-            log.info("no run header yet: %s", exc)
-            return time.monotonic() + HEADER_RETRY_S
+            # each try blocks this thread up to --timeout: back off to at most every 5 min
+            self._header_retry_s = min(2 * self._header_retry_s, 300.0)
+            log.info("no run header yet (next try in %.0f s): %s", self._header_retry_s, exc)
+            return time.monotonic() + self._header_retry_s
+        self._header_retry_s = HEADER_RETRY_S / 2
         self.state.join(header, None)
         return None
 

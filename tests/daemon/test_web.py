@@ -388,3 +388,73 @@ def test_another_address_than_loopback_only_when_asked_and_logged():
         start = time.monotonic()
         assert p.wait(20) == 0
         assert time.monotonic() - start < 10
+
+
+# ---- the feed threads --------------------------------------------------------------------------
+
+
+class FakeSubscriber:
+    """The Subscriber interface the feed uses, over a list of records."""
+
+    def __init__(self, records: list[tuple[str, dict]], header: dict) -> None:
+        self.tracker = LossTracker()
+        self.records = list(records)
+        self.header: dict | None = header
+        self.snapshot: dict | None = None
+        self.requests: list[str] = []
+        self.closed = False
+
+    @property
+    def stats(self):
+        return self.tracker.stats
+
+    def connect(self):
+        return self
+
+    def recv(self, timeout_s=None):
+        if not self.records:
+            time.sleep(0.01)
+            return None
+        topic, rec = self.records.pop(0)
+        return self.tracker.observe(topic, rec)
+
+    def request(self, op, args=None, **_kw):
+        self.requests.append(op)
+        return {"kind": "header", "run": self.tracker.stats.run, "nominal_odr_hz": RATE,
+                "i0": 0}
+
+    def close(self):
+        self.closed = True
+
+
+def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_header():
+    from avard.daemon.web.feed import Feed
+
+    new = "20260101T010000Z-bbbbbb"
+    snap = snapshot_dict()
+    recs = [*a_run(blocks=2),
+            ("avar", frames.avar_record(RUN, 0, 20000, 20000, snap, 0.0, 1e9)),
+            ("avar", frames.avar_record(RUN, 1, 20000, 20000, snap, 0.0, 1e9)),
+            *a_run(new, i0=1000, blocks=2)]
+    sub = FakeSubscriber(recs, {"run": RUN, "nominal_odr_hz": RATE, "i0": 0})
+    fitted: list[int] = []
+
+    def fit(data: dict) -> dict:
+        fitted.append(int(data["n_samples"]))
+        return {"x": "a fit"}
+
+    state = RunState()
+    f = Feed(sub, state, fit=fit, fit_interval_s=0.0)  # type: ignore[arg-type]
+    f.start()
+    deadline = time.monotonic() + 10
+    while (sub.records or not state.fits or "header" not in sub.requests) \
+            and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.2)
+    f.stop()
+    assert f.error is None and sub.closed
+    assert state.runs == [RUN, new]
+    assert sub.requests == ["header"]  # only for the new run: the first came on join
+    assert state.header["run"] == new
+    assert state.fits == {"x": "a fit"} and state.fitted is state.snapshot
+    assert 1 <= len(fitted) <= 2 and set(fitted) == {20000}  # never a fit per viewer or message
