@@ -181,8 +181,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="per phase (default 60)")
     ap.add_argument("--speed", type=float, default=1.0,
                     help="simulated time per real second (default 1: real time)")
-    ap.add_argument("--warmup", type=float, default=15.0,
-                    help="seconds before measuring (first snapshot and fit; default 15)")
+    ap.add_argument("--warmup", type=float, default=45.0,
+                    help="seconds before measuring (imports, first snapshots and fits; "
+                         "default 45)")
     ap.add_argument("--fit-interval", type=float, default=10.0, metavar="S",
                     help="avard web --fit-interval (default 10: every snapshot, so both "
                          "phases fit equally often)")

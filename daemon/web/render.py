@@ -153,7 +153,7 @@ class _Frame:
                        f'text-anchor="end">{yfmt(v)}</text>')
         out.append(f'<text class="label" x="{(ML + self.w - MR) / 2:.0f}" y="{self.h - 8}" '
                    f'text-anchor="middle">{escape(xlabel)}</text>')
-        out.append(f'<text class="label" transform="translate(14 {(MT + self.h - MB) / 2:.0f}) '
+        out.append(f'<text class="label" transform="translate(21 {(MT + self.h - MB) / 2:.0f}) '
                    f'rotate(-90)" text-anchor="middle">{escape(ylabel)}</text>')
         return "".join(out)
 
