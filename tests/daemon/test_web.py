@@ -274,8 +274,14 @@ def test_metrics_are_valid_exposition_text_with_the_runs_numbers():
     assert m[("avard_web_samples_received_total", frozenset())] == 375
     snap = state.snapshot.data
     for k, tau in enumerate(snap["tau"]):
-        key = ("avard_adev", frozenset({("channel", "y"), ("tau_s", f"{tau:.6g}")}))
+        at = ("tau_seconds", f"{tau:.6g}")
+        key = ("avard_adev_meters_per_second_squared", frozenset({("axis", "y"), at}))
         assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 1]))
+        key = ("avard_adev_meters_per_second_squared_upper", frozenset({("axis", "y"), at}))
+        assert m[key] == pytest.approx(math.sqrt(snap["hi"][k, 1]))
+        key = ("avard_temperature_adev_celsius", frozenset({("sensor", "chip"), at}))
+        assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 3]))
+    assert not any(n.startswith("avard_adev") and ("axis", "chip") in lab for n, lab in m)
 
 
 # ---- HTTP --------------------------------------------------------------------------------------
