@@ -117,7 +117,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     bound = runner.addresses[0][1] if runner.addresses else port
     shown = f"[{host}]" if ":" in host else host
     if is_loopback(host):
-        log.warning("serving http://%s:%d/ (read-only; this machine only)", shown, bound)
+        log.info("serving http://%s:%d/ (read-only; this machine only)", shown, bound)
     else:
         log.warning("serving http://%s:%d/ on %s as asked: reachable from the network, "
                     "read-only, no authentication", shown, bound, host)

@@ -24,7 +24,7 @@ import numpy as np
 from avard.core.model import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 
-from .state import RunState, Series, Snapshot
+from .state import SILENT_S, RunState, Series, Snapshot
 
 log = logging.getLogger(__name__)
 
@@ -435,8 +435,21 @@ def status_html(state: RunState) -> str:
     ]
     age = "" if state.status_received is None else \
         f"status {fmt_duration(state.clock() - state.status_received)} old"
-    return ('<dl class="status">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in rows)
+    return (_silence(state) + '<dl class="status">'
+            + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in rows)
             + f'</dl><p class="note">{age}</p>')
+
+
+def _silence(state: RunState) -> str:
+    """A warning when nothing has come from the service for a while: is it still running?"""
+    if state.last_message is None:
+        return ('<p class="alarm">Nothing received from the service yet: is it running, and '
+                "is the endpoint right?</p>")
+    quiet = state.clock() - state.last_message
+    if quiet < SILENT_S:
+        return ""
+    return (f'<p class="alarm">Nothing received from the service for {fmt_duration(quiet)}: '
+            "is it still running? (What is shown is as it last was.)</p>")
 
 
 def timeline_svg(state: RunState) -> str:

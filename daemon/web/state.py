@@ -30,6 +30,9 @@ from avard.daemon.subscriber import Message, StreamStats
 
 log = logging.getLogger(__name__)
 
+#: Seconds without any message after which the page says the service is silent (it sends
+#: raw blocks many times a second and status every few seconds).
+SILENT_S = 15.0
 #: Events and gaps kept for the time line (a 60-h run with a gap a minute fits).
 MAX_EVENTS = 5000
 #: Points a temperature series keeps before it halves its resolution.
@@ -111,6 +114,7 @@ class RunState:
     header: dict[str, Any] = field(default_factory=dict)
     status: dict[str, Any] = field(default_factory=dict)
     status_received: float | None = None
+    last_message: float | None = None    # when anything last came from the service (clock)
     snapshot: Snapshot | None = None
     compensated: Snapshot | None = None
     fits: dict[str, Any] = field(default_factory=dict)   # axis → NoiseFit of ``fitted``
@@ -185,6 +189,7 @@ class RunState:
     def update(self, msg: Message, stats: StreamStats | None = None) -> None:
         rec = msg.record
         with self.lock:
+            self.last_message = self.clock()
             if stats is not None:
                 self.stats = stats
             self._note_run(str(rec.get("run", "")))

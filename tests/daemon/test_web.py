@@ -164,6 +164,23 @@ def test_status_shows_the_services_counts_and_the_rate_offset():
     assert "{" not in text
 
 
+def test_a_silent_service_is_called_out_and_the_page_keeps_refreshing(monkeypatch):
+    from avard.daemon.web import app
+
+    now = [100.0]
+    state = RunState(clock=lambda: now[0])
+    assert "Nothing received from the service yet" in render.status_html(state)
+    feed(state, a_run(blocks=1))
+    assert "alarm" not in render.status_html(state)
+    now[0] += 40.0
+    assert "Nothing received from the service for 40 s" in render.status_html(state)
+
+    hub = app.Hub(state)
+    assert hub.refresh() and not hub.refresh()  # nothing changed: nothing to send
+    monkeypatch.setattr(app, "IDLE_REFRESH_S", 0.0)
+    assert hub.refresh()  # but ages move on: re-rendered after IDLE_REFRESH_S anyway
+
+
 # ---- rendering -------------------------------------------------------------------------------
 
 
