@@ -376,6 +376,58 @@ def test_target_in_the_query_is_checked():
 # ---- the command ---------------------------------------------------------------------------
 
 
+def test_with_curve_the_page_needs_the_keys(tmp_path):
+    """A CURVE service: avard web with an authorised key sees the run; without keys it gets
+    nothing and the page says so (the keys reach the one Subscriber as in avard watch)."""
+    from .web_rig import WebRig
+
+    keys, auth = tmp_path / "keys", tmp_path / "auth"
+    auth.mkdir()
+    for name in ("server", "web"):
+        subprocess.run(avard("keys", "--out", str(keys), "--name", name), check=True,
+                       capture_output=True, timeout=60)
+    (auth / "web.key").write_bytes((keys / "web.key").read_bytes())
+    rig = WebRig(tmp_path, web_args=("--server-key", str(keys / "server.key"), "--client-key",
+                                      str(keys / "web.key_secret")),
+                 extra_config=f'[curve]\nenabled = true\nserver_secret_key_file = '
+                              f'"{keys / "server.key_secret"}"\nauthorized_keys_dir = "{auth}"\n')
+    (other,) = free_ports(1)
+    stranger = None
+    try:
+        rig.start_service()
+        rig.start_web()
+        stranger = subprocess.Popen(
+            avard("web", f"tcp://127.0.0.1:{rig.pub}", "--timeout", "0.5", "--listen",
+                  f"127.0.0.1:{other}"), stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while rig.state()["samples_received"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.3)
+        assert rig.state()["samples_received"] > 0, rig.read_logs()
+        import urllib.request
+
+        def get(path: str) -> bytes:
+            with urllib.request.urlopen(f"http://127.0.0.1:{other}{path}", timeout=10) as r:
+                return r.read()
+
+        deadline = time.monotonic() + 30
+        while True:  # the stranger's server may still be starting
+            try:
+                state = json.loads(get("/state.json"))
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the keyless avard web never served"
+                time.sleep(0.3)
+        time.sleep(2.0)  # a keyless subscriber would have had messages by now
+        assert json.loads(get("/state.json"))["samples_received"] == state[
+            "samples_received"] == 0
+        assert "Nothing received from the service yet" in get("/").decode()
+    finally:
+        if stranger is not None:
+            stranger.terminate()
+            stranger.wait(20)
+        rig.close()
+
+
 def test_listen_addresses():
     assert parse_listen("127.0.0.1:8080") == ("127.0.0.1", 8080)
     assert parse_listen("[::1]:9") == ("::1", 9)

@@ -44,6 +44,7 @@ class WebRig:
     tmp: Path
     speed: float = 20.0
     web_args: tuple[str, ...] = ()
+    extra_config: str = ""          # more TOML sections for the service
     pub: int = 0
     req: int = 0
     http: int = 0
@@ -61,7 +62,8 @@ class WebRig:
         self.config.write_text(
             f'[publish]\nendpoint = "tcp://127.0.0.1:{self.pub}"\n'
             f'request_endpoint = "tcp://127.0.0.1:{self.req}"\nstatus_interval_s = 2.0\n'
-            "[allan]\nsnapshot_interval_s = 10.0\ncheckpoint_interval_s = 20.0\n")
+            "[allan]\nsnapshot_interval_s = 10.0\ncheckpoint_interval_s = 20.0\n"
+            + self.extra_config)
 
     @property
     def url(self) -> str:
