@@ -533,3 +533,47 @@ def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_
     assert state.header["run"] == new
     assert state.fits == {"x": "a fit"} and state.fitted is state.snapshot
     assert 1 <= len(fitted) <= 2 and set(fitted) == {20000}  # never a fit per viewer or message
+
+
+def test_history_from_the_recording_comes_first_and_live_records_are_not_counted_twice(
+        tmp_path):
+    from avard.core.recording import frame
+    from avard.daemon.web.feed import Feed
+
+    old, new = RUN, "20260101T010000Z-bbbbbb"
+    disk = [frames.header_record(old, rate_hz=RATE, t_mono=0.0, t_real=1e9, i0=0,
+                                 nominal_odr_hz=RATE),
+            *[r for _, r in a_run(old, blocks=4)],                      # temps 20.5 … 23.5
+            frames.gap_record(old, 0, 300, 20, 2.4, 1e9, "overrun"),
+            frames.header_record(new, rate_hz=RATE, t_mono=0.0, t_real=1e9, i0=1000,
+                                 nominal_odr_hz=RATE),
+            frames.gap_record(new, 0, 500, 500, 0.0, 1e9, "restart"),
+            *[r for _, r in a_run(new, i0=1000, blocks=2)]]
+    (tmp_path / f"{old}_0000_x.avr").write_bytes(
+        b"".join(frame(frames.encode(r)) for r in disk))
+    # live: the new run's second block again (already on disk), then two new ones
+    live = a_run(new, i0=1125, blocks=3, seq0=1)
+    sub = FakeSubscriber(live, {"run": new, "nominal_odr_hz": RATE, "i0": 1000})
+    state = RunState()
+    f = Feed(sub, state, fit=None, history=tmp_path)  # type: ignore[arg-type]
+    f.start()
+    deadline = time.monotonic() + 10
+    while sub.records and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.2)
+    f.stop()
+    assert f.error is None
+    assert state.runs == [old, new]
+    assert state.gaps_by_reason == {"overrun": 1, "restart": 1}  # no inferred second one
+    assert state.gap_samples_by_reason == {"overrun": 20, "restart": 500}
+    plate = state.temperatures["28-0000plate"]
+    assert plate.x == [i / RATE for i in (0, 125, 250, 375, 1000, 1125, 1250, 1375)]
+    # disk: 20.5 … 23.5, then 20.5, 21.5; live (values from k = 0): 1125 → 20.5 is the
+    # disk's block again and skipped, 1250 → 21.5, 1375 → 22.5
+    assert plate.y == [20.5, 21.5, 22.5, 23.5, 20.5, 21.5, 21.5, 22.5]
+
+
+def test_a_history_directory_that_does_not_exist_is_one_line_and_exit_2(tmp_path):
+    r = subprocess.run(avard("web", "tcp://127.0.0.1:1", "--history", str(tmp_path / "no")),
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--history" in r.stderr
