@@ -4,12 +4,14 @@
 
 Starts ``avard run --simulate quiet-lab`` (real time by default: 125 Hz, one raw block per
 drain) and ``avard web`` as processes on free loopback ports (the rig of the browser test,
-``tests/daemon/web_rig.py``). Two phases of ``--seconds`` each, in the same run:
+``tests/daemon/web_rig.py``). Three phases of ``--seconds`` each, in the same run:
 
 1. reference: the web server subscribed, nobody viewing;
 2. load: ``--viewers`` clients each load the page once (a late viewer gets the whole run)
    and then hold its server-sent-event stream open, reading every update; ``/metrics`` is
-   scraped every 5 s as Prometheus would.
+   scraped every 5 s as Prometheus would;
+3. reference again (the CPU ratio is against the mean of 1 and 3: the process warms up and
+   the machine's load drifts).
 
 The viewers are plain ``http.client`` connections in threads (written from the SSE format,
 not with the server's library). For each phase it prints the web process's CPU (s per s of
@@ -154,13 +156,14 @@ def run_phase(rig: WebRig, sub: Subscriber, name: str, seconds: float, viewers: 
 
 
 def format_table(phases: list[Phase]) -> str:
-    ref = phases[0]
-    lines = ["| phase | web CPU [s/s] | vs reference | RSS / peak [MB] | updates per viewer "
+    refs = [p for p in phases if p.name.startswith("reference")]
+    ref_cpu = sum(p.cpu_s for p in refs) / len(refs)
+    lines = ["| phase | web CPU [s/s] | vs mean reference | RSS / peak [MB] | updates per viewer "
              "(min–max) | SSE bytes | overruns | samples lost (service) | PUB dropped | "
              "ring consumers lost | web messages / samples lost |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for ph in phases:
-        ratio = ph.cpu_s / ref.cpu_s if ref.cpu_s > 0 else float("nan")
+        ratio = ph.cpu_s / ref_cpu if ref_cpu > 0 else float("nan")
         ups = f"{min(ph.updates)}–{max(ph.updates)}" if ph.updates else "–"
         lines.append(
             f"| {ph.name} | {ph.cpu_s:.3f} | {ratio:.2f} × | {ph.rss / 2**20:.1f} / "
@@ -178,8 +181,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="per phase (default 60)")
     ap.add_argument("--speed", type=float, default=1.0,
                     help="simulated time per real second (default 1: real time)")
-    ap.add_argument("--warmup", type=float, default=15.0,
-                    help="seconds before measuring (first snapshot and fit; default 15)")
+    ap.add_argument("--warmup", type=float, default=45.0,
+                    help="seconds before measuring (imports, first snapshots and fits; "
+                         "default 45)")
     ap.add_argument("--fit-interval", type=float, default=10.0, metavar="S",
                     help="avard web --fit-interval (default 10: every snapshot, so both "
                          "phases fit equally often)")
@@ -195,9 +199,12 @@ def main(argv: list[str]) -> int:
             rig.start_service()
             rig.start_web()
             time.sleep(args.warmup)
+            # reference before and after the load: the web process warms up (imports, the
+            # fit's caches) and the machine's load drifts; the ratio is against their mean
             phases = [run_phase(rig, sub, "reference: 0 viewers", args.seconds, 0),
                       run_phase(rig, sub, f"load: {args.viewers} viewers", args.seconds,
-                                args.viewers)]
+                                args.viewers),
+                      run_phase(rig, sub, "reference again: 0 viewers", args.seconds, 0)]
         finally:
             sub.close()
             rig.close()
@@ -205,7 +212,7 @@ def main(argv: list[str]) -> int:
           f"real time (quiet-lab, 125 Hz), web {' '.join(web_args)}; CPU in s per s of wall "
           "time (1.0 = one core)")
     print(format_table(phases))
-    load = phases[-1]
+    load = phases[1]
     print(f"page size {load.page_bytes} bytes; viewer errors: {load.errors or 'none'}")
     bad = [k for k, v in {**load.service, **load.web_loss}.items() if v] + \
         (["viewer errors"] if load.errors else []) + \

@@ -18,6 +18,7 @@ import contextlib
 import ipaddress
 import logging
 import signal
+from pathlib import Path
 
 from avard.core.errors import ConfigError
 from avard.daemon.subscriber import add_client_arguments, subscriber_from_args
@@ -46,6 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "a fit of three axes costs seconds of CPU)")
     parser.add_argument("--no-fit", action="store_true",
                         help="do not fit (no IEEE terms, no model curve)")
+    parser.add_argument("--history", metavar="DIR", default=None,
+                        help="the service's recording directory (recording.data_dir), when "
+                             "readable here: temperatures, gaps and events from before this "
+                             "server started are read from it first")
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -74,6 +79,9 @@ def _check_args(args: argparse.Namespace) -> tuple[str, int]:
         raise ConfigError(f"--refresh {args.refresh}: must be a positive number of seconds")
     if not args.fit_interval >= 0:
         raise ConfigError(f"--fit-interval {args.fit_interval}: must be ≥ 0 seconds")
+    if args.history is not None and not Path(args.history).is_dir():
+        raise ConfigError(f"--history {args.history}: no such directory; give the service's "
+                          "recording.data_dir (e.g. /var/lib/avard)")
     return host, port
 
 
@@ -102,7 +110,8 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
             loop.add_signal_handler(sig, stop.set)
     state = RunState()
     feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,  # type: ignore[arg-type]
-                fit_interval_s=args.fit_interval)
+                fit_interval_s=args.fit_interval,
+                history=None if args.history is None else Path(args.history))
     hub = Hub(state, refresh_s=args.refresh)
     app = make_app(state, hub, endpoint=args.endpoint)
     runner = web.AppRunner(app, access_log=None)
@@ -117,7 +126,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     bound = runner.addresses[0][1] if runner.addresses else port
     shown = f"[{host}]" if ":" in host else host
     if is_loopback(host):
-        log.warning("serving http://%s:%d/ (read-only; this machine only)", shown, bound)
+        log.info("serving http://%s:%d/ (read-only; this machine only)", shown, bound)
     else:
         log.warning("serving http://%s:%d/ on %s as asked: reachable from the network, "
                     "read-only, no authentication", shown, bound, host)

@@ -24,6 +24,7 @@ import asyncio
 import json
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 from html import escape
 from importlib import resources
@@ -39,6 +40,7 @@ log = logging.getLogger(__name__)
 
 DEFAULT_TARGET = 0.1
 KEEPALIVE_S = 15.0
+IDLE_REFRESH_S = 5.0
 STATIC = {"app.js": "text/javascript", "style.css": "text/css"}
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'none'; script-src 'self'; style-src 'self'; "
@@ -75,6 +77,7 @@ class Hub:
     common: dict[str, str] = field(default_factory=dict)
     closing: bool = False
     _seen_version: int = -1
+    _rendered_at: float = -math.inf
     _changed: set[str] = field(default_factory=set)
     # target → (seq it was rendered at, its fragments, which of them changed from seq − 1)
     _targets: dict[float, tuple[int, dict[str, str], set[str]]] = field(default_factory=dict)
@@ -87,11 +90,14 @@ class Hub:
         return self._cond
 
     def refresh(self) -> bool:
-        """Render the target-independent fragments anew if the state changed."""
+        """Render the target-independent fragments anew if the state changed, or at least
+        every ``IDLE_REFRESH_S`` (ages on the page advance, and a silent service shows)."""
+        now = time.monotonic()
         with self.state.lock:
-            if self.state.version == self._seen_version:
+            if self.state.version == self._seen_version \
+                    and now - self._rendered_at < IDLE_REFRESH_S:
                 return False
-            self._seen_version = self.state.version
+            self._seen_version, self._rendered_at = self.state.version, now
             new = render.common_fragments(self.state)
         self._changed = {k for k, v in new.items() if self.common.get(k) != v}
         self.common = new

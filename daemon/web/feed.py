@@ -14,9 +14,10 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-from avard.core.errors import NetworkError
+from avard.core.errors import FormatError, NetworkError
 from avard.daemon.subscriber import Subscriber
 
 from .state import RunState, Snapshot
@@ -33,8 +34,9 @@ class Feed:
     """Subscriber thread + fitter thread over one :class:`RunState`."""
 
     def __init__(self, sub: Subscriber, state: RunState, *, fit: FitFn | None,
-                 fit_interval_s: float = 60.0) -> None:
+                 fit_interval_s: float = 60.0, history: Path | None = None) -> None:
         self.sub = sub
+        self.history = history
         self.state = state
         self.fit = fit
         self.fit_interval_s = fit_interval_s
@@ -42,6 +44,7 @@ class Feed:
         self._snapshot_arrived = threading.Event()
         self._threads: list[threading.Thread] = []
         self.error: BaseException | None = None
+        self._header_retry_s = HEADER_RETRY_S / 2
 
     def start(self) -> None:
         self._threads = [threading.Thread(target=self._read, name="avard-web-sub", daemon=True)]
@@ -62,6 +65,9 @@ class Feed:
     def _read(self) -> None:
         try:
             self.sub.connect()  # subscribes, then asks for snapshot and header (logged if not)
+            if self.history is not None:
+                # live messages wait in the SUB socket's queue meanwhile (~15 min of them)
+                self._replay_history(self.history)
             self.state.join(self.sub.header, self.sub.snapshot)
             if self.sub.snapshot:
                 self._snapshot_arrived.set()
@@ -82,6 +88,24 @@ class Feed:
         finally:
             self.sub.close()
 
+    def _replay_history(self, path: Path) -> None:
+        """Temperatures, gaps and events of the service's recording, oldest first."""
+        from avard.core.recording import RecordingReader
+
+        t0, n = time.monotonic(), 0
+        try:
+            for rec in RecordingReader(path):
+                if self._stop.is_set():
+                    return
+                self.state.replay(rec)
+                n += 1
+        except (FormatError, OSError) as exc:
+            log.warning("cannot read the history in %s: %s", path, exc)
+        finally:
+            self.state.history_done()
+        log.info("read %d records of history from %s in %.1f s", n, path,
+                 time.monotonic() - t0)
+
     def _ask_header(self) -> float | None:
         """Ask for the run header; None when done, else the time to ask again."""
         if self.state.header and self.state.header.get("run") == self.sub.stats.run:
@@ -89,8 +113,11 @@ class Feed:
         try:
             header = self.sub.request("header")
         except NetworkError as exc:
-            log.info("no run header yet: %s", exc)
-            return time.monotonic() + HEADER_RETRY_S
+            # each try blocks this thread up to --timeout: back off to at most every 5 min
+            self._header_retry_s = min(2 * self._header_retry_s, 300.0)
+            log.info("no run header yet (next try in %.0f s): %s", self._header_retry_s, exc)
+            return time.monotonic() + self._header_retry_s
+        self._header_retry_s = HEADER_RETRY_S / 2
         self.state.join(header, None)
         return None
 

@@ -17,6 +17,7 @@ import numpy as np
 from .state import RunState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
+ACCEL_AXES = ("x", "y", "z")
 
 
 def _label(value: Any) -> str:
@@ -92,16 +93,23 @@ def metrics_text(state: RunState) -> str:
     if snap is not None:
         w.metric("avard_allan_samples", "gauge", "Samples in the latest Allan snapshot.",
                  [({}, snap.n_samples)])
-        for name, key, help_text in (
-                ("avard_adev", "avar", "Allan deviation at tau (m/s^2 for x/y/z, degC for "
-                                       "temperatures)."),
-                ("avard_adev_lower", "lo", "Lower end of the ADEV interval at tau."),
-                ("avard_adev_upper", "hi", "Upper end of the ADEV interval at tau.")):
-            w.metric(name, "gauge", help_text, _adev_samples(snap.data, key))
+        # one unit per metric name: accelerations and temperatures apart
+        ci = f"{100 * float(snap.data.get('ci', 0.683)):.1f} %"
+        for base, accel, unit, what in (
+                ("avard_adev_meters_per_second_squared", True, "m/s^2", "axis"),
+                ("avard_temperature_adev_celsius", False, "degC", "sensor")):
+            for suffix, key, help_text in (
+                    ("", "avar", f"Allan deviation at tau, {unit}."),
+                    ("_lower", "lo", f"Lower end of the {ci} ADEV interval at tau, {unit}."),
+                    ("_upper", "hi", f"Upper end of the {ci} ADEV interval at tau, {unit}.")):
+                w.metric(base + suffix, "gauge", help_text,
+                         _adev_samples(snap.data, key, accel=accel, label=what))
     return w.text()
 
 
-def _adev_samples(d: dict[str, Any], key: str) -> list[tuple[dict[str, Any], float]]:
+def _adev_samples(d: dict[str, Any], key: str, *, accel: bool,
+                  label: str) -> list[tuple[dict[str, Any], float]]:
+    """√(value) at every τ of the acceleration axes (``accel``) or of the other channels."""
     tau = np.asarray(d.get("tau", []), dtype=float)
     values = np.atleast_2d(np.asarray(d.get(key, []), dtype=float).T).T
     names = [str(n) for n in d.get("names", [])]
@@ -109,8 +117,10 @@ def _adev_samples(d: dict[str, Any], key: str) -> list[tuple[dict[str, Any], flo
     if values.ndim != 2 or values.shape[0] != len(tau):
         return out
     for c, name in enumerate(names[: values.shape[1]]):
+        if (name in ACCEL_AXES) != accel:
+            continue
         for k, t in enumerate(tau):
             v = values[k, c]
             if math.isfinite(v) and v >= 0:
-                out.append(({"channel": name, "tau_s": f"{t:.6g}"}, math.sqrt(v)))
+                out.append(({label: name, "tau_seconds": f"{t:.6g}"}, math.sqrt(v)))
     return out

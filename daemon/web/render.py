@@ -24,7 +24,7 @@ import numpy as np
 from avard.core.model import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 
-from .state import RunState, Series, Snapshot
+from .state import SILENT_S, RunState, Series, Snapshot
 
 log = logging.getLogger(__name__)
 
@@ -153,7 +153,7 @@ class _Frame:
                        f'text-anchor="end">{yfmt(v)}</text>')
         out.append(f'<text class="label" x="{(ML + self.w - MR) / 2:.0f}" y="{self.h - 8}" '
                    f'text-anchor="middle">{escape(xlabel)}</text>')
-        out.append(f'<text class="label" transform="translate(14 {(MT + self.h - MB) / 2:.0f}) '
+        out.append(f'<text class="label" transform="translate(21 {(MT + self.h - MB) / 2:.0f}) '
                    f'rotate(-90)" text-anchor="middle">{escape(ylabel)}</text>')
         return "".join(out)
 
@@ -256,7 +256,7 @@ def _legend(items: Sequence[tuple[str, str]], *, dashed_last: bool = False) -> s
         out.append(f'<line x1="{x}" y1="{MT + 12}" x2="{x + 18}" y2="{MT + 12}" '
                    f'stroke="{colour}" stroke-width="2.5"{dash}/><text class="tick" '
                    f'x="{x + 22}" y="{MT + 16}">{escape(name)}</text>')
-        x += 30 + 7 * len(name)
+        x += 34 + 11 * len(name)  # room for the larger phone font too
     out.append("</g>")
     return "".join(out)
 
@@ -435,12 +435,25 @@ def status_html(state: RunState) -> str:
     ]
     age = "" if state.status_received is None else \
         f"status {fmt_duration(state.clock() - state.status_received)} old"
-    return ('<dl class="status">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in rows)
+    return (_silence(state) + '<dl class="status">'
+            + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in rows)
             + f'</dl><p class="note">{age}</p>')
 
 
+def _silence(state: RunState) -> str:
+    """A warning when nothing has come from the service for a while: is it still running?"""
+    if state.last_message is None:
+        return ('<p class="alarm">Nothing received from the service yet: is it running, and '
+                "is the endpoint right?</p>")
+    quiet = state.clock() - state.last_message
+    if quiet < SILENT_S:
+        return ""
+    return (f'<p class="alarm">Nothing received from the service for {fmt_duration(quiet)}: '
+            "is it still running? (What is shown is as it last was.)</p>")
+
+
 def timeline_svg(state: RunState) -> str:
-    h = 96
+    h = 112
     end = max(state.run_time(None), max((i.t_s for i in state.timeline), default=0.0), 1.0)
     unit, scale = _time_unit(end)
     frame = _Frame((0.0, end / scale), (0.0, 1.0), logx=False, logy=False, h=h)

@@ -30,6 +30,11 @@ from avard.daemon.subscriber import Message, StreamStats
 
 log = logging.getLogger(__name__)
 
+#: Seconds without any message after which the page says the service is silent (it sends
+#: raw blocks many times a second and status every few seconds).
+SILENT_S = 15.0
+#: Record kinds read from the service's recording (``avard web --history DIR``).
+HISTORY_KINDS = ("header", "temp", "gap", "event")
 #: Events and gaps kept for the time line (a 60-h run with a gap a minute fits).
 MAX_EVENTS = 5000
 #: Points a temperature series keeps before it halves its resolution.
@@ -111,6 +116,7 @@ class RunState:
     header: dict[str, Any] = field(default_factory=dict)
     status: dict[str, Any] = field(default_factory=dict)
     status_received: float | None = None
+    last_message: float | None = None    # when anything last came from the service (clock)
     snapshot: Snapshot | None = None
     compensated: Snapshot | None = None
     fits: dict[str, Any] = field(default_factory=dict)   # axis → NoiseFit of ``fitted``
@@ -127,6 +133,8 @@ class RunState:
     _next_chip_t: float = -math.inf
     _prev_run_end: int | None = None      # the old run's last index, until the new run's
     _restart_gap_seen: bool = False       # first raw block (or gap record) settles it
+    # run → (newest index, newest t_mono) read from the recording, to skip them when live
+    _history_end: dict[str, tuple[int, float]] = field(default_factory=dict)
 
     # ---- the run's clock --------------------------------------------------------------------
 
@@ -183,10 +191,47 @@ class RunState:
             self.version += 1
 
     def update(self, msg: Message, stats: StreamStats | None = None) -> None:
+        """A message from the subscriber."""
         rec = msg.record
         with self.lock:
+            self.last_message = self.clock()
             if stats is not None:
                 self.stats = stats
+            if not self._in_history(rec):
+                self._apply(rec)
+
+    def replay(self, rec: dict[str, Any]) -> None:
+        """A record of the service's recording, read before the live stream (oldest first):
+        headers, temperatures, gaps and events; the rest is left to the live stream."""
+        kind = rec.get("kind")
+        if kind not in HISTORY_KINDS:
+            return
+        with self.lock:
+            self._apply(rec)
+            run = str(rec.get("run", ""))
+            i0, t = rec.get("i0"), rec.get("t_mono")
+            end_i0, end_t = self._history_end.get(run, (-1, -math.inf))
+            self._history_end[run] = (max(end_i0, i0) if isinstance(i0, int) else end_i0,
+                                      max(end_t, t) if isinstance(t, int | float) else end_t)
+
+    def history_done(self) -> None:
+        """The recording has been read: the live stream takes over."""
+        with self.lock:
+            self._prev_run_end = None  # the recording's own restart gaps are in already
+            self.version += 1
+
+    def _in_history(self, rec: dict[str, Any]) -> bool:
+        """True for a live record the recording already gave (same run, not newer)."""
+        end = self._history_end.get(str(rec.get("run", "")))
+        if end is None or rec.get("kind") not in ("temp", "gap", "event"):
+            return False
+        i0, t = rec.get("i0"), rec.get("t_mono")
+        if isinstance(i0, int):
+            return i0 <= end[0]
+        return isinstance(t, int | float) and t <= end[1]
+
+    def _apply(self, rec: dict[str, Any]) -> None:
+        with self.lock:
             self._note_run(str(rec.get("run", "")))
             kind = rec.get("kind")
             if kind == "gap" and rec.get("reason") == "restart":

@@ -164,6 +164,23 @@ def test_status_shows_the_services_counts_and_the_rate_offset():
     assert "{" not in text
 
 
+def test_a_silent_service_is_called_out_and_the_page_keeps_refreshing(monkeypatch):
+    from avard.daemon.web import app
+
+    now = [100.0]
+    state = RunState(clock=lambda: now[0])
+    assert "Nothing received from the service yet" in render.status_html(state)
+    feed(state, a_run(blocks=1))
+    assert "alarm" not in render.status_html(state)
+    now[0] += 40.0
+    assert "Nothing received from the service for 40 s" in render.status_html(state)
+
+    hub = app.Hub(state)
+    assert hub.refresh() and not hub.refresh()  # nothing changed: nothing to send
+    monkeypatch.setattr(app, "IDLE_REFRESH_S", 0.0)
+    assert hub.refresh()  # but ages move on: re-rendered after IDLE_REFRESH_S anyway
+
+
 # ---- rendering -------------------------------------------------------------------------------
 
 
@@ -274,8 +291,14 @@ def test_metrics_are_valid_exposition_text_with_the_runs_numbers():
     assert m[("avard_web_samples_received_total", frozenset())] == 375
     snap = state.snapshot.data
     for k, tau in enumerate(snap["tau"]):
-        key = ("avard_adev", frozenset({("channel", "y"), ("tau_s", f"{tau:.6g}")}))
+        at = ("tau_seconds", f"{tau:.6g}")
+        key = ("avard_adev_meters_per_second_squared", frozenset({("axis", "y"), at}))
         assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 1]))
+        key = ("avard_adev_meters_per_second_squared_upper", frozenset({("axis", "y"), at}))
+        assert m[key] == pytest.approx(math.sqrt(snap["hi"][k, 1]))
+        key = ("avard_temperature_adev_celsius", frozenset({("sensor", "chip"), at}))
+        assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 3]))
+    assert not any(n.startswith("avard_adev") and ("axis", "chip") in lab for n, lab in m)
 
 
 # ---- HTTP --------------------------------------------------------------------------------------
@@ -353,6 +376,58 @@ def test_target_in_the_query_is_checked():
 # ---- the command ---------------------------------------------------------------------------
 
 
+def test_with_curve_the_page_needs_the_keys(tmp_path):
+    """A CURVE service: avard web with an authorised key sees the run; without keys it gets
+    nothing and the page says so (the keys reach the one Subscriber as in avard watch)."""
+    from .web_rig import WebRig
+
+    keys, auth = tmp_path / "keys", tmp_path / "auth"
+    auth.mkdir()
+    for name in ("server", "web"):
+        subprocess.run(avard("keys", "--out", str(keys), "--name", name), check=True,
+                       capture_output=True, timeout=60)
+    (auth / "web.key").write_bytes((keys / "web.key").read_bytes())
+    rig = WebRig(tmp_path, web_args=("--server-key", str(keys / "server.key"), "--client-key",
+                                      str(keys / "web.key_secret")),
+                 extra_config=f'[curve]\nenabled = true\nserver_secret_key_file = '
+                              f'"{keys / "server.key_secret"}"\nauthorized_keys_dir = "{auth}"\n')
+    (other,) = free_ports(1)
+    stranger = None
+    try:
+        rig.start_service()
+        rig.start_web()
+        stranger = subprocess.Popen(
+            avard("web", f"tcp://127.0.0.1:{rig.pub}", "--timeout", "0.5", "--listen",
+                  f"127.0.0.1:{other}"), stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while rig.state()["samples_received"] == 0 and time.monotonic() < deadline:
+            time.sleep(0.3)
+        assert rig.state()["samples_received"] > 0, rig.read_logs()
+        import urllib.request
+
+        def get(path: str) -> bytes:
+            with urllib.request.urlopen(f"http://127.0.0.1:{other}{path}", timeout=10) as r:
+                return r.read()
+
+        deadline = time.monotonic() + 30
+        while True:  # the stranger's server may still be starting
+            try:
+                state = json.loads(get("/state.json"))
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the keyless avard web never served"
+                time.sleep(0.3)
+        time.sleep(2.0)  # a keyless subscriber would have had messages by now
+        assert json.loads(get("/state.json"))["samples_received"] == state[
+            "samples_received"] == 0
+        assert "Nothing received from the service yet" in get("/").decode()
+    finally:
+        if stranger is not None:
+            stranger.terminate()
+            stranger.wait(20)
+        rig.close()
+
+
 def test_listen_addresses():
     assert parse_listen("127.0.0.1:8080") == ("127.0.0.1", 8080)
     assert parse_listen("[::1]:9") == ("::1", 9)
@@ -388,3 +463,117 @@ def test_another_address_than_loopback_only_when_asked_and_logged():
         start = time.monotonic()
         assert p.wait(20) == 0
         assert time.monotonic() - start < 10
+
+
+# ---- the feed threads --------------------------------------------------------------------------
+
+
+class FakeSubscriber:
+    """The Subscriber interface the feed uses, over a list of records."""
+
+    def __init__(self, records: list[tuple[str, dict]], header: dict) -> None:
+        self.tracker = LossTracker()
+        self.records = list(records)
+        self.header: dict | None = header
+        self.snapshot: dict | None = None
+        self.requests: list[str] = []
+        self.closed = False
+
+    @property
+    def stats(self):
+        return self.tracker.stats
+
+    def connect(self):
+        return self
+
+    def recv(self, timeout_s=None):
+        if not self.records:
+            time.sleep(0.01)
+            return None
+        topic, rec = self.records.pop(0)
+        return self.tracker.observe(topic, rec)
+
+    def request(self, op, args=None, **_kw):
+        self.requests.append(op)
+        return {"kind": "header", "run": self.tracker.stats.run, "nominal_odr_hz": RATE,
+                "i0": 0}
+
+    def close(self):
+        self.closed = True
+
+
+def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_header():
+    from avard.daemon.web.feed import Feed
+
+    new = "20260101T010000Z-bbbbbb"
+    snap = snapshot_dict()
+    recs = [*a_run(blocks=2),
+            ("avar", frames.avar_record(RUN, 0, 20000, 20000, snap, 0.0, 1e9)),
+            ("avar", frames.avar_record(RUN, 1, 20000, 20000, snap, 0.0, 1e9)),
+            *a_run(new, i0=1000, blocks=2)]
+    sub = FakeSubscriber(recs, {"run": RUN, "nominal_odr_hz": RATE, "i0": 0})
+    fitted: list[int] = []
+
+    def fit(data: dict) -> dict:
+        fitted.append(int(data["n_samples"]))
+        return {"x": "a fit"}
+
+    state = RunState()
+    f = Feed(sub, state, fit=fit, fit_interval_s=0.0)  # type: ignore[arg-type]
+    f.start()
+    deadline = time.monotonic() + 10
+    while (sub.records or not state.fits or "header" not in sub.requests) \
+            and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.2)
+    f.stop()
+    assert f.error is None and sub.closed
+    assert state.runs == [RUN, new]
+    assert sub.requests == ["header"]  # only for the new run: the first came on join
+    assert state.header["run"] == new
+    assert state.fits == {"x": "a fit"} and state.fitted is state.snapshot
+    assert 1 <= len(fitted) <= 2 and set(fitted) == {20000}  # never a fit per viewer or message
+
+
+def test_history_from_the_recording_comes_first_and_live_records_are_not_counted_twice(
+        tmp_path):
+    from avard.core.recording import frame
+    from avard.daemon.web.feed import Feed
+
+    old, new = RUN, "20260101T010000Z-bbbbbb"
+    disk = [frames.header_record(old, rate_hz=RATE, t_mono=0.0, t_real=1e9, i0=0,
+                                 nominal_odr_hz=RATE),
+            *[r for _, r in a_run(old, blocks=4)],                      # temps 20.5 … 23.5
+            frames.gap_record(old, 0, 300, 20, 2.4, 1e9, "overrun"),
+            frames.header_record(new, rate_hz=RATE, t_mono=0.0, t_real=1e9, i0=1000,
+                                 nominal_odr_hz=RATE),
+            frames.gap_record(new, 0, 500, 500, 0.0, 1e9, "restart"),
+            *[r for _, r in a_run(new, i0=1000, blocks=2)]]
+    (tmp_path / f"{old}_0000_x.avr").write_bytes(
+        b"".join(frame(frames.encode(r)) for r in disk))
+    # live: the new run's second block again (already on disk), then two new ones
+    live = a_run(new, i0=1125, blocks=3, seq0=1)
+    sub = FakeSubscriber(live, {"run": new, "nominal_odr_hz": RATE, "i0": 1000})
+    state = RunState()
+    f = Feed(sub, state, fit=None, history=tmp_path)  # type: ignore[arg-type]
+    f.start()
+    deadline = time.monotonic() + 10
+    while sub.records and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.2)
+    f.stop()
+    assert f.error is None
+    assert state.runs == [old, new]
+    assert state.gaps_by_reason == {"overrun": 1, "restart": 1}  # no inferred second one
+    assert state.gap_samples_by_reason == {"overrun": 20, "restart": 500}
+    plate = state.temperatures["28-0000plate"]
+    assert plate.x == [i / RATE for i in (0, 125, 250, 375, 1000, 1125, 1250, 1375)]
+    # disk: 20.5 … 23.5, then 20.5, 21.5; live (values from k = 0): 1125 → 20.5 is the
+    # disk's block again and skipped, 1250 → 21.5, 1375 → 22.5
+    assert plate.y == [20.5, 21.5, 22.5, 23.5, 20.5, 21.5, 21.5, 22.5]
+
+
+def test_a_history_directory_that_does_not_exist_is_one_line_and_exit_2(tmp_path):
+    r = subprocess.run(avard("web", "tcp://127.0.0.1:1", "--history", str(tmp_path / "no")),
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--history" in r.stderr

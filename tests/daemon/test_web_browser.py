@@ -74,14 +74,24 @@ def rig(tmp_path: Path) -> Iterator[WebRig]:
         r.close()
 
 
-def wait_for(what: str, cond: Callable[[], Any], timeout: float, rig: WebRig) -> Any:
+def wait_for(what: str, cond: Callable[[], Any], timeout: float, rig: WebRig,
+             browser: Any = None) -> Any:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = cond()
         if value:
             return value
         time.sleep(0.25)
-    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}\n{rig.read_logs()}")
+    page = ""
+    if browser is not None:  # what the page showed, for the failure report
+        shot = rig.tmp / "timeout.png"
+        browser.save_screenshot(str(shot))
+        updates = browser.find_element("tag name", "body").get_attribute("data-updates")
+        conn = browser.find_element("id", "conn").text
+        page = (f"page: updates {updates}, connection {conn!r}, screenshot {shot}\n"
+                f"{browser.find_element('tag name', 'main').text[:3000]}\n")
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}\n{page}"
+                         f"state {rig.state()}\n{rig.read_logs()}")
 
 
 POINTS_JS = """
@@ -111,7 +121,7 @@ def test_the_page_shows_the_run_live_in_a_real_browser(browser, rig, tmp_path):
     # ADEV points for every axis
     points = wait_for("ADEV points for x, y and z",
                       lambda: (p := browser.execute_script(POINTS_JS))
-                      and all(p.get(a, 0) > 0 for a in "xyz") and p, 90, rig)
+                      and all(p.get(a, 0) > 0 for a in "xyz") and p, 90, rig, browser)
     assert set(points) == {"x", "y", "z"}
 
     # it updates without a reload: new SSE updates, and a newer snapshot in the plot
@@ -121,15 +131,15 @@ def test_the_page_shows_the_run_live_in_a_real_browser(browser, rig, tmp_path):
     wait_for("a newer Allan snapshot on the page",
              lambda: browser.find_element("css selector", "#adev p.note").text != note
              and int(browser.find_element("tag name", "body").get_attribute("data-updates"))
-             >= updates + 2, 60, rig)
+             >= updates + 2, 60, rig, browser)
     assert browser.execute_script("return window.__sameDocument") == marker  # no reload
     assert "live" in browser.find_element("id", "conn").get_attribute("class")
 
     # the fit: IEEE term rows with values, and a model curve per axis
     wait_for("the fitted terms", lambda: browser.find_elements(
-        "css selector", "#fit tr[data-term='velocity_random_walk']"), 60, rig)
+        "css selector", "#fit tr[data-term='velocity_random_walk']"), 60, rig, browser)
     wait_for("model curves", lambda: len(browser.find_elements(
-        "css selector", "#adev g.adev-axis path.model")) == 3, 60, rig)
+        "css selector", "#adev g.adev-axis path.model")) == 3, 60, rig, browser)
     vrw = browser.find_element("css selector", "#fit tr[data-term='velocity_random_walk']").text
     assert "absent" not in vrw and "e-0" in vrw, vrw
 
@@ -139,7 +149,7 @@ def test_the_page_shows_the_run_live_in_a_real_browser(browser, rig, tmp_path):
     rig.start_service()
     items = wait_for("the restart gap on the time line",
                      lambda: (i := browser.execute_script(ITEMS_JS)) and "gap:restart" in i
-                     and i, 90, rig)
+                     and i, 90, rig, browser)
     assert "event:new run" in items
     timeline = browser.find_element("id", "timeline").text
     assert "restart" in timeline

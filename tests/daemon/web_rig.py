@@ -33,6 +33,10 @@ def avard(*args: str) -> list[str]:
     return [sys.executable, "-m", "avard.daemon.cli", *args]
 
 
+class PortTaken(Exception):
+    """Another process took the port between asking for a free one and binding it."""
+
+
 @dataclass
 class WebRig:
     """``avard run --simulate quiet-lab`` + ``avard web`` on free loopback ports."""
@@ -40,6 +44,7 @@ class WebRig:
     tmp: Path
     speed: float = 20.0
     web_args: tuple[str, ...] = ()
+    extra_config: str = ""          # more TOML sections for the service
     pub: int = 0
     req: int = 0
     http: int = 0
@@ -50,11 +55,15 @@ class WebRig:
     def __post_init__(self) -> None:
         self.pub, self.req, self.http = free_ports(3)
         self.config = self.tmp / "svc.toml"
+        self._write_config()
+
+    def _write_config(self) -> None:
         # snapshots every 10 s and status every 2 s of simulated time
         self.config.write_text(
             f'[publish]\nendpoint = "tcp://127.0.0.1:{self.pub}"\n'
             f'request_endpoint = "tcp://127.0.0.1:{self.req}"\nstatus_interval_s = 2.0\n'
-            "[allan]\nsnapshot_interval_s = 10.0\ncheckpoint_interval_s = 20.0\n")
+            "[allan]\nsnapshot_interval_s = 10.0\ncheckpoint_interval_s = 20.0\n"
+            + self.extra_config)
 
     @property
     def url(self) -> str:
@@ -65,7 +74,22 @@ class WebRig:
         self.logs.append(path)
         return path.open("wb")
 
-    def start_service(self) -> None:
+    def start_service(self, tries: int = 3) -> None:
+        """Start the service; if its ports were taken meanwhile (it exits at once), on new
+        ones (only before ``avard web`` is started: it follows the ports it was given)."""
+        for _ in range(tries):
+            self._start_service()
+            try:
+                self.service.wait(1.5)  # type: ignore[union-attr]
+            except subprocess.TimeoutExpired:
+                return  # running
+            if self.web is not None:
+                break
+            self.pub, self.req = free_ports(2)
+            self._write_config()
+        raise RuntimeError(f"avard run exited: {self.read_logs()}")
+
+    def _start_service(self) -> None:
         self.service = subprocess.Popen(
             avard("run", "--simulate", "quiet-lab", "--speed", str(self.speed), "--seed", "3",
                   "--config", str(self.config), "--data-dir", str(self.tmp / "data")),
@@ -78,7 +102,17 @@ class WebRig:
             self.service.wait(30)
         self.service = None
 
-    def start_web(self) -> None:
+    def start_web(self, tries: int = 3) -> None:
+        """Start ``avard web``; a port taken meanwhile by another test (the free ports are
+        only free when asked) is replaced by a new one."""
+        for _ in range(tries - 1):
+            try:
+                return self._start_web()
+            except PortTaken:
+                (self.http,) = free_ports(1)
+        return self._start_web()
+
+    def _start_web(self) -> None:
         self.web = subprocess.Popen(
             avard("web", f"tcp://127.0.0.1:{self.pub}", "--request",
                   f"tcp://127.0.0.1:{self.req}", "--listen", f"127.0.0.1:{self.http}",
@@ -87,6 +121,8 @@ class WebRig:
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
             if self.web.poll() is not None:
+                if "cannot serve there" in self.logs[-1].read_text(errors="replace"):
+                    raise PortTaken(self.http)
                 raise RuntimeError(f"avard web exited: {self.read_logs()}")
             try:
                 self.state()
