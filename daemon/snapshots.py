@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -96,26 +97,42 @@ class SnapshotBoard:
                 self._cond.notify_all()
 
 
-def fit_snapshot(rec: dict[str, Any], *, filter_corner_hz: float) -> dict[str, Any]:
-    """IEEE noise terms with intervals per axis from an avar record ({} if unavailable)."""
+ACCEL_CHANNELS = ("x", "y", "z")
+
+
+def fit_snapshot(snap: dict[str, Any], *, filter_corner_hz: float | None = None
+                 ) -> dict[str, Any]:
+    """The noise fit (``avard.core.fit.NoiseFit``) of each acceleration channel of an Allan
+    snapshot (``AllanSnapshot.to_dict()``, lists or arrays); {} without the analysis side.
+
+    The one snapshot fit: the service's ``snapshot`` replies, ``avard watch`` and ``avard web``
+    all call it, so they show the same terms. The ADXL355's digital low-pass sits at ODR/4
+    (``filter_corner_hz`` defaults to the snapshot's rate / 4)."""
     try:
-        from avard.core.allan import AllanResult
         from avard.core.fit import fit_noise
-    except ImportError:
+    except ImportError:  # the analysis side is optional for a watcher
         return {}
-    snap = rec["snapshot"]
-    out: dict[str, Any] = {}
-    try:
-        var = np.asarray(snap["avar"], dtype=float)
-        base = {k: np.asarray(snap[k]) for k in ("tau", "m", "stride", "n")}
-        for c, axis in enumerate(("x", "y", "z")):
-            res = AllanResult(kind="oavar", rate_hz=float(snap["rate_hz"]), var=var[:, c],
-                              edf=np.asarray(snap["edf"], dtype=float)[:, c],
-                              lo=np.asarray(snap["lo"], dtype=float)[:, c],
-                              hi=np.asarray(snap["hi"], dtype=float)[:, c],
-                              alpha=np.asarray(snap["alpha"], dtype=float)[:, c],
-                              ci=float(snap["ci"]), **base)
-            out[axis] = fit_noise(res, filter_corner_hz=filter_corner_hz).to_dict()
-    except (AvardError, KeyError, TypeError, ValueError) as exc:
-        log.info("no fit for the snapshot yet: %s", exc)
+    names = [str(n) for n in snap.get("names", ACCEL_CHANNELS)]
+    rate = float(snap["rate_hz"])
+    ci = float(snap.get("ci", 0.683))
+    var, edf = np.asarray(snap["avar"], dtype=float), np.asarray(snap["edf"], dtype=float)
+    lo, hi = np.asarray(snap["lo"], dtype=float), np.asarray(snap["hi"], dtype=float)
+    out = {}
+    for c, name in enumerate(names):
+        if name not in ACCEL_CHANNELS:
+            continue
+        try:
+            res = SimpleNamespace(
+                tau=np.asarray(snap["tau"]), m=np.asarray(snap["m"]),
+                stride=np.asarray(snap["stride"]), n=np.asarray(snap["n"]), var=var[:, c],
+                edf=edf[:, c], lo=lo[:, c], hi=hi[:, c], rate_hz=rate, ci=ci,
+                kind=snap.get("kind", "pavar"))
+            out[name] = fit_noise(res, ci=ci, filter_corner_hz=filter_corner_hz or rate / 4)
+        except (AvardError, KeyError, IndexError, ValueError, TypeError) as exc:
+            log.debug("no fit for %s: %s", name, exc)
     return out
+
+
+def fit_record(rec: dict[str, Any]) -> dict[str, Any]:
+    """The service's fit of an ``avar`` record: :func:`fit_snapshot` as plain dicts."""
+    return {name: fit.to_dict() for name, fit in fit_snapshot(rec["snapshot"]).items()}

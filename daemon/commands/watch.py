@@ -27,12 +27,12 @@ import math
 import shutil
 import sys
 import time
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-from avard.core.errors import AvardError, NetworkError
+from avard.core.errors import NetworkError
 from avard.core.model import SYMBOLS
+from avard.daemon.snapshots import ACCEL_CHANNELS, fit_snapshot
 from avard.daemon.subscriber import Message, StreamStats, add_client_arguments, subscriber_from_args
 
 log = logging.getLogger(__name__)
@@ -40,7 +40,6 @@ log = logging.getLogger(__name__)
 NAME = "watch"
 HELP = "live view of a service: rate, loss, temperatures, ADEV, fit and time to target"
 
-ACCEL_CHANNELS = ("x", "y", "z")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -375,36 +374,6 @@ def _clip(line: str, width: int) -> str:
 
 def _num(x: Any) -> float | None:
     return float(x) if isinstance(x, int | float) and math.isfinite(x) and x > 0 else None
-
-
-def fit_snapshot(snap: dict[str, Any]) -> dict[str, Any]:
-    """The noise fit (``avard.core.fit.NoiseFit``) of each acceleration channel of an Allan
-    snapshot (AllanSnapshot.to_dict() with numpy arrays); {} without the analysis side.
-
-    Shared by ``avard watch`` and ``avard web`` so both show the same fit.
-    """
-    try:
-        from avard.core.fit import fit_noise
-    except ImportError:  # the analysis side is optional for a watcher
-        return {}
-    names = [str(n) for n in snap.get("names", ACCEL_CHANNELS)]
-    out = {}
-    for c, name in enumerate(names):
-        if name not in ACCEL_CHANNELS:
-            continue
-        try:
-            res = SimpleNamespace(
-                tau=snap["tau"], m=snap["m"], stride=snap["stride"], n=snap["n"],
-                var=snap["avar"][:, c], edf=snap["edf"][:, c], lo=snap["lo"][:, c],
-                hi=snap["hi"][:, c], rate_hz=float(snap["rate_hz"]),
-                ci=float(snap.get("ci", 0.683)), kind="pavar")
-            # the ADXL355's digital low-pass sits at ODR/4; the service's on-demand fit
-            # (request "snapshot") models it the same way, so both agree
-            out[name] = fit_noise(res, ci=float(snap.get("ci", 0.683)),
-                                  filter_corner_hz=res.rate_hz / 4)
-        except (AvardError, KeyError, IndexError, ValueError, TypeError) as exc:
-            log.debug("no fit for %s: %s", name, exc)
-    return out
 
 
 def run(args: argparse.Namespace) -> int:

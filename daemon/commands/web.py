@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) -> int:
     from aiohttp import web
-    from avard.daemon.commands.watch import fit_snapshot
+    from avard.daemon.snapshots import fit_snapshot
     from avard.daemon.web.app import Hub, make_app
     from avard.daemon.web.feed import Feed
     from avard.daemon.web.state import RunState

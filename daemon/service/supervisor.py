@@ -18,7 +18,6 @@ written and published as a ``gap``. Restart: see checkpoint.py.
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 import signal
@@ -36,7 +35,7 @@ from .. import __version__
 from ..acquisition import Acquisition
 from ..recorder import RestartGap, kernel_boot_id, last_recorded, new_run_id, restart_gap
 from ..ring import Ring
-from ..snapshots import SnapshotBoard, fit_snapshot
+from ..snapshots import SnapshotBoard, fit_record
 from ..timebase import SystemClock, TimeBase
 from .allan_stage import AllanStage
 from .checkpoint import restore_accumulators, save_state
@@ -129,8 +128,7 @@ class Service:
         self.final_status: dict[str, Any] = {}
         self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic,
                                     self._next_index, lambda: self.real_offset)
-        self.snapshots = SnapshotBoard(functools.partial(fit_snapshot,
-                                                         filter_corner_hz=odr / 4))
+        self.snapshots = SnapshotBoard(fit_record)
 
     # -- helpers ------------------------------------------------------------------------
     def real_now(self) -> float:

@@ -3,7 +3,7 @@
 :class:`Feed` owns one :class:`~avard.daemon.subscriber.Subscriber` (the same one ``avard
 watch`` and ``avard record`` use; ZeroMQ sockets stay in this one thread) and hands every
 decoded message to the state. A second thread fits the newest Allan snapshot with
-:func:`avard.daemon.commands.watch.fit_snapshot` — seconds of CPU for three axes, so at most
+:func:`avard.daemon.snapshots.fit_snapshot` — seconds of CPU for three axes, so at most
 every ``fit_interval_s`` and never on the web server's event loop. Both threads wait on
 work (a socket poll, an event), never spin.
 """
