@@ -50,8 +50,8 @@ MAX_REPLY_BYTES = 5 << 19
 #: Peers answered at once: a request from one more peer than this, while the others asked
 #: within PEER_WINDOW_S, gets a short error instead of a reply, so the replies queued for
 #: peers that do not read are bounded in total (MAX_PEERS × REPLY_HWM × MAX_REPLY_BYTES).
-MAX_PEERS = 8
-PEER_WINDOW_S = 60.0
+MAX_PEERS = 16
+PEER_WINDOW_S = 10.0
 #: Requests answered per second, all peers together: a flood costs the service at most this
 #: many handler calls (the reader shares the interpreter), the rest waits in libzmq's queues.
 MAX_REQUESTS_PER_S = 200.0
