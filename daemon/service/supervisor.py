@@ -417,6 +417,8 @@ class Service:
         if self.request_server is not None:
             self.request_server.stop()
         self.snapshots.stop()
+        if self.interrupt is not None:
+            self.interrupt.close()      # release the GPIO line
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None
