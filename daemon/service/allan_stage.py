@@ -53,8 +53,12 @@ class AllanStage(Stage):
         self.on_checkpoint = on_checkpoint
         self.snapshot_interval_s = snapshot_interval_s
         self.checkpoint_interval_s = checkpoint_interval_s
-        self._next_snap: float | None = None
-        self._next_ckpt: float | None = None
+        # Due at once: the first snapshot and checkpoint come with the first samples. The
+        # restore relies on that early checkpoint (it replays only the checkpoint's own run,
+        # so a run killed before its first one would be lost to the accumulators; issue #16
+        # makes the restore replay every run, after which this can become a choice).
+        self._next_snap = 0.0
+        self._next_ckpt = 0.0
         self._t = 0.0
 
     def handle(self, chunk: Chunk) -> None:
@@ -72,13 +76,6 @@ class AllanStage(Stage):
                 self.feed.gap()
         if chunk.n:
             self._t = float(chunk.t_mono[-1])
-        # The timers start at the first chunk, which usually holds only the start marks
-        # (_t = 0): the first snapshot and checkpoint then come with the first samples. The
-        # restore relies on that early checkpoint (it replays only the checkpoint's own run;
-        # issue #16 makes it replay every run, after which this can become deliberate).
-        if self._next_snap is None or self._next_ckpt is None:
-            self._next_snap = self._t + self.snapshot_interval_s
-            self._next_ckpt = self._t + self.checkpoint_interval_s
         if self._t >= self._next_snap:
             self._next_snap = self._t + self.snapshot_interval_s
             rec = self.snapshot_record()
