@@ -354,6 +354,7 @@ class Service:
         try:
             while not self.stop_requested.is_set():
                 self.check_threads()
+                self.run_header.refresh()   # a new header when the fitted rate has moved
                 assert self.acq is not None
                 if not self.ready and self.acq.first_samples.is_set():
                     self.ready = True
