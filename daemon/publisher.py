@@ -45,8 +45,13 @@ Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
 #: Unread replies queued per request peer, and requests queued per peer.
 REPLY_HWM = 2
 REQUEST_HWM = 16
-#: Largest reply (a `recent` is capped below it): with REPLY_HWM, ≤ 8 MiB per peer.
-MAX_REPLY_BYTES = 4 << 20
+#: Largest reply (a `recent` is capped at 2 MiB): with REPLY_HWM, ≤ 5 MiB per peer.
+MAX_REPLY_BYTES = 5 << 19
+#: Peers answered at once: a request from one more peer than this, while the others asked
+#: within PEER_WINDOW_S, gets a short error instead of a reply, so the replies queued for
+#: peers that do not read are bounded in total (MAX_PEERS × REPLY_HWM × MAX_REPLY_BYTES).
+MAX_PEERS = 16
+PEER_WINDOW_S = 10.0
 #: Requests answered per second, all peers together: a flood costs the service at most this
 #: many handler calls (the reader shares the interpreter), the rest waits in libzmq's queues.
 MAX_REQUESTS_PER_S = 200.0
@@ -266,7 +271,7 @@ class RequestServer:
                  handlers: Mapping[str, Handler] | None = None, *,
                  curve: CurveServerConfig | None = None, max_request_bytes: int = 65536,
                  max_reply_bytes: int = MAX_REPLY_BYTES,
-                 max_requests_per_s: float = MAX_REQUESTS_PER_S,
+                 max_requests_per_s: float = MAX_REQUESTS_PER_S, max_peers: int = MAX_PEERS,
                  hard_cap_bytes: int | None = None, allow_remote: bool = False) -> None:
         self.allow_remote = allow_remote
         self.handlers: dict[str, Handler] = dict(handlers or {})
@@ -277,6 +282,9 @@ class RequestServer:
         self.hard_cap_bytes = int(hard_cap_bytes or max(1 << 20, 4 * self.max_request_bytes))
         self.endpoint = endpoint
         self.max_requests_per_s = float(max_requests_per_s)
+        self.max_peers = int(max_peers)
+        self._peers: dict[bytes, float] = {}   # identity → last request (monotonic s)
+        self.refused_peers = 0
         self.answered = 0
         self.errors = 0
         self.refused_replies = 0     # replies a peer's full queue refused (it does not read)
@@ -410,7 +418,27 @@ class RequestServer:
             self.errors += 1
             return [*envelope, frames.encode_reply(
                 "?", error=f"expected one request frame, got {len(payloads)}")]
+        if not self._admit(identity):
+            self.errors += 1
+            self.refused_peers += 1
+            op, rid = _readable_op_id(payloads[0], self.max_request_bytes)
+            return [*envelope, frames.encode_reply(
+                op, id=rid, error=f"busy: {self.max_peers} other clients asked within "
+                f"{PEER_WINDOW_S:g} s; ask again later")]
         return [*envelope, self.handle(payloads[0])]
+
+    def _admit(self, identity: bytes) -> bool:
+        """Whether this peer may be answered: it is one of the ``max_peers`` that asked last
+        within PEER_WINDOW_S (peers quiet for longer make room)."""
+        now = time.monotonic()
+        peers = self._peers
+        if identity not in peers:
+            for old in [p for p, t in peers.items() if now - t > PEER_WINDOW_S]:
+                del peers[old]
+            if len(peers) >= self.max_peers:
+                return False
+        peers[identity] = now
+        return True
 
     def handle(self, payload: bytes) -> bytes:
         """Answer one request payload with reply bytes; every failure becomes an error reply

@@ -57,7 +57,7 @@ class AllanStage(Stage):
         self.on_checkpoint = on_checkpoint
         self.snapshot_interval_s = snapshot_interval_s
         self.checkpoint_interval_s = checkpoint_interval_s
-        self._next_snap: float | None = None
+        self._next_snap: float | None = None   # set by the first sample (see handle)
         self._next_ckpt: float | None = None
         self._t = 0.0
 

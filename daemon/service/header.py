@@ -12,8 +12,9 @@ Record = dict[str, Any]
 
 
 class RunHeader:
-    """The run's ``header`` record, built once and rebuilt only when the fitted rate has moved
-    by more than ``ppm`` (at most every ``min_interval_s``): the recorder writes each new one
+    """The run's ``header`` record, built once and rebuilt by :meth:`refresh` only when the
+    fitted rate has moved by more than ``ppm`` (at most every ``min_interval_s``): the recorder
+    writes each new one
     (and every segment starts with the current one, :meth:`for_segment`), the publisher sends
     it on the ``status`` topic, and the ``header`` request returns it, so all three carry the
     same record."""
@@ -36,15 +37,28 @@ class RunHeader:
         self.version = 0
 
     def current(self) -> Record:
+        """The current header (built at the first call, then only by :meth:`refresh`)."""
+        with self._lock:
+            if self._rec is None:
+                self._rec = self._build()
+                self._rate, self._t = float(self._tb.odr_hz), self._clock()
+                self.version += 1
+            return self._rec
+
+    def refresh(self) -> bool:
+        """Rebuild the header if the fitted rate has moved enough (the supervisor calls this,
+        one owner, so the recorder writes every version before it closes); True if rebuilt."""
+        self.current()
         with self._lock:
             rate = float(self._tb.odr_hz)
             now = self._clock()
-            if self._rec is None or (abs(rate / self._rate - 1.0) * 1e6 > self.ppm
-                                     and now - self._t >= self.min_interval_s):
-                self._rec = self._build()
-                self._rate, self._t = rate, now
-                self.version += 1
-            return self._rec
+            if abs(rate / self._rate - 1.0) * 1e6 <= self.ppm or \
+                    now - self._t < self.min_interval_s:
+                return False
+            self._rec = self._build()
+            self._rate, self._t = rate, now
+            self.version += 1
+            return True
 
     def for_segment(self) -> Record:
         """The header that starts a segment: the current one with ``i0`` at the reader's

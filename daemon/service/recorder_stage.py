@@ -38,21 +38,25 @@ class RecorderStage(Stage):
         self.checkpoint_written = checkpoint_written
         self.reopen = reopen
         self.block_samples = max(1, int(block_samples))
-        self._header_version = header.version   # the first segment's own header
+        header.current()
+        self._header_version = header.version   # what the first segment starts with
         self._parts: list[np.ndarray] = []
         self._i0 = 0
         self._t0 = 0.0
         self._n = 0
 
-    def _flush(self) -> None:
-        if not self._n:
-            return
+    def _write_header_if_new(self) -> None:
         if self.header.version != self._header_version:
             # The fitted rate moved: the recording gets the new header (load_recording takes
             # each run's newest), before the block whose times use that fit.
             rec = self.header.for_segment()
             self._header_version = self.header.version
             self.rec.write(rec)
+
+    def _flush(self) -> None:
+        if not self._n:
+            return
+        self._write_header_if_new()
         counts = np.concatenate(self._parts) if len(self._parts) > 1 else self._parts[0]
         self.rec.write(frames.raw_record(self.run_id, 0, self._i0, counts, self._t0,
                                          self._t0 + self.real_offset, rate_hz=self.rate_hz()))
@@ -98,9 +102,5 @@ class RecorderStage(Stage):
 
     def finish(self) -> None:
         self._flush()
-        if self.header.version != self._header_version:
-            # a newer fit of the rate after the last block (the publisher's final status may
-            # make one): the recording ends with the header that was published
-            self._header_version = self.header.version
-            self.rec.write(self.header.for_segment())
+        self._write_header_if_new()     # the last version too: it is the best fit
         self.rec.close()

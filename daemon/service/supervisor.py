@@ -365,6 +365,7 @@ class Service:
         try:
             while not self.stop_requested.is_set():
                 self.check_threads()
+                self.run_header.refresh()   # a new header when the fitted rate has moved
                 assert self.acq is not None
                 if not self.ready and self.acq.first_samples.is_set():
                     self.ready = True
@@ -422,15 +423,15 @@ class Service:
             self.acq.stop()
         if self.bank is not None:
             self.bank.stop()
-        # Allan first (its final snapshot/checkpoint are ring marks), the recorder last (it
-        # records the header version the publisher's final status may have made)
-        for w in sorted(self.workers, key=lambda w: isinstance(w, RecorderStage)):
+        for w in self.workers:  # Allan first: its final snapshot/checkpoint are ring marks
             w.stop()
         self.final_status = self.status()
         log.info("run %s stopped: %s", self.run_id, self.status_line())
         if self.request_server is not None:
             self.request_server.stop()
         self.snapshots.stop()
+        if self.interrupt is not None:
+            self.interrupt.close()      # release the GPIO line
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None

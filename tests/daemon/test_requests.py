@@ -154,3 +154,25 @@ def test_a_peer_that_never_reads_gets_its_replies_refused_not_queued() -> None:
     finally:
         srv.stop()
         ctx.destroy(linger=0)
+
+
+def test_replies_are_bounded_in_total_by_the_number_of_peers_answered() -> None:
+    """Beyond max_peers clients asking within the window, a new one gets a short 'busy' error
+    (naming its op and id) instead of a reply: what can queue for peers that never read is
+    bounded by max_peers × REPLY_HWM × the largest reply."""
+    srv = RequestServer(LOCAL, {"status": lambda _a: {"ok": 1}}, max_peers=3).start()
+    ctx = zmq.Context()
+    try:
+        socks = [_dealer(ctx, srv.endpoint) for _ in range(5)]
+        replies = []
+        for i, s in enumerate(socks):
+            s.send_multipart([b"", F.encode_request("status", id=100 + i)])
+            replies.append(_reply(s))
+        assert [r["ok"] for r in replies] == [True, True, True, False, False]
+        assert replies[3]["op"] == "status" and replies[3]["id"] == 103
+        assert "busy" in replies[3]["error"] and srv.refused_peers == 2
+        socks[0].send_multipart([b"", F.encode_request("status", id=7)])
+        assert _reply(socks[0])["ok"]                  # the admitted ones go on being answered
+    finally:
+        srv.stop()
+        ctx.destroy(linger=0)
