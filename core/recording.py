@@ -448,6 +448,9 @@ class WalkReport:
     losses: list[Loss] = field(default_factory=list)
     duplicates: list[tuple[int, int]] = field(default_factory=list)   # (i0, n) dropped
     recovered_headers: list[str] = field(default_factory=list)        # runs
+    # each run's newest readable header: the service rewrites it as its fit of the output
+    # rate improves, so this one carries the run's best rate (copies are not yielded again)
+    newest_header: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def samples_lost(self) -> int:
@@ -583,6 +586,7 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
             n_problems = len(reader.problems)
         run = rec["run"]
         if rec["kind"] == "header":
+            report.newest_header[run] = rec
             if run in headers:
                 continue                      # a header copy: the run is already known
             headers[run] = rec
@@ -959,7 +963,9 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     temperature = None
     if tnames:
         temperature = _hold_on_grid(idx, tnames, temps)
-    rates = [float(h["rate_hz"]) for h in headers]
+    # each run's newest header carries its best fit of the output rate; runs are averaged
+    fitted = {run: float(h["rate_hz"]) for run, h in report.newest_header.items()}
+    rates = list(fitted.values())
     scales = {_scale_of(h) for h in headers}
     meta = {
         "format": "avard-recording",
@@ -983,10 +989,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         "last_avar": last_avar,
         "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
     }
-    # Each run's newest header carries its best fit of the output rate (the service rewrites
-    # the header as the fit improves); runs are averaged.
-    fitted = {h["run"]: float(h["rate_hz"]) for h in headers}
-    return record_cls(accel=accel, rate_hz=float(np.mean(list(fitted.values()))),
+    return record_cls(accel=accel, rate_hz=float(np.mean(rates)),
                   names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
