@@ -53,11 +53,12 @@ class AllanStage(Stage):
         self.on_checkpoint = on_checkpoint
         self.snapshot_interval_s = snapshot_interval_s
         self.checkpoint_interval_s = checkpoint_interval_s
-        # Due at once: the first snapshot and checkpoint come with the first samples. The
-        # restore relies on that early checkpoint (it replays only the checkpoint's own run,
-        # so a run killed before its first one would be lost to the accumulators; issue #16
-        # makes the restore replay every run, after which this can become a choice).
-        self._next_snap = 0.0
+        # The first checkpoint is due at once, with the first samples: the restore relies on
+        # it (it replays only the checkpoint's own run, so a run killed before its first one
+        # would be lost to the accumulators; issue #16 makes the restore replay every run,
+        # after which this can become a choice). Snapshots start one interval after the
+        # first samples (an earlier one has too few τ points to say anything).
+        self._next_snap: float | None = None
         self._next_ckpt = 0.0
         self._t = 0.0
 
@@ -76,7 +77,9 @@ class AllanStage(Stage):
                 self.feed.gap()
         if chunk.n:
             self._t = float(chunk.t_mono[-1])
-        if self._t >= self._next_snap:
+        if self._next_snap is None and chunk.n:
+            self._next_snap = self._t + self.snapshot_interval_s
+        if self._next_snap is not None and self._t >= self._next_snap:
             self._next_snap = self._t + self.snapshot_interval_s
             rec = self.snapshot_record()
             if rec is not None:
