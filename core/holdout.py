@@ -85,7 +85,8 @@ def heldout_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float],
     independent averages, EDF ≥ 3), with the covariance ``fit_noise`` models from the model's
     components (its ``_avar_cov``, Whittle kernels, and its EDF floor), whitened as it
     whitens, plus (``predictive``) the model's own parameter covariance propagated to the
-    prediction, X·Cov(θ)·Xᵀ. No parameter is fitted here. With ``predictive`` False and the
+    prediction, X·Cov(θ)·Xᵀ, and for each term the fit left out, (U²/z)²·x xᵀ from its upper
+    limit U. No parameter is fitted here. With ``predictive`` False and the
     data the model was fitted on, this is the fit's own χ² (a test holds them equal). Uses
     fit.py's internals: one covariance model."""
     var = np.asarray(result.var, dtype=float)
@@ -114,6 +115,15 @@ def heldout_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float],
         # the prediction is itself uncertain: its parameters were estimated on other data
         # (their covariance from the fit, Birge-scaled); the two errors are independent
         C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
+        # a term the fit left out is known only to lie below its upper limit
+        # U² = θ̂ + z·se (fit._select_terms): its θ carries a standard error up to U²/z,
+        # which the prediction inherits (a short fit part that cannot tell flicker from
+        # random walk at its longest τ must not predict either with confidence)
+        for k, comp in enumerate(comps):
+            te = model.terms.get(comp.label)
+            if te is not None and not te.present and te.upper:
+                se = te.upper**2 / model.z_present
+                C = C + se**2 * np.outer(X[:, k], X[:, k])
     r = fit_mod._whitener(C) @ (var[idx] - X @ theta)
     return float(r @ r), len(idx)
 
