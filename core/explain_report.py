@@ -74,6 +74,8 @@ def holdout_lines(ex: Explanation) -> list[str]:
             causes = ", ".join(c.causes) or "no cause claimed"
             out.append(f"  {name}: held-out χ² base {c.chi2_base:.4g}, extended "
                        f"{c.chi2_ext:.4g} on n = {c.n_points} τ ({causes}{gtxt})")
+            if c.note is not None:
+                out.append(f"     {c.note}")
     return out
 
 

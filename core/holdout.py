@@ -59,6 +59,8 @@ __all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible"
 
 #: Fewest slow-view points in each part (as for explain's time-domain causes).
 MIN_PART_POINTS = 256
+#: Causes that are events of one record, not properties of the sensor.
+EVENTS = frozenset({"warmup", "bias_step"})
 #: Lags of a held-out part's start left out (the lag filter's unknown start state:
 #: e^(−5) < 1 % of the start-up difference remains).
 HELD_SETTLE_LAGS = 5.0
@@ -177,8 +179,18 @@ class ChannelHoldout:
             return None
         return 1.0 - self.chi2_ext / self.chi2_base
 
+    @property
+    def note(self) -> str | None:
+        """Why a gain near 0 is expected: the claimed causes are only events (a warm-up, a
+        step), which predict nothing in data they were not fitted on."""
+        if self.causes and set(self.causes) <= EVENTS:
+            return ("a warm-up or a step is an event of one record: it predicts no other "
+                    "data, so its held-out gain is near 0 by design; its own test is the "
+                    "evidence")
+        return None
+
     def to_dict(self) -> dict[str, Any]:
-        return {"causes": self.causes, "chi2_base": self.chi2_base,
+        return {"causes": self.causes, "chi2_base": self.chi2_base, "note": self.note,
                 "chi2_extended": self.chi2_ext, "n_points": self.n_points,
                 "gain": self.gain, "folds": [f.to_dict() for f in self.folds],
                 "reason": self.reason}

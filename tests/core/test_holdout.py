@@ -116,3 +116,18 @@ def test_record_too_short_to_split_says_so(tmp_path):
     assert "too short to split" in (ex.holdout.why_no_gain or "")
     assert ex.to_dict()["holdout"]["channels"] == {}
     assert np.isfinite(ex.channels["x"].base.fit.chi2_dof)
+
+
+def test_a_warmup_is_an_event_and_predicts_no_other_data(tmp_path):
+    """A warm-up fitted on the first half leaves the fit of the second half unchanged: there
+    both models are the same and so is their held-out χ²; the note says why."""
+    path = _file(tmp_path, 31, Truth(warmup=(2.4e-3, 900.0)), hours=4.0)
+    ex = explain_file(path, channels=["x"])
+    ch = ex.holdout.channels["x"] if ex.holdout is not None else None
+    assert ch is not None and ch.causes == ["warmup"]
+    second = next(f for f in ch.folds if f.fit_part == "second half")
+    first = next(f for f in ch.folds if f.fit_part == "first half")
+    assert second.chi2_ext == second.chi2_base
+    assert first.chi2_ext != first.chi2_base  # the first half's noise is fitted without it
+    assert ch.note is not None and "event" in ch.note
+    assert ex.to_dict()["holdout"]["channels"]["x"]["note"] == ch.note
