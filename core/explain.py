@@ -293,12 +293,15 @@ def explain_file(path: str, *, rate_hz: float | None = None,
                  channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None, block: int = 1 << 16,
                  filter_corner_hz: float | str | None = "auto",
-                 temperature: str | None = None, holdout: str | None = None) -> Explanation:
+                 temperature: str | None = None, holdout: str | None = None,
+                 heldout: bool = True) -> Explanation:
     """Explain the record at ``path`` (.npz, .csv or a recording), streamed once.
     ``filter_corner_hz`` as for ``report.analyze``; ``temperature`` names the one temperature
     channel to use (its compensation is then reported whatever its test says). ``holdout``:
     a second record of the same sensor (same rate and channels, checked before any work)
-    that the models fitted here predict; without it the record's halves predict each other."""
+    that the models fitted here predict; without it the record's halves predict each other.
+    ``heldout`` False skips the held-out measure (``avard analyze --temperature`` needs only
+    the thermal fit)."""
     meta, blocks = _source(path, block, rate_hz)
     meta.setdefault("source", path)
     held: tuple[dict[str, Any], Iterable[Block]] | None = None
@@ -309,15 +312,15 @@ def explain_file(path: str, *, rate_hz: float | None = None,
         held = h_meta, h_blocks
     return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
                           filter_corner_hz=filter_corner_hz, temperature=temperature,
-                          holdout=held)
+                          holdout=held, heldout=heldout)
 
 
 def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                    channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
                    stage: StageFn | None = None, filter_corner_hz: float | str | None = "auto",
                    temperature: str | None = None,
-                   holdout: tuple[dict[str, Any], Iterable[Block]] | None = None
-                   ) -> Explanation:
+                   holdout: tuple[dict[str, Any], Iterable[Block]] | None = None,
+                   heldout: bool = True) -> Explanation:
     """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
     (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
     segment end). ``holdout``: (meta, blocks) of a second record of the same sensor."""
@@ -371,6 +374,8 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
                                      th, an, meta, always_compensate=temperature is not None)
+    if not heldout and holdout is None:
+        return Explanation(an, out, t_allan, b / rate)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, holdout)

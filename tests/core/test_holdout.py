@@ -116,6 +116,9 @@ def test_record_too_short_to_split_says_so(tmp_path):
     assert "too short to split" in (ex.holdout.why_no_gain or "")
     assert ex.to_dict()["holdout"]["channels"] == {}
     assert np.isfinite(ex.channels["x"].base.fit.chi2_dof)
+    # asked not to (analyze --temperature needs only the thermal fit): no held-out measure
+    ex = explain_file(path, heldout=False)
+    assert ex.holdout is None and ex.to_dict()["holdout_gain"] is None
 
 
 def test_a_warmup_is_an_event_and_predicts_no_other_data(tmp_path):
