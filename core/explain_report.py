@@ -225,8 +225,19 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
     if ex.holdout is not None:
         from .holdout import DEFINITION
 
-        md += ["## Held-out gain", "", *[ln.strip() + "  " for ln in holdout_lines(ex)], "",
-               f"Definition: {DEFINITION}", ""]
+        ho = ex.holdout
+        md += ["## Held-out gain", "", *[ln + "  " for ln in holdout_lines(ex)[:2]], ""]
+        if any(c.folds for c in ho.channels.values()):
+            md += ["| channel | claimed causes | held-out χ² base | held-out χ² extended | "
+                   "n (τ) | gain |", "|---|---|---|---|---|---|"]
+            for name, c in ho.channels.items():
+                g = "–" if c.gain is None else f"{c.gain:.3g}"
+                md.append(f"| {name} | {', '.join(c.causes) or 'none'} | {c.chi2_base:.4g} | "
+                          f"{c.chi2_ext:.4g} | {c.n_points} | {g} |")
+            md.append("")
+        md += [f"- {name}: {c.reason or c.note}" for name, c in ho.channels.items()
+               if c.reason or c.note]
+        md += ["", f"Definition: {DEFINITION}", ""]
     for name, ch in ex.channels.items():
         safe = "".join(c if c.isalnum() else "_" for c in name)
         adev_png, res_png = f"adev_{safe}.png", f"misfit_{safe}.png"

@@ -70,6 +70,7 @@ def test_summary_and_report(thermal_file, tmp_path, capsys):
     md = (rep / "report.md").read_text()
     assert "## Channel x" in md and "Every cause tested" in md
     assert "## Held-out gain" in md and "Definition: gain = 1 − χ²_ext/χ²_base" in md
+    assert "| x | temperature | " in md
     for png in ("adev_x.png", "misfit_x.png", "temperature_adev.png"):
         assert (rep / png).stat().st_size > 1000
 
