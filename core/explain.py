@@ -27,6 +27,10 @@ One pass over the record (streamed, bounded memory):
    of analyze's model already.
 4. **Gain**: generalised χ²/dof (with the modelled covariance) of the base over the extended
    fit: 1 = no change.
+5. **Held-out gain** (:mod:`avard.core.holdout`): both models refitted on one half of the
+   slow view predict the other (two folds), or, with a second record of the same sensor
+   (``holdout``), fitted on this record predict that one; 1 − χ²_ext/χ²_base of the held-out
+   AVAR.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from . import causes as cz
 from .causes import Finding
 from .errors import DataError, FitError
 from .fit import NoiseFit, fit_noise
+from .holdout import Holdout, check_compatible, holdout_file, holdout_split
 from .readers import iter_blocks, load_record
 from .report import Analysis, ChannelAnalysis, ProgressFn, analyze_stream
 from .streaming import StreamingAllan
@@ -191,6 +196,8 @@ class Explanation:
     channels: dict[str, ChannelExplanation]
     temperature: dict[str, Any] = field(default_factory=dict)
     block_s: float = 0.0
+    #: the held-out measure (None only when explain was asked not to make it)
+    holdout: Holdout | None = None
 
     @property
     def source(self) -> str:
@@ -202,8 +209,11 @@ class Explanation:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON shape (SI units; NaN is written as null by the command)."""
+        ho = None if self.holdout is None else self.holdout.to_dict()
         return {"source": self.source, "rate_hz": self.rate_hz,
                 "n_samples": self.analysis.n_samples, "units": "SI",
+                "holdout_gain": None if ho is None else ho["holdout_gain"],
+                "holdout": ho,
                 "channels": {k: v.to_dict() for k, v in self.channels.items()}}
 
 
@@ -283,23 +293,39 @@ def explain_file(path: str, *, rate_hz: float | None = None,
                  channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None, block: int = 1 << 16,
                  filter_corner_hz: float | str | None = "auto",
-                 temperature: str | None = None) -> Explanation:
+                 temperature: str | None = None, holdout: str | None = None,
+                 heldout: bool = True) -> Explanation:
     """Explain the record at ``path`` (.npz, .csv or a recording), streamed once.
     ``filter_corner_hz`` as for ``report.analyze``; ``temperature`` names the one temperature
-    channel to use (its compensation is then reported whatever its test says)."""
+    channel to use (its compensation is then reported whatever its test says). ``holdout``:
+    a second record of the same sensor (same rate and channels, checked before any work)
+    that the models fitted here predict; without it the record's halves predict each other.
+    ``heldout`` False skips the held-out measure (``avard analyze --temperature`` needs only
+    the thermal fit)."""
     meta, blocks = _source(path, block, rate_hz)
     meta.setdefault("source", path)
+    held: tuple[dict[str, Any], Iterable[Block]] | None = None
+    if holdout is not None:
+        h_meta, h_blocks = _source(holdout, block, rate_hz)
+        h_meta.setdefault("source", holdout)
+        check_compatible(meta, h_meta, holdout)
+        held = h_meta, h_blocks
     return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
-                          filter_corner_hz=filter_corner_hz, temperature=temperature)
+                          filter_corner_hz=filter_corner_hz, temperature=temperature,
+                          holdout=held, heldout=heldout)
 
 
 def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                    channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
                    stage: StageFn | None = None, filter_corner_hz: float | str | None = "auto",
-                   temperature: str | None = None) -> Explanation:
+                   temperature: str | None = None,
+                   holdout: tuple[dict[str, Any], Iterable[Block]] | None = None,
+                   heldout: bool = True) -> Explanation:
     """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
     (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
-    segment end)."""
+    segment end). ``holdout``: (meta, blocks) of a second record of the same sensor."""
+    if holdout is not None:
+        check_compatible(meta, holdout[0], str(holdout[0].get("source", "holdout")))
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     tnames = list(meta.get("temperature_names") or [])
@@ -348,7 +374,31 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
                                      th, an, meta, always_compensate=temperature is not None)
-    return Explanation(an, out, t_allan, b / rate)
+    if not heldout and holdout is None:
+        return Explanation(an, out, t_allan, b / rate)
+    if stage is not None:
+        stage("measuring the gain on held-out data")
+    ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, holdout)
+    return Explanation(an, out, t_allan, b / rate, ho)
+
+
+def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
+             tnames: list[str], names: list[str], rate_b: float, b: int, meta: dict[str, Any],
+             holdout: tuple[dict[str, Any], Iterable[Block]] | None) -> Holdout:
+    """The held-out measure (:mod:`avard.core.holdout`): the record's halves, or the second
+    record streamed through a slow view with the same block (bounded memory)."""
+    if holdout is None:
+        return holdout_split(out, y_slow, t_slow, tnames, names, rate_b,
+                             str(meta.get("source", "stream")))
+    h_meta, h_blocks = holdout
+    view = SlowView(b, len(names), len(tnames))
+    for accel, temp, _end in h_blocks:
+        a = np.asarray(accel, dtype=float).reshape(len(accel), -1)
+        has_t = tnames and temp is not None and np.asarray(temp).size
+        view.update(a, temp if has_t else None)
+    y_h, t_h = view.finish()
+    return holdout_file(out, y_slow, t_slow, y_h, t_h, tnames, names, rate_b,
+                        str(h_meta.get("source", "holdout")))
 
 
 #: Gauss–Markov correlation times tried (log grid inside the fitted τ range).

@@ -50,11 +50,41 @@ def _chi(fit: NoiseFit) -> str:
     return f"{fit.chi2_dof:.3g}" if math.isfinite(fit.chi2_dof) else "n/a"
 
 
+def holdout_lines(ex: Explanation) -> list[str]:
+    """The held-out gain in words: what was held out, the gain (or why there is none) and
+    per channel the held-out χ² of the base and the extended model against its n."""
+    ho = ex.holdout
+    if ho is None:
+        return []
+    what = ("each half of the record predicted by models fitted on the other half"
+            if ho.mode == "split" else f"{ho.source} predicted by models fitted on this record")
+    out = [f"held out: {what} (Allan variance of {ho.block_s:.3g} s block means, τ ≥ "
+           f"{ho.block_s:.3g} s)"]
+    g = ho.gain
+    if g is None:
+        out.append(f"held-out gain: none ({ho.why_no_gain})")
+    else:
+        out.append(f"held-out gain {g:.3g} = 1 − χ²_ext/χ²_base of the held-out Allan "
+                   "variance (0: no better, 1: perfect; χ² ≈ n when a model predicts the data)")
+    for name, c in ho.channels.items():
+        if c.reason is not None:
+            out.append(f"  {name}: {c.reason}")
+        elif c.folds:
+            gtxt = "" if c.gain is None else f", gain {c.gain:.3g}"
+            causes = ", ".join(c.causes) or "no cause claimed"
+            out.append(f"  {name}: held-out χ² base {c.chi2_base:.4g}, extended "
+                       f"{c.chi2_ext:.4g} on n = {c.n_points} τ ({causes}{gtxt})")
+            if c.note is not None:
+                out.append(f"     {c.note}")
+    return out
+
+
 def summary(ex: Explanation) -> str:
     """Plain-text summary for the terminal (SI units, 68 % intervals)."""
     lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
              f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
              "intervals 68 %. Base model = avard analyze's fit."]
+    lines += holdout_lines(ex)
     for name, ch in ex.channels.items():
         lines.append("")
         lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
@@ -192,6 +222,22 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
           "model's 68 % χ² interval with the estimator's EDF. The gain is the base fit's "
           "χ²/dof over the extended fit's (above 1: the found causes describe the data "
           "better).", ""]
+    if ex.holdout is not None:
+        from .holdout import DEFINITION
+
+        ho = ex.holdout
+        md += ["## Held-out gain", "", *[ln + "  " for ln in holdout_lines(ex)[:2]], ""]
+        if any(c.folds for c in ho.channels.values()):
+            md += ["| channel | claimed causes | held-out χ² base | held-out χ² extended | "
+                   "n (τ) | gain |", "|---|---|---|---|---|---|"]
+            for name, c in ho.channels.items():
+                g = "–" if c.gain is None else f"{c.gain:.3g}"
+                md.append(f"| {name} | {', '.join(c.causes) or 'none'} | {c.chi2_base:.4g} | "
+                          f"{c.chi2_ext:.4g} | {c.n_points} | {g} |")
+            md.append("")
+        md += [f"- {name}: {c.reason or c.note}" for name, c in ho.channels.items()
+               if c.reason or c.note]
+        md += ["", f"Definition: {DEFINITION}", ""]
     for name, ch in ex.channels.items():
         safe = "".join(c if c.isalnum() else "_" for c in name)
         adev_png, res_png = f"adev_{safe}.png", f"misfit_{safe}.png"

@@ -4,13 +4,16 @@ extended by it and the temperature-compensated Allan deviation.
 
 Examples:
 
-    avard explain run1.npz                        # terminal summary
+    avard explain run1.npz                        # terminal summary (held out: its halves)
+    avard explain run1.npz --holdout run2.npz     # run2 (same sensor) is the held-out data
     avard explain run1.npz --json                 # machine-readable, SI units
     avard explain run1.npz --report out/          # Markdown report with plots
     avard explain run1.npz --channels x,z
 
-The base model is exactly `avard analyze`'s fit of the same file. The record is streamed
-once; progress goes to stderr when it is a terminal. See docs/explain.md.
+The base model is exactly `avard analyze`'s fit of the same file. The held-out gain is how
+much better the extended model predicts data it was not fitted on: by default the record's
+two halves predict each other; with --holdout the models fitted on DATA predict FILE. The
+record is streamed once; progress goes to stderr when it is a terminal. See docs/explain.md.
 """
 
 from __future__ import annotations
@@ -36,6 +39,10 @@ log = logging.getLogger("avard.explain")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("data", help="measured or simulated record (.npz, .csv or a recording)")
+    parser.add_argument("--holdout", metavar="FILE",
+                        help="a second record of the same sensor (same rate and channels) "
+                             "that the models fitted on DATA predict (default: the halves of "
+                             "DATA predict each other)")
     parser.add_argument("--json", action="store_true",
                         help="print the result as JSON (SI units) instead of the summary")
     parser.add_argument("--report", metavar="DIR",
@@ -94,10 +101,13 @@ def run(args: argparse.Namespace) -> int:
     if not Path(args.data).exists():
         raise DataError(f"{args.data} does not exist; give the path of a recorded or "
                         "simulated file")
+    if args.holdout and not Path(args.holdout).exists():
+        raise DataError(f"--holdout {args.holdout} does not exist; give the path of a second "
+                        "record of the same sensor")
     channels = split_channels(args.channels)
     progress, stage = _progress()
     ex = explain_file(args.data, rate_hz=args.rate_hz, channels=channels, progress=progress,
-                      stage=stage)
+                      stage=stage, holdout=args.holdout)
     if args.report:
         path = write_report(ex, args.report)
         log.info("report written to %s", path)

@@ -38,6 +38,18 @@ def test_json_output(thermal_file, capsys):
     assert lo < th["coefficient_mps2_per_k"] < hi
     assert len(x["compensated"]["adev"]) == len(x["base"]["tau_s"])
     assert x["gain"] > 1
+    # the held-out gain: the halves of the record predict each other, with its definition
+    ho = out_ex["holdout"]
+    assert ho["mode"] == "split" and ho["units"] == "SI" and "χ²" in ho["definition"]
+    hx = ho["channels"]["x"]
+    assert hx["causes"] == ["temperature"] and hx["n_points"] > 0
+    assert [f["fit_part"] for f in hx["folds"]] == ["first half", "second half"]
+    assert hx["chi2_base"] == pytest.approx(sum(f["chi2_base"] for f in hx["folds"]))
+    # only x claims a cause, so the record's gain is x's (this weak 3 h effect on 1.5 h
+    # halves: the sign is the data's; tests/core/test_holdout.py asserts it on a clear one)
+    assert out_ex["holdout_gain"] == hx["gain"] == pytest.approx(
+        1 - hx["chi2_extended"] / hx["chi2_base"])
+    assert ho["channels"]["y"]["gain"] is None and ho["channels"]["y"]["causes"] == []
 
 
 def _two_json(capsys):
@@ -54,8 +66,11 @@ def test_summary_and_report(thermal_file, tmp_path, capsys):
     assert cli.main(["explain", str(path), "--report", str(rep), "--channels", "x"]) == 0
     text = capsys.readouterr().out
     assert "FOUND temperature" in text and "m/s²/K" in text and "ambient" in text
+    assert "held-out gain" in text and "x: held-out χ² base" in text
     md = (rep / "report.md").read_text()
     assert "## Channel x" in md and "Every cause tested" in md
+    assert "## Held-out gain" in md and "Definition: gain = 1 − χ²_ext/χ²_base" in md
+    assert "| x | temperature | " in md
     for png in ("adev_x.png", "misfit_x.png", "temperature_adev.png"):
         assert (rep / png).stat().st_size > 1000
 
@@ -71,6 +86,24 @@ def test_user_errors_exit_2(tmp_path, capsys):
     assert "samples" in capsys.readouterr().err
     assert cli.main(["explain", str(tmp_path / "short.npz"), "--report",
                      str(tmp_path / "no" / "such" / "dir")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_holdout_of_another_sensor_set_up_exit_2(thermal_file, tmp_path, capsys):
+    """--holdout with another rate or other channels: one line naming both, exit 2."""
+    path, _ = thermal_file
+    rec, _ = make_record(12, logged=("ambient",), hours=0.2, rate_hz=20.0)
+    other = save(rec, tmp_path / "o.npz")
+    assert cli.main(["explain", str(path), "--holdout", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "--holdout" in err and "20 Hz" in err and "10 Hz" in err
+    rec, _ = make_record(13, logged=("plate",), hours=0.2)
+    other = save(rec, tmp_path / "p.npz")
+    assert cli.main(["explain", str(path), "--holdout", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "temperatures plate" in err
+    assert cli.main(["explain", str(path), "--holdout", str(tmp_path / "none.npz")]) == 2
     assert "does not exist" in capsys.readouterr().err
 
 

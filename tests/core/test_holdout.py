@@ -1,0 +1,136 @@
+"""The held-out gain of `avard explain` (core/holdout.py): models refitted on one half of the
+record predict the other (or, with a second record, fitted on one predict the other), misfit
+measured by the generalised χ² with fit_noise's covariance. Records from the generator
+written apart from the simulator (tests/support/hidden.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from avard.core.errors import DataError
+from avard.core.explain import explain_file
+from avard.core.fit import fit_noise
+from avard.core.holdout import DEFINITION, _avar, heldout_chi2
+
+from tests.support.hidden import Truth, make_record, save
+
+HIDDEN = Truth(coefficient=(3e-3, 1.5e-3, 0.0), lag_s=300.0)
+
+
+def _file(tmp_path, seed, truth=None, **kw):
+    rec, _ = make_record(seed, truth=truth, logged=("ambient",), **kw)
+    return str(save(rec, tmp_path / f"h{seed}.npz"))
+
+
+@pytest.fixture(scope="module")
+def hidden(tmp_path_factory):
+    """A 4 h record whose x and y follow the ambient temperature through a 5-minute lag."""
+    path = _file(tmp_path_factory.mktemp("ho"), 5, HIDDEN, hours=4.0)
+    return path, explain_file(path)
+
+
+def test_heldout_chi2_is_the_fits_own_chi2_on_its_own_data():
+    """The held-out χ² uses fit_noise's covariance model: on the data the model was fitted
+    on, without the parameter term, it is the fit's own generalised χ²."""
+    rec, _ = make_record(11, hours=2.0)
+    y = rec.accel[: (len(rec.accel) // 16) * 16].reshape(-1, 16, 3).mean(axis=1)[:, 0]
+    res = _avar(y, rec.rate_hz / 16)
+    fit = fit_noise(res)
+    chi2, n = heldout_chi2(fit, res, (fit.tau_min_s, fit.tau_max_s), predictive=False)
+    assert n == fit.n_points
+    assert chi2 == pytest.approx(fit.chi2_dof * fit.dof, rel=1e-9)
+    # the prediction's own uncertainty only ever adds to the covariance
+    chi2_p, _ = heldout_chi2(fit, res, (fit.tau_min_s, fit.tau_max_s))
+    assert chi2_p <= chi2 * (1 + 1e-9)
+
+
+def test_hidden_temperature_effect_gains_on_held_out_data(hidden):
+    """Fitted on one half, the thermal model predicts the other: the held-out misfit of the
+    extended model is near its n, the base model's far above; the axis without the effect
+    claims nothing and reports no gain."""
+    _path, ex = hidden
+    ho = ex.holdout
+    assert ho is not None and ho.mode == "split" and ho.reason is None
+    assert ho.gain is not None and ho.gain > 0.8
+    for name in ("x", "y"):
+        ch = ho.channels[name]
+        assert ch.causes == ["temperature"]
+        assert len(ch.folds) == 2
+        assert {(f.fit_part, f.heldout_part) for f in ch.folds} == {
+            ("first half", "second half"), ("second half", "first half")}
+        assert ch.chi2_ext < 3 * ch.n_points  # near its n: the model predicts the data
+        assert ch.chi2_base > 20 * ch.n_points
+        assert ch.gain is not None and ch.gain > 0.8
+    z = ho.channels["z"]
+    assert z.causes == [] and z.gain is None
+    assert z.chi2_ext == z.chi2_base
+    d = ex.to_dict()
+    assert d["holdout_gain"] == ho.gain
+    assert d["holdout"]["definition"] == DEFINITION
+    assert d["holdout"]["channels"]["x"]["chi2_extended"] == ho.channels["x"].chi2_ext
+
+
+def test_null_record_claims_nothing_and_reports_no_gain(tmp_path):
+    path = _file(tmp_path, 6, None, hours=4.0)
+    ex = explain_file(path)
+    assert all(not ch.claimed for ch in ex.channels.values())
+    ho = ex.holdout
+    assert ho is not None and ho.gain is None
+    assert "no cause claimed" in (ho.why_no_gain or "")
+    for ch in ho.channels.values():
+        # the base model's held-out misfit is still measured, the same for both models
+        assert len(ch.folds) == 2 and math.isfinite(ch.chi2_base) and ch.n_points > 0
+        assert ch.chi2_ext == ch.chi2_base and ch.gain is None
+    assert ex.to_dict()["holdout_gain"] is None
+
+
+def test_second_record_of_the_same_sensor_as_holdout(hidden, tmp_path):
+    """--holdout: the models fitted on the whole record predict a second record with the
+    same hidden effect (another seed, half as long)."""
+    path, _ex = hidden
+    other = _file(tmp_path, 7, HIDDEN, hours=2.0)
+    ex = explain_file(path, holdout=other)
+    ho = ex.holdout
+    assert ho is not None and ho.mode == "file" and ho.source == other
+    assert ho.gain is not None and ho.gain > 0.8
+    for name in ("x", "y"):
+        ch = ho.channels[name]
+        assert len(ch.folds) == 1 and ch.folds[0].heldout_part == "holdout"
+        assert ch.chi2_ext < 3 * ch.n_points
+        assert ch.chi2_base > 20 * ch.n_points
+
+
+def test_holdout_of_another_rate_is_refused_before_any_work(tmp_path):
+    path = _file(tmp_path, 8, None, hours=0.5)
+    other = _file(tmp_path, 9, None, hours=0.5, rate_hz=20.0)
+    with pytest.raises(DataError, match=r"--holdout .*20 Hz.*the data has 10 Hz"):
+        explain_file(path, holdout=other)
+
+
+def test_record_too_short_to_split_says_so(tmp_path):
+    path = _file(tmp_path, 10, None, hours=0.2)  # 720 s: 450 blocks of 1.6 s
+    ex = explain_file(path)
+    assert ex.holdout is not None and ex.holdout.gain is None
+    assert "too short to split" in (ex.holdout.why_no_gain or "")
+    assert ex.to_dict()["holdout"]["channels"] == {}
+    assert np.isfinite(ex.channels["x"].base.fit.chi2_dof)
+    # asked not to (analyze --temperature needs only the thermal fit): no held-out measure
+    ex = explain_file(path, heldout=False)
+    assert ex.holdout is None and ex.to_dict()["holdout_gain"] is None
+
+
+def test_a_warmup_is_an_event_and_predicts_no_other_data(tmp_path):
+    """A warm-up fitted on the first half leaves the fit of the second half unchanged: there
+    both models are the same and so is their held-out χ²; the note says why."""
+    path = _file(tmp_path, 31, Truth(warmup=(2.4e-3, 900.0)), hours=4.0)
+    ex = explain_file(path, channels=["x"])
+    ch = ex.holdout.channels["x"] if ex.holdout is not None else None
+    assert ch is not None and ch.causes == ["warmup"]
+    second = next(f for f in ch.folds if f.fit_part == "second half")
+    first = next(f for f in ch.folds if f.fit_part == "first half")
+    assert second.chi2_ext == second.chi2_base
+    assert first.chi2_ext != first.chi2_base  # the first half's noise is fitted without it
+    assert ch.note is not None and "event" in ch.note
+    assert ex.to_dict()["holdout"]["channels"]["x"]["note"] == ch.note
