@@ -415,8 +415,8 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
                 active = swapped
         cur, _ = chi2(active)
         if walk in active:
-            without, _ = chi2([b for b in active if b != walk])
-            z_all[walk] = math.sqrt(max(without - cur, 0.0))
+            c2_no_walk, _ = chi2([b for b in active if b != walk])
+            z_all[walk] = math.sqrt(max(c2_no_walk - cur, 0.0))
     upper = np.full(A, np.nan)
     for a in range(A):
         if a not in active:
