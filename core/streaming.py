@@ -99,8 +99,9 @@ class _Level:
         self.stride = stride
         self.spacing = m // stride
         self.sums = DifferenceSums.zeros(c)
-        # non-overlapping m-averages: every spacing-th first difference of the grid
-        self.ladder = Lag1Ladder(c, dmax=d)
+        # non-overlapping m-averages: every spacing-th first difference of the grid; per
+        # channel only (the cross sums would cost C times more at m = 1, every sample)
+        self.ladder = Lag1Ladder(c, dmax=d, cross=False)
 
 
 class _Grid:
