@@ -435,7 +435,7 @@ def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
     fell low also had small error bars, and the limit came out below the truth in 1 of 8
     absent-K records (issue 12); a term as large as θ_u scatters the AVAR as much as it
     would if it were there."""
-    X = p.X[np.ix_(idx, cand)]
+    X = p.X[np.ix_(idx, np.asarray(cand, dtype=np.intp))]
     y = p.y[idx]
     j = cand.index(a)
     theta = np.zeros(p.X.shape[1])
