@@ -28,7 +28,7 @@ def test_white_density_from_the_psd_agrees_with_n_from_the_fit(tmp_path: Path) -
     """White + flicker (+ a line on one): the density read from the spectrum's white region
     and N from the AVAR fit agree within their 68 % intervals on every record, and both hold
     the generator's N to within 1 %."""
-    for seed in range(4):
+    for seed in range(6):
         an = analyze(str(_record(tmp_path, seed, line=seed == 0)), psd=True)
         ch = an.channels["x"] if "x" in an.channels else next(iter(an.channels.values()))
         w = ch.psd.white
