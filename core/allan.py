@@ -416,7 +416,7 @@ def allan_variance(
         raise DataError(f"the longest segment ({longest} samples) is too short for {kind}")
     strides = np.array([default_stride(kind, int(m), stride, overlap) for m in ms], np.int64)
     sums = [DifferenceSums.zeros(c) for _ in ms]
-    ladders = [Lag1Ladder(c, dmax=d) for _ in ms]
+    ladders = [Lag1Ladder(c, dmax=d, cross=False) for _ in ms]
     for s0, s1 in bounds:
         seg = a[s0:s1]
         if seg.shape[0] < 1:
@@ -465,7 +465,10 @@ def finish_result(
         if w.shape != (c,) or not np.all(np.isfinite(w)):
             raise DataError(f"weights must be {c} finite numbers, one per channel; got {w!r}")
         s2 = np.einsum("i,kij,j->k", w, s2, w)[:, None, None]
-        ladders = [lad.weighted(w) for lad in ladders]
+        # the ladders keep per-channel sums only: a weighted channel's α comes from the
+        # slope of its own curve
+        ladders = [lad.weighted(w) for lad in ladders] if all(lad.cross for lad in ladders) \
+            else [_no_ladder(lad.dmax) for lad in ladders]
         one_d = True
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
@@ -473,6 +476,11 @@ def finish_result(
     alpha_id = alphas_from_ladders(ladders, d) if alpha is None else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
                             alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names)
+
+
+def _no_ladder(dmax: int) -> Lag1Ladder:
+    """An empty one-channel ladder: its α is NaN, so the slope of the curve decides."""
+    return Lag1Ladder(1, dmax)
 
 
 def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int) -> NDArray[np.float64]:

@@ -294,14 +294,15 @@ def explain_file(path: str, *, rate_hz: float | None = None,
                  stage: StageFn | None = None, block: int = 1 << 16,
                  filter_corner_hz: float | str | None = "auto",
                  temperature: str | None = None, holdout: str | None = None,
-                 heldout: bool = True) -> Explanation:
+                 heldout: bool = True, estimator: str = "oadev",
+                 psd: bool = False) -> Explanation:
     """Explain the record at ``path`` (.npz, .csv or a recording), streamed once.
     ``filter_corner_hz`` as for ``report.analyze``; ``temperature`` names the one temperature
     channel to use (its compensation is then reported whatever its test says). ``holdout``:
     a second record of the same sensor (same rate and channels, checked before any work)
     that the models fitted here predict; without it the record's halves predict each other.
     ``heldout`` False skips the held-out measure (``avard analyze --temperature`` needs only
-    the thermal fit)."""
+    the thermal fit). ``estimator`` and ``psd`` go to analyze's pass as in ``report.analyze``."""
     meta, blocks = _source(path, block, rate_hz)
     meta.setdefault("source", path)
     held: tuple[dict[str, Any], Iterable[Block]] | None = None
@@ -312,7 +313,7 @@ def explain_file(path: str, *, rate_hz: float | None = None,
         held = h_meta, h_blocks
     return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
                           filter_corner_hz=filter_corner_hz, temperature=temperature,
-                          holdout=held, heldout=heldout)
+                          holdout=held, heldout=heldout, estimator=estimator, psd=psd)
 
 
 def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
@@ -320,7 +321,8 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                    stage: StageFn | None = None, filter_corner_hz: float | str | None = "auto",
                    temperature: str | None = None,
                    holdout: tuple[dict[str, Any], Iterable[Block]] | None = None,
-                   heldout: bool = True) -> Explanation:
+                   heldout: bool = True, estimator: str = "oadev",
+                   psd: bool = False) -> Explanation:
     """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
     (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
     segment end). ``holdout``: (meta, blocks) of a second record of the same sensor."""
@@ -346,7 +348,7 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
 
     an = analyze_stream(meta, tee(), source=str(meta.get("source", "stream")),
                         channels=channels, progress=progress,
-                        filter_corner_hz=filter_corner_hz)
+                        filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
     y_slow, t_slow = slow.finish()
     rate_b = rate / b
     t_ok = [j for j in range(len(tnames))

@@ -71,12 +71,14 @@ class TermEstimate:
     present: bool
     z: float | None = None
     upper: float | None = None
+    note: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         # "upper": an absent term's one-sided upper limit (null when present or not tested)
         return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit,
                 "present": self.present,
-                "upper": None if self.present or self.upper is None else float(self.upper)}
+                "upper": None if self.present or self.upper is None else float(self.upper),
+                "note": self.note}
 
 
 @dataclass
@@ -177,6 +179,8 @@ class NoiseFit:
 _VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/s^2"),
                "filter": ("N", "m/s/sqrt(s)"), "lowpass_white": ("N", "m/s/sqrt(s)"),
                "white": ("N", "m/s/sqrt(s)")}
+#: Note on K and R when the record cannot tell a rate ramp from a rate random walk.
+RAMP_OR_WALK = "ramp or random walk: this record cannot tell them apart; read as random walk"
 #: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
 ROUNDING = "rounding"
 
@@ -314,8 +318,17 @@ def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 
     return theta, cov, C, float(r @ r)
 
 
-def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
-                  ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
+def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
+    """−2 ln L (up to a constant) of the AVAR points under the fitted model ``active`` with
+    the model's own covariance: χ² + ln det C."""
+    _, _, C, c2 = _fit_active(p, idx, active)
+    sign, logdet = np.linalg.slogdet(C)
+    return c2 + logdet if sign > 0 else math.inf
+
+
+def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
+                  ramp: int | None = None, walk: int | None = None
+                  ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64], bool]:
     """Stepwise selection by the likelihood-ratio test on the correlated, EDF-weighted
     residuals: a component is kept when removing it raises χ² by at least z_present²
     (2.33² = 5.4: one-sided 1 % for a coefficient on the boundary θ = 0).
@@ -327,8 +340,19 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
     backward steps remove any term that no longer passes. Returns the selected components,
     √Δχ² of each (the z of its test) and, for the terms left out, the one-sided upper limit
     θ̂ + z_present·se of θ when fitted with the selected ones (a "not detected, below" bound).
+
+    Rate ramp (index ``ramp``) against rate random walk (``walk``): a random walk's
+    realisation over a record looks like a trend, and a ramp fitted with the covariance of a
+    model in which it has taken the random walk's place has tight error bars it did not earn.
+    So the common covariance is that of the model *without* the ramp (the long-τ excess read
+    as a random walk): the ramp must beat what a random walk would do. When exactly one of
+    the two is selected, the two readings are compared by their Gaussian likelihood, each
+    with its own covariance; when neither is better by the test's margin the record cannot
+    tell them apart: the random walk is kept (the stochastic reading, whose interval includes
+    the realisation's scatter) and the last value returned is True ("ramp or random walk").
     """
-    _, _, C_star, _ = _fit_active(p, idx, list(range(A)))
+    base = [a for a in range(A) if a != ramp] if walk is not None else list(range(A))
+    _, _, C_star, _ = _fit_active(p, idx, base)
     T = _whitener(C_star)
     y = p.y[idx]
     crit = z_present**2
@@ -367,16 +391,69 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float
             break
         active.remove(a)
         cur, _ = chi2(active)
+    ambiguous = False
+    if ramp is not None and walk is not None and ramp in active and walk in active:
+        # both chosen: the ramp stays only if it also wins on likelihood with the models'
+        # own covariances; else the random walk alone reads the long-τ excess
+        without = [b for b in active if b != ramp]
+        if not _neg_log_lik(p, idx, active) + crit < _neg_log_lik(p, idx, without):
+            active = without
+            ambiguous = True
+    if ramp is not None and walk is not None and (ramp in active) != (walk in active):
+        # One of the two was chosen: compare the two readings by their Gaussian likelihood,
+        # each with its own covariance (χ² + ln det C), so that a random walk's wide scatter
+        # and a ramp's tight one both count. Clearly better (by the test's margin) wins;
+        # otherwise the record cannot tell them apart and the random walk is reported.
+        there, other = (ramp, walk) if ramp in active else (walk, ramp)
+        swapped = sorted([b for b in active if b != there] + [other])
+        nll_there, nll_other = _neg_log_lik(p, idx, active), _neg_log_lik(p, idx, swapped)
+        if nll_other + crit < nll_there:
+            active = swapped
+        elif not nll_there + crit < nll_other:
+            ambiguous = True
+            if there == ramp:  # the random walk reading
+                active = swapped
+        cur, _ = chi2(active)
+        if walk in active:
+            c2_no_walk, _ = chi2([b for b in active if b != walk])
+            z_all[walk] = math.sqrt(max(c2_no_walk - cur, 0.0))
     upper = np.full(A, np.nan)
     for a in range(A):
         if a not in active:
             cand = sorted([*active, a])
             c2, th = chi2(cand)
             z_all[a] = math.sqrt(max(cur - c2, 0.0))
-            TX = T @ p.X[np.ix_(idx, cand)]
-            se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[cand.index(a), cand.index(a)], 0.0))
-            upper[a] = th[cand.index(a)] + z_present * se
-    return active, z_all, upper
+            upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
+    return active, z_all, upper, ambiguous
+
+
+def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
+                 T0: NDArray, iterations: int = 6) -> float:
+    """One-sided upper limit θ_u = θ̂ + z·se of an absent component's θ, with the AVAR
+    covariance evaluated *at* θ_u (the hypothesis the limit excludes), iterated to a fixed
+    point. With the covariance of the fitted model instead, a random walk whose realisation
+    fell low also had small error bars, and the limit came out below the truth in 1 of 8
+    absent-K records (issue 12); a term as large as θ_u scatters the AVAR as much as it
+    would if it were there."""
+    X = p.X[np.ix_(idx, np.asarray(cand, dtype=np.intp))]
+    y = p.y[idx]
+    j = cand.index(a)
+    theta = np.zeros(p.X.shape[1])
+    T = T0  # first round: the common covariance of the selection
+    up = 0.0
+    for _ in range(iterations):
+        th, _ = _gls_nnls(X, y, T)
+        TX = T @ X
+        se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[j, j], 0.0))
+        new = th[j] + z * se
+        done = up > 0 and abs(new - up) <= 1e-3 * up
+        up = new
+        theta[cand] = th
+        theta[a] = up  # the covariance of the next round: the term at its limit
+        if done:
+            break
+        T = _whitener(_avar_cov(p, theta, idx))
+    return up
 
 
 def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
@@ -506,7 +583,10 @@ def fit_noise(
         start = int(np.searchsorted(m[keep], filter_min_m))
     idx = np.arange(start, K)
 
-    active, z_all, upper = _select_terms(p, idx, A, z_present)
+    labels = [comps[a].label for a in fitted]
+    ramp = labels.index("rate_ramp") if "rate_ramp" in labels else None
+    walk = labels.index("rate_random_walk") if "rate_random_walk" in labels else None
+    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk)
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
     else:
@@ -544,11 +624,14 @@ def fit_noise(
             lo = math.sqrt(max(theta[j] - zci * s, 0.0) + q)
             hi = math.sqrt(theta[j] + zci * s + q)
             te = TermEstimate(val, lo, hi, comp.unit, True, float(z_all[j]))
+            if ambiguous and j in (ramp, walk):
+                te.note = RAMP_OR_WALK
         else:
             theta_all[a] = 0.0
             te = TermEstimate(None, None, None, comp.unit, False,
                               None if np.isnan(z_all[j]) else float(z_all[j]),
-                              None if np.isnan(upper[j]) else math.sqrt(max(upper[j], 0.0)))
+                              None if np.isnan(upper[j]) else math.sqrt(max(upper[j], 0.0)),
+                              RAMP_OR_WALK if ambiguous and j in (ramp, walk) else None)
         if comp.label in TERMS:
             est[comp.label] = te
         else:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from math import comb
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -197,14 +198,21 @@ class Lag1Ladder:
     """Running sums for Stable32's noise identification of one τ, C channels at once.
 
     Fed the non-overlapping m-averages of the rate, in order (any unit: sums of m samples
-    work as well as means), it keeps, for the averages and their differences of order
-    k = 0 … ``dmax``: the count n, Σz, Σ z zᵀ (C×C), and over adjacent pairs (z_i, z_{i+1})
-    within a segment their number, Σ z_i z_{i+1}ᵀ (C×C), Σ z_i and Σ z_{i+1}. From these the
-    lag-1 autocorrelation about the series' mean is exact (NIST SP 1065 §5.6; Riley &
-    Greenhall 2004, eq. 2), whatever constant offset the averages carry, and the C×C products
-    give it for any weighted sum of channels (``weighted``). No data are kept, only the last
-    value of each order. The order-0 values are taken relative to the first average seen,
-    which keeps the sums well conditioned (an axis reading 9.81 m/s² with 1e-5 noise).
+    work as well as means), it gives, for the averages and their differences of order
+    k = 0 … ``dmax``: the count n, Σz, Σ z zᵀ, and over adjacent pairs (z_i, z_{i+1}) within
+    a segment their number, Σ z_i z_{i+1}ᵀ, Σ z_i and Σ z_{i+1}. From these the lag-1
+    autocorrelation about the series' mean is exact (NIST SP 1065 §5.6; Riley & Greenhall
+    2004, eq. 2), whatever constant offset the averages carry, and with ``cross`` the C×C
+    products give it for any weighted sum of channels (``weighted``).
+
+    The differenced series are never formed: the k-th difference is Σ_a c_a z_{i+a}, so its
+    sums of products are combinations of the averages' lag products Σ z_t z_{t+j}ᵀ
+    (j = 0 … dmax + 1) less the few products at the segment's two ends, which are computed
+    from its first and last 2·dmax + 2 values when the segment closes (or is read). One pass
+    of dot products per lag replaces three difference orders of passes. The order-0 values
+    are taken relative to the first average seen, which keeps the sums well conditioned (an
+    axis reading 9.81 m/s² with 1e-5 noise). ``n``, ``s``, … hold the closed segments;
+    ``totals()`` adds the open one.
     """
 
     FIELDS = ("n", "s", "s2", "np", "p", "left", "right")
@@ -223,7 +231,19 @@ class Lag1Ladder:
         self.left = np.zeros((orders, c))
         self.right = np.zeros((orders, c))
         self.ref: NDArray[np.float64] | None = None
-        self._tail: list[NDArray[np.float64] | None] = [None] * orders
+        self._lags = self.dmax + 1  # order dmax, pairs one apart
+        self._edge = 2 * self.dmax + 2  # values kept at each end of the open segment
+        self._keep = max(self._edge, self._lags)
+        self._open_reset()
+
+    def _open_reset(self) -> None:
+        c = self.c
+        self._n_open = 0
+        self._sum = np.zeros(c)
+        self._lag = np.zeros((self._lags + 1, c, c))
+        self._head = np.zeros((c, 0))
+        self._tail = np.zeros((c, 0))
+        self._few: NDArray[np.float64] | None = np.zeros((c, 0))  # all values while few
 
     def push(self, values: NDArray) -> None:
         """Add the next averages (k, C) of the current segment, oldest first."""
@@ -234,58 +254,130 @@ class Lag1Ladder:
         """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
         sums of products are dot products of rows (the cheapest form for small C)."""
         z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
-        if z.shape[1] == 0:
+        count = z.shape[1]
+        if count == 0:
             return
         if self.ref is None:
             self.ref = z[:, 0].copy()
         z = z - self.ref[:, None]
-        for k in range(self.dmax + 1):
-            count = z.shape[1]
-            if count == 0:
-                return
-            tail = self._tail[k]
-            total = z.sum(axis=1)
-            self.n[k] += count
-            self.s[k] += total
-            self.s2[k] += row_products(z, z, self.cross)
-            # adjacent pairs of [tail, z] without building it: those inside z, and (tail, z0)
-            pairs = count - 1 + (tail is not None)
-            if pairs:
-                self.np[k] += pairs
-                self.right[k] += total if tail is not None else total - z[:, 0]
-                self.left[k] += total - z[:, -1] + (tail if tail is not None else 0.0)
-                if count > 1:
-                    self.p[k] += row_products(z[:, :-1], z[:, 1:], self.cross)
-                if tail is not None:
-                    self.p[k] += (np.outer(tail, z[:, 0]) if self.cross
-                                  else np.diag(tail * z[:, 0]))
-            self._tail[k] = z[:, -1].copy()
-            if k == self.dmax:
-                return
-            nxt = np.empty((self.c, pairs))
-            if tail is not None:
-                nxt[:, 0] = z[:, 0] - tail
-            np.subtract(z[:, 1:], z[:, :-1], out=nxt[:, pairs - (count - 1):])
-            z = nxt
+        t = self._tail.shape[1]
+        full = np.concatenate([self._tail, z], axis=1) if t else z
+        self._sum += z.sum(axis=1)
+        for j in range(self._lags + 1):
+            start, stop = max(0, t - j), full.shape[1] - j  # products whose later end is new
+            if stop > start:
+                self._lag[j] += row_products(full[:, start:stop], full[:, start + j:stop + j],
+                                             self.cross)
+        if self._head.shape[1] < self._edge:
+            self._head = np.concatenate([self._head, z[:, :self._edge - self._head.shape[1]]],
+                                        axis=1)
+        self._tail = full[:, -self._keep:].copy()
+        self._n_open += count
+        if self._few is not None:
+            self._few = (np.concatenate([self._few, z], axis=1)
+                         if self._n_open <= 4 * self._edge else None)
 
     def gap(self) -> None:
         """End the segment: no pair and no difference spans what follows."""
-        self._tail = [None] * (self.dmax + 1)
+        if self._n_open:
+            seg = self._open_sums()
+            for f in self.FIELDS:
+                getattr(self, f)[...] += seg[f]
+        self._open_reset()
+
+    def _prod(self, a: NDArray, b: NDArray) -> NDArray[np.float64]:
+        return row_products(a, b, self.cross)
+
+    def _open_sums(self) -> dict[str, NDArray]:
+        """The open segment's sums per difference order (the FIELDS, stacked over k)."""
+        c, orders = self.c, self.dmax + 1
+        out: dict[str, NDArray] = {
+            "n": np.zeros(orders, dtype=np.int64), "np": np.zeros(orders, dtype=np.int64),
+            "s": np.zeros((orders, c)), "s2": np.zeros((orders, c, c)),
+            "p": np.zeros((orders, c, c)), "left": np.zeros((orders, c)),
+            "right": np.zeros((orders, c))}
+        n = self._n_open
+        if self._few is not None:  # a short segment: straight from its values
+            w = self._few
+            for k in range(orders):
+                if k:
+                    w = np.diff(w, axis=1)
+                if w.shape[1] == 0:
+                    break
+                out["n"][k] = w.shape[1]
+                out["s"][k] = w.sum(axis=1)
+                out["s2"][k] = self._prod(w, w)
+                if w.shape[1] > 1:
+                    out["np"][k] = w.shape[1] - 1
+                    out["p"][k] = self._prod(w[:, :-1], w[:, 1:])
+                    out["left"][k] = out["s"][k] - w[:, -1]
+                    out["right"][k] = out["s"][k] - w[:, 0]
+            return out
+        head, tail, keep = self._head, self._tail, self._keep
+        base = n - keep  # segment index of tail[:, 0]
+
+        def window(start: int, m: int, j: int) -> NDArray:
+            """Σ_{t=start}^{start+m−1} z_t z_{t+j}ᵀ from the lag sum less its two ends."""
+            total = self._lag[j].copy()
+            if start:
+                total -= self._prod(head[:, :start], head[:, j:start + j])
+            v = start + m  # first t left out at the end
+            if v <= n - 1 - j:
+                total -= self._prod(tail[:, v - base:keep - j], tail[:, v - base + j:keep])
+            return total
+
+        for k in range(orders):
+            coef = np.array([(-1) ** (k - a) * comb(k, a) for a in range(k + 1)], float)
+            nk = n - k
+            sw = sum(coef[a] * (self._sum - head[:, :a].sum(axis=1)
+                                - tail[:, keep - (k - a):].sum(axis=1) * (k - a > 0))
+                     for a in range(k + 1))
+            first = head[:, :k + 1] @ coef
+            last = tail[:, keep - 1 - k:keep] @ coef
+            mats = []
+            for ell in (0, 1):
+                m = nk - ell
+                acc = np.zeros((c, c))
+                for a in range(k + 1):
+                    for b in range(k + 1):
+                        bb = ell + b
+                        blk = (window(a, m, bb - a) if bb >= a else window(bb, m, a - bb).T)
+                        acc += coef[a] * coef[b] * blk
+                mats.append(acc)
+            out["n"][k], out["np"][k] = nk, nk - 1
+            out["s"][k], out["s2"][k], out["p"][k] = sw, mats[0], mats[1]
+            out["left"][k], out["right"][k] = sw - last, sw - first
+        return out
+
+    def totals(self) -> dict[str, NDArray]:
+        """Closed segments plus the open one: the FIELDS, stacked over the orders."""
+        tot = {f: getattr(self, f).copy() for f in self.FIELDS}
+        if self._n_open:
+            seg = self._open_sums()
+            for f in self.FIELDS:
+                tot[f] += seg[f]
+        return tot
+
+    def count(self) -> int:
+        """Averages seen (all segments)."""
+        return int(self.n[0]) + self._n_open
 
     def add(self, other: Lag1Ladder) -> None:
-        """Add another ladder's sums (other segments of the same channels)."""
+        """Add another ladder's sums (other segments of the same channels; its open segment
+        counts as ended, this one's continues)."""
+        o = other.totals()
         if other.ref is not None and self.ref is not None:
             # re-reference the other's order-0 sums: z' = z + (ref_o − ref_s) = z + h
             h = other.ref - self.ref
-            n, np_ = other.n[0], other.np[0]
+            n, np_ = o["n"][0], o["np"][0]
             keep = np.ones((self.c, self.c)) if self.cross else np.eye(self.c)
-            self.s2[0] += keep * (other.s2[0] + np.outer(other.s[0], h)
-                                  + np.outer(h, other.s[0]) + n * np.outer(h, h))
-            self.p[0] += keep * (other.p[0] + np.outer(other.left[0], h)
-                                 + np.outer(h, other.right[0]) + np_ * np.outer(h, h))
-            self.s[0] += other.s[0] + n * h
-            self.left[0] += other.left[0] + np_ * h
-            self.right[0] += other.right[0] + np_ * h
+            self.s2[0] += keep * (o["s2"][0] + np.outer(o["s"][0], h)
+                                  + np.outer(h, o["s"][0]) + n * np.outer(h, h))
+            self.p[0] += keep * (o["p"][0] + np.outer(o["left"][0], h)
+                                 + np.outer(h, o["right"][0]) + np_ * np.outer(h, h))
+            self.s[0] += o["s"][0] + n * h
+            self.left[0] += o["left"][0] + np_ * h
+            self.right[0] += o["right"][0] + np_ * h
             self.n[0] += n
             self.np[0] += np_
             lo = 1
@@ -294,46 +386,50 @@ class Lag1Ladder:
                 self.ref = None if other.ref is None else other.ref.copy()
             lo = 0
         for f in self.FIELDS:
-            getattr(self, f)[lo:] += getattr(other, f)[lo:]
+            getattr(self, f)[lo:] += o[f][lo:]
 
     def weighted(self, w: NDArray) -> Lag1Ladder:
-        """The ladder of the single channel Σ w_c z_c (its sums, without the segment tails)."""
+        """The ladder of the single channel Σ w_c z_c (its sums, as closed segments)."""
         if not self.cross:
             raise DataError("this ladder keeps no cross-channel sums; create it with "
                             "cross=True to weight channels")
         w = np.asarray(w, dtype=np.float64)
+        t = self.totals()
         out = Lag1Ladder(1, self.dmax)
-        out.n, out.np = self.n.copy(), self.np.copy()
+        out.n, out.np = t["n"], t["np"]
         for f in ("s", "left", "right"):
-            setattr(out, f, (getattr(self, f) @ w)[:, None])
+            setattr(out, f, (t[f] @ w)[:, None])
         for f in ("s2", "p"):
-            setattr(out, f, np.einsum("i,kij,j->k", w, getattr(self, f), w)[:, None, None])
+            setattr(out, f, np.einsum("i,kij,j->k", w, t[f], w)[:, None, None])
         out.ref = None if self.ref is None else np.array([float(self.ref @ w)])
         return out
 
-    def r1(self, k: int) -> NDArray[np.float64]:
+    def r1(self, k: int, t: dict[str, NDArray] | None = None) -> NDArray[np.float64]:
         """Lag-1 autocorrelation about the mean of the order-k series, per channel (NaN when
         there are fewer than 3 values or no spread)."""
-        n = float(self.n[k])
+        t = self.totals() if t is None else t
+        n = float(t["n"][k])
         out = np.full(self.c, np.nan)
-        if n < 3 or self.np[k] < 1:
+        if n < 3 or t["np"][k] < 1:
             return out
-        mean = self.s[k] / n
-        den = np.diagonal(self.s2[k]) - self.s[k] * mean
-        num = (np.diagonal(self.p[k]) - mean * (self.left[k] + self.right[k])
-               + self.np[k] * mean**2)
+        mean = t["s"][k] / n
+        den = np.diagonal(t["s2"][k]) - t["s"][k] * mean
+        num = (np.diagonal(t["p"][k]) - mean * (t["left"][k] + t["right"][k])
+               + t["np"][k] * mean**2)
         ok = den > 0
         out[ok] = num[ok] / den[ok]
         return out
 
-    def lag1_alpha(self, lowest: int) -> NDArray[np.float64]:
+    def lag1_alpha(self, lowest: int, t: dict[str, NDArray] | None = None
+                   ) -> NDArray[np.float64]:
         """alpha per channel by the lag-1 ladder (Riley & Greenhall 2004): difference until
         δ = r1/(1+r1) < 0.25 or k = dmax, alpha = −round(2δ) − 2k, clipped to [lowest, 2];
         NaN where the sums cannot give it."""
         out = np.full(self.c, np.nan)
         todo = np.ones(self.c, dtype=bool)
+        t = self.totals() if t is None else t
         for k in range(self.dmax + 1):
-            r1 = self.r1(k)
+            r1 = self.r1(k, t)
             with np.errstate(invalid="ignore", divide="ignore"):
                 delta = r1 / (1.0 + r1)
             bad = ~np.isfinite(delta) | (r1 <= -1.0)
@@ -345,16 +441,17 @@ class Lag1Ladder:
                 break
         return out
 
-    def b1(self) -> NDArray[np.float64]:
+    def b1(self, t: dict[str, NDArray] | None = None) -> NDArray[np.float64]:
         """Measured B1 per channel: sample variance of the averages over their two-sample
         (non-overlapping Allan) variance; NaN with fewer than 2 averages."""
-        n = float(self.n[0])
+        t = self.totals() if t is None else t
+        n = float(t["n"][0])
         out = np.full(self.c, np.nan)
-        if n < 2 or self.n[1] < 1:
+        if n < 2 or t["n"][1] < 1:
             return out
-        var = (np.diagonal(self.s2[0]) - self.s[0] ** 2 / n) / (n - 1.0)
+        var = (np.diagonal(t["s2"][0]) - t["s"][0] ** 2 / n) / (n - 1.0)
         # order-1 values are differences: the order-0 reference cancels in them
-        avar = np.diagonal(self.s2[1]) / (2.0 * float(self.n[1]))
+        avar = np.diagonal(t["s2"][1]) / (2.0 * float(t["n"][1]))
         ok = avar > 0
         out[ok] = var[ok] / avar[ok]
         return out
@@ -365,13 +462,14 @@ class Lag1Ladder:
         Stable32 separates white from flicker PM by R(n) = MVAR/AVAR, which these sums do
         not hold: flicker PM (alpha = 1) is taken, the smaller EDF of the two, so the
         interval is never the narrower white-PM one on a guess. NaN where neither applies."""
-        n = int(self.n[0])
+        n = self.count()
+        t = self.totals()
         if n >= MIN_POINTS:
-            return self.lag1_alpha(lowest)
+            return self.lag1_alpha(lowest, t)
         out = np.full(self.c, np.nan)
         if n < 4:
             return out
-        b1 = self.b1()
+        b1 = self.b1(t)
         for ch in range(self.c):
             if math.isfinite(b1[ch]):
                 a = alpha_from_b1(float(b1[ch]), n)
@@ -380,17 +478,42 @@ class Lag1Ladder:
 
     def state(self) -> dict:
         """Plain numbers and lists (msgpack/JSON-able); ``from_state`` restores it."""
+        def mat(a: NDArray) -> list:  # per-channel ladders keep only the diagonal
+            return (a if self.cross else np.diagonal(a, axis1=-2, axis2=-1)).tolist()
+
         return {"c": self.c, "dmax": self.dmax, "cross": self.cross,
-                **{f: getattr(self, f).tolist() for f in self.FIELDS},
+                **{f: mat(getattr(self, f)) if f in ("s2", "p") else getattr(self, f).tolist()
+                   for f in self.FIELDS},
                 "ref": None if self.ref is None else self.ref.tolist(),
-                "tail": [None if t is None else t.tolist() for t in self._tail]}
+                "open": {"n": self._n_open, "sum": self._sum.tolist(),
+                         "lag": mat(self._lag), "head": self._head.tolist(),
+                         "tail": self._tail.tolist(),
+                         "few": None if self._few is None else self._few.tolist()}}
 
     @classmethod
     def from_state(cls, d: dict) -> Lag1Ladder:
         self = cls(int(d["c"]), int(d["dmax"]), cross=bool(d.get("cross", True)))
+        def mat(v: list, shape: tuple[int, ...]) -> NDArray:
+            a = np.asarray(v, dtype=np.float64)
+            if self.cross:
+                return a.reshape(shape)
+            out = np.zeros(shape)
+            idx = np.arange(self.c)
+            out[..., idx, idx] = a.reshape(shape[:-1])
+            return out
+
         for f in cls.FIELDS:
             cur = getattr(self, f)
-            setattr(self, f, np.asarray(d[f], dtype=cur.dtype).reshape(cur.shape))
+            setattr(self, f, mat(d[f], cur.shape) if f in ("s2", "p")
+                    else np.asarray(d[f], dtype=cur.dtype).reshape(cur.shape))
         self.ref = None if d["ref"] is None else np.asarray(d["ref"], dtype=np.float64)
-        self._tail = [None if t is None else np.asarray(t, dtype=np.float64) for t in d["tail"]]
+        o = d["open"]
+        c = self.c
+        self._n_open = int(o["n"])
+        self._sum = np.asarray(o["sum"], dtype=np.float64)
+        self._lag = mat(o["lag"], self._lag.shape)
+        self._head = np.asarray(o["head"], dtype=np.float64).reshape(c, -1)
+        self._tail = np.asarray(o["tail"], dtype=np.float64).reshape(c, -1)
+        self._few = (None if o["few"] is None
+                     else np.asarray(o["few"], dtype=np.float64).reshape(c, -1))
         return self

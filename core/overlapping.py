@@ -13,14 +13,15 @@ subtracting the segment's first sample (a constant moves X by a straight line, w
 difference sees, and it keeps the sums small).
 
 Per τ it keeps n and Σ D² per channel (with ``covariance=True`` Σ D Dᵀ, C×C, the Allan
-covariance, as the batch estimator), and the
-non-overlapping m-averages of the segment go to a ``noise_id.Lag1Ladder``: the noise exponent
-alpha is identified as Stable32 does it, on the same data for every Allan estimator at that τ.
+covariance, as the batch estimator), and the non-overlapping m-averages of the segment go to
+a ``noise_id.Lag1Ladder``: the noise exponent alpha is identified as Stable32 does it, on the
+same data for every Allan estimator at that τ.
 ``result()`` is an ``AllanResult`` of kind "oavar", equal to ``allan.allan_variance(y, rate,
 ms / rate, kind="oavar")`` to rounding of the final sums, for any split into blocks.
 
-The arithmetic is numpy element-wise work on cache-sized pieces plus one C×C Gram product per
-piece and τ; no thread pool is involved.
+The arithmetic is numpy element-wise work on cache-sized pieces (the ring is channel-major, so
+each channel's differences are contiguous rows) and one dot product per channel (pair) per
+piece and τ; no BLAS thread pool is involved in anything larger than a vector.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from .model import SYMBOLS, TERMS, UNITS
 from .readers import iter_blocks, load_record
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
-           "find_lines"]
+           "find_lines", "psd_csv"]
 
 ProgressFn = Callable[[int, int | None], None]
 
@@ -175,6 +175,7 @@ class ChannelAnalysis:
     fit: NoiseFit
     lines: list[dict[str, float]] = field(default_factory=list)
     estimator: str = "oadev"
+    psd: Any = None  # psd.ChannelPsd when asked for (analyze(psd=True))
 
     def to_dict(self) -> dict[str, Any]:
         a = self.allan
@@ -186,6 +187,8 @@ class ChannelAnalysis:
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
                           for s in self.lines]
         d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
+        if self.psd is not None:
+            d["psd"] = self.psd.to_dict()
         return d
 
 
@@ -288,19 +291,23 @@ def analyze(
     block: int = 1 << 16,
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
+    psd: bool = False,
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
     ``filter_corner_hz``: "auto" (ADXL355 ODR/4 for avard's own records, else not modelled),
     a number in Hz, or None (not modelled: the bent shortest τ are left out instead).
     ``estimator``: "oadev" (fully overlapping, default) or "cascade" (see ``ESTIMATORS``).
+    ``psd``: also give each channel's one-sided PSD with its band and the white density read
+    from it, checked against the fit's N (``psd.ChannelPsd``).
     """
     meta, segments = _segments(path, block, rate_hz)
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
     return analyze_stream(meta, segments, source=path, channels=channels,
                           filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                          progress=progress, fit_kwargs=fit_kwargs, estimator=estimator)
+                          progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
+                          psd=psd)
 
 
 def _count_rows(path: str) -> int:
@@ -351,6 +358,7 @@ def analyze_stream(
     progress: ProgressFn | None = None,
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
+    psd: bool = False,
 ) -> Analysis:
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
@@ -375,7 +383,7 @@ def analyze_stream(
     else:
         sa = StreamingAllan(len(sel), rate, names=chosen)
     welch: WelchAccumulator | None = None
-    if find_sinusoids and (total is None or total >= 1024):
+    if (find_sinusoids or psd) and (total is None or total >= 1024):
         # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
         nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
         welch = WelchAccumulator(len(sel), rate, nper)
@@ -397,7 +405,7 @@ def analyze_stream(
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
     res = _with_differences(sa.result())
-    f, psd = (welch.result() if welch is not None else (None, None))
+    f, spectrum = (welch.result() if welch is not None else (None, None))
     corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
               else filter_corner_hz)
     # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
@@ -408,8 +416,8 @@ def analyze_stream(
     for j, i in enumerate(sel):
         one = res.channel(j)
         lines = []
-        if welch is not None and f is not None:
-            lines = find_lines(f, psd[:, j], welch.n_seg)
+        if welch is not None and spectrum is not None and find_sinusoids:
+            lines = find_lines(f, spectrum[:, j], welch.n_seg)
         extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
         kw = dict(fit_kwargs or {})
         if corner is not None and lsb is not None:
@@ -418,7 +426,16 @@ def analyze_stream(
             fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **kw)
         except FitError as exc:
             raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
-        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines, estimator)
+        chan_psd = None
+        if psd:
+            if welch is None or spectrum is None or welch.n_seg < 1:
+                raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
+                                "needs at least 1024)")
+            from .psd import channel_psd, white_density
+
+            chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
+            chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
+        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines, estimator, chan_psd)
     return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
                     channels=out, meta={**meta, "filter_corner_hz": corner},
                     estimator=estimator)
@@ -456,12 +473,16 @@ def format_table(an: Analysis) -> str:
             else:
                 ub = f"absent (< {_fmt(e.upper)} {UNITS[t]})" if e.upper else "absent"
                 lines.append(f"  {label:<24}{ub:>12}")
+            if e.note and t == "rate_random_walk":
+                lines.append(f"    {e.note}")
         if ch.lines:
             s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"
                           for ln in ch.lines)
             lines.append(f"  sinusoids: {s}")
         else:
             lines.append("  sinusoids: none found")
+        if ch.psd is not None:
+            lines.extend(_psd_lines(ch))
         chi = "n/a" if not math.isfinite(fit.chi2_dof) else f"{fit.chi2_dof:.2f}"
         lines.append(f"  fitted τ {fit.tau_min_s:.4g} s … {fit.tau_max_s:.4g} s "
                      f"({fit.n_points} points), χ²/dof = {chi} (dof {fit.dof})")
@@ -471,6 +492,35 @@ def format_table(an: Analysis) -> str:
                 lines.append(f"  note: the five-term model does not describe this curve "
                              f"(p = {p:.1g}); see `avard explain` for what else is in it")
     return "\n".join(lines)
+
+
+def _psd_lines(ch: ChannelAnalysis) -> list[str]:
+    cp = ch.psd
+    out = [f"  PSD: one-sided Welch, {cp.n_segments} segments, {len(cp.f)} bins to "
+           f"{cp.f[-1]:.4g} Hz, (m/s²)²/Hz with its {cp.ci:.1%} band (--json, --export psd)"]
+    w = cp.white
+    if w is None:
+        out.append("  PSD white density: no white region to read it in")
+    else:
+        verdict = "agrees with" if w.agrees else "DIFFERS from"
+        out.append(f"  PSD white density N = {_fmt(w.value)} [{_fmt(w.lo)}, {_fmt(w.hi)}] "
+                   f"m/s²/√Hz ({w.f_lo_hz:.3g}–{w.f_hi_hz:.3g} Hz, {w.n_bins} bins): {verdict}"
+                   f" the fit's N [{_fmt(w.fit_lo)}, {_fmt(w.fit_hi)}]")
+    return out
+
+
+def psd_csv(an: Analysis) -> str:
+    """The spectra as csv: channel, f_hz, psd, psd_lo, psd_hi ((m/s²)²/Hz, one-sided)."""
+    rows = ["channel,f_hz,psd_m2ps4_per_hz,psd_lo,psd_hi"]
+    for name, ch in an.channels.items():
+        cp = ch.psd
+        if cp is None:
+            continue
+        for k in range(len(cp.f)):
+            vals = (cp.f[k], cp.psd[k], cp.lo[k], cp.hi[k])
+            rows.append(",".join([name] + [("" if not math.isfinite(v) else f"{v:.9g}")
+                                           for v in vals]))
+    return "\n".join(rows) + "\n"
 
 
 def adev_csv(an: Analysis) -> str:

@@ -99,8 +99,9 @@ class _Level:
         self.stride = stride
         self.spacing = m // stride
         self.sums = DifferenceSums.zeros(c)
-        # non-overlapping m-averages: every spacing-th first difference of the grid
-        self.ladder = Lag1Ladder(c, dmax=d)
+        # non-overlapping m-averages: every spacing-th first difference of the grid; per
+        # channel only (the cross sums would cost C times more at m = 1, every sample)
+        self.ladder = Lag1Ladder(c, dmax=d, cross=False)
 
 
 class _Grid:
@@ -440,7 +441,7 @@ class StreamingAllan:
         c = self.n_channels
         # Levels past the last one with any sums are recreated empty on restore.
         count = max((k + 1 for k, lev in enumerate(self._levels)
-                     if lev.sums.n or lev.ladder.n[0]), default=0)
+                     if lev.sums.n or lev.ladder.count()), default=0)
         levs = self._levels[:count]
         iu = np.triu_indices(c)  # s2 is symmetric: one triangle is stored
         sums: dict = {"n": [int(lev.sums.n) for lev in levs]}

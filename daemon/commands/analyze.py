@@ -6,6 +6,7 @@ Examples:
     avard analyze data.csv --rate 125 --channels x z
     avard analyze lab.npz --json > lab.json     # machine-readable (shape in docs/analysis.md)
     avard analyze lab.npz --plot lab.png --export kalibr imu.yaml --export csv adev.csv
+    avard analyze lab.npz --psd --plot lab.png      # + spectrum: lab_psd.png, white density
 
 DATA is an .npz (accel in m/s², rate_hz), a .csv (header row; t column or --rate), or an avard
 recording (directory or .avr segment). The record is streamed, so its size is not limited by
@@ -22,7 +23,14 @@ from pathlib import Path
 
 from avard.core.errors import DataError
 from avard.core.outputs import check_output_file, check_plot_output
-from avard.core.report import adev_csv, analyze, format_table, kalibr_yaml, progress_printer
+from avard.core.report import (
+    adev_csv,
+    analyze,
+    format_table,
+    kalibr_yaml,
+    progress_printer,
+    psd_csv,
+)
 from avard.daemon.commands._options import add_channels_argument, split_channels
 
 NAME = "analyze"
@@ -55,8 +63,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "plot extra: matplotlib)")
     parser.add_argument("--export", nargs=2, action="append", default=[],
                         metavar=("FORMAT", "FILE"),
-                        help="write 'kalibr FILE.yaml' (noise density, random walk, rate) or "
-                             "'csv FILE.csv' (the ADEV table); repeatable")
+                        help="write 'kalibr FILE.yaml' (noise density, random walk, rate), "
+                             "'csv FILE.csv' (the ADEV table) or 'psd FILE.csv' (the spectra, "
+                             "needs --psd); repeatable")
+    parser.add_argument("--psd", action="store_true",
+                        help="also the one-sided Welch PSD per channel ((m/s²)²/Hz, with its "
+                             "band), the white density read from it against the fit's N; with "
+                             "--plot a second figure NAME_psd.png")
+    parser.add_argument("--estimator", choices=("oadev", "cascade"), default="oadev",
+                        help="Allan estimator: fully overlapping (oadev, default, as Stable32 "
+                             "and allantools) or the service's streaming cascade")
     parser.add_argument("--filter-corner", type=_corner, default="auto", metavar="HZ",
                         help="sensor low-pass corner to model on the white noise: a number in "
                              "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
@@ -99,9 +115,11 @@ def _finite(x: object) -> object:
 
 def run(args: argparse.Namespace) -> int:
     for fmt, _ in args.export:
-        if fmt not in ("kalibr", "csv"):
-            raise DataError(f"--export {fmt}: unknown format; use 'kalibr FILE.yaml' or "
-                            "'csv FILE.csv'")
+        if fmt not in ("kalibr", "csv", "psd"):
+            raise DataError(f"--export {fmt}: unknown format; use 'kalibr FILE.yaml', "
+                            "'csv FILE.csv' or 'psd FILE.csv'")
+        if fmt == "psd" and not args.psd:
+            raise DataError("--export psd needs --psd (the spectrum is computed with it)")
     if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
         raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
     # outputs before the analysis, so a bad path costs a second, not the whole run
@@ -117,12 +135,14 @@ def run(args: argparse.Namespace) -> int:
 
         ex = explain_file(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                           filter_corner_hz=args.filter_corner, progress=progress_printer(),
-                          temperature=args.temperature)
+                          temperature=args.temperature, heldout=False,
+                          estimator=args.estimator, psd=args.psd)
         an = ex.analysis
         comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
     else:
         an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
-                     filter_corner_hz=args.filter_corner, progress=progress_printer())
+                     filter_corner_hz=args.filter_corner, progress=progress_printer(),
+                     estimator=args.estimator, psd=args.psd)
         comp = {}
     if args.json:
         d = an.to_dict()
@@ -133,10 +153,16 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(format_table(an) + "\n")
         for k, v in comp.items():
             sys.stdout.write(_comp_line(k, v) + "\n")
+    writers = {"kalibr": kalibr_yaml, "csv": adev_csv, "psd": psd_csv}
     for fmt, path in args.export:
-        _write(path, kalibr_yaml(an) if fmt == "kalibr" else adev_csv(an))
+        _write(path, writers[fmt](an))
     if args.plot:
         from avard.core.plot import plot_analysis
 
         plot_analysis(an, args.plot)
+        if args.psd:
+            from avard.core.psd import plot_psd
+
+            p = Path(args.plot)
+            plot_psd(an, p.with_name(f"{p.stem}_psd{p.suffix}"))
     return 0

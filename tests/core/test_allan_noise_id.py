@@ -128,3 +128,28 @@ def test_b1_theory_and_classes() -> None:
     assert alpha_from_b1(5.0, 10) == -2
     assert alpha_from_b1(b1_theory(10, 0), 10) == -1
     assert alpha_from_b1(0.7, 10) is None  # PM: B1 cannot say which
+
+
+def test_lag1_ladder_short_segments_per_channel_sums_and_state() -> None:
+    """Segments shorter than the ladder's end buffers, per-channel (cross=False) sums, and a
+    state taken with a segment open: all give the directly computed pooled r1."""
+    rng = np.random.default_rng(21)
+    offset = np.array([5.0, -2.0, 0.0])
+    segs = [rng.normal(size=(k, 3)) + offset for k in (5, 2, 40, 7, 300)]
+    full, diag = Lag1Ladder(3), Lag1Ladder(3, cross=False)
+    for lad in (full, diag):
+        for seg in segs[:-1]:
+            lad.push(seg)
+            lad.gap()
+        lad.push(segs[-1][:100])
+    diag = Lag1Ladder.from_state(diag.state())  # open segment carried in the state
+    for lad in (full, diag):
+        lad.push(segs[-1][100:])
+    for k in range(3):
+        parts = [np.diff(s, n=k, axis=0) for s in segs]
+        parts = [q for q in parts if len(q)]
+        for ch in range(3):
+            want = _pooled_r1([q[:, ch] for q in parts])
+            assert full.r1(k)[ch] == pytest.approx(want, abs=1e-9)
+            assert diag.r1(k)[ch] == pytest.approx(want, abs=1e-9)
+    np.testing.assert_array_equal(full.alpha(-2), diag.alpha(-2))

@@ -166,7 +166,8 @@ def test_model_avar_is_the_sum_of_its_components() -> None:
     assert np.allclose(fit.model_avar(tau), M.model_avar(tau, vals))
     d = fit.to_dict()
     assert set(d) == {"terms", "sinusoids", "fit"}
-    assert set(d["terms"]["rate_ramp"]) == {"value", "lo", "hi", "unit", "present", "upper"}
+    assert set(d["terms"]["rate_ramp"]) == {"value", "lo", "hi", "unit", "present", "upper",
+                                            "note"}
 
 
 def test_streaming_result_fits_like_batch() -> None:

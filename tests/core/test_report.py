@@ -108,7 +108,7 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
         assert all(len(ch[key]) == k for key in ("adev", "adev_lo", "adev_hi", "edf", "alpha"))
         assert set(ch["terms"]) == set(TERMS)
         for name, t in ch["terms"].items():
-            assert set(t) == {"value", "lo", "hi", "unit", "present", "upper"}
+            assert set(t) == {"value", "lo", "hi", "unit", "present", "upper", "note"}
             assert t["unit"] == UNITS[name]
             if t["present"]:
                 assert t["lo"] <= t["value"] <= t["hi"] and t["upper"] is None

@@ -102,3 +102,24 @@ def test_cli_holds_blas_to_one_thread_before_numpy_loads() -> None:
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, check=True).stdout.split()
     assert out == ["False", "1", "3"]
+
+
+def test_psd_flag_plot_and_export(npz: Path, tmp_path: Path,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("matplotlib")
+    fig, spec = tmp_path / "a.png", tmp_path / "psd.csv"
+    assert main(["analyze", str(npz), "--psd", "--plot", str(fig), "--export", "psd",
+                 str(spec)]) == 0
+    out, _ = capsys.readouterr()
+    assert "PSD white density" in out
+    assert fig.exists() and (tmp_path / "a_psd.png").exists()
+    assert spec.read_text().startswith("channel,f_hz,psd_m2ps4_per_hz")
+    assert main(["analyze", str(npz), "--export", "psd", str(spec)]) == 2
+    assert "--export psd needs --psd" in capsys.readouterr().err
+
+
+def test_cascade_estimator_is_named(npz: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["analyze", str(npz), "--json", "--estimator", "cascade"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["estimator"] == "cascade"
+    assert all(ch["estimator"] == "cascade" for ch in d["channels"].values())
