@@ -35,7 +35,6 @@ One pass over the record (streamed, bounded memory):
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -50,8 +49,7 @@ from .causes import Finding
 from .errors import DataError, FitError
 from .fit import NoiseFit, fit_noise
 from .holdout import Holdout, check_compatible, holdout_file, holdout_split
-from .readers import iter_blocks, load_record
-from .report import Analysis, ChannelAnalysis, ProgressFn, analyze_stream
+from .report import Analysis, ChannelAnalysis, ProgressFn, analyze_stream, record_blocks
 from .streaming import StreamingAllan
 from .thermal_fit import ThermalFit, allan2, compensated_avar, fit_thermal_axes, signal_avar_on
 
@@ -258,35 +256,11 @@ Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 def _source(path: str, block: int, rate_hz: float | None
             ) -> tuple[dict[str, Any], Iterator[Block]]:
-    """Metadata and (accel, temperature, ends-a-segment) blocks, segmented as analyze does: a
-    file is one segment, streamed; a service recording is split where its sample index jumps."""
-    p = Path(path)
-    if not p.exists():
+    """Metadata and (accel, temperature, ends-a-segment) blocks, segmented exactly as analyze
+    segments them (``report.record_blocks``, its one segment iterator)."""
+    if not Path(path).exists():
         raise DataError(f"{path} does not exist; give the path of a recorded or simulated file")
-    if p.is_dir() or p.suffix == ".avr":
-        rec = load_record(p, rate_hz=rate_hz)
-        idx = np.asarray(rec.meta.get("index", np.arange(rec.n_samples)))
-        cuts = [0, *(np.flatnonzero(np.diff(idx) != 1) + 1).tolist(), rec.n_samples]
-        meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
-                "lsb_mps2": rec.meta.get("lsb_mps2"), "names": list(rec.names),
-                "temperature_names": list(rec.temperature_names), "source": rec.source,
-                "n_segments": len(cuts) - 1}
-
-        def gen_rec() -> Iterator[Block]:
-            for s0, s1 in itertools.pairwise(cuts):
-                for i in range(s0, s1, block):
-                    j = min(i + block, s1)
-                    t = None if rec.temperature_c is None else rec.temperature_c[i:j]
-                    yield rec.accel[i:j], t, j >= s1
-
-        return meta, gen_rec()
-    meta, blocks = iter_blocks(p, block, rate_hz=rate_hz)
-
-    def gen() -> Iterator[Block]:
-        for a, t in blocks:
-            yield a, t, False
-
-    return meta, gen()
+    return record_blocks(path, block, rate_hz)
 
 
 def explain_file(path: str, *, rate_hz: float | None = None,

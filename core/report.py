@@ -205,10 +205,26 @@ class Analysis:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
-        return {"source": self.source, "rate_hz": float(self.rate_hz),
-                "n_samples": int(self.n_samples), "estimator": self.estimator,
-                "estimator_description": ESTIMATORS[self.estimator],
-                "channels": {k: c.to_dict() for k, c in self.channels.items()}}
+        d = {"source": self.source, "rate_hz": float(self.rate_hz),
+             "n_samples": int(self.n_samples), "estimator": self.estimator,
+             "estimator_description": ESTIMATORS[self.estimator],
+             "channels": {k: c.to_dict() for k, c in self.channels.items()}}
+        rec = self.recording_summary()
+        if rec is not None:
+            d["recording"] = rec
+        return d
+
+    def recording_summary(self) -> dict[str, Any] | None:
+        """For a service recording: its segments (split at every gap record and restart),
+        gap records, and what damage cost or duplication repeated, in samples (index ranges);
+        None for a file."""
+        m = self.meta
+        if m.get("format") != "recording":
+            return None
+        return {"segments": int(m.get("n_segments", 1)), "gap_records": len(m.get("gaps", [])),
+                "samples_lost": int(m.get("samples_lost", 0)), "losses": m.get("losses", []),
+                "samples_duplicated": int(m.get("samples_duplicated", 0)),
+                "duplicates": m.get("duplicates", [])}
 
 
 def _num(v: Any) -> float | None:
@@ -237,12 +253,17 @@ def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
     return sorted(set(out))
 
 
-def _segments(path: str, block: int, rate_hz: float | None
-              ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
-    """Metadata and (accel block, ends-a-segment) pairs. Files are one segment, streamed; a
-    recording of the service is loaded (``recording.load_recording``) and split where the
-    service split its accumulators (``meta["segment_bounds"]``: every gap record, run change
-    and index jump), so nothing is averaged across a gap or a restart."""
+#: (accel block (n, C) m/s², temperature block (n, k) °C or None, ends a segment)
+RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
+
+
+def record_blocks(path: str, block: int, rate_hz: float | None
+                  ) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
+    """Metadata and blocks of a record: the one segment iterator of ``avard analyze`` and
+    ``avard explain``. Files are one segment, streamed; a recording of the service is loaded
+    (``recording.load_recording``) and split where the service split its accumulators
+    (``meta["segment_bounds"]``: every gap record, run change and index jump), so nothing is
+    averaged across a gap or a restart."""
     from pathlib import Path
 
     p = Path(path)
@@ -254,21 +275,34 @@ def _segments(path: str, block: int, rate_hz: float | None
                 "lsb_mps2": rec.meta.get("lsb_mps2"),
                 "names": list(rec.names), "temperature_names": list(rec.temperature_names),
                 "source": rec.source, "gaps": rec.meta.get("gaps", []),
-                "n_segments": len(cuts) - 1}
+                "n_segments": len(cuts) - 1,
+                "samples_lost": rec.meta.get("samples_lost", 0),
+                "samples_duplicated": rec.meta.get("samples_duplicated", 0),
+                "losses": rec.meta.get("losses", []),
+                "duplicates": rec.meta.get("duplicates", [])}
+        temps = rec.temperature_c
 
-        def gen_rec() -> Iterator[tuple[NDArray[np.float64], bool]]:
+        def gen_rec() -> Iterator[RecordBlock]:
             for s0, s1 in itertools.pairwise(cuts):
                 for i in range(s0, s1, block):
-                    yield rec.accel[i:min(i + block, s1)], i + block >= s1
+                    j = min(i + block, s1)
+                    yield rec.accel[i:j], None if temps is None else temps[i:j], j >= s1
 
         return meta, gen_rec()
     meta, blocks = iter_blocks(path, block, rate_hz=rate_hz)
 
-    def gen() -> Iterator[tuple[NDArray[np.float64], bool]]:
-        for a, _t in blocks:
-            yield a, False
+    def gen() -> Iterator[RecordBlock]:
+        for a, t in blocks:
+            yield a, t, False
 
     return meta, gen()
+
+
+def _segments(path: str, block: int, rate_hz: float | None
+              ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
+    """:func:`record_blocks` without the temperatures (what the Allan pass reads)."""
+    meta, blocks = record_blocks(path, block, rate_hz)
+    return meta, ((a, end) for a, _t, end in blocks)
 
 
 def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
@@ -459,6 +493,18 @@ def format_table(an: Analysis) -> str:
                  "— (not modelled: filter-bent short τ left out)"))
     lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
                  "Greenhall–Riley EDF with the noise type identified per τ (as Stable32)")
+    rec = an.recording_summary()
+    if rec is not None:
+        line = (f"recording: {rec['segments']} segment(s), split at each of its "
+                f"{rec['gap_records']} gap records and at every restart (never averaged across)")
+        if rec["samples_lost"]:
+            spans = ", ".join(f"[{x['i0']}, {x['i0'] + x['n']})" for x in rec["losses"][:5])
+            more = " …" if len(rec["losses"]) > 5 else ""
+            line += (f"; {rec['samples_lost']} samples lost to damage at indices "
+                     f"{spans}{more}")
+        if rec["samples_duplicated"]:
+            line += f"; {rec['samples_duplicated']} duplicated samples counted once"
+        lines.append(line)
     for name, ch in an.channels.items():
         fit = ch.fit
         lines.append("")

@@ -174,3 +174,23 @@ def test_gauss_markov_bump_as_a_component_of_the_gls_fit(tmp_path):
         assert 60.0 <= gm.params["time_constant_s"] <= 240.0
         assert any(e["cause"] == "gauss_markov" and e["present"] for e in ch.extended.extra)
         assert ch.gain > 1.0
+
+
+def test_base_model_is_analyzes_fit_of_a_restarted_recording(tmp_path):
+    """Back-to-back runs with zero-length restart gaps: the index is contiguous, yet the
+    service split its accumulators at every run change. explain reads the recording through
+    analyze's one segment iterator, so its base model is analyze's fit here too (a copy that
+    split only at index jumps once averaged across the restarts)."""
+    from .test_recording_walk import _write_run
+
+    i0 = 0
+    for k in range(4):
+        _write_run(tmp_path, f"n0000000{k + 1}-20260101T00000{k}Z-r", i0, 60, seed=40 + k,
+                   restart_gap=k > 0, offset=5000.0 * k)
+        i0 += 60 * 50
+    an = analyze(str(tmp_path), find_sinusoids=False)
+    ex = explain_file(str(tmp_path), heldout=False)
+    for name, ch in an.channels.items():
+        mine = ex.channels[name].base
+        np.testing.assert_array_equal(mine.allan.tau, ch.allan.tau)
+        np.testing.assert_allclose(mine.allan.dev, ch.allan.dev, rtol=1e-12)
