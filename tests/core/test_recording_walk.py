@@ -227,3 +227,28 @@ def test_no_sample_goes_missing_silently_under_random_bit_flips(three_segments, 
     top = int(read.max()) + 1 if read.size else 0
     covered = np.union1d(read, lost)
     assert np.setdiff1d(np.arange(top), covered).size == 0, report.losses
+
+
+def test_avard_analyze_names_the_lost_and_duplicated_samples(tmp_path, capsys):
+    """What the walk repaired reaches the user: analyze's table and JSON give the samples a
+    damaged frame cost (as an index range) and the duplicated samples it counted once."""
+    import json
+
+    from avard.daemon import cli
+
+    _write_run(tmp_path, "20260101T000000Z-a", 0, 40, seed=3, segment_s=4.0)
+    segs = sorted(tmp_path.glob("*.avr"))
+    reader = RecordingReader(segs[1])
+    at, victim = next((fr.offset, r) for fr in reader.frames()
+                      if (r := frames.decode(fr.payload))["kind"] == "raw")
+    _flip(segs[1], at + 60)
+    shutil.copy(segs[0], tmp_path / (segs[-1].stem + "_copy.avr"))   # sorts last
+    lost = f"[{victim['i0']}, {victim['i0'] + BLOCK})"
+    assert cli.main(["analyze", str(tmp_path)]) == 0
+    table = capsys.readouterr().out
+    assert f"{BLOCK} samples lost to damage at indices {lost}" in table
+    assert "duplicated samples counted once" in table
+    assert cli.main(["analyze", str(tmp_path), "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)["recording"]
+    assert rec["samples_lost"] == BLOCK and rec["losses"][0]["i0"] == victim["i0"]
+    assert rec["samples_duplicated"] > 0
