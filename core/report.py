@@ -44,8 +44,22 @@ ESTIMATORS = {
     "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
 }
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
-# default range), and while the running-sum ring (2·m_max points per channel) fits this budget.
+# default range), and while the running-sum ring (2·m_max points per channel) fits the
+# budget: a quarter of the memory available when analyze starts, at least this much. A fixed
+# 96 MiB cut a 60 h, 3-axis record two octaves short of N/4, where rate random walk shows.
 RING_BUDGET_BYTES = 96 << 20
+
+
+def ring_budget_bytes() -> int:
+    """Bytes the OADEV's running-sum history may take (see ``RING_BUDGET_BYTES``)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return max(RING_BUDGET_BYTES, int(line.split()[1]) * 1024 // 4)
+    except (OSError, ValueError, IndexError):
+        pass
+    return RING_BUDGET_BYTES
 
 
 # ---------------------------------------------------------------------------------------------
@@ -212,6 +226,8 @@ class Analysis:
         rec = self.recording_summary()
         if rec is not None:
             d["recording"] = rec
+        if "oadev_cut" in self.meta:
+            d["oadev_cut"] = self.meta["oadev_cut"]
         return d
 
     def recording_summary(self) -> dict[str, Any] | None:
@@ -355,14 +371,16 @@ def _count_rows(path: str) -> int:
     return max(0, lines)
 
 
-def oadev_grid(n_samples: int, n_channels: int) -> NDArray[np.int64]:
+def oadev_grid(n_samples: int, n_channels: int,
+               budget_bytes: int | None = None) -> NDArray[np.int64]:
     """Octave m for the OADEV of a record: ≥ 4 non-overlapping intervals (m ≤ N/4, where
     Stable32's tables stop), and a ring of 2·m_max points per channel within
-    ``RING_BUDGET_BYTES``; m = 1 at least."""
+    ``budget_bytes`` (default :func:`ring_budget_bytes`); m = 1 at least."""
     from .overlapping import PIECE
 
+    budget = ring_budget_bytes() if budget_bytes is None else budget_bytes
     m_max = max(1, n_samples // 4)
-    ring_max = RING_BUDGET_BYTES // (8 * max(1, n_channels)) - PIECE
+    ring_max = budget // (8 * max(1, n_channels)) - PIECE
     m_max = max(1, min(m_max, ring_max // 2))
     return 2 ** np.arange(int(math.log2(m_max)) + 1, dtype=np.int64)
 
@@ -413,7 +431,14 @@ def analyze_stream(
         if total is None:
             raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
                             "cannot be fixed; give n_samples or use estimator='cascade'")
-        sa = OverlappingAllan(len(sel), rate, oadev_grid(int(total), len(sel)), names=chosen)
+        grid = oadev_grid(int(total), len(sel))
+        full = oadev_grid(int(total), len(sel), budget_bytes=1 << 62)
+        if len(grid) < len(full):
+            # said in the table and the JSON: the longest τ the memory here allowed
+            meta = {**meta, "oadev_cut": {
+                "tau_max_s": float(grid[-1] / rate), "tau_full_s": float(full[-1] / rate),
+                "bytes_needed": int(16 * full[-1] * len(sel))}}
+        sa = OverlappingAllan(len(sel), rate, grid, names=chosen)
     else:
         sa = StreamingAllan(len(sel), rate, names=chosen)
     welch: WelchAccumulator | None = None
@@ -493,6 +518,12 @@ def format_table(an: Analysis) -> str:
                  "— (not modelled: filter-bent short τ left out)"))
     lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
                  "Greenhall–Riley EDF with the noise type identified per τ (as Stable32)")
+    cut = an.meta.get("oadev_cut")
+    if cut:
+        lines.append(f"OADEV stops at τ = {cut['tau_max_s']:.4g} s, short of N/4 "
+                     f"({cut['tau_full_s']:.4g} s): its history would need "
+                     f"{cut['bytes_needed'] / 2**20:.0f} MiB, more than a quarter of the free "
+                     "memory; --estimator cascade reaches N/4 in kilobytes")
     rec = an.recording_summary()
     if rec is not None:
         line = (f"recording: {rec['segments']} segment(s), split at each of its "

@@ -163,3 +163,22 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
         k = tau.index(m)
         np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[m][1:],
                                    rtol=4e-4)
+
+
+def test_the_oadev_reaches_n_over_4_or_says_where_memory_stopped_it(tmp_path, monkeypatch):
+    """With room, the grid reaches m = N/4 (Stable32's range); with too little memory for the
+    history, analyze stops earlier and says so in the table and the JSON."""
+    from avard.core import report
+
+    n = 1 << 16
+    rng = np.random.default_rng(5)
+    path = tmp_path / "w.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (n, 3)), rate_hz=100.0)
+    full = report.analyze(str(path), find_sinusoids=False)
+    assert int(full.channels["x"].allan.m[-1]) == n // 4 and "oadev_cut" not in full.to_dict()
+    monkeypatch.setattr(report, "ring_budget_bytes", lambda: 8 * 3 * (PIECE + 2 * 1024))
+    cut = report.analyze(str(path), find_sinusoids=False)
+    assert int(cut.channels["x"].allan.m[-1]) == 1024
+    d = cut.to_dict()["oadev_cut"]
+    assert d["tau_max_s"] == pytest.approx(10.24) and d["tau_full_s"] == pytest.approx(163.84)
+    assert "OADEV stops at τ = 10.24 s, short of N/4 (163.8 s)" in report.format_table(cut)
