@@ -147,6 +147,7 @@ def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
     assert st["overruns"] == 0 and 120 < st["samples"] < 260
     recs = list(RecordingReader(tmp_path / "rec"))
     assert recs[0]["sensor"]["device"] == "ADXL355"
+    assert recs[0]["config"] == cfg   # the typed Config leaves the stored config unchanged
     counts = np.concatenate([r["counts"] for r in recs if r["kind"] == "raw"])
     # counter_source: consecutive counts, so nothing was lost or repeated on the way.
     assert np.all(np.diff(counts[:, 0]) == 1)
