@@ -156,7 +156,8 @@ def build_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, 
     return dev, clock, sims, emu
 
 
-def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
+def simulated_service(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
+                      seed: int | None = None,
                       odr_error_ppm: float | None = None,
                       after_tick: Callable[[float], None] | None = None,
                       **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
@@ -167,16 +168,18 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     ``Service`` (speed, notifier, factories, …)."""
     from .service import Service
 
-    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed, odr_error_ppm=odr_error_ppm)
+    config = as_config(cfg)
+    dev, clock, sims, emu = build_simulated(config, preset, seed=seed,
+                                            odr_error_ppm=odr_error_ppm)
 
     def tick(t_mono: float) -> None:
         sims.on_tick(t_mono)
         if after_tick is not None:
             after_tick(t_mono)
 
-    if cfg["sensor"].get("int1_gpio"):
+    if config.sensor.int1_gpio:
         service_kw.setdefault("interrupt", EmulatedInterruptPin(emu, clock))
-    svc = Service(cfg, dev, clock, simulate=preset,
+    svc = Service(config, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)
     sims.deliver = svc.temperature_reading
