@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,10 +24,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .adxl355 import Adxl355
+from .config_types import Config, as_config
 from .ds18b20 import Ds18b20Bank
 from .emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from .interrupt import EmulatedInterruptPin
-from .pacing import watermark_settings
 from .transport import SpiBus
 from .w1_sysfs import SysfsTree
 
@@ -119,37 +119,45 @@ class SimulatedSensors:
             deliver(reading)
 
 
-def build_simulated(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
-                    odr_error_ppm: float | None = None) -> tuple[Adxl355, VirtualClock,
-                                                                 SimulatedSensors,
-                                                                 EmulatedAdxl355]:
-    """Driver over emulator over simulator, configured like ``cfg['sensor']`` says."""
+def open_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
+                   seed: int | None = None, odr_error_ppm: float | None = None
+                   ) -> tuple[Adxl355, VirtualClock, SimulatedSensors, EmulatedAdxl355]:
+    """Driver over emulator over simulator for ``cfg``'s sensor, not yet brought up."""
     from avard.core.simulate import SensorSimulator, make_config
 
-    s = cfg["sensor"]
-    sim_cfg = make_config(preset, odr_hz=float(s["odr_hz"]), range_g=int(s["range_g"]))
+    config = as_config(cfg)
+    s = config.sensor
+    sim_cfg = make_config(preset, odr_hz=s.odr_hz, range_g=s.range_g)
     # CLOCK_REALTIME of the simulation starts at the host's real time, so that restarts of a
     # simulated service see the real time between them.
     clock = VirtualClock(epoch=time.time() - 1000.0)
     sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
-                            interval_s=float(cfg["temperature"]["interval_s"]), clock=clock)
+                            interval_s=config.temperature.interval_s, clock=clock)
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)
     # The emulated chip has the later revision's intercept; the driver uses the configured one,
     # as on hardware, so a wrong intercept shows up as the chip-vs-DS18B20 offset it causes.
-    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock,
-                  temp_intercept_lsb=float(s["temp_intercept_lsb"]))
-    dev.probe()
-    dev.reset()
-    dev.configure(range_g=int(s["range_g"]), odr_hz=float(s["odr_hz"]),
-                  **watermark_settings(bool(s.get("int1_gpio"))))
-    dev.start()
+    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock, temp_intercept_lsb=s.temp_intercept_lsb)
     return dev, clock, sims, emu
 
 
+def build_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
+                    seed: int | None = None, odr_error_ppm: float | None = None
+                    ) -> tuple[Adxl355, VirtualClock, SimulatedSensors, EmulatedAdxl355]:
+    """Driver over emulator over simulator, configured like ``cfg``'s sensor says and started
+    (daemon/rig.py's one start-up sequence)."""
+    from .rig import bring_up
 
-def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int | None = None,
+    config = as_config(cfg)
+    dev, clock, sims, emu = open_simulated(config, preset, seed=seed,
+                                           odr_error_ppm=odr_error_ppm)
+    bring_up(dev, config.sensor, int1=bool(config.sensor.int1_gpio))
+    return dev, clock, sims, emu
+
+
+def simulated_service(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
+                      seed: int | None = None,
                       odr_error_ppm: float | None = None,
                       after_tick: Callable[[float], None] | None = None,
                       **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
@@ -160,16 +168,18 @@ def simulated_service(cfg: dict[str, dict[str, Any]], preset: str, *, seed: int 
     ``Service`` (speed, notifier, factories, …)."""
     from .service import Service
 
-    dev, clock, sims, emu = build_simulated(cfg, preset, seed=seed, odr_error_ppm=odr_error_ppm)
+    config = as_config(cfg)
+    dev, clock, sims, emu = build_simulated(config, preset, seed=seed,
+                                            odr_error_ppm=odr_error_ppm)
 
     def tick(t_mono: float) -> None:
         sims.on_tick(t_mono)
         if after_tick is not None:
             after_tick(t_mono)
 
-    if cfg["sensor"].get("int1_gpio"):
+    if config.sensor.int1_gpio:
         service_kw.setdefault("interrupt", EmulatedInterruptPin(emu, clock))
-    svc = Service(cfg, dev, clock, simulate=preset,
+    svc = Service(config, dev, clock, simulate=preset,
                   on_tick=sims.on_tick if after_tick is None else tick,
                   extra_temperature_names=list(sims.names), **service_kw)
     sims.deliver = svc.temperature_reading

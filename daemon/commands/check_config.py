@@ -13,6 +13,7 @@ import argparse
 import sys
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
+from avard.daemon.config_types import Config
 
 NAME = "check-config"
 HELP = "check a config file (unknown keys, types, ranges) without starting"
@@ -27,15 +28,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     check_runtime(cfg)
+    config = Config.from_dict(cfg)
     out = sys.stdout
     out.write(f"{args.config}: valid\n")
-    out.write(f"  ADXL355 at {cfg['sensor']['odr_hz']:g} Hz ODR, ±{cfg['sensor']['range_g']} g, "
+    out.write(f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
               f"drained at {effective_poll_hz(cfg):g} Hz\n")
-    if cfg["recording"]["enabled"]:
-        out.write(f"  recording into {cfg['recording']['data_dir']}\n")
-    if cfg["publish"]["enabled"]:
-        out.write(f"  publishing on {cfg['publish']['endpoint']}, requests on "
-                  f"{cfg['publish']['request_endpoint']}\n")
+    if config.recording.enabled:
+        out.write(f"  recording into {config.recording.data_dir}\n")
+    if config.publish.enabled:
+        out.write(f"  publishing on {config.publish.endpoint}, requests on "
+                  f"{config.publish.request_endpoint}\n")
     if args.show:
         for sec, table in cfg.items():
             out.write(f"[{sec}]\n")

@@ -26,6 +26,7 @@ from avard.core.errors import AvardError, OutputError
 from avard.core.outputs import check_output_dir, require_plot_extra
 from avard.core.presets import make_config
 from avard.daemon.config import load_config
+from avard.daemon.config_types import Config
 
 NAME = "demo"
 HELP = "run the service on the emulated ADXL355 for hours of simulated time, then analyse"
@@ -147,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         "allan.restore": False, "service.status_log_interval_s": 10.0,
     })
     ns = argparse.Namespace(simulate=args.preset, speed=0.0, seed=args.seed)
-    svc = build(ns, cfg)
+    svc = build(ns, Config.from_dict(cfg))
     listener: dict[str, _Listener] = {}
 
     def before_acquisition() -> None:

@@ -1,14 +1,16 @@
 """Check the sensor hardware before running the service.
 
-Opens the bus of the configuration (``[sensor]``: SPI or I2C), probes the ADXL355 and explains
-a wrong answer, resets and configures it, optionally runs the self-test (at ±8 g, where gravity
-plus the deflection cannot clip), then acquires for ``--seconds`` and reports the real output
-rate fitted against CLOCK_MONOTONIC (Hz and ppm off nominal, 1σ), the mean acceleration per
-axis (m/s², ± standard error of the mean), the chip temperature (°C, uncalibrated) and every
-DS18B20 on the 1-Wire bus. ``--emulate`` does the same against the register-level emulator
-(which has no 1-Wire bus: the DS18B20s are then skipped, and said to be). The last lines say
-what was checked and what was skipped. Exit status 0 when everything looked right, 1 when a
-check failed, 2 when the hardware could not be used at all.
+Opens the sensor through the rig factory (daemon/rig.py: the bus of ``[sensor]``, SPI or I2C;
+or with ``$AVARD_BACKEND=simulate:PRESET`` the simulated rig), then by the rig's one start-up
+sequence probes the ADXL355 (explaining a wrong answer), resets it, optionally runs the
+self-test (at ±8 g, where gravity plus the deflection cannot clip) and configures it; then
+acquires for ``--seconds`` and reports the real output rate fitted against CLOCK_MONOTONIC (Hz
+and ppm off nominal, 1σ), the mean acceleration per axis (m/s², ± standard error of the mean),
+the chip temperature (°C, uncalibrated) and every DS18B20 on the 1-Wire bus. ``--emulate`` does
+the same against the register-level emulator holding 1 g on Z (no 1-Wire bus: the DS18B20s are
+then skipped, and said to be, as with a simulated rig). The last lines say what was checked and
+what was skipped. Exit status 0 when everything looked right, 1 when a check failed, 2 when the
+hardware could not be used at all.
 """
 
 from __future__ import annotations
@@ -16,10 +18,13 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from avard.core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from avard.daemon.adxl355 import DeviceInfo
 
 NAME = "probe"
 HELP = "check the ADXL355 (IDs, self-test, real ODR, 1 g) and the DS18B20 sensors"
@@ -42,36 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --emulate: the emulated oscillator error, ppm")
 
 
-def _open(args: argparse.Namespace, s: dict[str, Any]) -> tuple[Any, Any]:
-    from avard.daemon.adxl355 import Adxl355
-    from avard.daemon.registers import sensitivity_lsb_per_g
-
-    if args.emulate:
-        from avard.daemon.emulator import (
-            EmulatedAdxl355,
-            FakeSpiDev,
-            VirtualClock,
-            constant_source,
-        )
-        from avard.daemon.transport import SpiBus
-
-        clock = VirtualClock()
-        one_g = round(sensitivity_lsb_per_g(int(s["range_g"])))
-        emu = EmulatedAdxl355(constant_source((0, 0, one_g)), clock,
-                              odr_error_ppm=args.ppm, temperature=24.0)
-        return Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock), clock
-    from avard.daemon.timebase import SystemClock
-    from avard.daemon.transport import open_bus
-
-    bus = open_bus(s["bus"], bus=s["spi_bus"] if s["bus"] == "spi" else s["i2c_bus"],
-                   device=s["spi_device"], address=s["i2c_address"],
-                   speed_hz=s["spi_speed_hz"])
-    clock = SystemClock()
-    return Adxl355(bus, clock=clock), clock
-
-
 def run(args: argparse.Namespace) -> int:
-    from avard.daemon.config import load_config
+    from avard.daemon.config_types import load
+    from avard.daemon.rig import bring_up, open_sensor
     from avard.daemon.timebase import TimeBase
 
     if not 0.5 <= args.seconds <= 3600:
@@ -79,23 +57,27 @@ def run(args: argparse.Namespace) -> int:
     if not abs(args.ppm) <= 1e5:   # the datasheet's oscillator is within a few 1000 ppm
         raise ConfigError(f"--ppm {args.ppm:g}: an emulated oscillator error must be within "
                           "±100000 ppm (±10 %)")
-    cfg = load_config(args.config)
-    s = cfg["sensor"]
+    config = load(args.config)
+    s = config.sensor
     out = sys.stdout
     ok = True
     checked: list[str] = []
     skipped: list[str] = []
-    dev, clock = _open(args, s)
-    try:
-        info = dev.probe()
+    # the backend of daemon/rig.py: --emulate is the still emulated sensor (1 g on Z, --ppm),
+    # else $AVARD_BACKEND's simulated rig, else the hardware
+    opened = open_sensor(config, still_odr_error_ppm=args.ppm if args.emulate else None)
+    dev, clock = opened.driver, opened.clock
+
+    def found(info: DeviceInfo) -> None:
         checked.append("IDs")
         out.write(f"{info.name} found: DEVID_AD 0x{info.devid_ad:02X}, DEVID_MST "
                   f"0x{info.devid_mst:02X}, PARTID 0x{info.partid:02X}, REVID {info.revid}\n")
-        dev.reset()
-        odr, rng = float(s["odr_hz"]), int(s["range_g"])
-        if args.self_test:
-            dev.configure(range_g=8, odr_hz=odr)
-            st = dev.self_test()
+
+    try:
+        up = bring_up(dev, s, self_test=args.self_test, found=found)
+        odr, rng = s.odr_hz, s.range_g
+        if up.self_test is not None:
+            st = up.self_test
             g = 9.80665
             deltas = ", ".join(f"{a} {d:.3f} g ({d * g:.2f} m/s²)"
                                for a, d in zip("XYZ", st.delta_g, strict=True))
@@ -104,8 +86,6 @@ def run(args: argparse.Namespace) -> int:
             checked.append("self-test")
         else:
             skipped.append("self-test (--no-self-test)")
-        dev.configure(range_g=rng, odr_hz=odr)
-        dev.start()
         tb = TimeBase(odr, group_delay_samples=dev.group_delay_samples,
                       min_span_s=min(1.0, args.seconds / 2))
         poll_s = min(0.25 * 32 / odr, 0.1)  # four polls per FIFO fill
@@ -157,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
         dev.close()
     if args.emulate:
         skipped.append("DS18B20s (--emulate has no 1-Wire bus)")
+    elif opened.emulated:
+        skipped.append(f"DS18B20s (the simulated rig {opened.simulate} has no real 1-Wire bus)")
     elif args.no_ds18b20:
         skipped.append("DS18B20s (--no-ds18b20)")
     else:

@@ -23,6 +23,7 @@ from avard.daemon.config import (
     check_seed,
     load_config,
 )
+from avard.daemon.config_types import Config, RecordingConfig
 from avard.daemon.sdnotify import Notifier
 from avard.daemon.service import Service
 
@@ -58,18 +59,18 @@ def _check_args(args: argparse.Namespace) -> None:
     check_seed(args.seed)
 
 
-def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
+def build(args: argparse.Namespace, config: Config,
           notifier: Any = None, **service_kw: Any) -> Service:
     """The service for these arguments over the backend daemon/rig.py chooses (hardware, or
     the simulated rig for --simulate / $AVARD_BACKEND)."""
     from avard.daemon.rig import build_rig
 
-    rig = build_rig(cfg, simulate=getattr(args, "simulate", None),
+    rig = build_rig(config, simulate=getattr(args, "simulate", None),
                     seed=getattr(args, "seed", None))
     if rig.simulate is not None:
         speed = getattr(args, "speed", None)
         service_kw.setdefault("speed", 1.0 if speed is None else (speed or None))
-    return rig.service(cfg, notifier=notifier, **service_kw)
+    return rig.service(config, notifier=notifier, **service_kw)
 
 
 #: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,
@@ -77,11 +78,11 @@ def build(args: argparse.Namespace, cfg: dict[str, dict[str, Any]],
 SYSTEM_PREFIXES = ("/var/", "/etc/", "/usr/", "/opt/", "/srv/", "/run/")
 
 
-def _check_system_folder(cfg: dict[str, dict[str, Any]], environ: Any = os.environ) -> None:
+def _check_system_folder(rec: RecordingConfig, environ: Any = os.environ) -> None:
     """Refuse to create a missing system data folder unless systemd started us (it sets
     $INVOCATION_ID for every unit it runs)."""
-    data_dir = str(cfg["recording"]["data_dir"])
-    if (cfg["recording"]["enabled"] and not os.path.exists(data_dir)
+    data_dir = rec.data_dir
+    if (rec.enabled and not os.path.exists(data_dir)
             and data_dir.startswith(SYSTEM_PREFIXES) and not environ.get("INVOCATION_ID")):
         raise ConfigError(
             f"recording.data_dir {data_dir} does not exist and avard run does not create "
@@ -93,12 +94,13 @@ def run(args: argparse.Namespace) -> int:
     _check_args(args)
     overrides = {"recording.data_dir": args.data_dir}
     cfg = load_config(args.config, **overrides)
+    config = Config.from_dict(cfg)
     if args.config is None:
         log.warning("no --config: using the built-in defaults (as in config/avard.toml); "
-                    "recording into %s", cfg["recording"]["data_dir"])
-    _check_system_folder(cfg)
+                    "recording into %s", config.recording.data_dir)
+    _check_system_folder(config.recording)
     check_runtime(cfg)          # the same checks as `avard check-config`
     notifier = Notifier()
-    svc = build(args, cfg, notifier=notifier)
+    svc = build(args, config, notifier=notifier)
     svc.install_signals()
     return svc.run(args.duration)

@@ -23,8 +23,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from avard.core import frames
@@ -33,6 +32,7 @@ from avard.core.recording import AllanFeed
 
 from .. import __version__
 from ..acquisition import Acquisition
+from ..config_types import Config, as_config
 from ..recorder import RestartGap, kernel_boot_id, last_recorded, new_run_id, restart_gap
 from ..ring import Ring
 from ..snapshots import SnapshotBoard, fit_record
@@ -56,7 +56,8 @@ class Service:
     """One acquisition run: builds nothing hardware-side itself (see daemon/rig.py and
     ``commands/run.py``); owns the threads and their shutdown."""
 
-    def __init__(self, cfg: dict[str, dict[str, Any]], sensor: Any, clock: Any, *,
+    def __init__(self, cfg: Config | Mapping[str, Mapping[str, Any]], sensor: Any, clock: Any,
+                 *,
                  run_id: str | None = None, speed: float | None = None,
                  temperature_bank: Any = None,
                  simulate: str | None = None, notifier: Any = None,
@@ -67,12 +68,13 @@ class Service:
                  sensor_info: dict[str, Any] | None = None,
                  extra_temperature_names: list[str] | None = None,
                  interrupt: Any = None) -> None:
-        self.cfg = cfg
+        self.config = config = as_config(cfg)
+        self.cfg = config.as_dict()    # the checked dict: what the header stores as ``config``
         self.sensor = sensor
         self.clock = clock
         # a run sequence number from the recording first: name order is data order even
         # when CLOCK_REALTIME is wrong (recorder.new_run_id)
-        self.run_id = run_id or new_run_id(cfg["recording"]["data_dir"], clock.realtime())
+        self.run_id = run_id or new_run_id(config.recording.data_dir, clock.realtime())
         self.boot_id: str | None = getattr(clock, "boot_id", None)
         if self.boot_id is None and isinstance(clock, SystemClock):
             self.boot_id = kernel_boot_id()
@@ -87,11 +89,11 @@ class Service:
         self.reopen_requested = threading.Event()
         self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
         self.stop_signal: int | None = None
-        odr = float(cfg["sensor"]["odr_hz"])
+        odr = config.sensor.odr_hz
         self.odr = odr
         self.timebase = TimeBase(odr, group_delay_samples=float(
             getattr(sensor, "group_delay_samples", 0.0)))
-        cap = int(cfg["service"]["ring_s"] * odr * 1.1) + 64
+        cap = int(config.service.ring_s * odr * 1.1) + 64
         self.ring = Ring(cap)
         self.real_offset = clock.realtime() - clock.monotonic()
         self.scale = float(getattr(sensor, "scale_mps2", 9.80665 / 256000))
@@ -99,14 +101,14 @@ class Service:
         # readings themselves (the simulated DS18B20 of --simulate).
         self.temp_names = ["chip", *(self.bank.names if self.bank is not None else []),
                            *(extra_temperature_names or [])]
-        self.data_dir = Path(cfg["recording"]["data_dir"])
+        self.data_dir = config.recording.path
         if streaming_cls is None:
             from avard.core.streaming import StreamingAllan
 
             streaming_cls = StreamingAllan
         self.streaming_cls = streaming_cls
         self.allan = streaming_cls(3 + len(self.temp_names), odr,
-                                   overlap=int(cfg["allan"]["overlap"]),
+                                   overlap=config.allan.overlap,
                                    names=["x", "y", "z", *self.temp_names])
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
         self.feed.run = self.run_id
@@ -154,7 +156,7 @@ class Service:
         return frames.header_record(
             self.run_id, rate_hz=float(tb.odr_hz), t_mono=t, t_real=t + self.real_offset,
             i0=self._next_index(),
-            scale_m_s2_per_count=self.scale, range_g=self.cfg["sensor"]["range_g"],
+            scale_m_s2_per_count=self.scale, range_g=self.config.sensor.range_g,
             sensor=self.sensor_info, temperature_sensors=self.temp_names[1:],
             software=f"avard {__version__}", config=self.cfg,
             temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
@@ -200,13 +202,13 @@ class Service:
 
     def save_state(self, rec: dict[str, Any]) -> None:
         """The state file for a checkpoint (only with a recording: it lives beside it)."""
-        if self.cfg["recording"]["enabled"]:
+        if self.config.recording.enabled:
             save_state(self.data_dir, rec)
 
     def restore(self) -> None:
         """Restore the accumulators from the last checkpoint (with what was recorded after
         it replayed) and continue the sample index across the restart."""
-        if self.cfg["allan"]["restore"]:
+        if self.config.allan.restore:
             got = restore_accumulators(self.data_dir, self.streaming_cls,
                                        list(self.allan.names), float(self.allan.rate_hz))
             if got is not None:
@@ -239,14 +241,14 @@ class Service:
         """Build the stages and start every thread, consumers before the reader;
         ``before_acquisition`` runs once the sockets are bound and before the first drain
         (a subscriber can connect then)."""
-        cfg = self.cfg
-        recording = bool(cfg["recording"]["enabled"])
+        cfg = self.config
+        recording = cfg.recording.enabled
         if recording:
             self._check_data_dir()
             self.restore()
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
-                               poll_hz=float(cfg["sensor"]["poll_hz"]),
-                               chip_interval_s=cfg["temperature"]["chip_interval_s"],
+                               poll_hz=cfg.sensor.poll_hz,
+                               chip_interval_s=cfg.temperature.chip_interval_s,
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
@@ -256,13 +258,13 @@ class Service:
         # Stages take what accumulated over a batch time instead of every drain; not when a
         # simulation runs unpaced (its reader waits for them: batching would slow it).
         paced = not (self.simulate is not None and self.speed is None)
-        acfg = cfg["allan"]
+        acfg = cfg.allan
         self.workers.append(AllanStage(
             self.ring.consumer("allan"), self.allan, self.feed, run_id=self.run_id,
             real_offset=self.real_offset, rate_hz=rate, emit=self.ring.mark,
             on_checkpoint=None if recording else self.save_state,
-            snapshot_interval_s=acfg["snapshot_interval_s"],
-            checkpoint_interval_s=acfg["checkpoint_interval_s"],
+            snapshot_interval_s=acfg.snapshot_interval_s,
+            checkpoint_interval_s=acfg.checkpoint_interval_s,
             batch_s=ALLAN_BATCH_S if paced else 0.0))
         if recording:
             self.recorder = (self._recorder_factory or _default_recorder)(self)
@@ -271,16 +273,16 @@ class Service:
                 real_offset=self.real_offset, rate_hz=rate, real_now=self.real_now,
                 header=self.run_header, checkpoint_written=self.save_state,
                 reopen=self.reopen_requested,
-                block_samples=int(cfg["recording"]["block_s"] * self.odr),
-                batch_s=min(RECORDER_BATCH_S, cfg["recording"]["block_s"]) if paced else 0.0))
-        if cfg["publish"]["enabled"]:
+                block_samples=int(cfg.recording.block_s * self.odr),
+                batch_s=min(RECORDER_BATCH_S, cfg.recording.block_s) if paced else 0.0))
+        if cfg.publish.enabled:
             self.publisher = (self._publisher_factory or _default_publisher)(self)
             self.request_server = (self._request_factory or _default_request_server)(self)
             self.workers.append(PublisherStage(
                 self.ring.consumer("publisher"), self.publisher, run_id=self.run_id,
                 real_offset=self.real_offset, rate_hz=rate, clock=self.clock,
                 status=self.status, header=self.run_header, snapshots=self.snapshots,
-                status_interval_s=cfg["publish"]["status_interval_s"],
+                status_interval_s=cfg.publish.status_interval_s,
                 max_block=max(32, int(self.odr)), batch_s=PUBLISH_BATCH_S if paced else 0.0))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
@@ -302,7 +304,7 @@ class Service:
         self.acq.start()
         log.info("run %s started: ADXL355 %g Hz, ±%d g, drained every %.3g s (FIFO half "
                  "full%s); temperature channels %s", self.run_id, self.odr,
-                 cfg["sensor"]["range_g"], self.acq.period,
+                 cfg.sensor.range_g, self.acq.period,
                  ", INT1 pin" if self.interrupt is not None else "",
                  ", ".join(self.temp_names))
 
@@ -315,7 +317,7 @@ class Service:
             snapshots=self.snapshots, status=self.status, header=self.run_header,
             ring=self.ring, nominal_odr_hz=self.odr, rate_hz=self.timebase_rate,
             scale_m_s2_per_count=self.scale,
-            recent_max_s=float(self.cfg["publish"]["recent_max_s"])).table()
+            recent_max_s=self.config.publish.recent_max_s).table()
 
     def _on_clock_step(self, real_offset: float) -> None:
         """The reader saw CLOCK_REALTIME step (and recorded it): wall-clock times written from
@@ -361,7 +363,7 @@ class Service:
         wd = n.watchdog_interval_s() if n is not None else None
         next_wd = time.monotonic()
         last_samples = -1
-        next_status_log = time.monotonic() + self.cfg["service"]["status_log_interval_s"]
+        next_status_log = time.monotonic() + self.config.service.status_log_interval_s
         try:
             while not self.stop_requested.is_set():
                 self.check_threads()
@@ -394,7 +396,7 @@ class Service:
                     if n is not None:
                         n.ready()   # reload finished (Type=notify protocol)
                 if now >= next_status_log:
-                    next_status_log = now + self.cfg["service"]["status_log_interval_s"]
+                    next_status_log = now + self.config.service.status_log_interval_s
                     log.info("status: %s", self.status_line())
                 wait = tick_s if self.ready else min(tick_s, 0.05)   # READY promptly
                 if duration_s is not None:
@@ -456,16 +458,16 @@ class Service:
 def _default_recorder(svc: Service) -> Any:
     from ..recorder import Recorder
 
-    r = svc.cfg["recording"]
-    return Recorder(svc.data_dir, svc.run_id, svc.run_header.for_segment, segment_s=r["segment_s"],
-                    fsync_interval_s=r["fsync_interval_s"], retention_days=r["retention_days"],
-                    retention_max_bytes=r["retention_max_bytes"],
-                    min_free_bytes=r["min_free_bytes"], clock=svc.clock.monotonic,
+    r = svc.config.recording
+    return Recorder(svc.data_dir, svc.run_id, svc.run_header.for_segment, segment_s=r.segment_s,
+                    fsync_interval_s=r.fsync_interval_s, retention_days=r.retention_days,
+                    retention_max_bytes=r.retention_max_bytes,
+                    min_free_bytes=r.min_free_bytes, clock=svc.clock.monotonic,
                     realtime=svc.clock.realtime)
 
 
 def _curve(svc: Service) -> Any:
-    if not svc.cfg["curve"]["enabled"]:
+    if not svc.config.curve.enabled:
         return None
     from ..curve import CurveServerConfig
 
@@ -477,14 +479,14 @@ def _curve(svc: Service) -> Any:
 def _default_publisher(svc: Service) -> Any:
     from ..publisher import Publisher
 
-    p = svc.cfg["publish"]
-    return Publisher(p["endpoint"], svc.run_id, hwm=p["hwm"], curve=_curve(svc),
-                     allow_remote=p["allow_remote"])
+    p = svc.config.publish
+    return Publisher(p.endpoint, svc.run_id, hwm=p.hwm, curve=_curve(svc),
+                     allow_remote=p.allow_remote)
 
 
 def _default_request_server(svc: Service) -> Any:
     from ..publisher import RequestServer
 
-    return RequestServer(svc.cfg["publish"]["request_endpoint"], svc.handlers(),
-                         curve=_curve(svc),
-                         allow_remote=svc.cfg["publish"]["allow_remote"]).start()
+    p = svc.config.publish
+    return RequestServer(p.request_endpoint, svc.handlers(), curve=_curve(svc),
+                         allow_remote=p.allow_remote).start()

@@ -67,3 +67,27 @@ def test_probe_says_what_it_checked_and_what_it_skipped(capsys):
     assert "skipped: DS18B20s (--emulate has no 1-Wire bus)" in out
     assert main(["probe", "--emulate", "--no-self-test", "--seconds", "1"]) == 0
     assert "skipped: self-test (--no-self-test); DS18B20s" in capsys.readouterr().out
+
+
+def test_probe_takes_its_backend_and_start_up_from_the_rig_factory(capsys, monkeypatch):
+    """$AVARD_BACKEND=simulate:PRESET probes the simulated rig of daemon/rig.py, through the
+    rig's one start-up sequence (with the self-test), like `avard run` would use it."""
+    from avard.daemon import rig
+
+    calls = []
+    real = rig.bring_up
+
+    def spy(dev, sensor, **kw):
+        calls.append(kw.get("self_test"))
+        return real(dev, sensor, **kw)
+
+    monkeypatch.setattr(rig, "bring_up", spy)
+    monkeypatch.setenv(rig.BACKEND_ENV, "simulate:quiet-lab")
+    assert main(["probe", "--seconds", "2"]) == 0
+    out = capsys.readouterr().out
+    assert calls == [True]
+    assert "ADXL355 found" in out and "self-test passed" in out and "gaps: 0" in out
+    assert "skipped: DS18B20s (the simulated rig quiet-lab has no real 1-Wire bus)" in out
+    monkeypatch.setenv(rig.BACKEND_ENV, "simulate:no-such-preset")
+    assert main(["probe", "--seconds", "2"]) == 2
+    assert "unknown preset" in capsys.readouterr().err

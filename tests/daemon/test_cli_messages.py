@@ -53,11 +53,12 @@ def test_record_refuses_a_file_name_for_its_folder(tmp_path: Path, capsys) -> No
 
 def test_run_by_hand_does_not_create_a_system_folder(capsys) -> None:
     from avard.daemon.commands.run import _check_system_folder
+    from avard.daemon.config_types import RecordingConfig
 
-    cfg = {"recording": {"enabled": True, "data_dir": "/var/lib/avard-test-not-there"}}
+    rec = RecordingConfig(enabled=True, data_dir="/var/lib/avard-test-not-there")
     with pytest.raises(ConfigError, match="does not create system folders"):
-        _check_system_folder(cfg, environ={})
-    _check_system_folder(cfg, environ={"INVOCATION_ID": "abc"})  # systemd: StateDirectory=
+        _check_system_folder(rec, environ={})
+    _check_system_folder(rec, environ={"INVOCATION_ID": "abc"})  # systemd: StateDirectory=
 
 
 def test_run_without_config_says_which_it_uses(capsys) -> None:

@@ -133,6 +133,7 @@ def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
     from avard.daemon import emulator, transport
     from avard.daemon.commands import run as run_cmd
     from avard.daemon.config import load_config
+    from avard.daemon.config_types import Config
 
     emu = emulator.EmulatedAdxl355(emulator.counter_source(), emulator.VirtualClock(speed=1.0))
     monkeypatch.setattr(transport, "open_bus",
@@ -140,12 +141,13 @@ def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
     cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
                                "publish.enabled": False, "temperature.ds18b20": False})
     args = argparse.Namespace(simulate=None, speed=None, seed=None)
-    svc = run_cmd.build(args, cfg)
+    svc = run_cmd.build(args, Config.from_dict(cfg))
     assert svc.run(1.5) == 0
     st = svc.final_status
     assert st["overruns"] == 0 and 120 < st["samples"] < 260
     recs = list(RecordingReader(tmp_path / "rec"))
     assert recs[0]["sensor"]["device"] == "ADXL355"
+    assert recs[0]["config"] == cfg   # the typed Config leaves the stored config unchanged
     counts = np.concatenate([r["counts"] for r in recs if r["kind"] == "raw"])
     # counter_source: consecutive counts, so nothing was lost or repeated on the way.
     assert np.all(np.diff(counts[:, 0]) == 1)

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from avard.core.errors import ConfigError
 from avard.daemon.config import load_config
+from avard.daemon.config_types import Config
 from avard.daemon.rig import BACKEND_ENV, build_rig, choose_backend
 
 
@@ -27,7 +28,8 @@ def test_backend_precedence_and_bad_values(monkeypatch: pytest.MonkeyPatch) -> N
 def test_env_backend_builds_the_simulated_rig_and_its_service(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(BACKEND_ENV, "simulate:quiet-lab")
-    cfg = load_config(None, **{"recording.data_dir": str(tmp_path), "publish.enabled": False})
+    cfg = Config.from_dict(load_config(None, **{"recording.data_dir": str(tmp_path),
+                                                "publish.enabled": False}))
     rig = build_rig(cfg, seed=4)
     assert rig.simulate == "quiet-lab" and rig.sensor_info["device"] == "ADXL355 (emulated)"
     svc = rig.service(cfg)
