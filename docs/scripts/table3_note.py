@@ -19,7 +19,9 @@ import argparse
 import math
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests.support
 
@@ -35,6 +37,13 @@ from tests.support.table3 import (
     outcomes_over_seeds,
     relative_errors,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+    from avard.core.allan import AllanResult
+    from matplotlib.figure import Figure
+
+    from tests.support.table3 import AxisAnalysis
 
 TERM_ROWS = (("velocity_random_walk", "N", "m/s/√s"), ("bias_instability", "B", "m/s²"),
              ("rate_random_walk", "K", "m/s²/√s"))
@@ -194,13 +203,13 @@ def _analysis_table(analyses, title: str) -> list[str]:
 _ESTIMATOR_NAMES = {"avar": "ADEV", "oavar": "overlapping ADEV"}
 
 
-def _interval_label(result) -> str:
+def _interval_label(result: AllanResult) -> str:
     """How the bars were made, read from the result itself: estimator and interval level."""
     name = _ESTIMATOR_NAMES.get(result.kind, result.kind)
     return f"{name} ± {100 * result.ci:.0f} % χ² interval"
 
 
-def _model_adev(an, tau):
+def _model_adev(an: AxisAnalysis, tau: np.ndarray) -> np.ndarray:
     """The simulated Table 3 terms as the chip delivers them: white noise through the ODR/4
     filter (exact at whole numbers of samples only) plus B and K, in m/s²."""
     import numpy as np
@@ -214,7 +223,8 @@ def _model_adev(an, tau):
     return np.sqrt(filt + rest)
 
 
-def adev_figure(analyses, literal, hours: float, literal_hours: float, seed: int):
+def adev_figure(analyses: Sequence[AxisAnalysis], literal: Sequence[AxisAnalysis], hours: float,
+                literal_hours: float, seed: int) -> Figure:
     """The figure of docs/table3.md: per axis, the ADEV of the ``paper-table3`` record
     (``hours`` long, K per √h) and of the literal reading (``literal_hours``, K per √s), each
     with its interval bars, the two models and the reported floor. Returns the Figure."""
@@ -270,15 +280,15 @@ def adev_figure(analyses, literal, hours: float, literal_hours: float, seed: int
     return fig
 
 
-def _figure_caption(analyses, literal, hours: float, literal_hours: float,
-                    seed: int) -> list[str]:
+def _figure_caption(analyses: Sequence[AxisAnalysis], literal: Sequence[AxisAnalysis],
+                    hours: float, literal_hours: float, seed: int) -> list[str]:
     """The figure's caption: what is drawn, and every bar beyond the chip filter (τ ≥ 1 s) that
     misses its model curve by more than 3 half-widths, with the noise type and EDF its interval
-    rests on (a 68 % interval misses by 3 half-widths about once in 400 points)."""
+    rests on (a Gaussian estimate misses its 68 % interval by 3 half-widths in 0.3 % of points)."""
     import numpy as np
 
     r0 = analyses[0].result
-    misses = []
+    misses: list[str] = []
     for length, records in ((hours, analyses), (literal_hours, literal)):
         for an in records:
             r = an.result
@@ -309,8 +319,8 @@ def _figure_caption(analyses, literal, hours: float, literal_hours: float,
     return lines
 
 
-def _plot(path: Path, analyses, literal, hours: float, literal_hours: float,
-          seed: int) -> None:
+def _plot(path: Path, analyses: Sequence[AxisAnalysis], literal: Sequence[AxisAnalysis],
+          hours: float, literal_hours: float, seed: int) -> None:
     import matplotlib.pyplot as plt
 
     fig = adev_figure(analyses, literal, hours, literal_hours, seed)
