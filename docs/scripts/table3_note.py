@@ -368,7 +368,8 @@ def main(argv: list[str] | None = None) -> int:
         "# Table 3 of the paper, simulated",
         "",
         f"Made by `docs/scripts/table3_note.py --hours {args.hours:g} --seed {args.seed} "
-        f"--literal-hours {args.literal_hours:g} --coverage-seeds {args.coverage_seeds}` "
+        f"--literal-hours {args.literal_hours:g} --coverage-seeds {args.coverage_seeds}"
+        + (f" --plot {args.plot}" if args.plot else "") + "` "
         f"({took:.0f} s). The paper (Section 4) "
         "measured an ADXL355 for 60 h on a granite bed in a ±1 °C room and printed the noise "
         "terms below. Simulating exactly those terms and analysing the result shows what the "
