@@ -284,6 +284,28 @@ def test_tmpfiles_make_etc_avard_readable_only_by_the_group(tmp_path):
         assert st.st_gid == avard_gid and st.st_uid == 0, sub
 
 
+@needs_analyze
+def test_tmpfiles_make_the_state_directory_as_the_unit_does(unit, tmp_path):
+    """install.sh runs `avard check-config` as the avard user before the first start, and
+    check-config checks that the data folder is writable: the folder the unit's
+    StateDirectory= would make at start must exist by then, with the same owner and mode (the
+    real-systemd test found every fresh install refused without it)."""
+    root = _scratch_root(tmp_path)
+    subprocess.run(["systemd-sysusers", f"--root={root}", str(SYSTEMD / "avard.sysusers")],
+                   check=True, capture_output=True)
+    proc = subprocess.run(
+        ["systemd-tmpfiles", f"--root={root}", "--create", str(SYSTEMD / "avard.tmpfiles")],
+        capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    user = _one(unit, "Service", "User")
+    uid, gid = next((int(f[2]), int(f[3])) for f in (
+        line.split(":") for line in (root / "etc/passwd").read_text().splitlines())
+        if f[0] == user)
+    st = (root / "var/lib" / _one(unit, "Service", "StateDirectory")).stat()
+    assert st.st_mode & 0o777 == int(_one(unit, "Service", "StateDirectoryMode"), 8)
+    assert (st.st_uid, st.st_gid) == (uid, gid)
+
+
 def test_install_script_dry_run_lists_every_step_and_changes_nothing(tmp_path):
     script = SYSTEMD / "install.sh"
     subprocess.run(["bash", "-n", str(script)], check=True)
