@@ -630,3 +630,42 @@ def phvar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) 
 def ohvar(y: ArrayLike, rate_hz: float, taus: str | ArrayLike = "octave", **kw) -> AllanResult:
     """Overlapping Hadamard variance (NIST SP 1065 eq. 18); see ``allan_variance``."""
     return allan_variance(y, rate_hz, taus, kind="ohvar", **kw)
+
+
+def checked_block(block: ArrayLike, n_channels: int, integer: bool | None
+                  ) -> tuple[NDArray, bool | None]:
+    """A block for a streaming Allan accumulator, checked: (n, C) (or (n,) for one channel),
+    finite, numeric; integer counts stay integers (exact int64 sums), floats become float64.
+    ``integer`` is the accumulator's kind so far (None until its first non-empty block); the
+    kind in force is returned with the block. Shared by ``StreamingAllan`` and
+    ``OverlappingAllan``, so both take and refuse the same input."""
+    a = np.asarray(block)
+    c = n_channels
+    if a.ndim == 1 and c == 1:
+        a = a[:, None]
+    if a.ndim != 2 or a.shape[1] != c:
+        raise DataError(f"block has shape {a.shape}; this accumulator takes (n, {c})"
+                        + (" or (n,)" if c == 1 else ""))
+    if a.dtype.kind == "b":
+        a = a.astype(np.int64)
+    if a.dtype.kind not in "iuf":
+        raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
+    if integer is None and a.shape[0]:
+        integer = a.dtype.kind in "iu"
+    if a.dtype.kind == "f":
+        bad = ~np.isfinite(a)
+        if bad.any():
+            i = int(np.argwhere(bad)[0][0])
+            raise DataError(f"block sample {i} is NaN or infinite; drop such samples and call "
+                            "gap() where they were")
+        if integer:
+            if np.any(a != np.rint(a)):
+                raise DataError("this accumulator was started with integer counts and got "
+                                "fractional samples; use one kind of input per accumulator")
+            return a.astype(np.int64), integer
+        return a.astype(np.float64, copy=False), integer
+    if not integer:
+        return a.astype(np.float64), integer
+    if a.dtype.kind == "u" and a.dtype.itemsize >= 8 and a.size and a.max() >= 2**62:
+        raise DataError("unsigned 64-bit samples this large cannot be summed in int64")
+    return a, integer  # narrower integers: the caller widens them to int64 as it sums

@@ -33,7 +33,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .allan import AllanResult, alphas_from_ladders, result_from_sums
+from .allan import AllanResult, alphas_from_ladders, checked_block, result_from_sums
 from .errors import DataError
 from .noise_id import Lag1Ladder, row_products
 
@@ -111,34 +111,12 @@ class OverlappingAllan:
             lad.gap()
 
     def _check_block(self, block: ArrayLike) -> NDArray:
-        a = np.asarray(block)
-        c = self.n_channels
-        if a.ndim == 1 and c == 1:
-            a = a[:, None]
-        if a.ndim != 2 or a.shape[1] != c:
-            raise DataError(f"block has shape {a.shape}; this accumulator takes (n, {c})"
-                            + (" or (n,)" if c == 1 else ""))
-        if a.dtype.kind == "b":
-            a = a.astype(np.int64)
-        if a.dtype.kind not in "iuf":
-            raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
-        if self._integer is None and a.shape[0]:
-            self._integer = a.dtype.kind in "iu"
+        first = self._integer is None
+        a, self._integer = checked_block(block, self.n_channels, self._integer)
+        if first and self._integer is not None:
             # channel-major: each channel's running sum is a contiguous row
-            self._ring = np.zeros((c, self._cap), np.int64 if self._integer else np.float64)
-        if a.dtype.kind == "f":
-            if not np.all(np.isfinite(a)):
-                i = int(np.argwhere(~np.isfinite(a))[0][0])
-                raise DataError(f"block sample {i} is NaN or infinite; drop such samples and "
-                                "call gap() where they were")
-            if self._integer:
-                if np.any(a != np.rint(a)):
-                    raise DataError("this accumulator was started with integer counts and got "
-                                    "fractional samples; use one kind of input per accumulator")
-                return a.astype(np.int64)
-            return a.astype(np.float64, copy=False)
-        if a.dtype.kind == "u" and a.dtype.itemsize >= 8 and a.size and a.max() >= 2**62:
-            raise DataError("unsigned 64-bit samples this large cannot be summed in int64")
+            self._ring = np.zeros((self.n_channels, self._cap),
+                                  np.int64 if self._integer else np.float64)
         return a.astype(np.int64 if self._integer else np.float64, copy=False)
 
     def update(self, block: ArrayLike) -> None:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .allan import AllanResult, DifferenceSums, finish_result, grid_sums
+from .allan import AllanResult, DifferenceSums, checked_block, finish_result, grid_sums
 from .errors import DataError, FormatError
 from .noise_id import Lag1Ladder
 from .scratch import scratch
@@ -242,46 +242,12 @@ class StreamingAllan:
         return self._grids[g]
 
     def _check_block(self, block: ArrayLike) -> NDArray:
-        a = np.asarray(block)
-        c = self.n_channels
-        if a.ndim == 1 and c == 1:
-            a = a[:, None]
-        if a.ndim != 2 or a.shape[1] != c:
-            raise DataError(
-                f"block has shape {a.shape}; this accumulator takes (n, {c})"
-                + (" or (n,)" if c == 1 else "")
-            )
-        if a.dtype.kind == "b":
-            a = a.astype(np.int64)
-        if a.dtype.kind not in "iuf":
-            raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
-        if self._integer is None and a.shape[0]:
-            self._integer = a.dtype.kind in "iu"
+        first = self._integer is None
+        a, self._integer = checked_block(block, self.n_channels, self._integer)
+        if first and self._integer is not None:
             for g in self._grids:
                 g.hist = g.hist.astype(self._dtype())
-        if a.dtype.kind == "f":
-            bad = ~np.isfinite(a)
-            if bad.any():
-                i = int(np.argwhere(bad)[0][0])
-                raise DataError(
-                    f"block sample {i} is NaN or infinite; drop such samples and call gap() "
-                    "where they were"
-                )
-            if self._integer:
-                if np.any(a != np.rint(a)):
-                    raise DataError(
-                        "this accumulator was started with integer counts and got fractional "
-                        "samples; use one kind of input per accumulator"
-                    )
-                return a.astype(np.int64)
-            return a.astype(np.float64, copy=False)
-        if not self._integer:
-            return a.astype(np.float64)
-        if a.dtype.kind == "u" and a.dtype.itemsize >= 8:
-            if a.size and a.max() >= 2**62:
-                raise DataError("unsigned 64-bit samples this large cannot be summed in int64")
-            return a.astype(np.int64)
-        return a  # narrower integers are widened to int64 while the offset is removed
+        return a
 
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
