@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.systemd.unit_file import parse_unit
+from tests.systemd.unit_file import parse_unit, scratch_config
 
 REPO = Path(__file__).resolve().parents[2]
 SYSTEMD = REPO / "systemd"
@@ -400,14 +400,9 @@ def test_exec_start_runs_unprivileged_with_no_new_privs_and_mdwe(unit, tmp_path)
     # Outside pytest's 0700 tmp tree, so that the unprivileged user can reach it.
     base = Path(tempfile.mkdtemp(prefix="avard-exec-", dir="/tmp"))
     base.chmod(0o755)
-    data = base / "data"
-    data.mkdir()
-    cfg_text = (REPO / "config" / "avard.toml").read_text()
-    cfg_text = re.sub(r'(?m)^data_dir = .*$', f'data_dir = "{data}"', cfg_text)
-    cfg_text = re.sub(r"tcp://127\.0\.0\.1:555[56]", "tcp://127.0.0.1:0", cfg_text)
-    config = base / "avard.toml"
-    config.write_text(cfg_text)
+    config = scratch_config(base)
     config.chmod(0o644)
+    data = base / "data"
     notify_path = base / "notify.sock"
     notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     notify.bind(str(notify_path))

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from .sandbox import missing_tools, spec_from_unit, syscall_filter, wrap
-from .unit_file import REPO, UNIT, Unit, parse_unit
+from .unit_file import UNIT, Unit, parse_unit, scratch_config
 
 VENV_AVARD = Path(sys.executable).with_name("avard")
 
@@ -51,22 +51,10 @@ def unit() -> Unit:
     return parse_unit(UNIT.read_text())
 
 
-def _config(tmp_path: Path) -> Path:
-    """The shipped config with a scratch data directory and ports the kernel picks."""
-    data = tmp_path / "data"
-    data.mkdir()
-    text = (REPO / "config" / "avard.toml").read_text()
-    text = re.sub(r"(?m)^data_dir = .*$", f'data_dir = "{data}"', text)
-    text = re.sub(r"tcp://127\.0\.0\.1:555[56]", "tcp://127.0.0.1:0", text)
-    path = tmp_path / "avard.toml"
-    path.write_text(text)
-    return path
-
-
 def _run_sandboxed(unit: Unit, tmp_path: Path) -> subprocess.CompletedProcess[str]:
     spec_path = tmp_path / "seccomp.json"
     spec_path.write_text(json.dumps(spec_from_unit(unit)))
-    argv = [str(VENV_AVARD), "run", "--config", str(_config(tmp_path)),
+    argv = [str(VENV_AVARD), "run", "--config", str(scratch_config(tmp_path)),
             "--simulate", "quiet-lab", "--duration", "5"]
     return subprocess.run(wrap(spec_path, argv), cwd=tmp_path, capture_output=True, text=True,
                           timeout=120, env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"))

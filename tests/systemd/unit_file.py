@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
@@ -25,3 +26,16 @@ def parse_unit(text: str) -> Unit:
         key, _, value = line.partition("=")
         current.setdefault(key.strip(), []).append(value.strip())
     return sections
+
+
+def scratch_config(folder: Path) -> Path:
+    """The shipped config with a data directory in ``folder`` and ports the kernel picks
+    (``folder``/avard.toml; the data directory ``folder``/data is made)."""
+    data = folder / "data"
+    data.mkdir()
+    text = (REPO / "config" / "avard.toml").read_text()
+    text = re.sub(r"(?m)^data_dir = .*$", f'data_dir = "{data}"', text)
+    text = re.sub(r"tcp://127\.0\.0\.1:555[56]", "tcp://127.0.0.1:0", text)
+    path = folder / "avard.toml"
+    path.write_text(text)
+    return path
