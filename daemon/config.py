@@ -422,6 +422,11 @@ def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
 # what depends on this machine: checked by both `avard check-config` and `avard run`
 
 
+#: What to do about a data directory the service cannot write (check_runtime and the service).
+DATA_DIR_ADVICE = ("under systemd StateDirectory= provides it, by hand use --data-dir DIR or "
+                   "`sudo install -d -o $USER /var/lib/avard`")
+
+
 def check_runtime(cfg: Mapping[str, Mapping[str, Any]]) -> None:
     """Check what ``avard run`` needs from the machine, all problems at once (ConfigError):
     the data directory writable (or creatable), and with CURVE on the server's secret key file
@@ -432,9 +437,8 @@ def check_runtime(cfg: Mapping[str, Mapping[str, Any]]) -> None:
     if rec["enabled"]:
         problem = _writable_dir(Path(rec["data_dir"]))
         if problem:
-            problems.append(f"recording.data_dir = {rec['data_dir']!r}: {problem}; under "
-                            "systemd StateDirectory= provides it, by hand use --data-dir DIR "
-                            "or `sudo install -d -o $USER /var/lib/avard`")
+            problems.append(f"recording.data_dir = {rec['data_dir']!r}: {problem}; "
+                            + DATA_DIR_ADVICE)
     if cfg["curve"]["enabled"]:
         problems += _curve_problems(cfg["curve"])
     if problems:

@@ -32,6 +32,7 @@ from avard.core.recording import AllanFeed
 
 from .. import __version__
 from ..acquisition import Acquisition
+from ..config import DATA_DIR_ADVICE
 from ..config_types import Config, as_config
 from ..recorder import RestartGap, kernel_boot_id, last_recorded, new_run_id, restart_gap
 from ..ring import Ring
@@ -234,8 +235,7 @@ class Service:
         except OSError as exc:
             raise ConfigError(
                 f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
-                f"({exc.strerror}); under systemd StateDirectory= provides it, by hand "
-                "use --data-dir DIR or `sudo install -d -o $USER /var/lib/avard`") from None
+                f"({exc.strerror}); {DATA_DIR_ADVICE}") from None
 
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
         """Build the stages and start every thread, consumers before the reader;
