@@ -103,7 +103,7 @@ def worker_allantools(path: str, axis: int) -> dict:
 
 
 def worker_stream(path: str) -> dict:
-    from avard.core.streaming import StreamingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
     acc = StreamingAllan(4, RATE_HZ, names=["x", "y", "z", "temp"])
     t0 = time.process_time()
@@ -122,7 +122,7 @@ def worker_stream(path: str) -> dict:
 
 
 def worker_fifo(path: str, n_sets: int) -> dict:
-    from avard.core.streaming import StreamingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
     block = next(read_blocks(path, n_sets))
     n_sets = block.shape[0]
@@ -136,7 +136,7 @@ def worker_fifo(path: str, n_sets: int) -> dict:
 
 def worker_realtime(path: str, n: int) -> dict:
     from allantools.realtime import oadev_realtime
-    from avard.core.streaming import StreamingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
     y = next(read_blocks(path, n))[:, 0].astype(np.float64) * LSB_MS2
     n = y.size

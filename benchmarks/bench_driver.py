@@ -27,8 +27,8 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from avard.daemon.adxl355 import Adxl355, decode_counts, decode_counts_naive, decode_fifo
-from avard.daemon.emulator import (
+from avard.daemon.hw.adxl355 import Adxl355, decode_counts, decode_counts_naive, decode_fifo
+from avard.daemon.hw.emulator import (
     EmulatedAdxl355,
     FakeSMBus,
     FakeSpiDev,
@@ -36,8 +36,8 @@ from avard.daemon.emulator import (
     counter_source,
     encode_entries,
 )
-from avard.daemon.thread_priority import raise_thread_priority
-from avard.daemon.transport import I2cBus, SpiBus
+from avard.daemon.hw.thread_priority import raise_thread_priority
+from avard.daemon.hw.transport import I2cBus, SpiBus
 
 
 def _best(fn, repeat: int = 5, number: int = 1) -> float:
@@ -195,7 +195,7 @@ def main(argv: list[str]) -> int:
                    "CAP_SYS_NICE); 0: normal scheduling (default)")
     args = p.parse_args(argv)
     # Overruns are counted in the table; one warning line each would drown it.
-    logging.getLogger("avard.daemon.adxl355").setLevel(logging.ERROR)
+    logging.getLogger("avard.daemon.hw.adxl355").setLevel(logging.ERROR)
 
     print("1. FIFO decode throughput (96 000 entries)")
     print(f"{'method':<40}{'entries/s':>14}{'× reference':>13}")

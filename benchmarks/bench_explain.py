@@ -62,9 +62,9 @@ def resources(path: str) -> None:
 
 def power(cases: int, seed0: int) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from avard.core.causes import min_detectable_step, min_detectable_warmup
-    from avard.core.explain import explain_file
-    from avard.core.thermal_fit import min_detectable_tempco
+    from avard.core.explain.causes import min_detectable_step, min_detectable_warmup
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.thermal_fit import min_detectable_tempco
 
     from tests.support.hidden import Truth, make_record, save
 

@@ -3,7 +3,7 @@
 The slope method is the reading of the paper's MATLAB workflow, allan_variance_ros and
 kalibr_allan: N on the −½ line at τ = 1 s, K on the +½ line at τ = 3 s, B = min ADEV / 0.664.
 It is given a denser τ grid (1-2-5 per decade) than the fit (octaves). Both read the same
-overlapping AVAR estimator of the same records (avard.core.allan). Records come from the
+overlapping AVAR estimator of the same records (avard.core.allan.deviations). Records come from the
 sensor simulator (ADXL355 low-pass at ODR/4, 20-bit quantization) with N, B, K on every axis
 and no temperature coupling, so the truth is known; the fit models the filter (as
 ``avard analyze`` does for ADXL355 records).
@@ -36,11 +36,11 @@ import time
 from collections.abc import Mapping
 
 import numpy as np
-from avard.core import model as mdl
-from avard.core.allan import allan_variance
-from avard.core.fit import fit_noise, slope_method
-from avard.core.presets import make_config
-from avard.core.simulate import SensorSimulator, n_samples
+from avard.core.allan.deviations import allan_variance
+from avard.core.model import terms as mdl
+from avard.core.model.fit import fit_noise, slope_method
+from avard.core.sim.presets import make_config
+from avard.core.sim.simulate import SensorSimulator, n_samples
 from numpy.typing import ArrayLike, NDArray
 
 #: Two regimes (SI units). "floor": a bias-instability floor between the white-noise and the

@@ -29,9 +29,9 @@ from collections.abc import Iterator
 
 import numpy as np
 import zmq
-from avard.core import frames
-from avard.daemon.publisher import Publisher
-from avard.daemon.subscriber import Subscriber
+from avard.core.io import frames
+from avard.daemon.net.publisher import Publisher
+from avard.daemon.net.subscriber import Subscriber
 
 BLOCK = 32
 LOCAL = "tcp://127.0.0.1:*"
@@ -186,7 +186,7 @@ def service_latency(odr_hz: float, seconds: float) -> tuple[np.ndarray, dict]:
     import tempfile
 
     from avard.daemon.config import load_config
-    from avard.daemon.simulation import simulated_service
+    from avard.daemon.hw.simulation import simulated_service
 
     with tempfile.TemporaryDirectory() as tmp:
         cfg = load_config(None, **{"recording.data_dir": tmp, "sensor.odr_hz": odr_hz,

@@ -20,7 +20,7 @@ import argparse
 import time
 
 import numpy as np
-from avard.core.recording import frame, scan_frames
+from avard.core.io.recording import frame, scan_frames
 
 
 def _clean(size: int, rng: np.random.Generator) -> bytes:

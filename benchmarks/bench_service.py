@@ -37,12 +37,12 @@ import time
 from typing import Any
 
 import numpy as np
-from avard.daemon.acquisition import Acquisition
 from avard.daemon.config import effective_poll_hz, load_config
-from avard.daemon.ring import Ring
-from avard.daemon.simulation import build_simulated, simulated_service
-from avard.daemon.subscriber import Subscriber
-from avard.daemon.timebase import TimeBase
+from avard.daemon.hw.simulation import build_simulated, simulated_service
+from avard.daemon.net.subscriber import Subscriber
+from avard.daemon.service.acquisition import Acquisition
+from avard.daemon.service.ring import Ring
+from avard.daemon.service.timebase import TimeBase
 
 
 def _cfg(odr: float, data_dir: str) -> dict:
@@ -182,11 +182,11 @@ def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
 _RSS_HARDWARE_PATH = r"""
 import sys
 from avard.daemon import blas_threads
-from avard.daemon.adxl355 import Adxl355
+from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.config import load_config
-from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.service import Service
-from avard.daemon.transport import SpiBus
+from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.service.supervisor import Service
+from avard.daemon.hw.transport import SpiBus
 odr, seconds, data_dir = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 clock = VirtualClock(speed=1.0)
 dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)

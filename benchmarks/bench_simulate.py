@@ -17,8 +17,8 @@ import resource
 import time
 
 import numpy as np
-from avard.core.presets import make_config
-from avard.core.simulate import SensorSimulator, n_samples
+from avard.core.sim.presets import make_config
+from avard.core.sim.simulate import SensorSimulator, n_samples
 
 
 def _peak_rss_mb() -> float:

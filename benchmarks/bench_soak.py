@@ -157,12 +157,12 @@ class _Schedule:
 def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: bool = False,
              seed: int = 1, log_level: int = logging.WARNING) -> SoakResult:
     """Run the soak for ``hours`` simulated hours with data under ``out``; return the result."""
-    from avard.core.recording import RecordingReader, replay_allan
+    from avard.core.io.recording import RecordingReader, replay_allan
     from avard.daemon.config import load_config
-    from avard.daemon.publisher import Publisher
-    from avard.daemon.recorder import FileOps, Recorder
-    from avard.daemon.service import Service
-    from avard.daemon.simulation import simulated_service
+    from avard.daemon.hw.simulation import simulated_service
+    from avard.daemon.net.publisher import Publisher
+    from avard.daemon.service.recorder import FileOps, Recorder
+    from avard.daemon.service.supervisor import Service
 
     logging.getLogger("avard").setLevel(log_level)
     res = SoakResult(hours=hours)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from avard.daemon.subscriber import Subscriber
+from avard.daemon.net.subscriber import Subscriber
 
 from tests.daemon.web_rig import WebRig
 

@@ -9,10 +9,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from .errors import AvardError
-from .fit import ROUNDING
-from .model import SYMBOLS, TERMS, UNITS
+from avard.core.errors import AvardError
+from avard.core.model.fit import ROUNDING
+from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 
 _COLOURS = {"quantization": "#9467bd", "velocity_random_walk": "#1f77b4",
             "bias_instability": "#2ca02c", "rate_random_walk": "#d62728",

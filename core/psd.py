@@ -26,10 +26,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.errors import DataError
 from numpy.typing import NDArray
 from scipy.stats import chi2
-
-from .errors import DataError
 
 __all__ = ["ChannelPsd", "WhiteDensity", "channel_psd", "plot_psd", "white_density"]
 
@@ -155,7 +154,7 @@ def white_density(cp: ChannelPsd, fit: Any, rate_hz: float, *,
 def plot_psd(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
     """The PSD figure (per channel: log-log PSD with its band, the white density read from
     it, the lines found), written next to the ADEV figure."""
-    from .plot import pyplot, save_figure
+    from avard.core.plot import pyplot, save_figure
 
     plt = pyplot()
     names = [n for n, ch in an.channels.items() if ch.psd is not None]

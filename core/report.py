@@ -24,14 +24,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from avard.core.errors import DataError, FitError
+from avard.core.io.readers import iter_blocks, load_record
+from avard.core.model.fit import NoiseFit, fit_noise
+from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from numpy.typing import NDArray
 from scipy.stats import chi2
 from scipy.stats import f as fdist
-
-from .errors import DataError, FitError
-from .fit import NoiseFit, fit_noise
-from .model import SYMBOLS, TERMS, UNITS
-from .readers import iter_blocks, load_record
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
            "find_lines", "psd_csv"]
@@ -376,7 +375,7 @@ def oadev_grid(n_samples: int, n_channels: int,
     """Octave m for the OADEV of a record: ≥ 4 non-overlapping intervals (m ≤ N/4, where
     Stable32's tables stop), and a ring of 2·m_max points per channel within
     ``budget_bytes`` (default :func:`ring_budget_bytes`); m = 1 at least."""
-    from .overlapping import PIECE
+    from avard.core.allan.overlapping import PIECE
 
     budget = ring_budget_bytes() if budget_bytes is None else budget_bytes
     m_max = max(1, n_samples // 4)
@@ -416,8 +415,8 @@ def analyze_stream(
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
     in m/s², True where a segment ends: no difference or spectrum spans what follows).
     ``estimator="oadev"`` needs ``n_samples`` (an upper bound will do) to fix its τ grid."""
-    from .overlapping import OverlappingAllan
-    from .streaming import StreamingAllan
+    from avard.core.allan.overlapping import OverlappingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
@@ -490,7 +489,7 @@ def analyze_stream(
             if welch is None or spectrum is None or welch.n_seg < 1:
                 raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
                                 "needs at least 1024)")
-            from .psd import channel_psd, white_density
+            from avard.core.psd import channel_psd, white_density
 
             chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
             chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)

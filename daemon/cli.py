@@ -23,10 +23,9 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from avard.core.errors import AvardError, describe_os_error  # noqa: E402  (after BLAS)
-
-from . import __version__, commands  # noqa: E402
-from .logfmt import formatter_for  # noqa: E402
-from .stop_signals import StopSignal  # noqa: E402
+from avard.daemon import __version__, commands  # noqa: E402
+from avard.daemon.service.logfmt import formatter_for  # noqa: E402
+from avard.daemon.service.stop_signals import StopSignal  # noqa: E402
 
 log = logging.getLogger("avard")
 

@@ -151,7 +151,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
 MAX_CONFIG_BYTES = 1 << 20
 #: Largest CURVE key file read (bytes): a real one is about 300 bytes.
 MAX_KEY_FILE_BYTES = 64 << 10
-#: Ring memory per sample (bytes): int32 counts × 3, int64 index, float64 time (daemon/ring.py).
+#: Ring memory per sample (bytes): int32 counts × 3, int64 index, float64 time
+#: (daemon/service/ring.py).
 RING_BYTES_PER_SAMPLE = 3 * 4 + 8 + 8
 #: The ring may take at most this share of the machine's physical memory.
 RING_MEMORY_SHARE = 0.25
@@ -411,9 +412,9 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
 
 
 def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
-    """The FIFO drain rate at the nominal ODR (daemon/pacing.py; the reader uses the fitted
+    """The FIFO drain rate at the nominal ODR (daemon/service/pacing.py; the reader uses the fitted
     one): the configured least rate, raised to drain the 32-set FIFO when half full."""
-    from .pacing import drain_period_s
+    from avard.daemon.service.pacing import drain_period_s
 
     return 1.0 / drain_period_s(float(cfg["sensor"]["odr_hz"]), float(cfg["sensor"]["poll_hz"]))
 

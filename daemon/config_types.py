@@ -162,6 +162,6 @@ def as_config(cfg: Config | Mapping[str, Mapping[str, Any]]) -> Config:
 
 def load(path: str | Path | None, **overrides: Any) -> Config:
     """``config.load_config`` (the one validation), typed."""
-    from .config import load_config
+    from avard.daemon.config import load_config
 
     return Config.from_dict(load_config(path, **overrides))

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core.presets import TABLE3_K_PRINTED, make_config
+from avard.core.sim.presets import TABLE3_K_PRINTED, make_config
 
 from tests.support.table3 import analyse_record
 

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from avard.core.errors import DataError
-from avard.core.outputs import check_output_file, check_plot_output
+from avard.core.io.outputs import check_output_file, check_plot_output
 from avard.core.report import (
     adev_csv,
     analyze,
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if args.temperature:
         # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
         # fit on the named channel
-        from avard.core.explain import explain_file
+        from avard.core.explain.engine import explain_file
 
         ex = explain_file(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                           filter_corner_hz=args.filter_corner, progress=progress_printer(),

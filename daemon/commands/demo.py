@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import AvardError, OutputError
-from avard.core.outputs import check_output_dir, require_plot_extra
-from avard.core.presets import make_config
+from avard.core.io.outputs import check_output_dir, require_plot_extra
+from avard.core.sim.presets import make_config
 from avard.daemon.config import load_config
 from avard.daemon.config_types import Config
 
@@ -50,7 +50,7 @@ class _Listener:
     """A subscriber thread that counts every raw sample and checks index continuity."""
 
     def __init__(self, endpoint: str, request_endpoint: str) -> None:
-        from avard.daemon.subscriber import Subscriber
+        from avard.daemon.net.subscriber import Subscriber
 
         self.sub = Subscriber(endpoint, request_endpoint=request_endpoint).connect(join=False)
         self.indices_ok = True
@@ -121,8 +121,8 @@ def _fmt(v: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from avard.core.fit import fit_noise
-    from avard.core.recording import load_recording, replay_allan
+    from avard.core.io.recording import load_recording, replay_allan
+    from avard.core.model.fit import fit_noise
     from avard.daemon.commands.run import build
 
     if args.hours <= 0:

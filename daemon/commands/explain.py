@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import DataError
-from avard.core.outputs import check_output_dir, require_plot_extra
+from avard.core.io.outputs import check_output_dir, require_plot_extra
 from avard.daemon.commands._options import add_channels_argument, split_channels
 
 NAME = "explain"
@@ -90,8 +90,8 @@ def _progress() -> tuple[Any, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from avard.core.explain import explain_file
-    from avard.core.explain_report import summary, write_report
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.report import summary, write_report
 
     if args.report:  # before the analysis: a bad folder costs a second, not minutes
         # DIR itself is made, as `mkdir DIR` would; a missing parent is more likely a typo

@@ -14,8 +14,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from avard.core.outputs import check_output_dir
-from avard.daemon.curve import make_keypair
+from avard.core.io.outputs import check_output_dir
+from avard.daemon.net.curve import make_keypair
 
 NAME = "keys"
 HELP = "make CURVE key pairs (secret files 0600) for the service and its subscribers"

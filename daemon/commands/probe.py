@@ -1,6 +1,6 @@
 """Check the sensor hardware before running the service.
 
-Opens the sensor through the rig factory (daemon/rig.py: the bus of ``[sensor]``, SPI or I2C;
+Opens the sensor through the rig factory (daemon/hw/rig.py: the bus of ``[sensor]``, SPI or I2C;
 or with ``$AVARD_BACKEND=simulate:PRESET`` the simulated rig), then by the rig's one start-up
 sequence probes the ADXL355 (explaining a wrong answer), resets it, optionally runs the
 self-test (at ±8 g, where gravity plus the deflection cannot clip) and configures it; then
@@ -24,7 +24,7 @@ import numpy as np
 from avard.core.errors import ConfigError
 
 if TYPE_CHECKING:
-    from avard.daemon.adxl355 import DeviceInfo
+    from avard.daemon.hw.adxl355 import DeviceInfo
 
 NAME = "probe"
 HELP = "check the ADXL355 (IDs, self-test, real ODR, 1 g) and the DS18B20 sensors"
@@ -49,8 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from avard.daemon.config_types import load
-    from avard.daemon.rig import bring_up, open_sensor
-    from avard.daemon.timebase import TimeBase
+    from avard.daemon.hw.rig import bring_up, open_sensor
+    from avard.daemon.service.timebase import TimeBase
 
     if not 0.5 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds}: use 0.5 to 3600 s")
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     ok = True
     checked: list[str] = []
     skipped: list[str] = []
-    # the backend of daemon/rig.py: --emulate is the still emulated sensor (1 g on Z, --ppm),
+    # the backend of daemon/hw/rig.py: --emulate is the still emulated sensor (1 g on Z, --ppm),
     # else $AVARD_BACKEND's simulated rig, else the hardware
     opened = open_sensor(config, still_odr_error_ppm=args.ppm if args.emulate else None)
     dev, clock = opened.driver, opened.clock
@@ -165,7 +165,7 @@ def _seconds_for(seconds: float, u_ppm: float) -> str:
 
 
 def _ds18b20(out: Any) -> bool:
-    from avard.daemon import ds18b20
+    from avard.daemon.hw import ds18b20
 
     ids = ds18b20.discover()
     if not ids:

@@ -2,7 +2,8 @@
 
 Subscribes to every topic of ENDPOINT, fetches the run header from the request socket (or takes
 it from the stream), and appends every record to rotating segment files under ``--out`` with
-the service's segment writer (daemon/recorder.py): ``avard analyze DIR`` reads the result like
+the service's segment writer (daemon/service/recorder.py): ``avard analyze DIR`` reads the
+result like
 a recording made on the Pi.
 
 Nothing lost passes silently: raw blocks that the network lost (a hole in the sequence numbers
@@ -26,11 +27,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from avard.core import frames
 from avard.core.errors import FormatError, NetworkError, OutputError
-from avard.core.outputs import check_output_dir
-from avard.daemon.recorder import Recorder
-from avard.daemon.subscriber import Message, Subscriber, add_client_arguments, subscriber_from_args
+from avard.core.io import frames
+from avard.core.io.outputs import check_output_dir
+from avard.daemon.net.subscriber import (
+    Message,
+    Subscriber,
+    add_client_arguments,
+    subscriber_from_args,
+)
+from avard.daemon.service.recorder import Recorder
 
 log = logging.getLogger(__name__)
 

@@ -24,8 +24,8 @@ from avard.daemon.config import (
     load_config,
 )
 from avard.daemon.config_types import Config, RecordingConfig
-from avard.daemon.sdnotify import Notifier
-from avard.daemon.service import Service
+from avard.daemon.service.sdnotify import Notifier
+from avard.daemon.service.supervisor import Service
 
 NAME = "run"
 HELP = "run the acquisition service (ADXL355 + DS18B20, Allan core, recording, ZeroMQ)"
@@ -61,9 +61,9 @@ def _check_args(args: argparse.Namespace) -> None:
 
 def build(args: argparse.Namespace, config: Config,
           notifier: Any = None, **service_kw: Any) -> Service:
-    """The service for these arguments over the backend daemon/rig.py chooses (hardware, or
+    """The service for these arguments over the backend daemon/hw/rig.py chooses (hardware, or
     the simulated rig for --simulate / $AVARD_BACKEND)."""
-    from avard.daemon.rig import build_rig
+    from avard.daemon.hw.rig import build_rig
 
     rig = build_rig(config, simulate=getattr(args, "simulate", None),
                     seed=getattr(args, "seed", None))

@@ -21,11 +21,11 @@ import sys
 import time
 
 from avard.core.errors import DataError, OutputError
-from avard.core.outputs import check_output_file, free_bytes
-from avard.core.presets import PRESETS, make_config, parse_override
-from avard.core.sim_io import draw_seed, npz_size, write_npz
+from avard.core.io.outputs import check_output_file, free_bytes
+from avard.core.sim.presets import PRESETS, make_config, parse_override
+from avard.core.sim.sim_io import draw_seed, npz_size, write_npz
 from avard.daemon.config import check_seed
-from avard.daemon.stop_signals import stop_signals_unwind
+from avard.daemon.service.stop_signals import stop_signals_unwind
 
 NAME = "simulate"
 HELP = "simulate a sensor record (preset + overrides) into an .npz file"

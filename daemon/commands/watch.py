@@ -9,7 +9,7 @@ join, and redraws every ``--interval`` seconds:
 * the latest temperatures (DS18B20 and the ADXL355's own sensor), °C;
 * ADEV at a few τ with its confidence interval (from the streamed Allan snapshot);
 * the noise-term fit with intervals — the service's when its ``avar`` record carries one,
-  otherwise fitted here from the snapshot (``avard.core.fit``) — and for every coefficient an
+  otherwise fitted here from the snapshot (``avard.core.model.fit``) — and for every coefficient an
   estimate of how long until its interval is narrower than ``--target`` (relative half-width).
 
 Time to target: an interval's relative width scales as 1/√EDF, and the EDF at a fixed τ grows
@@ -31,9 +31,14 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import NetworkError
-from avard.core.model import SYMBOLS
-from avard.daemon.snapshots import ACCEL_CHANNELS, fit_snapshot
-from avard.daemon.subscriber import Message, StreamStats, add_client_arguments, subscriber_from_args
+from avard.core.model.terms import SYMBOLS
+from avard.daemon.net.subscriber import (
+    Message,
+    StreamStats,
+    add_client_arguments,
+    subscriber_from_args,
+)
+from avard.daemon.service.snapshots import ACCEL_CHANNELS, fit_snapshot
 
 log = logging.getLogger(__name__)
 
@@ -177,7 +182,7 @@ class WatchView:
             self.events = [*self.events[-4:], str(what)]
 
     def _fit_here(self) -> dict[str, dict[str, Any]]:
-        """Fit each acceleration channel of the snapshot with avard.core.fit (if available)."""
+        """Fit each acceleration channel of the snapshot with avard.core.model.fit."""
         if self.snapshot is None:
             return {}
         return {name: fit.to_dict() for name, fit in fit_snapshot(self.snapshot).items()}

@@ -21,7 +21,7 @@ import signal
 from pathlib import Path
 
 from avard.core.errors import ConfigError
-from avard.daemon.subscriber import add_client_arguments, subscriber_from_args
+from avard.daemon.net.subscriber import add_client_arguments, subscriber_from_args
 
 NAME = "web"
 HELP = "serve a live, read-only web page (and /metrics) of a running service"
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) -> int:
     from aiohttp import web
-    from avard.daemon.snapshots import fit_snapshot
+    from avard.daemon.service.snapshots import fit_snapshot
     from avard.daemon.web.app import Hub, make_app
     from avard.daemon.web.feed import Feed
     from avard.daemon.web.state import RunState

@@ -10,11 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from avard.core import frames
-from avard.core.recording import AllanFeed
-
-from ..ring import Chunk, Consumer
-from .stage import Stage, offset_after_mark, split_chunk
+from avard.core.io import frames
+from avard.core.io.recording import AllanFeed
+from avard.daemon.service.ring import Chunk, Consumer
+from avard.daemon.service.stage import Stage, offset_after_mark, split_chunk
 
 Record = dict[str, Any]
 

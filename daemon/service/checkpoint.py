@@ -3,7 +3,7 @@
 The state file (``allan-state.ckpt`` beside the segments) is written atomically; a new run
 restores it, replays what the recording holds after it, and continues the sample index from
 the last recorded sample. :func:`restore_accumulators` is the one entry point the service
-uses; it replays with ``AllanFeed.replay`` (core/recording.py), as the offline reader does.
+uses; it replays with ``AllanFeed.replay`` (core/io/recording.py), as the offline reader does.
 """
 
 from __future__ import annotations
@@ -13,11 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from avard.core import frames
 from avard.core.errors import AvardError, FormatError
-from avard.core.recording import AllanFeed, frame, replay_after, scan_frames
-
-from ..recorder import write_atomic
+from avard.core.io import frames
+from avard.core.io.recording import AllanFeed, frame, replay_after, scan_frames
+from avard.daemon.service.recorder import write_atomic
 
 log = logging.getLogger("avard.daemon.service")
 

@@ -7,13 +7,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from avard.core import frames
 from avard.core.errors import AvardError
-
-from ..ring import Chunk, Consumer, Ring
-from ..snapshots import SnapshotBoard
-from .header import RunHeader
-from .stage import Stage, lost_marks_records, offset_after_mark, split_chunk
+from avard.core.io import frames
+from avard.daemon.service.header import RunHeader
+from avard.daemon.service.ring import Chunk, Consumer, Ring
+from avard.daemon.service.snapshots import SnapshotBoard
+from avard.daemon.service.stage import Stage, lost_marks_records, offset_after_mark, split_chunk
 
 Record = dict[str, Any]
 

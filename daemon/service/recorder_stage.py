@@ -1,5 +1,5 @@
 """The recorder stage: raw blocks of about ``block_s`` seconds and every mark, in sample order,
-into the segment files (daemon/recorder.py)."""
+into the segment files (daemon/service/recorder.py)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,10 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from avard.core import frames
-
-from ..ring import Chunk, Consumer
-from .header import RunHeader
-from .stage import Stage, lost_marks_records, offset_after_mark, split_chunk
+from avard.core.io import frames
+from avard.daemon.service.header import RunHeader
+from avard.daemon.service.ring import Chunk, Consumer
+from avard.daemon.service.stage import Stage, lost_marks_records, offset_after_mark, split_chunk
 
 Record = dict[str, Any]
 

@@ -12,9 +12,8 @@ import threading
 from typing import Any
 
 import numpy as np
-from avard.core import frames
-
-from ..ring import Chunk, Consumer
+from avard.core.io import frames
+from avard.daemon.service.ring import Chunk, Consumer
 
 log = logging.getLogger("avard.daemon.service")
 

@@ -26,24 +26,29 @@ import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from avard.core import frames
 from avard.core.errors import AvardError, ConfigError
-from avard.core.recording import AllanFeed
-
-from .. import __version__
-from ..acquisition import Acquisition
-from ..config import DATA_DIR_ADVICE
-from ..config_types import Config, as_config
-from ..recorder import RestartGap, kernel_boot_id, last_recorded, new_run_id, restart_gap
-from ..ring import Ring
-from ..snapshots import SnapshotBoard, fit_record
-from ..timebase import SystemClock, TimeBase
-from .allan_stage import AllanStage
-from .checkpoint import restore_accumulators, save_state
-from .header import RunHeader
-from .publisher_stage import PublisherStage, RequestHandlers
-from .recorder_stage import RecorderStage
-from .stage import Stage
+from avard.core.io import frames
+from avard.core.io.recording import AllanFeed
+from avard.daemon import __version__
+from avard.daemon.config import DATA_DIR_ADVICE
+from avard.daemon.config_types import Config, as_config
+from avard.daemon.service.acquisition import Acquisition
+from avard.daemon.service.allan_stage import AllanStage
+from avard.daemon.service.checkpoint import restore_accumulators, save_state
+from avard.daemon.service.header import RunHeader
+from avard.daemon.service.publisher_stage import PublisherStage, RequestHandlers
+from avard.daemon.service.recorder import (
+    RestartGap,
+    kernel_boot_id,
+    last_recorded,
+    new_run_id,
+    restart_gap,
+)
+from avard.daemon.service.recorder_stage import RecorderStage
+from avard.daemon.service.ring import Ring
+from avard.daemon.service.snapshots import SnapshotBoard, fit_record
+from avard.daemon.service.stage import Stage
+from avard.daemon.service.timebase import SystemClock, TimeBase
 
 log = logging.getLogger("avard.daemon.service")
 
@@ -54,7 +59,7 @@ PUBLISH_BATCH_S = 0.05
 
 
 class Service:
-    """One acquisition run: builds nothing hardware-side itself (see daemon/rig.py and
+    """One acquisition run: builds nothing hardware-side itself (see daemon/hw/rig.py and
     ``commands/run.py``); owns the threads and their shutdown."""
 
     def __init__(self, cfg: Config | Mapping[str, Mapping[str, Any]], sensor: Any, clock: Any,
@@ -104,7 +109,7 @@ class Service:
                            *(extra_temperature_names or [])]
         self.data_dir = config.recording.path
         if streaming_cls is None:
-            from avard.core.streaming import StreamingAllan
+            from avard.core.allan.streaming import StreamingAllan
 
             streaming_cls = StreamingAllan
         self.streaming_cls = streaming_cls
@@ -456,7 +461,7 @@ class Service:
 
 
 def _default_recorder(svc: Service) -> Any:
-    from ..recorder import Recorder
+    from avard.daemon.service.recorder import Recorder
 
     r = svc.config.recording
     return Recorder(svc.data_dir, svc.run_id, svc.run_header.for_segment, segment_s=r.segment_s,
@@ -469,7 +474,7 @@ def _default_recorder(svc: Service) -> Any:
 def _curve(svc: Service) -> Any:
     if not svc.config.curve.enabled:
         return None
-    from ..curve import CurveServerConfig
+    from avard.daemon.net.curve import CurveServerConfig
 
     c = CurveServerConfig.from_mapping(svc.cfg["curve"])
     c.check()
@@ -477,7 +482,7 @@ def _curve(svc: Service) -> Any:
 
 
 def _default_publisher(svc: Service) -> Any:
-    from ..publisher import Publisher
+    from avard.daemon.net.publisher import Publisher
 
     p = svc.config.publish
     return Publisher(p.endpoint, svc.run_id, hwm=p.hwm, curve=_curve(svc),
@@ -485,7 +490,7 @@ def _default_publisher(svc: Service) -> Any:
 
 
 def _default_request_server(svc: Service) -> Any:
-    from ..publisher import RequestServer
+    from avard.daemon.net.publisher import RequestServer
 
     p = svc.config.publish
     return RequestServer(p.request_endpoint, svc.handlers(), curve=_curve(svc),

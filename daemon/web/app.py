@@ -31,10 +31,9 @@ from importlib import resources
 from typing import Any
 
 from aiohttp import web
-
-from . import render
-from .metrics import CONTENT_TYPE, metrics_text
-from .state import RunState
+from avard.daemon.web import render
+from avard.daemon.web.metrics import CONTENT_TYPE, metrics_text
+from avard.daemon.web.state import RunState
 
 log = logging.getLogger(__name__)
 

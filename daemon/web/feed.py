@@ -1,9 +1,9 @@
 """The threads behind the page: the subscriber that fills :class:`RunState`, and the fitter.
 
-:class:`Feed` owns one :class:`~avard.daemon.subscriber.Subscriber` (the same one ``avard
+:class:`Feed` owns one :class:`~avard.daemon.net.subscriber.Subscriber` (the same one ``avard
 watch`` and ``avard record`` use; ZeroMQ sockets stay in this one thread) and hands every
 decoded message to the state. A second thread fits the newest Allan snapshot with
-:func:`avard.daemon.snapshots.fit_snapshot` — seconds of CPU for three axes, so at most
+:func:`avard.daemon.service.snapshots.fit_snapshot` — seconds of CPU for three axes, so at most
 every ``fit_interval_s`` and never on the web server's event loop. Both threads wait on
 work (a socket poll, an event), never spin.
 """
@@ -18,9 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from avard.core.errors import FormatError, NetworkError
-from avard.daemon.subscriber import Subscriber
-
-from .state import RunState, Snapshot
+from avard.daemon.net.subscriber import Subscriber
+from avard.daemon.web.state import RunState, Snapshot
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +89,7 @@ class Feed:
 
     def _replay_history(self, path: Path) -> None:
         """Temperatures, gaps and events of the service's recording, oldest first."""
-        from avard.core.recording import RecordingReader
+        from avard.core.io.recording import RecordingReader
 
         t0, n = time.monotonic(), 0
         try:

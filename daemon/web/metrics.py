@@ -13,8 +13,7 @@ import time
 from typing import Any
 
 import numpy as np
-
-from .state import RunState
+from avard.daemon.web.state import RunState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 ACCEL_AXES = ("x", "y", "z")

@@ -21,10 +21,9 @@ from html import escape
 from typing import Any
 
 import numpy as np
-from avard.core.model import SYMBOLS
+from avard.core.model.terms import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
-
-from .state import SILENT_S, RunState, Series, Snapshot
+from avard.daemon.web.state import SILENT_S, RunState, Series, Snapshot
 
 log = logging.getLogger(__name__)
 
@@ -289,7 +288,7 @@ def adev_html(state: RunState) -> str:
 def fit_html(state: RunState, target: float) -> str:
     if not state.fits:
         return ('<p class="waiting">Fit pending (fitted here from the latest snapshot, with '
-                '<code>avard.core.fit</code>).</p>')
+                '<code>avard.core.model.fit</code>).</p>')
     T = state.fitted.duration_s if state.fitted is not None else 0.0
     ci = float(state.fitted.data.get("ci", 0.683)) if state.fitted is not None else 0.683
     head = (f"<tr><th>term</th>{''.join(f'<th>{a}</th>' for a in state.fits)}</tr>")

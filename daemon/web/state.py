@@ -9,7 +9,7 @@ viewer who opens the page on Sunday sees Friday's temperatures and gaps:
 * every gap and event on a time line (the newest :data:`MAX_EVENTS`, with counts by reason
   that are never thinned);
 * the latest status map, header and Allan snapshot; the fit of the snapshot is made on
-  demand by the caller (it costs seconds, see :func:`avard.daemon.snapshots.fit_snapshot`).
+  demand by the caller (it costs seconds, see :func:`avard.daemon.service.snapshots.fit_snapshot`).
 
 Time on the run's axis is the sample index divided by the nominal ODR: the index continues
 across service restarts (the restart becomes a gap), so one axis holds the whole run.
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from avard.daemon.subscriber import Message, StreamStats
+from avard.daemon.net.subscriber import Message, StreamStats
 
 log = logging.getLogger(__name__)
 

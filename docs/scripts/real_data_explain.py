@@ -13,9 +13,9 @@ import sys
 import time
 from pathlib import Path
 
-from avard.core.explain import explain_file
-from avard.core.explain_report import term_changes
-from avard.core.model import SYMBOLS
+from avard.core.explain.engine import explain_file
+from avard.core.explain.report import term_changes
+from avard.core.model.terms import SYMBOLS
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[2] / "shared" / "data" / "imudata"

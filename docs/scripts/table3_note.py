@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests.support
 
-from avard.core.model import BI_FACTOR
-from avard.core.presets import TABLE3_K_PRINTED, make_config
+from avard.core.model.terms import BI_FACTOR
+from avard.core.sim.presets import TABLE3_K_PRINTED, make_config
 
 from tests.support.table3 import (
     DATASHEET_N_RANGE,
@@ -40,7 +40,7 @@ from tests.support.table3 import (
 
 if TYPE_CHECKING:
     import numpy as np
-    from avard.core.allan import AllanResult
+    from avard.core.allan.deviations import AllanResult
     from matplotlib.figure import Figure
 
     from tests.support.table3 import AxisAnalysis
@@ -213,7 +213,7 @@ def _model_adev(an: AxisAnalysis, tau: np.ndarray) -> np.ndarray:
     """The simulated Table 3 terms as the chip delivers them: white noise through the ODR/4
     filter (exact at whole numbers of samples only) plus B and K, in m/s²."""
     import numpy as np
-    from avard.core.model import lowpass_white_avar
+    from avard.core.model.terms import lowpass_white_avar
 
     from tests.support.table3 import model_adev
 

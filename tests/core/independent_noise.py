@@ -52,8 +52,8 @@ def study_record(rng: np.random.Generator, *, hours: float = 4.0, rate_hz: float
     """One record of the K-against-ramp study (issue 12): white + flicker + rate random walk,
     no ramp, K and B drawn uniformly; the fully overlapping ADEV at octave τ and avard's fit.
     Returns the truth and what the fit said about K and R."""
-    from avard.core.allan import oavar
-    from avard.core.fit import fit_noise
+    from avard.core.allan.deviations import oavar
+    from avard.core.model.fit import fit_noise
 
     n = int(hours * 3600 * rate_hz)
     K = float(rng.uniform(*k_range))

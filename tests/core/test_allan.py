@@ -5,7 +5,15 @@ from __future__ import annotations
 import allantools
 import numpy as np
 import pytest
-from avard.core.allan import AllanResult, allan_variance, avar, oavar, ohvar, pavar, tau_grid
+from avard.core.allan.deviations import (
+    AllanResult,
+    allan_variance,
+    avar,
+    oavar,
+    ohvar,
+    pavar,
+    tau_grid,
+)
 from avard.core.errors import DataError
 
 
@@ -223,8 +231,8 @@ def test_alpha_can_be_imposed_per_tau() -> None:
 
 def test_result_and_snapshot_dicts_round_trip() -> None:
     import msgpack
+    from avard.core.allan.streaming import StreamingAllan
     from avard.core.errors import FormatError
-    from avard.core.streaming import StreamingAllan
 
     y = np.random.default_rng(15).normal(size=(3000, 2))
     res = oavar(y, 10.0, names=["a", "b"])

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.allan import oavar
-from avard.core.errors import DataError
-from avard.core.noise_id import (
+from avard.core.allan.deviations import oavar
+from avard.core.allan.noise_id import (
     Lag1Ladder,
     alpha_from_b1,
     alpha_from_lag1,
@@ -15,6 +14,7 @@ from avard.core.noise_id import (
     identify_alpha,
     lag1_acf,
 )
+from avard.core.errors import DataError
 
 
 def power_law(alpha: int, n: int, rng: np.random.Generator) -> np.ndarray:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import allantools
 import numpy as np
-from avard.core.allan import oavar, pavar
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.deviations import oavar, pavar
+from avard.core.allan.streaming import StreamingAllan
 
 
 def test_real_run_streaming_equals_batch_and_allantools(imudata_dir: Path) -> None:

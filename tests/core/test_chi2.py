@@ -1,10 +1,10 @@
-"""core/chi2.py (numpy-only χ² quantiles for the service) against scipy.special."""
+"""core/allan/chi2.py (numpy-only χ² quantiles for the service) against scipy.special."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.chi2 import chi2_ppf, gammainc_pq
+from avard.core.allan.chi2 import chi2_ppf, gammainc_pq
 from scipy.special import gammainc, gammaincc, gammaincinv
 
 K = np.concatenate([np.geomspace(0.2, 1e9, 300), [1.0, 2.0, 3.0, 99.9, 100.0, 100.1]])
@@ -44,7 +44,7 @@ def test_the_service_path_imports_no_scipy() -> None:
     import subprocess
     import sys
 
-    code = ("import sys; from avard.core.streaming import StreamingAllan; import numpy as np;"
+    code = ("import sys; from avard.core.allan.streaming import StreamingAllan; import numpy as np;"
             "s = StreamingAllan(3, 125.0);"
             "s.update(np.random.default_rng(1).normal(size=(5000, 3)));"
             "s.snapshot(); print(sorted(m for m in sys.modules if m.startswith('scipy')))")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import allantools.ci as atci
 import numpy as np
 import pytest
-from avard.core.allan import allan_variance, oavar
-from avard.core.edf import chi2_interval, edf_greenhall
+from avard.core.allan.deviations import allan_variance, oavar
+from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.errors import DataError
 
 

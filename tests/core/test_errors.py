@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 
 import pytest
-from avard.core import sim_io
 from avard.core.errors import AvardError, OutputError, describe_os_error
-from avard.core.presets import make_config
+from avard.core.sim import sim_io
+from avard.core.sim.presets import make_config
 
 
 @pytest.mark.parametrize(("code", "advice"), [

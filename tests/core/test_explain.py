@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 import pytest
-from avard.core.causes import min_detectable_step, min_detectable_warmup
-from avard.core.explain import explain_file
+from avard.core.explain.causes import min_detectable_step, min_detectable_warmup
+from avard.core.explain.engine import explain_file
+from avard.core.explain.thermal_fit import min_detectable_tempco
 from avard.core.report import analyze
-from avard.core.thermal_fit import min_detectable_tempco
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -148,7 +148,7 @@ def test_bias_step_found_where_it_is(tmp_path):
 
 def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
     """Long records scan the lags on at most SCAN_POINTS block means; the result holds."""
-    from avard.core import thermal_fit
+    from avard.core.explain import thermal_fit
 
     c = _three_times_minimum(AMBIENT, 600.0)
     path, _ = _file(tmp_path, 31, Truth(coefficient=(c, 0.0, 0.0), lag_s=600.0),

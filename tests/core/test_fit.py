@@ -7,11 +7,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from avard.core import model as M
-from avard.core.allan import allan_variance
+from avard.core.allan.deviations import allan_variance
 from avard.core.errors import FitError
-from avard.core.fit import fit_noise, slope_method
-from avard.core.model import TERMS
+from avard.core.model import terms as M
+from avard.core.model.fit import fit_noise, slope_method
+from avard.core.model.terms import TERMS
 from scipy import signal
 
 # ---------------------------------------------------------------------------------------------
@@ -171,7 +171,7 @@ def test_model_avar_is_the_sum_of_its_components() -> None:
 
 
 def test_streaming_result_fits_like_batch() -> None:
-    from avard.core.streaming import StreamingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
     rng = np.random.default_rng(16)
     rate = 100.0

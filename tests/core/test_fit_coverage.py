@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core import model as M
-from avard.core.allan import allan_variance
-from avard.core.fit import fit_noise
+from avard.core.allan.deviations import allan_variance
+from avard.core.model import terms as M
+from avard.core.model.fit import fit_noise
 
 from .test_fit import octave_oavar, record
 

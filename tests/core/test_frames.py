@@ -5,8 +5,8 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 import pytest
-from avard.core import frames as F
 from avard.core.errors import FormatError
+from avard.core.io import frames as F
 
 
 def _examples() -> list[dict]:

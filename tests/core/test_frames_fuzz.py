@@ -9,8 +9,8 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 import pytest
-from avard.core import frames as F
 from avard.core.errors import FormatError
+from avard.core.io import frames as F
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -1,5 +1,5 @@
-"""The held-out gain of `avard explain` (core/holdout.py): models refitted on one half of the
-record predict the other (or, with a second record, fitted on one predict the other), misfit
+"""The held-out gain of `avard explain` (core/explain/holdout.py): models refitted on one half
+of the record predict the other (or, with a second record, fitted on one predict the other), misfit
 measured by the generalised χ² with fit_noise's covariance. Records from the generator
 written apart from the simulator (tests/support/hidden.py)."""
 
@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 from avard.core.errors import DataError
-from avard.core.explain import explain_file
-from avard.core.fit import fit_noise
-from avard.core.holdout import DEFINITION, _avar, heldout_chi2
+from avard.core.explain.engine import explain_file
+from avard.core.explain.holdout import DEFINITION, _avar, heldout_chi2
+from avard.core.model.fit import fit_noise
 
 from tests.support.hidden import Truth, make_record, save
 

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from avard.core import model as M
 from avard.core.errors import FitError
+from avard.core.model import terms as M
 from scipy import signal
 from scipy.integrate import quad
 
@@ -118,7 +118,7 @@ def test_lowpass_white_bends_short_tau_and_tends_to_white() -> None:
     white = N**2 / (m / fs)
     assert np.all(v[:3] < white[:3] * 0.97)  # the filter removes variance at a few samples
     assert v[-1] == pytest.approx(white[-1], rel=2e-3)
-    # the same filter on simulated white noise (what core/simulate.py does)
+    # the same filter on simulated white noise (what core/sim/simulate.py does)
     rng = np.random.default_rng(1)
     b, a = signal.butter(2, 0.5)
     y = signal.lfilter(b, a, N * math.sqrt(fs) * rng.standard_normal(600_000))

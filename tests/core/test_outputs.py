@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 from avard.core.errors import OutputError
-from avard.core.outputs import check_output_dir, check_output_file, free_bytes
+from avard.core.io.outputs import check_output_dir, check_output_file, free_bytes
 
 
 def test_a_good_file_path_passes_and_leaves_nothing_behind(tmp_path: Path) -> None:

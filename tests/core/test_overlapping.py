@@ -13,9 +13,9 @@ from pathlib import Path
 import allantools
 import numpy as np
 import pytest
-from avard.core.allan import oavar
+from avard.core.allan.deviations import oavar
+from avard.core.allan.overlapping import PIECE, OverlappingAllan
 from avard.core.errors import DataError
-from avard.core.overlapping import PIECE, OverlappingAllan
 
 from .test_allan import STABLE32, nbs14_1000
 from .test_allan_noise_id import power_law

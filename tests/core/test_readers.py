@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from avard.core.errors import DataError, FormatError
-from avard.core.readers import Record, iter_blocks, load_record, record_info
+from avard.core.io.readers import Record, iter_blocks, load_record, record_info
 
 
 def _npz(path: Path, compressed: bool = False, **arrays) -> Path:
@@ -151,7 +151,7 @@ def test_csv_errors_name_the_problem(tmp_path: Path) -> None:
 
 
 def test_recording_dispatch_is_lazy_and_reads_avard_recordings(tmp_path: Path) -> None:
-    """A directory or .avr goes to avard.core.recording; a directory without a recording
+    """A directory or .avr goes to avard.core.io.recording; a directory without a recording
     says so."""
     empty = tmp_path / "rec"
     empty.mkdir()

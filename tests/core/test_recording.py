@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core import frames
 from avard.core.errors import FormatError
-from avard.core.recording import (
+from avard.core.io import frames
+from avard.core.io.recording import (
     FRAME_HEADER,
     AllanFeed,
     RecordingReader,
@@ -146,7 +146,7 @@ def test_allan_feed_holds_temperatures_from_their_index_and_waits_for_all() -> N
 
 
 def test_last_record_reads_from_the_end_and_survives_damage(tmp_path: Path) -> None:
-    from avard.core.recording import first_record, frame_offsets, last_record
+    from avard.core.io.recording import first_record, frame_offsets, last_record
 
     recs = [_header()] + [frames.raw_record("r1", k, 10 * k, np.full((10, 3), k, np.int32),
                                             0.0, 0.0) for k in range(5)]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
-from avard.core.recording import (
+from avard.core.io.recording import (
     MAX_FRAME_BYTES,
     _crc_of_ranges,
     _PrefixCrc,

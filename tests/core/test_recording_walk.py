@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 import pytest
-from avard.core import frames
 from avard.core.errors import FormatError
-from avard.core.recording import (
+from avard.core.io import frames
+from avard.core.io.recording import (
     RecordingReader,
     WalkReport,
     load_recording,
@@ -21,7 +21,7 @@ from avard.core.recording import (
     walk,
 )
 from avard.core.report import analyze
-from avard.daemon.recorder import Recorder
+from avard.daemon.service.recorder import Recorder
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -178,7 +178,7 @@ def test_analyze_splits_at_restarts_exactly_as_the_service_accumulators(tmp_path
 
 
 def test_records_waiting_for_a_header_are_bounded_and_reported(tmp_path, monkeypatch):
-    import avard.core.recording as recording
+    import avard.core.io.recording as recording
 
     monkeypatch.setattr(recording, "MAX_HEADERLESS_SAMPLES", 10 * BLOCK)
     _write_run(tmp_path, "20260101T000000Z-a", 0, 40, seed=9, header_every_s=8.0)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from avard.core.errors import DataError
-from avard.core.model import TERMS, UNITS
+from avard.core.model.terms import TERMS, UNITS
 from avard.core.report import (
     WelchAccumulator,
     adev_csv,
@@ -196,7 +196,7 @@ def test_recording_of_the_service_is_analysed_with_its_gap(tmp_path: Path) -> No
     """An avard recording (header + raw count blocks + a gap record, as the service writes it)
     is read through the recording reader, split at the gap, and modelled with the ADXL355
     filter (ODR/4) because it is the chip's own data."""
-    from avard.core import frames, recording
+    from avard.core.io import frames, recording
     from scipy import signal
 
     rng = np.random.default_rng(21)

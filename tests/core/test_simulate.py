@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from avard.core.allan import oavar
+from avard.core.allan.deviations import oavar
 from avard.core.errors import ConfigError
-from avard.core.model import BI_FACTOR, lowpass_white_avar
-from avard.core.noise_gen import ar1_avar, flicker_ladder, lerp, white_plus_ar1_filter
-from avard.core.presets import G0, PRESETS, make_config, parse_override
-from avard.core.simulate import (
+from avard.core.model.terms import BI_FACTOR, lowpass_white_avar
+from avard.core.sim.noise_gen import ar1_avar, flicker_ladder, lerp, white_plus_ar1_filter
+from avard.core.sim.presets import G0, PRESETS, make_config, parse_override
+from avard.core.sim.simulate import (
     COUNTS_MAX,
     COUNTS_MIN,
     SensorSimulator,

@@ -8,10 +8,10 @@ import os
 import numpy as np
 import pytest
 from avard.core.errors import DataError
-from avard.core.presets import make_config
-from avard.core.sim_io import write_npz
-from avard.core.simulate import SensorSimulator, simulate_record
-from avard.core.thermal import DS18B20_STEP_C, ds18b20_aligned, ds18b20_readings
+from avard.core.sim.presets import make_config
+from avard.core.sim.sim_io import write_npz
+from avard.core.sim.simulate import SensorSimulator, simulate_record
+from avard.core.sim.thermal import DS18B20_STEP_C, ds18b20_aligned, ds18b20_readings
 
 
 def test_npz_written_in_chunks_equals_in_memory_record(tmp_path) -> None:

@@ -4,8 +4,8 @@ giving the table's values back (N, B within the paper's 4.7 %; K where the recor
 from __future__ import annotations
 
 import pytest
-from avard.core.model import BI_FACTOR
-from avard.core.presets import TABLE3_B, TABLE3_K_PRINTED, TABLE3_N, make_config
+from avard.core.model.terms import BI_FACTOR
+from avard.core.sim.presets import TABLE3_B, TABLE3_K_PRINTED, TABLE3_N, make_config
 
 from tests.support.table3 import (
     PAPER_MAX_ERROR,

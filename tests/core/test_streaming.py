@@ -5,9 +5,9 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 import pytest
-from avard.core.allan import allan_variance, pavar
+from avard.core.allan.deviations import allan_variance, pavar
+from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
 from avard.core.errors import DataError, FormatError
-from avard.core.streaming import AllanSnapshot, StreamingAllan
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from avard.core.explain import SlowView, block_size
-from avard.core.thermal_fit import lag_filter, signal_avar_on
+from avard.core.explain.engine import SlowView, block_size
+from avard.core.explain.thermal_fit import lag_filter, signal_avar_on
 
 
 @pytest.mark.parametrize("lag_s", [30.0, 300.0, 1200.0])

@@ -7,7 +7,7 @@ fake_w1_tree``).
     tree.set_temperature(tree.ids["plate"], 25.0)   # or set_crc_failure, set_reset_value,
                                                     # set_all_zero, remove, restore
 
-The files carry real scratchpad bytes and CRC-8 (see avard.daemon.w1_sysfs), so w1thermsensor
+The files carry real scratchpad bytes and CRC-8 (see avard.daemon.hw.w1_sysfs), so w1thermsensor
 itself parses them exactly as on a Raspberry Pi.
 """
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from avard.daemon.w1_sysfs import SysfsTree
+from avard.daemon.hw.w1_sysfs import SysfsTree
 
 #: Fixed, valid 1-Wire serials for named test sensors.
 SERIALS = ("0316a2797cff", "0417b3808d00", "05a1c4919e11", "06b2d5a2af22")

@@ -7,9 +7,9 @@ import logging
 import numpy as np
 import pytest
 from avard.core.errors import BusError, ConfigError, DeviceStalledError, HardwareError
-from avard.daemon import registers as R
-from avard.daemon.adxl355 import Adxl355, decode_counts, decode_counts_naive, decode_fifo
-from avard.daemon.emulator import (
+from avard.daemon.hw import registers as R
+from avard.daemon.hw.adxl355 import Adxl355, decode_counts, decode_counts_naive, decode_fifo
+from avard.daemon.hw.emulator import (
     EmulatedAdxl355,
     FakeSMBus,
     FakeSpiDev,
@@ -18,7 +18,7 @@ from avard.daemon.emulator import (
     counter_source,
     encode_entries,
 )
-from avard.daemon.transport import I2cBus, SpiBus
+from avard.daemon.hw.transport import I2cBus, SpiBus
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -475,7 +475,7 @@ def test_drains_never_invent_samples_and_report_every_jump(steps):
 
 
 def test_temperature_intercept_calibration_against_a_reference():
-    from avard.daemon.adxl355 import fit_temperature_intercept
+    from avard.daemon.hw.adxl355 import fit_temperature_intercept
 
     rng = np.random.default_rng(3)
     state = {"t": 25.0}
@@ -534,7 +534,7 @@ def test_close_puts_the_part_in_standby_and_survives_a_dead_bus():
 def test_repeated_faults_do_not_flood_the_log(caplog):
     dev, emu, _ = rig()
     emu.faults.fail_always()
-    with caplog.at_level(logging.WARNING, logger="avard.daemon.adxl355"):
+    with caplog.at_level(logging.WARNING, logger="avard.daemon.hw.adxl355"):
         for _ in range(200):
             with pytest.raises(BusError):
                 dev.drain()

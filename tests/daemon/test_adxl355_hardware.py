@@ -12,9 +12,9 @@ import time
 
 import numpy as np
 import pytest
-from avard.daemon.adxl355 import Adxl355
-from avard.daemon.timebase import TimeBase
-from avard.daemon.transport import open_bus
+from avard.daemon.hw.adxl355 import Adxl355
+from avard.daemon.hw.transport import open_bus
+from avard.daemon.service.timebase import TimeBase
 
 pytestmark = pytest.mark.hardware
 
@@ -68,7 +68,7 @@ def test_self_test_at_8g(dev):
 
 
 def test_ds18b20_on_the_bus_if_any():
-    from avard.daemon import ds18b20
+    from avard.daemon.hw import ds18b20
 
     ids = ds18b20.discover()
     if not ids:

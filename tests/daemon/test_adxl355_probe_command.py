@@ -70,9 +70,9 @@ def test_probe_says_what_it_checked_and_what_it_skipped(capsys):
 
 
 def test_probe_takes_its_backend_and_start_up_from_the_rig_factory(capsys, monkeypatch):
-    """$AVARD_BACKEND=simulate:PRESET probes the simulated rig of daemon/rig.py, through the
+    """$AVARD_BACKEND=simulate:PRESET probes the simulated rig of daemon/hw/rig.py, through the
     rig's one start-up sequence (with the self-test), like `avard run` would use it."""
-    from avard.daemon import rig
+    from avard.daemon.hw import rig
 
     calls = []
     real = rig.bring_up

@@ -7,7 +7,7 @@ import os
 import threading
 
 import pytest
-from avard.daemon import thread_priority as TP
+from avard.daemon.hw import thread_priority as TP
 
 
 def test_raises_only_the_calling_thread_or_says_why_not(caplog):

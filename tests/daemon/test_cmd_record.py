@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zmq
-from avard.core import frames as F
 from avard.core.errors import DataError, FormatError
-from avard.core.recording import RecordingReader
+from avard.core.io import frames as F
+from avard.core.io.recording import RecordingReader
 from avard.daemon import cli
 from avard.daemon.commands import record
-from avard.daemon.publisher import RequestServer
+from avard.daemon.net.publisher import RequestServer
 
 SCALE = 3.9e-6 * 9.80665
 
@@ -165,11 +165,11 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     """The service over the emulated sensor; `avard record`'s archiver as a remote subscriber.
     The archive holds the same samples as the service's recording, and its offline Allan
     variance equals the recording's."""
-    from avard.core.recording import load_recording, replay_allan
+    from avard.core.io.recording import load_recording, replay_allan
     from avard.daemon.commands.record import StreamArchiver
     from avard.daemon.config import load_config
-    from avard.daemon.simulation import simulated_service
-    from avard.daemon.subscriber import Subscriber
+    from avard.daemon.hw.simulation import simulated_service
+    from avard.daemon.net.subscriber import Subscriber
 
     cfg = load_config(None, **{
         "recording.data_dir": str(tmp_path / "rec"),

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core import frames
-from avard.core.recording import RecordingReader, replay_allan, scan_frames
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, replay_allan, scan_frames
 from avard.daemon.cli import main
 
 CONFIG = """
@@ -130,10 +130,10 @@ def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
     backpressure), with only /dev/spidev replaced by the register-level emulator."""
     import argparse
 
-    from avard.daemon import emulator, transport
     from avard.daemon.commands import run as run_cmd
     from avard.daemon.config import load_config
     from avard.daemon.config_types import Config
+    from avard.daemon.hw import emulator, transport
 
     emu = emulator.EmulatedAdxl355(emulator.counter_source(), emulator.VirtualClock(speed=1.0))
     monkeypatch.setattr(transport, "open_bus",
@@ -159,10 +159,10 @@ from avard.daemon.cli import build_parser
 build_parser("run")                       # what `avard run` imports before it runs
 from avard.daemon import blas_threads
 from avard.daemon.config import load_config
-from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.adxl355 import Adxl355
-from avard.daemon.service import Service
-from avard.daemon.transport import SpiBus
+from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.hw.adxl355 import Adxl355
+from avard.daemon.service.supervisor import Service
+from avard.daemon.hw.transport import SpiBus
 clock = VirtualClock()
 dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=125.0); dev.start()

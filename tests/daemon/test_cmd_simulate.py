@@ -78,8 +78,8 @@ def test_a_record_larger_than_the_free_space_is_refused_with_the_numbers(
         tmp_path, capsys) -> None:
     import shutil
 
-    from avard.core.presets import make_config
-    from avard.core.sim_io import npz_size
+    from avard.core.sim.presets import make_config
+    from avard.core.sim.sim_io import npz_size
 
     free = shutil.disk_usage(tmp_path).free
     cfg = make_config("quiet-lab")
@@ -93,8 +93,8 @@ def test_a_record_larger_than_the_free_space_is_refused_with_the_numbers(
 
 
 def test_the_size_estimate_is_what_is_written(tmp_path) -> None:
-    from avard.core.presets import make_config
-    from avard.core.sim_io import npz_size
+    from avard.core.sim.presets import make_config
+    from avard.core.sim.sim_io import npz_size
 
     assert main(["simulate", "--hours", "0.02", "--seed", "2",
                  "--out", str(tmp_path / "a.npz")]) == 0

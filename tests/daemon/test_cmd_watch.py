@@ -9,12 +9,12 @@ import threading
 import numpy as np
 import pytest
 import zmq
-from avard.core import frames as F
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames as F
 from avard.daemon import cli
 from avard.daemon.commands.watch import WatchView, fmt_duration, time_to_target
-from avard.daemon.publisher import RequestServer
-from avard.daemon.subscriber import StreamStats
+from avard.daemon.net.publisher import RequestServer
+from avard.daemon.net.subscriber import StreamStats
 
 RATE = 125.0
 SIGMA = 1e-3  # m/s² white noise per sample → VRW = σ/√rate

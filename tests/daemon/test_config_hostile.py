@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from avard.daemon import config
 from avard.daemon.cli import main
-from avard.daemon.curve import make_keypair
+from avard.daemon.net.curve import make_keypair
 
 
 def _refused(capsys: pytest.CaptureFixture, argv: list[str], *words: str) -> str:

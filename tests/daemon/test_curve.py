@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 import zmq
 import zmq.auth
-from avard.core import frames as F
 from avard.core.errors import ConfigError, NetworkError
-from avard.daemon.curve import (
+from avard.core.io import frames as F
+from avard.daemon.net.curve import (
     CurveClientConfig,
     CurveServerConfig,
     load_public_key,
     load_secret_key,
     make_keypair,
 )
-from avard.daemon.publisher import Publisher, RequestServer
-from avard.daemon.subscriber import Subscriber
+from avard.daemon.net.publisher import Publisher, RequestServer
+from avard.daemon.net.subscriber import Subscriber
 
 LOCAL = "tcp://127.0.0.1:*"
 

@@ -17,7 +17,7 @@ def test_demo_short_run_writes_report_and_plot(tmp_path: Path,
     assert "max relative difference" in text
     assert "velocity_random_walk" in text and "m/s/sqrt(s)" in text
     # each term is shown next to the simulator's true value, and N comes back within 2 %
-    from avard.core.presets import make_config
+    from avard.core.sim.presets import make_config
 
     n_true = make_config("quiet-lab").velocity_random_walk[0]
     n_line = next(ln for ln in text.splitlines() if ln.strip().startswith("velocity_random_walk"))

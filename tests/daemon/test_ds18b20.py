@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 from avard.core.errors import ConfigError
-from avard.daemon import ds18b20 as D
-from avard.daemon.emulator import VirtualClock
-from avard.daemon.w1_sysfs import crc8_maxim, scratchpad, w1_slave_text
+from avard.daemon.hw import ds18b20 as D
+from avard.daemon.hw.emulator import VirtualClock
+from avard.daemon.hw.w1_sysfs import crc8_maxim, scratchpad, w1_slave_text
 
 from .fake_w1 import fake_w1_tree
 
@@ -66,7 +66,7 @@ def test_faults_give_nan_with_a_status_and_are_logged_once(tmp_path, caplog):
         (tree.set_all_zero, D.NOT_READY),
         (tree.remove, D.MISSING),
     ]
-    with caplog.at_level(logging.WARNING, logger="avard.daemon.ds18b20"):
+    with caplog.at_level(logging.WARNING, logger="avard.daemon.hw.ds18b20"):
         for make_fault, status in cases:
             if status == D.MISSING:
                 tree.set_temperature(sid, 30.0)

@@ -8,9 +8,9 @@ import time
 import numpy as np
 import pytest
 from avard.core.errors import BusError
-from avard.daemon import registers as R
-from avard.daemon.adxl355 import decode_counts
-from avard.daemon.emulator import (
+from avard.daemon.hw import registers as R
+from avard.daemon.hw.adxl355 import decode_counts
+from avard.daemon.hw.emulator import (
     EmulatedAdxl355,
     FakeSpiDev,
     VirtualClock,
@@ -19,7 +19,7 @@ from avard.daemon.emulator import (
     counter_source,
     encode_entries,
 )
-from avard.daemon.transport import SpiBus
+from avard.daemon.hw.transport import SpiBus
 
 A = R.ADDR
 

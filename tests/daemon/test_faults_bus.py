@@ -20,15 +20,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from avard.core.recording import RecordingReader, replay_allan
-from avard.daemon import registers as R
-from avard.daemon.adxl355 import Adxl355
+from avard.core.io.recording import RecordingReader, replay_allan
 from avard.daemon.config import load_config
-from avard.daemon.emulator import EmulatedAdxl355, FakeSMBus, VirtualClock, counter_source
-from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated
-from avard.daemon.subscriber import Subscriber
-from avard.daemon.transport import I2cBus
+from avard.daemon.hw import registers as R
+from avard.daemon.hw.adxl355 import Adxl355
+from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSMBus, VirtualClock, counter_source
+from avard.daemon.hw.simulation import build_simulated
+from avard.daemon.hw.transport import I2cBus
+from avard.daemon.net.subscriber import Subscriber
+from avard.daemon.service.supervisor import Service
 
 RATE = 125.0
 

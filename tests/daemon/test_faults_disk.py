@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from avard.core.recording import RecordingReader
-from avard.daemon.recorder import FileOps, Recorder
+from avard.core.io.recording import RecordingReader
+from avard.daemon.service.recorder import FileOps, Recorder
 
 from .test_faults_bus import RATE, run_rig
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from avard.daemon.ds18b20 import Ds18b20Bank
+from avard.daemon.hw.ds18b20 import Ds18b20Bank
 
 from .fake_w1 import fake_w1_tree
 from .test_faults_bus import (

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core import frames
-from avard.core.recording import RecordingReader, replay_allan, scan_frames
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, replay_allan, scan_frames
 
 RATE = 125.0
 FSYNC_S = 1.0

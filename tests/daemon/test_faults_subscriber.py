@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 import zmq
-from avard.core import frames
-from avard.daemon.publisher import Publisher
-from avard.daemon.subscriber import LossTracker
+from avard.core.io import frames
+from avard.daemon.net.publisher import Publisher
+from avard.daemon.net.subscriber import LossTracker
 
 from .test_faults_bus import Listener, run_rig
 

@@ -1,4 +1,4 @@
-"""Hostile input against the record decoder (avard.core.frames): hypothesis fuzzing.
+"""Hostile input against the record decoder (avard.core.io.frames): hypothesis fuzzing.
 
 Every decoder must, for any bytes at all, either return a valid record or raise FormatError
 with a message saying what is wrong: no other exception, no hang, and no allocation that grows
@@ -23,8 +23,8 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
-from avard.core import frames
 from avard.core.errors import FormatError
+from avard.core.io import frames
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 

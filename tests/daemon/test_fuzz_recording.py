@@ -1,4 +1,4 @@
-"""Hostile input against the recording reader (avard.core.recording): hypothesis fuzzing.
+"""Hostile input against the recording reader (avard.core.io.recording): hypothesis fuzzing.
 
 Segment files are damaged the ways disks and power cuts damage them (truncation, bit flips,
 zero-filled or garbage blocks, lengths claiming 4 GB) and built by a hostile writer (frames with
@@ -18,8 +18,8 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
-from avard.core import frames, recording
 from avard.core.errors import AvardError, FormatError
+from avard.core.io import frames, recording
 from hypothesis import given
 from hypothesis import strategies as st
 

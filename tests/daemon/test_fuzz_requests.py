@@ -17,10 +17,10 @@ from typing import Any
 import msgpack
 import pytest
 import zmq
-from avard.core import frames
-from avard.daemon.publisher import RequestServer
-from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated
+from avard.core.io import frames
+from avard.daemon.hw.simulation import build_simulated
+from avard.daemon.net.publisher import RequestServer
+from avard.daemon.service.supervisor import Service
 from hypothesis import given
 from hypothesis import strategies as st
 

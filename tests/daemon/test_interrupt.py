@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from avard.core.errors import ConfigError
-from avard.core.recording import RecordingReader
-from avard.daemon.adxl355 import Adxl355
+from avard.core.io.recording import RecordingReader
 from avard.daemon.config import load_config
-from avard.daemon.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.interrupt import EmulatedInterruptPin, GpiodPin, parse_spec
-from avard.daemon.pacing import watermark_sets, watermark_settings
-from avard.daemon.simulation import simulated_service
-from avard.daemon.transport import SpiBus
+from avard.daemon.hw.adxl355 import Adxl355
+from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.hw.interrupt import EmulatedInterruptPin, GpiodPin, parse_spec
+from avard.daemon.hw.simulation import simulated_service
+from avard.daemon.hw.transport import SpiBus
+from avard.daemon.service.pacing import watermark_sets, watermark_settings
 
 
 def _rig(use_int1: bool) -> tuple[Adxl355, EmulatedAdxl355, VirtualClock]:

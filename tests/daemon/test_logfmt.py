@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from avard.daemon.logfmt import priority_of
+from avard.daemon.service.logfmt import priority_of
 
 
 def test_priorities_follow_syslog() -> None:

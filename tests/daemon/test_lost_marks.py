@@ -10,12 +10,12 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
-from avard.core import frames
-from avard.core.recording import AllanFeed
-from avard.daemon.ring import Ring
+from avard.core.io import frames
+from avard.core.io.recording import AllanFeed
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.header import RunHeader
 from avard.daemon.service.recorder_stage import RecorderStage
+from avard.daemon.service.ring import Ring
 
 
 class Sink:

@@ -10,16 +10,16 @@ import msgpack
 import numpy as np
 import pytest
 import zmq
-from avard.core import frames as F
 from avard.core.errors import ConfigError, DataError, FormatError
-from avard.daemon.publisher import (
+from avard.core.io import frames as F
+from avard.daemon.net.publisher import (
     DEFAULT_PUB_ENDPOINT,
     DEFAULT_REQUEST_ENDPOINT,
     Publisher,
     RequestServer,
     is_loopback,
 )
-from avard.daemon.subscriber import LossTracker
+from avard.daemon.net.subscriber import LossTracker
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -254,7 +254,7 @@ def test_random_requests_over_the_socket(ctx: zmq.Context, server: RequestServer
 
 
 def test_ipv6_loopback() -> None:
-    from avard.daemon.subscriber import Subscriber
+    from avard.daemon.net.subscriber import Subscriber
 
     try:
         pub = Publisher("tcp://[::1]:*", "v6")

@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from avard.core import frames
-from avard.core.recording import RecordingReader
-from avard.daemon.recorder import FileOps, Recorder
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader
+from avard.daemon.service.recorder import FileOps, Recorder
 
 
 class Clock:

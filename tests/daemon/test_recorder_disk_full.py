@@ -19,9 +19,9 @@ from typing import IO, Any
 
 import numpy as np
 import pytest
-from avard.core import frames
-from avard.core.recording import RecordingReader, load_recording
-from avard.daemon.recorder import FileOps, Recorder, write_atomic
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, load_recording
+from avard.daemon.service.recorder import FileOps, Recorder, write_atomic
 
 RATE = 125.0
 BLOCK = 100

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 from avard.core.errors import ConfigError
-from avard.daemon import registers as R
+from avard.daemon.hw import registers as R
 
 
 def test_addresses_and_resets_match_the_datasheet_table():
@@ -74,9 +74,10 @@ def test_importing_the_hardware_layer_touches_no_hardware():
     import sys
 
     code = ("import sys\n"
-            "import avard.daemon.registers, avard.daemon.transport, avard.daemon.adxl355\n"
-            "import avard.daemon.timebase, avard.daemon.emulator, avard.daemon.ds18b20\n"
-            "import avard.daemon.w1_sysfs, avard.daemon.thread_priority\n"
+            "import avard.daemon.hw.registers, avard.daemon.hw.transport, avard.daemon.hw.adxl355\n"
+            "import avard.daemon.service.timebase, avard.daemon.hw.emulator\n"
+            "import avard.daemon.hw.ds18b20\n"
+            "import avard.daemon.hw.w1_sysfs, avard.daemon.hw.thread_priority\n"
             "import avard.daemon.commands.probe\n"
             "print(sorted(m for m in ('spidev', 'smbus2', 'w1thermsensor') if m in sys.modules))")
     env = {k: v for k, v in os.environ.items() if k != "W1THERMSENSOR_NO_KERNEL_MODULE"}

@@ -10,9 +10,9 @@ import msgpack
 import numpy as np
 import pytest
 import zmq
-from avard.core import frames as F
-from avard.daemon.publisher import REPLY_HWM, RequestServer
-from avard.daemon.snapshots import SnapshotBoard
+from avard.core.io import frames as F
+from avard.daemon.net.publisher import REPLY_HWM, RequestServer
+from avard.daemon.service.snapshots import SnapshotBoard
 
 LOCAL = "tcp://127.0.0.1:*"
 

@@ -8,18 +8,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from avard.core import frames
-from avard.core.recording import RecordingReader, load_recording, segment_files
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, load_recording, segment_files
 from avard.daemon.config import load_config
-from avard.daemon.recorder import (
+from avard.daemon.hw.simulation import build_simulated
+from avard.daemon.service.recorder import (
     LastRecorded,
     Recorder,
     last_recorded,
     new_run_id,
     restart_gap,
 )
-from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated
+from avard.daemon.service.supervisor import Service
 
 
 def _run_service(data: Path, seconds: float, *, clock_back_s: float = 0.0) -> Service:

@@ -4,7 +4,7 @@ Runs that record samples but are SIGKILLed before their first checkpoint leave t
 file of an earlier run behind. The next start must replay everything recorded after that
 checkpoint, including the killed runs' samples; the final accumulators then equal the
 offline Allan of the whole recording and an independent numpy overlapping AVAR (NIST SP 1065
-eq. 12 with the stride of ``avard.core.streaming``), to 1e-12.
+eq. 12 with the stride of ``avard.core.allan.streaming``), to 1e-12.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from avard.core import frames
-from avard.core.recording import RecordingReader, load_recording, replay_allan, scan_frames
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, load_recording, replay_allan, scan_frames
 
 from .test_faults_sigkill import NotifySocket, _spawn
 
@@ -137,7 +137,7 @@ def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path
     """Not at once (the Allan worker's timers used to start at t = 0 when its first chunk held
     only marks, so every run checkpointed immediately)."""
     from avard.daemon.config import load_config
-    from avard.daemon.simulation import simulated_service
+    from avard.daemon.hw.simulation import simulated_service
 
     cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
                                "publish.enabled": False, "sensor.poll_hz": 1.0,

@@ -1,4 +1,4 @@
-"""daemon/rig.py: one place chooses the backend (argument, then $AVARD_BACKEND, then hardware)."""
+"""daemon/hw/rig.py: one place chooses the backend (argument, $AVARD_BACKEND, then hardware)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from avard.core.errors import ConfigError
 from avard.daemon.config import load_config
 from avard.daemon.config_types import Config
-from avard.daemon.rig import BACKEND_ENV, build_rig, choose_backend
+from avard.daemon.hw.rig import BACKEND_ENV, build_rig, choose_backend
 
 
 def test_backend_precedence_and_bad_values(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -6,7 +6,7 @@ import threading
 
 import numpy as np
 import pytest
-from avard.daemon.ring import Ring
+from avard.daemon.service.ring import Ring
 
 
 def _block(i0: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -8,7 +8,7 @@ import threading
 import uuid
 
 import pytest
-from avard.daemon.sdnotify import Notifier
+from avard.daemon.service.sdnotify import Notifier
 
 
 def _recv_fields(sock: socket.socket) -> dict[str, str]:

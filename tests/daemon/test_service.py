@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 import pytest
 from avard.core.errors import NetworkError
-from avard.core.recording import RecordingReader, load_recording, replay_allan
+from avard.core.io.recording import RecordingReader, load_recording, replay_allan
 from avard.daemon.config import load_config
-from avard.daemon.service import Service
-from avard.daemon.simulation import build_simulated, simulated_service
-from avard.daemon.subscriber import Subscriber
+from avard.daemon.hw.simulation import build_simulated, simulated_service
+from avard.daemon.net.subscriber import Subscriber
+from avard.daemon.service.supervisor import Service
 
 
 def _cfg(data_dir: Path, **extra: Any) -> dict:
@@ -230,8 +230,8 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
 
 def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> None:
     """Real w1thermsensor over a fake sysfs tree, in the bank's own threads."""
-    from avard.daemon.ds18b20 import Ds18b20Bank
-    from avard.daemon.w1_sysfs import SysfsTree
+    from avard.daemon.hw.ds18b20 import Ds18b20Bank
+    from avard.daemon.hw.w1_sysfs import SysfsTree
 
     tree = SysfsTree(tmp_path / "w1")
     sid = tree.add("0316a2797cff", 21.5)
@@ -263,7 +263,7 @@ def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
         tmp_path: Path) -> None:
     import socket
 
-    from avard.daemon.sdnotify import Notifier
+    from avard.daemon.service.sdnotify import Notifier
 
     path = str(tmp_path / "notify.sock")
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
@@ -313,7 +313,7 @@ def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
 def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: Path) -> None:
     import errno
 
-    from avard.daemon.recorder import FileOps, Recorder
+    from avard.daemon.service.recorder import FileOps, Recorder
 
     class Disk(FileOps):
         full = False
@@ -374,7 +374,7 @@ def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: 
 
 
 def test_curve_section_secures_both_sockets_of_the_service(tmp_path: Path) -> None:
-    from avard.daemon.curve import CurveClientConfig, make_keypair
+    from avard.daemon.net.curve import CurveClientConfig, make_keypair
 
     server_pub, server_sec = make_keypair(tmp_path / "server", "server")
     auth = tmp_path / "authorized"

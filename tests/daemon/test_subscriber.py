@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core import frames as F
 from avard.core.errors import ConfigError, NetworkError
-from avard.daemon.publisher import Publisher, RequestServer
-from avard.daemon.subscriber import LossTracker, Subscriber, request_endpoint_for
+from avard.core.io import frames as F
+from avard.daemon.net.publisher import Publisher, RequestServer
+from avard.daemon.net.subscriber import LossTracker, Subscriber, request_endpoint_for
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -135,7 +135,7 @@ def test_garbage_from_a_publisher_is_counted_not_fatal() -> None:
 def test_command_line_client_arguments(tmp_path) -> None:
     import argparse
 
-    from avard.daemon.subscriber import add_client_arguments, subscriber_from_args
+    from avard.daemon.net.subscriber import add_client_arguments, subscriber_from_args
 
     parser = argparse.ArgumentParser()
     add_client_arguments(parser)

@@ -393,7 +393,7 @@ def test_exec_start_runs_unprivileged_with_no_new_privs_and_mdwe(unit, tmp_path)
     import threading
     import time
 
-    from avard.core.recording import RecordingReader
+    from avard.core.io.recording import RecordingReader
 
     if not _mdwe_supported():
         pytest.skip("kernel without PR_SET_MDWE (Linux < 6.3)")

@@ -6,8 +6,8 @@ import errno
 
 import pytest
 from avard.core.errors import BusError, ConfigError, HardwareError
-from avard.daemon.emulator import EmulatedAdxl355, FakeSMBus, FakeSpiDev, VirtualClock
-from avard.daemon.transport import I2cBus, RegisterBus, SpiBus, open_bus
+from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSMBus, FakeSpiDev, VirtualClock
+from avard.daemon.hw.transport import I2cBus, RegisterBus, SpiBus, open_bus
 
 
 class RecordingSpi:

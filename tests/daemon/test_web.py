@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 import pytest
-from avard.core import frames
-from avard.core.streaming import StreamingAllan
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames
 from avard.daemon.commands.web import is_loopback, parse_listen
-from avard.daemon.subscriber import LossTracker
+from avard.daemon.net.subscriber import LossTracker
 from avard.daemon.web import render
 from avard.daemon.web.metrics import metrics_text
 from avard.daemon.web.state import RunState, Series
@@ -185,7 +185,7 @@ def test_a_silent_service_is_called_out_and_the_page_keeps_refreshing(monkeypatc
 
 
 def test_the_adev_plot_has_every_finite_point_of_every_axis_and_the_model():
-    from avard.daemon.snapshots import fit_snapshot
+    from avard.daemon.service.snapshots import fit_snapshot
 
     state = RunState()
     state.set_snapshot({"snapshot": snapshot_dict()})
@@ -537,7 +537,7 @@ def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_
 
 def test_history_from_the_recording_comes_first_and_live_records_are_not_counted_twice(
         tmp_path):
-    from avard.core.recording import frame
+    from avard.core.io.recording import frame
     from avard.daemon.web.feed import Feed
 
     old, new = RUN, "20260101T010000Z-bbbbbb"

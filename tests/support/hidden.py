@@ -1,5 +1,5 @@
 """A hidden-effect record generator for testing ``avard explain``, written apart from the
-simulator (``avard simulate`` / ``core/simulate.py`` / ``core/thermal.py``).
+simulator (``avard simulate`` / ``core/sim/simulate.py`` / ``core/sim/thermal.py``).
 
 Noise: white (per-sample σ = N·√fs), bias instability from ``noise_gen``'s flicker ladder
 (the end-corrected one), rate random walk as a cumulative sum. Temperatures: an ambient
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from avard.core import noise_gen
-from avard.core.readers import Record
+from avard.core.io.readers import Record
+from avard.core.sim import noise_gen
 from numpy.typing import NDArray
 
 AXES = ("x", "y", "z")

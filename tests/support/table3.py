@@ -2,7 +2,7 @@
 ``paper-table3`` record analysed with the noise fit (docs/table3.md is made from this by
 docs/scripts/table3_note.py).
 
-Closed forms (IEEE 952 Annex C; ``avard.core.model``): AVAR = N²/τ + (2 ln2/π)·B² + K²τ/3.
+Closed forms (IEEE 952 Annex C; ``avard.core.model.terms``): AVAR = N²/τ + (2 ln2/π)·B² + K²τ/3.
 The slope method reads B as min ADEV / 0.6643, which is only right when the N and K lines pass
 well below the floor; the minimum of the three-term model is the number to compare.
 """
@@ -14,10 +14,11 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from avard.core.allan import AllanResult
-from avard.core.fit import NoiseFit, slope_method
-from avard.core.model import BI_FACTOR
-from avard.core.presets import (
+from avard.core.allan.deviations import AllanResult
+from avard.core.model.fit import NoiseFit, slope_method
+from avard.core.model.terms import BI_FACTOR
+from avard.core.report import analyze_stream
+from avard.core.sim.presets import (
     DATASHEET_N,
     G0,
     TABLE3_B,
@@ -25,8 +26,7 @@ from avard.core.presets import (
     TABLE3_N,
     SimConfig,
 )
-from avard.core.report import analyze_stream
-from avard.core.simulate import SensorSimulator, n_samples
+from avard.core.sim.simulate import SensorSimulator, n_samples
 
 AXES = ("x", "y", "z")
 #: The paper's reported maximum estimation error (Section 4): 4.7 % at long cluster times.

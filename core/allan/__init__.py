@@ -1,0 +1,10 @@
+"""Allan-family estimators and their statistics.
+
+- ``deviations.py``  batch ADEV/OADEV/MDEV/TDEV/HDEV on arrays (NIST SP 1065 equation numbers);
+- ``overlapping.py`` the exact fully overlapping AVAR, streamed in bounded memory (analyze);
+- ``streaming.py``   the cheap octave cascade the service keeps for 60 h in kilobytes;
+- ``edf.py``, ``chi2.py`` equivalent degrees of freedom and the χ² intervals;
+- ``noise_id.py``    Stable32's noise identification (lag-1 ACF, B1/R(n)), shared by every
+  estimator;
+- ``scratch.py``     per-thread work arrays for the kernels.
+"""

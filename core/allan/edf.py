@@ -1,0 +1,218 @@
+"""Equivalent degrees of freedom and chi-squared confidence intervals of difference variances.
+
+The EDF follows C. A. Greenhall and W. J. Riley, "Uncertainty of stability variances based on
+finite differences", Proc. 35th PTTI (2003), referred to as GR below, and NIST SP 1065 §5.3.
+GR write a variance estimator as the mean of M squared d-th differences of the phase, taken
+every ``stride`` samples (``S = m / stride`` estimates per averaging time τ = m·τ0). For a
+Gaussian process the estimate is a quadratic form, so its EDF is
+
+    edf = 2 E[V]² / Var[V] = M² R(0)² / Σ_{|j|<M} (M − |j|) R(j)²,
+
+with R(j) the covariance of two differences j strides apart. GR express R through the
+generalised autocovariance ``sw`` of power-law noise (their eq. 7), filtered by the averaging
+(eq. 8) and by the d-th difference (eq. 9), and give the truncated sum (eq. 10) plus
+asymptotic forms (their tables 1–3) for long records. The stride enters only through S and
+M, which is why the same algorithm covers non-, partially and fully overlapping estimators.
+
+Noise exponents ``alpha`` are those of fractional frequency, S_y(f) ∝ f^alpha:
++2 white PM, +1 flicker PM, 0 white FM, −1 flicker FM, −2 random-walk FM, −3, −4 (Hadamard
+only). In accelerometer language "frequency" is the measured acceleration: white FM is
+velocity random walk, flicker FM is bias instability, random-walk FM is rate random walk.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from math import comb
+
+import numpy as np
+from avard.core.allan.chi2 import chi2_ppf
+from avard.core.errors import DataError
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["chi2_interval", "edf_greenhall", "edf_simple"]
+
+# GR switch to the asymptotic forms beyond this many terms of the basic sum.
+_J_MAX = 100
+
+# GR table 1 (modified variances) is not needed: avard has no modified estimators.
+# GR table 2: asymptotic (a0, a1) for unmodified variances, rows alpha = +2 … −4,
+# columns d = 1, 2, 3; NaN where alpha + 2d ≤ 1 (variance does not converge).
+_NAN = (math.nan, math.nan)
+_TABLE2: dict[int, tuple[tuple[float, float], ...]] = {
+    2: ((3 / 2, 1 / 2), (35 / 18, 1.0), (231 / 100, 3 / 2)),
+    1: ((78.6, 25.2), (790.0, 410.0), (9950.0, 6520.0)),
+    0: ((2 / 3, 1 / 6), (2 / 3, 1 / 3), (7 / 9, 1 / 2)),
+    -1: (_NAN, (0.852, 0.375), (0.997, 0.617)),
+    -2: (_NAN, (1.079, 0.368), (1.033, 0.607)),
+    -3: (_NAN, _NAN, (1.053, 0.553)),
+    -4: (_NAN, _NAN, (1.302, 0.535)),
+}
+# GR table 3: (b0, b1) for flicker PM (alpha = +1), columns d = 1, 2, 3.
+_TABLE3 = ((6.0, 4.0), (15.23, 12.0), (47.8, 40.0))
+
+
+def _sw(t: NDArray[np.float64], alpha: int) -> NDArray[np.float64]:
+    """GR eq. 7: generalised autocovariance of the power-law 'w' process, up to a constant."""
+    # The overall sign of sw is irrelevant here: the EDF only uses ratios of squares of it.
+    at = np.abs(t)
+    p = 3 - alpha
+    if alpha % 2 == 0:  # even alpha: |t|^(3 − alpha)
+        return at**p
+    # odd alpha: |t|^(3 − alpha) · ln|t|, continuous with value 0 at t = 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        val = np.where(at > 0, at**p * np.log(np.where(at > 0, at, 1.0)), 0.0)
+    return val
+
+
+def _sx(t: NDArray[np.float64], f: float, alpha: int) -> NDArray[np.float64]:
+    """GR eq. 8: the averaging filter applied to sw; f = ∞ is the continuous-time limit."""
+    if math.isinf(f):
+        return _sw(t, alpha + 2)
+    return f * f * (2 * _sw(t, alpha) - _sw(t - 1 / f, alpha) - _sw(t + 1 / f, alpha))
+
+
+def _sz(t: NDArray[np.float64], f: float, alpha: int, d: int) -> NDArray[np.float64]:
+    """GR eq. 9: the d-th difference filter, Σ_k (−1)^k C(2d, d+k) sx(t + k)."""
+    t = np.asarray(t, dtype=np.float64)
+    out = np.zeros_like(t)
+    for k in range(-d, d + 1):
+        out += (-1) ** abs(k) * comb(2 * d, d + k) * _sx(t + k, f, alpha)
+    return out
+
+
+def _basic_sum(j_terms: int, m_count: float, s: float, f: float, alpha: int, d: int) -> float:
+    """GR eq. 10: sz(0)² + 2 Σ_{j=1}^{J−1} (1 − j/M) sz(j/S)² + (1 − J/M) sz(J/S)².
+
+    Written as A − B/M with A, B depending only on (J, S, F, alpha, d), which are cached: a
+    snapshot every few seconds then costs no sz evaluations, only the new M.
+    """
+    a_sum, b_sum = _basic_terms(int(j_terms), float(s), float(f), int(alpha), int(d))
+    return a_sum - b_sum / m_count
+
+
+@lru_cache(maxsize=4096)
+def _basic_terms(j_terms: int, s: float, f: float, alpha: int, d: int) -> tuple[float, float]:
+    j = np.arange(1, j_terms, dtype=np.float64)
+    sz_j = _sz(j / s, f, alpha, d) ** 2
+    sz_0 = float(_sz(np.zeros(1), f, alpha, d)[0]) ** 2
+    sz_last = float(_sz(np.array([j_terms / s]), f, alpha, d)[0]) ** 2
+    a_sum = sz_0 + 2.0 * float(np.sum(sz_j)) + sz_last
+    b_sum = 2.0 * float(np.sum(j * sz_j)) + j_terms * sz_last
+    return a_sum, b_sum
+
+
+@lru_cache(maxsize=256)
+def _sz0_squared(f: float, alpha: int, d: int) -> float:
+    return float(_sz(np.zeros(1), f, alpha, d)[0]) ** 2
+
+
+def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> float:
+    """Equivalent degrees of freedom of an unmodified d-th difference variance (GR 2003).
+
+    Parameters
+    ----------
+    alpha : int
+        Power-law exponent of the rate (fractional-frequency) noise, +2 … −4; must satisfy
+        alpha + 2d > 1 for the variance to exist.
+    d : int
+        Order of the phase difference: 1, 2 (Allan variance), 3 (Hadamard variance).
+    m : int
+        Averaging factor, τ = m·τ0.
+    stride : int
+        Distance in samples between successive differences: 1 fully overlapping
+        (NIST SP 1065 eq. 12), m non-overlapping (eq. 11), anything between partially
+        overlapping. GR's stride factor is S = m / stride.
+    n_phase : int
+        Number of phase points (rate samples + 1) of the segment the differences come from.
+
+    Returns
+    -------
+    float
+        The EDF, or NaN when no difference fits in the record.
+    """
+    alpha, d, m, stride, n_phase = int(alpha), int(d), int(m), int(stride), int(n_phase)
+    if d not in (1, 2, 3):
+        raise DataError(f"difference order d={d} is not supported; use 1, 2 or 3")
+    if not -4 <= alpha <= 2 or alpha + 2 * d <= 1:
+        raise DataError(
+            f"noise exponent alpha={alpha} is outside the range where a d={d} difference "
+            f"variance converges (need -4 <= alpha <= 2 and alpha + 2d > 1)"
+        )
+    if m < 1 or stride < 1:
+        raise DataError(f"averaging factor m={m} and stride={stride} must both be >= 1")
+    s_factor = m / stride  # GR's S
+    length = 1 + m * d  # GR's L for unmodified variances (F = m)
+    if n_phase < length:
+        return math.nan
+    m_count = 1 + (n_phase - length) // stride  # GR's M: number of differences
+    j_terms = int(min(m_count, math.ceil((d + 1) * s_factor)))  # GR's J
+    r = m_count / s_factor
+
+    if alpha <= 0:  # GR case 2: unmodified, alpha <= 0
+        if j_terms <= _J_MAX:
+            f = float(m) if m * (d + 1) <= _J_MAX else math.inf
+            return _sz0_squared(f, alpha, d) * m_count / _basic_sum(
+                j_terms, m_count, s_factor, f, alpha, d)
+        if r > d + 1:
+            a0, a1 = _TABLE2[alpha][d - 1]
+            return 1.0 / ((a0 - a1 / r) / r)
+        m_prime = _J_MAX / r
+        return _sz0_squared(math.inf, alpha, d) * _J_MAX / _basic_sum(
+            _J_MAX, _J_MAX, m_prime, math.inf, alpha, d)
+
+    if alpha == 1:  # GR case 3: flicker PM, the averaging factor enters through ln m
+        if j_terms <= _J_MAX:
+            return _sz0_squared(float(m), 1, d) * m_count / _basic_sum(
+                j_terms, m_count, s_factor, float(m), 1, d)
+        b0, b1 = _TABLE3[d - 1]
+        if r > d + 1:
+            a0, a1 = _TABLE2[1][d - 1]
+            return (b0 + b1 * math.log(m)) ** 2 * r / (a0 - a1 / r)
+        m_prime = _J_MAX / r
+        return (b0 + b1 * math.log(m)) ** 2 * _J_MAX / _basic_sum(
+            _J_MAX, _J_MAX, m_prime, m_prime, 1, d
+        )
+
+    # GR case 4: white PM (alpha = +2). Differences further apart than d·m are uncorrelated,
+    # so the basic sum is exact whenever it is short; otherwise GR's asymptotic form.
+    if j_terms <= _J_MAX:
+        return _sz0_squared(float(m), 2, d) * m_count / _basic_sum(
+            j_terms, m_count, s_factor, float(m), 2, d)
+    a0 = comb(4 * d, 2 * d) / comb(2 * d, d) ** 2
+    a1 = d / 2.0
+    return 1.0 / ((a0 - a1 / r) / m_count)
+
+
+def edf_simple(n_diff: int) -> float:
+    """Crude EDF = number of differences; only for comparison with the GR value."""
+    return float(n_diff)
+
+
+def chi2_interval(
+    var: ArrayLike, edf: ArrayLike, ci: float = 0.683
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two-sided chi-squared confidence interval of a variance estimate (NIST SP 1065 eq. 40).
+
+    ``lo = edf·var / χ²_{edf}((1+ci)/2)``, ``hi = edf·var / χ²_{edf}((1−ci)/2)``. Entries
+    with a non-finite or non-positive EDF get NaN bounds.
+    """
+    if not 0.0 < ci < 1.0:
+        raise DataError(f"confidence level ci={ci} must lie strictly between 0 and 1")
+    v = np.asarray(var, dtype=np.float64)
+    e = np.broadcast_to(np.asarray(edf, dtype=np.float64), v.shape)
+    ok = np.isfinite(e) & (e > 0)
+    e_safe = np.where(ok, e, 1.0)
+    lo = np.where(ok, e_safe * v / _chi2_ppf(0.5 + ci / 2, e_safe), np.nan)
+    hi = np.where(ok, e_safe * v / _chi2_ppf(0.5 - ci / 2, e_safe), np.nan)
+    return lo, hi
+
+
+def _chi2_ppf(p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Chi-squared quantile: χ²_k(p) = 2·P⁻¹(k/2, p), P the regularised lower incomplete gamma.
+
+    (core/allan/chi2.py, numpy only: the service computes intervals with every snapshot and must not
+    import scipy, ~30 MB of resident memory on a 512 MB Raspberry Pi.)
+    """
+    return chi2_ppf(p, k)

@@ -1,0 +1,518 @@
+"""Power-law noise identification: lag-1 autocorrelation with a local-slope fallback.
+
+The EDF of a variance estimate depends on the noise type at each τ (see ``avard.core.allan.edf``).
+Two ways to find it, both from W. J. Riley and C. A. Greenhall, "Power law noise
+identification using the lag 1 autocorrelation", Proc. 18th EFTF (2004), and NIST SP 1065
+§5.6:
+
+* Lag-1 ACF: average the rate data in blocks of m, difference the averages k times until the
+  lag-1 autocorrelation r1 is small, then δ = r1 / (1 + r1) and alpha = −2(δ + k) (rate data).
+  White rate noise gives r1 = 0 at k = 0; each difference of a white sequence gives r1 = −1/2.
+* Local slope: AVAR ∝ τ^μ with μ = −alpha − 1 for −3 < alpha ≤ 1; it cannot tell white PM
+  (alpha = 2) from flicker PM (both μ = −2) and is noisy, so it is the fallback only.
+
+``alpha_from_lag1`` is the bare formula; the Allan accumulators (batch and streaming) apply it
+to their own differences: the second difference of the phase at lag m is m times the first
+difference of adjacent m-averages, so the products of differences m apart that the
+accumulators keep give r1 at k = d − 1 for the d-th difference variance, with every overlapping
+difference used, whatever the record length and without keeping the data.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from math import comb
+
+import numpy as np
+from avard.core.errors import DataError
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "Lag1Ladder",
+    "alpha_from_b1",
+    "alpha_from_lag1",
+    "alpha_from_slope",
+    "b1_theory",
+    "identify_alpha",
+    "lag1_acf",
+    "row_products",
+]
+
+# Riley & Greenhall: below this many (averaged) points the lag-1 ACF is too noisy to use.
+MIN_POINTS = 30
+
+
+def lag1_acf(x: ArrayLike) -> float:
+    """Lag-1 autocorrelation r1 = Σ (x_i − x̄)(x_{i+1} − x̄) / Σ (x_i − x̄)² (NIST SP 1065 §5.6)."""
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 1 or a.size < 3:
+        raise DataError(f"lag-1 autocorrelation needs a 1-D series of >= 3 points, got {a.shape}")
+    c = a - a.mean()
+    den = float(np.dot(c, c))
+    if den == 0.0:
+        return math.nan
+    return float(np.dot(c[:-1], c[1:])) / den
+
+
+def alpha_from_lag1(r1: float, k: int) -> float:
+    """Noise exponent alpha (rate data) from r1 of rate averages differenced k times.
+
+    δ = r1 / (1 + r1), alpha = −2(δ + k) (Riley & Greenhall 2004, eq. 4). Returns a float; the
+    caller rounds. NaN when r1 is not finite or r1 ≤ −1.
+    """
+    if not math.isfinite(r1) or r1 <= -1.0:
+        return math.nan
+    delta = r1 / (1.0 + r1)
+    return -2.0 * (delta + k)
+
+
+def alpha_from_slope(mu: float, d: int = 2) -> int:
+    """Noise exponent from the local log-log slope μ of an AVAR (d=2) or HVAR (d=3) curve.
+
+    μ = −alpha − 1 for alpha ≤ 1; μ ≤ −2 is reported as white PM (alpha = 2) because flicker
+    and white PM cannot be told apart from the slope. Clipped to the range the estimator
+    converges for (alpha ≥ −2 for d = 2, ≥ −4 for d = 3).
+    """
+    lowest = 1 - 2 * d + 1  # alpha + 2d > 1
+    if not math.isfinite(mu):
+        return 0
+    if mu <= -1.75:
+        return 2
+    return int(min(1, max(lowest, round(-mu - 1.0))))
+
+
+def identify_alpha(
+    y: ArrayLike, m: int, *, dmax: int = 2, data_type: str = "rate"
+) -> int:
+    """Dominant power-law noise exponent at averaging factor m by the lag-1 ACF method.
+
+    Parameters
+    ----------
+    y : array (N,)
+        Rate samples (``data_type="rate"``, the accelerometer convention, = fractional
+        frequency) or phase samples (``"phase"``).
+    m : int
+        Averaging factor.
+    dmax : int
+        Most differences to take: 2 for Allan variance, 3 for Hadamard variance.
+
+    Returns
+    -------
+    int
+        alpha rounded to an integer in [−2·dmax + 2, 2]: 2 white PM, 1 flicker PM, 0 white FM,
+        −1 flicker FM, −2 random-walk FM, … Raises ``DataError`` when fewer than 30 averages
+        are available (use ``alpha_from_slope`` on the variance curve instead).
+    """
+    a = np.asarray(y, dtype=np.float64)
+    if a.ndim != 1:
+        raise DataError(f"identify_alpha takes one channel (1-D array), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise DataError("identify_alpha got NaN or infinite samples; remove them first")
+    m = int(m)
+    if m < 1:
+        raise DataError(f"averaging factor m={m} must be >= 1")
+    if data_type == "phase":
+        x = a[::m]  # decimated phase, then remove frequency offset and drift
+        x = _detrend(x, 2)
+        extra = 2.0  # phase data are one integration above rate data
+    elif data_type == "rate":
+        n = a.size // m
+        x = a[: n * m].reshape(n, m).mean(axis=1)
+        x = _detrend(x, 1)
+        extra = 0.0
+    else:
+        raise DataError(f"data_type={data_type!r} must be 'rate' or 'phase'")
+    if x.size < MIN_POINTS:
+        raise DataError(
+            f"only {x.size} averages of {m} samples: the lag-1 ACF needs >= {MIN_POINTS}; "
+            "use a smaller m or alpha_from_slope"
+        )
+    k = 0
+    while True:
+        r1 = lag1_acf(x)
+        if not math.isfinite(r1):
+            return 0
+        delta = r1 / (1.0 + r1)
+        if delta < 0.25 or k >= dmax:
+            alpha = -2.0 * (delta + k) + extra
+            return int(min(2, max(-2 * dmax + 2, round(alpha))))
+        x = np.diff(x)
+        k += 1
+
+
+def _detrend(x: np.ndarray, deg: int) -> np.ndarray:
+    t = np.arange(x.size, dtype=np.float64)
+    if x.size <= deg:
+        return x - x.mean()
+    coef = np.polyfit(t, x, deg)
+    return x - np.polyval(coef, t)
+
+
+# ---------------------------------------------------------------------------------------------
+# Stable32's identification on running sums: one implementation for every estimator
+
+
+def b1_theory(n: int, mu: int) -> float:
+    """Barnes' expected B1 ratio (N-sample over two-sample variance) for N averages and a
+    variance exponent μ (AVAR ∝ τ^μ): N(1 − N^μ) / (2(N − 1)(1 − 2^μ)), and its limit
+    N ln N / (2(N − 1) ln 2) at μ = 0 (NBS TN 375; NIST SP 1065 §5.2)."""
+    if n < 2:
+        raise DataError(f"B1 needs at least 2 averages, got {n}")
+    if mu == 0:
+        return n * math.log(n) / (2.0 * (n - 1) * math.log(2.0))
+    return n * (1.0 - float(n) ** mu) / (2.0 * (n - 1) * (1.0 - 2.0**mu))
+
+
+def alpha_from_b1(b1: float, n: int) -> int | None:
+    """Noise exponent from a measured B1 ratio of n averages: the μ whose expected B1 is
+    nearest on a log scale (boundaries at the geometric means, as Stable32), mapped to
+    alpha = −μ − 1. μ = −2 (white or flicker PM) returns None: B1 cannot tell them apart."""
+    mus = (1, 0, -1, -2)  # random-walk FM, flicker FM, white FM, PM
+    for hi, lo in itertools.pairwise(mus):
+        if b1 > math.sqrt(b1_theory(n, hi) * b1_theory(n, lo)):
+            return -hi - 1
+    return None
+
+
+def row_products(a: NDArray, b: NDArray, cross: bool = True) -> NDArray[np.float64]:
+    """(C, C) matrix of Σ_t a[i, t]·b[j, t] for channel-major (C, L) arrays, as dot products of
+    rows: for a few channels this is several times faster than a (C×L)·(L×C) matrix product
+    (measured 30 µs against 100 µs for 3 × 8192), and exactly symmetric when a is b. With
+    ``cross=False`` only the diagonal is computed (zeros elsewhere)."""
+    c = a.shape[0]
+    if not cross:
+        return np.diag([float(np.dot(a[i], b[i])) for i in range(c)])
+    out = np.empty((c, c))
+    for i in range(c):
+        for j in range(c):
+            if a is b and j < i:
+                out[i, j] = out[j, i]
+            else:
+                out[i, j] = float(np.dot(a[i], b[j]))
+    return out
+
+
+class Lag1Ladder:
+    """Running sums for Stable32's noise identification of one τ, C channels at once.
+
+    Fed the non-overlapping m-averages of the rate, in order (any unit: sums of m samples
+    work as well as means), it gives, for the averages and their differences of order
+    k = 0 … ``dmax``: the count n, Σz, Σ z zᵀ, and over adjacent pairs (z_i, z_{i+1}) within
+    a segment their number, Σ z_i z_{i+1}ᵀ, Σ z_i and Σ z_{i+1}. From these the lag-1
+    autocorrelation about the series' mean is exact (NIST SP 1065 §5.6; Riley & Greenhall
+    2004, eq. 2), whatever constant offset the averages carry, and with ``cross`` the C×C
+    products give it for any weighted sum of channels (``weighted``).
+
+    The differenced series are never formed: the k-th difference is Σ_a c_a z_{i+a}, so its
+    sums of products are combinations of the averages' lag products Σ z_t z_{t+j}ᵀ
+    (j = 0 … dmax + 1) less the few products at the segment's two ends, which are computed
+    from its first and last 2·dmax + 2 values when the segment closes (or is read). One pass
+    of dot products per lag replaces three difference orders of passes. The order-0 values
+    are taken relative to the first average seen, which keeps the sums well conditioned (an
+    axis reading 9.81 m/s² with 1e-5 noise). ``n``, ``s``, … hold the closed segments;
+    ``totals()`` adds the open one.
+    """
+
+    FIELDS = ("n", "s", "s2", "np", "p", "left", "right")
+
+    def __init__(self, n_channels: int, dmax: int = 2, *, cross: bool = True) -> None:
+        c = int(n_channels)
+        self.c = c
+        self.dmax = int(dmax)
+        self.cross = bool(cross)  # keep channel cross products (needed by ``weighted``)
+        orders = self.dmax + 1
+        self.n = np.zeros(orders, dtype=np.int64)
+        self.np = np.zeros(orders, dtype=np.int64)
+        self.s = np.zeros((orders, c))
+        self.s2 = np.zeros((orders, c, c))
+        self.p = np.zeros((orders, c, c))
+        self.left = np.zeros((orders, c))
+        self.right = np.zeros((orders, c))
+        self.ref: NDArray[np.float64] | None = None
+        self._lags = self.dmax + 1  # order dmax, pairs one apart
+        self._edge = 2 * self.dmax + 2  # values kept at each end of the open segment
+        self._keep = max(self._edge, self._lags)
+        self._open_reset()
+
+    def _open_reset(self) -> None:
+        c = self.c
+        self._n_open = 0
+        self._sum = np.zeros(c)
+        self._lag = np.zeros((self._lags + 1, c, c))
+        self._head = np.zeros((c, 0))
+        self._tail = np.zeros((c, 0))
+        self._few: NDArray[np.float64] | None = np.zeros((c, 0))  # all values while few
+
+    def push(self, values: NDArray) -> None:
+        """Add the next averages (k, C) of the current segment, oldest first."""
+        z = np.asarray(values, dtype=np.float64).reshape(-1, self.c)
+        self.push_rows(np.ascontiguousarray(z.T))
+
+    def push_rows(self, values: NDArray) -> None:
+        """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
+        sums of products are dot products of rows (the cheapest form for small C)."""
+        z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
+        count = z.shape[1]
+        if count == 0:
+            return
+        if self.ref is None:
+            self.ref = z[:, 0].copy()
+        z = z - self.ref[:, None]
+        t = self._tail.shape[1]
+        full = np.concatenate([self._tail, z], axis=1) if t else z
+        self._sum += z.sum(axis=1)
+        for j in range(self._lags + 1):
+            start, stop = max(0, t - j), full.shape[1] - j  # products whose later end is new
+            if stop > start:
+                self._lag[j] += row_products(full[:, start:stop], full[:, start + j:stop + j],
+                                             self.cross)
+        if self._head.shape[1] < self._edge:
+            self._head = np.concatenate([self._head, z[:, :self._edge - self._head.shape[1]]],
+                                        axis=1)
+        self._tail = full[:, -self._keep:].copy()
+        self._n_open += count
+        if self._few is not None:
+            self._few = (np.concatenate([self._few, z], axis=1)
+                         if self._n_open <= 4 * self._edge else None)
+
+    def gap(self) -> None:
+        """End the segment: no pair and no difference spans what follows."""
+        if self._n_open:
+            seg = self._open_sums()
+            for f in self.FIELDS:
+                getattr(self, f)[...] += seg[f]
+        self._open_reset()
+
+    def _prod(self, a: NDArray, b: NDArray) -> NDArray[np.float64]:
+        return row_products(a, b, self.cross)
+
+    def _open_sums(self) -> dict[str, NDArray]:
+        """The open segment's sums per difference order (the FIELDS, stacked over k)."""
+        c, orders = self.c, self.dmax + 1
+        out: dict[str, NDArray] = {
+            "n": np.zeros(orders, dtype=np.int64), "np": np.zeros(orders, dtype=np.int64),
+            "s": np.zeros((orders, c)), "s2": np.zeros((orders, c, c)),
+            "p": np.zeros((orders, c, c)), "left": np.zeros((orders, c)),
+            "right": np.zeros((orders, c))}
+        n = self._n_open
+        if self._few is not None:  # a short segment: straight from its values
+            w = self._few
+            for k in range(orders):
+                if k:
+                    w = np.diff(w, axis=1)
+                if w.shape[1] == 0:
+                    break
+                out["n"][k] = w.shape[1]
+                out["s"][k] = w.sum(axis=1)
+                out["s2"][k] = self._prod(w, w)
+                if w.shape[1] > 1:
+                    out["np"][k] = w.shape[1] - 1
+                    out["p"][k] = self._prod(w[:, :-1], w[:, 1:])
+                    out["left"][k] = out["s"][k] - w[:, -1]
+                    out["right"][k] = out["s"][k] - w[:, 0]
+            return out
+        head, tail, keep = self._head, self._tail, self._keep
+        base = n - keep  # segment index of tail[:, 0]
+
+        def window(start: int, m: int, j: int) -> NDArray:
+            """Σ_{t=start}^{start+m−1} z_t z_{t+j}ᵀ from the lag sum less its two ends."""
+            total = self._lag[j].copy()
+            if start:
+                total -= self._prod(head[:, :start], head[:, j:start + j])
+            v = start + m  # first t left out at the end
+            if v <= n - 1 - j:
+                total -= self._prod(tail[:, v - base:keep - j], tail[:, v - base + j:keep])
+            return total
+
+        for k in range(orders):
+            coef = np.array([(-1) ** (k - a) * comb(k, a) for a in range(k + 1)], float)
+            nk = n - k
+            sw = sum(coef[a] * (self._sum - head[:, :a].sum(axis=1)
+                                - tail[:, keep - (k - a):].sum(axis=1) * (k - a > 0))
+                     for a in range(k + 1))
+            first = head[:, :k + 1] @ coef
+            last = tail[:, keep - 1 - k:keep] @ coef
+            mats = []
+            for ell in (0, 1):
+                m = nk - ell
+                acc = np.zeros((c, c))
+                for a in range(k + 1):
+                    for b in range(k + 1):
+                        bb = ell + b
+                        blk = (window(a, m, bb - a) if bb >= a else window(bb, m, a - bb).T)
+                        acc += coef[a] * coef[b] * blk
+                mats.append(acc)
+            out["n"][k], out["np"][k] = nk, nk - 1
+            out["s"][k], out["s2"][k], out["p"][k] = sw, mats[0], mats[1]
+            out["left"][k], out["right"][k] = sw - last, sw - first
+        return out
+
+    def totals(self) -> dict[str, NDArray]:
+        """Closed segments plus the open one: the FIELDS, stacked over the orders."""
+        tot = {f: getattr(self, f).copy() for f in self.FIELDS}
+        if self._n_open:
+            seg = self._open_sums()
+            for f in self.FIELDS:
+                tot[f] += seg[f]
+        return tot
+
+    def count(self) -> int:
+        """Averages seen (all segments)."""
+        return int(self.n[0]) + self._n_open
+
+    def add(self, other: Lag1Ladder) -> None:
+        """Add another ladder's sums (other segments of the same channels; its open segment
+        counts as ended, this one's continues)."""
+        o = other.totals()
+        if other.ref is not None and self.ref is not None:
+            # re-reference the other's order-0 sums: z' = z + (ref_o − ref_s) = z + h
+            h = other.ref - self.ref
+            n, np_ = o["n"][0], o["np"][0]
+            keep = np.ones((self.c, self.c)) if self.cross else np.eye(self.c)
+            self.s2[0] += keep * (o["s2"][0] + np.outer(o["s"][0], h)
+                                  + np.outer(h, o["s"][0]) + n * np.outer(h, h))
+            self.p[0] += keep * (o["p"][0] + np.outer(o["left"][0], h)
+                                 + np.outer(h, o["right"][0]) + np_ * np.outer(h, h))
+            self.s[0] += o["s"][0] + n * h
+            self.left[0] += o["left"][0] + np_ * h
+            self.right[0] += o["right"][0] + np_ * h
+            self.n[0] += n
+            self.np[0] += np_
+            lo = 1
+        else:
+            if self.ref is None:
+                self.ref = None if other.ref is None else other.ref.copy()
+            lo = 0
+        for f in self.FIELDS:
+            getattr(self, f)[lo:] += o[f][lo:]
+
+    def weighted(self, w: NDArray) -> Lag1Ladder:
+        """The ladder of the single channel Σ w_c z_c (its sums, as closed segments)."""
+        if not self.cross:
+            raise DataError("this ladder keeps no cross-channel sums; create it with "
+                            "cross=True to weight channels")
+        w = np.asarray(w, dtype=np.float64)
+        t = self.totals()
+        out = Lag1Ladder(1, self.dmax)
+        out.n, out.np = t["n"], t["np"]
+        for f in ("s", "left", "right"):
+            setattr(out, f, (t[f] @ w)[:, None])
+        for f in ("s2", "p"):
+            setattr(out, f, np.einsum("i,kij,j->k", w, t[f], w)[:, None, None])
+        out.ref = None if self.ref is None else np.array([float(self.ref @ w)])
+        return out
+
+    def r1(self, k: int, t: dict[str, NDArray] | None = None) -> NDArray[np.float64]:
+        """Lag-1 autocorrelation about the mean of the order-k series, per channel (NaN when
+        there are fewer than 3 values or no spread)."""
+        t = self.totals() if t is None else t
+        n = float(t["n"][k])
+        out = np.full(self.c, np.nan)
+        if n < 3 or t["np"][k] < 1:
+            return out
+        mean = t["s"][k] / n
+        den = np.diagonal(t["s2"][k]) - t["s"][k] * mean
+        num = (np.diagonal(t["p"][k]) - mean * (t["left"][k] + t["right"][k])
+               + t["np"][k] * mean**2)
+        ok = den > 0
+        out[ok] = num[ok] / den[ok]
+        return out
+
+    def lag1_alpha(self, lowest: int, t: dict[str, NDArray] | None = None
+                   ) -> NDArray[np.float64]:
+        """alpha per channel by the lag-1 ladder (Riley & Greenhall 2004): difference until
+        δ = r1/(1+r1) < 0.25 or k = dmax, alpha = −round(2δ) − 2k, clipped to [lowest, 2];
+        NaN where the sums cannot give it."""
+        out = np.full(self.c, np.nan)
+        todo = np.ones(self.c, dtype=bool)
+        t = self.totals() if t is None else t
+        for k in range(self.dmax + 1):
+            r1 = self.r1(k, t)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                delta = r1 / (1.0 + r1)
+            bad = ~np.isfinite(delta) | (r1 <= -1.0)
+            todo &= ~(bad & todo)  # stays NaN
+            stop = todo & ((delta < 0.25) | (k == self.dmax))
+            out[stop] = np.clip(-np.round(2.0 * delta[stop]) - 2 * k, lowest, 2)
+            todo &= ~stop
+            if not todo.any():
+                break
+        return out
+
+    def b1(self, t: dict[str, NDArray] | None = None) -> NDArray[np.float64]:
+        """Measured B1 per channel: sample variance of the averages over their two-sample
+        (non-overlapping Allan) variance; NaN with fewer than 2 averages."""
+        t = self.totals() if t is None else t
+        n = float(t["n"][0])
+        out = np.full(self.c, np.nan)
+        if n < 2 or t["n"][1] < 1:
+            return out
+        var = (np.diagonal(t["s2"][0]) - t["s"][0] ** 2 / n) / (n - 1.0)
+        # order-1 values are differences: the order-0 reference cancels in them
+        avar = np.diagonal(t["s2"][1]) / (2.0 * float(t["n"][1]))
+        ok = avar > 0
+        out[ok] = var[ok] / avar[ok]
+        return out
+
+    def alpha(self, lowest: int) -> NDArray[np.float64]:
+        """Stable32's choice per channel: the lag-1 ladder with at least ``MIN_POINTS``
+        averages; below, Barnes' B1 ratio (with at least 4 averages). Where B1 says 'PM',
+        Stable32 separates white from flicker PM by R(n) = MVAR/AVAR, which these sums do
+        not hold: flicker PM (alpha = 1) is taken, the smaller EDF of the two, so the
+        interval is never the narrower white-PM one on a guess. NaN where neither applies."""
+        n = self.count()
+        t = self.totals()
+        if n >= MIN_POINTS:
+            return self.lag1_alpha(lowest, t)
+        out = np.full(self.c, np.nan)
+        if n < 4:
+            return out
+        b1 = self.b1(t)
+        for ch in range(self.c):
+            if math.isfinite(b1[ch]):
+                a = alpha_from_b1(float(b1[ch]), n)
+                out[ch] = max(lowest, 1 if a is None else a)
+        return out
+
+    def state(self) -> dict:
+        """Plain numbers and lists (msgpack/JSON-able); ``from_state`` restores it."""
+        def mat(a: NDArray) -> list:  # per-channel ladders keep only the diagonal
+            return (a if self.cross else np.diagonal(a, axis1=-2, axis2=-1)).tolist()
+
+        return {"c": self.c, "dmax": self.dmax, "cross": self.cross,
+                **{f: mat(getattr(self, f)) if f in ("s2", "p") else getattr(self, f).tolist()
+                   for f in self.FIELDS},
+                "ref": None if self.ref is None else self.ref.tolist(),
+                "open": {"n": self._n_open, "sum": self._sum.tolist(),
+                         "lag": mat(self._lag), "head": self._head.tolist(),
+                         "tail": self._tail.tolist(),
+                         "few": None if self._few is None else self._few.tolist()}}
+
+    @classmethod
+    def from_state(cls, d: dict) -> Lag1Ladder:
+        self = cls(int(d["c"]), int(d["dmax"]), cross=bool(d.get("cross", True)))
+        def mat(v: list, shape: tuple[int, ...]) -> NDArray:
+            a = np.asarray(v, dtype=np.float64)
+            if self.cross:
+                return a.reshape(shape)
+            out = np.zeros(shape)
+            idx = np.arange(self.c)
+            out[..., idx, idx] = a.reshape(shape[:-1])
+            return out
+
+        for f in cls.FIELDS:
+            cur = getattr(self, f)
+            setattr(self, f, mat(d[f], cur.shape) if f in ("s2", "p")
+                    else np.asarray(d[f], dtype=cur.dtype).reshape(cur.shape))
+        self.ref = None if d["ref"] is None else np.asarray(d["ref"], dtype=np.float64)
+        o = d["open"]
+        c = self.c
+        self._n_open = int(o["n"])
+        self._sum = np.asarray(o["sum"], dtype=np.float64)
+        self._lag = mat(o["lag"], self._lag.shape)
+        self._head = np.asarray(o["head"], dtype=np.float64).reshape(c, -1)
+        self._tail = np.asarray(o["tail"], dtype=np.float64).reshape(c, -1)
+        self._few = (None if o["few"] is None
+                     else np.asarray(o["few"], dtype=np.float64).reshape(c, -1))
+        return self

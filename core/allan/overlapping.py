@@ -1,0 +1,209 @@
+"""Fully overlapping Allan variance (OADEV as Stable32 and allantools define it), streamed.
+
+NIST SP 1065 eq. 12 in the phase form of ``avard.core.allan.deviations``: with X the running
+sum of the
+rate samples y (X_0 = 0, X_i = Σ_{k<i} y_k, kept in sample units so τ0 never multiplies),
+
+    σ²(τ = m τ0) = Σ_{i=0}^{N−2m} (X_{i+2m} − 2X_{i+m} + X_i)² / (2 m² (N − 2m + 1)),
+
+every i, at every m of the grid. A difference only ever reaches 2m samples back, so the
+accumulator keeps a ring of the last 2·m_max + P running-sum points per channel (P the piece
+processed at once), never the record: memory O(τ_max), whatever the duration. Integer counts
+are summed in int64 and every difference is exact; float samples are summed in float64 after
+subtracting the segment's first sample (a constant moves X by a straight line, which no second
+difference sees, and it keeps the sums small).
+
+Per τ it keeps n and Σ D² per channel (with ``covariance=True`` Σ D Dᵀ, C×C, the Allan
+covariance, as the batch estimator), and the non-overlapping m-averages of the segment go to
+a ``noise_id.Lag1Ladder``: the noise exponent alpha is identified as Stable32 does it, on the
+same data for every Allan estimator at that τ.
+``result()`` is an ``AllanResult`` of kind "oavar", equal to ``allan.allan_variance(y, rate,
+ms / rate, kind="oavar")`` to rounding of the final sums, for any split into blocks.
+
+The arithmetic is numpy element-wise work on cache-sized pieces (the ring is channel-major, so
+each channel's differences are contiguous rows) and one dot product per channel (pair) per
+piece and τ; no BLAS thread pool is involved in anything larger than a vector.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+from avard.core.allan.deviations import (
+    AllanResult,
+    alphas_from_ladders,
+    checked_block,
+    result_from_sums,
+)
+from avard.core.allan.noise_id import Lag1Ladder, row_products
+from avard.core.errors import DataError
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["OverlappingAllan"]
+
+# New samples processed at once: keeps the temporaries (a few × PIECE × C doubles) in cache.
+PIECE = 1 << 13
+
+
+class OverlappingAllan:
+    """Streaming fully overlapping Allan variance of C channels at a fixed grid of m.
+
+    Parameters
+    ----------
+    n_channels : int
+        Number of channels C.
+    rate_hz : float
+        Sample rate; τ = m / rate_hz.
+    ms : sequence of int
+        Averaging factors (≥ 1). The largest fixes the memory: a ring of 2·max(ms) + PIECE
+        points per channel (8 bytes each).
+    names : channel names, kept in the result.
+    covariance : bool
+        Also accumulate the cross-channel sums: the result's ``cov`` (the Allan covariance,
+        AVAR of any weighted sum of channels). Off by default: for C channels it costs
+        (C + 1)/2 times the arithmetic of the variances alone.
+    """
+
+    def __init__(self, n_channels: int, rate_hz: float, ms: Sequence[int] | NDArray,
+                 *, names: Sequence[str] | None = None, covariance: bool = False) -> None:
+        if not isinstance(n_channels, int | np.integer) or n_channels < 1:
+            raise DataError(f"n_channels={n_channels!r} must be a positive integer")
+        if not (isinstance(rate_hz, int | float | np.integer | np.floating)
+                and math.isfinite(float(rate_hz)) and float(rate_hz) > 0):
+            raise DataError(f"rate_hz={rate_hz!r} must be a finite sample rate > 0 Hz")
+        grid = np.unique(np.asarray(ms, dtype=np.int64))
+        if grid.size == 0 or grid[0] < 1:
+            raise DataError("ms must be one or more averaging factors >= 1")
+        if names is not None and len(names) != n_channels:
+            raise DataError(f"{len(names)} names given for {n_channels} channels")
+        self.n_channels = int(n_channels)
+        self.rate_hz = float(rate_hz)
+        self.ms = grid
+        self.names = list(names) if names is not None else [f"ch{i}" for i in range(n_channels)]
+        c = self.n_channels
+        self._cap = 2 * int(grid[-1]) + PIECE
+        self._integer: bool | None = None
+        self._ring: NDArray | None = None  # allocated with the first block's dtype
+        self._n = np.zeros(grid.size, dtype=np.int64)
+        self._s2 = np.zeros((grid.size, c, c))
+        self.covariance = bool(covariance)
+        self._ladders = [Lag1Ladder(c, dmax=2, cross=self.covariance) for _ in grid]
+        # averages waiting for their ladder: pushed in batches, since at long τ each piece
+        # brings only a few and a push costs tens of numpy calls whatever its size
+        self._pending: list[list[NDArray]] = [[] for _ in grid]
+        self._pending_n = [0] * grid.size
+        self.n_samples = 0
+        self.n_segments = 0
+        self._reset_segment()
+
+    # ------------------------------------------------------------------------ input
+    def _flush_ladders(self) -> None:
+        for k, lad in enumerate(self._ladders):
+            if self._pending[k]:
+                lad.push_rows(np.concatenate(self._pending[k], axis=1))
+                self._pending[k] = []
+                self._pending_n[k] = 0
+
+    def _reset_segment(self) -> None:
+        self._flush_ladders()
+        self._pos = 0  # phase points of this segment written so far (X_0 included)
+        self._offset: NDArray | None = None
+        self._carry: NDArray | None = None
+        for lad in self._ladders:
+            lad.gap()
+
+    def _check_block(self, block: ArrayLike) -> NDArray:
+        first = self._integer is None
+        a, self._integer = checked_block(block, self.n_channels, self._integer)
+        if first and self._integer is not None:
+            # channel-major: each channel's running sum is a contiguous row
+            self._ring = np.zeros((self.n_channels, self._cap),
+                                  np.int64 if self._integer else np.float64)
+        return a.astype(np.int64 if self._integer else np.float64, copy=False)
+
+    def update(self, block: ArrayLike) -> None:
+        """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
+        a = self._check_block(block)
+        for i in range(0, a.shape[0], PIECE):
+            self._process(a[i:i + PIECE])
+        self.n_samples += a.shape[0]
+
+    def gap(self) -> None:
+        """End the current segment: later differences never reach back across this point."""
+        self._reset_segment()
+
+    # ------------------------------------------------------------------------ kernel
+    def _span(self, start: int, length: int) -> NDArray:
+        """Phase points (C, length) of segment positions [start, start + length)."""
+        assert self._ring is not None
+        i = start % self._cap
+        if i + length <= self._cap:
+            return self._ring[:, i:i + length]
+        return np.concatenate([self._ring[:, i:], self._ring[:, :i + length - self._cap]],
+                              axis=1)
+
+    def _process(self, a: NDArray) -> None:
+        ring = self._ring
+        assert ring is not None
+        c = self.n_channels
+        n = a.shape[0]
+        if self._offset is None:
+            self._offset = a[0].copy()
+            self._carry = np.zeros(c, dtype=ring.dtype)
+            ring[:, 0] = 0  # X_0
+            self._pos = 1
+            self.n_segments += 1
+        work = np.empty((n + 1, c), dtype=ring.dtype)
+        work[0] = self._carry
+        np.subtract(a, self._offset, out=work[1:], casting="unsafe")
+        np.cumsum(work, axis=0, out=work)
+        self._carry = work[-1].copy()
+        p0 = self._pos  # segment position of the first new phase point
+        i = p0 % self._cap
+        first = min(n, self._cap - i)
+        ring[:, i:i + first] = work[1:1 + first].T
+        ring[:, :n - first] = work[1 + first:].T
+        self._pos = p1 = p0 + n
+        buf = np.empty((c, n), dtype=ring.dtype)  # D in the ring's dtype (int64: exact)
+        as_float = np.empty((c, n)) if buf.dtype != np.float64 else buf
+        for k, m in enumerate(self.ms.tolist()):
+            lo = max(0, p0 - 2 * m)  # first new difference D_lo (its last point ≥ p0)
+            hi = p1 - 2 * m  # differences D_i, i < hi
+            if hi > lo:
+                count = hi - lo
+                d = buf[:, :count]
+                mid = self._span(lo + m, count)
+                np.subtract(self._span(lo + 2 * m, count), mid, out=d)
+                np.subtract(d, mid, out=d)
+                np.add(d, self._span(lo, count), out=d)
+                if d.dtype != np.float64:
+                    np.copyto(as_float[:, :count], d)  # exact: differences are far below 2**53
+                    d = as_float[:, :count]
+                self._n[k] += count
+                self._s2[k] += row_products(d, d, self.covariance)
+            # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
+            q0 = max(m, -(-p0 // m) * m)
+            if q0 < p1:
+                last = q0 + ((p1 - 1 - q0) // m) * m
+                ends = self._span(q0 - m, last - q0 + m + 1)[:, ::m]
+                self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
+                self._pending_n[k] += ends.shape[1] - 1
+                if self._pending_n[k] >= PIECE:
+                    self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1))
+                    self._pending[k] = []
+                    self._pending_n[k] = 0
+
+    # ------------------------------------------------------------------------ results
+    def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
+        """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
+        channel, else (K, C)); τ with no complete difference have NaN variance and n = 0."""
+        self._flush_ladders()
+        res = result_from_sums(
+            "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
+            n_phase=self._n + 2 * self.ms, alpha=alpha,
+            alpha_id=alphas_from_ladders(self._ladders, 2), ci=ci,
+            one_d=self.n_channels == 1, names=self.names)
+        return res if self.covariance else replace(res, cov=None)

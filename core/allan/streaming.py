@@ -1,0 +1,507 @@
+"""Bounded-memory streaming Allan variance with the full Allan covariance between channels.
+
+``StreamingAllan`` accumulates, at octave averaging factors m = 2^k, the sums behind the
+partially overlapping Allan variance of ``avard.core.allan.deviations`` (NIST SP 1065 eq. 12 with a
+stride): for m ≤ S (S = ``overlap``, default 8) every difference is used (stride 1, the fully
+overlapping estimator); above, differences every m/S samples (a decimation cascade: level k
+only ever sees the phase every m/S samples). Greenhall & Riley's EDF shows that S = 8 keeps
+≥ 98 % of the fully overlapping EDF for white, flicker and random-walk rate noise, so the
+accumulator holds the statistical information of the whole history in kilobytes:
+O(C² · S · octaves) numbers, whatever the duration.
+
+Per level it keeps, for the second phase differences D_i = X_{i+2m} − 2X_{i+m} + X_i (X the
+running sum of the rate, i on the stride grid of the current segment), n and Σ D Dᵀ (C×C: the
+Allan covariance, so the AVAR of any linear combination of channels, e.g. an axis minus
+k × temperature, is available afterwards via ``weights``); and the sums of Stable32's noise
+identification over the non-overlapping m-averages (``avard.core.allan.noise_id.Lag1Ladder``, the
+same α as the batch and the fully overlapping estimators at that τ). Per stride grid it
+keeps the last 3·S phase points, to continue the differences in the next block (levels
+m ≤ S share the stride-1 grid).
+With ``hadamard=True`` third differences take the place of D (Hadamard variance).
+
+Integer blocks (raw counts) are summed in int64, so every difference is exact for any record
+length; float blocks are summed in float64 after subtracting the segment's first sample. The
+stride grid and the offset are those of the batch estimator, so ``result()`` equals
+``allan_variance(y, rate, kind="pavar", overlap=S)`` (``"phvar"`` for Hadamard) to rounding of
+the final sums, for any split into blocks.
+
+A ``gap()`` ends the segment: the phase history is dropped (no difference straddles the gap)
+and the sums carry on. ``merge`` adds another accumulator's sums. ``state()`` is a plain dict
+(msgpack-able) that ``from_state`` restores exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from avard.core.allan.deviations import (
+    AllanResult,
+    DifferenceSums,
+    checked_block,
+    finish_result,
+    grid_sums,
+)
+from avard.core.allan.noise_id import Lag1Ladder
+from avard.core.allan.scratch import scratch
+from avard.core.errors import DataError, FormatError
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["AllanSnapshot", "StreamingAllan"]
+
+STATE_VERSION = 3  # 3: noise identification by Lag1Ladder sums
+# Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
+# numpy's per-call overhead would otherwise dominate. Results never depend on it.
+_FLUSH_SAMPLES = 4096
+# Largest piece processed at once (working memory ≈ 4 × this × C × 8 bytes).
+_MAX_BLOCK = 1 << 16
+_EXACT_FLOAT = 2.0**53  # integers below this are exact in float64
+
+
+@dataclass(frozen=True)
+class AllanSnapshot:
+    """What the service publishes every few seconds.
+
+    tau (K,) s; m, stride, n (K,); avar, edf, lo, hi, alpha (K, C) with avar in (input unit)²;
+    cov (K, C, C) the Allan covariance; n_samples; names; ci; rate_hz; kind (the estimator,
+    "pavar", or "phvar" whose ``avar`` holds the Hadamard variance).
+    """
+
+    tau: NDArray[np.float64]
+    m: NDArray[np.int64]
+    stride: NDArray[np.int64]
+    avar: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    n: NDArray[np.int64]
+    edf: NDArray[np.float64]
+    lo: NDArray[np.float64]
+    hi: NDArray[np.float64]
+    alpha: NDArray[np.float64]
+    n_samples: int
+    names: tuple[str, ...]
+    ci: float
+    rate_hz: float
+    kind: str = "pavar"  # "phvar" for a Hadamard accumulator
+
+    def to_dict(self) -> dict:
+        """Plain lists/numbers, msgpack- and JSON-able (units: s, (input unit)²)."""
+        out: dict = {"n_samples": int(self.n_samples), "names": list(self.names),
+                     "ci": float(self.ci), "rate_hz": float(self.rate_hz), "kind": self.kind}
+        for key in ("tau", "m", "stride", "avar", "cov", "n", "edf", "lo", "hi", "alpha"):
+            out[key] = np.asarray(getattr(self, key)).tolist()
+        return out
+
+
+class _Level:
+    """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""
+
+    __slots__ = ("ladder", "m", "spacing", "stride", "sums")
+
+    def __init__(self, m: int, stride: int, c: int, d: int) -> None:
+        self.m = m
+        self.stride = stride
+        self.spacing = m // stride
+        self.sums = DifferenceSums.zeros(c)
+        # non-overlapping m-averages: every spacing-th first difference of the grid; per
+        # channel only (the cross sums would cost C times more at m = 1, every sample)
+        self.ladder = Lag1Ladder(c, dmax=d, cross=False)
+
+
+class _Grid:
+    """Phase history on one stride grid, shared by the levels that use that stride.
+
+    Stride 1 serves every m ≤ S (fully overlapping); each stride s = m/S > 1 serves one level.
+    ``hist`` holds the last (d+1)·max(sp) points (enough for the lag partner of the next
+    block's first second difference), in the accumulator's dtype (int64 counts stay exact).
+    """
+
+    __slots__ = ("base", "hist", "keep", "stride")
+
+    def __init__(self, stride: int, keep: int, c: int, dtype: type) -> None:
+        self.stride = stride
+        self.keep = keep
+        self.hist: NDArray = np.zeros((1, c), dtype=dtype)  # X_0 = 0 of the segment
+        self.base = 0  # grid index, within the segment, of hist[0]
+
+    def push(self, points: NDArray, levels: Sequence[_Level], d: int) -> None:
+        """Append new grid points and add every completed difference to the levels' sums."""
+        h = self.hist.shape[0]
+        arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
+        arr[:h] = self.hist  # int64 → float64 is exact below 2**53 (checked by the caller)
+        arr[h:] = points
+        length = arr.shape[0]
+        for lev in levels:
+            sp = lev.spacing
+            grid_sums(arr, sp, h, lev.sums, d)
+            # averages ending at a new grid point that is a multiple of m in the segment
+            e0 = max(h, sp)
+            e0 += (-(self.base + e0)) % sp
+            if e0 < length:
+                lev.ladder.push((arr[e0::sp] - arr[e0 - sp:length - sp:sp]).astype(np.float64))
+        if arr.shape[0] > self.keep:
+            self.base += arr.shape[0] - self.keep
+            arr = arr[-self.keep :]
+        # a copy in the stored dtype: the scratch buffer is reused by the next grid
+        self.hist = arr.astype(self.hist.dtype)
+
+
+class StreamingAllan:
+    """Streaming partially overlapping Allan variance of C channels at octave τ.
+
+    Parameters
+    ----------
+    n_channels : int
+        Number of channels C (e.g. 3 axes + temperatures).
+    rate_hz : float
+        Sample rate; τ = m / rate_hz.
+    overlap : int
+        S: fully overlapping up to m = S, stride m/S above. A power of two.
+    max_octaves : int
+        Largest m is 2^(max_octaves − 1).
+    names : channel names.
+    hadamard : bool
+        Accumulate the Hadamard variance (third differences, NIST SP 1065 eq. 18; insensitive
+        to a linear rate drift) instead of the Allan variance; results have kind "phvar".
+    """
+
+    def __init__(
+        self,
+        n_channels: int,
+        rate_hz: float,
+        *,
+        overlap: int = 8,
+        max_octaves: int = 40,
+        names: Sequence[str] | None = None,
+        hadamard: bool = False,
+    ) -> None:
+        if not isinstance(n_channels, (int, np.integer)) or n_channels < 1:
+            raise DataError(f"n_channels={n_channels!r} must be a positive integer")
+        if not (isinstance(rate_hz, (int, float, np.integer, np.floating))
+                and math.isfinite(float(rate_hz)) and float(rate_hz) > 0):
+            raise DataError(f"rate_hz={rate_hz!r} must be a finite sample rate > 0 Hz")
+        if overlap < 1 or overlap & (overlap - 1):
+            raise DataError(f"overlap={overlap} must be a power of two >= 1 (default 8)")
+        if not 1 <= max_octaves <= 62:
+            raise DataError(f"max_octaves={max_octaves} must lie in 1..62")
+        if names is not None and len(names) != n_channels:
+            raise DataError(f"{len(names)} names given for {n_channels} channels")
+        self.n_channels = int(n_channels)
+        self.rate_hz = float(rate_hz)
+        self.overlap = int(overlap)
+        self.max_octaves = int(max_octaves)
+        self.hadamard = bool(hadamard)
+        self.kind = "phvar" if self.hadamard else "pavar"
+        self._d = 3 if self.hadamard else 2  # order of the phase difference
+        self.names = list(names) if names is not None else [f"ch{i}" for i in range(n_channels)]
+        self.n_samples = 0  # all samples accepted, over all segments
+        self.n_segments = 0  # segments started (a gap or merge adds to it)
+        self._integer: bool | None = None  # decided by the first block
+        self._levels: list[_Level] = []
+        self._grids: list[_Grid] = []
+        self._log2s = self.overlap.bit_length() - 1
+        self._pending: list[NDArray] = []
+        self._pending_n = 0
+        self._reset_segment()
+
+    # ----------------------------------------------------------------- segments and blocks
+    def _reset_segment(self) -> None:
+        self._seg_count = 0  # samples in the current segment
+        self._offset: NDArray | None = None  # first sample of the segment (removed)
+        self._carry: NDArray | None = None  # phase X at the segment's last sample
+        self._big = False  # has |X| reached 2**53 in this segment (integer input)?
+        for g in self._grids:
+            g.hist = np.zeros((1, self.n_channels), dtype=self._dtype())
+            g.base = 0
+        for lev in self._levels:
+            lev.ladder.gap()
+
+    def _dtype(self) -> type:
+        return np.int64 if self._integer else np.float64
+
+    def _level(self, k: int) -> _Level:
+        while len(self._levels) <= k:
+            j = len(self._levels)
+            self._levels.append(_Level(1 << j, self._stride(j), self.n_channels, self._d))
+        return self._levels[k]
+
+    def _stride(self, k: int) -> int:
+        m = 1 << k
+        return 1 if m <= self.overlap else m // self.overlap
+
+    def _grid_levels(self, g: int) -> list[_Level]:
+        """Levels on grid g (stride 2^g): all m ≤ S for g = 0, else the one m = 2^g·S."""
+        ks = range(min(self._log2s + 1, self.max_octaves)) if g == 0 else \
+            ([self._log2s + g] if self._log2s + g < self.max_octaves else [])
+        return [self._level(k) for k in ks]
+
+    def _grid(self, g: int) -> _Grid:
+        while len(self._grids) <= g:
+            # Grids are created when the segment first reaches their stride, so the segment's
+            # only earlier point on them is X_0 = 0, which a new grid starts with.
+            keep = (self._d + 1) * (self.overlap if len(self._grids) else
+                               min(self.overlap, 1 << (self.max_octaves - 1)))
+            self._grids.append(_Grid(1 << len(self._grids), keep, self.n_channels,
+                                     self._dtype()))
+        return self._grids[g]
+
+    def _check_block(self, block: ArrayLike) -> NDArray:
+        first = self._integer is None
+        a, self._integer = checked_block(block, self.n_channels, self._integer)
+        if first and self._integer is not None:
+            for g in self._grids:
+                g.hist = g.hist.astype(self._dtype())
+        return a
+
+    def update(self, block: ArrayLike) -> None:
+        """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
+        a = self._check_block(block)
+        n = a.shape[0]
+        if n == 0:
+            return
+        if n >= _FLUSH_SAMPLES:
+            self._flush()  # pending small blocks come first, in order
+            # bounded pieces keep the working memory independent of the caller's block size
+            for i in range(0, n, _MAX_BLOCK):
+                self._process(a[i : i + _MAX_BLOCK])
+        else:
+            # copy: the caller may reuse its buffer (a FIFO drain) after we return
+            self._pending.append(np.array(a, copy=True))
+            self._pending_n += n
+            if self._pending_n >= _FLUSH_SAMPLES:
+                self._flush()
+        self.n_samples += n
+
+    def _flush(self) -> None:
+        if not self._pending:
+            return
+        a = self._pending[0] if len(self._pending) == 1 else np.concatenate(self._pending)
+        self._pending = []
+        self._pending_n = 0
+        self._process(a)
+
+    def _process(self, a: NDArray) -> None:
+        """Run the cascade on a validated block of the current segment."""
+        dtype = self._dtype()
+        if self._offset is None:
+            self._offset = a[0].copy()
+            self._carry = np.zeros(self.n_channels, dtype=dtype)
+            self.n_segments += 1
+        n = a.shape[0]
+        # X continues from the carried value; cumsum over [carry, block] adds in the same order
+        # as the batch cumsum over the whole segment, so float phases are bit-identical.
+        work = scratch("work", n + 1, self.n_channels, dtype)
+        work[0] = self._carry
+        np.subtract(a, self._offset, out=work[1:], casting="unsafe")
+        np.cumsum(work, axis=0, out=work)
+        phase = work[1:]  # X at segment indices seg_count+1 … seg_count+n
+        first_index = self._seg_count + 1
+        self._carry = phase[-1].copy()
+        if self._integer and not self._big:
+            self._big = bool(np.abs(phase).max(initial=0) >= _EXACT_FLOAT)
+        if self._integer and not self._big:
+            # Every X of this segment so far is an integer below 2**53, so float64 holds it
+            # exactly: one conversion here instead of one per level. Once a segment's phase
+            # has gone beyond, its grids work in int64 (slower, still exact).
+            phase_f = scratch("work_f", n, self.n_channels, np.float64)
+            np.copyto(phase_f, phase)
+            phase = phase_f
+        if self._seg_count == 0:
+            for g in self._grids:
+                g.hist = np.zeros((1, self.n_channels), dtype=dtype)  # X_0 = 0
+                g.base = 0
+        self._seg_count += n
+        for gi in range(self.max_octaves):
+            s = 1 << gi
+            if s > self._seg_count:
+                break  # no point beyond X_0 on this grid yet, nor on any coarser one
+            levels = self._grid_levels(gi)
+            if not levels:
+                break
+            grid = self._grid(gi)
+            off = (-first_index) % s  # first new index on this grid
+            if off < n:
+                grid.push(phase[off::s], levels, self._d)
+
+    def gap(self) -> None:
+        """End the current segment: later differences never reach back across this point."""
+        self._flush()
+        self._reset_segment()
+
+    # ------------------------------------------------------------------------ results
+    def _active(self) -> list[_Level]:
+        return [lev for lev in self._levels if lev.sums.n > 0]
+
+    def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
+        """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
+
+        ``weights`` (C,) gives the single channel Σ w_c y_c from the covariance. A one-channel
+        accumulator, or a weighted result, has 1-D arrays; otherwise (K, C).
+        """
+        self._flush()
+        levels = self._active()
+        if not levels:
+            raise DataError(
+                f"no Allan variance yet: {self.n_samples} samples in the longest segment is "
+                "too few for τ = 2 τ0; feed more samples"
+            )
+        ms = np.array([lev.m for lev in levels], dtype=np.int64)
+        strides = np.array([lev.stride for lev in levels], dtype=np.int64)
+        return finish_result(
+            self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels],
+            [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
+            weights=weights,
+        )
+
+    def snapshot(self, ci: float = 0.683) -> AllanSnapshot:
+        """τ, AVAR per channel, covariance, counts, EDF and CI, at the current point."""
+        self._flush()
+        if not self._active():
+            k = 0
+            empty = np.zeros((0, self.n_channels))
+            ints = np.zeros(0, dtype=np.int64)
+            return AllanSnapshot(np.zeros(0), ints, ints, empty,
+                                 np.zeros((k, self.n_channels, self.n_channels)), ints,
+                                 empty, empty, empty, empty, self.n_samples,
+                                 tuple(self.names), ci, self.rate_hz, self.kind)
+        res = finish_result(
+            self.kind, self.rate_hz,
+            np.array([lev.m for lev in self._active()], dtype=np.int64),
+            np.array([lev.stride for lev in self._active()], dtype=np.int64),
+            [lev.sums for lev in self._active()], [lev.ladder for lev in self._active()],
+            ci=ci, names=self.names,
+        )
+        assert res.cov is not None
+        return AllanSnapshot(res.tau, res.m, res.stride, res.var, res.cov, res.n, res.edf,
+                             res.lo, res.hi, res.alpha, self.n_samples, tuple(self.names),
+                             ci, self.rate_hz, self.kind)
+
+    # ------------------------------------------------------------- merge and persistence
+    def merge(self, other: StreamingAllan) -> None:
+        """Add the sums of another accumulator (other segments of the same channels).
+
+        Both must have the same channels, rate, overlap and kind. ``other``'s open segment counts as
+        ended; this accumulator's open segment continues.
+        """
+        if not isinstance(other, StreamingAllan):
+            raise DataError("merge takes another StreamingAllan")
+        if (other.n_channels != self.n_channels or other.overlap != self.overlap
+                or other.rate_hz != self.rate_hz or other.kind != self.kind):
+            raise DataError(
+                "cannot merge accumulators with different channels, rate, overlap or kind: "
+                f"({self.n_channels}, {self.rate_hz} Hz, S={self.overlap}, {self.kind}) vs "
+                f"({other.n_channels}, {other.rate_hz} Hz, S={other.overlap}, {other.kind})"
+            )
+        self._flush()
+        other._flush()
+        for k, lev in enumerate(other._levels):
+            mine = self._level(k)
+            mine.sums.add(lev.sums)
+            mine.ladder.add(lev.ladder)
+        self.n_samples += other.n_samples
+        self.n_segments += other.n_segments
+
+    def state(self) -> dict:
+        """Everything needed to continue exactly: plain numbers, lists and bytes (msgpack-able).
+
+        Pending small blocks are folded in first. Arrays are {"dtype", "shape", "data"} maps,
+        as in avard's frame format.
+        """
+        self._flush()
+        c = self.n_channels
+        # Levels past the last one with any sums are recreated empty on restore.
+        count = max((k + 1 for k, lev in enumerate(self._levels)
+                     if lev.sums.n or lev.ladder.count()), default=0)
+        levs = self._levels[:count]
+        iu = np.triu_indices(c)  # s2 is symmetric: one triangle is stored
+        sums: dict = {"n": [int(lev.sums.n) for lev in levs]}
+        sums["s2"] = _pack(np.array([lev.sums.s2[iu] for lev in levs],
+                                    dtype=np.float64).reshape(count, len(iu[0])))
+        sums["ladders"] = [lev.ladder.state() for lev in levs]
+        grids = self._grids
+        hist = (np.concatenate([g.hist for g in grids]) if grids
+                else np.zeros((0, c), dtype=self._dtype()))
+        levels = {"count": len(levs), "sums": sums, "grids": len(grids), "hist": _pack(hist),
+                  "hist_len": [int(g.hist.shape[0]) for g in grids],
+                  "base": [int(g.base) for g in grids]}
+        return {
+            "kind": "streaming_allan",
+            "v": STATE_VERSION,
+            "n_channels": self.n_channels,
+            "rate_hz": self.rate_hz,
+            "overlap": self.overlap,
+            "max_octaves": self.max_octaves,
+            "hadamard": self.hadamard,
+            "names": list(self.names),
+            "integer": self._integer,
+            "n_samples": self.n_samples,
+            "n_segments": self.n_segments,
+            "seg_count": self._seg_count,
+            "big": self._big,
+            "offset": None if self._offset is None else _pack(self._offset),
+            "carry": None if self._carry is None else _pack(self._carry),
+            "levels": levels,
+        }
+
+    @classmethod
+    def from_state(cls, state: dict) -> StreamingAllan:
+        """Restore an accumulator from ``state()`` exactly (same sums, same history)."""
+        try:
+            if state.get("kind") != "streaming_allan" or state.get("v") != STATE_VERSION:
+                raise FormatError(
+                    f"not a version-{STATE_VERSION} StreamingAllan state "
+                    f"(kind={state.get('kind')!r}, v={state.get('v')!r})"
+                )
+            self = cls(int(state["n_channels"]), float(state["rate_hz"]),
+                       overlap=int(state["overlap"]), max_octaves=int(state["max_octaves"]),
+                       hadamard=bool(state.get("hadamard", False)),
+                       names=list(state["names"]))
+            self._integer = state["integer"]
+            self.n_samples = int(state["n_samples"])
+            self.n_segments = int(state["n_segments"])
+            self._seg_count = int(state["seg_count"])
+            self._big = bool(state["big"])
+            self._offset = None if state["offset"] is None else _unpack(state["offset"])
+            self._carry = None if state["carry"] is None else _unpack(state["carry"])
+            lv = state["levels"]
+            count = int(lv["count"])
+            if count > self.max_octaves:
+                raise FormatError(f"state has {count} levels, more than max_octaves")
+            hist = _unpack(lv["hist"])
+            ends = np.cumsum([0, *lv["hist_len"]])
+            for g in range(int(lv["grids"])):
+                grid = self._grid(g)
+                grid.hist = hist[ends[g] : ends[g + 1]].copy()
+                grid.base = int(lv["base"][g])
+            sums = lv["sums"]
+            c = self.n_channels
+            s2 = _unpack(sums["s2"])
+            for k in range(count):
+                lev = self._level(k)
+                lev.sums.n = int(sums["n"][k])
+                lev.sums.s2 = _symmetric(s2[k], c)
+                lev.ladder = Lag1Ladder.from_state(sums["ladders"][k])
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise FormatError(f"StreamingAllan state is incomplete or malformed: {exc}; "
+                              "start a new accumulator") from exc
+        return self
+
+
+def _symmetric(tri: NDArray, c: int) -> NDArray:
+    """The symmetric (c, c) matrix whose upper triangle (row-major) is ``tri``."""
+    out = np.zeros((c, c))
+    out[np.triu_indices(c)] = tri
+    return out + np.triu(out, 1).T
+
+
+def _pack(a: NDArray) -> dict:
+    a = np.ascontiguousarray(a)
+    return {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.tobytes()}
+
+
+def _unpack(d: dict) -> NDArray:
+    dtype = np.dtype(d["dtype"])
+    if dtype.kind not in "if":
+        raise FormatError(f"array dtype {d['dtype']!r} is not allowed in a state")
+    return np.frombuffer(d["data"], dtype=dtype).reshape(d["shape"]).copy()

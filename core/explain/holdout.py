@@ -1,0 +1,462 @@
+"""The held-out gain of ``avard explain``: how much better the extended model predicts data it
+was not fitted on than analyze's base model does.
+
+Both models are fitted on one part of the data (the *fit part*) and predict the Allan variance
+of another (the *held-out part*):
+
+- **split** (default): the record's slow view (block means of ≈ 1 s, ``explain.SlowView``) in
+  two time-contiguous halves A and B, two folds: fit on A and predict B, fit on B and predict
+  A; the χ² of both folds add.
+- **file** (``--holdout FILE``): the whole record is the fit part; FILE, a second record of
+  the same sensor at the same rate with the same channels, is held out.
+
+On the fit part, the *base* model is ``fit.fit_noise`` of its AVAR (analyze's terms and its
+lines); the *extended* model is the same fit of its AVAR with the claimed causes' signals
+removed, their parameters fitted on the fit part alone: the temperature coefficient and lag
+(``thermal_fit.fit_thermal`` on the claimed channel), the warm-up and the step (least squares,
+``causes``) where the fit part holds them, the Gauss–Markov σ as a GLS component (at the
+correlation time found on the whole record). On the held-out part, the base model predicts
+the measured AVAR; the extended model predicts the AVAR with the *predicted* signals removed:
+the temperature through the fitted lag and coefficient from the held-out part's own logged
+temperature, a warm-up's tail where the held-out part follows it. A warm-up or a step is an
+event of one record, not a property of the sensor: it predicts nothing in another record, and
+a step nothing in the other half (its continuation is constant).
+
+Misfit: the generalised χ² of the held-out AVAR against each model's prediction, with the
+covariance ``fit_noise`` models (Whittle kernels of the model's own components, NIST SP 1065
+§5.3 for the diagonal), over the τ both fits used and the held-out part resolves
+(:func:`heldout_chi2`). No parameter is fitted on those points, so a model that describes the
+sensor gives χ² ≈ n (the number of τ). The gain is
+
+    gain = 1 − χ²_ext / χ²_base   (both on the same held-out τ, summed over folds and axes)
+
+0: the extension predicts no better; 0.9: its held-out misfit is a tenth of the base's;
+negative: it predicts worse (over-fitting). It is null, with the reason, when no cause is
+claimed (the extended model is the base model) or the record is too short to split.
+The AVAR here is the slow view's (τ ≥ one block), where every cause acts.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.errors import DataError, FitError
+from avard.core.explain import causes as cz
+from avard.core.explain.thermal_fit import ThermalFit, fit_thermal, lag_filter
+from avard.core.model import fit as fit_mod
+from avard.core.model import terms as mdl
+from avard.core.model.fit import NoiseFit, fit_noise
+from numpy.typing import NDArray
+
+__all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible",
+           "heldout_chi2", "holdout_file", "holdout_split"]
+
+#: Fewest slow-view points in each part (as for explain's time-domain causes).
+MIN_PART_POINTS = 256
+#: Causes that are events of one record, not properties of the sensor.
+EVENTS = frozenset({"warmup", "bias_step"})
+#: Lags of a held-out part's start left out (the lag filter's unknown start state:
+#: e^(−5) < 1 % of the start-up difference remains).
+HELD_SETTLE_LAGS = 5.0
+
+DEFINITION = ("gain = 1 − χ²_ext/χ²_base: generalised χ² (covariance modelled as avard "
+              "analyze's fit models it) of the held-out Allan variance ((m/s²)², τ in s) "
+              "against the base model (analyze's terms and lines) and against the extended "
+              "model (the claimed causes, parameters fitted on the fit part only, their "
+              "predicted signals removed from the held-out part); 0 = no better, 1 = perfect, "
+              "< 0 = worse. χ² ≈ n (the number of held-out τ) when a model predicts the data.")
+
+
+def _avar(y: NDArray, rate_hz: float) -> Any:
+    """Analyze's streaming estimator on one slow-view series."""
+    sa = StreamingAllan(1, rate_hz)
+    sa.update(np.asarray(y, dtype=float)[:, None])
+    return sa.result()
+
+
+def heldout_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float],
+                 predictive: bool = True) -> tuple[float, int]:
+    """(χ², n): the generalised χ² of ``result``'s AVAR against ``model``'s prediction at the
+    n τ inside ``tau_range`` that the held-out data resolve (``fit_noise``'s own cuts: ≥ 8
+    independent averages, EDF ≥ 3), with the covariance ``fit_noise`` models from the model's
+    components (its ``_avar_cov``, Whittle kernels, and its EDF floor), whitened as it
+    whitens, plus (``predictive``) the model's own parameter covariance propagated to the
+    prediction, X·Cov(θ)·Xᵀ, and for each term the fit left out, (U²/z)²·x xᵀ from its upper
+    limit U. No parameter is fitted here. With ``predictive`` False and the
+    data the model was fitted on, this is the fit's own χ² (a test holds them equal). Uses
+    fit.py's internals: one covariance model."""
+    var = np.asarray(result.var, dtype=float)
+    tau = np.asarray(result.tau, dtype=float)
+    m = np.asarray(result.m, dtype=np.int64)
+    n = np.asarray(result.n, dtype=float)
+    M = fit_mod._n_samples(result)
+    edf = np.asarray(result.edf, dtype=float)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    ok = (np.isfinite(var) & (var > 0) & (n > 0) & (n_total / m >= 8.0)
+          & ~(np.isfinite(edf) & (edf < 3.0))
+          & (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9)))
+    idx = np.flatnonzero(ok)
+    if len(idx) == 0:
+        return math.nan, 0
+    rate = float(result.rate_hz)
+    comps = model.components
+    X = np.column_stack([c.basis(tau[idx], rate) for c in comps])
+    theta = np.asarray(model.theta, dtype=float)
+    G = mdl.avar_covariance_kernels(m[idx], [c.psd(rate) for c in comps])
+    p = fit_mod._Problem(y=var[idx], X=X, fixed=np.zeros(len(idx)), G=G,
+                         theta_fixed=np.zeros(0), M=M[idx], edf_floor=100.0 * M[idx],
+                         m_tau=tau[idx])
+    C = fit_mod._avar_cov(p, theta, np.arange(len(idx)))
+    if predictive:
+        # the prediction is itself uncertain: its parameters were estimated on other data
+        # (their covariance from the fit, Birge-scaled); the two errors are independent
+        C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
+        # a term the fit left out is known only to lie below its upper limit
+        # U² = θ̂ + z·se (fit._select_terms): its θ carries a standard error up to U²/z,
+        # which the prediction inherits (a short fit part that cannot tell flicker from
+        # random walk at its longest τ must not predict either with confidence)
+        for k, comp in enumerate(comps):
+            te = model.terms.get(comp.label)
+            if te is not None and not te.present and te.upper:
+                se = te.upper**2 / model.z_present
+                C = C + se**2 * np.outer(X[:, k], X[:, k])
+    r = fit_mod._whitener(C) @ (var[idx] - X @ theta)
+    return float(r @ r), len(idx)
+
+
+# --------------------------------------------------------------------------------------------
+# results
+
+
+@dataclass
+class Fold:
+    """One fit-part → held-out-part prediction of one axis."""
+
+    fit_part: str
+    heldout_part: str
+    chi2_base: float
+    chi2_ext: float
+    n_points: int
+    tau_range_s: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"fit_part": self.fit_part, "heldout_part": self.heldout_part,
+                "chi2_base": self.chi2_base, "chi2_extended": self.chi2_ext,
+                "n_points": self.n_points, "tau_range_s": list(self.tau_range_s)}
+
+
+@dataclass
+class ChannelHoldout:
+    """One axis: held-out χ² of the base and the extended model, summed over the folds."""
+
+    name: str
+    causes: list[str]
+    folds: list[Fold] = field(default_factory=list)
+    reason: str | None = None
+
+    @property
+    def chi2_base(self) -> float:
+        return float(sum(f.chi2_base for f in self.folds)) if self.folds else math.nan
+
+    @property
+    def chi2_ext(self) -> float:
+        return float(sum(f.chi2_ext for f in self.folds)) if self.folds else math.nan
+
+    @property
+    def n_points(self) -> int:
+        return sum(f.n_points for f in self.folds)
+
+    @property
+    def gain(self) -> float | None:
+        """1 − χ²_ext/χ²_base, or None when nothing is claimed on this axis."""
+        if not self.causes or not self.folds or not self.chi2_base > 0:
+            return None
+        return 1.0 - self.chi2_ext / self.chi2_base
+
+    @property
+    def note(self) -> str | None:
+        """Why a gain near 0 is expected: the claimed causes are only events (a warm-up, a
+        step), which predict nothing in data they were not fitted on."""
+        if self.causes and set(self.causes) <= EVENTS:
+            return ("a warm-up or a step is an event of one record: it predicts no other "
+                    "data, so its held-out gain is near 0 by design; its own test is the "
+                    "evidence")
+        return None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"causes": self.causes, "chi2_base": self.chi2_base, "note": self.note,
+                "chi2_extended": self.chi2_ext, "n_points": self.n_points,
+                "gain": self.gain, "folds": [f.to_dict() for f in self.folds],
+                "reason": self.reason}
+
+
+@dataclass
+class Holdout:
+    """The held-out measure of a whole explanation (``mode`` "split" or "file")."""
+
+    mode: str
+    source: str
+    block_s: float
+    channels: dict[str, ChannelHoldout] = field(default_factory=dict)
+    reason: str | None = None
+
+    @property
+    def gain(self) -> float | None:
+        """1 − Σχ²_ext/Σχ²_base over the axes with a claimed cause; None when there is none
+        (or the record could not be split)."""
+        chs = [c for c in self.channels.values() if c.gain is not None]
+        if self.reason is not None or not chs:
+            return None
+        b = sum(c.chi2_base for c in chs)
+        return 1.0 - sum(c.chi2_ext for c in chs) / b if b > 0 else None
+
+    @property
+    def why_no_gain(self) -> str | None:
+        if self.reason is not None:
+            return self.reason
+        if self.gain is None:
+            return "no cause claimed on any axis: the extended model is the base model"
+        return None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mode": self.mode, "source": self.source, "holdout_gain": self.gain,
+                "definition": DEFINITION, "reason": self.why_no_gain,
+                "slow_view_block_s": self.block_s, "units": "SI",
+                "channels": {k: v.to_dict() for k, v in self.channels.items()}}
+
+
+# --------------------------------------------------------------------------------------------
+# the causes of one axis, refitted on a fit part
+
+
+@dataclass
+class Part:
+    """A slice of the slow view of one axis, ``y`` (m/s²); ``t0_s`` its start (s) on the time
+    axis of its own record; ``label`` for the output."""
+
+    y: NDArray[np.float64]
+    t0_s: float
+    label: str
+    first: bool  # starts at its record's start (a warm-up can be fitted here)
+
+
+@dataclass
+class Claims:
+    """What explain claimed on the whole record for one axis (parameters from there are used
+    only where stated: the Gauss–Markov T, the temperature channel, the step's time)."""
+
+    thermal_channel: int | None = None  # index into the temperature columns
+    warmup: bool = False
+    step_time_s: float | None = None
+    gauss_markov_T: float | None = None
+    lines: list[dict[str, float]] = field(default_factory=list)
+    whole_thermal: ThermalFit | None = None  # the whole record's, for "file"
+    whole_warmup: tuple[float, float] | None = None  # (T, size) for "file"
+    whole_step: tuple[float, float] | None = None  # (time, size) for "file"
+
+    @property
+    def names(self) -> list[str]:
+        out = []
+        if self.thermal_channel is not None:
+            out.append("temperature")
+        if self.warmup:
+            out.append("warmup")
+        if self.step_time_s is not None:
+            out.append("bias_step")
+        if self.gauss_markov_T is not None:
+            out.append("gauss_markov")
+        return out
+
+
+Temps = tuple[NDArray, slice] | None
+
+
+def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
+             u_fit: Temps, u_held: Temps
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """(signal on the fit part, its prediction on the held-out part, blocks to leave out at
+    the held-out part's start) of the claimed causes. ``u_fit``/``u_held``: (the claimed
+    temperature channel of the part's record (°C), the part's slice of it), for the lag
+    filter; ``refit``: fit the parameters on the fit part (split) or use the whole record's
+    (file: the fit part is the whole record).
+
+    The sensor's temperature when a record starts is unknown (the lag filter's start state).
+    On a fit part that starts its record, the start-up settling is fitted with the thermal
+    model (``ThermalFit.signal(temps, y)``, as explain does); on a held-out part nothing may
+    be fitted, so its first ``HELD_SETTLE_LAGS`` lags are left out of both models' χ²."""
+    d_fit = np.zeros(len(fit.y))
+    d_held = np.zeros(len(held.y))
+    skip = 0
+    if c.thermal_channel is not None and u_fit is not None and u_held is not None:
+        part_t = u_fit[0][u_fit[1]][:, None]
+        if refit:
+            th = fit_thermal(fit.y, part_t, ["t"], rate_b)
+        else:
+            assert c.whole_thermal is not None
+            th = replace(c.whole_thermal, channel_index=0)
+        coef, lag = th.coefficient, th.lag_s
+        if fit.first:
+            d_fit += th.signal(part_t, fit.y)
+        else:
+            # the lag runs over the whole logged series the part belongs to, so the part
+            # starts in the state the sensor was in
+            uf = lag_filter(u_fit[0], lag, rate_b)[u_fit[1]]
+            d_fit += coef * (uf - uf.mean())
+        uh = lag_filter(u_held[0], lag, rate_b)[u_held[1]]
+        d_held += coef * (uh - uh.mean())
+        if held.first and lag > 0:
+            skip = math.ceil(HELD_SETTLE_LAGS * lag * rate_b)
+    if c.warmup and fit.first:
+        if refit:
+            _sse, T, size = cz.transient_fits(fit.y - d_fit, rate_b)["warmup"]
+        else:
+            assert c.whole_warmup is not None
+            T, size = c.whole_warmup
+        d_fit += cz.warmup_signal(len(fit.y), rate_b, T, size)
+        if held.t0_s > fit.t0_s:  # the same record, later: the warm-up's tail
+            d_held += cz.warmup_signal(len(held.y), rate_b, T, size, t0_s=held.t0_s)
+    if c.step_time_s is not None:
+        end = fit.t0_s + len(fit.y) / rate_b
+        if refit and fit.t0_s < c.step_time_s < end:
+            cand = cz.detect_bias_step(fit.y - d_fit, rate_b)
+            d_fit += cz.step_signal(len(fit.y), rate_b, cand.params["time_s"] + fit.t0_s,
+                                    cand.params["size"], t0_s=fit.t0_s)
+        elif not refit and c.whole_step is not None:
+            d_fit += cz.step_signal(len(fit.y), rate_b, *c.whole_step)
+    return d_fit, d_held, skip
+
+
+def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
+          u_fit: Temps, u_held: Temps) -> Fold:
+    """Fit both models on ``fit`` and measure their held-out χ² on ``held``."""
+    nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
+    extra = [{"cause": "sinusoid", "params": {"frequency_hz": ln["frequency_hz"]}}
+             for ln in c.lines if 0 < ln["frequency_hz"] < nyq]
+    base = fit_noise(_avar(fit.y, rate_b), extra=extra)
+    if c.names:
+        d_fit, d_held, skip = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
+        if len(held.y) - skip < MIN_PART_POINTS:
+            raise FitError(f"the held-out part is too short once its first {skip} blocks "
+                           "(the thermal lag's unknown start state) are left out")
+        gm = ([] if c.gauss_markov_T is None else
+              [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
+        ext = fit_noise(_avar(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        held_var = _avar(held.y[skip:], rate_b)
+        held_ext = _avar((held.y - d_held)[skip:], rate_b)
+    else:
+        held_var = _avar(held.y, rate_b)
+        ext, held_ext = base, held_var
+    rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
+    cb, nb = heldout_chi2(base, held_var, rng)
+    ce, ne = heldout_chi2(ext, held_ext, rng)
+    if nb != ne or nb == 0:
+        raise FitError(f"no common held-out τ in {rng[0]:.3g}…{rng[1]:.3g} s")
+    return Fold(fit.label, held.label, cb, ce, nb, rng)
+
+
+# --------------------------------------------------------------------------------------------
+# the two modes
+
+
+def claims_of(ch: Any, temp_names: Sequence[str]) -> Claims:
+    """The claimed causes of one ``explain.ChannelExplanation``."""
+    c = Claims(lines=list(ch.base.lines))
+    for f in ch.claimed:
+        if f.cause == "temperature" and f.channel in temp_names:
+            c.thermal_channel = list(temp_names).index(f.channel)
+            c.whole_thermal = ch.thermal
+        elif f.cause == "warmup":
+            c.warmup = True
+            c.whole_warmup = (f.params["time_constant_s"], f.params["size"])
+        elif f.cause == "bias_step":
+            c.step_time_s = f.params["time_s"]
+            c.whole_step = (f.params["time_s"], f.params["size"])
+        elif f.cause == "gauss_markov":
+            c.gauss_markov_T = f.params["time_constant_s"]
+    return c
+
+
+def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float,
+             refit: bool, temps_of: Any) -> ChannelHoldout:
+    out = ChannelHoldout(name, c.names)
+    try:
+        for fit, held in folds:
+            u_fit, u_held = temps_of(fit), temps_of(held)
+            out.folds.append(_fold(fit, held, c, rate_b, refit, u_fit, u_held))
+    except (FitError, DataError) as exc:
+        out.folds = []
+        out.reason = f"held-out fit failed: {exc}"
+    return out
+
+
+def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
+                  t_names: Sequence[str], names: Sequence[str], rate_b: float,
+                  source: str) -> Holdout:
+    """Two folds over the time-contiguous halves of the record's slow view (module doc)."""
+    M = len(y_slow)
+    h = M // 2
+    ho = Holdout("split", source, 1.0 / rate_b)
+    if h < MIN_PART_POINTS:
+        ho.reason = (f"record too short to split: {M} slow-view blocks of {1 / rate_b:.3g} s, "
+                     f"each half needs {MIN_PART_POINTS}")
+        return ho
+    for name, ch in explanations.items():
+        j = list(names).index(name)
+        y = y_slow[:, j]
+        c = claims_of(ch, t_names)
+        A = Part(y[:h], 0.0, "first half", True)
+        B = Part(y[h:], h / rate_b, "second half", False)
+
+        def temps_of(p: Part, c: Claims = c) -> Temps:
+            if c.thermal_channel is None or t_slow is None:
+                return None
+            return t_slow[:, c.thermal_channel], slice(0, h) if p.first else slice(h, None)
+
+        ho.channels[name] = _channel(name, c, [(A, B), (B, A)], rate_b, True, temps_of)
+    return ho
+
+
+def check_compatible(meta: dict[str, Any], other: dict[str, Any], path: str) -> None:
+    """One line (DataError, exit 2) when ``other`` is not a record of the same sensor set-up
+    as ``meta``: the same rate and the same accelerometer and temperature channels."""
+    r0, r1 = float(meta["rate_hz"]), float(other["rate_hz"])
+    n0, n1 = list(meta["names"]), list(other["names"])
+    t0 = list(meta.get("temperature_names") or [])
+    t1 = list(other.get("temperature_names") or [])
+    if abs(r1 - r0) > 1e-9 * r0 or n0 != n1 or t0 != t1:
+        raise DataError(
+            f"--holdout {path}: {r1:g} Hz, channels {','.join(n1) or 'none'}, temperatures "
+            f"{','.join(t1) or 'none'}; the data has {r0:g} Hz, channels "
+            f"{','.join(n0) or 'none'}, temperatures {','.join(t0) or 'none'}: give a record "
+            "of the same sensor at the same rate with the same channels")
+
+
+def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
+                 y_held: NDArray, t_held: NDArray | None, t_names: Sequence[str],
+                 names: Sequence[str], rate_b: float, source: str) -> Holdout:
+    """Models fitted on the whole record (its slow view ``y_slow``) predict a second record
+    of the same sensor (its slow view ``y_held``, same blocks)."""
+    ho = Holdout("file", source, 1.0 / rate_b)
+    if len(y_held) < MIN_PART_POINTS:
+        ho.reason = (f"held-out record too short: {len(y_held)} slow-view blocks of "
+                     f"{1 / rate_b:.3g} s, it needs {MIN_PART_POINTS}")
+        return ho
+    for name, ch in explanations.items():
+        j = list(names).index(name)
+        c = claims_of(ch, t_names)
+        fit = Part(y_slow[:, j], 0.0, "data", True)
+        held = Part(y_held[:, j], 0.0, "holdout", True)
+
+        def temps_of(p: Part, c: Claims = c) -> Temps:
+            src = t_slow if p.label == "data" else t_held
+            if c.thermal_channel is None or src is None:
+                return None
+            return src[:, c.thermal_channel], slice(None)
+
+        ho.channels[name] = _channel(name, c, [(fit, held)], rate_b, False, temps_of)
+    return ho

@@ -1,0 +1,274 @@
+"""Terminal summary and Markdown report (with PNG plots) of an ``avard explain`` result.
+
+Per channel: the measured Allan deviation with its 68 % interval, the band where the base
+model (analyze's fit) says it should fall (the model's χ² interval with the estimator's EDF,
+NIST SP 1065 §5.3), the base model, the extended model (the noise fitted with the found
+signals removed) and the temperature-compensated ADEV; the misfit in σ; and every cause's test.
+matplotlib is imported only when plots are written (the optional ``plot`` extra).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from avard.core.explain.engine import ChannelExplanation, Explanation
+from avard.core.explain.thermal_fit import DS18B20_CONVERSION_S
+from avard.core.model.fit import NoiseFit, TermEstimate
+from avard.core.model.terms import SYMBOLS, TERMS, UNITS
+from avard.core.plot import pyplot, save_figure
+from numpy.typing import NDArray
+from scipy.stats import chi2 as chi2_dist
+
+_UNICODE = (("^2", "²"), ("^3", "³"), ("sqrt(s)", "√s"), ("sqrt(Hz)", "√Hz"))
+
+
+def unicode_unit(u: str) -> str:
+    """'m/s^2' → 'm/s²', 'm/s/sqrt(s)' → 'm/s/√s'."""
+    for a, b in _UNICODE:
+        u = u.replace(a, b)
+    return u
+
+
+def _fmt_term(t: TermEstimate, name: str) -> str:
+    unit = unicode_unit(UNITS[name])
+    if not t.present or t.value is None:
+        return f"absent (< {t.upper:.3g} {unit})" if t.upper else "absent"
+    return f"{t.value:.4g} [{t.lo:.4g}, {t.hi:.4g}] {unit}"
+
+
+def term_changes(ch: ChannelExplanation) -> list[tuple[str, str, str]]:
+    """(term, base, extended) per IEEE coefficient, with units and 68 % intervals."""
+    return [(n, _fmt_term(ch.base.fit.terms[n], n), _fmt_term(ch.extended.terms[n], n))
+            for n in TERMS]
+
+
+def _chi(fit: NoiseFit) -> str:
+    return f"{fit.chi2_dof:.3g}" if math.isfinite(fit.chi2_dof) else "n/a"
+
+
+def holdout_lines(ex: Explanation) -> list[str]:
+    """The held-out gain in words: what was held out, the gain (or why there is none) and
+    per channel the held-out χ² of the base and the extended model against its n."""
+    ho = ex.holdout
+    if ho is None:
+        return []
+    what = ("each half of the record predicted by models fitted on the other half"
+            if ho.mode == "split" else f"{ho.source} predicted by models fitted on this record")
+    out = [f"held out: {what} (Allan variance of {ho.block_s:.3g} s block means, τ ≥ "
+           f"{ho.block_s:.3g} s)"]
+    g = ho.gain
+    if g is None:
+        out.append(f"held-out gain: none ({ho.why_no_gain})")
+    else:
+        out.append(f"held-out gain {g:.3g} = 1 − χ²_ext/χ²_base of the held-out Allan "
+                   "variance (0: no better, 1: perfect; χ² ≈ n when a model predicts the data)")
+    for name, c in ho.channels.items():
+        if c.reason is not None:
+            out.append(f"  {name}: {c.reason}")
+        elif c.folds:
+            gtxt = "" if c.gain is None else f", gain {c.gain:.3g}"
+            causes = ", ".join(c.causes) or "no cause claimed"
+            out.append(f"  {name}: held-out χ² base {c.chi2_base:.4g}, extended "
+                       f"{c.chi2_ext:.4g} on n = {c.n_points} τ ({causes}{gtxt})")
+            if c.note is not None:
+                out.append(f"     {c.note}")
+    return out
+
+
+def summary(ex: Explanation) -> str:
+    """Plain-text summary for the terminal (SI units, 68 % intervals)."""
+    lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
+             f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
+             "intervals 68 %. Base model = avard analyze's fit."]
+    lines += holdout_lines(ex)
+    for name, ch in ex.channels.items():
+        lines.append("")
+        lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
+                     f"{_chi(ch.extended)}; gain {ch.gain:.3g}")
+        if ch.misfit:
+            for r in ch.misfit:
+                lines.append(f"  misfit {r['direction']} the base model at τ "
+                             f"{r['tau_range_s'][0]:.3g}…{r['tau_range_s'][1]:.3g} s, up to "
+                             f"{r['max_sigma']:+.3g} σ")
+        else:
+            lines.append("  the base model fits within 3 σ at every fitted τ")
+        claimed = ch.claimed
+        if not claimed:
+            lines.append("  findings: none (no cause passed its test)")
+        for f in claimed:
+            params = ", ".join(
+                f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"
+                                  if k in f.intervals else "")
+                for k, v in f.params.items())
+            lines.append(f"  FOUND {f.cause}: {params} (SI units)")
+            lines.append(f"        {f.evidence}")
+        lines.append("  IEEE coefficients (base → extended, 68 % interval):")
+        for term, b, e in term_changes(ch):
+            lines.append(f"    {SYMBOLS[term]} {term:21s} {b}  →  {e}")
+    return "\n".join(lines)
+
+
+def band(var_model: NDArray, edf: NDArray, ci: float = 0.683) -> tuple[NDArray, NDArray]:
+    """Where a measurement with EDF ν falls with probability ``ci`` if the model is right:
+    σ²·χ²_ν(q)/ν (NIST SP 1065 eq. 40)."""
+    e = np.maximum(np.asarray(edf, dtype=float), 1e-3)
+    return (var_model * chi2_dist.ppf(0.5 - ci / 2, e) / e,
+            var_model * chi2_dist.ppf(0.5 + ci / 2, e) / e)
+
+
+def _log_ticks(ax: Any) -> None:
+    from matplotlib.ticker import LogLocator
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_locator(LogLocator(base=10.0, numticks=12))
+    ax.tick_params(labelsize=8)
+
+
+def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
+    plt = pyplot()
+    a = ch.base.allan
+    tau = np.asarray(a.tau, dtype=float)
+    ok = np.isfinite(a.var) & (a.var > 0)
+    mb = ch.base.fit.model_avar(tau)
+    lo_b, hi_b = band(mb, a.edf)
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    ax.fill_between(tau[ok], np.sqrt(lo_b[ok]), np.sqrt(hi_b[ok]), color="0.85",
+                    label="base model, 68 % band")
+    ax.errorbar(tau[ok], a.dev[ok], yerr=[a.dev[ok] - a.dev_lo[ok], a.dev_hi[ok] - a.dev[ok]],
+                fmt="o", ms=3, color="k", label="measured ADEV, 68 % interval")
+    ax.plot(tau[ok], np.sqrt(mb[ok]), "-", color="C0", label="base model (avard analyze)")
+    if ch.claimed and ch.extended is not ch.base.fit:
+        me = ch.extended.model_avar(tau)
+        for v in ch.contributions.values():
+            me = me + v
+        ax.plot(tau[ok], np.sqrt(me[ok]), "--", color="C3",
+                label="extended model (" + ", ".join(f.cause for f in ch.claimed) + ")")
+    if ch.compensated_var is not None:
+        ax.plot(tau[ok], np.sqrt(ch.compensated_var[ok]), "s:", ms=3, color="C2",
+                label="found signals removed (compensated ADEV)")
+    for r in ch.misfit:
+        ax.axvspan(r["tau_range_s"][0] / 1.2, r["tau_range_s"][1] * 1.2, color="C1",
+                   alpha=0.12, label="misfit > 3 σ" if r is ch.misfit[0] else None)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    _log_ticks(ax)
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("Allan deviation (m/s²)")
+    ax.set_title(f"channel {ch.name}: measurement, base and extended model")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    save_figure(fig, path, dpi=110)
+
+
+def _plot_residuals(ch: ChannelExplanation, path: Path) -> None:
+    plt = pyplot()
+    a = ch.base.allan
+    tau = np.asarray(a.tau, dtype=float)
+    s = np.sqrt(2.0 / np.maximum(a.edf, 1e-3))
+    mb = ch.base.fit.model_avar(tau)
+    zb = (a.var - mb) / (mb * s)
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
+    ax.axhspan(-3, 3, color="0.9", label="±3 σ")
+    ax.semilogx(tau, zb, "o-", ms=3, label="base model (avard analyze)")
+    if ch.extended is not ch.base.fit and ch.compensated_var is not None:
+        me = ch.extended.model_avar(tau)
+        ze = (ch.compensated_var - me) / (me * s)
+        ax.semilogx(tau, ze, "s--", ms=3, label="extended model (found signals removed)")
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("misfit (σ)")
+    ax.set_title(f"channel {ch.name}: (measured − model) / σ of the estimate")
+    ax.set_yscale("symlog", linthresh=3)
+    top = max(3.0, float(np.nanmax(np.abs(zb))) if np.any(np.isfinite(zb)) else 3.0)
+    ticks = [t for t in (1, 3, 10, 30, 100, 300, 1000, 3000, 10000) if t <= 1.5 * top]
+    ax.set_yticks([-t for t in reversed(ticks)] + [0] + ticks)
+    ax.set_yticklabels([f"{-t:g}" for t in reversed(ticks)] + ["0"] + [f"{t:g}" for t in ticks])
+    ax.tick_params(labelsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    save_figure(fig, path, dpi=110)
+
+
+def _plot_temperature(ex: Explanation, path: Path) -> None:
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 4.0))
+    for name, r in ex.temperature.items():
+        tau = np.asarray(r.tau, dtype=float)
+        # below the DS18B20's conversion time the values are artefacts of its 0.75 s,
+        # 0.0625 K readings, not the temperature
+        ok = (tau >= DS18B20_CONVERSION_S) & np.isfinite(r.var) & (r.var > 0)
+        ax.loglog(tau[ok], np.sqrt(r.var[ok]), "o-", ms=3, label=name)
+    _log_ticks(ax)
+    ax.set_xlabel("averaging time τ (s)")
+    ax.set_ylabel("Allan deviation (K)")
+    ax.set_title(f"temperature channels (τ ≥ {DS18B20_CONVERSION_S:g} s, the DS18B20 "
+                 "conversion time)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    save_figure(fig, path, dpi=110)
+
+
+def write_report(ex: Explanation, outdir: str | Path) -> Path:
+    """Write ``report.md`` and the PNG plots into ``outdir``; returns the report's path."""
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    md = ["# avard explain report", "",
+          f"Data: `{ex.source}`, {ex.rate_hz:g} Hz, {ex.analysis.n_samples} samples.", "",
+          "Units are SI: Allan deviation in m/s², averaging time τ in s, intervals 68 %. "
+          "The base model is `avard analyze`'s fit of the same record. The band is the base "
+          "model's 68 % χ² interval with the estimator's EDF. The gain is the base fit's "
+          "χ²/dof over the extended fit's (above 1: the found causes describe the data "
+          "better).", ""]
+    if ex.holdout is not None:
+        from avard.core.explain.holdout import DEFINITION
+
+        ho = ex.holdout
+        md += ["## Held-out gain", "", *[ln + "  " for ln in holdout_lines(ex)[:2]], ""]
+        if any(c.folds for c in ho.channels.values()):
+            md += ["| channel | claimed causes | held-out χ² base | held-out χ² extended | "
+                   "n (τ) | gain |", "|---|---|---|---|---|---|"]
+            for name, c in ho.channels.items():
+                g = "–" if c.gain is None else f"{c.gain:.3g}"
+                md.append(f"| {name} | {', '.join(c.causes) or 'none'} | {c.chi2_base:.4g} | "
+                          f"{c.chi2_ext:.4g} | {c.n_points} | {g} |")
+            md.append("")
+        md += [f"- {name}: {c.reason or c.note}" for name, c in ho.channels.items()
+               if c.reason or c.note]
+        md += ["", f"Definition: {DEFINITION}", ""]
+    for name, ch in ex.channels.items():
+        safe = "".join(c if c.isalnum() else "_" for c in name)
+        adev_png, res_png = f"adev_{safe}.png", f"misfit_{safe}.png"
+        _plot_channel(ch, out / adev_png)
+        _plot_residuals(ch, out / res_png)
+        md += [f"## Channel {name}", "", f"![ADEV of {name}]({adev_png})", "",
+               f"![misfit of {name}]({res_png})", "",
+               f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
+               f"**{ch.gain:.3g}**.", "", "### Misfit of the base model", ""]
+        if ch.misfit:
+            md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]
+            md += [f"| {r['tau_range_s'][0]:.3g} – {r['tau_range_s'][1]:.3g} | "
+                   f"{r['direction']} | {r['max_sigma']:+.3g} |" for r in ch.misfit]
+        else:
+            md.append("Within 3 σ at every fitted τ.")
+        md += ["", "### Every cause tested", "",
+               "| cause | claimed | statistic | threshold | evidence |", "|---|---|---|---|---|"]
+        for f in ch.findings:
+            stat = f"{f.statistic:.3g}" if math.isfinite(f.statistic) else "–"
+            thr = f"{f.threshold:g}" if math.isfinite(f.threshold) else "–"
+            ev = f.evidence.replace("|", "\\|")
+            md.append(f"| {f.cause} | {'yes' if f.claimed else 'no'} | {stat} | {thr} | {ev} |")
+        md += ["", "### IEEE coefficients (68 % interval)", "",
+               "| term | base | extended |", "|---|---|---|"]
+        md += [f"| {SYMBOLS[t]} {t} | {b} | {e} |" for t, b, e in term_changes(ch)]
+        md.append("")
+    if ex.temperature:
+        _plot_temperature(ex, out / "temperature_adev.png")
+        md += ["## Temperature channels", "",
+               f"Allan deviation of each temperature channel (K), from τ = "
+               f"{DS18B20_CONVERSION_S:g} s (the DS18B20 conversion time) up.", "",
+               "![temperature ADEV](temperature_adev.png)", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(md), encoding="utf-8")
+    return path

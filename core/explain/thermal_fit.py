@@ -1,0 +1,385 @@
+"""Which logged temperature drives an axis, through what first-order lag, with what
+coefficient; and the temperature-compensated Allan variance. For ``avard explain`` (and
+``avard analyze --temperature``).
+
+Physics: heat reaches the sensor die from the logged channel (plate, ambient or the chip's own)
+through a thermal mass, a first-order lag: dT_s/dt = (T − T_s)/τ_L. The output moves by
+c·T_s (bias and sensitivity tempco, m/s²/K). Both act on seconds to hours, so the fit runs on
+the slow view (block means of ≈ 1 s; ``explain.SlowView``).
+
+Estimator. For a trial lag τ_L the logged channel is passed through the lag (exact
+discretisation for a linearly interpolated input, ``thermal.lag_coefficients``) and the
+streaming Allan accumulator (``streaming.StreamingAllan``, analyze's estimator at its octave τ)
+gives the Allan covariance of axis y and lagged temperature u. At each τ_k the regression of
+Allan differences of y on those of u is c_k = Cov_A(y, u)/AVAR(u), with variance
+r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: the number of
+independent differences). Differencing removes the offset and whitens flicker and random walk,
+so the regression is valid under the axis's own noise. The c_k are combined with inverse-
+variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
+combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
+over a log grid refined around the best point) and the channel (largest z). Under red noise
+it is too optimistic (the noise differences are not independent across a slow regressor), so
+the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
+(``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
+shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
+interval is the analytic profile widened to the same scale: {τ_L : z² ≥ z²_max − (se/se_a)²}.
+Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
+
+Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
+ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
+thermal share falls as τ³: a smooth signal's AVAR ∝ τ², white noise's ∝ 1/τ).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.sim.thermal import lag_coefficients
+from numpy.typing import NDArray
+from scipy import signal as sps
+
+__all__ = [
+    "Z_TEMPERATURE",
+    "ThermalFit",
+    "allan2",
+    "compensated_avar",
+    "fit_thermal",
+    "fit_thermal_axes",
+    "lag_filter",
+    "min_detectable_tempco",
+    "signal_avar_on",
+    "tempco_from_cov",
+]
+
+Z_TEMPERATURE = 5.0
+#: Contiguous parts of the record for the jackknife standard error of the coefficient.
+JACKKNIFE_GROUPS = 10
+#: Most block means the lag scan runs on.
+SCAN_POINTS = 1 << 15
+#: DS18B20 conversion time (s): the temperature says nothing faster than this.
+DS18B20_CONVERSION_S = 0.75
+#: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
+_RHO = 0.5
+
+
+def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """T seen through a first-order lag of time constant ``lag_s`` (s), starting in steady
+    state at T[0]; ``lag_s`` = 0 returns T."""
+    T = np.asarray(T, dtype=float)
+    if lag_s <= 0:
+        return T.copy()
+    b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
+    zi = sps.lfilter_zi(b, a) * T[0]
+    out, _ = sps.lfilter(b, a, T, zi=zi)
+    return np.asarray(out, dtype=float)
+
+
+def allan2(y: NDArray, u: NDArray, rate_hz: float) -> Any:
+    """Allan variances and covariance of (y, u) with the streaming estimator."""
+    sa = StreamingAllan(2, rate_hz)
+    sa.update(np.column_stack([y, u]))
+    return sa.result()
+
+
+def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
+                    ) -> tuple[float, float, int]:
+    """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
+    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc)."""
+    cov = np.asarray(res.cov, dtype=float)
+    tau = np.asarray(res.tau, dtype=float)
+    edf = np.asarray(res.edf, dtype=float)
+    edf_y = edf[:, 0] if edf.ndim == 2 else edf
+    vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    ok = (np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (tau >= min_tau_s)
+          & np.isfinite(edf_y) & (edf_y >= 3))
+    k = np.flatnonzero(ok)
+    if len(k) == 0:
+        return 0.0, math.inf, 0
+    c = cyu[k] / vu[k]
+    r = np.maximum(vy[k] - cyu[k] ** 2 / vu[k], 1e-300)
+    se = np.sqrt(r / (vu[k] * edf_y[k]))
+    w = 1.0 / se**2
+    chat = float(np.sum(w * c) / np.sum(w))
+    rho = _RHO ** np.abs(np.subtract.outer(np.arange(len(k)), np.arange(len(k))))
+    ws = w * se
+    var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
+    return chat, math.sqrt(var), len(k)
+
+
+def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKKNIFE_GROUPS
+                     ) -> tuple[float, float]:
+    """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
+    error: the record in ``groups`` contiguous parts, each its own segment of the streaming
+    accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
+    se² = (G−1)/G·Σ(ĉ_(−g) − mean)². The analytic se of :func:`tempco_from_cov` treats the
+    Allan differences of the noise as independent across a slow regressor, which red noise
+    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it."""
+    M = len(y)
+    edges = np.linspace(0, M, groups + 1).astype(int)
+    parts = []
+    for a, b in itertools.pairwise(edges):
+        sa = StreamingAllan(2, rate_hz)
+        sa.update(np.column_stack([y[a:b], u[a:b]]))
+        parts.append(sa)
+    full = StreamingAllan.from_state(parts[0].state())
+    for sa in parts[1:]:
+        full.merge(sa)
+    c_all, _se, _n = tempco_from_cov(full.result())
+    cs = []
+    for g in range(groups):
+        rest = [sa for h, sa in enumerate(parts) if h != g]
+        acc = StreamingAllan.from_state(rest[0].state())
+        for sa in rest[1:]:
+            acc.merge(sa)
+        cs.append(tempco_from_cov(acc.result())[0])
+    c = np.asarray(cs)
+    se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
+    return c_all, se
+
+
+def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
+    """AVAR ((m/s²)²) a slow signal ``d`` (sampled at ``rate_hz``) puts into a record, at the
+    averaging times ``tau`` of the full-rate analysis: measured by the streaming estimator on
+    ``d``, log-log interpolated; below its first τ it falls as τ² (a smooth signal)."""
+    sa = StreamingAllan(1, rate_hz)
+    sa.update(np.asarray(d, dtype=float)[:, None])
+    res = sa.result()
+    ts, vs = np.asarray(res.tau, float), np.maximum(np.asarray(res.var, float), 1e-300)
+    ok = np.isfinite(vs)
+    ts, vs = ts[ok], vs[ok]
+    t = np.asarray(tau, dtype=float)
+    out = np.exp(np.interp(np.log(t), np.log(ts), np.log(vs)))
+    low = t < ts[0]
+    out[low] = vs[0] * (t[low] / ts[0]) ** 2
+    return out
+
+
+def compensated_avar(var: NDArray, tau: NDArray, res: Any, coefficient: float
+                     ) -> NDArray[np.float64]:
+    """``var`` (the axis's full-rate AVAR at ``tau``) with the thermal part ĉ·u removed, from
+    the two-channel Allan covariance ``res`` (axis, lagged temperature): see module doc."""
+    cov = np.asarray(res.cov, dtype=float)
+    ts = np.asarray(res.tau, dtype=float)
+    vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
+    comp = vy - 2 * coefficient * cyu + coefficient**2 * vu
+    ok = np.isfinite(comp) & (vy > 0)
+    ts = ts[ok]
+    ratio = np.clip(comp[ok] / vy[ok], 1e-6, None)
+    t = np.asarray(tau, dtype=float)
+    r = np.exp(np.interp(np.log(t), np.log(ts), np.log(ratio)))
+    low = t < ts[0]
+    r[low] = 1.0 - (1.0 - ratio[0]) * (t[low] / ts[0]) ** 3
+    return np.asarray(var, dtype=float) * r
+
+
+@dataclass
+class ThermalFit:
+    """The thermal model of one axis (SI units). ``channel`` drives it through a first-order
+    lag ``lag_s`` [lag_lo, lag_hi] with ``coefficient`` [coef_lo, coef_hi] m/s²/K (68 %);
+    ``z`` its test statistic; ``others``: the best z and lag of every other channel."""
+
+    channel: str
+    channel_index: int
+    coefficient: float
+    coef_se: float
+    lag_s: float
+    lag_lo: float
+    lag_hi: float
+    z: float
+    rate_hz: float
+    others: dict[str, dict[str, float]] = field(default_factory=dict)
+    allan: Any = field(default=None, repr=False)
+
+    threshold: float = Z_TEMPERATURE
+
+    @property
+    def passed(self) -> bool:
+        return self.z >= self.threshold
+
+    @property
+    def coef_interval(self) -> tuple[float, float]:
+        return self.coefficient - self.coef_se, self.coefficient + self.coef_se
+
+    def signal(self, temps: NDArray, y: NDArray | None = None) -> NDArray[np.float64]:
+        """ĉ·(lagged driving channel − its mean) on the slow view (m/s²). The sensor's
+        temperature at the record's start is unknown (the lag filter starts at T[0]); with
+        the axis ``y`` given, the start-up difference β·e^(−t/τ_L) is fitted to y − ĉu by
+        least squares (with an offset and a drift) and included, so it is not mistaken for
+        a warm-up."""
+        u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
+        d = self.coefficient * (u - u.mean())
+        if y is None or self.lag_s <= 0:
+            return d
+        t = np.arange(len(u)) / self.rate_hz
+        e = np.exp(-t / self.lag_s)
+        a = np.column_stack([np.ones_like(t), t, e])
+        coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
+        return d + coef[2] * (e - e.mean())
+
+
+    def evidence(self) -> str:
+        lo, hi = self.coef_interval
+        txt = (f"the axis follows temperature '{self.channel}' through a first-order lag of "
+               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}] with "
+               f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
+               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
+        if self.others:
+            txt += "; other channels: " + ", ".join(
+                f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
+                for k, v in self.others.items())
+        return txt
+
+    def finding(self) -> Any:
+        from avard.core.explain.causes import Finding
+
+        lo, hi = self.coef_interval
+        return Finding("temperature", False,
+                       {"coefficient": self.coefficient, "lag_s": self.lag_s},
+                       {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},
+                       self.z, self.threshold, self.evidence(), channel=self.channel)
+
+    def to_dict(self) -> dict[str, Any]:
+        lo, hi = self.coef_interval
+        return {"channel": self.channel, "coefficient_mps2_per_k": self.coefficient,
+                "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
+                "lag_interval_s": [self.lag_lo, self.lag_hi], "z": self.z,
+                "threshold": self.threshold, "passed": self.passed, "others": self.others}
+
+
+def _lag_grid(record_s: float, rate_hz: float) -> NDArray[np.float64]:
+    lo = max(4.0 / rate_hz, 4.0)
+    hi = max(record_s / 4.0, 2 * lo)
+    return np.concatenate([[0.0], np.geomspace(lo, hi, 28)])
+
+
+class _Pair:
+    """The (axis j, temperature) 2×2 slice of a multi-channel AllanResult."""
+
+    def __init__(self, res: Any, j: int) -> None:
+        sel = [j, -1]
+        self.tau = res.tau
+        self.cov = np.asarray(res.cov)[:, sel][:, :, sel]
+        self.edf = np.asarray(res.edf)[:, sel]
+
+
+def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
+          ) -> list[list[tuple[float, float, float, float]]]:
+    """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
+    per lag serves all axes."""
+    out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
+    for L in lags:
+        u = lag_filter(T, float(L), rate_hz)
+        sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
+        sa.update(np.column_stack([Y, u]))
+        res = sa.result()
+        for j in range(Y.shape[1]):
+            c, se, _n = tempco_from_cov(_Pair(res, j))
+            z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
+            out[j].append((float(L), c, se, z))
+    return out
+
+
+def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) -> ThermalFit:
+    """The thermal model of one axis ``y``: :func:`fit_thermal_axes` for a single column."""
+    return fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps, names, rate_hz)[0]
+
+
+def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float
+                     ) -> list[ThermalFit]:
+    """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
+    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
+    Y = np.asarray(Y, dtype=float)
+    record_s = len(Y) / rate_hz
+    # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
+    # lags sought are minutes); the chosen lag is then fitted on the whole slow view
+    f = 1 << max(0, math.ceil(math.log2(len(Y) / SCAN_POINTS)))
+    m = (len(Y) // f) * f
+    Ys = Y[:m].reshape(-1, f, Y.shape[1]).mean(axis=1)
+    Ts = temps[:m].reshape(-1, f, temps.shape[1]).mean(axis=1)
+    rate_s = rate_hz / f
+    grid = _lag_grid(record_s, rate_s)
+    scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
+    for j in range(temps.shape[1]):
+        per_axis = _scan(Ys, Ts[:, j], grid, rate_s)
+        # refine between the neighbouring grid points of each axis's best lag
+        fine: set[float] = set()
+        for sc in per_axis:
+            i = int(np.argmax([s[3] for s in sc]))
+            if 0 < i < len(grid) - 1 and grid[i] > 0:
+                fine.update(np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1],
+                                         13).tolist())
+        if fine:
+            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s)
+            per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
+        scans[j] = [sorted(sc) for sc in per_axis]
+    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans})
+            for a in range(Y.shape[1])]
+
+
+def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+          best: dict[int, list[tuple[float, float, float, float]]]) -> ThermalFit:
+    """The driving channel and lag of one axis from its scans, with the profile interval."""
+    zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
+    jb = max(zmax, key=lambda j: zmax[j])
+    scan = best[jb]
+    k = int(np.argmax([s[3] for s in scan]))
+    L, _c_scan, se_scan, z_fast = scan[k]
+    u = lag_filter(temps[:, jb], L, rate_hz)
+    res = allan2(y, u, rate_hz)
+    c, se_a, _n = tempco_from_cov(res)
+    _c_parts, se_jk = jackknife_tempco(y, u, rate_hz)
+    # the larger of the two: the jackknife's parts may be shorter than the noise's
+    # correlation at the regressor's period, where it is too small itself
+    se = max(se_jk, se_a)
+    z = abs(c) / se if se > 0 else 0.0
+    # profile interval of the lag: the scan's z² within (se/se_scan)² of the best, i.e.
+    # Δχ² = 1 on the scale of the reported error (the analytic z² curve has the right shape
+    # but is too narrow)
+    widen = (se / se_scan) ** 2 if se_scan > 0 and math.isfinite(se_scan) else 1.0
+    inside = [s[0] for s in scan if s[3] ** 2 >= z_fast**2 - max(widen, 1.0)]
+    lo_i, hi_i = min(inside), max(inside)
+    lags = [s[0] for s in scan]
+    pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
+    if pos_lo == 0:
+        lag_lo = lo_i
+    elif lags[pos_lo - 1] > 0:
+        lag_lo = math.sqrt(lags[pos_lo - 1] * lo_i)
+    else:
+        lag_lo = lo_i / 2
+    lag_hi = hi_i if pos_hi == len(lags) - 1 else math.sqrt(lags[pos_hi + 1] * max(hi_i, 1e-9))
+    others = {}
+    for j, sc in best.items():
+        if j != jb:
+            kk = int(np.argmax([s[3] for s in sc]))
+            others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
+    return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
+                      others, res)
+
+
+def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                          amplitude_c: float, period_s: float, lag_s: float,
+                          z: float = Z_TEMPERATURE, lag_rel: float | None = None) -> float:
+    """Smallest coefficient (m/s²/K) the temperature test detects (z ≥ ``z`` on average) for a
+    logged ±``amplitude_c`` sinusoid of ``period_s`` reaching the sensor through a first-order
+    lag ``lag_s``, on noise N (m/s/√s), B (m/s²), K (m/s²·√s) over ``record_s``. With
+    ``lag_rel``, the coefficient at which the lag's standard error is ``lag_rel``·lag instead.
+
+    Derivation: the sensor sees a sinusoid of amplitude a = c·A/√(1 + ω²L²). A sinusoid's
+    amplitude in noise of one-sided PSD S(f0) over T is known to σ_a = √(2·S(f0)/T), and with
+    NIST SP 1065 Table 5, S(f) = 2N² + B²/(πf) + K²/(2π²f²) (white, flicker, random-walk rate
+    noise whose AVAR is N²/τ, (2 ln2/π)B², K²τ/3). So z = a/σ_a and
+    c_min = z·σ_a·√(1 + ω²L²)/A. The phase −atan(ωL) carries the lag: σ_φ = 1/z, hence
+    σ_L/L = (1 + ω²L²)/(ωL·z).
+    """
+    f0 = 1.0 / period_s
+    s_f0 = 2 * n_white**2 + b_inst**2 / (math.pi * f0) + k_rrw**2 / (2 * math.pi**2 * f0**2)
+    sigma_a = math.sqrt(2 * s_f0 / record_s)
+    wl = 2 * math.pi * lag_s / period_s
+    if lag_rel is not None:
+        z = (1 + wl**2) / (wl * lag_rel) if wl > 0 else math.inf
+    return z * sigma_a * math.hypot(1.0, wl) / amplitude_c

@@ -1,0 +1,483 @@
+"""One reader of measured (or simulated) data for every avard command.
+
+Formats:
+
+* ``.npz``: ``accel`` (N, C) or (N,) in m/s² (required), ``rate_hz`` (scalar Hz; or pass
+  ``rate_hz=``), optional ``axes`` (C names), ``gyro`` (N, G) rad/s, ``temperature_c`` (N,)
+  or (N, k) °C aligned with the samples (NaN where not read), ``temperature_names``. Never
+  unpickled. Big members are read from the zip stream in blocks, not loaded whole.
+* ``.csv``: one header row; a ``t`` (or ``time``, ``t_s``, ``time_s``) column in seconds or
+  ``rate_hz=``; ``temp_*`` columns in °C; ``gyro_*`` columns in rad/s; every other column is an
+  acceleration in m/s². Comma, semicolon or tab separated.
+* an avard recording (a directory of segment files, or one ``.avr`` segment): read by
+  ``avard.core.io.recording.load_recording``, imported lazily.
+
+``load_record`` returns a :class:`Record`; ``iter_blocks`` streams (accel, temperature) blocks
+with the metadata first, so a long record never has to fit in memory.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import logging
+import math
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from avard.core.errors import DataError, FormatError
+from numpy.typing import NDArray
+
+__all__ = ["Record", "iter_blocks", "load_record", "record_info"]
+
+log = logging.getLogger(__name__)
+
+_TIME_COLUMNS = ("t", "time", "t_s", "time_s")
+
+
+@dataclass
+class Record:
+    """A whole record in SI units: ``accel`` (N, C) m/s² sampled at ``rate_hz`` Hz, channel
+    ``names``; ``temperature_c`` (N, k) °C or None with ``temperature_names``; ``gyro``
+    (N, G) rad/s or None; ``source`` the file it came from; ``meta`` anything else."""
+
+    accel: NDArray[np.float64]
+    rate_hz: float
+    names: list[str]
+    temperature_c: NDArray[np.float64] | None = None
+    temperature_names: list[str] = field(default_factory=list)
+    source: str = ""
+    gyro: NDArray[np.float64] | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.accel.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_samples / self.rate_hz
+
+
+def check_rate(rate_hz: Any, where: str) -> float:
+    """A usable sample rate in Hz, or a DataError saying what is wrong with it."""
+    try:
+        r = float(np.asarray(rate_hz).reshape(()))
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{where}: sample rate {rate_hz!r} is not a number; give it in Hz "
+                        "(e.g. --rate 125)") from exc
+    if not math.isfinite(r) or r <= 0:
+        raise DataError(f"{where}: sample rate {r} Hz is impossible; it must be a positive, "
+                        "finite number of Hz (e.g. --rate 125)")
+    if r > 1e7:
+        raise DataError(f"{where}: sample rate {r:g} Hz is beyond any accelerometer; is it in "
+                        "Hz (not a period)?")
+    return r
+
+
+def _is_recording(p: Path) -> bool:
+    return p.is_dir() or p.suffix == ".avr"
+
+
+def _kind(path: str | Path) -> tuple[Path, str]:
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: no such file or directory")
+    if _is_recording(p):
+        return p, "recording"
+    suffix = p.suffix.lower()
+    if suffix == ".npz":
+        return p, "npz"
+    if suffix == ".csv":
+        return p, "csv"
+    if suffix == ".txt":
+        # a .txt is often a CSV export under another name; say how it is read
+        log.warning("%s: reading it as CSV (a header row, then comma, semicolon or tab "
+                    "separated numbers); rename it .csv to silence this", p)
+        return p, "csv"
+    raise FormatError(f"{p}: unknown data format {suffix or '(no suffix)'!r}; avard reads .npz, "
+                      ".csv, or a recording directory / .avr segment")
+
+
+# ---------------------------------------------------------------------------------------------
+# .npz, streamed from the zip
+
+
+class _NpzMember:
+    """One .npy member of an .npz opened as a stream: shape, dtype and sequential row reads."""
+
+    def __init__(self, zf: zipfile.ZipFile, name: str, where: str) -> None:
+        self.fh: IO[bytes] = zf.open(name)
+        try:
+            version = np.lib.format.read_magic(self.fh)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)
+            shape, fortran, dtype = read(self.fh, max_header_size=1 << 16)
+        except ValueError as exc:
+            raise FormatError(f"{where}: member {name} is not a valid .npy array ({exc})") \
+                from exc
+        if dtype.hasobject:
+            raise FormatError(f"{where}: member {name} holds Python objects; avard never "
+                              "unpickles data. Save plain numeric arrays")
+        if fortran and len(shape) > 2:
+            raise FormatError(f"{where}: member {name} is a Fortran-ordered array of "
+                              f"{len(shape)} dimensions; save it with np.ascontiguousarray")
+        self.shape: tuple[int, ...] = tuple(shape)
+        self.dtype = dtype
+        # Fortran order (column after column, as R and MATLAB write) is read through one
+        # sequential handle per column, each positioned once at its column's start: a deflated
+        # member cannot seek back cheaply, but each handle only ever moves forward.
+        self.fortran = bool(fortran) and len(shape) == 2
+        self.data_offset = self.fh.tell()
+        self.pos = 0
+        self._zf, self._name = zf, name
+        self._cols: list[IO[bytes]] = []
+
+    def rows(self, n: int) -> NDArray:
+        if self.fortran:
+            return self._fortran_rows(n)
+        row = int(np.prod(self.shape[1:], dtype=np.int64)) if len(self.shape) > 1 else 1
+        nbytes = n * row * self.dtype.itemsize
+        buf = self.fh.read(nbytes)
+        got = len(buf) // (row * self.dtype.itemsize)
+        a = np.frombuffer(buf[: got * row * self.dtype.itemsize], dtype=self.dtype)
+        self.pos += got
+        return a.reshape((got, *self.shape[1:])) if len(self.shape) > 1 else a
+
+    def _fortran_rows(self, n: int) -> NDArray:
+        nrow, ncol = self.shape
+        n = max(0, min(n, nrow - self.pos))
+        isz = self.dtype.itemsize
+        if not self._cols:
+            for c in range(ncol):
+                fh = self._zf.open(self._name)
+                fh.seek(self.data_offset + c * nrow * isz)
+                self._cols.append(fh)
+        out = np.empty((n, ncol), dtype=self.dtype)
+        for c, fh in enumerate(self._cols):
+            out[:, c] = np.frombuffer(fh.read(n * isz), dtype=self.dtype)
+        self.pos += n
+        return out
+
+    def close(self) -> None:
+        self.fh.close()
+        for fh in self._cols:
+            fh.close()
+
+
+def _small(zf: zipfile.ZipFile, key: str, where: str) -> Any:
+    with zf.open(f"{key}.npy") as fh:
+        try:
+            return np.lib.format.read_array(fh, allow_pickle=False)
+        except ValueError as exc:
+            raise FormatError(f"{where}: key {key!r} cannot be read without unpickling "
+                              f"({exc}); store plain numbers or strings") from exc
+
+
+def _open_npz(p: Path) -> zipfile.ZipFile:
+    try:
+        return zipfile.ZipFile(p)
+    except zipfile.BadZipFile as exc:
+        # an .npz is a zip archive; one that is not (or whose end is missing) was cut short
+        # while being copied or written, or is another format under an .npz name
+        raise FormatError(f"{p}: not a complete .npz (zip) archive ({exc}); it is truncated "
+                          "or not an .npz: copy or write it again") from exc
+
+
+def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, Any]:
+    keys = {n[:-4] for n in zf.namelist() if n.endswith(".npy")}
+    if "accel" not in keys:
+        raise DataError(f"{p}: no 'accel' array (found {sorted(keys) or 'nothing'}); the .npz "
+                        "needs accel (N, C) in m/s² and rate_hz")
+    acc = _NpzMember(zf, "accel.npy", str(p))
+    acc.close()
+    if len(acc.shape) not in (1, 2) or acc.shape[0] == 0:
+        raise DataError(f"{p}: accel has shape {acc.shape}; it must be (N,) or (N, C) with N > 0")
+    if acc.dtype.kind not in "iuf":
+        raise DataError(f"{p}: accel has dtype {acc.dtype}; it must be numbers (m/s²)")
+    n = int(acc.shape[0])
+    c = 1 if len(acc.shape) == 1 else int(acc.shape[1])
+    if rate_hz is not None:
+        rate = check_rate(rate_hz, str(p))
+    elif "rate_hz" in keys:
+        rate = check_rate(_small(zf, "rate_hz", str(p)), f"{p} (key rate_hz)")
+    else:
+        raise DataError(f"{p}: no 'rate_hz' in the file; give the sample rate with --rate HZ")
+    names = [f"ch{i}" for i in range(c)] if c != 3 else ["x", "y", "z"]
+    if "axes" in keys:
+        axes = [str(a) for a in np.atleast_1d(_small(zf, "axes", str(p)))]
+        if len(axes) != c:
+            raise DataError(f"{p}: {len(axes)} axis names for {c} accel columns; fix 'axes'")
+        names = axes
+    tshape = None
+    tnames: list[str] = []
+    if "temperature_c" in keys:
+        t = _NpzMember(zf, "temperature_c.npy", str(p))
+        t.close()
+        tshape = t.shape
+        if tshape[0] != n or len(tshape) not in (1, 2):
+            raise DataError(f"{p}: temperature_c has shape {tshape}; it must be (N,) or (N, k) "
+                            f"aligned with the {n} accel samples")
+        k = 1 if len(tshape) == 1 else tshape[1]
+        tnames = [f"temp{i}" for i in range(k)]
+        if "temperature_names" in keys:
+            tn = [str(a) for a in np.atleast_1d(_small(zf, "temperature_names", str(p)))]
+            if len(tn) == k:
+                tnames = tn
+    meta: dict[str, Any] = {"format": "npz", "n_samples": n, "rate_hz": rate, "names": names,
+                            "temperature_names": tnames, "source": str(p),
+                            "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"}}
+    for key in ("source", "preset", "odr_nominal_hz", "lsb_mps2", "seed"):
+        if key in keys:
+            v = _small(zf, key, str(p))
+            meta["file_" + key if key == "source" else key] = v.item() if v.ndim == 0 else v
+    meta["has_gyro"] = "gyro" in keys
+    return meta
+
+
+def _check_finite(a: NDArray, offset: int, where: str) -> None:
+    bad = ~np.isfinite(a)
+    if bad.any():
+        i = int(np.flatnonzero(bad.any(axis=1) if a.ndim == 2 else bad)[0])
+        raise DataError(f"{where}: accel sample {offset + i} is not finite (NaN or inf); cut "
+                        "the record there or fill the hole before analysing")
+
+
+def _npz_blocks(p: Path, meta: dict[str, Any], block: int
+                ) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
+    with _open_npz(p) as zf:
+        acc = _NpzMember(zf, "accel.npy", str(p))
+        tm = _NpzMember(zf, "temperature_c.npy", str(p)) if meta["temperature_names"] else None
+        done = 0
+        try:
+            while done < meta["n_samples"]:
+                a = acc.rows(block).astype(np.float64)
+                if len(a) == 0:
+                    raise FormatError(f"{p}: accel ends after {done} of {meta['n_samples']} "
+                                      "samples; the file is truncated")
+                if a.ndim == 1:
+                    a = a[:, None]
+                _check_finite(a, done, str(p))
+                t = None
+                if tm is not None:
+                    t = tm.rows(len(a)).astype(np.float64)
+                    if t.ndim == 1:
+                        t = t[:, None]
+                done += len(a)
+                yield a, t
+        finally:
+            acc.close()
+            if tm is not None:
+                tm.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# .csv
+
+
+def _csv_open(p: Path) -> tuple[IO[str], list[str], str]:
+    fh = open(p, newline="", encoding="utf-8")  # closed by the caller
+    head = fh.readline()
+    if not head.strip():
+        fh.close()
+        raise DataError(f"{p}: empty file or empty first line; a .csv needs a header row")
+    delim = max((",", ";", "\t"), key=head.count)
+    cols = [c.strip().strip('"').strip() for c in next(csv.reader([head], delimiter=delim))]
+    try:
+        float(cols[0])
+    except ValueError:
+        pass
+    else:
+        fh.close()
+        raise DataError(f"{p}: the first line is numbers, not a header; add a header row "
+                        "naming the columns (e.g. t,x,y,z)")
+    return fh, cols, delim
+
+
+def _csv_layout(p: Path, cols: list[str]) -> dict[str, Any]:
+    low = [c.lower() for c in cols]
+    tcol = next((i for i, c in enumerate(low) if c in _TIME_COLUMNS), None)
+    temp = [i for i, c in enumerate(low) if c.startswith("temp")]
+    gyro = [i for i, c in enumerate(low) if c.startswith("gyro")]
+    accel = [i for i in range(len(cols)) if i != tcol and i not in temp and i not in gyro]
+    if not accel:
+        raise DataError(f"{p}: no acceleration column among {cols}; columns other than t, "
+                        "temp_* and gyro_* are read as acceleration in m/s²")
+    return {"t": tcol, "temp": temp, "gyro": gyro, "accel": accel}
+
+
+def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
+                ) -> Iterator[tuple[int, NDArray[np.float64]]]:
+    line0 = 2
+    while True:
+        lines = [ln for ln in itertools.islice(fh, block) if ln.strip()]
+        if not lines:
+            return
+        try:
+            a = np.loadtxt(io.StringIO("".join(lines)), delimiter=delim, ndmin=2,
+                           dtype=np.float64)
+        except ValueError as exc:
+            raise DataError(f"{p}: unreadable number in lines {line0}–{line0 + len(lines) - 1}"
+                            f" ({exc}); every field must be a number") from exc
+        if a.shape[1] != ncols:
+            raise DataError(f"{p}: lines from {line0} have {a.shape[1]} fields, the header "
+                            f"{ncols}; fix the missing or extra column")
+        yield line0, a
+        line0 += len(lines)
+
+
+def _rate_from_t(t: NDArray, p: Path) -> float:
+    dt = np.diff(t)
+    if len(dt) == 0:
+        raise DataError(f"{p}: one sample cannot give a sample rate; give --rate HZ")
+    if np.any(dt <= 0):
+        i = int(np.flatnonzero(dt <= 0)[0])
+        raise DataError(f"{p}: the t column does not increase at sample {i + 1}; times must be "
+                        "strictly increasing seconds (or drop t and give --rate)")
+    med = float(np.median(dt))
+    return check_rate(1.0 / med, f"{p} (from the t column)")
+
+
+def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
+                         ) -> tuple[dict[str, Any], Iterator[tuple[NDArray, NDArray | None]]]:
+    fh, cols, delim = _csv_open(p)
+    lay = _csv_layout(p, cols)
+    chunks = _csv_chunks(fh, delim, len(cols), block, p)
+    try:
+        first = next(chunks)
+    except StopIteration:
+        fh.close()
+        raise DataError(f"{p}: a header but no data rows") from None
+    except Exception:
+        fh.close()
+        raise
+    if rate_hz is not None:
+        rate = check_rate(rate_hz, str(p))
+    elif lay["t"] is not None:
+        rate = _rate_from_t(first[1][:, lay["t"]], p)
+    else:
+        fh.close()
+        raise DataError(f"{p}: no time column ({', '.join(_TIME_COLUMNS)}) and no rate; give "
+                        "--rate HZ")
+    meta: dict[str, Any] = {
+        "format": "csv", "n_samples": None, "rate_hz": rate,
+        "names": [cols[i] for i in lay["accel"]],
+        "temperature_names": [cols[i] for i in lay["temp"]], "source": str(p),
+        "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"},
+        "has_gyro": bool(lay["gyro"]),
+    }
+
+    def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
+        last_t = -math.inf
+        done = 0
+        try:
+            for _, a in itertools.chain([first], chunks):
+                if lay["t"] is not None and rate_hz is None:
+                    t = a[:, lay["t"]]
+                    if t[0] <= last_t or np.any(np.diff(t) <= 0):
+                        raise DataError(f"{p}: the t column does not increase near sample "
+                                        f"{done}; times must be strictly increasing")
+                    last_t = float(t[-1])
+                acc = a[:, lay["accel"]]
+                _check_finite(acc, done, str(p))
+                temp = a[:, lay["temp"]] if lay["temp"] else None
+                done += len(a)
+                yield acc, temp
+        finally:
+            fh.close()
+
+    return meta, gen()
+
+
+# ---------------------------------------------------------------------------------------------
+# public API
+
+
+def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None = None
+                ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64],
+                                                          NDArray[np.float64] | None]]]:
+    """Metadata and a stream of (accel (n, C) m/s², temperature (n, k) °C or None) blocks.
+
+    The metadata holds ``rate_hz``, ``names``, ``temperature_names``, ``n_samples`` (None for
+    CSV, unknown until read), ``source`` and ``format``. Memory stays at one block.
+    """
+    if block < 1:
+        raise DataError(f"block size {block} must be >= 1 sample")
+    p, kind = _kind(path)
+    if kind == "npz":
+        with _open_npz(p) as zf:
+            meta = _npz_meta(zf, p, rate_hz)
+        return meta, _npz_blocks(p, meta, block)
+    if kind == "csv":
+        return _csv_meta_and_blocks(p, rate_hz, block)
+    rec = _load_recording(p, rate_hz)
+    meta = _record_meta(rec)
+
+    def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
+        for i in range(0, rec.n_samples, block):
+            t = None if rec.temperature_c is None else rec.temperature_c[i:i + block]
+            yield rec.accel[i:i + block], t
+
+    return meta, gen()
+
+
+def _record_meta(rec: Record) -> dict[str, Any]:
+    meta = {k: v for k, v in rec.meta.items() if k not in ("index",)}
+    meta.update({"n_samples": rec.n_samples, "rate_hz": rec.rate_hz, "names": list(rec.names),
+                 "temperature_names": list(rec.temperature_names), "source": rec.source})
+    meta.setdefault("format", "recording")
+    return meta
+
+
+def _load_recording(p: Path, rate_hz: float | None) -> Record:
+    """The service's recordings, through avard.core.io.recording (imported only when needed)."""
+    from avard.core.io.recording import load_recording
+
+    rec = load_recording(p)
+    if not isinstance(rec, Record):  # a fallback record class: same fields
+        rec = Record(rec.accel, rec.rate_hz, list(rec.names), rec.temperature_c,
+                     list(rec.temperature_names), rec.source, rec.gyro, dict(rec.meta))
+    if rec.n_samples == 0:
+        raise DataError(f"{p}: the recording holds no samples")
+    rec.rate_hz = check_rate(rate_hz if rate_hz is not None else rec.rate_hz, str(p))
+    return rec
+
+
+def record_info(path: str | Path, *, rate_hz: float | None = None) -> dict[str, Any]:
+    """The metadata of ``iter_blocks`` without reading the samples (CSV: first block only)."""
+    meta, blocks = iter_blocks(path, rate_hz=rate_hz)
+    close = getattr(blocks, "close", None)
+    if close is not None:
+        close()
+    return meta
+
+
+def load_record(path: str | Path, *, rate_hz: float | None = None) -> Record:
+    """The whole record in memory (see the module docstring for the formats). For records
+    larger than memory use :func:`iter_blocks`."""
+    p, kind = _kind(path)
+    if kind == "recording":
+        return _load_recording(p, rate_hz)
+    meta, blocks = iter_blocks(p, rate_hz=rate_hz)
+    acc, temps = [], []
+    for a, t in blocks:
+        acc.append(a)
+        if t is not None:
+            temps.append(t)
+    accel = np.concatenate(acc)
+    temperature = np.concatenate(temps) if temps else None
+    gyro = None
+    if kind == "npz" and meta.get("has_gyro"):
+        with _open_npz(p) as zf:
+            g = _NpzMember(zf, "gyro.npy", str(p))
+            if g.shape[0] == accel.shape[0]:
+                gyro = g.rows(g.shape[0]).astype(np.float64)
+            g.close()
+    return Record(accel=accel, rate_hz=float(meta["rate_hz"]), names=list(meta["names"]),
+                  temperature_c=temperature, temperature_names=list(meta["temperature_names"]),
+                  source=str(p), gyro=gyro, meta=meta)

@@ -1,0 +1,690 @@
+"""Fit the IEEE noise terms to an Allan variance curve, with intervals that are checked.
+
+The method (one channel, overlapping or partially overlapping AVAR):
+
+1. **Model.** σ²(τ) = Σ_j θ_j·b_j(τ) with θ_j the squared coefficients and b_j the closed forms
+   of ``model.py`` (IEEE 952 Annex C): Q: 3/τ², N: 1/τ (or the low-pass-filtered white curve
+   when the sensor's filter corner is given), B: 2 ln2/π, K: τ/3, R: τ²/2, plus any ``extra``
+   component whose nonlinear parameter is fixed (sinusoid at f0: sin⁴(πf0τ)/(πf0τ)²;
+   Gauss–Markov with T; those are linear in A², σ²).
+2. **Weights.** var(σ̂²_k) = 2σ⁴_k/EDF_k (NIST SP 1065 §5.3), with σ²_k the *model* value
+   (iteratively reweighted, so points that happen to fall low do not get extra weight).
+3. **Correlation.** Neighbouring overlapping AVAR estimates share data: with octave spacing
+   the correlation is about 0.5 for white noise and 0.9 for rate random walk. The full
+   covariance Cov(σ̂²_k, σ̂²_l) = (2/M)∫S²|H_k|²|H_l|²dν is computed from the fitted model's
+   own spectrum (``model.avar_covariance_kernels``); the estimate is the non-negative weighted
+   least-squares solution and its covariance is the sandwich (XᵀWX)⁻¹XᵀWCWX(XᵀWX)⁻¹.
+4. **τ range from the data.** Points with too few differences (EDF < ``min_edf``, or fewer
+   than ``min_averages`` independent τ-averages in the record) are left out at long τ. At short
+   τ, unless the filter is modelled, the shortest point is left out while the curve still
+   shows a significant filter bend (a negative τ⁻² deficit below the white line, more than
+   ``drop_z`` standard errors; see ``_short_tau_cut``), up to ``max_drop`` points. With the
+   filter modelled (``filter_corner_hz``), the model is exact from one sample on: the chip
+   filters its white noise (``model.lowpass_white_avar``) and its bias-instability (flicker)
+   noise (``model.lowpass_flicker_avar``: 0.38× the floor at one sample, 0.80× at two), and
+   the fit starts at two samples (``filter_min_m``): the one-sample point depends on the
+   spectrum right at Nyquist, which neither model pins down.
+5. **Presence.** Stepwise likelihood-ratio selection (``_select_terms``): a term is present
+   when removing it raises the generalised χ² by at least ``z_present``² (z_present = 2.33:
+   a one-sided 1 % level for a coefficient on its boundary θ = 0). Terms left out are
+   reported absent (value None) with a one-sided upper limit.
+6. **Intervals.** θ̂ ± z_ci·se at level ``ci`` (68.3 % by default), mapped through √ to the
+   coefficient, widened by the Birge ratio √(χ²/dof) when that exceeds 1. A coverage study
+   over simulated records checks them (tests/core/test_fit_coverage.py): 60–76 % of 68 %
+   intervals hold the true N and B; false presence of Q, K, R stays under 5 % (measured
+   0.5–3 %).
+
+``slope_method`` is the reading used by the paper's MATLAB workflow, allan_variance_ros and
+kalibr_allan, kept for comparison (benchmarks/bench_fit.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from avard.core.errors import FitError
+from avard.core.model import terms as mdl
+from avard.core.model.terms import TERMS, UNITS
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import nnls
+from scipy.stats import norm
+
+__all__ = ["NoiseFit", "TermEstimate", "fit_noise", "slope_method"]
+
+
+@dataclass
+class TermEstimate:
+    """One coefficient: value with its interval [lo, hi] at the fit's confidence level, in
+    ``unit`` (SI). ``present`` False means the data do not support the term: value/lo/hi None.
+    ``z`` is the presence test's statistic √Δχ² (None if not fitted); ``upper`` for an absent
+    term is its one-sided upper limit at the test's level (the data exclude larger values)."""
+
+    value: float | None
+    lo: float | None
+    hi: float | None
+    unit: str
+    present: bool
+    z: float | None = None
+    upper: float | None = None
+    note: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        # "upper": an absent term's one-sided upper limit (null when present or not tested)
+        return {"value": self.value, "lo": self.lo, "hi": self.hi, "unit": self.unit,
+                "present": self.present,
+                "upper": None if self.present or self.upper is None else float(self.upper),
+                "note": self.note}
+
+
+@dataclass
+class Component:
+    """One linear column of the model: θ·basis(τ), θ = (coefficient)². ``fixed_value`` set
+    means the coefficient is known and not fitted."""
+
+    label: str
+    cause: str
+    params: dict[str, float]
+    value_key: str
+    unit: str
+    fixed_value: float | None = None
+
+    def basis(self, tau: NDArray, rate_hz: float) -> NDArray[np.float64]:
+        """AVAR per unit θ at τ."""
+        return mdl.component_avar(self.cause, tau, {**self.params, self.value_key: 1.0},
+                                  rate_hz=rate_hz)
+
+    def psd(self, rate_hz: float) -> mdl.PsdFn | None:
+        """Unit PSD (cycles/sample) for the estimator covariance; None if deterministic."""
+        if self.cause in TERMS:
+            return mdl.term_psd(self.cause, rate_hz)
+        if self.cause == "gauss_markov":
+            return mdl.gauss_markov_psd(rate_hz, self.params["T"])
+        if self.cause == "white":
+            return mdl.term_psd("velocity_random_walk", rate_hz)
+        if self.cause == "lowpass_flicker":
+            return mdl.lowpass_flicker_psd(rate_hz, self.params["corner_hz"],
+                                           int(self.params.get("order", 2)))
+        if self.cause in ("filter", "lowpass_white"):
+            return mdl.lowpass_white_psd(rate_hz, self.params["corner_hz"],
+                                         int(self.params.get("order", 2)))
+        return None  # sinusoid: deterministic
+
+
+@dataclass
+class NoiseFit:
+    """Result of ``fit_noise`` for one channel (SI units throughout).
+
+    ``terms``: every IEEE term, present or absent; ``sinusoids``: present sinusoids
+    ``{"frequency_hz", "amplitude", "lo", "hi"}``; ``extra``: every extra component
+    ``{"cause", "params", "present", "lo", "hi"}``; ``tau_min_s``/``tau_max_s``: the τ range
+    used; ``chi2_dof``: generalised χ²/dof of the residuals with the modelled covariance
+    (≈ 1 when the model describes the data).
+    """
+
+    terms: dict[str, TermEstimate]
+    sinusoids: list[dict[str, float]]
+    extra: list[dict[str, Any]]
+    tau_min_s: float
+    tau_max_s: float
+    chi2_dof: float
+    rate_hz: float = 1.0
+    filter_corner_hz: float | None = None
+    n_points: int = 0
+    dof: int = 0
+    ci: float = 0.683
+    z_present: float = 2.33
+    components: list[Component] = field(default_factory=list, repr=False)
+    theta: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
+    theta_cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+
+    def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
+        """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
+        t = np.atleast_1d(np.asarray(tau, dtype=float))
+        out = {}
+        for comp, th in zip(self.components, self.theta, strict=True):
+            if th > 0:
+                out[comp.label] = th * comp.basis(t, self.rate_hz)
+        return out
+
+    def model_avar(self, tau: ArrayLike) -> NDArray[np.float64]:
+        """Total fitted model AVAR at τ ((m/s²)²)."""
+        t = np.atleast_1d(np.asarray(tau, dtype=float))
+        total = np.zeros_like(t)
+        for v in self.component_avars(t).values():
+            total += v
+        return total
+
+    def values(self) -> dict[str, float | None]:
+        """Point values of the IEEE terms (None when absent), for ``model.model_avar``."""
+        return {k: t.value for k, t in self.terms.items()}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "terms": {k: t.to_dict() for k, t in self.terms.items()},
+            "sinusoids": [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
+                          for s in self.sinusoids],
+            "fit": {"tau_min_s": self.tau_min_s, "tau_max_s": self.tau_max_s,
+                    "chi2_dof": self.chi2_dof},
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+_VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/s^2"),
+               "filter": ("N", "m/s/sqrt(s)"), "lowpass_white": ("N", "m/s/sqrt(s)"),
+               "white": ("N", "m/s/sqrt(s)")}
+#: Note on K and R when the record cannot tell a rate ramp from a rate random walk.
+RAMP_OR_WALK = "ramp or random walk: this record cannot tell them apart; read as random walk"
+#: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
+ROUNDING = "rounding"
+
+
+def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz: float | None,
+                rate_hz: float) -> list[Component]:
+    comps = []
+    for t in terms:
+        if t not in TERMS:
+            raise FitError(f"unknown noise term {t!r}; choose from {', '.join(TERMS)}")
+        if t == "velocity_random_walk" and filter_corner_hz is not None:
+            comps.append(Component(t, "filter", {"corner_hz": float(filter_corner_hz)}, "N",
+                                   UNITS[t]))
+        elif t == "bias_instability" and filter_corner_hz is not None:
+            comps.append(Component(t, "lowpass_flicker", {"corner_hz": float(filter_corner_hz)},
+                                   "value", UNITS[t]))
+        else:
+            comps.append(Component(t, t, {}, "value", UNITS[t]))
+    for e in extra:
+        cause = e.get("cause")
+        if cause not in _VALUE_KEYS:
+            raise FitError(f"extra component {e!r}: cause must be one of {sorted(_VALUE_KEYS)}")
+        key, unit = _VALUE_KEYS[cause]
+        params = {k: float(v) for k, v in dict(e.get("params", {})).items()}
+        fixed = params.pop(key, None)
+        if cause == "sinusoid":
+            f0 = params.get("frequency_hz")
+            if f0 is None or not 0 < f0 <= rate_hz / 2:
+                raise FitError(f"sinusoid needs 0 < frequency_hz <= {rate_hz / 2} Hz; got {f0}")
+            label = f"sinusoid {f0:.6g} Hz"
+        elif cause == "white":
+            label = str(e.get("label", "white"))
+        elif cause == "gauss_markov":
+            if "time_constant_s" in params:  # the explain pipeline's name for T
+                params["T"] = params.pop("time_constant_s")
+            if params.get("T", 0) <= 0:
+                raise FitError("gauss_markov needs a correlation time T > 0 s in params")
+            label = f"gauss_markov T={params['T']:.4g} s"
+        else:
+            if "corner_hz" not in params:
+                raise FitError("filter needs params corner_hz")
+            label = "filtered white"
+        comps.append(Component(label, cause, params, key, unit, fixed))
+    return comps
+
+
+def _n_samples(result: Any) -> NDArray[np.float64]:
+    """Samples spanned by the differences of each τ: (n − 1)·stride + 2m (≈ N for every τ)."""
+    stride = np.asarray(getattr(result, "stride", np.ones_like(result.m)), dtype=float)
+    return (np.asarray(result.n, float) - 1.0) * stride + 2.0 * np.asarray(result.m, float)
+
+
+@dataclass
+class _Problem:
+    """The fixed ingredients of one channel's fit over the τ points kept."""
+
+    y: NDArray[np.float64]  # measured AVAR minus fixed components
+    X: NDArray[np.float64]  # (K, A) basis of fitted components
+    fixed: NDArray[np.float64]  # (K,) AVAR of fixed components
+    G: NDArray[np.float64]  # (K, K, A+F, A+F) covariance kernels
+    theta_fixed: NDArray[np.float64]
+    M: NDArray[np.float64]  # (K,) number of difference positions
+    edf_floor: NDArray[np.float64]
+    m_tau: NDArray[np.float64]  # (K,) τ of the points (s)
+
+
+def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
+    return np.concatenate([theta, p.theta_fixed])
+
+
+def _avar_cov(p: _Problem, theta: NDArray, idx: NDArray) -> NDArray[np.float64]:
+    """Modelled covariance matrix of the AVAR estimates at points ``idx`` (Whittle form),
+    with a floor so that deterministic-only models keep finite weights."""
+    th = _theta_full(p, theta)
+    G = p.G[np.ix_(idx, idx)]
+    q = np.einsum("klab,a,b->kl", G, th, th)
+    M = p.M[idx]
+    C = 2.0 * q / np.maximum.outer(M, M)
+    model = p.X[idx] @ theta + p.fixed[idx]
+    floor = 2.0 * model**2 / p.edf_floor[idx]
+    d = np.diag(C).copy()
+    bump = np.maximum(floor - d, 0.0)
+    C[np.diag_indices_from(C)] = d + bump
+    return C
+
+
+def _whitener(C: NDArray) -> NDArray[np.float64]:
+    """T with T·C·Tᵀ = I on C's numerically non-null subspace (eigen-decomposition of the
+    correlation matrix; directions below 1e-10 of the largest eigenvalue are dropped)."""
+    d = np.sqrt(np.diag(C))
+    R = C / np.outer(d, d)
+    w, V = np.linalg.eigh(R)
+    keep = w > 1e-10 * w.max()
+    return (V[:, keep] / np.sqrt(w[keep])).T / d
+
+
+def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], float]:
+    """Non-negative generalised least squares: min ‖T(y − Xθ)‖², θ ≥ 0; returns (θ, χ²).
+    Columns are scaled to unit norm first because the basis spans many decades."""
+    A = T @ X
+    b = T @ y
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    sol, rnorm = nnls(A / scale, b, maxiter=50 * X.shape[1] + 100)
+    return sol / scale, float(rnorm**2)
+
+
+def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 8
+                ) -> tuple[NDArray, NDArray, NDArray, float]:
+    """Iterated GLS fit, θ ≥ 0, on points ``idx`` with components ``active``: the covariance
+    of the AVAR estimates is recomputed from the current model until θ settles.
+
+    Returns θ (zeros for inactive components), Cov(θ[active]) = (XᵀC⁻¹X)⁻¹, the AVAR
+    covariance C and the generalised χ² of the residuals."""
+    A = p.X.shape[1]
+    X = p.X[np.ix_(idx, active)]
+    y = p.y[idx]
+    theta = np.zeros(A)
+    # start: relative weights from the measured values, no correlation
+    v = 2.0 * np.maximum(y + p.fixed[idx], 1e-300) ** 2 / p.M[idx]
+    theta[active], _ = _gls_nnls(X, y, np.diag(1.0 / np.sqrt(v)))
+    for _ in range(iterations):
+        C = _avar_cov(p, theta, idx)
+        new = np.zeros(A)
+        new[active], _ = _gls_nnls(X, y, _whitener(C))
+        done = np.allclose(new, theta, rtol=1e-5, atol=0)
+        theta = new
+        if done:
+            break
+    C = _avar_cov(p, theta, idx)
+    T = _whitener(C)
+    TX = T @ X
+    cov = np.linalg.pinv(TX.T @ TX)
+    r = T @ (y - X @ theta[active])
+    return theta, cov, C, float(r @ r)
+
+
+def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
+    """−2 ln L (up to a constant) of the AVAR points under the fitted model ``active`` with
+    the model's own covariance: χ² + ln det C."""
+    _, _, C, c2 = _fit_active(p, idx, active)
+    sign, logdet = np.linalg.slogdet(C)
+    return c2 + logdet if sign > 0 else math.inf
+
+
+def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
+                  ramp: int | None = None, walk: int | None = None
+                  ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64], bool]:
+    """Stepwise selection by the likelihood-ratio test on the correlated, EDF-weighted
+    residuals: a component is kept when removing it raises χ² by at least z_present²
+    (2.33² = 5.4: one-sided 1 % for a coefficient on the boundary θ = 0).
+
+    All candidate models are compared with one covariance, the one of the full model (every
+    candidate term fitted), so that a deterministic term (rate ramp, which adds no estimator
+    variance of its own) cannot look significant merely by shrinking its own error bars.
+    Forward steps add the candidate that lowers χ² most while the drop passes the test; then
+    backward steps remove any term that no longer passes. Returns the selected components,
+    √Δχ² of each (the z of its test) and, for the terms left out, the one-sided upper limit
+    θ̂ + z_present·se of θ when fitted with the selected ones (a "not detected, below" bound).
+
+    Rate ramp (index ``ramp``) against rate random walk (``walk``): a random walk's
+    realisation over a record looks like a trend, and a ramp fitted with the covariance of a
+    model in which it has taken the random walk's place has tight error bars it did not earn.
+    So the common covariance is that of the model *without* the ramp (the long-τ excess read
+    as a random walk): the ramp must beat what a random walk would do. When exactly one of
+    the two is selected, the two readings are compared by their Gaussian likelihood, each
+    with its own covariance; when neither is better by the test's margin the record cannot
+    tell them apart: the random walk is kept (the stochastic reading, whose interval includes
+    the realisation's scatter) and the last value returned is True ("ramp or random walk").
+    """
+    base = [a for a in range(A) if a != ramp] if walk is not None else list(range(A))
+    _, _, C_star, _ = _fit_active(p, idx, base)
+    T = _whitener(C_star)
+    y = p.y[idx]
+    crit = z_present**2
+
+    def chi2(active: list[int]) -> tuple[float, NDArray]:
+        if not active:
+            r = T @ y
+            return float(r @ r), np.zeros(0)
+        th, c2 = _gls_nnls(p.X[np.ix_(idx, active)], y, T)
+        return c2, th
+
+    z_all = np.full(A, np.nan)
+    active: list[int] = []
+    cur, _ = chi2(active)
+    while len(active) < A:
+        trials = []
+        for a in range(A):
+            if a not in active:
+                cand = sorted([*active, a])
+                c2, th = chi2(cand)
+                trials.append((c2, a, cand, th))
+        c2, a, cand, th = min(trials, key=lambda t: t[0])
+        gain = cur - c2
+        if gain < crit or th[cand.index(a)] <= 0:
+            break
+        active, cur = cand, c2
+    while active:
+        drops = []
+        for a in active:
+            rest = [b for b in active if b != a]
+            c2, _ = chi2(rest)
+            drops.append((c2 - cur, a))
+            z_all[a] = math.sqrt(max(c2 - cur, 0.0))
+        gain, a = min(drops)
+        if gain >= crit:
+            break
+        active.remove(a)
+        cur, _ = chi2(active)
+    ambiguous = False
+    if ramp is not None and walk is not None and ramp in active and walk in active:
+        # both chosen: the ramp stays only if it also wins on likelihood with the models'
+        # own covariances; else the random walk alone reads the long-τ excess
+        without = [b for b in active if b != ramp]
+        if not _neg_log_lik(p, idx, active) + crit < _neg_log_lik(p, idx, without):
+            active = without
+            ambiguous = True
+    if ramp is not None and walk is not None and (ramp in active) != (walk in active):
+        # One of the two was chosen: compare the two readings by their Gaussian likelihood,
+        # each with its own covariance (χ² + ln det C), so that a random walk's wide scatter
+        # and a ramp's tight one both count. Clearly better (by the test's margin) wins;
+        # otherwise the record cannot tell them apart and the random walk is reported.
+        there, other = (ramp, walk) if ramp in active else (walk, ramp)
+        swapped = sorted([b for b in active if b != there] + [other])
+        nll_there, nll_other = _neg_log_lik(p, idx, active), _neg_log_lik(p, idx, swapped)
+        if nll_other + crit < nll_there:
+            active = swapped
+        elif not nll_there + crit < nll_other:
+            ambiguous = True
+            if there == ramp:  # the random walk reading
+                active = swapped
+        cur, _ = chi2(active)
+        if walk in active:
+            c2_no_walk, _ = chi2([b for b in active if b != walk])
+            z_all[walk] = math.sqrt(max(c2_no_walk - cur, 0.0))
+    upper = np.full(A, np.nan)
+    for a in range(A):
+        if a not in active:
+            cand = sorted([*active, a])
+            c2, th = chi2(cand)
+            z_all[a] = math.sqrt(max(cur - c2, 0.0))
+            upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
+    return active, z_all, upper, ambiguous
+
+
+def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
+                 T0: NDArray, iterations: int = 6) -> float:
+    """One-sided upper limit θ_u = θ̂ + z·se of an absent component's θ, with the AVAR
+    covariance evaluated *at* θ_u (the hypothesis the limit excludes), iterated to a fixed
+    point. With the covariance of the fitted model instead, a random walk whose realisation
+    fell low also had small error bars, and the limit came out below the truth in 1 of 8
+    absent-K records (issue 12); a term as large as θ_u scatters the AVAR as much as it
+    would if it were there."""
+    X = p.X[np.ix_(idx, np.asarray(cand, dtype=np.intp))]
+    y = p.y[idx]
+    j = cand.index(a)
+    theta = np.zeros(p.X.shape[1])
+    T = T0  # first round: the common covariance of the selection
+    up = 0.0
+    for _ in range(iterations):
+        th, _ = _gls_nnls(X, y, T)
+        TX = T @ X
+        se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[j, j], 0.0))
+        new = th[j] + z * se
+        done = up > 0 and abs(new - up) <= 1e-3 * up
+        up = new
+        theta[cand] = th
+        theta[a] = up  # the covariance of the next round: the term at its limit
+        if done:
+            break
+        T = _whitener(_avar_cov(p, theta, idx))
+    return up
+
+
+def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
+                   drop_z: float, max_drop: int) -> int:
+    """Number of shortest τ to leave out because the sensor's low-pass bends them.
+
+    A low-pass on white noise lowers the AVAR at a few samples by an amount falling like
+    1/m (the bend of ``model.lowpass_white_avar`` is ≈ −c·N²τ0/τ²): a *negative* τ⁻² term,
+    which quantization (positive τ⁻²) cannot produce. So while the remaining curve, fitted
+    with the terms other than Q plus a free-signed τ⁻² "bend" column (GLS with the modelled
+    covariance), shows a bend below zero by more than ``drop_z`` standard errors, the
+    shortest point is left out; at most ``max_drop`` points go.
+    """
+    base = [j for j, a in enumerate(fitted) if comps[a].cause != "quantization"]
+    K = p.X.shape[0]
+    start = 0
+    while start < max_drop and K - start >= len(base) + 3:
+        idx = np.arange(start, K)
+        _, _, C, _ = _fit_active(p, idx, base)
+        T = _whitener(C)
+        tau = p.m_tau[idx]
+        X = np.column_stack([p.X[np.ix_(idx, base)], 1.0 / (tau * rate_hz) ** 2])
+        TX = T @ X
+        coef, *_ = np.linalg.lstsq(TX, T @ p.y[idx], rcond=None)
+        cov = np.linalg.pinv(TX.T @ TX)
+        se = math.sqrt(max(cov[-1, -1], 0.0))
+        if se > 0 and coef[-1] / se < -drop_z:
+            start += 1
+        else:
+            break
+    return start
+
+
+def fit_noise(
+    result: Any,
+    *,
+    filter_corner_hz: float | None = None,
+    terms: Sequence[str] = TERMS,
+    extra: Sequence[Mapping] = (),
+    tau_range: tuple[float, float] | None = None,
+    ci: float = 0.683,
+    z_present: float = 2.33,
+    min_edf: float = 3.0,
+    min_averages: float = 8.0,
+    drop_z: float = 3.0,
+    max_drop: int = 8,
+    birge_scale: bool = True,
+    rounding_lsb: float | None = None,
+    filter_min_m: int = 2,
+) -> NoiseFit:
+    """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
+
+    ``result``: a single-channel ``AllanResult`` (tau, m, stride, var, n, edf, rate_hz) of
+    rate data in m/s². ``filter_corner_hz``: model the sensor's low-pass (ADXL355: ODR/4) on
+    the white and the flicker (bias-instability) noise, so the fit starts at
+    ``filter_min_m`` samples (2), instead of excluding the bent short τ.
+    ``extra``: dicts
+    ``{"cause": "sinusoid"|"gauss_markov"|"filter", "params": {...}}``; the nonlinear
+    parameter (frequency_hz, T, corner_hz) is fixed, the amplitude-like one (amplitude,
+    sigma, N) is fitted unless given. ``tau_range``: (min, max) seconds to restrict the
+    automatic range further. ``rounding_lsb``: the record's LSB (m/s²) when it is known to be
+    rounded after the sensor's filter (ADXL355 output): the rounding adds unfiltered white
+    noise of LSB²/12 per sample, a fixed component; N is then reported as the white level of
+    the output, √(N_filtered² + LSB²/(12·fs)), the N a datasheet or the slope method gives.
+    See the module docstring for the method and the tests.
+    """
+    var = np.asarray(result.var, dtype=float)
+    if var.ndim != 1:
+        raise FitError("fit_noise takes one channel: pass result.channel(c)")
+    rate = float(result.rate_hz)
+    if not (math.isfinite(rate) and rate > 0):
+        raise FitError(f"sample rate {rate} Hz is not a positive number")
+    tau = np.asarray(result.tau, dtype=float)
+    m = np.asarray(result.m, dtype=np.int64)
+    n = np.asarray(result.n, dtype=float)
+    M = _n_samples(result)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
+
+    ok = np.isfinite(var) & (var > 0) & (n > 0)
+    # long-τ cut: too few independent averages, or too few EDF for a usable weight
+    ok &= n_total / m >= min_averages
+    ok &= ~(np.isfinite(edf) & (edf < min_edf))
+    if tau_range is not None:
+        ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
+    keep = np.flatnonzero(ok)
+    extra = list(extra)
+    n_q2 = 0.0
+    if rounding_lsb is not None:
+        if not (math.isfinite(rounding_lsb) and rounding_lsb > 0):
+            raise FitError(f"rounding_lsb {rounding_lsb} m/s² is not a positive number")
+        n_q2 = rounding_lsb**2 / (12.0 * rate)
+        extra.append({"cause": "white", "label": ROUNDING, "params": {"N": math.sqrt(n_q2)}})
+    comps = _components(terms, extra, filter_corner_hz, rate)
+    fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
+    fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
+    if not np.any(np.isfinite(var) & (var > 0)):
+        # zero Allan variance at every τ: a longer record would not help
+        raise FitError("the Allan variance is zero at every τ: the channel is constant (no "
+                       "noise to fit); check the sensor, or leave the channel out (--channels)")
+    if len(keep) < len(fitted) + 2:
+        raise FitError(
+            f"only {len(keep)} usable averaging times for {len(fitted)} model terms; record "
+            "a longer data set or fit fewer terms"
+        )
+    t_k = tau[keep]
+    X = np.column_stack([comps[i].basis(t_k, rate) for i in fitted])
+    fixed_avar = np.zeros(len(keep))
+    theta_fixed = np.array([comps[i].fixed_value**2 for i in fixed])
+    for i, th in zip(fixed, theta_fixed, strict=True):
+        fixed_avar += th * comps[i].basis(t_k, rate)
+    psds = [comps[i].psd(rate) for i in fitted] + [comps[i].psd(rate) for i in fixed]
+    G = mdl.avar_covariance_kernels(m[keep], psds)
+    p = _Problem(y=var[keep] - fixed_avar, X=X, fixed=fixed_avar, G=G,
+                 theta_fixed=theta_fixed, M=M[keep], edf_floor=100.0 * M[keep], m_tau=t_k)
+
+    K = len(keep)
+    A = len(fitted)
+    start = 0
+    if filter_corner_hz is None:
+        start = _short_tau_cut(p, comps, fitted, rate, drop_z, max_drop)
+    else:
+        # The one-sample point hangs on the spectrum right at Nyquist, where neither the
+        # chip's filter (the datasheet gives only its corner) nor the 1/f model is pinned
+        # down; fitted, it turned a 0.1 % difference there into a false quantization term
+        # on 10 of 10 X/Y axes of 60 h paper-table3 records, none from two samples on.
+        start = int(np.searchsorted(m[keep], filter_min_m))
+    idx = np.arange(start, K)
+
+    labels = [comps[a].label for a in fitted]
+    ramp = labels.index("rate_ramp") if "rate_ramp" in labels else None
+    walk = labels.index("rate_random_walk") if "rate_random_walk" in labels else None
+    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk)
+    if active:
+        theta, cov, C, chi2 = _fit_active(p, idx, active)
+    else:
+        theta, cov = np.zeros(A), np.zeros((0, 0))
+        C = _avar_cov(p, theta, idx)
+        r = _whitener(C) @ p.y[idx]
+        chi2 = float(r @ r)
+    dof = len(idx) - len(active)
+    chi2_dof = chi2 / dof if dof > 0 else float("nan")
+    # Birge ratio: when the residuals scatter more than their modelled covariance allows, the
+    # intervals widen by √(χ²/dof) (never narrow); a misfit model then reports honest,
+    # larger uncertainties instead of precise wrong ones.
+    birge = math.sqrt(chi2_dof) if math.isfinite(chi2_dof) and chi2_dof > 1 else 1.0
+    if birge_scale:
+        cov = cov * birge**2
+    se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+    zci = float(norm.ppf(0.5 + ci / 2.0))
+    est: dict[str, TermEstimate] = {}
+    extras: list[dict[str, Any]] = []
+    sinusoids: list[dict[str, float]] = []
+    theta_all = np.zeros(len(comps))
+    for j, a in enumerate(fitted):
+        theta_all[a] = theta[j]
+    for i, th in zip(fixed, theta_fixed, strict=True):
+        theta_all[i] = th
+    for j, a in enumerate(fitted):
+        comp = comps[a]
+        present = j in active and theta[j] > 0
+        if present:
+            s = se_active[active.index(j)]
+            # the white level of the output includes the (known, fixed) rounding noise
+            q = n_q2 if comp.label == "velocity_random_walk" else 0.0
+            val = math.sqrt(theta[j] + q)
+            lo = math.sqrt(max(theta[j] - zci * s, 0.0) + q)
+            hi = math.sqrt(theta[j] + zci * s + q)
+            te = TermEstimate(val, lo, hi, comp.unit, True, float(z_all[j]))
+            if ambiguous and j in (ramp, walk):
+                te.note = RAMP_OR_WALK
+        else:
+            theta_all[a] = 0.0
+            te = TermEstimate(None, None, None, comp.unit, False,
+                              None if np.isnan(z_all[j]) else float(z_all[j]),
+                              None if np.isnan(upper[j]) else math.sqrt(max(upper[j], 0.0)),
+                              RAMP_OR_WALK if ambiguous and j in (ramp, walk) else None)
+        if comp.label in TERMS:
+            est[comp.label] = te
+        else:
+            info = {"cause": comp.cause, "label": comp.label,
+                    "params": {**comp.params, comp.value_key: te.value}, "present": present,
+                    "lo": te.lo, "hi": te.hi, "unit": te.unit}
+            extras.append(info)
+            if comp.cause == "sinusoid" and present:
+                sinusoids.append({"frequency_hz": comp.params["frequency_hz"],
+                                  "amplitude": te.value, "lo": te.lo, "hi": te.hi})
+    for i in fixed:
+        comp = comps[i]
+        extras.append({"cause": comp.cause, "label": comp.label,
+                       "params": {**comp.params, comp.value_key: comp.fixed_value},
+                       "present": True, "lo": None, "hi": None, "unit": comp.unit,
+                       "fixed": True})
+    for t in TERMS:
+        est.setdefault(t, TermEstimate(None, None, None, UNITS[t], False))
+    full_cov = np.zeros((len(comps), len(comps)))
+    act = [fitted[j] for j in active]
+    full_cov[np.ix_(act, act)] = cov
+    return NoiseFit(
+        terms=est, sinusoids=sinusoids, extra=extras,
+        tau_min_s=float(t_k[idx[0]]), tau_max_s=float(t_k[idx[-1]]), chi2_dof=float(chi2_dof),
+        rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
+        z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
+    )
+
+
+def slope_method(result: Any) -> dict[str, float]:
+    """The slope reading of the MATLAB example, allan_variance_ros and kalibr_allan.
+
+    On log-log ADEV: the line of slope −½ through the point whose local slope is closest to
+    −½, read at τ = 1 s → N; slope +½ through the point closest to +½, read at τ = 3 s → K;
+    B = min ADEV / 0.664 (IEEE 952 Annex C). No uncertainty, biased where terms overlap.
+    """
+    var = np.asarray(result.var, dtype=float)
+    if var.ndim != 1:
+        raise FitError("slope_method takes one channel: pass result.channel(c)")
+    tau = np.asarray(result.tau, dtype=float)
+    ok = np.isfinite(var) & (var > 0)
+    tau, adev = tau[ok], np.sqrt(var[ok])
+    if len(tau) < 3:
+        raise FitError("the slope method needs at least 3 averaging times")
+    lt, la = np.log10(tau), np.log10(adev)
+    slope = np.diff(la) / np.diff(lt)
+
+    def line_at(target: float, tau_read: float) -> float:
+        i = int(np.argmin(np.abs(slope - target)))
+        b = la[i] - target * lt[i]
+        return float(10 ** (target * math.log10(tau_read) + b))
+
+    return {
+        "velocity_random_walk": line_at(-0.5, 1.0),
+        "bias_instability": float(adev.min() / mdl.BI_FACTOR),
+        "rate_random_walk": line_at(0.5, 3.0),
+    }

@@ -1,0 +1,1 @@
+"""ZeroMQ: the publisher and request server, the subscriber client, CURVE keys."""

@@ -1,0 +1,290 @@
+"""The reader thread: the only code that talks to the ADXL355 bus.
+
+It does nothing slow: sleep until the FIFO is due to hold a useful block (pacing.py: from the
+fitted output rate and the FIFO depth, with margin), drain the FIFO, give each sample its index
+and a time from the fitted time base, push the block into the ring, and (every
+``chip_interval_s``) read the chip's temperature. Everything it learns about loss goes into the
+ring as a mark, in order with the samples:
+
+- an overrun (STATUS.FIFO_OVR) becomes a ``gap`` record; the number of lost sets is estimated
+  from the elapsed time and the fitted rate (the chip does not say), and the sample index
+  jumps by that estimate so that index and time stay aligned;
+- a failed transfer (BusError) becomes a ``bus_error`` event; the FIFO keeps filling, so a
+  short bus fault costs nothing, and a long one shows up as an overrun gap;
+- a device that stops producing samples (the source raises DeviceStalledError: it owns that
+  detection) becomes one ``stalled`` event (and the watchdog is no longer fed, see
+  service/supervisor.py); ``resumed`` when samples flow again.
+
+Temperatures of other sources (DS18B20 threads) are marked with :meth:`Acquisition.stamp`,
+which gives the index of the next sample, so the time base of every channel is the sample
+index.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from avard.core.errors import AvardError, DeviceStalledError, HardwareError
+from avard.core.io import frames
+from avard.daemon.hw.interrupt import InterruptPin
+from avard.daemon.hw.source import GapReason, SampleSource
+from avard.daemon.service.pacing import drain_period_s
+from avard.daemon.service.ring import Ring
+from avard.daemon.service.timebase import TimeBase
+
+log = logging.getLogger(__name__)
+
+
+class Acquisition:
+    """Drain loop over an ``Adxl355``-like driver (``drain()``, ``read_temperature_c()``).
+
+    ``clock`` provides ``monotonic()``, ``realtime()`` and ``sleep()``; under simulation it is
+    a stepped virtual clock and ``speed`` caps how much faster than real time the loop runs
+    (None: as fast as the CPU allows).
+    """
+
+    def __init__(self, sensor: SampleSource, ring: Ring, timebase: TimeBase, clock: Any, *,
+                 poll_hz: float, chip_interval_s: float = 1.0, run_id: str = "",
+                 speed: float | None = None,
+                 on_tick: Callable[[float], None] | None = None,
+                 start_index: int = 0, backpressure: bool = False,
+                 on_clock_step: Callable[[float], None] | None = None,
+                 stop_at: float | None = None,
+                 interrupt: InterruptPin | None = None) -> None:
+        self.sensor = sensor
+        self.ring = ring
+        self.tb = timebase
+        self.clock = clock
+        self.poll_hz = float(poll_hz)     # the least drain rate (sensor.poll_hz)
+        # INT1 on the FIFO watermark (interrupt.py): wait on the pin, the timer as fallback
+        self.interrupt = interrupt
+        self.chip_interval_s = float(chip_interval_s)
+        self.run_id = run_id
+        self.speed = speed
+        self.on_tick = on_tick          # called with t_mono after each poll (simulated temps)
+        # called with the new CLOCK_REALTIME − CLOCK_MONOTONIC offset after a realtime step
+        self.on_clock_step = on_clock_step
+        self.clock_steps = 0
+        self.next_index = int(start_index)
+        # Simulation only: time is virtual, so waiting for a slow consumer costs nothing and
+        # keeps "as fast as possible" from outrunning the recorder. On hardware the reader
+        # never waits (the sensor does not), and a consumer that falls behind gets a gap.
+        self.backpressure = bool(backpressure)
+        self.samples = 0
+        self.overruns = 0
+        self.lost_estimate = 0
+        self.bus_errors = 0
+        self._consecutive_errors = 0
+        self.stalled = False
+        self.last_sample_t: float | None = None
+        self._last_drain_t: float | None = None
+        self._next_chip = 0.0
+        self._next_recover = 0.0
+        self.max_drain_interval_s = 0.0   # longest drain-to-drain interval (benchmarks)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+        self.first_samples = threading.Event()
+        # The reader itself ends at clock time ``stop_at`` (a --duration): a supervisor that
+        # looks at a fast virtual clock every few wall milliseconds would stop at a
+        # thread-timing-dependent sample, and the same seed would give different records.
+        self.stop_at = stop_at
+        self.finished = threading.Event()
+
+    # -- control ------------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def stamp(self) -> int:
+        """Index of the next sample: where a reading taken now belongs on the sample grid."""
+        return self.next_index
+
+    def mark(self, record: dict[str, Any]) -> None:
+        self.ring.mark(record)
+
+    @property
+    def period(self) -> float:
+        """Seconds between drains at the rate fitted so far."""
+        return drain_period_s(self.tb.odr_hz, self.poll_hz)
+
+    # -- loop ---------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            wall0 = time.monotonic()
+            t0 = self.clock.monotonic()
+            next_t = t0
+            while not self._stop.is_set():
+                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
+                    self.finished.set()
+                    break
+                self.poll_once()
+                period = self.period
+                if self.interrupt is not None:
+                    # The pin rises at the watermark (FIFO half full); the timeout is the
+                    # timer's fallback (a pin that never rises costs latency, not data), and
+                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
+                    t_drain = self.clock.monotonic()
+                    self.interrupt.wait(1.5 * period)
+                    early = t_drain + 0.25 * period - self.clock.monotonic()
+                    if early > 0:
+                        self.clock.sleep(early)
+                else:
+                    next_t += period
+                    now = self.clock.monotonic()
+                    if next_t < now - 10 * period:
+                        next_t = now  # fell far behind (a slow machine): do not catch up
+                    self.clock.sleep(max(0.0, next_t - now))
+                if self.speed:
+                    # Cap the pace at speed × real time (the virtual clock is stepped).
+                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
+                    if ahead > 0:
+                        self._stop.wait(ahead)
+        except BaseException as exc:  # the service sees it and stops with an error
+            log.exception("reader thread died")
+            self.error = exc
+
+    def _wait_for_consumers(self) -> None:
+        limit = self.ring.capacity // 2
+        while not self._stop.is_set() and any(c.backlog > limit for c in self.ring.consumers):
+            self._stop.wait(0.002)
+
+    def poll_once(self) -> int:
+        """One drain; returns the number of samples pushed."""
+        if self.backpressure:
+            self._wait_for_consumers()
+        try:
+            d = self.sensor.drain()
+        except DeviceStalledError as exc:
+            # The source owns stall detection (it knows its rate and FIFO): it raises once
+            # the part has produced nothing for its stall timeout. Recorded once per stall.
+            t = self.clock.monotonic()
+            self.bus_errors += 1
+            if not self.stalled:
+                self.stalled = True
+                log.error("the ADXL355 stopped producing: %s", exc)
+                self.mark(frames.event_record(
+                    self.run_id, 0, "stalled", t, self.clock.realtime(), i0=self.next_index,
+                    detail={"error": str(exc), "count": self.bus_errors,
+                            "since_s": None if self.last_sample_t is None
+                            else t - self.last_sample_t}))
+            self._try_recover(t)      # a reset loses the FIFO, but nothing flows anyway
+            return 0
+        except HardwareError as exc:
+            self.bus_errors += 1
+            t = self.clock.monotonic()
+            if self.bus_errors <= 10 or self.bus_errors % 1000 == 0:
+                log.warning("bus_error #%d while draining: %s", self.bus_errors, exc)
+            self.mark(frames.event_record(self.run_id, 0, "bus_error", t, self.clock.realtime(),
+                                          i0=self.next_index,
+                                          detail={"error": str(exc), "count": self.bus_errors}))
+            self._consecutive_errors += 1
+            # A single failed transfer costs nothing (the FIFO keeps the data); only a
+            # persistent failure is worth a reset, which loses the FIFO.
+            if self._consecutive_errors >= 3:
+                self._try_recover(t)
+            return 0
+        self._consecutive_errors = 0
+        counts = np.asarray(d.counts, dtype=np.int32)
+        n = int(counts.shape[0])
+        t_mono, t_real = float(d.t_mono), float(d.t_real)
+        self._check_clock_step(t_mono, t_real)
+        if d.overrun:
+            self._overrun(n, t_mono, t_real, d.gap_reasons, d.gap_reason or "overrun",
+                          d.since_last_s)
+        if n:
+            i0 = self.next_index
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun), exact=bool(d.complete))
+            times = self.tb.timestamps(i0, n)
+            self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
+            self.next_index += n
+            self.samples += n
+            self.last_sample_t = t_mono
+            if self.stalled:
+                self.stalled = False
+                log.warning("samples flow again")
+                self.mark(frames.event_record(self.run_id, 0, "resumed", t_mono, t_real,
+                                              i0=i0))
+            self.first_samples.set()
+        if self._last_drain_t is not None:
+            self.max_drain_interval_s = max(self.max_drain_interval_s, t_mono - self._last_drain_t)
+        self._last_drain_t = t_mono
+        if t_mono >= self._next_chip:
+            self._next_chip = t_mono + self.chip_interval_s
+            self._chip_temperature(t_mono, t_real)
+        if self.on_tick is not None:
+            self.on_tick(t_mono)
+        return n
+
+    def _check_clock_step(self, t_mono: float, t_real: float) -> None:
+        """CLOCK_REALTIME jumped (NTP step, a date change, a Pi without RTC getting its time):
+        record a ``clock_step`` event. Sample order and times stay on CLOCK_MONOTONIC; only
+        the wall-clock times written beside them follow the new offset from here on."""
+        step = self.tb.realtime_step(t_mono, t_real)
+        if step is None:
+            return
+        self.clock_steps += 1
+        log.warning("CLOCK_REALTIME stepped by %+.3f s; sample times stay on CLOCK_MONOTONIC",
+                    step)
+        self.mark(frames.event_record(self.run_id, 0, "clock_step", t_mono, t_real,
+                                      i0=self.next_index,
+                                      detail={"step_s": step, "t_real_after": t_real}))
+        if self.on_clock_step is not None:
+            self.on_clock_step(t_real - t_mono)
+
+    def _try_recover(self, t: float) -> None:
+        """After a failed drain, re-probe and restart the part (at most once a second)."""
+        if t < self._next_recover:
+            return
+        self._next_recover = t + 1.0
+        try:
+            self.sensor.recover()
+            log.warning("ADXL355 recovered (probed, reset, reconfigured, restarted)")
+        except AvardError as exc:
+            log.debug("recovery failed: %s", exc)
+
+    def _overrun(self, n_read: int, t_mono: float, t_real: float,
+                 reasons: tuple[GapReason, ...], reason: str,
+                 since_last_s: float | None = None) -> None:
+        """A gap of unknown size: estimate the lost sets from the time since the last drain
+        (the driver's ``since_last_s`` when it knows it) × the fitted rate."""
+        self.overruns += 1
+        if since_last_s is not None:
+            elapsed = float(since_last_s)
+        else:
+            elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
+        expected = round(elapsed * self.tb.odr_hz)
+        # An overrun lost at least one set by definition; other gaps (a failed transfer,
+        # a realignment) may have lost none: then the gap has n = 0 but still ends the
+        # Allan segment, because continuity cannot be proven.
+        floor = 1 if GapReason.FIFO_OVERRUN in reasons else 0
+        lost = max(floor, expected - n_read)
+        i0 = self.next_index
+        self.next_index += lost
+        self.lost_estimate += lost
+        log.warning("gap (%s): about %d samples lost at index %d", reason, lost, i0)
+        self.mark(frames.gap_record(self.run_id, 0, i0, lost, t_mono, t_real, reason,
+                                    estimated=True))
+
+    def _chip_temperature(self, t_mono: float, t_real: float) -> None:
+        try:
+            value = float(self.sensor.read_temperature_c())
+        except AvardError as exc:
+            log.debug("chip temperature read failed: %s", exc)
+            return
+        self.mark(frames.temp_record(self.run_id, 0, self.next_index, ["chip"], [value],
+                                     t_mono, t_real, source="adxl355"))

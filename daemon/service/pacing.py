@@ -1,0 +1,39 @@
+"""When the reader drains the ADXL355 FIFO: when it is due to hold a useful block.
+
+The FIFO holds 96 entries = 32 X/Y/Z sets, i.e. 32/ODR seconds (256 ms at 125 Hz, 8 ms at
+4 kHz); it overruns (and loses sets) when it is not drained within that time. Each drain costs a
+fixed amount of CPU (a STATUS read, a burst, decoding, a push into the ring) however many sets
+it returns, so the reader drains when the FIFO is due to be ``FILL_TARGET`` full at the
+*fitted* output rate, leaving the rest of the FIFO as the margin for a late wake-up, and at
+least ``poll_hz`` times a second (``sensor.poll_hz``: it bounds how late a sample reaches the
+ring and the subscribers).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from avard.daemon.hw.registers import FIFO_LOCATIONS
+
+#: X/Y/Z sets the FIFO holds.
+FIFO_SETS = FIFO_LOCATIONS // 3
+#: Drain when the FIFO is due to hold this fraction of its sets: half is the wake-up margin
+#: (128 ms at 125 Hz, 4 ms at 4 kHz; Linux wakes a sleeping thread well within that).
+FILL_TARGET = 0.5
+
+
+def drain_period_s(odr_hz: float, poll_hz: float) -> float:
+    """Seconds between drains for a (fitted) output rate and the configured least drain rate."""
+    return min(1.0 / float(poll_hz), FILL_TARGET * FIFO_SETS / float(odr_hz))
+
+
+def watermark_sets() -> int:
+    """FIFO_SAMPLES watermark for the interrupt-driven reader, in sets (same fill target)."""
+    return max(1, round(FILL_TARGET * FIFO_SETS))
+
+
+def watermark_settings(use_int1: bool) -> dict[str, Any]:
+    """``Adxl355.configure`` arguments for a reader that waits on INT1 at this fill."""
+    if not use_int1:
+        return {}
+    return {"watermark": 3 * watermark_sets(), "int1_watermark": True}

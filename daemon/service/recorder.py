@@ -1,0 +1,520 @@
+"""The segment writer: CRC-framed records appended to rotating segment files.
+
+- Every segment starts with the run's header, so each file can be read on its own, and
+  repeats it every ``header_every_s`` of data time: a damaged first header then costs no
+  samples (the reader interprets the records before the copy with it).
+- Rotation every ``segment_s`` of *data* time (the service clock, virtual under ``--speed``),
+  and on SIGHUP (:meth:`Recorder.reopen`), so log rotation tools can move files away.
+- ``fsync`` at most every ``fsync_interval_s`` of wall time: a power cut loses at most that.
+- Disk full (ENOSPC/EDQUOT, or free space below ``min_free_bytes``): the failed frame is cut
+  off again (no half frame stays in the file), writing pauses, acquisition and publishing go
+  on, the state shows in :attr:`Recorder.status` and the log; free space is re-checked every
+  ``retry_s`` and writing resumes in a new segment that starts with a ``gap`` record naming
+  the samples lost (reason ``disk_full``).
+- Retention after every rotation: segments older than ``retention_days`` and then the oldest
+  while the total exceeds ``retention_max_bytes`` are deleted (never the open one).
+
+All file-system access goes through :class:`FileOps`, so tests can inject ENOSPC, slow disks or
+failing fsyncs without filling a real disk.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import re
+import secrets
+import shutil
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from avard.core.errors import FormatError
+from avard.core.io import frames
+from avard.core.io.recording import SEGMENT_SUFFIX, first_record, frame, last_record
+
+log = logging.getLogger(__name__)
+
+_FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
+class FileOps:
+    """The recorder's file-system layer (real files); subclass it to inject faults.
+
+    Segments are opened unbuffered: a buffered file would flush its buffer again inside
+    ``truncate()`` and hit ENOSPC a second time, leaving the torn frame in the file."""
+
+    #: Attempts (and the pause between them) to cut a torn frame off after a failed write.
+    truncate_attempts = 3
+    truncate_pause_s = 0.01
+
+    def open_append(self, path: Path) -> IO[bytes]:
+        return open(path, "ab", buffering=0)
+
+    def write(self, f: IO[bytes], data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            # A raw file may write only part (the disk filled up under it); the next call
+            # then raises the error that says why.
+            done = f.write(view)
+            if not done:
+                raise OSError(errno.EIO, "write wrote nothing")
+            view = view[done:]
+
+    def fsync(self, f: IO[bytes]) -> None:
+        os.fsync(f.fileno())
+
+    def truncate(self, f: IO[bytes], size: int) -> None:
+        # ftruncate on the descriptor: no buffer to flush first, and shrinking a file needs
+        # no free blocks, so this works on a full disk.
+        os.ftruncate(f.fileno(), size)
+        f.seek(size)
+
+    def free_bytes(self, directory: Path) -> int:
+        return shutil.disk_usage(directory).free
+
+    def remove(self, path: Path) -> None:
+        path.unlink()
+
+    def segments(self, directory: Path) -> list[tuple[Path, int, float]]:
+        """(path, size bytes, mtime s) of the segment files, oldest name first."""
+        out = []
+        for p in sorted(directory.glob("*" + SEGMENT_SUFFIX)):
+            try:
+                st = p.stat()
+            except FileNotFoundError:
+                continue
+            out.append((p, st.st_size, st.st_mtime))
+        return out
+
+
+@dataclass
+class LostSpan:
+    """Samples that reached the recorder but could not be written."""
+
+    i0: int
+    n: int
+    t_mono: float
+    t_real: float
+    records: int = 0
+
+
+class Recorder:
+    """Append records to segment files under ``data_dir``; thread-safe, never raises OSError
+    into the service for a full disk (it pauses and says so instead)."""
+
+    def __init__(self, data_dir: str | Path, run_id: str,
+                 header: Callable[[], dict[str, Any]], *,
+                 segment_s: float = 3600.0, fsync_interval_s: float = 5.0,
+                 retention_days: float = 0.0, retention_max_bytes: int = 0,
+                 min_free_bytes: int = 0, retry_s: float = 5.0, header_every_s: float = 60.0,
+                 clock: Callable[[], float] = time.monotonic,
+                 wall: Callable[[], float] = time.monotonic,
+                 realtime: Callable[[], float] = time.time,
+                 fileops: FileOps | None = None) -> None:
+        self.dir = Path(data_dir)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.run_id = run_id
+        self._header = header
+        self.segment_s = float(segment_s)
+        self.fsync_interval_s = float(fsync_interval_s)
+        self.retention_days = float(retention_days)
+        self.retention_max_bytes = int(retention_max_bytes)
+        self.min_free_bytes = int(min_free_bytes)
+        self.retry_s = float(retry_s)
+        self.header_every_s = float(header_every_s)
+        self._header_at = 0.0
+        self.clock, self.wall, self.realtime = clock, wall, realtime
+        self.ops = fileops or FileOps()
+        self._lock = threading.RLock()
+        self._f: IO[bytes] | None = None
+        self.path: Path | None = None
+        self._size = 0
+        self._opened_at = 0.0
+        self._last_sync = wall()
+        self._dirty = False
+        self._segment_no = 0
+        self._seq: dict[str, int] = {}
+        self._full_since: float | None = None
+        self._next_retry = 0.0
+        self.lost: LostSpan | None = None
+        self.records = 0
+        self.bytes = 0
+        self.segments_written = 0
+        self.records_lost = 0
+        self.samples_lost = 0
+        self.deleted: list[str] = []
+        self.errors = 0
+        self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
+
+    # -- public -------------------------------------------------------------------------
+    @property
+    def disk_full(self) -> bool:
+        return self._full_since is not None
+
+    def status(self) -> dict[str, Any]:
+        """For STATUS= and the status record: state, file, bytes, losses, free space."""
+        try:
+            free = self.ops.free_bytes(self.dir)
+        except OSError:
+            free = -1
+        return {"state": "disk_full" if self.disk_full else "writing",
+                "segment": self.path.name if self.path else None,
+                "records": self.records, "bytes": self.bytes,
+                "segments": self.segments_written, "records_lost": self.records_lost,
+                "samples_lost": self.samples_lost, "torn_frames": self.torn_frames,
+                "free_bytes": free}
+
+    def write(self, record: dict[str, Any]) -> bool:
+        """Write one record (its ``run``/``seq`` are set here). False when it was lost to a
+        full disk; the loss is then remembered and written as a gap on resume."""
+        with self._lock:
+            now = self.clock()
+            if self.disk_full and not self._try_resume(now):
+                self._remember_lost(record)
+                return False
+            if self._f is None or now - self._opened_at >= self.segment_s:
+                if not self._rotate(now):
+                    self._remember_lost(record)
+                    return False
+            if self.header_every_s and now - self._header_at >= self.header_every_s:
+                self._header_at = now
+                if not self._append(self._header()):
+                    self._remember_lost(record)
+                    return False
+            if not self._append(record):
+                self._remember_lost(record)
+                return False
+            self._maybe_sync()
+            return True
+
+    def flush(self) -> None:
+        """fsync now (before a checkpoint is trusted, and at stop)."""
+        with self._lock:
+            if self._f is not None and self._dirty:
+                try:
+                    self.ops.fsync(self._f)
+                except OSError as exc:
+                    self._failed(exc, "fsync")
+                self._dirty = False
+                self._last_sync = self.wall()
+
+    def reopen(self) -> None:
+        """SIGHUP: close the current segment; the next record opens a new one."""
+        with self._lock:
+            log.info("reopening the recording (SIGHUP)")
+            self._close_file()
+
+    def close(self) -> None:
+        with self._lock:
+            if self.lost is not None and not self.disk_full:
+                self._flush_lost()
+            self._close_file()
+
+    # -- internals ----------------------------------------------------------------------
+    def _stamp(self, record: dict[str, Any]) -> dict[str, Any]:
+        rec = dict(record)
+        kind = rec["kind"]
+        rec["run"] = self.run_id
+        rec["seq"] = self._seq.get(kind, 0)
+        self._seq[kind] = rec["seq"] + 1
+        return rec
+
+    def _append(self, record: dict[str, Any]) -> bool:
+        assert self._f is not None
+        data = frame(frames.encode(self._stamp(record)))
+        if self.min_free_bytes and self._free() < self.min_free_bytes + len(data):
+            self._enter_full(f"free space below min_free_bytes={self.min_free_bytes}")
+            return False
+        try:
+            self.ops.write(self._f, data)
+        except OSError as exc:
+            self._cut_torn_frame()
+            self._failed(exc, "write")
+            return False
+        self._size += len(data)
+        self.bytes += len(data)
+        self.records += 1
+        self._dirty = True
+        return True
+
+    def _cut_torn_frame(self) -> None:
+        """Cut a partly written frame off again so the file stays a clean frame sequence.
+
+        Retried: a truncate can fail transiently (EINTR, a busy NFS server). If it still
+        fails, the torn frame stays at the end of this segment, which is never appended to
+        again (writing resumes in a new segment), so the reader reports it as that segment's
+        truncated tail and loses nothing else; the lost records are in the resume gap."""
+        assert self._f is not None
+        last: OSError | None = None
+        for attempt in range(self.ops.truncate_attempts):
+            try:
+                self.ops.truncate(self._f, self._size)
+                return
+            except OSError as exc:
+                last = exc
+                if attempt + 1 < self.ops.truncate_attempts:
+                    time.sleep(self.ops.truncate_pause_s)
+        self.torn_frames += 1
+        log.error("cannot cut the torn frame off %s at byte %d (%s); the segment is closed "
+                  "and the reader will skip its truncated tail", self.path, self._size, last)
+
+    def _free(self) -> int:
+        try:
+            return self.ops.free_bytes(self.dir)
+        except OSError:
+            return 1 << 62
+
+    def _maybe_sync(self) -> None:
+        if self._dirty and self.wall() - self._last_sync >= self.fsync_interval_s:
+            self.flush()
+
+    def _rotate(self, now: float) -> bool:
+        self._close_file()
+        t_real = self.realtime()
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
+        # Run id first (it starts with the run's real UTC start time), then the segment
+        # number: name order is data order even when a simulated clock runs ahead of real
+        # time. The segment's own start time is for humans.
+        name = f"{self.run_id}_{self._segment_no:04d}_{stamp}{SEGMENT_SUFFIX}"
+        path = self.dir / name
+        try:
+            self._f = self.ops.open_append(path)
+        except OSError as exc:
+            self._failed(exc, "open")
+            return False
+        self._segment_no += 1
+        self.path = path
+        self._size = 0
+        self._opened_at = now
+        self.segments_written += 1
+        log.info("recording into %s", path)
+        self._header_at = now
+        if not self._append(self._header()):
+            return False
+        if self.lost is not None:
+            self._flush_lost()
+        self._retention()
+        return True
+
+    def _flush_lost(self) -> None:
+        lost = self.lost
+        if lost is None or self._f is None:
+            return
+        rec = frames.gap_record(self.run_id, 0, lost.i0, lost.n, lost.t_mono, lost.t_real,
+                                "disk_full", lost_records=lost.records)
+        if self._append(rec):
+            log.warning("recording resumed; samples [%d, %d) and %d records were lost to a "
+                        "full disk (recorded as a gap)", lost.i0, lost.i0 + lost.n,
+                        lost.records)
+            self.lost = None
+
+    def _close_file(self) -> None:
+        if self._f is None:
+            return
+        try:
+            if self._dirty:
+                self.ops.fsync(self._f)
+        except OSError as exc:
+            self._failed(exc, "fsync")
+        try:
+            self._f.close()
+        except OSError as exc:
+            self._failed(exc, "close")
+        self._f = None
+        self._dirty = False
+
+    def _failed(self, exc: OSError, what: str) -> None:
+        self.errors += 1
+        if exc.errno in _FULL_ERRNOS:
+            self._enter_full(f"{what} failed: {exc.strerror}")
+        else:
+            # Other I/O errors: treat like a full disk (pause and retry), never crash
+            # acquisition; the log says what it was.
+            log.error("recording %s failed on %s: %s", what, self.path, exc)
+            self._enter_full(f"{what} failed: {exc}")
+
+    def _enter_full(self, why: str) -> None:
+        if self._full_since is None:
+            self._full_since = self.clock()
+            log.error("recording paused (%s) in %s; acquisition and publishing go on, the "
+                      "lost interval will be recorded as a gap when space returns",
+                      why, self.dir)
+            self._close_file_quietly()
+        self._next_retry = self.wall() + self.retry_s
+
+    def _close_file_quietly(self) -> None:
+        if self._f is not None:
+            try:
+                self._f.close()
+            except OSError:
+                pass
+            self._f = None
+
+    def _try_resume(self, now: float) -> bool:
+        if self.wall() < self._next_retry:
+            return False
+        self._next_retry = self.wall() + self.retry_s
+        if self._free() < max(self.min_free_bytes, 1):
+            return False
+        log.warning("disk space is back (%d bytes free); resuming the recording", self._free())
+        self._full_since = None
+        return self._rotate(now)
+
+    def _remember_lost(self, record: dict[str, Any]) -> None:
+        self.records_lost += 1
+        kind = record.get("kind")
+        if self.lost is None:
+            i0 = int(record.get("i0", record.get("i_end", 0)))
+            self.lost = LostSpan(i0, 0, float(record.get("t_mono", 0.0)),
+                                 float(record.get("t_real", 0.0)))
+        self.lost.records += 1
+        if kind == "raw":
+            if self.lost.n == 0:
+                self.lost.i0 = int(record["i0"])
+            self.lost.n = int(record["i0"]) + int(record["n"]) - self.lost.i0
+            self.samples_lost += int(record["n"])
+
+    def _retention(self) -> None:
+        if not self.retention_days and not self.retention_max_bytes:
+            return
+        try:
+            segs = [s for s in self.ops.segments(self.dir) if s[0] != self.path]
+        except OSError as exc:
+            log.error("retention: cannot list %s: %s", self.dir, exc)
+            return
+        keep = []
+        if self.retention_days:
+            limit = self.realtime() - self.retention_days * 86400.0
+            for p, size, mtime in segs:
+                if mtime < limit:
+                    self._delete(p, "older than retention_days")
+                else:
+                    keep.append((p, size, mtime))
+        else:
+            keep = segs
+        if self.retention_max_bytes:
+            total = sum(s for _, s, _ in keep) + self._size
+            for p, size, _ in keep:
+                if total <= self.retention_max_bytes:
+                    break
+                self._delete(p, "recording above retention_max_bytes")
+                total -= size
+
+    def _delete(self, path: Path, why: str) -> None:
+        try:
+            self.ops.remove(path)
+            self.deleted.append(path.name)
+            log.info("deleted %s (%s)", path.name, why)
+        except OSError as exc:
+            log.error("retention: cannot delete %s: %s", path, exc)
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Replace ``path`` by ``data`` all at once (write a temporary file, fsync, rename).
+
+    On any failure (a full disk) the temporary file is removed again and the error raised:
+    the old file stays whole and no partial ``.tmp`` is left behind."""
+    tmp = path.with_suffix(".tmp")
+    try:
+        with open(tmp, "wb", buffering=0) as f:
+            FileOps().write(f, data)
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# --------------------------------------------------------------------------------------------
+# order that does not depend on the wall clock: run ids, restart gaps
+
+#: Run ids are ``nSSSSSSSS-YYYYMMDDTHHMMSSZ-xxxxxx``: a run sequence number taken from the
+#: recording itself (one more than the highest there), then the UTC start for humans. Name
+#: order is the sequence order, so it is data order even when CLOCK_REALTIME was wrong at
+#: boot (a Pi without RTC before NTP); the ``n`` sorts these after the older stamp-first ids.
+_RUN_SEQ = re.compile(r"n(\d{8})-")
+
+
+def new_run_id(data_dir: str | Path, t_real: float) -> str:
+    """The next run id for a recording directory (see ``_RUN_SEQ``)."""
+    seq = 0
+    d = Path(data_dir)
+    if d.is_dir():
+        for f in d.iterdir():
+            m = _RUN_SEQ.match(f.name)
+            if m:
+                seq = max(seq, int(m.group(1)))
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
+    return f"n{seq + 1:08d}-{stamp}-{secrets.token_hex(3)}"
+
+
+def kernel_boot_id() -> str | None:
+    """The kernel's boot id: CLOCK_MONOTONIC readings compare only within one boot."""
+    try:
+        return Path("/proc/sys/kernel/random/boot_id").read_text().strip() or None
+    except OSError:
+        return None
+
+
+@dataclass(frozen=True)
+class LastRecorded:
+    """Where the recording ends: the index after its last sample and that moment's clocks."""
+
+    i_end: int
+    t_mono: float
+    t_real: float
+    boot_id: str | None
+
+
+@dataclass(frozen=True)
+class RestartGap:
+    """Samples ``[i0, i0 + n)`` the service did not acquire across a restart, measured with
+    ``clock``: "monotonic" (same boot: exact up to the rate), "realtime" (another boot: as
+    good as the wall clock) or "unknown" (the wall clock went back: n = 0, said so)."""
+
+    i0: int
+    n: int
+    t_real: float
+    clock: str
+
+
+def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
+    """The end of the newest segment that holds samples (names sort in data order), read from
+    the file's end, so an hour-long segment costs little."""
+    d = Path(data_dir)
+    if not d.is_dir():
+        return None
+    for seg in sorted(d.glob("*" + SEGMENT_SUFFIX), reverse=True):
+        try:
+            rec = last_record(seg, "raw")
+            head = first_record(seg) if rec is not None else None
+        except (OSError, FormatError):
+            continue
+        if rec is not None:
+            span = rec["n"] / float(rec.get("rate_hz") or nominal_hz)
+            boot = head.get("boot_id") if head and head.get("run") == rec["run"] else None
+            return LastRecorded(int(rec["i0"]) + int(rec["n"]), float(rec["t_mono"]) + span,
+                                float(rec["t_real"]) + span,
+                                boot if isinstance(boot, str) else None)
+    return None
+
+
+def restart_gap(last: LastRecorded, *, boot_id: str | None, t_mono: float, t_real: float,
+                rate_hz: float) -> RestartGap:
+    """How many samples a restart lost: from CLOCK_MONOTONIC when the last run was in this
+    boot, else from CLOCK_REALTIME, and 0 (clock "unknown") when that went backwards."""
+    if boot_id is not None and boot_id == last.boot_id and t_mono >= last.t_mono:
+        elapsed, how = t_mono - last.t_mono, "monotonic"
+    elif t_real >= last.t_real:
+        elapsed, how = t_real - last.t_real, "realtime"
+    else:
+        elapsed, how = 0.0, "unknown"
+        log.warning("CLOCK_REALTIME is %.0f s behind the end of the recording and the last "
+                    "run was in another boot: the restart gap's length is unknown (recorded "
+                    "as 0 samples)", last.t_real - t_real)
+    return RestartGap(last.i_end, round(elapsed * rate_hz), last.t_real, how)

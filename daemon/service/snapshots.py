@@ -1,0 +1,138 @@
+"""The latest published Allan snapshot for the ``snapshot`` request, fitted off the request path.
+
+The publisher hands every ``avar`` record it sends to :meth:`SnapshotBoard.publish`; the
+``snapshot`` request returns exactly that record (never an older one, never one the
+subscribers have not been sent yet). Its noise fit (core/model/fit.py: NNLS and normal quantiles,
+0.1–2 s on a Pi, and the module that loads scipy) is computed by the board's own thread, not by
+the request thread, so ``status`` and ``recent`` are never queued behind a fit. The thread
+starts fitting only once a client has asked for a snapshot (a service nobody asks never loads
+scipy) and from then on fits each new record as it is published; a reply carries the fit of
+its own record when it is ready, else ``fit`` nil and ``fit_pending`` true.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+from avard.core.errors import AvardError
+
+log = logging.getLogger(__name__)
+
+Fit = Callable[[dict[str, Any]], dict[str, Any]]
+
+
+class SnapshotBoard:
+    """Holds the newest published ``avar`` record and its fit; one fitting thread."""
+
+    def __init__(self, fit: Fit) -> None:
+        self._fit = fit
+        self._cond = threading.Condition()
+        self._latest: dict[str, Any] | None = None
+        self._fitted: dict[str, Any] | None = None    # the record the fit below belongs to
+        self._fit_result: dict[str, Any] | None = None
+        self._wanted = False
+        self._stopping = False
+        self._thread: threading.Thread | None = None
+        self.fits = 0
+
+    def publish(self, record: dict[str, Any]) -> None:
+        """A new ``avar`` record went out on the wire."""
+        with self._cond:
+            self._latest = record
+            self._cond.notify_all()
+
+    def reply(self) -> dict[str, Any] | None:
+        """The latest published record with its fit if ready (None before the first)."""
+        with self._cond:
+            if not self._wanted:
+                self._wanted = True
+                self._start()
+            self._cond.notify_all()
+            rec = self._latest
+            if rec is None:
+                return None
+            ready = self._fitted is rec
+            return dict(rec, fit=self._fit_result if ready else None, fit_pending=not ready)
+
+    def wait_fitted(self, timeout: float) -> bool:
+        """Block until the latest record has its fit (tests, and clients in-process)."""
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: self._latest is not None and self._fitted is self._latest, timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _start(self) -> None:
+        if self._thread is None and not self._stopping:
+            self._thread = threading.Thread(target=self._run, name="avard-fit", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._stopping or (
+                    self._latest is not None and self._fitted is not self._latest))
+                if self._stopping:
+                    return
+                rec = self._latest
+            assert rec is not None
+            try:
+                result = self._fit(rec)
+            except Exception:   # a fit must never end the thread; the reply says no fit
+                log.exception("fitting the snapshot failed")
+                result = {}
+            with self._cond:
+                self._fitted, self._fit_result = rec, result
+                self.fits += 1
+                self._cond.notify_all()
+
+
+ACCEL_CHANNELS = ("x", "y", "z")
+
+
+def fit_snapshot(snap: dict[str, Any], *, filter_corner_hz: float | None = None
+                 ) -> dict[str, Any]:
+    """The noise fit (``avard.core.model.fit.NoiseFit``) of each acceleration channel of an Allan
+    snapshot (``AllanSnapshot.to_dict()``, lists or arrays); {} without the analysis side.
+
+    The one snapshot fit: the service's ``snapshot`` replies, ``avard watch`` and ``avard web``
+    all call it, so they show the same terms. The ADXL355's digital low-pass sits at ODR/4
+    (``filter_corner_hz`` defaults to the snapshot's rate / 4)."""
+    try:
+        from avard.core.model.fit import fit_noise
+    except ImportError:  # the analysis side is optional for a watcher
+        return {}
+    names = [str(n) for n in snap.get("names", ACCEL_CHANNELS)]
+    rate = float(snap["rate_hz"])
+    ci = float(snap.get("ci", 0.683))
+    var, edf = np.asarray(snap["avar"], dtype=float), np.asarray(snap["edf"], dtype=float)
+    lo, hi = np.asarray(snap["lo"], dtype=float), np.asarray(snap["hi"], dtype=float)
+    out = {}
+    for c, name in enumerate(names):
+        if name not in ACCEL_CHANNELS:
+            continue
+        try:
+            res = SimpleNamespace(
+                tau=np.asarray(snap["tau"]), m=np.asarray(snap["m"]),
+                stride=np.asarray(snap["stride"]), n=np.asarray(snap["n"]), var=var[:, c],
+                edf=edf[:, c], lo=lo[:, c], hi=hi[:, c], rate_hz=rate, ci=ci,
+                kind=snap.get("kind", "pavar"))
+            out[name] = fit_noise(res, ci=ci, filter_corner_hz=filter_corner_hz or rate / 4)
+        except (AvardError, KeyError, IndexError, ValueError, TypeError) as exc:
+            log.debug("no fit for %s: %s", name, exc)
+    return out
+
+
+def fit_record(rec: dict[str, Any]) -> dict[str, Any]:
+    """The service's fit of an ``avar`` record: :func:`fit_snapshot` as plain dicts."""
+    return {name: fit.to_dict() for name, fit in fit_snapshot(rec["snapshot"]).items()}
