@@ -143,7 +143,8 @@ def _open_hardware(sensor: SensorConfig) -> OpenedSensor:
 
 @dataclass
 class Rig:
-    """A sensor and what goes with it, ready for a :class:`~avard.daemon.service.supervisor.Service`."""
+    """A sensor and what goes with it, ready for a
+    :class:`~avard.daemon.service.supervisor.Service`."""
 
     sensor: Any
     clock: Any
