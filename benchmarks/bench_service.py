@@ -184,6 +184,7 @@ import sys
 from avard.daemon import blas_threads
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.service.supervisor import Service
 from avard.daemon.hw.transport import SpiBus
@@ -193,7 +194,7 @@ dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), cloc
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
 cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
     "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
-Service(cfg, dev, clock, speed=1.0).run(seconds)
+Service(as_config(cfg), dev, clock, speed=1.0).run(seconds)
 heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
 print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
 """

@@ -164,7 +164,7 @@ class Rig:
                            ("interrupt", self.interrupt), ("on_tick", self.on_tick)):
             if value is not None:
                 service_kw.setdefault(key, value)
-        svc = Service(config.as_dict(), self.sensor, self.clock, simulate=self.simulate,
+        svc = Service(config, self.sensor, self.clock, simulate=self.simulate,
                       sensor_info=self.sensor_info,
                       extra_temperature_names=list(self.extra_temperature_names),
                       **service_kw)

@@ -159,6 +159,7 @@ from avard.daemon.cli import build_parser
 build_parser("run")                       # what `avard run` imports before it runs
 from avard.daemon import blas_threads
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.service.supervisor import Service
@@ -168,7 +169,7 @@ dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), cloc
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=125.0); dev.start()
 cfg = load_config(None, **{"recording.data_dir": sys.argv[1], "publish.enabled": False,
                            "allan.snapshot_interval_s": 1.0})
-svc = Service(cfg, dev, clock)
+svc = Service(as_config(cfg), dev, clock)
 svc.run(30.0)
 heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("scipy", "matplotlib"))
 print(blas_threads.LOADED_BEFORE_NUMPY, os.environ["OPENBLAS_NUM_THREADS"], heavy,
