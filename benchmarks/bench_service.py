@@ -82,6 +82,20 @@ print(n / seconds)
 """
 
 
+def _threads_cpu_s() -> dict[str, float]:
+    """CPU seconds of every live thread of this process, by Python thread name."""
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    out: dict[str, float] = {}
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            cpu = _thread_cpu_s(int(tid))
+        except FileNotFoundError:   # ended meanwhile
+            continue
+        name = names.get(int(tid), "other")
+        out[name] = out.get(name, 0.0) + cpu
+    return out
+
+
 def _vm_rss_mb() -> float:
     return int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) / 1024
 
@@ -125,6 +139,7 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
             origin["virt"] = clock.monotonic()
             origin["cpu"] = time.process_time()
             origin["sub_cpu"] = _thread_cpu_s(int(origin["sub_tid"]))
+            origin["threads"] = _threads_cpu_s()  # type: ignore[assignment]
             origin["rss0"] = _vm_rss_mb()
             if client is not None:   # a hostile request client, in its own process
                 origin["client"] = subprocess.Popen(  # type: ignore[assignment]
@@ -139,6 +154,17 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 stop.wait(0.25)
 
         threading.Thread(target=watch_rss, daemon=True).start()
+
+        def per_thread() -> None:   # just before the service stops its threads
+            stop.wait(seconds - 0.5)
+            after = _threads_cpu_s()
+            t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
+            origin["per_thread"] = {  # type: ignore[assignment]
+                k.removeprefix("avard-"): v - t0.get(k, 0.0) for k, v in after.items()
+                if k.startswith("avard-") or k == "MainThread"}
+            origin["per_thread_wall"] = time.monotonic() - origin["wall"]
+
+        threading.Thread(target=per_thread, daemon=True).start()
         svc.run(seconds, before_acquisition=before)
         drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
         req_rate = float("nan")
@@ -161,7 +187,9 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 "samples": st["samples"],
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
-                "poll": effective_poll_hz(cfg)}
+                "poll": effective_poll_hz(cfg),
+                "threads": {k: v / origin["per_thread_wall"]
+                            for k, v in origin.get("per_thread", {}).items()}}
 
 
 def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
@@ -260,6 +288,10 @@ def main(argv: list[str]) -> int:
               f"{r['p99']:7.1f} {r['rss_sim']:10.1f} {r['rss_hw']:9.1f}")
     print("ref = drain loop alone (driver + emulator + simulator) at the same drain period; "
           "ratio = service / ref")
+    for odr, r, _ref in rows:
+        parts = sorted(r["threads"].items(), key=lambda kv: -kv[1])
+        print(f"{odr:g} Hz CPU-s/s by thread (MainThread = supervisor): "
+              + ", ".join(f"{k} {v:.4f}" for k, v in parts))
     print("RSS = peak resident memory of `avard run` as its own process: sim = --simulate "
           f"(loads {rows[0][1]['heavy_sim']}), hw = the hardware path, emulator fed by a "
           f"counter (loads {rows[0][1]['heavy_hw']} of scipy/matplotlib)")
