@@ -53,9 +53,11 @@ def _cfg(odr: float, data_dir: str) -> dict:
 
 
 def _thread_cpu_s(tid: int) -> float:
-    """CPU seconds (user + system) of one thread of this process, from /proc."""
-    fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """CPU seconds of one thread of this process: the scheduler's run time in ns from
+    /proc (exact; the user + system ticks of /proc/…/stat are sampled every 10 ms and miss
+    threads that run in short bursts)."""
+    with open(f"/proc/self/task/{tid}/schedstat") as f:
+        return int(f.read().split()[0]) * 1e-9
 
 
 _CLIENT = r"""
@@ -82,18 +84,33 @@ print(n / seconds)
 """
 
 
-def _threads_cpu_s() -> dict[str, float]:
-    """CPU seconds of every live thread of this process, by Python thread name."""
+def _tids() -> set[int]:
+    return {int(t) for t in os.listdir("/proc/self/task")}
+
+
+def _threads_cpu_s(exclude: set[int]) -> dict[str, float]:
+    """CPU seconds of the live threads of this process but ``exclude``, by Python thread
+    name (threads Python did not start, libzmq's I/O threads, as "libzmq")."""
     names = {t.native_id: t.name for t in threading.enumerate()}
     out: dict[str, float] = {}
-    for tid in os.listdir("/proc/self/task"):
+    for tid in _tids() - exclude:
         try:
-            cpu = _thread_cpu_s(int(tid))
+            cpu = _thread_cpu_s(tid)
         except FileNotFoundError:   # ended meanwhile
             continue
-        name = names.get(int(tid), "other")
+        name = names.get(tid, "libzmq").removeprefix("avard-")
         out[name] = out.get(name, 0.0) + cpu
     return out
+
+
+def _cpu_of(tids: set[int]) -> float:
+    total = 0.0
+    for tid in tids:
+        try:
+            total += _thread_cpu_s(tid)
+        except FileNotFoundError:
+            pass
+    return total
 
 
 def _vm_rss_mb() -> float:
@@ -111,7 +128,6 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
         origin: dict[str, float] = {}
 
         def listen(sub: Subscriber) -> None:
-            origin["sub_tid"] = threading.get_native_id()
             while not stop.is_set() or sub._sub.poll(200):
                 msg = sub.recv(timeout_s=0.2)
                 if msg is None or msg.topic != "raw":
@@ -125,10 +141,31 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 t_last = r["t_mono"] + (r["n"] - 1) / r.get("rate_hz", odr)
                 lat.append(now - (origin["wall"] + (t_last - origin["virt"])))
 
+        rss = {"max": 0.0}
+
+        def watch_rss() -> None:
+            while not stop.is_set():
+                rss["max"] = max(rss["max"], _vm_rss_mb())
+                stop.wait(0.25)
+
+        def per_thread() -> None:   # just before the service stops its threads
+            stop.wait(seconds - 0.5)
+            after = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type]
+            t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
+            wall = time.monotonic() - origin["wall"]
+            origin["per_thread"] = {  # type: ignore[assignment]
+                k: (v - t0.get(k, 0.0)) / wall for k, v in after.items()}
+
         def before() -> None:
+            # Everything the bench starts (the subscriber, its libzmq threads, its helper
+            # threads) is a client or a probe, not the service: their CPU is taken out.
+            tids0 = _tids()
             sub = Subscriber(svc.publisher.endpoint).connect(join=False)
             th = threading.Thread(target=listen, args=(sub,), daemon=True)
             th.start()
+            threading.Thread(target=watch_rss, daemon=True).start()
+            threading.Thread(target=per_thread, daemon=True).start()
+            origin["bench_tids"] = _tids() - tids0  # type: ignore[assignment]
             origin["th"] = th  # type: ignore[assignment]
             origin["sub"] = sub  # type: ignore[assignment]
             deadline = time.monotonic() + 5
@@ -138,41 +175,22 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
             origin["wall"] = time.monotonic()
             origin["virt"] = clock.monotonic()
             origin["cpu"] = time.process_time()
-            origin["sub_cpu"] = _thread_cpu_s(int(origin["sub_tid"]))
-            origin["threads"] = _threads_cpu_s()  # type: ignore[assignment]
+            origin["sub_cpu"] = _cpu_of(origin["bench_tids"])  # type: ignore[arg-type]
+            origin["threads"] = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type,assignment]
             origin["rss0"] = _vm_rss_mb()
             if client is not None:   # a hostile request client, in its own process
                 origin["client"] = subprocess.Popen(  # type: ignore[assignment]
                     [sys.executable, "-c", _CLIENT, svc.request_server.endpoint, client,
                      str(seconds)], stdout=subprocess.PIPE, text=True)
 
-        rss = {"max": 0.0}
-
-        def watch_rss() -> None:
-            while not stop.is_set():
-                rss["max"] = max(rss["max"], _vm_rss_mb())
-                stop.wait(0.25)
-
-        threading.Thread(target=watch_rss, daemon=True).start()
-
-        def per_thread() -> None:   # just before the service stops its threads
-            stop.wait(seconds - 0.5)
-            after = _threads_cpu_s()
-            t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
-            origin["per_thread"] = {  # type: ignore[assignment]
-                k.removeprefix("avard-"): v - t0.get(k, 0.0) for k, v in after.items()
-                if k.startswith("avard-") or k == "MainThread"}
-            origin["per_thread_wall"] = time.monotonic() - origin["wall"]
-
-        threading.Thread(target=per_thread, daemon=True).start()
         svc.run(seconds, before_acquisition=before)
         drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
         req_rate = float("nan")
         if client is not None:
             out, _ = origin["client"].communicate(timeout=60)  # type: ignore[attr-defined]
             req_rate = float(out.split()[-1])
-        # The bench's subscriber is a client, not the service: its thread's CPU is taken out.
-        sub_cpu = _thread_cpu_s(int(origin["sub_tid"])) - origin["sub_cpu"]
+        # The bench's subscriber is a client, not the service: its threads' CPU is taken out.
+        sub_cpu = _cpu_of(origin["bench_tids"]) - origin["sub_cpu"]  # type: ignore[arg-type]
         cpu = time.process_time() - origin["cpu"] - sub_cpu
         wall = time.monotonic() - origin["wall"]
         stop.set()
@@ -188,8 +206,7 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
                 "poll": effective_poll_hz(cfg),
-                "threads": {k: v / origin["per_thread_wall"]
-                            for k, v in origin.get("per_thread", {}).items()}}
+                "threads": origin.get("per_thread", {})}
 
 
 def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
@@ -272,7 +289,7 @@ def main(argv: list[str]) -> int:
         rows.append((odr, res, ref))
     print(f"service at --speed 1 for {args.seconds:g} s per rate (emulated ADXL355, quiet-lab); "
           "CPU = CPU s of the service (all its threads, emulator and simulator included) per "
-          "simulated s; sub = the bench's subscriber thread")
+          "simulated s; sub = the bench's subscriber (its threads and libzmq's), taken out")
     hdr = (f"{'ODR Hz':>7} {'drain Hz':>8} {'sim s':>6} {'samples':>8} {'overruns':>8} "
            f"{'recv ok':>7} {'CPU/sim s':>9} {'sub':>6} {'ref CPU/s':>9} {'ratio':>6} "
            f"{'lat p50 ms':>10} {'p99 ms':>7} {'RSS sim MB':>10} {'RSS hw MB':>9}")
