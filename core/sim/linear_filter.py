@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 #: Points scanned together before the blocks are joined (see the module docstring).
-SCAN_BLOCK = 64
+SCAN_BLOCK = 32
 
 
 def _doubling(s: NDArray, lam: NDArray) -> None:
