@@ -53,9 +53,11 @@ def _cfg(odr: float, data_dir: str) -> dict:
 
 
 def _thread_cpu_s(tid: int) -> float:
-    """CPU seconds (user + system) of one thread of this process, from /proc."""
-    fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    """CPU seconds of one thread of this process: the scheduler's run time in ns from
+    /proc (exact; the user + system ticks of /proc/…/stat are sampled every 10 ms and miss
+    threads that run in short bursts)."""
+    with open(f"/proc/self/task/{tid}/schedstat") as f:
+        return int(f.read().split()[0]) * 1e-9
 
 
 _CLIENT = r"""
@@ -82,6 +84,35 @@ print(n / seconds)
 """
 
 
+def _tids() -> set[int]:
+    return {int(t) for t in os.listdir("/proc/self/task")}
+
+
+def _threads_cpu_s(exclude: set[int]) -> dict[str, float]:
+    """CPU seconds of the live threads of this process but ``exclude``, by Python thread
+    name (threads Python did not start, libzmq's I/O threads, as "libzmq")."""
+    names = {t.native_id: t.name for t in threading.enumerate()}
+    out: dict[str, float] = {}
+    for tid in _tids() - exclude:
+        try:
+            cpu = _thread_cpu_s(tid)
+        except FileNotFoundError:   # ended meanwhile
+            continue
+        name = names.get(tid, "libzmq").removeprefix("avard-")
+        out[name] = out.get(name, 0.0) + cpu
+    return out
+
+
+def _cpu_of(tids: set[int]) -> float:
+    total = 0.0
+    for tid in tids:
+        try:
+            total += _thread_cpu_s(tid)
+        except FileNotFoundError:
+            pass
+    return total
+
+
 def _vm_rss_mb() -> float:
     return int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) / 1024
 
@@ -97,7 +128,6 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
         origin: dict[str, float] = {}
 
         def listen(sub: Subscriber) -> None:
-            origin["sub_tid"] = threading.get_native_id()
             while not stop.is_set() or sub._sub.poll(200):
                 msg = sub.recv(timeout_s=0.2)
                 if msg is None or msg.topic != "raw":
@@ -111,10 +141,31 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 t_last = r["t_mono"] + (r["n"] - 1) / r.get("rate_hz", odr)
                 lat.append(now - (origin["wall"] + (t_last - origin["virt"])))
 
+        rss = {"max": 0.0}
+
+        def watch_rss() -> None:
+            while not stop.is_set():
+                rss["max"] = max(rss["max"], _vm_rss_mb())
+                stop.wait(0.25)
+
+        def per_thread() -> None:   # just before the service stops its threads
+            stop.wait(seconds - 0.5)
+            after = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type]
+            t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
+            wall = time.monotonic() - origin["wall"]
+            origin["per_thread"] = {  # type: ignore[assignment]
+                k: (v - t0.get(k, 0.0)) / wall for k, v in after.items()}
+
         def before() -> None:
+            # Everything the bench starts (the subscriber, its libzmq threads, its helper
+            # threads) is a client or a probe, not the service: their CPU is taken out.
+            tids0 = _tids()
             sub = Subscriber(svc.publisher.endpoint).connect(join=False)
             th = threading.Thread(target=listen, args=(sub,), daemon=True)
             th.start()
+            threading.Thread(target=watch_rss, daemon=True).start()
+            threading.Thread(target=per_thread, daemon=True).start()
+            origin["bench_tids"] = _tids() - tids0  # type: ignore[assignment]
             origin["th"] = th  # type: ignore[assignment]
             origin["sub"] = sub  # type: ignore[assignment]
             deadline = time.monotonic() + 5
@@ -124,29 +175,22 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
             origin["wall"] = time.monotonic()
             origin["virt"] = clock.monotonic()
             origin["cpu"] = time.process_time()
-            origin["sub_cpu"] = _thread_cpu_s(int(origin["sub_tid"]))
+            origin["sub_cpu"] = _cpu_of(origin["bench_tids"])  # type: ignore[arg-type]
+            origin["threads"] = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type,assignment]
             origin["rss0"] = _vm_rss_mb()
             if client is not None:   # a hostile request client, in its own process
                 origin["client"] = subprocess.Popen(  # type: ignore[assignment]
                     [sys.executable, "-c", _CLIENT, svc.request_server.endpoint, client,
                      str(seconds)], stdout=subprocess.PIPE, text=True)
 
-        rss = {"max": 0.0}
-
-        def watch_rss() -> None:
-            while not stop.is_set():
-                rss["max"] = max(rss["max"], _vm_rss_mb())
-                stop.wait(0.25)
-
-        threading.Thread(target=watch_rss, daemon=True).start()
         svc.run(seconds, before_acquisition=before)
         drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
         req_rate = float("nan")
         if client is not None:
             out, _ = origin["client"].communicate(timeout=60)  # type: ignore[attr-defined]
             req_rate = float(out.split()[-1])
-        # The bench's subscriber is a client, not the service: its thread's CPU is taken out.
-        sub_cpu = _thread_cpu_s(int(origin["sub_tid"])) - origin["sub_cpu"]
+        # The bench's subscriber is a client, not the service: its threads' CPU is taken out.
+        sub_cpu = _cpu_of(origin["bench_tids"]) - origin["sub_cpu"]  # type: ignore[arg-type]
         cpu = time.process_time() - origin["cpu"] - sub_cpu
         wall = time.monotonic() - origin["wall"]
         stop.set()
@@ -161,7 +205,8 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 "samples": st["samples"],
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
-                "poll": effective_poll_hz(cfg)}
+                "poll": effective_poll_hz(cfg),
+                "threads": origin.get("per_thread", {})}
 
 
 def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
@@ -184,6 +229,7 @@ import sys
 from avard.daemon import blas_threads
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.service.supervisor import Service
 from avard.daemon.hw.transport import SpiBus
@@ -193,7 +239,7 @@ dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), cloc
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
 cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
     "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
-Service(cfg, dev, clock, speed=1.0).run(seconds)
+Service(as_config(cfg), dev, clock, speed=1.0).run(seconds)
 heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
 print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
 """
@@ -243,7 +289,7 @@ def main(argv: list[str]) -> int:
         rows.append((odr, res, ref))
     print(f"service at --speed 1 for {args.seconds:g} s per rate (emulated ADXL355, quiet-lab); "
           "CPU = CPU s of the service (all its threads, emulator and simulator included) per "
-          "simulated s; sub = the bench's subscriber thread")
+          "simulated s; sub = the bench's subscriber (its threads and libzmq's), taken out")
     hdr = (f"{'ODR Hz':>7} {'drain Hz':>8} {'sim s':>6} {'samples':>8} {'overruns':>8} "
            f"{'recv ok':>7} {'CPU/sim s':>9} {'sub':>6} {'ref CPU/s':>9} {'ratio':>6} "
            f"{'lat p50 ms':>10} {'p99 ms':>7} {'RSS sim MB':>10} {'RSS hw MB':>9}")
@@ -259,6 +305,10 @@ def main(argv: list[str]) -> int:
               f"{r['p99']:7.1f} {r['rss_sim']:10.1f} {r['rss_hw']:9.1f}")
     print("ref = drain loop alone (driver + emulator + simulator) at the same drain period; "
           "ratio = service / ref")
+    for odr, r, _ref in rows:
+        parts = sorted(r["threads"].items(), key=lambda kv: -kv[1])
+        print(f"{odr:g} Hz CPU-s/s by thread (MainThread = supervisor): "
+              + ", ".join(f"{k} {v:.4f}" for k, v in parts))
     print("RSS = peak resident memory of `avard run` as its own process: sim = --simulate "
           f"(loads {rows[0][1]['heavy_sim']}), hw = the hardware path, emulator fed by a "
           f"counter (loads {rows[0][1]['heavy_hw']} of scipy/matplotlib)")

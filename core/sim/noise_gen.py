@@ -24,8 +24,8 @@ from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
+from avard.core.sim.linear_filter import ModalFilter, first_order_scan, nnls_small
 from numpy.typing import NDArray
-from scipy import signal
 
 #: A Gauss–Markov process gets at least this many grid points per time constant.
 GM_POINTS_PER_TAU = 8.0
@@ -90,16 +90,13 @@ def flicker_ladder(
 
 def _end_correction(ts: Sequence[float], dt_s: float, w: float) -> NDArray[np.float64]:
     """Variance factors of the lowest END_RUNGS members (see :func:`flicker_ladder`)."""
-    from scipy.optimize import nnls
-
     m_lo, m_hi = END_FIT_M
     m_hi = max(m_lo + 1, min(m_hi, int(ts[-1] / dt_s / 100.0)))
     ms = np.unique(np.round(np.geomspace(m_lo, m_hi, 30)).astype(int))
     target = 2.0 * math.log(2.0) / math.pi
     a = np.array([[w * ar1_avar(t, dt_s, int(m)) / target for t in ts] for m in ms])
     rest = a[:, END_RUNGS:].sum(axis=1)
-    f, _ = nnls(a[:, :END_RUNGS], 1.0 - rest)
-    return f
+    return nnls_small(a[:, :END_RUNGS], 1.0 - rest)
 
 
 def reinject_interpolation_loss(
@@ -142,16 +139,16 @@ class AR1Bank:
     time constant T (φ = e^(−Δ/T), c = σ√(1−φ²)), or, with T = inf, a random walk with
     increments σ·w (φ = 1, start at 0). The state starts from the stationary distribution, so
     the record has no start-up transient. Every (process, axis) has its own random stream, so
-    draws stay contiguous in time whatever the chunk size. Output layout (3, m).
+    draws stay contiguous in time whatever the chunk size. Output layout (3, m). All
+    processes run as one vectorised recurrence (linear_filter.first_order_scan).
     """
 
     def __init__(self, entries: Sequence[tuple[float, NDArray]], step_s: float,
                  seed: np.random.SeedSequence) -> None:
         children = seed.spawn(len(entries))
         self.rngs = [[np.random.default_rng(s) for s in ch.spawn(3)] for ch in children]
-        self.sos: list[NDArray] = []
-        self.scale = [np.asarray(s, dtype=float)[:, None] for _, s in entries]
-        self.zi: list[NDArray] = []
+        self.scale = np.array([np.asarray(s, dtype=float) for _, s in entries]).reshape(-1, 3)
+        phis, gains, prev = [], [], []
         for (T, _), rngs in zip(entries, self.rngs, strict=True):
             if math.isinf(T):
                 phi, gain, x0 = 1.0, 1.0, np.zeros(3)
@@ -159,21 +156,23 @@ class AR1Bank:
                 phi = math.exp(-step_s / T)
                 gain = math.sqrt(-math.expm1(-2.0 * step_s / T))  # √(1−φ²), exact for tiny Δ/T
                 x0 = np.array([r.standard_normal() for r in rngs])
-            self.sos.append(np.array([[gain, 0.0, 0.0, 1.0, -phi, 0.0]]))
-            zi = np.zeros((1, 3, 2))
-            zi[0, :, 0] = phi * x0     # transposed direct form: y[0] = b0·w[0] + φ·x[−1]
-            self.zi.append(zi)
+            phis.append(phi)
+            gains.append(gain)
+            prev.append(x0)
+        self.phi = np.array(phis).reshape(-1, 1)       # (P, 1) against (P, 3)
+        self.gain = np.array(gains).reshape(-1, 1, 1)
+        self.prev = np.array(prev).reshape(-1, 3)      # x[−1] of every (process, axis)
 
     def next_values(self, m: int) -> NDArray[np.float64]:
-        out = np.zeros((3, m))
-        w = np.empty((3, m))
-        for p, sos in enumerate(self.sos):
-            for a, r in enumerate(self.rngs[p]):
-                r.standard_normal(out=w[a])
-            y, self.zi[p] = signal.sosfilt(sos, w, axis=-1, zi=self.zi[p])
-            y *= self.scale[p]
-            out += y
-        return out
+        w = np.empty((len(self.rngs), 3, m))
+        for p, rngs in enumerate(self.rngs):
+            for a, r in enumerate(rngs):
+                r.standard_normal(out=w[p, a])
+        w *= self.gain
+        x = first_order_scan(w, self.phi, self.prev)    # x[j] = φ·x[j−1] + c·w[j]
+        if m:
+            self.prev = x[:, :, -1].copy()
+        return np.einsum("pa,pam->am", self.scale, x)
 
 
 def white_plus_ar1_filter(
@@ -220,36 +219,36 @@ class FastNoise:
     all from one white stream per axis through :func:`white_plus_ar1_filter` (the same
     Gaussian process as the independent sum, at the cost of one random draw per sample).
     The filter state is warmed up on its own stream, so the record starts stationary.
-    Output layout (3, m).
+    Output layout (3, m). The filter runs in modal form (linear_filter.ModalFilter).
     """
 
     def __init__(self, sigma_w: NDArray, gms: Sequence[tuple[float, NDArray]], step_s: float,
                  seed: np.random.SeedSequence) -> None:
+        # equal time constants are one process of the summed variance (the modal form needs
+        # distinct poles)
+        merged: dict[float, NDArray] = {}
+        for T, s in gms:
+            merged[T] = np.sqrt(merged.get(T, 0.0) ** 2 + np.asarray(s, dtype=float) ** 2)
+        gms = list(merged.items())
         seeds = seed.spawn(4)
         self.rngs = [np.random.default_rng(s) for s in seeds[:3]]
         warm = np.random.default_rng(seeds[3])
         phis = [math.exp(-step_s / T) for T, _ in gms]
         slowest = max([T for T, _ in gms], default=step_s)
         n_warm = int(40 * slowest / step_s) + 64       # φ^n_warm < e^−40: stationary
-        self.sos: list[NDArray] = []
-        self.zi: list[NDArray] = []
+        self.filters: list[ModalFilter] = []
         for a in range(3):
             g, zeros, poles = white_plus_ar1_filter(
                 float(sigma_w[a]), phis, [float(s[a]) for _, s in gms])
-            if len(poles) == 0:
-                sos = np.array([[g, 0.0, 0.0, 1.0, 0.0, 0.0]])
-            else:
-                sos = signal.zpk2sos(zeros, poles, g)
-            _, zi = signal.sosfilt(sos, warm.standard_normal(n_warm),
-                                   zi=np.zeros((sos.shape[0], 2)))
-            self.sos.append(sos)
-            self.zi.append(zi)
+            f = ModalFilter.from_zpk(zeros, poles, g)
+            f.run(warm.standard_normal(n_warm)[None, :])
+            self.filters.append(f)
 
     def next_values(self, m: int) -> NDArray[np.float64]:
         out = np.empty((3, m))
-        for a, (sos, rng) in enumerate(zip(self.sos, self.rngs, strict=True)):
+        for a, (f, rng) in enumerate(zip(self.filters, self.rngs, strict=True)):
             rng.standard_normal(out=out[a])
-            out[a], self.zi[a] = signal.sosfilt(sos, out[a], zi=self.zi[a])
+            out[a] = f.run(out[a][None, :])[0]
         return out
 
 

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from avard.core.sim.linear_filter import ModalFilter, first_order_scan
 from avard.core.sim.presets import SimConfig
 from numpy.typing import NDArray
-from scipy import signal
 
 #: DS18B20 12-bit resolution (°C).
 DS18B20_STEP_C = 0.0625
@@ -55,10 +55,11 @@ class ThermalSource:
         self.omega = 2.0 * math.pi / cfg.hvac_period_s
         self.b_plate, self.a_plate = lag_coefficients(cfg.plate_tau_s, step_s)
         self.b_chip, self.a_chip = lag_coefficients(cfg.chip_tau_s, step_s)
+        self.plate_lag = ModalFilter.first_order(*self.b_plate, -self.a_plate[1])
+        self.chip_lag = ModalFilter.first_order(*self.b_chip, -self.a_chip[1])
+        self._started = False
         self.phi_w = math.exp(-step_s / cfg.room_wander_tau_s)
         self.wander = cfg.room_wander_c * rng.standard_normal()
-        self.zi_plate: NDArray | None = None
-        self.zi_chip: NDArray | None = None
         gravity = np.asarray(cfg.gravity_mps2)
         self.k_temp = np.asarray(cfg.bias_tempco_mps2_per_k) + gravity * np.asarray(
             cfg.sensitivity_tempco_per_k)
@@ -66,9 +67,10 @@ class ThermalSource:
         self._tbuf = np.zeros((3, 0))        # plate, ambient, die for grid points from _tbuf_j0
         self._tbuf_j0 = 0
 
-    def _initial_state(self, u0: float) -> tuple[NDArray, NDArray]:
+    def _initial_state(self, u0: float) -> tuple[float, float]:
         """Plate and die start in the steady state of the room's cycle and drift, so the record
-        has no artificial settling transient (the warm-up is modelled on purpose)."""
+        has no artificial settling transient (the warm-up is modelled on purpose). Returns the
+        lags' states: y[0] = b0·u[0] + state."""
         c = self.cfg
         drift = c.room_drift_c_per_h / 3600.0
         amp_p, ph_p = _lagged_sine(c.hvac_amplitude_c, self.omega, [c.plate_tau_s])
@@ -76,8 +78,8 @@ class ThermalSource:
         base = c.room_temp_c + self.wander
         p0 = base + amp_p * math.sin(ph_p) - drift * c.plate_tau_s
         c0 = base + amp_c * math.sin(ph_c) - drift * (c.plate_tau_s + c.chip_tau_s)
-        # transposed direct form: y[0] = b0·u[0] + z  ⇒  z = y[0] − b0·u[0]
-        return (np.array([p0 - self.b_plate[0] * u0]), np.array([c0 - self.b_chip[0] * p0]))
+        # y[0] = b0·u[0] + z  ⇒  z = y[0] − b0·u[0]
+        return p0 - self.b_plate[0] * u0, c0 - self.b_chip[0] * p0
 
     def next_values(self, m: int) -> NDArray[np.float64]:
         c = self.cfg
@@ -87,15 +89,18 @@ class ThermalSource:
         # slow room wander: AR(1) on this grid (Gauss–Markov, σ = room_wander_c)
         w = self.rng.standard_normal(m)
         gain = c.room_wander_c * math.sqrt(-math.expm1(-2.0 * self.step_s / c.room_wander_tau_s))
-        wander, _ = signal.lfilter([gain], [1.0, -self.phi_w], w, zi=[self.phi_w * self.wander])
+        wander = first_order_scan(gain * w, self.phi_w, self.wander)
         ambient = (c.room_temp_c + c.hvac_amplitude_c * np.sin(self.omega * t)
                    + c.room_drift_c_per_h * t / 3600.0 + wander)
-        if self.zi_plate is None:
-            self.zi_plate, self.zi_chip = self._initial_state(float(ambient[0]))
-        self.wander = float(wander[-1])
-        plate, self.zi_plate = signal.lfilter(self.b_plate, self.a_plate, ambient,
-                                              zi=self.zi_plate)
-        die, self.zi_chip = signal.lfilter(self.b_chip, self.a_chip, plate, zi=self.zi_chip)
+        if not self._started and m:
+            self._started = True
+            z_plate, z_chip = self._initial_state(float(ambient[0]))
+            self.plate_lag.state[:] = z_plate
+            self.chip_lag.state[:] = z_chip
+        if m:
+            self.wander = float(wander[-1])
+        plate = self.plate_lag.run(ambient[None, :])[0]
+        die = self.chip_lag.run(plate[None, :])[0]
         chip = die + c.warmup_chip_c * -np.expm1(-t / c.warmup_tau_s)
         self._tbuf = np.concatenate([self._tbuf, np.stack([plate, ambient, chip])], axis=1)
         return (np.outer(self.k_temp, chip - self.t_ref)

@@ -48,6 +48,9 @@ TemperatureSource = Callable[[], float]  # () -> °C
 
 _FIFO = R.ADDR["FIFO_DATA"]
 _EMPTY_ENTRY = bytes([0x00, 0x00, R.FIFO_MARK_EMPTY])
+# The registers the output adjustment depends on (offsets, self-test, range).
+_OFFSET_FIRST, _OFFSET_LAST = R.ADDR["OFFSET_X_H"], R.ADDR["OFFSET_Z_L"]
+_SELF_TEST, _RANGE = R.ADDR["SELF_TEST"], R.ADDR["RANGE"]
 
 
 class VirtualClock:
@@ -152,13 +155,16 @@ def _saturate(c: np.ndarray) -> np.ndarray:
 def encode_entries(counts: np.ndarray) -> bytes:
     """FIFO bytes for (k, 3) counts: 3 bytes per axis, left-justified 20-bit two's complement,
     MSB first; the X entry of each set carries the marker bit (third byte, bit 0)."""
-    c = np.asarray(counts, dtype=np.int64).reshape(-1, 3)
-    v = (_saturate(c) & 0xFFFFF).astype(np.uint32)
-    out = np.empty((*v.shape, 3), dtype=np.uint8)
-    out[..., 0] = (v >> 12) & 0xFF
-    out[..., 1] = (v >> 4) & 0xFF
-    out[..., 2] = (v & 0x0F) << 4
-    out[:, 0, 2] |= R.FIFO_MARK_X
+    return _encode_in_range(_saturate(np.asarray(counts, dtype=np.int64).reshape(-1, 3)))
+
+
+def _encode_in_range(c: np.ndarray) -> bytes:
+    """:func:`encode_entries` of (k, 3) counts already held to the 20-bit range: the 20 bits
+    shifted to the top of a 24-bit big-endian word are the entry's three bytes (the low
+    nibble of the third is 0 but for the marker)."""
+    word = ((c & 0xFFFFF) << 4).astype(">u4").view(np.uint8).reshape(-1, 4)
+    out = np.ascontiguousarray(word[:, 1:])
+    out[0::3, 2] |= R.FIFO_MARK_X
     return out.tobytes()
 
 
@@ -261,6 +267,8 @@ class EmulatedAdxl355:
         self._ovr = False
         self._data_rdy = False
         self._latest = np.zeros(3, dtype=np.int64)
+        self._adjust_key = b""
+        self._adjust: np.ndarray | None = None
         self._measuring = False
         self._t_start = 0.0
         self.produced = 0
@@ -386,15 +394,17 @@ class EmulatedAdxl355:
                 raise ValueError(f"sample source returned shape {block.shape}, expected ({n}, 3)")
             tail.append(block[-keep:])
             left -= n
-        new = np.concatenate(tail)[-keep:].astype(np.int64)
-        new = new + self._output_adjust()
+        new = (tail[0] if len(tail) == 1 else np.concatenate(tail)[-keep:]).astype(np.int64)
+        adjust = self._output_adjust()
+        if adjust is not None:
+            new += adjust
         new = _saturate(new)
         self._latest = new[-1].copy()
         self._data_rdy = True
         self.produced += k
         self.produced_total += k
         skipped = k - len(new)  # sets that were overwritten before they could even be stored
-        self.fifo += encode_entries(new)
+        self.fifo += _encode_in_range(new)
         excess = len(self.fifo) - 3 * R.FIFO_OVERRUN_LOCATIONS
         if excess > 0 or skipped > 0:
             # A write past 99 locations: the newest data overwrite the oldest.
@@ -403,8 +413,19 @@ class EmulatedAdxl355:
             self._ovr = True
             self.lost += skipped + max(excess, 0) // R.SET_BYTES
 
-    def _output_adjust(self) -> np.ndarray:
-        """What the part adds after the source: offset registers and self-test deflection."""
+    def _output_adjust(self) -> np.ndarray | None:
+        """What the part adds after the source: offset registers and self-test deflection
+        (None when nothing). Computed again only when those registers change: this runs at
+        every drain."""
+        key = bytes(self.regs[_OFFSET_FIRST:_OFFSET_LAST + 1]) + bytes(
+            (self.regs[_SELF_TEST], self.regs[_RANGE]))
+        if key != self._adjust_key:
+            self._adjust_key = key
+            adj = self._compute_output_adjust()
+            self._adjust = adj if adj.any() else None
+        return self._adjust
+
+    def _compute_output_adjust(self) -> np.ndarray:
         adj = np.zeros(3, dtype=np.int64)
         for i, axis in enumerate("XYZ"):
             hi = self.regs[R.ADDR[f"OFFSET_{axis}_H"]]

@@ -143,8 +143,8 @@ def _open_hardware(sensor: SensorConfig) -> OpenedSensor:
 
 @dataclass
 class Rig:
-    """A sensor and what goes with it, ready for the service
-    (:class:`~avard.daemon.service.supervisor.Service`)."""
+    """A sensor and what goes with it, ready for a
+    :class:`~avard.daemon.service.supervisor.Service`."""
 
     sensor: Any
     clock: Any
@@ -164,7 +164,7 @@ class Rig:
                            ("interrupt", self.interrupt), ("on_tick", self.on_tick)):
             if value is not None:
                 service_kw.setdefault(key, value)
-        svc = Service(config.as_dict(), self.sensor, self.clock, simulate=self.simulate,
+        svc = Service(config, self.sensor, self.clock, simulate=self.simulate,
                       sensor_info=self.sensor_info,
                       extra_temperature_names=list(self.extra_temperature_names),
                       **service_kw)

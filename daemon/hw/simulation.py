@@ -14,6 +14,7 @@ reader thread's sleeps, so ``--speed`` never causes overruns from host schedulin
 
 from __future__ import annotations
 
+import math
 import tempfile
 import time
 from collections.abc import Callable, Mapping
@@ -47,9 +48,6 @@ class SimulatedSensors:
     that sensor vanish from the bus until it is taken out again."""
 
     sim: Any
-    plate_c: float = float("nan")
-    ambient_c: float = float("nan")
-    chip_c: float = float("nan")
     names: tuple[str, str] = ("28-00000000plate", "28-0000000ambient")
     ids: tuple[str, str] = ("00000000a001", "00000000a002")   # 1-Wire ids in the fake tree
     interval_s: float = 1.0
@@ -66,7 +64,12 @@ class SimulatedSensors:
 
     def source(self, n: int) -> np.ndarray:
         """The next ``n`` samples' counts. The simulator is called in batches (its cost is
-        per call), and the temperatures follow the sample handed out last."""
+        per call); the temperatures follow the sample handed out last, and are read from
+        the batch only when asked for (once a second, not at every drain)."""
+        buf = self._buf
+        if buf is not None and self._pos + n <= len(buf.counts):   # the usual drain
+            self._pos += n
+            return buf.counts[self._pos - n:self._pos]
         parts = []
         while n > 0:
             if self._buf is None or self._pos >= len(self._buf.counts):
@@ -76,13 +79,31 @@ class SimulatedSensors:
             parts.append(self._buf.counts[self._pos:self._pos + take])
             self._pos += take
             n -= take
-            last = self._pos - 1
-            self.plate_c, self.ambient_c = (float(v) for v in self._buf.temp_c[last])
-            self.chip_c = float(self._buf.chip_temp_c[last])
         return np.concatenate(parts) if len(parts) != 1 else parts[0]
 
+    def _temperatures(self) -> tuple[float, float, float]:
+        """Plate, ambient and die temperature (°C) at the sample handed out last (NaN before
+        the first)."""
+        if self._buf is None or self._pos == 0:
+            return (math.nan,) * 3
+        plate, ambient, chip = self._buf.temperatures_at(np.array([self._pos - 1]))[0]
+        return float(plate), float(ambient), float(chip)
+
+    @property
+    def plate_c(self) -> float:
+        return self._temperatures()[0]
+
+    @property
+    def ambient_c(self) -> float:
+        return self._temperatures()[1]
+
+    @property
+    def chip_c(self) -> float:
+        return self._temperatures()[2]
+
     def chip_temperature(self) -> float:
-        return 25.0 if np.isnan(self.chip_c) else self.chip_c
+        chip = self.chip_c
+        return 25.0 if math.isnan(chip) else chip
 
     def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
         """The fake sysfs tree (in a temporary folder, removed with this object) and the
@@ -99,11 +120,14 @@ class SimulatedSensors:
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
         deliver = self.deliver
-        if deliver is None or t_mono < self._next or np.isnan(self.plate_c):
+        if deliver is None or t_mono < self._next:
+            return
+        plate, ambient, _chip = self._temperatures()
+        if math.isnan(plate):
             return
         self._next = t_mono + self.interval_s
         tree, bank = self._one_wire()
-        for name, sid, v in zip(self.names, self.ids, (self.plate_c, self.ambient_c),
+        for name, sid, v in zip(self.names, self.ids, (plate, ambient),
                                 strict=True):
             lost = name in self.fail
             if lost and name not in self._lost:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import errno as errno_mod
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any, Protocol, runtime_checkable
 
 from avard.core.errors import BusError, ConfigError, HardwareError
@@ -73,11 +73,11 @@ class SpiBus:
         spi.max_speed_hz = int(speed_hz)
         self.transfers = 0  # number of xfer2 calls, for benchmarks and tests
 
-    def _xfer(self, tx: list[int], what: str) -> list[int]:
+    def _xfer(self, tx: list[int], what: str | Callable[[], str]) -> list[int]:
         try:
             rx = self.spi.xfer2(tx)
         except OSError as exc:
-            raise _bus_error(what, exc) from exc
+            raise _bus_error(what if isinstance(what, str) else what(), exc) from exc
         self.transfers += 1
         return rx
 
@@ -85,10 +85,13 @@ class SpiBus:
         if n <= 0:
             return b""
         step = self.max_transfer - 1
-        if n > step and addr != FIFO_DATA:
+        cmd = ((addr & 0x7F) << 1) | 1
+        if n <= step:   # one transfer (every read but a long FIFO burst); runs at every drain
+            rx = self._xfer([cmd] + [0] * n, lambda: f"SPI read of {n} bytes at 0x{addr:02X}")
+            return bytes(rx[1:])
+        if addr != FIFO_DATA:
             raise ValueError(f"a {n}-byte burst from 0x{addr:02X} does not fit one SPI transfer")
         out = bytearray()
-        cmd = ((addr & 0x7F) << 1) | 1
         while len(out) < n:
             k = min(step, n - len(out))
             rx = self._xfer([cmd] + [0] * k, f"SPI read of {k} bytes at 0x{addr:02X}")

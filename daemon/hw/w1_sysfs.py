@@ -74,6 +74,7 @@ class SysfsTree:
         # The kernel also lists the bus master; readers must ignore it.
         (self.base / "w1_bus_master1").mkdir(exist_ok=True)
         self._hidden = self.base.parent / (self.base.name + ".removed")
+        self._written: dict[Path, str] = {}   # the last text written to each w1_slave
 
     @staticmethod
     def full_id(sensor_id: str) -> str:
@@ -84,6 +85,11 @@ class SysfsTree:
 
     def _write(self, sensor_id: str, text: str) -> None:
         p = self.path(sensor_id)
+        if self._written.get(p) == text and p.exists():
+            # unchanged (a 0.0625 °C step is rare second to second): the simulated rig
+            # rewrites each sensor every conversion, and a rename costs milliseconds here
+            return
+        self._written[p] = text
         p.parent.mkdir(parents=True, exist_ok=True)
         tmp = p.with_suffix(".tmp")
         tmp.write_text(text)

@@ -290,6 +290,10 @@ class RequestServer:
         self._ctx: zmq.Context | None = None
         self._curve: CurveServer | None = None
         self._sock: zmq.Socket | None = None
+        # An inproc pair that wakes the server thread's poll at stop(): it then sleeps in
+        # poll() without a timeout instead of waking ten times a second to look at _stop.
+        self._wake_rx: zmq.Socket | None = None
+        self._wake_tx: zmq.Socket | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
 
@@ -323,6 +327,12 @@ class RequestServer:
                 self._curve.apply(sock)
             self.endpoint = _bind(sock, self._requested_endpoint, "request server",
                                   self._curve is not None, self.allow_remote)
+            wake = f"inproc://avard-request-wake-{id(self)}"
+            self._wake_rx = self._ctx.socket(zmq.PAIR)
+            self._wake_rx.bind(wake)
+            self._wake_tx = self._ctx.socket(zmq.PAIR)
+            self._wake_tx.setsockopt(zmq.LINGER, 0)
+            self._wake_tx.connect(wake)
         except BaseException:
             self._close_all()
             raise
@@ -341,6 +351,11 @@ class RequestServer:
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the thread and close the socket; returns within about ``timeout`` seconds."""
         self._stop.set()
+        if self._wake_tx is not None and self._thread is not None:
+            try:
+                self._wake_tx.send(b"", zmq.NOBLOCK)
+            except zmq.ZMQError:
+                pass   # the thread also sees _stop at its next request
         if self._thread is not None:
             self._thread.join(timeout)
             if self._thread.is_alive():
@@ -349,6 +364,11 @@ class RequestServer:
         self._close_all()
 
     def _close_all(self) -> None:
+        for attr in ("_wake_rx", "_wake_tx"):
+            wake: zmq.Socket | None = getattr(self, attr)
+            if wake is not None:
+                wake.close(linger=0)
+                setattr(self, attr, None)
         if self._sock is not None:
             self._sock.close(linger=LINGER_MS)
             self._sock = None
@@ -372,6 +392,8 @@ class RequestServer:
         assert sock is not None
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
+        if self._wake_rx is not None:
+            poller.register(self._wake_rx, zmq.POLLIN)
         interval = 1.0 / self.max_requests_per_s
         next_slot = time.monotonic()
         while not self._stop.is_set():
@@ -381,7 +403,8 @@ class RequestServer:
                 self._stop.wait(next_slot - now)
             next_slot = max(next_slot, now - 1.0) + interval
             try:
-                if not poller.poll(100):
+                ready = dict(poller.poll(None if self._wake_rx is not None else 100))
+                if sock not in ready:
                     continue
                 msg = sock.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -76,8 +77,9 @@ class Stage:
     """A consumer thread: block on the ring until it holds work, hand each chunk to ``handle``.
 
     After handling a chunk the thread lets ``batch_s`` pass before it reads again (unless it
-    is behind), so that at 4 kHz it takes one larger chunk instead of waking at every drain
-    (the per-wake cost is fixed; ``batch_s`` is the latency this stage adds). ``idle_s`` is
+    is behind, or it had waited that long for the chunk anyway), so that at 4 kHz it takes
+    one larger chunk instead of waking at every drain (the per-wake cost is fixed;
+    ``batch_s`` is the latency this stage adds). ``idle_s`` is
     the longest wait without work before :meth:`idle` runs (a stage with something to do on a
     timer, such as the status record, does it there); the thread never wakes on a timer to
     look for samples."""
@@ -108,18 +110,26 @@ class Stage:
 
     def _run(self) -> None:
         try:
+            waited = 0.0   # seconds blocked on the ring before the chunk handled now
             while True:
                 stopping = self._stop.is_set()
                 chunk = self.consumer.read(self.max_samples)
                 if chunk.n or chunk.marks or chunk.lost_samples or chunk.lost_marks:
                     self.handle(chunk)
-                    if self.batch_s and not stopping and not self.consumer.backlog:
+                    # Batch only while work comes faster than batch_s: a stage that had to
+                    # wait that long for this chunk would gather nothing more by sleeping,
+                    # only wake twice per drain (at 125 Hz the reader pushes every 128 ms).
+                    if (self.batch_s and not stopping and not self.consumer.backlog
+                            and waited < self.batch_s):
                         self._stop.wait(self.batch_s)
+                    waited = 0.0
                     continue
                 if stopping:
                     break
+                t0 = time.monotonic()
                 if not self.consumer.wait(self.idle_s):
                     self.idle()
+                waited += time.monotonic() - t0
             self.finish()
         except BaseException as exc:
             log.exception("%s thread died", self.name)

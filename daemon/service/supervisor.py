@@ -23,7 +23,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 from avard.core.errors import AvardError, ConfigError
@@ -31,7 +31,7 @@ from avard.core.io import frames
 from avard.core.io.recording import AllanFeed
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
-from avard.daemon.config_types import Config, as_config
+from avard.daemon.config_types import Config
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
@@ -62,7 +62,7 @@ class Service:
     """One acquisition run: builds nothing hardware-side itself (see daemon/hw/rig.py and
     ``commands/run.py``); owns the threads and their shutdown."""
 
-    def __init__(self, cfg: Config | Mapping[str, Mapping[str, Any]], sensor: Any, clock: Any,
+    def __init__(self, config: Config, sensor: Any, clock: Any,
                  *,
                  run_id: str | None = None, speed: float | None = None,
                  temperature_bank: Any = None,
@@ -74,7 +74,10 @@ class Service:
                  sensor_info: dict[str, Any] | None = None,
                  extra_temperature_names: list[str] | None = None,
                  interrupt: Any = None) -> None:
-        self.config = config = as_config(cfg)
+        if not isinstance(config, Config):
+            # the contract is typed: build the Config at the edge (config_types.load/as_config)
+            raise TypeError(f"Service takes a config_types.Config, not {type(config).__name__}")
+        self.config = config
         self.cfg = config.as_dict()    # the checked dict: what the header stores as ``config``
         self.sensor = sensor
         self.clock = clock

@@ -430,6 +430,24 @@ def test_overrun_between_status_read_and_burst_is_reported_and_voids_the_carry()
     assert np.array_equal(d.counts[:, 1], -d.counts[:, 0])  # every set is a real set
 
 
+def test_status_is_read_again_only_when_the_fifo_could_have_overrun():
+    """A drain is two transfers (STATUS + FIFO_ENTRIES, the burst) when it took less than
+    half the time the FIFO's free room needs to fill; a third (STATUS again) when it was
+    preempted that long, which is when an overrun in between is possible."""
+    dev, _emu, clock = rig(odr_hz=4000.0)
+    bus = dev.bus
+    clock.advance(0.004)
+    before = bus.transfers
+    d = dev.drain()
+    assert d.n_sets > 0 and not d.overrun and bus.transfers - before == 2
+    dev.bus = Preempted(bus, clock, 0.003)   # 3 ms: 12 sets, over half the free room (16)
+    clock.advance(0.004)
+    dev.bus.armed = True
+    before = bus.transfers
+    d = dev.drain()
+    assert not d.overrun and bus.transfers - before == 3
+
+
 def test_a_gap_is_reported_once_even_on_a_drain_without_sets():
     dev, _, clock = rig()
     clock.advance(0.01)

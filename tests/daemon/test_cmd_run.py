@@ -159,6 +159,7 @@ from avard.daemon.cli import build_parser
 build_parser("run")                       # what `avard run` imports before it runs
 from avard.daemon import blas_threads
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.service.supervisor import Service
@@ -168,7 +169,7 @@ dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), cloc
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=125.0); dev.start()
 cfg = load_config(None, **{"recording.data_dir": sys.argv[1], "publish.enabled": False,
                            "allan.snapshot_interval_s": 1.0})
-svc = Service(cfg, dev, clock)
+svc = Service(as_config(cfg), dev, clock)
 svc.run(30.0)
 heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("scipy", "matplotlib"))
 print(blas_threads.LOADED_BEFORE_NUMPY, os.environ["OPENBLAS_NUM_THREADS"], heavy,
@@ -177,8 +178,8 @@ print(blas_threads.LOADED_BEFORE_NUMPY, os.environ["OPENBLAS_NUM_THREADS"], heav
 
 
 def test_the_service_path_loads_no_scipy_and_one_blas_thread(tmp_path: Path) -> None:
-    """`avard run` on hardware (here the emulator without the simulator, which needs
-    scipy.signal): BLAS held to one thread before numpy loads, and neither scipy nor
+    """`avard run` on hardware (here the emulator fed by a counter, without the simulator):
+    BLAS held to one thread before numpy loads, and neither scipy nor
     matplotlib imported through a run with snapshots (their intervals included)."""
     env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
     out = subprocess.run([sys.executable, "-c", _LEAN, str(tmp_path)], capture_output=True,
@@ -187,3 +188,27 @@ def test_the_service_path_loads_no_scipy_and_one_blas_thread(tmp_path: Path) -> 
     before, threads, heavy, n = out.stdout.split(maxsplit=3)
     assert (before, threads, heavy) == ("True", "1", "[]")
     assert int(n) > 3000
+
+
+_LEAN_SIMULATE = r"""
+import sys
+from avard.daemon.cli import main
+sys.argv = ["avard", "run", "--config", sys.argv[1], "--simulate", "quiet-lab", "--speed", "0",
+            "--duration", "40", "--data-dir", sys.argv[2], "--seed", "3"]
+rc = main()
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("scipy", "matplotlib"))
+print(rc, heavy)
+"""
+
+
+def test_the_simulated_rig_loads_no_scipy(tmp_path: Path) -> None:
+    """`avard run --simulate` (issue #13: RSS ≤ 80 MB): the simulator's filters are numpy
+    (core/sim/linear_filter.py), so neither scipy nor matplotlib is imported through a run
+    of the whole simulated rig with snapshots."""
+    cfg = tmp_path / "avard.toml"
+    cfg.write_text("[publish]\nenabled = false\n[allan]\nsnapshot_interval_s = 1.0\n")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", _LEAN_SIMULATE, str(cfg), str(tmp_path / "d")],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split(maxsplit=1) == ["0", "[]\n"], out.stdout + out.stderr[-2000:]

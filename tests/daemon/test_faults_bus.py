@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from avard.core.io.recording import RecordingReader, replay_allan
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw import registers as R
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSMBus, VirtualClock, counter_source
@@ -136,7 +137,8 @@ def run_rig(tmp_path: Path, seconds: float, *, inject: Inject | None = None, see
         kw["recorder_factory"] = recorder_factory
     if notifier is not None:
         kw["notifier"] = notifier
-    svc = Service(cfg, dev, clock, speed=speed, simulate="quiet-lab", on_tick=sims.on_tick,
+    svc = Service(as_config(cfg), dev, clock, speed=speed, simulate="quiet-lab",
+                  on_tick=sims.on_tick,
                   extra_temperature_names=list(sims.names) if bank is None else [],
                   temperature_bank=bank, **kw)
     if bank is None:

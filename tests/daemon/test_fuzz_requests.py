@@ -18,6 +18,7 @@ import msgpack
 import pytest
 import zmq
 from avard.core.io import frames
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.net.publisher import RequestServer
 from avard.daemon.service.supervisor import Service
@@ -49,7 +50,7 @@ def counter(request):
 def server(tmp_path_factory):
     cfg = rig_config(tmp_path_factory.mktemp("req") / "rec")
     dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
-    svc = Service(cfg, dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
+    svc = Service(as_config(cfg), dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
                   extra_temperature_names=list(sims.names))
     # Some samples in the ring, so that "recent" has something to return.
     import numpy as np

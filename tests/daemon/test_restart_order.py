@@ -11,6 +11,7 @@ import numpy as np
 from avard.core.io import frames
 from avard.core.io.recording import RecordingReader, load_recording, segment_files
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.service.recorder import (
     LastRecorded,
@@ -27,7 +28,7 @@ def _run_service(data: Path, seconds: float, *, clock_back_s: float = 0.0) -> Se
                                "sensor.poll_hz": 1.0, "recording.segment_s": 3600.0})
     dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=3)
     clock.step_realtime(-clock_back_s)          # a Pi without RTC, before NTP
-    svc = Service(cfg, dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
+    svc = Service(as_config(cfg), dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
                   extra_temperature_names=list(sims.names))
     sims.service = svc
     svc.run(seconds)

@@ -20,6 +20,7 @@ import pytest
 from avard.core.errors import NetworkError
 from avard.core.io.recording import RecordingReader, load_recording, replay_allan
 from avard.daemon.config import load_config
+from avard.daemon.config_types import as_config
 from avard.daemon.hw.simulation import build_simulated, simulated_service
 from avard.daemon.net.subscriber import Subscriber
 from avard.daemon.service.supervisor import Service
@@ -238,7 +239,8 @@ def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> 
     bank = Ds18b20Bank({"plate": sid}, interval_s=0.05, base_directory=tree.base)
     cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
     dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
-    svc = Service(cfg, dev, clock, speed=20.0, simulate="quiet-lab", temperature_bank=bank)
+    svc = Service(as_config(cfg), dev, clock, speed=20.0, simulate="quiet-lab",
+                  temperature_bank=bank)
     timers = [threading.Timer(1.0, tree.remove, args=(sid,)),
               threading.Timer(1.6, tree.restore, args=(sid,)),
               threading.Timer(2.4, svc.stop_requested.set)]
@@ -417,3 +419,13 @@ def test_curve_section_secures_both_sockets_of_the_service(tmp_path: Path) -> No
     assert got["raw"]["counts"].shape[1] == 3
     assert got["status"]["samples"] > 0
     assert got["plain"] is None
+
+
+def test_service_takes_the_typed_config_only(tmp_path: Path) -> None:
+    """The Service's contract is typed: a checked dict is turned into a Config at the edge
+    (config_types.as_config), never inside the service."""
+    cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
+    dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
+    with pytest.raises(TypeError, match="Config"):
+        Service(cfg, dev, clock)  # type: ignore[arg-type]
+    assert Service(as_config(cfg), dev, clock).config.sensor.odr_hz == cfg["sensor"]["odr_hz"]
