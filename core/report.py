@@ -42,6 +42,11 @@ ESTIMATORS = {
     "oadev": "fully overlapping ADEV (OADEV, NIST SP 1065 eq. 12; Stable32 'Overlapping Allan')",
     "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
 }
+#: The estimator as a figure's legend names it.
+ESTIMATOR_LABELS = {"oadev": "OADEV", "cascade": "cascade ADEV (stride m/8)"}
+#: SI unit of each per-τ array of a channel in ``--json`` ("1": dimensionless).
+ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s^2",
+              "edf": "1", "alpha": "1"}
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
 # default range), and while the running-sum ring (2·m_max points per channel) fits the
 # budget: a quarter of the memory available when analyze starts, at least this much. A fixed
@@ -194,7 +199,7 @@ class ChannelAnalysis:
         a = self.allan
         d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
              "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
-             "alpha": _list(a.alpha)}
+             "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -516,7 +521,8 @@ def format_table(an: Analysis) -> str:
     lines.append("sensor low-pass modelled at " + (f"{fc:g} Hz" if fc else
                  "— (not modelled: filter-bent short τ left out)"))
     lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
-                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32)")
+                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32); "
+                 "its values per τ (m/s², with interval, EDF, α): --json or --export csv FILE")
     cut = an.meta.get("oadev_cut")
     if cut:
         lines.append(f"OADEV stops at τ = {cut['tau_max_s']:.4g} s, short of N/4 "
