@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.readers import iter_blocks, load_record
 from avard.core.model.fit import NoiseFit, fit_noise
@@ -403,6 +404,7 @@ def _with_differences(res: Any) -> Any:
     return replace(res, **cut)
 
 
+@one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
 def analyze_stream(
     meta: dict[str, Any],
     segments: Iterable[tuple[NDArray[np.float64], bool]],
