@@ -145,19 +145,19 @@ def white_density(cp: ChannelPsd, fit: NoiseFit, rate_hz: float, *,
     (``fit.terms['velocity_random_walk']``). None when the fit has no N or no bin is white.
 
     The other fitted components (flicker, quantization, rate random walk, Gauss–Markov, the
-    fixed LSB rounding) still add power inside any band: with B/N ≈ 2 √Hz at 125 Hz flicker is
-    3 % of the white level at 5–16 Hz, and the chip's low-pass takes 6 % off it at half its
-    corner. So θ_N = N² is read as a one-parameter weighted least-squares fit of the bins,
+    fixed LSB rounding) still add power inside any band: with B/N ≈ 1.9 √Hz flicker adds 11 %
+    to the white level at 5 Hz and 4 % at 16 Hz (a plain mean read N 2.6 % high), and the chip's
+    low-pass (ODR/4) takes 3 % off it at half its corner. So θ_N = N² is read as a
+    one-parameter weighted least-squares fit of the bins,
 
         θ̂_N = Σ aᵢ (Sᵢ − Oᵢ) / Σ aᵢ uᵢ,   aᵢ = uᵢ / Mᵢ²,
 
     with uᵢ the N component's unit spectrum (filter included), Oᵢ the other components'
     fitted spectrum and Mᵢ the fitted total (var Sᵢ ∝ Mᵢ²). Its interval joins in quadrature
     the Welch scatter of T = Σ aᵢSᵢ (Satterthwaite ν_T = ν_b(Σ aᵢMᵢ)²/Σ(aᵢMᵢ)², ν_b the
-    EDF per bin of a band sum, ``_band_nu_per_bin``) and the
-    uncertainty of the
-    subtraction Σ aᵢOᵢ from the fit's covariance of the other θ. Terms the fit found absent
-    are not subtracted. Like the fit's, the N reported includes the fixed rounding noise.
+    EDF per bin of a band sum, ``_band_nu_per_bin``) and the uncertainty of the subtraction
+    Σ aᵢOᵢ from the fit's covariance of the other θ. Terms the fit found absent are not
+    subtracted. Like the fit's, the N reported includes the fixed rounding noise.
     """
     e = fit.terms["velocity_random_walk"]
     if not e.present or e.value is None:
@@ -184,11 +184,9 @@ def white_density(cp: ChannelPsd, fit: NoiseFit, rate_hz: float, *,
         return None
     u, m, s = unit[j, ok], total[ok], cp.psd[ok]
     a = u / (m * m)
-    others = np.ones(len(labels), bool)
-    others[j] = False
     # sums of products as element-wise work (no BLAS thread pool for a few thousand bins)
     g = np.sum(unit[:, ok] * a, axis=1)  # Σ aᵢ u_k,ᵢ per component k
-    g[~others] = 0.0
+    g[j] = 0.0  # the other components only
     d = float(np.sum(a * u))
     t = float(np.sum(a * s))
     o = float(np.sum(theta * g))
