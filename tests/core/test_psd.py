@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from avard.core.model.fit import TermEstimate
+from avard.core.psd import WhiteDensity
 from avard.core.report import analyze, format_table, psd_csv
 from avard.core.sim.presets import TABLE3_N, make_config
 from avard.core.sim.sim_io import write_npz
@@ -82,16 +84,22 @@ def _strong_flicker(tmp: Path, seed: int) -> dict[str, float]:
     ch = next(iter(analyze(str(p), psd=True).channels.values()))
     w = ch.psd.white
     assert w is not None and w.n_bins > 1000 and w.others_share > 0.02
-    return {"err": w.value / N_TRUE - 1.0, "half": (w.hi - w.lo) / (2.0 * w.value),
-            "covers": w.lo <= N_TRUE <= w.hi, "agrees": bool(w.agrees),
-            "fit_err": ch.fit.terms["velocity_random_walk"].value / N_TRUE - 1.0}
+    return _row(w, ch.fit.terms["velocity_random_walk"], N_TRUE)
+
+
+def _row(w: WhiteDensity, e: TermEstimate, truth: float) -> dict[str, float]:
+    assert e.value is not None and e.lo is not None and e.hi is not None
+    return {"err": w.value / truth - 1.0, "half": (w.hi - w.lo) / (2.0 * w.value),
+            "covers": w.lo <= truth <= w.hi, "agrees": bool(w.agrees),
+            "fit_err": e.value / truth - 1.0, "fit_covers": e.lo <= truth <= e.hi}
 
 
 def _check_study(rows: list[dict[str, float]], min_cover: int, min_agree: int,
                  label: str = "") -> None:
     """The PSD's N unbiased (mean error within 3 standard errors and 0.5 %), its interval as
-    wide as its scatter (ratio 0.5–1.7), holding the truth as often as a 68.3 % interval must
-    (``min_cover``: the bound fails by chance with probability below 1 %), overlapping the
+    wide as its scatter (ratio 0.5–1.7), it and the fit's N holding the truth as often as a
+    68.3 % interval must (``min_cover``: the bound fails by chance with probability below 1 %
+    for each), overlapping the
     fit's interval (the two read the same data, so they overlap far more often than
     independent 68 % intervals would: in every one of 100 records tried in development;
     ``min_agree`` allows a miss in ten), and the fit's N within 0.5 % of the truth on
@@ -103,10 +111,12 @@ def _check_study(rows: list[dict[str, float]], min_cover: int, min_agree: int,
     print(f"{label}: {len(rows)} records, PSD N - truth {err.mean():+.2%} ± {se:.2%}, "
           f"scatter/half-width {err.std(ddof=1) / half:.2f}, covered "
           f"{sum(r['covers'] for r in rows)}, agree {sum(r['agrees'] for r in rows)}, "
-          f"fit N - truth {np.mean([r['fit_err'] for r in rows]):+.2%}")
+          f"fit N - truth {np.mean([r['fit_err'] for r in rows]):+.2%}, fit covered "
+          f"{sum(r['fit_covers'] for r in rows)}")
     assert abs(err.mean()) <= max(3.0 * se, 1e-4) and abs(err.mean()) < 0.005, (err.mean(), se)
     assert 0.5 <= err.std(ddof=1) / half <= 1.7, (err.std(ddof=1), half)
     assert sum(r["covers"] for r in rows) >= min_cover, rows
+    assert sum(r["fit_covers"] for r in rows) >= min_cover, rows
     assert sum(r["agrees"] for r in rows) >= min_agree, rows
     assert abs(np.mean([r["fit_err"] for r in rows])) < 0.005
 
@@ -127,7 +137,7 @@ def test_white_density_next_to_strong_flicker_over_60_records(tmp_path: Path) ->
     (each bound fails by chance with probability 0.1 %)."""
     rows = [_strong_flicker(tmp_path, 100 + seed) for seed in range(60)]
     _check_study(rows, min_cover=30, min_agree=54, label="B/N = 2")
-    assert sum(r["covers"] for r in rows) <= 51
+    assert sum(r["covers"] for r in rows) <= 51 and sum(r["fit_covers"] for r in rows) <= 51
 
 
 def _table3_record(tmp: Path, seed: int) -> dict[str, dict]:
@@ -163,11 +173,8 @@ def test_white_density_on_paper_table3_records_is_unbiased(tmp_path: Path) -> No
         truth = _table3_truth(k)
         rows = []
         for chans in runs:
-            w = chans[axis].psd.white
-            rows.append({"err": w.value / truth - 1.0, "half": (w.hi - w.lo) / (2 * w.value),
-                         "covers": w.lo <= truth <= w.hi, "agrees": bool(w.agrees),
-                         "fit_err": chans[axis].fit.terms["velocity_random_walk"].value
-                         / truth - 1.0})
+            rows.append(_row(chans[axis].psd.white,
+                             chans[axis].fit.terms["velocity_random_walk"], truth))
         # P(≤ 8 of 20 covered | 68.3 %) = 0.008
         _check_study(rows, min_cover=9, min_agree=16, label=f"paper-table3 {axis}")
 
