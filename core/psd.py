@@ -34,7 +34,8 @@ from scipy.stats import chi2, norm
 if TYPE_CHECKING:
     from avard.core.model.fit import NoiseFit
 
-__all__ = ["ChannelPsd", "WhiteDensity", "channel_psd", "plot_psd", "white_density"]
+__all__ = ["ChannelPsd", "WhiteDensity", "channel_psd", "plot_psd", "psd_panel",
+           "white_density"]
 
 UNIT = "(m/s^2)^2/Hz"
 # the N component must be this share of the fitted spectrum: the rest is subtracted, and a
@@ -215,8 +216,9 @@ def white_density(cp: ChannelPsd, fit: NoiseFit, rate_hz: float, *,
 
 
 def plot_psd(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
-    """The PSD figure (per channel: log-log PSD with its band, the white density read from
-    it, the lines found), written next to the ADEV figure."""
+    """The PSD figure (per channel: log-log PSD with its band, the spectrum of the AVAR fit's
+    model, the white level read from it, the lines found), written next to the ADEV
+    figure."""
     from avard.core.plot import pyplot, save_figure
 
     plt = pyplot()
@@ -227,23 +229,34 @@ def plot_psd(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
     rows = math.ceil(len(names) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 5.0 * rows), squeeze=False)
     for ax, name in zip(axes.ravel(), names, strict=False):
-        cp = an.channels[name].psd
-        keep = cp.f > 0
-        ax.fill_between(cp.f[keep], cp.lo[keep], cp.hi[keep], color="#9ecae1", lw=0,
-                        label=f"{cp.ci:.0%} band")
-        ax.loglog(cp.f[keep], cp.psd[keep], color="#08519c", lw=0.8, label="Welch PSD")
-        if cp.white is not None:
-            w = cp.white
-            ax.hlines(2 * w.value**2, w.f_lo_hz, w.f_hi_hz, color="#d62728",
-                      label=f"white: N = {w.value:.4g} m/s²/√Hz")
-        for ln in cp.lines:
-            ax.axvline(ln["frequency_hz"], color="#ff7f0e", lw=0.6, ls=":")
-        ax.set_xlabel("frequency f (Hz)")
-        ax.set_ylabel("one-sided PSD ((m/s²)²/Hz)")
-        ax.set_title(f"channel {name}")
-        ax.legend(fontsize=8)
+        psd_panel(ax, an.channels[name])
     for ax in axes.ravel()[len(names):]:
         ax.set_visible(False)
     fig.suptitle(f"{Path(an.source).name}: power spectral density (Welch, Hann, 50 % overlap)",
                  fontsize=11)
     return save_figure(fig, path, dpi=dpi)
+
+
+def psd_panel(ax: Any, ch: Any) -> None:
+    """One channel's panel of :func:`plot_psd` (``ch``: a ``report.ChannelAnalysis``)."""
+    cp = ch.psd
+    keep = cp.f > 0
+    f = cp.f[keep]
+    ax.fill_between(f, cp.lo[keep], cp.hi[keep], color="#9ecae1", lw=0,
+                    label=f"{cp.ci:.0%} band")
+    ax.loglog(f, cp.psd[keep], color="#08519c", lw=0.8, label="Welch PSD")
+    fit = ch.fit
+    if len(fit.components):
+        # what the white density's reading subtracts: the model of the Allan fit, as spectrum
+        model = np.einsum("k,kf->f", np.asarray(fit.theta, float), _one_sided_unit_spectra(f, fit))
+        ax.loglog(f, model, color="k", lw=1.0, ls="--", label="spectrum of the AVAR fit")
+    if cp.white is not None:
+        w = cp.white
+        ax.hlines(2 * w.value**2, w.f_lo_hz, w.f_hi_hz, color="#d62728",
+                  label=f"white read here: N = {w.value:.4g} m/s²/√Hz")
+    for ln in cp.lines:
+        ax.axvline(ln["frequency_hz"], color="#ff7f0e", lw=0.6, ls=":")
+    ax.set_xlabel("frequency f (Hz)")
+    ax.set_ylabel("one-sided PSD ((m/s²)²/Hz)")
+    ax.set_title(f"channel {ch.name}")
+    ax.legend(fontsize=8)
