@@ -73,19 +73,22 @@ def save_figure(fig: Any, path: str | Path, *, dpi: int) -> Path:
 
 
 def _panel(ax: Any, ch: Any) -> None:
+    from avard.core.report import ESTIMATOR_LABELS
+
     a, fit = ch.allan, ch.fit
+    measured = f"measured {ESTIMATOR_LABELS.get(ch.estimator, ch.estimator)}"
     ok = np.isfinite(a.dev) & (a.dev > 0)
     tau, dev = a.tau[ok], a.dev[ok]
     lo = np.where(np.isfinite(a.dev_lo[ok]), a.dev_lo[ok], dev)
     hi = np.where(np.isfinite(a.dev_hi[ok]), a.dev_hi[ok], dev)
     used = (tau >= fit.tau_min_s * (1 - 1e-9)) & (tau <= fit.tau_max_s * (1 + 1e-9))
     ax.errorbar(tau[used], dev[used], yerr=[dev[used] - lo[used], hi[used] - dev[used]],
-                fmt="o", ms=4, color="k", capsize=2, lw=1, label="measured ADEV (fitted)",
+                fmt="o", ms=4, color="k", capsize=2, lw=1, label=f"{measured} (fitted)",
                 zorder=5)
     if (~used).any():
         ax.errorbar(tau[~used], dev[~used], yerr=[dev[~used] - lo[~used], hi[~used] - dev[~used]],
                     fmt="o", ms=4, mfc="white", color="0.5", capsize=2, lw=1,
-                    label="measured (not fitted)", zorder=4)
+                    label=f"{measured} (not fitted)", zorder=4)
     # whole numbers of samples: the filtered-white curve is defined at integer m only
     rate = fit.rate_hz
     t = np.unique(np.rint(np.geomspace(tau.min(), tau.max(), 400) * rate)) / rate

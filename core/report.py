@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.readers import iter_blocks, load_record
 from avard.core.model.fit import NoiseFit, fit_noise
@@ -42,6 +43,11 @@ ESTIMATORS = {
     "oadev": "fully overlapping ADEV (OADEV, NIST SP 1065 eq. 12; Stable32 'Overlapping Allan')",
     "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
 }
+#: The estimator as a figure's legend names it.
+ESTIMATOR_LABELS = {"oadev": "OADEV", "cascade": "cascade ADEV (stride m/8)"}
+#: SI unit of each per-τ array of a channel in ``--json`` ("1": dimensionless).
+ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s^2",
+              "edf": "1", "alpha": "1"}
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
 # default range), and while the running-sum ring (2·m_max points per channel) fits the
 # budget: a quarter of the memory available when analyze starts, at least this much. A fixed
@@ -194,7 +200,7 @@ class ChannelAnalysis:
         a = self.allan
         d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
              "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
-             "alpha": _list(a.alpha)}
+             "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -398,6 +404,7 @@ def _with_differences(res: Any) -> Any:
     return replace(res, **cut)
 
 
+@one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
 def analyze_stream(
     meta: dict[str, Any],
     segments: Iterable[tuple[NDArray[np.float64], bool]],
@@ -516,7 +523,8 @@ def format_table(an: Analysis) -> str:
     lines.append("sensor low-pass modelled at " + (f"{fc:g} Hz" if fc else
                  "— (not modelled: filter-bent short τ left out)"))
     lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
-                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32)")
+                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32); "
+                 "its values per τ (m/s², with interval, EDF, α): --json or --export csv FILE")
     cut = an.meta.get("oadev_cut")
     if cut:
         lines.append(f"OADEV stops at τ = {cut['tau_max_s']:.4g} s, short of N/4 "

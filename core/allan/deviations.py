@@ -36,6 +36,7 @@ import numpy as np
 from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.allan.noise_id import Lag1Ladder, alpha_from_slope, identify_alpha
 from avard.core.allan.scratch import scratch
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FormatError
 from numpy.typing import ArrayLike, NDArray
 
@@ -353,6 +354,7 @@ def segment_phase(seg: NDArray, is_int: bool) -> NDArray:
     return p
 
 
+@one_blas_thread  # long dot products would wake OpenBLAS's pool (core/blas.py)
 def allan_variance(
     y: ArrayLike,
     rate_hz: float,

@@ -39,6 +39,7 @@ from avard.core.allan.deviations import (
     result_from_sums,
 )
 from avard.core.allan.noise_id import Lag1Ladder, row_products
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
@@ -124,6 +125,7 @@ class OverlappingAllan:
                                   np.int64 if self._integer else np.float64)
         return a.astype(np.int64 if self._integer else np.float64, copy=False)
 
+    @one_blas_thread  # long dot products would wake OpenBLAS's pool (core/blas.py)
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
         a = self._check_block(block)
@@ -197,6 +199,7 @@ class OverlappingAllan:
                     self._pending_n[k] = 0
 
     # ------------------------------------------------------------------------ results
+    @one_blas_thread
     def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
         """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
         channel, else (K, C)); τ with no complete difference have NaN variance and n = 0."""

@@ -15,7 +15,7 @@ import threading
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MAX_CACHED_BYTES", "ones", "scratch"]
+__all__ = ["MAX_CACHED_BYTES", "scratch"]
 
 MAX_CACHED_BYTES = 16 << 20
 _local = threading.local()
@@ -39,12 +39,3 @@ def scratch(key: str, rows: int, cols: int, dtype: np.dtype | type) -> NDArray:
         pool[(key, dt.str)] = buf
     return buf[: rows * cols].reshape(rows, cols)
 
-
-def ones(n: int) -> NDArray[np.float64]:
-    """A read-only vector of n ones (for column sums through BLAS: ones @ a)."""
-    vec = getattr(_local, "ones", None)
-    if vec is None or vec.size < n:
-        vec = np.ones(max(n, 1024))
-        vec.flags.writeable = False
-        _local.ones = vec
-    return vec[:n]

@@ -46,6 +46,7 @@ from avard.core.allan.deviations import (
 )
 from avard.core.allan.noise_id import Lag1Ladder
 from avard.core.allan.scratch import scratch
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FormatError
 from numpy.typing import ArrayLike, NDArray
 
@@ -254,6 +255,7 @@ class StreamingAllan:
                 g.hist = g.hist.astype(self._dtype())
         return a
 
+    @one_blas_thread  # long dot products would wake OpenBLAS's pool (core/blas.py)
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
         a = self._check_block(block)
@@ -333,6 +335,7 @@ class StreamingAllan:
     def _active(self) -> list[_Level]:
         return [lev for lev in self._levels if lev.sums.n > 0]
 
+    @one_blas_thread
     def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
         """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
 

@@ -154,7 +154,8 @@ class ChannelExplanation:
         if self.thermal is None or self.thermal_compensated_var is None:
             return None
         return {**self.thermal.to_dict(),
-                "compensated_adev": np.sqrt(self.thermal_compensated_var).tolist()}
+                "compensated_adev": np.sqrt(self.thermal_compensated_var).tolist(),
+                "units": {"compensated_adev": "m/s^2"}}
 
     @property
     def claimed(self) -> list[Finding]:

@@ -82,3 +82,18 @@ def study_summary(rows: list[dict]) -> dict:
         "k_present": len(present),
         "k_covered": sum(r["k_lo"] <= r["K"] <= r["k_hi"] for r in present),
     }
+
+
+def flicker_spectral(n: int, rate_hz: float, B: float, rng: np.random.Generator) -> np.ndarray:
+    """Bias instability B (m/s²) with the one-sided PSD B²/(π f) at every Fourier frequency
+    of the record up to Nyquist (h₋₁ = B²/π, NIST SP 1065 table 7): white Gaussian noise
+    shaped in the frequency domain (a circular record; no power below 1/T). Unlike
+    :func:`flicker`, whose shortest Gauss–Markov member rolls the spectrum off above
+    1/(2π t_min) (or aliases it back when t_min < 1/fs), it is 1/f across the whole band, which
+    a white level read next to strong flicker at 5–40 Hz needs."""
+    spec = np.fft.rfft(rng.normal(size=n))
+    f = np.fft.rfftfreq(n, 1.0 / rate_hz)
+    gain = np.zeros_like(f)
+    # E|rfft(w)|² = n, so |X|² = n·S₁·fs/2 gives the one-sided PSD S₁ = 2|X|²/(n fs)
+    gain[1:] = np.sqrt(B * B / (math.pi * f[1:]) * rate_hz / 2.0)
+    return np.fft.irfft(spec * gain, n)

@@ -102,7 +102,7 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     assert list(d["channels"]) == ["x", "z"]
     for cname, ch in d["channels"].items():
         assert set(ch) == {"estimator", "tau_s", "adev", "adev_lo", "adev_hi", "edf", "alpha",
-                           "terms", "sinusoids", "fit"}
+                           "units", "terms", "sinusoids", "fit"}
         assert ch["estimator"] == "oadev"
         k = len(ch["tau_s"])
         assert all(len(ch[key]) == k for key in ("adev", "adev_lo", "adev_hi", "edf", "alpha"))
