@@ -88,6 +88,26 @@ def test_integer_counts_exact_multichannel_with_gaps() -> None:
     assert res.var[k, 0] == pytest.approx(float(total) / (2 * m * m * res.n[k]), rel=1e-15)
 
 
+def test_window_sum_and_three_cursor_paths_give_the_same_sums() -> None:
+    """Every τ once through the window-sum path (m below the piece) and once through the
+    three-cursor path (piece of 1): the same sums to the rounding of the float64 sums of
+    squares (the differences themselves are exact for counts)."""
+    rng = np.random.default_rng(8)
+    ms = 2 ** np.arange(11)
+    counts = rng.integers(-(1 << 19), 1 << 19, size=(9000, 2))
+    floats = np.cumsum(rng.normal(0.0, 1e-3, (9000, 2)), axis=0) + 9.81
+    for y in (counts, floats):
+        runs = []
+        for piece in (4096, 1):
+            acc = OverlappingAllan(2, 10.0, ms, piece=piece)
+            for i in range(0, len(y), 1000):
+                acc.update(y[i:i + 1000])
+            runs.append(acc.result())
+        np.testing.assert_allclose(runs[0].var, runs[1].var, rtol=1e-12)
+        np.testing.assert_array_equal(runs[0].n, runs[1].n)
+        np.testing.assert_array_equal(runs[0].alpha, runs[1].alpha)
+
+
 def test_memory_is_a_ring_of_two_m_max() -> None:
     acc = OverlappingAllan(2, 100.0, [1, 8, 512])
     acc.update(np.zeros((100000, 2)))
