@@ -221,7 +221,12 @@ class OverlappingAllan:
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
                 last = q0 + ((p1 - 1 - q0) // m) * m
-                ends = self._span(q0 - m, last - q0 + m + 1)[:, ::m]
+                if m == 1:
+                    ends = self._span(q0 - 1, last - q0 + 2)
+                else:
+                    # only the interval ends are read: a span of m points would copy up to m
+                    # values (32 MB at m = 2**22) wherever it wraps around the ring
+                    ends = ring[:, np.arange(q0 - m, last + 1, m) % self._cap]
                 self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
                 self._pending_n[k] += ends.shape[1] - 1
                 if self._pending_n[k] >= PIECE:

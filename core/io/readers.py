@@ -24,7 +24,7 @@ import itertools
 import logging
 import math
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -248,20 +248,29 @@ def _check_finite(a: NDArray, offset: int, where: str) -> None:
                         "the record there or fill the hole before analysing")
 
 
-def _npz_blocks(p: Path, meta: dict[str, Any], block: int
+def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int] | None,
+                temperature: bool
                 ) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
     with _open_npz(p) as zf:
         acc = _NpzMember(zf, "accel.npy", str(p))
-        tm = _NpzMember(zf, "temperature_c.npy", str(p)) if meta["temperature_names"] else None
+        tm = (_NpzMember(zf, "temperature_c.npy", str(p))
+              if temperature and meta["temperature_names"] else None)
         done = 0
         try:
             while done < meta["n_samples"]:
-                a = acc.rows(block).astype(np.float64)
-                if len(a) == 0:
+                raw = acc.rows(block)
+                if len(raw) == 0:
                     raise FormatError(f"{p}: accel ends after {done} of {meta['n_samples']} "
                                       "samples; the file is truncated")
-                if a.ndim == 1:
-                    a = a[:, None]
+                if raw.ndim == 1:
+                    raw = raw[:, None]
+                if columns is None:
+                    a = raw.astype(np.float64)
+                else:
+                    # only the columns asked for are converted (one copy, column by column)
+                    a = np.empty((len(raw), len(columns)))
+                    for j, col in enumerate(columns):
+                        a[:, j] = raw[:, col]
                 _check_finite(a, done, str(p))
                 t = None
                 if tm is not None:
@@ -398,13 +407,17 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
 # public API
 
 
-def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None = None
+def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None = None,
+                columns: Sequence[int] | None = None, temperature: bool = True
                 ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64],
                                                           NDArray[np.float64] | None]]]:
     """Metadata and a stream of (accel (n, C) m/s², temperature (n, k) °C or None) blocks.
 
     The metadata holds ``rate_hz``, ``names``, ``temperature_names``, ``n_samples`` (None for
     CSV, unknown until read), ``source`` and ``format``. Memory stays at one block.
+    ``columns``: only these accel columns (by number, in this order), e.g. one channel per
+    pass when a consumer's memory grows with the channels; ``temperature=False`` skips the
+    temperatures (None in every block). The metadata always describes the whole record.
     """
     if block < 1:
         raise DataError(f"block size {block} must be >= 1 sample")
@@ -412,18 +425,32 @@ def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None
     if kind == "npz":
         with _open_npz(p) as zf:
             meta = _npz_meta(zf, p, rate_hz)
-        return meta, _npz_blocks(p, meta, block)
+        _check_columns(columns, len(meta["names"]), p)
+        return meta, _npz_blocks(p, meta, block, columns, temperature)
     if kind == "csv":
-        return _csv_meta_and_blocks(p, rate_hz, block)
-    rec = _load_recording(p, rate_hz)
-    meta = _record_meta(rec)
+        meta, blocks = _csv_meta_and_blocks(p, rate_hz, block)
+    else:
+        rec = _load_recording(p, rate_hz)
+        meta = _record_meta(rec)
 
-    def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
-        for i in range(0, rec.n_samples, block):
-            t = None if rec.temperature_c is None else rec.temperature_c[i:i + block]
-            yield rec.accel[i:i + block], t
+        def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
+            for i in range(0, rec.n_samples, block):
+                t = None if rec.temperature_c is None else rec.temperature_c[i:i + block]
+                yield rec.accel[i:i + block], t
 
-    return meta, gen()
+        blocks = gen()
+    _check_columns(columns, len(meta["names"]), p)
+    if columns is None and temperature:
+        return meta, blocks
+    cols = None if columns is None else list(columns)
+    return meta, ((a if cols is None else a[:, cols], t if temperature else None)
+                  for a, t in blocks)
+
+
+def _check_columns(columns: Sequence[int] | None, n: int, p: Path) -> None:
+    if columns is not None and any(not 0 <= int(c) < n for c in columns):
+        raise DataError(f"{p}: accel columns {list(columns)} asked for, the record has {n} "
+                        f"(0..{n - 1})")
 
 
 def _record_meta(rec: Record) -> dict[str, Any]:
