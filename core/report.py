@@ -96,7 +96,9 @@ class WelchAccumulator:
             # window product and one batched FFT per block instead of one per segment
             # (contiguous rows into reused buffers: a transform of fresh, page-faulted memory
             # or of one segment at a time measured twice as slow)
-            segs = np.lib.stride_tricks.sliding_window_view(a, self.L, axis=0)[::step][:k]
+            rows, cols = a.strides
+            segs = np.lib.stride_tricks.as_strided(a, (k, self.c, self.L),
+                                                   (step * rows, cols, rows), writeable=False)
             nf = self.L // 2 + 1
             seg = scratch("welch.seg", k * self.c, self.L, np.float64).reshape(k, self.c, -1)
             np.subtract(segs, segs.mean(axis=2, keepdims=True), out=seg)
@@ -296,14 +298,14 @@ RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
 def record_blocks(path: str, block: int, rate_hz: float | None, *,
-                  columns: Sequence[int] | None = None, temperature: bool = True
-                  ) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
+                  columns: Sequence[int] | None = None, temperature: bool = True,
+                  verify: bool = True) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
     """Metadata and blocks of a record: the one segment iterator of ``avard analyze`` and
     ``avard explain``. Files are one segment, streamed; a recording of the service is loaded
     (``recording.load_recording``) and split where the service split its accumulators
     (``meta["segment_bounds"]``: every gap record, run change and index jump), so nothing is
-    averaged across a gap or a restart. ``columns`` and ``temperature`` as for
-    ``readers.iter_blocks`` (only those accel columns; no temperatures)."""
+    averaged across a gap or a restart. ``columns``, ``temperature`` and ``verify`` as for
+    ``readers.iter_blocks`` (only those accel columns; no temperatures; no CRC check)."""
     from pathlib import Path
 
     p = Path(path)
@@ -332,7 +334,7 @@ def record_blocks(path: str, block: int, rate_hz: float | None, *,
 
         return meta, gen_rec()
     meta, blocks = iter_blocks(path, block, rate_hz=rate_hz, columns=columns,
-                               temperature=temperature)
+                               temperature=temperature, verify=verify)
 
     def gen() -> Iterator[RecordBlock]:
         for a, t in blocks:
@@ -342,10 +344,11 @@ def record_blocks(path: str, block: int, rate_hz: float | None, *,
 
 
 def _segments(path: str, block: int, rate_hz: float | None,
-              columns: Sequence[int] | None = None
+              columns: Sequence[int] | None = None, verify: bool = True
               ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
     """:func:`record_blocks` without the temperatures (what the Allan pass reads)."""
-    meta, blocks = record_blocks(path, block, rate_hz, columns=columns, temperature=False)
+    meta, blocks = record_blocks(path, block, rate_hz, columns=columns, temperature=False,
+                                 verify=verify)
     return meta, ((a, end) for a, _t, end in blocks)
 
 
@@ -390,20 +393,25 @@ def analyze(
         return _analyze_passes(meta, [(sel, segments, sel)], **opts)
     # A file is read again rather than held: one pass per group of channels whose OADEV
     # histories fit RING_BUDGET_BYTES together, so only that group's histories are live.
-    # The first pass takes the blocks already opened (a CSV reader has read its first rows).
+    # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
+    # the blocks already opened (its reader has read the first rows); an .npz reader opens
+    # nothing before its first block, so it is simply replaced by one of the group's columns.
     groups = oadev_pass_groups(sel, int(meta["n_samples"]))
     passes: list[tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]], list[int] | None]]
-    passes = [(groups[0], segments, groups[0])]
+    if meta.get("format") == "npz":
+        passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
+    else:
+        passes = [(groups[0], segments, groups[0])]
     for g in groups[1:]:
-        passes.append((g, _lazy_segments(path, block, rate_hz, g), None))
+        passes.append((g, _lazy_segments(path, block, rate_hz, g, False), None))
     return _analyze_passes(meta, passes, **opts)
 
 
-def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int]
-                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
+                   verify: bool) -> Iterator[tuple[NDArray[np.float64], bool]]:
     """The record's blocks of ``columns`` only, opened when the pass starts (not before, so
     one file handle is open at a time)."""
-    yield from _segments(path, block, rate_hz, columns)[1]
+    yield from _segments(path, block, rate_hz, columns, verify)[1]
 
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
