@@ -54,6 +54,10 @@ __all__ = ["OverlappingAllan"]
 # 1 MiB L2 for one channel, and the kernel measured 1.5 ns per sample and τ against 3.1 ns at
 # 2**13 and 1.6 ns at 2**17 (one float64 channel, 2**22 samples, 21 octaves).
 PIECE = 1 << 16
+# Averages pushed to a noise-identification ladder at once. A push makes a few arrays of the
+# batch's size and reads each several times; at 2**14 doubles (128 KiB) they stay in the
+# L2 cache: measured 2.9 ns per average against 8.5 ns at 2**15 and 2**16.
+LADDER_BATCH = 1 << 14
 
 
 class OverlappingAllan:
@@ -220,19 +224,39 @@ class OverlappingAllan:
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
-                last = q0 + ((p1 - 1 - q0) // m) * m
-                if m == 1:
-                    ends = self._span(q0 - 1, last - q0 + 2)
-                else:
-                    # only the interval ends are read: a span of m points would copy up to m
-                    # values (32 MB at m = 2**22) wherever it wraps around the ring
-                    ends = ring[:, np.arange(q0 - m, last + 1, m) % self._cap]
-                self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
-                self._pending_n[k] += ends.shape[1] - 1
-                if self._pending_n[k] >= PIECE:
-                    self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1))
-                    self._pending[k] = []
-                    self._pending_n[k] = 0
+                self._feed(k, self._interval_sums(m, q0, q0 + ((p1 - 1 - q0) // m) * m))
+
+    def _interval_sums(self, m: int, q0: int, last: int) -> NDArray:
+        """X_q − X_{q−m} for q = q0, q0 + m, … last (C, k): the non-overlapping sums of m
+        samples ending there, in a reused buffer (valid until the next call)."""
+        ring = self._ring
+        assert ring is not None
+        k = (last - q0) // m + 1
+        start = (q0 - m) % self._cap
+        if start + last - q0 + m < self._cap:  # the interval ends as a strided view
+            ends = ring[:, start:start + last - q0 + m + 1:m]
+        else:
+            # wrapped: only the ends are gathered (a span of m points would copy up to m
+            # values, 32 MB at m = 2**22)
+            ends = ring[:, np.arange(q0 - m, last + 1, m) % self._cap]
+        sums = scratch("oadev.sums", self.n_channels, k, ring.dtype)
+        np.subtract(ends[:, 1:], ends[:, :-1], out=sums)  # exact in int64 for counts
+        return sums
+
+    def _feed(self, k: int, sums: NDArray) -> None:
+        """Pass averages to τ k's ladder in batches of about ``LADDER_BATCH``: at long τ each
+        piece brings only a few (a push costs tens of numpy calls whatever its size), at short
+        τ a piece brings more than one batch."""
+        if self._pending_n[k] + sums.shape[1] < LADDER_BATCH:
+            self._pending[k].append(sums.astype(np.float64, copy=True))
+            self._pending_n[k] += sums.shape[1]
+            return
+        if self._pending[k]:
+            sums = np.concatenate([*self._pending[k], sums.astype(np.float64)], axis=1)
+            self._pending[k] = []
+            self._pending_n[k] = 0
+        for i in range(0, sums.shape[1], LADDER_BATCH):
+            self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH])
 
     # ------------------------------------------------------------------------ results
     def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
