@@ -1,11 +1,14 @@
-"""``avard analyze`` as a library: stream a record once, fit every channel, and write it out.
+"""``avard analyze`` as a library: stream a record, fit every channel, and write it out.
 
-One pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
+A pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
 channel: the fully overlapping Allan variance (``overlapping.OverlappingAllan``, OADEV as
 Stable32 and allantools compute it, NIST SP 1065 eq. 12, at octave τ; memory a ring of 2·m_max
-running-sum points) and a Welch spectrum used to find sinusoids. ``estimator="cascade"``
-gives the service's streaming cascade instead (``streaming.StreamingAllan``, stride m/8 above
-m = 8: partially overlapping, a different estimator with ≥ 98 % of the OADEV's EDF).
+running-sum points) and a Welch spectrum used to find sinusoids. A file long enough that the
+rings of all its channels would exceed ``RING_BUDGET_BYTES`` is read once per group of
+channels that fit (``oadev_pass_groups``), so only one group's rings are live.
+``estimator="cascade"`` gives the service's streaming cascade instead
+(``streaming.StreamingAllan``, stride m/8 above m = 8: partially overlapping, a different
+estimator with ≥ 98 % of the OADEV's EDF).
 Lines found in the spectrum enter the noise fit as fixed components (their
 amplitude is measured far more precisely by the spectrum than by the AVAR bump), so they do
 not bias N, B or K; then ``fit.fit_noise`` fits the IEEE terms.
@@ -50,9 +53,12 @@ ESTIMATORS = {
     "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
 }
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
-# default range), and while the running-sum ring (2·m_max points per channel) fits the
-# budget: a quarter of the memory available when analyze starts, at least this much. A fixed
+# default range), and while the running-sum rings live at once (2·m_max points per channel)
+# fit a quarter of the memory available when analyze starts, at least this much. A fixed
 # 96 MiB cut a 60 h, 3-axis record two octaves short of N/4, where rate random walk shows.
+# ``analyze`` of a file also uses this much as the rings of one pass: channels whose rings
+# do not fit it together are read in further passes (one 60 h axis per pass), which keeps the
+# whole analysis of such a record at ~1/10 of the memory of allantools' oadev.
 RING_BUDGET_BYTES = 96 << 20
 
 
