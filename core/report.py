@@ -561,7 +561,8 @@ def _analyze_passes(
     psd: bool,
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
-    its blocks, the block columns to take or None for all), read one after another."""
+    its blocks, the block columns to take or None for all), read one after another.
+    ``progress`` counts the samples read over all passes (the record's length × passes)."""
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
     rate = float(meta["rate_hz"])
@@ -805,7 +806,7 @@ def progress_printer(stream: Any = None) -> ProgressFn | None:
         if pct == last[0] and total:
             return
         last[0] = pct
-        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples)" if total else \
+        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples read)" if total else \
             f"\ranalyze: {done} samples"
         stream.write(msg)
         if total and done >= total:
