@@ -1,11 +1,14 @@
-"""``avard analyze`` as a library: stream a record once, fit every channel, and write it out.
+"""``avard analyze`` as a library: stream a record, fit every channel, and write it out.
 
-One pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
+A pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
 channel: the fully overlapping Allan variance (``overlapping.OverlappingAllan``, OADEV as
 Stable32 and allantools compute it, NIST SP 1065 eq. 12, at octave τ; memory a ring of 2·m_max
-running-sum points) and a Welch spectrum used to find sinusoids. ``estimator="cascade"``
-gives the service's streaming cascade instead (``streaming.StreamingAllan``, stride m/8 above
-m = 8: partially overlapping, a different estimator with ≥ 98 % of the OADEV's EDF).
+running-sum points) and a Welch spectrum used to find sinusoids. A file long enough that the
+rings of all its channels would exceed ``RING_BUDGET_BYTES`` is read once per group of
+channels that fit (``oadev_pass_groups``), so only one group's rings are live.
+``estimator="cascade"`` gives the service's streaming cascade instead
+(``streaming.StreamingAllan``, stride m/8 above m = 8: partially overlapping, a different
+estimator with ≥ 98 % of the OADEV's EDF).
 Lines found in the spectrum enter the noise fit as fixed components (their
 amplitude is measured far more precisely by the spectrum than by the AVAR bump), so they do
 not bias N, B or K; then ``fit.fit_noise`` fits the IEEE terms.
@@ -21,17 +24,24 @@ import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.readers import iter_blocks, load_record
-from avard.core.model.fit import NoiseFit, fit_noise
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from numpy.typing import NDArray
-from scipy.stats import chi2
-from scipy.stats import f as fdist
+
+if TYPE_CHECKING:
+    from avard.core.model.fit import NoiseFit
+
+# scipy (the fit, the line threshold) is imported where it is used, after the pass over the
+# data: it is ~50–70 MB resident, and loaded before the pass it would sit under the OADEV's
+# history at the peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze). scipy.special
+# rather than scipy.stats: the quantiles are the same functions, without the 0.4–0.9 s import
+# of every distribution.
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
            "find_lines", "psd_csv"]
@@ -49,9 +59,12 @@ ESTIMATOR_LABELS = {"oadev": "OADEV", "cascade": "cascade ADEV (stride m/8)"}
 ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s^2",
               "edf": "1", "alpha": "1"}
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
-# default range), and while the running-sum ring (2·m_max points per channel) fits the
-# budget: a quarter of the memory available when analyze starts, at least this much. A fixed
+# default range), and while the running-sum rings live at once (2·m_max points per channel)
+# fit a quarter of the memory available when analyze starts, at least this much. A fixed
 # 96 MiB cut a 60 h, 3-axis record two octaves short of N/4, where rate random walk shows.
+# ``analyze`` of a file also uses this much as the rings of one pass: channels whose rings
+# do not fit it together are read in further passes (one 60 h axis per pass), which keeps the
+# whole analysis of such a record at ~1/10 of the memory of allantools' oadev.
 RING_BUDGET_BYTES = 96 << 20
 
 
@@ -73,7 +86,8 @@ def ring_budget_bytes() -> int:
 
 class WelchAccumulator:
     """Streaming Welch PSD (Hann window, 50 % overlap, mean removed per segment), one-sided
-    density in (unit)²/Hz. Memory: one segment per channel."""
+    density in (unit)²/Hz. Memory: one segment per channel, and the segments of one block
+    while it is transformed."""
 
     def __init__(self, n_channels: int, rate_hz: float, nperseg: int) -> None:
         self.c = n_channels
@@ -86,16 +100,35 @@ class WelchAccumulator:
         self._buf = np.zeros((0, n_channels))
 
     def update(self, block: NDArray) -> None:
-        a = np.concatenate([self._buf, np.asarray(block, dtype=float).reshape(-1, self.c)])
+        a = np.asarray(block, dtype=float).reshape(-1, self.c)
+        if len(self._buf):
+            a = np.concatenate([self._buf, a])
         step = self.L // 2
-        start = 0
-        while start + self.L <= len(a):
-            seg = a[start:start + self.L]
-            seg = (seg - seg.mean(axis=0)) * self.win[:, None]
-            self.sum += np.abs(np.fft.rfft(seg, axis=0)) ** 2
-            self.n_seg += 1
-            start += step
-        self._buf = a[start:]
+        k = (len(a) - self.L) // step + 1 if len(a) >= self.L else 0
+        if k > 0:
+            # all the block's segments at once, channel-major (k, C, L): one mean, one
+            # window product and one batched FFT per block instead of one per segment
+            # (contiguous rows into reused buffers: a transform of fresh, page-faulted memory
+            # or of one segment at a time measured twice as slow)
+            # channel-major first, so that every segment is contiguous (strided segments
+            # made the mean and the window product three times slower for three channels)
+            cm = np.ascontiguousarray(a.T) if self.c > 1 else a.reshape(1, -1)
+            rows, cols = cm.strides
+            segs = np.lib.stride_tricks.as_strided(cm, (k, self.c, self.L),
+                                                   (step * cols, rows, cols), writeable=False)
+            nf = self.L // 2 + 1
+            seg = scratch("welch.seg", k * self.c, self.L, np.float64).reshape(k, self.c, -1)
+            np.subtract(segs, segs.mean(axis=2, keepdims=True), out=seg)
+            seg *= self.win
+            spec = scratch("welch.spec", k * self.c, nf, np.complex128).reshape(k, self.c, -1)
+            np.fft.rfft(seg, axis=2, out=spec)
+            parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
+            np.square(parts, out=parts)
+            power = parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)  # (C, F)
+            self.sum += power.T
+            self.n_seg += k
+        # the samples of the next, still incomplete segment (a copy: the block is the caller's)
+        self._buf = a[k * step:].copy()
 
     def gap(self) -> None:
         """A break in the data: the partial segment is dropped, none spans the gap."""
@@ -135,8 +168,11 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     lobe, min_side = 2, 4
     if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
         return []
+    from avard.core.allan.chi2 import chi2_ppf
+    from scipy.special import fdtri
+
     nu = max(2.0, 1.8 * n_seg)
-    med_ratio = chi2.median(nu) / nu
+    med_ratio = float(chi2_ppf(0.5, nu)) / nu
     ring = np.ones(2 * half_width + 1, dtype=bool)
     ring[half_width - lobe:half_width + lobe + 1] = False
     # median of the ring around every bin whose full window fits (np.median averages the two
@@ -161,7 +197,7 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     # degrees of freedom, so bin/background is F(ν, ν_bg)-distributed, not χ²(ν)/ν. That
     # matters where the window is short (low bins) and few segments were averaged.
     nu_bg = np.maximum(2.0, n_bg * nu * 2.0 / math.pi)
-    thr = fdist.isf(p_false / len(f), nu, nu_bg)
+    thr = fdtri(nu, nu_bg, 1.0 - p_false / len(f))  # the F(ν, ν_bg) upper quantile
     ratio = psd / np.where(bg > 0, bg, np.inf)
     df = f[1] - f[0]
     lines = []
@@ -278,13 +314,15 @@ def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
 RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
-def record_blocks(path: str, block: int, rate_hz: float | None
-                  ) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
+def record_blocks(path: str, block: int, rate_hz: float | None, *,
+                  columns: Sequence[int] | None = None, temperature: bool = True,
+                  verify: bool = True) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
     """Metadata and blocks of a record: the one segment iterator of ``avard analyze`` and
     ``avard explain``. Files are one segment, streamed; a recording of the service is loaded
     (``recording.load_recording``) and split where the service split its accumulators
     (``meta["segment_bounds"]``: every gap record, run change and index jump), so nothing is
-    averaged across a gap or a restart."""
+    averaged across a gap or a restart. ``columns``, ``temperature`` and ``verify`` as for
+    ``readers.iter_blocks`` (only those accel columns; no temperatures; no CRC check)."""
     from pathlib import Path
 
     p = Path(path)
@@ -301,16 +339,19 @@ def record_blocks(path: str, block: int, rate_hz: float | None
                 "samples_duplicated": rec.meta.get("samples_duplicated", 0),
                 "losses": rec.meta.get("losses", []),
                 "duplicates": rec.meta.get("duplicates", [])}
-        temps = rec.temperature_c
+        temps = rec.temperature_c if temperature else None
+        cols = None if columns is None else list(columns)
 
         def gen_rec() -> Iterator[RecordBlock]:
             for s0, s1 in itertools.pairwise(cuts):
                 for i in range(s0, s1, block):
                     j = min(i + block, s1)
-                    yield rec.accel[i:j], None if temps is None else temps[i:j], j >= s1
+                    a = rec.accel[i:j] if cols is None else rec.accel[i:j, cols]
+                    yield a, None if temps is None else temps[i:j], j >= s1
 
         return meta, gen_rec()
-    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz)
+    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz, columns=columns,
+                               temperature=temperature, verify=verify)
 
     def gen() -> Iterator[RecordBlock]:
         for a, t in blocks:
@@ -319,10 +360,12 @@ def record_blocks(path: str, block: int, rate_hz: float | None
     return meta, gen()
 
 
-def _segments(path: str, block: int, rate_hz: float | None
+def _segments(path: str, block: int, rate_hz: float | None,
+              columns: Sequence[int] | None = None, verify: bool = True
               ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
     """:func:`record_blocks` without the temperatures (what the Allan pass reads)."""
-    meta, blocks = record_blocks(path, block, rate_hz)
+    meta, blocks = record_blocks(path, block, rate_hz, columns=columns, temperature=False,
+                                 verify=verify)
     return meta, ((a, end) for a, _t, end in blocks)
 
 
@@ -359,10 +402,45 @@ def analyze(
     meta, segments = _segments(path, block, rate_hz)
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
-    return analyze_stream(meta, segments, source=path, channels=channels,
-                          filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                          progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
-                          psd=psd)
+    opts = dict(source=path, filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
+                progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd)
+    sel = _select(list(meta["names"]), channels)
+    if estimator != "oadev" or meta.get("format") == "recording":
+        # a service recording is loaded whole (``record_blocks``): passes would save nothing
+        return _analyze_passes(meta, [(sel, segments, sel)], **opts)
+    # A file is read again rather than held: one pass per group of channels whose OADEV
+    # histories fit RING_BUDGET_BYTES together, so only that group's histories are live.
+    # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
+    # the blocks already opened (its reader has read the first rows); an .npz reader opens
+    # nothing before its first block, so it is simply replaced by one of the group's columns.
+    groups = oadev_pass_groups(sel, int(meta["n_samples"]))
+    passes: list[tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]], list[int] | None]]
+    if meta.get("format") == "npz":
+        passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
+    else:
+        passes = [(groups[0], segments, groups[0])]
+    for g in groups[1:]:
+        passes.append((g, _lazy_segments(path, block, rate_hz, g, False), None))
+    return _analyze_passes(meta, passes, **opts)
+
+
+def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
+                   verify: bool) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """The record's blocks of ``columns`` only, opened when the pass starts (not before, so
+    one file handle is open at a time)."""
+    yield from _segments(path, block, rate_hz, columns, verify)[1]
+
+
+def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
+    """``sel`` split into groups whose OADEV histories (8 bytes × (2·m_max + PIECE) points per
+    channel) fit ``RING_BUDGET_BYTES`` together, one channel at least: the channels of one
+    pass over a file. Short records take every channel in one pass."""
+    from avard.core.allan.overlapping import PIECE
+
+    grid = oadev_grid(n_samples, 1)
+    per_channel = 8 * (2 * int(grid[-1]) + PIECE)
+    size = max(1, RING_BUDGET_BYTES // per_channel)
+    return [sel[i:i + size] for i in range(0, len(sel), size)]
 
 
 def _count_rows(path: str) -> int:
@@ -421,40 +499,46 @@ def analyze_stream(
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
     in m/s², True where a segment ends: no difference or spectrum spans what follows).
-    ``estimator="oadev"`` needs ``n_samples`` (an upper bound will do) to fix its τ grid."""
+    ``estimator="oadev"`` needs ``n_samples`` (an upper bound will do) to fix its τ grid.
+    The blocks are read once, every channel at a time (the OADEV history is then 2·m_max
+    points for each channel at once; ``analyze`` of a file reads it once per channel group
+    instead)."""
+    sel = _select(list(meta["names"]), channels)
+    return _analyze_passes(meta, [(sel, segments, sel)], source=source,
+                           filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
+                           progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
+                           psd=psd)
+
+
+@dataclass
+class _PassResult:
+    """What one pass over the blocks gives for its channels."""
+
+    allan: Any  # AllanResult of the pass's channels, τ without differences dropped
+    welch: WelchAccumulator | None
+    n: int  # samples read
+
+
+def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int] | None,
+              names: list[str], rate: float, estimator: str, grid: NDArray[np.int64] | None,
+              nper: int | None, progress: ProgressFn | None, done: int,
+              total: int | None) -> _PassResult:
+    """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
+    the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
+    of the whole analysis."""
     from avard.core.allan.overlapping import OverlappingAllan
     from avard.core.allan.streaming import StreamingAllan
 
-    if estimator not in ESTIMATORS:
-        raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
-    rate = float(meta["rate_hz"])
-    names = list(meta["names"])
-    sel = _select(names, channels)
-    total = meta.get("n_samples")
-    chosen = [names[i] for i in sel]
     sa: OverlappingAllan | StreamingAllan
     if estimator == "oadev":
-        if total is None:
-            raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
-                            "cannot be fixed; give n_samples or use estimator='cascade'")
-        grid = oadev_grid(int(total), len(sel))
-        full = oadev_grid(int(total), len(sel), budget_bytes=1 << 62)
-        if len(grid) < len(full):
-            # said in the table and the JSON: the longest τ the memory here allowed
-            meta = {**meta, "oadev_cut": {
-                "tau_max_s": float(grid[-1] / rate), "tau_full_s": float(full[-1] / rate),
-                "bytes_needed": int(16 * full[-1] * len(sel))}}
-        sa = OverlappingAllan(len(sel), rate, grid, names=chosen)
+        assert grid is not None
+        sa = OverlappingAllan(len(names), rate, grid, names=names)
     else:
-        sa = StreamingAllan(len(sel), rate, names=chosen)
-    welch: WelchAccumulator | None = None
-    if (find_sinusoids or psd) and (total is None or total >= 1024):
-        # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
-        nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
-        welch = WelchAccumulator(len(sel), rate, nper)
+        sa = StreamingAllan(len(names), rate, names=names)
+    welch = WelchAccumulator(len(names), rate, nper) if nper is not None else None
     n = 0
-    for accel, segment_end in segments:
-        a = accel[:, sel]
+    for accel, segment_end in blocks:
+        a = accel if take is None else accel[:, take]
         sa.update(a)
         if welch is not None:
             welch.update(a)
@@ -465,42 +549,102 @@ def analyze_stream(
             if welch is not None:
                 welch.gap()
         if progress is not None:
-            progress(n, total)
+            progress(done + n, total)
+    res = _with_differences(sa.result()) if n >= 16 else None
+    return _PassResult(res, welch, n)
+
+
+def _analyze_passes(
+    meta: dict[str, Any],
+    passes: Sequence[tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]],
+                           list[int] | None]],
+    *,
+    source: str,
+    filter_corner_hz: float | str | None,
+    find_sinusoids: bool,
+    progress: ProgressFn | None,
+    fit_kwargs: dict[str, Any] | None,
+    estimator: str,
+    psd: bool,
+) -> Analysis:
+    """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
+    its blocks, the block columns to take or None for all), read one after another.
+    ``progress`` counts the samples read over all passes (the record's length × passes)."""
+    if estimator not in ESTIMATORS:
+        raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
+    rate = float(meta["rate_hz"])
+    names = list(meta["names"])
+    total = meta.get("n_samples")
+    grid = None
+    if estimator == "oadev":
+        if total is None:
+            raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
+                            "cannot be fixed; give n_samples or use estimator='cascade'")
+        width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
+        grid = oadev_grid(int(total), width)
+        full = oadev_grid(int(total), width, budget_bytes=1 << 62)
+        if len(grid) < len(full):
+            # said in the table and the JSON: the longest τ the memory here allowed
+            meta = {**meta, "oadev_cut": {
+                "tau_max_s": float(grid[-1] / rate), "tau_full_s": float(full[-1] / rate),
+                "bytes_needed": int(16 * full[-1] * width)}}
+    nper = None
+    if (find_sinusoids or psd) and (total is None or total >= 1024):
+        # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
+        nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
+    all_total = None if total is None else int(total) * len(passes)
+    results: list[tuple[list[int], _PassResult]] = []
+    done = 0
+    for chans, blocks, take in passes:
+        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
+                        progress, done, all_total)
+        if results and one.n != results[0][1].n:
+            raise DataError(f"{source}: read {one.n} samples on one pass and "
+                            f"{results[0][1].n} on another; the file changed while it was "
+                            "analysed")
+        done += one.n
+        results.append((chans, one))
+    n = results[0][1].n
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
-    res = _with_differences(sa.result())
-    f, spectrum = (welch.result() if welch is not None else (None, None))
     corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
               else filter_corner_hz)
     # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
     # fit holds as a fixed term (simulated records and recordings carry the LSB)
     lsb = meta.get("lsb_mps2")
     lsb = float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0 else None
-    out: dict[str, ChannelAnalysis] = {}
-    for j, i in enumerate(sel):
-        one = res.channel(j)
-        lines = []
-        if welch is not None and spectrum is not None and find_sinusoids:
-            lines = find_lines(f, spectrum[:, j], welch.n_seg)
-        extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
-        kw = dict(fit_kwargs or {})
-        if corner is not None and lsb is not None:
-            kw.setdefault("rounding_lsb", lsb)
-        try:
-            fit = fit_noise(one, filter_corner_hz=corner, extra=extra, **kw)
-        except FitError as exc:
-            raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
-        chan_psd = None
-        if psd:
-            if welch is None or spectrum is None or welch.n_seg < 1:
-                raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
-                                "needs at least 1024)")
-            from avard.core.psd import channel_psd, white_density
+    from avard.core.model.fit import fit_noise
 
-            chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
-            chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
-        out[names[i]] = ChannelAnalysis(names[i], one, fit, lines, estimator, chan_psd)
+    out: dict[str, ChannelAnalysis] = {}
+    for chans, one in results:
+        welch = one.welch
+        f, spectrum = (welch.result() if welch is not None else (None, None))
+        for j, i in enumerate(chans):
+            allan = one.allan.channel(j)
+            lines = []
+            if welch is not None and spectrum is not None and find_sinusoids:
+                lines = find_lines(f, spectrum[:, j], welch.n_seg)
+            extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
+            kw = dict(fit_kwargs or {})
+            if corner is not None and lsb is not None:
+                kw.setdefault("rounding_lsb", lsb)
+            try:
+                fit = fit_noise(allan, filter_corner_hz=corner, extra=extra, **kw)
+            except FitError as exc:
+                raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
+            chan_psd = None
+            if psd:
+                if welch is None or spectrum is None or welch.n_seg < 1:
+                    raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
+                                    "needs at least 1024)")
+                from avard.core.psd import channel_psd, white_density
+
+                chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
+                chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
+            out[names[i]] = ChannelAnalysis(names[i], allan, fit, lines, estimator, chan_psd)
+    # channels in the record's order, whatever the passes
+    out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
                     channels=out, meta={**meta, "filter_corner_hz": corner},
                     estimator=estimator)
@@ -571,7 +715,9 @@ def format_table(an: Analysis) -> str:
         lines.append(f"  fitted τ {fit.tau_min_s:.4g} s … {fit.tau_max_s:.4g} s "
                      f"({fit.n_points} points), χ²/dof = {chi} (dof {fit.dof})")
         if math.isfinite(fit.chi2_dof) and fit.dof > 0:
-            p = float(chi2.sf(fit.chi2_dof * fit.dof, fit.dof))
+            from scipy.special import chdtrc  # the χ² upper tail
+
+            p = float(chdtrc(fit.dof, fit.chi2_dof * fit.dof))
             if p < 0.001:
                 lines.append(f"  note: the five-term model does not describe this curve "
                              f"(p = {p:.1g}); see `avard explain` for what else is in it")
@@ -668,7 +814,7 @@ def progress_printer(stream: Any = None) -> ProgressFn | None:
         if pct == last[0] and total:
             return
         last[0] = pct
-        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples)" if total else \
+        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples read)" if total else \
             f"\ranalyze: {done} samples"
         stream.write(msg)
         if total and done >= total:

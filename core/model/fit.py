@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -51,7 +52,6 @@ from avard.core.model import terms as mdl
 from avard.core.model.terms import TERMS, UNITS
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
-from scipy.stats import norm
 
 __all__ = ["NoiseFit", "TermEstimate", "fit_noise", "slope_method"]
 
@@ -603,7 +603,9 @@ def fit_noise(
         cov = cov * birge**2
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
-    zci = float(norm.ppf(0.5 + ci / 2.0))
+    # the standard normal quantile from the standard library: importing scipy.stats for it
+    # cost `avard analyze` 0.4–0.9 s of CPU and ~25 MB
+    zci = NormalDist().inv_cdf(0.5 + ci / 2.0)
     est: dict[str, TermEstimate] = {}
     extras: list[dict[str, Any]] = []
     sinusoids: list[dict[str, float]] = []

@@ -88,6 +88,26 @@ def test_integer_counts_exact_multichannel_with_gaps() -> None:
     assert res.var[k, 0] == pytest.approx(float(total) / (2 * m * m * res.n[k]), rel=1e-15)
 
 
+def test_window_sum_and_three_cursor_paths_give_the_same_sums() -> None:
+    """Every τ once through the window-sum path (m below the piece) and once through the
+    three-cursor path (piece of 1): the same sums to the rounding of the float64 sums of
+    squares (the differences themselves are exact for counts)."""
+    rng = np.random.default_rng(8)
+    ms = 2 ** np.arange(11)
+    counts = rng.integers(-(1 << 19), 1 << 19, size=(9000, 2))
+    floats = np.cumsum(rng.normal(0.0, 1e-3, (9000, 2)), axis=0) + 9.81
+    for y in (counts, floats):
+        runs = []
+        for piece in (4096, 1):
+            acc = OverlappingAllan(2, 10.0, ms, piece=piece)
+            for i in range(0, len(y), 1000):
+                acc.update(y[i:i + 1000])
+            runs.append(acc.result())
+        np.testing.assert_allclose(runs[0].var, runs[1].var, rtol=1e-12)
+        np.testing.assert_array_equal(runs[0].n, runs[1].n)
+        np.testing.assert_array_equal(runs[0].alpha, runs[1].alpha)
+
+
 def test_memory_is_a_ring_of_two_m_max() -> None:
     acc = OverlappingAllan(2, 100.0, [1, 8, 512])
     acc.update(np.zeros((100000, 2)))
@@ -182,3 +202,42 @@ def test_the_oadev_reaches_n_over_4_or_says_where_memory_stopped_it(tmp_path, mo
     d = cut.to_dict()["oadev_cut"]
     assert d["tau_max_s"] == pytest.approx(10.24) and d["tau_full_s"] == pytest.approx(163.84)
     assert "OADEV stops at τ = 10.24 s, short of N/4 (163.8 s)" in report.format_table(cut)
+
+
+def test_one_pass_per_channel_equals_one_pass_for_all(tmp_path, monkeypatch):
+    """A long record is read once per channel (only one channel's history live); the result
+    is the one pass over every channel's, channel for channel, spectrum and fit included."""
+    from avard.core import report
+
+    n = 1 << 15
+    rng = np.random.default_rng(6)
+    y = rng.normal(0, 1e-3, (n, 3)) + np.array([0.0, 0.1, 9.81])
+    y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 50.0)
+    path = tmp_path / "three.npz"
+    np.savez(path, accel=y, rate_hz=50.0)
+    assert report.oadev_pass_groups([0, 1, 2], n) == [[0, 1, 2]]
+    one = report.analyze(str(path))
+    # a budget for one channel's history at a time: three passes over the file
+    monkeypatch.setattr(report, "RING_BUDGET_BYTES", 8 * (2 * (n // 4) + PIECE))
+    assert report.oadev_pass_groups([0, 1, 2], n) == [[0], [1], [2]]
+    seen: list[tuple[int, int | None]] = []
+    three = report.analyze(str(path), progress=lambda d, t: seen.append((d, t)))
+    assert seen[-1] == (3 * n, 3 * n)
+    assert list(three.channels) == ["x", "y", "z"]
+    for name in "xyz":
+        a, b = one.channels[name], three.channels[name]
+        np.testing.assert_allclose(b.allan.var, a.allan.var, rtol=1e-13)
+        np.testing.assert_array_equal(b.allan.alpha, a.allan.alpha)
+        assert b.lines == a.lines
+        assert b.fit.to_dict() == a.fit.to_dict()
+    assert len(three.channels["y"].lines) == 1
+    only_z = report.analyze(str(path), channels=["z"])
+    np.testing.assert_allclose(only_z.channels["z"].allan.var, one.channels["z"].allan.var,
+                               rtol=1e-13)
+    # a CSV: the first pass takes the rows its reader has already parsed, the others reopen it
+    csv = tmp_path / "three.csv"
+    csv.write_text("x,y,z\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in y.tolist()))
+    from_csv = report.analyze(str(csv), rate_hz=50.0)
+    for name in "xyz":
+        np.testing.assert_allclose(from_csv.channels[name].allan.var,
+                                   one.channels[name].allan.var, rtol=1e-12)
