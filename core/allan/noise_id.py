@@ -30,12 +30,15 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "Lag1Ladder",
+    "RnSums",
     "alpha_from_b1",
     "alpha_from_lag1",
+    "alpha_from_rn",
     "alpha_from_slope",
     "b1_theory",
     "identify_alpha",
     "lag1_acf",
+    "rn_flicker_pm",
     "row_products",
 ]
 
@@ -173,6 +176,79 @@ def alpha_from_b1(b1: float, n: int) -> int | None:
         if b1 > math.sqrt(b1_theory(n, hi) * b1_theory(n, lo)):
             return -hi - 1
     return None
+
+
+def rn_flicker_pm(m: int) -> float:
+    """Expected R(n) = MVAR/AVAR for flicker PM at averaging factor m: the ratio of the two
+    asymptotic responses tabulated in NIST SP 1065 (and IEEE Std 1139-2008),
+    MVAR = 3 ln(256/27) h₁ / (8π²τ²) and AVAR = [1.038 + 3 ln(2π f_h τ)] h₁ / (4π²τ²), with the
+    measurement bandwidth f_h = 1/(2τ0) (the samples' Nyquist frequency), so 2π f_h τ = π m."""
+    return 1.5 * math.log(256.0 / 27.0) / (1.038 + 3.0 * math.log(math.pi * m))
+
+
+def alpha_from_rn(rn: float, m: int) -> int | None:
+    """White (2) or flicker (1) PM from a measured R(n) = MVAR/AVAR at averaging factor m
+    (Stable32's test where B1 says 'PM'; NIST SP 1065 §5.6): R(n) = 1/m for white PM, and
+    ``rn_flicker_pm(m)`` for flicker PM; the boundary is their geometric mean, as for B1.
+    None where R(n) cannot separate them (m so small that both expectations meet, or R(n)
+    not finite)."""
+    white, flicker = 1.0 / m, rn_flicker_pm(m)
+    if not math.isfinite(rn) or flicker <= 1.5 * white:
+        return None
+    return 2 if rn < math.sqrt(white * flicker) else 1
+
+
+class RnSums:
+    """The sums behind R(n) = MVAR/AVAR at one averaging factor m, C channels at once.
+
+    Fed the second phase differences D_i = X_{i+2m} − 2X_{i+m} + X_i of a segment at every i,
+    in order (any split), it keeps Σ D² (the overlapping AVAR, NIST SP 1065 eq. 12) and
+    Σ (Σ_{j=i}^{i+m−1} D_j)² (the modified AVAR, SP 1065 eq. 14: the same differences averaged
+    over m consecutive starts), and the last m − 1 differences to continue the moving sums in
+    the next block. ``gap()`` ends the segment. Only estimators that see every difference at
+    lag m can feed it (batch, the fully overlapping stream); the cascade above m = S cannot.
+    """
+
+    def __init__(self, n_channels: int, m: int) -> None:
+        self.m = int(m)
+        self.c = int(n_channels)
+        self.n_d = 0
+        self.s_d = np.zeros(self.c)
+        self.n_mod = 0
+        self.s_mod = np.zeros(self.c)
+        self._tail = np.zeros((self.c, 0))
+
+    def push(self, d: NDArray) -> None:
+        """Add the next differences (C, k), channel-major, oldest first."""
+        d = np.asarray(d, dtype=np.float64).reshape(self.c, -1)
+        if d.shape[1] == 0:
+            return
+        self.n_d += d.shape[1]
+        self.s_d += np.einsum("ij,ij->i", d, d)
+        full = np.concatenate([self._tail, d], axis=1) if self._tail.shape[1] else d
+        m = self.m
+        if full.shape[1] >= m:
+            cs = np.zeros((self.c, full.shape[1] + 1))
+            np.cumsum(full, axis=1, out=cs[:, 1:])
+            w = cs[:, m:] - cs[:, :-m]  # moving sums of m differences ending in full
+            self.n_mod += w.shape[1]
+            self.s_mod += np.einsum("ij,ij->i", w, w)
+        self._tail = full[:, max(0, full.shape[1] - (m - 1)):].copy() if m > 1 else full[:, :0]
+
+    def gap(self) -> None:
+        """End the segment: no moving sum spans what follows."""
+        self._tail = np.zeros((self.c, 0))
+
+    def ratio(self) -> NDArray[np.float64]:
+        """Measured R(n) per channel: MVAR/AVAR = (Σ w²/n_mod) / (m² Σ D²/n_d); NaN without
+        a modified difference or with zero AVAR."""
+        out = np.full(self.c, np.nan)
+        if self.n_mod == 0 or self.n_d == 0:
+            return out
+        avar = self.s_d / self.n_d
+        ok = avar > 0
+        out[ok] = self.s_mod[ok] / self.n_mod / (self.m**2 * avar[ok])
+        return out
 
 
 def row_products(a: NDArray, b: NDArray, cross: bool = True) -> NDArray[np.float64]:
@@ -455,11 +531,13 @@ class Lag1Ladder:
         out[ok] = var[ok] / avar[ok]
         return out
 
-    def alpha(self, lowest: int) -> NDArray[np.float64]:
+    def alpha(self, lowest: int, rn: NDArray | None = None, m: int = 0
+              ) -> NDArray[np.float64]:
         """Stable32's choice per channel: the lag-1 ladder with at least ``MIN_POINTS``
-        averages; below, Barnes' B1 ratio (with at least 4 averages). Where B1 says 'PM',
-        Stable32 separates white from flicker PM by R(n) = MVAR/AVAR, which these sums do
-        not hold: flicker PM (alpha = 1) is taken, the smaller EDF of the two, so the
+        averages; below, Barnes' B1 ratio (with at least 4 averages), and where B1 says 'PM'
+        the R(n) = MVAR/AVAR ratio ``rn`` (per channel, at averaging factor ``m``; see
+        ``RnSums``) separates white PM (2) from flicker PM (1). Without a usable R(n) (the
+        cascade keeps no MVAR sums) flicker PM is taken, the smaller EDF of the two, so the
         interval is never the narrower white-PM one on a guess. NaN where neither applies."""
         n = self.count()
         t = self.totals()
@@ -472,6 +550,8 @@ class Lag1Ladder:
         for ch in range(self.c):
             if math.isfinite(b1[ch]):
                 a = alpha_from_b1(float(b1[ch]), n)
+                if a is None:
+                    a = None if rn is None else alpha_from_rn(float(rn[ch]), m)
                 out[ch] = max(lowest, 1 if a is None else a)
         return out
 

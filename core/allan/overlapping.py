@@ -38,7 +38,7 @@ from avard.core.allan.deviations import (
     checked_block,
     result_from_sums,
 )
-from avard.core.allan.noise_id import Lag1Ladder, row_products
+from avard.core.allan.noise_id import MIN_POINTS, Lag1Ladder, RnSums, row_products
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
@@ -91,6 +91,8 @@ class OverlappingAllan:
         self._s2 = np.zeros((grid.size, c, c))
         self.covariance = bool(covariance)
         self._ladders = [Lag1Ladder(c, dmax=2, cross=self.covariance) for _ in grid]
+        # R(n) = MVAR/AVAR sums, kept only while a τ has < MIN_POINTS averages (B1's range)
+        self._rn: list[RnSums | None] = [RnSums(c, int(m)) for m in grid]
         # averages waiting for their ladder: pushed in batches, since at long τ each piece
         # brings only a few and a push costs tens of numpy calls whatever its size
         self._pending: list[list[NDArray]] = [[] for _ in grid]
@@ -114,6 +116,9 @@ class OverlappingAllan:
         self._carry: NDArray | None = None
         for lad in self._ladders:
             lad.gap()
+        for r in self._rn:
+            if r is not None:
+                r.gap()
 
     def _check_block(self, block: ArrayLike) -> NDArray:
         first = self._integer is None
@@ -184,6 +189,12 @@ class OverlappingAllan:
                     d = as_float[:, :count]
                 self._n[k] += count
                 self._s2[k] += row_products(d, d, self.covariance)
+                rk = self._rn[k]
+                if rk is not None:  # R(n) matters only while B1 decides (< MIN_POINTS)
+                    if self._ladders[k].count() + self._pending_n[k] >= MIN_POINTS:
+                        self._rn[k] = None
+                    else:
+                        rk.push(d)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
@@ -204,6 +215,6 @@ class OverlappingAllan:
         res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
-            alpha_id=alphas_from_ladders(self._ladders, 2), ci=ci,
+            alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms), ci=ci,
             one_d=self.n_channels == 1, names=self.names)
         return res if self.covariance else replace(res, cov=None)
