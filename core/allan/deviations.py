@@ -86,6 +86,8 @@ class AllanResult:
     ``lo``/``hi`` are the chi-squared interval at level ``ci`` with the Greenhall–Riley EDF
     for the noise exponent ``alpha`` (see ``avard.core.allan.edf``).
     ``cov`` (K, C, C), when present, is the Allan covariance: AVAR of Σ w_c y_c = w·cov·w.
+    ``quantiles`` says how the χ² quantiles of the bounds were computed: "exact", or
+    "stable32" (Stable32's approximation, to reproduce its printed bounds; ``edf.chi2_interval``).
     """
 
     kind: str
@@ -102,6 +104,7 @@ class AllanResult:
     ci: float = 0.683
     cov: NDArray[np.float64] | None = None
     names: tuple[str, ...] = field(default=())
+    quantiles: str = "exact"
 
     @property
     def dev(self) -> NDArray[np.float64]:
@@ -146,7 +149,7 @@ class AllanResult:
     def to_dict(self) -> dict:
         """Plain lists and numbers (msgpack/JSON-able); NaN stays NaN."""
         out: dict = {"kind": self.kind, "rate_hz": self.rate_hz, "ci": self.ci,
-                     "names": list(self.names)}
+                     "names": list(self.names), "quantiles": self.quantiles}
         for key in ("tau", "m", "stride", "var", "n", "edf", "lo", "hi", "alpha"):
             out[key] = np.asarray(getattr(self, key)).tolist()
         out["cov"] = None if self.cov is None else self.cov.tolist()
@@ -174,6 +177,7 @@ class AllanResult:
                 ci=float(d.get("ci", 0.683)),
                 cov=None if cov is None else np.asarray(cov, dtype=np.float64),
                 names=tuple(d.get("names", ())),
+                quantiles=str(d.get("quantiles", "exact")),
             )
         except KeyError as exc:
             raise FormatError(f"Allan result/snapshot dict lacks {exc}; it is not one") from exc
@@ -371,6 +375,7 @@ def allan_variance(
     gaps: Sequence[int] | None = None,
     overlap: int = DEFAULT_OVERLAP,
     names: Sequence[str] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """Allan or Hadamard variance of rate samples (NIST SP 1065 eqs. 11, 12, 18).
 
@@ -397,6 +402,8 @@ def allan_variance(
         slope. The same α for every estimator at that τ (batch, streaming, cascade).
     gaps : sample indices at which a new segment starts; no difference straddles a gap.
     names : channel names, kept in the result.
+    quantiles : "exact" (default) or "stable32": the χ² quantiles of the bounds as Stable32
+        computes them, to reproduce its printed intervals (``edf.chi2_interval``).
 
     τ longer than the record can hold give NaN variance with n = 0 (never a made-up value).
     """
@@ -442,7 +449,7 @@ def allan_variance(
                 rk.push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))
                 rk.gap()
     return finish_result(kind, rate_hz, ms, strides, sums, ladders, ci=ci, alpha=alpha,
-                         one_d=one_d, names=names, rn=rn)
+                         one_d=one_d, names=names, rn=rn, quantiles=quantiles)
 
 
 def rn_sums_for(kind: str, ms: NDArray[np.int64], segments: Sequence[int], c: int
@@ -471,6 +478,7 @@ def finish_result(
     names: Sequence[str] | None = None,
     weights: ArrayLike | None = None,
     rn: Sequence[RnSums | None] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """Turn difference sums into an ``AllanResult`` (shared by batch and streaming).
 
@@ -501,7 +509,8 @@ def finish_result(
     n_phase = (np.maximum(n, 1) - 1) * strides + d * ms + 1
     alpha_id = alphas_from_ladders(ladders, d, rn, ms) if alpha is None else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
-                            alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names)
+                            alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names,
+                            quantiles=quantiles)
 
 
 def _no_ladder(dmax: int) -> Lag1Ladder:
@@ -538,6 +547,7 @@ def result_from_sums(
     alpha_id: NDArray[np.float64] | None = None,
     one_d: bool = False,
     names: Sequence[str] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """The ``AllanResult`` of difference sums: n (K,) differences, s2 (K, C, C) = Σ D Dᵀ.
 
@@ -565,7 +575,7 @@ def result_from_sums(
         for ch in range(c):
             edf[k, ch] = edf_greenhall(int(alphas[k, ch]), d, int(ms[k]), int(strides[k]),
                                        int(n_phase[k]))
-    lo, hi = chi2_interval(var, edf, ci)
+    lo, hi = chi2_interval(var, edf, ci, quantiles)
     squeeze = (lambda x: x[:, 0]) if one_d else (lambda x: x)
     return AllanResult(
         kind=kind,
@@ -582,6 +592,7 @@ def result_from_sums(
         ci=ci,
         cov=cov,
         names=tuple(names) if names else (),
+        quantiles=quantiles,
     )
 
 

@@ -208,13 +208,15 @@ class OverlappingAllan:
                     self._pending_n[k] = 0
 
     # ------------------------------------------------------------------------ results
-    def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
+    def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None,
+               quantiles: str = "exact") -> AllanResult:
         """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
-        channel, else (K, C)); τ with no complete difference have NaN variance and n = 0."""
+        channel, else (K, C)); τ with no complete difference have NaN variance and n = 0.
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``)."""
         self._flush_ladders()
         res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
             alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms), ci=ci,
-            one_d=self.n_channels == 1, names=self.names)
+            one_d=self.n_channels == 1, names=self.names, quantiles=quantiles)
         return res if self.covariance else replace(res, cov=None)
