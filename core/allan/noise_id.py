@@ -1,21 +1,20 @@
-"""Power-law noise identification: lag-1 autocorrelation with a local-slope fallback.
+"""Power-law noise identification as Stable32 does it, one implementation for every estimator.
 
 The EDF of a variance estimate depends on the noise type at each τ (see ``avard.core.allan.edf``).
-Two ways to find it, both from W. J. Riley and C. A. Greenhall, "Power law noise
-identification using the lag 1 autocorrelation", Proc. 18th EFTF (2004), and NIST SP 1065
-§5.6:
+Stable32 identifies it (W. J. Riley and C. A. Greenhall, "Power law noise identification
+using the lag 1 autocorrelation", Proc. 18th EFTF (2004); NIST SP 1065 §5.6):
 
-* Lag-1 ACF: average the rate data in blocks of m, difference the averages k times until the
-  lag-1 autocorrelation r1 is small, then δ = r1 / (1 + r1) and alpha = −2(δ + k) (rate data).
-  White rate noise gives r1 = 0 at k = 0; each difference of a white sequence gives r1 = −1/2.
-* Local slope: AVAR ∝ τ^μ with μ = −alpha − 1 for −3 < alpha ≤ 1; it cannot tell white PM
-  (alpha = 2) from flicker PM (both μ = −2) and is noisy, so it is the fallback only.
+* ≥ 30 averages — lag-1 ACF: average the rate data in blocks of m, difference the averages
+  k times until the lag-1 autocorrelation r1 (about the mean) is small, then
+  δ = r1 / (1 + r1) and alpha = −2(δ + k) (rate data). White rate noise gives r1 = 0 at
+  k = 0; each difference of a white sequence gives r1 = −1/2. ``Lag1Ladder`` keeps the sums.
+* 4–29 averages — Barnes' B1 ratio (sample variance over two-sample variance of the
+  averages, NBS TN 375), which cannot tell white PM from flicker PM; where it says PM, the
+  R(n) = MVAR/AVAR ratio does (``RnSums``, ``alpha_from_rn``).
+* fewer — the local log-log slope of the curve (``alpha_from_slope``; noisy, and blind to
+  white against flicker PM).
 
-``alpha_from_lag1`` is the bare formula; the Allan accumulators (batch and streaming) apply it
-to their own differences: the second difference of the phase at lag m is m times the first
-difference of adjacent m-averages, so the products of differences m apart that the
-accumulators keep give r1 at k = d − 1 for the d-th difference variance, with every overlapping
-difference used, whatever the record length and without keeping the data.
+``identify_alpha`` is the lag-1 rung on an array, through the same ``Lag1Ladder``.
 """
 
 from __future__ import annotations
@@ -90,6 +89,12 @@ def identify_alpha(
 ) -> int:
     """Dominant power-law noise exponent at averaging factor m by the lag-1 ACF method.
 
+    The same computation as every Allan estimator's (``Lag1Ladder``, fed the non-overlapping
+    m-averages): the lag-1 autocorrelation about the mean (no detrending), differenced while
+    δ = r1/(1+r1) ≥ 0.25, at most ``dmax`` times. Phase data are differenced to rate first:
+    the m-averages of the rate are the differences of the phase decimated by m, so that is
+    Stable32's ladder on the decimated phase one rung down.
+
     Parameters
     ----------
     y : array (N,)
@@ -104,8 +109,9 @@ def identify_alpha(
     -------
     int
         alpha rounded to an integer in [−2·dmax + 2, 2]: 2 white PM, 1 flicker PM, 0 white FM,
-        −1 flicker FM, −2 random-walk FM, … Raises ``DataError`` when fewer than 30 averages
-        are available (use ``alpha_from_slope`` on the variance curve instead).
+        −1 flicker FM, −2 random-walk FM, … (0 for a constant series, which has no noise).
+        Raises ``DataError`` when fewer than 30 averages are available (Stable32 uses B1 and
+        R(n) there: ``allan_variance`` does; or ``alpha_from_slope`` on the variance curve).
     """
     a = np.asarray(y, dtype=np.float64)
     if a.ndim != 1:
@@ -116,40 +122,19 @@ def identify_alpha(
     if m < 1:
         raise DataError(f"averaging factor m={m} must be >= 1")
     if data_type == "phase":
-        x = a[::m]  # decimated phase, then remove frequency offset and drift
-        x = _detrend(x, 2)
-        extra = 2.0  # phase data are one integration above rate data
-    elif data_type == "rate":
-        n = a.size // m
-        x = a[: n * m].reshape(n, m).mean(axis=1)
-        x = _detrend(x, 1)
-        extra = 0.0
-    else:
+        a = np.diff(a)
+    elif data_type != "rate":
         raise DataError(f"data_type={data_type!r} must be 'rate' or 'phase'")
-    if x.size < MIN_POINTS:
+    n = a.size // m
+    if n < MIN_POINTS:
         raise DataError(
-            f"only {x.size} averages of {m} samples: the lag-1 ACF needs >= {MIN_POINTS}; "
+            f"only {n} averages of {m} samples: the lag-1 ACF needs >= {MIN_POINTS}; "
             "use a smaller m or alpha_from_slope"
         )
-    k = 0
-    while True:
-        r1 = lag1_acf(x)
-        if not math.isfinite(r1):
-            return 0
-        delta = r1 / (1.0 + r1)
-        if delta < 0.25 or k >= dmax:
-            alpha = -2.0 * (delta + k) + extra
-            return int(min(2, max(-2 * dmax + 2, round(alpha))))
-        x = np.diff(x)
-        k += 1
-
-
-def _detrend(x: np.ndarray, deg: int) -> np.ndarray:
-    t = np.arange(x.size, dtype=np.float64)
-    if x.size <= deg:
-        return x - x.mean()
-    coef = np.polyfit(t, x, deg)
-    return x - np.polyval(coef, t)
+    ladder = Lag1Ladder(1, dmax=int(dmax), cross=False)
+    ladder.push(a[: n * m].reshape(n, m).sum(axis=1))  # sums of m: as the estimators feed it
+    alpha = float(ladder.lag1_alpha(2 - 2 * int(dmax))[0])
+    return int(alpha) if math.isfinite(alpha) else 0
 
 
 # ---------------------------------------------------------------------------------------------

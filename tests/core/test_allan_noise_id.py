@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.allan.deviations import oavar
+from avard.core.allan.deviations import allan_variance, oavar
 from avard.core.allan.noise_id import (
     Lag1Ladder,
     RnSums,
@@ -230,3 +230,26 @@ def test_white_and_flicker_pm_told_apart_below_30_averages(alpha: int) -> None:
         exact += int(a == alpha)
     assert right_pm == pm_said
     assert exact >= 28, exact
+
+
+def test_identify_alpha_is_the_estimators_ladder_and_matches_stable32() -> None:
+    """``identify_alpha`` is the estimators' computation (one ladder), for rate and phase
+    input alike, and gives Stable32's Alpha at every τ of PHASE.DAT where Stable32 uses the
+    lag-1 ACF (≥ 30 averages; PHASE.DAT is NBS14 integrated to phase)."""
+    from .test_allan import nbs14_1000
+    from .test_overlapping import STABLE32_PHASE_DAT_ALPHA
+
+    y = nbs14_1000()
+    phase = np.concatenate([[0.0], np.cumsum(y)])
+    ms = [m for m in sorted(STABLE32_PHASE_DAT_ALPHA) if 1000 // m >= 30]
+    assert len(ms) == 33
+    for m in ms:
+        assert identify_alpha(y, m) == STABLE32_PHASE_DAT_ALPHA[m], m
+        assert identify_alpha(phase, m, data_type="phase") == STABLE32_PHASE_DAT_ALPHA[m], m
+    rng = np.random.default_rng(3)
+    for alpha in (2, 1, 0, -1, -2):
+        z = power_law(alpha, 1 << 13, rng) + 9.81  # an offset (an axis at 1 g) changes nothing
+        for m in (1, 3, 16, 200):
+            assert identify_alpha(z, m) == int(oavar(z, 1.0, [m]).alpha[0])
+            assert identify_alpha(z, m, dmax=3) == int(
+                allan_variance(z, 1.0, [m], kind="ohvar").alpha[0])
