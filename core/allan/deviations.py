@@ -442,7 +442,9 @@ def allan_variance(
             else:
                 strided_sums(p, int(m), st, d, sums[k])
             # noise identification: the segment's non-overlapping m-averages (as sums)
-            ladders[k].push(np.diff(p[::int(m)], axis=0).astype(np.float64))
+            # (with m times the segment's first sample, removed from p, added back: every
+            # segment's averages on one scale for the pooled mean of the identification)
+            ladders[k].push((np.diff(p[::int(m)], axis=0) + int(m) * seg[0]).astype(np.float64))
             ladders[k].gap()
             rk = rn[k]
             if rk is not None and p.shape[0] > 2 * m:  # R(n): every second difference

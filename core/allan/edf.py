@@ -207,13 +207,35 @@ def chi2_interval(
         raise DataError(f"confidence level ci={ci} must lie strictly between 0 and 1")
     if quantiles not in QUANTILES:
         raise DataError(f"quantiles={quantiles!r} is unknown; use one of {QUANTILES}")
-    ppf = chi2_ppf if quantiles == "exact" else chi2_ppf_stable32
     v = np.asarray(var, dtype=np.float64)
     e = np.broadcast_to(np.asarray(edf, dtype=np.float64), v.shape)
     ok = np.isfinite(e) & (e > 0)
     e_safe = np.where(ok, e, 1.0)
     # (core/allan/chi2.py, numpy only: the service computes intervals with every snapshot and
     # must not import scipy, ~30 MB of resident memory on a 512 MB Raspberry Pi.)
-    lo = np.where(ok, e_safe * v / ppf(0.5 + ci / 2, e_safe), np.nan)
-    hi = np.where(ok, e_safe * v / ppf(0.5 - ci / 2, e_safe), np.nan)
+    lo = np.where(ok, e_safe * v / _quantiles(quantiles, 0.5 + ci / 2, e_safe), np.nan)
+    hi = np.where(ok, e_safe * v / _quantiles(quantiles, 0.5 - ci / 2, e_safe), np.nan)
     return lo, hi
+
+
+# χ² quantiles already computed, by (method, p, EDF): a snapshot needs one per τ and channel,
+# channels at a τ mostly share their EDF, and the long-τ levels' EDF does not change between
+# snapshots. Bounded: cleared when full.
+_PPF_CACHE: dict[tuple[str, float, float], float] = {}
+_PPF_CACHE_MAX = 1 << 14
+
+
+def _quantiles(method: str, p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+    """χ²_k(p) for every entry of k, each distinct value computed once (and remembered)."""
+    flat = k.ravel()
+    uniq, inverse = np.unique(flat, return_inverse=True)
+    vals = np.array([_PPF_CACHE.get((method, p, float(u)), math.nan) for u in uniq])
+    todo = np.isnan(vals)
+    if todo.any():
+        ppf = chi2_ppf if method == "exact" else chi2_ppf_stable32
+        vals[todo] = ppf(p, uniq[todo])
+        if len(_PPF_CACHE) > _PPF_CACHE_MAX:
+            _PPF_CACHE.clear()
+        for u, v in zip(uniq[todo].tolist(), vals[todo].tolist(), strict=True):
+            _PPF_CACHE[(method, p, u)] = v
+    return vals[inverse].reshape(k.shape)

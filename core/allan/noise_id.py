@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from functools import lru_cache
 from math import comb
+from typing import NamedTuple
 
 import numpy as np
 from avard.core.errors import DataError
@@ -254,6 +256,53 @@ def row_products(a: NDArray, b: NDArray, cross: bool = True) -> NDArray[np.float
     return out
 
 
+class _DiagWeights(NamedTuple):
+    """Fixed coefficients of ``Lag1Ladder._open_sums_diag`` for one (dmax, keep, head)."""
+
+    lag: NDArray[np.float64]     # (orders, 2, lags) on the lag sums
+    hp: NDArray[np.float64]      # (orders, 2, lags, head + 1) on the head's prefix sums
+    ts: NDArray[np.float64]      # (orders, 2, lags, keep + 1) on the tail's suffix sums
+    s_sum: NDArray[np.float64]   # (orders,) on the open sum
+    s_head: NDArray[np.float64]  # (orders, head) less these head values
+    s_tail: NDArray[np.float64]  # (orders, keep) less these tail values
+    first: NDArray[np.float64]   # (orders, head): the first order-k value
+    last: NDArray[np.float64]    # (orders, keep): the last order-k value
+
+
+@lru_cache(maxsize=16)
+def _diag_weights(dmax: int, keep: int, e: int) -> _DiagWeights:
+    """The k-th difference is Σ_a c_a z_{i+a} (c_a = (−1)^(k−a) C(k, a)); its sums of products
+    over the segment (ℓ = 0) and over adjacent pairs (ℓ = 1) are Σ_{a,b} c_a c_b W(start, j),
+    with the window sum W = lag_j − (head prefix at start) − (tail suffix at u): the same
+    bookkeeping as the general ``_open_sums``, written once as coefficients."""
+    orders, lags = dmax + 1, dmax + 2
+    w = _DiagWeights(np.zeros((orders, 2, lags)), np.zeros((orders, 2, lags, e + 1)),
+                     np.zeros((orders, 2, lags, keep + 1)), np.zeros(orders),
+                     np.zeros((orders, e)), np.zeros((orders, keep)), np.zeros((orders, e)),
+                     np.zeros((orders, keep)))
+    for k in range(orders):
+        coef = [(-1) ** (k - a) * comb(k, a) for a in range(k + 1)]
+        for a in range(k + 1):
+            w.s_sum[k] += coef[a]
+            w.s_head[k, :a] += coef[a]
+            if k - a > 0:
+                w.s_tail[k, keep - (k - a):] += coef[a]
+            w.first[k, a] = coef[a]
+            w.last[k, keep - 1 - k + a] = coef[a]
+        for ell in (0, 1):
+            for a in range(k + 1):
+                for b in range(k + 1):
+                    bb = ell + b
+                    start, j = (a, bb - a) if bb >= a else (bb, a - bb)
+                    c = coef[a] * coef[b]
+                    w.lag[k, ell, j] += c
+                    w.hp[k, ell, j, start] += c
+                    u = start + keep - k - ell  # tail index of the first t after the window
+                    if 0 <= u < keep - j:
+                        w.ts[k, ell, j, u] += c
+    return w
+
+
 class Lag1Ladder:
     """Running sums for Stable32's noise identification of one τ, C channels at once.
 
@@ -304,6 +353,7 @@ class Lag1Ladder:
         self._head = np.zeros((c, 0))
         self._tail = np.zeros((c, 0))
         self._few: NDArray[np.float64] | None = np.zeros((c, 0))  # all values while few
+        self._open_cache: dict[str, NDArray] | None = None  # _open_sums() until the next push
 
     def push(self, values: NDArray) -> None:
         """Add the next averages (k, C) of the current segment, oldest first."""
@@ -317,6 +367,7 @@ class Lag1Ladder:
         count = z.shape[1]
         if count == 0:
             return
+        self._open_cache = None
         if self.ref is None:
             self.ref = z[:, 0].copy()
         z = z - self.ref[:, None]
@@ -326,8 +377,7 @@ class Lag1Ladder:
         for j in range(self._lags + 1):
             start, stop = max(0, t - j), full.shape[1] - j  # products whose later end is new
             if stop > start:
-                self._lag[j] += row_products(full[:, start:stop], full[:, start + j:stop + j],
-                                             self.cross)
+                self._lag[j] += self._prod(full[:, start:stop], full[:, start + j:stop + j])
         if self._head.shape[1] < self._edge:
             self._head = np.concatenate([self._head, z[:, :self._edge - self._head.shape[1]]],
                                         axis=1)
@@ -340,13 +390,22 @@ class Lag1Ladder:
     def gap(self) -> None:
         """End the segment: no pair and no difference spans what follows."""
         if self._n_open:
-            seg = self._open_sums()
+            seg = self._cached_open_sums()
             for f in self.FIELDS:
                 getattr(self, f)[...] += seg[f]
         self._open_reset()
 
+    def _cached_open_sums(self) -> dict[str, NDArray]:
+        """``_open_sums`` computed once per state of the open segment: a snapshot reads every
+        level's ladder, and most long-τ levels have had no new average since the last one."""
+        if self._open_cache is None:
+            self._open_cache = self._open_sums()
+        return self._open_cache
+
     def _prod(self, a: NDArray, b: NDArray) -> NDArray[np.float64]:
-        return row_products(a, b, self.cross)
+        if not self.cross:  # per channel: one call for all channels
+            return np.diag(np.einsum("ij,ij->i", a, b))
+        return row_products(a, b, True)
 
     def _open_sums(self) -> dict[str, NDArray]:
         """The open segment's sums per difference order (the FIELDS, stacked over k)."""
@@ -373,6 +432,8 @@ class Lag1Ladder:
                     out["left"][k] = out["s"][k] - w[:, -1]
                     out["right"][k] = out["s"][k] - w[:, 0]
             return out
+        if not self.cross:
+            return self._open_sums_diag(out)
         head, tail, keep = self._head, self._tail, self._keep
         base = n - keep  # segment index of tail[:, 0]
 
@@ -409,14 +470,45 @@ class Lag1Ladder:
             out["left"][k], out["right"][k] = sw - last, sw - first
         return out
 
+    def _open_sums_diag(self, out: dict[str, NDArray]) -> dict[str, NDArray]:
+        """``_open_sums`` of a per-channel ladder (cross=False), with (C,) vectors: every
+        window's end corrections come from prefix sums of the head's lag products and suffix
+        sums of the tail's, and every output is a fixed linear combination of those, the lag
+        sums and the ends (``_diag_weights``): a few matrix products instead of one numpy call
+        per window (a snapshot reads every level's ladder). Equal to the general path
+        (tested)."""
+        keep, head, tail = self._keep, self._head, self._tail
+        lags, e = self._lags + 1, head.shape[1]
+        # hp[j][:, s] = Σ_{t<s} z_t z_{t+j} over the head; ts[j][:, u] = Σ_{t≥u} over the tail
+        hp = np.zeros((lags, self.c, e + 1))
+        ts = np.zeros((lags, self.c, keep + 1))
+        for j in range(lags):
+            np.cumsum(head[:, :e - j] * head[:, j:], axis=1, out=hp[j, :, 1:e - j + 1])
+            prod = tail[:, :keep - j] * tail[:, j:]
+            ts[j, :, :keep - j] = np.cumsum(prod[:, ::-1], axis=1)[:, ::-1]
+        w = _diag_weights(self.dmax, keep, e)
+        lag = np.diagonal(self._lag, axis1=1, axis2=2)  # (lags, C)
+        vec = (np.einsum("klj,jc->klc", w.lag, lag) - np.einsum("klji,jci->klc", w.hp, hp)
+               - np.einsum("klji,jci->klc", w.ts, ts))  # (orders, 2, C): s2 and p
+        sw = w.s_sum[:, None] * self._sum - w.s_head @ head.T - w.s_tail @ tail.T
+        orders = self.dmax + 1
+        ks = np.arange(orders)
+        out["n"][:] = self._n_open - ks
+        out["np"][:] = self._n_open - ks - 1
+        out["s"][:] = sw
+        out["left"][:] = sw - w.last @ tail.T
+        out["right"][:] = sw - w.first @ head.T
+        idx = np.arange(self.c)
+        out["s2"][:, idx, idx] = vec[:, 0]
+        out["p"][:, idx, idx] = vec[:, 1]
+        return out
+
     def totals(self) -> dict[str, NDArray]:
         """Closed segments plus the open one: the FIELDS, stacked over the orders."""
-        tot = {f: getattr(self, f).copy() for f in self.FIELDS}
-        if self._n_open:
-            seg = self._open_sums()
-            for f in self.FIELDS:
-                tot[f] += seg[f]
-        return tot
+        if not self._n_open:
+            return {f: getattr(self, f).copy() for f in self.FIELDS}
+        seg = self._cached_open_sums()
+        return {f: getattr(self, f) + seg[f] for f in self.FIELDS}  # new arrays
 
     def count(self) -> int:
         """Averages seen (all segments)."""

@@ -200,7 +200,9 @@ class OverlappingAllan:
             if q0 < p1:
                 last = q0 + ((p1 - 1 - q0) // m) * m
                 ends = self._span(q0 - m, last - q0 + m + 1)[:, ::m]
-                self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
+                # m × the segment's first sample added back: one scale for all segments
+                sums = np.diff(ends, axis=1) + m * self._offset[:, None]
+                self._pending[k].append(sums.astype(np.float64, copy=False))
                 self._pending_n[k] += ends.shape[1] - 1
                 if self._pending_n[k] >= PIECE:
                     self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1))
