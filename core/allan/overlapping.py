@@ -105,7 +105,11 @@ class OverlappingAllan:
     def _flush_ladders(self) -> None:
         for k, lad in enumerate(self._ladders):
             if self._pending[k]:
-                lad.push_rows(np.concatenate(self._pending[k], axis=1))
+                # m × the segment's first sample (removed from the phase) added back: every
+                # segment's averages on one scale for the identification's pooled mean
+                assert self._offset is not None
+                lad.push_rows(np.concatenate(self._pending[k], axis=1),
+                              int(self.ms[k]) * self._offset)
                 self._pending[k] = []
                 self._pending_n[k] = 0
 
@@ -200,12 +204,11 @@ class OverlappingAllan:
             if q0 < p1:
                 last = q0 + ((p1 - 1 - q0) // m) * m
                 ends = self._span(q0 - m, last - q0 + m + 1)[:, ::m]
-                # m × the segment's first sample added back: one scale for all segments
-                sums = np.diff(ends, axis=1) + m * self._offset[:, None]
-                self._pending[k].append(sums.astype(np.float64, copy=False))
+                self._pending[k].append(np.diff(ends, axis=1).astype(np.float64, copy=False))
                 self._pending_n[k] += ends.shape[1] - 1
                 if self._pending_n[k] >= PIECE:
-                    self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1))
+                    self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1),
+                                               m * self._offset)
                     self._pending[k] = []
                     self._pending_n[k] = 0
 

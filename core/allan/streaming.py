@@ -101,7 +101,7 @@ class AllanSnapshot:
 class _Level:
     """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""
 
-    __slots__ = ("ladder", "m", "pending", "pending_n", "spacing", "stride", "sums")
+    __slots__ = ("ladder", "m", "pending", "pending_n", "shift", "spacing", "stride", "sums")
 
     def __init__(self, m: int, stride: int, c: int, d: int) -> None:
         self.m = m
@@ -113,9 +113,12 @@ class _Level:
         self.ladder = Lag1Ladder(c, dmax=d, cross=False)
         self.pending: list[NDArray] = []  # (k, C) averages not yet in the ladder
         self.pending_n = 0
+        self.shift: NDArray | None = None  # added to the queued averages (the segment's)
 
-    def take(self, averages: NDArray) -> None:
-        """Queue new m-averages (k, C) of the current segment for the ladder."""
+    def take(self, averages: NDArray, shift: NDArray) -> None:
+        """Queue new m-averages (k, C) of the current segment for the ladder, to which
+        ``shift`` (C,) is added (the same for the whole segment)."""
+        self.shift = shift
         self.pending.append(averages)
         self.pending_n += averages.shape[0]
         if self.pending_n >= _LADDER_BATCH:
@@ -125,7 +128,7 @@ class _Level:
         """Push the queued averages into the ladder (before anything reads or ends it)."""
         if self.pending:
             self.ladder.push(self.pending[0] if len(self.pending) == 1
-                             else np.concatenate(self.pending))
+                             else np.concatenate(self.pending), self.shift)
             self.pending = []
             self.pending_n = 0
 
@@ -165,8 +168,8 @@ class _Grid:
             e0 = max(h, sp)
             e0 += (-(self.base + e0)) % sp
             if e0 < length:
-                sums = arr[e0::sp] - arr[e0 - sp:length - sp:sp]
-                lev.take((sums + lev.m * offset).astype(np.float64))
+                sums = arr[e0::sp] - arr[e0 - sp:length - sp:sp]  # a new array
+                lev.take(np.asarray(sums, dtype=np.float64), lev.m * offset)
         if arr.shape[0] > self.keep:
             self.base += arr.shape[0] - self.keep
             arr = arr[-self.keep :]
