@@ -195,6 +195,8 @@ class ChannelAnalysis:
         d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
              "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
              "alpha": _list(a.alpha)}
+        if getattr(a, "quantiles", "exact") != "exact":  # said only when not the default
+            d["quantiles"] = a.quantiles
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -341,6 +343,7 @@ def analyze(
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
     psd: bool = False,
+    quantiles: str = "exact",
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
@@ -356,7 +359,7 @@ def analyze(
     return analyze_stream(meta, segments, source=path, channels=channels,
                           filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
                           progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
-                          psd=psd)
+                          psd=psd, quantiles=quantiles)
 
 
 def _count_rows(path: str) -> int:
@@ -410,6 +413,7 @@ def analyze_stream(
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
     psd: bool = False,
+    quantiles: str = "exact",
 ) -> Analysis:
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
@@ -462,7 +466,8 @@ def analyze_stream(
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
-    res = _with_differences(sa.result())
+    # quantiles="stable32": the intervals' χ² quantiles as Stable32 computes them
+    res = _with_differences(sa.result(quantiles=quantiles))
     f, spectrum = (welch.result() if welch is not None else (None, None))
     corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
               else filter_corner_hz)

@@ -43,10 +43,12 @@ def _p_series(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.floa
     """P(a, x) = xᵃe⁻ˣ/Γ(a+1) · Σₙ xⁿ/((a+1)…(a+n)); fast for x < a + 1."""
     term = np.ones_like(x)
     total = np.ones_like(x)
-    for n in range(1, _ITER_SERIES):
+    live = np.ones(x.shape, dtype=bool)  # converged entries stop changing: each value is
+    for n in range(1, _ITER_SERIES):     # then the same whatever else is in the vector
         term = term * x / (a + n)
-        total = total + term
-        if np.all(term <= total * 1e-16):
+        total = np.where(live, total + term, total)
+        live &= ~(term <= total * 1e-16)
+        if not live.any():
             break
     return np.exp(_log_prefactor(a, x) - np.log(a)) * total
 
@@ -57,6 +59,7 @@ def _q_fraction(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.fl
     c = np.full_like(x, 1.0 / _TINY)
     d = 1.0 / b
     h = d.copy()
+    live = np.ones(x.shape, dtype=bool)
     for i in range(1, _ITER_SERIES):
         an = -i * (i - a)
         b = b + 2.0
@@ -66,8 +69,9 @@ def _q_fraction(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.fl
         c = np.where(np.abs(c) < _TINY, _TINY, c)
         d = 1.0 / d
         delta = d * c
-        h = h * delta
-        if np.all(np.abs(delta - 1.0) < 1e-15):
+        h = np.where(live, h * delta, h)  # converged entries stop changing (see _p_series)
+        live &= ~(np.abs(delta - 1.0) < 1e-15)
+        if not live.any():
             break
     return np.exp(_log_prefactor(a, x)) * h
 

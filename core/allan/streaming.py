@@ -370,11 +370,13 @@ class StreamingAllan:
     def _active(self) -> list[_Level]:
         return [lev for lev in self._levels if lev.sums.n > 0]
 
-    def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
+    def result(self, weights: ArrayLike | None = None, ci: float = 0.683,
+               quantiles: str = "exact") -> AllanResult:
         """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
 
         ``weights`` (C,) gives the single channel Σ w_c y_c from the covariance. A one-channel
         accumulator, or a weighted result, has 1-D arrays; otherwise (K, C).
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``).
         """
         self._settle()
         levels = self._active()
@@ -388,7 +390,7 @@ class StreamingAllan:
         return finish_result(
             self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels],
             [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
-            weights=weights,
+            weights=weights, quantiles=quantiles,
         )
 
     def snapshot(self, ci: float = 0.683) -> AllanSnapshot:

@@ -85,6 +85,32 @@ def test_stable32_quantiles_reproduce_its_printed_bounds() -> None:
     assert np.all(np.abs(exact.dev_lo[:2] / res.dev_lo[:2] - 1) > 1e-4)
 
 
+def test_analyze_cli_with_stable32_quantiles_prints_stable32s_bounds(tmp_path) -> None:
+    """`avard analyze nbs14.csv --rate 1 --json --quantiles stable32`: the 68 % bounds at
+    m = 1 and 8 equal Stable32's printed digits (its α there is avard's: white FM), at m = 64
+    within 1e-4, and the JSON says which quantiles were used."""
+    import json
+    import subprocess
+    import sys
+
+    p = tmp_path / "nbs14.csv"
+    p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in nbs14_1000()))
+    out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
+                          "--rate", "1", "--json", "--quantiles", "stable32"],
+                         capture_output=True, text=True, check=True)
+    ch = json.loads(out.stdout)["channels"]["y"]
+    assert ch["quantiles"] == "stable32"
+    tau = [int(t) for t in ch["tau_s"]]
+    for m in (1, 8, 64):
+        k = tau.index(m)
+        assert ch["alpha"][k] == 0
+        got = [ch["adev_lo"][k], ch["adev_hi"][k]]
+        if m < 64:
+            assert [float(f"{v:.4e}") for v in got] == list(STABLE32[m][1:])
+        else:
+            np.testing.assert_allclose(got, STABLE32[m][1:], rtol=1e-4)
+
+
 @pytest.mark.parametrize("rate", [1.0, 3.0, 100.0])
 def test_agrees_with_allantools_overlapping(rate: float) -> None:
     y = np.random.default_rng(7).normal(0.3, 2.0, 20000)

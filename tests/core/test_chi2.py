@@ -65,3 +65,14 @@ def test_stable32_quantiles_exact_to_100_dof_approximate_above() -> None:
         assert np.all(rel < 1e-3) and np.all(rel > 0) and rel[2] < rel[0], rel
     with pytest.raises(ValueError):
         chi2_ppf_stable32(1.0, 10.0)
+
+
+def test_each_quantile_is_the_same_whatever_else_is_in_the_vector() -> None:
+    """A converged entry stops changing, so χ²_k(p) does not depend on the other entries
+    computed with it (the intervals remember quantiles by EDF: a snapshot must give the same
+    bounds whichever EDF were computed together)."""
+    k = np.concatenate([np.geomspace(0.3, 1e6, 120), [1.0, 99.9, 782.03]])
+    for p in (0.025, 0.1585, 0.8415):
+        vec = chi2_ppf(p, k)
+        one = np.array([chi2_ppf(p, np.array([v]))[0] for v in k])
+        np.testing.assert_array_equal(vec, one)
