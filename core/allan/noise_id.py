@@ -340,6 +340,9 @@ class Lag1Ladder:
         self.left = np.zeros((orders, c))
         self.right = np.zeros((orders, c))
         self.ref: NDArray[np.float64] | None = None
+        # (count stamp, lowest, α) of the last ``alpha`` without R(n): a snapshot asks every
+        # level, and a long-τ level gets a new average only every so often
+        self._alpha_memo: tuple[tuple[int, int, int], NDArray[np.float64]] | None = None
         self._lags = self.dmax + 1  # order dmax, pairs one apart
         self._edge = 2 * self.dmax + 2  # values kept at each end of the open segment
         self._keep = max(self._edge, self._lags)
@@ -620,6 +623,17 @@ class Lag1Ladder:
         ``RnSums``) separates white PM (2) from flicker PM (1). Without a usable R(n) (the
         cascade keeps no MVAR sums) flicker PM is taken, the smaller EDF of the two, so the
         interval is never the narrower white-PM one on a guess. NaN where neither applies."""
+        # every change of the sums raises the closed count or the open one (a gap moves the
+        # open into the closed one): the stamp says whether anything changed since
+        stamp = (int(self.n[0]), self._n_open, int(lowest))
+        if rn is None and self._alpha_memo is not None and self._alpha_memo[0] == stamp:
+            return self._alpha_memo[1].copy()
+        out = self._alpha(lowest, rn, m)
+        if rn is None:
+            self._alpha_memo = (stamp, out.copy())
+        return out
+
+    def _alpha(self, lowest: int, rn: NDArray | None, m: int) -> NDArray[np.float64]:
         n = self.count()
         t = self.totals()
         if n >= MIN_POINTS:

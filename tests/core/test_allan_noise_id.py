@@ -270,3 +270,21 @@ def test_per_channel_ladder_fast_path_equals_the_general_sums() -> None:
             want = np.diagonal(tf[f], axis1=1, axis2=2) if f in ("s2", "p") else tf[f]
             got = np.diagonal(td[f], axis1=1, axis2=2) if f in ("s2", "p") else td[f]
             np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_ladder_alpha_follows_every_change_of_its_sums() -> None:
+    """α is remembered between calls while the sums stay the same; any push or merge that
+    changes them gives the α of the new sums (a gap moves nothing and keeps it)."""
+    rng = np.random.default_rng(9)
+    lad = Lag1Ladder(1, cross=False)
+    lad.push(rng.normal(size=(400, 1)))
+    assert lad.alpha(-2)[0] == 0 and lad.alpha(-2)[0] == 0  # white, twice (remembered)
+    lad.push(np.cumsum(rng.normal(size=(20000, 1)), axis=0) * 10.0)  # a random walk
+    assert lad.alpha(-2)[0] == -2
+    lad.gap()
+    assert lad.alpha(-2)[0] == -2
+    other = Lag1Ladder(1, cross=False)
+    other.push(rng.normal(size=(10 ** 5, 1)) * 1e3)  # much more white noise, merged
+    lad.add(other)
+    fresh = Lag1Ladder.from_state(lad.state())
+    assert lad.alpha(-2)[0] == fresh.alpha(-2)[0] == 0
