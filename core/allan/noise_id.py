@@ -362,31 +362,48 @@ class Lag1Ladder:
         """Add the next averages (k, C) of the current segment, oldest first; ``shift`` (C,),
         when given, is added to every one of them (in the same pass as the reference)."""
         z = np.asarray(values, dtype=np.float64).reshape(-1, self.c)
-        self.push_rows(np.ascontiguousarray(z.T), shift)
+        if z.shape[0] == 0:
+            return
+        ref = self._reference(z[0], shift)
+        rows = np.empty((self.c, z.shape[0]))
+        np.subtract(z.T, ref[:, None], out=rows)  # channel-major and referenced in one pass
+        self._push_referenced(rows)
 
     def push_rows(self, values: NDArray, shift: NDArray | None = None) -> None:
         """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
         sums of products are dot products of rows (the cheapest form for small C)."""
         z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
-        count = z.shape[1]
-        if count == 0:
+        if z.shape[1] == 0:
             return
-        self._open_cache = None
+        self._push_referenced(z - self._reference(z[:, 0], shift)[:, None])
+
+    def _reference(self, first: NDArray, shift: NDArray | None) -> NDArray[np.float64]:
+        """What to subtract from raw averages that get ``shift`` added: ref − shift, with ref
+        the first (shifted) average this ladder saw."""
         h = np.zeros(self.c) if shift is None else np.asarray(shift, dtype=np.float64)
         if self.ref is None:
-            self.ref = z[:, 0] + h
-        z = z - (self.ref - h)[:, None]
+            self.ref = first + h
+        return self.ref - h
+
+    def _push_referenced(self, z: NDArray[np.float64]) -> None:
+        """Add averages (C, k) already relative to ``ref``."""
+        self._open_cache = None
+        count = z.shape[1]
         t = self._tail.shape[1]
-        full = np.concatenate([self._tail, z], axis=1) if t else z
         self._sum += z.sum(axis=1)
         for j in range(self._lags + 1):
-            start, stop = max(0, t - j), full.shape[1] - j  # products whose later end is new
-            if stop > start:
-                self._lag[j] += self._prod(full[:, start:stop], full[:, start + j:stop + j])
+            # products z_{q−j} z_q whose later end q is new: both ends new, ...
+            if count > j:
+                self._lag[j] += self._prod(z[:, :count - j], z[:, j:])
+            # ... or the earlier end still in the tail of the previous push
+            q0, q1 = max(0, j - t), min(j, count)
+            if q1 > q0:
+                self._lag[j] += self._prod(self._tail[:, t + q0 - j:t + q1 - j], z[:, q0:q1])
         if self._head.shape[1] < self._edge:
             self._head = np.concatenate([self._head, z[:, :self._edge - self._head.shape[1]]],
                                         axis=1)
-        self._tail = full[:, -self._keep:].copy()
+        self._tail = (z[:, count - self._keep:].copy() if count >= self._keep
+                      else np.concatenate([self._tail, z], axis=1)[:, -self._keep:])
         self._n_open += count
         if self._few is not None:
             self._few = (np.concatenate([self._few, z], axis=1)
