@@ -154,10 +154,11 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
         assert float(f"{ch['adev'][tau.index(m)]:.4e}") == ref
     assert float(f"{ch['adev'][tau.index(128)]:.4e}") == STABLE32[128][0]
     assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA.get(m, 1) for m in tau]
-    # bounds: within 5e-5 at m = 64, about one unit of the last printed digit (Stable32's
-    # bounds imply an EDF 0.1 % above GR's there: 21.26 vs 21.24); at m = 1 and 8 they imply
-    # an EDF 1.2 % above GR's algorithm (791 vs 782, 168 vs 166; allantools computes 782 and
-    # 166 too), 1.4e-4 to 3.7e-4 relative.
+    # bounds (exact χ² quantiles, the default): within 5e-5 at m = 64, about one unit of the
+    # last printed digit; at m = 1 and 8, 1.4e-4 to 3.7e-4 relative, because Stable32 takes
+    # its χ² quantile above 100 EDF from an approximation (A&S 26.4.17/26.2.22); the EDF is
+    # GR's (782 and 166, as allantools). With --quantiles stable32 they equal its digits
+    # (tests/core/test_allan.py).
     k = tau.index(64)
     np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[64][1:],
                                rtol=5e-5)  # 4.4e-5: about one unit of the last digit
