@@ -237,6 +237,8 @@ class ChannelAnalysis:
         d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
              "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
              "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
+        if getattr(a, "quantiles", "exact") != "exact":  # said only when not the default
+            d["quantiles"] = a.quantiles
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -390,6 +392,7 @@ def analyze(
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
     psd: bool = False,
+    quantiles: str = "exact",
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
@@ -403,7 +406,8 @@ def analyze(
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
     opts = dict(source=path, filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd)
+                progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd,
+                quantiles=quantiles)
     sel = _select(list(meta["names"]), channels)
     if estimator != "oadev" or meta.get("format") == "recording":
         # a service recording is loaded whole (``record_blocks``): passes would save nothing
@@ -495,6 +499,7 @@ def analyze_stream(
     fit_kwargs: dict[str, Any] | None = None,
     estimator: str = "oadev",
     psd: bool = False,
+    quantiles: str = "exact",
 ) -> Analysis:
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
@@ -507,7 +512,7 @@ def analyze_stream(
     return _analyze_passes(meta, [(sel, segments, sel)], source=source,
                            filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
                            progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
-                           psd=psd)
+                           psd=psd, quantiles=quantiles)
 
 
 @dataclass
@@ -522,7 +527,7 @@ class _PassResult:
 def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int] | None,
               names: list[str], rate: float, estimator: str, grid: NDArray[np.int64] | None,
               nper: int | None, progress: ProgressFn | None, done: int,
-              total: int | None) -> _PassResult:
+              total: int | None, quantiles: str = "exact") -> _PassResult:
     """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
     the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
     of the whole analysis."""
@@ -550,7 +555,8 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
                 welch.gap()
         if progress is not None:
             progress(done + n, total)
-    res = _with_differences(sa.result()) if n >= 16 else None
+    # quantiles="stable32": the intervals' χ² quantiles as Stable32 computes them
+    res = _with_differences(sa.result(quantiles=quantiles)) if n >= 16 else None
     return _PassResult(res, welch, n)
 
 
@@ -566,6 +572,7 @@ def _analyze_passes(
     fit_kwargs: dict[str, Any] | None,
     estimator: str,
     psd: bool,
+    quantiles: str = "exact",
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
     its blocks, the block columns to take or None for all), read one after another.
@@ -597,7 +604,7 @@ def _analyze_passes(
     done = 0
     for chans, blocks, take in passes:
         one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
-                        progress, done, all_total)
+                        progress, done, all_total, quantiles)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "

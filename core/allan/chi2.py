@@ -43,10 +43,12 @@ def _p_series(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.floa
     """P(a, x) = xᵃe⁻ˣ/Γ(a+1) · Σₙ xⁿ/((a+1)…(a+n)); fast for x < a + 1."""
     term = np.ones_like(x)
     total = np.ones_like(x)
-    for n in range(1, _ITER_SERIES):
+    live = np.ones(x.shape, dtype=bool)  # converged entries stop changing: each value is
+    for n in range(1, _ITER_SERIES):     # then the same whatever else is in the vector
         term = term * x / (a + n)
-        total = total + term
-        if np.all(term <= total * 1e-16):
+        total = np.where(live, total + term, total)
+        live &= ~(term <= total * 1e-16)
+        if not live.any():
             break
     return np.exp(_log_prefactor(a, x) - np.log(a)) * total
 
@@ -57,6 +59,7 @@ def _q_fraction(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.fl
     c = np.full_like(x, 1.0 / _TINY)
     d = 1.0 / b
     h = d.copy()
+    live = np.ones(x.shape, dtype=bool)
     for i in range(1, _ITER_SERIES):
         an = -i * (i - a)
         b = b + 2.0
@@ -66,8 +69,9 @@ def _q_fraction(a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.fl
         c = np.where(np.abs(c) < _TINY, _TINY, c)
         d = 1.0 / d
         delta = d * c
-        h = h * delta
-        if np.all(np.abs(delta - 1.0) < 1e-15):
+        h = np.where(live, h * delta, h)  # converged entries stop changing (see _p_series)
+        live &= ~(np.abs(delta - 1.0) < 1e-15)
+        if not live.any():
             break
     return np.exp(_log_prefactor(a, x)) * h
 
@@ -180,3 +184,46 @@ def _erfinv(y: float) -> float:
         if abs(err) < 1e-16:
             break
     return x
+
+
+# --------------------------------------------------------------------------------------------
+# Stable32's quantiles, to reproduce its printed intervals digit for digit
+
+# Abramowitz & Stegun 26.2.22, the normal upper-tail quantile x_p ≈ t − (c0 + c1 t)/(1 + d1 t +
+# d2 t²), t = √(ln 1/p²), |error| < 3e-3: A&S print c1 = 0.27061; Stable32's source has 0.27601
+# (two digits swapped), which is what its bounds carry (A. Wallin, allantools' maintainer,
+# reading Stable32's source: "Fun with chi-squared", 2020; checked here on NBS14's bounds).
+STABLE32_AS_26_2_22 = (2.30753, 0.27601, 0.99229, 0.04481)
+# Stable32 uses the approximation above this EDF, and iterates on the distribution below.
+STABLE32_APPROX_EDF = 100.0
+
+
+def _normal_upper_quantile_as(p: float) -> float:
+    """x with Q_normal(x) = p by A&S 26.2.22 with Stable32's coefficients (0 < p < 1)."""
+    q = p if p <= 0.5 else 1.0 - p
+    t = math.sqrt(math.log(1.0 / (q * q)))
+    c0, c1, d1, d2 = STABLE32_AS_26_2_22
+    x = t - (c0 + c1 * t) / (1.0 + d1 * t + d2 * t * t)
+    return x if p <= 0.5 else -x
+
+
+def chi2_ppf_stable32(p: float, k: ArrayLike) -> NDArray[np.float64]:
+    """χ²_k(p) as Stable32 computes it, for reproducing its printed intervals (not for new
+    results: it is off by up to ~1e-3 relative near k = 100).
+
+    For k > 100, Abramowitz & Stegun 26.4.17 (Wilson–Hilferty),
+    χ² ≈ k (1 − 2/(9k) + x √(2/(9k)))³, with x the normal quantile of upper-tail probability
+    1 − p from A&S 26.2.22 as Stable32 has it (``STABLE32_AS_26_2_22``). For k ≤ 100 Stable32
+    iterates on the distribution function, to about four digits; the exact quantile is used.
+    """
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"chi2_ppf_stable32: p = {p} must lie strictly between 0 and 1")
+    k_arr = np.asarray(k, dtype=np.float64)
+    out = chi2_ppf(p, k_arr)
+    big = k_arr > STABLE32_APPROX_EDF
+    if np.any(big):
+        x = _normal_upper_quantile_as(1.0 - p)
+        kb = k_arr[big]
+        h = 2.0 / (9.0 * kb)
+        out[big] = kb * (1.0 - h + x * np.sqrt(h)) ** 3
+    return out

@@ -34,7 +34,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from avard.core.allan.edf import chi2_interval, edf_greenhall
-from avard.core.allan.noise_id import Lag1Ladder, alpha_from_slope, identify_alpha
+from avard.core.allan.noise_id import (
+    MIN_POINTS,
+    Lag1Ladder,
+    RnSums,
+    alpha_from_slope,
+    identify_alpha,
+)
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FormatError
@@ -81,6 +87,8 @@ class AllanResult:
     ``lo``/``hi`` are the chi-squared interval at level ``ci`` with the Greenhall–Riley EDF
     for the noise exponent ``alpha`` (see ``avard.core.allan.edf``).
     ``cov`` (K, C, C), when present, is the Allan covariance: AVAR of Σ w_c y_c = w·cov·w.
+    ``quantiles`` says how the χ² quantiles of the bounds were computed: "exact", or
+    "stable32" (Stable32's approximation, to reproduce its printed bounds; ``edf.chi2_interval``).
     """
 
     kind: str
@@ -97,6 +105,7 @@ class AllanResult:
     ci: float = 0.683
     cov: NDArray[np.float64] | None = None
     names: tuple[str, ...] = field(default=())
+    quantiles: str = "exact"
 
     @property
     def dev(self) -> NDArray[np.float64]:
@@ -141,7 +150,7 @@ class AllanResult:
     def to_dict(self) -> dict:
         """Plain lists and numbers (msgpack/JSON-able); NaN stays NaN."""
         out: dict = {"kind": self.kind, "rate_hz": self.rate_hz, "ci": self.ci,
-                     "names": list(self.names)}
+                     "names": list(self.names), "quantiles": self.quantiles}
         for key in ("tau", "m", "stride", "var", "n", "edf", "lo", "hi", "alpha"):
             out[key] = np.asarray(getattr(self, key)).tolist()
         out["cov"] = None if self.cov is None else self.cov.tolist()
@@ -169,6 +178,7 @@ class AllanResult:
                 ci=float(d.get("ci", 0.683)),
                 cov=None if cov is None else np.asarray(cov, dtype=np.float64),
                 names=tuple(d.get("names", ())),
+                quantiles=str(d.get("quantiles", "exact")),
             )
         except KeyError as exc:
             raise FormatError(f"Allan result/snapshot dict lacks {exc}; it is not one") from exc
@@ -367,6 +377,7 @@ def allan_variance(
     gaps: Sequence[int] | None = None,
     overlap: int = DEFAULT_OVERLAP,
     names: Sequence[str] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """Allan or Hadamard variance of rate samples (NIST SP 1065 eqs. 11, 12, 18).
 
@@ -393,6 +404,8 @@ def allan_variance(
         slope. The same α for every estimator at that τ (batch, streaming, cascade).
     gaps : sample indices at which a new segment starts; no difference straddles a gap.
     names : channel names, kept in the result.
+    quantiles : "exact" (default) or "stable32": the χ² quantiles of the bounds as Stable32
+        computes them, to reproduce its printed intervals (``edf.chi2_interval``).
 
     τ longer than the record can hold give NaN variance with n = 0 (never a made-up value).
     """
@@ -418,6 +431,7 @@ def allan_variance(
     strides = np.array([default_stride(kind, int(m), stride, overlap) for m in ms], np.int64)
     sums = [DifferenceSums.zeros(c) for _ in ms]
     ladders = [Lag1Ladder(c, dmax=d, cross=False) for _ in ms]
+    rn = rn_sums_for(kind, ms, [b - s for s, b in bounds], c)
     for s0, s1 in bounds:
         seg = a[s0:s1]
         if seg.shape[0] < 1:
@@ -430,10 +444,28 @@ def allan_variance(
             else:
                 strided_sums(p, int(m), st, d, sums[k])
             # noise identification: the segment's non-overlapping m-averages (as sums)
-            ladders[k].push(np.diff(p[::int(m)], axis=0).astype(np.float64))
+            # (with m times the segment's first sample, removed from p, added back: every
+            # segment's averages on one scale for the pooled mean of the identification)
+            ladders[k].push((np.diff(p[::int(m)], axis=0) + int(m) * seg[0]).astype(np.float64))
             ladders[k].gap()
+            rk = rn[k]
+            if rk is not None and p.shape[0] > 2 * m:  # R(n): every second difference
+                rk.push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))
+                rk.gap()
     return finish_result(kind, rate_hz, ms, strides, sums, ladders, ci=ci, alpha=alpha,
-                         one_d=one_d, names=names)
+                         one_d=one_d, names=names, rn=rn, quantiles=quantiles)
+
+
+def rn_sums_for(kind: str, ms: NDArray[np.int64], segments: Sequence[int], c: int
+                ) -> list[RnSums | None]:
+    """R(n) sums for the τ where Stable32 may need them: fewer than ``MIN_POINTS``
+    non-overlapping averages in all (B1 decides there, and R(n) where B1 says PM). None for
+    the other τ, and for the cascade's kinds ("pavar", "phvar"), which keep the cascade's
+    identification exactly (the stream sees every lag-m difference only up to m = S)."""
+    if kind in ("pavar", "phvar"):
+        return [None] * len(ms)
+    return [RnSums(c, int(m)) if sum(s // int(m) for s in segments) < MIN_POINTS else None
+            for m in ms]
 
 
 def finish_result(
@@ -449,11 +481,15 @@ def finish_result(
     one_d: bool = False,
     names: Sequence[str] | None = None,
     weights: ArrayLike | None = None,
+    rn: Sequence[RnSums | None] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """Turn difference sums into an ``AllanResult`` (shared by batch and streaming).
 
     ``sums[k]`` holds the sums of the d-th phase differences at ``ms[k]`` (the variance),
-    ``ladders[k]`` those of the non-overlapping averages (the noise identification).
+    ``ladders[k]`` those of the non-overlapping averages (the noise identification), ``rn[k]``
+    (optional) those of R(n) = MVAR/AVAR that separate white from flicker PM below 30
+    averages.
     With ``weights`` (C,), the result is the single channel Σ w_c y_c, computed from the
     covariance sums.
     """
@@ -470,13 +506,15 @@ def finish_result(
         # slope of its own curve
         ladders = [lad.weighted(w) for lad in ladders] if all(lad.cross for lad in ladders) \
             else [_no_ladder(lad.dmax) for lad in ladders]
+        rn = None  # per-channel sums: a weighted channel has no R(n); flicker PM is taken
         one_d = True
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
     n_phase = (np.maximum(n, 1) - 1) * strides + d * ms + 1
-    alpha_id = alphas_from_ladders(ladders, d) if alpha is None else None
+    alpha_id = alphas_from_ladders(ladders, d, rn, ms) if alpha is None else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
-                            alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names)
+                            alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names,
+                            quantiles=quantiles)
 
 
 def _no_ladder(dmax: int) -> Lag1Ladder:
@@ -484,13 +522,19 @@ def _no_ladder(dmax: int) -> Lag1Ladder:
     return Lag1Ladder(1, dmax)
 
 
-def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int) -> NDArray[np.float64]:
+def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
+                        rn: Sequence[RnSums | None] | None = None,
+                        ms: ArrayLike | None = None) -> NDArray[np.float64]:
     """(K, C) noise exponents identified as Stable32 does (``Lag1Ladder.alpha``): lag-1 ACF
-    of the non-overlapping averages with ≥ 30 of them, B1 below; NaN where neither applies."""
+    of the non-overlapping averages with ≥ 30 of them, B1 below, and R(n) = MVAR/AVAR from
+    ``rn[k]`` (when given) where B1 says PM; NaN where neither applies."""
     lowest = 2 - 2 * d
     if not ladders:
         return np.zeros((0, 0))
-    return np.array([lad.alpha(lowest) for lad in ladders], dtype=np.float64)
+    rs = [None] * len(ladders) if rn is None else list(rn)
+    mm = np.zeros(len(ladders), np.int64) if ms is None else np.asarray(ms, np.int64)
+    return np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m))
+                     for lad, r, m in zip(ladders, rs, mm, strict=True)], dtype=np.float64)
 
 
 def result_from_sums(
@@ -507,6 +551,7 @@ def result_from_sums(
     alpha_id: NDArray[np.float64] | None = None,
     one_d: bool = False,
     names: Sequence[str] | None = None,
+    quantiles: str = "exact",
 ) -> AllanResult:
     """The ``AllanResult`` of difference sums: n (K,) differences, s2 (K, C, C) = Σ D Dᵀ.
 
@@ -534,7 +579,7 @@ def result_from_sums(
         for ch in range(c):
             edf[k, ch] = edf_greenhall(int(alphas[k, ch]), d, int(ms[k]), int(strides[k]),
                                        int(n_phase[k]))
-    lo, hi = chi2_interval(var, edf, ci)
+    lo, hi = chi2_interval(var, edf, ci, quantiles)
     squeeze = (lambda x: x[:, 0]) if one_d else (lambda x: x)
     return AllanResult(
         kind=kind,
@@ -551,6 +596,7 @@ def result_from_sums(
         ci=ci,
         cov=cov,
         names=tuple(names) if names else (),
+        quantiles=quantiles,
     )
 
 

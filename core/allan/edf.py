@@ -27,11 +27,11 @@ from functools import lru_cache
 from math import comb
 
 import numpy as np
-from avard.core.allan.chi2 import chi2_ppf
+from avard.core.allan.chi2 import chi2_ppf, chi2_ppf_stable32
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["chi2_interval", "edf_greenhall", "edf_simple"]
+__all__ = ["QUANTILES", "chi2_interval", "edf_greenhall", "edf_simple"]
 
 # GR switch to the asymptotic forms beyond this many terms of the basic sum.
 _J_MAX = 100
@@ -190,29 +190,52 @@ def edf_simple(n_diff: int) -> float:
     return float(n_diff)
 
 
+QUANTILES = ("exact", "stable32")
+
+
 def chi2_interval(
-    var: ArrayLike, edf: ArrayLike, ci: float = 0.683
+    var: ArrayLike, edf: ArrayLike, ci: float = 0.683, quantiles: str = "exact"
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Two-sided chi-squared confidence interval of a variance estimate (NIST SP 1065 eq. 40).
 
     ``lo = edf·var / χ²_{edf}((1+ci)/2)``, ``hi = edf·var / χ²_{edf}((1−ci)/2)``. Entries
-    with a non-finite or non-positive EDF get NaN bounds.
+    with a non-finite or non-positive EDF get NaN bounds. ``quantiles="stable32"`` takes the
+    χ² quantiles as Stable32 computes them (``chi2.chi2_ppf_stable32``: an approximation
+    above 100 degrees of freedom), to reproduce its printed bounds; the default is exact.
     """
     if not 0.0 < ci < 1.0:
         raise DataError(f"confidence level ci={ci} must lie strictly between 0 and 1")
+    if quantiles not in QUANTILES:
+        raise DataError(f"quantiles={quantiles!r} is unknown; use one of {QUANTILES}")
     v = np.asarray(var, dtype=np.float64)
     e = np.broadcast_to(np.asarray(edf, dtype=np.float64), v.shape)
     ok = np.isfinite(e) & (e > 0)
     e_safe = np.where(ok, e, 1.0)
-    lo = np.where(ok, e_safe * v / _chi2_ppf(0.5 + ci / 2, e_safe), np.nan)
-    hi = np.where(ok, e_safe * v / _chi2_ppf(0.5 - ci / 2, e_safe), np.nan)
+    # (core/allan/chi2.py, numpy only: the service computes intervals with every snapshot and
+    # must not import scipy, ~30 MB of resident memory on a 512 MB Raspberry Pi.)
+    lo = np.where(ok, e_safe * v / _quantiles(quantiles, 0.5 + ci / 2, e_safe), np.nan)
+    hi = np.where(ok, e_safe * v / _quantiles(quantiles, 0.5 - ci / 2, e_safe), np.nan)
     return lo, hi
 
 
-def _chi2_ppf(p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Chi-squared quantile: χ²_k(p) = 2·P⁻¹(k/2, p), P the regularised lower incomplete gamma.
+# χ² quantiles already computed, by (method, p, EDF): a snapshot needs one per τ and channel,
+# channels at a τ mostly share their EDF, and the long-τ levels' EDF does not change between
+# snapshots. Bounded: cleared when full.
+_PPF_CACHE: dict[tuple[str, float, float], float] = {}
+_PPF_CACHE_MAX = 1 << 14
 
-    (core/allan/chi2.py, numpy only: the service computes intervals with every snapshot and must not
-    import scipy, ~30 MB of resident memory on a 512 MB Raspberry Pi.)
-    """
-    return chi2_ppf(p, k)
+
+def _quantiles(method: str, p: float, k: NDArray[np.float64]) -> NDArray[np.float64]:
+    """χ²_k(p) for every entry of k, each distinct value computed once (and remembered)."""
+    flat = k.ravel()
+    uniq, inverse = np.unique(flat, return_inverse=True)
+    vals = np.array([_PPF_CACHE.get((method, p, float(u)), math.nan) for u in uniq])
+    todo = np.isnan(vals)
+    if todo.any():
+        ppf = chi2_ppf if method == "exact" else chi2_ppf_stable32
+        vals[todo] = ppf(p, uniq[todo])
+        if len(_PPF_CACHE) > _PPF_CACHE_MAX:
+            _PPF_CACHE.clear()
+        for u, v in zip(uniq[todo].tolist(), vals[todo].tolist(), strict=True):
+            _PPF_CACHE[(method, p, u)] = v
+    return vals[inverse].reshape(k.shape)

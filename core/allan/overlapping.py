@@ -42,7 +42,7 @@ from avard.core.allan.deviations import (
     checked_block,
     result_from_sums,
 )
-from avard.core.allan.noise_id import Lag1Ladder, row_products
+from avard.core.allan.noise_id import MIN_POINTS, Lag1Ladder, RnSums, row_products
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError
@@ -112,6 +112,8 @@ class OverlappingAllan:
         self._s2 = np.zeros((grid.size, c, c))
         self.covariance = bool(covariance)
         self._ladders = [Lag1Ladder(c, dmax=2, cross=self.covariance) for _ in grid]
+        # R(n) = MVAR/AVAR sums, kept only while a τ has < MIN_POINTS averages (B1's range)
+        self._rn: list[RnSums | None] = [RnSums(c, int(m)) for m in grid]
         # averages waiting for their ladder: pushed in batches, since at long τ each piece
         # brings only a few and a push costs tens of numpy calls whatever its size
         self._pending: list[list[NDArray]] = [[] for _ in grid]
@@ -124,7 +126,11 @@ class OverlappingAllan:
     def _flush_ladders(self) -> None:
         for k, lad in enumerate(self._ladders):
             if self._pending[k]:
-                lad.push_rows(np.concatenate(self._pending[k], axis=1))
+                # m × the segment's first sample (removed from the phase) added back: every
+                # segment's averages on one scale for the identification's pooled mean
+                assert self._offset is not None
+                lad.push_rows(np.concatenate(self._pending[k], axis=1),
+                              int(self.ms[k]) * self._offset)
                 self._pending[k] = []
                 self._pending_n[k] = 0
 
@@ -135,6 +141,9 @@ class OverlappingAllan:
         self._carry: NDArray | None = None
         for lad in self._ladders:
             lad.gap()
+        for r in self._rn:
+            if r is not None:
+                r.gap()
 
     def _check_block(self, block: ArrayLike) -> NDArray:
         first = self._integer is None
@@ -223,6 +232,12 @@ class OverlappingAllan:
                     s2 = self._s2[k]
                     for ch in range(c):
                         s2[ch, ch] += float(np.dot(d[ch], d[ch]))
+                rk = self._rn[k]
+                if rk is not None:  # R(n) matters only while B1 decides (< MIN_POINTS)
+                    if self._ladders[k].count() + self._pending_n[k] >= MIN_POINTS:
+                        self._rn[k] = None
+                    else:
+                        rk.push(d)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
@@ -257,18 +272,25 @@ class OverlappingAllan:
             sums = np.concatenate([*self._pending[k], sums.astype(np.float64)], axis=1)
             self._pending[k] = []
             self._pending_n[k] = 0
+        # m × the segment's first sample (removed from the phase) added back: every segment's
+        # averages on one scale for the identification's pooled mean (pending averages are
+        # of this segment: a gap flushes them)
+        assert self._offset is not None
+        shift = int(self.ms[k]) * self._offset
         for i in range(0, sums.shape[1], LADDER_BATCH):
-            self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH])
+            self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH], shift)
 
     # ------------------------------------------------------------------------ results
     @one_blas_thread
-    def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None) -> AllanResult:
+    def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None,
+               quantiles: str = "exact") -> AllanResult:
         """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
-        channel, else (K, C)); τ with no complete difference have NaN variance and n = 0."""
+        channel, else (K, C)); τ with no complete difference have NaN variance and n = 0.
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``)."""
         self._flush_ladders()
         res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
-            alpha_id=alphas_from_ladders(self._ladders, 2), ci=ci,
-            one_d=self.n_channels == 1, names=self.names)
+            alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms), ci=ci,
+            one_d=self.n_channels == 1, names=self.names, quantiles=quantiles)
         return res if self.covariance else replace(res, cov=None)

@@ -59,6 +59,10 @@ _FLUSH_SAMPLES = 4096
 # Largest piece processed at once (working memory ≈ 4 × this × C × 8 bytes).
 _MAX_BLOCK = 1 << 16
 _EXACT_FLOAT = 2.0**53  # integers below this are exact in float64
+# m-averages a level collects before they go to its Lag1Ladder: a push costs a few dozen numpy
+# calls whatever its size, and a long-τ level gets only a few averages per block. The ladder's
+# sums are exact for any split, so results never depend on it.
+_LADDER_BATCH = 4096
 
 
 @dataclass(frozen=True)
@@ -98,7 +102,7 @@ class AllanSnapshot:
 class _Level:
     """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""
 
-    __slots__ = ("ladder", "m", "spacing", "stride", "sums")
+    __slots__ = ("ladder", "m", "pending", "pending_n", "shift", "spacing", "stride", "sums")
 
     def __init__(self, m: int, stride: int, c: int, d: int) -> None:
         self.m = m
@@ -108,6 +112,26 @@ class _Level:
         # non-overlapping m-averages: every spacing-th first difference of the grid; per
         # channel only (the cross sums would cost C times more at m = 1, every sample)
         self.ladder = Lag1Ladder(c, dmax=d, cross=False)
+        self.pending: list[NDArray] = []  # (k, C) averages not yet in the ladder
+        self.pending_n = 0
+        self.shift: NDArray | None = None  # added to the queued averages (the segment's)
+
+    def take(self, averages: NDArray, shift: NDArray) -> None:
+        """Queue new m-averages (k, C) of the current segment for the ladder, to which
+        ``shift`` (C,) is added (the same for the whole segment)."""
+        self.shift = shift
+        self.pending.append(averages)
+        self.pending_n += averages.shape[0]
+        if self.pending_n >= _LADDER_BATCH:
+            self.settle()
+
+    def settle(self) -> None:
+        """Push the queued averages into the ladder (before anything reads or ends it)."""
+        if self.pending:
+            self.ladder.push(self.pending[0] if len(self.pending) == 1
+                             else np.concatenate(self.pending), self.shift)
+            self.pending = []
+            self.pending_n = 0
 
 
 class _Grid:
@@ -126,8 +150,13 @@ class _Grid:
         self.hist: NDArray = np.zeros((1, c), dtype=dtype)  # X_0 = 0 of the segment
         self.base = 0  # grid index, within the segment, of hist[0]
 
-    def push(self, points: NDArray, levels: Sequence[_Level], d: int) -> None:
-        """Append new grid points and add every completed difference to the levels' sums."""
+    def push(self, points: NDArray, levels: Sequence[_Level], d: int, offset: NDArray) -> None:
+        """Append new grid points and add every completed difference to the levels' sums.
+
+        ``offset`` is the segment's first sample, removed from the phase: the ladders get the
+        m-averages with it added back (as sums of m samples), so that every segment's
+        averages are on one scale and the pooled mean of the noise identification is the
+        records' (a difference order ≥ 1 never sees it; order 0 does)."""
         h = self.hist.shape[0]
         arr = scratch("cat", h + points.shape[0], points.shape[1], points.dtype)
         arr[:h] = self.hist  # int64 → float64 is exact below 2**53 (checked by the caller)
@@ -140,7 +169,8 @@ class _Grid:
             e0 = max(h, sp)
             e0 += (-(self.base + e0)) % sp
             if e0 < length:
-                lev.ladder.push((arr[e0::sp] - arr[e0 - sp:length - sp:sp]).astype(np.float64))
+                sums = arr[e0::sp] - arr[e0 - sp:length - sp:sp]  # a new array
+                lev.take(np.asarray(sums, dtype=np.float64), lev.m * offset)
         if arr.shape[0] > self.keep:
             self.base += arr.shape[0] - self.keep
             arr = arr[-self.keep :]
@@ -216,6 +246,7 @@ class StreamingAllan:
             g.hist = np.zeros((1, self.n_channels), dtype=self._dtype())
             g.base = 0
         for lev in self._levels:
+            lev.settle()
             lev.ladder.gap()
 
     def _dtype(self) -> type:
@@ -324,25 +355,33 @@ class StreamingAllan:
             grid = self._grid(gi)
             off = (-first_index) % s  # first new index on this grid
             if off < n:
-                grid.push(phase[off::s], levels, self._d)
+                grid.push(phase[off::s], levels, self._d, self._offset)
 
     def gap(self) -> None:
         """End the current segment: later differences never reach back across this point."""
         self._flush()
         self._reset_segment()
 
+    def _settle(self) -> None:
+        """Fold in pending blocks and queued averages: the sums are then complete."""
+        self._flush()
+        for lev in self._levels:
+            lev.settle()
+
     # ------------------------------------------------------------------------ results
     def _active(self) -> list[_Level]:
         return [lev for lev in self._levels if lev.sums.n > 0]
 
     @one_blas_thread
-    def result(self, weights: ArrayLike | None = None, ci: float = 0.683) -> AllanResult:
+    def result(self, weights: ArrayLike | None = None, ci: float = 0.683,
+               quantiles: str = "exact") -> AllanResult:
         """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
 
         ``weights`` (C,) gives the single channel Σ w_c y_c from the covariance. A one-channel
         accumulator, or a weighted result, has 1-D arrays; otherwise (K, C).
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``).
         """
-        self._flush()
+        self._settle()
         levels = self._active()
         if not levels:
             raise DataError(
@@ -354,12 +393,12 @@ class StreamingAllan:
         return finish_result(
             self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels],
             [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
-            weights=weights,
+            weights=weights, quantiles=quantiles,
         )
 
     def snapshot(self, ci: float = 0.683) -> AllanSnapshot:
         """τ, AVAR per channel, covariance, counts, EDF and CI, at the current point."""
-        self._flush()
+        self._settle()
         if not self._active():
             k = 0
             empty = np.zeros((0, self.n_channels))
@@ -396,8 +435,8 @@ class StreamingAllan:
                 f"({self.n_channels}, {self.rate_hz} Hz, S={self.overlap}, {self.kind}) vs "
                 f"({other.n_channels}, {other.rate_hz} Hz, S={other.overlap}, {other.kind})"
             )
-        self._flush()
-        other._flush()
+        self._settle()
+        other._settle()
         for k, lev in enumerate(other._levels):
             mine = self._level(k)
             mine.sums.add(lev.sums)
@@ -411,7 +450,7 @@ class StreamingAllan:
         Pending small blocks are folded in first. Arrays are {"dtype", "shape", "data"} maps,
         as in avard's frame format.
         """
-        self._flush()
+        self._settle()
         c = self.n_channels
         # Levels past the last one with any sums are recreated empty on restore.
         count = max((k + 1 for k, lev in enumerate(self._levels)

@@ -73,6 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--estimator", choices=("oadev", "cascade"), default="oadev",
                         help="Allan estimator: fully overlapping (oadev, default, as Stable32 "
                              "and allantools) or the service's streaming cascade")
+    parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
+                        help="chi-squared quantiles of the intervals: exact (default) or as "
+                             "Stable32 computes them (reproduces its printed bounds)")
     parser.add_argument("--filter-corner", type=_corner, default="auto", metavar="HZ",
                         help="sensor low-pass corner to model on the white noise: a number in "
                              "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
@@ -128,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
                           suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    if args.temperature and args.quantiles != "exact":
+        raise DataError("--quantiles stable32 is not available with --temperature; run "
+                        "analyze without --temperature to compare with Stable32")
     if args.temperature:
         # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
         # fit on the named channel
@@ -142,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                      filter_corner_hz=args.filter_corner, progress=progress_printer(),
-                     estimator=args.estimator, psd=args.psd)
+                     estimator=args.estimator, psd=args.psd, quantiles=args.quantiles)
         comp = {}
     if args.json:
         d = an.to_dict()

@@ -65,6 +65,52 @@ def test_stable32_phase_dat_confidence_bounds() -> None:
     np.testing.assert_allclose(res.dev_hi, ref[:, 2], rtol=2e-3)
 
 
+def test_stable32_quantiles_reproduce_its_printed_bounds() -> None:
+    """With Stable32's χ² quantiles (A&S 26.4.17 with its 26.2.22 coefficients above 100
+    degrees of freedom) the bounds at m = 1 and 8 (EDF 782 and 166) equal Stable32's printed
+    digits; the exact quantiles miss them by 1.4e-4 to 3.7e-4. At m = 64 and 128 (EDF 21 and
+    9.6) Stable32 iterates its quantile to about four digits: within 1e-4."""
+    ms = sorted(STABLE32)
+    res = oavar(nbs14_1000(), 1.0, ms, alpha=0, quantiles="stable32")
+    assert res.quantiles == "stable32"
+    for k, m in enumerate(ms):
+        _, lo, hi = STABLE32[m]
+        if m in (1, 8):
+            assert (float(f"{res.dev_lo[k]:.4e}"), float(f"{res.dev_hi[k]:.4e}")) == (lo, hi)
+        else:
+            np.testing.assert_allclose([res.dev_lo[k], res.dev_hi[k]], [lo, hi], rtol=1e-4)
+    exact = oavar(nbs14_1000(), 1.0, ms, alpha=0)
+    assert exact.quantiles == "exact"
+    np.testing.assert_array_equal(exact.dev_lo[2:], res.dev_lo[2:])  # EDF <= 100: the same
+    assert np.all(np.abs(exact.dev_lo[:2] / res.dev_lo[:2] - 1) > 1e-4)
+
+
+def test_analyze_cli_with_stable32_quantiles_prints_stable32s_bounds(tmp_path) -> None:
+    """`avard analyze nbs14.csv --rate 1 --json --quantiles stable32`: the 68 % bounds at
+    m = 1 and 8 equal Stable32's printed digits (its α there is avard's: white FM), at m = 64
+    within 1e-4, and the JSON says which quantiles were used."""
+    import json
+    import subprocess
+    import sys
+
+    p = tmp_path / "nbs14.csv"
+    p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in nbs14_1000()))
+    out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
+                          "--rate", "1", "--json", "--quantiles", "stable32"],
+                         capture_output=True, text=True, check=True)
+    ch = json.loads(out.stdout)["channels"]["y"]
+    assert ch["quantiles"] == "stable32"
+    tau = [int(t) for t in ch["tau_s"]]
+    for m in (1, 8, 64):
+        k = tau.index(m)
+        assert ch["alpha"][k] == 0
+        got = [ch["adev_lo"][k], ch["adev_hi"][k]]
+        if m < 64:
+            assert [float(f"{v:.4e}") for v in got] == list(STABLE32[m][1:])
+        else:
+            np.testing.assert_allclose(got, STABLE32[m][1:], rtol=1e-4)
+
+
 @pytest.mark.parametrize("rate", [1.0, 3.0, 100.0])
 def test_agrees_with_allantools_overlapping(rate: float) -> None:
     y = np.random.default_rng(7).normal(0.3, 2.0, 20000)

@@ -1,14 +1,17 @@
-"""Power-law noise identification: lag-1 ACF (Riley & Greenhall 2004) and the slope fallback."""
+"""Power-law noise identification: lag-1 ACF (Riley & Greenhall 2004), B1 and R(n) below 30
+averages (Stable32), and the slope fallback."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.allan.deviations import oavar
+from avard.core.allan.deviations import allan_variance, oavar
 from avard.core.allan.noise_id import (
     Lag1Ladder,
+    RnSums,
     alpha_from_b1,
     alpha_from_lag1,
+    alpha_from_rn,
     alpha_from_slope,
     b1_theory,
     identify_alpha,
@@ -153,3 +156,135 @@ def test_lag1_ladder_short_segments_per_channel_sums_and_state() -> None:
             assert full.r1(k)[ch] == pytest.approx(want, abs=1e-9)
             assert diag.r1(k)[ch] == pytest.approx(want, abs=1e-9)
     np.testing.assert_array_equal(full.alpha(-2), diag.alpha(-2))
+
+
+def _mvar_avar_literal(x: np.ndarray, m: int) -> tuple[float, float]:
+    """MVAR and overlapping AVAR of phase x (sample units) straight from NIST SP 1065
+    eqs. 14 and 12, with the double loop of eq. 14 written out."""
+    n = x.size
+    d = [x[i + 2 * m] - 2 * x[i + m] + x[i] for i in range(n - 2 * m)]
+    mod = [sum(d[j:j + m]) for j in range(n - 3 * m + 1)]
+    return (float(np.mean(np.square(mod))) / (2 * m**4),
+            float(np.mean(np.square(d))) / (2 * m**2))
+
+
+def test_rn_sums_equal_the_definition_for_any_split_and_gap() -> None:
+    rng = np.random.default_rng(5)
+    y = rng.normal(size=(700, 2)) + np.array([3.0, 0.0])
+    m = 9
+    segs = [y[:300], y[300:]]
+    acc = RnSums(2, m)
+    for seg in segs:
+        x = np.vstack([np.zeros((1, 2)), np.cumsum(seg, axis=0)])
+        d = (x[2 * m:] - 2 * x[m:-m] + x[:-2 * m]).T
+        for part in np.array_split(d, [1, 5, 17, 200], axis=1):
+            acc.push(part)
+        acc.gap()
+    for ch in range(2):
+        parts = [_mvar_avar_literal(np.concatenate([[0.0], np.cumsum(sg[:, ch])]), m)
+                 for sg in segs]
+        # pooled over the two segments, weighted by their counts (300 and 400 samples)
+        n_mod = [300 - 3 * m + 2, 400 - 3 * m + 2]  # L + 1 phase points per segment
+        n_d = [300 - 2 * m + 1, 400 - 2 * m + 1]
+        mvar = sum(p[0] * k for p, k in zip(parts, n_mod, strict=True)) / sum(n_mod)
+        avar = sum(p[1] * k for p, k in zip(parts, n_d, strict=True)) / sum(n_d)
+        assert acc.ratio()[ch] == pytest.approx(mvar / avar, rel=1e-12)
+
+
+# Stable32 on the Keysight 53230A time-interval noise floor (55 688 phase points; allantools'
+# test suite, tests/Keysight53230A_ti_noise_floor/tic_oadev.txt and tic_mdev.txt): averaging
+# factor → (OADEV, MDEV, Stable32's "Alpha"). White PM up to m = 1024 (lag-1 ACF, ≥ 30
+# averages), flicker PM from m = 2048 (27 averages and fewer: B1 says PM, R(n) decides).
+STABLE32_TIC = {8: (2.2296e-12, 7.9280e-13, 2), 16: (1.1110e-12, 2.8456e-13, 2),
+                32: (5.5853e-13, 1.0271e-13, 2), 64: (2.7960e-13, 4.0708e-14, 2),
+                128: (1.4018e-13, 1.8420e-14, 2), 256: (7.0538e-14, 7.4228e-15, 2),
+                512: (3.5291e-14, 2.9908e-15, 2), 1024: (1.7663e-14, 1.4367e-15, 2),
+                2048: (8.8933e-15, 9.4879e-16, 1), 4096: (4.4960e-15, 6.0549e-16, 1),
+                8192: (2.2694e-15, 3.5547e-16, 1)}
+
+
+def test_rn_classifies_stable32s_own_mdev_and_oadev_as_stable32_does() -> None:
+    """R(n) = (MDEV/OADEV)² of Stable32's published columns, classified by ``alpha_from_rn``,
+    gives Stable32's Alpha at every τ of the run (where Stable32 itself used R(n), and where
+    the lag-1 ACF found the same white PM)."""
+    for m, (oadev, mdev, alpha) in STABLE32_TIC.items():
+        assert alpha_from_rn((mdev / oadev) ** 2, m) == alpha, m
+    assert alpha_from_rn(1.0, 1) is None  # MVAR = AVAR at m = 1: no information
+    assert alpha_from_rn(float("nan"), 64) is None
+
+
+@pytest.mark.parametrize("alpha", [2, 1])
+def test_white_and_flicker_pm_told_apart_below_30_averages(alpha: int) -> None:
+    """Phase noise with 16 averages per τ (B1's range): where B1 says PM, R(n) names white or
+    flicker PM correctly (measured: in all 32 of 40 runs where B1 said PM, for each type);
+    in the other runs B1 itself missed (white FM read), which R(n) cannot repair."""
+    rng = np.random.default_rng(7 + alpha)
+    m = 256
+    pm_said, right_pm, exact = 0, 0, 0
+    for _ in range(40):
+        y = power_law(alpha, 16 * m, rng)
+        a = int(oavar(y, 1.0, [m]).alpha[0])
+        if a in (1, 2):
+            pm_said += 1
+            right_pm += int(a == alpha)
+        exact += int(a == alpha)
+    assert right_pm == pm_said
+    assert exact >= 28, exact
+
+
+def test_identify_alpha_is_the_estimators_ladder_and_matches_stable32() -> None:
+    """``identify_alpha`` is the estimators' computation (one ladder), for rate and phase
+    input alike, and gives Stable32's Alpha at every τ of PHASE.DAT where Stable32 uses the
+    lag-1 ACF (≥ 30 averages; PHASE.DAT is NBS14 integrated to phase)."""
+    from .test_allan import nbs14_1000
+    from .test_overlapping import STABLE32_PHASE_DAT_ALPHA
+
+    y = nbs14_1000()
+    phase = np.concatenate([[0.0], np.cumsum(y)])
+    ms = [m for m in sorted(STABLE32_PHASE_DAT_ALPHA) if 1000 // m >= 30]
+    assert len(ms) == 33
+    for m in ms:
+        assert identify_alpha(y, m) == STABLE32_PHASE_DAT_ALPHA[m], m
+        assert identify_alpha(phase, m, data_type="phase") == STABLE32_PHASE_DAT_ALPHA[m], m
+    rng = np.random.default_rng(3)
+    for alpha in (2, 1, 0, -1, -2):
+        z = power_law(alpha, 1 << 13, rng) + 9.81  # an offset (an axis at 1 g) changes nothing
+        for m in (1, 3, 16, 200):
+            assert identify_alpha(z, m) == int(oavar(z, 1.0, [m]).alpha[0])
+            assert identify_alpha(z, m, dmax=3) == int(
+                allan_variance(z, 1.0, [m], kind="ohvar").alpha[0])
+
+
+def test_per_channel_ladder_fast_path_equals_the_general_sums() -> None:
+    """The per-channel ladder's vectorised end corrections (``_open_sums_diag``) give the
+    diagonal of the general C×C computation, for open segments of any length and split."""
+    rng = np.random.default_rng(17)
+    for n in (25, 26, 40, 333, 5000):
+        z = 9.81 + np.cumsum(rng.normal(size=(n, 3)), axis=0) * 1e-3
+        full, diag = Lag1Ladder(3), Lag1Ladder(3, cross=False)
+        for lad in (full, diag):
+            for part in np.array_split(z, [3, 7, n // 2]):
+                lad.push(part)
+        tf, td = full.totals(), diag.totals()
+        for f in Lag1Ladder.FIELDS:
+            want = np.diagonal(tf[f], axis1=1, axis2=2) if f in ("s2", "p") else tf[f]
+            got = np.diagonal(td[f], axis1=1, axis2=2) if f in ("s2", "p") else td[f]
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_ladder_alpha_follows_every_change_of_its_sums() -> None:
+    """α is remembered between calls while the sums stay the same; any push or merge that
+    changes them gives the α of the new sums (a gap moves nothing and keeps it)."""
+    rng = np.random.default_rng(9)
+    lad = Lag1Ladder(1, cross=False)
+    lad.push(rng.normal(size=(400, 1)))
+    assert lad.alpha(-2)[0] == 0 and lad.alpha(-2)[0] == 0  # white, twice (remembered)
+    lad.push(np.cumsum(rng.normal(size=(20000, 1)), axis=0) * 10.0)  # a random walk
+    assert lad.alpha(-2)[0] == -2
+    lad.gap()
+    assert lad.alpha(-2)[0] == -2
+    other = Lag1Ladder(1, cross=False)
+    other.push(rng.normal(size=(10 ** 5, 1)) * 1e3)  # much more white noise, merged
+    lad.add(other)
+    fresh = Lag1Ladder.from_state(lad.state())
+    assert lad.alpha(-2)[0] == fresh.alpha(-2)[0] == 0

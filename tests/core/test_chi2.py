@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.allan.chi2 import chi2_ppf, gammainc_pq
+from avard.core.allan.chi2 import chi2_ppf, chi2_ppf_stable32, gammainc_pq
 from scipy.special import gammainc, gammaincc, gammaincinv
 
 K = np.concatenate([np.geomspace(0.2, 1e9, 300), [1.0, 2.0, 3.0, 99.9, 100.0, 100.1]])
@@ -50,3 +50,29 @@ def test_the_service_path_imports_no_scipy() -> None:
             "s.snapshot(); print(sorted(m for m in sys.modules if m.startswith('scipy')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_stable32_quantiles_exact_to_100_dof_approximate_above() -> None:
+    """Stable32's χ² quantiles: the exact ones up to 100 degrees of freedom, Wilson–Hilferty
+    with A&S 26.2.22 (Stable32's coefficients) above: within 1e-3 relative there, closer
+    as k grows, and never the exact value (the NBS14 bounds in test_allan hold it to
+    Stable32's printed digits)."""
+    for p in (0.1585, 0.8415, 0.025, 0.975):
+        k = np.array([1.0, 10.0, 100.0])
+        np.testing.assert_array_equal(chi2_ppf_stable32(p, k), chi2_ppf(p, k))
+        big = np.array([101.0, 1e3, 1e5])
+        rel = np.abs(chi2_ppf_stable32(p, big) / chi2_ppf(p, big) - 1.0)
+        assert np.all(rel < 1e-3) and np.all(rel > 0) and rel[2] < rel[0], rel
+    with pytest.raises(ValueError):
+        chi2_ppf_stable32(1.0, 10.0)
+
+
+def test_each_quantile_is_the_same_whatever_else_is_in_the_vector() -> None:
+    """A converged entry stops changing, so χ²_k(p) does not depend on the other entries
+    computed with it (the intervals remember quantiles by EDF: a snapshot must give the same
+    bounds whichever EDF were computed together)."""
+    k = np.concatenate([np.geomspace(0.3, 1e6, 120), [1.0, 99.9, 782.03]])
+    for p in (0.025, 0.1585, 0.8415):
+        vec = chi2_ppf(p, k)
+        one = np.array([chi2_ppf(p, np.array([v]))[0] for v in k])
+        np.testing.assert_array_equal(vec, one)

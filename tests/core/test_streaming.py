@@ -334,3 +334,39 @@ def test_streaming_with_gaps_equals_batch_segments(cuts, gap_after, integer) -> 
     np.testing.assert_array_equal(got.n, ref.n[:k])
     assert np.all(ref.n[k:] == 0)
     np.testing.assert_allclose(got.var, ref.var[:k], rtol=1e-12)
+
+
+def test_cascade_noise_id_sums_equal_the_plain_computation() -> None:
+    """The ladders inside the cascade (averages queued per level, pushed in batches, carried
+    through a state round trip with averages still queued, and ended by a gap) hold the lag-1
+    autocorrelation of the non-overlapping m-averages computed plainly, at every level and
+    difference order."""
+    from .test_allan_noise_id import _pooled_r1
+
+    y = random_record(30000, 2, 8)
+    acc = StreamingAllan(2, 10.0)
+    rng = np.random.default_rng(8)
+    i = 0
+    for cut in (17000, 30000):
+        while i < cut:
+            n = int(min(cut - i, rng.integers(1, 5000)))
+            acc.update(y[i:i + n])
+            i += n
+            if 9000 <= i < 9000 + 5000 and n < 5000:
+                acc = StreamingAllan.from_state(msgpack.unpackb(msgpack.packb(acc.state())))
+        if cut == 17000:
+            acc.gap()
+    acc.result()  # settles the queues
+    segs = [y[:17000], y[17000:]]
+    for lev in acc._levels:
+        m = lev.m
+        avgs = [np.diff(np.concatenate([np.zeros((1, 2)), np.cumsum(s, axis=0)])[::m], axis=0)
+                for s in segs]
+        for k in range(3):
+            parts = [np.diff(a, n=k, axis=0) for a in avgs]
+            parts = [q for q in parts if len(q) > 1]
+            if sum(len(q) for q in parts) < 3:
+                continue
+            for ch in range(2):
+                want = _pooled_r1([q[:, ch] for q in parts])
+                assert lev.ladder.r1(k)[ch] == pytest.approx(want, abs=1e-9), (m, k, ch)
