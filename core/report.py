@@ -527,7 +527,8 @@ class _PassResult:
 def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int] | None,
               names: list[str], rate: float, estimator: str, grid: NDArray[np.int64] | None,
               nper: int | None, progress: ProgressFn | None, done: int,
-              total: int | None, quantiles: str = "exact") -> _PassResult:
+              total: int | None, quantiles: str = "exact",
+              n_record: int | None = None) -> _PassResult:
     """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
     the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
     of the whole analysis."""
@@ -537,7 +538,7 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
     sa: OverlappingAllan | StreamingAllan
     if estimator == "oadev":
         assert grid is not None
-        sa = OverlappingAllan(len(names), rate, grid, names=names)
+        sa = OverlappingAllan(len(names), rate, grid, names=names, n_total=n_record)
     else:
         sa = StreamingAllan(len(names), rate, names=names)
     welch = WelchAccumulator(len(names), rate, nper) if nper is not None else None
@@ -604,7 +605,8 @@ def _analyze_passes(
     done = 0
     for chans, blocks, take in passes:
         one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
-                        progress, done, all_total, quantiles)
+                        progress, done, all_total, quantiles,
+                        None if total is None else int(total))
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "

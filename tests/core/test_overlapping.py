@@ -157,6 +157,29 @@ def test_streaming_identifies_every_power_law() -> None:
     assert hits >= 0.6 * total, (hits, total)
 
 
+def test_the_record_length_hint_keeps_r_n_only_where_b1_decides_and_changes_nothing() -> None:
+    """``n_total`` (analyze of a file knows it) drops the R(n) sums of τ that will hold
+    ≥ 30 averages from the start; on a gapless record every α, variance and bound is the
+    same as without the hint, white PM told from flicker PM by R(n) at the long τ included."""
+    n = 1 << 14
+    grid = np.array([1, 4, 64, n // 20, n // 8, n // 4])
+    for alpha in (2, 1):
+        y = power_law(alpha, n, np.random.default_rng(7 + alpha))
+        plain = OverlappingAllan(1, 1.0, grid)
+        hinted = OverlappingAllan(1, 1.0, grid, n_total=n)
+        assert [r is None for r in hinted._rn] == [n // m >= 30 for m in grid]
+        for i in range(0, n, 3000):
+            plain.update(y[i:i + 3000])
+            hinted.update(y[i:i + 3000])
+        a, b = plain.result(), hinted.result()
+        assert list(a.alpha) == list(b.alpha)
+        np.testing.assert_array_equal(a.var, b.var)
+        np.testing.assert_array_equal(a.lo, b.lo)
+        np.testing.assert_array_equal(a.hi, b.hi)
+    with pytest.raises(DataError, match="n_total"):
+        OverlappingAllan(1, 1.0, grid, n_total=-1)
+
+
 def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     """`avard analyze nbs14.csv --rate 1 --json`: OADEV to Stable32's printed digits, α as
     Stable32 identifies it, and the 68.3 % bounds of the white-FM τ against Stable32's."""
