@@ -53,7 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
 from scipy.stats import norm
 
-__all__ = ["NoiseFit", "TermEstimate", "fit_noise", "slope_method"]
+__all__ = ["ModelChi2", "NoiseFit", "TermEstimate", "fit_noise", "model_chi2", "slope_method"]
 
 
 @dataclass
@@ -230,6 +230,27 @@ def _n_samples(result: Any) -> NDArray[np.float64]:
     """Samples spanned by the differences of each τ: (n − 1)·stride + 2m (≈ N for every τ)."""
     stride = np.asarray(getattr(result, "stride", np.ones_like(result.m)), dtype=float)
     return (np.asarray(result.n, float) - 1.0) * stride + 2.0 * np.asarray(result.m, float)
+
+
+def _usable(result: Any, min_edf: float, min_averages: float,
+            tau_range: tuple[float, float] | None) -> NDArray[np.intp]:
+    """Indices of the τ points a fit may use: a finite positive AVAR, enough independent
+    averages (≥ ``min_averages``) and EDF (≥ ``min_edf``) for a usable weight, inside
+    ``tau_range`` (s). One cut for ``fit_noise`` and ``model_chi2``."""
+    var = np.asarray(result.var, dtype=float)
+    tau = np.asarray(result.tau, dtype=float)
+    m = np.asarray(result.m, dtype=float)
+    n = np.asarray(result.n, dtype=float)
+    M = _n_samples(result)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
+    ok = np.isfinite(var) & (var > 0) & (n > 0)
+    # long-τ cut: too few independent averages, or too few EDF for a usable weight
+    ok &= n_total / m >= min_averages
+    ok &= ~(np.isfinite(edf) & (edf < min_edf))
+    if tau_range is not None:
+        ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
+    return np.flatnonzero(ok)
 
 
 @dataclass
@@ -527,18 +548,8 @@ def fit_noise(
         raise FitError(f"sample rate {rate} Hz is not a positive number")
     tau = np.asarray(result.tau, dtype=float)
     m = np.asarray(result.m, dtype=np.int64)
-    n = np.asarray(result.n, dtype=float)
     M = _n_samples(result)
-    n_total = float(np.nanmax(M)) if len(M) else 0.0
-    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
-
-    ok = np.isfinite(var) & (var > 0) & (n > 0)
-    # long-τ cut: too few independent averages, or too few EDF for a usable weight
-    ok &= n_total / m >= min_averages
-    ok &= ~(np.isfinite(edf) & (edf < min_edf))
-    if tau_range is not None:
-        ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
-    keep = np.flatnonzero(ok)
+    keep = _usable(result, min_edf, min_averages, tau_range)
     extra = list(extra)
     n_q2 = 0.0
     if rounding_lsb is not None:
@@ -658,6 +669,66 @@ def fit_noise(
         rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
     )
+
+
+@dataclass(frozen=True)
+class ModelChi2:
+    """``model_chi2``'s answer: the generalised χ² of an Allan variance against a fixed model,
+    over ``n_points`` τ (``tau_s``, s). χ² ≈ n when the model describes the data."""
+
+    chi2: float
+    n_points: int
+    tau_s: NDArray[np.float64]
+
+
+def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | None = None, *,
+               predictive: bool = False, min_edf: float = 3.0,
+               min_averages: float = 8.0) -> ModelChi2:
+    """χ² of a fixed, already fitted model on (other) Allan variance data; nothing is fitted.
+
+    ``model``: a ``fit_noise`` result; ``result``: a single-channel ``AllanResult`` of rate
+    data in m/s² at the model's sample rate (e.g. a held-out record or another part of one).
+    The points are those ``fit_noise`` would use (its cuts: ≥ ``min_averages`` independent
+    averages, EDF ≥ ``min_edf``) inside ``tau_range`` (s). The residual r = σ̂² − Σθ_j·b_j(τ)
+    is whitened with the covariance ``fit_noise`` models for its own fit, evaluated at the
+    model's θ: Whittle kernels of the model's components (Cov(σ̂²_k, σ̂²_l) =
+    (2/M)∫S²|H_k|²|H_l|²dν) and the NIST SP 1065 §5.3 floor 2σ⁴/EDF on the diagonal; χ² =
+    rᵀC⁻¹r. On the data the model was fitted on (same τ range) this is the fit's own χ²
+    (``chi2_dof·dof``; a test holds them equal).
+
+    ``predictive``: the model predicts data it was not fitted on, so its own uncertainty adds
+    to C (independent of the data's scatter): the fit's parameter covariance carried to the
+    prediction, X·Cov(θ)·Xᵀ, and for each IEEE term the fit left out, a standard error of
+    U²/z_present on its θ from its upper limit U (the term is known only to lie below U).
+    Returns χ² NaN and n 0 when no τ qualifies.
+    """
+    idx = _usable(result, min_edf, min_averages, tau_range)
+    tau = np.asarray(result.tau, dtype=float)[idx]
+    if len(idx) == 0:
+        return ModelChi2(math.nan, 0, tau)
+    var = np.asarray(result.var, dtype=float)[idx]
+    m = np.asarray(result.m, dtype=np.int64)[idx]
+    M = _n_samples(result)[idx]
+    rate = float(result.rate_hz)
+    comps = model.components
+    X = np.column_stack([c.basis(tau, rate) for c in comps])
+    theta = np.asarray(model.theta, dtype=float)
+    G = mdl.avar_covariance_kernels(m, [c.psd(rate) for c in comps])
+    p = _Problem(y=var, X=X, fixed=np.zeros(len(idx)), G=G, theta_fixed=np.zeros(0), M=M,
+                 edf_floor=100.0 * M, m_tau=tau)
+    C = _avar_cov(p, theta, np.arange(len(idx)))
+    if predictive:
+        # its parameters were estimated on other data (covariance Birge-scaled by the fit)
+        C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
+        # U² = θ̂ + z·se (``_upper_limit``): θ of a left-out term carries up to U²/z; a short
+        # fit that cannot tell flicker from random walk must not predict either with confidence
+        for k, comp in enumerate(comps):
+            te = model.terms.get(comp.label)
+            if te is not None and not te.present and te.upper:
+                se = te.upper**2 / model.z_present
+                C = C + se**2 * np.outer(X[:, k], X[:, k])
+    r = _whitener(C) @ (var - X @ theta)
+    return ModelChi2(float(r @ r), len(idx), tau)
 
 
 def slope_method(result: Any) -> dict[str, float]:
