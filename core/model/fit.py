@@ -53,7 +53,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
 from scipy.stats import norm
 
-__all__ = ["ModelChi2", "NoiseFit", "TermEstimate", "fit_noise", "model_chi2", "slope_method"]
+__all__ = ["Component", "ModelChi2", "NoiseFit", "TermEstimate", "avar_estimate_covariance",
+           "fit_noise", "model_chi2", "model_components", "slope_method"]
 
 
 @dataclass
@@ -140,6 +141,11 @@ class NoiseFit:
     components: list[Component] = field(default_factory=list, repr=False)
     theta: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
     theta_cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    #: ln det of the modelled AVAR covariance at the fitted θ over the points used: with
+    #: χ² it gives the Gaussian −2 ln L (χ² + ln det C) that compares models whose
+    #: covariances differ (a nonlinear parameter scanned outside the fit, e.g. a
+    #: Gauss–Markov T); χ² alone favours the model that predicts the larger scatter
+    log_det_cov: float = math.nan
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
@@ -224,6 +230,31 @@ def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz
             label = "filtered white"
         comps.append(Component(label, cause, params, key, unit, fixed))
     return comps
+
+
+def model_components(terms: Iterable[str], extra: Sequence[Mapping] = (), *, rate_hz: float,
+                     filter_corner_hz: float | None = None) -> list[Component]:
+    """The components ``fit_noise`` builds for ``terms`` and ``extra`` (same arguments), for
+    computing with the fit's own model outside a fit (e.g. a stated detection minimum)."""
+    return _components(terms, extra, filter_corner_hz, rate_hz)
+
+
+def avar_estimate_covariance(components: Sequence[Component], theta: ArrayLike,
+                             m: ArrayLike, n_samples: ArrayLike, rate_hz: float
+                             ) -> NDArray[np.float64]:
+    """Cov(σ̂²_k, σ̂²_l) of overlapping AVAR estimates at τ_k = m_k/fs from records of
+    ``n_samples`` samples, for the model Σθ_j·b_j: the covariance ``fit_noise`` weights its
+    fit with (Whittle kernels (2/M)∫S²|H_k|²|H_l|²dν of the components' spectra, the NIST SP
+    1065 §5.3 floor 2σ⁴/EDF on the diagonal). ``theta`` in the order of ``components``."""
+    m_a = np.asarray(m, dtype=np.int64)
+    M = np.asarray(n_samples, dtype=float) * np.ones(len(m_a))
+    tau = m_a / float(rate_hz)
+    th = np.asarray(theta, dtype=float)
+    X = np.column_stack([c.basis(tau, rate_hz) for c in components])
+    G = mdl.avar_covariance_kernels(m_a, [c.psd(rate_hz) for c in components])
+    p = _Problem(y=X @ th, X=X, fixed=np.zeros(len(m_a)), G=G, theta_fixed=np.zeros(0), M=M,
+                 edf_floor=100.0 * M, m_tau=tau)
+    return _avar_cov(p, th, np.arange(len(m_a)))
 
 
 def _n_samples(result: Any) -> NDArray[np.float64]:
@@ -604,6 +635,7 @@ def fit_noise(
         C = _avar_cov(p, theta, idx)
         r = _whitener(C) @ p.y[idx]
         chi2 = float(r @ r)
+    sign, log_det = np.linalg.slogdet(C)
     dof = len(idx) - len(active)
     chi2_dof = chi2 / dof if dof > 0 else float("nan")
     # Birge ratio: when the residuals scatter more than their modelled covariance allows, the
@@ -668,6 +700,7 @@ def fit_noise(
         tau_min_s=float(t_k[idx[0]]), tau_max_s=float(t_k[idx[-1]]), chi2_dof=float(chi2_dof),
         rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
+        log_det_cov=float(log_det) if sign > 0 else math.nan,
     )
 
 
@@ -707,16 +740,12 @@ def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | No
     if len(idx) == 0:
         return ModelChi2(math.nan, 0, tau)
     var = np.asarray(result.var, dtype=float)[idx]
-    m = np.asarray(result.m, dtype=np.int64)[idx]
-    M = _n_samples(result)[idx]
     rate = float(result.rate_hz)
     comps = model.components
     X = np.column_stack([c.basis(tau, rate) for c in comps])
     theta = np.asarray(model.theta, dtype=float)
-    G = mdl.avar_covariance_kernels(m, [c.psd(rate) for c in comps])
-    p = _Problem(y=var, X=X, fixed=np.zeros(len(idx)), G=G, theta_fixed=np.zeros(0), M=M,
-                 edf_floor=100.0 * M, m_tau=tau)
-    C = _avar_cov(p, theta, np.arange(len(idx)))
+    C = avar_estimate_covariance(comps, theta, np.asarray(result.m)[idx],
+                                 _n_samples(result)[idx], rate)
     if predictive:
         # its parameters were estimated on other data (covariance Birge-scaled by the fit)
         C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
