@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 from scipy import signal as sps
@@ -376,8 +377,7 @@ def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s:
     c_min = z·σ_a·√(1 + ω²L²)/A. The phase −atan(ωL) carries the lag: σ_φ = 1/z, hence
     σ_L/L = (1 + ω²L²)/(ωL·z).
     """
-    f0 = 1.0 / period_s
-    s_f0 = 2 * n_white**2 + b_inst**2 / (math.pi * f0) + k_rrw**2 / (2 * math.pi**2 * f0**2)
+    s_f0 = noise_psd(1.0 / period_s, n_white, b_inst, k_rrw)
     sigma_a = math.sqrt(2 * s_f0 / record_s)
     wl = 2 * math.pi * lag_s / period_s
     if lag_rel is not None:
