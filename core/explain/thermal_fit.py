@@ -55,6 +55,7 @@ __all__ = [
     "min_detectable_tempco",
     "signal_avar_on",
     "tempco_from_cov",
+    "without_start",
 ]
 
 Z_TEMPERATURE = 5.0
@@ -268,6 +269,30 @@ class _Pair:
         self.edf = np.asarray(res.edf)[:, sel]
 
 
+def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """``cols`` (M, k) with the lag filter's start-up settling e^(−t/τ_L) projected out of
+    every column (least squares, with an offset).
+
+    The sensor's temperature when the record starts is unknown; ``lag_filter`` starts in
+    steady state at T[0], so the lagged channel differs from the sensor's by β·e^(−t/τ_L).
+    With both the axis and the lagged temperature residualised on that shape, their
+    regression gives the coefficient of the model y = c·u + β'·e^(−t/τ_L) (Frisch–Waugh).
+    Without it, a plate-logged channel with a 20-minute lag (the start-up difference
+    three times the lagged swing) gave the coefficient and the lag at 0.75× the truth even
+    without noise."""
+    X = np.asarray(cols, dtype=float)
+    if lag_s <= 0:
+        return X.copy()
+    t = np.arange(len(X)) / rate_hz
+    v = np.exp(-t / lag_s)
+    v = v - v.mean()
+    vv = float(v @ v)
+    if not vv > 0:
+        return X.copy()
+    Xc = X - X.mean(axis=0)
+    return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
+
+
 def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
           ) -> list[list[tuple[float, float, float, float]]]:
     """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
@@ -276,7 +301,7 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
         sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        sa.update(np.column_stack([Y, u]))
+        sa.update(without_start(np.column_stack([Y, u]), float(L), rate_hz))
         res = sa.result()
         for j in range(Y.shape[1]):
             c, se, _n = tempco_from_cov(_Pair(res, j))
@@ -331,9 +356,10 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     k = int(np.argmax([s[3] for s in scan]))
     L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
-    res = allan2(y, u, rate_hz)
+    yu = without_start(np.column_stack([y, u]), L, rate_hz)
+    res = allan2(yu[:, 0], yu[:, 1], rate_hz)
     c, se_a, _n = tempco_from_cov(res)
-    _c_parts, se_jk = jackknife_tempco(y, u, rate_hz)
+    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
