@@ -9,7 +9,11 @@ import math
 
 import numpy as np
 import pytest
-from avard.core.explain.causes import min_detectable_step, min_detectable_warmup
+from avard.core.explain.causes import (
+    min_detectable_sinusoid,
+    min_detectable_step,
+    min_detectable_warmup,
+)
 from avard.core.explain.engine import explain_file
 from avard.core.explain.gauss_markov import gm_fisher, min_detectable_gauss_markov
 from avard.core.explain.thermal_fit import min_detectable_tempco
@@ -181,6 +185,24 @@ def test_gauss_markov_bump_as_a_component_of_the_gls_fit(tmp_path):
         assert lo < gm.params["sigma"] < hi
         assert any(e["cause"] == "gauss_markov" and e["present"] for e in ch.extended.extra)
         assert ch.gain > 1.0
+
+
+@pytest.mark.parametrize(("times", "found"), [(3.0, True), (1 / 3, False)])
+def test_sinusoid_at_its_stated_minimum(tmp_path, times, found):
+    """A sinusoid on every axis at 3× the stated minimum for analyze's line finder (4 h,
+    10 Hz, 0.137 Hz, between Welch bins): found on every axis with its amplitude within
+    20 %; at a third of it, on none."""
+    f0 = 0.137
+    amp = times * min_detectable_sinusoid(1.6e-4, 2e-5, 2e-6, 4 * 3600, 10.0, f0)
+    path, _ = _file(tmp_path, 51, Truth(sinusoid=(amp, f0)), logged=("ambient",))
+    ex = explain_file(path, heldout=False)
+    for ch in ex.channels.values():
+        near = [f for f in ch.claimed if f.cause == "sinusoid"
+                and abs(f.params["frequency_hz"] - f0) < 3 * 10.0 / 16384]
+        assert bool(near) is found, [f.evidence for f in ch.findings]
+        if found:
+            assert near[0].params["amplitude"] == pytest.approx(amp, rel=0.2)
+        assert not [f for f in ch.claimed if f.cause != "sinusoid"]
 
 
 def test_gauss_markov_minimum_is_where_the_fisher_errors_reach_their_target():
