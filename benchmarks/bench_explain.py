@@ -165,6 +165,7 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as d:
         for j, case in enumerate(rows):
             n = det = par = false = lines = 0
+            wrong: dict[str, int] = {}
             for i in range(cases):
                 # distinct seeds per row, the same from run to run
                 rec, _ = make_record(seed0 + 1000 * j + i, hours=hours, rate_hz=rate, N=n_w,
@@ -181,7 +182,11 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                         f0, tol = case.line
                         mine = [f for f in mine if abs(f.params["frequency_hz"] - f0) < tol][:1]
                     lines += sum(f.cause == "sinusoid" and f not in mine for f in ch.claimed)
-                    bad |= any(f.cause != "sinusoid" and f not in mine for f in ch.claimed)
+                    other = [f for f in ch.claimed if f.cause != "sinusoid" and f not in mine]
+                    bad |= bool(other)
+                    for f in other:
+                        key = f"{f.cause} on {a} (seed {seed0 + 1000 * j + i})"
+                        wrong[key] = wrong.get(key, 0) + 1
                     if a in case.hidden_on:
                         ok_det &= bool(mine)
                         ok_par &= bool(mine) and case.check(mine[0].params)
@@ -189,7 +194,8 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                 par += ok_par if case.hidden_on else not bad
                 false += bad
             print(f"{case.name:26s} {n:5d} {det / n:9.0%} {par / n:10.0%} {false / n:13.0%} "
-                  f"{lines:16d}", flush=True)
+                  f"{lines:16d}" + (f"   false: {', '.join(wrong)}" if wrong else ""),
+                  flush=True)
     print("detected: the cause claimed on every axis it was hidden on (null: nothing claimed);"
           " params ok: also within 20 %; false claims: records with any other claim; lines: "
           "sinusoids analyze's line finder put in the base model (all axes, not hidden)")
