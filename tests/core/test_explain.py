@@ -183,6 +183,11 @@ def test_gauss_markov_bump_as_a_component_of_the_gls_fit(tmp_path):
         assert gm.params["time_constant_s"] == pytest.approx(10.0, rel=0.2)
         lo, hi = gm.intervals["sigma"]
         assert lo < gm.params["sigma"] < hi
+        # T's profile interval brackets it, half-width the Fisher error (5.4 %) within 2×
+        t_lo, t_hi = gm.intervals["time_constant_s"]
+        T = gm.params["time_constant_s"]
+        assert t_lo < T < t_hi
+        assert 0.027 < (t_hi - t_lo) / (2 * T) < 0.11
         assert any(e["cause"] == "gauss_markov" and e["present"] for e in ch.extended.extra)
         assert ch.gain > 1.0
 
