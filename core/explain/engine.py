@@ -18,6 +18,8 @@ One pass over the record (streamed, bounded memory):
      temperature-compensated ADEV from the same covariance.
    - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): least-squares fits in the time
      domain on the slow view, with the window-contrast tests there.
+   - ``gauss_markov`` (:mod:`avard.core.explain.gauss_markov`): a component of the GLS fit
+     itself (closed-form AVAR), its T scanned by −2 ln L.
 
    The AVAR each fitted signal puts into the record (measured with the streaming estimator on
    the slow view, the same octave τ) enters ``fit_noise`` as one more component
