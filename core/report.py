@@ -144,8 +144,33 @@ class WelchAccumulator:
         return f, psd
 
 
+#: Bins each side of a line's main lobe (Hann) and the running-median half width.
+LINE_LOBE, LINE_HALF_WIDTH = 2, 32
+
+
+def welch_nperseg(total: int | None) -> int:
+    """analyze's Welch segment: 16384 samples (≈ 0.008 Hz at 125 Hz), fewer for short
+    records so that there are ≥ 8 segments."""
+    return 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
+
+
+def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: float = 0.01
+                   ) -> NDArray[np.float64]:
+    """The bin/background ratio a line must exceed (``find_lines``' test): bins are
+    χ²(ν)/ν with ν ≈ 1.8·segments, the background a median of ``n_bg`` bins carrying about
+    2/π of their degrees of freedom, so the ratio is F(ν, ν_bg); Bonferroni over ``n_bins``
+    keeps one false line per spectrum at ``p_false``."""
+    from scipy.special import fdtri  # scipy.special, not scipy.stats: see the note above
+
+    nu = max(2.0, 1.8 * n_seg)
+    nu_bg = np.maximum(2.0, np.asarray(n_bg, dtype=float) * nu * 2.0 / math.pi)
+    # the F(ν, ν_bg) upper quantile
+    return np.asarray(fdtri(nu, nu_bg, 1.0 - p_false / n_bins), dtype=float)
+
+
 def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
-               max_lines: int = 8, half_width: int = 32) -> list[dict[str, float]]:
+               max_lines: int = 8, half_width: int = LINE_HALF_WIDTH
+               ) -> list[dict[str, float]]:
     """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
     more than chance allows.
 
@@ -165,11 +190,10 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
     {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
     """
-    lobe, min_side = 2, 4
+    lobe, min_side = LINE_LOBE, 4
     if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
         return []
     from avard.core.allan.chi2 import chi2_ppf
-    from scipy.special import fdtri
 
     nu = max(2.0, 1.8 * n_seg)
     med_ratio = float(chi2_ppf(0.5, nu)) / nu
@@ -196,8 +220,7 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     # The background is itself an estimate: a median of n_bg bins carries about 2/π of their
     # degrees of freedom, so bin/background is F(ν, ν_bg)-distributed, not χ²(ν)/ν. That
     # matters where the window is short (low bins) and few segments were averaged.
-    nu_bg = np.maximum(2.0, n_bg * nu * 2.0 / math.pi)
-    thr = fdtri(nu, nu_bg, 1.0 - p_false / len(f))  # the F(ν, ν_bg) upper quantile
+    thr = line_threshold(len(f), n_seg, n_bg, p_false)
     ratio = psd / np.where(bg > 0, bg, np.inf)
     df = f[1] - f[0]
     lines = []
@@ -598,8 +621,7 @@ def _analyze_passes(
                 "bytes_needed": int(16 * full[-1] * width)}}
     nper = None
     if (find_sinusoids or psd) and (total is None or total >= 1024):
-        # 16384-sample segments (≈ 0.008 Hz at 125 Hz), fewer for short records: ≥ 8 segments
-        nper = 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
+        nper = welch_nperseg(total)
     all_total = None if total is None else int(total) * len(passes)
     results: list[tuple[list[int], _PassResult]] = []
     done = 0

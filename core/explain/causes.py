@@ -262,6 +262,41 @@ def _noise_avar(tau: float | NDArray, n_white: float, b_inst: float, k_rrw: floa
     return np.asarray(n_white**2 / t + (0.6643 * b_inst) ** 2 + k_rrw**2 * t / 3.0)
 
 
+def noise_psd(f: float, n_white: float, b_inst: float, k_rrw: float) -> float:
+    """One-sided PSD ((m/s²)²/Hz) at f of white, flicker and random-walk rate noise whose
+    AVAR is N²/τ + (2 ln2/π)B² + K²τ/3: 2N² + B²/(πf) + K²/(2π²f²) (NIST SP 1065 Table 5:
+    h₀ = 2N², h₋₁ = B²/π, h₋₂ = K²/(2π²))."""
+    return 2 * n_white**2 + b_inst**2 / (math.pi * f) + k_rrw**2 / (2 * math.pi**2 * f**2)
+
+
+#: Hann window: worst-case power of a line between two bins relative to one on a bin
+#: (scalloping loss 1.42 dB)
+HANN_SCALLOP = 0.718
+
+
+def min_detectable_sinusoid(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                            rate_hz: float, frequency_hz: float) -> float:
+    """Smallest sinusoid amplitude A (m/s², of A·sin 2πft) that analyze's line finder
+    (``report.find_lines``) finds on average at ``frequency_hz``, on noise N, B, K over
+    ``record_s`` at ``rate_hz``.
+
+    Welch with analyze's segment (``report.welch_nperseg``: L samples, Δf = fs/L, K ≈
+    2·n/L − 1 segments at 50 % overlap): a Hann-windowed line puts A²·L/(3·fs) = A²/(3Δf)
+    into its peak bin ((Σw)²/Σw² = 2L/3), times ``HANN_SCALLOP`` when it falls between
+    bins; the noise there is S(f0) (:func:`noise_psd`). The finder asks the bin/background
+    ratio to exceed ``report.line_threshold`` (F(ν, ν_bg) at a 1 % chance of one false line
+    per spectrum), so on average A_min² = 3·Δf·S(f0)·(thr − 1)/HANN_SCALLOP."""
+    from avard.core.report import LINE_HALF_WIDTH, LINE_LOBE, line_threshold, welch_nperseg
+
+    n = int(record_s * rate_hz)
+    L = welch_nperseg(n)
+    segs = max(1, 2 * n // L - 1)
+    thr = float(line_threshold(L // 2 + 1, segs, 2 * (LINE_HALF_WIDTH - LINE_LOBE)))
+    df = rate_hz / L
+    s0 = noise_psd(frequency_hz, n_white, b_inst, k_rrw)
+    return math.sqrt(3.0 * df * s0 * (thr - 1.0) / HANN_SCALLOP)
+
+
 def min_detectable_warmup(n_white: float, b_inst: float, k_rrw: float,
                           time_constant_s: float) -> float:
     """Smallest warm-up size (m/s²) the test passes on average: the contrast of the first

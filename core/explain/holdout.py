@@ -25,8 +25,8 @@ a step nothing in the other half (its continuation is constant).
 Misfit: the generalised χ² of the held-out AVAR against each model's prediction, with the
 covariance ``fit_noise`` models (Whittle kernels of the model's own components, NIST SP 1065
 §5.3 for the diagonal), over the τ both fits used and the held-out part resolves
-(:func:`heldout_chi2`). No parameter is fitted on those points, so a model that describes the
-sensor gives χ² ≈ n (the number of τ). The gain is
+(``fit.model_chi2`` with ``predictive``). No parameter is fitted on those points, so a model
+that describes the sensor gives χ² ≈ n (the number of τ). The gain is
 
     gain = 1 − χ²_ext / χ²_base   (both on the same held-out τ, summed over folds and axes)
 
@@ -48,13 +48,11 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import ThermalFit, fit_thermal, lag_filter
-from avard.core.model import fit as fit_mod
-from avard.core.model import terms as mdl
-from avard.core.model.fit import NoiseFit, fit_noise
+from avard.core.model.fit import fit_noise, model_chi2
 from numpy.typing import NDArray
 
 __all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible",
-           "heldout_chi2", "holdout_file", "holdout_split"]
+           "holdout_file", "holdout_split"]
 
 #: Fewest slow-view points in each part (as for explain's time-domain causes).
 MIN_PART_POINTS = 256
@@ -77,56 +75,6 @@ def _avar(y: NDArray, rate_hz: float) -> Any:
     sa = StreamingAllan(1, rate_hz)
     sa.update(np.asarray(y, dtype=float)[:, None])
     return sa.result()
-
-
-def heldout_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float],
-                 predictive: bool = True) -> tuple[float, int]:
-    """(χ², n): the generalised χ² of ``result``'s AVAR against ``model``'s prediction at the
-    n τ inside ``tau_range`` that the held-out data resolve (``fit_noise``'s own cuts: ≥ 8
-    independent averages, EDF ≥ 3), with the covariance ``fit_noise`` models from the model's
-    components (its ``_avar_cov``, Whittle kernels, and its EDF floor), whitened as it
-    whitens, plus (``predictive``) the model's own parameter covariance propagated to the
-    prediction, X·Cov(θ)·Xᵀ, and for each term the fit left out, (U²/z)²·x xᵀ from its upper
-    limit U. No parameter is fitted here. With ``predictive`` False and the
-    data the model was fitted on, this is the fit's own χ² (a test holds them equal). Uses
-    fit.py's internals: one covariance model."""
-    var = np.asarray(result.var, dtype=float)
-    tau = np.asarray(result.tau, dtype=float)
-    m = np.asarray(result.m, dtype=np.int64)
-    n = np.asarray(result.n, dtype=float)
-    M = fit_mod._n_samples(result)
-    edf = np.asarray(result.edf, dtype=float)
-    n_total = float(np.nanmax(M)) if len(M) else 0.0
-    ok = (np.isfinite(var) & (var > 0) & (n > 0) & (n_total / m >= 8.0)
-          & ~(np.isfinite(edf) & (edf < 3.0))
-          & (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9)))
-    idx = np.flatnonzero(ok)
-    if len(idx) == 0:
-        return math.nan, 0
-    rate = float(result.rate_hz)
-    comps = model.components
-    X = np.column_stack([c.basis(tau[idx], rate) for c in comps])
-    theta = np.asarray(model.theta, dtype=float)
-    G = mdl.avar_covariance_kernels(m[idx], [c.psd(rate) for c in comps])
-    p = fit_mod._Problem(y=var[idx], X=X, fixed=np.zeros(len(idx)), G=G,
-                         theta_fixed=np.zeros(0), M=M[idx], edf_floor=100.0 * M[idx],
-                         m_tau=tau[idx])
-    C = fit_mod._avar_cov(p, theta, np.arange(len(idx)))
-    if predictive:
-        # the prediction is itself uncertain: its parameters were estimated on other data
-        # (their covariance from the fit, Birge-scaled); the two errors are independent
-        C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
-        # a term the fit left out is known only to lie below its upper limit
-        # U² = θ̂ + z·se (fit._select_terms): its θ carries a standard error up to U²/z,
-        # which the prediction inherits (a short fit part that cannot tell flicker from
-        # random walk at its longest τ must not predict either with confidence)
-        for k, comp in enumerate(comps):
-            te = model.terms.get(comp.label)
-            if te is not None and not te.present and te.upper:
-                se = te.upper**2 / model.z_present
-                C = C + se**2 * np.outer(X[:, k], X[:, k])
-    r = fit_mod._whitener(C) @ (var[idx] - X @ theta)
-    return float(r @ r), len(idx)
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,11 +300,12 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = _avar(held.y, rate_b)
         ext, held_ext = base, held_var
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
-    cb, nb = heldout_chi2(base, held_var, rng)
-    ce, ne = heldout_chi2(ext, held_ext, rng)
+    cb = model_chi2(base, held_var, rng, predictive=True)
+    ce = model_chi2(ext, held_ext, rng, predictive=True)
+    nb, ne = cb.n_points, ce.n_points
     if nb != ne or nb == 0:
         raise FitError(f"no common held-out τ in {rng[0]:.3g}…{rng[1]:.3g} s")
-    return Fold(fit.label, held.label, cb, ce, nb, rng)
+    return Fold(fit.label, held.label, cb.chi2, ce.chi2, nb, rng)
 
 
 # --------------------------------------------------------------------------------------------

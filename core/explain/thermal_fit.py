@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 from scipy import signal as sps
@@ -54,6 +55,7 @@ __all__ = [
     "min_detectable_tempco",
     "signal_avar_on",
     "tempco_from_cov",
+    "without_start",
 ]
 
 Z_TEMPERATURE = 5.0
@@ -267,6 +269,30 @@ class _Pair:
         self.edf = np.asarray(res.edf)[:, sel]
 
 
+def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """``cols`` (M, k) with the lag filter's start-up settling e^(−t/τ_L) projected out of
+    every column (least squares, with an offset).
+
+    The sensor's temperature when the record starts is unknown; ``lag_filter`` starts in
+    steady state at T[0], so the lagged channel differs from the sensor's by β·e^(−t/τ_L).
+    With both the axis and the lagged temperature residualised on that shape, their
+    regression gives the coefficient of the model y = c·u + β'·e^(−t/τ_L) (Frisch–Waugh).
+    Without it, a plate-logged channel with a 20-minute lag (the start-up difference
+    three times the lagged swing) gave the coefficient and the lag at 0.75× the truth even
+    without noise."""
+    X = np.asarray(cols, dtype=float)
+    if lag_s <= 0:
+        return X.copy()
+    t = np.arange(len(X)) / rate_hz
+    v = np.exp(-t / lag_s)
+    v = v - v.mean()
+    vv = float(v @ v)
+    if not vv > 0:
+        return X.copy()
+    Xc = X - X.mean(axis=0)
+    return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
+
+
 def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
           ) -> list[list[tuple[float, float, float, float]]]:
     """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
@@ -275,7 +301,7 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
         sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        sa.update(np.column_stack([Y, u]))
+        sa.update(without_start(np.column_stack([Y, u]), float(L), rate_hz))
         res = sa.result()
         for j in range(Y.shape[1]):
             c, se, _n = tempco_from_cov(_Pair(res, j))
@@ -330,9 +356,10 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     k = int(np.argmax([s[3] for s in scan]))
     L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
-    res = allan2(y, u, rate_hz)
+    yu = without_start(np.column_stack([y, u]), L, rate_hz)
+    res = allan2(yu[:, 0], yu[:, 1], rate_hz)
     c, se_a, _n = tempco_from_cov(res)
-    _c_parts, se_jk = jackknife_tempco(y, u, rate_hz)
+    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
@@ -376,8 +403,7 @@ def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s:
     c_min = z·σ_a·√(1 + ω²L²)/A. The phase −atan(ωL) carries the lag: σ_φ = 1/z, hence
     σ_L/L = (1 + ω²L²)/(ωL·z).
     """
-    f0 = 1.0 / period_s
-    s_f0 = 2 * n_white**2 + b_inst**2 / (math.pi * f0) + k_rrw**2 / (2 * math.pi**2 * f0**2)
+    s_f0 = noise_psd(1.0 / period_s, n_white, b_inst, k_rrw)
     sigma_a = math.sqrt(2 * s_f0 / record_s)
     wl = 2 * math.pi * lag_s / period_s
     if lag_rel is not None:

@@ -53,7 +53,8 @@ from avard.core.model.terms import TERMS, UNITS
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
 
-__all__ = ["NoiseFit", "TermEstimate", "fit_noise", "slope_method"]
+__all__ = ["Component", "ModelChi2", "NoiseFit", "TermEstimate", "avar_estimate_covariance",
+           "fit_noise", "model_chi2", "model_components", "slope_method"]
 
 
 @dataclass
@@ -140,6 +141,11 @@ class NoiseFit:
     components: list[Component] = field(default_factory=list, repr=False)
     theta: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0), repr=False)
     theta_cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    #: ln det of the modelled AVAR covariance at the fitted θ over the points used: with
+    #: χ² it gives the Gaussian −2 ln L (χ² + ln det C) that compares models whose
+    #: covariances differ (a nonlinear parameter scanned outside the fit, e.g. a
+    #: Gauss–Markov T); χ² alone favours the model that predicts the larger scatter
+    log_det_cov: float = math.nan
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
@@ -226,10 +232,56 @@ def _components(terms: Iterable[str], extra: Sequence[Mapping], filter_corner_hz
     return comps
 
 
+def model_components(terms: Iterable[str], extra: Sequence[Mapping] = (), *, rate_hz: float,
+                     filter_corner_hz: float | None = None) -> list[Component]:
+    """The components ``fit_noise`` builds for ``terms`` and ``extra`` (same arguments), for
+    computing with the fit's own model outside a fit (e.g. a stated detection minimum)."""
+    return _components(terms, extra, filter_corner_hz, rate_hz)
+
+
+def avar_estimate_covariance(components: Sequence[Component], theta: ArrayLike,
+                             m: ArrayLike, n_samples: ArrayLike, rate_hz: float
+                             ) -> NDArray[np.float64]:
+    """Cov(σ̂²_k, σ̂²_l) of overlapping AVAR estimates at τ_k = m_k/fs from records of
+    ``n_samples`` samples, for the model Σθ_j·b_j: the covariance ``fit_noise`` weights its
+    fit with (Whittle kernels (2/M)∫S²|H_k|²|H_l|²dν of the components' spectra, the NIST SP
+    1065 §5.3 floor 2σ⁴/EDF on the diagonal). ``theta`` in the order of ``components``."""
+    m_a = np.asarray(m, dtype=np.int64)
+    M = np.asarray(n_samples, dtype=float) * np.ones(len(m_a))
+    tau = m_a / float(rate_hz)
+    th = np.asarray(theta, dtype=float)
+    X = np.column_stack([c.basis(tau, rate_hz) for c in components])
+    G = mdl.avar_covariance_kernels(m_a, [c.psd(rate_hz) for c in components])
+    p = _Problem(y=X @ th, X=X, fixed=np.zeros(len(m_a)), G=G, theta_fixed=np.zeros(0), M=M,
+                 edf_floor=100.0 * M, m_tau=tau)
+    return _avar_cov(p, th, np.arange(len(m_a)))
+
+
 def _n_samples(result: Any) -> NDArray[np.float64]:
     """Samples spanned by the differences of each τ: (n − 1)·stride + 2m (≈ N for every τ)."""
     stride = np.asarray(getattr(result, "stride", np.ones_like(result.m)), dtype=float)
     return (np.asarray(result.n, float) - 1.0) * stride + 2.0 * np.asarray(result.m, float)
+
+
+def _usable(result: Any, min_edf: float, min_averages: float,
+            tau_range: tuple[float, float] | None) -> NDArray[np.intp]:
+    """Indices of the τ points a fit may use: a finite positive AVAR, enough independent
+    averages (≥ ``min_averages``) and EDF (≥ ``min_edf``) for a usable weight, inside
+    ``tau_range`` (s). One cut for ``fit_noise`` and ``model_chi2``."""
+    var = np.asarray(result.var, dtype=float)
+    tau = np.asarray(result.tau, dtype=float)
+    m = np.asarray(result.m, dtype=float)
+    n = np.asarray(result.n, dtype=float)
+    M = _n_samples(result)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
+    ok = np.isfinite(var) & (var > 0) & (n > 0)
+    # long-τ cut: too few independent averages, or too few EDF for a usable weight
+    ok &= n_total / m >= min_averages
+    ok &= ~(np.isfinite(edf) & (edf < min_edf))
+    if tau_range is not None:
+        ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
+    return np.flatnonzero(ok)
 
 
 @dataclass
@@ -527,18 +579,8 @@ def fit_noise(
         raise FitError(f"sample rate {rate} Hz is not a positive number")
     tau = np.asarray(result.tau, dtype=float)
     m = np.asarray(result.m, dtype=np.int64)
-    n = np.asarray(result.n, dtype=float)
     M = _n_samples(result)
-    n_total = float(np.nanmax(M)) if len(M) else 0.0
-    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
-
-    ok = np.isfinite(var) & (var > 0) & (n > 0)
-    # long-τ cut: too few independent averages, or too few EDF for a usable weight
-    ok &= n_total / m >= min_averages
-    ok &= ~(np.isfinite(edf) & (edf < min_edf))
-    if tau_range is not None:
-        ok &= (tau >= tau_range[0] * (1 - 1e-9)) & (tau <= tau_range[1] * (1 + 1e-9))
-    keep = np.flatnonzero(ok)
+    keep = _usable(result, min_edf, min_averages, tau_range)
     extra = list(extra)
     n_q2 = 0.0
     if rounding_lsb is not None:
@@ -593,6 +635,7 @@ def fit_noise(
         C = _avar_cov(p, theta, idx)
         r = _whitener(C) @ p.y[idx]
         chi2 = float(r @ r)
+    sign, log_det = np.linalg.slogdet(C)
     dof = len(idx) - len(active)
     chi2_dof = chi2 / dof if dof > 0 else float("nan")
     # Birge ratio: when the residuals scatter more than their modelled covariance allows, the
@@ -659,7 +702,64 @@ def fit_noise(
         tau_min_s=float(t_k[idx[0]]), tau_max_s=float(t_k[idx[-1]]), chi2_dof=float(chi2_dof),
         rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
+        log_det_cov=float(log_det) if sign > 0 else math.nan,
     )
+
+
+@dataclass(frozen=True)
+class ModelChi2:
+    """``model_chi2``'s answer: the generalised χ² of an Allan variance against a fixed model,
+    over ``n_points`` τ (``tau_s``, s). χ² ≈ n when the model describes the data."""
+
+    chi2: float
+    n_points: int
+    tau_s: NDArray[np.float64]
+
+
+def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | None = None, *,
+               predictive: bool = False, min_edf: float = 3.0,
+               min_averages: float = 8.0) -> ModelChi2:
+    """χ² of a fixed, already fitted model on (other) Allan variance data; nothing is fitted.
+
+    ``model``: a ``fit_noise`` result; ``result``: a single-channel ``AllanResult`` of rate
+    data in m/s² at the model's sample rate (e.g. a held-out record or another part of one).
+    The points are those ``fit_noise`` would use (its cuts: ≥ ``min_averages`` independent
+    averages, EDF ≥ ``min_edf``) inside ``tau_range`` (s). The residual r = σ̂² − Σθ_j·b_j(τ)
+    is whitened with the covariance ``fit_noise`` models for its own fit, evaluated at the
+    model's θ: Whittle kernels of the model's components (Cov(σ̂²_k, σ̂²_l) =
+    (2/M)∫S²|H_k|²|H_l|²dν) and the NIST SP 1065 §5.3 floor 2σ⁴/EDF on the diagonal; χ² =
+    rᵀC⁻¹r. On the data the model was fitted on (same τ range) this is the fit's own χ²
+    (``chi2_dof·dof``; a test holds them equal).
+
+    ``predictive``: the model predicts data it was not fitted on, so its own uncertainty adds
+    to C (independent of the data's scatter): the fit's parameter covariance carried to the
+    prediction, X·Cov(θ)·Xᵀ, and for each IEEE term the fit left out, a standard error of
+    U²/z_present on its θ from its upper limit U (the term is known only to lie below U).
+    Returns χ² NaN and n 0 when no τ qualifies.
+    """
+    idx = _usable(result, min_edf, min_averages, tau_range)
+    tau = np.asarray(result.tau, dtype=float)[idx]
+    if len(idx) == 0:
+        return ModelChi2(math.nan, 0, tau)
+    var = np.asarray(result.var, dtype=float)[idx]
+    rate = float(result.rate_hz)
+    comps = model.components
+    X = np.column_stack([c.basis(tau, rate) for c in comps])
+    theta = np.asarray(model.theta, dtype=float)
+    C = avar_estimate_covariance(comps, theta, np.asarray(result.m)[idx],
+                                 _n_samples(result)[idx], rate)
+    if predictive:
+        # its parameters were estimated on other data (covariance Birge-scaled by the fit)
+        C = C + X @ np.asarray(model.theta_cov, dtype=float) @ X.T
+        # U² = θ̂ + z·se (``_upper_limit``): θ of a left-out term carries up to U²/z; a short
+        # fit that cannot tell flicker from random walk must not predict either with confidence
+        for k, comp in enumerate(comps):
+            te = model.terms.get(comp.label)
+            if te is not None and not te.present and te.upper:
+                se = te.upper**2 / model.z_present
+                C = C + se**2 * np.outer(X[:, k], X[:, k])
+    r = _whitener(C) @ (var - X @ theta)
+    return ModelChi2(float(r @ r), len(idx), tau)
 
 
 def slope_method(result: Any) -> dict[str, float]:

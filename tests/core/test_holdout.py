@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from avard.core.errors import DataError
 from avard.core.explain.engine import explain_file
-from avard.core.explain.holdout import DEFINITION, _avar, heldout_chi2
-from avard.core.model.fit import fit_noise
+from avard.core.explain.holdout import DEFINITION
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -29,21 +28,6 @@ def hidden(tmp_path_factory):
     """A 4 h record whose x and y follow the ambient temperature through a 5-minute lag."""
     path = _file(tmp_path_factory.mktemp("ho"), 5, HIDDEN, hours=4.0)
     return path, explain_file(path)
-
-
-def test_heldout_chi2_is_the_fits_own_chi2_on_its_own_data():
-    """The held-out χ² uses fit_noise's covariance model: on the data the model was fitted
-    on, without the parameter term, it is the fit's own generalised χ²."""
-    rec, _ = make_record(11, hours=2.0)
-    y = rec.accel[: (len(rec.accel) // 16) * 16].reshape(-1, 16, 3).mean(axis=1)[:, 0]
-    res = _avar(y, rec.rate_hz / 16)
-    fit = fit_noise(res)
-    chi2, n = heldout_chi2(fit, res, (fit.tau_min_s, fit.tau_max_s), predictive=False)
-    assert n == fit.n_points
-    assert chi2 == pytest.approx(fit.chi2_dof * fit.dof, rel=1e-9)
-    # the prediction's own uncertainty only ever adds to the covariance
-    chi2_p, _ = heldout_chi2(fit, res, (fit.tau_min_s, fit.tau_max_s))
-    assert chi2_p <= chi2 * (1 + 1e-9)
 
 
 def test_hidden_temperature_effect_gains_on_held_out_data(hidden):

@@ -66,3 +66,28 @@ def test_signal_avar_of_a_sinusoid_is_its_closed_form():
     np.testing.assert_allclose(got[2:], want[2:], rtol=0.05)
     # below the first τ (1 s): a smooth signal's τ² law
     np.testing.assert_allclose(got[:2], want[:2], rtol=0.05)
+
+
+def test_without_start_removes_the_lag_filters_start_up_settling():
+    """The sensor's temperature at the start is unknown: the lag filter starts at T[0], so
+    the lagged channel differs from what the sensor saw by β·e^(−t/τ_L). Without noise, a
+    plate-logged ±0.215 °C cycle through a 20-minute lag (the start-up difference 3× the
+    lagged swing) gives the coefficient and the lag exactly once that shape is projected
+    out (without it: 0.75× both)."""
+    from avard.core.explain.thermal_fit import fit_thermal, without_start
+
+    rate, lag, period, c = 1.0, 1200.0, 1800.0, 0.03
+    t = np.arange(4 * 3600) / rate
+    w = 2 * math.pi / period
+    plate = 22.0 + 0.215 * np.sin(w * t)
+    # the sensor in steady state (closed form): amplitude and phase of the first-order lag
+    sensor = 0.215 / math.hypot(1.0, w * lag) * np.sin(w * t - math.atan(w * lag))
+    y = c * sensor
+    th = fit_thermal(y, plate[:, None], ["plate"], rate)
+    assert th.coefficient == pytest.approx(c, rel=0.02)
+    assert th.lag_s == pytest.approx(lag, rel=0.05)
+    # the projection leaves no e^(−t/τ_L) component and no offset in any column
+    X = without_start(np.column_stack([y, plate]), lag, rate)
+    v = np.exp(-t / lag)
+    assert np.allclose(X.mean(axis=0), 0.0, atol=1e-12)
+    assert np.allclose((v - v.mean()) @ X, 0.0, atol=1e-8)

@@ -8,7 +8,8 @@ first-order lag; the sinusoid's lagged response is the closed form A/√(1+ω²�
 −atan(ωτ), the wander's the zero-order-hold recursion: a different discretisation from the
 one the fit uses (first-order hold). The sensor sees the *driving* channel through its own
 first-order lag. Logged like a DS18B20: one reading every 0.75 s, 0.0625 °C steps, NaN in
-between. Transients: a warm-up size·e^(−t/T) and a bias step.
+between. Transients: a warm-up size·e^(−t/T) and a bias step; a Gauss–Markov process (AR(1));
+a sinusoid (random phase per axis).
 
 ``make_record`` returns the record (``readers.Record``) and the truth separately, so a test
 hands only the record (or its file) to explain.
@@ -40,6 +41,7 @@ class Truth:
     warmup: tuple[float, float] | None = None  # (size m/s², time constant s), all axes
     step: tuple[float, float] | None = None  # (time s, size m/s²), all axes
     gauss_markov: tuple[float, float] | None = None  # (σ m/s², correlation time s), all axes
+    sinusoid: tuple[float, float] | None = None  # (amplitude m/s², frequency Hz), all axes
     noise: dict[str, float] = field(default_factory=dict)
 
 
@@ -116,6 +118,9 @@ def make_record(seed: int, *, hours: float = 4.0, rate_hz: float = 10.0,
         wg = rng.standard_normal((n, 3)) * sg * math.sqrt(1 - phi_g * phi_g)
         x0 = sg * rng.standard_normal(3)
         acc += lfilter([1.0], [1.0, -phi_g], wg, axis=0, zi=(phi_g * x0)[None, :])[0]
+    if truth.sinusoid is not None:
+        amp_s, f_s = truth.sinusoid
+        acc += amp_s * np.sin(2 * math.pi * f_s * t[:, None] + rng.uniform(0, 2 * math.pi, 3))
     chans = {"plate": plate, "ambient": ambient}
     temps = np.full((n, len(logged)), np.nan)
     idx = np.arange(1, int(n * dt / DS18B20_CONVERSION_S)) * DS18B20_CONVERSION_S * rate_hz
