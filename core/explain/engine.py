@@ -1,15 +1,18 @@
 """``avard explain``: where the fitted noise model leaves the measurement, the physical cause,
 and the model extended by it; on the engine of ``avard analyze``.
 
-One pass over the record (streamed, bounded memory):
+Streamed, in bounded memory:
 
-1. **Base model = analyze's fit.** The blocks go through ``report.analyze_stream``, the very
-   function ``avard analyze`` runs: its Allan estimator and EDF, its line finder
+1. **Base model = analyze's fit.** ``explain_file`` calls ``report.analyze`` on the file, the
+   very function ``avard analyze`` runs, with its passes and so its peak memory (blocks from
+   anywhere, ``explain_stream``, go through ``report.analyze_stream`` in one pass): its Allan
+   estimator and EDF, its line finder
    (``report.find_lines``), its ``fit.fit_noise`` GLS with the modelled covariance, presence
    test, intervals and upper limits. Sinusoids found there are part of the base model.
-2. **Slow view.** On the way, block means of every axis and temperature channel are kept
-   (blocks of 2^k samples, about a second, at most ``MAX_POINTS`` per channel: ≈ 2 MB for a
-   60 h record). Everything explain adds acts on seconds or longer, so it is fitted there.
+2. **Slow view.** On the way (a file: on one more read), block means of every axis and
+   temperature channel are kept (blocks of 2^k samples, about a second, at most
+   ``MAX_POINTS`` per channel: ≈ 2 MB for a 60 h record). Everything explain adds acts on
+   seconds or longer, so it is fitted there.
 3. **Causes, each an extension of the same fit.**
 
    - ``temperature`` (:mod:`avard.core.explain.thermal_fit`): the sensor sees a logged temperature
@@ -58,7 +61,14 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
 )
 from avard.core.model.fit import NoiseFit, fit_noise
-from avard.core.report import Analysis, ChannelAnalysis, ProgressFn, analyze_stream, record_blocks
+from avard.core.report import (
+    Analysis,
+    ChannelAnalysis,
+    ProgressFn,
+    analyze,
+    analyze_stream,
+    record_blocks,
+)
 from numpy.typing import NDArray
 
 __all__ = ["ChannelExplanation", "Explanation", "Finding", "SlowView", "block_size",
@@ -272,6 +282,12 @@ def _source(path: str, block: int, rate_hz: float | None
     return record_blocks(path, block, rate_hz)
 
 
+def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
+    tnames = list(meta.get("temperature_names") or [])
+    raise DataError(f"temperature channel {temperature!r} is not in this record; its "
+                    "temperature channels are " + (", ".join(tnames) or "none"))
+
+
 def explain_file(path: str, *, rate_hz: float | None = None,
                  channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None, block: int = 1 << 16,
@@ -294,9 +310,21 @@ def explain_file(path: str, *, rate_hz: float | None = None,
         h_meta.setdefault("source", holdout)
         check_compatible(meta, h_meta, holdout)
         held = h_meta, h_blocks
+    if temperature is not None and temperature not in (meta.get("temperature_names") or []):
+        _unknown_temperature(temperature, meta)
+    # The base is `avard analyze` of the file itself, the same call: the same passes (one per
+    # channel group whose OADEV histories fit its budget, so the same peak memory: one pass
+    # over every channel, as explain_stream must do with blocks from anywhere, held all
+    # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
+    # file for the slow view, which keeps only block means.
+    base = analyze(path, rate_hz=rate_hz, channels=channels, progress=progress, block=block,
+                   filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
+    if stage is not None:
+        stage("reading the record's slow view (block means)")
     return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
                           filter_corner_hz=filter_corner_hz, temperature=temperature,
-                          holdout=held, heldout=heldout, estimator=estimator, psd=psd)
+                          holdout=held, heldout=heldout, estimator=estimator, psd=psd,
+                          base=base)
 
 
 def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
@@ -305,18 +333,19 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                    temperature: str | None = None,
                    holdout: tuple[dict[str, Any], Iterable[Block]] | None = None,
                    heldout: bool = True, estimator: str = "oadev",
-                   psd: bool = False) -> Explanation:
+                   psd: bool = False, base: Analysis | None = None) -> Explanation:
     """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
     (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
-    segment end). ``holdout``: (meta, blocks) of a second record of the same sensor."""
+    segment end). ``holdout``: (meta, blocks) of a second record of the same sensor.
+    ``base``: analyze's result for these blocks when the caller has it (``explain_file``);
+    the blocks then feed only the slow view."""
     if holdout is not None:
         check_compatible(meta, holdout[0], str(holdout[0].get("source", "holdout")))
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     tnames = list(meta.get("temperature_names") or [])
     if temperature is not None and temperature not in tnames:
-        raise DataError(f"temperature channel {temperature!r} is not in this record; its "
-                        "temperature channels are " + (", ".join(tnames) or "none"))
+        _unknown_temperature(temperature, meta)
     b = block_size(rate, meta.get("n_samples"))
     slow = SlowView(b, len(names), len(tnames))
 
@@ -329,9 +358,14 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                 slow.update(a, None)
             yield a, end
 
-    an = analyze_stream(meta, tee(), source=str(meta.get("source", "stream")),
-                        channels=channels, progress=progress,
-                        filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
+    if base is None:
+        an = analyze_stream(meta, tee(), source=str(meta.get("source", "stream")),
+                            channels=channels, progress=progress,
+                            filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
+    else:
+        an = base
+        for _ in tee():
+            pass
     y_slow, t_slow = slow.finish()
     rate_b = rate / b
     t_ok = [j for j in range(len(tnames))
