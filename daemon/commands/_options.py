@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from avard.core.errors import DataError
 
@@ -28,3 +29,31 @@ def split_channels(values: list[str] | str | None) -> list[str] | None:
         raise DataError("--channels: no channel named; give names or numbers such as 'x z' "
                         "or '0,2'")
     return names
+
+
+def filter_corner(text: str) -> float | str | None:
+    """``--filter-corner``: a corner in Hz, 'auto' or 'none'."""
+    if text == "auto":
+        return "auto"
+    if text == "none":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a corner in Hz, 'auto' or 'none'") \
+            from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"filter corner {text} Hz must be > 0")
+    return v
+
+
+def add_model_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options that choose analyze's estimator and noise model; `avard explain` takes the
+    same ones, so that its base is analyze's fit of the file run with the same options."""
+    parser.add_argument("--estimator", choices=("oadev", "cascade"), default="oadev",
+                        help="Allan estimator: fully overlapping (oadev, default, as Stable32 "
+                             "and allantools) or the service's streaming cascade")
+    parser.add_argument("--filter-corner", type=filter_corner, default="auto", metavar="HZ",
+                        help="sensor low-pass corner to model on the white noise: a number in "
+                             "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
+                             "(leave out the short τ it bends; default auto)")

@@ -31,25 +31,14 @@ from avard.core.report import (
     progress_printer,
     psd_csv,
 )
-from avard.daemon.commands._options import add_channels_argument, split_channels
+from avard.daemon.commands._options import (
+    add_channels_argument,
+    add_model_arguments,
+    split_channels,
+)
 
 NAME = "analyze"
 HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"
-
-
-def _corner(text: str) -> float | str | None:
-    if text == "auto":
-        return "auto"
-    if text == "none":
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give a corner in Hz, 'auto' or 'none'") \
-            from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"filter corner {text} Hz must be > 0")
-    return v
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -70,16 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also the one-sided Welch PSD per channel ((m/s²)²/Hz, with its "
                              "band), the white density read from it against the fit's N; with "
                              "--plot a second figure NAME_psd.png")
-    parser.add_argument("--estimator", choices=("oadev", "cascade"), default="oadev",
-                        help="Allan estimator: fully overlapping (oadev, default, as Stable32 "
-                             "and allantools) or the service's streaming cascade")
+    add_model_arguments(parser)
     parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
                         help="chi-squared quantiles of the intervals: exact (default) or as "
                              "Stable32 computes them (reproduces its printed bounds)")
-    parser.add_argument("--filter-corner", type=_corner, default="auto", metavar="HZ",
-                        help="sensor low-pass corner to model on the white noise: a number in "
-                             "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
-                             "(leave out the short τ it bends; default auto)")
     parser.add_argument("--temperature", metavar="CHANNEL",
                         help="temperature channel to compensate: fit its first-order lag and "
                              "coefficient (m/s²/K) per axis and add the temperature-"

@@ -9,6 +9,7 @@ Examples:
     avard explain run1.npz --json                 # machine-readable, SI units
     avard explain run1.npz --report out/          # Markdown report with plots
     avard explain run1.npz --channels x,z
+    avard explain run1.npz --filter-corner none   # the same options as avard analyze's
 
 The base model is exactly `avard analyze`'s fit of the same file. The held-out gain is how
 much better the extended model predicts data it was not fitted on: by default the record's
@@ -29,7 +30,11 @@ from typing import Any
 import numpy as np
 from avard.core.errors import DataError
 from avard.core.io.outputs import check_output_dir, require_plot_extra
-from avard.daemon.commands._options import add_channels_argument, split_channels
+from avard.daemon.commands._options import (
+    add_channels_argument,
+    add_model_arguments,
+    split_channels,
+)
 
 NAME = "explain"
 HELP = "find where the noise model misfits the data, name the cause, measure the gain"
@@ -50,6 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_channels_argument(parser)
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
+    add_model_arguments(parser)
+    parser.add_argument("--temperature", metavar="CHANNEL",
+                        help="use only this temperature channel for the thermal model, and "
+                             "report its compensated ADEV whatever its test says")
 
 
 def _jsonable(x: Any) -> Any:
@@ -107,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
     channels = split_channels(args.channels)
     progress, stage = _progress()
     ex = explain_file(args.data, rate_hz=args.rate_hz, channels=channels, progress=progress,
-                      stage=stage, holdout=args.holdout)
+                      stage=stage, holdout=args.holdout, estimator=args.estimator,
+                      filter_corner_hz=args.filter_corner, temperature=args.temperature)
     if args.report:
         path = write_report(ex, args.report)
         log.info("report written to %s", path)

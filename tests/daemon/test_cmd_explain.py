@@ -52,6 +52,20 @@ def test_json_output(thermal_file, capsys):
     assert ho["channels"]["y"]["gain"] is None and ho["channels"]["y"]["causes"] == []
 
 
+@pytest.mark.parametrize("options", [["--estimator", "cascade"], ["--filter-corner", "2.5"]])
+def test_explain_takes_analyzes_model_options_and_its_base_follows(thermal_file, capsys,
+                                                                   options):
+    """explain's base is analyze's fit of the same file run with the same options."""
+    path, _ = thermal_file
+    assert cli.main(["explain", str(path), "--json", "--channels", "y", *options]) == 0
+    assert cli.main(["analyze", str(path), "--json", "--channels", "y", *options]) == 0
+    out_ex, out_an = _two_json(capsys)
+    assert out_ex["channels"]["y"]["base"] == out_an["channels"]["y"]
+    assert cli.main(["analyze", str(path), "--json", "--channels", "y"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert plain["channels"]["y"] != out_an["channels"]["y"]  # the option did change the fit
+
+
 def _two_json(capsys):
     text = capsys.readouterr().out
     dec = json.JSONDecoder()
