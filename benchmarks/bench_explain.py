@@ -14,7 +14,8 @@ simulator). Per case kind, ``--cases`` records of 4 h at 10 Hz (N 1.6e-4 m/s/√
 K 2e-6 m/s²·√s) are explained: "temperature" hides 3× the stated minimum coefficient
 (``thermal_fit.min_detectable_tempco``, lag to 10 %) behind a 5-minute first-order lag on the
 logged ambient channel, on x; "warmup" and "bias_step" hide 3× their stated minimum
-(``causes.min_detectable_warmup`` / ``_step``) on every axis; "null" hides nothing.
+(``causes.min_detectable_warmup`` / ``_step``) on every axis, "warmup+step" both in one
+record (each must be found with its parameters); "null" hides nothing.
 """
 
 from __future__ import annotations
@@ -82,11 +83,13 @@ def power(cases: int, seed0: int) -> None:
     print(f"  warmup: T {t_w:g} s, minimum {w_min:.3g} m/s², hidden {3 * w_min:.3g}")
     print("  gauss_markov: σ 2e-4 m/s², T 120 s (no stated minimum yet)")
     print(f"  bias_step: at {t_step:g} s, minimum {s_min:.3g} m/s², hidden {3 * s_min:.3g}")
+    print("  warmup+step: both of the above in the same record")
     kinds = {
         "temperature": Truth(coefficient=(3 * c_min, 0.0, 0.0), lag_s=lag),
         "warmup": Truth(warmup=(3 * w_min, t_w)),
         "gauss_markov": Truth(gauss_markov=(2e-4, 120.0)),
         "bias_step": Truth(step=(t_step, 3 * s_min)),
+        "warmup+step": Truth(warmup=(3 * w_min, t_w), step=(t_step, 3 * s_min)),
         "null": Truth(),
     }
 
@@ -119,11 +122,14 @@ def power(cases: int, seed0: int) -> None:
                 for a, ch in ex.channels.items():
                     mine = [f for f in ch.claimed if f.cause != "sinusoid"]
                     lines += sum(f.cause == "sinusoid" for f in ch.claimed)
-                    hit = [f for f in mine if f.cause == kind and a in hidden_on]
-                    bad |= any(f.cause != kind or a not in hidden_on for f in mine)
+                    # "warmup+step" hides both: each must be found, with its parameters
+                    want = {"warmup+step": ["warmup", "bias_step"]}.get(kind, [kind])
+                    hit = {f.cause: f for f in mine if f.cause in want and a in hidden_on}
+                    bad |= any(f.cause not in want or a not in hidden_on for f in mine)
                     if a in hidden_on:
-                        ok_det &= bool(hit)
-                        ok_par &= bool(hit) and right(kind, hit[0].params)
+                        ok_det &= len(hit) == len(want)
+                        ok_par &= len(hit) == len(want) and all(
+                            right(c, f.params) for c, f in hit.items())
                 det += ok_det if kind != "null" else not bad
                 par += ok_par if kind != "null" else not bad
                 false += bad

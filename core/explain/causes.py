@@ -22,7 +22,7 @@ analyze's model (``fit.fit_noise``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +52,8 @@ class Candidate:
     statistic: float = 0.0
     threshold: float = 0.0
     evidence: str = ""
+    #: 68 % intervals of the parameters ([lo, hi], SI units), where the fit gives them
+    intervals: dict[str, list[float]] = field(default_factory=dict)
     #: extra detail for the report (arrays for plots); never serialised to JSON
     detail: dict[str, Any] = field(default_factory=dict)
     #: channel name of the temperature witness (temperature cause only)
@@ -300,39 +302,224 @@ def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw:
     return c
 
 
-def refine_warmup(y: NDArray, rate_hz: float, cand: Candidate, noise: dict[str, float],
-                  max_blocks: int = 1024) -> Candidate:
-    """The warm-up's time constant and size by generalised least squares of [1, t, e^(−t/T)]
-    with the noise covariance of analyze's fitted N, B, K (``noise``), T on a grid within a
-    factor 2 of the detector's; the test (window contrast) is unchanged. Ordinary least
-    squares weighs every block alike, and the random walk's slow wander then pulls T."""
-    b = max(1, len(y) // max_blocks)
-    yb = block_means(y, b)
-    dt = b / rate_hz
-    t = (np.arange(len(yb)) + 0.5) * dt
-    C = _noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
-    from scipy.linalg import solve_triangular
+# --------------------------------------------------------------------------------------------
+# generalised least squares of the transients: parameters and 68 % intervals
 
+
+#: Points of the profile grids: the warm-up's T (log grid over a factor 8 either side of the
+#: detector's) and the step's time (a quarter block apart over ± 4 % of the record).
+T_GRID = 81
+STEP_GRID_FRACTION = 0.04
+
+
+def _step_blocks(t: NDArray, dt: float, ts: NDArray) -> NDArray:
+    """H(t − ts) averaged over each block (centres ``t``, length ``dt``), one column per
+    ``ts``: the block holding the step gets the fraction after it, so the fit's χ² is a
+    continuous function of the step time, not a staircase of whole blocks."""
+    return np.clip((t[:, None] + dt / 2 - np.asarray(ts)[None, :]) / dt, 0.0, 1.0)
+
+
+def _weight_interval(x: NDArray, chi: NDArray, scale: float) -> tuple[float, float, float]:
+    """(16th, 50th, 84th percentile) of the likelihood exp(−(χ² − χ²_min)/(2·scale)) over an
+    even grid x, interpolated: the estimate and its central 68 %. For a change point: its
+    profile χ² is a jagged two-sided random walk, not a parabola, so Δχ² = 1 around the
+    minimum under-covers (31 % on white noise) and the minimum itself may sit on a spike off
+    the likelihood's bulk; the normalised likelihood (a flat prior on the grid) covers about
+    68 %, a little more (``tests/core/test_causes.py``)."""
+    w = np.exp(-(chi - chi.min()) / (2.0 * scale))
+    cdf = np.cumsum(w) / w.sum()
+    lo, mid, hi = np.interp([0.1587, 0.5, 0.8413], cdf, x)
+    return float(lo), float(mid), float(hi)
+
+
+def _profile_interval(x: NDArray, chi: NDArray, rise: float) -> tuple[float, float]:
+    """[lo, hi] of the connected region around the minimum of a profile χ²(x) where it stays
+    within ``rise`` of the minimum (Δχ² = 1 for 68 %, one parameter), the edges interpolated
+    between grid points; a grid edge where the profile never rises that far."""
+    i = int(np.argmin(chi))
+    lim = float(chi[i]) + rise
+    lo_i = i
+    while lo_i > 0 and chi[lo_i - 1] <= lim:
+        lo_i -= 1
+    hi_i = i
+    while hi_i < len(x) - 1 and chi[hi_i + 1] <= lim:
+        hi_i += 1
+
+    def cross(a: int, b: int) -> float:  # the x between grid points a (inside), b (outside)
+        f = (lim - chi[a]) / (chi[b] - chi[a]) if chi[b] != chi[a] else 0.0
+        return float(x[a] + f * (x[b] - x[a]))
+
+    lo = float(x[0]) if lo_i == 0 else cross(lo_i, lo_i - 1)
+    hi = float(x[-1]) if hi_i == len(x) - 1 else cross(hi_i, hi_i + 1)
+    return lo, hi
+
+
+class _Gls:
+    """GLS of block means (≤ ``max_blocks``) on [1, t] plus the transients' columns, with the
+    noise covariance of analyze's fitted N, B, K (``_noise_cov``): the data and every column
+    are whitened by the covariance's Cholesky factor, so each χ² is a plain least squares.
+    Ordinary least squares weighs every block alike, and the random walk's slow wander then
+    pulls the warm-up's T (15 % scatter at 3× the minimum) and the step's size."""
+
+    def __init__(self, y: NDArray, rate_hz: float, noise: dict[str, float],
+                 max_blocks: int) -> None:
+        from scipy.linalg import solve_triangular
+
+        b = max(1, len(y) // max_blocks)
+        self.yb = block_means(y, b)
+        self.dt = b / rate_hz
+        self.t = (np.arange(len(self.yb)) + 0.5) * self.dt
+        c = _noise_cov(self.t, self.dt, noise.get("N", 0.0), noise.get("B", 0.0),
+                       noise.get("K", 0.0))
+        self._L = np.linalg.cholesky(c)  # LinAlgError: the caller keeps the detector's values
+        self._solve = solve_triangular
+        self.wy = self.white(self.yb)
+        self.wbase = self.white(np.column_stack([np.ones_like(self.t), self.t]))
+
+    def white(self, cols: NDArray) -> NDArray:
+        return np.asarray(self._solve(self._L, cols, lower=True))
+
+    def chi2(self, cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
+        """(χ², coefficients, (AᵀA)⁻¹) of the whitened data on [1, t] + ``cols`` (whitened)."""
+        a = np.column_stack([self.wbase, *cols])
+        coef, *_ = np.linalg.lstsq(a, self.wy, rcond=None)
+        r = self.wy - a @ coef
+        return float(r @ r), coef, np.linalg.pinv(a.T @ a)
+
+    def profile(self, wcols: NDArray, fixed: list[NDArray]) -> NDArray:
+        """χ² with each whitened column of ``wcols`` in turn beside the ``fixed`` ones: with
+        Q an orthonormal basis of [1, t] + fixed, r the data's residual and c' each column's,
+        χ² = r·r − (c'·r)²/(c'·c') (one more column in a least squares), all at once."""
+        q, _ = np.linalg.qr(np.column_stack([self.wbase, *fixed]))
+        r = self.wy - q @ (q.T @ self.wy)
+        c = wcols - q @ (q.T @ wcols)
+        cc = np.einsum("ij,ij->j", c, c)
+        cr = c.T @ r
+        with np.errstate(invalid="ignore", divide="ignore"):
+            gain = np.where(cc > 1e-300, cr**2 / cc, 0.0)
+        return np.asarray(float(r @ r) - gain)
+
+
+def refine_transients(y: NDArray, rate_hz: float, noise: dict[str, float],
+                      warmup: Candidate | None = None, step: Candidate | None = None,
+                      max_blocks: int = 1024) -> list[Candidate]:
+    """The passed transients' parameters and 68 % intervals by one generalised least-squares
+    fit of [1, t, e^(−t/T), H(t − t_s)] (the columns of the causes given), with the noise
+    covariance of analyze's fitted N, B, K (``noise``); the tests (window contrasts) are
+    unchanged. Warm-up and step are fitted together, so neither biases the other.
+
+    T and t_s enter nonlinearly: each is profiled on a grid (T over a factor 8 either side of
+    the detector's, t_s over ± 4 % of the record a quarter block apart), the other one held
+    at its best, two rounds. Intervals (68 %): T where the profile χ² stays within s² of its
+    minimum (Δχ² = 1, one parameter); t_s, a change point whose profile is no parabola, the
+    central 68 % of its profile likelihood (``_weight_interval``; t_s is its median); the
+    sizes ± s·√(cov) of the linearised model at the best point (the warm-up's with the column
+    ∂/∂T, so its size carries T's uncertainty). s² = max(1, χ²/dof), the Birge ratio, widens
+    them when the noise model under-describes the record.
+    On a covariance that will not factor, the detectors' values are returned unchanged."""
     try:
-        L = np.linalg.cholesky(C)
+        g = _Gls(y, rate_hz, noise, max_blocks)
     except np.linalg.LinAlgError:
-        return cand
-    T0 = cand.params["time_constant_s"]
-    Ts = np.geomspace(T0 / 2, T0 * 2, 41)
-    # whiten the data, the offset and drift, and every trial exponential in one solve
-    cols = np.column_stack([yb, np.ones_like(t), t, np.exp(-t[:, None] / Ts[None, :])])
-    w = solve_triangular(L, cols, lower=True)
-    wy, base = w[:, 0], w[:, 1:3]
-    best = (math.inf, T0, cand.params["size"])
-    for i, T in enumerate(Ts):
-        a = np.column_stack([base, w[:, 3 + i]])
-        coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
-        r = wy - a @ coef
-        chi = float(r @ r)
-        if chi < best[0]:
-            best = (chi, float(T), float(coef[2]))
-    _, T, size = best
-    return Candidate(cand.cause, cand.passed, {"time_constant_s": T, "size": size},
-                     cand.statistic, cand.threshold,
-                     cand.evidence + f"; generalised least squares with analyze's noise model: "
-                     f"time constant {T:.4g} s, size {size:.3g} m/s²")
+        return [c for c in (warmup, step) if c is not None]
+    t, dt = g.t, g.dt
+    record_s = len(g.yb) * dt
+    T = warmup.params["time_constant_s"] if warmup is not None else 0.0
+    ts = step.params["time_s"] if step is not None else 0.0
+    t_grid = (np.geomspace(max(T / 8, 2 * dt), min(T * 8, record_s / 2), T_GRID)
+              if warmup is not None else np.zeros(0))
+    half = STEP_GRID_FRACTION * record_s
+    s_grid = (np.arange(max(ts - half, 8 * dt), min(ts + half, record_s - 8 * dt), dt / 4)
+              if step is not None else np.zeros(0))
+    w_exp = g.white(np.exp(-t[:, None] / t_grid[None, :])) if warmup is not None else None
+    w_step = g.white(_step_blocks(t, dt, s_grid)) if step is not None else None
+    chi_t = chi_s = np.zeros(0)
+    for _round in range(2):
+        if w_exp is not None:
+            fixed = [] if w_step is None else [g.white(_step_blocks(t, dt, [ts])[:, 0])]
+            chi_t = g.profile(w_exp, fixed)
+            T = float(t_grid[int(np.argmin(chi_t))])
+        if w_step is not None:
+            fixed = [] if w_exp is None else [g.white(np.exp(-t / T))]
+            chi_s = g.profile(w_step, fixed)
+            ts = _weight_interval(s_grid, chi_s, 1.0)[1]
+        if w_exp is None or w_step is None:
+            break
+    # the sizes at the best point; their uncertainty from the linearised model, which adds
+    # the column ∂/∂T of the warm-up (size·t/T²·e^(−t/T)) so the size carries T's
+    plain: list[NDArray] = []
+    if warmup is not None:
+        e = np.exp(-t / T)
+        plain.append(g.white(e))
+    if step is not None:
+        plain.append(g.white(_step_blocks(t, dt, [ts])[:, 0]))
+    chi, coef, _ = g.chi2(plain)
+    lin = list(plain)
+    if warmup is not None:
+        lin.insert(1, g.white(float(coef[2]) * t / T**2 * e))
+    cov = g.chi2(lin)[2]
+    dof = max(1, len(g.yb) - 2 - len(lin))
+    s2 = max(1.0, chi / dof)
+    out: list[Candidate] = []
+    # the test's evidence (a candidate refitted again keeps it, not the earlier refit's)
+    tests = {c.cause: c.detail.get("test", c.evidence) for c in (warmup, step) if c is not None}
+    both = " (warm-up and step fitted together)" if None not in (warmup, step) else ""
+    note = f"generalised least squares with analyze's noise model{both}, χ²/dof {chi / dof:.3g}: "
+    if warmup is not None:
+        size = float(coef[2])
+        se = math.sqrt(s2 * cov[2, 2])
+        t_lo, t_hi = _profile_interval(t_grid, chi_t, s2)
+        out.append(replace(warmup, params={"time_constant_s": T, "size": size},
+                           intervals={"time_constant_s": [t_lo, t_hi],
+                                      "size": [size - se, size + se]},
+                           detail={**warmup.detail, "test": tests["warmup"]},
+                           evidence=tests["warmup"] + "; " + note
+                           + f"time constant {T:.4g} s [{t_lo:.4g}, {t_hi:.4g}], size "
+                           f"{size:.3g} m/s² [{size - se:.3g}, {size + se:.3g}] (68 %)"))
+    if step is not None:
+        k = 2 + (1 if warmup is not None else 0)
+        kc = k + (1 if warmup is not None else 0)
+        size = float(coef[k])
+        se = math.sqrt(s2 * cov[kc, kc])
+        s_lo, _, s_hi = _weight_interval(s_grid, chi_s, s2)
+        out.append(replace(step, params={"time_s": ts, "size": size},
+                           intervals={"time_s": [s_lo, s_hi], "size": [size - se, size + se]},
+                           detail={**step.detail, "test": tests["bias_step"]},
+                           evidence=tests["bias_step"] + "; " + note
+                           + f"time {ts:.6g} s [{s_lo:.6g}, {s_hi:.6g}], size {size:.3g} m/s² "
+                           f"[{size - se:.3g}, {size + se:.3g}] (68 %)"))
+    return out
+
+
+def find_transients(y: NDArray, rate_hz: float, noise: dict[str, float]
+                    ) -> tuple[Candidate, Candidate]:
+    """(warm-up, step) of one axis's slow view, each tested, the passed ones refined with
+    intervals (``refine_transients``).
+
+    Both tests compare the two shapes on the same data (a step must fit better than a warm-up
+    and vice versa), so on their own they exclude each other. They compose: the one that
+    passes is the stronger; it is refined and removed, and the other is tested on the
+    residual, with the same test and threshold (and the same comparison of shapes there, so
+    a warm-up's leftover is not taken for a step). When both pass they are refitted
+    together."""
+    fits = transient_fits(y, rate_hz)
+    warm = detect_warmup(y, rate_hz, fits)
+    step = detect_bias_step(y, rate_hz, fits)
+    if not (warm.passed or step.passed):
+        return warm, step
+    first = warm if warm.passed else step
+    (ref,) = refine_transients(y, rate_hz, noise, **{_ARG[first.cause]: first})
+    resid = y - cause_signal(ref, len(y), rate_hz)
+    detect = detect_bias_step if first is warm else detect_warmup
+    second = detect(resid, rate_hz)
+    second = replace(second, evidence=f"with the {first.cause} removed: " + second.evidence)
+    if not second.passed:
+        return (ref, second) if first is warm else (second, ref)
+    if first is warm:
+        w0, s0 = ref, second
+    else:
+        w0, s0 = second, ref
+    w1, s1 = refine_transients(y, rate_hz, noise, warmup=w0, step=s0)
+    return w1, s1
+
+
+_ARG = {"warmup": "warmup", "bias_step": "step"}
