@@ -13,6 +13,9 @@ signal it describes then enters analyze's GLS fit as one more AVAR component
 - ``warmup``: the same contrast at the record start for an exponential settling, with the
   time constant from a least-squares fit of [1, t, e^(−t/T)]; test ≥ 6 and it fits better than
   a step.
+- ``find_transients``: the two compose (the stronger removed, the other tested on the
+  residual), and ``refine_transients`` fits the passed ones together by generalised least
+  squares with the noise model, which gives their parameters and 68 % intervals.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
 (``report.find_lines``); rate ramp, the chip's low-pass and the LSB rounding are terms of

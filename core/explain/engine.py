@@ -16,8 +16,10 @@ One pass over the record (streamed, bounded memory):
      channel through a first-order lag; coefficient (m/s²/K) and lag (s) with 68 % intervals
      from the streaming Allan covariance of axis and lagged temperature; the
      temperature-compensated ADEV from the same covariance.
-   - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): least-squares fits in the time
-     domain on the slow view, with the window-contrast tests there.
+   - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): window-contrast tests on
+     the slow view that compose (the stronger removed before the other is tested); the
+     passed ones fitted together by GLS with the noise of the extended fit, with 68 %
+     intervals.
 
    The AVAR each fitted signal puts into the record (measured with the streaming estimator on
    the slow view, the same octave τ) enters ``fit_noise`` as one more component
