@@ -374,12 +374,20 @@ class _Gls:
         self.t = (np.arange(len(self.yb)) + 0.5) * self.dt
         c = _noise_cov(self.t, self.dt, noise.get("N", 0.0), noise.get("B", 0.0),
                        noise.get("K", 0.0))
-        self._L = np.linalg.cholesky(c)  # LinAlgError: the caller keeps the detector's values
+        diag = np.diag(c)
+        # fast path: white noise alone (B = K = 0) has a diagonal covariance, whitened by
+        # dividing by its σ (the Cholesky factor is that diagonal; tests hold them equal)
+        self._sd = np.sqrt(diag) if not np.any(c - np.diag(diag)) else None
+        if self._sd is None:
+            # LinAlgError: the caller keeps the detector's values
+            self._L = np.linalg.cholesky(c)
         self._solve = solve_triangular
         self.wy = self.white(self.yb)
         self.wbase = self.white(np.column_stack([np.ones_like(self.t), self.t]))
 
     def white(self, cols: NDArray) -> NDArray:
+        if self._sd is not None:
+            return np.asarray(cols / (self._sd if cols.ndim == 1 else self._sd[:, None]))
         return np.asarray(self._solve(self._L, cols, lower=True))
 
     def chi2(self, cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:

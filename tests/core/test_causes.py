@@ -133,6 +133,23 @@ def test_step_intervals_on_white_noise():
     assert float(np.median(widths)) == pytest.approx(se, rel=0.15)
 
 
+def test_white_noise_fast_path_equals_the_cholesky_path():
+    """White noise alone is whitened by dividing by σ; with a random walk too small to
+    matter (K = 1e-30) the general Cholesky path runs: same parameters and intervals."""
+    rng = np.random.default_rng(8)
+    n, rate = 2048, 1.0
+    t = np.arange(n) / rate
+    y = rng.standard_normal(n) + 3.0 * np.exp(-t / 150.0) + np.where(t >= 1200.0, 0.8, 0.0)
+    w = cz.Candidate("warmup", True, {"time_constant_s": 120.0, "size": 3.0})
+    s = cz.Candidate("bias_step", True, {"time_s": 1210.0, "size": 0.8})
+    fast = cz.refine_transients(y, rate, {"N": 1.0}, warmup=w, step=s)
+    slow = cz.refine_transients(y, rate, {"N": 1.0, "K": 1e-30}, warmup=w, step=s)
+    for a, b in zip(fast, slow, strict=True):
+        for k in a.params:
+            assert a.params[k] == pytest.approx(b.params[k], rel=1e-9)
+            assert a.intervals[k] == pytest.approx(b.intervals[k], rel=1e-9)
+
+
 def _coverage(tmp_path, seeds) -> dict[tuple[str, str], tuple[int, int]]:
     """(held, counted) of the 68 % intervals of every transient parameter over the axes of
     warm-up + step records, by (cause, parameter)."""
