@@ -516,7 +516,8 @@ def refine_transients(y: NDArray, rate_hz: float, noise: dict[str, float],
     # the test's evidence (a candidate refitted again keeps it, not the earlier refit's)
     tests = {c.cause: c.detail.get("test", c.evidence) for c in (warmup, step) if c is not None}
     both = " (warm-up and step fitted together)" if None not in (warmup, step) else ""
-    note = f"generalised least squares with analyze's noise model{both}, χ²/dof {chi / dof:.3g}: "
+    note = (f"generalised least squares with the fitted noise (N, B, K){both}, "
+            f"χ²/dof {chi / dof:.3g}: ")
     if warmup is not None:
         size = float(coef[2])
         lo, hi = _size_interval(chi_t, sz_t, v_t, s2)
