@@ -17,8 +17,9 @@ K 2e-6 m/s²·√s) are explained, each hiding one cause at 3× its stated minim
 10 and 20 minutes, logged on the ambient or on the plate channel; a warm-up and a bias step
 (``causes.min_detectable_warmup`` / ``_step``), a Gauss–Markov process
 (``gauss_markov.min_detectable_gauss_markov``, σ and T to 10 %) and a sinusoid
-(``causes.min_detectable_sinusoid``, analyze's line finder) on every axis; "null" hides
-nothing. ``--rows`` runs a subset (row-name prefixes).
+(``causes.min_detectable_sinusoid``, analyze's line finder) on every axis; "warmup+step"
+hides a warm-up and a step in one record (each must be found, with its parameters); "null"
+hides nothing. ``--rows`` runs a subset (row-name prefixes).
 """
 
 from __future__ import annotations
@@ -81,6 +82,8 @@ class Case:
     logged: tuple[str, ...] = ("ambient",)
     #: a hidden line's frequency and how near (Hz) a line found must be to count as it
     line: tuple[float, float] | None = None
+    #: for a row hiding several causes (kind "a+b"): the parameter check of each
+    checks: dict[str, Callable[[dict[str, float]], bool]] | None = None
 
 
 def _near(a: float, b: float, rel: float = 0.2) -> bool:
@@ -140,6 +143,13 @@ def cases_at_3x(hours: float, rate: float, n_w: float, b_i: float, k_r: float) -
              f"{f_sin:g} Hz: minimum {sn:.3g} m/s² (analyze's line finder), hidden "
              f"{3 * sn:.3g}",
              lambda p: _near(p["amplitude"], 3 * sn), line=(f_sin, bin_hz)),
+        Case("warmup+step", "warmup+bias_step",
+             Truth(warmup=(3 * w, t_w), step=(t_step, 3 * st)),
+             "both of the above in one record", lambda p: True,
+             checks={"warmup": lambda p: _near(p["size"], 3 * w)
+                     and _near(p["time_constant_s"], t_w),
+                     "bias_step": lambda p: _near(p["size"], 3 * st)
+                     and abs(p["time_s"] - t_step) < 0.01 * rec_s}),
         Case("null", "", Truth(), "nothing hidden", lambda p: True, ()),
     ]
     return out
@@ -174,7 +184,8 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                 n += 1
                 ok_det, ok_par, bad = True, True, False
                 for a, ch in ex.channels.items():
-                    mine = [f for f in ch.claimed if f.cause == case.kind and a in case.hidden_on]
+                    want = case.kind.split("+") if case.kind else []
+                    mine = [f for f in ch.claimed if f.cause in want and a in case.hidden_on]
                     if case.line is not None:
                         # the hidden line is the one found within three Welch bins of its
                         # frequency; analyze's other lines are counted apart (its own
@@ -188,8 +199,13 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                         key = f"{f.cause} on {a} (seed {seed0 + 1000 * j + i})"
                         wrong[key] = wrong.get(key, 0) + 1
                     if a in case.hidden_on:
-                        ok_det &= bool(mine)
-                        ok_par &= bool(mine) and case.check(mine[0].params)
+                        # every cause hidden must be found ("warmup+bias_step": both), each
+                        # with its parameters
+                        got = {f.cause: f for f in mine}
+                        checks = case.checks or {case.kind: case.check}
+                        ok_det &= len(got) == len(want)
+                        ok_par &= len(got) == len(want) and all(
+                            checks[c](f.params) for c, f in got.items())
                 det += ok_det if case.hidden_on else not bad
                 par += ok_par if case.hidden_on else not bad
                 false += bad

@@ -13,6 +13,9 @@ signal it describes then enters analyze's GLS fit as one more AVAR component
 - ``warmup``: the same contrast at the record start for an exponential settling, with the
   time constant from a least-squares fit of [1, t, e^(−t/T)]; test ≥ 6 and it fits better than
   a step.
+- ``find_transients``: the two compose (the stronger removed, the other tested on the
+  residual), and ``refine_transients`` fits the passed ones together by generalised least
+  squares with the noise model, which gives their parameters and 68 % intervals.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
 (``report.find_lines``); rate ramp, the chip's low-pass and the LSB rounding are terms of
@@ -22,7 +25,7 @@ analyze's model (``fit.fit_noise``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +55,8 @@ class Candidate:
     statistic: float = 0.0
     threshold: float = 0.0
     evidence: str = ""
+    #: 68 % intervals of the parameters ([lo, hi], SI units), where the fit gives them
+    intervals: dict[str, list[float]] = field(default_factory=dict)
     #: extra detail for the report (arrays for plots); never serialised to JSON
     detail: dict[str, Any] = field(default_factory=dict)
     #: channel name of the temperature witness (temperature cause only)
@@ -335,39 +340,272 @@ def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw:
     return c
 
 
-def refine_warmup(y: NDArray, rate_hz: float, cand: Candidate, noise: dict[str, float],
-                  max_blocks: int = 1024) -> Candidate:
-    """The warm-up's time constant and size by generalised least squares of [1, t, e^(−t/T)]
-    with the noise covariance of analyze's fitted N, B, K (``noise``), T on a grid within a
-    factor 2 of the detector's; the test (window contrast) is unchanged. Ordinary least
-    squares weighs every block alike, and the random walk's slow wander then pulls T."""
-    b = max(1, len(y) // max_blocks)
-    yb = block_means(y, b)
-    dt = b / rate_hz
-    t = (np.arange(len(yb)) + 0.5) * dt
-    C = _noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
-    from scipy.linalg import solve_triangular
+# --------------------------------------------------------------------------------------------
+# generalised least squares of the transients: parameters and 68 % intervals
 
+
+#: Points of the profile grids: the warm-up's T (log grid over a factor 8 either side of the
+#: detector's) and the step's time (a quarter block apart over ± 4 % of the record).
+T_GRID = 81
+STEP_GRID_FRACTION = 0.04
+
+
+def _step_blocks(t: NDArray, dt: float, ts: NDArray) -> NDArray:
+    """H(t − ts) averaged over each block (centres ``t``, length ``dt``), one column per
+    ``ts``: the block holding the step gets the fraction after it, so the fit's χ² is a
+    continuous function of the step time, not a staircase of whole blocks."""
+    return np.clip((t[:, None] + dt / 2 - np.asarray(ts)[None, :]) / dt, 0.0, 1.0)
+
+
+def _weight_interval(x: NDArray, chi: NDArray, scale: float) -> tuple[float, float, float]:
+    """(16th, 50th, 84th percentile) of the likelihood exp(−(χ² − χ²_min)/(2·scale)) over an
+    even grid x, interpolated: the estimate and its central 68 %. For a change point: its
+    profile χ² is a jagged two-sided random walk, not a parabola, so Δχ² = 1 around the
+    minimum under-covers (31 % on white noise) and the minimum itself may sit on a spike off
+    the likelihood's bulk; the normalised likelihood (a flat prior on the grid) covers about
+    68 %, a little more (``tests/core/test_causes.py``)."""
+    w = np.exp(-(chi - chi.min()) / (2.0 * scale))
+    cdf = np.cumsum(w) / w.sum()
+    lo, mid, hi = np.interp([0.1587, 0.5, 0.8413], cdf, x)
+    return float(lo), float(mid), float(hi)
+
+
+def _profile_interval(x: NDArray, chi: NDArray, rise: float) -> tuple[float, float]:
+    """[lo, hi] of the connected region around the minimum of a profile χ²(x) where it stays
+    within ``rise`` of the minimum (Δχ² = 1 for 68 %, one parameter), the edges interpolated
+    between grid points; a grid edge where the profile never rises that far."""
+    i = int(np.argmin(chi))
+    lim = float(chi[i]) + rise
+    lo_i = i
+    while lo_i > 0 and chi[lo_i - 1] <= lim:
+        lo_i -= 1
+    hi_i = i
+    while hi_i < len(x) - 1 and chi[hi_i + 1] <= lim:
+        hi_i += 1
+
+    def cross(a: int, b: int) -> float:  # the x between grid points a (inside), b (outside)
+        f = (lim - chi[a]) / (chi[b] - chi[a]) if chi[b] != chi[a] else 0.0
+        return float(x[a] + f * (x[b] - x[a]))
+
+    lo = float(x[0]) if lo_i == 0 else cross(lo_i, lo_i - 1)
+    hi = float(x[-1]) if hi_i == len(x) - 1 else cross(hi_i, hi_i + 1)
+    return lo, hi
+
+
+class _Gls:
+    """GLS of block means (≤ ``max_blocks``) on [1, t] plus the transients' columns, with the
+    noise covariance of analyze's fitted N, B, K (``_noise_cov``): the data and every column
+    are whitened by the covariance's Cholesky factor, so each χ² is a plain least squares.
+    Ordinary least squares weighs every block alike, and the random walk's slow wander then
+    pulls the warm-up's T (15 % scatter at 3× the minimum) and the step's size."""
+
+    def __init__(self, y: NDArray, rate_hz: float, noise: dict[str, float],
+                 max_blocks: int) -> None:
+        from scipy.linalg import solve_triangular
+
+        b = max(1, len(y) // max_blocks)
+        self.yb = block_means(y, b)
+        self.dt = b / rate_hz
+        self.t = (np.arange(len(self.yb)) + 0.5) * self.dt
+        c = _noise_cov(self.t, self.dt, noise.get("N", 0.0), noise.get("B", 0.0),
+                       noise.get("K", 0.0))
+        diag = np.diag(c)
+        # fast path: white noise alone (B = K = 0) has a diagonal covariance, whitened by
+        # dividing by its σ (the Cholesky factor is that diagonal; tests hold them equal)
+        self._sd = np.sqrt(diag) if not np.any(c - np.diag(diag)) else None
+        if self._sd is None:
+            # LinAlgError: the caller keeps the detector's values
+            self._L = np.linalg.cholesky(c)
+        self._solve = solve_triangular
+        self.wy = self.white(self.yb)
+        self.wbase = self.white(np.column_stack([np.ones_like(self.t), self.t]))
+
+    def white(self, cols: NDArray) -> NDArray:
+        if self._sd is not None:
+            return np.asarray(cols / (self._sd if cols.ndim == 1 else self._sd[:, None]))
+        return np.asarray(self._solve(self._L, cols, lower=True))
+
+    def chi2(self, cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
+        """(χ², coefficients, (AᵀA)⁻¹) of the whitened data on [1, t] + ``cols`` (whitened)."""
+        a = np.column_stack([self.wbase, *cols])
+        coef, *_ = np.linalg.lstsq(a, self.wy, rcond=None)
+        r = self.wy - a @ coef
+        return float(r @ r), coef, np.linalg.pinv(a.T @ a)
+
+    def profile(self, wcols: NDArray, fixed: list[NDArray]
+                ) -> tuple[NDArray, NDArray, NDArray]:
+        """(χ², coefficient, its variance) with each whitened column of ``wcols`` in turn
+        beside [1, t] and the ``fixed`` ones. With Q an orthonormal basis of those, r the
+        data's residual and c' each column's: χ² = r·r − (c'·r)²/(c'·c'), coefficient
+        c'·r/(c'·c'), variance 1/(c'·c') (Frisch–Waugh–Lovell), all at once."""
+        q, _ = np.linalg.qr(np.column_stack([self.wbase, *fixed]))
+        r = self.wy - q @ (q.T @ self.wy)
+        c = wcols - q @ (q.T @ wcols)
+        cc = np.maximum(np.einsum("ij,ij->j", c, c), 1e-300)
+        cr = c.T @ r
+        return float(r @ r) - cr**2 / cc, cr / cc, 1.0 / cc
+
+
+def _size_interval(chi: NDArray, size: NDArray, var: NDArray, rise: float
+                   ) -> tuple[float, float]:
+    """68 % interval of a size that is linear given a nonlinear parameter p (T, t_s) profiled
+    on a grid: at each p, χ²(size) = χ²(p) + (size − ŝ(p))²/v(p) exactly, so the size's
+    profile is their lower envelope; the interval is where it stays within ``rise`` (Δχ² = 1
+    times the Birge ratio) of its minimum. The linearised covariance at the best p alone
+    under-covered (a warm-up's size held the truth in 60 % of model-exact draws): size and T
+    are strongly correlated, and not linearly at 3× the minimum."""
+    i = int(np.argmin(chi))
+    se = math.sqrt(var[i] * rise)
+    grid = np.linspace(size[i] - 8 * se, size[i] + 8 * se, 801)
+    env = np.min(chi[:, None] + (grid[None, :] - size[:, None]) ** 2 / var[:, None], axis=0)
+    return _profile_interval(grid, env, rise)
+
+
+def _vertex(x: NDArray, chi: NDArray) -> float:
+    """The minimum of a profile χ² on a log grid, by the parabola through the grid minimum and
+    its neighbours in log x (a grid point alone is up to half a step off: 2.6 % in T, which
+    moved the warm-up's size by most of its standard error)."""
+    i = int(np.argmin(chi))
+    if i == 0 or i == len(x) - 1:
+        return float(x[i])
+    a, b, c = np.log(x[i - 1:i + 2])
+    fa, fb, fc = chi[i - 1:i + 2]
+    den = (b - a) * (fb - fc) - (b - c) * (fb - fa)
+    if den == 0:
+        return float(x[i])
+    v = b - 0.5 * ((b - a) ** 2 * (fb - fc) - (b - c) ** 2 * (fb - fa)) / den
+    return float(np.exp(np.clip(v, a, c)))
+
+
+def _step_profile(g: _Gls, grid: NDArray, chi: NDArray, fixed: list[NDArray]
+                  ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]:
+    """The step time's profile χ² on a fine grid over where its likelihood on the coarse
+    ``grid`` (``chi``) is not negligible: a step many block σ tall is located to a small
+    fraction of a block, finer than the coarse grid's quarter block."""
+    h = float(grid[1] - grid[0]) if len(grid) > 1 else g.dt / 4
+    live = grid[np.exp(-(chi - chi.min()) / 2.0) > 1e-6]
+    lo, hi = max(float(live.min()) - h, float(grid[0])), min(float(live.max()) + h,
+                                                               float(grid[-1]))
+    n = int(np.clip((hi - lo) / (g.dt / 64), 16, 512))
+    fine = np.linspace(lo, hi, n)
+    return fine, g.profile(g.white(_step_blocks(g.t, g.dt, fine)), fixed)
+
+
+def refine_transients(y: NDArray, rate_hz: float, noise: dict[str, float],
+                      warmup: Candidate | None = None, step: Candidate | None = None,
+                      max_blocks: int = 1024) -> list[Candidate]:
+    """The passed transients' parameters and 68 % intervals by one generalised least-squares
+    fit of [1, t, e^(−t/T), H(t − t_s)] (the columns of the causes given), with the noise
+    covariance of analyze's fitted N, B, K (``noise``); the tests (window contrasts) are
+    unchanged. Warm-up and step are fitted together, so neither biases the other.
+
+    T and t_s enter nonlinearly: each is profiled on a grid (T over a factor 8 either side of
+    the detector's, its minimum by a parabola in log T; t_s over ± 4 % of the record a
+    quarter block apart, then finer where its likelihood lives), the other one held at its
+    best, two rounds. Intervals (68 %): T where the profile χ² stays within s² of its minimum
+    (Δχ² = 1, one parameter); t_s, a change point whose profile is no parabola, the central
+    68 % of its profile likelihood (``_weight_interval``; t_s is its median); each size from
+    its own profile over T or t_s (``_size_interval``: linear given them, so exact on the
+    grid). s² = max(1, χ²/dof), the Birge ratio, widens them when the noise model
+    under-describes the record.
+    On a covariance that will not factor, the detectors' values are returned unchanged."""
     try:
-        L = np.linalg.cholesky(C)
+        g = _Gls(y, rate_hz, noise, max_blocks)
     except np.linalg.LinAlgError:
-        return cand
-    T0 = cand.params["time_constant_s"]
-    Ts = np.geomspace(T0 / 2, T0 * 2, 41)
-    # whiten the data, the offset and drift, and every trial exponential in one solve
-    cols = np.column_stack([yb, np.ones_like(t), t, np.exp(-t[:, None] / Ts[None, :])])
-    w = solve_triangular(L, cols, lower=True)
-    wy, base = w[:, 0], w[:, 1:3]
-    best = (math.inf, T0, cand.params["size"])
-    for i, T in enumerate(Ts):
-        a = np.column_stack([base, w[:, 3 + i]])
-        coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
-        r = wy - a @ coef
-        chi = float(r @ r)
-        if chi < best[0]:
-            best = (chi, float(T), float(coef[2]))
-    _, T, size = best
-    return Candidate(cand.cause, cand.passed, {"time_constant_s": T, "size": size},
-                     cand.statistic, cand.threshold,
-                     cand.evidence + f"; generalised least squares with analyze's noise model: "
-                     f"time constant {T:.4g} s, size {size:.3g} m/s²")
+        return [c for c in (warmup, step) if c is not None]
+    t, dt = g.t, g.dt
+    record_s = len(g.yb) * dt
+    T = warmup.params["time_constant_s"] if warmup is not None else 0.0
+    ts = step.params["time_s"] if step is not None else 0.0
+    t_grid = (np.geomspace(max(T / 8, 2 * dt), min(T * 8, record_s / 2), T_GRID)
+              if warmup is not None else np.zeros(0))
+    half = STEP_GRID_FRACTION * record_s
+    s_grid = (np.arange(max(ts - half, 8 * dt), min(ts + half, record_s - 8 * dt), dt / 4)
+              if step is not None else np.zeros(0))
+    w_exp = g.white(np.exp(-t[:, None] / t_grid[None, :])) if warmup is not None else None
+    w_step = g.white(_step_blocks(t, dt, s_grid)) if step is not None else None
+    chi_t = chi_s = s_fine = sz_t = v_t = sz_s = v_s = np.zeros(0)
+    for _round in range(2):
+        if w_exp is not None:
+            fixed = [] if w_step is None else [g.white(_step_blocks(t, dt, [ts])[:, 0])]
+            chi_t, sz_t, v_t = g.profile(w_exp, fixed)
+            T = _vertex(t_grid, chi_t)
+        if w_step is not None:
+            fixed = [] if w_exp is None else [g.white(np.exp(-t / T))]
+            s_fine, (chi_s, sz_s, v_s) = _step_profile(g, s_grid, g.profile(w_step, fixed)[0],
+                                                       fixed)
+            ts = _weight_interval(s_fine, chi_s, 1.0)[1]
+        if w_exp is None or w_step is None:
+            break
+    # the sizes at the best point; their intervals from the profiles (``_size_interval``)
+    plain: list[NDArray] = []
+    if warmup is not None:
+        plain.append(g.white(np.exp(-t / T)))
+    if step is not None:
+        plain.append(g.white(_step_blocks(t, dt, [ts])[:, 0]))
+    chi, coef, _ = g.chi2(plain)
+    # T and t_s count as fitted parameters
+    dof = max(1, len(g.yb) - 2 - 2 * len(plain))
+    s2 = max(1.0, chi / dof)
+    out: list[Candidate] = []
+    # the test's evidence (a candidate refitted again keeps it, not the earlier refit's)
+    tests = {c.cause: c.detail.get("test", c.evidence) for c in (warmup, step) if c is not None}
+    both = " (warm-up and step fitted together)" if None not in (warmup, step) else ""
+    note = (f"generalised least squares with the fitted noise (N, B, K){both}, "
+            f"χ²/dof {chi / dof:.3g}: ")
+    if warmup is not None:
+        size = float(coef[2])
+        lo, hi = _size_interval(chi_t, sz_t, v_t, s2)
+        t_lo, t_hi = _profile_interval(t_grid, chi_t, s2)
+        out.append(replace(warmup, params={"time_constant_s": T, "size": size},
+                           intervals={"time_constant_s": [t_lo, t_hi], "size": [lo, hi]},
+                           detail={**warmup.detail, "test": tests["warmup"]},
+                           evidence=tests["warmup"] + "; " + note
+                           + f"time constant {T:.4g} s [{t_lo:.4g}, {t_hi:.4g}], size "
+                           f"{size:.3g} m/s² [{lo:.3g}, {hi:.3g}] (68 %)"))
+    if step is not None:
+        size = float(coef[-1])
+        lo, hi = _size_interval(chi_s, sz_s, v_s, s2)
+        s_lo, _, s_hi = _weight_interval(s_fine, chi_s, s2)
+        out.append(replace(step, params={"time_s": ts, "size": size},
+                           intervals={"time_s": [s_lo, s_hi], "size": [lo, hi]},
+                           detail={**step.detail, "test": tests["bias_step"]},
+                           evidence=tests["bias_step"] + "; " + note
+                           + f"time {ts:.6g} s [{s_lo:.6g}, {s_hi:.6g}], size {size:.3g} m/s² "
+                           f"[{lo:.3g}, {hi:.3g}] (68 %)"))
+    return out
+
+
+def find_transients(y: NDArray, rate_hz: float, noise: dict[str, float]
+                    ) -> tuple[Candidate, Candidate]:
+    """(warm-up, step) of one axis's slow view, each tested, the passed ones refined with
+    intervals (``refine_transients``).
+
+    Both tests compare the two shapes on the same data (a step must fit better than a warm-up
+    and vice versa), so on their own they exclude each other. They compose: the one that
+    passes is the stronger; it is refined and removed, and the other is tested on the
+    residual, with the same test and threshold (and the same comparison of shapes there, so
+    a warm-up's leftover is not taken for a step). When both pass they are refitted
+    together."""
+    fits = transient_fits(y, rate_hz)
+    warm = detect_warmup(y, rate_hz, fits)
+    step = detect_bias_step(y, rate_hz, fits)
+    if not (warm.passed or step.passed):
+        return warm, step
+    first = warm if warm.passed else step
+    (ref,) = refine_transients(y, rate_hz, noise, **{_ARG[first.cause]: first})
+    resid = y - cause_signal(ref, len(y), rate_hz)
+    detect = detect_bias_step if first is warm else detect_warmup
+    second = detect(resid, rate_hz)
+    second = replace(second, evidence=f"with the {first.cause} removed: " + second.evidence)
+    if not second.passed:
+        return (ref, second) if first is warm else (second, ref)
+    if first is warm:
+        w0, s0 = ref, second
+    else:
+        w0, s0 = second, ref
+    w1, s1 = refine_transients(y, rate_hz, noise, warmup=w0, step=s0)
+    return w1, s1
+
+
+_ARG = {"warmup": "warmup", "bias_step": "step"}

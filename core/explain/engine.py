@@ -19,8 +19,10 @@ Streamed, in bounded memory:
      channel through a first-order lag; coefficient (m/s²/K) and lag (s) with 68 % intervals
      from the streaming Allan covariance of axis and lagged temperature; the
      temperature-compensated ADEV from the same covariance.
-   - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): least-squares fits in the time
-     domain on the slow view, with the window-contrast tests there.
+   - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): window-contrast tests on
+     the slow view that compose (the stronger removed before the other is tested); the
+     passed ones fitted together by GLS with the noise of the extended fit, with 68 %
+     intervals.
    - ``gauss_markov`` (:mod:`avard.core.explain.gauss_markov`): a component of the GLS fit
      itself (closed-form AVAR), its T scanned by −2 ln L.
 
@@ -456,6 +458,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     signal = np.zeros(len(y_slow))
     comp_var: NDArray[np.float64] | None = None
     thermal_only: NDArray[np.float64] | None = None
+    trans: list[cz.Candidate] = []
+    work = y_slow
     if len(y_slow) >= MIN_SLOW_POINTS:
         if thermal is not None and temps is not None:
             f = thermal.finding()
@@ -468,37 +472,54 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                     signal += d
                     curves["temperature"] = signal_avar_on(d, rate_b, tau)
         work = y_slow - signal
-        fits = cz.transient_fits(work, rate_b)
-        for cand in (cz.detect_warmup(work, rate_b, fits),
-                     cz.detect_bias_step(work, rate_b, fits)):
-            if cand.cause == "warmup" and cand.passed:
-                cand = cz.refine_warmup(work, rate_b, cand, _noise_levels(base))
-            findings.append(Finding(cand.cause, cand.passed, dict(cand.params), {},
-                                    cand.statistic, cand.threshold, cand.evidence))
-            if cand.passed:
-                d = cz.cause_signal(cand, len(work), rate_b)
-                signal += d
-                curves[cand.cause] = signal_avar_on(d, rate_b, tau)
+        # warm-up and step compose: the stronger is removed before the other is tested, both
+        # refitted together by GLS with analyze's noise model (their 68 % intervals)
+        trans = list(cz.find_transients(work, rate_b, _noise_levels(base)))
     corner = an.meta.get("filter_corner_hz")
     lsb = meta.get("lsb_mps2")
     kw: dict[str, Any] = {}
     if corner is not None and isinstance(lsb, int | float) and lsb > 0:
         kw["rounding_lsb"] = float(lsb)
     extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
-    ext = base
-    current = allan
-    if curves:
-        # the record with every claimed signal removed, from the Allan covariance of the axis
-        # and that signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)
-        comp_var = compensated_avar(allan.var, tau, allan2(y_slow, signal, rate_b), 1.0)
-        ratio = comp_var / np.where(allan.var > 0, allan.var, 1.0)
-        comp = replace(allan, var=comp_var, lo=allan.lo * ratio, hi=allan.hi * ratio)
-        current = comp
+
+    def extend(cands: list[cz.Candidate]) -> tuple[NDArray[np.float64], NoiseFit, Any]:
+        """(compensated AVAR, extended fit, its Allan result) with the thermal signal and the
+        passed transients ``cands`` removed, from the Allan covariance of the axis and that
+        signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)."""
+        total = signal.copy()
+        for c in cands:
+            d = cz.cause_signal(c, len(y_slow), rate_b)
+            total += d
+            curves[c.cause] = signal_avar_on(d, rate_b, tau)
+        cv = compensated_avar(allan.var, tau, allan2(y_slow, total, rate_b), 1.0)
+        ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
+        comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
         try:
-            ext = fit_noise(comp, filter_corner_hz=corner, extra=extra, **kw)
+            fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, **kw)
         except FitError as exc:
             raise FitError(f"channel {ch.name}, the model with the found causes: {exc}") \
                 from exc
+        return cv, fit, comp
+
+    ext = base
+    current: Any = allan
+    passed = [c for c in trans if c.passed]
+    if curves or passed:
+        comp_var, ext, current = extend(passed)
+    if passed:
+        # analyze's fit of the whole record counts the transients' AVAR as noise (at 3× the
+        # minimum warm-up its K is 3× the truth), which widens their intervals; so they are
+        # refitted once with the noise of the fit that has them removed
+        w = next((c for c in passed if c.cause == "warmup"), None)
+        st = next((c for c in passed if c.cause == "bias_step"), None)
+        redo = {c.cause: c for c in cz.refine_transients(work, rate_b, _noise_levels(ext),
+                                                          warmup=w, step=st)}
+        trans = [redo.get(c.cause, c) for c in trans]
+        comp_var, ext, current = extend([c for c in trans if c.passed])
+    for cand in trans:
+        findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
+                                dict(cand.intervals) if cand.passed else {},
+                                cand.statistic, cand.threshold, cand.evidence))
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra, kw)
     findings.append(gm)
     if gm_fit is not None:

@@ -32,7 +32,8 @@ that describes the sensor gives χ² ≈ n (the number of τ). The gain is
 
 0: the extension predicts no better; 0.9: its held-out misfit is a tenth of the base's;
 negative: it predicts worse (over-fitting). It is null, with the reason, when no cause is
-claimed (the extended model is the base model) or the record is too short to split.
+claimed (the extended model is the base model), when every claimed cause is an event (a
+warm-up, a step: nothing to predict) or the record is too short to split.
 The AVAR here is the slow view's (τ ≥ one block), where every cause acts.
 """
 
@@ -158,15 +159,26 @@ class Holdout:
         """1 − Σχ²_ext/Σχ²_base over the axes with a claimed cause; None when there is none
         (or the record could not be split)."""
         chs = [c for c in self.channels.values() if c.gain is not None]
-        if self.reason is not None or not chs:
+        if self.reason is not None or not chs or self._events_only:
             return None
         b = sum(c.chi2_base for c in chs)
         return 1.0 - sum(c.chi2_ext for c in chs) / b if b > 0 else None
 
     @property
+    def _events_only(self) -> bool:
+        """Every claimed cause on every axis is an event (a warm-up, a step): their held-out
+        gain is near 0 by design, so a headline figure would read as a failed model."""
+        claimed = [set(c.causes) for c in self.channels.values() if c.causes]
+        return bool(claimed) and all(cs <= EVENTS for cs in claimed)
+
+    @property
     def why_no_gain(self) -> str | None:
         if self.reason is not None:
             return self.reason
+        if self._events_only:
+            return ("every claimed cause is an event of this record (a warm-up or a step): "
+                    "it predicts no other data, so there is no held-out gain to measure; "
+                    "each cause's own test is the evidence (per-axis χ² in 'channels')")
         if self.gain is None:
             return "no cause claimed on any axis: the extended model is the base model"
         return None

@@ -198,6 +198,8 @@ class ThermalFit:
     allan: Any = field(default=None, repr=False)
 
     threshold: float = Z_TEMPERATURE
+    #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
+    lag_open: bool = False
 
     @property
     def passed(self) -> bool:
@@ -249,7 +251,8 @@ class ThermalFit:
         lo, hi = self.coef_interval
         return {"channel": self.channel, "coefficient_mps2_per_k": self.coefficient,
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
-                "lag_interval_s": [self.lag_lo, self.lag_hi], "z": self.z,
+                "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
+                "z": self.z,
                 "threshold": self.threshold, "passed": self.passed, "others": self.others}
 
 
@@ -385,7 +388,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
             kk = int(np.argmax([s[3] for s in sc]))
             others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
-                      others, res)
+                      others, res, lag_open=pos_hi == len(lags) - 1)
 
 
 def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,

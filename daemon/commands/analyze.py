@@ -80,13 +80,23 @@ def _write(path: str, text: str) -> None:
 
 
 def _comp_line(name: str, v: dict | None) -> str:
+    """One line per axis: the verdict of the temperature test first, then the coefficient and
+    the lag, each with its 68 % interval (the lag's marked open when it reaches the longest
+    lag tried)."""
     if v is None:
         return (f"channel {name}: no temperature fit (the channel is constant or the record "
                 "too short)")
     lo, hi = v["coefficient_interval"]
-    return (f"channel {name}: {v['coefficient_mps2_per_k']:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] "
-            f"(68 %) from '{v['channel']}' through a first-order lag of {v['lag_s']:.4g} s "
-            f"(z = {v['z']:.3g}); compensated ADEV in --json")
+    llo, lhi = v["lag_interval_s"]
+    z, zt = v["z"], v["threshold"]
+    verdict = (f"detected (z {z:.3g} ≥ {zt:g})" if v["passed"]
+               else f"not detected (z {z:.3g} < {zt:g})")
+    upper = f"≥ {lhi:.4g} s, the longest lag tried" if v.get("lag_interval_open") \
+        else f"{lhi:.4g} s"
+    return (f"channel {name}: temperature coupling {verdict}: "
+            f"{v['coefficient_mps2_per_k']:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %) from "
+            f"'{v['channel']}' through a first-order lag of {v['lag_s']:.4g} s "
+            f"[{llo:.4g} s, {upper}] (68 %); compensated ADEV in --json")
 
 
 def _finite(x: object) -> object:
