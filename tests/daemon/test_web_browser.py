@@ -74,6 +74,18 @@ def rig(tmp_path: Path) -> Iterator[WebRig]:
         r.close()
 
 
+def page_text(browser: Any, css: str) -> str:
+    """The text of the first element matching ``css``, read in one script call: the page
+    replaces its sections on every update, so an element found by one WebDriver call may be
+    gone (stale) by the next."""
+    return browser.execute_script(
+        "const e = document.querySelector(arguments[0]); return e ? e.innerText : '';", css)
+
+
+def page_updates(browser: Any) -> int:
+    return int(browser.execute_script("return document.body.dataset.updates || 0"))
+
+
 def wait_for(what: str, cond: Callable[[], Any], timeout: float, rig: WebRig,
              browser: Any = None) -> Any:
     deadline = time.monotonic() + timeout
@@ -86,10 +98,9 @@ def wait_for(what: str, cond: Callable[[], Any], timeout: float, rig: WebRig,
     if browser is not None:  # what the page showed, for the failure report
         shot = rig.tmp / "timeout.png"
         browser.save_screenshot(str(shot))
-        updates = browser.find_element("tag name", "body").get_attribute("data-updates")
-        conn = browser.find_element("id", "conn").text
-        page = (f"page: updates {updates}, connection {conn!r}, screenshot {shot}\n"
-                f"{browser.find_element('tag name', 'main').text[:3000]}\n")
+        page = (f"page: updates {page_updates(browser)}, connection "
+                f"{page_text(browser, '#conn')!r}, screenshot {shot}\n"
+                f"{page_text(browser, 'main')[:3000]}\n")
     raise AssertionError(f"timed out after {timeout:g} s waiting for {what}\n{page}"
                          f"state {rig.state()}\n{rig.read_logs()}")
 
@@ -126,21 +137,21 @@ def test_the_page_shows_the_run_live_in_a_real_browser(browser, rig, tmp_path):
 
     # it updates without a reload: new SSE updates, and a newer snapshot in the plot
     marker = browser.execute_script("window.__sameDocument = 1; return 1")
-    note = browser.find_element("css selector", "#adev p.note").text
-    updates = int(browser.find_element("tag name", "body").get_attribute("data-updates"))
+    note = page_text(browser, "#adev p.note")
+    updates = page_updates(browser)
     wait_for("a newer Allan snapshot on the page",
-             lambda: browser.find_element("css selector", "#adev p.note").text != note
-             and int(browser.find_element("tag name", "body").get_attribute("data-updates"))
-             >= updates + 2, 60, rig, browser)
+             lambda: page_text(browser, "#adev p.note") != note
+             and page_updates(browser) >= updates + 2, 60, rig, browser)
     assert browser.execute_script("return window.__sameDocument") == marker  # no reload
-    assert "live" in browser.find_element("id", "conn").get_attribute("class")
+    assert "live" in browser.execute_script("return document.getElementById('conn').className")
 
     # the fit: IEEE term rows with values, and a model curve per axis
-    wait_for("the fitted terms", lambda: browser.find_elements(
-        "css selector", "#fit tr[data-term='velocity_random_walk']"), 60, rig, browser)
+    wait_for("the fitted terms",
+             lambda: page_text(browser, "#fit tr[data-term='velocity_random_walk']"), 60, rig,
+             browser)
     wait_for("model curves", lambda: len(browser.find_elements(
         "css selector", "#adev g.adev-axis path.model")) == 3, 60, rig, browser)
-    vrw = browser.find_element("css selector", "#fit tr[data-term='velocity_random_walk']").text
+    vrw = page_text(browser, "#fit tr[data-term='velocity_random_walk']")
     assert "absent" not in vrw and "e-0" in vrw, vrw
 
     # a gap injected in the service: restart it on the same data directory
@@ -151,7 +162,7 @@ def test_the_page_shows_the_run_live_in_a_real_browser(browser, rig, tmp_path):
                      lambda: (i := browser.execute_script(ITEMS_JS)) and "gap:restart" in i
                      and i, 90, rig, browser)
     assert "event:new run" in items
-    timeline = browser.find_element("id", "timeline").text
+    timeline = page_text(browser, "#timeline")
     assert "restart" in timeline
 
     # nothing from anywhere but avard itself
