@@ -3,9 +3,10 @@ and the model extended by it; on the engine of ``avard analyze``.
 
 Streamed, in bounded memory:
 
-1. **Base model = analyze's fit.** ``explain_file`` calls ``report.analyze`` on the file, the
-   very function ``avard analyze`` runs, with its passes and so its peak memory (blocks from
-   anywhere, ``explain_stream``, go through ``report.analyze_stream`` in one pass): its Allan
+1. **Base model = analyze's fit.** ``explain_file`` calls ``report.analyze`` on a file, the
+   very function ``avard analyze`` runs, with its passes and so its peak memory (a recording,
+   which analyze takes in one pass, and blocks from anywhere, ``explain_stream``, go through
+   ``report.analyze_stream`` in one pass): its Allan
    estimator and EDF, its line finder
    (``report.find_lines``), its ``fit.fit_noise`` GLS with the modelled covariance, presence
    test, intervals and upper limits. Sinusoids found there are part of the base model.
@@ -314,15 +315,20 @@ def explain_file(path: str, *, rate_hz: float | None = None,
         held = h_meta, h_blocks
     if temperature is not None and temperature not in (meta.get("temperature_names") or []):
         _unknown_temperature(temperature, meta)
-    # The base is `avard analyze` of the file itself, the same call: the same passes (one per
-    # channel group whose OADEV histories fit its budget, so the same peak memory: one pass
-    # over every channel, as explain_stream must do with blocks from anywhere, held all
+    # A file's base is `avard analyze` of the file itself, the same call: the same passes (one
+    # per channel group whose OADEV histories fit its budget, so the same peak memory: one
+    # pass over every channel, as explain_stream must do with blocks from anywhere, held all
     # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
-    # file for the slow view, which keeps only block means.
-    base = analyze(path, rate_hz=rate_hz, channels=channels, progress=progress, block=block,
-                   filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
-    if stage is not None:
-        stage("reading the record's slow view (block means)")
+    # file for the slow view, which keeps only block means. A recording is already loaded
+    # whole by _source, and analyze takes it in one pass too: the base then comes from the
+    # same single pass (loading it a second time would double the memory).
+    base = None
+    if meta.get("format") != "recording":
+        base = analyze(path, rate_hz=rate_hz, channels=channels, progress=progress,
+                       block=block, filter_corner_hz=filter_corner_hz, estimator=estimator,
+                       psd=psd)
+        if stage is not None:
+            stage("reading the record's slow view (block means)")
     return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
                           filter_corner_hz=filter_corner_hz, temperature=temperature,
                           holdout=held, heldout=heldout, estimator=estimator, psd=psd,
