@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -61,22 +62,20 @@ def _computations(log2n: int) -> dict[str, tuple[Callable[[], object], Callable[
     y = np.random.default_rng(0).normal(size=(1 << log2n, 3))
     block = 1 << 16
 
-    def cascade(pool: bool) -> object:
-        s = StreamingAllan(3, 100.0)
-        upd = StreamingAllan.update.__wrapped__ if pool else StreamingAllan.update
-        res = StreamingAllan.result.__wrapped__ if pool else StreamingAllan.result
+    def streamed(s: Any, pool: bool) -> object:
+        """Feed ``y`` to accumulator ``s``; ``pool``: without the one-thread hold."""
+        cls = type(s)
+        upd = cls.update.__wrapped__ if pool else cls.update
+        res = cls.result.__wrapped__ if pool else cls.result
         for i in range(0, len(y), block):
             upd(s, y[i:i + block])
         return res(s)
 
+    def cascade(pool: bool) -> object:
+        return streamed(StreamingAllan(3, 100.0), pool)
+
     def oadev(pool: bool) -> object:
-        ms = 2 ** np.arange(log2n - 2)
-        s = OverlappingAllan(3, 100.0, ms)
-        upd = OverlappingAllan.update.__wrapped__ if pool else OverlappingAllan.update
-        res = OverlappingAllan.result.__wrapped__ if pool else OverlappingAllan.result
-        for i in range(0, len(y), block):
-            upd(s, y[i:i + block])
-        return res(s)
+        return streamed(OverlappingAllan(3, 100.0, 2 ** np.arange(log2n - 2)), pool)
 
     def batch(pool: bool) -> object:
         f = allan_variance.__wrapped__ if pool else allan_variance  # type: ignore[attr-defined]
