@@ -6,5 +6,6 @@
 - ``edf.py``, ``chi2.py`` equivalent degrees of freedom and the χ² intervals;
 - ``noise_id.py``    Stable32's noise identification (lag-1 ACF, B1/R(n)), shared by every
   estimator;
+- ``kernels.py``     the OADEV's inner sums: ``_kernels.c`` when built (optional), else numpy;
 - ``scratch.py``     per-thread work arrays for the kernels.
 """

@@ -20,13 +20,17 @@ same data for every Allan estimator at that τ.
 ``result()`` is an ``AllanResult`` of kind "oavar", equal to ``allan.allan_variance(y, rate,
 ms / rate, kind="oavar")`` to rounding of the final sums, for any split into blocks.
 
-The arithmetic is numpy element-wise work on cache-sized pieces (the ring is channel-major, so
-each channel's differences are contiguous rows) and one dot product per channel (pair) per
-piece and τ; no BLAS thread pool is involved in anything larger than a vector. For m shorter
-than the piece, D comes from the window sums W_j = X_{j+m} − X_j of the piece's span as
-D_i = W_{i+m} − W_i (two passes over the data per τ instead of three); longer m read the
-three points straight from the ring. Both give exact differences for counts and agree to
-the rounding of the float64 sums (``tests/core/test_overlapping.py`` runs one record through both).
+The arithmetic: with the compiled loop (``kernels``, built at install where a compiler is
+present) each channel's Σ D² at a τ is one pass over the three spans of the ring, D never
+stored (and R(n)'s moving sums fused into it while they are kept). Without it, or for counts
+(int64, exact) and the covariance, numpy element-wise work on cache-sized pieces (the ring is
+channel-major, so each channel's differences are contiguous rows) and one dot product per
+channel (pair) per piece and τ; no BLAS thread pool is involved in anything larger than a
+vector. For m shorter than the piece, D comes from the window sums W_j = X_{j+m} − X_j of the
+piece's span as D_i = W_{i+m} − W_i (two passes over the data per τ instead of three); longer
+m read the three points straight from the ring. All paths give exact differences for counts
+and agree to the rounding of the float64 sums (``tests/core/test_overlapping.py`` runs one
+record through both numpy paths, ``tests/core/test_kernels.py`` the compiled against numpy).
 """
 
 from __future__ import annotations
@@ -34,8 +38,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.deviations import (
     AllanResult,
     alphas_from_ladders,
@@ -214,45 +220,76 @@ class OverlappingAllan:
         buf = scratch("oadev.d", c, n, ring.dtype)
         window = scratch("oadev.window", c, 2 * n, ring.dtype)
         as_float = scratch("oadev.float", c, n, np.float64) if buf.dtype != np.float64 else buf
+        kern = kernels.compiled() if ring.dtype == np.float64 and not self.covariance else None
         for k, m in enumerate(self.ms.tolist()):
             lo = max(0, p0 - 2 * m)  # first new difference D_lo (its last point ≥ p0)
             hi = p1 - 2 * m  # differences D_i, i < hi
             if hi > lo:
                 count = hi - lo
-                d = buf[:, :count]
-                if m < count:
-                    # short τ: the window sums W_j = X_{j+m} − X_j over the span once, then
-                    # D_i = W_{i+m} − W_i (two passes instead of three)
-                    x = self._span(lo, count + 2 * m)
-                    w = window[:, :count + m]
-                    np.subtract(x[:, m:], x[:, :count + m], out=w)
-                    np.subtract(w[:, m:], w[:, :count], out=d)
-                else:
-                    # long τ: the three points X_{i+2m}, X_{i+m}, X_i lie far apart in the ring
-                    mid = self._span(lo + m, count)
-                    np.subtract(self._span(lo + 2 * m, count), mid, out=d)
-                    np.subtract(d, mid, out=d)
-                    np.add(d, self._span(lo, count), out=d)
-                if d.dtype != np.float64:
-                    np.copyto(as_float[:, :count], d)  # exact: differences are far below 2**53
-                    d = as_float[:, :count]
-                self._n[k] += count
-                if self.covariance:
-                    self._s2[k] += row_products(d, d, True)
-                else:
-                    s2 = self._s2[k]
-                    for ch in range(c):
-                        s2[ch, ch] += float(np.dot(d[ch], d[ch]))
                 rk = self._rn[k]
-                if rk is not None:  # R(n) matters only while B1 decides (< MIN_POINTS)
-                    if self._ladders[k].count() + self._pending_n[k] >= MIN_POINTS:
-                        self._rn[k] = None
-                    else:
-                        rk.push(d)
+                if rk is not None and (self._ladders[k].count() + self._pending_n[k]
+                                       >= MIN_POINTS):
+                    # R(n) matters only while B1 decides (< MIN_POINTS averages)
+                    rk = self._rn[k] = None
+                self._n[k] += count
+                if kern is not None:
+                    self._compiled_sums(k, m, lo, count, kern, rk)
+                else:
+                    self._numpy_sums(k, m, lo, count, buf, window, as_float, rk)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
                 self._feed(k, self._interval_sums(m, q0, q0 + ((p1 - 1 - q0) // m) * m))
+
+    def _compiled_sums(self, k: int, m: int, lo: int, count: int, kern: Any,
+                       rk: RnSums | None) -> None:
+        """Σ D² of differences D_lo … D_{lo+count−1} at τ k by the compiled loop (float64,
+        variances only): the three spans X_i, X_{i+m}, X_{i+2m} are read once, D stays in
+        registers (and, while R(n) is kept, its moving sums too)."""
+        if m < count:  # one span holds all three points: sliced, not copied three times
+            x = self._span(lo, count + 2 * m)
+            x0, x1, x2 = x[:, :count], x[:, m:m + count], x[:, 2 * m:2 * m + count]
+        else:
+            x0, x1, x2 = (self._span(lo, count), self._span(lo + m, count),
+                          self._span(lo + 2 * m, count))
+        s2 = self._s2[k]
+        if rk is not None:
+            sums = rk.push_phase(x0, x1, x2)
+            for ch in range(self.n_channels):
+                s2[ch, ch] += sums[ch]
+            return
+        for ch in range(self.n_channels):
+            s2[ch, ch] += kern.sumsq(x0[ch], x1[ch], x2[ch])
+
+    def _numpy_sums(self, k: int, m: int, lo: int, count: int, buf: NDArray, window: NDArray,
+                    as_float: NDArray, rk: RnSums | None) -> None:
+        """Σ D² (or Σ D Dᵀ) of differences D_lo … D_{lo+count−1} at τ k in numpy: the
+        general path (counts in int64, the covariance, no compiled kernel)."""
+        d = buf[:, :count]
+        if m < count:
+            # short τ: the window sums W_j = X_{j+m} − X_j over the span once, then
+            # D_i = W_{i+m} − W_i (two passes instead of three)
+            x = self._span(lo, count + 2 * m)
+            w = window[:, :count + m]
+            np.subtract(x[:, m:], x[:, :count + m], out=w)
+            np.subtract(w[:, m:], w[:, :count], out=d)
+        else:
+            # long τ: the three points X_{i+2m}, X_{i+m}, X_i lie far apart in the ring
+            mid = self._span(lo + m, count)
+            np.subtract(self._span(lo + 2 * m, count), mid, out=d)
+            np.subtract(d, mid, out=d)
+            np.add(d, self._span(lo, count), out=d)
+        if d.dtype != np.float64:
+            np.copyto(as_float[:, :count], d)  # exact: differences are far below 2**53
+            d = as_float[:, :count]
+        if self.covariance:
+            self._s2[k] += row_products(d, d, True)
+        else:
+            s2 = self._s2[k]
+            for ch in range(self.n_channels):
+                s2[ch, ch] += float(np.dot(d[ch], d[ch]))
+        if rk is not None:
+            rk.push(d)
 
     def _interval_sums(self, m: int, q0: int, last: int) -> NDArray:
         """X_q − X_{q−m} for q = q0, q0 + m, … last (C, k): the non-overlapping sums of m
