@@ -49,9 +49,9 @@ from typing import Any
 import numpy as np
 from avard.core.errors import FitError
 from avard.core.model import terms as mdl
+from avard.core.model.nnls import nnls
 from avard.core.model.terms import TERMS, UNITS
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import nnls
 
 __all__ = ["Component", "ModelChi2", "NoiseFit", "TermEstimate", "avar_estimate_covariance",
            "fit_noise", "model_chi2", "model_components", "slope_method"]

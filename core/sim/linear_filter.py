@@ -162,24 +162,3 @@ def butterworth_lowpass_zpk(order: int, wn: float) -> tuple[NDArray, NDArray, fl
     zeros = -np.ones(order, dtype=complex)
     gain = float(np.real(np.prod(1.0 - poles) / np.prod(1.0 - zeros)))
     return zeros, poles, gain
-
-
-def nnls_small(a: NDArray, b: NDArray) -> NDArray[np.float64]:
-    """Non-negative least squares min ‖a·x − b‖, x ≥ 0, for a few unknowns, exactly: the
-    solution is the unconstrained least-squares solution on its set of positive unknowns
-    (Lawson & Hanson 1974, ch. 23), so the best feasible one over all 2ⁿ sets is it."""
-    n = a.shape[1]
-    if n > 8:
-        raise ValueError("nnls_small enumerates subsets: at most 8 unknowns")
-    best, best_r = np.zeros(n), float(np.sum(b * b))
-    for mask in range(1, 1 << n):
-        cols = [i for i in range(n) if mask >> i & 1]
-        sol, *_ = np.linalg.lstsq(a[:, cols], b, rcond=None)
-        if np.any(sol < 0):
-            continue
-        r = float(np.sum((a[:, cols] @ sol - b) ** 2))
-        if r < best_r:
-            best = np.zeros(n)
-            best[cols] = sol
-            best_r = r
-    return best

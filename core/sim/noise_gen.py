@@ -24,7 +24,8 @@ from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
-from avard.core.sim.linear_filter import ModalFilter, first_order_scan, nnls_small
+from avard.core.model.nnls import nnls
+from avard.core.sim.linear_filter import ModalFilter, first_order_scan
 from numpy.typing import NDArray
 
 #: A Gauss–Markov process gets at least this many grid points per time constant.
@@ -96,7 +97,7 @@ def _end_correction(ts: Sequence[float], dt_s: float, w: float) -> NDArray[np.fl
     target = 2.0 * math.log(2.0) / math.pi
     a = np.array([[w * ar1_avar(t, dt_s, int(m)) / target for t in ts] for m in ms])
     rest = a[:, END_RUNGS:].sum(axis=1)
-    return nnls_small(a[:, :END_RUNGS], 1.0 - rest)
+    return nnls(a[:, :END_RUNGS], 1.0 - rest)[0]
 
 
 def reinject_interpolation_loss(

@@ -13,11 +13,10 @@ from avard.core.sim.linear_filter import (
     ModalFilter,
     butterworth_lowpass_zpk,
     first_order_scan,
-    nnls_small,
 )
 from avard.core.sim.noise_gen import white_plus_ar1_filter
 from avard.core.sim.simulate import adxl355_lowpass_sos
-from scipy import optimize, signal
+from scipy import signal
 
 LENGTHS = [1, 2, 7, SCAN_BLOCK, 2 * SCAN_BLOCK + 1, 5 * SCAN_BLOCK + 17, 50_000]
 
@@ -97,14 +96,3 @@ def test_first_order_lag_equals_lfilter() -> None:
 def test_repeated_poles_are_refused() -> None:
     with pytest.raises(ValueError, match="repeated"):
         ModalFilter.from_zpk([], [0.5, 0.5], 1.0)
-
-
-def test_nnls_small_equals_scipy() -> None:
-    rng = np.random.default_rng(9)
-    for _ in range(50):
-        a = rng.standard_normal((30, 3))
-        b = rng.standard_normal(30)
-        ref, _ = optimize.nnls(a, b)
-        got = nnls_small(a, b)
-        assert np.allclose(got, ref, rtol=0, atol=1e-12)
-        assert np.all(got >= 0)

@@ -1,0 +1,62 @@
+"""avard's NNLS (Lawson–Hanson in numpy) against scipy.optimize.nnls, the reference it replaces
+in the noise fit: the same solution on random, rank-deficient and badly scaled problems, and
+the Kuhn–Tucker conditions that define the solution."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from avard.core.errors import FitError
+from avard.core.model.nnls import nnls
+from scipy.optimize import nnls as scipy_nnls
+
+
+def _kkt(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> None:
+    """x ≥ 0, the gradient Aᵀ(b − Ax) ≤ 0 where x = 0 and = 0 where x > 0 (to rounding)."""
+    g = a.T @ (b - a @ x)
+    scale = np.abs(a).sum() * np.abs(b).sum() + 1e-300
+    assert np.all(x >= 0)
+    assert np.all(g[x == 0] <= 1e-10 * scale)
+    np.testing.assert_allclose(g[x > 0], 0.0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_equals_scipy_on_random_problems(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    m, n = int(rng.integers(3, 30)), int(rng.integers(1, 12))
+    a = rng.standard_normal((m, n)) * 10.0 ** rng.uniform(-3, 3, n)  # columns over decades
+    b = rng.standard_normal(m)
+    x, r = nnls(a, b)
+    ref, rref = scipy_nnls(a, b)
+    assert r == pytest.approx(rref, rel=1e-9, abs=1e-12)
+    if m >= n:  # unique solution: the same x
+        np.testing.assert_allclose(x, ref, rtol=1e-7, atol=1e-10 * np.abs(ref).max(initial=1))
+    _kkt(a, b, x)
+
+
+def test_noise_fit_like_problem() -> None:
+    """Five AVAR terms over 20 octaves, the kind of basis the fit scales to unit columns."""
+    tau = 2.0 ** np.arange(20) / 100.0
+    basis = np.stack([3 / tau**2, 1 / tau, np.full_like(tau, 2 * np.log(2) / np.pi),
+                      tau / 3, tau**2 / 2], axis=1)
+    truth = np.array([0.0, 2.5e-8, 4e-10, 4e-12, 0.0])
+    rng = np.random.default_rng(3)
+    y = basis @ truth * (1 + 0.05 * rng.standard_normal(tau.size))
+    a = basis / y[:, None]
+    b = np.ones_like(y)
+    scale = np.linalg.norm(a, axis=0)
+    x, r = nnls(a / scale, b)
+    ref, rref = scipy_nnls(a / scale, b)
+    np.testing.assert_allclose(x, ref, rtol=1e-8, atol=1e-12)
+    assert r == pytest.approx(rref, rel=1e-9)
+
+
+def test_all_negative_and_degenerate() -> None:
+    a = np.eye(3)
+    x, r = nnls(a, np.array([-1.0, -2.0, -3.0]))
+    assert np.all(x == 0) and r == pytest.approx(np.sqrt(14))
+    a = np.array([[1.0, 1.0], [1.0, 1.0]])  # identical columns: any split is a solution
+    x, r = nnls(a, np.array([2.0, 2.0]))
+    assert r == pytest.approx(0.0, abs=1e-12) and x.sum() == pytest.approx(2.0)
+    with pytest.raises(FitError, match="matrix"):
+        nnls(np.ones(3), np.ones(3))
