@@ -95,44 +95,67 @@ class WelchAccumulator:
         self.L = int(nperseg)
         self.win = np.hanning(self.L + 1)[:-1]  # periodic Hann
         self.scale = 1.0 / (self.rate * np.sum(self.win**2))
+        # The segment mean is removed in the spectrum: a periodic Hann window's transform is
+        # nonzero only at bins 0 and ±1, so (x − μ)·w and x·w transform alike except there,
+        # by μ·W₀ and μ·W₁ (one pass fewer over every sample than subtracting μ first).
+        self._w01 = np.fft.rfft(self.win)[:2].real.copy()
         self.sum = np.zeros((self.L // 2 + 1, n_channels))
         self.n_seg = 0
-        self._buf = np.zeros((0, n_channels))
+        # channel-major samples not yet in a full segment, then the block: each sample is
+        # transposed once, and every segment is a contiguous row of it
+        self._cm = np.zeros((n_channels, 0))
+        self._held = 0
+        self._ref: NDArray[np.float64] | None = None
 
     def update(self, block: NDArray) -> None:
         a = np.asarray(block, dtype=float).reshape(-1, self.c)
-        if len(self._buf):
-            a = np.concatenate([self._buf, a])
+        if len(a) == 0:
+            return
+        if self._ref is None:
+            # a per-channel constant (the first sample) taken off every sample: the segment
+            # means to remove are then the signal's wander, not 9.81 m/s² of gravity
+            self._ref = a[0].copy()
+        held, total = self._held, self._held + len(a)
+        if self._cm.shape[1] < total:
+            grown = np.empty((self.c, max(total, 2 * self._cm.shape[1])))
+            grown[:, :held] = self._cm[:, :held]
+            self._cm = grown
+        np.subtract(a.T, self._ref[:, None], out=self._cm[:, held:total])
         step = self.L // 2
-        k = (len(a) - self.L) // step + 1 if len(a) >= self.L else 0
+        k = (total - self.L) // step + 1 if total >= self.L else 0
         if k > 0:
-            # all the block's segments at once, channel-major (k, C, L): one mean, one
-            # window product and one batched FFT per block instead of one per segment
-            # (contiguous rows into reused buffers: a transform of fresh, page-faulted memory
-            # or of one segment at a time measured twice as slow)
-            # channel-major first, so that every segment is contiguous (strided segments
-            # made the mean and the window product three times slower for three channels)
-            cm = np.ascontiguousarray(a.T) if self.c > 1 else a.reshape(1, -1)
+            # all the block's segments at once (k, C, L), strided over the channel-major
+            # buffer: one window product, one batched FFT per block (contiguous rows into
+            # reused buffers: a transform of fresh, page-faulted memory or of one segment at
+            # a time measured twice as slow)
+            cm = self._cm
             rows, cols = cm.strides
             segs = np.lib.stride_tricks.as_strided(cm, (k, self.c, self.L),
                                                    (step * cols, rows, cols), writeable=False)
             nf = self.L // 2 + 1
             seg = scratch("welch.seg", k * self.c, self.L, np.float64).reshape(k, self.c, -1)
-            np.subtract(segs, segs.mean(axis=2, keepdims=True), out=seg)
-            seg *= self.win
+            np.multiply(segs, self.win, out=seg)
             spec = scratch("welch.spec", k * self.c, nf, np.complex128).reshape(k, self.c, -1)
             np.fft.rfft(seg, axis=2, out=spec)
+            # segment means from half-segment sums (each sample summed once, not twice)
+            halves = cm[:, :(k + 1) * step].reshape(self.c, k + 1, step).sum(axis=2)
+            mean = ((halves[:, :-1] + halves[:, 1:]) / self.L).T  # (k, C)
+            spec[:, :, 0] -= mean * self._w01[0]
+            spec[:, :, 1] -= mean * self._w01[1]
             parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
             np.square(parts, out=parts)
             power = parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)  # (C, F)
             self.sum += power.T
             self.n_seg += k
-        # the samples of the next, still incomplete segment (a copy: the block is the caller's)
-        self._buf = a[k * step:].copy()
+        # the samples of the next, still incomplete segment move to the front
+        rest = total - k * step
+        if k > 0:
+            self._cm[:, :rest] = self._cm[:, k * step:total]
+        self._held = rest
 
     def gap(self) -> None:
         """A break in the data: the partial segment is dropped, none spans the gap."""
-        self._buf = np.zeros((0, self.c))
+        self._held = 0
 
     def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(f in Hz, PSD (F, C)); empty when no full segment was seen."""

@@ -204,17 +204,24 @@ class OverlappingAllan:
             ring[:, 0] = 0  # X_0
             self._pos = 1
             self.n_segments += 1
-        # reused work arrays: fresh ones this size would be page-faulted in on every piece
-        work = scratch("oadev.work", n + 1, c, ring.dtype)
-        work[0] = self._carry
-        np.subtract(a, self._offset, out=work[1:], casting="unsafe")
-        np.cumsum(work, axis=0, out=work)
-        self._carry = work[-1].copy()
         p0 = self._pos  # segment position of the first new phase point
         i = p0 % self._cap
-        first = min(n, self._cap - i)
-        ring[:, i:i + first] = work[1:1 + first].T
-        ring[:, :n - first] = work[1 + first:].T
+        if 0 < i and i + n <= self._cap:
+            # the running sum straight into the ring, after the point before it (X_{p0−1},
+            # the carry): each channel's row in one transposing copy and one cumsum
+            span = ring[:, i - 1:i + n]
+            np.subtract(a.T, self._offset[:, None], out=span[:, 1:], casting="unsafe")
+            np.cumsum(span, axis=1, out=span)
+            self._carry = span[:, -1].copy()
+        else:  # the piece wraps round the ring: through reused work rows
+            work = scratch("oadev.work", c, n + 1, ring.dtype)
+            work[:, 0] = self._carry
+            np.subtract(a.T, self._offset[:, None], out=work[:, 1:], casting="unsafe")
+            np.cumsum(work, axis=1, out=work)
+            self._carry = work[:, -1].copy()
+            first = min(n, self._cap - i)
+            ring[:, i:i + first] = work[:, 1:1 + first]
+            ring[:, :n - first] = work[:, 1 + first:]
         self._pos = p1 = p0 + n
         # D in the ring's dtype (int64: exact); window sums need up to 2·piece points
         buf = scratch("oadev.d", c, n, ring.dtype)
