@@ -436,17 +436,68 @@ def _noise_levels(fit: NoiseFit) -> dict[str, float]:
 
 
 def _thermal_signal(thermal: ThermalFit, temps: NDArray, y: NDArray, rate_b: float
-                    ) -> NDArray[np.float64]:
-    """The thermal signal to remove. The lag filter's start state is unknown: a start-up
-    settling with the lag's own time constant is part of the thermal model (fitted). When a
-    warm-up still shows after that, it is a cause of its own: the start state is then not
-    fitted, so the warm-up test sees the transient whole."""
+                    ) -> tuple[NDArray[np.float64], bool]:
+    """The thermal signal to remove, and whether it includes the fitted start state. The lag
+    filter's start state is unknown: a start-up settling with the lag's own time constant is
+    part of the thermal model (fitted). When a warm-up still shows after that, it is a cause
+    of its own: the start state is then not fitted, so the warm-up test sees the transient
+    whole."""
     if thermal.lag_s <= 0:
-        return thermal.signal(temps)
+        return thermal.signal(temps), False
     with_start = thermal.signal(temps, y)
     if cz.detect_warmup(y - with_start, rate_b).passed:
-        return thermal.signal(temps)
-    return with_start
+        return thermal.signal(temps), False
+    return with_start, True
+
+
+def _signal_variations(thermal: ThermalFit | None, temps: NDArray | None, y: NDArray,
+                       with_start: bool, cands: list[cz.Candidate], rate_b: float
+                       ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """For each uncertain parameter of the removed signals, the change of the removed signal
+    when that parameter moves one standard error up and down (68 % half-widths): the thermal
+    coefficient and lag, each transient's size and time constant or time."""
+    out: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    if thermal is not None and temps is not None and thermal.passed:
+        base = thermal.signal(temps, y if with_start else None)
+        moves = [("coefficient", thermal.coef_se)]
+        if math.isfinite(thermal.lag_hi) and thermal.lag_hi > thermal.lag_lo:
+            moves.append(("lag_s", 0.5 * (thermal.lag_hi - thermal.lag_lo)))
+        for key, se in moves:
+            if not (math.isfinite(se) and se > 0):
+                continue
+            v = getattr(thermal, key)
+            sig = [replace(thermal, **{key: max(0.0, v + sgn * se)}).signal(
+                temps, y if with_start else None) - base for sgn in (1, -1)]
+            out.append((sig[0], sig[1]))
+    for c in cands:
+        base = cz.cause_signal(c, len(y), rate_b)
+        for key, (lo, hi) in c.intervals.items():
+            se = 0.5 * (hi - lo)
+            if key not in c.params or not (math.isfinite(se) and se > 0):
+                continue
+            sig = [cz.cause_signal(replace(c, params={**c.params, key: c.params[key] + sgn * se}),
+                                   len(y), rate_b) - base for sgn in (1, -1)]
+            out.append((sig[0], sig[1]))
+    return out
+
+
+def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, rate_b: float,
+                       variations: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
+                       ) -> NDArray[np.float64]:
+    """Covariance of the compensated AVAR at ``tau`` that the removed signal's parameters
+    carry, by the delta method: for each parameter, J = [AVAR_c(θ + s) − AVAR_c(θ − s)]/2 (s
+    its standard error; the central difference is exact for the thermal coefficient, on which
+    the compensated AVAR is quadratic), summed as Σ J Jᵀ with the parameters taken
+    independent. ``fit_noise(added_cov=…)`` adds it to the noise model's covariance, so the
+    extended fit's intervals carry the uncertainty of what was removed."""
+    k = len(tau)
+    cov = np.zeros((k, k))
+    for up, down in variations:
+        hi = compensated_avar(var, tau, allan2(y, total + up, rate_b), 1.0)
+        lo = compensated_avar(var, tau, allan2(y, total + down, rate_b), 1.0)
+        j = np.where(np.isfinite(hi - lo), 0.5 * (hi - lo), 0.0)
+        cov += np.outer(j, j)
+    return cov
 
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
@@ -462,6 +513,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     findings: list[Finding] = []
     curves: dict[str, NDArray[np.float64]] = {}
     signal = np.zeros(len(y_slow))
+    with_start = False
     comp_var: NDArray[np.float64] | None = None
     thermal_only: NDArray[np.float64] | None = None
     trans: list[cz.Candidate] = []
@@ -472,7 +524,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             f.claimed = thermal.passed
             findings.append(f)
             if thermal.passed or always_compensate:
-                d = _thermal_signal(thermal, temps, y_slow, rate_b)
+                d, with_start = _thermal_signal(thermal, temps, y_slow, rate_b)
                 thermal_only = compensated_avar(allan.var, tau, allan2(y_slow, d, rate_b), 1.0)
                 if thermal.passed:
                     signal += d
@@ -500,6 +552,12 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         cv = compensated_avar(allan.var, tau, allan2(y_slow, total, rate_b), 1.0)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
+        # the removed signal's parameters are estimates: their uncertainty enters the same
+        # GLS fit as a covariance of the compensated points (one set of intervals)
+        kw["added_cov"] = removal_covariance(
+            allan.var, tau, y_slow, total, rate_b,
+            _signal_variations(thermal if "temperature" in curves else None, temps, y_slow,
+                               with_start, cands, rate_b))
         try:
             fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, **kw)
         except FitError as exc:

@@ -296,6 +296,8 @@ class _Problem:
     M: NDArray[np.float64]  # (K,) number of difference positions
     edf_floor: NDArray[np.float64]
     m_tau: NDArray[np.float64]  # (K,) τ of the points (s)
+    # (K, K) covariance from outside the noise model (the uncertainty of a removed signal)
+    added: NDArray[np.float64] | None = None
 
 
 def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
@@ -315,6 +317,8 @@ def _avar_cov(p: _Problem, theta: NDArray, idx: NDArray) -> NDArray[np.float64]:
     d = np.diag(C).copy()
     bump = np.maximum(floor - d, 0.0)
     C[np.diag_indices_from(C)] = d + bump
+    if p.added is not None:
+        C += p.added[np.ix_(idx, idx)]
     return C
 
 
@@ -554,6 +558,7 @@ def fit_noise(
     birge_scale: bool = True,
     rounding_lsb: float | None = None,
     filter_min_m: int = 2,
+    added_cov: ArrayLike | None = None,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -569,6 +574,11 @@ def fit_noise(
     rounded after the sensor's filter (ADXL355 output): the rounding adds unfiltered white
     noise of LSB²/12 per sample, a fixed component; N is then reported as the white level of
     the output, √(N_filtered² + LSB²/(12·fs)), the N a datasheet or the slope method gives.
+    ``added_cov``: a (len(tau), len(tau)) covariance of the AVAR points from outside the
+    noise model, added to the modelled one wherever the fit uses it (GLS weights, χ², the
+    presence test, the intervals): ``avard explain`` passes the uncertainty of a signal it
+    removed before refitting (a temperature coupling, a warm-up), so that the extended fit's
+    intervals carry it.
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -608,8 +618,16 @@ def fit_noise(
         fixed_avar += th * comps[i].basis(t_k, rate)
     psds = [comps[i].psd(rate) for i in fitted] + [comps[i].psd(rate) for i in fixed]
     G = mdl.avar_covariance_kernels(m[keep], psds)
+    added = None
+    if added_cov is not None:
+        full = np.asarray(added_cov, dtype=float)
+        if full.shape != (len(tau), len(tau)) or not np.all(np.isfinite(full)):
+            raise FitError(f"added_cov must be a finite ({len(tau)}, {len(tau)}) matrix, got "
+                           f"shape {full.shape}")
+        added = full[np.ix_(keep, keep)]
     p = _Problem(y=var[keep] - fixed_avar, X=X, fixed=fixed_avar, G=G,
-                 theta_fixed=theta_fixed, M=M[keep], edf_floor=100.0 * M[keep], m_tau=t_k)
+                 theta_fixed=theta_fixed, M=M[keep], edf_floor=100.0 * M[keep], m_tau=t_k,
+                 added=added)
 
     K = len(keep)
     A = len(fitted)

@@ -270,3 +270,25 @@ def test_rounding_after_the_filter_is_a_fixed_term_and_n_is_the_output_level() -
     assert plain.terms["quantization"].present
     with pytest.raises(FitError, match="rounding_lsb"):
         fit_noise(res, filter_corner_hz=rate / 4, rounding_lsb=-1.0)
+
+
+def test_added_covariance_enters_the_fit() -> None:
+    """``added_cov`` (explain's uncertainty of a removed signal): zero changes nothing, a
+    covariance fully correlated over τ widens the intervals of the term it resembles, and a
+    matrix of the wrong shape is refused by name."""
+    rng = np.random.default_rng(21)
+    rate = 50.0
+    res = octave_oavar(record(1 << 17, rate, rng, N=1e-4, B=3e-5), rate)
+    plain = fit_noise(res)
+    zero = fit_noise(res, added_cov=np.zeros((len(res.tau), len(res.tau))))
+    for name in TERMS:
+        a, b = zero.terms[name], plain.terms[name]
+        assert (a.value, a.lo, a.hi, a.present) == (b.value, b.lo, b.hi, b.present)
+    # an uncertain flat offset of the AVAR, 20 % of the flicker floor, at every τ at once
+    j = np.full(len(res.tau), 0.2 * (2 * math.log(2) / math.pi) * 3e-5**2)
+    wide = fit_noise(res, added_cov=np.outer(j, j))
+    b0, b1 = plain.terms["bias_instability"], wide.terms["bias_instability"]
+    assert b0.present and b1.present
+    assert b1.hi - b1.lo > 1.5 * (b0.hi - b0.lo)
+    with pytest.raises(FitError, match="added_cov"):
+        fit_noise(res, added_cov=np.zeros((2, 2)))
