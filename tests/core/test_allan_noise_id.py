@@ -236,16 +236,18 @@ def test_identify_alpha_is_the_estimators_ladder_and_matches_stable32() -> None:
     """``identify_alpha`` is the estimators' computation (one ladder), for rate and phase
     input alike, and gives Stable32's Alpha at every τ of PHASE.DAT where Stable32 uses the
     lag-1 ACF (≥ 30 averages; PHASE.DAT is NBS14 integrated to phase)."""
+    from .stable32 import all_tau
     from .test_allan import nbs14_1000
-    from .test_overlapping import STABLE32_PHASE_DAT_ALPHA
+
+    s32_alpha = {r.af: r.alpha for r in all_tau("oavar")}
 
     y = nbs14_1000()
     phase = np.concatenate([[0.0], np.cumsum(y)])
-    ms = [m for m in sorted(STABLE32_PHASE_DAT_ALPHA) if 1000 // m >= 30]
+    ms = [m for m in sorted(s32_alpha) if 1000 // m >= 30]
     assert len(ms) == 33
     for m in ms:
-        assert identify_alpha(y, m) == STABLE32_PHASE_DAT_ALPHA[m], m
-        assert identify_alpha(phase, m, data_type="phase") == STABLE32_PHASE_DAT_ALPHA[m], m
+        assert identify_alpha(y, m) == s32_alpha[m], m
+        assert identify_alpha(phase, m, data_type="phase") == s32_alpha[m], m
     rng = np.random.default_rng(3)
     for alpha in (2, 1, 0, -1, -2):
         z = power_law(alpha, 1 << 13, rng) + 9.81  # an offset (an axis at 1 g) changes nothing
