@@ -148,3 +148,22 @@ def test_tau_128(kind: str) -> None:
     flicker = _run(kind, [128], alpha=1)
     np.testing.assert_array_equal([own.lo, own.hi, own.edf],
                                   [flicker.lo, flicker.hi, flicker.edf])
+
+
+def test_the_analyze_stream_is_stable32s_at_every_af() -> None:
+    """The fully overlapping stream (what `avard analyze` runs on a file, with the record
+    length it knows) at all 139 AFs of Stable32's OADEV run: the batch estimator's α, EDF
+    and deviation at every one, so the CLI matches Stable32 wherever the API does."""
+    from avard.core.allan.overlapping import OverlappingAllan
+
+    rows = all_tau("oavar")
+    ms = [r.af for r in rows]
+    y = nbs14_1000()
+    acc = OverlappingAllan(1, 1.0, ms, n_total=y.size)
+    for i in range(0, y.size, 77):
+        acc.update(y[i:i + 77])
+    got = acc.result()
+    batch = _run("oavar", ms)
+    np.testing.assert_array_equal(got.alpha, batch.alpha)
+    np.testing.assert_allclose(got.edf, batch.edf, rtol=1e-12)
+    assert [_printed(float(d)) for d in got.dev] == [r.dev for r in rows]
