@@ -25,10 +25,10 @@ from .test_allan_noise_id import power_law
 # (the NBS14 1000-point set integrated to 1001 phase points), every averaging factor Stable32
 # printed (tests/core/stable32/phase_dat_oadev_all.txt; the same for its OHDEV run).
 STABLE32_PHASE_DAT_ALPHA = {r.af: r.alpha for r in all_tau("oavar")}
-# That run skips AF 128 (it steps by 2 there); Stable32's automatic α at AF 127 and 129 (the
-# same 7 averages) is 1, and its MTOT and HTOT runs give 1 at 128. Its octave table's
-# "Alpha 0" at 128 is that run's noise type, fixed at white FM (tests/core/stable32/).
-STABLE32_AUTO_ALPHA_128 = 1
+# That run skips AF 128 (it steps by 2 there). In an octave run (analyze's grid) AF 128 has 7
+# averages, fewer than the 8 below which Stable32 keeps the α of the next shorter τ of the run
+# (noise_id.HOLD_BELOW_AVERAGES): 0 from AF 64, the "Alpha 0" its octave table prints.
+STABLE32_OCTAVE_ALPHA_128 = 0
 # Stable32 OADEV of the same set (octave run): m → σ, printed to 5 digits.
 STABLE32_PHASE_DAT_OADEV = {r.af: r.dev for r in octave_fixed_white_fm()["oavar"]}
 
@@ -194,9 +194,11 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     for m, ref in STABLE32_PHASE_DAT_OADEV.items():
         assert float(f"{ch['adev'][tau.index(m)]:.4e}") == ref
     assert float(f"{ch['adev'][tau.index(128)]:.4e}") == STABLE32[128][0]
-    assert STABLE32_PHASE_DAT_ALPHA[127] == STABLE32_PHASE_DAT_ALPHA[129] == 1
-    assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA[m] if m != 128 else STABLE32_AUTO_ALPHA_128
+    assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA[m] if m != 128 else STABLE32_OCTAVE_ALPHA_128
                            for m in tau]
+    k = tau.index(128)  # so its bounds are Stable32's (EDF 9.6 ≤ 100: exact quantiles, as its)
+    np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[128][1:],
+                               rtol=6e-4)
     # the CLI's α, EDF and bounds are the Python API's at every τ (one α per τ and estimator)
     api = oavar(nbs14_1000(), 1.0, tau)
     assert ch["alpha"] == list(api.alpha)

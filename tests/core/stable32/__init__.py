@@ -9,14 +9,15 @@ Two kinds of run are kept, and they must not be mixed up:
 
 * ``phase_dat_{adev,oadev,hdev,ohdev}_all.txt`` (Stable32 1.53, every AF to N/4 or so): the
   noise type *identified* by Stable32 at each AF (Alpha column), no bounds (printed as 0).
-* ``phase_dat_octave_fixed_white_fm.txt`` (Stable32 1.60, octaves): bounds at 68.3 %, with
-  the noise type *fixed* at white FM (Alpha 0) for every AF. The evidence that it is fixed,
-  not identified: Alpha is 0 at AF 128 for all four estimators, also ADEV with 6 and HDEV
-  with 5 differences, where the automatic runs give 1 at AF 127 and 129 (the same 7 or 6
-  averages, the same B1 and R(n) region) and Stable32's automatic MTOT and HTOT octave runs
-  (allantools tests/phasedat/phase_dat_mtotdev_octave.txt, phase_dat_htotdev_octave.txt) give
-  1 at AF 128; allantools' file of the 1.60 MTOT run is named ``..._alpha0`` and gives 0
-  there; and allantools computes every bound of these octave tables with alpha = 0.
+* ``phase_dat_octave_fixed_white_fm.txt`` (Stable32 1.60, octaves): bounds at 68.3 %, Alpha
+  0 (white FM) at every AF. Whether the run fixed the noise type or identified it, the table
+  cannot tell: identified as Stable32 does (lag-1 ACF to AF 32, B1 at 64, and at 128, 7
+  averages, the α of 64 kept: ``noise_id.HOLD_BELOW_AVERAGES``) it is 0 at every AF too, and
+  avard's own α gives these bounds. For "fixed": allantools names its file of the 1.60 MTOT
+  run ``..._alpha0`` and computes every bound of these tables with alpha = 0, and Stable32's
+  automatic MTOT and HTOT octave runs (allantools tests/phasedat/phase_dat_mtotdev_octave.txt,
+  phase_dat_htotdev_octave.txt) give 1 at AF 128 (total estimators, whose identification
+  avard does not have). The name of the file keeps the first reading.
 """
 
 from __future__ import annotations
