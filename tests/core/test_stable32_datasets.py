@@ -16,8 +16,8 @@ printed AF: the deviation and the count to the printed digits; avard's own α eq
 Stable32's wherever Stable32 uses the lag-1 ACF (≥ 30 averages: 185 rows, all equal) and the
 bounds with it within 5e-4 of Stable32's there (1.3e-3 for the OCXO, whose printed
 deviations carry Stable32's rounding); in the B1/R(n) range (4–29 averages) avard's own α
-equal at 37 of 45 rows (all 17 non-overlapping ones), the bounds with it within 6e-4 there,
-and the 8 others explained (``B1_AGREEMENT``).
+equal at 36 of 46 rows (all 19 non-overlapping ones), the bounds with it within 6e-4 there,
+and the 10 others explained (``B1_AGREEMENT``).
 """
 
 from __future__ import annotations
@@ -145,6 +145,9 @@ class Columns:
     alpha: NDArray[np.float64]
     edf: NDArray[np.float64]
 
+    def take(self, ks: list[int]) -> Columns:
+        return Columns(*(getattr(self, f)[ks] for f in ("n", "dev", "lo", "hi", "alpha", "edf")))
+
     @classmethod
     def of(cls, parts: list[AllanResult]) -> Columns:
         return cls(*(np.concatenate([getattr(r, f) for r in parts]) for f in
@@ -229,7 +232,7 @@ def test_own_alpha_and_bounds_where_stable32_uses_the_lag1_acf(tests_dir: Path, 
 
 
 # Measured agreement in the B1/R(n) range (4 to 29 averages): (rows where avard's own α is
-# Stable32's, rows). The 8 others are the overlapping runs' Cs AF 20000, 40000, 100000 (27, 13,
+# Stable32's, rows). The 10 others are the overlapping runs' Cs AF 20000, 40000, 100000 (27, 13,
 # 5 averages: Stable32 0, avard -1, which Stable32's own ADEV and HDEV runs print from the
 # same averages) and OCXO AF 2048, 4096 (9, 4: Stable32 0, avard -1): Stable32 takes B1's
 # expected values at N = its count of overlapping differences, which avard does not copy
@@ -252,7 +255,7 @@ def test_alpha_and_bounds_in_the_b1_range(tests_dir: Path, name: str, kind: str)
     bounds with avard's own α Stable32's within 6e-4 where the α agree (2.4e-3 for the OCXO,
     whose printed deviations carry Stable32's rounding). With Stable32's α the bounds are
     its printed ones within the same at every row: where they differ more with avard's own
-    (up to 13 %, Cs OHDEV at AF 100000), α alone differs."""
+    (up to 13 %), α alone differs."""
     y = rates(tests_dir, name)
     every = table(tests_dir, name, kind)
     # on the run's whole grid: below 10 (8) averages the α of the next shorter τ is kept
@@ -265,8 +268,7 @@ def test_alpha_and_bounds_in_the_b1_range(tests_dir: Path, name: str, kind: str)
     same = [k for k, a, r in zip(b1, ours, rows, strict=True) if a == r.alpha]
     assert len(same) >= agree, [(r.af, a, r.alpha) for a, r in zip(ours, rows, strict=True)]
     limit = 2.4e-3 if name in ROUNDED else 6e-4
-    own = Columns(*(getattr(full, f)[same] for f in ("n", "dev", "lo", "hi", "alpha", "edf")))
-    assert worst_bound_error(own, [every[k] for k in same]) < limit
+    assert worst_bound_error(full.take(same), [every[k] for k in same]) < limit
     theirs = run(y, kind, [r.af for r in rows], alpha=[r.alpha for r in rows],
                  quantiles="stable32")
     assert worst_bound_error(theirs, rows) < limit
@@ -335,3 +337,33 @@ def test_analyze_cli_on_pink_noise(tests_dir: Path, tmp_path: Path) -> None:
     assert ch["alpha"] == [int(a) for a in api.alpha]
     np.testing.assert_allclose(ch["edf"], api.edf, rtol=1e-12)
     np.testing.assert_allclose([ch["adev_lo"], ch["adev_hi"]], [api.lo, api.hi], rtol=1e-12)
+
+
+def print_table() -> None:
+    """The table of docs/analysis.md ("Checked against Stable32"), measured:
+    ``.venv/bin/python -m tests.core.test_stable32_datasets``."""
+    names = {"avar": "ADEV", "oavar": "OADEV", "hvar": "HDEV", "ohvar": "OHDEV"}
+
+    def worst(res: Columns, rows: list[Row], ks: list[int]) -> str:
+        return f"{worst_bound_error(res.take(ks), [rows[k] for k in ks]):.1e}" if ks else "–"
+
+    tests = reference_tests()
+    for name, kind in CASES:
+        y = rates(tests, name)
+        rows = table(tests, name, kind)
+        full = run(y, kind, [r.af for r in rows])
+        ref = read_table(tests / SETS[name].folder / OFFSET_FREE[kind]) if name in ROUNDED \
+            else rows
+        dev = run(y, kind, [r.af for r in ref]).dev / np.array([r.dev for r in ref]) - 1
+        lag = [k for k, r in enumerate(rows) if y.size // r.af >= LAG1_MIN_AVERAGES]
+        b1 = [k for k in range(len(rows)) if k not in lag]
+        same = [k for k in b1 if int(full.alpha[k]) == rows[k].alpha]
+        extra = f" (+{len(ref)})" if name in ROUNDED else ""
+        print(f"| {name} | {names[kind]} | {len(rows)}{extra} | {np.abs(dev).max():.1e} | "
+              f"{sum(int(full.alpha[k]) == rows[k].alpha for k in lag)}/{len(lag)} | "
+              f"{len(same)}/{len(b1)} | {worst(full, rows, lag)} | {worst(full, rows, same)} | "
+              f"{worst(full, rows, list(range(len(rows))))} |")
+
+
+if __name__ == "__main__":
+    print_table()
