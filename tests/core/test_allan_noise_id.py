@@ -290,3 +290,43 @@ def test_ladder_alpha_follows_every_change_of_its_sums() -> None:
     lad.add(other)
     fresh = Lag1Ladder.from_state(lad.state())
     assert lad.alpha(-2)[0] == fresh.alpha(-2)[0] == 0
+
+
+def test_below_ten_averages_the_shorter_taus_alpha_is_kept() -> None:
+    """Stable32's rule (noise_id.HOLD_BELOW_AVERAGES): a τ with fewer than 10 averages (8 for
+    an overlapping estimator) takes the α of the next shorter τ of the grid, when there is
+    one; alone it is identified from its own averages. Flicker PM here, so B1 at the long τ
+    alone reads a noisy class that the kept α does not follow."""
+    n = 1 << 12
+    held_any = False
+    for seed in range(6):
+        y = power_law(1, n, np.random.default_rng(300 + seed))
+        for kind, m2, fewest in (("avar", n // 9, 10), ("oavar", n // 9, 8),
+                                 ("oavar", n // 7, 8)):
+            alone = allan_variance(y, 1.0, [m2], kind=kind).alpha[0]
+            grid = allan_variance(y, 1.0, [n // 64, m2], kind=kind).alpha
+            if n // m2 < fewest:  # kept from n // 64 (64 averages: the lag-1 ACF's α)
+                assert grid[1] == grid[0]
+                held_any |= bool(alone != grid[0])
+            else:
+                assert grid[1] == alone
+    assert held_any  # the rule changed something somewhere (else the test shows nothing)
+
+
+def test_b1_compared_at_the_count_of_differences_for_non_overlapping_estimators() -> None:
+    """B1's expected values are taken at N = the estimator's count of differences for ADEV
+    (n − 1 of n averages), at N = n for OADEV (Stable32's larger overlapping count is not
+    copied: it reads flicker FM as white FM). On 20 averages of flicker FM the large N does
+    change the class, so the two paths are told apart."""
+    n, m = 1 << 15, (1 << 15) // 20
+    changed = 0
+    for seed in range(10):
+        y = power_law(-1, n, np.random.default_rng(39 + seed))
+        ladder = Lag1Ladder(1, dmax=2, cross=False)
+        ladder.push(y[: 20 * m].reshape(20, m).sum(axis=1))
+        own = int(ladder.alpha(-2)[0])
+        assert oavar(y, 1.0, [m]).alpha[0] == own
+        assert allan_variance(y, 1.0, [m], kind="avar").alpha[0] == \
+            int(ladder.alpha(-2, n_terms=19)[0])
+        changed += int(ladder.alpha(-2, n_terms=n - 2 * m + 1)[0]) != own
+    assert changed >= 5  # Stable32's overlapping N would move most of them (measured 8)
