@@ -10,6 +10,7 @@ extracted, and the result cached under ``$AVARD_TEST_CACHE`` (default
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import shutil
@@ -72,6 +73,16 @@ def reference_tests() -> Path:
     if done.is_dir():
         return done
     root.mkdir(parents=True, exist_ok=True)
+    # one fetch at a time: parallel test workers (pytest -n 2) share the cache
+    with (root / f".{NAME}-{VERSION}.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.is_dir():
+            _fetch_and_extract(root)
+    return done
+
+
+def _fetch_and_extract(root: Path) -> None:
+    """Fetch (unless kept) and check the archive, then extract its tests/ into ``root``."""
     archive = root / ARCHIVE
     if not archive.is_file():
         with tempfile.TemporaryDirectory(dir=root) as tmp:
@@ -88,7 +99,5 @@ def reference_tests() -> Path:
         members = [m for m in tar.getmembers() if m.name.startswith(prefix)]
         tar.extractall(tmp, members=members, filter="data")
         final = root / f"{NAME}-{VERSION}"
-        if not done.is_dir():
-            shutil.rmtree(final, ignore_errors=True)
-            os.replace(Path(tmp) / f"{NAME}-{VERSION}", final)
-    return done
+        shutil.rmtree(final, ignore_errors=True)  # a folder without tests/: left half-made
+        os.replace(Path(tmp) / f"{NAME}-{VERSION}", final)
