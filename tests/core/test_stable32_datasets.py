@@ -5,7 +5,7 @@ check "intervals with avard's own α within 1 % of Stable32's where Stable32's m
 is made here, on the raw records and Stable32 tables kept in allantools' source distribution
 (fetched and cached by ``tests/support/allantools_sdist.py``, never copied into avard):
 
-* Cs 5071A clock against an H-maser, 556 990 phase points at 1 s (decade runs, Stable32 1.53);
+* Cs 5071A clock against an H-maser, 556 990 phase points at 1 s (decade runs);
 * Keysight 53230A time-interval floor, 55 688 phase points at 1 s (octave runs);
 * GPS 1PPS against an H-maser, 241 218 phase points at 1 s (decade ADEV, octave others);
 * 10 MHz OCXO, 19 982 frequency points at 1 s (octave runs, Stable32 1.60);
