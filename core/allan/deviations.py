@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.allan.noise_id import (
+    HOLD_BELOW_AVERAGES,
     MIN_POINTS,
     Lag1Ladder,
     RnSums,
@@ -511,7 +512,8 @@ def finish_result(
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
     n_phase = (np.maximum(n, 1) - 1) * strides + d * ms + 1
-    alpha_id = alphas_from_ladders(ladders, d, rn, ms) if alpha is None else None
+    alpha_id = alphas_from_ladders(ladders, d, rn, ms, n, strides) if alpha is None \
+        else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
                             alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names,
                             quantiles=quantiles)
@@ -524,17 +526,46 @@ def _no_ladder(dmax: int) -> Lag1Ladder:
 
 def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
                         rn: Sequence[RnSums | None] | None = None,
-                        ms: ArrayLike | None = None) -> NDArray[np.float64]:
+                        ms: ArrayLike | None = None, n_terms: ArrayLike | None = None,
+                        strides: ArrayLike | None = None) -> NDArray[np.float64]:
     """(K, C) noise exponents identified as Stable32 does (``Lag1Ladder.alpha``): lag-1 ACF
     of the non-overlapping averages with ≥ 30 of them, B1 below, and R(n) = MVAR/AVAR from
-    ``rn[k]`` (when given) where B1 says PM; NaN where neither applies."""
+    ``rn[k]`` (when given) where B1 says PM; NaN where neither applies.
+
+    With ``ms``, ``n_terms`` (K,) (the estimator's count of differences per τ) and
+    ``strides`` (K,), Stable32's B1 range (``noise_id.HOLD_BELOW_AVERAGES``): with fewer
+    averages than the threshold (10, or 8 where the stride is shorter than m) the α of the
+    next shorter τ, when it has one; and for the non-overlapping estimators (stride m) B1's
+    expected values at N = ``n_terms[k]``. Not for the overlapping ones: Stable32 takes N =
+    its count of overlapping differences there too (N − 2m + 1, thousands) while the measured
+    ratio comes from the n averages, which reads flicker FM as white FM and random-walk FM as
+    flicker FM (synthetic power-law noise at 20 averages: 23 of 50 right against 35 with
+    N = n; tests/core/test_overlapping.py); avard keeps N = n there, and differs from
+    Stable32's α at those rows (docs/analysis.md, "Checked against Stable32")."""
     lowest = 2 - 2 * d
     if not ladders:
         return np.zeros((0, 0))
     rs = [None] * len(ladders) if rn is None else list(rn)
     mm = np.zeros(len(ladders), np.int64) if ms is None else np.asarray(ms, np.int64)
-    return np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m))
-                     for lad, r, m in zip(ladders, rs, mm, strict=True)], dtype=np.float64)
+    st = None if strides is None else np.asarray(strides, np.int64)
+    # B1's N: the count of differences for the non-overlapping estimators only; see below
+    nt: list[int | None] = [None] * len(ladders)
+    if n_terms is not None and st is not None:
+        nt = [int(v) if int(s) >= int(m) else None
+              for v, s, m in zip(np.asarray(n_terms), st, mm, strict=True)]
+    out = np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m), t)
+                    for lad, r, m, t in zip(ladders, rs, mm, nt, strict=True)],
+                   dtype=np.float64)
+    if ms is None or st is None:
+        return out
+    prev: int | None = None
+    for k in np.argsort(mm, kind="stable"):  # Stable32 runs from short τ to long
+        hold = HOLD_BELOW_AVERAGES[bool(st[k] < mm[k])]
+        if prev is not None and ladders[k].count() < hold:
+            have = np.isfinite(out[prev])
+            out[k, have] = out[prev, have]
+        prev = int(k)
+    return out
 
 
 def result_from_sums(

@@ -10,9 +10,12 @@ using the lag 1 autocorrelation", Proc. 18th EFTF (2004); NIST SP 1065 §5.6):
   k = 0; each difference of a white sequence gives r1 = −1/2. ``Lag1Ladder`` keeps the sums.
 * 4–29 averages — Barnes' B1 ratio (sample variance over two-sample variance of the
   averages, NBS TN 375), which cannot tell white PM from flicker PM; where it says PM, the
-  R(n) = MVAR/AVAR ratio does (``RnSums``, ``alpha_from_rn``).
-* fewer — the local log-log slope of the curve (``alpha_from_slope``; noisy, and blind to
-  white against flicker PM).
+  R(n) = MVAR/AVAR ratio does (``RnSums``, ``alpha_from_rn``). Its expected values are taken
+  at N = the estimator's count of differences, and below 10 averages (8 for overlapping
+  estimators) the α of the next shorter τ is kept, as Stable32's output shows it does
+  (``HOLD_BELOW_AVERAGES``; applied by ``deviations.alphas_from_ladders``).
+* fewer than 4 with no shorter τ — the local log-log slope of the curve
+  (``alpha_from_slope``; noisy, and blind to white against flicker PM).
 
 ``identify_alpha`` is the lag-1 rung on an array, through the same ``Lag1Ladder``.
 """
@@ -31,6 +34,7 @@ from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "HOLD_BELOW_AVERAGES",
     "Lag1Ladder",
     "RnSums",
     "alpha_from_b1",
@@ -46,6 +50,18 @@ __all__ = [
 
 # Riley & Greenhall: below this many (averaged) points the lag-1 ACF is too noisy to use.
 MIN_POINTS = 30
+
+# Stable32's B1 range, as its output shows it (the rule is not published; these three
+# reproduce Stable32's α at every one of the 443 rows with 4 to 29 averages of its published
+# runs: PHASE.DAT's ADEV, OADEV, HDEV, OHDEV at every AF, the Cs 5071A, 53230A, GPS, OCXO and
+# pink-noise runs; tests/core/test_stable32_datasets.py, docs/analysis.md):
+# * the expected B1(N, μ) is taken at N = the estimator's count of differences ('#' in its
+#   tables: N − 2m + 1 for OADEV, n − 1 for ADEV of n averages), not at the n averages the
+#   measured ratio comes from, so overlapping and non-overlapping runs can differ in α at
+#   one τ from the same averages (``Lag1Ladder.alpha``'s ``n_terms``);
+# * with fewer averages than these, no identification: the α of the next shorter τ of the
+#   run is kept (non-overlapping estimators, overlapping ones).
+HOLD_BELOW_AVERAGES = {False: 10, True: 8}
 
 
 def lag1_acf(x: ArrayLike) -> float:
@@ -415,7 +431,7 @@ class Lag1Ladder:
         self.ref: NDArray[np.float64] | None = None
         # (count stamp, lowest, α) of the last ``alpha`` without R(n): a snapshot asks every
         # level, and a long-τ level gets a new average only every so often
-        self._alpha_memo: tuple[tuple[int, int, int], NDArray[np.float64]] | None = None
+        self._alpha_memo: tuple[tuple[int, int, int, int], NDArray[np.float64]] | None = None
         self._lags = self.dmax + 1  # order dmax, pairs one apart
         self._edge = 2 * self.dmax + 2  # values kept at each end of the open segment
         self._keep = max(self._edge, self._lags)
@@ -705,25 +721,30 @@ class Lag1Ladder:
         out[ok] = var[ok] / avar[ok]
         return out
 
-    def alpha(self, lowest: int, rn: NDArray | None = None, m: int = 0
-              ) -> NDArray[np.float64]:
+    def alpha(self, lowest: int, rn: NDArray | None = None, m: int = 0,
+              n_terms: int | None = None) -> NDArray[np.float64]:
         """Stable32's choice per channel: the lag-1 ladder with at least ``MIN_POINTS``
         averages; below, Barnes' B1 ratio (with at least 4 averages), and where B1 says 'PM'
         the R(n) = MVAR/AVAR ratio ``rn`` (per channel, at averaging factor ``m``; see
         ``RnSums``) separates white PM (2) from flicker PM (1). Without a usable R(n) (the
         cascade keeps no MVAR sums) flicker PM is taken, the smaller EDF of the two, so the
-        interval is never the narrower white-PM one on a guess. NaN where neither applies."""
+        interval is never the narrower white-PM one on a guess. NaN where neither applies.
+
+        ``n_terms``: the estimator's count of differences at this τ, the N of the expected
+        B1(N, μ) the measured ratio is compared with, as Stable32 takes it (see
+        ``HOLD_BELOW_AVERAGES``); the count of averages when not given."""
         # every change of the sums raises the closed count or the open one (a gap moves the
         # open into the closed one): the stamp says whether anything changed since
-        stamp = (int(self.n[0]), self._n_open, int(lowest))
+        stamp = (int(self.n[0]), self._n_open, int(lowest), -1 if n_terms is None else n_terms)
         if rn is None and self._alpha_memo is not None and self._alpha_memo[0] == stamp:
             return self._alpha_memo[1].copy()
-        out = self._alpha(lowest, rn, m)
+        out = self._alpha(lowest, rn, m, n_terms)
         if rn is None:
             self._alpha_memo = (stamp, out.copy())
         return out
 
-    def _alpha(self, lowest: int, rn: NDArray | None, m: int) -> NDArray[np.float64]:
+    def _alpha(self, lowest: int, rn: NDArray | None, m: int, n_terms: int | None
+               ) -> NDArray[np.float64]:
         n = self.count()
         t = self.totals()
         if n >= MIN_POINTS:
@@ -732,9 +753,10 @@ class Lag1Ladder:
         if n < 4:
             return out
         b1 = self.b1(t)
+        big_n = n if n_terms is None else max(int(n_terms), 2)
         for ch in range(self.c):
             if math.isfinite(b1[ch]):
-                a = alpha_from_b1(float(b1[ch]), n)
+                a = alpha_from_b1(float(b1[ch]), big_n)
                 if a is None:
                     a = None if rn is None else alpha_from_rn(float(rn[ch]), m)
                 out[ch] = max(lowest, 1 if a is None else a)

@@ -346,6 +346,7 @@ class OverlappingAllan:
         res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
-            alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms), ci=ci,
+            alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms, self._n,
+                                          np.ones_like(self.ms)), ci=ci,
             one_d=self.n_channels == 1, names=self.names, quantiles=quantiles)
         return res if self.covariance else replace(res, cov=None)

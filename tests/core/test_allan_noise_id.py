@@ -236,16 +236,18 @@ def test_identify_alpha_is_the_estimators_ladder_and_matches_stable32() -> None:
     """``identify_alpha`` is the estimators' computation (one ladder), for rate and phase
     input alike, and gives Stable32's Alpha at every τ of PHASE.DAT where Stable32 uses the
     lag-1 ACF (≥ 30 averages; PHASE.DAT is NBS14 integrated to phase)."""
+    from .stable32 import all_tau
     from .test_allan import nbs14_1000
-    from .test_overlapping import STABLE32_PHASE_DAT_ALPHA
+
+    s32_alpha = {r.af: r.alpha for r in all_tau("oavar")}
 
     y = nbs14_1000()
     phase = np.concatenate([[0.0], np.cumsum(y)])
-    ms = [m for m in sorted(STABLE32_PHASE_DAT_ALPHA) if 1000 // m >= 30]
+    ms = [m for m in sorted(s32_alpha) if 1000 // m >= 30]
     assert len(ms) == 33
     for m in ms:
-        assert identify_alpha(y, m) == STABLE32_PHASE_DAT_ALPHA[m], m
-        assert identify_alpha(phase, m, data_type="phase") == STABLE32_PHASE_DAT_ALPHA[m], m
+        assert identify_alpha(y, m) == s32_alpha[m], m
+        assert identify_alpha(phase, m, data_type="phase") == s32_alpha[m], m
     rng = np.random.default_rng(3)
     for alpha in (2, 1, 0, -1, -2):
         z = power_law(alpha, 1 << 13, rng) + 9.81  # an offset (an axis at 1 g) changes nothing
@@ -288,3 +290,43 @@ def test_ladder_alpha_follows_every_change_of_its_sums() -> None:
     lad.add(other)
     fresh = Lag1Ladder.from_state(lad.state())
     assert lad.alpha(-2)[0] == fresh.alpha(-2)[0] == 0
+
+
+def test_below_ten_averages_the_shorter_taus_alpha_is_kept() -> None:
+    """Stable32's rule (noise_id.HOLD_BELOW_AVERAGES): a τ with fewer than 10 averages (8 for
+    an overlapping estimator) takes the α of the next shorter τ of the grid, when there is
+    one; alone it is identified from its own averages. Flicker PM here, so B1 at the long τ
+    alone reads a noisy class that the kept α does not follow."""
+    n = 1 << 12
+    held_any = False
+    for seed in range(6):
+        y = power_law(1, n, np.random.default_rng(300 + seed))
+        for kind, m2, fewest in (("avar", n // 9, 10), ("oavar", n // 9, 8),
+                                 ("oavar", n // 7, 8)):
+            alone = allan_variance(y, 1.0, [m2], kind=kind).alpha[0]
+            grid = allan_variance(y, 1.0, [n // 64, m2], kind=kind).alpha
+            if n // m2 < fewest:  # kept from n // 64 (64 averages: the lag-1 ACF's α)
+                assert grid[1] == grid[0]
+                held_any |= bool(alone != grid[0])
+            else:
+                assert grid[1] == alone
+    assert held_any  # the rule changed something somewhere (else the test shows nothing)
+
+
+def test_b1_compared_at_the_count_of_differences_for_non_overlapping_estimators() -> None:
+    """B1's expected values are taken at N = the estimator's count of differences for ADEV
+    (n − 1 of n averages), at N = n for OADEV (Stable32's larger overlapping count is not
+    copied: it reads flicker FM as white FM). On 20 averages of flicker FM the large N does
+    change the class, so the two paths are told apart."""
+    n, m = 1 << 15, (1 << 15) // 20
+    changed = 0
+    for seed in range(10):
+        y = power_law(-1, n, np.random.default_rng(39 + seed))
+        ladder = Lag1Ladder(1, dmax=2, cross=False)
+        ladder.push(y[: 20 * m].reshape(20, m).sum(axis=1))
+        own = int(ladder.alpha(-2)[0])
+        assert oavar(y, 1.0, [m]).alpha[0] == own
+        assert allan_variance(y, 1.0, [m], kind="avar").alpha[0] == \
+            int(ladder.alpha(-2, n_terms=19)[0])
+        changed += int(ladder.alpha(-2, n_terms=n - 2 * m + 1)[0]) != own
+    assert changed >= 5  # Stable32's overlapping N would move most of them (measured 8)

@@ -17,22 +17,20 @@ from avard.core.allan.deviations import oavar
 from avard.core.allan.overlapping import PIECE, OverlappingAllan
 from avard.core.errors import DataError
 
+from .stable32 import all_tau, octave_fixed_white_fm
 from .test_allan import STABLE32, nbs14_1000
 from .test_allan_noise_id import power_law
 
 # Stable32's noise identification ("Alpha" column) in its Overlapping Allan run on PHASE.DAT
 # (the NBS14 1000-point set integrated to 1001 phase points), every averaging factor Stable32
-# printed. Source: allantools test suite, tests/phase.dat/phase_dat_oadev.txt.
-STABLE32_PHASE_DAT_ALPHA = {
-    **{m: 0 for m in range(1, 69)}, 69: 1, 70: 1, 71: 1, 73: 0, 75: 0, 77: 0, 79: 0, 81: 0,
-    83: 1, 85: 0, 87: 1, 89: 1, 91: 0, 93: 0, 95: 0, 97: 0, 99: 1, 101: 1, 103: 1, 105: 0,
-    107: 1, 109: 1, 111: 1, 113: 0, 115: 0, 117: 0, 119: 0, 121: 0,
-    **{m: 1 for m in range(123, 144, 2)}, **{m: 1 for m in range(146, 216, 3)},
-    **{m: 1 for m in range(219, 248, 4)},
-}
-# Stable32 OADEV of the same set (same file): m → σ, printed to 5 digits.
-STABLE32_PHASE_DAT_OADEV = {1: 2.9223e-01, 2: 2.0102e-01, 4: 1.4479e-01, 8: 1.0570e-01,
-                            16: 6.1915e-02, 32: 4.8082e-02, 64: 3.6237e-02}
+# printed (tests/core/stable32/phase_dat_oadev_all.txt; the same for its OHDEV run).
+STABLE32_PHASE_DAT_ALPHA = {r.af: r.alpha for r in all_tau("oavar")}
+# That run skips AF 128 (it steps by 2 there). In an octave run (analyze's grid) AF 128 has 7
+# averages, fewer than the 8 below which Stable32 keeps the α of the next shorter τ of the run
+# (noise_id.HOLD_BELOW_AVERAGES): 0 from AF 64, the "Alpha 0" its octave table prints.
+STABLE32_OCTAVE_ALPHA_128 = 0
+# Stable32 OADEV of the same set (octave run): m → σ, printed to 5 digits.
+STABLE32_PHASE_DAT_OADEV = {r.af: r.dev for r in octave_fixed_white_fm()["oavar"]}
 
 
 def _stream(y: np.ndarray, rate: float, ms: np.ndarray, block: int,
@@ -196,7 +194,17 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     for m, ref in STABLE32_PHASE_DAT_OADEV.items():
         assert float(f"{ch['adev'][tau.index(m)]:.4e}") == ref
     assert float(f"{ch['adev'][tau.index(128)]:.4e}") == STABLE32[128][0]
-    assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA.get(m, 1) for m in tau]
+    assert ch["alpha"] == [STABLE32_PHASE_DAT_ALPHA[m] if m != 128 else STABLE32_OCTAVE_ALPHA_128
+                           for m in tau]
+    k = tau.index(128)  # so its bounds are Stable32's (EDF 9.6 ≤ 100: exact quantiles, as its)
+    np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[128][1:],
+                               rtol=6e-4)
+    # the CLI's α, EDF and bounds are the Python API's at every τ (one α per τ and estimator)
+    api = oavar(nbs14_1000(), 1.0, tau)
+    assert ch["alpha"] == list(api.alpha)
+    np.testing.assert_allclose(ch["edf"], api.edf, rtol=1e-12)
+    np.testing.assert_allclose([ch["adev_lo"], ch["adev_hi"]], [api.dev_lo, api.dev_hi],
+                               rtol=1e-12)
     # bounds (exact χ² quantiles, the default): within 5e-5 at m = 64, about one unit of the
     # last printed digit; at m = 1 and 8, 1.4e-4 to 3.7e-4 relative, because Stable32 takes
     # its χ² quantile above 100 EDF from an approximation (A&S 26.4.17/26.2.22); the EDF is
