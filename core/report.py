@@ -37,11 +37,12 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from avard.core.model.fit import NoiseFit
 
-# scipy (the fit, the line threshold) is imported where it is used, after the pass over the
-# data: it is ~50–70 MB resident, and loaded before the pass it would sit under the OADEV's
-# history at the peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze). scipy.special
-# rather than scipy.stats: the quantiles are the same functions, without the 0.4–0.9 s import
-# of every distribution.
+# analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
+# χ² tail come from core/allan/beta.py and chi2.py (scipy.special cost 0.1–0.2 CPU-s of every
+# analyze, ~1 s on a Pi). What still needs scipy (the filter corner's model, --psd) imports it
+# where it is used, after the pass over the data: it is ~50–70 MB resident, and loaded before
+# the pass it would sit under the OADEV's history at the peak (measured 190 → 129 MB peak for
+# a 60 h, 3-axis analyze).
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
            "find_lines", "psd_csv"]
@@ -183,12 +184,12 @@ def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: floa
     χ²(ν)/ν with ν ≈ 1.8·segments, the background a median of ``n_bg`` bins carrying about
     2/π of their degrees of freedom, so the ratio is F(ν, ν_bg); Bonferroni over ``n_bins``
     keeps one false line per spectrum at ``p_false``."""
-    from scipy.special import fdtri  # scipy.special, not scipy.stats: see the note above
+    from avard.core.allan.beta import f_isf_array  # not scipy: see the note above
 
     nu = max(2.0, 1.8 * n_seg)
     nu_bg = np.maximum(2.0, np.asarray(n_bg, dtype=float) * nu * 2.0 / math.pi)
     # the F(ν, ν_bg) upper quantile
-    return np.asarray(fdtri(nu, nu_bg, 1.0 - p_false / n_bins), dtype=float)
+    return f_isf_array(p_false / n_bins, nu, nu_bg)
 
 
 def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
@@ -769,9 +770,9 @@ def format_table(an: Analysis) -> str:
         lines.append(f"  fitted τ {fit.tau_min_s:.4g} s … {fit.tau_max_s:.4g} s "
                      f"({fit.n_points} points), χ²/dof = {chi} (dof {fit.dof})")
         if math.isfinite(fit.chi2_dof) and fit.dof > 0:
-            from scipy.special import chdtrc  # the χ² upper tail
+            from avard.core.allan.chi2 import chi2_sf  # the χ² upper tail, without scipy
 
-            p = float(chdtrc(fit.dof, fit.chi2_dof * fit.dof))
+            p = float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof))
             if p < 0.001:
                 lines.append(f"  note: the five-term model does not describe this curve "
                              f"(p = {p:.1g}); see `avard explain` for what else is in it")

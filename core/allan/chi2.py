@@ -140,6 +140,13 @@ def gammainc_pq(a: ArrayLike, x: ArrayLike) -> tuple[NDArray[np.float64], NDArra
     return p.reshape(shape), q.reshape(shape)
 
 
+def chi2_sf(x: ArrayLike, k: ArrayLike) -> NDArray[np.float64]:
+    """Pr(χ²_k > x), the chi-squared upper tail (a fit's p-value): Q(k/2, x/2), Q the
+    regularised upper incomplete gamma function (DLMF 8.2.4; x ≥ 0, k > 0)."""
+    return gammainc_pq(np.asarray(k, dtype=np.float64) / 2.0,
+                       np.asarray(x, dtype=np.float64) / 2.0)[1]
+
+
 def chi2_ppf(p: float, k: ArrayLike) -> NDArray[np.float64]:
     """χ²_k(p): the p-quantile of the chi-squared distribution with k degrees of freedom
     (k > 0 and finite, 0 < p < 1), as 2·P⁻¹(k/2, p)."""
