@@ -246,16 +246,36 @@ def test_transient_interval_plumbing_on_a_few_records(tmp_path):
     assert sum(h for h, _ in cov.values()) >= 12, cov
 
 
+#: the slow coverage study, computed once for the two tests that read it
+_STUDY: dict[tuple[str, str], tuple[int, int]] = {}
+
+
+def _study(tmp_path) -> dict[tuple[str, str], tuple[int, int]]:
+    if not _STUDY:
+        _STUDY.update(_coverage(tmp_path, range(400, 450)))
+        print({f"{c}.{p}": f"{h}/{n}" for (c, p), (h, n) in _STUDY.items()})  # for the docs
+    return _STUDY
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known gap: the warm-up's size interval holds the truth "
-                   "in 88/150 = 59 % (T 71 %, step size 61 %, step time 64 %); on model-exact "
-                   "noise it holds 77 %, so the hidden generator's noise is described a little "
-                   "too narrowly (docs/explain.md 'Transients')")
 def test_transient_intervals_hold_the_truth_about_68_percent(tmp_path):
     """50 warm-up + step records (150 axes): each parameter's 68 % interval holds the truth
-    in 60–76 % of them (binomial σ 3.8 % at 68 %: about ± 2 σ)."""
-    cov = _coverage(tmp_path, range(400, 450))
-    print({f"{c}.{p}": f"{h}/{n}" for (c, p), (h, n) in cov.items()})  # for docs/explain.md
+    in 60–76 % of them (binomial σ 3.8 % at 68 %: about ± 2 σ); the warm-up's T at least
+    60 % here, its upper side is the known gap below. Before absent noise terms entered the
+    GLS at their upper limit (not 0), the warm-up size held it in 88/150 = 59 %."""
+    cov = _study(tmp_path)
     for k, (held, counted) in cov.items():
         assert counted >= 145, (k, cov)
-        assert 0.60 <= held / counted <= 0.76, (k, cov)
+        assert held / counted >= 0.60, (k, cov)
+        if k != ("warmup", "time_constant_s"):
+            assert held / counted <= 0.76, (k, cov)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known gap: the warm-up's T interval is a little wide "
+                   "(115/150 = 77 % here, 221/300 = 74 % over seeds 400–449 and 500–549; "
+                   "docs/explain.md 'Transients')")
+def test_warmup_time_constant_interval_is_not_wide(tmp_path):
+    """The warm-up T's 68 % interval holds the truth in at most 76 % of the 150 axes."""
+    held, counted = _study(tmp_path)[("warmup", "time_constant_s")]
+    assert held / counted <= 0.76, (held, counted)
