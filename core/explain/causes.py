@@ -16,6 +16,9 @@ signal it describes then enters analyze's GLS fit as one more AVAR component
 - ``find_transients``: the two compose (the stronger removed, the other tested on the
   residual), and ``refine_transients`` fits the passed ones together by generalised least
   squares with the noise model, which gives their parameters and 68 % intervals.
+- ``transient_floor``: a passed transient is claimed only when its size reaches its own stated
+  minimum on the record's noise and what the logged temperature's 0.0625 K resolution makes
+  through the fitted coupling.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
 (``report.find_lines``); rate ramp, the chip's low-pass and the LSB rounding are terms of

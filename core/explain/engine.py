@@ -23,7 +23,7 @@ Streamed, in bounded memory:
    - ``warmup`` and ``bias_step`` (:mod:`avard.core.explain.causes`): window-contrast tests on
      the slow view that compose (the stronger removed before the other is tested); the
      passed ones fitted together by GLS with the noise of the extended fit, with 68 %
-     intervals.
+     intervals; claimed only at or above their floor (``causes.transient_floor``).
    - ``gauss_markov`` (:mod:`avard.core.explain.gauss_markov`): a component of the GLS fit
      itself (closed-form AVAR), its T scanned by −2 ln L.
 
