@@ -16,6 +16,9 @@ signal it describes then enters analyze's GLS fit as one more AVAR component
 - ``find_transients``: the two compose (the stronger removed, the other tested on the
   residual), and ``refine_transients`` fits the passed ones together by generalised least
   squares with the noise model, which gives their parameters and 68 % intervals.
+- ``transient_floor``: a passed transient is claimed only when its size reaches its own stated
+  minimum on the record's noise and what the logged temperature's 0.0625 K resolution makes
+  through the fitted coupling.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
 (``report.find_lines``); rate ramp, the chip's low-pass and the LSB rounding are terms of
@@ -29,6 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from avard.core.sim.thermal import DS18B20_STEP_C
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
@@ -319,6 +323,53 @@ def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: f
     √(2·AVAR(window)); the test wants 6 of them at the best window."""
     w = np.array([0.01, 0.02, 0.04]) * record_s
     return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))
+
+
+def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
+                    coefficient: float = 0.0) -> tuple[float, str]:
+    """The smallest size (m/s²) a passed transient may have to be claimed, and why.
+
+    Two floors, the larger counts:
+
+    - its own stated minimum (``min_detectable_warmup`` at its fitted T, ``min_detectable_step``
+      on the record), with the noise levels of the fit that has the transients removed: below
+      it the window contrast passed on a favourable draw of the noise's scatter, not on a
+      size the test resolves (a 1.2e-4 m/s² step, the minimum 2.0e-4, was claimed on the
+      residual of a warm-up record);
+    - the logged temperature's resolution through the fitted coupling, |c|·0.0625 K (the
+      DS18B20's step): the thermal model removes c·lag(T_logged), and the logged reading is
+      the true temperature rounded, so the residual keeps c·lag(rounding error), which stays
+      within ±|c|·0.0625 K/2 and jumps when a slowly turning temperature crosses a reading
+      step; any transient of at most |c|·0.0625 K can be that rounding (a 2.7e-4 m/s² "step"
+      147 s into a record with c = 4.6e-3 m/s²/K, where the lag filter's start state is
+      fitted and nothing smooths the first readings).
+    """
+    n_w, b_i, k_r = noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0)
+    if cand.cause == "warmup":
+        own = min_detectable_warmup(n_w, b_i, k_r, cand.params["time_constant_s"])
+    else:
+        own = min_detectable_step(n_w, b_i, k_r, record_s)
+    rounding = abs(coefficient) * DS18B20_STEP_C
+    if rounding > own:
+        return rounding, (f"what the logged temperature's {DS18B20_STEP_C:g} K resolution "
+                          f"produces through the coupling ({abs(coefficient):.3g} m/s²/K × "
+                          f"{DS18B20_STEP_C:g} K = {rounding:.3g} m/s²)")
+    return own, f"its stated minimum on this record's noise ({own:.3g} m/s²)"
+
+
+def apply_floor(cand: Candidate, noise: dict[str, float], record_s: float,
+                coefficient: float = 0.0) -> Candidate:
+    """``cand`` unchanged when it is not passed or its size reaches ``transient_floor``;
+    else not passed, with the reason in its evidence."""
+    if not cand.passed:
+        return cand
+    floor, why = transient_floor(cand, noise, record_s, coefficient)
+    size = abs(cand.params["size"])
+    if size >= floor:
+        return cand
+    return replace(cand, passed=False, intervals={},
+                   evidence=cand.evidence + f"; not claimed: size {size:.3g} m/s² is below "
+                   f"{why}")
 
 
 

@@ -8,6 +8,7 @@ explain sees only the file. Sizes are 3× the stated minima (docs/explain.md "Tr
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -102,6 +103,78 @@ def test_profile_interval_reads_the_crossings_between_grid_points():
     assert (lo, hi) == (0.0, 7.0)
 
 
+def test_a_transient_below_its_floor_is_not_claimed():
+    """The claim floor (``causes.transient_floor``): a passed step or warm-up below its own
+    stated minimum on the record's noise is not claimed, nor one a coupling of c m/s²/K can
+    make from the logged temperature's 0.0625 K resolution (c·0.0625 K); at the floor or
+    above it stays as it was."""
+    noise = {"N": N, "B": B, "K": K}
+    rec_s = HOURS * 3600
+    st_min = cz.min_detectable_step(N, B, K, rec_s)
+    w_min = cz.min_detectable_warmup(N, B, K, T_WARM)
+    step = cz.Candidate("bias_step", True, {"time_s": 100.0, "size": -0.9 * st_min},
+                        intervals={"size": [-1.0, 1.0]}, evidence="test")
+    out = cz.apply_floor(step, noise, rec_s)
+    assert not out.passed and out.intervals == {}
+    assert "below its stated minimum" in out.evidence
+    # the sign does not matter, the size does
+    assert cz.apply_floor(replace(step, params={"time_s": 100.0, "size": -1.1 * st_min}),
+                          noise, rec_s).passed
+    warm = cz.Candidate("warmup", True, {"time_constant_s": T_WARM, "size": 0.9 * w_min})
+    assert not cz.apply_floor(warm, noise, rec_s).passed
+    assert cz.apply_floor(replace(warm, params={"time_constant_s": T_WARM,
+                                                "size": 1.1 * w_min}), noise, rec_s).passed
+    # above its own minimum, but within what the logged temperature's rounding makes
+    c = 2.0 * st_min / 0.0625
+    big = replace(step, params={"time_s": 100.0, "size": 1.5 * st_min})
+    assert cz.apply_floor(big, noise, rec_s).passed
+    out = cz.apply_floor(big, noise, rec_s, coefficient=-c)
+    assert not out.passed and "0.0625 K" in out.evidence
+    # a test that did not pass is left alone
+    failed = replace(step, passed=False)
+    assert cz.apply_floor(failed, noise, rec_s) is failed
+
+
+@pytest.mark.parametrize(("seed", "row", "axis"), [
+    # plate-logged, 5-minute lag: a 2.4e-4 m/s² "step" 147 s in, under c·0.0625 K = 2.9e-4
+    (14017, "temperature plate 5 min", "x"),
+    # warm-up: a 1.2e-4 m/s² step 430 s before the end on the residual, under the minimum
+    (10001, "warmup", "z"),
+])
+def test_the_benchmarks_false_claims_are_not_claimed(tmp_path, seed, row, axis):
+    """The two false claims the benchmark made (docs/explain.md "Benchmark") are below their
+    floor: the step is still tested and reported, but not claimed; the hidden cause is."""
+    from benchmarks.bench_explain import cases_at_3x
+
+    case = {c.name: c for c in cases_at_3x(HOURS, 10.0, N, B, K)}[row]
+    rec, _ = make_record(seed, hours=HOURS, truth=case.truth, logged=case.logged)
+    ex = explain_file(str(save(rec, tmp_path / "f.npz")), heldout=False)
+    ch = ex.channels[axis]
+    assert {f.cause for f in ch.claimed} == {case.kind}, [f.evidence for f in ch.claimed]
+    (step,) = [f for f in ch.findings if f.cause == "bias_step"]
+    assert not step.claimed and "not claimed: size" in step.evidence
+
+
+def test_absent_noise_terms_enter_the_transients_gls_at_their_upper_limit():
+    """A term the fit calls absent is not zero noise: the transients' GLS covariance (and
+    their floor) takes it at its upper limit; a present one at its value."""
+    from avard.core.explain.engine import _noise_levels
+    from avard.core.model.fit import NoiseFit, TermEstimate
+
+    def term(value, upper=None):
+        if value is None:
+            return TermEstimate(None, None, None, "", False, upper=upper)
+        return TermEstimate(value, value, value, "", True)
+
+    fit = NoiseFit({"velocity_random_walk": term(1.6e-4),
+                    "bias_instability": term(None, upper=3e-5),
+                    "rate_random_walk": term(None, upper=2.5e-6),
+                    "quantization": term(None)}, [], [], 1.0, 100.0, 1.0)
+    assert _noise_levels(fit) == {"N": 1.6e-4, "B": 3e-5, "K": 2.5e-6}
+    fit.terms["rate_random_walk"] = term(None)  # not tested: no limit, nothing to add
+    assert _noise_levels(fit)["K"] == 0.0
+
+
 DRAWS = 400
 
 
@@ -173,16 +246,36 @@ def test_transient_interval_plumbing_on_a_few_records(tmp_path):
     assert sum(h for h, _ in cov.values()) >= 12, cov
 
 
+#: the slow coverage study, computed once for the two tests that read it
+_STUDY: dict[tuple[str, str], tuple[int, int]] = {}
+
+
+def _study(tmp_path) -> dict[tuple[str, str], tuple[int, int]]:
+    if not _STUDY:
+        _STUDY.update(_coverage(tmp_path, range(400, 450)))
+        print({f"{c}.{p}": f"{h}/{n}" for (c, p), (h, n) in _STUDY.items()})  # for the docs
+    return _STUDY
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known gap: the warm-up's size interval holds the truth "
-                   "in 88/150 = 59 % (T 71 %, step size 61 %, step time 64 %); on model-exact "
-                   "noise it holds 77 %, so the hidden generator's noise is described a little "
-                   "too narrowly (docs/explain.md 'Transients')")
 def test_transient_intervals_hold_the_truth_about_68_percent(tmp_path):
     """50 warm-up + step records (150 axes): each parameter's 68 % interval holds the truth
-    in 60–76 % of them (binomial σ 3.8 % at 68 %: about ± 2 σ)."""
-    cov = _coverage(tmp_path, range(400, 450))
-    print({f"{c}.{p}": f"{h}/{n}" for (c, p), (h, n) in cov.items()})  # for docs/explain.md
+    in 60–76 % of them (binomial σ 3.8 % at 68 %: about ± 2 σ); the warm-up's T at least
+    60 % here, its upper side is the known gap below. Before absent noise terms entered the
+    GLS at their upper limit (not 0), the warm-up size held it in 88/150 = 59 %."""
+    cov = _study(tmp_path)
     for k, (held, counted) in cov.items():
         assert counted >= 145, (k, cov)
-        assert 0.60 <= held / counted <= 0.76, (k, cov)
+        assert held / counted >= 0.60, (k, cov)
+        if k != ("warmup", "time_constant_s"):
+            assert held / counted <= 0.76, (k, cov)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known gap: the warm-up's T interval is a little wide "
+                   "(115/150 = 77 % here, 221/300 = 74 % over seeds 400–449 and 500–549; "
+                   "docs/explain.md 'Transients')")
+def test_warmup_time_constant_interval_is_not_wide(tmp_path):
+    """The warm-up T's 68 % interval holds the truth in at most 76 % of the 150 axes."""
+    held, counted = _study(tmp_path)[("warmup", "time_constant_s")]
+    assert held / counted <= 0.76, (held, counted)
