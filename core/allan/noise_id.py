@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan import kernels
+from avard.core.allan.scratch import scratch
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
@@ -464,7 +465,14 @@ class Lag1Ladder:
         z = np.asarray(values, dtype=np.float64).reshape(self.c, -1)
         if z.shape[1] == 0:
             return
-        self._push_referenced(z - self._reference(z[:, 0], shift)[:, None])
+        ref = self._reference(z[:, 0], shift)
+        if not ref.any():  # already relative (the first segment's shortest τ): no copy
+            self._push_referenced(z)
+            return
+        # a reused buffer: a fresh array of a batch's size is page-faulted in on every push
+        rows = scratch("ladder.rows", self.c, z.shape[1], np.float64)
+        np.subtract(z, ref[:, None], out=rows)
+        self._push_referenced(rows)
 
     def _reference(self, first: NDArray, shift: NDArray | None) -> NDArray[np.float64]:
         """What to subtract from raw averages that get ``shift`` added: ref − shift, with ref
