@@ -91,6 +91,9 @@ class WelchAccumulator:
     while it is transformed."""
 
     def __init__(self, n_channels: int, rate_hz: float, nperseg: int) -> None:
+        if int(nperseg) < 2 or int(nperseg) % 2:
+            # 50 % overlap and the segment means from half-segment sums need an even length
+            raise DataError(f"Welch segment of {nperseg} samples: use an even length ≥ 2")
         self.c = n_channels
         self.rate = float(rate_hz)
         self.L = int(nperseg)

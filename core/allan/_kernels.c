@@ -179,8 +179,16 @@ static struct PyModuleDef kernels_module = {
     kernels_methods, NULL, NULL, NULL, NULL,
 };
 
+/* The interface version avard.core.allan.kernels expects (its API): raise both together. */
+#define KERNELS_API 1
+
 PyMODINIT_FUNC
 PyInit__kernels(void)
 {
-    return PyModule_Create(&kernels_module);
+    PyObject *mod = PyModule_Create(&kernels_module);
+    if (mod != NULL && PyModule_AddIntConstant(mod, "API", KERNELS_API) < 0) {
+        Py_DECREF(mod);
+        return NULL;
+    }
+    return mod;
 }

@@ -12,6 +12,7 @@ holds the two equal, and the OADEV built on each).
 compiled; its general path is ``noise_id.RnSums.push`` on the differences.
 
 ``use_compiled(False)`` switches to numpy (tests; ``AVARD_NO_C_KERNELS=1`` does it at import).
+A build whose ``API`` number is not this module's is ignored (numpy is used).
 """
 
 from __future__ import annotations
@@ -26,12 +27,19 @@ from numpy.typing import NDArray
 __all__ = ["compiled", "sumsq", "sumsq_numpy", "use_compiled"]
 
 
+#: The interface this module calls (``_kernels.API``): a module built from another version of
+#: ``_kernels.c`` (a stale build left in a source tree) is not used.
+API = 1
+
+
 def _load() -> ModuleType | None:
-    if os.environ.get("AVARD_NO_C_KERNELS"):
+    if os.environ.get("AVARD_NO_C_KERNELS", "0") not in ("", "0"):
         return None
     try:
         from avard.core.allan import _kernels  # type: ignore[attr-defined]
     except ImportError:  # not built (no compiler at install): the numpy path
+        return None
+    if getattr(_kernels, "API", None) != API:
         return None
     return _kernels
 

@@ -550,6 +550,10 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         kw["rounding_lsb"] = float(lsb)
     extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
 
+    # the covariance of the compensated points that the removed signal's parameters carry
+    # (``removal_covariance``): set by each ``extend``, given to every fit of those points
+    added: list[NDArray[np.float64] | None] = [None]
+
     def extend(cands: list[cz.Candidate]) -> tuple[NDArray[np.float64], NoiseFit, Any]:
         """(compensated AVAR, extended fit, its Allan result) with the thermal signal and the
         passed transients ``cands`` removed, from the Allan covariance of the axis and that
@@ -564,12 +568,13 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
         # the removed signal's parameters are estimates: their uncertainty enters the same
         # GLS fit as a covariance of the compensated points (one set of intervals)
-        kw["added_cov"] = removal_covariance(
+        added[0] = removal_covariance(
             allan.var, tau, y_slow, total, rate_b,
             _signal_variations(thermal if "temperature" in curves else None, temps, y_slow,
                                with_start, cands, rate_b))
         try:
-            fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, **kw)
+            fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, added_cov=added[0],
+                            **kw)
         except FitError as exc:
             raise FitError(f"channel {ch.name}, the model with the found causes: {exc}") \
                 from exc
@@ -601,7 +606,10 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 redo = {c.cause: c for c in cz.refine_transients(
                     work, rate_b, _noise_levels(ext), warmup=keep.get("warmup"),
                     step=keep.get("bias_step"))}
-                floored = [redo.get(c.cause, c) for c in floored]
+                # the refitted size must still reach its floor
+                floored = [cz.apply_floor(redo[c.cause], _noise_levels(ext),
+                                          len(y_slow) / rate_b, coef)
+                           if c.cause in redo else c for c in floored]
         trans = floored
         for c in trans:
             if not c.passed:
@@ -610,11 +618,13 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             comp_var, ext, current = extend([c for c in trans if c.passed])
         else:
             comp_var, ext, current = None, base, allan
+            added[0] = None  # nothing removed any more: no uncertainty of it either
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
                                 cand.statistic, cand.threshold, cand.evidence))
-    gm, gm_fit = scan_gauss_markov(current, ext, corner, extra, kw)
+    gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
+                                   kw if added[0] is None else {**kw, "added_cov": added[0]})
     findings.append(gm)
     if gm_fit is not None:
         ext = gm_fit

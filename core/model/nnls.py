@@ -37,6 +37,8 @@ def nnls(a: NDArray, b: NDArray, maxiter: int | None = None
         raise FitError(f"nnls needs a (m, n) matrix and a (m,) vector, got {a.shape} and "
                        f"{b.shape}")
     m, n = a.shape
+    if n == 0:
+        return np.zeros(0), float(np.linalg.norm(b))
     limit = 3 * n if maxiter is None else int(maxiter)
     x = np.zeros(n)
     passive = np.zeros(n, dtype=bool)
@@ -53,16 +55,18 @@ def nnls(a: NDArray, b: NDArray, maxiter: int | None = None
         if free[j] <= tol:
             break
         passive[j] = True
+        first = True
         while True:
             z = np.zeros(n)
             z[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
             if np.all(z[passive] > 0):
                 break
-            if z[j] <= 0 and x[j] == 0:
+            if first and z[j] <= 0:
                 passive[j] = False
                 stuck[j] = True
                 z = x
                 break
+            first = False
             steps += 1
             if steps > limit:
                 raise FitError(f"nnls did not converge in {limit} steps")

@@ -1,6 +1,7 @@
-"""The uncertainty of what `avard explain` removes enters the extended fit
-(``engine.removal_covariance`` → ``fit_noise(added_cov=…)``): the delta-method Jacobian equals
-the analytic derivative of the compensated AVAR, and the extended fit's intervals carry it."""
+"""The uncertainty of what `avard explain` removes, as the covariance ``engine.
+removal_covariance`` gives ``fit_noise(added_cov=…)``: its delta-method Jacobian equals the
+analytic derivative of the compensated AVAR (that ``fit_noise`` widens intervals by such a
+covariance is tests/core/test_fit.py::test_added_covariance_enters_the_fit)."""
 
 from __future__ import annotations
 

@@ -108,3 +108,20 @@ def test_oadev_compiled_equals_numpy(compiled: None, piece: int) -> None:
         np.testing.assert_array_equal(fast.n, slow.n)  # type: ignore[attr-defined]
         np.testing.assert_array_equal(fast.alpha, slow.alpha)  # type: ignore[attr-defined]
         np.testing.assert_allclose(fast.edf, slow.edf, rtol=1e-9)  # type: ignore[attr-defined]
+
+
+def test_a_build_of_another_interface_is_not_used(compiled: None,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stale ``_kernels`` (built from another ``_kernels.c``, e.g. left in a source tree)
+    is ignored, and ``AVARD_NO_C_KERNELS`` chooses numpy only when set to something other
+    than 0."""
+    from avard.core.allan import _kernels  # type: ignore[attr-defined]
+
+    assert kernels._load() is _kernels
+    monkeypatch.setattr(_kernels, "API", kernels.API + 1)
+    assert kernels._load() is None
+    monkeypatch.setattr(_kernels, "API", kernels.API)
+    monkeypatch.setenv("AVARD_NO_C_KERNELS", "0")
+    assert kernels._load() is _kernels
+    monkeypatch.setenv("AVARD_NO_C_KERNELS", "1")
+    assert kernels._load() is None

@@ -60,3 +60,5 @@ def test_all_negative_and_degenerate() -> None:
     assert r == pytest.approx(0.0, abs=1e-12) and x.sum() == pytest.approx(2.0)
     with pytest.raises(FitError, match="matrix"):
         nnls(np.ones(3), np.ones(3))
+    x, r = nnls(np.zeros((3, 0)), np.array([3.0, 4.0, 0.0]))  # no unknowns: b is the residual
+    assert x.shape == (0,) and r == pytest.approx(5.0)

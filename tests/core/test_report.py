@@ -64,6 +64,11 @@ def test_streamed_welch_equals_scipy_welch(channels: int) -> None:
     assert acc.n_seg == (n - L) // (L // 2) + 1
 
 
+def test_welch_segment_must_be_even() -> None:
+    with pytest.raises(DataError, match="even length"):
+        WelchAccumulator(1, 10.0, 255)
+
+
 def test_streamed_welch_never_spans_a_gap() -> None:
     """Across ``gap()`` no segment mixes the two sides: the accumulated spectrum is the
     segment-count-weighted mean of scipy's Welch of each side (one far from the other)."""
