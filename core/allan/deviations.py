@@ -539,7 +539,7 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
     expected values at N = ``n_terms[k]``. Not for the overlapping ones: Stable32 takes N =
     its count of overlapping differences there too (N − 2m + 1, thousands) while the measured
     ratio comes from the n averages, which reads flicker FM as white FM and random-walk FM as
-    flicker FM (synthetic power-law noise at 20 averages: 23 of 50 right against 35 with
+    flicker FM (synthetic FM power-law noise at 20 averages: 9 of 30 right against 21 with
     N = n; tests/core/test_overlapping.py); avard keeps N = n there, and differs from
     Stable32's α at those rows (docs/analysis.md, "Checked against Stable32")."""
     lowest = 2 - 2 * d

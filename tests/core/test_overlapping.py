@@ -155,6 +155,30 @@ def test_streaming_identifies_every_power_law() -> None:
     assert hits >= 0.6 * total, (hits, total)
 
 
+def test_b1_at_the_count_of_averages_beats_stable32s_overlapping_count() -> None:
+    """Why avard's overlapping estimators compare B1 at N = the n averages its ratio comes
+    from, not at Stable32's count of overlapping differences (N − 2m + 1): on the FM power laws
+    of ``test_streaming_identifies_every_power_law`` (20 averages), the latter names fewer
+    records right (B1's flicker-FM expectation grows with N, so the ratio reads one type too
+    white). docs/analysis.md gives the counts."""
+    from avard.core.allan.noise_id import Lag1Ladder, alpha_from_b1
+
+    n = 1 << 15
+    m = n // 20
+    ours, theirs = 0, 0
+    for alpha in (0, -1, -2):
+        rng = np.random.default_rng(40 + alpha)
+        for _ in range(10):
+            y = power_law(alpha, n, rng)
+            lad = Lag1Ladder(1)
+            k = n // m
+            lad.push(y[:k * m].reshape(k, m).mean(axis=1))
+            b1 = float(lad.b1()[0])
+            ours += int(alpha_from_b1(b1, k) == alpha)
+            theirs += int(alpha_from_b1(b1, n - 2 * m + 1) == alpha)
+    assert ours > theirs, (ours, theirs)
+
+
 def test_the_record_length_hint_keeps_r_n_only_where_b1_decides_and_changes_nothing() -> None:
     """``n_total`` (analyze of a file knows it) drops the R(n) sums of τ that will hold
     ≥ 30 averages from the start; on a gapless record every α, variance and bound is the
