@@ -9,13 +9,18 @@ Gaussian −2 ln L of the AVAR points, χ² + ln det C, with C the covariance ``
 models at the fitted θ: χ² alone favours the T whose model predicts the larger scatter (on
 4 h records with T = 120 s it put T at 1.3–2× the truth, 12 axes).
 
-The 68 % interval of T is the profile-likelihood one: where χ² + ln det C, the noise terms
-refitted at every T, rises by 1 above its minimum. σ's interval is the GLS one at the fitted T.
+Intervals (68 %). T's is the profile-likelihood one: where χ² + ln det C, the noise terms
+refitted at every T, rises by max(1, χ²/dof) above its minimum (the fit's Birge rule). σ's
+adds to the GLS interval at the fitted T the shift of σ̂ along T's interval, in quadrature
+(the marginal variance of a locally Gaussian likelihood: :func:`_sigma_with_t`). Checked by
+tests/core/test_gauss_markov_coverage.py on the independent generator (docs/explain.md).
 
-Claim. The component must be present and its σ² stand ``Z_GAUSS_MARKOV`` (8) standard errors
-above 0. The fit's own presence test asks 2.33, but the scan over T is a search and flicker
-noise is itself a sum of Gauss–Markov processes: on 36 null axes (tests/support/hidden.py,
-4 h) the best T reached z 5.7. The threshold is set on null records, not derived.
+Claim. The component must be present and its σ² stand ``Z_GAUSS_MARKOV`` (8) standard
+errors above 0. The fit's own presence test asks 2.33, but the scan over T is a search: noise
+alone, as the fit models it, takes the scan's maximum z to ``Z_SCAN_NOISE`` (3.5, derived from
+Davies' bound at 0.5 % per axis); the records' mismatch with the model takes it further
+(z 4.5–5.2 on the independent generator), which is why the claim asks 8 (the constants'
+comments).
 
 Stated minimum (:func:`min_detectable_gauss_markov`). The Fisher information of the AVAR GLS
 fit at the truth: J = [b_N, b_B, b_K, b_GM, θ_GM·∂b_GM/∂T] over analyze's octave τ with
@@ -49,38 +54,39 @@ from avard.core.model.fit import (
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-__all__ = ["GM_FALSE_CLAIM_RATE", "GM_GRID", "Z_GAUSS_MARKOV", "gm_fisher",
+__all__ = ["GM_FALSE_CLAIM_RATE", "GM_GRID", "Z_GAUSS_MARKOV", "Z_SCAN_NOISE", "gm_fisher",
            "min_detectable_gauss_markov", "scan_arc_length", "scan_directions",
            "scan_false_claim_bound",
            "scan_gauss_markov"]
 
 #: Gauss–Markov correlation times tried (log grid inside the fitted τ range).
 GM_GRID = 10
-#: False claims of a Gauss–Markov component per axis the test allows (the T scan included).
+#: False claims per axis the noise-only threshold ``Z_SCAN_NOISE`` allows (the T scan included).
 GM_FALSE_CLAIM_RATE = 0.005
-#: z of σ² a Gauss–Markov component must reach. Without one, z(s) = θ̂/se(θ̂) at s = ln T is
-#: a unit-variance Gaussian process over the scanned range, and the scan reports z near its
-#: maximum (the −2 ln L minimum is near the largest z²), which is not normal. Davies (1987,
-#: Biometrika 74, 33–43) bounds its tail: P(max z > u) ≤ Φ(−u) + V·e^(−u²/2)/(2π), V the
-#: arc length of z's correlation structure over the range (:func:`scan_arc_length`: the GM
-#: AVAR shape whitened by the fit's covariance, the noise terms projected out, normalised;
-#: V/π is about the number of independent T trials). At 10 Hz V is 4.2 (1 h) to 6.6 (60 h),
-#: at 4 kHz for 60 h 9.3; the bound reaches ``GM_FALSE_CLAIM_RATE`` at u = 3.18, 3.30 and
-#: 3.40. 3.5 keeps it below 0.5 % (0.17–0.35 %) on all of them
-#: (tests/core/test_gauss_markov.py); a null study on the independent generator checks it
-#: (docs/explain.md, "Stated detection power (Gauss–Markov)").
-Z_GAUSS_MARKOV = 3.5
+#: z the T scan's maximum reaches on noise alone at ``GM_FALSE_CLAIM_RATE`` per axis, derived.
+#: Without a Gauss–Markov component, z(s) = θ̂/se(θ̂) at s = ln T is, to the Gaussian order
+#: the fit works in, a unit-variance Gaussian process over the scanned range (its skewness
+#: under the fit's model is ≤ 0.04: docs/scripts/gauss_markov_null.py), and the scan reports z
+#: near its maximum (the −2 ln L minimum is near the largest z²), which is not normal. Davies
+#: (1987, Biometrika 74, 33–43) bounds its tail: P(max z > u) ≤ Φ(−u) + V·e^(−u²/2)/(2π),
+#: V the arc length of z's correlation structure over the range (:func:`scan_arc_length`;
+#: V/π is about the number of independent T trials). At 10 Hz V is 4.9 (1 h) to 7.2 (60 h),
+#: at 4 kHz for 60 h 10.0; the bound reaches 0.5 % at u = 3.23, 3.33 and 3.41: 3.5 holds it
+#: below 0.5 % on all of them (tests/core/test_gauss_markov.py).
+Z_SCAN_NOISE = 3.5
+#: z of σ² a Gauss–Markov component must reach to be claimed. Not ``Z_SCAN_NOISE``: on the
+#: independent generator (tests/support/hidden.py, 4 h at 10 Hz) the realised z is wider than
+#: the model's. On 150 null axes z ≥ 3.5 on 4.7 %, against 0.23 % bounded, 7 of them at
+#: T ≥ 135 s (max 5.0); and on records with a bias step, a warm-up or a thermal coupling
+#: removed, components with σ ≈ 2.7e-5 m/s² (about the flicker level, B = 2e-5) reached z
+#: 4.5–5.2 on 4 of 71 records (a test record and 3 of 70 benchmark records). The claim threshold
+#: stays 8, set on those records: the gap to the derived 3.5 is the model's mismatch with
+#: the records, which is not derived (docs/explain.md, "Not done").
+Z_GAUSS_MARKOV = 8.0
 #: −2 ln L of a T without a present component (finite: the 1-D minimiser needs numbers)
 _NO_FIT = 1e300
-#: The scan's T range inside the fitted τ range [τ_min, τ_max]: [4τ_min, τ_max/16].
+#: The scan's T range inside the fitted τ range [τ_min, τ_max]: [4τ_min, τ_max/4].
 T_MARGIN = 4.0
-#: The upper end: a bump at T peaks at τ ≈ 1.9T; at τ_max/16 it peaks where the record
-#: holds ≥ 8·16/1.9 ≈ 68 independent averages. Davies' bound takes z Gaussian; the AVAR
-#: estimates are χ²-like, with a right tail that a one-sided test for a bump meets: at EDF ν
-#: the 3.5σ quantile of χ²_ν/ν is above the Gaussian's by (u²−1)·√(8/ν)/6 σ (Cornish–Fisher),
-#: 0.5σ at ν ≈ 110 but 1.7σ at ν ≈ 10, where a bump with T near τ_max/4 sits. On 150 null
-#: axes with the range up to τ_max/4, 7 reached z > 3.5, all at T ≥ 135 s (4 h records).
-T_MARGIN_HI = 16.0
 
 
 def _nll(f: NoiseFit) -> float:
@@ -92,7 +98,7 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     """Scan T for a Gauss–Markov component of the GLS fit of ``res`` (analyze's AVAR, or the
     AVAR with the found causes removed), with ``fit0``'s τ range, the sinusoids ``extra``
     and ``fit_noise`` keywords ``kw``. Returns the finding and, when claimed, the fit."""
-    lo, hi = T_MARGIN * fit0.tau_min_s, fit0.tau_max_s / T_MARGIN_HI
+    lo, hi = T_MARGIN * fit0.tau_min_s, fit0.tau_max_s / T_MARGIN
     if not hi > 2.0 * lo or not math.isfinite(fit0.chi2_dof):
         return Finding("gauss_markov", False, {}, {}, 0.0, Z_GAUSS_MARKOV,
                        "fitted τ range too short for a Gauss–Markov bump test"), None
@@ -151,7 +157,6 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     z = sigma**2 / se_th if se_th > 0 else 0.0
     passed = z >= Z_GAUSS_MARKOV
     intervals = {"sigma": [gm["lo"], gm["hi"]]}
-    located = ""
     if passed:  # the profile costs ≈ 20 more fits: only for a claim
         # the fit's own Birge rule: −2 ln L rises by χ²/dof (when > 1), not 1, where the
         # residuals scatter more than the modelled covariance allows
@@ -160,18 +165,12 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
                                        math.log(hi), rise)
         intervals["time_constant_s"] = [t_lo, t_hi]
         intervals["sigma"] = _sigma_with_t(sigma, gm, fit_at(t_lo, True), fit_at(t_hi, True))
-        # a bump is claimed where it is located: T's interval closed inside the scanned
-        # range. A −2 ln L falling to the range's end is a long-τ excess of the χ²-tailed
-        # AVAR estimates, not a bump (null records: z 3.9 and 5.0 at T = τ_max/16)
-        if not (lo * (1 + 1e-9) < t_lo and t_hi < hi * (1 - 1e-9)):
-            passed = False
-            located = (f"; not located: T's 68 % interval [{t_lo:.3g}, {t_hi:.3g}] s reaches "
-                       "the end of the scanned range")
     ev = (f"a Gauss–Markov component (σ {sigma:.3g} m/s² [{intervals['sigma'][0]:.3g}, "
           f"{intervals['sigma'][1]:.3g}], correlation time {T:.4g} s, by −2 ln L over "
           f"{lo:.3g}…{hi:.3g} s, noise terms free) is present in the GLS fit with σ² at z = "
-          f"{z:.3g} of its standard error (test: ≥ {Z_GAUSS_MARKOV:g}, the scan over T "
-          f"included, and T located){located}")
+          f"{z:.3g} of its standard error (test: ≥ {Z_GAUSS_MARKOV:g}; noise alone reaches "
+          f"{Z_SCAN_NOISE:g} over the T scan at 0.5 % per axis, the records' mismatch with the "
+          "model more)")
     return (Finding("gauss_markov", passed, {"sigma": sigma, "time_constant_s": T},
                     intervals, z, Z_GAUSS_MARKOV, ev),
             f if passed else None)
@@ -268,7 +267,7 @@ def min_detectable_gauss_markov(n_white: float, b_inst: float, k_rrw: float, T: 
     process's own scatter is above ``rel``."""
     m, _n = _octaves(record_s, rate_hz)
     tau = m / rate_hz
-    if len(tau) < 6 or not T_MARGIN * tau[0] <= T <= tau[-1] / T_MARGIN_HI:
+    if len(tau) < 6 or not T_MARGIN * tau[0] <= T <= tau[-1] / T_MARGIN:
         return math.inf
     ref = max(n_white / math.sqrt(T), b_inst, k_rrw * math.sqrt(T), 1e-12)
 
@@ -303,7 +302,7 @@ def scan_directions(n_white: float, b_inst: float, k_rrw: float, record_s: float
     residuals): z's correlation between two T is U(s₁)·U(s₂)."""
     m, n = _octaves(record_s, rate_hz)
     tau = m / rate_hz
-    lo, hi = T_MARGIN * tau[0], tau[-1] / T_MARGIN_HI
+    lo, hi = T_MARGIN * tau[0], tau[-1] / T_MARGIN
     levels = {"velocity_random_walk": n_white, "bias_instability": b_inst,
               "rate_random_walk": k_rrw}
     terms = [t for t, v in levels.items() if v > 0]
