@@ -12,7 +12,8 @@ models at the fitted θ: χ² alone favours the T whose model predicts the large
 Intervals (68 %). T's is the profile-likelihood one: where χ² + ln det C, the noise terms
 refitted at every T, rises by max(1, χ²/dof) above its minimum (the fit's Birge rule). σ's
 adds to the GLS interval at the fitted T the shift of σ̂ along T's interval, in quadrature
-(the marginal variance of a locally Gaussian likelihood: :func:`_sigma_with_t`). Checked by
+(the marginal variance of a locally Gaussian likelihood: :func:`_sigma_with_t`); both for a
+claim only (T's profile costs ≈ 20 fits), σ's GLS interval otherwise. Checked by
 tests/core/test_gauss_markov_coverage.py on the independent generator (docs/explain.md).
 
 Claim. The component must be present and its σ² stand ``Z_GAUSS_MARKOV`` (8) standard
@@ -56,8 +57,7 @@ from scipy.optimize import minimize_scalar
 
 __all__ = ["GM_FALSE_CLAIM_RATE", "GM_GRID", "Z_GAUSS_MARKOV", "Z_SCAN_NOISE", "gm_fisher",
            "min_detectable_gauss_markov", "scan_arc_length", "scan_directions",
-           "scan_false_claim_bound",
-           "scan_gauss_markov"]
+           "scan_false_claim_bound", "scan_gauss_markov"]
 
 #: Gauss–Markov correlation times tried (log grid inside the fitted τ range).
 GM_GRID = 10
