@@ -1,6 +1,5 @@
-"""The Gauss–Markov cause: the z the T scan reaches on noise alone is derived (Davies' bound),
-the claim threshold is above it, and σ's interval carries T's uncertainty
-(core/explain/gauss_markov.py)."""
+"""The Gauss–Markov cause: its claim threshold is derived (Davies' bound for the T scan) and
+σ's interval carries T's uncertainty (core/explain/gauss_markov.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +11,6 @@ import pytest
 from avard.core.explain.gauss_markov import (
     GM_FALSE_CLAIM_RATE,
     Z_GAUSS_MARKOV,
-    Z_SCAN_NOISE,
     _sigma_with_t,
     scan_arc_length,
     scan_directions,
@@ -24,20 +22,18 @@ NOISE = (1.6e-4, 2e-5, 2e-6)
 
 @pytest.mark.parametrize(("hours", "rate_hz"), [(1 / 6, 10.0), (1.0, 10.0), (4.0, 10.0),
                                                 (60.0, 10.0), (60.0, 4000.0)])
-def test_noise_threshold_keeps_the_false_claim_bound_below_its_rate(hours, rate_hz):
-    """Davies' bound at the noise-only threshold stays below the stated rate from 10 minutes
+def test_threshold_keeps_the_false_claim_bound_below_its_rate(hours, rate_hz):
+    """Davies' bound at the threshold stays below the stated rate from 10 minutes
     at 10 Hz to 60 h at 4 kHz (the longest scan avard meets)."""
     v = scan_arc_length(*NOISE, hours * 3600, rate_hz)
-    assert scan_false_claim_bound(Z_SCAN_NOISE, v) <= GM_FALSE_CLAIM_RATE
-    # the claim asks more than noise alone reaches (the records' mismatch with the model)
-    assert Z_GAUSS_MARKOV > Z_SCAN_NOISE
+    assert scan_false_claim_bound(Z_GAUSS_MARKOV, v) <= GM_FALSE_CLAIM_RATE
 
 
-def test_noise_threshold_is_the_bound_not_a_margin_on_it():
+def test_threshold_is_the_bound_not_a_margin_on_it():
     """The constant is where the bound meets the rate on the longest scan, rounded up to
     0.1: a quarter less would break it there."""
     v = scan_arc_length(*NOISE, 60 * 3600, 4000.0)
-    assert scan_false_claim_bound(Z_SCAN_NOISE - 0.25, v) > GM_FALSE_CLAIM_RATE
+    assert scan_false_claim_bound(Z_GAUSS_MARKOV - 0.25, v) > GM_FALSE_CLAIM_RATE
 
 
 def test_arc_length_bound_against_a_monte_carlo_of_the_scan_maximum():
