@@ -8,6 +8,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from avard.core.explain.causes import min_detectable_warmup
+from avard.core.explain.engine import explain_file
 from avard.core.explain.gauss_markov import (
     GM_FALSE_CLAIM_RATE,
     Z_GAUSS_MARKOV,
@@ -16,6 +18,8 @@ from avard.core.explain.gauss_markov import (
     scan_directions,
     scan_false_claim_bound,
 )
+
+from tests.support.hidden import Truth, make_record, save
 
 NOISE = (1.6e-4, 2e-5, 2e-6)
 
@@ -64,3 +68,25 @@ def test_sigma_interval_adds_the_shift_along_t_in_quadrature():
     assert lo == pytest.approx(1.0 - math.hypot(0.1, 0.3))
     assert hi == pytest.approx(1.0 + math.hypot(0.2, 0.3))
     assert _sigma_with_t(1.0, gm, None, at(1.4)) == pytest.approx([0.9, 1.2])
+
+
+def test_null_axis_the_wald_z_took_for_a_bump_is_not_claimed(tmp_path):
+    """Seed 80016 of the independent generator, nothing hidden: on x the Wald z σ²/se(σ²)
+    reached 5.0 at T = 135 s (random walk taken over at its bound). The likelihood ratio
+    inside the scanned range stays below the threshold: nothing claimed on any axis."""
+    rec, _ = make_record(80016)
+    ex = explain_file(str(save(rec, tmp_path / "n.npz")), heldout=False)
+    for ch in ex.channels.values():
+        gm = next(f for f in ch.findings if f.cause == "gauss_markov")
+        assert not gm.claimed and gm.statistic < Z_GAUSS_MARKOV, gm.evidence
+
+
+def test_a_bump_at_the_end_of_the_range_is_not_located(tmp_path):
+    """The uncoupled z axis of a warm-up record (benchmark seed 92001): z 3.7, above the
+    threshold, with −2 ln L least at the scanned range's end: T is not located, no claim."""
+    w = min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
+    rec, _ = make_record(92001, truth=Truth(warmup=(3 * w, 900.0)))
+    ex = explain_file(str(save(rec, tmp_path / "w.npz")), heldout=False)
+    gm = next(f for f in ex.channels["z"].findings if f.cause == "gauss_markov")
+    assert gm.statistic >= Z_GAUSS_MARKOV
+    assert not gm.claimed and "not located" in gm.evidence, gm.evidence
