@@ -15,7 +15,11 @@ from avard.core.explain.causes import (
     min_detectable_warmup,
 )
 from avard.core.explain.engine import explain_file
-from avard.core.explain.gauss_markov import gm_fisher, min_detectable_gauss_markov
+from avard.core.explain.gauss_markov import (
+    Z_GAUSS_MARKOV,
+    gm_fisher,
+    min_detectable_gauss_markov,
+)
 from avard.core.explain.thermal_fit import min_detectable_tempco
 from avard.core.report import analyze
 
@@ -223,7 +227,7 @@ def test_gauss_markov_minimum_is_where_the_fisher_errors_reach_their_target():
     assert math.isinf(min_detectable_gauss_markov(*args, 600.0, 4 * 3600, 10.0, rel=0.1))
     assert math.isinf(min_detectable_gauss_markov(*args, 1e5, 4 * 3600, 10.0))
     d = min_detectable_gauss_markov(*args, 30.0, 4 * 3600, 10.0)
-    assert gm_fisher(d, 30.0, *args, 4 * 3600, 10.0)[2] >= 8.0 > gm_fisher(
+    assert gm_fisher(d, 30.0, *args, 4 * 3600, 10.0)[2] >= Z_GAUSS_MARKOV > gm_fisher(
         0.95 * d, 30.0, *args, 4 * 3600, 10.0)[2]
 
 
