@@ -325,6 +325,18 @@ def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: f
     return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))
 
 
+def gauss_markov_rounding_floor(coefficient: float) -> float:
+    """The σ (m/s²) a Gauss–Markov bump on a thermally coupled axis must exceed to be claimed:
+    |c|·0.0625 K/√12, the RMS of the logged temperature's rounding error carried through the
+    fitted coupling. The thermal model removes c·lag(T_logged); its residual keeps
+    c·lag(rounding error), and while a slow cycle turns the temperature the rounding error is
+    a sawtooth whose period is the time to cross one reading step (≈ 80 s for ±0.215 °C over
+    30 min), correlated like a Gauss–Markov process of that time (a plate-logged 2-minute-lag
+    record of the benchmark, seed 99000: σ 3.9e-5 m/s², T 96 s, with c = 4.9e-3 m/s²/K, whose
+    rounding RMS is 8.9e-5). The lag only shrinks it, so this bounds it from above."""
+    return abs(coefficient) * DS18B20_STEP_C / math.sqrt(12.0)
+
+
 def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
                     coefficient: float = 0.0) -> tuple[float, str]:
     """The smallest size (m/s²) a passed transient may have to be claimed, and why.
