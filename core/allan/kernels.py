@@ -1,30 +1,29 @@
 """The OADEV's inner sums: the compiled loop when it was built, numpy otherwise.
 
-``sumsq(x0, x1, x2)`` is Σ_i D_i² with D_i = (x2_i − x1_i) − (x1_i − x0_i): for spans
-X_i, X_{i+m}, X_{i+2m} of a phase record, the sum behind the fully overlapping AVAR (NIST SP
-1065 eq. 12). numpy needs three element-wise passes (each writing a temporary) and a dot
-product for it; ``_kernels.c`` reads the three spans once (1.3 → 0.37 ns per sample and τ,
-in the cache). The extension is optional (setup.py): without a compiler avard installs and
+``_kernels.sumsq(x0, x1, x2)`` is Σ_i D_i² with D_i = (x2_i − x1_i) − (x1_i − x0_i): for
+spans X_i, X_{i+m}, X_{i+2m} of a phase record, the sum behind the fully overlapping AVAR
+(NIST SP 1065 eq. 12). numpy needs three element-wise passes (each writing a temporary, the
+general path ``second_differences``) and a dot product for it; ``_kernels.c`` reads the three
+spans once (1.3 → 0.37 ns per sample and τ, in the cache). ``_kernels.sumsq_mod`` adds the
+modified AVAR's running sums for ``noise_id.RnSums`` (its general path is ``RnSums.push`` on
+the differences). The extension is optional (setup.py): without a compiler avard installs and
 runs on the numpy path, which gives the same sums to rounding (``tests/core/test_kernels.py``
 holds the two equal, and the OADEV built on each).
 
-``sumsq_mod`` (the same sum plus the modified AVAR's running sums, for ``RnSums``) exists only
-compiled; its general path is ``noise_id.RnSums.push`` on the differences.
-
-``use_compiled(False)`` switches to numpy (tests; ``AVARD_NO_C_KERNELS=1`` does it at import).
-A build whose ``API`` number is not this module's is ignored (numpy is used).
+``compiled()`` is the module in use, or None. ``use_compiled(False)`` switches to numpy
+(tests; ``AVARD_NO_C_KERNELS=1`` does it at import). A build whose ``API`` number is not this
+module's is ignored (numpy is used).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["compiled", "sumsq", "sumsq_numpy", "use_compiled"]
+__all__ = ["API", "compiled", "second_differences", "use_compiled"]
 
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
@@ -60,16 +59,12 @@ def use_compiled(on: bool) -> bool:
     return _ACTIVE is not None
 
 
-def sumsq_numpy(x0: NDArray[np.float64], x1: NDArray[np.float64],
-                x2: NDArray[np.float64]) -> float:
-    """Σ ((x2 − x1) − (x1 − x0))², in numpy (the general path)."""
-    d = np.subtract(x2, x1)
+def second_differences(x0: NDArray, x1: NDArray, x2: NDArray,
+                       out: NDArray | None = None) -> NDArray:
+    """D = (x2 − x1) − x1 + x0 element-wise (into ``out`` when given): the numpy path's
+    differences, whose Σ D² the compiled ``sumsq`` gives without storing them. Exact for
+    int64 counts."""
+    d = np.subtract(x2, x1, out=out)
     d -= x1
     d += x0
-    return float(np.dot(d, d))
-
-
-def sumsq(x0: NDArray[np.float64], x1: NDArray[np.float64], x2: NDArray[np.float64]) -> float:
-    """Σ ((x2 − x1) − (x1 − x0))² over 1-D float64 spans of one length."""
-    fn: Callable[..., float] = _ACTIVE.sumsq if _ACTIVE is not None else sumsq_numpy
-    return fn(x0, x1, x2)
+    return d

@@ -275,9 +275,7 @@ class RnSums:
         equal)."""
         kern = kernels.compiled()
         if kern is None:
-            d = np.subtract(x2, x1)
-            d -= x1
-            d += x0
+            d = kernels.second_differences(x0, x1, x2)
             self.push(d)
             return _row_dots(d, d)
         n = x0.shape[1]

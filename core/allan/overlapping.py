@@ -285,10 +285,8 @@ class OverlappingAllan:
             np.subtract(w[:, m:], w[:, :count], out=d)
         else:
             # long τ: the three points X_{i+2m}, X_{i+m}, X_i lie far apart in the ring
-            mid = self._span(lo + m, count)
-            np.subtract(self._span(lo + 2 * m, count), mid, out=d)
-            np.subtract(d, mid, out=d)
-            np.add(d, self._span(lo, count), out=d)
+            kernels.second_differences(self._span(lo, count), self._span(lo + m, count),
+                                       self._span(lo + 2 * m, count), out=d)
         if d.dtype != np.float64:
             np.copyto(as_float[:, :count], d)  # exact: differences are far below 2**53
             d = as_float[:, :count]
