@@ -311,6 +311,22 @@ def min_detectable_gauss_markov(n_white: float, b_inst: float, k_rrw: float, T: 
 # the claim threshold (Davies' bound for the T scan)
 
 
+def noise_whitener(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                   rate_hz: float) -> tuple[NDArray, float, Any, NDArray, NDArray]:
+    """(m, n, components, θ, L) of the noise alone (white N, flicker B, random walk K; the
+    zero ones left out) over analyze's octave τ of ``record_s`` at ``rate_hz``: L the
+    Cholesky factor of the covariance the fit uses for the AVAR estimates, which whitens
+    them (the scan's directions and the null study's cumulants both start from it)."""
+    m, n = _octaves(record_s, rate_hz)
+    levels = {"velocity_random_walk": n_white, "bias_instability": b_inst,
+              "rate_random_walk": k_rrw}
+    terms = [t for t, v in levels.items() if v > 0]
+    comps = model_components(terms, rate_hz=rate_hz)
+    theta = np.array([levels[t] ** 2 for t in terms])
+    L = np.linalg.cholesky(avar_estimate_covariance(comps, theta, m, n, rate_hz))
+    return m, n, comps, theta, L
+
+
 def scan_directions(n_white: float, b_inst: float, k_rrw: float, record_s: float,
                     rate_hz: float, steps: int = 400) -> NDArray[np.float64]:
     """Unit vectors U(s) (columns, ``steps`` of them over s = ln T in the scanned range):
@@ -319,15 +335,9 @@ def scan_directions(n_white: float, b_inst: float, k_rrw: float, record_s: float
     all of analyze's noise terms (the scan fits them all) projected out, normalised. Without
     a Gauss–Markov component, z(s) = U(s)·e with e standard normal (the whitened AVAR
     residuals): z's correlation between two T is U(s₁)·U(s₂)."""
-    m, n = _octaves(record_s, rate_hz)
+    m, _n, _comps, _theta, L = noise_whitener(n_white, b_inst, k_rrw, record_s, rate_hz)
     tau = m / rate_hz
     lo, hi = T_MARGIN * tau[0], tau[-1] / T_MARGIN_HI
-    levels = {"velocity_random_walk": n_white, "bias_instability": b_inst,
-              "rate_random_walk": k_rrw}
-    terms = [t for t, v in levels.items() if v > 0]
-    comps = model_components(terms, rate_hz=rate_hz)
-    theta = np.array([levels[t] ** 2 for t in terms])
-    L = np.linalg.cholesky(avar_estimate_covariance(comps, theta, m, n, rate_hz))
     X = np.linalg.solve(L, np.column_stack(
         [c.basis(tau, rate_hz) for c in model_components(mdl.TERMS, rate_hz=rate_hz)]))
     Q, _ = np.linalg.qr(X / np.linalg.norm(X, axis=0))

@@ -18,12 +18,11 @@ import numpy as np
 from avard.core.explain.engine import explain_file
 from avard.core.explain.gauss_markov import (
     Z_GAUSS_MARKOV,
-    _octaves,
+    noise_whitener,
     scan_arc_length,
     scan_directions,
     scan_false_claim_bound,
 )
-from avard.core.model.fit import avar_estimate_covariance, model_components
 from numpy.typing import NDArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -39,13 +38,7 @@ def z_cumulants(n_white: float, b_inst: float, k_rrw: float, record_s: float,
     z puts on the AVAR estimates): κ_r = 2^(r−1)(r−1)!·tr((BΣ)^r), in Whittle form κ2 =
     (2/M)∫S²g² dν, κ3 = (8/M²)∫S³g³ dν over (−½, ½), g = Σ w_k|H_k|². κ2 = 1 checks the
     integration against the covariance the fit uses."""
-    m, n = _octaves(record_s, rate_hz)
-    levels = {"velocity_random_walk": n_white, "bias_instability": b_inst,
-              "rate_random_walk": k_rrw}
-    terms = [t for t, v in levels.items() if v > 0]
-    comps = model_components(terms, rate_hz=rate_hz)
-    theta = np.array([levels[t] ** 2 for t in terms])
-    L = np.linalg.cholesky(avar_estimate_covariance(comps, theta, m, n, rate_hz))
+    m, n, comps, theta, L = noise_whitener(n_white, b_inst, k_rrw, record_s, rate_hz)
     W = np.linalg.solve(L.T, scan_directions(n_white, b_inst, k_rrw, record_s, rate_hz, steps))
     mmax = float(m.max())
     nu = np.concatenate([np.linspace(1e-12, 8.0 / mmax, 513)[1:],
