@@ -38,6 +38,7 @@ from avard.core.allan.overlapping import OverlappingAllan
 from numpy.typing import NDArray
 
 from ..support.allantools_sdist import Corrupt, Unavailable, reference_tests
+from .stable32 import Row, read_rows
 
 LAG1_MIN_AVERAGES = 30  # Stable32 uses the lag-1 ACF with at least this many averages
 
@@ -94,27 +95,6 @@ def tests_dir() -> Path:
         pytest.skip(str(e))
 
 
-@dataclass(frozen=True)
-class Row:
-    """One line of a Stable32 table: AF, count ('#'), Alpha, and the deviation with bounds."""
-
-    af: int
-    n: int
-    alpha: int
-    lo: float
-    dev: float
-    hi: float
-
-
-def read_table(path: Path) -> list[Row]:
-    rows = []
-    for s in path.read_text().splitlines():
-        if s.strip() and not s.lstrip().startswith("#"):
-            af, _tau, n, alpha, lo, dev, hi = s.split()
-            rows.append(Row(int(af), int(n), int(alpha), float(lo), float(dev), float(hi)))
-    return rows
-
-
 @functools.cache
 def _rates(path: Path, phase: bool, nominal_hz: float) -> NDArray[np.float64]:
     raw = np.loadtxt(path, comments="#", dtype=np.float64)
@@ -131,7 +111,7 @@ def rates(tests: Path, name: str) -> NDArray[np.float64]:
 
 def table(tests: Path, name: str, kind: str) -> list[Row]:
     d = SETS[name]
-    return read_table(tests / d.folder / d.tables[kind])
+    return read_rows(tests / d.folder / d.tables[kind])
 
 
 @dataclass(frozen=True)
@@ -184,7 +164,7 @@ def test_deviation_and_count_to_the_printed_digits(tests_dir: Path, name: str,
     y = rates(tests_dir, name)
     assert list(run(y, kind, [r.af for r in rows]).n) == [r.n for r in rows]
     if name in ROUNDED:
-        rows = read_table(tests_dir / SETS[name].folder / OFFSET_FREE[kind])
+        rows = read_rows(tests_dir / SETS[name].folder / OFFSET_FREE[kind])
     res = run(y, kind, [r.af for r in rows])
     assert list(res.n) == [r.n for r in rows]
     np.testing.assert_allclose(res.dev, [r.dev for r in rows], rtol=5e-5)
@@ -351,7 +331,7 @@ def print_table() -> None:
         y = rates(tests, name)
         rows = table(tests, name, kind)
         full = run(y, kind, [r.af for r in rows])
-        ref = read_table(tests / SETS[name].folder / OFFSET_FREE[kind]) if name in ROUNDED \
+        ref = read_rows(tests / SETS[name].folder / OFFSET_FREE[kind]) if name in ROUNDED \
             else rows
         dev = run(y, kind, [r.af for r in ref]).dev / np.array([r.dev for r in ref]) - 1
         lag = [k for k, r in enumerate(rows) if y.size // r.af >= LAG1_MIN_AVERAGES]

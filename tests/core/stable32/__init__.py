@@ -56,10 +56,16 @@ def _row(fields: list[str]) -> Row:
     return Row(int(af), int(n), int(alpha), float(lo), float(dev), float(hi))
 
 
+def read_rows(path: Path) -> list[Row]:
+    """The rows of a table file in Stable32's column order (AF, τ, #, Alpha, Min σ, σ,
+    Max σ), comment lines left out: these files and allantools' own alike."""
+    lines = path.read_text().splitlines()
+    return [_row(s.split()) for s in lines if s.strip() and not s.lstrip().startswith("#")]
+
+
 def all_tau(kind: str) -> list[Row]:
     """The automatic-identification run of one sigma type, every AF in Stable32's order."""
-    lines = (HERE / ALL_TAU[kind]).read_text().splitlines()
-    return [_row(s.split()) for s in lines if s.strip() and not s.startswith("#")]
+    return read_rows(HERE / ALL_TAU[kind])
 
 
 def octave_fixed_white_fm() -> dict[str, list[Row]]:
