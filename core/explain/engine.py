@@ -552,12 +552,13 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
 
     # the covariance of the compensated points that the removed signal's parameters carry
     # (``removal_covariance``): set by each ``extend``, given to every fit of those points
-    added: list[NDArray[np.float64] | None] = [None]
+    added: NDArray[np.float64] | None = None
 
     def extend(cands: list[cz.Candidate]) -> tuple[NDArray[np.float64], NoiseFit, Any]:
         """(compensated AVAR, extended fit, its Allan result) with the thermal signal and the
         passed transients ``cands`` removed, from the Allan covariance of the axis and that
         signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)."""
+        nonlocal added
         total = signal.copy()
         for c in cands:
             d = cz.cause_signal(c, len(y_slow), rate_b)
@@ -568,12 +569,12 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
         # the removed signal's parameters are estimates: their uncertainty enters the same
         # GLS fit as a covariance of the compensated points (one set of intervals)
-        added[0] = removal_covariance(
+        added = removal_covariance(
             allan.var, tau, y_slow, total, rate_b,
             _signal_variations(thermal if "temperature" in curves else None, temps, y_slow,
                                with_start, cands, rate_b))
         try:
-            fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, added_cov=added[0],
+            fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, added_cov=added,
                             **kw)
         except FitError as exc:
             raise FitError(f"channel {ch.name}, the model with the found causes: {exc}") \
@@ -618,13 +619,13 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             comp_var, ext, current = extend([c for c in trans if c.passed])
         else:
             comp_var, ext, current = None, base, allan
-            added[0] = None  # nothing removed any more: no uncertainty of it either
+            added = None  # nothing removed any more: no uncertainty of it either
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
                                 cand.statistic, cand.threshold, cand.evidence))
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
-                                   kw if added[0] is None else {**kw, "added_cov": added[0]})
+                                   kw if added is None else {**kw, "added_cov": added})
     if gm.claimed and thermal is not None and thermal.passed:
         floor = cz.gauss_markov_rounding_floor(thermal.coefficient)
         if gm.params.get("sigma", 0.0) < floor:
