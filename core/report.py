@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
@@ -67,6 +68,12 @@ ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s
 # do not fit it together are read in further passes (one 60 h axis per pass), which keeps the
 # whole analysis of such a record at ~1/10 of the memory of allantools' oadev.
 RING_BUDGET_BYTES = 96 << 20
+# ``analyze`` of a file reads it once per group of channels whose rings fit this together:
+# two 60 h axes (68 MB each) per pass, so a 3-axis record is read twice, not three times
+# (the R(n) sums that took another 56 MB per axis are computed only where B1 needs them,
+# ``OverlappingAllan(defer_rn=True)``). The whole analysis of such a record then peaks at
+# ~180 MB, 1/6 of allantools' oadev of the same axes (``python -m benchmarks analyze``).
+PASS_BUDGET_BYTES = 144 << 20
 
 
 def ring_budget_bytes() -> int:
@@ -103,7 +110,7 @@ class WelchAccumulator:
         # nonzero only at bins 0 and ±1, so (x − μ)·w and x·w transform alike except there,
         # by μ·W₀ and μ·W₁ (one pass fewer over every sample than subtracting μ first).
         self._w01 = np.fft.rfft(self.win)[:2].real.copy()
-        self.sum = np.zeros((self.L // 2 + 1, n_channels))
+        self._power = np.zeros((n_channels, self.L // 2 + 1))  # Σ |X|² per channel and bin
         self.n_seg = 0
         # channel-major samples not yet in a full segment, then the block: each sample is
         # transposed once, and every segment is a contiguous row of it
@@ -146,10 +153,13 @@ class WelchAccumulator:
             mean = ((halves[:, :-1] + halves[:, 1:]) / self.L).T  # (k, C)
             spec[:, :, 0] -= mean * self._w01[0]
             spec[:, :, 1] -= mean * self._w01[1]
-            parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
-            np.square(parts, out=parts)
-            power = parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)  # (C, F)
-            self.sum += power.T
+            kern = kernels.compiled()
+            if kern is not None:  # Σ over the segments of re² + im², one pass
+                kern.power_sum(spec.reshape(-1).view(np.float64), k, self._power.reshape(-1))
+            else:
+                parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
+                np.square(parts, out=parts)
+                self._power += parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)
             self.n_seg += k
         # the samples of the next, still incomplete segment move to the front
         rest = total - k * step
@@ -166,7 +176,7 @@ class WelchAccumulator:
         f = np.fft.rfftfreq(self.L, 1.0 / self.rate)
         if self.n_seg == 0:
             return f, np.full((len(f), self.c), np.nan)
-        psd = self.sum / self.n_seg * self.scale
+        psd = self._power.T / self.n_seg * self.scale
         psd[1:-1] *= 2.0  # one-sided
         return f, psd
 
@@ -430,6 +440,11 @@ def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
     return None
 
 
+#: One pass over a record: its channels (numbers in the record), their blocks, and the block
+#: columns to take (None: all).
+_Pass = tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]], list[int] | None]
+
+
 def analyze(
     path: str,
     *,
@@ -468,14 +483,18 @@ def analyze(
     # the blocks already opened (its reader has read the first rows); an .npz reader opens
     # nothing before its first block, so it is simply replaced by one of the group's columns.
     groups = oadev_pass_groups(sel, int(meta["n_samples"]))
-    passes: list[tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]], list[int] | None]]
+    passes: list[_Pass]
     if meta.get("format") == "npz":
         passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
     else:
         passes = [(groups[0], segments, groups[0])]
     for g in groups[1:]:
         passes.append((g, _lazy_segments(path, block, rate_hz, g, False), None))
-    return _analyze_passes(meta, passes, **opts)
+
+    def reread(column: int) -> Iterable[tuple[NDArray[np.float64], bool]]:
+        return _lazy_segments(path, block, rate_hz, [column], False)
+
+    return _analyze_passes(meta, passes, reread=reread, **opts)
 
 
 def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
@@ -487,13 +506,13 @@ def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[i
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
     """``sel`` split into groups whose OADEV histories (8 bytes × (2·m_max + PIECE) points per
-    channel) fit ``RING_BUDGET_BYTES`` together, one channel at least: the channels of one
+    channel) fit ``PASS_BUDGET_BYTES`` together, one channel at least: the channels of one
     pass over a file. Short records take every channel in one pass."""
     from avard.core.allan.overlapping import PIECE
 
     grid = oadev_grid(n_samples, 1)
     per_channel = 8 * (2 * int(grid[-1]) + PIECE)
-    size = max(1, RING_BUDGET_BYTES // per_channel)
+    size = max(1, PASS_BUDGET_BYTES // per_channel)
     return [sel[i:i + size] for i in range(0, len(sel), size)]
 
 
@@ -578,17 +597,22 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
               names: list[str], rate: float, estimator: str, grid: NDArray[np.int64] | None,
               nper: int | None, progress: ProgressFn | None, done: int,
               total: int | None, quantiles: str = "exact",
-              n_record: int | None = None) -> _PassResult:
+              n_record: int | None = None,
+              reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None
+              ) -> _PassResult:
     """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
     the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
-    of the whole analysis."""
+    of the whole analysis. ``reread(j)``: channel j's blocks again, for the R(n) sums the
+    OADEV then leaves out until B1 asks for them (``_deferred_rn``)."""
     from avard.core.allan.overlapping import OverlappingAllan
     from avard.core.allan.streaming import StreamingAllan
 
     sa: OverlappingAllan | StreamingAllan
     if estimator == "oadev":
         assert grid is not None
-        sa = OverlappingAllan(len(names), rate, grid, names=names, n_total=n_record)
+        defer = reread is not None and n_record is not None
+        sa = OverlappingAllan(len(names), rate, grid, names=names, n_total=n_record,
+                              defer_rn=defer)
     else:
         sa = StreamingAllan(len(names), rate, names=names)
     welch = WelchAccumulator(len(names), rate, nper) if nper is not None else None
@@ -606,16 +630,44 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
                 welch.gap()
         if progress is not None:
             progress(done + n, total)
+    if isinstance(sa, OverlappingAllan) and reread is not None and n >= 16:
+        _deferred_rn(sa, reread, n)
     # quantiles="stable32": the intervals' χ² quantiles as Stable32 computes them
     res = _with_differences(sa.result(quantiles=quantiles)) if n >= 16 else None
     return _PassResult(res, welch, n)
 
 
+def _deferred_rn(sa: Any, reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]],
+                 n: int) -> None:
+    """The R(n) sums ``sa`` (an ``OverlappingAllan(defer_rn=True)`` fed the whole record)
+    needs where B1 says PM in its range: each such channel read again into an accumulator of
+    those τ alone, which keeps them (the same differences in the same pieces, so the same
+    sums as keeping them in the first pass). One channel at a time: a history of 3·m per τ.
+    Nothing is read on records without PM noise at the long τ."""
+    from avard.core.allan.overlapping import OverlappingAllan
+
+    need = sa.rn_needed()
+    for ch in sorted({c for chans in need.values() for c in chans}):
+        ks = [k for k, chans in need.items() if ch in chans]
+        extra = OverlappingAllan(1, sa.rate_hz, sa.ms[ks])
+        got = 0
+        for accel, segment_end in reread(ch):
+            extra.update(accel)
+            got += len(accel)
+            if segment_end:
+                extra.gap()
+        if got != n:
+            raise DataError(f"read {got} samples of channel {sa.names[ch]} again for R(n) "
+                            f"after {n}; the file changed while it was analysed")
+        sums = extra.rn_sums()
+        sa.set_rn(ch, {k: r for k, r in zip(ks, sums, strict=True) if r is not None})
+
+
 def _analyze_passes(
     meta: dict[str, Any],
-    passes: Sequence[tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]],
-                           list[int] | None]],
+    passes: Sequence[_Pass],
     *,
+    reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None,
     source: str,
     filter_corner_hz: float | str | None,
     find_sinusoids: bool,
@@ -627,7 +679,9 @@ def _analyze_passes(
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
     its blocks, the block columns to take or None for all), read one after another.
-    ``progress`` counts the samples read over all passes (the record's length × passes)."""
+    ``progress`` counts the samples read over all passes (the record's length × passes).
+    ``reread(column)``, when the record can be read again, gives one column's blocks: the
+    OADEV then defers R(n) and reads a column again only where B1 needs it."""
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
     rate = float(meta["rate_hz"])
@@ -653,9 +707,14 @@ def _analyze_passes(
     results: list[tuple[list[int], _PassResult]] = []
     done = 0
     for chans, blocks, take in passes:
+        again = None
+        if reread is not None:
+            def again(j: int, chans: list[int] = chans
+                      ) -> Iterable[tuple[NDArray[np.float64], bool]]:
+                return reread(chans[j])
         one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
                         progress, done, all_total, quantiles,
-                        None if total is None else int(total))
+                        None if total is None else int(total), again)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "

@@ -15,9 +15,29 @@
  *       sum of D over the segment (P_0 = 0, P_k = last after the k differences seen so far),
  *       ring[j mod m] holding P_j for the last m indices j (m = len(ring)); every new index
  *       e = k+1 ... k+n with e >= m gives w = P_e - P_{e-m}, summed as w^2.
+ *   running_sum(y, offset, carry, out) -> the last value
+ *       out[i] = carry + sum_{j <= i} (y[j] - offset), added left to right as numpy's cumsum
+ *       adds (the same bits); y may be strided (a column of a block of samples), so the
+ *       transposing copy, the offset and the running sum are one pass (numpy's cumsum alone
+ *       measured 3.4 ns per value).
+ *   power_sum(spec, k, out)
+ *       the Welch spectrum's accumulation: spec a float64 view of k blocks of complex
+ *       transforms (re, im pairs), each block as long as out; out[j] += sum over the blocks
+ *       of re^2 + im^2 of its j-th value (numpy's square, sum over the blocks and sum over
+ *       the pairs: three passes over the transforms, measured 0.7 ms against 0.1 ms per
+ *       eight 16384-point segments of two channels).
+ *   lag_sums(x, m, ref, out, old) -> number of values
+ *       the noise identification's sums over one channel's averages z (Lag1Ladder): with
+ *       m >= 1, z_j = (x[(j+1)m] - x[jm]) - ref for j = 0 ... (len(x) - 1)/m - 1 (x a span of
+ *       the running sum, z the non-overlapping sums of m samples, never stored); with m = 0,
+ *       z_j = x[j] - ref. The first `old` values (at most LAG_MAX) were pushed before: they
+ *       enter only the products that reach a new value. Adds sum z over the new values to
+ *       out[0] and sum z_t z_{t+j} over pairs whose later value is new to out[1 + j], for the
+ *       lags j = 0 ... len(out) - 2 (at most LAG_MAX = 3, what the ladder's dmax = 2 needs).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <string.h>
 
 static int
 get_vector(PyObject *obj, Py_buffer *view, int writable, const char *name)
@@ -165,11 +185,237 @@ kernels_sumsq_mod(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     return Py_BuildValue("(ddLd)", s_d, s_mod, n_mod, p);
 }
 
+/* lag_sums: the averages are made a block at a time into a buffer in the L1 cache (with the
+ * next few values, and zeros past the last, so that every product of the block is there),
+ * then one loop carries the sum and the four lag products on pairs of values in vector
+ * registers (GCC's vector extension: SSE2 on x86-64, NEON on a Pi's aarch64), two
+ * accumulators per sum so that no sum waits on its own adds. Measured 0.55 ns per value
+ * against 1.1 for a separate loop per sum and 1.3 for numpy's sum and four dot products,
+ * before its passes making the averages. */
+#define LAG_MAX 3
+#define LAG_BLOCK 512
+
+typedef double v2d __attribute__((vector_size(16)));
+
+static inline v2d
+load2(const double *p)
+{
+    v2d v;
+    memcpy(&v, p, sizeof v);  /* unaligned: buf + j for odd j */
+    return v;
+}
+
+static void
+lag_loop(const double *x, Py_ssize_t m, Py_ssize_t k, double ref, int lags, int old,
+         double *out)
+{
+    double buf[LAG_BLOCK + 8];
+    v2d acc[5][2];
+    double rest[5] = {0.0, 0.0, 0.0, 0.0, 0.0};
+    memset(acc, 0, sizeof acc);
+    for (Py_ssize_t t0 = 0; t0 < k; t0 += LAG_BLOCK) {
+        Py_ssize_t nb = k - t0 < LAG_BLOCK ? k - t0 : LAG_BLOCK;  /* this block's values */
+        Py_ssize_t ne = k - t0 < nb + LAG_MAX ? k - t0 : nb + LAG_MAX;  /* and the next few */
+        if (m == 0) {
+            const double *z = x + t0;
+            for (Py_ssize_t i = 0; i < ne; i++)
+                buf[i] = z[i] - ref;
+        } else if (m == 1) {
+            const double *p = x + t0;
+            for (Py_ssize_t i = 0; i < ne; i++)
+                buf[i] = (p[i + 1] - p[i]) - ref;
+        } else {
+            const double *p = x + t0 * m;
+            for (Py_ssize_t i = 0; i < ne; i++)
+                buf[i] = (p[(i + 1) * m] - p[i * m]) - ref;
+        }
+        for (Py_ssize_t i = ne; i < nb + 8; i++)
+            buf[i] = 0.0;  /* past the last value: its products are 0 */
+        Py_ssize_t i = 0;
+        for (; i + 4 <= nb; i += 4) {
+            v2d a = load2(buf + i), b = load2(buf + i + 2);
+            acc[0][0] += a;
+            acc[0][1] += b;
+            acc[1][0] += a * a;
+            acc[1][1] += b * b;
+            acc[2][0] += a * load2(buf + i + 1);
+            acc[2][1] += b * load2(buf + i + 3);
+            acc[3][0] += a * load2(buf + i + 2);
+            acc[3][1] += b * load2(buf + i + 4);
+            acc[4][0] += a * load2(buf + i + 3);
+            acc[4][1] += b * load2(buf + i + 5);
+        }
+        for (; i < nb; i++) {
+            double z = buf[i];
+            rest[0] += z;
+            for (int j = 0; j <= LAG_MAX; j++)
+                rest[1 + j] += z * buf[i + j];
+        }
+    }
+    /* less the sums among the old values alone (pushed before with their own products) */
+    double z[LAG_MAX];
+    for (int i = 0; i < old; i++)
+        z[i] = (m == 0 ? x[i] : x[(i + 1) * m] - x[i * m]) - ref;
+    for (int i = 0; i < old; i++) {
+        rest[0] -= z[i];
+        for (int j = 0; i + j < old; j++)
+            rest[1 + j] -= z[i] * z[i + j];
+    }
+    for (int j = 0; j < lags + 2; j++) {
+        v2d v = acc[j][0] + acc[j][1];
+        out[j] += (v[0] + v[1]) + rest[j];
+    }
+}
+
+static PyObject *
+kernels_lag_sums(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    Py_buffer v, o;
+    if (nargs != 5) {
+        PyErr_SetString(PyExc_TypeError, "lag_sums(x, m, ref, out, old) takes 5 arguments");
+        return NULL;
+    }
+    long old = PyLong_AsLong(args[4]);
+    if (old == -1 && PyErr_Occurred())
+        return NULL;
+    Py_ssize_t m = PyLong_AsSsize_t(args[1]);
+    if (m == -1 && PyErr_Occurred())
+        return NULL;
+    double ref = PyFloat_AsDouble(args[2]);
+    if (ref == -1.0 && PyErr_Occurred())
+        return NULL;
+    if (m < 0) {
+        PyErr_SetString(PyExc_ValueError, "m must be >= 0");
+        return NULL;
+    }
+    if (get_vector(args[0], &v, 0, "x") < 0)
+        return NULL;
+    if (get_vector(args[3], &o, 1, "out") < 0) {
+        PyBuffer_Release(&v);
+        return NULL;
+    }
+    Py_ssize_t lags = o.shape[0] - 2;
+    if (lags < 0 || lags > LAG_MAX) {
+        PyErr_Format(PyExc_ValueError, "out must hold 2 to %d values", LAG_MAX + 2);
+        PyBuffer_Release(&v);
+        PyBuffer_Release(&o);
+        return NULL;
+    }
+    Py_ssize_t n = v.shape[0];
+    Py_ssize_t k = m == 0 ? n : (n > 0 ? (n - 1) / m : 0);
+    if (old < 0 || old > LAG_MAX || old > k) {
+        PyErr_Format(PyExc_ValueError, "old must be 0 to %d and at most the values in x",
+                     LAG_MAX);
+        PyBuffer_Release(&v);
+        PyBuffer_Release(&o);
+        return NULL;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    lag_loop(v.buf, m, k, ref, (int)lags, (int)old, o.buf);
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&v);
+    PyBuffer_Release(&o);
+    return PyLong_FromSsize_t(k);
+}
+
+static PyObject *
+kernels_running_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    Py_buffer y, o;
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "running_sum(y, offset, carry, out) takes 4 arguments");
+        return NULL;
+    }
+    double offset = PyFloat_AsDouble(args[1]);
+    if (offset == -1.0 && PyErr_Occurred())
+        return NULL;
+    double carry = PyFloat_AsDouble(args[2]);
+    if (carry == -1.0 && PyErr_Occurred())
+        return NULL;
+    if (PyObject_GetBuffer(args[0], &y, PyBUF_STRIDES | PyBUF_FORMAT) < 0)
+        return NULL;
+    if (y.ndim != 1 || y.itemsize != 8 || y.format == NULL || strcmp(y.format, "d") != 0
+            || y.strides[0] % 8 != 0) {
+        PyErr_SetString(PyExc_TypeError, "y must be a 1-D float64 array");
+        PyBuffer_Release(&y);
+        return NULL;
+    }
+    if (get_vector(args[3], &o, 1, "out") < 0) {
+        PyBuffer_Release(&y);
+        return NULL;
+    }
+    if (o.shape[0] != y.shape[0]) {
+        PyErr_SetString(PyExc_ValueError, "y and out must have the same length");
+        PyBuffer_Release(&y);
+        PyBuffer_Release(&o);
+        return NULL;
+    }
+    const double *src = y.buf;
+    const Py_ssize_t step = y.strides[0] / 8, n = y.shape[0];
+    double *dst = o.buf, acc = carry;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        acc = acc + (src[i * step] - offset);
+        dst[i] = acc;
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&y);
+    PyBuffer_Release(&o);
+    return PyFloat_FromDouble(acc);
+}
+
+static PyObject *
+kernels_power_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    Py_buffer v, o;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "power_sum(spec, k, out) takes 3 arguments");
+        return NULL;
+    }
+    Py_ssize_t k = PyLong_AsSsize_t(args[1]);
+    if (k == -1 && PyErr_Occurred())
+        return NULL;
+    if (get_vector(args[0], &v, 0, "spec") < 0)
+        return NULL;
+    if (get_vector(args[2], &o, 1, "out") < 0) {
+        PyBuffer_Release(&v);
+        return NULL;
+    }
+    const Py_ssize_t f = o.shape[0];
+    if (k < 0 || v.shape[0] != 2 * k * f) {
+        PyErr_SetString(PyExc_ValueError, "spec must hold k blocks of len(out) complex values");
+        PyBuffer_Release(&v);
+        PyBuffer_Release(&o);
+        return NULL;
+    }
+    const double *src = v.buf;
+    double *dst = o.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t b = 0; b < k; b++) {
+        const double *blk = src + 2 * b * f;
+        for (Py_ssize_t j = 0; j < f; j++)
+            dst[j] += blk[2 * j] * blk[2 * j] + blk[2 * j + 1] * blk[2 * j + 1];
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&v);
+    PyBuffer_Release(&o);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef kernels_methods[] = {
     {"sumsq", (PyCFunction)(void (*)(void))kernels_sumsq, METH_FASTCALL,
      "sumsq(x0, x1, x2): sum of ((x2 - x1) - (x1 - x0))**2 over float64 vectors"},
     {"sumsq_mod", (PyCFunction)(void (*)(void))kernels_sumsq_mod, METH_FASTCALL,
      "sumsq_mod(x0, x1, x2, ring, k, last): sumsq and the modified AVAR's running sums"},
+    {"running_sum", (PyCFunction)(void (*)(void))kernels_running_sum, METH_FASTCALL,
+     "running_sum(y, offset, carry, out): out = carry + cumsum(y - offset); the last value"},
+    {"power_sum", (PyCFunction)(void (*)(void))kernels_power_sum, METH_FASTCALL,
+     "power_sum(spec, k, out): out += the sum over k blocks of |spec|^2"},
+    {"lag_sums", (PyCFunction)(void (*)(void))kernels_lag_sums, METH_FASTCALL,
+     "lag_sums(x, m, ref, out, old): the averages' sum and lag products, added to out"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -180,7 +426,7 @@ static struct PyModuleDef kernels_module = {
 };
 
 /* The interface version avard.core.allan.kernels expects (its API): raise both together. */
-#define KERNELS_API 1
+#define KERNELS_API 2
 
 PyMODINIT_FUNC
 PyInit__kernels(void)

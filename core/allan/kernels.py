@@ -28,7 +28,7 @@ __all__ = ["API", "compiled", "second_differences", "use_compiled"]
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
 #: ``_kernels.c`` (a stale build left in a source tree) is not used.
-API = 1
+API = 2
 
 
 def _load() -> ModuleType | None:

@@ -314,6 +314,16 @@ class RnSums:
         """End the segment: no moving sum spans what follows."""
         self._gap_reset()
 
+    def take_channel(self, ch: int, other: RnSums, of: int = 0) -> None:
+        """Channel ``ch`` of these sums from channel ``of`` of ``other`` (the same m, fed
+        the same differences in a pass of its own: the counts are the same for every
+        channel of a record)."""
+        if other.m != self.m:
+            raise DataError(f"R(n) sums at m = {other.m} given for m = {self.m}")
+        self.n_d, self.n_mod = other.n_d, other.n_mod
+        self.s_d[ch] = other.s_d[of]
+        self.s_mod[ch] = other.s_mod[of]
+
     def ratio(self) -> NDArray[np.float64]:
         """Measured R(n) per channel: MVAR/AVAR = (Σ w²/n_mod) / (m² Σ D²/n_d); NaN without
         a modified difference or with zero AVAR."""
@@ -455,7 +465,8 @@ class Lag1Ladder:
         ref = self._reference(z[0], shift)
         rows = np.empty((self.c, z.shape[0]))
         np.subtract(z.T, ref[:, None], out=rows)  # channel-major and referenced in one pass
-        self._push_referenced(rows)
+        if not self._compiled_push(rows, 0, np.zeros(self.c), z.shape[0]):
+            self._push_referenced(rows)
 
     def push_rows(self, values: NDArray, shift: NDArray | None = None) -> None:
         """``push`` for channel-major averages (C, k): each channel a contiguous row, so the
@@ -464,6 +475,8 @@ class Lag1Ladder:
         if z.shape[1] == 0:
             return
         ref = self._reference(z[:, 0], shift)
+        if self._compiled_push(z, 0, ref, z.shape[1]):
+            return
         if not ref.any():  # already relative (the first segment's shortest τ): no copy
             self._push_referenced(z)
             return
@@ -471,6 +484,36 @@ class Lag1Ladder:
         rows = scratch("ladder.rows", self.c, z.shape[1], np.float64)
         np.subtract(z, ref[:, None], out=rows)
         self._push_referenced(rows)
+
+    def span_overlap(self) -> int:
+        """How many averages already pushed a ``push_spans`` span may begin with: the open
+        segment's last min(n, dmax + 1), whose products with the new averages the compiled
+        loop then sums in the same pass."""
+        return min(self._tail.shape[1], self._lags)
+
+    def push_spans(self, x: NDArray, m: int, shift: NDArray | None = None,
+                   old: int = 0) -> None:
+        """``push_rows`` of the non-overlapping sums of m samples given as a span of their
+        running sum: x (C, k·m + 1) channel-major, the averages x[:, (j+1)m] − x[:, jm] for
+        j < k, of which the first ``old`` (at most ``span_overlap()``) are the last ones
+        pushed before. With the compiled loop the averages are never stored (one pass over
+        the span for all the sums); without it, or for a cross-channel ladder, they are made
+        and pushed."""
+        x = np.asarray(x, dtype=np.float64).reshape(self.c, -1)
+        m, old = int(m), int(old)
+        if m < 1:
+            raise DataError(f"m={m} must be an averaging factor >= 1")
+        if not 0 <= old <= self.span_overlap():
+            raise DataError(f"old={old}: a span may begin with at most "
+                            f"{self.span_overlap()} averages pushed before")
+        k = (x.shape[1] - 1) // m
+        if k <= old:
+            return
+        ref = self._reference(x[:, (old + 1) * m] - x[:, old * m], shift)
+        if self._compiled_push(x, m, ref, k, old):
+            return
+        pts = x[:, old * m:k * m + 1:m]
+        self._push_referenced((pts[:, 1:] - pts[:, :-1]) - ref[:, None])
 
     def _reference(self, first: NDArray, shift: NDArray | None) -> NDArray[np.float64]:
         """What to subtract from raw averages that get ``shift`` added: ref − shift, with ref
@@ -480,29 +523,83 @@ class Lag1Ladder:
             self.ref = first + h
         return self.ref - h
 
+    #: Fewest new averages a push gives the compiled loop: below it, or while the segment is
+    #: short enough to be kept whole (``_few``), numpy's path costs no more.
+    COMPILED_MIN = 64
+
+    def _compiled_push(self, x: NDArray, m: int, ref: NDArray, k: int, old: int = 0) -> bool:
+        """The push of the averages ``old`` … k − 1 of x by the compiled ``lag_sums``
+        (m = 0: x − ref; m ≥ 1: the span's sums of m samples less ref), when it is built and
+        applies; False otherwise. Its sums come from one pass, with the products that reach
+        back into the previous push when x begins with ``span_overlap()`` of its averages;
+        the segment's head and tail take the first and last few averages."""
+        kern = kernels.compiled()
+        new = k - old
+        if (kern is None or self.cross or self._lags > 3 or new < self.COMPILED_MIN
+                or self._n_open + new <= 4 * self._edge or x.dtype != np.float64
+                or x.strides[1] != 8):
+            return False
+        sums = np.zeros((self.c, self._lags + 2))
+        for ch in range(self.c):
+            kern.lag_sums(x[ch], m, float(ref[ch]), sums[ch], old)
+
+        def values(j0: int, j1: int) -> NDArray[np.float64]:
+            """Averages j0 … j1 − 1 of x, referenced, as the numpy path makes them."""
+            if m == 0:
+                return x[:, j0:j1] - ref[:, None]
+            pts = x[:, j0 * m:j1 * m + 1:m]
+            return (pts[:, 1:] - pts[:, :-1]) - ref[:, None]
+
+        self._open_cache = None
+        self._sum += sums[:, 0]
+        idx = np.arange(self.c)
+        self._lag[:, idx, idx] += sums[:, 1:].T
+        reached_back = old == self.span_overlap()
+        head = (values(old, old + self._edge) if self._head.shape[1] < self._edge
+                or not reached_back else None)
+        self._push_ends(new, head, values(max(old, k - self._keep), k),
+                        tail_products=not reached_back)
+        return True
+
     def _push_referenced(self, z: NDArray[np.float64]) -> None:
         """Add averages (C, k) already relative to ``ref``."""
         self._open_cache = None
         count = z.shape[1]
-        t = self._tail.shape[1]
         self._sum += z.sum(axis=1)
         for j in range(self._lags + 1):
-            # products z_{q−j} z_q whose later end q is new: both ends new, ...
+            # products z_{q−j} z_q with both ends in this push
             if count > j:
                 self._lag[j] += self._prod(z[:, :count - j], z[:, j:])
-            # ... or the earlier end still in the tail of the previous push
+        self._push_ends(count, z[:, :self._keep], z[:, max(0, count - self._keep):], every=z)
+
+    def _push_ends(self, count: int, first: NDArray | None, last: NDArray, *,
+                   tail_products: bool = True, every: NDArray | None = None) -> None:
+        """The rest of a push of ``count`` averages whose own sums are in: the products whose
+        earlier end is still in the previous push's tail (unless the compiled loop summed
+        them: ``tail_products=False``), and the segment's head, tail and short-segment
+        values. ``first``/``last``: the push's first and last min(count, keep) averages
+        (``first`` may be None when neither the products nor the head need it); ``every``:
+        all of them (needed while the segment is short)."""
+        t = self._tail.shape[1]
+        for j in range(self._lags + 1 if tail_products else 0):
             q0, q1 = max(0, j - t), min(j, count)
             if q1 > q0:
-                self._lag[j] += self._prod(self._tail[:, t + q0 - j:t + q1 - j], z[:, q0:q1])
+                assert first is not None
+                self._lag[j] += self._prod(self._tail[:, t + q0 - j:t + q1 - j],
+                                           first[:, q0:q1])
         if self._head.shape[1] < self._edge:
-            self._head = np.concatenate([self._head, z[:, :self._edge - self._head.shape[1]]],
+            assert first is not None
+            self._head = np.concatenate([self._head, first[:, :self._edge - self._head.shape[1]]],
                                         axis=1)
-        self._tail = (z[:, count - self._keep:].copy() if count >= self._keep
-                      else np.concatenate([self._tail, z], axis=1)[:, -self._keep:])
+        self._tail = (last.copy() if count >= self._keep
+                      else np.concatenate([self._tail, last], axis=1)[:, -self._keep:])
         self._n_open += count
         if self._few is not None:
-            self._few = (np.concatenate([self._few, z], axis=1)
-                         if self._n_open <= 4 * self._edge else None)
+            if self._n_open <= 4 * self._edge:
+                assert every is not None  # the compiled push is not taken while few
+                self._few = np.concatenate([self._few, every], axis=1)
+            else:
+                self._few = None
 
     def gap(self) -> None:
         """End the segment: no pair and no difference spans what follows."""
@@ -747,6 +844,20 @@ class Lag1Ladder:
         out = self._alpha(lowest, rn, m, n_terms)
         if rn is None:
             self._alpha_memo = (stamp, out.copy())
+        return out
+
+    def needs_rn(self, n_terms: int | None = None) -> NDArray[np.bool_]:
+        """Per channel, whether ``alpha`` (with these ``n_terms``) takes R(n): B1's range
+        (4 … MIN_POINTS − 1 averages) and a B1 that says PM. Where it does not, R(n) is never
+        read, so an accumulator may leave its sums out and compute them only here."""
+        n = self.count()
+        out = np.zeros(self.c, dtype=bool)
+        if n >= MIN_POINTS or n < 4:
+            return out
+        b1 = self.b1()
+        big_n = n if n_terms is None else max(int(n_terms), 2)
+        for ch in range(self.c):
+            out[ch] = math.isfinite(b1[ch]) and alpha_from_b1(float(b1[ch]), big_n) is None
         return out
 
     def _alpha(self, lowest: int, rn: NDArray | None, m: int, n_terms: int | None

@@ -68,6 +68,10 @@ PIECE = 1 << 16
 # compiled OADEV loop: the feed and push 0.13 s at 2**15 against 0.15 s at 2**14 and 2**16
 # per 5.4 M samples × 3 channels.
 LADDER_BATCH = 1 << 15
+# With the compiled loop, a piece's averages at a τ go to the ladder straight from the ring
+# when there are at least this many (short τ: no interval sums made, no copies); fewer wait
+# in a batch as above (one push costs tens of Python operations, whatever its size).
+LADDER_SPAN_MIN = 1 << 10
 
 
 class OverlappingAllan:
@@ -91,11 +95,18 @@ class OverlappingAllan:
         New samples processed at once (default ``PIECE``). τ with m below the piece take the
         window-sum path, longer ones the three-cursor path; both give the same sums (a test
         runs one record through small and large pieces).
+    n_total : int, optional
+        The record's length, when known: R(n)'s sums are kept only at the τ where it leaves
+        fewer than ``MIN_POINTS`` averages (B1's range).
+    defer_rn : bool
+        With ``n_total``: keep no R(n) sums at all; ``rn_needed()`` says after the last
+        block where the identification needs them, and ``set_rn`` supplies them.
     """
 
     def __init__(self, n_channels: int, rate_hz: float, ms: Sequence[int] | NDArray,
                  *, names: Sequence[str] | None = None, covariance: bool = False,
-                 piece: int = PIECE, n_total: int | None = None) -> None:
+                 piece: int = PIECE, n_total: int | None = None,
+                 defer_rn: bool = False) -> None:
         if not isinstance(n_channels, int | np.integer) or n_channels < 1:
             raise DataError(f"n_channels={n_channels!r} must be a positive integer")
         if not (isinstance(rate_hz, int | float | np.integer | np.floating)
@@ -129,11 +140,23 @@ class OverlappingAllan:
         # sums it would discard (measured with `python -m benchmarks analyze --hours 60`).
         # A gap then can leave such a τ short of MIN_POINTS averages without R(n): it is
         # identified by B1 alone (flicker PM where B1 says PM), as the cascade does.
+        #
+        # ``defer_rn=True`` (with ``n_total``) keeps none at all: R(n) is read only where B1
+        # says PM, which on an accelerometer's records it never does at these τ, so the
+        # caller that can read the record again (analyze of a file) asks ``rn_needed()``
+        # after the last block and supplies those few sums from a pass of their own
+        # (``set_rn``). That spares every such analyze their cost, 56 MB per 60 h axis and
+        # 0.2 CPU-s for three, and lets two axes share a pass.
         if n_total is not None and (not isinstance(n_total, int | np.integer) or n_total < 0):
             raise DataError(f"n_total={n_total!r} must be a sample count >= 0")
+        if defer_rn and n_total is None:
+            raise DataError("defer_rn needs n_total: which τ end in B1's range depends on it")
+        self._rn_deferred = [bool(defer_rn) and int(n_total or 0) // int(m) < MIN_POINTS
+                             for m in grid]
         self._rn: list[RnSums | None] = [
-            RnSums(c, int(m)) if n_total is None or int(n_total) // int(m) < MIN_POINTS
-            else None for m in grid]
+            RnSums(c, int(m)) if (n_total is None or int(n_total) // int(m) < MIN_POINTS)
+            and not deferred else None for m, deferred in zip(grid, self._rn_deferred,
+                                                              strict=True)]
         # averages waiting for their ladder: pushed in batches, since at long τ each piece
         # brings only a few and a push costs tens of numpy calls whatever its size
         self._pending: list[list[NDArray]] = [[] for _ in grid]
@@ -144,15 +167,19 @@ class OverlappingAllan:
 
     # ------------------------------------------------------------------------ input
     def _flush_ladders(self) -> None:
-        for k, lad in enumerate(self._ladders):
-            if self._pending[k]:
-                # m × the segment's first sample (removed from the phase) added back: every
-                # segment's averages on one scale for the identification's pooled mean
-                assert self._offset is not None
-                lad.push_rows(np.concatenate(self._pending[k], axis=1),
-                              int(self.ms[k]) * self._offset)
-                self._pending[k] = []
-                self._pending_n[k] = 0
+        for k in range(len(self._ladders)):
+            self._flush_ladder(k)
+
+    def _flush_ladder(self, k: int) -> None:
+        """Push τ k's waiting averages to its ladder."""
+        if self._pending[k]:
+            # m × the segment's first sample (removed from the phase) added back: every
+            # segment's averages on one scale for the identification's pooled mean
+            assert self._offset is not None
+            self._ladders[k].push_rows(np.concatenate(self._pending[k], axis=1),
+                                       int(self.ms[k]) * self._offset)
+            self._pending[k] = []
+            self._pending_n[k] = 0
 
     def _reset_segment(self) -> None:
         self._flush_ladders()
@@ -209,7 +236,20 @@ class OverlappingAllan:
             self.n_segments += 1
         p0 = self._pos  # segment position of the first new phase point
         i = p0 % self._cap
-        if 0 < i and i + n <= self._cap:
+        kern = kernels.compiled() if ring.dtype == np.float64 else None
+        assert self._carry is not None
+        if kern is not None:
+            # the compiled loop reads each column once and writes its running sum straight
+            # into the ring (two stretches where the piece wraps), the same bits as cumsum
+            first = min(n, self._cap - i)
+            for ch in range(c):
+                off = float(self._offset[ch])
+                carry = kern.running_sum(a[:first, ch], off, float(self._carry[ch]),
+                                         ring[ch, i:i + first])
+                if first < n:
+                    carry = kern.running_sum(a[first:, ch], off, carry, ring[ch, :n - first])
+                self._carry[ch] = carry
+        elif 0 < i and i + n <= self._cap:
             # the running sum straight into the ring, after the point before it (X_{p0−1},
             # the carry): each channel's row in one transposing copy and one cumsum
             span = ring[:, i - 1:i + n]
@@ -230,7 +270,8 @@ class OverlappingAllan:
         buf = scratch("oadev.d", c, n, ring.dtype)
         window = scratch("oadev.window", c, 2 * n, ring.dtype)
         as_float = scratch("oadev.float", c, n, np.float64) if buf.dtype != np.float64 else buf
-        kern = kernels.compiled() if ring.dtype == np.float64 and not self.covariance else None
+        if self.covariance:
+            kern = None  # the compiled loop sums per channel: the covariance takes numpy's
         for k, m in enumerate(self.ms.tolist()):
             lo = max(0, p0 - 2 * m)  # first new difference D_lo (its last point ≥ p0)
             hi = p1 - 2 * m  # differences D_i, i < hi
@@ -249,7 +290,26 @@ class OverlappingAllan:
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
-                self._feed(k, self._interval_sums(m, q0, q0 + ((p1 - 1 - q0) // m) * m))
+                last = q0 + ((p1 - 1 - q0) // m) * m
+                if kern is None or (last - q0) // m + 1 < LADDER_SPAN_MIN or not self._span_push(
+                        k, m, q0, last):
+                    self._feed(k, self._interval_sums(m, q0, last))
+
+    def _span_push(self, k: int, m: int, q0: int, last: int) -> bool:
+        """Push the averages ending at q0 … last (step m) to τ k's ladder straight from the
+        ring, when their span (from the last few pushed, whose products with the new ones
+        the compiled loop then sums too) is one unwrapped stretch; False otherwise."""
+        ring = self._ring
+        assert ring is not None and self._offset is not None
+        self._flush_ladder(k)  # any waiting averages first, in order
+        lad = self._ladders[k]
+        old = lad.span_overlap()
+        first = q0 - m - old * m  # segment position of the span's first point
+        start = first % self._cap
+        if first < 0 or self._pos - first > self._cap or start + last - first >= self._cap:
+            return False  # before the segment, overwritten, or wrapped round the ring
+        lad.push_spans(ring[:, start:start + last - first + 1], m, m * self._offset, old)
+        return True
 
     def _compiled_sums(self, k: int, m: int, lo: int, count: int, kern: Any,
                        rk: RnSums | None) -> None:
@@ -335,6 +395,38 @@ class OverlappingAllan:
         shift = int(self.ms[k]) * self._offset
         for i in range(0, sums.shape[1], LADDER_BATCH):
             self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH], shift)
+
+    # ------------------------------------------------------------------------ R(n) later
+    def rn_needed(self) -> dict[int, list[int]]:
+        """{index into ``ms``: channels} where R(n) was deferred and the noise
+        identification needs it (B1 says PM with fewer than ``MIN_POINTS`` averages), for a
+        ``set_rn`` before ``result()``. Empty unless ``defer_rn``, and on records with no PM
+        noise at the long τ."""
+        self._flush_ladders()
+        out: dict[int, list[int]] = {}
+        for k, deferred in enumerate(self._rn_deferred):
+            if deferred and self._n[k] > 0:
+                need = np.flatnonzero(self._ladders[k].needs_rn())
+                if need.size:
+                    out[k] = [int(ch) for ch in need]
+        return out
+
+    def rn_sums(self) -> list[RnSums | None]:
+        """The R(n) sums kept per τ (None where there are none)."""
+        return list(self._rn)
+
+    def set_rn(self, ch: int, sums: dict[int, RnSums], of: int = 0) -> None:
+        """Channel ``ch``'s deferred R(n) sums at the τ ``sums`` names (index into ``ms``:
+        the sums of an accumulator fed this channel's blocks again at that m; its channel
+        ``of``)."""
+        for k, r in sums.items():
+            if not self._rn_deferred[k]:
+                raise DataError(f"R(n) at m = {int(self.ms[k])} was not deferred")
+            if self._rn[k] is None:
+                self._rn[k] = RnSums(self.n_channels, int(self.ms[k]))
+            rk = self._rn[k]
+            assert rk is not None
+            rk.take_channel(ch, r, of)
 
     # ------------------------------------------------------------------------ results
     @one_blas_thread

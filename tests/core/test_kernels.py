@@ -13,8 +13,9 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from avard.core.allan import kernels
-from avard.core.allan.noise_id import RnSums
+from avard.core.allan.noise_id import Lag1Ladder, RnSums
 from avard.core.allan.overlapping import OverlappingAllan
+from avard.core.errors import DataError
 
 
 @pytest.fixture
@@ -108,6 +109,117 @@ def test_oadev_compiled_equals_numpy(compiled: None, piece: int) -> None:
         np.testing.assert_array_equal(fast.n, slow.n)  # type: ignore[attr-defined]
         np.testing.assert_array_equal(fast.alpha, slow.alpha)  # type: ignore[attr-defined]
         np.testing.assert_allclose(fast.edf, slow.edf, rtol=1e-9)  # type: ignore[attr-defined]
+
+
+def _lag_reference(z: np.ndarray, lags: int, old: int) -> list[float]:
+    """Σ z over the new values and Σ z_t z_{t+j} over pairs whose later value is new."""
+    out = [float(z[old:].sum())]
+    for j in range(lags + 1):
+        t = np.arange(max(0, len(z) - j))
+        keep = t + j >= old
+        out.append(float(np.dot(z[t[keep]], z[t[keep] + j])))
+    return out
+
+
+def test_lag_sums_equals_numpy(compiled: None) -> None:
+    """The ladder's sums from a running-sum span (m ≥ 1) or from the values (m = 0), with the
+    first ``old`` values only in the products reaching a new one: every length round the
+    loop's block and vector steps."""
+    c = kernels.compiled()
+    assert c is not None
+    rng = np.random.default_rng(12)
+    y = rng.standard_normal(5000) + 3.0
+    x = np.concatenate([[0.0], np.cumsum(y)])
+    for m, k, old, lags in itertools.product((0, 1, 3, 64), (0, 1, 3, 4, 7, 511, 512, 513,
+                                                              1030), (0, 1, 3), (0, 1, 3)):
+        if old > k or (m > 1 and k * m > len(y)):
+            continue
+        src = y[:k] if m == 0 else x[:k * max(m, 1) + 1]
+        z = (y[:k] if m == 0 else np.diff(x[:k * m + 1:m])) - 0.25
+        out = np.zeros(lags + 2)
+        assert c.lag_sums(src, m, 0.25, out, old) == k
+        np.testing.assert_allclose(out, _lag_reference(z, lags, old), rtol=1e-12, atol=1e-9)
+    with pytest.raises(ValueError, match="out must hold"):
+        c.lag_sums(x, 1, 0.0, np.zeros(6), 0)
+    with pytest.raises(ValueError, match="old"):
+        c.lag_sums(x[:3], 1, 0.0, np.zeros(5), 3)
+    with pytest.raises(ValueError, match="m must"):
+        c.lag_sums(x, -1, 0.0, np.zeros(5), 0)
+
+
+def test_running_sum_is_numpys_cumsum_bit_for_bit(compiled: None) -> None:
+    """The OADEV's running sum from a strided column, offset taken off: the very bits of
+    numpy's subtract and cumsum (so the OADEV is the same on both paths)."""
+    c = kernels.compiled()
+    assert c is not None
+    a = np.random.default_rng(13).normal(9.81, 1e-3, (70_001, 3))
+    out = np.empty(len(a))
+    for ch in range(3):
+        last = c.running_sum(a[:, ch], a[0, ch], 2.5, out)
+        ref = np.empty(len(a) + 1)
+        ref[0] = 2.5
+        np.subtract(a[:, ch], a[0, ch], out=ref[1:])
+        np.cumsum(ref, out=ref)
+        np.testing.assert_array_equal(out, ref[1:])
+        assert last == ref[-1]
+    with pytest.raises(ValueError, match="same length"):
+        c.running_sum(a[:5, 0], 0.0, 0.0, out)
+
+
+def test_ladder_compiled_equals_numpy(compiled: None) -> None:
+    """Lag1Ladder on both paths, fed pushes of every size (the few-values start, the compiled
+    loop's minimum, spans that begin with the last pushed averages), a gap and a shift: the
+    same sums to rounding and the same α."""
+    rng = np.random.default_rng(14)
+    y = rng.standard_normal((3, 30_000)).cumsum(axis=1) * 1e-2 + rng.standard_normal((3, 30_000))
+    m = 4
+    x = np.concatenate([np.zeros((3, 1)), np.cumsum(y, axis=1)], axis=1)
+    sizes = [5, 10, 70, 63, 64, 2000, 1, 3000]
+
+    def run(use_c: bool) -> Lag1Ladder:
+        kernels.use_compiled(use_c)
+        lad = Lag1Ladder(3, cross=False)
+        j = 0
+        for i, size in enumerate(sizes):
+            if i == 6:
+                lad.gap()
+            if i % 2:
+                old = lad.span_overlap() if i != 6 else 0
+                lad.push_spans(x[:, (j - old) * m:(j + size) * m + 1], m, np.full(3, 0.5), old)
+            else:
+                z = x[:, (j + 1) * m:(j + size) * m + 1:m] - x[:, j * m:(j + size - 1) * m + 1:m]
+                lad.push_rows(z, np.full(3, 0.5))
+            j += size
+        return lad
+
+    fast, slow = run(True), run(False)
+    tf, ts = fast.totals(), slow.totals()
+    for f in Lag1Ladder.FIELDS:
+        np.testing.assert_allclose(tf[f], ts[f], rtol=1e-10, atol=1e-8, err_msg=f)
+    np.testing.assert_array_equal(fast.alpha(-2), slow.alpha(-2))
+    with pytest.raises(DataError, match="old"):
+        fast.push_spans(x[:, :100], m, None, 4)
+
+
+def test_welch_compiled_equals_numpy(compiled: None) -> None:
+    """The Welch spectrum's Σ |X|² over segments by ``power_sum`` and by numpy's square and
+    sums: the same PSD to rounding, over blocks that leave segments across their ends."""
+    from avard.core.report import WelchAccumulator
+
+    a = np.random.default_rng(15).standard_normal((50_000, 2)) + np.array([0.0, 9.81])
+    psd = []
+    for use_c in (True, False):
+        kernels.use_compiled(use_c)
+        w = WelchAccumulator(2, 100.0, 4096)
+        for i in range(0, len(a), 7000):
+            w.update(a[i:i + 7000])
+        psd.append(w.result()[1])
+    np.testing.assert_allclose(psd[0], psd[1], rtol=1e-12)
+    kernels.use_compiled(True)
+    c = kernels.compiled()
+    assert c is not None
+    with pytest.raises(ValueError, match="k blocks"):
+        c.power_sum(np.zeros(10), 2, np.zeros(3))
 
 
 def test_a_build_of_another_interface_is_not_used(compiled: None,

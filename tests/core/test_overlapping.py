@@ -202,6 +202,79 @@ def test_the_record_length_hint_keeps_r_n_only_where_b1_decides_and_changes_noth
         OverlappingAllan(1, 1.0, grid, n_total=-1)
 
 
+def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
+    """``defer_rn=True`` keeps no R(n) sums; where B1 then says PM, the channel fed again to an
+    accumulator of those τ supplies them (``set_rn``) and every α, variance and bound is the
+    one of keeping them all along. On FM noise nothing is asked for."""
+    n = 1 << 14
+    grid = np.array([1, 4, 64, n // 20, n // 8, n // 4])
+    long_tau = [k for k, m in enumerate(grid) if n // m < 30]
+    for alpha in (2, 1, 0):
+        y = power_law(alpha, n, np.random.default_rng(17 + alpha))
+        y2 = np.stack([y, power_law(-1, n, np.random.default_rng(3))], axis=1)  # PM, FM
+        kept = OverlappingAllan(2, 1.0, grid, n_total=n)
+        deferred = OverlappingAllan(2, 1.0, grid, n_total=n, defer_rn=True)
+        assert all(r is None for r in deferred.rn_sums())
+        for i in range(0, n, 3000):
+            kept.update(y2[i:i + 3000])
+            deferred.update(y2[i:i + 3000])
+        need = deferred.rn_needed()
+        if alpha == 0:
+            assert need == {}
+        else:
+            # B1 says PM on the PM channel only, at the τ of its range
+            assert need and set(need) <= set(long_tau)
+            assert all(chans == [0] for chans in need.values())
+        for ch in sorted({c for chans in need.values() for c in chans}):
+            ks = list(need)
+            extra = OverlappingAllan(1, 1.0, grid[ks])
+            for i in range(0, n, 3000):
+                extra.update(y2[i:i + 3000, ch])
+            deferred.set_rn(ch, dict(zip(ks, extra.rn_sums(), strict=True)))
+        a, b = kept.result(), deferred.result()
+        np.testing.assert_array_equal(a.alpha, b.alpha)
+        np.testing.assert_array_equal(a.var, b.var)
+        np.testing.assert_array_equal(a.lo, b.lo)
+        np.testing.assert_array_equal(a.hi, b.hi)
+    with pytest.raises(DataError, match="n_total"):
+        OverlappingAllan(1, 1.0, grid, defer_rn=True)
+    with pytest.raises(DataError, match="not deferred"):
+        OverlappingAllan(1, 1.0, grid, n_total=n).set_rn(0, {0: kept.rn_sums()[-1]})
+
+
+def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypatch) -> None:
+    """analyze of a file defers R(n) and reads again only the channel whose long τ B1 calls
+    PM; its result is analyze_stream's, which keeps R(n) in the one pass."""
+    from avard.core import report
+
+    n = 1 << 15
+    y = np.stack([power_law(2, n, np.random.default_rng(21)) * 1e-3,
+                  power_law(0, n, np.random.default_rng(22)) * 1e-3], axis=1)
+    path = tmp_path / "pm_fm.npz"
+    np.savez(path, accel=y, rate_hz=10.0, axes=np.array(["pm", "fm"]))
+    reads: list[list[int]] = []
+    lazy = report._lazy_segments
+
+    def spy(path, block, rate_hz, columns, verify):
+        reads.append(list(columns))
+        return lazy(path, block, rate_hz, columns, verify)
+
+    monkeypatch.setattr(report, "_lazy_segments", spy)
+    from_file = report.analyze(str(path), find_sinusoids=False)
+    # the pass over both channels, then the PM channel again for its R(n)
+    assert reads == [[0, 1], [0]]
+    meta = {"rate_hz": 10.0, "names": ["pm", "fm"], "n_samples": n}
+    blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))  # the file's blocks
+    kept = report.analyze_stream(meta, blocks, find_sinusoids=False)
+    pm = from_file.channels["pm"].allan
+    assert 2 in pm.alpha[n // pm.m < 30]  # R(n) told white PM in B1's range
+    for name in ("pm", "fm"):
+        a, b = kept.channels[name].allan, from_file.channels[name].allan
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_array_equal(b.var, a.var)
+        np.testing.assert_array_equal(b.lo, a.lo)
+
+
 def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     """`avard analyze nbs14.csv --rate 1 --json`: OADEV to Stable32's printed digits, α as
     Stable32 identifies it, and the 68.3 % bounds of the white-FM τ against Stable32's."""
@@ -276,7 +349,7 @@ def test_one_pass_per_channel_equals_one_pass_for_all(tmp_path, monkeypatch):
     assert report.oadev_pass_groups([0, 1, 2], n) == [[0, 1, 2]]
     one = report.analyze(str(path))
     # a budget for one channel's history at a time: three passes over the file
-    monkeypatch.setattr(report, "RING_BUDGET_BYTES", 8 * (2 * (n // 4) + PIECE))
+    monkeypatch.setattr(report, "PASS_BUDGET_BYTES", 8 * (2 * (n // 4) + PIECE))
     assert report.oadev_pass_groups([0, 1, 2], n) == [[0], [1], [2]]
     seen: list[tuple[int, int | None]] = []
     three = report.analyze(str(path), progress=lambda d, t: seen.append((d, t)))
