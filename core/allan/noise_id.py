@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan import kernels
-from avard.core.allan.scratch import scratch
+from avard.core.allan.scratch import mapped_zeros, scratch
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
@@ -245,7 +245,7 @@ class RnSums:
             return
         m, k = self.m, self._k
         if self._ring is None:
-            self._ring = np.zeros((self.c, m))
+            self._ring = mapped_zeros((self.c, m))
         self.n_d += n
         self.s_d += _row_dots(d, d)
         p_new = np.cumsum(d, axis=1)  # P_{k+1} … P_{k+n}: the running sum is the costly pass
@@ -280,7 +280,7 @@ class RnSums:
             return _row_dots(d, d)
         n = x0.shape[1]
         if self._ring is None:
-            self._ring = np.zeros((self.c, self.m))
+            self._ring = mapped_zeros((self.c, self.m))
         out = np.empty(self.c)
         n_mod = 0
         for ch in range(self.c):

@@ -49,7 +49,7 @@ from avard.core.allan.deviations import (
     result_from_sums,
 )
 from avard.core.allan.noise_id import MIN_POINTS, Lag1Ladder, RnSums, row_products
-from avard.core.allan.scratch import scratch
+from avard.core.allan.scratch import mapped_zeros, scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
@@ -72,6 +72,11 @@ LADDER_BATCH = 1 << 15
 # when there are at least this many (short τ: no interval sums made, no copies); fewer wait
 # in a batch as above (one push costs tens of Python operations, whatever its size).
 LADDER_SPAN_MIN = 1 << 10
+# Such averages wait in the ring until their span reaches this many samples (or the next
+# piece would overwrite or wrap it), then go in one push: a push per piece and τ cost a 60 h
+# analyze 0.2 CPU-s of Python; spans of 2**18 samples (2 MiB a channel) are still in the L3
+# cache when the loop reads them.
+LADDER_SPAN = 1 << 18
 
 
 class OverlappingAllan:
@@ -161,6 +166,9 @@ class OverlappingAllan:
         # brings only a few and a push costs tens of numpy calls whatever its size
         self._pending: list[list[NDArray]] = [[] for _ in grid]
         self._pending_n = [0] * grid.size
+        # or, with the compiled loop, the first and last end point (q) of the averages that
+        # wait in the ring (``_ring_take``); never both at once for a τ
+        self._due: list[tuple[int, int] | None] = [None] * grid.size
         self.n_samples = 0
         self.n_segments = 0
         self._reset_segment()
@@ -172,6 +180,8 @@ class OverlappingAllan:
 
     def _flush_ladder(self, k: int) -> None:
         """Push τ k's waiting averages to its ladder."""
+        if self._due[k] is not None:
+            self._push_due(k)
         if self._pending[k]:
             # m × the segment's first sample (removed from the phase) added back: every
             # segment's averages on one scale for the identification's pooled mean
@@ -197,8 +207,8 @@ class OverlappingAllan:
         a, self._integer = checked_block(block, self.n_channels, self._integer)
         if first and self._integer is not None:
             # channel-major: each channel's running sum is a contiguous row
-            self._ring = np.zeros((self.n_channels, self._cap),
-                                  np.int64 if self._integer else np.float64)
+            self._ring = mapped_zeros((self.n_channels, self._cap),
+                                      np.int64 if self._integer else np.float64)
         return a.astype(np.int64 if self._integer else np.float64, copy=False)
 
     @one_blas_thread  # long dot products would wake OpenBLAS's pool (core/blas.py)
@@ -278,8 +288,7 @@ class OverlappingAllan:
             if hi > lo:
                 count = hi - lo
                 rk = self._rn[k]
-                if rk is not None and (self._ladders[k].count() + self._pending_n[k]
-                                       >= MIN_POINTS):
+                if rk is not None and self._ladders[k].count() + self._waiting(k) >= MIN_POINTS:
                     # R(n) matters only while B1 decides (< MIN_POINTS averages)
                     rk = self._rn[k] = None
                 self._n[k] += count
@@ -291,25 +300,59 @@ class OverlappingAllan:
             q0 = max(m, -(-p0 // m) * m)
             if q0 < p1:
                 last = q0 + ((p1 - 1 - q0) // m) * m
-                if kern is None or (last - q0) // m + 1 < LADDER_SPAN_MIN or not self._span_push(
-                        k, m, q0, last):
+                if kern is None or not self._ring_take(k, m, q0, last):
                     self._feed(k, self._interval_sums(m, q0, last))
 
-    def _span_push(self, k: int, m: int, q0: int, last: int) -> bool:
-        """Push the averages ending at q0 … last (step m) to τ k's ladder straight from the
-        ring, when their span (from the last few pushed, whose products with the new ones
-        the compiled loop then sums too) is one unwrapped stretch; False otherwise."""
-        ring = self._ring
-        assert ring is not None and self._offset is not None
-        self._flush_ladder(k)  # any waiting averages first, in order
-        lad = self._ladders[k]
-        old = lad.span_overlap()
-        first = q0 - m - old * m  # segment position of the span's first point
-        start = first % self._cap
+    def _waiting(self, k: int) -> int:
+        """Averages of τ k not yet pushed to its ladder."""
+        due = self._due[k]
+        return self._pending_n[k] + (0 if due is None else (due[1] - due[0]) // int(self.ms[k])
+                                     + 1)
+
+    def _due_span(self, k: int, first_q: int) -> tuple[int, int, int]:
+        """(first point, its ring index, averages already pushed it begins with) of the span
+        for τ k's averages from the one ending at ``first_q``: it reaches back to the last
+        few pushed, whose products with the new ones the compiled loop then sums too."""
+        m = int(self.ms[k])
+        old = self._ladders[k].span_overlap()
+        first = first_q - m - old * m
+        return first, first % self._cap, old
+
+    def _ring_take(self, k: int, m: int, q0: int, last: int) -> bool:
+        """The averages ending at q0 … last (step m) wait in the ring for τ k's compiled
+        ladder push (``LADDER_SPAN``), when the piece brings at least ``LADDER_SPAN_MIN``
+        of them or some already wait, and their span is one unwrapped, intact stretch;
+        False (they go through the batches) otherwise."""
+        due = self._due[k]
+        if due is None:
+            if (last - q0) // m + 1 < LADDER_SPAN_MIN:
+                return False
+            self._flush_ladder(k)  # batched averages first, in order
+            first_q = q0
+        else:
+            first_q = due[0]
+        first, start, _old = self._due_span(k, first_q)
         if first < 0 or self._pos - first > self._cap or start + last - first >= self._cap:
-            return False  # before the segment, overwritten, or wrapped round the ring
-        lad.push_spans(ring[:, start:start + last - first + 1], m, m * self._offset, old)
+            # before the segment, overwritten or wrapped round the ring: what waits goes now
+            # (its span was whole at the last piece), these through the batches
+            if due is not None:
+                self._push_due(k)
+            return False
+        self._due[k] = (first_q, last)
+        if last - first_q >= LADDER_SPAN or start + self._pos + self._piece - first >= self._cap:
+            self._push_due(k)  # long enough, or the next piece would overwrite or wrap it
         return True
+
+    def _push_due(self, k: int) -> None:
+        """Push the averages waiting in the ring for τ k, straight from their span."""
+        due = self._due[k]
+        ring = self._ring
+        assert due is not None and ring is not None and self._offset is not None
+        self._due[k] = None
+        m = int(self.ms[k])
+        first, start, old = self._due_span(k, due[0])
+        self._ladders[k].push_spans(ring[:, start:start + due[1] - first + 1], m,
+                                    m * self._offset, old)
 
     def _compiled_sums(self, k: int, m: int, lo: int, count: int, kern: Any,
                        rk: RnSums | None) -> None:

@@ -15,7 +15,7 @@ import threading
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MAX_CACHED_BYTES", "scratch"]
+__all__ = ["MAX_CACHED_BYTES", "mapped_zeros", "scratch"]
 
 MAX_CACHED_BYTES = 16 << 20
 _local = threading.local()
@@ -39,3 +39,15 @@ def scratch(key: str, rows: int, cols: int, dtype: np.dtype | type) -> NDArray:
         pool[(key, dt.str)] = buf
     return buf[: rows * cols].reshape(rows, cols)
 
+
+
+def mapped_zeros(shape: tuple[int, ...], dtype: np.dtype | type = np.float64) -> NDArray:
+    """Zeros whose pages are all mapped now, in one sequential sweep: for a history that a
+    streaming loop fills a piece at a time (the OADEV's ring, R(n)'s), the first touches
+    otherwise fall inside that loop one page at a time. Measured on the 60 h, 3-axis analyze:
+    the running sum's writes took 0.35 CPU-s with the rings' pages mapped on first touch,
+    0.06 s after a sweep that itself took 0.02 s. Every page is written by the loop sooner or
+    later, so the memory used is the same."""
+    out = np.empty(shape, dtype=dtype)
+    out.fill(0)
+    return out

@@ -84,10 +84,16 @@ def test_rn_sums_push_phase_equals_push(compiled: None) -> None:
         assert got == c.sumsq(x[0, :n], x[0, m:m + n], x[0, 2 * m:2 * m + n])
 
 
-@pytest.mark.parametrize("piece", [64, 1 << 12])
-def test_oadev_compiled_equals_numpy(compiled: None, piece: int) -> None:
+@pytest.mark.parametrize(("piece", "span"), [(64, 1 << 18), (1 << 12, 1 << 18), (1 << 12, 5000)])
+def test_oadev_compiled_equals_numpy(compiled: None, piece: int, span: int,
+                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """The whole estimator on both paths: short τ (one span) and long τ (three spans, the
-    ring wrapping), R(n) kept where the record is short in averages, a gap, 2 channels."""
+    ring wrapping), R(n) kept where the record is short in averages, a gap, 2 channels; the
+    ladder's averages taken from the ring in spans cut by the ring's end, a gap, or
+    ``LADDER_SPAN``."""
+    from avard.core.allan import overlapping
+
+    monkeypatch.setattr(overlapping, "LADDER_SPAN", span)
     rng = np.random.default_rng(piece)
     n = 40_000
     walk = np.cumsum(rng.standard_normal((n, 2)), axis=0) * 1e-3
