@@ -1,4 +1,4 @@
-"""The one compiled part of avard: the OADEV inner loop (core/allan/_kernels.c).
+"""The one compiled part of avard: analyze's inner loops (core/allan/_kernels.c).
 
 Everything else is in pyproject.toml. The extension is optional: where it cannot be built
 (no compiler or no Python headers, as on a bare Raspberry Pi OS without python3-dev) the

@@ -4,8 +4,9 @@ A pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumula
 channel: the fully overlapping Allan variance (``overlapping.OverlappingAllan``, OADEV as
 Stable32 and allantools compute it, NIST SP 1065 eq. 12, at octave τ; memory a ring of 2·m_max
 running-sum points) and a Welch spectrum used to find sinusoids. A file long enough that the
-rings of all its channels would exceed ``RING_BUDGET_BYTES`` is read once per group of
-channels that fit (``oadev_pass_groups``), so only one group's rings are live.
+rings of all its channels would exceed ``PASS_BUDGET_BYTES`` is read once per group of
+channels that fit (``oadev_pass_groups``), so only one group's rings are live; the OADEV
+then leaves R(n) out and reads a channel again for it only where B1 needs it.
 ``estimator="cascade"`` gives the service's streaming cascade instead
 (``streaming.StreamingAllan``, stride m/8 above m = 8: partially overlapping, a different
 estimator with ≥ 98 % of the OADEV's EDF).
@@ -478,7 +479,7 @@ def analyze(
         # a service recording is loaded whole (``record_blocks``): passes would save nothing
         return _analyze_passes(meta, [(sel, segments, sel)], **opts)
     # A file is read again rather than held: one pass per group of channels whose OADEV
-    # histories fit RING_BUDGET_BYTES together, so only that group's histories are live.
+    # histories fit PASS_BUDGET_BYTES together, so only that group's histories are live.
     # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
     # the blocks already opened (its reader has read the first rows); an .npz reader opens
     # nothing before its first block, so it is simply replaced by one of the group's columns.

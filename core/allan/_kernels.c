@@ -1,13 +1,15 @@
-/* The fully overlapping Allan variance's inner loop in C: avard.core.allan._kernels.
+/* analyze's inner loops in C: avard.core.allan._kernels.
  *
  * numpy needs three element-wise passes and a dot product to sum the second differences
  * D_i = X_{i+2m} - 2 X_{i+m} + X_i of the phase (NIST SP 1065 eq. 12), each pass writing a
- * temporary; this loop reads the three spans once and keeps D in registers (measured 1.3 ns
- * against 0.37 ns per sample and tau in the cache). It is a fast path beside the numpy one
- * in avard.core.allan.kernels, which a test holds equal to it; the build is optional
- * (setup.py), so avard runs without a compiler.
+ * temporary; sumsq reads the three spans once and keeps D in registers (measured 1.3 ns
+ * against 0.37 ns per sample and tau in the cache). The running sum, the noise
+ * identification's sums and the Welch power sum are here for the same reason (see each).
+ * Every loop is a fast path beside a numpy one in avard.core.allan.kernels and its callers,
+ * which tests hold equal to it; the build is optional (setup.py), so avard runs without a
+ * compiler.
  *
- * Functions (float64, 1-D, C-contiguous buffers of one channel, equal lengths n):
+ * Functions (float64, 1-D, C-contiguous buffers of one channel unless said, equal lengths n):
  *   sumsq(x0, x1, x2) -> float
  *       sum_i D_i^2 with D_i = (x2[i] - x1[i]) - (x1[i] - x0[i]).
  *   sumsq_mod(x0, x1, x2, ring, k, last) -> (sum D^2, sum w^2, count of w, new last)

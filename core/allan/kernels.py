@@ -1,14 +1,25 @@
-"""The OADEV's inner sums: the compiled loop when it was built, numpy otherwise.
+"""analyze's inner loops: the compiled module when it was built, numpy otherwise.
 
-``_kernels.sumsq(x0, x1, x2)`` is Σ_i D_i² with D_i = (x2_i − x1_i) − (x1_i − x0_i): for
-spans X_i, X_{i+m}, X_{i+2m} of a phase record, the sum behind the fully overlapping AVAR
-(NIST SP 1065 eq. 12). numpy needs three element-wise passes (each writing a temporary, the
-general path ``second_differences``) and a dot product for it; ``_kernels.c`` reads the three
-spans once (1.3 → 0.37 ns per sample and τ, in the cache). ``_kernels.sumsq_mod`` adds the
-modified AVAR's running sums for ``noise_id.RnSums`` (its general path is ``RnSums.push`` on
-the differences). The extension is optional (setup.py): without a compiler avard installs and
-runs on the numpy path, which gives the same sums to rounding (``tests/core/test_kernels.py``
-holds the two equal, and the OADEV built on each).
+``_kernels.c`` holds each loop that a 60 h analyze spends its time in, beside the numpy path
+that stays for installs without a compiler (and for counts and covariances):
+
+* ``sumsq(x0, x1, x2)``: Σ_i D_i² with D_i = (x2_i − x1_i) − (x1_i − x0_i), for spans X_i,
+  X_{i+m}, X_{i+2m} of a phase record the sum behind the fully overlapping AVAR (NIST SP
+  1065 eq. 12). numpy needs three element-wise passes (``second_differences``) and a dot
+  product; the loop reads the three spans once (1.3 → 0.37 ns per sample and τ, in the
+  cache). ``sumsq_mod`` adds the modified AVAR's running sums for ``noise_id.RnSums``
+  (general path ``RnSums.push``).
+* ``running_sum(y, offset, carry, out)``: the running sum of a (strided) column less an
+  offset, numpy's subtract-and-cumsum bit for bit (``OverlappingAllan``'s ring).
+* ``lag_sums(x, m, ref, out, old)``: the noise identification's sum and lag products of the
+  non-overlapping averages, read straight from a running-sum span (``Lag1Ladder``'s
+  ``push_spans``; general path: the averages made, then a row sum and dot products).
+* ``power_sum(spec, k, out)``: the Welch spectrum's Σ |X|² over segments
+  (``report.WelchAccumulator``).
+
+The extension is optional (setup.py): without a compiler avard installs and runs on the
+numpy path, which gives the same results to rounding (``tests/core/test_kernels.py`` holds
+each pair equal, and the OADEV built on each).
 
 ``compiled()`` is the module in use, or None. ``use_compiled(False)`` switches to numpy
 (tests; ``AVARD_NO_C_KERNELS=1`` does it at import). A build whose ``API`` number is not this
