@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from avard.core.allan import kernels
+from avard.core.allan.noise_id import check_noise_id
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
@@ -300,6 +301,8 @@ class ChannelAnalysis:
              "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
         if getattr(a, "quantiles", "exact") != "exact":  # said only when not the default
             d["quantiles"] = a.quantiles
+        if getattr(a, "noise_id", "avard") != "avard":  # the rule behind alpha, likewise
+            d["noise_id"] = a.noise_id
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
         d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
@@ -459,6 +462,7 @@ def analyze(
     estimator: str = "oadev",
     psd: bool = False,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
@@ -467,13 +471,16 @@ def analyze(
     ``estimator``: "oadev" (fully overlapping, default) or "cascade" (see ``ESTIMATORS``).
     ``psd``: also give each channel's one-sided PSD with its band and the white density read
     from it, checked against the fit's N (``psd.ChannelPsd``).
+    ``quantiles``, ``noise_id``: "stable32" reproduces Stable32's χ² quantiles and its B1
+    rule for the noise identification (``edf.chi2_interval``, ``noise_id.NOISE_IDS``).
     """
+    check_noise_id(noise_id)
     meta, segments = _segments(path, block, rate_hz)
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
     opts = dict(source=path, filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
                 progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd,
-                quantiles=quantiles)
+                quantiles=quantiles, noise_id=noise_id)
     sel = _select(list(meta["names"]), channels)
     if estimator != "oadev" or meta.get("format") == "recording":
         # a service recording is loaded whole (``record_blocks``): passes would save nothing
@@ -570,6 +577,7 @@ def analyze_stream(
     estimator: str = "oadev",
     psd: bool = False,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> Analysis:
     """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
     ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
@@ -582,7 +590,7 @@ def analyze_stream(
     return _analyze_passes(meta, [(sel, segments, sel)], source=source,
                            filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
                            progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
-                           psd=psd, quantiles=quantiles)
+                           psd=psd, quantiles=quantiles, noise_id=noise_id)
 
 
 @dataclass
@@ -599,8 +607,8 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
               nper: int | None, progress: ProgressFn | None, done: int,
               total: int | None, quantiles: str = "exact",
               n_record: int | None = None,
-              reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None
-              ) -> _PassResult:
+              reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None,
+              noise_id: str = "avard") -> _PassResult:
     """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
     the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
     of the whole analysis. ``reread(j)``: channel j's blocks again, for the R(n) sums the
@@ -632,14 +640,15 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
         if progress is not None:
             progress(done + n, total)
     if isinstance(sa, OverlappingAllan) and reread is not None and n >= 16:
-        _deferred_rn(sa, reread, n)
-    # quantiles="stable32": the intervals' χ² quantiles as Stable32 computes them
-    res = _with_differences(sa.result(quantiles=quantiles)) if n >= 16 else None
+        _deferred_rn(sa, reread, n, noise_id)
+    # "stable32": the intervals' χ² quantiles, and the B1 rule, as Stable32's
+    res = (_with_differences(sa.result(quantiles=quantiles, noise_id=noise_id)) if n >= 16
+           else None)
     return _PassResult(res, welch, n)
 
 
 def _deferred_rn(sa: Any, reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]],
-                 n: int) -> None:
+                 n: int, noise_id: str = "avard") -> None:
     """The R(n) sums ``sa`` (an ``OverlappingAllan(defer_rn=True)`` fed the whole record)
     needs where B1 says PM in its range: each such channel read again into an accumulator of
     those τ alone, which keeps them (the same differences in the same pieces, so the same
@@ -647,7 +656,7 @@ def _deferred_rn(sa: Any, reread: Callable[[int], Iterable[tuple[NDArray[np.floa
     Nothing is read on records without PM noise at the long τ."""
     from avard.core.allan.overlapping import OverlappingAllan
 
-    need = sa.rn_needed()
+    need = sa.rn_needed(noise_id)
     for ch in sorted({c for chans in need.values() for c in chans}):
         ks = [k for k, chans in need.items() if ch in chans]
         extra = OverlappingAllan(1, sa.rate_hz, sa.ms[ks])
@@ -677,6 +686,7 @@ def _analyze_passes(
     estimator: str,
     psd: bool,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
     its blocks, the block columns to take or None for all), read one after another.
@@ -715,7 +725,7 @@ def _analyze_passes(
                 return reread(chans[j])
         one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
                         progress, done, all_total, quantiles,
-                        None if total is None else int(total), again)
+                        None if total is None else int(total), again, noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "

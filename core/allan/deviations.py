@@ -40,6 +40,7 @@ from avard.core.allan.noise_id import (
     Lag1Ladder,
     RnSums,
     alpha_from_slope,
+    check_noise_id,
     identify_alpha,
 )
 from avard.core.allan.scratch import scratch
@@ -90,6 +91,8 @@ class AllanResult:
     ``cov`` (K, C, C), when present, is the Allan covariance: AVAR of Σ w_c y_c = w·cov·w.
     ``quantiles`` says how the χ² quantiles of the bounds were computed: "exact", or
     "stable32" (Stable32's approximation, to reproduce its printed bounds; ``edf.chi2_interval``).
+    ``noise_id`` names the rule behind ``alpha`` ("avard" or "stable32":
+    ``noise_id.NOISE_IDS``).
     """
 
     kind: str
@@ -107,6 +110,7 @@ class AllanResult:
     cov: NDArray[np.float64] | None = None
     names: tuple[str, ...] = field(default=())
     quantiles: str = "exact"
+    noise_id: str = "avard"
 
     @property
     def dev(self) -> NDArray[np.float64]:
@@ -151,7 +155,8 @@ class AllanResult:
     def to_dict(self) -> dict:
         """Plain lists and numbers (msgpack/JSON-able); NaN stays NaN."""
         out: dict = {"kind": self.kind, "rate_hz": self.rate_hz, "ci": self.ci,
-                     "names": list(self.names), "quantiles": self.quantiles}
+                     "names": list(self.names), "quantiles": self.quantiles,
+                     "noise_id": self.noise_id}
         for key in ("tau", "m", "stride", "var", "n", "edf", "lo", "hi", "alpha"):
             out[key] = np.asarray(getattr(self, key)).tolist()
         out["cov"] = None if self.cov is None else self.cov.tolist()
@@ -180,6 +185,7 @@ class AllanResult:
                 cov=None if cov is None else np.asarray(cov, dtype=np.float64),
                 names=tuple(d.get("names", ())),
                 quantiles=str(d.get("quantiles", "exact")),
+                noise_id=str(d.get("noise_id", "avard")),
             )
         except KeyError as exc:
             raise FormatError(f"Allan result/snapshot dict lacks {exc}; it is not one") from exc
@@ -379,6 +385,7 @@ def allan_variance(
     overlap: int = DEFAULT_OVERLAP,
     names: Sequence[str] | None = None,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> AllanResult:
     """Allan or Hadamard variance of rate samples (NIST SP 1065 eqs. 11, 12, 18).
 
@@ -407,6 +414,8 @@ def allan_variance(
     names : channel names, kept in the result.
     quantiles : "exact" (default) or "stable32": the χ² quantiles of the bounds as Stable32
         computes them, to reproduce its printed intervals (``edf.chi2_interval``).
+    noise_id : "avard" (default) or "stable32": B1's N for the overlapping estimators with
+        4–29 averages (``noise_id.NOISE_IDS``); "stable32" gives Stable32's printed α.
 
     τ longer than the record can hold give NaN variance with n = 0 (never a made-up value).
     """
@@ -454,7 +463,8 @@ def allan_variance(
                 rk.push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))
                 rk.gap()
     return finish_result(kind, rate_hz, ms, strides, sums, ladders, ci=ci, alpha=alpha,
-                         one_d=one_d, names=names, rn=rn, quantiles=quantiles)
+                         one_d=one_d, names=names, rn=rn, quantiles=quantiles,
+                         noise_id=noise_id)
 
 
 def rn_sums_for(kind: str, ms: NDArray[np.int64], segments: Sequence[int], c: int
@@ -484,6 +494,7 @@ def finish_result(
     weights: ArrayLike | None = None,
     rn: Sequence[RnSums | None] | None = None,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> AllanResult:
     """Turn difference sums into an ``AllanResult`` (shared by batch and streaming).
 
@@ -512,11 +523,11 @@ def finish_result(
         names = ["+".join(f"{wi:g}*{nm}" for wi, nm in zip(w, names, strict=True))] \
             if names else None
     n_phase = (np.maximum(n, 1) - 1) * strides + d * ms + 1
-    alpha_id = alphas_from_ladders(ladders, d, rn, ms, n, strides) if alpha is None \
-        else None
+    alpha_id = alphas_from_ladders(ladders, d, rn, ms, n, strides, noise_id) \
+        if alpha is None else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
                             alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names,
-                            quantiles=quantiles)
+                            quantiles=quantiles, noise_id=noise_id)
 
 
 def _no_ladder(dmax: int) -> Lag1Ladder:
@@ -527,7 +538,8 @@ def _no_ladder(dmax: int) -> Lag1Ladder:
 def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
                         rn: Sequence[RnSums | None] | None = None,
                         ms: ArrayLike | None = None, n_terms: ArrayLike | None = None,
-                        strides: ArrayLike | None = None) -> NDArray[np.float64]:
+                        strides: ArrayLike | None = None, noise_id: str = "avard"
+                        ) -> NDArray[np.float64]:
     """(K, C) noise exponents identified as Stable32 does (``Lag1Ladder.alpha``): lag-1 ACF
     of the non-overlapping averages with ≥ 30 of them, B1 below, and R(n) = MVAR/AVAR from
     ``rn[k]`` (when given) where B1 says PM; NaN where neither applies.
@@ -541,7 +553,8 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
     ratio comes from the n averages, which reads flicker FM as white FM and random-walk FM as
     flicker FM (synthetic FM power-law noise at 20 averages: 9 of 30 right against 21 with
     N = n; tests/core/test_overlapping.py); avard keeps N = n there, and differs from
-    Stable32's α at those rows (docs/analysis.md, "Checked against Stable32")."""
+    Stable32's α at those rows (docs/analysis.md, "Checked against Stable32"), unless
+    ``noise_id="stable32"`` asks for Stable32's N."""
     lowest = 2 - 2 * d
     if not ladders:
         return np.zeros((0, 0))
@@ -550,8 +563,9 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
     st = None if strides is None else np.asarray(strides, np.int64)
     # B1's N: the count of differences for the non-overlapping estimators only; see below
     nt: list[int | None] = [None] * len(ladders)
+    overlapping_too = check_noise_id(noise_id) == "stable32"
     if n_terms is not None and st is not None:
-        nt = [int(v) if int(s) >= int(m) else None
+        nt = [int(v) if int(s) >= int(m) or overlapping_too else None
               for v, s, m in zip(np.asarray(n_terms), st, mm, strict=True)]
     out = np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m), t)
                     for lad, r, m, t in zip(ladders, rs, mm, nt, strict=True)],
@@ -583,6 +597,7 @@ def result_from_sums(
     one_d: bool = False,
     names: Sequence[str] | None = None,
     quantiles: str = "exact",
+    noise_id: str = "avard",
 ) -> AllanResult:
     """The ``AllanResult`` of difference sums: n (K,) differences, s2 (K, C, C) = Σ D Dᵀ.
 
@@ -628,6 +643,7 @@ def result_from_sums(
         cov=cov,
         names=tuple(names) if names else (),
         quantiles=quantiles,
+        noise_id=noise_id,
     )
 
 

@@ -63,6 +63,21 @@ MIN_POINTS = 30
 # * with fewer averages than these, no identification: the α of the next shorter τ of the
 #   run is kept (non-overlapping estimators, overlapping ones).
 HOLD_BELOW_AVERAGES = {False: 10, True: 8}
+# B1's N for the overlapping estimators (stride < m), the one place where avard's rule and
+# Stable32's differ (docs/analysis.md, "Checked against Stable32"):
+# * "avard" (default): N = the count of averages the measured ratio comes from;
+# * "stable32": N = the estimator's count of overlapping differences, as Stable32 takes it,
+#   which reproduces its printed α (and so its bounds) at every row of its runs, and reads
+#   FM noise one type too white with 4–29 averages.
+# The non-overlapping estimators take N = their count of differences under both.
+NOISE_IDS = ("avard", "stable32")
+
+
+def check_noise_id(noise_id: str) -> str:
+    """``noise_id`` if it names a rule of ``NOISE_IDS``; else a ``DataError`` that says so."""
+    if noise_id not in NOISE_IDS:
+        raise DataError(f"noise_id={noise_id!r} is unknown; use one of {NOISE_IDS}")
+    return noise_id
 
 
 def lag1_acf(x: ArrayLike) -> float:

@@ -48,7 +48,13 @@ from avard.core.allan.deviations import (
     checked_block,
     result_from_sums,
 )
-from avard.core.allan.noise_id import MIN_POINTS, Lag1Ladder, RnSums, row_products
+from avard.core.allan.noise_id import (
+    MIN_POINTS,
+    Lag1Ladder,
+    RnSums,
+    check_noise_id,
+    row_products,
+)
 from avard.core.allan.scratch import mapped_zeros, scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError
@@ -440,16 +446,18 @@ class OverlappingAllan:
             self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH], shift)
 
     # ------------------------------------------------------------------------ R(n) later
-    def rn_needed(self) -> dict[int, list[int]]:
+    def rn_needed(self, noise_id: str = "avard") -> dict[int, list[int]]:
         """{index into ``ms``: channels} where R(n) was deferred and the noise
-        identification needs it (B1 says PM with fewer than ``MIN_POINTS`` averages), for a
-        ``set_rn`` before ``result()``. Empty unless ``defer_rn``, and on records with no PM
-        noise at the long τ."""
+        identification (by the rule ``noise_id``) needs it: B1 says PM with fewer than
+        ``MIN_POINTS`` averages. For a ``set_rn`` before ``result()``. Empty unless
+        ``defer_rn``, and on records with no PM noise at the long τ."""
         self._flush_ladders()
+        stable32 = check_noise_id(noise_id) == "stable32"
         out: dict[int, list[int]] = {}
         for k, deferred in enumerate(self._rn_deferred):
             if deferred and self._n[k] > 0:
-                need = np.flatnonzero(self._ladders[k].needs_rn())
+                nt = int(self._n[k]) if stable32 else None  # B1's N, as alphas_from_ladders
+                need = np.flatnonzero(self._ladders[k].needs_rn(nt))
                 if need.size:
                     out[k] = [int(ch) for ch in need]
         return out
@@ -474,15 +482,17 @@ class OverlappingAllan:
     # ------------------------------------------------------------------------ results
     @one_blas_thread
     def result(self, ci: float = 0.683, alpha: int | ArrayLike | None = None,
-               quantiles: str = "exact") -> AllanResult:
+               quantiles: str = "exact", noise_id: str = "avard") -> AllanResult:
         """The accumulated OADEV as an ``AllanResult`` of kind "oavar" (1-D arrays for one
         channel, else (K, C)); τ with no complete difference have NaN variance and n = 0.
-        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``)."""
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``);
+        ``noise_id="stable32"``: α by Stable32's B1 rule (``noise_id.NOISE_IDS``)."""
         self._flush_ladders()
         res = result_from_sums(
             "oavar", self.rate_hz, self.ms, np.ones_like(self.ms), self._n, self._s2,
             n_phase=self._n + 2 * self.ms, alpha=alpha,
             alpha_id=alphas_from_ladders(self._ladders, 2, self._rn, self.ms, self._n,
-                                          np.ones_like(self.ms)), ci=ci,
-            one_d=self.n_channels == 1, names=self.names, quantiles=quantiles)
+                                          np.ones_like(self.ms), noise_id), ci=ci,
+            one_d=self.n_channels == 1, names=self.names, quantiles=quantiles,
+            noise_id=noise_id)
         return res if self.covariance else replace(res, cov=None)

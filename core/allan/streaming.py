@@ -374,12 +374,13 @@ class StreamingAllan:
 
     @one_blas_thread
     def result(self, weights: ArrayLike | None = None, ci: float = 0.683,
-               quantiles: str = "exact") -> AllanResult:
+               quantiles: str = "exact", noise_id: str = "avard") -> AllanResult:
         """The accumulated variance as an ``AllanResult`` (kind "pavar", or "phvar").
 
         ``weights`` (C,) gives the single channel Σ w_c y_c from the covariance. A one-channel
         accumulator, or a weighted result, has 1-D arrays; otherwise (K, C).
-        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``).
+        ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``);
+        ``noise_id``: the B1 rule for the overlapping levels (``noise_id.NOISE_IDS``).
         """
         self._settle()
         levels = self._active()
@@ -393,7 +394,7 @@ class StreamingAllan:
         return finish_result(
             self.kind, self.rate_hz, ms, strides, [lev.sums for lev in levels],
             [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
-            weights=weights, quantiles=quantiles,
+            weights=weights, quantiles=quantiles, noise_id=noise_id,
         )
 
     def snapshot(self, ci: float = 0.683) -> AllanSnapshot:

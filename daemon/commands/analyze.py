@@ -63,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
                         help="chi-squared quantiles of the intervals: exact (default) or as "
                              "Stable32 computes them (reproduces its printed bounds)")
+    parser.add_argument("--noise-id", choices=("avard", "stable32"), default="avard",
+                        help="noise identification behind each interval's EDF: avard "
+                             "(default) or Stable32's B1 rule for the overlapping ADEV with "
+                             "4-29 averages (reproduces its printed alpha; see "
+                             "docs/analysis.md)")
     parser.add_argument("--temperature", metavar="CHANNEL",
                         help="temperature channel to compensate: fit its first-order lag and "
                              "coefficient (m/s²/K) per axis and add the temperature-"
@@ -124,9 +129,10 @@ def run(args: argparse.Namespace) -> int:
                           suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
-    if args.temperature and args.quantiles != "exact":
-        raise DataError("--quantiles stable32 is not available with --temperature; run "
-                        "analyze without --temperature to compare with Stable32")
+    if args.temperature and (args.quantiles != "exact" or args.noise_id != "avard"):
+        raise DataError("--quantiles stable32 and --noise-id stable32 are not available with "
+                        "--temperature; run analyze without --temperature to compare with "
+                        "Stable32")
     if args.temperature:
         # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
         # fit on the named channel
@@ -141,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                      filter_corner_hz=args.filter_corner, progress=progress_printer(),
-                     estimator=args.estimator, psd=args.psd, quantiles=args.quantiles)
+                     estimator=args.estimator, psd=args.psd, quantiles=args.quantiles,
+                     noise_id=args.noise_id)
         comp = {}
     if args.json:
         d = an.to_dict()

@@ -254,6 +254,22 @@ def test_alpha_and_bounds_in_the_b1_range(tests_dir: Path, name: str, kind: str)
     assert worst_bound_error(theirs, rows) < limit
 
 
+@pytest.mark.parametrize(("name", "kind"), CASES)
+def test_alpha_and_bounds_by_stable32s_rule_in_the_b1_range(tests_dir: Path, name: str,
+                                                          kind: str) -> None:
+    """``noise_id="stable32"`` (``--noise-id stable32``): avard's own α is Stable32's at every
+    B1 row of every run, the 10 overlapping rows where the default rule differs included, and
+    the bounds with it are Stable32's within the limits above (1 % asked) at every row."""
+    y = rates(tests_dir, name)
+    every = table(tests_dir, name, kind)
+    full = run(y, kind, [r.af for r in every], noise_id="stable32")
+    b1 = [k for k, r in enumerate(every) if y.size // r.af < LAG1_MIN_AVERAGES]
+    rows = [every[k] for k in b1]
+    assert [int(full.alpha[k]) for k in b1] == [r.alpha for r in rows]
+    limit = 2.4e-3 if name in ROUNDED else 6e-4
+    assert worst_bound_error(full.take(b1), rows) < limit
+
+
 @pytest.mark.parametrize(("name", "kind", "af"), [
     ("cs5071a", "oavar", 20000), ("cs5071a", "oavar", 40000), ("cs5071a", "ohvar", 20000),
     ("cs5071a", "ohvar", 40000), ("ocxo", "oavar", 2048), ("ocxo", "ohvar", 2048)])
@@ -346,3 +362,34 @@ def print_table() -> None:
 
 if __name__ == "__main__":
     print_table()
+
+
+def test_analyze_cli_noise_id_stable32(tests_dir: Path, tmp_path: Path) -> None:
+    """`avard analyze ocxo.csv --rate 1 --json --noise-id stable32`: the JSON names the rule,
+    and its α, EDF and bounds are the Python API's under it at every τ of analyze's grid;
+    the default run (no "noise_id" key, as for the default quantiles) takes at m = 2048 and
+    4096 (9 and 4 averages) the noise type one redder, as Stable32's ADEV run does
+    (test_stable32s_overlapping_alpha_is_b1_at_its_count_of_differences)."""
+    y = rates(tests_dir, "ocxo")
+    p = tmp_path / "ocxo.csv"
+    p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in y))
+
+    def cli(*extra: str) -> dict:
+        out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
+                              "--rate", "1", "--json", *extra],
+                             capture_output=True, text=True, check=True)
+        return json.loads(out.stdout)["channels"]["y"]
+
+    theirs, ours = cli("--noise-id", "stable32"), cli()
+    assert theirs["noise_id"] == "stable32" and "noise_id" not in ours
+    tau = [int(t) for t in theirs["tau_s"]]
+    api = allan_variance(y, 1.0, tau, kind="oavar", noise_id="stable32")
+    assert theirs["alpha"] == [float(a) for a in api.alpha]
+    np.testing.assert_allclose(theirs["edf"], api.edf, rtol=1e-12)
+    np.testing.assert_allclose([theirs["adev_lo"], theirs["adev_hi"]],
+                               [api.dev_lo, api.dev_hi], rtol=1e-12)
+    differ = [t for t, a, b in zip(tau, theirs["alpha"], ours["alpha"], strict=True) if a != b]
+    assert differ == [2048, 4096]
+    bad = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
+                          "--rate", "1", "--noise-id", "bogus"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr

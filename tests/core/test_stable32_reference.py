@@ -100,6 +100,22 @@ def test_alpha_in_the_b1_range(kind: str) -> None:
         (r.af, int(a), r.alpha) for r, a in zip(rows, ours, strict=True) if a != r.alpha]
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_alpha_by_stable32s_rule_at_every_b1_row(kind: str) -> None:
+    """``noise_id="stable32"`` (``avard analyze --noise-id stable32``): B1 at Stable32's own
+    count of differences for the overlapping runs too, which gives its printed α at every AF
+    of every run, all 106 overlapping B1 rows included (the non-overlapping ones are the same
+    under both rules); the lag-1 range is unchanged."""
+    rows = all_tau(kind)
+    res = _run(kind, [r.af for r in rows], noise_id="stable32")
+    bad = [(r.af, int(a), r.alpha) for r, a in zip(rows, res.alpha, strict=True)
+           if int(a) != r.alpha]
+    assert bad == []
+    default = _run(kind, [r.af for r in rows])
+    differ = int(np.sum(default.alpha != res.alpha))
+    assert differ == {"avar": 0, "hvar": 0, "oavar": 3, "ohvar": 3}[kind]
+
+
 def _worst_bound_error(kind: str, rows: list[Row], **kw) -> float:
     res = _run(kind, [r.af for r in rows], **kw)
     lo, hi = res.lo, res.hi
@@ -172,3 +188,10 @@ def test_the_analyze_stream_is_stable32s_at_every_af() -> None:
     np.testing.assert_array_equal(got.alpha, batch.alpha)
     np.testing.assert_allclose(got.edf, batch.edf, rtol=1e-12)
     assert [_printed(float(d)) for d in got.dev] == [r.dev for r in rows]
+
+
+def test_an_unknown_noise_id_rule_is_refused() -> None:
+    from avard.core.errors import DataError
+
+    with pytest.raises(DataError, match="noise_id='b1'"):
+        _run("oavar", [1, 2], noise_id="b1")
