@@ -510,7 +510,7 @@ class Lag1Ladder:
                    old: int = 0) -> None:
         """``push_rows`` of the non-overlapping sums of m samples given as a span of their
         running sum: x (C, k·m + 1) channel-major, the averages x[:, (j+1)m] − x[:, jm] for
-        j < k, of which the first ``old`` (at most ``span_overlap()``) are the last ones
+        j < k, of which the first ``old`` (0, or exactly ``span_overlap()``) are the last ones
         pushed before. With the compiled loop the averages are never stored (one pass over
         the span for all the sums); without it, or for a cross-channel ladder, they are made
         and pushed."""
@@ -518,9 +518,11 @@ class Lag1Ladder:
         m, old = int(m), int(old)
         if m < 1:
             raise DataError(f"m={m} must be an averaging factor >= 1")
-        if not 0 <= old <= self.span_overlap():
-            raise DataError(f"old={old}: a span may begin with at most "
-                            f"{self.span_overlap()} averages pushed before")
+        if old not in (0, self.span_overlap()):
+            # all of the reach-back products or none: with part of them the compiled loop
+            # and the tail's products would both count some
+            raise DataError(f"old={old}: a span begins with 0 or all "
+                            f"{self.span_overlap()} of the last averages pushed")
         k = (x.shape[1] - 1) // m
         if k <= old:
             return

@@ -111,7 +111,8 @@ class OverlappingAllan:
         fewer than ``MIN_POINTS`` averages (B1's range).
     defer_rn : bool
         With ``n_total``: keep no R(n) sums at all; ``rn_needed()`` says after the last
-        block where the identification needs them, and ``set_rn`` supplies them.
+        block where the identification needs them, and ``set_rn`` supplies them. A
+        ``result()`` before that takes flicker PM where B1 says PM (as without R(n)).
     """
 
     def __init__(self, n_channels: int, rate_hz: float, ms: Sequence[int] | NDArray,
@@ -308,6 +309,8 @@ class OverlappingAllan:
                 last = q0 + ((p1 - 1 - q0) // m) * m
                 if kern is None or not self._ring_take(k, m, q0, last):
                     self._feed(k, self._interval_sums(m, q0, last))
+            elif self._due[k] is not None:
+                self._guard_due(k)  # no new average, but the next piece still moves the ring
 
     def _waiting(self, k: int) -> int:
         """Averages of τ k not yet pushed to its ladder."""
@@ -345,9 +348,18 @@ class OverlappingAllan:
                 self._push_due(k)
             return False
         self._due[k] = (first_q, last)
-        if last - first_q >= LADDER_SPAN or start + self._pos + self._piece - first >= self._cap:
-            self._push_due(k)  # long enough, or the next piece would overwrite or wrap it
+        self._guard_due(k)
         return True
+
+    def _guard_due(self, k: int) -> None:
+        """Push τ k's waiting averages when their span is long enough, or when the next
+        piece could overwrite or wrap it. Checked after every piece, with a new average at k
+        or not: a short piece without one (a block's end) still moves the ring on."""
+        due = self._due[k]
+        assert due is not None
+        first, start, _old = self._due_span(k, due[0])
+        if due[1] - due[0] >= LADDER_SPAN or start + self._pos + self._piece - first >= self._cap:
+            self._push_due(k)
 
     def _push_due(self, k: int) -> None:
         """Push the averages waiting in the ring for τ k, straight from their span."""

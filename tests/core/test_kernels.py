@@ -100,21 +100,52 @@ def test_oadev_compiled_equals_numpy(compiled: None, piece: int, span: int,
     y = rng.standard_normal((n, 2)) + walk + np.array([0.0, 9.81])
     ms = 2 ** np.arange(14)
 
-    def run(use_c: bool, n_total: int | None) -> object:
+    def run(use_c: bool, n_total: int | None) -> OverlappingAllan:
         kernels.use_compiled(use_c)
         oa = OverlappingAllan(2, 100.0, ms, piece=piece, n_total=n_total)
         oa.update(y[:12_345])
         oa.update(y[12_345:25_000])
         oa.gap()
         oa.update(y[25_000:])
-        return oa.result()
+        return oa
 
     for n_total in (None, n):
-        fast, slow = run(True, n_total), run(False, n_total)
-        np.testing.assert_allclose(fast.var, slow.var, rtol=1e-11)  # type: ignore[attr-defined]
-        np.testing.assert_array_equal(fast.n, slow.n)  # type: ignore[attr-defined]
-        np.testing.assert_array_equal(fast.alpha, slow.alpha)  # type: ignore[attr-defined]
-        np.testing.assert_allclose(fast.edf, slow.edf, rtol=1e-9)  # type: ignore[attr-defined]
+        fast_acc, slow_acc = run(True, n_total), run(False, n_total)
+        fast, slow = fast_acc.result(), slow_acc.result()
+        np.testing.assert_allclose(fast.var, slow.var, rtol=1e-11)
+        np.testing.assert_array_equal(fast.n, slow.n)
+        np.testing.assert_array_equal(fast.alpha, slow.alpha)
+        np.testing.assert_allclose(fast.edf, slow.edf, rtol=1e-9)
+        _assert_same_ladders(fast_acc, slow_acc)
+
+
+def _assert_same_ladders(fast: OverlappingAllan, slow: OverlappingAllan) -> None:
+    """Every τ's noise-identification sums equal on both paths (α alone, being rounded,
+    would hide a wrong span)."""
+    for k, (a, b) in enumerate(zip(fast._ladders, slow._ladders, strict=True)):
+        ta, tb = a.totals(), b.totals()
+        for f in Lag1Ladder.FIELDS:
+            np.testing.assert_allclose(ta[f], tb[f], rtol=1e-9, atol=1e-9 * max(
+                1.0, float(np.max(np.abs(tb["s2"])))), err_msg=f"tau {k}: {f}")
+
+
+def test_averages_waiting_in_the_ring_survive_a_short_piece(compiled: None) -> None:
+    """A block's short last piece brings no average at a long m; the full piece after it
+    must not overwrite the averages still waiting in the ring (a grid that is not octaves,
+    where the ring's length is no multiple of every m)."""
+    y = np.random.default_rng(16).standard_normal(65536 + 43 + 65536) + 3.0
+    cuts = [(0, 65536), (65536, 65579), (65579, len(y))]
+
+    def run(use_c: bool) -> OverlappingAllan:
+        kernels.use_compiled(use_c)
+        oa = OverlappingAllan(1, 1.0, [60, 32780])
+        for a, b in cuts:
+            oa.update(y[a:b])
+        return oa
+
+    fast, slow = run(True), run(False)
+    np.testing.assert_array_equal(fast.result().alpha, slow.result().alpha)
+    _assert_same_ladders(fast, slow)
 
 
 def _lag_reference(z: np.ndarray, lags: int, old: int) -> list[float]:
@@ -205,6 +236,9 @@ def test_ladder_compiled_equals_numpy(compiled: None) -> None:
     np.testing.assert_array_equal(fast.alpha(-2), slow.alpha(-2))
     with pytest.raises(DataError, match="old"):
         fast.push_spans(x[:, :100], m, None, 4)
+    assert fast.span_overlap() == 3
+    with pytest.raises(DataError, match="old=1"):  # part of the reach-back: refused
+        fast.push_spans(x[:, :100], m, None, 1)
 
 
 def test_welch_compiled_equals_numpy(compiled: None) -> None:
