@@ -21,6 +21,7 @@ Outputs: a text table, the ``--json`` dictionary (shape fixed by issue 4), a kal
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -51,6 +52,8 @@ __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyz
            "find_lines", "psd_csv"]
 
 ProgressFn = Callable[[int, int | None], None]
+
+log = logging.getLogger(__name__)
 
 #: Estimator names as they appear in the table, the JSON and the csv.
 ESTIMATORS = {
@@ -659,6 +662,9 @@ def _deferred_rn(sa: Any, reread: Callable[[int], Iterable[tuple[NDArray[np.floa
     need = sa.rn_needed(noise_id)
     for ch in sorted({c for chans in need.values() for c in chans}):
         ks = [k for k, chans in need.items() if ch in chans]
+        # said, since the progress shown is the passes' and this read comes after them
+        log.info("channel %s read again for R(n) at τ = %s s, where B1 says PM",
+                 sa.names[ch], ", ".join(f"{m / sa.rate_hz:g}" for m in sa.ms[ks]))
         extra = OverlappingAllan(1, sa.rate_hz, sa.ms[ks])
         got = 0
         for accel, segment_end in reread(ch):

@@ -242,7 +242,8 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
         OverlappingAllan(1, 1.0, grid, n_total=n).set_rn(0, {0: kept.rn_sums()[-1]})
 
 
-def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypatch) -> None:
+def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypatch,
+                                                              caplog) -> None:
     """analyze of a file defers R(n) and reads again only the channel whose long τ B1 calls
     PM; its result is analyze_stream's, which keeps R(n) in the one pass."""
     from avard.core import report
@@ -260,9 +261,11 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
         return lazy(path, block, rate_hz, columns, verify)
 
     monkeypatch.setattr(report, "_lazy_segments", spy)
-    from_file = report.analyze(str(path), find_sinusoids=False)
-    # the pass over both channels, then the PM channel again for its R(n)
+    with caplog.at_level("INFO", logger="avard.core.report"):
+        from_file = report.analyze(str(path), find_sinusoids=False)
+    # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
+    assert [r.getMessage().split(" read again")[0] for r in caplog.records] == ["channel pm"]
     meta = {"rate_hz": 10.0, "names": ["pm", "fm"], "n_samples": n}
     blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))  # the file's blocks
     kept = report.analyze_stream(meta, blocks, find_sinusoids=False)
