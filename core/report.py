@@ -43,10 +43,11 @@ if TYPE_CHECKING:
 
 # analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
 # χ² tail come from core/allan/beta.py and chi2.py (scipy.special cost 0.1–0.2 CPU-s of every
-# analyze, ~1 s on a Pi). What still needs scipy (the filter corner's model, --psd) imports it
-# where it is used, after the pass over the data: it is ~50–70 MB resident, and loaded before
-# the pass it would sit under the OADEV's history at the peak (measured 190 → 129 MB peak for
-# a 60 h, 3-axis analyze).
+# analyze, ~1 s on a Pi), and the chip filter's model (an ADXL355 record's) from the
+# simulator's numpy Butterworth (model.terms._butterworth; scipy.signal was 0.5 CPU-s and
+# ~70 MB). What still needs scipy (--psd's intervals) imports it where it is used, after the
+# pass over the data: loaded before the pass it would sit under the OADEV's history at the
+# peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze).
 
 __all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
            "find_lines", "psd_csv"]

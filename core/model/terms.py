@@ -129,14 +129,14 @@ def gauss_markov_avar(tau: ArrayLike, sigma: float, T: float) -> NDArray[np.floa
 # The ADXL355's own low-pass filter acting on white noise
 
 
-@lru_cache(maxsize=32)
-def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np.float64]:
-    """Autocovariance r(k), k = 0…L, of unit-variance white noise through a Butterworth low-pass
-    (``order``) at ``corner_hz``, normalised to unit DC gain. The ADXL355 datasheet does not give
-    its decimation filter; a 2nd-order Butterworth at ODR/4 reproduces the documented corner and
-    is what the simulator uses. The impulse response is truncated where it has decayed to 1e-12.
-    """
-    from scipy import signal
+def _butterworth(rate_hz: float, corner_hz: float, order: int
+                 ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], float]:
+    """(zeros, poles, gain) of the Butterworth low-pass at ``corner_hz``: the simulator's own
+    design (``sim.linear_filter.butterworth_lowpass_zpk``, numpy, held to
+    ``scipy.signal.butter``), so the model and the simulated chip are one filter, and a fit
+    of an ADXL355 record loads no scipy (scipy.signal is ~0.5 CPU-s and ~70 MB to import,
+    several seconds on a Raspberry Pi)."""
+    from avard.core.sim.linear_filter import butterworth_lowpass_zpk
 
     wn = corner_hz / (rate_hz / 2.0)
     if not 0.0 < wn < 1.0:
@@ -144,12 +144,24 @@ def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np
             f"filter corner {corner_hz} Hz must lie between 0 and the Nyquist frequency "
             f"{rate_hz / 2} Hz"
         )
-    b, a = signal.butter(order, wn)
+    return butterworth_lowpass_zpk(order, wn)
+
+
+@lru_cache(maxsize=32)
+def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np.float64]:
+    """Autocovariance r(k), k = 0…L, of unit-variance white noise through a Butterworth low-pass
+    (``order``) at ``corner_hz``, normalised to unit DC gain. The ADXL355 datasheet does not give
+    its decimation filter; a 2nd-order Butterworth at ODR/4 reproduces the documented corner and
+    is what the simulator uses. The impulse response is truncated where it has decayed to 1e-12.
+    """
+    from avard.core.sim.linear_filter import ModalFilter
+
+    zeros, poles, gain = _butterworth(rate_hz, corner_hz, order)
     n = 64
     while True:
-        imp = np.zeros(n)
-        imp[0] = 1.0
-        h = signal.lfilter(b, a, imp)
+        imp = np.zeros((1, n))
+        imp[0, 0] = 1.0
+        h = ModalFilter.from_zpk(zeros, poles, gain).run(imp)[0]  # the impulse response
         if np.max(np.abs(h[-8:])) < 1e-12 * np.max(np.abs(h)) or n > 1 << 20:
             break
         n *= 2
@@ -193,12 +205,13 @@ def lowpass_white_avar(
 
 def lowpass_gain2(nu: NDArray[np.float64], rate_hz: float, corner_hz: float,
                   order: int = 2) -> NDArray[np.float64]:
-    """|G(ν)|² of the same Butterworth low-pass (unit DC gain), ν in cycles per sample."""
-    from scipy import signal
-
-    b, a = signal.butter(order, corner_hz / (rate_hz / 2.0))
-    _, g = signal.freqz(b, a, worN=2.0 * np.pi * np.asarray(nu))
-    return np.abs(g) ** 2
+    """|G(ν)|² of the same Butterworth low-pass (unit DC gain), ν in cycles per sample:
+    gain²·Π|e^{2πiν} − z_i|² / Π|e^{2πiν} − p_k|² from its zeros and poles."""
+    zeros, poles, gain = _butterworth(rate_hz, corner_hz, order)
+    e = np.exp(2j * np.pi * np.asarray(nu, dtype=np.float64))[..., None]
+    num = np.prod(np.abs(e - zeros) ** 2, axis=-1)
+    den = np.prod(np.abs(e - poles) ** 2, axis=-1)
+    return gain**2 * num / den
 
 
 # --------------------------------------------------------------------------------------------

@@ -158,6 +158,10 @@ def butterworth_lowpass_zpk(order: int, wn: float) -> tuple[NDArray, NDArray, fl
     omega = 2.0 * math.tan(math.pi * wn / 2.0)
     k = np.arange(order)
     s = omega * np.exp(1j * math.pi * (2 * k + order + 1) / (2 * order))
+    if order % 2:
+        # the real pole of an odd order, exactly real: e^{jπ} carries 1e-16 of imaginary
+        # part, which made ModalFilter count it as half of a conjugate pair (twice)
+        s[order // 2] = -omega
     poles = (2.0 + s) / (2.0 - s)
     zeros = -np.ones(order, dtype=complex)
     gain = float(np.real(np.prod(1.0 - poles) / np.prod(1.0 - zeros)))

@@ -54,6 +54,19 @@ def test_butterworth_design_is_scipys() -> None:
         butterworth_lowpass_zpk(2, 1.0)
 
 
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_butterworth_of_any_order_filters_as_lfilter(order: int) -> None:
+    """The modal filter of an odd order's design too: its real pole is exactly real (with
+    the 1e-16 of imaginary part e^{jπ} left it, the filter took it for half of a conjugate
+    pair and counted it twice)."""
+    z, p, k = butterworth_lowpass_zpk(order, 0.3)
+    assert np.count_nonzero(p.imag == 0) == order % 2
+    x = np.random.default_rng(order).standard_normal((1, 500))
+    got = ModalFilter.from_zpk(z, p, k).run(x)[0]
+    ref = signal.lfilter(*signal.butter(order, 0.3), x[0])
+    assert np.allclose(got, ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+
+
 @pytest.mark.parametrize("m", LENGTHS)
 def test_chip_lowpass_streams_equal_to_sosfilt(m: int) -> None:
     """The ADXL355 Butterworth in modal form, split in uneven blocks, started in the steady

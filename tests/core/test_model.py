@@ -126,6 +126,33 @@ def test_lowpass_white_bends_short_tau_and_tends_to_white() -> None:
     assert np.allclose(est, v[:4], rtol=0.02)
 
 
+@pytest.mark.parametrize("order", [1, 2, 3, 4])
+def test_filter_model_is_scipys_butterworth(order: int) -> None:
+    """The chip-filter model without scipy (the simulator's numpy Butterworth, its impulse
+    response by the modal filter, |G|² from zeros and poles) against scipy.signal's butter,
+    lfilter and freqz: the autocovariance behind ``lowpass_white_avar`` and the gain behind
+    the flicker model and the AVAR covariance, at corners from ODR/100 to 0.45·ODR."""
+    for fs, fc in [(125.0, 31.25), (125.0, 5.0), (100.0, 1.0), (100.0, 45.0)]:
+        b, a = signal.butter(order, fc / (fs / 2))
+        n = 64
+        while True:  # the truncation rule of the model: decayed to 1e-12
+            imp = np.zeros(n)
+            imp[0] = 1.0
+            h = signal.lfilter(b, a, imp)
+            if np.max(np.abs(h[-8:])) < 1e-12 * np.max(np.abs(h)):
+                break
+            n *= 2
+        h = h / h.sum()
+        ref = np.correlate(h, h, mode="full")[len(h) - 1:]
+        got = M._lowpass_autocov.__wrapped__(fs, fc, order)
+        assert len(got) == len(ref)
+        assert np.max(np.abs(got - ref)) < 1e-9 * ref[0]
+        nu = np.linspace(0.0, 0.5, 257)
+        _, g = signal.freqz(b, a, worN=2 * np.pi * nu)
+        np.testing.assert_allclose(M.lowpass_gain2(nu, fs, fc, order), np.abs(g) ** 2,
+                                   rtol=0, atol=1e-9)
+
+
 def test_model_avar_adds_components() -> None:
     tau = np.array([0.1, 1.0, 10.0])
     terms = {"velocity_random_walk": 1e-4, "bias_instability": 2e-5, "rate_ramp": None}
