@@ -535,6 +535,20 @@ def _no_ladder(dmax: int) -> Lag1Ladder:
     return Lag1Ladder(1, dmax)
 
 
+def b1_counts(ms: ArrayLike, n_terms: ArrayLike, strides: ArrayLike, noise_id: str = "avard"
+              ) -> list[int | None]:
+    """Per τ, the N at which B1's expected values are taken (``Lag1Ladder.alpha``'s
+    ``n_terms``; None: the count of averages): the estimator's count of differences
+    ``n_terms`` for the non-overlapping estimators (stride ≥ m), and for the overlapping ones
+    too under ``noise_id="stable32"`` (``noise_id.NOISE_IDS``; see ``alphas_from_ladders``).
+    The one place this rule is written: the identification and ``OverlappingAllan``'s
+    deferred R(n) both take it from here."""
+    overlapping_too = check_noise_id(noise_id) == "stable32"
+    return [int(v) if int(s) >= int(m) or overlapping_too else None
+            for v, s, m in zip(np.asarray(n_terms), np.asarray(strides), np.asarray(ms),
+                               strict=True)]
+
+
 def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
                         rn: Sequence[RnSums | None] | None = None,
                         ms: ArrayLike | None = None, n_terms: ArrayLike | None = None,
@@ -561,12 +575,8 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
     rs = [None] * len(ladders) if rn is None else list(rn)
     mm = np.zeros(len(ladders), np.int64) if ms is None else np.asarray(ms, np.int64)
     st = None if strides is None else np.asarray(strides, np.int64)
-    # B1's N: the count of differences for the non-overlapping estimators only; see below
-    nt: list[int | None] = [None] * len(ladders)
-    overlapping_too = check_noise_id(noise_id) == "stable32"
-    if n_terms is not None and st is not None:
-        nt = [int(v) if int(s) >= int(m) or overlapping_too else None
-              for v, s, m in zip(np.asarray(n_terms), st, mm, strict=True)]
+    nt = b1_counts(mm, n_terms, st, noise_id) if n_terms is not None and st is not None \
+        else [None] * len(ladders)
     out = np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m), t)
                     for lad, r, m, t in zip(ladders, rs, mm, nt, strict=True)],
                    dtype=np.float64)

@@ -868,14 +868,18 @@ class Lag1Ladder:
         (4 … MIN_POINTS − 1 averages) and a B1 that says PM. Where it does not, R(n) is never
         read, so an accumulator may leave its sums out and compute them only here."""
         n = self.count()
-        out = np.zeros(self.c, dtype=bool)
         if n >= MIN_POINTS or n < 4:
-            return out
-        b1 = self.b1()
+            return np.zeros(self.c, dtype=bool)
+        return np.array([a is None for a in self._b1_alphas(n, self.totals(), n_terms)])
+
+    def _b1_alphas(self, n: int, t: dict[str, NDArray], n_terms: int | None
+                   ) -> list[float | None]:
+        """Per channel, B1's noise exponent from these totals of n averages: None where B1
+        says PM (R(n) decides), NaN where B1 cannot be measured. B1's range (4 … MIN_POINTS
+        − 1 averages) is the caller's to check."""
+        b1 = self.b1(t)
         big_n = n if n_terms is None else max(int(n_terms), 2)
-        for ch in range(self.c):
-            out[ch] = math.isfinite(b1[ch]) and alpha_from_b1(float(b1[ch]), big_n) is None
-        return out
+        return [alpha_from_b1(float(v), big_n) if math.isfinite(v) else math.nan for v in b1]
 
     def _alpha(self, lowest: int, rn: NDArray | None, m: int, n_terms: int | None
                ) -> NDArray[np.float64]:
@@ -886,14 +890,12 @@ class Lag1Ladder:
         out = np.full(self.c, np.nan)
         if n < 4:
             return out
-        b1 = self.b1(t)
-        big_n = n if n_terms is None else max(int(n_terms), 2)
-        for ch in range(self.c):
-            if math.isfinite(b1[ch]):
-                a = alpha_from_b1(float(b1[ch]), big_n)
-                if a is None:
-                    a = None if rn is None else alpha_from_rn(float(rn[ch]), m)
-                out[ch] = max(lowest, 1 if a is None else a)
+        for ch, a in enumerate(self._b1_alphas(n, t, n_terms)):
+            if a is None:  # B1 says PM: R(n), when there is one, tells white from flicker
+                a = None if rn is None else alpha_from_rn(float(rn[ch]), m)
+            elif math.isnan(a):
+                continue
+            out[ch] = max(lowest, 1 if a is None else a)
         return out
 
     def state(self) -> dict:

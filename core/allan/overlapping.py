@@ -45,6 +45,7 @@ from avard.core.allan import kernels
 from avard.core.allan.deviations import (
     AllanResult,
     alphas_from_ladders,
+    b1_counts,
     checked_block,
     result_from_sums,
 )
@@ -52,7 +53,6 @@ from avard.core.allan.noise_id import (
     MIN_POINTS,
     Lag1Ladder,
     RnSums,
-    check_noise_id,
     row_products,
 )
 from avard.core.allan.scratch import mapped_zeros, scratch
@@ -464,12 +464,11 @@ class OverlappingAllan:
         ``MIN_POINTS`` averages. For a ``set_rn`` before ``result()``. Empty unless
         ``defer_rn``, and on records with no PM noise at the long τ."""
         self._flush_ladders()
-        stable32 = check_noise_id(noise_id) == "stable32"
+        nt = b1_counts(self.ms, self._n, np.ones_like(self.ms), noise_id)  # as result()'s
         out: dict[int, list[int]] = {}
         for k, deferred in enumerate(self._rn_deferred):
             if deferred and self._n[k] > 0:
-                nt = int(self._n[k]) if stable32 else None  # B1's N, as alphas_from_ladders
-                need = np.flatnonzero(self._ladders[k].needs_rn(nt))
+                need = np.flatnonzero(self._ladders[k].needs_rn(nt[k]))
                 if need.size:
                     out[k] = [int(ch) for ch in need]
         return out
