@@ -41,19 +41,52 @@
 #include <Python.h>
 #include <string.h>
 
+/* A 1-D float64 buffer: C-contiguous, or with ``strided`` any whole-element stride (a column
+ * of a block); writable for an output. */
 static int
-get_vector(PyObject *obj, Py_buffer *view, int writable, const char *name)
+get_vector_as(PyObject *obj, Py_buffer *view, int writable, int strided, const char *name)
 {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    int flags = (strided ? PyBUF_STRIDES : PyBUF_C_CONTIGUOUS) | PyBUF_FORMAT
+                | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(obj, view, flags) < 0)
         return -1;
     if (view->ndim != 1 || view->itemsize != 8 || view->format == NULL
-            || strcmp(view->format, "d") != 0) {
-        PyErr_Format(PyExc_TypeError, "%s must be a 1-D contiguous float64 array", name);
+            || strcmp(view->format, "d") != 0 || (strided && view->strides[0] % 8 != 0)) {
+        PyErr_Format(PyExc_TypeError, strided ? "%s must be a 1-D float64 array"
+                     : "%s must be a 1-D contiguous float64 array", name);
         PyBuffer_Release(view);
         return -1;
     }
     return 0;
+}
+
+static int
+get_vector(PyObject *obj, Py_buffer *view, int writable, const char *name)
+{
+    return get_vector_as(obj, view, writable, 0, name);
+}
+
+/* An input vector (strided if asked) and a contiguous writable output, both or neither. */
+static int
+get_in_out(PyObject *in, PyObject *out, Py_buffer *vin, Py_buffer *vout, int strided,
+           const char *in_name)
+{
+    if (get_vector_as(in, vin, 0, strided, in_name) < 0)
+        return -1;
+    if (get_vector(out, vout, 1, "out") < 0) {
+        PyBuffer_Release(vin);
+        return -1;
+    }
+    return 0;
+}
+
+/* Release both and return NULL: a refusal after get_in_out, its error already set. */
+static PyObject *
+release2(Py_buffer *a, Py_buffer *b)
+{
+    PyBuffer_Release(a);
+    PyBuffer_Release(b);
+    return NULL;
 }
 
 static int
@@ -291,27 +324,19 @@ kernels_lag_sums(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
         PyErr_SetString(PyExc_ValueError, "m must be >= 0");
         return NULL;
     }
-    if (get_vector(args[0], &v, 0, "x") < 0)
+    if (get_in_out(args[0], args[3], &v, &o, 0, "x") < 0)
         return NULL;
-    if (get_vector(args[3], &o, 1, "out") < 0) {
-        PyBuffer_Release(&v);
-        return NULL;
-    }
     Py_ssize_t lags = o.shape[0] - 2;
     if (lags < 0 || lags > LAG_MAX) {
         PyErr_Format(PyExc_ValueError, "out must hold 2 to %d values", LAG_MAX + 2);
-        PyBuffer_Release(&v);
-        PyBuffer_Release(&o);
-        return NULL;
+        return release2(&v, &o);
     }
     Py_ssize_t n = v.shape[0];
     Py_ssize_t k = m == 0 ? n : (n > 0 ? (n - 1) / m : 0);
     if (old < 0 || old > LAG_MAX || old > k) {
         PyErr_Format(PyExc_ValueError, "old must be 0 to %d and at most the values in x",
                      LAG_MAX);
-        PyBuffer_Release(&v);
-        PyBuffer_Release(&o);
-        return NULL;
+        return release2(&v, &o);
     }
     Py_BEGIN_ALLOW_THREADS
     lag_loop(v.buf, m, k, ref, (int)lags, (int)old, o.buf);
@@ -336,23 +361,11 @@ kernels_running_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     double carry = PyFloat_AsDouble(args[2]);
     if (carry == -1.0 && PyErr_Occurred())
         return NULL;
-    if (PyObject_GetBuffer(args[0], &y, PyBUF_STRIDES | PyBUF_FORMAT) < 0)
+    if (get_in_out(args[0], args[3], &y, &o, 1, "y") < 0)
         return NULL;
-    if (y.ndim != 1 || y.itemsize != 8 || y.format == NULL || strcmp(y.format, "d") != 0
-            || y.strides[0] % 8 != 0) {
-        PyErr_SetString(PyExc_TypeError, "y must be a 1-D float64 array");
-        PyBuffer_Release(&y);
-        return NULL;
-    }
-    if (get_vector(args[3], &o, 1, "out") < 0) {
-        PyBuffer_Release(&y);
-        return NULL;
-    }
     if (o.shape[0] != y.shape[0]) {
         PyErr_SetString(PyExc_ValueError, "y and out must have the same length");
-        PyBuffer_Release(&y);
-        PyBuffer_Release(&o);
-        return NULL;
+        return release2(&y, &o);
     }
     const double *src = y.buf;
     const Py_ssize_t step = y.strides[0] / 8, n = y.shape[0];
@@ -380,18 +393,12 @@ kernels_power_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_ssize_t k = PyLong_AsSsize_t(args[1]);
     if (k == -1 && PyErr_Occurred())
         return NULL;
-    if (get_vector(args[0], &v, 0, "spec") < 0)
+    if (get_in_out(args[0], args[2], &v, &o, 0, "spec") < 0)
         return NULL;
-    if (get_vector(args[2], &o, 1, "out") < 0) {
-        PyBuffer_Release(&v);
-        return NULL;
-    }
     const Py_ssize_t f = o.shape[0];
     if (k < 0 || v.shape[0] != 2 * k * f) {
         PyErr_SetString(PyExc_ValueError, "spec must hold k blocks of len(out) complex values");
-        PyBuffer_Release(&v);
-        PyBuffer_Release(&o);
-        return NULL;
+        return release2(&v, &o);
     }
     const double *src = v.buf;
     double *dst = o.buf;
@@ -423,7 +430,8 @@ static PyMethodDef kernels_methods[] = {
 
 static struct PyModuleDef kernels_module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "Compiled inner loops of the fully overlapping Allan variance (optional).", -1,
+    "Compiled inner loops of avard analyze: the OADEV, its noise identification and the "
+    "Welch spectrum (optional).", -1,
     kernels_methods, NULL, NULL, NULL, NULL,
 };
 
