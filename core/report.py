@@ -39,6 +39,7 @@ from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from avard.core.allan.overlapping import OverlappingAllan
     from avard.core.model.fit import NoiseFit
 
 # analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
@@ -448,9 +449,13 @@ def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
     return None
 
 
+#: A record's blocks: (samples (n, C) in m/s², True where a segment ends).
+_Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 #: One pass over a record: its channels (numbers in the record), their blocks, and the block
 #: columns to take (None: all).
-_Pass = tuple[list[int], Iterable[tuple[NDArray[np.float64], bool]], list[int] | None]
+_Pass = tuple[list[int], _Blocks, list[int] | None]
+#: One channel's blocks read again (R(n) deferred by the OADEV; see ``_deferred_rn``).
+_Reread = Callable[[int], _Blocks]
 
 
 def analyze(
@@ -503,7 +508,7 @@ def analyze(
     for g in groups[1:]:
         passes.append((g, _lazy_segments(path, block, rate_hz, g, False), None))
 
-    def reread(column: int) -> Iterable[tuple[NDArray[np.float64], bool]]:
+    def reread(column: int) -> _Blocks:
         return _lazy_segments(path, block, rate_hz, [column], False)
 
     return _analyze_passes(meta, passes, reread=reread, **opts)
@@ -570,7 +575,7 @@ def _with_differences(res: Any) -> Any:
 @one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
 def analyze_stream(
     meta: dict[str, Any],
-    segments: Iterable[tuple[NDArray[np.float64], bool]],
+    segments: _Blocks,
     *,
     source: str = "stream",
     channels: Sequence[str] | None = None,
@@ -606,12 +611,11 @@ class _PassResult:
     n: int  # samples read
 
 
-def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int] | None,
+def _one_pass(blocks: _Blocks, take: list[int] | None,
               names: list[str], rate: float, estimator: str, grid: NDArray[np.int64] | None,
               nper: int | None, progress: ProgressFn | None, done: int,
               total: int | None, quantiles: str = "exact",
-              n_record: int | None = None,
-              reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None,
+              n_record: int | None = None, reread: _Reread | None = None,
               noise_id: str = "avard") -> _PassResult:
     """Stream ``blocks`` (their columns ``take``, or all) into the chosen Allan accumulator and
     the Welch spectrum of the channels ``names``; ``done``/``total`` place it in the progress
@@ -651,8 +655,8 @@ def _one_pass(blocks: Iterable[tuple[NDArray[np.float64], bool]], take: list[int
     return _PassResult(res, welch, n)
 
 
-def _deferred_rn(sa: Any, reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]],
-                 n: int, noise_id: str = "avard") -> None:
+def _deferred_rn(sa: OverlappingAllan, reread: _Reread, n: int, noise_id: str = "avard"
+                 ) -> None:
     """The R(n) sums ``sa`` (an ``OverlappingAllan(defer_rn=True)`` fed the whole record)
     needs where B1 says PM in its range: each such channel read again into an accumulator of
     those τ alone, which keeps them (the same differences in the same pieces, so the same
@@ -684,7 +688,7 @@ def _analyze_passes(
     meta: dict[str, Any],
     passes: Sequence[_Pass],
     *,
-    reread: Callable[[int], Iterable[tuple[NDArray[np.float64], bool]]] | None = None,
+    reread: _Reread | None = None,
     source: str,
     filter_corner_hz: float | str | None,
     find_sinusoids: bool,
@@ -727,8 +731,7 @@ def _analyze_passes(
     for chans, blocks, take in passes:
         again = None
         if reread is not None:
-            def again(j: int, chans: list[int] = chans
-                      ) -> Iterable[tuple[NDArray[np.float64], bool]]:
+            def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
         one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
                         progress, done, all_total, quantiles,
