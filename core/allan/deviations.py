@@ -46,6 +46,7 @@ from avard.core.allan.noise_id import (
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FormatError
+from avard.core.finite import first_nonfinite_row
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -756,18 +757,11 @@ def checked_block(block: ArrayLike, n_channels: int, integer: bool | None
         raise DataError(f"block has dtype {a.dtype}; pass float or integer samples")
     if integer is None and a.shape[0]:
         integer = a.dtype.kind in "iu"
-    # a NaN or an infinity makes the sum non-finite, so a finite sum clears the block in one
-    # reduction; only a non-finite one (or an overflowing sum of huge values) is searched
     if a.dtype.kind == "f":
-        with np.errstate(over="ignore", invalid="ignore"):
-            total = float(np.add.reduce(a, axis=None))
-    if a.dtype.kind == "f" and not math.isfinite(total):
-        bad = ~np.isfinite(a)
-        if bad.any():
-            i = int(np.argwhere(bad)[0][0])
+        i = first_nonfinite_row(a)  # one reduction for a finite block
+        if i is not None:
             raise DataError(f"block sample {i} is NaN or infinite; drop such samples and call "
                             "gap() where they were")
-    if a.dtype.kind == "f":
         if integer:
             if np.any(a != np.rint(a)):
                 raise DataError("this accumulator was started with integer counts and got "

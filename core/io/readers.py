@@ -33,6 +33,7 @@ from typing import IO, Any
 
 import numpy as np
 from avard.core.errors import DataError, FormatError
+from avard.core.finite import first_nonfinite_row
 from numpy.typing import NDArray
 
 __all__ = ["Record", "iter_blocks", "load_record", "record_info"]
@@ -295,14 +296,8 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
 
 
 def _check_finite(a: NDArray, offset: int, where: str) -> None:
-    # a NaN or an infinity makes the sum non-finite, so a finite sum clears the block in one
-    # reduction; only a non-finite one (or an overflowing sum of huge values) is searched
-    with np.errstate(over="ignore", invalid="ignore"):
-        if math.isfinite(float(np.add.reduce(a, axis=None))):
-            return
-    bad = ~np.isfinite(a)
-    if bad.any():
-        i = int(np.flatnonzero(bad.any(axis=1) if a.ndim == 2 else bad)[0])
+    i = first_nonfinite_row(a)
+    if i is not None:
         raise DataError(f"{where}: accel sample {offset + i} is not finite (NaN or inf); cut "
                         "the record there or fill the hole before analysing")
 
