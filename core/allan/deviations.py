@@ -536,25 +536,11 @@ def _no_ladder(dmax: int) -> Lag1Ladder:
     return Lag1Ladder(1, dmax)
 
 
-def b1_counts(ms: ArrayLike, n_terms: ArrayLike, strides: ArrayLike, noise_id: str = "avard"
-              ) -> list[int | None]:
-    """Per τ, the N at which B1's expected values are taken (``Lag1Ladder.alpha``'s
-    ``n_terms``; None: the count of averages): the estimator's count of differences
-    ``n_terms`` for the non-overlapping estimators (stride ≥ m), and for the overlapping ones
-    too under ``noise_id="stable32"`` (``noise_id.NOISE_IDS``; see ``alphas_from_ladders``).
-    The one place this rule is written: the identification and ``OverlappingAllan``'s
-    deferred R(n) both take it from here."""
-    overlapping_too = check_noise_id(noise_id) == "stable32"
-    return [int(v) if int(s) >= int(m) or overlapping_too else None
-            for v, s, m in zip(np.asarray(n_terms), np.asarray(strides), np.asarray(ms),
-                               strict=True)]
-
-
 def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
                         rn: Sequence[RnSums | None] | None = None,
                         ms: ArrayLike | None = None, n_terms: ArrayLike | None = None,
-                        strides: ArrayLike | None = None, noise_id: str = "avard"
-                        ) -> NDArray[np.float64]:
+                        strides: ArrayLike | None = None, noise_id: str = "avard",
+                        rn_read: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
     """(K, C) noise exponents identified as Stable32 does (``Lag1Ladder.alpha``): lag-1 ACF
     of the non-overlapping averages with ≥ 30 of them, B1 below, and R(n) = MVAR/AVAR from
     ``rn[k]`` (when given) where B1 says PM; NaN where neither applies.
@@ -569,18 +555,29 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
     flicker FM (synthetic FM power-law noise at 20 averages: 9 of 30 right against 21 with
     N = n; tests/core/test_overlapping.py); avard keeps N = n there, and differs from
     Stable32's α at those rows (docs/analysis.md, "Checked against Stable32"), unless
-    ``noise_id="stable32"`` asks for Stable32's N."""
+    ``noise_id="stable32"`` asks for Stable32's N.
+
+    ``rn_read`` (K, C), when given, is set True where the α returned rests on R(n): B1 says
+    PM in its range and the τ's own α is kept (not the shorter τ's). An accumulator that
+    defers R(n) learns from it which sums it must supply."""
     lowest = 2 - 2 * d
     if not ladders:
         return np.zeros((0, 0))
     rs = [None] * len(ladders) if rn is None else list(rn)
     mm = np.zeros(len(ladders), np.int64) if ms is None else np.asarray(ms, np.int64)
     st = None if strides is None else np.asarray(strides, np.int64)
-    nt = b1_counts(mm, n_terms, st, noise_id) if n_terms is not None and st is not None \
-        else [None] * len(ladders)
+    # B1's N: the count of differences for the non-overlapping estimators (and, under
+    # noise_id="stable32", the overlapping ones too); see above
+    nt: list[int | None] = [None] * len(ladders)
+    overlapping_too = check_noise_id(noise_id) == "stable32"
+    if n_terms is not None and st is not None:
+        nt = [int(v) if int(s) >= int(m) or overlapping_too else None
+              for v, s, m in zip(np.asarray(n_terms), st, mm, strict=True)]
     out = np.array([lad.alpha(lowest, None if r is None else r.ratio(), int(m), t)
                     for lad, r, m, t in zip(ladders, rs, mm, nt, strict=True)],
                    dtype=np.float64)
+    if rn_read is not None:
+        rn_read[...] = [lad.needs_rn(t) for lad, t in zip(ladders, nt, strict=True)]
     if ms is None or st is None:
         return out
     prev: int | None = None
@@ -589,6 +586,8 @@ def alphas_from_ladders(ladders: Sequence[Lag1Ladder], d: int,
         if prev is not None and ladders[k].count() < hold:
             have = np.isfinite(out[prev])
             out[k, have] = out[prev, have]
+            if rn_read is not None:
+                rn_read[k, have] = False  # the shorter τ's α: this τ's R(n) goes unread
         prev = int(k)
     return out
 

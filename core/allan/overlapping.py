@@ -45,7 +45,6 @@ from avard.core.allan import kernels
 from avard.core.allan.deviations import (
     AllanResult,
     alphas_from_ladders,
-    b1_counts,
     checked_block,
     result_from_sums,
 )
@@ -154,8 +153,9 @@ class OverlappingAllan:
         # identified by B1 alone (flicker PM where B1 says PM), as the cascade does.
         #
         # ``defer_rn=True`` (with ``n_total``) keeps none at all: R(n) is read only where B1
-        # says PM, which on an accelerometer's records it never does at these τ, so the
-        # caller that can read the record again (analyze of a file) asks ``rn_needed()``
+        # says PM at a τ that keeps its own α, which on an accelerometer's records is rare
+        # (B1 of 8–29 averages of FM noise saying PM by chance), so the caller that can
+        # read the record again (analyze of a file) asks ``rn_needed()``
         # after the last block and supplies those few sums from a pass of their own
         # (``set_rn``). That spares every such analyze their cost, 56 MB per 60 h axis and
         # 0.2 CPU-s for three, and lets two axes share a pass.
@@ -460,18 +460,17 @@ class OverlappingAllan:
     # ------------------------------------------------------------------------ R(n) later
     def rn_needed(self, noise_id: str = "avard") -> dict[int, list[int]]:
         """{index into ``ms``: channels} where R(n) was deferred and the noise
-        identification (by the rule ``noise_id``) needs it: B1 says PM with fewer than
-        ``MIN_POINTS`` averages. For a ``set_rn`` before ``result()``. Empty unless
+        identification (by the rule ``noise_id``) will read it: B1 says PM with fewer than
+        ``MIN_POINTS`` averages, at a τ whose α is not the shorter τ's (``result()``'s own
+        identification says where). For a ``set_rn`` before ``result()``. Empty unless
         ``defer_rn``, and on records with no PM noise at the long τ."""
         self._flush_ladders()
-        nt = b1_counts(self.ms, self._n, np.ones_like(self.ms), noise_id)  # as result()'s
-        out: dict[int, list[int]] = {}
-        for k, deferred in enumerate(self._rn_deferred):
-            if deferred and self._n[k] > 0:
-                need = np.flatnonzero(self._ladders[k].needs_rn(nt[k]))
-                if need.size:
-                    out[k] = [int(ch) for ch in need]
-        return out
+        read = np.zeros((len(self.ms), self.n_channels), dtype=bool)
+        alphas_from_ladders(self._ladders, 2, None, self.ms, self._n, np.ones_like(self.ms),
+                            noise_id, rn_read=read)
+        return {k: [int(ch) for ch in np.flatnonzero(read[k])]
+                for k, deferred in enumerate(self._rn_deferred)
+                if deferred and self._n[k] > 0 and read[k].any()}
 
     def rn_sums(self) -> list[RnSums | None]:
         """The R(n) sums kept per τ (None where there are none)."""

@@ -242,6 +242,31 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
         OverlappingAllan(1, 1.0, grid, n_total=n).set_rn(0, {0: kept.rn_sums()[-1]})
 
 
+def test_deferred_r_n_is_not_asked_for_where_the_shorter_tau_s_alpha_is_kept() -> None:
+    """Below 8 averages the overlapping estimator keeps the α of the next shorter τ
+    (HOLD_BELOW_AVERAGES): B1 may say PM there, but R(n) would go unread, so ``rn_needed``
+    (taken from ``result()``'s own identification) does not ask for it; the result is still
+    the one of keeping R(n) all along."""
+    n = 1 << 14
+    grid = np.array([1, 4, 64, n // 20, n // 6])  # 20 and 6 averages at the last two
+    y = power_law(2, n, np.random.default_rng(31))
+    kept = OverlappingAllan(1, 1.0, grid, n_total=n)
+    deferred = OverlappingAllan(1, 1.0, grid, n_total=n, defer_rn=True)
+    for acc in (kept, deferred):
+        for i in range(0, n, 3000):
+            acc.update(y[i:i + 3000])
+    need = deferred.rn_needed()  # (which also pushes the averages still waiting)
+    assert deferred._ladders[4].needs_rn()[0]  # B1 says PM at 6 averages ...
+    assert need == {3: [0]}  # ... but only the 20-average τ's R(n) is asked for
+    extra = OverlappingAllan(1, 1.0, grid[[3]])
+    for i in range(0, n, 3000):
+        extra.update(y[i:i + 3000])
+    deferred.set_rn(0, {3: extra.rn_sums()[0]})
+    a, b = kept.result(), deferred.result()
+    np.testing.assert_array_equal(a.alpha, b.alpha)
+    np.testing.assert_array_equal(a.lo, b.lo)
+
+
 def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypatch,
                                                               caplog) -> None:
     """analyze of a file defers R(n) and reads again only the channel whose long τ B1 calls
