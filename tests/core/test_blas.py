@@ -67,16 +67,25 @@ print(json.dumps({"libs": [os.path.basename(b.path) for b in libs], "pool": pool
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux /proc")
-def test_api_computations_leave_the_blas_pool_idle() -> None:
+@pytest.mark.parametrize("kernels", ["numpy", "compiled"])
+def test_api_computations_leave_the_blas_pool_idle(kernels: str) -> None:
+    """On numpy's path (no compiled loops: an install without a compiler) the computations
+    make long dot products, and the probe sees the workers wake without the hold. The
+    compiled loops make few (6–7 ticks against 24–28 here, 4 under a parallel suite), so
+    there only the hold itself is checked."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                        "AVARD_NO_C_KERNELS")}
+    if kernels == "numpy":
+        env["AVARD_NO_C_KERNELS"] = "1"
     out = subprocess.run([sys.executable, "-c", _CHILD], env=env, capture_output=True,
                          text=True, timeout=300, check=True).stdout
     r = json.loads(out.strip().splitlines()[-1])
     if not r["libs"] or max(r["pool"]) <= 1:
         pytest.skip(f"no OpenBLAS pool to hold here (libraries {r['libs']}, pool {r['pool']})")
-    # the same computations without the hold wake the workers: the probe can see them
-    assert r["free"] >= 5, r
+    if kernels == "numpy":
+        # the same computations without the hold wake the workers: the probe can see them
+        assert r["free"] >= 5, r
     # with it (as shipped) the workers get no CPU at all (one clock tick of slack)
     assert r["held"] <= 1, r
     # and the program gets its pool back afterwards, also when the computation raised
