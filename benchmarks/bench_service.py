@@ -42,7 +42,7 @@ from avard.daemon.hw.simulation import build_simulated, simulated_service
 from avard.daemon.net.subscriber import Subscriber
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.ring import Ring
-from avard.daemon.service.timebase import TimeBase
+from avard.daemon.hw.timebase import TimeBase
 
 
 def _cfg(odr: float, data_dir: str) -> dict:

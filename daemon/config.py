@@ -412,9 +412,9 @@ def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str
 
 
 def effective_poll_hz(cfg: Mapping[str, Mapping[str, Any]]) -> float:
-    """The FIFO drain rate at the nominal ODR (daemon/service/pacing.py; the reader uses the fitted
+    """The FIFO drain rate at the nominal ODR (daemon/hw/pacing.py; the reader uses the fitted
     one): the configured least rate, raised to drain the 32-set FIFO when half full."""
-    from avard.daemon.service.pacing import drain_period_s
+    from avard.daemon.hw.pacing import drain_period_s
 
     return 1.0 / drain_period_s(float(cfg["sensor"]["odr_hz"]), float(cfg["sensor"]["poll_hz"]))
 

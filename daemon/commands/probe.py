@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from avard.daemon.config_types import load
     from avard.daemon.hw.rig import bring_up, open_sensor
-    from avard.daemon.service.timebase import TimeBase
+    from avard.daemon.hw.timebase import TimeBase
 
     if not 0.5 <= args.seconds <= 3600:
         raise ConfigError(f"--seconds {args.seconds}: use 0.5 to 3600 s")

@@ -35,7 +35,7 @@ from avard.core.errors import (
 from avard.daemon.hw import registers as R
 from avard.daemon.hw.source import GapReason, parse_reasons
 from avard.daemon.hw.transport import I2cBus, RegisterBus
-from avard.daemon.service.timebase import SystemClock
+from avard.daemon.hw.timebase import SystemClock
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")

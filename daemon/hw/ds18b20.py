@@ -38,7 +38,7 @@ from typing import Any
 
 from avard.core.errors import ConfigError
 from avard.daemon.hw.w1_sysfs import DS18B20_FAMILY, crc8_maxim
-from avard.daemon.service.timebase import SystemClock
+from avard.daemon.hw.timebase import SystemClock
 
 log = logging.getLogger(__name__)
 

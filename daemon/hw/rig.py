@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from avard.core.errors import ConfigError, HardwareError
 from avard.daemon.config_types import Config, SensorConfig, TemperatureConfig
-from avard.daemon.service.pacing import watermark_settings
+from avard.daemon.hw.pacing import watermark_settings
 
 if TYPE_CHECKING:
     from avard.daemon.hw.adxl355 import Adxl355, DeviceInfo, SelfTestResult
@@ -132,7 +132,7 @@ def _open_simulated(config: Config, preset: str, seed: int | None,
 def _open_hardware(sensor: SensorConfig) -> OpenedSensor:
     from avard.daemon.hw.adxl355 import Adxl355
     from avard.daemon.hw.transport import open_bus
-    from avard.daemon.service.timebase import SystemClock
+    from avard.daemon.hw.timebase import SystemClock
 
     bus = open_bus(sensor.bus, bus=sensor.bus_number, device=sensor.spi_device,
                    address=sensor.i2c_address, speed_hz=sensor.spi_speed_hz)

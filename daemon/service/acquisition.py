@@ -33,9 +33,9 @@ from avard.core.errors import AvardError, DeviceStalledError, HardwareError
 from avard.core.io import frames
 from avard.daemon.hw.interrupt import InterruptPin
 from avard.daemon.hw.source import GapReason, SampleSource
-from avard.daemon.service.pacing import drain_period_s
+from avard.daemon.hw.pacing import drain_period_s
 from avard.daemon.service.ring import Ring
-from avard.daemon.service.timebase import TimeBase
+from avard.daemon.hw.timebase import TimeBase
 
 log = logging.getLogger(__name__)
 

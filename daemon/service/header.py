@@ -6,7 +6,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from avard.daemon.service.timebase import TimeBase
+from avard.daemon.hw.timebase import TimeBase
 
 Record = dict[str, Any]
 

@@ -48,7 +48,7 @@ from avard.daemon.service.recorder_stage import RecorderStage
 from avard.daemon.service.ring import Ring
 from avard.daemon.service.snapshots import SnapshotBoard, fit_record
 from avard.daemon.service.stage import Stage
-from avard.daemon.service.timebase import SystemClock, TimeBase
+from avard.daemon.hw.timebase import SystemClock, TimeBase
 
 log = logging.getLogger("avard.daemon.service")
 

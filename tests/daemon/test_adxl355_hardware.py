@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.transport import open_bus
-from avard.daemon.service.timebase import TimeBase
+from avard.daemon.hw.timebase import TimeBase
 
 pytestmark = pytest.mark.hardware
 

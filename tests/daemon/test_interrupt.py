@@ -14,7 +14,7 @@ from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, 
 from avard.daemon.hw.interrupt import EmulatedInterruptPin, GpiodPin, parse_spec
 from avard.daemon.hw.simulation import simulated_service
 from avard.daemon.hw.transport import SpiBus
-from avard.daemon.service.pacing import watermark_sets, watermark_settings
+from avard.daemon.hw.pacing import watermark_sets, watermark_settings
 
 
 def _rig(use_int1: bool) -> tuple[Adxl355, EmulatedAdxl355, VirtualClock]:

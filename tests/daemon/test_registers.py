@@ -75,7 +75,7 @@ def test_importing_the_hardware_layer_touches_no_hardware():
 
     code = ("import sys\n"
             "import avard.daemon.hw.registers, avard.daemon.hw.transport, avard.daemon.hw.adxl355\n"
-            "import avard.daemon.service.timebase, avard.daemon.hw.emulator\n"
+            "import avard.daemon.hw.timebase, avard.daemon.hw.emulator\n"
             "import avard.daemon.hw.ds18b20\n"
             "import avard.daemon.hw.w1_sysfs, avard.daemon.hw.thread_priority\n"
             "import avard.daemon.commands.probe\n"
