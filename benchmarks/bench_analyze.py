@@ -86,8 +86,8 @@ def _timed(owner: Any, name: str, parts: dict[str, float], key: str) -> None:
 
 
 def worker_analyze(path: str) -> dict:
-    from avard.core import report
     from avard.core.allan.overlapping import OverlappingAllan
+    from avard.core.analysis import engine as report
 
     parts: dict[str, float] = {}
     _timed(report, "_one_pass", parts, "passes")

@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 from avard.daemon.config import effective_poll_hz, load_config
 from avard.daemon.hw.simulation import build_simulated, simulated_service
+from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.net.subscriber import Subscriber
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.ring import Ring
-from avard.daemon.hw.timebase import TimeBase
 
 
 def _cfg(odr: float, data_dir: str) -> dict:

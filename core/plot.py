@@ -73,7 +73,7 @@ def save_figure(fig: Any, path: str | Path, *, dpi: int) -> Path:
 
 
 def _panel(ax: Any, ch: Any) -> None:
-    from avard.core.report import ESTIMATOR_LABELS
+    from avard.core.analysis.results import ESTIMATOR_LABELS
 
     a, fit = ch.allan, ch.fit
     measured = f"measured {ESTIMATOR_LABELS.get(ch.estimator, ch.estimator)}"

@@ -2,7 +2,7 @@
 without scipy.
 
 ``avard analyze`` needs one F quantile after its pass over the data, the line finder's
-threshold (core/report.py ``line_threshold``: F(ν, ν_bg) with ν up to ~6000, ν_bg up to
+threshold (core/analysis/spectrum.py ``line_threshold``: F(ν, ν_bg) with ν up to ~6000, ν_bg up to
 ~3·10⁵ and tail probabilities down to ~1e-7). Importing scipy.special for it cost every
 analyze 0.1–0.2 CPU-s on a PC and about a second on a Raspberry Pi; the χ² quantiles and tail
 (core/allan/chi2.py) are here for the same reason. tests/core/test_beta.py holds these values

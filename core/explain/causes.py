@@ -295,7 +295,12 @@ def min_detectable_sinusoid(n_white: float, b_inst: float, k_rrw: float, record_
     bins; the noise there is S(f0) (:func:`noise_psd`). The finder asks the bin/background
     ratio to exceed ``report.line_threshold`` (F(ν, ν_bg) at a 1 % chance of one false line
     per spectrum), so on average A_min² = 3·Δf·S(f0)·(thr − 1)/HANN_SCALLOP."""
-    from avard.core.report import LINE_HALF_WIDTH, LINE_LOBE, line_threshold, welch_nperseg
+    from avard.core.analysis.spectrum import (
+        LINE_HALF_WIDTH,
+        LINE_LOBE,
+        line_threshold,
+        welch_nperseg,
+    )
 
     n = int(record_s * rate_hz)
     L = welch_nperseg(n)

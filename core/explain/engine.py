@@ -51,6 +51,8 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.analysis.engine import ProgressFn, analyze, analyze_stream, record_blocks
+from avard.core.analysis.results import Analysis, ChannelAnalysis
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.causes import Finding
@@ -64,14 +66,6 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
 )
 from avard.core.model.fit import NoiseFit, fit_noise
-from avard.core.report import (
-    Analysis,
-    ChannelAnalysis,
-    ProgressFn,
-    analyze,
-    analyze_stream,
-    record_blocks,
-)
 from numpy.typing import NDArray
 
 __all__ = ["ChannelExplanation", "Explanation", "Finding", "SlowView", "block_size",

@@ -21,21 +21,16 @@ import math
 import sys
 from pathlib import Path
 
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
 from avard.core.errors import DataError
 from avard.core.io.outputs import check_output_file, check_plot_output
-from avard.core.report import (
-    adev_csv,
-    analyze,
-    format_table,
-    kalibr_yaml,
-    progress_printer,
-    psd_csv,
-)
 from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
     split_channels,
 )
+from avard.daemon.commands.progress import progress_printer
 
 NAME = "analyze"
 HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"
@@ -167,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
 
         plot_analysis(an, args.plot)
         if args.psd:
-            from avard.core.psd import plot_psd
+            from avard.core.analysis.psd import plot_psd
 
             p = Path(args.plot)
             plot_psd(an, p.with_name(f"{p.stem}_psd{p.suffix}"))

@@ -34,8 +34,8 @@ from avard.core.errors import (
 )
 from avard.daemon.hw import registers as R
 from avard.daemon.hw.source import GapReason, parse_reasons
-from avard.daemon.hw.transport import I2cBus, RegisterBus
 from avard.daemon.hw.timebase import SystemClock
+from avard.daemon.hw.transport import I2cBus, RegisterBus
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")

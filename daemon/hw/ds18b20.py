@@ -37,8 +37,8 @@ from types import ModuleType
 from typing import Any
 
 from avard.core.errors import ConfigError
-from avard.daemon.hw.w1_sysfs import DS18B20_FAMILY, crc8_maxim
 from avard.daemon.hw.timebase import SystemClock
+from avard.daemon.hw.w1_sysfs import DS18B20_FAMILY, crc8_maxim
 
 log = logging.getLogger(__name__)
 

@@ -131,8 +131,8 @@ def _open_simulated(config: Config, preset: str, seed: int | None,
 
 def _open_hardware(sensor: SensorConfig) -> OpenedSensor:
     from avard.daemon.hw.adxl355 import Adxl355
-    from avard.daemon.hw.transport import open_bus
     from avard.daemon.hw.timebase import SystemClock
+    from avard.daemon.hw.transport import open_bus
 
     bus = open_bus(sensor.bus, bus=sensor.bus_number, device=sensor.spi_device,
                    address=sensor.i2c_address, speed_hz=sensor.spi_speed_hz)

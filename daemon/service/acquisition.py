@@ -32,10 +32,10 @@ import numpy as np
 from avard.core.errors import AvardError, DeviceStalledError, HardwareError
 from avard.core.io import frames
 from avard.daemon.hw.interrupt import InterruptPin
-from avard.daemon.hw.source import GapReason, SampleSource
 from avard.daemon.hw.pacing import drain_period_s
-from avard.daemon.service.ring import Ring
+from avard.daemon.hw.source import GapReason, SampleSource
 from avard.daemon.hw.timebase import TimeBase
+from avard.daemon.service.ring import Ring
 
 log = logging.getLogger(__name__)
 

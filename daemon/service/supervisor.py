@@ -32,6 +32,7 @@ from avard.core.io.recording import AllanFeed
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
+from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
@@ -48,7 +49,6 @@ from avard.daemon.service.recorder_stage import RecorderStage
 from avard.daemon.service.ring import Ring
 from avard.daemon.service.snapshots import SnapshotBoard, fit_record
 from avard.daemon.service.stage import Stage
-from avard.daemon.hw.timebase import SystemClock, TimeBase
 
 log = logging.getLogger("avard.daemon.service")
 

@@ -34,7 +34,7 @@ def test_cli_path_and_python_api_give_one_alpha_and_edf(imudata_dir: Path) -> No
     """`avard analyze` (streamed OADEV) and `oavar` (batch) on a real record: the same noise
     type and EDF at every τ, the cascade the same α where its τ coincide (issue 12: the CLI
     and the API used to disagree, EDF 158 against 520 at one point)."""
-    from avard.core.report import analyze
+    from avard.core.analysis.engine import analyze
 
     path = imudata_dir / "adis16405_run1.npz"
     an = analyze(str(path), find_sinusoids=False)

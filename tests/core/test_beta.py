@@ -16,7 +16,7 @@ from avard.core.allan.beta import (
     f_ppf,
 )
 from avard.core.allan.chi2 import chi2_sf
-from avard.core.report import line_threshold
+from avard.core.analysis.spectrum import line_threshold
 from scipy.special import betainc as sc_betainc
 from scipy.special import betaincc, betainccinv, chdtrc, fdtri
 from scipy.special import betaincinv as sc_betaincinv

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from avard.core.analysis.engine import analyze
 from avard.core.explain.causes import (
     min_detectable_sinusoid,
     min_detectable_step,
@@ -21,7 +22,6 @@ from avard.core.explain.gauss_markov import (
     min_detectable_gauss_markov,
 )
 from avard.core.explain.thermal_fit import min_detectable_tempco
-from avard.core.report import analyze
 
 from tests.support.hidden import Truth, make_record, save
 

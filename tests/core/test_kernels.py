@@ -244,7 +244,7 @@ def test_ladder_compiled_equals_numpy(compiled: None) -> None:
 def test_welch_compiled_equals_numpy(compiled: None) -> None:
     """The Welch spectrum's Σ |X|² over segments by ``power_sum`` and by numpy's square and
     sums: the same PSD to rounding, over blocks that leave segments across their ends."""
-    from avard.core.report import WelchAccumulator
+    from avard.core.analysis.spectrum import WelchAccumulator
 
     a = np.random.default_rng(15).standard_normal((50_000, 2)) + np.array([0.0, 9.81])
     psd = []

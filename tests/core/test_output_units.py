@@ -9,7 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core.report import ADEV_UNITS, analyze, format_table
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.formats import format_table
+from avard.core.analysis.results import ADEV_UNITS
 from avard.core.sim.presets import make_config
 from avard.core.sim.sim_io import write_npz
 from avard.daemon.cli import main

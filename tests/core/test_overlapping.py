@@ -271,7 +271,7 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
                                                               caplog) -> None:
     """analyze of a file defers R(n) and reads again only the channel whose long τ B1 calls
     PM; its result is analyze_stream's, which keeps R(n) in the one pass."""
-    from avard.core import report
+    from avard.core.analysis import engine as report
 
     n = 1 << 15
     y = np.stack([power_law(2, n, np.random.default_rng(21)) * 1e-3,
@@ -286,7 +286,7 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
         return lazy(path, block, rate_hz, columns, verify)
 
     monkeypatch.setattr(report, "_lazy_segments", spy)
-    with caplog.at_level("INFO", logger="avard.core.report"):
+    with caplog.at_level("INFO", logger="avard.core.analysis.engine"):
         from_file = report.analyze(str(path), find_sinusoids=False)
     # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
@@ -347,7 +347,7 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
 def test_the_oadev_reaches_n_over_4_or_says_where_memory_stopped_it(tmp_path, monkeypatch):
     """With room, the grid reaches m = N/4 (Stable32's range); with too little memory for the
     history, analyze stops earlier and says so in the table and the JSON."""
-    from avard.core import report
+    from avard.core.analysis import engine as report
 
     n = 1 << 16
     rng = np.random.default_rng(5)
@@ -360,13 +360,15 @@ def test_the_oadev_reaches_n_over_4_or_says_where_memory_stopped_it(tmp_path, mo
     assert int(cut.channels["x"].allan.m[-1]) == 1024
     d = cut.to_dict()["oadev_cut"]
     assert d["tau_max_s"] == pytest.approx(10.24) and d["tau_full_s"] == pytest.approx(163.84)
-    assert "OADEV stops at τ = 10.24 s, short of N/4 (163.8 s)" in report.format_table(cut)
+    from avard.core.analysis.formats import format_table
+
+    assert "OADEV stops at τ = 10.24 s, short of N/4 (163.8 s)" in format_table(cut)
 
 
 def test_one_pass_per_channel_equals_one_pass_for_all(tmp_path, monkeypatch):
     """A long record is read once per channel (only one channel's history live); the result
     is the one pass over every channel's, channel for channel, spectrum and fit included."""
-    from avard.core import report
+    from avard.core.analysis import engine as report
 
     n = 1 << 15
     rng = np.random.default_rng(6)

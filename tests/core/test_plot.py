@@ -13,7 +13,7 @@ def test_the_fitted_range_is_in_the_legend(tmp_path: Path, monkeypatch: pytest.M
                                            ) -> None:
     pytest.importorskip("matplotlib")
     from avard.core import plot
-    from avard.core.report import analyze
+    from avard.core.analysis.engine import analyze
 
     rng = np.random.default_rng(5)
     data = tmp_path / "w.npz"

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.formats import format_table, psd_csv
+from avard.core.analysis.psd import WhiteDensity
 from avard.core.model.fit import TermEstimate
-from avard.core.psd import WhiteDensity
-from avard.core.report import analyze, format_table, psd_csv
 from avard.core.sim.presets import TABLE3_N, make_config
 from avard.core.sim.sim_io import write_npz
 
@@ -186,8 +187,8 @@ def test_band_edf_matches_the_scatter_of_a_welch_band_mean() -> None:
     measured one (the wide-band formula is a few % conservative on a 205-bin band: the edge
     bins' neighbours outside are not summed; 1.02–1.12 over seeds 3–8). Counting each bin
     with the EDF of a single bin (ν ≈ 1.8 K, no correlation) would claim 0.70 of it."""
-    from avard.core.psd import _band_nu_per_bin
-    from avard.core.report import WelchAccumulator
+    from avard.core.analysis.psd import _band_nu_per_bin
+    from avard.core.analysis.spectrum import WelchAccumulator
 
     rng = np.random.default_rng(3)
     records, n, nper = 400, 1 << 14, 512
@@ -207,7 +208,7 @@ def test_the_fit_as_a_spectrum_matches_the_welch_psd_and_is_drawn(tmp_path: Path
     0.05–1 Hz, where flicker is 0.6 to 13 times the white level, within 10 % (its Welch
     scatter is 2.2 %), and over 2–40 Hz within 3 % (scatter 0.3 %); a two-sided/one-sided or
     per-sample/per-Hz slip would be a factor 2 or 100."""
-    from avard.core.psd import _one_sided_unit_spectra
+    from avard.core.analysis.psd import _one_sided_unit_spectra
 
     rng = np.random.default_rng(21)
     n = 1 << 18
@@ -221,8 +222,8 @@ def test_the_fit_as_a_spectrum_matches_the_welch_psd_and_is_drawn(tmp_path: Path
         model = np.asarray(ch.fit.theta) @ _one_sided_unit_spectra(cp.f[band], ch.fit)
         assert np.mean(cp.psd[band]) == pytest.approx(np.mean(model), rel=tol), (lo, hi)
     pytest.importorskip("matplotlib")
+    from avard.core.analysis.psd import psd_panel
     from avard.core.plot import pyplot
-    from avard.core.psd import psd_panel
 
     fig, ax = pyplot().subplots()
     try:

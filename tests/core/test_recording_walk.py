@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from avard.core.analysis.engine import analyze
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
@@ -20,7 +21,6 @@ from avard.core.io.recording import (
     replay_allan,
     walk,
 )
-from avard.core.report import analyze
 from avard.daemon.service.recorder import Recorder
 from hypothesis import given, settings
 from hypothesis import strategies as st

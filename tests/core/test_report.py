@@ -10,16 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml
+from avard.core.analysis.spectrum import WelchAccumulator, find_lines
 from avard.core.errors import DataError
 from avard.core.model.terms import TERMS, UNITS
-from avard.core.report import (
-    WelchAccumulator,
-    adev_csv,
-    analyze,
-    find_lines,
-    format_table,
-    kalibr_yaml,
-)
 
 from .test_fit import record
 

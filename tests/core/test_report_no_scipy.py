@@ -15,9 +15,10 @@ import numpy as np
 # Run in a fresh interpreter: the test process has scipy loaded by other tests.
 PROBE = """
 import json, sys
-import avard.core.report as r
+import avard.core.analysis.engine as r
+from avard.core.analysis.formats import format_table
 an = r.analyze(sys.argv[1])
-table = r.format_table(an)
+table = format_table(an)
 print(json.dumps({
     "scipy": sorted(m for m in sys.modules if m == "scipy" or m.startswith("scipy.")),
     "lines": {k: ch.lines for k, ch in an.channels.items()},

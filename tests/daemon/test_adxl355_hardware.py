@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 from avard.daemon.hw.adxl355 import Adxl355
-from avard.daemon.hw.transport import open_bus
 from avard.daemon.hw.timebase import TimeBase
+from avard.daemon.hw.transport import open_bus
 
 pytestmark = pytest.mark.hardware
 

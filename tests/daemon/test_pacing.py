@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
+from avard.daemon.hw.pacing import FIFO_SETS, drain_period_s
+from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.service.acquisition import Acquisition
-from avard.daemon.hw.pacing import FIFO_SETS, drain_period_s
 from avard.daemon.service.ring import Ring
-from avard.daemon.hw.timebase import TimeBase
 
 
 def test_drain_period_is_half_the_fifo_or_the_least_rate() -> None:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.hw.transport import SpiBus
 from avard.daemon.hw.timebase import SystemClock, TimeBase
+from avard.daemon.hw.transport import SpiBus
 
 
 def run(ppm: float, odr: float = 1000.0, seconds: float = 20.0, overrun_every: int = 0,

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult
+from avard.core.analysis.engine import analyze_stream
 from avard.core.model.fit import NoiseFit, slope_method
 from avard.core.model.terms import BI_FACTOR
-from avard.core.report import analyze_stream
 from avard.core.sim.presets import (
     DATASHEET_N,
     G0,

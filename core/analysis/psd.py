@@ -1,7 +1,7 @@
 """The power spectral density beside the Allan variance (IEEE Std 1293 names both).
 
 ``avard analyze`` already streams every channel through a Welch accumulator
-(``report.WelchAccumulator``: Hann window, 50 % overlap, mean removed per segment) to find
+(``spectrum.WelchAccumulator``: Hann window, 50 % overlap, mean removed per segment) to find
 sinusoids. This module turns its averaged periodogram into what a user reads:
 
 * the one-sided PSD in (m/s²)²/Hz with its chi-squared band: each bin of an average of K
@@ -16,7 +16,7 @@ sinusoids. This module turns its averaged periodogram into what a user reads:
   below 0.4 f_s and half the sensor's low-pass corner when it is known. The other components'
   fitted spectrum is subtracted there, not ignored (``white_density``): a plain mean of the
   region read N 2.6 % high on a B/N ≈ 1.9 √Hz record whose interval was 0.6 % wide;
-* the lines found (``report.find_lines``), unchanged.
+* the lines found (``spectrum.find_lines``), unchanged.
 """
 
 from __future__ import annotations
@@ -238,7 +238,7 @@ def plot_psd(an: Any, path: str | Path, *, dpi: int = 130) -> Path:
 
 
 def psd_panel(ax: Any, ch: Any) -> None:
-    """One channel's panel of :func:`plot_psd` (``ch``: a ``report.ChannelAnalysis``)."""
+    """One channel's panel of :func:`plot_psd` (``ch``: a ``results.ChannelAnalysis``)."""
     cp = ch.psd
     keep = cp.f > 0
     f = cp.f[keep]

@@ -23,24 +23,22 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from avard.core.allan import kernels
 from avard.core.allan.noise_id import check_noise_id
-from avard.core.allan.scratch import scratch
+from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
+from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_nperseg
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.readers import iter_blocks, load_record
-from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from avard.core.allan.overlapping import OverlappingAllan
-    from avard.core.model.fit import NoiseFit
+
 
 # analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
 # χ² tail come from core/allan/beta.py and chi2.py (scipy.special cost 0.1–0.2 CPU-s of every
@@ -50,23 +48,14 @@ if TYPE_CHECKING:
 # pass over the data: loaded before the pass it would sit under the OADEV's history at the
 # peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze).
 
-__all__ = ["Analysis", "ChannelAnalysis", "WelchAccumulator", "analyze", "analyze_stream",
-           "find_lines", "psd_csv"]
 
+__all__ = ["analyze", "analyze_stream"]
+
+#: A progress callback: (samples read, total or None).
 ProgressFn = Callable[[int, int | None], None]
 
 log = logging.getLogger(__name__)
 
-#: Estimator names as they appear in the table, the JSON and the csv.
-ESTIMATORS = {
-    "oadev": "fully overlapping ADEV (OADEV, NIST SP 1065 eq. 12; Stable32 'Overlapping Allan')",
-    "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
-}
-#: The estimator as a figure's legend names it.
-ESTIMATOR_LABELS = {"oadev": "OADEV", "cascade": "cascade ADEV (stride m/8)"}
-#: SI unit of each per-τ array of a channel in ``--json`` ("1": dimensionless).
-ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s^2",
-              "edf": "1", "alpha": "1"}
 # OADEV τ grid: octaves while the record holds ≥ 4 non-overlapping intervals (Stable32's
 # default range), and while the running-sum rings live at once (2·m_max points per channel)
 # fit a quarter of the memory available when analyze starts, at least this much. A fixed
@@ -93,277 +82,6 @@ def ring_budget_bytes() -> int:
     except (OSError, ValueError, IndexError):
         pass
     return RING_BUDGET_BYTES
-
-
-# ---------------------------------------------------------------------------------------------
-# spectrum and sinusoid detection
-
-
-class WelchAccumulator:
-    """Streaming Welch PSD (Hann window, 50 % overlap, mean removed per segment), one-sided
-    density in (unit)²/Hz. Memory: one segment per channel, and the segments of one block
-    while it is transformed."""
-
-    def __init__(self, n_channels: int, rate_hz: float, nperseg: int) -> None:
-        if int(nperseg) < 2 or int(nperseg) % 2:
-            # 50 % overlap and the segment means from half-segment sums need an even length
-            raise DataError(f"Welch segment of {nperseg} samples: use an even length ≥ 2")
-        self.c = n_channels
-        self.rate = float(rate_hz)
-        self.L = int(nperseg)
-        self.win = np.hanning(self.L + 1)[:-1]  # periodic Hann
-        self.scale = 1.0 / (self.rate * np.sum(self.win**2))
-        # The segment mean is removed in the spectrum: a periodic Hann window's transform is
-        # nonzero only at bins 0 and ±1, so (x − μ)·w and x·w transform alike except there,
-        # by μ·W₀ and μ·W₁ (one pass fewer over every sample than subtracting μ first).
-        self._w01 = np.fft.rfft(self.win)[:2].real.copy()
-        self._power = np.zeros((n_channels, self.L // 2 + 1))  # Σ |X|² per channel and bin
-        self.n_seg = 0
-        # channel-major samples not yet in a full segment, then the block: each sample is
-        # transposed once, and every segment is a contiguous row of it
-        self._cm = np.zeros((n_channels, 0))
-        self._held = 0
-        self._ref: NDArray[np.float64] | None = None
-
-    def update(self, block: NDArray) -> None:
-        a = np.asarray(block, dtype=float).reshape(-1, self.c)
-        if len(a) == 0:
-            return
-        if self._ref is None:
-            # a per-channel constant (the first sample) taken off every sample: the segment
-            # means to remove are then the signal's wander, not 9.81 m/s² of gravity
-            self._ref = a[0].copy()
-        held, total = self._held, self._held + len(a)
-        if self._cm.shape[1] < total:
-            grown = np.empty((self.c, max(total, 2 * self._cm.shape[1])))
-            grown[:, :held] = self._cm[:, :held]
-            self._cm = grown
-        np.subtract(a.T, self._ref[:, None], out=self._cm[:, held:total])
-        step = self.L // 2
-        k = (total - self.L) // step + 1 if total >= self.L else 0
-        if k > 0:
-            # all the block's segments at once (k, C, L), strided over the channel-major
-            # buffer: one window product, one batched FFT per block (contiguous rows into
-            # reused buffers: a transform of fresh, page-faulted memory or of one segment at
-            # a time measured twice as slow)
-            cm = self._cm
-            rows, cols = cm.strides
-            segs = np.lib.stride_tricks.as_strided(cm, (k, self.c, self.L),
-                                                   (step * cols, rows, cols), writeable=False)
-            nf = self.L // 2 + 1
-            seg = scratch("welch.seg", k * self.c, self.L, np.float64).reshape(k, self.c, -1)
-            np.multiply(segs, self.win, out=seg)
-            spec = scratch("welch.spec", k * self.c, nf, np.complex128).reshape(k, self.c, -1)
-            np.fft.rfft(seg, axis=2, out=spec)
-            # segment means from half-segment sums (each sample summed once, not twice)
-            halves = cm[:, :(k + 1) * step].reshape(self.c, k + 1, step).sum(axis=2)
-            mean = ((halves[:, :-1] + halves[:, 1:]) / self.L).T  # (k, C)
-            spec[:, :, 0] -= mean * self._w01[0]
-            spec[:, :, 1] -= mean * self._w01[1]
-            kern = kernels.compiled()
-            if kern is not None:  # Σ over the segments of re² + im², one pass
-                kern.power_sum(spec.reshape(-1).view(np.float64), k, self._power.reshape(-1))
-            else:
-                parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
-                np.square(parts, out=parts)
-                self._power += parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)
-            self.n_seg += k
-        # the samples of the next, still incomplete segment move to the front
-        rest = total - k * step
-        if k > 0:
-            self._cm[:, :rest] = self._cm[:, k * step:total]
-        self._held = rest
-
-    def gap(self) -> None:
-        """A break in the data: the partial segment is dropped, none spans the gap."""
-        self._held = 0
-
-    def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(f in Hz, PSD (F, C)); empty when no full segment was seen."""
-        f = np.fft.rfftfreq(self.L, 1.0 / self.rate)
-        if self.n_seg == 0:
-            return f, np.full((len(f), self.c), np.nan)
-        psd = self._power.T / self.n_seg * self.scale
-        psd[1:-1] *= 2.0  # one-sided
-        return f, psd
-
-
-#: Bins each side of a line's main lobe (Hann) and the running-median half width.
-LINE_LOBE, LINE_HALF_WIDTH = 2, 32
-
-
-def welch_nperseg(total: int | None) -> int:
-    """analyze's Welch segment: 16384 samples (≈ 0.008 Hz at 125 Hz), fewer for short
-    records so that there are ≥ 8 segments."""
-    return 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
-
-
-def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: float = 0.01
-                   ) -> NDArray[np.float64]:
-    """The bin/background ratio a line must exceed (``find_lines``' test): bins are
-    χ²(ν)/ν with ν ≈ 1.8·segments, the background a median of ``n_bg`` bins carrying about
-    2/π of their degrees of freedom, so the ratio is F(ν, ν_bg); Bonferroni over ``n_bins``
-    keeps one false line per spectrum at ``p_false``."""
-    from avard.core.allan.beta import f_isf_array  # not scipy: see the note above
-
-    nu = max(2.0, 1.8 * n_seg)
-    nu_bg = np.maximum(2.0, np.asarray(n_bg, dtype=float) * nu * 2.0 / math.pi)
-    # the F(ν, ν_bg) upper quantile
-    return f_isf_array(p_false / n_bins, nu, nu_bg)
-
-
-def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
-               max_lines: int = 8, half_width: int = LINE_HALF_WIDTH
-               ) -> list[dict[str, float]]:
-    """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
-    more than chance allows.
-
-    Background: the median of the bins within ±``half_width`` of each bin, leaving out the
-    bin's own main lobe (±2 bins), divided by the median/mean ratio of the averaged
-    periodogram's χ² distribution. The window is always symmetric: near 0 Hz it shrinks to
-    the bins available on both sides (DC excluded). A one-sided or padded window there is
-    biased low on a red spectrum (flicker, random walk), and with thousands of averaged
-    segments that bias alone passes the test: a 60 h record's 1/f rise at 0.05 Hz read as two
-    lines; at Nyquist the un-doubled last bin does the same. The median of a symmetric window
-    is unbiased for any monotonic background. Bins with fewer than 4 background bins on each
-    side are not tested (the lowest and highest 7).
-    Test: each bin is χ²(ν)/ν × background with ν ≈ 1.8·segments (Hann, 50 % overlap; Welch
-    1967), the background an estimate with ≈ (2/π)·ν per bin it is the median of, so the
-    ratio is F(ν, ν_bg)-distributed; the threshold keeps the chance of one false line per
-    spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P), P = Σ (PSD −
-    background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
-    {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
-    """
-    lobe, min_side = LINE_LOBE, 4
-    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
-        return []
-    from avard.core.allan.chi2 import chi2_ppf
-
-    nu = max(2.0, 1.8 * n_seg)
-    med_ratio = float(chi2_ppf(0.5, nu)) / nu
-    ring = np.ones(2 * half_width + 1, dtype=bool)
-    ring[half_width - lobe:half_width + lobe + 1] = False
-    # median of the ring around every bin whose full window fits (np.median averages the two
-    # middle values of the even count; a single rank would be biased on a sloping spectrum)
-    bg = np.full(len(f), np.nan)
-    win = np.lib.stride_tricks.sliding_window_view(psd, 2 * half_width + 1)
-    bg[half_width:len(f) - half_width] = np.median(win[:, ring], axis=1)
-    n_bg = np.full(len(f), 2.0 * (half_width - lobe))
-    # bins near either end: the widest symmetric window that fits between the bin and DC or
-    # Nyquist (both excluded: DC is emptied by the mean removal, Nyquist is not doubled)
-    first = lobe + min_side + 1
-    last = len(f) - 1 - first
-    for k in [*range(first, half_width + 1), *range(len(f) - 1 - half_width, last + 1)]:
-        w = min(k - 1, len(f) - 2 - k, half_width)
-        sides = np.r_[psd[k - w:k - lobe], psd[k + lobe + 1:k + w + 1]]
-        bg[k] = np.median(sides)
-        n_bg[k] = len(sides)
-    bg[:first] = bg[first]          # only used for the main lobe of a line at the first bin
-    bg[last + 1:] = bg[last]
-    bg /= med_ratio
-    # The background is itself an estimate: a median of n_bg bins carries about 2/π of their
-    # degrees of freedom, so bin/background is F(ν, ν_bg)-distributed, not χ²(ν)/ν. That
-    # matters where the window is short (low bins) and few segments were averaged.
-    thr = line_threshold(len(f), n_seg, n_bg, p_false)
-    ratio = psd / np.where(bg > 0, bg, np.inf)
-    df = f[1] - f[0]
-    lines = []
-    k = first
-    while k <= last:
-        if ratio[k] > thr[k] and ratio[k] >= ratio[k - 1] and ratio[k] >= ratio[k + 1]:
-            sl = slice(k - 2, k + 3)
-            excess = np.clip(psd[sl] - bg[sl], 0.0, None)
-            power = float(np.sum(excess) * df)
-            if power > 0:
-                freq = float(np.sum(excess * f[sl]) / np.sum(excess))
-                lines.append({"frequency_hz": freq, "amplitude": math.sqrt(2.0 * power)})
-            k += 3
-        else:
-            k += 1
-    lines.sort(key=lambda d: -d["amplitude"])
-    return lines[:max_lines]
-
-
-# ---------------------------------------------------------------------------------------------
-# the analysis
-
-
-@dataclass
-class ChannelAnalysis:
-    """One channel: its Allan result (AllanResult, one channel), the fit, the lines found."""
-
-    name: str
-    allan: Any
-    fit: NoiseFit
-    lines: list[dict[str, float]] = field(default_factory=list)
-    estimator: str = "oadev"
-    psd: Any = None  # psd.ChannelPsd when asked for (analyze(psd=True))
-
-    def to_dict(self) -> dict[str, Any]:
-        a = self.allan
-        d = {"estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
-             "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
-             "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
-        if getattr(a, "quantiles", "exact") != "exact":  # said only when not the default
-            d["quantiles"] = a.quantiles
-        if getattr(a, "noise_id", "avard") != "avard":  # the rule behind alpha, likewise
-            d["noise_id"] = a.noise_id
-        fd = self.fit.to_dict()
-        d["terms"] = fd["terms"]
-        d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
-                          for s in self.lines]
-        d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
-        if self.psd is not None:
-            d["psd"] = self.psd.to_dict()
-        return d
-
-
-@dataclass
-class Analysis:
-    """The whole ``avard analyze`` result: source, rate (Hz), sample count, channels."""
-
-    source: str
-    rate_hz: float
-    n_samples: int
-    channels: dict[str, ChannelAnalysis]
-    meta: dict[str, Any] = field(default_factory=dict)
-    estimator: str = "oadev"
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
-        d = {"source": self.source, "rate_hz": float(self.rate_hz),
-             "n_samples": int(self.n_samples), "estimator": self.estimator,
-             "estimator_description": ESTIMATORS[self.estimator],
-             "channels": {k: c.to_dict() for k, c in self.channels.items()}}
-        rec = self.recording_summary()
-        if rec is not None:
-            d["recording"] = rec
-        if "oadev_cut" in self.meta:
-            d["oadev_cut"] = self.meta["oadev_cut"]
-        return d
-
-    def recording_summary(self) -> dict[str, Any] | None:
-        """For a service recording: its segments (split at every gap record and restart),
-        gap records, and what damage cost or duplication repeated, in samples (index ranges);
-        None for a file."""
-        m = self.meta
-        if m.get("format") != "recording":
-            return None
-        return {"segments": int(m.get("n_segments", 1)), "gap_records": len(m.get("gaps", [])),
-                "samples_lost": int(m.get("samples_lost", 0)), "losses": m.get("losses", []),
-                "samples_duplicated": int(m.get("samples_duplicated", 0)),
-                "duplicates": m.get("duplicates", [])}
-
-
-def _num(v: Any) -> float | None:
-    if v is None:
-        return None
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
-def _list(a: Any) -> list[float | None]:
-    return [_num(v) for v in np.asarray(a, dtype=float).ravel()]
 
 
 def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
@@ -776,7 +494,7 @@ def _analyze_passes(
                 if welch is None or spectrum is None or welch.n_seg < 1:
                     raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
                                     "needs at least 1024)")
-                from avard.core.psd import channel_psd, white_density
+                from avard.core.analysis.psd import channel_psd, white_density
 
                 chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
                 chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
@@ -786,177 +504,3 @@ def _analyze_passes(
     return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
                     channels=out, meta={**meta, "filter_corner_hz": corner},
                     estimator=estimator)
-
-
-# ---------------------------------------------------------------------------------------------
-# text, csv, kalibr
-
-
-def _fmt(v: float | None) -> str:
-    return "—" if v is None else f"{v:.4g}"
-
-
-def format_table(an: Analysis) -> str:
-    """Human-readable report: per channel the five terms (value, 68 % interval, SI unit, or
-    'absent'), the sinusoids, the τ range used and the fit quality."""
-    lines = [f"{an.source}: {an.n_samples} samples at {an.rate_hz:g} Hz "
-             f"({an.n_samples / an.rate_hz / 3600:.3g} h). Units SI; intervals 68.3 %."]
-    fc = an.meta.get("filter_corner_hz")
-    lines.append("sensor low-pass modelled at " + (f"{fc:g} Hz" if fc else
-                 "— (not modelled: filter-bent short τ left out)"))
-    lines.append(f"Allan deviation: {ESTIMATORS[an.estimator]}, octave τ; intervals from "
-                 "Greenhall–Riley EDF with the noise type identified per τ (as Stable32); "
-                 "its values per τ (m/s², with interval, EDF, α): --json or --export csv FILE")
-    cut = an.meta.get("oadev_cut")
-    if cut:
-        lines.append(f"OADEV stops at τ = {cut['tau_max_s']:.4g} s, short of N/4 "
-                     f"({cut['tau_full_s']:.4g} s): its history would need "
-                     f"{cut['bytes_needed'] / 2**20:.0f} MiB, more than a quarter of the free "
-                     "memory; --estimator cascade reaches N/4 in kilobytes")
-    rec = an.recording_summary()
-    if rec is not None:
-        line = (f"recording: {rec['segments']} segment(s), split at each of its "
-                f"{rec['gap_records']} gap records and at every restart (never averaged across)")
-        if rec["samples_lost"]:
-            spans = ", ".join(f"[{x['i0']}, {x['i0'] + x['n']})" for x in rec["losses"][:5])
-            more = " …" if len(rec["losses"]) > 5 else ""
-            line += (f"; {rec['samples_lost']} samples lost to damage at indices "
-                     f"{spans}{more}")
-        if rec["samples_duplicated"]:
-            line += f"; {rec['samples_duplicated']} duplicated samples counted once"
-        lines.append(line)
-    for name, ch in an.channels.items():
-        fit = ch.fit
-        lines.append("")
-        lines.append(f"channel {name}")
-        lines.append(f"  {'term':<24}{'value':>12}  {'68 % interval':<25}{'unit'}")
-        for t in TERMS:
-            e = fit.terms[t]
-            label = f"{t} ({SYMBOLS[t]})"
-            if e.present:
-                lines.append(f"  {label:<24}{_fmt(e.value):>12}  "
-                             f"{'[' + _fmt(e.lo) + ', ' + _fmt(e.hi) + ']':<25}{UNITS[t]}")
-            else:
-                ub = f"absent (< {_fmt(e.upper)} {UNITS[t]})" if e.upper else "absent"
-                lines.append(f"  {label:<24}{ub:>12}")
-            if e.note and t == "rate_random_walk":
-                lines.append(f"    {e.note}")
-        if ch.lines:
-            s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"
-                          for ln in ch.lines)
-            lines.append(f"  sinusoids: {s}")
-        else:
-            lines.append("  sinusoids: none found")
-        if ch.psd is not None:
-            lines.extend(_psd_lines(ch))
-        chi = "n/a" if not math.isfinite(fit.chi2_dof) else f"{fit.chi2_dof:.2f}"
-        lines.append(f"  fitted τ {fit.tau_min_s:.4g} s … {fit.tau_max_s:.4g} s "
-                     f"({fit.n_points} points), χ²/dof = {chi} (dof {fit.dof})")
-        if math.isfinite(fit.chi2_dof) and fit.dof > 0:
-            from avard.core.allan.chi2 import chi2_sf  # the χ² upper tail, without scipy
-
-            p = float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof))
-            if p < 0.001:
-                lines.append(f"  note: the five-term model does not describe this curve "
-                             f"(p = {p:.1g}); see `avard explain` for what else is in it")
-    return "\n".join(lines)
-
-
-def _psd_lines(ch: ChannelAnalysis) -> list[str]:
-    cp = ch.psd
-    out = [f"  PSD: one-sided Welch, {cp.n_segments} segments, {len(cp.f)} bins to "
-           f"{cp.f[-1]:.4g} Hz, (m/s²)²/Hz with its {cp.ci:.1%} band (--json, --export psd)"]
-    w = cp.white
-    if w is None:
-        out.append("  PSD white density: no white region to read it in")
-    else:
-        verdict = "agrees with" if w.agrees else "DIFFERS from"
-        out.append(f"  PSD white density N = {_fmt(w.value)} [{_fmt(w.lo)}, {_fmt(w.hi)}] "
-                   f"m/s²/√Hz ({w.f_lo_hz:.3g}–{w.f_hi_hz:.3g} Hz, {w.n_bins} bins): {verdict}"
-                   f" the fit's N [{_fmt(w.fit_lo)}, {_fmt(w.fit_hi)}]")
-    return out
-
-
-def psd_csv(an: Analysis) -> str:
-    """The spectra as csv: channel, f_hz, psd, psd_lo, psd_hi ((m/s²)²/Hz, one-sided)."""
-    rows = ["channel,f_hz,psd_m2ps4_per_hz,psd_lo,psd_hi"]
-    for name, ch in an.channels.items():
-        cp = ch.psd
-        if cp is None:
-            continue
-        for k in range(len(cp.f)):
-            vals = (cp.f[k], cp.psd[k], cp.lo[k], cp.hi[k])
-            rows.append(",".join([name] + [("" if not math.isfinite(v) else f"{v:.9g}")
-                                           for v in vals]))
-    return "\n".join(rows) + "\n"
-
-
-def adev_csv(an: Analysis) -> str:
-    """The ADEV table as csv: channel, tau_s, adev, adev_lo, adev_hi (m/s²), edf, model (m/s²:
-    the fitted model's ADEV), used (1 if the point was in the fit), alpha (noise exponent the
-    interval assumes), estimator ("oadev" or "cascade", see ``ESTIMATORS``)."""
-    rows = ["channel,tau_s,adev_mps2,adev_lo_mps2,adev_hi_mps2,edf,model_adev_mps2,used,alpha,"
-            "estimator"]
-    for name, ch in an.channels.items():
-        a = ch.allan
-        model = np.sqrt(ch.fit.model_avar(a.tau))
-        for k in range(len(a.tau)):
-            used = int(ch.fit.tau_min_s * (1 - 1e-9) <= a.tau[k] <= ch.fit.tau_max_s * (1 + 1e-9))
-            vals = [a.tau[k], a.dev[k], a.dev_lo[k], a.dev_hi[k], a.edf[k], model[k]]
-            alpha = a.alpha[k]
-            rows.append(",".join([name] + [("" if not math.isfinite(v) else f"{v:.9g}")
-                                           for v in vals]
-                                 + [str(used), "" if not math.isfinite(alpha) else
-                                    str(int(alpha)), ch.estimator]))
-    return "\n".join(rows) + "\n"
-
-
-def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
-    """kalibr's IMU noise file: accelerometer_noise_density = N (m/s²/√Hz), _random_walk = K
-    (m/s³/√Hz), update_rate (Hz). kalibr takes one value for all axes: the largest over the
-    channels (conservative). An axis without a detected K contributes its upper limit; if no
-    channel gives anything, a comment says so and the value is 0."""
-    ns = [c.fit.terms["velocity_random_walk"].value for c in an.channels.values()]
-    ks = []
-    for c in an.channels.values():
-        e = c.fit.terms["rate_random_walk"]
-        ks.append(e.value if e.present else e.upper)
-    n_val = max((v for v in ns if v is not None), default=None)
-    k_val = max((v for v in ks if v is not None), default=None)
-    if n_val is None:
-        raise FitError("no channel has a velocity random walk N; kalibr needs one")
-    k_note = ("largest K over the axes" if any(c.fit.terms["rate_random_walk"].present
-                                                for c in an.channels.values())
-              else "K not detected: the largest 99 % upper limit over the axes")
-    out = [
-        f"# accelerometer noise from avard analyze of {an.source}",
-        f"# channels: {', '.join(an.channels)}; largest value over them; SI units",
-        f"accelerometer_noise_density: {n_val:.6e}   # N, m/s^2/sqrt(Hz)",
-        f"accelerometer_random_walk: {0.0 if k_val is None else k_val:.6e}   # {k_note}, "
-        "m/s^3/sqrt(Hz)",
-        f"rostopic: {rostopic}",
-        f"update_rate: {an.rate_hz:.6g}   # Hz",
-    ]
-    return "\n".join(out) + "\n"
-
-
-def progress_printer(stream: Any = None) -> ProgressFn | None:
-    """A progress callback writing to stderr, or None when stderr is not a terminal."""
-    stream = stream or sys.stderr
-    if not getattr(stream, "isatty", lambda: False)():
-        return None
-    last = [-1]
-
-    def show(done: int, total: int | None) -> None:
-        pct = -1 if not total else int(100 * done / total)
-        if pct == last[0] and total:
-            return
-        last[0] = pct
-        msg = f"\ranalyze: {pct:3d} % ({done}/{total} samples read)" if total else \
-            f"\ranalyze: {done} samples"
-        stream.write(msg)
-        if total and done >= total:
-            stream.write("\n")
-        stream.flush()
-
-    return show

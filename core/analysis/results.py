@@ -1,0 +1,105 @@
+"""What ``avard analyze`` returns: per channel the Allan result, the fit and the lines
+(``ChannelAnalysis``), the whole record (``Analysis``) and the ``--json`` shape of both."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from avard.core.model.fit import NoiseFit
+
+#: Estimator names as they appear in the table, the JSON and the csv.
+ESTIMATORS = {
+    "oadev": "fully overlapping ADEV (OADEV, NIST SP 1065 eq. 12; Stable32 'Overlapping Allan')",
+    "cascade": "partially overlapping ADEV (stride m/8 above m = 8; avard's streaming cascade)",
+}
+#: The estimator as a figure's legend names it.
+ESTIMATOR_LABELS = {"oadev": "OADEV", "cascade": "cascade ADEV (stride m/8)"}
+#: SI unit of each per-τ array of a channel in ``--json`` ("1": dimensionless).
+ADEV_UNITS = {"tau_s": "s", "adev": "m/s^2", "adev_lo": "m/s^2", "adev_hi": "m/s^2",
+              "edf": "1", "alpha": "1"}
+# ---------------------------------------------------------------------------------------------
+# the analysis
+
+
+@dataclass
+class ChannelAnalysis:
+    """One channel: its Allan result (AllanResult, one channel), the fit, the lines found."""
+
+    name: str
+    allan: Any
+    fit: NoiseFit
+    lines: list[dict[str, float]] = field(default_factory=list)
+    estimator: str = "oadev"
+    psd: Any = None  # psd.ChannelPsd when asked for (analyze(psd=True))
+
+    def to_dict(self) -> dict[str, Any]:
+        a = self.allan
+        d: dict[str, Any] = {
+            "estimator": self.estimator, "tau_s": _list(a.tau), "adev": _list(a.dev),
+            "adev_lo": _list(a.dev_lo), "adev_hi": _list(a.dev_hi), "edf": _list(a.edf),
+            "alpha": _list(a.alpha), "units": dict(ADEV_UNITS)}
+        if getattr(a, "quantiles", "exact") != "exact":  # said only when not the default
+            d["quantiles"] = a.quantiles
+        if getattr(a, "noise_id", "avard") != "avard":  # the rule behind alpha, likewise
+            d["noise_id"] = a.noise_id
+        fd = self.fit.to_dict()
+        d["terms"] = fd["terms"]
+        d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
+                          for s in self.lines]
+        d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
+        if self.psd is not None:
+            d["psd"] = self.psd.to_dict()
+        return d
+
+
+@dataclass
+class Analysis:
+    """The whole ``avard analyze`` result: source, rate (Hz), sample count, channels."""
+
+    source: str
+    rate_hz: float
+    n_samples: int
+    channels: dict[str, ChannelAnalysis]
+    meta: dict[str, Any] = field(default_factory=dict)
+    estimator: str = "oadev"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
+        d = {"source": self.source, "rate_hz": float(self.rate_hz),
+             "n_samples": int(self.n_samples), "estimator": self.estimator,
+             "estimator_description": ESTIMATORS[self.estimator],
+             "channels": {k: c.to_dict() for k, c in self.channels.items()}}
+        rec = self.recording_summary()
+        if rec is not None:
+            d["recording"] = rec
+        if "oadev_cut" in self.meta:
+            d["oadev_cut"] = self.meta["oadev_cut"]
+        return d
+
+    def recording_summary(self) -> dict[str, Any] | None:
+        """For a service recording: its segments (split at every gap record and restart),
+        gap records, and what damage cost or duplication repeated, in samples (index ranges);
+        None for a file."""
+        m = self.meta
+        if m.get("format") != "recording":
+            return None
+        return {"segments": int(m.get("n_segments", 1)), "gap_records": len(m.get("gaps", [])),
+                "samples_lost": int(m.get("samples_lost", 0)), "losses": m.get("losses", []),
+                "samples_duplicated": int(m.get("samples_duplicated", 0)),
+                "duplicates": m.get("duplicates", [])}
+
+
+def _num(v: Any) -> float | None:
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _list(a: Any) -> list[float | None]:
+    return [_num(v) for v in np.asarray(a, dtype=float).ravel()]

@@ -1,0 +1,204 @@
+"""The Welch spectrum of ``avard analyze`` and its sinusoid (line) finder: a streaming
+Welch accumulator, its segment length, and the F-test threshold a line must pass."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from avard.core.allan import kernels
+from avard.core.allan.scratch import scratch
+from avard.core.errors import DataError
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    pass
+
+# ---------------------------------------------------------------------------------------------
+# spectrum and sinusoid detection
+
+
+class WelchAccumulator:
+    """Streaming Welch PSD (Hann window, 50 % overlap, mean removed per segment), one-sided
+    density in (unit)²/Hz. Memory: one segment per channel, and the segments of one block
+    while it is transformed."""
+
+    def __init__(self, n_channels: int, rate_hz: float, nperseg: int) -> None:
+        if int(nperseg) < 2 or int(nperseg) % 2:
+            # 50 % overlap and the segment means from half-segment sums need an even length
+            raise DataError(f"Welch segment of {nperseg} samples: use an even length ≥ 2")
+        self.c = n_channels
+        self.rate = float(rate_hz)
+        self.L = int(nperseg)
+        self.win = np.hanning(self.L + 1)[:-1]  # periodic Hann
+        self.scale = 1.0 / (self.rate * np.sum(self.win**2))
+        # The segment mean is removed in the spectrum: a periodic Hann window's transform is
+        # nonzero only at bins 0 and ±1, so (x − μ)·w and x·w transform alike except there,
+        # by μ·W₀ and μ·W₁ (one pass fewer over every sample than subtracting μ first).
+        self._w01 = np.fft.rfft(self.win)[:2].real.copy()
+        self._power = np.zeros((n_channels, self.L // 2 + 1))  # Σ |X|² per channel and bin
+        self.n_seg = 0
+        # channel-major samples not yet in a full segment, then the block: each sample is
+        # transposed once, and every segment is a contiguous row of it
+        self._cm = np.zeros((n_channels, 0))
+        self._held = 0
+        self._ref: NDArray[np.float64] | None = None
+
+    def update(self, block: NDArray) -> None:
+        a = np.asarray(block, dtype=float).reshape(-1, self.c)
+        if len(a) == 0:
+            return
+        if self._ref is None:
+            # a per-channel constant (the first sample) taken off every sample: the segment
+            # means to remove are then the signal's wander, not 9.81 m/s² of gravity
+            self._ref = a[0].copy()
+        held, total = self._held, self._held + len(a)
+        if self._cm.shape[1] < total:
+            grown = np.empty((self.c, max(total, 2 * self._cm.shape[1])))
+            grown[:, :held] = self._cm[:, :held]
+            self._cm = grown
+        np.subtract(a.T, self._ref[:, None], out=self._cm[:, held:total])
+        step = self.L // 2
+        k = (total - self.L) // step + 1 if total >= self.L else 0
+        if k > 0:
+            # all the block's segments at once (k, C, L), strided over the channel-major
+            # buffer: one window product, one batched FFT per block (contiguous rows into
+            # reused buffers: a transform of fresh, page-faulted memory or of one segment at
+            # a time measured twice as slow)
+            cm = self._cm
+            rows, cols = cm.strides
+            segs = np.lib.stride_tricks.as_strided(cm, (k, self.c, self.L),
+                                                   (step * cols, rows, cols), writeable=False)
+            nf = self.L // 2 + 1
+            seg = scratch("welch.seg", k * self.c, self.L, np.float64).reshape(k, self.c, -1)
+            np.multiply(segs, self.win, out=seg)
+            spec = scratch("welch.spec", k * self.c, nf, np.complex128).reshape(k, self.c, -1)
+            np.fft.rfft(seg, axis=2, out=spec)
+            # segment means from half-segment sums (each sample summed once, not twice)
+            halves = cm[:, :(k + 1) * step].reshape(self.c, k + 1, step).sum(axis=2)
+            mean = ((halves[:, :-1] + halves[:, 1:]) / self.L).T  # (k, C)
+            spec[:, :, 0] -= mean * self._w01[0]
+            spec[:, :, 1] -= mean * self._w01[1]
+            kern = kernels.compiled()
+            if kern is not None:  # Σ over the segments of re² + im², one pass
+                kern.power_sum(spec.reshape(-1).view(np.float64), k, self._power.reshape(-1))
+            else:
+                parts = spec.view(np.float64)  # (k, C, 2F): re, im pairs
+                np.square(parts, out=parts)
+                self._power += parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)
+            self.n_seg += k
+        # the samples of the next, still incomplete segment move to the front
+        rest = total - k * step
+        if k > 0:
+            self._cm[:, :rest] = self._cm[:, k * step:total]
+        self._held = rest
+
+    def gap(self) -> None:
+        """A break in the data: the partial segment is dropped, none spans the gap."""
+        self._held = 0
+
+    def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(f in Hz, PSD (F, C)); empty when no full segment was seen."""
+        f = np.fft.rfftfreq(self.L, 1.0 / self.rate).astype(np.float64, copy=False)
+        if self.n_seg == 0:
+            return f, np.full((len(f), self.c), np.nan)
+        psd: NDArray[np.float64] = self._power.T / self.n_seg * self.scale
+        psd[1:-1] *= 2.0  # one-sided
+        return f, psd
+
+
+#: Bins each side of a line's main lobe (Hann) and the running-median half width.
+LINE_LOBE, LINE_HALF_WIDTH = 2, 32
+
+
+def welch_nperseg(total: int | None) -> int:
+    """analyze's Welch segment: 16384 samples (≈ 0.008 Hz at 125 Hz), fewer for short
+    records so that there are ≥ 8 segments."""
+    return 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
+
+
+def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: float = 0.01
+                   ) -> NDArray[np.float64]:
+    """The bin/background ratio a line must exceed (``find_lines``' test): bins are
+    χ²(ν)/ν with ν ≈ 1.8·segments, the background a median of ``n_bg`` bins carrying about
+    2/π of their degrees of freedom, so the ratio is F(ν, ν_bg); Bonferroni over ``n_bins``
+    keeps one false line per spectrum at ``p_false``."""
+    from avard.core.allan.beta import f_isf_array  # not scipy: see the note above
+
+    nu = max(2.0, 1.8 * n_seg)
+    nu_bg = np.maximum(2.0, np.asarray(n_bg, dtype=float) * nu * 2.0 / math.pi)
+    # the F(ν, ν_bg) upper quantile
+    return f_isf_array(p_false / n_bins, nu, nu_bg)
+
+
+def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
+               max_lines: int = 8, half_width: int = LINE_HALF_WIDTH
+               ) -> list[dict[str, float]]:
+    """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
+    more than chance allows.
+
+    Background: the median of the bins within ±``half_width`` of each bin, leaving out the
+    bin's own main lobe (±2 bins), divided by the median/mean ratio of the averaged
+    periodogram's χ² distribution. The window is always symmetric: near 0 Hz it shrinks to
+    the bins available on both sides (DC excluded). A one-sided or padded window there is
+    biased low on a red spectrum (flicker, random walk), and with thousands of averaged
+    segments that bias alone passes the test: a 60 h record's 1/f rise at 0.05 Hz read as two
+    lines; at Nyquist the un-doubled last bin does the same. The median of a symmetric window
+    is unbiased for any monotonic background. Bins with fewer than 4 background bins on each
+    side are not tested (the lowest and highest 7).
+    Test: each bin is χ²(ν)/ν × background with ν ≈ 1.8·segments (Hann, 50 % overlap; Welch
+    1967), the background an estimate with ≈ (2/π)·ν per bin it is the median of, so the
+    ratio is F(ν, ν_bg)-distributed; the threshold keeps the chance of one false line per
+    spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P), P = Σ (PSD −
+    background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
+    {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
+    """
+    lobe, min_side = LINE_LOBE, 4
+    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
+        return []
+    from avard.core.allan.chi2 import chi2_ppf
+
+    nu = max(2.0, 1.8 * n_seg)
+    med_ratio = float(chi2_ppf(0.5, nu)) / nu
+    ring = np.ones(2 * half_width + 1, dtype=bool)
+    ring[half_width - lobe:half_width + lobe + 1] = False
+    # median of the ring around every bin whose full window fits (np.median averages the two
+    # middle values of the even count; a single rank would be biased on a sloping spectrum)
+    bg = np.full(len(f), np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(psd, 2 * half_width + 1)
+    bg[half_width:len(f) - half_width] = np.median(win[:, ring], axis=1)
+    n_bg = np.full(len(f), 2.0 * (half_width - lobe))
+    # bins near either end: the widest symmetric window that fits between the bin and DC or
+    # Nyquist (both excluded: DC is emptied by the mean removal, Nyquist is not doubled)
+    first = lobe + min_side + 1
+    last = len(f) - 1 - first
+    for k in [*range(first, half_width + 1), *range(len(f) - 1 - half_width, last + 1)]:
+        w = min(k - 1, len(f) - 2 - k, half_width)
+        sides = np.r_[psd[k - w:k - lobe], psd[k + lobe + 1:k + w + 1]]
+        bg[k] = np.median(sides)
+        n_bg[k] = len(sides)
+    bg[:first] = bg[first]          # only used for the main lobe of a line at the first bin
+    bg[last + 1:] = bg[last]
+    bg /= med_ratio
+    # The background is itself an estimate: a median of n_bg bins carries about 2/π of their
+    # degrees of freedom, so bin/background is F(ν, ν_bg)-distributed, not χ²(ν)/ν. That
+    # matters where the window is short (low bins) and few segments were averaged.
+    thr = line_threshold(len(f), n_seg, n_bg, p_false)
+    ratio = psd / np.where(bg > 0, bg, np.inf)
+    df = f[1] - f[0]
+    lines = []
+    k = first
+    while k <= last:
+        if ratio[k] > thr[k] and ratio[k] >= ratio[k - 1] and ratio[k] >= ratio[k + 1]:
+            sl = slice(k - 2, k + 3)
+            excess = np.clip(psd[sl] - bg[sl], 0.0, None)
+            power = float(np.sum(excess) * df)
+            if power > 0:
+                freq = float(np.sum(excess * f[sl]) / np.sum(excess))
+                lines.append({"frequency_hz": freq, "amplitude": math.sqrt(2.0 * power)})
+            k += 3
+        else:
+            k += 1
+    lines.sort(key=lambda d: -d["amplitude"])
+    return lines[:max_lines]
