@@ -83,8 +83,9 @@ def make_counter(request: pytest.FixtureRequest) -> FuzzCounter:
 
 
 def save_counts(request: pytest.FixtureRequest, counter: FuzzCounter) -> None:
-    if request.config.cache is not None:
-        request.config.cache.set(f"avard/fuzz/{request.module.__name__.rsplit('.', 1)[-1]}",
+    cache = getattr(request.config, "cache", None)  # absent under -p no:cacheprovider
+    if cache is not None:
+        cache.set(f"avard/fuzz/{request.module.__name__.rsplit('.', 1)[-1]}",
                                  dict(counter.counts))
 
 
