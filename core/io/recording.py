@@ -23,12 +23,13 @@ from __future__ import annotations
 import logging
 import struct
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.allan.feed import AllanFeed, Segmenter, scale_of
 from avard.core.errors import FormatError
 
 log = logging.getLogger(__name__)
@@ -628,191 +629,6 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
 
 
 # --------------------------------------------------------------------------------------------
-# the Allan feed: one definition of "what the accumulators saw", shared by service and replay
-
-
-class Segmenter:
-    """The one rule for where the accumulators' segments end: at every gap record, every run
-    change (a header of another run) and every jump in the sample index. :class:`AllanFeed`
-    breaks its segments by it; ``load_recording`` records the same breaks for ``avard
-    analyze`` (``meta["segment_bounds"]``), so both average over exactly the same stretches."""
-
-    def __init__(self) -> None:
-        self.run: str | None = None
-        self.next_index: int | None = None
-        self.n = 0                      # raw samples seen
-        self.bounds: list[int] = [0]    # sample counts where a segment starts, then the end
-
-    def starts_segment(self, rec: dict[str, Any]) -> bool:
-        """Whether ``rec`` ends the current segment (before its own samples, if any)."""
-        kind = rec["kind"]
-        cut = False
-        if kind == "header" and rec["run"] != self.run:
-            self.run, cut = rec["run"], True
-        elif kind == "gap":
-            cut = True
-        elif kind == "raw":
-            i0 = int(rec["i0"])
-            cut = self.next_index is not None and i0 != self.next_index
-        if cut:
-            self.next_index = None
-            if self.bounds[-1] != self.n:
-                self.bounds.append(self.n)
-        if kind == "raw":
-            self.next_index = int(rec["i0"]) + int(rec["n"])
-            self.n += int(rec["n"])
-        return cut
-
-    def segment_bounds(self) -> list[int]:
-        """0, every break, N: consecutive pairs are the segments' [start, stop) in samples."""
-        return self.bounds + ([self.n] if self.bounds[-1] != self.n else [])
-
-
-class AllanFeed:
-    """Builds the (n, 3 + k) blocks the streaming Allan accumulators see, from raw and
-    temperature records, identically in the service and in an offline replay.
-
-    Channels are the three axes in m/s² (counts × the header's scale) followed by the
-    temperature channels in °C, each held at its last reading (zero-order hold) from the
-    sample index the reading was stamped with. Feeding starts only once every temperature
-    channel has a first reading (a hold needs a value to hold); samples before that are
-    counted in ``skipped``. A jump in the sample index, an explicit gap or a new run ends the
-    segment (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
-
-    ``sink`` is anything with ``update(block)`` and ``gap()`` (a StreamingAllan).
-    """
-
-    def __init__(self, sink: Any, scale_m_s2_per_count: float, temp_names: list[str]) -> None:
-        self.sink = sink
-        self.scale = float(scale_m_s2_per_count)
-        self.temp_names = list(temp_names)
-        self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
-        self._held = np.full(len(self.temp_names), np.nan)
-        self._pending: list[tuple[int, np.ndarray]] = []   # (i0, held values from i0 on)
-        self.next_index: int | None = None
-        self.fed = 0
-        self.skipped = 0
-        self._open = False          # samples fed since the last gap()
-        self.run: str | None = None
-        self._segments = Segmenter()
-
-    @property
-    def channels(self) -> list[str]:
-        return ["x", "y", "z", *self.temp_names]
-
-    # -- state for checkpoints -------------------------------------------------------------
-    def state(self) -> dict[str, Any]:
-        """What the feed needs to continue exactly: held temperatures, pending readings."""
-        return {"next_index": self.next_index, "held": [float(v) for v in self._held],
-                "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
-                "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
-                "run": self.run}
-
-    @classmethod
-    def from_state(cls, sink: Any, state: dict[str, Any]) -> AllanFeed:
-        """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
-        feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
-        feed.next_index = state["next_index"]
-        feed._held = np.array(state["held"], dtype=float)
-        feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
-        feed._open = bool(state.get("open", False))
-        feed.run = feed._segments.run = state.get("run")
-        feed._segments.next_index = feed.next_index
-        return feed
-
-    # -- records -------------------------------------------------------------------------
-    def apply(self, rec: dict[str, Any]) -> None:
-        """Feed one record as the service did: a new run's header starts a new segment with
-        that run's scale and temperature channels (held values start unknown, as in a freshly
-        started service); raw, temp and gap records go to :meth:`raw`, :meth:`temp`,
-        :meth:`gap`; other kinds are not data."""
-        kind = rec["kind"]
-        if self._segments.starts_segment(rec):
-            self.gap()
-        if kind == "header":
-            if rec["run"] != self.run:
-                self.run = rec["run"]
-                self.scale = _scale_of(rec)
-                self.temp_names = list(rec.get("temperature_channels", []))
-                self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
-                self._held = np.full(len(self.temp_names), np.nan)
-                self._pending = []
-        elif kind == "raw":
-            self.raw(int(rec["i0"]), rec["counts"])
-        elif kind == "temp":
-            self.temp(int(rec["i0"]), rec["names"], rec["values_c"])
-        elif kind == "gap":
-            self.gap()
-
-    def replay(self, records: Iterable[dict[str, Any]], *, after: int | None = None) -> int:
-        """Feed every record of ``records`` (as :func:`walk` yields them), skipping samples
-        and readings before index ``after`` (what a checkpoint already holds), whatever run
-        wrote them. Returns the number of samples fed."""
-        n0 = self.fed
-        for rec in records:
-            kind = rec["kind"]
-            if after is not None and kind in ("raw", "temp", "gap"):
-                i0 = int(rec["i0"])
-                if kind == "raw" and i0 + int(rec["n"]) <= after:
-                    continue
-                if kind == "raw" and i0 < after:
-                    rec = dict(rec, i0=after, n=i0 + int(rec["n"]) - after,
-                               counts=rec["counts"][after - i0:])
-                elif kind != "raw" and i0 < after:
-                    continue
-            self.apply(rec)
-        return self.fed - n0
-
-    def temp(self, i0: int, names: list[str], values_c: list[float | None]) -> None:
-        """A temperature reading valid from sample index ``i0`` on (None = failed read)."""
-        held = self._pending[-1][1].copy() if self._pending else self._held.copy()
-        for name, value in zip(names, values_c, strict=True):
-            col = self._col.get(name)
-            if col is not None and value is not None:
-                held[col - 3] = float(value)
-        self._pending.append((int(i0), held))
-
-    def gap(self) -> None:
-        """Samples are missing here: end the accumulators' segment."""
-        if self._open:
-            self.sink.gap()
-            self._open = False
-        self.next_index = None
-
-    def raw(self, i0: int, counts: np.ndarray) -> None:
-        """A block of raw counts (n, 3) for samples ``[i0, i0 + n)``."""
-        n = int(counts.shape[0])
-        if n == 0:
-            return
-        if self.next_index is not None and i0 != self.next_index:
-            self.gap()
-        self.next_index = i0 + n
-        block = np.empty((n, 3 + len(self.temp_names)))
-        block[:, :3] = np.asarray(counts, dtype=np.float64) * self.scale
-        # Piecewise-constant temperature columns: apply the pending readings in order.
-        start = 0
-        held = self._held
-        while self._pending and self._pending[0][0] < i0 + n:
-            at, values = self._pending.pop(0)
-            cut = max(0, at - i0)
-            block[start:cut, 3:] = held
-            start = max(start, cut)
-            held = values
-        block[start:, 3:] = held
-        self._held = held
-        if len(self.temp_names):
-            known = ~np.isnan(block[:, 3:]).any(axis=1)
-            if not known.all():
-                first = int(np.argmax(known)) if known.any() else n
-                self.skipped += first
-                block = block[first:]
-        if block.shape[0]:
-            self.sink.update(block)
-            self.fed += block.shape[0]
-            self._open = True
-
-
-# --------------------------------------------------------------------------------------------
 # streaming iteration and the whole-record loader
 
 
@@ -841,14 +657,6 @@ class Block:
     t_real: float             # CLOCK_REALTIME s of the first sample
 
 
-def _scale_of(header: dict[str, Any]) -> float:
-    scale = header.get("scale_m_s2_per_count")
-    if not isinstance(scale, int | float) or not scale > 0:
-        raise FormatError(f"header of run {header.get('run')!r} has no positive "
-                          "scale_m_s2_per_count; this recording cannot be converted to m/s²")
-    return float(scale)
-
-
 def iter_records(path: str | Path, *, strict: bool = False,
                  reader: RecordingReader | None = None) -> Iterator[dict[str, Any]]:
     """Every decoded record of a recording in order (see :class:`RecordingReader`)."""
@@ -871,7 +679,7 @@ def replay_allan(path: str | Path, *, streaming_cls: Any = None,
         names = list(first.get("temperature_channels", []))
         allan = streaming_cls(3 + len(names), float(first["rate_hz"]),
                               names=["x", "y", "z", *names])
-        feed = AllanFeed(allan, _scale_of(first), names)
+        feed = AllanFeed(allan, scale_of(first), names)
         feed.apply(first)
         feed.replay(records)
         return allan
@@ -936,7 +744,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         cuts.starts_segment(rec)
         if kind == "header":
             headers.append(rec)
-            scale = _scale_of(rec)
+            scale = scale_of(rec)
         elif kind == "raw":
             blocks.append(np.asarray(rec["counts"], dtype=np.float64) * scale)
             index.append(rec["i0"] + np.arange(rec["n"], dtype=np.int64))
@@ -965,7 +773,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     # each run's newest header carries its best fit of the output rate; runs are averaged
     fitted = {run: float(h["rate_hz"]) for run, h in report.newest_header.items()}
     rates = list(fitted.values())
-    scales = {_scale_of(h) for h in headers}
+    scales = {scale_of(h) for h in headers}
     meta = {
         "format": "avard-recording",
         "files": [str(f) for f in reader.files],
@@ -992,23 +800,3 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
                   names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
-
-
-def replay_after(directory: str | Path, feed: AllanFeed, after: int) -> int:
-    """Feed ``feed`` every sample a recording holds from index ``after`` on, whatever run
-    wrote it (the service's restore: a checkpoint, then everything recorded after it, also by
-    runs killed before their first checkpoint). Reads only from the newest segment whose
-    header starts at or before ``after``, so a long recording is not read again at every
-    restart. Returns the number of samples fed."""
-    try:
-        files = segment_files(directory)
-    except FormatError:
-        return 0
-    keep = 0
-    for k, seg in enumerate(files):
-        head = first_record(seg)
-        if head is not None and head.get("kind") == "header" and int(head["i0"]) <= after:
-            keep = k
-    reader = RecordingReader(directory)
-    reader.files = files[keep:]
-    return feed.replay(walk(reader), after=after)

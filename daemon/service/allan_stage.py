@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from avard.core.allan.feed import AllanFeed
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon.service.ring import Chunk, Consumer
 from avard.daemon.service.stage import Stage, offset_after_mark, split_chunk
 

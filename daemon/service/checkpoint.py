@@ -13,9 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from avard.core.allan.feed import AllanFeed
+from avard.core.allan.replay import replay_after
 from avard.core.errors import AvardError, FormatError
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed, frame, replay_after, scan_frames
+from avard.core.io.recording import frame, scan_frames
 from avard.daemon.service.recorder import write_atomic
 
 log = logging.getLogger("avard.daemon.service")

@@ -26,9 +26,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from avard.core.allan.feed import AllanFeed
 from avard.core.errors import AvardError, ConfigError
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
