@@ -6,8 +6,9 @@ On disk every record is one frame::
 
 where the payload is the same msgpack record that goes on the wire (``avard.core.io.frames``).
 A segment file is a sequence of frames that starts with a ``header`` record; a recording is a
-file or a directory of segment files, read in name order (names start with the run id, which
-starts with a run sequence number: see daemon/service/recorder.py ``new_run_id``).
+file or a directory of segment files, read in data order: by run (the run id starts with a run
+sequence number, daemon/service/recorder.py ``new_run_id``) and sample index, both read from
+the frames (:func:`order_segments`), never from the file names.
 
 Why this framing: a power cut can only leave a *truncated* last frame (appends are the only
 writes), which the reader detects from the length and drops, saying how many bytes it dropped.
@@ -21,9 +22,10 @@ This module never touches hardware or sockets (it is part of ``avard.core``).
 from __future__ import annotations
 
 import logging
+import re
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -292,18 +294,118 @@ def _resync(buf: memoryview, start: int, max_bytes: int,
 
 def segment_files(path: str | Path) -> list[Path]:
     """The segment files of a recording: the file itself, or a directory's ``*.avr`` files in
-    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with a run sequence
-    number, ``nSSSSSSSS-``, so name order is data order whatever the wall clock said)."""
+    data order (:func:`order_segments`: read from their frames, never from their names)."""
     p = Path(path)
     if p.is_dir():
-        files = sorted(f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file())
+        files = [f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file()]
         if not files:
             raise FormatError(f"{p}: no {SEGMENT_SUFFIX} segment files in this directory; "
                               "point at a recording directory written by `avard run`")
-        return files
+        return order_segments(files)
     if not p.exists():
         raise FormatError(f"{p}: no such recording file or directory")
     return [p]
+
+
+#: A run id begins with its run sequence number, ``nSSSSSSSS-`` (daemon/service/recorder.py
+#: ``new_run_id``); ids written before that begin with a UTC stamp and sort before them.
+_RUN_SEQ = re.compile(r"n(\d+)-")
+
+
+@dataclass(frozen=True, order=True)
+class SegmentKey:
+    """Where a segment sits in its recording, read from its frames: the run (by its sequence
+    number), then the first sample index its data records name (raw, temp, gap, event: the
+    recorder writes them in sample order), then the sequence number of its first header
+    (segments of one run that start at the same index), then the name (only to make the
+    order total). Names are not trusted: ``_9999_`` sorted after ``_10000_`` while the field
+    was four digits wide, and a file can be renamed."""
+
+    run_seq: int            # -1 for an old stamp-first run id, then ordered by ``run``
+    run: str
+    i0: int                 # NO_INDEX when no record of the file names an index
+    header_seq: int         # -1 when the file holds no readable header
+    name: str
+
+
+#: ``SegmentKey.i0`` of a file with no readable record: after its run's readable segments.
+NO_INDEX = 1 << 62
+#: Records read from a segment's start to find its first sample index (the recorder writes
+#: the header, perhaps a gap or event, then the first raw block).
+_HEAD_RECORDS = 64
+
+
+def run_order(run: str) -> tuple[int, str]:
+    """Sort key of a run id: its run sequence number, or -1 then the id for old ids."""
+    m = _RUN_SEQ.match(run)
+    return (int(m.group(1)) if m else -1, run)
+
+
+def _head_records(path: Path) -> Iterator[dict[str, Any] | None]:
+    """The first records of a segment, read frame by frame from its start (a few small
+    reads, not the file); yields None and stops at the first frame that does not check."""
+    from avard.core.io import frames as wire
+
+    with open(path, "rb") as f:
+        for _ in range(_HEAD_RECORDS):
+            head = f.read(FRAME_HEADER.size)
+            if len(head) < FRAME_HEADER.size:
+                return
+            n, crc = FRAME_HEADER.unpack(head)
+            if n == 0 or n > MAX_FRAME_BYTES:
+                yield None
+                return
+            payload = f.read(n)
+            if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
+                yield None
+                return
+            try:
+                yield wire.decode(payload)
+            except FormatError:
+                yield None
+                return
+
+
+def segment_key(path: str | Path) -> SegmentKey:
+    """A segment's :class:`SegmentKey`, from the records at its start; after damage there,
+    from a scan of the whole file (resynchronising). A file with no record naming an index
+    takes its header's; with no readable record at all, its name's run id and NO_INDEX."""
+    p = Path(path)
+    header: dict[str, Any] | None = None
+    first: dict[str, Any] | None = None
+    damaged = False
+    try:
+        for rec in _head_records(p):
+            if rec is None:
+                damaged = True
+            elif rec["kind"] == "header":
+                header = header or rec
+            elif "i0" in rec:
+                first = rec
+            if damaged or first is not None:
+                break
+        if first is None and damaged:
+            for rec in RecordingReader(p):
+                if rec["kind"] == "header":
+                    header = header or rec
+                elif "i0" in rec:
+                    first = rec
+                    break
+    except (OSError, FormatError):
+        pass
+    ref = first or header
+    if ref is None:
+        return SegmentKey(*run_order(p.name.split("_", 1)[0]), NO_INDEX, -1, p.name)
+    seq = int(header["seq"]) if header is not None and header["run"] == ref["run"] else -1
+    return SegmentKey(*run_order(str(ref["run"])), int(ref["i0"]), seq, p.name)
+
+
+def order_segments(paths: Iterable[str | Path]) -> list[Path]:
+    """Segment files in data order, by :func:`segment_key` (one small read per file). The
+    one ordering every reader of a recording uses: the walk, the service's restore and
+    ``last_recorded``, retention's "oldest first"."""
+    keyed = sorted((segment_key(p), Path(p)) for p in paths)
+    return [p for _, p in keyed]
 
 
 def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:

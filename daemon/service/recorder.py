@@ -35,7 +35,13 @@ from typing import IO, Any
 
 from avard.core.errors import FormatError
 from avard.core.io import frames
-from avard.core.io.recording import SEGMENT_SUFFIX, first_record, frame, last_record
+from avard.core.io.recording import (
+    SEGMENT_SUFFIX,
+    first_record,
+    frame,
+    last_record,
+    order_segments,
+)
 
 log = logging.getLogger(__name__)
 
@@ -277,10 +283,12 @@ class Recorder:
         self._close_file()
         t_real = self.realtime()
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
-        # Run id first (it starts with the run's real UTC start time), then the segment
-        # number: name order is data order even when a simulated clock runs ahead of real
-        # time. The segment's own start time is for humans.
-        name = f"{self.run_id}_{self._segment_no:04d}_{stamp}{SEGMENT_SUFFIX}"
+        # Run id first (it starts with the run's sequence number), then the segment number,
+        # eight digits wide so names sort in data order for any run the service can make
+        # (four digits put segment 10 000 before 9 998). Readers do not rely on names: they
+        # order segments by run and sample index from the frames (recording.order_segments).
+        # The segment's own start time is for humans.
+        name = f"{self.run_id}_{self._segment_no:08d}_{stamp}{SEGMENT_SUFFIX}"
         path = self.dir / name
         try:
             self._f = self.ops.open_append(path)
@@ -484,12 +492,13 @@ class RestartGap:
 
 
 def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
-    """The end of the newest segment that holds samples (names sort in data order), read from
-    the file's end, so an hour-long segment costs little."""
+    """The end of the newest segment that holds samples (in data order, read from the frames:
+    recording.order_segments), read from the file's end, so an hour-long segment costs
+    little."""
     d = Path(data_dir)
     if not d.is_dir():
         return None
-    for seg in sorted(d.glob("*" + SEGMENT_SUFFIX), reverse=True):
+    for seg in reversed(order_segments(d.glob("*" + SEGMENT_SUFFIX))):
         try:
             rec = last_record(seg, "raw")
             head = first_record(seg) if rec is not None else None
