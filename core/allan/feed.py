@@ -84,6 +84,12 @@ class AllanFeed:
         self._held = np.full(len(self.temp_names), np.nan)
         self._pending: list[tuple[int, np.ndarray]] = []   # (i0, held values from i0 on)
         self.next_index: int | None = None
+        #: The index after the last sample this feed accounts for (fed, or skipped for want
+        #: of a temperature reading); None until told (the service sets it to its start
+        #: index, a restore to what the checkpoint held plus the replay). Unlike
+        #: ``next_index`` it survives a gap: a checkpoint's ``i_end`` is this, so the restore
+        #: replays exactly the samples after it, never the ones the accumulators hold.
+        self.covered: int | None = None
         self.fed = 0
         self.skipped = 0
         self._open = False          # samples fed since the last gap()
@@ -97,7 +103,8 @@ class AllanFeed:
     # -- state for checkpoints -------------------------------------------------------------
     def state(self) -> dict[str, Any]:
         """What the feed needs to continue exactly: held temperatures, pending readings."""
-        return {"next_index": self.next_index, "held": [float(v) for v in self._held],
+        return {"next_index": self.next_index, "covered": self.covered,
+                "held": [float(v) for v in self._held],
                 "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
                 "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
                 "run": self.run}
@@ -107,6 +114,8 @@ class AllanFeed:
         """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
         feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
         feed.next_index = state["next_index"]
+        covered = state.get("covered")
+        feed.covered = None if covered is None else int(covered)
         feed._held = np.array(state["held"], dtype=float)
         feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
         feed._open = bool(state.get("open", False))
@@ -143,6 +152,8 @@ class AllanFeed:
         and readings before index ``after`` (what a checkpoint already holds), whatever run
         wrote them. Returns the number of samples fed."""
         n0 = self.fed
+        if after is not None:
+            self.cover(after)
         for rec in records:
             kind = rec["kind"]
             if after is not None and kind in ("raw", "temp", "gap"):
@@ -166,6 +177,11 @@ class AllanFeed:
                 held[col - 3] = float(value)
         self._pending.append((int(i0), held))
 
+    def cover(self, index: int) -> None:
+        """Every sample before ``index`` is accounted for (never moves back)."""
+        if self.covered is None or index > self.covered:
+            self.covered = int(index)
+
     def gap(self) -> None:
         """Samples are missing here: end the accumulators' segment."""
         if self._open:
@@ -181,6 +197,7 @@ class AllanFeed:
         if self.next_index is not None and i0 != self.next_index:
             self.gap()
         self.next_index = i0 + n
+        self.cover(i0 + n)
         block = np.empty((n, 3 + len(self.temp_names)))
         block[:, :3] = np.asarray(counts, dtype=np.float64) * self.scale
         # Piecewise-constant temperature columns: apply the pending readings in order.

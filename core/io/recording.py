@@ -366,11 +366,35 @@ def _head_records(path: Path) -> Iterator[dict[str, Any] | None]:
                 return
 
 
+#: Keys already read, by (path, inode, size, mtime): the service orders its recording at
+#: every start (restore, last_recorded, retention) and a weekend at segment_s = 10 s makes
+#: 21 600 files; a file that changed in any way is read again.
+_KEYS: dict[tuple[str, int, int, int], SegmentKey] = {}
+_KEYS_MAX = 1 << 17
+
+
 def segment_key(path: str | Path) -> SegmentKey:
     """A segment's :class:`SegmentKey`, from the records at its start; after damage there,
     from a scan of the whole file (resynchronising). A file with no record naming an index
     takes its header's; with no readable record at all, its name's run id and NO_INDEX."""
     p = Path(path)
+    try:
+        st = p.stat()
+        stamp: tuple[str, int, int, int] | None = (str(p), st.st_ino, st.st_size,
+                                                    st.st_mtime_ns)
+    except OSError:
+        stamp = None
+    if stamp is not None and stamp in _KEYS:
+        return _KEYS[stamp]
+    key = _read_segment_key(p)
+    if stamp is not None:
+        if len(_KEYS) >= _KEYS_MAX:
+            _KEYS.clear()
+        _KEYS[stamp] = key
+    return key
+
+
+def _read_segment_key(p: Path) -> SegmentKey:
     header: dict[str, Any] | None = None
     first: dict[str, Any] | None = None
     damaged = False
@@ -400,12 +424,16 @@ def segment_key(path: str | Path) -> SegmentKey:
     return SegmentKey(*run_order(str(ref["run"])), int(ref["i0"]), seq, p.name)
 
 
+def keyed_segments(paths: Iterable[str | Path]) -> list[tuple[SegmentKey, Path]]:
+    """Segment files with their :func:`segment_key`, in data order (a few small reads per
+    file). The one ordering every reader of a recording uses: the walk, the service's
+    restore and ``last_recorded``, retention's "oldest first"."""
+    return sorted((segment_key(p), Path(p)) for p in paths)
+
+
 def order_segments(paths: Iterable[str | Path]) -> list[Path]:
-    """Segment files in data order, by :func:`segment_key` (one small read per file). The
-    one ordering every reader of a recording uses: the walk, the service's restore and
-    ``last_recorded``, retention's "oldest first"."""
-    keyed = sorted((segment_key(p), Path(p)) for p in paths)
-    return [p for _, p in keyed]
+    """Segment files in data order (:func:`keyed_segments` without the keys)."""
+    return [p for _, p in keyed_segments(paths)]
 
 
 def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
@@ -451,20 +479,22 @@ def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
         return None
 
 
-def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
-    """The last valid record of ``kind`` in one segment file, reading from the end."""
+def records_backwards(path: str | Path) -> Iterator[dict[str, Any]]:
+    """The valid records of one segment file, newest first, read from the end (frame offsets
+    from the length fields); a damaged file is read forwards once (resynchronising)."""
     offsets = frame_offsets(path)
     if offsets is None:
-        found = None
-        for rec in RecordingReader(path):
-            if rec["kind"] == kind:
-                found = rec
-        return found
+        yield from reversed(list(RecordingReader(path)))
+        return
     for off in reversed(offsets):
         hit = read_frame_at(path, off)
-        if hit is not None and hit["kind"] == kind:
-            return hit
-    return None
+        if hit is not None:
+            yield hit
+
+
+def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
+    """The last valid record of ``kind`` in one segment file, reading from the end."""
+    return next((rec for rec in records_backwards(path) if rec["kind"] == kind), None)
 
 
 def first_record(path: str | Path) -> dict[str, Any] | None:

@@ -106,12 +106,19 @@ class AllanStage(Stage):
         snap.update(channels=self.feed.channels,
                     units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
                     allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"])
-        return frames.avar_record(self.run_id, 0, self.feed.next_index or 0,
+        return frames.avar_record(self.run_id, 0, self.i_end(),
                                   int(self.allan.n_samples), snap, self._t,
                                   self._t + self.real_offset)
 
+    def i_end(self) -> int:
+        """The index after the last sample the accumulators account for: the feed's
+        ``covered``, which a gap or a run that fed nothing leaves where it was (the feed's
+        ``next_index`` is None then, and a checkpoint that said 0 made the next start replay
+        the whole recording onto accumulators that already held it)."""
+        return self.feed.covered if self.feed.covered is not None else 0
+
     def checkpoint(self) -> None:
-        rec = frames.checkpoint_record(self.run_id, 0, self.feed.next_index or 0,
+        rec = frames.checkpoint_record(self.run_id, 0, self.i_end(),
                                        int(self.allan.n_samples), self.allan.state(),
                                        self._t, self._t + self.real_offset)
         rec["feed"] = self.feed.state()

@@ -1,0 +1,161 @@
+"""A run stopped before its first sample reaches the Allan stage must not make the next start
+count the recording twice (#26 item 1).
+
+The old checkpoint said ``i_end = 0`` / ``next_index = null`` when the feed had seen nothing
+(an early stop, a sensor that produced nothing before SIGTERM, SIGTERM during the start-up
+replay), and the next restore replayed the whole recording on top of accumulators that
+already held it. The checkpoint now says which samples the accumulators account for
+(``covered``), and after every sequence of runs the accumulators equal the offline Allan
+variance of the recording (same samples, same AVAR).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.io import frames
+from avard.core.io.recording import RecordingReader, replay_allan, scan_frames
+from avard.core.io.recording import frame as frame_bytes
+from avard.daemon.config import load_config
+from avard.daemon.hw.adxl355 import Drain
+from avard.daemon.hw.simulation import simulated_service
+from avard.daemon.service.checkpoint import STATE_FILE
+from avard.daemon.service.supervisor import Service
+
+
+def _service(data: Path, seed: int) -> Service:
+    cfg = load_config(None, **{"recording.data_dir": str(data), "publish.enabled": False,
+                               "sensor.poll_hz": 2.0, "allan.checkpoint_interval_s": 4.0,
+                               "allan.snapshot_interval_s": 4.0})
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=seed)
+    return svc
+
+
+def _run(data: Path, seconds: float, seed: int, *, stop_first: bool = False) -> Service:
+    svc = _service(data, seed)
+    if stop_first:
+        # a sensor that produces nothing, stopped by SIGTERM (under the unit READY never
+        # comes and TimeoutStartSec sends it); the same as SIGTERM during the start-up replay
+        def nothing() -> Drain:
+            return Drain(np.zeros((0, 3), np.int32), False, svc.clock.monotonic(),
+                         svc.clock.realtime(), 0)
+
+        svc.sensor.drain = nothing
+        svc.run(None, before_acquisition=svc.stop_requested.set)
+        assert svc.final_status["samples"] == 0
+    else:
+        svc.run(seconds)
+    return svc
+
+
+def _state(data: Path) -> dict:
+    return frames.decode(next(scan_frames((data / STATE_FILE).read_bytes())).payload)
+
+
+def _assert_accumulators_equal_the_recording(data: Path) -> None:
+    final = StreamingAllan.from_state(_state(data)["state"]).snapshot()
+    offline = replay_allan(data).snapshot()
+    recorded = sum(r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    assert final.n_samples == offline.n_samples, (final.n_samples, offline.n_samples, recorded)
+    assert final.n_samples <= recorded
+    np.testing.assert_allclose(final.avar, offline.avar, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("early", ["duration", "stopped_before_samples"])
+def test_an_early_stop_between_two_runs_does_not_count_the_recording_twice(tmp_path, early):
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    if early == "duration":
+        _run(data, 0.05, 2)                           # `avard run … --duration 0.05`
+    else:
+        _run(data, 0.0, 2, stop_first=True)
+    ckpt = _state(data)
+    assert ckpt["i_end"] > 0                          # says which samples it holds
+    _run(data, 6.0, 3)
+    _assert_accumulators_equal_the_recording(data)
+
+
+def test_two_early_stops_in_a_row_then_a_run(tmp_path):
+    """Restarts in quick succession: each early stop keeps what the last checkpoint said."""
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    _run(data, 0.0, 2, stop_first=True)
+    _run(data, 0.05, 3)
+    _run(data, 6.0, 4)
+    _assert_accumulators_equal_the_recording(data)
+
+
+def test_a_checkpoint_after_a_gap_still_says_what_it_holds(tmp_path):
+    """A gap just before the checkpoint (the feed's next index is unknown there) must not
+    turn the checkpoint's index into 0 either."""
+    data = tmp_path / "rec"
+    svc = _run(data, 9.0, 1)
+    held = svc.feed.covered
+    svc.feed.gap()
+    assert svc.feed.covered == held and held is not None and held > 0
+
+
+# -- a damaged or deleted state file (#26 item 3) ---------------------------------------------
+
+
+def _damage(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("fault", ["deleted", "damaged", "emptied"])
+def test_a_lost_state_file_is_rebuilt_from_the_recordings_checkpoint_records(tmp_path, caplog,
+                                                                              fault):
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    _run(data, 5.0, 2)
+    state = data / STATE_FILE
+    if fault == "deleted":
+        state.unlink()
+    elif fault == "damaged":
+        _damage(state)
+    else:
+        state.write_bytes(b"")
+    caplog.set_level("WARNING", logger="avard.daemon.service")
+    svc = _run(data, 6.0, 3)
+    # the history the recording holds is kept: the accumulators equal its offline Allan
+    _assert_accumulators_equal_the_recording(data)
+    assert svc.restored is not None and svc.restored["state_file"].startswith(
+        "missing" if fault == "deleted" else "damaged")
+    # rebuilt from the newest checkpoint record (the previous run's final one): nothing after
+    # it to replay, so the start-up does not read the recording again
+    assert svc.restored["replayed"] == 0 and svc.restored["run"] == _runs(data)[1]
+    said = [r for r in caplog.records if r.levelname == "WARNING" and STATE_FILE in r.message]
+    assert said and "rebuilt the accumulators from the recording's checkpoint record" in \
+        said[0].getMessage()
+
+
+def _runs(data: Path) -> list[str]:
+    out: list[str] = []
+    for r in RecordingReader(data):
+        if r["kind"] == "header" and r["run"] not in out:
+            out.append(r["run"])
+    return out
+
+
+def test_a_lost_state_file_and_a_killed_run_replays_what_came_after_the_checkpoint(tmp_path):
+    """The newest checkpoint record is the previous run's last; a later run killed before its
+    first checkpoint (no final checkpoint either) is replayed after it."""
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    svc = _service(data, 2)
+    svc.run(3.0)
+    # a SIGKILL: the run's samples are recorded, its checkpoints are not
+    killed = _runs(data)[-1]
+    for seg in data.glob(f"{killed}_*.avr"):
+        kept = [f for f in scan_frames(seg.read_bytes())
+                if frames.decode(f.payload)["kind"] not in ("checkpoint", "avar")]
+        seg.write_bytes(b"".join(frame_bytes(f.payload) for f in kept))
+    (data / STATE_FILE).unlink()
+    svc = _run(data, 5.0, 3)
+    assert svc.restored is not None and svc.restored["replayed"] > 0
+    _assert_accumulators_equal_the_recording(data)
