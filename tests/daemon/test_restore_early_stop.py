@@ -159,3 +159,45 @@ def test_a_lost_state_file_and_a_killed_run_replays_what_came_after_the_checkpoi
     svc = _run(data, 5.0, 3)
     assert svc.restored is not None and svc.restored["replayed"] > 0
     _assert_accumulators_equal_the_recording(data)
+
+
+# -- the run-time invariant (#26: checked while running, not only in tests) --------------------
+
+
+def test_every_checkpoint_checks_the_accumulators_against_what_was_recorded(tmp_path):
+    data = tmp_path / "rec"
+    svc = _run(data, 13.0, 1)
+    ckpts = [r for r in RecordingReader(data) if r["kind"] == "checkpoint"]
+    assert len(ckpts) >= 3
+    for c in ckpts:
+        check = c["check"]
+        recorded = sum(max(0, min(r["i0"] + r["n"], check["to"]) - max(r["i0"], check["from"]))
+                       for r in RecordingReader(data) if r["kind"] == "raw")
+        assert check["seen"] == recorded and check["n_added"] == check["fed"]
+    assert not [r for r in RecordingReader(data)
+                if r["kind"] == "event" and r["name"] == "invariant_violated"]
+    assert svc.workers[1].violations == 0
+
+
+def test_a_violation_is_logged_and_recorded_as_an_event(tmp_path, caplog):
+    """A feed that counts a block twice (the kind of fault the early stop caused) is caught at
+    the next checkpoint, loudly, and the recording says so."""
+    data = tmp_path / "rec"
+    svc = _service(data, 1)
+    feed = svc.feed
+    real_raw = feed.raw
+    doubled = []
+
+    def raw_twice(i0, counts):
+        real_raw(i0, counts)
+        if not doubled and feed.fed > 500:
+            doubled.append(i0)
+            real_raw(i0, counts)                 # the same samples again
+    feed.raw = raw_twice
+    caplog.set_level("ERROR", logger="avard.daemon.service")
+    svc.run(9.0)
+    events = [r for r in RecordingReader(data)
+              if r["kind"] == "event" and r["name"] == "invariant_violated"]
+    assert len(events) == 1 and events[0]["detail"]["accumulators_took"] > \
+        events[0]["detail"]["recorded"]
+    assert any("invariant violated" in r.getMessage() for r in caplog.records)
