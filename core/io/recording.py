@@ -373,25 +373,49 @@ _KEYS: dict[tuple[str, int, int, int], SegmentKey] = {}
 _KEYS_MAX = 1 << 17
 
 
+_ENDS: dict[tuple[str, int, int, int], int] = {}
+
+
+def _stamp(p: Path) -> tuple[str, int, int, int] | None:
+    try:
+        st = p.stat()
+    except OSError:
+        return None
+    return (str(p), st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def _cached(cache: dict[tuple[str, int, int, int], Any], p: Path, read: Any) -> Any:
+    stamp = _stamp(p)
+    if stamp is not None and stamp in cache:
+        return cache[stamp]
+    value = read(p)
+    if stamp is not None:
+        if len(cache) >= _KEYS_MAX:
+            cache.clear()
+        cache[stamp] = value
+    return value
+
+
 def segment_key(path: str | Path) -> SegmentKey:
     """A segment's :class:`SegmentKey`, from the records at its start; after damage there,
     from a scan of the whole file (resynchronising). A file with no record naming an index
     takes its header's; with no readable record at all, its name's run id and NO_INDEX."""
-    p = Path(path)
-    try:
-        st = p.stat()
-        stamp: tuple[str, int, int, int] | None = (str(p), st.st_ino, st.st_size,
-                                                    st.st_mtime_ns)
-    except OSError:
-        stamp = None
-    if stamp is not None and stamp in _KEYS:
-        return _KEYS[stamp]
-    key = _read_segment_key(p)
-    if stamp is not None:
-        if len(_KEYS) >= _KEYS_MAX:
-            _KEYS.clear()
-        _KEYS[stamp] = key
+    key: SegmentKey = _cached(_KEYS, Path(path), _read_segment_key)
     return key
+
+
+def segment_end(path: str | Path) -> int:
+    """The index after the last sample of a segment's last readable raw block; NO_INDEX
+    when it holds none (read from the file's end, kept while the file is unchanged)."""
+    def read(p: Path) -> int:
+        try:
+            rec = last_record(p, "raw")
+        except (OSError, FormatError):
+            rec = None
+        return NO_INDEX if rec is None else int(rec["i0"]) + int(rec["n"])
+
+    end: int = _cached(_ENDS, Path(path), read)
+    return end
 
 
 def _read_segment_key(p: Path) -> SegmentKey:

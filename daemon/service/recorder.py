@@ -12,7 +12,10 @@
   ``retry_s`` and writing resumes in a new segment that starts with a ``gap`` record naming
   the samples lost (reason ``disk_full``).
 - Retention after every rotation: segments older than ``retention_days`` and then the oldest
-  while the total exceeds ``retention_max_bytes`` are deleted (never the open one).
+  while the total exceeds ``retention_max_bytes`` are deleted (never the open one). Age and
+  "oldest" are measured in the recording's own time, from its frames: sample indices over the
+  output rate, segments in (run, index) order. Never file mtimes against CLOCK_REALTIME: a Pi
+  without an RTC whose clock NTP steps forward by days would lose every older segment.
 
 All file-system access goes through :class:`FileOps`, so tests can inject ENOSPC, slow disks or
 failing fsyncs without filling a real disk.
@@ -36,11 +39,15 @@ from typing import IO, Any
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
+    NO_INDEX,
     SEGMENT_SUFFIX,
+    SegmentKey,
     first_record,
     frame,
+    keyed_segments,
     last_record,
     order_segments,
+    segment_end,
 )
 
 log = logging.getLogger(__name__)
@@ -87,7 +94,8 @@ class FileOps:
         path.unlink()
 
     def segments(self, directory: Path) -> list[tuple[Path, int, float]]:
-        """(path, size bytes, mtime s) of the segment files, oldest name first."""
+        """(path, size bytes, mtime s) of the segment files (retention orders them by their
+        frames, recording.keyed_segments; the mtime is not used for age)."""
         out = []
         for p in sorted(directory.glob("*" + SEGMENT_SUFFIX)):
             try:
@@ -154,6 +162,8 @@ class Recorder:
         self.records_lost = 0
         self.samples_lost = 0
         self.deleted: list[str] = []
+        self._index_end = 0        # the index after the newest sample named by a record written
+        self._rate_hz = 0.0        # the output rate the records give (fitted, else nominal)
         self.errors = 0
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
 
@@ -245,8 +255,18 @@ class Recorder:
         self._size += len(data)
         self.bytes += len(data)
         self.records += 1
+        self._note_time(record)
         self._dirty = True
         return True
+
+    def _note_time(self, record: dict[str, Any]) -> None:
+        """Keep the recording's own clock: the newest sample index written and the rate."""
+        if "i0" in record:
+            end = int(record["i0"]) + (int(record["n"]) if record["kind"] == "raw" else 0)
+            self._index_end = max(self._index_end, end)
+        rate = record.get("rate_hz")
+        if isinstance(rate, int | float) and rate > 0:
+            self._rate_hz = float(rate)
 
     def _cut_torn_frame(self) -> None:
         """Cut a partly written frame off again so the file stays a clean frame sequence.
@@ -395,23 +415,44 @@ class Recorder:
         except OSError as exc:
             log.error("retention: cannot list %s: %s", self.dir, exc)
             return
-        keep = []
-        if self.retention_days:
-            limit = self.realtime() - self.retention_days * 86400.0
-            for p, size, mtime in segs:
-                if mtime < limit:
-                    self._delete(p, "older than retention_days")
-                else:
-                    keep.append((p, size, mtime))
-        else:
-            keep = segs
+        size = {p: s for p, s, _mtime in segs}
+        keyed = keyed_segments(size)          # oldest first, in the recording's own order
+        keep = [p for _, p in keyed]
+        if self.retention_days and self._rate_hz > 0:
+            keep = self._retain_by_age(keyed)
         if self.retention_max_bytes:
-            total = sum(s for _, s, _ in keep) + self._size
-            for p, size, _ in keep:
+            total = sum(size[p] for p in keep) + self._size
+            for p in keep:
                 if total <= self.retention_max_bytes:
                     break
                 self._delete(p, "recording above retention_max_bytes")
-                total -= size
+                total -= size[p]
+
+    def _retain_by_age(self, keyed: list[tuple[SegmentKey, Path]]) -> list[Path]:
+        """Delete the segments whose every sample is more than ``retention_days`` of sample
+        time (indices over the rate) older than the newest sample written; the rest, oldest
+        first. A segment's end is its last raw block's (read from the file's end once); one
+        without raw blocks ends before the next segment's first index. A segment without a
+        readable index has no known age and is kept."""
+        limit = self.retention_days * 86400.0 * self._rate_hz      # in samples
+        ends = []                     # the first index of the next segment that names one
+        end = self._index_end
+        for key, _p in reversed(keyed):
+            ends.append(end)
+            if key.i0 != NO_INDEX:
+                end = key.i0
+        ends.reverse()
+        keep: list[Path] = []
+        for (key, p), bound in zip(keyed, ends, strict=True):
+            last = segment_end(p)
+            end = last if last != NO_INDEX else bound
+            if key.i0 != NO_INDEX and self._index_end - end > limit:
+                age_d = (self._index_end - end) / self._rate_hz / 86400.0
+                self._delete(p, f"its newest sample is {age_d:.2f} days of recording older "
+                                f"than the newest, above retention_days={self.retention_days:g}")
+            else:
+                keep.append(p)
+        return keep
 
     def _delete(self, path: Path, why: str) -> None:
         try:

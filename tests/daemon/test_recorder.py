@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import errno
-import os
 from pathlib import Path
 
 import numpy as np
@@ -131,12 +130,16 @@ def test_min_free_bytes_counts_as_full(tmp_path: Path) -> None:
 
 def test_retention_by_size_and_age_never_deletes_open_segment(tmp_path: Path) -> None:
     clock, wall = Clock(), Clock()
-    old = tmp_path / "20000101T000000Z_old_0000.avr"
-    old.write_bytes(b"x" * 100)
-    os.utime(old, (1.0, 1.0))
+    # a segment two days of samples older than the newest (age is sample time: #26 item 4)
+    old = Recorder(tmp_path, "20000101T000000Z-old", _header, clock=clock, wall=wall)
+    old.write(_raw(0))
+    old.close()
+    assert old.path is not None
     rec = _make(tmp_path, clock, wall, segment_s=10.0, retention_days=1.0)
-    rec.write(_raw(0))
-    assert not old.exists() and rec.deleted == [old.name]
+    rec.write(_raw(2 * 86400 * 125))
+    clock.t = 10.0                                  # the next rotation applies retention
+    rec.write(_raw(2 * 86400 * 125 + 10))
+    assert not old.path.exists() and rec.deleted == [old.path.name]
     rec.close()
     clock2, wall2 = Clock(), Clock()
     rec2 = Recorder(tmp_path / "b", "r", _header, segment_s=1.0, retention_max_bytes=3000,
