@@ -11,6 +11,8 @@
   on, the state shows in :attr:`Recorder.status` and the log; free space is re-checked every
   ``retry_s`` and writing resumes in a new segment that starts with a ``gap`` record naming
   the samples lost (reason ``disk_full``).
+- Any other write error (EACCES on a segment, EIO, EROFS): the same pause and retry, but
+  reported as what it is: state ``write_error`` with the error, gap reason ``write_error``.
 - Retention after every rotation: segments older than ``retention_days`` and then the oldest
   while the total exceeds ``retention_max_bytes`` are deleted (never the open one). Age and
   "oldest" are measured in the recording's own time, from its frames: sample indices over the
@@ -115,6 +117,7 @@ class LostSpan:
     t_mono: float
     t_real: float
     records: int = 0
+    reason: str = "disk_full"       # or "write_error": why they could not be written
 
 
 class Recorder:
@@ -153,7 +156,9 @@ class Recorder:
         self._dirty = False
         self._segment_no = 0
         self._seq: dict[str, int] = {}
-        self._full_since: float | None = None
+        self._full_since: float | None = None    # paused since (disk full or write error)
+        self._pause: str | None = None           # "disk_full" | "write_error" while paused
+        self._pause_detail = ""
         self._next_retry = 0.0
         self.lost: LostSpan | None = None
         self.records = 0
@@ -170,6 +175,11 @@ class Recorder:
     # -- public -------------------------------------------------------------------------
     @property
     def disk_full(self) -> bool:
+        return self._pause == "disk_full"
+
+    @property
+    def paused(self) -> bool:
+        """Writing is paused: a full disk or another write error (retried every retry_s)."""
         return self._full_since is not None
 
     def status(self) -> dict[str, Any]:
@@ -178,7 +188,7 @@ class Recorder:
             free = self.ops.free_bytes(self.dir)
         except OSError:
             free = -1
-        return {"state": "disk_full" if self.disk_full else "writing",
+        return {"state": self._pause or "writing", "error": self._pause_detail or None,
                 "segment": self.path.name if self.path else None,
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
@@ -190,7 +200,7 @@ class Recorder:
         full disk; the loss is then remembered and written as a gap on resume."""
         with self._lock:
             now = self.clock()
-            if self.disk_full and not self._try_resume(now):
+            if self.paused and not self._try_resume(now):
                 self._remember_lost(record)
                 return False
             if self._f is None or now - self._opened_at >= self.segment_s:
@@ -227,7 +237,7 @@ class Recorder:
 
     def close(self) -> None:
         with self._lock:
-            if self.lost is not None and not self.disk_full:
+            if self.lost is not None and not self.paused:
                 self._flush_lost()
             self._close_file()
 
@@ -244,7 +254,8 @@ class Recorder:
         assert self._f is not None
         data = frame(frames.encode(self._stamp(record)))
         if self.min_free_bytes and self._free() < self.min_free_bytes + len(data):
-            self._enter_full(f"free space below min_free_bytes={self.min_free_bytes}")
+            self._enter_full(f"free space below min_free_bytes={self.min_free_bytes}",
+                             "disk_full")
             return False
         try:
             self.ops.write(self._f, data)
@@ -334,11 +345,11 @@ class Recorder:
         if lost is None or self._f is None:
             return
         rec = frames.gap_record(self.run_id, 0, lost.i0, lost.n, lost.t_mono, lost.t_real,
-                                "disk_full", lost_records=lost.records)
+                                lost.reason, lost_records=lost.records)
         if self._append(rec):
-            log.warning("recording resumed; samples [%d, %d) and %d records were lost to a "
-                        "full disk (recorded as a gap)", lost.i0, lost.i0 + lost.n,
-                        lost.records)
+            log.warning("recording resumed; samples [%d, %d) and %d records were lost to %s "
+                        "(recorded as a gap)", lost.i0, lost.i0 + lost.n, lost.records,
+                        "a full disk" if lost.reason == "disk_full" else "a write error")
             self.lost = None
 
     def _close_file(self) -> None:
@@ -359,19 +370,19 @@ class Recorder:
     def _failed(self, exc: OSError, what: str) -> None:
         self.errors += 1
         if exc.errno in _FULL_ERRNOS:
-            self._enter_full(f"{what} failed: {exc.strerror}")
+            self._enter_full(f"{what} failed: {exc.strerror}", "disk_full")
         else:
-            # Other I/O errors: treat like a full disk (pause and retry), never crash
-            # acquisition; the log says what it was.
-            log.error("recording %s failed on %s: %s", what, self.path, exc)
-            self._enter_full(f"{what} failed: {exc}")
+            # Other I/O errors (EACCES, EIO, EROFS): pause and retry like a full disk, never
+            # crash acquisition, and say what it was: not a full disk.
+            self._enter_full(f"{what} failed: {exc}", "write_error")
 
-    def _enter_full(self, why: str) -> None:
+    def _enter_full(self, why: str, reason: str) -> None:
         if self._full_since is None:
             self._full_since = self.clock()
-            log.error("recording paused (%s) in %s; acquisition and publishing go on, the "
-                      "lost interval will be recorded as a gap when space returns",
-                      why, self.dir)
+            self._pause, self._pause_detail = reason, why
+            log.error("recording paused (%s: %s) in %s; acquisition and publishing go on, "
+                      "the lost interval will be recorded as a %s gap when writing resumes",
+                      reason.replace("_", " "), why, self.dir, reason)
             self._close_file_quietly()
         self._next_retry = self.wall() + self.retry_s
 
@@ -389,8 +400,12 @@ class Recorder:
         self._next_retry = self.wall() + self.retry_s
         if self._free() < max(self.min_free_bytes, 1):
             return False
-        log.warning("disk space is back (%d bytes free); resuming the recording", self._free())
-        self._full_since = None
+        if self._pause == "disk_full":
+            log.warning("disk space is back (%d bytes free); resuming the recording",
+                        self._free())
+        else:
+            log.warning("retrying the recording after %s", self._pause_detail)
+        self._full_since, self._pause, self._pause_detail = None, None, ""
         return self._rotate(now)
 
     def _remember_lost(self, record: dict[str, Any]) -> None:
@@ -399,7 +414,8 @@ class Recorder:
         if self.lost is None:
             i0 = int(record.get("i0", record.get("i_end", 0)))
             self.lost = LostSpan(i0, 0, float(record.get("t_mono", 0.0)),
-                                 float(record.get("t_real", 0.0)))
+                                 float(record.get("t_real", 0.0)),
+                                 reason=self._pause or "disk_full")
         self.lost.records += 1
         if kind == "raw":
             if self.lost.n == 0:

@@ -168,3 +168,38 @@ def test_reopen_starts_a_new_segment(tmp_path: Path) -> None:
     rec.close()
     assert rec.path is not None and rec.path.exists() and rec.path != first
     assert [r["kind"] for r in RecordingReader(rec.path)] == ["header", "raw"]
+
+
+class NoPermission(FileOps):
+    """A segment the service may not write (EACCES), until ``allowed``."""
+
+    def __init__(self) -> None:
+        self.allowed = True
+
+    def open_append(self, path: Path):  # type: ignore[no-untyped-def]
+        if not self.allowed:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return super().open_append(path)
+
+
+def test_a_permission_error_is_reported_as_what_it_is_not_as_a_full_disk(tmp_path: Path,
+                                                                         caplog) -> None:
+    """#26 item 11: EACCES on a segment was reported as ``disk_full`` (state and gap)."""
+    clock, wall = Clock(), Clock()
+    ops = NoPermission()
+    rec = _make(tmp_path, clock, wall, ops, segment_s=10.0, retry_s=5.0)
+    assert rec.write(_raw(0))
+    ops.allowed = False
+    clock.t = wall.t = 10.0                       # rotation: the new segment cannot be opened
+    assert not rec.write(_raw(10))
+    st = rec.status()
+    assert st["state"] == "write_error" and not rec.disk_full
+    assert "Permission denied" in st["error"]
+    assert "disk full" not in " ".join(r.getMessage() for r in caplog.records).lower()
+    ops.allowed = True
+    clock.t = wall.t = 20.0
+    assert rec.write(_raw(20))
+    rec.close()
+    gaps = [r for r in RecordingReader(tmp_path) if r["kind"] == "gap"]
+    assert [(g["reason"], g["i0"], g["n"]) for g in gaps] == [("write_error", 10, 10)]
+    assert rec.status()["state"] == "writing"
