@@ -47,8 +47,8 @@ from avard.core.io.recording import (
     first_record,
     frame,
     keyed_segments,
-    last_record,
     order_segments,
+    records_backwards,
     segment_end,
 )
 
@@ -549,24 +549,33 @@ class RestartGap:
 
 
 def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
-    """The end of the newest segment that holds samples (in data order, read from the frames:
-    recording.order_segments), read from the file's end, so an hour-long segment costs
-    little."""
+    """Where the recording ends: after its last raw block, or at the start of a later run
+    that recorded no sample (its ``start`` event: the index it started from and when), so
+    runs restarted in quick succession each own the part of the hole after the last one's
+    start instead of all claiming it from the last sample (overlapping ``restart`` gaps).
+    Segments newest first in data order (recording.order_segments), each read from its end,
+    so an hour-long segment costs little."""
     d = Path(data_dir)
     if not d.is_dir():
         return None
     for seg in reversed(order_segments(d.glob("*" + SEGMENT_SUFFIX))):
         try:
-            rec = last_record(seg, "raw")
-            head = first_record(seg) if rec is not None else None
+            end = next((r for r in records_backwards(seg) if r["kind"] == "raw"
+                        or (r["kind"] == "event" and r["name"] == "start" and "i0" in r)),
+                       None)
+            head = first_record(seg) if end is not None else None
         except (OSError, FormatError):
             continue
-        if rec is not None:
-            span = rec["n"] / float(rec.get("rate_hz") or nominal_hz)
-            boot = head.get("boot_id") if head and head.get("run") == rec["run"] else None
-            return LastRecorded(int(rec["i0"]) + int(rec["n"]), float(rec["t_mono"]) + span,
-                                float(rec["t_real"]) + span,
-                                boot if isinstance(boot, str) else None)
+        if end is None:
+            continue
+        boot = head.get("boot_id") if head and head.get("run") == end["run"] else None
+        boot = boot if isinstance(boot, str) else None
+        if end["kind"] == "event":
+            return LastRecorded(int(end["i0"]), float(end["t_mono"]), float(end["t_real"]),
+                                boot)
+        span = end["n"] / float(end.get("rate_hz") or nominal_hz)
+        return LastRecorded(int(end["i0"]) + int(end["n"]), float(end["t_mono"]) + span,
+                            float(end["t_real"]) + span, boot)
     return None
 
 

@@ -23,6 +23,7 @@ from avard.daemon.config import load_config
 from avard.daemon.hw.adxl355 import Drain
 from avard.daemon.hw.simulation import simulated_service
 from avard.daemon.service.checkpoint import STATE_FILE
+from avard.daemon.service.recorder import Recorder, last_recorded, restart_gap
 from avard.daemon.service.supervisor import Service
 
 
@@ -201,3 +202,48 @@ def test_a_violation_is_logged_and_recorded_as_an_event(tmp_path, caplog):
     assert len(events) == 1 and events[0]["detail"]["accumulators_took"] > \
         events[0]["detail"]["recorded"]
     assert any("invariant violated" in r.getMessage() for r in caplog.records)
+
+
+# -- restarts in quick succession: one hole, one gap of the right size (#26 item 11) ---------
+
+
+def _run_segment(d: Path, run: str, i0: int, n: int, t_mono: float, *,
+                 restart: tuple[int, int] | None = None) -> None:
+    """A run as the service writes it: header, its restart gap, its start event at index
+    ``i0`` and time ``t_mono`` (one boot), then ``n`` samples."""
+    def header() -> dict:
+        return frames.header_record(run, rate_hz=125.0, t_mono=t_mono, t_real=1.7e9 + t_mono,
+                                    i0=i0, scale_m_s2_per_count=3.9e-5, boot_id="boot")
+
+    rec = Recorder(d, run, header)
+    if restart is not None:
+        rec.write(frames.gap_record(run, 0, restart[0], restart[1], t_mono, 1.7e9 + t_mono,
+                                    "restart", estimated=True, clock="monotonic"))
+    rec.write(frames.event_record(run, 0, "start", t_mono, 1.7e9 + t_mono, i0=i0))
+    if n:
+        rec.write(frames.raw_record(run, 0, i0, np.zeros((n, 3), np.int32), t_mono,
+                                    1.7e9 + t_mono, rate_hz=125.0))
+    rec.close()
+
+
+def _restart(d: Path, run: str, t_mono: float, n: int) -> tuple[int, int]:
+    """The service's start: the gap from the recording's end, then the run."""
+    last = last_recorded(d, 125.0)
+    assert last is not None
+    g = restart_gap(last, boot_id="boot", t_mono=t_mono, t_real=1.7e9 + t_mono,
+                    rate_hz=125.0)
+    _run_segment(d, run, g.i0 + g.n, n, t_mono, restart=(g.i0, g.n))
+    return g.i0, g.n
+
+
+def test_restarts_that_record_no_sample_do_not_write_overlapping_restart_gaps(tmp_path):
+    """Runs that started and stopped without recording a sample each measured their restart
+    gap from the last *sample*, so one hole became [2494, +481), [2494, +811), [2494, +1101).
+    A run's start event ends the recording too: the gaps tile the hole exactly."""
+    _run_segment(tmp_path, "n00000001-a", 0, 2494, 0.0)           # samples end at 19.952 s
+    gaps = [_restart(tmp_path, "n00000002-b", 19.952 + 481 / 125, 0),
+            _restart(tmp_path, "n00000003-c", 19.952 + 811 / 125, 0),
+            _restart(tmp_path, "n00000004-d", 19.952 + 1101 / 125, 250)]
+    assert gaps == [(2494, 481), (2975, 330), (3305, 290)]
+    last = last_recorded(tmp_path, 125.0)
+    assert last is not None and last.i_end == 2494 + 1101 + 250
