@@ -90,6 +90,10 @@ class AllanFeed:
         #: ``next_index`` it survives a gap: a checkpoint's ``i_end`` is this, so the restore
         #: replays exactly the samples after it, never the ones the accumulators hold.
         self.covered: int | None = None
+        #: The index the accumulators started from (empty then): they can never hold more
+        #: than ``covered - origin`` samples, whatever retention deleted since. None when
+        #: unknown (a checkpoint written before this was kept).
+        self.origin: int | None = None
         self.fed = 0
         self.skipped = 0
         self._open = False          # samples fed since the last gap()
@@ -103,7 +107,7 @@ class AllanFeed:
     # -- state for checkpoints -------------------------------------------------------------
     def state(self) -> dict[str, Any]:
         """What the feed needs to continue exactly: held temperatures, pending readings."""
-        return {"next_index": self.next_index, "covered": self.covered,
+        return {"next_index": self.next_index, "covered": self.covered, "origin": self.origin,
                 "held": [float(v) for v in self._held],
                 "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
                 "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
@@ -114,8 +118,9 @@ class AllanFeed:
         """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
         feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
         feed.next_index = state["next_index"]
-        covered = state.get("covered")
+        covered, origin = state.get("covered"), state.get("origin")
         feed.covered = None if covered is None else int(covered)
+        feed.origin = None if origin is None else int(origin)
         feed._held = np.array(state["held"], dtype=float)
         feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
         feed._open = bool(state.get("open", False))

@@ -83,6 +83,7 @@ class Restored:
     allan: Any
     info: dict[str, Any]
     covered: int
+    origin: int | None          # the index the accumulators started from, when known
 
 
 def held_index(ckpt: dict[str, Any]) -> int | None:
@@ -199,6 +200,7 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
         run = ckpt["run"]
     elif fresh is not None:
         feed, after = AllanFeed(fresh, 1.0, list(names[3:])), None   # headers set the scale
+        feed.origin = _first_index(data_dir)
         source = "the whole recording (it holds no usable checkpoint record)"
     else:
         return None
@@ -222,12 +224,12 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
     else:
         log.warning("restored the Allan accumulators of run %s (%d samples, %d replayed from "
                     "the recording)", run, allan.n_samples, replayed)
-    first = _first_index(data_dir)
-    span = covered - first if first is not None else None
+    span = covered - feed.origin if feed.origin is not None else None
     if span is not None and int(allan.n_samples) > span:
-        msg = (f"the restored accumulators hold {int(allan.n_samples)} samples but the "
-               f"recording has only {span} sample indices up to {covered} (checkpoint "
-               f"{base_n} + replayed {replayed}); they are dropped and this run starts afresh")
+        msg = (f"the restored accumulators hold {int(allan.n_samples)} samples but only "
+               f"{span} sample indices lie between where they started ({feed.origin}) and "
+               f"{covered} (checkpoint {base_n} + replayed {replayed}); they are dropped and "
+               "this run starts afresh")
         log.error("invariant violated: %s", msg)
-        return Restored(None, {"invariant_violated": msg, **info}, covered)
-    return Restored(allan, info, covered)
+        return Restored(None, {"invariant_violated": msg, **info}, covered, None)
+    return Restored(allan, info, covered, feed.origin)

@@ -231,6 +231,7 @@ class Service:
                 self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
                 self.feed.run = self.run_id
                 self.feed.cover(got.covered)
+                self.feed.origin = got.origin
                 self.restored = got.info
         last = last_recorded(self.data_dir, self.odr)
         if last is not None:
@@ -244,6 +245,8 @@ class Service:
         # replayed, or deliberately not: a fresh start), so a checkpoint taken before this run
         # feeds anything still says exactly what they hold (#26 item 1).
         self.feed.cover(self.start_index)
+        if self.feed.origin is None and int(self.allan.n_samples) == 0:
+            self.feed.origin = self.start_index      # fresh accumulators start here
 
     # -- lifecycle ----------------------------------------------------------------------
     def _check_data_dir(self) -> None:

@@ -247,3 +247,33 @@ def test_restarts_that_record_no_sample_do_not_write_overlapping_restart_gaps(tm
     assert gaps == [(2494, 481), (2975, 330), (3305, 290)]
     last = last_recorded(tmp_path, 125.0)
     assert last is not None and last.i_end == 2494 + 1101 + 250
+
+
+def test_segments_deleted_by_retention_do_not_look_like_double_counting(tmp_path, caplog):
+    """The accumulators legitimately hold more than what is left of the recording once
+    retention deleted old segments: the restore's invariant counts from where they started."""
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    second = _run(data, 5.0, 2)
+    first_run = _runs(data)[0]
+    for seg in data.glob(f"{first_run}_*.avr"):
+        seg.unlink()
+    caplog.set_level("ERROR", logger="avard.daemon.service")
+    svc = _run(data, 2.0, 3)
+    assert svc.restored is not None and "invariant_violated" not in svc.restored
+    assert svc.restored["n_samples"] == int(second.allan.n_samples)
+    assert not [r for r in caplog.records if "invariant" in r.getMessage()]
+
+
+def test_accumulators_holding_more_samples_than_indices_are_dropped_loudly(tmp_path, caplog):
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    ckpt = _state(data)
+    ckpt["feed"]["origin"] = ckpt["feed"]["covered"] - 10     # claims to have started late
+    (data / STATE_FILE).write_bytes(frame_bytes(frames.encode(ckpt)))
+    caplog.set_level("ERROR", logger="avard.daemon.service")
+    svc = _run(data, 2.0, 2)
+    assert svc.restored is not None and "invariant_violated" in svc.restored
+    assert any("invariant violated" in r.getMessage() for r in caplog.records)
+    # this run starts afresh: its accumulators hold only its own samples
+    assert int(svc.allan.n_samples) <= svc.final_status["samples"]
