@@ -5,9 +5,12 @@ every run the accumulators equal the offline Allan variance of the recording (#2
 
 from __future__ import annotations
 
+import pytest
+
 from benchmarks.soak_restarts import format_campaign, run_restart_campaign
 
 
+@pytest.mark.slow
 def test_one_round_of_the_restart_classes(tmp_path, capsys):
     res = run_restart_campaign(tmp_path, seed=2, cycles=1)
     with capsys.disabled():
