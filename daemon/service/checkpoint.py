@@ -9,7 +9,7 @@ uses; it replays with ``AllanFeed.replay`` (core/io/recording.py), as the offlin
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -152,7 +152,8 @@ def _first_index(data_dir: Path) -> int | None:
 
 
 def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
-                         rate_hz: float, *, fresh: Any = None) -> Restored | None:
+                         rate_hz: float, *,
+                         fresh: Callable[[], Any] | None = None) -> Restored | None:
     """The accumulators of the last checkpoint with everything recorded after it replayed,
     ended by a gap (the restart); None when there is nothing to restore (no recording, or a
     checkpoint of another configuration: the service then starts afresh).
@@ -160,8 +161,8 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
     The checkpoint is the state file; when that is missing, damaged or does not say which
     samples it holds, the recording's newest usable ``checkpoint`` record (written every
     ``checkpoint_interval_s``, so the replay after it stays short and start-up is not held
-    past TimeoutStartSec); when the recording has none, ``fresh`` (empty accumulators of this
-    configuration) fed the whole recording. Every such rebuild is logged at WARNING with what
+    past TimeoutStartSec); when the recording has none, ``fresh()`` (new empty accumulators of
+    this configuration) fed the whole recording. Every such rebuild is logged at WARNING with what
     was done. Then the invariant: the accumulators cannot hold more samples than the
     recording has indices up to ``covered``; if they do, they are dropped (ERROR, and the
     start event says so) rather than continued wrong."""
@@ -199,7 +200,7 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
         feed, after = got
         run = ckpt["run"]
     elif fresh is not None:
-        feed, after = AllanFeed(fresh, 1.0, list(names[3:])), None   # headers set the scale
+        feed, after = AllanFeed(fresh(), 1.0, list(names[3:])), None  # headers set the scale
         feed.origin = _first_index(data_dir)
         source = "the whole recording (it holds no usable checkpoint record)"
     else:

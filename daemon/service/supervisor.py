@@ -224,7 +224,7 @@ class Service:
         if self.config.allan.restore:
             got = restore_accumulators(self.data_dir, self.streaming_cls,
                                        list(self.allan.names), float(self.allan.rate_hz),
-                                       fresh=self.allan)
+                                       fresh=self._fresh_allan)
             if got is not None:
                 # None: the restored state broke an invariant and was dropped (logged)
                 self.allan = got.allan if got.allan is not None else self._fresh_allan()

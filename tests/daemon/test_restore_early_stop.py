@@ -143,6 +143,29 @@ def _runs(data: Path) -> list[str]:
     return out
 
 
+def _strip_checkpoints(data: Path, run: str) -> None:
+    for seg in data.glob(f"{run}_*.avr"):
+        kept = [f for f in scan_frames(seg.read_bytes())
+                if frames.decode(f.payload)["kind"] not in ("checkpoint", "avar")]
+        seg.write_bytes(b"".join(frame_bytes(f.payload) for f in kept))
+
+
+def test_a_lost_state_file_and_no_checkpoint_record_rebuilds_from_the_whole_recording(
+        tmp_path, caplog):
+    data = tmp_path / "rec"
+    _run(data, 6.0, 1)
+    _run(data, 4.0, 2)
+    for run in _runs(data):
+        _strip_checkpoints(data, run)
+    (data / STATE_FILE).unlink()
+    caplog.set_level("WARNING", logger="avard.daemon.service")
+    svc = _run(data, 3.0, 3)
+    assert svc.restored is not None and svc.restored["source"].startswith("the whole recording")
+    _assert_accumulators_equal_the_recording(data)
+    assert any("rebuilt the accumulators from the whole recording" in r.getMessage()
+               for r in caplog.records)
+
+
 def test_a_lost_state_file_and_a_killed_run_replays_what_came_after_the_checkpoint(tmp_path):
     """The newest checkpoint record is the previous run's last; a later run killed before its
     first checkpoint (no final checkpoint either) is replayed after it."""
@@ -151,11 +174,7 @@ def test_a_lost_state_file_and_a_killed_run_replays_what_came_after_the_checkpoi
     svc = _service(data, 2)
     svc.run(3.0)
     # a SIGKILL: the run's samples are recorded, its checkpoints are not
-    killed = _runs(data)[-1]
-    for seg in data.glob(f"{killed}_*.avr"):
-        kept = [f for f in scan_frames(seg.read_bytes())
-                if frames.decode(f.payload)["kind"] not in ("checkpoint", "avar")]
-        seg.write_bytes(b"".join(frame_bytes(f.payload) for f in kept))
+    _strip_checkpoints(data, _runs(data)[-1])
     (data / STATE_FILE).unlink()
     svc = _run(data, 5.0, 3)
     assert svc.restored is not None and svc.restored["replayed"] > 0
