@@ -558,7 +558,18 @@ def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | Non
     d = Path(data_dir)
     if not d.is_dir():
         return None
-    for seg in reversed(order_segments(d.glob("*" + SEGMENT_SUFFIX))):
+    ordered = order_segments(d.glob("*" + SEGMENT_SUFFIX))
+    by_name = sorted(ordered, key=lambda p: p.name)
+    if by_name != ordered:
+        # the invariant "order comes from the data" holds (every reader orders by the
+        # frames), but the names say otherwise: renamed files, or four-digit segment
+        # numbers past 9 999 from an older version; tools that sort names would misread it
+        first = next(k for k, (a, b) in enumerate(zip(by_name, ordered, strict=True))
+                     if a != b)
+        log.warning("segment names in %s do not sort in data order (by name %s comes where "
+                    "the frames put %s); avard reads them in frame order", d,
+                    by_name[first].name, ordered[first].name)
+    for seg in reversed(ordered):
         try:
             end = next((r for r in records_backwards(seg) if r["kind"] == "raw"
                         or (r["kind"] == "event" and r["name"] == "start" and "i0" in r)),

@@ -57,7 +57,7 @@ def test_segment_names_sort_in_data_order_past_segment_9999(tmp_path):
     assert sorted(p.name for p in written) == [p.name for p in written]
 
 
-def test_readers_order_segments_by_their_frames_whatever_the_names_say(tmp_path):
+def test_readers_order_segments_by_their_frames_whatever_the_names_say(tmp_path, caplog):
     written = _record(tmp_path, 9997, 5)
     # the names the old recorder gave them: four digits wide, 10 000 sorts before 9 997
     old = []
@@ -77,6 +77,9 @@ def test_readers_order_segments_by_their_frames_whatever_the_names_say(tmp_path)
     # the service's start: the newest segment is the one holding the last samples
     last = last_recorded(tmp_path, RATE)
     assert last is not None and last.i_end == 1250
+    # the service's start says so, loudly
+    assert any("do not sort in data order" in r.getMessage() for r in caplog.records
+               if r.levelname == "WARNING")
 
 
 def test_a_segment_whose_header_is_damaged_is_placed_by_its_records(tmp_path):
