@@ -1,9 +1,12 @@
 """Checkpoints of the Allan accumulators and the restore at start-up.
 
 The state file (``allan-state.ckpt`` beside the segments) is written atomically; a new run
-restores it, replays what the recording holds after it, and continues the sample index from
-the last recorded sample. :func:`restore_accumulators` is the one entry point the service
-uses; it replays with ``AllanFeed.replay`` (core/io/recording.py), as the offline reader does.
+restores it, replays what the recording holds after the index its accumulators account for
+(the feed's ``covered``), and continues the sample index from the end of the recording. When
+the state file is missing, damaged or says nothing usable, the recording's own ``checkpoint``
+records stand in for it. :func:`restore_accumulators` is the one entry point the service
+uses; it replays with ``replay_after`` (core/allan/replay.py), through the same walk and
+``AllanFeed`` as the offline reader.
 """
 
 from __future__ import annotations
@@ -52,12 +55,8 @@ class StateFile:
     problem: str | None          # "missing", or what is wrong with it; None when readable
 
 
-def load_state(data_dir: Path) -> dict[str, Any] | None:
-    """The state file's checkpoint record, or None (missing or unreadable)."""
-    return read_state(data_dir).record
-
-
 def read_state(data_dir: Path) -> StateFile:
+    """The state file's checkpoint record, or why there is none (missing, damaged)."""
     path = data_dir / STATE_FILE
     if not path.exists():
         return StateFile(None, "missing")
