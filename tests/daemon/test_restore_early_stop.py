@@ -296,3 +296,20 @@ def test_accumulators_holding_more_samples_than_indices_are_dropped_loudly(tmp_p
     assert any("invariant violated" in r.getMessage() for r in caplog.records)
     # this run starts afresh: its accumulators hold only its own samples
     assert int(svc.allan.n_samples) <= svc.final_status["samples"]
+
+
+def test_a_checkpoint_left_by_the_old_early_stop_bug_is_not_trusted(tmp_path, caplog):
+    """Upgrading over a state file the old code wrote at an early stop (``i_end = 0``,
+    ``next_index = null``, samples held, no ``covered``): it is recognised, not replayed onto,
+    and the recording's checkpoint record stands in for it."""
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    ckpt = _state(data)
+    ckpt["i_end"] = 0
+    ckpt["feed"] = {k: v for k, v in ckpt["feed"].items() if k not in ("covered", "origin")}
+    ckpt["feed"]["next_index"] = None
+    (data / STATE_FILE).write_bytes(frame_bytes(frames.encode(ckpt)))
+    caplog.set_level("WARNING", logger="avard.daemon.service")
+    svc = _run(data, 4.0, 2)
+    assert svc.restored is not None and svc.restored["state_file"].startswith("unusable")
+    _assert_accumulators_equal_the_recording(data)
