@@ -19,6 +19,10 @@ optionally a full disk). At the end it prints:
   subscriber received it), from the recording (offline replay) and from the subscriber's copy
   (offline replay), at a few τ, with the largest relative difference (equal: < 1e-9).
 
+Then the restart classes (benchmarks/soak_restarts.py, ``--restart-cycles``): early stops,
+restarts in quick succession, the checkpoint file damaged, emptied and deleted, and a
+CLOCK_REALTIME step with retention, each checked against the recording.
+
 Exit status 0 when every check holds. tests/daemon/test_soak_short.py runs 2 simulated hours.
 """
 
@@ -411,6 +415,10 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--out", type=Path, default=None, help="keep the data here (default: a "
                     "temporary directory, removed at the end)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--restart-cycles", type=int, default=1,
+                    help="rounds of the restart classes after the soak (early stops, quick "
+                         "restarts, checkpoint damage, clock step with retention: "
+                         "benchmarks/soak_restarts.py); 0 skips them")
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="avard-soak-"))
     out.mkdir(parents=True, exist_ok=True)
@@ -418,10 +426,17 @@ def main(argv: list[str]) -> int:
         res = run_soak(args.hours, out, fault_every_h=args.fault_every_h,
                        disk_full=args.disk_full, seed=args.seed)
         print(format_result(res))
+        restarts_ok = True
+        if args.restart_cycles > 0:
+            from benchmarks.soak_restarts import format_campaign, run_restart_campaign
+
+            camp = run_restart_campaign(out, seed=args.seed, cycles=args.restart_cycles)
+            print(format_campaign(camp))
+            restarts_ok = camp.ok
     finally:
         if args.out is None:
             shutil.rmtree(out, ignore_errors=True)
-    return 0 if res.ok else 1
+    return 0 if res.ok and restarts_ok else 1
 
 
 if __name__ == "__main__":

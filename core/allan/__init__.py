@@ -7,5 +7,8 @@
 - ``noise_id.py``    Stable32's noise identification (lag-1 ACF, B1/R(n)), shared by every
   estimator;
 - ``kernels.py``     the OADEV's inner sums: ``_kernels.c`` when built (optional), else numpy;
-- ``scratch.py``     per-thread work arrays for the kernels.
+- ``scratch.py``     per-thread work arrays for the kernels;
+- ``feed.py``        what the service's accumulators see: ``AllanFeed`` (records → blocks) and
+  ``Segmenter`` (where segments end), shared with the offline replay;
+- ``replay.py``      a recording replayed into them after a checkpoint (the restore).
 """

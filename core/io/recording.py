@@ -6,8 +6,9 @@ On disk every record is one frame::
 
 where the payload is the same msgpack record that goes on the wire (``avard.core.io.frames``).
 A segment file is a sequence of frames that starts with a ``header`` record; a recording is a
-file or a directory of segment files, read in name order (names start with the run id, which
-starts with a run sequence number: see daemon/service/recorder.py ``new_run_id``).
+file or a directory of segment files, read in data order: by run (the run id starts with a run
+sequence number, daemon/service/recorder.py ``new_run_id``) and sample index, both read from
+the frames (:func:`order_segments`), never from the file names.
 
 Why this framing: a power cut can only leave a *truncated* last frame (appends are the only
 writes), which the reader detects from the length and drops, saying how many bytes it dropped.
@@ -21,6 +22,7 @@ This module never touches hardware or sockets (it is part of ``avard.core``).
 from __future__ import annotations
 
 import logging
+import re
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
@@ -29,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.allan.feed import AllanFeed, Segmenter, scale_of
 from avard.core.errors import FormatError
 
 log = logging.getLogger(__name__)
@@ -146,8 +149,7 @@ def scan_frames(data: bytes, name: str = "<bytes>", *, max_bytes: int = MAX_FRAM
 
 _CRC_BITS = 25                  # Z_{2^j} for j < 25 covers payload lengths up to 2^25 - 1
 _ZERO_TABLES: np.ndarray | None = None
-_WINDOW0 = 1 << 14              # first resync window (candidate offsets), doubled up to
-_WINDOW_MAX = 1 << 20           # this, so memory stays bounded on any file
+_WINDOW_MAX = 1 << 20           # largest resync window (candidate offsets): bounded memory
 
 
 def _zero_byte_tables() -> np.ndarray:
@@ -272,15 +274,51 @@ def _valid_in(buf: memoryview, lo: int, hi: int, max_bytes: int,
     return pos[good]
 
 
+#: Candidate offsets right after the damage that are checked one at a time (parsing the
+#: length, and a zlib CRC when the claimed payload is short) before the windowed search: on a
+#: densely damaged segment the next frame is usually a few bytes away, and a fixed window of
+#: 16 384 vectorised candidates per resync cost ~140 CPU-s per MB (#26 item 10).
+_NEAR = 64
+#: Payload bytes those one-at-a-time CRCs may cover per resync (longer claims are left to the
+#: windowed search, whose cost per candidate does not grow with the claimed length), so a
+#: crafted file cannot make the near search quadratic.
+_NEAR_CRC_BYTES = 1 << 12
+_WINDOW_NEAR = 1 << 8           # first window of the search after that, doubled up to
+                                # _WINDOW_MAX
+
+
 def _resync(buf: memoryview, start: int, max_bytes: int,
             prefix: _PrefixCrc | None = None) -> int | None:
     """Offset of the next position at or after ``start`` where a valid frame begins.
 
-    Same answer as trying ``_valid_at`` at every offset in turn, in time linear in the bytes
-    searched (windows of candidate offsets that double in size)."""
+    Same answer as trying ``_valid_at`` at every offset in turn. Work grows with the distance
+    to that frame, not with a fixed window: the first ``_NEAR`` offsets are tried one at a
+    time (a frame claiming a long payload there is deferred), then windows of candidates that
+    double from ``_WINDOW_NEAR``, each checked with prefix CRCs in time independent of the
+    claimed lengths (linear in the bytes searched overall)."""
+    size = len(buf)
+    hdr = FRAME_HEADER.size
+    deferred: int | None = None          # first near offset whose long claim was not checked
+    budget = _NEAR_CRC_BYTES
+    stop = min(start + _NEAR, size - hdr + 1)
+    for q in range(start, stop):
+        n = int.from_bytes(buf[q:q + 4], "little")
+        if n == 0 or n > max_bytes or q + hdr + n > size:
+            continue
+        if n > budget:
+            deferred = q if deferred is None else deferred
+            continue
+        budget -= n
+        if _valid_at(buf, q, max_bytes) is not None:
+            if deferred is None:
+                return q
+            prefix = prefix or _PrefixCrc(buf)
+            found = _valid_in(buf, deferred, q, max_bytes, prefix)
+            return int(found[0]) if found.size else q
     prefix = prefix or _PrefixCrc(buf)
-    pos, window = start, _WINDOW0
-    while pos + FRAME_HEADER.size <= len(buf):
+    pos = deferred if deferred is not None else max(stop, start)
+    window = _WINDOW_NEAR
+    while pos + hdr <= size:
         found = _valid_in(buf, pos, pos + window, max_bytes, prefix)
         if found.size:
             return int(found[0])
@@ -291,18 +329,170 @@ def _resync(buf: memoryview, start: int, max_bytes: int,
 
 def segment_files(path: str | Path) -> list[Path]:
     """The segment files of a recording: the file itself, or a directory's ``*.avr`` files in
-    name order (names are ``RUN_NNNN_STAMP.avr`` and a run id begins with a run sequence
-    number, ``nSSSSSSSS-``, so name order is data order whatever the wall clock said)."""
+    data order (:func:`order_segments`: read from their frames, never from their names)."""
     p = Path(path)
     if p.is_dir():
-        files = sorted(f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file())
+        files = [f for f in p.iterdir() if f.suffix == SEGMENT_SUFFIX and f.is_file()]
         if not files:
             raise FormatError(f"{p}: no {SEGMENT_SUFFIX} segment files in this directory; "
                               "point at a recording directory written by `avard run`")
-        return files
+        return order_segments(files)
     if not p.exists():
         raise FormatError(f"{p}: no such recording file or directory")
     return [p]
+
+
+#: A run id begins with its run sequence number, ``nSSSSSSSS-`` (daemon/service/recorder.py
+#: ``new_run_id``); ids written before that begin with a UTC stamp and sort before them.
+_RUN_SEQ = re.compile(r"n(\d+)-")
+
+
+@dataclass(frozen=True, order=True)
+class SegmentKey:
+    """Where a segment sits in its recording, read from its frames: the run (by its sequence
+    number), then the first sample index its data records name (raw, temp, gap, event: the
+    recorder writes them in sample order), then the sequence number of its first header
+    (segments of one run that start at the same index), then the name (only to make the
+    order total). Names are not trusted: ``_9999_`` sorted after ``_10000_`` while the field
+    was four digits wide, and a file can be renamed."""
+
+    run_seq: int            # -1 for an old stamp-first run id, then ordered by ``run``
+    run: str
+    i0: int                 # NO_INDEX when no record of the file names an index
+    header_seq: int         # -1 when the file holds no readable header
+    name: str
+
+
+#: ``SegmentKey.i0`` of a file with no readable record: after its run's readable segments.
+NO_INDEX = 1 << 62
+#: Records read from a segment's start to find its first sample index (the recorder writes
+#: the header, perhaps a gap or event, then the first raw block).
+_HEAD_RECORDS = 64
+
+
+def run_order(run: str) -> tuple[int, str]:
+    """Sort key of a run id: its run sequence number, or -1 then the id for old ids."""
+    m = _RUN_SEQ.match(run)
+    return (int(m.group(1)) if m else -1, run)
+
+
+def _head_records(path: Path) -> Iterator[dict[str, Any] | None]:
+    """The first records of a segment, read frame by frame from its start (a few small
+    reads, not the file); yields None and stops at the first frame that does not check."""
+    from avard.core.io import frames as wire
+
+    with open(path, "rb") as f:
+        for _ in range(_HEAD_RECORDS):
+            head = f.read(FRAME_HEADER.size)
+            if len(head) < FRAME_HEADER.size:
+                return
+            n, crc = FRAME_HEADER.unpack(head)
+            if n == 0 or n > MAX_FRAME_BYTES:
+                yield None
+                return
+            payload = f.read(n)
+            if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
+                yield None
+                return
+            try:
+                yield wire.decode(payload)
+            except FormatError:
+                yield None
+                return
+
+
+#: Keys already read, by (path, inode, size, mtime): the service orders its recording at
+#: every start (restore, last_recorded, retention) and a weekend at segment_s = 10 s makes
+#: 21 600 files; a file that changed in any way is read again.
+_KEYS: dict[tuple[str, int, int, int], SegmentKey] = {}
+_KEYS_MAX = 1 << 17
+
+
+_ENDS: dict[tuple[str, int, int, int], int] = {}
+
+
+def _stamp(p: Path) -> tuple[str, int, int, int] | None:
+    try:
+        st = p.stat()
+    except OSError:
+        return None
+    return (str(p), st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def _cached(cache: dict[tuple[str, int, int, int], Any], p: Path, read: Any) -> Any:
+    stamp = _stamp(p)
+    if stamp is not None and stamp in cache:
+        return cache[stamp]
+    value = read(p)
+    if stamp is not None:
+        if len(cache) >= _KEYS_MAX:
+            cache.clear()
+        cache[stamp] = value
+    return value
+
+
+def segment_key(path: str | Path) -> SegmentKey:
+    """A segment's :class:`SegmentKey`, from the records at its start; after damage there,
+    from a scan of the whole file (resynchronising). A file with no record naming an index
+    takes its header's; with no readable record at all, its name's run id and NO_INDEX."""
+    key: SegmentKey = _cached(_KEYS, Path(path), _read_segment_key)
+    return key
+
+
+def segment_end(path: str | Path) -> int:
+    """The index after the last sample of a segment's last readable raw block; NO_INDEX
+    when it holds none (read from the file's end, kept while the file is unchanged)."""
+    def read(p: Path) -> int:
+        try:
+            rec = last_record(p, "raw")
+        except (OSError, FormatError):
+            rec = None
+        return NO_INDEX if rec is None else int(rec["i0"]) + int(rec["n"])
+
+    end: int = _cached(_ENDS, Path(path), read)
+    return end
+
+
+def _read_segment_key(p: Path) -> SegmentKey:
+    header: dict[str, Any] | None = None
+    first: dict[str, Any] | None = None
+    damaged = False
+    try:
+        for rec in _head_records(p):
+            if rec is None:
+                damaged = True
+            elif rec["kind"] == "header":
+                header = header or rec
+            elif "i0" in rec:
+                first = rec
+            if damaged or first is not None:
+                break
+        if first is None and damaged:
+            for rec in RecordingReader(p):
+                if rec["kind"] == "header":
+                    header = header or rec
+                elif "i0" in rec:
+                    first = rec
+                    break
+    except (OSError, FormatError):
+        pass
+    ref = first or header
+    if ref is None:
+        return SegmentKey(*run_order(p.name.split("_", 1)[0]), NO_INDEX, -1, p.name)
+    seq = int(header["seq"]) if header is not None and header["run"] == ref["run"] else -1
+    return SegmentKey(*run_order(str(ref["run"])), int(ref["i0"]), seq, p.name)
+
+
+def keyed_segments(paths: Iterable[str | Path]) -> list[tuple[SegmentKey, Path]]:
+    """Segment files with their :func:`segment_key`, in data order (a few small reads per
+    file). The one ordering every reader of a recording uses: the walk, the service's
+    restore and ``last_recorded``, retention's "oldest first"."""
+    return sorted((segment_key(p), Path(p)) for p in paths)
+
+
+def order_segments(paths: Iterable[str | Path]) -> list[Path]:
+    """Segment files in data order (:func:`keyed_segments` without the keys)."""
+    return [p for _, p in keyed_segments(paths)]
 
 
 def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
@@ -348,20 +538,22 @@ def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
         return None
 
 
-def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
-    """The last valid record of ``kind`` in one segment file, reading from the end."""
+def records_backwards(path: str | Path) -> Iterator[dict[str, Any]]:
+    """The valid records of one segment file, newest first, read from the end (frame offsets
+    from the length fields); a damaged file is read forwards once (resynchronising)."""
     offsets = frame_offsets(path)
     if offsets is None:
-        found = None
-        for rec in RecordingReader(path):
-            if rec["kind"] == kind:
-                found = rec
-        return found
+        yield from reversed(list(RecordingReader(path)))
+        return
     for off in reversed(offsets):
         hit = read_frame_at(path, off)
-        if hit is not None and hit["kind"] == kind:
-            return hit
-    return None
+        if hit is not None:
+            yield hit
+
+
+def last_record(path: str | Path, kind: str) -> dict[str, Any] | None:
+    """The last valid record of ``kind`` in one segment file, reading from the end."""
+    return next((rec for rec in records_backwards(path) if rec["kind"] == kind), None)
 
 
 def first_record(path: str | Path) -> dict[str, Any] | None:
@@ -628,191 +820,6 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
 
 
 # --------------------------------------------------------------------------------------------
-# the Allan feed: one definition of "what the accumulators saw", shared by service and replay
-
-
-class Segmenter:
-    """The one rule for where the accumulators' segments end: at every gap record, every run
-    change (a header of another run) and every jump in the sample index. :class:`AllanFeed`
-    breaks its segments by it; ``load_recording`` records the same breaks for ``avard
-    analyze`` (``meta["segment_bounds"]``), so both average over exactly the same stretches."""
-
-    def __init__(self) -> None:
-        self.run: str | None = None
-        self.next_index: int | None = None
-        self.n = 0                      # raw samples seen
-        self.bounds: list[int] = [0]    # sample counts where a segment starts, then the end
-
-    def starts_segment(self, rec: dict[str, Any]) -> bool:
-        """Whether ``rec`` ends the current segment (before its own samples, if any)."""
-        kind = rec["kind"]
-        cut = False
-        if kind == "header" and rec["run"] != self.run:
-            self.run, cut = rec["run"], True
-        elif kind == "gap":
-            cut = True
-        elif kind == "raw":
-            i0 = int(rec["i0"])
-            cut = self.next_index is not None and i0 != self.next_index
-        if cut:
-            self.next_index = None
-            if self.bounds[-1] != self.n:
-                self.bounds.append(self.n)
-        if kind == "raw":
-            self.next_index = int(rec["i0"]) + int(rec["n"])
-            self.n += int(rec["n"])
-        return cut
-
-    def segment_bounds(self) -> list[int]:
-        """0, every break, N: consecutive pairs are the segments' [start, stop) in samples."""
-        return self.bounds + ([self.n] if self.bounds[-1] != self.n else [])
-
-
-class AllanFeed:
-    """Builds the (n, 3 + k) blocks the streaming Allan accumulators see, from raw and
-    temperature records, identically in the service and in an offline replay.
-
-    Channels are the three axes in m/s² (counts × the header's scale) followed by the
-    temperature channels in °C, each held at its last reading (zero-order hold) from the
-    sample index the reading was stamped with. Feeding starts only once every temperature
-    channel has a first reading (a hold needs a value to hold); samples before that are
-    counted in ``skipped``. A jump in the sample index, an explicit gap or a new run ends the
-    segment (``StreamingAllan.gap()``), so no Allan cluster straddles lost samples.
-
-    ``sink`` is anything with ``update(block)`` and ``gap()`` (a StreamingAllan).
-    """
-
-    def __init__(self, sink: Any, scale_m_s2_per_count: float, temp_names: list[str]) -> None:
-        self.sink = sink
-        self.scale = float(scale_m_s2_per_count)
-        self.temp_names = list(temp_names)
-        self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
-        self._held = np.full(len(self.temp_names), np.nan)
-        self._pending: list[tuple[int, np.ndarray]] = []   # (i0, held values from i0 on)
-        self.next_index: int | None = None
-        self.fed = 0
-        self.skipped = 0
-        self._open = False          # samples fed since the last gap()
-        self.run: str | None = None
-        self._segments = Segmenter()
-
-    @property
-    def channels(self) -> list[str]:
-        return ["x", "y", "z", *self.temp_names]
-
-    # -- state for checkpoints -------------------------------------------------------------
-    def state(self) -> dict[str, Any]:
-        """What the feed needs to continue exactly: held temperatures, pending readings."""
-        return {"next_index": self.next_index, "held": [float(v) for v in self._held],
-                "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
-                "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
-                "run": self.run}
-
-    @classmethod
-    def from_state(cls, sink: Any, state: dict[str, Any]) -> AllanFeed:
-        """The feed of :meth:`state`, feeding ``sink`` (the restored accumulators)."""
-        feed = cls(sink, float(state["scale"]), list(state["temp_names"]))
-        feed.next_index = state["next_index"]
-        feed._held = np.array(state["held"], dtype=float)
-        feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
-        feed._open = bool(state.get("open", False))
-        feed.run = feed._segments.run = state.get("run")
-        feed._segments.next_index = feed.next_index
-        return feed
-
-    # -- records -------------------------------------------------------------------------
-    def apply(self, rec: dict[str, Any]) -> None:
-        """Feed one record as the service did: a new run's header starts a new segment with
-        that run's scale and temperature channels (held values start unknown, as in a freshly
-        started service); raw, temp and gap records go to :meth:`raw`, :meth:`temp`,
-        :meth:`gap`; other kinds are not data."""
-        kind = rec["kind"]
-        if self._segments.starts_segment(rec):
-            self.gap()
-        if kind == "header":
-            if rec["run"] != self.run:
-                self.run = rec["run"]
-                self.scale = _scale_of(rec)
-                self.temp_names = list(rec.get("temperature_channels", []))
-                self._col = {name: 3 + i for i, name in enumerate(self.temp_names)}
-                self._held = np.full(len(self.temp_names), np.nan)
-                self._pending = []
-        elif kind == "raw":
-            self.raw(int(rec["i0"]), rec["counts"])
-        elif kind == "temp":
-            self.temp(int(rec["i0"]), rec["names"], rec["values_c"])
-        elif kind == "gap":
-            self.gap()
-
-    def replay(self, records: Iterable[dict[str, Any]], *, after: int | None = None) -> int:
-        """Feed every record of ``records`` (as :func:`walk` yields them), skipping samples
-        and readings before index ``after`` (what a checkpoint already holds), whatever run
-        wrote them. Returns the number of samples fed."""
-        n0 = self.fed
-        for rec in records:
-            kind = rec["kind"]
-            if after is not None and kind in ("raw", "temp", "gap"):
-                i0 = int(rec["i0"])
-                if kind == "raw" and i0 + int(rec["n"]) <= after:
-                    continue
-                if kind == "raw" and i0 < after:
-                    rec = dict(rec, i0=after, n=i0 + int(rec["n"]) - after,
-                               counts=rec["counts"][after - i0:])
-                elif kind != "raw" and i0 < after:
-                    continue
-            self.apply(rec)
-        return self.fed - n0
-
-    def temp(self, i0: int, names: list[str], values_c: list[float | None]) -> None:
-        """A temperature reading valid from sample index ``i0`` on (None = failed read)."""
-        held = self._pending[-1][1].copy() if self._pending else self._held.copy()
-        for name, value in zip(names, values_c, strict=True):
-            col = self._col.get(name)
-            if col is not None and value is not None:
-                held[col - 3] = float(value)
-        self._pending.append((int(i0), held))
-
-    def gap(self) -> None:
-        """Samples are missing here: end the accumulators' segment."""
-        if self._open:
-            self.sink.gap()
-            self._open = False
-        self.next_index = None
-
-    def raw(self, i0: int, counts: np.ndarray) -> None:
-        """A block of raw counts (n, 3) for samples ``[i0, i0 + n)``."""
-        n = int(counts.shape[0])
-        if n == 0:
-            return
-        if self.next_index is not None and i0 != self.next_index:
-            self.gap()
-        self.next_index = i0 + n
-        block = np.empty((n, 3 + len(self.temp_names)))
-        block[:, :3] = np.asarray(counts, dtype=np.float64) * self.scale
-        # Piecewise-constant temperature columns: apply the pending readings in order.
-        start = 0
-        held = self._held
-        while self._pending and self._pending[0][0] < i0 + n:
-            at, values = self._pending.pop(0)
-            cut = max(0, at - i0)
-            block[start:cut, 3:] = held
-            start = max(start, cut)
-            held = values
-        block[start:, 3:] = held
-        self._held = held
-        if len(self.temp_names):
-            known = ~np.isnan(block[:, 3:]).any(axis=1)
-            if not known.all():
-                first = int(np.argmax(known)) if known.any() else n
-                self.skipped += first
-                block = block[first:]
-        if block.shape[0]:
-            self.sink.update(block)
-            self.fed += block.shape[0]
-            self._open = True
-
-
-# --------------------------------------------------------------------------------------------
 # streaming iteration and the whole-record loader
 
 
@@ -841,14 +848,6 @@ class Block:
     t_real: float             # CLOCK_REALTIME s of the first sample
 
 
-def _scale_of(header: dict[str, Any]) -> float:
-    scale = header.get("scale_m_s2_per_count")
-    if not isinstance(scale, int | float) or not scale > 0:
-        raise FormatError(f"header of run {header.get('run')!r} has no positive "
-                          "scale_m_s2_per_count; this recording cannot be converted to m/s²")
-    return float(scale)
-
-
 def iter_records(path: str | Path, *, strict: bool = False,
                  reader: RecordingReader | None = None) -> Iterator[dict[str, Any]]:
     """Every decoded record of a recording in order (see :class:`RecordingReader`)."""
@@ -871,7 +870,7 @@ def replay_allan(path: str | Path, *, streaming_cls: Any = None,
         names = list(first.get("temperature_channels", []))
         allan = streaming_cls(3 + len(names), float(first["rate_hz"]),
                               names=["x", "y", "z", *names])
-        feed = AllanFeed(allan, _scale_of(first), names)
+        feed = AllanFeed(allan, scale_of(first), names)
         feed.apply(first)
         feed.replay(records)
         return allan
@@ -936,7 +935,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
         cuts.starts_segment(rec)
         if kind == "header":
             headers.append(rec)
-            scale = _scale_of(rec)
+            scale = scale_of(rec)
         elif kind == "raw":
             blocks.append(np.asarray(rec["counts"], dtype=np.float64) * scale)
             index.append(rec["i0"] + np.arange(rec["n"], dtype=np.int64))
@@ -965,7 +964,7 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     # each run's newest header carries its best fit of the output rate; runs are averaged
     fitted = {run: float(h["rate_hz"]) for run, h in report.newest_header.items()}
     rates = list(fitted.values())
-    scales = {_scale_of(h) for h in headers}
+    scales = {scale_of(h) for h in headers}
     meta = {
         "format": "avard-recording",
         "files": [str(f) for f in reader.files],
@@ -992,23 +991,3 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
                   names=["x", "y", "z"],
                   temperature_c=temperature, temperature_names=tnames,
                   source=str(path), gyro=None, meta=meta)
-
-
-def replay_after(directory: str | Path, feed: AllanFeed, after: int) -> int:
-    """Feed ``feed`` every sample a recording holds from index ``after`` on, whatever run
-    wrote it (the service's restore: a checkpoint, then everything recorded after it, also by
-    runs killed before their first checkpoint). Reads only from the newest segment whose
-    header starts at or before ``after``, so a long recording is not read again at every
-    restart. Returns the number of samples fed."""
-    try:
-        files = segment_files(directory)
-    except FormatError:
-        return 0
-    keep = 0
-    for k, seg in enumerate(files):
-        head = first_record(seg)
-        if head is not None and head.get("kind") == "header" and int(head["i0"]) <= after:
-            keep = k
-    reader = RecordingReader(directory)
-    reader.files = files[keep:]
-    return feed.replay(walk(reader), after=after)

@@ -7,15 +7,17 @@ The stage never reads what it emits: marks are skipped by kind.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from typing import Any
 
+from avard.core.allan.feed import AllanFeed
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon.service.ring import Chunk, Consumer
 from avard.daemon.service.stage import Stage, offset_after_mark, split_chunk
 
 Record = dict[str, Any]
+log = logging.getLogger("avard.daemon.service")
 
 
 def relabel_tau(snap: dict[str, Any], odr_hz: float) -> None:
@@ -59,10 +61,22 @@ class AllanStage(Stage):
         self._next_snap: float | None = None   # set by the first sample (see handle)
         self._next_ckpt: float | None = None
         self._t = 0.0
+        self.ring_lost = 0                      # samples this stage lost from the ring
+        # counts at the last checkpoint, or before the first chunk (see _check)
+        self._since: dict[str, int] | None = None
+
+    def _counts(self) -> dict[str, int]:
+        # a sink without a sample count (a test double that only records calls) counts 0
+        return {"i_end": self.i_end(), "n": int(getattr(self.allan, "n_samples", 0)),
+                "seen": self.feed.fed + self.feed.skipped, "fed": self.feed.fed,
+                "lost": self.ring_lost}
 
     def handle(self, chunk: Chunk) -> None:
+        if self._since is None:
+            self._since = self._counts()
         if chunk.lost_samples or chunk.lost_marks:
             self.feed.gap()
+            self.ring_lost += chunk.lost_samples
         for kind, val in split_chunk(chunk):
             if kind == "samples":
                 a, b = val
@@ -106,21 +120,45 @@ class AllanStage(Stage):
         snap.update(channels=self.feed.channels,
                     units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
                     allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"])
-        return frames.avar_record(self.run_id, 0, self.feed.next_index or 0,
+        return frames.avar_record(self.run_id, 0, self.i_end(),
                                   int(self.allan.n_samples), snap, self._t,
                                   self._t + self.real_offset)
 
+    def i_end(self) -> int:
+        """The index after the last sample the accumulators account for: the feed's
+        ``covered``, which a gap or a run that fed nothing leaves where it was (the feed's
+        ``next_index`` is None then, and a checkpoint that said 0 made the next start replay
+        the whole recording onto accumulators that already held it)."""
+        return self.feed.covered if self.feed.covered is not None else 0
+
     def checkpoint(self) -> None:
-        rec = frames.checkpoint_record(self.run_id, 0, self.feed.next_index or 0,
+        rec = frames.checkpoint_record(self.run_id, 0, self.i_end(),
                                        int(self.allan.n_samples), self.allan.state(),
                                        self._t, self._t + self.real_offset)
         rec["feed"] = self.feed.state()
+        rec["check"] = self._check()
         self.emit(rec)
         if self.on_checkpoint is not None:
             self.on_checkpoint(rec)
         # With a recording, the recorder saves the state file once the checkpoint record
         # (and every sample before it) is written and fsynced: a checkpoint never covers
         # samples the recording lost in a crash, so restore + replay equals the recording.
+
+    def _check(self) -> dict[str, int]:
+        """What the accumulators took since the last checkpoint, for the run-time invariant
+        the recorder checks (RecorderStage): samples of indices [from, to) seen by the feed
+        (fed, or skipped before every temperature channel had a reading), lost from the ring,
+        and the growth of the accumulators' sample count, which must equal the samples fed."""
+        now = self._counts()
+        was, self._since = self._since or now, now
+        check = {"from": was["i_end"], "to": now["i_end"], "seen": now["seen"] - was["seen"],
+                 "lost": now["lost"] - was["lost"], "n_added": now["n"] - was["n"],
+                 "fed": now["fed"] - was["fed"]}
+        if check["n_added"] != check["fed"]:
+            log.error("invariant violated: the Allan accumulators grew by %d samples while "
+                      "the feed gave them %d (indices [%d, %d))", check["n_added"],
+                      check["fed"], check["from"], check["to"])
+        return check
 
     def finish(self) -> None:
         rec = self.snapshot_record()

@@ -11,8 +11,13 @@
   on, the state shows in :attr:`Recorder.status` and the log; free space is re-checked every
   ``retry_s`` and writing resumes in a new segment that starts with a ``gap`` record naming
   the samples lost (reason ``disk_full``).
+- Any other write error (EACCES on a segment, EIO, EROFS): the same pause and retry, but
+  reported as what it is: state ``write_error`` with the error, gap reason ``write_error``.
 - Retention after every rotation: segments older than ``retention_days`` and then the oldest
-  while the total exceeds ``retention_max_bytes`` are deleted (never the open one).
+  while the total exceeds ``retention_max_bytes`` are deleted (never the open one). Age and
+  "oldest" are measured in the recording's own time, from its frames: sample indices over the
+  output rate, segments in (run, index) order. Never file mtimes against CLOCK_REALTIME: a Pi
+  without an RTC whose clock NTP steps forward by days would lose every older segment.
 
 All file-system access goes through :class:`FileOps`, so tests can inject ENOSPC, slow disks or
 failing fsyncs without filling a real disk.
@@ -35,7 +40,17 @@ from typing import IO, Any
 
 from avard.core.errors import FormatError
 from avard.core.io import frames
-from avard.core.io.recording import SEGMENT_SUFFIX, first_record, frame, last_record
+from avard.core.io.recording import (
+    NO_INDEX,
+    SEGMENT_SUFFIX,
+    SegmentKey,
+    first_record,
+    frame,
+    keyed_segments,
+    order_segments,
+    records_backwards,
+    segment_end,
+)
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +96,8 @@ class FileOps:
         path.unlink()
 
     def segments(self, directory: Path) -> list[tuple[Path, int, float]]:
-        """(path, size bytes, mtime s) of the segment files, oldest name first."""
+        """(path, size bytes, mtime s) of the segment files (retention orders them by their
+        frames, recording.keyed_segments; the mtime is not used for age)."""
         out = []
         for p in sorted(directory.glob("*" + SEGMENT_SUFFIX)):
             try:
@@ -101,6 +117,7 @@ class LostSpan:
     t_mono: float
     t_real: float
     records: int = 0
+    reason: str = "disk_full"       # or "write_error": why they could not be written
 
 
 class Recorder:
@@ -139,7 +156,9 @@ class Recorder:
         self._dirty = False
         self._segment_no = 0
         self._seq: dict[str, int] = {}
-        self._full_since: float | None = None
+        self._full_since: float | None = None    # paused since (disk full or write error)
+        self._pause: str | None = None           # "disk_full" | "write_error" while paused
+        self._pause_detail = ""
         self._next_retry = 0.0
         self.lost: LostSpan | None = None
         self.records = 0
@@ -148,12 +167,19 @@ class Recorder:
         self.records_lost = 0
         self.samples_lost = 0
         self.deleted: list[str] = []
+        self._index_end = 0        # the index after the newest sample named by a record written
+        self._rate_hz = 0.0        # the output rate the records give (fitted, else nominal)
         self.errors = 0
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
 
     # -- public -------------------------------------------------------------------------
     @property
     def disk_full(self) -> bool:
+        return self._pause == "disk_full"
+
+    @property
+    def paused(self) -> bool:
+        """Writing is paused: a full disk or another write error (retried every retry_s)."""
         return self._full_since is not None
 
     def status(self) -> dict[str, Any]:
@@ -162,7 +188,7 @@ class Recorder:
             free = self.ops.free_bytes(self.dir)
         except OSError:
             free = -1
-        return {"state": "disk_full" if self.disk_full else "writing",
+        return {"state": self._pause or "writing", "error": self._pause_detail or None,
                 "segment": self.path.name if self.path else None,
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
@@ -174,7 +200,7 @@ class Recorder:
         full disk; the loss is then remembered and written as a gap on resume."""
         with self._lock:
             now = self.clock()
-            if self.disk_full and not self._try_resume(now):
+            if self.paused and not self._try_resume(now):
                 self._remember_lost(record)
                 return False
             if self._f is None or now - self._opened_at >= self.segment_s:
@@ -211,7 +237,7 @@ class Recorder:
 
     def close(self) -> None:
         with self._lock:
-            if self.lost is not None and not self.disk_full:
+            if self.lost is not None and not self.paused:
                 self._flush_lost()
             self._close_file()
 
@@ -228,7 +254,8 @@ class Recorder:
         assert self._f is not None
         data = frame(frames.encode(self._stamp(record)))
         if self.min_free_bytes and self._free() < self.min_free_bytes + len(data):
-            self._enter_full(f"free space below min_free_bytes={self.min_free_bytes}")
+            self._enter_full(f"free space below min_free_bytes={self.min_free_bytes}",
+                             "disk_full")
             return False
         try:
             self.ops.write(self._f, data)
@@ -239,8 +266,18 @@ class Recorder:
         self._size += len(data)
         self.bytes += len(data)
         self.records += 1
+        self._note_time(record)
         self._dirty = True
         return True
+
+    def _note_time(self, record: dict[str, Any]) -> None:
+        """Keep the recording's own clock: the newest sample index written and the rate."""
+        if "i0" in record:
+            end = int(record["i0"]) + (int(record["n"]) if record["kind"] == "raw" else 0)
+            self._index_end = max(self._index_end, end)
+        rate = record.get("rate_hz")
+        if isinstance(rate, int | float) and rate > 0:
+            self._rate_hz = float(rate)
 
     def _cut_torn_frame(self) -> None:
         """Cut a partly written frame off again so the file stays a clean frame sequence.
@@ -277,10 +314,12 @@ class Recorder:
         self._close_file()
         t_real = self.realtime()
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
-        # Run id first (it starts with the run's real UTC start time), then the segment
-        # number: name order is data order even when a simulated clock runs ahead of real
-        # time. The segment's own start time is for humans.
-        name = f"{self.run_id}_{self._segment_no:04d}_{stamp}{SEGMENT_SUFFIX}"
+        # Run id first (it starts with the run's sequence number), then the segment number,
+        # eight digits wide so names sort in data order for any run the service can make
+        # (four digits put segment 10 000 before 9 998). Readers do not rely on names: they
+        # order segments by run and sample index from the frames (recording.order_segments).
+        # The segment's own start time is for humans.
+        name = f"{self.run_id}_{self._segment_no:08d}_{stamp}{SEGMENT_SUFFIX}"
         path = self.dir / name
         try:
             self._f = self.ops.open_append(path)
@@ -306,11 +345,11 @@ class Recorder:
         if lost is None or self._f is None:
             return
         rec = frames.gap_record(self.run_id, 0, lost.i0, lost.n, lost.t_mono, lost.t_real,
-                                "disk_full", lost_records=lost.records)
+                                lost.reason, lost_records=lost.records)
         if self._append(rec):
-            log.warning("recording resumed; samples [%d, %d) and %d records were lost to a "
-                        "full disk (recorded as a gap)", lost.i0, lost.i0 + lost.n,
-                        lost.records)
+            log.warning("recording resumed; samples [%d, %d) and %d records were lost to %s "
+                        "(recorded as a gap)", lost.i0, lost.i0 + lost.n, lost.records,
+                        "a full disk" if lost.reason == "disk_full" else "a write error")
             self.lost = None
 
     def _close_file(self) -> None:
@@ -331,19 +370,19 @@ class Recorder:
     def _failed(self, exc: OSError, what: str) -> None:
         self.errors += 1
         if exc.errno in _FULL_ERRNOS:
-            self._enter_full(f"{what} failed: {exc.strerror}")
+            self._enter_full(f"{what} failed: {exc.strerror}", "disk_full")
         else:
-            # Other I/O errors: treat like a full disk (pause and retry), never crash
-            # acquisition; the log says what it was.
-            log.error("recording %s failed on %s: %s", what, self.path, exc)
-            self._enter_full(f"{what} failed: {exc}")
+            # Other I/O errors (EACCES, EIO, EROFS): pause and retry like a full disk, never
+            # crash acquisition, and say what it was: not a full disk.
+            self._enter_full(f"{what} failed: {exc}", "write_error")
 
-    def _enter_full(self, why: str) -> None:
+    def _enter_full(self, why: str, reason: str) -> None:
         if self._full_since is None:
             self._full_since = self.clock()
-            log.error("recording paused (%s) in %s; acquisition and publishing go on, the "
-                      "lost interval will be recorded as a gap when space returns",
-                      why, self.dir)
+            self._pause, self._pause_detail = reason, why
+            log.error("recording paused (%s: %s) in %s; acquisition and publishing go on, "
+                      "the lost interval will be recorded as a %s gap when writing resumes",
+                      reason.replace("_", " "), why, self.dir, reason)
             self._close_file_quietly()
         self._next_retry = self.wall() + self.retry_s
 
@@ -361,8 +400,12 @@ class Recorder:
         self._next_retry = self.wall() + self.retry_s
         if self._free() < max(self.min_free_bytes, 1):
             return False
-        log.warning("disk space is back (%d bytes free); resuming the recording", self._free())
-        self._full_since = None
+        if self._pause == "disk_full":
+            log.warning("disk space is back (%d bytes free); resuming the recording",
+                        self._free())
+        else:
+            log.warning("retrying the recording after %s", self._pause_detail)
+        self._full_since, self._pause, self._pause_detail = None, None, ""
         return self._rotate(now)
 
     def _remember_lost(self, record: dict[str, Any]) -> None:
@@ -371,7 +414,8 @@ class Recorder:
         if self.lost is None:
             i0 = int(record.get("i0", record.get("i_end", 0)))
             self.lost = LostSpan(i0, 0, float(record.get("t_mono", 0.0)),
-                                 float(record.get("t_real", 0.0)))
+                                 float(record.get("t_real", 0.0)),
+                                 reason=self._pause or "disk_full")
         self.lost.records += 1
         if kind == "raw":
             if self.lost.n == 0:
@@ -387,23 +431,44 @@ class Recorder:
         except OSError as exc:
             log.error("retention: cannot list %s: %s", self.dir, exc)
             return
-        keep = []
-        if self.retention_days:
-            limit = self.realtime() - self.retention_days * 86400.0
-            for p, size, mtime in segs:
-                if mtime < limit:
-                    self._delete(p, "older than retention_days")
-                else:
-                    keep.append((p, size, mtime))
-        else:
-            keep = segs
+        size = {p: s for p, s, _mtime in segs}
+        keyed = keyed_segments(size)          # oldest first, in the recording's own order
+        keep = [p for _, p in keyed]
+        if self.retention_days and self._rate_hz > 0:
+            keep = self._retain_by_age(keyed)
         if self.retention_max_bytes:
-            total = sum(s for _, s, _ in keep) + self._size
-            for p, size, _ in keep:
+            total = sum(size[p] for p in keep) + self._size
+            for p in keep:
                 if total <= self.retention_max_bytes:
                     break
                 self._delete(p, "recording above retention_max_bytes")
-                total -= size
+                total -= size[p]
+
+    def _retain_by_age(self, keyed: list[tuple[SegmentKey, Path]]) -> list[Path]:
+        """Delete the segments whose every sample is more than ``retention_days`` of sample
+        time (indices over the rate) older than the newest sample written; the rest, oldest
+        first. A segment's end is its last raw block's (read from the file's end once); one
+        without raw blocks ends before the next segment's first index. A segment without a
+        readable index has no known age and is kept."""
+        limit = self.retention_days * 86400.0 * self._rate_hz      # in samples
+        ends = []                     # the first index of the next segment that names one
+        end = self._index_end
+        for key, _p in reversed(keyed):
+            ends.append(end)
+            if key.i0 != NO_INDEX:
+                end = key.i0
+        ends.reverse()
+        keep: list[Path] = []
+        for (key, p), bound in zip(keyed, ends, strict=True):
+            last = segment_end(p)
+            end = last if last != NO_INDEX else bound
+            if key.i0 != NO_INDEX and self._index_end - end > limit:
+                age_d = (self._index_end - end) / self._rate_hz / 86400.0
+                self._delete(p, f"its newest sample is {age_d:.2f} days of recording older "
+                                f"than the newest, above retention_days={self.retention_days:g}")
+            else:
+                keep.append(p)
+        return keep
 
     def _delete(self, path: Path, why: str) -> None:
         try:
@@ -484,23 +549,44 @@ class RestartGap:
 
 
 def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | None:
-    """The end of the newest segment that holds samples (names sort in data order), read from
-    the file's end, so an hour-long segment costs little."""
+    """Where the recording ends: after its last raw block, or at the start of a later run
+    that recorded no sample (its ``start`` event: the index it started from and when), so
+    runs restarted in quick succession each own the part of the hole after the last one's
+    start instead of all claiming it from the last sample (overlapping ``restart`` gaps).
+    Segments newest first in data order (recording.order_segments), each read from its end,
+    so an hour-long segment costs little."""
     d = Path(data_dir)
     if not d.is_dir():
         return None
-    for seg in sorted(d.glob("*" + SEGMENT_SUFFIX), reverse=True):
+    ordered = order_segments(d.glob("*" + SEGMENT_SUFFIX))
+    by_name = sorted(ordered, key=lambda p: p.name)
+    if by_name != ordered:
+        # the invariant "order comes from the data" holds (every reader orders by the
+        # frames), but the names say otherwise: renamed files, or four-digit segment
+        # numbers past 9 999 from an older version; tools that sort names would misread it
+        first = next(k for k, (a, b) in enumerate(zip(by_name, ordered, strict=True))
+                     if a != b)
+        log.warning("segment names in %s do not sort in data order (by name %s comes where "
+                    "the frames put %s); avard reads them in frame order", d,
+                    by_name[first].name, ordered[first].name)
+    for seg in reversed(ordered):
         try:
-            rec = last_record(seg, "raw")
-            head = first_record(seg) if rec is not None else None
+            end = next((r for r in records_backwards(seg) if r["kind"] == "raw"
+                        or (r["kind"] == "event" and r["name"] == "start" and "i0" in r)),
+                       None)
+            head = first_record(seg) if end is not None else None
         except (OSError, FormatError):
             continue
-        if rec is not None:
-            span = rec["n"] / float(rec.get("rate_hz") or nominal_hz)
-            boot = head.get("boot_id") if head and head.get("run") == rec["run"] else None
-            return LastRecorded(int(rec["i0"]) + int(rec["n"]), float(rec["t_mono"]) + span,
-                                float(rec["t_real"]) + span,
-                                boot if isinstance(boot, str) else None)
+        if end is None:
+            continue
+        boot = head.get("boot_id") if head and head.get("run") == end["run"] else None
+        boot = boot if isinstance(boot, str) else None
+        if end["kind"] == "event":
+            return LastRecorded(int(end["i0"]), float(end["t_mono"]), float(end["t_real"]),
+                                boot)
+        span = end["n"] / float(end.get("rate_hz") or nominal_hz)
+        return LastRecorded(int(end["i0"]) + int(end["n"]), float(end["t_mono"]) + span,
+                            float(end["t_real"]) + span, boot)
     return None
 
 

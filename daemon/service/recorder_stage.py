@@ -3,6 +3,7 @@ into the segment files (daemon/service/recorder.py)."""
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -14,6 +15,7 @@ from avard.daemon.service.ring import Chunk, Consumer
 from avard.daemon.service.stage import Stage, lost_marks_records, offset_after_mark, split_chunk
 
 Record = dict[str, Any]
+log = logging.getLogger("avard.daemon.service")
 
 
 class RecorderStage(Stage):
@@ -43,6 +45,11 @@ class RecorderStage(Stage):
         self._i0 = 0
         self._t0 = 0.0
         self._n = 0
+        # index ranges received from the ring (and lost from it) not yet checked against a
+        # checkpoint: the run-time invariant (check_checkpoint)
+        self._received: list[tuple[int, int]] = []
+        self._lost: list[tuple[int, int]] = []
+        self.violations = 0
 
     def _write_header_if_new(self) -> None:
         if self.header.version != self._header_version:
@@ -65,6 +72,7 @@ class RecorderStage(Stage):
         if chunk.lost_samples:
             self._flush()
             i0, i1 = chunk.lost_index or (0, 0)
+            self._lost.append((i0, i1))
             self.rec.write(frames.gap_record(self.run_id, 0, i0, max(0, i1 - i0),
                                              float(chunk.t_mono[0]) if chunk.n else 0.0,
                                              self.real_now(), "recorder_behind"))
@@ -77,12 +85,18 @@ class RecorderStage(Stage):
                 self._flush()
                 self.real_offset = offset_after_mark(val, self.real_offset)
                 written = self.rec.write(val)
-                if val["kind"] == "checkpoint" and written:
-                    self.rec.flush()
-                    self.checkpoint_written(val)
+                if val["kind"] == "checkpoint":
+                    self.check_checkpoint(val)
+                    if written:
+                        self.rec.flush()
+                        self.checkpoint_written(val)
                 continue
             a, b = val
             i0 = int(chunk.index[a])
+            if self._received and self._received[-1][1] == i0:     # contiguous: extend
+                self._received[-1] = (self._received[-1][0], i0 + b - a)
+            else:
+                self._received.append((i0, i0 + b - a))
             if self._n and i0 != self._i0 + self._n:
                 self._flush()
             while a < b:
@@ -98,6 +112,35 @@ class RecorderStage(Stage):
             self.reopen.clear()
             self._flush()
             self.rec.reopen()
+
+    def check_checkpoint(self, ckpt: Record) -> None:
+        """The run-time invariant: the samples the accumulators took since the last checkpoint
+        (the checkpoint's ``check``: indices [from, to)) are exactly the samples this stage
+        received for the recording in that range. Checked when neither stage lost samples
+        from the ring there (those losses are recorded gaps of their own). A violation is
+        logged at ERROR and recorded as an ``invariant_violated`` event."""
+        check = ckpt.get("check")
+        if not isinstance(check, dict):
+            return
+        lo, hi = int(check["from"]), int(check["to"])
+
+        def inside(ranges: list[tuple[int, int]]) -> int:
+            return sum(max(0, min(b, hi) - max(a, lo)) for a, b in ranges)
+
+        got, lost = inside(self._received), inside(self._lost)
+        self._received = [(max(a, hi), b) for a, b in self._received if b > hi]
+        self._lost = [(max(a, hi), b) for a, b in self._lost if b > hi]
+        if lost or int(check["lost"]):
+            return
+        if got != int(check["seen"]):
+            self.violations += 1
+            detail = {"from": lo, "to": hi, "accumulators_took": int(check["seen"]),
+                      "recorded": got}
+            log.error("invariant violated: the Allan accumulators took %d samples of indices "
+                      "[%d, %d) but the recording received %d", check["seen"], lo, hi, got)
+            self.rec.write(frames.event_record(self.run_id, 0, "invariant_violated",
+                                               float(ckpt["t_mono"]), self.real_now(), i0=hi,
+                                               detail=detail))
 
     def finish(self) -> None:
         self._flush()

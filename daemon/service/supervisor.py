@@ -26,9 +26,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from avard.core.allan.feed import AllanFeed
 from avard.core.errors import AvardError, ConfigError
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
@@ -116,9 +116,7 @@ class Service:
 
             streaming_cls = StreamingAllan
         self.streaming_cls = streaming_cls
-        self.allan = streaming_cls(3 + len(self.temp_names), odr,
-                                   overlap=config.allan.overlap,
-                                   names=["x", "y", "z", *self.temp_names])
+        self.allan = self._fresh_allan()
         self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
         self.feed.run = self.run_id
         self.start_index = 0
@@ -142,6 +140,12 @@ class Service:
         self.snapshots = SnapshotBoard(fit_record)
 
     # -- helpers ------------------------------------------------------------------------
+    def _fresh_allan(self) -> Any:
+        """Empty accumulators of this configuration."""
+        return self.streaming_cls(3 + len(self.temp_names), self.odr,
+                                  overlap=self.config.allan.overlap,
+                                  names=["x", "y", "z", *self.temp_names])
+
     def real_now(self) -> float:
         return float(self.clock.realtime())
 
@@ -219,11 +223,15 @@ class Service:
         it replayed) and continue the sample index across the restart."""
         if self.config.allan.restore:
             got = restore_accumulators(self.data_dir, self.streaming_cls,
-                                       list(self.allan.names), float(self.allan.rate_hz))
+                                       list(self.allan.names), float(self.allan.rate_hz),
+                                       fresh=self._fresh_allan)
             if got is not None:
-                self.allan = got.allan
-                self.feed = AllanFeed(got.allan, self.scale, self.temp_names)
+                # None: the restored state broke an invariant and was dropped (logged)
+                self.allan = got.allan if got.allan is not None else self._fresh_allan()
+                self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
                 self.feed.run = self.run_id
+                self.feed.cover(got.covered)
+                self.feed.origin = got.origin
                 self.restored = got.info
         last = last_recorded(self.data_dir, self.odr)
         if last is not None:
@@ -233,6 +241,12 @@ class Service:
                                             t_mono=self.clock.monotonic(),
                                             t_real=self.real_now(), rate_hz=self.odr)
             self.start_index = last.i_end + self._restart_gap.n
+        # The accumulators account for every sample before this run's first (restored and
+        # replayed, or deliberately not: a fresh start), so a checkpoint taken before this run
+        # feeds anything still says exactly what they hold (#26 item 1).
+        self.feed.cover(self.start_index)
+        if self.feed.origin is None and int(self.allan.n_samples) == 0:
+            self.feed.origin = self.start_index      # fresh accumulators start here
 
     # -- lifecycle ----------------------------------------------------------------------
     def _check_data_dir(self) -> None:

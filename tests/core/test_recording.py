@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from avard.core.allan.feed import AllanFeed
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
     FRAME_HEADER,
-    AllanFeed,
     RecordingReader,
     frame,
     scan_frames,

@@ -68,3 +68,59 @@ def test_a_crafted_segment_where_every_offset_claims_the_rest_of_the_file_reads_
     good = frame(b"\x81\xa4kind\xa3raw")
     got = list(scan_frames(data[:200_000] + good, "crafted", problems=problems))
     assert [f.offset for f in got] == [200_000]
+
+
+def _densely_damaged(n_frames: int) -> bytes:
+    """The campaign's file: valid 13-byte frames (5-byte payloads), each followed by a junk
+    byte."""
+    rng = np.random.default_rng(3)
+    out = bytearray()
+    for k in range(n_frames):
+        out += frame(bytes(rng.integers(0, 256, 5, dtype=np.uint8))) + bytes([k % 251 + 1])
+    return bytes(out)
+
+
+def test_resync_work_on_a_densely_damaged_segment_grows_with_its_size_not_a_window(
+        monkeypatch) -> None:
+    """#26 item 10: every resync evaluated a fixed window of 16 384 candidate offsets, about
+    1 200 candidate evaluations per byte of such a file (140 CPU-s per MB). Counted here, not
+    timed: candidate offsets evaluated (one at a time, or in vectorised windows) per byte."""
+    import avard.core.io.recording as rec
+
+    data = _densely_damaged(3000)
+    evaluated = [0]
+    one, window = rec._valid_at, rec._valid_in
+
+    def count_one(buf, pos, max_bytes):  # type: ignore[no-untyped-def]
+        evaluated[0] += 1
+        return one(buf, pos, max_bytes)
+
+    def count_window(buf, lo, hi, max_bytes, prefix):  # type: ignore[no-untyped-def]
+        evaluated[0] += max(0, min(hi, len(buf) - 7) - lo)
+        return window(buf, lo, hi, max_bytes, prefix)
+
+    monkeypatch.setattr(rec, "_valid_at", count_one)
+    monkeypatch.setattr(rec, "_valid_in", count_window)
+    problems: list = []
+    frames_read = list(scan_frames(data, problems=problems))
+    assert len(frames_read) == 3000
+    assert len(problems) == 3000 and all(p.dropped_bytes == 1 for p in problems)
+    assert evaluated[0] / len(data) < 2.0, evaluated[0] / len(data)
+
+
+@settings(max_examples=60, deadline=None)
+@given(junk=st.lists(st.binary(min_size=0, max_size=40), min_size=1, max_size=12),
+       long_claims=st.booleans())
+def test_the_near_search_equals_the_definition_between_short_and_long_claims(junk,
+                                                                             long_claims):
+    """Frames separated by junk, some of whose offsets claim long payloads (deferred to the
+    windowed search) before a short valid frame: the same offset as trying every byte."""
+    parts = []
+    for k, j in enumerate(junk):
+        if long_claims and len(j) >= 4:
+            j = (5000 + k).to_bytes(4, "little") + j[4:]
+        parts.append(frame(bytes([k]) * (1 + k % 7)) + j)
+    buf = memoryview(b"".join(parts) + b"\x00" * 5100)   # room for the long claims
+    for start in range(0, len(buf) - 5100, 3):
+        assert _resync(buf, start, MAX_FRAME_BYTES) == _resync_by_definition(
+            buf, start, MAX_FRAME_BYTES)

@@ -10,8 +10,8 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+from avard.core.allan.feed import AllanFeed
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.header import RunHeader
 from avard.daemon.service.recorder_stage import RecorderStage

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import errno
-import os
 from pathlib import Path
 
 import numpy as np
@@ -131,12 +130,16 @@ def test_min_free_bytes_counts_as_full(tmp_path: Path) -> None:
 
 def test_retention_by_size_and_age_never_deletes_open_segment(tmp_path: Path) -> None:
     clock, wall = Clock(), Clock()
-    old = tmp_path / "20000101T000000Z_old_0000.avr"
-    old.write_bytes(b"x" * 100)
-    os.utime(old, (1.0, 1.0))
+    # a segment two days of samples older than the newest (age is sample time: #26 item 4)
+    old = Recorder(tmp_path, "20000101T000000Z-old", _header, clock=clock, wall=wall)
+    old.write(_raw(0))
+    old.close()
+    assert old.path is not None
     rec = _make(tmp_path, clock, wall, segment_s=10.0, retention_days=1.0)
-    rec.write(_raw(0))
-    assert not old.exists() and rec.deleted == [old.name]
+    rec.write(_raw(2 * 86400 * 125))
+    clock.t = 10.0                                  # the next rotation applies retention
+    rec.write(_raw(2 * 86400 * 125 + 10))
+    assert not old.path.exists() and rec.deleted == [old.path.name]
     rec.close()
     clock2, wall2 = Clock(), Clock()
     rec2 = Recorder(tmp_path / "b", "r", _header, segment_s=1.0, retention_max_bytes=3000,
@@ -165,3 +168,38 @@ def test_reopen_starts_a_new_segment(tmp_path: Path) -> None:
     rec.close()
     assert rec.path is not None and rec.path.exists() and rec.path != first
     assert [r["kind"] for r in RecordingReader(rec.path)] == ["header", "raw"]
+
+
+class NoPermission(FileOps):
+    """A segment the service may not write (EACCES), until ``allowed``."""
+
+    def __init__(self) -> None:
+        self.allowed = True
+
+    def open_append(self, path: Path):  # type: ignore[no-untyped-def]
+        if not self.allowed:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return super().open_append(path)
+
+
+def test_a_permission_error_is_reported_as_what_it_is_not_as_a_full_disk(tmp_path: Path,
+                                                                         caplog) -> None:
+    """#26 item 11: EACCES on a segment was reported as ``disk_full`` (state and gap)."""
+    clock, wall = Clock(), Clock()
+    ops = NoPermission()
+    rec = _make(tmp_path, clock, wall, ops, segment_s=10.0, retry_s=5.0)
+    assert rec.write(_raw(0))
+    ops.allowed = False
+    clock.t = wall.t = 10.0                       # rotation: the new segment cannot be opened
+    assert not rec.write(_raw(10))
+    st = rec.status()
+    assert st["state"] == "write_error" and not rec.disk_full
+    assert "Permission denied" in st["error"]
+    assert "disk full" not in " ".join(r.getMessage() for r in caplog.records).lower()
+    ops.allowed = True
+    clock.t = wall.t = 20.0
+    assert rec.write(_raw(20))
+    rec.close()
+    gaps = [r for r in RecordingReader(tmp_path) if r["kind"] == "gap"]
+    assert [(g["reason"], g["i0"], g["n"]) for g in gaps] == [("write_error", 10, 10)]
+    assert rec.status()["state"] == "writing"

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from avard.core.allan.feed import AllanFeed
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.errors import AvardError
 from avard.core.io import frames
-from avard.core.io.recording import AllanFeed
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.publisher_stage import RequestHandlers
 from avard.daemon.service.ring import Ring

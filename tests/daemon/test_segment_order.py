@@ -1,0 +1,96 @@
+"""Segment order comes from the frames, not from the file names (#26 item 2).
+
+``Recorder._rotate`` named segments ``{n:04d}``: segment 10 000 sorted before 9 998 (a 28 h
+run at ``segment_s = 10``), so ``analyze`` read samples out of order, ``last_recorded`` took
+segment 9 999 as the newest and the restart gap claimed present samples as lost. Now every
+reader orders segments by (run, sample index) read from their frames, and the names are wide
+enough to sort correctly anyway.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from avard.core.io import frames
+from avard.core.io.recording import (
+    RecordingReader,
+    load_recording,
+    order_segments,
+    segment_files,
+    segment_key,
+)
+from avard.daemon.service.recorder import Recorder, last_recorded
+
+RUN = "n00000007-20260101T000000Z-abcdef"
+RATE = 125.0
+
+
+def _record(d: Path, first_segment: int, n_segments: int, block: int = 50) -> list[Path]:
+    """One run of ``n_segments`` segments numbered from ``first_segment``, one raw block of
+    ``block`` samples each; returns the files in the order they were written."""
+    now = [0.0]
+    nxt = [1000]
+
+    def header() -> dict:
+        return frames.header_record(RUN, rate_hz=RATE, t_mono=now[0], t_real=1.7e9 + now[0],
+                                    i0=nxt[0], scale_m_s2_per_count=3.9e-5)
+
+    rec = Recorder(d, RUN, header, segment_s=1.0, clock=lambda: now[0])
+    rec._segment_no = first_segment
+    written = []
+    rng = np.random.default_rng(5)
+    for _ in range(n_segments):
+        counts = rng.integers(-500, 500, size=(block, 3)).astype(np.int32)
+        rec.write(frames.raw_record(RUN, 0, nxt[0], counts, now[0], 1.7e9 + now[0],
+                                    rate_hz=RATE))
+        assert rec.path is not None
+        written.append(rec.path)
+        nxt[0] += block
+        now[0] += 1.0
+    rec.close()
+    return written
+
+
+def test_segment_names_sort_in_data_order_past_segment_9999(tmp_path):
+    written = _record(tmp_path, 9997, 5)
+    assert sorted(p.name for p in written) == [p.name for p in written]
+
+
+def test_readers_order_segments_by_their_frames_whatever_the_names_say(tmp_path, caplog):
+    written = _record(tmp_path, 9997, 5)
+    # the names the old recorder gave them: four digits wide, 10 000 sorts before 9 997
+    old = []
+    for k, p in enumerate(written):
+        q = p.with_name(f"{RUN}_{9997 + k:04d}_20260101T000000Z.avr")
+        p.rename(q)
+        old.append(q)
+    assert sorted(p.name for p in old) != [p.name for p in old]
+    assert segment_files(tmp_path) == old
+    assert order_segments(reversed(old)) == old
+    idx = np.concatenate([r["i0"] + np.arange(r["n"]) for r in RecordingReader(tmp_path)
+                          if r["kind"] == "raw"])
+    assert np.array_equal(idx, 1000 + np.arange(250))           # data order, no jump
+    rec = load_recording(tmp_path)
+    assert rec.meta["segment_bounds"] == [0, 250]                # no spurious break
+    assert rec.meta["samples_lost"] == 0
+    # the service's start: the newest segment is the one holding the last samples
+    last = last_recorded(tmp_path, RATE)
+    assert last is not None and last.i_end == 1250
+    # the service's start says so, loudly
+    assert any("do not sort in data order" in r.getMessage() for r in caplog.records
+               if r.levelname == "WARNING")
+
+
+def test_a_segment_whose_header_is_damaged_is_placed_by_its_records(tmp_path):
+    written = _record(tmp_path, 9997, 4)
+    victim = written[1]
+    data = bytearray(victim.read_bytes())
+    data[12] ^= 0xFF                                             # the header's payload
+    victim.write_bytes(bytes(data))
+    names = [victim.with_name(f"z{k}.avr") for k in (3, 0, 2, 1)]   # in no useful order
+    for p, q in zip(written, names, strict=True):
+        p.rename(q)
+    key = segment_key(names[1])
+    assert key.header_seq == -1 and key.i0 == 1050                # from its raw block
+    assert segment_files(tmp_path) == names
