@@ -47,6 +47,7 @@ from avard.daemon.service.recorder import (
 )
 from avard.daemon.service.recorder_stage import RecorderStage
 from avard.daemon.service.ring import Ring
+from avard.daemon.service.signal_latch import SignalLatch, WakingEvent
 from avard.daemon.service.snapshots import SnapshotBoard, fit_record
 from avard.daemon.service.stage import Stage
 
@@ -94,7 +95,8 @@ class Service:
         self.sensor_info = dict(sensor_info or {})
         self.notifier = notifier
         self.interrupt = interrupt        # interrupt.InterruptPin on the FIFO watermark
-        self.stop_requested = threading.Event()
+        self.stop_requested = WakingEvent()
+        self._latch: SignalLatch | None = None   # signals and stop requests wake the loop
         self.reopen_requested = threading.Event()
         self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
         self.stop_signal: int | None = None
@@ -366,6 +368,7 @@ class Service:
         The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
         of a given seed always holds the same samples."""
         self._stop_at = None if duration_s is None else self.t_start + duration_s
+        latch = self._signal_latch()
         self.start(before_acquisition)
         n = self.notifier
         wd = n.watchdog_interval_s() if n is not None else None
@@ -374,6 +377,9 @@ class Service:
         next_status_log = time.monotonic() + self.config.service.status_log_interval_s
         try:
             while not self.stop_requested.is_set():
+                self._handle_signals(latch.wait(0.0) if latch.pending() else [])
+                if self.stop_requested.is_set():
+                    break
                 self.check_threads()
                 self.run_header.refresh()   # a new header when the fitted rate has moved
                 assert self.acq is not None
@@ -392,7 +398,8 @@ class Service:
                     n.status(self.status_line())
                     next_wd = now + wd
                 if self._reload_keys.is_set():
-                    # Not in the signal handler: zmq calls belong in a normal thread context.
+                    # Not in the signal handler: zmq calls belong in a normal thread context,
+                    # and a burst of SIGHUPs before this point is one reload.
                     self._reload_keys.clear()
                     log.info("SIGHUP: reopening the recording files, re-reading client keys")
                     if n is not None:
@@ -416,11 +423,38 @@ class Service:
                     wait = max(0.005, min(wait, left / self.speed if self.speed else 0.05))
                 if n is not None and wd and self.ready:
                     wait = min(wait, max(0.0, next_wd - time.monotonic()))
-                self.stop_requested.wait(wait)
+                self._handle_signals(latch.wait(wait))
         finally:
             self.stop()
+            self._close_latch()
         self.check_threads()
         return 0
+
+    def _signal_latch(self) -> SignalLatch:
+        if self._latch is None:
+            self._latch = SignalLatch()
+            self.stop_requested.latch = self._latch
+        return self._latch
+
+    def _close_latch(self) -> None:
+        if self._latch is not None:
+            self.stop_requested.latch = None
+            installed = self._latch.close()
+            self._latch = None
+            if signal.SIGHUP in installed:
+                # the run is over: a late reload has nothing to reopen, and SIGHUP's default
+                # action would end the process while it flushes and exits
+                signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    def _handle_signals(self, signums: list[int]) -> None:
+        """Act on the signals the latch noted, in the main loop's normal context."""
+        for signum in signums:
+            if signum in (signal.SIGTERM, signal.SIGINT):
+                self.stop_signal = signum
+                self.stop_requested.set()
+            elif signum == signal.SIGHUP:
+                self.reopen_requested.set()
+                self._reload_keys.set()
 
     def stop(self) -> None:
         """Flush and close everything, in data order: reader, Allan, recorder, publisher."""
@@ -447,20 +481,10 @@ class Service:
             self.publisher = None
 
     def install_signals(self) -> None:
-        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording (main thread only)."""
-        def _term(signum: int, _frame: Any) -> None:
-            self.stop_signal = signum      # logged by the main loop, not here (locks)
-            self.stop_requested.set()
-
-        def _hup(_signum: int, _frame: Any) -> None:
-            # Only flags here: the handler runs in the main thread, which may be inside the
-            # notifier's or a socket's lock at this moment.
-            self.reopen_requested.set()
-            self._reload_keys.set()
-
-        signal.signal(signal.SIGTERM, _term)
-        signal.signal(signal.SIGINT, _term)
-        signal.signal(signal.SIGHUP, _hup)
+        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording and re-reads client keys
+        (main thread only). The handlers only note the signal (signal_latch.py: a handler
+        that takes a lock deadlocks, a burst of them recursed); the main loop acts on it."""
+        self._signal_latch().install((signal.SIGTERM, signal.SIGINT, signal.SIGHUP))
 
 
 def _default_recorder(svc: Service) -> Any:
