@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from avard.core.errors import AvardError, ConfigError
+from avard.core.errors import ConfigError, ServiceFault
 from avard.core.io import frames
 from avard.core.io.recording import AllanFeed
 from avard.daemon import __version__
@@ -355,12 +355,16 @@ class Service:
                                           t + self.real_offset, source="ds18b20"))
 
     def check_threads(self) -> None:
-        """Raise when a thread died (the service must stop with an error, not limp on)."""
+        """Raise ServiceFault when a thread died: the service stops (flushing what the other
+        stages hold) and exits with status 70, which the unit restarts, instead of limping on
+        without a stage or exiting 2, which RestartPreventExitStatus=2 would keep down."""
         if self.acq is not None and self.acq.error is not None:
-            raise AvardError(f"the reader thread stopped: {self.acq.error}")
+            raise ServiceFault(f"the reader thread stopped: {self.acq.error!r}; exiting for "
+                               "systemd to restart the service")
         for w in self.workers:
             if w.error is not None:
-                raise AvardError(f"the {w.name} thread stopped: {w.error}")
+                raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
+                                   "systemd to restart the service")
 
     def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
             before_acquisition: Callable[[], None] | None = None) -> int:
