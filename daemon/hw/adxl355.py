@@ -37,7 +37,7 @@ from avard.core.errors import (
 )
 from avard.daemon.hw import registers as R
 from avard.daemon.hw.source import GapReason, parse_reasons
-from avard.daemon.hw.timebase import SystemClock
+from avard.daemon.hw.timebase import SystemClock, read_clock_pair
 from avard.daemon.hw.transport import I2cBus, RegisterBus
 
 log = logging.getLogger(__name__)
@@ -206,6 +206,8 @@ class Drain:
     #: CLOCK_MONOTONIC just after the burst returned: a burst that took longer than a sample
     #: period was pre-empted, and its sets were taken from the FIFO near its end
     t_burst_end: float = 0.0
+    #: uncertainty of ``t_real`` as the CLOCK_REALTIME of the moment ``t_mono``, s
+    t_real_u: float = 0.0
 
     @property
     def n_sets(self) -> int:
@@ -484,8 +486,9 @@ class Adxl355:
     # -- the FIFO ------------------------------------------------------------------------------
     def drain(self, max_sets: int | None = None) -> Drain:
         """Read every whole XYZ set in the FIFO (at most ``max_sets``). See :class:`Drain`."""
-        t_mono = self.clock.monotonic()
-        t_real = self.clock.realtime()
+        # a tight CLOCK_MONOTONIC/CLOCK_REALTIME pair (a pre-emption between the two reads
+        # looked like a CLOCK_REALTIME step)
+        t_mono, t_real, t_real_u = read_clock_pair(self.clock)
         status, entries_reg = self._read(A["STATUS"], 2, in_drain=True)
         # FIFO_ENTRIES was sampled somewhere between t_mono and now: if that window is longer
         # than a sample period (preempted, retried), t_mono no longer dates the newest set.
@@ -548,7 +551,7 @@ class Adxl355:
                       complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS,
                       since_last_s=None if self._last_drain_t is None
                       else t_mono - self._last_drain_t, t_burst=t_burst,
-                      t_burst_end=t_burst_end)
+                      t_burst_end=t_burst_end, t_real_u=t_real_u)
         self._last_drain_t = t_mono
         self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:

@@ -232,7 +232,7 @@ class Acquisition:
         counts = np.asarray(d.counts, dtype=np.int32)
         n = int(counts.shape[0])
         t_mono, t_real = float(d.t_mono), float(d.t_real)
-        self._check_clock_step(t_mono, t_real)
+        self._check_clock_step(t_mono, t_real, float(getattr(d, "t_real_u", 0.0)))
         reasons = d.gap_reasons
         if self._overrun_after_read and GapReason.FIFO_OVERRUN not in reasons:
             reasons = (*reasons, GapReason.FIFO_OVERRUN)
@@ -290,11 +290,11 @@ class Acquisition:
             self.on_tick(t_mono)
         return n
 
-    def _check_clock_step(self, t_mono: float, t_real: float) -> None:
+    def _check_clock_step(self, t_mono: float, t_real: float, u_s: float = 0.0) -> None:
         """CLOCK_REALTIME jumped (NTP step, a date change, a Pi without RTC getting its time):
         record a ``clock_step`` event. Sample order and times stay on CLOCK_MONOTONIC; only
         the wall-clock times written beside them follow the new offset from here on."""
-        step = self.tb.realtime_step(t_mono, t_real)
+        step = self.tb.realtime_step(t_mono, t_real, u_s=u_s)
         if step is None:
             return
         self.clock_steps += 1
