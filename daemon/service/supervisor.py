@@ -36,7 +36,7 @@ from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
-from avard.daemon.service.header import RunHeader
+from avard.daemon.service.header import RunHeader, time_of_index
 from avard.daemon.service.publisher_stage import PublisherStage, RequestHandlers
 from avard.daemon.service.recorder import (
     RestartGap,
@@ -140,7 +140,8 @@ class Service:
         self.ready = False
         self.final_status: dict[str, Any] = {}
         self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic,
-                                    self._next_index, lambda: self.real_offset)
+                                    self._next_index, lambda: self.real_offset,
+                                    time_before_first_drain=self._time_before_first_drain)
         self.snapshots = SnapshotBoard(fit_record)
 
     # -- helpers ------------------------------------------------------------------------
@@ -149,6 +150,20 @@ class Service:
 
     def _next_index(self) -> int:
         return self.acq.next_index if self.acq else self.start_index
+
+    def _time_before_first_drain(self, index: int) -> float:
+        """The time of sample ``index`` before the time base has a drain, on the line the
+        time base will fit: the part's k-th set after its start is due (k + 1) periods
+        later and reaches FIFO_ENTRIES one period after that (the sync stage holds the
+        newest set), and TimeBase.time_of dates a set half a period and the filter's group
+        delay before it is seen. The clock now when the source does not say when it
+        started."""
+        started = getattr(self.sensor, "t_started", None)
+        if started is None:
+            return float(self.clock.monotonic())
+        k = index - self.start_index          # sets after the part's start
+        gd = float(getattr(self.sensor, "group_delay_samples", 0.0))
+        return float(started) + (k + 1.5 - gd) / self.odr
 
     def header(self) -> dict[str, Any]:
         """The run's current header record (see :class:`RunHeader`)."""
@@ -163,10 +178,11 @@ class Service:
                         "n_points": rate.n_points}
         except (ValueError, ZeroDivisionError, AttributeError):
             timebase = {"odr_hz": tb.odr_hz}
-        t = self.clock.monotonic()
+        i0 = self._next_index()
+        t = time_of_index(tb, i0, self._time_before_first_drain)
         return frames.header_record(
             self.run_id, rate_hz=float(tb.odr_hz), t_mono=t, t_real=t + self.real_offset,
-            i0=self._next_index(),
+            i0=i0,
             scale_m_s2_per_count=self.scale, range_g=self.config.sensor.range_g,
             sensor=self.sensor_info, temperature_sensors=self.temp_names[1:],
             software=f"avard {__version__}", config=self.cfg,
