@@ -5,7 +5,7 @@ A real step is still seen, once."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
@@ -34,7 +34,7 @@ class PreemptedClock(VirtualClock):
 
 class Marks:
     capacity = 1 << 20
-    consumers: list[Any] = []
+    consumers: ClassVar[list[Any]] = []
 
     def __init__(self) -> None:
         self.events: list[dict] = []

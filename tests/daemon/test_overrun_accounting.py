@@ -11,7 +11,7 @@ overrun: sets lost during a drain and everything before the first drain were not
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -30,7 +30,7 @@ class Capture:
     """Stands in for the ring: keeps what the reader pushes and marks."""
 
     capacity = 1 << 22
-    consumers: list[Any] = []
+    consumers: ClassVar[list[Any]] = []
 
     def __init__(self) -> None:
         self.index: list[np.ndarray] = []
@@ -96,7 +96,7 @@ def _check(acq: Acquisition, emu: EmulatedAdxl355, cap: Capture) -> tuple[np.nda
 @pytest.mark.parametrize("moment", ["before_first_drain", "between_drains", "inside_drain",
                                     "inside_drain_briefly", "all"])
 def test_loss_is_counted_from_time_wherever_the_reader_was_late(moment: str) -> None:
-    dev, emu, clock, bus, acq, cap = _rig()
+    _dev, emu, clock, bus, acq, cap = _rig()
     if moment in ("before_first_drain", "all"):
         clock.advance(0.5)            # a slow start: the FIFO overran before the first drain
         acq.poll_once()
@@ -122,7 +122,7 @@ def test_loss_is_counted_from_time_wherever_the_reader_was_late(moment: str) -> 
 
 
 def test_a_loss_nobody_reports_becomes_an_unaccounted_gap() -> None:
-    dev, emu, clock, bus, acq, cap = _rig()
+    _dev, emu, clock, _bus, acq, cap = _rig()
     _drains(acq, clock, 10)
     clock.advance(PERIOD)
     emu._update()
