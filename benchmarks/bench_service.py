@@ -368,6 +368,10 @@ def _watch_table(seconds: float) -> int:
     """The cost of one watching client: the service's fit thread fits each new Allan record
     once a client has asked for a snapshot; with the filter terms cached per normalised
     corner (core/model/terms.py) a fit costs the same after the first request as before."""
+    per_fit = _fit_cost_per_snapshot()
+    print("one snapshot's fit (3 axes) at a fitted rate that moves by 3 ppm from one snapshot "
+          "to the next, CPU-s: " + ", ".join(f"{c:.3f}" for c in per_fit)
+          + " (the first computes the filter terms of this corner)")
     quiet = _service_run(125.0, seconds)
     watched = _service_run(125.0, seconds, "watch")
     rss_hw, _heavy = _rss_mb(125.0, min(seconds, 10.0), False)
@@ -384,3 +388,22 @@ def _watch_table(seconds: float) -> int:
     print(f"peak RSS of `avard run` on the hardware path (own process, no client): "
           f"{rss_hw:.1f} MB")
     return 0
+
+
+def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
+    """CPU-s of :func:`fit_snapshot` for ``n`` snapshots of one 10-minute white + random-walk
+    record whose fitted rate moves by 3 ppm each time (what a running service's does)."""
+    from avard.core.allan.streaming import StreamingAllan
+    from avard.daemon.service.snapshots import fit_snapshot
+
+    rng = np.random.default_rng(1)
+    a = StreamingAllan(3, 125.0, names=["x", "y", "z"])
+    x = rng.standard_normal((125 * 600, 3)) * 1e-3
+    a.update(x + np.cumsum(rng.standard_normal((125 * 600, 3)), axis=0) * 1e-7)
+    snap = a.snapshot().to_dict()
+    out = []
+    for k in range(n):
+        t0 = time.process_time()
+        fit_snapshot(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k)))
+        out.append(time.process_time() - t0)
+    return out

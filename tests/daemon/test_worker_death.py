@@ -53,3 +53,17 @@ def test_the_unit_bounds_the_fd_table() -> None:
     assert "LimitNOFILE" in unit
     soft, _, hard = unit["LimitNOFILE"][-1].partition(":")
     assert int(soft) >= 4096 and int(hard or soft) >= int(soft)
+
+
+def test_check_config_states_the_rate_that_holds_on_the_real_clock(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from avard.daemon.service.acquisition import REALTIME_HELD_HZ
+
+    for odr, noted in ((4000, True), (REALTIME_HELD_HZ, False)):
+        cfg = tmp_path / f"a{odr:g}.toml"
+        cfg.write_text(f"[sensor]\nodr_hz = {odr}\n[recording]\n"
+                       f"data_dir = \"{tmp_path / 'rec'}\"\n")
+        assert cli.main(["check-config", str(cfg)]) == 0
+        out = capsys.readouterr().out
+        assert (f"only {REALTIME_HELD_HZ:g} Hz was measured free of FIFO overruns" in out) \
+            == noted, out
