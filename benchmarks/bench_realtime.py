@@ -75,13 +75,20 @@ class CheckingRing:
             self.gaps.append(rec)
 
 
-def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0) -> dict[str, Any]:
+def realtime_rig(odr_hz: float) -> tuple[Adxl355, EmulatedAdxl355, VirtualClock]:
+    """The driver over the counter-fed emulator on the real clock, configured, not started
+    (also bench_driver's real-time run)."""
     clock = VirtualClock(speed=1.0)
     emu = EmulatedAdxl355(counter_source(), clock)
     dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock)
     dev.probe()
     dev.reset()
     dev.configure(range_g=2, odr_hz=odr_hz)
+    return dev, emu, clock
+
+
+def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0) -> dict[str, Any]:
+    dev, emu, clock = realtime_rig(odr_hz)
     ring = CheckingRing()
     dev.start()
     acq = Acquisition(dev, ring, TimeBase(odr_hz), clock, poll_hz=poll_hz)  # type: ignore[arg-type]

@@ -20,6 +20,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -179,14 +180,29 @@ time.sleep(secs)
 """
 
 
-def fd_exhaustion(tmp: Path, n: int = 1010, hold_s: float = 20.0) -> CampaignResult:
-    res = CampaignResult("fd exhaustion", f"{n} idle TCP connections to each socket")
-    svc = Service(tmp)
+def _campaign(res: CampaignResult, tmp: Path, attack: Callable[[Service], None], *,
+              speed: float = 5.0) -> CampaignResult:
+    """Start the service, let it settle, ``attack`` it (which adds its checks), stop it with
+    SIGTERM: it must exit 0."""
+    svc = Service(tmp, speed=speed)
+    rc: int | None = None
     try:
         if not svc.wait_ready():
             res.checks["service became ready"] = False
             return res
         svc.watch(2.0)
+        attack(svc)
+    finally:
+        rc = svc.stop()
+        res.samples = svc.samples
+    res.checks["stopped cleanly on SIGTERM (0)"] = rc == 0
+    return res
+
+
+def fd_exhaustion(tmp: Path, n: int = 1010, hold_s: float = 20.0) -> CampaignResult:
+    res = CampaignResult("fd exhaustion", f"{n} idle TCP connections to each socket")
+
+    def attack(svc: Service) -> None:
         segs0, ck0 = len(svc.segments()), svc.checkpoint_mtime()
         holders = [subprocess.Popen([sys.executable, "-c", _HOLDER, str(port), str(n),
                                      str(hold_s)], stdout=subprocess.PIPE, text=True)
@@ -200,11 +216,8 @@ def fd_exhaustion(tmp: Path, n: int = 1010, hold_s: float = 20.0) -> CampaignRes
         res.checks["segments kept rotating"] = len(svc.segments()) > segs0
         res.checks["checkpoints kept being written"] = svc.checkpoint_mtime() > ck0
         res.checks["fds stayed bounded (< 700)"] = max(s[2] for s in svc.samples) < 700
-    finally:
-        rc = svc.stop()
-        res.samples = svc.samples
-    res.checks["stopped cleanly on SIGTERM (0)"] = rc == 0
-    return res
+
+    return _campaign(res, tmp, attack)
 
 
 _HUPPER = ("import os, signal, sys, time\n"
@@ -216,11 +229,8 @@ _HUPPER = ("import os, signal, sys, time\n"
 
 def sighup_burst(tmp: Path, seconds: float = 5.0) -> CampaignResult:
     res = CampaignResult("SIGHUP burst", f"2 senders, SIGHUP as fast as kill(2) for {seconds} s")
-    svc = Service(tmp)
-    try:
-        if not svc.wait_ready():
-            res.checks["service became ready"] = False
-            return res
+
+    def attack(svc: Service) -> None:
         senders = [subprocess.Popen([sys.executable, "-c", _HUPPER, str(svc.proc.pid),
                                      str(seconds)]) for _ in range(2)]
         svc.watch(seconds)
@@ -229,11 +239,9 @@ def sighup_burst(tmp: Path, seconds: float = 5.0) -> CampaignResult:
         svc.watch(2.0)
         res.checks["alive after the burst"] = svc.proc.poll() is None
         res.checks["a client still gets a status reply"] = svc.ask_status()
-    finally:
-        rc = svc.stop()
-        res.samples = svc.samples
-    text = svc.log.read_text()
-    res.checks["stopped cleanly on SIGTERM (0)"] = rc == 0
+
+    _campaign(res, tmp, attack)
+    text = (tmp / "service.log").read_text()
     res.checks["no traceback"] = "Traceback" not in text
     res.notes.append(f"reloads logged: {text.count('SIGHUP: reopening')}")
     return res
@@ -272,12 +280,8 @@ def request_flood(tmp: Path, n: int = 600, size: int = 1 << 20,
                   seconds: float = 20.0) -> CampaignResult:
     res = CampaignResult("request flood", f"{n} connections sending {size >> 20} MB requests "
                          f"for {seconds:g} s")
-    svc = Service(tmp)
-    try:
-        if not svc.wait_ready():
-            res.checks["service became ready"] = False
-            return res
-        svc.watch(2.0)
+
+    def attack(svc: Service) -> None:
         rss0 = svc.samples[-1][1]
         fl = subprocess.Popen([sys.executable, "-c", _FLOODER, str(svc.req), str(n), str(size),
                                str(seconds)], stdout=subprocess.PIPE, text=True)
@@ -288,11 +292,8 @@ def request_flood(tmp: Path, n: int = 600, size: int = 1 << 20,
         peak = max(s[1] for s in svc.samples)
         res.notes.append(f"RSS before {rss0:.1f} MB, peak {peak:.1f} MB")
         res.checks["RSS grew by < 150 MB"] = peak - rss0 < 150
-    finally:
-        rc = svc.stop()
-        res.samples = svc.samples
-    res.checks["stopped cleanly on SIGTERM (0)"] = rc == 0
-    return res
+
+    return _campaign(res, tmp, attack)
 
 
 _STALLED = r"""
@@ -315,12 +316,8 @@ time.sleep(secs)      # never reads
 def stalled_subscribers(tmp: Path, n: int = 50, seconds: float = 30.0) -> CampaignResult:
     res = CampaignResult("stalled subscribers", f"{n} subscribers that never read, {seconds:g} s"
                          " at --speed 20")
-    svc = Service(tmp, speed=20.0)
-    try:
-        if not svc.wait_ready():
-            res.checks["service became ready"] = False
-            return res
-        svc.watch(2.0)
+
+    def attack(svc: Service) -> None:
         rss0 = svc.samples[-1][1]
         st = subprocess.Popen([sys.executable, "-c", _STALLED, str(svc.pub), str(n),
                                str(seconds)])
@@ -329,11 +326,8 @@ def stalled_subscribers(tmp: Path, n: int = 50, seconds: float = 30.0) -> Campai
         res.checks["a client still gets a status reply"] = svc.ask_status()
         peak = max(s[1] for s in svc.samples)
         res.notes.append(f"RSS before {rss0:.1f} MB, peak {peak:.1f} MB")
-    finally:
-        rc = svc.stop()
-        res.samples = svc.samples
-    res.checks["stopped cleanly on SIGTERM (0)"] = rc == 0
-    return res
+
+    return _campaign(res, tmp, attack, speed=20.0)
 
 
 CAMPAIGN = (fd_exhaustion, sighup_burst, request_flood, stalled_subscribers)
