@@ -456,13 +456,37 @@ def lowpass_flicker_ratio(m: ArrayLike, rate_hz: float, corner_hz: float,
     ≈ 0.38 at m = 1, 0.80 at 2, 0.97 at 4 and 0.99 at 8: the chip filters the flicker too,
     which ``lowpass_white_avar`` alone does not describe."""
     mm = np.atleast_1d(np.asarray(m, dtype=float))
-    # S(ν)dν = dν/ν = d ln ν: integrate |H_m|²(|G|²) on a log grid down to where |H_m|² ∝ ν²
-    # has made the integrand negligible
-    x = np.linspace(math.log(1e-9), math.log(0.5), 400_001)
-    nu = np.exp(x)
-    g2 = lowpass_gain2(nu, rate_hz, corner_hz, order)
+    x, nu, g2, s2 = _flicker_grid(_filter_key(rate_hz, corner_hz), int(order))
     out = np.empty(len(mm))
     for i, mi in enumerate(mm):
-        h2 = 2.0 * np.sin(np.pi * nu * mi) ** 4 / (mi**2 * np.sin(np.pi * nu) ** 2)
-        out[i] = np.trapezoid(h2 * g2, x) / np.trapezoid(h2, x)
+        num = den = 0.0
+        # in slices sharing their end points (the trapezoid rule adds up exactly): a few MB
+        # of temporaries instead of tens, which the service's RSS would keep as its peak
+        for a in range(0, len(x) - 1, _GRID_SLICE):
+            b = min(a + _GRID_SLICE + 1, len(x))
+            h2 = 2.0 * np.sin(np.pi * nu[a:b] * mi) ** 4 / (mi**2 * s2[a:b])
+            num += float(np.trapezoid(h2 * g2[a:b], x[a:b]))
+            den += float(np.trapezoid(h2, x[a:b]))
+        out[i] = num / den
     return out
+
+
+#: Points of the log-frequency grid of :func:`lowpass_flicker_ratio`, and its slices.
+_GRID_N = 400_001
+_GRID_SLICE = 50_000
+
+
+@lru_cache(maxsize=8)
+def _flicker_grid(wn: float, order: int) -> tuple[NDArray[np.float64], ...]:
+    """The grid of :func:`lowpass_flicker_ratio` for the normalised corner ``wn``: ln ν, ν,
+    |G(ν)|² and sin²(πν), computed once per corner (they do not depend on m). S(ν)dν = dν/ν
+    = d ln ν: a log grid down to where |H_m|² ∝ ν² has made the integrand negligible."""
+    x = np.linspace(math.log(1e-9), math.log(0.5), _GRID_N)
+    nu = np.exp(x)
+    g2 = np.empty_like(nu)
+    for a in range(0, _GRID_N, _GRID_SLICE):
+        g2[a:a + _GRID_SLICE] = lowpass_gain2(nu[a:a + _GRID_SLICE], 2.0, wn, order)
+    s2 = np.sin(np.pi * nu) ** 2
+    for arr in (x, nu, g2, s2):
+        arr.flags.writeable = False
+    return x, nu, g2, s2
