@@ -54,7 +54,10 @@ class SignalLatch:
         """Sleep until a signal, a :meth:`wake` or ``timeout_s``; return the signals noted
         since the last call (each once, however often it came)."""
         if not self.pending():
-            select.select([self._rx], [], [], max(0.0, timeout_s))
+            # poll, not select: select() refuses fds above 1024 (LimitNOFILE is higher)
+            p = select.poll()
+            p.register(self._rx, select.POLLIN)
+            p.poll(max(0.0, timeout_s) * 1e3)
         while True:
             try:
                 if not self._rx.recv(4096):
