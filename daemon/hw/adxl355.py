@@ -208,6 +208,12 @@ class Drain:
     t_burst_end: float = 0.0
     #: uncertainty of ``t_real`` as the CLOCK_REALTIME of the moment ``t_mono``, s
     t_real_u: float = 0.0
+    #: the overrun was seen only by the STATUS read after the burst (at ``t_post``), which
+    #: also read FIFO_ENTRIES (``post_entries``; −1 when not read): 96 means the FIFO overran
+    #: after the burst; fewer, that it was full when read and these sets follow a loss
+    overrun_in_drain: bool = False
+    t_post: float = 0.0
+    post_entries: int = -1
 
     @property
     def n_sets(self) -> int:
@@ -510,7 +516,9 @@ class Adxl355:
         if max_sets is not None:
             n_read = min(n_all, max(3 * max_sets - c, 0))
         data = b""
-        t_burst = t_burst_end = t_mono
+        t_burst = t_burst_end = t_post = t_mono
+        post_entries = -1
+        overrun_in_drain = False
         if n_read > 0:
             t_burst = self.clock.monotonic()
             data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True)
@@ -523,9 +531,16 @@ class Adxl355:
             # to fill (half of it, for any clock error): then the read is saved (one of
             # three transfers per drain).
             room_s = (R.FIFO_LOCATIONS - entries) // 3 / self.odr_hz
-            preempted = self.clock.monotonic() - t_mono >= 0.5 * room_s
-            post = self._read(A["STATUS"], 1, in_drain=True)[0] if preempted else 0
+            t_post = self.clock.monotonic()
+            preempted = t_post - t_mono >= 0.5 * room_s
+            post = 0
+            if preempted:
+                # STATUS and FIFO_ENTRIES: a FIFO still full after the burst overran after
+                # it (the loss follows these sets); otherwise the sets it holds date them
+                post, post_reg = self._read(A["STATUS"], 2, in_drain=True)
+                post_entries = post_reg & 0x7F
             if post & R.STATUS_FIFO_OVR:
+                overrun_in_drain = not (status & R.STATUS_FIFO_OVR)
                 tight = False  # the sets read were produced after t_mono
                 self.overruns += 1
                 self._note_gap(GapReason.FIFO_OVERRUN)
@@ -551,7 +566,9 @@ class Adxl355:
                       complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS,
                       since_last_s=None if self._last_drain_t is None
                       else t_mono - self._last_drain_t, t_burst=t_burst,
-                      t_burst_end=t_burst_end, t_real_u=t_real_u)
+                      t_burst_end=t_burst_end, t_real_u=t_real_u,
+                      overrun_in_drain=overrun_in_drain, t_post=t_post,
+                      post_entries=post_entries)
         self._last_drain_t = t_mono
         self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:

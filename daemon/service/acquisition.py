@@ -38,7 +38,7 @@ from avard.core.errors import AvardError, DeviceStalledError, HardwareError
 from avard.core.io import frames
 from avard.daemon.hw.interrupt import InterruptPin
 from avard.daemon.hw.pacing import drain_period_s
-from avard.daemon.hw.registers import FIFO_OVERRUN_LOCATIONS
+from avard.daemon.hw.registers import FIFO_LOCATIONS, FIFO_OVERRUN_LOCATIONS
 from avard.daemon.hw.source import GapReason, SampleSource
 from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.service.ring import Ring
@@ -249,8 +249,12 @@ class Acquisition:
         # drain that reached it (an unplugged part's outage; nothing for a stall, whose empty
         # drains kept coming), and the time line starts again at the part's new start.
         behind = None if restarted else self._behind(d, n, reasons)
-        if (GapReason.FIFO_OVERRUN in d.gap_reasons and behind is not None
-                and behind < 0.5 and not self._overrun_after_read):
+        post_entries = int(getattr(d, "post_entries", -1))
+        after_read = bool(getattr(d, "overrun_in_drain", False)) and (
+            post_entries >= FIFO_LOCATIONS
+            or (post_entries < 0 and behind is not None and behind < 0.5))
+        if (GapReason.FIFO_OVERRUN in d.gap_reasons and after_read
+                and not self._overrun_after_read):
             # The FIFO was not full yet when this drain's burst read it: the overrun its
             # second STATUS read saw came after, so the loss lies between these sets and the
             # next drain's (whose burst finds the FIFO still full): counted there.
@@ -337,7 +341,13 @@ class Acquisition:
             return None
         t_a, i_a = self._anchor
         rate = float(self.tb.odr_hz)
-        if GapReason.FIFO_OVERRUN in reasons:
+        post_entries = int(getattr(d, "post_entries", -1))
+        if (GapReason.FIFO_OVERRUN in reasons and getattr(d, "overrun_in_drain", False)
+                and 0 <= post_entries < FIFO_LOCATIONS):
+            # Full when the burst read it, whenever that was: after the burst the FIFO held
+            # the sets that followed these, newest the one due at the second STATUS read.
+            first = (i_a + (float(d.t_post) - t_a) * rate - post_entries // 3 - (n - 1))
+        elif GapReason.FIFO_OVERRUN in reasons:
             t_b = float(getattr(d, "t_burst", 0.0) or d.t_mono)
             t_e = float(getattr(d, "t_burst_end", 0.0) or t_b)
             if t_e - t_b > 1.0 / rate:

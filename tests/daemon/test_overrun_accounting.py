@@ -53,12 +53,19 @@ class LateBus(SpiBus):
         super().__init__(dev)
         self.clock = clock
         self.late_in_burst = 0.0
+        self.late_after_burst = 0.0
 
     def read(self, addr: int, n: int) -> bytes:
         if addr == R.ADDR["FIFO_DATA"] and self.late_in_burst:
             self.clock.advance(self.late_in_burst)
             self.late_in_burst = 0.0
-        return super().read(addr, n)
+        out = super().read(addr, n)
+        if addr == R.ADDR["FIFO_DATA"] and self.late_after_burst:
+            # pre-empted after the transfer, before the second STATUS read: the FIFO overruns
+            # after this drain's sets were read
+            self.clock.advance(self.late_after_burst)
+            self.late_after_burst = 0.0
+        return out
 
 
 def _rig() -> tuple[Adxl355, EmulatedAdxl355, VirtualClock, LateBus, Acquisition, Capture]:
@@ -94,7 +101,7 @@ def _check(acq: Acquisition, emu: EmulatedAdxl355, cap: Capture) -> tuple[np.nda
 
 
 @pytest.mark.parametrize("moment", ["before_first_drain", "between_drains", "inside_drain",
-                                    "inside_drain_briefly", "all"])
+                                    "inside_drain_briefly", "after_burst", "all"])
 def test_loss_is_counted_from_time_wherever_the_reader_was_late(moment: str) -> None:
     _dev, emu, clock, bus, acq, cap = _rig()
     if moment in ("before_first_drain", "all"):
@@ -109,6 +116,9 @@ def test_loss_is_counted_from_time_wherever_the_reader_was_late(moment: str) -> 
         _drains(acq, clock, 20)
     if moment in ("inside_drain_briefly", "all"):
         bus.late_in_burst = 0.025     # 25 sets arrive into 16 free places
+        _drains(acq, clock, 20)
+    if moment in ("after_burst", "all"):
+        bus.late_after_burst = 0.15   # the loss follows this drain's sets: counted at the next
         _drains(acq, clock, 20)
     assert emu.lost > 0
     _check(acq, emu, cap)
