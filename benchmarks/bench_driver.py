@@ -111,12 +111,9 @@ def _run_queue_wait_reader() -> Callable[[], float] | None:
 
 def bench_realtime(seconds: float, poll_s: float, odr_hz: float,
                    rt_priority: int = 0) -> dict[str, float]:
-    clock = VirtualClock(speed=1.0)
-    emu = EmulatedAdxl355(counter_source(), clock)
-    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock)
-    dev.probe()
-    dev.reset()
-    dev.configure(range_g=2, odr_hz=odr_hz)
+    from benchmarks.bench_realtime import realtime_rig
+
+    dev, emu, _clock = realtime_rig(odr_hz)
     stop = threading.Event()
     stats = {"sets": 0, "overruns": 0, "drains": 0, "max_gap_s": 0.0, "bad_sequence": 0,
              "silent_breaks": 0, "rt_refused": 0, "max_gap_cpu_s": 0.0, "max_gap_wait_s": -1.0,

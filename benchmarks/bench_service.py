@@ -72,6 +72,14 @@ end, n = time.monotonic() + seconds, 0
 big = msgpack.packb({"op": "recent", "args": {"seconds": 5.0}, "id": 1})
 if mode == "noread":   # asks for the biggest replies and never reads one
     s.setsockopt(zmq.RCVHWM, 1); s.setsockopt(zmq.RCVBUF, 4096)
+if mode == "watch":    # what `avard watch` asks: a snapshot (with its fit) now and then
+    snap = msgpack.packb({"op": "snapshot", "args": {}, "id": 1})
+    while time.monotonic() < end:
+        s.send_multipart([b"", snap]); n += 1
+        if s.poll(10000):
+            s.recv_multipart()
+        time.sleep(min(5.0, max(0.0, end - time.monotonic())))
+    print(n / seconds); sys.exit(0)
 while time.monotonic() < end:
     try:               # as fast as the socket takes them (never blocks past the end)
         s.send_multipart([b"", big if mode == "noread" else reqs[n % len(reqs)]], zmq.NOBLOCK)
@@ -149,7 +157,13 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 stop.wait(0.25)
 
         def per_thread() -> None:   # just before the service stops its threads
-            stop.wait(seconds - 0.5)
+            stop.wait(seconds / 2)
+            # the second half alone: steady state, after one-time costs (imports, the first
+            # fit's filter terms)
+            origin["cpu_half"] = time.process_time()
+            origin["sub_cpu_half"] = _cpu_of(origin["bench_tids"])  # type: ignore[arg-type]
+            origin["wall_half"] = time.monotonic()
+            stop.wait(seconds / 2 - 0.5)
             after = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type]
             t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
             wall = time.monotonic() - origin["wall"]
@@ -193,6 +207,11 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
         sub_cpu = _cpu_of(origin["bench_tids"]) - origin["sub_cpu"]  # type: ignore[arg-type]
         cpu = time.process_time() - origin["cpu"] - sub_cpu
         wall = time.monotonic() - origin["wall"]
+        steady = float("nan")
+        if "cpu_half" in origin:
+            sub_half = _cpu_of(origin["bench_tids"]) - origin["sub_cpu_half"]  # type: ignore[arg-type]
+            steady = ((time.process_time() - origin["cpu_half"] - sub_half)
+                      / (time.monotonic() - origin["wall_half"]))
         stop.set()
         origin["th"].join(5)  # type: ignore[attr-defined]
         origin["sub"].close()  # type: ignore[attr-defined]
@@ -202,6 +221,7 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 "req_rate": req_rate, "answered": svc.request_server.answered
                 if svc.request_server else 0,
                 "cpu": cpu, "sub_cpu": sub_cpu, "wall": wall, "sim": st["sim_time_s"],
+                "steady_cpu_per_s": steady, "rss_max": rss["max"],
                 "samples": st["samples"],
                 "overruns": st["overruns"], "received": got["samples"], "continuous": got["ok"],
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
@@ -278,8 +298,14 @@ def main(argv: list[str]) -> int:
     p.add_argument("--rates", default="125,4000", help="ODRs in Hz, comma separated")
     p.add_argument("--clients", action="store_true",
                    help="also run each rate under a request flood and a never-reading client")
+    p.add_argument("--watch", action="store_true",
+                   help="only: the service at 125 Hz with one `avard watch`-like client "
+                        "(a snapshot request every 5 s: every Allan record is fitted from "
+                        "the first on); steady-state CPU (second half) and RSS")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    if args.watch:
+        return _watch_table(args.seconds)
     rows = []
     for odr in (float(r) for r in args.rates.split(",")):
         ref = _drain_only(odr, args.seconds)
@@ -336,3 +362,48 @@ def _client_table(rows: list[tuple[float, dict[str, Any], dict[str, Any]]],
             print(f"{odr:7g} {client or 'none':>8} {r['req_rate']:10.0f} {r['answered']:8d} "
                   f"{r['overruns']:8d} {r['drain_max_s'] / fifo_s:25.2f} "
                   f"{r['cpu'] / r['sim']:9.3f} {r['rss_growth']:13.1f}")
+
+
+def _watch_table(seconds: float) -> int:
+    """The cost of one watching client: the service's fit thread fits each new Allan record
+    once a client has asked for a snapshot; with the filter terms cached per normalised
+    corner (core/model/terms.py) a fit costs the same after the first request as before."""
+    per_fit = _fit_cost_per_snapshot()
+    print("one snapshot's fit (3 axes) at a fitted rate that moves by 3 ppm from one snapshot "
+          "to the next, CPU-s: " + ", ".join(f"{c:.3f}" for c in per_fit)
+          + " (the first computes the filter terms of this corner)")
+    quiet = _service_run(125.0, seconds)
+    watched = _service_run(125.0, seconds, "watch")
+    rss_hw, _heavy = _rss_mb(125.0, min(seconds, 10.0), False)
+    print(f"service at 125 Hz, --speed 1, {seconds:g} s, quiet-lab; steady = CPU-s per s over "
+          "the second half (after the first fit); machine shared and loaded: read ratios")
+    hdr = (f"{'client':>8} {'CPU/sim s':>9} {'steady CPU/s':>12} {'fit thread CPU/s':>16} "
+           f"{'RSS max MB (in-process)':>23}")
+    print(hdr)
+    print("-" * len(hdr))
+    for name, r in (("none", quiet), ("watch", watched)):
+        fit = r["threads"].get("fit", 0.0)
+        print(f"{name:>8} {r['cpu'] / r['sim']:9.4f} {r['steady_cpu_per_s']:12.4f} "
+              f"{fit:16.4f} {r['rss_max']:23.1f}")
+    print(f"peak RSS of `avard run` on the hardware path (own process, no client): "
+          f"{rss_hw:.1f} MB")
+    return 0
+
+
+def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
+    """CPU-s of :func:`fit_snapshot` for ``n`` snapshots of one 10-minute white + random-walk
+    record whose fitted rate moves by 3 ppm each time (what a running service's does)."""
+    from avard.core.allan.streaming import StreamingAllan
+    from avard.daemon.service.snapshots import fit_snapshot
+
+    rng = np.random.default_rng(1)
+    a = StreamingAllan(3, 125.0, names=["x", "y", "z"])
+    x = rng.standard_normal((125 * 600, 3)) * 1e-3
+    a.update(x + np.cumsum(rng.standard_normal((125 * 600, 3)), axis=0) * 1e-7)
+    snap = a.snapshot().to_dict()
+    out = []
+    for k in range(n):
+        t0 = time.process_time()
+        fit_snapshot(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k)))
+        out.append(time.process_time() - t0)
+    return out

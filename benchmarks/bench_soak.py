@@ -1,6 +1,7 @@
 """Soak: the whole service for many simulated hours, faults on a schedule, a remote subscriber.
 
 ``python -m benchmarks soak [--hours 60] [--fault-every-h 2] [--out DIR] [--disk-full]``
+``python -m benchmarks soak --campaign``: the classes of soak_service_faults.py instead.
 
 The service (reader, ring, Allan accumulators, recorder, publisher, request socket) runs in
 this process over the register-level emulator fed by the simulator (preset quiet-lab,
@@ -419,9 +420,23 @@ def main(argv: list[str]) -> int:
                     help="rounds of the restart classes after the soak (early stops, quick "
                          "restarts, checkpoint damage, clock step with retention: "
                          "benchmarks/soak_restarts.py); 0 skips them")
+    ap.add_argument("--campaign", action="store_true",
+                    help="run the campaign classes against the process and the request side "
+                         "instead (soak_service_faults.py: fd exhaustion, SIGHUP bursts, "
+                         "request floods, stalled subscribers)")
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="avard-soak-"))
     out.mkdir(parents=True, exist_ok=True)
+    if args.campaign:
+        from benchmarks.soak_service_faults import run_campaign
+
+        try:
+            results = run_campaign(out)
+            print("\n\n".join(r.format() for r in results))
+        finally:
+            if args.out is None:
+                shutil.rmtree(out, ignore_errors=True)
+        return 0 if all(r.ok for r in results) else 1
     try:
         res = run_soak(args.hours, out, fault_every_h=args.fault_every_h,
                        disk_full=args.disk_full, seed=args.seed)

@@ -9,6 +9,18 @@ it into a one-line message and a non-zero exit; the service logs it.
 class AvardError(Exception):
     """Root of every error avard raises on purpose."""
 
+    #: The command line's exit status for it: 2, "you must fix something" (the unit's
+    #: RestartPreventExitStatus=2 keeps such a service down instead of looping).
+    exit_status = 2
+
+
+class ServiceFault(AvardError):
+    """A part of the running service failed on its own (a worker thread died): nothing the
+    user must fix, so the exit status is 70 (EX_SOFTWARE), which systemd's Restart=on-failure
+    restarts; the restart is a recorded gap."""
+
+    exit_status = 70
+
 
 class DataError(AvardError, ValueError):
     """Input arrays or measured-data files that cannot be used (shape, NaN, rate, too short)."""

@@ -86,11 +86,12 @@ def setup_logging(verbosity: int) -> None:
     root.setLevel(level)
 
 
-def _fail(command: str, message: str) -> int:
-    """Print the one line the README promises (messages never span lines) and return 2."""
+def _fail(command: str, message: str, status: int = 2) -> int:
+    """Print the one line the README promises (messages never span lines) and return
+    ``status`` (2 unless the error says otherwise: see AvardError.exit_status)."""
     one_line = " ".join(message.split())
     print(f"avard {command}: error: {one_line}", file=sys.stderr)
-    return 2
+    return status
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -106,7 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args._run(args) or 0)
     except AvardError as exc:
-        return _fail(args.command, str(exc))
+        return _fail(args.command, str(exc), exc.exit_status)
     except BrokenPipeError:
         # `avard analyze x.npz | head`: the reader left; end quietly, as cat does
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -147,8 +147,29 @@ def _butterworth(rate_hz: float, corner_hz: float, order: int
     return butterworth_lowpass_zpk(order, wn)
 
 
-@lru_cache(maxsize=32)
+def _filter_key(rate_hz: float, corner_hz: float) -> float:
+    """The one number the filter's effect depends on, its corner in units of the Nyquist
+    frequency, to 7 significant digits: the key of the caches below. Keyed by the rate
+    itself, every snapshot of a running service (whose fitted rate moves by parts per
+    million from one snapshot to the next) missed them and paid the whole filter
+    computation again (a ~6× CPU rise after the first `snapshot` request, issue 26). A
+    relative change of 5e-8 in the corner changes the AVAR factors by less than that."""
+    wn = float(corner_hz) / (float(rate_hz) / 2.0)
+    if not 0.0 < wn < 1.0:
+        raise FitError(
+            f"filter corner {corner_hz} Hz must lie between 0 and the Nyquist frequency "
+            f"{rate_hz / 2} Hz"
+        )
+    return float(f"{wn:.7g}")
+
+
 def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np.float64]:
+    """:func:`_lowpass_autocov_wn` at this rate and corner (cached by the normalised corner)."""
+    return _lowpass_autocov_wn(_filter_key(rate_hz, corner_hz), order)
+
+
+@lru_cache(maxsize=32)
+def _lowpass_autocov_wn(wn: float, order: int) -> NDArray[np.float64]:
     """Autocovariance r(k), k = 0…L, of unit-variance white noise through a Butterworth low-pass
     (``order``) at ``corner_hz``, normalised to unit DC gain. The ADXL355 datasheet does not give
     its decimation filter; a 2nd-order Butterworth at ODR/4 reproduces the documented corner and
@@ -156,7 +177,7 @@ def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np
     """
     from avard.core.sim.linear_filter import ModalFilter
 
-    zeros, poles, gain = _butterworth(rate_hz, corner_hz, order)
+    zeros, poles, gain = _butterworth(2.0, wn, order)   # rate 2: the corner is wn
     n = 64
     while True:
         imp = np.zeros((1, n))
@@ -411,17 +432,20 @@ def lowpass_flicker_avar(
     and 20 % at m = 2."""
     t = _tau(tau)
     m = np.maximum(np.rint(t * rate_hz).astype(np.int64), 1)
-    ratio = np.array([_flicker_ratio_one(int(mi), float(rate_hz), float(corner_hz), int(order))
-                      for mi in m])
+    wn = _filter_key(rate_hz, corner_hz)
+    ratio = np.array([_flicker_ratio_one(int(mi), wn, int(order)) for mi in m])
     return term_avar("bias_instability", t, B) * ratio
 
 
 @lru_cache(maxsize=4096)
-def _flicker_ratio_one(m: int, rate_hz: float, corner_hz: float, order: int) -> float:
+def _flicker_ratio_one(m: int, wn: float, order: int) -> float:
+    """``lowpass_flicker_ratio`` at one m for the corner ``wn`` (units of Nyquist: rate 2)
+    — the costly part of a fit (a 400 001-point integral per m), computed once per
+    (m, normalised corner) for the whole run (see :func:`_filter_key`)."""
     # The filter's effect falls like 1/m² (≈ 0.6/m² at ODR/4): below 4e-8 beyond m = 4096.
     if m > 4096:
         return 1.0
-    return float(lowpass_flicker_ratio([m], rate_hz, corner_hz, order)[0])
+    return float(lowpass_flicker_ratio([m], 2.0, wn, order)[0])
 
 
 def lowpass_flicker_ratio(m: ArrayLike, rate_hz: float, corner_hz: float,
@@ -432,13 +456,37 @@ def lowpass_flicker_ratio(m: ArrayLike, rate_hz: float, corner_hz: float,
     ≈ 0.38 at m = 1, 0.80 at 2, 0.97 at 4 and 0.99 at 8: the chip filters the flicker too,
     which ``lowpass_white_avar`` alone does not describe."""
     mm = np.atleast_1d(np.asarray(m, dtype=float))
-    # S(ν)dν = dν/ν = d ln ν: integrate |H_m|²(|G|²) on a log grid down to where |H_m|² ∝ ν²
-    # has made the integrand negligible
-    x = np.linspace(math.log(1e-9), math.log(0.5), 400_001)
-    nu = np.exp(x)
-    g2 = lowpass_gain2(nu, rate_hz, corner_hz, order)
+    x, nu, g2, s2 = _flicker_grid(_filter_key(rate_hz, corner_hz), int(order))
     out = np.empty(len(mm))
     for i, mi in enumerate(mm):
-        h2 = 2.0 * np.sin(np.pi * nu * mi) ** 4 / (mi**2 * np.sin(np.pi * nu) ** 2)
-        out[i] = np.trapezoid(h2 * g2, x) / np.trapezoid(h2, x)
+        num = den = 0.0
+        # in slices sharing their end points (the trapezoid rule adds up exactly): a few MB
+        # of temporaries instead of tens, which the service's RSS would keep as its peak
+        for a in range(0, len(x) - 1, _GRID_SLICE):
+            b = min(a + _GRID_SLICE + 1, len(x))
+            h2 = 2.0 * np.sin(np.pi * nu[a:b] * mi) ** 4 / (mi**2 * s2[a:b])
+            num += float(np.trapezoid(h2 * g2[a:b], x[a:b]))
+            den += float(np.trapezoid(h2, x[a:b]))
+        out[i] = num / den
     return out
+
+
+#: Points of the log-frequency grid of :func:`lowpass_flicker_ratio`, and its slices.
+_GRID_N = 400_001
+_GRID_SLICE = 50_000
+
+
+@lru_cache(maxsize=8)
+def _flicker_grid(wn: float, order: int) -> tuple[NDArray[np.float64], ...]:
+    """The grid of :func:`lowpass_flicker_ratio` for the normalised corner ``wn``: ln ν, ν,
+    |G(ν)|² and sin²(πν), computed once per corner (they do not depend on m). S(ν)dν = dν/ν
+    = d ln ν: a log grid down to where |H_m|² ∝ ν² has made the integrand negligible."""
+    x = np.linspace(math.log(1e-9), math.log(0.5), _GRID_N)
+    nu = np.exp(x)
+    g2 = np.empty_like(nu)
+    for a in range(0, _GRID_N, _GRID_SLICE):
+        g2[a:a + _GRID_SLICE] = lowpass_gain2(nu[a:a + _GRID_SLICE], 2.0, wn, order)
+    s2 = np.sin(np.pi * nu) ** 2
+    for arr in (x, nu, g2, s2):
+        arr.flags.writeable = False
+    return x, nu, g2, s2

@@ -14,6 +14,7 @@ import sys
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
 from avard.daemon.config_types import Config
+from avard.daemon.service.acquisition import REALTIME_HELD_HZ
 
 NAME = "check-config"
 HELP = "check a config file (unknown keys, types, ranges) without starting"
@@ -33,6 +34,13 @@ def run(args: argparse.Namespace) -> int:
     out.write(f"{args.config}: valid\n")
     out.write(f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
               f"drained at {effective_poll_hz(cfg):g} Hz\n")
+    if config.sensor.odr_hz > REALTIME_HELD_HZ:
+        fifo_ms = 32e3 / config.sensor.odr_hz
+        out.write(f"  note: at {config.sensor.odr_hz:g} Hz the FIFO holds {fifo_ms:.3g} ms: "
+                  f"beside a CPU-bound process on a 2-core machine only "
+                  f"{REALTIME_HELD_HZ:g} Hz was measured free of FIFO overruns (no SCHED_FIFO "
+                  "under the unit); each overrun is a recorded gap of counted size "
+                  "(docs/service.md, python -m benchmarks realtime)\n")
     if config.recording.enabled:
         out.write(f"  recording into {config.recording.data_dir}\n")
     if config.publish.enabled:

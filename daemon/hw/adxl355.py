@@ -9,9 +9,12 @@ driver, ADI's no-OS driver). The parts that bite and how they are handled:
   and realigns on the markers when the FIFO does not start with X (ADI no-OS issue 2431).
   Entries of an unfinished set at the end of a burst are carried to the next drain, so a
   misaligned FIFO costs one set once, not one set per drain.
-* STATUS.FIFO_OVR means newer data overwrote older: an unknown number of sets is lost. The
-  drain says so (``overrun=True``); the service records a gap. Sample indices count the sets
-  received; they never pretend to know how many were lost.
+* STATUS.FIFO_OVR means newer data overwrote older: the chip does not say how many sets
+  were lost. The drain says so (``overrun=True``) with the moment of its burst read
+  (``t_burst``: the FIFO was full then, so the first set read is the FIFO_FULL_SETS-th
+  newest), and the moment measurement started (``Adxl355.t_started``); the service counts the
+  loss from time and records a gap of that size. The driver's ``index0`` counts the sets
+  received only.
 * A failed transfer during a drain may have popped entries or cleared FIFO_OVR on the chip, so
   it is also reported as a gap (``gap_reason`` says which), after ``retries`` attempts.
 * TEMP2/TEMP1 are not double-buffered: they are read in one burst and re-read if TEMP2 moved.
@@ -34,7 +37,7 @@ from avard.core.errors import (
 )
 from avard.daemon.hw import registers as R
 from avard.daemon.hw.source import GapReason, parse_reasons
-from avard.daemon.hw.timebase import SystemClock
+from avard.daemon.hw.timebase import SystemClock, read_clock_pair
 from avard.daemon.hw.transport import I2cBus, RegisterBus
 
 log = logging.getLogger(__name__)
@@ -193,9 +196,24 @@ class Drain:
     #: the STATUS/FIFO_ENTRIES read finished within one sample period of ``t_mono`` and no
     #: overrun happened during the drain. Only such drains feed the time-base fit.
     complete: bool = True
-    #: CLOCK_MONOTONIC seconds since the previous drain's stamp (None for the first): with the
-    #: fitted rate, ``since_last_s × odr − n_sets`` estimates the sets an overrun lost.
+    #: CLOCK_MONOTONIC seconds since the previous drain's stamp (None for the first).
     since_last_s: float | None = None
+    #: CLOCK_MONOTONIC just before the FIFO_DATA burst (``t_mono`` when there was none). After
+    #: an overrun the FIFO is full at that moment: ``counts[0]`` is the
+    #: ``FIFO_FULL_SETS``-th newest set then, which dates it (the loss before it is counted
+    #: from time: service/acquisition.py).
+    t_burst: float = 0.0
+    #: CLOCK_MONOTONIC just after the burst returned: a burst that took longer than a sample
+    #: period was pre-empted, and its sets were taken from the FIFO near its end
+    t_burst_end: float = 0.0
+    #: uncertainty of ``t_real`` as the CLOCK_REALTIME of the moment ``t_mono``, s
+    t_real_u: float = 0.0
+    #: the overrun was seen only by the STATUS read after the burst (at ``t_post``), which
+    #: also read FIFO_ENTRIES (``post_entries``; −1 when not read): 96 means the FIFO overran
+    #: after the burst; fewer, that it was full when read and these sets follow a loss
+    overrun_in_drain: bool = False
+    t_post: float = 0.0
+    post_entries: int = -1
 
     @property
     def n_sets(self) -> int:
@@ -269,6 +287,9 @@ class Adxl355:
         self._measuring = False
         self._last_data_t: float | None = None
         self._last_drain_t: float | None = None
+        #: CLOCK_MONOTONIC when measurement last started: the first set after it is due one
+        #: period later (what the service counts loss before the first drain from)
+        self.t_started: float | None = None
 
     # -- bus access with retries -----------------------------------------------------------
     def _read(self, addr: int, n: int, *, in_drain: bool = False) -> bytes:
@@ -415,6 +436,7 @@ class Adxl355:
         self._measuring = True
         self._carry = b""
         self._last_data_t = self.clock.monotonic()
+        self.t_started = self._last_data_t
 
     def standby(self) -> None:
         """Enter standby (the chip clears its FIFO)."""
@@ -470,8 +492,9 @@ class Adxl355:
     # -- the FIFO ------------------------------------------------------------------------------
     def drain(self, max_sets: int | None = None) -> Drain:
         """Read every whole XYZ set in the FIFO (at most ``max_sets``). See :class:`Drain`."""
-        t_mono = self.clock.monotonic()
-        t_real = self.clock.realtime()
+        # a tight CLOCK_MONOTONIC/CLOCK_REALTIME pair (a pre-emption between the two reads
+        # looked like a CLOCK_REALTIME step)
+        t_mono, t_real, t_real_u = read_clock_pair(self.clock)
         status, entries_reg = self._read(A["STATUS"], 2, in_drain=True)
         # FIFO_ENTRIES was sampled somewhere between t_mono and now: if that window is longer
         # than a sample period (preempted, retried), t_mono no longer dates the newest set.
@@ -493,8 +516,13 @@ class Adxl355:
         if max_sets is not None:
             n_read = min(n_all, max(3 * max_sets - c, 0))
         data = b""
+        t_burst = t_burst_end = t_post = t_mono
+        post_entries = -1
+        overrun_in_drain = False
         if n_read > 0:
+            t_burst = self.clock.monotonic()
             data = self._read(A["FIFO_DATA"], 3 * n_read, in_drain=True)
+            t_burst_end = self.clock.monotonic()
             # If this thread was preempted between the STATUS read and the burst, the FIFO
             # may have overrun in between: the oldest entries (the ones just read were to
             # follow the carried set and the previous drain) were overwritten. STATUS again
@@ -503,9 +531,16 @@ class Adxl355:
             # to fill (half of it, for any clock error): then the read is saved (one of
             # three transfers per drain).
             room_s = (R.FIFO_LOCATIONS - entries) // 3 / self.odr_hz
-            preempted = self.clock.monotonic() - t_mono >= 0.5 * room_s
-            post = self._read(A["STATUS"], 1, in_drain=True)[0] if preempted else 0
+            t_post = self.clock.monotonic()
+            preempted = t_post - t_mono >= 0.5 * room_s
+            post = 0
+            if preempted:
+                # STATUS and FIFO_ENTRIES: a FIFO still full after the burst overran after
+                # it (the loss follows these sets); otherwise the sets it holds date them
+                post, post_reg = self._read(A["STATUS"], 2, in_drain=True)
+                post_entries = post_reg & 0x7F
             if post & R.STATUS_FIFO_OVR:
+                overrun_in_drain = not (status & R.STATUS_FIFO_OVR)
                 tight = False  # the sets read were produced after t_mono
                 self.overruns += 1
                 self._note_gap(GapReason.FIFO_OVERRUN)
@@ -530,7 +565,10 @@ class Adxl355:
                       dropped_entries=dec.dropped + dec.empty, t_mono_end=t_end,
                       complete=tight and n_read == n_all and entries < R.FIFO_LOCATIONS,
                       since_last_s=None if self._last_drain_t is None
-                      else t_mono - self._last_drain_t)
+                      else t_mono - self._last_drain_t, t_burst=t_burst,
+                      t_burst_end=t_burst_end, t_real_u=t_real_u,
+                      overrun_in_drain=overrun_in_drain, t_post=t_post,
+                      post_entries=post_entries)
         self._last_drain_t = t_mono
         self._gap_reasons = []  # each gap is reported once, even on a drain without sets
         if n:

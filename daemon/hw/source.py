@@ -30,6 +30,7 @@ class GapReason(StrEnum):
     RESTART = "restart"             # measurement restarted
     RECOVERED = "recovered"         # probe, reset, reconfigure, restart after an error
     SELF_TEST = "self_test"         # self-test deflected the outputs
+    UNACCOUNTED = "unaccounted"     # sets arrived later than time says: a loss nobody reported
 
 
 def parse_reasons(text: str | None) -> tuple[GapReason, ...]:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -57,6 +57,33 @@ class SystemClock:
     def sleep(seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds)
+
+
+#: A CLOCK_MONOTONIC/CLOCK_REALTIME pair read within this is tight enough to stop retrying.
+CLOCK_PAIR_TIGHT_S = 50e-6
+CLOCK_PAIR_TRIES = 3
+
+
+def read_clock_pair(clock: Any) -> tuple[float, float, float]:
+    """(t_mono, t_real, u): CLOCK_MONOTONIC now, CLOCK_REALTIME at that moment, and the
+    uncertainty of the pair (s). Read as monotonic, realtime, monotonic: realtime was read
+    within that window, so the pair is its middle ± half the window. A thread pre-empted
+    between two reads made a window of 0.1 s, and the realtime offset looked 0.1 s off
+    (a spurious clock_step pair); the read is retried and the narrowest window's offset kept,
+    and a step is judged against ``u`` (TimeBase.realtime_step). ``t_mono`` is the last read,
+    the one closest to what the caller does next."""
+    best_off, best_u = 0.0, float("inf")
+    m2 = 0.0
+    for _ in range(CLOCK_PAIR_TRIES):
+        m1 = clock.monotonic()
+        r = clock.realtime()
+        m2 = clock.monotonic()
+        u = 0.5 * (m2 - m1)
+        if u < best_u:
+            best_off, best_u = r - 0.5 * (m1 + m2), u
+        if m2 - m1 <= CLOCK_PAIR_TIGHT_S:
+            break
+    return m2, m2 + best_off, best_u
 
 
 @dataclass(frozen=True)
@@ -133,6 +160,7 @@ class TimeBase:
         self._last_index = 0.0
         self._last_t: float | None = None
         self._last_real_offset: float | None = None
+        self._last_real_u = 0.0
         self._pending_gap = False
         self.n_points = 0
 
@@ -184,15 +212,17 @@ class TimeBase:
         return self.update(drain.last_index, drain.t_mono, gap=bool(drain.overrun),
                            exact=bool(drain.complete))
 
-    def realtime_step(self, t_mono: float, t_real: float, threshold_s: float = 0.05
-                      ) -> float | None:
+    def realtime_step(self, t_mono: float, t_real: float, threshold_s: float = 0.05,
+                      u_s: float = 0.0) -> float | None:
         """Track CLOCK_REALTIME − CLOCK_MONOTONIC; return the step in s when it jumped by more
-        than ``threshold_s`` since the last call (an NTP step or a date change), else None.
-        Steps are events: sample order and times stay on the monotonic clock."""
+        than ``threshold_s`` plus the uncertainties of this read and the previous one
+        (``u_s``: :func:`read_clock_pair`) since the last call (an NTP step or a date
+        change), else None. Steps are events: sample order and times stay on the monotonic
+        clock."""
         off = t_real - t_mono
-        prev = self._last_real_offset
-        self._last_real_offset = off
-        if prev is not None and abs(off - prev) > threshold_s:
+        prev, prev_u = self._last_real_offset, self._last_real_u
+        self._last_real_offset, self._last_real_u = off, float(u_s)
+        if prev is not None and abs(off - prev) > threshold_s + u_s + prev_u:
             return off - prev
         return None
 

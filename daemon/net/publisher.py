@@ -26,8 +26,13 @@ from typing import Any
 import zmq
 from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.io import frames
+from avard.daemon.net.admission import (
+    MAX_REQUEST_CONNECTIONS,
+    MAX_SUBSCRIBERS,
+    ConnectionGate,
+    fd_budget,
+)
 from avard.daemon.net.curve import CurveServer, CurveServerConfig
-from zmq.utils.monitor import parse_monitor_message
 
 log = logging.getLogger(__name__)
 
@@ -43,12 +48,16 @@ _LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1", "[::1]"}
 Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
 #: Unread replies queued per request peer, and requests queued per peer.
 REPLY_HWM = 2
-REQUEST_HWM = 16
+REQUEST_HWM = 2
 #: Largest reply (a `recent` is capped at 2 MiB): with REPLY_HWM, ≤ 5 MiB per peer.
 MAX_REPLY_BYTES = 5 << 19
-#: Peers answered at once: a request from one more peer than this, while the others asked
-#: within PEER_WINDOW_S, gets a short error instead of a reply, so the replies queued for
+#: Peers answered at once: a valid request from one more peer than this, while the others
+#: asked within PEER_WINDOW_S, gets a short error instead of a reply, so the replies queued for
 #: peers that do not read are bounded in total (MAX_PEERS × REPLY_HWM × MAX_REPLY_BYTES).
+#: Only a request for an op this server answers takes a place: junk gets its (small) error
+#: reply without one, so junk peers cannot lock clients out.
+#: Requests queued are bounded too: ≤ MAX_REQUEST_CONNECTIONS connections (admission.py),
+#: each with ≤ REQUEST_HWM + 1 messages of ≤ hard_cap_bytes.
 MAX_PEERS = 16
 PEER_WINDOW_S = 10.0
 #: Requests answered per second, all peers together: a flood costs the service at most this
@@ -111,7 +120,8 @@ class Publisher:
 
     def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
                  hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
-                 check: bool = True, allow_remote: bool = False) -> None:
+                 check: bool = True, allow_remote: bool = False,
+                 max_subscribers: int = MAX_SUBSCRIBERS) -> None:
         if hwm < 1:
             raise ConfigError(f"publisher hwm={hwm}: must be at least 1 message")
         self.run_id = str(run_id)
@@ -133,12 +143,15 @@ class Publisher:
             self._sock.setsockopt(zmq.LINGER, LINGER_MS)
             if self._curve is not None:
                 self._curve.apply(self._sock)
-            # connection events, so STATUS can say how many subscribers are connected
-            self._monitor = self._sock.get_monitor_socket(
-                zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED | zmq.EVENT_HANDSHAKE_FAILED_AUTH
-            )
+            # connection events: STATUS says how many subscribers are connected, and the
+            # gate keeps them ≤ max_subscribers (admission.py: the fd table is bounded)
+            self._gate = ConnectionGate(
+                self._sock, fd_budget(max_subscribers, what="publisher",
+                                      others=MAX_REQUEST_CONNECTIONS),
+                "publisher", evict_newest=True, extra_events=zmq.EVENT_HANDSHAKE_FAILED_AUTH)
             self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None,
                                   allow_remote)
+            self._gate.bound(self.endpoint)
         except BaseException:
             self._teardown()
             raise
@@ -179,25 +192,17 @@ class Publisher:
             except zmq.Again:
                 self.dropped += 1
             self._since_monitor += 1
-            if self._since_monitor >= 64:  # connection events are rare; skip the syscall
+            if self._since_monitor >= 8:  # connection events are rare; skip the syscall
                 self._poll_monitor()
         return seq
 
     def _poll_monitor(self) -> None:
         self._since_monitor = 0
-        while self._monitor.poll(0):
-            try:
-                event = parse_monitor_message(self._monitor.recv_multipart(zmq.NOBLOCK))
-            except (zmq.Again, ValueError):
-                return
-            ev = event["event"]
-            if ev == zmq.EVENT_ACCEPTED:
-                self.peers += 1
-            elif ev == zmq.EVENT_DISCONNECTED:
-                self.peers = max(0, self.peers - 1)
-            elif ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
+        for ev in self._gate.poll():
+            if ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
                 self.auth_failures += 1
                 log.warning("publisher refused a peer that failed CURVE authentication")
+        self.peers = self._gate.connections
 
     def reload_keys(self) -> None:
         """Re-read the authorised client keys (call on SIGHUP); no-op without CURVE."""
@@ -210,6 +215,7 @@ class Publisher:
             self._poll_monitor()
             return {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
                     "peers": self.peers, "auth_failures": self.auth_failures,
+                    "refused_connections": self._gate.evicted,
                     "seq": dict(self._seq)}
 
     def close(self) -> None:
@@ -219,14 +225,9 @@ class Publisher:
 
     def _teardown(self) -> None:
         sock = getattr(self, "_sock", None)
-        if sock is not None and not sock.closed:
-            try:
-                sock.disable_monitor()
-            except zmq.ZMQError:
-                pass
-        mon = getattr(self, "_monitor", None)
-        if mon is not None:
-            mon.close(linger=0)
+        gate = getattr(self, "_gate", None)
+        if gate is not None and sock is not None and not sock.closed:
+            gate.close()
         if sock is not None:
             sock.close(linger=LINGER_MS)
         if self._curve is not None:
@@ -271,18 +272,22 @@ class RequestServer:
                  curve: CurveServerConfig | None = None, max_request_bytes: int = 65536,
                  max_reply_bytes: int = MAX_REPLY_BYTES,
                  max_requests_per_s: float = MAX_REQUESTS_PER_S, max_peers: int = MAX_PEERS,
-                 hard_cap_bytes: int | None = None, allow_remote: bool = False) -> None:
+                 hard_cap_bytes: int | None = None, allow_remote: bool = False,
+                 max_connections: int = MAX_REQUEST_CONNECTIONS) -> None:
         self.allow_remote = allow_remote
+        self.max_connections = int(max_connections)
+        self._gate: ConnectionGate | None = None
         self.handlers: dict[str, Handler] = dict(handlers or {})
         self._requested_endpoint = endpoint
         self._curve_config = curve
         self.max_request_bytes = int(max_request_bytes)
         self.max_reply_bytes = int(max_reply_bytes)
-        self.hard_cap_bytes = int(hard_cap_bytes or max(1 << 20, 4 * self.max_request_bytes))
+        self.hard_cap_bytes = int(hard_cap_bytes or 2 * self.max_request_bytes)
         self.endpoint = endpoint
         self.max_requests_per_s = float(max_requests_per_s)
         self.max_peers = int(max_peers)
         self._peers: dict[bytes, float] = {}   # identity → last request (monotonic s)
+        self._last_admitted = False   # the last handle_frames answered an admitted request
         self.refused_peers = 0
         self.answered = 0
         self.errors = 0
@@ -325,8 +330,12 @@ class RequestServer:
             sock.setsockopt(zmq.ROUTER_MANDATORY, 1)   # a full peer raises, it is counted
             if self._curve is not None:
                 self._curve.apply(sock)
+            self._gate = ConnectionGate(sock, fd_budget(self.max_connections,
+                                                        what="request server"),
+                                        "request server", evict_newest=False)
             self.endpoint = _bind(sock, self._requested_endpoint, "request server",
                                   self._curve is not None, self.allow_remote)
+            self._gate.bound(self.endpoint)
             wake = f"inproc://avard-request-wake-{id(self)}"
             self._wake_rx = self._ctx.socket(zmq.PAIR)
             self._wake_rx.bind(wake)
@@ -369,6 +378,9 @@ class RequestServer:
             if wake is not None:
                 wake.close(linger=0)
                 setattr(self, attr, None)
+        if self._gate is not None:
+            self._gate.close()
+            self._gate = None
         if self._sock is not None:
             self._sock.close(linger=LINGER_MS)
             self._sock = None
@@ -394,6 +406,9 @@ class RequestServer:
         poller.register(sock, zmq.POLLIN)
         if self._wake_rx is not None:
             poller.register(self._wake_rx, zmq.POLLIN)
+        gate = self._gate
+        if gate is not None:
+            poller.register(gate.monitor, zmq.POLLIN)
         interval = 1.0 / self.max_requests_per_s
         next_slot = time.monotonic()
         while not self._stop.is_set():
@@ -404,9 +419,12 @@ class RequestServer:
             next_slot = max(next_slot, now - 1.0) + interval
             try:
                 ready = dict(poller.poll(None if self._wake_rx is not None else 100))
+                if gate is not None:
+                    gate.poll()     # connections counted and capped before any request
                 if sock not in ready:
                     continue
-                msg = sock.recv_multipart(zmq.NOBLOCK)
+                parts = sock.recv_multipart(zmq.NOBLOCK, copy=False)
+                msg = [p.bytes for p in parts]
             except zmq.Again:
                 continue
             except zmq.ZMQError as exc:
@@ -421,6 +439,8 @@ class RequestServer:
                 continue
             if reply_frames is None:
                 continue
+            if gate is not None and self._last_admitted:
+                gate.note_request(parts[-1].get(zmq.SRCFD))
             try:
                 sock.send_multipart(reply_frames, flags=zmq.NOBLOCK)
             except zmq.ZMQError as exc:  # peer gone or its queue full: its problem, not ours
@@ -436,10 +456,14 @@ class RequestServer:
             envelope, payloads = [identity, b""], msg[2:]
         else:
             envelope, payloads = [identity], msg[1:]
+        self._last_admitted = False
         if len(payloads) != 1:
             self.errors += 1
             return [*envelope, frames.encode_reply(
                 "?", error=f"expected one request frame, got {len(payloads)}")]
+        op, _rid = _readable_op_id(payloads[0], self.max_request_bytes)
+        if op not in self.handlers or len(payloads[0]) > self.max_request_bytes:
+            return [*envelope, self.handle(payloads[0])]   # junk: an error, no place taken
         if not self._admit(identity):
             self.errors += 1
             self.refused_peers += 1
@@ -447,6 +471,7 @@ class RequestServer:
             return [*envelope, frames.encode_reply(
                 op, id=rid, error=f"busy: {self.max_peers} other clients asked within "
                 f"{PEER_WINDOW_S:g} s; ask again later")]
+        self._last_admitted = True
         return [*envelope, self.handle(payloads[0])]
 
     def _admit(self, identity: bytes) -> bool:

@@ -6,9 +6,14 @@ and a time from the fitted time base, push the block into the ring, and (every
 ``chip_interval_s``) read the chip's temperature. Everything it learns about loss goes into the
 ring as a mark, in order with the samples:
 
-- an overrun (STATUS.FIFO_OVR) becomes a ``gap`` record; the number of lost sets is estimated
-  from the elapsed time and the fitted rate (the chip does not say), and the sample index
-  jumps by that estimate so that index and time stay aligned;
+- an overrun (STATUS.FIFO_OVR) becomes a ``gap`` record whose size is counted from time (the
+  chip does not say): the fitted rate × the time from the last good drain to the burst that
+  read the full FIFO, less the sets read since and what the full FIFO held; the sample index
+  jumps by it so that index and the true count of sets stay together. Sets lost before the
+  first drain (a slow start) count from when measurement started. A drain whose sets arrive
+  later than time says, by more than the clock's uncertainty, is a loss nobody reported: it
+  becomes an ``unaccounted`` gap of that size (the invariant "every loss becomes a gap of the
+  right size", checked at run time);
 - a failed transfer (BusError) becomes a ``bus_error`` event; the FIFO keeps filling, so a
   short bus fault costs nothing, and a long one shows up as an overrun gap;
 - a device that stops producing samples (the source raises DeviceStalledError: it owns that
@@ -33,6 +38,7 @@ from avard.core.errors import AvardError, DeviceStalledError, HardwareError
 from avard.core.io import frames
 from avard.daemon.hw.interrupt import InterruptPin
 from avard.daemon.hw.pacing import drain_period_s
+from avard.daemon.hw.registers import FIFO_LOCATIONS, FIFO_OVERRUN_LOCATIONS
 from avard.daemon.hw.source import GapReason, SampleSource
 from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.service.ring import Ring
@@ -42,6 +48,22 @@ log = logging.getLogger(__name__)
 #: Paced (simulated) reader: waits up to this long are plain sleeps, longer ones can be cut
 #: short by stop().
 _PACE_SLEEP_MAX_S = 0.2
+#: Sets the full FIFO holds after an overrun (96 locations and the 3 of the sync stage): the
+#: first set a drain reads then is this many sets before the newest.
+FIFO_FULL_SETS = FIFO_OVERRUN_LOCATIONS // 3
+#: The highest ODR measured to run without FIFO overruns on the real clock beside a CPU hog
+#: on a 2-core machine (``python -m benchmarks realtime --hog 1``, docs/service.md: at 500 Hz
+#: already 85 overruns a minute, at 4 kHz thousands, under the shared development machine's
+#: load). Above it the drain's 2–4 ms wake-ups miss under load and the unit cannot help:
+#: RestrictRealtime=yes refuses SCHED_FIFO and a negative nice did not change the count.
+#: ``avard check-config`` says so; the loss is then gaps of counted size, never silent.
+REALTIME_HELD_HZ = 125.0
+#: Gap reasons after which the part started measuring afresh (the time line restarts).
+_RESTARTED = frozenset({GapReason.STALL, GapReason.RESET, GapReason.STANDBY,
+                        GapReason.RESTART, GapReason.RECOVERED, GapReason.SELF_TEST})
+#: A complete drain's first set may lie up to ~2 sets off the time line (the newest set is
+#: dated within one sample period, at both ends): more than this behind is a loss.
+UNACCOUNTED_MIN_SETS = 2.5
 
 
 class Acquisition:
@@ -90,6 +112,13 @@ class Acquisition:
         self._next_chip = 0.0
         self._next_recover = 0.0
         self.max_drain_interval_s = 0.0   # longest drain-to-drain interval (benchmarks)
+        # (t_mono, index) of the newest set of the last good drain (complete, no gap), or of
+        # the set before the first when measurement started: where counting from time starts
+        started = getattr(sensor, "t_started", None)
+        self._anchor: tuple[float, float] | None = (
+            None if started is None else (float(started), float(start_index) - 1.0))
+        self.unaccounted = 0      # losses found by the time check, not reported by the chip
+        self._overrun_after_read = False   # an overrun seen after a burst: its gap is next
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -210,10 +239,44 @@ class Acquisition:
         counts = np.asarray(d.counts, dtype=np.int32)
         n = int(counts.shape[0])
         t_mono, t_real = float(d.t_mono), float(d.t_real)
-        self._check_clock_step(t_mono, t_real)
-        if d.overrun:
-            self._overrun(n, t_mono, t_real, d.gap_reasons, d.gap_reason or "overrun",
-                          d.since_last_s)
+        self._check_clock_step(t_mono, t_real, float(getattr(d, "t_real_u", 0.0)))
+        reasons = d.gap_reasons
+        if self._overrun_after_read and GapReason.FIFO_OVERRUN not in reasons:
+            reasons = (*reasons, GapReason.FIFO_OVERRUN)
+        restarted = any(r in _RESTARTED for r in reasons)
+        # After the part was stopped and started again (a recovery, a self-test) time since
+        # the last good drain does not count its sets: the gap is the time since the last
+        # drain that reached it (an unplugged part's outage; nothing for a stall, whose empty
+        # drains kept coming), and the time line starts again at the part's new start.
+        behind = None if restarted else self._behind(d, n, reasons)
+        post_entries = int(getattr(d, "post_entries", -1))
+        after_read = bool(getattr(d, "overrun_in_drain", False)) and (
+            post_entries >= FIFO_LOCATIONS
+            or (post_entries < 0 and behind is not None and behind < 0.5))
+        if (GapReason.FIFO_OVERRUN in d.gap_reasons and after_read
+                and not self._overrun_after_read):
+            # The FIFO was not full yet when this drain's burst read it: the overrun its
+            # second STATUS read saw came after, so the loss lies between these sets and the
+            # next drain's (whose burst finds the FIFO still full): counted there.
+            self.overruns += 1
+            self._overrun_after_read = True
+            reasons = tuple(r for r in d.gap_reasons if r != GapReason.FIFO_OVERRUN)
+            behind = None
+            if reasons:
+                self._overrun(n, t_mono, t_real, reasons, ",".join(reasons), d.since_last_s,
+                              None, count=False)
+        elif d.overrun or self._overrun_after_read:
+            self._overrun(n, t_mono, t_real, reasons, ",".join(reasons) or "overrun",
+                          d.since_last_s, behind, count=not self._overrun_after_read)
+            self._overrun_after_read = False
+        elif behind is not None and behind > UNACCOUNTED_MIN_SETS:
+            self.unaccounted += 1
+            self._gap(round(behind), t_mono, t_real, GapReason.UNACCOUNTED)
+        started = getattr(self.sensor, "t_started", None)
+        if restarted and started is not None:
+            self._anchor = (float(started), float(self.next_index) - 1.0)
+        if n and d.complete and not d.overrun and not self._overrun_after_read:
+            self._anchor = (t_mono, float(self.next_index + n - 1))
         if n:
             i0 = self.next_index
             self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun), exact=bool(d.complete))
@@ -238,11 +301,11 @@ class Acquisition:
             self.on_tick(t_mono)
         return n
 
-    def _check_clock_step(self, t_mono: float, t_real: float) -> None:
+    def _check_clock_step(self, t_mono: float, t_real: float, u_s: float = 0.0) -> None:
         """CLOCK_REALTIME jumped (NTP step, a date change, a Pi without RTC getting its time):
         record a ``clock_step`` event. Sample order and times stay on CLOCK_MONOTONIC; only
         the wall-clock times written beside them follow the new offset from here on."""
-        step = self.tb.realtime_step(t_mono, t_real)
+        step = self.tb.realtime_step(t_mono, t_real, u_s=u_s)
         if step is None:
             return
         self.clock_steps += 1
@@ -265,22 +328,61 @@ class Acquisition:
         except AvardError as exc:
             log.debug("recovery failed: %s", exc)
 
+    def _behind(self, d: Any, n: int, reasons: tuple[GapReason, ...]) -> float | None:
+        """How many sets the first set of this drain lies beyond ``next_index`` by time (the
+        sets lost before it), or None when time cannot date it.
+
+        From the anchor (the newest set of the last good drain, at its ``t_mono``) the set
+        due at time t has index anchor + (t − t_anchor) × the fitted rate. After an overrun
+        the FIFO was full at the burst (``t_burst``): the first set read was then the
+        FIFO_FULL_SETS-th newest. In a complete drain the newest set read is the one due at
+        ``t_mono`` (within a sample period), so the first is n − 1 before it."""
+        if self._anchor is None or not n:
+            return None
+        t_a, i_a = self._anchor
+        rate = float(self.tb.odr_hz)
+        post_entries = int(getattr(d, "post_entries", -1))
+        if (GapReason.FIFO_OVERRUN in reasons and getattr(d, "overrun_in_drain", False)
+                and 0 <= post_entries < FIFO_LOCATIONS):
+            # Full when the burst read it, whenever that was: after the burst the FIFO held
+            # the sets that followed these, newest the one due at the second STATUS read.
+            first = (i_a + (float(d.t_post) - t_a) * rate - post_entries // 3 - (n - 1))
+        elif GapReason.FIFO_OVERRUN in reasons:
+            t_b = float(getattr(d, "t_burst", 0.0) or d.t_mono)
+            t_e = float(getattr(d, "t_burst_end", 0.0) or t_b)
+            if t_e - t_b > 1.0 / rate:
+                t_b = t_e       # pre-empted in the transfer: the FIFO was read near its end
+            first = i_a + (t_b - t_a) * rate - (FIFO_FULL_SETS - 1)
+        elif d.complete:
+            first = i_a + (float(d.t_mono) - t_a) * rate - (n - 1)
+        else:
+            return None
+        return first - self.next_index
+
     def _overrun(self, n_read: int, t_mono: float, t_real: float,
                  reasons: tuple[GapReason, ...], reason: str,
-                 since_last_s: float | None = None) -> None:
-        """A gap of unknown size: estimate the lost sets from the time since the last drain
-        (the driver's ``since_last_s`` when it knows it) × the fitted rate."""
-        self.overruns += 1
-        if since_last_s is not None:
-            elapsed = float(since_last_s)
-        else:
-            elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
-        expected = round(elapsed * self.tb.odr_hz)
+                 since_last_s: float | None = None, behind: float | None = None, *,
+                 count: bool = True) -> None:
+        """A gap the source reported: its size counted from time (:meth:`_behind`); without
+        an anchor (a source that does not say when it started, before its first good drain)
+        estimated from the time since the last drain × the fitted rate."""
+        if count:
+            self.overruns += 1
         # An overrun lost at least one set by definition; other gaps (a failed transfer,
         # a realignment) may have lost none: then the gap has n = 0 but still ends the
         # Allan segment, because continuity cannot be proven.
         floor = 1 if GapReason.FIFO_OVERRUN in reasons else 0
-        lost = max(floor, expected - n_read)
+        if behind is not None:
+            lost = max(floor, round(behind))
+        else:
+            if since_last_s is not None:
+                elapsed = float(since_last_s)
+            else:
+                elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
+            lost = max(floor, round(elapsed * self.tb.odr_hz) - n_read)
+        self._gap(lost, t_mono, t_real, reason)
+
+    def _gap(self, lost: int, t_mono: float, t_real: float, reason: str) -> None:
         i0 = self.next_index
         self.next_index += lost
         self.lost_estimate += lost

@@ -11,6 +11,18 @@ from avard.daemon.hw.timebase import TimeBase
 Record = dict[str, Any]
 
 
+def time_of_index(timebase: TimeBase, index: int, fallback: Callable[[int], float]) -> float:
+    """CLOCK_MONOTONIC time of sample ``index`` on the fitted time base: a header's
+    (``i0``, ``t_mono``) is a point of the raw blocks' time line (wire-format.md). The clock
+    at the moment the header was built lay up to a drain period and a batch after it (139 ms
+    off at 125 Hz); ``fallback(index)`` before the first drain (the supervisor's: from when
+    the part started measuring, at the nominal rate)."""
+    try:
+        return float(timebase.time_of(index))
+    except (ValueError, ZeroDivisionError):
+        return float(fallback(index))
+
+
 class RunHeader:
     """The run's ``header`` record, built once and rebuilt by :meth:`refresh` only when the
     fitted rate has moved by more than ``ppm`` (at most every ``min_interval_s``): the recorder
@@ -22,8 +34,10 @@ class RunHeader:
     def __init__(self, build: Callable[[], Record], timebase: TimeBase,
                  clock: Callable[[], float], next_index: Callable[[], int],
                  real_offset: Callable[[], float], *, ppm: float = 2.0,
-                 min_interval_s: float = 10.0) -> None:
+                 min_interval_s: float = 10.0,
+                 time_before_first_drain: Callable[[int], float] | None = None) -> None:
         self._build = build
+        self._time_before = time_before_first_drain or (lambda _i: clock())
         self._tb = timebase
         self._clock = clock
         self._next_index = next_index
@@ -64,6 +78,6 @@ class RunHeader:
         """The header that starts a segment: the current one with ``i0`` at the reader's
         next index (never behind the segment's first sample: restore skips the segments whose
         header ``i0`` is at or before a checkpoint's end, so a stale one would skip data)."""
-        t = self._clock()
-        return dict(self.current(), t_mono=t, t_real=t + self._real_offset(),
-                    i0=self._next_index())
+        i0 = self._next_index()
+        t = time_of_index(self._tb, i0, self._time_before)
+        return dict(self.current(), t_mono=t, t_real=t + self._real_offset(), i0=i0)

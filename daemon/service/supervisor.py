@@ -27,7 +27,7 @@ from collections.abc import Callable
 from typing import Any
 
 from avard.core.allan.feed import AllanFeed
-from avard.core.errors import AvardError, ConfigError
+from avard.core.errors import ConfigError, ServiceFault
 from avard.core.io import frames
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
@@ -36,7 +36,7 @@ from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
-from avard.daemon.service.header import RunHeader
+from avard.daemon.service.header import RunHeader, time_of_index
 from avard.daemon.service.publisher_stage import PublisherStage, RequestHandlers
 from avard.daemon.service.recorder import (
     RestartGap,
@@ -47,6 +47,7 @@ from avard.daemon.service.recorder import (
 )
 from avard.daemon.service.recorder_stage import RecorderStage
 from avard.daemon.service.ring import Ring
+from avard.daemon.service.signal_latch import SignalLatch, WakingEvent
 from avard.daemon.service.snapshots import SnapshotBoard, fit_record
 from avard.daemon.service.stage import Stage
 
@@ -94,7 +95,8 @@ class Service:
         self.sensor_info = dict(sensor_info or {})
         self.notifier = notifier
         self.interrupt = interrupt        # interrupt.InterruptPin on the FIFO watermark
-        self.stop_requested = threading.Event()
+        self.stop_requested = WakingEvent()
+        self._latch: SignalLatch | None = None   # signals and stop requests wake the loop
         self.reopen_requested = threading.Event()
         self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
         self.stop_signal: int | None = None
@@ -136,7 +138,8 @@ class Service:
         self.ready = False
         self.final_status: dict[str, Any] = {}
         self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic,
-                                    self._next_index, lambda: self.real_offset)
+                                    self._next_index, lambda: self.real_offset,
+                                    time_before_first_drain=self._time_before_first_drain)
         self.snapshots = SnapshotBoard(fit_record)
 
     # -- helpers ------------------------------------------------------------------------
@@ -152,6 +155,20 @@ class Service:
     def _next_index(self) -> int:
         return self.acq.next_index if self.acq else self.start_index
 
+    def _time_before_first_drain(self, index: int) -> float:
+        """The time of sample ``index`` before the time base has a drain, on the line the
+        time base will fit: the part's k-th set after its start is due (k + 1) periods
+        later and reaches FIFO_ENTRIES one period after that (the sync stage holds the
+        newest set), and TimeBase.time_of dates a set half a period and the filter's group
+        delay before it is seen. The clock now when the source does not say when it
+        started."""
+        started = getattr(self.sensor, "t_started", None)
+        if started is None:
+            return float(self.clock.monotonic())
+        k = index - self.start_index          # sets after the part's start
+        gd = float(getattr(self.sensor, "group_delay_samples", 0.0))
+        return float(started) + (k + 1.5 - gd) / self.odr
+
     def header(self) -> dict[str, Any]:
         """The run's current header record (see :class:`RunHeader`)."""
         return self.run_header.current()
@@ -165,10 +182,11 @@ class Service:
                         "n_points": rate.n_points}
         except (ValueError, ZeroDivisionError, AttributeError):
             timebase = {"odr_hz": tb.odr_hz}
-        t = self.clock.monotonic()
+        i0 = self._next_index()
+        t = time_of_index(tb, i0, self._time_before_first_drain)
         return frames.header_record(
             self.run_id, rate_hz=float(tb.odr_hz), t_mono=t, t_real=t + self.real_offset,
-            i0=self._next_index(),
+            i0=i0,
             scale_m_s2_per_count=self.scale, range_g=self.config.sensor.range_g,
             sensor=self.sensor_info, temperature_sensors=self.temp_names[1:],
             software=f"avard {__version__}", config=self.cfg,
@@ -367,12 +385,16 @@ class Service:
                                           t + self.real_offset, source="ds18b20"))
 
     def check_threads(self) -> None:
-        """Raise when a thread died (the service must stop with an error, not limp on)."""
+        """Raise ServiceFault when a thread died: the service stops (flushing what the other
+        stages hold) and exits with status 70, which the unit restarts, instead of limping on
+        without a stage or exiting 2, which RestartPreventExitStatus=2 would keep down."""
         if self.acq is not None and self.acq.error is not None:
-            raise AvardError(f"the reader thread stopped: {self.acq.error}")
+            raise ServiceFault(f"the reader thread stopped: {self.acq.error!r}; exiting for "
+                               "systemd to restart the service")
         for w in self.workers:
             if w.error is not None:
-                raise AvardError(f"the {w.name} thread stopped: {w.error}")
+                raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
+                                   "systemd to restart the service")
 
     def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
             before_acquisition: Callable[[], None] | None = None) -> int:
@@ -380,6 +402,7 @@ class Service:
         The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
         of a given seed always holds the same samples."""
         self._stop_at = None if duration_s is None else self.t_start + duration_s
+        latch = self._signal_latch()
         self.start(before_acquisition)
         n = self.notifier
         wd = n.watchdog_interval_s() if n is not None else None
@@ -388,6 +411,9 @@ class Service:
         next_status_log = time.monotonic() + self.config.service.status_log_interval_s
         try:
             while not self.stop_requested.is_set():
+                self._handle_signals(latch.wait(0.0) if latch.pending() else [])
+                if self.stop_requested.is_set():
+                    break
                 self.check_threads()
                 self.run_header.refresh()   # a new header when the fitted rate has moved
                 assert self.acq is not None
@@ -406,7 +432,8 @@ class Service:
                     n.status(self.status_line())
                     next_wd = now + wd
                 if self._reload_keys.is_set():
-                    # Not in the signal handler: zmq calls belong in a normal thread context.
+                    # Not in the signal handler: zmq calls belong in a normal thread context,
+                    # and a burst of SIGHUPs before this point is one reload.
                     self._reload_keys.clear()
                     log.info("SIGHUP: reopening the recording files, re-reading client keys")
                     if n is not None:
@@ -430,11 +457,38 @@ class Service:
                     wait = max(0.005, min(wait, left / self.speed if self.speed else 0.05))
                 if n is not None and wd and self.ready:
                     wait = min(wait, max(0.0, next_wd - time.monotonic()))
-                self.stop_requested.wait(wait)
+                self._handle_signals(latch.wait(wait))
         finally:
             self.stop()
+            self._close_latch()
         self.check_threads()
         return 0
+
+    def _signal_latch(self) -> SignalLatch:
+        if self._latch is None:
+            self._latch = SignalLatch()
+            self.stop_requested.latch = self._latch
+        return self._latch
+
+    def _close_latch(self) -> None:
+        if self._latch is not None:
+            self.stop_requested.latch = None
+            installed = self._latch.close()
+            self._latch = None
+            if signal.SIGHUP in installed:
+                # the run is over: a late reload has nothing to reopen, and SIGHUP's default
+                # action would end the process while it flushes and exits
+                signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    def _handle_signals(self, signums: list[int]) -> None:
+        """Act on the signals the latch noted, in the main loop's normal context."""
+        for signum in signums:
+            if signum in (signal.SIGTERM, signal.SIGINT):
+                self.stop_signal = signum
+                self.stop_requested.set()
+            elif signum == signal.SIGHUP:
+                self.reopen_requested.set()
+                self._reload_keys.set()
 
     def stop(self) -> None:
         """Flush and close everything, in data order: reader, Allan, recorder, publisher."""
@@ -461,20 +515,10 @@ class Service:
             self.publisher = None
 
     def install_signals(self) -> None:
-        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording (main thread only)."""
-        def _term(signum: int, _frame: Any) -> None:
-            self.stop_signal = signum      # logged by the main loop, not here (locks)
-            self.stop_requested.set()
-
-        def _hup(_signum: int, _frame: Any) -> None:
-            # Only flags here: the handler runs in the main thread, which may be inside the
-            # notifier's or a socket's lock at this moment.
-            self.reopen_requested.set()
-            self._reload_keys.set()
-
-        signal.signal(signal.SIGTERM, _term)
-        signal.signal(signal.SIGINT, _term)
-        signal.signal(signal.SIGHUP, _hup)
+        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording and re-reads client keys
+        (main thread only). The handlers only note the signal (signal_latch.py: a handler
+        that takes a lock deadlocks, a burst of them recursed); the main loop acts on it."""
+        self._signal_latch().install((signal.SIGTERM, signal.SIGINT, signal.SIGHUP))
 
 
 def _default_recorder(svc: Service) -> Any:

@@ -144,7 +144,7 @@ def test_filter_model_is_scipys_butterworth(order: int) -> None:
             n *= 2
         h = h / h.sum()
         ref = np.correlate(h, h, mode="full")[len(h) - 1:]
-        got = M._lowpass_autocov.__wrapped__(fs, fc, order)
+        got = M._lowpass_autocov_wn.__wrapped__(fc / (fs / 2), order)
         assert len(got) == len(ref)
         assert np.max(np.abs(got - ref)) < 1e-9 * ref[0]
         nu = np.linspace(0.0, 0.5, 257)
@@ -193,3 +193,27 @@ def test_covariance_kernels_match_monte_carlo() -> None:
         emp = np.corrcoef(est.T)
         pred = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
         assert np.all(np.abs(np.diag(emp, 1) - np.diag(pred, 1)) < 0.08), (name, emp, pred)
+
+
+def test_filter_terms_are_computed_once_per_corner_not_per_fitted_rate() -> None:
+    """A running service's fitted rate moves by ppm between snapshots: the low-pass terms must
+    come from the cache (keyed by the normalised corner), not be integrated again each time
+    (issue 26 item 9: one `snapshot` request raised the fit thread's CPU ~6x for the run)."""
+    tau = np.array([1, 2, 3, 5, 8, 16, 64, 1000]) / 125.0
+    first = M.lowpass_flicker_avar(tau, 2e-5, 125.0, 31.25)
+    white = M.lowpass_white_avar(tau, 1e-4, 125.0, 31.25)
+    flicker0 = M._flicker_ratio_one.cache_info().misses
+    white0 = M._lowpass_autocov_wn.cache_info().misses
+    for k in range(1, 6):
+        rate = 125.0 * (1 + 2.7e-6 * k)
+        # the service's corner is the fitted rate / 4
+        again = M.lowpass_flicker_avar(tau * 125.0 / rate, 2e-5, rate, rate / 4)
+        np.testing.assert_allclose(again, first, rtol=1e-12)
+        w = M.lowpass_white_avar(tau * 125.0 / rate, 1e-4, rate, rate / 4)
+        np.testing.assert_allclose(w, white * rate / 125.0, rtol=1e-12)
+    assert M._flicker_ratio_one.cache_info().misses == flicker0
+    assert M._lowpass_autocov_wn.cache_info().misses == white0
+    # a corner that really differs is computed anew, and differs
+    other = M.lowpass_flicker_avar(tau, 2e-5, 125.0, 20.0)
+    assert M._flicker_ratio_one.cache_info().misses > flicker0
+    assert not np.allclose(other, first, rtol=1e-3, atol=0)
