@@ -1,0 +1,762 @@
+"""The one record source of every command: a typed description and a re-iterable block stream.
+
+``open_record(path)`` gives a :class:`RecordSource` for an ``.npz``, a ``.csv`` or an avard
+recording (a directory of segment files, or one ``.avr`` segment) alike:
+
+* ``source.info`` is a frozen :class:`RecordInfo`: where it came from, its format (an enum,
+  never a string to compare), the sensor, the rate with its standard uncertainty, the
+  channels, the sample count, the LSB, the sensor's own low-pass corner when known, and for a
+  recording the summary of its runs, losses, gaps and duplicates (:class:`RecordingSummary`).
+* ``source.blocks(...)`` streams (accel (n, C) m/s², temperature (n, k) °C or None, True where
+  a segment ends) and may be called again: a consumer may read the record (or some of its
+  channels) once more. Memory stays at one block whatever the record's length; a recording
+  is walked frame by frame (``recording.walk``), never loaded whole.
+
+A recording is scanned once when it is opened (no samples kept): every run's rate, where the
+sample index jumps without a gap record (a missing, emptied or replaced segment: a loss, in
+samples, with the files it lies between), and what was read twice. Runs whose fitted rates do
+not agree by the one rule of :mod:`avard.core.io.rates` are refused, naming them, unless
+``runs=`` picks compatible ones: they are never averaged. One WARNING line per run says what
+was lost or duplicated; the detail is in ``info.recording`` (and analyze's JSON).
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import re
+import zlib
+from array import array
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from avard.core.errors import DataError, FormatError
+from avard.core.io.rates import format_rate, rates_compatible
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from avard.core.io.recording import Frame, Problem
+
+__all__ = ["BLOCK", "Duplicate", "Gap", "Loss", "RecordBlock", "RecordFormat", "RecordInfo",
+           "RecordSource", "RecordingSummary", "RunSummary", "StreamSource", "open_record"]
+
+log = logging.getLogger(__name__)
+
+#: Samples per block a source yields by default.
+BLOCK = 1 << 16
+
+#: (accel block (n, C) m/s², temperature block (n, k) °C or None, True where a segment ends:
+#: no Allan difference or spectrum segment spans what follows)
+RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
+
+
+class RecordFormat(enum.Enum):
+    """What a record was read from."""
+
+    NPZ = "npz"
+    CSV = "csv"
+    RECORDING = "recording"      # the service's recording (segment files)
+    STREAM = "stream"            # blocks from anywhere (the simulator, a test)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """One run of a recording: its fitted rate (Hz) with its standard uncertainty (0 when the
+    header does not give one), its samples and what damage or deletion cost it."""
+
+    run: str
+    rate_hz: float
+    rate_u_hz: float
+    first_index: int
+    n_samples: int
+    samples_lost: int
+    samples_duplicated: int
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "rate_hz": self.rate_hz, "rate_u_hz": self.rate_u_hz,
+                "first_index": self.first_index, "n_samples": self.n_samples,
+                "samples_lost": self.samples_lost,
+                "samples_duplicated": self.samples_duplicated}
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Samples ``[i0, i0 + n)`` of run ``run`` the recording lacks without a gap record saying
+    why: damage (``cause``), or a missing, empty or replaced segment; ``where`` names the
+    files around them."""
+
+    run: str
+    i0: int
+    n: int
+    cause: str
+    where: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "cause": self.cause,
+                "where": self.where}
+
+
+@dataclass(frozen=True)
+class Duplicate:
+    """Samples ``[i0, i0 + n)`` read again in ``where`` (counted once)."""
+
+    run: str
+    i0: int
+    n: int
+    where: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "where": self.where}
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A gap record: samples ``[i0, i0 + n)`` the service knew it missed, and why."""
+
+    run: str
+    i0: int
+    n: int
+    reason: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a recording holds beyond its samples: the runs read (in order), every loss,
+    duplicate and gap record, the segments the accumulators saw (split at every gap record,
+    run change and index jump), the files, and the frames the reader skipped."""
+
+    runs: tuple[RunSummary, ...]
+    losses: tuple[Loss, ...]
+    duplicates: tuple[Duplicate, ...]
+    gaps: tuple[Gap, ...]
+    n_segments: int
+    files: tuple[str, ...]
+    problems: tuple[str, ...]
+    dropped_bytes: int
+
+    @property
+    def samples_lost(self) -> int:
+        return sum(x.n for x in self.losses)
+
+    @property
+    def samples_duplicated(self) -> int:
+        return sum(x.n for x in self.duplicates)
+
+    def to_dict(self) -> dict[str, object]:
+        """The ``recording`` part of analyze's JSON."""
+        return {"segments": self.n_segments, "gap_records": len(self.gaps),
+                "samples_lost": self.samples_lost,
+                "losses": [x.to_dict() for x in self.losses],
+                "samples_duplicated": self.samples_duplicated,
+                "duplicates": [x.to_dict() for x in self.duplicates],
+                "runs": [r.to_dict() for r in self.runs],
+                "gaps": [g.to_dict() for g in self.gaps],
+                "problems": list(self.problems), "dropped_bytes": self.dropped_bytes}
+
+
+@dataclass(frozen=True)
+class RecordInfo:
+    """A record's description, known before its samples are read. ``rate_hz`` in Hz with its
+    standard uncertainty ``rate_u_hz`` (0: unknown); ``n_samples`` None when unknown (a CSV);
+    ``lsb_mps2`` the quantisation step in m/s² when the record says it; ``filter_corner_hz``
+    the sensor's own low-pass corner (the ADXL355's ODR/4) when the record says it is one,
+    so every path that fits the record models the same filter."""
+
+    source: str
+    format: RecordFormat
+    rate_hz: float
+    names: tuple[str, ...]
+    temperature_names: tuple[str, ...] = ()
+    n_samples: int | None = None
+    rate_u_hz: float = 0.0
+    lsb_mps2: float | None = None
+    sensor_name: str | None = None
+    sensor_model: str | None = None
+    filter_corner_hz: float | None = None
+    has_gyro: bool = False
+    recording: RecordingSummary | None = None
+
+    def as_meta(self) -> dict[str, Any]:
+        """The description as the plain dictionary older code reads (explain's internals,
+        ``Analysis.meta``): new code reads the fields."""
+        meta: dict[str, Any] = {
+            "format": self.format.value, "source": self.source, "rate_hz": self.rate_hz,
+            "rate_u_hz": self.rate_u_hz, "names": list(self.names),
+            "temperature_names": list(self.temperature_names), "n_samples": self.n_samples,
+            "lsb_mps2": self.lsb_mps2, "sensor": self.sensor_name,
+            "sensor_model": self.sensor_model, "has_gyro": self.has_gyro,
+            "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"}}
+        if self.recording is not None:
+            meta["n_segments"] = self.recording.n_segments
+        return meta
+
+
+class RecordSource(Protocol):
+    """A record: its description and its blocks, readable as often as a consumer needs
+    (``rereadable`` False: a one-shot stream, read once)."""
+
+    @property
+    def info(self) -> RecordInfo: ...
+
+    @property
+    def rereadable(self) -> bool: ...
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]: ...
+
+
+def _check_block(block: int) -> None:
+    if block < 1:
+        raise DataError(f"block size {block} must be >= 1 sample")
+
+
+def _check_columns(columns: Sequence[int] | None, info: RecordInfo) -> None:
+    n = len(info.names)
+    if columns is not None and any(not 0 <= int(c) < n for c in columns):
+        raise DataError(f"{info.source}: accel columns {list(columns)} asked for, the record "
+                        f"has {n} (0..{n - 1})")
+
+
+# ---------------------------------------------------------------------------------------------
+# blocks from anywhere
+
+
+class StreamSource:
+    """Blocks from anywhere (the simulator, a test) with their description: read once."""
+
+    rereadable = False
+
+    def __init__(self, info: RecordInfo, blocks: Iterable[RecordBlock]) -> None:
+        self._info = info
+        self._blocks: Iterable[RecordBlock] | None = blocks
+
+    @property
+    def info(self) -> RecordInfo:
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        """The blocks as given (``block`` does not re-cut them); a second call is refused."""
+        if self._blocks is None:
+            raise DataError(f"{self._info.source}: a stream can be read once only")
+        _check_columns(columns, self._info)
+        blocks, self._blocks = self._blocks, None
+        cols = None if columns is None else list(columns)
+        for a, t, end in blocks:
+            yield (a if cols is None else a[:, cols]), (t if temperature else None), end
+
+
+# ---------------------------------------------------------------------------------------------
+# .npz and .csv: the file readers of readers.py
+
+
+class FileSource:
+    """An ``.npz`` or ``.csv`` file, streamed by :func:`avard.core.io.readers.iter_blocks`
+    (one segment: a file has no gaps)."""
+
+    rereadable = True
+
+    def __init__(self, path: Path, rate_hz: float | None) -> None:
+        from avard.core.io.readers import record_info
+
+        self.path, self._rate = path, rate_hz
+        meta = record_info(path, rate_hz=rate_hz)
+        fmt = RecordFormat(meta["format"])
+        odr = meta.get("odr_nominal_hz")
+        rate = float(meta["rate_hz"])
+        lsb = meta.get("lsb_mps2")
+        preset = meta.get("preset")
+        # avard's simulator writes odr_nominal_hz: its records are an ADXL355's, filter and all
+        adxl = odr is not None
+        self._info = RecordInfo(
+            source=str(path), format=fmt, rate_hz=rate, names=tuple(meta["names"]),
+            temperature_names=tuple(meta["temperature_names"]),
+            n_samples=None if meta["n_samples"] is None else int(meta["n_samples"]),
+            lsb_mps2=float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0
+            else None,
+            sensor_name=str(preset) if preset is not None else None,
+            sensor_model="ADXL355" if adxl else None,
+            filter_corner_hz=rate / 4.0 if adxl else None,
+            has_gyro=bool(meta.get("has_gyro")))
+
+    @property
+    def info(self) -> RecordInfo:
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        from avard.core.io.readers import iter_blocks
+
+        _check_block(block)
+        _check_columns(columns, self._info)
+        _meta, it = iter_blocks(self.path, block, rate_hz=self._rate, columns=columns,
+                                temperature=temperature, verify=verify)
+        for a, t in it:
+            yield a, t, False
+
+
+# ---------------------------------------------------------------------------------------------
+# recordings: walked frame by frame
+
+
+_SEGMENT_NAME = re.compile(r"^(?P<run>.+)_(?P<seq>\d{4,})_[^_]*$")
+
+
+@dataclass(frozen=True)
+class _SegmentFile:
+    path: Path
+    run: str | None
+    seq: int | None
+    state: str            # "ok", "empty" or "not a file"
+
+
+def _segment_entries(p: Path) -> list[_SegmentFile]:
+    """Every ``*.avr`` entry of a recording directory, readable or not: an emptied segment or
+    a directory in a segment's place is named when a loss lies where it was."""
+    from avard.core.io.recording import SEGMENT_SUFFIX
+
+    if not p.is_dir():
+        return []
+    out = []
+    for f in sorted(p.iterdir()):
+        if f.suffix != SEGMENT_SUFFIX:
+            continue
+        m = _SEGMENT_NAME.match(f.stem)
+        state = ("not a file" if not f.is_file()
+                 else "empty" if f.stat().st_size == 0 else "ok")
+        out.append(_SegmentFile(f, m["run"] if m else None, int(m["seq"]) if m else None,
+                                state))
+    return out
+
+
+def _between(entries: list[_SegmentFile], run: str, a: str | None, b: str | None) -> str:
+    """Where samples of ``run`` went missing between file ``a`` and file ``b`` (None: the
+    run's start or end), with what the directory shows there."""
+    by_name = {str(e.path): e for e in entries}
+    ea, eb = by_name.get(a or ""), by_name.get(b or "")
+    lo = ea.seq if ea is not None and ea.run == run else None
+    hi = eb.seq if eb is not None and eb.run == run else None
+    mine = {e.seq: e for e in entries if e.run == run and e.seq is not None}
+    said = []
+    if lo is not None:
+        top = hi if hi is not None else max(mine, default=lo) + 1
+        for s in range(lo + 1, top):
+            e = mine.get(s)
+            said.append(f"segment {s:04d} " + ("missing" if e is None else
+                                               f"{e.state} ({e.path.name})"))
+    place = (f"between {Path(a).name} and {Path(b).name}" if a and b
+             else f"after {Path(a).name}" if a else f"before {Path(b).name}" if b
+             else "in the recording")
+    return place + (": " + ", ".join(said) if said else "")
+
+
+class _RunTally:
+    """What the scan counts for one run."""
+
+    def __init__(self) -> None:
+        self.first = -1          # the run's first sample index read
+        self.n = 0
+        self.lost = 0
+        self.dup = 0
+
+
+class RecordingSource:
+    """An avard recording, walked frame by frame (``recording.walk``): never held whole.
+
+    Opening scans it once (no samples kept beyond the temperature readings): the runs and
+    their rates, the sample count, the losses (damage, and every jump of a run's sample index
+    that no gap record explains: a missing, emptied or replaced segment), the duplicates, and
+    the temperature readings the blocks hold on the sample grid. ``runs`` keeps only those
+    runs."""
+
+    rereadable = True
+
+    def __init__(self, path: Path, rate_hz: float | None = None,
+                 runs: Sequence[str] | None = None) -> None:
+        self.path = path
+        self.runs = None if runs is None else frozenset(runs)
+        self._rate_hz = rate_hz
+        self._info: RecordInfo | None = None
+        self._temps: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None
+        self.files: list[Path] = []
+        self.entries: list[_SegmentFile] = []
+
+    def records(self) -> Iterator[dict[str, Any]]:
+        """The recording's records as ``recording.walk`` gives them (each run's header once,
+        duplicates dropped), the files as they are now: what ``avard web --history``
+        replays. Needs no scan."""
+        from avard.core.io.recording import segment_files
+
+        self.files = segment_files(self.path)
+        return self._walk()
+
+    # -- the walk both the scan and the blocks use -------------------------------------------
+    def _walk(self, problems: list[Problem] | None = None, report: Any = None,
+              where: list[str] | None = None) -> Iterator[dict[str, Any]]:
+        """The records of ``walk`` over this recording's files. The reader's problems go to
+        ``problems`` (reported once, by the scan), not to the log at every pass; ``where``
+        is kept at the file being read."""
+        from avard.core.io.recording import RecordingReader, walk
+
+        sink = problems if problems is not None else []
+
+        class _Reader(RecordingReader):
+            def _report(self, local: list[Problem]) -> None:
+                while local:
+                    prob = local.pop(0)
+                    self.problems.append(prob)
+                    sink.append(prob)
+
+            def frames(self) -> Iterator[Frame]:
+                for f in self.files:
+                    if where is not None:
+                        where[0] = str(f)
+                    yield from _one_file(self, f)
+
+        reader = _Reader(self.path)
+        reader.files = list(self.files)
+        return walk(reader, report)
+
+    def _scan(self, rate_hz: float | None) -> RecordInfo:
+        from avard.core.io.recording import Segmenter, WalkReport, _scale_of, segment_files
+
+        self.files = segment_files(self.path)
+        self.entries = _segment_entries(self.path)
+
+        problems: list[Problem] = []
+        report = WalkReport()
+        where = [""]
+        cuts = Segmenter()
+        tally: dict[str, _RunTally] = {}
+        losses: list[Loss] = []
+        dups: list[Duplicate] = []
+        gaps: list[Gap] = []
+        expect: dict[str, int] = {}          # next sample index of each run
+        last_file: dict[str, str] = {}       # the file of each run's last raw block
+        prev_run: str | None = None
+        scales: set[float] = set()
+        tnames: list[str] = []
+        n_losses = n_dups = 0
+        n = 0
+        last_run = ""
+
+        def reported() -> None:
+            """What the walk reported since the last record: damage losses (of the run they
+            name) and duplicates (of the file being read)."""
+            nonlocal n_losses, n_dups
+            for x in report.losses[n_losses:]:
+                losses.append(Loss(x.run, x.i0, x.n, x.cause, where[0]))
+                if x.run in tally:
+                    tally[x.run].lost += x.n
+            n_losses = len(report.losses)
+            for i0, k in report.duplicates[n_dups:]:
+                _add_duplicate(dups, Duplicate(last_run, i0, k, where[0]))
+                if last_run in tally:
+                    tally[last_run].dup += k
+            n_dups = len(report.duplicates)
+
+        for rec in self._walk(problems, report, where):
+            kind, run = rec["kind"], rec["run"]
+            reported()
+            last_run = run
+            if self.runs is not None and run not in self.runs:
+                continue
+            if kind == "header":
+                scales.add(_scale_of(rec))
+                for name in rec.get("temperature_channels", []):
+                    if name not in tnames:
+                        tnames.append(name)
+                tally.setdefault(run, _RunTally())
+            cuts.starts_segment(rec)
+            if kind == "gap":
+                i0, k = int(rec["i0"]), int(rec["n"])
+                gaps.append(Gap(run, i0, k, str(rec.get("reason", ""))))
+                # a restart continues the sample index: what the last run's end lacks up to
+                # the restart's gap is a loss too (its last segment deleted, say)
+                if (rec.get("reason") == "restart" and prev_run is not None
+                        and prev_run != run and prev_run in expect and i0 > expect[prev_run]):
+                    self._lost(losses, tally, prev_run, expect[prev_run], i0,
+                               last_file.get(prev_run), where[0])
+                    expect[prev_run] = i0
+                if run in expect:
+                    expect[run] = max(expect[run], i0 + k)
+                else:
+                    expect[run] = i0 + k
+            elif kind == "raw":
+                i0, k = int(rec["i0"]), int(rec["n"])
+                t = tally[run]
+                if t.first < 0:
+                    t.first = i0
+                # the run's start is where its first block is (or its restart gap ends)
+                expect.setdefault(run, i0)
+                if i0 > expect[run] and not _damage_covers(report.losses, run, expect[run], i0):
+                    self._lost(losses, tally, run, expect[run], i0, last_file.get(run),
+                               where[0])
+                expect[run] = max(expect[run], i0 + k)
+                last_file[run] = where[0]
+                t.n += k
+                n += k
+                prev_run = run
+        reported()     # the walk reports headerless losses, and a last copied file, at its end
+        if not tally:
+            if self.runs is not None:
+                raise DataError(f"{self.path}: no run {', '.join(sorted(self.runs))} in this "
+                                "recording")
+            lost = f" ({report.samples_lost} samples without a header)" if report.losses else ""
+            raise FormatError(f"{self.path}: no header record found{lost}; not an avard "
+                              "recording, or every header copy of it is damaged")
+        if n == 0:
+            raise DataError(f"{self.path}: the recording holds no samples")
+        run_list = self._runs(tally, report.newest_header)
+        rate, rate_u = self._rate(run_list, rate_hz)
+        summary = RecordingSummary(
+            runs=tuple(run_list), losses=tuple(losses), duplicates=tuple(dups),
+            gaps=tuple(gaps), n_segments=len(cuts.segment_bounds()) - 1,
+            files=tuple(str(f) for f in self.files),
+            problems=tuple(str(p) for p in problems),
+            dropped_bytes=sum(p.dropped_bytes for p in problems))
+        self._say(summary, problems)
+        head = report.newest_header[run_list[0].run]
+        device = (head.get("sensor") or {}).get("device")
+        model = "ADXL355" if device is None or "ADXL355" in str(device) else str(device)
+        return RecordInfo(
+            source=str(self.path), format=RecordFormat.RECORDING, rate_hz=rate,
+            rate_u_hz=rate_u, names=("x", "y", "z"), temperature_names=tuple(tnames),
+            n_samples=n, lsb_mps2=scales.pop() if len(scales) == 1 else None,
+            sensor_name=str(device) if device is not None else None, sensor_model=model,
+            # the ADXL355's digital low-pass sits at ODR/4 whatever the ODR
+            filter_corner_hz=rate / 4.0 if model == "ADXL355" else None,
+            recording=summary)
+
+    def _lost(self, losses: list[Loss], tally: dict[str, _RunTally], run: str, a: int, b: int,
+              before: str | None, after: str) -> None:
+        """Samples ``[a, b)`` of ``run`` absent with no gap record: a loss, placed between the
+        file of the run's last block and the file read now."""
+        losses.append(Loss(run, a, b - a, "no gap record explains them",
+                           _between(self.entries, run, before, after if after != before
+                                    else None)))
+        tally[run].lost += b - a
+
+    def _runs(self, tally: dict[str, _RunTally], newest: dict[str, dict[str, Any]]
+              ) -> list[RunSummary]:
+        out = []
+        for run, t in tally.items():
+            h = newest.get(run, {})
+            tb = h.get("timebase") or {}
+            u = tb.get("odr_u_hz")
+            out.append(RunSummary(run, float(h.get("rate_hz", math.nan)),
+                                  float(u) if isinstance(u, int | float) and u > 0 else 0.0,
+                                  t.first, t.n, t.lost, t.dup))
+        return out
+
+    def _rate(self, runs: list[RunSummary], rate_hz: float | None) -> tuple[float, float]:
+        """The record's rate: the runs' fitted rates, which must agree by the rule of
+        core/io/rates.py (never averaged across ODR settings), weighted by their samples."""
+        from avard.core.io.readers import check_rate
+
+        with_data = [r for r in runs if r.n_samples > 0]
+        ref = with_data[0]
+        bad = [r for r in with_data[1:]
+               if not rates_compatible(ref.rate_hz, r.rate_hz, ref.rate_u_hz, r.rate_u_hz)]
+        if bad:
+            listed = "; ".join(f"run {r.run} at {format_rate(r.rate_hz, r.rate_u_hz)} "
+                               f"({r.n_samples} samples)" for r in with_data)
+            raise DataError(f"{self.path}: runs at incompatible rates ({listed}); they are not "
+                            "averaged: analyse each separately with --run RUN")
+        if rate_hz is not None:
+            return check_rate(rate_hz, str(self.path)), 0.0
+        w = np.array([r.n_samples for r in with_data], dtype=float)
+        rates = np.array([r.rate_hz for r in with_data])
+        rate = float(np.sum(w * rates) / np.sum(w))
+        us = [r.rate_u_hz for r in with_data]
+        u = float(math.sqrt(sum((wi * ui) ** 2 for wi, ui in zip(w, us, strict=True)))
+                  / np.sum(w)) if all(x > 0 for x in us) else 0.0
+        return check_rate(rate, str(self.path)), u
+
+    def _say(self, summary: RecordingSummary, problems: list[Problem]) -> None:
+        """One WARNING per damaged file and one per run that lost or repeated samples."""
+        per_file: dict[str, list[Problem]] = {}
+        for p in problems:
+            per_file.setdefault(p.file, []).append(p)
+        for f, probs in per_file.items():
+            log.warning("%s: %d damaged or truncated frame(s) skipped (%d bytes), first at "
+                        "byte %d", f, len(probs), sum(p.dropped_bytes for p in probs),
+                        probs[0].offset)
+        for r in summary.runs:
+            if r.samples_lost or r.samples_duplicated:
+                mine = [x for x in summary.losses if x.run == r.run]
+                first = f"; first: {mine[0].n} samples {mine[0].where}" if mine else ""
+                log.warning("%s: run %s: %d samples lost in %d place(s), %d read twice "
+                            "(counted once)%s; detail in --json", self.path, r.run,
+                            r.samples_lost, len(mine), r.samples_duplicated, first)
+
+    def _temperature_tables(self) -> list[tuple[NDArray[np.int64], NDArray[np.float64]]]:
+        """Each temperature channel's readings (sample index, °C) in index order, later
+        records winning at an equal index (as ``load_recording``'s hold): read by one more walk
+        the first time a consumer asks for temperatures (analyze never does, so its memory
+        holds none of the tens of MB a 60 h run's readings take)."""
+        if self._temps is None:
+            readings: dict[str, tuple[array[int], array[float]]] = {}
+            for rec in self._walk():
+                if rec["kind"] != "temp" or (self.runs is not None
+                                             and rec["run"] not in self.runs):
+                    continue
+                for name, value in zip(rec["names"], rec["values_c"], strict=True):
+                    if value is not None:
+                        idx, vals = readings.setdefault(name, (array("q"), array("d")))
+                        idx.append(int(rec["i0"]))
+                        vals.append(float(value))
+            self._temps = []
+            for name in self.info.temperature_names:
+                idx, vals = readings.get(name, (array("q"), array("d")))
+                st = np.array(idx, dtype=np.int64)
+                order = np.argsort(st, kind="stable")
+                self._temps.append((st[order], np.array(vals, dtype=np.float64)[order]))
+        return self._temps
+
+    @property
+    def info(self) -> RecordInfo:
+        """The description, from one scan of the recording on first use."""
+        if self._info is None:
+            self._info = self._scan(self._rate_hz)
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        """The recording's samples in SI units, in blocks of at most ``block`` samples that
+        end where the service's accumulators ended a segment (every gap record, run change
+        and index jump); temperatures held at their last reading (NaN before the first)."""
+        from avard.core.io.recording import Segmenter, _scale_of
+
+        info = self.info
+        _check_block(block)
+        _check_columns(columns, info)
+        cols = [0, 1, 2] if columns is None else [int(c) for c in columns]
+        temps = (self._temperature_tables() if temperature and info.temperature_names
+                 else None)
+        buf = np.empty((block, len(cols)))
+        fill = 0
+        start = 0                      # sample index of buf[0]
+        cuts = Segmenter()
+        scale = 0.0
+        n = 0
+
+        def flush(end: bool) -> RecordBlock:
+            a = buf[:fill].copy()
+            t = None
+            if temps is not None:
+                idx = np.arange(start, start + fill, dtype=np.int64)
+                t = np.full((fill, len(temps)), np.nan)
+                for c, (st, v) in enumerate(temps):
+                    if len(st):
+                        k = np.searchsorted(st, idx, side="right") - 1
+                        have = k >= 0
+                        t[have, c] = v[k[have]]
+            return a, t, end
+
+        for rec in self._walk():
+            if self.runs is not None and rec["run"] not in self.runs:
+                continue
+            if cuts.starts_segment(rec) and fill:
+                yield flush(True)
+                fill = 0
+            kind = rec["kind"]
+            if kind == "header":
+                scale = _scale_of(rec)
+            elif kind == "raw":
+                counts = np.asarray(rec["counts"])
+                i0, k = int(rec["i0"]), int(counts.shape[0])
+                at = 0
+                while at < k:
+                    if fill == 0:
+                        start = i0 + at
+                    take = min(block - fill, k - at)
+                    buf[fill:fill + take] = counts[at:at + take][:, cols]
+                    buf[fill:fill + take] *= scale
+                    fill += take
+                    at += take
+                    if fill == block:
+                        yield flush(False)
+                        fill = 0
+                n += k
+        if fill:
+            yield flush(True)
+        if n != info.n_samples:
+            raise DataError(f"{self.path}: read {n} samples, {info.n_samples} when it "
+                            "was opened; the recording changed while it was read (analyse a "
+                            "copy, or a recording the service has finished)")
+
+
+def _one_file(reader: Any, f: Path) -> Iterator[Frame]:
+    """The frames of one segment file as ``recording.scan_frames`` finds them, read frame by
+    frame: a clean hour-long segment is never held whole (it would be most of the memory
+    analyze may add over an .npz). At the first frame that is not valid (damage, or the
+    truncated tail a power cut leaves) the file is handed to ``scan_frames``, which reports
+    and resynchronises exactly as for any reader; the frames before are the same either way."""
+    from avard.core.io.recording import FRAME_HEADER, Frame, scan_frames
+
+    hdr = FRAME_HEADER.size
+    pos = 0
+    with open(f, "rb") as fh:
+        while True:
+            head = fh.read(hdr)
+            if not head:
+                return                      # a clean end
+            if len(head) < hdr:
+                break
+            n, crc = FRAME_HEADER.unpack(head)
+            if not 0 < n <= reader.max_bytes:
+                break
+            payload = fh.read(n)
+            if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
+                break
+            yield Frame(str(f), pos, payload)
+            pos += hdr + n
+    local: list[Problem] = []
+    for fr in scan_frames(f.read_bytes(), str(f), max_bytes=reader.max_bytes, problems=local):
+        if fr.offset >= pos:
+            reader._report(local)
+            yield fr
+    reader._report(local)
+
+
+def _damage_covers(losses: Sequence[Any], run: str, a: int, b: int) -> bool:
+    """Whether the walk already reported ``[a, b)`` of ``run`` lost to damage."""
+    return any(x.run == run and x.i0 <= a and x.i0 + x.n >= b for x in losses[-4:])
+
+
+def _add_duplicate(dups: list[Duplicate], d: Duplicate) -> None:
+    """Duplicates of one file merged into one range when they follow each other."""
+    if dups:
+        last = dups[-1]
+        if last.run == d.run and last.where == d.where and last.i0 + last.n == d.i0:
+            dups[-1] = Duplicate(d.run, last.i0, last.n + d.n, d.where)
+            return
+    dups.append(d)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def open_record(path: str | Path, *, rate_hz: float | None = None,
+                runs: Sequence[str] | None = None) -> RecordSource:
+    """The record at ``path``: an ``.npz``, a ``.csv`` (or ``.txt``), or an avard recording
+    (a directory of segment files, or one ``.avr`` segment). ``rate_hz`` overrides the
+    record's rate (Hz); ``runs`` keeps only these runs of a recording."""
+    from avard.core.io.readers import record_kind
+
+    p, kind = record_kind(path)
+    if kind == "recording":
+        rec = RecordingSource(p, rate_hz, runs)
+        _ = rec.info      # scanned now: a bad recording is said before any analysis starts
+        return rec
+    if runs is not None:
+        raise DataError(f"{p}: --run picks runs of a recording; this is a single {kind} file")
+    return FileSource(p, rate_hz)
