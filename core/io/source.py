@@ -385,6 +385,7 @@ class RecordingSource:
         self._rate_hz = rate_hz
         self._info: RecordInfo | None = None
         self._temps: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None
+        self._ends: dict[str, int] = {}          # bytes of each file the scan read
         self.files: list[Path] = []
         self.entries: list[_SegmentFile] = []
 
@@ -395,6 +396,7 @@ class RecordingSource:
         from avard.core.io.recording import segment_files
 
         self.files = segment_files(self.path)
+        self._ends = {}
         return self._walk()
 
     # -- the walk both the scan and the blocks use -------------------------------------------
@@ -418,8 +420,11 @@ class RecordingSource:
                 for f in self.files:
                     if where is not None:
                         where[0] = str(f)
-                    yield from _one_file(self, f)
+                    yield from _one_file(self, f, ends)
 
+        # the scan notes how far it read each file; later reads stop there, so a recording
+        # the service is still appending to reads as the scan found it
+        ends = self._ends
         reader = _Reader(self.path)
         reader.files = list(self.files)
         return walk(reader, report)
@@ -429,6 +434,7 @@ class RecordingSource:
 
         self.files = segment_files(self.path)
         self.entries = _segment_entries(self.path)
+        self._ends = {}
 
         problems: list[Problem] = []
         report = WalkReport()
@@ -694,21 +700,28 @@ class RecordingSource:
                             "copy, or a recording the service has finished)")
 
 
-def _one_file(reader: Any, f: Path) -> Iterator[Frame]:
+def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
     """The frames of one segment file as ``recording.scan_frames`` finds them, read frame by
     frame: a clean hour-long segment is never held whole (it would be most of the memory
     analyze may add over an .npz). At the first frame that is not valid (damage, or the
     truncated tail a power cut leaves) the file is handed to ``scan_frames``, which reports
-    and resynchronises exactly as for any reader; the frames before are the same either way."""
+    and resynchronises exactly as for any reader; the frames before are the same either way.
+    ``ends[file]``, when set, is where to stop (what the first read of the file found); else
+    it is set to that."""
     from avard.core.io.recording import FRAME_HEADER, Frame, scan_frames
 
+    name = str(f)
+    limit = ends.get(name)
     hdr = FRAME_HEADER.size
     pos = 0
     with open(f, "rb") as fh:
         while True:
+            if limit is not None and pos >= limit:
+                return
             head = fh.read(hdr)
             if not head:
-                return                      # a clean end
+                ends[name] = pos             # a clean end
+                return
             if len(head) < hdr:
                 break
             n, crc = FRAME_HEADER.unpack(head)
@@ -717,10 +730,14 @@ def _one_file(reader: Any, f: Path) -> Iterator[Frame]:
             payload = fh.read(n)
             if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
                 break
-            yield Frame(str(f), pos, payload)
+            yield Frame(name, pos, payload)
             pos += hdr + n
+    data = f.read_bytes()
+    if limit is not None:
+        data = data[:limit]
+    ends.setdefault(name, len(data))
     local: list[Problem] = []
-    for fr in scan_frames(f.read_bytes(), str(f), max_bytes=reader.max_bytes, problems=local):
+    for fr in scan_frames(data, name, max_bytes=reader.max_bytes, problems=local):
         if fr.offset >= pos:
             reader._report(local)
             yield fr

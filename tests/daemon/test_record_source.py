@@ -215,3 +215,24 @@ def test_analyze_does_not_load_a_recording(recording: Path, monkeypatch) -> None
 
     monkeypatch.setattr(module, "load_recording", refuse)
     assert analyze(open_record(recording), AnalyzeOptions(channels=("x",))).n_samples > 0
+
+
+def test_a_recording_still_being_written_reads_as_it_was_opened(recording: Path,
+                                                                 tmp_path: Path) -> None:
+    """The service appends while analyze reads: every read stops where the scan stopped, so
+    the passes agree with each other and with the description."""
+    from avard.core.io import frames
+    from avard.core.io.recording import frame
+
+    rec = _copy(recording, tmp_path)
+    src = open_record(rec)
+    n = src.info.n_samples
+    assert n is not None
+    last = _segments(rec)[-1]
+    run = last.name.split("_")[0]
+    more = frames.raw_record(run, 10**6, n, np.ones((125, 3), dtype=np.int32), 0.0, 0.0)
+    with open(last, "ab") as fh:
+        fh.write(frame(frames.encode(more)))
+    assert sum(len(a) for a, _t, _e in src.blocks()) == n
+    assert analyze(src, AnalyzeOptions(channels=("z",))).n_samples == n
+    assert open_record(rec).info.n_samples == n + 125      # opened again: the new block
