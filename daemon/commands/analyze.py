@@ -7,10 +7,13 @@ Examples:
     avard analyze lab.npz --json > lab.json     # machine-readable (shape in docs/analysis.md)
     avard analyze lab.npz --plot lab.png --export kalibr imu.yaml --export csv adev.csv
     avard analyze lab.npz --psd --plot lab.png      # + spectrum: lab_psd.png, white density
+    avard analyze /var/lib/avard --run RUN          # one run of a recording
 
 DATA is an .npz (accel in m/s², rate_hz), a .csv (header row; t column or --rate), or an avard
-recording (directory or .avr segment). The record is streamed, so its size is not limited by
-memory; progress goes to stderr when it is a terminal.
+recording (directory or .avr segment). Every one is streamed (a recording too: walked frame by
+frame), so its size is not limited by memory; a recording's lost, duplicated or missing
+segments are said, and runs at rates that differ are refused together (--run takes one);
+progress goes to stderr when it is a terminal.
 """
 
 from __future__ import annotations
