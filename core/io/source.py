@@ -25,6 +25,7 @@ from __future__ import annotations
 import enum
 import logging
 import math
+import os
 import re
 import zlib
 from array import array
@@ -357,6 +358,71 @@ def _between(entries: list[_SegmentFile], run: str, a: str | None, b: str | None
     return place + (": " + ", ".join(said) if said else "")
 
 
+#: One raw block as the blocks assemble it: (first index, counts (n, 3) int32, scale m/s² per
+#: count, a segment ends before it).
+_Piece = tuple[int, NDArray[np.int32], float, bool]
+
+
+#: Record kinds that hold no samples and no sample index the scan needs.
+_NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
+
+
+def _peek_kind(payload: bytes) -> str | None:
+    """The ``kind`` of an encoded record from its first bytes (frames.encode writes it first:
+    a map, the key "kind", a short string), or None when it is not laid out so."""
+    if not payload:
+        return None
+    b0 = payload[0]
+    i = 1 if 0x80 <= b0 <= 0x8F else 3 if b0 == 0xDE else 5 if b0 == 0xDF else -1
+    if i < 0 or payload[i:i + 5] != b"\xa4kind" or len(payload) <= i + 5:
+        return None
+    size = payload[i + 5] - 0xA0
+    if not 0 <= size < 32:
+        return None
+    return payload[i + 6:i + 6 + size].decode("ascii", "replace")
+
+
+def _counts_offset(fr: Frame, counts: Any, header_bytes: int) -> int:
+    """Byte offset in the file of a raw record's counts (little-endian int32, 3 columns, C
+    order), found in its frame's payload; -1 when they are stored otherwise (the general path
+    then reads such a recording). Any occurrence of the very bytes is the same data."""
+    if not (isinstance(counts, np.ndarray) and counts.dtype == np.dtype("<i4")
+            and counts.ndim == 2 and counts.shape[1] == 3 and counts.size):
+        return -1
+    at = fr.payload.find(counts.tobytes())
+    return -1 if at < 0 else fr.offset + header_bytes + at
+
+
+class _Plan:
+    """Where each kept raw block's counts lie, in walk order: compact columns (about 25
+    bytes a block: 10 MB for 60 h of 0.5 s blocks)."""
+
+    def __init__(self) -> None:
+        self.fidx = array("H")
+        self.off = array("q")
+        self.i0 = array("q")
+        self.n = array("I")
+        self.sidx = array("H")
+        self.cut = array("B")
+        self.scales: list[float] = []
+        self.ok = True
+
+    def add(self, at: tuple[int, int, int] | None, i0: int, n: int, scale: float,
+            cut: bool) -> None:
+        if (not self.ok or at is None or at[1] < 0 or at[0] >= 1 << 16
+                or len(self.scales) >= (1 << 16) - 1):
+            self.ok = False
+            return
+        if not self.scales or self.scales[-1] != scale:
+            self.scales.append(scale)
+        self.fidx.append(at[0])
+        self.off.append(at[1] + 12 * (i0 - at[2]))    # a part of a duplicated block
+        self.i0.append(i0)
+        self.n.append(n)
+        self.sidx.append(len(self.scales) - 1)
+        self.cut.append(cut)
+
+
 class _RunTally:
     """What the scan counts for one run."""
 
@@ -386,6 +452,7 @@ class RecordingSource:
         self._info: RecordInfo | None = None
         self._temps: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None
         self._ends: dict[str, int] = {}          # bytes of each file the scan read
+        self._plan: _Plan | None = None          # where the scan found each kept block
         self.files: list[Path] = []
         self.entries: list[_SegmentFile] = []
 
@@ -401,15 +468,23 @@ class RecordingSource:
 
     # -- the walk both the scan and the blocks use -------------------------------------------
     def _walk(self, problems: list[Problem] | None = None, report: Any = None,
-              where: list[str] | None = None) -> Iterator[dict[str, Any]]:
+              where: list[str] | None = None, tag: bool = False,
+              skip: frozenset[str] = frozenset()) -> Iterator[dict[str, Any]]:
         """The records of ``walk`` over this recording's files. The reader's problems go to
         ``problems`` (reported once, by the scan), not to the log at every pass; ``where``
-        is kept at the file being read."""
-        from avard.core.io.recording import RecordingReader, walk
+        is kept at the file being read. ``tag``: each raw record gets ``_at`` = (file number,
+        byte offset of its counts in that file or -1, its first index), what the scan's read
+        plan needs (the walk passes it through, also to the parts of a duplicated block).
+        ``skip``: record kinds not decoded at all (the scan needs no temperatures, Allan
+        snapshots or checkpoints: two thirds of a recording's decoding)."""
+        from avard.core.io.recording import FRAME_HEADER, RecordingReader, walk
 
         sink = problems if problems is not None else []
 
         class _Reader(RecordingReader):
+            last: Frame | None = None
+            number = 0
+
             def _report(self, local: list[Problem]) -> None:
                 while local:
                     prob = local.pop(0)
@@ -417,10 +492,23 @@ class RecordingSource:
                     sink.append(prob)
 
             def frames(self) -> Iterator[Frame]:
-                for f in self.files:
+                for k, f in enumerate(self.files):
+                    self.number = k
                     if where is not None:
                         where[0] = str(f)
-                    yield from _one_file(self, f, ends)
+                    for fr in _one_file(self, f, ends):
+                        if skip and _peek_kind(fr.payload) in skip:
+                            continue        # CRC-checked, not decoded: no samples in it
+                        self.last = fr
+                        yield fr
+
+            def __iter__(self) -> Iterator[dict[str, Any]]:
+                for rec in super().__iter__():
+                    if tag and rec["kind"] == "raw" and self.last is not None:
+                        rec["_at"] = (self.number, _counts_offset(self.last, rec["counts"],
+                                                                  FRAME_HEADER.size),
+                                      int(rec["i0"]))
+                    yield rec
 
         # the scan notes how far it read each file; later reads stop there, so a recording
         # the service is still appending to reads as the scan found it
@@ -468,19 +556,23 @@ class RecordingSource:
                     tally[last_run].dup += k
             n_dups = len(report.duplicates)
 
-        for rec in self._walk(problems, report, where):
+        plan = _Plan()
+        cut = False
+        scale = 0.0
+        for rec in self._walk(problems, report, where, tag=True, skip=_NO_SAMPLES):
             kind, run = rec["kind"], rec["run"]
             reported()
             last_run = run
             if self.runs is not None and run not in self.runs:
                 continue
             if kind == "header":
-                scales.add(_scale_of(rec))
+                scale = _scale_of(rec)
+                scales.add(scale)
                 for name in rec.get("temperature_channels", []):
                     if name not in tnames:
                         tnames.append(name)
                 tally.setdefault(run, _RunTally())
-            cuts.starts_segment(rec)
+            cut = cuts.starts_segment(rec) or cut
             if kind == "gap":
                 i0, k = int(rec["i0"]), int(rec["n"])
                 gaps.append(Gap(run, i0, k, str(rec.get("reason", ""))))
@@ -510,6 +602,9 @@ class RecordingSource:
                 t.n += k
                 n += k
                 prev_run = run
+                plan.add(rec.get("_at"), i0, int(np.asarray(rec["counts"]).shape[0]), scale,
+                         cut)
+                cut = False
         reported()     # the walk reports headerless losses, and a last copied file, at its end
         if not tally:
             if self.runs is not None:
@@ -520,6 +615,7 @@ class RecordingSource:
                               "recording, or every header copy of it is damaged")
         if n == 0:
             raise DataError(f"{self.path}: the recording holds no samples")
+        self._plan = plan if plan.ok else None
         run_list = self._runs(tally, report.newest_header)
         rate, rate_u = self._rate(run_list, rate_hz)
         summary = RecordingSummary(
@@ -627,6 +723,49 @@ class RecordingSource:
                 self._temps.append((st[order], np.array(vals, dtype=np.float64)[order]))
         return self._temps
 
+    def _walked(self) -> Iterator[_Piece]:
+        """The raw pieces in walk order, by the general path: every record decoded and
+        checked (``recording.walk``), cut where the service's ``Segmenter`` cut."""
+        from avard.core.io.recording import Segmenter, _scale_of
+
+        cuts = Segmenter()
+        scale, cut = 0.0, False
+        for rec in self._walk():
+            if self.runs is not None and rec["run"] not in self.runs:
+                continue
+            cut = cuts.starts_segment(rec) or cut
+            if rec["kind"] == "header":
+                scale = _scale_of(rec)
+            elif rec["kind"] == "raw":
+                yield int(rec["i0"]), np.asarray(rec["counts"]), scale, cut
+                cut = False
+
+    def _planned(self) -> Iterator[_Piece]:
+        """The same pieces by the fast path: the scan walked and checked every frame and
+        noted where each kept block's counts lie; a later read takes just those bytes (no
+        decoding of the raw, temperature, Allan and checkpoint records again). Held equal
+        to :meth:`_walked` by tests/daemon/test_record_source.py."""
+        plan = self._plan
+        assert plan is not None
+        fd, open_k = -1, -1
+        try:
+            for j in range(len(plan.i0)):
+                k = int(plan.fidx[j])
+                if k != open_k:
+                    if fd >= 0:
+                        os.close(fd)
+                    fd, open_k = os.open(self.files[k], os.O_RDONLY), k
+                n = int(plan.n[j])
+                data = os.pread(fd, 12 * n, int(plan.off[j]))
+                if len(data) != 12 * n:
+                    raise DataError(f"{self.files[k]}: shorter than when it was opened; the "
+                                    "recording changed while it was read (analyse a copy)")
+                counts = np.frombuffer(data, dtype="<i4").reshape(n, 3)
+                yield int(plan.i0[j]), counts, plan.scales[plan.sidx[j]], bool(plan.cut[j])
+        finally:
+            if fd >= 0:
+                os.close(fd)
+
     @property
     def info(self) -> RecordInfo:
         """The description, from one scan of the recording on first use."""
@@ -639,8 +778,6 @@ class RecordingSource:
         """The recording's samples in SI units, in blocks of at most ``block`` samples that
         end where the service's accumulators ended a segment (every gap record, run change
         and index jump); temperatures held at their last reading (NaN before the first)."""
-        from avard.core.io.recording import Segmenter, _scale_of
-
         info = self.info
         _check_block(block)
         _check_columns(columns, info)
@@ -650,8 +787,6 @@ class RecordingSource:
         buf = np.empty((block, len(cols)))
         fill = 0
         start = 0                      # sample index of buf[0]
-        cuts = Segmenter()
-        scale = 0.0
         n = 0
 
         def flush(end: bool) -> RecordBlock:
@@ -667,31 +802,25 @@ class RecordingSource:
                         t[have, c] = v[k[have]]
             return a, t, end
 
-        for rec in self._walk():
-            if self.runs is not None and rec["run"] not in self.runs:
-                continue
-            if cuts.starts_segment(rec) and fill:
+        pieces = self._planned() if self._plan is not None else self._walked()
+        for i0, counts, scale, cut in pieces:
+            if cut and fill:
                 yield flush(True)
                 fill = 0
-            kind = rec["kind"]
-            if kind == "header":
-                scale = _scale_of(rec)
-            elif kind == "raw":
-                counts = np.asarray(rec["counts"])
-                i0, k = int(rec["i0"]), int(counts.shape[0])
-                at = 0
-                while at < k:
-                    if fill == 0:
-                        start = i0 + at
-                    take = min(block - fill, k - at)
-                    buf[fill:fill + take] = counts[at:at + take][:, cols]
-                    buf[fill:fill + take] *= scale
-                    fill += take
-                    at += take
-                    if fill == block:
-                        yield flush(False)
-                        fill = 0
-                n += k
+            k = int(counts.shape[0])
+            at = 0
+            while at < k:
+                if fill == 0:
+                    start = i0 + at
+                take = min(block - fill, k - at)
+                buf[fill:fill + take] = counts[at:at + take][:, cols]
+                buf[fill:fill + take] *= scale
+                fill += take
+                at += take
+                if fill == block:
+                    yield flush(False)
+                    fill = 0
+            n += k
         if fill:
             yield flush(True)
         if n != info.n_samples:

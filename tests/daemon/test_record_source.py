@@ -236,3 +236,39 @@ def test_a_recording_still_being_written_reads_as_it_was_opened(recording: Path,
     assert sum(len(a) for a, _t, _e in src.blocks()) == n
     assert analyze(src, AnalyzeOptions(channels=("z",))).n_samples == n
     assert open_record(rec).info.n_samples == n + 125      # opened again: the new block
+
+
+def _flip(path: Path, at: int) -> None:
+    data = bytearray(path.read_bytes())
+    data[at] ^= 0x04
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("damage", ["none", "flipped", "copied", "deleted"])
+def test_the_read_plan_is_the_walk(recording: Path, tmp_path: Path, damage: str) -> None:
+    """The fast path (the scan's read plan: only the counts' bytes read again) yields the
+    very blocks of the general one (every frame decoded and walked), on a clean recording, a
+    damaged frame, a copied segment and a deleted one; temperatures and column picks too."""
+    rec = _copy(recording, tmp_path)
+    segs = _segments(rec)
+    if damage == "flipped":
+        _flip(segs[2], 5000)
+    elif damage == "copied":
+        shutil.copy(segs[0], rec / (segs[-1].stem + "_copy.avr"))
+    elif damage == "deleted":
+        segs[1].unlink()
+    src = open_record(rec)
+    assert src._plan is not None          # the fast path is the one taken
+    for kw in ({}, {"columns": [2, 0], "temperature": False}):
+        fast = list(src.blocks(1000, **kw))
+        plan, src._plan = src._plan, None
+        slow = list(src.blocks(1000, **kw))
+        src._plan = plan
+        assert len(fast) == len(slow)
+        for (a, t, e), (b, u, f) in zip(fast, slow, strict=True):
+            np.testing.assert_array_equal(a, b)
+            assert e == f
+            if t is None:
+                assert u is None
+            else:
+                np.testing.assert_array_equal(t, u)
