@@ -66,8 +66,10 @@ class RecordFormat(enum.Enum):
 
 @dataclass(frozen=True)
 class RunSummary:
-    """One run of a recording: its fitted rate (Hz) with its standard uncertainty (0 when the
-    header does not give one), its samples and what damage or deletion cost it."""
+    """One run of a recording: its rate (Hz) with its standard uncertainty, its samples and
+    what damage or deletion cost it. ``rate_fitted`` False: the run ended before the
+    service's fit of the output rate was ready, so its header carries the nominal ODR
+    (``nominal_hz``) and no uncertainty."""
 
     run: str
     rate_hz: float
@@ -76,12 +78,19 @@ class RunSummary:
     n_samples: int
     samples_lost: int
     samples_duplicated: int
+    rate_fitted: bool = True
+    nominal_hz: float | None = None
 
     def to_dict(self) -> dict[str, object]:
         return {"run": self.run, "rate_hz": self.rate_hz, "rate_u_hz": self.rate_u_hz,
+                "rate_fitted": self.rate_fitted, "nominal_hz": self.nominal_hz,
                 "first_index": self.first_index, "n_samples": self.n_samples,
                 "samples_lost": self.samples_lost,
                 "samples_duplicated": self.samples_duplicated}
+
+    def rate_text(self) -> str:
+        return (format_rate(self.rate_hz, self.rate_u_hz) if self.rate_fitted
+                else f"{self.rate_hz:g} Hz (nominal, not fitted yet)")
 
 
 @dataclass(frozen=True)
@@ -653,31 +662,47 @@ class RecordingSource:
             h = newest.get(run, {})
             tb = h.get("timebase") or {}
             u = tb.get("odr_u_hz")
+            fitted = isinstance(u, int | float) and u > 0
+            nominal = h.get("nominal_odr_hz")
             out.append(RunSummary(run, float(h.get("rate_hz", math.nan)),
-                                  float(u) if isinstance(u, int | float) and u > 0 else 0.0,
-                                  t.first, t.n, t.lost, t.dup))
+                                  float(u) if isinstance(u, int | float) and fitted else 0.0,
+                                  t.first, t.n, t.lost, t.dup,
+                                  rate_fitted=fitted or not isinstance(tb.get("odr_hz"),
+                                                                       int | float),
+                                  nominal_hz=float(nominal) if isinstance(
+                                      nominal, int | float) else None))
         return out
 
     def _rate(self, runs: list[RunSummary], rate_hz: float | None) -> tuple[float, float]:
         """The record's rate: the runs' fitted rates, which must agree by the rule of
-        core/io/rates.py (never averaged across ODR settings), weighted by their samples."""
+        core/io/rates.py (never averaged across ODR settings), weighted by their samples. A
+        run too short for the service's rate fit agrees when its nominal ODR is the others'
+        (its nominal rate says nothing finer) and does not enter the mean."""
         from avard.core.io.readers import check_rate
 
         with_data = [r for r in runs if r.n_samples > 0]
-        ref = with_data[0]
-        bad = [r for r in with_data[1:]
-               if not rates_compatible(ref.rate_hz, r.rate_hz, ref.rate_u_hz, r.rate_u_hz)]
+        fitted = [r for r in with_data if r.rate_fitted] or with_data[:1]
+        ref = fitted[0]
+        nominal = ref.nominal_hz if ref.nominal_hz is not None else ref.rate_hz
+        bad = [r for r in with_data
+               if (r.rate_fitted and ref.rate_fitted
+                   and not rates_compatible(ref.rate_hz, r.rate_hz, ref.rate_u_hz,
+                                            r.rate_u_hz))
+               or ((not r.rate_fitted or not ref.rate_fitted)
+                   and (r.nominal_hz if r.nominal_hz is not None else r.rate_hz) != nominal)]
         if bad:
-            listed = "; ".join(f"run {r.run} at {format_rate(r.rate_hz, r.rate_u_hz)} "
-                               f"({r.n_samples} samples)" for r in with_data)
+            listed = "; ".join(f"run {r.run} at {r.rate_text()} ({r.n_samples} samples)"
+                               for r in with_data)
             raise DataError(f"{self.path}: runs at incompatible rates ({listed}); they are not "
                             "averaged: analyse each separately with --run RUN")
         if rate_hz is not None:
             return check_rate(rate_hz, str(self.path)), 0.0
-        w = np.array([r.n_samples for r in with_data], dtype=float)
-        rates = np.array([r.rate_hz for r in with_data])
+        if len(fitted) == 1:
+            return check_rate(ref.rate_hz, str(self.path)), ref.rate_u_hz
+        w = np.array([r.n_samples for r in fitted], dtype=float)
+        rates = np.array([r.rate_hz for r in fitted])
         rate = float(np.sum(w * rates) / np.sum(w))
-        us = [r.rate_u_hz for r in with_data]
+        us = [r.rate_u_hz for r in fitted]
         u = float(math.sqrt(sum((wi * ui) ** 2 for wi, ui in zip(w, us, strict=True)))
                   / np.sum(w)) if all(x > 0 for x in us) else 0.0
         return check_rate(rate, str(self.path)), u

@@ -53,10 +53,10 @@ def _record(tmp: Path, name: str, *, seconds: float, seed: int, odr: float = 125
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """40 s at 125 Hz in four segments."""
+    """40 s at 125 Hz in segments of about 10 s."""
     tmp = tmp_path_factory.mktemp("rec")
     rec = _record(tmp, "rec", seconds=40.0, seed=5)
-    assert len(_segments(rec)) >= 4
+    assert len(_segments(rec)) >= 3            # a middle one at least
     return rec
 
 
@@ -274,3 +274,19 @@ def test_the_read_plan_is_the_walk(recording: Path, tmp_path: Path, damage: str)
                 assert u is None
             else:
                 np.testing.assert_array_equal(t, u)
+
+
+def test_a_run_too_short_for_the_rate_fit_joins_its_odr_and_leaves_the_mean(
+        recording: Path, tmp_path: Path) -> None:
+    """A run killed before the service fitted its rate carries the nominal ODR: it is one
+    sensor's data with runs of the same ODR (not refused for the nominal's ppm), and the
+    record's rate stays the fitted one."""
+    rec = _copy(recording, tmp_path)
+    fitted = open_record(rec).info
+    _record(tmp_path, "short", seconds=5.0, seed=9, data=rec)
+    info = open_record(rec).info
+    assert info.recording is not None
+    first, short = info.recording.runs
+    assert first.rate_fitted and not short.rate_fitted and short.rate_hz == 125.0
+    assert info.rate_hz == fitted.rate_hz and info.rate_u_hz == fitted.rate_u_hz
+    assert info.n_samples == fitted.n_samples + short.n_samples
