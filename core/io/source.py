@@ -445,11 +445,11 @@ class _RunTally:
 class RecordingSource:
     """An avard recording, walked frame by frame (``recording.walk``): never held whole.
 
-    Opening scans it once (no samples kept beyond the temperature readings): the runs and
-    their rates, the sample count, the losses (damage, and every jump of a run's sample index
-    that no gap record explains: a missing, emptied or replaced segment), the duplicates, and
-    the temperature readings the blocks hold on the sample grid. ``runs`` keeps only those
-    runs."""
+    Opening scans it once (no samples kept): the runs and their rates, the sample count, the
+    losses (damage, and every jump of a run's sample index that no gap record explains: a
+    missing, emptied or replaced segment), the duplicates, and a read plan (where each kept
+    raw block's counts lie), so later reads take only those bytes. Temperatures are read
+    the first time a consumer asks for them. ``runs`` keeps only those runs."""
 
     rereadable = True
 
