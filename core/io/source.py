@@ -779,7 +779,7 @@ class RecordingSource:
                 if k != open_k:
                     if fd >= 0:
                         os.close(fd)
-                    fd, open_k = os.open(self.files[k], os.O_RDONLY), k
+                    fd, open_k = _open_segment(self.files[k]), k
                 n = int(plan.n[j])
                 data = os.pread(fd, 12 * n, int(plan.off[j]))
                 if len(data) != 12 * n:
@@ -868,7 +868,7 @@ def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
     limit = ends.get(name)
     hdr = FRAME_HEADER.size
     pos = 0
-    with open(f, "rb") as fh:
+    with os.fdopen(_open_segment(f), "rb") as fh:
         while True:
             if limit is not None and pos >= limit:
                 return
@@ -896,6 +896,18 @@ def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
             reader._report(local)
             yield fr
     reader._report(local)
+
+
+def _open_segment(f: Path) -> int:
+    """A segment's file descriptor, or one line saying it went while the recording was
+    read (retention, or a hand, deleted it) or cannot be read."""
+    try:
+        return os.open(f, os.O_RDONLY)
+    except FileNotFoundError:
+        raise DataError(f"{f}: removed while the recording was read (the service's retention "
+                        "deletes the oldest segments); analyse a copy of the recording") from None
+    except OSError as exc:
+        raise DataError(f"{f}: cannot be read ({exc.strerror}); check its permissions") from exc
 
 
 def _damage_covers(losses: Sequence[Any], run: str, a: int, b: int) -> bool:

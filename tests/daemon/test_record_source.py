@@ -290,3 +290,12 @@ def test_a_run_too_short_for_the_rate_fit_joins_its_odr_and_leaves_the_mean(
     assert first.rate_fitted and not short.rate_fitted and short.rate_hz == 125.0
     assert info.rate_hz == fitted.rate_hz and info.rate_u_hz == fitted.rate_u_hz
     assert info.n_samples == fitted.n_samples + short.n_samples
+
+
+def test_a_segment_removed_while_it_is_read_is_one_line(recording: Path,
+                                                         tmp_path: Path) -> None:
+    rec = _copy(recording, tmp_path)
+    src = open_record(rec)
+    _segments(rec)[0].unlink()                # retention, between the scan and the pass
+    with pytest.raises(DataError, match="removed while the recording was read"):
+        list(src.blocks())
