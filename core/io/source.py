@@ -527,6 +527,16 @@ class RecordingSource:
         return walk(reader, report)
 
     def _scan(self, rate_hz: float | None) -> RecordInfo:
+        """The scan, with the walk's own WARNING per damaged block held back: ``_say`` sums
+        them up per file and per run (the walk still logs them for its other readers)."""
+        quiet = logging.getLogger("avard.core.io.recording")
+        quiet.addFilter(_below_warning)
+        try:
+            return self._scan_walk(rate_hz)
+        finally:
+            quiet.removeFilter(_below_warning)
+
+    def _scan_walk(self, rate_hz: float | None) -> RecordInfo:
         from avard.core.io.recording import Segmenter, WalkReport, _scale_of, segment_files
 
         self.files = segment_files(self.path)
@@ -555,7 +565,7 @@ class RecordingSource:
             name) and duplicates (of the file being read)."""
             nonlocal n_losses, n_dups
             for x in report.losses[n_losses:]:
-                losses.append(Loss(x.run, x.i0, x.n, x.cause, where[0]))
+                losses.append(Loss(x.run, x.i0, x.n, x.cause, f"in {Path(where[0]).name}"))
                 if x.run in tally:
                     tally[x.run].lost += x.n
             n_losses = len(report.losses)
@@ -719,7 +729,9 @@ class RecordingSource:
         for r in summary.runs:
             if r.samples_lost or r.samples_duplicated:
                 mine = [x for x in summary.losses if x.run == r.run]
-                first = f"; first: {mine[0].n} samples {mine[0].where}" if mine else ""
+                x = mine[0] if mine else None
+                first = (f"; first: {x.n} samples from index {x.i0}, {x.where} ({x.cause})"
+                         if x is not None else "")
                 log.warning("%s: run %s: %d samples lost in %d place(s), %d read twice "
                             "(counted once)%s; detail in --json", self.path, r.run,
                             r.samples_lost, len(mine), r.samples_duplicated, first)
@@ -896,6 +908,10 @@ def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
             reader._report(local)
             yield fr
     reader._report(local)
+
+
+def _below_warning(record: logging.LogRecord) -> bool:
+    return record.levelno < logging.WARNING
 
 
 def _open_segment(f: Path) -> int:

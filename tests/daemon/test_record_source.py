@@ -299,3 +299,24 @@ def test_a_segment_removed_while_it_is_read_is_one_line(recording: Path,
     _segments(rec)[0].unlink()                # retention, between the scan and the pass
     with pytest.raises(DataError, match="removed while the recording was read"):
         list(src.blocks())
+
+
+def test_damaged_frames_are_one_line_per_file_and_one_per_run(
+        recording: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    from avard.core.io import frames
+
+    rec = _copy(recording, tmp_path)
+    seg = _segments(rec)[1]
+    raws = [(fr.offset, frames.decode(fr.payload)) for fr in RecordingReader(seg).frames()]
+    hits = [(at, r) for at, r in raws if r["kind"] == "raw"][2:9:3]     # apart: 3 losses
+    for at, _r in hits:
+        _flip(seg, at + 60)
+    with caplog.at_level(logging.WARNING):
+        info = open_record(rec).info
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(said) == 2, said
+    assert seg.name in said[0] and "3 damaged" in said[0]
+    lost = sum(int(r["n"]) for _at, r in hits)
+    assert f"{lost} samples lost in 3 place(s)" in said[1]
+    assert info.recording is not None and info.recording.samples_lost == lost
+    assert [x.i0 for x in info.recording.losses] == [int(r["i0"]) for _at, r in hits]
