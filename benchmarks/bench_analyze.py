@@ -7,7 +7,7 @@ of ``bench_allan`` (20-bit counts, white noise, a slow bias random walk, 1 g on 
 m/s² and written once as an uncompressed .npz, the form ``avard simulate`` writes. Each
 measurement runs in a fresh subprocess with one BLAS thread, so peak RSS (VmHWM) is its own:
 
-* avard: ``report.analyze(path)``, the whole `avard analyze` (the record streamed once into
+* avard: ``analyze(open_record(path))``, the whole `avard analyze` (the record streamed once into
   the fully overlapping ADEV at octave τ and the Welch spectrum, the noise fit per axis);
 * allantools: the three axes loaded, then ``oadev(axis, rate, data_type="freq",
   taus="octave")`` on each; the same estimator at the same τ.
@@ -88,6 +88,7 @@ def _timed(owner: Any, name: str, parts: dict[str, float], key: str) -> None:
 def worker_analyze(path: str) -> dict:
     from avard.core.allan.overlapping import OverlappingAllan
     from avard.core.analysis import engine as report
+    from avard.core.io.source import open_record
 
     parts: dict[str, float] = {}
     _timed(report, "_one_pass", parts, "passes")
@@ -95,7 +96,8 @@ def worker_analyze(path: str) -> dict:
         _timed(OverlappingAllan, name, parts, "oadev")
         _timed(report.WelchAccumulator, name, parts, "spectrum")
     t0 = time.process_time()
-    an = report.analyze(path)  # no scipy: NNLS, F quantile and χ² tail are avard's own
+    # no scipy: NNLS, F quantile and χ² tail are avard's own
+    an = report.analyze(open_record(path))
     cpu = time.process_time() - t0
     ch = an.channels["x"].allan
     split = {"OADEV (kernel, running sums, noise identification)": parts["oadev"],
