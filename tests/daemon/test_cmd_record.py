@@ -167,8 +167,8 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     variance equals the recording's."""
     from avard.core.io.recording import load_recording, replay_allan
     from avard.daemon.commands.record import StreamArchiver
+    from avard.daemon.compose import simulated_service
     from avard.daemon.config import load_config
-    from avard.daemon.hw.simulation import simulated_service
     from avard.daemon.net.subscriber import Subscriber
 
     cfg = load_config(None, **{
