@@ -24,7 +24,7 @@ import sys
 import numpy as np
 from avard.core.analysis.separate import Separation, align, read_sensor, separate
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_plot_output
+from avard.core.io.outputs import check_plot_output, finite_for_json
 from avard.daemon.commands._options import add_channels_argument, filter_corner, split_channels
 
 NAME = "separate"
@@ -177,16 +177,6 @@ def plot_separation(sep: Separation, path: str) -> None:
     save_figure(fig, path, dpi=130)
 
 
-def _finite(x: object) -> object:
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_finite(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    return x
-
-
 def run(args: argparse.Namespace) -> int:
     if args.plot:   # before the work, so a bad path costs a second
         check_plot_output(args.plot, what=f"--plot {args.plot}")
@@ -194,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
                             channels=split_channels(args.channels),
                             filter_corner_hz=args.filter_corner)
     if args.json:
-        sys.stdout.write(json.dumps(_finite(sep.to_dict()), indent=1, allow_nan=False) + "\n")
+        text = json.dumps(finite_for_json(sep.to_dict()), indent=1, allow_nan=False)
+        sys.stdout.write(text + "\n")
     else:
         sys.stdout.write(format_separation(sep) + "\n")
     if args.plot:
