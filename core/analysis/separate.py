@@ -27,7 +27,9 @@ form), so the estimate is distributed as
     Ŝ = (λ₊ X − λ₋ Y) / ν,   X, Y ~ χ²_ν independent,  Var Ŝ = (PQ + S²)/ν            (3)
 
 with ν the equivalent degrees of freedom of the overlapping estimator (Greenhall's EDF, SP
-1065 eq. 41, for the noise identified on U's and V's series; the smaller of the two). The
+1065 eq. 41, for the noise identified on U's and V's series): their geometric mean, which the
+Cauchy–Schwarz inequality makes a lower bound of the product's EDF when U and V differ in
+noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags). The
 interval inverts (3) in S, holding the other sensors' parts P − S and Q − S at their
 estimates: S_hi is where the observed Ŝ falls at the lower (1 − ci)/2 tail, S_lo at the upper
 one. Where S_lo reaches 0 (every negative estimate, and positive ones the data cannot tell
@@ -241,7 +243,7 @@ def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
             est.append(var[:, i] - cov[:, 0, 1])                        # (1)
             big_p.append(var[:, i])
             big_q.append(var[:, dc])
-            nu.append(np.minimum(edf[:, i], edf[:, dc]))
+            nu.append(np.sqrt(edf[:, i] * edf[:, dc]))
         else:
             j, k = (x for x in range(3) if x != i)
             dij, dik = d_col[(min(i, j), max(i, j))], d_col[(min(i, k), max(i, k))]
@@ -249,7 +251,7 @@ def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
             est.append(0.5 * (var[:, dij] + var[:, dik] - var[:, djk]))   # (2)
             big_p.append(var[:, dij])
             big_q.append(var[:, dik])
-            nu.append(np.minimum(edf[:, dij], edf[:, dik]))
+            nu.append(np.sqrt(edf[:, dij] * edf[:, dik]))
     common = np.mean([cov[:, i, j] for i, j in pairs], axis=0)
     est.append(common)
     if s == 2:
