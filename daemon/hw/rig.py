@@ -94,6 +94,24 @@ class RigSpec:
     clock: ClockSpec = field(default_factory=ClockSpec)
     temperature: TemperatureConfig = field(default_factory=TemperatureConfig)
 
+    def __post_init__(self) -> None:
+        if not self.sensors:
+            raise ConfigError("a rig needs at least one sensor")
+        names = [s.name for s in self.sensors]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ConfigError(f"sensor names must differ: {', '.join(dup)} is used twice")
+        seen: dict[tuple[str, int, int], str] = {}
+        for s in self.sensors:
+            b = s.bus
+            where = (b.kind, b.number, b.device if b.kind == "spi" else b.address)
+            if where in seen:
+                wire = (f"/dev/spidev{b.number}.{b.device}" if b.kind == "spi"
+                        else f"/dev/i2c-{b.number} address 0x{b.address:02X}")
+                raise ConfigError(f"sensors {seen[where]} and {s.name} are both on {wire}; "
+                                  "give each its own chip select or I2C address")
+            seen[where] = s.name
+
     @property
     def simulate(self) -> str | None:
         return self.clock.simulate

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -177,3 +177,87 @@ def build_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, 
     parts = rig.parts
     return (cast(Adxl355, rig.sensor), cast(VirtualClock, rig.clock),
             cast(SimulatedSensors, parts["sims"]), cast(EmulatedAdxl355, parts["emulator"]))
+
+
+# -- several emulated sensors on one bed --------------------------------------------------------
+
+@dataclass(frozen=True)
+class BedSpec:
+    """The motion every sensor of an emulated rig feels (per axis, SI): a white part (a
+    building's floor vibration; its ADEV at τ = 1 s, m/s/√s) and a slow tilt (a random walk of
+    the acceleration, m/s²/√s)."""
+
+    white: float = 5e-5
+    tilt: float = 1e-6
+    seed: int | None = None
+
+
+class BedMotion:
+    """The bed's motion by sample index, drawn once and handed to each sensor's source in
+    turn (m/s², (n, 3)): sample k is the same for every sensor, whatever order and block
+    sizes they drain in; a sample is dropped once every sensor has taken it."""
+
+    def __init__(self, spec: BedSpec, n_sensors: int, rate_hz: float) -> None:
+        self.spec = spec
+        self.rate_hz = float(rate_hz)
+        self._rng = np.random.default_rng(spec.seed)
+        self._buf = np.zeros((0, 3))
+        self._base = 0                      # sample index of _buf[0]
+        self._pos = [0] * n_sensors         # next sample index of each sensor
+        self._level = np.zeros(3)           # the tilt's current value
+
+    def _extend(self, upto: int) -> None:
+        n = upto - (self._base + len(self._buf))
+        if n <= 0:
+            return
+        white = self._rng.normal(0.0, self.spec.white * math.sqrt(self.rate_hz), (n, 3))
+        steps = self._rng.normal(0.0, self.spec.tilt / math.sqrt(self.rate_hz), (n, 3))
+        walk = self._level + np.cumsum(steps, axis=0)
+        self._level = walk[-1]
+        self._buf = np.concatenate([self._buf, white + walk])
+
+    def take(self, sensor: int, n: int) -> np.ndarray:
+        start = self._pos[sensor]
+        self._extend(start + n)
+        out = self._buf[start - self._base:start - self._base + n].copy()
+        self._pos[sensor] = start + n
+        drop = min(self._pos) - self._base
+        if drop > 4096:
+            self._buf = self._buf[drop:]
+            self._base += drop
+        return out
+
+
+def emulated_rig(sensors: Sequence[SensorSpec], preset: str, *, bed: BedSpec = BedSpec(),
+                 seed: int | None = None) -> tuple[VirtualClock, list[tuple[str, Adxl355,
+                                                                           EmulatedAdxl355]]]:
+    """Several ADXL355s (each over its described emulated transport: SPI bus/chip select or
+    I2C address) on one virtual clock, each the simulator's ``preset`` (its own noise, its own
+    seed) plus the one :class:`BedMotion`: (clock, [(name, driver, emulator)]), not yet
+    brought up. All sensors run at the first one's ODR."""
+    from avard.core.sim.simulate import SensorSimulator, make_config
+    from avard.daemon.hw.emulator import FakeSMBus
+    from avard.daemon.hw.registers import STANDARD_GRAVITY, sensitivity_lsb_per_g
+    from avard.daemon.hw.transport import I2cBus
+
+    odr = sensors[0].odr_hz
+    clock = VirtualClock(epoch=time.time() - 1000.0)
+    motion = BedMotion(bed, len(sensors), odr)
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, s in enumerate(sensors):
+        sim = SensorSimulator(make_config(preset, odr_hz=odr, range_g=s.range_g),
+                              seed=int(rng.integers(2**31)))
+        lsb = STANDARD_GRAVITY / sensitivity_lsb_per_g(s.range_g)
+
+        def source(n: int, sim: Any = sim, i: int = i, lsb: float = lsb) -> np.ndarray:
+            accel = sim.next(n).accel + motion.take(i, n)
+            return np.clip(np.rint(accel / lsb), -(1 << 19), (1 << 19) - 1).astype(np.int32)
+
+        emu = EmulatedAdxl355(source, clock, odr_error_ppm=0.0, temperature=25.0)
+        bus: Any = (SpiBus(FakeSpiDev(emu)) if s.bus.kind == "spi"
+                    else I2cBus(FakeSMBus(emu, address=s.bus.address, bus=s.bus.number),
+                                address=s.bus.address))
+        out.append((s.name, Adxl355(bus, clock=clock,
+                                    temp_intercept_lsb=s.temp_intercept_lsb), emu))
+    return clock, out
