@@ -55,7 +55,7 @@ def test_view_with_a_service_fit() -> None:
     assert re.search(r"bias_instability\s+not resolved \(< 3\.000e-06 m/s\^2\)", text)
     assert "(service;" in text
     # ADEV rows at the octaves nearest 0.1 s and 1 s, with the snapshot's numbers
-    tau = snap.tau
+    tau = np.asarray(snap["tau"])
     k = int(np.argmin(np.abs(np.log(tau / 1.0))))
     adev_x = math.sqrt(snap["avar"][k][0])
     row = next(ln for ln in text.splitlines() if ln.strip().startswith(f"{tau[k]:.4g} "))
