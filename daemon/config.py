@@ -58,6 +58,7 @@ RING_MEMORY_SHARE = 0.25
 SYSTEM_DIRS = frozenset(Path(p) for p in ("/", "/bin", "/boot", "/dev", "/etc", "/lib",
                                           "/lib64", "/proc", "/run", "/sbin", "/sys", "/usr",
                                           "/var"))
+_SENSOR_NAME = re.compile(r"[A-Za-z0-9_.-]{1,32}")
 _DS18B20_ID = re.compile(r"(28-)?[0-9a-fA-F]{12}")
 
 
@@ -252,6 +253,9 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
                 problems.append(problem)
             else:
                 cfg[sec][name] = checked
+    if not _SENSOR_NAME.fullmatch(cfg["sensor"]["name"]):
+        problems.append(f"sensor.name = {cfg['sensor']['name']!r}: use 1 to 32 letters, digits, "
+                        "'-', '_' or '.'")
     for sid in cfg["temperature"]["ids"]:
         if not _DS18B20_ID.fullmatch(sid):
             problems.append(f"temperature.ids: {sid!r} is not a DS18B20 id; write ids like "

@@ -83,6 +83,8 @@ def setting(default: _T, unit: str = "", lo: float | None = None, hi: float | No
 class SensorConfig:
     """``[sensor]``: how the ADXL355 is wired and run."""
 
+    name: str = setting("adxl355", doc="the sensor's name: stored in the recording header, "
+                        "and avard separate's label for it")
     bus: str = setting("spi", choices=("spi", "i2c"), doc="how the ADXL355 is wired")
     spi_bus: int = setting(0, lo=0, hi=7, doc="/dev/spidevB.D: B")
     spi_device: int = setting(0, lo=0, hi=7, doc="/dev/spidevB.D: D (chip select)")

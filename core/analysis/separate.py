@@ -374,6 +374,7 @@ class SensorRecord:
     t0_s: float | None = None
     source: str = ""
     meta: dict[str, Any] = field(default_factory=dict)
+    sensor_name: str | None = None        # the recording header's sensor.name, when it has one
 
 
 def read_sensor(path: str | Path, *, rate_hz: float | None = None) -> SensorRecord:
@@ -383,8 +384,11 @@ def read_sensor(path: str | Path, *, rate_hz: float | None = None) -> SensorReco
 
     rec = load_record(path, rate_hz=rate_hz)
     meta = rec.meta
-    t0, rate_u = None, 0.0
+    t0, rate_u, name = None, 0.0, None
     headers = meta.get("headers") or []
+    if headers and isinstance(headers[0].get("sensor"), dict):
+        got = headers[0]["sensor"].get("name")
+        name = got if isinstance(got, str) and got else None
     index = meta.get("index")
     if headers and index is not None and len(index):
         h = headers[0]
@@ -394,7 +398,7 @@ def read_sensor(path: str | Path, *, rate_hz: float | None = None) -> SensorReco
         if isinstance(tb.get("odr_u_hz"), int | float) and math.isfinite(tb["odr_u_hz"]):
             rate_u = float(tb["odr_u_hz"])
     return SensorRecord(np.asarray(rec.accel, dtype=np.float64), tuple(rec.names),
-                        float(rec.rate_hz), rate_u, t0, str(path), dict(meta))
+                        float(rec.rate_hz), rate_u, t0, str(path), dict(meta), name)
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="2 or 3 records of co-located sensors (.npz, .csv, recording)")
     parser.add_argument("--names", nargs="+", metavar="NAME",
                         help="the sensors' names, in the order of the records (default: the "
-                             "file names)")
+                             "recordings' sensor.name, else the file names)")
     parser.add_argument("--rate", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz of every record (needed for a csv without a t "
                              "column)")
@@ -64,7 +64,7 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise DataError(f"--rate {rate_hz}: a sample rate must be a positive number of Hz")
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
-    sensor_names = names or _names_of(paths)
+    sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
     aligned = align(records, channels)
     corner: float | None
     if filter_corner_hz == "auto":
@@ -78,9 +78,13 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
                     filter_corner_hz=corner, notes=aligned.notes, sources=paths)
 
 
-def _names_of(paths: list[str]) -> list[str]:
+def _names_of(paths: list[str], recorded: list[str | None]) -> list[str]:
+    """The sensors' names as their recordings call them (sensor.name), else the file names,
+    else sensor1, sensor2, …"""
     from pathlib import Path
 
+    if all(recorded) and len(set(recorded)) == len(recorded):
+        return [str(n) for n in recorded]
     stems = [Path(p.rstrip("/")).stem or p for p in paths]
     if len(set(stems)) == len(stems):
         return stems

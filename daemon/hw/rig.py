@@ -36,10 +36,6 @@ log = logging.getLogger(__name__)
 
 BACKEND_ENV = "AVARD_BACKEND"
 
-#: The name of the one sensor of a ``[sensor]`` config.
-DEFAULT_SENSOR_NAME = "adxl355"
-
-
 # -- the rig as data ----------------------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -66,10 +62,10 @@ class SensorSpec:
     temp_intercept_lsb: float = 1885.0
 
     @classmethod
-    def from_config(cls, s: SensorConfig, name: str = DEFAULT_SENSOR_NAME) -> SensorSpec:
+    def from_config(cls, s: SensorConfig) -> SensorSpec:
         bus = BusSpec(s.bus, s.bus_number, device=s.spi_device, address=s.i2c_address,
                       speed_hz=s.spi_speed_hz)
-        return cls(name, bus, range_g=s.range_g, odr_hz=s.odr_hz, int1_gpio=s.int1_gpio,
+        return cls(s.name, bus, range_g=s.range_g, odr_hz=s.odr_hz, int1_gpio=s.int1_gpio,
                    temp_intercept_lsb=s.temp_intercept_lsb)
 
 
@@ -296,7 +292,8 @@ def _simulated(spec: RigSpec) -> Rig:
     sims, emu = opened.parts["sims"], opened.parts["emulator"]
     pin = EmulatedInterruptPin(emu, opened.clock) if use_int1 else None
     return Rig(spec, opened.driver, opened.clock,
-               {"device": "ADXL355 (emulated)", "preset": spec.simulate},
+               {"device": "ADXL355 (emulated)", "preset": spec.simulate,
+                "name": sensor.name},
                interrupt=pin, extra_temperature_names=tuple(sims.names),
                on_tick=sims.on_tick, temperature_feed=sims, parts=dict(opened.parts))
 
@@ -312,7 +309,7 @@ def _hardware(spec: RigSpec) -> Rig:
     info = bring_up(opened.driver, s, int1=interrupt is not None).info
     return Rig(spec, opened.driver, opened.clock,
                {"device": info.name, "partid": info.partid, "revid": info.revid,
-                "bus": s.bus.kind},
+                "bus": s.bus.kind, "name": s.name},
                temperature_bank=_ds18b20_bank(spec.temperature), interrupt=interrupt)
 
 

@@ -33,8 +33,10 @@ def test_env_backend_builds_the_simulated_rig_and_its_service(
                                                 "publish.enabled": False}))
     rig = build_rig(describe_rig(cfg, seed=4, speed=None))
     assert rig.simulate == "quiet-lab" and rig.info["device"] == "ADXL355 (emulated)"
+    assert rig.info["name"] == "adxl355" == rig.spec.sensors[0].name   # into the header
     svc = compose(cfg, rig)
     svc.run(30.0)
+    assert svc.header()["sensor"]["name"] == "adxl355"
     st = svc.final_status
     assert st["samples"] > 30 * 120 and st["overruns"] == 0
     # the simulated DS18B20s reached the service through the rig's wiring
