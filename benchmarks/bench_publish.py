@@ -185,8 +185,8 @@ def service_latency(odr_hz: float, seconds: float) -> tuple[np.ndarray, dict]:
     on the service's own clock (newest sample time = t_mono + (n − 1)/rate)."""
     import tempfile
 
+    from avard.daemon.compose import simulated_service
     from avard.daemon.config import load_config
-    from avard.daemon.hw.simulation import simulated_service
 
     with tempfile.TemporaryDirectory() as tmp:
         cfg = load_config(None, **{"recording.data_dir": tmp, "sensor.odr_hz": odr_hz,

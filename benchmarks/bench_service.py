@@ -37,8 +37,9 @@ import time
 from typing import Any
 
 import numpy as np
+from avard.daemon.compose import simulated_service
 from avard.daemon.config import effective_poll_hz, load_config
-from avard.daemon.hw.simulation import build_simulated, simulated_service
+from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.net.subscriber import Subscriber
 from avard.daemon.service.acquisition import Acquisition
@@ -251,7 +252,8 @@ from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.config import load_config
 from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.service.supervisor import Service
+from avard.daemon.compose import compose
+from avard.daemon.hw.rig import ClockSpec, Rig, RigSpec, SensorSpec
 from avard.daemon.hw.transport import SpiBus
 odr, seconds, data_dir = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
 clock = VirtualClock(speed=1.0)
@@ -259,7 +261,9 @@ dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), cloc
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
 cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
     "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
-Service(as_config(cfg), dev, clock, speed=1.0).run(seconds)
+config = as_config(cfg)
+spec = RigSpec((SensorSpec.from_config(config.sensor),), ClockSpec(speed=1.0))
+compose(config, Rig(spec, dev, clock, {})).run(seconds)
 heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
 print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
 """

@@ -163,11 +163,11 @@ def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: 
              seed: int = 1, log_level: int = logging.WARNING) -> SoakResult:
     """Run the soak for ``hours`` simulated hours with data under ``out``; return the result."""
     from avard.core.io.recording import RecordingReader, replay_allan
+    from avard.daemon.compose import simulated_service
     from avard.daemon.config import load_config
-    from avard.daemon.hw.simulation import simulated_service
     from avard.daemon.net.publisher import Publisher
     from avard.daemon.service.recorder import FileOps, Recorder
-    from avard.daemon.service.supervisor import Service
+    from avard.daemon.service.supervisor import Service, ServiceHooks
 
     logging.getLogger("avard").setLevel(log_level)
     res = SoakResult(hours=hours)
@@ -215,8 +215,8 @@ def run_soak(hours: float, out: Path, *, fault_every_h: float = 2.0, disk_full: 
                         realtime=svc.clock.realtime, fileops=disk or FileOps())
 
     svc, sims, emu = simulated_service(cfg, "quiet-lab", seed=seed, speed=None,
-                                       publisher_factory=publisher_factory,
-                                       recorder_factory=recorder_factory)
+                                       hooks=ServiceHooks(publisher=publisher_factory,
+                                                          recorder=recorder_factory))
     dev, clock = svc.sensor, svc.clock
     ctx = {"svc": svc, "emu": emu, "clock": clock, "sims": sims}
     drain = dev.drain

@@ -1,4 +1,5 @@
-"""The service configuration: one schema, TOML in, a checked nested dict out.
+"""The service configuration: one schema (declared in config_types.py), TOML in, a checked nested
+dict out.
 
 Every key has a type, a default, a unit and what is allowed (a range or a set of choices).
 Unknown sections or keys, wrong types and out-of-range values are refused *before* anything
@@ -31,120 +32,17 @@ import stat
 import tempfile
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
 from avard.core.errors import ConfigError
+from avard.daemon.config_types import ODR_CHOICES, Key, schema
 
-#: Output data rates of the ADXL355 (Hz, datasheet FILTER register table).
-ODR_CHOICES = (4000.0, 2000.0, 1000.0, 500.0, 250.0, 125.0, 62.5, 31.25, 15.625, 7.8125, 3.90625)
+__all__ = ["ODR_CHOICES", "SCHEMA", "Key", "load_config", "validate_config"]
 
-
-@dataclass(frozen=True)
-class Key:
-    """One configuration key: its type, default, unit and what is allowed."""
-
-    type: type | tuple[type, ...]
-    default: Any
-    unit: str = ""
-    lo: float | None = None
-    hi: float | None = None
-    choices: tuple[Any, ...] | None = None
-    doc: str = ""
-    path: bool = False       # a directory the service writes: restricted to allowed roots
-
-    def allowed(self) -> str:
-        if self.choices is not None:
-            return "one of " + ", ".join(repr(c) for c in self.choices)
-        parts = [self._type_name()]
-        if self.lo is not None and self.hi is not None:
-            parts.append(f"from {self.lo:g} to {self.hi:g}")
-        elif self.lo is not None:
-            parts.append(f"at least {self.lo:g}")
-        if self.unit:
-            parts.append(self.unit)
-        return " ".join(parts)
-
-    def _type_name(self) -> str:
-        types = self.type if isinstance(self.type, tuple) else (self.type,)
-        names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-                 list: "a list of strings"}
-        return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
-
-
-_NUM = (int, float)
-
-SCHEMA: dict[str, dict[str, Key]] = {
-    "sensor": {
-        "bus": Key(str, "spi", choices=("spi", "i2c"), doc="how the ADXL355 is wired"),
-        "spi_bus": Key(int, 0, lo=0, hi=7, doc="/dev/spidevB.D: B"),
-        "spi_device": Key(int, 0, lo=0, hi=7, doc="/dev/spidevB.D: D (chip select)"),
-        "spi_speed_hz": Key(int, 5_000_000, "Hz", 100_000, 10_000_000, doc="SPI clock"),
-        "i2c_bus": Key(int, 1, lo=0, hi=31, doc="/dev/i2c-N"),
-        "i2c_address": Key(int, 0x1D, choices=(0x1D, 0x53), doc="ASEL low 0x1D, high 0x53"),
-        "range_g": Key(int, 2, "g", choices=(2, 4, 8), doc="full scale ±range_g"),
-        "odr_hz": Key(_NUM, 125.0, "Hz", choices=ODR_CHOICES, doc="output data rate"),
-        "poll_hz": Key(_NUM, 4.0, "Hz", 1.0, 2000.0,
-                       doc="least FIFO drain rate; raised to drain the FIFO half full"),
-        "int1_gpio": Key(str, "", doc="GPIO of the INT1 pin as CHIP:LINE (e.g. gpiochip0:25): "
-                         "wait on the FIFO watermark instead of a timer; empty: timer"),
-        "temp_intercept_lsb": Key(_NUM, 1885.0, "LSB", 1700.0, 2100.0,
-                                  doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)"),
-    },
-    "temperature": {
-        "ds18b20": Key(bool, True, doc="read DS18B20 sensors on the 1-Wire bus"),
-        "ids": Key(list, [], doc="DS18B20 IDs to use ('28-...'); empty: all found"),
-        "required": Key(bool, False, doc="refuse to start when a listed DS18B20 is missing"),
-        "interval_s": Key(_NUM, 1.0, "s", 0.75, 3600.0, doc="DS18B20 read interval"),
-        "chip_interval_s": Key(_NUM, 1.0, "s", 0.01, 3600.0,
-                               doc="ADXL355 on-chip temperature read interval"),
-    },
-    "allan": {
-        "overlap": Key(int, 8, choices=(1, 2, 4, 8, 16, 32, 64),
-                       doc="differences kept per octave (stride m/overlap): a power of two"),
-        "snapshot_interval_s": Key(_NUM, 10.0, "s", 0.1, 86400.0,
-                                   doc="publish and record an Allan snapshot this often"),
-        "checkpoint_interval_s": Key(_NUM, 60.0, "s", 1.0, 86400.0,
-                                     doc="save the accumulators for restart this often"),
-        "restore": Key(bool, True, doc="restore the accumulators from the last checkpoint"),
-    },
-    "recording": {
-        "enabled": Key(bool, True, doc="write the recording"),
-        "data_dir": Key(str, "/var/lib/avard", path=True, doc="segment files go here"),
-        "segment_s": Key(_NUM, 3600.0, "s", 10.0, 86400.0, doc="start a new segment this often"),
-        "fsync_interval_s": Key(_NUM, 5.0, "s", 0.05, 3600.0,
-                                doc="fsync this often: a power cut loses at most this much"),
-        "block_s": Key(_NUM, 1.0, "s", 0.01, 10.0, doc="raw samples per record, in seconds"),
-        "retention_days": Key(_NUM, 0.0, "days", 0.0, 36500.0,
-                              doc="delete segments older than this; 0 keeps all"),
-        "retention_max_bytes": Key(int, 0, "bytes", 0, None,
-                                   doc="delete oldest segments above this total; 0 = no limit"),
-        "min_free_bytes": Key(int, 64 * 1024 * 1024, "bytes", 0, None,
-                              doc="pause writing (disk full) below this much free space"),
-    },
-    "publish": {
-        "enabled": Key(bool, True, doc="publish over ZeroMQ"),
-        "endpoint": Key(str, "tcp://127.0.0.1:5555", doc="PUB socket (raw, temp, avar, ...)"),
-        "request_endpoint": Key(str, "tcp://127.0.0.1:5556",
-                                doc="request socket (snapshot, status, recent)"),
-        "allow_remote": Key(bool, False, doc="needed to bind anything but loopback"),
-        "hwm": Key(int, 10000, "messages", 10, 10_000_000, doc="PUB send high-water mark"),
-        "status_interval_s": Key(_NUM, 5.0, "s", 0.1, 3600.0, doc="publish status this often"),
-        "recent_max_s": Key(_NUM, 10.0, "s", 0.0, 600.0, doc="longest 'recent' reply"),
-    },
-    "curve": {
-        "enabled": Key(bool, False, doc="CURVE-encrypt and authenticate both sockets"),
-        "server_secret_key_file": Key(str, "", doc="server secret key (from `avard keys`)"),
-        "authorized_keys_dir": Key(str, "", doc="directory of authorised client public keys"),
-    },
-    "service": {
-        "ring_s": Key(_NUM, 30.0, "s", 1.0, 3600.0, doc="ring buffer length in seconds"),
-        "status_log_interval_s": Key(_NUM, 60.0, "s", 1.0, 86400.0,
-                                     doc="log a status line this often"),
-    },
-}
+#: The keys, read off the typed dataclasses of daemon/config_types.py (declared once there).
+SCHEMA: dict[str, dict[str, Key]] = schema()
 
 
 #: Largest config file read (bytes): a real one is a few kB.
@@ -160,6 +58,7 @@ RING_MEMORY_SHARE = 0.25
 SYSTEM_DIRS = frozenset(Path(p) for p in ("/", "/bin", "/boot", "/dev", "/etc", "/lib",
                                           "/lib64", "/proc", "/run", "/sbin", "/sys", "/usr",
                                           "/var"))
+_SENSOR_NAME = re.compile(r"[A-Za-z0-9_.-]{1,32}")
 _DS18B20_ID = re.compile(r"(28-)?[0-9a-fA-F]{12}")
 
 
@@ -354,6 +253,9 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
                 problems.append(problem)
             else:
                 cfg[sec][name] = checked
+    if not _SENSOR_NAME.fullmatch(cfg["sensor"]["name"]):
+        problems.append(f"sensor.name = {cfg['sensor']['name']!r}: use 1 to 32 letters, digits, "
+                        "'-', '_' or '.'")
     for sid in cfg["temperature"]["ids"]:
         if not _DS18B20_ID.fullmatch(sid):
             problems.append(f"temperature.ids: {sid!r} is not a DS18B20 id; write ids like "

@@ -1,12 +1,12 @@
-"""The checked configuration as typed, frozen dataclasses: one per ``[section]`` of the schema.
+"""The configuration, declared once: one frozen dataclass per ``[section]``, each field carrying
+its :class:`Key` (unit, range or choices, documentation) as metadata.
 
-daemon/config.py stays the one source of truth for what a key may hold (type, default, unit,
-range, choices) and checks a TOML file into a nested dict; :meth:`Config.from_dict` turns that
-checked dict into these objects, so code reads ``config.sensor.odr_hz`` (a float, known to
-mypy) instead of ``cfg["sensor"]["odr_hz"]`` (Any). The classes are written out rather than
-generated from the schema so the type checker sees their fields;
-tests/daemon/test_config_types.py holds them equal to the schema: every schema key is a field
-with the same default and the matching type, and every field is a schema key.
+Both faces of the configuration come from these classes: :func:`schema` reads the keys off the
+fields (their type from the annotation, their default from the field) and daemon/config.py's
+``SCHEMA``, which checks a TOML file into a nested dict, is that schema;
+:meth:`Config.from_dict` turns the checked dict into these typed objects, so code reads
+``config.sensor.odr_hz`` (a float, known to mypy) instead of ``cfg["sensor"]["odr_hz"]`` (Any).
+A key is added, renamed or given a new range in one place: here.
 
 Types follow what validation yields: a number key (int or float in TOML) is a ``float``, a
 list of strings is a ``tuple[str, ...]`` (frozen all the way down). :meth:`Config.as_dict`
@@ -16,27 +16,90 @@ gives the validated dict back (lists again), which the recording header stores.
 from __future__ import annotations
 
 import dataclasses
+import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar, cast
+
+_T = TypeVar("_T")
+
+#: Output data rates of the ADXL355 (Hz, datasheet FILTER register table).
+ODR_CHOICES = (4000.0, 2000.0, 1000.0, 500.0, 250.0, 125.0, 62.5, 31.25, 15.625, 7.8125, 3.90625)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration key: its type, default, unit and what is allowed."""
+
+    type: type | tuple[type, ...]
+    default: Any
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[Any, ...] | None = None
+    doc: str = ""
+    path: bool = False       # a directory the service writes: restricted to allowed roots
+
+    def allowed(self) -> str:
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        parts = [self._type_name()]
+        if self.lo is not None and self.hi is not None:
+            parts.append(f"from {self.lo:g} to {self.hi:g}")
+        elif self.lo is not None:
+            parts.append(f"at least {self.lo:g}")
+        if self.unit:
+            parts.append(self.unit)
+        return " ".join(parts)
+
+    def _type_name(self) -> str:
+        types = self.type if isinstance(self.type, tuple) else (self.type,)
+        names = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+                 list: "a list of strings"}
+        return " or ".join(dict.fromkeys(names.get(t, t.__name__) for t in types))
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """What a field says about its key beyond type and default (see :func:`setting`)."""
+
+    unit: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[Any, ...] | None = None
+    doc: str = ""
+    path: bool = False
+
+
+def setting(default: _T, unit: str = "", lo: float | None = None, hi: float | None = None, *,
+            choices: tuple[Any, ...] | None = None, doc: str = "", path: bool = False) -> _T:
+    """A config field: its default, and what the schema checks (unit, range, choices)."""
+    spec = _Spec(unit, lo, hi, choices, doc, path)
+    return cast(_T, field(default=default, metadata={"key": spec}))
 
 
 @dataclass(frozen=True)
 class SensorConfig:
     """``[sensor]``: how the ADXL355 is wired and run."""
 
-    bus: str = "spi"
-    spi_bus: int = 0
-    spi_device: int = 0
-    spi_speed_hz: int = 5_000_000
-    i2c_bus: int = 1
-    i2c_address: int = 0x1D
-    range_g: int = 2
-    odr_hz: float = 125.0
-    poll_hz: float = 4.0
-    int1_gpio: str = ""
-    temp_intercept_lsb: float = 1885.0
+    name: str = setting("adxl355", doc="the sensor's name: stored in the recording header, "
+                        "and avard separate's label for it")
+    bus: str = setting("spi", choices=("spi", "i2c"), doc="how the ADXL355 is wired")
+    spi_bus: int = setting(0, lo=0, hi=7, doc="/dev/spidevB.D: B")
+    spi_device: int = setting(0, lo=0, hi=7, doc="/dev/spidevB.D: D (chip select)")
+    spi_speed_hz: int = setting(5_000_000, "Hz", 100_000, 10_000_000, doc="SPI clock")
+    i2c_bus: int = setting(1, lo=0, hi=31, doc="/dev/i2c-N")
+    i2c_address: int = setting(0x1D, choices=(0x1D, 0x53), doc="ASEL low 0x1D, high 0x53")
+    range_g: int = setting(2, "g", choices=(2, 4, 8), doc="full scale ±range_g")
+    odr_hz: float = setting(125.0, "Hz", choices=ODR_CHOICES, doc="output data rate")
+    poll_hz: float = setting(4.0, "Hz", 1.0, 2000.0,
+                             doc="least FIFO drain rate; raised to drain the FIFO half full")
+    int1_gpio: str = setting("", doc="GPIO of the INT1 pin as CHIP:LINE (e.g. gpiochip0:25): "
+                             "wait on the FIFO watermark instead of a timer; empty: timer")
+    temp_intercept_lsb: float = setting(
+        1885.0, "LSB", 1700.0, 2100.0,
+        doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)")
 
     @property
     def bus_number(self) -> int:
@@ -48,35 +111,44 @@ class SensorConfig:
 class TemperatureConfig:
     """``[temperature]``: the DS18B20s and the chip's own sensor."""
 
-    ds18b20: bool = True
-    ids: tuple[str, ...] = ()
-    required: bool = False
-    interval_s: float = 1.0
-    chip_interval_s: float = 1.0
+    ds18b20: bool = setting(True, doc="read DS18B20 sensors on the 1-Wire bus")
+    ids: tuple[str, ...] = setting((), doc="DS18B20 IDs to use ('28-...'); empty: all found")
+    required: bool = setting(False, doc="refuse to start when a listed DS18B20 is missing")
+    interval_s: float = setting(1.0, "s", 0.75, 3600.0, doc="DS18B20 read interval")
+    chip_interval_s: float = setting(1.0, "s", 0.01, 3600.0,
+                                     doc="ADXL355 on-chip temperature read interval")
 
 
 @dataclass(frozen=True)
 class AllanConfig:
     """``[allan]``: the streaming accumulators, snapshots and checkpoints."""
 
-    overlap: int = 8
-    snapshot_interval_s: float = 10.0
-    checkpoint_interval_s: float = 60.0
-    restore: bool = True
+    overlap: int = setting(8, choices=(1, 2, 4, 8, 16, 32, 64),
+                           doc="differences kept per octave (stride m/overlap): a power of two")
+    snapshot_interval_s: float = setting(10.0, "s", 0.1, 86400.0,
+                                         doc="publish and record an Allan snapshot this often")
+    checkpoint_interval_s: float = setting(60.0, "s", 1.0, 86400.0,
+                                           doc="save the accumulators for restart this often")
+    restore: bool = setting(True, doc="restore the accumulators from the last checkpoint")
 
 
 @dataclass(frozen=True)
 class RecordingConfig:
     """``[recording]``: the segment files."""
 
-    enabled: bool = True
-    data_dir: str = "/var/lib/avard"
-    segment_s: float = 3600.0
-    fsync_interval_s: float = 5.0
-    block_s: float = 1.0
-    retention_days: float = 0.0
-    retention_max_bytes: int = 0
-    min_free_bytes: int = 64 * 1024 * 1024
+    enabled: bool = setting(True, doc="write the recording")
+    data_dir: str = setting("/var/lib/avard", path=True, doc="segment files go here")
+    segment_s: float = setting(3600.0, "s", 10.0, 86400.0, doc="start a new segment this often")
+    fsync_interval_s: float = setting(5.0, "s", 0.05, 3600.0,
+                                      doc="fsync this often: a power cut loses at most this much")
+    block_s: float = setting(1.0, "s", 0.01, 10.0, doc="raw samples per record, in seconds")
+    retention_days: float = setting(0.0, "days", 0.0, 36500.0,
+                                    doc="delete segments older than this; 0 keeps all")
+    retention_max_bytes: int = setting(0, "bytes", 0, None,
+                                       doc="delete oldest segments above this total; 0 = no "
+                                       "limit")
+    min_free_bytes: int = setting(64 * 1024 * 1024, "bytes", 0, None,
+                                  doc="pause writing (disk full) below this much free space")
 
     @property
     def path(self) -> Path:
@@ -87,30 +159,32 @@ class RecordingConfig:
 class PublishConfig:
     """``[publish]``: the ZeroMQ PUB and request sockets."""
 
-    enabled: bool = True
-    endpoint: str = "tcp://127.0.0.1:5555"
-    request_endpoint: str = "tcp://127.0.0.1:5556"
-    allow_remote: bool = False
-    hwm: int = 10000
-    status_interval_s: float = 5.0
-    recent_max_s: float = 10.0
+    enabled: bool = setting(True, doc="publish over ZeroMQ")
+    endpoint: str = setting("tcp://127.0.0.1:5555", doc="PUB socket (raw, temp, avar, ...)")
+    request_endpoint: str = setting("tcp://127.0.0.1:5556",
+                                    doc="request socket (snapshot, status, recent)")
+    allow_remote: bool = setting(False, doc="needed to bind anything but loopback")
+    hwm: int = setting(10000, "messages", 10, 10_000_000, doc="PUB send high-water mark")
+    status_interval_s: float = setting(5.0, "s", 0.1, 3600.0, doc="publish status this often")
+    recent_max_s: float = setting(10.0, "s", 0.0, 600.0, doc="longest 'recent' reply")
 
 
 @dataclass(frozen=True)
 class CurveConfig:
     """``[curve]``: CURVE encryption and authentication of both sockets."""
 
-    enabled: bool = False
-    server_secret_key_file: str = ""
-    authorized_keys_dir: str = ""
+    enabled: bool = setting(False, doc="CURVE-encrypt and authenticate both sockets")
+    server_secret_key_file: str = setting("", doc="server secret key (from `avard keys`)")
+    authorized_keys_dir: str = setting("", doc="directory of authorised client public keys")
 
 
 @dataclass(frozen=True)
 class ServiceConfig:
     """``[service]``: the ring buffer and the status log."""
 
-    ring_s: float = 30.0
-    status_log_interval_s: float = 60.0
+    ring_s: float = setting(30.0, "s", 1.0, 3600.0, doc="ring buffer length in seconds")
+    status_log_interval_s: float = setting(60.0, "s", 1.0, 86400.0,
+                                           doc="log a status line this often")
 
 
 @dataclass(frozen=True)
@@ -165,3 +239,23 @@ def load(path: str | Path | None, **overrides: Any) -> Config:
     from avard.daemon.config import load_config
 
     return Config.from_dict(load_config(path, **overrides))
+
+
+#: The schema key type of each field annotation: a number accepts TOML's int and float.
+_KEY_TYPES: dict[Any, type | tuple[type, ...]] = {
+    int: int, str: str, bool: bool, float: (int, float), tuple[str, ...]: list}
+
+
+def schema() -> dict[str, dict[str, Key]]:
+    """``{section: {key: Key}}`` read off the dataclasses: what daemon/config.py checks."""
+    out: dict[str, dict[str, Key]] = {}
+    for sec, cls in SECTIONS.items():
+        hints = typing.get_type_hints(cls)
+        keys: dict[str, Key] = {}
+        for f in dataclasses.fields(cls):
+            spec: _Spec = f.metadata["key"]
+            default = list(f.default) if isinstance(f.default, tuple) else f.default
+            keys[f.name] = Key(_KEY_TYPES[hints[f.name]], default, spec.unit, spec.lo, spec.hi,
+                               spec.choices, spec.doc, spec.path)
+        out[sec] = keys
+    return out

@@ -45,7 +45,7 @@ from avard.core.allan.noise_id import (
 )
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
-from avard.core.errors import DataError, FormatError
+from avard.core.errors import DataError
 from avard.core.finite import first_nonfinite_row
 from numpy.typing import ArrayLike, NDArray
 
@@ -162,34 +162,6 @@ class AllanResult:
             out[key] = np.asarray(getattr(self, key)).tolist()
         out["cov"] = None if self.cov is None else self.cov.tolist()
         return out
-
-    @classmethod
-    def from_dict(cls, d: dict) -> AllanResult:
-        """Inverse of ``to_dict``; also reads ``AllanSnapshot.to_dict()`` (its "avar" is
-        ``var``; kind "pavar" when absent). Raises ``FormatError`` naming a missing key."""
-        try:
-            var = np.asarray(d["var"] if "var" in d else d["avar"], dtype=np.float64)
-            cov = d.get("cov")
-            return cls(
-                kind=str(d.get("kind", "pavar")),
-                rate_hz=float(d["rate_hz"]),
-                tau=np.asarray(d["tau"], dtype=np.float64),
-                m=np.asarray(d["m"], dtype=np.int64),
-                stride=np.asarray(d["stride"], dtype=np.int64),
-                var=var,
-                n=np.asarray(d["n"], dtype=np.int64),
-                edf=np.asarray(d["edf"], dtype=np.float64),
-                lo=np.asarray(d["lo"], dtype=np.float64),
-                hi=np.asarray(d["hi"], dtype=np.float64),
-                alpha=np.asarray(d["alpha"], dtype=np.float64),
-                ci=float(d.get("ci", 0.683)),
-                cov=None if cov is None else np.asarray(cov, dtype=np.float64),
-                names=tuple(d.get("names", ())),
-                quantiles=str(d.get("quantiles", "exact")),
-                noise_id=str(d.get("noise_id", "avard")),
-            )
-        except KeyError as exc:
-            raise FormatError(f"Allan result/snapshot dict lacks {exc}; it is not one") from exc
 
 
 @dataclass

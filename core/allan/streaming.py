@@ -98,6 +98,65 @@ class AllanSnapshot:
             out[key] = np.asarray(getattr(self, key)).tolist()
         return out
 
+    @classmethod
+    def from_dict(cls, d: object) -> AllanSnapshot:
+        """THE decoder of a published snapshot (the inverse of :meth:`to_dict`, lists or
+        arrays): the service's fit, ``avard watch``, ``avard web`` and ``avard record`` read
+        ``avar`` records through it. Every array is checked against the others' shapes (K τ,
+        C named channels), so a ragged, truncated or hostile snapshot is refused here with
+        one ``FormatError`` naming what is wrong, never half-drawn later."""
+        if not isinstance(d, dict):
+            raise FormatError(f"an Allan snapshot is a map, not {type(d).__name__}")
+        try:
+            names = d["names"]
+            if not isinstance(names, list | tuple) or not all(isinstance(n, str) for n in names):
+                raise FormatError("snapshot names must be a list of strings")
+            c = len(names)
+            tau = _array(d, "tau", np.float64, 1)
+            k = len(tau)
+            per_tau = {key: _array(d, key, np.int64, 1, (k,)) for key in ("m", "stride", "n")}
+            per_ch = {key: _array(d, key, np.float64, 2, (k, c))
+                      for key in ("avar", "edf", "lo", "hi", "alpha")}
+            cov = _array(d, "cov", np.float64, 3, (k, c, c))
+            kind = d.get("kind", "pavar")
+            if kind not in ("pavar", "phvar"):
+                raise FormatError(f"snapshot kind {kind!r} is not pavar or phvar")
+            return cls(tau, per_tau["m"], per_tau["stride"], per_ch["avar"], cov, per_tau["n"],
+                       per_ch["edf"], per_ch["lo"], per_ch["hi"], per_ch["alpha"],
+                       int(d["n_samples"]), tuple(names), float(d["ci"]), float(d["rate_hz"]),
+                       str(kind))
+        except KeyError as exc:
+            raise FormatError(f"an Allan snapshot lacks {exc}; it is not one") from None
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise FormatError(f"an Allan snapshot does not decode: {exc}") from None
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.names)
+
+    def channel(self, c: int) -> AllanResult:
+        """Channel ``c`` as a single-channel :class:`AllanResult` (what the noise fit takes)."""
+        if not -self.n_channels <= c < self.n_channels:
+            raise DataError(f"channel {c} does not exist: this snapshot has {self.n_channels}")
+        return AllanResult(
+            kind=self.kind, rate_hz=self.rate_hz, tau=self.tau, m=self.m, stride=self.stride,
+            var=self.avar[:, c], n=self.n, edf=self.edf[:, c], lo=self.lo[:, c],
+            hi=self.hi[:, c], alpha=self.alpha[:, c], ci=self.ci,
+            cov=self.cov[:, c:c + 1, c:c + 1], names=(self.names[c],))
+
+
+def _array(d: dict, key: str, dtype: type, ndim: int,
+           shape: tuple[int, ...] | None = None) -> NDArray:
+    """``d[key]`` as a read-only array of ``dtype`` with ``ndim`` dimensions (and ``shape``)."""
+    a: NDArray = np.array(d[key], dtype=dtype)
+    if a.ndim != ndim and a.size == 0 and shape is not None:
+        a = a.reshape(shape)               # an empty snapshot's [] for (0, C)
+    if a.ndim != ndim or (shape is not None and a.shape != shape):
+        raise FormatError(f"snapshot {key} has shape {a.shape}, expected "
+                          f"{shape if shape is not None else f'{ndim} dimension(s)'}")
+    a.flags.writeable = False
+    return a
+
 
 class _Level:
     """Sums of one octave level: m = 2^k, stride, spacing sp = m / stride on its grid."""

@@ -10,6 +10,7 @@ for permissions, read-only mounts, ACLs and a process without CAP_DAC_OVERRIDE a
 from __future__ import annotations
 
 import errno
+import math
 import os
 import shutil
 import tempfile
@@ -127,3 +128,15 @@ def free_bytes(path: str | os.PathLike[str]) -> int:
         if exc.errno == errno.ENOENT:
             return 0
         raise
+
+
+def finite_for_json(x: object) -> object:
+    """``x`` (dicts, lists, numbers) with every non-finite float as None: what a ``--json``
+    output prints (strict JSON has no NaN or infinity)."""
+    if isinstance(x, dict):
+        return {k: finite_for_json(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [finite_for_json(v) for v in x]
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    return x

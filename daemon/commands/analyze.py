@@ -27,7 +27,7 @@ from pathlib import Path
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_file, check_plot_output
+from avard.core.io.outputs import check_output_file, check_plot_output, finite_for_json
 from avard.core.io.source import open_record
 from avard.daemon.commands._options import (
     add_channels_argument,
@@ -105,16 +105,6 @@ def _comp_line(name: str, v: dict | None) -> str:
             f"[{llo:.4g} s, {upper}] (68 %); compensated ADEV in --json")
 
 
-def _finite(x: object) -> object:
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_finite(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    return x
-
-
 def run(args: argparse.Namespace) -> int:
     for fmt, _ in args.export:
         if fmt not in ("kalibr", "csv", "psd"):
@@ -153,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         d = an.to_dict()
         for k, v in comp.items():
-            d["channels"][k]["temperature_compensation"] = _finite(v)
+            d["channels"][k]["temperature_compensation"] = finite_for_json(v)
         sys.stdout.write(json.dumps(d, indent=1, allow_nan=False) + "\n")
     else:
         sys.stdout.write(format_table(an) + "\n")

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import FormatError, NetworkError, OutputError
 from avard.core.io import frames
 from avard.core.io.outputs import check_output_dir
@@ -148,8 +149,25 @@ class StreamArchiver:
             self.recorder.write(frames.event_record(
                 rec["run"], 0, "subscriber_loss", rec.get("t_mono", 0.0),
                 rec.get("t_real", 0.0), detail={"topic": msg.topic, "lost_messages": msg.lost}))
+        if rec["kind"] == "avar" and not self._decodes(rec):
+            return
         if self.recorder.write(rec):
             self.written += 1
+
+    def _decodes(self, rec: dict[str, Any]) -> bool:
+        """An ``avar`` record's snapshot read by the one decoder (as watch and web read it);
+        one that does not decode is archived as an ``unreadable_snapshot`` event instead, so
+        the recording never holds a snapshot its readers would refuse."""
+        try:
+            AllanSnapshot.from_dict(rec.get("snapshot"))
+            return True
+        except FormatError as exc:
+            log.warning("an unreadable Allan snapshot was not archived: %s", exc)
+            assert self.recorder is not None
+            self.recorder.write(frames.event_record(
+                rec["run"], 0, "unreadable_snapshot", rec.get("t_mono", 0.0),
+                rec.get("t_real", 0.0), detail={"error": str(exc)}))
+            return False
 
     def _recover(self, msg: Message, i0: int, n: int) -> list[dict[str, Any]]:
         """Records for the lost samples ``[i0, i0 + n)``: raw blocks fetched back from the

@@ -25,7 +25,7 @@ from avard.daemon.config import (
 )
 from avard.daemon.config_types import Config, RecordingConfig
 from avard.daemon.service.sdnotify import Notifier
-from avard.daemon.service.supervisor import Service
+from avard.daemon.service.supervisor import Service, ServiceHooks
 
 NAME = "run"
 HELP = "run the acquisition service (ADXL355 + DS18B20, Allan core, recording, ZeroMQ)"
@@ -59,18 +59,18 @@ def _check_args(args: argparse.Namespace) -> None:
     check_seed(args.seed)
 
 
-def build(args: argparse.Namespace, config: Config,
-          notifier: Any = None, **service_kw: Any) -> Service:
-    """The service for these arguments over the backend daemon/hw/rig.py chooses (hardware, or
-    the simulated rig for --simulate / $AVARD_BACKEND)."""
-    from avard.daemon.hw.rig import build_rig
+def build(args: argparse.Namespace, config: Config, notifier: Any = None,
+          hooks: ServiceHooks | None = None) -> Service:
+    """The service for these arguments over the rig daemon/hw/rig.py describes (hardware, or
+    the simulated rig for --simulate / $AVARD_BACKEND), composed in daemon/compose.py."""
+    from avard.daemon.compose import compose
+    from avard.daemon.hw.rig import describe_rig
 
-    rig = build_rig(config, simulate=getattr(args, "simulate", None),
-                    seed=getattr(args, "seed", None))
-    if rig.simulate is not None:
-        speed = getattr(args, "speed", None)
-        service_kw.setdefault("speed", 1.0 if speed is None else (speed or None))
-    return rig.service(config, notifier=notifier, **service_kw)
+    speed = getattr(args, "speed", None)
+    spec = describe_rig(config, simulate=getattr(args, "simulate", None),
+                        seed=getattr(args, "seed", None),
+                        speed=1.0 if speed is None else (speed or None))
+    return compose(config, spec, notifier=notifier, hooks=hooks)
 
 
 #: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,

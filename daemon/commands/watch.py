@@ -30,7 +30,8 @@ import time
 from typing import Any
 
 import numpy as np
-from avard.core.errors import NetworkError
+from avard.core.allan.streaming import AllanSnapshot
+from avard.core.errors import FormatError, NetworkError
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.net.subscriber import (
     Message,
@@ -118,7 +119,7 @@ class WatchView:
         self.odr_hz: float | None = None
         self.temps: dict[str, float | None] = {}
         self.chip_temp_c: float | None = None
-        self.snapshot: dict[str, Any] | None = None
+        self.snapshot: AllanSnapshot | None = None
         self.fits: dict[str, dict[str, Any]] = {}
         self.fit_source = ""
         self.status: dict[str, Any] = {}
@@ -136,15 +137,12 @@ class WatchView:
             return
         if "snapshot" in snapshot:  # the request socket answers with the whole avar record
             snapshot, fit = snapshot["snapshot"], snapshot.get("fit", fit)
-        if not isinstance(snapshot, dict):
-            return
         try:
-            self.snapshot = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
-                             for k, v in snapshot.items()}
-        except ValueError as exc:  # ragged lists: not a snapshot this avard understands
+            self.snapshot = AllanSnapshot.from_dict(snapshot)   # the one decoder
+        except FormatError as exc:  # not a snapshot this avard understands
             log.warning("ignoring an unreadable Allan snapshot: %s", exc)
             return
-        self.odr_hz = self.odr_hz or _num(snapshot.get("rate_hz"))
+        self.odr_hz = self.odr_hz or self.snapshot.rate_hz
         self.fits = {}
         if isinstance(fit, dict) and fit:
             self.fits = {"x": fit} if "terms" in fit else {
@@ -190,8 +188,10 @@ class WatchView:
     # ---- rendering ------------------------------------------------------------------------
 
     def duration_s(self) -> float:
-        snap = self.snapshot or {}
-        n, rate = _num(snap.get("n_samples")), _num(snap.get("rate_hz")) or self.odr_hz
+        snap = self.snapshot
+        if snap is None:
+            return 0.0
+        n, rate = snap.n_samples, snap.rate_hz or self.odr_hz
         return n / rate if n and rate else 0.0
 
     def render(self, stats: StreamStats, endpoint: str = "", *, width: int | None = None,
@@ -252,26 +252,19 @@ class WatchView:
         """ADEV at the chosen τ: full rows (value [lo, hi] per channel; accelerometer
         channels alone when all do not fit) and compact rows (value −lo/+hi %)."""
         snap = self.snapshot
-        if snap is None or len(snap.get("tau", [])) == 0:
+        if snap is None or len(snap.tau) == 0:
             return [["ADEV      no Allan snapshot yet"]]
-        tau = np.asarray(snap["tau"], dtype=float)
-        avar = np.atleast_2d(np.asarray(snap["avar"], dtype=float).T).T
-        lo = np.atleast_2d(np.asarray(snap.get("lo", avar), dtype=float).T).T
-        hi = np.atleast_2d(np.asarray(snap.get("hi", avar), dtype=float).T).T
-        names = [str(n) for n in snap.get("names", [f"ch{i}" for i in range(avar.shape[1])])]
-        ci = float(snap.get("ci", 0.683))
-        declared = [str(u) for u in snap.get("units", [])]
-        units = [_unit(n, declared[i] if i < len(declared) else None)
-                 for i, n in enumerate(names)]
-        if avar.shape[1] != len(names):
-            raise ValueError(f"{len(names)} names for {avar.shape[1]} channels")
+        tau, avar, lo, hi = snap.tau, snap.avar, snap.lo, snap.hi
+        names = list(snap.names)
+        ci = snap.ci
+        units = [_unit(n) for n in names]
         rows = []
         for want in self.taus:
             k = int(np.argmin(np.abs(np.log(tau / want))))
             if k in rows or not 0.5 <= tau[k] / want <= 2.0:
                 continue
             rows.append(k)
-        title = (f"ADEV      {int(snap.get('n_samples', 0))} samples = "
+        title = (f"ADEV      {snap.n_samples} samples = "
                  f"{fmt_duration(self.duration_s())}; value [{100 * ci:.1f} % interval]")
         accel = [c for c, n in enumerate(names) if n in ACCEL_CHANNELS] or list(range(len(names)))
 

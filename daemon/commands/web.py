@@ -110,7 +110,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     state = RunState()
-    feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,  # type: ignore[arg-type]
+    feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,
                 fit_interval_s=args.fit_interval,
                 history=None if args.history is None else RecordingSource(Path(args.history)))
     hub = Hub(state, refresh_s=args.refresh)

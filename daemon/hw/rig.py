@@ -1,22 +1,25 @@
-"""The one place that chooses and builds the sensor backend: the real ADXL355 (and DS18B20s)
-or the register-level emulator fed by the simulator.
+"""The rig as data, and the one place that builds its hardware side: the real ADXL355 (and
+DS18B20s) or the register-level emulator fed by the simulator.
 
-The backend comes from ``--simulate PRESET`` when given, else from ``$AVARD_BACKEND``
-(``hardware`` or ``simulate:PRESET``), else it is the hardware. :func:`open_sensor` opens the
-ADXL355 driver over the configured bus (or over the emulator) and :func:`bring_up` is the one
-probe/reset/[self-test]/configure/start sequence; :func:`build_rig` adds the temperature
-sources and the INT1 pin, and :meth:`Rig.service` builds the service over it. ``avard run``
-and ``avard demo`` use :func:`build_rig`; ``avard probe`` uses :func:`open_sensor` and
-:func:`bring_up` (with the self-test) and reads the driver itself.
+A :class:`RigSpec` (frozen: sensors, their buses, the clock) is what the configuration and the
+command line describe (:func:`describe_rig`); :func:`build_rig` turns it into a :class:`Rig`:
+the opened, started drivers, the clock, the temperature sources and the INT1 pin. The service
+is composed over a Rig by daemon/compose.py (the composition root); nothing here imports the
+service. The backend comes from ``--simulate PRESET`` when given, else from
+``$AVARD_BACKEND`` (``hardware`` or ``simulate:PRESET``), else it is the hardware.
+:func:`open_sensor` opens the ADXL355 driver over the described bus (or over the emulator) and
+:func:`bring_up` is the one probe/reset/[self-test]/configure/start sequence. ``avard run`` and
+``avard demo`` compose a Rig; ``avard probe`` uses :func:`open_sensor` and :func:`bring_up`
+(with the self-test) and reads the driver itself.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from avard.core.errors import ConfigError, HardwareError
 from avard.daemon.config_types import Config, SensorConfig, TemperatureConfig
@@ -24,10 +27,107 @@ from avard.daemon.hw.pacing import watermark_settings
 
 if TYPE_CHECKING:
     from avard.daemon.hw.adxl355 import Adxl355, DeviceInfo, SelfTestResult
+    from avard.daemon.hw.ds18b20 import Ds18b20Bank, TemperatureReading
+    from avard.daemon.hw.interrupt import InterruptPin
+    from avard.daemon.hw.source import SampleSource
+    from avard.daemon.hw.timebase import Clock
 
 log = logging.getLogger(__name__)
 
 BACKEND_ENV = "AVARD_BACKEND"
+
+# -- the rig as data ----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class BusSpec:
+    """How one ADXL355 is reached: ``spi`` (/dev/spidevNUMBER.DEVICE) or ``i2c``
+    (/dev/i2c-NUMBER at ADDRESS)."""
+
+    kind: str
+    number: int
+    device: int = 0
+    address: int = 0x1D
+    speed_hz: int = 5_000_000
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """One ADXL355 of the rig: its name, its bus and how it is run."""
+
+    name: str
+    bus: BusSpec
+    range_g: int = 2
+    odr_hz: float = 125.0
+    int1_gpio: str = ""
+    temp_intercept_lsb: float = 1885.0
+
+    @classmethod
+    def from_config(cls, s: SensorConfig) -> SensorSpec:
+        bus = BusSpec(s.bus, s.bus_number, device=s.spi_device, address=s.i2c_address,
+                      speed_hz=s.spi_speed_hz)
+        return cls(s.name, bus, range_g=s.range_g, odr_hz=s.odr_hz, int1_gpio=s.int1_gpio,
+                   temp_intercept_lsb=s.temp_intercept_lsb)
+
+
+@dataclass(frozen=True)
+class ClockSpec:
+    """The rig's clock: the host's (``system``) or the emulator's stepped ``virtual`` clock,
+    which a simulated rig (``simulate`` names the simulator preset) runs on."""
+
+    kind: str = "system"
+    simulate: str | None = None
+    seed: int | None = None
+    odr_error_ppm: float | None = None
+    #: the virtual clock runs at most this many times real time (None: as fast as it can)
+    speed: float | None = None
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """What is bolted together: the sensors (each on its bus), the clock, the DS18B20s."""
+
+    sensors: tuple[SensorSpec, ...]
+    clock: ClockSpec = field(default_factory=ClockSpec)
+    temperature: TemperatureConfig = field(default_factory=TemperatureConfig)
+
+    def __post_init__(self) -> None:
+        if not self.sensors:
+            raise ConfigError("a rig needs at least one sensor")
+        names = [s.name for s in self.sensors]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ConfigError(f"sensor names must differ: {', '.join(dup)} is used twice")
+        seen: dict[tuple[str, int, int], str] = {}
+        for s in self.sensors:
+            b = s.bus
+            where = (b.kind, b.number, b.device if b.kind == "spi" else b.address)
+            if where in seen:
+                wire = (f"/dev/spidev{b.number}.{b.device}" if b.kind == "spi"
+                        else f"/dev/i2c-{b.number} address 0x{b.address:02X}")
+                raise ConfigError(f"sensors {seen[where]} and {s.name} are both on {wire}; "
+                                  "give each its own chip select or I2C address")
+            seen[where] = s.name
+
+    @property
+    def simulate(self) -> str | None:
+        return self.clock.simulate
+
+
+def describe_rig(config: Config, *, simulate: str | None = None, seed: int | None = None,
+                 odr_error_ppm: float | None = None, speed: float | None = 1.0) -> RigSpec:
+    """The rig ``config`` describes, on :func:`choose_backend`'s backend; a simulated rig's
+    virtual clock runs at most ``speed`` times real time (None: as fast as it can)."""
+    preset = choose_backend(simulate)
+    if preset is not None:
+        from avard.core.sim.presets import PRESETS
+
+        if preset not in PRESETS:
+            raise ConfigError(f"--simulate {preset!r}: unknown preset; choose one of "
+                              f"{', '.join(sorted(PRESETS))}")
+        clock = ClockSpec("virtual", preset, seed, odr_error_ppm, speed)
+    else:
+        clock = ClockSpec()
+    return RigSpec((SensorSpec.from_config(config.sensor),), clock, config.temperature)
 
 
 def choose_backend(simulate: str | None) -> str | None:
@@ -42,6 +142,37 @@ def choose_backend(simulate: str | None) -> str | None:
         raise ConfigError(f"{BACKEND_ENV}={value!r}: expected 'hardware' or "
                           "'simulate:PRESET' (e.g. simulate:quiet-lab)")
     return preset
+
+
+# -- the rig built ------------------------------------------------------------------------------
+
+class TemperatureFeed(Protocol):
+    """Temperatures the rig produces itself (the simulated DS18B20s): they go to ``deliver``,
+    which the composition root points at the service's reading handler."""
+
+    deliver: Callable[[TemperatureReading], None] | None
+
+
+@dataclass(frozen=True)
+class Rig:
+    """The rig built: what a :class:`~avard.daemon.service.supervisor.Service` is handed."""
+
+    spec: RigSpec
+    sensor: SampleSource
+    clock: Clock
+    info: Mapping[str, object]
+    temperature_bank: Ds18b20Bank | None = None
+    interrupt: InterruptPin | None = None
+    #: names of the temperature channels the rig's own feed delivers (simulated DS18B20s)
+    extra_temperature_names: tuple[str, ...] = ()
+    #: called by the reader after each poll with CLOCK_MONOTONIC (the simulated conversions)
+    on_tick: Callable[[float], None] | None = None
+    temperature_feed: TemperatureFeed | None = None
+    parts: Mapping[str, object] = field(default_factory=dict)   # emulator, simulator (tests)
+
+    @property
+    def simulate(self) -> str | None:
+        return self.spec.simulate
 
 
 @dataclass(frozen=True)
@@ -73,15 +204,16 @@ def open_sensor(config: Config, *, simulate: str | None = None, seed: int | None
     """The backend's driver, before probe/reset/configure/start. ``still_odr_error_ppm``
     asks for the emulator holding 1 g on Z exactly (``avard probe --emulate``); otherwise
     the backend is :func:`choose_backend`'s: the simulated rig of a preset, or the hardware."""
+    spec = describe_rig(config, simulate=simulate, seed=seed, odr_error_ppm=odr_error_ppm)
+    sensor = spec.sensors[0]
     if still_odr_error_ppm is not None:
-        return _still(config.sensor, still_odr_error_ppm)
-    preset = choose_backend(simulate)
-    if preset is not None:
-        return _open_simulated(config, preset, seed, odr_error_ppm)
-    return _open_hardware(config.sensor)
+        return _still(sensor, still_odr_error_ppm)
+    if spec.simulate is not None:
+        return _open_simulated(sensor, spec)
+    return _open_hardware(sensor)
 
 
-def bring_up(dev: Adxl355, sensor: SensorConfig, *, int1: bool = False,
+def bring_up(dev: Adxl355, sensor: SensorSpec | SensorConfig, *, int1: bool = False,
              self_test: bool = False,
              found: Callable[[DeviceInfo], None] | None = None) -> BringUp:
     """The one start-up sequence of the ADXL355: probe the IDs, reset, optionally run the
@@ -101,7 +233,7 @@ def bring_up(dev: Adxl355, sensor: SensorConfig, *, int1: bool = False,
     return BringUp(info, st)
 
 
-def _still(sensor: SensorConfig, odr_error_ppm: float) -> OpenedSensor:
+def _still(sensor: SensorSpec, odr_error_ppm: float) -> OpenedSensor:
     from avard.daemon.hw.adxl355 import Adxl355
     from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, constant_source
     from avard.daemon.hw.registers import sensitivity_lsb_per_g
@@ -115,93 +247,59 @@ def _still(sensor: SensorConfig, odr_error_ppm: float) -> OpenedSensor:
                         parts={"emulator": emu})
 
 
-def _open_simulated(config: Config, preset: str, seed: int | None,
-                    odr_error_ppm: float | None) -> OpenedSensor:
-    from avard.core.sim.presets import PRESETS
+def _open_simulated(sensor: SensorSpec, spec: RigSpec) -> OpenedSensor:
     from avard.daemon.hw.simulation import open_simulated
 
-    if preset not in PRESETS:
-        raise ConfigError(f"--simulate {preset!r}: unknown preset; choose one of "
-                          f"{', '.join(sorted(PRESETS))}")
-    dev, clock, sims, emu = open_simulated(config, preset, seed=seed,
-                                           odr_error_ppm=odr_error_ppm)
-    return OpenedSensor(dev, clock, simulate=preset, emulated=True,
+    c = spec.clock
+    assert c.simulate is not None
+    dev, clock, sims, emu = open_simulated(sensor, c.simulate, seed=c.seed,
+                                           odr_error_ppm=c.odr_error_ppm,
+                                           interval_s=spec.temperature.interval_s)
+    return OpenedSensor(dev, clock, simulate=c.simulate, emulated=True,
                         parts={"sims": sims, "emulator": emu})
 
 
-def _open_hardware(sensor: SensorConfig) -> OpenedSensor:
+def _open_hardware(sensor: SensorSpec) -> OpenedSensor:
     from avard.daemon.hw.adxl355 import Adxl355
     from avard.daemon.hw.timebase import SystemClock
     from avard.daemon.hw.transport import open_bus
 
-    bus = open_bus(sensor.bus, bus=sensor.bus_number, device=sensor.spi_device,
-                   address=sensor.i2c_address, speed_hz=sensor.spi_speed_hz)
+    b = sensor.bus
+    bus = open_bus(b.kind, bus=b.number, device=b.device, address=b.address,
+                   speed_hz=b.speed_hz)
     clock = SystemClock()
     return OpenedSensor(Adxl355(bus, clock=clock, temp_intercept_lsb=sensor.temp_intercept_lsb),
                         clock)
 
 
-@dataclass
-class Rig:
-    """A sensor and what goes with it, ready for a
-    :class:`~avard.daemon.service.supervisor.Service`."""
-
-    sensor: Any
-    clock: Any
-    sensor_info: dict[str, Any]
-    simulate: str | None = None
-    temperature_bank: Any = None
-    interrupt: Any = None
-    extra_temperature_names: list[str] = field(default_factory=list)
-    on_tick: Callable[[float], None] | None = None
-    attach: Callable[[Any], None] | None = None     # wires a simulated rig to its service
-    parts: dict[str, Any] = field(default_factory=dict)   # emulator, simulator (tests)
-
-    def service(self, config: Config, **service_kw: Any) -> Any:
-        from avard.daemon.service.supervisor import Service
-
-        for key, value in (("temperature_bank", self.temperature_bank),
-                           ("interrupt", self.interrupt), ("on_tick", self.on_tick)):
-            if value is not None:
-                service_kw.setdefault(key, value)
-        svc = Service(config, self.sensor, self.clock, simulate=self.simulate,
-                      sensor_info=self.sensor_info,
-                      extra_temperature_names=list(self.extra_temperature_names),
-                      **service_kw)
-        if self.attach is not None:
-            self.attach(svc)
-        return svc
+def build_rig(spec: RigSpec) -> Rig:
+    """The described rig's configured, started sensor and what goes with it."""
+    if len(spec.sensors) != 1:
+        raise ConfigError(f"this rig has {len(spec.sensors)} sensors; the service runs one "
+                          "sensor per rig so far")
+    if spec.simulate is not None:
+        return _simulated(spec)
+    return _hardware(spec)
 
 
-def build_rig(config: Config, *, simulate: str | None = None, seed: int | None = None,
-              odr_error_ppm: float | None = None) -> Rig:
-    """The configured, started sensor of the chosen backend."""
-    preset = choose_backend(simulate)
-    if preset is not None:
-        return _simulated(config, preset, seed, odr_error_ppm)
-    return _hardware(config)
-
-
-def _simulated(config: Config, preset: str, seed: int | None,
-               odr_error_ppm: float | None) -> Rig:
+def _simulated(spec: RigSpec) -> Rig:
     from avard.daemon.hw.interrupt import EmulatedInterruptPin
 
-    opened = _open_simulated(config, preset, seed, odr_error_ppm)
-    use_int1 = bool(config.sensor.int1_gpio)
-    bring_up(opened.driver, config.sensor, int1=use_int1)
+    sensor = spec.sensors[0]
+    opened = _open_simulated(sensor, spec)
+    use_int1 = bool(sensor.int1_gpio)
+    bring_up(opened.driver, sensor, int1=use_int1)
     sims, emu = opened.parts["sims"], opened.parts["emulator"]
     pin = EmulatedInterruptPin(emu, opened.clock) if use_int1 else None
-
-    def attach(svc: Any) -> None:
-        sims.deliver = svc.temperature_reading
-
-    return Rig(opened.driver, opened.clock, {"device": "ADXL355 (emulated)", "preset": preset},
-               simulate=preset, interrupt=pin, extra_temperature_names=list(sims.names),
-               on_tick=sims.on_tick, attach=attach, parts=dict(opened.parts))
+    return Rig(spec, opened.driver, opened.clock,
+               {"device": "ADXL355 (emulated)", "preset": spec.simulate,
+                "name": sensor.name},
+               interrupt=pin, extra_temperature_names=tuple(sims.names),
+               on_tick=sims.on_tick, temperature_feed=sims, parts=dict(opened.parts))
 
 
-def _hardware(config: Config) -> Rig:
-    s = config.sensor
+def _hardware(spec: RigSpec) -> Rig:
+    s = spec.sensors[0]
     interrupt = None
     if s.int1_gpio:
         from avard.daemon.hw.interrupt import GpiodPin
@@ -209,12 +307,13 @@ def _hardware(config: Config) -> Rig:
         interrupt = GpiodPin(s.int1_gpio)
     opened = _open_hardware(s)
     info = bring_up(opened.driver, s, int1=interrupt is not None).info
-    return Rig(opened.driver, opened.clock, {"device": info.name, "partid": info.partid,
-                                             "revid": info.revid, "bus": s.bus},
-               temperature_bank=_ds18b20_bank(config.temperature), interrupt=interrupt)
+    return Rig(spec, opened.driver, opened.clock,
+               {"device": info.name, "partid": info.partid, "revid": info.revid,
+                "bus": s.bus.kind, "name": s.name},
+               temperature_bank=_ds18b20_bank(spec.temperature), interrupt=interrupt)
 
 
-def _ds18b20_bank(t: TemperatureConfig) -> Any:
+def _ds18b20_bank(t: TemperatureConfig) -> Ds18b20Bank | None:
     """The DS18B20 reader threads for the configured (or every present) sensor."""
     if not t.ds18b20:
         return None

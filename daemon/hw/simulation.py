@@ -8,8 +8,9 @@ and overrun logic as on the Pi. The emulator's samples come from
 DS18B20s reach the service the way real ones do: written into a fake 1-Wire sysfs tree
 (w1_sysfs.py) and read by the real :class:`~avard.daemon.hw.ds18b20.Ds18b20Bank` (w1thermsensor,
 0.0625 °C quantisation, CRC checks), synchronously on the virtual clock. The backend is chosen
-in daemon/hw/rig.py. Time is a stepped :class:`VirtualClock` advanced by the
-reader thread's sleeps, so ``--speed`` never causes overruns from host scheduling jitter.
+in daemon/hw/rig.py, the service composed over it in daemon/compose.py. Time is a stepped
+:class:`VirtualClock` advanced by the reader thread's sleeps, so ``--speed`` never causes
+overruns from host scheduling jitter.
 """
 
 from __future__ import annotations
@@ -17,22 +18,21 @@ from __future__ import annotations
 import math
 import tempfile
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from avard.daemon.config_types import Config, as_config
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.ds18b20 import Ds18b20Bank
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
-from avard.daemon.hw.interrupt import EmulatedInterruptPin
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.hw.w1_sysfs import SysfsTree
 
 if TYPE_CHECKING:
-    from avard.daemon.service.supervisor import Service
+    from avard.daemon.hw.rig import SensorSpec
 
 
 
@@ -142,68 +142,122 @@ class SimulatedSensors:
             deliver(reading)
 
 
-def open_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
-                   seed: int | None = None, odr_error_ppm: float | None = None
+def open_simulated(sensor: SensorSpec, preset: str, *, seed: int | None = None,
+                   odr_error_ppm: float | None = None, interval_s: float = 1.0
                    ) -> tuple[Adxl355, VirtualClock, SimulatedSensors, EmulatedAdxl355]:
-    """Driver over emulator over simulator for ``cfg``'s sensor, not yet brought up."""
+    """Driver over emulator over simulator for the described sensor, not yet brought up;
+    the simulated DS18B20s convert every ``interval_s``."""
     from avard.core.sim.simulate import SensorSimulator, make_config
 
-    config = as_config(cfg)
-    s = config.sensor
-    sim_cfg = make_config(preset, odr_hz=s.odr_hz, range_g=s.range_g)
+    sim_cfg = make_config(preset, odr_hz=sensor.odr_hz, range_g=sensor.range_g)
     # CLOCK_REALTIME of the simulation starts at the host's real time, so that restarts of a
     # simulated service see the real time between them.
     clock = VirtualClock(epoch=time.time() - 1000.0)
-    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed),
-                            interval_s=config.temperature.interval_s, clock=clock)
+    sims = SimulatedSensors(SensorSimulator(sim_cfg, seed=seed), interval_s=interval_s,
+                            clock=clock)
     ppm = sim_cfg.odr_error_ppm if odr_error_ppm is None else odr_error_ppm
     emu = EmulatedAdxl355(sims.source, clock, odr_error_ppm=ppm,
                           temperature=sims.chip_temperature)
     # The emulated chip has the later revision's intercept; the driver uses the configured one,
     # as on hardware, so a wrong intercept shows up as the chip-vs-DS18B20 offset it causes.
-    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock, temp_intercept_lsb=s.temp_intercept_lsb)
+    dev = Adxl355(SpiBus(FakeSpiDev(emu)), clock=clock,
+                  temp_intercept_lsb=sensor.temp_intercept_lsb)
     return dev, clock, sims, emu
 
 
 def build_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
                     seed: int | None = None, odr_error_ppm: float | None = None
                     ) -> tuple[Adxl355, VirtualClock, SimulatedSensors, EmulatedAdxl355]:
-    """Driver over emulator over simulator, configured like ``cfg``'s sensor says and started
-    (daemon/hw/rig.py's one start-up sequence)."""
-    from avard.daemon.hw.rig import bring_up
+    """Driver over emulator over simulator, configured like ``cfg``'s sensor says and started:
+    the parts of the simulated rig daemon/hw/rig.py builds (for tests that take it apart)."""
+    from avard.daemon.hw.rig import build_rig, describe_rig
 
-    config = as_config(cfg)
-    dev, clock, sims, emu = open_simulated(config, preset, seed=seed,
-                                           odr_error_ppm=odr_error_ppm)
-    bring_up(dev, config.sensor, int1=bool(config.sensor.int1_gpio))
-    return dev, clock, sims, emu
+    rig = build_rig(describe_rig(as_config(cfg), simulate=preset, seed=seed,
+                                 odr_error_ppm=odr_error_ppm))
+    parts = rig.parts
+    return (cast(Adxl355, rig.sensor), cast(VirtualClock, rig.clock),
+            cast(SimulatedSensors, parts["sims"]), cast(EmulatedAdxl355, parts["emulator"]))
 
 
-def simulated_service(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, *,
-                      seed: int | None = None,
-                      odr_error_ppm: float | None = None,
-                      after_tick: Callable[[float], None] | None = None,
-                      **service_kw: Any) -> tuple[Service, SimulatedSensors, EmulatedAdxl355]:
-    """The service over the simulated rig (``build_simulated``), wired both ways: the reader
-    thread's ticks drive the simulated DS18B20 conversions (then ``after_tick``, a test's or
-    benchmark's hook, if given), and those readings go into this service's ring. The driver
-    and the virtual clock are ``svc.sensor`` and ``svc.clock``. ``service_kw`` go to
-    ``Service`` (speed, notifier, factories, …)."""
-    from avard.daemon.service.supervisor import Service
+# -- several emulated sensors on one bed --------------------------------------------------------
 
-    config = as_config(cfg)
-    dev, clock, sims, emu = build_simulated(config, preset, seed=seed,
-                                            odr_error_ppm=odr_error_ppm)
+@dataclass(frozen=True)
+class BedSpec:
+    """The motion every sensor of an emulated rig feels (per axis, SI): a white part (a
+    building's floor vibration; its ADEV at τ = 1 s, m/s/√s) and a slow tilt (a random walk of
+    the acceleration, m/s²/√s)."""
 
-    def tick(t_mono: float) -> None:
-        sims.on_tick(t_mono)
-        if after_tick is not None:
-            after_tick(t_mono)
+    white: float = 5e-5
+    tilt: float = 1e-6
+    seed: int | None = None
 
-    if config.sensor.int1_gpio:
-        service_kw.setdefault("interrupt", EmulatedInterruptPin(emu, clock))
-    svc = Service(config, dev, clock, simulate=preset,
-                  on_tick=sims.on_tick if after_tick is None else tick,
-                  extra_temperature_names=list(sims.names), **service_kw)
-    sims.deliver = svc.temperature_reading
-    return svc, sims, emu
+
+class BedMotion:
+    """The bed's motion by sample index, drawn once and handed to each sensor's source in
+    turn (m/s², (n, 3)): sample k is the same for every sensor, whatever order and block
+    sizes they drain in; a sample is dropped once every sensor has taken it."""
+
+    def __init__(self, spec: BedSpec, n_sensors: int, rate_hz: float) -> None:
+        self.spec = spec
+        self.rate_hz = float(rate_hz)
+        self._rng = np.random.default_rng(spec.seed)
+        self._buf = np.zeros((0, 3))
+        self._base = 0                      # sample index of _buf[0]
+        self._pos = [0] * n_sensors         # next sample index of each sensor
+        self._level = np.zeros(3)           # the tilt's current value
+
+    def _extend(self, upto: int) -> None:
+        n = upto - (self._base + len(self._buf))
+        if n <= 0:
+            return
+        white = self._rng.normal(0.0, self.spec.white * math.sqrt(self.rate_hz), (n, 3))
+        steps = self._rng.normal(0.0, self.spec.tilt / math.sqrt(self.rate_hz), (n, 3))
+        walk = self._level + np.cumsum(steps, axis=0)
+        self._level = walk[-1]
+        self._buf = np.concatenate([self._buf, white + walk])
+
+    def take(self, sensor: int, n: int) -> np.ndarray:
+        start = self._pos[sensor]
+        self._extend(start + n)
+        out = self._buf[start - self._base:start - self._base + n].copy()
+        self._pos[sensor] = start + n
+        drop = min(self._pos) - self._base
+        if drop > 4096:
+            self._buf = self._buf[drop:]
+            self._base += drop
+        return out
+
+
+def emulated_rig(sensors: Sequence[SensorSpec], preset: str, *, bed: BedSpec = BedSpec(),
+                 seed: int | None = None) -> tuple[VirtualClock, list[tuple[str, Adxl355,
+                                                                           EmulatedAdxl355]]]:
+    """Several ADXL355s (each over its described emulated transport: SPI bus/chip select or
+    I2C address) on one virtual clock, each the simulator's ``preset`` (its own noise, its own
+    seed) plus the one :class:`BedMotion`: (clock, [(name, driver, emulator)]), not yet
+    brought up. All sensors run at the first one's ODR."""
+    from avard.core.sim.simulate import SensorSimulator, make_config
+    from avard.daemon.hw.emulator import FakeSMBus
+    from avard.daemon.hw.registers import STANDARD_GRAVITY, sensitivity_lsb_per_g
+    from avard.daemon.hw.transport import I2cBus
+
+    odr = sensors[0].odr_hz
+    clock = VirtualClock(epoch=time.time() - 1000.0)
+    motion = BedMotion(bed, len(sensors), odr)
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, s in enumerate(sensors):
+        sim = SensorSimulator(make_config(preset, odr_hz=odr, range_g=s.range_g),
+                              seed=int(rng.integers(2**31)))
+        lsb = STANDARD_GRAVITY / sensitivity_lsb_per_g(s.range_g)
+
+        def source(n: int, sim: Any = sim, i: int = i, lsb: float = lsb) -> np.ndarray:
+            accel = sim.next(n).accel + motion.take(i, n)
+            return np.clip(np.rint(accel / lsb), -(1 << 19), (1 << 19) - 1).astype(np.int32)
+
+        emu = EmulatedAdxl355(source, clock, odr_error_ppm=0.0, temperature=25.0)
+        bus: Any = (SpiBus(FakeSpiDev(emu)) if s.bus.kind == "spi"
+                    else I2cBus(FakeSMBus(emu, address=s.bus.address, bus=s.bus.number),
+                                address=s.bus.address))
+        out.append((s.name, Adxl355(bus, clock=clock,
+                                    temp_intercept_lsb=s.temp_intercept_lsb), emu))
+    return clock, out

@@ -9,14 +9,15 @@ thing and are handed what they need:
 - ``publisher_stage.py`` the PUB socket and the request handlers;
 - ``header.py``      the run's header record, shared by recorder, publisher and requests;
 - ``checkpoint.py``  the state file and the restore at start-up;
-- ``acquisition.py`` the reader thread (FIFO drain into the ring), paced by ``pacing.py``;
+- ``acquisition.py`` the reader thread (FIFO drain into the ring), paced by hw/pacing.py;
 - ``ring.py``        the sample ring the stages block on;
-- ``timebase.py``    the fitted output data rate and the sample clock;
 - ``recorder.py``    the crash-safe segment writer (also used by ``avard record``);
 - ``snapshots.py``   the one snapshot fit (service, ``avard watch``, ``avard web``);
 - ``sdnotify.py``, ``stop_signals.py``, ``logfmt.py``: systemd and process plumbing
   (``daemon/blas_threads.py`` stays outside: it must run before anything imports numpy).
 
-The wire format is docs/wire-format.md, the design docs/service.md. This package imports
-nothing itself: ``avard`` loads ``logfmt`` and ``stop_signals`` before numpy is imported.
+The service is handed a built rig (daemon/hw/rig.py) by the composition root,
+daemon/compose.py. The wire format is docs/wire-format.md, the design docs/service.md. This
+package imports nothing itself: ``avard`` loads ``logfmt`` and ``stop_signals`` before numpy
+is imported.
 """

@@ -15,10 +15,9 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
-from types import SimpleNamespace
 from typing import Any
 
-import numpy as np
+from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import AvardError
 
 log = logging.getLogger(__name__)
@@ -100,10 +99,10 @@ class SnapshotBoard:
 ACCEL_CHANNELS = ("x", "y", "z")
 
 
-def fit_snapshot(snap: dict[str, Any], *, filter_corner_hz: float | None = None
+def fit_snapshot(snap: AllanSnapshot, *, filter_corner_hz: float | None = None
                  ) -> dict[str, Any]:
-    """The noise fit (``avard.core.model.fit.NoiseFit``) of each acceleration channel of an Allan
-    snapshot (``AllanSnapshot.to_dict()``, lists or arrays); {} without the analysis side.
+    """The noise fit (``avard.core.model.fit.NoiseFit``) of each acceleration channel of a
+    decoded Allan snapshot (``AllanSnapshot.from_dict``); {} without the analysis side.
 
     The one snapshot fit: the service's ``snapshot`` replies, ``avard watch`` and ``avard web``
     all call it, so they show the same terms. The ADXL355's digital low-pass sits at ODR/4
@@ -112,27 +111,19 @@ def fit_snapshot(snap: dict[str, Any], *, filter_corner_hz: float | None = None
         from avard.core.model.fit import fit_noise
     except ImportError:  # the analysis side is optional for a watcher
         return {}
-    names = [str(n) for n in snap.get("names", ACCEL_CHANNELS)]
-    rate = float(snap["rate_hz"])
-    ci = float(snap.get("ci", 0.683))
-    var, edf = np.asarray(snap["avar"], dtype=float), np.asarray(snap["edf"], dtype=float)
-    lo, hi = np.asarray(snap["lo"], dtype=float), np.asarray(snap["hi"], dtype=float)
     out = {}
-    for c, name in enumerate(names):
+    for c, name in enumerate(snap.names):
         if name not in ACCEL_CHANNELS:
             continue
         try:
-            res = SimpleNamespace(
-                tau=np.asarray(snap["tau"]), m=np.asarray(snap["m"]),
-                stride=np.asarray(snap["stride"]), n=np.asarray(snap["n"]), var=var[:, c],
-                edf=edf[:, c], lo=lo[:, c], hi=hi[:, c], rate_hz=rate, ci=ci,
-                kind=snap.get("kind", "pavar"))
-            out[name] = fit_noise(res, ci=ci, filter_corner_hz=filter_corner_hz or rate / 4)
-        except (AvardError, KeyError, IndexError, ValueError, TypeError) as exc:
+            out[name] = fit_noise(snap.channel(c), ci=snap.ci,
+                                  filter_corner_hz=filter_corner_hz or snap.rate_hz / 4)
+        except (AvardError, IndexError, ValueError, TypeError) as exc:
             log.debug("no fit for %s: %s", name, exc)
     return out
 
 
 def fit_record(rec: dict[str, Any]) -> dict[str, Any]:
     """The service's fit of an ``avar`` record: :func:`fit_snapshot` as plain dicts."""
-    return {name: fit.to_dict() for name, fit in fit_snapshot(rec["snapshot"]).items()}
+    snap = AllanSnapshot.from_dict(rec["snapshot"])
+    return {name: fit.to_dict() for name, fit in fit_snapshot(snap).items()}

@@ -24,6 +24,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from avard.core.allan.feed import AllanFeed
@@ -32,6 +33,7 @@ from avard.core.io import frames
 from avard.daemon import __version__
 from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
+from avard.daemon.hw.rig import Rig
 from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
@@ -59,42 +61,51 @@ RECORDER_BATCH_S = 0.25
 PUBLISH_BATCH_S = 0.05
 
 
-class Service:
-    """One acquisition run: builds nothing hardware-side itself (see daemon/hw/rig.py and
-    ``commands/run.py``); owns the threads and their shutdown."""
+@dataclass(frozen=True)
+class ServiceHooks:
+    """Replacements for the parts the service makes itself (tests and benchmarks inject faulty
+    disks or counting sockets): each factory is called with the service."""
 
-    def __init__(self, config: Config, sensor: Any, clock: Any,
-                 *,
-                 run_id: str | None = None, speed: float | None = None,
-                 temperature_bank: Any = None,
-                 simulate: str | None = None, notifier: Any = None,
-                 recorder_factory: Callable[..., Any] | None = None,
-                 publisher_factory: Callable[..., Any] | None = None,
-                 request_factory: Callable[..., Any] | None = None,
-                 streaming_cls: Any = None, on_tick: Callable[[float], None] | None = None,
-                 sensor_info: dict[str, Any] | None = None,
-                 extra_temperature_names: list[str] | None = None,
-                 interrupt: Any = None) -> None:
+    recorder: Callable[[Service], Any] | None = None
+    publisher: Callable[[Service], Any] | None = None
+    request_server: Callable[[Service], Any] | None = None
+    streaming_cls: Any = None       # the accumulator class (StreamingAllan by default)
+
+
+class Service:
+    """One acquisition run over a built :class:`~avard.daemon.hw.rig.Rig`: builds nothing
+    hardware-side itself (daemon/compose.py composes it); owns the threads and their
+    shutdown."""
+
+    def __init__(self, config: Config, rig: Rig, *, run_id: str | None = None,
+                 notifier: Any = None, hooks: ServiceHooks | None = None) -> None:
         if not isinstance(config, Config):
             # the contract is typed: build the Config at the edge (config_types.load/as_config)
             raise TypeError(f"Service takes a config_types.Config, not {type(config).__name__}")
+        if not isinstance(rig, Rig):
+            raise TypeError(f"Service takes a hw.rig.Rig, not {type(rig).__name__}")
+        hooks = hooks or ServiceHooks()
+        sensor, clock = rig.sensor, rig.clock
         self.config = config
         self.cfg = config.as_dict()    # the checked dict: what the header stores as ``config``
-        self.sensor = sensor
-        self.clock = clock
+        self.rig = rig
+        self.sensor: Any = sensor
+        self.clock: Any = clock
         # a run sequence number from the recording first: name order is data order even
         # when CLOCK_REALTIME is wrong (recorder.new_run_id)
         self.run_id = run_id or new_run_id(config.recording.data_dir, clock.realtime())
         self.boot_id: str | None = getattr(clock, "boot_id", None)
         if self.boot_id is None and isinstance(clock, SystemClock):
             self.boot_id = kernel_boot_id()
-        self.speed = speed
-        self.simulate = simulate
-        self.bank = temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
+        self.speed = rig.spec.clock.speed
+        self.simulate = rig.simulate
+        self.bank = rig.temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
         self._temp_ok: dict[str, bool] = {}
-        self.sensor_info = dict(sensor_info or {})
+        self.sensor_info = dict(rig.info)
         self.notifier = notifier
-        self.interrupt = interrupt        # interrupt.InterruptPin on the FIFO watermark
+        self.interrupt = rig.interrupt        # interrupt.InterruptPin on the FIFO watermark
+        extra_temperature_names = list(rig.extra_temperature_names)
+        on_tick = rig.on_tick
         self.stop_requested = WakingEvent()
         self._latch: SignalLatch | None = None   # signals and stop requests wake the loop
         self.reopen_requested = threading.Event()
@@ -111,8 +122,9 @@ class Service:
         # Channels: the chip's own sensor, the DS18B20 threads, and sources that mark their
         # readings themselves (the simulated DS18B20 of --simulate).
         self.temp_names = ["chip", *(self.bank.names if self.bank is not None else []),
-                           *(extra_temperature_names or [])]
+                           *extra_temperature_names]
         self.data_dir = config.recording.path
+        streaming_cls = hooks.streaming_cls
         if streaming_cls is None:
             from avard.core.allan.streaming import StreamingAllan
 
@@ -125,9 +137,9 @@ class Service:
         self.restored: dict[str, Any] | None = None
         self._restart_gap: RestartGap | None = None
         self._stop_at: float | None = None
-        self._recorder_factory = recorder_factory
-        self._publisher_factory = publisher_factory
-        self._request_factory = request_factory
+        self._recorder_factory = hooks.recorder
+        self._publisher_factory = hooks.publisher
+        self._request_factory = hooks.request_server
         self.recorder: Any = None
         self.publisher: Any = None
         self.request_server: Any = None

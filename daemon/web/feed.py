@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import FormatError, NetworkError
 from avard.core.io.source import RecordingSource
 from avard.daemon.net.subscriber import Subscriber
@@ -26,7 +27,7 @@ log = logging.getLogger(__name__)
 #: Seconds between asks for the run header while the service has not given one.
 HEADER_RETRY_S = 10.0
 
-FitFn = Callable[[dict[str, Any]], dict[str, Any]]
+FitFn = Callable[[AllanSnapshot], dict[str, Any]]
 
 
 class Feed:

@@ -12,7 +12,7 @@ import math
 import time
 from typing import Any
 
-import numpy as np
+from avard.core.allan.streaming import AllanSnapshot
 from avard.daemon.web.state import RunState
 
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
@@ -93,7 +93,7 @@ def metrics_text(state: RunState) -> str:
         w.metric("avard_allan_samples", "gauge", "Samples in the latest Allan snapshot.",
                  [({}, snap.n_samples)])
         # one unit per metric name: accelerations and temperatures apart
-        ci = f"{100 * float(snap.data.get('ci', 0.683)):.1f} %"
+        ci = f"{100 * snap.data.ci:.1f} %"
         for base, accel, unit, what in (
                 ("avard_adev_meters_per_second_squared", True, "m/s^2", "axis"),
                 ("avard_temperature_adev_celsius", False, "degC", "sensor")):
@@ -106,12 +106,12 @@ def metrics_text(state: RunState) -> str:
     return w.text()
 
 
-def _adev_samples(d: dict[str, Any], key: str, *, accel: bool,
+def _adev_samples(d: AllanSnapshot, key: str, *, accel: bool,
                   label: str) -> list[tuple[dict[str, Any], float]]:
     """√(value) at every τ of the acceleration axes (``accel``) or of the other channels."""
-    tau = np.asarray(d.get("tau", []), dtype=float)
-    values = np.atleast_2d(np.asarray(d.get(key, []), dtype=float).T).T
-    names = [str(n) for n in d.get("names", [])]
+    tau = d.tau
+    values = getattr(d, key)
+    names = list(d.names)
     out: list[tuple[dict[str, Any], float]] = []
     if values.ndim != 2 or values.shape[0] != len(tau):
         return out

@@ -186,10 +186,9 @@ def _log_range(values: np.ndarray) -> tuple[float, float]:
 def adev_svg(snap: Snapshot, fits: dict[str, Any], *, title: str = "ADEV") -> str:
     """Log-log ADEV of the x/y/z channels with their intervals and the fitted model curve."""
     d = snap.data
-    tau = np.asarray(d["tau"], dtype=float)
-    names = [str(n) for n in d.get("names", AXES)]
-    cols = [(c, n) for c, n in enumerate(names) if n in AXES]
-    avar, lo, hi = (np.atleast_2d(np.asarray(d[k], dtype=float).T).T for k in ("avar", "lo", "hi"))
+    tau = d.tau
+    cols = [(c, n) for c, n in enumerate(d.names) if n in AXES]
+    avar, lo, hi = d.avar, d.lo, d.hi
     adev, adev_lo, adev_hi = _sqrt(avar), _sqrt(lo), _sqrt(hi)
     idx = [c for c, _ in cols]
     shown = np.concatenate([adev[:, idx].ravel(), adev_lo[:, idx].ravel(),
@@ -265,7 +264,7 @@ def adev_html(state: RunState) -> str:
     if snap is None:
         return '<p class="waiting">No Allan snapshot yet (the service sends one every ' \
                '<code>allan.snapshot_interval_s</code>).</p>'
-    ci = float(snap.data.get("ci", 0.683))
+    ci = snap.data.ci
     fitted = state.fitted
     note = ("model curve: fit of this snapshot" if fitted is snap else
             "model curve: fit of an earlier snapshot" if fitted is not None else
@@ -290,7 +289,7 @@ def fit_html(state: RunState, target: float) -> str:
         return ('<p class="waiting">Fit pending (fitted here from the latest snapshot, with '
                 '<code>avard.core.model.fit</code>).</p>')
     T = state.fitted.duration_s if state.fitted is not None else 0.0
-    ci = float(state.fitted.data.get("ci", 0.683)) if state.fitted is not None else 0.683
+    ci = state.fitted.data.ci if state.fitted is not None else 0.683
     head = (f"<tr><th>term</th>{''.join(f'<th>{a}</th>' for a in state.fits)}</tr>")
     terms: list[str] = []
     for fit in state.fits.values():
@@ -334,10 +333,9 @@ def targets_html(state: RunState, target: float) -> str:
     if snap is None:
         return '<p class="waiting">Waiting for an Allan snapshot.</p>'
     d = snap.data
-    tau = np.asarray(d["tau"], dtype=float)
-    names = [str(n) for n in d.get("names", AXES)]
-    cols = [(c, n) for c, n in enumerate(names) if n in AXES]
-    avar, lo, hi = (np.atleast_2d(np.asarray(d[k], dtype=float).T).T for k in ("avar", "lo", "hi"))
+    tau = d.tau
+    cols = [(c, n) for c, n in enumerate(d.names) if n in AXES]
+    avar, lo, hi = d.avar, d.lo, d.hi
     T = snap.duration_s
     rows = []
     for k, t in enumerate(tau):

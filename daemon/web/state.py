@@ -25,7 +25,8 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
+from avard.core.allan.streaming import AllanSnapshot
+from avard.core.errors import FormatError
 from avard.daemon.net.subscriber import Message, StreamStats
 
 log = logging.getLogger(__name__)
@@ -89,15 +90,16 @@ class TimelineItem:
 
 @dataclass
 class Snapshot:
-    """The newest Allan snapshot (numpy arrays) and when it arrived."""
+    """The newest Allan snapshot (decoded by ``AllanSnapshot.from_dict``) and when it
+    arrived."""
 
-    data: dict[str, Any]
+    data: AllanSnapshot
     received: float
     n_samples: int
 
     @property
     def rate_hz(self) -> float:
-        return float(self.data.get("rate_hz") or 0.0)
+        return float(self.data.rate_hz or 0.0)
 
     @property
     def duration_s(self) -> float:
@@ -175,19 +177,20 @@ class RunState:
 
     def set_snapshot(self, record: dict[str, Any]) -> None:
         """An ``avar`` record (or the request socket's answer, the same record)."""
-        snap = record.get("snapshot")
-        if not isinstance(snap, dict) or not isinstance(snap.get("tau"), list | np.ndarray) \
-                or len(snap["tau"]) == 0:
-            return  # not a snapshot, or one without any τ yet (the service's first)
+        try:
+            snap = AllanSnapshot.from_dict(record.get("snapshot"))   # the one decoder
+            comp = record.get("compensated")  # a temperature-compensated snapshot
+            compensated = AllanSnapshot.from_dict(comp) if isinstance(comp, dict) else None
+        except FormatError as exc:  # ragged arrays from a newer/broken peer
+            log.warning("ignoring an unreadable Allan snapshot: %s", exc)
+            return
+        if len(snap.tau) == 0:
+            return  # one without any τ yet (the service's first)
         with self.lock:
-            try:
-                self.snapshot = _snapshot(snap, self.clock())
-                comp = record.get("compensated")  # a temperature-compensated snapshot
-                if isinstance(comp, dict) and "tau" in comp:
-                    self.compensated = _snapshot(comp, self.clock())
-            except (ValueError, TypeError) as exc:  # ragged arrays from a newer/broken peer
-                log.warning("ignoring an unreadable Allan snapshot: %s", exc)
-                return
+            now = self.clock()
+            self.snapshot = Snapshot(snap, now, snap.n_samples)
+            if compensated is not None:
+                self.compensated = Snapshot(compensated, now, compensated.n_samples)
             self.version += 1
 
     def update(self, msg: Message, stats: StreamStats | None = None) -> None:
@@ -334,9 +337,3 @@ class RunState:
         with self.lock:
             self.fits, self.fitted = fits, snapshot
             self.version += 1
-
-
-def _snapshot(snap: dict[str, Any], now: float) -> Snapshot:
-    data = {k: (np.asarray(v) if isinstance(v, list | np.ndarray) else v)
-            for k, v in snap.items()}
-    return Snapshot(data, now, int(snap.get("n_samples", 0) or 0))

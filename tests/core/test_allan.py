@@ -275,21 +275,26 @@ def test_alpha_can_be_imposed_per_tau() -> None:
         oavar(y, 1.0, [1, 2], alpha=-3)  # AVAR does not converge there
 
 
-def test_result_and_snapshot_dicts_round_trip() -> None:
+def test_the_snapshot_decoder_round_trips_and_refuses_what_does_not_fit() -> None:
     import msgpack
-    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
     from avard.core.errors import FormatError
 
     y = np.random.default_rng(15).normal(size=(3000, 2))
-    res = oavar(y, 10.0, names=["a", "b"])
-    back = AllanResult.from_dict(msgpack.unpackb(msgpack.packb(res.to_dict())))
-    np.testing.assert_array_equal(back.var, res.var)
-    np.testing.assert_array_equal(back.cov, res.cov)
-    assert back.names == ("a", "b") and back.kind == "oavar"
-    acc = StreamingAllan(2, 10.0)
+    acc = StreamingAllan(2, 10.0, names=["a", "b"])
     acc.update(y)
-    from_snap = AllanResult.from_dict(acc.snapshot().to_dict())
-    np.testing.assert_array_equal(from_snap.var, acc.result().var)
-    assert from_snap.kind == "pavar" and from_snap.channel(1).var.ndim == 1
-    with pytest.raises(FormatError, match="tau"):
-        AllanResult.from_dict({"var": [1.0], "rate_hz": 1.0})
+    snap = acc.snapshot()
+    back = AllanSnapshot.from_dict(msgpack.unpackb(msgpack.packb(snap.to_dict())))
+    for key in ("tau", "m", "stride", "avar", "cov", "n", "edf", "lo", "hi", "alpha"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(snap, key))
+    assert (back.names, back.kind, back.n_samples) == (("a", "b"), "pavar", 3000)
+    one = back.channel(1)                          # what the noise fit takes
+    np.testing.assert_array_equal(one.var, acc.result().var[:, 1])
+    assert one.var.ndim == 1 and one.names == ("b",) and one.cov.shape == (len(one.tau), 1, 1)
+    d = snap.to_dict()
+    for broken, match in (({k: v for k, v in d.items() if k != "tau"}, "tau"),
+                          ({**d, "avar": [row[:1] for row in d["avar"]]}, "avar has shape"),
+                          ({**d, "tau": [1, [2, 3]]}, "does not decode"),
+                          ({**d, "names": 5}, "names"), ([1, 2], "a map")):
+        with pytest.raises(FormatError, match=match):
+            AllanSnapshot.from_dict(broken)

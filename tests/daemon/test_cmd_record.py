@@ -167,8 +167,8 @@ def test_archive_of_the_real_service_equals_its_own_recording(tmp_path: Path) ->
     variance equals the recording's."""
     from avard.core.io.recording import load_recording, replay_allan
     from avard.daemon.commands.record import StreamArchiver
+    from avard.daemon.compose import simulated_service
     from avard.daemon.config import load_config
-    from avard.daemon.hw.simulation import simulated_service
     from avard.daemon.net.subscriber import Subscriber
 
     cfg = load_config(None, **{
@@ -258,3 +258,35 @@ def test_record_fetches_lost_blocks_back_from_the_ring(service: FakeService,
     np.testing.assert_array_equal(half["counts"][:, 1], 7 + np.arange(16, 32))
     gaps = [(g["i0"], g["n"], g["reason"]) for g in recs if g["kind"] == "gap"]
     assert gaps == [(224, 16, "subscriber_loss")]
+
+
+def test_record_archives_snapshots_its_readers_can_decode_and_says_which_it_could_not(
+        service: FakeService, tmp_path: Path) -> None:
+    """The avar records go through the one snapshot decoder (AllanSnapshot.from_dict), as in
+    watch and web: a good one is archived as is; a ragged one becomes an event, not a record
+    that every later reader would refuse."""
+    from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
+
+    out = tmp_path / "archive"
+    thread, result = _record(service, out)
+    service.wait_subscribed()
+    acc = StreamingAllan(3, 125.0, names=["x", "y", "z"])
+    acc.update(np.random.default_rng(3).normal(size=(4096, 3)))
+    good = acc.snapshot().to_dict()
+    bad = {**good, "avar": [row[:2] for row in good["avar"]]}
+    service.send("raw", _raw("run-1", 0, 0))
+    service.send("avar", F.avar_record("run-1", 0, 32, 4096, bad, 0.0, 0.0))
+    service.send("avar", F.avar_record("run-1", 1, 32, 4096, good, 0.0, 0.0))
+    while sum(r["kind"] in ("avar", "event") for r in _read(out)) < 2:
+        assert thread.is_alive(), "record ended early"
+        time.sleep(0.02)
+    result["stop"].set()
+    thread.join(30)
+    recs = list(RecordingReader(out))
+    avars = [r for r in recs if r["kind"] == "avar"]
+    assert len(avars) == 1
+    back = AllanSnapshot.from_dict(avars[0]["snapshot"])
+    np.testing.assert_array_equal(back.avar, acc.snapshot().avar)
+    events = [r for r in recs if r["kind"] == "event"]
+    assert [e["name"] for e in events] == ["unreadable_snapshot"]
+    assert "avar has shape" in events[0]["detail"]["error"]

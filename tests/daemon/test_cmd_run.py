@@ -162,14 +162,17 @@ from avard.daemon.config import load_config
 from avard.daemon.config_types import as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.hw.adxl355 import Adxl355
-from avard.daemon.service.supervisor import Service
+from avard.daemon.compose import compose
+from avard.daemon.hw.rig import Rig, RigSpec, SensorSpec
 from avard.daemon.hw.transport import SpiBus
 clock = VirtualClock()
 dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=125.0); dev.start()
 cfg = load_config(None, **{"recording.data_dir": sys.argv[1], "publish.enabled": False,
                            "allan.snapshot_interval_s": 1.0})
-svc = Service(as_config(cfg), dev, clock)
+config = as_config(cfg)
+rig = Rig(RigSpec((SensorSpec.from_config(config.sensor),)), dev, clock, {})
+svc = compose(config, rig)
 svc.run(30.0)
 heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("scipy", "matplotlib"))
 print(blas_threads.LOADED_BEFORE_NUMPY, os.environ["OPENBLAS_NUM_THREADS"], heavy,

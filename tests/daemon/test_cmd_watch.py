@@ -75,7 +75,7 @@ def test_view_fits_locally_without_a_service_fit() -> None:
     other = WatchView()
     other.set_snapshot(F.avar_record("r", 0, 1, 1, _snapshot(1 << 12), 0.0, 0.0,
                                      fit={"terms": {}}))
-    assert other.fit_source == "service" and other.snapshot["n_samples"] == 1 << 12
+    assert other.fit_source == "service" and other.snapshot.n_samples == 1 << 12
 
 
 def test_watch_once_over_a_real_stream(capsys: pytest.CaptureFixture) -> None:
@@ -159,13 +159,13 @@ def test_the_view_fits_the_terminal_with_the_essentials_on_it(width: int, height
     assert "plate 21.50 °C, air 22.12 °C, chip 24.3 °C" in text
     # ADEV at every shown τ, each accelerometer channel with its interval
     snap = view.snapshot
-    tau = np.asarray(snap["tau"])
+    tau = snap.tau
     for want in (0.1, 1.0, 10.0, 100.0):
         k = int(np.argmin(np.abs(np.log(tau / want))))
         row = next(ln for ln in lines if ln.strip().startswith(f"{tau[k]:.4g} "))
         for c in range(3):
-            v = math.sqrt(snap["avar"][k][c])
-            lo, hi = math.sqrt(snap["lo"][k][c]), math.sqrt(snap["hi"][k][c])
+            v = math.sqrt(snap.avar[k, c])
+            lo, hi = math.sqrt(snap.lo[k, c]), math.sqrt(snap.hi[k, c])
             if width >= 120:   # room for the interval's ends
                 assert f"{v:.3e} [{lo:.2e}, {hi:.2e}]" in row
             else:              # the interval as −/+ percent of the value

@@ -53,6 +53,7 @@ def test_shipped_file_equals_defaults_and_comments_every_key() -> None:
     ({"publish": {"endpoint": "tcp://0.0.0.0:5555"}}, r"allow_remote = true"),
     ({"publish": {"endpoint": "udp://x"}}, r"ZeroMQ endpoint"),
     ({"temperature": {"ids": [1, 2]}}, r"temperature\.ids = \[1, 2\]"),
+    ({"sensor": {"name": "left plate"}}, r"sensor\.name = 'left plate': use 1 to 32"),
 ])
 def test_bad_values_are_refused_with_key_value_and_allowed(raw: dict, pattern: str) -> None:
     with pytest.raises(ConfigError, match=pattern):

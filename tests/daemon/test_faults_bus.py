@@ -10,6 +10,7 @@ This module also holds the harness the other test_faults_* modules use (``run_ri
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import threading
 import time
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 import pytest
 from avard.core.io.recording import RecordingReader, replay_allan
+from avard.daemon.compose import compose
 from avard.daemon.config import load_config
 from avard.daemon.config_types import as_config
 from avard.daemon.hw import registers as R
@@ -29,7 +31,9 @@ from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSMBus, VirtualClock, c
 from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.hw.transport import I2cBus
 from avard.daemon.net.subscriber import Subscriber
-from avard.daemon.service.supervisor import Service
+from avard.daemon.service.supervisor import Service, ServiceHooks
+
+from tests.support.rigs import rig_from_parts
 
 RATE = 125.0
 
@@ -132,17 +136,13 @@ def run_rig(tmp_path: Path, seconds: float, *, inject: Inject | None = None, see
 
         dev.drain = faulty_drain  # type: ignore[method-assign]
 
-    kw: dict[str, Any] = {}
-    if recorder_factory is not None:
-        kw["recorder_factory"] = recorder_factory
-    if notifier is not None:
-        kw["notifier"] = notifier
-    svc = Service(as_config(cfg), dev, clock, speed=speed, simulate="quiet-lab",
-                  on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names) if bank is None else [],
-                  temperature_bank=bank, **kw)
-    if bank is None:
-        sims.deliver = svc.temperature_reading
+    config = as_config(cfg)
+    parts = rig_from_parts(config, dev, clock, simulate="quiet-lab", speed=speed, sims=sims,
+                           bank=bank)
+    if bank is not None:     # the bank replaces the simulated DS18B20s; the ticks stay
+        parts = dataclasses.replace(parts, extra_temperature_names=(), temperature_feed=None)
+    svc = compose(config, parts, notifier=notifier,
+                  hooks=ServiceHooks(recorder=recorder_factory))
     ctx: dict[str, Any] = {"svc": svc, "sims": sims, "emu": emu, "clock": clock, "dev": dev,
                            "once": once}
     box: dict[str, Any] = {}

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from avard.core.io.recording import RecordingReader, load_recording
 from avard.daemon.cli import main
+from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config
-from avard.daemon.hw.simulation import simulated_service
 
 
 def _analyze(path: Path, *extra: str) -> dict:

@@ -18,12 +18,14 @@ import msgpack
 import pytest
 import zmq
 from avard.core.io import frames
+from avard.daemon.compose import compose
 from avard.daemon.config_types import as_config
 from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.net.publisher import RequestServer
-from avard.daemon.service.supervisor import Service
 from hypothesis import given
 from hypothesis import strategies as st
+
+from tests.support.rigs import rig_from_parts
 
 from .test_faults_bus import rig_config
 from .test_faults_subscriber import _rss_bytes
@@ -50,8 +52,8 @@ def counter(request):
 def server(tmp_path_factory):
     cfg = rig_config(tmp_path_factory.mktemp("req") / "rec")
     dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
-    svc = Service(as_config(cfg), dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names))
+    svc = compose(as_config(cfg), rig_from_parts(as_config(cfg), dev, clock,
+                                                 simulate="quiet-lab", sims=sims))
     # Some samples in the ring, so that "recent" has something to return.
     import numpy as np
 

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from avard.core.errors import ConfigError
 from avard.core.io.recording import RecordingReader
+from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config
 from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.hw.interrupt import EmulatedInterruptPin, GpiodPin, parse_spec
 from avard.daemon.hw.pacing import watermark_sets, watermark_settings
-from avard.daemon.hw.simulation import simulated_service
 from avard.daemon.hw.transport import SpiBus
 
 

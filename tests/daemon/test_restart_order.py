@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from avard.core.io import frames
 from avard.core.io.recording import RecordingReader, load_recording, segment_files
+from avard.daemon.compose import compose
 from avard.daemon.config import load_config
 from avard.daemon.config_types import as_config
 from avard.daemon.hw.simulation import build_simulated
@@ -22,15 +23,16 @@ from avard.daemon.service.recorder import (
 )
 from avard.daemon.service.supervisor import Service
 
+from tests.support.rigs import rig_from_parts
+
 
 def _run_service(data: Path, seconds: float, *, clock_back_s: float = 0.0) -> Service:
     cfg = load_config(None, **{"recording.data_dir": str(data), "publish.enabled": False,
                                "sensor.poll_hz": 1.0, "recording.segment_s": 3600.0})
     dev, clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=3)
     clock.step_realtime(-clock_back_s)          # a Pi without RTC, before NTP
-    svc = Service(as_config(cfg), dev, clock, simulate="quiet-lab", on_tick=sims.on_tick,
-                  extra_temperature_names=list(sims.names))
-    sims.service = svc
+    svc = compose(as_config(cfg), rig_from_parts(as_config(cfg), dev, clock,
+                                                 simulate="quiet-lab", sims=sims))
     svc.run(seconds)
     return svc
 

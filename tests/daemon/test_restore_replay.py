@@ -136,8 +136,8 @@ def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_p
 def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path):
     """Not at once (the Allan worker's timers used to start at t = 0 when its first chunk held
     only marks, so every run checkpointed immediately)."""
+    from avard.daemon.compose import simulated_service
     from avard.daemon.config import load_config
-    from avard.daemon.hw.simulation import simulated_service
 
     cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
                                "publish.enabled": False, "sensor.poll_hz": 1.0,

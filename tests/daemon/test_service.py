@@ -19,11 +19,14 @@ import numpy as np
 import pytest
 from avard.core.errors import NetworkError
 from avard.core.io.recording import RecordingReader, load_recording, replay_allan
+from avard.daemon.compose import compose, simulated_service
 from avard.daemon.config import load_config
 from avard.daemon.config_types import as_config
-from avard.daemon.hw.simulation import build_simulated, simulated_service
+from avard.daemon.hw.simulation import build_simulated
 from avard.daemon.net.subscriber import Subscriber
-from avard.daemon.service.supervisor import Service
+from avard.daemon.service.supervisor import Service, ServiceHooks
+
+from tests.support.rigs import rig_from_parts
 
 
 def _cfg(data_dir: Path, **extra: Any) -> dict:
@@ -239,8 +242,8 @@ def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> 
     bank = Ds18b20Bank({"plate": sid}, interval_s=0.05, base_directory=tree.base)
     cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
     dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
-    svc = Service(as_config(cfg), dev, clock, speed=20.0, simulate="quiet-lab",
-                  temperature_bank=bank)
+    svc = compose(as_config(cfg), rig_from_parts(as_config(cfg), dev, clock, simulate="quiet-lab",
+                                                 speed=20.0, bank=bank))
     timers = [threading.Timer(1.0, tree.remove, args=(sid,)),
               threading.Timer(1.6, tree.restore, args=(sid,)),
               threading.Timer(2.4, svc.stop_requested.set)]
@@ -356,7 +359,7 @@ def test_disk_full_keeps_acquiring_and_publishing_and_records_the_gap(tmp_path: 
         inject(ctx, t - svc.t_start)
 
     svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=11, speed=None, after_tick=tick,
-                                         recorder_factory=recorder)
+                                         hooks=ServiceHooks(recorder=recorder))
     ctx = {"svc": svc}
     box: dict[str, Listener] = {}
     svc.run(60.0, before_acquisition=lambda: box.setdefault("l", Listener(svc)))
@@ -426,6 +429,9 @@ def test_service_takes_the_typed_config_only(tmp_path: Path) -> None:
     (config_types.as_config), never inside the service."""
     cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
     dev, clock, _sims, _emu = build_simulated(cfg, "quiet-lab", seed=5)
+    rig = rig_from_parts(as_config(cfg), dev, clock)
     with pytest.raises(TypeError, match="Config"):
-        Service(cfg, dev, clock)  # type: ignore[arg-type]
-    assert Service(as_config(cfg), dev, clock).config.sensor.odr_hz == cfg["sensor"]["odr_hz"]
+        Service(cfg, rig)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="Rig"):
+        Service(as_config(cfg), dev)  # type: ignore[arg-type]
+    assert Service(as_config(cfg), rig).config.sensor.odr_hz == cfg["sensor"]["odr_hz"]

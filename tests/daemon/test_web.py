@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 import pytest
-from avard.core.allan.streaming import StreamingAllan
+from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
 from avard.core.io import frames
 from avard.core.io.source import RecordingSource
 from avard.daemon.commands.web import is_loopback, parse_listen
@@ -138,11 +138,18 @@ def test_the_services_first_snapshot_without_any_tau_is_not_drawn():
     assert "No Allan snapshot yet" in render.adev_html(state)
 
 
-def test_a_fragment_that_cannot_be_drawn_says_so_and_the_rest_of_the_page_stays():
+def test_a_fragment_that_cannot_be_drawn_says_so_and_the_rest_of_the_page_stays(monkeypatch):
     state = RunState()
     snap = snapshot_dict()
     snap["avar"] = [row[:2] for row in snap["avar"]]  # two columns for x, y, z, chip
     state.set_snapshot({"snapshot": snap})
+    assert state.snapshot is None            # the one decoder refuses it before any drawing
+    state.set_snapshot({"snapshot": snapshot_dict()})
+
+    def broken(*args, **kwargs):
+        raise IndexError("index 2 is out of bounds")
+
+    monkeypatch.setattr(render, "adev_svg", broken)
     parts = render.fragments(state, 0.1)
     assert "Cannot draw this" in parts["adev"] and "IndexError" in parts["adev"]
     assert "Cannot draw this" not in parts["status"] + parts["timeline"]
@@ -195,8 +202,8 @@ def test_the_adev_plot_has_every_finite_point_of_every_axis_and_the_model():
     assert set(fits) == {"x", "y", "z"}
     state.set_fits(fits, snap)
     svg = render.adev_svg(snap, fits)
-    finite = int(np.sum(np.isfinite(np.asarray(snap.data["avar"])[:, 0])
-                        & (np.asarray(snap.data["avar"])[:, 0] > 0)))
+    finite = int(np.sum(np.isfinite(snap.data.avar[:, 0])
+                        & (snap.data.avar[:, 0] > 0)))
     for axis in "xyz":
         group = re.search(rf'<g class="adev-axis" data-points="(\d+)" data-axis="{axis}"(.*?)</g>',
                           svg, re.S)
@@ -214,9 +221,9 @@ def test_time_to_target_per_tau_follows_the_interval_width():
     snap = state.snapshot.data
     html = render.targets_html(state, 0.1)
     rows = re.findall(r"<tr><th>([\d.e+-]+)</th>(.*?)</tr>", html)
-    assert len(rows) == len(snap["tau"])
-    adev = np.sqrt(np.asarray(snap["avar"])[:, 0])
-    w = (np.sqrt(np.asarray(snap["hi"])[:, 0]) - np.sqrt(np.asarray(snap["lo"])[:, 0])) / adev / 2
+    assert len(rows) == len(snap.tau)
+    adev = np.sqrt(snap.avar[:, 0])
+    w = (np.sqrt(snap.hi[:, 0]) - np.sqrt(snap.lo[:, 0])) / adev / 2
     for (_tau, cells), wk in zip(rows, w, strict=True):
         first = re.search(r"±([\d.e+-]+) %", cells)
         assert first[1] == f"{100 * wk:.3g}"   # the width, to the 3 figures shown
@@ -291,14 +298,14 @@ def test_metrics_are_valid_exposition_text_with_the_runs_numbers():
     assert m[("avard_disk_free_bytes", frozenset())] == 1e9
     assert m[("avard_web_samples_received_total", frozenset())] == 375
     snap = state.snapshot.data
-    for k, tau in enumerate(snap["tau"]):
+    for k, tau in enumerate(snap.tau):
         at = ("tau_seconds", f"{tau:.6g}")
         key = ("avard_adev_meters_per_second_squared", frozenset({("axis", "y"), at}))
-        assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 1]))
+        assert m[key] == pytest.approx(math.sqrt(snap.avar[k, 1]))
         key = ("avard_adev_meters_per_second_squared_upper", frozenset({("axis", "y"), at}))
-        assert m[key] == pytest.approx(math.sqrt(snap["hi"][k, 1]))
+        assert m[key] == pytest.approx(math.sqrt(snap.hi[k, 1]))
         key = ("avard_temperature_adev_celsius", frozenset({("sensor", "chip"), at}))
-        assert m[key] == pytest.approx(math.sqrt(snap["avar"][k, 3]))
+        assert m[key] == pytest.approx(math.sqrt(snap.avar[k, 3]))
     assert not any(n.startswith("avard_adev") and ("axis", "chip") in lab for n, lab in m)
 
 
@@ -515,8 +522,8 @@ def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_
     sub = FakeSubscriber(recs, {"run": RUN, "nominal_odr_hz": RATE, "i0": 0})
     fitted: list[int] = []
 
-    def fit(data: dict) -> dict:
-        fitted.append(int(data["n_samples"]))
+    def fit(data: AllanSnapshot) -> dict:
+        fitted.append(data.n_samples)
         return {"x": "a fit"}
 
     state = RunState()

@@ -1,0 +1,484 @@
+"""Each sensor's own noise separated from what the bed does, by two or three co-located sensors.
+
+Sensors bolted to one plate see the same input c(t) (the bed's motion) plus their own noise
+eᵢ(t): yᵢ = c + eᵢ. With the noises uncorrelated with each other and with c, the Allan
+covariance of two sensors is the common part and the rest of each sensor's Allan variance is
+its own noise (Groslambert covariance, Vernotte et al. 2016; allantools ``gcodev``):
+
+    σ²_c = Cov_A(y₁, y₂),     σ²_{e,i} = σ²_A(yᵢ) − Cov_A(y₁, y₂)                     (1)
+
+With three sensors the three-cornered hat (Gray & Allan 1974; allantools
+``three_cornered_hat_phase``) takes each sensor's noise from the Allan variances of the
+pairwise differences, in which the common input cancels exactly:
+
+    σ²_{e,1} = ½ [σ²_A(y₁ − y₂) + σ²_A(y₁ − y₃) − σ²_A(y₂ − y₃)]   (and cyclically)     (2)
+
+and the common part is the mean of the three pairwise Allan covariances. Every Allan variance
+and covariance here is the fully overlapping one (NIST SP 1065 eq. 14, its covariance form for
+two series) from :func:`avard.core.allan.deviations.allan_variance`, the project's one batch
+estimator.
+
+**Intervals.** Each estimate is the mean of products ½ UₖVₖ of two second-difference series
+(for (1): U = D₁, V = D₁ − D₂; for (2): U = D₁ − D₂, V = D₁ − D₃; for the common part
+U = D₁, V = D₂), with E[½U²] = P, E[½V²] = Q and E[½UV] = S the variance sought. For Gaussian
+U, V one product is λ₊χ²₁ − λ₋χ²₁ with λ± = (√(PQ) ± S)/2 (the eigenvalues of the quadratic
+form), so the estimate is distributed as
+
+    Ŝ = (λ₊ X − λ₋ Y) / ν,   X, Y ~ χ²_ν independent,  Var Ŝ = (PQ + S²)/ν            (3)
+
+with ν the equivalent degrees of freedom of the overlapping estimator (Greenhall's EDF, SP
+1065 eq. 41, for the noise identified on U's and V's series): their geometric mean, which the
+Cauchy–Schwarz inequality makes a lower bound of the product's EDF when U and V differ in
+noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags). The
+interval inverts (3) in S, holding the other sensors' parts P − S and Q − S at their
+estimates: S_hi is where the observed Ŝ falls at the lower (1 − ci)/2 tail, S_lo at the upper
+one. Where S_lo reaches 0 (every negative estimate, and positive ones the data cannot tell
+from 0) the result is an **upper limit** S_hi: never a negative variance or a NaN.
+A coverage test on records from a generator written apart from the simulator
+(tests/support/colocated.py) holds the self-noise intervals to their nominal 68 %.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from avard.core.allan.chi2 import chi2_ppf
+from avard.core.allan.deviations import AllanResult, allan_variance
+from avard.core.errors import AvardError, DataError
+from avard.core.io.rates import rates_compatible
+from numpy.typing import ArrayLike, NDArray
+
+#: Estimates at τ with fewer non-overlapping averages than this are not reported.
+MIN_AVERAGES = 2
+#: χ² quantile points per axis of the grid that represents (3); the interval ends are good to
+#: about 1/_GRID of probability.
+_GRID = 64
+_BISECT = 40
+
+
+# -- the estimator --------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Part:
+    """One separated Allan variance over τ: the estimate (may be ≤ 0), its interval
+    [lo, hi] (lo = 0 where ``upper_limit``), the EDF of (3) behind it, in (m/s²)²."""
+
+    var: NDArray[np.float64]
+    lo: NDArray[np.float64]
+    hi: NDArray[np.float64]
+    upper_limit: NDArray[np.bool_]
+    edf: NDArray[np.float64]
+
+    @property
+    def dev(self) -> NDArray[np.float64]:
+        """The ADEV where it is resolved from 0, NaN where only an upper limit is known."""
+        return np.where(self.upper_limit, np.nan, np.sqrt(np.clip(self.var, 0.0, None)))
+
+    def to_dict(self) -> dict[str, Any]:
+        ul = self.upper_limit
+        return {"adev": [None if u else math.sqrt(max(v, 0.0)) for v, u in zip(self.var, ul,
+                                                                             strict=True)],
+                "adev_lo": [None if u else math.sqrt(v) for v, u in zip(self.lo, ul,
+                                                                       strict=True)],
+                "adev_hi": [math.sqrt(v) for v in self.hi],
+                "upper_limit": [bool(u) for u in ul],
+                "edf": [float(v) for v in self.edf]}
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Where the common input lies below a sensor's own noise: per τ "below" (the common
+    part's upper end under the self-noise's lower end), "above" (the reverse) or "not
+    resolved"; ``factor`` the self-noise ADEV over the common ADEV (estimates) and
+    ``factor_at_least`` the factor the intervals guarantee (NaN where not resolved below)."""
+
+    state: tuple[str, ...]
+    factor: NDArray[np.float64]
+    factor_at_least: NDArray[np.float64]
+
+    def below_runs(self) -> list[tuple[int, int]]:
+        """The runs of consecutive τ indices [first, last] resolved "below"."""
+        runs: list[tuple[int, int]] = []
+        for k, st in enumerate(self.state):
+            if st != "below":
+                continue
+            if runs and runs[-1][1] == k - 1:
+                runs[-1] = (runs[-1][0], k)
+            else:
+                runs.append((k, k))
+        return runs
+
+
+@dataclass(frozen=True)
+class AxisSeparation:
+    """The separation of one axis: the τ, each sensor's self-noise, the common part."""
+
+    axis: str
+    tau: NDArray[np.float64]
+    m: NDArray[np.int64]
+    averages: NDArray[np.int64]
+    self_noise: tuple[Part, ...]
+    common: Part
+    verdicts: tuple[Verdict, ...]
+    fits: tuple[Any, ...] = ()            # NoiseFit | None per sensor
+    fit_problems: tuple[str | None, ...] = ()
+
+    def self_result(self, i: int, rate_hz: float, ci: float) -> AllanResult:
+        """Sensor ``i``'s self-noise as a single-channel AllanResult (for the one fit):
+        τ where it is only an upper limit are left out (var NaN)."""
+        p = self.self_noise[i]
+        var = np.where(p.upper_limit, np.nan, p.var)
+        k = len(self.tau)
+        return AllanResult(kind="oavar", rate_hz=rate_hz, tau=self.tau, m=self.m,
+                           stride=np.ones(k, np.int64), var=var, n=self.averages * self.m,
+                           edf=p.edf, lo=p.lo, hi=p.hi, alpha=np.full(k, np.nan), ci=ci)
+
+
+@dataclass(frozen=True)
+class Separation:
+    """Self-noise and common mode of 2 or 3 co-located sensors, per axis (SI: m/s²)."""
+
+    sensors: tuple[str, ...]
+    method: str                       # "groslambert covariance" | "three-cornered hat"
+    rate_hz: float
+    n_samples: int
+    ci: float
+    axes: tuple[AxisSeparation, ...]
+    notes: tuple[str, ...] = ()
+    sources: tuple[str, ...] = ()
+    filter_corner_hz: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "method": self.method, "sensors": list(self.sensors), "rate_hz": self.rate_hz,
+            "n_samples": self.n_samples, "ci": self.ci, "notes": list(self.notes),
+            "sources": list(self.sources), "units": {"adev": "m/s^2", "tau": "s"},
+            "axes": {}}
+        for ax in self.axes:
+            d: dict[str, Any] = {"tau": [float(t) for t in ax.tau],
+                                 "averages": [int(a) for a in ax.averages],
+                                 "common": ax.common.to_dict(), "sensors": {}}
+            for i, name in enumerate(self.sensors):
+                v = ax.verdicts[i]
+                fit = ax.fits[i] if ax.fits else None
+                d["sensors"][name] = {
+                    "self_noise": ax.self_noise[i].to_dict(),
+                    "verdict": {"state": list(v.state),
+                                "factor": [_num(f) for f in v.factor],
+                                "factor_at_least": [_num(f) for f in v.factor_at_least],
+                                "common_below_self_tau_ranges_s": [
+                                    [float(ax.tau[a]), float(ax.tau[b])]
+                                    for a, b in v.below_runs()]},
+                    "fit": None if fit is None else fit.to_dict(),
+                    "fit_problem": ax.fit_problems[i] if ax.fit_problems else None}
+            out["axes"][ax.axis] = d
+        return out
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def separate(accels: Sequence[ArrayLike], rate_hz: float, *, sensors: Sequence[str],
+             axes: Sequence[str], taus: str | ArrayLike = "octave", ci: float = 0.683,
+             fit: bool = True, filter_corner_hz: float | None = None,
+             notes: Sequence[str] = (), sources: Sequence[str] = ()) -> Separation:
+    """Separate 2 or 3 aligned records (each (N, C) in m/s² at ``rate_hz``, the same N and
+    channels ``axes``) into each sensor's self-noise and the common input, per τ and axis
+    (eqs. 1–3 of the module docstring); with ``fit`` the IEEE terms of each self-noise by
+    :func:`avard.core.model.fit.fit_noise`."""
+    ys = [np.asarray(a, dtype=np.float64) for a in accels]
+    ys = [y[:, None] if y.ndim == 1 else y for y in ys]
+    s = len(ys)
+    if s not in (2, 3):
+        raise DataError(f"separate takes 2 or 3 co-located sensors, not {s}")
+    if len(sensors) != s or len(set(sensors)) != s:
+        raise DataError(f"{s} records need {s} distinct sensor names, got {list(sensors)}")
+    shape = ys[0].shape
+    if any(y.shape != shape for y in ys) or shape[1] != len(axes):
+        raise DataError("the records must be aligned first: the same samples and axes "
+                        f"(shapes {[y.shape for y in ys]}, axes {list(axes)})")
+    if not (0.0 < ci < 1.0):
+        raise DataError(f"ci={ci}: a confidence level is between 0 and 1")
+    out = []
+    for c, axis in enumerate(axes):
+        out.append(_separate_axis([y[:, c] for y in ys], float(rate_hz), axis, taus, ci,
+                                  fit, filter_corner_hz))
+    method = "groslambert covariance" if s == 2 else "three-cornered hat"
+    return Separation(tuple(sensors), method, float(rate_hz), int(shape[0]), ci, tuple(out),
+                      tuple(notes), tuple(sources), filter_corner_hz)
+
+
+_PAIRS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}
+
+
+def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
+                   taus: str | ArrayLike, ci: float, fit: bool,
+                   filter_corner_hz: float | None) -> AxisSeparation:
+    s = len(cols)
+    pairs = _PAIRS[s]
+    diffs = [cols[i] - cols[j] for i, j in pairs]
+    res = allan_variance(np.column_stack(cols + diffs), rate, taus, kind="oavar", ci=ci)
+    n_total = len(cols[0])
+    averages = n_total // res.m
+    keep = (res.n > 0) & (averages >= MIN_AVERAGES) & np.all(np.isfinite(res.edf), axis=1)
+    if not np.any(keep):
+        raise DataError(f"axis {axis}: the records are too short for a single Allan "
+                        f"covariance with {MIN_AVERAGES} averages")
+    tau, m, var = res.tau[keep], res.m[keep], res.var[keep]
+    edf, cov = res.edf[keep], res.cov[keep] if res.cov is not None else None
+    assert cov is not None
+    d_col = {pair: s + k for k, pair in enumerate(pairs)}   # column of y_i − y_j
+
+    est, big_p, big_q, nu = [], [], [], []
+    for i in range(s):
+        if s == 2:
+            j = 1 - i
+            dc = d_col[(min(i, j), max(i, j))]
+            est.append(var[:, i] - cov[:, 0, 1])                        # (1)
+            big_p.append(var[:, i])
+            big_q.append(var[:, dc])
+            nu.append(np.sqrt(edf[:, i] * edf[:, dc]))
+        else:
+            j, k = (x for x in range(3) if x != i)
+            dij, dik = d_col[(min(i, j), max(i, j))], d_col[(min(i, k), max(i, k))]
+            djk = d_col[(min(j, k), max(j, k))]
+            est.append(0.5 * (var[:, dij] + var[:, dik] - var[:, djk]))   # (2)
+            big_p.append(var[:, dij])
+            big_q.append(var[:, dik])
+            nu.append(np.sqrt(edf[:, dij] * edf[:, dik]))
+    common = np.mean([cov[:, i, j] for i, j in pairs], axis=0)
+    est.append(common)
+    if s == 2:
+        big_p.append(var[:, 0])
+        big_q.append(var[:, 1])
+    else:    # the mean of three covariances varies less than one: (3) for one is wider
+        mean_a = np.mean(var[:, :s], axis=1)
+        big_p.append(mean_a)
+        big_q.append(mean_a)
+    nu.append(np.min(edf[:, :s], axis=1))
+
+    k = len(tau)
+    lo, hi, upper, nu_eff = covariance_interval(
+        np.concatenate(est), np.concatenate(big_p), np.concatenate(big_q),
+        np.concatenate(nu), ci)
+    parts = [Part(np.concatenate(est)[q * k:(q + 1) * k], lo[q * k:(q + 1) * k],
+                  hi[q * k:(q + 1) * k], upper[q * k:(q + 1) * k], nu_eff[q * k:(q + 1) * k])
+             for q in range(s + 1)]
+    self_parts, common_part = tuple(parts[:s]), parts[s]
+    verdicts = tuple(_verdict(p, common_part) for p in self_parts)
+    sep = AxisSeparation(axis, tau, m, averages[keep], self_parts, common_part, verdicts)
+    if not fit:
+        return sep
+    fits, problems = [], []
+    for i in range(s):
+        f, problem = _fit(sep.self_result(i, rate, ci), filter_corner_hz)
+        fits.append(f)
+        problems.append(problem)
+    return AxisSeparation(axis, tau, m, averages[keep], self_parts, common_part, verdicts,
+                          tuple(fits), tuple(problems))
+
+
+def _fit(result: AllanResult, filter_corner_hz: float | None) -> tuple[Any, str | None]:
+    from avard.core.model.fit import fit_noise
+
+    try:
+        return fit_noise(result, filter_corner_hz=filter_corner_hz, ci=result.ci), None
+    except AvardError as exc:
+        return None, str(exc)
+
+
+def _verdict(own: Part, common: Part) -> Verdict:
+    below = common.hi < own.lo
+    above = ~common.upper_limit & (common.lo > own.hi)
+    state = tuple("below" if b else "above" if a else "not resolved"
+                  for b, a in zip(below, above, strict=True))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(own.upper_limit | common.upper_limit, np.nan,
+                          np.sqrt(own.var / common.var))
+        least = np.where(below & (common.hi > 0), np.sqrt(own.lo / common.hi), np.nan)
+        least = np.where(below & (common.hi <= 0), np.inf, least)
+    return Verdict(state, factor, least)
+
+
+def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
+                        ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                                    NDArray[np.bool_], NDArray[np.float64]]:
+    """The ``ci`` interval [lo, hi] of variances S estimated by Ŝ = mean ½UV (eq. 3), from
+    the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit`` where
+    lo is 0; and the EDF of a χ² with the same relative variance, 2S²/Var Ŝ (for the fit's
+    weights)."""
+    s_hat = np.asarray(est, dtype=np.float64)
+    nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
+    b_p = np.clip(np.asarray(big_p, dtype=np.float64) - s_hat, 0.0, None)
+    b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_hat, 0.0, None)
+    tail = (1.0 - ci) / 2.0
+    grid = (np.arange(_GRID) + 0.5) / _GRID
+    xq = np.array([chi2_ppf(float(p), nu) for p in grid])       # (J, M)
+    x_over = xq / nu                                             # χ²_ν/ν quantile points
+
+    def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ observed | S = s_true), per estimate."""
+        r = np.sqrt((s_true + b_p) * (s_true + b_q))
+        lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
+        vals = lp * x_over[:, None, :] - lm * x_over[None, :, :]
+        return np.mean(vals <= s_hat, axis=(0, 1))
+
+    scale = np.maximum.reduce([np.abs(s_hat), b_p, b_q, np.full_like(s_hat, 1e-300)])
+    top = 4.0 * scale
+    for _ in range(200):                      # S_hi lies below top: grow it until so
+        need = cdf(top) > tail
+        if not np.any(need):
+            break
+        top = np.where(need, top * 2.0, top)
+    lo_s, hi_s = np.zeros_like(s_hat), top.copy()
+    for _ in range(_BISECT):                   # hi: the S at which Ŝ is at the lower tail
+        mid = (lo_s + hi_s) / 2.0
+        low_tail = cdf(mid) <= tail
+        hi_s = np.where(low_tail, mid, hi_s)
+        lo_s = np.where(low_tail, lo_s, mid)
+    upper_end = hi_s
+    at_zero = 1.0 - cdf(np.zeros_like(s_hat))  # P(Ŝ ≥ observed | S = 0)
+    upper_limit = at_zero > tail
+    a, b = np.zeros_like(s_hat), upper_end.copy()
+    for _ in range(_BISECT):                   # lo: the S at which Ŝ is at the upper tail
+        mid = (a + b) / 2.0
+        beyond = 1.0 - cdf(mid) <= tail
+        a = np.where(beyond, mid, a)
+        b = np.where(beyond, b, mid)
+    lower_end = np.where(upper_limit, 0.0, a)
+    s_pos = np.clip(s_hat, 0.0, None)
+    var_hat = ((s_pos + b_p) * (s_pos + b_q) + s_pos**2) / nu
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nu_eff = np.where(var_hat > 0, 2.0 * s_pos**2 / var_hat, 0.0)
+    return lower_end, upper_end, upper_limit, nu_eff
+
+
+# -- the records ----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class SensorRecord:
+    """One co-located sensor's record as separate needs it: samples (N, C) m/s², channel
+    names, the fitted rate and its standard uncertainty (0 when unknown), the CLOCK_REALTIME
+    of the first sample (None when the record has no time), the file."""
+
+    accel: NDArray[np.float64]
+    names: tuple[str, ...]
+    rate_hz: float
+    rate_u_hz: float = 0.0
+    t0_s: float | None = None
+    source: str = ""
+    meta: dict[str, Any] = field(default_factory=dict)
+    sensor_name: str | None = None        # the recording header's sensor.name, when it has one
+
+
+def read_sensor(path: str | Path, *, rate_hz: float | None = None) -> SensorRecord:
+    """THE place separate reads a record (through core/io/readers.py; to become the record
+    source's ``open_record``): samples, rate, its uncertainty and start time."""
+    from avard.core.io.readers import load_record
+
+    rec = load_record(path, rate_hz=rate_hz)
+    meta = rec.meta
+    t0, rate_u, name = None, 0.0, None
+    headers = meta.get("headers") or []
+    if headers and isinstance(headers[0].get("sensor"), dict):
+        got = headers[0]["sensor"].get("name")
+        name = got if isinstance(got, str) and got else None
+    index = meta.get("index")
+    if headers and index is not None and len(index):
+        h = headers[0]
+        if isinstance(h.get("t_real"), int | float) and isinstance(h.get("i0"), int):
+            t0 = float(h["t_real"]) + (int(index[0]) - int(h["i0"])) / rec.rate_hz
+        tb = headers[-1].get("timebase") or {}
+        if isinstance(tb.get("odr_u_hz"), int | float) and math.isfinite(tb["odr_u_hz"]):
+            rate_u = float(tb["odr_u_hz"])
+    return SensorRecord(np.asarray(rec.accel, dtype=np.float64), tuple(rec.names),
+                        float(rec.rate_hz), rate_u, t0, str(path), dict(meta), name)
+
+
+@dataclass(frozen=True)
+class Aligned:
+    """Records cut to their common stretch: (N, C) each at one rate, and what was done."""
+
+    accels: tuple[NDArray[np.float64], ...]
+    rate_hz: float
+    axes: tuple[str, ...]
+    notes: tuple[str, ...]
+
+
+def align(records: Sequence[SensorRecord], channels: Sequence[str] | None = None) -> Aligned:
+    """Cut 2 or 3 records to the samples they share: by time when every record has a start
+    time (refusing records that do not overlap), else by index (said in the notes); at one
+    rate, resampling (averages over the common sample interval) only when the rates are not
+    compatible by core/io/rates.py's rule."""
+    if len(records) not in (2, 3):
+        raise DataError(f"separate takes 2 or 3 records of co-located sensors, not "
+                        f"{len(records)}")
+    axes = [n for n in records[0].names if all(n in r.names for r in records[1:])]
+    if channels:
+        missing = [c for c in channels if c not in axes]
+        if missing:
+            raise DataError(f"--channels {', '.join(missing)}: not a channel every record has "
+                            f"(shared: {', '.join(axes) or 'none'})")
+        axes = list(channels)
+    if not axes:
+        raise DataError("the records share no channel name; they cannot be compared axis by "
+                        "axis (name the axes alike, e.g. x y z)")
+    notes: list[str] = []
+    first = records[0]
+    same_rate = all(rates_compatible(first.rate_hz, r.rate_hz, first.rate_u_hz, r.rate_u_hz)
+                    for r in records[1:])
+    rate = min(r.rate_hz for r in records) if not same_rate else \
+        float(np.mean([r.rate_hz for r in records]))
+    cols = [[r.names.index(a) for a in axes] for r in records]
+    timed = all(r.t0_s is not None for r in records)
+    if timed:
+        starts = [float(r.t0_s) for r in records]  # type: ignore[arg-type]
+        ends = [t + len(r.accel) / r.rate_hz for t, r in zip(starts, records, strict=True)]
+        t_a, t_b = max(starts), min(ends)
+        if t_b <= t_a:
+            raise DataError("the records do not overlap in time (" + "; ".join(
+                f"{r.source or i}: {s:.3f}–{e:.3f} s" for i, (r, s, e) in
+                enumerate(zip(records, starts, ends, strict=True))) + "); co-located sensors "
+                "must be recorded at the same time")
+        notes.append(f"aligned by time: {t_b - t_a:.6g} s shared by every record")
+    else:
+        t_a = 0.0
+        starts = [0.0] * len(records)
+        t_b = min(len(r.accel) / r.rate_hz for r in records)
+        notes.append("aligned by index: not every record carries its start time, so their "
+                     "first samples are taken as simultaneous")
+    if same_rate:
+        offs = [round((t_a - s) * r.rate_hz) for s, r in zip(starts, records, strict=True)]
+        n = min(len(r.accel) - o for o, r in zip(offs, records, strict=True))
+        if timed:
+            n = min(n, math.floor((t_b - t_a) * rate + 1e-9))
+        accels = tuple(r.accel[o:o + n][:, c] for o, r, c in zip(offs, records, cols,
+                                                                  strict=True))
+    else:
+        n = math.floor((t_b - t_a) * rate + 1e-9)
+        accels = tuple(_resample(r.accel[:, c], r.rate_hz, s, t_a, rate, n)
+                       for r, c, s in zip(records, cols, starts, strict=True))
+        notes.append("resampled to " + f"{rate:.10g} Hz: the rates " + ", ".join(
+            f"{r.rate_hz:.10g}" for r in records) + " Hz are not one rate by core/io/rates.py's"
+            " rule; each new sample is the average over its interval (short τ are smoothed)")
+    if n < 4:
+        raise DataError(f"the records share only {max(n, 0)} samples; too few to separate")
+    return Aligned(accels, rate, tuple(axes), tuple(notes))
+
+
+def _resample(y: NDArray[np.float64], rate: float, t0: float, t_a: float, new_rate: float,
+              n: int) -> NDArray[np.float64]:
+    """Averages of the rate samples ``y`` over [t_a + k/new_rate, t_a + (k+1)/new_rate): the
+    phase (running integral) read at the new sample edges, differenced (what an Allan
+    variance at the new rate sees)."""
+    phase = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(y, axis=0) / rate])
+    t_old = t0 + np.arange(len(phase)) / rate
+    edges = t_a + np.arange(n + 1) / new_rate
+    at = np.column_stack([np.interp(edges, t_old, phase[:, c]) for c in range(y.shape[1])])
+    return np.diff(at, axis=0) * new_rate

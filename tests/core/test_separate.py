@@ -1,0 +1,152 @@
+"""core/analysis/separate.py: the Groslambert covariance and the three-cornered hat against
+allantools, negative estimates as upper limits, and the alignment of records."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from avard.core.analysis.separate import (
+    SensorRecord,
+    align,
+    covariance_interval,
+    separate,
+)
+from avard.core.errors import DataError
+
+allantools = pytest.importorskip("allantools")
+
+RATE = 50.0
+
+
+def _sensors(seed: int, n: int = 1 << 14, common: float = 0.5,
+             own: tuple[float, ...] = (1.0, 2.0, 1.5)) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    c = np.cumsum(rng.normal(0, 0.02, n)) + rng.normal(0, common, n)   # a drifting bed
+    return [(c + rng.normal(0, s, n))[:, None] * 1e-3 for s in own]
+
+
+def _phase(y: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(y) / RATE])
+
+
+def test_two_sensors_common_mode_equals_allantools_gcodev() -> None:
+    ys = _sensors(1)[:2]
+    ax = separate(ys, RATE, sensors=["a", "b"], axes=["z"], fit=False).axes[0]
+    taus, gd, _err, _ns = allantools.gcodev(_phase(ys[0][:, 0]), _phase(ys[1][:, 0]), rate=RATE,
+                                 data_type="phase", taus=ax.tau)
+    assert len(taus) >= len(ax.tau) - 1          # allantools drops n ≤ 1 only
+    compared = 0
+    for t, g in zip(taus, gd, strict=True):
+        k = int(np.argmin(np.abs(ax.tau - t)))
+        assert ax.tau[k] == pytest.approx(t, rel=1e-12)
+        # gcodev returns √|covariance| (it drops the sign)
+        assert math.sqrt(abs(ax.common.var[k])) == pytest.approx(g, rel=1e-9)
+        compared += 1
+    assert compared >= 8
+
+
+def test_three_sensors_self_noise_equals_allantools_three_cornered_hat() -> None:
+    ys = _sensors(2)
+    ax = separate(ys, RATE, sensors=["a", "b", "c"], axes=["z"], fit=False).axes[0]
+    y = [v[:, 0] for v in ys]
+    ab, bc, ca = _phase(y[0] - y[1]), _phase(y[1] - y[2]), _phase(y[2] - y[0])
+    compared = 0
+    for i, (p1, p2, p3) in enumerate(((ab, bc, ca), (bc, ca, ab), (ca, ab, bc))):
+        taus, dev, _err, _ns = allantools.three_cornered_hat_phase(
+            p1, p2, p3, RATE, ax.tau, allantools.oadev)
+        for t, d in zip(taus, dev, strict=True):
+            k = int(np.argmin(np.abs(ax.tau - t)))
+            assert ax.tau[k] == pytest.approx(t, rel=1e-12)
+            ours = ax.self_noise[i].var[k]
+            if d > 0:   # allantools sets a negative variance to 0; ours keeps the sign
+                assert math.sqrt(ours) == pytest.approx(d, rel=1e-9), (i, t)
+                compared += 1
+            else:
+                assert ours <= 0.0
+    assert compared >= 24
+
+
+def test_a_sensor_without_own_noise_gets_upper_limits_never_a_negative_or_nan() -> None:
+    """Sensor b is the bed itself (no own noise): its estimate is negative at some τ; the
+    output says 'at most' there and nothing is NaN or negative."""
+    ys = _sensors(3, own=(1.0, 0.0, 1.0))
+    for s in (2, 3):
+        sep = separate(ys[:s], RATE, sensors=["a", "b", "c"][:s], axes=["z"], fit=False)
+        b = sep.axes[0].self_noise[1]
+        assert np.any(b.var < 0) and np.all(b.upper_limit[b.var <= 0])
+        for part in (*sep.axes[0].self_noise, sep.axes[0].common):
+            assert np.all(np.isfinite(part.lo)) and np.all(part.lo >= 0)
+            assert np.all(np.isfinite(part.hi)) and np.all(part.hi > 0)
+            assert np.all(part.lo <= part.hi)
+        d = sep.to_dict()
+        json.dumps(d, allow_nan=False)     # no NaN anywhere in --json
+        ul = d["axes"]["z"]["sensors"]["b"]["self_noise"]
+        assert all(v is None for v, u in zip(ul["adev"], ul["upper_limit"], strict=True) if u)
+
+
+def test_the_interval_reduces_to_the_chi_squared_one_for_a_single_channel() -> None:
+    """With U = V (P = Q = S) eq. 3 is one scaled χ²_ν: the ends must be the familiar
+    ν S / χ²_ν(1 − p) and ν S / χ²_ν(p)."""
+    from avard.core.allan.chi2 import chi2_ppf
+
+    s, nu = np.array([2.0, 2.0]), np.array([10.0, 40.0])
+    lo, hi, ul, nu_eff = covariance_interval(s, s, s, nu, 0.683)
+    want_lo = nu * s / chi2_ppf(0.8415, nu)
+    want_hi = nu * s / chi2_ppf(0.1585, nu)
+    assert np.allclose(lo, want_lo, rtol=0.04) and np.allclose(hi, want_hi, rtol=0.04)
+    assert not ul.any() and np.allclose(nu_eff, nu)
+
+
+def _rec(n: int, rate: float = RATE, t0: float | None = None, seed: int = 0,
+         names: tuple[str, ...] = ("x", "z"), u: float = 0.0) -> SensorRecord:
+    a = np.random.default_rng(seed).normal(size=(n, len(names)))
+    return SensorRecord(a, names, rate, u, t0, f"r{seed}")
+
+
+def test_records_are_cut_to_the_time_they_share() -> None:
+    a = _rec(1000, t0=100.0, seed=1)
+    b = _rec(1000, t0=104.0, seed=2)              # starts 4 s = 200 samples later
+    al = align([a, b])
+    assert al.accels[0].shape == al.accels[1].shape == (800, 2)
+    np.testing.assert_array_equal(al.accels[0], a.accel[200:1000])
+    np.testing.assert_array_equal(al.accels[1], b.accel[:800])
+    assert "aligned by time" in al.notes[0]
+
+
+def test_records_that_do_not_overlap_are_refused() -> None:
+    with pytest.raises(DataError, match="do not overlap in time"):
+        align([_rec(1000, t0=0.0), _rec(1000, t0=50.0)])
+
+
+def test_without_start_times_the_alignment_is_by_index_and_says_so() -> None:
+    al = align([_rec(900, seed=1), _rec(1000, t0=3.0, seed=2)], ["z"])
+    assert al.accels[0].shape == (900, 1) and al.axes == ("z",)
+    assert "aligned by index" in al.notes[0]
+
+
+def test_compatible_rates_are_not_resampled_and_incompatible_ones_are() -> None:
+    a, b = _rec(2000, RATE, seed=1), _rec(2000, RATE * (1 + 20e-6), seed=2)
+    al = align([a, b])
+    np.testing.assert_array_equal(al.accels[1], b.accel)       # 20 ppm: one rate
+    assert not any("resampled" in n for n in al.notes)
+    c = _rec(4000, 2 * RATE, seed=3)
+    al = align([a, c])
+    assert al.rate_hz == RATE and al.accels[1].shape == (2000, 2)
+    # each new sample is the mean of the two old ones it spans
+    np.testing.assert_allclose(al.accels[1], c.accel.reshape(2000, 2, 2).mean(axis=1),
+                               rtol=1e-9, atol=1e-12)
+    assert any("resampled" in n for n in al.notes)
+
+
+def test_bad_inputs_say_what_is_wrong() -> None:
+    with pytest.raises(DataError, match="2 or 3"):
+        align([_rec(100)])
+    with pytest.raises(DataError, match="share no channel"):
+        align([_rec(100, names=("x",)), _rec(100, names=("y",))])
+    with pytest.raises(DataError, match="--channels q"):
+        align([_rec(100), _rec(100)], ["q"])
+    with pytest.raises(DataError, match="distinct sensor names"):
+        separate(_sensors(1)[:2], RATE, sensors=["a", "a"], axes=["z"])
