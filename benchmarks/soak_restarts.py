@@ -62,7 +62,7 @@ def _config(data: Path, **extra: Any) -> Any:
 
 def _service(data: Path, seed: int, *, after_tick: Callable[[float], None] | None = None,
              **extra: Any) -> Any:
-    from avard.daemon.hw.simulation import simulated_service
+    from avard.daemon.compose import simulated_service
 
     svc, _sims, _emu = simulated_service(_config(data, **extra), "quiet-lab", seed=seed,
                                          after_tick=after_tick)

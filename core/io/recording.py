@@ -577,9 +577,11 @@ class RecordingReader:
 
     def __post_init__(self) -> None:
         self.files = segment_files(self.path)
+        self.current: Path | None = None   # the segment file being read
 
     def frames(self) -> Iterator[Frame]:
         for f in self.files:
+            self.current = f
             data = f.read_bytes()
             local: list[Problem] = []
             for fr in scan_frames(data, str(f), max_bytes=self.max_bytes, problems=local):
@@ -638,6 +640,8 @@ class WalkReport:
 
     losses: list[Loss] = field(default_factory=list)
     duplicates: list[tuple[int, int]] = field(default_factory=list)   # (i0, n) dropped
+    # the file each duplicate was read in (the walk drops it there, before the next record)
+    duplicate_files: list[str] = field(default_factory=list)
     recovered_headers: list[str] = field(default_factory=list)        # runs
     # each run's newest readable header: the service rewrites it as its fit of the output
     # rate improves, so this one carries the run's best rate (copies are not yielded again)
@@ -767,6 +771,7 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
         kept = sum(b - a for a, b in parts)
         if kept < n:
             report.duplicates.append((i0, n - kept))
+            report.duplicate_files.append(str(reader.current or ""))
             # one line per block would be 3600 an hour of a copied segment: the readers
             # summarise report.duplicates (core/io/source.py: one WARNING per run)
             log.debug("samples [%d, %d) of run %s were already read; counted once",

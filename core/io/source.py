@@ -503,6 +503,7 @@ class RecordingSource:
             def frames(self) -> Iterator[Frame]:
                 for k, f in enumerate(self.files):
                     self.number = k
+                    self.current = f
                     if where is not None:
                         where[0] = str(f)
                     for fr in _one_file(self, f, ends):
@@ -537,7 +538,8 @@ class RecordingSource:
             quiet.removeFilter(_below_warning)
 
     def _scan_walk(self, rate_hz: float | None) -> RecordInfo:
-        from avard.core.io.recording import Segmenter, WalkReport, _scale_of, segment_files
+        from avard.core.allan.feed import Segmenter, scale_of
+        from avard.core.io.recording import WalkReport, segment_files
 
         self.files = segment_files(self.path)
         self.entries = _segment_entries(self.path)
@@ -569,8 +571,9 @@ class RecordingSource:
                 if x.run in tally:
                     tally[x.run].lost += x.n
             n_losses = len(report.losses)
-            for i0, k in report.duplicates[n_dups:]:
-                _add_duplicate(dups, Duplicate(last_run, i0, k, where[0]))
+            for (i0, k), seen in zip(report.duplicates[n_dups:],
+                                     report.duplicate_files[n_dups:], strict=True):
+                _add_duplicate(dups, Duplicate(last_run, i0, k, seen or where[0]))
                 if last_run in tally:
                     tally[last_run].dup += k
             n_dups = len(report.duplicates)
@@ -585,7 +588,7 @@ class RecordingSource:
             if self.runs is not None and run not in self.runs:
                 continue
             if kind == "header":
-                scale = _scale_of(rec)
+                scale = scale_of(rec)
                 scales.add(scale)
                 for name in rec.get("temperature_channels", []):
                     if name not in tnames:
@@ -763,7 +766,7 @@ class RecordingSource:
     def _walked(self) -> Iterator[_Piece]:
         """The raw pieces in walk order, by the general path: every record decoded and
         checked (``recording.walk``), cut where the service's ``Segmenter`` cut."""
-        from avard.core.io.recording import Segmenter, _scale_of
+        from avard.core.allan.feed import Segmenter, scale_of
 
         cuts = Segmenter()
         scale, cut = 0.0, False
@@ -772,7 +775,7 @@ class RecordingSource:
                 continue
             cut = cuts.starts_segment(rec) or cut
             if rec["kind"] == "header":
-                scale = _scale_of(rec)
+                scale = scale_of(rec)
             elif rec["kind"] == "raw":
                 yield int(rec["i0"]), np.asarray(rec["counts"]), scale, cut
                 cut = False

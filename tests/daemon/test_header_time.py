@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from avard.core.io.recording import RecordingReader
+from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config
-from avard.daemon.hw.simulation import simulated_service
 
 
 def test_every_header_dates_its_i0_on_the_raw_time_line(tmp_path: Path) -> None:

@@ -19,9 +19,9 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.io import frames
 from avard.core.io.recording import RecordingReader, replay_allan, scan_frames
 from avard.core.io.recording import frame as frame_bytes
+from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config
 from avard.daemon.hw.adxl355 import Drain
-from avard.daemon.hw.simulation import simulated_service
 from avard.daemon.service.checkpoint import STATE_FILE
 from avard.daemon.service.recorder import Recorder, last_recorded, restart_gap
 from avard.daemon.service.supervisor import Service
