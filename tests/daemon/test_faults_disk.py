@@ -48,6 +48,9 @@ def test_disk_full_keeps_acquiring_and_publishing_records_the_loss_and_resumes(t
     seen: dict[str, Any] = {}
     full_from, full_to = int(12 * RATE), int(22 * RATE)  # sample indices: 10 s of data
 
+    retry_s = 1.0
+    data_time = [0.0]  # seconds of data the recorder has been handed: its retry clock
+
     class DiskFillsAtIndex(Recorder):
         """The disk is full while the recorder writes samples [full_from, full_to): defined
         on the data, so however far the recorder thread works behind the reader, the window
@@ -56,16 +59,18 @@ def test_disk_full_keeps_acquiring_and_publishing_records_the_loss_and_resumes(t
         def write(self, record: dict[str, Any]) -> bool:
             if record.get("kind") == "raw":
                 ops.full = full_from <= record["i0"] < full_to
+                data_time[0] = record["i0"] / RATE
             return super().write(record)
 
     def recorder_factory(svc: Any) -> Recorder:
         r = svc.cfg["recording"]
-        # every clock of the recorder on the service's (virtual) time, so the retry after
-        # retry_s happens on schedule however fast the simulation runs
+        # The retry after retry_s (and the fsync interval) run on the time of the data the
+        # recorder writes, so where the gap ends does not depend on how far the recorder
+        # thread lags the reader on a loaded machine; segments rotate on the service clock.
         return DiskFillsAtIndex(svc.data_dir, svc.run_id, svc.header,
                                 segment_s=r["segment_s"],
-                                fsync_interval_s=r["fsync_interval_s"], retry_s=1.0,
-                                clock=svc.clock.monotonic, wall=svc.clock.monotonic,
+                                fsync_interval_s=r["fsync_interval_s"], retry_s=retry_s,
+                                clock=svc.clock.monotonic, wall=lambda: data_time[0],
                                 realtime=svc.clock.realtime, fileops=ops)
 
     def inject(ctx: dict, t: float) -> None:
@@ -98,13 +103,23 @@ def test_disk_full_keeps_acquiring_and_publishing_records_the_loss_and_resumes(t
     missing = np.setdiff1d(sub_idx, rec_idx)
     assert missing.size == gap["n"] > 0
     np.testing.assert_array_equal(missing, np.arange(gap["i0"], gap["i0"] + gap["n"]))
-    # ... which starts with the first block of the full window and spans its 10 s, plus a
-    # raw block and the retry interval before writing resumed. (The retry runs on the
-    # service clock while the recorder may be catching up on the ring, so one retry interval
-    # can cover a little more data: 2 s of slack.)
-    block = rig.svc.cfg["recording"]["block_s"] * RATE
-    assert full_from <= gap["i0"] < full_from + block
-    assert full_to - full_from - block <= gap["n"] <= full_to - full_from + block + 3 * RATE
+    # ... which starts with the first raw block of the full window and ends with the first
+    # block of data time at or after a retry (every retry_s of data time from the first
+    # refused write) whose samples lie past the window: exactly, worked out from the blocks
+    # the subscriber received.
+    starts = [r["i0"] for r in rig.listener.raw()]
+    first_refused = next(i for i in starts if i >= full_from)
+    next_retry = first_refused / RATE + retry_s
+    resumed = None
+    for i in starts:
+        if i <= first_refused or i / RATE < next_retry:
+            continue
+        next_retry = i / RATE + retry_s
+        if i >= full_to:
+            resumed = i
+            break
+    assert resumed is not None
+    assert (gap["i0"], gap["i0"] + gap["n"]) == (first_refused, resumed)
     # ... and it resumed: samples after the gap reach to the end of the run.
     assert rec_idx[-1] == sub_idx[-1]
     assert rig.svc.final_status["disk"]["samples_lost"] == gap["n"]

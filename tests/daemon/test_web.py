@@ -460,9 +460,9 @@ def test_another_address_than_loopback_only_when_asked_and_logged():
         assert f"http://127.0.0.1:{port}/" in line and "this machine only" in line, line
     finally:
         p.send_signal(signal.SIGTERM)
-        start = time.monotonic()
-        assert p.wait(20) == 0
-        assert time.monotonic() - start < 10
+        # stops on the signal while it still tries to reach the service (a hang fails here
+        # with TimeoutExpired; no wall-time figure a loaded machine would break)
+        assert p.wait(60) == 0
 
 
 # ---- the feed threads --------------------------------------------------------------------------
