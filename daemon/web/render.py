@@ -396,9 +396,22 @@ def temperatures_html(state: RunState) -> str:
     latest = ", ".join(
         f"{escape(_short(k))} {'—' if v is None else f'{v:.2f}'} °C"
         for k, v in sorted(state.latest_temps.items()))
-    return (f'<p class="note">Latest: {latest}. Whole run so far, thinned to at most '
-            f'{max(s.max_points for s in state.temperatures.values())} points per channel.</p>'
-            + temperatures_svg(state.temperatures, state.run_time(None)))
+    return (f'<p class="note">Latest: {latest}. {escape(temperatures_span(state))}, thinned to '
+            f'at most {max(s.max_points for s in state.temperatures.values())} points per '
+            'channel.</p>' + temperatures_svg(state.temperatures, state.run_time(None)))
+
+
+def temperatures_span(state: RunState) -> str:
+    """What the temperature plot covers, said as it is: the live stream starts when avard web
+    did; only with ``--history`` does it hold the run before."""
+    since = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(state.started))
+    if state.history is not None and state.history_records:
+        return f"The run from the recording in {state.history}, then live"
+    if state.history is not None:
+        return (f"Since avard web started ({since}); nothing was read from --history "
+                f"{state.history}")
+    return (f"Since avard web started ({since}); start it with --history DIR to show the "
+            "run before")
 
 
 # ---- status and time line ------------------------------------------------------------------

@@ -577,3 +577,24 @@ def test_a_history_directory_that_does_not_exist_is_one_line_and_exit_2(tmp_path
     r = subprocess.run(avard("web", "tcp://127.0.0.1:1", "--history", str(tmp_path / "no")),
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--history" in r.stderr
+
+
+def test_the_temperature_card_says_what_it_covers() -> None:
+    """Without --history the plot starts when avard web did, and says so (it said "Whole run
+    so far"); with a recording read first it holds the run before."""
+    from avard.daemon.web.render import temperatures_html
+    from avard.daemon.web.state import RunState
+
+    live = RunState(started=0.0)
+    live._temperature("plate", 1.0, 21.5)
+    text = temperatures_html(live)
+    assert "Since avard web started (1970-01-01 00:00 UTC)" in text
+    assert "--history DIR" in text and "Whole run" not in text
+    read = RunState(history="/var/lib/avard")
+    read._temperature("plate", 1.0, 21.5)
+    read.history_done(42)
+    assert "The run from the recording in /var/lib/avard, then live" in temperatures_html(read)
+    empty = RunState(history="/nowhere")
+    empty._temperature("plate", 1.0, 21.5)
+    empty.history_done(0)
+    assert "nothing was read from --history /nowhere" in temperatures_html(empty)
