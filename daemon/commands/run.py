@@ -27,6 +27,8 @@ from avard.daemon.service.sdnotify import Notifier
 from avard.daemon.service.supervisor import Service
 
 NAME = "run"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "run the acquisition service (ADXL355 + DS18B20, Allan core, recording, ZeroMQ)"
 
 log = logging.getLogger(__name__)

@@ -24,6 +24,8 @@ from avard.core.errors import ConfigError
 from avard.daemon.net.subscriber import add_client_arguments, subscriber_from_args
 
 NAME = "web"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "serve a live, read-only web page (and /metrics) of a running service"
 
 log = logging.getLogger(__name__)

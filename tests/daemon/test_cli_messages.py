@@ -128,3 +128,27 @@ def test_check_config_show_prints_toml_that_reads_back_to_the_same_config(
     assert load_config(again) == load_config(src, **{"recording.data_dir": str(data)}) \
         == {sec: {k: v for k, v in t.items()} for sec, t in load_config(again).items()}
     assert parsed["recording"]["data_dir"] == str(data)
+
+
+def test_a_csv_with_decimal_commas_gets_a_hint(tmp_path: Path, capsys) -> None:
+    csv = tmp_path / "lab.csv"
+    csv.write_text("t;x;y;z\n0,0;0,1;0,2;9,8\n0,008;0,1;0,2;9,8\n")
+    assert main(["analyze", str(csv)]) == 2
+    err = _err(capsys)
+    assert "decimal commas" in err and "decimal points" in err
+    good = tmp_path / "ok.csv"  # a number that is wrong for another reason: no such hint
+    good.write_text("t;x\n0.0;abc\n0.008;0.1\n")
+    assert main(["analyze", str(good)]) == 2
+    assert "decimal commas" not in _err(capsys)
+
+
+def test_help_keeps_the_lines_of_a_command_description(capsys) -> None:
+    """--help printed the examples and lists of a command's description folded into one
+    paragraph."""
+    with pytest.raises(SystemExit):
+        main(["watch", "--help"])
+    out = capsys.readouterr().out
+    assert "\n* rate: the service's fitted ODR" in out
+    with pytest.raises(SystemExit):
+        main(["probe", "--help"])
+    assert "(default 2500)" in " ".join(capsys.readouterr().out.split())

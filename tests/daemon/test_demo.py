@@ -53,6 +53,8 @@ def test_the_demo_with_its_seed_prints_the_same_numbers_every_run(
                      "--no-plot"]) == 0
         captured = capsys.readouterr()
         assert "wall time" in captured.err and "wall" not in captured.out
+        # no log lines beside the results unless -v (they went to stderr, mixed with them)
+        assert "INFO" not in captured.err
         texts.append(captured.out.replace(str(tmp_path / f"d{i}"), "OUT"))
     assert texts[0] == texts[1]
     lines = texts[0].splitlines()

@@ -349,3 +349,17 @@ def test_odr_error_can_drift_without_a_jump():
     clock.advance(2.0)
     entries(bus)
     assert emu.produced == 1000 + 2010
+
+
+def test_the_simulated_chip_temperature_starts_where_the_simulation_does() -> None:
+    """It read 25 °C before the first sample (a spike at the start of every simulated run)."""
+    from avard.daemon.config import load_config
+    from avard.daemon.hw.simulation import build_simulated
+
+    cfg = load_config(None, **{"recording.data_dir": "/tmp/avard-test-unused"})
+    _dev, _clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=3)
+    before = sims.chip_temperature()
+    first = sims.source(1)
+    assert len(first) == 1
+    assert sims.chip_temperature() == pytest.approx(before, abs=1e-6)
+    assert abs(before - 25.0) > 0.5  # quiet-lab's chip is not at 25 °C
