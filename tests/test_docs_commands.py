@@ -148,8 +148,12 @@ def _wait_http(url: str, proc: subprocess.Popen) -> bytes:  # type: ignore[type-
             time.sleep(0.2)
 
 
-def test_the_getting_started_walk_on_the_emulated_sensor(tmp_path: Path) -> None:
-    """Step 0, 2, 4, 5 and 6 of the page as written, in a scratch folder (ports swapped)."""
+@pytest.mark.parametrize("with_report", [
+    False, pytest.param(True, marks=pytest.mark.slow)], ids=["walk", "walk+explain-report"])
+def test_the_getting_started_walk_on_the_emulated_sensor(tmp_path: Path,
+                                                        with_report: bool) -> None:
+    """Step 0, 2, 4, 5 and 6 of the page as written, in a scratch folder (ports swapped).
+    `explain --report` (seconds of CPU for its figures) runs in the slow set."""
     pub, req, http = _free_port(), _free_port(), _free_port()
     ports = tmp_path / "ports.toml"
     ports.write_text(f'[publish]\nendpoint = "tcp://127.0.0.1:{pub}"\n'
@@ -175,8 +179,9 @@ def test_the_getting_started_walk_on_the_emulated_sensor(tmp_path: Path) -> None
     sh(RUN_HERE[1], "--config", str(ports))
     assert "velocity_random_walk" in sh(RUN_HERE[2]).stdout
     assert "valid" in sh(RUN_HERE[3]).stdout
-    assert sh(RUN_HERE[6]).stdout.startswith("avard explain:")
-    assert (tmp_path / "report" / "report.md").exists()
+    if with_report:
+        assert sh(RUN_HERE[6]).stdout.startswith("avard explain:")
+        assert (tmp_path / "report" / "report.md").exists()
 
     # watch and web against a running (emulated) service
     service = subprocess.Popen(
