@@ -11,6 +11,7 @@ import math
 import re
 import signal
 import subprocess
+import threading
 import time
 
 import numpy as np
@@ -478,6 +479,8 @@ class FakeSubscriber:
         self.snapshot: dict | None = None
         self.requests: list[str] = []
         self.closed = False
+        # set when the feed asks for more after the last record: it has applied them all
+        self.drained = threading.Event()
 
     @property
     def stats(self):
@@ -488,6 +491,7 @@ class FakeSubscriber:
 
     def recv(self, timeout_s=None):
         if not self.records:
+            self.drained.set()
             time.sleep(0.01)
             return None
         topic, rec = self.records.pop(0)
@@ -521,11 +525,10 @@ def test_the_feed_fills_the_state_fits_each_new_snapshot_once_and_refetches_the_
     state = RunState()
     f = Feed(sub, state, fit=fit, fit_interval_s=0.0)  # type: ignore[arg-type]
     f.start()
-    deadline = time.monotonic() + 10
-    while (sub.records or not state.fits or "header" not in sub.requests) \
+    deadline = time.monotonic() + 120  # a bound on a hang only
+    while (not sub.drained.is_set() or not state.fits or "header" not in sub.requests) \
             and time.monotonic() < deadline:
         time.sleep(0.02)
-    time.sleep(0.2)
     f.stop()
     assert f.error is None and sub.closed
     assert state.runs == [RUN, new]
@@ -557,10 +560,7 @@ def test_history_from_the_recording_comes_first_and_live_records_are_not_counted
     state = RunState()
     f = Feed(sub, state, fit=None, history=tmp_path)  # type: ignore[arg-type]
     f.start()
-    deadline = time.monotonic() + 10
-    while sub.records and time.monotonic() < deadline:
-        time.sleep(0.02)
-    time.sleep(0.2)
+    assert sub.drained.wait(120)  # every record applied (a bound on a hang only)
     f.stop()
     assert f.error is None
     assert state.runs == [old, new]
