@@ -68,17 +68,21 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         help_text = getattr(mod, "HELP", None)
         if help_text is not None:
             help_text = help_text.replace("%", "%%")
-        p = sub.add_parser(mod.NAME, help=help_text, description=mod.__doc__)
+        # the description as written: its examples and lists keep their lines
+        p = sub.add_parser(mod.NAME, help=help_text, description=mod.__doc__,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
         if hasattr(mod, "add_arguments"):
             mod.add_arguments(p)
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _narrates=getattr(mod, "NARRATES", False))
     return parser
 
 
-def setup_logging(verbosity: int) -> None:
+def setup_logging(verbosity: int, narrates: bool = True) -> None:
     """Log to stderr in a form journald keeps: '<level-prefix>name: message', no timestamps
-    (journald adds its own)."""
-    level = logging.WARNING - 10 * min(verbosity + 1, 2)
+    (journald adds its own). INFO lines by default only for the commands that narrate (the
+    service, web, record, simulate); the others print results and show INFO with -v, so
+    log lines are not mixed into what they print."""
+    level = logging.WARNING - 10 * min(verbosity + (1 if narrates else 0), 2)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(formatter_for(sys.stderr))   # <N> priority prefixes for journald
     root = logging.getLogger()
@@ -100,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     first = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(first)
     args = parser.parse_args(argv)
-    setup_logging(args.verbose)
+    setup_logging(args.verbose, getattr(args, "_narrates", True))
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
         return 2

@@ -330,14 +330,30 @@ DATA_DIR_ADVICE = ("under systemd StateDirectory= provides it, by hand use --dat
                    "`sudo install -d -o $USER /var/lib/avard`")
 
 
-def check_runtime(cfg: Mapping[str, Mapping[str, Any]]) -> None:
+#: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,
+#: never as a side effect of trying the service by hand.
+SYSTEM_PREFIXES = ("/var/", "/etc/", "/usr/", "/opt/", "/srv/", "/run/")
+
+
+def check_runtime(cfg: Mapping[str, Mapping[str, Any]],
+                  environ: Mapping[str, str] = os.environ) -> None:
     """Check what ``avard run`` needs from the machine, all problems at once (ConfigError):
-    the data directory writable (or creatable), and with CURVE on the server's secret key file
-    (a regular file only its owner can read, holding a secret key, not a public one) and the
-    authorised-keys directory (a directory of regular ``*.key`` files)."""
+    the data directory writable (or creatable; a missing system folder only when systemd
+    starts us, which sets $INVOCATION_ID for every unit it runs and whose StateDirectory=
+    makes it), and with CURVE on the server's secret key file (a regular file only its owner
+    can read, holding a secret key, not a public one) and the authorised-keys directory (a
+    directory of regular ``*.key`` files). ``avard run`` and ``avard check-config`` both call
+    this, so a config that passes check-config starts."""
     problems: list[str] = []
     rec = cfg["recording"]
-    if rec["enabled"]:
+    data_dir = str(rec["data_dir"])
+    if (rec["enabled"] and not os.path.exists(data_dir)
+            and data_dir.startswith(SYSTEM_PREFIXES) and not environ.get("INVOCATION_ID")):
+        problems.append(
+            f"recording.data_dir {data_dir} does not exist and avard run does not create "
+            "system folders unless systemd starts it (StateDirectory= makes it); by hand, "
+            "record elsewhere with --data-dir DIR, or create it first")
+    elif rec["enabled"]:
         problem = _writable_dir(Path(rec["data_dir"]))
         if problem:
             problems.append(f"recording.data_dir = {rec['data_dir']!r}: {problem}; "

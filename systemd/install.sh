@@ -7,7 +7,8 @@
 #   sudo systemd/install.sh --prefix /srv/avard   # venv elsewhere than /opt/avard
 #
 # What it does (each step is idempotent, so running it again upgrades in place):
-#   1. a Python venv in PREFIX (default /opt/avard) with avard installed from this checkout;
+#   1. a Python venv in PREFIX (default /opt/avard) with avard installed from this checkout,
+#      and `avard` on everyone's PATH: a link /usr/local/bin/avard -> PREFIX/bin/avard;
 #   2. the system user and groups from systemd/avard.sysusers (systemd-sysusers);
 #   3. /etc/avard (root:avard 0750) from systemd/avard.tmpfiles (systemd-tmpfiles);
 #   4. /etc/avard/avard.toml from config/avard.toml, only if there is none yet (yours is kept),
@@ -16,15 +17,17 @@
 #   6. the unit in /etc/systemd/system, daemon-reload, enable (and start unless --no-start);
 #   7. unless --no-start: wait until the unit is active and still up a few seconds later, else
 #      print the last lines of its journal and exit 1.
+# The recording in /var/lib/avard is 0750 avard:avard: read it as a member of the avard group
+# (`sudo usermod -aG avard $USER`, then log in again) or with sudo.
 # Remove with: systemctl disable --now avard; rm /etc/systemd/system/avard.service
-#   /usr/lib/sysusers.d/avard.conf /usr/lib/tmpfiles.d/avard.conf; rm -r PREFIX
-# (the recording in /var/lib/avard and the config in /etc/avard are left for you).
+#   /usr/lib/sysusers.d/avard.conf /usr/lib/tmpfiles.d/avard.conf /usr/local/bin/avard;
+#   rm -r PREFIX (the recording in /var/lib/avard and the config in /etc/avard are left).
 set -euo pipefail
 
 PREFIX=/opt/avard
 START=1
 DRY=0
-usage() { sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --prefix) PREFIX="${2:?--prefix needs a directory}"; shift 2 ;;
@@ -70,6 +73,14 @@ run python3 -m venv "$PREFIX"
 run "$PREFIX/bin/python" -m pip install -q --upgrade pip
 run "$PREFIX/bin/python" -m pip install -q "$REPO"
 run install -D -m 0644 "$REPO/docs/reliability.md" "$PREFIX/share/doc/reliability.md"
+# `avard watch`, `avard analyze` ... by name, for every user; a file there that is not a link
+# (another avard installed by hand) is kept and said.
+LINK=/usr/local/bin/avard
+if [ -e "$LINK" ] && [ ! -L "$LINK" ]; then
+    echo "= keeping $LINK (not a link; this install's avard is $PREFIX/bin/avard)"
+else
+    run ln -sfn "$PREFIX/bin/avard" "$LINK"
+fi
 
 # 2. and 3. User, groups, /etc/avard.
 run install -D -m 0644 "$HERE/avard.sysusers" /usr/lib/sysusers.d/avard.conf
@@ -113,8 +124,10 @@ if [ "$DRY" -eq 1 ]; then
     echo "dry run: nothing was installed, changed or started"
     exit 0
 fi
+GROUP_HINT="the recording in /var/lib/avard is readable by the avard group: 'sudo usermod -aG avard ${SUDO_USER:-\$USER}' (then log in again), or use sudo"
 if [ "$START" -eq 0 ]; then
     echo "avard is enabled: start it with 'systemctl start avard'"
+    echo "$GROUP_HINT"
     exit 0
 fi
 
@@ -133,4 +146,5 @@ sleep 3
 systemctl is-active --quiet avard.service || start_failed "it stopped right after starting"
 [ "$(systemctl show -p MainPID --value avard.service)" = "$main_pid" ] ||
     start_failed "it was restarted right after starting"
-echo "avard is running: 'systemctl status avard', 'journalctl -u avard -f'"
+echo "avard is running: 'systemctl status avard', 'journalctl -u avard -f', 'avard watch tcp://127.0.0.1:5555'"
+echo "$GROUP_HINT"

@@ -78,6 +78,12 @@ def holdout_lines(ex: Explanation) -> list[str]:
     return out
 
 
+def _cell(v: float | None, fmt: str) -> str:
+    """A number for the report's tables; "—" where there is none (never "nan": a held-out
+    χ² without folds, a gain without a base misfit)."""
+    return f"{v:{fmt}}" if v is not None and math.isfinite(v) else "—"
+
+
 def summary(ex: Explanation) -> str:
     """Plain-text summary for the terminal (SI units, 68 % intervals)."""
     lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
@@ -87,7 +93,7 @@ def summary(ex: Explanation) -> str:
     for name, ch in ex.channels.items():
         lines.append("")
         lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
-                     f"{_chi(ch.extended)}; gain {ch.gain:.3g}")
+                     f"{_chi(ch.extended)}; gain {_cell(ch.gain, '.3g')}")
         if ch.misfit:
             for r in ch.misfit:
                 lines.append(f"  misfit {r['direction']} the base model at τ "
@@ -230,9 +236,10 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
             md += ["| channel | claimed causes | held-out χ² base | held-out χ² extended | "
                    "n (τ) | gain |", "|---|---|---|---|---|---|"]
             for name, c in ho.channels.items():
-                g = "–" if c.gain is None else f"{c.gain:.3g}"
-                md.append(f"| {name} | {', '.join(c.causes) or 'none'} | {c.chi2_base:.4g} | "
-                          f"{c.chi2_ext:.4g} | {c.n_points} | {g} |")
+                g = "–" if c.gain is None else _cell(c.gain, ".3g")
+                md.append(f"| {name} | {', '.join(c.causes) or 'none'} | "
+                          f"{_cell(c.chi2_base, '.4g')} | {_cell(c.chi2_ext, '.4g')} | "
+                          f"{c.n_points} | {g} |")
             md.append("")
         md += [f"- {name}: {c.reason or c.note}" for name, c in ho.channels.items()
                if c.reason or c.note]
@@ -245,11 +252,11 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
         md += [f"## Channel {name}", "", f"![ADEV of {name}]({adev_png})", "",
                f"![misfit of {name}]({res_png})", "",
                f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
-               f"**{ch.gain:.3g}**.", "", "### Misfit of the base model", ""]
+               f"**{_cell(ch.gain, '.3g')}**.", "", "### Misfit of the base model", ""]
         if ch.misfit:
             md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]
             md += [f"| {r['tau_range_s'][0]:.3g} – {r['tau_range_s'][1]:.3g} | "
-                   f"{r['direction']} | {r['max_sigma']:+.3g} |" for r in ch.misfit]
+                   f"{r['direction']} | {_cell(r['max_sigma'], '+.3g')} |" for r in ch.misfit]
         else:
             md.append("Within 3 σ at every fitted τ.")
         md += ["", "### Every cause tested", "",

@@ -25,6 +25,7 @@ import io
 import itertools
 import logging
 import math
+import re
 import struct
 import zipfile
 import zlib
@@ -393,8 +394,11 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
             a = np.loadtxt(io.StringIO("".join(lines)), delimiter=delim, ndmin=2,
                            dtype=np.float64)
         except ValueError as exc:
+            hint = ("; the numbers use decimal commas: write them with decimal points "
+                    "(e.g. 9.81; export with a point as the decimal separator)"
+                    if delim != "," and re.search(r"(^|\D)\d+,\d+", "".join(lines)) else "")
             raise DataError(f"{p}: unreadable number in lines {line0}–{line0 + len(lines) - 1}"
-                            f" ({exc}); every field must be a number") from exc
+                            f" ({exc}); every field must be a number{hint}") from exc
         if a.shape[1] != ncols:
             raise DataError(f"{p}: lines from {line0} have {a.shape[1]} fields, the header "
                             f"{ncols}; fix the missing or extra column")

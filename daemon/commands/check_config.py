@@ -10,7 +10,12 @@ here starts. Exit 0 when the file is valid, 2 when it is not.
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import re
 import sys
+from collections.abc import Mapping
+from typing import Any
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
 from avard.daemon.config_types import Config
@@ -22,33 +27,65 @@ HELP = "check a config file (unknown keys, types, ranges) without starting"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("config", help="TOML configuration file (see config/avard.toml)")
+    parser.add_argument("--data-dir", metavar="DIR",
+                        help="override recording.data_dir, as `avard run --data-dir` does")
     parser.add_argument("--show", action="store_true",
                         help="print the effective configuration (defaults filled in)")
 
 
 def run(args: argparse.Namespace) -> int:
-    cfg = load_config(args.config)
+    cfg = load_config(args.config, **{"recording.data_dir": args.data_dir})
     check_runtime(cfg)
     config = Config.from_dict(cfg)
-    out = sys.stdout
-    out.write(f"{args.config}: valid\n")
-    out.write(f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
-              f"drained at {effective_poll_hz(cfg):g} Hz\n")
+    summary = [f"{args.config}: valid",
+               f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
+               f"drained at {effective_poll_hz(cfg):g} Hz"]
     if config.sensor.odr_hz > REALTIME_HELD_HZ:
         fifo_ms = 32e3 / config.sensor.odr_hz
-        out.write(f"  note: at {config.sensor.odr_hz:g} Hz the FIFO holds {fifo_ms:.3g} ms: "
-                  f"beside a CPU-bound process on a 2-core machine only "
-                  f"{REALTIME_HELD_HZ:g} Hz was measured free of FIFO overruns (no SCHED_FIFO "
-                  "under the unit); each overrun is a recorded gap of counted size "
-                  "(docs/service.md, python -m benchmarks realtime)\n")
+        summary.append(
+            f"  note: at {config.sensor.odr_hz:g} Hz the FIFO holds {fifo_ms:.3g} ms: beside a "
+            f"CPU-bound process on a 2-core machine only {REALTIME_HELD_HZ:g} Hz was measured "
+            "free of FIFO overruns (no SCHED_FIFO under the unit); each overrun is a recorded "
+            "gap of counted size (docs/service.md, python -m benchmarks realtime)")
     if config.recording.enabled:
-        out.write(f"  recording into {config.recording.data_dir}\n")
+        summary.append(f"  recording into {config.recording.data_dir}")
     if config.publish.enabled:
-        out.write(f"  publishing on {config.publish.endpoint}, requests on "
-                  f"{config.publish.request_endpoint}\n")
+        summary.append(f"  publishing on {config.publish.endpoint}, requests on "
+                       f"{config.publish.request_endpoint}")
+    out = sys.stdout
+    # with --show the whole output is TOML (the summary as comments): it can be saved and run
+    out.write("".join(("# " if args.show else "") + ln + "\n" for ln in summary))
     if args.show:
-        for sec, table in cfg.items():
-            out.write(f"[{sec}]\n")
-            for key, value in table.items():
-                out.write(f"{key} = {value!r}\n")
+        out.write(to_toml(cfg))
     return 0
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        if isinstance(value, float) and not math.isfinite(value):
+            return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # a TOML basic string is JSON's escaping
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"no TOML for {type(value).__name__}")
+
+
+def _toml_key(key: str) -> str:
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
+def to_toml(cfg: Mapping[str, Mapping[str, Any]]) -> str:
+    """The effective configuration as TOML that ``avard run --config`` reads back."""
+    lines: list[str] = []
+    for sec, table in cfg.items():
+        lines.append(f"[{_toml_key(sec)}]")
+        lines += [f"{_toml_key(k)} = {_toml_value(v)}" if v is not None
+                  else f"# {k}: not set (TOML has no empty value)" for k, v in table.items()]
+        lines.append("")
+    return "\n".join(lines)

@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     ex = explain_file(source, options, holdout=holdout, progress=progress, stage=stage)
     if args.report:
         path = write_report(ex, args.report)
-        log.info("report written to %s", path)
+        sys.stderr.write(f"avard explain: wrote the report to {path}\n")
     if args.json:
         json.dump(_jsonable(ex.to_dict()), sys.stdout, indent=2, allow_nan=False)
         sys.stdout.write("\n")

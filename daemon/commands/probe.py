@@ -44,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--emulate", action="store_true", help="no hardware: use the "
                         "register-level emulator (1 g on Z)")
     parser.add_argument("--ppm", type=float, default=2500.0,
-                        help="with --emulate: the emulated oscillator error, ppm")
+                        help="with --emulate: the emulated oscillator error, ppm (default "
+                             "2500)")
 
 
 def run(args: argparse.Namespace) -> int:

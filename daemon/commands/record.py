@@ -42,6 +42,8 @@ from avard.daemon.service.recorder import Recorder
 log = logging.getLogger(__name__)
 
 NAME = "record"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "archive a remote stream (ENDPOINT) into recording segments, with gaps for what was lost"
 
 #: Records kept while waiting for the header (~40 s of the service's ≤ 100 raw blocks/s).

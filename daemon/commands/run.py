@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 from typing import Any
 
 from avard.core.errors import ConfigError
@@ -23,11 +22,13 @@ from avard.daemon.config import (
     check_seed,
     load_config,
 )
-from avard.daemon.config_types import Config, RecordingConfig
+from avard.daemon.config_types import Config
 from avard.daemon.service.sdnotify import Notifier
 from avard.daemon.service.supervisor import Service, ServiceHooks
 
 NAME = "run"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "run the acquisition service (ADXL355 + DS18B20, Allan core, recording, ZeroMQ)"
 
 log = logging.getLogger(__name__)
@@ -73,23 +74,6 @@ def build(args: argparse.Namespace, config: Config, notifier: Any = None,
     return compose(config, spec, notifier=notifier, hooks=hooks)
 
 
-#: Folders that belong to the system: created by systemd (StateDirectory=) or an installer,
-#: never as a side effect of trying the service by hand.
-SYSTEM_PREFIXES = ("/var/", "/etc/", "/usr/", "/opt/", "/srv/", "/run/")
-
-
-def _check_system_folder(rec: RecordingConfig, environ: Any = os.environ) -> None:
-    """Refuse to create a missing system data folder unless systemd started us (it sets
-    $INVOCATION_ID for every unit it runs)."""
-    data_dir = rec.data_dir
-    if (rec.enabled and not os.path.exists(data_dir)
-            and data_dir.startswith(SYSTEM_PREFIXES) and not environ.get("INVOCATION_ID")):
-        raise ConfigError(
-            f"recording.data_dir {data_dir} does not exist and avard run does not create "
-            "system folders unless systemd starts it (StateDirectory= makes it); by hand, "
-            "record elsewhere with --data-dir DIR, or create it first")
-
-
 def run(args: argparse.Namespace) -> int:
     _check_args(args)
     overrides = {"recording.data_dir": args.data_dir}
@@ -98,7 +82,6 @@ def run(args: argparse.Namespace) -> int:
     if args.config is None:
         log.warning("no --config: using the built-in defaults (as in config/avard.toml); "
                     "recording into %s", config.recording.data_dir)
-    _check_system_folder(config.recording)
     check_runtime(cfg)          # the same checks as `avard check-config`
     notifier = Notifier()
     svc = build(args, config, notifier=notifier)

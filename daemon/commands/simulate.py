@@ -28,6 +28,8 @@ from avard.daemon.config import check_seed
 from avard.daemon.service.stop_signals import stop_signals_unwind
 
 NAME = "simulate"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "simulate a sensor record (preset + overrides) into an .npz file"
 
 log = logging.getLogger("avard.simulate")

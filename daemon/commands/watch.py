@@ -120,8 +120,15 @@ class WatchView:
         self.temps: dict[str, float | None] = {}
         self.chip_temp_c: float | None = None
         self.snapshot: AllanSnapshot | None = None
-        self.fits: dict[str, dict[str, Any]] = {}
+        self.snapshot_end: int | None = None   # the index after the snapshot's last sample
+        self.snapshot_at: float | None = None  # self.clock() when it arrived
+        self._fits: dict[str, dict[str, Any]] = {}
+        self._fit_due = False                  # a snapshot without the service's fit
+        self.fits_computed = 0
         self.fit_source = ""
+        self.started_at = clock()
+        self.last_message_at: float | None = None
+        self.newest_end: int | None = None     # the index after the newest sample received
         self.status: dict[str, Any] = {}
         self.events: list[str] = []
         self._rate_t0: float | None = None
@@ -131,11 +138,17 @@ class WatchView:
 
     # ---- updates --------------------------------------------------------------------------
 
-    def set_snapshot(self, snapshot: dict[str, Any] | None, fit: Any = None) -> None:
-        """A new Allan snapshot (dict of AllanSnapshot.to_dict()) and optional service fit."""
+    def set_snapshot(self, snapshot: dict[str, Any] | None, fit: Any = None, *,
+                     i_end: int | None = None) -> None:
+        """A new Allan snapshot (dict of AllanSnapshot.to_dict()) and optional service fit.
+
+        Without the service's fit, the fit here is made when the view is next looked at
+        (:attr:`fits`), for the newest snapshot only: a view behind a fast service skips the
+        snapshots it had no time for instead of fitting every stale one."""
         if not snapshot:
             return
         if "snapshot" in snapshot:  # the request socket answers with the whole avar record
+            i_end = snapshot.get("i_end", i_end)
             snapshot, fit = snapshot["snapshot"], snapshot.get("fit", fit)
         try:
             self.snapshot = AllanSnapshot.from_dict(snapshot)   # the one decoder
@@ -143,20 +156,34 @@ class WatchView:
             log.warning("ignoring an unreadable Allan snapshot: %s", exc)
             return
         self.odr_hz = self.odr_hz or self.snapshot.rate_hz
-        self.fits = {}
+        self.snapshot_end = int(i_end) if isinstance(i_end, int) else None
+        self.snapshot_at = self.clock()
+        self._fits = {}
+        self._fit_due = False
         if isinstance(fit, dict) and fit:
-            self.fits = {"x": fit} if "terms" in fit else {
+            self._fits = {"x": fit} if "terms" in fit else {
                 k: v for k, v in fit.items() if isinstance(v, dict) and "terms" in v}
             self.fit_source = "service"
         elif self.fit_locally:
-            self.fits = self._fit_here()
+            self._fit_due = True
             self.fit_source = "fitted here"
+
+    @property
+    def fits(self) -> dict[str, dict[str, Any]]:
+        """The fit of the current snapshot: the service's, or made here once on demand."""
+        if self._fit_due:
+            self._fit_due = False
+            self._fits = self._fit_here()
+            self.fits_computed += 1
+        return self._fits
 
     def update(self, msg: Message) -> None:
         rec = msg.record
         self.run = rec["run"]
         kind = rec["kind"]
+        self.last_message_at = self.clock()
         if kind == "raw":
+            self.newest_end = int(rec["i0"]) + int(rec["n"])
             now = self.clock()
             self._samples += rec["n"]
             if self._rate_t0 is None:
@@ -171,7 +198,7 @@ class WatchView:
             for name, value in zip(rec["names"], rec["values_c"], strict=False):
                 self.temps[str(name)] = value
         elif kind == "avar":
-            self.set_snapshot(rec["snapshot"], rec.get("fit"))
+            self.set_snapshot(rec["snapshot"], rec.get("fit"), i_end=rec.get("i_end"))
         elif kind == "status":
             self.status = rec["status"]
             self.odr_hz = _num(self.status.get("rate_hz")) or self.odr_hz
@@ -217,6 +244,7 @@ class WatchView:
         if self.chip_temp_c is not None:
             temps.append(f"chip {self.chip_temp_c:.1f} °C")
         head.append("temps     " + (", ".join(temps) if temps else "none yet"))
+        head.append(self._render_age(endpoint))
         extra = ["messages  " + ", ".join(
             f"{t} {s.received} ({s.lost} lost)" for t, s in sorted(stats.topics.items()))
             + (f"; {stats.bad_messages} undecodable" if stats.bad_messages else "")]
@@ -238,6 +266,27 @@ class WatchView:
         if len(lines) > h:
             lines = [*lines[:max(h - 1, 0)], "… (a taller terminal shows more)"][:h]
         return "\n".join(_clip(ln, w) for ln in lines) + "\n"
+
+    def _render_age(self, endpoint: str) -> str:
+        """How old the view is: plainly when nothing arrives, else how far the snapshot
+        (ADEV and fit) lags the newest sample received and when it arrived."""
+        now = self.clock()
+        if self.last_message_at is None:
+            return (f"data      nothing received from {endpoint or 'the service'} in "
+                    f"{fmt_duration(now - self.started_at)}: is the service running there, "
+                    "and are the endpoint and keys right?")
+        quiet = now - self.last_message_at
+        if quiet >= 10:
+            return (f"data      nothing new for {fmt_duration(quiet)}: the view below is "
+                    "that old (service stopped or network down?)")
+        if self.snapshot is None or self.snapshot_at is None:
+            return "data      arriving; no Allan snapshot yet"
+        age = f"snapshot received {fmt_duration(now - self.snapshot_at)} ago"
+        rate = self.odr_hz
+        if self.snapshot_end is not None and self.newest_end is not None and rate:
+            behind = max(self.newest_end - self.snapshot_end, 0) / rate
+            age += f", {fmt_duration(behind)} of data behind the newest sample"
+        return f"data      arriving; {age}"
 
     def _section(self, part: str, render: Any, width: int) -> list[list[str]]:
         """The variants of a section that fit ``width``, full first (at least one)."""
@@ -403,6 +452,12 @@ def run(args: argparse.Namespace) -> int:
                                        f"{args.wait:g} s (is the service running?)")
                 continue
             if now >= next_draw:
+                # what queued up meanwhile first, so the view shows the newest snapshot
+                # (only that one is fitted) rather than one a redraw behind
+                for _ in range(100_000):
+                    if (queued := sub.recv(0)) is None:
+                        break
+                    view.update(queued)
                 # on a terminal: its size now (it may have been resized); one line is kept
                 # free so the cursor line does not scroll the view's first line away
                 size = shutil.get_terminal_size() if out.isatty() else None

@@ -7,7 +7,7 @@ the fitted IEEE terms with intervals, the time until each τ's interval is withi
 temperatures over the run, gaps and events on a time line, and the service's status. Pages
 update by server-sent events; every script and style is served by avard itself. Another
 listen address is used only when given, and logged. Needs the ``web`` extra
-(``pip install 'avard[web]'``).
+(``pip install 'avard[web]'``; from a checkout ``.venv/bin/pip install -e '.[web]'``).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from avard.core.errors import ConfigError
 from avard.daemon.net.subscriber import add_client_arguments, subscriber_from_args
 
 NAME = "web"
+#: INFO lines by default: a long-running command says what it does as it goes
+NARRATES = True
 HELP = "serve a live, read-only web page (and /metrics) of a running service"
 
 log = logging.getLogger(__name__)
@@ -90,8 +92,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         from aiohttp import web  # noqa: F401 - only to say what is missing, early
     except ImportError:
-        raise ConfigError("avard web needs the 'web' extra: pip install 'avard[web]' "
-                          "(it adds aiohttp)") from None
+        raise ConfigError("avard web needs the 'web' extra (it adds aiohttp): "
+                          "pip install 'avard[web]', or from a checkout "
+                          ".venv/bin/pip install -e '.[web]'") from None
     sub = subscriber_from_args(args)
     return asyncio.run(_serve(args, sub, host, port))
 
@@ -109,7 +112,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     for sig in (signal.SIGTERM, signal.SIGINT):
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
-    state = RunState()
+    state = RunState(history=args.history)
     feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,
                 fit_interval_s=args.fit_interval,
                 history=None if args.history is None else RecordingSource(Path(args.history)))

@@ -102,8 +102,16 @@ class SimulatedSensors:
         return self._temperatures()[2]
 
     def chip_temperature(self) -> float:
-        chip = self.chip_c
-        return 25.0 if math.isnan(chip) else chip
+        """The die temperature now; before the first sample (the driver reads TEMP while it
+        configures the chip) that of the first sample, not a made-up 25 °C that showed as a
+        spike at the start of every simulated run. The first batch is the one the first
+        drain would make, so the samples are the same."""
+        if self._buf is None:
+            self._buf = self.sim.next(self.batch)
+            self._pos = 0
+        if self._pos == 0:
+            return float(self._buf.temperatures_at(np.array([0]))[0][2])
+        return self.chip_c
 
     def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
         """The fake sysfs tree (in a temporary folder, removed with this object) and the

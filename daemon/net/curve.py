@@ -104,17 +104,20 @@ def load_secret_key(path: str | os.PathLike[str]) -> tuple[bytes, bytes]:
     except OSError as exc:
         raise ConfigError(f"CURVE secret key file {p} is not readable ({exc.strerror}); make "
                           "one with `avard keys --out DIR`") from None
+    try:
+        public, secret = zmq.auth.load_certificate(p)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"cannot read CURVE keys from {p}: {exc}") from None
+    # what the file holds first: a public NAME.key given here is the wrong file, whatever
+    # its mode (a chmod would not help)
+    if not secret:
+        raise ConfigError(f"{p} holds no secret key, only a public one; give the "
+                          "NAME.key_secret file that `avard keys` wrote beside it")
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
         raise ConfigError(
             f"CURVE secret key file {p} is readable by others (mode {stat.S_IMODE(mode):04o}); "
             f"run `chmod 600 {p}`"
         )
-    try:
-        public, secret = zmq.auth.load_certificate(p)
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"cannot read CURVE keys from {p}: {exc}") from None
-    if not secret:
-        raise ConfigError(f"{p} holds no secret key; use the NAME.key_secret file")
     return public, secret
 
 

@@ -390,10 +390,36 @@ def add_client_arguments(parser: Any) -> None:
                         help="seconds to wait for a request reply (default 2)")
 
 
+def check_client_endpoint(endpoint: str, what: str = "ENDPOINT") -> None:
+    """ConfigError (one line) for an endpoint a client cannot reach whatever runs there: a
+    port outside 1–65535, or a host name that does not resolve (said as such, not as a
+    service that is not running)."""
+    import socket
+
+    if not endpoint.startswith("tcp://"):
+        return
+    host, sep, port = endpoint[len("tcp://"):].rpartition(":")
+    if not sep or not host:
+        raise ConfigError(f"{what} {endpoint!r}: write tcp://HOST:PORT, e.g. "
+                          "tcp://raspberrypi.local:5555")
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ConfigError(f"{what} {endpoint!r}: port {port} is not a TCP port (1–65535)")
+    name = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    try:
+        socket.getaddrinfo(name, int(port), type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ConfigError(f"{what} {endpoint!r}: the host name {name!r} does not resolve "
+                          f"({getattr(exc, 'strerror', None) or exc}); check its spelling, "
+                          "or give the Pi's IP address") from None
+
+
 def subscriber_from_args(args: Any, topics: Iterable[str] = frames.TOPICS) -> Subscriber:
     """A (not yet connected) Subscriber from the arguments of :func:`add_client_arguments`."""
     from pathlib import Path
 
+    check_client_endpoint(args.endpoint)
+    if args.request is not None:
+        check_client_endpoint(args.request, "--request")
     if (args.server_key is None) != (args.client_key is None):
         raise ConfigError("CURVE needs both --server-key (the service's NAME.key) and "
                           "--client-key (your NAME.key_secret), or neither")

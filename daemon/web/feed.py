@@ -103,7 +103,7 @@ class Feed:
         except (FormatError, OSError) as exc:
             log.warning("cannot read the history in %s: %s", path, exc)
         finally:
-            self.state.history_done()
+            self.state.history_done(n)
         log.info("read %d records of history from %s in %.1f s", n, path,
                  time.monotonic() - t0)
 

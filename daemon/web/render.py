@@ -34,7 +34,9 @@ OTHER_COLOURS = ("#CC79A7", "#E69F00", "#56B4E9", "#000000", "#999999")
 GAP_COLOURS = {"overrun": "#D55E00", "bus_error": "#CC79A7", "restart": "#0072B2",
                "disk_full": "#E69F00", "subscriber_loss": "#999999"}
 W, H = 640, 400                 # SVG user units; the page scales it to the screen width
-ML, MR, MT, MB = 74, 16, 14, 46  # margins: left, right, top, bottom
+# margins: left, right, top, bottom; room for the phone's larger text (style.css) so that no
+# tick label meets an axis label at any width (tests/daemon/test_web_browser.py checks 412 px)
+ML, MR, MT, MB = 84, 16, 14, 52
 
 
 def fragments(state: RunState, target: float) -> dict[str, str]:
@@ -140,11 +142,17 @@ class _Frame:
     def axes(self, xlabel: str, ylabel: str, xfmt: Any = _g, yfmt: Any = _g) -> str:
         out = [f'<rect class="plot-bg" x="{ML}" y="{MT}" width="{self.w - ML - MR}" '
                f'height="{self.h - MT - MB}"/>']
+        # a y tick label at the bottom corner and an x tick label at the left one would
+        # meet: the corner keeps the y label
+        corner = any(self.py(v) > self.h - MB - 12
+                     for v in self._ticks(self.y0, self.y1, self.logy))
         for v in self._ticks(self.x0, self.x1, self.logx):
             x = self.px(v)
+            label = "" if corner and x < ML + 24 else (
+                f'<text class="tick" x="{x:.1f}" y="{self.h - MB + 17}" '
+                f'text-anchor="middle">{xfmt(v)}</text>')
             out.append(f'<line class="grid" x1="{x:.1f}" y1="{MT}" x2="{x:.1f}" '
-                       f'y2="{self.h - MB}"/><text class="tick" x="{x:.1f}" '
-                       f'y="{self.h - MB + 15}" text-anchor="middle">{xfmt(v)}</text>')
+                       f'y2="{self.h - MB}"/>{label}')
         for v in self._ticks(self.y0, self.y1, self.logy):
             y = self.py(v)
             out.append(f'<line class="grid" x1="{ML}" y1="{y:.1f}" x2="{self.w - MR}" '
@@ -394,9 +402,22 @@ def temperatures_html(state: RunState) -> str:
     latest = ", ".join(
         f"{escape(_short(k))} {'—' if v is None else f'{v:.2f}'} °C"
         for k, v in sorted(state.latest_temps.items()))
-    return (f'<p class="note">Latest: {latest}. Whole run so far, thinned to at most '
-            f'{max(s.max_points for s in state.temperatures.values())} points per channel.</p>'
-            + temperatures_svg(state.temperatures, state.run_time(None)))
+    return (f'<p class="note">Latest: {latest}. {escape(temperatures_span(state))}, thinned to '
+            f'at most {max(s.max_points for s in state.temperatures.values())} points per '
+            'channel.</p>' + temperatures_svg(state.temperatures, state.run_time(None)))
+
+
+def temperatures_span(state: RunState) -> str:
+    """What the temperature plot covers, said as it is: the live stream starts when avard web
+    did; only with ``--history`` does it hold the run before."""
+    since = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime(state.started))
+    if state.history is not None and state.history_records:
+        return f"The run from the recording in {state.history}, then live"
+    if state.history is not None:
+        return (f"Since avard web started ({since}); nothing was read from --history "
+                f"{state.history}")
+    return (f"Since avard web started ({since}); start it with --history DIR to show the "
+            "run before")
 
 
 # ---- status and time line ------------------------------------------------------------------
@@ -450,7 +471,7 @@ def _silence(state: RunState) -> str:
 
 
 def timeline_svg(state: RunState) -> str:
-    h = 112
+    h = 126
     end = max(state.run_time(None), max((i.t_s for i in state.timeline), default=0.0), 1.0)
     unit, scale = _time_unit(end)
     frame = _Frame((0.0, end / scale), (0.0, 1.0), logx=False, logy=False, h=h)
@@ -461,8 +482,8 @@ def timeline_svg(state: RunState) -> str:
                     f'text-anchor="middle">{_g(v)}</text>')
     body.append(f'<text class="label" x="{(ML + W - MR) / 2:.0f}" y="{h - 10}" '
                 f'text-anchor="middle">run time [{unit}]</text>')
-    body.append(f'<text class="tick" x="{ML - 6}" y="{MT + 14}" text-anchor="end">gaps</text>'
-                f'<text class="tick" x="{ML - 6}" y="{MT + 34}" text-anchor="end">events</text>')
+    body.append(f'<text class="tick" x="{ML - 6}" y="{MT + 16}" text-anchor="end">gaps</text>'
+                f'<text class="tick" x="{ML - 6}" y="{MT + 42}" text-anchor="end">events</text>')
     for item in state.timeline:
         x = frame.px(item.t_s / scale)
         title = escape(f"{item.name} at {item.t_s:.1f} s: {item.detail}")
@@ -471,11 +492,11 @@ def timeline_svg(state: RunState) -> str:
                                       / scale) - x)
             colour = GAP_COLOURS.get(item.name, "#D55E00")
             body.append(f'<g class="tl-item" data-kind="gap" data-name="{escape(item.name)}">'
-                        f'<rect x="{x - 1:.1f}" y="{MT + 2}" width="{width:.1f}" height="18" '
+                        f'<rect x="{x - 1:.1f}" y="{MT + 3}" width="{width:.1f}" height="18" '
                         f'fill="{colour}"><title>{title}</title></rect></g>')
         else:
             body.append(f'<g class="tl-item" data-kind="event" data-name="{escape(item.name)}">'
-                        f'<path d="M{x:.1f},{MT + 24} l5,9 l-10,0 z" fill="#444">'
+                        f'<path d="M{x:.1f},{MT + 30} l5,9 l-10,0 z" fill="#444">'
                         f'<title>{title}</title></path></g>')
     return _svg("".join(body), "gaps and events over the run", "plot timeline", h=h)
 

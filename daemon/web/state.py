@@ -113,6 +113,8 @@ class RunState:
 
     lock: threading.RLock = field(default_factory=threading.RLock)
     started: float = field(default_factory=time.time)
+    history: str | None = None   # the recording read first (``--history``), if any
+    history_records: int = 0     # records read from it
     clock: Any = time.monotonic
     runs: list[str] = field(default_factory=list)
     header: dict[str, Any] = field(default_factory=dict)
@@ -217,9 +219,10 @@ class RunState:
             self._history_end[run] = (max(end_i0, i0) if isinstance(i0, int) else end_i0,
                                       max(end_t, t) if isinstance(t, int | float) else end_t)
 
-    def history_done(self) -> None:
-        """The recording has been read: the live stream takes over."""
+    def history_done(self, records: int = 0) -> None:
+        """The recording has been read (``records`` of it): the live stream takes over."""
         with self.lock:
+            self.history_records = records
             self._prev_run_end = None  # the recording's own restart gaps are in already
             self.version += 1
 

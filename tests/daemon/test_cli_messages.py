@@ -52,13 +52,27 @@ def test_record_refuses_a_file_name_for_its_folder(tmp_path: Path, capsys) -> No
 
 
 def test_run_by_hand_does_not_create_a_system_folder(capsys) -> None:
-    from avard.daemon.commands.run import _check_system_folder
-    from avard.daemon.config_types import RecordingConfig
+    from avard.daemon.config import check_runtime, load_config
 
-    rec = RecordingConfig(enabled=True, data_dir="/var/lib/avard-test-not-there")
+    cfg = load_config(None, **{"recording.data_dir": "/var/lib/avard/test-not-there"})
     with pytest.raises(ConfigError, match="does not create system folders"):
-        _check_system_folder(rec, environ={})
-    _check_system_folder(rec, environ={"INVOCATION_ID": "abc"})  # systemd: StateDirectory=
+        check_runtime(cfg, environ={})
+    check_runtime(cfg, environ={"INVOCATION_ID": "abc"})  # systemd: StateDirectory=
+
+
+def test_check_config_refuses_what_run_refuses(tmp_path: Path, capsys) -> None:
+    """check-config's --help promises "a config that passes here starts": a missing system
+    folder that `avard run` by hand refuses is refused by check-config too, in its words."""
+    if Path("/var/lib/avard").exists():
+        pytest.skip("/var/lib/avard exists on this machine")
+    cfg = tmp_path / "avard.toml"
+    cfg.write_text('[recording]\ndata_dir = "/var/lib/avard/test-not-there"\n')
+    assert main(["check-config", str(cfg)]) == 2
+    check_err = _err(capsys)
+    assert "does not create system folders" in check_err
+    assert main(["run", "--config", str(cfg), "--simulate", "quiet-lab", "--duration", "1"]) == 2
+    run_err = _err(capsys)
+    assert check_err.split(": ", 1)[-1] in run_err
 
 
 def test_run_without_config_says_which_it_uses(capsys) -> None:
@@ -95,3 +109,46 @@ def test_a_refused_connection_gets_network_advice() -> None:
     text = describe_os_error(ConnectionRefusedError(errno.ECONNREFUSED,
                                                     os.strerror(errno.ECONNREFUSED)))
     assert "check the address and that the service runs" in text
+
+
+def test_check_config_show_prints_toml_that_reads_back_to_the_same_config(
+        tmp_path: Path, capsys) -> None:
+    import tomllib
+
+    from avard.daemon.config import load_config
+
+    src = Path(__file__).parents[2] / "config" / "avard.toml"
+    data = tmp_path / "rec"
+    assert main(["check-config", str(src), "--data-dir", str(data), "--show"]) == 0
+    shown = capsys.readouterr().out
+    assert "True" not in shown and "False" not in shown and "= true" in shown
+    parsed = tomllib.loads(shown)  # the whole output, summary included (as comments)
+    again = tmp_path / "shown.toml"
+    again.write_text(shown)
+    assert load_config(again) == load_config(src, **{"recording.data_dir": str(data)}) \
+        == {sec: {k: v for k, v in t.items()} for sec, t in load_config(again).items()}
+    assert parsed["recording"]["data_dir"] == str(data)
+
+
+def test_a_csv_with_decimal_commas_gets_a_hint(tmp_path: Path, capsys) -> None:
+    csv = tmp_path / "lab.csv"
+    csv.write_text("t;x;y;z\n0,0;0,1;0,2;9,8\n0,008;0,1;0,2;9,8\n")
+    assert main(["analyze", str(csv)]) == 2
+    err = _err(capsys)
+    assert "decimal commas" in err and "decimal points" in err
+    good = tmp_path / "ok.csv"  # a number that is wrong for another reason: no such hint
+    good.write_text("t;x\n0.0;abc\n0.008;0.1\n")
+    assert main(["analyze", str(good)]) == 2
+    assert "decimal commas" not in _err(capsys)
+
+
+def test_help_keeps_the_lines_of_a_command_description(capsys) -> None:
+    """--help printed the examples and lists of a command's description folded into one
+    paragraph."""
+    with pytest.raises(SystemExit):
+        main(["watch", "--help"])
+    out = capsys.readouterr().out
+    assert "\n* rate: the service's fitted ODR" in out
+    with pytest.raises(SystemExit):
+        main(["probe", "--help"])
+    assert "(default 2500)" in " ".join(capsys.readouterr().out.split())

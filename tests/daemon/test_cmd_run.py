@@ -41,12 +41,22 @@ def _start(tmp: Path, *extra: str) -> subprocess.Popen:
         stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, env=env, text=True)
 
 
+def _timeout_stop_s() -> float:
+    unit = Path(__file__).parents[2] / "systemd" / "avard.service"
+    line = next(ln for ln in unit.read_text().splitlines() if ln.startswith("TimeoutStopSec="))
+    return float(line.split("=", 1)[1].rstrip("s"))
+
+
 def _wait_for(pred, timeout: float = 60.0) -> None:  # type: ignore[no-untyped-def]
     deadline = time.monotonic() + timeout
     while not pred():
         if time.monotonic() > deadline:
             raise AssertionError("timed out")
         time.sleep(0.05)
+
+
+def _recorded_samples(data_dir: Path) -> int:
+    return sum(r["n"] for r in RecordingReader(data_dir) if r["kind"] == "raw")
 
 
 def _state(path: Path) -> dict:
@@ -59,7 +69,9 @@ def test_killed_process_restarts_with_gap_and_restored_accumulators(tmp_path: Pa
     p1 = _start(tmp_path, "--speed", "0")
     try:
         _wait_for(lambda: ckpt.exists() and _state(ckpt)["n_samples"] > 40 * 125)
-        time.sleep(0.3)                     # more data after the checkpoint: the crash window
+        # more data recorded after the checkpoint: the crash window (a count, not a sleep)
+        n_ckpt = _state(ckpt)["n_samples"]
+        _wait_for(lambda: _recorded_samples(tmp_path / "rec") > n_ckpt + 125)
     finally:
         p1.send_signal(signal.SIGKILL)
         p1.communicate(timeout=10)
@@ -92,17 +104,16 @@ def test_sigterm_flushes_and_sighup_reopens(tmp_path: Path) -> None:
         _wait_for(lambda: any((tmp_path / "rec").glob("*.avr")))
         time.sleep(1.0)
         p.send_signal(signal.SIGHUP)
-        _wait_for(lambda: len(list((tmp_path / "rec").glob("*.avr"))) >= 2, 20)
+        _wait_for(lambda: len(list((tmp_path / "rec").glob("*.avr"))) >= 2)
         time.sleep(0.5)
-        t0 = time.monotonic()
         p.send_signal(signal.SIGTERM)
-        _, err = p.communicate(timeout=10)
-        stop_s = time.monotonic() - t0
+        # The promise is systemd's: stopped before TimeoutStopSec= (else it is SIGKILLed).
+        # TimeoutExpired fails the test; no wall-time figure tighter than that contract.
+        _, err = p.communicate(timeout=_timeout_stop_s())
     finally:
         if p.poll() is None:
             p.kill()
     assert p.returncode == 0, err
-    assert stop_s < 5.0
     reader = RecordingReader(tmp_path / "rec")
     recs = list(reader)
     assert reader.problems == []                   # closed cleanly: no truncated tail

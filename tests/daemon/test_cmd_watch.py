@@ -196,3 +196,67 @@ def test_a_short_terminal_keeps_the_first_lines_and_says_there_is_more() -> None
 def test_without_a_terminal_nothing_is_cut() -> None:
     text = _full_view().render(StreamStats(), "tcp://h:1")
     assert "…" not in text and "plate [°C]" in text   # every channel, full intervals
+
+
+# ---- how old the view is; skipping stale snapshots; endpoints ---------------------------------
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_a_view_behind_the_stream_fits_only_the_newest_snapshot() -> None:
+    from avard.daemon.net.subscriber import Message
+
+    view = WatchView(target=0.1)
+    snaps = [_snapshot(1 << 12, seed=k) for k in range(5)]
+    for k, snap in enumerate(snaps):  # five snapshots queued before the view is drawn
+        view.update(Message("avar", F.avar_record("r", k, (k + 1) << 12, 1 << 12, snap,
+                                                  0.0, 0.0)))
+    assert view.fits_computed == 0
+    view.render(StreamStats())
+    view.render(StreamStats())
+    assert view.fits_computed == 1
+    # ... and that one fit is of the last snapshot
+    newest = WatchView(target=0.1)
+    newest.set_snapshot(snaps[-1])
+    assert view.fits == newest.fits
+
+
+def test_the_view_says_how_old_it_is_and_when_nothing_arrives() -> None:
+    from avard.daemon.net.subscriber import Message
+
+    clock = _Clock()
+    view = WatchView(clock=clock)
+    clock.t = 12.0
+    text = view.render(StreamStats(), "tcp://pi:5555")
+    assert "nothing received from tcp://pi:5555 in 12 s: is the service running there" in text
+    counts = np.zeros((125, 3), dtype=np.int32)
+    view.update(Message("avar", F.avar_record("r", 0, 1000, 1000, _snapshot(1 << 12),
+                                               0.0, 0.0, fit={"terms": {}})))
+    view.update(Message("raw", F.raw_record("r", 0, 1000 + 2 * 125, counts, 0.0, 0.0)))
+    clock.t = 14.0
+    line = next(ln for ln in view.render(StreamStats()).splitlines()
+                if ln.startswith("data "))
+    assert line == ("data      arriving; snapshot received 2 s ago, 3 s of data behind the "
+                    "newest sample")
+    clock.t = 30.0
+    assert "nothing new for 18 s: the view below is that old" in view.render(StreamStats())
+
+
+@pytest.mark.parametrize(("endpoint", "words"), [
+    ("tcp://127.0.0.1:100000", "port 100000 is not a TCP port (1–65535)"),
+    ("tcp://127.0.0.1:0", "port 0 is not a TCP port"),
+    ("tcp://no-such-host.invalid:5555", "'no-such-host.invalid' does not resolve"),
+    ("tcp://127.0.0.1", "write tcp://HOST:PORT"),
+])
+def test_watch_refuses_an_endpoint_it_cannot_reach_in_one_line(
+        endpoint: str, words: str, capsys: pytest.CaptureFixture) -> None:
+    assert cli.main(["watch", endpoint]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1, err
+    assert "is the service running" not in err

@@ -82,7 +82,9 @@ def test_poll_rate_rises_with_odr() -> None:
 
 
 def test_check_config_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["check-config", str(SHIPPED)]) == 0
+    # the shipped config records into /var/lib/avard, which systemd makes: by hand (as `avard
+    # run` would) with the data folder somewhere this user may write
+    assert main(["check-config", str(SHIPPED), "--data-dir", str(tmp_path / "rec")]) == 0
     assert "valid" in capsys.readouterr().out
     bad = tmp_path / "bad.toml"
     bad.write_text("[sensor]\nodr_hz = 100\n")

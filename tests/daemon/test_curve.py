@@ -170,3 +170,11 @@ def test_reload_keys_admits_a_newly_authorised_client(keys: dict, tmp_path: Path
             assert bad.request("status") == {"ok": 1}
         finally:
             bad.close()
+
+
+def test_a_public_key_given_as_the_secret_one_is_named_as_such(tmp_path) -> None:
+    """Not "chmod 600": a public NAME.key (mode 0644 as written) is the wrong file."""
+    pub, _sec = make_keypair(tmp_path, "laptop")
+    with pytest.raises(ConfigError, match="holds no secret key, only a public one") as e:
+        load_secret_key(pub)
+    assert "chmod" not in str(e.value)

@@ -7,6 +7,8 @@ from pathlib import Path
 import pytest
 from avard.daemon.cli import main
 
+from tests.support.demo_block import README_ARGS, SHORT_ARGS, SHORT_BLOCK, demo_stdout, readme_block
+
 
 def test_demo_short_run_writes_report_and_plot(tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
@@ -42,17 +44,45 @@ def test_demo_refuses_nonpositive_hours(tmp_path: Path,
 def test_the_demo_with_its_seed_prints_the_same_numbers_every_run(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The service used to stop when its supervisor next looked at the fast virtual clock,
-    so the sample count (and every fitted number) changed from run to run with one seed."""
+    so the sample count (and every fitted number) changed from run to run with one seed; the
+    recording's size and the snapshot count are the same on every run too (the wall time is
+    on stderr)."""
     texts = []
     for i in range(2):
         assert main(["demo", "--hours", "0.05", "--out", str(tmp_path / f"d{i}"),
                      "--no-plot"]) == 0
-        text = capsys.readouterr().out
-        # wall time and the output folder are the only things allowed to differ
-        texts.append([ln.split(" in ")[0] if ln.strip().startswith("service:") else ln
-                      for ln in text.splitlines() if "wrote " not in ln])
+        captured = capsys.readouterr()
+        assert "wall time" in captured.err and "wall" not in captured.out
+        # no log lines beside the results unless -v (they went to stderr, mixed with them)
+        assert "INFO" not in captured.err
+        texts.append(captured.out.replace(str(tmp_path / f"d{i}"), "OUT"))
     assert texts[0] == texts[1]
-    n = int(texts[0][1].split()[1])
+    lines = texts[0].splitlines()
+    n = int(lines[1].split()[1])
     # quiet-lab's real ODR (125 Hz, −800 ppm); the samples after the last drain (polled at
     # 3·ODR/32, so fewer than 11) stay in the FIFO
     assert 0 <= round(0.05 * 3600 * 124.9) - n <= 32 / 3 + 1
+    # every sample and every snapshot (one per 60 s of service time) reached the subscriber
+    assert f"subscriber: {n} samples, index continuity ok, 0 messages lost, 3 Allan " \
+           "snapshots" in lines[2]
+
+
+def test_a_short_demo_prints_exactly_the_stored_block(tmp_path: Path) -> None:
+    """The stored block and README.md's are written by one script (tests/support/demo_block.py)
+    from real runs: when the demo's output changes, this fails, and the script updates both."""
+    assert demo_stdout(SHORT_ARGS, tmp_path) == SHORT_BLOCK.read_text(), (
+        "the demo's output changed: run `.venv/bin/python -m tests.support.demo_block` and "
+        "commit README.md and tests/daemon/demo_short.txt")
+
+
+@pytest.mark.slow
+def test_make_demo_prints_exactly_the_readme_block(tmp_path: Path) -> None:
+    assert demo_stdout(README_ARGS, tmp_path) == readme_block()
+
+
+def test_the_readme_shows_the_demo_block_with_what_make_demo_runs() -> None:
+    block = readme_block()
+    assert block.startswith("avard demo: 6 simulated hours")
+    assert "\n  wrote demo-out/report.md" in block
+    makefile = (Path(__file__).parents[2] / "Makefile").read_text()
+    assert "\t$(VENV)/bin/avard demo\n" in makefile  # README_ARGS: no arguments

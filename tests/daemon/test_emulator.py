@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import errno
-import time
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -309,11 +309,34 @@ def test_virtual_clock_manual_and_real_time():
     assert c.realtime() - c.monotonic() == pytest.approx(1.7e9 - 3600)
     with pytest.raises(ValueError):
         c.advance(-1)
+
+def test_virtual_clock_at_a_speed_maps_real_time_exactly(monkeypatch):
+    # A stand-in for the real clock: what a sleep asks of it and what the virtual clock reads
+    # are exact, however loaded the machine (no wall-time measurement).
+    import avard.daemon.hw.emulator as emulator
+
+    class RealTime:
+        now = 100.0
+        slept: ClassVar[list[float]] = []
+
+        @classmethod
+        def monotonic(cls) -> float:
+            return cls.now
+
+        @classmethod
+        def sleep(cls, s: float) -> None:
+            cls.slept.append(s)
+            cls.now += s
+
+    monkeypatch.setattr(emulator, "time", RealTime)
     fast = VirtualClock(start=0.0, speed=50.0)
-    t0 = time.monotonic()
     fast.sleep(1.0)  # 1 virtual second = 20 ms of real time
-    assert fast.monotonic() >= 1.0
-    assert time.monotonic() - t0 < 1.0
+    assert RealTime.slept == [pytest.approx(0.02)]
+    assert fast.monotonic() == pytest.approx(1.0)
+    RealTime.now += 0.5  # half a real second: 25 virtual ones
+    assert fast.monotonic() == pytest.approx(26.0)
+    fast.sleep(0.0)
+    assert len(RealTime.slept) == 1
 
 
 def test_odr_error_can_drift_without_a_jump():
@@ -326,3 +349,17 @@ def test_odr_error_can_drift_without_a_jump():
     clock.advance(2.0)
     entries(bus)
     assert emu.produced == 1000 + 2010
+
+
+def test_the_simulated_chip_temperature_starts_where_the_simulation_does() -> None:
+    """It read 25 °C before the first sample (a spike at the start of every simulated run)."""
+    from avard.daemon.config import load_config
+    from avard.daemon.hw.simulation import build_simulated
+
+    cfg = load_config(None, **{"recording.data_dir": "/tmp/avard-test-unused"})
+    _dev, _clock, sims, _emu = build_simulated(cfg, "quiet-lab", seed=3)
+    before = sims.chip_temperature()
+    first = sims.source(1)
+    assert len(first) == 1
+    assert sims.chip_temperature() == pytest.approx(before, abs=1e-6)
+    assert abs(before - 25.0) > 0.5  # quiet-lab's chip is not at 25 °C

@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,8 @@ from avard.daemon.service.supervisor import Service, ServiceHooks
 
 from tests.support.rigs import rig_from_parts
 
+from .pubsub import is_probe, wait_until_subscribed
+
 RATE = 125.0
 
 # ------------------------------------------------------------------------------ the harness
@@ -54,26 +55,27 @@ class Listener:
     def __init__(self, svc: Service) -> None:
         self.sub = Subscriber(svc.publisher.endpoint,
                               request_endpoint=svc.request_server.endpoint).connect(join=False)
-        self.records: list[tuple[str, dict]] = []
+        # before acquisition starts: from here on the subscriber gets every message
+        self.records: list[tuple[str, dict]] = wait_until_subscribed(svc.publisher, self.sub)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
-        deadline = time.monotonic() + 5
-        while svc.publisher.stats()["peers"] < 1 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        time.sleep(0.2)  # the SUB subscription reaches the PUB socket
+
+    def _keep(self, msg: Any) -> None:
+        if not is_probe(msg.record):
+            self.records.append((msg.topic, msg.record))
 
     def _run(self) -> None:
         while not self._stop.is_set():
             msg = self.sub.recv(timeout_s=0.1)
             if msg is not None:
-                self.records.append((msg.topic, msg.record))
+                self._keep(msg)
 
     def finish(self) -> None:
         self._stop.set()
         self._thread.join(5)
         while (msg := self.sub.recv(timeout_s=0.3)) is not None:
-            self.records.append((msg.topic, msg.record))
+            self._keep(msg)
         self.sub.close()
 
     def raw(self) -> list[dict]:

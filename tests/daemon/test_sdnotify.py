@@ -186,24 +186,33 @@ def test_service_feeds_the_watchdog_only_while_samples_advance(tmp_path, path_so
     # The whole service with a Notifier on a real socket: WATCHDOG=1 stops while the sensor
     # produces nothing (so systemd's WatchdogSec= restarts a stuck service) and comes back
     # with the samples; READY=1 once samples flow; STOPPING=1 at the end.
-    import time
-
     from .test_faults_bus import run_rig
 
     sock, path = path_socket
     sock.settimeout(0.05)
-    got: list[tuple[float, dict[str, str]]] = []
-    stop = threading.Event()
+    received: list[dict[str, str]] = []
+    stamped: list[tuple[float, dict[str, str]]] = []
     box: dict = {}
 
-    def collect() -> None:
-        while not stop.is_set():
+    class StampedNotifier(Notifier):
+        """Each message stamped with the service's (virtual) time when it is sent, not when a
+        thread of this test gets round to reading it: the times below are exact on a loaded
+        machine."""
+
+        def notify(self, fields):  # type: ignore[no-untyped-def]
+            clock = box.get("clock")
+            t = clock.monotonic() - box["t0"] if clock else -1.0
+            sent = super().notify(fields)
+            if sent:  # (a datagram the full socket refused is not expected below)
+                stamped.append((t, {k: str(v) for k, v in fields.items()}))
+            return sent
+
+    def collect() -> None:  # until STOPPING=1, the last message the service sends
+        while not received or received[-1].get("STOPPING") != "1":
             try:
-                fields = _recv_fields(sock)
+                received.append(_recv_fields(sock))
             except TimeoutError:
                 continue
-            clock = box.get("clock")
-            got.append((clock.monotonic() - box["t0"] if clock else -1.0, fields))
 
     def inject(ctx: dict, t: float) -> None:
         box.setdefault("clock", ctx["clock"])
@@ -215,14 +224,16 @@ def test_service_feeds_the_watchdog_only_while_samples_advance(tmp_path, path_so
 
     reader = threading.Thread(target=collect, daemon=True)
     reader.start()
-    notifier = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "200000"})  # ping each 0.1 s
+    notifier = StampedNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "200000"})
     try:
         rig = run_rig(tmp_path, 22.0, inject=inject, speed=10.0, notifier=notifier)
     finally:
-        time.sleep(0.2)
-        stop.set()
-        reader.join(2)
+        reader.join(120)  # a bound on a hang only: it returns at STOPPING=1
         notifier.close()
+    assert not reader.is_alive(), "STOPPING=1 never arrived"
+    # what was sent is what arrived, in order
+    assert received == [f for _, f in stamped]
+    got = stamped
     pings = [t for t, f in got if f.get("WATCHDOG") == "1"]
     assert any(f.get("READY") == "1" for _, f in got)
     assert any(f.get("STOPPING") == "1" for _, f in got)

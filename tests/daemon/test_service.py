@@ -28,6 +28,8 @@ from avard.daemon.service.supervisor import Service, ServiceHooks
 
 from tests.support.rigs import rig_from_parts
 
+from .pubsub import is_probe, wait_until_subscribed
+
 
 def _cfg(data_dir: Path, **extra: Any) -> dict:
     return load_config(None, **{
@@ -43,26 +45,27 @@ class Listener:
     def __init__(self, svc: Service) -> None:
         self.sub = Subscriber(svc.publisher.endpoint,
                               request_endpoint=svc.request_server.endpoint).connect(join=False)
-        self.records: list[tuple[str, dict]] = []
+        # before acquisition starts: from here on the subscriber gets every message
+        self.records: list[tuple[str, dict]] = wait_until_subscribed(svc.publisher, self.sub)
         self.stop_evt = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
         self.thread.start()
-        deadline = time.monotonic() + 5
-        while svc.publisher.stats()["peers"] < 1 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        time.sleep(0.2)
+
+    def _keep(self, msg: Any) -> None:
+        if not is_probe(msg.record):
+            self.records.append((msg.topic, msg.record))
 
     def _run(self) -> None:
         while not self.stop_evt.is_set():
             msg = self.sub.recv(timeout_s=0.1)
             if msg is not None:
-                self.records.append((msg.topic, msg.record))
+                self._keep(msg)
 
     def finish(self) -> None:
         self.stop_evt.set()
         self.thread.join(5)
         while (msg := self.sub.recv(timeout_s=0.3)) is not None:
-            self.records.append((msg.topic, msg.record))
+            self._keep(msg)
         self.sub.close()
 
 
@@ -191,33 +194,43 @@ def test_injected_faults_become_gap_and_event_records(tmp_path: Path) -> None:
 
 
 def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
-    # A snapshot every 60 s of virtual time (3 s real at speed 20): the fit of one (its own
-    # thread) is done before the next replaces it.
+    # A snapshot every 60 s of virtual time (3 s real at speed 20).
     cfg = _cfg(tmp_path / "rec", **{"allan.snapshot_interval_s": 60.0})
-    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3, speed=20.0)
+    svc, _sims, emu = simulated_service(cfg, "quiet-lab", seed=3, speed=20.0)
     answers: dict[str, Any] = {}
 
     def ask() -> None:
-        sub = Subscriber(svc.publisher.endpoint, request_endpoint=svc.request_server.endpoint)
-        time.sleep(1.0)
-        answers["status"] = sub.request("status")
+        try:
+            _ask()
+        finally:  # a failure above leaves the answers missing, never the service running
+            svc.stop_requested.set()
+
+    def _ask() -> None:
+        sub = Subscriber(svc.publisher.endpoint, request_endpoint=svc.request_server.endpoint,
+                         request_timeout_s=30.0)
+        # until the 2 s asked for below exist (a count, not a guess at how fast the service
+        # runs on this machine)
+        while (status := sub.request("status"))["samples"] < 2 * 125:
+            time.sleep(0.05)
+        answers["status"] = status
         answers["recent"] = sub.request("recent", {"seconds": 2.0})
-        for _ in range(400):           # none before the first snapshot interval
+        hang = time.monotonic() + 300  # a bound on a hang only
+        while "first_snapshot" not in answers:  # none before the first snapshot interval
             try:
                 answers["first_snapshot"] = sub.request("snapshot")
-                break
             except NetworkError:
+                assert time.monotonic() < hang
                 time.sleep(0.05)
-        # The fit is computed off the request thread; ask again until it is there.
-        for _ in range(400):
-            answers["snapshot"] = sub.request("snapshot")
-            if not answers["snapshot"]["fit_pending"]:
-                break
+        # The fit is computed off the request thread. The sensor stops, so no newer snapshot
+        # replaces this one before its fit is done, however slow the machine: ask until it is.
+        emu.stop_producing()
+        while (snap := sub.request("snapshot"))["fit_pending"]:
+            assert time.monotonic() < hang
             time.sleep(0.05)
+        answers["snapshot"] = snap
         with pytest.raises(Exception, match="seconds"):
             sub.request("recent", {"seconds": 1e9})
         sub.close()
-        svc.stop_requested.set()
 
     threading.Timer(0.1, ask).start()
     svc.run(None)
@@ -277,31 +290,43 @@ def test_sd_notify_ready_once_samples_flow_and_watchdog_only_while_they_advance(
     notifier = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "100000"})  # ping every 50 ms
     cfg = _cfg(tmp_path / "rec", **{"publish.enabled": False})
     svc, _sims, emu = simulated_service(cfg, "quiet-lab", seed=9, speed=20.0, notifier=notifier)
-    stall_at: list[float] = []
-
-    def stall() -> None:
-        stall_at.append(time.monotonic())
-        emu.stop_producing()
-
-    timers = [threading.Timer(1.0, stall), threading.Timer(2.0, svc.stop_requested.set)]
-    for t in timers:
-        t.start()
     text: list[str] = []
     done = threading.Event()
+    # Driven by the messages, not by how far the service got in a wall-clock interval: the
+    # sensor stops after 5 watchdog pings; the service is stopped once 5 STATUS= followed the
+    # last ping after that. If pings never stopped, the hang guard stops it and the
+    # assertions below say so.
+    hang_guard = threading.Timer(120.0, svc.stop_requested.set)
+    hang_guard.start()
 
     def receive() -> None:  # like systemd: read as they come (the queue is short)
+        stalled = False
+        since_ping = 0
         while not done.is_set():
             try:
-                text.append(sock.recv(4096).decode())
+                m = sock.recv(4096).decode()
             except TimeoutError:
                 continue
+            text.append(m)
+            if m.startswith("WATCHDOG=1"):
+                since_ping = 0
+            elif m.startswith("STATUS="):
+                since_ping += 1
+            if not stalled and sum(t.startswith("WATCHDOG=1") for t in text) >= 5:
+                stalled = True
+                emu.stop_producing()
+                since_ping = 0
+            if stalled and since_ping >= 5:
+                svc.stop_requested.set()
+            if m.startswith("STOPPING=1"):
+                return
 
     rx = threading.Thread(target=receive)
     rx.start()
     svc.run(None)
-    time.sleep(0.2)
+    rx.join(120.0)
     done.set()
-    rx.join()
+    hang_guard.cancel()
     sock.close()
     assert text[0].startswith("READY=1")
     assert sum(m.startswith("READY=1") for m in text) == 1

@@ -317,6 +317,7 @@ def test_install_script_dry_run_lists_every_step_and_changes_nothing(tmp_path):
     out = proc.stdout
     for step in (
         f"{tmp_path}/venv/bin/python -m pip install -q {REPO}",
+        f"ln -sfn {tmp_path}/venv/bin/avard /usr/local/bin/avard",  # `avard` on PATH
         "systemd-sysusers avard.conf",
         "systemd-tmpfiles --create avard.conf",
         "check-config /etc/avard/avard.toml",

@@ -79,10 +79,16 @@ class WebRig:
         ones (only before ``avard web`` is started: it follows the ports it was given)."""
         for _ in range(tries):
             self._start_service()
-            try:
-                self.service.wait(1.5)  # type: ignore[union-attr]
-            except subprocess.TimeoutExpired:
-                return  # running
+            # running once it says samples flow (its sockets are bound before), not after a
+            # guessed 1.5 s: a loaded machine takes longer than that just to import
+            log = self.logs[-1]
+            deadline = time.monotonic() + 120  # a bound on a hang only
+            while self.service.poll() is None:  # type: ignore[union-attr]
+                if "samples flow" in log.read_text(errors="replace"):
+                    return
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"avard run never became ready: {self.read_logs()}")
+                time.sleep(0.05)
             if self.web is not None:
                 break
             self.pub, self.req = free_ports(2)
@@ -132,11 +138,11 @@ class WebRig:
         raise RuntimeError(f"avard web did not answer: {self.read_logs()}")
 
     def state(self) -> dict[str, Any]:
-        with urllib.request.urlopen(self.url + "state.json", timeout=5) as r:
+        with urllib.request.urlopen(self.url + "state.json", timeout=30) as r:
             return json.loads(r.read())
 
     def get(self, path: str) -> tuple[int, dict[str, str], bytes]:
-        with urllib.request.urlopen(self.url + path.lstrip("/"), timeout=10) as r:
+        with urllib.request.urlopen(self.url + path.lstrip("/"), timeout=30) as r:
             return r.status, dict(r.headers), r.read()
 
     def read_logs(self) -> str:
