@@ -142,7 +142,7 @@ def test_command_line_client_arguments(tmp_path) -> None:
     sub = subscriber_from_args(parser.parse_args(["tcp://10.1.2.3:7000"]))
     assert sub.request_endpoint == "tcp://10.1.2.3:7001" and sub.curve is None
     with pytest.raises(ConfigError, match="both --server-key"):
-        subscriber_from_args(parser.parse_args(["tcp://h:1", "--server-key", "s.key"]))
+        subscriber_from_args(parser.parse_args(["tcp://127.0.0.1:1", "--server-key", "s.key"]))
     args = parser.parse_args(["ipc:///run/avard/pub", "--request", "ipc:///run/avard/req",
                               "--server-key", "s.key", "--client-key", "c.key_secret",
                               "--timeout", "7"])
