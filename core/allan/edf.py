@@ -239,3 +239,78 @@ def _quantiles(method: str, p: float, k: NDArray[np.float64]) -> NDArray[np.floa
         for u, v in zip(uniq[todo].tolist(), vals[todo].tolist(), strict=True):
             _PPF_CACHE[(method, p, u)] = v
     return vals[inverse].reshape(k.shape)
+
+
+# ----------------------------------------------------------------------------------------------
+# The long-τ statistics (core/allan/longtau.py). New functions only: the estimators above keep
+# their EDF exactly.
+
+# GR table 1: asymptotic (a0, a1) for the modified variances (F = 1), rows alpha = +2 … −4,
+# columns d = 1, 2, 3; NaN where the variance does not converge.
+_TABLE1: dict[int, tuple[tuple[float, float], ...]] = {
+    2: ((2 / 3, 1 / 3), (7 / 9, 1 / 2), (22 / 25, 2 / 3)),
+    1: ((0.840, 0.345), (0.997, 0.616), (1.141, 0.843)),
+    0: ((1.079, 0.368), (1.033, 0.607), (1.184, 0.848)),
+    -1: (_NAN, (1.048, 0.534), (1.180, 0.816)),
+    -2: (_NAN, (1.302, 0.535), (1.175, 0.777)),
+    -3: (_NAN, _NAN, (1.194, 0.703)),
+    -4: (_NAN, _NAN, (1.489, 0.702)),
+}
+
+
+def edf_greenhall_modified(alpha: int, d: int, m: int, n_phase: int) -> float:
+    """EDF of a fully overlapping *modified* d-th difference variance (MVAR and TVAR for d = 2;
+    GR 2003 case 1, F = 1, S = m; NIST SP 1065 §5.3), for ``n_phase`` phase points. NaN when
+    no difference fits."""
+    alpha, d, m, n_phase = int(alpha), int(d), int(m), int(n_phase)
+    if d not in (1, 2, 3) or not -4 <= alpha <= 2 or alpha + 2 * d <= 1:
+        raise DataError(f"alpha={alpha}, d={d}: a modified variance needs -4 <= alpha <= 2, "
+                        "d in 1..3 and alpha + 2d > 1")
+    if m < 1:
+        raise DataError(f"averaging factor m={m} must be >= 1")
+    length = m + m * d  # GR's L = m/F + m·d with F = 1
+    if n_phase < length:
+        return math.nan
+    s_factor = float(m)  # fully overlapping: stride 1
+    m_count = 1 + (n_phase - length)  # GR's M = 1 + ⌊S (N − L)/m⌋
+    j_terms = int(min(m_count, (d + 1) * s_factor))
+    r = m_count / s_factor
+    if j_terms <= _J_MAX:
+        return _sz0_squared(1.0, alpha, d) * m_count / _basic_sum(
+            j_terms, m_count, s_factor, 1.0, alpha, d)
+    if r > d + 1:
+        a0, a1 = _TABLE1[alpha][d - 1]
+        return 1.0 / ((a0 - a1 / r) / r)
+    m_prime = _J_MAX / r
+    return _sz0_squared(1.0, alpha, d) * _J_MAX / _basic_sum(
+        _J_MAX, _J_MAX, m_prime, 1.0, alpha, d)
+
+
+# SP 1065 Table 7 (TOTVAR) and Table 8 (MTOT, TTOT): edf = b·(T/τ) − c, by alpha.
+TOTVAR_EDF = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
+MTOT_EDF = {2: (1.90, 2.10), 1: (1.20, 1.40), 0: (1.10, 1.20), -1: (0.85, 0.50),
+            -2: (0.75, 0.31)}
+# SP 1065 Table 9 (HTOT): edf = (T/τ) / (b0 + b1·τ/T), FM types alpha 0 … −4.
+HTOT_EDF = {0: (0.559, 1.004), -1: (0.868, 1.006), -2: (0.938, 1.000), -3: (0.974, 1.000),
+            -4: (1.276, 0.792)}
+
+
+def edf_total(kind: str, alpha: int, m: int, n_phase: int) -> float:
+    """EDF of a total variance from SP 1065's tables, with T/τ = (N − 1)/m for N phase points
+    (the record's length over τ); NaN where the table has no row for ``alpha`` (the caller
+    takes the corresponding non-total EDF there, ``longtau``) or the formula gives ≤ 0."""
+    ratio = (int(n_phase) - 1) / int(m)
+    table = {"totvar": TOTVAR_EDF, "mtotvar": MTOT_EDF, "ttotvar": MTOT_EDF}.get(kind)
+    if table is not None:
+        if int(alpha) not in table:
+            return math.nan
+        b, c = table[int(alpha)]
+        e = b * ratio - c
+    elif kind == "htotvar":
+        if int(alpha) not in HTOT_EDF:
+            return math.nan
+        b0, b1 = HTOT_EDF[int(alpha)]
+        e = ratio / (b0 + b1 / ratio)
+    else:
+        raise DataError(f"{kind!r} is not a total variance")
+    return e if e > 0 else math.nan
