@@ -26,7 +26,8 @@ Where SP 1065 and Stable32 differ (both are offered: ``edf_convention``):
   every τ. ``"stable32"`` takes MDEV's EDF below m = 16; at m ≥ 16 Stable32's bounds are up to
   3 % away from Table 8's, by a rule not published (tests/core/test_stable32_longtau.py).
 * HTOT: Table 9 reproduces Stable32's bounds from m = 16 on; below, Stable32's EDF is another
-  we could not identify (bounds within 1.1 %). Both conventions take Table 9.
+  we could not identify, smaller than Table 9's; avard takes the smaller of Table 9's and
+  OHDEV's (Greenhall–Riley) there, whose interval is wider than Stable32's (both conventions).
 * Bias: HTOT is divided by SP 1065's factor for its noise type (0.995 white FM, 0.851 flicker,
   0.771 random walk, 0.717 and 0.679 for α = −3, −4), as Stable32 prints it; TOTVAR by
   1 − a·τ/T (a = 0.481 flicker FM, 0.750 random-walk FM; SP 1065 §5.2.11); MTOT, TTOT and
@@ -350,7 +351,12 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
         return edf_total("mtotvar", alpha, m, n_phase)
     if name == "htot":
         e = edf_total("htotvar", alpha, m, n_phase) if m > 1 else math.nan
-        return e if math.isfinite(e) else edf_greenhall(alpha, 3, m, 1, n_phase)
+        ohdev = edf_greenhall(alpha, 3, m, 1, n_phase)
+        if not math.isfinite(e):
+            return ohdev
+        # below m = 16 Table 9 claims more than Stable32 prints (its rule there unknown):
+        # OHDEV's EDF where it is the smaller, so the interval is never the narrower
+        return min(e, ohdev) if m < STABLE32_MTOT_SWITCH else e
     if avar_part:  # TheoH's OADEV part
         mm = max(1, round(tau_over_tau0))
         return edf_greenhall(alpha, 2, mm, 1, n_phase)
