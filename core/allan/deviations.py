@@ -442,7 +442,6 @@ def allan_variance(
     strides = np.array([default_stride(kind, int(m), stride, overlap) for m in ms], np.int64)
     sums = [DifferenceSums.zeros(c) for _ in ms]
     ladders = [Lag1Ladder(c, dmax=d, cross=False) for _ in ms]
-    rn = rn_sums_for(kind, ms, [b - s for s, b in bounds], c)
     for s0, s1 in bounds:
         seg = a[s0:s1]
         if seg.shape[0] < 1:
@@ -459,6 +458,27 @@ def allan_variance(
             # segment's averages on one scale for the pooled mean of the identification)
             ladders[k].push((np.diff(p[::int(m)], axis=0) + int(m) * seg[0]).astype(np.float64))
             ladders[k].gap()
+    # R(n) = MVAR/AVAR, only at the τ where the identification will read it (B1 says PM in
+    # its range, at a τ keeping its own α): a second look at the record for those few, as
+    # OverlappingAllan defers it. Summed at every τ of B1's range it cost an all-τ run of the
+    # Cs 5071A record most of its noise identification.
+    rn = rn_sums_for(kind, ms, [b - s for s, b in bounds], c)
+    if alpha is None and any(r is not None for r in rn):
+        read = np.zeros((len(ms), c), dtype=bool)
+        alphas_from_ladders(ladders, d, None, ms,
+                            np.array([x.n for x in sums], dtype=np.int64), strides, noise_id,
+                            rn_read=read)
+        rn = [r if r is not None and read[k].any() else None for k, r in enumerate(rn)]
+    else:
+        rn = [None] * len(ms)
+    for s0, s1 in bounds:
+        if not any(r is not None for r in rn):
+            break
+        seg = a[s0:s1]
+        if seg.shape[0] < 1:
+            continue
+        p = segment_phase(seg, is_int)
+        for k, m in enumerate(ms):
             rk = rn[k]
             if rk is not None and p.shape[0] > 2 * m:  # R(n): every second difference
                 rk.push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))
