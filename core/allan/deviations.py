@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.allan.noise_id import (
     HOLD_BELOW_AVERAGES,
@@ -255,6 +256,27 @@ def grid_sums(q: NDArray, sp: int, h: int, sums: DifferenceSums, d: int) -> None
         a = b
 
 
+def _compiled_sums(p: NDArray, m: int, d: int, sums: DifferenceSums) -> bool:
+    """The fully overlapping sums of one float64 channel by the compiled loop
+    (``kernels``): Σ (X_{i+2m} − 2X_{i+m} + X_i)² read in one pass (d = 2), and for d = 3 the
+    same loop on the window sums W_j = X_{j+m} − X_j, since the third difference is
+    W_{i+2m} − 2W_{i+m} + W_i. False (nothing added) where it does not apply: integer counts
+    (exact int64 sums), several channels (the covariance), no compiled module; ``grid_sums``
+    then, which a test holds equal."""
+    kern = kernels.compiled()
+    if kern is None or p.dtype != np.float64 or p.shape[1] != 1 or d not in (2, 3):
+        return False
+    col = p[:, 0]
+    if d == 3:
+        col = col[m:] - col[:-m]
+    n_d = col.shape[0] - 2 * m
+    if n_d <= 0:
+        return True
+    sums.n += n_d
+    sums.s2[0, 0] += kern.sumsq(col[:n_d], col[m:m + n_d], col[2 * m:2 * m + n_d])
+    return True
+
+
 def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: DifferenceSums) -> None:
     """``grid_sums`` for a stride that does not divide m (batch only, whole segment):
     differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …"""
@@ -449,7 +471,9 @@ def allan_variance(
         p = segment_phase(seg, is_int)
         for k, m in enumerate(ms):
             st = int(strides[k])
-            if int(m) % st == 0:
+            if st == 1 and _compiled_sums(p, int(m), d, sums[k]):
+                pass
+            elif int(m) % st == 0:
                 grid_sums(p[::st], int(m) // st, 0, sums[k], d)
             else:
                 strided_sums(p, int(m), st, d, sums[k])
