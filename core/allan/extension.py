@@ -36,7 +36,8 @@ def centred_phase(y: ArrayLike) -> NDArray[np.float64]:
         raise DataError("rate samples hold NaN or infinity; remove them or split the record")
     x = np.empty(a.size + 1)
     x[0] = 0.0
-    np.cumsum(a - (a.mean() if a.size else 0.0), out=x[1:])
+    np.subtract(a, a.mean() if a.size else 0.0, out=x[1:])  # in place: no second copy
+    np.cumsum(x[1:], out=x[1:])
     return x
 
 

@@ -255,7 +255,7 @@ def statistic(
     rate_hz = float(rate_hz)
     limit = int(max_points or MAX_POINTS[st.cost])
     r = max(1, -(-a.shape[0] // limit))
-    yd = decimate(a.astype(np.float64), r)
+    yd = decimate(a.astype(np.float64, copy=False), r)
     rate_d = rate_hz / r
     n_phase = yd.shape[0] + 1
     if n_phase < 4:

@@ -94,13 +94,17 @@ class StatisticsReport:
 
 
 class _Averager:
-    """r-averages of a stream of blocks (n, C), per segment, with the remainder carried."""
+    """r-averages of a stream of blocks (n, C), written into one array sized from the record's
+    length (no list of pieces concatenated at the end, which doubled the peak), with each
+    segment's span and the remainder carried."""
 
-    def __init__(self, c: int, r: int) -> None:
+    def __init__(self, c: int, r: int, n_samples: int) -> None:
         self.r = r
         self.c = c
-        self.done: list[NDArray[np.float64]] = []
-        self.parts: list[NDArray[np.float64]] = []
+        self.out = np.empty((n_samples // r + 1, c))
+        self.pos = 0
+        self.start = 0  # first average of the open segment
+        self.spans: list[tuple[int, int]] = []
         self.rest = np.zeros((0, c))
 
     def push(self, a: NDArray[np.float64], end: bool) -> None:
@@ -108,22 +112,27 @@ class _Averager:
             a = np.concatenate([self.rest, a])
         k = a.shape[0] // self.r * self.r
         if k:
-            self.parts.append(decimate(a[:k], self.r))
+            avg = decimate(a[:k], self.r)
+            if self.pos + avg.shape[0] > self.out.shape[0]:
+                raise DataError("the record is longer than its sample count said; run "
+                                "analyze again (a file that grew while being read?)")
+            self.out[self.pos:self.pos + avg.shape[0]] = avg
+            self.pos += avg.shape[0]
         self.rest = a[k:].copy()
         if end:
             self.close()
 
     def close(self) -> None:
-        if self.parts:
-            self.done.append(np.concatenate(self.parts))
-        self.parts, self.rest = [], np.zeros((0, self.c))
+        if self.pos > self.start:
+            self.spans.append((self.start, self.pos))
+        self.start, self.rest = self.pos, np.zeros((0, self.c))
 
     def longest(self) -> tuple[NDArray[np.float64], int]:
         self.close()
-        if not self.done:
+        if not self.spans:
             raise DataError("the record holds no complete average for the statistics")
-        k = int(np.argmax([d.shape[0] for d in self.done]))
-        return self.done[k], len(self.done)
+        s0, s1 = max(self.spans, key=lambda s: s[1] - s[0])
+        return self.out[s0:s1], len(self.spans)
 
 
 def compute_statistics(path: str, request: StatisticsRequest, *, rate_hz: float,
@@ -139,7 +148,7 @@ def compute_statistics(path: str, request: StatisticsRequest, *, rate_hz: float,
     meta, blocks = record_blocks(path, block, rate_override, temperature=False)
     cols = _select(list(meta["names"]), list(names))
     r_lin = max(1, -(-int(n_samples) // MAX_POINTS["linear"]))
-    avg = _Averager(len(cols), r_lin)
+    avg = _Averager(len(cols), r_lin, int(n_samples))
     for a, _t, end in blocks:
         avg.push(np.asarray(a, dtype=np.float64)[:, cols], end)
     data, n_segments = avg.longest()
