@@ -140,10 +140,11 @@ def _grid(name: str, n_phase: int, taus: str | ArrayLike, rate_hz: float) -> NDA
     reach = {"oadev": half, "totdev": half, "mdev": third, "tdev": third, "mtot": third,
              "ttot": third, "htot": third}.get(name, n_phase - 1)
     theo = name in _THEO
-    if isinstance(taus, str):
+    if isinstance(taus, str):  # (unique: the reach may be an octave itself)
         ms: ArrayLike
-        if taus == "octave":
-            ms = 2 ** np.arange(int(math.log2(max(reach, 1))) + 1) if reach >= 1 else []
+        if taus == "octave":  # and the statistic's own reach, its longest τ
+            ms = np.append(2 ** np.arange(int(math.log2(max(reach, 1))) + 1),
+                           reach - (reach % 2 if theo else 0)) if reach >= 1 else []
         elif taus == "decade":
             ms = [b * 10**e for e in range(int(math.log10(max(reach, 1))) + 1) for b in (1, 2, 5)]
         elif taus == "all":
@@ -151,7 +152,7 @@ def _grid(name: str, n_phase: int, taus: str | ArrayLike, rate_hz: float) -> NDA
         else:
             raise DataError(f"taus={taus!r} is not a τ grid; use 'octave', 'decade', 'all' or "
                             "an array of τ in seconds")
-        out = np.asarray(ms, dtype=np.int64)
+        out = np.unique(np.asarray(ms, dtype=np.int64))
         out = out[(out >= 1) & (out <= reach)]
         if theo:
             out = out[out % 2 == 0]

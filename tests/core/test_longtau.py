@@ -80,7 +80,7 @@ def test_theobr_and_theoh_from_theo1_and_avar() -> None:
     assert np.all(0.75 * beyond > k) and np.all(beyond % 2 == 0)
     np.testing.assert_allclose(th.var[~avar_part], [ratio * brute_theo1(x, int(m))
                                                     for m in beyond], rtol=1e-12)
-    assert float(th.tau[-1]) == pytest.approx(0.75 * 128)  # octaves of m up to N − 1
+    assert float(th.tau[-1]) == pytest.approx(0.75 * 180)  # octaves of m, then m = N − 1
 
 
 def test_theobr_refuses_a_record_too_short_for_its_ratio() -> None:
