@@ -19,27 +19,20 @@ checked as such.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 from avard.core.allan.longtau import statistic
 
-from ..support.allantools_sdist import Corrupt, Unavailable, reference_tests
+from ..support.allantools_sdist import reference_tests_or_skip
 from .test_allan import nbs14_1000
 
 
 @pytest.fixture(scope="module")
 def phasedat() -> Path:
-    try:
-        return reference_tests() / "phasedat"
-    except Corrupt as e:
-        pytest.fail(str(e))
-    except Unavailable as e:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run the Stable32 data-set tests: {e}")
-        pytest.skip(str(e))
+    """allantools' PHASE.DAT folder (``reference_tests_or_skip``)."""
+    return reference_tests_or_skip() / "phasedat"
 
 
 def rows(path: Path) -> list[tuple[int, float, int, float, float, float]]:
