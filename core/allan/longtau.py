@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 from avard.core.allan.deviations import AllanResult, allan_variance, validate_input
 from avard.core.allan.edf import (
+    TOTVAR_EDF,
     chi2_interval,
     edf_greenhall,
     edf_greenhall_modified,
@@ -363,7 +364,6 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
         return edf_greenhall(alpha, 2, mm, 1, n_phase)
     # Theo family: TOTVAR's Table 7 row at T/τ (white FM's for the PM types; see docstring)
     ratio = (n_phase - 1) / tau_over_tau0
-    from avard.core.allan.edf import TOTVAR_EDF
     b, c = TOTVAR_EDF[min(0, max(-2, alpha))]
     e = b * ratio - c
     return e if e > 0 else math.nan
