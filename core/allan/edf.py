@@ -314,3 +314,42 @@ def edf_total(kind: str, alpha: int, m: int, n_phase: int) -> float:
     else:
         raise DataError(f"{kind!r} is not a total variance")
     return e if e > 0 else math.nan
+
+
+def edf_theo1(alpha: int, m: int, n_phase: int) -> float:
+    """EDF of Theo1 at the averaging factor m (τ = 0.75·m·τ0) for ``n_phase`` phase points,
+    by the fitted forms of NIST SP 1065 §5.2.14 (Howe and Tasset; W. Riley's "CI2"), with
+    r = 0.75·m and N = ``n_phase``:
+
+    * white PM (α = 2):   0.86 (N + 1)(N − 4r/3) / (N − r) · r / (r + 1.14)
+    * flicker PM (α = 1): (4.798 N² − 6.374 N r + 12.387 r) / (√(r + 36.6) (N − r)) · r / (r + 0.3)
+    * white FM (α = 0):   [(4.1 N + 0.8)/r − (3.1 N + 6.5)/N] · r^1.5 / (r^1.5 + 5.2)
+    * flicker FM (α = −1): (2 N² − 1.3 N r − 3.5 r) / (N r) · r³ / (r³ + 2.3)
+    * random-walk FM (α = −2): (4.4 N − 2)/(2.9 r) · [(4.4 N − 1)² − 8.6 r (4.4 N − 1)
+      + 11.4 r²] / (4.4 N − 3)²
+
+    These are what Stable32 prints (its Theo1 bounds on a 1253-point record, α = −1, are
+    reproduced within 3.2e-4: tests/core/test_stable32_longtau.py). NaN where no form applies:
+    α outside +2 … −2, or a form that gives EDF < 1 (random-walk FM towards r ≈ 0.63 N, where
+    its quadratic changes sign: an EDF of 0.1 there puts the whole χ² interval above the
+    estimate, and its simulated coverage fell to 45 %); the caller then says what it takes
+    instead (``longtau``)."""
+    a, n = int(alpha), float(n_phase)
+    r = 0.75 * int(m)
+    if r <= 0 or r >= n:
+        return math.nan
+    if a == 2:
+        e = 0.86 * (n + 1) * (n - 4 * r / 3) / (n - r) * r / (r + 1.14)
+    elif a == 1:
+        e = (4.798 * n * n - 6.374 * n * r + 12.387 * r) / (math.sqrt(r + 36.6) * (n - r)) \
+            * r / (r + 0.3)
+    elif a == 0:
+        e = ((4.1 * n + 0.8) / r - (3.1 * n + 6.5) / n) * r**1.5 / (r**1.5 + 5.2)
+    elif a == -1:
+        e = (2 * n * n - 1.3 * n * r - 3.5 * r) / (n * r) * r**3 / (r**3 + 2.3)
+    elif a == -2:
+        q = 4.4 * n - 1
+        e = (4.4 * n - 2) / (2.9 * r) * (q * q - 8.6 * r * q + 11.4 * r * r) / (4.4 * n - 3) ** 2
+    else:
+        return math.nan
+    return e if e >= 1 else math.nan

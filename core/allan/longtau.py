@@ -14,7 +14,7 @@ totdev     eq. 25 (``total``)               T/2           Table 7 (FM); OADEV's 
 mtot       eq. 27                           T/3           Table 8, b·T/τ − c
 ttot       eq. 28, τ/√3·MTOT (unit × s)     T/3           as MTOT
 htot       eq. 29, OHDEV at m = 1           T/3           Table 9 (FM); OHDEV's for PM
-theo1      eq. 30 (``theo``), τ = 0.75 m τ0  0.75 T        Table 7 at τ (conservative, see below)
+theo1      eq. 30 (``theo``), τ = 0.75 m τ0  0.75 T        §5.2.14's forms (stand-in: below)
 theobr     eq. 31                           0.75 T        as Theo1
 theoh      eq. 32: OADEV to 10 % T, TheoBR  0.75 T        OADEV's, then as Theo1
 =========  ===============================  ============  ======================================
@@ -37,14 +37,15 @@ Where SP 1065 and Stable32 differ (both are offered: ``edf_convention``):
   at flicker PM on PHASE.DAT, a factor SP 1065 does not give), avard does not. TheoBR and
   TheoH remove the bias from the data themselves, which is what they are for.
   ``debias=False`` prints every statistic raw.
-* Theo1's EDF: SP 1065 gives fitted formulas per noise type (Howe and Tasset); the forms
-  we had for white PM and random-walk FM disagreed with simulation (an EDF above the
-  simulated spread's, or negative towards 0.75 T), so avard does not use them. It takes
-  TOTVAR's Table 7 row of the noise type at T/τ (white FM's for the PM types), whose 68.3 %
-  intervals hold the ensemble value in ≥ 62 % of 400 simulated white, flicker and
-  random-walk FM records at every τ from 7.5 τ0 to 0.75 T (tests/core/test_longtau.py,
-  slow): no narrower than the data support, and for white FM about half the EDF of SP 1065's
-  formula at short τ (wider than need be there).
+* Theo1's EDF: SP 1065 §5.2.14's fitted forms per noise type (``edf.edf_theo1``), as
+  Stable32 prints them (its Theo1 bounds on a 1253-point record reproduced within 3.2e-4).
+  Where no form applies (random-walk FM from τ ≈ 0.6 T on, where the form falls below one
+  degree of freedom and then below zero) the stand-in ``THEO_STAND_IN``: TOTVAR's Table 7
+  row at T/τ, which the simulations show conservative; ``theo_edf_source`` says which, and
+  ``--stat``'s table marks the stand-in's rows. Simulated coverage of the 68.3 % interval
+  (300 records of 1001 points, tests/core/test_longtau.py, slow): 60–76 % wherever the EDF
+  is ≥ 10 and τ ≤ 0.6 T; ≥ 60 % elsewhere, except white PM beyond 0.6 T, where the form
+  claims about 1.5 times the EDF the records show (both conventions: it is SP 1065's).
 
 Noise type α for the EDF: given, or the overlapping ADEV's identification (Stable32's rules,
 ``noise_id``) at the statistic's τ; beyond the OADEV's reach (τ > T/2) the α of its longest
@@ -70,6 +71,7 @@ from avard.core.allan.edf import (
     chi2_interval,
     edf_greenhall,
     edf_greenhall_modified,
+    edf_theo1,
     edf_total,
 )
 from avard.core.allan.extension import centred_phase, decimate
@@ -362,11 +364,29 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
     if avar_part:  # TheoH's OADEV part
         mm = max(1, round(tau_over_tau0))
         return edf_greenhall(alpha, 2, mm, 1, n_phase)
-    # Theo family: TOTVAR's Table 7 row at T/τ (white FM's for the PM types; see docstring)
-    ratio = (n_phase - 1) / tau_over_tau0
+    # Theo family: SP 1065's forms where one applies, else the stand-in (``theo_edf_source``)
+    e = edf_theo1(alpha, m, n_phase)
+    return e if math.isfinite(e) else _theo_stand_in(alpha, n_phase, tau_over_tau0)
+
+
+THEO_STAND_IN = "TOTVAR's Table 7 at T/τ (no SP 1065 form applies)"
+
+
+def _theo_stand_in(alpha: int, n_phase: int, tau_over_tau0: float) -> float:
+    """TOTVAR's Table 7 row of the noise type at T/τ (white FM's for the PM types): where
+    SP 1065's Theo1 forms give nothing (random-walk FM beyond τ ≈ 0.63 T), an EDF whose
+    intervals held the ensemble value in ≥ 62 % of simulated records (tests/core/
+    test_longtau.py), so no narrower than the data support."""
     b, c = TOTVAR_EDF[min(0, max(-2, alpha))]
-    e = b * ratio - c
+    e = b * (n_phase - 1) / tau_over_tau0 - c
     return e if e > 0 else math.nan
+
+
+def theo_edf_source(alpha: int, m: int, n_phase: int) -> str:
+    """Where the EDF of Theo1 (and TheoBR, TheoH beyond OADEV) at the Theo1 averaging factor
+    m on ``n_phase`` phase points comes from: "SP 1065" (§5.2.14's forms, as Stable32) or
+    ``THEO_STAND_IN``; the table and JSON of ``--stat`` say which, per τ."""
+    return "SP 1065" if math.isfinite(edf_theo1(alpha, m, n_phase)) else THEO_STAND_IN
 
 
 def _debiased(name: str, v: float, alpha: int, tau_over_tau0: float, n_phase: int) -> float:

@@ -26,7 +26,13 @@ import numpy as np
 from avard.core.allan.deviations import AllanResult
 from avard.core.allan.dynamic import DynamicAllan, dynamic_adev
 from avard.core.allan.extension import decimate
-from avard.core.allan.longtau import MAX_POINTS, STATISTICS, statistic
+from avard.core.allan.longtau import (
+    MAX_POINTS,
+    STATISTICS,
+    THEO_STAND_IN,
+    statistic,
+    theo_edf_source,
+)
 from avard.core.errors import DataError
 from numpy.typing import NDArray
 
@@ -85,6 +91,9 @@ class StatisticsReport:
                 r["dev_lo"] = np.asarray(res.dev_lo).tolist()
                 r["dev_hi"] = np.asarray(res.dev_hi).tolist()
                 r["unit"] = _UNIT.get(stat, "m/s²")
+                sources = edf_sources(stat, res, self.segment[0])
+                if sources:
+                    r["edf_source"] = sources
                 d[stat] = r
             entry: dict = {"statistics": d}
             if ch.dynamic is not None:
@@ -185,6 +194,24 @@ def _g(v: float) -> str:
     return "—" if not math.isfinite(v) else f"{v:.4g}"
 
 
+def edf_sources(stat: str, res: AllanResult, samples: int) -> list[str]:
+    """Per τ of a Theo-family result, where its EDF comes from (``longtau.theo_edf_source``:
+    SP 1065's forms or the stand-in); [] for the other statistics and TheoH's OADEV part
+    ("SP 1065" there: Greenhall–Riley)."""
+    if stat not in ("theo1", "theobr", "theoh") or not len(res.tau):
+        return []
+    r = int(res.stride[0])
+    n_phase = samples // r + 1
+    out = []
+    for k in range(len(res.tau)):
+        m = int(res.m[k]) // r
+        theo_part = abs(float(res.tau[k]) * res.rate_hz / r - 0.75 * m) < 1e-6 * m
+        a = float(res.alpha[k] if np.ndim(res.alpha) == 1 else np.min(res.alpha[k]))
+        out.append(theo_edf_source(int(a), m, n_phase) if theo_part and math.isfinite(a)
+                   else "SP 1065")
+    return out
+
+
 def statistics_table(rep: StatisticsReport) -> str:
     """The text table: per channel and statistic, τ, the deviation, its 68 % bounds, EDF, α."""
     lines = ["", "Statistics (SI; bounds 68.3 % from the EDF of NIST SP 1065 / Stable32; "
@@ -200,12 +227,16 @@ def statistics_table(rep: StatisticsReport) -> str:
                          f"{_UNIT.get(stat, 'm/s²')}")
             lines.append(f"    {'tau_s':>11} {'dev':>11} {'lo':>11} {'hi':>11} {'edf':>9} "
                          f"{'alpha':>5}")
+            sources = edf_sources(stat, res, rep.segment[0])
             for k in range(len(res.tau)):
                 a = float(res.alpha[k])
+                mark = "*" if sources and sources[k] == THEO_STAND_IN else " "
                 lines.append(f"    {res.tau[k]:>11.4g} {_g(float(res.dev[k])):>11} "
                              f"{_g(float(res.dev_lo[k])):>11} {_g(float(res.dev_hi[k])):>11} "
-                             f"{_g(float(res.edf[k])):>9} "
+                             f"{_g(float(res.edf[k])):>9}{mark}"
                              f"{'' if not math.isfinite(a) else int(a):>5}")
+            if THEO_STAND_IN in sources:
+                lines.append(f"    * EDF: {THEO_STAND_IN}, a conservative stand-in")
         if ch.dynamic is not None:
             d = ch.dynamic
             lines.append(f"  channel {name}: dynamic ADEV, window {d.window_s:.4g} s, step "

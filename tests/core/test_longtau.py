@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from avard.core.allan.deviations import oavar
 from avard.core.allan.extension import centred_phase, decimate, reflect
-from avard.core.allan.longtau import parse_statistics, statistic, theoh_split
+from avard.core.allan.longtau import (
+    THEO_STAND_IN,
+    parse_statistics,
+    statistic,
+    theo_edf_source,
+    theoh_split,
+)
 from avard.core.errors import DataError
 
 from .test_allan import nbs14_1000
@@ -141,25 +147,37 @@ def test_parse_statistics() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("alpha", [0, -1, -2])
+@pytest.mark.parametrize("alpha", [2, 1, 0, -1, -2])
 def test_theo1_intervals_cover(alpha: int) -> None:
-    """Coverage of the Theo family's 68.3 % interval (EDF: TOTVAR's Table 7 at T/τ) on 400
-    simulated records of power-law FM noise (FFT-shaped, 257 phase points), truth = the
-    ensemble mean of Theo1 at each m: at every m from 10 to N − 1 the interval holds it in at
-    least 62 % of the records (68.3 % less 2.6 binomial σ); an EDF that claimed more than the
-    data hold would fall below."""
-    rng = np.random.default_rng(100 + alpha)
-    n, ms, runs = 256, [10, 40, 120, 200, 256], 400
+    """Coverage of Theo1's 68.3 % interval (SP 1065's EDF forms, the stand-in where none
+    applies) on 300 simulated records of power-law noise (FFT-shaped, 1001 phase points),
+    truth = the ensemble mean of Theo1 at each m. Where the EDF is ≥ 10 (χ²'s shape holds)
+    and τ ≤ 0.6 T, the interval holds the truth in 60–76 % of the records; everywhere it
+    holds it in ≥ 60 % (wider where the forms under-claim at long τ), except white PM beyond
+    τ = 0.6 T, where SP 1065's form claims about 1.5 times the EDF the records show (the
+    form's, and Stable32's, own limit: docs/analysis.md)."""
+    rng = np.random.default_rng(7 + alpha)
+    n, ms, runs = 1000, [10, 40, 100, 200, 400, 600, 800, 900, 1000], 300
     var = np.zeros((runs, len(ms)))
     lo = np.zeros_like(var)
     hi = np.zeros_like(var)
+    edf = np.zeros(len(ms))
     for k in range(runs):
         w = np.fft.rfft(rng.standard_normal(8 * n))
         f = np.fft.rfftfreq(8 * n)
         f[0] = f[1]
         y = np.fft.irfft(w * f ** (alpha / 2), 8 * n)[:n]
         res = statistic("theo1", y, 1.0, [0.75 * m for m in ms], alpha=alpha)
-        var[k], lo[k], hi[k] = res.var, res.lo, res.hi
+        var[k], lo[k], hi[k], edf = res.var, res.lo, res.hi, res.edf
     truth = var.mean(axis=0)
     coverage = np.mean((lo <= truth) & (truth <= hi), axis=0)
-    assert np.all(coverage >= 0.62), coverage
+    m = np.array(ms)
+    chi2_shape = (edf >= 10) & (m <= 0.8 * n)
+    assert np.all((coverage[chi2_shape] >= 0.60) & (coverage[chi2_shape] <= 0.76)), coverage
+    beyond = (m > 0.8 * n) if alpha == 2 else np.zeros(m.size, dtype=bool)
+    assert np.all(coverage[~beyond] >= 0.60), coverage
+    if alpha == 2:  # the known limit, measured: the form claims more than the spread shows
+        simulated = 2 * truth**2 / var.var(axis=0)
+        assert np.all(edf[beyond & (edf > 10)] > 1.3 * simulated[beyond & (edf > 10)])
+    if alpha == -2:  # the form gives EDF < 1 from τ ≈ 0.6 T: the stand-in there
+        assert [theo_edf_source(-2, int(v), n + 1) for v in ms[-3:]] == [THEO_STAND_IN] * 3

@@ -158,3 +158,43 @@ def test_htot_bias_correction_is_what_separates_the_two_runs(phasedat: Path) -> 
     table = rows(phasedat / "phase_dat_htotdev_octave_nobias.txt")
     raw = statistic("htot", nbs14_1000(), 1.0, [r[0] for r in table], alpha=0, debias=False)
     assert [printed(float(v)) for v in raw.dev] == [r[4] for r in table]
+
+
+# Stable32's Theo1 run with bounds on a 1253-point phase record at α = −1 (the Sr87 decade
+# run kept in allantoolkit's test assets, tests/assets/Sr87/phase/decade/theo1.txt; the
+# record is not in allantools' archive, so only the printed AF, Min, Thêo1, Max are used):
+# PHASE.DAT's Theo1 runs print no bounds (0.0000e+00).
+SR87_THEO1 = [(10, 9.0186e-17, 9.3602e-17, 9.7440e-17), (20, 8.0961e-17, 8.5259e-17, 9.0327e-17),
+              (40, 6.8646e-17, 7.3785e-17, 8.0282e-17), (100, 4.7428e-17, 5.2962e-17, 6.1034e-17),
+              (200, 3.5585e-17, 4.1387e-17, 5.1425e-17), (400, 2.2152e-17, 2.7202e-17, 3.8730e-17),
+              (1000, 1.8488e-17, 2.5050e-17, 5.9475e-17)]
+
+
+def test_theo1_bounds_are_sp1065s_edf_forms_as_stable32_prints_them() -> None:
+    """SP 1065's Theo1 EDF (flicker FM form, r = 0.75·AF, N = 1253 phase points) turns each
+    printed Thêo1 into Stable32's printed Min and Max within 6e-4 (measured 3.2e-4, the
+    5-digit rounding of three printed numbers)."""
+    from avard.core.allan.edf import chi2_interval, edf_theo1
+
+    dev = np.array([r[2] for r in SR87_THEO1])
+    edf = np.array([edf_theo1(-1, r[0], 1253) for r in SR87_THEO1])
+    lo, hi = chi2_interval(dev**2, edf, quantiles="stable32")
+    err = np.maximum(np.abs(np.sqrt(lo) / [r[1] for r in SR87_THEO1] - 1),
+                     np.abs(np.sqrt(hi) / [r[3] for r in SR87_THEO1] - 1))
+    assert float(np.max(err)) < 6e-4, err
+    # Table 7 at T/τ (the stand-in) would not: it is off by more than 1 % at some AF
+    stand_in = 1.17 * 1252 / (0.75 * np.array([r[0] for r in SR87_THEO1])) - 0.22
+    lo2, _ = chi2_interval(dev**2, stand_in, quantiles="stable32")
+    assert float(np.max(np.abs(np.sqrt(lo2) / [r[1] for r in SR87_THEO1] - 1))) > 1e-2
+
+
+def test_theo1_on_phase_dat_takes_sp1065s_edf(phasedat: Path) -> None:
+    """statistic("theo1") prints SP 1065's EDF for the α asked at every AF of Stable32's
+    PHASE.DAT run, and its bounds hold the printed Thêo1 (Stable32 prints no bounds there)."""
+    from avard.core.allan.edf import edf_theo1
+
+    table = rows(phasedat / "phase_dat_theo1_alpha0.txt")
+    res = _run("theo1", table)
+    assert np.allclose(res.edf, [edf_theo1(0, r[0], 1001) for r in table], rtol=1e-12)
+    ref = np.array([r[4] for r in table])
+    assert np.all((res.dev_lo < ref) & (ref < res.dev_hi))
