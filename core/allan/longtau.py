@@ -21,10 +21,13 @@ theoh      eq. 32: OADEV to 10 % T, TheoBR  0.75 T        OADEV's, then as Theo1
 
 Where SP 1065 and Stable32 differ (both are offered: ``edf_convention``):
 
-* MTOT and TTOT: Stable32 prints MDEV's Greenhall–Riley EDF below m = 16 (its PHASE.DAT bounds
-  at AF 1–8 are those of MDEV to 2e-4) and Table 8 from there on; SP 1065 gives Table 8 at
-  every τ. ``"stable32"`` takes MDEV's EDF below m = 16; at m ≥ 16 Stable32's bounds are up to
-  3 % away from Table 8's, by a rule not published (tests/core/test_stable32_longtau.py).
+* MTOT and TTOT: SP 1065 gives Table 8 (b·T/τ − c) at every τ. Stable32 prints MDEV's
+  Greenhall–Riley EDF below AF 10 and from there b·T/τ − c with its own coefficients, not
+  Table 8's (white FM 1.333, 1.89 against 1.10, 1.20; flicker PM 1.735, 3.0 against 1.20,
+  1.40: its bounds are up to 6.5 % from Table 8's). Those were measured from its PHASE.DAT
+  bounds and hold on an independent Stable32 run to 3.5e-4 (``STABLE32_MTOT_EDF``);
+  ``"stable32"`` takes them (and Table 8 at the other α, where none was measured). They give
+  more EDF than Table 8 (a narrower interval): ``"sp1065"`` stays the default.
 * HTOT: Table 9 reproduces Stable32's bounds from m = 16 on; below, Stable32's EDF is another
   we could not identify, smaller than Table 9's; avard takes the smaller of Table 9's and
   OHDEV's (Greenhall–Riley) there, whose interval is wider than Stable32's (both conventions).
@@ -92,8 +95,17 @@ HTOT_BIAS = {0: 0.995, -1: 0.851, -2: 0.771, -3: 0.717, -4: 0.679}
 TOTVAR_BIAS = {-1: 0.481, -2: 0.750}
 # MTOT / MVAR by α (W. Riley, "CI2": Stable32 1.53 divided MTOT and TTOT by it, 1.60 does not).
 MTOT_BIAS = {2: 0.94, 1: 0.83, 0: 0.73, -1: 0.70, -2: 0.69}
-# Stable32's MTOT/TTOT bounds follow MDEV's EDF below this averaging factor.
-STABLE32_MTOT_SWITCH = 16
+# Stable32's MTOT/TTOT bounds follow MDEV's EDF below this averaging factor (its decade runs
+# at AF 10 already take the linear law below; its octave runs at AF 8 MDEV's EDF).
+STABLE32_MTOT_SWITCH = 10
+# ... and from there b·(T/τ) − c with these (b, c), which are not SP 1065's Table 8: measured
+# from Stable32's PHASE.DAT bounds (least squares over its α 0 and α 1 rows at AF ≥ 10,
+# T/τ = (N − 1)/m) and confirmed on an independent Stable32 run (a 1253-point record: its 9
+# MTOT rows at AF ≥ 10 within 3.5e-4; tests/core/test_stable32_longtau.py). Other α: none
+# measured, Table 8's.
+STABLE32_MTOT_EDF = {0: (1.3333, 1.8935), 1: (1.7346, 3.0)}
+# HTOT: Table 9 reproduces Stable32's bounds from this averaging factor on (not below).
+HTOT_TABLE9_FROM = 16
 
 
 @dataclass(frozen=True)
@@ -352,6 +364,10 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
     if name in ("mtot", "ttot"):
         if convention == "stable32" and m < STABLE32_MTOT_SWITCH:
             return edf_greenhall_modified(alpha, 2, m, n_phase)
+        if convention == "stable32" and alpha in STABLE32_MTOT_EDF:
+            b, c = STABLE32_MTOT_EDF[alpha]
+            e = b * (n_phase - 1) / m - c
+            return e if e > 0 else math.nan
         return edf_total("mtotvar", alpha, m, n_phase)
     if name == "htot":
         e = edf_total("htotvar", alpha, m, n_phase) if m > 1 else math.nan
@@ -360,7 +376,7 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
             return ohdev
         # below m = 16 Table 9 claims more than Stable32 prints (its rule there unknown):
         # OHDEV's EDF where it is the smaller, so the interval is never the narrower
-        return min(e, ohdev) if m < STABLE32_MTOT_SWITCH else e
+        return min(e, ohdev) if m < HTOT_TABLE9_FROM else e
     if avar_part:  # TheoH's OADEV part
         mm = max(1, round(tau_over_tau0))
         return edf_greenhall(alpha, 2, mm, 1, n_phase)
