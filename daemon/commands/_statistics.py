@@ -31,8 +31,8 @@ def add_statistics_arguments(parser: argparse.ArgumentParser) -> None:
                              f"{','.join(STATISTICS)} (EDF and 68 %% bounds each; long "
                              "records are averaged first, see docs/allan.md)")
     parser.add_argument("--edf-convention", choices=EDF_CONVENTIONS, default="sp1065",
-                        help="EDF of MTOT/TTOT at short τ: NIST SP 1065's table (default) or "
-                             "as Stable32 prints it")
+                        help="EDF of MTOT/TTOT: NIST SP 1065's Table 8 (default) or as "
+                             "Stable32 prints it (docs/allan.md)")
     parser.add_argument("--dynamic", action="store_true",
                         help="also the dynamic ADEV (sliding-window OADEV, τ ≤ window/4) with "
                              "a test per τ that the windows agree")

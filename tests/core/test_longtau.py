@@ -181,3 +181,27 @@ def test_theo1_intervals_cover(alpha: int) -> None:
         assert np.all(edf[beyond & (edf > 10)] > 1.3 * simulated[beyond & (edf > 10)])
     if alpha == -2:  # the form gives EDF < 1 from τ ≈ 0.6 T: the stand-in there
         assert [theo_edf_source(-2, int(v), n + 1) for v in ms[-3:]] == [THEO_STAND_IN] * 3
+
+
+def test_the_output_says_where_theo1s_edf_is_the_stand_in() -> None:
+    """Random-walk FM beyond τ ≈ 0.6 T: SP 1065's form gives no EDF, the stand-in is taken and
+    the table marks its row, the JSON names its source per τ."""
+    from avard.core.analysis.statistics import (
+        ChannelStatistics,
+        StatisticsReport,
+        edf_sources,
+        statistics_table,
+    )
+
+    y = np.random.default_rng(1).standard_normal(400)
+    res = statistic("theo1", y, 1.0, [0.75 * m for m in (20, 360, 400)], alpha=-2)
+    assert np.all(np.isfinite(res.edf))
+    assert edf_sources("theo1", res, 400) == ["SP 1065", THEO_STAND_IN, THEO_STAND_IN]
+    rep = StatisticsReport(rate_hz=1.0, channels={"x": ChannelStatistics({"theo1": res})},
+                           segment=(400, 1))
+    text = statistics_table(rep)
+    assert text.count("*") == 3 and THEO_STAND_IN in text  # two rows and the footnote
+    assert rep.to_dict()["channels"]["x"]["statistics"]["theo1"]["edf_source"][1] == \
+        THEO_STAND_IN
+    white = statistic("theo1", y, 1.0, [0.75 * m for m in (20, 360, 400)], alpha=0)
+    assert edf_sources("theo1", white, 400) == ["SP 1065"] * 3
