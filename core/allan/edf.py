@@ -353,3 +353,34 @@ def edf_theo1(alpha: int, m: int, n_phase: int) -> float:
     else:
         return math.nan
     return e if e >= 1 else math.nan
+
+
+def edf_table5(alpha: int, m: int, n_phase: int) -> float:
+    """The "simple" EDF of NIST SP 1065 Table 5 (Stein's approximations for the overlapping
+    AVAR), for N = ``n_phase`` phase points at the averaging factor m:
+
+    * white PM (α = 2):   (N + 1)(N − 2m) / (2 (N − m))
+    * flicker PM (α = 1): exp(√(ln((N − 1)/2m) · ln((2m + 1)(N − 1)/4)))
+    * white FM (α = 0):   [3(N − 1)/2m − 2(N − 2)/N] · 4m² / (4m² + 5)
+    * flicker FM (α = −1): 2(N − 2)/(2.3 N − 4.9) at m = 1, 5N² / (4m (N + 3m)) from m = 2
+    * random-walk FM (α = −2): (N − 2)/(m (N − 3)²) · [(N − 1)² − 3m(N − 1) + 4m²]
+
+    Stable32 prints HTOT's bounds with these below AF 16 and at white PM (``longtau``). NaN
+    for another α or an EDF ≤ 0."""
+    a, n, mm = int(alpha), float(n_phase), float(m)
+    if mm < 1 or n <= 2 * mm:
+        return math.nan
+    if a == 2:
+        e = (n + 1) * (n - 2 * mm) / (2 * (n - mm))
+    elif a == 1:
+        u, v = (n - 1) / (2 * mm), (2 * mm + 1) * (n - 1) / 4
+        e = math.exp(math.sqrt(math.log(u) * math.log(v))) if u > 1 else math.nan
+    elif a == 0:
+        e = (3 * (n - 1) / (2 * mm) - 2 * (n - 2) / n) * 4 * mm * mm / (4 * mm * mm + 5)
+    elif a == -1:
+        e = 2 * (n - 2) / (2.3 * n - 4.9) if mm == 1 else 5 * n * n / (4 * mm * (n + 3 * mm))
+    elif a == -2:
+        e = (n - 2) / (mm * (n - 3) ** 2) * ((n - 1) ** 2 - 3 * mm * (n - 1) + 4 * mm * mm)
+    else:
+        return math.nan
+    return e if e > 0 else math.nan

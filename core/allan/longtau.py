@@ -28,9 +28,16 @@ Where SP 1065 and Stable32 differ (both are offered: ``edf_convention``):
   bounds and hold on an independent Stable32 run to 3.5e-4 (``STABLE32_MTOT_EDF``);
   ``"stable32"`` takes them (and Table 8 at the other α, where none was measured). They give
   more EDF than Table 8 (a narrower interval): ``"sp1065"`` stays the default.
-* HTOT: Table 9 reproduces Stable32's bounds from m = 16 on; below, Stable32's EDF is another
-  we could not identify, smaller than Table 9's; avard takes the smaller of Table 9's and
-  OHDEV's (Greenhall–Riley) there, whose interval is wider than Stable32's (both conventions).
+* HTOT: SP 1065 gives Table 9 (FM types); avard takes OHDEV's Greenhall–Riley EDF for the
+  PM types and, below m = 16, the smaller of the two (``"sp1065"``, the default: the
+  interval is never the narrower). Stable32 prints Table 9 from AF 16 on, but below AF 16
+  and at white PM SP 1065's Table 5 "simple" EDF (Stein's, for AVAR): its PHASE.DAT bounds
+  at α 0 below AF 16 within 3.7e-4 and at α 2 at every AF within 1.3e-4, and on an
+  independent 1253-point run at α −2, −1, 0 below AF 16 within 3.5e-4 (not at AF 1, α −1,
+  where Table 5's form is below one degree of freedom and Stable32 prints Table 9's to
+  3e-3). ``"stable32"`` takes that. Not identified: Stable32's HTOT EDF at flicker PM
+  (PHASE.DAT AF 128, 256; Table 5's is 0.3 % and 1.4 % away in the bounds), where both
+  conventions take OHDEV's, the smaller (wider) one.
 * Bias: HTOT is divided by SP 1065's factor for its noise type (0.995 white FM, 0.851 flicker,
   0.771 random walk, 0.717 and 0.679 for α = −3, −4), as Stable32 prints it; TOTVAR by
   1 − a·τ/T (a = 0.481 flicker FM, 0.750 random-walk FM; SP 1065 §5.2.11); MTOT, TTOT and
@@ -74,6 +81,7 @@ from avard.core.allan.edf import (
     chi2_interval,
     edf_greenhall,
     edf_greenhall_modified,
+    edf_table5,
     edf_theo1,
     edf_total,
 )
@@ -370,12 +378,18 @@ def _edf(name: str, alpha: int, m: int, n_phase: int, convention: str, avar_part
             return e if e > 0 else math.nan
         return edf_total("mtotvar", alpha, m, n_phase)
     if name == "htot":
-        e = edf_total("htotvar", alpha, m, n_phase) if m > 1 else math.nan
         ohdev = edf_greenhall(alpha, 3, m, 1, n_phase)
+        if convention == "stable32":  # Table 5 below AF 16 and at white PM, Table 9 else
+            e5 = edf_table5(alpha, m, n_phase) if not (alpha == -1 and m == 1) else math.nan
+            if (m < HTOT_TABLE9_FROM or alpha == 2) and math.isfinite(e5):
+                return e5
+            e9 = edf_total("htotvar", alpha, m, n_phase)
+            return e9 if math.isfinite(e9) else ohdev
+        e = edf_total("htotvar", alpha, m, n_phase) if m > 1 else math.nan
         if not math.isfinite(e):
             return ohdev
-        # below m = 16 Table 9 claims more than Stable32 prints (its rule there unknown):
-        # OHDEV's EDF where it is the smaller, so the interval is never the narrower
+        # below m = 16 Table 9 claims more than OHDEV's Greenhall–Riley EDF (exact for the
+        # OHVAR that HTOT is at m = 1): the smaller, so the interval is never the narrower
         return min(e, ohdev) if m < HTOT_TABLE9_FROM else e
     if avar_part:  # TheoH's OADEV part
         mm = max(1, round(tau_over_tau0))
