@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.allan.noise_id import (
     HOLD_BELOW_AVERAGES,
@@ -227,6 +228,27 @@ def grid_sums(q: NDArray, sp: int, h: int, sums: DifferenceSums, d: int) -> None
         a = b
 
 
+def _compiled_sums(p: NDArray, m: int, d: int, sums: DifferenceSums) -> bool:
+    """The fully overlapping sums of one float64 channel by the compiled loop
+    (``kernels``): Σ (X_{i+2m} − 2X_{i+m} + X_i)² read in one pass (d = 2), and for d = 3 the
+    same loop on the window sums W_j = X_{j+m} − X_j, since the third difference is
+    W_{i+2m} − 2W_{i+m} + W_i. False (nothing added) where it does not apply: integer counts
+    (exact int64 sums), several channels (the covariance), no compiled module; ``grid_sums``
+    then, which a test holds equal."""
+    kern = kernels.compiled()
+    if kern is None or p.dtype != np.float64 or p.shape[1] != 1 or d not in (2, 3):
+        return False
+    col = p[:, 0]
+    if d == 3:
+        col = col[m:] - col[:-m]
+    n_d = col.shape[0] - 2 * m
+    if n_d <= 0:
+        return True
+    sums.n += n_d
+    sums.s2[0, 0] += kern.sumsq(col[:n_d], col[m:m + n_d], col[2 * m:2 * m + n_d])
+    return True
+
+
 def strided_sums(p: NDArray, m: int, stride: int, d: int, sums: DifferenceSums) -> None:
     """``grid_sums`` for a stride that does not divide m (batch only, whole segment):
     differences D_i = Σ_k c_k p[i + k·m] at i = 0, stride, 2·stride, …"""
@@ -414,7 +436,6 @@ def allan_variance(
     strides = np.array([default_stride(kind, int(m), stride, overlap) for m in ms], np.int64)
     sums = [DifferenceSums.zeros(c) for _ in ms]
     ladders = [Lag1Ladder(c, dmax=d, cross=False) for _ in ms]
-    rn = rn_sums_for(kind, ms, [b - s for s, b in bounds], c)
     for s0, s1 in bounds:
         seg = a[s0:s1]
         if seg.shape[0] < 1:
@@ -422,7 +443,9 @@ def allan_variance(
         p = segment_phase(seg, is_int)
         for k, m in enumerate(ms):
             st = int(strides[k])
-            if int(m) % st == 0:
+            if st == 1 and _compiled_sums(p, int(m), d, sums[k]):
+                pass
+            elif int(m) % st == 0:
                 grid_sums(p[::st], int(m) // st, 0, sums[k], d)
             else:
                 strided_sums(p, int(m), st, d, sums[k])
@@ -431,6 +454,27 @@ def allan_variance(
             # segment's averages on one scale for the pooled mean of the identification)
             ladders[k].push((np.diff(p[::int(m)], axis=0) + int(m) * seg[0]).astype(np.float64))
             ladders[k].gap()
+    # R(n) = MVAR/AVAR, only at the τ where the identification will read it (B1 says PM in
+    # its range, at a τ keeping its own α): a second look at the record for those few, as
+    # OverlappingAllan defers it. Summed at every τ of B1's range it cost an all-τ run of the
+    # Cs 5071A record most of its noise identification.
+    rn = rn_sums_for(kind, ms, [b - s for s, b in bounds], c)
+    if alpha is None and any(r is not None for r in rn):
+        read = np.zeros((len(ms), c), dtype=bool)
+        alphas_from_ladders(ladders, d, None, ms,
+                            np.array([x.n for x in sums], dtype=np.int64), strides, noise_id,
+                            rn_read=read)
+        rn = [r if r is not None and read[k].any() else None for k, r in enumerate(rn)]
+    else:
+        rn = [None] * len(ms)
+    for s0, s1 in bounds:
+        if not any(r is not None for r in rn):
+            break
+        seg = a[s0:s1]
+        if seg.shape[0] < 1:
+            continue
+        p = segment_phase(seg, is_int)
+        for k, m in enumerate(ms):
             rk = rn[k]
             if rk is not None and p.shape[0] > 2 * m:  # R(n): every second difference
                 rk.push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))

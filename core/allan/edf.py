@@ -239,3 +239,148 @@ def _quantiles(method: str, p: float, k: NDArray[np.float64]) -> NDArray[np.floa
         for u, v in zip(uniq[todo].tolist(), vals[todo].tolist(), strict=True):
             _PPF_CACHE[(method, p, u)] = v
     return vals[inverse].reshape(k.shape)
+
+
+# ----------------------------------------------------------------------------------------------
+# The long-τ statistics (core/allan/longtau.py). New functions only: the estimators above keep
+# their EDF exactly.
+
+# GR table 1: asymptotic (a0, a1) for the modified variances (F = 1), rows alpha = +2 … −4,
+# columns d = 1, 2, 3; NaN where the variance does not converge.
+_TABLE1: dict[int, tuple[tuple[float, float], ...]] = {
+    2: ((2 / 3, 1 / 3), (7 / 9, 1 / 2), (22 / 25, 2 / 3)),
+    1: ((0.840, 0.345), (0.997, 0.616), (1.141, 0.843)),
+    0: ((1.079, 0.368), (1.033, 0.607), (1.184, 0.848)),
+    -1: (_NAN, (1.048, 0.534), (1.180, 0.816)),
+    -2: (_NAN, (1.302, 0.535), (1.175, 0.777)),
+    -3: (_NAN, _NAN, (1.194, 0.703)),
+    -4: (_NAN, _NAN, (1.489, 0.702)),
+}
+
+
+def edf_greenhall_modified(alpha: int, d: int, m: int, n_phase: int) -> float:
+    """EDF of a fully overlapping *modified* d-th difference variance (MVAR and TVAR for d = 2;
+    GR 2003 case 1, F = 1, S = m; NIST SP 1065 §5.3), for ``n_phase`` phase points. NaN when
+    no difference fits."""
+    alpha, d, m, n_phase = int(alpha), int(d), int(m), int(n_phase)
+    if d not in (1, 2, 3) or not -4 <= alpha <= 2 or alpha + 2 * d <= 1:
+        raise DataError(f"alpha={alpha}, d={d}: a modified variance needs -4 <= alpha <= 2, "
+                        "d in 1..3 and alpha + 2d > 1")
+    if m < 1:
+        raise DataError(f"averaging factor m={m} must be >= 1")
+    length = m + m * d  # GR's L = m/F + m·d with F = 1
+    if n_phase < length:
+        return math.nan
+    s_factor = float(m)  # fully overlapping: stride 1
+    m_count = 1 + (n_phase - length)  # GR's M = 1 + ⌊S (N − L)/m⌋
+    j_terms = int(min(m_count, (d + 1) * s_factor))
+    r = m_count / s_factor
+    if j_terms <= _J_MAX:
+        return _sz0_squared(1.0, alpha, d) * m_count / _basic_sum(
+            j_terms, m_count, s_factor, 1.0, alpha, d)
+    if r > d + 1:
+        a0, a1 = _TABLE1[alpha][d - 1]
+        return 1.0 / ((a0 - a1 / r) / r)
+    m_prime = _J_MAX / r
+    return _sz0_squared(1.0, alpha, d) * _J_MAX / _basic_sum(
+        _J_MAX, _J_MAX, m_prime, 1.0, alpha, d)
+
+
+# SP 1065 Table 7 (TOTVAR) and Table 8 (MTOT, TTOT): edf = b·(T/τ) − c, by alpha.
+TOTVAR_EDF = {0: (1.50, 0.0), -1: (1.17, 0.22), -2: (0.93, 0.36)}
+MTOT_EDF = {2: (1.90, 2.10), 1: (1.20, 1.40), 0: (1.10, 1.20), -1: (0.85, 0.50),
+            -2: (0.75, 0.31)}
+# SP 1065 Table 9 (HTOT): edf = (T/τ) / (b0 + b1·τ/T), FM types alpha 0 … −4.
+HTOT_EDF = {0: (0.559, 1.004), -1: (0.868, 1.006), -2: (0.938, 1.000), -3: (0.974, 1.000),
+            -4: (1.276, 0.792)}
+
+
+def edf_total(kind: str, alpha: int, m: int, n_phase: int) -> float:
+    """EDF of a total variance from SP 1065's tables, with T/τ = (N − 1)/m for N phase points
+    (the record's length over τ); NaN where the table has no row for ``alpha`` (the caller
+    takes the corresponding non-total EDF there, ``longtau``) or the formula gives ≤ 0."""
+    ratio = (int(n_phase) - 1) / int(m)
+    table = {"totvar": TOTVAR_EDF, "mtotvar": MTOT_EDF, "ttotvar": MTOT_EDF}.get(kind)
+    if table is not None:
+        if int(alpha) not in table:
+            return math.nan
+        b, c = table[int(alpha)]
+        e = b * ratio - c
+    elif kind == "htotvar":
+        if int(alpha) not in HTOT_EDF:
+            return math.nan
+        b0, b1 = HTOT_EDF[int(alpha)]
+        e = ratio / (b0 + b1 / ratio)
+    else:
+        raise DataError(f"{kind!r} is not a total variance")
+    return e if e > 0 else math.nan
+
+
+def edf_theo1(alpha: int, m: int, n_phase: int) -> float:
+    """EDF of Theo1 at the averaging factor m (τ = 0.75·m·τ0) for ``n_phase`` phase points,
+    by the fitted forms of NIST SP 1065 §5.2.14 (Howe and Tasset; W. Riley's "CI2"), with
+    r = 0.75·m and N = ``n_phase``:
+
+    * white PM (α = 2):   0.86 (N + 1)(N − 4r/3) / (N − r) · r / (r + 1.14)
+    * flicker PM (α = 1): (4.798 N² − 6.374 N r + 12.387 r) / (√(r + 36.6) (N − r)) · r / (r + 0.3)
+    * white FM (α = 0):   [(4.1 N + 0.8)/r − (3.1 N + 6.5)/N] · r^1.5 / (r^1.5 + 5.2)
+    * flicker FM (α = −1): (2 N² − 1.3 N r − 3.5 r) / (N r) · r³ / (r³ + 2.3)
+    * random-walk FM (α = −2): (4.4 N − 2)/(2.9 r) · [(4.4 N − 1)² − 8.6 r (4.4 N − 1)
+      + 11.4 r²] / (4.4 N − 3)²
+
+    These are what Stable32 prints (its Theo1 bounds on a 1253-point record, α = −1, are
+    reproduced within 3.2e-4: tests/core/test_stable32_longtau.py). NaN where no form applies:
+    α outside +2 … −2, or a form that gives EDF < 1 (random-walk FM towards r ≈ 0.63 N, where
+    its quadratic changes sign: an EDF of 0.1 there puts the whole χ² interval above the
+    estimate, and its simulated coverage fell to 45 %); the caller then says what it takes
+    instead (``longtau``)."""
+    a, n = int(alpha), float(n_phase)
+    r = 0.75 * int(m)
+    if r <= 0 or r >= n:
+        return math.nan
+    if a == 2:
+        e = 0.86 * (n + 1) * (n - 4 * r / 3) / (n - r) * r / (r + 1.14)
+    elif a == 1:
+        e = (4.798 * n * n - 6.374 * n * r + 12.387 * r) / (math.sqrt(r + 36.6) * (n - r)) \
+            * r / (r + 0.3)
+    elif a == 0:
+        e = ((4.1 * n + 0.8) / r - (3.1 * n + 6.5) / n) * r**1.5 / (r**1.5 + 5.2)
+    elif a == -1:
+        e = (2 * n * n - 1.3 * n * r - 3.5 * r) / (n * r) * r**3 / (r**3 + 2.3)
+    elif a == -2:
+        q = 4.4 * n - 1
+        e = (4.4 * n - 2) / (2.9 * r) * (q * q - 8.6 * r * q + 11.4 * r * r) / (4.4 * n - 3) ** 2
+    else:
+        return math.nan
+    return e if e >= 1 else math.nan
+
+
+def edf_table5(alpha: int, m: int, n_phase: int) -> float:
+    """The "simple" EDF of NIST SP 1065 Table 5 (Stein's approximations for the overlapping
+    AVAR), for N = ``n_phase`` phase points at the averaging factor m:
+
+    * white PM (α = 2):   (N + 1)(N − 2m) / (2 (N − m))
+    * flicker PM (α = 1): exp(√(ln((N − 1)/2m) · ln((2m + 1)(N − 1)/4)))
+    * white FM (α = 0):   [3(N − 1)/2m − 2(N − 2)/N] · 4m² / (4m² + 5)
+    * flicker FM (α = −1): 2(N − 2)/(2.3 N − 4.9) at m = 1, 5N² / (4m (N + 3m)) from m = 2
+    * random-walk FM (α = −2): (N − 2)/(m (N − 3)²) · [(N − 1)² − 3m(N − 1) + 4m²]
+
+    Stable32 prints HTOT's bounds with these below AF 16 and at white PM (``longtau``). NaN
+    for another α or an EDF ≤ 0."""
+    a, n, mm = int(alpha), float(n_phase), float(m)
+    if mm < 1 or n <= 2 * mm:
+        return math.nan
+    if a == 2:
+        e = (n + 1) * (n - 2 * mm) / (2 * (n - mm))
+    elif a == 1:
+        u, v = (n - 1) / (2 * mm), (2 * mm + 1) * (n - 1) / 4
+        e = math.exp(math.sqrt(math.log(u) * math.log(v))) if u > 1 else math.nan
+    elif a == 0:
+        e = (3 * (n - 1) / (2 * mm) - 2 * (n - 2) / n) * 4 * mm * mm / (4 * mm * mm + 5)
+    elif a == -1:
+        e = 2 * (n - 2) / (2.3 * n - 4.9) if mm == 1 else 5 * n * n / (4 * mm * (n + 3 * mm))
+    elif a == -2:
+        e = (n - 2) / (mm * (n - 3) ** 2) * ((n - 1) ** 2 - 3 * mm * (n - 1) + 4 * mm * mm)
+    else:
+        return math.nan
+    return e if e > 0 else math.nan

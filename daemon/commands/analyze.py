@@ -8,6 +8,8 @@ Examples:
     avard analyze lab.npz --plot lab.png --export kalibr imu.yaml --export csv adev.csv
     avard analyze lab.npz --psd --plot lab.png      # + spectrum: lab_psd.png, white density
     avard analyze /var/lib/avard --run RUN          # one run of a recording
+    avard analyze lab.npz --stat oadev,totdev,theoh --dynamic --plot lab.png  # + lab_stats.png,
+                                                    # lab_dynamic.png (docs/allan.md)
 
 DATA is an .npz (accel in m/s², rate_hz), a .csv (header row; t column or --rate), or an avard
 recording (directory or .avr segment). Every one is streamed (a recording too: walked frame by
@@ -26,6 +28,7 @@ from pathlib import Path
 
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
+from avard.core.analysis.statistics import statistics_csv, statistics_table
 from avard.core.errors import DataError
 from avard.core.io.outputs import check_output_file, check_plot_output, finite_for_json
 from avard.core.io.source import open_record
@@ -34,6 +37,12 @@ from avard.daemon.commands._options import (
     add_model_arguments,
     add_run_argument,
     analyze_options,
+)
+from avard.daemon.commands._statistics import (
+    add_statistics_arguments,
+    plot_extras,
+    run_statistics,
+    statistics_request,
 )
 from avard.daemon.commands.progress import progress_printer
 
@@ -73,6 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="temperature channel to compensate: fit its first-order lag and "
                              "coefficient (m/s²/K) per axis and add the temperature-"
                              "compensated ADEV (see docs/explain.md)")
+    add_statistics_arguments(parser)
 
 
 def _write(path: str, text: str) -> None:
@@ -107,11 +117,14 @@ def _comp_line(name: str, v: dict | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     for fmt, _ in args.export:
-        if fmt not in ("kalibr", "csv", "psd"):
+        if fmt not in ("kalibr", "csv", "psd", "stats"):
             raise DataError(f"--export {fmt}: unknown format; use 'kalibr FILE.yaml', "
-                            "'csv FILE.csv' or 'psd FILE.csv'")
+                            "'csv FILE.csv', 'psd FILE.csv' or 'stats FILE.csv'")
         if fmt == "psd" and not args.psd:
             raise DataError("--export psd needs --psd (the spectrum is computed with it)")
+        if fmt == "stats" and not args.stat:
+            raise DataError("--export stats needs --stat (the statistics to write)")
+    request = statistics_request(args)
     if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
         raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
     # outputs before the analysis, so a bad path costs a second, not the whole run
@@ -140,18 +153,27 @@ def run(args: argparse.Namespace) -> int:
     else:
         an = analyze(source, options, progress=progress_printer())
         comp = {}
+    stats = run_statistics(source, an, request)
     if args.json:
         d = an.to_dict()
         for k, v in comp.items():
             d["channels"][k]["temperature_compensation"] = finite_for_json(v)
+        if stats is not None:
+            d["statistics"] = finite_for_json(stats.to_dict())
         sys.stdout.write(json.dumps(d, indent=1, allow_nan=False) + "\n")
     else:
         sys.stdout.write(format_table(an) + "\n")
         for k, v in comp.items():
             sys.stdout.write(_comp_line(k, v) + "\n")
+        if stats is not None:
+            sys.stdout.write(statistics_table(stats) + "\n")
     writers = {"kalibr": kalibr_yaml, "csv": adev_csv, "psd": psd_csv}
     for fmt, path in args.export:
-        _write(path, writers[fmt](an))
+        if fmt == "stats":
+            assert stats is not None  # --export stats needs --stat (checked above)
+            _write(path, statistics_csv(stats))
+        else:
+            _write(path, writers[fmt](an))
     if args.plot:
         from avard.core.plot import plot_analysis
 
@@ -161,4 +183,5 @@ def run(args: argparse.Namespace) -> int:
 
             p = Path(args.plot)
             plot_psd(an, p.with_name(f"{p.stem}_psd{p.suffix}"))
+        plot_extras(stats, args.plot)
     return 0

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -37,7 +36,7 @@ from avard.core.allan.noise_id import Lag1Ladder
 from avard.core.allan.overlapping import OverlappingAllan
 from numpy.typing import NDArray
 
-from ..support.allantools_sdist import Corrupt, Unavailable, reference_tests
+from ..support.allantools_sdist import reference_tests, reference_tests_or_skip
 from .stable32 import Row, read_rows
 
 LAG1_MIN_AVERAGES = 30  # Stable32 uses the lag-1 ACF with at least this many averages
@@ -85,14 +84,7 @@ OFFSET_FREE = {"avar": "stable32_adev_alltau.txt", "oavar": "stable32_oadev_allt
 def tests_dir() -> Path:
     """allantools' ``tests/`` folder: skipped with the reason where it cannot be fetched,
     failed under CI (``CI=true``), failed always when the archive is not the pinned one."""
-    try:
-        return reference_tests()
-    except Corrupt as e:
-        pytest.fail(str(e))
-    except Unavailable as e:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run the Stable32 data-set tests: {e}")
-        pytest.skip(str(e))
+    return reference_tests_or_skip()
 
 
 @functools.cache

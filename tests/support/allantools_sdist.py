@@ -101,3 +101,18 @@ def _fetch_and_extract(root: Path) -> None:
         final = root / f"{NAME}-{VERSION}"
         shutil.rmtree(final, ignore_errors=True)  # a folder without tests/: left half-made
         os.replace(Path(tmp) / f"{NAME}-{VERSION}", final)
+
+
+def reference_tests_or_skip() -> Path:
+    """``reference_tests()`` for a test: skipped with the reason where the archive cannot be
+    fetched, failed under CI (``CI=true``), failed always when it is not the pinned one."""
+    import pytest
+
+    try:
+        return reference_tests()
+    except Corrupt as e:
+        pytest.fail(str(e))
+    except Unavailable as e:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run the Stable32 data-set tests: {e}")
+        pytest.skip(str(e))
