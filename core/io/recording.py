@@ -495,11 +495,9 @@ def order_segments(paths: Iterable[str | Path]) -> list[Path]:
     return [p for _, p in keyed_segments(paths)]
 
 
-def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
-    """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
-    decoding): fast for finding the tail of an hour-long segment at start-up. A truncated
-    last frame is left out. None when a length field is implausible (damage): then read the
-    file with :class:`RecordingReader`."""
+def _listed_frames(path: str | Path, max_bytes: int) -> tuple[list[int], int, int] | None:
+    """Frame offsets from the length fields alone, the byte where the listing stopped and the
+    file size; None when a length field is implausible."""
     offsets = []
     with open(path, "rb") as f:
         size = f.seek(0, 2)
@@ -514,6 +512,40 @@ def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list
                 break
             offsets.append(pos)
             pos = end
+    return offsets, pos, size
+
+
+def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
+    """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
+    decoding): fast for finding the tail of an hour-long segment at start-up. A frame whose
+    length runs past the end of the file ends the listing (a torn tail, or a flipped bit in
+    a length: :func:`records_backwards` tells them apart). None when a length field is
+    implausible (damage): then read the file with :class:`RecordingReader`."""
+    listed = _listed_frames(path, max_bytes)
+    return None if listed is None else listed[0]
+
+
+def _checked_offsets(path: str | Path) -> list[int] | None:
+    """Offsets of the valid frames of a segment, from the length fields where they can be
+    trusted; None when the file must be read forwards, resynchronising.
+
+    A power cut leaves only a torn last frame, which the listing never includes. So a last
+    listed frame that fails its CRC is damage (a wrong length led the walk astray). And a
+    listing that stops on a length past the end of the file is either that torn tail or a
+    flipped bit in a length field: the bytes from there are scanned forwards, resynchronising
+    (a torn tail is shorter than one frame, so this costs nothing after a power cut), and
+    any valid frame found there is damage's survivor, kept."""
+    listed = _listed_frames(path, MAX_FRAME_BYTES)
+    if listed is None:
+        return None
+    offsets, stop, size = listed
+    if offsets and read_frame_at(path, offsets[-1]) is None:
+        return None
+    if stop < size:
+        with open(path, "rb") as f:
+            f.seek(stop)
+            tail = f.read()
+        offsets += [stop + fr.offset for fr in scan_frames(tail, str(path))]
     return offsets
 
 
@@ -540,8 +572,9 @@ def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
 
 def records_backwards(path: str | Path) -> Iterator[dict[str, Any]]:
     """The valid records of one segment file, newest first, read from the end (frame offsets
-    from the length fields); a damaged file is read forwards once (resynchronising)."""
-    offsets = frame_offsets(path)
+    from the length fields, checked: :func:`_checked_offsets`); a damaged file is read
+    forwards once (resynchronising)."""
+    offsets = _checked_offsets(path)
     if offsets is None:
         yield from reversed(list(RecordingReader(path)))
         return

@@ -163,3 +163,42 @@ def test_last_record_reads_from_the_end_and_survives_damage(tmp_path: Path) -> N
     seg.write_bytes(bytes(data))
     assert frame_offsets(seg) is None
     assert last_record(seg, "raw")["i0"] == 40                      # falls back to a full scan
+
+
+def _raw_segment(path: Path, k: int) -> list[int]:
+    """A segment of a header and ``k`` raw blocks of 10 samples; the blocks' byte offsets."""
+    recs = [_header()] + [frames.raw_record("r1", j, 10 * j, np.full((10, 3), j, np.int32),
+                                            0.0, 0.0) for j in range(k)]
+    _write_segment(path, recs)
+    return [f.offset for f in scan_frames(path.read_bytes())][1:]
+
+
+@pytest.mark.parametrize("bit", [10, 20])            # a length inside the file; one past EOF
+def test_one_flipped_length_bit_never_hides_the_records_after_it(tmp_path: Path,
+                                                                 bit: int) -> None:
+    """A flipped bit in a frame's length field is damage, not a torn tail: the records after
+    it are still read, from the end, and the last raw block is the true one."""
+    from avard.core.io.recording import last_record, records_backwards
+
+    seg = tmp_path / "s.avr"
+    offs = _raw_segment(seg, 40)
+    data = bytearray(seg.read_bytes())
+    n = int.from_bytes(data[offs[5]:offs[5] + 4], "little") ^ (1 << bit)
+    assert n < 1 << 24                                 # plausible (under MAX_FRAME_BYTES)
+    data[offs[5]:offs[5] + 4] = n.to_bytes(4, "little")
+    seg.write_bytes(bytes(data))
+    assert last_record(seg, "raw")["i0"] == 390
+    got = [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"]
+    assert got == [j for j in reversed(range(40)) if j != 5]
+
+
+def test_a_torn_tail_is_still_dropped_from_the_end(tmp_path: Path) -> None:
+    from avard.core.io.recording import last_record, records_backwards
+
+    seg = tmp_path / "s.avr"
+    _raw_segment(seg, 6)
+    whole = seg.read_bytes()
+    seg.write_bytes(whole + frame(frames.encode(frames.raw_record(
+        "r1", 6, 60, np.ones((10, 3), np.int32), 0.0, 0.0)))[:-9])
+    assert last_record(seg, "raw")["i0"] == 50
+    assert [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"] == [5, 4, 3, 2, 1, 0]
