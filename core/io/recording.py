@@ -22,6 +22,7 @@ This module never touches hardware or sockets (it is part of ``avard.core``).
 from __future__ import annotations
 
 import logging
+import mmap
 import re
 import struct
 import zlib
@@ -525,27 +526,39 @@ def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list
     return None if listed is None else listed[0]
 
 
-def _checked_offsets(path: str | Path) -> list[int] | None:
+def _scanned_offsets(path: str | Path, start: int = 0) -> list[int]:
+    """Offsets of the valid frames of a segment from byte ``start`` on, read forwards,
+    resynchronising; the file is mapped, not read into memory, and only the offsets are
+    kept (an hour-long segment at 4 kHz is ~170 MB)."""
+    with open(path, "rb") as f:
+        if f.seek(0, 2) <= start:
+            return []
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+            view = memoryview(mapped)
+            try:
+                return [start + fr.offset for fr in scan_frames(view[start:], str(path))]
+            finally:
+                view.release()
+
+
+def _checked_offsets(path: str | Path) -> list[int]:
     """Offsets of the valid frames of a segment, from the length fields where they can be
-    trusted; None when the file must be read forwards, resynchronising.
+    trusted, else from a forward scan (resynchronising).
 
     A power cut leaves only a torn last frame, which the listing never includes. So a last
-    listed frame that fails its CRC is damage (a wrong length led the walk astray). And a
-    listing that stops on a length past the end of the file is either that torn tail or a
-    flipped bit in a length field: the bytes from there are scanned forwards, resynchronising
-    (a torn tail is shorter than one frame, so this costs nothing after a power cut), and
-    any valid frame found there is damage's survivor, kept."""
+    listed frame that fails its CRC is damage (a wrong length led the walk astray): the file
+    is scanned. A listing that stops on a length past the end of the file is either that torn
+    tail or a flipped bit in a length field: the bytes from there are scanned (a torn tail is
+    shorter than one frame, so this costs nothing after a power cut), and any valid frame
+    found there is damage's survivor, kept."""
     listed = _listed_frames(path, MAX_FRAME_BYTES)
     if listed is None:
-        return None
+        return _scanned_offsets(path)
     offsets, stop, size = listed
     if offsets and read_frame_at(path, offsets[-1]) is None:
-        return None
+        return _scanned_offsets(path)
     if stop < size:
-        with open(path, "rb") as f:
-            f.seek(stop)
-            tail = f.read()
-        offsets += [stop + fr.offset for fr in scan_frames(tail, str(path))]
+        offsets += _scanned_offsets(path, stop)
     return offsets
 
 
@@ -572,13 +585,10 @@ def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
 
 def records_backwards(path: str | Path) -> Iterator[dict[str, Any]]:
     """The valid records of one segment file, newest first, read from the end (frame offsets
-    from the length fields, checked: :func:`_checked_offsets`); a damaged file is read
-    forwards once (resynchronising)."""
-    offsets = _checked_offsets(path)
-    if offsets is None:
-        yield from reversed(list(RecordingReader(path)))
-        return
-    for off in reversed(offsets):
+    from the length fields, checked: :func:`_checked_offsets`); a damaged file is scanned
+    forwards once (resynchronising) for its frame offsets alone, so what is held is one
+    offset per frame and the records being looked at, never the file or all its records."""
+    for off in reversed(_checked_offsets(path)):
         hit = read_frame_at(path, off)
         if hit is not None:
             yield hit

@@ -202,3 +202,43 @@ def test_a_torn_tail_is_still_dropped_from_the_end(tmp_path: Path) -> None:
         "r1", 6, 60, np.ones((10, 3), np.int32), 0.0, 0.0)))[:-9])
     assert last_record(seg, "raw")["i0"] == 50
     assert [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"] == [5, 4, 3, 2, 1, 0]
+
+
+def test_reading_a_damaged_segment_from_the_end_holds_no_copy_of_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A damaged segment is read forwards to find its frames, but neither its bytes nor its
+    decoded records are held: the last raw block costs a couple of decodes, and while the
+    caller looks at it the reader holds far less than the file's size (an hour at 4 kHz is
+    ~170 MB). The resync's own working memory is bounded by its window, not the file."""
+    import tracemalloc
+
+    from avard.core.io import recording
+
+    seg = tmp_path / "s.avr"
+    recs = [_header()] + [frames.raw_record("r1", j, 500 * j, np.full((500, 3), j, np.int32),
+                                            0.0, 0.0) for j in range(300)]
+    _write_segment(seg, recs)
+    data = bytearray(seg.read_bytes())
+    off = [f.offset for f in scan_frames(bytes(data))][3]
+    data[off:off + 4] = (1 << 30).to_bytes(4, "little")       # implausible: read forwards
+    seg.write_bytes(bytes(data))
+    decoded = 0
+    real = frames.decode
+
+    def counting(payload: bytes, **kw: object) -> dict:
+        nonlocal decoded
+        decoded += 1
+        return real(payload, **kw)
+
+    monkeypatch.setattr(frames, "decode", counting)
+    tracemalloc.start()
+    try:
+        newest = recording.records_backwards(seg)
+        last = next(r for r in newest if r["kind"] == "raw")
+        held = tracemalloc.get_traced_memory()[0]     # while the reader waits at its record
+    finally:
+        tracemalloc.stop()
+    assert last["i0"] == 500 * 299
+    assert decoded <= 2
+    assert held < len(data) // 8, (held, len(data))
+    assert [r["seq"] for r in newest][-1] == 0     # and it still goes on to the start
