@@ -313,3 +313,37 @@ def test_a_checkpoint_left_by_the_old_early_stop_bug_is_not_trusted(tmp_path, ca
     svc = _run(data, 4.0, 2)
     assert svc.restored is not None and svc.restored["state_file"].startswith("unusable")
     _assert_accumulators_equal_the_recording(data)
+
+
+def test_a_lost_tail_and_an_unknown_restart_gap_never_reuse_indices_the_accumulators_hold(
+        tmp_path, caplog):
+    """The state file says the accumulators cover the second run, whose segment is gone (a
+    lost or damaged tail), and the wall clock is behind the recording (a Pi without RTC
+    after a power cut: restart gap "unknown", 0 samples). The third run must start where the
+    accumulators end, not where the recording does: the indices between are a recorded loss,
+    never fed twice."""
+    data = tmp_path / "rec"
+    first = _run(data, 9.0, 1)
+    second = _run(data, 9.0, 2)
+    covered = _state(data)["feed"]["covered"]
+    for seg in data.glob(f"{second.run_id}_*.avr"):
+        seg.unlink()
+    first_end = max(r["i0"] + r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    assert first_end < covered
+    caplog.set_level("ERROR", logger="avard.daemon.service")
+    svc = _service(data, 3)
+    svc.clock.step_realtime(-3600.0)
+    svc.run(5.0)
+    assert svc.start_index == covered
+    assert not [r for r in caplog.records if "invariant" in r.getMessage()]
+    recs = [r for r in RecordingReader(data) if r["run"] == svc.run_id]
+    (gap,) = [r for r in recs if r["kind"] == "gap" and r["reason"] == "restart"]
+    assert (gap["i0"], gap["n"], gap["clock"]) == (first_end, covered - first_end, "unknown")
+    assert not [r for r in recs if r["kind"] == "event" and r["name"] == "invariant_violated"]
+    alone = tmp_path / "third"                  # the third run's samples, taken once
+    alone.mkdir()
+    for seg in data.glob(f"{svc.run_id}_*.avr"):
+        (alone / seg.name).write_bytes(seg.read_bytes())
+    third = replay_allan(alone).snapshot().n_samples
+    assert int(_state(data)["state"]["n_samples"]) == int(second.allan.n_samples) + third
+    assert first.run_id < second.run_id < svc.run_id
