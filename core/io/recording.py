@@ -351,8 +351,10 @@ _RUN_SEQ = re.compile(r"n(\d+)-")
 @dataclass(frozen=True, order=True)
 class SegmentKey:
     """Where a segment sits in its recording, read from its frames: the run (by its sequence
-    number), then the first sample index its data records name (raw, temp, gap, event: the
-    recorder writes them in sample order), then the sequence number of its first header
+    number), then the first sample index its sample records name (raw, gap: the recorder
+    writes them in sample order; a segment without one in its first records takes its first
+    ``temp`` or ``event`` index, which can be a drain early: those are stamped in another
+    thread before they are queued), then the sequence number of its first header
     (segments of one run that start at the same index), then the name (only to make the
     order total). Names are not trusted: ``_9999_`` sorted after ``_10000_`` while the field
     was four digits wide, and a file can be renamed."""
@@ -454,30 +456,43 @@ def segment_end(path: str | Path) -> int:
     return end
 
 
+#: Records that carry samples' indices in sample order. ``temp`` and ``event`` records are
+#: stamped with the ring's index in another thread before they are queued, so one can land
+#: at a segment's start naming an index the previous segment's samples still cover.
+_SAMPLE_KINDS = ("raw", "gap")
+
+
 def _read_segment_key(p: Path) -> SegmentKey:
     header: dict[str, Any] | None = None
-    first: dict[str, Any] | None = None
+    first: dict[str, Any] | None = None       # the first sample record (raw or gap)
+    other: dict[str, Any] | None = None       # else the first record naming an index
+
+    def take(rec: dict[str, Any]) -> None:
+        nonlocal header, first, other
+        if rec["kind"] == "header":
+            header = header or rec
+        elif rec["kind"] in _SAMPLE_KINDS:
+            first = first or rec
+        elif "i0" in rec and rec["i0"] is not None:
+            other = other or rec
+
     damaged = False
     try:
         for rec in _head_records(p):
             if rec is None:
                 damaged = True
-            elif rec["kind"] == "header":
-                header = header or rec
-            elif "i0" in rec:
-                first = rec
-            if damaged or first is not None:
+                break
+            take(rec)
+            if first is not None:
                 break
         if first is None and damaged:
             for rec in RecordingReader(p):
-                if rec["kind"] == "header":
-                    header = header or rec
-                elif "i0" in rec:
-                    first = rec
+                take(rec)
+                if first is not None:
                     break
     except (OSError, FormatError):
         pass
-    ref = first or header
+    ref = first or other or header
     if ref is None:
         return SegmentKey(*run_order(p.name.split("_", 1)[0]), NO_INDEX, -1, p.name)
     seq = int(header["seq"]) if header is not None and header["run"] == ref["run"] else -1
