@@ -346,3 +346,36 @@ def test_a_lost_tail_and_an_unknown_restart_gap_never_reuse_indices_the_accumula
         (alone / seg.name).write_bytes(seg.read_bytes())
     third = replay_allan(alone).snapshot().n_samples
     assert int(_state(data)["state"]["n_samples"]) == int(second.allan.n_samples) + third
+
+
+def test_a_whole_recording_rebuild_is_announced_with_its_length_before_it_starts(
+        tmp_path, caplog, monkeypatch):
+    """Without a usable checkpoint record the restore replays the whole recording before
+    READY, which TimeoutStartSec bounds: a WARNING says so, with how much will be replayed,
+    before the replay starts (so a journal that ends there explains the timeout)."""
+    from avard.core.allan import replay
+
+    data = tmp_path / "rec"
+    _run(data, 6.0, 1)
+    _run(data, 4.0, 2)
+    for run in _runs(data):
+        _strip_checkpoints(data, run)
+    (data / STATE_FILE).unlink()
+    recorded = sum(r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    first = min(r["i0"] for r in RecordingReader(data) if r["kind"] == "raw")
+    end = max(r["i0"] + r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    size = sum(f.stat().st_size for f in data.glob("*.avr"))
+    said_before: list[str] = []
+    real = replay.replay_after
+
+    def replay_after(*a, **kw):  # type: ignore[no-untyped-def]
+        said_before.extend(r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+        return real(*a, **kw)
+
+    monkeypatch.setattr("avard.daemon.service.checkpoint.replay_after", replay_after)
+    caplog.set_level("WARNING", logger="avard.daemon.service")
+    _run(data, 2.0, 3)
+    (msg,) = [m for m in said_before if "TimeoutStartSec" in m]
+    assert f"indices {first} to {end}" in msg and f"{end - first} samples" in msg
+    assert f"{size / 1e6:.1f} MB" in msg and "2 segments" in msg
+    assert recorded <= end - first
