@@ -512,8 +512,9 @@ def order_segments(paths: Iterable[str | Path]) -> list[Path]:
 
 
 def _listed_frames(path: str | Path, max_bytes: int) -> tuple[list[int], int, int] | None:
-    """Frame offsets from the length fields alone, the byte where the listing stopped and the
-    file size; None when a length field is implausible."""
+    """Frame offsets from the length fields alone, the byte where the listing stopped (a
+    length of 0 or one past the end of the file) and the file size; None when a length
+    field is implausible."""
     offsets = []
     with open(path, "rb") as f:
         size = f.seek(0, 2)
@@ -524,7 +525,8 @@ def _listed_frames(path: str | Path, max_bytes: int) -> tuple[list[int], int, in
             if n > max_bytes:
                 return None
             end = pos + FRAME_HEADER.size + n
-            if end > size:
+            # n == 0 is never a record (see _valid_at): a zero-filled tail, also ended here
+            if n == 0 or end > size:
                 break
             offsets.append(pos)
             pos = end
@@ -533,10 +535,10 @@ def _listed_frames(path: str | Path, max_bytes: int) -> tuple[list[int], int, in
 
 def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
     """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
-    decoding): fast for finding the tail of an hour-long segment at start-up. A frame whose
-    length runs past the end of the file ends the listing (a torn tail, or a flipped bit in
-    a length: :func:`records_backwards` tells them apart). None when a length field is
-    implausible (damage): then read the file with :class:`RecordingReader`."""
+    decoding): fast for finding the tail of an hour-long segment at start-up. A length of 0
+    (a zero-filled tail) or one running past the end of the file ends the listing (a torn
+    tail, or a flipped bit in a length: :func:`records_backwards` tells them apart). None
+    when a length field is implausible (damage): then the file must be scanned."""
     listed = _listed_frames(path, max_bytes)
     return None if listed is None else listed[0]
 

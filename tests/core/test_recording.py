@@ -242,3 +242,25 @@ def test_reading_a_damaged_segment_from_the_end_holds_no_copy_of_it(
     assert decoded <= 2
     assert held < len(data) // 8, (held, len(data))
     assert [r["seq"] for r in newest][-1] == 0     # and it still goes on to the start
+
+
+def test_a_zero_filled_tail_is_read_from_the_end_not_by_scanning_the_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """ext4 can leave a block of zeros after a power cut. Eight zero bytes read as a frame of
+    length 0 (never a record): the listing ends there and only the zeros are scanned, not the
+    hour of recording before them."""
+    from avard.core.io import recording
+
+    seg = tmp_path / "s.avr"
+    _raw_segment(seg, 20)
+    seg.write_bytes(seg.read_bytes() + bytes(4096))
+    starts: list[int] = []
+    real = recording._scanned_offsets
+
+    def scanned(path: str | Path, start: int = 0) -> list[int]:
+        starts.append(start)
+        return real(path, start)
+
+    monkeypatch.setattr(recording, "_scanned_offsets", scanned)
+    assert recording.last_record(seg, "raw")["i0"] == 190
+    assert starts and min(starts) == seg.stat().st_size - 4096
