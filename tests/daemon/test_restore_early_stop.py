@@ -150,14 +150,20 @@ def _strip_checkpoints(data: Path, run: str) -> None:
         seg.write_bytes(b"".join(frame_bytes(f.payload) for f in kept))
 
 
-def test_a_lost_state_file_and_no_checkpoint_record_rebuilds_from_the_whole_recording(
-        tmp_path, caplog):
+def _two_runs_without_checkpoints(tmp_path: Path) -> Path:
+    """Two runs whose checkpoint records are stripped and whose state file is gone."""
     data = tmp_path / "rec"
     _run(data, 6.0, 1)
     _run(data, 4.0, 2)
     for run in _runs(data):
         _strip_checkpoints(data, run)
     (data / STATE_FILE).unlink()
+    return data
+
+
+def test_a_lost_state_file_and_no_checkpoint_record_rebuilds_from_the_whole_recording(
+        tmp_path, caplog):
+    data = _two_runs_without_checkpoints(tmp_path)
     caplog.set_level("WARNING", logger="avard.daemon.service")
     svc = _run(data, 3.0, 3)
     assert svc.restored is not None and svc.restored["source"].startswith("the whole recording")
@@ -355,12 +361,7 @@ def test_a_whole_recording_rebuild_is_announced_with_its_length_before_it_starts
     before the replay starts (so a journal that ends there explains the timeout)."""
     from avard.core.allan import replay
 
-    data = tmp_path / "rec"
-    _run(data, 6.0, 1)
-    _run(data, 4.0, 2)
-    for run in _runs(data):
-        _strip_checkpoints(data, run)
-    (data / STATE_FILE).unlink()
+    data = _two_runs_without_checkpoints(tmp_path)
     recorded = sum(r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
     first = min(r["i0"] for r in RecordingReader(data) if r["kind"] == "raw")
     end = max(r["i0"] + r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
