@@ -17,6 +17,7 @@ from avard.core.io.recording import (
     RecordingReader,
     load_recording,
     order_segments,
+    scan_frames,
     segment_files,
     segment_key,
 )
@@ -124,3 +125,24 @@ def test_a_temperature_stamped_before_a_rotation_does_not_key_the_next_segment_e
     assert segment_key(b).i0 == 200
     feed = AllanFeed(StreamingAllan(3, RATE), 3.9e-5, [])
     assert replay_after(tmp_path, feed, 180) == 120            # [180, 300): none skipped
+
+
+def test_last_recorded_survives_a_flipped_bit_in_a_length_field(tmp_path):
+    """The reviewer's case end to end: a plausible length running past the end of the
+    newest segment made last_recorded return an old end (the next run then called recorded
+    samples lost and, with clock "unknown", reused their indices)."""
+    rec = Recorder(tmp_path, RUN, lambda: frames.header_record(
+        RUN, rate_hz=RATE, t_mono=0.0, t_real=1.7e9, i0=1050, scale_m_s2_per_count=3.9e-5))
+    for k in range(20):
+        rec.write(frames.raw_record(RUN, 0, 1050 + 50 * k, np.zeros((50, 3), np.int32),
+                                    k, 1.7e9 + k, rate_hz=RATE))
+    assert rec.path is not None
+    newest = rec.path
+    rec.close()
+    data = bytearray(newest.read_bytes())
+    offs = [f.offset for f in scan_frames(bytes(data))]
+    n = int.from_bytes(data[offs[4]:offs[4] + 4], "little") | (1 << 20)
+    data[offs[4]:offs[4] + 4] = n.to_bytes(4, "little")
+    newest.write_bytes(bytes(data))
+    last = last_recorded(tmp_path, RATE)
+    assert last is not None and last.i_end == 1050 + 50 * 20
