@@ -27,7 +27,7 @@ import re
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -552,10 +552,15 @@ def _scanned_offsets(path: str | Path, start: int = 0) -> list[int]:
             return []
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
             view = memoryview(mapped)
+            problems: list[Problem] = []
             try:
-                return [start + fr.offset for fr in scan_frames(view[start:], str(path))]
+                return [start + fr.offset
+                        for fr in scan_frames(view[start:], str(path), problems=problems)]
             finally:
                 view.release()
+                for prob in problems:         # damage is never silent (a torn tail is
+                    if prob.kind != "truncated":  # what a power cut leaves: not news)
+                        log.warning("%s", replace(prob, offset=start + prob.offset))
 
 
 def _checked_offsets(path: str | Path) -> list[int]:

@@ -174,8 +174,8 @@ def _raw_segment(path: Path, k: int) -> list[int]:
 
 
 @pytest.mark.parametrize("bit", [10, 20])            # a length inside the file; one past EOF
-def test_one_flipped_length_bit_never_hides_the_records_after_it(tmp_path: Path,
-                                                                 bit: int) -> None:
+def test_one_flipped_length_bit_never_hides_the_records_after_it(
+        tmp_path: Path, bit: int, caplog: pytest.LogCaptureFixture) -> None:
     """A flipped bit in a frame's length field is damage, not a torn tail: the records after
     it are still read, from the end, and the last raw block is the true one."""
     from avard.core.io.recording import last_record, records_backwards
@@ -190,6 +190,8 @@ def test_one_flipped_length_bit_never_hides_the_records_after_it(tmp_path: Path,
     assert last_record(seg, "raw")["i0"] == 390
     got = [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"]
     assert got == [j for j in reversed(range(40)) if j != 5]
+    # and the damage is said, at its byte offset, as the forward reader says it
+    assert any(f"corrupt record at byte {offs[5]} " in r.getMessage() for r in caplog.records)
 
 
 def test_a_torn_tail_is_still_dropped_from_the_end(tmp_path: Path) -> None:
