@@ -22,11 +22,12 @@ This module never touches hardware or sockets (it is part of ``avard.core``).
 from __future__ import annotations
 
 import logging
+import mmap
 import re
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -350,8 +351,10 @@ _RUN_SEQ = re.compile(r"n(\d+)-")
 @dataclass(frozen=True, order=True)
 class SegmentKey:
     """Where a segment sits in its recording, read from its frames: the run (by its sequence
-    number), then the first sample index its data records name (raw, temp, gap, event: the
-    recorder writes them in sample order), then the sequence number of its first header
+    number), then the first sample index its sample records name (raw, gap: the recorder
+    writes them in sample order; a segment without one in its first records takes its first
+    ``temp`` or ``event`` index, which can be a drain early: those are stamped in another
+    thread before they are queued), then the sequence number of its first header
     (segments of one run that start at the same index), then the name (only to make the
     order total). Names are not trusted: ``_9999_`` sorted after ``_10000_`` while the field
     was four digits wide, and a file can be renamed."""
@@ -453,30 +456,43 @@ def segment_end(path: str | Path) -> int:
     return end
 
 
+#: Records that carry samples' indices in sample order. ``temp`` and ``event`` records are
+#: stamped with the ring's index in another thread before they are queued, so one can land
+#: at a segment's start naming an index the previous segment's samples still cover.
+_SAMPLE_KINDS = ("raw", "gap")
+
+
 def _read_segment_key(p: Path) -> SegmentKey:
     header: dict[str, Any] | None = None
-    first: dict[str, Any] | None = None
+    first: dict[str, Any] | None = None       # the first sample record (raw or gap)
+    other: dict[str, Any] | None = None       # else the first record naming an index
+
+    def take(rec: dict[str, Any]) -> None:
+        nonlocal header, first, other
+        if rec["kind"] == "header":
+            header = header or rec
+        elif rec["kind"] in _SAMPLE_KINDS:
+            first = first or rec
+        elif "i0" in rec and rec["i0"] is not None:
+            other = other or rec
+
     damaged = False
     try:
         for rec in _head_records(p):
             if rec is None:
                 damaged = True
-            elif rec["kind"] == "header":
-                header = header or rec
-            elif "i0" in rec:
-                first = rec
-            if damaged or first is not None:
+                break
+            take(rec)
+            if first is not None:
                 break
         if first is None and damaged:
             for rec in RecordingReader(p):
-                if rec["kind"] == "header":
-                    header = header or rec
-                elif "i0" in rec:
-                    first = rec
+                take(rec)
+                if first is not None:
                     break
     except (OSError, FormatError):
         pass
-    ref = first or header
+    ref = first or other or header
     if ref is None:
         return SegmentKey(*run_order(p.name.split("_", 1)[0]), NO_INDEX, -1, p.name)
     seq = int(header["seq"]) if header is not None and header["run"] == ref["run"] else -1
@@ -495,11 +511,10 @@ def order_segments(paths: Iterable[str | Path]) -> list[Path]:
     return [p for _, p in keyed_segments(paths)]
 
 
-def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
-    """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
-    decoding): fast for finding the tail of an hour-long segment at start-up. A truncated
-    last frame is left out. None when a length field is implausible (damage): then read the
-    file with :class:`RecordingReader`."""
+def _listed_frames(path: str | Path, max_bytes: int) -> tuple[list[int], int, int] | None:
+    """Frame offsets from the length fields alone, the byte where the listing stopped (a
+    length of 0 or one past the end of the file) and the file size; None when a length
+    field is implausible."""
     offsets = []
     with open(path, "rb") as f:
         size = f.seek(0, 2)
@@ -510,10 +525,62 @@ def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list
             if n > max_bytes:
                 return None
             end = pos + FRAME_HEADER.size + n
-            if end > size:
+            # n == 0 is never a record (see _valid_at): a zero-filled tail, also ended here
+            if n == 0 or end > size:
                 break
             offsets.append(pos)
             pos = end
+    return offsets, pos, size
+
+
+def frame_offsets(path: str | Path, *, max_bytes: int = MAX_FRAME_BYTES) -> list[int] | None:
+    """Byte offsets of the frames of a segment from their length fields alone (no CRC, no
+    decoding): fast for finding the tail of an hour-long segment at start-up. A length of 0
+    (a zero-filled tail) or one running past the end of the file ends the listing (a torn
+    tail, or a flipped bit in a length: :func:`records_backwards` tells them apart). None
+    when a length field is implausible (damage): then the file must be scanned."""
+    listed = _listed_frames(path, max_bytes)
+    return None if listed is None else listed[0]
+
+
+def _scanned_offsets(path: str | Path, start: int = 0) -> list[int]:
+    """Offsets of the valid frames of a segment from byte ``start`` on, read forwards,
+    resynchronising; the file is mapped, not read into memory, and only the offsets are
+    kept (an hour-long segment at 4 kHz is ~170 MB)."""
+    with open(path, "rb") as f:
+        if f.seek(0, 2) <= start:
+            return []
+        with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+            view = memoryview(mapped)
+            problems: list[Problem] = []
+            try:
+                return [start + fr.offset
+                        for fr in scan_frames(view[start:], str(path), problems=problems)]
+            finally:
+                view.release()
+                for prob in problems:         # damage is never silent (a torn tail is
+                    if prob.kind != "truncated":  # what a power cut leaves: not news)
+                        log.warning("%s", replace(prob, offset=start + prob.offset))
+
+
+def _checked_offsets(path: str | Path) -> list[int]:
+    """Offsets of the valid frames of a segment, from the length fields where they can be
+    trusted, else from a forward scan (resynchronising).
+
+    A power cut leaves only a torn last frame, which the listing never includes. So a last
+    listed frame that fails its CRC is damage (a wrong length led the walk astray): the file
+    is scanned. A listing that stops on a length past the end of the file is either that torn
+    tail or a flipped bit in a length field: the bytes from there are scanned (a torn tail is
+    shorter than one frame, so this costs nothing after a power cut), and any valid frame
+    found there is damage's survivor, kept."""
+    listed = _listed_frames(path, MAX_FRAME_BYTES)
+    if listed is None:
+        return _scanned_offsets(path)
+    offsets, stop, size = listed
+    if offsets and read_frame_at(path, offsets[-1]) is None:
+        return _scanned_offsets(path)
+    if stop < size:
+        offsets += _scanned_offsets(path, stop)
     return offsets
 
 
@@ -540,12 +607,10 @@ def read_frame_at(path: str | Path, offset: int) -> dict[str, Any] | None:
 
 def records_backwards(path: str | Path) -> Iterator[dict[str, Any]]:
     """The valid records of one segment file, newest first, read from the end (frame offsets
-    from the length fields); a damaged file is read forwards once (resynchronising)."""
-    offsets = frame_offsets(path)
-    if offsets is None:
-        yield from reversed(list(RecordingReader(path)))
-        return
-    for off in reversed(offsets):
+    from the length fields, checked: :func:`_checked_offsets`); a damaged file is scanned
+    forwards once (resynchronising) for its frame offsets alone, so what is held is one
+    offset per frame and the records being looked at, never the file or all its records."""
+    for off in reversed(_checked_offsets(path)):
         hit = read_frame_at(path, off)
         if hit is not None:
             yield hit

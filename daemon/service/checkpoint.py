@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from avard.core.allan.feed import AllanFeed
-from avard.core.allan.replay import replay_after
+from avard.core.allan.replay import ReplayExtent, replay_after, replay_extent
 from avard.core.errors import AvardError, FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
@@ -150,6 +150,19 @@ def _first_index(data_dir: Path) -> int | None:
     return keyed[0][0].i0 if keyed and keyed[0][0].i0 != NO_INDEX else None
 
 
+def _announce_whole_replay(ext: ReplayExtent, rate_hz: float) -> None:
+    """The one restore whose length has no bound but the recording's: said before it starts,
+    so a journal that ends there (systemd's start timeout) explains itself."""
+    span = ext.end_index - ext.first_index
+    log.warning("the recording holds no usable checkpoint record: replaying all of it into "
+                "new accumulators before READY (%d segments, %.1f MB, sample indices %d to %d: "
+                "%d samples, %.0f s at %g Hz, gaps included). Start-up waits for it; if it "
+                "runs past TimeoutStartSec systemd stops the service: raise TimeoutStartSec "
+                "in a drop-in, or move old segments out of the data directory",
+                ext.segments, ext.bytes / 1e6, ext.first_index, ext.end_index, span,
+                span / rate_hz if rate_hz > 0 else float("nan"), rate_hz)
+
+
 def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
                          rate_hz: float, *,
                          fresh: Callable[[], Any] | None = None) -> Restored | None:
@@ -159,12 +172,14 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
 
     The checkpoint is the state file; when that is missing, damaged or does not say which
     samples it holds, the recording's newest usable ``checkpoint`` record (written every
-    ``checkpoint_interval_s``, so the replay after it stays short and start-up is not held
-    past TimeoutStartSec); when the recording has none, ``fresh()`` (new empty accumulators of
-    this configuration) fed the whole recording. Every such rebuild is logged at WARNING with what
-    was done. Then the invariant: the accumulators cannot hold more samples than the
-    recording has indices up to ``covered``; if they do, they are dropped (ERROR, and the
-    start event says so) rather than continued wrong."""
+    ``checkpoint_interval_s``: the replay reads from the segment holding it, at most one
+    ``segment_s`` of recording before it plus what was recorded after); when the recording has
+    none, ``fresh()`` (new empty accumulators of this configuration) fed the whole recording,
+    synchronously before READY, with no bound but the recording's length: announced at
+    WARNING with its extent before it starts (TimeoutStartSec can stop it). Every such
+    rebuild is logged at WARNING with what was done. Then the invariant: the accumulators
+    cannot hold more samples than the recording has indices up to ``covered``; if they do,
+    they are dropped (ERROR, and the start event says so) rather than continued wrong."""
     state = read_state(data_dir)
     ckpt, problem = state.record, state.problem
     source = STATE_FILE
@@ -206,6 +221,8 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
         return None
     allan = feed.sink
     base_n = int(allan.n_samples)
+    if after is None:
+        _announce_whole_replay(replay_extent(data_dir, None), rate_hz)
     try:
         replayed = replay_after(data_dir, feed, after)
     except (AvardError, ValueError) as exc:

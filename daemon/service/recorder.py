@@ -218,8 +218,10 @@ class Recorder:
             self._maybe_sync()
             return True
 
-    def flush(self) -> None:
-        """fsync now (before a checkpoint is trusted, and at stop)."""
+    def flush(self) -> bool:
+        """fsync now (before a checkpoint is trusted, and at stop). True when what was
+        written is on disk; False when the fsync failed or writing is paused (a checkpoint
+        record then must not be named in the state file)."""
         with self._lock:
             if self._f is not None and self._dirty:
                 try:
@@ -228,6 +230,7 @@ class Recorder:
                     self._failed(exc, "fsync")
                 self._dirty = False
                 self._last_sync = self.wall()
+            return not self.paused
 
     def reopen(self) -> None:
         """SIGHUP: close the current segment; the next record opens a new one."""

@@ -87,8 +87,9 @@ class RecorderStage(Stage):
                 written = self.rec.write(val)
                 if val["kind"] == "checkpoint":
                     self.check_checkpoint(val)
-                    if written:
-                        self.rec.flush()
+                    # the state file names this record as on disk: only once it is (a
+                    # failed fsync pauses the recorder and flush says so)
+                    if written and self.rec.flush():
                         self.checkpoint_written(val)
                 continue
             a, b = val

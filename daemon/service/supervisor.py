@@ -24,7 +24,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from avard.core.allan.feed import AllanFeed
@@ -251,6 +251,7 @@ class Service:
     def restore(self) -> None:
         """Restore the accumulators from the last checkpoint (with what was recorded after
         it replayed) and continue the sample index across the restart."""
+        covered = 0
         if self.config.allan.restore:
             got = restore_accumulators(self.data_dir, self.streaming_cls,
                                        list(self.allan.names), float(self.allan.rate_hz),
@@ -261,16 +262,21 @@ class Service:
                 self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
                 self.feed.run = self.run_id
                 self.feed.cover(got.covered)
+                covered = got.covered
                 self.feed.origin = got.origin
                 self.restored = got.info
         last = last_recorded(self.data_dir, self.odr)
         if last is not None:
             # the index continues from the recording; the gap is measured on CLOCK_MONOTONIC
             # within one boot, on CLOCK_REALTIME across boots (recorder.restart_gap)
-            self._restart_gap = restart_gap(last, boot_id=self.boot_id,
-                                            t_mono=self.clock.monotonic(),
-                                            t_real=self.real_now(), rate_hz=self.odr)
-            self.start_index = last.i_end + self._restart_gap.n
+            gap = restart_gap(last, boot_id=self.boot_id, t_mono=self.clock.monotonic(),
+                              t_real=self.real_now(), rate_hz=self.odr)
+            # Never below what the accumulators already hold (a lost tail and a gap the
+            # clocks cannot measure would reuse those indices): the gap then ends there.
+            if covered > last.i_end + gap.n:
+                gap = replace(gap, n=covered - last.i_end)
+            self._restart_gap = gap
+            self.start_index = last.i_end + gap.n
         # The accumulators account for every sample before this run's first (restored and
         # replayed, or deliberately not: a fresh start), so a checkpoint taken before this run
         # feeds anything still says exactly what they hold (#26 item 1).

@@ -163,3 +163,106 @@ def test_last_record_reads_from_the_end_and_survives_damage(tmp_path: Path) -> N
     seg.write_bytes(bytes(data))
     assert frame_offsets(seg) is None
     assert last_record(seg, "raw")["i0"] == 40                      # falls back to a full scan
+
+
+def _raw_segment(path: Path, k: int) -> list[int]:
+    """A segment of a header and ``k`` raw blocks of 10 samples; the blocks' byte offsets."""
+    recs = [_header()] + [frames.raw_record("r1", j, 10 * j, np.full((10, 3), j, np.int32),
+                                            0.0, 0.0) for j in range(k)]
+    _write_segment(path, recs)
+    return [f.offset for f in scan_frames(path.read_bytes())][1:]
+
+
+@pytest.mark.parametrize("bit", [10, 20])            # a length inside the file; one past EOF
+def test_one_flipped_length_bit_never_hides_the_records_after_it(
+        tmp_path: Path, bit: int, caplog: pytest.LogCaptureFixture) -> None:
+    """A flipped bit in a frame's length field is damage, not a torn tail: the records after
+    it are still read, from the end, and the last raw block is the true one."""
+    from avard.core.io.recording import last_record, records_backwards
+
+    seg = tmp_path / "s.avr"
+    offs = _raw_segment(seg, 40)
+    data = bytearray(seg.read_bytes())
+    n = int.from_bytes(data[offs[5]:offs[5] + 4], "little") ^ (1 << bit)
+    assert n < 1 << 24                                 # plausible (under MAX_FRAME_BYTES)
+    data[offs[5]:offs[5] + 4] = n.to_bytes(4, "little")
+    seg.write_bytes(bytes(data))
+    assert last_record(seg, "raw")["i0"] == 390
+    got = [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"]
+    assert got == [j for j in reversed(range(40)) if j != 5]
+    # and the damage is said, at its byte offset, as the forward reader says it
+    assert any(f"corrupt record at byte {offs[5]} " in r.getMessage() for r in caplog.records)
+
+
+def test_a_torn_tail_is_still_dropped_from_the_end(tmp_path: Path) -> None:
+    from avard.core.io.recording import last_record, records_backwards
+
+    seg = tmp_path / "s.avr"
+    _raw_segment(seg, 6)
+    whole = seg.read_bytes()
+    seg.write_bytes(whole + frame(frames.encode(frames.raw_record(
+        "r1", 6, 60, np.ones((10, 3), np.int32), 0.0, 0.0)))[:-9])
+    assert last_record(seg, "raw")["i0"] == 50
+    assert [r["seq"] for r in records_backwards(seg) if r["kind"] == "raw"] == [5, 4, 3, 2, 1, 0]
+
+
+def test_reading_a_damaged_segment_from_the_end_holds_no_copy_of_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A damaged segment is read forwards to find its frames, but neither its bytes nor its
+    decoded records are held: the last raw block costs a couple of decodes, and while the
+    caller looks at it the reader holds far less than the file's size (an hour at 4 kHz is
+    ~170 MB). The resync's own working memory is bounded by its window, not the file."""
+    import tracemalloc
+
+    from avard.core.io import recording
+
+    seg = tmp_path / "s.avr"
+    recs = [_header()] + [frames.raw_record("r1", j, 500 * j, np.full((500, 3), j, np.int32),
+                                            0.0, 0.0) for j in range(300)]
+    _write_segment(seg, recs)
+    data = bytearray(seg.read_bytes())
+    off = [f.offset for f in scan_frames(bytes(data))][3]
+    data[off:off + 4] = (1 << 30).to_bytes(4, "little")       # implausible: read forwards
+    seg.write_bytes(bytes(data))
+    decoded = 0
+    real = frames.decode
+
+    def counting(payload: bytes, **kw: object) -> dict:
+        nonlocal decoded
+        decoded += 1
+        return real(payload, **kw)
+
+    monkeypatch.setattr(frames, "decode", counting)
+    tracemalloc.start()
+    try:
+        newest = recording.records_backwards(seg)
+        last = next(r for r in newest if r["kind"] == "raw")
+        held = tracemalloc.get_traced_memory()[0]     # while the reader waits at its record
+    finally:
+        tracemalloc.stop()
+    assert last["i0"] == 500 * 299
+    assert decoded <= 2
+    assert held < len(data) // 8, (held, len(data))
+    assert [r["seq"] for r in newest][-1] == 0     # and it still goes on to the start
+
+
+def test_a_zero_filled_tail_is_read_from_the_end_not_by_scanning_the_file(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """ext4 can leave a block of zeros after a power cut. Eight zero bytes read as a frame of
+    length 0 (never a record): the listing ends there and only the zeros are scanned, not the
+    hour of recording before them."""
+    from avard.core.io import recording
+
+    seg = tmp_path / "s.avr"
+    _raw_segment(seg, 20)
+    seg.write_bytes(seg.read_bytes() + bytes(4096))
+    starts: list[int] = []
+    real = recording._scanned_offsets
+
+    def scanned(path: str | Path, start: int = 0) -> list[int]:
+        starts.append(start)
+        return real(path, start)
+
+    monkeypatch.setattr(recording, "_scanned_offsets", scanned)
+    assert recording.last_record(seg, "raw")["i0"] == 190
+    assert starts and min(starts) == seg.stat().st_size - 4096

@@ -38,8 +38,8 @@ class Written:
         self.records.append(rec)
         return True
 
-    def flush(self) -> None:
-        pass
+    def flush(self) -> bool:
+        return True
 
 
 def _header() -> RunHeader:

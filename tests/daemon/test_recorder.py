@@ -203,3 +203,68 @@ def test_a_permission_error_is_reported_as_what_it_is_not_as_a_full_disk(tmp_pat
     gaps = [r for r in RecordingReader(tmp_path) if r["kind"] == "gap"]
     assert [(g["reason"], g["i0"], g["n"]) for g in gaps] == [("write_error", 10, 10)]
     assert rec.status()["state"] == "writing"
+
+
+class FailingFsync(FileOps):
+    """Real files whose fsync fails with EIO (a dying SD card) while ``fail`` is set."""
+
+    def __init__(self) -> None:
+        self.fail = True
+
+    def fsync(self, f) -> None:  # type: ignore[no-untyped-def]
+        if self.fail:
+            raise OSError(errno.EIO, "Input/output error")
+        super().fsync(f)
+
+
+def test_flush_says_whether_the_data_is_on_disk(tmp_path: Path) -> None:
+    clock, wall = Clock(), Clock()
+    ops = FailingFsync()
+    rec = _make(tmp_path, clock, wall, ops, fsync_interval_s=3600.0)
+    assert rec.write(_raw(0))
+    assert rec.flush() is False                # EIO: paused with write_error, not on disk
+    assert rec.status()["state"] == "write_error"
+    assert rec.flush() is False                # and still not, though nothing is dirty now
+    rec.close()
+    ops.fail = False
+    rec2 = _make(tmp_path / "b", clock, wall, ops, fsync_interval_s=3600.0)
+    assert rec2.write(_raw(0))
+    assert rec2.flush() is True
+    rec2.close()
+
+
+def test_a_failed_fsync_never_writes_the_state_file(tmp_path: Path) -> None:
+    """The state file names a checkpoint record as on disk: written only when the fsync
+    before it succeeded (a state file ahead of the recording is a restore from samples the
+    recording does not hold)."""
+    import threading
+    from types import SimpleNamespace
+
+    from avard.daemon.service.header import RunHeader
+    from avard.daemon.service.recorder_stage import RecorderStage
+    from avard.daemon.service.ring import Ring
+
+    clock, wall = Clock(), Clock()
+    ops = FailingFsync()
+    rec = _make(tmp_path, clock, wall, ops, fsync_interval_s=3600.0)
+    ring = Ring(100)
+    consumer = ring.consumer("recorder")
+    stated: list[dict] = []
+    header = RunHeader(lambda: _header(), SimpleNamespace(odr_hz=125.0),  # type: ignore[arg-type]
+                       lambda: 0.0, lambda: 0, lambda: 0.0)
+    stage = RecorderStage(consumer, rec, run_id="run1", real_offset=0.0,
+                          rate_hz=lambda: 125.0, real_now=lambda: 1.7e9, header=header,
+                          checkpoint_written=stated.append, reopen=threading.Event(),
+                          block_samples=1000)
+    ring.push(np.ones((10, 3), np.int32), np.arange(10), np.arange(10) / 125.0)
+    ring.mark(frames.checkpoint_record("run1", 0, 10, 10, {}, 0.08, 1.7e9))
+    stage.handle(consumer.read())
+    assert stated == []
+    rec.close()
+    ops.fail = False
+    rec2 = _make(tmp_path / "b", clock, wall, ops, fsync_interval_s=3600.0)
+    stage.rec = rec2
+    ring.mark(frames.checkpoint_record("run1", 1, 10, 10, {}, 0.09, 1.7e9))
+    stage.handle(consumer.read())
+    assert [r["i_end"] for r in stated] == [10]
+    rec2.close()

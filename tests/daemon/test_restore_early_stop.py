@@ -150,14 +150,20 @@ def _strip_checkpoints(data: Path, run: str) -> None:
         seg.write_bytes(b"".join(frame_bytes(f.payload) for f in kept))
 
 
-def test_a_lost_state_file_and_no_checkpoint_record_rebuilds_from_the_whole_recording(
-        tmp_path, caplog):
+def _two_runs_without_checkpoints(tmp_path: Path) -> Path:
+    """Two runs whose checkpoint records are stripped and whose state file is gone."""
     data = tmp_path / "rec"
     _run(data, 6.0, 1)
     _run(data, 4.0, 2)
     for run in _runs(data):
         _strip_checkpoints(data, run)
     (data / STATE_FILE).unlink()
+    return data
+
+
+def test_a_lost_state_file_and_no_checkpoint_record_rebuilds_from_the_whole_recording(
+        tmp_path, caplog):
+    data = _two_runs_without_checkpoints(tmp_path)
     caplog.set_level("WARNING", logger="avard.daemon.service")
     svc = _run(data, 3.0, 3)
     assert svc.restored is not None and svc.restored["source"].startswith("the whole recording")
@@ -313,3 +319,64 @@ def test_a_checkpoint_left_by_the_old_early_stop_bug_is_not_trusted(tmp_path, ca
     svc = _run(data, 4.0, 2)
     assert svc.restored is not None and svc.restored["state_file"].startswith("unusable")
     _assert_accumulators_equal_the_recording(data)
+
+
+def test_a_lost_tail_and_an_unknown_restart_gap_never_reuse_indices_the_accumulators_hold(
+        tmp_path, caplog):
+    """The state file says the accumulators cover the second run, whose segment is gone (a
+    lost or damaged tail), and the wall clock is behind the recording (a Pi without RTC
+    after a power cut: restart gap "unknown", 0 samples). The third run must start where the
+    accumulators end, not where the recording does: the indices between are a recorded loss,
+    never fed twice."""
+    data = tmp_path / "rec"
+    _run(data, 9.0, 1)
+    second = _run(data, 9.0, 2)
+    covered = _state(data)["feed"]["covered"]
+    for seg in data.glob(f"{second.run_id}_*.avr"):
+        seg.unlink()
+    first_end = max(r["i0"] + r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    assert first_end < covered
+    caplog.set_level("ERROR", logger="avard.daemon.service")
+    svc = _service(data, 3)
+    svc.clock.step_realtime(-3600.0)
+    svc.run(5.0)
+    assert svc.start_index == covered
+    assert not [r for r in caplog.records if "invariant" in r.getMessage()]
+    recs = [r for r in RecordingReader(data) if r["run"] == svc.run_id]
+    (gap,) = [r for r in recs if r["kind"] == "gap" and r["reason"] == "restart"]
+    assert (gap["i0"], gap["n"], gap["clock"]) == (first_end, covered - first_end, "unknown")
+    assert not [r for r in recs if r["kind"] == "event" and r["name"] == "invariant_violated"]
+    alone = tmp_path / "third"                  # the third run's samples, taken once
+    alone.mkdir()
+    for seg in data.glob(f"{svc.run_id}_*.avr"):
+        (alone / seg.name).write_bytes(seg.read_bytes())
+    third = replay_allan(alone).snapshot().n_samples
+    assert int(_state(data)["state"]["n_samples"]) == int(second.allan.n_samples) + third
+
+
+def test_a_whole_recording_rebuild_is_announced_with_its_length_before_it_starts(
+        tmp_path, caplog, monkeypatch):
+    """Without a usable checkpoint record the restore replays the whole recording before
+    READY, which TimeoutStartSec bounds: a WARNING says so, with how much will be replayed,
+    before the replay starts (so a journal that ends there explains the timeout)."""
+    from avard.core.allan import replay
+
+    data = _two_runs_without_checkpoints(tmp_path)
+    recorded = sum(r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    first = min(r["i0"] for r in RecordingReader(data) if r["kind"] == "raw")
+    end = max(r["i0"] + r["n"] for r in RecordingReader(data) if r["kind"] == "raw")
+    size = sum(f.stat().st_size for f in data.glob("*.avr"))
+    said_before: list[str] = []
+    real = replay.replay_after
+
+    def replay_after(*a, **kw):  # type: ignore[no-untyped-def]
+        said_before.extend(r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+        return real(*a, **kw)
+
+    monkeypatch.setattr("avard.daemon.service.checkpoint.replay_after", replay_after)
+    caplog.set_level("WARNING", logger="avard.daemon.service")
+    _run(data, 2.0, 3)
+    (msg,) = [m for m in said_before if "TimeoutStartSec" in m]
+    assert f"indices {first} to {end}" in msg and f"{end - first} samples" in msg
+    assert f"{size / 1e6:.1f} MB" in msg and "2 segments" in msg
+    assert recorded <= end - first

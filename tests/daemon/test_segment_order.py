@@ -17,9 +17,11 @@ from avard.core.io.recording import (
     RecordingReader,
     load_recording,
     order_segments,
+    scan_frames,
     segment_files,
     segment_key,
 )
+from avard.core.io.recording import frame as frame_bytes
 from avard.daemon.service.recorder import Recorder, last_recorded
 
 RUN = "n00000007-20260101T000000Z-abcdef"
@@ -94,3 +96,53 @@ def test_a_segment_whose_header_is_damaged_is_placed_by_its_records(tmp_path):
     key = segment_key(names[1])
     assert key.header_seq == -1 and key.i0 == 1050                # from its raw block
     assert segment_files(tmp_path) == names
+
+
+def test_a_temperature_stamped_before_a_rotation_does_not_key_the_next_segment_early(tmp_path):
+    """The temperature thread stamps a ``temp`` (or ``event``) record with the ring's index
+    before ``ring.mark``; when the segment rotates between the previous raw flush and that
+    record, the new segment starts with a record naming an index the previous segment's
+    samples still cover. The segment's key is its first sample record (raw or gap), so the
+    restore's replay never starts one segment too late and skips samples."""
+    from avard.core.allan.feed import AllanFeed
+    from avard.core.allan.replay import replay_after
+    from avard.core.allan.streaming import StreamingAllan
+
+    def header(i0: int) -> dict:
+        return frames.header_record(RUN, rate_hz=RATE, t_mono=0.0, t_real=1.7e9, i0=i0,
+                                    scale_m_s2_per_count=3.9e-5)
+
+    def raw(i0: int) -> dict:
+        return frames.raw_record(RUN, 0, i0, np.ones((100, 3), np.int32), i0 / RATE,
+                                 1.7e9 + i0 / RATE, rate_hz=RATE)
+
+    a, b = tmp_path / f"{RUN}_000000_a.avr", tmp_path / f"{RUN}_000001_b.avr"
+    a.write_bytes(b"".join(frame_bytes(frames.encode(r))
+                           for r in [header(0), raw(0), raw(100)]))
+    early = frames.temp_record(RUN, 0, 150, ["chip"], [21.0], 150 / RATE, 1.7e9)
+    b.write_bytes(b"".join(frame_bytes(frames.encode(r))
+                           for r in [header(200), early, raw(200)]))
+    assert segment_key(b).i0 == 200
+    feed = AllanFeed(StreamingAllan(3, RATE), 3.9e-5, [])
+    assert replay_after(tmp_path, feed, 180) == 120            # [180, 300): none skipped
+
+
+def test_last_recorded_survives_a_flipped_bit_in_a_length_field(tmp_path):
+    """The reviewer's case end to end: a plausible length running past the end of the
+    newest segment made last_recorded return an old end (the next run then called recorded
+    samples lost and, with clock "unknown", reused their indices)."""
+    rec = Recorder(tmp_path, RUN, lambda: frames.header_record(
+        RUN, rate_hz=RATE, t_mono=0.0, t_real=1.7e9, i0=1050, scale_m_s2_per_count=3.9e-5))
+    for k in range(20):
+        rec.write(frames.raw_record(RUN, 0, 1050 + 50 * k, np.zeros((50, 3), np.int32),
+                                    k, 1.7e9 + k, rate_hz=RATE))
+    assert rec.path is not None
+    newest = rec.path
+    rec.close()
+    data = bytearray(newest.read_bytes())
+    offs = [f.offset for f in scan_frames(bytes(data))]
+    n = int.from_bytes(data[offs[4]:offs[4] + 4], "little") | (1 << 20)
+    data[offs[4]:offs[4] + 4] = n.to_bytes(4, "little")
+    newest.write_bytes(bytes(data))
+    last = last_recorded(tmp_path, RATE)
+    assert last is not None and last.i_end == 1050 + 50 * 20
