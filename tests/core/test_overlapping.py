@@ -127,7 +127,7 @@ def test_noise_identification_matches_stable32_on_phase_dat() -> None:
     (4–29 averages) at least 80 % do: Stable32 separates white from flicker PM there with
     R(n) = MVAR/AVAR, which avard takes as flicker PM, and B1 on 4–7 averages is fragile."""
     ms = np.array(sorted(STABLE32_PHASE_DAT_ALPHA))
-    res = oavar(nbs14_1000(), 1.0, ms)
+    res = oavar(nbs14_1000(), 1.0, ms, noise_id="powerlaw")
     ref = np.array([STABLE32_PHASE_DAT_ALPHA[int(m)] for m in ms])
     lag1 = 1000 // ms >= 30
     np.testing.assert_array_equal(res.alpha[lag1], ref[lag1])
@@ -145,7 +145,7 @@ def test_streaming_identifies_every_power_law() -> None:
         rng = np.random.default_rng(40 + alpha)
         for _ in range(10):
             y = power_law(alpha, n, rng)
-            res = _stream(y, 1.0, np.array([1, 4, n // 20]), 5000).result()
+            res = _stream(y, 1.0, np.array([1, 4, n // 20]), 5000).result(noise_id="powerlaw")
             assert list(res.alpha[:2]) == [alpha, alpha]
             # B1's classes are −2, −1, 0 and PM (split into 1 and 2 by R(n)): a miss is a
             # neighbouring class, so white PM may read as white FM (0), never as −1
@@ -287,13 +287,13 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
 
     monkeypatch.setattr(report, "_lazy_segments", spy)
     with caplog.at_level("INFO", logger="avard.core.analysis.engine"):
-        from_file = report.analyze(str(path), find_sinusoids=False)
+        from_file = report.analyze(str(path), find_sinusoids=False, noise_id="powerlaw")
     # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
     assert [r.getMessage().split(" read again")[0] for r in caplog.records] == ["channel pm"]
     meta = {"rate_hz": 10.0, "names": ["pm", "fm"], "n_samples": n}
     blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))  # the file's blocks
-    kept = report.analyze_stream(meta, blocks, find_sinusoids=False)
+    kept = report.analyze_stream(meta, blocks, find_sinusoids=False, noise_id="powerlaw")
     pm = from_file.channels["pm"].allan
     assert 2 in pm.alpha[n // pm.m < 30]  # R(n) told white PM in B1's range
     for name in ("pm", "fm"):
@@ -309,7 +309,8 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     p = tmp_path / "nbs14.csv"
     p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in nbs14_1000()))
     out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
-                          "--rate", "1", "--json"], capture_output=True, text=True, check=True)
+                          "--rate", "1", "--json", "--noise-id", "powerlaw"],
+                         capture_output=True, text=True, check=True)
     d = json.loads(out.stdout)
     assert d["estimator"] == "oadev"
     ch = d["channels"]["y"]
@@ -325,7 +326,7 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[128][1:],
                                rtol=6e-4)
     # the CLI's α, EDF and bounds are the Python API's at every τ (one α per τ and estimator)
-    api = oavar(nbs14_1000(), 1.0, tau)
+    api = oavar(nbs14_1000(), 1.0, tau, noise_id="powerlaw")
     assert ch["alpha"] == list(api.alpha)
     np.testing.assert_allclose(ch["edf"], api.edf, rtol=1e-12)
     np.testing.assert_allclose([ch["adev_lo"], ch["adev_hi"]], [api.dev_lo, api.dev_hi],
