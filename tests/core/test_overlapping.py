@@ -205,7 +205,8 @@ def test_the_record_length_hint_keeps_r_n_only_where_b1_decides_and_changes_noth
 def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
     """``defer_rn=True`` keeps no R(n) sums; where B1 then says PM, the channel fed again to an
     accumulator of those τ supplies them (``set_rn``) and every α, variance and bound is the
-    one of keeping them all along. On FM noise nothing is asked for."""
+    one of keeping them all along (the "powerlaw" rule; the default keeps no PM type on float
+    rate data and never asks). On FM noise nothing is asked for."""
     n = 1 << 14
     grid = np.array([1, 4, 64, n // 20, n // 8, n // 4])
     long_tau = [k for k, m in enumerate(grid) if n // m < 30]
@@ -218,7 +219,10 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
         for i in range(0, n, 3000):
             kept.update(y2[i:i + 3000])
             deferred.update(y2[i:i + 3000])
-        need = deferred.rn_needed()
+        # the default rule keeps no PM on float rate data, so it never asks
+        assert deferred.rn_needed() == {}
+        np.testing.assert_array_equal(kept.result().edf, deferred.result().edf)
+        need = deferred.rn_needed("powerlaw")
         if alpha == 0:
             assert need == {}
         else:
@@ -231,7 +235,7 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
             for i in range(0, n, 3000):
                 extra.update(y2[i:i + 3000, ch])
             deferred.set_rn(ch, dict(zip(ks, extra.rn_sums(), strict=True)))
-        a, b = kept.result(), deferred.result()
+        a, b = kept.result(noise_id="powerlaw"), deferred.result(noise_id="powerlaw")
         np.testing.assert_array_equal(a.alpha, b.alpha)
         np.testing.assert_array_equal(a.var, b.var)
         np.testing.assert_array_equal(a.lo, b.lo)
@@ -255,14 +259,14 @@ def test_deferred_r_n_is_not_asked_for_where_the_shorter_tau_s_alpha_is_kept() -
     for acc in (kept, deferred):
         for i in range(0, n, 3000):
             acc.update(y[i:i + 3000])
-    need = deferred.rn_needed()  # (which also pushes the averages still waiting)
+    need = deferred.rn_needed("powerlaw")  # (which also pushes the averages still waiting)
     assert deferred._ladders[4].needs_rn()[0]  # B1 says PM at 6 averages ...
     assert need == {3: [0]}  # ... but only the 20-average τ's R(n) is asked for
     extra = OverlappingAllan(1, 1.0, grid[[3]])
     for i in range(0, n, 3000):
         extra.update(y[i:i + 3000])
     deferred.set_rn(0, {3: extra.rn_sums()[0]})
-    a, b = kept.result(), deferred.result()
+    a, b = kept.result(noise_id="powerlaw"), deferred.result(noise_id="powerlaw")
     np.testing.assert_array_equal(a.alpha, b.alpha)
     np.testing.assert_array_equal(a.lo, b.lo)
 
@@ -290,6 +294,13 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
         from_file = report.analyze(str(path), find_sinusoids=False, noise_id="powerlaw")
     # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
+    # the default reads rate data: a float record keeps no PM type, so R(n), which only
+    # tells white from flicker PM, is never read and no channel is read twice
+    reads.clear()
+    default = report.analyze(str(path), find_sinusoids=False)
+    assert reads == [[0, 1]]
+    assert np.all(default.channels["pm"].allan.alpha <= 0)
+    reads.clear()
     assert [r.getMessage().split(" read again")[0] for r in caplog.records] == ["channel pm"]
     meta = {"rate_hz": 10.0, "names": ["pm", "fm"], "n_samples": n}
     blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))  # the file's blocks
@@ -301,6 +312,13 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
         np.testing.assert_array_equal(b.alpha, a.alpha)
         np.testing.assert_array_equal(b.var, a.var)
         np.testing.assert_array_equal(b.lo, a.lo)
+    # and the default without the second read is the one pass's, R(n) kept or not
+    blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))
+    one_pass = report.analyze_stream(meta, blocks, find_sinusoids=False)
+    for name in ("pm", "fm"):
+        a, b = one_pass.channels[name].allan, default.channels[name].allan
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_array_equal(b.edf, a.edf)
 
 
 def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
