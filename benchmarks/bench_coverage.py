@@ -64,6 +64,7 @@ class Coverage:
     tau: np.ndarray
     share: np.ndarray
     edf_mean: np.ndarray
+    signal: np.ndarray  # the noise-free signal's share of the true AVAR at each τ
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -90,12 +91,12 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
         if mix.sine_amplitude or mix.drift:
             clean_var.append(allan_variance(clean, rate, ms / rate, alpha=0).var)
     assert ms is not None
-    truth = noise_avar(mix, n, ms)
-    if clean_var:
-        truth = truth + np.mean(clean_var, axis=0)
+    noise = noise_avar(mix, n, ms)
+    signal = np.mean(clean_var, axis=0) if clean_var else np.zeros(len(ms))
+    truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),
-                    np.mean(edf, axis=0))
+                    np.mean(edf, axis=0), signal / truth)
 
 
 def main(argv: list[str]) -> int:
@@ -126,7 +127,8 @@ def main(argv: list[str]) -> int:
                   f"({len(c.tau)}) | {c.share.min():.1%} | {c.share.max():.1%} | "
                   f"{', '.join(f'{t:g}' for t in out) or 'none'} |", flush=True)
             if args.detail:
-                for t, s, e in zip(c.tau, c.share, c.edf_mean, strict=True):
-                    print(f"    τ {t:9.1f} s  coverage {s:6.1%}  mean EDF {e:10.1f}")
+                for t, s, e, g in zip(c.tau, c.share, c.edf_mean, c.signal, strict=True):
+                    print(f"    τ {t:9.1f} s  coverage {s:6.1%}  mean EDF {e:10.1f}  "
+                          f"signal {g:6.1%} of the AVAR")
     print(f"CPU {time.process_time() - cpu0:.0f} s (process time)")
     return 0 if bad == 0 else 1
