@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.engine import analyze
+from avard.core.analysis.formats import format_table
 from avard.core.model.fit import NOT_RESOLVED
 from avard.core.sim.presets import make_config
 from avard.core.sim.simulate import SensorSimulator
@@ -52,6 +53,8 @@ def test_a_ramp_seen_only_at_the_longest_tau_is_not_yet_resolved(tmp_path) -> No
     an = analyze(str(path), estimator="cascade", filter_corner_hz=rate / 4,
                  find_sinusoids=False, channels=["x"])
     off = an.channels["x"].fit.terms
+    table = format_table(an)  # analyze's table says it under the term's line
+    assert table.count(NOT_RESOLVED) == sum(e.note == NOT_RESOLVED for e in off.values()) >= 1
     for name, est in fits["x"].terms.items():
         assert (off[name].present, off[name].note) == (est.present, est.note), name
         if est.present:
