@@ -56,6 +56,9 @@ def format_table(an: Analysis) -> str:
         fit = ch.fit
         lines.append("")
         lines.append(f"channel {name}")
+        if fc and fit.filter_corner_hz is None:  # fit_noise found no such filter here
+            lines.append(f"  no low-pass at {fc:g} Hz in this channel's curve: fitted "
+                         "without the filter model")
         lines.append(f"  {'term':<24}{'value':>12}  {'68 % interval':<25}{'unit'}")
         for t in TERMS:
             e = fit.terms[t]

@@ -47,6 +47,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
+from avard.core.allan.chi2 import chi2_sf
 from avard.core.errors import FitError
 from avard.core.model import terms as mdl
 from avard.core.model.nnls import nnls
@@ -580,6 +581,55 @@ def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_
 
 
 def fit_noise(
+    result: Any,
+    *,
+    filter_corner_hz: float | None = None,
+    terms: Sequence[str] = TERMS,
+    extra: Sequence[Mapping] = (),
+    tau_range: tuple[float, float] | None = None,
+    ci: float = 0.683,
+    z_present: float = 2.33,
+    min_edf: float = 3.0,
+    min_averages: float = 8.0,
+    drop_z: float = 3.0,
+    max_drop: int = 8,
+    birge_scale: bool = True,
+    rounding_lsb: float | None = None,
+    filter_min_m: int = 2,
+    added_cov: ArrayLike | None = None,
+) -> NoiseFit:
+    """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance
+    (``_fit_noise_once``, whose docstring says how), checking the filter model against the
+    data: when ``filter_corner_hz`` is given but the curve shows no low-pass at all (fitted
+    without the filter model, no short τ is bent) while the filtered model misfits it (χ²
+    upper tail below 1e-3), the record has no such filter and the fit without it is returned
+    (its ``filter_corner_hz`` None). A white + random-walk record without a filter, read
+    as an ADXL355 record, otherwise gave χ²/dof 5–10, a false quantization term and "the
+    five-term model does not describe this curve" (issue 24)."""
+    kw: dict[str, Any] = dict(
+        terms=terms, extra=extra, tau_range=tau_range, ci=ci, z_present=z_present,
+        min_edf=min_edf, min_averages=min_averages, drop_z=drop_z, max_drop=max_drop,
+        birge_scale=birge_scale, rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
+        added_cov=added_cov)
+    fit = _fit_noise_once(result, filter_corner_hz=filter_corner_hz, **kw)
+    if filter_corner_hz is None or not (fit.dof > 0 and math.isfinite(fit.chi2_dof)):
+        return fit
+    if float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof)) >= FILTER_MISFIT_P:
+        return fit
+    plain = _fit_noise_once(result, filter_corner_hz=None, **kw)
+    first = _usable(result, min_edf, min_averages, tau_range)
+    unbent = len(first) > 0 and plain.tau_min_s <= float(np.asarray(result.tau)[first[0]])
+    better = plain.dof > 0 and (
+        float(chi2_sf(plain.chi2_dof * plain.dof, plain.dof)) >= FILTER_MISFIT_P
+        or plain.chi2_dof < 0.5 * fit.chi2_dof)
+    return plain if unbent and better else fit
+
+
+#: χ² upper-tail probability below which a filtered model is checked against the data.
+FILTER_MISFIT_P = 1e-3
+
+
+def _fit_noise_once(
     result: Any,
     *,
     filter_corner_hz: float | None = None,
