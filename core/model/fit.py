@@ -598,55 +598,6 @@ def fit_noise(
     filter_min_m: int = 2,
     added_cov: ArrayLike | None = None,
 ) -> NoiseFit:
-    """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance
-    (``_fit_noise_once``, whose docstring says how), checking the filter model against the
-    data: when ``filter_corner_hz`` is given but the curve shows no low-pass at all (fitted
-    without the filter model, no short τ is bent) while the filtered model misfits it (χ²
-    upper tail below 1e-3), the record has no such filter and the fit without it is returned
-    (its ``filter_corner_hz`` None). A white + random-walk record without a filter, read
-    as an ADXL355 record, otherwise gave χ²/dof 5–10, a false quantization term and "the
-    five-term model does not describe this curve" (issue 24)."""
-    kw: dict[str, Any] = dict(
-        terms=terms, extra=extra, tau_range=tau_range, ci=ci, z_present=z_present,
-        min_edf=min_edf, min_averages=min_averages, drop_z=drop_z, max_drop=max_drop,
-        birge_scale=birge_scale, rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
-        added_cov=added_cov)
-    fit = _fit_noise_once(result, filter_corner_hz=filter_corner_hz, **kw)
-    if filter_corner_hz is None or not (fit.dof > 0 and math.isfinite(fit.chi2_dof)):
-        return fit
-    if float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof)) >= FILTER_MISFIT_P:
-        return fit
-    plain = _fit_noise_once(result, filter_corner_hz=None, **kw)
-    first = _usable(result, min_edf, min_averages, tau_range)
-    unbent = len(first) > 0 and plain.tau_min_s <= float(np.asarray(result.tau)[first[0]])
-    better = plain.dof > 0 and (
-        float(chi2_sf(plain.chi2_dof * plain.dof, plain.dof)) >= FILTER_MISFIT_P
-        or plain.chi2_dof < 0.5 * fit.chi2_dof)
-    return plain if unbent and better else fit
-
-
-#: χ² upper-tail probability below which a filtered model is checked against the data.
-FILTER_MISFIT_P = 1e-3
-
-
-def _fit_noise_once(
-    result: Any,
-    *,
-    filter_corner_hz: float | None = None,
-    terms: Sequence[str] = TERMS,
-    extra: Sequence[Mapping] = (),
-    tau_range: tuple[float, float] | None = None,
-    ci: float = 0.683,
-    z_present: float = 2.33,
-    min_edf: float = 3.0,
-    min_averages: float = 8.0,
-    drop_z: float = 3.0,
-    max_drop: int = 8,
-    birge_scale: bool = True,
-    rounding_lsb: float | None = None,
-    filter_min_m: int = 2,
-    added_cov: ArrayLike | None = None,
-) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
     ``result``: a single-channel ``AllanResult`` (tau, m, stride, var, n, edf, rate_hz) of
@@ -666,6 +617,9 @@ def _fit_noise_once(
     presence test, the intervals): ``avard explain`` passes the uncertainty of a signal it
     removed before refitting (a temperature coupling, a warm-up), so that the extended fit's
     intervals carry it.
+    With ``filter_corner_hz``, the filter model is checked against the curve: when it
+    misfits (χ² upper tail < 1e-3) and the curve fitted without it shows no bent short τ,
+    the fit without it is returned (``filter_corner_hz`` None: the record has no such filter).
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -823,13 +777,39 @@ def _fit_noise_once(
     full_cov = np.zeros((len(comps), len(comps)))
     act = [fitted[j] for j in active]
     full_cov[np.ix_(act, act)] = cov
-    return NoiseFit(
+    fit = NoiseFit(
         terms=est, sinusoids=sinusoids, extra=extras,
         tau_min_s=float(t_k[idx[0]]), tau_max_s=float(t_k[idx[-1]]), chi2_dof=float(chi2_dof),
         rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
         log_det_cov=float(log_det) if sign > 0 else math.nan,
     )
+    if filter_corner_hz is None or not _misfit(fit):
+        return fit
+    # The filter model, checked against the curve: misfitting, while the curve fitted
+    # without it shows no bent short τ at all, means the record has no such filter (a white
+    # + random-walk record without one, read as an ADXL355 record, gave χ²/dof 5–10, a
+    # false quantization term and "the five-term model does not describe this curve";
+    # issue 24). The fit without it is then returned (its filter_corner_hz None).
+    plain = fit_noise(result, terms=terms, extra=extra, tau_range=tau_range, ci=ci,
+                      z_present=z_present, min_edf=min_edf, min_averages=min_averages,
+                      drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
+                      rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
+                      added_cov=added_cov)
+    unbent = plain.tau_min_s <= float(tau[keep[0]])
+    better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
+    return plain if unbent and better else fit
+
+
+#: χ² upper-tail probability below which a fit misfits its curve (and a filtered model is
+#: checked against the data).
+FILTER_MISFIT_P = 1e-3
+
+
+def _misfit(fit: NoiseFit) -> bool:
+    """Whether the fit's χ² is beyond its upper tail at ``FILTER_MISFIT_P``."""
+    return (fit.dof > 0 and math.isfinite(fit.chi2_dof)
+            and float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof)) < FILTER_MISFIT_P)
 
 
 @dataclass(frozen=True)
