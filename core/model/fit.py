@@ -597,6 +597,7 @@ def fit_noise(
     rounding_lsb: float | None = None,
     filter_min_m: int = 2,
     added_cov: ArrayLike | None = None,
+    check_filter: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -617,9 +618,10 @@ def fit_noise(
     presence test, the intervals): ``avard explain`` passes the uncertainty of a signal it
     removed before refitting (a temperature coupling, a warm-up), so that the extended fit's
     intervals carry it.
-    With ``filter_corner_hz``, the filter model is checked against the curve: when it
-    misfits (χ² upper tail < 1e-3) and the curve fitted without it shows no bent short τ,
-    the fit without it is returned (``filter_corner_hz`` None: the record has no such filter).
+    With ``filter_corner_hz`` (and ``check_filter``, False when a user named the corner),
+    the filter model is checked against the curve: when it misfits (χ² upper tail < 1e-3)
+    and the curve fitted without it shows no bent short τ, the fit without it is returned
+    (``filter_corner_hz`` None: the record has no such filter).
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -784,7 +786,7 @@ def fit_noise(
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
         log_det_cov=float(log_det) if sign > 0 else math.nan,
     )
-    if filter_corner_hz is None or not _misfit(fit):
+    if filter_corner_hz is None or not check_filter or not _misfit(fit):
         return fit
     # The filter model, checked against the curve: misfitting, while the curve fitted
     # without it shows no bent short τ at all, means the record has no such filter (a white
