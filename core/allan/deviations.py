@@ -43,6 +43,7 @@ from avard.core.allan.noise_id import (
     alpha_from_slope,
     check_noise_id,
     identify_alpha,
+    physical_alpha_edf,
 )
 from avard.core.allan.scratch import scratch
 from avard.core.blas import one_blas_thread
@@ -481,7 +482,7 @@ def allan_variance(
                 rk.gap()
     return finish_result(kind, rate_hz, ms, strides, sums, ladders, ci=ci, alpha=alpha,
                          one_d=one_d, names=names, rn=rn, quantiles=quantiles,
-                         noise_id=noise_id)
+                         noise_id=noise_id, lsb=1.0 if is_int else None)
 
 
 def rn_sums_for(kind: str, ms: NDArray[np.int64], segments: Sequence[int], c: int
@@ -512,6 +513,7 @@ def finish_result(
     rn: Sequence[RnSums | None] | None = None,
     quantiles: str = "exact",
     noise_id: str = "avard",
+    lsb: float | None = None,
 ) -> AllanResult:
     """Turn difference sums into an ``AllanResult`` (shared by batch and streaming).
 
@@ -544,7 +546,7 @@ def finish_result(
         if alpha is None else None
     return result_from_sums(kind, rate_hz, ms, strides, n, s2, n_phase=n_phase, ci=ci,
                             alpha=alpha, alpha_id=alpha_id, one_d=one_d, names=names,
-                            quantiles=quantiles, noise_id=noise_id)
+                            quantiles=quantiles, noise_id=noise_id, lsb=lsb)
 
 
 def _no_ladder(dmax: int) -> Lag1Ladder:
@@ -624,12 +626,17 @@ def result_from_sums(
     names: Sequence[str] | None = None,
     quantiles: str = "exact",
     noise_id: str = "avard",
+    lsb: float | None = None,
 ) -> AllanResult:
     """The ``AllanResult`` of difference sums: n (K,) differences, s2 (K, C, C) = Σ D Dᵀ.
 
     ``alpha``: integers given by the user (validated); else ``alpha_id``, the identified
     exponents (K, C), whose NaN (too few averages) are filled from the local slope of the
     variance curve. EDF by Greenhall–Riley for ``n_phase`` phase points (SP 1065 §5.3).
+    Under ``noise_id="avard"`` the identified α is constrained to what rate data can hold
+    and the EDF is the least over the α the identification cannot rule out
+    (``noise_id.physical_alpha_edf``; ``lsb``: the samples' rounding step in their unit, 1
+    for integer counts, None when unknown: then no PM type anywhere).
     """
     d = KINDS[kind]
     norm = NORM[d]
@@ -645,10 +652,16 @@ def result_from_sums(
         ident = np.full(var.shape, np.nan) if alpha_id is None else alpha_id
         alphas = _fill_alphas(np.asarray(ident, dtype=np.float64).reshape(var.shape), var, ms, d)
     edf = np.full_like(var, np.nan)
+    physical = alpha is None and check_noise_id(noise_id) == "avard"
     for k in range(k_count):
         if n[k] == 0:
             continue
         for ch in range(c):
+            if physical:  # what rate data can hold, and the least EDF it could have
+                alphas[k, ch], edf[k, ch] = physical_alpha_edf(
+                    int(alphas[k, ch]), float(var[k, ch]), d, int(ms[k]), int(strides[k]),
+                    int(n_phase[k]), (int(n_phase[k]) - 1) // int(ms[k]), lsb)
+                continue
             edf[k, ch] = edf_greenhall(int(alphas[k, ch]), d, int(ms[k]), int(strides[k]),
                                        int(n_phase[k]))
     lo, hi = chi2_interval(var, edf, ci, quantiles)

@@ -43,8 +43,12 @@ __all__ = [
     "alpha_from_rn",
     "alpha_from_slope",
     "b1_theory",
+    "fm_support_edf",
     "identify_alpha",
     "lag1_acf",
+    "physical_alpha_edf",
+    "plausible_alphas",
+    "pm_possible",
     "rn_flicker_pm",
     "row_products",
 ]
@@ -63,14 +67,19 @@ MIN_POINTS = 30
 # * with fewer averages than these, no identification: the α of the next shorter τ of the
 #   run is kept (non-overlapping estimators, overlapping ones).
 HOLD_BELOW_AVERAGES = {False: 10, True: 8}
-# B1's N for the overlapping estimators (stride < m), the one place where avard's rule and
-# Stable32's differ (docs/analysis.md, "Checked against Stable32"):
-# * "avard" (default): N = the count of averages the measured ratio comes from;
+# The rules of identification (``--noise-id``):
+# * "avard" (default): what an accelerometer's rate data can hold. "powerlaw"'s identification,
+#   with PM types only where the rounding to the LSB can produce them (``pm_possible``; FM
+#   elsewhere, so no EDF above what any FM type gives), and the EDF the least over the types
+#   the identification's own sampling spread cannot rule out (``physical_alpha_edf``);
+# * "powerlaw": every power-law type, Stable32's ladder with one change, B1's N for the
+#   overlapping estimators (stride < m) = the count of averages the measured ratio comes
+#   from (docs/analysis.md, "Checked against Stable32"); for clock (phase) data;
 # * "stable32": N = the estimator's count of overlapping differences, as Stable32 takes it,
 #   which reproduces its printed α (and so its bounds) at every row of its runs, and reads
 #   FM noise one type too white with 4–29 averages.
-# The non-overlapping estimators take N = their count of differences under both.
-NOISE_IDS = ("avard", "stable32")
+# The non-overlapping estimators take N = their count of differences under all three.
+NOISE_IDS = ("avard", "powerlaw", "stable32")
 
 
 def check_noise_id(noise_id: str) -> str:
@@ -939,3 +948,82 @@ class Lag1Ladder:
         self._few = (None if o["few"] is None
                      else np.asarray(o["few"], dtype=np.float64).reshape(c, -1))
         return self
+
+
+# ---------------------------------------------------------------------------------------------
+# The EDF an accelerometer's rate data support: avard's rule ("avard")
+
+
+def pm_possible(var: float, m: int, lsb: float | None) -> bool:
+    """Whether white or flicker PM (α = 2, 1) can be what rate data hold at averaging factor m.
+
+    Rate data (acceleration) hold PM-like noise only as the rounding to the LSB: the running
+    sum X of rounded samples carries an error bounded by ±lsb/2 per sample, so the second
+    difference D = X_{i+2m} − 2X_{i+m} + X_i of that error is at most 2·lsb and its AVAR
+    D²/(2m²) at most 2·lsb²/m². Where that bound is below half the measured AVAR, the
+    rounding cannot be the dominant noise and PM is not a type the data can hold. Without an
+    LSB (a float record whose rounding is unknown), never.
+    """
+    if lsb is None or not (math.isfinite(var) and var > 0):
+        return False
+    return 2.0 * lsb * lsb / (m * m) >= 0.5 * var
+
+
+def plausible_alphas(alpha: int, n_averages: int, d: int, pm: bool, overlapping: bool
+                     ) -> list[int]:
+    """The noise exponents rate data of this identification could hold at one τ.
+
+    ``alpha``: the identified exponent; ``n_averages``: the non-overlapping averages it came
+    from; ``pm``: ``pm_possible`` there. PM types outside the rounding region are read as
+    white FM (the most EDF any FM type gives). The identification's own sampling spread:
+
+    * below Stable32's hold threshold (10 averages, 8 for overlapping estimators;
+      ``HOLD_BELOW_AVERAGES``) nothing is identified: every FM type (and PM where possible);
+    * B1/R(n) (< ``MIN_POINTS`` averages): B1's ratio of n averages scatters by about
+      √(2/n) in log, more than half the step between neighbouring types' expectations, so
+      the neighbours on both sides count;
+    * lag-1 ACF: r1 of n averages has a standard error of about 1/√n, so α = −2δ − 2k
+      about 2/√n: below ``SPREAD_LAG1`` averages that reaches the next type's boundary from
+      the middle of a bin, and the neighbours count too.
+    """
+    lowest = 2 - 2 * d
+    top = 2 if pm else 0
+    a = int(min(max(alpha, lowest), top))
+    if n_averages < HOLD_BELOW_AVERAGES[overlapping]:
+        return list(range(lowest, top + 1))
+    if n_averages < SPREAD_LAG1:
+        return [b for b in (a - 1, a, a + 1) if lowest <= b <= top]
+    return [a]
+
+
+# Below this many averages the lag-1 ACF's spread (≈ 2/√n in α) reaches a neighbour type.
+SPREAD_LAG1 = 64
+
+
+def physical_alpha_edf(alpha: int, var: float, d: int, m: int, stride: int, n_phase: int,
+                       n_averages: int, lsb: float | None
+                       ) -> tuple[int, float]:
+    """(α, EDF) of one τ under avard's rule for rate data: α constrained to what the data
+    can hold (``pm_possible``), EDF the smallest over ``plausible_alphas``, so never above
+    ``fm_support_edf`` outside the rounding region."""
+    from avard.core.allan.edf import edf_greenhall  # edf imports nothing from here
+
+    pm = pm_possible(var, m, lsb)
+    lowest = 2 - 2 * d
+    a = int(min(max(alpha, lowest), 2 if pm else 0))
+    cands = plausible_alphas(a, n_averages, d, pm, stride < m)
+    edfs = [edf_greenhall(b, d, m, stride, n_phase) for b in cands]
+    finite = [e for e in edfs if math.isfinite(e)]
+    return a, min(finite) if finite else math.nan
+
+
+def fm_support_edf(d: int, m: int, stride: int, n_phase: int) -> float:
+    """The most EDF any FM type (α ≤ 0) gives this estimator at m over n_phase points: what a
+    record of rate data supports outside the rounding region. White FM for the overlapping
+    estimators; for the non-overlapping ones (stride m) the redder types give a little more
+    (their differences are less anti-correlated)."""
+    from avard.core.allan.edf import edf_greenhall
+
+    vals = [edf_greenhall(a, d, m, stride, n_phase) for a in range(2 - 2 * d, 1)]
+    finite = [v for v in vals if math.isfinite(v)]
+    return max(finite) if finite else math.nan

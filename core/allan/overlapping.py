@@ -52,6 +52,7 @@ from avard.core.allan.noise_id import (
     MIN_POINTS,
     Lag1Ladder,
     RnSums,
+    check_noise_id,
     row_products,
 )
 from avard.core.allan.scratch import mapped_zeros, scratch
@@ -465,6 +466,10 @@ class OverlappingAllan:
         identification says where). For a ``set_rn`` before ``result()``. Empty unless
         ``defer_rn``, and on records with no PM noise at the long τ."""
         self._flush_ladders()
+        if check_noise_id(noise_id) == "avard":
+            # rate data with no LSB given (``result`` passes none): PM is never kept, so
+            # which PM R(n) would name is never read; no channel is read again for it
+            return {}
         read = np.zeros((len(self.ms), self.n_channels), dtype=bool)
         alphas_from_ladders(self._ladders, 2, None, self.ms, self._n, np.ones_like(self.ms),
                             noise_id, rn_read=read)

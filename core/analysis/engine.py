@@ -366,7 +366,8 @@ def _analyze_passes(
             if corner is not None and lsb is not None:
                 kw["rounding_lsb"] = lsb
             try:
-                fit = fit_noise(allan, filter_corner_hz=corner, extra=extra, **kw)
+                fit = fit_noise(allan, filter_corner_hz=corner, extra=extra,
+                                check_filter=options.filter_corner_hz == "auto", **kw)
             except FitError as exc:
                 raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
             chan_psd = None

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.errors import FitError
+from avard.core.model.fit import RAMP_OR_WALK
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 
 if TYPE_CHECKING:
@@ -55,6 +56,9 @@ def format_table(an: Analysis) -> str:
         fit = ch.fit
         lines.append("")
         lines.append(f"channel {name}")
+        if fc and fit.filter_corner_hz is None:  # fit_noise found no such filter here
+            lines.append(f"  no low-pass at {fc:g} Hz in this channel's curve: fitted "
+                         "without the filter model")
         lines.append(f"  {'term':<24}{'value':>12}  {'68 % interval':<25}{'unit'}")
         for t in TERMS:
             e = fit.terms[t]
@@ -65,7 +69,8 @@ def format_table(an: Analysis) -> str:
             else:
                 ub = f"absent (< {_fmt(e.upper)} {UNITS[t]})" if e.upper else "absent"
                 lines.append(f"  {label:<24}{ub:>12}")
-            if e.note and t == "rate_random_walk":
+            # the ramp-or-walk note is on both K and R: said once, under K
+            if e.note and (e.note != RAMP_OR_WALK or t == "rate_random_walk"):
                 lines.append(f"    {e.note}")
         if ch.lines:
             s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"

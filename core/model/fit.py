@@ -47,6 +47,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
+from avard.core.allan.chi2 import chi2_sf
 from avard.core.errors import FitError
 from avard.core.model import terms as mdl
 from avard.core.model.nnls import nnls
@@ -186,6 +187,12 @@ _VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/
                "white": ("N", "m/s/sqrt(s)")}
 #: Note on K and R when the record cannot tell a rate ramp from a rate random walk.
 RAMP_OR_WALK = "ramp or random walk: this record cannot tell them apart; read as random walk"
+#: Note on a present K or R that only the longest τ of the fit shows (``_rests_on_longest``):
+#: the model keeps it, displays say "not yet resolved" instead of its interval.
+NOT_RESOLVED = ("not yet resolved: only the longest τ of the fit shows this term, which a slow "
+                "periodic signal mimics there as well; a longer record decides")
+#: The terms that rise with τ and so are decided at the long end of the curve.
+LONG_TAU_TERMS = ("rate_random_walk", "rate_ramp")
 #: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
 ROUNDING = "rounding"
 
@@ -511,6 +518,37 @@ def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
     return up
 
 
+def _rests_on_longest(p: _Problem, idx: NDArray, active: list[int], a: int, crit: float,
+                      ramp: int | None, walk: int | None) -> bool:
+    """Whether component ``a``'s presence hangs on the longest τ of the fit alone: with that
+    point left out its likelihood-ratio gain falls below the test's ``crit``.
+
+    A rate ramp (AVAR ∝ τ²) and a rate random walk (∝ τ) are read at the long end of the
+    curve, where the last point holds a handful of averages, and a slow periodic signal (a
+    30-minute air-conditioning cycle) rises as τ² below a quarter of its period: on 40 min of
+    such a record the fit read a ramp from its one last point, which the longer τ beyond
+    the fit (too few averages to fit) refuted (issue 24). As in ``_select_terms``, the test
+    uses one covariance for both models, that of the active model with the ramp read as a
+    random walk, so the ramp must beat what a random walk would do."""
+    sub = idx[:-1]
+    if len(sub) < len(active) + 2:
+        return True
+    cov_model = list(active)
+    if ramp is not None and walk is not None and ramp in cov_model:
+        cov_model = sorted({b for b in cov_model if b != ramp} | {walk})
+    _, _, C, _ = _fit_active(p, sub, cov_model)
+    T = _whitener(C)
+    y = p.y[sub]
+    _, with_a = _gls_nnls(p.X[np.ix_(sub, np.asarray(active, dtype=np.intp))], y, T)
+    rest = [b for b in active if b != a]
+    if rest:
+        _, without = _gls_nnls(p.X[np.ix_(sub, np.asarray(rest, dtype=np.intp))], y, T)
+    else:
+        r = T @ y
+        without = float(r @ r)
+    return without - with_a < crit
+
+
 def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
                    drop_z: float, max_drop: int) -> int:
     """Number of shortest τ to leave out because the sensor's low-pass bends them.
@@ -560,6 +598,7 @@ def fit_noise(
     rounding_lsb: float | None = None,
     filter_min_m: int = 2,
     added_cov: ArrayLike | None = None,
+    check_filter: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -580,6 +619,10 @@ def fit_noise(
     presence test, the intervals): ``avard explain`` passes the uncertainty of a signal it
     removed before refitting (a temperature coupling, a warm-up), so that the extended fit's
     intervals carry it.
+    With ``filter_corner_hz`` (and ``check_filter``, False when a user named the corner),
+    the filter model is checked against the curve: when it misfits (χ² upper tail < 1e-3)
+    and the curve fitted without it shows no bent short τ, the fit without it is returned
+    (``filter_corner_hz`` None: the record has no such filter).
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -647,6 +690,10 @@ def fit_noise(
     ramp = labels.index("rate_ramp") if "rate_ramp" in labels else None
     walk = labels.index("rate_random_walk") if "rate_random_walk" in labels else None
     active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk)
+    # kept in the model (the curve needs them), but flagged: a display says "not yet
+    # resolved" instead of an interval and a time to target
+    unresolved = [a for a in active if labels[a] in LONG_TAU_TERMS
+                  and _rests_on_longest(p, idx, active, a, z_present**2, ramp, walk)]
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
     else:
@@ -663,6 +710,21 @@ def fit_noise(
     birge = math.sqrt(chi2_dof) if math.isfinite(chi2_dof) and chi2_dof > 1 else 1.0
     if birge_scale:
         cov = cov * birge**2
+    # A deterministic term's interval is never narrower than its presence test's evidence:
+    # present at z = √Δχ² it is known to about θ/z. The model's own covariance can claim far
+    # less, since a ramp or a sinusoid adds no scatter of its own to the AVAR estimates: ±2 %
+    # on a ramp whose test gave z = 3.3 (issue 24). (The noise terms keep their sandwich
+    # intervals, whose coverage tests/core/test_fit_coverage.py measures.) Rows and columns
+    # scale together, so the correlations stay.
+    if active:
+        th_a = theta[active]
+        z_a = np.array([z_all[a] if np.isfinite(z_all[a]) and z_all[a] > 0
+                        and comps[fitted[a]].psd(rate) is None else np.inf for a in active])
+        se_now = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        floor = np.where(np.isfinite(z_a), th_a / z_a, 0.0)
+        grow = np.where((se_now > 0) & (floor > se_now), floor / np.maximum(se_now, 1e-300),
+                        1.0)
+        cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
@@ -689,6 +751,8 @@ def fit_noise(
             te = TermEstimate(val, lo, hi, comp.unit, True, float(z_all[j]))
             if ambiguous and j in (ramp, walk):
                 te.note = RAMP_OR_WALK
+            elif j in unresolved:
+                te.note = NOT_RESOLVED
         else:
             theta_all[a] = 0.0
             te = TermEstimate(None, None, None, comp.unit, False,
@@ -716,13 +780,39 @@ def fit_noise(
     full_cov = np.zeros((len(comps), len(comps)))
     act = [fitted[j] for j in active]
     full_cov[np.ix_(act, act)] = cov
-    return NoiseFit(
+    fit = NoiseFit(
         terms=est, sinusoids=sinusoids, extra=extras,
         tau_min_s=float(t_k[idx[0]]), tau_max_s=float(t_k[idx[-1]]), chi2_dof=float(chi2_dof),
         rate_hz=rate, filter_corner_hz=filter_corner_hz, n_points=len(idx), dof=dof, ci=ci,
         z_present=z_present, components=comps, theta=theta_all, theta_cov=full_cov,
         log_det_cov=float(log_det) if sign > 0 else math.nan,
     )
+    if filter_corner_hz is None or not check_filter or not _misfit(fit):
+        return fit
+    # The filter model, checked against the curve: misfitting, while the curve fitted
+    # without it shows no bent short τ at all, means the record has no such filter (a white
+    # + random-walk record without one, read as an ADXL355 record, gave χ²/dof 5–10, a
+    # false quantization term and "the five-term model does not describe this curve";
+    # issue 24). The fit without it is then returned (its filter_corner_hz None).
+    plain = fit_noise(result, terms=terms, extra=extra, tau_range=tau_range, ci=ci,
+                      z_present=z_present, min_edf=min_edf, min_averages=min_averages,
+                      drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
+                      rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
+                      added_cov=added_cov)
+    unbent = plain.tau_min_s <= float(tau[keep[0]])
+    better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
+    return plain if unbent and better else fit
+
+
+#: χ² upper-tail probability below which a fit misfits its curve (and a filtered model is
+#: checked against the data).
+FILTER_MISFIT_P = 1e-3
+
+
+def _misfit(fit: NoiseFit) -> bool:
+    """Whether the fit's χ² is beyond its upper tail at ``FILTER_MISFIT_P``."""
+    return (fit.dof > 0 and math.isfinite(fit.chi2_dof)
+            and float(chi2_sf(fit.chi2_dof * fit.dof, fit.dof)) < FILTER_MISFIT_P)
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ import math
 import sys
 from pathlib import Path
 
+from avard.core.allan.noise_id import NOISE_IDS
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
 from avard.core.analysis.statistics import statistics_csv, statistics_table
@@ -73,11 +74,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
                         help="chi-squared quantiles of the intervals: exact (default) or as "
                              "Stable32 computes them (reproduces its printed bounds)")
-    parser.add_argument("--noise-id", choices=("avard", "stable32"), default="avard",
+    parser.add_argument("--noise-id", choices=NOISE_IDS, default="avard",
                         help="noise identification behind each interval's EDF: avard "
-                             "(default) or Stable32's B1 rule for the overlapping ADEV with "
-                             "4-29 averages (reproduces its printed alpha; see "
-                             "docs/analysis.md)")
+                             "(default: the noise types acceleration data can hold, the "
+                             "least EDF the identification cannot rule out), powerlaw "
+                             "(every power-law type, for phase data) or stable32 (Stable32's "
+                             "exact rules, reproduces its printed alpha; see docs/analysis.md)")
     parser.add_argument("--temperature", metavar="CHANNEL",
                         help="temperature channel to compensate: fit its first-order lag and "
                              "coefficient (m/s²/K) per axis and add the temperature-"

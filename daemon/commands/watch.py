@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import FormatError, NetworkError
+from avard.core.model.fit import NOT_RESOLVED
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.net.subscriber import (
     Message,
@@ -357,6 +358,9 @@ class WatchView:
                     full.append(f"    {term:<22} not resolved{bound}")
                     continue
                 v, a, b = est["value"], est.get("lo"), est.get("hi")
+                if est.get("note") == NOT_RESOLVED:  # only the longest τ shows it
+                    full.append(f"    {term:<22} {v:.3e} {unit:<14} not yet resolved")
+                    continue
                 interval = (f"[{a:.3e}, {b:.3e}]" if a is not None and b is not None
                             else "[?]")
                 full.append(f"    {term:<22} {v:.3e} {interval} {unit:<14} "
@@ -380,6 +384,8 @@ class WatchView:
                 v, a, b = est.get("value"), est.get("lo"), est.get("hi")
                 if not est.get("present") or v is None:
                     cell = f"< {b:.2e}" if isinstance(b, int | float) else "absent"
+                elif est.get("note") == NOT_RESOLVED:
+                    cell = f"{v:.3e} not yet resolved"
                 else:
                     half = (f"±{_pct((b - a) / (2 * abs(v)) * 100)}%"
                             if a is not None and b is not None and v else "±?")

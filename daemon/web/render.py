@@ -21,6 +21,7 @@ from html import escape
 from typing import Any
 
 import numpy as np
+from avard.core.model.fit import NOT_RESOLVED
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 from avard.daemon.web.state import SILENT_S, RunState, Series, Snapshot
@@ -324,6 +325,9 @@ def _term_cell(est: Any, T: float, target: float) -> str:
         hi = est.hi
         bound = f" <small>(&lt; {_e(hi)} {unit})</small>" if isinstance(hi, float) else ""
         return f'<span class="absent">absent</span>{bound}'
+    if getattr(est, "note", None) == NOT_RESOLVED:  # only the longest τ shows it
+        return (f"{_e(est.value)} <small>{unit}</small>"
+                f'<br><small class="absent">not yet resolved</small>')
     more = time_to_target(est.value, est.lo, est.hi, T, target)
     return (f"{_e(est.value)} <small>[{_e(est.lo, 2)}, {_e(est.hi, 2)}] {unit}</small>"
             f"<br><small>{_when(more)}</small>")

@@ -96,7 +96,8 @@ def test_analyze_cli_with_stable32_quantiles_prints_stable32s_bounds(tmp_path) -
     p = tmp_path / "nbs14.csv"
     p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in nbs14_1000()))
     out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
-                          "--rate", "1", "--json", "--quantiles", "stable32"],
+                          "--rate", "1", "--json", "--quantiles", "stable32",
+                           "--noise-id", "powerlaw"],
                          capture_output=True, text=True, check=True)
     ch = json.loads(out.stdout)["channels"]["y"]
     assert ch["quantiles"] == "stable32"
@@ -198,8 +199,14 @@ def test_noise_identification_in_result() -> None:
     assert np.all(white.alpha == 0)
     rw = oavar(np.cumsum(rng.normal(size=100000)), 1.0, [1, 4, 16, 64])
     assert np.all(rw.alpha == -2)
-    wpm = oavar(np.diff(rng.normal(size=100001)), 1.0, [1, 4, 16, 64])
+    d = np.diff(rng.normal(size=100001))
+    wpm = oavar(d, 1.0, [1, 4, 16, 64], noise_id="powerlaw")
     assert np.all(wpm.alpha == 2)
+    # the default reads rate data: float samples with no known LSB hold no PM type, so the
+    # white-PM record is read as white FM, with white FM's EDF (the most any FM type gives)
+    rate = oavar(d, 1.0, [1, 4, 16, 64])
+    assert np.all(rate.alpha == 0)
+    np.testing.assert_allclose(rate.edf, oavar(d, 1.0, [1, 4, 16, 64], alpha=0).edf)
 
 
 def test_gaps_split_segments() -> None:

@@ -35,7 +35,7 @@ def test_identify_alpha_on_generated_noise(alpha: int) -> None:
     y = power_law(alpha, 2**15, rng)
     assert [identify_alpha(y, m) for m in (1, 4)] == [alpha, alpha]
     # the accumulators' own identification (same ACF ladder on their difference sums)
-    assert list(oavar(y, 1.0, [1, 4]).alpha) == [alpha, alpha]
+    assert list(oavar(y, 1.0, [1, 4], noise_id="powerlaw").alpha) == [alpha, alpha]
 
 
 def test_lag1_formulas() -> None:
@@ -223,7 +223,7 @@ def test_white_and_flicker_pm_told_apart_below_30_averages(alpha: int) -> None:
     pm_said, right_pm, exact = 0, 0, 0
     for _ in range(40):
         y = power_law(alpha, 16 * m, rng)
-        a = int(oavar(y, 1.0, [m]).alpha[0])
+        a = int(oavar(y, 1.0, [m], noise_id="powerlaw").alpha[0])
         if a in (1, 2):
             pm_said += 1
             right_pm += int(a == alpha)
@@ -252,9 +252,9 @@ def test_identify_alpha_is_the_estimators_ladder_and_matches_stable32() -> None:
     for alpha in (2, 1, 0, -1, -2):
         z = power_law(alpha, 1 << 13, rng) + 9.81  # an offset (an axis at 1 g) changes nothing
         for m in (1, 3, 16, 200):
-            assert identify_alpha(z, m) == int(oavar(z, 1.0, [m]).alpha[0])
+            assert identify_alpha(z, m) == int(oavar(z, 1.0, [m], noise_id="powerlaw").alpha[0])
             assert identify_alpha(z, m, dmax=3) == int(
-                allan_variance(z, 1.0, [m], kind="ohvar").alpha[0])
+                allan_variance(z, 1.0, [m], kind="ohvar", noise_id="powerlaw").alpha[0])
 
 
 def test_per_channel_ladder_fast_path_equals_the_general_sums() -> None:
@@ -303,8 +303,8 @@ def test_below_ten_averages_the_shorter_taus_alpha_is_kept() -> None:
         y = power_law(1, n, np.random.default_rng(300 + seed))
         for kind, m2, fewest in (("avar", n // 9, 10), ("oavar", n // 9, 8),
                                  ("oavar", n // 7, 8)):
-            alone = allan_variance(y, 1.0, [m2], kind=kind).alpha[0]
-            grid = allan_variance(y, 1.0, [n // 64, m2], kind=kind).alpha
+            alone = allan_variance(y, 1.0, [m2], kind=kind, noise_id="powerlaw").alpha[0]
+            grid = allan_variance(y, 1.0, [n // 64, m2], kind=kind, noise_id="powerlaw").alpha
             if n // m2 < fewest:  # kept from n // 64 (64 averages: the lag-1 ACF's α)
                 assert grid[1] == grid[0]
                 held_any |= bool(alone != grid[0])

@@ -129,7 +129,7 @@ def test_noise_identification_matches_stable32_on_phase_dat() -> None:
     (4–29 averages) at least 80 % do: Stable32 separates white from flicker PM there with
     R(n) = MVAR/AVAR, which avard takes as flicker PM, and B1 on 4–7 averages is fragile."""
     ms = np.array(sorted(STABLE32_PHASE_DAT_ALPHA))
-    res = oavar(nbs14_1000(), 1.0, ms)
+    res = oavar(nbs14_1000(), 1.0, ms, noise_id="powerlaw")
     ref = np.array([STABLE32_PHASE_DAT_ALPHA[int(m)] for m in ms])
     lag1 = 1000 // ms >= 30
     np.testing.assert_array_equal(res.alpha[lag1], ref[lag1])
@@ -147,7 +147,7 @@ def test_streaming_identifies_every_power_law() -> None:
         rng = np.random.default_rng(40 + alpha)
         for _ in range(10):
             y = power_law(alpha, n, rng)
-            res = _stream(y, 1.0, np.array([1, 4, n // 20]), 5000).result()
+            res = _stream(y, 1.0, np.array([1, 4, n // 20]), 5000).result(noise_id="powerlaw")
             assert list(res.alpha[:2]) == [alpha, alpha]
             # B1's classes are −2, −1, 0 and PM (split into 1 and 2 by R(n)): a miss is a
             # neighbouring class, so white PM may read as white FM (0), never as −1
@@ -207,7 +207,8 @@ def test_the_record_length_hint_keeps_r_n_only_where_b1_decides_and_changes_noth
 def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
     """``defer_rn=True`` keeps no R(n) sums; where B1 then says PM, the channel fed again to an
     accumulator of those τ supplies them (``set_rn``) and every α, variance and bound is the
-    one of keeping them all along. On FM noise nothing is asked for."""
+    one of keeping them all along (the "powerlaw" rule; the default keeps no PM type on float
+    rate data and never asks). On FM noise nothing is asked for."""
     n = 1 << 14
     grid = np.array([1, 4, 64, n // 20, n // 8, n // 4])
     long_tau = [k for k, m in enumerate(grid) if n // m < 30]
@@ -220,7 +221,10 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
         for i in range(0, n, 3000):
             kept.update(y2[i:i + 3000])
             deferred.update(y2[i:i + 3000])
-        need = deferred.rn_needed()
+        # the default rule keeps no PM on float rate data, so it never asks
+        assert deferred.rn_needed() == {}
+        np.testing.assert_array_equal(kept.result().edf, deferred.result().edf)
+        need = deferred.rn_needed("powerlaw")
         if alpha == 0:
             assert need == {}
         else:
@@ -233,7 +237,7 @@ def test_deferred_r_n_read_again_where_b1_says_pm_equals_keeping_it() -> None:
             for i in range(0, n, 3000):
                 extra.update(y2[i:i + 3000, ch])
             deferred.set_rn(ch, dict(zip(ks, extra.rn_sums(), strict=True)))
-        a, b = kept.result(), deferred.result()
+        a, b = kept.result(noise_id="powerlaw"), deferred.result(noise_id="powerlaw")
         np.testing.assert_array_equal(a.alpha, b.alpha)
         np.testing.assert_array_equal(a.var, b.var)
         np.testing.assert_array_equal(a.lo, b.lo)
@@ -257,14 +261,14 @@ def test_deferred_r_n_is_not_asked_for_where_the_shorter_tau_s_alpha_is_kept() -
     for acc in (kept, deferred):
         for i in range(0, n, 3000):
             acc.update(y[i:i + 3000])
-    need = deferred.rn_needed()  # (which also pushes the averages still waiting)
+    need = deferred.rn_needed("powerlaw")  # (which also pushes the averages still waiting)
     assert deferred._ladders[4].needs_rn()[0]  # B1 says PM at 6 averages ...
     assert need == {3: [0]}  # ... but only the 20-average τ's R(n) is asked for
     extra = OverlappingAllan(1, 1.0, grid[[3]])
     for i in range(0, n, 3000):
         extra.update(y[i:i + 3000])
     deferred.set_rn(0, {3: extra.rn_sums()[0]})
-    a, b = kept.result(), deferred.result()
+    a, b = kept.result(noise_id="powerlaw"), deferred.result(noise_id="powerlaw")
     np.testing.assert_array_equal(a.alpha, b.alpha)
     np.testing.assert_array_equal(a.lo, b.lo)
 
@@ -290,14 +294,23 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
 
     monkeypatch.setattr(report, "_accel", spy)
     with caplog.at_level("INFO", logger="avard.core.analysis.engine"):
-        from_file = report.analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
+        from_file = report.analyze(open_record(str(path)),
+                                   AnalyzeOptions(find_sinusoids=False, noise_id="powerlaw"))
     # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
+    # the default reads rate data: a float record keeps no PM type, so R(n), which only
+    # tells white from flicker PM, is never read and no channel is read twice
+    reads.clear()
+    default = report.analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
+    assert reads == [[0, 1]]
+    assert np.all(default.channels["pm"].allan.alpha <= 0)
+    reads.clear()
     assert [r.getMessage().split(" read again")[0] for r in caplog.records] == ["channel pm"]
     info = RecordInfo(source="stream", format=RecordFormat.STREAM, rate_hz=10.0,
                       names=("pm", "fm"), n_samples=n)
     blocks = ((y[i:i + (1 << 16)], None, False) for i in range(0, n, 1 << 16))  # the file's
-    kept = report.analyze(StreamSource(info, blocks), AnalyzeOptions(find_sinusoids=False))
+    kept = report.analyze(StreamSource(info, blocks),
+                          AnalyzeOptions(find_sinusoids=False, noise_id="powerlaw"))
     pm = from_file.channels["pm"].allan
     assert 2 in pm.alpha[n // pm.m < 30]  # R(n) told white PM in B1's range
     for name in ("pm", "fm"):
@@ -305,6 +318,13 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
         np.testing.assert_array_equal(b.alpha, a.alpha)
         np.testing.assert_array_equal(b.var, a.var)
         np.testing.assert_array_equal(b.lo, a.lo)
+    # and the default without the second read is the one pass's, R(n) kept or not
+    blocks = ((y[i:i + (1 << 16)], None, False) for i in range(0, n, 1 << 16))
+    one_pass = report.analyze(StreamSource(info, blocks), AnalyzeOptions(find_sinusoids=False))
+    for name in ("pm", "fm"):
+        a, b = one_pass.channels[name].allan, default.channels[name].allan
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_array_equal(b.edf, a.edf)
 
 
 def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
@@ -313,7 +333,8 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     p = tmp_path / "nbs14.csv"
     p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in nbs14_1000()))
     out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
-                          "--rate", "1", "--json"], capture_output=True, text=True, check=True)
+                          "--rate", "1", "--json", "--noise-id", "powerlaw"],
+                         capture_output=True, text=True, check=True)
     d = json.loads(out.stdout)
     assert d["estimator"] == "oadev"
     ch = d["channels"]["y"]
@@ -329,7 +350,7 @@ def test_nbs14_through_analyze_json_equals_stable32(tmp_path: Path) -> None:
     np.testing.assert_allclose([ch["adev_lo"][k], ch["adev_hi"][k]], STABLE32[128][1:],
                                rtol=6e-4)
     # the CLI's α, EDF and bounds are the Python API's at every τ (one α per τ and estimator)
-    api = oavar(nbs14_1000(), 1.0, tau)
+    api = oavar(nbs14_1000(), 1.0, tau, noise_id="powerlaw")
     assert ch["alpha"] == list(api.alpha)
     np.testing.assert_allclose(ch["edf"], api.edf, rtol=1e-12)
     np.testing.assert_allclose([ch["adev_lo"], ch["adev_hi"]], [api.dev_lo, api.dev_hi],

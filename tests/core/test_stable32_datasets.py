@@ -130,7 +130,10 @@ def run(y: NDArray[np.float64], kind: str, ms: list[int], alpha: list[int] | Non
         **kw) -> Columns:
     """avard's batch estimator for a Stable32 sigma type at the AFs ``ms`` (own α unless
     ``alpha`` gives one per AF). Stable32's HDEV is avard's "phvar" with stride m (a stride
-    longer than every m is clipped to m)."""
+    longer than every m is clipped to m). The identification is "powerlaw" unless ``kw``
+    names another: every power-law type, as the clocks behind these runs hold (the default
+    "avard" reads rate data, where PM types exist only as LSB rounding)."""
+    kw.setdefault("noise_id", "powerlaw")
     if kind == "hvar":
         kind, kw = "phvar", {**kw, "stride": max(ms)}
     return Columns.of([allan_variance(y, 1.0, ms, kind=kind, alpha=alpha, **kw)])
@@ -294,7 +297,7 @@ def test_the_analyze_stream_is_the_batch_oadev(tests_dir: Path, name: str) -> No
     acc = OverlappingAllan(1, 1.0, ms, n_total=y.size)
     for i in range(0, y.size, 65536):
         acc.update(y[i:i + 65536])
-    got = acc.result()
+    got = acc.result(noise_id="powerlaw")
     batch = run(y, "oavar", ms)
     np.testing.assert_array_equal(got.alpha, batch.alpha)
     np.testing.assert_allclose(got.edf, batch.edf, rtol=1e-12)
@@ -303,16 +306,17 @@ def test_the_analyze_stream_is_the_batch_oadev(tests_dir: Path, name: str) -> No
 
 
 def test_analyze_cli_on_pink_noise(tests_dir: Path, tmp_path: Path) -> None:
-    """`avard analyze pink.csv --rate 1 --json` on the pink FM record: its octave grid is
-    Stable32's (AF 1 to 2048), the OADEV to the printed digits, α Stable32's at every AF
-    (lag-1 ACF to 256, B1 at 512 and 1024, kept from 1024 at 2048 with 4 averages), the
-    bounds within 5e-4 at every AF, and α, EDF and bounds the Python API's."""
+    """`avard analyze pink.csv --rate 1 --json --noise-id powerlaw` on the pink FM record:
+    its octave grid is Stable32's (AF 1 to 2048), the OADEV to the printed digits, α
+    Stable32's at every AF (lag-1 ACF to 256, B1 at 512 and 1024, kept from 1024 at 2048
+    with 4 averages), the bounds within 5e-4 at every AF, and α, EDF and bounds the Python API's."""
     y = rates(tests_dir, "pink")
     rows = table(tests_dir, "pink", "oavar")
     p = tmp_path / "pink.csv"
     p.write_text("y\n" + "".join(f"{float(v)!r}\n" for v in y))
     out = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "analyze", str(p),
-                          "--rate", "1", "--json"], capture_output=True, text=True, check=True)
+                          "--rate", "1", "--json", "--noise-id", "powerlaw"],
+                         capture_output=True, text=True, check=True)
     ch = json.loads(out.stdout)["channels"]["y"]
     assert ch["estimator"] == "oadev"
     assert [int(t) for t in ch["tau_s"]] == [r.af for r in rows]
@@ -359,8 +363,8 @@ if __name__ == "__main__":
 def test_analyze_cli_noise_id_stable32(tests_dir: Path, tmp_path: Path) -> None:
     """`avard analyze ocxo.csv --rate 1 --json --noise-id stable32`: the JSON names the rule,
     and its α, EDF and bounds are the Python API's under it at every τ of analyze's grid;
-    the default run (no "noise_id" key, as for the default quantiles) takes at m = 2048 and
-    4096 (9 and 4 averages) the noise type one redder, as Stable32's ADEV run does
+    the "powerlaw" run takes at m = 2048 and 4096 (9 and 4 averages) the noise type one
+    redder, as Stable32's ADEV run does
     (test_stable32s_overlapping_alpha_is_b1_at_its_count_of_differences)."""
     y = rates(tests_dir, "ocxo")
     p = tmp_path / "ocxo.csv"
@@ -372,8 +376,9 @@ def test_analyze_cli_noise_id_stable32(tests_dir: Path, tmp_path: Path) -> None:
                              capture_output=True, text=True, check=True)
         return json.loads(out.stdout)["channels"]["y"]
 
-    theirs, ours = cli("--noise-id", "stable32"), cli()
-    assert theirs["noise_id"] == "stable32" and "noise_id" not in ours
+    theirs, ours = cli("--noise-id", "stable32"), cli("--noise-id", "powerlaw")
+    assert theirs["noise_id"] == "stable32" and ours["noise_id"] == "powerlaw"
+    assert "noise_id" not in cli()  # the default rule, as the default quantiles, unnamed
     tau = [int(t) for t in theirs["tau_s"]]
     api = allan_variance(y, 1.0, tau, kind="oavar", noise_id="stable32")
     assert theirs["alpha"] == [float(a) for a in api.alpha]
