@@ -34,6 +34,7 @@ from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_npe
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.readers import iter_blocks, load_record
+from avard.core.io.screen import screen_record
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
@@ -106,6 +107,17 @@ RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 def record_blocks(path: str, block: int, rate_hz: float | None, *,
                   columns: Sequence[int] | None = None, temperature: bool = True,
                   verify: bool = True) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
+    """:func:`_read_blocks` through the input screen (``core/io/screen.py``): outlying
+    acceleration rows cut out as gaps (judged on every axis, so each pass over a group of
+    ``columns`` cuts the same rows), bad temperature readings NaN; ``meta["screen"]`` is the
+    ``ScreenLog`` that fills as the blocks stream."""
+    meta, blocks = _read_blocks(path, block, rate_hz, temperature=temperature, verify=verify)
+    return meta, screen_record(meta, blocks, columns)
+
+
+def _read_blocks(path: str, block: int, rate_hz: float | None, *,
+                 columns: Sequence[int] | None = None, temperature: bool = True,
+                 verify: bool = True) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
     """Metadata and blocks of a record: the one segment iterator of ``avard analyze`` and
     ``avard explain``. Files are one segment, streamed; a recording of the service is loaded
     (``recording.load_recording``) and split where the service split its accumulators
@@ -220,7 +232,8 @@ def analyze(
     groups = oadev_pass_groups(sel, int(meta["n_samples"]))
     passes: list[_Pass]
     if meta.get("format") == "npz":
-        passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
+        passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True, meta),
+                   None)]
     else:
         passes = [(groups[0], segments, groups[0])]
     for g in groups[1:]:
@@ -233,10 +246,15 @@ def analyze(
 
 
 def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
-                   verify: bool) -> Iterator[tuple[NDArray[np.float64], bool]]:
+                   verify: bool, meta: dict[str, Any] | None = None
+                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
     """The record's blocks of ``columns`` only, opened when the pass starts (not before, so
-    one file handle is open at a time)."""
-    yield from _segments(path, block, rate_hz, columns, verify)[1]
+    one file handle is open at a time). ``meta``: the analysis's, which takes this pass's
+    input screen (every pass screens alike; the first one's is reported)."""
+    m, blocks = _segments(path, block, rate_hz, columns, verify)
+    if meta is not None:
+        meta["screen"] = m["screen"]
+    yield from blocks
 
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:

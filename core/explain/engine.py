@@ -65,6 +65,7 @@ from avard.core.explain.thermal_fit import (
     fit_thermal_axes,
     signal_avar_on,
 )
+from avard.core.io.screen import ScreenLog
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
 
@@ -122,13 +123,21 @@ class SlowView:
                                           np.nan))
             self._carry_t = t[nb * self.b:]
 
-    def finish(self) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-        """(axes (M, C), temperatures (M, k) with gaps interpolated, or None)."""
+    def finish(self, holes: Sequence[Sequence[tuple[float, float]]] = (),
+               rate_b: float = 1.0
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """(axes (M, C), temperatures (M, k) with gaps interpolated, or None). ``holes``: per
+        temperature channel, (start, end) s where the screen says the log tells nothing of the
+        temperature (a stuck run: its readings were read before the rule could know), made
+        gaps before the interpolation; ``rate_b`` blocks per second."""
         acc = np.concatenate(self._acc) if self._acc else np.zeros((0, self._carry_a.shape[1]))
         if not self.n_temps or not self._tmp:
             return acc, None
         tmp = np.concatenate(self._tmp)
         idx = np.arange(len(tmp))
+        for j, spans in enumerate(holes):
+            for t0, t1 in spans:
+                tmp[max(0, math.floor(t0 * rate_b)):math.ceil(t1 * rate_b) + 1, j] = np.nan
         for j in range(tmp.shape[1]):
             ok = np.isfinite(tmp[:, j])
             if np.count_nonzero(ok) < 2:
@@ -212,6 +221,8 @@ class Explanation:
     block_s: float = 0.0
     #: the held-out measure (None only when explain was asked not to make it)
     holdout: Holdout | None = None
+    #: what the input screen masked (core/io/screen.py), None for blocks that bypassed it
+    screen: ScreenLog | None = None
 
     @property
     def source(self) -> str:
@@ -228,6 +239,7 @@ class Explanation:
                 "n_samples": self.analysis.n_samples, "units": "SI",
                 "holdout_gain": None if ho is None else ho["holdout_gain"],
                 "holdout": ho,
+                "screened": None if self.screen is None else self.screen.to_dict(),
                 "channels": {k: v.to_dict() for k, v in self.channels.items()}}
 
 
@@ -368,8 +380,11 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         an = base
         for _ in tee():
             pass
-    y_slow, t_slow = slow.finish()
     rate_b = rate / b
+    screen: ScreenLog | None = meta.get("screen")
+    stuck = [[(x.start_s, x.end_s) for x in screen.stretches
+              if x.channel == nm and x.kind == "stuck"] for nm in tnames] if screen else []
+    y_slow, t_slow = slow.finish(stuck, rate_b)
     t_ok = [j for j in range(len(tnames))
             if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
             and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
@@ -394,13 +409,14 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         j = names.index(name)
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
-                                     th, an, meta, always_compensate=temperature is not None)
+                                     th, an, meta, always_compensate=temperature is not None,
+                                     holes=screen)
     if not heldout and holdout is None:
-        return Explanation(an, out, t_allan, b / rate)
+        return Explanation(an, out, t_allan, b / rate, screen=screen)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, holdout)
-    return Explanation(an, out, t_allan, b / rate, ho)
+    return Explanation(an, out, t_allan, b / rate, ho, screen=screen)
 
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
@@ -418,8 +434,11 @@ def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArra
         has_t = tnames and temp is not None and np.asarray(temp).size
         view.update(a, temp if has_t else None)
     y_h, t_h = view.finish()
+    # each side's τ in seconds of its own fitted rate (the rates agree by core.io.rates' rule,
+    # they are not equal)
     return holdout_file(out, y_slow, t_slow, y_h, t_h, tnames, names, rate_b,
-                        str(h_meta.get("source", "holdout")))
+                        str(h_meta.get("source", "holdout")),
+                        held_rate_b=float(h_meta["rate_hz"]) / b)
 
 
 def _noise_levels(fit: NoiseFit) -> dict[str, float]:
@@ -506,8 +525,8 @@ def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, r
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                      temps: NDArray | None, thermal: ThermalFit | None, an: Analysis,
-                     meta: dict[str, Any], always_compensate: bool = False
-                     ) -> ChannelExplanation:
+                     meta: dict[str, Any], always_compensate: bool = False,
+                     holes: ScreenLog | None = None) -> ChannelExplanation:
     allan = ch.allan
     tau = np.asarray(allan.tau, dtype=float)
     base = ch.fit
@@ -614,6 +633,16 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         else:
             comp_var, ext, current = None, base, allan
             added = None  # nothing removed any more: no uncertainty of it either
+    if holes is not None and thermal is not None and "temperature" in curves:
+        screened = [_not_in_hole(c, holes, thermal, len(y_slow) / rate_b) for c in trans]
+        changed = any(a.passed != b.passed for a, b in zip(trans, screened, strict=True))
+        trans = screened
+        if changed:
+            kept = [c for c in trans if c.passed]
+            for c in trans:
+                if not c.passed:
+                    curves.pop(c.cause, None)
+            comp_var, ext, current = extend(kept) if (curves or kept) else (None, base, allan)
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
@@ -638,6 +667,37 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                 "(report.find_lines); part of the base model"))
     return ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
                               thermal_only)
+
+
+#: Lags after a hole in the driving temperature log within which the lag filter still carries
+#: the interpolated stretch (e^(−3) ≈ 5 % of it).
+HOLE_SETTLE_LAGS = 3.0
+
+
+def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
+                 record_s: float) -> cz.Candidate:
+    """``c`` unless it is a passed transient inside a hole of the driving temperature log (a
+    masked reading, a dropout, a stuck run) or within ``HOLE_SETTLE_LAGS`` lags after it:
+    there the removed thermal signal is made of interpolated temperature, and what it leaves
+    in the axis is the hole, not a cause of the axis (a 25-minute dropout read as a bias step
+    of 4–5e-4 m/s²). Such a transient is not claimed, and says why."""
+    if not c.passed:
+        return c
+    lag = max(thermal.lag_s, 0.0)
+    if c.cause == "bias_step":
+        t_c = float(c.params.get("time_s", math.nan))
+        span = (t_c, t_c)
+    else:  # a warm-up acts over its first three time constants
+        span = (0.0, 3.0 * float(c.params.get("time_constant_s", 0.0)))
+    for h0, h1 in screen.holes(thermal.channel):
+        if h1 - h0 < 1.0:
+            continue  # a single masked reading: the interpolation across it is exact enough
+        if span[0] <= h1 + HOLE_SETTLE_LAGS * lag + 1.0 and span[1] >= h0 - 1.0:
+            return replace(c, passed=False, intervals={}, evidence=c.evidence + (
+                f"; not claimed: it falls in a hole of the temperature log {thermal.channel!r}"
+                f" ({h0:.6g}–{h1:.6g} s, or the {HOLE_SETTLE_LAGS:g} lags after it), where "
+                "the removed thermal signal is interpolated: a hole in a log is not a cause"))
+    return c
 
 
 def _s(v: float | None) -> str:

@@ -83,6 +83,8 @@ def summary(ex: Explanation) -> str:
     lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
              f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
              "intervals 68 %. Base model = avard analyze's fit."]
+    if ex.screen is not None:
+        lines += ex.screen.lines()
     lines += holdout_lines(ex)
     for name, ch in ex.channels.items():
         lines.append("")
@@ -221,6 +223,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
           "model's 68 % χ² interval with the estimator's EDF. The gain is the base fit's "
           "χ²/dof over the extended fit's (above 1: the found causes describe the data "
           "better).", ""]
+    if ex.screen is not None:
+        md += ["## Screened inputs", "", *[ln.strip() + "  " for ln in ex.screen.lines(50)],
+               ""]
     if ex.holdout is not None:
         from avard.core.explain.holdout import DEFINITION
 
