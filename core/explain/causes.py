@@ -84,12 +84,19 @@ class Finding:
     present_in_fit: bool = False
     scale: list[float | None] = field(default_factory=list)
     channel: str | None = None
+    #: the extended model misfits (``verdict``): the parameters are a rejected model's best
+    model_dependent: bool = False
+    #: the intervals withheld because held-out data reject the model (None: not withheld)
+    intervals_if_model_held: dict[str, list[float]] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"cause": self.cause, "claimed": self.claimed,
                              "params": self.params, "intervals": self.intervals,
                              "statistic": self.statistic, "threshold": self.threshold,
-                             "present_in_fit": self.present_in_fit, "evidence": self.evidence}
+                             "present_in_fit": self.present_in_fit, "evidence": self.evidence,
+                             "model_dependent": self.model_dependent}
+        if self.intervals_if_model_held is not None:
+            d["intervals_if_model_held"] = self.intervals_if_model_held
         if self.channel is not None:
             d["channel"] = self.channel
         return d

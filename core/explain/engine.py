@@ -65,6 +65,7 @@ from avard.core.explain.thermal_fit import (
     fit_thermal_axes,
     signal_avar_on,
 )
+from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenLog
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
@@ -166,12 +167,23 @@ class ChannelExplanation:
     contributions: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     #: AVAR with only the temperature part removed (the thermal fit's compensated curve)
     thermal_compensated_var: NDArray[np.float64] | None = None
+    #: the extended model's own misfit ranges (τ beyond 3 σ)
+    ext_misfit: list[dict[str, Any]] = field(default_factory=list)
+    #: whether the extended model describes the axis (``verdict.judge``), set by explain
+    verdict: Verdict | None = None
+    #: fitted τ where the compensation makes the ADEV worse beyond its interval (then the
+    #: compensated ADEV is not given)
+    compensation_worse_s: list[float] = field(default_factory=list)
 
     def compensation_dict(self) -> dict[str, Any] | None:
         """The temperature compensation (``avard analyze --temperature``): the thermal fit
         and the compensated ADEV at the channel's τ (m/s²), or None."""
         if self.thermal is None or self.thermal_compensated_var is None:
             return None
+        worse = self._worse(self.thermal_compensated_var)
+        if worse:
+            return {**self.thermal.to_dict(), "compensated_adev": None,
+                    "compensated_withheld": _withheld(worse), "units": {}}
         return {**self.thermal.to_dict(),
                 "compensated_adev": np.sqrt(self.thermal_compensated_var).tolist(),
                 "units": {"compensated_adev": "m/s^2"}}
@@ -196,13 +208,46 @@ class ChannelExplanation:
             "findings": [f.to_dict() for f in self.findings],
             "misfit": self.misfit,
             "gain": self.gain,
+            "verdict": None if self.verdict is None else self.verdict.to_dict(),
             "thermal": None if self.thermal is None else self.thermal.to_dict(),
             "compensated": None,
+            "compensated_withheld": None,
         }
         if self.compensated_var is not None:
-            out["compensated"] = {"tau_s": tau.tolist(),
-                                  "adev": np.sqrt(self.compensated_var).tolist()}
+            if self.compensation_worse_s:
+                out["compensated_withheld"] = _withheld(self.compensation_worse_s)
+            else:
+                out["compensated"] = {"tau_s": tau.tolist(),
+                                      "adev": np.sqrt(self.compensated_var).tolist()}
         return out
+
+    def _worse(self, comp_var: NDArray[np.float64]) -> list[float]:
+        a = self.base.allan
+        tau = np.asarray(a.tau, dtype=float)
+        return compensation_worse_at(tau, a.var, a.hi, comp_var, _used(self.base.fit, tau))
+
+    def judge(self, held: Any | None) -> None:
+        """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
+        ``holdout.ChannelHoldout`` or None); when it fails, the claimed causes' parameters
+        are model-dependent, and their intervals are withheld where held-out data reject."""
+        # a warm-up or a step predicts nothing in other data: no held-out test of them
+        usable = held is not None and held.folds and held.note is None
+        hx = (held.chi2_ext, held.n_points) if usable else (None, 0)
+        self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx)
+        if self.verdict.explained:
+            return
+        for f in self.findings:
+            if f.claimed and f.cause != "sinusoid":
+                f.model_dependent = True
+                if self.verdict.heldout_rejects and f.intervals:
+                    f.intervals_if_model_held, f.intervals = f.intervals, {}
+
+
+def _withheld(worse: list[float]) -> str:
+    return ("not given: the compensation makes the ADEV worse than uncompensated beyond its "
+            "68 % interval at τ " + ", ".join(f"{t:.3g}" for t in worse[:8])
+            + (" …" if len(worse) > 8 else "") + " s (it removes a signal the axis does not "
+            "carry there)")
 
 
 def _extra_dict(e: dict[str, Any]) -> dict[str, Any]:
@@ -412,10 +457,14 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
                                      th, an, meta, always_compensate=temperature is not None,
                                      holes=screen)
     if not heldout and holdout is None:
+        for ch_ex in out.values():
+            ch_ex.judge(None)
         return Explanation(an, out, t_allan, b / rate, screen=screen)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, holdout)
+    for name, ch_ex in out.items():
+        ch_ex.judge(ho.channels.get(name))
     return Explanation(an, out, t_allan, b / rate, ho, screen=screen)
 
 
@@ -465,7 +514,7 @@ def _thermal_signal(thermal: ThermalFit, temps: NDArray, y: NDArray, rate_b: flo
     part of the thermal model (fitted). When a warm-up still shows after that, it is a cause
     of its own: the start state is then not fitted, so the warm-up test sees the transient
     whole."""
-    if thermal.lag_s <= 0:
+    if thermal.lag_s == 0:
         return thermal.signal(temps), False
     with_start = thermal.signal(temps, y)
     if cz.detect_warmup(y - with_start, rate_b).passed:
@@ -489,7 +538,9 @@ def _signal_variations(thermal: ThermalFit | None, temps: NDArray | None, y: NDA
             if not (math.isfinite(se) and se > 0):
                 continue
             v = getattr(thermal, key)
-            sig = [replace(thermal, **{key: max(0.0, v + sgn * se)}).signal(
+            # either sign: a coefficient may be negative, a lag negative (the logged sensor
+            # lagging the die)
+            sig = [replace(thermal, **{key: v + sgn * se}).signal(
                 temps, y if with_start else None) - base for sgn in (1, -1)]
             out.append((sig[0], sig[1]))
     for c in cands:
@@ -611,7 +662,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         # a transient is claimed only at or above its floor (its stated minimum on this
         # noise, and what the logged temperature's resolution makes through the coupling:
         # ``causes.transient_floor``); one that stays is refitted without the dropped one
-        coef = thermal.coefficient if thermal is not None and thermal.passed else 0.0
+        coef = _rounding_gain(thermal) if thermal is not None and thermal.passed else 0.0
         floored = [cz.apply_floor(c, _noise_levels(ext), len(y_slow) / rate_b, coef)
                    for c in trans]
         if any(a.passed != b.passed for a, b in zip(trans, floored, strict=True)):
@@ -650,7 +701,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
                                    kw if added is None else {**kw, "added_cov": added})
     if gm.claimed and thermal is not None and thermal.passed:
-        floor = cz.gauss_markov_rounding_floor(thermal.coefficient)
+        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
         if gm.params.get("sigma", 0.0) < floor:
             gm = replace(gm, claimed=False, intervals={}, evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
@@ -665,8 +716,24 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                                    "amplitude": ln["amplitude"]}, {}, math.nan,
                                 math.nan, "line found by analyze's line finder "
                                 "(report.find_lines); part of the base model"))
-    return ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
-                              thermal_only)
+    out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
+                             thermal_only)
+    if ext is not base:
+        ext_var = np.asarray(current.var, dtype=float)
+        eu = _used(ext, tau)
+        out.ext_misfit = misfit_ranges(tau[eu], ext_var[eu], ext.model_avar(tau)[eu],
+                                       allan.edf[eu])
+    else:
+        out.ext_misfit = misfit
+    if comp_var is not None:
+        out.compensation_worse_s = out._worse(comp_var)
+    return out
+
+
+def _rounding_gain(thermal: ThermalFit) -> float:
+    """The coefficient through which the logged readings' rounding reaches the residual: ĉ,
+    doubled for a negative lag (the lead-lag's gain at high frequencies is 2)."""
+    return thermal.coefficient * (2.0 if thermal.lag_s < 0 else 1.0)
 
 
 #: Lags after a hole in the driving temperature log within which the lag filter still carries
@@ -683,7 +750,7 @@ def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
     of 4–5e-4 m/s²). Such a transient is not claimed, and says why."""
     if not c.passed:
         return c
-    lag = max(thermal.lag_s, 0.0)
+    lag = abs(thermal.lag_s)
     if c.cause == "bias_step":
         t_c = float(c.params.get("time_s", math.nan))
         span = (t_c, t_c)

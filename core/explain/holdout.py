@@ -278,8 +278,8 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
             d_fit += coef * (uf - uf.mean())
         uh = lag_filter(u_held[0], lag, held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
-        if held.first and lag > 0:
-            skip = math.ceil(HELD_SETTLE_LAGS * lag * held.rate(rate_b))
+        if held.first and lag != 0:
+            skip = math.ceil(HELD_SETTLE_LAGS * abs(lag) * held.rate(rate_b))
     if c.warmup and fit.first:
         if refit:
             _sse, T, size = cz.transient_fits(fit.y - d_fit, rate_b)["warmup"]

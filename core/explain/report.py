@@ -90,6 +90,8 @@ def summary(ex: Explanation) -> str:
         lines.append("")
         lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
                      f"{_chi(ch.extended)}; gain {ch.gain:.3g}")
+        if ch.verdict is not None:
+            lines.append(f"  {ch.verdict.line()}")
         if ch.misfit:
             for r in ch.misfit:
                 lines.append(f"  misfit {r['direction']} the base model at τ "
@@ -105,6 +107,10 @@ def summary(ex: Explanation) -> str:
                 f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"
                                   if k in f.intervals else "")
                 for k, v in f.params.items())
+            if f.model_dependent:
+                params += ("; model-dependent" if f.intervals_if_model_held is None else
+                           "; model-dependent, no interval: the held-out data reject the "
+                           "extended model")
             lines.append(f"  FOUND {f.cause}: {params} (SI units)")
             lines.append(f"        {f.evidence}")
         lines.append("  IEEE coefficients (base → extended, 68 % interval):")
@@ -148,7 +154,7 @@ def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
             me = me + v
         ax.plot(tau[ok], np.sqrt(me[ok]), "--", color="C3",
                 label="extended model (" + ", ".join(f.cause for f in ch.claimed) + ")")
-    if ch.compensated_var is not None:
+    if ch.compensated_var is not None and not ch.compensation_worse_s:
         ax.plot(tau[ok], np.sqrt(ch.compensated_var[ok]), "s:", ms=3, color="C2",
                 label="found signals removed (compensated ADEV)")
     for r in ch.misfit:
@@ -250,7 +256,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
         md += [f"## Channel {name}", "", f"![ADEV of {name}]({adev_png})", "",
                f"![misfit of {name}]({res_png})", "",
                f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
-               f"**{ch.gain:.3g}**.", "", "### Misfit of the base model", ""]
+               f"**{ch.gain:.3g}**.", "",
+               *([] if ch.verdict is None else [ch.verdict.line(), ""]),
+               "### Misfit of the base model", ""]
         if ch.misfit:
             md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]
             md += [f"| {r['tau_range_s'][0]:.3g} – {r['tau_range_s'][1]:.3g} | "

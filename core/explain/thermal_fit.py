@@ -71,9 +71,19 @@ _RHO = 0.5
 
 def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     """T seen through a first-order lag of time constant ``lag_s`` (s), starting in steady
-    state at T[0]; ``lag_s`` = 0 returns T."""
+    state at T[0]; ``lag_s`` = 0 returns T.
+
+    A negative ``lag_s`` is the logged sensor lagging the die: with a = |lag_s|, the lead-lag
+    (1 + 2as)/(1 + as) = 2 − 1/(1 + as), i.e. 2T − lag(T, a): at the slow frequencies where
+    the coupling acts it is T + a·dT/dt (the die a ahead of the log, continuous through 0
+    with the lag, T − a·dT/dt), and its gain at high frequencies stays 2 where the pure
+    inverse T + a·dT/dt would amplify the 0.0625 K rounding of the readings without bound
+    (which buried a true −90 s lag under its own noise: found at +12 s). It is the model of a
+    sensor lag 2a against a die lag a; other ratios differ from it at periods near a."""
     T = np.asarray(T, dtype=float)
-    if lag_s <= 0:
+    if lag_s < 0:
+        return np.asarray(2.0 * T - lag_filter(T, -lag_s, rate_hz), dtype=float)
+    if lag_s == 0:
         return T.copy()
     b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
     zi = sps.lfilter_zi(b, a) * T[0]
@@ -113,8 +123,18 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     return chat, math.sqrt(var), len(k)
 
 
-def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKKNIFE_GROUPS
-                     ) -> tuple[float, float]:
+def min_tau_for(lag_s: float) -> float:
+    """The shortest τ (s) the regression uses for a trial lag: twice the DS18B20's conversion
+    time, and for a negative lag twice |lag|, below which the lead-lag's high-frequency gain
+    makes the regressor mostly the readings' 0.0625 K rounding (an error in the variable that
+    pulls ĉ towards 0: 5 % low at −60 s)."""
+    base = 2 * DS18B20_CONVERSION_S
+    return max(base, 2.0 * -lag_s) if lag_s < 0 else base
+
+
+def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
+                     groups: int = JACKKNIFE_GROUPS,
+                     min_tau_s: float = 2 * DS18B20_CONVERSION_S) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
     error: the record in ``groups`` contiguous parts, each its own segment of the streaming
     accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
@@ -131,14 +151,14 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKK
     full = StreamingAllan.from_state(parts[0].state())
     for sa in parts[1:]:
         full.merge(sa)
-    c_all, _se, _n = tempco_from_cov(full.result())
+    c_all, _se, _n = tempco_from_cov(full.result(), min_tau_s)
     cs = []
     for g in range(groups):
         rest = [sa for h, sa in enumerate(parts) if h != g]
         acc = StreamingAllan.from_state(rest[0].state())
         for sa in rest[1:]:
             acc.merge(sa)
-        cs.append(tempco_from_cov(acc.result())[0])
+        cs.append(tempco_from_cov(acc.result(), min_tau_s)[0])
     c = np.asarray(cs)
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
@@ -217,10 +237,10 @@ class ThermalFit:
         a warm-up."""
         u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
         d = self.coefficient * (u - u.mean())
-        if y is None or self.lag_s <= 0:
+        if y is None or self.lag_s == 0:
             return d
         t = np.arange(len(u)) / self.rate_hz
-        e = np.exp(-t / self.lag_s)
+        e = np.exp(-t / abs(self.lag_s))
         a = np.column_stack([np.ones_like(t), t, e])
         coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
         return d + coef[2] * (e - e.mean())
@@ -228,8 +248,12 @@ class ThermalFit:
 
     def evidence(self) -> str:
         lo, hi = self.coef_interval
-        txt = (f"the axis follows temperature '{self.channel}' through a first-order lag of "
-               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}] with "
+        path = ("a first-order lag of" if self.lag_s >= 0 else
+                "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
+                " of")
+        txt = (f"the axis follows temperature '{self.channel}' through {path} "
+               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
+               f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
         if self.others:
@@ -256,10 +280,28 @@ class ThermalFit:
                 "threshold": self.threshold, "passed": self.passed, "others": self.others}
 
 
+#: The longest negative lag tried (s): a DS18B20 in its TO-92 package on a plate lags the die
+#: by its own thermal time constant, tens of seconds to a few minutes, never hours.
+NEG_LAG_MAX_S = 1800.0
+#: How much larger z² a channel whose best lag is at the end of the search (open) must reach
+#: to be preferred over one with an interior optimum (Δ(−2 ln L) = Δz²: 9 is 3 σ).
+OPEN_END_MARGIN = 9.0
+
+
 def _lag_grid(record_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """Lags tried: negative (the logged sensor lags the die) from −``NEG_LAG_MAX_S`` (at most
+    record/16), 0, and positive to record/4, log-spaced either side."""
     lo = max(4.0 / rate_hz, 4.0)
     hi = max(record_s / 4.0, 2 * lo)
-    return np.concatenate([[0.0], np.geomspace(lo, hi, 28)])
+    neg_hi = min(NEG_LAG_MAX_S, record_s / 16.0)
+    neg = -np.geomspace(neg_hi, lo, 12) if neg_hi > 2 * lo else np.zeros(0)
+    return np.concatenate([neg, [0.0], np.geomspace(lo, hi, 28)])
+
+
+def _between(a: float, b: float) -> float:
+    """The point between two neighbouring lags of the grid (geometric on one side of 0,
+    arithmetic across it)."""
+    return math.copysign(math.sqrt(a * b), a) if a * b > 0 else 0.5 * (a + b)
 
 
 class _Pair:
@@ -284,10 +326,10 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     three times the lagged swing) gave the coefficient and the lag at 0.75× the truth even
     without noise."""
     X = np.asarray(cols, dtype=float)
-    if lag_s <= 0:
+    if lag_s == 0:
         return X.copy()
     t = np.arange(len(X)) / rate_hz
-    v = np.exp(-t / lag_s)
+    v = np.exp(-t / abs(lag_s))  # a negative lag's lag(T, |lag|) starts the same way
     v = v - v.mean()
     vv = float(v @ v)
     if not vv > 0:
@@ -307,7 +349,7 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
         sa.update(without_start(np.column_stack([Y, u]), float(L), rate_hz))
         res = sa.result()
         for j in range(Y.shape[1]):
-            c, se, _n = tempco_from_cov(_Pair(res, j))
+            c, se, _n = tempco_from_cov(_Pair(res, j), min_tau_for(float(L)))
             z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
             out[j].append((float(L), c, se, z))
     return out
@@ -339,9 +381,11 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
         fine: set[float] = set()
         for sc in per_axis:
             i = int(np.argmax([s[3] for s in sc]))
-            if 0 < i < len(grid) - 1 and grid[i] > 0:
-                fine.update(np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1],
-                                         13).tolist())
+            if 0 < i < len(grid) - 1 and grid[i - 1] * grid[i + 1] > 0:
+                a, b = grid[i - 1], grid[i + 1]
+                fine.update((math.copysign(1.0, a) * np.geomspace(abs(a), abs(b), 13)).tolist())
+            elif 0 < i < len(grid) - 1:  # next to 0: linear across it
+                fine.update(np.linspace(grid[i - 1], grid[i + 1], 13).tolist())
         if fine:
             extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s)
             per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
@@ -354,15 +398,26 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
           best: dict[int, list[tuple[float, float, float, float]]]) -> ThermalFit:
     """The driving channel and lag of one axis from its scans, with the profile interval."""
     zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
-    jb = max(zmax, key=lambda j: zmax[j])
+
+    def at_end(sc: list[tuple[float, float, float, float]]) -> bool:
+        k = int(np.argmax([s[3] for s in sc]))
+        return k in (0, len(sc) - 1)
+
+    # a channel whose lag sits at the end of the search (open) is preferred over one with an
+    # interior optimum only when its z² is larger by OPEN_END_MARGIN
+    def rank(j: int) -> float:
+        return zmax[j] ** 2 - (OPEN_END_MARGIN if at_end(best[j]) else 0.0)
+
+    jb = max(zmax, key=rank)
     scan = best[jb]
     k = int(np.argmax([s[3] for s in scan]))
     L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
     res = allan2(yu[:, 0], yu[:, 1], rate_hz)
-    c, se_a, _n = tempco_from_cov(res)
-    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz)
+    c, se_a, _n = tempco_from_cov(res, min_tau_for(L))
+    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz,
+                                       min_tau_s=min_tau_for(L))
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
@@ -375,20 +430,16 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     lo_i, hi_i = min(inside), max(inside)
     lags = [s[0] for s in scan]
     pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
-    if pos_lo == 0:
-        lag_lo = lo_i
-    elif lags[pos_lo - 1] > 0:
-        lag_lo = math.sqrt(lags[pos_lo - 1] * lo_i)
-    else:
-        lag_lo = lo_i / 2
-    lag_hi = hi_i if pos_hi == len(lags) - 1 else math.sqrt(lags[pos_hi + 1] * max(hi_i, 1e-9))
+    lag_lo = lo_i if pos_lo == 0 else _between(lags[pos_lo - 1], lo_i)
+    lag_hi = hi_i if pos_hi == len(lags) - 1 else _between(lags[pos_hi + 1], hi_i)
     others = {}
     for j, sc in best.items():
         if j != jb:
             kk = int(np.argmax([s[3] for s in sc]))
             others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
-                      others, res, lag_open=pos_hi == len(lags) - 1)
+                      others, res, lag_open=pos_hi == len(lags) - 1 or (
+                          pos_lo == 0 and lags[0] < 0))
 
 
 def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,

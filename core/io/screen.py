@@ -8,15 +8,16 @@ here; a masked stretch is a *gap* to the estimators.
 **Acceleration** (all axes together: a shock or a corrupted frame is an event of the sensor,
 and one rule for every axis keeps the passes that read the axes in groups on the same samples).
 A sample is an outlier when, on some axis, it leaves the median of its 17 neighbours by more
-than ``SHOCK_Z`` times the block's robust sample scale (the median absolute first difference
-/ (0.6745·√2): the white part of the noise, which random walk and flicker do not touch at
-one sample); the 17-sample median follows a step or a slow drift, so only stretches of at most
-8 samples stand out (a step is never masked). Outliers within ``SHOCK_MARGIN`` samples of each
-other make one stretch, widened by that margin (the chip's filter spreads a shock), and the
-stretch is cut out: the block is split there and a segment ends before it, so no Allan
-difference and no spectrum segment straddles it. In the first second of a record it is a
-``startup_glitch``, later a ``shock``. At ``SHOCK_Z`` = 12 a Gaussian record of 10^10 samples
-has no false mask (P(|z| > 12) ≈ 4e-33 per sample).
+than ``SHOCK_Z`` times the block's robust scale of that kind of distance (the median absolute
+distance of a sample from its 17 neighbours' mean / 0.6745: the fast part of the noise, which
+random walk and flicker do not touch, and which a chip filter's correlated samples keep
+consistent with the test); the 17-sample median follows a step or a slow drift, so only
+stretches of at most 8 samples stand out (a step is never masked). Outliers within
+``SHOCK_MARGIN`` samples of each other make one stretch, widened by that margin (the chip's
+filter spreads a shock), and the stretch is cut out: the block is split there and a segment
+ends before it, so no Allan difference and no spectrum segment straddles it. In the first
+second of a record it is a ``startup_glitch``, later a ``shock``. At ``SHOCK_Z`` = 12 a
+Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample).
 
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
@@ -42,7 +43,6 @@ Masked temperature readings become NaN (the slow view then has no reading there)
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -166,27 +166,36 @@ def _running_median(a: NDArray[np.float64], idx: NDArray[np.intp], half: int
     return out
 
 
+def _local_residual(col: NDArray[np.float64], half: int) -> NDArray[np.float64]:
+    """col minus the mean of its 2·half + 1 neighbours (clipped at the ends), by cumulative
+    sums: the high-pass statistic whose robust spread scales the outlier test."""
+    n = len(col)
+    c = np.concatenate([[0.0], np.cumsum(col - col[0])])
+    i = np.arange(n)
+    lo, hi = np.maximum(0, i - half), np.minimum(n, i + half + 1)
+    return np.asarray(col - col[0] - (c[hi] - c[lo]) / (hi - lo), dtype=float)
+
+
 def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
-    with their margin. Cheap on clean data: the medians are taken only where a first
-    difference already stands out."""
+    with their margin. The scale is the robust spread of the sample's distance from its
+    neighbours' mean (the same statistic, so a chip filter's correlated samples, whose first
+    differences are small against their spread, are not taken for shocks); the median of the
+    neighbours is taken only where that distance already stands out."""
     n = len(a)
     bad = np.zeros(n, dtype=bool)
     if n < 2 * SHOCK_HALF + 2:
         return bad
     for j in range(a.shape[1]):
-        col = a[:, j]
-        d = np.abs(np.diff(col))
-        scale = float(np.median(d)) / (0.6745 * math.sqrt(2.0))
+        col = np.asarray(a[:, j], dtype=float)
+        r = _local_residual(col, SHOCK_HALF)
+        scale = float(np.median(np.abs(r))) / 0.6745
         if not scale > 0:
             continue
-        # a sample SHOCK_Z from its neighbours' median has a first difference of at least
-        # about that on one side (the neighbours themselves are near the median)
-        cand = np.flatnonzero(d > 0.5 * SHOCK_Z * scale)
+        # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
+        cand = np.flatnonzero(np.abs(r) > 0.5 * SHOCK_Z * scale)
         if not len(cand):
             continue
-        cand = np.unique(np.concatenate([cand, cand + 1]))
-        cand = cand[cand < n]
         med = _running_median(col, cand, SHOCK_HALF)
         out = cand[np.abs(col[cand] - med) > SHOCK_Z * scale]
         bad[out] = True

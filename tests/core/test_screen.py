@@ -123,3 +123,19 @@ def test_power_on_values_do_not_hide_a_coupling_and_a_dropout_is_no_step(tmp_pat
     assert ex.screen.counts() == {"power_on_85": 3, "dropout": 1}
     d = ex.to_dict()["screened"]
     assert {s["kind"] for s in d["stretches"]} == {"power_on_85", "dropout"}
+
+
+def test_a_chip_filters_correlated_samples_are_not_shocks():
+    """Heavily low-passed noise (AR(1), ρ = 0.95: first differences a third of the spread)
+    over 2e6 samples: nothing masked; a shock of 15 spreads still is."""
+    rng = np.random.default_rng(7)
+    n = 2_000_000
+    e = rng.standard_normal(n)
+    rho = 0.95
+    from itertools import accumulate
+
+    x = np.fromiter(accumulate(e, lambda s, v: rho * s + v), float, n)
+    a = np.column_stack([x, x[::-1], -x])
+    assert not screen_accel(a).any()
+    a[1_000_000, 0] += 15 * x.std()
+    assert set(np.flatnonzero(screen_accel(a))) == set(range(999_998, 1_000_003))
