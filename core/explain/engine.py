@@ -445,8 +445,12 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
     if t_slow is not None and t_ok and len(y_slow) >= MIN_SLOW_POINTS:
         if stage is not None:
             stage("fitting the thermal model")
+        # the screen's holes in each log: gaps of its regression, never the axis's response
+        holes = {i: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
+                     for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
+                 for i, j in enumerate(t_ok)} if screen is not None else None
         th_fits = list(fit_thermal_axes(y_slow[:, cols], t_slow[:, t_ok],
-                                        [tnames[k] for k in t_ok], rate_b))
+                                        [tnames[k] for k in t_ok], rate_b, holes))
     out: dict[str, ChannelExplanation] = {}
     for (name, ch), th in zip(an.channels.items(), th_fits, strict=True):
         if stage is not None:

@@ -91,10 +91,12 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     return np.asarray(out, dtype=float)
 
 
-def allan2(y: NDArray, u: NDArray, rate_hz: float) -> Any:
-    """Allan variances and covariance of (y, u) with the streaming estimator."""
+def allan2(y: NDArray, u: NDArray, rate_hz: float,
+           keep: NDArray[np.bool_] | None = None) -> Any:
+    """Allan variances and covariance of (y, u) with the streaming estimator (rows outside
+    ``keep`` left out as gaps)."""
     sa = StreamingAllan(2, rate_hz)
-    sa.update(np.column_stack([y, u]))
+    feed(sa, np.column_stack([y, u]), keep)
     return sa.result()
 
 
@@ -123,6 +125,40 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     return chat, math.sqrt(var), len(k)
 
 
+#: Lags after a hole in the temperature log that stay out of the regression (the lag filter
+#: still carries the interpolated stretch: e^(−3) ≈ 5 % of it).
+HOLE_SETTLE_LAGS = 3.0
+#: Holes: per temperature channel, (first, last) slow-view blocks the log says nothing about.
+Holes = dict[int, list[tuple[int, int]]]
+
+
+def hole_mask(n: int, holes: list[tuple[int, int]], lag_s: float, rate_hz: float
+              ) -> NDArray[np.bool_] | None:
+    """Blocks kept by the regression (None: all): each hole and ``HOLE_SETTLE_LAGS`` lags
+    after it are left out, so the interpolation across a hole is never taken for the axis's
+    response (a 25-minute dropout put the lag at +34…47 s against a true 0)."""
+    if not holes:
+        return None
+    keep = np.ones(n, dtype=bool)
+    settle = math.ceil(HOLE_SETTLE_LAGS * abs(lag_s) * rate_hz)
+    for a, b in holes:
+        keep[max(0, a):min(n, b + 1 + settle)] = False
+    return keep
+
+
+def feed(sa: StreamingAllan, X: NDArray, keep: NDArray[np.bool_] | None) -> None:
+    """``sa.update`` with the rows of ``X`` where ``keep`` is False left out as gaps (no Allan
+    difference spans them)."""
+    if keep is None:
+        sa.update(X)
+        return
+    m = np.concatenate([[False], keep, [False]]).astype(np.int8)
+    d = np.diff(m)
+    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        sa.update(X[a:b])
+        sa.gap()
+
+
 def min_tau_for(lag_s: float) -> float:
     """The shortest τ (s) the regression uses for a trial lag: twice the DS18B20's conversion
     time, and for a negative lag twice |lag|, below which the lead-lag's high-frequency gain
@@ -134,7 +170,8 @@ def min_tau_for(lag_s: float) -> float:
 
 def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
                      groups: int = JACKKNIFE_GROUPS,
-                     min_tau_s: float = 2 * DS18B20_CONVERSION_S) -> tuple[float, float]:
+                     min_tau_s: float = 2 * DS18B20_CONVERSION_S,
+                     keep: NDArray[np.bool_] | None = None) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
     error: the record in ``groups`` contiguous parts, each its own segment of the streaming
     accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
@@ -146,7 +183,7 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     parts = []
     for a, b in itertools.pairwise(edges):
         sa = StreamingAllan(2, rate_hz)
-        sa.update(np.column_stack([y[a:b], u[a:b]]))
+        feed(sa, np.column_stack([y[a:b], u[a:b]]), None if keep is None else keep[a:b])
         parts.append(sa)
     full = StreamingAllan.from_state(parts[0].state())
     for sa in parts[1:]:
@@ -338,15 +375,17 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
 
 
-def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
+def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
+          holes: list[tuple[int, int]] | None = None
           ) -> list[list[tuple[float, float, float, float]]]:
     """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
-    per lag serves all axes."""
+    per lag serves all axes; ``holes`` (blocks at this rate) and their settling left out."""
     out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
         sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        sa.update(without_start(np.column_stack([Y, u]), float(L), rate_hz))
+        feed(sa, without_start(np.column_stack([Y, u]), float(L), rate_hz),
+             hole_mask(len(Y), holes or [], float(L), rate_hz))
         res = sa.result()
         for j in range(Y.shape[1]):
             c, se, _n = tempco_from_cov(_Pair(res, j), min_tau_for(float(L)))
@@ -360,10 +399,13 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
     return fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps, names, rate_hz)[0]
 
 
-def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float
-                     ) -> list[ThermalFit]:
+def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+                     holes: Holes | None = None) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
-    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
+    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
+    channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
+    masked readings), left out of its regression with the lag's settling after them."""
+    holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
@@ -376,7 +418,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     grid = _lag_grid(record_s, rate_s)
     scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
     for j in range(temps.shape[1]):
-        per_axis = _scan(Ys, Ts[:, j], grid, rate_s)
+        hj = [(a // f, b // f) for a, b in holes.get(j, [])]
+        per_axis = _scan(Ys, Ts[:, j], grid, rate_s, hj)
         # refine between the neighbouring grid points of each axis's best lag
         fine: set[float] = set()
         for sc in per_axis:
@@ -387,15 +430,16 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             elif 0 < i < len(grid) - 1:  # next to 0: linear across it
                 fine.update(np.linspace(grid[i - 1], grid[i + 1], 13).tolist())
         if fine:
-            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s)
+            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj)
             per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
         scans[j] = [sorted(sc) for sc in per_axis]
-    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans})
+    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes)
             for a in range(Y.shape[1])]
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-          best: dict[int, list[tuple[float, float, float, float]]]) -> ThermalFit:
+          best: dict[int, list[tuple[float, float, float, float]]],
+          holes: Holes | None = None) -> ThermalFit:
     """The driving channel and lag of one axis from its scans, with the profile interval."""
     zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
 
@@ -414,10 +458,11 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
-    res = allan2(yu[:, 0], yu[:, 1], rate_hz)
+    keep = hole_mask(len(y), (holes or {}).get(jb, []), L, rate_hz)
+    res = allan2(yu[:, 0], yu[:, 1], rate_hz, keep)
     c, se_a, _n = tempco_from_cov(res, min_tau_for(L))
     _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz,
-                                       min_tau_s=min_tau_for(L))
+                                       min_tau_s=min_tau_for(L), keep=keep)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
