@@ -167,13 +167,15 @@ def _running_median(a: NDArray[np.float64], idx: NDArray[np.intp], half: int
 
 
 def _local_residual(col: NDArray[np.float64], half: int) -> NDArray[np.float64]:
-    """col minus the mean of its 2·half + 1 neighbours (clipped at the ends), by cumulative
-    sums: the high-pass statistic whose robust spread scales the outlier test."""
-    n = len(col)
-    c = np.concatenate([[0.0], np.cumsum(col - col[0])])
-    i = np.arange(n)
-    lo, hi = np.maximum(0, i - half), np.minimum(n, i + half + 1)
-    return np.asarray(col - col[0] - (c[hi] - c[lo]) / (hi - lo), dtype=float)
+    """col minus the mean of its 2·half + 1 neighbours (reflected at the ends, so a glitch in
+    the first samples still stands out), by one cumulative sum: the high-pass statistic whose
+    robust spread scales the outlier test."""
+    x = np.pad(col - col[0], half, mode="reflect")
+    c = np.empty(len(x) + 1)
+    c[0] = 0.0
+    np.cumsum(x, out=c[1:])
+    w = 2 * half + 1
+    return np.asarray(col - col[0] - (c[w:] - c[:-w]) / w, dtype=float)
 
 
 def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -189,7 +191,8 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
     for j in range(a.shape[1]):
         col = np.asarray(a[:, j], dtype=float)
         r = _local_residual(col, SHOCK_HALF)
-        scale = float(np.median(np.abs(r))) / 0.6745
+        # every 4th sample gives the median to a few % on a block (and a quarter the work)
+        scale = float(np.median(np.abs(r[::4]))) / 0.6745
         if not scale > 0:
             continue
         # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
