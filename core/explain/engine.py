@@ -59,6 +59,7 @@ from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import Holdout, check_compatible, holdout_file, holdout_split
 from avard.core.explain.thermal_fit import (
+    HOLE_SETTLE_LAGS,
     ThermalFit,
     allan2,
     compensated_avar,
@@ -740,11 +741,6 @@ def _rounding_gain(thermal: ThermalFit) -> float:
     bounded error: 1 for a lag, 3 for a negative lag's lead-lag 2δ − h_lag (a 2× factor, its
     high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records)."""
     return thermal.coefficient * (3.0 if thermal.lag_s < 0 else 1.0)
-
-
-#: Lags after a hole in the driving temperature log within which the lag filter still carries
-#: the interpolated stretch (e^(−3) ≈ 5 % of it).
-HOLE_SETTLE_LAGS = 3.0
 
 
 def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
