@@ -263,7 +263,15 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--skip-resources", action="store_true")
     ap.add_argument("--rows", help="comma-separated row names (prefixes) to run, e.g. "
                     "'temperature plate,gauss_markov'; default all")
+    ap.add_argument("--weekend", type=int, default=0, metavar="CASES",
+                    help="also the weekend classes of issue 23 (bench_explain_weekend), "
+                    "CASES records per row")
     args = ap.parse_args(argv)
+    if args.weekend:
+        from benchmarks.bench_explain_weekend import run
+
+        run(args.weekend, 23000, args.rows.split(",") if args.rows else None)
+        return 0
     if not args.skip_resources:
         with tempfile.TemporaryDirectory() as d:
             path = args.file

@@ -34,6 +34,7 @@ from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_nperseg
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
+from avard.core.io.screen import ScreenedSource
 from avard.core.io.source import RecordFormat, RecordInfo, RecordSource
 from numpy.typing import NDArray
 
@@ -132,6 +133,13 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     path the blocks took.
     """
     check_noise_id(options.noise_id)
+    if options.screen and not isinstance(source, ScreenedSource):
+        # the input screen (core/io/screen.py): glitches and shocks cut out as gaps, said in
+        # the results; explain screens once itself and hands analyze the screened blocks
+        screened = ScreenedSource(source)
+        an = analyze(screened, options, progress=progress)
+        an.meta["screen"] = screened.log
+        return an
     info = source.info
     sel = _select(list(info.names), options.channels)
     total = info.n_samples

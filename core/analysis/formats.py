@@ -40,6 +40,9 @@ def format_table(an: Analysis) -> str:
                      f"({cut['tau_full_s']:.4g} s): its history would need "
                      f"{cut['bytes_needed'] / 2**20:.0f} MiB, more than a quarter of the free "
                      "memory; --estimator cascade reaches N/4 in kilobytes")
+    screen = an.meta.get("screen")
+    if screen is not None:
+        lines += screen.lines()
     rec = an.recording_summary()
     if rec is not None:
         line = (f"recording: {rec['segments']} segment(s), split at each of its "

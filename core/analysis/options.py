@@ -27,6 +27,8 @@ class AnalyzeOptions:
     ``quantiles``, ``noise_id``: "stable32" reproduces Stable32's χ² quantiles and B1 rule.
     ``ci``: the confidence level of the fit's intervals (0.683: 68 %).
     ``block``: samples per block read (memory is a few blocks).
+    ``screen``: read the record through the input screen (``core/io/screen.py``: start-up
+    glitches and shocks cut out as gaps, bad temperature readings masked, all said).
     """
 
     channels: tuple[str, ...] | None = None
@@ -38,6 +40,7 @@ class AnalyzeOptions:
     noise_id: str = "avard"
     ci: float = 0.683
     block: int = BLOCK
+    screen: bool = True
 
 
 #: analyze's defaults (what `avard analyze FILE` does).

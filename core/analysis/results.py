@@ -82,6 +82,9 @@ class Analysis:
             d["recording"] = rec
         if "oadev_cut" in self.meta:
             d["oadev_cut"] = self.meta["oadev_cut"]
+        screen = self.meta.get("screen")
+        if screen is not None:
+            d["screened"] = screen.to_dict()
         return d
 
     def recording_summary(self) -> dict[str, Any] | None:

@@ -44,7 +44,7 @@ Streamed, in bounded memory:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -59,12 +59,15 @@ from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import Holdout, check_compatible, holdout_file, holdout_split
 from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
+    HOLE_SETTLE_LAGS,
     ThermalFit,
     allan2,
     compensated_avar,
     fit_thermal_axes,
     signal_avar_on,
 )
+from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
+from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
@@ -123,13 +126,21 @@ class SlowView:
                                           np.nan))
             self._carry_t = t[nb * self.b:]
 
-    def finish(self) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-        """(axes (M, C), temperatures (M, k) with gaps interpolated, or None)."""
+    def finish(self, holes: Sequence[Sequence[tuple[float, float]]] = (),
+               rate_b: float = 1.0
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """(axes (M, C), temperatures (M, k) with gaps interpolated, or None). ``holes``: per
+        temperature channel, (start, end) s where the screen says the log tells nothing of the
+        temperature (a stuck run: its readings were read before the rule could know), made
+        gaps before the interpolation; ``rate_b`` blocks per second."""
         acc = np.concatenate(self._acc) if self._acc else np.zeros((0, self._carry_a.shape[1]))
         if not self.n_temps or not self._tmp:
             return acc, None
         tmp = np.concatenate(self._tmp)
         idx = np.arange(len(tmp))
+        for j, spans in enumerate(holes):
+            for t0, t1 in spans:
+                tmp[max(0, math.floor(t0 * rate_b)):math.ceil(t1 * rate_b) + 1, j] = np.nan
         for j in range(tmp.shape[1]):
             ok = np.isfinite(tmp[:, j])
             if np.count_nonzero(ok) < 2:
@@ -158,12 +169,23 @@ class ChannelExplanation:
     contributions: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     #: AVAR with only the temperature part removed (the thermal fit's compensated curve)
     thermal_compensated_var: NDArray[np.float64] | None = None
+    #: the extended model's own misfit ranges (τ beyond 3 σ)
+    ext_misfit: list[dict[str, Any]] = field(default_factory=list)
+    #: whether the extended model describes the axis (``verdict.judge``), set by explain
+    verdict: Verdict | None = None
+    #: fitted τ where the compensation makes the ADEV worse beyond its interval (then the
+    #: compensated ADEV is not given)
+    compensation_worse_s: list[float] = field(default_factory=list)
 
     def compensation_dict(self) -> dict[str, Any] | None:
         """The temperature compensation (``avard analyze --temperature``): the thermal fit
         and the compensated ADEV at the channel's τ (m/s²), or None."""
         if self.thermal is None or self.thermal_compensated_var is None:
             return None
+        worse = self._worse(self.thermal_compensated_var)
+        if worse:
+            return {**self.thermal.to_dict(), "compensated_adev": None,
+                    "compensated_withheld": _withheld(worse), "units": {}}
         return {**self.thermal.to_dict(),
                 "compensated_adev": np.sqrt(self.thermal_compensated_var).tolist(),
                 "units": {"compensated_adev": "m/s^2"}}
@@ -188,13 +210,46 @@ class ChannelExplanation:
             "findings": [f.to_dict() for f in self.findings],
             "misfit": self.misfit,
             "gain": self.gain,
+            "verdict": None if self.verdict is None else self.verdict.to_dict(),
             "thermal": None if self.thermal is None else self.thermal.to_dict(),
             "compensated": None,
+            "compensated_withheld": None,
         }
         if self.compensated_var is not None:
-            out["compensated"] = {"tau_s": tau.tolist(),
-                                  "adev": np.sqrt(self.compensated_var).tolist()}
+            if self.compensation_worse_s:
+                out["compensated_withheld"] = _withheld(self.compensation_worse_s)
+            else:
+                out["compensated"] = {"tau_s": tau.tolist(),
+                                      "adev": np.sqrt(self.compensated_var).tolist()}
         return out
+
+    def _worse(self, comp_var: NDArray[np.float64]) -> list[float]:
+        a = self.base.allan
+        tau = np.asarray(a.tau, dtype=float)
+        return compensation_worse_at(tau, a.var, a.hi, comp_var, _used(self.base.fit, tau))
+
+    def judge(self, held: Any | None) -> None:
+        """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
+        ``holdout.ChannelHoldout`` or None); when it fails, the claimed causes' parameters
+        are model-dependent, and their intervals are withheld where held-out data reject."""
+        # a warm-up or a step predicts nothing in other data: no held-out test of them
+        usable = held is not None and held.folds and held.note is None
+        hx = (held.chi2_ext, held.n_points) if usable else (None, 0)
+        self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx)
+        if self.verdict.explained:
+            return
+        for f in self.findings:
+            if f.claimed and f.cause != "sinusoid":
+                f.model_dependent = True
+                if self.verdict.heldout_rejects and f.intervals:
+                    f.intervals_if_model_held, f.intervals = f.intervals, {}
+
+
+def _withheld(worse: list[float]) -> str:
+    return ("not given: the compensation makes the ADEV worse than uncompensated beyond its "
+            "68 % interval at τ " + ", ".join(f"{t:.3g}" for t in worse[:8])
+            + (" …" if len(worse) > 8 else "") + " s (it removes a signal the axis does not "
+            "carry there)")
 
 
 def _extra_dict(e: dict[str, Any]) -> dict[str, Any]:
@@ -213,6 +268,8 @@ class Explanation:
     block_s: float = 0.0
     #: the held-out measure (None only when explain was asked not to make it)
     holdout: Holdout | None = None
+    #: what the input screen masked (core/io/screen.py), None for blocks that bypassed it
+    screen: ScreenLog | None = None
 
     @property
     def source(self) -> str:
@@ -229,6 +286,7 @@ class Explanation:
                 "n_samples": self.analysis.n_samples, "units": "SI",
                 "holdout_gain": None if ho is None else ho["holdout_gain"],
                 "holdout": ho,
+                "screened": None if self.screen is None else self.screen.to_dict(),
                 "channels": {k: v.to_dict() for k, v in self.channels.items()}}
 
 
@@ -311,8 +369,10 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     (n, C) m/s², temperature (n, k) °C or None, segment end). ``holdout``: a second record of
     the same sensor. ``base``: analyze's result for these blocks when the caller has it
     (``explain_file``); the blocks then feed only the slow view."""
+    # one screen for the slow view and the analysis: analyze is handed the screened blocks
+    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
     meta = source.info.as_meta()
-    blocks = source.blocks(options.block)
+    blocks = screened.blocks(options.block)
     temperature, heldout = options.temperature, options.heldout
     held = None
     if holdout is not None:
@@ -338,13 +398,18 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
 
     if base is None:
         an = analyze(StreamSource(source.info, ((a, None, end) for a, end in tee())),
-                     options, progress=progress)
+                     replace(options, screen=False), progress=progress)
     else:
         an = base
         for _ in tee():
             pass
-    y_slow, t_slow = slow.finish()
     rate_b = rate / b
+    screen: ScreenLog | None = screened.log
+    if base is None:
+        an.meta["screen"] = screen
+    stuck = [[(x.start_s, x.end_s) for x in screen.stretches
+              if x.channel == nm and x.kind == "stuck"] for nm in tnames] if screen else []
+    y_slow, t_slow = slow.finish(stuck, rate_b)
     t_ok = [j for j in range(len(tnames))
             if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
             and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
@@ -360,8 +425,12 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     if t_slow is not None and t_ok and len(y_slow) >= MIN_SLOW_POINTS:
         if stage is not None:
             stage("fitting the thermal model")
+        # the screen's holes in each log: gaps of its regression, never the axis's response
+        holes = {i: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
+                     for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
+                 for i, j in enumerate(t_ok)} if screen is not None else None
         th_fits = list(fit_thermal_axes(y_slow[:, cols], t_slow[:, t_ok],
-                                        [tnames[k] for k in t_ok], rate_b))
+                                        [tnames[k] for k in t_ok], rate_b, holes))
     out: dict[str, ChannelExplanation] = {}
     for (name, ch), th in zip(an.channels.items(), th_fits, strict=True):
         if stage is not None:
@@ -369,13 +438,18 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         j = names.index(name)
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
-                                     th, an, meta, always_compensate=temperature is not None)
+                                     th, an, meta, always_compensate=temperature is not None,
+                                     holes=screen)
     if not heldout and held is None:
-        return Explanation(an, out, t_allan, b / rate)
+        for ch_ex in out.values():
+            ch_ex.judge(None)
+        return Explanation(an, out, t_allan, b / rate, screen=screen)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held)
-    return Explanation(an, out, t_allan, b / rate, ho)
+    for name, ch_ex in out.items():
+        ch_ex.judge(ho.channels.get(name))
+    return Explanation(an, out, t_allan, b / rate, ho, screen=screen)
 
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
@@ -393,8 +467,11 @@ def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArra
         has_t = tnames and temp is not None and np.asarray(temp).size
         view.update(a, temp if has_t else None)
     y_h, t_h = view.finish()
+    # each side's τ in seconds of its own fitted rate (the rates agree by core.io.rates' rule,
+    # they are not equal)
     return holdout_file(out, y_slow, t_slow, y_h, t_h, tnames, names, rate_b,
-                        str(h_meta.get("source", "holdout")))
+                        str(h_meta.get("source", "holdout")),
+                        held_rate_b=float(h_meta["rate_hz"]) / b)
 
 
 def _noise_levels(fit: NoiseFit) -> dict[str, float]:
@@ -421,7 +498,7 @@ def _thermal_signal(thermal: ThermalFit, temps: NDArray, y: NDArray, rate_b: flo
     part of the thermal model (fitted). When a warm-up still shows after that, it is a cause
     of its own: the start state is then not fitted, so the warm-up test sees the transient
     whole."""
-    if thermal.lag_s <= 0:
+    if thermal.lag_s == 0:
         return thermal.signal(temps), False
     with_start = thermal.signal(temps, y)
     if cz.detect_warmup(y - with_start, rate_b).passed:
@@ -445,7 +522,9 @@ def _signal_variations(thermal: ThermalFit | None, temps: NDArray | None, y: NDA
             if not (math.isfinite(se) and se > 0):
                 continue
             v = getattr(thermal, key)
-            sig = [replace(thermal, **{key: max(0.0, v + sgn * se)}).signal(
+            # either sign: a coefficient may be negative, a lag negative (the logged sensor
+            # lagging the die)
+            sig = [replace(thermal, **{key: v + sgn * se}).signal(
                 temps, y if with_start else None) - base for sgn in (1, -1)]
             out.append((sig[0], sig[1]))
     for c in cands:
@@ -481,8 +560,8 @@ def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, r
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                      temps: NDArray | None, thermal: ThermalFit | None, an: Analysis,
-                     meta: dict[str, Any], always_compensate: bool = False
-                     ) -> ChannelExplanation:
+                     meta: dict[str, Any], always_compensate: bool = False,
+                     holes: ScreenLog | None = None) -> ChannelExplanation:
     allan = ch.allan
     tau = np.asarray(allan.tau, dtype=float)
     base = ch.fit
@@ -567,7 +646,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         # a transient is claimed only at or above its floor (its stated minimum on this
         # noise, and what the logged temperature's resolution makes through the coupling:
         # ``causes.transient_floor``); one that stays is refitted without the dropped one
-        coef = thermal.coefficient if thermal is not None and thermal.passed else 0.0
+        coef = _rounding_gain(thermal) if thermal is not None and thermal.passed else 0.0
         floored = [cz.apply_floor(c, _noise_levels(ext), len(y_slow) / rate_b, coef)
                    for c in trans]
         if any(a.passed != b.passed for a, b in zip(trans, floored, strict=True)):
@@ -589,6 +668,16 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         else:
             comp_var, ext, current = None, base, allan
             added = None  # nothing removed any more: no uncertainty of it either
+    if holes is not None and thermal is not None and "temperature" in curves:
+        screened = [_not_in_hole(c, holes, thermal, len(y_slow) / rate_b) for c in trans]
+        changed = any(a.passed != b.passed for a, b in zip(trans, screened, strict=True))
+        trans = screened
+        if changed:
+            kept = [c for c in trans if c.passed]
+            for c in trans:
+                if not c.passed:
+                    curves.pop(c.cause, None)
+            comp_var, ext, current = extend(kept) if (curves or kept) else (None, base, allan)
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
@@ -596,7 +685,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
                                    kw if added is None else {**kw, "added_cov": added})
     if gm.claimed and thermal is not None and thermal.passed:
-        floor = cz.gauss_markov_rounding_floor(thermal.coefficient)
+        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
         if gm.params.get("sigma", 0.0) < floor:
             gm = replace(gm, claimed=False, intervals={}, evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
@@ -611,8 +700,52 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                                    "amplitude": ln["amplitude"]}, {}, math.nan,
                                 math.nan, "line found by analyze's line finder "
                                 "(report.find_lines); part of the base model"))
-    return ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
-                              thermal_only)
+    out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
+                             thermal_only)
+    if ext is not base:
+        ext_var = np.asarray(current.var, dtype=float)
+        eu = _used(ext, tau)
+        out.ext_misfit = misfit_ranges(tau[eu], ext_var[eu], ext.model_avar(tau)[eu],
+                                       allan.edf[eu])
+    else:
+        out.ext_misfit = misfit
+    if comp_var is not None:
+        out.compensation_worse_s = out._worse(comp_var)
+    return out
+
+
+def _rounding_gain(thermal: ThermalFit) -> float:
+    """The coefficient through which the logged readings' rounding reaches the residual: ĉ
+    times the L1 norm of the path's impulse response, the largest factor it can put on a
+    bounded error: 1 for a lag, 3 for a negative lag's lead-lag 2δ − h_lag (a 2× factor, its
+    high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records)."""
+    return thermal.coefficient * (3.0 if thermal.lag_s < 0 else 1.0)
+
+
+def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
+                 record_s: float) -> cz.Candidate:
+    """``c`` unless it is a passed transient inside a hole of the driving temperature log (a
+    masked reading, a dropout, a stuck run) or within ``HOLE_SETTLE_LAGS`` lags after it:
+    there the removed thermal signal is made of interpolated temperature, and what it leaves
+    in the axis is the hole, not a cause of the axis (a 25-minute dropout read as a bias step
+    of 4–5e-4 m/s²). Such a transient is not claimed, and says why."""
+    if not c.passed:
+        return c
+    lag = abs(thermal.lag_s)
+    if c.cause == "bias_step":
+        t_c = float(c.params.get("time_s", math.nan))
+        span = (t_c, t_c)
+    else:  # a warm-up acts over its first three time constants
+        span = (0.0, 3.0 * float(c.params.get("time_constant_s", 0.0)))
+    for h0, h1 in screen.holes(thermal.channel):
+        if h1 - h0 < 1.0:
+            continue  # a single masked reading: the interpolation across it is exact enough
+        if span[0] <= h1 + HOLE_SETTLE_LAGS * lag + 1.0 and span[1] >= h0 - 1.0:
+            return replace(c, passed=False, intervals={}, evidence=c.evidence + (
+                f"; not claimed: it falls in a hole of the temperature log {thermal.channel!r}"
+                f" ({h0:.6g}–{h1:.6g} s, or the {HOLE_SETTLE_LAGS:g} lags after it), where "
+                "the removed thermal signal is interpolated: a hole in a log is not a cause"))
+    return c
 
 
 def _s(v: float | None) -> str:

@@ -8,7 +8,9 @@ of another (the *held-out part*):
   two time-contiguous halves A and B, two folds: fit on A and predict B, fit on B and predict
   A; the χ² of both folds add.
 - **file** (``--holdout FILE``): the whole record is the fit part; FILE, a second record of
-  the same sensor at the same rate with the same channels, is held out.
+  the same sensor (rates agreeing by ``core.io.rates``' one rule: every run fits its own) with
+  the same channels, is held out. Each side's slow view has the same block in samples and its
+  τ in seconds of its own rate.
 
 On the fit part, the *base* model is ``fit.fit_noise`` of its AVAR (analyze's terms and its
 lines); the *extended* model is the same fit of its AVAR with the claimed causes' signals
@@ -49,6 +51,7 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import ThermalFit, fit_thermal, lag_filter
+from avard.core.io.rates import format_rate, require_compatible
 from avard.core.model.fit import fit_noise, model_chi2
 from numpy.typing import NDArray
 
@@ -203,6 +206,12 @@ class Part:
     t0_s: float
     label: str
     first: bool  # starts at its record's start (a warm-up can be fitted here)
+    #: blocks per second of the part's own record (None: the fold's); a second record of the
+    #: same sensor fits its own rate, so its τ are its own
+    rate_b: float | None = None
+
+    def rate(self, default: float) -> float:
+        return default if self.rate_b is None else self.rate_b
 
 
 @dataclass
@@ -267,10 +276,10 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
             # starts in the state the sensor was in
             uf = lag_filter(u_fit[0], lag, rate_b)[u_fit[1]]
             d_fit += coef * (uf - uf.mean())
-        uh = lag_filter(u_held[0], lag, rate_b)[u_held[1]]
+        uh = lag_filter(u_held[0], lag, held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
-        if held.first and lag > 0:
-            skip = math.ceil(HELD_SETTLE_LAGS * lag * rate_b)
+        if held.first and lag != 0:
+            skip = math.ceil(HELD_SETTLE_LAGS * abs(lag) * held.rate(rate_b))
     if c.warmup and fit.first:
         if refit:
             _sse, T, size = cz.transient_fits(fit.y - d_fit, rate_b)["warmup"]
@@ -279,7 +288,8 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
             T, size = c.whole_warmup
         d_fit += cz.warmup_signal(len(fit.y), rate_b, T, size)
         if held.t0_s > fit.t0_s:  # the same record, later: the warm-up's tail
-            d_held += cz.warmup_signal(len(held.y), rate_b, T, size, t0_s=held.t0_s)
+            d_held += cz.warmup_signal(len(held.y), held.rate(rate_b), T, size,
+                                       t0_s=held.t0_s)
     if c.step_time_s is not None:
         end = fit.t0_s + len(fit.y) / rate_b
         if refit and fit.t0_s < c.step_time_s < end:
@@ -306,12 +316,15 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
         ext = fit_noise(_avar(fit.y - d_fit, rate_b), extra=[*extra, *gm])
-        held_var = _avar(held.y[skip:], rate_b)
-        held_ext = _avar((held.y - d_held)[skip:], rate_b)
+        held_var = _avar(held.y[skip:], held.rate(rate_b))
+        held_ext = _avar((held.y - d_held)[skip:], held.rate(rate_b))
     else:
-        held_var = _avar(held.y, rate_b)
+        held_var = _avar(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
+    # the same block counts on the held-out side, whose τ are in seconds of its own rate
+    r = rate_b / held.rate(rate_b)
+    rng = (rng[0] * r, rng[1] * r)
     cb = model_chi2(base, held_var, rng, predictive=True)
     ce = model_chi2(ext, held_ext, rng, predictive=True)
     nb, ne = cb.n_points, ce.n_points
@@ -384,24 +397,37 @@ def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray
 
 def check_compatible(meta: dict[str, Any], other: dict[str, Any], path: str) -> None:
     """One line (DataError, exit 2) when ``other`` is not a record of the same sensor set-up
-    as ``meta``: the same rate and the same accelerometer and temperature channels."""
+    as ``meta``: rates that agree by the one rule of ``core.io.rates`` (every run fits its own
+    rate, so two records of one sensor never carry the very same one) and the same
+    accelerometer and temperature channels."""
     r0, r1 = float(meta["rate_hz"]), float(other["rate_hz"])
+    u0, u1 = _rate_u(meta), _rate_u(other)
     n0, n1 = list(meta["names"]), list(other["names"])
     t0 = list(meta.get("temperature_names") or [])
     t1 = list(other.get("temperature_names") or [])
-    if abs(r1 - r0) > 1e-9 * r0 or n0 != n1 or t0 != t1:
+    require_compatible("the data", r0, f"--holdout {path}", r1, u0, u1)
+    if n0 != n1 or t0 != t1:
         raise DataError(
-            f"--holdout {path}: {r1:g} Hz, channels {','.join(n1) or 'none'}, temperatures "
-            f"{','.join(t1) or 'none'}; the data has {r0:g} Hz, channels "
-            f"{','.join(n0) or 'none'}, temperatures {','.join(t0) or 'none'}: give a record "
-            "of the same sensor at the same rate with the same channels")
+            f"--holdout {path}: {format_rate(r1, u1)}, channels {','.join(n1) or 'none'}, "
+            f"temperatures {','.join(t1) or 'none'}; the data has {format_rate(r0, u0)}, "
+            f"channels {','.join(n0) or 'none'}, temperatures {','.join(t0) or 'none'}: give "
+            "a record of the same sensor with the same channels")
+
+
+def _rate_u(meta: dict[str, Any]) -> float:
+    """The fitted rate's standard uncertainty (Hz) when the record carries one, else 0 (the
+    rule's 100 ppm slack alone)."""
+    u = meta.get("rate_uncertainty_hz")
+    return float(u) if isinstance(u, int | float) and math.isfinite(u) and u > 0 else 0.0
 
 
 def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
                  y_held: NDArray, t_held: NDArray | None, t_names: Sequence[str],
-                 names: Sequence[str], rate_b: float, source: str) -> Holdout:
+                 names: Sequence[str], rate_b: float, source: str,
+                 held_rate_b: float | None = None) -> Holdout:
     """Models fitted on the whole record (its slow view ``y_slow``) predict a second record
-    of the same sensor (its slow view ``y_held``, same blocks)."""
+    of the same sensor (its slow view ``y_held``, the same block in samples; ``held_rate_b``
+    its blocks per second by its own fitted rate, default ``rate_b``)."""
     ho = Holdout("file", source, 1.0 / rate_b)
     if len(y_held) < MIN_PART_POINTS:
         ho.reason = (f"held-out record too short: {len(y_held)} slow-view blocks of "
@@ -411,7 +437,7 @@ def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray 
         j = list(names).index(name)
         c = claims_of(ch, t_names)
         fit = Part(y_slow[:, j], 0.0, "data", True)
-        held = Part(y_held[:, j], 0.0, "holdout", True)
+        held = Part(y_held[:, j], 0.0, "holdout", True, held_rate_b)
 
         def temps_of(p: Part, c: Claims = c) -> Temps:
             src = t_slow if p.label == "data" else t_held

@@ -89,11 +89,15 @@ def summary(ex: Explanation) -> str:
     lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
              f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
              "intervals 68 %. Base model = avard analyze's fit."]
+    if ex.screen is not None:
+        lines += ex.screen.lines()
     lines += holdout_lines(ex)
     for name, ch in ex.channels.items():
         lines.append("")
         lines.append(f"channel {name}: base χ²/dof {_chi(ch.base.fit)}, extended "
                      f"{_chi(ch.extended)}; gain {_cell(ch.gain, '.3g')}")
+        if ch.verdict is not None:
+            lines.append(f"  {ch.verdict.line()}")
         if ch.misfit:
             for r in ch.misfit:
                 lines.append(f"  misfit {r['direction']} the base model at τ "
@@ -109,6 +113,10 @@ def summary(ex: Explanation) -> str:
                 f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"
                                   if k in f.intervals else "")
                 for k, v in f.params.items())
+            if f.model_dependent:
+                params += ("; model-dependent" if f.intervals_if_model_held is None else
+                           "; model-dependent, no interval: the held-out data reject the "
+                           "extended model")
             lines.append(f"  FOUND {f.cause}: {params} (SI units)")
             lines.append(f"        {f.evidence}")
         lines.append("  IEEE coefficients (base → extended, 68 % interval):")
@@ -152,7 +160,7 @@ def _plot_channel(ch: ChannelExplanation, path: Path) -> None:
             me = me + v
         ax.plot(tau[ok], np.sqrt(me[ok]), "--", color="C3",
                 label="extended model (" + ", ".join(f.cause for f in ch.claimed) + ")")
-    if ch.compensated_var is not None:
+    if ch.compensated_var is not None and not ch.compensation_worse_s:
         ax.plot(tau[ok], np.sqrt(ch.compensated_var[ok]), "s:", ms=3, color="C2",
                 label="found signals removed (compensated ADEV)")
     for r in ch.misfit:
@@ -227,6 +235,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
           "model's 68 % χ² interval with the estimator's EDF. The gain is the base fit's "
           "χ²/dof over the extended fit's (above 1: the found causes describe the data "
           "better).", ""]
+    if ex.screen is not None:
+        md += ["## Screened inputs", "", *[ln.strip() + "  " for ln in ex.screen.lines(50)],
+               ""]
     if ex.holdout is not None:
         from avard.core.explain.holdout import DEFINITION
 
@@ -252,7 +263,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
         md += [f"## Channel {name}", "", f"![ADEV of {name}]({adev_png})", "",
                f"![misfit of {name}]({res_png})", "",
                f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
-               f"**{_cell(ch.gain, '.3g')}**.", "", "### Misfit of the base model", ""]
+               f"**{_cell(ch.gain, '.3g')}**.", "",
+               *([] if ch.verdict is None else [ch.verdict.line(), ""]),
+               "### Misfit of the base model", ""]
         if ch.misfit:
             md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]
             md += [f"| {r['tau_range_s'][0]:.3g} – {r['tau_range_s'][1]:.3g} | "

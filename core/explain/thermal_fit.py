@@ -71,9 +71,19 @@ _RHO = 0.5
 
 def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     """T seen through a first-order lag of time constant ``lag_s`` (s), starting in steady
-    state at T[0]; ``lag_s`` = 0 returns T."""
+    state at T[0]; ``lag_s`` = 0 returns T.
+
+    A negative ``lag_s`` is the logged sensor lagging the die: with a = |lag_s|, the lead-lag
+    (1 + 2as)/(1 + as) = 2 − 1/(1 + as), i.e. 2T − lag(T, a): at the slow frequencies where
+    the coupling acts it is T + a·dT/dt (the die a ahead of the log, continuous through 0
+    with the lag, T − a·dT/dt), and its gain at high frequencies stays 2 where the pure
+    inverse T + a·dT/dt would amplify the 0.0625 K rounding of the readings without bound
+    (which buried a true −90 s lag under its own noise: found at +12 s). It is the model of a
+    sensor lag 2a against a die lag a; other ratios differ from it at periods near a."""
     T = np.asarray(T, dtype=float)
-    if lag_s <= 0:
+    if lag_s < 0:
+        return np.asarray(2.0 * T - lag_filter(T, -lag_s, rate_hz), dtype=float)
+    if lag_s == 0:
         return T.copy()
     b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
     zi = sps.lfilter_zi(b, a) * T[0]
@@ -81,10 +91,12 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     return np.asarray(out, dtype=float)
 
 
-def allan2(y: NDArray, u: NDArray, rate_hz: float) -> Any:
-    """Allan variances and covariance of (y, u) with the streaming estimator."""
+def allan2(y: NDArray, u: NDArray, rate_hz: float,
+           keep: NDArray[np.bool_] | None = None) -> Any:
+    """Allan variances and covariance of (y, u) with the streaming estimator (rows outside
+    ``keep`` left out as gaps)."""
     sa = StreamingAllan(2, rate_hz)
-    sa.update(np.column_stack([y, u]))
+    feed(sa, np.column_stack([y, u]), keep)
     return sa.result()
 
 
@@ -113,8 +125,53 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     return chat, math.sqrt(var), len(k)
 
 
-def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKKNIFE_GROUPS
-                     ) -> tuple[float, float]:
+#: Lags after a hole in the temperature log that stay out of the regression (the lag filter
+#: still carries the interpolated stretch: e^(−3) ≈ 5 % of it).
+HOLE_SETTLE_LAGS = 3.0
+#: Holes: per temperature channel, (first, last) slow-view blocks the log says nothing about.
+Holes = dict[int, list[tuple[int, int]]]
+
+
+def hole_mask(n: int, holes: list[tuple[int, int]], lag_s: float, rate_hz: float
+              ) -> NDArray[np.bool_] | None:
+    """Blocks kept by the regression (None: all): each hole and ``HOLE_SETTLE_LAGS`` lags
+    after it are left out, so the interpolation across a hole is never taken for the axis's
+    response (a 25-minute dropout put the lag at +34…47 s against a true 0)."""
+    if not holes:
+        return None
+    keep = np.ones(n, dtype=bool)
+    settle = math.ceil(HOLE_SETTLE_LAGS * abs(lag_s) * rate_hz)
+    for a, b in holes:
+        keep[max(0, a):min(n, b + 1 + settle)] = False
+    return keep
+
+
+def feed(sa: StreamingAllan, X: NDArray, keep: NDArray[np.bool_] | None) -> None:
+    """``sa.update`` with the rows of ``X`` where ``keep`` is False left out as gaps (no Allan
+    difference spans them)."""
+    if keep is None:
+        sa.update(X)
+        return
+    m = np.concatenate([[False], keep, [False]]).astype(np.int8)
+    d = np.diff(m)
+    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        sa.update(X[a:b])
+        sa.gap()
+
+
+def min_tau_for(lag_s: float) -> float:
+    """The shortest τ (s) the regression uses for a trial lag: twice the DS18B20's conversion
+    time, and for a negative lag twice |lag|, below which the lead-lag's high-frequency gain
+    makes the regressor mostly the readings' 0.0625 K rounding (an error in the variable that
+    pulls ĉ towards 0: 5 % low at −60 s)."""
+    base = 2 * DS18B20_CONVERSION_S
+    return max(base, 2.0 * -lag_s) if lag_s < 0 else base
+
+
+def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
+                     groups: int = JACKKNIFE_GROUPS,
+                     min_tau_s: float = 2 * DS18B20_CONVERSION_S,
+                     keep: NDArray[np.bool_] | None = None) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
     error: the record in ``groups`` contiguous parts, each its own segment of the streaming
     accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
@@ -126,19 +183,19 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float, groups: int = JACKK
     parts = []
     for a, b in itertools.pairwise(edges):
         sa = StreamingAllan(2, rate_hz)
-        sa.update(np.column_stack([y[a:b], u[a:b]]))
+        feed(sa, np.column_stack([y[a:b], u[a:b]]), None if keep is None else keep[a:b])
         parts.append(sa)
     full = StreamingAllan.from_state(parts[0].state())
     for sa in parts[1:]:
         full.merge(sa)
-    c_all, _se, _n = tempco_from_cov(full.result())
+    c_all, _se, _n = tempco_from_cov(full.result(), min_tau_s)
     cs = []
     for g in range(groups):
         rest = [sa for h, sa in enumerate(parts) if h != g]
         acc = StreamingAllan.from_state(rest[0].state())
         for sa in rest[1:]:
             acc.merge(sa)
-        cs.append(tempco_from_cov(acc.result())[0])
+        cs.append(tempco_from_cov(acc.result(), min_tau_s)[0])
     c = np.asarray(cs)
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
@@ -217,10 +274,10 @@ class ThermalFit:
         a warm-up."""
         u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
         d = self.coefficient * (u - u.mean())
-        if y is None or self.lag_s <= 0:
+        if y is None or self.lag_s == 0:
             return d
         t = np.arange(len(u)) / self.rate_hz
-        e = np.exp(-t / self.lag_s)
+        e = np.exp(-t / abs(self.lag_s))
         a = np.column_stack([np.ones_like(t), t, e])
         coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
         return d + coef[2] * (e - e.mean())
@@ -228,8 +285,12 @@ class ThermalFit:
 
     def evidence(self) -> str:
         lo, hi = self.coef_interval
-        txt = (f"the axis follows temperature '{self.channel}' through a first-order lag of "
-               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}] with "
+        path = ("a first-order lag of" if self.lag_s >= 0 else
+                "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
+                " of")
+        txt = (f"the axis follows temperature '{self.channel}' through {path} "
+               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
+               f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
         if self.others:
@@ -256,10 +317,28 @@ class ThermalFit:
                 "threshold": self.threshold, "passed": self.passed, "others": self.others}
 
 
+#: The longest negative lag tried (s): a DS18B20 in its TO-92 package on a plate lags the die
+#: by its own thermal time constant, tens of seconds to a few minutes, never hours.
+NEG_LAG_MAX_S = 1800.0
+#: How much larger z² a channel whose best lag is at the end of the search (open) must reach
+#: to be preferred over one with an interior optimum (Δ(−2 ln L) = Δz²: 9 is 3 σ).
+OPEN_END_MARGIN = 9.0
+
+
 def _lag_grid(record_s: float, rate_hz: float) -> NDArray[np.float64]:
+    """Lags tried: negative (the logged sensor lags the die) from −``NEG_LAG_MAX_S`` (at most
+    record/16), 0, and positive to record/4, log-spaced either side."""
     lo = max(4.0 / rate_hz, 4.0)
     hi = max(record_s / 4.0, 2 * lo)
-    return np.concatenate([[0.0], np.geomspace(lo, hi, 28)])
+    neg_hi = min(NEG_LAG_MAX_S, record_s / 16.0)
+    neg = -np.geomspace(neg_hi, lo, 12) if neg_hi > 2 * lo else np.zeros(0)
+    return np.concatenate([neg, [0.0], np.geomspace(lo, hi, 28)])
+
+
+def _between(a: float, b: float) -> float:
+    """The point between two neighbouring lags of the grid (geometric on one side of 0,
+    arithmetic across it)."""
+    return math.copysign(math.sqrt(a * b), a) if a * b > 0 else 0.5 * (a + b)
 
 
 class _Pair:
@@ -284,10 +363,10 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     three times the lagged swing) gave the coefficient and the lag at 0.75× the truth even
     without noise."""
     X = np.asarray(cols, dtype=float)
-    if lag_s <= 0:
+    if lag_s == 0:
         return X.copy()
     t = np.arange(len(X)) / rate_hz
-    v = np.exp(-t / lag_s)
+    v = np.exp(-t / abs(lag_s))  # a negative lag's lag(T, |lag|) starts the same way
     v = v - v.mean()
     vv = float(v @ v)
     if not vv > 0:
@@ -296,18 +375,20 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
 
 
-def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float
+def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
+          holes: list[tuple[int, int]] | None = None
           ) -> list[list[tuple[float, float, float, float]]]:
     """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
-    per lag serves all axes."""
+    per lag serves all axes; ``holes`` (blocks at this rate) and their settling left out."""
     out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
         sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        sa.update(without_start(np.column_stack([Y, u]), float(L), rate_hz))
+        feed(sa, without_start(np.column_stack([Y, u]), float(L), rate_hz),
+             hole_mask(len(Y), holes or [], float(L), rate_hz))
         res = sa.result()
         for j in range(Y.shape[1]):
-            c, se, _n = tempco_from_cov(_Pair(res, j))
+            c, se, _n = tempco_from_cov(_Pair(res, j), min_tau_for(float(L)))
             z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
             out[j].append((float(L), c, se, z))
     return out
@@ -318,10 +399,13 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
     return fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps, names, rate_hz)[0]
 
 
-def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float
-                     ) -> list[ThermalFit]:
+def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+                     holes: Holes | None = None) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
-    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc)."""
+    temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
+    channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
+    masked readings), left out of its regression with the lag's settling after them."""
+    holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
@@ -334,35 +418,51 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     grid = _lag_grid(record_s, rate_s)
     scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
     for j in range(temps.shape[1]):
-        per_axis = _scan(Ys, Ts[:, j], grid, rate_s)
+        hj = [(a // f, b // f) for a, b in holes.get(j, [])]
+        per_axis = _scan(Ys, Ts[:, j], grid, rate_s, hj)
         # refine between the neighbouring grid points of each axis's best lag
         fine: set[float] = set()
         for sc in per_axis:
             i = int(np.argmax([s[3] for s in sc]))
-            if 0 < i < len(grid) - 1 and grid[i] > 0:
-                fine.update(np.geomspace(max(grid[i - 1], grid[1] / 2), grid[i + 1],
-                                         13).tolist())
+            if 0 < i < len(grid) - 1 and grid[i - 1] * grid[i + 1] > 0:
+                a, b = grid[i - 1], grid[i + 1]
+                fine.update((math.copysign(1.0, a) * np.geomspace(abs(a), abs(b), 13)).tolist())
+            elif 0 < i < len(grid) - 1:  # next to 0: linear across it
+                fine.update(np.linspace(grid[i - 1], grid[i + 1], 13).tolist())
         if fine:
-            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s)
+            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj)
             per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
         scans[j] = [sorted(sc) for sc in per_axis]
-    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans})
+    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes)
             for a in range(Y.shape[1])]
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-          best: dict[int, list[tuple[float, float, float, float]]]) -> ThermalFit:
+          best: dict[int, list[tuple[float, float, float, float]]],
+          holes: Holes | None = None) -> ThermalFit:
     """The driving channel and lag of one axis from its scans, with the profile interval."""
     zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
-    jb = max(zmax, key=lambda j: zmax[j])
+
+    def at_end(sc: list[tuple[float, float, float, float]]) -> bool:
+        k = int(np.argmax([s[3] for s in sc]))
+        return k in (0, len(sc) - 1)
+
+    # a channel whose lag sits at the end of the search (open) is preferred over one with an
+    # interior optimum only when its z² is larger by OPEN_END_MARGIN
+    def rank(j: int) -> float:
+        return zmax[j] ** 2 - (OPEN_END_MARGIN if at_end(best[j]) else 0.0)
+
+    jb = max(zmax, key=rank)
     scan = best[jb]
     k = int(np.argmax([s[3] for s in scan]))
     L, _c_scan, se_scan, z_fast = scan[k]
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
-    res = allan2(yu[:, 0], yu[:, 1], rate_hz)
-    c, se_a, _n = tempco_from_cov(res)
-    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz)
+    keep = hole_mask(len(y), (holes or {}).get(jb, []), L, rate_hz)
+    res = allan2(yu[:, 0], yu[:, 1], rate_hz, keep)
+    c, se_a, _n = tempco_from_cov(res, min_tau_for(L))
+    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz,
+                                       min_tau_s=min_tau_for(L), keep=keep)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
@@ -375,20 +475,16 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     lo_i, hi_i = min(inside), max(inside)
     lags = [s[0] for s in scan]
     pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
-    if pos_lo == 0:
-        lag_lo = lo_i
-    elif lags[pos_lo - 1] > 0:
-        lag_lo = math.sqrt(lags[pos_lo - 1] * lo_i)
-    else:
-        lag_lo = lo_i / 2
-    lag_hi = hi_i if pos_hi == len(lags) - 1 else math.sqrt(lags[pos_hi + 1] * max(hi_i, 1e-9))
+    lag_lo = lo_i if pos_lo == 0 else _between(lags[pos_lo - 1], lo_i)
+    lag_hi = hi_i if pos_hi == len(lags) - 1 else _between(lags[pos_hi + 1], hi_i)
     others = {}
     for j, sc in best.items():
         if j != jb:
             kk = int(np.argmax([s[3] for s in sc]))
             others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
-                      others, res, lag_open=pos_hi == len(lags) - 1)
+                      others, res, lag_open=pos_hi == len(lags) - 1 or (
+                          pos_lo == 0 and lags[0] < 0))
 
 
 def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,

@@ -94,7 +94,8 @@ def _valid_at(buf: memoryview, pos: int, max_bytes: int) -> int | None:
     return n
 
 
-def scan_frames(data: bytes | memoryview, name: str = "<bytes>", *, max_bytes: int = MAX_FRAME_BYTES,
+def scan_frames(data: bytes | memoryview, name: str = "<bytes>", *,
+                max_bytes: int = MAX_FRAME_BYTES,
                 problems: list[Problem] | None = None) -> Iterator[Frame]:
     """Yield the valid frames of one segment's bytes, recording what had to be skipped.
 

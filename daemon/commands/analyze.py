@@ -114,7 +114,8 @@ def _comp_line(name: str, v: dict | None) -> str:
     return (f"channel {name}: temperature coupling {verdict}: "
             f"{v['coefficient_mps2_per_k']:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %) from "
             f"'{v['channel']}' through a first-order lag of {v['lag_s']:.4g} s "
-            f"[{llo:.4g} s, {upper}] (68 %); compensated ADEV in --json")
+            f"[{llo:.4g} s, {upper}] (68 %); compensated ADEV "
+            + (v["compensated_withheld"] if v.get("compensated_withheld") else "in --json"))
 
 
 def run(args: argparse.Namespace) -> int:

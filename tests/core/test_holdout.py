@@ -91,8 +91,32 @@ def test_second_record_of_the_same_sensor_as_holdout(hidden, tmp_path):
 def test_holdout_of_another_rate_is_refused_before_any_work(tmp_path):
     path = _file(tmp_path, 8, None, hours=0.5)
     other = _file(tmp_path, 9, None, hours=0.5, rate_hz=20.0)
-    with pytest.raises(DataError, match=r"--holdout .*20 Hz.*the data has 10 Hz"):
+    with pytest.raises(DataError, match=r"the data was sampled at 10 Hz and --holdout .* at "
+                                        r"20 Hz"):
         explain_file(open_record(path), holdout=open_record(other))
+    # 1000 ppm apart is another rate setting's distance, not one sensor's runs: both rates
+    # named with the digits that tell them apart
+    near = _file(tmp_path, 11, None, hours=0.5, rate_hz=10.01)
+    with pytest.raises(DataError, match=r"10 Hz and --holdout .* at 10\.01 Hz"):
+        explain_file(open_record(path), holdout=open_record(near))
+
+
+def test_holdout_of_the_same_sensor_at_its_own_fitted_rate(hidden, tmp_path):
+    """Every run fits its own rate (124.90011 against 124.89984 Hz on the real runs): a second
+    record 20 ppm off is the same sensor by core.io.rates' rule, and its τ are its own."""
+    path, _ex = hidden
+    folds = []
+    for ppm in (0.0, 20.0, -20.0):
+        rec, _ = make_record(7, truth=HIDDEN, logged=("ambient",), hours=2.0)
+        rec.rate_hz = 10.0 * (1 + ppm * 1e-6)
+        other = str(save(rec, tmp_path / f"own_rate{ppm:g}.npz"))
+        ho = explain_file(open_record(path), holdout=open_record(other)).holdout
+        assert ho is not None and ho.gain is not None and ho.gain > 0.8
+        folds.append(ho.channels["x"].folds[0])
+    # the held-out τ are the same block counts in seconds of the held-out record's own rate:
+    # none is lost at the range's ends to a few ppm
+    assert folds[1].n_points == folds[2].n_points == folds[0].n_points > 0
+    assert folds[1].tau_range_s[0] == pytest.approx(folds[0].tau_range_s[0], rel=1e-4)
 
 
 def test_record_too_short_to_split_says_so(tmp_path):

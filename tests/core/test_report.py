@@ -145,7 +145,10 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     an = analyze(open_record(str(lab_npz)))
     d = json.loads(json.dumps(an.to_dict(), allow_nan=False))
     assert set(d) == {"source", "rate_hz", "n_samples", "estimator", "estimator_description",
-                      "channels"}
+                      "channels", "screened"}
+    # the input screen (core/io/screen.py) says what it masked: nothing on a clean record
+    assert set(d["screened"]) == {"counts", "samples_masked", "stretches", "rules", "units"}
+    assert d["screened"]["counts"] == {} and d["screened"]["samples_masked"] == 0
     assert d["estimator"] == "oadev" and "OADEV" in d["estimator_description"]
     assert d["rate_hz"] == RATE and d["n_samples"] == 1 << 17
     assert list(d["channels"]) == ["x", "z"]

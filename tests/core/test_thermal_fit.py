@@ -91,3 +91,29 @@ def test_without_start_removes_the_lag_filters_start_up_settling():
     v = np.exp(-t / lag)
     assert np.allclose(X.mean(axis=0), 0.0, atol=1e-12)
     assert np.allclose((v - v.mean()) @ X, 0.0, atol=1e-8)
+
+
+def test_negative_lag_is_the_logged_sensor_lagging_the_die():
+    """The logged DS18B20 slower than the die (its own 120 s against the die's 60 s behind
+    the room): the lag was pinned at 0 s before (extended χ²/dof 13–21); now the lead-lag
+    2T − lag(T, a) is in the search and finds a ≈ 60 s with the coefficient."""
+    from avard.core.explain.thermal_fit import fit_thermal
+
+    rate = 1.0 / 1.6
+    n = int(4 * 3600 * rate)
+    t = np.arange(n) / rate
+    amb = 21 + 0.5 * np.sin(2 * math.pi * t / 1800) + 0.05 * np.sin(2 * math.pi * t / 7000)
+    die, logged = lag_filter(amb, 60.0, rate), lag_filter(amb, 120.0, rate)
+    rng = np.random.default_rng(3)
+    y = 3e-3 * die + 1.6e-4 / math.sqrt(1.6) * rng.standard_normal(n)
+    temps = (np.round(logged / 0.0625) * 0.0625)[:, None]
+    th = fit_thermal(y, temps, ["ambient"], rate)
+    assert th.passed and th.lag_s < 0
+    assert abs(th.lag_s + 60.0) < 0.2 * 60.0
+    assert abs(th.coefficient / 3e-3 - 1) < 0.05
+    assert "negative lag" in th.evidence()
+    # through 0 the lead and the lag agree to first order: T ∓ a·dT/dt
+    slow = 21 + 0.5 * np.sin(2 * math.pi * t / 36000)
+    lead, lag = lag_filter(slow, -5.0, rate), lag_filter(slow, 5.0, rate)
+    mid = slice(200, None)
+    assert np.allclose((lead + lag)[mid] / 2, slow[mid], atol=2e-5)

@@ -1,0 +1,158 @@
+"""`avard explain` on a weekend as it really is (issue 23): records from
+``tests/support/weekend.py`` (numpy only, written apart from the simulator and from
+``tests/support/hidden.py``: room → plate → die and → logged DS18B20 paths, Kasdin flicker,
+log faults), each class at 3× its stated minimum, written down here *before* the run:
+
+- ``negative lag``: the logged DS18B20 120 s behind the plate, the die 60 s (the lead-lag
+  of ``thermal_fit.lag_filter`` with a = 60 s). Stated minimum: the Fisher information of the
+  sinusoid's amplitude in the GLS noise (``thermal_fit.min_detectable_tempco``'s σ_a, z = 5)
+  divided by the lead-lag's gain |1 + 2jωa|/|1 + jωa| at the cycle, on the plate sensor's
+  swing; the lag to 10 % as the docs' rule (σ_L/L = (1 + ω²L²)/(ωL·z)) at |L| = a.
+- ``faulty log``: a plate-logged coupling through the die's 30 s behind the plate against
+  the sensor's 30 s (lag 0) with three 85.0 °C readings, two −127 °C readings, a 25-minute
+  dropout and a 3-sample start-up glitch; its minimum the same rule at lag 0.
+- ``typical tempco 24 h`` / ``60 h``: the ADXL355's datasheet-typical 2e-4 m/s²/K through a
+  5-minute lag from the ambient channel (not 3× a minimum: the realistic level; the docs'
+  table gives the minimum there).
+- ``null, faulty log``: nothing coupled, the same faults; ``null, insensitive sensor in a
+  cycling room``: coefficient 0, a ±1 °C 20-minute compressor cycle on top of the HVAC.
+
+Per record: a claim of the class's cause on x with the right mechanism (the sign of the lag),
+its parameters within 20 % (a lag within 20 % or 30 s), and inside their 68 % intervals;
+any other claim is a false claim. Rates with one-sided 95 % Clopper–Pearson bounds.
+
+    python -m benchmarks explain_weekend [--cases 40] [--seed0 23000] [--rows negative,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from benchmarks.bench_explain import _rate
+
+N, B, K = 1.6e-4, 2e-5, 2e-6
+HOURS, RATE = 4.0, 10.0
+PERIOD, AMP, PLATE_TAU = 1800.0, 0.5, 600.0
+
+
+@dataclass
+class Row:
+    name: str
+    weekend: Any
+    coefficient: float  # hidden on x (0: a null row)
+    lag_s: float  # the lag explain should find (negative: the sensor lags the die)
+    minimum: str
+
+
+def _plate_swing(amp: float = AMP) -> float:
+    return amp / math.hypot(1.0, 2 * math.pi * PLATE_TAU / PERIOD)
+
+
+def rows() -> list[Row]:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from avard.core.explain.thermal_fit import min_detectable_tempco
+
+    from tests.support.weekend import Weekend
+
+    rec_s = HOURS * 3600
+    w = 2 * math.pi / PERIOD
+    A = _plate_swing() / math.hypot(1.0, w * 60.0)  # the plate through the sensor's own lag
+    a = 60.0
+    gain = math.hypot(1.0, 2 * w * a) / math.hypot(1.0, w * a)
+    det = min_detectable_tempco(N, B, K, rec_s, A, PERIOD, 0.0) / gain
+    z_lag = (1 + (w * a) ** 2) / (0.1 * w * a)  # the lag to 10 %
+    lag_min = det * z_lag / 5.0
+    neg = max(det, lag_min)
+    faulty = min_detectable_tempco(N, B, K, rec_s, A, PERIOD, 0.0)
+    base = Weekend(hours=HOURS, rate_hz=RATE, N=N, B=B, K=K)
+    faults = dict(faults_85=3, faults_127=2, dropouts_s=[(6000.0, 1500.0)],
+                  glitches=[(0.0, 3, 0.5)])
+    return [
+        Row("negative lag", replace(base, die_tau_s=60.0, sensor_tau_s=120.0,
+                                    coefficient=(3 * neg, 0, 0)), 3 * neg, -60.0,
+            f"die 60 s, sensor 120 s behind the plate: minimum {neg:.3g} m/s²/K (detection "
+            f"{det:.3g}, lag to 10 % {lag_min:.3g}), hidden {3 * neg:.3g}"),
+        Row("faulty log", replace(base, die_tau_s=30.0, sensor_tau_s=30.0,
+                                  coefficient=(3 * faulty, 0, 0), **faults), 3 * faulty, 0.0,
+            f"lag 0, 3× 85 °C, 2× −127 °C, 25-min dropout, start-up glitch: minimum "
+            f"{faulty:.3g} m/s²/K, hidden {3 * faulty:.3g}"),
+        Row("null, faulty log", replace(base, **faults), 0.0, 0.0, "nothing coupled"),
+        Row("null, cycling room", replace(base, compressor_c=1.0, logged=("plate", "ambient")),
+            0.0, 0.0, "insensitive sensor, ±1 °C 20-min compressor on the HVAC"),
+        Row("typical tempco 24 h", replace(base, hours=24.0, logged=("ambient",),
+                                           plate_tau_s=0.0, die_tau_s=300.0,
+                                           coefficient=(2e-4, 0, 0)), 2e-4, 300.0,
+            "2e-4 m/s²/K (ADXL355 typical) through 5 min from the ambient channel"),
+        Row("typical tempco 60 h", replace(base, hours=60.0, logged=("ambient",),
+                                           plate_tau_s=0.0, die_tau_s=300.0,
+                                           coefficient=(2e-4, 0, 0)), 2e-4, 300.0,
+            "as above, 60 h"),
+    ]
+
+
+def run(cases: int, seed0: int, only: list[str] | None) -> None:
+    from avard.core.explain.engine import explain_file
+
+    from tests.support.weekend import save
+
+    todo = [r for r in rows() if not only or any(r.name.startswith(o) for o in only)]
+    print(f"weekend records (tests/support/weekend.py), {cases} per row, N {N:g} m/s/√s, "
+          f"B {B:g} m/s², K {K:g} m/s²·√s, {RATE:g} Hz:")
+    for r in todo:
+        print(f"  {r.name}: {r.minimum}")
+    print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 % c / L':>14s} "
+          f"{'false claims (axes)':>24s} {'unexplained':>12s} {'CPU s/rec':>9s}")
+    for j, r in enumerate(todo):
+        n = ok = par = in_c = in_l = false = axes = unexpl = 0
+        cpu = 0.0
+        with tempfile.TemporaryDirectory() as d:
+            for i in range(cases):
+                seed = seed0 + 1000 * j + i
+                path = save(seed, r.weekend, Path(d) / "w.npz")
+                t0 = time.process_time()
+                ex = explain_file(str(path), heldout=False)
+                cpu += time.process_time() - t0
+                n += 1
+                for a, ch in ex.channels.items():
+                    axes += 1
+                    mine = [f for f in ch.claimed if f.cause == "temperature"
+                            and a == "x" and r.coefficient]
+                    other = [f for f in ch.claimed if f.cause != "sinusoid" and f not in mine]
+                    false += bool(other)
+                    unexpl += ch.verdict is not None and not ch.verdict.explained
+                    if a != "x" or not r.coefficient:
+                        continue
+                    if mine:
+                        p, iv = mine[0].params, mine[0].intervals
+                        right_sign = (p["lag_s"] < 0) == (r.lag_s < 0) or abs(r.lag_s) < 30
+                        ok += right_sign
+                        c_ok = abs(p["coefficient"] / r.coefficient - 1) <= 0.2
+                        l_ok = abs(p["lag_s"] - r.lag_s) <= max(0.2 * abs(r.lag_s), 30.0)
+                        par += right_sign and c_ok and l_ok
+                        lo, hi = iv.get("coefficient", [math.nan, math.nan])
+                        in_c += lo <= r.coefficient <= hi
+                        lo, hi = iv.get("lag_s", [math.nan, math.nan])
+                        in_l += lo <= r.lag_s <= hi
+        hid = n if r.coefficient else 0
+        print(f"{r.name:22s} {_rate(ok, hid, False) if hid else '—':>22s} "
+              f"{_rate(par, hid, False) if hid else '—':>22s} "
+              f"{(f'{in_c}/{hid} {in_l}/{hid}' if hid else '—'):>14s} "
+              f"{_rate(false, axes, True):>24s} {unexpl:>12d} {cpu / max(n, 1):9.1f}",
+              flush=True)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks explain_weekend")
+    ap.add_argument("--cases", type=int, default=40)
+    ap.add_argument("--seed0", type=int, default=23000)
+    ap.add_argument("--rows", help="comma-separated row-name prefixes")
+    args = ap.parse_args(argv)
+    run(args.cases, args.seed0, args.rows.split(",") if args.rows else None)
+    return 0

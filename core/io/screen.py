@@ -1,0 +1,440 @@
+"""Screening of a record's inputs before any estimator sees them: what a weekend's logs really
+hold besides the sensor's noise, each masked, counted and listed with its time.
+
+One screen for ``avard analyze`` and ``avard explain`` alike: ``ScreenedSource`` (the one
+segment iterator of both) passes its blocks through :func:`screen_blocks`. Nothing is interpolated
+here; a masked stretch is a *gap* to the estimators.
+
+**Acceleration** (all axes together: a shock or a corrupted frame is an event of the sensor,
+and one rule for every axis keeps the passes that read the axes in groups on the same samples).
+A sample is an outlier when, on some axis, it leaves the median of its 17 neighbours by more
+than ``SHOCK_Z`` times the block's robust scale of that kind of distance (the median absolute
+distance of a sample from its 17 neighbours' mean / 0.6745: the fast part of the noise, which
+random walk and flicker do not touch, and which a chip filter's correlated samples keep
+consistent with the test); the 17-sample median follows a step or a slow drift, so only
+stretches of at most 8 samples stand out (a step is never masked). Outliers within
+``SHOCK_MARGIN`` samples of each other make one stretch, widened by that margin (the chip's
+filter spreads a shock), and the stretch is cut out: the block is split there and a segment
+ends before it, so no Allan difference and no spectrum segment straddles it. In the first
+second of a record it is a ``startup_glitch``, later a ``shock``. At ``SHOCK_Z`` = 12 a
+Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample).
+
+**Temperature** (each DS18B20 channel, readings where the column is finite):
+
+- ``read_error``: −127 °C (the driver's value for a failed CRC or a missing device) or any
+  reading outside the DS18B20's range (−55…125 °C);
+- ``power_on_85``: exactly 85.0 °C (the power-on-reset register) more than ``JUMP_C`` from the
+  nearest good readings on either side (a room at 85 °C would have neighbours near 85);
+- ``spike``: a single reading more than ``JUMP_C`` from both neighbours, which agree with each
+  other to within ``JUMP_C``/2 (a room or a plate does not move 0.5 K and back in two
+  readings; that is 8 steps of the 0.0625 K resolution);
+- ``dropout``: no reading for longer than ``DROPOUT_S`` (and ``DROPOUT_READINGS`` reading
+  intervals); nothing to mask, but listed: explain never names a cause on another channel
+  in such a hole (a hole in a log is not a cause);
+- ``stuck``: a run of one identical value longer than ``STUCK_MIN_S`` *and* ``STUCK_FACTOR``
+  times the 95th percentile of the channel's own runs. A DS18B20 in a stable room reads the
+  same 0.0625 K step for hours, which is normal: its runs are all long, so the rule, made of
+  the record's own statistics, does not fire; in a room whose readings change every few
+  minutes a run of hours is not the room. Masked like a dropout (the value is not evidence of
+  the temperature).
+
+Masked temperature readings become NaN (the slow view then has no reading there).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["ScreenLog", "Screened", "screen_accel", "screen_blocks", "screen_record",
+           "screen_temperature", "stuck_runs"]
+
+#: Robust σ of the sample scale an acceleration outlier must exceed.
+SHOCK_Z = 12.0
+#: Half-window of the running median (samples): stretches up to this long stand out.
+SHOCK_HALF = 8
+#: Samples around an outlier that go with it (and that join two outliers into one stretch).
+SHOCK_MARGIN = 2
+#: Seconds after a record's start where an outlier is a start-up glitch.
+STARTUP_S = 1.0
+#: The DS18B20's range (°C) and its error value.
+DS18B20_MIN_C, DS18B20_MAX_C, DS18B20_ERROR_C = -55.0, 125.0, -127.0
+#: The power-on-reset value.
+POWER_ON_C = 85.0
+#: A jump (K) a room or a plate cannot make and undo between two readings.
+JUMP_C = 0.5
+#: A hole in a temperature log longer than this (s) and this many reading intervals.
+DROPOUT_S, DROPOUT_READINGS = 10.0, 8.0
+#: The stuck rule: longer than this (s) and this factor times the channel's 95th-percentile run.
+STUCK_MIN_S, STUCK_FACTOR = 1800.0, 10.0
+
+
+@dataclass(frozen=True)
+class Screened:
+    """One masked (or, for a dropout, missing) stretch: the channel, what it is, its first and
+    last sample (record index) and time (s from the record's start), and how many samples
+    (acceleration) or readings (temperature) were masked."""
+
+    channel: str
+    kind: str
+    first: int
+    last: int
+    start_s: float
+    end_s: float
+    count: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"channel": self.channel, "kind": self.kind, "start_s": self.start_s,
+                "end_s": self.end_s, "first_sample": self.first, "last_sample": self.last,
+                "count": self.count}
+
+
+KIND_TEXT = {"startup_glitch": "start-up glitch", "shock": "isolated shock",
+             "read_error": "read error (-127 °C or out of range)",
+             "power_on_85": "85.0 °C power-on value", "spike": "spike",
+             "dropout": "dropout (no reading)", "stuck": "stuck reading"}
+
+
+@dataclass
+class ScreenLog:
+    """What the screen masked, filled while the blocks stream (``screen_blocks``)."""
+
+    rate_hz: float
+    stretches: list[Screened] = field(default_factory=list)
+    done: bool = False
+
+    def counts(self) -> dict[str, int]:
+        """Stretches per kind."""
+        out: dict[str, int] = {}
+        for s in self.stretches:
+            out[s.kind] = out.get(s.kind, 0) + 1
+        return out
+
+    def samples_masked(self) -> int:
+        """Acceleration samples cut out (every axis)."""
+        return sum(s.count for s in self.stretches if s.kind in ("startup_glitch", "shock"))
+
+    def holes(self, channel: str) -> list[tuple[float, float]]:
+        """(start, end) s of the stretches of a temperature channel where the log says
+        nothing about the temperature (masked readings, dropouts, stuck runs)."""
+        return [(s.start_s, s.end_s) for s in self.stretches if s.channel == channel]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"counts": self.counts(), "samples_masked": self.samples_masked(),
+                "stretches": [s.to_dict() for s in self.stretches],
+                "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
+                          "median of its 17 neighbours (any axis), cut out as a gap; "
+                          "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
+                          "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
+                          "of one value > 30 min and 10x the channel's 95th-percentile run"),
+                "units": {"start_s": "s", "end_s": "s"}}
+
+    def lines(self, limit: int = 8) -> list[str]:
+        """The text: one summary line, then up to ``limit`` stretches with their times."""
+        if not self.stretches:
+            return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
+                    "dropout or stuck reading)"]
+        c = self.counts()
+        head = "screened: " + ", ".join(f"{n} {KIND_TEXT.get(k, k)}{'' if n == 1 else 's'}"
+                                        for k, n in sorted(c.items()))
+        if self.samples_masked():
+            head += f"; {self.samples_masked()} acceleration samples cut out as gaps"
+        out = [head]
+        for s in self.stretches[:limit]:
+            out.append(f"  {s.channel}: {KIND_TEXT.get(s.kind, s.kind)} at "
+                       f"{s.start_s:.6g}–{s.end_s:.6g} s ({s.count} "
+                       f"{'readings' if s.kind not in ('startup_glitch', 'shock') else 'samples'})")
+        if len(self.stretches) > limit:
+            out.append(f"  … and {len(self.stretches) - limit} more (--json lists all)")
+        return out
+
+
+# --------------------------------------------------------------------------------------------
+# acceleration
+
+
+def _running_median(a: NDArray[np.float64], idx: NDArray[np.intp], half: int
+                    ) -> NDArray[np.float64]:
+    """Median of a[i − half … i + half] (clipped to the array) at the indices ``idx``."""
+    out = np.empty(len(idx))
+    for k, i in enumerate(idx):
+        out[k] = np.median(a[max(0, i - half):i + half + 1])
+    return out
+
+
+def _local_residual(col: NDArray[np.float64], half: int) -> NDArray[np.float64]:
+    """col minus the mean of its 2·half + 1 neighbours (reflected at the ends, so a glitch in
+    the first samples still stands out), by one cumulative sum: the high-pass statistic whose
+    robust spread scales the outlier test."""
+    x = np.pad(col - col[0], half, mode="reflect")
+    c = np.empty(len(x) + 1)
+    c[0] = 0.0
+    np.cumsum(x, out=c[1:])
+    w = 2 * half + 1
+    return np.asarray(col - col[0] - (c[w:] - c[:-w]) / w, dtype=float)
+
+
+def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
+    with their margin. The scale is the robust spread of the sample's distance from its
+    neighbours' mean (the same statistic, so a chip filter's correlated samples, whose first
+    differences are small against their spread, are not taken for shocks); the median of the
+    neighbours is taken only where that distance already stands out."""
+    n = len(a)
+    bad = np.zeros(n, dtype=bool)
+    if n < 2 * SHOCK_HALF + 2:
+        return bad
+    for j in range(a.shape[1]):
+        col = np.asarray(a[:, j], dtype=float)
+        r = _local_residual(col, SHOCK_HALF)
+        # every 4th sample gives the median to a few % on a block (and a quarter the work)
+        scale = float(np.median(np.abs(r[::4]))) / 0.6745
+        if not scale > 0:
+            continue
+        # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
+        cand = np.flatnonzero(np.abs(r) > 0.5 * SHOCK_Z * scale)
+        if not len(cand):
+            continue
+        med = _running_median(col, cand, SHOCK_HALF)
+        out = cand[np.abs(col[cand] - med) > SHOCK_Z * scale]
+        bad[out] = True
+    if bad.any():
+        idx = np.flatnonzero(bad)
+        for m in range(1, SHOCK_MARGIN + 1):
+            bad[np.clip(idx - m, 0, n - 1)] = True
+            bad[np.clip(idx + m, 0, n - 1)] = True
+    return bad
+
+
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """[first, last] of each run of True."""
+    if not mask.any():
+        return []
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(),
+                    strict=True))
+
+
+# --------------------------------------------------------------------------------------------
+# temperature
+
+
+def screen_temperature(values: NDArray[np.float64]) -> list[tuple[int, str]]:
+    """(position in ``values``, kind) of the readings to mask in one channel's sequence of
+    readings (the rule in the module's doc: read errors, 85 °C power-on values, spikes)."""
+    v = np.asarray(values, dtype=float)
+    out: list[tuple[int, str]] = []
+    err = (v == DS18B20_ERROR_C) | (v < DS18B20_MIN_C) | (v > DS18B20_MAX_C)
+    good = ~err
+    for i in np.flatnonzero(err):
+        out.append((int(i), "read_error"))
+    gi = np.flatnonzero(good & (v != POWER_ON_C))
+    for i in np.flatnonzero(good & (v == POWER_ON_C)):
+        k = np.searchsorted(gi, i)
+        near = [v[gi[k - 1]]] if k > 0 else []
+        near += [v[gi[k]]] if k < len(gi) else []
+        if near and min(abs(POWER_ON_C - x) for x in near) > JUMP_C:
+            out.append((int(i), "power_on_85"))
+            good[i] = False
+    g = np.flatnonzero(good)
+    if len(g) >= 3:
+        x = v[g]
+        left, mid, right = x[:-2], x[1:-1], x[2:]
+        spike = ((np.abs(mid - left) > JUMP_C) & (np.abs(mid - right) > JUMP_C)
+                 & (np.abs(left - right) < 0.5 * JUMP_C))
+        for i in g[1:-1][spike]:
+            out.append((int(i), "spike"))
+    return sorted(out)
+
+
+def stuck_runs(times_s: NDArray[np.float64], values: NDArray[np.float64]
+               ) -> list[tuple[int, int]]:
+    """[first, last] positions (in the readings) of runs of one value that the channel's own
+    statistics make implausible: longer than ``STUCK_MIN_S`` and ``STUCK_FACTOR`` times the
+    95th percentile of its runs (a stable room's runs are all long, and none is flagged)."""
+    v = np.asarray(values, dtype=float)
+    t = np.asarray(times_s, dtype=float)
+    if len(v) < 3:
+        return []
+    change = np.flatnonzero(np.diff(v) != 0) + 1
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change - 1, [len(v) - 1]])
+    dur = t[ends] - t[starts]
+    if len(dur) < 3:
+        return []  # one or two runs: nothing to compare a run with (a stable room)
+    limit = max(STUCK_MIN_S, STUCK_FACTOR * float(np.percentile(dur, 95)))
+    return [(int(a), int(b)) for a, b, d in zip(starts, ends, dur, strict=True) if d > limit]
+
+
+# --------------------------------------------------------------------------------------------
+# the stream
+
+#: (accel (n, C) m/s², temperature (n, k) °C or None, ends a segment)
+Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
+
+
+class _TempTrack:
+    """One temperature channel's readings seen so far (bounded: the reading values and their
+    sample index; ~2 per second of record), for the rules that need the neighbours or the
+    whole record (spikes across blocks, dropouts, stuck runs)."""
+
+    def __init__(self) -> None:
+        self.idx: list[NDArray[np.int64]] = []
+        self.val: list[NDArray[np.float64]] = []
+
+    def add(self, offset: int, col: NDArray[np.float64]) -> None:
+        ok = np.flatnonzero(np.isfinite(col))
+        if len(ok):
+            self.idx.append(ok.astype(np.int64) + offset)
+            self.val.append(col[ok])
+
+    def arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        if not self.idx:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        if len(self.idx) > 1:  # kept as one array, so a long record is joined once per block
+            self.idx, self.val = [np.concatenate(self.idx)], [np.concatenate(self.val)]
+        return self.idx[0], self.val[0]
+
+
+def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
+                  temperature_names: Sequence[str], log: ScreenLog,
+                  columns: Sequence[int] | None = None) -> Iterator[Block]:
+    """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
+    ends before each cut) and the bad temperature readings set to NaN; what was masked goes
+    to ``log``. ``columns``: the accel columns to hand on (after screening on all).
+
+    Temperature readings are judged with one block of look-ahead (a spike's right-hand
+    neighbour may be in the next block), so each block is handed on when the next has been
+    read; the stuck and dropout rules need the whole channel and are applied at the end
+    (they mask nothing analyze reads; explain masks its slow view by ``log.holes``)."""
+    tnames = list(temperature_names)
+    tracks = [_TempTrack() for _ in tnames]
+    pending: list[tuple[int, Block]] = []
+    offset = 0
+    start_n = round(STARTUP_S * rate_hz)
+    cols = None if columns is None else list(columns)
+
+    def emit(off: int, blk: Block, last: bool) -> Iterator[Block]:
+        a, t, end = blk
+        if t is not None and tnames:
+            t = _mask_readings(off, t, tracks, tnames, log, rate_hz, final=last)
+        bad = screen_accel(a)
+        runs = _runs(bad)
+        for f, l_ in runs:
+            kind = "startup_glitch" if off + f < start_n else "shock"
+            log.stretches.append(Screened("accel", kind, off + f, off + l_, (off + f) / rate_hz,
+                                          (off + l_ + 1) / rate_hz, l_ - f + 1))
+        pos = 0
+        pieces: list[Block] = []
+        for f, l_ in runs:
+            if f > pos:
+                pieces.append((a[pos:f], None if t is None else t[pos:f], True))
+            pos = l_ + 1
+        if pos < len(a):
+            pieces.append((a[pos:], None if t is None else t[pos:], end))
+        elif pieces:
+            pieces[-1] = (pieces[-1][0], pieces[-1][1], True)
+        for pa, pt, pe in pieces:
+            yield (pa if cols is None else pa[:, cols]), pt, pe
+
+    for blk in blocks:
+        a, t, _end = blk
+        if t is not None and tnames:
+            tt = np.asarray(t, dtype=float).reshape(len(a), -1)
+            for j, tr in enumerate(tracks):
+                tr.add(offset, tt[:, j])
+        pending.append((offset, blk))
+        offset += len(a)
+        while len(pending) > 1:
+            off, b = pending.pop(0)
+            yield from emit(off, b, False)
+    while pending:
+        off, b = pending.pop(0)
+        yield from emit(off, b, not pending)
+    _whole_record_rules(tracks, tnames, log, rate_hz)
+    log.stretches.sort(key=lambda s: (s.start_s, s.channel))
+    log.done = True
+
+
+def _mask_readings(off: int, t: NDArray[np.float64], tracks: list[_TempTrack],
+                   tnames: list[str], log: ScreenLog, rate_hz: float, final: bool
+                   ) -> NDArray[np.float64]:
+    """The block's temperatures with the readings the per-reading rules reject set to NaN,
+    judged on every reading seen so far (this block's neighbours included)."""
+    t = np.array(t, dtype=float).reshape(len(t), -1)
+    for j, tr in enumerate(tracks):
+        idx, val = tr.arrays()
+        # the neighbours that matter: the few readings either side of this block
+        lo = max(0, int(np.searchsorted(idx, off)) - 4)
+        hi = min(len(idx), int(np.searchsorted(idx, off + len(t))) + 4)
+        for p, kind in screen_temperature(val[lo:hi]):
+            i = int(idx[lo + p])
+            if not off <= i < off + len(t):
+                continue
+            t[i - off, j] = np.nan
+            log.stretches.append(Screened(tnames[j], kind, i, i, i / rate_hz, i / rate_hz, 1))
+    return t
+
+
+def _whole_record_rules(tracks: list[_TempTrack], tnames: list[str], log: ScreenLog,
+                        rate_hz: float) -> None:
+    """Dropouts and stuck runs: rules that need the channel's whole record."""
+    for j, tr in enumerate(tracks):
+        idx, val = tr.arrays()
+        if len(idx) < 3:
+            continue
+        sec = idx / rate_hz
+        gaps = np.diff(sec)
+        typical = float(np.median(gaps))
+        hole = max(DROPOUT_S, DROPOUT_READINGS * typical)
+        for k in np.flatnonzero(gaps > hole):
+            log.stretches.append(Screened(tnames[j], "dropout", int(idx[k]) + 1,
+                                          int(idx[k + 1]) - 1, float(sec[k]),
+                                          float(sec[k + 1]), 0))
+        for a, b in stuck_runs(sec, val):
+            log.stretches.append(Screened(tnames[j], "stuck", int(idx[a]), int(idx[b]),
+                                          float(sec[a]), float(sec[b]), b - a + 1))
+
+
+def screen_record(meta: dict[str, Any], blocks: Iterator[Block],
+                  columns: Sequence[int] | None = None) -> Iterator[Block]:
+    """``screen_blocks`` of a record's blocks (every accel column), its ``ScreenLog`` put in
+    ``meta["screen"]`` for the results (analyze's and explain's text, JSON and report)."""
+    log = ScreenLog(float(meta["rate_hz"]))
+    meta["screen"] = log
+    return screen_blocks(blocks, log.rate_hz, list(meta["names"]),
+                         list(meta.get("temperature_names") or []), log, columns)
+
+
+class ScreenedSource:
+    """A record source read through the input screen (``screen_blocks``): what analyze and
+    explain read. Every read screens alike (the same blocks, the same rule); ``log`` is the
+    first complete read's ``ScreenLog``, for the results. The screen judges every accel
+    axis, so it reads all of them and hands on the ``columns`` asked for."""
+
+    def __init__(self, source: Any) -> None:
+        self.source = source
+        self.log: ScreenLog | None = None
+
+    @property
+    def info(self) -> Any:
+        return self.source.info
+
+    @property
+    def rereadable(self) -> bool:
+        return bool(self.source.rereadable)
+
+    def blocks(self, block: int = 1 << 16, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[Block]:
+        info = self.source.info
+        log = ScreenLog(float(info.rate_hz))
+        if self.log is None:
+            self.log = log
+        raw = self.source.blocks(block, columns=None, temperature=temperature, verify=verify)
+        yield from screen_blocks(raw, log.rate_hz, list(info.names),
+                                 list(info.temperature_names), log, columns)

@@ -1,0 +1,170 @@
+"""A weekend as it really is: a generator written apart from ``avard simulate``, ``core/sim``
+and ``tests/support/hidden.py`` (numpy only), for ``avard explain``'s checks of issue 23.
+
+Physics, each stage its own first-order path with its own time constant:
+room (HVAC cycle, a compressor's square-ish cycle, slow wander) → plate (``plate_tau_s``) →
+die (``die_tau_s``, behind the plate) and → logged DS18B20 (``sensor_tau_s`` behind the plate,
+rounded to 0.0625 K, one reading every 0.75 s). The accelerometer sees the *die*:
+coefficient·T_die (+ optional terms in T_die², dT_die/dt, or a hysteresis), so a logged
+sensor slower than the die is a negative lag, and two paths are two time constants.
+
+Noise: white (N), flicker (B) by Kasdin's fractional-difference filter (h_k = h_{k−1}·(k − 1
++ α/2)/k, α = 1 for 1/f in rate, applied by FFT convolution), random walk (K).
+
+Transients: warm-ups, steps and excursions (a step up then back) at given times. Log faults:
+85.0 °C readings, −127 °C readings, dropouts (NaN) and a stuck stretch (the reading frozen),
+and acceleration glitches (a few samples far off).
+
+``make`` returns (accel (n, 3), temperature (n, k) with NaN between readings, names, truth
+dict); ``save`` writes the .npz avard reads and the truth as JSON beside it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+AXES = ("x", "y", "z")
+READ_EVERY_S = 0.75
+STEP_C = 0.0625
+
+
+@dataclass
+class Weekend:
+    """What is hidden (SI units); every list holds tuples as documented."""
+
+    hours: float = 4.0
+    rate_hz: float = 10.0
+    N: float = 1.6e-4
+    B: float = 2e-5
+    K: float = 2e-6
+    hvac_c: float = 0.5
+    hvac_period_s: float = 1800.0
+    compressor_c: float = 0.0
+    compressor_period_s: float = 1200.0
+    wander_c: float = 0.05
+    plate_tau_s: float = 600.0
+    die_tau_s: float = 30.0
+    sensor_tau_s: float = 60.0
+    logged: tuple[str, ...] = ("plate",)
+    coefficient: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s²/K on T_die
+    quadratic: float = 0.0  # m/s²/K² on (T_die − mean) ², x only
+    rate_coupling: float = 0.0  # m/s² per K/s on dT_die/dt, x only
+    hysteresis_c: float = 0.0  # m/s²: ±h by the sign of the die's last move > 0.05 K, x only
+    second_path: tuple[float, float] = (0.0, 0.0)  # (coefficient, die τ) of a 2nd path, x
+    warmups: list[tuple[float, float]] = field(default_factory=list)  # (size, T), x
+    steps: list[tuple[float, float]] = field(default_factory=list)  # (time, size), x
+    excursions: list[tuple[float, float, float]] = field(default_factory=list)  # (t0, t1, size)
+    faults_85: int = 0
+    faults_127: int = 0
+    dropouts_s: list[tuple[float, float]] = field(default_factory=list)  # (start, length)
+    stuck_s: list[tuple[float, float]] = field(default_factory=list)  # (start, length)
+    glitches: list[tuple[float, int, float]] = field(default_factory=list)  # (t, n, size)
+
+
+def _lag(u: NDArray, tau: float, dt: float) -> NDArray:
+    """First-order lag, exact for a held input (y_k = a·y_(k−1) + (1 − a)·u_k), from steady
+    state; a plain recursion (numpy only, no filter library)."""
+    if tau <= 0:
+        return u.copy()
+    a = math.exp(-dt / tau)
+    out = np.empty_like(u)
+    y = float(u[0])
+    for i, v in enumerate(u.tolist()):
+        y = a * y + (1 - a) * v
+        out[i] = y
+    return out
+
+
+def _kasdin_flicker(n: int, rng: np.random.Generator) -> NDArray:
+    """Flicker (1/f) noise by Kasdin's fractional-difference filter (α = 1) on unit white
+    noise, the whole record long: one-sided PSD 1/(π f) at low f, i.e. AVAR 2 ln 2/π
+    (the bias instability's, per unit B²)."""
+    k = np.arange(1, n)
+    coeff = np.concatenate([[1.0], np.cumprod((k - 1 + 0.5) / k)])
+    w = rng.standard_normal(n)
+    size = 1 << math.ceil(math.log2(2 * n))
+    return np.fft.irfft(np.fft.rfft(w, size) * np.fft.rfft(coeff, size), size)[:n]
+
+
+def make(seed: int, w: Weekend) -> tuple[NDArray, NDArray, list[str], dict[str, Any]]:
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / w.rate_hz
+    n = int(w.hours * 3600 * w.rate_hz)
+    t = np.arange(n) * dt
+    ph = rng.uniform(0, 2 * math.pi, 3)
+    room = 21.0 + w.hvac_c * np.sin(2 * math.pi * t / w.hvac_period_s + ph[0])
+    if w.compressor_c:
+        room += w.compressor_c * np.tanh(4 * np.sin(2 * math.pi * t / w.compressor_period_s
+                                                    + ph[1]))
+    room += w.wander_c * np.cumsum(rng.standard_normal(n)) / math.sqrt(n)
+    plate = _lag(room, w.plate_tau_s, dt)
+    die = _lag(plate, w.die_tau_s, dt)
+    sensor = _lag(plate, w.sensor_tau_s, dt)
+    acc = w.N * math.sqrt(w.rate_hz) * rng.standard_normal((n, 3))
+    for j in range(3):  # AVAR (2 ln 2/π)·B² (NIST SP 1065 Table 5's flicker floor)
+        acc[:, j] += w.B * _kasdin_flicker(n, rng)
+    acc += w.K * math.sqrt(dt) * np.cumsum(rng.standard_normal((n, 3)), axis=0)
+    dm = die - die.mean()
+    for j in range(3):
+        acc[:, j] += w.coefficient[j] * dm
+    acc[:, 0] += w.quadratic * (dm ** 2 - np.mean(dm ** 2))
+    if w.rate_coupling:
+        acc[:, 0] += w.rate_coupling * np.gradient(die, dt)
+    if w.hysteresis_c:
+        state, ref, hy = 1.0, die[0], np.empty(n)
+        for i in range(n):
+            if die[i] - ref > 0.05:
+                state, ref = 1.0, die[i]
+            elif ref - die[i] > 0.05:
+                state, ref = -1.0, die[i]
+            ref = max(ref, die[i]) if state > 0 else min(ref, die[i])
+            hy[i] = state
+        acc[:, 0] += w.hysteresis_c * (hy - hy.mean())
+    if w.second_path[0]:
+        d2 = _lag(plate, w.second_path[1], dt)
+        acc[:, 0] += w.second_path[0] * (d2 - d2.mean())
+    for size, T in w.warmups:
+        acc[:, 0] += size * np.exp(-t / T)
+    for ts, size in w.steps:
+        acc[:, 0] += np.where(t >= ts, size, 0.0)
+    for t0, t1, size in w.excursions:
+        acc[:, 0] += np.where((t >= t0) & (t < t1), size, 0.0)
+    for tg, k, size in w.glitches:
+        i = int(tg * w.rate_hz)
+        acc[i:i + k] += size
+    every = max(1, round(READ_EVERY_S * w.rate_hz))
+    cols = {"plate": sensor, "ambient": room}
+    temps = np.full((n, len(w.logged)), np.nan)
+    for c, name in enumerate(w.logged):
+        r = np.round(cols[name][::every] / STEP_C) * STEP_C
+        temps[::every, c] = r
+    readings = np.flatnonzero(np.isfinite(temps[:, 0]))
+    for k in rng.choice(len(readings) - 20, w.faults_85, replace=False) + 10:
+        temps[readings[k], 0] = 85.0
+    for k in rng.choice(len(readings) - 20, w.faults_127, replace=False) + 10:
+        temps[readings[k], 0] = -127.0
+    for s0, ln in w.stuck_s:
+        i0, i1 = int(s0 * w.rate_hz), int((s0 + ln) * w.rate_hz)
+        v = temps[i0:i1, 0]
+        v[np.isfinite(v)] = np.nanmean(v[:every * 2])
+    for s0, ln in w.dropouts_s:
+        temps[int(s0 * w.rate_hz):int((s0 + ln) * w.rate_hz), :] = np.nan
+    truth = asdict(w)
+    truth["seed"] = seed
+    truth["lag_effective_s"] = w.die_tau_s - w.sensor_tau_s  # die vs logged plate sensor
+    return acc, temps, list(w.logged), truth
+
+
+def save(seed: int, w: Weekend, path: Path) -> Path:
+    acc, temps, names, truth = make(seed, w)
+    np.savez(path, accel=acc, rate_hz=w.rate_hz, axes=np.array(AXES), temperature_c=temps,
+             temperature_names=np.array(names))
+    Path(str(path) + ".truth.json").write_text(json.dumps(truth, indent=1))
+    return path
