@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from avard.core.allan.overlapping import OverlappingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
 
 # analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
@@ -190,6 +191,7 @@ def analyze(
     psd: bool = False,
     quantiles: str = "exact",
     noise_id: str = "avard",
+    workers: int = 1,
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
@@ -200,8 +202,13 @@ def analyze(
     from it, checked against the fit's N (``psd.ChannelPsd``).
     ``quantiles``, ``noise_id``: "stable32" reproduces Stable32's χ² quantiles and its B1
     rule for the noise identification (``edf.chi2_interval``, ``noise_id.NOISE_IDS``).
+    ``workers``: the OADEV pass of an .npz file on that many processes, cut by time and
+    added up exactly (``core/analysis/parallel.py``); the cascade, CSV files (whose length
+    is only bounded before they are read) and recordings take one.
     """
     check_noise_id(noise_id)
+    if not isinstance(workers, int) or workers < 1:
+        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1")
     meta, segments = _segments(path, block, rate_hz)
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
@@ -217,7 +224,8 @@ def analyze(
     # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
     # the blocks already opened (its reader has read the first rows); an .npz reader opens
     # nothing before its first block, so it is simply replaced by one of the group's columns.
-    groups = oadev_pass_groups(sel, int(meta["n_samples"]))
+    # each worker holds a history of its own: the passes are planned for a share of the budget
+    groups = oadev_pass_groups(sel, int(meta["n_samples"]), PASS_BUDGET_BYTES // workers)
     passes: list[_Pass]
     if meta.get("format") == "npz":
         passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
@@ -229,7 +237,13 @@ def analyze(
     def reread(column: int) -> _Blocks:
         return _lazy_segments(path, block, rate_hz, [column], False)
 
-    return _analyze_passes(meta, passes, reread=reread, **opts)
+    parallel = None
+    if workers > 1 and meta.get("format") == "npz":  # a CSV's length is only bounded
+        def read(columns: list[int]) -> _Blocks:
+            return _lazy_segments(path, block, rate_hz, columns, False)
+
+        parallel = _Parallel(workers, read, (0, int(meta["n_samples"])))
+    return _analyze_passes(meta, passes, reread=reread, parallel=parallel, **opts)
 
 
 def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
@@ -239,15 +253,18 @@ def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[i
     yield from _segments(path, block, rate_hz, columns, verify)[1]
 
 
-def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
+def oadev_pass_groups(sel: list[int], n_samples: int,
+                      budget_bytes: int | None = None) -> list[list[int]]:
     """``sel`` split into groups whose OADEV histories (8 bytes × (2·m_max + PIECE) points per
-    channel) fit ``PASS_BUDGET_BYTES`` together, one channel at least: the channels of one
-    pass over a file. Short records take every channel in one pass."""
+    channel) fit ``budget_bytes`` (default ``PASS_BUDGET_BYTES``) together, one channel at
+    least: the channels of one pass over a file. Short records take every channel in one
+    pass."""
     from avard.core.allan.overlapping import PIECE
 
     grid = oadev_grid(n_samples, 1)
     per_channel = 8 * (2 * int(grid[-1]) + PIECE)
-    size = max(1, PASS_BUDGET_BYTES // per_channel)
+    budget = PASS_BUDGET_BYTES if budget_bytes is None else budget_bytes
+    size = max(1, budget // per_channel)
     return [sel[i:i + size] for i in range(0, len(sel), size)]
 
 
@@ -365,6 +382,16 @@ def _one_pass(blocks: _Blocks, take: list[int] | None,
                 welch.gap()
         if progress is not None:
             progress(done + n, total)
+    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+
+
+def _finish_pass(sa: OverlappingAllan | StreamingAllan, welch: WelchAccumulator | None, n: int,
+                 reread: _Reread | None, quantiles: str, noise_id: str) -> _PassResult:
+    """A pass's result from its accumulators, fed by one pass or added up from a parallel
+    pass's chunks (``parallel.run_pass``): R(n) read again where B1 needs it, then the
+    Allan result."""
+    from avard.core.allan.overlapping import OverlappingAllan
+
     if isinstance(sa, OverlappingAllan) and reread is not None and n >= 16:
         _deferred_rn(sa, reread, n, noise_id)
     # "stable32": the intervals' χ² quantiles, and the B1 rule, as Stable32's
@@ -402,6 +429,35 @@ def _deferred_rn(sa: OverlappingAllan, reread: _Reread, n: int, noise_id: str = 
         sa.set_rn(ch, {k: r for k, r in zip(ks, sums, strict=True) if r is not None})
 
 
+@dataclass(frozen=True)
+class _Parallel:
+    """How to run an OADEV pass on several processes: the workers, the record's blocks of
+    some channels from its start (re-readable: every worker reads its own chunk), and the
+    segments' bounds (``meta["segment_bounds"]``)."""
+
+    workers: int
+    read: Callable[[list[int]], _Blocks]
+    bounds: tuple[int, ...]
+
+
+def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
+                   grid: NDArray[np.int64], nper: int | None, total: int,
+                   reread: _Reread | None, quantiles: str, noise_id: str,
+                   progress: ProgressFn | None, done: int, all_total: int | None
+                   ) -> _PassResult:
+    """``_one_pass`` of the OADEV with the record cut into chunks, one per worker."""
+    from avard.core.analysis.parallel import run_pass
+
+    def step(samples: int) -> None:
+        if progress is not None:
+            progress(done + samples, all_total)
+
+    sa, welch, n = run_pass(lambda: par.read(chans), None, names, rate, grid, nper, total,
+                            par.bounds, par.workers, defer_rn=reread is not None,
+                            progress=step)
+    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+
+
 def _analyze_passes(
     meta: dict[str, Any],
     passes: Sequence[_Pass],
@@ -416,12 +472,15 @@ def _analyze_passes(
     psd: bool,
     quantiles: str = "exact",
     noise_id: str = "avard",
+    parallel: _Parallel | None = None,
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
     its blocks, the block columns to take or None for all), read one after another.
     ``progress`` counts the samples read over all passes (the record's length × passes).
     ``reread(column)``, when the record can be read again, gives one column's blocks: the
-    OADEV then defers R(n) and reads a column again only where B1 needs it."""
+    OADEV then defers R(n) and reads a column again only where B1 needs it.
+    ``parallel`` (the OADEV only): each pass's chunks on that many worker processes
+    (``parallel.run_pass``), exactly the one-pass sums."""
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
     rate = float(meta["rate_hz"])
@@ -433,6 +492,8 @@ def _analyze_passes(
             raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
                             "cannot be fixed; give n_samples or use estimator='cascade'")
         width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
+        if parallel is not None:
+            width *= parallel.workers  # each worker holds its chunk's history
         grid = oadev_grid(int(total), width)
         full = oadev_grid(int(total), width, budget_bytes=1 << 62)
         if len(grid) < len(full):
@@ -451,9 +512,14 @@ def _analyze_passes(
         if reread is not None:
             def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
-        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
-                        progress, done, all_total, quantiles,
-                        None if total is None else int(total), again, noise_id)
+        if parallel is not None and grid is not None and total is not None:
+            one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid, nper,
+                                 int(total), again, quantiles, noise_id, progress, done,
+                                 all_total)
+        else:
+            one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
+                            nper, progress, done, all_total, quantiles,
+                            None if total is None else int(total), again, noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "
