@@ -224,8 +224,12 @@ def analyze(
     # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
     # the blocks already opened (its reader has read the first rows); an .npz reader opens
     # nothing before its first block, so it is simply replaced by one of the group's columns.
-    # each worker holds a history of its own: the passes are planned for a share of the budget
-    groups = oadev_pass_groups(sel, int(meta["n_samples"]), PASS_BUDGET_BYTES // workers)
+    groups = oadev_pass_groups(sel, int(meta["n_samples"]))
+    if workers > 1:
+        # each worker holds a history of its own: a pass of one worker's channels is split
+        # so that all workers together hold as many histories as one pass would
+        groups = [g[i:i + -(-len(g) // workers)] for g in groups
+                  for i in range(0, len(g), -(-len(g) // workers))]
     passes: list[_Pass]
     if meta.get("format") == "npz":
         passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
@@ -253,18 +257,15 @@ def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[i
     yield from _segments(path, block, rate_hz, columns, verify)[1]
 
 
-def oadev_pass_groups(sel: list[int], n_samples: int,
-                      budget_bytes: int | None = None) -> list[list[int]]:
+def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
     """``sel`` split into groups whose OADEV histories (8 bytes × (2·m_max + PIECE) points per
-    channel) fit ``budget_bytes`` (default ``PASS_BUDGET_BYTES``) together, one channel at
-    least: the channels of one pass over a file. Short records take every channel in one
-    pass."""
+    channel) fit ``PASS_BUDGET_BYTES`` together, one channel at least: the channels of one
+    pass over a file. Short records take every channel in one pass."""
     from avard.core.allan.overlapping import PIECE
 
     grid = oadev_grid(n_samples, 1)
     per_channel = 8 * (2 * int(grid[-1]) + PIECE)
-    budget = PASS_BUDGET_BYTES if budget_bytes is None else budget_bytes
-    size = max(1, budget // per_channel)
+    size = max(1, PASS_BUDGET_BYTES // per_channel)
     return [sel[i:i + size] for i in range(0, len(sel), size)]
 
 
