@@ -191,7 +191,7 @@ def analyze(
     psd: bool = False,
     quantiles: str = "exact",
     noise_id: str = "avard",
-    workers: int = 1,
+    workers: int | str = 1,
 ) -> Analysis:
     """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
 
@@ -204,14 +204,23 @@ def analyze(
     rule for the noise identification (``edf.chi2_interval``, ``noise_id.NOISE_IDS``).
     ``workers``: the OADEV pass of an .npz file on that many processes, cut by time and
     added up exactly (``core/analysis/parallel.py``); the cascade, CSV files (whose length
-    is only bounded before they are read) and recordings take one.
+    is only bounded before they are read) and recordings take one. ``"auto"``:
+    ``parallel.default_workers()`` for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1.
     """
     check_noise_id(noise_id)
-    if not isinstance(workers, int) or workers < 1:
-        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1")
+    if workers != "auto" and (not isinstance(workers, int) or isinstance(workers, bool)
+                              or workers < 1):
+        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1 "
+                        "or 'auto'")
     meta, segments = _segments(path, block, rate_hz)
     if meta.get("n_samples") is None and estimator == "oadev":
         meta = {**meta, "n_samples": _count_rows(path)}
+    if workers == "auto":
+        from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, default_workers
+
+        workers = (default_workers() if int(meta["n_samples"] or 0) >= PARALLEL_MIN_SAMPLES
+                   else 1)
+    assert isinstance(workers, int)
     opts = dict(source=path, filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
                 progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd,
                 quantiles=quantiles, noise_id=noise_id)

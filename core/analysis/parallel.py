@@ -44,13 +44,18 @@ from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import DataError
 from numpy.typing import NDArray
 
-__all__ = ["MAX_WORKERS", "Chunk", "default_workers", "plan_chunks", "run_pass"]
+__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "default_workers", "plan_chunks",
+           "run_pass"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
 #: Below this much memory (a Pi 3 has 1 GB) the default is one worker: each worker holds an
 #: OADEV history of its own.
 SMALL_MACHINE_BYTES = 2 << 30
+
+#: ``workers="auto"`` runs shorter records on one worker: below ~9 h at 125 Hz the forks and
+#: the re-read prefix cost about what the second core saves.
+PARALLEL_MIN_SAMPLES = 1 << 22
 
 #: A record's blocks: (samples (n, C) in m/s², True where a segment ends).
 Blocks = Iterable[tuple[NDArray[np.float64], bool]]

@@ -55,6 +55,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "band), the white density read from it against the fit's N; with "
                              "--plot a second figure NAME_psd.png")
     add_model_arguments(parser)
+    parser.add_argument("--workers", default="auto", metavar="N",
+                        help="processes for the OADEV of an .npz file, cut by time and added "
+                             "up exactly (same result as 1): a whole number, or auto "
+                             "(default: 1 on a machine under 2 GB or for records under 2**22 "
+                             "samples, else the cores, at most 4)")
     parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
                         help="chi-squared quantiles of the intervals: exact (default) or as "
                              "Stable32 computes them (reproduces its printed bounds)")
@@ -124,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
                           suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    _workers(args.workers)  # checked before the work
     if args.temperature and (args.quantiles != "exact" or args.noise_id != "avard"):
         raise DataError("--quantiles stable32 and --noise-id stable32 are not available with "
                         "--temperature; run analyze without --temperature to compare with "
@@ -143,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
                      filter_corner_hz=args.filter_corner, progress=progress_printer(),
                      estimator=args.estimator, psd=args.psd, quantiles=args.quantiles,
-                     noise_id=args.noise_id)
+                     noise_id=args.noise_id, workers=_workers(args.workers))
         comp = {}
     if args.json:
         d = an.to_dict()
@@ -167,3 +173,16 @@ def run(args: argparse.Namespace) -> int:
             p = Path(args.plot)
             plot_psd(an, p.with_name(f"{p.stem}_psd{p.suffix}"))
     return 0
+
+
+def _workers(text: str) -> int | str:
+    """--workers: 'auto' or a whole number >= 1."""
+    if text == "auto":
+        return "auto"
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise DataError(f"--workers {text}: give a whole number of processes >= 1, or auto")
+    return n
