@@ -24,7 +24,9 @@ import itertools
 import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -233,12 +235,7 @@ def analyze(
     # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
     # the blocks already opened (its reader has read the first rows); an .npz reader opens
     # nothing before its first block, so it is simply replaced by one of the group's columns.
-    groups = oadev_pass_groups(sel, int(meta["n_samples"]))
-    if workers > 1:
-        # each worker holds a history of its own: a pass of one worker's channels is split
-        # so that all workers together hold as many histories as one pass would
-        groups = [g[i:i + -(-len(g) // workers)] for g in groups
-                  for i in range(0, len(g), -(-len(g) // workers))]
+    groups = _split_for_workers(oadev_pass_groups(sel, int(meta["n_samples"])), workers)
     passes: list[_Pass]
     if meta.get("format") == "npz":
         passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
@@ -264,6 +261,84 @@ def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[i
     """The record's blocks of ``columns`` only, opened when the pass starts (not before, so
     one file handle is open at a time)."""
     yield from _segments(path, block, rate_hz, columns, verify)[1]
+
+
+def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]:
+    """Each worker holds an OADEV history of its own: a pass's channels split so that all
+    workers together hold as many histories as one pass would."""
+    if workers <= 1:
+        return groups
+    return [g[i:i + -(-len(g) // workers)] for g in groups
+            for i in range(0, len(g), -(-len(g) // workers))]
+
+
+def _columns_of(path: str, block: int, rate_hz: float | None, columns: list[int]
+                ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A record's blocks of ``columns`` (a picklable reader for ``parallel.ChainedRead``)."""
+    return _lazy_segments(path, block, rate_hz, columns, False)
+
+
+def analyze_records(
+    paths: Sequence[str],
+    *,
+    rate_hz: float | None = None,
+    channels: Sequence[str] | None = None,
+    filter_corner_hz: float | str | None = "auto",
+    find_sinusoids: bool = True,
+    progress: ProgressFn | None = None,
+    block: int = 1 << 16,
+    fit_kwargs: dict[str, Any] | None = None,
+    psd: bool = False,
+    quantiles: str = "exact",
+    noise_id: str = "avard",
+    chunks: int = 1,
+    executor: Executor | None = None,
+) -> Analysis:
+    """Several .npz records of one sensor analysed as one record whose segments they are
+    (no difference or spectrum segment spans two of them): the same channels, rates that
+    agree by ``core/io/rates.py``'s rule (τ labelled with the first record's rate), the
+    OADEV at the τ the longest record reaches. Each pass is cut into ``chunks`` per worker
+    and run on ``executor`` (``avard fleet``: a Dask client's) or forked processes; one
+    record and one chunk is ``analyze(path)``."""
+    from avard.core.analysis.parallel import ChainedRead
+    from avard.core.io.rates import require_compatible
+
+    check_noise_id(noise_id)
+    if not paths:
+        raise DataError("no records to analyse")
+    metas = []
+    for p in paths:
+        meta, _blocks = _segments(p, block, rate_hz)
+        if meta.get("format") != "npz":
+            raise DataError(f"{p}: only .npz records are pooled (its format is "
+                            f"{meta.get('format')}); analyse it on its own")
+        metas.append(meta)
+    first = metas[0]
+    for p, m in zip(paths[1:], metas[1:], strict=True):
+        if list(m["names"]) != list(first["names"]):
+            raise DataError(f"{p} has channels {', '.join(m['names'])} and {paths[0]} "
+                            f"{', '.join(first['names'])}: pool records of one sensor only")
+        require_compatible(str(paths[0]), float(first["rate_hz"]), str(p), float(m["rate_hz"]))
+    sizes = [int(m["n_samples"]) for m in metas]
+    bounds = tuple(int(v) for v in np.cumsum([0, *sizes]))
+    read = ChainedRead(tuple(partial(_columns_of, p, block, rate_hz) for p in paths))
+    meta = {**first, "n_samples": bounds[-1], "longest_segment": max(sizes),
+            "segment_bounds": list(bounds), "records": [str(p) for p in paths],
+            "source": ", ".join(str(p) for p in paths)}
+    sel = _select(list(meta["names"]), channels)
+    groups = _split_for_workers(oadev_pass_groups(sel, max(sizes)), chunks)
+    passes: list[_Pass] = [(g, read(g), None) for g in groups]
+    parallel = (_Parallel(chunks, read, bounds, executor)
+                if chunks > 1 or executor is not None else None)
+
+    def reread(column: int) -> _Blocks:
+        return read([column])
+
+    return _analyze_passes(meta, passes, reread=reread, parallel=parallel,
+                           source=str(meta["source"]), filter_corner_hz=filter_corner_hz,
+                           find_sinusoids=find_sinusoids, progress=progress,
+                           fit_kwargs=fit_kwargs, estimator="oadev", psd=psd,
+                           quantiles=quantiles, noise_id=noise_id)
 
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
@@ -448,6 +523,7 @@ class _Parallel:
     workers: int
     read: Callable[[list[int]], _Blocks]
     bounds: tuple[int, ...]
+    executor: Executor | None = None  # e.g. a Dask client's (``avard fleet``); else forks
 
 
 def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
@@ -462,9 +538,9 @@ def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: flo
         if progress is not None:
             progress(done + samples, all_total)
 
-    sa, welch, n = run_pass(lambda: par.read(chans), None, names, rate, grid, nper, total,
+    sa, welch, n = run_pass(partial(par.read, chans), None, names, rate, grid, nper, total,
                             par.bounds, par.workers, defer_rn=reread is not None,
-                            progress=step)
+                            progress=step, executor=par.executor)
     return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
 
 
@@ -504,8 +580,10 @@ def _analyze_passes(
         width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
         if parallel is not None:
             width *= parallel.workers  # each worker holds its chunk's history
-        grid = oadev_grid(int(total), width)
-        full = oadev_grid(int(total), width, budget_bytes=1 << 62)
+        # records pooled as segments (``analyze_records``): no τ beyond the longest one's
+        longest = int(meta.get("longest_segment", total))
+        grid = oadev_grid(longest, width)
+        full = oadev_grid(longest, width, budget_bytes=1 << 62)
         if len(grid) < len(full):
             # said in the table and the JSON: the longest τ the memory here allowed
             meta = {**meta, "oadev_cut": {

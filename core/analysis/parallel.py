@@ -35,7 +35,8 @@ import itertools
 import math
 import multiprocessing
 import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,7 +126,8 @@ def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) ->
 
 @dataclass(frozen=True)
 class _Job:
-    """What every worker needs, inherited through the fork: nothing of it is pickled."""
+    """What every worker needs: inherited through the fork by the local processes, pickled
+    (so ``read`` must be picklable, e.g. ``ChainedRead``) for another executor's."""
 
     read: Callable[[], Blocks]
     take: list[int] | None
@@ -142,9 +144,13 @@ _JOB: _Job | None = None
 
 
 def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
-    """One chunk's OADEV part and Welch power sums (the worker's task)."""
-    job = _JOB
-    assert job is not None
+    """One chunk's parts, for a forked local worker (the job inherited)."""
+    assert _JOB is not None
+    return chunk_part(_JOB, i)
+
+
+def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
+    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
@@ -183,13 +189,16 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
              rate_hz: float, grid: NDArray[np.int64], nperseg: int | None, n_total: int,
              bounds: Sequence[int], workers: int, *, defer_rn: bool = True,
              progress: Callable[[int], None] | None = None,
+             executor: Executor | None = None,
              ) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
     """One pass over a record (the channels ``names``: its blocks' columns ``take``, or
     all) on ``workers`` processes: the OADEV accumulator holding the whole record's sums
     (``OverlappingAllan.from_part``), the Welch accumulator and the samples read, as one
     pass would give them. ``read()`` gives the record's blocks from its start (each worker
     reads from there: what comes before its chunk only advances the running sum).
-    ``progress(samples)`` after each chunk."""
+    ``progress(samples)`` after each chunk. ``executor``: run the ``workers`` chunks there
+    (e.g. a Dask client's, ``avard fleet``) instead of on forked local processes; ``read``
+    must then be picklable."""
     global _JOB
     chunks = plan_chunks(bounds, workers, alignment(grid, nperseg), reach(grid, nperseg))
     _JOB = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), defer_rn,
@@ -197,7 +206,15 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
     try:
         parts: list[tuple[OadevPart, WelchPart | None] | None]
         parts = [None] * len(chunks)
-        if len(chunks) == 1:
+        if executor is not None:
+            done = 0
+            jobs = [_JOB] * len(chunks)
+            for i, one in enumerate(executor.map(chunk_part, jobs, range(len(chunks)))):
+                parts[i] = one
+                done += chunks[i].stop - chunks[i].start
+                if progress is not None:
+                    progress(done)
+        elif len(chunks) == 1:
             parts[0] = _chunk_part(0)
         else:
             ctx = multiprocessing.get_context("fork")
@@ -223,3 +240,21 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
     acc = OverlappingAllan.from_part(total, rate_hz, names=names, n_total=int(n_total),
                                      defer_rn=defer_rn)
     return acc, welch, total.n_samples
+
+
+@dataclass(frozen=True)
+class ChainedRead:
+    """Several records read one after another as the segments of one record (a gap at each
+    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read."""
+
+    read: tuple[Callable[[list[int]], Blocks], ...]
+
+    def __call__(self, columns: list[int]) -> Iterator[tuple[NDArray[np.float64], bool]]:
+        for r in self.read:
+            last: tuple[NDArray[np.float64], bool] | None = None
+            for b in r(columns):
+                if last is not None:
+                    yield last
+                last = b
+            if last is not None:
+                yield last[0], True  # no difference or spectrum segment spans two records
