@@ -48,8 +48,10 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
 def test_fleet_on_a_local_cluster_equals_analyze_and_flags_the_two_outliers(
         fleet: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    csv = tmp_path / "fleet.csv"
-    rc = main(["fleet", *map(str, fleet), "--workers", "2", "--json", "--csv", str(csv)])
+    csv, png = tmp_path / "fleet.csv", tmp_path / "fleet.png"
+    args = ["fleet", *map(str, fleet), "--workers", "2", "--json", "--csv", str(csv)]
+    plot = pytest.importorskip("matplotlib", reason="the plot extra") is not None
+    rc = main([*args, "--plot", str(png)] if plot else args)
     assert rc == 0
     d = json.loads(capsys.readouterr().out)
     flagged = {(o["sensor"], o["term"]) for o in d["outliers"]}
@@ -69,6 +71,7 @@ def test_fleet_on_a_local_cluster_equals_analyze_and_flags_the_two_outliers(
                     assert got["value"] == pytest.approx(e.value, rel=1e-9)
                     assert got["lo"] == pytest.approx(e.lo, rel=1e-9)
     assert csv.read_text().startswith("sensor,channel,term,value")
+    assert png.stat().st_size > 10_000
 
 
 def test_by_sensor_pools_a_sensors_records(fleet: list[Path], tmp_path: Path) -> None:
