@@ -23,10 +23,13 @@ What stays single-worker: the cascade estimator (``--estimator cascade``: the se
 streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
 the few channels and τ that need them after the pass, as on one worker) and the fit.
 
-The workers are forked processes (``multiprocessing``'s "fork" context): each inherits the
-job (how to read the record, the τ grid) and sends back only its part, a few numbers per τ
-and the spectrum's power sums. Each worker holds one pass's OADEV history, so the passes
-are planned for ``PASS_BUDGET_BYTES / workers`` (``engine.oadev_pass_groups``).
+The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
+context): each inherits the job (how to read the record, the τ grid) and sends back only its
+part, a few numbers per τ and the spectrum's power sums. A worker that dies (killed, out of
+memory) ends the analysis with an error that says so, instead of a wait for its chunk.
+Each worker holds one OADEV history per channel of its pass, so a pass's channels are split
+among the workers (``engine._split_for_workers``): together they hold as many histories as
+one pass would.
 """
 
 from __future__ import annotations
@@ -36,13 +39,14 @@ import math
 import multiprocessing
 import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor
+from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 import numpy as np
 from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
 from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
-from avard.core.errors import DataError
+from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
 __all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "default_workers", "plan_chunks",
@@ -206,25 +210,31 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
     try:
         parts: list[tuple[OadevPart, WelchPart | None] | None]
         parts = [None] * len(chunks)
-        if executor is not None:
-            done = 0
-            jobs = [_JOB] * len(chunks)
-            for i, one in enumerate(executor.map(chunk_part, jobs, range(len(chunks)))):
-                parts[i] = one
-                done += chunks[i].stop - chunks[i].start
-                if progress is not None:
-                    progress(done)
-        elif len(chunks) == 1:
+        if len(chunks) == 1 and executor is None:
             parts[0] = _chunk_part(0)
         else:
-            ctx = multiprocessing.get_context("fork")
-            with ctx.Pool(min(workers, len(chunks))) as pool:
+            # a forked local pool inherits the job (only chunk numbers cross to it); another
+            # executor (Dask's) gets the job pickled with each chunk
+            own = executor is None
+            pool = executor or ProcessPoolExecutor(
+                min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"))
+            try:
+                results = (pool.map(_chunk_part, range(len(chunks))) if own else
+                           pool.map(chunk_part, [_JOB] * len(chunks), range(len(chunks))))
                 done = 0
-                for i, one in enumerate(pool.imap(_chunk_part, range(len(chunks)))):
+                for i, one in enumerate(results):
                     parts[i] = one
                     done += chunks[i].stop - chunks[i].start
                     if progress is not None:
                         progress(done)
+            except BrokenProcessPool as exc:
+                # a worker killed (out of memory, a signal): said, never waited for forever
+                raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
+                                 "run again with fewer --workers (each holds an OADEV "
+                                 "history of its own) or --workers 1") from exc
+            finally:
+                if own:
+                    pool.shutdown(wait=True, cancel_futures=True)
     finally:
         _JOB = None
     total: OadevPart | None = None

@@ -216,3 +216,40 @@ def test_workers_must_be_a_positive_whole_number(tmp_path) -> None:
     for bad in (0, -1, 1.5):
         with pytest.raises(DataError, match="workers"):
             analyze(str(path), workers=bad)
+
+
+def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> None:
+    """A worker killed mid-chunk (out of memory, a signal) ends the analysis with an error
+    that says so: a pool that lost a task would otherwise wait for it forever."""
+    import os
+
+    from avard.core.analysis import parallel
+    from avard.core.errors import AvardError
+
+    rng = np.random.default_rng(3)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
+    real = parallel.chunk_part
+
+    def dies_on_the_second(job, i):
+        if i == 1:
+            os._exit(9)  # the forked worker vanishes, as under the OOM killer
+        return real(job, i)
+
+    monkeypatch.setattr(parallel, "chunk_part", dies_on_the_second)
+    with pytest.raises(AvardError, match=r"worker process .* died"):
+        analyze(str(path), workers=2)
+
+
+def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeypatch) -> None:
+    """The record changes under the workers (a chunk finds fewer samples than planned): said,
+    not a silently shorter analysis."""
+    from avard.core.analysis import parallel
+
+    rng = np.random.default_rng(4)
+    y = rng.normal(0, 1e-3, (1 << 16, 1))
+    job = parallel._Job(lambda: iter([(y[:40000], False)]), None, ["x"], 100.0,
+                        2 ** np.arange(10), None, len(y), False,
+                        [parallel.Chunk(0, 32768, 36864), parallel.Chunk(32768, 65536, 65536)])
+    with pytest.raises(DataError, match="changed while it was analysed"):
+        parallel.chunk_part(job, 1)
