@@ -7,7 +7,7 @@ of ``bench_allan`` (20-bit counts, white noise, a slow bias random walk, 1 g on 
 m/s² and written once as an uncompressed .npz, the form ``avard simulate`` writes. Each
 measurement runs in a fresh subprocess with one BLAS thread, so peak RSS (VmHWM) is its own:
 
-* avard: ``report.analyze(path)``, the whole `avard analyze` (the record streamed once into
+* avard: ``analyze(open_record(path))``, the whole `avard analyze` (the record streamed once into
   the fully overlapping ADEV at octave τ and the Welch spectrum, the noise fit per axis);
 * allantools: the three axes loaded, then ``oadev(axis, rate, data_type="freq",
   taus="octave")`` on each; the same estimator at the same τ.
@@ -94,6 +94,7 @@ def _timed(owner: Any, name: str, parts: dict[str, float], key: str) -> None:
 def worker_analyze(path: str) -> dict:
     from avard.core.allan.overlapping import OverlappingAllan
     from avard.core.analysis import engine as report
+    from avard.core.io.source import open_record
 
     parts: dict[str, float] = {}
     _timed(report, "_one_pass", parts, "passes")
@@ -101,7 +102,8 @@ def worker_analyze(path: str) -> dict:
         _timed(OverlappingAllan, name, parts, "oadev")
         _timed(report.WelchAccumulator, name, parts, "spectrum")
     t0 = time.process_time()
-    an = report.analyze(path)  # no scipy: NNLS, F quantile and χ² tail are avard's own
+    # no scipy: NNLS, F quantile and χ² tail are avard's own
+    an = report.analyze(open_record(path))
     cpu = time.process_time() - t0
     ch = an.channels["x"].allan
     split = {"OADEV (kernel, running sums, noise identification)": parts["oadev"],
@@ -162,6 +164,8 @@ def worker_parallel(path: str, workers: str) -> dict:
     import threading
 
     from avard.core.analysis.engine import analyze
+    from avard.core.analysis.options import AnalyzeOptions
+    from avard.core.io.source import open_record
 
     peak = [0.0]
     stop = threading.Event()
@@ -173,7 +177,7 @@ def worker_parallel(path: str, workers: str) -> dict:
     t = threading.Thread(target=sample, daemon=True)
     t.start()
     t0 = time.monotonic()
-    an = analyze(path, workers=int(workers))
+    an = analyze(open_record(path), AnalyzeOptions(workers=int(workers)))
     wall = time.monotonic() - t0
     stop.set()
     t.join()

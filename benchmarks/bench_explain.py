@@ -183,6 +183,8 @@ def cases_at_3x(hours: float, rate: float, n_w: float, b_i: float, k_r: float) -
 def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
 
     from tests.support.hidden import make_record, save
 
@@ -206,7 +208,8 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                 # distinct seeds per row, the same from run to run
                 rec, _ = make_record(seed0 + 1000 * j + i, hours=hours, rate_hz=rate, N=n_w,
                                      B=b_i, K=k_r, truth=case.truth, logged=case.logged)
-                ex = explain_file(str(save(rec, Path(d) / "r.npz")), heldout=False)
+                ex = explain_file(open_record(str(save(rec, Path(d) / "r.npz"))),
+                                  ExplainOptions(heldout=False))
                 n += 1
                 ok_det, ok_par, bad = True, True, False
                 for a, ch in ex.channels.items():

@@ -1,6 +1,7 @@
 """``avard analyze`` as a library: stream a record, fit every channel, and write it out.
 
-A pass over the data (``readers.iter_blocks``) feeds two bounded-memory accumulators per
+A pass over a record source (``core.io.source``: an .npz, a CSV or a recording, streamed)
+feeds two bounded-memory accumulators per
 channel: the fully overlapping Allan variance (``overlapping.OverlappingAllan``, OADEV as
 Stable32 and allantools compute it, NIST SP 1065 eq. 12, at octave τ; memory a ring of 2·m_max
 running-sum points) and a Welch spectrum used to find sinusoids. A file long enough that the
@@ -20,7 +21,6 @@ Outputs: a text table, the ``--json`` dictionary (shape fixed by issue 4), a kal
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -31,11 +31,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from avard.core.allan.noise_id import check_noise_id
+from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_nperseg
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
-from avard.core.io.readers import iter_blocks, load_record
+from avard.core.io.source import RecordFormat, RecordInfo, RecordSource
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ if TYPE_CHECKING:
 # peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze).
 
 
-__all__ = ["analyze", "analyze_stream"]
+__all__ = ["AnalyzeOptions", "analyze"]
 
 #: A progress callback: (samples read, total or None).
 ProgressFn = Callable[[int, int | None], None]
@@ -102,74 +103,6 @@ def _select(names: list[str], channels: Sequence[str] | None) -> list[int]:
     return sorted(set(out))
 
 
-#: (accel block (n, C) m/s², temperature block (n, k) °C or None, ends a segment)
-RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
-
-
-def record_blocks(path: str, block: int, rate_hz: float | None, *,
-                  columns: Sequence[int] | None = None, temperature: bool = True,
-                  verify: bool = True) -> tuple[dict[str, Any], Iterator[RecordBlock]]:
-    """Metadata and blocks of a record: the one segment iterator of ``avard analyze`` and
-    ``avard explain``. Files are one segment, streamed; a recording of the service is loaded
-    (``recording.load_recording``) and split where the service split its accumulators
-    (``meta["segment_bounds"]``: every gap record, run change and index jump), so nothing is
-    averaged across a gap or a restart. ``columns``, ``temperature`` and ``verify`` as for
-    ``readers.iter_blocks`` (only those accel columns; no temperatures; no CRC check)."""
-    from pathlib import Path
-
-    p = Path(path)
-    if p.is_dir() or p.suffix == ".avr":
-        rec = load_record(p, rate_hz=rate_hz)
-        # the service's own segment breaks (every gap record, run change, index jump)
-        cuts = rec.meta.get("segment_bounds") or [0, rec.n_samples]
-        meta = {"format": "recording", "n_samples": rec.n_samples, "rate_hz": rec.rate_hz,
-                "lsb_mps2": rec.meta.get("lsb_mps2"),
-                "names": list(rec.names), "temperature_names": list(rec.temperature_names),
-                "source": rec.source, "gaps": rec.meta.get("gaps", []),
-                "n_segments": len(cuts) - 1,
-                "samples_lost": rec.meta.get("samples_lost", 0),
-                "samples_duplicated": rec.meta.get("samples_duplicated", 0),
-                "losses": rec.meta.get("losses", []),
-                "duplicates": rec.meta.get("duplicates", [])}
-        temps = rec.temperature_c if temperature else None
-        cols = None if columns is None else list(columns)
-
-        def gen_rec() -> Iterator[RecordBlock]:
-            for s0, s1 in itertools.pairwise(cuts):
-                for i in range(s0, s1, block):
-                    j = min(i + block, s1)
-                    a = rec.accel[i:j] if cols is None else rec.accel[i:j, cols]
-                    yield a, None if temps is None else temps[i:j], j >= s1
-
-        return meta, gen_rec()
-    meta, blocks = iter_blocks(path, block, rate_hz=rate_hz, columns=columns,
-                               temperature=temperature, verify=verify)
-
-    def gen() -> Iterator[RecordBlock]:
-        for a, t in blocks:
-            yield a, t, False
-
-    return meta, gen()
-
-
-def _segments(path: str, block: int, rate_hz: float | None,
-              columns: Sequence[int] | None = None, verify: bool = True
-              ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64], bool]]]:
-    """:func:`record_blocks` without the temperatures (what the Allan pass reads)."""
-    meta, blocks = record_blocks(path, block, rate_hz, columns=columns, temperature=False,
-                                 verify=verify)
-    return meta, ((a, end) for a, _t, end in blocks)
-
-
-def default_filter_corner(meta: dict[str, Any], rate_hz: float) -> float | None:
-    """The ADXL355 low-pass corner (ODR/4) when the record says it comes from one: a service
-    recording or a simulated record (which carries odr_nominal_hz). Other sensors' filters are
-    unknown, and the fit then leaves out the short τ they bend (a data-driven cut)."""
-    if meta.get("format") == "recording" or "odr_nominal_hz" in meta:
-        return rate_hz / 4.0
-    return None
-
-
 #: A record's blocks: (samples (n, C) in m/s², True where a segment ends).
 _Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 #: One pass over a record: its channels (numbers in the record), their blocks, and the block
@@ -179,88 +112,65 @@ _Pass = tuple[list[int], _Blocks, list[int] | None]
 _Reread = Callable[[int], _Blocks]
 
 
-def analyze(
-    path: str,
-    *,
-    rate_hz: float | None = None,
-    channels: Sequence[str] | None = None,
-    filter_corner_hz: float | str | None = "auto",
-    find_sinusoids: bool = True,
-    progress: ProgressFn | None = None,
-    block: int = 1 << 16,
-    fit_kwargs: dict[str, Any] | None = None,
-    estimator: str = "oadev",
-    psd: bool = False,
-    quantiles: str = "exact",
-    noise_id: str = "avard",
-    workers: int | str = 1,
-) -> Analysis:
-    """Read ``path`` once (streamed), compute per-channel AVAR and spectrum, fit the terms.
+def _accel(source: RecordSource, block: int, columns: Sequence[int] | None,
+           verify: bool = True) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """The source's accel blocks of ``columns`` (no temperatures), opened when the pass
+    starts (not before, so one file handle is open at a time)."""
+    for a, _t, end in source.blocks(block, columns=columns, temperature=False, verify=verify):
+        yield a, end
 
-    ``filter_corner_hz``: "auto" (ADXL355 ODR/4 for avard's own records, else not modelled),
-    a number in Hz, or None (not modelled: the bent shortest τ are left out instead).
-    ``estimator``: "oadev" (fully overlapping, default) or "cascade" (see ``ESTIMATORS``).
-    ``psd``: also give each channel's one-sided PSD with its band and the white density read
-    from it, checked against the fit's N (``psd.ChannelPsd``).
-    ``quantiles``, ``noise_id``: "stable32" reproduces Stable32's χ² quantiles and its B1
-    rule for the noise identification (``edf.chi2_interval``, ``noise_id.NOISE_IDS``).
-    ``workers``: the OADEV pass of an .npz file on that many processes, cut by time and
-    added up exactly (``core/analysis/parallel.py``); the cascade, CSV files (whose length
-    is only bounded before they are read) and recordings take one. ``"auto"``:
-    ``parallel.default_workers()`` for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1.
+
+@one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
+def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
+            progress: ProgressFn | None = None) -> Analysis:
+    """Per-channel AVAR and spectrum of ``source`` (``core.io.source.open_record``, or a
+    ``StreamSource`` of blocks from anywhere), and the noise fit, as ``options`` say.
+
+    A source that can be read again is read once per group of channels whose OADEV
+    histories fit ``PASS_BUDGET_BYTES`` together, so only that group's histories are live
+    (the first pass checks an .npz member's CRC, the others skip it), and the OADEV defers
+    R(n), reading a channel again only where B1 needs it. A one-shot stream, or the
+    ``cascade`` estimator, is read once with every channel at a time. The fit models the
+    record's own low-pass corner (``RecordInfo.filter_corner_hz``) with ``"auto"``, whatever
+    path the blocks took.
     """
-    check_noise_id(noise_id)
-    if workers != "auto" and (not isinstance(workers, int) or isinstance(workers, bool)
-                              or workers < 1):
-        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1 "
-                        "or 'auto'")
-    meta, segments = _segments(path, block, rate_hz)
-    if meta.get("n_samples") is None and estimator == "oadev":
-        meta = {**meta, "n_samples": _count_rows(path)}
+    check_noise_id(options.noise_id)
+    info = source.info
+    sel = _select(list(info.names), options.channels)
+    total = info.n_samples
+    if total is None and options.estimator == "oadev" and info.format is RecordFormat.CSV:
+        total = _count_rows(info.source)
+    block = options.block
+    if options.estimator != "oadev" or not source.rereadable or total is None:
+        return _analyze_passes(info, total, [(sel, _accel(source, block, sel), None)],
+                               options=options, progress=progress)
+    workers = _workers(options.workers, int(total))
+    if info.format is not RecordFormat.NPZ:
+        workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
+    groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
+    passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
+                           for k, g in enumerate(groups)]
+
+    def reread(column: int) -> _Blocks:
+        return _accel(source, block, [column], verify=False)
+
+    parallel = (_Parallel(workers, partial(_accel_columns, source, block), (0, int(total)))
+                if workers > 1 else None)
+    return _analyze_passes(info, total, passes, reread=reread, options=options,
+                           progress=progress, parallel=parallel)
+
+
+def _workers(workers: int | str, n_samples: int) -> int:
+    """``AnalyzeOptions.workers`` as a number: ``"auto"`` is ``parallel.default_workers()``
+    for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1."""
     if workers == "auto":
         from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, default_workers
 
-        workers = (default_workers() if int(meta["n_samples"] or 0) >= PARALLEL_MIN_SAMPLES
-                   else 1)
-    assert isinstance(workers, int)
-    opts = dict(source=path, filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                progress=progress, fit_kwargs=fit_kwargs, estimator=estimator, psd=psd,
-                quantiles=quantiles, noise_id=noise_id)
-    sel = _select(list(meta["names"]), channels)
-    if estimator != "oadev" or meta.get("format") == "recording":
-        # a service recording is loaded whole (``record_blocks``): passes would save nothing
-        return _analyze_passes(meta, [(sel, segments, sel)], **opts)
-    # A file is read again rather than held: one pass per group of channels whose OADEV
-    # histories fit PASS_BUDGET_BYTES together, so only that group's histories are live.
-    # The first pass checks an .npz member's CRC, the others skip it. A CSV's first pass takes
-    # the blocks already opened (its reader has read the first rows); an .npz reader opens
-    # nothing before its first block, so it is simply replaced by one of the group's columns.
-    groups = _split_for_workers(oadev_pass_groups(sel, int(meta["n_samples"])), workers)
-    passes: list[_Pass]
-    if meta.get("format") == "npz":
-        passes = [(groups[0], _lazy_segments(path, block, rate_hz, groups[0], True), None)]
-    else:
-        passes = [(groups[0], segments, groups[0])]
-    for g in groups[1:]:
-        passes.append((g, _lazy_segments(path, block, rate_hz, g, False), None))
-
-    def reread(column: int) -> _Blocks:
-        return _lazy_segments(path, block, rate_hz, [column], False)
-
-    parallel = None
-    if workers > 1 and meta.get("format") == "npz":  # a CSV's length is only bounded
-        def read(columns: list[int]) -> _Blocks:
-            return _lazy_segments(path, block, rate_hz, columns, False)
-
-        parallel = _Parallel(workers, read, (0, int(meta["n_samples"])))
-    return _analyze_passes(meta, passes, reread=reread, parallel=parallel, **opts)
-
-
-def _lazy_segments(path: str, block: int, rate_hz: float | None, columns: list[int],
-                   verify: bool) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """The record's blocks of ``columns`` only, opened when the pass starts (not before, so
-    one file handle is open at a time)."""
-    yield from _segments(path, block, rate_hz, columns, verify)[1]
+        return default_workers() if n_samples >= PARALLEL_MIN_SAMPLES else 1
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1 "
+                        "or 'auto'")
+    return workers
 
 
 def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]:
@@ -272,60 +182,49 @@ def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]
             for i in range(0, len(g), -(-len(g) // workers))]
 
 
-def _columns_of(path: str, block: int, rate_hz: float | None, columns: list[int]
-                ) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """A record's blocks of ``columns`` (a picklable reader for ``parallel.ChainedRead``)."""
-    return _lazy_segments(path, block, rate_hz, columns, False)
+def _accel_columns(source: RecordSource, block: int, columns: list[int]
+                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A source's accel blocks of ``columns`` from its start, unchecked (the first pass
+    checked the CRC): a picklable reader for the chunks of a parallel pass."""
+    return _accel(source, block, columns, verify=False)
 
 
-def analyze_records(
-    paths: Sequence[str],
-    *,
-    rate_hz: float | None = None,
-    channels: Sequence[str] | None = None,
-    filter_corner_hz: float | str | None = "auto",
-    find_sinusoids: bool = True,
-    progress: ProgressFn | None = None,
-    block: int = 1 << 16,
-    fit_kwargs: dict[str, Any] | None = None,
-    psd: bool = False,
-    quantiles: str = "exact",
-    noise_id: str = "avard",
-    chunks: int = 1,
-    executor: Executor | None = None,
-) -> Analysis:
+def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = DEFAULT_OPTIONS,
+                    *, chunks: int = 1, executor: Executor | None = None,
+                    progress: ProgressFn | None = None) -> Analysis:
     """Several .npz records of one sensor analysed as one record whose segments they are
     (no difference or spectrum segment spans two of them): the same channels, rates that
     agree by ``core/io/rates.py``'s rule (τ labelled with the first record's rate), the
-    OADEV at the τ the longest record reaches. Each pass is cut into ``chunks`` per worker
-    and run on ``executor`` (``avard fleet``: a Dask client's) or forked processes; one
-    record and one chunk is ``analyze(path)``."""
+    OADEV at the τ the longest record reaches. Each pass is cut into ``chunks`` and run on
+    ``executor`` (``avard fleet``: a Dask client's) or forked processes; one record and one
+    chunk is ``analyze(source)``."""
+    from dataclasses import replace
+
     from avard.core.analysis.parallel import ChainedRead
     from avard.core.io.rates import require_compatible
 
-    check_noise_id(noise_id)
-    if not paths:
+    check_noise_id(options.noise_id)
+    if not sources:
         raise DataError("no records to analyse")
-    metas = []
-    for p in paths:
-        meta, _blocks = _segments(p, block, rate_hz)
-        if meta.get("format") != "npz":
-            raise DataError(f"{p}: only .npz records are pooled (its format is "
-                            f"{meta.get('format')}); analyse it on its own")
-        metas.append(meta)
-    first = metas[0]
-    for p, m in zip(paths[1:], metas[1:], strict=True):
-        if list(m["names"]) != list(first["names"]):
-            raise DataError(f"{p} has channels {', '.join(m['names'])} and {paths[0]} "
-                            f"{', '.join(first['names'])}: pool records of one sensor only")
-        require_compatible(str(paths[0]), float(first["rate_hz"]), str(p), float(m["rate_hz"]))
-    sizes = [int(m["n_samples"]) for m in metas]
+    if options.estimator != "oadev":
+        raise DataError("records are pooled with the OADEV only; analyse them one by one "
+                        "for the cascade")
+    infos = [s.info for s in sources]
+    first = infos[0]
+    for i in infos:
+        if i.format is not RecordFormat.NPZ or i.n_samples is None:
+            raise DataError(f"{i.source}: only .npz records are pooled (its format is "
+                            f"{i.format.value}); analyse it on its own")
+        if i.names != first.names:
+            raise DataError(f"{i.source} has channels {', '.join(i.names)} and {first.source}"
+                            f" {', '.join(first.names)}: pool records of one sensor only")
+        require_compatible(first.source, first.rate_hz, i.source, i.rate_hz, first.rate_u_hz,
+                           i.rate_u_hz)
+    sizes = [int(i.n_samples or 0) for i in infos]
     bounds = tuple(int(v) for v in np.cumsum([0, *sizes]))
-    read = ChainedRead(tuple(partial(_columns_of, p, block, rate_hz) for p in paths))
-    meta = {**first, "n_samples": bounds[-1], "longest_segment": max(sizes),
-            "segment_bounds": list(bounds), "records": [str(p) for p in paths],
-            "source": ", ".join(str(p) for p in paths)}
-    sel = _select(list(meta["names"]), channels)
+    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources))
+    info = replace(first, source=", ".join(i.source for i in infos), n_samples=bounds[-1])
+    sel = _select(list(info.names), options.channels)
     groups = _split_for_workers(oadev_pass_groups(sel, max(sizes)), chunks)
     passes: list[_Pass] = [(g, read(g), None) for g in groups]
     parallel = (_Parallel(chunks, read, bounds, executor)
@@ -334,11 +233,8 @@ def analyze_records(
     def reread(column: int) -> _Blocks:
         return read([column])
 
-    return _analyze_passes(meta, passes, reread=reread, parallel=parallel,
-                           source=str(meta["source"]), filter_corner_hz=filter_corner_hz,
-                           find_sinusoids=find_sinusoids, progress=progress,
-                           fit_kwargs=fit_kwargs, estimator="oadev", psd=psd,
-                           quantiles=quantiles, noise_id=noise_id)
+    return _analyze_passes(info, bounds[-1], passes, reread=reread, options=options,
+                           progress=progress, parallel=parallel, longest=max(sizes))
 
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
@@ -390,36 +286,6 @@ def _with_differences(res: Any) -> Any:
     if res.cov is not None:
         cut["cov"] = res.cov[keep]
     return replace(res, **cut)
-
-
-@one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
-def analyze_stream(
-    meta: dict[str, Any],
-    segments: _Blocks,
-    *,
-    source: str = "stream",
-    channels: Sequence[str] | None = None,
-    filter_corner_hz: float | str | None = "auto",
-    find_sinusoids: bool = True,
-    progress: ProgressFn | None = None,
-    fit_kwargs: dict[str, Any] | None = None,
-    estimator: str = "oadev",
-    psd: bool = False,
-    quantiles: str = "exact",
-    noise_id: str = "avard",
-) -> Analysis:
-    """``analyze`` on blocks from anywhere (a file reader, the simulator): ``meta`` gives
-    ``rate_hz``, ``names`` and, when known, ``n_samples``; ``segments`` yields (block (n, C)
-    in m/s², True where a segment ends: no difference or spectrum spans what follows).
-    ``estimator="oadev"`` needs ``n_samples`` (an upper bound will do) to fix its τ grid.
-    The blocks are read once, every channel at a time (the OADEV history is then 2·m_max
-    points for each channel at once; ``analyze`` of a file reads it once per channel group
-    instead)."""
-    sel = _select(list(meta["names"]), channels)
-    return _analyze_passes(meta, [(sel, segments, sel)], source=source,
-                           filter_corner_hz=filter_corner_hz, find_sinusoids=find_sinusoids,
-                           progress=progress, fit_kwargs=fit_kwargs, estimator=estimator,
-                           psd=psd, quantiles=quantiles, noise_id=noise_id)
 
 
 @dataclass
@@ -516,14 +382,15 @@ def _deferred_rn(sa: OverlappingAllan, reread: _Reread, n: int, noise_id: str = 
 
 @dataclass(frozen=True)
 class _Parallel:
-    """How to run an OADEV pass on several processes: the workers, the record's blocks of
-    some channels from its start (re-readable: every worker reads its own chunk), and the
-    segments' bounds (``meta["segment_bounds"]``)."""
+    """How to run an OADEV pass on several processes: the workers (chunks), the record's
+    blocks of some channels from its start (re-readable and picklable: every worker reads
+    its own chunk), the segments' bounds, and where to run (forks, or e.g. a Dask client's
+    executor for ``avard fleet``)."""
 
     workers: int
     read: Callable[[list[int]], _Blocks]
     bounds: tuple[int, ...]
-    executor: Executor | None = None  # e.g. a Dask client's (``avard fleet``); else forks
+    executor: Executor | None = None
 
 
 def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
@@ -545,33 +412,31 @@ def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: flo
 
 
 def _analyze_passes(
-    meta: dict[str, Any],
+    info: RecordInfo,
+    total: int | None,
     passes: Sequence[_Pass],
     *,
-    reread: _Reread | None = None,
-    source: str,
-    filter_corner_hz: float | str | None,
-    find_sinusoids: bool,
+    options: AnalyzeOptions,
     progress: ProgressFn | None,
-    fit_kwargs: dict[str, Any] | None,
-    estimator: str,
-    psd: bool,
-    quantiles: str = "exact",
-    noise_id: str = "avard",
+    reread: _Reread | None = None,
     parallel: _Parallel | None = None,
+    longest: int | None = None,
 ) -> Analysis:
-    """The analysis of the channels of ``passes``: each (channel numbers in ``meta["names"]``,
+    """The analysis of the channels of ``passes``: each (channel numbers in ``info.names``,
     its blocks, the block columns to take or None for all), read one after another.
+    ``total``: the record's sample count (or an upper bound; None when unknown).
     ``progress`` counts the samples read over all passes (the record's length × passes).
     ``reread(column)``, when the record can be read again, gives one column's blocks: the
     OADEV then defers R(n) and reads a column again only where B1 needs it.
     ``parallel`` (the OADEV only): each pass's chunks on that many worker processes
-    (``parallel.run_pass``), exactly the one-pass sums."""
+    (``parallel.run_pass``), exactly the one-pass sums. ``longest``: records pooled as
+    segments (``analyze_records``) have no τ beyond the longest one's."""
+    estimator, source = options.estimator, info.source
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
-    rate = float(meta["rate_hz"])
-    names = list(meta["names"])
-    total = meta.get("n_samples")
+    rate = float(info.rate_hz)
+    names = list(info.names)
+    meta: dict[str, Any] = info.as_meta()
     grid = None
     if estimator == "oadev":
         if total is None:
@@ -580,16 +445,16 @@ def _analyze_passes(
         width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
         if parallel is not None:
             width *= parallel.workers  # each worker holds its chunk's history
-        # records pooled as segments (``analyze_records``): no τ beyond the longest one's
-        longest = int(meta.get("longest_segment", total))
-        grid = oadev_grid(longest, width)
-        full = oadev_grid(longest, width, budget_bytes=1 << 62)
+        reach = int(total) if longest is None else longest
+        grid = oadev_grid(reach, width)
+        full = oadev_grid(reach, width, budget_bytes=1 << 62)
         if len(grid) < len(full):
             # said in the table and the JSON: the longest τ the memory here allowed
-            meta = {**meta, "oadev_cut": {
+            meta["oadev_cut"] = {
                 "tau_max_s": float(grid[-1] / rate), "tau_full_s": float(full[-1] / rate),
-                "bytes_needed": int(16 * full[-1] * width)}}
+                "bytes_needed": int(16 * full[-1] * width)}
     nper = None
+    find_sinusoids, psd = options.find_sinusoids, options.psd
     if (find_sinusoids or psd) and (total is None or total >= 1024):
         nper = welch_nperseg(total)
     all_total = None if total is None else int(total) * len(passes)
@@ -602,12 +467,12 @@ def _analyze_passes(
                 return reread(chans[j])
         if parallel is not None and grid is not None and total is not None:
             one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid, nper,
-                                 int(total), again, quantiles, noise_id, progress, done,
-                                 all_total)
+                                 int(total), again, options.quantiles, options.noise_id,
+                                 progress, done, all_total)
         else:
             one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
-                            nper, progress, done, all_total, quantiles,
-                            None if total is None else int(total), again, noise_id)
+                            nper, progress, done, all_total, options.quantiles,
+                            None if total is None else int(total), again, options.noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "
@@ -618,12 +483,12 @@ def _analyze_passes(
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
-    corner = (default_filter_corner(meta, rate) if filter_corner_hz == "auto"
-              else filter_corner_hz)
+    # "auto": the record's own corner, carried by its RecordInfo whatever path it came by
+    corner = (info.filter_corner_hz if options.filter_corner_hz == "auto"
+              else options.filter_corner_hz)
     # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
     # fit holds as a fixed term (simulated records and recordings carry the LSB)
-    lsb = meta.get("lsb_mps2")
-    lsb = float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0 else None
+    lsb = info.lsb_mps2
     from avard.core.model.fit import fit_noise
 
     out: dict[str, ChannelAnalysis] = {}
@@ -636,9 +501,9 @@ def _analyze_passes(
             if welch is not None and spectrum is not None and find_sinusoids:
                 lines = find_lines(f, spectrum[:, j], welch.n_seg)
             extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
-            kw = dict(fit_kwargs or {})
+            kw: dict[str, float] = {"ci": options.ci}
             if corner is not None and lsb is not None:
-                kw.setdefault("rounding_lsb", lsb)
+                kw["rounding_lsb"] = lsb
             try:
                 fit = fit_noise(allan, filter_corner_hz=corner, extra=extra, **kw)
             except FitError as exc:
@@ -655,6 +520,5 @@ def _analyze_passes(
             out[names[i]] = ChannelAnalysis(names[i], allan, fit, lines, estimator, chan_psd)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
-    return Analysis(source=str(meta.get("source", source)), rate_hz=rate, n_samples=n,
-                    channels=out, meta={**meta, "filter_corner_hz": corner},
-                    estimator=estimator)
+    return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
+                    meta={**meta, "filter_corner_hz": corner}, estimator=estimator, info=info)

@@ -46,7 +46,7 @@ def format_table(an: Analysis) -> str:
         if rec["samples_lost"]:
             spans = ", ".join(f"[{x['i0']}, {x['i0'] + x['n']})" for x in rec["losses"][:5])
             more = " …" if len(rec["losses"]) > 5 else ""
-            line += (f"; {rec['samples_lost']} samples lost to damage at indices "
+            line += (f"; {rec['samples_lost']} samples lost (damage or missing segments) at "
                      f"{spans}{more}")
         if rec["samples_duplicated"]:
             line += f"; {rec['samples_duplicated']} duplicated samples counted once"

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from avard.core.io.source import RecordInfo
     from avard.core.model.fit import NoiseFit
 
 #: Estimator names as they appear in the table, the JSON and the csv.
@@ -67,6 +68,8 @@ class Analysis:
     channels: dict[str, ChannelAnalysis]
     meta: dict[str, Any] = field(default_factory=dict)
     estimator: str = "oadev"
+    #: the record's description (core.io.source.RecordInfo): format, sensor, recording summary
+    info: RecordInfo | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``--json`` shape of issue 4 (SI units; NaN written as null)."""
@@ -85,13 +88,9 @@ class Analysis:
         """For a service recording: its segments (split at every gap record and restart),
         gap records, and what damage cost or duplication repeated, in samples (index ranges);
         None for a file."""
-        m = self.meta
-        if m.get("format") != "recording":
+        if self.info is None or self.info.recording is None:
             return None
-        return {"segments": int(m.get("n_segments", 1)), "gap_records": len(m.get("gaps", [])),
-                "samples_lost": int(m.get("samples_lost", 0)), "losses": m.get("losses", []),
-                "samples_duplicated": int(m.get("samples_duplicated", 0)),
-                "duplicates": m.get("duplicates", [])}
+        return self.info.recording.to_dict()
 
 
 def _num(v: Any) -> float | None:

@@ -44,20 +44,20 @@ Streamed, in bounded memory:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
-from avard.core.analysis.engine import ProgressFn, analyze, analyze_stream, record_blocks
+from avard.core.analysis.engine import ProgressFn, analyze
 from avard.core.analysis.results import Analysis, ChannelAnalysis
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import Holdout, check_compatible, holdout_file, holdout_split
+from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     ThermalFit,
     allan2,
@@ -65,6 +65,7 @@ from avard.core.explain.thermal_fit import (
     fit_thermal_axes,
     signal_avar_on,
 )
+from avard.core.io.source import RecordSource, StreamSource
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
 
@@ -270,79 +271,54 @@ def _used(fit: NoiseFit, tau: NDArray) -> NDArray[np.bool_]:
 Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
-def _source(path: str, block: int, rate_hz: float | None
-            ) -> tuple[dict[str, Any], Iterator[Block]]:
-    """Metadata and (accel, temperature, ends-a-segment) blocks, segmented exactly as analyze
-    segments them (``report.record_blocks``, its one segment iterator)."""
-    if not Path(path).exists():
-        raise DataError(f"{path} does not exist; give the path of a recorded or simulated file")
-    return record_blocks(path, block, rate_hz)
-
-
 def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
     tnames = list(meta.get("temperature_names") or [])
     raise DataError(f"temperature channel {temperature!r} is not in this record; its "
                     "temperature channels are " + (", ".join(tnames) or "none"))
 
 
-def explain_file(path: str, *, rate_hz: float | None = None,
-                 channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
-                 stage: StageFn | None = None, block: int = 1 << 16,
-                 filter_corner_hz: float | str | None = "auto",
-                 temperature: str | None = None, holdout: str | None = None,
-                 heldout: bool = True, estimator: str = "oadev",
-                 psd: bool = False) -> Explanation:
-    """Explain the record at ``path`` (.npz, .csv or a recording), streamed once.
-    ``filter_corner_hz`` as for ``report.analyze``; ``temperature`` names the one temperature
-    channel to use (its compensation is then reported whatever its test says). ``holdout``:
-    a second record of the same sensor (same rate and channels, checked before any work)
-    that the models fitted here predict; without it the record's halves predict each other.
-    ``heldout`` False skips the held-out measure (``avard analyze --temperature`` needs only
-    the thermal fit). ``estimator`` and ``psd`` go to analyze's pass as in ``report.analyze``."""
-    meta, blocks = _source(path, block, rate_hz)
-    meta.setdefault("source", path)
-    held: tuple[dict[str, Any], Iterable[Block]] | None = None
+def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
+                 holdout: RecordSource | None = None, progress: ProgressFn | None = None,
+                 stage: StageFn | None = None) -> Explanation:
+    """Explain ``source`` (``core.io.source.open_record``: an .npz, a CSV or a recording).
+    ``options`` are analyze's plus explain's (``ExplainOptions``). ``holdout``: a second
+    record of the same sensor (same rate and channels, checked before any work) that the
+    models fitted here predict; without it the record's halves predict each other."""
+    meta = source.info.as_meta()
     if holdout is not None:
-        h_meta, h_blocks = _source(holdout, block, rate_hz)
-        h_meta.setdefault("source", holdout)
-        check_compatible(meta, h_meta, holdout)
-        held = h_meta, h_blocks
+        check_compatible(meta, holdout.info.as_meta(), holdout.info.source)
+    temperature = options.temperature
     if temperature is not None and temperature not in (meta.get("temperature_names") or []):
         _unknown_temperature(temperature, meta)
-    # A file's base is `avard analyze` of the file itself, the same call: the same passes (one
+    # The base is `avard analyze` of the record itself, the same call: the same passes (one
     # per channel group whose OADEV histories fit its budget, so the same peak memory: one
     # pass over every channel, as explain_stream must do with blocks from anywhere, held all
     # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
-    # file for the slow view, which keeps only block means. A recording is already loaded
-    # whole by _source, and analyze takes it in one pass too: the base then comes from the
-    # same single pass (loading it a second time would double the memory).
+    # record for the slow view, which keeps only block means.
     base = None
-    if meta.get("format") != "recording":
-        base = analyze(path, rate_hz=rate_hz, channels=channels, progress=progress,
-                       block=block, filter_corner_hz=filter_corner_hz, estimator=estimator,
-                       psd=psd)
+    if source.rereadable:
+        base = analyze(source, options, progress=progress)
         if stage is not None:
             stage("reading the record's slow view (block means)")
-    return explain_stream(meta, blocks, channels=channels, progress=progress, stage=stage,
-                          filter_corner_hz=filter_corner_hz, temperature=temperature,
-                          holdout=held, heldout=heldout, estimator=estimator, psd=psd,
+    return explain_stream(source, options, holdout=holdout, progress=progress, stage=stage,
                           base=base)
 
 
-def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
-                   channels: Sequence[str] | None = None, progress: ProgressFn | None = None,
-                   stage: StageFn | None = None, filter_corner_hz: float | str | None = "auto",
-                   temperature: str | None = None,
-                   holdout: tuple[dict[str, Any], Iterable[Block]] | None = None,
-                   heldout: bool = True, estimator: str = "oadev",
-                   psd: bool = False, base: Analysis | None = None) -> Explanation:
-    """``explain_file`` on blocks from anywhere: ``meta`` as for ``report.analyze_stream``
-    (plus ``temperature_names``), blocks (accel (n, C) m/s², temperature (n, k) °C or None,
-    segment end). ``holdout``: (meta, blocks) of a second record of the same sensor.
-    ``base``: analyze's result for these blocks when the caller has it (``explain_file``);
-    the blocks then feed only the slow view."""
+def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
+                   holdout: RecordSource | None = None, progress: ProgressFn | None = None,
+                   stage: StageFn | None = None, base: Analysis | None = None) -> Explanation:
+    """``explain_file`` on blocks from anywhere (``core.io.source.StreamSource``: accel
+    (n, C) m/s², temperature (n, k) °C or None, segment end). ``holdout``: a second record of
+    the same sensor. ``base``: analyze's result for these blocks when the caller has it
+    (``explain_file``); the blocks then feed only the slow view."""
+    meta = source.info.as_meta()
+    blocks = source.blocks(options.block)
+    temperature, heldout = options.temperature, options.heldout
+    held = None
     if holdout is not None:
-        check_compatible(meta, holdout[0], str(holdout[0].get("source", "holdout")))
+        held = holdout.info.as_meta(), holdout.blocks(options.block)
+    if held is not None:
+        check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
     rate = float(meta["rate_hz"])
     names = list(meta["names"])
     tnames = list(meta.get("temperature_names") or [])
@@ -361,9 +337,8 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
             yield a, end
 
     if base is None:
-        an = analyze_stream(meta, tee(), source=str(meta.get("source", "stream")),
-                            channels=channels, progress=progress,
-                            filter_corner_hz=filter_corner_hz, estimator=estimator, psd=psd)
+        an = analyze(StreamSource(source.info, ((a, None, end) for a, end in tee())),
+                     options, progress=progress)
     else:
         an = base
         for _ in tee():
@@ -395,11 +370,11 @@ def explain_stream(meta: dict[str, Any], blocks: Iterable[Block], *,
         out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
                                      None if t_slow is None else t_slow[:, t_ok],
                                      th, an, meta, always_compensate=temperature is not None)
-    if not heldout and holdout is None:
+    if not heldout and held is None:
         return Explanation(an, out, t_allan, b / rate)
     if stage is not None:
         stage("measuring the gain on held-out data")
-    ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, holdout)
+    ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held)
     return Explanation(an, out, t_allan, b / rate, ho)
 
 

@@ -9,11 +9,13 @@ Formats:
 * ``.csv``: one header row; a ``t`` (or ``time``, ``t_s``, ``time_s``) column in seconds or
   ``rate_hz=``; ``temp_*`` columns in °C; ``gyro_*`` columns in rad/s; every other column is an
   acceleration in m/s². Comma, semicolon or tab separated.
-* an avard recording (a directory of segment files, or one ``.avr`` segment): read by
+* an avard recording (a directory of segment files, or one ``.avr`` segment): streamed by
+  :mod:`avard.core.io.source` (``open_record``); ``load_record`` loads one whole through
   ``avard.core.io.recording.load_recording``, imported lazily.
 
-``load_record`` returns a :class:`Record`; ``iter_blocks`` streams (accel, temperature) blocks
-with the metadata first, so a long record never has to fit in memory.
+Every command reads records through ``avard.core.io.source.open_record``, which uses this
+module's file readers. ``load_record`` returns a whole :class:`Record`; ``iter_blocks``
+streams a file's (accel, temperature) blocks with the metadata first.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from avard.core.errors import DataError, FormatError
 from avard.core.finite import first_nonfinite_row
 from numpy.typing import NDArray
 
-__all__ = ["Record", "iter_blocks", "load_record", "record_info"]
+__all__ = ["Record", "check_rate", "iter_blocks", "load_record", "record_info", "record_kind"]
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +89,9 @@ def _is_recording(p: Path) -> bool:
     return p.is_dir() or p.suffix == ".avr"
 
 
-def _kind(path: str | Path) -> tuple[Path, str]:
+def record_kind(path: str | Path) -> tuple[Path, str]:
+    """The path and what it holds: "npz", "csv" or "recording" (a DataError or FormatError
+    naming the path when it is none of them)."""
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file or directory")
@@ -482,24 +486,16 @@ def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None
     """
     if block < 1:
         raise DataError(f"block size {block} must be >= 1 sample")
-    p, kind = _kind(path)
+    p, kind = record_kind(path)
     if kind == "npz":
         with _open_npz(p) as zf:
             meta = _npz_meta(zf, p, rate_hz)
         _check_columns(columns, len(meta["names"]), p)
         return meta, _npz_blocks(p, meta, block, columns, temperature, verify)
-    if kind == "csv":
-        meta, blocks = _csv_meta_and_blocks(p, rate_hz, block)
-    else:
-        rec = _load_recording(p, rate_hz)
-        meta = _record_meta(rec)
-
-        def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
-            for i in range(0, rec.n_samples, block):
-                t = None if rec.temperature_c is None else rec.temperature_c[i:i + block]
-                yield rec.accel[i:i + block], t
-
-        blocks = gen()
+    if kind != "csv":
+        raise DataError(f"{p}: a recording is streamed by avard.core.io.source.open_record "
+                        "(its runs, losses and segments come with it), not by iter_blocks")
+    meta, blocks = _csv_meta_and_blocks(p, rate_hz, block)
     _check_columns(columns, len(meta["names"]), p)
     if columns is None and temperature:
         return meta, blocks
@@ -512,14 +508,6 @@ def _check_columns(columns: Sequence[int] | None, n: int, p: Path) -> None:
     if columns is not None and any(not 0 <= int(c) < n for c in columns):
         raise DataError(f"{p}: accel columns {list(columns)} asked for, the record has {n} "
                         f"(0..{n - 1})")
-
-
-def _record_meta(rec: Record) -> dict[str, Any]:
-    meta = {k: v for k, v in rec.meta.items() if k not in ("index",)}
-    meta.update({"n_samples": rec.n_samples, "rate_hz": rec.rate_hz, "names": list(rec.names),
-                 "temperature_names": list(rec.temperature_names), "source": rec.source})
-    meta.setdefault("format", "recording")
-    return meta
 
 
 def _load_recording(p: Path, rate_hz: float | None) -> Record:
@@ -548,7 +536,7 @@ def record_info(path: str | Path, *, rate_hz: float | None = None) -> dict[str, 
 def load_record(path: str | Path, *, rate_hz: float | None = None) -> Record:
     """The whole record in memory (see the module docstring for the formats). For records
     larger than memory use :func:`iter_blocks`."""
-    p, kind = _kind(path)
+    p, kind = record_kind(path)
     if kind == "recording":
         return _load_recording(p, rate_hz)
     meta, blocks = iter_blocks(p, rate_hz=rate_hz)

@@ -127,7 +127,7 @@ class NoiseFit:
     """
 
     terms: dict[str, TermEstimate]
-    sinusoids: list[dict[str, float]]
+    sinusoids: list[dict[str, float | None]]
     extra: list[dict[str, Any]]
     tau_min_s: float
     tau_max_s: float
@@ -351,7 +351,7 @@ def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 
     Returns θ (zeros for inactive components), Cov(θ[active]) = (XᵀC⁻¹X)⁻¹, the AVAR
     covariance C and the generalised χ² of the residuals."""
     A = p.X.shape[1]
-    X = p.X[np.ix_(idx, active)]
+    X = p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))]
     y = p.y[idx]
     theta = np.zeros(A)
     # start: relative weights from the measured values, no correlation
@@ -416,7 +416,7 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
         if not active:
             r = T @ y
             return float(r @ r), np.zeros(0)
-        th, c2 = _gls_nnls(p.X[np.ix_(idx, active)], y, T)
+        th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
         return c2, th
 
     z_all = np.full(A, np.nan)
@@ -530,7 +530,8 @@ def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_
         _, _, C, _ = _fit_active(p, idx, base)
         T = _whitener(C)
         tau = p.m_tau[idx]
-        X = np.column_stack([p.X[np.ix_(idx, base)], 1.0 / (tau * rate_hz) ** 2])
+        X = np.column_stack([p.X[np.ix_(idx, np.asarray(base, dtype=np.intp))],
+                             1.0 / (tau * rate_hz) ** 2])
         TX = T @ X
         coef, *_ = np.linalg.lstsq(TX, T @ p.y[idx], rcond=None)
         cov = np.linalg.pinv(TX.T @ TX)
@@ -613,7 +614,7 @@ def fit_noise(
     t_k = tau[keep]
     X = np.column_stack([comps[i].basis(t_k, rate) for i in fitted])
     fixed_avar = np.zeros(len(keep))
-    theta_fixed = np.array([comps[i].fixed_value**2 for i in fixed])
+    theta_fixed = np.array([float(comps[i].fixed_value or 0.0) ** 2 for i in fixed])
     for i, th in zip(fixed, theta_fixed, strict=True):
         fixed_avar += th * comps[i].basis(t_k, rate)
     psds = [comps[i].psd(rate) for i in fitted] + [comps[i].psd(rate) for i in fixed]
@@ -669,7 +670,7 @@ def fit_noise(
     zci = NormalDist().inv_cdf(0.5 + ci / 2.0)
     est: dict[str, TermEstimate] = {}
     extras: list[dict[str, Any]] = []
-    sinusoids: list[dict[str, float]] = []
+    sinusoids: list[dict[str, float | None]] = []
     theta_all = np.zeros(len(comps))
     for j, a in enumerate(fitted):
         theta_all[a] = theta[j]

@@ -342,9 +342,10 @@ def _pair_quadrature(mk: int, ml: int, c: float = 4.0) -> tuple[NDArray, NDArray
     def hk2(nu: NDArray, m: int) -> NDArray:
         return 2.0 * np.sin(np.pi * nu * m) ** 4 / (m**2 * np.sin(np.pi * nu) ** 2)
 
-    nodes, weights = [], []
+    nodes: list[NDArray] = []
+    weights: list[NDArray] = []
 
-    def midpoint(a: float, b: float, step: float) -> NDArray:
+    def midpoint(a: float, b: float, step: float) -> tuple[NDArray, float]:
         n = max(int(np.ceil((b - a) / step)), 1)
         return a + (np.arange(n) + 0.5) * ((b - a) / n), (b - a) / n
 
@@ -367,9 +368,9 @@ def _pair_quadrature(mk: int, ml: int, c: float = 4.0) -> tuple[NDArray, NDArray
             # log-spaced midpoints: the remaining factors vary slowly on a log scale
             edges = np.geomspace(nu2, half, 129)
             x = np.sqrt(edges[1:] * edges[:-1])
-            h = np.diff(edges)
+            widths = np.diff(edges)
             pbar = _mean_sin4_product(r)
-            w = h * 4.0 * pbar / (mk**2 * ml**2 * np.sin(np.pi * x) ** 4)
+            w = widths * 4.0 * pbar / (mk**2 * ml**2 * np.sin(np.pi * x) ** 4)
             nodes.append(x)
             weights.append(w)
     return np.concatenate(nodes), np.concatenate(weights)

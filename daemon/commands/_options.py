@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import DataError
 
 CHANNELS_HELP = ("channels to use, by name or number: 'x z' or 'x,z' (default: all)")
@@ -57,3 +58,22 @@ def add_model_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sensor low-pass corner to model on the white noise: a number in "
                              "Hz, 'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
                              "(leave out the short τ it bends; default auto)")
+
+
+def add_run_argument(parser: argparse.ArgumentParser) -> None:
+    """``--run RUN``: only these runs of a recording (runs at different rates are refused
+    together, never averaged: this analyses them one at a time)."""
+    parser.add_argument("--run", action="append", default=None, metavar="RUN",
+                        help="with a recording: only this run (repeatable); runs whose rates "
+                             "differ are refused together, naming them")
+
+
+def analyze_options(args: argparse.Namespace) -> AnalyzeOptions:
+    """The AnalyzeOptions of analyze's and explain's shared arguments."""
+    channels = split_channels(args.channels)
+    return AnalyzeOptions(
+        channels=None if channels is None else tuple(channels),
+        filter_corner_hz=args.filter_corner, estimator=args.estimator,
+        psd=bool(getattr(args, "psd", False)),
+        quantiles=getattr(args, "quantiles", "exact"),
+        noise_id=getattr(args, "noise_id", "avard"))

@@ -7,10 +7,13 @@ Examples:
     avard analyze lab.npz --json > lab.json     # machine-readable (shape in docs/analysis.md)
     avard analyze lab.npz --plot lab.png --export kalibr imu.yaml --export csv adev.csv
     avard analyze lab.npz --psd --plot lab.png      # + spectrum: lab_psd.png, white density
+    avard analyze /var/lib/avard --run RUN          # one run of a recording
 
 DATA is an .npz (accel in m/s², rate_hz), a .csv (header row; t column or --rate), or an avard
-recording (directory or .avr segment). The record is streamed, so its size is not limited by
-memory; progress goes to stderr when it is a terminal.
+recording (directory or .avr segment). Every one is streamed (a recording too: walked frame by
+frame), so its size is not limited by memory; a recording's lost, duplicated or missing
+segments are said, and runs at rates that differ are refused together (--run takes one);
+progress goes to stderr when it is a terminal.
 """
 
 from __future__ import annotations
@@ -19,16 +22,19 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
 from avard.core.errors import DataError
 from avard.core.io.outputs import check_output_file, check_plot_output
+from avard.core.io.source import open_record
 from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
-    split_channels,
+    add_run_argument,
+    analyze_options,
 )
 from avard.daemon.commands.progress import progress_printer
 
@@ -42,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sample rate in Hz (overrides the file's; needed for a csv "
                              "without a t column)")
     add_channels_argument(parser)
+    add_run_argument(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--plot", metavar="FILE.png", help="write the ADEV figure (needs the "
                         "plot extra: matplotlib)")
@@ -134,22 +141,22 @@ def run(args: argparse.Namespace) -> int:
         raise DataError("--quantiles stable32 and --noise-id stable32 are not available with "
                         "--temperature; run analyze without --temperature to compare with "
                         "Stable32")
+    options = analyze_options(args)
+    source = open_record(args.data, rate_hz=args.rate, runs=args.run)
     if args.temperature:
-        # the same analysis (explain runs analyze_stream on the same blocks) plus the thermal
-        # fit on the named channel
+        # the same analysis (explain's base is analyze of the same source with the same
+        # options) plus the thermal fit on the named channel
         from avard.core.explain.engine import explain_file
+        from avard.core.explain.options import ExplainOptions
 
-        ex = explain_file(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
-                          filter_corner_hz=args.filter_corner, progress=progress_printer(),
-                          temperature=args.temperature, heldout=False,
-                          estimator=args.estimator, psd=args.psd)
+        ex = explain_file(source, ExplainOptions(**vars(options), temperature=args.temperature,
+                                                 heldout=False),
+                          progress=progress_printer())
         an = ex.analysis
         comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
     else:
-        an = analyze(args.data, rate_hz=args.rate, channels=split_channels(args.channels),
-                     filter_corner_hz=args.filter_corner, progress=progress_printer(),
-                     estimator=args.estimator, psd=args.psd, quantiles=args.quantiles,
-                     noise_id=args.noise_id, workers=_workers(args.workers))
+        an = analyze(source, replace(options, workers=_workers(args.workers)),
+                     progress=progress_printer())
         comp = {}
     if args.json:
         d = an.to_dict()

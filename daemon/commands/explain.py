@@ -33,7 +33,8 @@ from avard.core.io.outputs import check_output_dir, require_plot_extra
 from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
-    split_channels,
+    add_run_argument,
+    analyze_options,
 )
 
 NAME = "explain"
@@ -53,6 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", metavar="DIR",
                         help="write report.md with plots into DIR (needs matplotlib)")
     add_channels_argument(parser)
+    add_run_argument(parser)
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
     add_model_arguments(parser)
@@ -100,7 +102,9 @@ def _progress() -> tuple[Any, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
     from avard.core.explain.report import summary, write_report
+    from avard.core.io.source import open_record
 
     if args.report:  # before the analysis: a bad folder costs a second, not minutes
         # DIR itself is made, as `mkdir DIR` would; a missing parent is more likely a typo
@@ -113,11 +117,13 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout and not Path(args.holdout).exists():
         raise DataError(f"--holdout {args.holdout} does not exist; give the path of a second "
                         "record of the same sensor")
-    channels = split_channels(args.channels)
+    # both records opened (and a recording scanned) before any analysis
+    options = ExplainOptions(**vars(analyze_options(args)), temperature=args.temperature)
+    source = open_record(args.data, rate_hz=args.rate_hz, runs=args.run)
+    holdout = (None if args.holdout is None
+               else open_record(args.holdout, rate_hz=args.rate_hz))
     progress, stage = _progress()
-    ex = explain_file(args.data, rate_hz=args.rate_hz, channels=channels, progress=progress,
-                      stage=stage, holdout=args.holdout, estimator=args.estimator,
-                      filter_corner_hz=args.filter_corner, temperature=args.temperature)
+    ex = explain_file(source, options, holdout=holdout, progress=progress, stage=stage)
     if args.report:
         path = write_report(ex, args.report)
         log.info("report written to %s", path)

@@ -78,15 +78,15 @@ def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
             name = stem if stem not in names else str(p)
             names[name] = [str(p)]
         return names
-    from avard.core.io.readers import iter_blocks
+    from avard.core.io.source import RecordFormat, open_record
 
     out: dict[str, list[str]] = {}
     for p in paths:
-        if Path(p).suffix != ".npz":
+        info = open_record(p).info
+        if info.format is not RecordFormat.NPZ:
             raise DataError(f"{p}: --by sensor pools .npz records only; give it with --by "
                             "file")
-        meta, _blocks = iter_blocks(p, 1 << 16)
-        sensor = meta.get("sensor")
+        sensor = info.sensor_name
         if not sensor:
             raise DataError(f"{p} names no sensor (no 'sensor' field); use --by file")
         out.setdefault(str(sensor), []).append(str(p))
@@ -117,19 +117,19 @@ def _client(args: argparse.Namespace) -> Any:
 
 def _analyse_group(paths: list[str], args: argparse.Namespace, executor: Executor) -> Analysis:
     from avard.core.analysis.engine import analyze, analyze_records
-    from avard.core.io.readers import iter_blocks
+    from avard.core.analysis.options import AnalyzeOptions
+    from avard.core.io.source import RecordFormat, open_record
 
     channels = split_channels(args.channels)
-    if all(Path(p).suffix == ".npz" for p in paths):
-        n = 0
-        for p in paths:
-            meta, _blocks = iter_blocks(p, 1 << 16)
-            n = max(n, int(meta["n_samples"]))
+    options = AnalyzeOptions(channels=None if channels is None else tuple(channels))
+    sources = [open_record(p, rate_hz=args.rate) for p in paths]
+    if all(s.info.format is RecordFormat.NPZ for s in sources):
+        n = max(int(s.info.n_samples or 0) for s in sources)
         chunks = max(1, min(16, n // CHUNK_SAMPLES))
-        return analyze_records(paths, channels=channels, chunks=chunks, executor=executor)
-    (path,) = paths
+        return analyze_records(sources, options, chunks=chunks, executor=executor)
+    (source,) = sources
     # a CSV or a recording: one task, analyze as it is
-    return executor.submit(analyze, path, rate_hz=args.rate, channels=channels).result()
+    return executor.submit(analyze, source, options).result()
 
 
 def analyse_fleet(groups: dict[str, list[str]], args: argparse.Namespace, executor: Executor,

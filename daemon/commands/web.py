@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) -> int:
     from aiohttp import web
+    from avard.core.io.source import RecordingSource
     from avard.daemon.service.snapshots import fit_snapshot
     from avard.daemon.web.app import Hub, make_app
     from avard.daemon.web.feed import Feed
@@ -111,7 +112,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     state = RunState()
     feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,  # type: ignore[arg-type]
                 fit_interval_s=args.fit_interval,
-                history=None if args.history is None else Path(args.history))
+                history=None if args.history is None else RecordingSource(Path(args.history)))
     hub = Hub(state, refresh_s=args.refresh)
     app = make_app(state, hub, endpoint=args.endpoint)
     runner = web.AppRunner(app, access_log=None)

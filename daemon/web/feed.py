@@ -14,10 +14,10 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from avard.core.errors import FormatError, NetworkError
+from avard.core.io.source import RecordingSource
 from avard.daemon.net.subscriber import Subscriber
 from avard.daemon.web.state import RunState, Snapshot
 
@@ -33,7 +33,8 @@ class Feed:
     """Subscriber thread + fitter thread over one :class:`RunState`."""
 
     def __init__(self, sub: Subscriber, state: RunState, *, fit: FitFn | None,
-                 fit_interval_s: float = 60.0, history: Path | None = None) -> None:
+                 fit_interval_s: float = 60.0,
+                 history: RecordingSource | None = None) -> None:
         self.sub = sub
         self.history = history
         self.state = state
@@ -87,13 +88,13 @@ class Feed:
         finally:
             self.sub.close()
 
-    def _replay_history(self, path: Path) -> None:
-        """Temperatures, gaps and events of the service's recording, oldest first."""
-        from avard.core.io.recording import RecordingReader
-
+    def _replay_history(self, source: RecordingSource) -> None:
+        """Temperatures, gaps and events of the service's recording, oldest first, as the one
+        record source walks it (each run's header once, duplicates dropped)."""
+        path = source.path
         t0, n = time.monotonic(), 0
         try:
-            for rec in RecordingReader(path):
+            for rec in source.records():
                 if self._stop.is_set():
                     return
                 self.state.replay(rec)

@@ -8,6 +8,8 @@ import allantools
 import numpy as np
 from avard.core.allan.deviations import oavar, pavar
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.analysis.options import AnalyzeOptions
+from avard.core.io.source import open_record
 
 
 def test_real_run_streaming_equals_batch_and_allantools(imudata_dir: Path) -> None:
@@ -37,7 +39,7 @@ def test_cli_path_and_python_api_give_one_alpha_and_edf(imudata_dir: Path) -> No
     from avard.core.analysis.engine import analyze
 
     path = imudata_dir / "adis16405_run1.npz"
-    an = analyze(str(path), find_sinusoids=False)
+    an = analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
     with np.load(path) as f:
         accel, rate = f["accel"], float(f["rate_hz"])
     cascade = StreamingAllan(3, rate)

@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 from avard.core.explain import causes as cz
 from avard.core.explain.engine import explain_file
+from avard.core.explain.options import ExplainOptions
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -30,7 +32,8 @@ TRUE = {("warmup", "size"): WARM, ("warmup", "time_constant_s"): T_WARM,
 
 def _explain(tmp_path, seed: int, truth: Truth):
     rec, _ = make_record(seed, hours=HOURS, truth=truth, logged=("ambient",))
-    return explain_file(str(save(rec, tmp_path / f"c{seed}.npz")), heldout=False)
+    return explain_file(open_record(str(save(rec, tmp_path / f"c{seed}.npz"))),
+                        ExplainOptions(heldout=False))
 
 
 def _claimed(ch) -> dict:
@@ -68,7 +71,8 @@ def test_no_heldout_headline_when_every_claimed_cause_is_an_event(tmp_path):
     """A warm-up and a step predict no other data (their held-out gain is near 0 by design),
     so the headline held-out gain is null with that reason; each axis keeps its own χ²."""
     rec, _ = make_record(14, hours=HOURS, truth=BOTH, logged=("ambient",))
-    ex = explain_file(str(save(rec, tmp_path / "e.npz")), channels=["x"])
+    ex = explain_file(open_record(str(save(rec, tmp_path / "e.npz"))),
+                      ExplainOptions(channels=("x",)))
     assert ex.holdout is not None
     assert {f.cause for f in ex.channels["x"].claimed} == {"warmup", "bias_step"}
     d = ex.to_dict()
@@ -148,7 +152,8 @@ def test_the_benchmarks_false_claims_are_not_claimed(tmp_path, seed, row, axis):
 
     case = {c.name: c for c in cases_at_3x(HOURS, 10.0, N, B, K)}[row]
     rec, _ = make_record(seed, hours=HOURS, truth=case.truth, logged=case.logged)
-    ex = explain_file(str(save(rec, tmp_path / "f.npz")), heldout=False)
+    ex = explain_file(open_record(str(save(rec, tmp_path / "f.npz"))),
+                      ExplainOptions(heldout=False))
     ch = ex.channels[axis]
     assert {f.cause for f in ch.claimed} == {case.kind}, [f.evidence for f in ch.claimed]
     (step,) = [f for f in ch.findings if f.cause == "bias_step"]
@@ -290,7 +295,8 @@ def test_a_gauss_markov_bump_from_the_temperature_rounding_is_not_claimed(tmp_pa
 
     case = {c.name: c for c in cases_at_3x(HOURS, 10.0, N, B, K)}["temperature plate 2 min"]
     rec, _ = make_record(99000, hours=HOURS, truth=case.truth, logged=case.logged)
-    ex = explain_file(str(save(rec, tmp_path / "g.npz")), heldout=False)
+    ex = explain_file(open_record(str(save(rec, tmp_path / "g.npz"))),
+                      ExplainOptions(heldout=False))
     ch = ex.channels["x"]
     assert {f.cause for f in ch.claimed} == {"temperature"}
     (gm,) = [f for f in ch.findings if f.cause == "gauss_markov"]

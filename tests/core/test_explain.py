@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.explain.causes import (
     min_detectable_sinusoid,
     min_detectable_step,
@@ -21,7 +22,9 @@ from avard.core.explain.gauss_markov import (
     gm_fisher,
     min_detectable_gauss_markov,
 )
+from avard.core.explain.options import ExplainOptions
 from avard.core.explain.thermal_fit import min_detectable_tempco
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -33,8 +36,8 @@ def _file(tmp_path, seed, truth=None, **kw):
 
 def test_base_model_is_analyzes_fit_of_the_same_file(tmp_path):
     path, _ = _file(tmp_path, 3, Truth(coefficient=(3e-4, 0, 0), lag_s=600.0), hours=2.0)
-    an = analyze(path)
-    ex = explain_file(path)
+    an = analyze(open_record(path))
+    ex = explain_file(open_record(path))
     assert list(ex.channels) == list(an.channels)
     for name, ch in an.channels.items():
         mine = ex.channels[name].base
@@ -70,7 +73,7 @@ def test_thermal_lag_coefficient_and_driving_channel(tmp_path, logged, drive, la
     c = _three_times_minimum(AMBIENT if drive == "ambient" else PLATE, lag_s)
     truth = Truth(coefficient=(c, 0.0, -c), lag_s=lag_s, drive=drive)
     path, _ = _file(tmp_path, 11 + int(lag_s), truth, logged=logged)
-    ex = explain_file(path)
+    ex = explain_file(open_record(path))
     for axis, coef in (("x", c), ("z", -c)):
         ch = ex.channels[axis]
         th = ch.thermal
@@ -106,7 +109,8 @@ def test_long_lag_is_found_on_its_channel(tmp_path, logged):
     c = _three_times_minimum(AMBIENT, 1200.0)
     truth = Truth(coefficient=(c, 0.0, 0.0), lag_s=1200.0, drive="ambient")
     path, _ = _file(tmp_path, 21, truth, logged=logged)
-    th = explain_file(path, channels=["x"], heldout=False).channels["x"].thermal
+    th = explain_file(open_record(path),
+                      ExplainOptions(channels=("x",), heldout=False)).channels["x"].thermal
     assert th is not None and th.passed and th.channel == "ambient"
     assert th.coefficient == pytest.approx(c, rel=0.2)
     assert th.lag_s == pytest.approx(1200.0, rel=0.2)
@@ -114,7 +118,7 @@ def test_long_lag_is_found_on_its_channel(tmp_path, logged):
 
 def test_null_record_is_clean(tmp_path):
     path, _ = _file(tmp_path, 5)
-    ex = explain_file(path)
+    ex = explain_file(open_record(path))
     for ch in ex.channels.values():
         assert not ch.claimed, [f.evidence for f in ch.claimed]
         assert ch.extended is ch.base.fit
@@ -124,7 +128,7 @@ def test_null_record_is_clean(tmp_path):
 def _warmup_case(tmp_path):
     size = 3 * min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
     path, _ = _file(tmp_path, 7, Truth(warmup=(size, 900.0)))
-    return size, explain_file(path)
+    return size, explain_file(open_record(path))
 
 
 def test_warmup_found_with_its_size(tmp_path):
@@ -151,7 +155,7 @@ def test_bias_step_found_where_it_is(tmp_path):
     size = 3 * min_detectable_step(1.6e-4, 2e-5, 2e-6, 4 * 3600.0)
     truth = Truth(step=(5000.0, size))
     path, _ = _file(tmp_path, 8, truth)
-    ex = explain_file(path)
+    ex = explain_file(open_record(path))
     for ch in ex.channels.values():
         claimed = {f.cause: f for f in ch.claimed}
         assert set(claimed) == {"bias_step"}, [f.evidence for f in ch.claimed]
@@ -167,7 +171,7 @@ def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
     path, _ = _file(tmp_path, 31, Truth(coefficient=(c, 0.0, 0.0), lag_s=600.0),
                     logged=("ambient",))
     monkeypatch.setattr(thermal_fit, "SCAN_POINTS", 1024)
-    th = explain_file(path, channels=["x"]).channels["x"].thermal
+    th = explain_file(open_record(path), ExplainOptions(channels=("x",))).channels["x"].thermal
     assert th is not None and th.passed
     assert th.coefficient == pytest.approx(c, rel=0.2)
     assert th.lag_s == pytest.approx(600.0, rel=0.2)
@@ -179,7 +183,7 @@ def test_gauss_markov_bump_as_a_component_of_the_gls_fit(tmp_path):
     GLS fit, the fit improved, σ and T within 20 %."""
     sigma = 3 * min_detectable_gauss_markov(1.6e-4, 2e-5, 2e-6, 10.0, 4 * 3600, 10.0, rel=0.1)
     path, _ = _file(tmp_path, 41, Truth(gauss_markov=(sigma, 10.0)))
-    ex = explain_file(path, heldout=False)
+    ex = explain_file(open_record(path), ExplainOptions(heldout=False))
     for ch in ex.channels.values():
         gm = {f.cause: f for f in ch.claimed}.get("gauss_markov")
         assert gm is not None, [f.evidence for f in ch.findings]
@@ -204,7 +208,7 @@ def test_sinusoid_at_its_stated_minimum(tmp_path, times, found):
     f0 = 0.137
     amp = times * min_detectable_sinusoid(1.6e-4, 2e-5, 2e-6, 4 * 3600, 10.0, f0)
     path, _ = _file(tmp_path, 51, Truth(sinusoid=(amp, f0)), logged=("ambient",))
-    ex = explain_file(path, heldout=False)
+    ex = explain_file(open_record(path), ExplainOptions(heldout=False))
     for ch in ex.channels.values():
         near = [f for f in ch.claimed if f.cause == "sinusoid"
                 and abs(f.params["frequency_hz"] - f0) < 3 * 10.0 / 16384]
@@ -243,8 +247,8 @@ def test_base_model_is_analyzes_fit_of_a_restarted_recording(tmp_path):
         _write_run(tmp_path, f"n0000000{k + 1}-20260101T00000{k}Z-r", i0, 60, seed=40 + k,
                    restart_gap=k > 0, offset=5000.0 * k)
         i0 += 60 * 50
-    an = analyze(str(tmp_path), find_sinusoids=False)
-    ex = explain_file(str(tmp_path), heldout=False)
+    an = analyze(open_record(str(tmp_path)), AnalyzeOptions(find_sinusoids=False))
+    ex = explain_file(open_record(str(tmp_path)), ExplainOptions(heldout=False))
     for name, ch in an.channels.items():
         mine = ex.channels[name].base
         np.testing.assert_array_equal(mine.allan.tau, ch.allan.tau)

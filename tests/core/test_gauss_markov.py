@@ -18,6 +18,8 @@ from avard.core.explain.gauss_markov import (
     scan_directions,
     scan_false_claim_bound,
 )
+from avard.core.explain.options import ExplainOptions
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -75,7 +77,8 @@ def test_null_axis_the_wald_z_took_for_a_bump_is_not_claimed(tmp_path):
     reached 5.0 at T = 135 s (random walk taken over at its bound). The likelihood ratio
     inside the scanned range stays below the threshold: nothing claimed on any axis."""
     rec, _ = make_record(80016)
-    ex = explain_file(str(save(rec, tmp_path / "n.npz")), heldout=False)
+    ex = explain_file(open_record(str(save(rec, tmp_path / "n.npz"))),
+                      ExplainOptions(heldout=False))
     for ch in ex.channels.values():
         gm = next(f for f in ch.findings if f.cause == "gauss_markov")
         assert not gm.claimed and gm.statistic < Z_GAUSS_MARKOV, gm.evidence
@@ -91,11 +94,11 @@ def test_a_bump_at_the_end_of_the_range_is_not_located(tmp_path, monkeypatch):
     w = min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
     rec, _ = make_record(92001, truth=Truth(warmup=(3 * w, 900.0)))
     path = str(save(rec, tmp_path / "w.npz"))
-    ex = explain_file(path, heldout=False)
+    ex = explain_file(open_record(path), ExplainOptions(heldout=False))
     gm = next(f for f in ex.channels["z"].findings if f.cause == "gauss_markov")
     assert not gm.claimed
     monkeypatch.setattr(gmod, "Z_GAUSS_MARKOV", 0.9 * gm.statistic)
-    ex = explain_file(path, heldout=False)
+    ex = explain_file(open_record(path), ExplainOptions(heldout=False))
     gm = next(f for f in ex.channels["z"].findings if f.cause == "gauss_markov")
     assert gm.statistic >= gmod.Z_GAUSS_MARKOV
     assert not gm.claimed and "not located" in gm.evidence, gm.evidence

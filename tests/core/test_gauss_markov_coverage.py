@@ -18,6 +18,8 @@ import math
 import pytest
 from avard.core.explain.engine import explain_file
 from avard.core.explain.gauss_markov import min_detectable_gauss_markov
+from avard.core.explain.options import ExplainOptions
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -43,7 +45,7 @@ def test_gauss_markov_intervals_hold_the_truth_68_percent(tmp_path, T, seed0):
         rec, _ = make_record(seed0 + i, hours=HOURS, rate_hz=RATE, N=N_W, B=B_I, K=K_R,
                              truth=Truth(gauss_markov=(sigma, T)))
         path = save(rec, tmp_path / f"gm{seed0 + i}.npz")
-        ex = explain_file(str(path), heldout=False)
+        ex = explain_file(open_record(str(path)), ExplainOptions(heldout=False))
         path.unlink()
         for ch in ex.channels.values():
             gm = {f.cause: f for f in ch.claimed}.get("gauss_markov")

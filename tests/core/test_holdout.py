@@ -12,6 +12,8 @@ import pytest
 from avard.core.errors import DataError
 from avard.core.explain.engine import explain_file
 from avard.core.explain.holdout import DEFINITION
+from avard.core.explain.options import ExplainOptions
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -27,7 +29,7 @@ def _file(tmp_path, seed, truth=None, **kw):
 def hidden(tmp_path_factory):
     """A 4 h record whose x and y follow the ambient temperature through a 5-minute lag."""
     path = _file(tmp_path_factory.mktemp("ho"), 5, HIDDEN, hours=4.0)
-    return path, explain_file(path)
+    return path, explain_file(open_record(path))
 
 
 def test_hidden_temperature_effect_gains_on_held_out_data(hidden):
@@ -58,7 +60,7 @@ def test_hidden_temperature_effect_gains_on_held_out_data(hidden):
 
 def test_null_record_claims_nothing_and_reports_no_gain(tmp_path):
     path = _file(tmp_path, 6, None, hours=4.0)
-    ex = explain_file(path)
+    ex = explain_file(open_record(path))
     assert all(not ch.claimed for ch in ex.channels.values())
     ho = ex.holdout
     assert ho is not None and ho.gain is None
@@ -75,7 +77,7 @@ def test_second_record_of_the_same_sensor_as_holdout(hidden, tmp_path):
     same hidden effect (another seed, half as long)."""
     path, _ex = hidden
     other = _file(tmp_path, 7, HIDDEN, hours=2.0)
-    ex = explain_file(path, holdout=other)
+    ex = explain_file(open_record(path), holdout=open_record(other))
     ho = ex.holdout
     assert ho is not None and ho.mode == "file" and ho.source == other
     assert ho.gain is not None and ho.gain > 0.8
@@ -90,18 +92,18 @@ def test_holdout_of_another_rate_is_refused_before_any_work(tmp_path):
     path = _file(tmp_path, 8, None, hours=0.5)
     other = _file(tmp_path, 9, None, hours=0.5, rate_hz=20.0)
     with pytest.raises(DataError, match=r"--holdout .*20 Hz.*the data has 10 Hz"):
-        explain_file(path, holdout=other)
+        explain_file(open_record(path), holdout=open_record(other))
 
 
 def test_record_too_short_to_split_says_so(tmp_path):
     path = _file(tmp_path, 10, None, hours=0.2)  # 720 s: 450 blocks of 1.6 s
-    ex = explain_file(path)
+    ex = explain_file(open_record(path))
     assert ex.holdout is not None and ex.holdout.gain is None
     assert "too short to split" in (ex.holdout.why_no_gain or "")
     assert ex.to_dict()["holdout"]["channels"] == {}
     assert np.isfinite(ex.channels["x"].base.fit.chi2_dof)
     # asked not to (analyze --temperature needs only the thermal fit): no held-out measure
-    ex = explain_file(path, heldout=False)
+    ex = explain_file(open_record(path), ExplainOptions(heldout=False))
     assert ex.holdout is None and ex.to_dict()["holdout_gain"] is None
 
 
@@ -109,7 +111,7 @@ def test_a_warmup_is_an_event_and_predicts_no_other_data(tmp_path):
     """A warm-up fitted on the first half leaves the fit of the second half unchanged: there
     both models are the same and so is their held-out χ²; the note says why."""
     path = _file(tmp_path, 31, Truth(warmup=(2.4e-3, 900.0)), hours=4.0)
-    ex = explain_file(path, channels=["x"])
+    ex = explain_file(open_record(path), ExplainOptions(channels=("x",)))
     ch = ex.holdout.channels["x"] if ex.holdout is not None else None
     assert ch is not None and ch.causes == ["warmup"]
     second = next(f for f in ch.folds if f.fit_part == "second half")

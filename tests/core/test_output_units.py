@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import format_table
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.analysis.results import ADEV_UNITS
+from avard.core.io.source import open_record
 from avard.core.sim.presets import make_config
 from avard.core.sim.sim_io import write_npz
 from avard.daemon.cli import main
@@ -27,7 +29,7 @@ def record(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.parametrize("estimator", ["oadev", "cascade"])
 def test_every_per_tau_array_in_the_json_has_an_si_unit(record: Path, estimator: str) -> None:
-    an = analyze(str(record), estimator=estimator)
+    an = analyze(open_record(str(record)), AnalyzeOptions(estimator=estimator))
     for ch in an.to_dict()["channels"].values():
         n_tau = len(ch["tau_s"])
         arrays = {k for k, v in ch.items() if isinstance(v, list) and len(v) == n_tau}
@@ -38,7 +40,7 @@ def test_every_per_tau_array_in_the_json_has_an_si_unit(record: Path, estimator:
 
 
 def test_the_table_says_where_the_adev_values_are(record: Path) -> None:
-    text = format_table(analyze(str(record)))
+    text = format_table(analyze(open_record(str(record))))
     assert "fully overlapping ADEV (OADEV" in text
     assert "--json or --export csv" in text and "m/s²" in text
 
@@ -50,7 +52,7 @@ def test_the_figure_legend_names_the_estimator(record: Path, estimator: str,
     pytest.importorskip("matplotlib")
     from avard.core.plot import _panel, pyplot
 
-    an = analyze(str(record), estimator=estimator)
+    an = analyze(open_record(str(record)), AnalyzeOptions(estimator=estimator))
     fig, ax = pyplot().subplots()
     try:
         _panel(ax, next(iter(an.channels.values())))

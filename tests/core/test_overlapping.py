@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 from avard.core.allan.deviations import oavar
 from avard.core.allan.overlapping import PIECE, OverlappingAllan
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import DataError
+from avard.core.io.source import RecordFormat, RecordInfo, StreamSource, open_record
 
 from .stable32 import all_tau, octave_fixed_white_fm
 from .test_allan import STABLE32, nbs14_1000
@@ -270,7 +272,8 @@ def test_deferred_r_n_is_not_asked_for_where_the_shorter_tau_s_alpha_is_kept() -
 def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypatch,
                                                               caplog) -> None:
     """analyze of a file defers R(n) and reads again only the channel whose long τ B1 calls
-    PM; its result is analyze_stream's, which keeps R(n) in the one pass."""
+    PM; its result is that of a one-shot stream of the same blocks, which keeps R(n) in the
+    one pass."""
     from avard.core.analysis import engine as report
 
     n = 1 << 15
@@ -279,21 +282,22 @@ def test_analyze_of_a_file_reads_a_channel_again_only_for_r_n(tmp_path, monkeypa
     path = tmp_path / "pm_fm.npz"
     np.savez(path, accel=y, rate_hz=10.0, axes=np.array(["pm", "fm"]))
     reads: list[list[int]] = []
-    lazy = report._lazy_segments
+    lazy = report._accel
 
-    def spy(path, block, rate_hz, columns, verify):
+    def spy(source, block, columns, verify=True):
         reads.append(list(columns))
-        return lazy(path, block, rate_hz, columns, verify)
+        return lazy(source, block, columns, verify)
 
-    monkeypatch.setattr(report, "_lazy_segments", spy)
+    monkeypatch.setattr(report, "_accel", spy)
     with caplog.at_level("INFO", logger="avard.core.analysis.engine"):
-        from_file = report.analyze(str(path), find_sinusoids=False)
+        from_file = report.analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
     # the pass over both channels, then the PM channel again for its R(n), said in the log
     assert reads == [[0, 1], [0]]
     assert [r.getMessage().split(" read again")[0] for r in caplog.records] == ["channel pm"]
-    meta = {"rate_hz": 10.0, "names": ["pm", "fm"], "n_samples": n}
-    blocks = ((y[i:i + (1 << 16)], False) for i in range(0, n, 1 << 16))  # the file's blocks
-    kept = report.analyze_stream(meta, blocks, find_sinusoids=False)
+    info = RecordInfo(source="stream", format=RecordFormat.STREAM, rate_hz=10.0,
+                      names=("pm", "fm"), n_samples=n)
+    blocks = ((y[i:i + (1 << 16)], None, False) for i in range(0, n, 1 << 16))  # the file's
+    kept = report.analyze(StreamSource(info, blocks), AnalyzeOptions(find_sinusoids=False))
     pm = from_file.channels["pm"].allan
     assert 2 in pm.alpha[n // pm.m < 30]  # R(n) told white PM in B1's range
     for name in ("pm", "fm"):
@@ -353,10 +357,10 @@ def test_the_oadev_reaches_n_over_4_or_says_where_memory_stopped_it(tmp_path, mo
     rng = np.random.default_rng(5)
     path = tmp_path / "w.npz"
     np.savez(path, accel=rng.normal(0, 1e-3, (n, 3)), rate_hz=100.0)
-    full = report.analyze(str(path), find_sinusoids=False)
+    full = report.analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
     assert int(full.channels["x"].allan.m[-1]) == n // 4 and "oadev_cut" not in full.to_dict()
     monkeypatch.setattr(report, "ring_budget_bytes", lambda: 8 * 3 * (PIECE + 2 * 1024))
-    cut = report.analyze(str(path), find_sinusoids=False)
+    cut = report.analyze(open_record(str(path)), AnalyzeOptions(find_sinusoids=False))
     assert int(cut.channels["x"].allan.m[-1]) == 1024
     d = cut.to_dict()["oadev_cut"]
     assert d["tau_max_s"] == pytest.approx(10.24) and d["tau_full_s"] == pytest.approx(163.84)
@@ -377,12 +381,12 @@ def test_one_pass_per_channel_equals_one_pass_for_all(tmp_path, monkeypatch):
     path = tmp_path / "three.npz"
     np.savez(path, accel=y, rate_hz=50.0)
     assert report.oadev_pass_groups([0, 1, 2], n) == [[0, 1, 2]]
-    one = report.analyze(str(path))
+    one = report.analyze(open_record(str(path)))
     # a budget for one channel's history at a time: three passes over the file
     monkeypatch.setattr(report, "PASS_BUDGET_BYTES", 8 * (2 * (n // 4) + PIECE))
     assert report.oadev_pass_groups([0, 1, 2], n) == [[0], [1], [2]]
     seen: list[tuple[int, int | None]] = []
-    three = report.analyze(str(path), progress=lambda d, t: seen.append((d, t)))
+    three = report.analyze(open_record(str(path)), progress=lambda d, t: seen.append((d, t)))
     assert seen[-1] == (3 * n, 3 * n)
     assert list(three.channels) == ["x", "y", "z"]
     for name in "xyz":
@@ -392,13 +396,13 @@ def test_one_pass_per_channel_equals_one_pass_for_all(tmp_path, monkeypatch):
         assert b.lines == a.lines
         assert b.fit.to_dict() == a.fit.to_dict()
     assert len(three.channels["y"].lines) == 1
-    only_z = report.analyze(str(path), channels=["z"])
+    only_z = report.analyze(open_record(str(path)), AnalyzeOptions(channels=("z",)))
     np.testing.assert_allclose(only_z.channels["z"].allan.var, one.channels["z"].allan.var,
                                rtol=1e-13)
     # a CSV: the first pass takes the rows its reader has already parsed, the others reopen it
     csv = tmp_path / "three.csv"
     csv.write_text("x,y,z\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in y.tolist()))
-    from_csv = report.analyze(str(csv), rate_hz=50.0)
+    from_csv = report.analyze(open_record(str(csv), rate_hz=50.0))
     for name in "xyz":
         np.testing.assert_allclose(from_csv.channels[name].allan.var,
                                    one.channels[name].allan.var, rtol=1e-12)

@@ -10,9 +10,11 @@ import pytest
 from avard.core.allan.noise_id import Lag1Ladder
 from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
 from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.analysis.parallel import Chunk, alignment, plan_chunks
 from avard.core.analysis.spectrum import WelchAccumulator
 from avard.core.errors import DataError
+from avard.core.io.source import open_record
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -174,8 +176,8 @@ def test_analyze_on_workers_equals_one_worker(tmp_path, workers) -> None:
     y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
     path = tmp_path / "r.npz"
     np.savez(path, accel=y, rate_hz=100.0)
-    one = analyze(str(path))
-    par = analyze(str(path), workers=workers)
+    one = analyze(open_record(path))
+    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
     assert par.n_samples == one.n_samples
     for name, ch in one.channels.items():
         a, b = ch.allan, par.channels[name].allan
@@ -202,20 +204,18 @@ def test_analyze_on_workers_reads_r_n_again_as_one_worker(tmp_path) -> None:
     y = np.stack([pm, rng.normal(0, 1e-3, n)], axis=1)
     path = tmp_path / "pm.npz"
     np.savez(path, accel=y, rate_hz=10.0, axes=np.array(["pm", "fm"]))
-    one = analyze(str(path), find_sinusoids=False)
-    par = analyze(str(path), find_sinusoids=False, workers=2)
+    one = analyze(open_record(path), AnalyzeOptions(find_sinusoids=False))
+    par = analyze(open_record(path), AnalyzeOptions(find_sinusoids=False, workers=2))
     for name in ("pm", "fm"):
         a, b = one.channels[name].allan, par.channels[name].allan
         np.testing.assert_array_equal(b.alpha, a.alpha)
         np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
 
 
-def test_workers_must_be_a_positive_whole_number(tmp_path) -> None:
-    path = tmp_path / "w.npz"
-    np.savez(path, accel=np.zeros((4096, 1)), rate_hz=10.0)
-    for bad in (0, -1, 1.5):
+def test_workers_must_be_a_positive_whole_number() -> None:
+    for bad in (0, -1, 1.5, True, "two"):
         with pytest.raises(DataError, match="workers"):
-            analyze(str(path), workers=bad)
+            AnalyzeOptions(workers=bad)
 
 
 def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> None:
@@ -238,7 +238,7 @@ def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> Non
 
     monkeypatch.setattr(parallel, "chunk_part", dies_on_the_second)
     with pytest.raises(AvardError, match=r"worker process .* died"):
-        analyze(str(path), workers=2)
+        analyze(open_record(path), AnalyzeOptions(workers=2))
 
 
 def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeypatch) -> None:

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from avard.core.io.source import open_record
 
 
 def test_the_fitted_range_is_in_the_legend(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -18,7 +19,7 @@ def test_the_fitted_range_is_in_the_legend(tmp_path: Path, monkeypatch: pytest.M
     rng = np.random.default_rng(5)
     data = tmp_path / "w.npz"
     np.savez(data, accel=rng.normal(0, 1e-3, (20000, 1)), rate_hz=100.0)
-    an = analyze(str(data))
+    an = analyze(open_record(str(data)))
     legends: list[list[str]] = []
     save = plot.save_figure
 

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import format_table, psd_csv
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.analysis.psd import WhiteDensity
+from avard.core.io.source import open_record
 from avard.core.model.fit import TermEstimate
 from avard.core.sim.presets import TABLE3_N, make_config
 from avard.core.sim.sim_io import write_npz
@@ -37,7 +39,8 @@ def test_white_density_from_the_psd_agrees_with_n_from_the_fit(tmp_path: Path) -
     and N from the AVAR fit agree within their 68 % intervals on every record, and both hold
     the generator's N to within 1 %."""
     for seed in range(6):
-        an = analyze(str(_record(tmp_path, seed, line=seed == 0)), psd=True)
+        an = analyze(open_record(str(_record(tmp_path, seed, line=seed == 0))),
+                     AnalyzeOptions(psd=True))
         ch = an.channels["x"] if "x" in an.channels else next(iter(an.channels.values()))
         w = ch.psd.white
         assert w is not None and w.n_bins > 1000
@@ -57,7 +60,7 @@ def test_psd_is_one_sided_and_its_band_covers_as_claimed(tmp_path: Path) -> None
     y = rng.normal(scale=2e-3, size=n)  # white: one-sided PSD 2σ²/fs
     p = tmp_path / "w.npz"
     np.savez(p, accel=y[:, None], rate_hz=RATE)
-    an = analyze(str(p), psd=True)
+    an = analyze(open_record(str(p)), AnalyzeOptions(psd=True))
     cp = next(iter(an.channels.values())).psd
     inner = slice(2, len(cp.f) - 2)
     truth = 2 * 2e-3**2 / RATE
@@ -82,7 +85,7 @@ def _strong_flicker(tmp: Path, seed: int) -> dict[str, float]:
     a = white(n, RATE, N_TRUE, rng) + flicker_spectral(n, RATE, B_STRONG, rng)
     p = tmp / f"bf{seed}.npz"
     np.savez(p, accel=a[:, None], rate_hz=RATE)
-    ch = next(iter(analyze(str(p), psd=True).channels.values()))
+    ch = next(iter(analyze(open_record(str(p)), AnalyzeOptions(psd=True)).channels.values()))
     w = ch.psd.white
     assert w is not None and w.n_bins > 1000 and w.others_share > 0.02
     return _row(w, ch.fit.terms["velocity_random_walk"], N_TRUE)
@@ -145,7 +148,7 @@ def _table3_record(tmp: Path, seed: int) -> dict[str, dict]:
     """0.2 h of the paper-table3 preset (125 Hz, chip low-pass at 31.25 Hz, LSB rounding)."""
     p = tmp / f"t3_{seed}.npz"
     write_npz(p, make_config("paper-table3"), 0.2, seed)
-    return analyze(str(p), psd=True).channels
+    return analyze(open_record(str(p)), AnalyzeOptions(psd=True)).channels
 
 
 def _table3_truth(k: int) -> float:
@@ -215,7 +218,7 @@ def test_the_fit_as_a_spectrum_matches_the_welch_psd_and_is_drawn(tmp_path: Path
     a = white(n, RATE, N_TRUE, rng) + flicker_spectral(n, RATE, B_STRONG, rng)
     p = tmp_path / "m.npz"
     np.savez(p, accel=a[:, None], rate_hz=RATE)
-    ch = next(iter(analyze(str(p), psd=True).channels.values()))
+    ch = next(iter(analyze(open_record(str(p)), AnalyzeOptions(psd=True)).channels.values()))
     cp = ch.psd
     for lo, hi, tol in ((0.05, 1.0, 0.10), (2.0, 40.0, 0.03)):
         band = (cp.f >= lo) & (cp.f <= hi)

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
@@ -21,6 +22,7 @@ from avard.core.io.recording import (
     replay_allan,
     walk,
 )
+from avard.core.io.source import open_record
 from avard.daemon.service.recorder import Recorder
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -169,7 +171,8 @@ def test_analyze_splits_at_restarts_exactly_as_the_service_accumulators(tmp_path
     assert rec.meta["segment_bounds"] == [0, 1500, 3000, 4500, 6000]
     service = replay_allan(tmp_path).result()
     # the service's estimator (the streaming cascade); analyze's default is the full OADEV
-    result = analyze(str(tmp_path), find_sinusoids=False, estimator="cascade")
+    result = analyze(open_record(str(tmp_path)),
+                     AnalyzeOptions(find_sinusoids=False, estimator="cascade"))
     for c, name in enumerate("xyz"):
         ours = result.channels[name].allan
         theirs = service.channel(c)
@@ -246,7 +249,7 @@ def test_avard_analyze_names_the_lost_and_duplicated_samples(tmp_path, capsys):
     lost = f"[{victim['i0']}, {victim['i0'] + BLOCK})"
     assert cli.main(["analyze", str(tmp_path)]) == 0
     table = capsys.readouterr().out
-    assert f"{BLOCK} samples lost to damage at indices {lost}" in table
+    assert f"{BLOCK} samples lost (damage or missing segments) at {lost}" in table
     assert "duplicated samples counted once" in table
     assert cli.main(["analyze", str(tmp_path), "--json"]) == 0
     rec = json.loads(capsys.readouterr().out)["recording"]

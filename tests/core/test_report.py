@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.analysis.spectrum import WelchAccumulator, find_lines
 from avard.core.errors import DataError
+from avard.core.io.source import RecordFormat, open_record
 from avard.core.model.terms import TERMS, UNITS
 
 from .test_fit import record
@@ -140,7 +142,7 @@ def test_find_lines_no_false_lines_on_a_red_spectrum_and_finds_a_low_line() -> N
 
 
 def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
-    an = analyze(str(lab_npz))
+    an = analyze(open_record(str(lab_npz)))
     d = json.loads(json.dumps(an.to_dict(), allow_nan=False))
     assert set(d) == {"source", "rate_hz", "n_samples", "estimator", "estimator_description",
                       "channels"}
@@ -178,7 +180,7 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
 
 
 def test_table_csv_and_kalibr(lab_npz: Path) -> None:
-    an = analyze(str(lab_npz), channels=["z"])
+    an = analyze(open_record(str(lab_npz)), AnalyzeOptions(channels=("z",)))
     assert list(an.channels) == ["z"]
     text = format_table(an)
     assert "velocity_random_walk (N)" in text and "m/s/sqrt(s)" in text
@@ -207,16 +209,17 @@ def test_table_csv_and_kalibr(lab_npz: Path) -> None:
 
 def test_unknown_channel_and_short_record(tmp_path: Path, lab_npz: Path) -> None:
     with pytest.raises(DataError, match="channel 'q'"):
-        analyze(str(lab_npz), channels=["q"])
+        analyze(open_record(str(lab_npz)), AnalyzeOptions(channels=("q",)))
     p = tmp_path / "short.npz"
     np.savez(p, accel=np.zeros((10, 3)), rate_hz=10.0)
     with pytest.raises(DataError, match="samples"):
-        analyze(str(p))
+        analyze(open_record(str(p)))
 
 
 def test_progress_is_reported_per_block(lab_npz: Path) -> None:
     seen: list[tuple[int, int | None]] = []
-    analyze(str(lab_npz), progress=lambda d, t: seen.append((d, t)), block=20_000)
+    analyze(open_record(str(lab_npz)),
+            AnalyzeOptions(block=20_000), progress=lambda d, t: seen.append((d, t)))
     assert seen[-1] == (1 << 17, 1 << 17) and len(seen) == math.ceil((1 << 17) / 20_000)
 
 
@@ -224,14 +227,15 @@ def test_plot_writes_a_figure(tmp_path: Path, lab_npz: Path) -> None:
     pytest.importorskip("matplotlib")
     from avard.core.plot import plot_analysis
 
-    an = analyze(str(lab_npz))
+    an = analyze(open_record(str(lab_npz)))
     out = plot_analysis(an, tmp_path / "f.png")
     data = out.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
 
 
 def test_real_imudata_analysis(imudata_dir: Path) -> None:
-    an = analyze(str(imudata_dir / "adis16405_run2.npz"), channels=["x"])
+    an = analyze(open_record(str(imudata_dir / "adis16405_run2.npz")),
+                 AnalyzeOptions(channels=("x",)))
     fit = an.channels["x"].fit
     n = fit.terms["velocity_random_walk"]
     assert n.present and 1e-3 < n.value < 1e-2  # ADIS16405: a few mm/s/√s
@@ -267,8 +271,9 @@ def test_recording_of_the_service_is_analysed_with_its_gap(tmp_path: Path) -> No
     seg = tmp_path / "rec" / "run-1_0000.avr"
     seg.parent.mkdir()
     seg.write_bytes(b"".join(recording.frame(frames.encode(r)) for r in recs))
-    an = analyze(str(seg.parent))
-    assert an.meta["format"] == "recording" and an.meta["n_segments"] == 2
+    an = analyze(open_record(str(seg.parent)))
+    assert an.info is not None and an.info.format is RecordFormat.RECORDING
+    assert an.info.recording is not None and an.info.recording.n_segments == 2
     assert an.meta["filter_corner_hz"] == pytest.approx(rate / 4)
     assert an.n_samples == 40 * n_blk
     fit = an.channels["x"].fit

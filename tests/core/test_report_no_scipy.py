@@ -17,7 +17,8 @@ PROBE = """
 import json, sys
 import avard.core.analysis.engine as r
 from avard.core.analysis.formats import format_table
-an = r.analyze(sys.argv[1])
+from avard.core.io.source import open_record
+an = r.analyze(open_record(sys.argv[1]))
 table = format_table(an)
 print(json.dumps({
     "scipy": sorted(m for m in sys.modules if m == "scipy" or m.startswith("scipy.")),

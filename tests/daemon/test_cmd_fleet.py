@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core.analysis.engine import analyze
+from avard.core.analysis.engine import analyze, analyze_records
+from avard.core.io.source import open_record
 from avard.daemon.cli import main
 
 pytest.importorskip("distributed")
@@ -61,7 +62,7 @@ def test_fleet_on_a_local_cluster_equals_analyze_and_flags_the_two_outliers(
     # every sensor's terms are avard analyze's of its file alone
     rows = {(r["sensor"], r["channel"]): r for r in d["sensors"]}
     for p in fleet:
-        an = analyze(str(p))
+        an = analyze(open_record(p))
         for name, ch in an.channels.items():
             row = rows[(p.stem, name)]
             for term, e in ch.fit.terms.items():
@@ -76,8 +77,6 @@ def test_fleet_on_a_local_cluster_equals_analyze_and_flags_the_two_outliers(
 
 def test_by_sensor_pools_a_sensors_records(fleet: list[Path], tmp_path: Path) -> None:
     """--by sensor: two records naming one sensor are pooled as segments of one record."""
-    from avard.core.analysis.engine import analyze_records
-
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
     for p, seed in ((a, 1), (b, 2)):
         rng = np.random.default_rng(seed)
@@ -89,7 +88,8 @@ def test_by_sensor_pools_a_sensors_records(fleet: list[Path], tmp_path: Path) ->
     assert out.returncode == 0, out.stderr
     d = json.loads(out.stdout)
     pooled = next(r for r in d["sensors"] if r["sensor"] == "same" and r["channel"] == "x")
-    ref = analyze_records([str(a), str(b)]).channels["x"].fit.terms["velocity_random_walk"]
+    ref = analyze_records([open_record(a), open_record(b)]).channels["x"].fit.terms[
+        "velocity_random_walk"]
     assert pooled["hours"] == pytest.approx(2 * N / RATE / 3600)
     assert pooled["terms"]["velocity_random_walk"]["value"] == pytest.approx(ref.value,
                                                                             rel=1e-9)

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.io import frames
+from avard.core.io.source import RecordingSource
 from avard.daemon.commands.web import is_loopback, parse_listen
 from avard.daemon.net.subscriber import LossTracker
 from avard.daemon.web import render
@@ -555,7 +556,8 @@ def test_history_from_the_recording_comes_first_and_live_records_are_not_counted
     live = a_run(new, i0=1125, blocks=3, seq0=1)
     sub = FakeSubscriber(live, {"run": new, "nominal_odr_hz": RATE, "i0": 1000})
     state = RunState()
-    f = Feed(sub, state, fit=None, history=tmp_path)  # type: ignore[arg-type]
+    f = Feed(sub, state, fit=None,  # type: ignore[arg-type]
+             history=RecordingSource(tmp_path))
     f.start()
     deadline = time.monotonic() + 10
     while sub.records and time.monotonic() < deadline:

@@ -15,7 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult
-from avard.core.analysis.engine import analyze_stream
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
+from avard.core.io.source import RecordBlock, RecordFormat, RecordInfo, StreamSource
 from avard.core.model.fit import NoiseFit, slope_method
 from avard.core.model.terms import BI_FACTOR
 from avard.core.sim.presets import (
@@ -103,24 +105,26 @@ def analyse_record(
     progress: Callable[[int, int | None], None] | None = None,
 ) -> list[AxisAnalysis]:
     """Simulate ``hours`` of ``config`` and analyse it exactly as ``avard analyze`` does a
-    simulated record (``report.analyze_stream``: streaming Allan accumulator, line search,
+    simulated record (``analyze`` of a ``StreamSource``: streaming Allan accumulator, line search,
     fit with the chip filter modelled at ODR/4 from two samples on), without writing the
     record to disk; read each axis with the slope method too."""
     sim = SensorSimulator(config, seed)
     total = n_samples(config, hours)
 
-    def blocks() -> Iterator[tuple[np.ndarray, bool]]:
+    def blocks() -> Iterator[RecordBlock]:
         done = 0
         while done < total:
             c = sim.next(min(chunk, total - done))
             done += len(c)
-            yield c.counts * config.lsb_mps2, False       # what the sensor reports, m/s²
+            yield c.counts * config.lsb_mps2, None, False       # what the sensor reports, m/s²
 
-    meta = {"rate_hz": config.rate_hz, "names": list(config.axes), "n_samples": total,
-            "odr_nominal_hz": config.odr_hz, "lsb_mps2": config.lsb_mps2,
-            "source": f"simulated {config.preset}"}
-    an = analyze_stream(meta, blocks(), find_sinusoids=find_sinusoids, progress=progress,
-                        fit_kwargs={"ci": ci})
+    # a simulated ADXL355: its LSB and its low-pass corner (ODR/4) travel with the blocks
+    info = RecordInfo(source=f"simulated {config.preset}", format=RecordFormat.STREAM,
+                      rate_hz=config.rate_hz, names=tuple(config.axes), n_samples=total,
+                      lsb_mps2=config.lsb_mps2, sensor_name=config.preset,
+                      sensor_model="ADXL355", filter_corner_hz=config.rate_hz / 4.0)
+    an = analyze(StreamSource(info, blocks()),
+                 AnalyzeOptions(find_sinusoids=find_sinusoids, ci=ci), progress=progress)
     out = []
     for a, axis in enumerate(config.axes):
         ca = an.channels[axis]

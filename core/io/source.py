@@ -1,0 +1,963 @@
+"""The one record source of every command: a typed description and a re-iterable block stream.
+
+``open_record(path)`` gives a :class:`RecordSource` for an ``.npz``, a ``.csv`` or an avard
+recording (a directory of segment files, or one ``.avr`` segment) alike:
+
+* ``source.info`` is a frozen :class:`RecordInfo`: where it came from, its format (an enum,
+  never a string to compare), the sensor, the rate with its standard uncertainty, the
+  channels, the sample count, the LSB, the sensor's own low-pass corner when known, and for a
+  recording the summary of its runs, losses, gaps and duplicates (:class:`RecordingSummary`).
+* ``source.blocks(...)`` streams (accel (n, C) m/s², temperature (n, k) °C or None, True where
+  a segment ends) and may be called again: a consumer may read the record (or some of its
+  channels) once more. Memory stays at one block whatever the record's length; a recording
+  is walked frame by frame (``recording.walk``), never loaded whole.
+
+A recording is scanned once when it is opened (no samples kept): every run's rate, where the
+sample index jumps without a gap record (a missing, emptied or replaced segment: a loss, in
+samples, with the files it lies between), and what was read twice. Runs whose fitted rates do
+not agree by the one rule of :mod:`avard.core.io.rates` are refused, naming them, unless
+``runs=`` picks compatible ones: they are never averaged. One WARNING line per run says what
+was lost or duplicated; the detail is in ``info.recording`` (and analyze's JSON).
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import os
+import re
+import zlib
+from array import array
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from avard.core.errors import DataError, FormatError
+from avard.core.io.rates import format_rate, rates_compatible
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from avard.core.io.recording import Frame, Problem
+
+__all__ = ["BLOCK", "Duplicate", "Gap", "Loss", "RecordBlock", "RecordFormat", "RecordInfo",
+           "RecordSource", "RecordingSummary", "RunSummary", "StreamSource", "open_record"]
+
+log = logging.getLogger(__name__)
+
+#: Samples per block a source yields by default.
+BLOCK = 1 << 16
+
+#: (accel block (n, C) m/s², temperature block (n, k) °C or None, True where a segment ends:
+#: no Allan difference or spectrum segment spans what follows)
+RecordBlock = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
+
+
+class RecordFormat(enum.Enum):
+    """What a record was read from."""
+
+    NPZ = "npz"
+    CSV = "csv"
+    RECORDING = "recording"      # the service's recording (segment files)
+    STREAM = "stream"            # blocks from anywhere (the simulator, a test)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """One run of a recording: its rate (Hz) with its standard uncertainty, its samples and
+    what damage or deletion cost it. ``rate_fitted`` False: the run ended before the
+    service's fit of the output rate was ready, so its header carries the nominal ODR
+    (``nominal_hz``) and no uncertainty."""
+
+    run: str
+    rate_hz: float
+    rate_u_hz: float
+    first_index: int
+    n_samples: int
+    samples_lost: int
+    samples_duplicated: int
+    rate_fitted: bool = True
+    nominal_hz: float | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "rate_hz": self.rate_hz, "rate_u_hz": self.rate_u_hz,
+                "rate_fitted": self.rate_fitted, "nominal_hz": self.nominal_hz,
+                "first_index": self.first_index, "n_samples": self.n_samples,
+                "samples_lost": self.samples_lost,
+                "samples_duplicated": self.samples_duplicated}
+
+    def rate_text(self) -> str:
+        return (format_rate(self.rate_hz, self.rate_u_hz) if self.rate_fitted
+                else f"{self.rate_hz:g} Hz (nominal, not fitted yet)")
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Samples ``[i0, i0 + n)`` of run ``run`` the recording lacks without a gap record saying
+    why: damage (``cause``), or a missing, empty or replaced segment; ``where`` names the
+    files around them."""
+
+    run: str
+    i0: int
+    n: int
+    cause: str
+    where: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "cause": self.cause,
+                "where": self.where}
+
+
+@dataclass(frozen=True)
+class Duplicate:
+    """Samples ``[i0, i0 + n)`` read again in ``where`` (counted once)."""
+
+    run: str
+    i0: int
+    n: int
+    where: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "where": self.where}
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A gap record: samples ``[i0, i0 + n)`` the service knew it missed, and why."""
+
+    run: str
+    i0: int
+    n: int
+    reason: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"run": self.run, "i0": self.i0, "n": self.n, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a recording holds beyond its samples: the runs read (in order), every loss,
+    duplicate and gap record, the segments the accumulators saw (split at every gap record,
+    run change and index jump), the files, and the frames the reader skipped."""
+
+    runs: tuple[RunSummary, ...]
+    losses: tuple[Loss, ...]
+    duplicates: tuple[Duplicate, ...]
+    gaps: tuple[Gap, ...]
+    n_segments: int
+    files: tuple[str, ...]
+    problems: tuple[str, ...]
+    dropped_bytes: int
+
+    @property
+    def samples_lost(self) -> int:
+        return sum(x.n for x in self.losses)
+
+    @property
+    def samples_duplicated(self) -> int:
+        return sum(x.n for x in self.duplicates)
+
+    def to_dict(self) -> dict[str, object]:
+        """The ``recording`` part of analyze's JSON."""
+        return {"segments": self.n_segments, "gap_records": len(self.gaps),
+                "samples_lost": self.samples_lost,
+                "losses": [x.to_dict() for x in self.losses],
+                "samples_duplicated": self.samples_duplicated,
+                "duplicates": [x.to_dict() for x in self.duplicates],
+                "runs": [r.to_dict() for r in self.runs],
+                "gaps": [g.to_dict() for g in self.gaps],
+                "problems": list(self.problems), "dropped_bytes": self.dropped_bytes}
+
+
+@dataclass(frozen=True)
+class RecordInfo:
+    """A record's description, known before its samples are read. ``rate_hz`` in Hz with its
+    standard uncertainty ``rate_u_hz`` (0: unknown); ``n_samples`` None when unknown (a CSV);
+    ``lsb_mps2`` the quantisation step in m/s² when the record says it; ``filter_corner_hz``
+    the sensor's own low-pass corner (the ADXL355's ODR/4) when the record says it is one,
+    so every path that fits the record models the same filter."""
+
+    source: str
+    format: RecordFormat
+    rate_hz: float
+    names: tuple[str, ...]
+    temperature_names: tuple[str, ...] = ()
+    n_samples: int | None = None
+    rate_u_hz: float = 0.0
+    lsb_mps2: float | None = None
+    sensor_name: str | None = None
+    sensor_model: str | None = None
+    filter_corner_hz: float | None = None
+    has_gyro: bool = False
+    recording: RecordingSummary | None = None
+
+    def as_meta(self) -> dict[str, Any]:
+        """The description as the plain dictionary older code reads (explain's internals,
+        ``Analysis.meta``): new code reads the fields."""
+        meta: dict[str, Any] = {
+            "format": self.format.value, "source": self.source, "rate_hz": self.rate_hz,
+            "rate_u_hz": self.rate_u_hz, "names": list(self.names),
+            "temperature_names": list(self.temperature_names), "n_samples": self.n_samples,
+            "lsb_mps2": self.lsb_mps2, "sensor": self.sensor_name,
+            "sensor_model": self.sensor_model, "has_gyro": self.has_gyro,
+            "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"}}
+        if self.recording is not None:
+            meta["n_segments"] = self.recording.n_segments
+        return meta
+
+
+class RecordSource(Protocol):
+    """A record: its description and its blocks, readable as often as a consumer needs
+    (``rereadable`` False: a one-shot stream, read once)."""
+
+    @property
+    def info(self) -> RecordInfo: ...
+
+    @property
+    def rereadable(self) -> bool: ...
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]: ...
+
+
+def _check_block(block: int) -> None:
+    if block < 1:
+        raise DataError(f"block size {block} must be >= 1 sample")
+
+
+def _check_columns(columns: Sequence[int] | None, info: RecordInfo) -> None:
+    n = len(info.names)
+    if columns is not None and any(not 0 <= int(c) < n for c in columns):
+        raise DataError(f"{info.source}: accel columns {list(columns)} asked for, the record "
+                        f"has {n} (0..{n - 1})")
+
+
+# ---------------------------------------------------------------------------------------------
+# blocks from anywhere
+
+
+class StreamSource:
+    """Blocks from anywhere (the simulator, a test) with their description: read once."""
+
+    rereadable = False
+
+    def __init__(self, info: RecordInfo, blocks: Iterable[RecordBlock]) -> None:
+        self._info = info
+        self._blocks: Iterable[RecordBlock] | None = blocks
+
+    @property
+    def info(self) -> RecordInfo:
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        """The blocks as given (``block`` does not re-cut them); a second call is refused."""
+        if self._blocks is None:
+            raise DataError(f"{self._info.source}: a stream can be read once only")
+        _check_columns(columns, self._info)
+        blocks, self._blocks = self._blocks, None
+        cols = None if columns is None else list(columns)
+        for a, t, end in blocks:
+            yield (a if cols is None else a[:, cols]), (t if temperature else None), end
+
+
+# ---------------------------------------------------------------------------------------------
+# .npz and .csv: the file readers of readers.py
+
+
+class FileSource:
+    """An ``.npz`` or ``.csv`` file, streamed by :func:`avard.core.io.readers.iter_blocks`
+    (one segment: a file has no gaps)."""
+
+    rereadable = True
+
+    def __init__(self, path: Path, rate_hz: float | None) -> None:
+        from avard.core.io.readers import record_info
+
+        self.path, self._rate = path, rate_hz
+        meta = record_info(path, rate_hz=rate_hz)
+        fmt = RecordFormat(meta["format"])
+        odr = meta.get("odr_nominal_hz")
+        rate = float(meta["rate_hz"])
+        lsb = meta.get("lsb_mps2")
+        preset = meta.get("preset")
+        # avard's simulator writes odr_nominal_hz: its records are an ADXL355's, filter and all
+        adxl = odr is not None
+        self._info = RecordInfo(
+            source=str(path), format=fmt, rate_hz=rate, names=tuple(meta["names"]),
+            temperature_names=tuple(meta["temperature_names"]),
+            n_samples=None if meta["n_samples"] is None else int(meta["n_samples"]),
+            lsb_mps2=float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0
+            else None,
+            # the file's own 'sensor' field (avard fleet --by sensor), else the preset's name
+            sensor_name=(str(meta["sensor"]) if meta.get("sensor") is not None
+                         else str(preset) if preset is not None else None),
+            sensor_model="ADXL355" if adxl else None,
+            filter_corner_hz=rate / 4.0 if adxl else None,
+            has_gyro=bool(meta.get("has_gyro")))
+
+    @property
+    def info(self) -> RecordInfo:
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        from avard.core.io.readers import iter_blocks
+
+        _check_block(block)
+        _check_columns(columns, self._info)
+        _meta, it = iter_blocks(self.path, block, rate_hz=self._rate, columns=columns,
+                                temperature=temperature, verify=verify)
+        for a, t in it:
+            yield a, t, False
+
+
+# ---------------------------------------------------------------------------------------------
+# recordings: walked frame by frame
+
+
+_SEGMENT_NAME = re.compile(r"^(?P<run>.+)_(?P<seq>\d{4,})_[^_]*$")
+
+
+@dataclass(frozen=True)
+class _SegmentFile:
+    path: Path
+    run: str | None
+    seq: int | None
+    state: str            # "ok", "empty" or "not a file"
+
+
+def _segment_entries(p: Path) -> list[_SegmentFile]:
+    """Every ``*.avr`` entry of a recording directory, readable or not: an emptied segment or
+    a directory in a segment's place is named when a loss lies where it was."""
+    from avard.core.io.recording import SEGMENT_SUFFIX
+
+    if not p.is_dir():
+        return []
+    out = []
+    for f in sorted(p.iterdir()):
+        if f.suffix != SEGMENT_SUFFIX:
+            continue
+        m = _SEGMENT_NAME.match(f.stem)
+        state = ("not a file" if not f.is_file()
+                 else "empty" if f.stat().st_size == 0 else "ok")
+        out.append(_SegmentFile(f, m["run"] if m else None, int(m["seq"]) if m else None,
+                                state))
+    return out
+
+
+def _between(entries: list[_SegmentFile], run: str, a: str | None, b: str | None) -> str:
+    """Where samples of ``run`` went missing between file ``a`` and file ``b`` (None: the
+    run's start or end), with what the directory shows there."""
+    by_name = {str(e.path): e for e in entries}
+    ea, eb = by_name.get(a or ""), by_name.get(b or "")
+    lo = ea.seq if ea is not None and ea.run == run else None
+    hi = eb.seq if eb is not None and eb.run == run else None
+    mine = {e.seq: e for e in entries if e.run == run and e.seq is not None}
+    said = []
+    if lo is not None:
+        top = hi if hi is not None else max(mine, default=lo) + 1
+        for s in range(lo + 1, top):
+            e = mine.get(s)
+            said.append(f"segment {s:04d} " + ("missing" if e is None else
+                                               f"{e.state} ({e.path.name})"))
+    place = (f"between {Path(a).name} and {Path(b).name}" if a and b
+             else f"after {Path(a).name}" if a else f"before {Path(b).name}" if b
+             else "in the recording")
+    return place + (": " + ", ".join(said) if said else "")
+
+
+#: One raw block as the blocks assemble it: (first index, counts (n, 3) int32, scale m/s² per
+#: count, a segment ends before it).
+_Piece = tuple[int, NDArray[np.int32], float, bool]
+
+
+#: Record kinds that hold no samples and no sample index the scan needs.
+_NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
+
+
+def _peek_kind(payload: bytes) -> str | None:
+    """The ``kind`` of an encoded record from its first bytes (frames.encode writes it first:
+    a map, the key "kind", a short string), or None when it is not laid out so."""
+    if not payload:
+        return None
+    b0 = payload[0]
+    i = 1 if 0x80 <= b0 <= 0x8F else 3 if b0 == 0xDE else 5 if b0 == 0xDF else -1
+    if i < 0 or payload[i:i + 5] != b"\xa4kind" or len(payload) <= i + 5:
+        return None
+    size = payload[i + 5] - 0xA0
+    if not 0 <= size < 32:
+        return None
+    return payload[i + 6:i + 6 + size].decode("ascii", "replace")
+
+
+def _counts_offset(fr: Frame, counts: Any, header_bytes: int) -> int:
+    """Byte offset in the file of a raw record's counts (little-endian int32, 3 columns, C
+    order), found in its frame's payload; -1 when they are stored otherwise (the general path
+    then reads such a recording). Any occurrence of the very bytes is the same data."""
+    if not (isinstance(counts, np.ndarray) and counts.dtype == np.dtype("<i4")
+            and counts.ndim == 2 and counts.shape[1] == 3 and counts.size):
+        return -1
+    at = fr.payload.find(counts.tobytes())
+    return -1 if at < 0 else fr.offset + header_bytes + at
+
+
+class _Plan:
+    """Where each kept raw block's counts lie, in walk order: compact columns (about 25
+    bytes a block: 10 MB for 60 h of 0.5 s blocks)."""
+
+    def __init__(self) -> None:
+        self.fidx = array("H")
+        self.off = array("q")
+        self.i0 = array("q")
+        self.n = array("I")
+        self.sidx = array("H")
+        self.cut = array("B")
+        self.scales: list[float] = []
+        self.ok = True
+
+    def add(self, at: tuple[int, int, int] | None, i0: int, n: int, scale: float,
+            cut: bool) -> None:
+        if (not self.ok or at is None or at[1] < 0 or at[0] >= 1 << 16
+                or len(self.scales) >= (1 << 16) - 1):
+            self.ok = False
+            return
+        if not self.scales or self.scales[-1] != scale:
+            self.scales.append(scale)
+        self.fidx.append(at[0])
+        self.off.append(at[1] + 12 * (i0 - at[2]))    # a part of a duplicated block
+        self.i0.append(i0)
+        self.n.append(n)
+        self.sidx.append(len(self.scales) - 1)
+        self.cut.append(cut)
+
+
+class _RunTally:
+    """What the scan counts for one run."""
+
+    def __init__(self) -> None:
+        self.first = -1          # the run's first sample index read
+        self.n = 0
+        self.lost = 0
+        self.dup = 0
+
+
+class RecordingSource:
+    """An avard recording, walked frame by frame (``recording.walk``): never held whole.
+
+    Opening scans it once (no samples kept): the runs and their rates, the sample count, the
+    losses (damage, and every jump of a run's sample index that no gap record explains: a
+    missing, emptied or replaced segment), the duplicates, and a read plan (where each kept
+    raw block's counts lie), so later reads take only those bytes. Temperatures are read
+    the first time a consumer asks for them. ``runs`` keeps only those runs."""
+
+    rereadable = True
+
+    def __init__(self, path: Path, rate_hz: float | None = None,
+                 runs: Sequence[str] | None = None) -> None:
+        self.path = path
+        self.runs = None if runs is None else frozenset(runs)
+        self._rate_hz = rate_hz
+        self._info: RecordInfo | None = None
+        self._temps: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None
+        self._ends: dict[str, int] = {}          # bytes of each file the scan read
+        self._plan: _Plan | None = None          # where the scan found each kept block
+        self.files: list[Path] = []
+        self.entries: list[_SegmentFile] = []
+
+    def records(self) -> Iterator[dict[str, Any]]:
+        """The recording's records as ``recording.walk`` gives them (each run's header once,
+        duplicates dropped), the files as they are now: what ``avard web --history``
+        replays. Needs no scan."""
+        from avard.core.io.recording import segment_files
+
+        self.files = segment_files(self.path)
+        self._ends = {}
+        return self._walk()
+
+    # -- the walk both the scan and the blocks use -------------------------------------------
+    def _walk(self, problems: list[Problem] | None = None, report: Any = None,
+              where: list[str] | None = None, tag: bool = False,
+              skip: frozenset[str] = frozenset()) -> Iterator[dict[str, Any]]:
+        """The records of ``walk`` over this recording's files. The reader's problems go to
+        ``problems`` (reported once, by the scan), not to the log at every pass; ``where``
+        is kept at the file being read. ``tag``: each raw record gets ``_at`` = (file number,
+        byte offset of its counts in that file or -1, its first index), what the scan's read
+        plan needs (the walk passes it through, also to the parts of a duplicated block).
+        ``skip``: record kinds not decoded at all (the scan needs no temperatures, Allan
+        snapshots or checkpoints: two thirds of a recording's decoding)."""
+        from avard.core.io.recording import FRAME_HEADER, RecordingReader, walk
+
+        sink = problems if problems is not None else []
+
+        class _Reader(RecordingReader):
+            last: Frame | None = None
+            number = 0
+
+            def _report(self, local: list[Problem]) -> None:
+                while local:
+                    prob = local.pop(0)
+                    self.problems.append(prob)
+                    sink.append(prob)
+
+            def frames(self) -> Iterator[Frame]:
+                for k, f in enumerate(self.files):
+                    self.number = k
+                    if where is not None:
+                        where[0] = str(f)
+                    for fr in _one_file(self, f, ends):
+                        if skip and _peek_kind(fr.payload) in skip:
+                            continue        # CRC-checked, not decoded: no samples in it
+                        self.last = fr
+                        yield fr
+
+            def __iter__(self) -> Iterator[dict[str, Any]]:
+                for rec in super().__iter__():
+                    if tag and rec["kind"] == "raw" and self.last is not None:
+                        rec["_at"] = (self.number, _counts_offset(self.last, rec["counts"],
+                                                                  FRAME_HEADER.size),
+                                      int(rec["i0"]))
+                    yield rec
+
+        # the scan notes how far it read each file; later reads stop there, so a recording
+        # the service is still appending to reads as the scan found it
+        ends = self._ends
+        reader = _Reader(self.path)
+        reader.files = list(self.files)
+        return walk(reader, report)
+
+    def _scan(self, rate_hz: float | None) -> RecordInfo:
+        """The scan, with the walk's own WARNING per damaged block held back: ``_say`` sums
+        them up per file and per run (the walk still logs them for its other readers)."""
+        quiet = logging.getLogger("avard.core.io.recording")
+        quiet.addFilter(_below_warning)
+        try:
+            return self._scan_walk(rate_hz)
+        finally:
+            quiet.removeFilter(_below_warning)
+
+    def _scan_walk(self, rate_hz: float | None) -> RecordInfo:
+        from avard.core.io.recording import Segmenter, WalkReport, _scale_of, segment_files
+
+        self.files = segment_files(self.path)
+        self.entries = _segment_entries(self.path)
+        self._ends = {}
+
+        problems: list[Problem] = []
+        report = WalkReport()
+        where = [""]
+        cuts = Segmenter()
+        tally: dict[str, _RunTally] = {}
+        losses: list[Loss] = []
+        dups: list[Duplicate] = []
+        gaps: list[Gap] = []
+        expect: dict[str, int] = {}          # next sample index of each run
+        last_file: dict[str, str] = {}       # the file of each run's last raw block
+        prev_run: str | None = None
+        scales: set[float] = set()
+        tnames: list[str] = []
+        n_losses = n_dups = 0
+        n = 0
+        last_run = ""
+
+        def reported() -> None:
+            """What the walk reported since the last record: damage losses (of the run they
+            name) and duplicates (of the file being read)."""
+            nonlocal n_losses, n_dups
+            for x in report.losses[n_losses:]:
+                losses.append(Loss(x.run, x.i0, x.n, x.cause, f"in {Path(where[0]).name}"))
+                if x.run in tally:
+                    tally[x.run].lost += x.n
+            n_losses = len(report.losses)
+            for i0, k in report.duplicates[n_dups:]:
+                _add_duplicate(dups, Duplicate(last_run, i0, k, where[0]))
+                if last_run in tally:
+                    tally[last_run].dup += k
+            n_dups = len(report.duplicates)
+
+        plan = _Plan()
+        cut = False
+        scale = 0.0
+        for rec in self._walk(problems, report, where, tag=True, skip=_NO_SAMPLES):
+            kind, run = rec["kind"], rec["run"]
+            reported()
+            last_run = run
+            if self.runs is not None and run not in self.runs:
+                continue
+            if kind == "header":
+                scale = _scale_of(rec)
+                scales.add(scale)
+                for name in rec.get("temperature_channels", []):
+                    if name not in tnames:
+                        tnames.append(name)
+                tally.setdefault(run, _RunTally())
+            cut = cuts.starts_segment(rec) or cut
+            if kind == "gap":
+                i0, k = int(rec["i0"]), int(rec["n"])
+                gaps.append(Gap(run, i0, k, str(rec.get("reason", ""))))
+                # a restart continues the sample index: what the last run's end lacks up to
+                # the restart's gap is a loss too (its last segment deleted, say)
+                if (rec.get("reason") == "restart" and prev_run is not None
+                        and prev_run != run and prev_run in expect and i0 > expect[prev_run]):
+                    self._lost(losses, tally, prev_run, expect[prev_run], i0,
+                               last_file.get(prev_run), where[0])
+                    expect[prev_run] = i0
+                if run in expect:
+                    expect[run] = max(expect[run], i0 + k)
+                else:
+                    expect[run] = i0 + k
+            elif kind == "raw":
+                i0, k = int(rec["i0"]), int(rec["n"])
+                t = tally[run]
+                if t.first < 0:
+                    t.first = i0
+                # the run's start is where its first block is (or its restart gap ends)
+                expect.setdefault(run, i0)
+                if i0 > expect[run] and not _damage_covers(report.losses, run, expect[run], i0):
+                    self._lost(losses, tally, run, expect[run], i0, last_file.get(run),
+                               where[0])
+                expect[run] = max(expect[run], i0 + k)
+                last_file[run] = where[0]
+                t.n += k
+                n += k
+                prev_run = run
+                plan.add(rec.get("_at"), i0, int(np.asarray(rec["counts"]).shape[0]), scale,
+                         cut)
+                cut = False
+        reported()     # the walk reports headerless losses, and a last copied file, at its end
+        if not tally:
+            if self.runs is not None:
+                raise DataError(f"{self.path}: no run {', '.join(sorted(self.runs))} in this "
+                                "recording")
+            lost = f" ({report.samples_lost} samples without a header)" if report.losses else ""
+            raise FormatError(f"{self.path}: no header record found{lost}; not an avard "
+                              "recording, or every header copy of it is damaged")
+        if n == 0:
+            raise DataError(f"{self.path}: the recording holds no samples")
+        self._plan = plan if plan.ok else None
+        run_list = self._runs(tally, report.newest_header)
+        rate, rate_u = self._rate(run_list, rate_hz)
+        summary = RecordingSummary(
+            runs=tuple(run_list), losses=tuple(losses), duplicates=tuple(dups),
+            gaps=tuple(gaps), n_segments=len(cuts.segment_bounds()) - 1,
+            files=tuple(str(f) for f in self.files),
+            problems=tuple(str(p) for p in problems),
+            dropped_bytes=sum(p.dropped_bytes for p in problems))
+        self._say(summary, problems)
+        head = report.newest_header[run_list[0].run]
+        device = (head.get("sensor") or {}).get("device")
+        model = "ADXL355" if device is None or "ADXL355" in str(device) else str(device)
+        return RecordInfo(
+            source=str(self.path), format=RecordFormat.RECORDING, rate_hz=rate,
+            rate_u_hz=rate_u, names=("x", "y", "z"), temperature_names=tuple(tnames),
+            n_samples=n, lsb_mps2=scales.pop() if len(scales) == 1 else None,
+            sensor_name=str(device) if device is not None else None, sensor_model=model,
+            # the ADXL355's digital low-pass sits at ODR/4 whatever the ODR
+            filter_corner_hz=rate / 4.0 if model == "ADXL355" else None,
+            recording=summary)
+
+    def _lost(self, losses: list[Loss], tally: dict[str, _RunTally], run: str, a: int, b: int,
+              before: str | None, after: str) -> None:
+        """Samples ``[a, b)`` of ``run`` absent with no gap record: a loss, placed between the
+        file of the run's last block and the file read now."""
+        losses.append(Loss(run, a, b - a, "no gap record explains them",
+                           _between(self.entries, run, before, after if after != before
+                                    else None)))
+        tally[run].lost += b - a
+
+    def _runs(self, tally: dict[str, _RunTally], newest: dict[str, dict[str, Any]]
+              ) -> list[RunSummary]:
+        out = []
+        for run, t in tally.items():
+            h = newest.get(run, {})
+            tb = h.get("timebase") or {}
+            u = tb.get("odr_u_hz")
+            fitted = isinstance(u, int | float) and u > 0
+            nominal = h.get("nominal_odr_hz")
+            out.append(RunSummary(run, float(h.get("rate_hz", math.nan)),
+                                  float(u) if isinstance(u, int | float) and fitted else 0.0,
+                                  t.first, t.n, t.lost, t.dup,
+                                  rate_fitted=fitted or not isinstance(tb.get("odr_hz"),
+                                                                       int | float),
+                                  nominal_hz=float(nominal) if isinstance(
+                                      nominal, int | float) else None))
+        return out
+
+    def _rate(self, runs: list[RunSummary], rate_hz: float | None) -> tuple[float, float]:
+        """The record's rate: the runs' fitted rates, which must agree by the rule of
+        core/io/rates.py (never averaged across ODR settings), weighted by their samples. A
+        run too short for the service's rate fit agrees when its nominal ODR is the others'
+        (its nominal rate says nothing finer) and does not enter the mean."""
+        from avard.core.io.readers import check_rate
+
+        with_data = [r for r in runs if r.n_samples > 0]
+        fitted = [r for r in with_data if r.rate_fitted] or with_data[:1]
+        ref = fitted[0]
+        nominal = ref.nominal_hz if ref.nominal_hz is not None else ref.rate_hz
+        bad = [r for r in with_data
+               if (r.rate_fitted and ref.rate_fitted
+                   and not rates_compatible(ref.rate_hz, r.rate_hz, ref.rate_u_hz,
+                                            r.rate_u_hz))
+               or ((not r.rate_fitted or not ref.rate_fitted)
+                   and (r.nominal_hz if r.nominal_hz is not None else r.rate_hz) != nominal)]
+        if bad:
+            listed = "; ".join(f"run {r.run} at {r.rate_text()} ({r.n_samples} samples)"
+                               for r in with_data)
+            raise DataError(f"{self.path}: runs at incompatible rates ({listed}); they are not "
+                            "averaged: analyse each separately with --run RUN")
+        if rate_hz is not None:
+            return check_rate(rate_hz, str(self.path)), 0.0
+        if len(fitted) == 1:
+            return check_rate(ref.rate_hz, str(self.path)), ref.rate_u_hz
+        w = np.array([r.n_samples for r in fitted], dtype=float)
+        rates = np.array([r.rate_hz for r in fitted])
+        rate = float(np.sum(w * rates) / np.sum(w))
+        us = [r.rate_u_hz for r in fitted]
+        u = float(math.sqrt(sum((wi * ui) ** 2 for wi, ui in zip(w, us, strict=True)))
+                  / np.sum(w)) if all(x > 0 for x in us) else 0.0
+        return check_rate(rate, str(self.path)), u
+
+    def _say(self, summary: RecordingSummary, problems: list[Problem]) -> None:
+        """One WARNING per damaged file and one per run that lost or repeated samples."""
+        per_file: dict[str, list[Problem]] = {}
+        for p in problems:
+            per_file.setdefault(p.file, []).append(p)
+        for f, probs in per_file.items():
+            log.warning("%s: %d damaged or truncated frame(s) skipped (%d bytes), first at "
+                        "byte %d", f, len(probs), sum(p.dropped_bytes for p in probs),
+                        probs[0].offset)
+        for r in summary.runs:
+            if r.samples_lost or r.samples_duplicated:
+                mine = [x for x in summary.losses if x.run == r.run]
+                x = mine[0] if mine else None
+                first = (f"; first: {x.n} samples from index {x.i0}, {x.where} ({x.cause})"
+                         if x is not None else "")
+                log.warning("%s: run %s: %d samples lost in %d place(s), %d read twice "
+                            "(counted once)%s; detail in --json", self.path, r.run,
+                            r.samples_lost, len(mine), r.samples_duplicated, first)
+
+    def _temperature_tables(self) -> list[tuple[NDArray[np.int64], NDArray[np.float64]]]:
+        """Each temperature channel's readings (sample index, °C) in index order, later
+        records winning at an equal index (as ``load_recording``'s hold): read by one more walk
+        the first time a consumer asks for temperatures (analyze never does, so its memory
+        holds none of the tens of MB a 60 h run's readings take)."""
+        if self._temps is None:
+            readings: dict[str, tuple[array[int], array[float]]] = {}
+            for rec in self._walk():
+                if rec["kind"] != "temp" or (self.runs is not None
+                                             and rec["run"] not in self.runs):
+                    continue
+                for name, value in zip(rec["names"], rec["values_c"], strict=True):
+                    if value is not None:
+                        idx, vals = readings.setdefault(name, (array("q"), array("d")))
+                        idx.append(int(rec["i0"]))
+                        vals.append(float(value))
+            self._temps = []
+            for name in self.info.temperature_names:
+                idx, vals = readings.get(name, (array("q"), array("d")))
+                st = np.array(idx, dtype=np.int64)
+                order = np.argsort(st, kind="stable")
+                self._temps.append((st[order], np.array(vals, dtype=np.float64)[order]))
+        return self._temps
+
+    def _walked(self) -> Iterator[_Piece]:
+        """The raw pieces in walk order, by the general path: every record decoded and
+        checked (``recording.walk``), cut where the service's ``Segmenter`` cut."""
+        from avard.core.io.recording import Segmenter, _scale_of
+
+        cuts = Segmenter()
+        scale, cut = 0.0, False
+        for rec in self._walk():
+            if self.runs is not None and rec["run"] not in self.runs:
+                continue
+            cut = cuts.starts_segment(rec) or cut
+            if rec["kind"] == "header":
+                scale = _scale_of(rec)
+            elif rec["kind"] == "raw":
+                yield int(rec["i0"]), np.asarray(rec["counts"]), scale, cut
+                cut = False
+
+    def _planned(self) -> Iterator[_Piece]:
+        """The same pieces by the fast path: the scan walked and checked every frame and
+        noted where each kept block's counts lie; a later read takes just those bytes (no
+        decoding of the raw, temperature, Allan and checkpoint records again). Held equal
+        to :meth:`_walked` by tests/daemon/test_record_source.py."""
+        plan = self._plan
+        assert plan is not None
+        fd, open_k = -1, -1
+        try:
+            for j in range(len(plan.i0)):
+                k = int(plan.fidx[j])
+                if k != open_k:
+                    if fd >= 0:
+                        os.close(fd)
+                    fd, open_k = _open_segment(self.files[k]), k
+                n = int(plan.n[j])
+                data = os.pread(fd, 12 * n, int(plan.off[j]))
+                if len(data) != 12 * n:
+                    raise DataError(f"{self.files[k]}: shorter than when it was opened; the "
+                                    "recording changed while it was read (analyse a copy)")
+                counts = np.frombuffer(data, dtype="<i4").reshape(n, 3)
+                yield int(plan.i0[j]), counts, plan.scales[plan.sidx[j]], bool(plan.cut[j])
+        finally:
+            if fd >= 0:
+                os.close(fd)
+
+    @property
+    def info(self) -> RecordInfo:
+        """The description, from one scan of the recording on first use."""
+        if self._info is None:
+            self._info = self._scan(self._rate_hz)
+        return self._info
+
+    def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
+        """The recording's samples in SI units, in blocks of at most ``block`` samples that
+        end where the service's accumulators ended a segment (every gap record, run change
+        and index jump); temperatures held at their last reading (NaN before the first)."""
+        info = self.info
+        _check_block(block)
+        _check_columns(columns, info)
+        cols = [0, 1, 2] if columns is None else [int(c) for c in columns]
+        temps = (self._temperature_tables() if temperature and info.temperature_names
+                 else None)
+        buf = np.empty((block, len(cols)))
+        fill = 0
+        start = 0                      # sample index of buf[0]
+        n = 0
+
+        def flush(end: bool) -> RecordBlock:
+            a = buf[:fill].copy()
+            t = None
+            if temps is not None:
+                idx = np.arange(start, start + fill, dtype=np.int64)
+                t = np.full((fill, len(temps)), np.nan)
+                for c, (st, v) in enumerate(temps):
+                    if len(st):
+                        k = np.searchsorted(st, idx, side="right") - 1
+                        have = k >= 0
+                        t[have, c] = v[k[have]]
+            return a, t, end
+
+        pieces = self._planned() if self._plan is not None else self._walked()
+        for i0, counts, scale, cut in pieces:
+            if cut and fill:
+                yield flush(True)
+                fill = 0
+            k = int(counts.shape[0])
+            at = 0
+            while at < k:
+                if fill == 0:
+                    start = i0 + at
+                take = min(block - fill, k - at)
+                buf[fill:fill + take] = counts[at:at + take][:, cols]
+                buf[fill:fill + take] *= scale
+                fill += take
+                at += take
+                if fill == block:
+                    yield flush(False)
+                    fill = 0
+            n += k
+        if fill:
+            yield flush(True)
+        if n != info.n_samples:
+            raise DataError(f"{self.path}: read {n} samples, {info.n_samples} when it "
+                            "was opened; the recording changed while it was read (analyse a "
+                            "copy, or a recording the service has finished)")
+
+
+def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
+    """The frames of one segment file as ``recording.scan_frames`` finds them, read frame by
+    frame: a clean hour-long segment is never held whole (it would be most of the memory
+    analyze may add over an .npz). At the first frame that is not valid (damage, or the
+    truncated tail a power cut leaves) the file is handed to ``scan_frames``, which reports
+    and resynchronises exactly as for any reader; the frames before are the same either way.
+    ``ends[file]``, when set, is where to stop (what the first read of the file found); else
+    it is set to that."""
+    from avard.core.io.recording import FRAME_HEADER, Frame, scan_frames
+
+    name = str(f)
+    limit = ends.get(name)
+    hdr = FRAME_HEADER.size
+    pos = 0
+    with os.fdopen(_open_segment(f), "rb") as fh:
+        while True:
+            if limit is not None and pos >= limit:
+                return
+            head = fh.read(hdr)
+            if not head:
+                ends[name] = pos             # a clean end
+                return
+            if len(head) < hdr:
+                break
+            n, crc = FRAME_HEADER.unpack(head)
+            if not 0 < n <= reader.max_bytes:
+                break
+            payload = fh.read(n)
+            if len(payload) != n or zlib.crc32(payload) & 0xFFFFFFFF != crc:
+                break
+            yield Frame(name, pos, payload)
+            pos += hdr + n
+    data = f.read_bytes()
+    if limit is not None:
+        data = data[:limit]
+    ends.setdefault(name, len(data))
+    local: list[Problem] = []
+    for fr in scan_frames(data, name, max_bytes=reader.max_bytes, problems=local):
+        if fr.offset >= pos:
+            reader._report(local)
+            yield fr
+    reader._report(local)
+
+
+def _below_warning(record: logging.LogRecord) -> bool:
+    return record.levelno < logging.WARNING
+
+
+def _open_segment(f: Path) -> int:
+    """A segment's file descriptor, or one line saying it went while the recording was
+    read (retention, or a hand, deleted it) or cannot be read."""
+    try:
+        return os.open(f, os.O_RDONLY)
+    except FileNotFoundError:
+        raise DataError(f"{f}: removed while the recording was read (the service's retention "
+                        "deletes the oldest segments); analyse a copy of the recording") from None
+    except OSError as exc:
+        raise DataError(f"{f}: cannot be read ({exc.strerror}); check its permissions") from exc
+
+
+def _damage_covers(losses: Sequence[Any], run: str, a: int, b: int) -> bool:
+    """Whether the walk already reported ``[a, b)`` of ``run`` lost to damage."""
+    return any(x.run == run and x.i0 <= a and x.i0 + x.n >= b for x in losses[-4:])
+
+
+def _add_duplicate(dups: list[Duplicate], d: Duplicate) -> None:
+    """Duplicates of one file merged into one range when they follow each other."""
+    if dups:
+        last = dups[-1]
+        if last.run == d.run and last.where == d.where and last.i0 + last.n == d.i0:
+            dups[-1] = Duplicate(d.run, last.i0, last.n + d.n, d.where)
+            return
+    dups.append(d)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def open_record(path: str | Path, *, rate_hz: float | None = None,
+                runs: Sequence[str] | None = None) -> RecordSource:
+    """The record at ``path``: an ``.npz``, a ``.csv`` (or ``.txt``), or an avard recording
+    (a directory of segment files, or one ``.avr`` segment). ``rate_hz`` overrides the
+    record's rate (Hz); ``runs`` keeps only these runs of a recording."""
+    from avard.core.io.readers import record_kind
+
+    p, kind = record_kind(path)
+    if kind == "recording":
+        rec = RecordingSource(p, rate_hz, runs)
+        _ = rec.info      # scanned now: a bad recording is said before any analysis starts
+        return rec
+    if runs is not None:
+        raise DataError(f"{p}: --run picks runs of a recording; this is a single {kind} file")
+    return FileSource(p, rate_hz)
