@@ -564,11 +564,17 @@ class OverlappingAllan:
                   covariance: bool = False, n_total: int | None = None,
                   defer_rn: bool = False) -> OverlappingAllan:
         """An accumulator holding ``part``'s sums (e.g. the sum of a record's chunks): its
-        ``result()``, ``rn_needed()`` and ``set_rn()`` are those of one pass over the record.
-        It takes no further samples."""
+        ``result()``, ``rn_needed()`` and ``set_rn()`` are those of one pass over the record
+        made with ``defer_rn`` (R(n) is never part of a part: with ``defer_rn`` the caller
+        supplies it, as analyze does; without, B1 alone identifies the long τ). It takes no
+        further samples."""
         c = part.s2.shape[1]
         out = cls(c, rate_hz, part.ms, names=names, covariance=covariance, n_total=n_total,
                   defer_rn=defer_rn)
+        if not defer_rn:
+            # a part carries no R(n) sums: without them B1 alone identifies the long τ
+            # (flicker PM where it says PM), never from empty sums
+            out._rn = [None] * len(out.ms)
         out._n = part.n.copy()
         out._s2 = part.s2.copy()
         out._ladders = [copy.deepcopy(lad) for lad in part.ladders]

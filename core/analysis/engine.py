@@ -182,11 +182,11 @@ def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]
             for i in range(0, len(g), -(-len(g) // workers))]
 
 
-def _accel_columns(source: RecordSource, block: int, columns: list[int]
-                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """A source's accel blocks of ``columns`` from its start, unchecked (the first pass
-    checked the CRC): a picklable reader for the chunks of a parallel pass."""
-    return _accel(source, block, columns, verify=False)
+def _accel_columns(source: RecordSource, block: int, columns: list[int], *,
+                   verify: bool = False) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A source's accel blocks of ``columns`` from its start: a picklable reader for the
+    chunks of a parallel pass (the chunk that reads a first pass to the end verifies)."""
+    return _accel(source, block, columns, verify=verify)
 
 
 def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = DEFAULT_OPTIONS,
@@ -405,9 +405,10 @@ def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: flo
         if progress is not None:
             progress(done + samples, all_total)
 
+    # the first pass checks the file's CRC, as one pass does (its last chunk reads to the end)
     sa, welch, n = run_pass(partial(par.read, chans), None, names, rate, grid, nper, total,
-                            par.bounds, par.workers, defer_rn=reread is not None,
-                            progress=step, executor=par.executor)
+                            par.bounds, par.workers, verify=done == 0, progress=step,
+                            executor=par.executor)
     return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
 
 
@@ -443,8 +444,10 @@ def _analyze_passes(
             raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
                             "cannot be fixed; give n_samples or use estimator='cascade'")
         width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
-        if parallel is not None:
-            width *= parallel.workers  # each worker holds its chunk's history
+        if parallel is not None and parallel.executor is None:
+            # each local worker holds its chunk's history here (a Dask worker holds its own
+            # elsewhere: the grid is then one analyze's)
+            width *= parallel.workers
         reach = int(total) if longest is None else longest
         grid = oadev_grid(reach, width)
         full = oadev_grid(reach, width, budget_bytes=1 << 62)
@@ -465,7 +468,8 @@ def _analyze_passes(
         if reread is not None:
             def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
-        if parallel is not None and grid is not None and total is not None:
+        if parallel is not None and grid is not None and total is not None and \
+                again is not None:  # R(n) is read again after a parallel pass
             one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid, nper,
                                  int(total), again, options.quantiles, options.noise_id,
                                  progress, done, all_total)

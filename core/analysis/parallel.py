@@ -130,25 +130,34 @@ def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) ->
 
 @dataclass(frozen=True)
 class _Job:
-    """What every worker needs: inherited through the fork by the local processes, pickled
-    (so ``read`` must be picklable, e.g. ``ChainedRead``) for another executor's."""
+    """What every worker needs: handed to the forked local processes when they start (never
+    pickled), pickled (so ``read`` must be picklable, e.g. ``ChainedRead``) for another
+    executor's. ``read(verify=...)`` gives the record's blocks from its start; the chunk
+    that reads to the record's end checks the file's CRC when ``verify``."""
 
-    read: Callable[[], Blocks]
+    read: Callable[..., Blocks]
     take: list[int] | None
     names: list[str]
     rate_hz: float
     grid: NDArray[np.int64]
     nperseg: int | None
     n_total: int
-    defer_rn: bool
+    verify: bool
     chunks: list[Chunk]
 
 
+#: The job of this forked worker process (``_take_job``): one per process, never shared
+#: between concurrent passes (each pass starts processes of its own).
 _JOB: _Job | None = None
 
 
+def _take_job(job: _Job) -> None:
+    global _JOB
+    _JOB = job
+
+
 def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
-    """One chunk's parts, for a forked local worker (the job inherited)."""
+    """One chunk's parts, in a forked local worker (the job handed to it at its start)."""
     assert _JOB is not None
     return chunk_part(_JOB, i)
 
@@ -158,15 +167,16 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
+    # R(n) is never part of a chunk: the caller reads it again after the pass (defer_rn)
     acc = OverlappingAllan(c, job.rate_hz, job.grid, names=job.names, n_total=job.n_total,
-                           defer_rn=job.defer_rn, own_from=ch.start,
+                           defer_rn=True, own_from=ch.start,
                            own_until=None if last else ch.stop)
     welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
              else None)
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
     pos = 0
-    for accel, segment_end in job.read():
+    for accel, segment_end in job.read(verify=job.verify and last):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
@@ -191,7 +201,7 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
 
 def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str],
              rate_hz: float, grid: NDArray[np.int64], nperseg: int | None, n_total: int,
-             bounds: Sequence[int], workers: int, *, defer_rn: bool = True,
+             bounds: Sequence[int], workers: int, *, verify: bool = False,
              progress: Callable[[int], None] | None = None,
              executor: Executor | None = None,
              ) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
@@ -202,41 +212,38 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
     reads from there: what comes before its chunk only advances the running sum).
     ``progress(samples)`` after each chunk. ``executor``: run the ``workers`` chunks there
     (e.g. a Dask client's, ``avard fleet``) instead of on forked local processes; ``read``
-    must then be picklable."""
-    global _JOB
+    must then be picklable. ``verify``: the chunk that reads to the end checks the file's
+    CRC (the first pass over a file does). R(n) is left to the caller: the accumulator is
+    ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does after one pass."""
     chunks = plan_chunks(bounds, workers, alignment(grid, nperseg), reach(grid, nperseg))
-    _JOB = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), defer_rn,
-                chunks)
-    try:
-        parts: list[tuple[OadevPart, WelchPart | None] | None]
-        parts = [None] * len(chunks)
-        if len(chunks) == 1 and executor is None:
-            parts[0] = _chunk_part(0)
-        else:
-            # a forked local pool inherits the job (only chunk numbers cross to it); another
-            # executor (Dask's) gets the job pickled with each chunk
-            own = executor is None
-            pool = executor or ProcessPoolExecutor(
-                min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"))
-            try:
-                results = (pool.map(_chunk_part, range(len(chunks))) if own else
-                           pool.map(chunk_part, [_JOB] * len(chunks), range(len(chunks))))
-                done = 0
-                for i, one in enumerate(results):
-                    parts[i] = one
-                    done += chunks[i].stop - chunks[i].start
-                    if progress is not None:
-                        progress(done)
-            except BrokenProcessPool as exc:
-                # a worker killed (out of memory, a signal): said, never waited for forever
-                raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
-                                 "run again with fewer --workers (each holds an OADEV "
-                                 "history of its own) or --workers 1") from exc
-            finally:
-                if own:
-                    pool.shutdown(wait=True, cancel_futures=True)
-    finally:
-        _JOB = None
+    job = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), verify, chunks)
+    parts: list[tuple[OadevPart, WelchPart | None] | None] = [None] * len(chunks)
+    if len(chunks) == 1 and executor is None:
+        parts[0] = chunk_part(job, 0)
+    else:
+        # forked local processes get the job when they start (only chunk numbers cross to
+        # them, so ``read`` may be any callable); another executor (Dask's) gets it pickled
+        own = executor is None
+        pool = executor or ProcessPoolExecutor(
+            min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"),
+            initializer=_take_job, initargs=(job,))
+        try:
+            results = (pool.map(_chunk_part, range(len(chunks))) if own else
+                       pool.map(chunk_part, [job] * len(chunks), range(len(chunks))))
+            done = 0
+            for i, one in enumerate(results):
+                parts[i] = one
+                done += chunks[i].stop - chunks[i].start
+                if progress is not None:
+                    progress(done)
+        except BrokenProcessPool as exc:
+            # a worker killed (out of memory, a signal): said, never waited for forever
+            raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
+                             "run again with fewer --workers (each holds an OADEV "
+                             "history of its own) or --workers 1") from exc
+        finally:
+            if own:
+                pool.shutdown(wait=True, cancel_futures=True)
     total: OadevPart | None = None
     welch = (WelchAccumulator(len(names), rate_hz, nperseg) if nperseg is not None
              else None)
@@ -248,7 +255,7 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
             welch.add(power)
     assert total is not None
     acc = OverlappingAllan.from_part(total, rate_hz, names=names, n_total=int(n_total),
-                                     defer_rn=defer_rn)
+                                     defer_rn=True)
     return acc, welch, total.n_samples
 
 
@@ -257,12 +264,13 @@ class ChainedRead:
     """Several records read one after another as the segments of one record (a gap at each
     record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read."""
 
-    read: tuple[Callable[[list[int]], Blocks], ...]
+    read: tuple[Callable[..., Blocks], ...]
 
-    def __call__(self, columns: list[int]) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    def __call__(self, columns: list[int], *, verify: bool = False
+                 ) -> Iterator[tuple[NDArray[np.float64], bool]]:
         for r in self.read:
             last: tuple[NDArray[np.float64], bool] | None = None
-            for b in r(columns):
+            for b in r(columns, verify=verify):
                 if last is not None:
                     yield last
                 last = b

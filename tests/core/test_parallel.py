@@ -248,8 +248,46 @@ def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeyp
 
     rng = np.random.default_rng(4)
     y = rng.normal(0, 1e-3, (1 << 16, 1))
-    job = parallel._Job(lambda: iter([(y[:40000], False)]), None, ["x"], 100.0,
+    job = parallel._Job(lambda verify: iter([(y[:40000], False)]), None, ["x"], 100.0,
                         2 ** np.arange(10), None, len(y), False,
                         [parallel.Chunk(0, 32768, 36864), parallel.Chunk(32768, 65536, 65536)])
     with pytest.raises(DataError, match="changed while it was analysed"):
         parallel.chunk_part(job, 1)
+
+
+def test_a_damaged_npz_is_refused_on_workers_as_on_one(tmp_path) -> None:
+    """The parallel pass checks the member's CRC as the first pass of one worker does: a
+    flipped bit is an error, never an ADEV."""
+    from avard.core.errors import FormatError
+
+    rng = np.random.default_rng(7)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2] ^= 0x10  # one bit inside the accel member's data
+    path.write_bytes(bytes(raw))
+    for workers in (1, 2):
+        with pytest.raises(FormatError, match="CRC"):
+            analyze(open_record(path), AnalyzeOptions(workers=workers))
+
+
+def test_concurrent_parallel_passes_keep_their_own_records(tmp_path) -> None:
+    """Two analyses on one executor at once (avard fleet's threads): each gets its own
+    record's result, whatever the interleaving."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from avard.core.analysis.engine import analyze_records
+
+    paths = []
+    for scale, name in ((1e-3, "a.npz"), (1.0, "b.npz")):
+        p = tmp_path / name
+        np.savez(p, accel=np.random.default_rng(1).normal(0, scale, (1 << 15, 1)), axes=["x"],
+                 rate_hz=100.0)
+        paths.append(p)
+    alone = [analyze(open_record(p)).channels["x"].allan.dev for p in paths]
+    with ThreadPoolExecutor(4) as ex, ThreadPoolExecutor(2) as callers:
+        futs = [callers.submit(analyze_records, [open_record(p)], chunks=3, executor=ex)
+                for p in paths for _ in range(3)]
+        got = [f.result().channels["x"].allan.dev for f in futs]
+    for i, dev in enumerate(got):
+        np.testing.assert_allclose(dev, alone[i // 3], rtol=1e-12)
