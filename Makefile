@@ -17,7 +17,7 @@ $(VENV)/.installed-run: pyproject.toml setup.py core/allan/_kernels.c | $(VENV)/
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml setup.py core/allan/_kernels.c | $(VENV)/bin/python
-	$(PY) -m pip install -q -e '.[test,plot,web]'
+	$(PY) -m pip install -q -e '.[test,plot,web,fleet]'
 	@touch $@ $(VENV)/.installed-run
 
 demo: $(VENV)/.installed-run

@@ -1,6 +1,6 @@
 """`avard analyze` (fully overlapping ADEV + fit + spectrum) against allantools ``oadev``.
 
-    python -m benchmarks analyze [--hours 60]
+    python -m benchmarks analyze [--hours 60] [--workers N]
 
 The record (default 60 h at 100 Hz: 21.6 M samples × 3 axes) is the synthetic ADXL355 record
 of ``bench_allan`` (20-bit counts, white noise, a slow bias random walk, 1 g on z), scaled to
@@ -18,6 +18,12 @@ fit; no scipy is imported) against allantools' three ``oadev`` calls (its import
 the record outside); on a second row allantools' loading of the .npz counted too (both
 then go from the file to the deviations); on a third, each whole worker process from its
 start.
+
+With ``--workers N`` it also runs ``analyze(path, workers=N)`` (the exact parallel analysis,
+``core/analysis/parallel.py``) beside ``analyze(path)`` in the same run and prints wall time,
+CPU (the workers' included) and the peak memory of the whole process tree (the sum of the
+processes' proportional set sizes, sampled every 10 ms), with the largest ADEV difference
+and whether α, EDF and the terms' presence agree.
 """
 
 from __future__ import annotations
@@ -127,12 +133,74 @@ def worker_allantools(path: str) -> dict:
             "adev_x": [float(v) for v in devs[0]]}
 
 
-WORKERS = {"analyze": worker_analyze, "allantools": worker_allantools}
+def _tree_rss_mb() -> float:
+    """Memory of this process and its children (MB): the sum of their proportional set sizes
+    (/proc/PID/smaps_rollup Pss), so pages a forked worker shares with its parent count once,
+    not once per process as a sum of resident sets would."""
+    me = os.getpid()
+    total = 0
+    for pid in [me, *_children(me)]:
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as f:
+                for line in f:
+                    if line.startswith("Pss:"):
+                        total += int(line.split()[1])
+        except OSError:
+            pass
+    return total / 1024
 
 
-def _run(kind: str, path: Path) -> dict:
+def _children(pid: int) -> list[int]:
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(p) for p in f.read().split()]
+    except OSError:
+        return []
+
+
+def worker_parallel(path: str, workers: str) -> dict:
+    """``analyze(path, workers=N)`` (N = 1 for the reference) with its wall time, the CPU of
+    the process and its workers, and the peak of the process tree's resident memory."""
+    import threading
+
+    from avard.core.analysis.engine import analyze
+    from avard.core.analysis.options import AnalyzeOptions
+    from avard.core.io.source import open_record
+
+    peak = [0.0]
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.wait(0.01):
+            peak[0] = max(peak[0], _tree_rss_mb())
+
+    t = threading.Thread(target=sample, daemon=True)
+    t.start()
+    t0 = time.monotonic()
+    an = analyze(open_record(path), AnalyzeOptions(workers=int(workers)))
+    wall = time.monotonic() - t0
+    stop.set()
+    t.join()
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out: dict[str, Any] = {"wall_s": wall, "peak_tree_mb": peak[0],
+                           "cpu_s": _process_cpu_s() + kids.ru_utime + kids.ru_stime,
+                           "channels": {}}
+    for name, ch in an.channels.items():
+        out["channels"][name] = {
+            "adev": [float(v) for v in ch.allan.dev], "alpha": [int(v) for v in ch.allan.alpha],
+            "edf": [float(v) for v in ch.allan.edf],
+            "present": [bool(e.present) for e in ch.fit.terms.values()]}
+    return out
+
+
+WORKERS = {"analyze": worker_analyze, "allantools": worker_allantools,
+           "parallel": worker_parallel}
+
+
+def _run(kind: str, path: Path, *extra: str) -> dict:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    cmd = [sys.executable, "-m", "benchmarks.bench_analyze", "--worker", kind, str(path)]
+    cmd = [sys.executable, "-m", "benchmarks.bench_analyze", "--worker", kind, str(path),
+           *extra]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env,
                          cwd=Path(__file__).resolve().parents[1])
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -140,11 +208,13 @@ def _run(kind: str, path: Path) -> dict:
 
 def main(argv: list[str]) -> int:
     if argv and argv[0] == "--worker":
-        print(json.dumps(WORKERS[argv[1]](argv[2])))
+        print(json.dumps(WORKERS[argv[1]](*argv[2:])))
         return 0
     ap = argparse.ArgumentParser(prog="python -m benchmarks analyze", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=60.0, help="record length (default 60 h)")
+    ap.add_argument("--workers", type=int, default=None, metavar="N",
+                    help="also analyze(path, workers=N) against one worker, in the same run")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as tmp:
         path, n = make_npz(Path(tmp), args.hours)
@@ -152,6 +222,9 @@ def main(argv: list[str]) -> int:
               f"{path.stat().st_size / 1e6:.0f} MB .npz (float64 m/s²)")
         ref = _run("allantools", path)
         ours = _run("analyze", path)
+        if args.workers:
+            one = _run("parallel", path, "1")
+            par = _run("parallel", path, str(args.workers))
     k = min(len(ref["adev_x"]), len(ours["adev_x"]))
     agree = float(np.max(np.abs(np.array(ours["adev_x"][:k]) / np.array(ref["adev_x"][:k])
                                 - 1.0)))
@@ -184,7 +257,31 @@ def main(argv: list[str]) -> int:
     print("\nwhere avard's CPU time goes                              | CPU s | share")
     for what, sec in ours["split"].items():
         print(f"{what:<56} | {sec:5.2f} | {sec / ours['cpu_s']:.0%}")
+    if args.workers:
+        _print_parallel(one, par, args.workers)
     return 0
+
+
+def _print_parallel(one: dict, par: dict, workers: int) -> None:
+    rel = max(float(np.max(np.abs(np.array(p["adev"]) / np.array(o["adev"]) - 1.0)))
+              for o, p in zip(one["channels"].values(), par["channels"].values(),
+                              strict=True))
+    same = all(o[k] == p[k] for o, p in zip(one["channels"].values(),
+                                             par["channels"].values(), strict=True)
+               for k in ("alpha", "present"))
+    edf = max(float(np.max(np.abs(np.array(p["edf"]) / np.array(o["edf"]) - 1.0)))
+              for o, p in zip(one["channels"].values(), par["channels"].values(),
+                              strict=True))
+    print(f"\nanalyze on {workers} workers against 1 (same record, same run; "
+          f"{os.cpu_count()} cores here)")
+    print(f"  wall s:            {one['wall_s']:.2f} → {par['wall_s']:.2f}  "
+          f"ratio {par['wall_s'] / one['wall_s']:.2f} (target ≤ 0.6 on 2 cores)")
+    print(f"  CPU s (all procs): {one['cpu_s']:.2f} → {par['cpu_s']:.2f}")
+    print(f"  peak memory of the process tree, MB: {one['peak_tree_mb']:.0f} → "
+          f"{par['peak_tree_mb']:.0f}  ratio {par['peak_tree_mb'] / one['peak_tree_mb']:.2f} "
+          "(target ≤ 1.5)")
+    print(f"  largest |ADEV ratio − 1|: {rel:.1e} (target ≤ 1e-12); EDF {edf:.1e}; "
+          f"α and term presence {'equal' if same else 'DIFFER'}")
 
 
 if __name__ == "__main__":

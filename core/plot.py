@@ -124,3 +124,49 @@ def _panel(ax: Any, ch: Any) -> None:
     ax.grid(True, which="major", alpha=0.35)
     ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
               frameon=False)
+
+
+def plot_population(analyses: Any, pop: Any, path: str | Path, *, dpi: int = 130) -> Path:
+    """``avard fleet --plot``: per axis every sensor's ADEV (outliers in colour and named),
+    the population's median and its 16–84 % band across the sensors at each τ (the sensors'
+    curves interpolated log-log onto the first one's τ)."""
+    plt = pyplot()
+    names = list(next(iter(analyses.values())).channels)
+    flagged = {(o.sensor, o.channel) for o in pop.outliers}
+    cols = min(len(names), 3)
+    rows = math.ceil(len(names) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 5.2 * rows), squeeze=False)
+    for ax, name in zip(axes.ravel(), names, strict=False):
+        ref_tau = None
+        curves = []
+        for sensor, an in analyses.items():
+            ch = an.channels.get(name)
+            if ch is None:
+                continue
+            tau, dev = np.asarray(ch.allan.tau), np.asarray(ch.allan.dev)
+            out = (sensor, name) in flagged
+            ax.loglog(tau, dev, color="#d62728" if out else "0.6", lw=1.4 if out else 0.8,
+                      label=f"{sensor} (outlier)" if out else None)
+            if ref_tau is None:
+                ref_tau = tau
+            ok = (ref_tau >= tau[0]) & (ref_tau <= tau[-1])
+            curve = np.full(len(ref_tau), np.nan)
+            curve[ok] = np.exp(np.interp(np.log(ref_tau[ok]), np.log(tau), np.log(dev)))
+            curves.append(curve)
+        if ref_tau is not None and curves:
+            stack = np.array(curves)
+            with np.errstate(all="ignore"):
+                med = np.nanmedian(stack, axis=0)
+                lo, hi = np.nanpercentile(stack, [16, 84], axis=0)
+            ax.fill_between(ref_tau, lo, hi, color="#1f77b4", alpha=0.2,
+                            label="16–84 % of the sensors")
+            ax.loglog(ref_tau, med, color="#1f77b4", lw=2, label="median")
+        ax.set_xlabel("τ (s)")
+        ax.set_ylabel("Allan deviation (m/s²)")
+        ax.set_title(f"axis {name}: {len(analyses)} sensors")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    fig.suptitle("fleet: Allan deviation of the population (SI units)", fontsize=11)
+    return save_figure(fig, path, dpi=dpi)

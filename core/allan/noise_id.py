@@ -756,31 +756,37 @@ class Lag1Ladder:
         """Averages seen (all segments)."""
         return int(self.n[0]) + self._n_open
 
-    def add(self, other: Lag1Ladder) -> None:
+    def add(self, other: Lag1Ladder, sign: int = 1) -> None:
         """Add another ladder's sums (other segments of the same channels; its open segment
-        counts as ended, this one's continues)."""
+        counts as ended, this one's continues). ``sign=-1`` takes them away instead: the
+        exact parallel analysis (``core/analysis/parallel.py``) adds a chunk's sums over its
+        stretch and the few averages past its end, and takes away those past its end alone,
+        so that what straddles each cut is counted once."""
+        if sign not in (1, -1):
+            raise DataError(f"sign={sign!r}: a ladder's sums are added (1) or taken away (-1)")
         o = other.totals()
         if other.ref is not None and self.ref is not None:
             # re-reference the other's order-0 sums: z' = z + (ref_o − ref_s) = z + h
             h = other.ref - self.ref
             n, np_ = o["n"][0], o["np"][0]
             keep = np.ones((self.c, self.c)) if self.cross else np.eye(self.c)
-            self.s2[0] += keep * (o["s2"][0] + np.outer(o["s"][0], h)
-                                  + np.outer(h, o["s"][0]) + n * np.outer(h, h))
-            self.p[0] += keep * (o["p"][0] + np.outer(o["left"][0], h)
-                                 + np.outer(h, o["right"][0]) + np_ * np.outer(h, h))
-            self.s[0] += o["s"][0] + n * h
-            self.left[0] += o["left"][0] + np_ * h
-            self.right[0] += o["right"][0] + np_ * h
-            self.n[0] += n
-            self.np[0] += np_
+            self.s2[0] += sign * keep * (o["s2"][0] + np.outer(o["s"][0], h)
+                                         + np.outer(h, o["s"][0]) + n * np.outer(h, h))
+            self.p[0] += sign * keep * (o["p"][0] + np.outer(o["left"][0], h)
+                                        + np.outer(h, o["right"][0]) + np_ * np.outer(h, h))
+            self.s[0] += sign * (o["s"][0] + n * h)
+            self.left[0] += sign * (o["left"][0] + np_ * h)
+            self.right[0] += sign * (o["right"][0] + np_ * h)
+            self.n[0] += sign * n
+            self.np[0] += sign * np_
             lo = 1
         else:
             if self.ref is None:
                 self.ref = None if other.ref is None else other.ref.copy()
             lo = 0
         for f in self.FIELDS:
-            getattr(self, f)[lo:] += o[f][lo:]
+            getattr(self, f)[lo:] += sign * o[f][lo:]
+        self._alpha_memo = None  # the sums changed under the count stamp it keys on
 
     def weighted(self, w: NDArray) -> Lag1Ladder:
         """The ladder of the single channel Σ w_c z_c (its sums, as closed segments)."""

@@ -35,9 +35,10 @@ record through both numpy paths, ``tests/core/test_kernels.py`` the compiled aga
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -60,13 +61,16 @@ from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["OverlappingAllan"]
+__all__ = ["OadevPart", "OverlappingAllan"]
 
 # New samples processed at once. Larger pieces mean fewer numpy calls per τ (the Python cost
 # of a call is fixed); at 2**16 the temporaries (a few × PIECE × C doubles) still sit in the
 # 1 MiB L2 for one channel, and the kernel measured 1.5 ns per sample and τ against 3.1 ns at
 # 2**13 and 1.6 ns at 2**17 (one float64 channel, 2**22 samples, 21 octaves).
 PIECE = 1 << 16
+# A chunk of a parallel analysis keeps this many averages of each τ past its end: the ladder's
+# sums of products reach that far (order-2 differences of adjacent pairs: four averages).
+LADDER_REACH = 4
 # Averages pushed to a noise-identification ladder at once. A push makes a few arrays of the
 # batch's size and reads each several times; at 2**15 doubles (256 KiB) they stay in the
 # L2 cache (the ladder's referenced copy is a reused buffer: fresh ones were page-faulted in
@@ -83,6 +87,36 @@ LADDER_SPAN_MIN = 1 << 10
 # analyze 0.2 CPU-s of Python; spans of 2**18 samples (2 MiB a channel) are still in the L3
 # cache when the loop reads them.
 LADDER_SPAN = 1 << 18
+
+
+@dataclass(frozen=True)
+class OadevPart:
+    """What one chunk of a record contributes to its OADEV: the sums of the differences
+    that start in the chunk (``n``, Σ D Dᵀ per τ) and the noise-identification ladders of
+    the averages that start in it (their products with the next chunk's first averages
+    included), as ``OverlappingAllan(own_until=…).part()`` gives them.
+
+    Parts of adjacent chunks add (``+``, associative): the parts of a record's chunks add up
+    to the part of the whole record, to the rounding of the sums, and
+    ``OverlappingAllan.from_part`` turns a sum of parts into an accumulator whose
+    ``result()`` is the one-pass result. Small: no history, a few numbers per τ."""
+
+    ms: NDArray[np.int64]
+    n: NDArray[np.int64]
+    s2: NDArray[np.float64]
+    ladders: tuple[Lag1Ladder, ...]
+    n_samples: int
+
+    def __add__(self, other: OadevPart) -> OadevPart:
+        if not np.array_equal(self.ms, other.ms) or self.s2.shape != other.s2.shape:
+            raise DataError("parts of different τ grids or channels do not add")
+        ladders = []
+        for a, b in zip(self.ladders, other.ladders, strict=True):
+            lad = copy.deepcopy(a)
+            lad.add(b)
+            ladders.append(lad)
+        return OadevPart(self.ms, self.n + other.n, self.s2 + other.s2, tuple(ladders),
+                         self.n_samples + other.n_samples)
 
 
 class OverlappingAllan:
@@ -118,7 +152,8 @@ class OverlappingAllan:
     def __init__(self, n_channels: int, rate_hz: float, ms: Sequence[int] | NDArray,
                  *, names: Sequence[str] | None = None, covariance: bool = False,
                  piece: int = PIECE, n_total: int | None = None,
-                 defer_rn: bool = False) -> None:
+                 defer_rn: bool = False, own_from: int = 0,
+                 own_until: int | None = None) -> None:
         if not isinstance(n_channels, int | np.integer) or n_channels < 1:
             raise DataError(f"n_channels={n_channels!r} must be a positive integer")
         if not (isinstance(rate_hz, int | float | np.integer | np.floating)
@@ -179,6 +214,18 @@ class OverlappingAllan:
         self._due: list[tuple[int, int] | None] = [None] * grid.size
         self.n_samples = 0
         self.n_segments = 0
+        if own_until is not None and (not isinstance(own_until, int | np.integer)
+                                      or own_until < 0):
+            raise DataError(f"own_until={own_until!r} must be a sample index >= 0")
+        self._own_until = None if own_until is None else int(own_until)
+        if not isinstance(own_from, int | np.integer) or own_from < 0:
+            raise DataError(f"own_from={own_from!r} must be a sample index >= 0")
+        self._own_from = int(own_from)
+        # the averages at and past ``own_until`` (the next chunk's), kept to be taken away
+        self._past = ([Lag1Ladder(c, dmax=2, cross=self.covariance) for _ in grid]
+                      if own_until is not None else None)
+        self._seg_first = 0  # sample index (in this stream) of the open segment's first sample
+        self._closed = False  # made by ``from_part``: sums only, no history
         self._reset_segment()
 
     # ------------------------------------------------------------------------ input
@@ -206,6 +253,8 @@ class OverlappingAllan:
         self._carry: NDArray | None = None
         for lad in self._ladders:
             lad.gap()
+        for lad in self._past or ():
+            lad.gap()
         for r in self._rn:
             if r is not None:
                 r.gap()
@@ -222,10 +271,20 @@ class OverlappingAllan:
     @one_blas_thread  # long dot products would wake OpenBLAS's pool (core/blas.py)
     def update(self, block: ArrayLike) -> None:
         """Add a block of samples, (n, C) or (n,) for one channel; any n ≥ 0."""
+        if self._closed:
+            raise DataError("this accumulator was made from parts (from_part) and takes no "
+                            "samples")
         a = self._check_block(block)
-        for i in range(0, a.shape[0], self._piece):
-            self._process(a[i:i + self._piece])
-        self.n_samples += a.shape[0]
+        i = 0
+        while i < a.shape[0]:
+            # a piece ends where the chunk's own samples begin: the ones before only advance
+            # the running sum
+            end = i + self._piece
+            if self.n_samples < self._own_from:
+                end = min(end, i + self._own_from - self.n_samples)
+            self._process(a[i:end])
+            self.n_samples += min(end, a.shape[0]) - i
+            i = end
 
     def gap(self) -> None:
         """End the current segment: later differences never reach back across this point."""
@@ -252,6 +311,7 @@ class OverlappingAllan:
             ring[:, 0] = 0  # X_0
             self._pos = 1
             self.n_segments += 1
+            self._seg_first = self.n_samples
         p0 = self._pos  # segment position of the first new phase point
         i = p0 % self._cap
         kern = kernels.compiled() if ring.dtype == np.float64 else None
@@ -284,15 +344,23 @@ class OverlappingAllan:
             ring[:, i:i + first] = work[:, 1:1 + first]
             ring[:, :n - first] = work[:, 1 + first:]
         self._pos = p1 = p0 + n
+        if self.n_samples < self._own_from:
+            return  # before a parallel chunk's own samples: the running sum only
         # D in the ring's dtype (int64: exact); window sums need up to 2·piece points
         buf = scratch("oadev.d", c, n, ring.dtype)
         window = scratch("oadev.window", c, 2 * n, ring.dtype)
         as_float = scratch("oadev.float", c, n, np.float64) if buf.dtype != np.float64 else buf
         if self.covariance:
             kern = None  # the compiled loop sums per channel: the covariance takes numpy's
+        # a chunk of a parallel analysis: where the next chunk's differences begin, as a
+        # segment position (D_i spans samples i … i + 2m − 1 of the segment)
+        own = None if self._own_until is None else self._own_until - self._seg_first
+        first = self._own_from - self._seg_first  # a chunk's first own difference
         for k, m in enumerate(self.ms.tolist()):
-            lo = max(0, p0 - 2 * m)  # first new difference D_lo (its last point ≥ p0)
+            lo = max(0, p0 - 2 * m, first)  # first new difference D_lo (its last point ≥ p0)
             hi = p1 - 2 * m  # differences D_i, i < hi
+            if own is not None:
+                hi = min(hi, own)
             if hi > lo:
                 count = hi - lo
                 rk = self._rn[k]
@@ -306,12 +374,29 @@ class OverlappingAllan:
                     self._numpy_sums(k, m, lo, count, buf, window, as_float, rk)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
-            if q0 < p1:
-                last = q0 + ((p1 - 1 - q0) // m) * m
+            last = q0 + ((p1 - 1 - q0) // m) * m
+            if own is not None and q0 <= last:
+                last = self._past_averages(k, m, own, q0, last)
+            if q0 <= last:
                 if kern is None or not self._ring_take(k, m, q0, last):
                     self._feed(k, self._interval_sums(m, q0, last))
             elif self._due[k] is not None:
                 self._guard_due(k)  # no new average, but the next piece still moves the ring
+
+    def _past_averages(self, k: int, m: int, own: int, q0: int, last: int) -> int:
+        """For a chunk of a parallel analysis: the averages of τ k ending at q0 … last (step
+        m) that start at the next chunk's first sample (segment position ``own``) or later
+        go to ``_past`` as well, up to ``LADDER_REACH`` of them; returns the last end point
+        the ladder itself takes (averages starting before ``own + LADDER_REACH·m``).
+        ``part()`` takes ``_past`` away again: what remains is every sum of the averages
+        whose first value starts before ``own``, those reaching past it included."""
+        assert self._past is not None and self._offset is not None
+        reach = own + LADDER_REACH * m  # averages starting before this are taken
+        keep = min(last, (reach // m) * m)  # end points q ≤ reach: start q − m < reach
+        p0 = max(q0, -(-(own + m) // m) * m)  # first end point whose start is ≥ own
+        if p0 <= keep:
+            self._past[k].push_rows(self._interval_sums(m, p0, keep), m * self._offset)
+        return keep
 
     def _waiting(self, k: int) -> int:
         """Averages of τ k not yet pushed to its ladder."""
@@ -457,6 +542,46 @@ class OverlappingAllan:
         shift = int(self.ms[k]) * self._offset
         for i in range(0, sums.shape[1], LADDER_BATCH):
             self._ladders[k].push_rows(sums[:, i:i + LADDER_BATCH], shift)
+
+    # ------------------------------------------------------------------------ parallel
+    def part(self) -> OadevPart:
+        """This accumulator's sums as an ``OadevPart``: with ``own_until``, only what the
+        chunk owns (the averages past its end taken away again); the open segment counts
+        as ended. R(n) sums are not part of it (analyze defers them and reads them later)."""
+        self._flush_ladders()
+        ladders = []
+        for k, lad in enumerate(self._ladders):
+            own = copy.deepcopy(lad)
+            if self._past is not None:
+                own.add(self._past[k], -1)
+            ladders.append(own)
+        end = self.n_samples if self._own_until is None else min(self.n_samples,
+                                                                   self._own_until)
+        return OadevPart(self.ms.copy(), self._n.copy(), self._s2.copy(), tuple(ladders),
+                         max(0, int(end) - self._own_from))
+
+    @classmethod
+    def from_part(cls, part: OadevPart, rate_hz: float, *, names: Sequence[str] | None = None,
+                  covariance: bool = False, n_total: int | None = None,
+                  defer_rn: bool = False) -> OverlappingAllan:
+        """An accumulator holding ``part``'s sums (e.g. the sum of a record's chunks): its
+        ``result()``, ``rn_needed()`` and ``set_rn()`` are those of one pass over the record
+        made with ``defer_rn`` (R(n) is never part of a part: with ``defer_rn`` the caller
+        supplies it, as analyze does; without, B1 alone identifies the long τ). It takes no
+        further samples."""
+        c = part.s2.shape[1]
+        out = cls(c, rate_hz, part.ms, names=names, covariance=covariance, n_total=n_total,
+                  defer_rn=defer_rn)
+        if not defer_rn:
+            # a part carries no R(n) sums: without them B1 alone identifies the long τ
+            # (flicker PM where it says PM), never from empty sums
+            out._rn = [None] * len(out.ms)
+        out._n = part.n.copy()
+        out._s2 = part.s2.copy()
+        out._ladders = [copy.deepcopy(lad) for lad in part.ladders]
+        out.n_samples = part.n_samples
+        out._closed = True
+        return out
 
     # ------------------------------------------------------------------------ R(n) later
     def rn_needed(self, noise_id: str = "avard") -> dict[int, list[int]]:

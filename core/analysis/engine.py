@@ -24,7 +24,9 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -40,6 +42,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from avard.core.allan.overlapping import OverlappingAllan
+    from avard.core.allan.streaming import StreamingAllan
 
 
 # analyze of a file does not import scipy: the line threshold's F quantile and the p-value's
@@ -149,15 +152,97 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     if options.estimator != "oadev" or not source.rereadable or total is None:
         return _analyze_passes(info, total, [(sel, _accel(source, block, sel), None)],
                                options=options, progress=progress)
-    groups = oadev_pass_groups(sel, int(total))
+    workers = _workers(options.workers, int(total))
+    if info.format is not RecordFormat.NPZ:
+        workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
+    groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
 
     def reread(column: int) -> _Blocks:
         return _accel(source, block, [column], verify=False)
 
+    parallel = (_Parallel(workers, partial(_accel_columns, source, block), (0, int(total)))
+                if workers > 1 else None)
     return _analyze_passes(info, total, passes, reread=reread, options=options,
-                           progress=progress)
+                           progress=progress, parallel=parallel)
+
+
+def _workers(workers: int | str, n_samples: int) -> int:
+    """``AnalyzeOptions.workers`` as a number: ``"auto"`` is ``parallel.default_workers()``
+    for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1."""
+    if workers == "auto":
+        from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, default_workers
+
+        return default_workers() if n_samples >= PARALLEL_MIN_SAMPLES else 1
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1 "
+                        "or 'auto'")
+    return workers
+
+
+def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]:
+    """Each worker holds an OADEV history of its own: a pass's channels split so that all
+    workers together hold as many histories as one pass would."""
+    if workers <= 1:
+        return groups
+    return [g[i:i + -(-len(g) // workers)] for g in groups
+            for i in range(0, len(g), -(-len(g) // workers))]
+
+
+def _accel_columns(source: RecordSource, block: int, columns: list[int], *,
+                   verify: bool = False) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A source's accel blocks of ``columns`` from its start: a picklable reader for the
+    chunks of a parallel pass (the chunk that reads a first pass to the end verifies)."""
+    return _accel(source, block, columns, verify=verify)
+
+
+def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = DEFAULT_OPTIONS,
+                    *, chunks: int = 1, executor: Executor | None = None,
+                    progress: ProgressFn | None = None) -> Analysis:
+    """Several .npz records of one sensor analysed as one record whose segments they are
+    (no difference or spectrum segment spans two of them): the same channels, rates that
+    agree by ``core/io/rates.py``'s rule (τ labelled with the first record's rate), the
+    OADEV at the τ the longest record reaches. Each pass is cut into ``chunks`` and run on
+    ``executor`` (``avard fleet``: a Dask client's) or forked processes; one record and one
+    chunk is ``analyze(source)``."""
+    from dataclasses import replace
+
+    from avard.core.analysis.parallel import ChainedRead
+    from avard.core.io.rates import require_compatible
+
+    check_noise_id(options.noise_id)
+    if not sources:
+        raise DataError("no records to analyse")
+    if options.estimator != "oadev":
+        raise DataError("records are pooled with the OADEV only; analyse them one by one "
+                        "for the cascade")
+    infos = [s.info for s in sources]
+    first = infos[0]
+    for i in infos:
+        if i.format is not RecordFormat.NPZ or i.n_samples is None:
+            raise DataError(f"{i.source}: only .npz records are pooled (its format is "
+                            f"{i.format.value}); analyse it on its own")
+        if i.names != first.names:
+            raise DataError(f"{i.source} has channels {', '.join(i.names)} and {first.source}"
+                            f" {', '.join(first.names)}: pool records of one sensor only")
+        require_compatible(first.source, first.rate_hz, i.source, i.rate_hz, first.rate_u_hz,
+                           i.rate_u_hz)
+    sizes = [int(i.n_samples or 0) for i in infos]
+    bounds = tuple(int(v) for v in np.cumsum([0, *sizes]))
+    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources))
+    info = replace(first, source=", ".join(i.source for i in infos), n_samples=bounds[-1])
+    sel = _select(list(info.names), options.channels)
+    groups = _split_for_workers(oadev_pass_groups(sel, max(sizes)), chunks)
+    passes: list[_Pass] = [(g, read(g), None) for g in groups]
+    parallel = (_Parallel(chunks, read, bounds, executor)
+                if chunks > 1 or executor is not None else None)
+
+    def reread(column: int) -> _Blocks:
+        return read([column])
+
+    return _analyze_passes(info, bounds[-1], passes, reread=reread, options=options,
+                           progress=progress, parallel=parallel, longest=max(sizes))
 
 
 def oadev_pass_groups(sel: list[int], n_samples: int) -> list[list[int]]:
@@ -256,6 +341,16 @@ def _one_pass(blocks: _Blocks, take: list[int] | None,
                 welch.gap()
         if progress is not None:
             progress(done + n, total)
+    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+
+
+def _finish_pass(sa: OverlappingAllan | StreamingAllan, welch: WelchAccumulator | None, n: int,
+                 reread: _Reread | None, quantiles: str, noise_id: str) -> _PassResult:
+    """A pass's result from its accumulators, fed by one pass or added up from a parallel
+    pass's chunks (``parallel.run_pass``): R(n) read again where B1 needs it, then the
+    Allan result."""
+    from avard.core.allan.overlapping import OverlappingAllan
+
     if isinstance(sa, OverlappingAllan) and reread is not None and n >= 16:
         _deferred_rn(sa, reread, n, noise_id)
     # "stable32": the intervals' χ² quantiles, and the B1 rule, as Stable32's
@@ -293,6 +388,38 @@ def _deferred_rn(sa: OverlappingAllan, reread: _Reread, n: int, noise_id: str = 
         sa.set_rn(ch, {k: r for k, r in zip(ks, sums, strict=True) if r is not None})
 
 
+@dataclass(frozen=True)
+class _Parallel:
+    """How to run an OADEV pass on several processes: the workers (chunks), the record's
+    blocks of some channels from its start (re-readable and picklable: every worker reads
+    its own chunk), the segments' bounds, and where to run (forks, or e.g. a Dask client's
+    executor for ``avard fleet``)."""
+
+    workers: int
+    read: Callable[[list[int]], _Blocks]
+    bounds: tuple[int, ...]
+    executor: Executor | None = None
+
+
+def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
+                   grid: NDArray[np.int64], nper: int | None, total: int,
+                   reread: _Reread | None, quantiles: str, noise_id: str,
+                   progress: ProgressFn | None, done: int, all_total: int | None
+                   ) -> _PassResult:
+    """``_one_pass`` of the OADEV with the record cut into chunks, one per worker."""
+    from avard.core.analysis.parallel import run_pass
+
+    def step(samples: int) -> None:
+        if progress is not None:
+            progress(done + samples, all_total)
+
+    # the first pass checks the file's CRC, as one pass does (its last chunk reads to the end)
+    sa, welch, n = run_pass(partial(par.read, chans), None, names, rate, grid, nper, total,
+                            par.bounds, par.workers, verify=done == 0, progress=step,
+                            executor=par.executor)
+    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+
+
 def _analyze_passes(
     info: RecordInfo,
     total: int | None,
@@ -301,13 +428,18 @@ def _analyze_passes(
     options: AnalyzeOptions,
     progress: ProgressFn | None,
     reread: _Reread | None = None,
+    parallel: _Parallel | None = None,
+    longest: int | None = None,
 ) -> Analysis:
     """The analysis of the channels of ``passes``: each (channel numbers in ``info.names``,
     its blocks, the block columns to take or None for all), read one after another.
     ``total``: the record's sample count (or an upper bound; None when unknown).
     ``progress`` counts the samples read over all passes (the record's length × passes).
     ``reread(column)``, when the record can be read again, gives one column's blocks: the
-    OADEV then defers R(n) and reads a column again only where B1 needs it."""
+    OADEV then defers R(n) and reads a column again only where B1 needs it.
+    ``parallel`` (the OADEV only): each pass's chunks on that many worker processes
+    (``parallel.run_pass``), exactly the one-pass sums. ``longest``: records pooled as
+    segments (``analyze_records``) have no τ beyond the longest one's."""
     estimator, source = options.estimator, info.source
     if estimator not in ESTIMATORS:
         raise DataError(f"estimator {estimator!r} is unknown; use one of {sorted(ESTIMATORS)}")
@@ -320,8 +452,13 @@ def _analyze_passes(
             raise DataError(f"{source}: the record length is unknown, so the OADEV τ grid "
                             "cannot be fixed; give n_samples or use estimator='cascade'")
         width = max(len(chans) for chans, _b, _t in passes)  # channels live at once
-        grid = oadev_grid(int(total), width)
-        full = oadev_grid(int(total), width, budget_bytes=1 << 62)
+        if parallel is not None and parallel.executor is None:
+            # each local worker holds its chunk's history here (a Dask worker holds its own
+            # elsewhere: the grid is then one analyze's)
+            width *= parallel.workers
+        reach = int(total) if longest is None else longest
+        grid = oadev_grid(reach, width)
+        full = oadev_grid(reach, width, budget_bytes=1 << 62)
         if len(grid) < len(full):
             # said in the table and the JSON: the longest τ the memory here allowed
             meta["oadev_cut"] = {
@@ -339,9 +476,24 @@ def _analyze_passes(
         if reread is not None:
             def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
-        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid, nper,
-                        progress, done, all_total, options.quantiles,
-                        None if total is None else int(total), again, options.noise_id)
+        one = None
+        if parallel is not None and grid is not None and total is not None and \
+                again is not None:  # R(n) is read again after a parallel pass
+            from avard.core.analysis.parallel import ShortRead
+
+            try:
+                one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid,
+                                     nper, int(total), again, options.quantiles,
+                                     options.noise_id, progress, done, all_total)
+            except ShortRead as exc:
+                # the screen's cuts are gaps no plan knew of: one worker needs no plan
+                log.info("%s: the parallel pass read short (%s); analysed on one worker",
+                         source, exc)
+                parallel = None
+        if one is None:
+            one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
+                            nper, progress, done, all_total, options.quantiles,
+                            None if total is None else int(total), again, options.noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "

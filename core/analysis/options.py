@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from avard.core.errors import DataError
 from avard.core.io.source import BLOCK
 
 __all__ = ["DEFAULT_OPTIONS", "AnalyzeOptions", "FilterCorner"]
@@ -29,6 +30,9 @@ class AnalyzeOptions:
     ``block``: samples per block read (memory is a few blocks).
     ``screen``: read the record through the input screen (``core/io/screen.py``: start-up
     glitches and shocks cut out as gaps, bad temperature readings masked, all said).
+    ``workers``: processes for the OADEV of an .npz file, cut by time and added up exactly
+    (``core/analysis/parallel.py``: the result is one worker's), or ``"auto"`` (1 on a
+    machine under 2 GB or for records under 2**22 samples, else the cores, at most 4).
     """
 
     channels: tuple[str, ...] | None = None
@@ -41,6 +45,12 @@ class AnalyzeOptions:
     ci: float = 0.683
     block: int = BLOCK
     screen: bool = True
+    workers: int | Literal["auto"] = 1
+
+    def __post_init__(self) -> None:
+        w = self.workers
+        if w != "auto" and (not isinstance(w, int) or isinstance(w, bool) or w < 1):
+            raise DataError(f"workers={w!r}: give a whole number of processes >= 1 or 'auto'")
 
 
 #: analyze's defaults (what `avard analyze FILE` does).

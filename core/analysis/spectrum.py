@@ -4,6 +4,7 @@ Welch accumulator, its segment length, and the F-test threshold a line must pass
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,6 +18,15 @@ if TYPE_CHECKING:
 
 # ---------------------------------------------------------------------------------------------
 # spectrum and sinusoid detection
+
+
+@dataclass(frozen=True)
+class WelchPart:
+    """A stretch's Welch power sums: Σ |X|² per channel and bin over its ``n_seg``
+    segments (what ``WelchAccumulator`` adds up; no samples)."""
+
+    power: NDArray[np.float64]
+    n_seg: int
 
 
 class WelchAccumulator:
@@ -97,6 +107,19 @@ class WelchAccumulator:
     def gap(self) -> None:
         """A break in the data: the partial segment is dropped, none spans the gap."""
         self._held = 0
+
+    def part(self) -> WelchPart:
+        """The segments' power sums so far (a chunk's share of an exact parallel analysis)."""
+        return WelchPart(self._power.copy(), self.n_seg)
+
+    def add(self, part: WelchPart) -> None:
+        """Add the segments of another stretch of the same channels (``part()`` of an
+        accumulator at the same rate and segment length)."""
+        if part.power.shape != self._power.shape:
+            raise DataError(f"a Welch part of shape {part.power.shape} does not add to "
+                            f"{self._power.shape}")
+        self._power += part.power
+        self.n_seg += part.n_seg
 
     def result(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(f in Hz, PSD (F, C)); empty when no full segment was seen."""

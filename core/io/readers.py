@@ -292,7 +292,7 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
     meta: dict[str, Any] = {"format": "npz", "n_samples": n, "rate_hz": rate, "names": names,
                             "temperature_names": tnames, "source": str(p),
                             "units": {"accel": "m/s^2", "temperature": "degC", "rate": "Hz"}}
-    for key in ("source", "preset", "odr_nominal_hz", "lsb_mps2", "seed"):
+    for key in ("source", "preset", "odr_nominal_hz", "lsb_mps2", "seed", "sensor"):
         if key in keys:
             v = _small(zf, key, str(p))
             meta["file_" + key if key == "source" else key] = v.item() if v.ndim == 0 else v

@@ -291,7 +291,9 @@ class FileSource:
             n_samples=None if meta["n_samples"] is None else int(meta["n_samples"]),
             lsb_mps2=float(lsb) if isinstance(lsb, int | float | np.floating) and lsb > 0
             else None,
-            sensor_name=str(preset) if preset is not None else None,
+            # the file's own 'sensor' field (avard fleet --by sensor), else the preset's name
+            sensor_name=(str(meta["sensor"]) if meta.get("sensor") is not None
+                         else str(preset) if preset is not None else None),
             sensor_model="ADXL355" if adxl else None,
             filter_corner_hz=rate / 4.0 if adxl else None,
             has_gyro=bool(meta.get("has_gyro")))

@@ -24,6 +24,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from avard.core.allan.noise_id import NOISE_IDS
@@ -71,6 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "band), the white density read from it against the fit's N; with "
                              "--plot a second figure NAME_psd.png")
     add_model_arguments(parser)
+    parser.add_argument("--workers", default="auto", metavar="N",
+                        help="processes for the OADEV of an .npz file, cut by time and added "
+                             "up exactly (same result as 1): a whole number, or auto "
+                             "(default: 1 on a machine under 2 GB or for records under 2**22 "
+                             "samples, else the cores, at most 4)")
     parser.add_argument("--quantiles", choices=("exact", "stable32"), default="exact",
                         help="chi-squared quantiles of the intervals: exact (default) or as "
                              "Stable32 computes them (reproduces its printed bounds)")
@@ -136,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
                           suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    _workers(args.workers)  # checked before the work
     if args.temperature and (args.quantiles != "exact" or args.noise_id != "avard"):
         raise DataError("--quantiles stable32 and --noise-id stable32 are not available with "
                         "--temperature; run analyze without --temperature to compare with "
@@ -154,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
         an = ex.analysis
         comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
     else:
-        an = analyze(source, options, progress=progress_printer())
+        an = analyze(source, replace(options, workers=_workers(args.workers)),
+                     progress=progress_printer())
         comp = {}
     stats = run_statistics(source, an, request)
     if args.json:
@@ -188,3 +196,16 @@ def run(args: argparse.Namespace) -> int:
             plot_psd(an, p.with_name(f"{p.stem}_psd{p.suffix}"))
         plot_extras(stats, args.plot)
     return 0
+
+
+def _workers(text: str) -> int | str:
+    """--workers: 'auto' or a whole number >= 1."""
+    if text == "auto":
+        return "auto"
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise DataError(f"--workers {text}: give a whole number of processes >= 1, or auto")
+    return n

@@ -58,6 +58,8 @@ def test_json_exports_and_plot(npz: Path, tmp_path: Path,
     (["{npz}", "--channels", "w"], "channel 'w'"),
     (["{npz}", "--export", "yaml", "out.yaml"], "unknown format"),
     (["{csv}"], "--rate"),
+    (["{npz}", "--workers", "0"], "--workers 0"),
+    (["{npz}", "--workers", "two"], "whole number"),
 ])
 def test_failures_exit_nonzero_with_a_message(npz: Path, tmp_path: Path, args: list[str],
                                               message: str,
@@ -123,3 +125,19 @@ def test_cascade_estimator_is_named(npz: Path, capsys: pytest.CaptureFixture[str
     d = json.loads(capsys.readouterr().out)
     assert d["estimator"] == "cascade"
     assert all(ch["estimator"] == "cascade" for ch in d["channels"].values())
+
+
+def test_workers_give_the_one_worker_json(npz: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--workers 2 cuts the record by time and adds the chunks up exactly: the JSON is one
+    worker's, to the rounding of the sums."""
+    assert main(["analyze", str(npz), "--json", "--workers", "1"]) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert main(["analyze", str(npz), "--json", "--workers", "2"]) == 0
+    two = json.loads(capsys.readouterr().out)
+    for name, ch in one["channels"].items():
+        other = two["channels"][name]
+        np.testing.assert_allclose(other["adev"], ch["adev"], rtol=1e-12)
+        assert other["alpha"] == ch["alpha"]
+        np.testing.assert_allclose(other["edf"], ch["edf"], rtol=1e-12)
+        for term, t in ch["terms"].items():
+            assert other["terms"][term]["present"] == t["present"]

@@ -1,0 +1,284 @@
+"""Exact parallel analysis of one record: cut by time, each chunk analysed on its own core,
+the chunks' sums added (``avard analyze --workers N``).
+
+Cutting a record into chunks and merging their Allan variances (``StreamingAllan.merge``)
+loses the second differences that straddle each cut: a fraction of about 2mK/N of them for K
+cuts, nothing at short τ and a lot near N/4. Here nothing is lost. A chunk [start, stop)
+owns the differences D_i and the averages that *start* in it. It reads the record from its
+start, the samples before the chunk only advancing the running sum (so its differences are
+one pass's to the bit), and reads on past ``stop`` by
+the reach of its longest difference and of the noise identification's sums of products
+(``LADDER_REACH`` averages), which it keeps apart and takes away again
+(``OverlappingAllan(own_until=…)``, ``OadevPart``). Its Welch segments are those that start
+in it. The parts then add up to what one pass over the whole record holds, to the rounding
+of the sums, so the ADEV, its noise identification (α), EDF and intervals, the spectrum and
+the fit are the single-worker ones (``tests/core/test_parallel.py``).
+
+Cuts fall on multiples of ``alignment`` counted from the start of the segment (the stretch
+between gaps) they are in: the OADEV's averages and the Welch segments are aligned to that
+start, and a cut elsewhere would shift them. Records without any stretch longer than two
+alignments run on one worker.
+
+What stays single-worker: the cascade estimator (``--estimator cascade``: the service's
+streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
+the few channels and τ that need them after the pass, as on one worker) and the fit.
+
+The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
+context): each inherits the job (how to read the record, the τ grid) and sends back only its
+part, a few numbers per τ and the spectrum's power sums. A worker that dies (killed, out of
+memory) ends the analysis with an error that says so, instead of a wait for its chunk.
+Each worker holds one OADEV history per channel of its pass, so a pass's channels are split
+among the workers (``engine._split_for_workers``): together they hold as many histories as
+one pass would.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import multiprocessing
+import os
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+
+import numpy as np
+from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
+from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
+from avard.core.errors import AvardError, DataError
+from numpy.typing import NDArray
+
+__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ShortRead", "default_workers",
+           "plan_chunks", "run_pass"]
+
+#: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
+MAX_WORKERS = 4
+#: Below this much memory (a Pi 3 has 1 GB) the default is one worker: each worker holds an
+#: OADEV history of its own.
+SMALL_MACHINE_BYTES = 2 << 30
+
+#: ``workers="auto"`` runs shorter records on one worker: below ~9 h at 125 Hz the forks and
+#: the re-read prefix cost about what the second core saves.
+PARALLEL_MIN_SAMPLES = 1 << 22
+
+#: A record's blocks: (samples (n, C) in m/s², True where a segment ends).
+Blocks = Iterable[tuple[NDArray[np.float64], bool]]
+
+
+def default_workers() -> int:
+    """1 on a machine with less than 2 GB of memory, else the cores, at most 4."""
+    try:
+        with open("/proc/meminfo") as f:
+            total = next(int(line.split()[1]) * 1024 for line in f
+                         if line.startswith("MemTotal:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        total = 0
+    if total < SMALL_MACHINE_BYTES:
+        return 1
+    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0))))
+
+
+class ShortRead(DataError):
+    """A chunk found fewer samples than planned: the input screen cut rows out of the
+    record (its cuts are gaps the plan could not know), or the file changed. The engine then
+    reads the pass on one worker, which needs no plan."""
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One worker's stretch of a record: it owns samples [start, stop) and reads [start,
+    read_to)."""
+
+    start: int
+    stop: int
+    read_to: int
+
+
+def alignment(grid: NDArray[np.int64], nperseg: int | None) -> int:
+    """The step cuts fall on: a multiple of every m of the grid and of the Welch hop (all
+    powers of two, so the largest of them)."""
+    steps = [int(m) for m in grid] + ([nperseg // 2] if nperseg else [])
+    out = 1
+    for s in steps:
+        out = out * s // math.gcd(out, s)
+    return out
+
+
+def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
+    """Samples a chunk reads past its end: its last differences' (2·m_max), the noise
+    identification's averages' (``LADDER_REACH``·m_max) and its last Welch segment's."""
+    return max(LADDER_REACH * int(grid[-1]), (nperseg or 0) // 2)
+
+
+def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) -> list[Chunk]:
+    """Chunks of about equal length for ``workers``, cut at multiples of ``align`` from the
+    start of the segment each cut is in (``bounds``: the segments' first samples and the
+    record's length, as ``meta["segment_bounds"]``). Fewer chunks where the record has too
+    few such points."""
+    n = int(bounds[-1])
+    cuts = set()
+    for w in range(1, workers):
+        ideal = n * w / workers
+        best = None
+        for s0, s1 in itertools.pairwise(bounds):
+            j = round((ideal - s0) / align)
+            for jj in (j - 1, j, j + 1):
+                c = s0 + jj * align
+                if s0 < c < s1 and (best is None or abs(c - ideal) < abs(best - ideal)):
+                    best = c
+        if best is not None:
+            cuts.add(int(best))
+    edges = [0, *sorted(cuts), n]
+    return [Chunk(a, b, min(n, b + reach_) if b < n else n)
+            for a, b in itertools.pairwise(edges)]
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What every worker needs: handed to the forked local processes when they start (never
+    pickled), pickled (so ``read`` must be picklable, e.g. ``ChainedRead``) for another
+    executor's. ``read(verify=...)`` gives the record's blocks from its start; the chunk
+    that reads to the record's end checks the file's CRC when ``verify``."""
+
+    read: Callable[..., Blocks]
+    take: list[int] | None
+    names: list[str]
+    rate_hz: float
+    grid: NDArray[np.int64]
+    nperseg: int | None
+    n_total: int
+    verify: bool
+    chunks: list[Chunk]
+
+
+#: The job of this forked worker process (``_take_job``): one per process, never shared
+#: between concurrent passes (each pass starts processes of its own).
+_JOB: _Job | None = None
+
+
+def _take_job(job: _Job) -> None:
+    global _JOB
+    _JOB = job
+
+
+def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
+    """One chunk's parts, in a forked local worker (the job handed to it at its start)."""
+    assert _JOB is not None
+    return chunk_part(_JOB, i)
+
+
+def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
+    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
+    ch = job.chunks[i]
+    last = ch.stop >= job.n_total
+    c = len(job.names)
+    # R(n) is never part of a chunk: the caller reads it again after the pass (defer_rn)
+    acc = OverlappingAllan(c, job.rate_hz, job.grid, names=job.names, n_total=job.n_total,
+                           defer_rn=True, own_from=ch.start,
+                           own_until=None if last else ch.stop)
+    welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
+             else None)
+    # the Welch segments that start before ``stop`` end by half a segment past it
+    welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
+    pos = 0
+    for accel, segment_end in job.read(verify=job.verify and last):
+        lo, hi = pos, min(pos + len(accel), ch.read_to)
+        pos = hi
+        a = accel[:hi - lo]
+        if job.take is not None:
+            a = a[:, job.take]
+        # from the record's start: what comes before the chunk advances the running sum
+        # only, so the chunk's differences are one pass's to the bit
+        acc.update(a)
+        if welch is not None and hi > ch.start and lo < welch_to:
+            welch.update(a[max(0, ch.start - lo):welch_to - lo])
+        if hi >= ch.read_to:
+            break
+        if segment_end:
+            acc.gap()
+            if welch is not None:
+                welch.gap()
+    if pos < ch.read_to:
+        raise ShortRead(f"read {pos} samples where the record had {ch.read_to}: the input "
+                        "screen cut rows out, or the file changed while it was analysed")
+    return acc.part(), (None if welch is None else welch.part())
+
+
+def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str],
+             rate_hz: float, grid: NDArray[np.int64], nperseg: int | None, n_total: int,
+             bounds: Sequence[int], workers: int, *, verify: bool = False,
+             progress: Callable[[int], None] | None = None,
+             executor: Executor | None = None,
+             ) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
+    """One pass over a record (the channels ``names``: its blocks' columns ``take``, or
+    all) on ``workers`` processes: the OADEV accumulator holding the whole record's sums
+    (``OverlappingAllan.from_part``), the Welch accumulator and the samples read, as one
+    pass would give them. ``read()`` gives the record's blocks from its start (each worker
+    reads from there: what comes before its chunk only advances the running sum).
+    ``progress(samples)`` after each chunk. ``executor``: run the ``workers`` chunks there
+    (e.g. a Dask client's, ``avard fleet``) instead of on forked local processes; ``read``
+    must then be picklable. ``verify``: the chunk that reads to the end checks the file's
+    CRC (the first pass over a file does). R(n) is left to the caller: the accumulator is
+    ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does after one pass."""
+    chunks = plan_chunks(bounds, workers, alignment(grid, nperseg), reach(grid, nperseg))
+    job = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), verify, chunks)
+    parts: list[tuple[OadevPart, WelchPart | None] | None] = [None] * len(chunks)
+    if len(chunks) == 1 and executor is None:
+        parts[0] = chunk_part(job, 0)
+    else:
+        # forked local processes get the job when they start (only chunk numbers cross to
+        # them, so ``read`` may be any callable); another executor (Dask's) gets it pickled
+        own = executor is None
+        pool = executor or ProcessPoolExecutor(
+            min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"),
+            initializer=_take_job, initargs=(job,))
+        try:
+            results = (pool.map(_chunk_part, range(len(chunks))) if own else
+                       pool.map(chunk_part, [job] * len(chunks), range(len(chunks))))
+            done = 0
+            for i, one in enumerate(results):
+                parts[i] = one
+                done += chunks[i].stop - chunks[i].start
+                if progress is not None:
+                    progress(done)
+        except BrokenProcessPool as exc:
+            # a worker killed (out of memory, a signal): said, never waited for forever
+            raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
+                             "run again with fewer --workers (each holds an OADEV "
+                             "history of its own) or --workers 1") from exc
+        finally:
+            if own:
+                pool.shutdown(wait=True, cancel_futures=True)
+    total: OadevPart | None = None
+    welch = (WelchAccumulator(len(names), rate_hz, nperseg) if nperseg is not None
+             else None)
+    for each in parts:
+        assert each is not None
+        part, power = each
+        total = part if total is None else total + part
+        if welch is not None and power is not None:
+            welch.add(power)
+    assert total is not None
+    acc = OverlappingAllan.from_part(total, rate_hz, names=names, n_total=int(n_total),
+                                     defer_rn=True)
+    return acc, welch, total.n_samples
+
+
+@dataclass(frozen=True)
+class ChainedRead:
+    """Several records read one after another as the segments of one record (a gap at each
+    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read."""
+
+    read: tuple[Callable[..., Blocks], ...]
+
+    def __call__(self, columns: list[int], *, verify: bool = False
+                 ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+        for r in self.read:
+            last: tuple[NDArray[np.float64], bool] | None = None
+            for b in r(columns, verify=verify):
+                if last is not None:
+                    yield last
+                last = b
+            if last is not None:
+                yield last[0], True  # no difference or spectrum segment spans two records

@@ -1,0 +1,310 @@
+"""Exact parallel analysis (issue #29): a record cut into chunks by time, each chunk's part
+of the OADEV and of the spectrum, the parts added up — equal to one pass over the record."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from avard.core.allan.noise_id import Lag1Ladder
+from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
+from avard.core.analysis.parallel import Chunk, alignment, plan_chunks
+from avard.core.analysis.spectrum import WelchAccumulator
+from avard.core.errors import DataError
+from avard.core.io.source import open_record
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+
+def _feed(acc: OverlappingAllan | WelchAccumulator, y: np.ndarray, bounds: list[int],
+          lo: int, hi: int, block: int) -> None:
+    """Samples [lo, hi) of y in blocks of ``block``, with a gap at every segment end."""
+    for s0, s1 in itertools.pairwise(bounds):
+        a, b = max(s0, lo), min(s1, hi)
+        if a >= b:
+            continue
+        for i in range(a, b, block):
+            acc.update(y[i:min(i + block, b)])
+        if b == s1:
+            acc.gap()
+
+
+def _chunked(y, bounds, ms, cuts, *, covariance=False, block=4099) -> OadevPart:
+    n = len(y)
+    edges = [0, *cuts, n]
+    parts = []
+    for a, b in itertools.pairwise(edges):
+        acc = OverlappingAllan(y.shape[1], 10.0, ms, covariance=covariance, own_from=a,
+                               own_until=b if b < n else None)
+        _feed(acc, y, bounds, 0, min(n, b + LADDER_REACH * int(ms[-1])), block)
+        parts.append(acc.part())
+    total = parts[0]
+    for p in parts[1:]:
+        total = total + p
+    return total
+
+
+def _ladder_gap(a: Lag1Ladder, b: Lag1Ladder) -> float:
+    """Largest relative difference between two ladders' sums (b re-referenced to a's)."""
+    diff = Lag1Ladder(a.c, a.dmax, cross=a.cross)
+    diff.add(a)
+    diff.add(b, -1)
+    ta, td = a.totals(), diff.totals()
+    worst = 0.0
+    for f in Lag1Ladder.FIELDS:
+        scale = np.max(np.abs(ta[f])) or 1.0
+        worst = max(worst, float(np.max(np.abs(td[f]))) / scale)
+    return worst
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), channels=st.integers(1, 3), n_gaps=st.integers(0, 3),
+       n_cuts=st.integers(1, 4), counts=st.booleans(), covariance=st.booleans())
+def test_chunk_parts_add_up_to_one_pass(seed, channels, n_gaps, n_cuts, counts, covariance):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6000, 20000))
+    y = rng.normal(0, 1e-3, (n, channels)) + np.cumsum(rng.normal(0, 3e-6, (n, channels)), 0)
+    y += 9.81
+    if counts:  # integer raw counts: exact int64 running sums
+        y = np.round(y * 1e4).astype(np.int32)
+    ms = 2 ** np.arange(int(rng.integers(4, 10)))
+    gaps = sorted(rng.choice(np.arange(200, n - 200), n_gaps, replace=False).tolist())
+    bounds = [0, *gaps, n]
+    align = int(ms[-1])
+    points = [s0 + j * align for s0, s1 in itertools.pairwise(bounds)
+              for j in range(1, (s1 - s0) // align + 1) if s0 + j * align < s1]
+    if not points:
+        return
+    cuts = sorted(rng.choice(points, min(n_cuts, len(points)), replace=False).tolist())
+
+    one = OverlappingAllan(channels, 10.0, ms, covariance=covariance)
+    _feed(one, y, bounds, 0, n, 4099)
+    total = _chunked(y, bounds, ms, cuts, covariance=covariance)
+    assert total.n_samples == n
+    got = OverlappingAllan.from_part(total, 10.0, covariance=covariance).result()
+    ref = one.result()
+    assert np.array_equal(got.n, ref.n)
+    ok = np.isfinite(ref.var)
+    np.testing.assert_array_equal(np.isfinite(got.var), ok)
+    np.testing.assert_allclose(got.var[ok], ref.var[ok], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(got.alpha, ref.alpha)
+    np.testing.assert_allclose(got.edf[ok], ref.edf[ok], rtol=1e-12)
+    if covariance:
+        np.testing.assert_allclose(got.cov, ref.cov, rtol=1e-12, atol=1e-30)
+    for k in range(len(ms)):
+        assert _ladder_gap(one._ladders[k], total.ladders[k]) < 1e-12
+
+
+def test_parts_add_associatively() -> None:
+    rng = np.random.default_rng(4)
+    n = 12000
+    y = rng.normal(0, 1e-3, (n, 2))
+    ms = 2 ** np.arange(8)
+    edges = [0, 2560, 6144, 9216, n]
+    parts = []
+    for a, b in itertools.pairwise(edges):
+        acc = OverlappingAllan(2, 10.0, ms, own_from=a, own_until=b if b < n else None)
+        _feed(acc, y, [0, n], 0, min(n, b + LADDER_REACH * 128), 1000)
+        parts.append(acc.part())
+    left = (parts[0] + parts[1]) + (parts[2] + parts[3])
+    right = parts[0] + (parts[1] + (parts[2] + parts[3]))
+    np.testing.assert_array_equal(left.n, right.n)
+    np.testing.assert_allclose(left.s2, right.s2, rtol=1e-13)
+    for a_lad, b_lad in zip(left.ladders, right.ladders, strict=True):
+        assert _ladder_gap(a_lad, b_lad) < 1e-13
+
+
+def test_a_merge_of_independent_chunks_loses_what_straddles_the_cuts() -> None:
+    """Why the chunk reads past its end: without it (each chunk alone, as
+    ``StreamingAllan.merge`` pools segments) the long-τ differences across a cut are lost."""
+    rng = np.random.default_rng(8)
+    n = 8192
+    y = rng.normal(0, 1e-3, (n, 1))
+    ms = 2 ** np.arange(11)
+    one = OverlappingAllan(1, 10.0, ms)
+    one.update(y)
+    alone = [OverlappingAllan(1, 10.0, ms) for _ in range(2)]
+    alone[0].update(y[:4096])
+    alone[1].update(y[4096:])
+    lost = one.part().n - (alone[0].part() + alone[1].part()).n
+    np.testing.assert_array_equal(lost, 2 * ms - 1)  # the 2m − 1 differences across the cut
+    assert lost[-1] / one.part().n[-1] > 0.3  # a third of the longest τ's differences
+    exact = _chunked(y, [0, n], ms, [4096])
+    assert np.array_equal(exact.n, one.part().n)
+
+
+def test_welch_parts_add_up_to_one_spectrum() -> None:
+    rng = np.random.default_rng(2)
+    n, nper = 40000, 1024
+    y = rng.normal(0, 1e-3, (n, 2)) + 9.81
+    y[:, 0] += 1e-3 * np.sin(2 * np.pi * 3.3 * np.arange(n) / 100.0)
+    bounds = [0, 17000, n]
+    one = WelchAccumulator(2, 100.0, nper)
+    _feed(one, y, bounds, 0, n, 3000)
+    total = WelchAccumulator(2, 100.0, nper)
+    for a, b in [(0, 8192), (8192, 17000 + 4 * 512), (17000 + 4 * 512, n)]:
+        w = WelchAccumulator(2, 100.0, nper)
+        _feed(w, y, bounds, a, min(n, b + nper // 2) if b < n else n, 3000)
+        total.add(w.part())
+    assert total.n_seg == one.n_seg
+    np.testing.assert_allclose(total.result()[1], one.result()[1], rtol=1e-12)
+
+
+def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
+    bounds = [0, 1000, 70000, 100000]
+    chunks = plan_chunks(bounds, 3, 4096, 16384)
+    assert chunks[0].start == 0 and chunks[-1].stop == 100000
+    for c in chunks[1:]:
+        seg = max(b for b in bounds[:-1] if b <= c.start)
+        assert c.start > seg and (c.start - seg) % 4096 == 0
+    for a, b in itertools.pairwise(chunks):
+        assert a.stop == b.start and a.read_to == min(100000, a.stop + 16384)
+    # no stretch longer than the alignment: one chunk, the whole record
+    assert plan_chunks([0, 3000, 6000], 4, 4096, 16384) == [Chunk(0, 6000, 6000)]
+    assert alignment(2 ** np.arange(12), 1 << 14) == 8192
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_analyze_on_workers_equals_one_worker(tmp_path, workers) -> None:
+    rng = np.random.default_rng(11)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
+    y += np.array([0.0, 0.0, 9.81])
+    y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    one = analyze(open_record(path))
+    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
+    assert par.n_samples == one.n_samples
+    for name, ch in one.channels.items():
+        a, b = ch.allan, par.channels[name].allan
+        np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_allclose(b.edf, a.edf, rtol=1e-12)
+        assert len(par.channels[name].lines) == len(ch.lines)
+        for la, lb in zip(ch.lines, par.channels[name].lines, strict=True):
+            assert lb["frequency_hz"] == pytest.approx(la["frequency_hz"], rel=1e-12)
+            assert lb["amplitude"] == pytest.approx(la["amplitude"], rel=1e-9)
+        for term, e in ch.fit.terms.items():
+            f = par.channels[name].fit.terms[term]
+            assert f.present == e.present
+            if e.present:
+                assert f.value == pytest.approx(e.value, rel=1e-9)
+
+
+def test_analyze_on_workers_reads_r_n_again_as_one_worker(tmp_path) -> None:
+    """A channel whose long τ B1 calls PM gets its deferred R(n) read again after the
+    parallel pass, as after one pass: the same α at every τ."""
+    rng = np.random.default_rng(21)
+    n = 1 << 15
+    pm = np.diff(rng.normal(0, 1e-3, n + 1))  # white PM as rate data: differenced white
+    y = np.stack([pm, rng.normal(0, 1e-3, n)], axis=1)
+    path = tmp_path / "pm.npz"
+    np.savez(path, accel=y, rate_hz=10.0, axes=np.array(["pm", "fm"]))
+    one = analyze(open_record(path), AnalyzeOptions(find_sinusoids=False))
+    par = analyze(open_record(path), AnalyzeOptions(find_sinusoids=False, workers=2))
+    for name in ("pm", "fm"):
+        a, b = one.channels[name].allan, par.channels[name].allan
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
+
+
+def test_workers_must_be_a_positive_whole_number() -> None:
+    for bad in (0, -1, 1.5, True, "two"):
+        with pytest.raises(DataError, match="workers"):
+            AnalyzeOptions(workers=bad)
+
+
+def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> None:
+    """A worker killed mid-chunk (out of memory, a signal) ends the analysis with an error
+    that says so: a pool that lost a task would otherwise wait for it forever."""
+    import os
+
+    from avard.core.analysis import parallel
+    from avard.core.errors import AvardError
+
+    rng = np.random.default_rng(3)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
+    real = parallel.chunk_part
+
+    def dies_on_the_second(job, i):
+        if i == 1:
+            os._exit(9)  # the forked worker vanishes, as under the OOM killer
+        return real(job, i)
+
+    monkeypatch.setattr(parallel, "chunk_part", dies_on_the_second)
+    with pytest.raises(AvardError, match=r"worker process .* died"):
+        analyze(open_record(path), AnalyzeOptions(workers=2))
+
+
+def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeypatch) -> None:
+    """The record changes under the workers (a chunk finds fewer samples than planned): said,
+    not a silently shorter analysis."""
+    from avard.core.analysis import parallel
+
+    rng = np.random.default_rng(4)
+    y = rng.normal(0, 1e-3, (1 << 16, 1))
+    job = parallel._Job(lambda verify: iter([(y[:40000], False)]), None, ["x"], 100.0,
+                        2 ** np.arange(10), None, len(y), False,
+                        [parallel.Chunk(0, 32768, 36864), parallel.Chunk(32768, 65536, 65536)])
+    with pytest.raises(DataError, match="changed while it was analysed"):
+        parallel.chunk_part(job, 1)
+
+
+def test_a_damaged_npz_is_refused_on_workers_as_on_one(tmp_path) -> None:
+    """The parallel pass checks the member's CRC as the first pass of one worker does: a
+    flipped bit is an error, never an ADEV."""
+    from avard.core.errors import FormatError
+
+    rng = np.random.default_rng(7)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
+    raw = bytearray(path.read_bytes())
+    raw[len(raw) // 2] ^= 0x10  # one bit inside the accel member's data
+    path.write_bytes(bytes(raw))
+    for workers in (1, 2):
+        with pytest.raises(FormatError, match="CRC"):
+            analyze(open_record(path), AnalyzeOptions(workers=workers))
+
+
+def test_concurrent_parallel_passes_keep_their_own_records(tmp_path) -> None:
+    """Two analyses on one executor at once (avard fleet's threads): each gets its own
+    record's result, whatever the interleaving."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from avard.core.analysis.engine import analyze_records
+
+    paths = []
+    for scale, name in ((1e-3, "a.npz"), (1.0, "b.npz")):
+        p = tmp_path / name
+        np.savez(p, accel=np.random.default_rng(1).normal(0, scale, (1 << 15, 1)), axes=["x"],
+                 rate_hz=100.0)
+        paths.append(p)
+    alone = [analyze(open_record(p)).channels["x"].allan.dev for p in paths]
+    with ThreadPoolExecutor(4) as ex, ThreadPoolExecutor(2) as callers:
+        futs = [callers.submit(analyze_records, [open_record(p)], chunks=3, executor=ex)
+                for p in paths for _ in range(3)]
+        got = [f.result().channels["x"].allan.dev for f in futs]
+    for i, dev in enumerate(got):
+        np.testing.assert_allclose(dev, alone[i // 3], rtol=1e-12)
+
+
+def test_a_record_the_screen_cuts_is_analysed_on_one_worker_alike(tmp_path) -> None:
+    """A shock the input screen cuts out is a gap no chunk plan knew of: the parallel pass
+    reads short and the pass is read on one worker, so the result is one worker's."""
+    rng = np.random.default_rng(12)
+    n = 1 << 16
+    y = rng.normal(0, 1e-3, (n, 3))
+    y[40000:40003] += 0.5  # a shock on every axis, 500 σ
+    path = tmp_path / "shock.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    one = analyze(open_record(path))
+    par = analyze(open_record(path), AnalyzeOptions(workers=2))
+    assert one.meta["screen"].stretches  # the screen did cut the shock
+    assert par.n_samples == one.n_samples
+    for name, ch in one.channels.items():
+        np.testing.assert_array_equal(par.channels[name].allan.dev, ch.allan.dev)
