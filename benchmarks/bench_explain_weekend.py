@@ -99,6 +99,8 @@ def rows() -> list[Row]:
 
 def run(cases: int, seed0: int, only: list[str] | None) -> None:
     from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
 
     from tests.support.weekend import save
 
@@ -117,7 +119,7 @@ def run(cases: int, seed0: int, only: list[str] | None) -> None:
                 seed = seed0 + 1000 * j + i
                 path = save(seed, r.weekend, Path(d) / "w.npz")
                 t0 = time.process_time()
-                ex = explain_file(str(path), heldout=False)
+                ex = explain_file(open_record(path), ExplainOptions(heldout=False))
                 cpu += time.process_time() - t0
                 n += 1
                 for a, ch in ex.channels.items():

@@ -46,7 +46,7 @@ from avard.daemon.commands._statistics import (
     run_statistics,
     statistics_request,
 )
-from avard.daemon.commands.progress import progress_printer
+from avard.daemon.commands._progress import progress_printer
 
 NAME = "analyze"
 HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"

@@ -9,7 +9,9 @@ import math
 
 import numpy as np
 from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
 from avard.core.explain.engine import explain_file
+from avard.core.explain.options import ExplainOptions
 from avard.core.io.screen import (
     STUCK_MIN_S,
     ScreenLog,
@@ -18,6 +20,7 @@ from avard.core.io.screen import (
     screen_temperature,
     stuck_runs,
 )
+from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
 
@@ -91,9 +94,9 @@ def test_analyze_cuts_a_startup_glitch_as_a_gap(tmp_path):
     """A 3-sample start-up glitch sent analyze's χ²/dof to thousands; screened, the fit is the
     clean record's, and the text and JSON say what was cut."""
     rec, _ = make_record(3, hours=1.0, logged=("ambient",))
-    clean = analyze(str(save(rec, tmp_path / "clean.npz")), channels=["x"])
+    clean = analyze(open_record(save(rec, tmp_path / "clean.npz")), AnalyzeOptions(channels=("x",)))
     rec.accel[:3] += 0.5
-    an = analyze(str(save(rec, tmp_path / "glitch.npz")), channels=["x"])
+    an = analyze(open_record(save(rec, tmp_path / "glitch.npz")), AnalyzeOptions(channels=("x",)))
     assert an.channels["x"].fit.chi2_dof < 2 * clean.channels["x"].fit.chi2_dof + 1
     d = an.to_dict()["screened"]
     assert d["counts"] == {"startup_glitch": 1} and d["stretches"][0]["start_s"] == 0.0
@@ -114,7 +117,8 @@ def test_power_on_values_do_not_hide_a_coupling_and_a_dropout_is_no_step(tmp_pat
     ok = np.flatnonzero(np.isfinite(t[:, 0]))
     for k in (100, 5000, 9000):
         t[ok[k], 0] = 85.0
-    ex = explain_file(str(save(rec, tmp_path / "faulty.npz")), channels=["x"], heldout=False)
+    ex = explain_file(open_record(save(rec, tmp_path / "faulty.npz")),
+                      ExplainOptions(channels=("x",), heldout=False))
     ch = ex.channels["x"]
     assert ch.thermal is not None and ch.thermal.passed and ch.thermal.z > 20
     assert abs(ch.thermal.coefficient / 3e-3 - 1) < 0.1

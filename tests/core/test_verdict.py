@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 from avard.core.explain.engine import explain_file
+from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary
 from avard.core.explain.verdict import compensation_worse_at, judge
+from avard.core.io.source import open_record
 
 from tests.support.hidden import make_record, save
 
@@ -50,7 +52,8 @@ def test_a_dT_dt_coupling_is_unexplained_and_its_parameters_model_dependent(tmp_
     k = np.ones(600) / 600  # a minute's smoothing of the 0.0625 K readings (10 Hz)
     dtdt = np.gradient(np.convolve(temp, k, mode="same")) * rec.rate_hz
     rec.accel[:, 0] += 4.0 * dtdt  # m/s² per K/s
-    ex = explain_file(str(save(rec, tmp_path / "dtdt.npz")), channels=["x"])
+    ex = explain_file(open_record(save(rec, tmp_path / "dtdt.npz")),
+                      ExplainOptions(channels=("x",)))
     ch = ex.channels["x"]
     assert ch.verdict is not None and not ch.verdict.explained
     assert all(f.model_dependent for f in ch.claimed if f.cause != "sinusoid")

@@ -8,9 +8,11 @@ estimator gives the same terms, values and notes."""
 from __future__ import annotations
 
 import numpy as np
-from avard.core.allan.streaming import StreamingAllan
+from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import format_table
+from avard.core.analysis.options import AnalyzeOptions
+from avard.core.io.source import open_record
 from avard.core.model.fit import NOT_RESOLVED
 from avard.core.sim.presets import make_config
 from avard.core.sim.simulate import SensorSimulator
@@ -33,7 +35,7 @@ def test_a_ramp_seen_only_at_the_longest_tau_is_not_yet_resolved(tmp_path) -> No
     for i in range(0, y.shape[0], step):  # the service's blocks: one snapshot a minute
         sa.update(y[i:i + step])
     snap = sa.snapshot().to_dict()
-    fits = fit_snapshot(snap)
+    fits = fit_snapshot(AllanSnapshot.from_dict(snap))
     ramp = fits["x"].terms["rate_ramp"]
     # the presence test passes (z > 2.33), but without its longest τ it does not
     assert ramp.present and ramp.z is not None and ramp.z > 2.33
@@ -50,8 +52,8 @@ def test_a_ramp_seen_only_at_the_longest_tau_is_not_yet_resolved(tmp_path) -> No
     # one fit: analyze of the same samples with the service's estimator says the same
     path = tmp_path / "ql.npz"
     np.savez(path, accel=y, rate_hz=rate, axes=np.array(["x", "y", "z"]))
-    an = analyze(str(path), estimator="cascade", filter_corner_hz=rate / 4,
-                 find_sinusoids=False, channels=["x"])
+    an = analyze(open_record(path), AnalyzeOptions(estimator="cascade", filter_corner_hz=rate / 4,
+                                                   find_sinusoids=False, channels=("x",)))
     off = an.channels["x"].fit.terms
     table = format_table(an)  # analyze's table says it under the term's line
     assert table.count(NOT_RESOLVED) == sum(e.note == NOT_RESOLVED for e in off.values()) >= 1
