@@ -40,13 +40,13 @@ from avard.daemon.commands._options import (
     add_run_argument,
     analyze_options,
 )
+from avard.daemon.commands._progress import progress_printer
 from avard.daemon.commands._statistics import (
     add_statistics_arguments,
     plot_extras,
     run_statistics,
     statistics_request,
 )
-from avard.daemon.commands._progress import progress_printer
 
 NAME = "analyze"
 HELP = "fit noise terms (Q, N, B, K, R, sinusoids) with 68 % intervals to a record"
