@@ -43,7 +43,9 @@ def test_deferred_rn_gives_the_alpha_of_rn_everywhere() -> None:
     rng = np.random.default_rng(6)
     for y in (np.diff(rng.standard_normal(6_001)), rng.standard_normal(6_000)):
         ms = np.array([250, 300, 400, 500, 700, 1000, 1400], dtype=np.int64)
-        got = allan_variance(y, 1.0, ms.astype(float), kind="oavar")
+        # the power-law rule (phase data's): the default reads rate data, where no PM type is
+        # possible on float samples and R(n) is never read
+        got = allan_variance(y, 1.0, ms.astype(float), kind="oavar", noise_id="powerlaw")
         assert np.any(got.alpha >= 1)  # B1 says PM somewhere: R(n) is read
         # the former way: R(n) at every τ of B1's range
         p = segment_phase(y[:, None], False)
@@ -58,5 +60,5 @@ def test_deferred_rn_gives_the_alpha_of_rn_everywhere() -> None:
             rn[k].push((p[2 * m:] - 2 * p[m:-m] + p[:-2 * m]).T.astype(np.float64))
             rn[k].gap()
         want = finish_result("oavar", 1.0, ms, np.ones_like(ms), sums, ladders, one_d=True,
-                             rn=rn)
+                             rn=rn, noise_id="powerlaw")
         np.testing.assert_array_equal(got.alpha, want.alpha)
