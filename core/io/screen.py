@@ -43,7 +43,7 @@ Masked temperature readings become NaN (the slow view then has no reading there)
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -303,10 +303,14 @@ class _TempTrack:
 
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
-                  columns: Sequence[int] | None = None) -> Iterator[Block]:
+                  columns: Sequence[int] | None = None,
+                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None
+                  ) -> Iterator[Block]:
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
+    ``bad_rows(offset, block)``: the block's outlying rows (default ``screen_accel``; a
+    ``ScreenedSource`` hands the first read's verdicts to its later reads).
 
     Temperature readings are judged with one block of look-ahead (a spike's right-hand
     neighbour may be in the next block), so each block is handed on when the next has been
@@ -323,7 +327,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         a, t, end = blk
         if t is not None and tnames:
             t = _mask_readings(off, t, tracks, tnames, log, rate_hz, final=last)
-        bad = screen_accel(a)
+        bad = screen_accel(a) if bad_rows is None else bad_rows(off, a)
         runs = _runs(bad)
         for f, l_ in runs:
             kind = "startup_glitch" if off + f < start_n else "shock"
@@ -420,6 +424,11 @@ class ScreenedSource:
     def __init__(self, source: Any) -> None:
         self.source = source
         self.log: ScreenLog | None = None
+        # the first complete read's verdicts, per block size: {offset: outlying rows} (only
+        # blocks with any), so later passes (one per channel group) cut the very same rows
+        # without judging every axis again (the neighbours' medians cost as much as the
+        # OADEV of a long record)
+        self._verdicts: dict[int, dict[int, NDArray[np.intp]]] = {}
 
     @property
     def info(self) -> Any:
@@ -435,6 +444,24 @@ class ScreenedSource:
         log = ScreenLog(float(info.rate_hz))
         if self.log is None:
             self.log = log
-        raw = self.source.blocks(block, columns=None, temperature=temperature, verify=verify)
+        known = self._verdicts.get(block)
+        # judged once on every axis; later reads take only the columns asked for
+        raw = self.source.blocks(block, columns=None if known is None else columns,
+                                 temperature=temperature, verify=verify)
+        found: dict[int, NDArray[np.intp]] = {}
+
+        def judged(off: int, a: NDArray[np.float64]) -> NDArray[np.bool_]:
+            if known is not None:
+                bad = np.zeros(len(a), dtype=bool)
+                bad[known.get(off, np.empty(0, dtype=np.intp))] = True
+                return bad
+            bad = screen_accel(a)
+            if bad.any():
+                found[off] = np.flatnonzero(bad)
+            return bad
+
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
-                                 list(info.temperature_names), log, columns)
+                                 list(info.temperature_names), log,
+                                 columns if known is None else None, judged)
+        if known is None and log.done:
+            self._verdicts[block] = found

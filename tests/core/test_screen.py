@@ -145,3 +145,28 @@ def test_a_chip_filters_correlated_samples_are_not_shocks():
     assert not screen_accel(a).any()
     a[1_000_000, 0] += 15 * x.std()
     assert set(np.flatnonzero(screen_accel(a))) == set(range(999_998, 1_000_003))
+
+
+def test_a_second_read_cuts_the_same_rows_without_judging_again(tmp_path, monkeypatch):
+    """Every pass over a record (one per channel group) cuts the same rows: the first read's
+    verdicts are reused, the axes are not judged again."""
+    import avard.core.io.screen as screen_mod
+    from avard.core.io.screen import ScreenedSource
+
+    rng = np.random.default_rng(2)
+    y = rng.normal(0, 1e-3, (50_000, 3))
+    y[30_000:30_002] += 0.5
+    path = tmp_path / "s.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    src = ScreenedSource(open_record(path))
+    first = list(src.blocks(4096, columns=[0, 1, 2], temperature=False))
+    calls = []
+    real = screen_mod.screen_accel
+    monkeypatch.setattr(screen_mod, "screen_accel", lambda a: calls.append(1) or real(a))
+    again = list(src.blocks(4096, columns=[2], temperature=False))
+    assert not calls
+    assert [len(a) for a, _t, _e in again] == [len(a) for a, _t, _e in first]
+    assert [e for _a, _t, e in again] == [e for _a, _t, e in first]
+    for (a, _t, _e), (b, _u, _f) in zip(first, again, strict=True):
+        np.testing.assert_array_equal(a[:, 2], b[:, 0])
+    assert src.log is not None and src.log.counts() == {"shock": 1}
