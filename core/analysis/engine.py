@@ -155,6 +155,14 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     workers = _workers(options.workers, int(total))
     if info.format is not RecordFormat.NPZ:
         workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
+    if workers > 1 and isinstance(source, ScreenedSource):
+        # the screen judges the record once, here (its CRC checked), before the workers fork:
+        # they inherit its verdicts and read only their channels; a record it cuts has gaps
+        # no chunk plan knows of, and is read on one worker
+        for _blk in source.blocks(block, temperature=False):
+            pass
+        if source.log is not None and any(x.channel == "accel" for x in source.log.stretches):
+            workers = 1
     groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
