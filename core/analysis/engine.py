@@ -183,9 +183,7 @@ def _workers(workers: int | str, n_samples: int) -> int:
         from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, default_workers
 
         return default_workers() if n_samples >= PARALLEL_MIN_SAMPLES else 1
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise DataError(f"workers={workers!r}: give a whole number of processes >= 1 "
-                        "or 'auto'")
+    assert isinstance(workers, int)  # AnalyzeOptions checked it when it was made
     return workers
 
 
