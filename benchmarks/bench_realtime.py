@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import resource
 import subprocess
 import threading
 import time
@@ -33,8 +34,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 from avard.daemon.hw.adxl355 import Adxl355
+from avard.daemon.hw.drain_process import ReaderProcess, ReaderSpec
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
-from avard.daemon.hw.timebase import TimeBase
+from avard.daemon.hw.pacing import drain_period_s
+from avard.daemon.hw.thread_priority import raise_thread_priority
+from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.service.acquisition import Acquisition
 
@@ -60,13 +64,15 @@ class CheckingRing:
         c = counts[:, 0].astype(np.int64)
         if self.first is None:
             self.first = (int(index[0]), int(c[0]))
-        if self.last_counter is not None:
+            # set k carries k from the start of measurement: the sets before the first
+            # received are lost too (a late first drain)
+            self.true_lost += int(c[0])
+        elif self.last_counter is not None:
             self.true_lost += int((c[0] - self.last_counter - 1) % WRAP)
         self.disorder += int(np.count_nonzero(np.diff(c) % WRAP != 1))
         self.last_counter = int(c[-1])
-        # true number of set k since the first: counter difference (unwrapped by the total)
-        true = self.first[1] + self.received + self.true_lost   # counter of c[0], unwrapped
-        off = int(index[0]) - (true - self.first[1] + self.first[0])
+        # the true number of this block's first set: every set before it received or lost
+        off = int(index[0]) - (self.received + self.true_lost)
         self.max_offset = max(self.max_offset, abs(off))
         self.received += len(c)
 
@@ -87,32 +93,104 @@ def realtime_rig(odr_hz: float) -> tuple[Adxl355, EmulatedAdxl355, VirtualClock]
     return dev, emu, clock
 
 
-def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0) -> dict[str, Any]:
-    dev, emu, clock = realtime_rig(odr_hz)
+class DrainLog:
+    """Wraps a source's ``drain``: each drain's interval from the one before (its
+    ``since_last_s``: the chip's view of how late the reader came) and its duration (``t_mono``
+    to ``t_mono_end``: the bus transfers and decoding, pre-emptions included), seconds."""
+
+    def __init__(self, drain: Any) -> None:
+        self._drain = drain
+        self.intervals: list[float] = []
+        self.durations: list[float] = []
+
+    def __call__(self, max_sets: int | None = None) -> Any:
+        d = self._drain(max_sets)
+        if d.since_last_s is not None:
+            self.intervals.append(d.since_last_s)
+        self.durations.append(d.t_mono_end - d.t_mono)
+        return d
+
+    @staticmethod
+    def percentiles_ms(values: list[float]) -> tuple[float, ...]:
+        if not values:
+            return (float("nan"),) * 4
+        return tuple(float(v) * 1e3 for v in np.percentile(values, [50, 99, 99.9, 100]))
+
+
+def gil_load(stop: threading.Event) -> None:
+    """Stands for the service's other threads (Allan, recorder, publisher): Python and numpy
+    work that takes the GIL back as soon as it can."""
+    a = np.random.default_rng(0).random(20_000)
+    while not stop.is_set():
+        x = 0
+        for i in range(2_000):
+            x += i * i
+        np.cumsum(a)
+
+
+def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0, *, reader: str = "thread",
+                 rt_priority: int = 0, gil_threads: int = 0) -> dict[str, Any]:
     ring = CheckingRing()
-    dev.start()
-    acq = Acquisition(dev, ring, TimeBase(odr_hz), clock, poll_hz=poll_hz)  # type: ignore[arg-type]
+    proc: ReaderProcess | None = None
+    emu: EmulatedAdxl355 | None = None
+    source: Any
+    if reader == "process":
+        spec = ReaderSpec("avard.daemon.hw.drain_process:open_emulated", {"odr_hz": odr_hz},
+                          poll_hz=poll_hz, rt_priority=rt_priority)
+        proc = ReaderProcess(spec).start()
+        source, clock = proc, SystemClock()
+    else:
+        dev, emu, clock = realtime_rig(odr_hz)
+        dev.start()
+        source = dev
+    drains = DrainLog(source.drain)
+    source.drain = drains
+    acq = Acquisition(source, ring, TimeBase(odr_hz), clock, poll_hz=poll_hz)  # type: ignore[arg-type]
     cpu: dict[str, float] = {}
+    stop = threading.Event()
+    loaders = [threading.Thread(target=gil_load, args=(stop,), daemon=True)
+               for _ in range(gil_threads)]
 
     def timed_run() -> None:
+        if reader == "thread" and rt_priority:
+            raise_thread_priority(rt_priority)
         t0 = time.thread_time()
         acq._run()
         cpu["reader"] = time.thread_time() - t0
 
+    c0 = _children_cpu()
+    for t in loaders:
+        t.start()
     acq._thread = threading.Thread(target=timed_run, name="avard-reader", daemon=True)
     acq._thread.start()
     time.sleep(seconds)
     acq.stop()
+    stop.set()
+    if proc is not None:
+        proc.close()
+    child_cpu = _children_cpu() - c0
     claimed = sum(int(g["n"]) for g in ring.gaps)
     minutes = seconds / 60.0
+    produced = ring.received + ring.true_lost
     return {
-        "odr": odr_hz, "seconds": seconds, "produced": emu.produced_total,
-        "received": ring.received, "true_lost": ring.true_lost, "emu_lost": emu.lost,
+        "odr": odr_hz, "seconds": seconds, "reader": reader, "rt": rt_priority,
+        "gil": gil_threads, "produced": emu.produced_total if emu is not None else produced,
+        "received": ring.received, "true_lost": ring.true_lost,
         "overruns": acq.overruns, "per_min": acq.overruns / minutes, "claimed": claimed,
         "unaccounted": acq.unaccounted, "max_offset": ring.max_offset,
-        "disorder": ring.disorder, "reader_cpu_per_s": cpu.get("reader", float("nan")) / seconds,
-        "drain_period_s": acq.period, "error": repr(acq.error) if acq.error else "",
+        "disorder": ring.disorder,
+        "reader_cpu_per_s": (cpu.get("reader", float("nan")) + child_cpu) / seconds,
+        "interval_ms": DrainLog.percentiles_ms(drains.intervals),
+        "drain_ms": DrainLog.percentiles_ms(drains.durations),
+        "drain_period_s": (acq.period if proc is None
+                           else drain_period_s(odr_hz, poll_hz, proc.spec.fill)),
+        "error": repr(acq.error) if acq.error else "",
     }
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def main(argv: list[str]) -> int:
@@ -123,6 +201,14 @@ def main(argv: list[str]) -> int:
     p.add_argument("--hog", type=int, default=0, help="CPU-bound `yes` processes beside it")
     p.add_argument("--poll-hz", type=float, default=4.0, help="[sensor] poll_hz (the least "
                    "drain rate; the reader drains every half FIFO anyway)")
+    p.add_argument("--reader", choices=("thread", "process"), default="thread",
+                   help="the drain loop in the reader thread, or in its own process "
+                   "(hw/drain_process.py) feeding the reader thread through a pipe")
+    p.add_argument("--rt", type=int, default=0, metavar="PRIORITY",
+                   help="SCHED_FIFO priority of the drain loop (0: normal scheduling)")
+    p.add_argument("--gil-load", type=int, default=0, metavar="N",
+                   help="N threads of Python/numpy work in the service's process, standing "
+                   "for its Allan, recorder and publisher threads")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     load = os.getloadavg()
@@ -130,14 +216,18 @@ def main(argv: list[str]) -> int:
     rows = []
     try:
         for odr in (float(r) for r in args.rates.split(",")):
-            rows.append(run_realtime(odr, args.seconds, args.poll_hz))
+            rows.append(run_realtime(odr, args.seconds, args.poll_hz, reader=args.reader,
+                                     rt_priority=args.rt, gil_threads=args.gil_load))
     finally:
         for h in hogs:
             h.kill()
             h.wait()
-    print(f"the service's reader on the real clock, {args.seconds:g} s per rate, "
-          f"{args.hog} `yes` hog(s) beside it, {os.cpu_count()} CPUs, load average before "
-          f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    load_after = os.getloadavg()
+    sched = f"SCHED_FIFO {args.rt}" if args.rt else "normal scheduling"
+    print(f"the service's reader on the real clock, {args.seconds:g} s per rate, drain loop in "
+          f"its {args.reader}, {sched}, {args.gil_load} GIL-load thread(s), {args.hog} `yes` "
+          f"hog(s) beside it, {os.cpu_count()} CPUs, load average before {load[0]:.2f} "
+          f"{load[1]:.2f} {load[2]:.2f}, after {load_after[0]:.2f}")
     hdr = (f"{'ODR Hz':>7} {'produced':>9} {'received':>9} {'lost (counter)':>14} "
            f"{'claimed by gaps':>15} {'overruns':>8} {'/min':>6} {'unacc.':>6} "
            f"{'max |index-true|':>16} {'reader CPU-s/s':>14}")
@@ -152,5 +242,13 @@ def main(argv: list[str]) -> int:
         bad |= bool(r["disorder"] or r["error"])
     print("lost (counter) = sets missing from the counter sequence (the truth); claimed = sum "
           "of the reader's gap records; max |index-true| = largest drift of the index from "
-          "the counter, sets (each gap is an estimate from time: a few sets)")
+          "the counter, sets (each gap is an estimate from time: a few sets); reader CPU "
+          "includes the reader process's")
+    print(f"\n{'ODR Hz':>7} {'FIFO ms':>8} {'drain period ms':>15}   drain-to-drain interval ms "
+          "p50 / p99 / p99.9 / max   drain duration ms p50 / p99 / p99.9 / max")
+    for r in rows:
+        iv = " / ".join(f"{v:.2f}" for v in r["interval_ms"])
+        du = " / ".join(f"{v:.3f}" for v in r["drain_ms"])
+        print(f"{r['odr']:7g} {32e3 / r['odr']:8.2f} {r['drain_period_s'] * 1e3:15.2f}   "
+              f"{iv:>46}   {du:>36}")
     return 1 if bad else 0

@@ -31,6 +31,7 @@ class GapReason(StrEnum):
     RECOVERED = "recovered"         # probe, reset, reconfigure, restart after an error
     SELF_TEST = "self_test"         # self-test deflected the outputs
     UNACCOUNTED = "unaccounted"     # sets arrived later than time says: a loss nobody reported
+    READER_BACKLOG = "reader_backlog"  # the reader process dropped drains nobody took
 
 
 def parse_reasons(text: str | None) -> tuple[GapReason, ...]:

@@ -161,10 +161,17 @@ class Acquisition:
             wall0 = time.monotonic()
             t0 = self.clock.monotonic()
             next_t = t0
+            # a reader process (hw/drain_process.py) paces the chip itself: take its drains
+            # as they come
+            wait_for_drain = getattr(self.sensor, "wait_for_drain", None)
             while not self._stop.is_set():
                 if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
                     self.finished.set()
                     break
+                if wait_for_drain is not None:
+                    if wait_for_drain(_PACE_SLEEP_MAX_S):
+                        self.poll_once()
+                    continue
                 self.poll_once()
                 period = self.period
                 if self.interrupt is not None:
