@@ -63,6 +63,10 @@ _F_SETPIPE_SZ = getattr(fcntl, "F_SETPIPE_SZ", 1031)
 PIPE_BYTES = 1 << 20
 #: Seconds of drains the child keeps while the service does not read (then the oldest go).
 BACKLOG_S = 30.0
+#: SCHED_FIFO priority the reader process asks for (refused without CAP_SYS_NICE or an
+#: RLIMIT_RTPRIO; the drop-in systemd/realtime.conf allows it): below the kernel's threaded
+#: interrupt handlers (50), so the SPI controller's interrupt still runs before it.
+READER_RT_PRIORITY = 10
 #: Writes up to this size are atomic on a pipe (POSIX PIPE_BUF is at least 512; Linux 4096).
 PIPE_BUF = 4096
 

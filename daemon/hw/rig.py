@@ -35,6 +35,11 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 BACKEND_ENV = "AVARD_BACKEND"
+#: Above this ODR the hardware is drained by a process of its own (drain_process.py), not by
+#: the service's reader thread: the rate that held on the real clock beside a CPU hog with the
+#: GIL shared (docs/service.md, ``python -m benchmarks realtime``). An INT1 pin keeps the
+#: thread (the child does not wait on the pin).
+THREAD_READER_MAX_HZ = 125.0
 
 # -- the rig as data ----------------------------------------------------------------------------
 
@@ -60,13 +65,14 @@ class SensorSpec:
     odr_hz: float = 125.0
     int1_gpio: str = ""
     temp_intercept_lsb: float = 1885.0
+    poll_hz: float = 4.0
 
     @classmethod
     def from_config(cls, s: SensorConfig) -> SensorSpec:
         bus = BusSpec(s.bus, s.bus_number, device=s.spi_device, address=s.i2c_address,
                       speed_hz=s.spi_speed_hz)
         return cls(s.name, bus, range_g=s.range_g, odr_hz=s.odr_hz, int1_gpio=s.int1_gpio,
-                   temp_intercept_lsb=s.temp_intercept_lsb)
+                   temp_intercept_lsb=s.temp_intercept_lsb, poll_hz=s.poll_hz)
 
 
 @dataclass(frozen=True)
@@ -305,12 +311,36 @@ def _hardware(spec: RigSpec) -> Rig:
         from avard.daemon.hw.interrupt import GpiodPin
 
         interrupt = GpiodPin(s.int1_gpio)
+    elif s.odr_hz > THREAD_READER_MAX_HZ:
+        return _hardware_in_reader_process(spec)
     opened = _open_hardware(s)
     info = bring_up(opened.driver, s, int1=interrupt is not None).info
     return Rig(spec, opened.driver, opened.clock,
                {"device": info.name, "partid": info.partid, "revid": info.revid,
                 "bus": s.bus.kind, "name": s.name},
                temperature_bank=_ds18b20_bank(spec.temperature), interrupt=interrupt)
+
+
+def _hardware_in_reader_process(spec: RigSpec) -> Rig:
+    """The ADXL355 drained by a child process of its own (drain_process.py), SCHED_FIFO where
+    the system allows it: above THREAD_READER_MAX_HZ a reader thread sharing the GIL with the
+    service's other threads lets the FIFO overrun beside a CPU-bound process."""
+    from avard.daemon.hw.drain_process import READER_RT_PRIORITY, ReaderProcess, ReaderSpec
+    from avard.daemon.hw.timebase import SystemClock
+
+    s = spec.sensors[0]
+    b = s.bus
+    reader = ReaderProcess(ReaderSpec(
+        "avard.daemon.hw.drain_process:open_hardware",
+        {"kind": b.kind, "number": b.number, "device": b.device, "address": b.address,
+         "speed_hz": b.speed_hz, "range_g": s.range_g, "odr_hz": s.odr_hz,
+         "temp_intercept_lsb": s.temp_intercept_lsb},
+        poll_hz=s.poll_hz, rt_priority=READER_RT_PRIORITY,
+        chip_interval_s=spec.temperature.chip_interval_s)).start()
+    return Rig(spec, reader, SystemClock(),
+               {"device": "ADXL355", "bus": b.kind, "name": s.name,
+                "reader": f"process {reader.pid}"},
+               temperature_bank=_ds18b20_bank(spec.temperature))
 
 
 def _ds18b20_bank(t: TemperatureConfig) -> Ds18b20Bank | None:

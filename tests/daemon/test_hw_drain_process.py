@@ -11,13 +11,16 @@ machine was late.
 
 from __future__ import annotations
 
+import configparser
 import os
 import signal
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
-from avard.core.errors import DeviceStalledError, HardwareError
+from avard.core.errors import AvardError, DeviceStalledError, HardwareError
+from avard.daemon.config_types import TemperatureConfig
 from avard.daemon.hw import drain_process as DP
 from avard.daemon.hw.adxl355 import Drain
 from avard.daemon.hw.source import GapReason
@@ -176,3 +179,44 @@ def test_a_killed_child_is_started_again_and_the_hole_is_a_restart_gap() -> None
         assert acq.next_index > restart[0]["i0"] + restart[0]["n"]   # samples flow again
     finally:
         rp.close()
+
+
+def test_the_realtime_drop_in_allows_the_priority_the_reader_asks_for() -> None:
+    text = (Path(__file__).parents[2] / "systemd" / "realtime.conf").read_text()
+    unit = configparser.ConfigParser(strict=False, interpolation=None)
+    unit.optionxform = str  # type: ignore[assignment,method-assign]
+    unit.read_string(text)
+    assert dict(unit["Service"]) == {"RestrictRealtime": "no", "LimitRTPRIO": "10"}
+    assert 1 <= DP.READER_RT_PRIORITY <= int(unit["Service"]["LimitRTPRIO"])
+
+
+def test_above_the_thread_readers_rate_the_hardware_is_drained_by_a_process(monkeypatch) -> None:
+    from avard.daemon.hw import rig as RIG
+
+    started: list[DP.ReaderSpec] = []
+
+    class Fake(DP.ReaderProcess):
+        def start(self) -> DP.ReaderProcess:
+            started.append(self.spec)
+            return self
+
+    def thread_path(_s: object) -> None:
+        raise HardwareError("thread path")
+
+    monkeypatch.setattr(DP, "ReaderProcess", Fake)
+    monkeypatch.setattr(RIG, "_open_hardware", thread_path)
+    bus = RIG.BusSpec("spi", 0, device=1, speed_hz=8_000_000)
+    fast = RIG.RigSpec((RIG.SensorSpec("a", bus, odr_hz=4000.0, poll_hz=5.0),),
+                       temperature=TemperatureConfig(ds18b20=False, chip_interval_s=2.0))
+    rig = RIG.build_rig(fast)
+    assert isinstance(rig.sensor, Fake) and len(started) == 1
+    spec = started[0]
+    assert spec.opener == "avard.daemon.hw.drain_process:open_hardware"
+    assert spec.params["odr_hz"] == 4000.0 and spec.params["device"] == 1
+    assert spec.params["speed_hz"] == 8_000_000 and spec.poll_hz == 5.0
+    assert spec.rt_priority == DP.READER_RT_PRIORITY and spec.chip_interval_s == 2.0
+    for odr, int1 in ((RIG.THREAD_READER_MAX_HZ, ""), (4000.0, "gpiochip0:25")):
+        slow = RIG.RigSpec((RIG.SensorSpec("a", bus, odr_hz=odr, int1_gpio=int1),))
+        with pytest.raises(AvardError):     # the thread path (or the missing GPIO binding)
+            RIG.build_rig(slow)
+    assert len(started) == 1
