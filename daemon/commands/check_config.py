@@ -18,8 +18,13 @@ from collections.abc import Mapping
 from typing import Any
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
-from avard.daemon.config_types import Config
-from avard.daemon.service.acquisition import REALTIME_HELD_HZ
+from avard.daemon.config_types import Config, SensorConfig
+from avard.daemon.hw.pacing import (
+    FILL_TARGET_PROCESS,
+    HELD_HZ_PROCESS_FIFO,
+    drain_period_s,
+    reader_in_process,
+)
 
 NAME = "check-config"
 HELP = "check a config file (unknown keys, types, ranges) without starting"
@@ -37,16 +42,17 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, **{"recording.data_dir": args.data_dir})
     check_runtime(cfg)
     config = Config.from_dict(cfg)
+    s = config.sensor
+    drains = (f"drained at {1.0 / drain_period_s(s.odr_hz, s.poll_hz, FILL_TARGET_PROCESS):g} "
+              "Hz by a reader process on the hardware (SCHED_FIFO needs the drop-in "
+              "systemd/realtime.conf)"
+              if reader_in_process(bool(s.int1_gpio))
+              else f"drained at {effective_poll_hz(cfg):g} Hz")
     summary = [f"{args.config}: valid",
-               f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
-               f"drained at {effective_poll_hz(cfg):g} Hz"]
-    if config.sensor.odr_hz > REALTIME_HELD_HZ:
-        fifo_ms = 32e3 / config.sensor.odr_hz
-        summary.append(
-            f"  note: at {config.sensor.odr_hz:g} Hz the FIFO holds {fifo_ms:.3g} ms: beside a "
-            f"CPU-bound process on a 2-core machine only {REALTIME_HELD_HZ:g} Hz was measured "
-            "free of FIFO overruns (no SCHED_FIFO under the unit); each overrun is a recorded "
-            "gap of counted size (docs/service.md, python -m benchmarks realtime)")
+               f"  ADXL355 at {s.odr_hz:g} Hz ODR, ±{s.range_g} g, {drains}"]
+    note = realtime_note(config.sensor)
+    if note:
+        summary.append(f"  note: {note}")
     if config.recording.enabled:
         summary.append(f"  recording into {config.recording.data_dir}")
     if config.publish.enabled:
@@ -58,6 +64,25 @@ def run(args: argparse.Namespace) -> int:
     if args.show:
         out.write(to_toml(cfg))
     return 0
+
+
+def realtime_note(sensor: SensorConfig) -> str:
+    """What was measured at this ODR on the real clock beside a CPU-bound process (pacing.py's
+    HELD_HZ_PROCESS_FIFO, docs/service.md), when it is not "no overrun"; "" when it is."""
+    odr = sensor.odr_hz
+    after = ("; each overrun is a recorded gap of counted size (docs/service.md, python -m "
+             "benchmarks realtime)")
+    if sensor.int1_gpio:
+        return ("with INT1 the FIFO is drained by the service's thread, which shares the GIL "
+                "and was not measured free of FIFO overruns beside a CPU-bound process; "
+                f"without int1_gpio a reader process at SCHED_FIFO held up to "
+                f"{HELD_HZ_PROCESS_FIFO:g} Hz" + after)
+    if odr <= HELD_HZ_PROCESS_FIFO:
+        return ""
+    return (f"at {odr:g} Hz the FIFO holds {32e3 / odr:.3g} ms: beside a CPU-bound process on "
+            f"a 2-core machine only {HELD_HZ_PROCESS_FIFO:g} Hz was measured free of FIFO "
+            "overruns (the reader process at SCHED_FIFO, systemd/realtime.conf): the "
+            "machine's own stalls outlast the FIFO" + after)
 
 
 def _toml_value(value: Any) -> str:

@@ -41,6 +41,7 @@ import logging
 import math
 import os
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -168,10 +169,12 @@ def open_hardware(kind: str, number: int, device: int = 0, address: int = 0x1D,
     return dev
 
 
-def open_emulated(odr_hz: float, source: str = "counter", range_g: int = 2) -> Adxl355:
+def open_emulated(odr_hz: float, source: str = "counter", range_g: int = 2,
+                  **_wiring: str | int | float) -> Adxl355:
     """The register-level emulator on the real clock (CLOCK_MONOTONIC: it does not wait for
     the reader and overruns as the part does), behind the SPI transport, brought up.
-    ``source``: ``counter`` (set k carries k: every loss is visible) or ``still``."""
+    ``source``: ``counter`` (set k carries k: every loss is visible) or ``still``. It takes
+    :func:`open_hardware`'s arguments too and answers on any bus (a stand-in for the part)."""
     from avard.daemon.hw.emulator import (
         EmulatedAdxl355,
         FakeSpiDev,
@@ -378,7 +381,7 @@ class ReaderProcess:
     # -- the pipe
     def _read(self, timeout: float) -> None:
         """Wait up to ``timeout`` for bytes; parse every whole message into the queue."""
-        if self._eof:
+        if self._eof or self._out < 0:
             return
         ready, _, _ = select.select([self._out], [], [], max(0.0, timeout))
         if not ready:
@@ -387,6 +390,10 @@ class ReaderProcess:
         if not chunk:
             self._eof = True
             return
+        self._feed(chunk)
+
+    def _feed(self, chunk: bytes) -> None:
+        """Bytes from the pipe: a read may end inside a message; whole ones are parsed."""
         self._buf += chunk
         while len(self._buf) >= 2:
             size = int.from_bytes(self._buf[:2], "little")
@@ -480,6 +487,10 @@ _check: type[SampleSource] = ReaderProcess
 
 
 def main(argv: list[str]) -> int:
+    # Ctrl-C and a terminal's hang-up reach the whole process group: the service decides when
+    # to stop, and the child ends when the service closes the command pipe (or dies).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
                         format="avard reader: %(levelname)s %(message)s")
     spec = ReaderSpec.from_json(argv[0])

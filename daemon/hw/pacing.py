@@ -22,9 +22,26 @@ FIFO_SETS = FIFO_LOCATIONS // 3
 FILL_TARGET = 0.5
 
 
+#: The highest ODR measured to run 10 minutes on the real clock with 0 FIFO overruns beside a
+#: CPU-bound process (`yes`) on the shared, loaded 2-core development machine, the drain loop
+#: in its own process (drain_process.py) at SCHED_FIFO (systemd/realtime.conf)
+#: (``python -m benchmarks realtime``, docs/service.md "The reader process"). Above it the
+#: machine's own stalls (cyclictest saw a SCHED_FIFO C thread woken up to 34 ms late) outlast
+#: the FIFO; every loss is then a gap of counted size. At normal priority, under that load,
+#: neither the process (250 Hz) nor the reader thread (125 Hz) ran without overruns.
+HELD_HZ_PROCESS_FIFO = 500.0
+
 #: The reader process (drain_process.py) drains at a quarter: a drain there costs no one else
 #: the GIL, and three quarters of the FIFO (6 ms at 4 kHz) is left for a late wake-up.
 FILL_TARGET_PROCESS = 0.25
+
+
+def reader_in_process(int1: bool) -> bool:
+    """Whether the hardware is drained by the reader process (drain_process.py) rather than the
+    service's reader thread: always, unless the reader waits on INT1 (the child does not wait
+    on the pin). The thread shares the GIL with the service's other threads; beside a CPU hog
+    it overran even at 125 Hz where the process at SCHED_FIFO held 500 Hz (docs/service.md)."""
+    return not int1
 
 
 def drain_period_s(odr_hz: float, poll_hz: float, fill: float = FILL_TARGET) -> float:

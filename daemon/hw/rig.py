@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from avard.core.errors import ConfigError, HardwareError
 from avard.daemon.config_types import Config, SensorConfig, TemperatureConfig
-from avard.daemon.hw.pacing import watermark_settings
+from avard.daemon.hw.pacing import reader_in_process, watermark_settings
 
 if TYPE_CHECKING:
     from avard.daemon.hw.adxl355 import Adxl355, DeviceInfo, SelfTestResult
@@ -35,11 +35,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 BACKEND_ENV = "AVARD_BACKEND"
-#: Above this ODR the hardware is drained by a process of its own (drain_process.py), not by
-#: the service's reader thread: the rate that held on the real clock beside a CPU hog with the
-#: GIL shared (docs/service.md, ``python -m benchmarks realtime``). An INT1 pin keeps the
-#: thread (the child does not wait on the pin).
-THREAD_READER_MAX_HZ = 125.0
+#: What the reader process opens on the hardware (drain_process.py's ``module:function``).
+HARDWARE_OPENER = "avard.daemon.hw.drain_process:open_hardware"
 
 # -- the rig as data ----------------------------------------------------------------------------
 
@@ -175,6 +172,13 @@ class Rig:
     on_tick: Callable[[float], None] | None = None
     temperature_feed: TemperatureFeed | None = None
     parts: Mapping[str, object] = field(default_factory=dict)   # emulator, simulator (tests)
+    #: what the rig started and the service's stop ends (the reader process)
+    closers: tuple[Callable[[], None], ...] = ()
+
+    def close(self) -> None:
+        """End what the rig started (the service calls it when it stops)."""
+        for close in self.closers:
+            close()
 
     @property
     def simulate(self) -> str | None:
@@ -306,13 +310,13 @@ def _simulated(spec: RigSpec) -> Rig:
 
 def _hardware(spec: RigSpec) -> Rig:
     s = spec.sensors[0]
+    if reader_in_process(bool(s.int1_gpio)):
+        return _hardware_in_reader_process(spec)
     interrupt = None
     if s.int1_gpio:
         from avard.daemon.hw.interrupt import GpiodPin
 
         interrupt = GpiodPin(s.int1_gpio)
-    elif s.odr_hz > THREAD_READER_MAX_HZ:
-        return _hardware_in_reader_process(spec)
     opened = _open_hardware(s)
     info = bring_up(opened.driver, s, int1=interrupt is not None).info
     return Rig(spec, opened.driver, opened.clock,
@@ -323,15 +327,15 @@ def _hardware(spec: RigSpec) -> Rig:
 
 def _hardware_in_reader_process(spec: RigSpec) -> Rig:
     """The ADXL355 drained by a child process of its own (drain_process.py), SCHED_FIFO where
-    the system allows it: above THREAD_READER_MAX_HZ a reader thread sharing the GIL with the
-    service's other threads lets the FIFO overrun beside a CPU-bound process."""
+    the system allows it: a reader thread sharing the GIL with the service's other threads
+    lets the FIFO overrun beside a CPU-bound process (pacing.reader_in_process)."""
     from avard.daemon.hw.drain_process import READER_RT_PRIORITY, ReaderProcess, ReaderSpec
     from avard.daemon.hw.timebase import SystemClock
 
     s = spec.sensors[0]
     b = s.bus
     reader = ReaderProcess(ReaderSpec(
-        "avard.daemon.hw.drain_process:open_hardware",
+        HARDWARE_OPENER,
         {"kind": b.kind, "number": b.number, "device": b.device, "address": b.address,
          "speed_hz": b.speed_hz, "range_g": s.range_g, "odr_hz": s.odr_hz,
          "temp_intercept_lsb": s.temp_intercept_lsb},
@@ -340,7 +344,7 @@ def _hardware_in_reader_process(spec: RigSpec) -> Rig:
     return Rig(spec, reader, SystemClock(),
                {"device": "ADXL355", "bus": b.kind, "name": s.name,
                 "reader": f"process {reader.pid}"},
-               temperature_bank=_ds18b20_bank(spec.temperature))
+               temperature_bank=_ds18b20_bank(spec.temperature), closers=(reader.close,))
 
 
 def _ds18b20_bank(t: TemperatureConfig) -> Ds18b20Bank | None:

@@ -51,13 +51,6 @@ _PACE_SLEEP_MAX_S = 0.2
 #: Sets the full FIFO holds after an overrun (96 locations and the 3 of the sync stage): the
 #: first set a drain reads then is this many sets before the newest.
 FIFO_FULL_SETS = FIFO_OVERRUN_LOCATIONS // 3
-#: The highest ODR measured to run without FIFO overruns on the real clock beside a CPU hog
-#: on a 2-core machine (``python -m benchmarks realtime --hog 1``, docs/service.md: at 500 Hz
-#: already 85 overruns a minute, at 4 kHz thousands, under the shared development machine's
-#: load). Above it the drain's 2–4 ms wake-ups miss under load and the unit cannot help:
-#: RestrictRealtime=yes refuses SCHED_FIFO and a negative nice did not change the count.
-#: ``avard check-config`` says so; the loss is then gaps of counted size, never silent.
-REALTIME_HELD_HZ = 125.0
 #: Gap reasons after which the part started measuring afresh (the time line restarts).
 _RESTARTED = frozenset({GapReason.STALL, GapReason.RESET, GapReason.STANDBY,
                         GapReason.RESTART, GapReason.RECOVERED, GapReason.SELF_TEST})

@@ -528,6 +528,7 @@ class Service:
         self.snapshots.stop()
         if self.interrupt is not None:
             self.interrupt.close()      # release the GPIO line
+        self.rig.close()                # the reader process, where the rig started one
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None

@@ -137,18 +137,17 @@ def test_argument_and_config_errors_exit_2(tmp_path: Path,
 
 def test_hardware_code_path_over_an_emulated_spi_bus(tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
-    """The non-simulated path of `avard run` (system clock, real-time reader, no
-    backpressure), with only /dev/spidev replaced by the register-level emulator."""
+    """The non-simulated path of `avard run` (system clock, the reader process, no
+    backpressure), with only the part on /dev/spidev replaced by the register-level emulator
+    on the real clock (in the reader process: drain_process.open_emulated)."""
     import argparse
 
     from avard.daemon.commands import run as run_cmd
     from avard.daemon.config import load_config
     from avard.daemon.config_types import Config
-    from avard.daemon.hw import emulator, transport
+    from avard.daemon.hw import rig
 
-    emu = emulator.EmulatedAdxl355(emulator.counter_source(), emulator.VirtualClock(speed=1.0))
-    monkeypatch.setattr(transport, "open_bus",
-                        lambda *a, **k: transport.SpiBus(emulator.FakeSpiDev(emu)))
+    monkeypatch.setattr(rig, "HARDWARE_OPENER", "avard.daemon.hw.drain_process:open_emulated")
     cfg = load_config(None, **{"recording.data_dir": str(tmp_path / "rec"),
                                "publish.enabled": False, "temperature.ds18b20": False})
     args = argparse.Namespace(simulate=None, speed=None, seed=None)

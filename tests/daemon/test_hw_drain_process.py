@@ -190,7 +190,7 @@ def test_the_realtime_drop_in_allows_the_priority_the_reader_asks_for() -> None:
     assert 1 <= DP.READER_RT_PRIORITY <= int(unit["Service"]["LimitRTPRIO"])
 
 
-def test_above_the_thread_readers_rate_the_hardware_is_drained_by_a_process(monkeypatch) -> None:
+def test_the_hardware_is_drained_by_a_process_unless_int1_is_used(monkeypatch) -> None:
     from avard.daemon.hw import rig as RIG
 
     started: list[DP.ReaderSpec] = []
@@ -215,8 +215,61 @@ def test_above_the_thread_readers_rate_the_hardware_is_drained_by_a_process(monk
     assert spec.params["odr_hz"] == 4000.0 and spec.params["device"] == 1
     assert spec.params["speed_hz"] == 8_000_000 and spec.poll_hz == 5.0
     assert spec.rt_priority == DP.READER_RT_PRIORITY and spec.chip_interval_s == 2.0
-    for odr, int1 in ((RIG.THREAD_READER_MAX_HZ, ""), (4000.0, "gpiochip0:25")):
-        slow = RIG.RigSpec((RIG.SensorSpec("a", bus, odr_hz=odr, int1_gpio=int1),))
+    for odr in (125.0, 4000.0):                   # an INT1 pin keeps the thread
+        slow = RIG.RigSpec((RIG.SensorSpec("a", bus, odr_hz=odr, int1_gpio="gpiochip0:25"),))
         with pytest.raises(AvardError):     # the thread path (or the missing GPIO binding)
             RIG.build_rig(slow)
+    RIG.build_rig(RIG.RigSpec((RIG.SensorSpec("a", bus, odr_hz=125.0),),
+                              temperature=TemperatureConfig(ds18b20=False)))
+    assert started[-1].params["odr_hz"] == 125.0
+    started.pop()
     assert len(started) == 1
+
+
+def test_messages_split_anywhere_by_the_reads_arrive_whole_and_in_order() -> None:
+    rng = np.random.default_rng(7)
+    drains = [_drain(index0=i, counts=np.full((i % 33, 3), i, np.int32)) for i in range(40)]
+    stream = b"".join(DP.encode_drain(d) for d in drains)
+    rp = DP.ReaderProcess(DP.ReaderSpec(EMULATED))
+    cuts = np.sort(rng.choice(np.arange(1, len(stream)), size=200, replace=False))
+    for a, b in zip(np.r_[0, cuts], np.r_[cuts, len(stream)], strict=True):
+        rp._feed(stream[a:b])
+    got = [rp.drain() for _ in drains]
+    assert [d.index0 for d in got] == list(range(40))
+    assert all(np.array_equal(g.counts, d.counts) for g, d in zip(got, drains, strict=True))
+    with pytest.raises(HardwareError):            # nothing more: said, not invented
+        rp.drain()
+
+
+def test_the_child_ends_when_the_service_goes_away_without_a_word() -> None:
+    """The parent killed: its end of the command pipe closes, and the child stops (it must not
+    drain a part nobody reads for ever)."""
+    rp = DP.ReaderProcess(DP.ReaderSpec(EMULATED, {"odr_hz": 125.0}),
+                          start_timeout_s=60).start()
+    proc = rp._proc
+    assert proc is not None
+    os.close(rp._cmd)                 # what the kernel does when the service dies
+    rp._cmd = -1
+    assert proc.wait(timeout=60) == 0
+    rp.close()
+
+
+def test_the_services_stop_ends_the_reader_process(tmp_path: Path, monkeypatch) -> None:
+    import argparse
+
+    from avard.daemon.commands import run as run_cmd
+    from avard.daemon.config import load_config
+    from avard.daemon.config_types import Config
+    from avard.daemon.hw import rig
+
+    monkeypatch.setattr(rig, "HARDWARE_OPENER", EMULATED)
+    cfg = load_config(None, **{"recording.enabled": False, "publish.enabled": False,
+                               "temperature.ds18b20": False})
+    svc = run_cmd.build(argparse.Namespace(simulate=None, speed=None, seed=None),
+                        Config.from_dict(cfg))
+    reader = svc.rig.sensor
+    assert isinstance(reader, DP.ReaderProcess)
+    proc = reader._proc
+    assert proc is not None and proc.poll() is None
+    assert svc.run(0.5) == 0
+    assert proc.poll() == 0 and reader.pid is None      # ended, and in standby (exit 0)
