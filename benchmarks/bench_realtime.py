@@ -1,7 +1,8 @@
 """The service's reader on the real clock: overruns per minute, and every loss checked against
 a sample-encoded counter.
 
-``python -m benchmarks realtime [--seconds 60] [--rates 125,4000] [--hog N]``
+``python -m benchmarks realtime [--seconds 60] [--rates 125,4000] [--hog N]
+[--reader thread|process] [--rt PRIORITY] [--gil-load N]``
 
 The emulated ADXL355 produces sets on CLOCK_MONOTONIC (the emulator's clock at ``speed=1``: it
 does not wait for the reader, so a reader that is late overruns the FIFO exactly as the part
@@ -9,13 +10,19 @@ does), fed by the emulator's counter source: set k carries k in its data. The re
 service's own (``Acquisition``: pacing from the fitted rate, the driver's drain, the time base,
 the loss accounting) pushing into a ring stand-in that checks, for every block, the index the
 reader gave against the counter. ``--hog N`` runs N CPU-bound processes (``yes >/dev/null``)
-beside it, as the issue's acceptance run does. Reported per rate:
+beside it, as the issue's acceptance run does. ``--reader process`` runs the drain loop in
+the reader process (daemon/hw/drain_process.py: the emulator lives there, as the chip would be
+read there), ``--rt`` asks SCHED_FIFO for the drain loop, ``--gil-load N`` keeps N Python
+threads busy in the service's process (its Allan, recorder and publisher threads). Reported
+per rate:
 
 - sets the emulator produced, received, and lost by the counter (the truth);
 - overruns (gap records from the driver), per minute, and the sets their gaps claim;
 - ``unaccounted`` gaps: losses the chip did not report that the reader found from time;
 - the largest difference between the index given to a set and its counter (the index must
-  stay with the true count: a gap of the wrong size shows here), and the reader's CPU.
+  stay with the true count: a gap of the wrong size shows here), and the reader's CPU;
+- per drain: the interval from the drain before (how late the reader came: the FIFO lasts 32
+  sets) and the drain's own duration, percentiles p50/p99/p99.9/max.
 
 Timing on a loaded machine is pessimistic: the figures are what this machine gave at the
 time, with the load stated (``os.getloadavg`` before the run).
@@ -200,7 +207,8 @@ def main(argv: list[str]) -> int:
     p.add_argument("--rates", default="125,4000", help="ODRs in Hz, comma separated")
     p.add_argument("--hog", type=int, default=0, help="CPU-bound `yes` processes beside it")
     p.add_argument("--poll-hz", type=float, default=4.0, help="[sensor] poll_hz (the least "
-                   "drain rate; the reader drains every half FIFO anyway)")
+                   "drain rate; a reader thread drains every half FIFO anyway, the reader "
+                   "process every quarter)")
     p.add_argument("--reader", choices=("thread", "process"), default="thread",
                    help="the drain loop in the reader thread, or in its own process "
                    "(hw/drain_process.py) feeding the reader thread through a pipe")

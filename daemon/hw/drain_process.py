@@ -483,6 +483,7 @@ class ReaderProcess:
         return self
 
 
+#: mypy holds ReaderProcess to the SampleSource contract the reader thread is written against
 _check: type[SampleSource] = ReaderProcess
 
 
