@@ -397,7 +397,7 @@ def _watch_table(seconds: float) -> int:
 def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
     """CPU-s of :func:`fit_snapshot` for ``n`` snapshots of one 10-minute white + random-walk
     record whose fitted rate moves by 3 ppm each time (what a running service's does)."""
-    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
     from avard.daemon.service.snapshots import fit_snapshot
 
     rng = np.random.default_rng(1)
@@ -408,6 +408,6 @@ def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
     out = []
     for k in range(n):
         t0 = time.process_time()
-        fit_snapshot(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k)))
+        fit_snapshot(AllanSnapshot.from_dict(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k))))
         out.append(time.process_time() - t0)
     return out
