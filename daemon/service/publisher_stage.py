@@ -32,8 +32,8 @@ class PublisherStage(Stage):
     def __init__(self, consumer: Consumer, publisher: Any, *, run_id: str, real_offset: float,
                  rate_hz: Callable[[], float], clock: Any, status: Callable[[], Record],
                  header: RunHeader, snapshots: SnapshotBoard, status_interval_s: float,
-                 max_block: int, batch_s: float = 0.0) -> None:
-        super().__init__(consumer, idle_s=status_interval_s, batch_s=batch_s,
+                 max_block: int, batch_samples: int = 1) -> None:
+        super().__init__(consumer, idle_s=status_interval_s, batch_samples=batch_samples,
                          max_samples=max_block)
         self.pub = publisher
         self.run_id = run_id

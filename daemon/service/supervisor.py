@@ -55,9 +55,12 @@ from avard.daemon.service.stage import Stage
 
 log = logging.getLogger("avard.daemon.service")
 
-#: Seconds of samples each stage lets accumulate between reads (its added latency).
-ALLAN_BATCH_S = 0.25
-RECORDER_BATCH_S = 0.25
+#: Seconds of samples each stage lets accumulate between reads (its added latency; each read
+#: has a fixed cost). The Allan stage's output is a snapshot every snapshot_interval_s and the
+#: recorder writes raw blocks of recording.block_s (a mark writes a partial one), so neither
+#: gains from reading more often than once a second; the publisher's latency is the stream's.
+ALLAN_BATCH_S = 1.0
+RECORDER_BATCH_S = 1.0
 PUBLISH_BATCH_S = 0.05
 
 
@@ -323,7 +326,7 @@ class Service:
             on_checkpoint=None if recording else self.save_state,
             snapshot_interval_s=acfg.snapshot_interval_s,
             checkpoint_interval_s=acfg.checkpoint_interval_s,
-            batch_s=ALLAN_BATCH_S if paced else 0.0))
+            batch_samples=self._batch(ALLAN_BATCH_S, paced)))
         if recording:
             self.recorder = (self._recorder_factory or _default_recorder)(self)
             self.workers.append(RecorderStage(
@@ -332,7 +335,8 @@ class Service:
                 header=self.run_header, checkpoint_written=self.save_state,
                 reopen=self.reopen_requested,
                 block_samples=int(cfg.recording.block_s * self.odr),
-                batch_s=min(RECORDER_BATCH_S, cfg.recording.block_s) if paced else 0.0))
+                batch_samples=self._batch(min(RECORDER_BATCH_S, cfg.recording.block_s),
+                                          paced)))
         if cfg.publish.enabled:
             self.publisher = (self._publisher_factory or _default_publisher)(self)
             self.request_server = (self._request_factory or _default_request_server)(self)
@@ -341,7 +345,8 @@ class Service:
                 real_offset=self.real_offset, rate_hz=rate, clock=self.clock,
                 status=self.status, header=self.run_header, snapshots=self.snapshots,
                 status_interval_s=cfg.publish.status_interval_s,
-                max_block=max(32, int(self.odr)), batch_s=PUBLISH_BATCH_S if paced else 0.0))
+                max_block=max(32, int(self.odr)),
+                batch_samples=self._batch(PUBLISH_BATCH_S, paced)))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
             g = self._restart_gap
@@ -365,6 +370,11 @@ class Service:
                  cfg.sensor.range_g, self.acq.period,
                  ", INT1 pin" if self.interrupt is not None else "",
                  ", ".join(self.temp_names))
+
+    def _batch(self, seconds: float, paced: bool) -> int:
+        """A stage's batch in samples: ``seconds`` at the nominal rate when paced; one sample
+        when a simulation runs unpaced (its reader waits for the stages)."""
+        return max(1, int(seconds * self.odr)) if paced else 1
 
     def timebase_rate(self) -> float:
         """The fitted output rate, Hz (the nominal one until the fit has data)."""
