@@ -41,6 +41,11 @@ def split_chunk(chunk: Chunk) -> list[Item]:
             continue
         a, b = val
         sub = chunk.index[a:b]
+        if int(sub[-1]) - int(sub[0]) == b - a - 1:
+            # indices only ever grow (a gap jumps them forward): first and last tell that
+            # the run is contiguous, the usual case, without a pass over it
+            out.append((kind, val))
+            continue
         brk = np.flatnonzero(np.diff(sub) != 1) + 1
         edges = [a, *(a + brk).tolist(), b]
         out.extend(("samples", (x, y)) for x, y in itertools.pairwise(edges))

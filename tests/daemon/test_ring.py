@@ -168,3 +168,17 @@ def test_a_stop_between_the_stop_check_and_the_wait_is_not_missed() -> None:
     since = ring.wakes
     ring.wake()                                   # stop() ran after the stage looked
     assert c.wait(60.0, 32, since=since) is True  # returns at once instead of idling
+
+
+def test_split_chunk_breaks_runs_where_the_index_jumps_and_at_marks() -> None:
+    from avard.daemon.service.stage import split_chunk
+
+    ring = Ring(100)
+    c = ring.consumer("c")
+    ring.push(*_block(0, 10))
+    ring.mark({"kind": "temp"})
+    ring.push(*_block(10, 5))
+    ring.push(*_block(20, 5))                 # an overrun gap: 15..19 missing
+    items = split_chunk(c.read())
+    assert [(k, v) if k == "samples" else (k, v["kind"]) for k, v in items] == [
+        ("samples", (0, 10)), ("mark", "temp"), ("samples", (10, 15)), ("samples", (15, 20))]
