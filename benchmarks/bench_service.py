@@ -1,6 +1,6 @@
 """CPU cost of the whole service per simulated second, at 125 Hz and 4 kHz in real time.
 
-``python -m benchmarks service [--seconds S] [--rates 125,4000]``
+``python -m benchmarks service [--seconds S] [--rates 125,4000] [--clients] [--watch]``
 
 For each ODR the service runs on the emulated ADXL355 (preset quiet-lab) at ``--speed 1`` for
 ``--seconds`` (default 10; the report uses 60): reader thread draining at the default poll rate,
@@ -335,9 +335,10 @@ def main(argv: list[str]) -> int:
     p.add_argument("--clients", action="store_true",
                    help="also run each rate under a request flood and a never-reading client")
     p.add_argument("--watch", action="store_true",
-                   help="only: the service at 125 Hz with one `avard watch`-like client "
-                        "(a snapshot request every 5 s: every Allan record is fitted from "
-                        "the first on); steady-state CPU (second half) and RSS")
+                   help="only: the service at 125 Hz with no client, with the real "
+                        "`avard watch` attached, and with a client polling `snapshot` every "
+                        "5 s, against the drain loop alone; steady-state CPU (second half), "
+                        "CPU per thread, and RSS of `avard run` with `avard watch`")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.watch:
