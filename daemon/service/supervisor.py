@@ -426,11 +426,14 @@ class Service:
                 raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
                                    "systemd to restart the service")
 
-    def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
+    def run(self, duration_s: float | None = None, *, tick_s: float = 1.0,
             before_acquisition: Callable[[], None] | None = None) -> int:
         """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
         The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
-        of a given seed always holds the same samples."""
+        of a given seed always holds the same samples. Signals and stop requests wake the
+        loop; ``tick_s`` bounds how late it sees a dead thread or a moved rate (the header
+        is rebuilt at most every 10 s); the watchdog and the status log keep their own
+        deadlines."""
         self._stop_at = None if duration_s is None else self.t_start + duration_s
         latch = self._signal_latch()
         self.start(before_acquisition)
