@@ -239,6 +239,7 @@ class Service:
             st["subscribers"] = ps.get("peers", 0)
             st["published"] = ps.get("sent", 0)
             st["publish_dropped"] = ps.get("dropped", 0)
+            st["stalled_shut_down"] = ps.get("stalled_shut_down", 0)
         return st
 
     def status_line(self) -> str:
