@@ -28,6 +28,9 @@ class PublisherStage(Stage):
     status record (and the header when it changed) on the ``status`` topic."""
 
     name = "publisher"
+    # what it sends is a copy of what the recording and the accumulators hold: a dead
+    # publisher thread is restarted in place, the block it was sending becomes a gap
+    restartable = True
 
     def __init__(self, consumer: Consumer, publisher: Any, *, run_id: str, real_offset: float,
                  rate_hz: Callable[[], float], clock: Any, status: Callable[[], Record],
@@ -72,6 +75,16 @@ class PublisherStage(Stage):
                 self.run_id, 0, int(chunk.index[a]), chunk.counts[a:b], t0,
                 t0 + self.real_offset, rate_hz=rate))
         self.idle()
+
+    def lost_in_death(self, chunk: Chunk) -> None:
+        """The thread died while publishing ``chunk``: its samples may be partly unsent, so
+        one gap record covers them all (a subscriber may then hold some twice over a gap,
+        never a hole without one)."""
+        if chunk.n:
+            i0, i1 = int(chunk.index[0]), int(chunk.index[-1]) + 1
+            self.pub.publish("event", frames.gap_record(
+                self.run_id, 0, i0, i1 - i0, float(chunk.t_mono[0]), self.clock.realtime(),
+                "publisher_restart"))
 
     def idle(self) -> None:
         now = time.monotonic()

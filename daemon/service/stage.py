@@ -89,6 +89,10 @@ class Stage:
     record, does it there); the thread never wakes on a timer to look for samples."""
 
     name = "stage"
+    #: Whether a death of this stage's thread may be restarted in place (the supervisor does,
+    #: a few times): only for a stage whose output nothing downstream depends on for
+    #: correctness, and which can say what the dead thread's chunk lost (:meth:`lost_in_death`).
+    restartable = False
 
     def __init__(self, consumer: Consumer, *, idle_s: float = 5.0, batch_samples: int = 1,
                  max_samples: int | None = None) -> None:
@@ -99,6 +103,8 @@ class Stage:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
+        self.restarts = 0
+        self._chunk: Chunk | None = None     # the chunk being handled (lost if it dies)
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name=f"avard-{self.name}",
@@ -124,7 +130,9 @@ class Stage:
                     self.idle()
                 chunk = self.consumer.read(self.max_samples)
                 if chunk.n or chunk.marks or chunk.lost_samples or chunk.lost_marks:
+                    self._chunk = chunk
                     self.handle(chunk)
+                    self._chunk = None
                     continue
                 if stopping:
                     break
@@ -132,6 +140,22 @@ class Stage:
         except BaseException as exc:
             log.exception("%s thread died", self.name)
             self.error = exc
+
+    def restart(self) -> None:
+        """A new thread after this one died (``error`` set): what the dead thread's chunk
+        lost is said first (:meth:`lost_in_death`), then the stage reads on from its cursor."""
+        if self._thread is not None:
+            self._thread.join(1.0)
+        chunk, self._chunk = self._chunk, None
+        self.error = None
+        self.restarts += 1
+        if chunk is not None:
+            self.lost_in_death(chunk)
+        self.start()
+
+    def lost_in_death(self, chunk: Chunk) -> None:
+        """The chunk the dead thread was handling may be partly lost: say so (a gap)."""
+        return None
 
     def handle(self, chunk: Chunk) -> None:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -55,6 +55,9 @@ from avard.daemon.service.stage import Stage
 
 log = logging.getLogger("avard.daemon.service")
 
+#: Times a restartable stage (the publisher) is restarted in place before a death exits 70.
+MAX_STAGE_RESTARTS = 3
+
 #: Seconds of samples each stage lets accumulate between reads (its added latency; each read
 #: has a fixed cost). The Allan stage's output is a snapshot every snapshot_interval_s and the
 #: recorder writes raw blocks of recording.block_s (a mark writes a partial one), so neither
@@ -415,7 +418,7 @@ class Service:
                                           [reading.value_c if ok else None], t,
                                           t + self.real_offset, source="ds18b20"))
 
-    def check_threads(self) -> None:
+    def check_threads(self, *, restart: bool = True) -> None:
         """Raise ServiceFault when a thread died: the service stops (flushing what the other
         stages hold) and exits with status 70, which the unit restarts, instead of limping on
         without a stage or exiting 2, which RestartPreventExitStatus=2 would keep down."""
@@ -423,9 +426,16 @@ class Service:
             raise ServiceFault(f"the reader thread stopped: {self.acq.error!r}; exiting for "
                                "systemd to restart the service")
         for w in self.workers:
-            if w.error is not None:
-                raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
-                                   "systemd to restart the service")
+            if w.error is None:
+                continue
+            if restart and w.restartable and w.restarts < MAX_STAGE_RESTARTS:
+                # safe in place: nothing the recording or the accumulators hold depends on it
+                log.error("the %s thread stopped: %r; restarting it (#%d of %d)", w.name,
+                          w.error, w.restarts + 1, MAX_STAGE_RESTARTS)
+                w.restart()
+                continue
+            raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
+                               "systemd to restart the service")
 
     def run(self, duration_s: float | None = None, *, tick_s: float = 1.0,
             before_acquisition: Callable[[], None] | None = None) -> int:
@@ -495,7 +505,7 @@ class Service:
         finally:
             self.stop()
             self._close_latch()
-        self.check_threads()
+        self.check_threads(restart=False)
         return 0
 
     def _signal_latch(self) -> SignalLatch:
