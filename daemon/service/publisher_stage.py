@@ -79,12 +79,19 @@ class PublisherStage(Stage):
     def lost_in_death(self, chunk: Chunk) -> None:
         """The thread died while publishing ``chunk``: its samples may be partly unsent, so
         one gap record covers them all (a subscriber may then hold some twice over a gap,
-        never a hole without one)."""
+        never a hole without one), after a ``publisher_restart`` event that counts the
+        samples and marks it held."""
+        last = self.consumer.last_index
+        i0 = int(chunk.index[0]) if chunk.n else (0 if last is None else last + 1)
+        t = float(chunk.t_mono[0]) if chunk.n else float(self.clock.monotonic())
+        # the marks it held (temperatures, events, snapshots) may be unsent too: say how many
+        self.pub.publish("event", frames.event_record(
+            self.run_id, 0, "publisher_restart", t, self.clock.realtime(), i0=i0,
+            detail={"samples": chunk.n, "marks": len(chunk.marks)}))
         if chunk.n:
-            i0, i1 = int(chunk.index[0]), int(chunk.index[-1]) + 1
+            i1 = int(chunk.index[-1]) + 1
             self.pub.publish("event", frames.gap_record(
-                self.run_id, 0, i0, i1 - i0, float(chunk.t_mono[0]), self.clock.realtime(),
-                "publisher_restart"))
+                self.run_id, 0, i0, i1 - i0, t, self.clock.realtime(), "publisher_restart"))
 
     def idle(self) -> None:
         now = time.monotonic()

@@ -97,6 +97,9 @@ def test_a_dead_publisher_thread_is_restarted_in_place_and_its_block_becomes_a_g
     gaps = [r for t, r in rig.listener.records
             if r.get("kind") == "gap" and r.get("reason") == "publisher_restart"]
     assert len(gaps) == 1 and gaps[0]["i0"] == seen["died_at"] and gaps[0]["n"] > 0
+    events = [r for t, r in rig.listener.records
+              if r.get("kind") == "event" and r.get("name") == "publisher_restart"]
+    assert len(events) == 1 and events[0]["detail"]["samples"] == gaps[0]["n"]
     st = rig.listener.sub.stats
     assert st.samples_unexplained == 0 and st.messages_lost == 0
     # the recording lost nothing: one run, no gap of any kind
