@@ -33,13 +33,19 @@ def _unit() -> dict[str, list[str]]:
     return keys
 
 
+def _run_dying(stage: type, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+               capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """`avard run --simulate` whose ``stage`` dies at every chunk: (exit status, stderr)."""
+    monkeypatch.setattr(stage, "handle", _die)
+    status = cli.main(["run", "--simulate", "quiet-lab", "--duration", "30",
+                       "--data-dir", str(tmp_path / "rec")])
+    return status, capsys.readouterr().err
+
+
 def test_a_dead_worker_exits_with_a_status_systemd_restarts(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(AllanStage, "handle", _die)
-    status = cli.main(["run", "--simulate", "quiet-lab", "--duration", "30",
-                       "--data-dir", str(tmp_path / "rec")])
-    err = capsys.readouterr().err
+    status, err = _run_dying(AllanStage, tmp_path, monkeypatch, capsys)
     assert "allan thread stopped" in err
     assert status == ServiceFault.exit_status == 70
     unit = _unit()
@@ -112,9 +118,6 @@ def test_a_publisher_that_keeps_dying_exits_with_a_status_systemd_restarts(
     from avard.daemon.service.publisher_stage import PublisherStage
     from avard.daemon.service.supervisor import MAX_STAGE_RESTARTS
 
-    monkeypatch.setattr(PublisherStage, "handle", _die)
-    status = cli.main(["run", "--simulate", "quiet-lab", "--duration", "30",
-                       "--data-dir", str(tmp_path / "rec")])
-    err = capsys.readouterr().err
+    status, err = _run_dying(PublisherStage, tmp_path, monkeypatch, capsys)
     assert err.count("restarting it (#") == MAX_STAGE_RESTARTS
     assert "publisher thread stopped" in err and status == ServiceFault.exit_status
