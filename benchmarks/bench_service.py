@@ -1,6 +1,6 @@
 """CPU cost of the whole service per simulated second, at 125 Hz and 4 kHz in real time.
 
-``python -m benchmarks service [--seconds S] [--rates 125,4000]``
+``python -m benchmarks service [--seconds S] [--rates 125,4000] [--clients] [--watch]``
 
 For each ODR the service runs on the emulated ADXL355 (preset quiet-lab) at ``--speed 1`` for
 ``--seconds`` (default 10; the report uses 60): reader thread draining at the default poll rate,
@@ -73,7 +73,7 @@ end, n = time.monotonic() + seconds, 0
 big = msgpack.packb({"op": "recent", "args": {"seconds": 5.0}, "id": 1})
 if mode == "noread":   # asks for the biggest replies and never reads one
     s.setsockopt(zmq.RCVHWM, 1); s.setsockopt(zmq.RCVBUF, 4096)
-if mode == "watch":    # what `avard watch` asks: a snapshot (with its fit) now and then
+if mode == "poll":     # a client polling the snapshot (and its fit) every 5 s
     snap = msgpack.packb({"op": "snapshot", "args": {}, "id": 1})
     while time.monotonic() < end:
         s.send_multipart([b"", snap]); n += 1
@@ -165,6 +165,10 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
             origin["sub_cpu_half"] = _cpu_of(origin["bench_tids"])  # type: ignore[arg-type]
             origin["wall_half"] = time.monotonic()
             stop.wait(seconds / 2 - 0.5)
+            # ends here, before the stop (the last snapshot and checkpoint, the joins)
+            sub_half = _cpu_of(origin["bench_tids"]) - origin["sub_cpu_half"]  # type: ignore[arg-type]
+            origin["steady"] = ((time.process_time() - origin["cpu_half"] - sub_half)
+                                / (time.monotonic() - origin["wall_half"]))
             after = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type]
             t0: dict[str, float] = origin["threads"]  # type: ignore[assignment]
             wall = time.monotonic() - origin["wall"]
@@ -193,7 +197,11 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
             origin["sub_cpu"] = _cpu_of(origin["bench_tids"])  # type: ignore[arg-type]
             origin["threads"] = _threads_cpu_s(origin["bench_tids"])  # type: ignore[arg-type,assignment]
             origin["rss0"] = _vm_rss_mb()
-            if client is not None:   # a hostile request client, in its own process
+            if client == "avard-watch":   # the real `avard watch`, in its own process
+                origin["client"] = subprocess.Popen(  # type: ignore[assignment]
+                    _avard_watch_args(svc.publisher.endpoint, svc.request_server.endpoint),
+                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            elif client is not None:   # a hostile request client, in its own process
                 origin["client"] = subprocess.Popen(  # type: ignore[assignment]
                     [sys.executable, "-c", _CLIENT, svc.request_server.endpoint, client,
                      str(seconds)], stdout=subprocess.PIPE, text=True)
@@ -201,18 +209,20 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
         svc.run(seconds, before_acquisition=before)
         drain_max = svc.acq.max_drain_interval_s if svc.acq else float("nan")
         req_rate = float("nan")
-        if client is not None:
+        if client == "avard-watch":
+            proc = origin["client"]
+            proc.terminate()  # type: ignore[attr-defined]
+            _out, err = proc.communicate(timeout=60)  # type: ignore[attr-defined]
+            if "Traceback" in (err or ""):
+                raise RuntimeError(f"avard watch failed: {err[-2000:]}")
+        elif client is not None:
             out, _ = origin["client"].communicate(timeout=60)  # type: ignore[attr-defined]
             req_rate = float(out.split()[-1])
         # The bench's subscriber is a client, not the service: its threads' CPU is taken out.
         sub_cpu = _cpu_of(origin["bench_tids"]) - origin["sub_cpu"]  # type: ignore[arg-type]
         cpu = time.process_time() - origin["cpu"] - sub_cpu
         wall = time.monotonic() - origin["wall"]
-        steady = float("nan")
-        if "cpu_half" in origin:
-            sub_half = _cpu_of(origin["bench_tids"]) - origin["sub_cpu_half"]  # type: ignore[arg-type]
-            steady = ((time.process_time() - origin["cpu_half"] - sub_half)
-                      / (time.monotonic() - origin["wall_half"]))
+        steady = origin.get("steady", float("nan"))
         stop.set()
         origin["th"].join(5)  # type: ignore[attr-defined]
         origin["sub"].close()  # type: ignore[attr-defined]
@@ -228,6 +238,14 @@ def _service_run(odr: float, seconds: float, client: str | None = None) -> dict[
                 "p50": float(np.percentile(lat_ms, 50)), "p99": float(np.percentile(lat_ms, 99)),
                 "poll": effective_poll_hz(cfg),
                 "threads": origin.get("per_thread", {})}
+
+
+def _avard_watch_args(endpoint: str, request_endpoint: str) -> list[str]:
+    """`avard watch` as a user runs it (every topic, one snapshot request at join, its
+    own fits), redrawing every 2 s into a pipe."""
+    return [sys.executable, "-c", "import sys; from avard.daemon.cli import main; "
+            "sys.exit(main())", "watch", endpoint, "--request", request_endpoint,
+            "--interval", "2"]
 
 
 def _drain_only(odr: float, seconds: float) -> dict[str, Any]:
@@ -256,6 +274,7 @@ from avard.daemon.compose import compose
 from avard.daemon.hw.rig import ClockSpec, Rig, RigSpec, SensorSpec
 from avard.daemon.hw.transport import SpiBus
 odr, seconds, data_dir = float(sys.argv[1]), float(sys.argv[2]), sys.argv[3]
+watch = sys.argv[4:]   # a command (with {pub} and {req}) started once the sockets are bound
 clock = VirtualClock(speed=1.0)
 dev = Adxl355(SpiBus(FakeSpiDev(EmulatedAdxl355(counter_source(), clock))), clock=clock)
 dev.probe(); dev.reset(); dev.configure(range_g=2, odr_hz=odr); dev.start()
@@ -263,14 +282,25 @@ cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": data_dir,
     "publish.endpoint": "tcp://127.0.0.1:0", "publish.request_endpoint": "tcp://127.0.0.1:0"})
 config = as_config(cfg)
 spec = RigSpec((SensorSpec.from_config(config.sensor),), ClockSpec(speed=1.0))
-compose(config, Rig(spec, dev, clock, {})).run(seconds)
+svc = compose(config, Rig(spec, dev, clock, {}))
+procs = []
+def client():
+    import subprocess, time
+    args = [a.format(pub=svc.publisher.endpoint, req=svc.request_server.endpoint) for a in watch]
+    procs.append(subprocess.Popen(args, stdout=subprocess.DEVNULL))
+    time.sleep(1.0)    # connected before the first drain
+svc.run(seconds, before_acquisition=client if watch else None)
+for p in procs:
+    p.terminate(); p.wait(30)
 heavy = sorted({m.split(".")[0] for m in sys.modules} & {"scipy", "matplotlib"})
 print(open("/proc/self/status").read().split("VmHWM:")[1].split()[0], ",".join(heavy) or "-")
 """
 
 
-def _rss_mb(odr: float, seconds: float, simulate: bool) -> tuple[float, str]:
-    """Peak RSS (MB) of the service as its own process, and the heavy modules it loaded."""
+def _rss_mb(odr: float, seconds: float, simulate: bool,
+            watch: bool = False) -> tuple[float, str]:
+    """Peak RSS (MB) of the service as its own process, and the heavy modules it loaded;
+    ``watch``: with a real `avard watch` attached (hardware path only)."""
     with tempfile.TemporaryDirectory(prefix="avard-bench-rss-") as d:
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         if simulate:
@@ -288,6 +318,8 @@ def _rss_mb(odr: float, seconds: float, simulate: bool) -> tuple[float, str]:
                     "quiet-lab", "--duration", str(seconds), "--data-dir", d]
         else:
             args = [sys.executable, "-c", _RSS_HARDWARE_PATH, str(odr), str(seconds), d]
+            if watch:
+                args += _avard_watch_args("{pub}", "{req}")
         out = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
         if out.returncode != 0:
             raise RuntimeError(out.stderr[-2000:])
@@ -303,9 +335,10 @@ def main(argv: list[str]) -> int:
     p.add_argument("--clients", action="store_true",
                    help="also run each rate under a request flood and a never-reading client")
     p.add_argument("--watch", action="store_true",
-                   help="only: the service at 125 Hz with one `avard watch`-like client "
-                        "(a snapshot request every 5 s: every Allan record is fitted from "
-                        "the first on); steady-state CPU (second half) and RSS")
+                   help="only: the service at 125 Hz with no client, with the real "
+                        "`avard watch` attached, and with a client polling `snapshot` every "
+                        "5 s, against the drain loop alone; steady-state CPU (second half), "
+                        "CPU per thread, and RSS of `avard run` with `avard watch`")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     if args.watch:
@@ -369,35 +402,48 @@ def _client_table(rows: list[tuple[float, dict[str, Any], dict[str, Any]]],
 
 
 def _watch_table(seconds: float) -> int:
-    """The cost of one watching client: the service's fit thread fits each new Allan record
-    once a client has asked for a snapshot; with the filter terms cached per normalised
-    corner (core/model/terms.py) a fit costs the same after the first request as before."""
+    """The cost of one watching client at 125 Hz: the real `avard watch` in its own process
+    (it subscribes to every topic, asks one snapshot at join and fits the streamed ones
+    itself), and a client polling `snapshot` every 5 s (the service fits for it), against
+    the service with no client and the drain loop alone (the emulated sensor: on a Pi spidev
+    replaces it), all in the same run."""
     per_fit = _fit_cost_per_snapshot()
     print("one snapshot's fit (3 axes) at a fitted rate that moves by 3 ppm from one snapshot "
           "to the next, CPU-s: " + ", ".join(f"{c:.3f}" for c in per_fit)
           + " (the first computes the filter terms of this corner)")
-    quiet = _service_run(125.0, seconds)
-    watched = _service_run(125.0, seconds, "watch")
-    rss_hw, _heavy = _rss_mb(125.0, min(seconds, 10.0), False)
-    print(f"service at 125 Hz, --speed 1, {seconds:g} s, quiet-lab; steady = CPU-s per s over "
-          "the second half (after the first fit); machine shared and loaded: read ratios")
-    hdr = (f"{'client':>8} {'CPU/sim s':>9} {'steady CPU/s':>12} {'fit thread CPU/s':>16} "
-           f"{'RSS max MB (in-process)':>23}")
+    ref = _drain_only(125.0, seconds)
+    ref_cps = ref["cpu"] / ref["sim"]
+    rows = [(name, _service_run(125.0, seconds, client)) for name, client in
+            (("none", None), ("avard watch", "avard-watch"), ("poll 5 s", "poll"))]
+    rss_s = min(seconds, 30.0)
+    rss_hw, _heavy = _rss_mb(125.0, rss_s, False)
+    rss_watch, _heavy = _rss_mb(125.0, rss_s, False, watch=True)
+    print(f"service at 125 Hz, --speed 1, {seconds:g} s per row, quiet-lab; CPU-s of the "
+          "service process (every thread, the emulated sensor's included; the bench's own "
+          "subscriber taken out) per s; steady = over the second half (after the first "
+          f"fit); ref = the drain loop alone (emulator + simulator + driver), "
+          f"{ref_cps:.4f} CPU-s/s in the same run; machine shared and loaded")
+    hdr = (f"{'client':>12} {'CPU/sim s':>9} {'steady CPU/s':>12} {'steady - ref':>12} "
+           f"{'fit thread CPU/s':>16} {'RSS max MB (in-process)':>23}")
     print(hdr)
     print("-" * len(hdr))
-    for name, r in (("none", quiet), ("watch", watched)):
+    for name, r in rows:
         fit = r["threads"].get("fit", 0.0)
-        print(f"{name:>8} {r['cpu'] / r['sim']:9.4f} {r['steady_cpu_per_s']:12.4f} "
-              f"{fit:16.4f} {r['rss_max']:23.1f}")
-    print(f"peak RSS of `avard run` on the hardware path (own process, no client): "
-          f"{rss_hw:.1f} MB")
+        print(f"{name:>12} {r['cpu'] / r['sim']:9.4f} {r['steady_cpu_per_s']:12.4f} "
+              f"{r['steady_cpu_per_s'] - ref_cps:12.4f} {fit:16.4f} {r['rss_max']:23.1f}")
+    for name, r in rows:
+        parts = sorted(r["threads"].items(), key=lambda kv: -kv[1])
+        print(f"{name}: CPU-s/s by thread (MainThread = supervisor): "
+              + ", ".join(f"{k} {v:.4f}" for k, v in parts))
+    print(f"peak RSS of `avard run` on the hardware path (own process, {rss_s:g} s): "
+          f"{rss_hw:.1f} MB with no client, {rss_watch:.1f} MB with `avard watch` attached")
     return 0
 
 
 def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
     """CPU-s of :func:`fit_snapshot` for ``n`` snapshots of one 10-minute white + random-walk
     record whose fitted rate moves by 3 ppm each time (what a running service's does)."""
-    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
     from avard.daemon.service.snapshots import fit_snapshot
 
     rng = np.random.default_rng(1)
@@ -408,6 +454,6 @@ def _fit_cost_per_snapshot(n: int = 5) -> list[float]:
     out = []
     for k in range(n):
         t0 = time.process_time()
-        fit_snapshot(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k)))
+        fit_snapshot(AllanSnapshot.from_dict(dict(snap, rate_hz=125.0 * (1 + 3e-6 * k))))
         out.append(time.process_time() - t0)
     return out

@@ -25,10 +25,13 @@ warning, where the limit is lower.
 
 from __future__ import annotations
 
+import fcntl
 import itertools
 import logging
 import resource
 import socket
+import struct
+import termios
 import time
 
 import zmq
@@ -86,6 +89,10 @@ class ConnectionGate:
         self._fds: dict[int, tuple[int, float | None]] = {}
         self.accepted = 0
         self.evicted = 0
+        self.stalled_evicted = 0
+        # fd → monotonic time since which its kernel send queue has stayed full
+        self._full_since: dict[int, float] = {}
+        self.max_outq = 0          # the most bytes seen waiting in one peer's send queue
         sock.setsockopt(zmq.HANDSHAKE_IVL, HANDSHAKE_IVL_MS)
         self.monitor = sock.get_monitor_socket(
             zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED | extra_events)
@@ -120,6 +127,7 @@ class ConnectionGate:
                     self._evict(fd)
             elif ev == zmq.EVENT_DISCONNECTED:
                 self._fds.pop(fd, None)
+                self._full_since.pop(fd, None)
             else:
                 other.append(ev)
         return other
@@ -130,10 +138,40 @@ class ConnectionGate:
         return min(self._fds, key=lambda f: (self._fds[f][1] is not None,
                                              self._fds[f][1] or 0.0, self._fds[f][0]))
 
-    def _evict(self, newest: int) -> None:
-        fd = self._victim(newest)
-        del self._fds[fd]   # its DISCONNECTED event follows; counted gone from now
-        self.evicted += 1
+    def shed_stalled(self, now: float, full_bytes: int, stall_s: float) -> int:
+        """Shut down every connection whose kernel send queue (SIOCOUTQ: bytes not yet
+        acknowledged by the peer) has held at least ``full_bytes`` for ``stall_s`` seconds:
+        a peer that stopped reading. Its libzmq queue, which grows behind the full kernel
+        buffer up to the high-water mark, is freed with it; a subscriber reconnects by itself
+        and sees what it missed in the sequence numbers. Returns how many were shut down."""
+        shed = 0
+        for fd in list(self._fds):
+            buf = bytearray(4)
+            try:
+                fcntl.ioctl(fd, termios.TIOCOUTQ, buf)   # SIOCOUTQ on a TCP socket
+            except OSError:
+                self._full_since.pop(fd, None)
+                continue
+            outq = struct.unpack("i", buf)[0]
+            self.max_outq = max(self.max_outq, outq)
+            if outq < full_bytes:
+                self._full_since.pop(fd, None)
+                continue
+            since = self._full_since.setdefault(fd, now)
+            if now - since >= stall_s:
+                del self._fds[fd]
+                self._full_since.pop(fd, None)
+                self.stalled_evicted += 1
+                shed += 1
+                self._shutdown(fd)
+                (log.warning if self.stalled_evicted <= 10 or self.stalled_evicted % 1000 == 0
+                 else log.debug)(
+                    "%s: a peer read nothing for %.0f s (%d bytes waiting in its send queue): "
+                    "shut down (#%d), its queue freed", self.what, stall_s, outq,
+                    self.stalled_evicted)
+        return shed
+
+    def _shutdown(self, fd: int) -> None:
         try:
             s = socket.socket(fileno=fd)
         except OSError:
@@ -146,6 +184,13 @@ class ConnectionGate:
             pass
         finally:
             s.detach()   # libzmq owns the fd: never close it here
+
+    def _evict(self, newest: int) -> None:
+        fd = self._victim(newest)
+        del self._fds[fd]   # its DISCONNECTED event follows; counted gone from now
+        self._full_since.pop(fd, None)
+        self.evicted += 1
+        self._shutdown(fd)
         (log.warning if self.evicted <= 10 or self.evicted % 1000 == 0 else log.debug)(
             "%s: %d connections (the cap): one %s was shut down (#%d)", self.what,
             self.cap, "newcomer" if fd == newest else "idle peer", self.evicted)

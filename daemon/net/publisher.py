@@ -43,6 +43,15 @@ DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_HWM = 10000
 #: Shutdown never waits longer than this for queued messages (ms).
 LINGER_MS = 200
+#: Kernel send buffer per subscriber (SO_SNDBUF; Linux books twice this), instead of TCP
+#: autotuning's up to 4 MB: far above the stream's rate × any sane round trip.
+PUB_SNDBUF = 128 << 10
+#: A subscriber whose send queue stays at least half full for this long has stopped reading:
+#: it is shut down and its queues freed (admission.ConnectionGate.shed_stalled). Memory per
+#: stalled subscriber is then at most 2 × PUB_SNDBUF in the kernel plus what the stream sends
+#: in STALL_S (and the checks' spacing) in libzmq's queue, whatever the HWM: bytes, not
+#: messages; across subscribers at most MAX_SUBSCRIBERS times that.
+STALL_S = 10.0
 _LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
@@ -121,7 +130,8 @@ class Publisher:
     def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
                  hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
                  check: bool = True, allow_remote: bool = False,
-                 max_subscribers: int = MAX_SUBSCRIBERS) -> None:
+                 max_subscribers: int = MAX_SUBSCRIBERS, sndbuf: int = PUB_SNDBUF,
+                 stall_s: float = STALL_S) -> None:
         if hwm < 1:
             raise ConfigError(f"publisher hwm={hwm}: must be at least 1 message")
         self.run_id = str(run_id)
@@ -135,11 +145,14 @@ class Publisher:
         self.peers = 0
         self.auth_failures = 0
         self._since_monitor = 0
+        self.sndbuf = int(sndbuf)
+        self.stall_s = float(stall_s)
         try:
             if curve is not None:
                 self._curve = CurveServer(self._ctx, curve)
             self._sock = self._ctx.socket(zmq.PUB)
             self._sock.setsockopt(zmq.SNDHWM, hwm)
+            self._sock.setsockopt(zmq.SNDBUF, self.sndbuf)
             self._sock.setsockopt(zmq.LINGER, LINGER_MS)
             if self._curve is not None:
                 self._curve.apply(self._sock)
@@ -202,6 +215,7 @@ class Publisher:
             if ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
                 self.auth_failures += 1
                 log.warning("publisher refused a peer that failed CURVE authentication")
+        self._gate.shed_stalled(time.monotonic(), self.sndbuf // 2, self.stall_s)
         self.peers = self._gate.connections
 
     def reload_keys(self) -> None:
@@ -216,6 +230,8 @@ class Publisher:
             return {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
                     "peers": self.peers, "auth_failures": self.auth_failures,
                     "refused_connections": self._gate.evicted,
+                    "stalled_shut_down": self._gate.stalled_evicted,
+                    "max_send_queue_bytes": self._gate.max_outq,
                     "seq": dict(self._seq)}
 
     def close(self) -> None:

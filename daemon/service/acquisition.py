@@ -240,7 +240,7 @@ class Acquisition:
         n = int(counts.shape[0])
         t_mono, t_real = float(d.t_mono), float(d.t_real)
         self._check_clock_step(t_mono, t_real, float(getattr(d, "t_real_u", 0.0)))
-        reasons = d.gap_reasons
+        reasons = reported = d.gap_reasons     # a property that parses: read it once
         if self._overrun_after_read and GapReason.FIFO_OVERRUN not in reasons:
             reasons = (*reasons, GapReason.FIFO_OVERRUN)
         restarted = any(r in _RESTARTED for r in reasons)
@@ -253,14 +253,14 @@ class Acquisition:
         after_read = bool(getattr(d, "overrun_in_drain", False)) and (
             post_entries >= FIFO_LOCATIONS
             or (post_entries < 0 and behind is not None and behind < 0.5))
-        if (GapReason.FIFO_OVERRUN in d.gap_reasons and after_read
+        if (GapReason.FIFO_OVERRUN in reported and after_read
                 and not self._overrun_after_read):
             # The FIFO was not full yet when this drain's burst read it: the overrun its
             # second STATUS read saw came after, so the loss lies between these sets and the
             # next drain's (whose burst finds the FIFO still full): counted there.
             self.overruns += 1
             self._overrun_after_read = True
-            reasons = tuple(r for r in d.gap_reasons if r != GapReason.FIFO_OVERRUN)
+            reasons = tuple(r for r in reported if r != GapReason.FIFO_OVERRUN)
             behind = None
             if reasons:
                 self._overrun(n, t_mono, t_real, reasons, ",".join(reasons), d.since_last_s,

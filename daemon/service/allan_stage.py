@@ -47,8 +47,8 @@ class AllanStage(Stage):
                  emit: Callable[[Record], None],
                  on_checkpoint: Callable[[Record], None] | None,
                  snapshot_interval_s: float, checkpoint_interval_s: float,
-                 batch_s: float = 0.0) -> None:
-        super().__init__(consumer, batch_s=batch_s)
+                 batch_samples: int = 1) -> None:
+        super().__init__(consumer, batch_samples=batch_samples)
         self.allan = allan
         self.feed = feed
         self.run_id = run_id

@@ -28,12 +28,15 @@ class PublisherStage(Stage):
     status record (and the header when it changed) on the ``status`` topic."""
 
     name = "publisher"
+    # what it sends is a copy of what the recording and the accumulators hold: a dead
+    # publisher thread is restarted in place, the block it was sending becomes a gap
+    restartable = True
 
     def __init__(self, consumer: Consumer, publisher: Any, *, run_id: str, real_offset: float,
                  rate_hz: Callable[[], float], clock: Any, status: Callable[[], Record],
                  header: RunHeader, snapshots: SnapshotBoard, status_interval_s: float,
-                 max_block: int, batch_s: float = 0.0) -> None:
-        super().__init__(consumer, idle_s=status_interval_s, batch_s=batch_s,
+                 max_block: int, batch_samples: int = 1) -> None:
+        super().__init__(consumer, idle_s=status_interval_s, batch_samples=batch_samples,
                          max_samples=max_block)
         self.pub = publisher
         self.run_id = run_id
@@ -72,6 +75,23 @@ class PublisherStage(Stage):
                 self.run_id, 0, int(chunk.index[a]), chunk.counts[a:b], t0,
                 t0 + self.real_offset, rate_hz=rate))
         self.idle()
+
+    def lost_in_death(self, chunk: Chunk) -> None:
+        """The thread died while publishing ``chunk``: its samples may be partly unsent, so
+        one gap record covers them all (a subscriber may then hold some twice over a gap,
+        never a hole without one), after a ``publisher_restart`` event that counts the
+        samples and marks it held."""
+        last = self.consumer.last_index
+        i0 = int(chunk.index[0]) if chunk.n else (0 if last is None else last + 1)
+        t = float(chunk.t_mono[0]) if chunk.n else float(self.clock.monotonic())
+        # the marks it held (temperatures, events, snapshots) may be unsent too: say how many
+        self.pub.publish("event", frames.event_record(
+            self.run_id, 0, "publisher_restart", t, self.clock.realtime(), i0=i0,
+            detail={"samples": chunk.n, "marks": len(chunk.marks)}))
+        if chunk.n:
+            i1 = int(chunk.index[-1]) + 1
+            self.pub.publish("event", frames.gap_record(
+                self.run_id, 0, i0, i1 - i0, t, self.clock.realtime(), "publisher_restart"))
 
     def idle(self) -> None:
         now = time.monotonic()

@@ -28,8 +28,8 @@ class RecorderStage(Stage):
     def __init__(self, consumer: Consumer, recorder: Any, *, run_id: str, real_offset: float,
                  rate_hz: Callable[[], float], real_now: Callable[[], float],
                  header: RunHeader, checkpoint_written: Callable[[Record], None],
-                 reopen: threading.Event, block_samples: int, batch_s: float = 0.0) -> None:
-        super().__init__(consumer, batch_s=batch_s)
+                 reopen: threading.Event, block_samples: int, batch_samples: int = 1) -> None:
+        super().__init__(consumer, batch_samples=batch_samples)
         self.rec = recorder
         self.run_id = run_id
         self.real_offset = real_offset

@@ -12,9 +12,10 @@ order relative to the samples as the writer produced them.
 
 Memory is fixed at construction (``capacity`` × (channels·4 + 16) bytes); the lock is held only
 for the copy in or out, never while a consumer works. Consumers with nothing to read block in
-:meth:`Consumer.wait` on the ring's condition, which every push and mark notifies: a consumer
-thread wakes when there is work (or when :meth:`Ring.wake` asks it to look, at shutdown), not
-on a timer.
+:meth:`Consumer.wait` on their own condition (sharing the ring's lock), which a push notifies
+only once that consumer's batch is there (``min_samples``) and a mark only when it waits for
+single samples: a consumer thread wakes when its work is there (or when :meth:`Ring.wake` asks
+it to look, at shutdown), not on a timer and not at every drain of a sensor it batches.
 """
 
 from __future__ import annotations
@@ -61,7 +62,6 @@ class Ring:
         self._marks: deque[tuple[int, int, dict[str, Any]]] = deque(maxlen=mark_capacity)
         self._mark_head = 0               # marks ever pushed
         self._lock = threading.Lock()
-        self._cond = threading.Condition(self._lock)
         self._wakes = 0                   # Ring.wake() calls, so waiters can tell them apart
         self._consumers: list[Consumer] = []
 
@@ -95,31 +95,48 @@ class Ring:
                 self._index[:rest] = index[first:]
                 self._time[:rest] = t_mono[first:]
             self._head += n
-            self._cond.notify_all()
+            for c in self._consumers:
+                if c._wake_at is not None and self._head >= c._wake_at:
+                    c._cond.notify()
 
     def mark(self, item: dict[str, Any]) -> None:
         """Insert a mark (temperature, gap, event) after every sample pushed so far."""
         with self._lock:
             self._marks.append((self._mark_head, self._head, item))
             self._mark_head += 1
-            self._cond.notify_all()
+            for c in self._consumers:
+                if c._wake_at is not None and c._wake_on_marks:
+                    c._cond.notify()
 
     def wake(self) -> None:
         """Wake every consumer blocked in :meth:`Consumer.wait` (to see a stop request)."""
-        with self._cond:
+        with self._lock:
             self._wakes += 1
-            self._cond.notify_all()
+            for c in self._consumers:
+                c._cond.notify_all()
 
-    def _pending(self, c: Consumer) -> bool:
-        return c.pos < self._head or c.mark_pos < self._mark_head
+    def _ready(self, c: Consumer, min_samples: int) -> bool:
+        return (self._head - c.pos >= min_samples
+                or (min_samples <= 1 and c.mark_pos < self._mark_head))
 
-    def _wait(self, c: Consumer, timeout: float | None) -> bool:
-        with self._cond:
-            if self._pending(c):
+    @property
+    def wakes(self) -> int:
+        """:meth:`wake` calls so far (a waiter passes what it saw before its last look)."""
+        return self._wakes
+
+    def _wait(self, c: Consumer, timeout: float | None, min_samples: int,
+              since: int | None) -> bool:
+        with self._lock:
+            wakes = self._wakes if since is None else since
+            if self._ready(c, min_samples) or self._wakes != wakes:
                 return True
-            wakes = self._wakes
-            return self._cond.wait_for(
-                lambda: self._pending(c) or self._wakes != wakes, timeout)
+            c._wake_at = c.pos + min_samples
+            c._wake_on_marks = min_samples <= 1
+            try:
+                return c._cond.wait_for(
+                    lambda: self._ready(c, min_samples) or self._wakes != wakes, timeout)
+            finally:
+                c._wake_at = None
 
     # -- reader side --------------------------------------------------------------------
     def consumer(self, name: str, *, from_start: bool = False) -> Consumer:
@@ -127,7 +144,7 @@ class Ring:
         with self._lock:
             c = Consumer(self, name, 0 if from_start else self._head,
                          0 if from_start else self._mark_head)
-        self._consumers.append(c)
+            self._consumers.append(c)
         return c
 
     @property
@@ -142,10 +159,16 @@ class Ring:
             return self._copy(p0, self._head, [])
 
     def _copy(self, p0: int, p1: int, marks: list) -> Chunk:
-        n = p1 - p0
-        idx = (np.arange(p0, p1) % self.capacity) if n else np.zeros(0, dtype=np.int64)
-        return Chunk(self._counts[idx].copy(), self._index[idx].copy(), self._time[idx].copy(),
-                     p0, marks)
+        # at most two slices (where the ring wraps), not an index array per read
+        s = p0 % self.capacity
+        e = s + max(0, p1 - p0)
+        out: list[np.ndarray] = []
+        for arr in (self._counts, self._index, self._time):
+            if e <= self.capacity:
+                out.append(arr[s:e].copy())
+            else:
+                out.append(np.concatenate((arr[s:], arr[:e - self.capacity])))
+        return Chunk(out[0], out[1], out[2], p0, marks)
 
     def _read(self, c: Consumer, max_samples: int | None) -> Chunk:
         with self._lock:
@@ -198,11 +221,18 @@ class Consumer:
         self.mark_pos = mark_pos
         self.last_index: int | None = None
         self.lost_total = 0
+        self._cond = threading.Condition(ring._lock)   # notified by the ring (its lock held)
+        self._wake_at: int | None = None   # while waiting: the ring head that wakes it
+        self._wake_on_marks = False        # while waiting: whether a mark wakes it
 
-    def wait(self, timeout: float | None = None) -> bool:
-        """Block until there is something to read (samples or marks), :meth:`Ring.wake` is
-        called, or ``timeout`` seconds pass; False on a timeout with nothing to read."""
-        return self.ring._wait(self, timeout)
+    def wait(self, timeout: float | None = None, min_samples: int = 1, *,
+             since: int | None = None) -> bool:
+        """Block until there is something to read, :meth:`Ring.wake` is called (after
+        ``since``, a :attr:`Ring.wakes` value, when given), or ``timeout`` seconds pass; False
+        on a timeout before that. Something to read is ``min_samples`` samples, or with
+        ``min_samples`` ≤ 1 a sample or a mark (a consumer that batches takes the marks with
+        its batch, or after the timeout)."""
+        return self.ring._wait(self, timeout, max(1, int(min_samples)), since)
 
     def read(self, max_samples: int | None = None) -> Chunk:
         """Everything pushed since the last read (at most ``max_samples`` samples)."""

@@ -5,9 +5,12 @@ The publisher hands every ``avar`` record it sends to :meth:`SnapshotBoard.publi
 subscribers have not been sent yet). Its noise fit (core/model/fit.py: NNLS and normal quantiles,
 0.1–2 s on a Pi, and the module that loads scipy) is computed by the board's own thread, not by
 the request thread, so ``status`` and ``recent`` are never queued behind a fit. The thread
-starts fitting only once a client has asked for a snapshot (a service nobody asks never loads
-scipy) and from then on fits each new record as it is published; a reply carries the fit of
-its own record when it is ready, else ``fit`` nil and ``fit_pending`` true.
+fits on demand only: a ``snapshot`` request leases it the record current then and the next
+:data:`FIT_LEASE_RECORDS` published (a client that asks at least that often finds its fit
+ready); with no request since, it fits nothing, so one ``avard watch`` (it asks once, at join,
+then fits the streamed records itself) costs a few fits, not one per snapshot for the rest of
+the run. A service nobody asks never loads scipy. A reply carries the fit of its own record
+when it is ready, else ``fit`` nil and ``fit_pending`` true.
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ log = logging.getLogger(__name__)
 
 Fit = Callable[[dict[str, Any]], dict[str, Any]]
 
+#: Records fitted after the one current at a ``snapshot`` request, without another request.
+FIT_LEASE_RECORDS = 3
+
 
 class SnapshotBoard:
     """Holds the newest published ``avar`` record and its fit; one fitting thread."""
@@ -35,6 +41,8 @@ class SnapshotBoard:
         self._fitted: dict[str, Any] | None = None    # the record the fit below belongs to
         self._fit_result: dict[str, Any] | None = None
         self._wanted = False
+        self._published = 0     # records published so far: the latest is record _published
+        self._lease_end = 0     # the last record a request leased a fit to
         self._stopping = False
         self._thread: threading.Thread | None = None
         self.fits = 0
@@ -43,6 +51,7 @@ class SnapshotBoard:
         """A new ``avar`` record went out on the wire."""
         with self._cond:
             self._latest = record
+            self._published += 1
             self._cond.notify_all()
 
     def reply(self) -> dict[str, Any] | None:
@@ -51,6 +60,7 @@ class SnapshotBoard:
             if not self._wanted:
                 self._wanted = True
                 self._start()
+            self._lease_end = self._published + FIT_LEASE_RECORDS
             self._cond.notify_all()
             rec = self._latest
             if rec is None:
@@ -76,11 +86,20 @@ class SnapshotBoard:
             self._thread = threading.Thread(target=self._run, name="avard-fit", daemon=True)
             self._thread.start()
 
+    def fit_due(self) -> bool:
+        """Whether the thread has a record to fit: the latest is unfitted and within the
+        lease of the last request."""
+        with self._cond:
+            return self._fit_due()
+
+    def _fit_due(self) -> bool:
+        return (self._latest is not None and self._fitted is not self._latest
+                and self._published <= self._lease_end)
+
     def _run(self) -> None:
         while True:
             with self._cond:
-                self._cond.wait_for(lambda: self._stopping or (
-                    self._latest is not None and self._fitted is not self._latest))
+                self._cond.wait_for(lambda: self._stopping or self._fit_due())
                 if self._stopping:
                     return
                 rec = self._latest

@@ -9,7 +9,6 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
-import time
 from typing import Any
 
 import numpy as np
@@ -42,6 +41,11 @@ def split_chunk(chunk: Chunk) -> list[Item]:
             continue
         a, b = val
         sub = chunk.index[a:b]
+        if int(sub[-1]) - int(sub[0]) == b - a - 1:
+            # indices only ever grow (a gap jumps them forward): first and last tell that
+            # the run is contiguous, the usual case, without a pass over it
+            out.append((kind, val))
+            continue
         brk = np.flatnonzero(np.diff(sub) != 1) + 1
         edges = [a, *(a + brk).tolist(), b]
         out.extend(("samples", (x, y)) for x, y in itertools.pairwise(edges))
@@ -76,25 +80,31 @@ def lost_marks_records(run_id: str, chunk: Chunk, consumer: str,
 class Stage:
     """A consumer thread: block on the ring until it holds work, hand each chunk to ``handle``.
 
-    After handling a chunk the thread lets ``batch_s`` pass before it reads again (unless it
-    is behind, or it had waited that long for the chunk anyway), so that at 4 kHz it takes
-    one larger chunk instead of waking at every drain (the per-wake cost is fixed;
-    ``batch_s`` is the latency this stage adds). ``idle_s`` is
-    the longest wait without work before :meth:`idle` runs (a stage with something to do on a
-    timer, such as the status record, does it there); the thread never wakes on a timer to
-    look for samples."""
+    The thread sleeps until ``batch_samples`` samples are in the ring for it (the ring wakes
+    it then, not at every drain: the per-wake cost is fixed, and at 125 Hz a 0.25 s batch is
+    every other drain); marks wait for the batch they came with, or wake it at once when it
+    takes single samples. ``batch_samples`` / rate is the latency this stage adds. ``idle_s``
+    is the longest wait before the thread reads what there is (marks while no samples come)
+    and runs :meth:`idle` (a stage with something to do on a timer, such as the status
+    record, does it there); the thread never wakes on a timer to look for samples."""
 
     name = "stage"
+    #: Whether a death of this stage's thread may be restarted in place (the supervisor does,
+    #: a few times): only for a stage whose output nothing downstream depends on for
+    #: correctness, and which can say what the dead thread's chunk lost (:meth:`lost_in_death`).
+    restartable = False
 
-    def __init__(self, consumer: Consumer, *, idle_s: float = 5.0, batch_s: float = 0.0,
+    def __init__(self, consumer: Consumer, *, idle_s: float = 5.0, batch_samples: int = 1,
                  max_samples: int | None = None) -> None:
         self.consumer = consumer
         self.idle_s = idle_s
-        self.batch_s = batch_s
+        self.batch_samples = max(1, int(batch_samples))
         self.max_samples = max_samples
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
+        self.restarts = 0
+        self._chunk: Chunk | None = None     # the chunk being handled (lost if it dies)
 
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name=f"avard-{self.name}",
@@ -110,30 +120,42 @@ class Stage:
 
     def _run(self) -> None:
         try:
-            waited = 0.0   # seconds blocked on the ring before the chunk handled now
             while True:
+                # the wake count before the stop flag: a stop() between the two still ends
+                # the wait below (stop sets the flag, then wakes the ring)
+                since = self.consumer.ring.wakes
                 stopping = self._stop.is_set()
+                if not stopping and not self.consumer.wait(self.idle_s, self.batch_samples,
+                                                           since=since):
+                    self.idle()
                 chunk = self.consumer.read(self.max_samples)
                 if chunk.n or chunk.marks or chunk.lost_samples or chunk.lost_marks:
+                    self._chunk = chunk
                     self.handle(chunk)
-                    # Batch only while work comes faster than batch_s: a stage that had to
-                    # wait that long for this chunk would gather nothing more by sleeping,
-                    # only wake twice per drain (at 125 Hz the reader pushes every 128 ms).
-                    if (self.batch_s and not stopping and not self.consumer.backlog
-                            and waited < self.batch_s):
-                        self._stop.wait(self.batch_s)
-                    waited = 0.0
+                    self._chunk = None
                     continue
                 if stopping:
                     break
-                t0 = time.monotonic()
-                if not self.consumer.wait(self.idle_s):
-                    self.idle()
-                waited += time.monotonic() - t0
             self.finish()
         except BaseException as exc:
             log.exception("%s thread died", self.name)
             self.error = exc
+
+    def restart(self) -> None:
+        """A new thread after this one died (``error`` set): what the dead thread's chunk
+        lost is said first (:meth:`lost_in_death`), then the stage reads on from its cursor."""
+        if self._thread is not None:
+            self._thread.join(1.0)
+        chunk, self._chunk = self._chunk, None
+        self.error = None
+        self.restarts += 1
+        if chunk is not None:
+            self.lost_in_death(chunk)
+        self.start()
+
+    def lost_in_death(self, chunk: Chunk) -> None:
+        """The chunk the dead thread was handling may be partly lost: say so (a gap)."""
+        return None
 
     def handle(self, chunk: Chunk) -> None:  # pragma: no cover - abstract
         raise NotImplementedError

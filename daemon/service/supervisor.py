@@ -55,10 +55,18 @@ from avard.daemon.service.stage import Stage
 
 log = logging.getLogger("avard.daemon.service")
 
-#: Seconds of samples each stage lets accumulate between reads (its added latency).
-ALLAN_BATCH_S = 0.25
-RECORDER_BATCH_S = 0.25
-PUBLISH_BATCH_S = 0.05
+#: Times a restartable stage (the publisher) is restarted in place before a death exits 70.
+MAX_STAGE_RESTARTS = 3
+
+#: Seconds of samples each stage lets accumulate between reads (its added latency; each read
+#: has a fixed cost). The Allan stage's output is a snapshot every snapshot_interval_s and the
+#: recorder writes raw blocks of recording.block_s (a mark writes a partial one), so neither
+#: gains from reading more often than once a second. The publisher's is the live stream's
+#: latency: a quarter second (every other drain at 125 Hz) is well inside what a view that
+#: redraws every 2 s shows, and halves its wake-ups.
+ALLAN_BATCH_S = 1.0
+RECORDER_BATCH_S = 1.0
+PUBLISH_BATCH_S = 0.25
 
 
 @dataclass(frozen=True)
@@ -234,6 +242,7 @@ class Service:
             st["subscribers"] = ps.get("peers", 0)
             st["published"] = ps.get("sent", 0)
             st["publish_dropped"] = ps.get("dropped", 0)
+            st["stalled_shut_down"] = ps.get("stalled_shut_down", 0)
         return st
 
     def status_line(self) -> str:
@@ -323,7 +332,7 @@ class Service:
             on_checkpoint=None if recording else self.save_state,
             snapshot_interval_s=acfg.snapshot_interval_s,
             checkpoint_interval_s=acfg.checkpoint_interval_s,
-            batch_s=ALLAN_BATCH_S if paced else 0.0))
+            batch_samples=self._batch(ALLAN_BATCH_S, paced)))
         if recording:
             self.recorder = (self._recorder_factory or _default_recorder)(self)
             self.workers.append(RecorderStage(
@@ -332,7 +341,8 @@ class Service:
                 header=self.run_header, checkpoint_written=self.save_state,
                 reopen=self.reopen_requested,
                 block_samples=int(cfg.recording.block_s * self.odr),
-                batch_s=min(RECORDER_BATCH_S, cfg.recording.block_s) if paced else 0.0))
+                batch_samples=self._batch(min(RECORDER_BATCH_S, cfg.recording.block_s),
+                                          paced)))
         if cfg.publish.enabled:
             self.publisher = (self._publisher_factory or _default_publisher)(self)
             self.request_server = (self._request_factory or _default_request_server)(self)
@@ -341,7 +351,8 @@ class Service:
                 real_offset=self.real_offset, rate_hz=rate, clock=self.clock,
                 status=self.status, header=self.run_header, snapshots=self.snapshots,
                 status_interval_s=cfg.publish.status_interval_s,
-                max_block=max(32, int(self.odr)), batch_s=PUBLISH_BATCH_S if paced else 0.0))
+                max_block=max(32, int(self.odr)),
+                batch_samples=self._batch(PUBLISH_BATCH_S, paced)))
         # The first marks (restart gap, start event) for every consumer, in order.
         if self._restart_gap is not None:
             g = self._restart_gap
@@ -365,6 +376,11 @@ class Service:
                  cfg.sensor.range_g, self.acq.period,
                  ", INT1 pin" if self.interrupt is not None else "",
                  ", ".join(self.temp_names))
+
+    def _batch(self, seconds: float, paced: bool) -> int:
+        """A stage's batch in samples: ``seconds`` at the nominal rate when paced; one sample
+        when a simulation runs unpaced (its reader waits for the stages)."""
+        return max(1, int(seconds * self.odr)) if paced else 1
 
     def timebase_rate(self) -> float:
         """The fitted output rate, Hz (the nominal one until the fit has data)."""
@@ -402,7 +418,7 @@ class Service:
                                           [reading.value_c if ok else None], t,
                                           t + self.real_offset, source="ds18b20"))
 
-    def check_threads(self) -> None:
+    def check_threads(self, *, restart: bool = True) -> None:
         """Raise ServiceFault when a thread died: the service stops (flushing what the other
         stages hold) and exits with status 70, which the unit restarts, instead of limping on
         without a stage or exiting 2, which RestartPreventExitStatus=2 would keep down."""
@@ -410,15 +426,25 @@ class Service:
             raise ServiceFault(f"the reader thread stopped: {self.acq.error!r}; exiting for "
                                "systemd to restart the service")
         for w in self.workers:
-            if w.error is not None:
-                raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
-                                   "systemd to restart the service")
+            if w.error is None:
+                continue
+            if restart and w.restartable and w.restarts < MAX_STAGE_RESTARTS:
+                # safe in place: nothing the recording or the accumulators hold depends on it
+                log.error("the %s thread stopped: %r; restarting it (#%d of %d)", w.name,
+                          w.error, w.restarts + 1, MAX_STAGE_RESTARTS)
+                w.restart()
+                continue
+            raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
+                               "systemd to restart the service")
 
-    def run(self, duration_s: float | None = None, *, tick_s: float = 0.5,
+    def run(self, duration_s: float | None = None, *, tick_s: float = 1.0,
             before_acquisition: Callable[[], None] | None = None) -> int:
         """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
         The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
-        of a given seed always holds the same samples."""
+        of a given seed always holds the same samples. Signals and stop requests wake the
+        loop; ``tick_s`` bounds how late it sees a dead thread or a moved rate (the header
+        is rebuilt at most every 10 s); the watchdog and the status log keep their own
+        deadlines."""
         self._stop_at = None if duration_s is None else self.t_start + duration_s
         latch = self._signal_latch()
         self.start(before_acquisition)
@@ -479,7 +505,7 @@ class Service:
         finally:
             self.stop()
             self._close_latch()
-        self.check_threads()
+        self.check_threads(restart=False)
         return 0
 
     def _signal_latch(self) -> SignalLatch:

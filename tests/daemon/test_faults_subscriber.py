@@ -127,3 +127,61 @@ def test_publisher_memory_is_bounded_by_the_hwm_for_a_stalled_peer():
     assert st.samples_unexplained == 0
     # (a hole is seen between two received blocks: whole blocks of 1000, never more than lost)
     assert 0 < st.samples_lost <= st.messages_lost * 1000 and st.samples_lost % 1000 == 0
+
+
+def test_stalled_subscribers_are_shut_down_by_bytes_waiting_not_by_message_count():
+    """#26 (item 8's growth): with a high-water mark in messages, each stalled subscriber held
+    up to `hwm` messages (10 000 by default: minutes of the stream, 80 MB for 50 of them at
+    4 kHz). A subscriber whose kernel send queue stays at least half full for `stall_s` is
+    now shut down, whatever the HWM: three stalled peers beside a reading one, a HWM of
+    100 000 messages that would never drop, and the stalled ones are cut while the reader
+    gets every message."""
+    import threading
+
+    block = np.arange(3000, dtype=np.int32).reshape(1000, 3)     # 12 kB raw blocks
+    sndbuf = 32 << 10
+    with Publisher("tcp://127.0.0.1:0", "run-s", hwm=100_000, sndbuf=sndbuf,
+                   stall_s=0.3) as pub:
+        stalled = [StalledSubscriber(pub.endpoint) for _ in range(3)]
+        ctx = zmq.Context()
+        reader = ctx.socket(zmq.SUB)
+        reader.setsockopt(zmq.SUBSCRIBE, b"")
+        reader.setsockopt(zmq.RCVHWM, 0)
+        reader.connect(pub.endpoint)
+        tracker = LossTracker()
+        done = threading.Event()
+
+        def read() -> None:
+            while not done.is_set() or reader.poll(500):
+                if reader.poll(50):
+                    topic, data = reader.recv_multipart()
+                    tracker.observe(topic.decode(), frames.decode(data))
+
+        th = threading.Thread(target=read, daemon=True)
+        th.start()
+        for _ in range(500):
+            if pub.stats()["peers"] >= 4:
+                break
+            time.sleep(0.01)
+        assert pub.stats()["peers"] == 4
+        sent = 0
+        for i in range(20_000):     # a bound on the loop only: it ends at the third cut
+            pub.publish("raw", frames.raw_record("run-s", 0, 1000 * i, block, 0.0, 0.0))
+            sent += 1
+            if pub.stats()["stalled_shut_down"] >= 3:
+                break
+            time.sleep(0.002)
+        st = pub.stats()
+        done.set()
+        th.join(30)
+        reader.close(linger=0)
+        ctx.term()
+        for s in stalled:
+            s.sock.close(linger=0)
+            s.ctx.term()
+    assert st["stalled_shut_down"] >= 3
+    # the kernel's share per peer stays at the buffer set (Linux books twice SO_SNDBUF)
+    assert st["max_send_queue_bytes"] <= 2 * sndbuf + 4096
+    # the reading subscriber was never cut: every message, in order, none lost
+    raw = tracker.stats.topics["raw"]
+    assert raw.received == sent and raw.lost == 0

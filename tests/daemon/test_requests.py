@@ -12,7 +12,7 @@ import pytest
 import zmq
 from avard.core.io import frames as F
 from avard.daemon.net.publisher import REPLY_HWM, RequestServer
-from avard.daemon.service.snapshots import SnapshotBoard
+from avard.daemon.service.snapshots import FIT_LEASE_RECORDS, SnapshotBoard
 
 LOCAL = "tcp://127.0.0.1:*"
 
@@ -65,6 +65,34 @@ def test_no_fit_and_no_thread_until_a_client_asks() -> None:
     board.publish(_rec(2))
     assert not fit.started.wait(0.2) and fit.seen == []
     board.stop()
+
+
+def test_one_request_leases_a_few_fits_not_the_rest_of_the_run() -> None:
+    """#26 item 9: one `snapshot` request (what `avard watch` sends at join) made the service
+    fit every later snapshot for the rest of the run. It now fits the record current at the
+    request and the next FIT_LEASE_RECORDS, then nothing until a client asks again."""
+    fit = BlockingFit()
+    fit.release.set()
+    board = SnapshotBoard(fit)
+    try:
+        board.publish(_rec(0))
+        assert board.reply() is not None               # the one request
+        assert board.wait_fitted(10)
+        for k in range(1, 3 * FIT_LEASE_RECORDS):
+            board.publish(_rec(k))
+            if k <= FIT_LEASE_RECORDS:
+                assert board.wait_fitted(10)
+            else:                                      # past the lease: nothing to fit
+                assert not board.fit_due()
+        assert fit.seen == list(range(FIT_LEASE_RECORDS + 1))
+        last = 3 * FIT_LEASE_RECORDS - 1
+        rep = board.reply()                            # a client asks again: its record
+        assert rep is not None and rep["i_end"] == last and rep["fit_pending"]
+        assert board.wait_fitted(10)
+        assert fit.seen == [*range(FIT_LEASE_RECORDS + 1), last]
+        assert board.fits == FIT_LEASE_RECORDS + 2
+    finally:
+        board.stop()
 
 
 def _dealer(ctx: zmq.Context, endpoint: str) -> zmq.Socket:

@@ -6,7 +6,7 @@ import threading
 
 import numpy as np
 import pytest
-from avard.daemon.service.ring import Ring
+from avard.daemon.service.ring import Consumer, Ring
 
 
 def _block(i0: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -112,3 +112,73 @@ def test_concurrent_writer_and_reader_lose_nothing_when_reader_keeps_up() -> Non
 def test_capacity_must_be_positive() -> None:
     with pytest.raises(ValueError):
         Ring(0)
+
+
+class _CountingCondition(threading.Condition):
+    def __init__(self, lock: threading.Lock) -> None:
+        super().__init__(lock)
+        self.notified = 0
+
+    def notify(self, n: int = 1) -> None:
+        self.notified += 1
+        super().notify(n)
+
+
+def _wait_in_thread(c: Consumer, min_samples: int) -> tuple[threading.Thread, list[bool]]:
+    woke: list[bool] = []
+    t = threading.Thread(target=lambda: woke.append(c.wait(60.0, min_samples)), daemon=True)
+    t.start()
+    for _ in range(10_000):              # until the thread is blocked in the wait
+        if c._wake_at is not None:
+            break
+        t.join(0.001)
+    assert c._wake_at is not None
+    return t, woke
+
+
+def test_a_batching_consumer_is_woken_once_per_batch_not_per_push_or_mark() -> None:
+    """#26 item 9: every push and mark woke every stage thread (notify_all), three wake-ups
+    per drain at 125 Hz for stages that then went back to sleep. A consumer waiting for a
+    batch is now notified once, when its batch is in the ring; marks wait for the batch."""
+    ring = Ring(1000)
+    c = ring.consumer("batching")
+    other = ring.consumer("single")
+    c._cond = cond = _CountingCondition(ring._lock)
+    t, woke = _wait_in_thread(c, 32)
+    ring.push(*_block(0, 16))                     # a drain: half the batch
+    ring.mark({"kind": "temp"})                   # a temperature reading
+    assert cond.notified == 0 and t.is_alive()
+    ring.push(*_block(16, 16))                    # the batch is there: one notify
+    t.join(10)
+    assert cond.notified == 1 and woke == [True]
+    chunk = c.read()
+    assert chunk.n == 32 and len(chunk.marks) == 1 and chunk.marks[0][0] == 16
+    # a consumer of single samples is woken by a mark (the publisher's events go out at once)
+    other.read()
+    other._cond = cond1 = _CountingCondition(ring._lock)
+    t, woke = _wait_in_thread(other, 1)
+    ring.mark({"kind": "event"})
+    t.join(10)
+    assert cond1.notified == 1 and woke == [True] and other.read().marks
+
+
+def test_a_stop_between_the_stop_check_and_the_wait_is_not_missed() -> None:
+    ring = Ring(100)
+    c = ring.consumer("c")
+    since = ring.wakes
+    ring.wake()                                   # stop() ran after the stage looked
+    assert c.wait(60.0, 32, since=since) is True  # returns at once instead of idling
+
+
+def test_split_chunk_breaks_runs_where_the_index_jumps_and_at_marks() -> None:
+    from avard.daemon.service.stage import split_chunk
+
+    ring = Ring(100)
+    c = ring.consumer("c")
+    ring.push(*_block(0, 10))
+    ring.mark({"kind": "temp"})
+    ring.push(*_block(10, 5))
+    ring.push(*_block(20, 5))                 # an overrun gap: 15..19 missing
+    items = split_chunk(c.read())
+    assert [(k, v) if k == "samples" else (k, v["kind"]) for k, v in items] == [
+        ("samples", (0, 10)), ("mark", "temp"), ("samples", (10, 15)), ("samples", (15, 20))]

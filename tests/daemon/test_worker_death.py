@@ -33,13 +33,19 @@ def _unit() -> dict[str, list[str]]:
     return keys
 
 
+def _run_dying(stage: type, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+               capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """`avard run --simulate` whose ``stage`` dies at every chunk: (exit status, stderr)."""
+    monkeypatch.setattr(stage, "handle", _die)
+    status = cli.main(["run", "--simulate", "quiet-lab", "--duration", "30",
+                       "--data-dir", str(tmp_path / "rec")])
+    return status, capsys.readouterr().err
+
+
 def test_a_dead_worker_exits_with_a_status_systemd_restarts(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setattr(AllanStage, "handle", _die)
-    status = cli.main(["run", "--simulate", "quiet-lab", "--duration", "30",
-                       "--data-dir", str(tmp_path / "rec")])
-    err = capsys.readouterr().err
+    status, err = _run_dying(AllanStage, tmp_path, monkeypatch, capsys)
     assert "allan thread stopped" in err
     assert status == ServiceFault.exit_status == 70
     unit = _unit()
@@ -74,3 +80,51 @@ def test_check_config_states_the_rate_that_holds_on_the_real_clock(
             assert "note:" not in out, out
         else:
             assert said in out, out
+
+
+def test_a_dead_publisher_thread_is_restarted_in_place_and_its_block_becomes_a_gap(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """#26: a dead worker exited 70 and systemd restarted the whole service (a restart gap in
+    the recording). The publisher's output is a copy of what the recording and the
+    accumulators hold, so its thread is restarted in place: the run goes on, nothing is lost
+    from the recording, and the block it died on reaches subscribers as a gap record."""
+    from avard.daemon.service.publisher_stage import PublisherStage
+
+    from .test_faults_bus import run_rig
+
+    original = PublisherStage.handle
+    seen = {"n": 0, "died_at": None}
+
+    def die_once(self: Any, chunk: Any) -> None:
+        if chunk.n:
+            seen["n"] += 1
+            if seen["n"] == 4:
+                seen["died_at"] = int(chunk.index[0])
+                raise OSError(24, "Too many open files")
+        original(self, chunk)
+
+    monkeypatch.setattr(PublisherStage, "handle", die_once)
+    rig = run_rig(tmp_path, 30.0)          # raises ServiceFault if the death ends the run
+    pub = next(w for w in rig.svc.workers if w.name == "publisher")
+    assert pub.restarts == 1 and pub.error is None
+    gaps = [r for t, r in rig.listener.records
+            if r.get("kind") == "gap" and r.get("reason") == "publisher_restart"]
+    assert len(gaps) == 1 and gaps[0]["i0"] == seen["died_at"] and gaps[0]["n"] > 0
+    events = [r for t, r in rig.listener.records
+              if r.get("kind") == "event" and r.get("name") == "publisher_restart"]
+    assert len(events) == 1 and events[0]["detail"]["samples"] == gaps[0]["n"]
+    st = rig.listener.sub.stats
+    assert st.samples_unexplained == 0 and st.messages_lost == 0
+    # the recording lost nothing: one run, no gap of any kind
+    assert rig.kinds("gap") == []
+
+
+def test_a_publisher_that_keeps_dying_exits_with_a_status_systemd_restarts(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from avard.daemon.service.publisher_stage import PublisherStage
+    from avard.daemon.service.supervisor import MAX_STAGE_RESTARTS
+
+    status, err = _run_dying(PublisherStage, tmp_path, monkeypatch, capsys)
+    assert err.count("restarting it (#") == MAX_STAGE_RESTARTS
+    assert "publisher thread stopped" in err and status == ServiceFault.exit_status
