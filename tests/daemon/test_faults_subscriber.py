@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import zmq
 from avard.core.io import frames
+from avard.daemon.net.handshake import HELLO, is_hello
 from avard.daemon.net.publisher import Publisher
 from avard.daemon.net.subscriber import LossTracker
 
@@ -149,13 +150,17 @@ def test_stalled_subscribers_are_shut_down_by_bytes_waiting_not_by_message_count
         reader.setsockopt(zmq.RCVHWM, 0)
         reader.connect(pub.endpoint)
         tracker = LossTracker()
-        done = threading.Event()
+        done, joined = threading.Event(), threading.Event()
 
         def read() -> None:
             while not done.is_set() or reader.poll(500):
                 if reader.poll(50):
                     topic, data = reader.recv_multipart()
-                    tracker.observe(topic.decode(), frames.decode(data))
+                    record = frames.decode(data)
+                    if is_hello(record):  # subscribed: every message from here on
+                        joined.set()
+                        continue
+                    tracker.observe(topic.decode(), record)
 
         th = threading.Thread(target=read, daemon=True)
         th.start()
@@ -164,6 +169,13 @@ def test_stalled_subscribers_are_shut_down_by_bytes_waiting_not_by_message_count
                 break
             time.sleep(0.01)
         assert pub.stats()["peers"] == 4
+        # the reader's subscription reaches the publisher some time after its connection
+        # (ZeroMQ's slow joiner): hello events until it has one (daemon/net/handshake.py)
+        for _ in range(2400):  # a bound on a broken set-up only
+            pub.publish("event", frames.event_record("", 0, HELLO, 0.0, 0.0))
+            if joined.wait(0.05):
+                break
+        assert joined.is_set()
         sent = 0
         for i in range(20_000):     # a bound on the loop only: it ends at the third cut
             pub.publish("raw", frames.raw_record("run-s", 0, 1000 * i, block, 0.0, 0.0))
