@@ -92,19 +92,30 @@ def scan_file(fh: BinaryIO, name: str, number: int, max_bytes: int, limit: int |
     the file offset where it stopped and whether that is the file's clean end."""
     assert _framescan is not None
     fields = int(_framescan.ENTRY_FIELDS)
-    base = 0                         # file offset of data[0]
-    data = b""
+    base = 0                         # file offset of the chunk
     while True:
-        want = CHUNK if limit is None else min(CHUNK, limit - base - len(data))
-        more = fh.read(want) if want > 0 else b""
-        data = data + more if data else more
+        # each chunk starts at a frame: the frame the last one cut is read again whole
+        # (cheaper than copying the chunk's tail onto the next read)
+        fh.seek(base)
+        want = CHUNK if limit is None else min(CHUNK, limit - base)
+        data = fh.read(want) if want > 0 else b""
         consumed, status, raw = _framescan.scan(data, base, max_bytes)
+        if not consumed and not status and len(data) == want >= 8:
+            # one frame longer than a chunk (its length checked by the C loop): read whole
+            whole = 8 + int.from_bytes(data[:4], "little")
+            want = whole if limit is None else min(whole, limit - base)
+            if want > len(data):
+                fh.seek(base)
+                data = fh.read(want)
+                consumed, status, raw = _framescan.scan(data, base, max_bytes)
         e = np.frombuffer(raw, dtype=np.int64).reshape(-1, fields)
         yield from _entries(e, data, base, name, number)
         base += consumed
-        data = data[consumed:]
-        if status != 0 or not more:
-            return base, status == 0 and not data
+        if status != 0:
+            return base, False
+        if len(data) < want or not consumed:
+            # the end of the file (or of ``limit``): clean when no bytes are left over
+            return base, consumed == len(data)
 
 
 def spans(cont: NDArray[np.bool_]) -> Iterator[tuple[int, int]]:

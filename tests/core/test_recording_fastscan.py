@@ -176,7 +176,7 @@ def test_the_fast_scan_is_the_general_one_on_a_clean_recording(recording: Path,
 @pytest.mark.parametrize("damage", [
     "flipped raw", "flipped header", "flipped length", "torn tail", "zero tail",
     "deleted", "emptied", "directory", "copied", "copied renamed", "first header gone",
-    "garbage between", "other layout"])
+    "garbage between", "other layout", "undecodable"])
 def test_the_fast_scan_is_the_general_one_on_damage(recording: Path, tmp_path: Path,
                                                     monkeypatch, damage: str) -> None:
     rec = _copy(recording, tmp_path)
@@ -230,8 +230,26 @@ def test_the_fast_scan_is_the_general_one_on_damage(recording: Path, tmp_path: P
                 fr.offset:fr.offset + 8 + len(fr.payload)]
             pos = fr.offset + 8 + len(fr.payload)
         mid.write_bytes(bytes(out + data[pos:]))
+    elif damage == "undecodable":
+        # raw frames whose CRC checks but whose record does not (format version 2, a count
+        # of the wrong sign): reported, their samples lost
+        data = bytearray(mid.read_bytes())
+        out = bytearray()
+        from avard.core.io.recording import scan_frames
+        for fr in scan_frames(bytes(data)):
+            payload = fr.payload
+            if fr.offset in (raws[4], raws[9]):
+                bad = msgpack.unpackb(payload)
+                bad["v" if fr.offset == raws[4] else "i0"] = 2 if fr.offset == raws[4] else -1
+                payload = msgpack.packb(bad)
+            out += frame(payload)
+        mid.write_bytes(bytes(out))
     fast, slow = _both(rec, monkeypatch)
     _assert_same(fast, slow)
+    if damage == "undecodable":
+        assert not isinstance(fast, Exception) and fast.info.recording is not None
+        assert sum("undecodable" in p for p in fast.info.recording.problems) == 2
+        assert fast.info.recording.samples_lost > 0
     if damage in ("flipped raw", "deleted", "emptied", "directory"):
         assert not isinstance(fast, Exception)
         assert fast.info.recording is not None and fast.info.recording.samples_lost > 0
