@@ -664,16 +664,21 @@ class RecordingReader:
             self.problems.append(prob)
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
+        for fr in self.frames():
+            rec = self.decoded(fr)
+            if rec is not None:
+                yield rec
+
+    def decoded(self, fr: Frame) -> dict[str, Any] | None:
+        """A frame's record, or None when it does not decode (reported as undecodable)."""
         from avard.core.io import frames as wire  # the record schema shared with the wire
 
-        for fr in self.frames():
-            try:
-                rec = wire.decode(fr.payload, max_bytes=self.max_bytes)
-            except FormatError as exc:
-                size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
-                self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
-                continue
-            yield rec
+        try:
+            return wire.decode(fr.payload, max_bytes=self.max_bytes)
+        except FormatError as exc:
+            size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
+            self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
+            return None
 
     @property
     def dropped_bytes(self) -> int:

@@ -440,12 +440,13 @@ class _Plan:
         if not self.scales or self.scales[-1] != scale:
             self.scales.append(scale)
         k = len(off)
-        self.fidx.extend(np.full(k, fidx, dtype=np.uint16).tolist())
+        self.fidx.extend(array("H", [fidx]) * k)
         self.off.frombytes(np.ascontiguousarray(off, dtype=np.int64).tobytes())
         self.i0.frombytes(np.ascontiguousarray(i0, dtype=np.int64).tobytes())
         self.n.extend(n.tolist())
-        self.sidx.extend([len(self.scales) - 1] * k)
-        self.cut.extend([1 if cut else 0] + [0] * (k - 1))
+        self.sidx.extend(array("H", [len(self.scales) - 1]) * k)
+        self.cut.append(1 if cut else 0)
+        self.cut.extend(array("B", [0]) * (k - 1))
 
     def add(self, at: tuple[int, int, int] | None, i0: int, n: int, scale: float,
             cut: bool) -> None:
@@ -517,9 +518,8 @@ class RecordingSource:
         plan needs (the walk passes it through, also to the parts of a duplicated block).
         ``skip``: record kinds not decoded at all (the scan needs no temperatures, Allan
         snapshots or checkpoints: two thirds of a recording's decoding)."""
-        from avard.core.io import frames as wire
         from avard.core.io import rawscan
-        from avard.core.io.recording import FRAME_HEADER, Problem, RecordingReader, walk
+        from avard.core.io.recording import FRAME_HEADER, RecordingReader, walk
 
         sink = problems if problems is not None else []
         # the scan reads each file's frames in C where that is built (the walk takes its
@@ -573,11 +573,8 @@ class RecordingSource:
                 undecodable one reported), a raw one tagged with where its counts lie."""
                 if skip and _peek_kind(fr.payload) in skip:
                     return                  # CRC-checked, not decoded: no samples in it
-                try:
-                    rec = wire.decode(fr.payload, max_bytes=self.max_bytes)
-                except FormatError as exc:
-                    size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
-                    self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
+                rec = self.decoded(fr)
+                if rec is None:
                     return
                 if tag and rec["kind"] == "raw":
                     rec["_at"] = (self.number, _counts_offset(fr, rec["counts"],
