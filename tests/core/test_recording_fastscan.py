@@ -369,3 +369,29 @@ def test_the_c_reader_agrees_on_msgpack_variants() -> None:
     for packed in (msgpack.packb(base, use_single_float=True),
                    msgpack.packb(dict(base, i0=70000, seq=300))):
         _agrees(packed)
+
+
+def test_runs_interleaved_in_one_file_read_the_same(tmp_path: Path, monkeypatch) -> None:
+    """Blocks of two runs alternating in one segment, one run's header late, an index that
+    jumps back (met before), a zero-sample block: each where the walk must take the blocks one
+    by one, read alike by both paths."""
+    a, b = "n00000001-x-a", "n00000002-x-b"
+
+    def head(run: str, i0: int) -> bytes:
+        return frame(frames.encode(frames.header_record(
+            run, rate_hz=RATE, t_mono=0.0, t_real=0.0, i0=i0, scale_m_s2_per_count=SCALE)))
+
+    def raw(run: str, i0: int, n: int) -> bytes:
+        counts = np.arange(3 * n, dtype=np.int32).reshape(n, 3) + i0
+        return frame(frames.encode(frames.raw_record(run, 0, i0, counts, 0.0, 0.0)))
+
+    parts = [head(a, 0), raw(a, 0, 10), raw(a, 10, 10), raw(b, 1000, 10), raw(b, 1010, 10),
+             raw(a, 20, 10), head(b, 1000), raw(b, 1020, 10), raw(a, 15, 10),
+             raw(a, 30, 0), raw(a, 30, 10), raw(b, 1030, 5)]
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    (rec / f"{a}_00000000_x.avr").write_bytes(b"".join(parts))
+    fast, slow = _both(rec, monkeypatch)
+    _assert_same(fast, slow)
+    assert not isinstance(fast, Exception)
+    assert fast.info.recording is not None and fast.info.recording.samples_duplicated == 10
