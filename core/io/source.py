@@ -524,8 +524,9 @@ class RecordingSource:
         sink = problems if problems is not None else []
         # the scan reads each file's frames in C where that is built (the walk takes its
         # stretches of raw blocks as their blocks one by one); every other read, and the rest
-        # of a file after a frame that does not check, is the general reader's
-        fast = tag and rawscan.available()
+        # of a file after a frame that does not check, is the general reader's (the C loop
+        # skips exactly the kinds the scan skips)
+        fast = tag and skip == _NO_SAMPLES and rawscan.available()
 
         class _Reader(RecordingReader):
             number = 0
