@@ -31,11 +31,23 @@ import numpy as np
 from avard.core.io.recording import FRAME_HEADER, Frame
 from numpy.typing import NDArray
 
-_framescan: Any
-try:
-    from avard.core.io import _framescan  # type: ignore[attr-defined, no-redef]
-except ImportError:  # no compiler at install (setup.py): the general reader does it all
-    _framescan = None
+
+def _load() -> Any:
+    """The compiled frame loop, or None: not built (no compiler at install, setup.py), or
+    switched off by ``AVARD_NO_C_KERNELS`` (the one switch for every compiled path,
+    core/allan/kernels.py); the general reader then does it all."""
+    from avard.core.allan.kernels import switched_off
+
+    if switched_off():
+        return None
+    try:
+        from avard.core.io import _framescan as built  # type: ignore[attr-defined]
+    except ImportError:
+        return None
+    return built
+
+
+_framescan: Any = _load()
 
 #: The interface this module calls: a module built from another ``_framescan.c`` is not used.
 API = 1

@@ -395,3 +395,14 @@ def test_runs_interleaved_in_one_file_read_the_same(tmp_path: Path, monkeypatch)
     _assert_same(fast, slow)
     assert not isinstance(fast, Exception)
     assert fast.info.recording is not None and fast.info.recording.samples_duplicated == 10
+
+
+def test_the_one_switch_turns_the_frame_loop_off_too(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``AVARD_NO_C_KERNELS`` (anything but 0) switches off every compiled path: the Allan
+    kernels and the recording scan's frame loop alike, so the general reader scans."""
+    from avard.core.allan import kernels
+
+    monkeypatch.setenv("AVARD_NO_C_KERNELS", "0")
+    assert rawscan._load() is not None and kernels._load() is not None
+    monkeypatch.setenv("AVARD_NO_C_KERNELS", "1")
+    assert rawscan._load() is None and kernels._load() is None
