@@ -50,7 +50,7 @@ def _load() -> Any:
 _framescan: Any = _load()
 
 #: The interface this module calls: a module built from another ``_framescan.c`` is not used.
-API = 1
+API = 2
 #: Bytes of a segment handed to the C loop at once (a frame longer than this is read whole).
 CHUNK = 1 << 20
 

@@ -406,3 +406,40 @@ def test_the_one_switch_turns_the_frame_loop_off_too(monkeypatch: pytest.MonkeyP
     assert rawscan._load() is not None and kernels._load() is not None
     monkeypatch.setenv("AVARD_NO_C_KERNELS", "1")
     assert rawscan._load() is None and kernels._load() is None
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(min_size=0, max_size=700), st.integers(0, 15),
+       st.integers(0, 2**32 - 1))
+def test_the_frame_loops_crc_is_zlibs(data: bytes, cut: int, start: int) -> None:
+    """The C loop's CRC-32 (folded by carry-less multiplication where the CPU has it, zlib's
+    for the tail and short frames) is zlib's, whatever the length, alignment and start."""
+    import zlib
+
+    from avard.core.io import _framescan
+
+    view = memoryview(data)[cut:]
+    assert _framescan.crc32(view, start) == zlib.crc32(view, start)
+
+
+@pytest.mark.parametrize("size", [63, 64, 65, 79, 80, 127, 128, 129, 1 << 20, (1 << 20) + 37])
+def test_the_frame_loops_crc_at_the_folds_boundaries(size: int) -> None:
+    """Around the fold's 64-byte start and 16-byte steps, and a chunk's length."""
+    import zlib
+
+    from avard.core.io import _framescan
+
+    data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8).tobytes()
+    for cut in (0, 1, 7, 15):
+        assert _framescan.crc32(data[cut:]) == zlib.crc32(data[cut:])
+        assert _framescan.crc32(data[cut:], 0xFFFFFFFF) == zlib.crc32(data[cut:], 0xFFFFFFFF)
+    # a frame whose payload is long enough to fold still checks, and one flipped bit fails
+    payload = frames.encode(frames.raw_record(
+        "r", 0, 0, np.arange(3 * 1000, dtype=np.int32).reshape(-1, 3), 0.0, 0.0))
+    good = frame(payload)
+    consumed, status, _ = _framescan.scan(good, 0, 1 << 24)
+    assert (consumed, status) == (len(good), 0)
+    bad = bytearray(good)
+    bad[len(bad) // 2] ^= 1
+    consumed, status, _ = _framescan.scan(bytes(bad), 0, 1 << 24)
+    assert (consumed, status) == (0, 1)
