@@ -12,11 +12,11 @@ $(VENV)/bin/python:
 	  { echo "could not create $(VENV): on Debian install it with 'sudo apt install python3-venv'"; exit 1; }
 	$(PY) -m pip install -q --upgrade pip
 
-$(VENV)/.installed-run: pyproject.toml setup.py core/allan/_kernels.c | $(VENV)/bin/python
+$(VENV)/.installed-run: pyproject.toml setup.py core/allan/_kernels.c core/io/_framescan.c | $(VENV)/bin/python
 	$(PY) -m pip install -q -e '.[plot]'
 	@touch $@
 
-$(VENV)/.installed-test: pyproject.toml setup.py core/allan/_kernels.c | $(VENV)/bin/python
+$(VENV)/.installed-test: pyproject.toml setup.py core/allan/_kernels.c core/io/_framescan.c | $(VENV)/bin/python
 	$(PY) -m pip install -q -e '.[test,plot,web,fleet]'
 	@touch $@ $(VENV)/.installed-run
 
@@ -36,4 +36,4 @@ bench: $(VENV)/.installed-test
 	$(PY) -m benchmarks
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache core/allan/_kernels*.so
+	rm -rf $(VENV) build *.egg-info .pytest_cache core/allan/_kernels*.so core/io/_framescan*.so

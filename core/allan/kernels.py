@@ -34,7 +34,7 @@ from types import ModuleType
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["API", "compiled", "second_differences", "use_compiled"]
+__all__ = ["API", "compiled", "second_differences", "switched_off", "use_compiled"]
 
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
@@ -42,8 +42,15 @@ __all__ = ["API", "compiled", "second_differences", "use_compiled"]
 API = 2
 
 
+def switched_off() -> bool:
+    """Whether ``AVARD_NO_C_KERNELS`` (set to anything but 0) switches the compiled code off:
+    the one switch for every compiled path (these kernels, the recording scan's frame loop
+    in core/io/rawscan.py), so one run shows the whole pure-Python-and-numpy path."""
+    return os.environ.get("AVARD_NO_C_KERNELS", "0") not in ("", "0")
+
+
 def _load() -> ModuleType | None:
-    if os.environ.get("AVARD_NO_C_KERNELS", "0") not in ("", "0"):
+    if switched_off():
         return None
     try:
         from avard.core.allan import _kernels  # type: ignore[attr-defined]

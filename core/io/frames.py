@@ -349,6 +349,8 @@ def _check_structure(obj: Any, what: str) -> None:
         nodes += len(values)
         if nodes > MAX_NODES:
             raise FormatError(f"{what}: more than {MAX_NODES} values")
+        if _LEAF_TYPES.issuperset(map(type, values)):
+            continue                      # leaves only (most containers): checked in one go
         for v in values:
             t = type(v)
             if t is dict or t is list:
@@ -371,7 +373,8 @@ def decode(data: bytes | bytearray | memoryview, *, max_bytes: int = DEFAULT_MAX
     validate(record)
     if arrays:
         for key, value in record.items():
-            if is_packed_array(value):
+            # msgpack gives plain dicts; few values are maps of three (a header has ~20 values)
+            if type(value) is dict and len(value) == 3 and is_packed_array(value):
                 where = f"{record['kind']}.{key}"
                 record[key] = unpack_array(value, max_bytes=max_bytes, where=where)
     return record

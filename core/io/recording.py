@@ -664,16 +664,21 @@ class RecordingReader:
             self.problems.append(prob)
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
+        for fr in self.frames():
+            rec = self.decoded(fr)
+            if rec is not None:
+                yield rec
+
+    def decoded(self, fr: Frame) -> dict[str, Any] | None:
+        """A frame's record, or None when it does not decode (reported as undecodable)."""
         from avard.core.io import frames as wire  # the record schema shared with the wire
 
-        for fr in self.frames():
-            try:
-                rec = wire.decode(fr.payload, max_bytes=self.max_bytes)
-            except FormatError as exc:
-                size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
-                self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
-                continue
-            yield rec
+        try:
+            return wire.decode(fr.payload, max_bytes=self.max_bytes)
+        except FormatError as exc:
+            size = FRAME_HEADER.size + len(fr.payload)  # the whole frame is lost
+            self._report([Problem(fr.file, fr.offset, "undecodable", size, str(exc))])
+            return None
 
     @property
     def dropped_bytes(self) -> int:
@@ -734,7 +739,7 @@ class _IndexSet:
         """The parts of ``[i0, i1)`` not seen yet (and marks all of it seen)."""
         import bisect
 
-        if not self.hi or i0 >= self.hi[-1]:          # the common case: data in order
+        if self.in_order(i0):                         # the common case: data in order
             self._add(i0, i1)
             return [(i0, i1)]
         out, at = [], i0
@@ -749,6 +754,10 @@ class _IndexSet:
         for a, b in out:
             self._add(a, b)
         return out
+
+    def in_order(self, i0: int) -> bool:
+        """Whether every index from ``i0`` on is unseen and after all seen (data in order)."""
+        return not self.hi or i0 >= self.hi[-1]
 
     def _add(self, a: int, b: int) -> None:
         import bisect
@@ -769,6 +778,20 @@ class _IndexSet:
 #: repeats the header every 60 s of data: 240 000 samples at 4 kHz); older ones are reported
 #: lost beyond this, so memory stays bounded (about 50 MB of counts).
 MAX_HEADERLESS_SAMPLES = 1 << 22
+
+
+def _taken(rec: dict[str, Any], headers: dict[str, dict[str, Any]], seen: _IndexSet,
+           max_bytes: int) -> Iterable[dict[str, Any]]:
+    """The records one item of the reader stands for. A stretch (``_stretch``: consecutive
+    raw blocks of one run, each continuing the last one's index, from the scan's C loop,
+    core/io/rawscan.py) is taken as one raw block when its run's header is known and its
+    indices are all new: the walk then does for it what it does for its blocks one by one
+    (one range seen, the run's next index after its last block, damage before it charged to
+    its first). Otherwise its blocks are decoded one by one by the general decoder."""
+    stretch = rec.get("_stretch")
+    if stretch is None or (rec["run"] in headers and seen.in_order(int(rec["i0"]))):
+        return (rec,)
+    return stretch.records(max_bytes)  # type: ignore[no-any-return]
 
 
 def walk(reader: RecordingReader, report: WalkReport | None = None
@@ -846,46 +869,49 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
             yield dict(rec, i0=a, n=b - a, counts=rec["counts"][a - i0:b - i0])
 
     carry: str | None = None                 # a problem read since the last record used
-    for rec in reader:
-        if len(reader.problems) > n_problems:
-            carry = carry or str(reader.problems[n_problems])
-            n_problems = len(reader.problems)
-        run = rec["run"]
-        if rec["kind"] == "header":
-            report.newest_header[run] = rec
-            if run in headers:
-                continue                      # a header copy: the run is already known
-            headers[run] = rec
-            # where the run's samples start (the service's header may be a little ahead of
-            # its first block; the start event, when there is one, is exact)
-            expect.setdefault(run, int(rec["i0"]))
-            if run in pending:
-                report.recovered_headers.append(run)
-            held.pop(run, None)
-            for late, dmg in pending.pop(run, []):
-                yield from emit(late, dmg)
-            if run_now is None or run_now != run:
-                run_now = run
-                yield rec
-            continue
-        if run not in headers:
-            waiting = pending.setdefault(run, [])
-            waiting.append((rec, carry))
+    for item in reader:
+        # a stretch of raw blocks read by the scan's C loop (core/io/rawscan.py) is one
+        # block where that is the same as its blocks one by one, else its blocks
+        for rec in _taken(item, headers, seen_idx, reader.max_bytes):
+            if len(reader.problems) > n_problems:
+                carry = carry or str(reader.problems[n_problems])
+                n_problems = len(reader.problems)
+            run = rec["run"]
+            if rec["kind"] == "header":
+                report.newest_header[run] = rec
+                if run in headers:
+                    continue                      # a header copy: the run is already known
+                headers[run] = rec
+                # where the run's samples start (the service's header may be a little ahead of
+                # its first block; the start event, when there is one, is exact)
+                expect.setdefault(run, int(rec["i0"]))
+                if run in pending:
+                    report.recovered_headers.append(run)
+                held.pop(run, None)
+                for late, dmg in pending.pop(run, []):
+                    yield from emit(late, dmg)
+                if run_now is None or run_now != run:
+                    run_now = run
+                    yield rec
+                continue
+            if run not in headers:
+                waiting = pending.setdefault(run, [])
+                waiting.append((rec, carry))
+                carry = None
+                held[run] = held.get(run, 0) + int(rec.get("n", 0))
+                while held[run] > MAX_HEADERLESS_SAMPLES and waiting:
+                    # memory stays bounded however long a run goes without a readable header
+                    old, _ = waiting.pop(0)
+                    if old["kind"] == "raw":
+                        held[run] -= int(old["n"])
+                        expect[run] = max(expect.get(run, 0), int(old["i0"]) + int(old["n"]))
+                        report.losses.append(Loss(run, int(old["i0"]), int(old["n"]),
+                                                  f"no header of run {run} within "
+                                                  f"{MAX_HEADERLESS_SAMPLES} samples"))
+                        log.warning("%s", report.losses[-1])
+                continue
+            yield from emit(rec, carry)
             carry = None
-            held[run] = held.get(run, 0) + int(rec.get("n", 0))
-            while held[run] > MAX_HEADERLESS_SAMPLES and waiting:
-                # memory stays bounded however long a run goes without a readable header
-                old, _ = waiting.pop(0)
-                if old["kind"] == "raw":
-                    held[run] -= int(old["n"])
-                    expect[run] = max(expect.get(run, 0), int(old["i0"]) + int(old["n"]))
-                    report.losses.append(Loss(run, int(old["i0"]), int(old["n"]),
-                                              f"no header of run {run} within "
-                                              f"{MAX_HEADERLESS_SAMPLES} samples"))
-                    log.warning("%s", report.losses[-1])
-            continue
-        yield from emit(rec, carry)
-        carry = None
     for run, recs in pending.items():
         for rec, _ in recs:
             if rec["kind"] == "raw":

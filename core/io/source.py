@@ -374,6 +374,17 @@ def _between(entries: list[_SegmentFile], run: str, a: str | None, b: str | None
 _Piece = tuple[int, NDArray[np.int32], float, bool]
 
 
+#: Bytes of a segment the fast path reads at once (the counts of consecutive blocks and the
+#: records between them). Under glibc's mmap threshold on purpose: freeing larger buffers
+#: raises that threshold, and the analysis's arrays then fragment the heap (+17 MB of peak
+#: RSS at 60 h with 1 MB reads).
+_READ_BYTES = 120 << 10
+#: Bytes between two blocks' counts above which the fast path reads them apart: the records
+#: between (an Allan snapshot, a checkpoint: tens of kB) are not read again.
+_SKIP_BYTES = 1 << 14
+#: Blocks of the read plan looked at together by the fast path.
+_PLAN_WINDOW = 1 << 14
+
 #: Record kinds that hold no samples and no sample index the scan needs.
 _NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
 
@@ -417,6 +428,25 @@ class _Plan:
         self.cut = array("B")
         self.scales: list[float] = []
         self.ok = True
+
+    def extend(self, fidx: int, off: NDArray[np.int64], i0: NDArray[np.int64],
+               n: NDArray[np.int64], scale: float, cut: bool) -> None:
+        """Blocks of one file whose counts lie at ``off``, as :meth:`add` of each in turn
+        (``cut`` before the first)."""
+        if (not self.ok or fidx >= 1 << 16 or len(self.scales) >= (1 << 16) - 1
+                or not len(off) or int(off.min()) < 0):
+            self.ok = False
+            return
+        if not self.scales or self.scales[-1] != scale:
+            self.scales.append(scale)
+        k = len(off)
+        self.fidx.extend(array("H", [fidx]) * k)
+        self.off.frombytes(np.ascontiguousarray(off, dtype=np.int64).tobytes())
+        self.i0.frombytes(np.ascontiguousarray(i0, dtype=np.int64).tobytes())
+        self.n.extend(n.tolist())
+        self.sidx.extend(array("H", [len(self.scales) - 1]) * k)
+        self.cut.append(1 if cut else 0)
+        self.cut.extend(array("B", [0]) * (k - 1))
 
     def add(self, at: tuple[int, int, int] | None, i0: int, n: int, scale: float,
             cut: bool) -> None:
@@ -488,12 +518,17 @@ class RecordingSource:
         plan needs (the walk passes it through, also to the parts of a duplicated block).
         ``skip``: record kinds not decoded at all (the scan needs no temperatures, Allan
         snapshots or checkpoints: two thirds of a recording's decoding)."""
+        from avard.core.io import rawscan
         from avard.core.io.recording import FRAME_HEADER, RecordingReader, walk
 
         sink = problems if problems is not None else []
+        # the scan reads each file's frames in C where that is built (the walk takes its
+        # stretches of raw blocks as their blocks one by one); every other read, and the rest
+        # of a file after a frame that does not check, is the general reader's (the C loop
+        # skips exactly the kinds the scan skips)
+        fast = tag and skip == _NO_SAMPLES and rawscan.available()
 
         class _Reader(RecordingReader):
-            last: Frame | None = None
             number = 0
 
             def _report(self, local: list[Problem]) -> None:
@@ -502,25 +537,51 @@ class RecordingSource:
                     self.problems.append(prob)
                     sink.append(prob)
 
-            def frames(self) -> Iterator[Frame]:
+            def __iter__(self) -> Iterator[dict[str, Any]]:
                 for k, f in enumerate(self.files):
                     self.number = k
                     self.current = f
                     if where is not None:
                         where[0] = str(f)
+                    if fast:
+                        yield from self._fast_file(k, f)
+                        continue
                     for fr in _one_file(self, f, ends):
-                        if skip and _peek_kind(fr.payload) in skip:
-                            continue        # CRC-checked, not decoded: no samples in it
-                        self.last = fr
-                        yield fr
+                        yield from self._record(fr)
 
-            def __iter__(self) -> Iterator[dict[str, Any]]:
-                for rec in super().__iter__():
-                    if tag and rec["kind"] == "raw" and self.last is not None:
-                        rec["_at"] = (self.number, _counts_offset(self.last, rec["counts"],
-                                                                  FRAME_HEADER.size),
-                                      int(rec["i0"]))
-                    yield rec
+            def _fast_file(self, k: int, f: Path) -> Iterator[dict[str, Any]]:
+                name = str(f)
+                with os.fdopen(_open_segment(f), "rb") as fh:
+                    frames = rawscan.scan_file(fh, name, k, self.max_bytes, ends.get(name))
+                    while True:
+                        try:
+                            got = next(frames)
+                        except StopIteration as stop:
+                            pos, clean = stop.value
+                            break
+                        if isinstance(got, tuple):
+                            yield rawscan.stretch_record(*got)
+                        else:
+                            yield from self._record(got)
+                if clean:
+                    ends[name] = pos
+                    return
+                for fr in _one_file(self, f, ends, pos):   # damage, or a torn tail
+                    yield from self._record(fr)
+
+            def _record(self, fr: Frame) -> Iterator[dict[str, Any]]:
+                """One frame as RecordingReader reads it: skipped by its kind, decoded (an
+                undecodable one reported), a raw one tagged with where its counts lie."""
+                if skip and _peek_kind(fr.payload) in skip:
+                    return                  # CRC-checked, not decoded: no samples in it
+                rec = self.decoded(fr)
+                if rec is None:
+                    return
+                if tag and rec["kind"] == "raw":
+                    rec["_at"] = (self.number, _counts_offset(fr, rec["counts"],
+                                                              FRAME_HEADER.size),
+                                  int(rec["i0"]))
+                yield rec
 
         # the scan notes how far it read each file; later reads stop there, so a recording
         # the service is still appending to reads as the scan found it
@@ -626,8 +687,12 @@ class RecordingSource:
                 t.n += k
                 n += k
                 prev_run = run
-                plan.add(rec.get("_at"), i0, int(np.asarray(rec["counts"]).shape[0]), scale,
-                         cut)
+                stretch = rec.get("_stretch")
+                if stretch is None:
+                    plan.add(rec.get("_at"), i0, k, scale, cut)
+                else:
+                    plan.extend(stretch.number, stretch.counts, stretch.i0, stretch.n, scale,
+                                cut)
                 cut = False
         reported()     # the walk reports headerless losses, and a last copied file, at its end
         if not tally:
@@ -782,28 +847,67 @@ class RecordingSource:
                 yield int(rec["i0"]), np.asarray(rec["counts"]), scale, cut
                 cut = False
 
+    @staticmethod
+    def _window(plan: _Plan, lo: int, hi: int
+                ) -> Iterator[tuple[int, int, list[tuple[int, int]], int, float, bool]]:
+        """Reads for the plan's blocks ``[lo, hi)``: (file number, byte offset, each block's
+        counts as (offset from there, bytes), first index, scale, a segment ends before),
+        each read a run of blocks that continue each other (same file and scale, no cut,
+        the next index, at most ``_SKIP_BYTES`` of other records between) ending within
+        ``_READ_BYTES`` of its start (at least one block)."""
+        from avard.core.io import rawscan
+
+        hi = min(hi, len(plan.i0))
+        fidx = np.frombuffer(plan.fidx, dtype=np.uint16)[lo:hi]
+        off = np.frombuffer(plan.off, dtype=np.int64)[lo:hi]
+        i0 = np.frombuffer(plan.i0, dtype=np.int64)[lo:hi]
+        size = np.frombuffer(plan.n, dtype=np.uint32)[lo:hi].astype(np.int64) * 12
+        sidx = np.frombuffer(plan.sidx, dtype=np.uint16)[lo:hi]
+        cut = np.frombuffer(plan.cut, dtype=np.uint8)[lo:hi]
+        end = off + size
+        cont = np.zeros(len(i0), dtype=bool)
+        cont[1:] = ((fidx[1:] == fidx[:-1]) & (sidx[1:] == sidx[:-1]) & (cut[1:] == 0)
+                    & (i0[1:] == i0[:-1] + size[:-1] // 12) & (off[1:] >= end[:-1])
+                    & (off[1:] - end[:-1] <= _SKIP_BYTES))
+        for a, b in rawscan.spans(cont):
+            first = True
+            while a < b:
+                c = max(a + 1, int(np.searchsorted(end[a:b], int(off[a]) + _READ_BYTES,
+                                                   side="right")) + a)
+                at = int(off[a])
+                rel = (off[a:c] - at).tolist()
+                yield (int(fidx[a]), at, list(zip(rel, size[a:c].tolist(), strict=True)),
+                       int(i0[a]), plan.scales[int(sidx[a])], first and bool(cut[a]))
+                first = False
+                a = c
+
     def _planned(self) -> Iterator[_Piece]:
         """The same pieces by the fast path: the scan walked and checked every frame and
         noted where each kept block's counts lie; a later read takes just those bytes (no
-        decoding of the raw, temperature, Allan and checkpoint records again). Held equal
-        to :meth:`_walked` by tests/daemon/test_record_source.py."""
+        decoding of the raw, temperature, Allan and checkpoint records again), a run of
+        blocks that continue each other in one read of at most ``_READ_BYTES``. Held equal
+        to :meth:`_walked` by tests/daemon/test_record_source.py and
+        tests/core/test_recording_fastscan.py."""
         plan = self._plan
         assert plan is not None
         fd, open_k = -1, -1
         try:
-            for j in range(len(plan.i0)):
-                k = int(plan.fidx[j])
-                if k != open_k:
-                    if fd >= 0:
-                        os.close(fd)
-                    fd, open_k = _open_segment(self.files[k]), k
-                n = int(plan.n[j])
-                data = os.pread(fd, 12 * n, int(plan.off[j]))
-                if len(data) != 12 * n:
-                    raise DataError(f"{self.files[k]}: shorter than when it was opened; the "
-                                    "recording changed while it was read (analyse a copy)")
-                counts = np.frombuffer(data, dtype="<i4").reshape(n, 3)
-                yield int(plan.i0[j]), counts, plan.scales[plan.sidx[j]], bool(plan.cut[j])
+            # a window of the plan at a time: temporaries of the whole plan's length would be
+            # ~40 bytes a block, more than the plan itself
+            for w in range(0, len(plan.i0), _PLAN_WINDOW):
+                for k, at, counts, i0, scale, cut in self._window(plan, w, w + _PLAN_WINDOW):
+                    if k != open_k:
+                        if fd >= 0:
+                            os.close(fd)
+                        fd, open_k = _open_segment(self.files[k]), k
+                    data = os.pread(fd, counts[-1][0] + counts[-1][1], at)
+                    if len(data) != counts[-1][0] + counts[-1][1]:
+                        raise DataError(f"{self.files[k]}: shorter than when it was opened; "
+                                        "the recording changed while it was read (analyse a "
+                                        "copy)")
+                    view = memoryview(data)
+                    yield i0, np.frombuffer(b"".join([view[r:r + m] for r, m in counts]),
+                                            dtype="<i4").reshape(-1, 3), scale, cut
         finally:
             if fd >= 0:
                 os.close(fd)
@@ -855,8 +959,9 @@ class RecordingSource:
                 if fill == 0:
                     start = i0 + at
                 take = min(block - fill, k - at)
-                buf[fill:fill + take] = counts[at:at + take][:, cols]
-                buf[fill:fill + take] *= scale
+                part = counts[at:at + take]
+                for j, c in enumerate(cols):     # counts × scale in one pass per column
+                    np.multiply(part[:, c], scale, out=buf[fill:fill + take, j])
                 fill += take
                 at += take
                 if fill == block:
@@ -871,22 +976,24 @@ class RecordingSource:
                             "copy, or a recording the service has finished)")
 
 
-def _one_file(reader: Any, f: Path, ends: dict[str, int]) -> Iterator[Frame]:
+def _one_file(reader: Any, f: Path, ends: dict[str, int], start: int | None = None
+              ) -> Iterator[Frame]:
     """The frames of one segment file as ``recording.scan_frames`` finds them, read frame by
     frame: a clean hour-long segment is never held whole (it would be most of the memory
     analyze may add over an .npz). At the first frame that is not valid (damage, or the
     truncated tail a power cut leaves) the file is handed to ``scan_frames``, which reports
     and resynchronises exactly as for any reader; the frames before are the same either way.
     ``ends[file]``, when set, is where to stop (what the first read of the file found); else
-    it is set to that."""
+    it is set to that. ``start``: the frames before that offset were read and checked
+    already (by the scan's C loop, core/io/rawscan.py), which stopped there."""
     from avard.core.io.recording import FRAME_HEADER, Frame, scan_frames
 
     name = str(f)
     limit = ends.get(name)
     hdr = FRAME_HEADER.size
-    pos = 0
+    pos = 0 if start is None else start
     with os.fdopen(_open_segment(f), "rb") as fh:
-        while True:
+        while start is None:
             if limit is not None and pos >= limit:
                 return
             head = fh.read(hdr)
