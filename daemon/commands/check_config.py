@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
-from avard.daemon.config_types import Config
+from avard.daemon.config_types import Config, SensorConfig
 from avard.daemon.service.acquisition import REALTIME_HELD_HZ
 
 NAME = "check-config"
@@ -40,6 +40,10 @@ def run(args: argparse.Namespace) -> int:
     summary = [f"{args.config}: valid",
                f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
                f"drained at {effective_poll_hz(cfg):g} Hz"]
+    if config.sensors:
+        summary.append(f"  {len(config.sensors)} sensors, each recorded in DATA_DIR/NAME:")
+        summary += [f"    {s.name}: {_wiring(s)}, {s.odr_hz:g} Hz, ±{s.range_g} g, sync {s.sync}"
+                    for s in config.sensors]
     if config.sensor.odr_hz > REALTIME_HELD_HZ:
         fifo_ms = 32e3 / config.sensor.odr_hz
         summary.append(
@@ -58,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
     if args.show:
         out.write(to_toml(cfg))
     return 0
+
+
+def _wiring(s: SensorConfig) -> str:
+    return (f"/dev/spidev{s.spi_bus}.{s.spi_device}" if s.bus == "spi"
+            else f"/dev/i2c-{s.i2c_bus} address 0x{s.i2c_address:02X}")
 
 
 def _toml_value(value: Any) -> str:
@@ -80,12 +89,16 @@ def _toml_key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
 
 
-def to_toml(cfg: Mapping[str, Mapping[str, Any]]) -> str:
+def to_toml(cfg: Mapping[str, Any]) -> str:
     """The effective configuration as TOML that ``avard run --config`` reads back."""
     lines: list[str] = []
+    several = cfg.get("sensors")
     for sec, table in cfg.items():
-        lines.append(f"[{_toml_key(sec)}]")
-        lines += [f"{_toml_key(k)} = {_toml_value(v)}" if v is not None
-                  else f"# {k}: not set (TOML has no empty value)" for k, v in table.items()]
-        lines.append("")
+        if sec == "sensors":
+            continue
+        for entry in (several if sec == "sensor" and several else [table]):
+            lines.append(f"[[{sec}]]" if sec == "sensor" and several else f"[{_toml_key(sec)}]")
+            lines += [f"{_toml_key(k)} = {_toml_value(v)}" if v is not None
+                      else f"# {k}: not set (TOML has no empty value)" for k, v in entry.items()]
+            lines.append("")
     return "\n".join(lines)

@@ -128,6 +128,9 @@ class Acquisition:
         # thread-timing-dependent sample, and the same seed would give different records.
         self.stop_at = stop_at
         self.finished = threading.Event()
+        #: Other sensors on this bus, drained by this reader's thread after this one
+        #: (:func:`share_reader`: one reader per bus); their own start() is never called.
+        self.followers: list[Acquisition] = []
 
     # -- control ------------------------------------------------------------------------
     def start(self) -> None:
@@ -136,6 +139,8 @@ class Acquisition:
 
     def stop(self, timeout: float = 5.0) -> None:
         self._stop.set()
+        for f in self.followers:
+            f._stop.set()
         if self._thread is not None:
             self._thread.join(timeout)
 
@@ -152,8 +157,10 @@ class Acquisition:
 
     @property
     def period(self) -> float:
-        """Seconds between drains at the rate fitted so far."""
-        return drain_period_s(self.tb.odr_hz, self.poll_hz)
+        """Seconds between drains at the rate fitted so far (the shortest of the sensors this
+        reader drains)."""
+        own = drain_period_s(self.tb.odr_hz, self.poll_hz)
+        return min([own, *(f.period for f in self.followers)])
 
     # -- loop ---------------------------------------------------------------------------
     def _run(self) -> None:
@@ -164,10 +171,15 @@ class Acquisition:
             while not self._stop.is_set():
                 if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
                     self.finished.set()
+                    for f in self.followers:
+                        f.finished.set()
                     break
                 self.poll_once()
+                for f in self.followers:
+                    # one sensor's fault is its own (poll_once marks it); the bus goes on
+                    f.poll_once()
                 period = self.period
-                if self.interrupt is not None:
+                if self.interrupt is not None and not self.followers:
                     # The pin rises at the watermark (FIFO half full); the timeout is the
                     # timer's fallback (a pin that never rises costs latency, not data), and
                     # a pin stuck asserted cannot make the reader drain more than 4× as often.
@@ -194,6 +206,9 @@ class Acquisition:
         except BaseException as exc:  # the service sees it and stops with an error
             log.exception("reader thread died")
             self.error = exc
+            for f in self.followers:
+                f.error = exc
+
 
     def _wait_for_consumers(self) -> None:
         limit = self.ring.capacity // 2
@@ -398,3 +413,11 @@ class Acquisition:
             return
         self.mark(frames.temp_record(self.run_id, 0, self.next_index, ["chip"], [value],
                                      t_mono, t_real, source="adxl355"))
+
+
+def share_reader(acqs: list[Acquisition]) -> Acquisition:
+    """One reader thread for several sensors on one bus: the first drives the others (each
+    keeps its own index, time base, ring and marks). Returns the one to start."""
+    lead, *rest = acqs
+    lead.followers = list(rest)
+    return lead
