@@ -651,12 +651,14 @@ class RecordingSource:
         self._say(summary, problems)
         head = report.newest_header[run_list[0].run]
         device = (head.get("sensor") or {}).get("device")
+        # the configured name (``sensor.name``, a rig's lane) names it; older headers: the part
+        named = (head.get("sensor") or {}).get("name") or device
         model = "ADXL355" if device is None or "ADXL355" in str(device) else str(device)
         return RecordInfo(
             source=str(self.path), format=RecordFormat.RECORDING, rate_hz=rate,
             rate_u_hz=rate_u, names=("x", "y", "z"), temperature_names=tuple(tnames),
             n_samples=n, lsb_mps2=scales.pop() if len(scales) == 1 else None,
-            sensor_name=str(device) if device is not None else None, sensor_model=model,
+            sensor_name=str(named) if named is not None else None, sensor_model=model,
             # the ADXL355's digital low-pass sits at ODR/4 whatever the ODR
             filter_corner_hz=rate / 4.0 if model == "ADXL355" else None,
             recording=summary)

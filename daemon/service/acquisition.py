@@ -287,6 +287,7 @@ class Acquisition:
         elif behind is not None and behind > UNACCOUNTED_MIN_SETS:
             self.unaccounted += 1
             self._gap(round(behind), t_mono, t_real, GapReason.UNACCOUNTED)
+            restarted = True     # the time line broke: a new segment of the time base fit
         started = getattr(self.sensor, "t_started", None)
         if restarted and started is not None:
             self._anchor = (float(started), float(self.next_index) - 1.0)
@@ -294,7 +295,11 @@ class Acquisition:
             self._anchor = (t_mono, float(self.next_index + n - 1))
         if n:
             i0 = self.next_index
-            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun), exact=bool(d.complete))
+            # a restarted part (or an unreported loss) starts a new time line: a new segment
+            # of the fit (its slope kept), or the points after a stall would pull the fitted
+            # rate far off (91 Hz for 125 after a 10 s stall: a rig's alignment showed it)
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun) or restarted,
+                           exact=bool(d.complete))
             times = self.tb.timestamps(i0, n)
             self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
             self.next_index += n
