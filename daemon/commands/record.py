@@ -35,6 +35,7 @@ from avard.daemon.net.subscriber import (
     Message,
     Subscriber,
     add_client_arguments,
+    check_stream_sensor,
     subscriber_from_args,
 )
 from avard.daemon.service.recorder import Recorder
@@ -259,6 +260,7 @@ def run(args: argparse.Namespace) -> int:
     # SIGTERM ends the archive cleanly (flushed, closed); only the main thread may set it
     in_main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, _stop) if in_main else None
+    check_stream_sensor(sub)
     sub.connect(join=False)
     archiver = StreamArchiver(sub, out, segment_s=args.segment, fsync_s=args.fsync,
                               backfill=not args.no_backfill)

@@ -157,7 +157,7 @@ class RigService(Supervised):
                 if name not in tables:
                     raise ValueError(f"no sensor {name!r}; this rig has "
                                      f"{', '.join(self.names)}")
-                return tables[name][op](args)
+                return {**tables[name][op](args), "sensor_name": name}   # whose reply
             return handle
 
         ops = {op: route(op) for op in tables[self.names[0]]}

@@ -539,7 +539,8 @@ class Service(Supervised):
             snapshots=self.snapshots, status=self.status, header=self.run_header,
             ring=self.ring, nominal_odr_hz=self.odr, rate_hz=self.timebase_rate,
             scale_m_s2_per_count=self.scale,
-            recent_max_s=self.config.publish.recent_max_s).table()
+            recent_max_s=self.config.publish.recent_max_s).table() | {
+                "sensors": lambda _args: {"sensors": [self.sensor_name], "alignment": None}}
 
     def _on_clock_step(self, real_offset: float) -> None:
         """The reader saw CLOCK_REALTIME step (and recorded it): wall-clock times written from
