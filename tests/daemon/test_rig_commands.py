@@ -5,14 +5,13 @@ self-noise."""
 
 from __future__ import annotations
 
-import itertools
 import json
 import threading
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
-from avard.core.errors import ConfigError
 from avard.core.io.source import open_record, rig_sensors
 from avard.daemon import cli
 from avard.daemon.config import validate_config
@@ -108,41 +107,69 @@ def test_web_history_takes_one_sensor(rig_recording: Path, capsys: pytest.Captur
     _one_line(capsys.readouterr().err, "far, left, right")
 
 
-def test_the_stream_carries_the_sensor_and_a_subscriber_follows_one(tmp_path: Path) -> None:
+def test_the_stream_carries_the_sensor_and_record_archives_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A subscriber that follows one sensor gets that sensor's records only (topic and field),
+    on its own continuous index; `avard record`'s archiver over it writes a recording equal to
+    the service's own of that sensor; watch and record refuse an unknown name (status 2)."""
+    from avard.core.io.recording import load_recording
+    from avard.daemon.commands.record import StreamArchiver
+
     svc = _rig(tmp_path / "rec", publish=True)
     got: list[Any] = []
-    sub: Subscriber | None = None
-    ready = threading.Event()
+    box: dict[str, Any] = {"stop": threading.Event()}
 
     def before() -> None:
-        nonlocal sub
         pub, req = svc.publisher.endpoint, svc.request_server.endpoint
+        for cmd in ("watch", "record"):
+            extra = ["--once"] if cmd == "watch" else ["--out", str(tmp_path / "x")]
+            assert cli.main([cmd, pub, "--request", req, "--sensor", "nope", *extra]) == 2
         sub = Subscriber(pub, request_endpoint=req, sensor="right").connect(join=False)
+        box["sub"] = sub
         assert sub.sensors() == ["left", "right", "far"]
-        with pytest.raises(ConfigError, match="its sensors are left, right, far"):
-            Subscriber(pub, request_endpoint=req, sensor="nope").pick_sensor()
         hdr = sub.request("header")                                   # routed by sensor
         assert hdr["sensor"]["name"] == "right" and hdr["sensor_name"] == "right"
         wait_until_subscribed(svc.publisher, sub)
-        ready.set()
+        while sub.recv(0.1) is not None:
+            pass
+        arch = StreamArchiver(sub, tmp_path / "archive", segment_s=3600.0, fsync_s=5.0)
 
-    worker = threading.Thread(target=svc.run, args=(20.0,),
-                              kwargs={"before_acquisition": before})
-    worker.start()
-    assert ready.wait(60)
-    worker.join(120)
-    assert sub is not None
-    while (m := sub.recv(1.0)) is not None:
-        if not is_probe(m.record):
-            got.append(m)
+        def take(m: Any) -> None:
+            if not is_probe(m.record):
+                got.append(m)
+                arch.handle(m)
+
+        def loop() -> None:
+            while not box["stop"].is_set():
+                if (m := sub.recv(0.1)) is not None:
+                    take(m)
+            while (m := sub.recv(0.3)) is not None:      # what is still on its way
+                take(m)
+            arch.close()
+            sub.close()
+
+        box["thread"] = threading.Thread(target=loop, daemon=True)
+        box["thread"].start()
+
+    try:
+        svc.run(20.0, before_acquisition=before)
+    finally:
+        box["stop"].set()
+        if "thread" in box:
+            box["thread"].join(60)
+    for line in capsys.readouterr().err.strip().splitlines():
+        assert "Traceback" not in line
     raw = [m for m in got if m.record["kind"] == "raw"]
     assert raw and all(m.topic == "raw.right" for m in raw)
     assert all(m.record["sensor_name"] == "right" for m in got)
-    # one sensor's own index: continuous, nothing counted lost or unexplained
-    assert sub.stats.samples_unexplained == 0
-    idx = [(m.record["i0"], m.record["n"]) for m in raw]
-    assert all(a + n == b for (a, n), (b, _) in itertools.pairwise(idx))
-    sub.close()
+    stats = box["sub"].stats
+    assert stats.messages_lost == 0 and stats.samples_lost == 0 == stats.samples_unexplained
+    # the archive is the sensor's recording, name and samples
+    assert open_record(tmp_path / "archive").info.sensor_name == "right"
+    ours = load_recording(tmp_path / "archive")
+    theirs = load_recording(tmp_path / "rec" / "right")
+    assert ours.accel.shape[0] > 15 * ODR
+    np.testing.assert_array_equal(ours.accel, theirs.accel[:ours.accel.shape[0]])
 
 
 def test_a_one_sensor_recording_beside_a_rigs_is_still_read(rig_recording: Path,
@@ -159,3 +186,17 @@ def test_a_one_sensor_recording_beside_a_rigs_is_still_read(rig_recording: Path,
     assert open_record(root, sensor="left").info.sensor_name == "left"
     with pytest.raises(Exception, match="this record's sensor is left"):
         open_record(root, sensor="far")
+
+
+def test_fleet_by_sensor_takes_a_rigs_sensors(rig_recording: Path,
+                                              capsys: pytest.CaptureFixture) -> None:
+    from avard.daemon.commands.fleet import _groups
+    from avard.daemon.commands.separate import rig_records
+
+    groups = _groups(rig_records([str(rig_recording)], None), "sensor")
+    assert {k: [Path(p).name for p in v] for k, v in groups.items()} == {
+        "far": ["far"], "left": ["left"], "right": ["right"]}
+    some = _groups(rig_records([str(rig_recording)], ["left", "far"]), "sensor")
+    assert sorted(some) == ["far", "left"]
+    assert cli.main(["fleet", str(rig_recording), "--by", "sensor", "--sensor", "nope"]) == 2
+    assert "far, left, right" in capsys.readouterr().err
