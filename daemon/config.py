@@ -247,17 +247,7 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
         if not isinstance(table, Mapping):
             problems.append(f"{sec} = {table!r}: must be a [{sec}] table")
             continue
-        for name, value in table.items():
-            key = SCHEMA[sec].get(name)
-            if key is None:
-                problems.append(f"{sec}.{name}: unknown key; known keys in [{sec}] are "
-                                f"{', '.join(SCHEMA[sec])}")
-                continue
-            checked, problem = _check_value(f"{sec}.{name}", key, value)
-            if problem:
-                problems.append(problem)
-            else:
-                cfg[sec][name] = checked
+        _check_table(sec, f"[{sec}]", table, cfg[sec], problems)
     if entries:
         cfg["sensor"] = entries[0]
         cfg["sensors"] = entries
@@ -285,6 +275,24 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
     return cfg
 
 
+def _check_table(label: str, title: str, table: Mapping[str, Any], into: dict[str, Any],
+                 problems: list[str], *, section: str | None = None) -> None:
+    """Each key of ``table`` checked against ``SCHEMA[section or label]``; the checked values
+    go into ``into``, the problems (named ``label.key``) into ``problems``."""
+    keys = SCHEMA[section or label]
+    for name, value in table.items():
+        key = keys.get(name)
+        if key is None:
+            problems.append(f"{label}.{name}: unknown key; known keys in {title} are "
+                            f"{', '.join(keys)}")
+            continue
+        checked, problem = _check_value(f"{label}.{name}", key, value)
+        if problem:
+            problems.append(problem)
+        else:
+            into[name] = checked
+
+
 def _check_sensor_name(where: str, name: str, problems: list[str]) -> None:
     # the name is a directory of a several-sensor recording and part of a topic: no '.', '..'
     if not _SENSOR_NAME.fullmatch(name) or name in (".", ".."):
@@ -304,17 +312,7 @@ def _check_sensor_entries(tables: list[Any], problems: list[str]) -> list[dict[s
             continue
         entry = {k: _copy(key.default) for k, key in keys.items()}
         label = f"sensor #{n}"
-        for name, value in table.items():
-            key = keys.get(name)
-            if key is None:
-                problems.append(f"{label}.{name}: unknown key; known keys in [[sensor]] are "
-                                f"{', '.join(keys)}")
-                continue
-            checked, problem = _check_value(f"{label}.{name}", key, value)
-            if problem:
-                problems.append(problem)
-            else:
-                entry[name] = checked
+        _check_table(label, "[[sensor]]", table, entry, problems, section="sensor")
         if "name" not in table and len(tables) > 1:
             problems.append(f"{label}: several sensors need a name each (name = \"left\")")
         _check_sensor_name(f"{label}.name", entry["name"], problems)

@@ -33,7 +33,8 @@ from avard.daemon.service.supervisor import (
     Service,
     ServiceHooks,
     Supervised,
-    _curve,
+    _default_publisher,
+    _default_request_server,
 )
 
 log = logging.getLogger("avard.daemon.service")
@@ -118,6 +119,7 @@ class RigService(Supervised):
         names = [s.name for s in built.spec.sensors]
         self.names = tuple(names)
         self.run_id = run_id or rig_run_id(config.recording.data_dir, names, clock.realtime())
+        self.cfg = config.as_dict()     # what the request server's CURVE set-up reads
         self.sync = ("external" if all(s.sync == "external" for s in config.rig_sensors)
                      else "none")
         self.publisher: Any = None
@@ -143,7 +145,7 @@ class RigService(Supervised):
     # -- the shared sockets -------------------------------------------------------------
     def _lane_publisher(self, lane: Service) -> SensorPublisher:
         if self.publisher is None:
-            factory = self._publisher_factory or _rig_publisher
+            factory = self._publisher_factory or _default_publisher
             self.publisher = factory(lane)
         return SensorPublisher(self.publisher, lane.sensor_name)
 
@@ -172,7 +174,7 @@ class RigService(Supervised):
             lane._stop_at = self._stop_at
             lane.start()
         if self.config.publish.enabled:
-            self.request_server = (self._request_factory or _rig_request_server)(self)
+            self.request_server = (self._request_factory or _default_request_server)(self)
         if self.bank is not None:
             self.bank.sink = self._temperature_reading
             self.bank.start()
@@ -267,19 +269,3 @@ class RigService(Supervised):
 
     def status_line(self) -> str:
         return "; ".join(f"{lane.sensor_name}: {lane.status_line()}" for lane in self.lanes)
-
-
-def _rig_publisher(lane: Service) -> Any:
-    from avard.daemon.net.publisher import Publisher
-
-    p = lane.config.publish
-    return Publisher(p.endpoint, lane.run_id, hwm=p.hwm, curve=_curve(lane),
-                     allow_remote=p.allow_remote)
-
-
-def _rig_request_server(rig: RigService) -> Any:
-    from avard.daemon.net.publisher import RequestServer
-
-    p = rig.config.publish
-    return RequestServer(p.request_endpoint, rig.handlers(), curve=_curve(rig.lanes[0]),
-                         allow_remote=p.allow_remote).start()

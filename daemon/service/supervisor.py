@@ -25,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Protocol
 
 from avard.core.allan.feed import AllanFeed
 from avard.core.errors import ConfigError, ServiceFault
@@ -615,7 +615,16 @@ def _default_recorder(svc: Service) -> Any:
                     realtime=svc.clock.realtime)
 
 
-def _curve(svc: Service) -> Any:
+class Serving(Protocol):
+    """What the request server is built from: a Service, or a RigService for all its lanes."""
+
+    config: Config
+    cfg: dict[str, Any]
+
+    def handlers(self) -> dict[str, Callable[[dict[str, Any]], dict[str, Any]]]: ...
+
+
+def _curve(svc: Serving) -> Any:
     if not svc.config.curve.enabled:
         return None
     from avard.daemon.net.curve import CurveServerConfig
@@ -633,7 +642,7 @@ def _default_publisher(svc: Service) -> Any:
                      allow_remote=p.allow_remote)
 
 
-def _default_request_server(svc: Service) -> Any:
+def _default_request_server(svc: Serving) -> Any:
     from avard.daemon.net.publisher import RequestServer
 
     p = svc.config.publish
