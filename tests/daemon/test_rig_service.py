@@ -199,3 +199,41 @@ def test_a_sensor_added_then_one_removed_keeps_each_sensors_record(tmp_path: Pat
     right_files = sorted((root / "right").glob("*.avr"))
     assert len({f.name.split("_")[0] for f in right_files}) == 2
     assert np.all([f.stat().st_size > 0 for f in right_files])
+
+
+def test_sighup_reopens_every_sensors_recording(tmp_path: Path) -> None:
+    import signal
+
+    svc = _rig(_config(tmp_path, [LEFT, RIGHT]))
+    svc._handle_signals([signal.SIGHUP])
+    assert all(lane.reopen_requested.is_set() for lane in svc.lanes)
+    assert not svc.stop_requested.is_set()
+    svc._handle_signals([signal.SIGTERM])
+    assert svc.stop_requested.is_set()
+
+
+def test_a_subscriber_of_one_sensor_never_gets_a_sensor_whose_name_it_prefixes() -> None:
+    """ZeroMQ subscribes by prefix: raw.left would also match raw.left2."""
+    from avard.core.io import frames
+    from avard.daemon.net.publisher import Publisher
+    from avard.daemon.net.subscriber import Subscriber
+    from avard.daemon.service.rig_service import SensorPublisher
+
+    from tests.daemon.pubsub import is_probe, wait_until_subscribed
+
+    pub = Publisher("tcp://127.0.0.1:0", "run1", hwm=1000)
+    sub = Subscriber(pub.endpoint, sensor="left").connect(join=False)
+    try:
+        wait_until_subscribed(pub, sub)
+        for name in ("left2", "left", "lef", "left2", "left"):
+            SensorPublisher(pub, name).publish(None, frames.event_record(
+                "run1", 0, "mark", 0.0, 0.0, i0=0, detail={"from": name}))
+        got = []
+        while (m := sub.recv(0.5)) is not None:
+            if not is_probe(m.record):
+                got.append((m.topic, m.record["sensor_name"], m.record["detail"]["from"]))
+        assert got == [("event.left", "left", "left")] * 2
+        assert sub.stats.topics["event.left"].lost == 0      # seq counts per sensor's topic
+    finally:
+        sub.close()
+        pub.close()
