@@ -209,6 +209,19 @@ class Config:
         """The sensors of the rig: the ``[[sensor]]`` entries, or the one ``[sensor]``."""
         return self.sensors or (self.sensor,)
 
+    def one_sensor(self, name: str | None) -> Config:
+        """This config with only the sensor ``name`` (None: as it is), for what reads one
+        sensor (``avard probe --sensor NAME``); ConfigError naming the sensors otherwise."""
+        if name is None:
+            return self
+        for s in self.rig_sensors:
+            if s.name == name:
+                return dataclasses.replace(self, sensor=s, sensors=())
+        from avard.core.errors import ConfigError
+
+        raise ConfigError(f"--sensor {name}: no such sensor in the config; its sensors are "
+                          f"{', '.join(s.name for s in self.rig_sensors)}")
+
     @classmethod
     def from_dict(cls, cfg: Mapping[str, Any]) -> Config:
         """The typed form of a dict checked by ``config.validate_config``/``load_config``

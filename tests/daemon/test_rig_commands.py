@@ -200,3 +200,25 @@ def test_fleet_by_sensor_takes_a_rigs_sensors(rig_recording: Path,
     assert sorted(some) == ["far", "left"]
     assert cli.main(["fleet", str(rig_recording), "--by", "sensor", "--sensor", "nope"]) == 2
     assert "far, left, right" in capsys.readouterr().err
+
+
+def test_probe_takes_one_sensor_of_a_rig(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    f = tmp_path / "rig.toml"
+    f.write_text('[[sensor]]\nname = "left"\n[[sensor]]\nname = "right"\nspi_device = 1\n')
+    assert cli.main(["probe", "--config", str(f), "--emulate", "--no-self-test",
+                     "--no-ds18b20", "--seconds", "1", "--sensor", "right"]) == 0
+    capsys.readouterr()
+    assert cli.main(["probe", "--config", str(f), "--emulate", "--sensor", "nope"]) == 2
+    _one_line(capsys.readouterr().err, "--sensor nope", "its sensors are left, right")
+    assert cli.main(["probe", "--config", str(f), "--emulate"]) == 2
+    _one_line(capsys.readouterr().err, "probe one at a time with --sensor NAME")
+
+
+def test_watch_says_which_sensor_it_shows() -> None:
+    from avard.daemon.commands.watch import WatchView
+    from avard.daemon.net.subscriber import Message, StreamStats
+
+    view = WatchView()
+    view.update(Message("status.right", {"kind": "status", "run": "r", "seq": 0,
+                                         "sensor_name": "right", "status": {}}))
+    assert "run r  sensor right  (SI units)" in view.render(StreamStats(), "tcp://h:1")
