@@ -16,6 +16,10 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
+#: How far a time base may date a drain's newest set from its true time, in samples (the set
+#: is seen within one sample period of being made; daemon/service/acquisition.py).
+DATING_U_SAMPLES = 0.5
+
 
 class AlignedLane(Protocol):
     """What alignment needs of a lane: its name, its next sample index and its time base."""
@@ -82,6 +86,10 @@ def align(lanes: Sequence[AlignedLane], sync: str) -> Alignment | None:
         except (ValueError, ZeroDivisionError):
             return None
         offset = j - at
-        u = ((jitter ** 2 + r_jitter ** 2) ** 0.5) * odr
+        # the drains' scatter, and each time base's dating of a drain's newest set (within a
+        # sample period: half a sample each way), which does not average out when the drains
+        # keep one phase (a virtual clock, an INT1 pin); 0 for the reference against itself
+        dating = 0.0 if lane is ref else 2 * DATING_U_SAMPLES ** 2
+        u = ((jitter ** 2 + r_jitter ** 2) * odr ** 2 + dating) ** 0.5
         out.append(SensorAlignment(lane.sensor_name, odr, odr_u, offset, u, offset / odr))
     return Alignment(ref.sensor_name, at, t, sync, tuple(out))
