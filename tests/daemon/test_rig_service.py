@@ -242,3 +242,17 @@ def test_a_subscriber_of_one_sensor_never_gets_a_sensor_whose_name_it_prefixes()
     finally:
         sub.close()
         pub.close()
+
+
+def test_one_reader_per_bus_on_hardware(monkeypatch: pytest.MonkeyPatch) -> None:
+    """SPI0's two chip selects share a reader; SPI1 and I2C have their own (the parts here are
+    emulated behind the hardware path's opener: only the grouping is under test)."""
+    from avard.daemon.hw import rig as rig_mod
+
+    monkeypatch.setattr(rig_mod, "_open_hardware", lambda s: rig_mod._still(s, 0.0))
+    monkeypatch.setattr(rig_mod, "_ds18b20_bank", lambda t: None)
+    config = Config.from_dict(validate_config({"sensor": [LEFT, RIGHT, SPI1, FAR]}))
+    built = build_lanes(describe_rig(config))
+    assert built.readers == ((0, 1), (2,), (3,))
+    assert [lane.info["wiring"] for lane in built.lanes] == [
+        "/dev/spidev0.0", "/dev/spidev0.1", "/dev/spidev1.0", "/dev/i2c-1 address 0x53"]
