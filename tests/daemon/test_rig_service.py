@@ -256,3 +256,16 @@ def test_one_reader_per_bus_on_hardware(monkeypatch: pytest.MonkeyPatch) -> None
     assert built.readers == ((0, 1), (2,), (3,))
     assert [lane.info["wiring"] for lane in built.lanes] == [
         "/dev/spidev0.0", "/dev/spidev0.1", "/dev/spidev1.0", "/dev/i2c-1 address 0x53"]
+
+
+def test_one_sensor_entry_runs_todays_service_in_data_dir_itself(tmp_path: Path) -> None:
+    from avard.daemon.compose import compose_rig
+    from avard.daemon.service.supervisor import Service
+
+    config = _config(tmp_path, [{**RIGHT}])
+    svc = compose_rig(config, describe_rig(config, simulate="quiet-lab", seed=1, speed=None))
+    assert type(svc) is Service
+    svc.run(10.0)
+    root = tmp_path / "rec"
+    assert list(root.glob("*.avr")) and not [p for p in root.iterdir() if p.is_dir()]
+    assert open_record(root).info.sensor_name == "right"
