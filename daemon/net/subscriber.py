@@ -219,7 +219,8 @@ class Subscriber:
                  request_timeout_s: float = 2.0, sensor: str | None = None) -> None:
         self.endpoint = endpoint
         #: one sensor of a rig's stream (topics ``raw.NAME``...; a one-sensor service's plain
-        #: topics pass); None: a rig's first sensor once :meth:`join` asked for the sensors
+        #: topics pass); None: a rig's first sensor once :meth:`join` asked for the sensors,
+        #: or the first sensor whose topic arrives (:meth:`recv`): never a mix of sensors
         self.sensor = sensor
         self.topics = list(topics)
         unknown = set(self.topics) - set(frames.TOPICS)
@@ -384,7 +385,13 @@ class Subscriber:
                 continue
             topic = parts[0].decode("ascii", "replace")
             _base, dot, name = topic.partition(".")
-            if dot and self.sensor is not None and name != self.sensor:
+            if dot and self.sensor is None:
+                # a rig's stream before any sensor was chosen (its request socket was not up):
+                # one stream is one sensor's index, so follow the first one seen, never a mix
+                self.sensor = name
+                log.warning("the stream is a rig's (topic %s) and no sensor was picked: "
+                            "following %s; pick one with --sensor NAME", topic, name)
+            if dot and name != self.sensor:
                 continue          # another sensor of the rig: its own stream, not counted
             try:
                 record = frames.decode(parts[1], max_bytes=self.max_bytes)
