@@ -66,6 +66,15 @@ _RESTARTED = frozenset({GapReason.STALL, GapReason.RESET, GapReason.STANDBY,
 UNACCOUNTED_MIN_SETS = 2.5
 
 
+class StoppedWithBus(AvardError):
+    """A sensor's reader stopped because another sensor on its bus raised (that one holds
+    the error itself): the blame is not this sensor's."""
+
+    def __init__(self, cause: BaseException) -> None:
+        super().__init__(f"stopped with its bus's reader ({cause!r} in another sensor)")
+        self.cause = cause
+
+
 class Acquisition:
     """Drain loop over an ``Adxl355``-like driver (``drain()``, ``read_temperature_c()``).
 
@@ -164,6 +173,7 @@ class Acquisition:
 
     # -- loop ---------------------------------------------------------------------------
     def _run(self) -> None:
+        polling = self      # the sensor being drained: the one blamed when the thread dies
         try:
             wall0 = time.monotonic()
             t0 = self.clock.monotonic()
@@ -174,9 +184,11 @@ class Acquisition:
                     for f in self.followers:
                         f.finished.set()
                     break
+                polling = self
                 self.poll_once()
                 for f in self.followers:
                     # one sensor's fault is its own (poll_once marks it); the bus goes on
+                    polling = f
                     f.poll_once()
                 period = self.period
                 if self.interrupt is not None and not self.followers:
@@ -205,9 +217,11 @@ class Acquisition:
                         time.sleep(ahead)
         except BaseException as exc:  # the service sees it and stops with an error
             log.exception("reader thread died")
-            self.error = exc
-            for f in self.followers:
-                f.error = exc
+            # the sensor that raised is blamed; the others on its bus stopped with it
+            polling.error = exc
+            for a in (self, *self.followers):
+                if a is not polling:
+                    a.error = StoppedWithBus(exc)
 
 
     def _wait_for_consumers(self) -> None:

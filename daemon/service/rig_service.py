@@ -25,7 +25,7 @@ from avard.core.errors import ServiceFault
 from avard.core.io import frames
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import RigLanes, wiring
-from avard.daemon.service.acquisition import Acquisition, share_reader
+from avard.daemon.service.acquisition import Acquisition, StoppedWithBus, share_reader
 from avard.daemon.service.alignment import Alignment, align
 from avard.daemon.service.recorder import new_run_id
 from avard.daemon.service.supervisor import (
@@ -141,6 +141,11 @@ class RigService(Supervised):
         self._next_alignment = 0.0
         self.last_alignment: Alignment | None = None
         self.readers: list[Acquisition] = []
+        #: the lanes whose threads were started (stop() stops those: a start may fail midway)
+        self._started: list[Service] = []
+        #: each lane's samples when every lane had last advanced (the watchdog's count)
+        self._seen: list[int] = [0] * len(self.lanes)
+        self._advances = 0
 
     # -- the shared sockets -------------------------------------------------------------
     def _lane_publisher(self, lane: Service) -> SensorPublisher:
@@ -170,8 +175,12 @@ class RigService(Supervised):
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+        if self.config.recording.enabled:
+            for lane in self.lanes:      # every lane's directory before any lane's threads
+                lane._check_data_dir()
         for lane in self.lanes:
             lane._stop_at = self._stop_at
+            self._started.append(lane)
             lane.start()
         if self.config.publish.enabled:
             self.request_server = (self._request_factory or _default_request_server)(self)
@@ -205,7 +214,7 @@ class RigService(Supervised):
         if self.bank is not None:
             self.bank.stop()
         self._mark_alignment()
-        for lane in self.lanes:
+        for lane in self._started:
             lane.stop()
         if self.request_server is not None:
             self.request_server.stop()
@@ -214,11 +223,16 @@ class RigService(Supervised):
             self.publisher = None
 
     def check_threads(self) -> None:
-        for lane in self.lanes:
+        # the sensor whose drain raised first: the others of its bus only stopped with it
+        lanes = sorted(self.lanes, key=lambda lane: isinstance(
+            lane.acq.error if lane.acq is not None else None, StoppedWithBus))
+        for lane in lanes:
             try:
                 lane.check_threads()
             except ServiceFault as exc:
-                raise ServiceFault(f"sensor {lane.sensor_name}: {exc}") from None
+                k = self.names.index(lane.sensor_name)
+                raise ServiceFault(f"sensor {lane.sensor_name} "
+                                   f"({wiring(self.built.spec.sensors[k].bus)}): {exc}") from None
 
     def refresh(self) -> None:
         for lane in self.lanes:
@@ -247,10 +261,16 @@ class RigService(Supervised):
         return True
 
     def progress(self) -> Progress:
-        """READY once every sensor delivered; the watchdog is fed while any sensor's samples
-        advance (one dead sensor is its own stalled event, not a restart of the others)."""
+        """READY once every sensor delivered or is marked stalled (a part silent from the
+        start is its own stalled event and STATUS line, not a rig that never starts); the
+        count the watchdog follows advances only once every sensor not marked stalled has
+        advanced (a reader hung inside a transfer raises no stall: its frozen count stops
+        the watchdog, as for one sensor)."""
         ps = [lane.progress() for lane in self.lanes]
-        return Progress(all(p.first_samples for p in ps), sum(p.samples for p in ps),
+        if all(p.stalled or p.samples > seen for p, seen in zip(ps, self._seen, strict=True)):
+            self._seen = [p.samples for p in ps]
+            self._advances += 1
+        return Progress(all(p.first_samples or p.stalled for p in ps), self._advances,
                         all(p.stalled for p in ps), all(p.finished for p in ps))
 
     def sockets(self) -> tuple[Any, ...]:
@@ -268,4 +288,13 @@ class RigService(Supervised):
                                                 for lane in self.lanes}}
 
     def status_line(self) -> str:
-        return "; ".join(f"{lane.sensor_name}: {lane.status_line()}" for lane in self.lanes)
+        return "; ".join(f"{lane.sensor_name}: {_lane_state(lane)}{lane.status_line()}"
+                         for lane in self.lanes)
+
+
+def _lane_state(lane: Service) -> str:
+    """What STATUS says first of a lane that is not delivering: it names the silent sensor."""
+    acq = lane.acq
+    if acq is None or not acq.stalled:
+        return ""
+    return "STALLED (no samples yet), " if acq.samples == 0 else "STALLED, "

@@ -133,7 +133,14 @@ class Supervised:
         of a given seed always holds the same samples."""
         self._stop_at = None if duration_s is None else self.t_start + duration_s
         latch = self._signal_latch()
-        self.start(before_acquisition)
+        try:
+            self.start(before_acquisition)
+        except BaseException:
+            # a start that failed midway: what did start is stopped and flushed (stop() is
+            # safe after a partial start), then the error goes on
+            self.stop()
+            self._close_latch()
+            raise
         n = self.notifier
         wd = n.watchdog_interval_s() if n is not None else None
         next_wd = time.monotonic()

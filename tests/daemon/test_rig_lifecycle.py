@@ -1,0 +1,164 @@
+"""A rig's start, READY, watchdog and thread deaths (issue 28 item 1's review): READY
+with one sensor silent from the start, the watchdog fed only when every lane advanced, a
+failed start that leaves no lane running, the sensor that raised blamed with its bus."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from avard.core.io.recording import RecordingReader
+from avard.daemon.config import validate_config
+from avard.daemon.config_types import Config
+from avard.daemon.hw.rig import build_lanes, describe_rig
+from avard.daemon.service.rig_service import RigService
+
+LEFT = {"name": "left", "spi_device": 0}
+RIGHT = {"name": "right", "spi_device": 1}
+
+
+def _config(tmp_path: Path, sensors: Any) -> Config:
+    return Config.from_dict(validate_config({
+        "sensor": sensors,
+        "temperature": {"ds18b20": False},
+        "recording": {"data_dir": str(tmp_path / "rec")},
+        "publish": {"enabled": False},
+        "allan": {"snapshot_interval_s": 5.0, "checkpoint_interval_s": 5.0},
+    }))
+
+
+# -- 2. READY with one sensor silent from the start; 6. the watchdog per lane -------------------
+
+class _Notifier:
+    """sd_notify's calls, counted (the watchdog interval short so it is asked every tick)."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+        self.statuses: list[str] = []
+
+    def watchdog_interval_s(self) -> float:
+        return 0.01
+
+    def status(self, text: str) -> None:
+        self.calls.append("status")
+        self.statuses.append(text)
+
+    def __getattr__(self, name: str) -> Any:
+        return lambda *a: self.calls.append(name)
+
+
+def test_a_rig_with_a_sensor_silent_from_the_start_is_ready_and_status_names_it(
+        tmp_path: Path) -> None:
+    config = _config(tmp_path, [LEFT, RIGHT])
+    built = build_lanes(describe_rig(config, simulate="quiet-lab", seed=1, speed=None))
+    built.parts["emulators"][1].stop_producing()         # "right" never makes a sample
+    n = _Notifier()
+    svc = RigService(config, built, notifier=n)
+    svc.run(20.0)
+    assert svc.lanes[1].acq is not None and svc.lanes[1].acq.samples == 0
+    assert svc.lanes[1].acq.stalled
+    assert svc.ready and "ready" in n.calls
+    assert any("right: STALLED (no samples yet)" in s for s in n.statuses)
+    assert not any("left: STALLED" in s for s in n.statuses)
+
+
+def _progress_of(counts: list[tuple[int, bool]], svc: Any) -> Any:
+    from avard.daemon.service.supervisor import Progress
+
+    ps = [Progress(n > 0, n, stalled, False) for n, stalled in counts]
+    svc.lanes = [SimpleNamespace(progress=lambda p=p: p) for p in ps]
+    return RigService.progress(svc)
+
+
+def test_the_watchdog_count_advances_only_when_every_lane_did_or_is_stalled() -> None:
+    """A reader hung inside a transfer raises no stall: its frozen count alone must stop the
+    watchdog, however fast the other lanes go (r8: the sum kept advancing)."""
+    svc: Any = SimpleNamespace(_seen=[0, 0], _advances=0)
+    first = _progress_of([(1000, False), (500, False)], svc)
+    hung = _progress_of([(1250, False), (500, False)], svc)       # "far" frozen
+    assert hung.samples == first.samples and not hung.stalled
+    both = _progress_of([(1500, False), (510, False)], svc)
+    assert both.samples == first.samples + 1
+    marked = _progress_of([(1750, False), (510, True)], svc)     # frozen, but said stalled
+    assert marked.samples == both.samples + 1
+    assert marked.first_samples
+
+
+# -- 3. a later lane failing to start leaves nothing running ------------------------------------
+
+def test_a_lane_whose_directory_is_unusable_is_refused_before_any_lane_starts(
+        tmp_path: Path) -> None:
+    from avard.core.errors import ConfigError
+
+    (tmp_path / "rec").mkdir()
+    (tmp_path / "rec" / "right").write_text("not a directory")
+    config = _config(tmp_path, [LEFT, RIGHT])
+    svc = RigService(config, build_lanes(describe_rig(config, simulate="quiet-lab", seed=1,
+                                                      speed=None)))
+    before = set(threading.enumerate())
+    with pytest.raises(ConfigError, match="right"):
+        svc.run(5.0)
+    assert [t.name for t in set(threading.enumerate()) - before if t.is_alive()] == []
+    assert not any((tmp_path / "rec" / "left").glob("*.avr"))     # no lane had started
+
+
+def test_a_start_failing_after_a_lane_started_stops_and_flushes_that_lane(
+        tmp_path: Path) -> None:
+    """A failure the directory check cannot see (here: the second lane's recorder cannot be
+    made): the first lane's threads are stopped and its recording closed, not left running."""
+    from avard.daemon.service.supervisor import Service
+
+    config = _config(tmp_path, [LEFT, RIGHT])
+    svc = RigService(config, build_lanes(describe_rig(config, simulate="quiet-lab", seed=1,
+                                                      speed=None)))
+    real_start = Service.start
+
+    def start(lane: Service, before: Any = None) -> None:
+        if lane.sensor_name == "right":
+            raise OSError(28, "No space left on device")
+        real_start(lane, before)
+
+    before = set(threading.enumerate())
+    Service.start = start                    # type: ignore[method-assign]
+    try:
+        with pytest.raises(OSError):
+            svc.run(5.0)
+    finally:
+        Service.start = real_start           # type: ignore[method-assign]
+    assert [t.name for t in set(threading.enumerate()) - before if t.is_alive()] == []
+    left = svc.lanes[0]
+    assert left.workers and all(not w._thread.is_alive() for w in left.workers)  # type: ignore[attr-defined]
+    assert [r["name"] for r in RecordingReader(tmp_path / "rec" / "left")
+            if r["kind"] == "event"][:1] == ["start"]
+
+
+# -- 8. the sensor whose drain raised is blamed, with its bus ------------------------------------
+
+def test_the_sensor_that_raised_is_blamed_not_the_first_of_its_bus(tmp_path: Path) -> None:
+    from avard.core.errors import ServiceFault
+    from avard.daemon.service.acquisition import StoppedWithBus
+
+    config = _config(tmp_path, [LEFT, RIGHT])
+    built = build_lanes(describe_rig(config, simulate="quiet-lab", seed=1, speed=None))
+    dev = built.lanes[1].sensor
+    clock = built.clock
+    t0 = clock.monotonic()
+    real_drain = dev.drain
+
+    def drain(*a: Any, **k: Any) -> Any:
+        if clock.monotonic() - t0 > 5.0:
+            raise RuntimeError("driver bug in right")
+        return real_drain(*a, **k)
+
+    dev.drain = drain                               # type: ignore[method-assign]
+    svc = RigService(config, built)
+    with pytest.raises(ServiceFault) as err:
+        svc.run(20.0)
+    assert str(err.value).startswith("sensor right (/dev/spidev0.1): ")
+    assert "driver bug in right" in str(err.value)
+    left, right = (lane.acq for lane in svc.lanes)
+    assert isinstance(right.error, RuntimeError)             # type: ignore[union-attr]
+    assert isinstance(left.error, StoppedWithBus)            # type: ignore[union-attr]
