@@ -957,7 +957,16 @@ def rig_sensors(path: str | Path) -> tuple[str, ...]:
     p = Path(path)
     if not p.is_dir():
         return ()
-    return tuple(sorted(d.name for d in p.iterdir() if d.is_dir() and _holds_segments(d)))
+    return tuple(sorted(d.name for d in p.iterdir() if _readable_recording(d)))
+
+
+def _readable_recording(d: Path) -> bool:
+    """A subdirectory holding segment files; one that cannot be read (lost+found at a
+    mount's root, root-only) is no sensor's recording, not an error of the one beside it."""
+    try:
+        return d.is_dir() and _holds_segments(d)
+    except OSError:
+        return False
 
 
 def rig_of(path: str | Path) -> tuple[str, ...]:
@@ -979,6 +988,13 @@ def sensor_path(path: str | Path, sensor: str | None) -> Path:
     recording, perhaps beside a rig's later one) is that recording unless ``sensor`` names
     one of its subdirectories."""
     p = Path(path)
+    if sensor is None and p.is_dir() and _holds_segments(p):
+        beside = rig_sensors(p)      # today's one-sensor layout, a rig's recording beside it
+        if beside:
+            log.warning("%s holds a one-sensor recording (read here) and a rig's sensors "
+                        "beside it (%s): pick one of those with --sensor NAME", p,
+                        ", ".join(beside))
+        return p
     names = rig_sensors(p)
     if sensor is not None and sensor in names:
         return p / sensor

@@ -17,16 +17,19 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import shlex
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from avard.core.errors import ServiceFault
+from avard.core.errors import ConfigError, FormatError, ServiceFault
 from avard.core.io import frames
+from avard.core.io.recording import SEGMENT_SUFFIX, first_record, order_segments, run_order
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import RigLanes, wiring
 from avard.daemon.service.acquisition import Acquisition, StoppedWithBus, share_reader
 from avard.daemon.service.alignment import Alignment, align
+from avard.daemon.service.checkpoint import STATE_FILE
 from avard.daemon.service.recorder import new_run_id
 from avard.daemon.service.supervisor import (
     Progress,
@@ -101,9 +104,35 @@ def lane_config(config: Config, sensor_index: int) -> Config:
 
 
 def rig_run_id(data_dir: str | Path, names: Sequence[str], t_real: float) -> str:
-    """One run id for every lane, after the newest run of any of them."""
+    """One run id for every lane, after the newest run of any of them and of a one-sensor
+    recording in ``data_dir`` itself (run order is data order across the move to a rig)."""
     ids = [new_run_id(Path(data_dir) / n, t_real) for n in names]
-    return max(ids)
+    return max([*ids, new_run_id(data_dir, t_real)], key=run_order)
+
+
+def check_unmoved(data_dir: str | Path, names: Sequence[str]) -> None:
+    """Refuse (ConfigError, one line saying how to move it) a one-sensor recording in
+    ``data_dir`` itself whose sensor is one of the rig's while ``data_dir/NAME`` holds no
+    recording yet: the lane would start afresh beside it, its Allan state, sample index and
+    run order lost. Moved by hand, the lane restores from it as any restart does."""
+    d = Path(data_dir)
+    segments = order_segments(d.glob("*" + SEGMENT_SUFFIX)) if d.is_dir() else []
+    if not segments:
+        return
+    try:
+        head = first_record(segments[-1]) or {}
+    except (OSError, FormatError):
+        return                      # unreadable: not known to be one of these sensors'
+    name = (head.get("sensor") or {}).get("name")
+    if name not in names or any((d / str(name)).glob("*" + SEGMENT_SUFFIX)):
+        return
+    state = f" {shlex.quote(str(d / STATE_FILE))}" if (d / STATE_FILE).exists() else ""
+    to = shlex.quote(str(d / str(name)))
+    raise ConfigError(
+        f"recording.data_dir {d} holds sensor {name}'s one-sensor recording, and a rig "
+        f"records each sensor in DATA_DIR/NAME: move it there first (mkdir {to} && "
+        f"mv {shlex.quote(str(d))}/*{SEGMENT_SUFFIX}{state} {to}/), then start again; its "
+        "sample index, run order and (same channels) Allan state then continue")
 
 
 class RigService(Supervised):
@@ -176,6 +205,7 @@ class RigService(Supervised):
     # -- lifecycle ----------------------------------------------------------------------
     def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
         if self.config.recording.enabled:
+            check_unmoved(self.config.recording.data_dir, self.names)
             for lane in self.lanes:      # every lane's directory before any lane's threads
                 lane._check_data_dir()
         for lane in self.lanes:
