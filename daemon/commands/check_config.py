@@ -18,7 +18,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from avard.daemon.config import check_runtime, effective_poll_hz, load_config
-from avard.daemon.config_types import Config, SensorConfig
+from avard.daemon.config_types import Config
+from avard.daemon.hw.rig import SensorSpec, wiring
 from avard.daemon.service.acquisition import REALTIME_HELD_HZ
 
 NAME = "check-config"
@@ -37,20 +38,26 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, **{"recording.data_dir": args.data_dir})
     check_runtime(cfg)
     config = Config.from_dict(cfg)
-    summary = [f"{args.config}: valid",
-               f"  ADXL355 at {config.sensor.odr_hz:g} Hz ODR, ±{config.sensor.range_g} g, "
-               f"drained at {effective_poll_hz(cfg):g} Hz"]
-    if config.sensors:
-        summary.append(f"  {len(config.sensors)} sensors, each recorded in DATA_DIR/NAME:")
-        summary += [f"    {s.name}: {_wiring(s)}, {s.odr_hz:g} Hz, ±{s.range_g} g, sync {s.sync}"
-                    for s in config.sensors]
-    if config.sensor.odr_hz > REALTIME_HELD_HZ:
-        fifo_ms = 32e3 / config.sensor.odr_hz
+    summary = [f"{args.config}: valid"]
+    rig = config.rig_sensors
+    if len(rig) > 1:
+        summary.append(f"  {len(rig)} sensors, each recorded in DATA_DIR/NAME:")
+    for s in rig:     # every sensor's rate, drain and real-time note, not only the first's
+        poll_hz = effective_poll_hz({"sensor": {"odr_hz": s.odr_hz, "poll_hz": s.poll_hz}})
+        where = f"{s.name}: {wiring(SensorSpec.from_config(s).bus)}, " if len(rig) > 1 else ""
+        summary.append(f"  {'  ' if len(rig) > 1 else ''}{where}ADXL355 at {s.odr_hz:g} Hz "
+                       f"ODR, ±{s.range_g} g, drained at {poll_hz:g} Hz"
+                       + (f", sync {s.sync}" if len(rig) > 1 else ""))
+    fastest = max(s.odr_hz for s in rig)
+    if fastest > REALTIME_HELD_HZ:
+        fifo_ms = 32e3 / fastest
+        names = [s.name for s in rig if s.odr_hz > REALTIME_HELD_HZ]
+        which = f" ({', '.join(names)})" if len(rig) > 1 else ""
         summary.append(
-            f"  note: at {config.sensor.odr_hz:g} Hz the FIFO holds {fifo_ms:.3g} ms: beside a "
-            f"CPU-bound process on a 2-core machine only {REALTIME_HELD_HZ:g} Hz was measured "
-            "free of FIFO overruns (no SCHED_FIFO under the unit); each overrun is a recorded "
-            "gap of counted size (docs/service.md, python -m benchmarks realtime)")
+            f"  note: at {fastest:g} Hz{which} the FIFO holds {fifo_ms:.3g} ms: "
+            f"beside a CPU-bound process on a 2-core machine only {REALTIME_HELD_HZ:g} Hz was "
+            "measured free of FIFO overruns (no SCHED_FIFO under the unit); each overrun is a "
+            "recorded gap of counted size (docs/service.md, python -m benchmarks realtime)")
     if config.recording.enabled:
         summary.append(f"  recording into {config.recording.data_dir}")
     if config.publish.enabled:
@@ -62,11 +69,6 @@ def run(args: argparse.Namespace) -> int:
     if args.show:
         out.write(to_toml(cfg))
     return 0
-
-
-def _wiring(s: SensorConfig) -> str:
-    return (f"/dev/spidev{s.spi_bus}.{s.spi_device}" if s.bus == "spi"
-            else f"/dev/i2c-{s.i2c_bus} address 0x{s.i2c_address:02X}")
 
 
 def _toml_value(value: Any) -> str:
