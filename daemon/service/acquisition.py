@@ -18,7 +18,9 @@ ring as a mark, in order with the samples:
   short bus fault costs nothing, and a long one shows up as an overrun gap;
 - a device that stops producing samples (the source raises DeviceStalledError: it owns that
   detection) becomes one ``stalled`` event (and the watchdog is no longer fed, see
-  service/supervisor.py); ``resumed`` when samples flow again.
+  service/supervisor.py); ``resumed`` when samples flow again, with one gap over the whole
+  outage counted from time (its empty drains and recoveries are no loss of their own; a
+  part that never resumes made nothing, and nothing is counted lost).
 
 Temperatures of other sources (DS18B20 threads) are marked with :meth:`Acquisition.stamp`,
 which gives the index of the next sample, so the time base of every channel is the sample
@@ -31,6 +33,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -64,6 +67,15 @@ _RESTARTED = frozenset({GapReason.STALL, GapReason.RESET, GapReason.STANDBY,
 #: A complete drain's first set may lie up to ~2 sets off the time line (the newest set is
 #: dated within one sample period, at both ends): more than this behind is a loss.
 UNACCOUNTED_MIN_SETS = 2.5
+
+
+@dataclass
+class _Outage:
+    """A stall in progress: the last good drain's anchor (t_mono, index of its newest set)
+    and the gap reasons its empty drains reported."""
+
+    anchor: tuple[float, float] | None
+    reasons: set[str] = field(default_factory=set)
 
 
 class StoppedWithBus(AvardError):
@@ -128,6 +140,7 @@ class Acquisition:
             None if started is None else (float(started), float(start_index) - 1.0))
         self.unaccounted = 0      # losses found by the time check, not reported by the chip
         self._overrun_after_read = False   # an overrun seen after a burst: its gap is next
+        self._outage: _Outage | None = None   # a stall since the last samples
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
@@ -242,6 +255,10 @@ class Acquisition:
             self.bus_errors += 1
             if not self.stalled:
                 self.stalled = True
+                if self._outage is None:
+                    # one gap for the whole outage, sized by time once samples flow again:
+                    # its empty drains and recoveries are no loss of their own
+                    self._outage = _Outage(self._anchor)
                 log.error("the ADXL355 stopped producing: %s", exc)
                 self.mark(frames.event_record(
                     self.run_id, 0, "stalled", t, self.clock.realtime(), i0=self.next_index,
@@ -272,7 +289,10 @@ class Acquisition:
         reasons = d.gap_reasons
         if self._overrun_after_read and GapReason.FIFO_OVERRUN not in reasons:
             reasons = (*reasons, GapReason.FIFO_OVERRUN)
-        restarted = any(r in _RESTARTED for r in reasons)
+        outage = self._outage
+        if outage is not None:
+            outage.reasons.update(reasons)
+        restarted = outage is not None or any(r in _RESTARTED for r in reasons)
         # After the part was stopped and started again (a recovery, a self-test) time since
         # the last good drain does not count its sets: the gap is the time since the last
         # drain that reached it (an unplugged part's outage; nothing for a stall, whose empty
@@ -282,7 +302,10 @@ class Acquisition:
         after_read = bool(getattr(d, "overrun_in_drain", False)) and (
             post_entries >= FIFO_LOCATIONS
             or (post_entries < 0 and behind is not None and behind < 0.5))
-        if (GapReason.FIFO_OVERRUN in d.gap_reasons and after_read
+        if outage is not None:
+            if n:
+                self._end_outage(outage, n, t_mono, t_real)
+        elif (GapReason.FIFO_OVERRUN in d.gap_reasons and after_read
                 and not self._overrun_after_read):
             # The FIFO was not full yet when this drain's burst read it: the overrun its
             # second STATUS read saw came after, so the loss lies between these sets and the
@@ -415,6 +438,21 @@ class Acquisition:
                 elapsed = t_mono - self._last_drain_t if self._last_drain_t is not None else 0.0
             lost = max(floor, round(elapsed * self.tb.odr_hz) - n_read)
         self._gap(lost, t_mono, t_real, reason)
+
+    def _end_outage(self, outage: _Outage, n: int, t_mono: float, t_real: float) -> None:
+        """Samples flow again after a stall: one gap from the last good drain's newest set to
+        this drain's first, counted by time at the fitted rate (the index then stays on the
+        time line the alignment of a rig reads; without an anchor, none can be counted)."""
+        self._outage = None
+        self._overrun_after_read = False       # inside the outage: its gap covers it
+        lost = 0
+        if outage.anchor is not None:
+            t_a, i_a = outage.anchor
+            rate = float(self.tb.odr_hz)
+            first = i_a + (t_mono - (n - 1) / rate - t_a) * rate
+            lost = max(0, round(first - self.next_index))
+        reasons = sorted({GapReason.STALL, *outage.reasons})
+        self._gap(lost, t_mono, t_real, ",".join(reasons))
 
     def _gap(self, lost: int, t_mono: float, t_real: float, reason: str) -> None:
         i0 = self.next_index

@@ -162,3 +162,55 @@ def test_the_sensor_that_raised_is_blamed_not_the_first_of_its_bus(tmp_path: Pat
     left, right = (lane.acq for lane in svc.lanes)
     assert isinstance(right.error, RuntimeError)             # type: ignore[union-attr]
     assert isinstance(left.error, StoppedWithBus)            # type: ignore[union-attr]
+
+
+# -- 7. a stalled sensor's outage is one gap, sized by time ------------------------------------
+
+def _gaps(path: Path) -> list[dict[str, Any]]:
+    from avard.core.io.source import RecordingSource
+
+    return [r for r in RecordingSource(path).records() if r["kind"] == "gap"]
+
+
+def test_a_sensor_silent_for_the_whole_run_records_no_invented_loss(tmp_path: Path) -> None:
+    """It made nothing, so nothing was lost: the stall is an event, not 16 samples per
+    recovery (r3: 928 'lost' over 60 s of a part that made none)."""
+    config = _config(tmp_path, [LEFT, RIGHT])
+    built = build_lanes(describe_rig(config, simulate="quiet-lab", seed=1, speed=None))
+    built.parts["emulators"][1].stop_producing()
+    svc = RigService(config, built)
+    svc.run(30.0)
+    right = svc.lanes[1].acq
+    assert right is not None and right.samples == 0 and right.stalled
+    assert right.lost_estimate == 0 and right.next_index == 0
+    assert _gaps(tmp_path / "rec" / "right") == []
+
+
+def test_a_stall_then_resume_is_one_gap_the_size_of_the_outage(tmp_path: Path) -> None:
+    config = _config(tmp_path, [LEFT, RIGHT])
+    built = build_lanes(describe_rig(config, simulate="quiet-lab", seed=1, speed=None))
+    emu = built.parts["emulators"][1]
+    t0: list[float] = []
+
+    def tick(t: float) -> None:          # "right" makes nothing from 10 s to 20 s
+        t0.append(t) if not t0 else None
+        if 10.0 <= t - t0[0] < 20.0 and not emu.stalled:
+            emu.stop_producing()
+        elif t - t0[0] >= 20.0 and emu.stalled:
+            emu.resume_producing()
+
+    import dataclasses
+
+    lanes = list(built.lanes)
+    lanes[0] = dataclasses.replace(lanes[0], on_tick=tick)
+    svc = RigService(config, dataclasses.replace(built, lanes=tuple(lanes)))
+    svc.run(40.0)
+    gaps = _gaps(tmp_path / "rec" / "right")
+    assert len(gaps) == 1 and "stall" in gaps[0]["reason"]
+    left, right = (lane.acq for lane in svc.lanes)
+    assert left is not None and right is not None
+    assert right.samples == pytest.approx(30 * 125, abs=64)
+    # the gap is what time says was not made: the index stays on the time line, beside left's
+    assert gaps[0]["n"] == pytest.approx(10 * 125, abs=64)
+    assert right.next_index == pytest.approx(left.next_index, abs=3)
+    assert right.lost_estimate == gaps[0]["n"]

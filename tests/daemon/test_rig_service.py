@@ -168,8 +168,8 @@ def test_a_sensor_that_stops_answering_is_its_own_gap(tmp_path: Path) -> None:
     assert right.gaps
     have, counted = right.runs[0].n_samples, sum(g.n for g in right.gaps)
     assert have == pytest.approx(30 * ODR, abs=64)
-    # a stalled part makes no samples, so its index falls behind the others' by what was
-    # neither made nor counted as a gap: the alignment (fitted time bases) says so
+    # the stall is one gap sized by time once it resumes, so the index stays beside the
+    # others'; whatever it is off by, the alignment (fitted time bases) says so
     behind = runs["left"].runs[0].n_samples - (have + counted)   # type: ignore[union-attr]
     offset = _events(root / "left", "alignment")[-1]["detail"]["sensors"][1]
     assert offset["name"] == "right"
