@@ -36,7 +36,7 @@ from avard.daemon.hw.adxl355 import Adxl355
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock, counter_source
 from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.hw.transport import SpiBus
-from avard.daemon.service.acquisition import Acquisition
+from avard.daemon.service.acquisition import Acquisition, BusReader
 
 WRAP = 1 << 19   # the counter source's modulus
 
@@ -92,17 +92,19 @@ def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0) -> dict[st
     ring = CheckingRing()
     dev.start()
     acq = Acquisition(dev, ring, TimeBase(odr_hz), clock, poll_hz=poll_hz)  # type: ignore[arg-type]
+    reader = BusReader([acq])
     cpu: dict[str, float] = {}
 
     def timed_run() -> None:
         t0 = time.thread_time()
-        acq._run()
+        reader._run()
         cpu["reader"] = time.thread_time() - t0
 
-    acq._thread = threading.Thread(target=timed_run, name="avard-reader", daemon=True)
-    acq._thread.start()
+    thread = threading.Thread(target=timed_run, name="avard-reader", daemon=True)
+    thread.start()
     time.sleep(seconds)
-    acq.stop()
+    reader.stop()
+    thread.join(5.0)
     claimed = sum(int(g["n"]) for g in ring.gaps)
     minutes = seconds / 60.0
     return {

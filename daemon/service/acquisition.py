@@ -32,7 +32,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -142,7 +142,7 @@ class Acquisition:
         self._overrun_after_read = False   # an overrun seen after a burst: its gap is next
         self._outage: _Outage | None = None   # a stall since the last samples
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._reader: BusReader | None = None   # start(): this sensor's own reader
         self.error: BaseException | None = None
         self.first_samples = threading.Event()
         # The reader itself ends at clock time ``stop_at`` (a --duration): a supervisor that
@@ -150,25 +150,27 @@ class Acquisition:
         # thread-timing-dependent sample, and the same seed would give different records.
         self.stop_at = stop_at
         self.finished = threading.Event()
-        #: Other sensors on this bus, drained by this reader's thread after this one
-        #: (:func:`share_reader`: one reader per bus); their own start() is never called.
-        self.followers: list[Acquisition] = []
 
     # -- control ------------------------------------------------------------------------
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
-        self._thread.start()
+        """This sensor's own reader thread (several sensors on one bus: :func:`share_reader`,
+        whose :class:`BusReader` is started instead and this is never called)."""
+        self._reader = BusReader([self])
+        self._reader.start()
 
     def stop(self, timeout: float = 5.0) -> None:
+        if self._reader is not None:
+            self._reader.stop(timeout)
+        else:
+            self.request_stop()
+
+    def request_stop(self) -> None:
+        """End the drains (and a wait for slow consumers) soon; the reader joins."""
         self._stop.set()
-        for f in self.followers:
-            f._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
 
     @property
     def alive(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self._reader is not None and self._reader.alive
 
     def stamp(self) -> int:
         """Index of the next sample: where a reading taken now belongs on the sample grid."""
@@ -179,63 +181,8 @@ class Acquisition:
 
     @property
     def period(self) -> float:
-        """Seconds between drains at the rate fitted so far (the shortest of the sensors this
-        reader drains)."""
-        own = drain_period_s(self.tb.odr_hz, self.poll_hz)
-        return min([own, *(f.period for f in self.followers)])
-
-    # -- loop ---------------------------------------------------------------------------
-    def _run(self) -> None:
-        polling = self      # the sensor being drained: the one blamed when the thread dies
-        try:
-            wall0 = time.monotonic()
-            t0 = self.clock.monotonic()
-            next_t = t0
-            while not self._stop.is_set():
-                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
-                    self.finished.set()
-                    for f in self.followers:
-                        f.finished.set()
-                    break
-                polling = self
-                self.poll_once()
-                for f in self.followers:
-                    # one sensor's fault is its own (poll_once marks it); the bus goes on
-                    polling = f
-                    f.poll_once()
-                period = self.period
-                if self.interrupt is not None and not self.followers:
-                    # The pin rises at the watermark (FIFO half full); the timeout is the
-                    # timer's fallback (a pin that never rises costs latency, not data), and
-                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
-                    t_drain = self.clock.monotonic()
-                    self.interrupt.wait(1.5 * period)
-                    early = t_drain + 0.25 * period - self.clock.monotonic()
-                    if early > 0:
-                        self.clock.sleep(early)
-                else:
-                    next_t += period
-                    now = self.clock.monotonic()
-                    if next_t < now - 10 * period:
-                        next_t = now  # fell far behind (a slow machine): do not catch up
-                    self.clock.sleep(max(0.0, next_t - now))
-                if self.speed:
-                    # Cap the pace at speed × real time (the virtual clock is stepped).
-                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
-                    if ahead > _PACE_SLEEP_MAX_S:
-                        self._stop.wait(ahead)      # long: stay responsive to stop()
-                    elif ahead > 0:
-                        # a drain period: a plain sleep, as the hardware path's clock does
-                        # (Event.wait costs twice the CPU per wake-up, 250 times a second)
-                        time.sleep(ahead)
-        except BaseException as exc:  # the service sees it and stops with an error
-            log.exception("reader thread died")
-            # the sensor that raised is blamed; the others on its bus stopped with it
-            polling.error = exc
-            for a in (self, *self.followers):
-                if a is not polling:
-                    a.error = StoppedWithBus(exc)
-
+        """Seconds between drains at the rate fitted so far."""
+        return drain_period_s(self.tb.odr_hz, self.poll_hz)
 
     def _wait_for_consumers(self) -> None:
         limit = self.ring.capacity // 2
@@ -472,9 +419,97 @@ class Acquisition:
                                      t_mono, t_real, source="adxl355"))
 
 
-def share_reader(acqs: list[Acquisition]) -> Acquisition:
-    """One reader thread for several sensors on one bus: the first drives the others (each
-    keeps its own index, time base, ring and marks). Returns the one to start."""
-    lead, *rest = acqs
-    lead.followers = list(rest)
-    return lead
+class BusReader:
+    """The reader thread of one bus: drains each of its sensors in turn (each keeps its own
+    index, time base, ring and marks; one sensor's fault is its own), at the shortest of
+    their drain periods, until stopped or the first sensor's ``stop_at``. It owns what the
+    sensors share: the thread, stop, ``finished`` and, when it dies, each sensor's ``error``
+    (the one that raised its exception, the others :class:`StoppedWithBus`). INT1 paces a
+    reader of one sensor that has the pin; a shared bus drains on the timer."""
+
+    def __init__(self, members: Sequence[Acquisition]) -> None:
+        if not members:
+            raise ValueError("a bus reader needs at least one sensor")
+        self.members = tuple(members)
+        lead = self.members[0]
+        self.clock = lead.clock
+        self.speed = lead.speed
+        self.stop_at = lead.stop_at
+        self.interrupt = lead.interrupt if len(self.members) == 1 else None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        for m in self.members:
+            m.request_stop()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def period(self) -> float:
+        """Seconds between drains: the shortest of its sensors' at their fitted rates."""
+        return min(m.period for m in self.members)
+
+    def _run(self) -> None:
+        polling = self.members[0]   # the sensor being drained: blamed if the thread dies
+        try:
+            wall0 = time.monotonic()
+            t0 = self.clock.monotonic()
+            next_t = t0
+            while not self._stop.is_set():
+                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
+                    for m in self.members:
+                        m.finished.set()
+                    break
+                for m in self.members:
+                    # one sensor's fault is its own (poll_once marks it); the bus goes on
+                    polling = m
+                    m.poll_once()
+                period = self.period
+                if self.interrupt is not None:
+                    # The pin rises at the watermark (FIFO half full); the timeout is the
+                    # timer's fallback (a pin that never rises costs latency, not data), and
+                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
+                    t_drain = self.clock.monotonic()
+                    self.interrupt.wait(1.5 * period)
+                    early = t_drain + 0.25 * period - self.clock.monotonic()
+                    if early > 0:
+                        self.clock.sleep(early)
+                else:
+                    next_t += period
+                    now = self.clock.monotonic()
+                    if next_t < now - 10 * period:
+                        next_t = now  # fell far behind (a slow machine): do not catch up
+                    self.clock.sleep(max(0.0, next_t - now))
+                if self.speed:
+                    # Cap the pace at speed × real time (the virtual clock is stepped).
+                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
+                    if ahead > _PACE_SLEEP_MAX_S:
+                        self._stop.wait(ahead)      # long: stay responsive to stop()
+                    elif ahead > 0:
+                        # a drain period: a plain sleep, as the hardware path's clock does
+                        # (Event.wait costs twice the CPU per wake-up, 250 times a second)
+                        time.sleep(ahead)
+        except BaseException as exc:  # the service sees it and stops with an error
+            log.exception("reader thread died")
+            # the sensor that raised is blamed; the others on its bus stopped with it
+            polling.error = exc
+            for m in self.members:
+                if m is not polling:
+                    m.error = StoppedWithBus(exc)
+
+
+def share_reader(acqs: Sequence[Acquisition]) -> BusReader:
+    """One reader thread for several sensors on one bus (docs/architecture.md, "Several
+    sensors"): the :class:`BusReader` to start and stop; the sensors' own start() is never
+    called."""
+    return BusReader(acqs)

@@ -27,7 +27,7 @@ from avard.core.io import frames
 from avard.core.io.recording import SEGMENT_SUFFIX, first_record, order_segments, run_order
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import RigLanes, wiring
-from avard.daemon.service.acquisition import Acquisition, StoppedWithBus, share_reader
+from avard.daemon.service.acquisition import BusReader, StoppedWithBus, share_reader
 from avard.daemon.service.alignment import Alignment, align
 from avard.daemon.service.checkpoint import STATE_FILE
 from avard.daemon.service.recorder import new_run_id
@@ -169,7 +169,7 @@ class RigService(Supervised):
         self.alignment_interval_s = float(alignment_interval_s)
         self._next_alignment = 0.0
         self.last_alignment: Alignment | None = None
-        self.readers: list[Acquisition] = []
+        self.readers: list[BusReader] = []
         #: the lanes whose threads were started (stop() stops those: a start may fail midway)
         self._started: list[Service] = []
         #: each lane's samples when every lane had last advanced (the watchdog's count)
@@ -219,9 +219,9 @@ class RigService(Supervised):
             self.bank.start()
         acqs = [lane.acq for lane in self.lanes]
         for group in self.built.readers:
-            members = [acqs[k] for k in group]
-            assert all(a is not None for a in members)
-            self.readers.append(share_reader(members))  # type: ignore[arg-type]
+            members = [a for a in (acqs[k] for k in group) if a is not None]
+            assert len(members) == len(group)
+            self.readers.append(share_reader(members))
         if before_acquisition is not None:
             before_acquisition()
         for reader in self.readers:
