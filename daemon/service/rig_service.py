@@ -33,6 +33,7 @@ from avard.daemon.service.checkpoint import STATE_FILE
 from avard.daemon.service.recorder import new_run_id
 from avard.daemon.service.supervisor import (
     Progress,
+    RigFacts,
     Service,
     ServiceHooks,
     Supervised,
@@ -157,14 +158,12 @@ class RigService(Supervised):
         self._request_factory = hooks.request_server
         lane_hooks = dataclasses.replace(hooks, publisher=self._lane_publisher,
                                          request_server=lambda _svc: _NoRequestServer())
+        wirings = tuple(wiring(s.bus) for s in built.spec.sensors)
         self.lanes = tuple(
-            Service(lane_config(config, k), rig, run_id=self.run_id, hooks=lane_hooks)
+            Service(lane_config(config, k), rig, run_id=self.run_id, hooks=lane_hooks,
+                    own_reader=False,
+                    rig_facts=RigFacts(self.names, k, self.sync, wirings, names[0]))
             for k, rig in enumerate(built.lanes))
-        for k, lane in enumerate(self.lanes):
-            lane.own_reader = False
-            lane.rig_facts = {"sensors": names, "index": k, "sync": self.sync,
-                              "wiring": [wiring(s.bus) for s in built.spec.sensors],
-                              "reference": names[0]}
         self.bank = built.temperature_bank
         self.alignment_interval_s = float(alignment_interval_s)
         self._next_alignment = 0.0

@@ -83,6 +83,22 @@ class Progress:
     finished: bool
 
 
+@dataclass(frozen=True)
+class RigFacts:
+    """What a lane's header says of the rig it is part of: every sensor's name and wiring in
+    config order, this lane's place, the configured ``sync`` and the alignment's reference."""
+
+    sensors: tuple[str, ...]
+    index: int
+    sync: str
+    wiring: tuple[str, ...]
+    reference: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"sensors": list(self.sensors), "index": self.index, "sync": self.sync,
+                "wiring": list(self.wiring), "reference": self.reference}
+
+
 class Supervised:
     """The main thread's part of a run: start, supervise until a duration or a stop request
     (signals, sd_notify READY/WATCHDOG/STATUS/RELOADING), stop. :class:`Service` (one sensor)
@@ -241,7 +257,8 @@ class Service(Supervised):
     shutdown."""
 
     def __init__(self, config: Config, rig: Rig, *, run_id: str | None = None,
-                 notifier: Any = None, hooks: ServiceHooks | None = None) -> None:
+                 notifier: Any = None, hooks: ServiceHooks | None = None,
+                 rig_facts: RigFacts | None = None, own_reader: bool = True) -> None:
         if not isinstance(config, Config):
             # the contract is typed: build the Config at the edge (config_types.load/as_config)
             raise TypeError(f"Service takes a config_types.Config, not {type(config).__name__}")
@@ -255,9 +272,9 @@ class Service(Supervised):
         self.sensor: Any = sensor
         self.sensor_name = rig.spec.sensors[0].name
         #: the rig's facts for the header (several sensors: names, sync, this one's place)
-        self.rig_facts: dict[str, Any] | None = None
+        self.rig_facts = rig_facts
         #: False when a shared reader drains this sensor (RigService: one reader per bus)
-        self.own_reader = True
+        self.own_reader = own_reader
         # a run sequence number from the recording first: name order is data order even
         # when CLOCK_REALTIME is wrong (recorder.new_run_id)
         self.run_id = run_id or new_run_id(config.recording.data_dir, clock.realtime())
@@ -362,7 +379,7 @@ class Service(Supervised):
             temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
             allan_rate_hz=float(self.allan.rate_hz), timebase=timebase,
             simulate=self.simulate, restored=self.restored, boot_id=self.boot_id,
-            **({"rig": self.rig_facts} if self.rig_facts is not None else {}))
+            **({"rig": self.rig_facts.to_dict()} if self.rig_facts is not None else {}))
 
     def status(self) -> dict[str, Any]:
         acq = self.acq
