@@ -8,23 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from avard.daemon.config import validate_config
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import describe_rig
 
-LEFT = {"name": "left", "spi_device": 0}
-RIGHT = {"name": "right", "spi_device": 1}
-
-
-def _config(tmp_path: Path, sensors: Any) -> Config:
-    return Config.from_dict(validate_config({
-        "sensor": sensors,
-        "temperature": {"ds18b20": False},
-        "recording": {"data_dir": str(tmp_path / "rec")},
-        "publish": {"enabled": False},
-        "allan": {"snapshot_interval_s": 5.0, "checkpoint_interval_s": 5.0},
-    }))
-
+from tests.daemon.test_rig_service import LEFT, RIGHT, _config
 
 # -- 4. from today's one-sensor layout to a rig ---------------------------------------------------
 
