@@ -126,6 +126,8 @@ class StreamArchiver:
         if msg.new_run:
             self._next_header_try = 0.0  # ask for the new run's header at once
         if rec["kind"] == "header":
+            if self.header is not None and not self._same_sensor(rec):
+                return          # another sensor's header never becomes this archive's
             self.header = rec
         if self.header is None:
             self._fetch_header(rec["run"])

@@ -68,12 +68,14 @@ def test_the_archiver_refuses_another_sensors_record_and_counts_it(tmp_path: Pat
     arch.handle(Message("header.left", _rig_header("r1", "left"), new_run=True))
     arch.handle(Message("raw.left", _rig_raw("r1", 0, 0, "left")))
     arch.handle(Message("raw.right", _rig_raw("r1", 0, 0, "right")))
+    arch.handle(Message("header.right", _rig_header("r1", "right")))
     arch.handle(Message("raw.left", _rig_raw("r1", 1, 32, "left")))
     arch.close()
     raws = [r for r in RecordingReader(out) if r["kind"] == "raw"]
     assert [(r["i0"], r["sensor_name"]) for r in raws] == [(0, "left"), (32, "left")]
-    assert arch.other_sensor == 1
+    assert arch.other_sensor == 2
     assert arch.written == 2
+    assert arch.header is not None and arch.header["sensor"]["name"] == "left"
 
 
 def test_the_archiver_asks_for_the_sensors_again_when_it_fetches_the_header(
