@@ -104,3 +104,33 @@ def test_an_unreadable_subdirectory_does_not_break_a_plain_recording(
     info = open_record(root).info
     assert info.recording is not None
     assert info.recording.runs[0].n_samples == single.acq.samples
+
+
+def test_a_one_sensor_run_after_a_rigs_comes_after_it_in_run_order(tmp_path: Path) -> None:
+    """Back from a rig to one sensor in data_dir itself: its run is the next, not the first
+    again beside the rig's (r2's third step)."""
+    from avard.core.io.recording import run_order
+
+    rig = _run(_config(tmp_path, [LEFT, RIGHT]), 3.0, seed=1)
+    single = _run(_config(tmp_path, {"name": "solo"}), 3.0, seed=2)
+    assert run_order(single.run_id)[0] == run_order(rig.run_id)[0] + 1
+
+
+def test_the_next_run_id_skips_a_subdirectory_it_cannot_read(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    from avard.daemon.service.recorder import new_run_id
+
+    (tmp_path / "lost+found").mkdir()
+    (tmp_path / "left").mkdir()
+    (tmp_path / "left" / "n00000004-20260101T000000Z-abcdef_00000000_x.avr").write_bytes(b"")
+    real_iterdir = Path.iterdir
+
+    def iterdir(self: Path) -> Any:
+        if self.name == "lost+found":
+            raise PermissionError(errno.EACCES, "Permission denied", str(self))
+        return real_iterdir(self)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert new_run_id(tmp_path, 1.7e9).startswith("n00000005-")
