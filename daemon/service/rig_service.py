@@ -202,15 +202,15 @@ class RigService(Supervised):
         return ops
 
     # -- lifecycle ----------------------------------------------------------------------
-    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+    def start(self, before_acquisition: Callable[[], None] | None = None, *,
+              stop_at: float | None = None) -> None:
         if self.config.recording.enabled:
             check_unmoved(self.config.recording.data_dir, self.names)
             for lane in self.lanes:      # every lane's directory before any lane's threads
                 lane._check_data_dir()
         for lane in self.lanes:
-            lane._stop_at = self._stop_at
             self._started.append(lane)
-            lane.start()
+            lane.start(stop_at=stop_at)
         if self.config.publish.enabled:
             self.request_server = (self._request_factory or _default_request_server)(self)
         if self.bank is not None:

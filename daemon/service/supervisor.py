@@ -116,11 +116,12 @@ class Supervised:
         self.reopen_requested = threading.Event()
         self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
         self.stop_signal: int | None = None
-        self._stop_at: float | None = None
         self.t_start = clock.monotonic()
         self.ready = False
 
-    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+    def start(self, before_acquisition: Callable[[], None] | None = None, *,
+              stop_at: float | None = None) -> None:
+        """Start every thread; the readers end themselves at clock time ``stop_at``."""
         raise NotImplementedError
 
     def stop(self) -> None:
@@ -147,10 +148,10 @@ class Supervised:
         """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
         The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
         of a given seed always holds the same samples."""
-        self._stop_at = None if duration_s is None else self.t_start + duration_s
+        stop_at = None if duration_s is None else self.t_start + duration_s
         latch = self._signal_latch()
         try:
-            self.start(before_acquisition)
+            self.start(before_acquisition, stop_at=stop_at)
         except BaseException:
             # a start that failed midway: what did start is stopped and flushed (stop() is
             # safe after a partial start), then the error goes on
@@ -470,7 +471,8 @@ class Service(Supervised):
                 f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
                 f"({exc.strerror}); {DATA_DIR_ADVICE}") from None
 
-    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+    def start(self, before_acquisition: Callable[[], None] | None = None, *,
+              stop_at: float | None = None) -> None:
         """Build the stages and start every thread, consumers before the reader;
         ``before_acquisition`` runs once the sockets are bound and before the first drain
         (a subscriber can connect then)."""
@@ -486,7 +488,7 @@ class Service(Supervised):
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
                                backpressure=self.simulate is not None,
-                               interrupt=self.interrupt, stop_at=self._stop_at)
+                               interrupt=self.interrupt, stop_at=stop_at)
         rate = self.timebase_rate
         # Stages take what accumulated over a batch time instead of every drain; not when a
         # simulation runs unpaced (its reader waits for them: batching would slow it).

@@ -102,10 +102,10 @@ def test_a_start_failing_after_a_lane_started_stops_and_flushes_that_lane(
                                                       speed=None)))
     real_start = Service.start
 
-    def start(lane: Service, before: Any = None) -> None:
+    def start(lane: Service, before: Any = None, *, stop_at: float | None = None) -> None:
         if lane.sensor_name == "right":
             raise OSError(28, "No space left on device")
-        real_start(lane, before)
+        real_start(lane, before, stop_at=stop_at)
 
     before = set(threading.enumerate())
     Service.start = start                    # type: ignore[method-assign]
