@@ -79,18 +79,10 @@ def test_analyze_says_when_a_rigs_sensors_sit_beside_a_recording(
 
 # -- 5. an unreadable subdirectory beside a plain recording --------------------------------------
 
-def test_an_unreadable_subdirectory_does_not_break_a_plain_recording(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """lost+found at a mount's root is root-only: the service's user reading the recording
-    there must not fail on it (r7)."""
+def _lost_and_found_unreadable(monkeypatch: pytest.MonkeyPatch) -> None:
+    """lost+found at a mount's root is root-only (the tests may run as root, so say it)."""
     import errno
 
-    from avard.core.io.source import open_record, rig_sensors, sensor_path
-
-    single = _run(_config(tmp_path, {"name": "solo"}), 3.0, seed=1)
-    root = tmp_path / "rec"
-    (root / "lost+found").mkdir()
-    (root / "left").mkdir()
     real_iterdir = Path.iterdir
 
     def iterdir(self: Path) -> Any:
@@ -99,6 +91,19 @@ def test_an_unreadable_subdirectory_does_not_break_a_plain_recording(
         return real_iterdir(self)
 
     monkeypatch.setattr(Path, "iterdir", iterdir)
+
+
+def test_an_unreadable_subdirectory_does_not_break_a_plain_recording(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """lost+found at a mount's root is root-only: the service's user reading the recording
+    there must not fail on it (r7)."""
+    from avard.core.io.source import open_record, rig_sensors, sensor_path
+
+    single = _run(_config(tmp_path, {"name": "solo"}), 3.0, seed=1)
+    root = tmp_path / "rec"
+    (root / "lost+found").mkdir()
+    (root / "left").mkdir()
+    _lost_and_found_unreadable(monkeypatch)
     assert sensor_path(root, None) == root
     assert rig_sensors(root) == ()
     info = open_record(root).info
@@ -118,19 +123,10 @@ def test_a_one_sensor_run_after_a_rigs_comes_after_it_in_run_order(tmp_path: Pat
 
 def test_the_next_run_id_skips_a_subdirectory_it_cannot_read(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import errno
-
     from avard.daemon.service.recorder import new_run_id
 
     (tmp_path / "lost+found").mkdir()
     (tmp_path / "left").mkdir()
     (tmp_path / "left" / "n00000004-20260101T000000Z-abcdef_00000000_x.avr").write_bytes(b"")
-    real_iterdir = Path.iterdir
-
-    def iterdir(self: Path) -> Any:
-        if self.name == "lost+found":
-            raise PermissionError(errno.EACCES, "Permission denied", str(self))
-        return real_iterdir(self)
-
-    monkeypatch.setattr(Path, "iterdir", iterdir)
+    _lost_and_found_unreadable(monkeypatch)
     assert new_run_id(tmp_path, 1.7e9).startswith("n00000005-")
