@@ -47,7 +47,7 @@ from avard.daemon.hw.pacing import drain_period_s
 from avard.daemon.hw.thread_priority import raise_thread_priority
 from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.hw.transport import SpiBus
-from avard.daemon.service.acquisition import Acquisition
+from avard.daemon.service.acquisition import Acquisition, BusReader
 
 WRAP = 1 << 19   # the counter source's modulus
 
@@ -153,6 +153,7 @@ def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0, *, reader:
     drains = DrainLog(source.drain)
     source.drain = drains
     acq = Acquisition(source, ring, TimeBase(odr_hz), clock, poll_hz=poll_hz)  # type: ignore[arg-type]
+    bus = BusReader([acq])
     cpu: dict[str, float] = {}
     stop = threading.Event()
     loaders = [threading.Thread(target=gil_load, args=(stop,), daemon=True)
@@ -162,16 +163,17 @@ def run_realtime(odr_hz: float, seconds: float, poll_hz: float = 4.0, *, reader:
         if reader == "thread" and rt_priority:
             raise_thread_priority(rt_priority)
         t0 = time.thread_time()
-        acq._run()
+        bus._run()
         cpu["reader"] = time.thread_time() - t0
 
     c0 = _children_cpu()
     for t in loaders:
         t.start()
-    acq._thread = threading.Thread(target=timed_run, name="avard-reader", daemon=True)
-    acq._thread.start()
+    thread = threading.Thread(target=timed_run, name="avard-reader", daemon=True)
+    thread.start()
     time.sleep(seconds)
-    acq.stop()
+    bus.stop()
+    thread.join(5.0)
     stop.set()
     if proc is not None:
         proc.close()

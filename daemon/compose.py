@@ -15,18 +15,23 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any, cast
 
+from avard.core.errors import ConfigError
 from avard.daemon.config_types import Config, as_config
 from avard.daemon.hw.emulator import EmulatedAdxl355
-from avard.daemon.hw.rig import Rig, RigSpec, build_rig, describe_rig
+from avard.daemon.hw.rig import Rig, RigSpec, build_lanes, build_rig, describe_rig
 from avard.daemon.hw.simulation import SimulatedSensors
-from avard.daemon.service.supervisor import Service, ServiceHooks
+from avard.daemon.service.rig_service import RigService
+from avard.daemon.service.supervisor import Service, ServiceHooks, Supervised
 
 
 def compose(config: Config, spec: RigSpec | Rig, *, run_id: str | None = None,
             notifier: Any = None, hooks: ServiceHooks | None = None,
             after_tick: Callable[[float], None] | None = None) -> Service:
     """The service over the rig ``spec`` describes (or over a rig already built).
-    ``after_tick`` (a test's or benchmark's hook) runs after the rig's own tick."""
+    ``after_tick`` (a test's or benchmark's hook) runs after the rig's own tick. A rig of
+    several sensors is :func:`compose_rig`'s."""
+    if isinstance(spec, RigSpec) and len(spec.sensors) > 1:
+        raise ConfigError(f"{len(spec.sensors)} sensors: compose_rig builds their service")
     rig = spec if isinstance(spec, Rig) else build_rig(spec)
     if after_tick is not None:
         rig = dataclasses.replace(rig, on_tick=_chain(rig.on_tick, after_tick))
@@ -34,6 +39,16 @@ def compose(config: Config, spec: RigSpec | Rig, *, run_id: str | None = None,
     if rig.temperature_feed is not None:
         rig.temperature_feed.deliver = svc.temperature_reading
     return svc
+
+
+def compose_rig(config: Config, spec: RigSpec, *, run_id: str | None = None,
+                notifier: Any = None, hooks: ServiceHooks | None = None) -> Supervised:
+    """The service of ``spec``: a :class:`Service` for one sensor (as :func:`compose`), a
+    :class:`RigService` of one lane per sensor for several (docs/architecture.md)."""
+    if len(spec.sensors) == 1:
+        return compose(config, spec, run_id=run_id, notifier=notifier, hooks=hooks)
+    return RigService(config, build_lanes(spec), run_id=run_id, notifier=notifier,
+                      hooks=hooks)
 
 
 def _chain(first: Callable[[float], None] | None,

@@ -113,10 +113,11 @@ def machine_memory_bytes() -> int | None:
         return None
 
 
-def ring_bytes(cfg: Mapping[str, Mapping[str, Any]]) -> int:
+def ring_bytes(cfg: Mapping[str, Any]) -> int:
     """Memory of the ring buffer for this config (bytes); the service sizes it the same way."""
-    capacity = int(cfg["service"]["ring_s"] * float(cfg["sensor"]["odr_hz"]) * 1.1) + 64
-    return capacity * RING_BYTES_PER_SAMPLE
+    sensors = cfg.get("sensors") or [cfg["sensor"]]
+    return sum((int(cfg["service"]["ring_s"] * float(s["odr_hz"]) * 1.1) + 64)
+               * RING_BYTES_PER_SAMPLE for s in sensors)
 
 
 def default_config() -> dict[str, dict[str, Any]]:
@@ -230,11 +231,15 @@ def _check_endpoints(cfg: dict[str, dict[str, Any]], problems: list[str]) -> Non
                                 "name the file/directory made by `avard keys`")
 
 
-def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str, dict[str, Any]]:
+def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str, Any]:
     """Merge ``raw`` over the defaults and check every key; ConfigError lists all problems."""
-    cfg = default_config()
+    cfg: dict[str, Any] = default_config()
     problems: list[str] = []
+    entries: list[dict[str, Any]] | None = None
     for sec, table in raw.items():
+        if sec == "sensor" and isinstance(table, list):
+            entries = _check_sensor_entries(table, problems)
+            continue
         if sec not in SCHEMA:
             problems.append(f"[{sec}]: unknown section; known sections are "
                             f"{', '.join(SCHEMA)}")
@@ -242,20 +247,12 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
         if not isinstance(table, Mapping):
             problems.append(f"{sec} = {table!r}: must be a [{sec}] table")
             continue
-        for name, value in table.items():
-            key = SCHEMA[sec].get(name)
-            if key is None:
-                problems.append(f"{sec}.{name}: unknown key; known keys in [{sec}] are "
-                                f"{', '.join(SCHEMA[sec])}")
-                continue
-            checked, problem = _check_value(f"{sec}.{name}", key, value)
-            if problem:
-                problems.append(problem)
-            else:
-                cfg[sec][name] = checked
-    if not _SENSOR_NAME.fullmatch(cfg["sensor"]["name"]):
-        problems.append(f"sensor.name = {cfg['sensor']['name']!r}: use 1 to 32 letters, digits, "
-                        "'-', '_' or '.'")
+        _check_table(sec, f"[{sec}]", table, cfg[sec], problems)
+    if entries:
+        cfg["sensor"] = entries[0]
+        cfg["sensors"] = entries
+    else:
+        _check_sensor_name("sensor.name", cfg["sensor"]["name"], problems)
     for sid in cfg["temperature"]["ids"]:
         if not _DS18B20_ID.fullmatch(sid):
             problems.append(f"temperature.ids: {sid!r} is not a DS18B20 id; write ids like "
@@ -278,7 +275,62 @@ def validate_config(raw: Mapping[str, Any], source: str = "config") -> dict[str,
     return cfg
 
 
-def load_config(path: str | Path | None, **overrides: Any) -> dict[str, dict[str, Any]]:
+def _check_table(label: str, title: str, table: Mapping[str, Any], into: dict[str, Any],
+                 problems: list[str], *, section: str | None = None) -> None:
+    """Each key of ``table`` checked against ``SCHEMA[section or label]``; the checked values
+    go into ``into``, the problems (named ``label.key``) into ``problems``."""
+    keys = SCHEMA[section or label]
+    for name, value in table.items():
+        key = keys.get(name)
+        if key is None:
+            problems.append(f"{label}.{name}: unknown key; known keys in {title} are "
+                            f"{', '.join(keys)}")
+            continue
+        checked, problem = _check_value(f"{label}.{name}", key, value)
+        if problem:
+            problems.append(problem)
+        else:
+            into[name] = checked
+
+
+def _check_sensor_name(where: str, name: str, problems: list[str]) -> None:
+    # the name is a directory of a several-sensor recording and part of a topic: no '.', '..'
+    if not _SENSOR_NAME.fullmatch(name) or name in (".", ".."):
+        problems.append(f"{where} = {name!r}: use 1 to 32 letters, digits, '-', '_' or '.' "
+                        "(not '.' or '..')")
+
+
+def _check_sensor_entries(tables: list[Any], problems: list[str]) -> list[dict[str, Any]]:
+    """The ``[[sensor]]`` entries, each checked like a ``[sensor]`` table over the defaults;
+    names and wiring are then checked together by the rig's one rule (``RigSpec``): no two
+    sensors with one name, one chip select or one I2C address."""
+    keys = SCHEMA["sensor"]
+    out: list[dict[str, Any]] = []
+    for n, table in enumerate(tables, 1):
+        if not isinstance(table, Mapping):
+            problems.append(f"sensor #{n} = {table!r}: each [[sensor]] must be a table")
+            continue
+        entry = {k: _copy(key.default) for k, key in keys.items()}
+        label = f"sensor #{n}"
+        _check_table(label, "[[sensor]]", table, entry, problems, section="sensor")
+        if "name" not in table and len(tables) > 1:
+            problems.append(f"{label}: several sensors need a name each (name = \"left\")")
+        _check_sensor_name(f"{label}.name", entry["name"], problems)
+        out.append(entry)
+    if not tables:
+        problems.append("[[sensor]]: no entries; give at least one sensor")
+    elif len(out) == len(tables):
+        from avard.daemon.config_types import SensorConfig
+        from avard.daemon.hw.rig import RigSpec, SensorSpec
+
+        try:
+            RigSpec(tuple(SensorSpec.from_config(SensorConfig(**e)) for e in out))
+        except ConfigError as exc:
+            problems.append(str(exc))
+    return out
+
+
+def load_config(path: str | Path | None, **overrides: Any) -> dict[str, Any]:
     """Read and check a TOML config file (None: the defaults), then apply dotted overrides
     such as ``{"recording.data_dir": "/tmp/x"}`` (checked like the file's own keys)."""
     raw: dict[str, Any] = {}

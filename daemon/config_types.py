@@ -100,6 +100,9 @@ class SensorConfig:
     temp_intercept_lsb: float = setting(
         1885.0, "LSB", 1700.0, 2100.0,
         doc="TEMP reading at 25 °C: 1852 (Rev. 0) or 1885 (later)")
+    sync: str = setting("none", choices=("none", "external"),
+                        doc="several sensors: 'external' when their SYNC/CLK pins share one "
+                        "sample clock (recorded; the time bases are fitted either way)")
 
     @property
     def bus_number(self) -> int:
@@ -198,26 +201,54 @@ class Config:
     publish: PublishConfig = field(default_factory=PublishConfig)
     curve: CurveConfig = field(default_factory=CurveConfig)
     service: ServiceConfig = field(default_factory=ServiceConfig)
+    #: every ``[[sensor]]`` entry in order (``sensor`` is the first); () for a ``[sensor]`` table
+    sensors: tuple[SensorConfig, ...] = ()
+
+    @property
+    def rig_sensors(self) -> tuple[SensorConfig, ...]:
+        """The sensors of the rig: the ``[[sensor]]`` entries, or the one ``[sensor]``."""
+        return self.sensors or (self.sensor,)
+
+    def one_sensor(self, name: str | None) -> Config:
+        """This config with only the sensor ``name`` (None: as it is), for what reads one
+        sensor (``avard probe --sensor NAME``); ConfigError naming the sensors otherwise."""
+        if name is None:
+            return self
+        for s in self.rig_sensors:
+            if s.name == name:
+                return dataclasses.replace(self, sensor=s, sensors=())
+        from avard.core.errors import ConfigError
+
+        raise ConfigError(f"--sensor {name}: no such sensor in the config; its sensors are "
+                          f"{', '.join(s.name for s in self.rig_sensors)}")
 
     @classmethod
-    def from_dict(cls, cfg: Mapping[str, Mapping[str, Any]]) -> Config:
+    def from_dict(cls, cfg: Mapping[str, Any]) -> Config:
         """The typed form of a dict checked by ``config.validate_config``/``load_config``
         (every section and key present; an unchecked dict is not this function's input)."""
-        sections: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            section_cls = SECTIONS[f.name]
-            table = cfg[f.name]
-            sections[f.name] = section_cls(**{
-                k.name: tuple(table[k.name]) if isinstance(table[k.name], list) else table[k.name]
-                for k in dataclasses.fields(section_cls)})
+        sections: dict[str, Any] = {name: _section(section_cls, cfg[name])
+                                    for name, section_cls in SECTIONS.items()}
+        sections["sensors"] = tuple(_section(SensorConfig, t) for t in cfg.get("sensors", ()))
         return cls(**sections)
 
-    def as_dict(self) -> dict[str, dict[str, Any]]:
+    def as_dict(self) -> dict[str, Any]:
         """The validated nested dict this was built from (tuples as lists, as TOML has them):
         what a recording header stores as its ``config``."""
-        return {f.name: {k: list(v) if isinstance(v, tuple) else v
-                         for k, v in dataclasses.asdict(getattr(self, f.name)).items()}
-                for f in dataclasses.fields(self)}
+        out: dict[str, Any] = {name: _table(getattr(self, name)) for name in SECTIONS}
+        if self.sensors:
+            out["sensors"] = [_table(s) for s in self.sensors]
+        return out
+
+
+def _section(section_cls: type[_T], table: Mapping[str, Any]) -> _T:
+    return section_cls(**{
+        k.name: tuple(table[k.name]) if isinstance(table[k.name], list) else table[k.name]
+        for k in dataclasses.fields(section_cls)})  # type: ignore[arg-type]
+
+
+def _table(section: Any) -> dict[str, Any]:
+    return {k: list(v) if isinstance(v, tuple) else v
+            for k, v in dataclasses.asdict(section).items()}
 
 
 #: The dataclass of each ``[section]``, in schema order.

@@ -77,6 +77,8 @@ class Analysis:
              "n_samples": int(self.n_samples), "estimator": self.estimator,
              "estimator_description": ESTIMATORS[self.estimator],
              "channels": {k: c.to_dict() for k, c in self.channels.items()}}
+        if self.info is not None and self.info.sensor_name is not None:
+            d["sensor"] = self.info.sensor_name     # which sensor (a rig's: --sensor NAME)
         rec = self.recording_summary()
         if rec is not None:
             d["recording"] = rec

@@ -513,7 +513,7 @@ def topic_of(record: Mapping[str, Any]) -> str:
 # request / reply messages of the request socket
 
 #: Operations the request socket knows; the server may register fewer.
-REQUEST_OPS = ("snapshot", "status", "recent", "header")
+REQUEST_OPS = ("snapshot", "status", "recent", "header", "sensors")
 MAX_REQUEST_BYTES = 65536
 
 

@@ -716,12 +716,14 @@ class RecordingSource:
         self._say(summary, problems)
         head = report.newest_header[run_list[0].run]
         device = (head.get("sensor") or {}).get("device")
+        # the configured name (``sensor.name``, a rig's lane) names it; older headers: the part
+        named = (head.get("sensor") or {}).get("name") or device
         model = "ADXL355" if device is None or "ADXL355" in str(device) else str(device)
         return RecordInfo(
             source=str(self.path), format=RecordFormat.RECORDING, rate_hz=rate,
             rate_u_hz=rate_u, names=("x", "y", "z"), temperature_names=tuple(tnames),
             n_samples=n, lsb_mps2=scales.pop() if len(scales) == 1 else None,
-            sensor_name=str(device) if device is not None else None, sensor_model=model,
+            sensor_name=str(named) if named is not None else None, sensor_model=model,
             # the ADXL355's digital low-pass sits at ODR/4 whatever the ODR
             filter_corner_hz=rate / 4.0 if model == "ADXL355" else None,
             recording=summary)
@@ -1056,18 +1058,83 @@ def _add_duplicate(dups: list[Duplicate], d: Duplicate) -> None:
 # ---------------------------------------------------------------------------------------------
 
 
+def rig_sensors(path: str | Path) -> tuple[str, ...]:
+    """The sensors of a rig's recording (``avard run`` with several ``[[sensor]]``: one
+    recording directory per sensor, ``DIR/NAME``), in name order; () for anything else."""
+    p = Path(path)
+    if not p.is_dir():
+        return ()
+    return tuple(sorted(d.name for d in p.iterdir() if _readable_recording(d)))
+
+
+def _readable_recording(d: Path) -> bool:
+    """A subdirectory holding segment files; one that cannot be read (lost+found at a
+    mount's root, root-only) is no sensor's recording, not an error of the one beside it."""
+    try:
+        return d.is_dir() and _holds_segments(d)
+    except OSError:
+        return False
+
+
+def rig_of(path: str | Path) -> tuple[str, ...]:
+    """The sensors when ``path`` is a rig's recording and not itself a recording; () else."""
+    names = rig_sensors(path)
+    return () if not names or _holds_segments(Path(path)) else names
+
+
+def _holds_segments(d: Path) -> bool:
+    from avard.core.io.recording import SEGMENT_SUFFIX
+
+    return any(f.suffix == SEGMENT_SUFFIX for f in d.iterdir())
+
+
+def sensor_path(path: str | Path, sensor: str | None) -> Path:
+    """``path`` itself, or the recording of ``sensor`` in a rig's recording. A rig's recording
+    without a sensor named, or a name it does not hold, is refused (DataError, one line naming
+    the sensors it holds). A directory that holds segment files itself (a one-sensor
+    recording, perhaps beside a rig's later one) is that recording unless ``sensor`` names
+    one of its subdirectories."""
+    p = Path(path)
+    if sensor is None and p.is_dir() and _holds_segments(p):
+        beside = rig_sensors(p)      # today's one-sensor layout, a rig's recording beside it
+        if beside:
+            log.warning("%s holds a one-sensor recording (read here) and a rig's sensors "
+                        "beside it (%s): pick one of those with --sensor NAME", p,
+                        ", ".join(beside))
+        return p
+    names = rig_sensors(p)
+    if sensor is not None and sensor in names:
+        return p / sensor
+    if not names or _holds_segments(p):
+        return p
+    if sensor is None:
+        raise DataError(f"{p}: a rig's recording of {len(names)} sensors "
+                        f"({', '.join(names)}); pick one with --sensor NAME")
+    if sensor not in names:
+        raise DataError(f"{p}: no sensor {sensor!r} in this rig's recording; its sensors are "
+                        f"{', '.join(names)}")
+    return p / sensor
+
+
 def open_record(path: str | Path, *, rate_hz: float | None = None,
-                runs: Sequence[str] | None = None) -> RecordSource:
+                runs: Sequence[str] | None = None, sensor: str | None = None) -> RecordSource:
     """The record at ``path``: an ``.npz``, a ``.csv`` (or ``.txt``), or an avard recording
     (a directory of segment files, or one ``.avr`` segment). ``rate_hz`` overrides the
-    record's rate (Hz); ``runs`` keeps only these runs of a recording."""
+    record's rate (Hz); ``runs`` keeps only these runs of a recording; ``sensor`` picks one
+    sensor of a rig's recording (:func:`sensor_path`), or checks that a single record is
+    that sensor's."""
     from avard.core.io.readers import record_kind
 
-    p, kind = record_kind(path)
+    p, kind = record_kind(sensor_path(path, sensor))
+    source: RecordSource
     if kind == "recording":
-        rec = RecordingSource(p, rate_hz, runs)
-        _ = rec.info      # scanned now: a bad recording is said before any analysis starts
-        return rec
-    if runs is not None:
+        source = RecordingSource(p, rate_hz, runs)
+        _ = source.info   # scanned now: a bad recording is said before any analysis starts
+    elif runs is not None:
         raise DataError(f"{p}: --run picks runs of a recording; this is a single {kind} file")
-    return FileSource(p, rate_hz)
+    else:
+        source = FileSource(p, rate_hz)
+    if sensor is not None and source.info.sensor_name != sensor:
+        raise DataError(f"{p}: no sensor {sensor!r} here; this record's sensor is "
+                        f"{source.info.sensor_name or 'not named'}")
+    return source

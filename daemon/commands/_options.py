@@ -19,6 +19,16 @@ def add_channels_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--channels", nargs="+", metavar="NAME", help=CHANNELS_HELP)
 
 
+SENSOR_HELP = ("one sensor of a rig (several [[sensor]] entries): its recording in a rig's "
+               "recording, or its samples on the stream; refused, naming the sensors there, "
+               "when there is no such sensor")
+
+
+def add_sensor_argument(parser: argparse.ArgumentParser) -> None:
+    """``--sensor NAME``: which sensor of a rig a command reads."""
+    parser.add_argument("--sensor", metavar="NAME", default=None, help=SENSOR_HELP)
+
+
 def split_channels(values: list[str] | str | None) -> list[str] | None:
     """The channel names of ``--channels`` (``['x', 'z']`` from ``x z``, ``x,z`` or
     ``x, z``); None when the option was not given."""

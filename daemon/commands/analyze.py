@@ -38,6 +38,7 @@ from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
     add_run_argument,
+    add_sensor_argument,
     analyze_options,
 )
 from avard.daemon.commands._progress import progress_printer
@@ -58,6 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sample rate in Hz (overrides the file's; needed for a csv "
                              "without a t column)")
     add_channels_argument(parser)
+    add_sensor_argument(parser)
     add_run_argument(parser)
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--plot", metavar="FILE.png", help="write the ADEV figure (needs the "
@@ -148,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
                         "--temperature; run analyze without --temperature to compare with "
                         "Stable32")
     options = analyze_options(args)
-    source = open_record(args.data, rate_hz=args.rate, runs=args.run)
+    source = open_record(args.data, rate_hz=args.rate, runs=args.run, sensor=args.sensor)
     if args.temperature:
         # the same analysis (explain's base is analyze of the same source with the same
         # options) plus the thermal fit on the named channel

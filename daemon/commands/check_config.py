@@ -25,6 +25,7 @@ from avard.daemon.hw.pacing import (
     drain_period_s,
     reader_in_process,
 )
+from avard.daemon.hw.rig import SensorSpec, wiring
 
 NAME = "check-config"
 HELP = "check a config file (unknown keys, types, ranges) without starting"
@@ -42,17 +43,27 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, **{"recording.data_dir": args.data_dir})
     check_runtime(cfg)
     config = Config.from_dict(cfg)
-    s = config.sensor
-    drains = (f"drained at {1.0 / drain_period_s(s.odr_hz, s.poll_hz, FILL_TARGET_PROCESS):g} "
-              "Hz by a reader process on the hardware (SCHED_FIFO needs the drop-in "
-              "systemd/realtime.conf)"
-              if reader_in_process(bool(s.int1_gpio))
-              else f"drained at {effective_poll_hz(cfg):g} Hz")
-    summary = [f"{args.config}: valid",
-               f"  ADXL355 at {s.odr_hz:g} Hz ODR, ±{s.range_g} g, {drains}"]
-    note = realtime_note(config.sensor)
-    if note:
-        summary.append(f"  note: {note}")
+    summary = [f"{args.config}: valid"]
+    rig = config.rig_sensors
+    several = len(rig) > 1
+    if several:
+        summary.append(f"  {len(rig)} sensors, each recorded in DATA_DIR/NAME:")
+    for s in rig:     # every sensor's rate, drain and real-time note, not only the first's
+        poll_hz = effective_poll_hz({"sensor": {"odr_hz": s.odr_hz, "poll_hz": s.poll_hz}})
+        if not several and reader_in_process(bool(s.int1_gpio)):
+            hz = 1.0 / drain_period_s(s.odr_hz, s.poll_hz, FILL_TARGET_PROCESS)
+            drains = (f"drained at {hz:g} Hz by a reader process on the hardware (SCHED_FIFO "
+                      "needs the drop-in systemd/realtime.conf)")
+        else:
+            drains = (f"drained at {poll_hz:g} Hz"
+                      + (" by its bus's reader thread" if several else ""))
+        where = f"{s.name}: {wiring(SensorSpec.from_config(s).bus)}, " if several else ""
+        indent = "  " if several else ""
+        summary.append(f"  {indent}{where}ADXL355 at {s.odr_hz:g} Hz ODR, ±{s.range_g} g, "
+                       f"{drains}" + (f", sync {s.sync}" if several else ""))
+        note = realtime_note(s, rig=several)
+        if note:
+            summary.append(f"  {indent}note: {note}")
     if config.recording.enabled:
         summary.append(f"  recording into {config.recording.data_dir}")
     if config.publish.enabled:
@@ -66,12 +77,26 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def realtime_note(sensor: SensorConfig) -> str:
+#: The rate a reader thread (the service's own, sharing the GIL) held free of FIFO overruns
+#: beside a CPU-bound process on a 2-core machine (2026-11-27, docs/service.md).
+HELD_HZ_THREAD = 125.0
+
+
+def realtime_note(sensor: SensorConfig, *, rig: bool = False) -> str:
     """What was measured at this ODR on the real clock beside a CPU-bound process (pacing.py's
-    HELD_HZ_PROCESS_FIFO, docs/service.md), when it is not "no overrun"; "" when it is."""
+    HELD_HZ_PROCESS_FIFO, docs/service.md), when it is not "no overrun"; "" when it is.
+    ``rig``: the sensor is one of several, drained by its bus's reader thread."""
     odr = sensor.odr_hz
     after = ("; each overrun is a recorded gap of counted size (docs/service.md, python -m "
              "benchmarks realtime)")
+    if rig:
+        if odr <= HELD_HZ_THREAD:
+            return ""
+        return (f"at {odr:g} Hz the FIFO holds {32e3 / odr:.3g} ms: the sensors of a rig are "
+                "drained by a reader thread per bus, which shares the GIL with the service's "
+                f"other threads and held only {HELD_HZ_THREAD:g} Hz free of FIFO overruns "
+                "beside a CPU-bound process (the reader process, which held "
+                f"{HELD_HZ_PROCESS_FIFO:g} Hz, drains a one-sensor config)" + after)
     if sensor.int1_gpio:
         return ("with INT1 the FIFO is drained by the service's thread, which shares the GIL "
                 "and was not measured free of FIFO overruns beside a CPU-bound process; "
@@ -105,12 +130,16 @@ def _toml_key(key: str) -> str:
     return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
 
 
-def to_toml(cfg: Mapping[str, Mapping[str, Any]]) -> str:
+def to_toml(cfg: Mapping[str, Any]) -> str:
     """The effective configuration as TOML that ``avard run --config`` reads back."""
     lines: list[str] = []
+    several = cfg.get("sensors")
     for sec, table in cfg.items():
-        lines.append(f"[{_toml_key(sec)}]")
-        lines += [f"{_toml_key(k)} = {_toml_value(v)}" if v is not None
-                  else f"# {k}: not set (TOML has no empty value)" for k, v in table.items()]
-        lines.append("")
+        if sec == "sensors":
+            continue
+        for entry in (several if sec == "sensor" and several else [table]):
+            lines.append(f"[[{sec}]]" if sec == "sensor" and several else f"[{_toml_key(sec)}]")
+            lines += [f"{_toml_key(k)} = {_toml_value(v)}" if v is not None
+                      else f"# {k}: not set (TOML has no empty value)" for k, v in entry.items()]
+            lines.append("")
     return "\n".join(lines)

@@ -34,6 +34,7 @@ from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
     add_run_argument,
+    add_sensor_argument,
     analyze_options,
 )
 
@@ -54,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", metavar="DIR",
                         help="write report.md with plots into DIR (needs matplotlib)")
     add_channels_argument(parser)
+    add_sensor_argument(parser)
     add_run_argument(parser)
     parser.add_argument("--rate", dest="rate_hz", type=float, default=None, metavar="HZ",
                         help="sample rate in Hz when the file does not say")
@@ -119,9 +121,10 @@ def run(args: argparse.Namespace) -> int:
                         "record of the same sensor")
     # both records opened (and a recording scanned) before any analysis
     options = ExplainOptions(**vars(analyze_options(args)), temperature=args.temperature)
-    source = open_record(args.data, rate_hz=args.rate_hz, runs=args.run)
+    source = open_record(args.data, rate_hz=args.rate_hz, runs=args.run,
+                         sensor=args.sensor)
     holdout = (None if args.holdout is None
-               else open_record(args.holdout, rate_hz=args.rate_hz))
+               else open_record(args.holdout, rate_hz=args.rate_hz, sensor=args.sensor))
     progress, stage = _progress()
     ex = explain_file(source, options, holdout=holdout, progress=progress, stage=stage)
     if args.report:

@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--by", choices=("file", "sensor"), default="file",
                         help="one sensor per file (default), or pool the .npz records whose "
                              "'sensor' field names the same sensor")
+    parser.add_argument("--sensor", action="append", metavar="NAME", default=None,
+                        help="a rig's recording stands for its sensors' recordings; "
+                             "--sensor NAME (repeated) takes only these of them")
     parser.add_argument("--scheduler", metavar="ADDRESS",
                         help="a running Dask scheduler (tcp://HOST:8786); default: a "
                              "LocalCluster on this machine")
@@ -81,15 +84,19 @@ def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
     from avard.core.io.source import RecordFormat, open_record
 
     out: dict[str, list[str]] = {}
+    formats: dict[str, RecordFormat] = {}
     for p in paths:
         info = open_record(p).info
-        if info.format is not RecordFormat.NPZ:
-            raise DataError(f"{p}: --by sensor pools .npz records only; give it with --by "
-                            "file")
         sensor = info.sensor_name
         if not sensor:
             raise DataError(f"{p} names no sensor (no 'sensor' field); use --by file")
         out.setdefault(str(sensor), []).append(str(p))
+        formats[str(p)] = info.format
+    for sensor, group in out.items():
+        if len(group) > 1 and any(formats[p] is not RecordFormat.NPZ for p in group):
+            raise DataError(f"{group[0]}: --by sensor pools .npz records only, and "
+                            f"{len(group)} records name the sensor {sensor}; give them "
+                            "with --by file")
     return out
 
 
@@ -171,7 +178,10 @@ def run(args: argparse.Namespace) -> int:
         raise DataError(f"--workers {args.workers}: give a whole number of processes >= 1")
     if args.rate is not None and not args.rate > 0:
         raise DataError(f"--rate {args.rate}: a sample rate must be a positive number of Hz")
-    groups = _groups(args.paths, args.by)
+    from avard.daemon.commands.separate import rig_records
+
+    # a rig's recording stands for its sensors' recordings (--sensor NAME: only those)
+    groups = _groups(rig_records(args.paths, args.sensor), args.by)
     client = _client(args)
     try:
         analyses = analyse_fleet(groups, args, client.get_executor(), _progress())

@@ -33,6 +33,8 @@ HELP = "check the ADXL355 (IDs, self-test, real ODR, 1 g) and the DS18B20 sensor
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", metavar="FILE", help="TOML configuration ([sensor] bus "
                         "settings, odr_hz, range_g); default: the built-in defaults")
+    parser.add_argument("--sensor", metavar="NAME", default=None,
+                        help="with several [[sensor]] entries: the one to probe")
     parser.add_argument("--seconds", type=float, default=20.0,
                         help="acquisition time for the rate fit, s (default 20: about ±25 ppm "
                              "at 125 Hz; the uncertainty falls as seconds^-1.5)")
@@ -58,7 +60,11 @@ def run(args: argparse.Namespace) -> int:
     if not abs(args.ppm) <= 1e5:   # the datasheet's oscillator is within a few 1000 ppm
         raise ConfigError(f"--ppm {args.ppm:g}: an emulated oscillator error must be within "
                           "±100000 ppm (±10 %)")
-    config = load(args.config)
+    config = load(args.config).one_sensor(args.sensor)
+    if len(config.rig_sensors) > 1:
+        raise ConfigError(f"{args.config}: {len(config.rig_sensors)} sensors; probe one at a "
+                          f"time with --sensor NAME "
+                          f"({', '.join(x.name for x in config.rig_sensors)})")
     s = config.sensor
     out = sys.stdout
     ok = True

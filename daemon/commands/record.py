@@ -35,6 +35,7 @@ from avard.daemon.net.subscriber import (
     Message,
     Subscriber,
     add_client_arguments,
+    check_stream_sensor,
     subscriber_from_args,
 )
 from avard.daemon.service.recorder import Recorder
@@ -88,6 +89,8 @@ class StreamArchiver:
         self.dropped_waiting = 0
         self.gaps_written = 0
         self.gap_samples = 0
+        #: records of another sensor than the header's (a rig's): refused, counted, said
+        self.other_sensor = 0
         self._next_header_try = 0.0
 
     def _fetch_header(self, run: str) -> None:
@@ -96,6 +99,11 @@ class StreamArchiver:
         if now < self._next_header_try or not self.sub.request_endpoint:
             return
         self._next_header_try = now + 2.0
+        if self.sub.sensor is None:
+            try:       # the service may not have been up when the command started
+                self.sub.pick_sensor()
+            except NetworkError as exc:
+                log.warning("could not ask for the service's sensors: %s", exc)
         try:
             hdr = self.sub.request("header")
         except NetworkError as exc:
@@ -118,6 +126,8 @@ class StreamArchiver:
         if msg.new_run:
             self._next_header_try = 0.0  # ask for the new run's header at once
         if rec["kind"] == "header":
+            if self.header is not None and not self._same_sensor(rec):
+                return          # another sensor's header never becomes this archive's
             self.header = rec
         if self.header is None:
             self._fetch_header(rec["run"])
@@ -143,6 +153,8 @@ class StreamArchiver:
     def _write(self, msg: Message) -> None:
         assert self.recorder is not None
         rec = msg.record
+        if not self._same_sensor(rec):
+            return
         if msg.missing:
             for i0, n in msg.missing:
                 for r in self._recover(msg, i0, n):
@@ -155,6 +167,22 @@ class StreamArchiver:
             return
         if self.recorder.write(rec):
             self.written += 1
+
+    def _same_sensor(self, rec: dict[str, Any]) -> bool:
+        """A rig's record belongs in this archive only when it is the header's sensor's: one
+        recording is one sensor's sample index. Another's is refused and counted."""
+        name = rec.get("sensor_name")
+        if name is None:
+            return True
+        want = ((self.header or {}).get("sensor") or {}).get("name")
+        if name == want:
+            return True
+        self.other_sensor += 1
+        if self.other_sensor == 1:
+            log.warning("a record of sensor %s in the stream of %s's header: not archived "
+                        "(one recording is one sensor's; pick one with --sensor NAME)",
+                        name, want)
+        return False
 
     def _decodes(self, rec: dict[str, Any]) -> bool:
         """An ``avar`` record's snapshot read by the one decoder (as watch and web read it);
@@ -259,6 +287,7 @@ def run(args: argparse.Namespace) -> int:
     # SIGTERM ends the archive cleanly (flushed, closed); only the main thread may set it
     in_main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, _stop) if in_main else None
+    check_stream_sensor(sub)
     sub.connect(join=False)
     archiver = StreamArchiver(sub, out, segment_s=args.segment, fsync_s=args.fsync,
                               backfill=not args.no_backfill)
@@ -293,6 +322,9 @@ def run(args: argparse.Namespace) -> int:
         f"{archiver.gap_samples} recorded as gaps ({archiver.gaps_written} gap records)\n"
         f"service gaps: {s.samples_service_gap} samples; unexplained holes: "
         f"{s.samples_unexplained} samples\n")
+    if archiver.other_sensor:
+        sys.stdout.write(f"{archiver.other_sensor} records of another sensor than the "
+                         "header's were not archived (pick one with --sensor NAME)\n")
     if archiver.dropped_waiting:
         sys.stdout.write(f"{archiver.dropped_waiting} early records were dropped while "
                          "waiting for the run header\n")

@@ -24,7 +24,7 @@ from avard.daemon.config import (
 )
 from avard.daemon.config_types import Config
 from avard.daemon.service.sdnotify import Notifier
-from avard.daemon.service.supervisor import Service, ServiceHooks
+from avard.daemon.service.supervisor import ServiceHooks, Supervised
 
 NAME = "run"
 #: INFO lines by default: a long-running command says what it does as it goes
@@ -61,17 +61,17 @@ def _check_args(args: argparse.Namespace) -> None:
 
 
 def build(args: argparse.Namespace, config: Config, notifier: Any = None,
-          hooks: ServiceHooks | None = None) -> Service:
+          hooks: ServiceHooks | None = None) -> Supervised:
     """The service for these arguments over the rig daemon/hw/rig.py describes (hardware, or
     the simulated rig for --simulate / $AVARD_BACKEND), composed in daemon/compose.py."""
-    from avard.daemon.compose import compose
+    from avard.daemon.compose import compose_rig
     from avard.daemon.hw.rig import describe_rig
 
     speed = getattr(args, "speed", None)
     spec = describe_rig(config, simulate=getattr(args, "simulate", None),
                         seed=getattr(args, "seed", None),
                         speed=1.0 if speed is None else (speed or None))
-    return compose(config, spec, notifier=notifier, hooks=hooks)
+    return compose_rig(config, spec, notifier=notifier, hooks=hooks)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,6 +5,8 @@ Examples:
     avard separate a.npz b.npz                  # two sensors: Groslambert covariance
     avard separate a.npz b.npz c.npz --json     # three: the three-cornered hat
     avard separate rec_a rec_b --plot sep.png --channels z
+    avard separate /var/lib/avard                 # a rig's recording: its 2 or 3 sensors
+    avard separate /var/lib/avard --sensor left --sensor far
 
 Two or three records of sensors bolted to one bed (.npz, .csv, avard recordings), taken at the
 same time: they are aligned by time when every record has its start time (recordings), else
@@ -42,6 +44,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sample rate in Hz of every record (needed for a csv without a t "
                              "column)")
     add_channels_argument(parser)
+    parser.add_argument("--sensor", action="append", metavar="NAME", default=None,
+                        help="a rig's recording (a directory of one recording per sensor) "
+                             "stands for its sensors; --sensor NAME (repeated) takes only "
+                             "these of them")
     parser.add_argument("--filter-corner", type=filter_corner, default="none", metavar="HZ",
                         help="sensor low-pass corner to model in the self-noise fit: Hz, "
                              "'auto' (ODR/4 for avard's own ADXL355 records) or 'none' "
@@ -54,8 +60,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_and_separate(paths: list[str], *, names: list[str] | None = None,
                       rate_hz: float | None = None, channels: list[str] | None = None,
-                      filter_corner_hz: float | str | None = None) -> Separation:
-    """Read, align and separate (what ``run`` prints)."""
+                      filter_corner_hz: float | str | None = None,
+                      sensors: list[str] | None = None) -> Separation:
+    """Read, align and separate (what ``run`` prints). A rig's recording stands for its
+    sensors' recordings (``sensors``: only these of them)."""
+    paths = rig_records(paths, sensors)
     if len(paths) not in (2, 3):
         raise DataError(f"separate takes 2 or 3 records of co-located sensors, not "
                         f"{len(paths)}")
@@ -68,9 +77,11 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
     aligned = align(records, channels)
     corner: float | None
     if filter_corner_hz == "auto":
-        from avard.core.analysis.engine import default_filter_corner
+        from avard.core.io.source import open_record
 
-        corners = {default_filter_corner(r.meta, aligned.rate_hz) for r in records}
+        # the record source's one rule (RecordInfo.filter_corner_hz: ODR/4 for an ADXL355's
+        # records); the engine's old helper was gone and 'auto' raised an ImportError
+        corners = {open_record(p, rate_hz=rate_hz).info.filter_corner_hz for p in paths}
         corner = corners.pop() if len(corners) == 1 else None
     else:
         corner = filter_corner_hz if isinstance(filter_corner_hz, float) else None
@@ -150,6 +161,34 @@ def _cell(p: object, k: int) -> str:
            f"{math.sqrt(p.hi[k]):.2e}]"
 
 
+def rig_records(paths: list[str], sensors: list[str] | None) -> list[str]:
+    """Each rig's recording among ``paths`` replaced by its sensors' recordings (those named
+    in ``sensors`` when given: each must be in some rig's recording, refused otherwise)."""
+    from avard.core.io.source import rig_of, sensor_path
+
+    out: list[str] = []
+    found: set[str] = set()
+    rigs: list[str] = []
+    for p in paths:
+        names = rig_of(p)
+        if not names:
+            out.append(p)
+            continue
+        rigs += [f"{p}: {', '.join(names)}"]
+        for n in names:
+            if sensors is None or n in sensors:
+                out.append(str(sensor_path(p, n)))
+                found.add(n)
+    if sensors is not None:
+        if not rigs:
+            raise DataError("--sensor picks sensors of a rig's recording; none is given")
+        missing = [n for n in sensors if n not in found]
+        if missing:
+            raise DataError(f"--sensor {missing[0]}: no such sensor in the rig's recording "
+                            f"({'; '.join(rigs)})")
+    return out
+
+
 def plot_separation(sep: Separation, path: str) -> None:
     """Self-noise and common-mode ADEV with their intervals, one panel per axis; upper
     limits drawn as downward markers."""
@@ -186,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
     sep = load_and_separate(args.records, names=args.names, rate_hz=args.rate,
                             channels=split_channels(args.channels),
-                            filter_corner_hz=args.filter_corner)
+                            filter_corner_hz=args.filter_corner, sensors=args.sensor)
     if args.json:
         text = json.dumps(finite_for_json(sep.to_dict()), indent=1, allow_nan=False)
         sys.stdout.write(text + "\n")

@@ -117,6 +117,7 @@ class WatchView:
         self.fit_locally = fit_locally
         self.clock = clock
         self.run: str | None = None
+        self.sensor: str | None = None   # a rig's sensor, from its records
         self.odr_hz: float | None = None
         self.temps: dict[str, float | None] = {}
         self.chip_temp_c: float | None = None
@@ -181,6 +182,7 @@ class WatchView:
     def update(self, msg: Message) -> None:
         rec = msg.record
         self.run = rec["run"]
+        self.sensor = rec.get("sensor_name", self.sensor)     # a rig's sensor
         kind = rec["kind"]
         self.last_message_at = self.clock()
         if kind == "raw":
@@ -233,7 +235,8 @@ class WatchView:
         Without a size (output not a terminal) every line is shown in full."""
         w = width if width is not None else 10_000
         h = height if height is not None else 10_000
-        head = [f"avard watch {endpoint}  run {self.run or '?'}  (SI units)"]
+        which = f"  sensor {self.sensor}" if self.sensor else ""
+        head = [f"avard watch {endpoint}  run {self.run or '?'}{which}  (SI units)"]
         odr = f"{self.odr_hz:.4f} Hz fitted ODR" if self.odr_hz else "ODR unknown"
         here = f"{self._rate:.1f} samples/s arriving" if self._rate else "arrival rate pending"
         head.append(f"rate      {odr}; {here}")

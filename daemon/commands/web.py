@@ -21,7 +21,11 @@ import signal
 from pathlib import Path
 
 from avard.core.errors import ConfigError
-from avard.daemon.net.subscriber import add_client_arguments, subscriber_from_args
+from avard.daemon.net.subscriber import (
+    add_client_arguments,
+    check_stream_sensor,
+    subscriber_from_args,
+)
 
 NAME = "web"
 #: INFO lines by default: a long-running command says what it does as it goes
@@ -84,6 +88,10 @@ def _check_args(args: argparse.Namespace) -> tuple[str, int]:
     if args.history is not None and not Path(args.history).is_dir():
         raise ConfigError(f"--history {args.history}: no such directory; give the service's "
                           "recording.data_dir (e.g. /var/lib/avard)")
+    if args.history is not None:
+        from avard.core.io.source import sensor_path
+
+        sensor_path(args.history, args.sensor)     # a rig's: the sensor named, and known
     return host, port
 
 
@@ -96,12 +104,14 @@ def run(args: argparse.Namespace) -> int:
                           "pip install 'avard[web]', or from a checkout "
                           ".venv/bin/pip install -e '.[web]'") from None
     sub = subscriber_from_args(args)
+    if args.sensor is not None:
+        check_stream_sensor(sub)
     return asyncio.run(_serve(args, sub, host, port))
 
 
 async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) -> int:
     from aiohttp import web
-    from avard.core.io.source import RecordingSource
+    from avard.core.io.source import RecordingSource, sensor_path
     from avard.daemon.service.snapshots import fit_snapshot
     from avard.daemon.web.app import Hub, make_app
     from avard.daemon.web.feed import Feed
@@ -115,7 +125,8 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
     state = RunState(history=args.history)
     feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,
                 fit_interval_s=args.fit_interval,
-                history=None if args.history is None else RecordingSource(Path(args.history)))
+                history=None if args.history is None
+                else RecordingSource(sensor_path(args.history, args.sensor)))
     hub = Hub(state, refresh_s=args.refresh)
     app = make_app(state, hub, endpoint=args.endpoint)
     runner = web.AppRunner(app, access_log=None)

@@ -130,7 +130,8 @@ def describe_rig(config: Config, *, simulate: str | None = None, seed: int | Non
         clock = ClockSpec("virtual", preset, seed, odr_error_ppm, speed)
     else:
         clock = ClockSpec()
-    return RigSpec((SensorSpec.from_config(config.sensor),), clock, config.temperature)
+    return RigSpec(tuple(SensorSpec.from_config(s) for s in config.rig_sensors), clock,
+                   config.temperature)
 
 
 def choose_backend(simulate: str | None) -> str | None:
@@ -345,6 +346,72 @@ def _hardware_in_reader_process(spec: RigSpec) -> Rig:
                {"device": "ADXL355", "bus": b.kind, "name": s.name,
                 "reader": f"process {reader.pid}"},
                temperature_bank=_ds18b20_bank(spec.temperature), closers=(reader.close,))
+
+
+@dataclass(frozen=True)
+class RigLanes:
+    """A rig of several sensors built: one single-sensor :class:`Rig` per sensor (a *lane*,
+    sharing the clock), which lanes one reader thread drains (by index into ``lanes``: one
+    reader per bus; a simulated rig has one, since its reader steps the virtual clock), and
+    the DS18B20 bank every lane hears."""
+
+    spec: RigSpec
+    lanes: tuple[Rig, ...]
+    readers: tuple[tuple[int, ...], ...]
+    clock: Clock
+    temperature_bank: Ds18b20Bank | None = None
+    parts: Mapping[str, object] = field(default_factory=dict)   # emulators (tests)
+
+
+def wiring(bus: BusSpec) -> str:
+    """Where a sensor is wired, as the Pi names it."""
+    return (f"/dev/spidev{bus.number}.{bus.device}" if bus.kind == "spi"
+            else f"/dev/i2c-{bus.number} address 0x{bus.address:02X}")
+
+
+def build_lanes(spec: RigSpec) -> RigLanes:
+    """The described rig of several sensors, each configured and started (a sensor that does
+    not answer at start refuses the whole rig: the config says it is there)."""
+    lane_spec = [RigSpec((s,), spec.clock, spec.temperature) for s in spec.sensors]
+    if spec.simulate is not None:
+        from avard.daemon.hw.simulation import BedSpec, emulated_rig
+
+        rates = {s.odr_hz for s in spec.sensors}
+        if len(rates) > 1:
+            raise ConfigError("a simulated rig runs every sensor at one odr_hz; found "
+                              f"{', '.join(f'{r:g}' for r in sorted(rates))} Hz")
+        clock, emulated = emulated_rig(spec.sensors, spec.simulate,
+                                       bed=BedSpec(seed=spec.clock.seed), seed=spec.clock.seed)
+        lanes = []
+        for ls, s, (_name, dev, _emu) in zip(lane_spec, spec.sensors, emulated, strict=True):
+            bring_up(dev, s)
+            lanes.append(Rig(ls, dev, clock, {"device": "ADXL355 (emulated)",
+                                              "preset": spec.simulate, "name": s.name,
+                                              "bus": s.bus.kind, "wiring": wiring(s.bus)}))
+        return RigLanes(spec, tuple(lanes), (tuple(range(len(lanes))),), clock,
+                        parts={"emulators": [e for _n, _d, e in emulated]})
+    from avard.daemon.hw.timebase import SystemClock
+
+    system = SystemClock()
+    bank = _ds18b20_bank(spec.temperature)
+    names = tuple(bank.names) if bank is not None else ()
+    lanes = []
+    groups: dict[tuple[str, int], list[int]] = {}
+    for k, (ls, s) in enumerate(zip(lane_spec, spec.sensors, strict=True)):
+        interrupt = None
+        if s.int1_gpio:
+            from avard.daemon.hw.interrupt import GpiodPin
+
+            interrupt = GpiodPin(s.int1_gpio)
+        opened = _open_hardware(s)
+        info = bring_up(opened.driver, s, int1=interrupt is not None).info
+        lanes.append(Rig(ls, opened.driver, system,
+                         {"device": info.name, "partid": info.partid, "revid": info.revid,
+                          "bus": s.bus.kind, "wiring": wiring(s.bus), "name": s.name},
+                         interrupt=interrupt, extra_temperature_names=names))
+        groups.setdefault((s.bus.kind, s.bus.number), []).append(k)
+    return RigLanes(spec, tuple(lanes), tuple(tuple(g) for g in groups.values()), system,
+                    temperature_bank=bank)
 
 
 def _ds18b20_bank(t: TemperatureConfig) -> Ds18b20Bank | None:

@@ -216,8 +216,12 @@ class Subscriber:
     def __init__(self, endpoint: str, topics: Iterable[str] = frames.TOPICS, *,
                  request_endpoint: str | None = None, curve: CurveClientConfig | None = None,
                  rcvhwm: int = DEFAULT_RCVHWM, max_bytes: int = frames.DEFAULT_MAX_BYTES,
-                 request_timeout_s: float = 2.0) -> None:
+                 request_timeout_s: float = 2.0, sensor: str | None = None) -> None:
         self.endpoint = endpoint
+        #: one sensor of a rig's stream (topics ``raw.NAME``...; a one-sensor service's plain
+        #: topics pass); None: a rig's first sensor once :meth:`join` asked for the sensors,
+        #: or the first sensor whose topic arrives (:meth:`recv`): never a mix of sensors
+        self.sensor = sensor
         self.topics = list(topics)
         unknown = set(self.topics) - set(frames.TOPICS)
         if unknown:
@@ -265,8 +269,39 @@ class Subscriber:
             self.join()
         return self
 
+    def sensors(self) -> list[str]:
+        """The sensors the service publishes (the ``sensors`` op; a service that does not know
+        the op has one, named in its header)."""
+        try:
+            return [str(n) for n in self.request("sensors", {})["sensors"]]
+        except NetworkError as exc:
+            if "unknown op" not in str(exc):
+                raise
+        name = (self.request("header", {}).get("sensor") or {}).get("name")
+        return [str(name)] if name else []
+
+    def pick_sensor(self) -> None:
+        """Check ``sensor`` against the service's sensors (ConfigError, one line naming them);
+        without one, a rig's first sensor (said in the log): a rig's sensors each have their
+        own sample index, so one stream is one sensor's."""
+        names = self.sensors()
+        if self.sensor is None:
+            if len(names) > 1:
+                self.sensor = names[0]
+                log.warning("the service has %d sensors (%s): following %s; pick one with "
+                            "--sensor NAME", len(names), ", ".join(names), names[0])
+            return
+        if self.sensor not in names:
+            raise ConfigError(f"--sensor {self.sensor}: the service at {self.endpoint} has no "
+                              f"such sensor; its sensors are {', '.join(names) or 'unnamed'}")
+
     def join(self) -> None:
-        """Fetch the latest Allan snapshot and the run header; a failure is logged, not fatal."""
+        """Fetch the latest Allan snapshot and the run header; a failure is logged, not fatal.
+        A sensor named that the service does not have is refused (ConfigError)."""
+        try:
+            self.pick_sensor()
+        except NetworkError as exc:
+            log.warning("no sensors on join: %s", exc)
         for op in ("snapshot", "header"):
             try:
                 result = self.request(op)
@@ -305,6 +340,8 @@ class Subscriber:
         the next one (ids are checked as well).
         """
         timeout = self.request_timeout_s if timeout_s is None else timeout_s
+        if self.sensor is not None and op != "sensors":
+            args = {"sensor": self.sensor, **(args or {})}   # a rig routes ops by sensor
         sock = self._request_socket()
         rid = next(self._ids)
         sock.send_multipart([b"", frames.encode_request(op, args, id=rid)])
@@ -347,6 +384,15 @@ class Subscriber:
                 self.stats.bad_messages += 1
                 continue
             topic = parts[0].decode("ascii", "replace")
+            _base, dot, name = topic.partition(".")
+            if dot and self.sensor is None:
+                # a rig's stream before any sensor was chosen (its request socket was not up):
+                # one stream is one sensor's index, so follow the first one seen, never a mix
+                self.sensor = name
+                log.warning("the stream is a rig's (topic %s) and no sensor was picked: "
+                            "following %s; pick one with --sensor NAME", topic, name)
+            if dot and name != self.sensor:
+                continue          # another sensor of the rig: its own stream, not counted
             try:
                 record = frames.decode(parts[1], max_bytes=self.max_bytes)
             except FormatError as exc:
@@ -388,6 +434,9 @@ def add_client_arguments(parser: Any) -> None:
                         help="this client's secret CURVE key file (NAME.key_secret)")
     parser.add_argument("--timeout", type=float, default=2.0, metavar="S",
                         help="seconds to wait for a request reply (default 2)")
+    parser.add_argument("--sensor", metavar="NAME", default=None,
+                        help="one sensor of a rig (several [[sensor]] entries; default its "
+                             "first); refused, naming the sensors, when it has no such one")
 
 
 def check_client_endpoint(endpoint: str, what: str = "ENDPOINT") -> None:
@@ -430,4 +479,16 @@ def subscriber_from_args(args: Any, topics: Iterable[str] = frames.TOPICS) -> Su
     if request is None and args.endpoint.startswith("tcp://"):
         request = request_endpoint_for(args.endpoint)
     return Subscriber(args.endpoint, topics, request_endpoint=request, curve=curve,
-                      request_timeout_s=args.timeout)
+                      request_timeout_s=args.timeout, sensor=getattr(args, "sensor", None))
+
+
+def check_stream_sensor(sub: Subscriber) -> None:
+    """Before a command starts: ``sub.sensor`` checked against the service's sensors (a rig's
+    first when none is named), ConfigError for an unknown one; a service not answering now is
+    only logged (the command's own wait then says what is wrong)."""
+    if not sub.request_endpoint:
+        return
+    try:
+        sub.pick_sensor()
+    except NetworkError as exc:
+        log.warning("could not ask for the service's sensors: %s", exc)

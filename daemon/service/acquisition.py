@@ -18,7 +18,9 @@ ring as a mark, in order with the samples:
   short bus fault costs nothing, and a long one shows up as an overrun gap;
 - a device that stops producing samples (the source raises DeviceStalledError: it owns that
   detection) becomes one ``stalled`` event (and the watchdog is no longer fed, see
-  service/supervisor.py); ``resumed`` when samples flow again.
+  service/supervisor.py); ``resumed`` when samples flow again, with one gap over the whole
+  outage counted from time (its empty drains and recoveries are no loss of their own; a
+  part that never resumes made nothing, and nothing is counted lost).
 
 Temperatures of other sources (DS18B20 threads) are marked with :meth:`Acquisition.stamp`,
 which gives the index of the next sample, so the time base of every channel is the sample
@@ -30,7 +32,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -57,6 +60,24 @@ _RESTARTED = frozenset({GapReason.STALL, GapReason.RESET, GapReason.STANDBY,
 #: A complete drain's first set may lie up to ~2 sets off the time line (the newest set is
 #: dated within one sample period, at both ends): more than this behind is a loss.
 UNACCOUNTED_MIN_SETS = 2.5
+
+
+@dataclass
+class _Outage:
+    """A stall in progress: the last good drain's anchor (t_mono, index of its newest set)
+    and the gap reasons its empty drains reported."""
+
+    anchor: tuple[float, float] | None
+    reasons: set[str] = field(default_factory=set)
+
+
+class StoppedWithBus(AvardError):
+    """A sensor's reader stopped because another sensor on its bus raised (that one holds
+    the error itself): the blame is not this sensor's."""
+
+    def __init__(self, cause: BaseException) -> None:
+        super().__init__(f"stopped with its bus's reader ({cause!r} in another sensor)")
+        self.cause = cause
 
 
 class Acquisition:
@@ -112,8 +133,9 @@ class Acquisition:
             None if started is None else (float(started), float(start_index) - 1.0))
         self.unaccounted = 0      # losses found by the time check, not reported by the chip
         self._overrun_after_read = False   # an overrun seen after a burst: its gap is next
+        self._outage: _Outage | None = None   # a stall since the last samples
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._reader: BusReader | None = None   # start(): this sensor's own reader
         self.error: BaseException | None = None
         self.first_samples = threading.Event()
         # The reader itself ends at clock time ``stop_at`` (a --duration): a supervisor that
@@ -124,17 +146,24 @@ class Acquisition:
 
     # -- control ------------------------------------------------------------------------
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
-        self._thread.start()
+        """This sensor's own reader thread (several sensors on one bus: :func:`share_reader`,
+        whose :class:`BusReader` is started instead and this is never called)."""
+        self._reader = BusReader([self])
+        self._reader.start()
 
     def stop(self, timeout: float = 5.0) -> None:
+        if self._reader is not None:
+            self._reader.stop(timeout)
+        else:
+            self.request_stop()
+
+    def request_stop(self) -> None:
+        """End the drains (and a wait for slow consumers) soon; the reader joins."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
 
     @property
     def alive(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self._reader is not None and self._reader.alive
 
     def stamp(self) -> int:
         """Index of the next sample: where a reading taken now belongs on the sample grid."""
@@ -147,53 +176,6 @@ class Acquisition:
     def period(self) -> float:
         """Seconds between drains at the rate fitted so far."""
         return drain_period_s(self.tb.odr_hz, self.poll_hz)
-
-    # -- loop ---------------------------------------------------------------------------
-    def _run(self) -> None:
-        try:
-            wall0 = time.monotonic()
-            t0 = self.clock.monotonic()
-            next_t = t0
-            # a reader process (hw/drain_process.py) paces the chip itself: take its drains
-            # as they come
-            wait_for_drain = getattr(self.sensor, "wait_for_drain", None)
-            while not self._stop.is_set():
-                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
-                    self.finished.set()
-                    break
-                if wait_for_drain is not None:
-                    if wait_for_drain(_PACE_SLEEP_MAX_S):
-                        self.poll_once()
-                    continue
-                self.poll_once()
-                period = self.period
-                if self.interrupt is not None:
-                    # The pin rises at the watermark (FIFO half full); the timeout is the
-                    # timer's fallback (a pin that never rises costs latency, not data), and
-                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
-                    t_drain = self.clock.monotonic()
-                    self.interrupt.wait(1.5 * period)
-                    early = t_drain + 0.25 * period - self.clock.monotonic()
-                    if early > 0:
-                        self.clock.sleep(early)
-                else:
-                    next_t += period
-                    now = self.clock.monotonic()
-                    if next_t < now - 10 * period:
-                        next_t = now  # fell far behind (a slow machine): do not catch up
-                    self.clock.sleep(max(0.0, next_t - now))
-                if self.speed:
-                    # Cap the pace at speed × real time (the virtual clock is stepped).
-                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
-                    if ahead > _PACE_SLEEP_MAX_S:
-                        self._stop.wait(ahead)      # long: stay responsive to stop()
-                    elif ahead > 0:
-                        # a drain period: a plain sleep, as the hardware path's clock does
-                        # (Event.wait costs twice the CPU per wake-up, 250 times a second)
-                        time.sleep(ahead)
-        except BaseException as exc:  # the service sees it and stops with an error
-            log.exception("reader thread died")
-            self.error = exc
 
     def _wait_for_consumers(self) -> None:
         limit = self.ring.capacity // 2
@@ -213,6 +195,10 @@ class Acquisition:
             self.bus_errors += 1
             if not self.stalled:
                 self.stalled = True
+                if self._outage is None:
+                    # one gap for the whole outage, sized by time once samples flow again:
+                    # its empty drains and recoveries are no loss of their own
+                    self._outage = _Outage(self._anchor)
                 log.error("the ADXL355 stopped producing: %s", exc)
                 self.mark(frames.event_record(
                     self.run_id, 0, "stalled", t, self.clock.realtime(), i0=self.next_index,
@@ -243,7 +229,10 @@ class Acquisition:
         reasons = reported = d.gap_reasons     # a property that parses: read it once
         if self._overrun_after_read and GapReason.FIFO_OVERRUN not in reasons:
             reasons = (*reasons, GapReason.FIFO_OVERRUN)
-        restarted = any(r in _RESTARTED for r in reasons)
+        outage = self._outage
+        if outage is not None:
+            outage.reasons.update(reasons)
+        restarted = outage is not None or any(r in _RESTARTED for r in reasons)
         # After the part was stopped and started again (a recovery, a self-test) time since
         # the last good drain does not count its sets: the gap is the time since the last
         # drain that reached it (an unplugged part's outage; nothing for a stall, whose empty
@@ -253,7 +242,10 @@ class Acquisition:
         after_read = bool(getattr(d, "overrun_in_drain", False)) and (
             post_entries >= FIFO_LOCATIONS
             or (post_entries < 0 and behind is not None and behind < 0.5))
-        if (GapReason.FIFO_OVERRUN in reported and after_read
+        if outage is not None:
+            if n:
+                self._end_outage(outage, n, t_mono, t_real)
+        elif (GapReason.FIFO_OVERRUN in reported and after_read
                 and not self._overrun_after_read):
             # The FIFO was not full yet when this drain's burst read it: the overrun its
             # second STATUS read saw came after, so the loss lies between these sets and the
@@ -272,6 +264,7 @@ class Acquisition:
         elif behind is not None and behind > UNACCOUNTED_MIN_SETS:
             self.unaccounted += 1
             self._gap(round(behind), t_mono, t_real, GapReason.UNACCOUNTED)
+            restarted = True     # the time line broke: a new segment of the time base fit
         started = getattr(self.sensor, "t_started", None)
         if restarted and started is not None:
             self._anchor = (float(started), float(self.next_index) - 1.0)
@@ -279,7 +272,11 @@ class Acquisition:
             self._anchor = (t_mono, float(self.next_index + n - 1))
         if n:
             i0 = self.next_index
-            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun), exact=bool(d.complete))
+            # a restarted part (or an unreported loss) starts a new time line: a new segment
+            # of the fit (its slope kept), or the points after a stall would pull the fitted
+            # rate far off (91 Hz for 125 after a 10 s stall: a rig's alignment showed it)
+            self.tb.update(i0 + n - 1, t_mono, gap=bool(d.overrun) or restarted,
+                           exact=bool(d.complete))
             times = self.tb.timestamps(i0, n)
             self.ring.push(counts, np.arange(i0, i0 + n, dtype=np.int64), times)
             self.next_index += n
@@ -382,6 +379,21 @@ class Acquisition:
             lost = max(floor, round(elapsed * self.tb.odr_hz) - n_read)
         self._gap(lost, t_mono, t_real, reason)
 
+    def _end_outage(self, outage: _Outage, n: int, t_mono: float, t_real: float) -> None:
+        """Samples flow again after a stall: one gap from the last good drain's newest set to
+        this drain's first, counted by time at the fitted rate (the index then stays on the
+        time line the alignment of a rig reads; without an anchor, none can be counted)."""
+        self._outage = None
+        self._overrun_after_read = False       # inside the outage: its gap covers it
+        lost = 0
+        if outage.anchor is not None:
+            t_a, i_a = outage.anchor
+            rate = float(self.tb.odr_hz)
+            first = i_a + (t_mono - (n - 1) / rate - t_a) * rate
+            lost = max(0, round(first - self.next_index))
+        reasons = sorted({GapReason.STALL, *outage.reasons})
+        self._gap(lost, t_mono, t_real, ",".join(reasons))
+
     def _gap(self, lost: int, t_mono: float, t_real: float, reason: str) -> None:
         i0 = self.next_index
         self.next_index += lost
@@ -398,3 +410,107 @@ class Acquisition:
             return
         self.mark(frames.temp_record(self.run_id, 0, self.next_index, ["chip"], [value],
                                      t_mono, t_real, source="adxl355"))
+
+
+class BusReader:
+    """The reader thread of one bus: drains each of its sensors in turn (each keeps its own
+    index, time base, ring and marks; one sensor's fault is its own), at the shortest of
+    their drain periods, until stopped or the first sensor's ``stop_at``. It owns what the
+    sensors share: the thread, stop, ``finished`` and, when it dies, each sensor's ``error``
+    (the one that raised its exception, the others :class:`StoppedWithBus`). INT1 paces a
+    reader of one sensor that has the pin; a shared bus drains on the timer."""
+
+    def __init__(self, members: Sequence[Acquisition]) -> None:
+        if not members:
+            raise ValueError("a bus reader needs at least one sensor")
+        self.members = tuple(members)
+        lead = self.members[0]
+        self.clock = lead.clock
+        self.speed = lead.speed
+        self.stop_at = lead.stop_at
+        self.interrupt = lead.interrupt if len(self.members) == 1 else None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="avard-reader", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        for m in self.members:
+            m.request_stop()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def period(self) -> float:
+        """Seconds between drains: the shortest of its sensors' at their fitted rates."""
+        return min(m.period for m in self.members)
+
+    def _run(self) -> None:
+        polling = self.members[0]   # the sensor being drained: blamed if the thread dies
+        # a reader process (hw/drain_process.py) paces its one chip itself: its drains are
+        # taken as they come
+        wait_for_drain = (getattr(polling.sensor, "wait_for_drain", None)
+                          if len(self.members) == 1 else None)
+        try:
+            wall0 = time.monotonic()
+            t0 = self.clock.monotonic()
+            next_t = t0
+            while not self._stop.is_set():
+                if self.stop_at is not None and self.clock.monotonic() >= self.stop_at:
+                    for m in self.members:
+                        m.finished.set()
+                    break
+                if wait_for_drain is not None:
+                    if wait_for_drain(_PACE_SLEEP_MAX_S):
+                        polling.poll_once()
+                    continue
+                for m in self.members:
+                    # one sensor's fault is its own (poll_once marks it); the bus goes on
+                    polling = m
+                    m.poll_once()
+                period = self.period
+                if self.interrupt is not None:
+                    # The pin rises at the watermark (FIFO half full); the timeout is the
+                    # timer's fallback (a pin that never rises costs latency, not data), and
+                    # a pin stuck asserted cannot make the reader drain more than 4× as often.
+                    t_drain = self.clock.monotonic()
+                    self.interrupt.wait(1.5 * period)
+                    early = t_drain + 0.25 * period - self.clock.monotonic()
+                    if early > 0:
+                        self.clock.sleep(early)
+                else:
+                    next_t += period
+                    now = self.clock.monotonic()
+                    if next_t < now - 10 * period:
+                        next_t = now  # fell far behind (a slow machine): do not catch up
+                    self.clock.sleep(max(0.0, next_t - now))
+                if self.speed:
+                    # Cap the pace at speed × real time (the virtual clock is stepped).
+                    ahead = (self.clock.monotonic() - t0) / self.speed - (time.monotonic() - wall0)
+                    if ahead > _PACE_SLEEP_MAX_S:
+                        self._stop.wait(ahead)      # long: stay responsive to stop()
+                    elif ahead > 0:
+                        # a drain period: a plain sleep, as the hardware path's clock does
+                        # (Event.wait costs twice the CPU per wake-up, 250 times a second)
+                        time.sleep(ahead)
+        except BaseException as exc:  # the service sees it and stops with an error
+            log.exception("reader thread died")
+            # the sensor that raised is blamed; the others on its bus stopped with it
+            polling.error = exc
+            for m in self.members:
+                if m is not polling:
+                    m.error = StoppedWithBus(exc)
+
+
+def share_reader(acqs: Sequence[Acquisition]) -> BusReader:
+    """One reader thread for several sensors on one bus (docs/architecture.md, "Several
+    sensors"): the :class:`BusReader` to start and stop; the sensors' own start() is never
+    called."""
+    return BusReader(acqs)

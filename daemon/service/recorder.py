@@ -509,7 +509,10 @@ _RUN_SEQ = re.compile(r"n(\d{8})-")
 
 
 def new_run_id(data_dir: str | Path, t_real: float) -> str:
-    """The next run id for a recording directory (see ``_RUN_SEQ``)."""
+    """The next run id for a recording directory (see ``_RUN_SEQ``), after its runs and
+    those of its subdirectories: a rig records each sensor in ``data_dir/NAME``, so a
+    one-sensor run in ``data_dir`` after a rig's (or a rig's after it) comes later in run
+    order. A subdirectory this user cannot read (lost+found) holds no run of ours."""
     seq = 0
     d = Path(data_dir)
     if d.is_dir():
@@ -517,8 +520,25 @@ def new_run_id(data_dir: str | Path, t_real: float) -> str:
             m = _RUN_SEQ.match(f.name)
             if m:
                 seq = max(seq, int(m.group(1)))
+            elif _is_dir(f):
+                seq = max(seq, *(int(m.group(1)) for m in map(_RUN_SEQ.match, _names(f))
+                                 if m), 0)
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(t_real))
     return f"n{seq + 1:08d}-{stamp}-{secrets.token_hex(3)}"
+
+
+def _is_dir(p: Path) -> bool:
+    try:
+        return p.is_dir()
+    except OSError:
+        return False
+
+
+def _names(d: Path) -> list[str]:
+    try:
+        return [f.name for f in d.iterdir()]
+    except OSError:
+        return []
 
 
 def kernel_boot_id() -> str | None:

@@ -25,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Protocol
 
 from avard.core.allan.feed import AllanFeed
 from avard.core.errors import ConfigError, ServiceFault
@@ -80,13 +80,199 @@ class ServiceHooks:
     streaming_cls: Any = None       # the accumulator class (StreamingAllan by default)
 
 
-class Service:
+@dataclass(frozen=True)
+class Progress:
+    """What the supervising loop reads off the readers: samples flow (READY), how many (the
+    watchdog is fed only while they advance), a stalled sensor, a --duration reached."""
+
+    first_samples: bool
+    samples: int
+    stalled: bool
+    finished: bool
+
+
+@dataclass(frozen=True)
+class RigFacts:
+    """What a lane's header says of the rig it is part of: every sensor's name and wiring in
+    config order, this lane's place, the configured ``sync`` and the alignment's reference."""
+
+    sensors: tuple[str, ...]
+    index: int
+    sync: str
+    wiring: tuple[str, ...]
+    reference: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"sensors": list(self.sensors), "index": self.index, "sync": self.sync,
+                "wiring": list(self.wiring), "reference": self.reference}
+
+
+class Supervised:
+    """The main thread's part of a run: start, supervise until a duration or a stop request
+    (signals, sd_notify READY/WATCHDOG/STATUS/RELOADING), stop. :class:`Service` (one sensor)
+    and :class:`~avard.daemon.service.rig_service.RigService` (several) supply start, stop,
+    check_threads, refresh, progress, sockets and status_line."""
+
+    def __init__(self, config: Config, clock: Any, notifier: Any,
+                 speed: float | None) -> None:
+        self.config = config
+        self.clock: Any = clock
+        self.notifier = notifier
+        self.speed = speed
+        self.stop_requested = WakingEvent()
+        self._latch: SignalLatch | None = None   # signals and stop requests wake the loop
+        self.reopen_requested = threading.Event()
+        self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
+        self.stop_signal: int | None = None
+        self.t_start = clock.monotonic()
+        self.ready = False
+
+    def start(self, before_acquisition: Callable[[], None] | None = None, *,
+              stop_at: float | None = None) -> None:
+        """Start every thread; the readers end themselves at clock time ``stop_at``."""
+        raise NotImplementedError
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def check_threads(self, *, restart: bool = True) -> None:
+        """Raise ServiceFault when a thread died; ``restart``: a stage that is safe to
+        restart in place (the publisher) is restarted instead, a few times."""
+        raise NotImplementedError
+
+    def refresh(self) -> None:
+        """Periodic work of the main loop (a new header when the fitted rate has moved)."""
+
+    def progress(self) -> Progress:
+        raise NotImplementedError
+
+    def sockets(self) -> tuple[Any, ...]:
+        """The sockets whose CURVE client keys SIGHUP re-reads."""
+        return ()
+
+    def status_line(self) -> str:
+        raise NotImplementedError
+
+    def run(self, duration_s: float | None = None, *, tick_s: float = 1.0,
+            before_acquisition: Callable[[], None] | None = None) -> int:
+        """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
+        The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
+        of a given seed always holds the same samples. Signals and stop requests wake the
+        loop; ``tick_s`` bounds how late it sees a dead thread or a moved rate (the header
+        is rebuilt at most every 10 s); the watchdog and the status log keep their own
+        deadlines."""
+        stop_at = None if duration_s is None else self.t_start + duration_s
+        latch = self._signal_latch()
+        try:
+            self.start(before_acquisition, stop_at=stop_at)
+        except BaseException:
+            # a start that failed midway: what did start is stopped and flushed (stop() is
+            # safe after a partial start), then the error goes on
+            self.stop()
+            self._close_latch()
+            raise
+        n = self.notifier
+        wd = n.watchdog_interval_s() if n is not None else None
+        next_wd = time.monotonic()
+        last_samples = -1
+        next_status_log = time.monotonic() + self.config.service.status_log_interval_s
+        try:
+            while not self.stop_requested.is_set():
+                self._handle_signals(latch.wait(0.0) if latch.pending() else [])
+                if self.stop_requested.is_set():
+                    break
+                self.check_threads()
+                self.refresh()   # a new header when the fitted rate has moved
+                progress = self.progress()
+                if not self.ready and progress.first_samples:
+                    self.ready = True
+                    log.info("samples flow; ready")
+                    if n is not None:
+                        n.ready()
+                        n.status(self.status_line())
+                now = time.monotonic()
+                if n is not None and wd and self.ready and now >= next_wd:
+                    # WATCHDOG=1 only while samples advance: a stuck sensor lets systemd act.
+                    if progress.samples != last_samples and not progress.stalled:
+                        n.watchdog()
+                        last_samples = progress.samples
+                    n.status(self.status_line())
+                    next_wd = now + wd
+                if self._reload_keys.is_set():
+                    # Not in the signal handler: zmq calls belong in a normal thread context,
+                    # and a burst of SIGHUPs before this point is one reload.
+                    self._reload_keys.clear()
+                    log.info("SIGHUP: reopening the recording files, re-reading client keys")
+                    if n is not None:
+                        n.reloading()
+                    for sock in self.sockets():
+                        reload = getattr(sock, "reload_keys", None)
+                        if reload is not None:
+                            reload()
+                    if n is not None:
+                        n.ready()   # reload finished (Type=notify protocol)
+                if now >= next_status_log:
+                    next_status_log = now + self.config.service.status_log_interval_s
+                    log.info("status: %s", self.status_line())
+                wait = tick_s if self.ready else min(tick_s, 0.05)   # READY promptly
+                if duration_s is not None:
+                    if progress.finished:
+                        break
+                    left = max(0.0, duration_s - (self.clock.monotonic() - self.t_start))
+                    # virtual seconds → real seconds at this pace; past the end the reader
+                    # is finishing its last drain at stop_at: look again shortly
+                    wait = max(0.005, min(wait, left / self.speed if self.speed else 0.05))
+                if n is not None and wd and self.ready:
+                    wait = min(wait, max(0.0, next_wd - time.monotonic()))
+                self._handle_signals(latch.wait(wait))
+        finally:
+            self.stop()
+            self._close_latch()
+        self.check_threads(restart=False)
+        return 0
+
+    def _signal_latch(self) -> SignalLatch:
+        if self._latch is None:
+            self._latch = SignalLatch()
+            self.stop_requested.latch = self._latch
+        return self._latch
+
+    def _close_latch(self) -> None:
+        if self._latch is not None:
+            self.stop_requested.latch = None
+            installed = self._latch.close()
+            self._latch = None
+            if signal.SIGHUP in installed:
+                # the run is over: a late reload has nothing to reopen, and SIGHUP's default
+                # action would end the process while it flushes and exits
+                signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    def _handle_signals(self, signums: list[int]) -> None:
+        """Act on the signals the latch noted, in the main loop's normal context."""
+        for signum in signums:
+            if signum in (signal.SIGTERM, signal.SIGINT):
+                self.stop_signal = signum
+                self.stop_requested.set()
+            elif signum == signal.SIGHUP:
+                self.reopen_requested.set()
+                self._reload_keys.set()
+
+    def install_signals(self) -> None:
+        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording and re-reads client keys
+        (main thread only). The handlers only note the signal (signal_latch.py: a handler
+        that takes a lock deadlocks, a burst of them recursed); the main loop acts on it."""
+        self._signal_latch().install((signal.SIGTERM, signal.SIGINT, signal.SIGHUP))
+
+
+
+class Service(Supervised):
     """One acquisition run over a built :class:`~avard.daemon.hw.rig.Rig`: builds nothing
     hardware-side itself (daemon/compose.py composes it); owns the threads and their
     shutdown."""
 
     def __init__(self, config: Config, rig: Rig, *, run_id: str | None = None,
-                 notifier: Any = None, hooks: ServiceHooks | None = None) -> None:
+                 notifier: Any = None, hooks: ServiceHooks | None = None,
+                 rig_facts: RigFacts | None = None, own_reader: bool = True) -> None:
         if not isinstance(config, Config):
             # the contract is typed: build the Config at the edge (config_types.load/as_config)
             raise TypeError(f"Service takes a config_types.Config, not {type(config).__name__}")
@@ -94,31 +280,28 @@ class Service:
             raise TypeError(f"Service takes a hw.rig.Rig, not {type(rig).__name__}")
         hooks = hooks or ServiceHooks()
         sensor, clock = rig.sensor, rig.clock
-        self.config = config
+        super().__init__(config, clock, notifier, rig.spec.clock.speed)
         self.cfg = config.as_dict()    # the checked dict: what the header stores as ``config``
         self.rig = rig
         self.sensor: Any = sensor
-        self.clock: Any = clock
+        self.sensor_name = rig.spec.sensors[0].name
+        #: the rig's facts for the header (several sensors: names, sync, this one's place)
+        self.rig_facts = rig_facts
+        #: False when a shared reader drains this sensor (RigService: one reader per bus)
+        self.own_reader = own_reader
         # a run sequence number from the recording first: name order is data order even
         # when CLOCK_REALTIME is wrong (recorder.new_run_id)
         self.run_id = run_id or new_run_id(config.recording.data_dir, clock.realtime())
         self.boot_id: str | None = getattr(clock, "boot_id", None)
         if self.boot_id is None and isinstance(clock, SystemClock):
             self.boot_id = kernel_boot_id()
-        self.speed = rig.spec.clock.speed
         self.simulate = rig.simulate
         self.bank = rig.temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
         self._temp_ok: dict[str, bool] = {}
         self.sensor_info = dict(rig.info)
-        self.notifier = notifier
         self.interrupt = rig.interrupt        # interrupt.InterruptPin on the FIFO watermark
         extra_temperature_names = list(rig.extra_temperature_names)
         on_tick = rig.on_tick
-        self.stop_requested = WakingEvent()
-        self._latch: SignalLatch | None = None   # signals and stop requests wake the loop
-        self.reopen_requested = threading.Event()
-        self._reload_keys = threading.Event()   # SIGHUP: re-read CURVE client keys
-        self.stop_signal: int | None = None
         odr = config.sensor.odr_hz
         self.odr = odr
         self.timebase = TimeBase(odr, group_delay_samples=float(
@@ -144,7 +327,6 @@ class Service:
         self.start_index = 0
         self.restored: dict[str, Any] | None = None
         self._restart_gap: RestartGap | None = None
-        self._stop_at: float | None = None
         self._recorder_factory = hooks.recorder
         self._publisher_factory = hooks.publisher
         self._request_factory = hooks.request_server
@@ -154,8 +336,6 @@ class Service:
         self.acq: Acquisition | None = None
         self.workers: list[Stage] = []
         self._on_tick = on_tick
-        self.t_start = clock.monotonic()
-        self.ready = False
         self.final_status: dict[str, Any] = {}
         self.run_header = RunHeader(self._build_header, self.timebase, clock.monotonic,
                                     self._next_index, lambda: self.real_offset,
@@ -212,7 +392,8 @@ class Service:
             software=f"avard {__version__}", config=self.cfg,
             temperature_channels=self.temp_names, nominal_odr_hz=self.odr,
             allan_rate_hz=float(self.allan.rate_hz), timebase=timebase,
-            simulate=self.simulate, restored=self.restored, boot_id=self.boot_id)
+            simulate=self.simulate, restored=self.restored, boot_id=self.boot_id,
+            **({"rig": self.rig_facts.to_dict()} if self.rig_facts is not None else {}))
 
     def status(self) -> dict[str, Any]:
         acq = self.acq
@@ -304,7 +485,8 @@ class Service:
                 f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
                 f"({exc.strerror}); {DATA_DIR_ADVICE}") from None
 
-    def start(self, before_acquisition: Callable[[], None] | None = None) -> None:
+    def start(self, before_acquisition: Callable[[], None] | None = None, *,
+              stop_at: float | None = None) -> None:
         """Build the stages and start every thread, consumers before the reader;
         ``before_acquisition`` runs once the sockets are bound and before the first drain
         (a subscriber can connect then)."""
@@ -320,7 +502,7 @@ class Service:
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
                                backpressure=self.simulate is not None,
-                               interrupt=self.interrupt, stop_at=self._stop_at)
+                               interrupt=self.interrupt, stop_at=stop_at)
         rate = self.timebase_rate
         # Stages take what accumulated over a batch time instead of every drain; not when a
         # simulation runs unpaced (its reader waits for them: batching would slow it).
@@ -370,7 +552,8 @@ class Service:
             self.bank.start()
         if before_acquisition is not None:
             before_acquisition()
-        self.acq.start()
+        if self.own_reader:
+            self.acq.start()
         log.info("run %s started: ADXL355 %g Hz, ±%d g, drained every %.3g s (FIFO half "
                  "full%s); temperature channels %s", self.run_id, self.odr,
                  cfg.sensor.range_g, self.acq.period,
@@ -382,6 +565,18 @@ class Service:
         when a simulation runs unpaced (its reader waits for the stages)."""
         return max(1, int(seconds * self.odr)) if paced else 1
 
+    def refresh(self) -> None:
+        self.run_header.refresh()
+
+    def progress(self) -> Progress:
+        acq = self.acq
+        assert acq is not None
+        return Progress(acq.first_samples.is_set(), acq.samples, acq.stalled,
+                        acq.finished.is_set())
+
+    def sockets(self) -> tuple[Any, ...]:
+        return (self.publisher, self.request_server)
+
     def timebase_rate(self) -> float:
         """The fitted output rate, Hz (the nominal one until the fit has data)."""
         return float(self.timebase.odr_hz)
@@ -391,7 +586,8 @@ class Service:
             snapshots=self.snapshots, status=self.status, header=self.run_header,
             ring=self.ring, nominal_odr_hz=self.odr, rate_hz=self.timebase_rate,
             scale_m_s2_per_count=self.scale,
-            recent_max_s=self.config.publish.recent_max_s).table()
+            recent_max_s=self.config.publish.recent_max_s).table() | {
+                "sensors": lambda _args: {"sensors": [self.sensor_name], "alignment": None}}
 
     def _on_clock_step(self, real_offset: float) -> None:
         """The reader saw CLOCK_REALTIME step (and recorded it): wall-clock times written from
@@ -437,103 +633,6 @@ class Service:
             raise ServiceFault(f"the {w.name} thread stopped: {w.error!r}; exiting for "
                                "systemd to restart the service")
 
-    def run(self, duration_s: float | None = None, *, tick_s: float = 1.0,
-            before_acquisition: Callable[[], None] | None = None) -> int:
-        """Start, supervise until ``duration_s`` of (virtual) time or a stop request, stop.
-        The reader stops itself at exactly ``duration_s`` of clock time, so a simulated run
-        of a given seed always holds the same samples. Signals and stop requests wake the
-        loop; ``tick_s`` bounds how late it sees a dead thread or a moved rate (the header
-        is rebuilt at most every 10 s); the watchdog and the status log keep their own
-        deadlines."""
-        self._stop_at = None if duration_s is None else self.t_start + duration_s
-        latch = self._signal_latch()
-        self.start(before_acquisition)
-        n = self.notifier
-        wd = n.watchdog_interval_s() if n is not None else None
-        next_wd = time.monotonic()
-        last_samples = -1
-        next_status_log = time.monotonic() + self.config.service.status_log_interval_s
-        try:
-            while not self.stop_requested.is_set():
-                self._handle_signals(latch.wait(0.0) if latch.pending() else [])
-                if self.stop_requested.is_set():
-                    break
-                self.check_threads()
-                self.run_header.refresh()   # a new header when the fitted rate has moved
-                assert self.acq is not None
-                if not self.ready and self.acq.first_samples.is_set():
-                    self.ready = True
-                    log.info("samples flow; ready")
-                    if n is not None:
-                        n.ready()
-                        n.status(self.status_line())
-                now = time.monotonic()
-                if n is not None and wd and self.ready and now >= next_wd:
-                    # WATCHDOG=1 only while samples advance: a stuck sensor lets systemd act.
-                    if self.acq.samples != last_samples and not self.acq.stalled:
-                        n.watchdog()
-                        last_samples = self.acq.samples
-                    n.status(self.status_line())
-                    next_wd = now + wd
-                if self._reload_keys.is_set():
-                    # Not in the signal handler: zmq calls belong in a normal thread context,
-                    # and a burst of SIGHUPs before this point is one reload.
-                    self._reload_keys.clear()
-                    log.info("SIGHUP: reopening the recording files, re-reading client keys")
-                    if n is not None:
-                        n.reloading()
-                    for sock in (self.publisher, self.request_server):
-                        reload = getattr(sock, "reload_keys", None)
-                        if reload is not None:
-                            reload()
-                    if n is not None:
-                        n.ready()   # reload finished (Type=notify protocol)
-                if now >= next_status_log:
-                    next_status_log = now + self.config.service.status_log_interval_s
-                    log.info("status: %s", self.status_line())
-                wait = tick_s if self.ready else min(tick_s, 0.05)   # READY promptly
-                if duration_s is not None:
-                    if self.acq.finished.is_set():
-                        break
-                    left = max(0.0, duration_s - (self.clock.monotonic() - self.t_start))
-                    # virtual seconds → real seconds at this pace; past the end the reader
-                    # is finishing its last drain at stop_at: look again shortly
-                    wait = max(0.005, min(wait, left / self.speed if self.speed else 0.05))
-                if n is not None and wd and self.ready:
-                    wait = min(wait, max(0.0, next_wd - time.monotonic()))
-                self._handle_signals(latch.wait(wait))
-        finally:
-            self.stop()
-            self._close_latch()
-        self.check_threads(restart=False)
-        return 0
-
-    def _signal_latch(self) -> SignalLatch:
-        if self._latch is None:
-            self._latch = SignalLatch()
-            self.stop_requested.latch = self._latch
-        return self._latch
-
-    def _close_latch(self) -> None:
-        if self._latch is not None:
-            self.stop_requested.latch = None
-            installed = self._latch.close()
-            self._latch = None
-            if signal.SIGHUP in installed:
-                # the run is over: a late reload has nothing to reopen, and SIGHUP's default
-                # action would end the process while it flushes and exits
-                signal.signal(signal.SIGHUP, signal.SIG_IGN)
-
-    def _handle_signals(self, signums: list[int]) -> None:
-        """Act on the signals the latch noted, in the main loop's normal context."""
-        for signum in signums:
-            if signum in (signal.SIGTERM, signal.SIGINT):
-                self.stop_signal = signum
-                self.stop_requested.set()
-            elif signum == signal.SIGHUP:
-                self.reopen_requested.set()
-                self._reload_keys.set()
-
     def stop(self) -> None:
         """Flush and close everything, in data order: reader, Allan, recorder, publisher."""
         if self.stop_signal:
@@ -559,12 +658,6 @@ class Service:
             self.publisher.close()
             self.publisher = None
 
-    def install_signals(self) -> None:
-        """SIGTERM/SIGINT stop cleanly, SIGHUP reopens the recording and re-reads client keys
-        (main thread only). The handlers only note the signal (signal_latch.py: a handler
-        that takes a lock deadlocks, a burst of them recursed); the main loop acts on it."""
-        self._signal_latch().install((signal.SIGTERM, signal.SIGINT, signal.SIGHUP))
-
 
 def _default_recorder(svc: Service) -> Any:
     from avard.daemon.service.recorder import Recorder
@@ -577,7 +670,16 @@ def _default_recorder(svc: Service) -> Any:
                     realtime=svc.clock.realtime)
 
 
-def _curve(svc: Service) -> Any:
+class Serving(Protocol):
+    """What the request server is built from: a Service, or a RigService for all its lanes."""
+
+    config: Config
+    cfg: dict[str, Any]
+
+    def handlers(self) -> dict[str, Callable[[dict[str, Any]], dict[str, Any]]]: ...
+
+
+def _curve(svc: Serving) -> Any:
     if not svc.config.curve.enabled:
         return None
     from avard.daemon.net.curve import CurveServerConfig
@@ -595,7 +697,7 @@ def _default_publisher(svc: Service) -> Any:
                      allow_remote=p.allow_remote)
 
 
-def _default_request_server(svc: Service) -> Any:
+def _default_request_server(svc: Serving) -> Any:
     from avard.daemon.net.publisher import RequestServer
 
     p = svc.config.publish
