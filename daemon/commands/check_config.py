@@ -92,7 +92,8 @@ def realtime_note(sensor: SensorConfig, *, rig: bool = False) -> str:
     if rig:
         if odr <= HELD_HZ_THREAD:
             return ""
-        return (f"at {odr:g} Hz the FIFO holds {32e3 / odr:.3g} ms: the sensors of a rig are "
+        return (f"at {odr:g} Hz ({sensor.name}) the FIFO holds {32e3 / odr:.3g} ms: the "
+                "sensors of a rig are "
                 "drained by a reader thread per bus, which shares the GIL with the service's "
                 f"other threads and held only {HELD_HZ_THREAD:g} Hz free of FIFO overruns "
                 "beside a CPU-bound process (the reader process, which held "
