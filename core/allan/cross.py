@@ -105,6 +105,8 @@ class CrossAllan:
                                    max_octaves=max_octaves, names=names)
         # each sensor's index of the last sample fed through ``feed`` (None: a new segment)
         self._last: tuple[int, int] | None = None
+        self.n_segments = 0        # segments that received samples (a gap starts the next)
+        self._open = False
 
     @property
     def rate_hz(self) -> float:
@@ -114,10 +116,6 @@ class CrossAllan:
     def n_samples(self) -> int:
         """Aligned sample pairs accumulated (all segments)."""
         return self._acc.n_samples
-
-    @property
-    def n_segments(self) -> int:
-        return self._acc.n_segments
 
     def _stack(self, a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
         ya = np.asarray(a, dtype=np.float64)
@@ -137,12 +135,17 @@ class CrossAllan:
     def update(self, a: ArrayLike, b: ArrayLike) -> None:
         """Add aligned samples of a and b, each (n, A) (or (n,) for one axis) in SI;
         they continue the current segment."""
-        self._acc.update(self._stack(a, b))
+        block = self._stack(a, b)
+        if len(block) and not self._open:
+            self.n_segments += 1
+            self._open = True
+        self._acc.update(block)
 
     def gap(self) -> None:
         """End the segment: no later difference reaches back across this point."""
         self._acc.gap()
         self._last = None
+        self._open = False
 
     def feed(self, index_a: ArrayLike, index_b: ArrayLike, a: ArrayLike,
              b: ArrayLike) -> int:
@@ -178,6 +181,7 @@ class CrossAllan:
                 or other.sensors != self.sensors:
             raise DataError("merge takes a CrossAllan of the same sensors and axes")
         self._acc.merge(other._acc)
+        self.n_segments += other.n_segments
 
     def moments(self, ci: float = 0.683) -> tuple[PairMoments, ...]:
         """One :class:`PairMoments` per axis, at every octave τ with a difference so far."""
@@ -194,7 +198,8 @@ class CrossAllan:
         last fed indices."""
         return {"kind": STATE_KIND, "v": STATE_VERSION, "axes": list(self.axes),
                 "sensors": list(self.sensors), "last": None if self._last is None
-                else list(self._last), "allan": self._acc.state()}
+                else list(self._last), "segments": self.n_segments, "open": self._open,
+                "allan": self._acc.state()}
 
     @classmethod
     def from_state(cls, state: dict) -> CrossAllan:
@@ -214,6 +219,8 @@ class CrossAllan:
             self._acc = allan
             last = state["last"]
             self._last = None if last is None else (int(last[0]), int(last[1]))
+            self.n_segments = int(state["segments"])
+            self._open = bool(state["open"])
         except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
             raise FormatError(f"CrossAllan state is incomplete or malformed: {exc}; start a "
                               "new accumulator") from exc
