@@ -50,7 +50,7 @@ import numpy as np
 from avard.core.allan.chi2 import chi2_ppf
 from avard.core.allan.cross import PairMoments
 from avard.core.allan.deviations import AllanResult, allan_variance
-from avard.core.errors import AvardError, DataError
+from avard.core.errors import AvardError, DataError, FormatError
 from avard.core.io.rates import rates_compatible
 from numpy.typing import ArrayLike, NDArray
 
@@ -162,6 +162,7 @@ class Separation:
             "axes": {}}
         for ax in self.axes:
             d: dict[str, Any] = {"tau": [float(t) for t in ax.tau],
+                                 "m": [int(v) for v in ax.m],
                                  "averages": [int(a) for a in ax.averages],
                                  "common": ax.common.to_dict(), "sensors": {}}
             for i, name in enumerate(self.sensors):
@@ -179,6 +180,103 @@ class Separation:
                     "fit_problem": ax.fit_problems[i] if ax.fit_problems else None}
             out["axes"][ax.axis] = d
         return out
+
+
+    @classmethod
+    def from_dict(cls, d: object) -> Separation:
+        """THE decoder of a separation map (:meth:`to_dict`: ``avard separate --json`` and
+        the ``separation`` field of the service's ``avar`` record). Every list is checked
+        against the τ count, so a ragged or hostile map is refused with one
+        ``FormatError`` naming what is wrong. Variances come back as ADEV²: NaN where only an
+        upper limit is known (the map never carries a negative estimate); the fits are not
+        rebuilt (``fits`` empty; the live service sends none)."""
+        if not isinstance(d, dict):
+            raise FormatError(f"a separation is a map, not {type(d).__name__}")
+        try:
+            sensors = tuple(_strings(d["sensors"], "sensors"))
+            if len(sensors) not in PAIRS:
+                raise FormatError(f"a separation has 2 or 3 sensors, not {len(sensors)}")
+            axes_in = d["axes"]
+            if not isinstance(axes_in, dict) or not axes_in:
+                raise FormatError("a separation's axes must be a non-empty map")
+            axes = []
+            for name, ax in axes_in.items():
+                if not isinstance(ax, dict):
+                    raise FormatError(f"axis {name!r} is not a map")
+                tau = _floats(ax["tau"], f"{name}.tau")
+                k = len(tau)
+                m = _ints(ax["m"], f"{name}.m", k) if "m" in ax else \
+                    np.rint(tau * float(d["rate_hz"])).astype(np.int64)
+                per = ax["sensors"]
+                if not isinstance(per, dict) or set(per) != set(sensors):
+                    raise FormatError(f"axis {name!r} must hold every sensor of "
+                                      f"{list(sensors)}")
+                own = tuple(_part(per[s]["self_noise"], f"{name}.{s}", k) for s in sensors)
+                verdicts = tuple(_verdict_of(per[s]["verdict"], f"{name}.{s}", k)
+                                 for s in sensors)
+                problems = tuple(p if isinstance(p := per[s].get("fit_problem"), str) else None
+                                 for s in sensors)
+                axes.append(AxisSeparation(str(name), tau, m,
+                                           _ints(ax["averages"], f"{name}.averages", k), own,
+                                           _part(ax["common"], f"{name}.common", k), verdicts,
+                                           (), problems))
+            return cls(sensors, str(d["method"]), float(d["rate_hz"]), int(d["n_samples"]),
+                       float(d["ci"]), tuple(axes), tuple(_strings(d.get("notes", []), "notes")),
+                       tuple(_strings(d.get("sources", []), "sources")))
+        except KeyError as exc:
+            raise FormatError(f"a separation map lacks {exc}; it is not one") from None
+        except (TypeError, ValueError, OverflowError, AttributeError) as exc:
+            raise FormatError(f"a separation map does not decode: {exc}") from None
+
+
+def _strings(v: Any, what: str) -> list[str]:
+    if not isinstance(v, list | tuple) or not all(isinstance(x, str) for x in v):
+        raise FormatError(f"separation {what} must be a list of strings")
+    return list(v)
+
+
+def _floats(v: Any, what: str, k: int | None = None) -> NDArray[np.float64]:
+    """A list of numbers or nulls (NaN) of length ``k``."""
+    if not isinstance(v, list | tuple) or (k is not None and len(v) != k):
+        raise FormatError(f"separation {what} must be a list of {k if k is not None else ''} "
+                          "numbers".replace("  ", " "))
+    return np.array([np.nan if x is None else float(x) for x in v], dtype=np.float64)
+
+
+def _ints(v: Any, what: str, k: int) -> NDArray[np.int64]:
+    if not isinstance(v, list | tuple) or len(v) != k or \
+            not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        raise FormatError(f"separation {what} must be a list of {k} integers")
+    return np.array(v, dtype=np.int64)
+
+
+def _part(d: Any, what: str, k: int) -> Part:
+    if not isinstance(d, dict):
+        raise FormatError(f"separation {what} is not a map")
+    ul = d["upper_limit"]
+    if not isinstance(ul, list | tuple) or len(ul) != k or \
+            not all(isinstance(u, bool) for u in ul):
+        raise FormatError(f"separation {what}.upper_limit must be a list of {k} booleans")
+    upper = np.array(ul, dtype=bool)
+    adev, lo, hi = (_floats(d[key], f"{what}.{key}", k) for key in ("adev", "adev_lo",
+                                                                     "adev_hi"))
+    if np.any(np.isnan(adev) != upper) or np.any(np.isnan(hi)) or np.any(hi < 0) \
+            or np.any(adev < 0):
+        raise FormatError(f"separation {what}: an ADEV is given exactly where it is not an "
+                          "upper limit, and every upper end is a number ≥ 0")
+    return Part(adev**2, np.where(upper, 0.0, lo**2), hi**2, upper,
+                _floats(d["edf"], f"{what}.edf", k))
+
+
+def _verdict_of(d: Any, what: str, k: int) -> Verdict:
+    if not isinstance(d, dict):
+        raise FormatError(f"separation {what}.verdict is not a map")
+    state = _strings(d["state"], f"{what}.verdict.state")
+    if len(state) != k or not set(state) <= {"below", "above", "not resolved"}:
+        raise FormatError(f"separation {what}.verdict.state must be {k} of below, above, "
+                          "not resolved")
+    return Verdict(tuple(state), _floats(d["factor"], f"{what}.verdict.factor", k),
+                   _floats(d["factor_at_least"], f"{what}.verdict.factor_at_least", k))
 
 
 def _num(x: float) -> float | None:
