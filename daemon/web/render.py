@@ -365,22 +365,41 @@ def separation_svg(sep: Any, axis: Any) -> str:
                 "plot separation")
 
 
+def _runs(states: Sequence[str], want: str) -> list[tuple[int, int]]:
+    """Runs [first, last] of consecutive τ indices whose verdict is ``want``."""
+    runs: list[tuple[int, int]] = []
+    for k, st in enumerate(states):
+        if st == want:
+            if runs and runs[-1][1] == k - 1:
+                runs[-1] = (runs[-1][0], k)
+            else:
+                runs.append((k, k))
+    return runs
+
+
 def _bed_below(sep: Any, axis: Any) -> str:
-    """Per sensor: where the bed's input is resolved below the sensor's own noise."""
+    """Per sensor: where the bed's input is resolved below the sensor's own noise, where
+    above it, and that nothing is resolved when neither."""
     items = []
     for i, name in enumerate(sep.sensors):
         v = axis.verdicts[i]
-        runs = v.below_runs()
-        if not runs:
-            items.append(f"<li>{escape(name)}: bed below own noise at no τ yet (not "
-                         "resolved)</li>")
-            continue
-        spans = ", ".join(
-            f"{_g(axis.tau[a], 3)}–{_g(axis.tau[b], 3)} s" for a, b in runs)
-        least = np.asarray(v.factor_at_least, dtype=float)
-        finite = least[np.isfinite(least)]
-        by = f" (own noise ≥ {_g(float(finite.min()), 3)}× the bed's)" if len(finite) else ""
-        items.append(f"<li>{escape(name)}: bed below own noise at τ {spans}{by}</li>")
+        said = []
+        for want, text in (("below", "bed below own noise"), ("above", "bed above own noise")):
+            runs = _runs(v.state, want)
+            if not runs:
+                continue
+            spans = ", ".join(f"{_g(axis.tau[a], 3)}–{_g(axis.tau[b], 3)} s" if a != b
+                              else f"{_g(axis.tau[a], 3)} s" for a, b in runs)
+            by = ""
+            if want == "below":
+                least = np.asarray(v.factor_at_least, dtype=float)
+                finite = least[np.isfinite(least)]
+                by = f" (own noise ≥ {_g(float(finite.min()), 3)}× the bed's)" \
+                    if len(finite) else ""
+            said.append(f"{text} at τ {spans}{by}")
+        if not said:
+            said.append("bed against own noise not resolved at any τ yet")
+        items.append(f"<li>{escape(name)}: {'; '.join(said)}</li>")
     return f'<ul class="recent">{"".join(items)}</ul>'
 
 

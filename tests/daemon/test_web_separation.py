@@ -78,7 +78,11 @@ def test_the_card_draws_the_decoded_live_separation_per_axis_with_units() -> Non
             limits_seen += int(lims) if _n == "quiet" else 0
             assert (role == "common") == (_n == "common mode")
         # where the bed is resolved below a sensor's noise, the card says so
-        assert ("bed below own noise at τ" in body) == any(v.below_runs() for v in ax.verdicts)
+        for sensor, v in zip(got.sensors, ax.verdicts, strict=True):
+            (line,) = re.findall(rf"<li>{sensor}: (.*?)</li>", body)
+            assert ("bed below own noise at τ" in line) == ("below" in v.state), line
+            assert ("bed above own noise at τ" in line) == ("above" in v.state), line
+            assert ("not resolved at any τ" in line) == (set(v.state) == {"not resolved"})
     assert limits_seen > 0                    # "quiet"'s self-noise: upper limits, drawn as ▽
     assert "upper limit" in html
 
