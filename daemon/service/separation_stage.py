@@ -43,6 +43,11 @@ log = logging.getLogger("avard.daemon.service")
 #: before the alignment slips by one sample; above ½ so that fit jitter at a half-sample
 #: offset does not toggle it.
 SLIP_SAMPLES = 0.75
+#: Seconds of sample time between two computations of the live separation: its intervals
+#: (separate.covariance_interval, χ² quantiles for every τ, part and axis) cost about a
+#: second of CPU for three sensors, ten times an Allan snapshot's; in between, the ``avar``
+#: records carry the last one computed (its ``n_samples`` says how much data it covers).
+SEPARATION_INTERVAL_S = 60.0
 #: Seconds of the reference sensor's samples the aligner waits for a late sensor before it
 #: takes that sensor's samples as missing (a reader stuck on a dead bus must not grow the
 #: others' buffers without bound).
@@ -234,7 +239,7 @@ class SeparationStage:
 
     def __init__(self, sensors: Sequence[str], rate_hz: float, *,
                  axes: Sequence[str] = ("x", "y", "z"), ci: float = 0.683,
-                 overlap: int = 8) -> None:
+                 overlap: int = 8, interval_s: float = SEPARATION_INTERVAL_S) -> None:
         if len(sensors) not in PAIRS or len(set(sensors)) != len(sensors):
             raise DataError(f"the live separation takes 2 or 3 distinct co-located sensors, "
                             f"not {list(sensors)}")
@@ -242,6 +247,10 @@ class SeparationStage:
         self.axes = tuple(axes)
         self.ci = float(ci)
         self.rate_hz = float(rate_hz)
+        self.interval_s = float(interval_s)
+        self._cached: dict[str, Any] = {}
+        self._cached_at: int | None = None     # n_samples when it was computed
+        self.computed = 0                      # separations computed (for tests, status)
         self.pairs = {p: CrossAllan(rate_hz, axes=self.axes, overlap=overlap,
                                     sensors=(self.sensors[p[0]], self.sensors[p[1]]))
                       for p in PAIRS[len(self.sensors)]}
@@ -292,9 +301,17 @@ class SeparationStage:
                                      f"{k} {v}" for k, v in segments.items()),))
 
     def record_fields(self, rate_hz: float | None = None) -> dict[str, Any]:
-        """What the ``avar`` record carries: {"separation": map} once there is one, else {}."""
-        sep = self.separation(rate_hz)
-        return {} if sep is None else {"separation": sep.to_dict()}
+        """What the ``avar`` record carries: {"separation": map} once there is one, else {}.
+        Computed again once ``interval_s`` of samples (at the nominal rate) came in since
+        the last computation, else the last one (counted by sample, not wall clock)."""
+        n = self.n_samples
+        due = self._cached_at is None or n - self._cached_at >= self.interval_s * self.rate_hz
+        if due and n:
+            sep = self.separation(rate_hz)
+            self.computed += 1
+            if sep is not None:
+                self._cached, self._cached_at = {"separation": sep.to_dict()}, n
+        return dict(self._cached)
 
     def state(self) -> dict[str, Any]:
         """The pairs' states (msgpack-able), for the checkpoint."""

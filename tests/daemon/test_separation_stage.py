@@ -165,3 +165,23 @@ def test_state_round_trip_and_refusals() -> None:
         al.push(SensorBlock("a", 12, np.zeros((5, 3))), SensorClock(0, 0.0, 0.01))
     with pytest.raises(DataError, match="lacks"):
         stage.feed(AlignedBlock(("x", "y"), np.zeros((2, 1), np.int64), np.zeros((2, 1, 3))))
+
+
+def test_the_separation_is_computed_once_per_interval_of_samples() -> None:
+    rng = np.random.default_rng(2)
+    stage = SeparationStage(["a", "b"], 100.0, axes=("z",), interval_s=60.0)
+    names = ("a", "b")
+
+    def feed(n: int, start: int) -> None:
+        idx = np.tile(np.arange(start, start + n, dtype=np.int64), (2, 1))
+        stage.feed(AlignedBlock(names, idx, rng.normal(size=(2, n, 1))))
+
+    assert stage.record_fields() == {}                # nothing yet: no separation
+    feed(3000, 0)
+    first = stage.record_fields()
+    assert stage.computed == 1 and first["separation"]["n_samples"] == 3000
+    feed(3000, 3000)                                  # 30 s more: the last one again
+    assert stage.record_fields() == first and stage.computed == 1
+    feed(3000, 6000)                                  # 60 s since: a new one
+    again = stage.record_fields()
+    assert stage.computed == 2 and again["separation"]["n_samples"] == 9000
