@@ -108,15 +108,21 @@ def test_live_separation_equals_offline_on_the_emulated_rig(n_sensors: int) -> N
     assert np.sqrt(z.common.var[k]) == pytest.approx(1e-4, rel=0.25)
 
 
-def test_a_lost_block_is_a_gap_for_that_sensors_pairs_only() -> None:
-    stage, _aligner, blocks = _drive(3, 60.0, lose=(1, 100))      # "right" loses 0.2 s
+@pytest.mark.parametrize("who", [1, 0])
+def test_a_lost_block_is_a_gap_for_that_sensors_pairs_only(who: int) -> None:
+    """"right" (or "left", whose index is the ticks) loses one drain, 0.2 s."""
+    stage, _aligner, blocks = _drive(3, 60.0, lose=(who, 100))
     segments = {acc.sensors: acc.n_segments for acc in stage.pairs.values()}
-    assert segments == {("left", "right"): 2, ("left", "i2c"): 1, ("right", "i2c"): 2}
+    names = ("left", "right", "i2c")
+    assert segments == {pair: 2 if names[who] in pair else 1 for pair in segments}
     index = np.concatenate([b.index for b in blocks], axis=1)
-    missing = int(np.sum(index[1] < 0))
+    missing = int(np.sum(index[who] < 0))
     assert 24 <= missing <= 26                                   # 0.2 s at 125 Hz
+    assert int(np.sum(index < 0)) == missing                     # the others lost nothing
     n = {acc.sensors: acc.n_samples for acc in stage.pairs.values()}
-    assert n[("left", "i2c")] - n[("left", "right")] == missing
+    whole = [p for p in n if names[who] not in p]
+    for p in n:
+        assert n[whole[0]] - n[p] == (missing if names[who] in p else 0)
 
 
 def test_clocks_that_drift_apart_slip_and_each_slip_is_a_gap() -> None:
