@@ -48,6 +48,8 @@ SLIP_SAMPLES = 0.75
 #: second of CPU for three sensors, ten times an Allan snapshot's; in between, the ``avar``
 #: records carry the last one computed (its ``n_samples`` says how much data it covers).
 SEPARATION_INTERVAL_S = 60.0
+#: Aligned rows collected before the pair accumulators take them (see SeparationStage.feed).
+FLUSH_ROWS = 2048
 #: Seconds of the reference sensor's samples the aligner waits for a late sensor before it
 #: takes that sensor's samples as missing (a reader stuck on a dead bus must not grow the
 #: others' buffers without bound).
@@ -251,13 +253,16 @@ class SeparationStage:
         self._cached: dict[str, Any] = {}
         self._cached_at: int | None = None     # n_samples when it was computed
         self.computed = 0                      # separations computed (for tests, status)
+        self._pending: list[tuple[NDArray[np.int64], NDArray[np.float64]]] = []
+        self._pending_rows = 0
         self.pairs = {p: CrossAllan(rate_hz, axes=self.axes, overlap=overlap,
                                     sensors=(self.sensors[p[0]], self.sensors[p[1]]))
                       for p in PAIRS[len(self.sensors)]}
 
-    def feed(self, block: AlignedBlock) -> int:
-        """Add an aligned block (it may hold other sensors too); returns the rows added to
-        the first pair."""
+    def feed(self, block: AlignedBlock) -> None:
+        """Add an aligned block (it may hold other sensors too). Rows are collected up to
+        :data:`FLUSH_ROWS` before the pairs take them (a drain is a few dozen rows; numpy's
+        per-call cost would dominate); every result flushes first, so none depends on it."""
         try:
             rows = [block.names.index(n) for n in self.sensors]
         except ValueError:
@@ -266,22 +271,32 @@ class SeparationStage:
         if block.accel.shape[2] != len(self.axes):
             raise DataError(f"an aligned block has {block.accel.shape[2]} axes, the "
                             f"separation {len(self.axes)}")
-        added = []
+        self._pending.append((block.index[rows], block.accel[rows]))
+        self._pending_rows += block.index.shape[1]
+        if self._pending_rows >= FLUSH_ROWS:
+            self.flush()
+
+    def flush(self) -> None:
+        """Hand the collected rows to the pair accumulators (results do so themselves)."""
+        if not self._pending:
+            return
+        index = np.concatenate([i for i, _ in self._pending], axis=1)
+        accel = np.concatenate([a for _, a in self._pending], axis=1)
+        self._pending, self._pending_rows = [], 0
         for (i, j), acc in self.pairs.items():
-            a, b = rows[i], rows[j]
-            added.append(acc.feed(block.index[a], block.index[b], block.accel[a],
-                                  block.accel[b]))
-        return added[0]
+            acc.feed(index[i], index[j], accel[i], accel[j])
 
     @property
     def n_samples(self) -> int:
         """Aligned samples of the pair that has the fewest."""
+        self.flush()
         return min(acc.n_samples for acc in self.pairs.values())
 
     def separation(self, rate_hz: float | None = None) -> Separation | None:
         """The separation of everything fed so far, τ labelled with ``rate_hz`` (the fitted
         rate; default the nominal); None while no τ has enough averages in every pair."""
         rate = float(rate_hz) if rate_hz else self.rate_hz
+        self.flush()
         try:
             moments = {p: acc.moments(self.ci) for p, acc in self.pairs.items()}
             axes = tuple(separate_moments({p: m[c] for p, m in moments.items()},
@@ -315,6 +330,7 @@ class SeparationStage:
 
     def state(self) -> dict[str, Any]:
         """The pairs' states (msgpack-able), for the checkpoint."""
+        self.flush()
         return {"kind": "separation_stage", "v": 1, "sensors": list(self.sensors),
                 "ci": self.ci, "pairs": [acc.state() for acc in self.pairs.values()]}
 

@@ -75,6 +75,7 @@ def _drive(n_sensors: int, seconds: float, *, lose: tuple[int, int] | None = Non
         while (blk := aligner.pop()) is not None:
             stage.feed(blk)
             blocks.append(blk)
+    stage.flush()
     return stage, aligner, blocks
 
 
@@ -141,6 +142,7 @@ def test_clocks_that_drift_apart_slip_and_each_slip_is_a_gap() -> None:
         aligner.push(SensorBlock("b", i0, rng.normal(size=(250, 1))), b_clock)
         while (blk := aligner.pop()) is not None:
             stage.feed(blk)
+    stage.flush()
     # 20 000 samples × 200 ppm = 4 samples gained; a slip each
     assert aligner.slips["b"] == 4
     (acc,) = stage.pairs.values()
