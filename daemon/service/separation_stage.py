@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
@@ -133,7 +134,8 @@ class Aligner:
     """Per-sensor blocks in, :class:`AlignedBlock` out, on the first sensor's ticks (see the
     module docstring). ``push`` each reader's blocks with that sensor's clock; ``pop`` gives
     every tick that every sensor has reported up to (or that waited longer than
-    ``max_wait_s``)."""
+    ``max_wait_s``). Readers on different buses may push from their own threads while one
+    consumer pops: both take the aligner's lock."""
 
     def __init__(self, names: Sequence[str], *, max_wait_s: float = MAX_WAIT_S) -> None:
         if len(names) < 2 or len(set(names)) != len(names):
@@ -143,8 +145,17 @@ class Aligner:
         self._p = {n: _Pending() for n in self.names}
         self._next: int | None = None          # the next reference tick to emit
         self.slips = {n: 0 for n in self.names}
+        self._lock = threading.Lock()
 
     def push(self, block: SensorBlock, clock: SensorClock) -> None:
+        with self._lock:
+            self._push(block, clock)
+
+    def pop(self) -> AlignedBlock | None:
+        with self._lock:
+            return self._pop()
+
+    def _push(self, block: SensorBlock, clock: SensorClock) -> None:
         p = self._p.get(block.name)
         if p is None:
             raise DataError(f"sensor {block.name!r} is not one of {list(self.names)}")
@@ -165,7 +176,7 @@ class Aligner:
         if self._next is None and block.name == self.names[0] and n:
             self._next = block.i0
 
-    def pop(self) -> AlignedBlock | None:
+    def _pop(self) -> AlignedBlock | None:
         ref = self._p[self.names[0]]
         if self._next is None or ref.end is None or ref.clock is None:
             return None

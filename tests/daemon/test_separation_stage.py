@@ -193,3 +193,46 @@ def test_the_separation_is_computed_once_per_interval_of_samples() -> None:
     feed(3000, 6000)                                  # 60 s since: a new one
     again = stage.record_fields()
     assert stage.computed == 2 and again["separation"]["n_samples"] == 9000
+
+
+def test_readers_push_from_their_threads_while_one_consumer_pops() -> None:
+    import threading
+
+    n, b = 20_000, 50
+    rng = np.random.default_rng(4)
+    data = rng.normal(size=(3, n, 3))
+    names = ("a", "b", "c")
+    # unpaced threads run apart by more than the 30 s a silent sensor is waited for (in
+    # samples); a real-time reader that far behind is stuck, these are only unscheduled
+    aligner = Aligner(names, max_wait_s=1e6)
+    clock = SensorClock(0, 0.0, 0.01)
+    got: list[AlignedBlock] = []
+    pushed = threading.Barrier(4)
+
+    def reader(s: int) -> None:
+        pushed.wait()
+        for i0 in range(0, n, b):
+            aligner.push(SensorBlock(names[s], i0, data[s, i0:i0 + b]), clock)
+
+    def consumer() -> None:
+        pushed.wait()
+        rows = 0
+        while rows < n - 1:      # the last tick waits for a sample after it (SLIP margin)
+            blk = aligner.pop()
+            if blk is None:
+                continue
+            got.append(blk)
+            rows += blk.index.shape[1]
+
+    threads = [threading.Thread(target=reader, args=(s,)) for s in range(3)]
+    threads.append(threading.Thread(target=consumer))
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not any(t.is_alive() for t in threads)
+    index = np.concatenate([g.index for g in got], axis=1)
+    accel = np.concatenate([g.accel for g in got], axis=1)
+    k = index.shape[1]
+    np.testing.assert_array_equal(index, np.tile(np.arange(k), (3, 1)))
+    np.testing.assert_array_equal(accel, data[:, :k])
