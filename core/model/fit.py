@@ -187,10 +187,12 @@ _VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/
                "white": ("N", "m/s/sqrt(s)")}
 #: Note on K and R when the record cannot tell a rate ramp from a rate random walk.
 RAMP_OR_WALK = "ramp or random walk: this record cannot tell them apart; read as random walk"
-#: Note on a present K or R that only the longest τ of the fit shows (``_rests_on_longest``):
-#: the model keeps it, displays say "not yet resolved" instead of its interval.
-NOT_RESOLVED = ("not yet resolved: only the longest τ of the fit shows this term, which a slow "
-                "periodic signal mimics there as well; a longer record decides")
+#: Note on a present K or R that only the longest τ of the fit shows (``_rests_on_longest``)
+#: or that the τ beyond the fit refute (``_refuted_beyond``): the model keeps it, displays
+#: say "not yet resolved" instead of its interval.
+NOT_RESOLVED = ("not yet resolved: only the long end of the fit shows this term (its longest τ "
+                "alone, or the τ beyond the fit fall below it), which a slow periodic signal "
+                "mimics there as well; a longer record decides")
 #: The terms that rise with τ and so are decided at the long end of the curve.
 LONG_TAU_TERMS = ("rate_random_walk", "rate_ramp")
 #: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
@@ -549,6 +551,59 @@ def _rests_on_longest(p: _Problem, idx: NDArray, active: list[int], a: int, crit
     return without - with_a < crit
 
 
+def _refuted_beyond(result: Any, last: int, comps: list[Component], fitted: list[int],
+                    theta: NDArray, fixed: list[int], theta_fixed: NDArray,
+                    active: list[int], cov: NDArray, rate: float, z_refute: float) -> bool:
+    """Whether the τ the record measured beyond the fit (fewer than ``min_averages``
+    averages: too few to fit, not too few to test) fall below the fitted model by more than
+    ``z_refute`` standard deviations (the presence test's z: a term is refuted on the same
+    evidence that makes it present), which refutes the terms that make the long end.
+
+    A rate ramp R rises as τ² at every τ, and its part of the AVAR estimate, R²τ²/2, is
+    deterministic: it does not scatter. A slow periodic signal rises the same way below a
+    quarter of its period and then turns down, so on 41 min of a `quiet-lab` record (a
+    30-minute air-conditioning cycle) the fit read a ramp from τ ≤ 262 s that predicted
+    2.3e-8 m²/s⁴ at τ = 1049 s, where the record measured 4.6e-10 (issue 24). The estimate
+    at such a τ is taken as a non-central χ²: the noise part V_n of the model (its
+    components with a spectrum) with the curve's printed EDF ν, plus the deterministic part
+    S, so Var = (2V_n² + 4 S V_n)/ν (NIST SP 1065 §5.3 for V_n alone), to which the
+    prediction's own uncertainty adds (x·Cov(θ)·xᵀ, the fit's final covariance: a ramp known
+    to ±θ/z predicts to about S/z); z = (V_n + S − σ̂²)/√Var.
+    A rate random walk, itself noise, scatters too much at two to eight averages to be
+    refuted this way, which is right: a record that short cannot refute it."""
+    tau = np.asarray(result.tau, dtype=float)
+    var = np.asarray(result.var, dtype=float)
+    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
+    n = np.asarray(result.n, dtype=float)
+    M = _n_samples(result)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    m = np.asarray(result.m, dtype=float)
+    far = np.arange(last + 1, len(tau))
+    far = far[np.isfinite(var[far]) & (var[far] > 0) & (n[far] > 0)
+              & np.isfinite(edf[far]) & (edf[far] > 0) & (n_total / m[far] >= 2.0)]
+    if len(far) == 0:
+        return False
+    noise = np.zeros(len(far))
+    signal = np.zeros(len(far))
+    pairs = [(fitted[j], float(theta[j])) for j in range(len(fitted))]
+    pairs += [(i, float(th)) for i, th in zip(fixed, theta_fixed, strict=True)]
+    for i, th in pairs:
+        part = th * comps[i].basis(tau[far], rate)
+        if comps[i].psd(rate) is None:
+            signal += part
+        else:
+            noise += part
+    nu = edf[far]
+    x = np.column_stack([comps[fitted[a]].basis(tau[far], rate) for a in active])
+    pred = np.einsum("ka,ab,kb->k", x, cov, x)
+    sd = np.sqrt(np.maximum(2.0 * noise**2 + 4.0 * signal * noise, 0.0) / nu
+                 + np.maximum(pred, 0.0))
+    deficit = noise + signal - var[far]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(sd > 0, deficit / sd, np.where(deficit > 0, np.inf, 0.0))
+    return bool(np.any(z > z_refute))
+
+
 def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
                    drop_z: float, max_drop: int) -> int:
     """Number of shortest τ to leave out because the sensor's low-pass bends them.
@@ -726,6 +781,9 @@ def fit_noise(
                         1.0)
         cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    if active and _refuted_beyond(result, keep[idx[-1]], comps, fitted, theta, fixed,
+                                  theta_fixed, active, cov, rate, z_present):
+        unresolved += [a for a in active if labels[a] in LONG_TAU_TERMS and a not in unresolved]
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
     # cost `avard analyze` 0.4–0.9 s of CPU and ~25 MB
