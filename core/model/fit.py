@@ -341,6 +341,27 @@ def _whitener(C: NDArray) -> NDArray[np.float64]:
     return (V[:, keep] / np.sqrt(w[keep])).T / d
 
 
+def _param_cov(A: NDArray) -> NDArray[np.float64]:
+    """(AᵀA)⁻¹ of a whitened design A, its columns scaled to unit norm first. The basis spans
+    many decades (1/τ², 1/τ, τ, τ² over 0.01 s to 10⁴ s), and the pseudo-inverse of the
+    unscaled normal matrix cut its smallest directions as numerically null, which set their
+    variance to zero: a 60 h record without a filter read a 0.04 % shortfall at one sample
+    as a bend at z = −9700 and left out its 5 shortest τ as "filter-bent" (issue 24)."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    As = A / scale
+    return np.linalg.pinv(As.T @ As) / np.outer(scale, scale)
+
+
+def _gls_scaled(A: NDArray, b: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Least squares of the whitened system A·θ ≈ b: (θ, Cov θ), columns scaled as in
+    ``_param_cov``."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    coef, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    return coef / scale, _param_cov(A)
+
+
 def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], float]:
     """Non-negative generalised least squares: min ‖T(y − Xθ)‖², θ ≥ 0; returns (θ, χ²).
     Columns are scaled to unit norm first because the basis spans many decades."""
@@ -377,7 +398,7 @@ def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 
     C = _avar_cov(p, theta, idx)
     T = _whitener(C)
     TX = T @ X
-    cov = np.linalg.pinv(TX.T @ TX)
+    cov = _param_cov(TX)
     r = T @ (y - X @ theta[active])
     return theta, cov, C, float(r @ r)
 
@@ -508,7 +529,7 @@ def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
     for _ in range(iterations):
         th, _ = _gls_nnls(X, y, T)
         TX = T @ X
-        se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[j, j], 0.0))
+        se = math.sqrt(max(_param_cov(TX)[j, j], 0.0))
         new = th[j] + z * se
         done = up > 0 and abs(new - up) <= 1e-3 * up
         up = new
@@ -625,9 +646,7 @@ def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_
         tau = p.m_tau[idx]
         X = np.column_stack([p.X[np.ix_(idx, np.asarray(base, dtype=np.intp))],
                              1.0 / (tau * rate_hz) ** 2])
-        TX = T @ X
-        coef, *_ = np.linalg.lstsq(TX, T @ p.y[idx], rcond=None)
-        cov = np.linalg.pinv(TX.T @ TX)
+        coef, cov = _gls_scaled(T @ X, T @ p.y[idx])
         se = math.sqrt(max(cov[-1, -1], 0.0))
         if se > 0 and coef[-1] / se < -drop_z:
             start += 1
