@@ -172,7 +172,8 @@ def temperature_binned_adev(y: ArrayLike, temperature_c: ArrayLike, rate_hz: flo
     ``max_tau_fraction`` of the record (8 averages), so every bin holds differences.
 
     ``temperature_c``: one temperature per sample (°C; interpolate the logged DS18B20 reads
-    onto the samples first), finite."""
+    onto the samples first); NaN where there is no reading, and a difference whose span holds
+    one is left out of every bin (``count`` says how many each bin holds)."""
     a, _is_int, one_d = validate_input(y, rate_hz)
     if not one_d and a.shape[1] != 1:
         raise DataError("temperature_binned_adev takes one channel; call it per channel")
@@ -181,12 +182,13 @@ def temperature_binned_adev(y: ArrayLike, temperature_c: ArrayLike, rate_hz: flo
     if t.shape != a.shape:
         raise DataError(f"temperature has {t.shape} values for {a.shape} samples; give one "
                         "temperature per sample (interpolate the logged reads)")
-    if not np.all(np.isfinite(t)):
-        raise DataError("temperature holds NaN or infinite values; screen or interpolate them")
+    finite = np.isfinite(t)
+    if not np.any(finite):
+        raise DataError("the temperature holds no reading (all NaN); nothing to bin by")
     if int(bins) < 2:
         raise DataError(f"bins={bins}: at least 2 temperature bins are needed")
     rate = float(rate_hz)
-    edges = np.quantile(t, np.linspace(0.0, 1.0, int(bins) + 1))
+    edges = np.quantile(t[finite], np.linspace(0.0, 1.0, int(bins) + 1))
     if np.any(np.diff(edges) <= 0):
         raise DataError("the temperature does not vary enough for "
                         f"{bins} bins of equal count; use fewer bins")
@@ -195,7 +197,8 @@ def temperature_binned_adev(y: ArrayLike, temperature_c: ArrayLike, rate_hz: flo
         raise DataError(f"{a.size} samples are too few for a temperature-binned ADEV")
     ms = 2 ** np.arange(int(math.log2(m_max)) + 1)
     cy = np.concatenate([[0.0], np.cumsum(a - a.mean())])
-    ct = np.concatenate([[0.0], np.cumsum(t)])
+    ct = np.concatenate([[0.0], np.cumsum(np.where(finite, t, 0.0))])
+    cf = np.concatenate([[0], np.cumsum(finite)])
     shape = (int(bins), ms.size)
     var = np.full(shape, np.nan)
     lo, hi = np.full(shape, np.nan), np.full(shape, np.nan)
@@ -208,6 +211,8 @@ def temperature_binned_adev(y: ArrayLike, temperature_c: ArrayLike, rate_hz: flo
         starts = np.arange(d.size) * m
         temp = (ct[starts + 2 * m] - ct[starts]) / (2 * m)
         which = np.clip(np.searchsorted(edges, temp, side="right") - 1, 0, int(bins) - 1)
+        # a difference whose span lacks a reading is in no bin
+        which[(cf[starts + 2 * m] - cf[starts]) < 2 * m] = -1
         for b in range(int(bins)):
             sel = d[which == b]
             count[b, k] = sel.size

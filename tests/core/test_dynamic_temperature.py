@@ -48,7 +48,20 @@ def test_bad_temperatures_are_refused_in_one_line() -> None:
     y = np.zeros(1000)
     with pytest.raises(DataError, match="one temperature per sample"):
         temperature_binned_adev(y, np.zeros(999), 1.0)
-    with pytest.raises(DataError, match="NaN"):
+    with pytest.raises(DataError, match="no reading"):
         temperature_binned_adev(y, np.full(1000, np.nan), 1.0)
     with pytest.raises(DataError, match="does not vary enough"):
         temperature_binned_adev(y, np.full(1000, 21.0), 1.0)
+
+
+def test_differences_without_a_reading_are_in_no_bin() -> None:
+    """The first hour has no temperature (NaN, as before a DS18B20's first conversion): its
+    differences are left out, the rest binned as before."""
+    y = np.random.default_rng(5).normal(size=N) * 1e-4
+    t = TEMP.copy()
+    t[: int(3600 * RATE)] = np.nan
+    r = temperature_binned_adev(y, t, RATE)
+    full = temperature_binned_adev(y, TEMP, RATE)
+    assert r.count[:, 0].sum() == N - int(3600 * RATE) - 1  # τ0: those from 1 h on
+    assert np.all(r.count.sum(axis=0) < full.count.sum(axis=0))
+    assert np.all(np.isfinite(r.dev[:, :8]))
