@@ -574,7 +574,8 @@ def _rests_on_longest(p: _Problem, idx: NDArray, active: list[int], a: int, crit
 
 def _refuted_beyond(result: Any, last: int, comps: list[Component], fitted: list[int],
                     theta: NDArray, fixed: list[int], theta_fixed: NDArray,
-                    active: list[int], cov: NDArray, rate: float, z_refute: float) -> bool:
+                    active: list[int], cov: NDArray, rate: float, z_refute: float,
+                    min_averages: float) -> bool:
     """Whether the τ the record measured beyond the fit (fewer than ``min_averages``
     averages: too few to fit, not too few to test) fall below the fitted model by more than
     ``z_refute`` standard deviations (the presence test's z: a term is refuted on the same
@@ -601,7 +602,8 @@ def _refuted_beyond(result: Any, last: int, comps: list[Component], fitted: list
     m = np.asarray(result.m, dtype=float)
     far = np.arange(last + 1, len(tau))
     far = far[np.isfinite(var[far]) & (var[far] > 0) & (n[far] > 0)
-              & np.isfinite(edf[far]) & (edf[far] > 0) & (n_total / m[far] >= 2.0)]
+              & np.isfinite(edf[far]) & (edf[far] > 0) & (n_total / m[far] >= 2.0)
+              & (n_total / m[far] < min_averages)]
     if len(far) == 0:
         return False
     noise = np.zeros(len(far))
@@ -801,7 +803,7 @@ def fit_noise(
         cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
     if active and _refuted_beyond(result, keep[idx[-1]], comps, fitted, theta, fixed,
-                                  theta_fixed, active, cov, rate, z_present):
+                                  theta_fixed, active, cov, rate, z_present, min_averages):
         unresolved += [a for a in active if labels[a] in LONG_TAU_TERMS and a not in unresolved]
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
