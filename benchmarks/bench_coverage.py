@@ -65,6 +65,11 @@ class Coverage:
     share: np.ndarray
     edf_mean: np.ndarray
     signal: np.ndarray  # the noise-free signal's share of the true AVAR at each τ
+    # the EDF the estimates actually scatter with, 2·truth²/mean((σ̂² − truth)²) over the
+    # records (their scatter about the truth, as an EDF): above edf_mean, the printed
+    # intervals are wider than the scatter, and the share over-covers
+    edf_seen: np.ndarray
+    alpha_mean: np.ndarray
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -78,7 +83,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     n = round(hours * 3600 * rate)
     mix = mix_for(mix_kind, n, rate)
     rng = np.random.default_rng([seed, hours, ["plain", "sine", "drift"].index(mix_kind)])
-    lo, hi, clean_var, edf = [], [], [], []
+    lo, hi, clean_var, edf, var, alpha = [], [], [], [], [], []
     ms = None
     for _ in range(records):
         y, clean = record(mix, n, rng)
@@ -88,6 +93,8 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
         lo.append(r.lo[keep])
         hi.append(r.hi[keep])
         edf.append(r.edf[keep])
+        var.append(r.var[keep])
+        alpha.append(r.alpha[keep])
         if mix.sine_amplitude or mix.drift:
             clean_var.append(allan_variance(clean, rate, ms / rate, alpha=0).var)
     assert ms is not None
@@ -95,8 +102,9 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     signal = np.mean(clean_var, axis=0) if clean_var else np.zeros(len(ms))
     truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
+    seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),
-                    np.mean(edf, axis=0), signal / truth)
+                    np.mean(edf, axis=0), signal / truth, seen, np.mean(alpha, axis=0))
 
 
 def main(argv: list[str]) -> int:
@@ -127,8 +135,9 @@ def main(argv: list[str]) -> int:
                   f"({len(c.tau)}) | {c.share.min():.1%} | {c.share.max():.1%} | "
                   f"{', '.join(f'{t:g}' for t in out) or 'none'} |", flush=True)
             if args.detail:
-                for t, s, e, g in zip(c.tau, c.share, c.edf_mean, c.signal, strict=True):
+                for t, s, e, g, v, a in zip(c.tau, c.share, c.edf_mean, c.signal,
+                                            c.edf_seen, c.alpha_mean, strict=True):
                     print(f"    τ {t:9.1f} s  coverage {s:6.1%}  mean EDF {e:10.1f}  "
-                          f"signal {g:6.1%} of the AVAR")
+                          f"seen {v:10.1f}  mean α {a:5.2f}  signal {g:6.1%} of the AVAR")
     print(f"CPU {time.process_time() - cpu0:.0f} s (process time)")
     return 0 if bad == 0 else 1

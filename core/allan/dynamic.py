@@ -25,10 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 from avard.core.allan.chi2 import chi2_sf
 from avard.core.allan.deviations import allan_variance, validate_input
+from avard.core.allan.edf import chi2_interval, edf_greenhall
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["DynamicAllan", "dynamic_adev"]
+__all__ = ["DynamicAllan", "TemperatureAllan", "dynamic_adev", "temperature_binned_adev"]
 
 # a τ changes between windows when Bartlett's p-value is below this
 CHANGE_LEVEL = 0.01
@@ -120,3 +121,109 @@ def dynamic_adev(y: ArrayLike, rate_hz: float, window_s: float, step_s: float | 
                         t_s=(starts + win / 2) / rate, tau=ms / rate, dev=np.sqrt(var),
                         lo=np.sqrt(lo), hi=np.sqrt(hi), edf=edf, alpha=alpha, p_value=p,
                         independent=int(indep.size))
+
+
+@dataclass(frozen=True)
+class TemperatureAllan:
+    """ADEV of one channel with its Allan differences grouped by temperature. Shapes: B bins,
+    K τ. ``edges`` (B + 1,) °C; ``dev``, ``lo``, ``hi`` (B, K) ADEV and 68.3 % bounds (input
+    unit; NaN where a bin holds fewer than ``MIN_DIFFERENCES``); ``count`` (B, K) the
+    non-overlapping differences in each bin; ``p_value`` (K,) Bartlett's test that the bins
+    share one variance (NaN with fewer than 2 usable bins)."""
+
+    rate_hz: float
+    edges: NDArray[np.float64]
+    tau: NDArray[np.float64]
+    dev: NDArray[np.float64]
+    lo: NDArray[np.float64]
+    hi: NDArray[np.float64]
+    count: NDArray[np.int64]
+    p_value: NDArray[np.float64]
+
+    @property
+    def changes(self) -> NDArray[np.bool_]:
+        """(K,) True where the temperature bins disagree (p < ``CHANGE_LEVEL``)."""
+        return np.asarray(self.p_value < CHANGE_LEVEL)
+
+    def to_dict(self) -> dict:
+        out: dict = {"rate_hz": self.rate_hz, "change_level": CHANGE_LEVEL, "unit_edges": "°C"}
+        for key in ("edges", "tau", "dev", "lo", "hi", "count", "p_value"):
+            out[key] = np.asarray(getattr(self, key)).tolist()
+        out["changes"] = self.changes.tolist()
+        return out
+
+
+# a bin's variance from fewer differences than this is not printed
+MIN_DIFFERENCES = 4
+
+
+def temperature_binned_adev(y: ArrayLike, temperature_c: ArrayLike, rate_hz: float,
+                            bins: int = 4, max_tau_fraction: float = 0.125,
+                            ) -> TemperatureAllan:
+    """ADEV by temperature: at each octave τ, the *non-overlapping* Allan differences
+    d_i = ȳ_{i+1} − ȳ_i of m-averages (NIST SP 1065 eq. 10), each tagged with the mean
+    temperature over the 2m samples it spans, grouped into ``bins`` bins of equal count
+    (quantiles of the record's temperature, so every bin is populated); AVAR of a bin =
+    Σd²/(2n). Non-overlapping differences of white FM are independent, so a bin of n of them
+    has EDF n; the redder types' differences are positively correlated and hold fewer, so
+    the EDF is taken as the smaller of n and Greenhall–Riley's for random-walk FM at that n
+    (``edf.edf_greenhall``, α = −2, stride m): never more than the data support. Bartlett's
+    test (``bartlett``) says whether the bins share one variance at each τ. τ stop at
+    ``max_tau_fraction`` of the record (8 averages), so every bin holds differences.
+
+    ``temperature_c``: one temperature per sample (°C; interpolate the logged DS18B20 reads
+    onto the samples first); NaN where there is no reading, and a difference whose span holds
+    one is left out of every bin (``count`` says how many each bin holds)."""
+    a, _is_int, one_d = validate_input(y, rate_hz)
+    if not one_d and a.shape[1] != 1:
+        raise DataError("temperature_binned_adev takes one channel; call it per channel")
+    a = a[:, 0].astype(np.float64)
+    t = np.asarray(temperature_c, dtype=np.float64)
+    if t.shape != a.shape:
+        raise DataError(f"temperature has {t.shape} values for {a.shape} samples; give one "
+                        "temperature per sample (interpolate the logged reads)")
+    finite = np.isfinite(t)
+    if not np.any(finite):
+        raise DataError("the temperature holds no reading (all NaN); nothing to bin by")
+    if int(bins) < 2:
+        raise DataError(f"bins={bins}: at least 2 temperature bins are needed")
+    rate = float(rate_hz)
+    edges = np.quantile(t[finite], np.linspace(0.0, 1.0, int(bins) + 1))
+    if np.any(np.diff(edges) <= 0):
+        raise DataError("the temperature does not vary enough for "
+                        f"{bins} bins of equal count; use fewer bins")
+    m_max = int(a.size * max_tau_fraction)
+    if m_max < 1:
+        raise DataError(f"{a.size} samples are too few for a temperature-binned ADEV")
+    ms = 2 ** np.arange(int(math.log2(m_max)) + 1)
+    cy = np.concatenate([[0.0], np.cumsum(a - a.mean())])
+    ct = np.concatenate([[0.0], np.cumsum(np.where(finite, t, 0.0))])
+    cf = np.concatenate([[0], np.cumsum(finite)])
+    shape = (int(bins), ms.size)
+    var = np.full(shape, np.nan)
+    lo, hi = np.full(shape, np.nan), np.full(shape, np.nan)
+    count = np.zeros(shape, dtype=np.int64)
+    edf = np.full(shape, np.nan)
+    for k, m in enumerate(ms.tolist()):
+        n_avg = a.size // m
+        avg = (cy[m:n_avg * m + 1:m] - cy[0:n_avg * m:m]) / m
+        d = np.diff(avg)
+        starts = np.arange(d.size) * m
+        temp = (ct[starts + 2 * m] - ct[starts]) / (2 * m)
+        which = np.clip(np.searchsorted(edges, temp, side="right") - 1, 0, int(bins) - 1)
+        # a difference whose span lacks a reading is in no bin
+        which[(cf[starts + 2 * m] - cf[starts]) < 2 * m] = -1
+        for b in range(int(bins)):
+            sel = d[which == b]
+            count[b, k] = sel.size
+            if sel.size < MIN_DIFFERENCES:
+                continue
+            v = float(sel @ sel) / (2.0 * sel.size)
+            nu = min(float(sel.size),
+                     edf_greenhall(-2, 2, m, m, (sel.size + 1) * m + 1))
+            var[b, k], edf[b, k] = v, nu
+            bounds = chi2_interval(np.array([v]), np.array([nu]), 0.683)
+            lo[b, k], hi[b, k] = float(bounds[0][0]), float(bounds[1][0])
+    p = np.array([bartlett(var[:, k], edf[:, k]) for k in range(ms.size)])
+    return TemperatureAllan(rate_hz=rate, edges=edges, tau=ms / rate, dev=np.sqrt(var),
+                            lo=np.sqrt(lo), hi=np.sqrt(hi), count=count, p_value=p)

@@ -12,19 +12,28 @@ statistics use its longest segment, and say so (no difference straddles a gap).
 
 ``--dynamic``: the sliding-window OADEV (``allan.dynamic``) of each channel on the first
 averages, window ``window_s`` (default an eighth of the record) and step (default a quarter of
-the window).
+the window); and, when the record logs temperatures, the ADEV by temperature
+(``dynamic.temperature_binned_adev``) on the same averages against the mean of the record's
+temperature channels averaged alike (``by_temperature``, or ``by_temperature_note`` saying why
+there is none).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult
-from avard.core.allan.dynamic import DynamicAllan, dynamic_adev
+from avard.core.allan.dynamic import (
+    DynamicAllan,
+    TemperatureAllan,
+    dynamic_adev,
+    temperature_binned_adev,
+)
 from avard.core.allan.extension import decimate
 from avard.core.allan.longtau import (
     MAX_POINTS,
@@ -66,6 +75,8 @@ class ChannelStatistics:
 
     results: Mapping[str, AllanResult]
     dynamic: DynamicAllan | None = None
+    by_temperature: TemperatureAllan | None = None
+    by_temperature_note: str | None = None
 
 
 @dataclass(frozen=True)
@@ -99,6 +110,10 @@ class StatisticsReport:
             entry: dict = {"statistics": d}
             if ch.dynamic is not None:
                 entry["dynamic_adev"] = ch.dynamic.to_dict()
+            if ch.by_temperature is not None:
+                entry["adev_by_temperature"] = ch.by_temperature.to_dict()
+            elif ch.by_temperature_note is not None:
+                entry["adev_by_temperature"] = {"note": ch.by_temperature_note}
             out["channels"][name] = entry
         return out
 
@@ -145,6 +160,21 @@ class _Averager:
         return self.out[s0:s1], len(self.spans)
 
 
+def _hold(t: NDArray[np.float64], last: NDArray[np.float64] | None
+          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each temperature column held at its last reading (an .npz logs a reading only where
+    one was made, NaN between), carried across blocks in ``last``; NaN before the first."""
+    if last is None or last.shape[0] != t.shape[1]:
+        last = np.full(t.shape[1], np.nan)
+    ext = np.vstack([last[None, :], t])
+    ok = np.isfinite(ext)
+    idx = np.where(ok, np.arange(ext.shape[0])[:, None], 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    held = np.take_along_axis(ext, idx, axis=0)
+    held[~np.isfinite(held)] = np.nan
+    return held[1:], held[-1].copy()
+
+
 def compute_statistics(source: RecordSource, request: StatisticsRequest, *, rate_hz: float,
                        names: Sequence[str], n_samples: int,
                        oadev: Mapping[str, AllanResult] | None = None,
@@ -161,9 +191,20 @@ def compute_statistics(source: RecordSource, request: StatisticsRequest, *, rate
     cols = _select(list(source.info.names), list(names))
     r_lin = max(1, -(-int(n_samples) // MAX_POINTS["linear"]))
     avg = _Averager(len(cols), r_lin, int(n_samples))
-    for a, _t, end in source.blocks(block, columns=cols, temperature=False, verify=False):
+    want_t = request.dynamic and bool(source.info.temperature_names)
+    t_avg = _Averager(1, r_lin, int(n_samples)) if want_t else None
+    last: NDArray[np.float64] | None = None
+    for a, t, end in source.blocks(block, columns=cols, temperature=want_t, verify=False):
         avg.push(np.asarray(a, dtype=np.float64), end)
+        if t_avg is not None:
+            tt = np.asarray(t, dtype=np.float64) if t is not None else np.full((len(a), 1),
+                                                                                np.nan)
+            held, last = _hold(tt, last)
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows stay NaN
+                t_avg.push(np.nanmean(held, axis=1, keepdims=True), end)
     data, n_segments = avg.longest()
+    temp = t_avg.longest()[0][:, 0] if t_avg is not None else None
     n_used = data.shape[0] * r_lin
     r_quad = r_lin * max(1, -(-data.shape[0] // MAX_POINTS["quadratic"]))
     small = decimate(data, r_quad // r_lin)
@@ -182,12 +223,19 @@ def compute_statistics(source: RecordSource, request: StatisticsRequest, *, rate
                             edf_convention=request.edf_convention, names=[name])
             results[stat] = replace(res, rate_hz=float(rate_hz), m=res.m * r,
                                     stride=res.stride * r)
-        dyn = None
+        dyn, by_t, note = None, None, None
         if request.dynamic:
             span = data.shape[0] / rate_lin
             window = request.window_s if request.window_s is not None else span / 8
             dyn = dynamic_adev(data[:, j], rate_lin, window, request.step_s)
-        out[name] = ChannelStatistics(results, dyn)
+            if temp is None:
+                note = "the record logs no temperature"
+            else:
+                try:
+                    by_t = temperature_binned_adev(data[:, j], temp, rate_lin)
+                except DataError as exc:  # no reading yet, or a temperature that stood still
+                    note = str(exc)
+        out[name] = ChannelStatistics(results, dyn, by_t, note)
     return StatisticsReport(rate_hz=float(rate_hz), channels=out,
                             averaging={"linear": r_lin, "quadratic": r_quad},
                             segment=(n_used, n_segments))
@@ -251,6 +299,19 @@ def statistics_table(rep: StatisticsReport) -> str:
                 ratio = float(np.nanmax(d.dev[:, k]) / np.nanmin(d.dev[:, k]))
                 lines.append(f"    τ {d.tau[k]:>9.4g} s: p = {_g(p):>9} ({verdict}), "
                              f"largest/smallest window ADEV {ratio:.3g}")
+        if ch.by_temperature is not None:
+            b = ch.by_temperature
+            lines.append(f"  channel {name}: ADEV by temperature, {len(b.edges) - 1} bins of "
+                         "equal count (°C: " + ", ".join(f"{e:.3g}" for e in b.edges)
+                         + "): Bartlett's p that every bin has one variance")
+            for k in range(len(b.tau)):
+                p = float(b.p_value[k])
+                verdict = "depends on temperature" if b.changes[k] else "consistent"
+                devs = " ".join(_g(float(v)) for v in b.dev[:, k])
+                lines.append(f"    τ {b.tau[k]:>9.4g} s: p = {_g(p):>9} ({verdict}), ADEV "
+                             f"per bin {devs} m/s²")
+        elif ch.by_temperature_note is not None:
+            lines.append(f"  channel {name}: no ADEV by temperature: {ch.by_temperature_note}")
     return "\n".join(lines)
 
 

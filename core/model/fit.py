@@ -187,10 +187,12 @@ _VALUE_KEYS = {"sinusoid": ("amplitude", "m/s^2"), "gauss_markov": ("sigma", "m/
                "white": ("N", "m/s/sqrt(s)")}
 #: Note on K and R when the record cannot tell a rate ramp from a rate random walk.
 RAMP_OR_WALK = "ramp or random walk: this record cannot tell them apart; read as random walk"
-#: Note on a present K or R that only the longest τ of the fit shows (``_rests_on_longest``):
-#: the model keeps it, displays say "not yet resolved" instead of its interval.
-NOT_RESOLVED = ("not yet resolved: only the longest τ of the fit shows this term, which a slow "
-                "periodic signal mimics there as well; a longer record decides")
+#: Note on a present K or R that only the longest τ of the fit shows (``_rests_on_longest``)
+#: or that the τ beyond the fit refute (``_refuted_beyond``): the model keeps it, displays
+#: say "not yet resolved" instead of its interval.
+NOT_RESOLVED = ("not yet resolved: only the long end of the fit shows this term (its longest τ "
+                "alone, or the τ beyond the fit fall below it), which a slow periodic signal "
+                "mimics there as well; a longer record decides")
 #: The terms that rise with τ and so are decided at the long end of the curve.
 LONG_TAU_TERMS = ("rate_random_walk", "rate_ramp")
 #: Label of the fixed rounding component (``fit_noise(rounding_lsb=...)``).
@@ -339,6 +341,27 @@ def _whitener(C: NDArray) -> NDArray[np.float64]:
     return (V[:, keep] / np.sqrt(w[keep])).T / d
 
 
+def _param_cov(A: NDArray) -> NDArray[np.float64]:
+    """(AᵀA)⁻¹ of a whitened design A, its columns scaled to unit norm first. The basis spans
+    many decades (1/τ², 1/τ, τ, τ² over 0.01 s to 10⁴ s), and the pseudo-inverse of the
+    unscaled normal matrix cut its smallest directions as numerically null, which set their
+    variance to zero: a 60 h record without a filter read a 0.04 % shortfall at one sample
+    as a bend at z = −9700 and left out its 5 shortest τ as "filter-bent" (issue 24)."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    As = A / scale
+    return np.linalg.pinv(As.T @ As) / np.outer(scale, scale)
+
+
+def _gls_scaled(A: NDArray, b: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Least squares of the whitened system A·θ ≈ b: (θ, Cov θ), columns scaled as in
+    ``_param_cov``."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    coef, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
+    return coef / scale, _param_cov(A)
+
+
 def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], float]:
     """Non-negative generalised least squares: min ‖T(y − Xθ)‖², θ ≥ 0; returns (θ, χ²).
     Columns are scaled to unit norm first because the basis spans many decades."""
@@ -375,7 +398,7 @@ def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 
     C = _avar_cov(p, theta, idx)
     T = _whitener(C)
     TX = T @ X
-    cov = np.linalg.pinv(TX.T @ TX)
+    cov = _param_cov(TX)
     r = T @ (y - X @ theta[active])
     return theta, cov, C, float(r @ r)
 
@@ -506,7 +529,7 @@ def _upper_limit(p: _Problem, idx: NDArray, cand: list[int], a: int, z: float,
     for _ in range(iterations):
         th, _ = _gls_nnls(X, y, T)
         TX = T @ X
-        se = math.sqrt(max(np.linalg.pinv(TX.T @ TX)[j, j], 0.0))
+        se = math.sqrt(max(_param_cov(TX)[j, j], 0.0))
         new = th[j] + z * se
         done = up > 0 and abs(new - up) <= 1e-3 * up
         up = new
@@ -549,6 +572,61 @@ def _rests_on_longest(p: _Problem, idx: NDArray, active: list[int], a: int, crit
     return without - with_a < crit
 
 
+def _refuted_beyond(result: Any, last: int, comps: list[Component], fitted: list[int],
+                    theta: NDArray, fixed: list[int], theta_fixed: NDArray,
+                    active: list[int], cov: NDArray, rate: float, z_refute: float,
+                    min_averages: float) -> bool:
+    """Whether the τ the record measured beyond the fit (fewer than ``min_averages``
+    averages: too few to fit, not too few to test) fall below the fitted model by more than
+    ``z_refute`` standard deviations (the presence test's z: a term is refuted on the same
+    evidence that makes it present), which refutes the terms that make the long end.
+
+    A rate ramp R rises as τ² at every τ, and its part of the AVAR estimate, R²τ²/2, is
+    deterministic: it does not scatter. A slow periodic signal rises the same way below a
+    quarter of its period and then turns down, so on 41 min of a `quiet-lab` record (a
+    30-minute air-conditioning cycle) the fit read a ramp from τ ≤ 262 s that predicted
+    2.3e-8 m²/s⁴ at τ = 1049 s, where the record measured 4.6e-10 (issue 24). The estimate
+    at such a τ is taken as a non-central χ²: the noise part V_n of the model (its
+    components with a spectrum) with the curve's printed EDF ν, plus the deterministic part
+    S, so Var = (2V_n² + 4 S V_n)/ν (NIST SP 1065 §5.3 for V_n alone), to which the
+    prediction's own uncertainty adds (x·Cov(θ)·xᵀ, the fit's final covariance: a ramp known
+    to ±θ/z predicts to about S/z); z = (V_n + S − σ̂²)/√Var.
+    A rate random walk, itself noise, scatters too much at two to eight averages to be
+    refuted this way, which is right: a record that short cannot refute it."""
+    tau = np.asarray(result.tau, dtype=float)
+    var = np.asarray(result.var, dtype=float)
+    edf = np.asarray(getattr(result, "edf", np.full_like(var, np.nan)), dtype=float)
+    n = np.asarray(result.n, dtype=float)
+    M = _n_samples(result)
+    n_total = float(np.nanmax(M)) if len(M) else 0.0
+    m = np.asarray(result.m, dtype=float)
+    far = np.arange(last + 1, len(tau))
+    far = far[np.isfinite(var[far]) & (var[far] > 0) & (n[far] > 0)
+              & np.isfinite(edf[far]) & (edf[far] > 0) & (n_total / m[far] >= 2.0)
+              & (n_total / m[far] < min_averages)]
+    if len(far) == 0:
+        return False
+    noise = np.zeros(len(far))
+    signal = np.zeros(len(far))
+    pairs = [(fitted[j], float(theta[j])) for j in range(len(fitted))]
+    pairs += [(i, float(th)) for i, th in zip(fixed, theta_fixed, strict=True)]
+    for i, th in pairs:
+        part = th * comps[i].basis(tau[far], rate)
+        if comps[i].psd(rate) is None:
+            signal += part
+        else:
+            noise += part
+    nu = edf[far]
+    x = np.column_stack([comps[fitted[a]].basis(tau[far], rate) for a in active])
+    pred = np.einsum("ka,ab,kb->k", x, cov, x)
+    sd = np.sqrt(np.maximum(2.0 * noise**2 + 4.0 * signal * noise, 0.0) / nu
+                 + np.maximum(pred, 0.0))
+    deficit = noise + signal - var[far]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(sd > 0, deficit / sd, np.where(deficit > 0, np.inf, 0.0))
+    return bool(np.any(z > z_refute))
+
+
 def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_hz: float,
                    drop_z: float, max_drop: int) -> int:
     """Number of shortest τ to leave out because the sensor's low-pass bends them.
@@ -570,9 +648,7 @@ def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_
         tau = p.m_tau[idx]
         X = np.column_stack([p.X[np.ix_(idx, np.asarray(base, dtype=np.intp))],
                              1.0 / (tau * rate_hz) ** 2])
-        TX = T @ X
-        coef, *_ = np.linalg.lstsq(TX, T @ p.y[idx], rcond=None)
-        cov = np.linalg.pinv(TX.T @ TX)
+        coef, cov = _gls_scaled(T @ X, T @ p.y[idx])
         se = math.sqrt(max(cov[-1, -1], 0.0))
         if se > 0 and coef[-1] / se < -drop_z:
             start += 1
@@ -726,6 +802,9 @@ def fit_noise(
                         1.0)
         cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    if active and _refuted_beyond(result, keep[idx[-1]], comps, fitted, theta, fixed,
+                                  theta_fixed, active, cov, rate, z_present, min_averages):
+        unresolved += [a for a in active if labels[a] in LONG_TAU_TERMS and a not in unresolved]
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
     # cost `avard analyze` 0.4–0.9 s of CPU and ~25 MB

@@ -75,3 +75,30 @@ def test_bad_options_are_one_line_and_exit_2(npz: Path, argv: list[str], message
     assert main(["analyze", str(npz), *argv]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+def test_dynamic_bins_by_the_logged_temperature(
+        tmp_path: Path, npz: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--dynamic on a record that logs temperature (one DS18B20 read a second, NaN between,
+    as avard simulate writes it): the ADEV by temperature, held at each reading. The white
+    level doubles above 21 °C on a ±1 °C cycle, so the bins disagree at τ0 and the warmest
+    is about twice the coolest; a record without temperatures says why there is none."""
+    rate, n = 50.0, 120_000
+    t = np.arange(n) / rate
+    temp = 21.0 + np.sin(2 * np.pi * t / 600.0)
+    rng = np.random.default_rng(8)
+    accel = 1e-3 * rng.standard_normal((n, 1)) * np.where(temp > 21.0, 2.0, 1.0)[:, None]
+    logged = np.full((n, 1), np.nan)
+    logged[:: int(rate)] = temp[:: int(rate), None]
+    p = tmp_path / "temp.npz"
+    np.savez(p, accel=accel, rate_hz=rate, temperature_c=logged,
+             temperature_names=np.array(["plate"]))
+    assert main(["analyze", str(p), "--json", "--dynamic"]) == 0
+    by_t = json.loads(capsys.readouterr().out)["statistics"]["channels"]["ch0"][
+        "adev_by_temperature"]
+    assert by_t["changes"][0] and by_t["p_value"][0] < 1e-6
+    dev = np.array(by_t["dev"])
+    assert 1.8 < dev[-1, 0] / dev[0, 0] < 2.2
+    assert main(["analyze", str(npz), "--json", "--dynamic", "--window", "100"]) == 0
+    none = json.loads(capsys.readouterr().out)["statistics"]["channels"]["ch0"]
+    assert none["adev_by_temperature"] == {"note": "the record logs no temperature"}

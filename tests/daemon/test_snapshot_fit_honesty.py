@@ -8,6 +8,7 @@ estimator gives the same terms, values and notes."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import format_table
@@ -69,3 +70,59 @@ def test_a_ramp_seen_only_at_the_longest_tau_is_not_yet_resolved(tmp_path) -> No
     x_ramp = full[full.index("  x:") + 1:][:5]
     line = next(s for s in x_ramp if "rate_ramp" in s)
     assert "not yet resolved" in line and "[" not in line
+
+
+
+
+def _ramp_claims(seeds: tuple[int, ...], tmp_path) -> tuple[int, int, int, int]:
+    """Over 41 and 55 min of each seed: (x and y axis fits, live ramps claimed resolved on
+    x or y, the same on z, axes where analyze of the same samples with the service's
+    estimator says the same of R and K as the live fit)."""
+    claimed, claimed_z, same, total = 0, 0, 0, 0
+    for seed in seeds:
+        y_full, rate = quiet_lab(55, seed)
+        for minutes in (41, 55):
+            y = y_full[: int(minutes * 60 * rate)]
+            sa = StreamingAllan(3, rate, names=["x", "y", "z"])
+            step = int(60 * rate)
+            for i in range(0, y.shape[0], step):
+                sa.update(y[i:i + step])
+            fits = fit_snapshot(AllanSnapshot.from_dict(sa.snapshot().to_dict()))
+            path = tmp_path / f"ql{seed}_{minutes}.npz"
+            np.savez(path, accel=y, rate_hz=rate, axes=np.array(["x", "y", "z"]))
+            an = analyze(open_record(path), AnalyzeOptions(
+                estimator="cascade", filter_corner_hz=rate / 4, find_sinusoids=False))
+            for axis, fit in fits.items():
+                ramp = fit.terms["rate_ramp"]
+                if axis == "z":
+                    claimed_z += ramp.present and ramp.note is None
+                else:
+                    total += 1
+                    claimed += ramp.present and ramp.note is None
+                off = an.channels[axis].fit.terms
+                same += all((off[t].present, off[t].note) == (fit.terms[t].present,
+                                                              fit.terms[t].note)
+                            for t in ("rate_ramp", "rate_random_walk"))
+    return total, claimed, claimed_z, same
+
+
+def test_no_ramp_is_claimed_on_quiet_lab_seeds_4_and_5(tmp_path) -> None:
+    """Counts, not one record: quiet-lab has no ramp. On seed 5's x axis the live fit read
+    R ≈ 2e-7 m/s³ from τ ≤ 262 s, its test passing even without its longest τ (z 3–6),
+    while the snapshot's own τ beyond the fit (524 and 1049 s: too few averages to fit, not
+    to test) measured 0.5× and 0.02× the ramp's prediction there (fit._refuted_beyond). On
+    41 and 55 min of seeds 4 and 5 no ramp is claimed resolved on any axis, and analyze
+    of the same samples with the service's estimator says the same of R and K on each."""
+    total, claimed, claimed_z, same = _ramp_claims((4, 5), tmp_path)
+    assert (total, claimed, claimed_z, same) == (8, 0, 0, 12)
+
+
+@pytest.mark.slow
+def test_no_ramp_is_claimed_on_quiet_lab_across_seeds(tmp_path) -> None:
+    """The same over twelve seeds. x and y (48 fits): no ramp claimed resolved. z carries
+    the preset's warm-up (2e-4 m/s² settling with a 600 s time constant), a monotonic drift
+    that a ramp describes over these minutes; it is counted, not asserted absent (measured:
+    seed 11 at 41 and 55 min, 2 of 24). Every one of the 72 axes: analyze says the same."""
+    total, claimed, claimed_z, same = _ramp_claims(tuple(range(12)), tmp_path)
+    assert (total, claimed, same) == (48, 0, 72)
+    assert claimed_z <= 2
