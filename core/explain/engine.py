@@ -52,6 +52,7 @@ import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.engine import ProgressFn, analyze
 from avard.core.analysis.results import Analysis, ChannelAnalysis
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.causes import Finding
@@ -335,6 +336,7 @@ def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
                     "temperature channels are " + (", ".join(tnames) or "none"))
 
 
+@one_blas_thread  # a library entry point (core/blas.py): the pool's busy-waiting workers
 def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
                  holdout: RecordSource | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None) -> Explanation:
@@ -362,6 +364,7 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
                           base=base)
 
 
+@one_blas_thread
 def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
                    holdout: RecordSource | None = None, progress: ProgressFn | None = None,
                    stage: StageFn | None = None, base: Analysis | None = None) -> Explanation:

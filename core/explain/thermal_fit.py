@@ -38,6 +38,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from avard.core.allan.deviations import (
+    DEFAULT_OVERLAP,
+    NORM,
+    DifferenceSums,
+    grid_sums,
+    segment_phase,
+)
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
@@ -159,6 +166,90 @@ def feed(sa: StreamingAllan, X: NDArray, keep: NDArray[np.bool_] | None) -> None
         sa.gap()
 
 
+def kept_runs(n: int, keep: NDArray[np.bool_] | None) -> list[tuple[int, int]]:
+    """(start, end) of the runs of rows ``keep`` holds (all rows when None): the segments
+    ``feed`` gives the accumulator."""
+    if keep is None:
+        return [(0, n)]
+    m = np.concatenate([[False], keep, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
+                    strict=True))
+
+
+@dataclass(frozen=True)
+class OctaveSums:
+    """Allan difference sums at octave m of C channels over some segments: ``n`` (K,)
+    differences and ``s2`` (K, C, C) = Σ D Dᵀ, on the streaming cascade's stride grid. They
+    add over disjoint parts (``+``) and give the Allan covariance (``cov``)."""
+
+    ms: NDArray[np.int64]
+    n: NDArray[np.int64]
+    s2: NDArray[np.float64]
+
+    def __add__(self, other: OctaveSums) -> OctaveSums:
+        k = min(len(self.ms), len(other.ms))
+        return OctaveSums(self.ms[:k], self.n[:k] + other.n[:k], self.s2[:k] + other.s2[:k])
+
+    def cov(self) -> NDArray[np.float64]:
+        """Allan covariance (K, C, C), NaN where no difference was counted."""
+        scale = NORM[2] * self.ms.astype(float) ** 2 * np.maximum(self.n, 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where((self.n > 0)[:, None, None], self.s2 / scale[:, None, None],
+                            np.nan)
+
+
+def octave_sums(X: NDArray, keep: NDArray[np.bool_] | None = None, levels: int = 40,
+                overlap: int = DEFAULT_OVERLAP) -> OctaveSums:
+    """The difference sums ``StreamingAllan(C, rate).update`` (via ``feed(…, keep)``) holds
+    after ``X`` (M, C), from the same difference kernel (``deviations.grid_sums``) on the
+    same grids, without the noise identification (the lag scan needs only the covariance;
+    the axis's EDF does not depend on the trial lag). A test holds it equal to the
+    accumulator's covariance."""
+    X = np.asarray(X, dtype=float)
+    runs = kept_runs(len(X), keep)
+    longest = max((b - a for a, b in runs), default=0)
+    ms = [1 << k for k in range(levels) if 2 * (1 << k) <= longest]
+    sums = [DifferenceSums.zeros(X.shape[1]) for _ in ms]
+    for a, b in runs:
+        if b - a < 2:
+            continue
+        p = segment_phase(X[a:b], False)
+        for k, m in enumerate(ms):
+            if 2 * m > b - a:
+                break
+            st = 1 if m <= overlap else m // overlap
+            grid_sums(p[::st] if st > 1 else p, m // st, 0, sums[k], 2)
+    return OctaveSums(np.asarray(ms, dtype=np.int64),
+                      np.asarray([x.n for x in sums], dtype=np.int64),
+                      np.asarray([x.s2 for x in sums], dtype=float).reshape(
+                          len(ms), X.shape[1], X.shape[1]))
+
+
+@dataclass(frozen=True)
+class CovView:
+    """What :func:`tempco_from_cov` reads of an Allan result (τ, covariance, EDF), from
+    :class:`OctaveSums` with the axis's EDF scaled to the differences counted."""
+
+    tau: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    edf: NDArray[np.float64]
+
+
+def cov_view(sums: OctaveSums, rate_hz: float, edf_ref: NDArray, n_ref: NDArray,
+             cols: tuple[int, int] = (0, 1)) -> CovView:
+    """The (axis, temperature) slice ``cols`` of ``sums`` with the axis's EDF ``edf_ref``
+    (K,) of a reference count ``n_ref`` (K,) of differences scaled to this one's count (EDF
+    is proportional to the differences for the lag's few settling blocks left out, or a
+    jackknife's parts)."""
+    k = min(len(sums.ms), len(edf_ref))
+    sel = list(cols)
+    cov = sums.cov()[:k][:, sel][:, :, sel]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edf = np.asarray(edf_ref[:k], float) * sums.n[:k] / np.asarray(n_ref[:k], float)
+    return CovView(sums.ms[:k] / rate_hz, cov, np.column_stack([edf, edf]))
+
+
 def min_tau_for(lag_s: float) -> float:
     """The shortest τ (s) the regression uses for a trial lag: twice the DS18B20's conversion
     time, and for a negative lag twice |lag|, below which the lead-lag's high-frequency gain
@@ -171,31 +262,37 @@ def min_tau_for(lag_s: float) -> float:
 def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
                      groups: int = JACKKNIFE_GROUPS,
                      min_tau_s: float = 2 * DS18B20_CONVERSION_S,
-                     keep: NDArray[np.bool_] | None = None) -> tuple[float, float]:
+                     keep: NDArray[np.bool_] | None = None,
+                     ref: Any | None = None) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
-    error: the record in ``groups`` contiguous parts, each its own segment of the streaming
-    accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
+    error: the record in ``groups`` contiguous parts, each its own segment (their difference
+    sums add exactly, ``OctaveSums``); ĉ_(−g) from all parts but g;
     se² = (G−1)/G·Σ(ĉ_(−g) − mean)². The analytic se of :func:`tempco_from_cov` treats the
     Allan differences of the noise as independent across a slow regressor, which red noise
-    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it."""
+    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it.
+    ``ref``: the axis's Allan result on the whole record (its EDF, scaled to each
+    leave-one-out count; computed here when not given)."""
     M = len(y)
+    X = np.column_stack([y, u])
+    if ref is None:
+        ref = allan2(y, u, rate_hz, keep)
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
     edges = np.linspace(0, M, groups + 1).astype(int)
-    parts = []
-    for a, b in itertools.pairwise(edges):
-        sa = StreamingAllan(2, rate_hz)
-        feed(sa, np.column_stack([y[a:b], u[a:b]]), None if keep is None else keep[a:b])
-        parts.append(sa)
-    full = StreamingAllan.from_state(parts[0].state())
-    for sa in parts[1:]:
-        full.merge(sa)
-    c_all, _se, _n = tempco_from_cov(full.result(), min_tau_s)
+    parts = [octave_sums(X[a:b], None if keep is None else keep[a:b])
+             for a, b in itertools.pairwise(edges)]
+    full = parts[0]
+    for ps in parts[1:]:
+        full = full + ps
+    c_all, _se, _n = tempco_from_cov(cov_view(full, rate_hz, edf_ref, n_ref), min_tau_s)
     cs = []
     for g in range(groups):
-        rest = [sa for h, sa in enumerate(parts) if h != g]
-        acc = StreamingAllan.from_state(rest[0].state())
-        for sa in rest[1:]:
-            acc.merge(sa)
-        cs.append(tempco_from_cov(acc.result(), min_tau_s)[0])
+        rest = [ps for h, ps in enumerate(parts) if h != g]
+        acc = rest[0]
+        for ps in rest[1:]:
+            acc = acc + ps
+        cs.append(tempco_from_cov(cov_view(acc, rate_hz, edf_ref, n_ref), min_tau_s)[0])
     c = np.asarray(cs)
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
@@ -341,16 +438,6 @@ def _between(a: float, b: float) -> float:
     return math.copysign(math.sqrt(a * b), a) if a * b > 0 else 0.5 * (a + b)
 
 
-class _Pair:
-    """The (axis j, temperature) 2×2 slice of a multi-channel AllanResult."""
-
-    def __init__(self, res: Any, j: int) -> None:
-        sel = [j, -1]
-        self.tau = res.tau
-        self.cov = np.asarray(res.cov)[:, sel][:, :, sel]
-        self.edf = np.asarray(res.edf)[:, sel]
-
-
 def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     """``cols`` (M, k) with the lag filter's start-up settling e^(−t/τ_L) projected out of
     every column (least squares, with an offset).
@@ -365,33 +452,56 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     X = np.asarray(cols, dtype=float)
     if lag_s == 0:
         return X.copy()
-    t = np.arange(len(X)) / rate_hz
-    v = np.exp(-t / abs(lag_s))  # a negative lag's lag(T, |lag|) starts the same way
-    v = v - v.mean()
-    vv = float(v @ v)
+    # e^(−t/τ_L) is below 1e-16 after 37 lags: its products are taken where it lives (the
+    # whole-record products cost most of a lag scan), the mean's share added in closed form
+    # (Xc has zero mean, so vᵀXc = eᵀXc)
+    M = len(X)
+    n_e = min(M, math.ceil(37.0 * abs(lag_s) * rate_hz) + 1)
+    e = np.exp(-np.arange(n_e) / (rate_hz * abs(lag_s)))
+    mean_e = float(e.sum()) / M
+    # einsum, not e @ e: OpenBLAS's threaded ddot spent ~100× the arithmetic's CPU time on a
+    # shared machine
+    vv = float(np.einsum("i,i->", e, e)) - M * mean_e**2
     if not vv > 0:
         return X.copy()
     Xc = X - X.mean(axis=0)
-    return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
+    w = (e @ Xc[:n_e]) / vv
+    Xc += mean_e * w
+    Xc[:n_e] -= np.outer(e, w)
+    return Xc
 
 
 def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
-          holes: list[tuple[int, int]] | None = None
+          holes: list[tuple[int, int]] | None = None, ref: Any | None = None
           ) -> list[list[tuple[float, float, float, float]]]:
-    """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
-    per lag serves all axes; ``holes`` (blocks at this rate) and their settling left out."""
-    out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
+    """Per axis, (lag, ĉ, se, z) for every lag: one set of Allan difference sums of
+    (axes…, lagged T) per lag serves all axes (``octave_sums``: the covariance alone; the
+    axes' EDF, which does not depend on the lag, from ``ref``, their Allan result, computed
+    once); ``holes`` (blocks at this rate) and their settling left out."""
+    C = Y.shape[1]
+    if ref is None:
+        ref = _axes_reference(Y, rate_hz)
+    edf = np.asarray(ref.edf, dtype=float).reshape(len(ref.tau), -1)
+    n_ref = np.asarray(ref.n, dtype=float)
+    out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(C)]
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
-        sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        feed(sa, without_start(np.column_stack([Y, u]), float(L), rate_hz),
-             hole_mask(len(Y), holes or [], float(L), rate_hz))
-        res = sa.result()
-        for j in range(Y.shape[1]):
-            c, se, _n = tempco_from_cov(_Pair(res, j), min_tau_for(float(L)))
+        sums = octave_sums(without_start(np.column_stack([Y, u]), float(L), rate_hz),
+                           hole_mask(len(Y), holes or [], float(L), rate_hz))
+        for j in range(C):
+            c, se, _n = tempco_from_cov(cov_view(sums, rate_hz, edf[:, j], n_ref, (j, C)),
+                                        min_tau_for(float(L)))
             z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
             out[j].append((float(L), c, se, z))
     return out
+
+
+def _axes_reference(Y: NDArray, rate_hz: float) -> Any:
+    """The axes' Allan result (analyze's estimator, its EDF) that the lag scan's regressions
+    weight by."""
+    sa = StreamingAllan(Y.shape[1], rate_hz)
+    sa.update(Y)
+    return sa.result()
 
 
 def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) -> ThermalFit:
@@ -417,9 +527,10 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     rate_s = rate_hz / f
     grid = _lag_grid(record_s, rate_s)
     scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
+    ref = _axes_reference(Ys, rate_s)
     for j in range(temps.shape[1]):
         hj = [(a // f, b // f) for a, b in holes.get(j, [])]
-        per_axis = _scan(Ys, Ts[:, j], grid, rate_s, hj)
+        per_axis = _scan(Ys, Ts[:, j], grid, rate_s, hj, ref)
         # refine between the neighbouring grid points of each axis's best lag
         fine: set[float] = set()
         for sc in per_axis:
@@ -430,7 +541,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             elif 0 < i < len(grid) - 1:  # next to 0: linear across it
                 fine.update(np.linspace(grid[i - 1], grid[i + 1], 13).tolist())
         if fine:
-            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj)
+            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj, ref)
             per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
         scans[j] = [sorted(sc) for sc in per_axis]
     return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes)
@@ -462,7 +573,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     res = allan2(yu[:, 0], yu[:, 1], rate_hz, keep)
     c, se_a, _n = tempco_from_cov(res, min_tau_for(L))
     _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz,
-                                       min_tau_s=min_tau_for(L), keep=keep)
+                                       min_tau_s=min_tau_for(L), keep=keep, ref=res)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
