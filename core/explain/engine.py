@@ -336,7 +336,7 @@ def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
                     "temperature channels are " + (", ".join(tnames) or "none"))
 
 
-@one_blas_thread  # a library entry point (core/blas.py): the pool's busy-waiting workers
+@one_blas_thread  # a library entry point (core/blas.py): the pool's workers busy-wait
 def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
                  holdout: RecordSource | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None) -> Explanation:
@@ -354,14 +354,28 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     # per channel group whose OADEV histories fit its budget, so the same peak memory: one
     # pass over every channel, as explain_stream must do with blocks from anywhere, held all
     # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
-    # record for the slow view, which keeps only block means.
+    # record for the slow view, which keeps only block means. When analyze would read every
+    # channel in one pass anyway (``_one_pass``), that pass feeds the slow view too.
     base = None
-    if source.rereadable:
+    if source.rereadable and not _one_pass(source, options):
         base = analyze(source, options, progress=progress)
         if stage is not None:
             stage("reading the record's slow view (block means)")
     return explain_stream(source, options, holdout=holdout, progress=progress, stage=stage,
                           base=base)
+
+
+def _one_pass(source: RecordSource, options: ExplainOptions) -> bool:
+    """Whether analyze would read this record in one pass of every channel on one process:
+    then the slow view is collected on that pass (``explain_stream`` hands analyze the same
+    screened blocks; the result is the same, the record is read and screened once, not twice)
+    at the same peak memory."""
+    n = source.info.n_samples
+    if n is None or options.estimator != "oadev" or options.workers != 1:
+        return False
+    from avard.core.analysis.engine import oadev_pass_groups
+
+    return len(oadev_pass_groups(list(range(len(source.info.names))), int(n))) == 1
 
 
 @one_blas_thread

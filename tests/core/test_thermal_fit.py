@@ -117,3 +117,39 @@ def test_negative_lag_is_the_logged_sensor_lagging_the_die():
     lead, lag = lag_filter(slow, -5.0, rate), lag_filter(slow, 5.0, rate)
     mid = slice(200, None)
     assert np.allclose((lead + lag)[mid] / 2, slow[mid], atol=2e-5)
+
+
+@pytest.mark.parametrize("holes", [[], [(3000, 3500), (9000, 9001)]])
+def test_lag_scan_sums_equal_the_streaming_estimators_covariance(holes):
+    """The lag scan's fast path (``octave_sums``: the difference sums without the noise
+    identification) gives the streaming accumulator's Allan covariance and counts, gaps
+    included (its every trial lag used to pay for a full ``StreamingAllan.result``)."""
+    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.explain.thermal_fit import feed, hole_mask, octave_sums
+
+    rng = np.random.default_rng(4)
+    X = (np.cumsum(rng.standard_normal((20_000, 3)), axis=0) * 0.01
+         + rng.standard_normal((20_000, 3)))
+    keep = hole_mask(len(X), holes, 50.0, 1.0)
+    sa = StreamingAllan(3, 1.0)
+    feed(sa, X, keep)
+    res = sa.result()
+    fast = octave_sums(X, keep)
+    assert np.array_equal(fast.n, res.n)
+    scale = np.abs(res.cov).max(axis=(1, 2))[:, None, None]
+    assert np.max(np.abs(fast.cov() - res.cov) / scale) < 1e-12
+
+
+@pytest.mark.parametrize("lag_s", [-60.0, 4.0, 300.0, 20_000.0])
+def test_without_start_equals_the_projection_on_the_whole_record(lag_s):
+    """The start-up projection, computed where e^(−t/τ_L) lives, equals the full-length
+    least-squares projection it replaces."""
+    from avard.core.explain.thermal_fit import without_start
+
+    X = np.random.default_rng(5).standard_normal((21_093, 4))
+    t = np.arange(len(X)) / 0.5
+    v = np.exp(-t / abs(lag_s))
+    v -= v.mean()
+    Xc = X - X.mean(axis=0)
+    want = Xc - np.outer(v, (v @ Xc) / (v @ v))
+    assert np.max(np.abs(without_start(X, lag_s, 0.5) - want)) < 1e-12
