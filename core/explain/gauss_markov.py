@@ -77,12 +77,6 @@ GM_FALSE_CLAIM_RATE = 0.005
 #: (tests/core/test_gauss_markov.py). The null study and the benchmark check it on the
 #: independent generator (docs/explain.md, "Stated detection power (Gauss–Markov)").
 Z_GAUSS_MARKOV = 3.5
-#: The T refinement (≈ 12 more fits) runs only where the grid's best point reaches
-#: z ≥ Z_GAUSS_MARKOV − REFINE_MARGIN: moving T by half a grid step (ln ratio ≤ 0.4 on the
-#: ranges scanned) changes −2 ln L by (0.4/σ_lnT)², about 2 where a bump sits at the test's
-#: z (σ_lnT ≈ 0.3), against the 3.5² − 2.5² = 6 the margin allows; so an axis skipped could
-#: not reach the test. Most axes hold no bump, and the refinement was half the scan's cost.
-REFINE_MARGIN = 1.0
 #: −2 ln L of a T without a present component (finite: the 1-D minimiser needs numbers)
 _NO_FIT = 1e300
 #: The scan's T range inside the fitted τ range [τ_min, τ_max]: [4τ_min, τ_max/16].
@@ -142,21 +136,11 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
         return Finding("gauss_markov", False, {}, {}, 0.0, Z_GAUSS_MARKOV,
                        f"no Gauss–Markov component with T in {lo:.3g}…{hi:.3g} s is present "
                        "in the GLS fit"), None
-    try:
-        none: NoiseFit | None = fit_noise(res, filter_corner_hz=corner, extra=list(extra),
-                                          **{**kw, "z_present": 0.0})
-    except FitError:
-        none = None
-    best = fit_at(float(grid[k]), True)
-    z_grid = (0.0 if none is None or best is None else
-              math.sqrt(max(_nll(none) - vals[k], 0.0) / max(1.0, best.chi2_dof)))
-    T = float(grid[k])
-    if z_grid >= Z_GAUSS_MARKOV - REFINE_MARGIN:
-        # refine between the neighbouring grid points (bounded, in ln T)
-        a, b = math.log(grid[max(k - 1, 0)]), math.log(grid[min(k + 1, GM_GRID - 1)])
-        opt = minimize_scalar(crit, bounds=(a, b), method="bounded",
-                              options={"xatol": 0.01, "maxiter": 25})
-        T = float(math.exp(opt.x)) if opt.fun < vals[k] else T
+    # refine between the neighbouring grid points (bounded, in ln T)
+    a, b = math.log(grid[max(k - 1, 0)]), math.log(grid[min(k + 1, GM_GRID - 1)])
+    opt = minimize_scalar(crit, bounds=(a, b), method="bounded",
+                          options={"xatol": 0.01, "maxiter": 25})
+    T = float(math.exp(opt.x)) if opt.fun < vals[k] else float(grid[k])
     free = fit_at(T, True)
     f = fit_at(T, False)
     if f is None or free is None:
@@ -175,7 +159,12 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     # or flicker → 0) its se shrinks with it, and the Wald z reached 3.6–5.0 on null axes and
     # 4.5–5.2 on records with a transient removed, where √Δ(−2 ln L) stayed at 1.7–3.8
     rise = max(1.0, free.chi2_dof)
-    z = 0.0 if none is None else math.sqrt(max(_nll(none) - _nll(free), 0.0) / rise)
+    try:
+        none = fit_noise(res, filter_corner_hz=corner, extra=list(extra),
+                         **{**kw, "z_present": 0.0})
+        z = math.sqrt(max(_nll(none) - _nll(free), 0.0) / rise)
+    except FitError:
+        z = 0.0
     if not math.isfinite(z):
         z = 0.0
     passed = z >= Z_GAUSS_MARKOV
