@@ -424,7 +424,7 @@ def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray |
         cols = [list(names).index(a) for a in axes]
         for first, part in ((True, slice(0, h)), (False, slice(h, None))):
             fits = fit_thermal_axes(y_slow[part][:, cols], t_slow[part, ch][:, None], ["t"],
-                                    rate_b)
+                                    rate_b, lag_intervals=False)
             out.update({(a, first): f for a, f in zip(axes, fits, strict=True)})
     return out
 

@@ -535,12 +535,12 @@ def _z(view: CovView, mt: float) -> tuple[float, float, float]:
 
 def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
           holes: list[tuple[int, int]] | None = None, ref: Any | None = None,
-          floor_s: float = 0.0) -> list[list[ScanPoint]]:
+          floor_s: float = 0.0, parts: bool = False) -> list[list[ScanPoint]]:
     """Per axis, a ``ScanPoint`` for every lag: one set of Allan difference sums of
     (axes…, lagged T) per lag serves all axes (``octave_sums``: the covariance alone; the
     axes' EDF, which does not depend on the lag, from ``ref``, their Allan result, computed
-    once), and one per contiguous part for the jackknife; ``holes`` (blocks at this rate) and
-    their settling left out; τ from ``min_tau_for(lag, floor_s)``."""
+    once), and with ``parts`` one per contiguous part for the lag's jackknife; ``holes``
+    (blocks at this rate) and their settling left out; τ from ``min_tau_for(lag, floor_s)``."""
     C = Y.shape[1]
     if ref is None:
         ref = _axes_reference(Y, rate_hz)
@@ -553,16 +553,14 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
         X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
         keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
         sums = octave_sums(X, keep)
-        parts = [octave_sums(X[a:b], None if keep is None else keep[a:b])
-                 for a, b in itertools.pairwise(edges)]
-        whole = parts[0]
-        for ps in parts[1:]:
-            whole = whole + ps
+        pieces = [octave_sums(X[a:b], None if keep is None else keep[a:b])
+                  for a, b in itertools.pairwise(edges)] if parts else []
+        whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
         mt = min_tau_for(float(L), floor_s)
         for j in range(C):
             c, se, z = _z(cov_view(sums, rate_hz, edf[:, j], n_ref, (j, C)), mt)
             zg = np.array([_z(cov_view(whole - ps, rate_hz, edf[:, j], n_ref, (j, C)), mt)[2]
-                           for ps in parts])
+                           for ps in pieces])
             out[j].append(ScanPoint(float(L), c, se, z, zg))
     return out
 
@@ -599,11 +597,14 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
 
 
 def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-                     holes: Holes | None = None) -> list[ThermalFit]:
+                     holes: Holes | None = None, lag_intervals: bool = True
+                     ) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
     channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
-    masked readings), left out of its regression with the lag's settling after them."""
+    masked readings), left out of its regression with the lag's settling after them.
+    ``lag_intervals`` False: no jackknife of the lag (the held-out halves need only the
+    estimates); the lag's interval is then the estimate itself."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
@@ -632,6 +633,17 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             if fine:
                 extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj, ref, floor)
                 per_axis = [_merge(a, b) for a, b in zip(per_axis, extra, strict=True)]
+        if lag_intervals:
+            # the lag's jackknife on the lags between the coarse grid's neighbours of each
+            # axis's best (the parts' sums cost a scan each: not on the whole grid)
+            window: set[float] = set()
+            for sc in per_axis:
+                b = sc[int(np.argmax([p.z for p in sc]))].lag
+                lo_w = max((g for g in grid if g < b), default=b)
+                hi_w = min((g for g in grid if g > b), default=b)
+                window.update(p.lag for p in sc if lo_w <= p.lag <= hi_w)
+            jk = _scan(Ys, Ts[:, j], sorted(window), rate_s, hj, ref, floor, parts=True)
+            per_axis = [_merge(a, b) for a, b in zip(per_axis, jk, strict=True)]
         scans[j] = per_axis
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
     return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
@@ -705,7 +717,8 @@ def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:
 def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
     """(low, high, open low, open high): the lag's 68 % interval, the best lag ± its
     delete-a-group jackknife standard error (the best lag of the record with each of its
-    ``JACKKNIFE_GROUPS`` parts left out: se² = (G−1)/G·Σ(L_(−g) − mean)²).
+    ``JACKKNIFE_GROUPS`` parts left out: se² = (G−1)/G·Σ(L_(−g) − mean)²), over the lags
+    that carry the parts' z (``ScanPoint.zg``; none: the estimate alone).
 
     Not the profile of the analytic z² over the lags: the regressor carries noise the axis
     does not (the readings' rounding, the logger's own noise), and smoothing it away by a
@@ -713,18 +726,22 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     that draws the interval: a true lag 0 came out at 26 s [24.7, 28.8] (68 %), and the
     intervals of 32 records held the true lag in none. The jackknife measures how far the
     best lag moves with the data, whatever moves it. An end whose leave-one-out lags reach
-    the first or last lag tried is open."""
+    the first or last lag examined is open (its end the last lag examined)."""
     lags = [p.lag for p in scan]
     best, _i = _peak(lags, np.array([p.z for p in scan]))
-    zg = np.array([p.zg for p in scan])  # (lags, G)
+    sub = [p for p in scan if len(p.zg)]
+    if len(sub) < 3:
+        return best, best, k == 0, k == len(scan) - 1
+    sl = [p.lag for p in sub]
+    zg = np.array([p.zg for p in sub])  # (lags, G)
     G = zg.shape[1]
-    picks = [_peak(lags, zg[:, g]) for g in range(G)]
+    picks = [_peak(sl, zg[:, g]) for g in range(G)]
     lg = np.array([p[0] for p in picks])
     se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
     open_lo = any(p[1] == 0 for p in picks) or k == 0
-    open_hi = any(p[1] == len(lags) - 1 for p in picks) or k == len(lags) - 1
-    lo = lags[0] if open_lo else best - se
-    hi = lags[-1] if open_hi else best + se
+    open_hi = any(p[1] == len(sl) - 1 for p in picks) or k == len(scan) - 1
+    lo = min(sl[0], best) if open_lo else best - se
+    hi = max(sl[-1], best) if open_hi else best + se
     return lo, hi, open_lo, open_hi
 
 
