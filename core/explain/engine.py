@@ -57,7 +57,13 @@ from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
-from avard.core.explain.holdout import Holdout, check_compatible, holdout_file, holdout_split
+from avard.core.explain.holdout import (
+    ChannelHoldout,
+    Holdout,
+    check_compatible,
+    holdout_file,
+    holdout_split,
+)
 from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     HOLE_SETTLE_LAGS,
@@ -229,13 +235,14 @@ class ChannelExplanation:
         tau = np.asarray(a.tau, dtype=float)
         return compensation_worse_at(tau, a.var, a.hi, comp_var, _used(self.base.fit, tau))
 
-    def judge(self, held: Any | None) -> None:
+    def judge(self, held: ChannelHoldout | None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
         ``holdout.ChannelHoldout`` or None); when it fails, the claimed causes' parameters
         are model-dependent, and their intervals are withheld where held-out data reject."""
         # a warm-up or a step predicts nothing in other data: no held-out test of them
-        usable = held is not None and held.folds and held.note is None
-        hx = (held.chi2_ext, held.n_points) if usable else (None, 0)
+        hx: tuple[float | None, int] = (None, 0)
+        if held is not None and held.folds and held.note is None:
+            hx = (held.chi2_ext, held.n_points)
         self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx)
         if self.verdict.explained:
             return
