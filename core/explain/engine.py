@@ -52,11 +52,18 @@ import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.engine import ProgressFn, analyze
 from avard.core.analysis.results import Analysis, ChannelAnalysis
+from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
-from avard.core.explain.holdout import Holdout, check_compatible, holdout_file, holdout_split
+from avard.core.explain.holdout import (
+    ChannelHoldout,
+    Holdout,
+    check_compatible,
+    holdout_file,
+    holdout_split,
+)
 from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     HOLE_SETTLE_LAGS,
@@ -228,13 +235,14 @@ class ChannelExplanation:
         tau = np.asarray(a.tau, dtype=float)
         return compensation_worse_at(tau, a.var, a.hi, comp_var, _used(self.base.fit, tau))
 
-    def judge(self, held: Any | None) -> None:
+    def judge(self, held: ChannelHoldout | None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
         ``holdout.ChannelHoldout`` or None); when it fails, the claimed causes' parameters
         are model-dependent, and their intervals are withheld where held-out data reject."""
         # a warm-up or a step predicts nothing in other data: no held-out test of them
-        usable = held is not None and held.folds and held.note is None
-        hx = (held.chi2_ext, held.n_points) if usable else (None, 0)
+        hx: tuple[float | None, int] = (None, 0)
+        if held is not None and held.folds and held.note is None:
+            hx = (held.chi2_ext, held.n_points)
         self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx)
         if self.verdict.explained:
             return
@@ -335,6 +343,7 @@ def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
                     "temperature channels are " + (", ".join(tnames) or "none"))
 
 
+@one_blas_thread  # a library entry point (core/blas.py): the pool's workers busy-wait
 def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
                  holdout: RecordSource | None = None, progress: ProgressFn | None = None,
                  stage: StageFn | None = None) -> Explanation:
@@ -352,9 +361,10 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     # per channel group whose OADEV histories fit its budget, so the same peak memory: one
     # pass over every channel, as explain_stream must do with blocks from anywhere, held all
     # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
-    # record for the slow view, which keeps only block means.
+    # record for the slow view, which keeps only block means. When analyze would read every
+    # channel in one pass anyway (``_one_pass``), that pass feeds the slow view too.
     base = None
-    if source.rereadable:
+    if source.rereadable and not _one_pass(source, options):
         base = analyze(source, options, progress=progress)
         if stage is not None:
             stage("reading the record's slow view (block means)")
@@ -362,6 +372,20 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
                           base=base)
 
 
+def _one_pass(source: RecordSource, options: ExplainOptions) -> bool:
+    """Whether analyze would read this record in one pass of every channel on one process:
+    then the slow view is collected on that pass (``explain_stream`` hands analyze the same
+    screened blocks; the result is the same, the record is read and screened once, not twice)
+    at the same peak memory."""
+    n = source.info.n_samples
+    if n is None or options.estimator != "oadev" or options.workers != 1:
+        return False
+    from avard.core.analysis.engine import oadev_pass_groups
+
+    return len(oadev_pass_groups(list(range(len(source.info.names))), int(n))) == 1
+
+
+@one_blas_thread
 def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN, *,
                    holdout: RecordSource | None = None, progress: ProgressFn | None = None,
                    stage: StageFn | None = None, base: Analysis | None = None) -> Explanation:

@@ -50,7 +50,12 @@ import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
-from avard.core.explain.thermal_fit import ThermalFit, fit_thermal, lag_filter
+from avard.core.explain.thermal_fit import (
+    ThermalFit,
+    fit_thermal,
+    fit_thermal_axes,
+    lag_filter,
+)
 from avard.core.io.rates import format_rate, require_compatible
 from avard.core.model.fit import fit_noise, model_chi2
 from numpy.typing import NDArray
@@ -209,6 +214,9 @@ class Part:
     #: blocks per second of the part's own record (None: the fold's); a second record of the
     #: same sensor fits its own rate, so its τ are its own
     rate_b: float | None = None
+    #: the thermal model fitted on this part (split: one lag scan for all the axes that
+    #: claim the same channel, ``_part_thermals``); None: fitted when needed
+    thermal: ThermalFit | None = None
 
     def rate(self, default: float) -> float:
         return default if self.rate_b is None else self.rate_b
@@ -264,7 +272,8 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     if c.thermal_channel is not None and u_fit is not None and u_held is not None:
         part_t = u_fit[0][u_fit[1]][:, None]
         if refit:
-            th = fit_thermal(fit.y, part_t, ["t"], rate_b)
+            th = fit.thermal if fit.thermal is not None else \
+                fit_thermal(fit.y, part_t, ["t"], rate_b)
         else:
             assert c.whole_thermal is not None
             th = replace(c.whole_thermal, channel_index=0)
@@ -379,12 +388,14 @@ def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray
         ho.reason = (f"record too short to split: {M} slow-view blocks of {1 / rate_b:.3g} s, "
                      f"each half needs {MIN_PART_POINTS}")
         return ho
-    for name, ch in explanations.items():
+    claims = {name: claims_of(ch, t_names) for name, ch in explanations.items()}
+    thermals = _part_thermals(claims, y_slow, t_slow, names, rate_b, h)
+    for name, c in claims.items():
         j = list(names).index(name)
         y = y_slow[:, j]
-        c = claims_of(ch, t_names)
-        A = Part(y[:h], 0.0, "first half", True)
-        B = Part(y[h:], h / rate_b, "second half", False)
+        A = Part(y[:h], 0.0, "first half", True, thermal=thermals.get((name, True)))
+        B = Part(y[h:], h / rate_b, "second half", False,
+                 thermal=thermals.get((name, False)))
 
         def temps_of(p: Part, c: Claims = c) -> Temps:
             if c.thermal_channel is None or t_slow is None:
@@ -393,6 +404,29 @@ def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray
 
         ho.channels[name] = _channel(name, c, [(A, B), (B, A)], rate_b, True, temps_of)
     return ho
+
+
+def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray | None,
+                   names: Sequence[str], rate_b: float, h: int
+                   ) -> dict[tuple[str, bool], ThermalFit]:
+    """The thermal model of every axis that claims a temperature channel, fitted on each half
+    (key: (axis, first half?)): the axes that claim the same channel share one lag scan
+    (``fit_thermal_axes``), as on the whole record; each axis's own fit as
+    ``fit_thermal`` gives it alone."""
+    out: dict[tuple[str, bool], ThermalFit] = {}
+    if t_slow is None:
+        return out
+    by_channel: dict[int, list[str]] = {}
+    for name, c in claims.items():
+        if c.thermal_channel is not None:
+            by_channel.setdefault(c.thermal_channel, []).append(name)
+    for ch, axes in by_channel.items():
+        cols = [list(names).index(a) for a in axes]
+        for first, part in ((True, slice(0, h)), (False, slice(h, None))):
+            fits = fit_thermal_axes(y_slow[part][:, cols], t_slow[part, ch][:, None], ["t"],
+                                    rate_b, lag_intervals=False)
+            out.update({(a, first): f for a, f in zip(axes, fits, strict=True)})
+    return out
 
 
 def check_compatible(meta: dict[str, Any], other: dict[str, Any], path: str) -> None:

@@ -35,9 +35,16 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
+from avard.core.allan.deviations import (
+    DEFAULT_OVERLAP,
+    NORM,
+    DifferenceSums,
+    grid_sums,
+    segment_phase,
+)
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
@@ -100,10 +107,10 @@ def allan2(y: NDArray, u: NDArray, rate_hz: float,
     return sa.result()
 
 
-def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
-                    ) -> tuple[float, float, int]:
-    """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
-    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc)."""
+def regression_terms(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
+                     ) -> tuple[NDArray[np.float64], ...]:
+    """(τ, Cov_A(y, u), AVAR_u, AVAR_y, ν_y) at the τ the regression uses, from a
+    two-channel Allan result (axis, temperature)."""
     cov = np.asarray(res.cov, dtype=float)
     tau = np.asarray(res.tau, dtype=float)
     edf = np.asarray(res.edf, dtype=float)
@@ -111,18 +118,26 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
     ok = (np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (tau >= min_tau_s)
           & np.isfinite(edf_y) & (edf_y >= 3))
-    k = np.flatnonzero(ok)
-    if len(k) == 0:
+    return tau[ok], cyu[ok], vu[ok], vy[ok], edf_y[ok]
+
+
+def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
+                    ) -> tuple[float, float, int]:
+    """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
+    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc)."""
+    _tau, cyu, vu, vy, nu = regression_terms(res, min_tau_s)
+    if len(cyu) == 0:
         return 0.0, math.inf, 0
-    c = cyu[k] / vu[k]
-    r = np.maximum(vy[k] - cyu[k] ** 2 / vu[k], 1e-300)
-    se = np.sqrt(r / (vu[k] * edf_y[k]))
+    c = cyu / vu
+    r = np.maximum(vy - cyu**2 / vu, 1e-300)
+    se = np.sqrt(r / (vu * nu))
     w = 1.0 / se**2
     chat = float(np.sum(w * c) / np.sum(w))
-    rho = _RHO ** np.abs(np.subtract.outer(np.arange(len(k)), np.arange(len(k))))
+    idx = np.arange(len(c))
+    rho = _RHO ** np.abs(np.subtract.outer(idx, idx))
     ws = w * se
     var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
-    return chat, math.sqrt(var), len(k)
+    return chat, math.sqrt(var), len(c)
 
 
 #: Lags after a hole in the temperature log that stay out of the regression (the lag filter
@@ -159,43 +174,170 @@ def feed(sa: StreamingAllan, X: NDArray, keep: NDArray[np.bool_] | None) -> None
         sa.gap()
 
 
-def min_tau_for(lag_s: float) -> float:
+def kept_runs(n: int, keep: NDArray[np.bool_] | None) -> list[tuple[int, int]]:
+    """(start, end) of the runs of rows ``keep`` holds (all rows when None): the segments
+    ``feed`` gives the accumulator."""
+    if keep is None:
+        return [(0, n)]
+    m = np.concatenate([[False], keep, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(),
+                    strict=True))
+
+
+@dataclass(frozen=True)
+class OctaveSums:
+    """Allan difference sums at octave m of C channels over some segments: ``n`` (K,)
+    differences and ``s2`` (K, C, C) = Σ D Dᵀ, on the streaming cascade's stride grid. They
+    add over disjoint parts (``+``) and give the Allan covariance (``cov``)."""
+
+    ms: NDArray[np.int64]
+    n: NDArray[np.int64]
+    s2: NDArray[np.float64]
+
+    def __add__(self, other: OctaveSums) -> OctaveSums:
+        k = min(len(self.ms), len(other.ms))
+        return OctaveSums(self.ms[:k], self.n[:k] + other.n[:k], self.s2[:k] + other.s2[:k])
+
+    def __sub__(self, other: OctaveSums) -> OctaveSums:
+        k = min(len(self.ms), len(other.ms))
+        return OctaveSums(self.ms, self.n - np.pad(other.n[:k], (0, len(self.ms) - k)),
+                          self.s2 - np.pad(other.s2[:k], ((0, len(self.ms) - k), (0, 0),
+                                                           (0, 0))))
+
+    def cov(self) -> NDArray[np.float64]:
+        """Allan covariance (K, C, C), NaN where no difference was counted."""
+        scale = NORM[2] * self.ms.astype(float) ** 2 * np.maximum(self.n, 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where((self.n > 0)[:, None, None], self.s2 / scale[:, None, None],
+                            np.nan)
+
+
+def octave_sums(X: NDArray, keep: NDArray[np.bool_] | None = None, levels: int = 40,
+                overlap: int = DEFAULT_OVERLAP) -> OctaveSums:
+    """The difference sums ``StreamingAllan(C, rate).update`` (via ``feed(…, keep)``) holds
+    after ``X`` (M, C), from the same difference kernel (``deviations.grid_sums``) on the
+    same grids, without the noise identification (the lag scan needs only the covariance;
+    the axis's EDF does not depend on the trial lag). A test holds it equal to the
+    accumulator's covariance."""
+    X = np.asarray(X, dtype=float)
+    runs = kept_runs(len(X), keep)
+    longest = max((b - a for a, b in runs), default=0)
+    ms = [1 << k for k in range(levels) if 2 * (1 << k) <= longest]
+    sums = [DifferenceSums.zeros(X.shape[1]) for _ in ms]
+    for a, b in runs:
+        if b - a < 2:
+            continue
+        p = segment_phase(X[a:b], False)
+        for k, m in enumerate(ms):
+            if 2 * m > b - a:
+                break
+            st = 1 if m <= overlap else m // overlap
+            grid_sums(p[::st] if st > 1 else p, m // st, 0, sums[k], 2)
+    return OctaveSums(np.asarray(ms, dtype=np.int64),
+                      np.asarray([x.n for x in sums], dtype=np.int64),
+                      np.asarray([x.s2 for x in sums], dtype=float).reshape(
+                          len(ms), X.shape[1], X.shape[1]))
+
+
+@dataclass(frozen=True)
+class CovView:
+    """What :func:`tempco_from_cov` reads of an Allan result (τ, covariance, EDF), from
+    :class:`OctaveSums` with the axis's EDF scaled to the differences counted."""
+
+    tau: NDArray[np.float64]
+    cov: NDArray[np.float64]
+    edf: NDArray[np.float64]
+
+
+def cov_view(sums: OctaveSums, rate_hz: float, edf_ref: NDArray, n_ref: NDArray,
+             cols: tuple[int, int] = (0, 1)) -> CovView:
+    """The (axis, temperature) slice ``cols`` of ``sums`` with the axis's EDF ``edf_ref``
+    (K,) of a reference count ``n_ref`` (K,) of differences scaled to this one's count (EDF
+    is proportional to the differences for the lag's few settling blocks left out, or a
+    jackknife's parts)."""
+    k = min(len(sums.ms), len(edf_ref))
+    sel = list(cols)
+    cov = sums.cov()[:k][:, sel][:, :, sel]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edf = np.asarray(edf_ref[:k], float) * sums.n[:k] / np.asarray(n_ref[:k], float)
+    return CovView(sums.ms[:k] / rate_hz, cov, np.column_stack([edf, edf]))
+
+
+def min_tau_for(lag_s: float, floor_s: float = 0.0) -> float:
     """The shortest τ (s) the regression uses for a trial lag: twice the DS18B20's conversion
-    time, and for a negative lag twice |lag|, below which the lead-lag's high-frequency gain
-    makes the regressor mostly the readings' 0.0625 K rounding (an error in the variable that
-    pulls ĉ towards 0: 5 % low at −60 s)."""
-    base = 2 * DS18B20_CONVERSION_S
+    time, the channel's rounding floor ``floor_s`` (:func:`rounding_floor_tau`), and for a
+    negative lag twice |lag|, below which the lead-lag's high-frequency gain makes the
+    regressor mostly the readings' 0.0625 K rounding (an error in the variable that pulls ĉ
+    towards 0: 5 % low at −60 s)."""
+    base = max(2 * DS18B20_CONVERSION_S, floor_s)
     return max(base, 2.0 * -lag_s) if lag_s < 0 else base
+
+
+#: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
+DS18B20_STEP_K = 0.0625
+#: How far a channel's AVAR must stand above its readings' rounding for a τ to enter the
+#: regression: at 10 the rounding is ≤ 1/11 of the regressor's variance there.
+ROUNDING_SNR = 10.0
+
+
+def rounding_floor_tau(T: NDArray, rate_hz: float) -> float:
+    """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
+    least ``ROUNDING_SNR`` times more than its readings' rounding: AVAR_T(τ) ≥ SNR ·
+    (q²/12)·t_read/τ at that τ and the next octave (the rounding of readings every t_read
+    as white noise). Below it the regressor is mostly rounding: an error in the variable
+    that pulls ĉ towards 0 and, as a lag smooths the steps away, favours positive lags (a
+    true lag of 0 was found at 26 s [24.7, 28.8] on a faulty-log record of 4 h, the z² over
+    the lags dominated by how much of the rounding each trial lag smoothed)."""
+    sa = StreamingAllan(1, rate_hz)
+    sa.update(np.asarray(T, dtype=float)[:, None])
+    res = sa.result()
+    tau = np.asarray(res.tau, dtype=float)
+    var = np.asarray(res.var, dtype=float)
+    q = DS18B20_STEP_K**2 / 12.0 * DS18B20_CONVERSION_S / tau
+    ok = np.isfinite(var) & (var >= ROUNDING_SNR * q)
+    for i in range(len(tau)):
+        # the first τ above the rounding with the next octave above it too (a sinusoid's
+        # AVAR dips at multiples of its period)
+        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
+            return float(tau[i]) if i > 0 else 0.0
+    return math.inf
 
 
 def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
                      groups: int = JACKKNIFE_GROUPS,
                      min_tau_s: float = 2 * DS18B20_CONVERSION_S,
-                     keep: NDArray[np.bool_] | None = None) -> tuple[float, float]:
+                     keep: NDArray[np.bool_] | None = None,
+                     ref: Any | None = None) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
-    error: the record in ``groups`` contiguous parts, each its own segment of the streaming
-    accumulator (their sums merge exactly); ĉ_(−g) from all parts but g;
+    error: the record in ``groups`` contiguous parts, each its own segment (their difference
+    sums add exactly, ``OctaveSums``); ĉ_(−g) from all parts but g;
     se² = (G−1)/G·Σ(ĉ_(−g) − mean)². The analytic se of :func:`tempco_from_cov` treats the
     Allan differences of the noise as independent across a slow regressor, which red noise
-    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it."""
+    (random walk, flicker at the HVAC period) violates; the jackknife does not assume it.
+    ``ref``: the axis's Allan result on the whole record (its EDF, scaled to each
+    leave-one-out count; computed here when not given)."""
     M = len(y)
+    X = np.column_stack([y, u])
+    if ref is None:
+        ref = allan2(y, u, rate_hz, keep)
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
     edges = np.linspace(0, M, groups + 1).astype(int)
-    parts = []
-    for a, b in itertools.pairwise(edges):
-        sa = StreamingAllan(2, rate_hz)
-        feed(sa, np.column_stack([y[a:b], u[a:b]]), None if keep is None else keep[a:b])
-        parts.append(sa)
-    full = StreamingAllan.from_state(parts[0].state())
-    for sa in parts[1:]:
-        full.merge(sa)
-    c_all, _se, _n = tempco_from_cov(full.result(), min_tau_s)
+    parts = [octave_sums(X[a:b], None if keep is None else keep[a:b])
+             for a, b in itertools.pairwise(edges)]
+    full = parts[0]
+    for ps in parts[1:]:
+        full = full + ps
+    c_all, _se, _n = tempco_from_cov(cov_view(full, rate_hz, edf_ref, n_ref), min_tau_s)
     cs = []
     for g in range(groups):
-        rest = [sa for h, sa in enumerate(parts) if h != g]
-        acc = StreamingAllan.from_state(rest[0].state())
-        for sa in rest[1:]:
-            acc.merge(sa)
-        cs.append(tempco_from_cov(acc.result(), min_tau_s)[0])
+        rest = [ps for h, ps in enumerate(parts) if h != g]
+        acc = rest[0]
+        for ps in rest[1:]:
+            acc = acc + ps
+        cs.append(tempco_from_cov(cov_view(acc, rate_hz, edf_ref, n_ref), min_tau_s)[0])
     c = np.asarray(cs)
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
@@ -341,16 +483,6 @@ def _between(a: float, b: float) -> float:
     return math.copysign(math.sqrt(a * b), a) if a * b > 0 else 0.5 * (a + b)
 
 
-class _Pair:
-    """The (axis j, temperature) 2×2 slice of a multi-channel AllanResult."""
-
-    def __init__(self, res: Any, j: int) -> None:
-        sel = [j, -1]
-        self.tau = res.tau
-        self.cov = np.asarray(res.cov)[:, sel][:, :, sel]
-        self.edf = np.asarray(res.edf)[:, sel]
-
-
 def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     """``cols`` (M, k) with the lag filter's start-up settling e^(−t/τ_L) projected out of
     every column (least squares, with an offset).
@@ -365,33 +497,98 @@ def without_start(cols: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.flo
     X = np.asarray(cols, dtype=float)
     if lag_s == 0:
         return X.copy()
-    t = np.arange(len(X)) / rate_hz
-    v = np.exp(-t / abs(lag_s))  # a negative lag's lag(T, |lag|) starts the same way
-    v = v - v.mean()
-    vv = float(v @ v)
+    # e^(−t/τ_L) is below 1e-16 after 37 lags: its products are taken where it lives (the
+    # whole-record products cost most of a lag scan), the mean's share added in closed form
+    # (Xc has zero mean, so vᵀXc = eᵀXc)
+    M = len(X)
+    n_e = min(M, math.ceil(37.0 * abs(lag_s) * rate_hz) + 1)
+    e = np.exp(-np.arange(n_e) / (rate_hz * abs(lag_s)))
+    mean_e = float(e.sum()) / M
+    # einsum, not e @ e: OpenBLAS's threaded ddot spent ~100× the arithmetic's CPU time on a
+    # shared machine
+    vv = float(np.einsum("i,i->", e, e)) - M * mean_e**2
     if not vv > 0:
         return X.copy()
     Xc = X - X.mean(axis=0)
-    return np.asarray(Xc - np.outer(v, (v @ Xc) / vv), dtype=float)
+    w = (e @ Xc[:n_e]) / vv
+    Xc += mean_e * w
+    Xc[:n_e] -= np.outer(e, w)
+    return Xc
+
+
+class ScanPoint(NamedTuple):
+    """One trial lag of one axis: (lag s, ĉ, analytic se, z), and ``zg`` (G,) the z with
+    each of the record's ``JACKKNIFE_GROUPS`` contiguous parts left out in turn (the lag's
+    jackknife)."""
+
+    lag: float
+    c: float
+    se: float
+    z: float
+    zg: NDArray[np.float64]
+
+
+def _z(view: CovView, mt: float) -> tuple[float, float, float]:
+    c, se, _n = tempco_from_cov(view, mt)
+    return c, se, (abs(c) / se if se > 0 and math.isfinite(se) else 0.0)
 
 
 def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
-          holes: list[tuple[int, int]] | None = None
-          ) -> list[list[tuple[float, float, float, float]]]:
-    """Per axis, (lag, ĉ, se, z) for every lag: one Allan accumulator of (axes…, lagged T)
-    per lag serves all axes; ``holes`` (blocks at this rate) and their settling left out."""
-    out: list[list[tuple[float, float, float, float]]] = [[] for _ in range(Y.shape[1])]
+          holes: list[tuple[int, int]] | None = None, ref: Any | None = None,
+          floor_s: float = 0.0, parts: bool = False) -> list[list[ScanPoint]]:
+    """Per axis, a ``ScanPoint`` for every lag: one set of Allan difference sums of
+    (axes…, lagged T) per lag serves all axes (``octave_sums``: the covariance alone; the
+    axes' EDF, which does not depend on the lag, from ``ref``, their Allan result, computed
+    once), and with ``parts`` one per contiguous part for the lag's jackknife; ``holes``
+    (blocks at this rate) and their settling left out; τ from ``min_tau_for(lag, floor_s)``."""
+    C = Y.shape[1]
+    if ref is None:
+        ref = _axes_reference(Y, rate_hz)
+    edf = np.asarray(ref.edf, dtype=float).reshape(len(ref.tau), -1)
+    n_ref = np.asarray(ref.n, dtype=float)
+    edges = np.linspace(0, len(Y), JACKKNIFE_GROUPS + 1).astype(int)
+    out: list[list[ScanPoint]] = [[] for _ in range(C)]
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
-        sa = StreamingAllan(Y.shape[1] + 1, rate_hz)
-        feed(sa, without_start(np.column_stack([Y, u]), float(L), rate_hz),
-             hole_mask(len(Y), holes or [], float(L), rate_hz))
-        res = sa.result()
-        for j in range(Y.shape[1]):
-            c, se, _n = tempco_from_cov(_Pair(res, j), min_tau_for(float(L)))
-            z = abs(c) / se if se > 0 and math.isfinite(se) else 0.0
-            out[j].append((float(L), c, se, z))
+        X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
+        keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
+        sums = octave_sums(X, keep)
+        pieces = [octave_sums(X[a:b], None if keep is None else keep[a:b])
+                  for a, b in itertools.pairwise(edges)] if parts else []
+        whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
+        mt = min_tau_for(float(L), floor_s)
+        for j in range(C):
+            c, se, z = _z(cov_view(sums, rate_hz, edf[:, j], n_ref, (j, C)), mt)
+            zg = np.array([_z(cov_view(whole - ps, rate_hz, edf[:, j], n_ref, (j, C)), mt)[2]
+                           for ps in pieces])
+            out[j].append(ScanPoint(float(L), c, se, z, zg))
     return out
+
+
+def _merge(a: list[ScanPoint], b: list[ScanPoint]) -> list[ScanPoint]:
+    """Two scans of one axis as one, sorted by lag, each lag once (a refinement's end points
+    are grid points: counted twice they made the lag's interval end at the estimate)."""
+    return sorted({p.lag: p for p in [*a, *b]}.values(), key=lambda p: p.lag)
+
+
+def _refine(lags: list[float], best: float, n: int) -> list[float]:
+    """``n`` lags between the neighbours of ``best`` in the sorted ``lags`` (geometric on
+    one side of 0, linear across it)."""
+    i = lags.index(best)
+    if i == 0 or i == len(lags) - 1:
+        return []
+    a, b = lags[i - 1], lags[i + 1]
+    if a * b > 0:
+        return (math.copysign(1.0, a) * np.geomspace(abs(a), abs(b), n)).tolist()
+    return np.linspace(a, b, n).tolist()
+
+
+def _axes_reference(Y: NDArray, rate_hz: float) -> Any:
+    """The axes' Allan result (analyze's estimator, its EDF) that the lag scan's regressions
+    weight by."""
+    sa = StreamingAllan(Y.shape[1], rate_hz)
+    sa.update(Y)
+    return sa.result()
 
 
 def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) -> ThermalFit:
@@ -400,11 +597,14 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
 
 
 def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-                     holes: Holes | None = None) -> list[ThermalFit]:
+                     holes: Holes | None = None, lag_intervals: bool = True
+                     ) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
     channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
-    masked readings), left out of its regression with the lag's settling after them."""
+    masked readings), left out of its regression with the lag's settling after them.
+    ``lag_intervals`` False: no jackknife of the lag (the held-out halves need only the
+    estimates); the lag's interval is then the estimate itself."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
@@ -416,35 +616,48 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     Ts = temps[:m].reshape(-1, f, temps.shape[1]).mean(axis=1)
     rate_s = rate_hz / f
     grid = _lag_grid(record_s, rate_s)
-    scans: dict[int, list[list[tuple[float, float, float, float]]]] = {}
+    scans: dict[int, list[list[ScanPoint]]] = {}
+    ref = _axes_reference(Ys, rate_s)
     for j in range(temps.shape[1]):
         hj = [(a // f, b // f) for a, b in holes.get(j, [])]
-        per_axis = _scan(Ys, Ts[:, j], grid, rate_s, hj)
-        # refine between the neighbouring grid points of each axis's best lag
-        fine: set[float] = set()
-        for sc in per_axis:
-            i = int(np.argmax([s[3] for s in sc]))
-            if 0 < i < len(grid) - 1 and grid[i - 1] * grid[i + 1] > 0:
-                a, b = grid[i - 1], grid[i + 1]
-                fine.update((math.copysign(1.0, a) * np.geomspace(abs(a), abs(b), 13)).tolist())
-            elif 0 < i < len(grid) - 1:  # next to 0: linear across it
-                fine.update(np.linspace(grid[i - 1], grid[i + 1], 13).tolist())
-        if fine:
-            extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj)
-            per_axis = [a + b for a, b in zip(per_axis, extra, strict=True)]
-        scans[j] = [sorted(sc) for sc in per_axis]
-    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes)
-            for a in range(Y.shape[1])]
+        floor = rounding_floor_tau(Ts[:, j], rate_s)
+        per_axis = [sorted(sc, key=lambda p: p.lag)
+                    for sc in _scan(Ys, Ts[:, j], grid, rate_s, hj, ref, floor)]
+        # coarse to fine: twice between the neighbouring lags of each axis's best
+        for n_fine in (13, 9):
+            fine: set[float] = set()
+            for sc in per_axis:
+                lags = [p.lag for p in sc]
+                fine.update(_refine(lags, lags[int(np.argmax([p.z for p in sc]))], n_fine))
+            fine -= {p.lag for sc in per_axis for p in sc}
+            if fine:
+                extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj, ref, floor)
+                per_axis = [_merge(a, b) for a, b in zip(per_axis, extra, strict=True)]
+        if lag_intervals:
+            # the lag's jackknife on the lags between the coarse grid's neighbours of each
+            # axis's best (the parts' sums cost a scan each: not on the whole grid)
+            window: set[float] = set()
+            for sc in per_axis:
+                b = sc[int(np.argmax([p.z for p in sc]))].lag
+                lo_w = max((g for g in grid if g < b), default=b)
+                hi_w = min((g for g in grid if g > b), default=b)
+                window.update(p.lag for p in sc if lo_w <= p.lag <= hi_w)
+            jk = _scan(Ys, Ts[:, j], sorted(window), rate_s, hj, ref, floor, parts=True)
+            per_axis = [_merge(a, b) for a, b in zip(per_axis, jk, strict=True)]
+        scans[j] = per_axis
+    floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
+    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
+                  floors) for a in range(Y.shape[1])]
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-          best: dict[int, list[tuple[float, float, float, float]]],
-          holes: Holes | None = None) -> ThermalFit:
+          best: dict[int, list[ScanPoint]], holes: Holes | None = None,
+          floors: dict[int, float] | None = None) -> ThermalFit:
     """The driving channel and lag of one axis from its scans, with the profile interval."""
-    zmax = {j: max(s[3] for s in sc) for j, sc in best.items()}
+    zmax = {j: max(s.z for s in sc) for j, sc in best.items()}
 
-    def at_end(sc: list[tuple[float, float, float, float]]) -> bool:
-        k = int(np.argmax([s[3] for s in sc]))
+    def at_end(sc: list[ScanPoint]) -> bool:
+        k = int(np.argmax([s.z for s in sc]))
         return k in (0, len(sc) - 1)
 
     # a channel whose lag sits at the end of the search (open) is preferred over one with an
@@ -454,37 +667,82 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
 
     jb = max(zmax, key=rank)
     scan = best[jb]
-    k = int(np.argmax([s[3] for s in scan]))
-    L, _c_scan, se_scan, z_fast = scan[k]
+    k = int(np.argmax([s.z for s in scan]))
+    L = scan[k].lag
+    mt = min_tau_for(L, (floors or {}).get(jb, 0.0))
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
     keep = hole_mask(len(y), (holes or {}).get(jb, []), L, rate_hz)
     res = allan2(yu[:, 0], yu[:, 1], rate_hz, keep)
-    c, se_a, _n = tempco_from_cov(res, min_tau_for(L))
-    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz,
-                                       min_tau_s=min_tau_for(L), keep=keep)
+    c, se_a, _n = tempco_from_cov(res, mt)
+    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
+                                       ref=res)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself
     se = max(se_jk, se_a)
     z = abs(c) / se if se > 0 else 0.0
-    # profile interval of the lag: the scan's z² within (se/se_scan)² of the best, i.e.
-    # Δχ² = 1 on the scale of the reported error (the analytic z² curve has the right shape
-    # but is too narrow)
-    widen = (se / se_scan) ** 2 if se_scan > 0 and math.isfinite(se_scan) else 1.0
-    inside = [s[0] for s in scan if s[3] ** 2 >= z_fast**2 - max(widen, 1.0)]
-    lo_i, hi_i = min(inside), max(inside)
-    lags = [s[0] for s in scan]
-    pos_lo, pos_hi = lags.index(lo_i), lags.index(hi_i)
-    lag_lo = lo_i if pos_lo == 0 else _between(lags[pos_lo - 1], lo_i)
-    lag_hi = hi_i if pos_hi == len(lags) - 1 else _between(lags[pos_hi + 1], hi_i)
+    lag_lo, lag_hi, open_lo, open_hi = lag_interval(scan, k)
+    # ĉ is the coefficient at the chosen lag; the lag is an estimate too, and for a lag long
+    # against the cycle (ωL ≫ 1) the two trade off (c/√(1 + ω²L²) is what the data fix):
+    # the coefficient's interval carries the lag's by the delta method, dĉ/dL from the scan
+    # (the test's z stays the fixed-lag one: the lag search is in its threshold)
+    if 0 < k < len(scan) - 1 and not (open_lo or open_hi):
+        slope = (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
+        se = math.hypot(se, slope * 0.5 * (lag_hi - lag_lo))
     others = {}
     for j, sc in best.items():
         if j != jb:
-            kk = int(np.argmax([s[3] for s in sc]))
-            others[names[j]] = {"z": sc[kk][3], "lag_s": sc[kk][0], "coefficient": sc[kk][1]}
+            kk = int(np.argmax([s.z for s in sc]))
+            others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
-                      others, res, lag_open=pos_hi == len(lags) - 1 or (
-                          pos_lo == 0 and lags[0] < 0))
+                      others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0))
+
+
+def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:
+    """The lag of the largest z (a parabola through it and its neighbours in z², its vertex
+    kept between them), and the index of the largest."""
+    i = int(np.argmax(z))
+    if 0 < i < len(lags) - 1:
+        x = np.asarray(lags[i - 1:i + 2], dtype=float)
+        f = np.asarray(z[i - 1:i + 2], dtype=float) ** 2
+        den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
+        a = (x[2] * (f[1] - f[0]) + x[1] * (f[0] - f[2]) + x[0] * (f[2] - f[1])) / den
+        b = (x[2] ** 2 * (f[0] - f[1]) + x[1] ** 2 * (f[2] - f[0])
+             + x[0] ** 2 * (f[1] - f[2])) / den
+        if a < 0:
+            return float(np.clip(-b / (2 * a), x[0], x[2])), i
+    return float(lags[i]), i
+
+
+def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
+    """(low, high, open low, open high): the lag's 68 % interval, the best lag ± its
+    delete-a-group jackknife standard error (the best lag of the record with each of its
+    ``JACKKNIFE_GROUPS`` parts left out: se² = (G−1)/G·Σ(L_(−g) − mean)²), over the lags
+    that carry the parts' z (``ScanPoint.zg``; none: the estimate alone).
+
+    Not the profile of the analytic z² over the lags: the regressor carries noise the axis
+    does not (the readings' rounding, the logger's own noise), and smoothing it away by a
+    longer trial lag raises z² by a share of z² itself (≈ 500 at z 22), far above the Δ = 1
+    that draws the interval: a true lag 0 came out at 26 s [24.7, 28.8] (68 %), and the
+    intervals of 32 records held the true lag in none. The jackknife measures how far the
+    best lag moves with the data, whatever moves it. An end whose leave-one-out lags reach
+    the first or last lag examined is open (its end the last lag examined)."""
+    lags = [p.lag for p in scan]
+    best, _i = _peak(lags, np.array([p.z for p in scan]))
+    sub = [p for p in scan if len(p.zg)]
+    if len(sub) < 3:
+        return best, best, k == 0, k == len(scan) - 1
+    sl = [p.lag for p in sub]
+    zg = np.array([p.zg for p in sub])  # (lags, G)
+    G = zg.shape[1]
+    picks = [_peak(sl, zg[:, g]) for g in range(G)]
+    lg = np.array([p[0] for p in picks])
+    se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
+    open_lo = any(p[1] == 0 for p in picks) or k == 0
+    open_hi = any(p[1] == len(sl) - 1 for p in picks) or k == len(scan) - 1
+    lo = min(sl[0], best) if open_lo else best - se
+    hi = max(sl[-1], best) if open_hi else best + se
+    return lo, hi, open_lo, open_hi
 
 
 def min_detectable_tempco(n_white: float, b_inst: float, k_rrw: float, record_s: float,

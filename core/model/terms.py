@@ -298,6 +298,7 @@ def model_avar(
 PsdFn = Callable[[NDArray[np.float64]], NDArray[np.float64]]
 
 
+@lru_cache(maxsize=512)  # one function per component: its values on the nodes are cached
 def term_psd(term: str, rate_hz: float) -> PsdFn | None:
     """Two-sided discrete PSD per unit θ = value² (cycles/sample), or None for deterministic
     terms (rate ramp), which add no estimator variance of their own.
@@ -319,18 +320,21 @@ def term_psd(term: str, rate_hz: float) -> PsdFn | None:
     raise FitError(f"unknown noise term {term!r}")
 
 
+@lru_cache(maxsize=512)  # one function per component: its values on the nodes are cached
 def gauss_markov_psd(rate_hz: float, T: float) -> PsdFn:
     """PSD per unit σ² of a first-order Gauss–Markov process: fs·2T/(1 + (2πνfsT)²)."""
     fs = float(rate_hz)
     return lambda nu: fs * 2.0 * T / (1.0 + (2.0 * np.pi * nu * fs * T) ** 2)
 
 
+@lru_cache(maxsize=512)  # one function per component: its values on the nodes are cached
 def lowpass_flicker_psd(rate_hz: float, corner_hz: float, order: int = 2) -> PsdFn:
     """PSD per unit B² of flicker (bias-instability) noise through the low-pass."""
     fs = float(rate_hz)
     return lambda nu: lowpass_gain2(nu, fs, corner_hz, order) / (2.0 * np.pi * np.abs(nu))
 
 
+@lru_cache(maxsize=512)  # one function per component: its values on the nodes are cached
 def lowpass_white_psd(rate_hz: float, corner_hz: float, order: int = 2) -> PsdFn:
     """PSD per unit N² of white noise through the low-pass: fs·|G(ν)|²."""
     fs = float(rate_hz)
@@ -397,6 +401,45 @@ def _pair_quadrature(mk: int, ml: int, c: float = 4.0) -> tuple[NDArray, NDArray
     return np.concatenate(nodes), np.concatenate(weights)
 
 
+@lru_cache(maxsize=64)
+def _kernel_nodes(mkey: tuple[int, ...]) -> tuple[NDArray, NDArray, NDArray, list[tuple[int, int]]]:
+    """The quadrature of every pair of averaging factors (``_pair_quadrature``), concatenated:
+    (ν, weights, each pair's first node, the pairs). The same for every fit on these τ."""
+    K = len(mkey)
+    pairs = [(k, j) for k in range(K) for j in range(k, K)]
+    quads = [_pair_quadrature(mkey[k], mkey[j]) for k, j in pairs]
+    nu = np.concatenate([q[0] for q in quads])
+    w = np.concatenate([q[1] for q in quads])
+    starts = np.cumsum([0] + [len(q[0]) for q in quads[:-1]])
+    for a in (nu, w, starts):
+        a.setflags(write=False)
+    return nu, w, starts, pairs
+
+
+@lru_cache(maxsize=128)
+def _pair_integrals(mkey: tuple[int, ...], pa: PsdFn | None, pb: PsdFn | None
+                    ) -> NDArray[np.float64]:
+    """2∫ s_a s_b |H_k|²|H_l|² dν for every pair (k, l) of ``mkey``: cached per pair of
+    component PSDs (the PSD functions are cached per component, ``term_psd`` …), so a scan
+    that varies one component (a Gauss–Markov T) recomputes only that component's share."""
+    _nu, w, starts, _pairs = _kernel_nodes(mkey)
+    if pa is None or pb is None:
+        return np.zeros(len(starts))
+    sa = _psd_on(mkey, pa)
+    sb = sa if pb is pa else _psd_on(mkey, pb)
+    out = 2.0 * np.add.reduceat(w * sa * sb, starts)
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=32)
+def _psd_on(mkey: tuple[int, ...], p: PsdFn) -> NDArray[np.float64]:
+    """A component's PSD on the nodes of ``mkey``."""
+    out = np.asarray(p(_kernel_nodes(mkey)[0]), dtype=np.float64)
+    out.setflags(write=False)
+    return out
+
+
 def avar_covariance_kernels(m: ArrayLike, psds: list[PsdFn | None]) -> NDArray[np.float64]:
     """Kernels G[k, l, a, b] = 2∫₀^½ s_a(ν)s_b(ν)|H_mk|²|H_ml|² dν for the AVAR estimates at
     averaging factors m (K,) and unit component PSDs s_a (None = deterministic, zero).
@@ -406,20 +449,16 @@ def avar_covariance_kernels(m: ArrayLike, psds: list[PsdFn | None]) -> NDArray[n
         Cov(σ̂²_k, σ̂²_l) ≈ 2/M · ∫_{−½}^{½} S²|H_k|²|H_l|² dν = (2/M)·θᵀ G[k, l] θ.
     The correlation matrix built from these is what makes the fit's intervals honest.
     """
-    mm = np.asarray(m, dtype=np.int64)
-    K, A = len(mm), len(psds)
-    pairs = [(k, j) for k in range(K) for j in range(k, K)]
-    quads = [_pair_quadrature(int(mm[k]), int(mm[j])) for k, j in pairs]
-    nu = np.concatenate([q[0] for q in quads])
-    w = np.concatenate([q[1] for q in quads])
-    starts = np.cumsum([0] + [len(q[0]) for q in quads[:-1]])
-    s = np.array([p(nu) if p is not None else np.zeros_like(nu) for p in psds])
+    mkey = tuple(int(x) for x in np.asarray(m, dtype=np.int64))
+    K, A = len(mkey), len(psds)
+    _nu, _w, _starts, pairs = _kernel_nodes(mkey)
+    kk = np.array([k for k, _ in pairs], dtype=np.intp)
+    jj = np.array([j for _, j in pairs], dtype=np.intp)
     G = np.zeros((K, K, A, A))
     for a in range(A):
         for b in range(a, A):
-            g = 2.0 * np.add.reduceat(w * s[a] * s[b], starts)
-            for (k, j), val in zip(pairs, g, strict=True):
-                G[k, j, a, b] = G[j, k, a, b] = G[k, j, b, a] = G[j, k, b, a] = val
+            g = _pair_integrals(mkey, psds[a], psds[b])
+            G[kk, jj, a, b] = G[jj, kk, a, b] = G[kk, jj, b, a] = G[jj, kk, b, a] = g
     return G
 
 

@@ -217,3 +217,33 @@ def test_filter_terms_are_computed_once_per_corner_not_per_fitted_rate() -> None
     other = M.lowpass_flicker_avar(tau, 2e-5, 125.0, 20.0)
     assert M._flicker_ratio_one.cache_info().misses > flicker0
     assert not np.allclose(other, first, rtol=1e-3, atol=0)
+
+
+def test_covariance_kernels_cached_equal_the_direct_quadrature():
+    """The kernels, cached per pair of component PSDs (a Gauss–Markov T scan recomputes only
+    its own component's share), equal the direct sum over every pair's quadrature, for any
+    order of calls."""
+    import numpy as np
+    from avard.core.model import terms as mdl
+
+    m = np.array([1, 2, 4, 8, 16, 32, 64, 128])
+    rate = 10.0
+
+    def direct(psds):
+        K, A = len(m), len(psds)
+        G = np.zeros((K, K, A, A))
+        for k in range(K):
+            for j in range(k, K):
+                nu, w = mdl._pair_quadrature(int(m[k]), int(m[j]))
+                s = [p(nu) if p is not None else np.zeros_like(nu) for p in psds]
+                for a in range(A):
+                    for b in range(A):
+                        G[k, j, a, b] = G[j, k, a, b] = 2.0 * np.sum(w * s[a] * s[b])
+        return G
+
+    base = [mdl.term_psd(t, rate) for t in ("velocity_random_walk", "bias_instability",
+                                            "rate_random_walk", "rate_ramp")]
+    for T in (3.0, 30.0, 3.0):
+        psds = [*base, mdl.gauss_markov_psd(rate, T), mdl.lowpass_white_psd(rate, 2.5)]
+        got = mdl.avar_covariance_kernels(m, psds)
+        assert np.allclose(got, direct(psds), rtol=1e-12, atol=0)
