@@ -41,15 +41,16 @@ A coverage test on records from a generator written apart from the simulator
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from avard.core.allan.chi2 import chi2_ppf
+from avard.core.allan.cross import PairMoments
 from avard.core.allan.deviations import AllanResult, allan_variance
-from avard.core.errors import AvardError, DataError
+from avard.core.errors import AvardError, DataError, FormatError
 from avard.core.io.rates import rates_compatible
 from numpy.typing import ArrayLike, NDArray
 
@@ -161,6 +162,7 @@ class Separation:
             "axes": {}}
         for ax in self.axes:
             d: dict[str, Any] = {"tau": [float(t) for t in ax.tau],
+                                 "m": [int(v) for v in ax.m],
                                  "averages": [int(a) for a in ax.averages],
                                  "common": ax.common.to_dict(), "sensors": {}}
             for i, name in enumerate(self.sensors):
@@ -180,6 +182,103 @@ class Separation:
         return out
 
 
+    @classmethod
+    def from_dict(cls, d: object) -> Separation:
+        """THE decoder of a separation map (:meth:`to_dict`: ``avard separate --json`` and
+        the ``separation`` field of the service's ``avar`` record). Every list is checked
+        against the τ count, so a ragged or hostile map is refused with one
+        ``FormatError`` naming what is wrong. Variances come back as ADEV²: NaN where only an
+        upper limit is known (the map never carries a negative estimate); the fits are not
+        rebuilt (``fits`` empty; the live service sends none)."""
+        if not isinstance(d, dict):
+            raise FormatError(f"a separation is a map, not {type(d).__name__}")
+        try:
+            sensors = tuple(_strings(d["sensors"], "sensors"))
+            if len(sensors) not in PAIRS:
+                raise FormatError(f"a separation has 2 or 3 sensors, not {len(sensors)}")
+            axes_in = d["axes"]
+            if not isinstance(axes_in, dict) or not axes_in:
+                raise FormatError("a separation's axes must be a non-empty map")
+            axes = []
+            for name, ax in axes_in.items():
+                if not isinstance(ax, dict):
+                    raise FormatError(f"axis {name!r} is not a map")
+                tau = _floats(ax["tau"], f"{name}.tau")
+                k = len(tau)
+                m = _ints(ax["m"], f"{name}.m", k) if "m" in ax else \
+                    np.rint(tau * float(d["rate_hz"])).astype(np.int64)
+                per = ax["sensors"]
+                if not isinstance(per, dict) or set(per) != set(sensors):
+                    raise FormatError(f"axis {name!r} must hold every sensor of "
+                                      f"{list(sensors)}")
+                own = tuple(_part(per[s]["self_noise"], f"{name}.{s}", k) for s in sensors)
+                verdicts = tuple(_verdict_of(per[s]["verdict"], f"{name}.{s}", k)
+                                 for s in sensors)
+                problems = tuple(p if isinstance(p := per[s].get("fit_problem"), str) else None
+                                 for s in sensors)
+                axes.append(AxisSeparation(str(name), tau, m,
+                                           _ints(ax["averages"], f"{name}.averages", k), own,
+                                           _part(ax["common"], f"{name}.common", k), verdicts,
+                                           (), problems))
+            return cls(sensors, str(d["method"]), float(d["rate_hz"]), int(d["n_samples"]),
+                       float(d["ci"]), tuple(axes), tuple(_strings(d.get("notes", []), "notes")),
+                       tuple(_strings(d.get("sources", []), "sources")))
+        except KeyError as exc:
+            raise FormatError(f"a separation map lacks {exc}; it is not one") from None
+        except (TypeError, ValueError, OverflowError, AttributeError) as exc:
+            raise FormatError(f"a separation map does not decode: {exc}") from None
+
+
+def _strings(v: Any, what: str) -> list[str]:
+    if not isinstance(v, list | tuple) or not all(isinstance(x, str) for x in v):
+        raise FormatError(f"separation {what} must be a list of strings")
+    return list(v)
+
+
+def _floats(v: Any, what: str, k: int | None = None) -> NDArray[np.float64]:
+    """A list of numbers or nulls (NaN) of length ``k``."""
+    if not isinstance(v, list | tuple) or (k is not None and len(v) != k):
+        raise FormatError(f"separation {what} must be a list of {k if k is not None else ''} "
+                          "numbers".replace("  ", " "))
+    return np.array([np.nan if x is None else float(x) for x in v], dtype=np.float64)
+
+
+def _ints(v: Any, what: str, k: int) -> NDArray[np.int64]:
+    if not isinstance(v, list | tuple) or len(v) != k or \
+            not all(isinstance(x, int) and not isinstance(x, bool) for x in v):
+        raise FormatError(f"separation {what} must be a list of {k} integers")
+    return np.array(v, dtype=np.int64)
+
+
+def _part(d: Any, what: str, k: int) -> Part:
+    if not isinstance(d, dict):
+        raise FormatError(f"separation {what} is not a map")
+    ul = d["upper_limit"]
+    if not isinstance(ul, list | tuple) or len(ul) != k or \
+            not all(isinstance(u, bool) for u in ul):
+        raise FormatError(f"separation {what}.upper_limit must be a list of {k} booleans")
+    upper = np.array(ul, dtype=bool)
+    adev, lo, hi = (_floats(d[key], f"{what}.{key}", k) for key in ("adev", "adev_lo",
+                                                                     "adev_hi"))
+    if np.any(np.isnan(adev) != upper) or np.any(np.isnan(hi)) or np.any(hi < 0) \
+            or np.any(adev < 0):
+        raise FormatError(f"separation {what}: an ADEV is given exactly where it is not an "
+                          "upper limit, and every upper end is a number ≥ 0")
+    return Part(adev**2, np.where(upper, 0.0, lo**2), hi**2, upper,
+                _floats(d["edf"], f"{what}.edf", k))
+
+
+def _verdict_of(d: Any, what: str, k: int) -> Verdict:
+    if not isinstance(d, dict):
+        raise FormatError(f"separation {what}.verdict is not a map")
+    state = _strings(d["state"], f"{what}.verdict.state")
+    if len(state) != k or not set(state) <= {"below", "above", "not resolved"}:
+        raise FormatError(f"separation {what}.verdict.state must be {k} of below, above, "
+                          "not resolved")
+    return Verdict(tuple(state), _floats(d["factor"], f"{what}.verdict.factor", k),
+                   _floats(d["factor_at_least"], f"{what}.verdict.factor_at_least", k))
+
+
 def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -187,11 +286,14 @@ def _num(x: float) -> float | None:
 def separate(accels: Sequence[ArrayLike], rate_hz: float, *, sensors: Sequence[str],
              axes: Sequence[str], taus: str | ArrayLike = "octave", ci: float = 0.683,
              fit: bool = True, filter_corner_hz: float | None = None,
-             notes: Sequence[str] = (), sources: Sequence[str] = ()) -> Separation:
+             notes: Sequence[str] = (), sources: Sequence[str] = (),
+             overlap: int | None = None) -> Separation:
     """Separate 2 or 3 aligned records (each (N, C) in m/s² at ``rate_hz``, the same N and
     channels ``axes``) into each sensor's self-noise and the common input, per τ and axis
     (eqs. 1–3 of the module docstring); with ``fit`` the IEEE terms of each self-noise by
-    :func:`avard.core.model.fit.fit_noise`."""
+    :func:`avard.core.model.fit.fit_noise`. The Allan moments are fully overlapping, or with
+    ``overlap`` S the partially overlapping ones the service's streaming accumulators keep
+    (stride m/S above m = S; core/allan/cross.py), which the live separation equals."""
     ys = [np.asarray(a, dtype=np.float64) for a in accels]
     ys = [y[:, None] if y.ndim == 1 else y for y in ys]
     s = len(ys)
@@ -208,60 +310,104 @@ def separate(accels: Sequence[ArrayLike], rate_hz: float, *, sensors: Sequence[s
     out = []
     for c, axis in enumerate(axes):
         out.append(_separate_axis([y[:, c] for y in ys], float(rate_hz), axis, taus, ci,
-                                  fit, filter_corner_hz))
+                                  fit, filter_corner_hz, overlap))
     method = "groslambert covariance" if s == 2 else "three-cornered hat"
     return Separation(tuple(sensors), method, float(rate_hz), int(shape[0]), ci, tuple(out),
                       tuple(notes), tuple(sources), filter_corner_hz)
 
 
-_PAIRS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}
+PAIRS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}
 
 
 def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
                    taus: str | ArrayLike, ci: float, fit: bool,
-                   filter_corner_hz: float | None) -> AxisSeparation:
+                   filter_corner_hz: float | None, overlap: int | None) -> AxisSeparation:
     s = len(cols)
-    pairs = _PAIRS[s]
+    pairs = PAIRS[s]
     diffs = [cols[i] - cols[j] for i, j in pairs]
-    res = allan_variance(np.column_stack(cols + diffs), rate, taus, kind="oavar", ci=ci)
-    n_total = len(cols[0])
-    averages = n_total // res.m
-    keep = (res.n > 0) & (averages >= MIN_AVERAGES) & np.all(np.isfinite(res.edf), axis=1)
+    if overlap is None:
+        res = allan_variance(np.column_stack(cols + diffs), rate, taus, kind="oavar", ci=ci)
+    else:
+        res = allan_variance(np.column_stack(cols + diffs), rate, taus, kind="pavar", ci=ci,
+                             overlap=overlap)
+    moments = {pair: PairMoments.from_result(res, pair[0], pair[1], s + k, len(cols[0]))
+               for k, pair in enumerate(pairs)}
+    sep = separate_moments(moments, s, axis, ci)
+    if not fit:
+        return sep
+    fits, problems = [], []
+    for i in range(s):
+        f, problem = _fit(sep.self_result(i, rate, ci), filter_corner_hz)
+        fits.append(f)
+        problems.append(problem)
+    return replace(sep, fits=tuple(fits), fit_problems=tuple(problems))
+
+
+def separate_moments(moments: Mapping[tuple[int, int], PairMoments], n_sensors: int,
+                     axis: str, ci: float = 0.683) -> AxisSeparation:
+    """THE estimator: each of ``n_sensors`` (2 or 3) sensors' self-noise and the common part
+    at the τ every pair has (eqs. 1–3), from the Allan moments of each pair (i, j), i < j
+    (``PAIRS``): the batch path (:func:`separate`) and the service's streaming accumulators
+    (core/allan/cross.py) both hand it :class:`PairMoments`. A sensor's own Allan variance
+    and EDF are the mean over the pairs it is in (the same number when the pairs cover the
+    same samples; pairs with different losses cover slightly different ones). τ with fewer
+    than :data:`MIN_AVERAGES` averages (over the fewest samples of any pair) are left out."""
+    s = n_sensors
+    pairs = PAIRS.get(s)
+    if pairs is None or set(moments) != set(pairs):
+        raise DataError(f"the separation takes the moments of every pair of 2 or 3 sensors "
+                        f"({pairs}), not {sorted(moments)}")
+    ms = [moments[p].m[moments[p].n > 0] for p in pairs]
+    m_all = ms[0]
+    for other in ms[1:]:
+        m_all = np.intersect1d(m_all, other)
+    got = {p: moments[p].at(m_all) for p in pairs}
+    n_total = min(g.n_samples for g in got.values())
+    averages = n_total // m_all
+    finite = np.ones(len(m_all), dtype=bool)
+    for g in got.values():
+        finite &= np.isfinite(g.edf_a) & np.isfinite(g.edf_b) & np.isfinite(g.edf_d)
+    keep = (averages >= MIN_AVERAGES) & finite
     if not np.any(keep):
         raise DataError(f"axis {axis}: the records are too short for a single Allan "
                         f"covariance with {MIN_AVERAGES} averages")
-    tau, m, var = res.tau[keep], res.m[keep], res.var[keep]
-    edf, cov = res.edf[keep], res.cov[keep] if res.cov is not None else None
-    assert cov is not None
-    d_col = {pair: s + k for k, pair in enumerate(pairs)}   # column of y_i − y_j
+    got = {p: g.at(m_all[keep]) for p, g in got.items()}
+    first = got[pairs[0]]
+    tau, m = first.tau, first.m
+    var, edf = [], []
+    for i in range(s):       # each sensor's own Allan variance, from the pairs it is in
+        mine = [(g.var_a, g.edf_a) if p[0] == i else (g.var_b, g.edf_b)
+                for p, g in got.items() if i in p]
+        var.append(np.mean([v for v, _ in mine], axis=0))
+        edf.append(np.mean([e for _, e in mine], axis=0))
+
+    def pair(i: int, j: int) -> PairMoments:
+        return got[(min(i, j), max(i, j))]
 
     est, big_p, big_q, nu = [], [], [], []
     for i in range(s):
         if s == 2:
-            j = 1 - i
-            dc = d_col[(min(i, j), max(i, j))]
-            est.append(var[:, i] - cov[:, 0, 1])                        # (1)
-            big_p.append(var[:, i])
-            big_q.append(var[:, dc])
-            nu.append(np.sqrt(edf[:, i] * edf[:, dc]))
+            d = pair(0, 1)
+            est.append(var[i] - d.cov)                                     # (1)
+            big_p.append(var[i])
+            big_q.append(d.var_d)
+            nu.append(np.sqrt(edf[i] * d.edf_d))
         else:
             j, k = (x for x in range(3) if x != i)
-            dij, dik = d_col[(min(i, j), max(i, j))], d_col[(min(i, k), max(i, k))]
-            djk = d_col[(min(j, k), max(j, k))]
-            est.append(0.5 * (var[:, dij] + var[:, dik] - var[:, djk]))   # (2)
-            big_p.append(var[:, dij])
-            big_q.append(var[:, dik])
-            nu.append(np.sqrt(edf[:, dij] * edf[:, dik]))
-    common = np.mean([cov[:, i, j] for i, j in pairs], axis=0)
-    est.append(common)
+            dij, dik, djk = pair(i, j), pair(i, k), pair(j, k)
+            est.append(0.5 * (dij.var_d + dik.var_d - djk.var_d))          # (2)
+            big_p.append(dij.var_d)
+            big_q.append(dik.var_d)
+            nu.append(np.sqrt(dij.edf_d * dik.edf_d))
+    est.append(np.mean([got[p].cov for p in pairs], axis=0))
     if s == 2:
-        big_p.append(var[:, 0])
-        big_q.append(var[:, 1])
+        big_p.append(var[0])
+        big_q.append(var[1])
     else:    # the mean of three covariances varies less than one: (3) for one is wider
-        mean_a = np.mean(var[:, :s], axis=1)
+        mean_a = np.mean(np.column_stack(var), axis=1)
         big_p.append(mean_a)
         big_q.append(mean_a)
-    nu.append(np.min(edf[:, :s], axis=1))
+    nu.append(np.min(np.column_stack(edf), axis=1))
 
     k = len(tau)
     lo, hi, upper, nu_eff = covariance_interval(
@@ -272,16 +418,7 @@ def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
              for q in range(s + 1)]
     self_parts, common_part = tuple(parts[:s]), parts[s]
     verdicts = tuple(_verdict(p, common_part) for p in self_parts)
-    sep = AxisSeparation(axis, tau, m, averages[keep], self_parts, common_part, verdicts)
-    if not fit:
-        return sep
-    fits, problems = [], []
-    for i in range(s):
-        f, problem = _fit(sep.self_result(i, rate, ci), filter_corner_hz)
-        fits.append(f)
-        problems.append(problem)
-    return AxisSeparation(axis, tau, m, averages[keep], self_parts, common_part, verdicts,
-                          tuple(fits), tuple(problems))
+    return AxisSeparation(axis, tau, m, averages[keep], self_parts, common_part, verdicts)
 
 
 def _fit(result: AllanResult, filter_corner_hz: float | None) -> tuple[Any, str | None]:

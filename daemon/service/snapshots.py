@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 from avard.core.allan.streaming import AllanSnapshot
+from avard.core.analysis.separate import Separation
 from avard.core.errors import AvardError
 
 log = logging.getLogger(__name__)
@@ -127,3 +128,12 @@ def fit_record(rec: dict[str, Any]) -> dict[str, Any]:
     """The service's fit of an ``avar`` record: :func:`fit_snapshot` as plain dicts."""
     snap = AllanSnapshot.from_dict(rec["snapshot"])
     return {name: fit.to_dict() for name, fit in fit_snapshot(snap).items()}
+
+
+def separation_of(rec: dict[str, Any]) -> Separation | None:
+    """The live separation of co-located sensors an ``avar`` record carries (its
+    ``separation`` field, from daemon/service/separation_stage.py), decoded by the one
+    decoder :meth:`Separation.from_dict` (also that of ``avard separate --json``); None when
+    the record has none (a one-sensor service). ``FormatError`` when it does not decode."""
+    sep = rec.get("separation")
+    return None if sep is None else Separation.from_dict(sep)

@@ -169,6 +169,7 @@ def page_html(state: RunState, hub: Hub, target: float, endpoint: str) -> str:
     sections = [
         ("status", "Status", ""),
         ("adev", "Allan deviation", ""),
+        ("separation", "Self-noise against common mode", ""),
         ("fit", "Fitted noise terms", ""),
         ("targets", "Time until each τ is known", _target_form(target)),
         ("temps", "Temperatures", ""),

@@ -48,6 +48,7 @@ def fragments(state: RunState, target: float) -> dict[str, str]:
 def common_fragments(state: RunState) -> dict[str, str]:
     """The fragments every viewer shares."""
     return {"status": guarded(status_html, state), "adev": guarded(adev_html, state),
+            "separation": guarded(separation_html, state),
             "temps": guarded(temperatures_html, state),
             "timeline": guarded(timeline_html, state)}
 
@@ -287,6 +288,137 @@ def adev_html(state: RunState) -> str:
     else:
         out.append('<p class="note">Temperature-compensated ADEV: not provided by this '
                    'service.</p>')
+    return "".join(out)
+
+
+# ---- self-noise against common mode ------------------------------------------------------
+
+#: Colours of the co-located sensors' self-noise; the common mode is drawn in COMMON_COLOUR.
+SENSOR_COLOURS = ("#0072B2", "#D55E00", "#009E73")
+COMMON_COLOUR = "#444444"
+
+
+def _points(frame: _Frame, tau: np.ndarray, part: Any, label: str, shape: str) -> tuple[
+        list[str], int, int]:
+    """One separated part's points: an estimate with its interval bar, or, where only an upper
+    limit is known, a downward triangle at the limit with a bar down to the plot's floor."""
+    out, n_est, n_ul = [], 0, 0
+    adev = _sqrt(part.var)
+    lo, hi = _sqrt(part.lo), _sqrt(part.hi)
+    floor = frame.h - MB
+    for k, t in enumerate(tau):
+        if not (t > 0 and math.isfinite(hi[k]) and hi[k] > 0):
+            continue
+        x = frame.px(t)
+        if part.upper_limit[k]:
+            y = frame.py(hi[k])
+            out.append(f'<line class="ci ul" x1="{x:.1f}" y1="{y:.1f}" x2="{x:.1f}" '
+                       f'y2="{floor:.1f}" stroke-dasharray="2 3"/><path class="ul" '
+                       f'd="M{x - 5:.1f},{y - 4:.1f} L{x + 5:.1f},{y - 4:.1f} L{x:.1f},'
+                       f'{y + 4:.1f} Z"><title>{escape(label)}: τ = {t:.4g} s, ADEV '
+                       f'below {hi[k]:.3e} m/s² (upper limit: not resolved from 0)</title>'
+                       f'</path>')
+            n_ul += 1
+            continue
+        v = adev[k]
+        if not (math.isfinite(v) and v > 0):
+            continue
+        y = frame.py(v)
+        if math.isfinite(lo[k]) and lo[k] > 0:
+            out.append(f'<line class="ci" x1="{x:.1f}" y1="{frame.py(lo[k]):.1f}" '
+                       f'x2="{x:.1f}" y2="{frame.py(hi[k]):.1f}"/>')
+        mark = (f'<circle class="pt" cx="{x:.1f}" cy="{y:.1f}" r="3">' if shape == "circle"
+                else f'<rect class="pt" x="{x - 3.5:.1f}" y="{y - 3.5:.1f}" width="7" '
+                     'height="7">')
+        out.append(f'{mark}<title>{escape(label)}: τ = {t:.4g} s, ADEV {v:.3e} m/s² '
+                   f'[{_e(lo[k])}, {_e(hi[k])}]</title>'
+                   f'{"</circle>" if shape == "circle" else "</rect>"}')
+        n_est += 1
+    return out, n_est, n_ul
+
+
+def separation_svg(sep: Any, axis: Any) -> str:
+    """One axis: each sensor's self-noise ADEV and the common mode's (the bed), log-log, m/s²,
+    with their intervals; upper limits as ▽."""
+    tau = np.asarray(axis.tau, dtype=float)
+    parts = [*axis.self_noise, axis.common]
+    shown = np.concatenate([np.concatenate([_sqrt(p.var), _sqrt(p.hi),
+                                            np.where(p.upper_limit, np.nan, _sqrt(p.lo))])
+                            for p in parts])
+    ok_tau = tau[np.isfinite(tau) & (tau > 0)]
+    frame = _Frame(_log_range(ok_tau), _log_range(shown), logx=True, logy=True)
+    body = [frame.axes("τ [s]", "Allan deviation [m/s²]", xfmt=_decade, yfmt=_decade)]
+    legend = []
+    names = [*sep.sensors, "common mode"]
+    for q, part in enumerate(parts):
+        own = q < len(sep.sensors)
+        colour = SENSOR_COLOURS[q % len(SENSOR_COLOURS)] if own else COMMON_COLOUR
+        label = f"{names[q]} self-noise, {axis.axis}" if own else f"common mode, {axis.axis}"
+        pts, n_est, n_ul = _points(frame, tau, part, label, "circle" if own else "square")
+        role = "self" if own else "common"
+        body.append(f'<g class="sep-part" data-role="{role}" data-name="{escape(names[q])}" '
+                    f'data-points="{n_est}" data-limits="{n_ul}" stroke="{colour}" '
+                    f'fill="{colour}">{"".join(pts)}</g>')
+        legend.append((names[q][:14] if own else "common", colour))
+    body.append(_legend(legend))
+    return _svg("".join(body), f"self-noise against common mode, axis {axis.axis}",
+                "plot separation")
+
+
+def _runs(states: Sequence[str], want: str) -> list[tuple[int, int]]:
+    """Runs [first, last] of consecutive τ indices whose verdict is ``want``."""
+    runs: list[tuple[int, int]] = []
+    for k, st in enumerate(states):
+        if st == want:
+            if runs and runs[-1][1] == k - 1:
+                runs[-1] = (runs[-1][0], k)
+            else:
+                runs.append((k, k))
+    return runs
+
+
+def _bed_below(sep: Any, axis: Any) -> str:
+    """Per sensor: where the bed's input is resolved below the sensor's own noise, where
+    above it, and that nothing is resolved when neither."""
+    items = []
+    for i, name in enumerate(sep.sensors):
+        v = axis.verdicts[i]
+        said = []
+        for want, text in (("below", "bed below own noise"), ("above", "bed above own noise")):
+            runs = _runs(v.state, want)
+            if not runs:
+                continue
+            spans = ", ".join(f"{_g(axis.tau[a], 3)}–{_g(axis.tau[b], 3)} s" if a != b
+                              else f"{_g(axis.tau[a], 3)} s" for a, b in runs)
+            by = ""
+            if want == "below":
+                least = np.asarray(v.factor_at_least, dtype=float)
+                finite = least[np.isfinite(least)]
+                by = f" (own noise ≥ {_g(float(finite.min()), 3)}× the bed's)" \
+                    if len(finite) else ""
+            said.append(f"{text} at τ {spans}{by}")
+        if not said:
+            said.append("bed against own noise not resolved at any τ yet")
+        items.append(f"<li>{escape(name)}: {'; '.join(said)}</li>")
+    return f'<ul class="recent">{"".join(items)}</ul>'
+
+
+def separation_html(state: RunState) -> str:
+    sep = state.separation
+    if sep is None:
+        return ('<p class="waiting">No live separation: it needs two or three co-located '
+                'sensors in the service (each sensor\'s self-noise against the common mode '
+                'then comes with every Allan snapshot).</p>')
+    rate = float(sep.rate_hz) or 1.0
+    out = [f'<p class="note">{escape(sep.method)} of {escape(", ".join(sep.sensors))}: '
+           f'{sep.n_samples} aligned samples = {fmt_duration(sep.n_samples / rate)}; bars: '
+           f'{100 * sep.ci:.1f} % intervals; ▽ an upper limit (the estimate is not resolved '
+           f'from 0). ADEV in m/s², τ in s.</p>', '<div class="sep-axes">']
+    for axis in sep.axes:
+        out.append(f'<div class="sep-axis" data-axis="{escape(axis.axis)}"><h3>axis '
+                   f'{escape(axis.axis)}</h3>{separation_svg(sep, axis)}'
+                   f'{_bed_below(sep, axis)}</div>')
+    out.append("</div>")
     return "".join(out)
 
 

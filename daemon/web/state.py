@@ -26,8 +26,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from avard.core.allan.streaming import AllanSnapshot
+from avard.core.analysis.separate import Separation
 from avard.core.errors import FormatError
 from avard.daemon.net.subscriber import Message, StreamStats
+from avard.daemon.service.snapshots import separation_of
 
 log = logging.getLogger(__name__)
 
@@ -123,6 +125,7 @@ class RunState:
     last_message: float | None = None    # when anything last came from the service (clock)
     snapshot: Snapshot | None = None
     compensated: Snapshot | None = None
+    separation: Separation | None = None    # the live separation of co-located sensors
     fits: dict[str, Any] = field(default_factory=dict)   # axis → NoiseFit of ``fitted``
     fitted: Snapshot | None = None
     temperatures: dict[str, Series] = field(default_factory=dict)
@@ -179,6 +182,7 @@ class RunState:
 
     def set_snapshot(self, record: dict[str, Any]) -> None:
         """An ``avar`` record (or the request socket's answer, the same record)."""
+        self._set_separation(record)
         try:
             snap = AllanSnapshot.from_dict(record.get("snapshot"))   # the one decoder
             comp = record.get("compensated")  # a temperature-compensated snapshot
@@ -194,6 +198,19 @@ class RunState:
             if compensated is not None:
                 self.compensated = Snapshot(compensated, now, compensated.n_samples)
             self.version += 1
+
+    def _set_separation(self, record: dict[str, Any]) -> None:
+        """The record's live separation, if it carries one; one that does not decode is
+        ignored (logged), and the Allan snapshot beside it is still taken."""
+        try:
+            sep = separation_of(record)
+        except FormatError as exc:
+            log.warning("ignoring an unreadable live separation: %s", exc)
+            return
+        if sep is not None:
+            with self.lock:
+                self.separation = sep
+                self.version += 1
 
     def update(self, msg: Message, stats: StreamStats | None = None) -> None:
         """A message from the subscriber."""

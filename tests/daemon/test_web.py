@@ -353,7 +353,8 @@ def test_http_routes_are_read_only_self_contained_and_stream_updates():
         resp = await client.get("/events?target=20")
         assert resp.headers["Content-Type"] == "text/event-stream"
         first = await _next_event(resp)
-        assert set(first) == {"status", "adev", "fit", "targets", "temps", "timeline"}
+        assert set(first) == {"status", "adev", "separation", "fit", "targets", "temps",
+                              "timeline"}
         assert "±20 %" in first["targets"]
         assert hub.viewers == 1
         feed(state, [("event", frames.gap_record(RUN, 0, 250, 9, 0.0, 1e9, "overrun"))])
