@@ -326,12 +326,15 @@ class SeparationStage:
                                  "segments per pair " + ", ".join(
                                      f"{k} {v}" for k, v in segments.items()),))
 
-    def record_fields(self, rate_hz: float | None = None) -> dict[str, Any]:
+    def record_fields(self, rate_hz: float | None = None, *,
+                      force: bool = False) -> dict[str, Any]:
         """What the ``avar`` record carries: {"separation": map} once there is one, else {}.
         Computed again once ``interval_s`` of samples (at the nominal rate) came in since
-        the last computation, else the last one (counted by sample, not wall clock)."""
+        the last computation, else the last one (counted by sample, not wall clock);
+        ``force``: computed now unless nothing came in since (the run's last record)."""
         n = self.n_samples
-        due = self._cached_at is None or n - self._cached_at >= self.interval_s * self.rate_hz
+        due = self._cached_at is None or n - self._cached_at >= self.interval_s * self.rate_hz \
+            or (force and n != self._cached_at)
         if due and n:
             sep = self.separation(rate_hz)
             self.computed += 1
