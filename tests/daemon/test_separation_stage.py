@@ -36,9 +36,9 @@ BED = BedSpec(white=1e-4, tilt=1e-6, seed=2)
 def _bring_up_together(clock: Any, specs: Any, rig: list[tuple[str, Any, Any]]) -> None:
     """Bring-up takes virtual time (5 ms a sensor), so the sensors would start apart: each
     goes to standby the instant it started (before it made a sample), and all start at one
-    instant, as an external sync would have them. The emulated bed is shared by sample count
-    (daemon/hw/simulation.BedMotion), which is one instant only then; on hardware the bed is
-    a function of time, which the alignment by fitted time base follows whatever the start."""
+    instant, as an external sync would have them: then every sensor's sample k feels the bed
+    (a function of time, daemon/hw/simulation.BedMotion) at one instant, and the indices at
+    a tick are each sensor's origin apart (what the test below holds)."""
     for spec, (_n, dev, _e) in zip(specs, rig, strict=True):
         bring_up(dev, spec)
         dev.standby()
