@@ -139,18 +139,19 @@ class RigService(Supervised):
                               "reference": names[0]}
         # The live separation of the first 2–3 sensors (rig_separation.py): every lane's avar
         # record carries it, so a subscriber to any one sensor sees the rig's separation.
-        self.separation = RigSeparation(
-            names, config.sensor.odr_hz,
-            data_dir=Path(config.recording.data_dir) if config.recording.enabled else None,
-            checkpoint_interval_s=config.allan.checkpoint_interval_s)
-        if self.separation.left_out:
-            log.warning("the live separation takes the first %d sensors (%s); %s are "
-                        "recorded but not separated", len(self.separation.names),
-                        ", ".join(self.separation.names),
-                        ", ".join(self.separation.left_out))
-        for lane in self.lanes:
-            lane.avar_fields = self.separation.fields
-            lane.status_fields = lambda: {"separation": self.separation.status()}
+        self.separation: RigSeparation | None = None
+        if len(names) >= 2:
+            sep = self.separation = RigSeparation(
+                names, config.sensor.odr_hz,
+                data_dir=Path(config.recording.data_dir) if config.recording.enabled else None,
+                checkpoint_interval_s=config.allan.checkpoint_interval_s)
+            if sep.left_out:
+                log.warning("the live separation takes the first %d sensors (%s); %s are "
+                            "recorded but not separated", len(sep.names),
+                            ", ".join(sep.names), ", ".join(sep.left_out))
+            for lane in self.lanes:
+                lane.avar_fields = sep.fields
+                lane.status_fields = lambda: {"separation": sep.status()}
         self.bank = built.temperature_bank
         self.alignment_interval_s = float(alignment_interval_s)
         self._next_alignment = 0.0
@@ -194,12 +195,13 @@ class RigService(Supervised):
             self.bank.sink = self._temperature_reading
             self.bank.start()
         sep = self.separation
-        chosen = [lane for lane in self.lanes if lane.sensor_name in sep.names]
-        sep.restore({lane.sensor_name: lane.start_index for lane in chosen})
-        sep.attach([SeparatedLane(lane.sensor_name, lane.ring.consumer("separation"),
-                                  lane.scale, lane.timebase, lane.start_index)
-                    for lane in chosen])
-        sep.start()
+        if sep is not None:
+            chosen = [lane for lane in self.lanes if lane.sensor_name in sep.names]
+            sep.restore({lane.sensor_name: lane.start_index for lane in chosen})
+            sep.attach([SeparatedLane(lane.sensor_name, lane.ring.consumer("separation"),
+                                      lane.scale, lane.timebase, lane.start_index)
+                        for lane in chosen])
+            sep.start()
         acqs = [lane.acq for lane in self.lanes]
         for group in self.built.readers:
             members = [acqs[k] for k in group]
@@ -227,7 +229,8 @@ class RigService(Supervised):
         if self.bank is not None:
             self.bank.stop()
         # every sample the rings hold into the separation, before the lanes' last avar
-        self.separation.drain()
+        if self.separation is not None:
+            self.separation.drain()
         self._mark_alignment()
         for lane in self.lanes:
             lane.stop()
@@ -238,7 +241,7 @@ class RigService(Supervised):
             self.publisher = None
 
     def check_threads(self) -> None:
-        err = self.separation.error_of_threads()
+        err = self.separation.error_of_threads() if self.separation is not None else None
         if err is not None:
             raise ServiceFault(f"the live separation stopped: {err!r}; exiting for systemd "
                                "to restart the service")
