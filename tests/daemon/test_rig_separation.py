@@ -181,3 +181,13 @@ def test_a_rig_of_four_separates_its_first_three_and_says_so(tmp_path: Path) -> 
     svc.run(5.0)
     st = svc.lanes[3].final_status["separation"]
     assert st["sensors"] == ["left", "right", "far"] and st["left_out"] == ["spi1"]
+
+
+def test_a_sensor_added_between_runs_starts_the_pairs_afresh(tmp_path: Path) -> None:
+    root = tmp_path / "rec"
+    _rig(_config(root, SENSORS[:2]), Captured()).run(5.0)
+    svc = _rig(_config(root), Captured())
+    svc.run(5.0)
+    assert svc.separation is not None
+    assert svc.separation.restored["state"] == "unusable"
+    assert "separates ['left', 'right', 'far']" in svc.separation.restored["detail"]
