@@ -32,7 +32,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -124,6 +124,8 @@ class RigSeparation:
         self.next_index: dict[str, int] = {}
         self.restored: dict[str, Any] = {}
         self._fields: dict[str, Any] = {}
+        self._version = 0                         # separations computed and kept so far
+        self._given: dict[str, int] = {}          # the version each lane's avar carried
         self._fields_lock = threading.Lock()
         self._work = threading.Condition()
         self._pending = False
@@ -263,7 +265,9 @@ class RigSeparation:
         self.cpu_s["feed"] += c1 - c0
         self.cpu_s["separation"] += time.thread_time() - c1
         with self._fields_lock:
-            self._fields = fields
+            if fields != self._fields:
+                self._fields = fields
+                self._version += 1
         ckpt_rows = int(self.checkpoint_interval_s * self.nominal_odr)
         if self._next_ckpt_rows is None:
             self._next_ckpt_rows = self._rows_total + ckpt_rows
@@ -308,10 +312,18 @@ class RigSeparation:
         if self.error is None:
             self._take(final=True)
 
-    def fields(self) -> dict[str, Any]:
-        """What every lane's ``avar`` record carries (the Allan stages' thread calls it)."""
-        with self._fields_lock:
-            return dict(self._fields)
+    def fields_for(self, lane: str) -> Callable[[], dict[str, Any]]:
+        """What ``lane``'s next ``avar`` record carries (its Allan stage's thread calls it):
+        the separation once after each computation, {} in between (a map of ~10 kB in every
+        record of every sensor would grow each recording by a third; the ``snapshot``
+        request and avard web keep the last one seen, snapshots.SnapshotBoard)."""
+        def fields() -> dict[str, Any]:
+            with self._fields_lock:
+                if self._given.get(lane) == self._version:
+                    return {}
+                self._given[lane] = self._version
+                return dict(self._fields)
+        return fields
 
     def error_of_threads(self) -> BaseException | None:
         if self.error is not None:

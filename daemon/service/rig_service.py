@@ -150,7 +150,7 @@ class RigService(Supervised):
                             "recorded but not separated", len(sep.names),
                             ", ".join(sep.names), ", ".join(sep.left_out))
             for lane in self.lanes:
-                lane.avar_fields = sep.fields
+                lane.avar_fields = sep.fields_for(lane.sensor_name)
                 lane.status_fields = lambda: {"separation": sep.status()}
         self.bank = built.temperature_bank
         self.alignment_interval_s = float(alignment_interval_s)

@@ -70,10 +70,17 @@ def test_every_lane_publishes_the_separation_avard_separate_finds(tmp_path: Path
     svc = _rig(_config(root), pub)
     svc.run(120.0)
     last = {}
+    avars = 0
     for topic, rec in pub.sent:
         if rec["kind"] == "avar":
-            last[topic] = rec
+            avars += 1
+            if "separation" in rec:
+                last[topic] = rec
     assert sorted(last) == ["avar.far", "avar.left", "avar.right"]
+    final = {t: r for t, r in pub.sent if r["kind"] == "avar"}
+    assert all(final[t] is last[t] for t in last)          # the run's last: computed at stop
+    # only the records after a new computation carry it (every 60 s of 120, and at stop)
+    assert sum("separation" in r for _t, r in pub.sent) < avars / 2
     seps = [separation_of(rec) for rec in last.values()]
     assert all(s is not None for s in seps)
     live = seps[0]
@@ -191,3 +198,17 @@ def test_a_sensor_added_between_runs_starts_the_pairs_afresh(tmp_path: Path) -> 
     assert svc.separation is not None
     assert svc.separation.restored["state"] == "unusable"
     assert "separates ['left', 'right', 'far']" in svc.separation.restored["detail"]
+
+
+def test_the_snapshot_request_keeps_the_last_separation_beside_later_snapshots() -> None:
+    from avard.daemon.service.snapshots import SnapshotBoard
+
+    board = SnapshotBoard(lambda _rec: {})
+    board.publish({"kind": "avar", "n": 1, "separation": {"tag": 1}})
+    board.publish({"kind": "avar", "n": 2})
+    got = board.reply()
+    assert got is not None and got["n"] == 2 and got["separation"] == {"tag": 1}
+    board.publish({"kind": "avar", "n": 3, "separation": {"tag": 2}})
+    got = board.reply()
+    assert got is not None and got["separation"] == {"tag": 2}
+    board.stop()
