@@ -10,7 +10,9 @@ subscriber), at ``--odr``:
   quiet-lab: the simulator's DS18B20s too);
 - ``rig of 1``: the RigService over one emulated ADXL355 (daemon/hw/simulation.emulated_rig);
 - ``rig of N``: the RigService over N emulated ADXL355s on one bed, one reader thread (a
-  simulated rig's virtual clock is stepped by its reader).
+  simulated rig's virtual clock is stepped by its reader), with the live separation of the
+  first three (daemon/service/rig_separation.py; its thread's CPU is printed apart: the
+  computation at stop is once per run, so a short run overstates it per second).
 
 Measured: CPU seconds of the process (all threads, ``time.process_time``) per second of clock,
 and per run the overruns, estimated losses and unaccounted losses summed over the sensors
@@ -80,6 +82,12 @@ def run_rig(odr: float, seconds: float, n: int) -> tuple[float, tuple[int, int, 
         svc = RigService(config, build_lanes(describe_rig(config, simulate="quiet-lab", seed=1,
                                                           speed=1.0)))
         cpu, _wall = _measure(svc, seconds)
+        if svc.separation is not None:
+            # the live separation's thread (rig_separation.py), within the figure above
+            sep = svc.separation.cpu_s
+            print(f"  rig of {n}: live separation thread {sep['feed'] / seconds:.4f} CPU-s/s "
+                  f"aligning and feeding the pairs, {sep['separation']:.2f} CPU-s computing "
+                  f"{svc.separation.stage.computed} separations (the last at stop)")
         return cpu / seconds, _losses(list(svc.lanes))
 
 

@@ -591,10 +591,8 @@ def align(records: Sequence[SensorRecord], channels: Sequence[str] | None = None
         notes.append("aligned by index: not every record carries its start time, so their "
                      "first samples are taken as simultaneous")
     if same_rate:
-        offs = [round((t_a - s) * r.rate_hz) for s, r in zip(starts, records, strict=True)]
+        offs = _tick_offsets(starts, records, t_a) if timed else [0] * len(records)
         n = min(len(r.accel) - o for o, r in zip(offs, records, strict=True))
-        if timed:
-            n = min(n, math.floor((t_b - t_a) * rate + 1e-9))
         accels = tuple(r.accel[o:o + n][:, c] for o, r, c in zip(offs, records, cols,
                                                                   strict=True))
     else:
@@ -607,6 +605,21 @@ def align(records: Sequence[SensorRecord], channels: Sequence[str] | None = None
     if n < 4:
         raise DataError(f"the records share only {max(n, 0)} samples; too few to separate")
     return Aligned(accels, rate, tuple(axes), tuple(notes))
+
+
+def _tick_offsets(starts: Sequence[float], records: Sequence[SensorRecord],
+                  t_a: float) -> list[int]:
+    """Each record's first sample of the common stretch, by the live aligner's rule
+    (daemon/service/separation_stage.Aligner): the first record's samples are the ticks,
+    from the first whose nearest sample in every record exists; every other record's sample
+    at a tick is the one nearest in time. (Rounding each record from ``t_a`` on its own
+    would pair sensors that started a fraction of a sample apart differently from the live
+    separation.)"""
+    ref = records[0]
+    o0 = max(0, math.ceil((t_a - starts[0]) * ref.rate_hz - 0.5 - 1e-9))
+    tick = starts[0] + o0 / ref.rate_hz
+    return [o0, *(max(0, round((tick - s) * r.rate_hz))
+                  for s, r in zip(starts[1:], records[1:], strict=True))]
 
 
 def _resample(y: NDArray[np.float64], rate: float, t0: float, t_a: float, new_rate: float,

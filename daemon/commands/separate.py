@@ -25,7 +25,7 @@ import sys
 
 import numpy as np
 from avard.core.analysis.separate import Separation, align, read_sensor, separate
-from avard.core.errors import DataError
+from avard.core.errors import AvardError, DataError
 from avard.core.io.outputs import check_plot_output, finite_for_json
 from avard.daemon.commands._options import add_channels_argument, filter_corner, split_channels
 
@@ -175,7 +175,7 @@ def rig_records(paths: list[str], sensors: list[str] | None) -> list[str]:
             out.append(p)
             continue
         rigs += [f"{p}: {', '.join(names)}"]
-        for n in names:
+        for n in _rig_order(p, names):
             if sensors is None or n in sensors:
                 out.append(str(sensor_path(p, n)))
                 found.add(n)
@@ -187,6 +187,22 @@ def rig_records(paths: list[str], sensors: list[str] | None) -> list[str]:
             raise DataError(f"--sensor {missing[0]}: no such sensor in the rig's recording "
                             f"({'; '.join(rigs)})")
     return out
+
+
+def _rig_order(path: str, names: tuple[str, ...]) -> tuple[str, ...]:
+    """The rig's own order of its sensors (its headers' ``rig.sensors``: the first is the
+    reference the live separation aligns to, so ``avard separate`` pairs the same samples),
+    else name order."""
+    from avard.core.io.source import RecordingSource, sensor_path
+
+    try:
+        for rec in RecordingSource(sensor_path(path, names[0])).records():
+            if rec.get("kind") == "header":
+                order = [n for n in (rec.get("rig") or {}).get("sensors", []) if n in names]
+                return (*order, *(n for n in names if n not in order))
+    except (AvardError, OSError):
+        pass
+    return names
 
 
 def plot_separation(sep: Separation, path: str) -> None:

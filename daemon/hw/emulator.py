@@ -372,6 +372,12 @@ class EmulatedAdxl355:
         with self.lock:
             self._reset_state()
 
+    def sampled_at(self, first: int, n: int) -> np.ndarray:
+        """The CLOCK_MONOTONIC instants (s) at which sets ``first`` … ``first + n − 1`` of the
+        current measurement are taken (each at the end of its period, when it becomes due):
+        what a source shared by several parts needs to give each the input at its own time."""
+        return self._t_start + (first + 1 + np.arange(n)) / self.true_odr_hz
+
     # -- sample production ---------------------------------------------------------------
     def _update(self) -> None:
         """Produce every set due by now (lazily, at each bus access)."""

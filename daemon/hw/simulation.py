@@ -192,45 +192,77 @@ def build_simulated(cfg: Config | Mapping[str, Mapping[str, Any]], preset: str, 
 @dataclass(frozen=True)
 class BedSpec:
     """The motion every sensor of an emulated rig feels (per axis, SI): a white part (a
-    building's floor vibration; its ADEV at τ = 1 s, m/s/√s) and a slow tilt (a random walk of
-    the acceleration, m/s²/√s)."""
+    building's floor vibration; its ADEV at τ = 1 s, m/s/√s) within ``band_hz`` (floor
+    vibration lies below a few tens of Hz), and a slow tilt (a random walk of the
+    acceleration, m/s²/√s)."""
 
     white: float = 5e-5
     tilt: float = 1e-6
     seed: int | None = None
+    band_hz: float = 10.0
+
+
+#: The bed's grid, in samples of the sensors' rate (linear interpolation between its points
+#: then barely smooths the band the bed holds).
+BED_GRID = 4
 
 
 class BedMotion:
-    """The bed's motion by sample index, drawn once and handed to each sensor's source in
-    turn (m/s², (n, 3)): sample k is the same for every sensor, whatever order and block
-    sizes they drain in; a sample is dropped once every sensor has taken it."""
+    """The bed's motion as a function of time, as real hardware feels it (m/s², (n, 3)): drawn
+    once on a grid of :data:`BED_GRID` × ``rate_hz`` from the clock's ``t0``, the white part
+    smoothed to ``band_hz`` (two moving averages: a triangle, whose side lobes are low), and
+    read by each sensor at its own sampling instants (linear interpolation between grid
+    points far above the band). Sensors that started measuring a fraction of a sample apart
+    feel the bed a fraction of a sample apart, as on a plate; a stretch of the grid is
+    dropped once every sensor has read past it."""
 
-    def __init__(self, spec: BedSpec, n_sensors: int, rate_hz: float) -> None:
+    def __init__(self, spec: BedSpec, n_sensors: int, rate_hz: float, t0: float) -> None:
         self.spec = spec
-        self.rate_hz = float(rate_hz)
+        self.rate_hz = float(rate_hz) * BED_GRID        # the grid's rate
+        self.t0 = float(t0)
+        # two moving averages of L points: −3 dB at about 0.32 grid rate / L
+        self.width = max(1, round(0.32 * self.rate_hz / spec.band_hz)) \
+            if spec.band_hz > 0 else 1
         self._rng = np.random.default_rng(spec.seed)
         self._buf = np.zeros((0, 3))
-        self._base = 0                      # sample index of _buf[0]
-        self._pos = [0] * n_sensors         # next sample index of each sensor
+        self._base = 0                      # grid index of _buf[0]
+        self._read = [0.0] * n_sensors      # the grid position each sensor read up to
         self._level = np.zeros(3)           # the tilt's current value
+        # the points each average still needs from the previous draw
+        self._tails = [np.zeros((self.width - 1, 3)) for _ in range(2)]
+
+    def _smooth(self, x: np.ndarray, k: int) -> np.ndarray:
+        """One moving average of ``width`` points, continued across draws."""
+        if self.width == 1:
+            return x
+        both = np.concatenate([self._tails[k], x])
+        self._tails[k] = both[len(both) - (self.width - 1):]
+        c = np.concatenate([np.zeros((1, 3)), np.cumsum(both, axis=0)])
+        out: np.ndarray = (c[self.width:] - c[:-self.width]) / self.width
+        return out
 
     def _extend(self, upto: int) -> None:
         n = upto - (self._base + len(self._buf))
         if n <= 0:
             return
-        white = self._rng.normal(0.0, self.spec.white * math.sqrt(self.rate_hz), (n, 3))
+        raw = self._rng.normal(0.0, self.spec.white * math.sqrt(self.rate_hz), (n, 3))
         steps = self._rng.normal(0.0, self.spec.tilt / math.sqrt(self.rate_hz), (n, 3))
         walk = self._level + np.cumsum(steps, axis=0)
         self._level = walk[-1]
+        white = self._smooth(self._smooth(raw, 0), 1)
         self._buf = np.concatenate([self._buf, white + walk])
 
-    def take(self, sensor: int, n: int) -> np.ndarray:
-        start = self._pos[sensor]
-        self._extend(start + n)
-        out = self._buf[start - self._base:start - self._base + n].copy()
-        self._pos[sensor] = start + n
-        drop = min(self._pos) - self._base
-        if drop > 4096:
+    def at(self, sensor: int, t: np.ndarray) -> np.ndarray:
+        """The bed at CLOCK_MONOTONIC instants ``t`` (increasing), read by ``sensor``."""
+        x = np.maximum((np.asarray(t, dtype=np.float64) - self.t0) * self.rate_hz, 0.0)
+        self._extend(math.floor(x[-1]) + 2)
+        k = np.floor(x).astype(np.int64)
+        f = (x - k)[:, None]
+        lo = self._buf[k - self._base]
+        out: np.ndarray = lo + f * (self._buf[k + 1 - self._base] - lo)
+        self._read[sensor] = float(x[-1])
+        drop = int(min(self._read)) - 1 - self._base
+        if drop > 4096 * BED_GRID:
             self._buf = self._buf[drop:]
             self._base += drop
         return out
@@ -241,8 +273,9 @@ def emulated_rig(sensors: Sequence[SensorSpec], preset: str, *, bed: BedSpec = B
                                                                            EmulatedAdxl355]]]:
     """Several ADXL355s (each over its described emulated transport: SPI bus/chip select or
     I2C address) on one virtual clock, each the simulator's ``preset`` (its own noise, its own
-    seed) plus the one :class:`BedMotion`: (clock, [(name, driver, emulator)]), not yet
-    brought up. All sensors run at the first one's ODR."""
+    seed) plus the one :class:`BedMotion`, each feeling it at its own sampling instants:
+    (clock, [(name, driver, emulator)]), not yet brought up. All sensors run at the first
+    one's ODR."""
     from avard.core.sim.simulate import SensorSimulator, make_config
     from avard.daemon.hw.emulator import FakeSMBus
     from avard.daemon.hw.registers import STANDARD_GRAVITY, sensitivity_lsb_per_g
@@ -250,19 +283,31 @@ def emulated_rig(sensors: Sequence[SensorSpec], preset: str, *, bed: BedSpec = B
 
     odr = sensors[0].odr_hz
     clock = VirtualClock(epoch=time.time() - 1000.0)
-    motion = BedMotion(bed, len(sensors), odr)
+    motion = BedMotion(bed, len(sensors), odr, clock.monotonic())
     rng = np.random.default_rng(seed)
     out = []
     for i, s in enumerate(sensors):
         sim = SensorSimulator(make_config(preset, odr_hz=odr, range_g=s.range_g),
                               seed=int(rng.integers(2**31)))
         lsb = STANDARD_GRAVITY / sensitivity_lsb_per_g(s.range_g)
+        part: list[EmulatedAdxl355] = []
+        # sets handed out since the part's count last moved (it produces in chunks and
+        # counts them after the last): {produced: count at the last call, given: since}
+        at = {"produced": -1, "given": 0}
 
-        def source(n: int, sim: Any = sim, i: int = i, lsb: float = lsb) -> np.ndarray:
-            accel = sim.next(n).accel + motion.take(i, n)
+        def source(n: int, sim: Any = sim, i: int = i, lsb: float = lsb,
+                   part: list[EmulatedAdxl355] = part, at: dict[str, int] = at
+                   ) -> np.ndarray:
+            emu = part[0]
+            if emu.produced != at["produced"]:
+                at["produced"], at["given"] = emu.produced, 0
+            t = emu.sampled_at(emu.produced + at["given"], n)
+            at["given"] += n
+            accel = sim.next(n).accel + motion.at(i, t)
             return np.clip(np.rint(accel / lsb), -(1 << 19), (1 << 19) - 1).astype(np.int32)
 
         emu = EmulatedAdxl355(source, clock, odr_error_ppm=0.0, temperature=25.0)
+        part.append(emu)
         bus: Any = (SpiBus(FakeSpiDev(emu)) if s.bus.kind == "spi"
                     else I2cBus(FakeSMBus(emu, address=s.bus.address, bus=s.bus.number),
                                 address=s.bus.address))

@@ -47,8 +47,11 @@ class AllanStage(Stage):
                  emit: Callable[[Record], None],
                  on_checkpoint: Callable[[Record], None] | None,
                  snapshot_interval_s: float, checkpoint_interval_s: float,
-                 batch_samples: int = 1) -> None:
+                 batch_samples: int = 1,
+                 record_fields: Callable[[], Record] | None = None) -> None:
         super().__init__(consumer, batch_samples=batch_samples)
+        #: optional fields of every ``avar`` record (a rig's live ``separation``)
+        self.record_fields = record_fields
         self.allan = allan
         self.feed = feed
         self.run_id = run_id
@@ -120,9 +123,12 @@ class AllanStage(Stage):
         snap.update(channels=self.feed.channels,
                     units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
                     allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"])
-        return frames.avar_record(self.run_id, 0, self.i_end(),
-                                  int(self.allan.n_samples), snap, self._t,
-                                  self._t + self.real_offset)
+        rec = frames.avar_record(self.run_id, 0, self.i_end(),
+                                 int(self.allan.n_samples), snap, self._t,
+                                 self._t + self.real_offset)
+        if self.record_fields is not None:
+            rec.update(self.record_fields())
+        return rec
 
     def i_end(self) -> int:
         """The index after the last sample the accumulators account for: the feed's

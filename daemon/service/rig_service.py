@@ -31,6 +31,7 @@ from avard.daemon.service.acquisition import BusReader, StoppedWithBus, share_re
 from avard.daemon.service.alignment import Alignment, align
 from avard.daemon.service.checkpoint import STATE_FILE
 from avard.daemon.service.recorder import new_run_id
+from avard.daemon.service.rig_separation import RigSeparation, SeparatedLane
 from avard.daemon.service.supervisor import (
     Progress,
     RigFacts,
@@ -164,6 +165,21 @@ class RigService(Supervised):
                     own_reader=False,
                     rig_facts=RigFacts(self.names, k, self.sync, wirings, names[0]))
             for k, rig in enumerate(built.lanes))
+        # The live separation of the first 2–3 sensors (rig_separation.py): every lane's avar
+        # record carries it, so a subscriber to any one sensor sees the rig's separation.
+        self.separation: RigSeparation | None = None
+        if len(names) >= 2:
+            sep = self.separation = RigSeparation(
+                names, config.sensor.odr_hz,
+                data_dir=Path(config.recording.data_dir) if config.recording.enabled else None,
+                checkpoint_interval_s=config.allan.checkpoint_interval_s)
+            if sep.left_out:
+                log.warning("the live separation takes the first %d sensors (%s); %s are "
+                            "recorded but not separated", len(sep.names),
+                            ", ".join(sep.names), ", ".join(sep.left_out))
+            for lane in self.lanes:
+                lane.avar_fields = sep.fields_for(lane.sensor_name)
+                lane.status_fields = lambda: {"separation": sep.status()}
         self.bank = built.temperature_bank
         self.alignment_interval_s = float(alignment_interval_s)
         self._next_alignment = 0.0
@@ -216,6 +232,14 @@ class RigService(Supervised):
         if self.bank is not None:
             self.bank.sink = self._temperature_reading
             self.bank.start()
+        sep = self.separation
+        if sep is not None:
+            chosen = [lane for lane in self.lanes if lane.sensor_name in sep.names]
+            sep.restore({lane.sensor_name: lane.start_index for lane in chosen})
+            sep.attach([SeparatedLane(lane.sensor_name, lane.ring.consumer("separation"),
+                                      lane.scale, lane.timebase, lane.start_index)
+                        for lane in chosen])
+            sep.start()
         acqs = [lane.acq for lane in self.lanes]
         for group in self.built.readers:
             members = [a for a in (acqs[k] for k in group) if a is not None]
@@ -242,6 +266,9 @@ class RigService(Supervised):
             reader.stop()
         if self.bank is not None:
             self.bank.stop()
+        # every sample the rings hold into the separation, before the lanes' last avar
+        if self.separation is not None:
+            self.separation.drain()
         self._mark_alignment()
         for lane in self._started:
             lane.stop()
@@ -252,6 +279,10 @@ class RigService(Supervised):
             self.publisher = None
 
     def check_threads(self, *, restart: bool = True) -> None:
+        err = self.separation.error_of_threads() if self.separation is not None else None
+        if err is not None:
+            raise ServiceFault(f"the live separation stopped: {err!r}; exiting for systemd "
+                               "to restart the service")
         # the sensor whose drain raised first: the others of its bus only stopped with it
         lanes = sorted(self.lanes, key=lambda lane: isinstance(
             lane.acq.error if lane.acq is not None else None, StoppedWithBus))

@@ -44,11 +44,17 @@ log = logging.getLogger("avard.daemon.service")
 #: before the alignment slips by one sample; above ½ so that fit jitter at a half-sample
 #: offset does not toggle it.
 SLIP_SAMPLES = 0.75
-#: Seconds of sample time between two computations of the live separation: its intervals
-#: (separate.covariance_interval, χ² quantiles for every τ, part and axis) cost about a
-#: second of CPU for three sensors, ten times an Allan snapshot's; in between, the ``avar``
-#: records carry the last one computed (its ``n_samples`` says how much data it covers).
+#: Seconds of sample time between two computations of the live separation, at least: its
+#: intervals (separate.covariance_interval, χ² quantiles for every τ, part and axis) cost
+#: about half a second of CPU for three sensors, more than a second of one sensor's whole
+#: service; in between, the ``avar`` records carry the last one computed (its ``n_samples``
+#: says how much data it covers).
 SEPARATION_INTERVAL_S = 60.0
+#: ... and once the run is long, when it has grown by this fraction since the last (a
+#: separation of a day moves little in a minute) ...
+SEPARATION_GROWTH = 0.1
+#: ... but at most this many seconds of sample time apart (the page stays live).
+SEPARATION_MAX_INTERVAL_S = 600.0
 #: Aligned rows collected before the pair accumulators take them (see SeparationStage.feed).
 FLUSH_ROWS = 2048
 #: Seconds of the reference sensor's samples the aligner waits for a late sensor before it
@@ -326,12 +332,20 @@ class SeparationStage:
                                  "segments per pair " + ", ".join(
                                      f"{k} {v}" for k, v in segments.items()),))
 
-    def record_fields(self, rate_hz: float | None = None) -> dict[str, Any]:
+    def record_fields(self, rate_hz: float | None = None, *,
+                      force: bool = False) -> dict[str, Any]:
         """What the ``avar`` record carries: {"separation": map} once there is one, else {}.
         Computed again once ``interval_s`` of samples (at the nominal rate) came in since
-        the last computation, else the last one (counted by sample, not wall clock)."""
+        the last computation, or :data:`SEPARATION_GROWTH` of what it covered if that is
+        more (at most :data:`SEPARATION_MAX_INTERVAL_S`), else the last one (counted by
+        sample, not wall clock); ``force``: computed now unless nothing came in since (the
+        run's last record)."""
         n = self.n_samples
-        due = self._cached_at is None or n - self._cached_at >= self.interval_s * self.rate_hz
+        step = max(self.interval_s * self.rate_hz,
+                   min(SEPARATION_GROWTH * (self._cached_at or 0),
+                       SEPARATION_MAX_INTERVAL_S * self.rate_hz))
+        due = self._cached_at is None or n - self._cached_at >= step \
+            or (force and n != self._cached_at)
         if due and n:
             sep = self.separation(rate_hz)
             self.computed += 1

@@ -39,6 +39,7 @@ class SnapshotBoard:
         self._fit = fit
         self._cond = threading.Condition()
         self._latest: dict[str, Any] | None = None
+        self._separation: dict[str, Any] | None = None    # the last live separation seen
         self._fitted: dict[str, Any] | None = None    # the record the fit below belongs to
         self._fit_result: dict[str, Any] | None = None
         self._wanted = False
@@ -49,10 +50,14 @@ class SnapshotBoard:
         self.fits = 0
 
     def publish(self, record: dict[str, Any]) -> None:
-        """A new ``avar`` record went out on the wire."""
+        """A new ``avar`` record went out on the wire. A rig's records carry the live
+        ``separation`` only when it was computed anew: the board keeps the last one and
+        replies with it beside a later snapshot."""
         with self._cond:
             self._latest = record
             self._published += 1
+            if "separation" in record:
+                self._separation = record["separation"]
             self._cond.notify_all()
 
     def reply(self) -> dict[str, Any] | None:
@@ -67,7 +72,10 @@ class SnapshotBoard:
             if rec is None:
                 return None
             ready = self._fitted is rec
-            return dict(rec, fit=self._fit_result if ready else None, fit_pending=not ready)
+            extra = {} if self._separation is None or "separation" in rec else \
+                {"separation": self._separation}
+            return dict(rec, fit=self._fit_result if ready else None, fit_pending=not ready,
+                        **extra)
 
     def wait_fitted(self, timeout: float) -> bool:
         """Block until the latest record has its fit (tests, and clients in-process)."""

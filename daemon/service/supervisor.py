@@ -341,6 +341,10 @@ class Service(Supervised):
                                     self._next_index, lambda: self.real_offset,
                                     time_before_first_drain=self._time_before_first_drain)
         self.snapshots = SnapshotBoard(fit_record)
+        #: optional fields of every ``avar`` record (RigService: the live separation)
+        self.avar_fields: Callable[[], dict[str, Any]] | None = None
+        #: optional fields of the status (RigService: the live separation's slips and pairs)
+        self.status_fields: Callable[[], dict[str, Any]] | None = None
 
     # -- helpers ------------------------------------------------------------------------
     def _fresh_allan(self) -> Any:
@@ -424,6 +428,8 @@ class Service(Supervised):
             st["published"] = ps.get("sent", 0)
             st["publish_dropped"] = ps.get("dropped", 0)
             st["stalled_shut_down"] = ps.get("stalled_shut_down", 0)
+        if self.status_fields is not None:
+            st.update(self.status_fields())
         return st
 
     def status_line(self) -> str:
@@ -514,7 +520,7 @@ class Service(Supervised):
             on_checkpoint=None if recording else self.save_state,
             snapshot_interval_s=acfg.snapshot_interval_s,
             checkpoint_interval_s=acfg.checkpoint_interval_s,
-            batch_samples=self._batch(ALLAN_BATCH_S, paced)))
+            batch_samples=self._batch(ALLAN_BATCH_S, paced), record_fields=self.avar_fields))
         if recording:
             self.recorder = (self._recorder_factory or _default_recorder)(self)
             self.workers.append(RecorderStage(

@@ -405,6 +405,11 @@ def _bed_below(sep: Any, axis: Any) -> str:
 
 def separation_html(state: RunState) -> str:
     sep = state.separation
+    rig = state.header.get("rig")
+    if sep is None and isinstance(rig, dict) and len(rig.get("sensors") or []) >= 2:
+        return ('<p class="waiting">No live separation yet: the service computes it from the '
+                'sensors\' aligned samples once a minute of them is in and every pair has '
+                'an Allan difference at some τ.</p>')
     if sep is None:
         return ('<p class="waiting">No live separation: it needs two or three co-located '
                 'sensors in the service (each sensor\'s self-noise against the common mode '

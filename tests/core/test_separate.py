@@ -150,3 +150,18 @@ def test_bad_inputs_say_what_is_wrong() -> None:
         align([_rec(100), _rec(100)], ["q"])
     with pytest.raises(DataError, match="distinct sensor names"):
         separate(_sensors(1)[:2], RATE, sensors=["a", "a"], axes=["z"])
+
+
+def test_sensors_started_a_fraction_of_a_sample_apart_pair_as_the_live_aligner_does() -> None:
+    """The first record's samples are the ticks; each other's sample is the one nearest in
+    time (daemon/service/separation_stage.Aligner), not each rounded from the latest start:
+    b starts 0.625 samples after a, c 1.25: a's tick 1 pairs b's 0 and c's 0."""
+    a = _rec(1000, t0=100.0, seed=1)
+    b = _rec(1000, t0=100.0 + 0.625 / RATE, seed=2)
+    c = _rec(1000, t0=100.0 + 1.25 / RATE, seed=3)
+    al = align([a, b, c])
+    n = al.accels[0].shape[0]
+    np.testing.assert_array_equal(al.accels[0], a.accel[1:1 + n])
+    np.testing.assert_array_equal(al.accels[1], b.accel[:n])
+    np.testing.assert_array_equal(al.accels[2], c.accel[:n])
+    assert n == 999

@@ -107,7 +107,8 @@ def test_three_sensors_each_on_its_own_index_and_recording(tmp_path: Path) -> No
     assert len(svc.readers) == 0 and len(svc.built.readers) == 1   # a virtual clock: one
     svc.run(30.0)
     root = tmp_path / "rec"
-    assert sorted(p.name for p in root.iterdir()) == ["far", "left", "right"]
+    assert sorted(p.name for p in root.iterdir() if p.is_dir()) == ["far", "left", "right"]
+    assert (root / "separation-state.ckpt").is_file()      # the live separation's state
     runs = set()
     for lane in svc.lanes:
         info = open_record(root / lane.sensor_name).info

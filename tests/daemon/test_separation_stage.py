@@ -36,9 +36,9 @@ BED = BedSpec(white=1e-4, tilt=1e-6, seed=2)
 def _bring_up_together(clock: Any, specs: Any, rig: list[tuple[str, Any, Any]]) -> None:
     """Bring-up takes virtual time (5 ms a sensor), so the sensors would start apart: each
     goes to standby the instant it started (before it made a sample), and all start at one
-    instant, as an external sync would have them. The emulated bed is shared by sample count
-    (daemon/hw/simulation.BedMotion), which is one instant only then; on hardware the bed is
-    a function of time, which the alignment by fitted time base follows whatever the start."""
+    instant, as an external sync would have them: then every sensor's sample k feels the bed
+    (a function of time, daemon/hw/simulation.BedMotion) at one instant, and the indices at
+    a tick are each sensor's origin apart (what the test below holds)."""
     for spec, (_n, dev, _e) in zip(specs, rig, strict=True):
         bring_up(dev, spec)
         dev.standby()
@@ -175,7 +175,7 @@ def test_state_round_trip_and_refusals() -> None:
         stage.feed(AlignedBlock(("x", "y"), np.zeros((2, 1), np.int64), np.zeros((2, 1, 3))))
 
 
-def test_the_separation_is_computed_once_per_interval_of_samples() -> None:
+def test_the_separation_is_computed_once_per_interval_of_samples_then_per_growth() -> None:
     rng = np.random.default_rng(2)
     stage = SeparationStage(["a", "b"], 100.0, axes=("z",), interval_s=60.0)
     names = ("a", "b")
@@ -193,6 +193,16 @@ def test_the_separation_is_computed_once_per_interval_of_samples() -> None:
     feed(3000, 6000)                                  # 60 s since: a new one
     again = stage.record_fields()
     assert stage.computed == 2 and again["separation"]["n_samples"] == 9000
+    # a long run: again when it grew by a tenth (here 2 h: 720 s), at most every 600 s
+    feed(720_000 - 9000, 9000)
+    assert stage.record_fields()["separation"]["n_samples"] == 720_000
+    feed(59_000, 720_000)                             # 590 s: not yet
+    assert stage.record_fields()["separation"]["n_samples"] == 720_000
+    feed(1_000, 779_000)                              # 600 s: the cap
+    assert stage.record_fields()["separation"]["n_samples"] == 780_000
+    # the run's last record: whatever came in since, now
+    feed(10, 780_000)
+    assert stage.record_fields(force=True)["separation"]["n_samples"] == 780_010
 
 
 def test_readers_push_from_their_threads_while_one_consumer_pops() -> None:

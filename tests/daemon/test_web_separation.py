@@ -117,3 +117,13 @@ def test_the_page_has_the_card() -> None:
     html = page_html(state, Hub(state), 0.1, "tcp://127.0.0.1:1")
     assert '<section class="card separation"><h2>Self-noise against common mode</h2>' in html
     assert 'class="plot separation"' in html
+
+
+def test_a_rig_before_its_first_separation_says_it_is_coming() -> None:
+    from avard.daemon.web.render import separation_html
+    from avard.daemon.web.state import RunState
+
+    state = RunState()
+    assert "needs two or three" in separation_html(state)
+    state.header = {"rig": {"sensors": ["left", "right"]}}
+    assert "No live separation yet" in separation_html(state)
