@@ -37,7 +37,7 @@ from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_npe
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.screen import ScreenedSource
-from avard.core.io.source import RecordFormat, RecordInfo, RecordSource
+from avard.core.io.source import FileSource, RecordFormat, RecordInfo, RecordSource
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
@@ -155,14 +155,6 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     workers = _workers(options.workers, int(total))
     if info.format is not RecordFormat.NPZ:
         workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
-    if workers > 1 and isinstance(source, ScreenedSource):
-        # the screen judges the record once, here (its CRC checked), before the workers fork:
-        # they inherit its verdicts and read only their channels; a record it cuts has gaps
-        # no chunk plan knows of, and is read on one worker
-        for _blk in source.blocks(block, temperature=False):
-            pass
-        if source.log is not None and any(x.channel == "accel" for x in source.log.stretches):
-            workers = 1
     groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
@@ -170,8 +162,15 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     def reread(column: int) -> _Blocks:
         return _accel(source, block, [column], verify=False)
 
-    parallel = (_Parallel(workers, partial(_accel_columns, source, block), (0, int(total)))
-                if workers > 1 else None)
+    parallel = None
+    if workers > 1:
+        # the chunks read the file itself, each from its own start; with the screen on, the
+        # first pass's chunks judge their own blocks as this read would (a record the screen
+        # cuts has gaps no chunk plan knows of, and is then read on one worker)
+        screened = source if isinstance(source, ScreenedSource) else None
+        raw = source.source if screened is not None else source
+        parallel = _Parallel(workers, partial(_accel_columns, raw, block), (0, int(total)),
+                             screened=screened, block=block)
     return _analyze_passes(info, total, passes, reread=reread, options=options,
                            progress=progress, parallel=parallel)
 
@@ -196,11 +195,22 @@ def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]
             for i in range(0, len(g), -(-len(g) // workers))]
 
 
-def _accel_columns(source: RecordSource, block: int, columns: list[int], *,
-                   verify: bool = False) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """A source's accel blocks of ``columns`` from its start: a picklable reader for the
-    chunks of a parallel pass (the chunk that reads a first pass to the end verifies)."""
-    return _accel(source, block, columns, verify=verify)
+def _accel_columns(source: RecordSource, block: int, columns: list[int] | None, *,
+                   verify: bool = False, start: int = 0
+                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A source's accel blocks of ``columns`` (None: all) from sample ``start``: a picklable
+    reader for the chunks of a parallel pass (the chunk that reads a first pass to the end
+    verifies). A file seeks to ``start``; any other source is read up to it."""
+    if isinstance(source, FileSource):
+        for a, _t, end in source.blocks(block, columns=columns, temperature=False,
+                                        verify=verify, start=start):
+            yield a, end
+        return
+    pos = 0
+    for a, end in _accel(source, block, columns, verify=verify):
+        if pos + len(a) > start:
+            yield a[max(0, start - pos):], end
+        pos += len(a)
 
 
 def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = DEFAULT_OPTIONS,
@@ -236,7 +246,8 @@ def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = D
                            i.rate_u_hz)
     sizes = [int(i.n_samples or 0) for i in infos]
     bounds = tuple(int(v) for v in np.cumsum([0, *sizes]))
-    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources))
+    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources),
+                       tuple(sizes))
     info = replace(first, source=", ".join(i.source for i in infos), n_samples=bounds[-1])
     sel = _select(list(info.names), options.channels)
     groups = _split_for_workers(oadev_pass_groups(sel, max(sizes)), chunks)
@@ -402,9 +413,13 @@ class _Parallel:
     executor for ``avard fleet``)."""
 
     workers: int
-    read: Callable[[list[int]], _Blocks]
+    read: Callable[..., _Blocks]
     bounds: tuple[int, ...]
     executor: Executor | None = None
+    #: the record's input screen, judged by the first pass's chunks (``screen_accel`` on
+    #: blocks of ``block`` samples, as a one-worker read): told when nothing was cut
+    screened: ScreenedSource | None = None
+    block: int = 1 << 16
 
 
 def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
@@ -420,9 +435,16 @@ def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: flo
             progress(done + samples, all_total)
 
     # the first pass checks the file's CRC, as one pass does (its last chunk reads to the end)
-    sa, welch, n = run_pass(partial(par.read, chans), None, names, rate, grid, nper, total,
-                            par.bounds, par.workers, verify=done == 0, progress=step,
-                            executor=par.executor)
+    # and, with the screen, judges every axis (so it reads them all and analyses ``chans``)
+    screen = par.screened is not None and done == 0
+    read, take = ((partial(par.read, None), chans) if screen
+                  else (partial(par.read, chans), None))
+    sa, welch, n = run_pass(read, take, names, rate, grid, nper, total, par.bounds,
+                            par.workers, verify=done == 0, progress=step,
+                            executor=par.executor, screen_block=par.block if screen else None)
+    if screen:
+        assert par.screened is not None
+        par.screened.judged_clean(par.block)  # later reads cut nothing, as the chunks found
     return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
 
 

@@ -85,6 +85,11 @@ class ShortRead(DataError):
     reads the pass on one worker, which needs no plan."""
 
 
+class ScreenCut(ShortRead):
+    """A chunk's input screen (``_Job.screen``) found acceleration to cut: a gap the chunk
+    plan does not know of, so the record is analysed on one worker, as ``ShortRead``."""
+
+
 @dataclass(frozen=True)
 class Chunk:
     """One worker's stretch of a record: it owns samples [start, stop) and reads [start,
@@ -111,15 +116,49 @@ def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
     return max(LADDER_REACH * int(grid[-1]), (nperseg or 0) // 2)
 
 
-def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) -> list[Chunk]:
-    """Chunks of about equal length for ``workers``, cut at multiples of ``align`` from the
-    start of the segment each cut is in (``bounds``: the segments' first samples and the
-    record's length, as ``meta["segment_bounds"]``). Fewer chunks where the record has too
-    few such points."""
+#: What a chunk's own samples cost against the samples it only reads past its end (the
+#: differences at every τ, the spectrum and the screen against a read and a running sum):
+#: the chunk plan evens out reads + OWN_COST × owned samples, so the first chunks, which
+#: also read their neighbour's first ``reach`` samples, own fewer.
+OWN_COST = 3.0
+
+
+def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[float]:
+    """Cut points (not yet aligned) at which every chunk costs the same: a chunk [s, e)
+    costs (min(n, e + reach) − s) + own_cost·(e − s), the last (which reads no further) its
+    length × (1 + own_cost). Found by bisection on that common cost."""
+    rho = float(own_cost)
+
+    def cuts_for(cost: float) -> tuple[list[float], float]:
+        s, out = 0.0, []
+        for _ in range(workers - 1):
+            e = (cost + s * (1 + rho) - reach_) / (1 + rho)  # its reach inside the record
+            if e + reach_ > n:
+                e = (cost - n + s * (1 + rho)) / rho if rho > 0 else float(n)
+            e = min(max(e, s), float(n))
+            out.append(e)
+            s = e
+        return out, (n - s) * (1 + rho)
+
+    lo, hi = 0.0, (n + reach_) * (1 + rho)
+    for _ in range(80):
+        mid = (lo + hi) / 2
+        if cuts_for(mid)[1] > mid:
+            lo = mid
+        else:
+            hi = mid
+    return cuts_for(hi)[0]
+
+
+def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int,
+                own_cost: float = OWN_COST) -> list[Chunk]:
+    """Chunks of about equal work for ``workers`` (``_ideal_cuts``: a chunk that reads past
+    its end owns fewer samples), cut at multiples of ``align`` from the start of the segment
+    each cut is in (``bounds``: the segments' first samples and the record's length, as
+    ``meta["segment_bounds"]``). Fewer chunks where the record has too few such points."""
     n = int(bounds[-1])
     cuts = set()
-    for w in range(1, workers):
-        ideal = n * w / workers
+    for ideal in _ideal_cuts(n, workers, reach_, own_cost):
         best = None
         for s0, s1 in itertools.pairwise(bounds):
             j = round((ideal - s0) / align)
@@ -138,8 +177,10 @@ def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) ->
 class _Job:
     """What every worker needs: handed to the forked local processes when they start (never
     pickled), pickled (so ``read`` must be picklable, e.g. ``ChainedRead``) for another
-    executor's. ``read(verify=...)`` gives the record's blocks from its start; the chunk
-    that reads to the record's end checks the file's CRC when ``verify``."""
+    executor's. ``read(verify=..., start=...)`` gives the record's blocks from sample
+    ``start`` (all its columns when ``screen``, of which ``take`` are analysed); the chunk
+    that reads to the record's end checks the file's CRC when ``verify``. ``screen``: each
+    chunk judges its own blocks by the input screen (``ScreenCut`` when it would cut)."""
 
     read: Callable[..., Blocks]
     take: list[int] | None
@@ -150,6 +191,7 @@ class _Job:
     n_total: int
     verify: bool
     chunks: list[Chunk]
+    screen: bool = False
 
 
 #: The job of this forked worker process (``_take_job``): one per process, never shared
@@ -169,30 +211,34 @@ def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
 
 
 def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
-    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
+    """Chunk i's OADEV part and Welch power sums (a worker's task). The chunk reads from its
+    own start (a seek in an uncompressed .npz): its running sum starts there, which moves
+    every phase point by one constant that no difference sees, so its differences are one
+    pass's to the rounding of the sums."""
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
     # R(n) is never part of a chunk: the caller reads it again after the pass (defer_rn)
     acc = OverlappingAllan(c, job.rate_hz, job.grid, names=job.names, n_total=job.n_total,
-                           defer_rn=True, own_from=ch.start,
-                           own_until=None if last else ch.stop)
+                           defer_rn=True, own_until=None if last else ch.stop - ch.start)
     welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
              else None)
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
-    pos = 0
-    for accel, segment_end in job.read(verify=job.verify and last):
+    pos = ch.start
+    # the chunk that reads to the record's end checks the file's CRC (a seeking reader still
+    # reads the bytes before the chunk into it)
+    for accel, segment_end in job.read(verify=job.verify and last, start=ch.start):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
+        if job.screen and lo < ch.stop:
+            _screen(a[:ch.stop - lo], lo)
         if job.take is not None:
             a = a[:, job.take]
-        # from the record's start: what comes before the chunk advances the running sum
-        # only, so the chunk's differences are one pass's to the bit
         acc.update(a)
-        if welch is not None and hi > ch.start and lo < welch_to:
-            welch.update(a[max(0, ch.start - lo):welch_to - lo])
+        if welch is not None and lo < welch_to:
+            welch.update(a[:welch_to - lo])
         if hi >= ch.read_to:
             break
         if segment_end:
@@ -205,24 +251,43 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     return acc.part(), (None if welch is None else welch.part())
 
 
-def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str],
+def _screen(a: NDArray[np.float64], offset: int) -> None:
+    """The input screen's verdict on one of the chunk's own blocks (every axis, the blocks
+    of a one-worker read: the chunk starts on a block boundary). Any cut is a gap the plan
+    does not know: the pass is then read on one worker (``ScreenCut``)."""
+    from avard.core.io.screen import screen_accel
+
+    bad = screen_accel(a)
+    if bad.any():
+        raise ScreenCut(f"the input screen cuts {int(bad.sum())} samples from sample "
+                        f"{offset + int(np.argmax(bad))} on")
+
+
+def run_pass(read: Callable[..., Blocks], take: list[int] | None, names: list[str],
              rate_hz: float, grid: NDArray[np.int64], nperseg: int | None, n_total: int,
              bounds: Sequence[int], workers: int, *, verify: bool = False,
              progress: Callable[[int], None] | None = None,
-             executor: Executor | None = None,
+             executor: Executor | None = None, screen_block: int | None = None,
              ) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
     """One pass over a record (the channels ``names``: its blocks' columns ``take``, or
     all) on ``workers`` processes: the OADEV accumulator holding the whole record's sums
     (``OverlappingAllan.from_part``), the Welch accumulator and the samples read, as one
-    pass would give them. ``read()`` gives the record's blocks from its start (each worker
-    reads from there: what comes before its chunk only advances the running sum).
+    pass would give them. ``read(verify=, start=)`` gives the record's blocks from sample
+    ``start`` (each worker reads its own chunk and the ``reach`` past it).
     ``progress(samples)`` after each chunk. ``executor``: run the ``workers`` chunks there
     (e.g. a Dask client's, ``avard fleet``) instead of on forked local processes; ``read``
     must then be picklable. ``verify``: the chunk that reads to the end checks the file's
-    CRC (the first pass over a file does). R(n) is left to the caller: the accumulator is
-    ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does after one pass."""
-    chunks = plan_chunks(bounds, workers, alignment(grid, nperseg), reach(grid, nperseg))
-    job = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), verify, chunks)
+    CRC (the first pass over a file does). ``screen_block``: the chunks judge their blocks
+    by the input screen, as a one-worker read in blocks of that size would (so chunks
+    start on its multiples); ``ScreenCut`` when it would cut anything. R(n) is left to the
+    caller: the accumulator is ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a
+    file does after one pass."""
+    align = alignment(grid, nperseg)
+    if screen_block is not None:
+        align = align * screen_block // math.gcd(align, screen_block)
+    chunks = plan_chunks(bounds, workers, align, reach(grid, nperseg))
+    job = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), verify, chunks,
+               screen=screen_block is not None)
     parts: list[tuple[OadevPart, WelchPart | None] | None] = [None] * len(chunks)
     if len(chunks) == 1 and executor is None:
         parts[0] = chunk_part(job, 0)
@@ -268,17 +333,27 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
 @dataclass(frozen=True)
 class ChainedRead:
     """Several records read one after another as the segments of one record (a gap at each
-    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read."""
+    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read.
+    ``sizes``: each record's samples, so a chunk starts in the record its start falls in."""
 
     read: tuple[Callable[..., Blocks], ...]
+    sizes: tuple[int, ...]
 
-    def __call__(self, columns: list[int], *, verify: bool = False
+    def __call__(self, columns: list[int], *, verify: bool = False, start: int = 0
                  ) -> Iterator[tuple[NDArray[np.float64], bool]]:
-        for r in self.read:
+        offset = 0
+        for r, size in zip(self.read, self.sizes, strict=True):
+            if start >= offset + size:
+                if verify:  # a record the chunk starts after still has its CRC checked
+                    for _b in r(columns, verify=True, start=size):
+                        pass
+                offset += size
+                continue
             last: tuple[NDArray[np.float64], bool] | None = None
-            for b in r(columns, verify=verify):
+            for b in r(columns, verify=verify, start=max(0, start - offset)):
                 if last is not None:
                     yield last
                 last = b
             if last is not None:
                 yield last[0], True  # no difference or spectrum segment spans two records
+            offset += size

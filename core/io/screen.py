@@ -434,6 +434,15 @@ class ScreenedSource:
     def info(self) -> Any:
         return self.source.info
 
+    def judged_clean(self, block: int) -> None:
+        """The record's acceleration was judged elsewhere, block by block in blocks of
+        ``block`` samples (the chunks of a parallel analysis, ``parallel.ScreenCut``
+        otherwise), and nothing is to be cut: later reads take that verdict, and the log
+        says the screen ran."""
+        self._verdicts[block] = {}
+        if self.log is None:
+            self.log = ScreenLog(float(self.source.info.rate_hz), done=True)
+
     @property
     def rereadable(self) -> bool:
         return bool(self.source.rereadable)
