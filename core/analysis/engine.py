@@ -37,7 +37,7 @@ from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_npe
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.screen import ScreenedSource
-from avard.core.io.source import FileSource, RecordFormat, RecordInfo, RecordSource
+from avard.core.io.source import RecordFormat, RecordInfo, RecordSource
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
@@ -164,9 +164,9 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
 
     parallel = None
     if workers > 1:
-        # the chunks read the file itself, each from its own start; with the screen on, the
-        # first pass's chunks judge their own blocks as this read would (a record the screen
-        # cuts has gaps no chunk plan knows of, and is then read on one worker)
+        # the chunks read the file itself; with the screen on, the first pass's chunks judge
+        # their own blocks as this read would (a record the screen cuts has gaps no chunk
+        # plan knows of, and is then read on one worker)
         screened = source if isinstance(source, ScreenedSource) else None
         raw = source.source if screened is not None else source
         parallel = _Parallel(workers, partial(_accel_columns, raw, block), (0, int(total)),
@@ -196,21 +196,11 @@ def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]
 
 
 def _accel_columns(source: RecordSource, block: int, columns: list[int] | None, *,
-                   verify: bool = False, start: int = 0
-                   ) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """A source's accel blocks of ``columns`` (None: all) from sample ``start``: a picklable
-    reader for the chunks of a parallel pass (the chunk that reads a first pass to the end
-    verifies). A file seeks to ``start``; any other source is read up to it."""
-    if isinstance(source, FileSource):
-        for a, _t, end in source.blocks(block, columns=columns, temperature=False,
-                                        verify=verify, start=start):
-            yield a, end
-        return
-    pos = 0
-    for a, end in _accel(source, block, columns, verify=verify):
-        if pos + len(a) > start:
-            yield a[max(0, start - pos):], end
-        pos += len(a)
+                   verify: bool = False) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """A source's accel blocks of ``columns`` (None: all) from its start: a picklable reader
+    for the chunks of a parallel pass (the chunk that reads a first pass to the end
+    verifies)."""
+    return _accel(source, block, columns, verify=verify)
 
 
 def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = DEFAULT_OPTIONS,
@@ -246,8 +236,7 @@ def analyze_records(sources: Sequence[RecordSource], options: AnalyzeOptions = D
                            i.rate_u_hz)
     sizes = [int(i.n_samples or 0) for i in infos]
     bounds = tuple(int(v) for v in np.cumsum([0, *sizes]))
-    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources),
-                       tuple(sizes))
+    read = ChainedRead(tuple(partial(_accel_columns, s, options.block) for s in sources))
     info = replace(first, source=", ".join(i.source for i in infos), n_samples=bounds[-1])
     sel = _select(list(info.names), options.channels)
     groups = _split_for_workers(oadev_pass_groups(sel, max(sizes)), chunks)

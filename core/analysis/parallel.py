@@ -116,29 +116,29 @@ def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
     return max(LADDER_REACH * int(grid[-1]), (nperseg or 0) // 2)
 
 
-#: What a chunk's own samples cost against the samples it only reads past its end (the
-#: differences at every τ, the spectrum and the screen against a read and a running sum):
-#: the chunk plan evens out reads + OWN_COST × owned samples, so the first chunks, which
-#: also read their neighbour's first ``reach`` samples, own fewer.
+#: What a chunk's own samples cost against the samples it only reads (the differences at
+#: every τ, the spectrum and the screen against a read and a running sum): the chunk plan
+#: evens out reads + OWN_COST × owned samples. Every chunk reads from the record's start,
+#: and all but the last on past their end, so the last owns the most.
 OWN_COST = 3.0
 
 
 def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[float]:
     """Cut points (not yet aligned) at which every chunk costs the same: a chunk [s, e)
-    costs (min(n, e + reach) − s) + own_cost·(e − s), the last (which reads no further) its
-    length × (1 + own_cost). Found by bisection on that common cost."""
+    reads [0, min(n, e + reach)) and owns e − s samples, so costs min(n, e + reach) +
+    own_cost·(e − s); the last, n + own_cost·(n − s). Found by bisection on that cost."""
     rho = float(own_cost)
 
     def cuts_for(cost: float) -> tuple[list[float], float]:
         s, out = 0.0, []
         for _ in range(workers - 1):
-            e = (cost + s * (1 + rho) - reach_) / (1 + rho)  # its reach inside the record
+            e = (cost - reach_ + rho * s) / (1 + rho)  # its reach inside the record
             if e + reach_ > n:
-                e = (cost - n + s * (1 + rho)) / rho if rho > 0 else float(n)
+                e = s + (cost - n) / rho if rho > 0 else float(n)
             e = min(max(e, s), float(n))
             out.append(e)
             s = e
-        return out, (n - s) * (1 + rho)
+        return out, n + rho * (n - s)
 
     lo, hi = 0.0, (n + reach_) * (1 + rho)
     for _ in range(80):
@@ -152,8 +152,8 @@ def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[floa
 
 def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int,
                 own_cost: float = OWN_COST) -> list[Chunk]:
-    """Chunks of about equal work for ``workers`` (``_ideal_cuts``: a chunk that reads past
-    its end owns fewer samples), cut at multiples of ``align`` from the start of the segment
+    """Chunks of about equal work for ``workers`` (``_ideal_cuts``: the later a chunk, the
+    more it owns), cut at multiples of ``align`` from the start of the segment
     each cut is in (``bounds``: the segments' first samples and the record's length, as
     ``meta["segment_bounds"]``). Fewer chunks where the record has too few such points."""
     n = int(bounds[-1])
@@ -211,34 +211,33 @@ def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
 
 
 def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
-    """Chunk i's OADEV part and Welch power sums (a worker's task). The chunk reads from its
-    own start (a seek in an uncompressed .npz): its running sum starts there, which moves
-    every phase point by one constant that no difference sees, so its differences are one
-    pass's to the rounding of the sums."""
+    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
     # R(n) is never part of a chunk: the caller reads it again after the pass (defer_rn)
     acc = OverlappingAllan(c, job.rate_hz, job.grid, names=job.names, n_total=job.n_total,
-                           defer_rn=True, own_until=None if last else ch.stop - ch.start)
+                           defer_rn=True, own_from=ch.start,
+                           own_until=None if last else ch.stop)
     welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
              else None)
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
-    pos = ch.start
-    # the chunk that reads to the record's end checks the file's CRC (a seeking reader still
-    # reads the bytes before the chunk into it)
-    for accel, segment_end in job.read(verify=job.verify and last, start=ch.start):
+    pos = 0
+    for accel, segment_end in job.read(verify=job.verify and last):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
-        if job.screen and lo < ch.stop:
-            _screen(a[:ch.stop - lo], lo)
+        if job.screen and lo < ch.stop and hi > ch.start:
+            _screen(a, lo, ch)
         if job.take is not None:
             a = a[:, job.take]
+        # from the record's start: what comes before the chunk advances the running sum
+        # only, so the chunk's differences are one pass's to the bit (a running sum begun
+        # at the chunk's start moves the long records' ADEV by a few 1e-12)
         acc.update(a)
-        if welch is not None and lo < welch_to:
-            welch.update(a[:welch_to - lo])
+        if welch is not None and hi > ch.start and lo < welch_to:
+            welch.update(a[max(0, ch.start - lo):welch_to - lo])
         if hi >= ch.read_to:
             break
         if segment_end:
@@ -251,10 +250,10 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     return acc.part(), (None if welch is None else welch.part())
 
 
-def _screen(a: NDArray[np.float64], offset: int) -> None:
-    """The input screen's verdict on one of the chunk's own blocks (every axis, the blocks
-    of a one-worker read: the chunk starts on a block boundary). Any cut is a gap the plan
-    does not know: the pass is then read on one worker (``ScreenCut``)."""
+def _screen(a: NDArray[np.float64], offset: int, ch: Chunk) -> None:
+    """The input screen's verdict on one of the blocks the chunk owns (every axis; the
+    blocks of a one-worker read, since chunks start on a block boundary). Any cut is a gap
+    the plan does not know: the pass is then read on one worker (``ScreenCut``)."""
     from avard.core.io.screen import screen_accel
 
     bad = screen_accel(a)
@@ -333,27 +332,17 @@ def run_pass(read: Callable[..., Blocks], take: list[int] | None, names: list[st
 @dataclass(frozen=True)
 class ChainedRead:
     """Several records read one after another as the segments of one record (a gap at each
-    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read.
-    ``sizes``: each record's samples, so a chunk starts in the record its start falls in."""
+    record's end): what ``analyze_records`` pools. Picklable, so a Dask worker can read."""
 
     read: tuple[Callable[..., Blocks], ...]
-    sizes: tuple[int, ...]
 
-    def __call__(self, columns: list[int], *, verify: bool = False, start: int = 0
+    def __call__(self, columns: list[int], *, verify: bool = False
                  ) -> Iterator[tuple[NDArray[np.float64], bool]]:
-        offset = 0
-        for r, size in zip(self.read, self.sizes, strict=True):
-            if start >= offset + size:
-                if verify:  # a record the chunk starts after still has its CRC checked
-                    for _b in r(columns, verify=True, start=size):
-                        pass
-                offset += size
-                continue
+        for r in self.read:
             last: tuple[NDArray[np.float64], bool] | None = None
-            for b in r(columns, verify=verify, start=max(0, start - offset)):
+            for b in r(columns, verify=verify):
                 if last is not None:
                     yield last
                 last = b
             if last is not None:
                 yield last[0], True  # no difference or spectrum segment spans two records
-            offset += size

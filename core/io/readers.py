@@ -25,7 +25,6 @@ import io
 import itertools
 import logging
 import math
-import os
 import re
 import struct
 import zipfile
@@ -186,8 +185,7 @@ class _StoredRows:
     checked as through ``zipfile`` when its last row is read; a second pass over a file whose
     first pass checked it can skip that (0.13 s of the 0.18 s per pass)."""
 
-    def __init__(self, p: Path, zf: zipfile.ZipFile, member: _NpzMember, verify: bool,
-                 first_row: int = 0) -> None:
+    def __init__(self, p: Path, zf: zipfile.ZipFile, member: _NpzMember, verify: bool) -> None:
         info = zf.getinfo(member._name)
         self.shape, self.dtype = member.shape, member.dtype
         self.row_bytes = int(np.prod(self.shape[1:], dtype=np.int64)) * self.dtype.itemsize
@@ -209,34 +207,6 @@ class _StoredRows:
                               "the file is damaged: copy or write it again") from exc
         self.crc: int | None = zlib.crc32(npy_head) if verify else None
         self._buf = np.empty(0, dtype=self.dtype)
-        if first_row:
-            self._skip(first_row)
-
-    def _skip(self, rows: int) -> None:
-        """Move past the first ``rows`` rows (a chunk of a parallel analysis starts there):
-        a seek, or with ``verify`` a read of their raw bytes into the CRC (the whole member
-        is still checked, at the cost of the CRC alone: no row is converted)."""
-        rows = max(0, min(rows, self.left))
-        nbytes = rows * self.row_bytes
-        if self.crc is None:
-            self.fh.seek(nbytes, os.SEEK_CUR)
-        else:
-            buf = bytearray(min(nbytes, 1 << 22))
-            view = memoryview(buf)
-            left = nbytes
-            while left:
-                got = self.fh.readinto(view[:min(left, len(buf))]) or 0
-                if not got:
-                    break
-                self.crc = zlib.crc32(view[:got], self.crc)
-                left -= got
-        self.left -= rows
-        self._check_crc()
-
-    def _check_crc(self) -> None:
-        if self.left == 0 and self.crc is not None and self.crc != self.expected_crc:
-            raise FormatError(f"{self.where}: accel fails its CRC-32 check; the file is damaged "
-                              "(copy or write it again)")
 
     def rows(self, n: int) -> NDArray:
         """The next ≤ n rows, valid until the next call (the buffer is reused)."""
@@ -250,7 +220,9 @@ class _StoredRows:
         if self.crc is not None:
             self.crc = zlib.crc32(view[:got], self.crc)
         self.left -= k
-        self._check_crc()
+        if self.left == 0 and self.crc is not None and self.crc != self.expected_crc:
+            raise FormatError(f"{self.where}: accel fails its CRC-32 check; the file is damaged "
+                              "(copy or write it again)")
         a = self._buf[:k * self.row_bytes // self.dtype.itemsize]
         return a.reshape((k, *self.shape[1:])) if len(self.shape) > 1 else a
 
@@ -336,33 +308,18 @@ def _check_finite(a: NDArray, offset: int, where: str) -> None:
 
 
 def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int] | None,
-                temperature: bool, verify: bool, start: int = 0
+                temperature: bool, verify: bool
                 ) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
     with _open_npz(p) as zf:
         member = _NpzMember(zf, "accel.npy", str(p))
         acc: _NpzMember | _StoredRows = member
-        start = max(0, min(int(start), int(meta["n_samples"])))
-        done = 0
         if zf.getinfo("accel.npy").compress_type == zipfile.ZIP_STORED and not member.fortran:
             member.close()
-            acc = _StoredRows(p, zf, member, verify, start)
-            done = start
+            acc = _StoredRows(p, zf, member, verify)
         tm = (_NpzMember(zf, "temperature_c.npy", str(p))
               if temperature and meta["temperature_names"] else None)
+        done = 0
         try:
-            # a member that cannot seek (deflated, Fortran-ordered) is read up to ``start``
-            while done < start:
-                skipped = len(acc.rows(min(block, start - done)))
-                if tm is not None:
-                    tm.rows(skipped)
-                if not skipped:
-                    raise FormatError(f"{p}: accel ends after {done} of {meta['n_samples']} "
-                                      "samples; the file is truncated")
-                done += skipped
-            if tm is not None and isinstance(acc, _StoredRows):
-                left = start  # the temperatures' rows before ``start``, a block at a time
-                while left > 0:
-                    left -= max(1, len(tm.rows(min(block, left))))
             while done < meta["n_samples"]:
                 raw = acc.rows(block)
                 if len(raw) == 0:
@@ -518,7 +475,7 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
 
 def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None = None,
                 columns: Sequence[int] | None = None, temperature: bool = True,
-                verify: bool = True, start: int = 0
+                verify: bool = True
                 ) -> tuple[dict[str, Any], Iterator[tuple[NDArray[np.float64],
                                                           NDArray[np.float64] | None]]]:
     """Metadata and a stream of (accel (n, C) m/s², temperature (n, k) °C or None) blocks.
@@ -529,9 +486,7 @@ def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None
     pass when a consumer's memory grows with the channels; ``temperature=False`` skips the
     temperatures (None in every block). The metadata always describes the whole record.
     ``verify=False`` skips the CRC-32 check of an uncompressed .npz member: for another pass
-    over a file whose first pass checked it. ``start``: the stream begins at that sample (a
-    chunk of a parallel analysis): an uncompressed .npz seeks there (with ``verify`` the
-    rows before it still go through the CRC, unconverted), other files are read up to it.
+    over a file whose first pass checked it.
     """
     if block < 1:
         raise DataError(f"block size {block} must be >= 1 sample")
@@ -540,30 +495,17 @@ def iter_blocks(path: str | Path, block: int = 1 << 16, *, rate_hz: float | None
         with _open_npz(p) as zf:
             meta = _npz_meta(zf, p, rate_hz)
         _check_columns(columns, len(meta["names"]), p)
-        return meta, _npz_blocks(p, meta, block, columns, temperature, verify, start)
+        return meta, _npz_blocks(p, meta, block, columns, temperature, verify)
     if kind != "csv":
         raise DataError(f"{p}: a recording is streamed by avard.core.io.source.open_record "
                         "(its runs, losses and segments come with it), not by iter_blocks")
     meta, blocks = _csv_meta_and_blocks(p, rate_hz, block)
     _check_columns(columns, len(meta["names"]), p)
-    if start:
-        blocks = _from_row(blocks, int(start))
     if columns is None and temperature:
         return meta, blocks
     cols = None if columns is None else list(columns)
     return meta, ((a if cols is None else a[:, cols], t if temperature else None)
                   for a, t in blocks)
-
-
-def _from_row(blocks: Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]],
-              start: int) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
-    """``blocks`` less their first ``start`` rows (a file that cannot seek is read up to it)."""
-    pos = 0
-    for a, t in blocks:
-        if pos + len(a) > start:
-            k = max(0, start - pos)
-            yield a[k:], (None if t is None else t[k:])
-        pos += len(a)
 
 
 def _check_columns(columns: Sequence[int] | None, n: int, p: Path) -> None:

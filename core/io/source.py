@@ -303,17 +303,13 @@ class FileSource:
         return self._info
 
     def blocks(self, block: int = BLOCK, *, columns: Sequence[int] | None = None,
-               temperature: bool = True, verify: bool = True, start: int = 0
-               ) -> Iterator[RecordBlock]:
-        """The blocks, from sample ``start`` on (an uncompressed .npz seeks there: a chunk
-        of a parallel analysis reads its own stretch; ``verify`` still checks the whole
-        member's CRC)."""
+               temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
         from avard.core.io.readers import iter_blocks
 
         _check_block(block)
         _check_columns(columns, self._info)
         _meta, it = iter_blocks(self.path, block, rate_hz=self._rate, columns=columns,
-                                temperature=temperature, verify=verify, start=start)
+                                temperature=temperature, verify=verify)
         for a, t in it:
             yield a, t, False
 

@@ -248,8 +248,7 @@ def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeyp
 
     rng = np.random.default_rng(4)
     y = rng.normal(0, 1e-3, (1 << 16, 1))
-    job = parallel._Job(lambda verify, start: iter([(y[start:40000], False)]), None, ["x"],
-                        100.0,
+    job = parallel._Job(lambda verify: iter([(y[:40000], False)]), None, ["x"], 100.0,
                         2 ** np.arange(10), None, len(y), False,
                         [parallel.Chunk(0, 32768, 36864), parallel.Chunk(32768, 65536, 65536)])
     with pytest.raises(DataError, match="changed while it was analysed"):
