@@ -164,13 +164,16 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
 
     parallel = None
     if workers > 1:
-        # the chunks read the file itself; with the screen on, the first pass's chunks judge
-        # their own blocks as this read would (a record the screen cuts has gaps no chunk
-        # plan knows of, and is then read on one worker)
+        # the chunks read the file itself; with the screen on, each pass's chunks judge
+        # their own channels' columns (and the first pass the columns no pass analyses) over
+        # the samples they own, as this read would (a record the screen cuts has gaps no
+        # chunk plan knows of, and is then read on one worker)
         screened = source if isinstance(source, ScreenedSource) else None
         raw = source.source if screened is not None else source
         parallel = _Parallel(workers, partial(_accel_columns, raw, block), (0, int(total)),
-                             screened=screened, block=block)
+                             screened=screened, block=block,
+                             groups=_parallel_groups(groups, sel, workers),
+                             n_columns=len(info.names))
     return _analyze_passes(info, total, passes, reread=reread, options=options,
                            progress=progress, parallel=parallel)
 
@@ -184,6 +187,15 @@ def _workers(workers: int | str, n_samples: int) -> int:
         return default_workers() if n_samples >= PARALLEL_MIN_SAMPLES else 1
     assert isinstance(workers, int)  # AnalyzeOptions checked it when it was made
     return workers
+
+
+def _parallel_groups(groups: list[list[int]], sel: list[int], workers: int
+                     ) -> list[list[int]]:
+    """The channel groups of a parallel analysis: as many channels per pass as leave the
+    workers together with no more live histories than one worker's passes hold, one at
+    least (``parallel.plan_passes`` then cuts some of the passes by time)."""
+    size = max(1, max(len(g) for g in groups) // workers)
+    return [sel[i:i + size] for i in range(0, len(sel), size)]
 
 
 def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]:
@@ -405,36 +417,54 @@ class _Parallel:
     read: Callable[..., _Blocks]
     bounds: tuple[int, ...]
     executor: Executor | None = None
-    #: the record's input screen, judged by the first pass's chunks (``screen_accel`` on
-    #: blocks of ``block`` samples, as a one-worker read): told when nothing was cut
+    #: the record's input screen, judged by the chunks (``screen_accel`` on blocks of
+    #: ``block`` samples, as a one-worker read): told when nothing was cut
     screened: ScreenedSource | None = None
     block: int = 1 << 16
+    #: the passes' channels (None: the one-worker passes'), and the record's accel columns
+    groups: list[list[int]] | None = None
+    n_columns: int = 0
 
 
-def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
-                   grid: NDArray[np.int64], nper: int | None, total: int,
-                   reread: _Reread | None, quantiles: str, noise_id: str,
-                   progress: ProgressFn | None, done: int, all_total: int | None
-                   ) -> _PassResult:
-    """``_one_pass`` of the OADEV with the record cut into chunks, one per worker."""
-    from avard.core.analysis.parallel import run_pass
+def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], rate: float,
+                     grid: NDArray[np.int64], nper: int | None, total: int,
+                     reread: _Reread | None, quantiles: str, noise_id: str,
+                     progress: ProgressFn | None, scale: float, all_total: int | None
+                     ) -> list[tuple[list[int], _PassResult]]:
+    """``_one_pass`` of the OADEV for every group of channels, the record cut into chunks
+    and all of them run together on the workers (``parallel.run_passes``). The first pass
+    checks the file's CRC, as one pass does (its last chunk reads to the end)."""
+    from avard.core.analysis.parallel import PassSpec, run_passes
 
     def step(samples: int) -> None:
         if progress is not None:
-            progress(done + samples, all_total)
+            progress(round(samples * scale), all_total)
 
-    # the first pass checks the file's CRC, as one pass does (its last chunk reads to the end)
-    # and, with the screen, judges every axis (so it reads them all and analyses ``chans``)
-    screen = par.screened is not None and done == 0
-    read, take = ((partial(par.read, None), chans) if screen
-                  else (partial(par.read, chans), None))
-    sa, welch, n = run_pass(read, take, names, rate, grid, nper, total, par.bounds,
-                            par.workers, verify=done == 0, progress=step,
-                            executor=par.executor, screen_block=par.block if screen else None)
-    if screen:
-        assert par.screened is not None
+    screen = par.screened is not None
+    specs = []
+    covered = {c for g in groups for c in g}
+    for k, chans in enumerate(groups):
+        # the screen judges each axis on its own (a row is cut when any axis says so): a
+        # pass judges the columns it reads, the first also those no pass analyses
+        extra = [c for c in range(par.n_columns) if c not in covered] if screen and k == 0 \
+            else []
+        cols = chans + extra
+        specs.append(PassSpec(partial(par.read, cols), list(range(len(chans))) if extra
+                              else None, [names[i] for i in chans], verify=k == 0,
+                              screen=list(range(len(cols))) if screen else None))
+    parts = run_passes(specs, rate, grid, nper, total, par.bounds, par.workers,
+                       progress=step, executor=par.executor,
+                       screen_block=par.block if screen else None)
+    if par.screened is not None:
         par.screened.judged_clean(par.block)  # later reads cut nothing, as the chunks found
-    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+    out = []
+    for chans, (sa, welch, n) in zip(groups, parts, strict=True):
+        again = None
+        if reread is not None:
+            def again(j: int, chans: list[int] = chans) -> _Blocks:
+                return reread(chans[j])
+        out.append((chans, _finish_pass(sa, welch, n, again, quantiles, noise_id)))
+    return out
 
 
 def _analyze_passes(
@@ -472,7 +502,8 @@ def _analyze_passes(
         if parallel is not None and parallel.executor is None:
             # each local worker holds its chunk's history here (a Dask worker holds its own
             # elsewhere: the grid is then one analyze's)
-            width *= parallel.workers
+            width = max(width, max(len(g) for g in parallel.groups or [[0] * width])
+                        * parallel.workers)
         reach = int(total) if longest is None else longest
         grid = oadev_grid(reach, width)
         full = oadev_grid(reach, width, budget_bytes=1 << 62)
@@ -487,30 +518,33 @@ def _analyze_passes(
         nper = welch_nperseg(total)
     all_total = None if total is None else int(total) * len(passes)
     results: list[tuple[list[int], _PassResult]] = []
+    if parallel is not None and grid is not None and total is not None and \
+            reread is not None:  # R(n) is read again after a parallel pass
+        from avard.core.analysis.parallel import ShortRead
+
+        groups = parallel.groups or [chans for chans, _b, _t in passes]
+        try:
+            results = _parallel_passes(parallel, groups, names, rate, grid, nper, int(total),
+                                       reread, options.quantiles, options.noise_id,
+                                       progress, len(passes) / len(groups), all_total)
+        except ShortRead as exc:
+            # the screen's cuts are gaps no plan knew of: one worker needs no plan
+            log.info("%s: the parallel pass read short (%s); analysed on one worker",
+                     source, exc)
+            results = []
+        if any(one.n != results[0][1].n for _c, one in results):
+            raise DataError(f"{source}: the passes read different sample counts "
+                            f"({sorted({one.n for _c, one in results})}); the file changed "
+                            "while it was analysed")
     done = 0
-    for chans, blocks, take in passes:
+    for chans, blocks, take in passes if not results else ():
         again = None
         if reread is not None:
             def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
-        one = None
-        if parallel is not None and grid is not None and total is not None and \
-                again is not None:  # R(n) is read again after a parallel pass
-            from avard.core.analysis.parallel import ShortRead
-
-            try:
-                one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid,
-                                     nper, int(total), again, options.quantiles,
-                                     options.noise_id, progress, done, all_total)
-            except ShortRead as exc:
-                # the screen's cuts are gaps no plan knew of: one worker needs no plan
-                log.info("%s: the parallel pass read short (%s); analysed on one worker",
-                         source, exc)
-                parallel = None
-        if one is None:
-            one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
-                            nper, progress, done, all_total, options.quantiles,
-                            None if total is None else int(total), again, options.noise_id)
+        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
+                        nper, progress, done, all_total, options.quantiles,
+                        None if total is None else int(total), again, options.noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "
