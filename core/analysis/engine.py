@@ -365,7 +365,7 @@ def _one_pass(blocks: _Blocks, take: list[int] | None,
 def _finish_pass(sa: OverlappingAllan | StreamingAllan, welch: WelchAccumulator | None, n: int,
                  reread: _Reread | None, quantiles: str, noise_id: str) -> _PassResult:
     """A pass's result from its accumulators, fed by one pass or added up from a parallel
-    pass's chunks (``parallel.run_pass``): R(n) read again where B1 needs it, then the
+    pass's chunks (``parallel.run_passes``): R(n) read again where B1 needs it, then the
     Allan result."""
     from avard.core.allan.overlapping import OverlappingAllan
 
@@ -485,7 +485,7 @@ def _analyze_passes(
     ``reread(column)``, when the record can be read again, gives one column's blocks: the
     OADEV then defers R(n) and reads a column again only where B1 needs it.
     ``parallel`` (the OADEV only): each pass's chunks on that many worker processes
-    (``parallel.run_pass``), exactly the one-pass sums. ``longest``: records pooled as
+    (``parallel.run_passes``), exactly the one-pass sums. ``longest``: records pooled as
     segments (``analyze_records``) have no τ beyond the longest one's."""
     estimator, source = options.estimator, info.source
     if estimator not in ESTIMATORS:

@@ -23,13 +23,21 @@ What stays single-worker: the cascade estimator (``--estimator cascade``: the se
 streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
 the few channels and τ that need them after the pass, as on one worker) and the fit.
 
+Every pass (a group of channels) is planned at once (``plan_passes``): each is cut into as
+many chunks as make the workers, taking the chunks longest first, end soonest, since a cut
+costs a read of the record's start and of the reach past it again. Three channels on two
+workers are two passes analysed whole and one cut in two. The passes hold fewer channels
+than one worker's (``engine._parallel_groups``), so the workers together hold no more OADEV
+histories than one worker does. With the input screen on, each chunk judges the blocks it
+owns, each axis on its own (a row is cut when any axis says so: the first pass also judges
+the axes no pass analyses); a cut is a gap the plan does not know, and the record is then
+analysed on one worker (``ScreenCut``).
+
 The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
-context): each inherits the job (how to read the record, the τ grid) and sends back only its
-part, a few numbers per τ and the spectrum's power sums. A worker that dies (killed, out of
-memory) ends the analysis with an error that says so, instead of a wait for its chunk.
-Each worker holds one OADEV history per channel of its pass, so a pass's channels are split
-among the workers (``engine._split_for_workers``): together they hold as many histories as
-one pass would.
+context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
+back only its part, a few numbers per τ and the spectrum's power sums. A worker that dies
+(killed, out of memory) ends the analysis with an error that says so, instead of a wait for
+its chunk.
 """
 
 from __future__ import annotations
