@@ -467,6 +467,41 @@ def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], 
     return out
 
 
+@dataclass(frozen=True)
+class _FitJob:
+    """One channel's noise fit (``fit.fit_noise``): picklable, for a worker process."""
+
+    allan: Any  # the channel's AllanResult
+    corner: float | None
+    extra: list[dict[str, Any]]
+    check_filter: bool
+    kw: dict[str, float]
+
+
+def _fit_one(job: _FitJob) -> Any:
+    """The fit, or the ``FitError``'s message (an exception need not cross a process)."""
+    from avard.core.model.fit import fit_noise
+
+    try:
+        return fit_noise(job.allan, filter_corner_hz=job.corner, extra=job.extra,
+                         check_filter=job.check_filter, **job.kw)
+    except FitError as exc:
+        return str(exc)
+
+
+def _fit_all(jobs: list[_FitJob], workers: int) -> list[Any]:
+    """Every channel's fit, on ``workers`` forked processes when there are more channels than
+    one (after a parallel analysis the fits would otherwise be its one serial step)."""
+    if workers <= 1 or len(jobs) <= 1:
+        return [_fit_one(j) for j in jobs]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(workers, len(jobs)),
+                             mp_context=multiprocessing.get_context("fork")) as pool:
+        return list(pool.map(_fit_one, jobs))
+
+
 def _analyze_passes(
     info: RecordInfo,
     total: int | None,
@@ -561,36 +596,42 @@ def _analyze_passes(
     # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
     # fit holds as a fixed term (simulated records and recordings carry the LSB)
     lsb = info.lsb_mps2
-    from avard.core.model.fit import fit_noise
-
     out: dict[str, ChannelAnalysis] = {}
+    kw: dict[str, float] = {"ci": options.ci}
+    if corner is not None and lsb is not None:
+        kw["rounding_lsb"] = lsb
+    todo: list[tuple[int, int, _PassResult, Any, list[dict[str, Any]]]] = []
+    spectra = []
     for chans, one in results:
         welch = one.welch
         f, spectrum = (welch.result() if welch is not None else (None, None))
+        spectra.append((f, spectrum))
         for j, i in enumerate(chans):
-            allan = one.allan.channel(j)
             lines = []
             if welch is not None and spectrum is not None and find_sinusoids:
                 lines = find_lines(f, spectrum[:, j], welch.n_seg)
-            extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
-            kw: dict[str, float] = {"ci": options.ci}
-            if corner is not None and lsb is not None:
-                kw["rounding_lsb"] = lsb
-            try:
-                fit = fit_noise(allan, filter_corner_hz=corner, extra=extra,
-                                check_filter=options.filter_corner_hz == "auto", **kw)
-            except FitError as exc:
-                raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
-            chan_psd = None
-            if psd:
-                if welch is None or spectrum is None or welch.n_seg < 1:
-                    raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
-                                    "needs at least 1024)")
-                from avard.core.analysis.psd import channel_psd, white_density
+            todo.append((len(spectra) - 1, j, one, i, lines))
+    fit_args = [_FitJob(one.allan.channel(j), corner,
+                        [{"cause": "sinusoid", "params": dict(ln)} for ln in lines],
+                        options.filter_corner_hz == "auto", kw)
+                for _k, j, one, _i, lines in todo]
+    fits = _fit_all(fit_args, parallel.workers if parallel is not None
+                    and parallel.executor is None else 1)
+    for (k, j, one, i, lines), job, fit in zip(todo, fit_args, fits, strict=True):
+        if isinstance(fit, str):
+            raise FitError(f"{source}, channel {names[i]}: {fit}")
+        welch = one.welch
+        f, spectrum = spectra[k]
+        chan_psd = None
+        if psd:
+            if welch is None or spectrum is None or welch.n_seg < 1:
+                raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
+                                "needs at least 1024)")
+            from avard.core.analysis.psd import channel_psd, white_density
 
-                chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
-                chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
-            out[names[i]] = ChannelAnalysis(names[i], allan, fit, lines, estimator, chan_psd)
+            chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
+            chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
+        out[names[i]] = ChannelAnalysis(names[i], job.allan, fit, lines, estimator, chan_psd)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
