@@ -36,9 +36,16 @@
  *       enter only the products that reach a new value. Adds sum z over the new values to
  *       out[0] and sum z_t z_{t+j} over pairs whose later value is new to out[1 + j], for the
  *       lags j = 0 ... len(out) - 2 (at most LAG_MAX = 3, what the ladder's dmax = 2 needs).
+ *   local_residual(y, half, out)
+ *       the input screen's high-pass statistic (avard.core.io.screen): out[i] = |x_i - the
+ *       mean of x over i - half ... i + half| with x = y - y[0], the window reflected at the
+ *       ends as numpy's pad(mode="reflect") does (x_{-j} = x_j, x_{n-1+j} = x_{n-1-j}); y
+ *       may be strided (a column of a block), n > 2 half. One pass with a moving window sum
+ *       where numpy pads, sums cumulatively and subtracts (five passes and two temporaries).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 #include <string.h>
 
 /* A 1-D float64 buffer: C-contiguous, or with ``strided`` any whole-element stride (a column
@@ -414,6 +421,68 @@ kernels_power_sum(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+static PyObject *
+kernels_local_residual(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    Py_buffer v, o;
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "local_residual(y, half, out) takes 3 arguments");
+        return NULL;
+    }
+    Py_ssize_t h = PyLong_AsSsize_t(args[1]);
+    if (h == -1 && PyErr_Occurred())
+        return NULL;
+    if (get_in_out(args[0], args[2], &v, &o, 1, "y") < 0)
+        return NULL;
+    const Py_ssize_t n = v.shape[0];
+    if (h < 0 || n <= 2 * h || o.shape[0] != n) {
+        PyErr_SetString(PyExc_ValueError, "local_residual needs len(y) > 2 half >= 0 and out "
+                        "as long as y");
+        return release2(&v, &o);
+    }
+    const char *base = v.buf;
+    const Py_ssize_t stride = v.strides[0];
+    double *dst = o.buf;
+    Py_BEGIN_ALLOW_THREADS
+    const double y0 = *(const double *)base;
+#define X(j) (*(const double *)(base + (j) * stride) - y0)
+#define REFL(j) ((j) < 0 ? -(j) : ((j) >= n ? 2 * (n - 1) - (j) : (j)))
+    const double w = (double)(2 * h + 1);
+    double s = 0.0;
+    for (Py_ssize_t j = -h; j <= h; j++)
+        s += X(REFL(j));
+    /* the ends reflect; between them the window moves by one sample without a branch */
+    const Py_ssize_t lo = h < n ? h : n, hi = n - h - 1 > lo ? n - h - 1 : lo;
+    for (Py_ssize_t i = 0; i < lo; i++) {
+        dst[i] = fabs(X(i) - s / w);
+        s += X(REFL(i + h + 1)) - X(REFL(i - h));
+    }
+    if (stride == 8) {
+        const double *x = (const double *)base;
+        for (Py_ssize_t i = lo; i < hi; i++) {
+            dst[i] = fabs((x[i] - y0) - s / w);
+            s += x[i + h + 1] - x[i - h];
+        }
+    } else {
+        for (Py_ssize_t i = lo; i < hi; i++) {
+            dst[i] = fabs(X(i) - s / w);
+            s += X(i + h + 1) - X(i - h);
+        }
+    }
+    for (Py_ssize_t i = hi; i < n; i++) {
+        dst[i] = fabs(X(i) - s / w);
+        if (i + 1 < n)  /* no window after the last sample (its reflection may not exist) */
+            s += X(REFL(i + h + 1)) - X(REFL(i - h));
+    }
+#undef REFL
+#undef X
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&v);
+    PyBuffer_Release(&o);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef kernels_methods[] = {
     {"sumsq", (PyCFunction)(void (*)(void))kernels_sumsq, METH_FASTCALL,
      "sumsq(x0, x1, x2): sum of ((x2 - x1) - (x1 - x0))**2 over float64 vectors"},
@@ -425,18 +494,20 @@ static PyMethodDef kernels_methods[] = {
      "power_sum(spec, k, out): out += the sum over k blocks of |spec|^2"},
     {"lag_sums", (PyCFunction)(void (*)(void))kernels_lag_sums, METH_FASTCALL,
      "lag_sums(x, m, ref, out, old): the averages' sum and lag products, added to out"},
+    {"local_residual", (PyCFunction)(void (*)(void))kernels_local_residual, METH_FASTCALL,
+     "local_residual(y, half, out): out = |y - y[0] - its reflected moving mean|"},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef kernels_module = {
     PyModuleDef_HEAD_INIT, "_kernels",
-    "Compiled inner loops of avard analyze: the OADEV, its noise identification and the "
-    "Welch spectrum (optional).", -1,
+    "Compiled inner loops of avard analyze: the OADEV, its noise identification, the "
+    "Welch spectrum and the input screen (optional).", -1,
     kernels_methods, NULL, NULL, NULL, NULL,
 };
 
 /* The interface version avard.core.allan.kernels expects (its API): raise both together. */
-#define KERNELS_API 2
+#define KERNELS_API 3
 
 PyMODINIT_FUNC
 PyInit__kernels(void)

@@ -16,6 +16,9 @@ that stays for installs without a compiler (and for counts and covariances):
   ``push_spans``; general path: the averages made, then a row sum and dot products).
 * ``power_sum(spec, k, out)``: the Welch spectrum's Σ |X|² over segments
   (``report.WelchAccumulator``).
+* ``local_residual(y, half, out)``: the input screen's |sample − its neighbours' mean|
+  (``core/io/screen.py``; general path ``screen._local_residual``): one pass where numpy
+  pads, sums cumulatively and subtracts.
 
 The extension is optional (setup.py): without a compiler avard installs and runs on the
 numpy path, which gives the same results to rounding (``tests/core/test_kernels.py`` holds
@@ -39,7 +42,7 @@ __all__ = ["API", "compiled", "second_differences", "switched_off", "use_compile
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
 #: ``_kernels.c`` (a stale build left in a source tree) is not used.
-API = 2
+API = 3
 
 
 def switched_off() -> bool:

@@ -155,14 +155,6 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     workers = _workers(options.workers, int(total))
     if info.format is not RecordFormat.NPZ:
         workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
-    if workers > 1 and isinstance(source, ScreenedSource):
-        # the screen judges the record once, here (its CRC checked), before the workers fork:
-        # they inherit its verdicts and read only their channels; a record it cuts has gaps
-        # no chunk plan knows of, and is read on one worker
-        for _blk in source.blocks(block, temperature=False):
-            pass
-        if source.log is not None and any(x.channel == "accel" for x in source.log.stretches):
-            workers = 1
     groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
@@ -170,8 +162,18 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     def reread(column: int) -> _Blocks:
         return _accel(source, block, [column], verify=False)
 
-    parallel = (_Parallel(workers, partial(_accel_columns, source, block), (0, int(total)))
-                if workers > 1 else None)
+    parallel = None
+    if workers > 1:
+        # the chunks read the file itself; with the screen on, each pass's chunks judge
+        # their own channels' columns (and the first pass the columns no pass analyses) over
+        # the samples they own, as this read would (a record the screen cuts has gaps no
+        # chunk plan knows of, and is then read on one worker)
+        screened = source if isinstance(source, ScreenedSource) else None
+        raw = source.source if screened is not None else source
+        parallel = _Parallel(workers, partial(_accel_columns, raw, block), (0, int(total)),
+                             screened=screened, block=block,
+                             groups=_parallel_groups(groups, sel, workers),
+                             n_columns=len(info.names))
     return _analyze_passes(info, total, passes, reread=reread, options=options,
                            progress=progress, parallel=parallel)
 
@@ -187,6 +189,15 @@ def _workers(workers: int | str, n_samples: int) -> int:
     return workers
 
 
+def _parallel_groups(groups: list[list[int]], sel: list[int], workers: int
+                     ) -> list[list[int]]:
+    """The channel groups of a parallel analysis: as many channels per pass as leave the
+    workers together with no more live histories than one worker's passes hold, one at
+    least (``parallel.plan_passes`` then cuts some of the passes by time)."""
+    size = max(1, max(len(g) for g in groups) // workers)
+    return [sel[i:i + size] for i in range(0, len(sel), size)]
+
+
 def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]:
     """Each worker holds an OADEV history of its own: a pass's channels split so that all
     workers together hold as many histories as one pass would."""
@@ -196,10 +207,11 @@ def _split_for_workers(groups: list[list[int]], workers: int) -> list[list[int]]
             for i in range(0, len(g), -(-len(g) // workers))]
 
 
-def _accel_columns(source: RecordSource, block: int, columns: list[int], *,
+def _accel_columns(source: RecordSource, block: int, columns: list[int] | None, *,
                    verify: bool = False) -> Iterator[tuple[NDArray[np.float64], bool]]:
-    """A source's accel blocks of ``columns`` from its start: a picklable reader for the
-    chunks of a parallel pass (the chunk that reads a first pass to the end verifies)."""
+    """A source's accel blocks of ``columns`` (None: all) from its start: a picklable reader
+    for the chunks of a parallel pass (the chunk that reads a first pass to the end
+    verifies)."""
     return _accel(source, block, columns, verify=verify)
 
 
@@ -353,7 +365,7 @@ def _one_pass(blocks: _Blocks, take: list[int] | None,
 def _finish_pass(sa: OverlappingAllan | StreamingAllan, welch: WelchAccumulator | None, n: int,
                  reread: _Reread | None, quantiles: str, noise_id: str) -> _PassResult:
     """A pass's result from its accumulators, fed by one pass or added up from a parallel
-    pass's chunks (``parallel.run_pass``): R(n) read again where B1 needs it, then the
+    pass's chunks (``parallel.run_passes``): R(n) read again where B1 needs it, then the
     Allan result."""
     from avard.core.allan.overlapping import OverlappingAllan
 
@@ -402,28 +414,92 @@ class _Parallel:
     executor for ``avard fleet``)."""
 
     workers: int
-    read: Callable[[list[int]], _Blocks]
+    read: Callable[..., _Blocks]
     bounds: tuple[int, ...]
     executor: Executor | None = None
+    #: the record's input screen, judged by the chunks (``screen_accel`` on blocks of
+    #: ``block`` samples, as a one-worker read): told when nothing was cut
+    screened: ScreenedSource | None = None
+    block: int = 1 << 16
+    #: the passes' channels (None: the one-worker passes'), and the record's accel columns
+    groups: list[list[int]] | None = None
+    n_columns: int = 0
 
 
-def _parallel_pass(par: _Parallel, chans: list[int], names: list[str], rate: float,
-                   grid: NDArray[np.int64], nper: int | None, total: int,
-                   reread: _Reread | None, quantiles: str, noise_id: str,
-                   progress: ProgressFn | None, done: int, all_total: int | None
-                   ) -> _PassResult:
-    """``_one_pass`` of the OADEV with the record cut into chunks, one per worker."""
-    from avard.core.analysis.parallel import run_pass
+def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], rate: float,
+                     grid: NDArray[np.int64], nper: int | None, total: int,
+                     reread: _Reread | None, quantiles: str, noise_id: str,
+                     progress: ProgressFn | None, scale: float, all_total: int | None
+                     ) -> list[tuple[list[int], _PassResult]]:
+    """``_one_pass`` of the OADEV for every group of channels, the record cut into chunks
+    and all of them run together on the workers (``parallel.run_passes``). The first pass
+    checks the file's CRC, as one pass does (its last chunk reads to the end)."""
+    from avard.core.analysis.parallel import PassSpec, run_passes
 
     def step(samples: int) -> None:
         if progress is not None:
-            progress(done + samples, all_total)
+            progress(round(samples * scale), all_total)
 
-    # the first pass checks the file's CRC, as one pass does (its last chunk reads to the end)
-    sa, welch, n = run_pass(partial(par.read, chans), None, names, rate, grid, nper, total,
-                            par.bounds, par.workers, verify=done == 0, progress=step,
-                            executor=par.executor)
-    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+    screen = par.screened is not None
+    specs = []
+    covered = {c for g in groups for c in g}
+    for k, chans in enumerate(groups):
+        # the screen judges each axis on its own (a row is cut when any axis says so): a
+        # pass judges the columns it reads, the first also those no pass analyses
+        extra = [c for c in range(par.n_columns) if c not in covered] if screen and k == 0 \
+            else []
+        cols = chans + extra
+        specs.append(PassSpec(partial(par.read, cols), list(range(len(chans))) if extra
+                              else None, [names[i] for i in chans], verify=k == 0,
+                              screen=list(range(len(cols))) if screen else None))
+    parts = run_passes(specs, rate, grid, nper, total, par.bounds, par.workers,
+                       progress=step, executor=par.executor,
+                       screen_block=par.block if screen else None)
+    if par.screened is not None:
+        par.screened.judged_clean(par.block)  # later reads cut nothing, as the chunks found
+    out = []
+    for chans, (sa, welch, n) in zip(groups, parts, strict=True):
+        again = None
+        if reread is not None:
+            def again(j: int, chans: list[int] = chans) -> _Blocks:
+                return reread(chans[j])
+        out.append((chans, _finish_pass(sa, welch, n, again, quantiles, noise_id)))
+    return out
+
+
+@dataclass(frozen=True)
+class _FitJob:
+    """One channel's noise fit (``fit.fit_noise``): picklable, for a worker process."""
+
+    allan: Any  # the channel's AllanResult
+    corner: float | None
+    extra: list[dict[str, Any]]
+    check_filter: bool
+    kw: dict[str, float]
+
+
+def _fit_one(job: _FitJob) -> Any:
+    """The fit, or the ``FitError``'s message (an exception need not cross a process)."""
+    from avard.core.model.fit import fit_noise
+
+    try:
+        return fit_noise(job.allan, filter_corner_hz=job.corner, extra=job.extra,
+                         check_filter=job.check_filter, **job.kw)
+    except FitError as exc:
+        return str(exc)
+
+
+def _fit_all(jobs: list[_FitJob], workers: int) -> list[Any]:
+    """Every channel's fit, on ``workers`` forked processes when there are more channels than
+    one (after a parallel analysis the fits would otherwise be its one serial step)."""
+    if workers <= 1 or len(jobs) <= 1:
+        return [_fit_one(j) for j in jobs]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(workers, len(jobs)),
+                             mp_context=multiprocessing.get_context("fork")) as pool:
+        return list(pool.map(_fit_one, jobs))
 
 
 def _analyze_passes(
@@ -444,7 +520,7 @@ def _analyze_passes(
     ``reread(column)``, when the record can be read again, gives one column's blocks: the
     OADEV then defers R(n) and reads a column again only where B1 needs it.
     ``parallel`` (the OADEV only): each pass's chunks on that many worker processes
-    (``parallel.run_pass``), exactly the one-pass sums. ``longest``: records pooled as
+    (``parallel.run_passes``), exactly the one-pass sums. ``longest``: records pooled as
     segments (``analyze_records``) have no τ beyond the longest one's."""
     estimator, source = options.estimator, info.source
     if estimator not in ESTIMATORS:
@@ -461,7 +537,8 @@ def _analyze_passes(
         if parallel is not None and parallel.executor is None:
             # each local worker holds its chunk's history here (a Dask worker holds its own
             # elsewhere: the grid is then one analyze's)
-            width *= parallel.workers
+            width = max(width, max(len(g) for g in parallel.groups or [[0] * width])
+                        * parallel.workers)
         reach = int(total) if longest is None else longest
         grid = oadev_grid(reach, width)
         full = oadev_grid(reach, width, budget_bytes=1 << 62)
@@ -476,30 +553,33 @@ def _analyze_passes(
         nper = welch_nperseg(total)
     all_total = None if total is None else int(total) * len(passes)
     results: list[tuple[list[int], _PassResult]] = []
+    if parallel is not None and grid is not None and total is not None and \
+            reread is not None:  # R(n) is read again after a parallel pass
+        from avard.core.analysis.parallel import ShortRead
+
+        groups = parallel.groups or [chans for chans, _b, _t in passes]
+        try:
+            results = _parallel_passes(parallel, groups, names, rate, grid, nper, int(total),
+                                       reread, options.quantiles, options.noise_id,
+                                       progress, len(passes) / len(groups), all_total)
+        except ShortRead as exc:
+            # the screen's cuts are gaps no plan knew of: one worker needs no plan
+            log.info("%s: the parallel pass read short (%s); analysed on one worker",
+                     source, exc)
+            results = []
+        if any(one.n != results[0][1].n for _c, one in results):
+            raise DataError(f"{source}: the passes read different sample counts "
+                            f"({sorted({one.n for _c, one in results})}); the file changed "
+                            "while it was analysed")
     done = 0
-    for chans, blocks, take in passes:
+    for chans, blocks, take in passes if not results else ():
         again = None
         if reread is not None:
             def again(j: int, chans: list[int] = chans) -> _Blocks:
                 return reread(chans[j])
-        one = None
-        if parallel is not None and grid is not None and total is not None and \
-                again is not None:  # R(n) is read again after a parallel pass
-            from avard.core.analysis.parallel import ShortRead
-
-            try:
-                one = _parallel_pass(parallel, chans, [names[i] for i in chans], rate, grid,
-                                     nper, int(total), again, options.quantiles,
-                                     options.noise_id, progress, done, all_total)
-            except ShortRead as exc:
-                # the screen's cuts are gaps no plan knew of: one worker needs no plan
-                log.info("%s: the parallel pass read short (%s); analysed on one worker",
-                         source, exc)
-                parallel = None
-        if one is None:
-            one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
-                            nper, progress, done, all_total, options.quantiles,
-                            None if total is None else int(total), again, options.noise_id)
+        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
+                        nper, progress, done, all_total, options.quantiles,
+                        None if total is None else int(total), again, options.noise_id)
         if results and one.n != results[0][1].n:
             raise DataError(f"{source}: read {one.n} samples on one pass and "
                             f"{results[0][1].n} on another; the file changed while it was "
@@ -516,36 +596,42 @@ def _analyze_passes(
     # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
     # fit holds as a fixed term (simulated records and recordings carry the LSB)
     lsb = info.lsb_mps2
-    from avard.core.model.fit import fit_noise
-
     out: dict[str, ChannelAnalysis] = {}
+    kw: dict[str, float] = {"ci": options.ci}
+    if corner is not None and lsb is not None:
+        kw["rounding_lsb"] = lsb
+    todo: list[tuple[int, int, _PassResult, Any, list[dict[str, Any]]]] = []
+    spectra = []
     for chans, one in results:
         welch = one.welch
         f, spectrum = (welch.result() if welch is not None else (None, None))
+        spectra.append((f, spectrum))
         for j, i in enumerate(chans):
-            allan = one.allan.channel(j)
             lines = []
             if welch is not None and spectrum is not None and find_sinusoids:
                 lines = find_lines(f, spectrum[:, j], welch.n_seg)
-            extra = [{"cause": "sinusoid", "params": dict(ln)} for ln in lines]
-            kw: dict[str, float] = {"ci": options.ci}
-            if corner is not None and lsb is not None:
-                kw["rounding_lsb"] = lsb
-            try:
-                fit = fit_noise(allan, filter_corner_hz=corner, extra=extra,
-                                check_filter=options.filter_corner_hz == "auto", **kw)
-            except FitError as exc:
-                raise FitError(f"{source}, channel {names[i]}: {exc}") from exc
-            chan_psd = None
-            if psd:
-                if welch is None or spectrum is None or welch.n_seg < 1:
-                    raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
-                                    "needs at least 1024)")
-                from avard.core.analysis.psd import channel_psd, white_density
+            todo.append((len(spectra) - 1, j, one, i, lines))
+    fit_args = [_FitJob(one.allan.channel(j), corner,
+                        [{"cause": "sinusoid", "params": dict(ln)} for ln in lines],
+                        options.filter_corner_hz == "auto", kw)
+                for _k, j, one, _i, lines in todo]
+    fits = _fit_all(fit_args, parallel.workers if parallel is not None
+                    and parallel.executor is None else 1)
+    for (k, j, one, i, lines), job, fit in zip(todo, fit_args, fits, strict=True):
+        if isinstance(fit, str):
+            raise FitError(f"{source}, channel {names[i]}: {fit}")
+        welch = one.welch
+        f, spectrum = spectra[k]
+        chan_psd = None
+        if psd:
+            if welch is None or spectrum is None or welch.n_seg < 1:
+                raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
+                                "needs at least 1024)")
+            from avard.core.analysis.psd import channel_psd, white_density
 
-                chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
-                chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
-            out[names[i]] = ChannelAnalysis(names[i], allan, fit, lines, estimator, chan_psd)
+            chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
+            chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
+        out[names[i]] = ChannelAnalysis(names[i], job.allan, fit, lines, estimator, chan_psd)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,

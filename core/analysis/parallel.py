@@ -23,13 +23,21 @@ What stays single-worker: the cascade estimator (``--estimator cascade``: the se
 streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
 the few channels and τ that need them after the pass, as on one worker) and the fit.
 
+Every pass (a group of channels) is planned at once (``plan_passes``): each is cut into as
+many chunks as make the workers, taking the chunks longest first, end soonest, since a cut
+costs a read of the record's start and of the reach past it again. Three channels on two
+workers are two passes analysed whole and one cut in two. The passes hold fewer channels
+than one worker's (``engine._parallel_groups``), so the workers together hold no more OADEV
+histories than one worker does. With the input screen on, each chunk judges the blocks it
+owns, each axis on its own (a row is cut when any axis says so: the first pass also judges
+the axes no pass analyses); a cut is a gap the plan does not know, and the record is then
+analysed on one worker (``ScreenCut``).
+
 The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
-context): each inherits the job (how to read the record, the τ grid) and sends back only its
-part, a few numbers per τ and the spectrum's power sums. A worker that dies (killed, out of
-memory) ends the analysis with an error that says so, instead of a wait for its chunk.
-Each worker holds one OADEV history per channel of its pass, so a pass's channels are split
-among the workers (``engine._split_for_workers``): together they hold as many histories as
-one pass would.
+context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
+back only its part, a few numbers per τ and the spectrum's power sums. A worker that dies
+(killed, out of memory) ends the analysis with an error that says so, instead of a wait for
+its chunk.
 """
 
 from __future__ import annotations
@@ -49,8 +57,8 @@ from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
-__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ShortRead", "default_workers",
-           "plan_chunks", "run_pass"]
+__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "PassSpec", "ScreenCut", "ShortRead",
+           "default_workers", "plan_chunks", "plan_passes", "run_passes"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
@@ -85,6 +93,11 @@ class ShortRead(DataError):
     reads the pass on one worker, which needs no plan."""
 
 
+class ScreenCut(ShortRead):
+    """A chunk's input screen (``_Job.screen``) found acceleration to cut: a gap the chunk
+    plan does not know of, so the record is analysed on one worker, as ``ShortRead``."""
+
+
 @dataclass(frozen=True)
 class Chunk:
     """One worker's stretch of a record: it owns samples [start, stop) and reads [start,
@@ -111,15 +124,49 @@ def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
     return max(LADDER_REACH * int(grid[-1]), (nperseg or 0) // 2)
 
 
-def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) -> list[Chunk]:
-    """Chunks of about equal length for ``workers``, cut at multiples of ``align`` from the
-    start of the segment each cut is in (``bounds``: the segments' first samples and the
-    record's length, as ``meta["segment_bounds"]``). Fewer chunks where the record has too
-    few such points."""
+#: What a chunk's own samples cost against the samples it only reads (the differences at
+#: every τ, the spectrum and the screen against a read and a running sum): the chunk plan
+#: evens out reads + OWN_COST × owned samples. Every chunk reads from the record's start,
+#: and all but the last on past their end, so the last owns the most.
+OWN_COST = 3.0
+
+
+def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[float]:
+    """Cut points (not yet aligned) at which every chunk costs the same: a chunk [s, e)
+    reads [0, min(n, e + reach)) and owns e − s samples, so costs min(n, e + reach) +
+    own_cost·(e − s); the last, n + own_cost·(n − s). Found by bisection on that cost."""
+    rho = float(own_cost)
+
+    def cuts_for(cost: float) -> tuple[list[float], float]:
+        s, out = 0.0, []
+        for _ in range(workers - 1):
+            e = (cost - reach_ + rho * s) / (1 + rho)  # its reach inside the record
+            if e + reach_ > n:
+                e = s + (cost - n) / rho if rho > 0 else float(n)
+            e = min(max(e, s), float(n))
+            out.append(e)
+            s = e
+        return out, n + rho * (n - s)
+
+    lo, hi = 0.0, (n + reach_) * (1 + rho)
+    for _ in range(80):
+        mid = (lo + hi) / 2
+        if cuts_for(mid)[1] > mid:
+            lo = mid
+        else:
+            hi = mid
+    return cuts_for(hi)[0]
+
+
+def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int,
+                own_cost: float = OWN_COST) -> list[Chunk]:
+    """Chunks of about equal work for ``workers`` (``_ideal_cuts``: the later a chunk, the
+    more it owns), cut at multiples of ``align`` from the start of the segment
+    each cut is in (``bounds``: the segments' first samples and the record's length, as
+    ``meta["segment_bounds"]``). Fewer chunks where the record has too few such points."""
     n = int(bounds[-1])
     cuts = set()
-    for w in range(1, workers):
-        ideal = n * w / workers
+    for ideal in _ideal_cuts(n, workers, reach_, own_cost):
         best = None
         for s0, s1 in itertools.pairwise(bounds):
             j = round((ideal - s0) / align)
@@ -136,10 +183,13 @@ def plan_chunks(bounds: Sequence[int], workers: int, align: int, reach_: int) ->
 
 @dataclass(frozen=True)
 class _Job:
-    """What every worker needs: handed to the forked local processes when they start (never
-    pickled), pickled (so ``read`` must be picklable, e.g. ``ChainedRead``) for another
-    executor's. ``read(verify=...)`` gives the record's blocks from its start; the chunk
-    that reads to the record's end checks the file's CRC when ``verify``."""
+    """One pass's chunks and what every worker needs for them: handed to the forked local
+    processes when they start (never pickled), pickled (so ``read`` must be picklable, e.g.
+    ``ChainedRead``) for another executor's. ``read(verify=...)`` gives the record's blocks
+    from its start, of which the columns ``take`` (None: all) are the pass's channels; the
+    chunk that reads to the record's end checks the file's CRC when ``verify``. ``screen``:
+    the columns whose blocks each chunk judges by the input screen over the samples it owns
+    (``ScreenCut`` when it would cut), None for none."""
 
     read: Callable[..., Blocks]
     take: list[int] | None
@@ -150,22 +200,22 @@ class _Job:
     n_total: int
     verify: bool
     chunks: list[Chunk]
+    screen: list[int] | None = None
 
 
-#: The job of this forked worker process (``_take_job``): one per process, never shared
-#: between concurrent passes (each pass starts processes of its own).
-_JOB: _Job | None = None
+#: The jobs of this forked worker process (``_take_jobs``): one list per process, never
+#: shared between concurrent analyses (each starts processes of its own).
+_JOBS: list[_Job] = []
 
 
-def _take_job(job: _Job) -> None:
-    global _JOB
-    _JOB = job
+def _take_jobs(jobs: list[_Job]) -> None:
+    global _JOBS
+    _JOBS = jobs
 
 
-def _chunk_part(i: int) -> tuple[OadevPart, WelchPart | None]:
-    """One chunk's parts, in a forked local worker (the job handed to it at its start)."""
-    assert _JOB is not None
-    return chunk_part(_JOB, i)
+def _chunk_part(p: int, i: int) -> tuple[OadevPart, WelchPart | None]:
+    """Chunk i of pass p, in a forked local worker (the jobs handed to it at its start)."""
+    return chunk_part(_JOBS[p], i)
 
 
 def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
@@ -186,10 +236,13 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
+        if job.screen and ch.start <= lo < ch.stop:
+            _screen(a[:, job.screen], lo)
         if job.take is not None:
             a = a[:, job.take]
         # from the record's start: what comes before the chunk advances the running sum
-        # only, so the chunk's differences are one pass's to the bit
+        # only, so the chunk's differences are one pass's to the bit (a running sum begun
+        # at the chunk's start moves the long records' ADEV by a few 1e-12)
         acc.update(a)
         if welch is not None and hi > ch.start and lo < welch_to:
             welch.update(a[max(0, ch.start - lo):welch_to - lo])
@@ -205,41 +258,111 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     return acc.part(), (None if welch is None else welch.part())
 
 
-def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str],
-             rate_hz: float, grid: NDArray[np.int64], nperseg: int | None, n_total: int,
-             bounds: Sequence[int], workers: int, *, verify: bool = False,
-             progress: Callable[[int], None] | None = None,
-             executor: Executor | None = None,
-             ) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
-    """One pass over a record (the channels ``names``: its blocks' columns ``take``, or
-    all) on ``workers`` processes: the OADEV accumulator holding the whole record's sums
-    (``OverlappingAllan.from_part``), the Welch accumulator and the samples read, as one
-    pass would give them. ``read()`` gives the record's blocks from its start (each worker
-    reads from there: what comes before its chunk only advances the running sum).
-    ``progress(samples)`` after each chunk. ``executor``: run the ``workers`` chunks there
+def _screen(a: NDArray[np.float64], offset: int) -> None:
+    """The input screen's verdict on one block a chunk owns (its columns; a one-worker read's
+    block, since chunks start on a block boundary). Any cut is a gap the plan does not know:
+    the analysis is then read on one worker (``ScreenCut``)."""
+    from avard.core.io.screen import screen_accel
+
+    bad = screen_accel(a)
+    if bad.any():
+        raise ScreenCut(f"the input screen cuts {int(bad.sum())} samples from sample "
+                        f"{offset + int(np.argmax(bad))} on")
+
+
+@dataclass(frozen=True)
+class PassSpec:
+    """One OADEV pass of a parallel analysis: its channels ``names``, read by ``read``
+    (blocks from the record's start, of which ``take`` are its channels, None: all),
+    whether its chunk that reads to the end checks the file's CRC, and the block columns its
+    chunks judge by the input screen (None: none)."""
+
+    read: Callable[..., Blocks]
+    take: list[int] | None
+    names: list[str]
+    verify: bool = False
+    screen: list[int] | None = None
+
+
+def _chunk_costs(chunks: list[Chunk], n: int) -> list[float]:
+    """The work of each chunk as the plan counts it (``_ideal_cuts``)."""
+    return [min(n, ch.read_to) + OWN_COST * (ch.stop - ch.start) for ch in chunks]
+
+
+def _makespan(costs: list[float], workers: int) -> float:
+    """The longest worker's work when the tasks go, longest first, to the least loaded."""
+    loads = [0.0] * workers
+    for c in sorted(costs, reverse=True):
+        k = loads.index(min(loads))
+        loads[k] += c
+    return max(loads)
+
+
+def plan_passes(n_passes: int, bounds: Sequence[int], workers: int, align: int,
+                reach_: int) -> list[list[Chunk]]:
+    """How many chunks each of ``n_passes`` passes is cut into, so that the passes' chunks,
+    run longest first on ``workers`` processes, end soonest: a pass analysed whole reads
+    the record once, and each cut makes its chunks read the record's start and the reach
+    past their ends again, so e.g. three channels on two workers are two whole passes and
+    one cut in two. Ties go to fewer chunks."""
+    n = int(bounds[-1])
+    options = [plan_chunks(bounds, k, align, reach_) for k in range(1, workers + 1)]
+    costs = [_chunk_costs(o, n) for o in options]
+    if n_passes > 6:  # every pass cut alike: the choices per pass would be too many
+        k = min(range(len(options)), key=lambda j: (_makespan(costs[j] * n_passes, workers),
+                                                    j))
+        return [options[k]] * n_passes
+    combo = min(itertools.product(range(len(options)), repeat=n_passes),
+                key=lambda ks: (_makespan([c for k in ks for c in costs[k]], workers),
+                                sum(len(costs[k]) for k in ks)))
+    return [options[k] for k in combo]
+
+
+def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int64],
+               nperseg: int | None, n_total: int, bounds: Sequence[int], workers: int, *,
+               progress: Callable[[int], None] | None = None,
+               executor: Executor | None = None, screen_block: int | None = None,
+               ) -> list[tuple[OverlappingAllan, WelchAccumulator | None, int]]:
+    """The OADEV passes ``passes`` over one record, their chunks (``plan_passes``) run
+    together on ``workers`` processes, longest first: per pass the OADEV accumulator
+    holding the whole record's sums (``OverlappingAllan.from_part``), the Welch accumulator
+    and the samples read, as one pass would give them. ``progress(samples)`` after each
+    chunk (its own samples, summed over the passes). ``executor``: run the chunks there
     (e.g. a Dask client's, ``avard fleet``) instead of on forked local processes; ``read``
-    must then be picklable. ``verify``: the chunk that reads to the end checks the file's
-    CRC (the first pass over a file does). R(n) is left to the caller: the accumulator is
-    ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does after one pass."""
-    chunks = plan_chunks(bounds, workers, alignment(grid, nperseg), reach(grid, nperseg))
-    job = _Job(read, take, names, float(rate_hz), grid, nperseg, int(n_total), verify, chunks)
-    parts: list[tuple[OadevPart, WelchPart | None] | None] = [None] * len(chunks)
-    if len(chunks) == 1 and executor is None:
-        parts[0] = chunk_part(job, 0)
+    must then be picklable. ``screen_block``: the chunks judge their blocks by the input
+    screen, as a one-worker read in blocks of that size would (so chunks start on its
+    multiples); ``ScreenCut`` when it would cut anything. R(n) is left to the caller: the
+    accumulators are ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does
+    after one pass."""
+    align = alignment(grid, nperseg)
+    if screen_block is not None:
+        align = align * screen_block // math.gcd(align, screen_block)
+    n = int(n_total)
+    plans = plan_passes(len(passes), bounds, workers, align, reach(grid, nperseg))
+    jobs = [_Job(ps.read, ps.take, ps.names, float(rate_hz), grid, nperseg, n, ps.verify,
+                 chunks, screen=ps.screen if screen_block is not None else None)
+            for ps, chunks in zip(passes, plans, strict=True)]
+    tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
+                   key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
+    parts: dict[tuple[int, int], tuple[OadevPart, WelchPart | None]] = {}
+    done = 0
+    if len(tasks) == 1 and executor is None:
+        parts[tasks[0]] = chunk_part(jobs[0], 0)
     else:
-        # forked local processes get the job when they start (only chunk numbers cross to
-        # them, so ``read`` may be any callable); another executor (Dask's) gets it pickled
+        # forked local processes get the jobs when they start (only task numbers cross to
+        # them, so ``read`` may be any callable); another executor (Dask's) gets them pickled
         own = executor is None
         pool = executor or ProcessPoolExecutor(
-            min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"),
-            initializer=_take_job, initargs=(job,))
+            min(workers, len(tasks)), mp_context=multiprocessing.get_context("fork"),
+            initializer=_take_jobs, initargs=(jobs,))
         try:
-            results = (pool.map(_chunk_part, range(len(chunks))) if own else
-                       pool.map(chunk_part, [job] * len(chunks), range(len(chunks))))
-            done = 0
-            for i, one in enumerate(results):
-                parts[i] = one
-                done += chunks[i].stop - chunks[i].start
+            ps_, is_ = [t[0] for t in tasks], [t[1] for t in tasks]
+            results = (pool.map(_chunk_part, ps_, is_) if own else
+                       pool.map(chunk_part, [jobs[p] for p in ps_], is_))
+            for t, one in zip(tasks, results, strict=True):
+                parts[t] = one
+                ch = jobs[t[0]].chunks[t[1]]
+                done += ch.stop - ch.start
                 if progress is not None:
                     progress(done)
         except BrokenProcessPool as exc:
@@ -250,19 +373,21 @@ def run_pass(read: Callable[[], Blocks], take: list[int] | None, names: list[str
         finally:
             if own:
                 pool.shutdown(wait=True, cancel_futures=True)
-    total: OadevPart | None = None
-    welch = (WelchAccumulator(len(names), rate_hz, nperseg) if nperseg is not None
-             else None)
-    for each in parts:
-        assert each is not None
-        part, power = each
-        total = part if total is None else total + part
-        if welch is not None and power is not None:
-            welch.add(power)
-    assert total is not None
-    acc = OverlappingAllan.from_part(total, rate_hz, names=names, n_total=int(n_total),
-                                     defer_rn=True)
-    return acc, welch, total.n_samples
+    out = []
+    for p, job in enumerate(jobs):
+        total: OadevPart | None = None
+        welch = (WelchAccumulator(len(job.names), rate_hz, nperseg) if nperseg is not None
+                 else None)
+        for i in range(len(job.chunks)):
+            part, power = parts[(p, i)]
+            total = part if total is None else total + part
+            if welch is not None and power is not None:
+                welch.add(power)
+        assert total is not None
+        acc = OverlappingAllan.from_part(total, rate_hz, names=job.names, n_total=n,
+                                         defer_rn=True)
+        out.append((acc, welch, total.n_samples))
+    return out
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from avard.core.allan import kernels
 from numpy.typing import NDArray
 
 __all__ = ["ScreenLog", "Screened", "screen_accel", "screen_blocks", "screen_record",
@@ -188,15 +189,20 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
     bad = np.zeros(n, dtype=bool)
     if n < 2 * SHOCK_HALF + 2:
         return bad
+    kern = kernels.compiled()
+    dist = np.empty(n)
     for j in range(a.shape[1]):
         col = np.asarray(a[:, j], dtype=float)
-        r = _local_residual(col, SHOCK_HALF)
+        if kern is not None:  # the compiled pass (general path: _local_residual)
+            kern.local_residual(col, SHOCK_HALF, dist)
+        else:
+            np.abs(_local_residual(col, SHOCK_HALF), out=dist)
         # every 4th sample gives the median to a few % on a block (and a quarter the work)
-        scale = float(np.median(np.abs(r[::4]))) / 0.6745
+        scale = float(np.median(dist[::4])) / 0.6745
         if not scale > 0:
             continue
         # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
-        cand = np.flatnonzero(np.abs(r) > 0.5 * SHOCK_Z * scale)
+        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale)
         if not len(cand):
             continue
         med = _running_median(col, cand, SHOCK_HALF)
@@ -433,6 +439,15 @@ class ScreenedSource:
     @property
     def info(self) -> Any:
         return self.source.info
+
+    def judged_clean(self, block: int) -> None:
+        """The record's acceleration was judged elsewhere, block by block in blocks of
+        ``block`` samples (the chunks of a parallel analysis, ``parallel.ScreenCut``
+        otherwise), and nothing is to be cut: later reads take that verdict, and the log
+        says the screen ran."""
+        self._verdicts[block] = {}
+        if self.log is None:
+            self.log = ScreenLog(float(self.source.info.rate_hz), done=True)
 
     @property
     def rereadable(self) -> bool:

@@ -232,7 +232,7 @@ def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> Non
     real = parallel.chunk_part
 
     def dies_on_the_second(job, i):
-        if i == 1:
+        if i == 1 or job.names == ["ch1"]:  # a chunk of the second channel, or the second
             os._exit(9)  # the forked worker vanishes, as under the OOM killer
         return real(job, i)
 
@@ -308,3 +308,49 @@ def test_a_record_the_screen_cuts_is_analysed_on_one_worker_alike(tmp_path) -> N
     assert par.n_samples == one.n_samples
     for name, ch in one.channels.items():
         np.testing.assert_array_equal(par.channels[name].allan.dev, ch.allan.dev)
+
+
+@pytest.mark.parametrize("axis", [0, 2])
+def test_a_shock_on_one_axis_is_found_by_the_chunks_whatever_is_analysed(tmp_path,
+                                                                         axis) -> None:
+    """The chunks judge each axis on its own and the first pass also the axes no pass
+    analyses: a shock on one axis only (here, one not analysed when only x is asked for)
+    is cut exactly as one worker cuts it, and a clean record says the screen ran and cut
+    nothing."""
+    rng = np.random.default_rng(13)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3))
+    clean = tmp_path / "clean.npz"
+    np.savez(clean, accel=y, rate_hz=100.0)
+    y[90000:90002, axis] += 0.2  # 200 σ on one axis, in the second half
+    path = tmp_path / "shock.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    opts = {"channels": ("x",)}
+    one = analyze(open_record(path), AnalyzeOptions(**opts))
+    par = analyze(open_record(path), AnalyzeOptions(workers=2, **opts))
+    cut = [(s.first, s.last) for s in one.meta["screen"].stretches]
+    assert cut and cut == [(s.first, s.last) for s in par.meta["screen"].stretches]
+    np.testing.assert_array_equal(par.channels["x"].allan.dev, one.channels["x"].allan.dev)
+    ok = analyze(open_record(clean), AnalyzeOptions(workers=2, **opts))
+    assert ok.meta["screen"].done and not ok.meta["screen"].stretches
+
+
+def test_the_passes_are_planned_for_the_soonest_end() -> None:
+    """Three channels on two workers: two passes whole and one cut in two (a cut makes its
+    chunks read the record's start again); one channel on two workers is cut in two; the
+    plan's longest worker is never longer than cutting every pass alike."""
+    from avard.core.analysis.parallel import _chunk_costs, _makespan, plan_passes
+
+    n, align, reach_ = 1 << 24, 1 << 20, 1 << 22
+    three = plan_passes(3, [0, n], 2, align, reach_)
+    assert sorted(len(p) for p in three) == [1, 1, 2]
+    assert len(plan_passes(1, [0, n], 2, align, reach_)[0]) == 2
+    for passes, workers in ((3, 2), (2, 3), (4, 4), (5, 2)):
+        plan = plan_passes(passes, [0, n], workers, align, reach_)
+        best = _makespan([c for p in plan for c in _chunk_costs(p, n)], workers)
+        for k in range(1, workers + 1):
+            alike = plan_chunks([0, n], k, align, reach_)
+            assert best <= _makespan(_chunk_costs(alike, n) * passes, workers) + 1e-9
+        for p in plan:  # every pass covers the record once
+            assert p[0].start == 0 and p[-1].stop == n
+            assert all(a.stop == b.start for a, b in itertools.pairwise(p))
