@@ -126,7 +126,8 @@ def run(cases: int, seed0: int, only: list[str] | None) -> None:
                     axes += 1
                     mine = [f for f in ch.claimed if f.cause == "temperature"
                             and a == "x" and r.coefficient]
-                    other = [f for f in ch.claimed if f.cause != "sinusoid" and f not in mine]
+                    other = [f for f in ch.claimed
+                             if f.cause not in ("sinusoid", "periodic") and f not in mine]
                     false += bool(other)
                     unexpl += ch.verdict is not None and not ch.verdict.explained
                     if a != "x" or not r.coefficient:

@@ -37,16 +37,23 @@ from avard.core.sim.thermal import DS18B20_STEP_C
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
-CAUSES = ("temperature", "warmup", "bias_step", "gauss_markov", "sinusoid")
+CAUSES = ("temperature", "warmup", "bias_step", "excursion", "drift", "gauss_markov",
+          "sinusoid", "periodic")
 PARAMS = {
     "temperature": ("coefficient", "lag_s"),
     "warmup": ("time_constant_s", "size"),
     "bias_step": ("time_s", "size"),
+    "excursion": ("start_s", "end_s", "size"),
+    "drift": ("rate",),
+    "periodic": ("frequency_hz", "amplitude", "harmonics", "modulation_hz", "frequency_lo_hz",
+                 "frequency_hi_hz"),
     "gauss_markov": ("sigma", "time_constant_s"),
     "sinusoid": ("frequency_hz", "amplitude"),
 }
 UNITS = {"coefficient": "m/s²/K", "lag_s": "s", "time_constant_s": "s", "size": "m/s²",
-         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²", "sigma": "m/s²"}
+         "time_s": "s", "start_s": "s", "end_s": "s", "rate": "m/s³", "frequency_hz": "Hz",
+         "amplitude": "m/s²", "sigma": "m/s²", "harmonics": "", "modulation_hz": "Hz",
+         "frequency_lo_hz": "Hz", "frequency_hi_hz": "Hz"}
 
 Z_STEP = 6.0
 
@@ -263,12 +270,19 @@ def warmup_signal(n: int, rate_hz: float, time_constant_s: float, size: float,
 
 
 def cause_signal(cand: Candidate, n: int, rate_hz: float) -> NDArray:
-    """The signal a passed transient candidate describes, on n samples at ``rate_hz``."""
+    """The signal a passed transient candidate (a warm-up, a step, an excursion, a drift)
+    describes, on n samples at ``rate_hz``."""
     p = cand.params
     if cand.cause == "warmup":
         return warmup_signal(n, rate_hz, p["time_constant_s"], p["size"])
     if cand.cause == "bias_step":
         return step_signal(n, rate_hz, p["time_s"], p["size"])
+    if cand.cause == "excursion":
+        return (step_signal(n, rate_hz, p["start_s"], p["size"])
+                - step_signal(n, rate_hz, p["end_s"], p["size"]))
+    if cand.cause == "drift":  # about the record's middle (the offset is the noise's)
+        t = np.arange(n) / rate_hz
+        return np.asarray(p["rate"] * (t - 0.5 * n / rate_hz))
     raise ValueError(f"{cand.cause} is not a time-domain transient")  # a bug
 
 
