@@ -302,7 +302,8 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
     2. Harmonics: from the lowest frequency up, a line (or band) with found lines at k·f
        (k ≤ ``MAX_HARMONIC``, within ``HARMONIC_TOL_BINS``·k bins, wider by a band's spread).
     3. Sidebands: two lines at fc ± fm, equally far within the same tolerance, around a
-       line or harmonic already placed, are its modulation."""
+       line or harmonic already placed, are its modulation; then a lone line at ±fm of a
+       member of a group with that modulation is one of its sidebands."""
     if not lines:
         return
     df = float(f[1] - f[0])
@@ -380,6 +381,18 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
                     group[j], role[j] = group[ctr], -1.0
                 mod.setdefault(group[ctr], []).append(0.5 * (fm + reps[up]["f"] - fc))
                 free = [j for j in free if j not in (lo_j, up)]
+    # a lone sideband (its partner below the finder's threshold) at a known modulation's
+    # offset from a member of that group
+    for j in range(len(reps)):
+        if role[j] != 1.0 or sum(group[x] == group[j] for x in range(len(reps))) != 1:
+            continue
+        for g_id, fms in mod.items():
+            fm = float(np.mean(fms))
+            if any(role[c] >= 1 and group[c] == g_id
+                   and abs(abs(reps[j]["f"] - reps[c]["f"]) - fm) <= HARMONIC_TOL_BINS * df
+                   for c in range(len(reps))):
+                group[j], role[j] = g_id, -1.0
+                break
     # the marks, on every line of a representative
     for ci, c in enumerate(clusters):
         for i in c:

@@ -284,11 +284,12 @@ def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
     return [c for c in out if c.cause != "bias_step"] + merged
 
 
-def _pair_excursions(cands: list[cz.Candidate]) -> list[cz.Candidate]:
+def _pair_excursions(cands: list[cz.Candidate], alpha: float) -> list[cz.Candidate]:
     """Steps read as excursions: in time order, a step and a later one of the opposite sign
     with nothing unpaired between them (nested like brackets) are one excursion when their
     sizes are consistent with a return to the level before (|s₁ + s₂| within twice their
-    combined standard error); its size the mean of |s₁| and |s₂| with the first's sign."""
+    combined standard error); its size the mean of |s₁| and |s₂| with the first's sign. It
+    is then tested as an excursion (the family's threshold at its most trials)."""
     steps = sorted((c for c in cands if c.cause == "bias_step"),
                    key=lambda c: c.params["time_s"])
     rest = [c for c in cands if c.cause != "bias_step"]
@@ -310,7 +311,9 @@ def _pair_excursions(cands: list[cz.Candidate]) -> list[cz.Candidate]:
                 out.append(cz.Candidate(
                     "excursion", True, {"start_s": a.params["time_s"],
                                         "end_s": c.params["time_s"], "size": size},
-                    min(a.statistic, c.statistic), max(a.threshold, c.threshold),
+                    min(a.statistic, c.statistic),
+                    # the excursion family's test (its most trials: every pair of grid times)
+                    alarm.bonferroni_z(alpha / len(TRANSIENT_CAUSES), GRID * (GRID - 1) // 2),
                     f"two steps that return to the level before them (sizes {s1:.3g} and "
                     f"{s2:.3g} m/s², their sum within twice its standard error): "
                     f"{a.detail.get('test', a.evidence)}; and {c.detail.get('test', c.evidence)}"))
@@ -357,6 +360,8 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         tent = _normalise(tent, 2 * len(y) / rate_hz / GRID)
         tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
                                                         rate_hz, n_white), tent)
+        # two steps that return to the level before them are tested as one excursion
+        tent = _pair_excursions(tent, alpha)
     dropped: list[cz.Candidate] = []
     while tent:
         g = _gls(y, rate_hz, noise_of(signal_of(tent, n, rate_hz)))
@@ -376,7 +381,7 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     if not tent:
         return [], dropped or first
     out = refine_compound(y, rate_hz, noise_of(signal_of(tent, n, rate_hz)), tent)
-    paired = _pair_excursions(out)
+    paired = _pair_excursions(out, alpha)
     if len(paired) < len(out):
         out = refine_compound(y, rate_hz, noise_of(signal_of(paired, n, rate_hz)), paired)
     # a size must be as far from zero as the test asked of its z
