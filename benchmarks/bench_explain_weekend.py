@@ -269,6 +269,9 @@ def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
                     axes += 1
                     false += bool([f for f in ex.channels[ax].claimed
                                    if f.cause not in ("sinusoid", "periodic")])
+                if n % 10 == 0 and n < cases:  # a long row says where it is
+                    print(f"  … {r.name} after {n}: right {ok}, params {par}, in 68 % "
+                          f"{inside}/{total}, false {false}/{axes}", flush=True)
         print(f"{r.name:22s} {_rate(ok, n, False):>22s} {_rate(par, n, False):>22s} "
               f"{f'{inside}/{total}':>14s} {_rate(false, axes, True):>24s} "
               f"{cpu / max(n, 1):9.1f}", flush=True)
