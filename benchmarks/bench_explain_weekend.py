@@ -233,13 +233,54 @@ def _match(ch: Any, expect: list[tuple[str, dict[str, float]]], record_s: float
     return right, par, inside, total
 
 
-def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
+@dataclass
+class EventScore:
+    """What one event row measured (``score_events``)."""
+
+    n: int = 0
+    right: int = 0
+    params: int = 0
+    inside: int = 0
+    intervals: int = 0
+    false: int = 0
+    axes: int = 0
+    cpu_s: float = 0.0
+
+
+def score_events(r: Event, cases: int, seed0: int,
+                 progress: bool = False) -> EventScore:
+    """Explain ``cases`` records of the event row ``r`` (seeds from ``seed0``) and count."""
     from avard.core.explain.engine import explain_file
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
 
     from tests.support.weekend import save
 
+    sc = EventScore()
+    with tempfile.TemporaryDirectory() as d:
+        for i in range(cases):
+            path = save(seed0 + i, r.weekend, Path(d) / "w.npz")
+            t0 = time.process_time()
+            ex = explain_file(open_record(path), ExplainOptions(heldout=False))
+            sc.cpu_s += time.process_time() - t0
+            sc.n += 1
+            a, b, c, t = _match(ex.channels["x"], r.expect, r.weekend.hours * 3600)
+            sc.right += a
+            sc.params += b
+            sc.inside += c
+            sc.intervals += t
+            for ax in ("y", "z"):
+                sc.axes += 1
+                sc.false += bool([f for f in ex.channels[ax].claimed
+                                  if f.cause not in ("sinusoid", "periodic")])
+            if progress and sc.n % 10 == 0 and sc.n < cases:  # a long row says where it is
+                print(f"  … {r.name} after {sc.n}: right {sc.right}, params {sc.params}, in "
+                      f"68 % {sc.inside}/{sc.intervals}, false {sc.false}/{sc.axes}",
+                      flush=True)
+    return sc
+
+
+def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
     todo = [r for r in rows_events() if not only or any(r.name.startswith(o) for o in only)]
     if not todo:
         return
@@ -249,32 +290,11 @@ def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
     print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 %':>14s} "
           f"{'false claims (y, z)':>24s} {'CPU s/rec':>9s}")
     for j, r in enumerate(todo):
-        n = ok = par = inside = total = false = axes = 0
-        cpu = 0.0
-        with tempfile.TemporaryDirectory() as d:
-            for i in range(cases):
-                seed = seed0 + 500 + 1000 * j + i
-                path = save(seed, r.weekend, Path(d) / "w.npz")
-                t0 = time.process_time()
-                ex = explain_file(open_record(path), ExplainOptions(heldout=False))
-                cpu += time.process_time() - t0
-                n += 1
-                rs = r.weekend.hours * 3600
-                a, b, c, t = _match(ex.channels["x"], r.expect, rs)
-                ok += a
-                par += b
-                inside += c
-                total += t
-                for ax in ("y", "z"):
-                    axes += 1
-                    false += bool([f for f in ex.channels[ax].claimed
-                                   if f.cause not in ("sinusoid", "periodic")])
-                if n % 10 == 0 and n < cases:  # a long row says where it is
-                    print(f"  … {r.name} after {n}: right {ok}, params {par}, in 68 % "
-                          f"{inside}/{total}, false {false}/{axes}", flush=True)
-        print(f"{r.name:22s} {_rate(ok, n, False):>22s} {_rate(par, n, False):>22s} "
-              f"{f'{inside}/{total}':>14s} {_rate(false, axes, True):>24s} "
-              f"{cpu / max(n, 1):9.1f}", flush=True)
+        sc = score_events(r, cases, seed0 + 500 + 1000 * j, progress=True)
+        print(f"{r.name:22s} {_rate(sc.right, sc.n, False):>22s} "
+              f"{_rate(sc.params, sc.n, False):>22s} {f'{sc.inside}/{sc.intervals}':>14s} "
+              f"{_rate(sc.false, sc.axes, True):>24s} {sc.cpu_s / max(sc.n, 1):9.1f}",
+              flush=True)
 
 
 def run(cases: int, seed0: int, only: list[str] | None) -> None:

@@ -184,3 +184,36 @@ def test_two_unrelated_steady_lines_stay_two_findings():
     groups = line_groups(_lines(sig, rate))
     assert sorted(round(g.frequency_hz, 2) for g in groups) == [0.7, 1.9]
     assert all(g.kind == "steady line" for g in groups)
+
+
+def test_explain_reports_one_finding_per_disturbance():
+    from avard.core.analysis.spectrum import LineGroup
+    from avard.core.explain.engine import _periodic_finding
+
+    steady = _periodic_finding(LineGroup(3.3, 1e-3, 0.9e-3, 1.1e-3, None, (1,), None, 1))
+    assert steady.cause == "sinusoid" and steady.intervals == {"amplitude": [0.9e-3, 1.1e-3]}
+    fam = _periodic_finding(LineGroup(0.5, 2e-3, 1.9e-3, 2.1e-3, None, (1, 2, 3), 0.05, 7))
+    assert fam.cause == "periodic" and fam.claimed
+    assert fam.params["harmonics"] == 3 and fam.params["modulation_hz"] == 0.05
+    pump = _periodic_finding(LineGroup(12.2, 2e-3, 1.9e-3, 2.1e-3, (12.0, 12.4), (1,), None, 4))
+    assert pump.cause == "periodic"
+    assert (pump.params["frequency_lo_hz"], pump.params["frequency_hi_hz"]) == (12.0, 12.4)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("row", ["compound 1 h", "compound 4 h", "drift 4 h", "pump 12→12.4 Hz",
+                                 "harmonics + sidebands"])
+def test_event_rows_at_three_times_their_minimum(row):
+    """The issue's checks on one class: ≥ 40 records from the weekend generator at 3× the
+    stated minimum: the right cause on x in ≥ 95 %, its parameters within 20 % in ≥ 95 %,
+    inside their 68 % intervals in 60–76 %, and no claim on the 80 null axes (y, z) beyond
+    one (the 95 % upper bound of the false-claim rate then stays under 6 %; the benchmark
+    pools the rows for the issue's 2 %)."""
+    from benchmarks.bench_explain_weekend import rows_events, score_events
+
+    r = {e.name: e for e in rows_events()}[row]
+    sc = score_events(r, 40, 73000)
+    assert sc.right >= 0.95 * sc.n, sc
+    assert sc.params >= 0.95 * sc.n, sc
+    assert sc.intervals and 0.60 <= sc.inside / sc.intervals <= 0.76, sc
+    assert sc.false <= 1, sc
