@@ -513,6 +513,9 @@ def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
     # a K scale the record can resolve when the fit has none: one block's white σ over the
     # record
     k_ref = k0 if k0 > 0 else n_w / record_s
+    if not k_ref > 0:
+        return cz.Candidate("drift", False, evidence="drift test: no noise level to test "
+                            "against (N and K are zero)")
     ks = np.concatenate([[0.0], np.geomspace(k_ref / K_SPAN, k_ref * K_SPAN, K_GRID)])
     base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
     tc = t - t.mean()
