@@ -4,6 +4,7 @@ Welch accumulator, its segment length, and the F-test threshold a line must pass
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -290,12 +291,46 @@ class LineGroup:
         return ", ".join(parts) or "steady line"
 
 
+#: Bins per step when a drifting line's band is grown outwards from a line.
+BAND_STEP = 8
+
+
+def _hann_skirt(x: float) -> float:
+    """Power of a periodic-Hann-windowed line x bins from it, relative to its peak (at worst,
+    the line between bins): (sinc(x)/(1 − x²))²."""
+    return (math.sin(math.pi * x) / (math.pi * x * (1.0 - x * x))) ** 2 if x > 1 else 1.0
+
+
+def _band(k: int, psd: NDArray, wide: Callable[[int], float], thr: float
+          ) -> tuple[int, int] | None:
+    """The bins [lo, hi] over which the line at bin k's power spreads (a drifting line), or
+    None for a steady one: outwards from where the Hann skirt of a steady line this strong
+    falls below 5 % of the background, steps of ``BAND_STEP`` bins whose mean stays above
+    ``thr`` times the wide background; a band needs a whole step raised on one side."""
+    peak = psd[k] / max(wide(k), 1e-300)
+    x0 = LEAK_BINS
+    while x0 < 4 * WIDE_HALF_WIDTH and peak * _hann_skirt(x0 + 0.5) > 0.05:
+        x0 += 1
+    hi = k + x0
+    while hi + BAND_STEP < len(psd) - 1 and float(
+            np.mean(psd[hi + 1:hi + 1 + BAND_STEP])) > thr * wide(hi + BAND_STEP // 2):
+        hi += BAND_STEP
+    lo = k - x0
+    while lo - BAND_STEP > 1 and float(
+            np.mean(psd[lo - BAND_STEP:lo])) > thr * wide(lo - BAND_STEP // 2):
+        lo -= BAND_STEP
+    if hi == k + x0 and lo == k - x0:
+        return None
+    return (lo if lo < k - x0 else k, hi if hi > k + x0 else k)
+
+
 def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
            med_ratio: float) -> None:
     """Mark which lines are one periodic disturbance (``line_groups`` reads the marks back).
 
-    1. Drifting: neighbouring lines whose PSD between them (``LEAK_BINS`` clear of each) stays
-       above the wide
+    1. Drifting: a line whose PSD stays raised beyond its Hann skirt (``_band``), and
+       neighbouring lines whose PSD between them (``LEAK_BINS`` clear of each) stays above the
+       wide
        background (median of ±``WIDE_HALF_WIDTH`` bins) by 3 standard errors of a mean of
        those bins are one line moving over a band; its amplitude is that of the band's
        power above the wide background.
@@ -316,31 +351,44 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
             wide_cache[k] = float(np.median(psd[lo:hi])) / med_ratio
         return wide_cache[k]
 
-    # 1. drifting bands
+    # 1. drifting bands: each line's band (``_band``), lines inside one band together, and
+    # neighbours whose PSD between them stays raised
+    thr8 = 1.0 + 3.0 * math.sqrt(2.0 / (nu * BAND_STEP))
+    bands = {i: _band(int(lines[i]["bin"]), psd, wide, thr8) for i in order}
     clusters: list[list[int]] = []
+    spans: list[tuple[int, int] | None] = []
     for i in order:
+        k = int(lines[i]["bin"])
         if clusters:
             j = clusters[-1][-1]
-            k1, k2 = int(lines[j]["bin"]), int(lines[i]["bin"])
+            k1 = int(lines[j]["bin"])
+            span = spans[-1]
             # clear of both lines' main lobes and near leakage: a strong steady line's
             # Hann skirt would otherwise join it to a sideband a few bins away
-            between = psd[k1 + LEAK_BINS + 1:k2 - LEAK_BINS]
-            b = wide((k1 + k2) // 2)
+            between = psd[k1 + LEAK_BINS + 1:k - LEAK_BINS]
             m = len(between)
-            if m > 0 and float(np.mean(between)) > b * (1.0 + 3.0 * math.sqrt(2.0 / (nu * m))):
+            joined = (span is not None and span[0] <= k <= span[1]) or (
+                m > 0 and float(np.mean(between))
+                > wide((k1 + k) // 2) * (1.0 + 3.0 * math.sqrt(2.0 / (nu * m))))
+            if joined:
                 clusters[-1].append(i)
+                own = bands[i]
+                lo_k = min(x for x in (span[0] if span else k1, own[0] if own else k))
+                hi_k = max(x for x in (span[1] if span else k, own[1] if own else k))
+                spans[-1] = (lo_k, hi_k)
                 continue
         clusters.append([i])
+        spans.append(bands[i])
     reps: list[dict[str, float]] = []
-    for c in clusters:
-        if len(c) == 1:
+    for c, span in zip(clusters, spans, strict=True):
+        if span is None and len(c) == 1:
             ln = lines[c[0]]
             reps.append({"f": ln["frequency_hz"], "a": ln["amplitude"], "lo": ln["amplitude_lo"],
                          "hi": ln["amplitude_hi"], "spread": 0.0, "band_lo": math.nan,
                          "band_hi": math.nan, "members": 1.0})
             continue
-        k1 = int(lines[c[0]]["bin"]) - LINE_LOBE
-        k2 = int(lines[c[-1]]["bin"]) + LINE_LOBE + 1
+        k1 = min(int(lines[c[0]]["bin"]) - LINE_LOBE, span[0] if span else len(psd))
+        k2 = max(int(lines[c[-1]]["bin"]) + LINE_LOBE, span[1] if span else 0) + 1
         b = wide((k1 + k2) // 2)
         excess = np.clip(psd[k1:k2] - b, 0.0, None)
         power = float(np.sum(excess) * df)
@@ -348,8 +396,8 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
         fc = float(np.sum(excess * f[k1:k2]) / max(np.sum(excess), 1e-300))
         reps.append({"f": fc, "a": math.sqrt(2.0 * power), "lo": lo, "hi": hi,
                      "spread": float(f[k2 - 1] - f[k1]) / 2.0,
-                     "band_lo": lines[c[0]]["frequency_hz"],
-                     "band_hi": lines[c[-1]]["frequency_hz"], "members": float(len(c))})
+                     "band_lo": float(f[k1 + LINE_LOBE]),
+                     "band_hi": float(f[k2 - 1 - LINE_LOBE]), "members": float(len(c))})
     # 2. harmonics, 3. sidebands: over the representatives, lowest frequency first
     group = [-1] * len(reps)
     role = [0.0] * len(reps)
