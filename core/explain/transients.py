@@ -67,6 +67,10 @@ GRID = 256
 MAX_EFFECTS = 8
 #: A proposal enters the forward search when its z reaches this fraction of its threshold.
 FORWARD_MARGIN = 0.75
+#: Two opposite steps are one excursion when their sum is within this many standard errors
+#: of zero (at 2, one excursion in ten of the benchmark's 1 h records stayed two steps: the
+#: random walk moves the level between the edges).
+PAIR_SIGMA = 3.0
 #: Points of the warm-up's T scan (log grid from 2 blocks to a quarter of the record).
 T_SCAN = 48
 #: K grid of the drift's likelihood ratio: a factor ``K_SPAN`` either side of the fitted K.
@@ -287,8 +291,8 @@ def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
 def _pair_excursions(cands: list[cz.Candidate], alpha: float) -> list[cz.Candidate]:
     """Steps read as excursions: in time order, a step and a later one of the opposite sign
     with nothing unpaired between them (nested like brackets) are one excursion when their
-    sizes are consistent with a return to the level before (|s₁ + s₂| within twice their
-    combined standard error); its size the mean of |s₁| and |s₂| with the first's sign. It
+    sizes are consistent with a return to the level before (|s₁ + s₂| within ``PAIR_SIGMA``
+    combined standard errors); its size the mean of |s₁| and |s₂| with the first's sign. It
     is then tested as an excursion (the family's threshold at its most trials)."""
     steps = sorted((c for c in cands if c.cause == "bias_step"),
                    key=lambda c: c.params["time_s"])
@@ -304,7 +308,7 @@ def _pair_excursions(cands: list[cz.Candidate], alpha: float) -> list[cz.Candida
         if stack:
             a = stack[-1]
             s1, s2 = a.params["size"], c.params["size"]
-            tol = 2.0 * math.hypot(se(a), se(c))
+            tol = PAIR_SIGMA * math.hypot(se(a), se(c))
             if s1 * s2 < 0 and math.isfinite(tol) and abs(s1 + s2) <= tol:
                 stack.pop()
                 size = math.copysign(0.5 * (abs(s1) + abs(s2)), s1)
