@@ -261,7 +261,8 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
                         f0, tol = case.line
                         mine = [f for f in mine if abs(f.params["frequency_hz"] - f0) < tol][:1]
                     lines += sum(f.cause == "sinusoid" and f not in mine for f in ch.claimed)
-                    other = [f for f in ch.claimed if f.cause != "sinusoid" and f not in mine]
+                    other = [f for f in ch.claimed
+                             if f.cause not in ("sinusoid", "periodic") and f not in mine]
                     bad |= bool(other)
                     for f in other:
                         key = f"{f.cause} on {a} (seed {seed0 + 1000 * j + i})"

@@ -50,7 +50,10 @@ class ChannelAnalysis:
             d["noise_id"] = a.noise_id
         fd = self.fit.to_dict()
         d["terms"] = fd["terms"]
-        d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"]}
+        d["sinusoids"] = [{"frequency_hz": s["frequency_hz"], "amplitude": s["amplitude"],
+                           **({"amplitude_interval": [s["amplitude_lo"], s["amplitude_hi"]]}
+                              if "amplitude_lo" in s else {}),
+                           **({"disturbance": int(s["group"])} if "group" in s else {})}
                           for s in self.lines]
         d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
         if self.psd is not None:

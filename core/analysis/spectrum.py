@@ -4,6 +4,7 @@ Welch accumulator, its segment length, and the F-test threshold a line must pass
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -219,9 +220,262 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
             power = float(np.sum(excess) * df)
             if power > 0:
                 freq = float(np.sum(excess * f[sl]) / np.sum(excess))
-                lines.append({"frequency_hz": freq, "amplitude": math.sqrt(2.0 * power)})
+                lo, hi = _amplitude_interval(power, excess, bg[sl], nu, df)
+                lines.append({"frequency_hz": freq, "amplitude": math.sqrt(2.0 * power),
+                              "amplitude_lo": lo, "amplitude_hi": hi, "bin": float(k)})
             k += 3
         else:
             k += 1
+    _group(lines, f, psd, nu, med_ratio)
     lines.sort(key=lambda d: -d["amplitude"])
+    for ln in lines:
+        del ln["bin"]
     return lines[:max_lines]
+
+
+#: Neighbouring Hann bins share about half their noise: the variance of a sum over a line's
+#: main lobe is this many times the sum of the bins' variances.
+LOBE_CORRELATION = 2.0
+
+
+def _amplitude_interval(power: float, excess: NDArray, bg: NDArray, nu: float, df: float
+                        ) -> tuple[float, float]:
+    """68 % interval of a line's amplitude √(2P) from the variance of its power P = Σ
+    excess·Δf over the main lobe: a bin of the averaged periodogram holding a line of power
+    density e over noise b has variance (b² + 2·e·b)·2/ν (the noise alone, and its product
+    with the line), the lobe's bins correlated (``LOBE_CORRELATION``)."""
+    var = float(np.sum((bg**2 + 2.0 * excess * bg) * 2.0 / nu)) * LOBE_CORRELATION * df**2
+    sd = math.sqrt(max(var, 0.0))
+    return math.sqrt(2.0 * max(power - sd, 0.0)), math.sqrt(2.0 * (power + sd))
+
+
+#: The most harmonics of a fundamental looked for, and how near (bins, times the harmonic's
+#: number for a drifting fundamental's spread) a line must be to count as one.
+MAX_HARMONIC, HARMONIC_TOL_BINS = 10, 2.5
+#: Bins either side of a line left out when asking whether the PSD between two lines is raised
+#: (a drifting line): the main lobe and the first skirt of the Hann window.
+LEAK_BINS = LINE_LOBE + 4
+#: The wide background a drifting line's band is measured against: ±this many bins.
+WIDE_HALF_WIDTH = 8 * LINE_HALF_WIDTH
+
+
+@dataclass(frozen=True)
+class LineGroup:
+    """One periodic disturbance: a line with its harmonics and sidebands, or a drifting line
+    (its power spread over a band). ``frequency_hz``: the fundamental (a drifting one: the
+    power-weighted centre of its band); ``amplitude`` (m/s² for acceleration) with its 68 %
+    interval: the fundamental's, or for a drifting line the amplitude of its whole band's
+    power; ``band_hz``: where a drifting line's power lies (None for a steady one);
+    ``harmonics``: the harmonic numbers found (1 the fundamental); ``modulation_hz``: the
+    sidebands' offset (None without sidebands); ``members``: how many lines of the finder
+    it gathers."""
+
+    frequency_hz: float
+    amplitude: float
+    amplitude_lo: float
+    amplitude_hi: float
+    band_hz: tuple[float, float] | None
+    harmonics: tuple[int, ...]
+    modulation_hz: float | None
+    members: int
+
+    @property
+    def kind(self) -> str:
+        parts = []
+        if self.band_hz is not None:
+            parts.append("drifting")
+        if len(self.harmonics) > 1:
+            parts.append("with harmonics")
+        if self.modulation_hz is not None:
+            parts.append("modulated")
+        return ", ".join(parts) or "steady line"
+
+
+#: Bins per step when a drifting line's band is grown outwards from a line.
+BAND_STEP = 8
+
+
+def _hann_skirt(x: float) -> float:
+    """Power of a periodic-Hann-windowed line x bins from it, relative to its peak (at worst,
+    the line between bins): (sinc(x)/(1 − x²))²."""
+    return (math.sin(math.pi * x) / (math.pi * x * (1.0 - x * x))) ** 2 if x > 1 else 1.0
+
+
+def _band(k: int, psd: NDArray, wide: Callable[[int], float], thr: float
+          ) -> tuple[int, int] | None:
+    """The bins [lo, hi] over which the line at bin k's power spreads (a drifting line), or
+    None for a steady one: outwards from where the Hann skirt of a steady line this strong
+    falls below 5 % of the background, steps of ``BAND_STEP`` bins whose mean stays above
+    ``thr`` times the wide background; a band needs a whole step raised on one side."""
+    peak = psd[k] / max(wide(k), 1e-300)
+    x0 = LEAK_BINS
+    while x0 < 4 * WIDE_HALF_WIDTH and peak * _hann_skirt(x0 + 0.5) > 0.05:
+        x0 += 1
+    hi = k + x0
+    while hi + BAND_STEP < len(psd) - 1 and float(
+            np.mean(psd[hi + 1:hi + 1 + BAND_STEP])) > thr * wide(hi + BAND_STEP // 2):
+        hi += BAND_STEP
+    lo = k - x0
+    while lo - BAND_STEP > 1 and float(
+            np.mean(psd[lo - BAND_STEP:lo])) > thr * wide(lo - BAND_STEP // 2):
+        lo -= BAND_STEP
+    if hi == k + x0 and lo == k - x0:
+        return None
+    return (lo if lo < k - x0 else k, hi if hi > k + x0 else k)
+
+
+def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
+           med_ratio: float) -> None:
+    """Mark which lines are one periodic disturbance (``line_groups`` reads the marks back).
+
+    1. Drifting: a line whose PSD stays raised beyond its Hann skirt (``_band``), and
+       neighbouring lines whose PSD between them (``LEAK_BINS`` clear of each) stays above the
+       wide
+       background (median of ±``WIDE_HALF_WIDTH`` bins) by 3 standard errors of a mean of
+       those bins are one line moving over a band; its amplitude is that of the band's
+       power above the wide background.
+    2. Harmonics: from the lowest frequency up, a line (or band) with found lines at k·f
+       (k ≤ ``MAX_HARMONIC``, within ``HARMONIC_TOL_BINS``·k bins, wider by a band's spread).
+    3. Sidebands: two lines at fc ± fm, equally far within the same tolerance, around a
+       line or harmonic already placed, are its modulation; then a lone line at ±fm of a
+       member of a group with that modulation is one of its sidebands."""
+    if not lines:
+        return
+    df = float(f[1] - f[0])
+    order = sorted(range(len(lines)), key=lambda i: lines[i]["bin"])
+    wide_cache: dict[int, float] = {}
+
+    def wide(k: int) -> float:
+        if k not in wide_cache:
+            lo, hi = max(1, k - WIDE_HALF_WIDTH), min(len(psd) - 1, k + WIDE_HALF_WIDTH + 1)
+            wide_cache[k] = float(np.median(psd[lo:hi])) / med_ratio
+        return wide_cache[k]
+
+    # 1. drifting bands: each line's band (``_band``), lines inside one band together, and
+    # neighbours whose PSD between them stays raised
+    thr8 = 1.0 + 3.0 * math.sqrt(2.0 / (nu * BAND_STEP))
+    bands = {i: _band(int(lines[i]["bin"]), psd, wide, thr8) for i in order}
+    clusters: list[list[int]] = []
+    spans: list[tuple[int, int] | None] = []
+    for i in order:
+        k = int(lines[i]["bin"])
+        if clusters:
+            j = clusters[-1][-1]
+            k1 = int(lines[j]["bin"])
+            span = spans[-1]
+            # clear of both lines' main lobes and near leakage: a strong steady line's
+            # Hann skirt would otherwise join it to a sideband a few bins away
+            between = psd[k1 + LEAK_BINS + 1:k - LEAK_BINS]
+            m = len(between)
+            joined = (span is not None and span[0] <= k <= span[1]) or (
+                m > 0 and float(np.mean(between))
+                > wide((k1 + k) // 2) * (1.0 + 3.0 * math.sqrt(2.0 / (nu * m))))
+            if joined:
+                clusters[-1].append(i)
+                own = bands[i]
+                lo_k = min(x for x in (span[0] if span else k1, own[0] if own else k))
+                hi_k = max(x for x in (span[1] if span else k, own[1] if own else k))
+                spans[-1] = (lo_k, hi_k)
+                continue
+        clusters.append([i])
+        spans.append(bands[i])
+    reps: list[dict[str, float]] = []
+    for c, span in zip(clusters, spans, strict=True):
+        if span is None and len(c) == 1:
+            ln = lines[c[0]]
+            reps.append({"f": ln["frequency_hz"], "a": ln["amplitude"], "lo": ln["amplitude_lo"],
+                         "hi": ln["amplitude_hi"], "spread": 0.0, "band_lo": math.nan,
+                         "band_hi": math.nan, "members": 1.0})
+            continue
+        k1 = min(int(lines[c[0]]["bin"]) - LINE_LOBE, span[0] if span else len(psd))
+        k2 = max(int(lines[c[-1]]["bin"]) + LINE_LOBE, span[1] if span else 0) + 1
+        b = wide((k1 + k2) // 2)
+        excess = np.clip(psd[k1:k2] - b, 0.0, None)
+        power = float(np.sum(excess) * df)
+        lo, hi = _amplitude_interval(power, excess, np.full(len(excess), b), nu, df)
+        fc = float(np.sum(excess * f[k1:k2]) / max(np.sum(excess), 1e-300))
+        reps.append({"f": fc, "a": math.sqrt(2.0 * power), "lo": lo, "hi": hi,
+                     "spread": float(f[k2 - 1] - f[k1]) / 2.0,
+                     "band_lo": float(f[k1 + LINE_LOBE]),
+                     "band_hi": float(f[k2 - 1 - LINE_LOBE]), "members": float(len(c))})
+    # 2. harmonics, 3. sidebands: over the representatives, lowest frequency first
+    group = [-1] * len(reps)
+    role = [0.0] * len(reps)
+    n_groups = 0
+    for i, r in enumerate(reps):
+        if group[i] >= 0:
+            continue
+        group[i], role[i] = n_groups, 1.0
+        for k in range(2, MAX_HARMONIC + 1):
+            tol = HARMONIC_TOL_BINS * df * k + k * r["spread"]
+            near = [j for j in range(len(reps)) if group[j] < 0
+                    and abs(reps[j]["f"] - k * r["f"]) <= tol]
+            if near:
+                j = min(near, key=lambda j: abs(reps[j]["f"] - k * r["f"]))
+                group[j], role[j] = n_groups, float(k)
+        n_groups += 1
+    mod: dict[int, list[float]] = {}
+    for ctr in [i for i in range(len(reps)) if role[i] >= 1]:
+        fc = reps[ctr]["f"]
+        free = [j for j in range(len(reps)) if role[j] == 1.0 and group[j] != group[ctr]
+                and sum(group[x] == group[j] for x in range(len(reps))) == 1]
+        tol = HARMONIC_TOL_BINS * df
+        for lo_j in [j for j in free if reps[j]["f"] < fc]:
+            fm = fc - reps[lo_j]["f"]
+            ups = [j for j in free if j != lo_j and abs(reps[j]["f"] - fc - fm) <= tol]
+            if ups and role[lo_j] == 1.0:
+                up = ups[0]
+                for j in (lo_j, up):
+                    group[j], role[j] = group[ctr], -1.0
+                mod.setdefault(group[ctr], []).append(0.5 * (fm + reps[up]["f"] - fc))
+                free = [j for j in free if j not in (lo_j, up)]
+    # a lone sideband (its partner below the finder's threshold) at a known modulation's
+    # offset from a member of that group
+    for j in range(len(reps)):
+        if role[j] != 1.0 or sum(group[x] == group[j] for x in range(len(reps))) != 1:
+            continue
+        for g_id, fms in mod.items():
+            fm = float(np.mean(fms))
+            if any(role[c] >= 1 and group[c] == g_id
+                   and abs(abs(reps[j]["f"] - reps[c]["f"]) - fm) <= HARMONIC_TOL_BINS * df
+                   for c in range(len(reps))):
+                group[j], role[j] = g_id, -1.0
+                break
+    # the marks, on every line of a representative
+    for ci, c in enumerate(clusters):
+        for i in c:
+            lines[i]["group"] = float(group[ci])
+            lines[i]["harmonic"] = role[ci]
+            lines[i]["modulation_hz"] = float(np.mean(mod[group[ci]])) if group[ci] in mod \
+                else 0.0
+            r = reps[ci]
+            lines[i].update({"group_frequency_hz": r["f"], "group_amplitude": r["a"],
+                             "group_amplitude_lo": r["lo"], "group_amplitude_hi": r["hi"],
+                             "band_lo_hz": r["band_lo"], "band_hi_hz": r["band_hi"],
+                             "members": r["members"]})
+
+
+def line_groups(lines: list[dict[str, float]]) -> list[LineGroup]:
+    """The periodic disturbances of a channel from ``find_lines``' marks: one per group, its
+    fundamental (harmonic 1) giving frequency and amplitude; strongest first. Lines without
+    marks (found before the grouping existed) are one group each."""
+    by: dict[float, list[dict[str, float]]] = {}
+    for n, ln in enumerate(lines):
+        by.setdefault(ln.get("group", -1.0 - n), []).append(ln)
+    out = []
+    for members in by.values():
+        fund = [m for m in members if m.get("harmonic", 1.0) == 1.0] or members
+        m0 = fund[0]
+        a = m0.get("group_amplitude", m0["amplitude"])
+        band = (m0.get("band_lo_hz", math.nan), m0.get("band_hi_hz", math.nan))
+        harm = sorted({int(m.get("harmonic", 1.0)) for m in members
+                       if m.get("harmonic", 1.0) >= 1.0})
+        fm = m0.get("modulation_hz", 0.0)
+        out.append(LineGroup(
+            m0.get("group_frequency_hz", m0["frequency_hz"]), a,
+            m0.get("group_amplitude_lo", m0.get("amplitude_lo", math.nan)),
+            m0.get("group_amplitude_hi", m0.get("amplitude_hi", math.nan)),
+            band if all(math.isfinite(x) for x in band) else None, tuple(harm),
+            fm if fm > 0 else None, len(members)))
+    out.sort(key=lambda g: -g.amplitude)
+    return out

@@ -1,34 +1,36 @@
-"""The time-domain causes of `avard explain`: a warm-up transient and a bias step.
+"""The time-domain causes of `avard explain`: their parameters, signals, stated minima and
+the generalised least squares (``_Gls``) of block means they are fitted by.
 
-Both act on seconds to hours, so they are fitted on the slow view of the record (block means
-of about a second, :class:`avard.core.explain.engine.SlowView`), further averaged to about 4096
-blocks here. Each detector returns a :class:`Candidate`: parameters (SI units), its test
-statistic against the threshold, and a sentence of evidence a reader can check by hand. The
-signal it describes then enters analyze's GLS fit as one more AVAR component
-(``fit_noise(extra_avar=...)``), under the same presence test as the noise terms.
+They act on seconds to hours, so they are fitted on the slow view of the record (block means
+of about a second, :class:`avard.core.explain.engine.SlowView`). A :class:`Candidate` holds
+one: parameters (SI units), its test statistic against the threshold, and a sentence of
+evidence a reader can check by hand. The signal it describes is removed from the axis and
+analyze's GLS fit is made again on what is left (the extended model).
 
-- ``bias_step``: the largest difference of adjacent window means, robustly scaled by the
-  spread of all such differences (their std is √(2·AVAR(w)), NIST SP 1065 eq. 6); test ≥ 6 and
-  a step fits the record better than a warm-up exponential.
-- ``warmup``: the same contrast at the record start for an exponential settling, with the
-  time constant from a least-squares fit of [1, t, e^(−t/T)]; test ≥ 6 and it fits better than
-  a step.
-- ``find_transients``: the two compose (the stronger removed, the other tested on the
-  residual), and ``refine_transients`` fits the passed ones together by generalised least
-  squares with the noise model, which gives their parameters and 68 % intervals.
-- ``apply_floor``: a passed transient is claimed when its size's GLS interval at ``Z_CLAIM``
-  standard errors excludes zero and the size reaches what the logged temperature's 0.0625 K
-  resolution makes through the fitted coupling (``transient_floor``); its stated minimum is
-  said beside it as a statement of power, never a floor.
+The search explain runs is :mod:`avard.core.explain.transients` (several steps, excursions,
+a warm-up, a drift; one false-alarm budget, :mod:`avard.core.explain.alarm`). Here:
+
+- ``detect_bias_step`` / ``detect_warmup``: the window-contrast detectors (the largest
+  difference of adjacent window means, robustly scaled, test ≥ 6), used where one quick
+  look is asked (the thermal lag's start state, the hold-out's leftover step); their
+  ``min_detectable_step`` / ``_warmup`` are the stated minima the docs give (power, never a
+  floor);
+- ``refine_transients``: one warm-up and one step fitted together by GLS with the noise
+  model, with 68 % intervals (its profile helpers ``_weight_interval``,
+  ``_profile_interval``, ``_size_interval``, ``_vertex`` serve the compound fit too);
+- ``transient_floor``: what the logged temperature's 0.0625 K resolution makes through the
+  fitted coupling; a transient below it is not claimed on a thermally coupled axis;
+- ``apply_floor``: a transient's size interval at ``Z_CLAIM`` must exclude zero.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
-(``report.find_lines``); rate ramp, the chip's low-pass and the LSB rounding are terms of
-analyze's model (``fit.fit_noise``).
+(``spectrum.find_lines``, which also groups a periodic disturbance's lines); rate ramp, the
+chip's low-pass and the LSB rounding are terms of analyze's model (``fit.fit_noise``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -37,16 +39,23 @@ from avard.core.sim.thermal import DS18B20_STEP_C
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
-CAUSES = ("temperature", "warmup", "bias_step", "gauss_markov", "sinusoid")
+CAUSES = ("temperature", "warmup", "bias_step", "excursion", "drift", "gauss_markov",
+          "sinusoid", "periodic")
 PARAMS = {
     "temperature": ("coefficient", "lag_s"),
     "warmup": ("time_constant_s", "size"),
     "bias_step": ("time_s", "size"),
+    "excursion": ("start_s", "end_s", "size"),
+    "drift": ("rate",),
+    "periodic": ("frequency_hz", "amplitude", "harmonics", "modulation_hz", "frequency_lo_hz",
+                 "frequency_hi_hz"),
     "gauss_markov": ("sigma", "time_constant_s"),
     "sinusoid": ("frequency_hz", "amplitude"),
 }
 UNITS = {"coefficient": "m/s²/K", "lag_s": "s", "time_constant_s": "s", "size": "m/s²",
-         "time_s": "s", "frequency_hz": "Hz", "amplitude": "m/s²", "sigma": "m/s²"}
+         "time_s": "s", "start_s": "s", "end_s": "s", "rate": "m/s³", "frequency_hz": "Hz",
+         "amplitude": "m/s²", "sigma": "m/s²", "harmonics": "", "modulation_hz": "Hz",
+         "frequency_lo_hz": "Hz", "frequency_hi_hz": "Hz"}
 
 Z_STEP = 6.0
 
@@ -263,12 +272,19 @@ def warmup_signal(n: int, rate_hz: float, time_constant_s: float, size: float,
 
 
 def cause_signal(cand: Candidate, n: int, rate_hz: float) -> NDArray:
-    """The signal a passed transient candidate describes, on n samples at ``rate_hz``."""
+    """The signal a passed transient candidate (a warm-up, a step, an excursion, a drift)
+    describes, on n samples at ``rate_hz``."""
     p = cand.params
     if cand.cause == "warmup":
         return warmup_signal(n, rate_hz, p["time_constant_s"], p["size"])
     if cand.cause == "bias_step":
         return step_signal(n, rate_hz, p["time_s"], p["size"])
+    if cand.cause == "excursion":
+        return (step_signal(n, rate_hz, p["start_s"], p["size"])
+                - step_signal(n, rate_hz, p["end_s"], p["size"]))
+    if cand.cause == "drift":  # about the record's middle (the offset is the noise's)
+        t = np.arange(n) / rate_hz
+        return np.asarray(p["rate"] * (t - 0.5 * n / rate_hz))
     raise ValueError(f"{cand.cause} is not a time-domain transient")  # a bug
 
 
@@ -441,7 +457,7 @@ T_GRID = 81
 STEP_GRID_FRACTION = 0.04
 
 
-def _step_blocks(t: NDArray, dt: float, ts: NDArray) -> NDArray:
+def _step_blocks(t: NDArray, dt: float, ts: NDArray | Sequence[float]) -> NDArray:
     """H(t − ts) averaged over each block (centres ``t``, length ``dt``), one column per
     ``ts``: the block holding the step gets the fraction after it, so the fit's χ² is a
     continuous function of the step time, not a staircase of whole blocks."""
@@ -665,38 +681,3 @@ def refine_transients(y: NDArray, rate_hz: float, noise: dict[str, float],
                            + f"time {ts:.6g} s [{s_lo:.6g}, {s_hi:.6g}], size {size:.3g} m/s² "
                            f"[{lo:.3g}, {hi:.3g}] (68 %)"))
     return out
-
-
-def find_transients(y: NDArray, rate_hz: float, noise: dict[str, float]
-                    ) -> tuple[Candidate, Candidate]:
-    """(warm-up, step) of one axis's slow view, each tested, the passed ones refined with
-    intervals (``refine_transients``).
-
-    Both tests compare the two shapes on the same data (a step must fit better than a warm-up
-    and vice versa), so on their own they exclude each other. They compose: the one that
-    passes is the stronger; it is refined and removed, and the other is tested on the
-    residual, with the same test and threshold (and the same comparison of shapes there, so
-    a warm-up's leftover is not taken for a step). When both pass they are refitted
-    together."""
-    fits = transient_fits(y, rate_hz)
-    warm = detect_warmup(y, rate_hz, fits)
-    step = detect_bias_step(y, rate_hz, fits)
-    if not (warm.passed or step.passed):
-        return warm, step
-    first = warm if warm.passed else step
-    (ref,) = refine_transients(y, rate_hz, noise, **{_ARG[first.cause]: first})
-    resid = y - cause_signal(ref, len(y), rate_hz)
-    detect = detect_bias_step if first is warm else detect_warmup
-    second = detect(resid, rate_hz)
-    second = replace(second, evidence=f"with the {first.cause} removed: " + second.evidence)
-    if not second.passed:
-        return (ref, second) if first is warm else (second, ref)
-    if first is warm:
-        w0, s0 = ref, second
-    else:
-        w0, s0 = second, ref
-    w1, s1 = refine_transients(y, rate_hz, noise, warmup=w0, step=s0)
-    return w1, s1
-
-
-_ARG = {"warmup": "warmup", "bias_step": "step"}

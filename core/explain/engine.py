@@ -52,9 +52,11 @@ import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.engine import ProgressFn, analyze
 from avard.core.analysis.results import Analysis, ChannelAnalysis
+from avard.core.analysis.spectrum import LineGroup, line_groups
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
+from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import (
@@ -247,7 +249,7 @@ class ChannelExplanation:
         if self.verdict.explained:
             return
         for f in self.findings:
-            if f.claimed and f.cause != "sinusoid":
+            if f.claimed and f.cause not in ("sinusoid", "periodic"):
                 f.model_dependent = True
                 if self.verdict.heldout_rejects and f.intervals:
                     f.intervals_if_model_held, f.intervals = f.intervals, {}
@@ -612,15 +614,36 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                     signal += d
                     curves["temperature"] = signal_avar_on(d, rate_b, tau)
         work = y_slow - signal
-        # warm-up and step compose: the stronger is removed before the other is tested, both
-        # refitted together by GLS with analyze's noise model (their 68 % intervals)
-        trans = list(cz.find_transients(work, rate_b, _noise_levels(base)))
     corner = an.meta.get("filter_corner_hz")
     lsb = meta.get("lsb_mps2")
     kw: dict[str, Any] = {}
     if corner is not None and isinstance(lsb, int | float) and lsb > 0:
         kw["rounding_lsb"] = float(lsb)
     extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
+
+    def noise_without(d: NDArray[np.float64]) -> dict[str, float]:
+        """N, B, K of analyze's model fitted to the axis with the thermal signal and ``d``
+        removed: each transient is tested against noise with the others (and itself) out."""
+        if not np.any(d) and not np.any(signal):
+            return _noise_levels(base)
+        cv = compensated_avar(allan.var, tau, allan2(y_slow, signal + d, rate_b), 1.0)
+        ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
+        try:
+            fit = fit_noise(replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio),
+                            filter_corner_hz=corner, extra=extra, **kw)
+        except FitError:
+            return _noise_levels(base)
+        return _noise_levels(fit)
+
+    missed: list[cz.Candidate] = []
+    if len(y_slow) >= MIN_SLOW_POINTS:
+        start = 0.0
+        if with_start and thermal is not None:
+            # what the lag filter's fitted start state can leave: the removed signal's swing
+            # over its first three lags
+            head = signal[:max(2, math.ceil(3 * abs(thermal.lag_s) * rate_b))]
+            start = float(np.ptp(head))
+        trans, missed = _compound(work, rate_b, noise_without, thermal, holes, start)
 
     # the covariance of the compensated points that the removed signal's parameters carry
     # (``removal_covariance``): set by each ``extend``, given to every fit of those points
@@ -632,10 +655,10 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         signal; refitted exactly as analyze fits (its terms, lines, filter, LSB)."""
         nonlocal added
         total = signal.copy()
-        for c in cands:
+        for i, c in enumerate(cands):
             d = cz.cause_signal(c, len(y_slow), rate_b)
             total += d
-            curves[c.cause] = signal_avar_on(d, rate_b, tau)
+            curves[_label(c, i, cands)] = signal_avar_on(d, rate_b, tau)
         cv = compensated_avar(allan.var, tau, allan2(y_slow, total, rate_b), 1.0)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
@@ -655,53 +678,9 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
 
     ext = base
     current: Any = allan
-    passed = [c for c in trans if c.passed]
-    if curves or passed:
-        comp_var, ext, current = extend(passed)
-    if passed:
-        # analyze's fit of the whole record counts the transients' AVAR as noise (at 3× the
-        # minimum warm-up its K is 3× the truth), which widens their intervals; so they are
-        # refitted once with the noise of the fit that has them removed
-        w = next((c for c in passed if c.cause == "warmup"), None)
-        st = next((c for c in passed if c.cause == "bias_step"), None)
-        redo = {c.cause: c for c in cz.refine_transients(work, rate_b, _noise_levels(ext),
-                                                          warmup=w, step=st)}
-        trans = [redo.get(c.cause, c) for c in trans]
-        # a transient is claimed only at or above its floor (its stated minimum on this
-        # noise, and what the logged temperature's resolution makes through the coupling:
-        # ``causes.transient_floor``); one that stays is refitted without the dropped one
-        coef = _rounding_gain(thermal) if thermal is not None and thermal.passed else 0.0
-        floored = [cz.apply_floor(c, _noise_levels(ext), len(y_slow) / rate_b, coef)
-                   for c in trans]
-        if any(a.passed != b.passed for a, b in zip(trans, floored, strict=True)):
-            keep = {c.cause: c for c in floored if c.passed}
-            if keep:
-                redo = {c.cause: c for c in cz.refine_transients(
-                    work, rate_b, _noise_levels(ext), warmup=keep.get("warmup"),
-                    step=keep.get("bias_step"))}
-                # the refitted size must still reach its floor
-                floored = [cz.apply_floor(redo[c.cause], _noise_levels(ext),
-                                          len(y_slow) / rate_b, coef)
-                           if c.cause in redo else c for c in floored]
-        trans = floored
-        for c in trans:
-            if not c.passed:
-                curves.pop(c.cause, None)
-        if curves or any(c.passed for c in trans):
-            comp_var, ext, current = extend([c for c in trans if c.passed])
-        else:
-            comp_var, ext, current = None, base, allan
-            added = None  # nothing removed any more: no uncertainty of it either
-    if holes is not None and thermal is not None and "temperature" in curves:
-        screened = [_not_in_hole(c, holes, thermal, len(y_slow) / rate_b) for c in trans]
-        changed = any(a.passed != b.passed for a, b in zip(trans, screened, strict=True))
-        trans = screened
-        if changed:
-            kept = [c for c in trans if c.passed]
-            for c in trans:
-                if not c.passed:
-                    curves.pop(c.cause, None)
-            comp_var, ext, current = extend(kept) if (curves or kept) else (None, base, allan)
+    if curves or trans:
+        comp_var, ext, current = extend(trans)
+    trans = trans + missed
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
@@ -719,11 +698,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     findings.append(gm)
     if gm_fit is not None:
         ext = gm_fit
-    for ln in ch.lines:
-        findings.append(Finding("sinusoid", True, {"frequency_hz": ln["frequency_hz"],
-                                                   "amplitude": ln["amplitude"]}, {}, math.nan,
-                                math.nan, "line found by analyze's line finder "
-                                "(report.find_lines); part of the base model"))
+    findings += [_periodic_finding(g) for g in line_groups(ch.lines)]
     out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
                              thermal_only)
     if ext is not base:
@@ -736,6 +711,78 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     if comp_var is not None:
         out.compensation_worse_s = out._worse(comp_var)
     return out
+
+
+def _periodic_finding(g: LineGroup) -> Finding:
+    """One periodic disturbance of analyze's line finder (``spectrum.line_groups``) as one
+    finding: a steady line alone is a "sinusoid"; a line with harmonics or sidebands, or a
+    drifting line, is "periodic", with its harmonics, modulation and frequency band."""
+    params = {"frequency_hz": g.frequency_hz, "amplitude": g.amplitude}
+    iv = ({"amplitude": [g.amplitude_lo, g.amplitude_hi]}
+          if math.isfinite(g.amplitude_lo) and math.isfinite(g.amplitude_hi) else {})
+    what = [f"{g.kind}: {g.members} line(s) of analyze's line finder (spectrum.find_lines) "
+            "taken as one disturbance"]
+    if len(g.harmonics) > 1:
+        params["harmonics"] = float(len(g.harmonics))
+        what.append("harmonics " + ", ".join(str(k) for k in g.harmonics))
+    if g.modulation_hz is not None:
+        params["modulation_hz"] = g.modulation_hz
+        what.append(f"sidebands ±{g.modulation_hz:.4g} Hz (a modulation)")
+    if g.band_hz is not None:
+        params["frequency_lo_hz"], params["frequency_hi_hz"] = g.band_hz
+        what.append(f"its frequency moves over {g.band_hz[0]:.5g}–{g.band_hz[1]:.5g} Hz; the "
+                    "amplitude is that of the band's whole power")
+    cause = "periodic" if len(what) > 1 else "sinusoid"
+    return Finding(cause, True, params, iv, math.nan, math.nan,
+                   "; ".join(what) + "; part of the base model (analyze's sinusoids)")
+
+
+def _label(c: cz.Candidate, i: int, cands: list[cz.Candidate]) -> str:
+    """The name of a removed signal's AVAR curve: its cause, numbered when the axis has
+    several of that cause (two steps: "bias_step 1", "bias_step 2")."""
+    same = [j for j, o in enumerate(cands) if o.cause == c.cause]
+    return c.cause if len(same) == 1 else f"{c.cause} {same.index(i) + 1}"
+
+
+def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: ThermalFit | None,
+              screen: ScreenLog | None, start_span: float = 0.0
+              ) -> tuple[list[cz.Candidate], list[cz.Candidate]]:
+    """(claimed, not claimed) transients and drift of one axis (:mod:`transients`). Where a
+    thermal signal was removed, a transient the logged temperature's rounding can make
+    (``causes.transient_floor``), one in a hole of the driving log (``_not_in_hole``), or a
+    warm-up the lag filter's fitted start state can make (T within a factor 3 of the lag,
+    size within ``start_span``, the removed signal's swing over its first three lags) is not
+    claimed, and the others are refitted without it."""
+    found, missed = tr.find_compound(work, rate_b, noise_of)
+    if found and thermal is not None and thermal.passed:
+        record_s = len(work) / rate_b
+        lag = abs(thermal.lag_s)
+        checked = []
+        for c in found:
+            floor, why = cz.transient_floor(c, {}, record_s, _rounding_gain(thermal))
+            T = c.params.get("time_constant_s", math.nan)
+            if (c.cause == "warmup" and lag > 0 and lag / 3 <= T <= 3 * lag
+                    and abs(c.params["size"]) <= start_span):
+                c = replace(c, passed=False, intervals={}, evidence=c.evidence + (
+                    f"; not claimed: a settling with the thermal lag's time scale ({lag:.4g} s)"
+                    f" and within the swing the removed thermal signal makes over its first "
+                    f"three lags ({start_span:.3g} m/s²) is what the lag filter's unknown "
+                    "start state can leave"))
+            elif abs(c.params["size"]) < floor:
+                c = replace(c, passed=False, intervals={}, evidence=c.evidence + (
+                    f"; not claimed: size {abs(c.params['size']):.3g} m/s² is below {why}"))
+            elif screen is not None:
+                c = _not_in_hole(c, screen, thermal, record_s)
+            checked.append(c)
+        kept = [c for c in checked if c.passed]
+        if len(kept) < len(found):
+            missed = [c for c in checked if not c.passed] + missed
+            found = (tr.refine_compound(work, rate_b, noise_of(tr.signal_of(kept, len(work),
+                                                                            rate_b)), kept)
+                     if kept else [])
+    drift = tr.test_drift(work, rate_b, noise_of(tr.signal_of(found, len(work), rate_b)),
+                          found)
+    return ([*found, drift], missed) if drift.passed else (found, [*missed, drift])
 
 
 def _rounding_gain(thermal: ThermalFit) -> float:
@@ -759,6 +806,10 @@ def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
     if c.cause == "bias_step":
         t_c = float(c.params.get("time_s", math.nan))
         span = (t_c, t_c)
+    elif c.cause == "excursion":  # either edge
+        span = (float(c.params["start_s"]), float(c.params["end_s"]))
+    elif c.cause != "warmup":
+        return c
     else:  # a warm-up acts over its first three time constants
         span = (0.0, 3.0 * float(c.params.get("time_constant_s", 0.0)))
     for h0, h1 in screen.holes(thermal.channel):

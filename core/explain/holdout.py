@@ -66,7 +66,7 @@ __all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible"
 #: Fewest slow-view points in each part (as for explain's time-domain causes).
 MIN_PART_POINTS = 256
 #: Causes that are events of one record, not properties of the sensor.
-EVENTS = frozenset({"warmup", "bias_step"})
+EVENTS = frozenset({"warmup", "bias_step", "excursion"})
 #: Lags of a held-out part's start left out (the lag filter's unknown start state:
 #: e^(−5) < 1 % of the start-up difference remains).
 HELD_SETTLE_LAGS = 5.0

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.explain.alarm import ALPHA_AXIS
 from avard.core.explain.engine import ChannelExplanation, Explanation
 from avard.core.explain.thermal_fit import DS18B20_CONVERSION_S
 from avard.core.model.fit import NoiseFit, TermEstimate
@@ -88,7 +89,8 @@ def summary(ex: Explanation) -> str:
     """Plain-text summary for the terminal (SI units, 68 % intervals)."""
     lines = [f"avard explain: {ex.source} at {ex.rate_hz:g} Hz, {ex.analysis.n_samples} "
              f"samples ({ex.analysis.n_samples / ex.rate_hz / 3600:.3g} h). Units SI; "
-             "intervals 68 %. Base model = avard analyze's fit."]
+             "intervals 68 %. Base model = avard analyze's fit. False-alarm level: "
+             f"{ALPHA_AXIS:.2g} per axis for all of explain's causes together."]
     if ex.screen is not None:
         lines += ex.screen.lines()
     lines += holdout_lines(ex)

@@ -171,7 +171,9 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
                 assert upper is not None and t["upper"] == pytest.approx(upper) and upper > 0
         assert set(ch["fit"]) == {"tau_min_s", "tau_max_s", "chi2_dof"}
         for s in ch["sinusoids"]:
-            assert set(s) == {"frequency_hz", "amplitude"}
+            # issue 23: each amplitude with its 68 % interval, and its disturbance
+            assert set(s) == {"frequency_hz", "amplitude", "amplitude_interval", "disturbance"}
+            assert s["amplitude_interval"][0] <= s["amplitude"] <= s["amplitude_interval"][1]
     x, z = d["channels"]["x"], d["channels"]["z"]
     assert x["sinusoids"] == []
     assert len(z["sinusoids"]) == 1

@@ -56,7 +56,7 @@ def test_a_dT_dt_coupling_is_unexplained_and_its_parameters_model_dependent(tmp_
                       ExplainOptions(channels=("x",)))
     ch = ex.channels["x"]
     assert ch.verdict is not None and not ch.verdict.explained
-    assert all(f.model_dependent for f in ch.claimed if f.cause != "sinusoid")
+    assert all(f.model_dependent for f in ch.claimed if f.cause not in ("sinusoid", "periodic"))
     text = summary(ex)
     assert "UNEXPLAINED" in text
     d = ex.to_dict()["channels"]["x"]

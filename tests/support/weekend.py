@@ -11,7 +11,9 @@ sensor slower than the die is a negative lag, and two paths are two time constan
 Noise: white (N), flicker (B) by Kasdin's fractional-difference filter (h_k = h_{k−1}·(k − 1
 + α/2)/k, α = 1 for 1/f in rate, applied by FFT convolution), random walk (K).
 
-Transients: warm-ups, steps and excursions (a step up then back) at given times. Log faults:
+Transients: warm-ups, steps and excursions (a step up then back) at given times, a linear
+drift; periodic disturbances: a fundamental with harmonics and an amplitude modulation
+(sidebands), a pump whose frequency moves linearly over the record. Log faults:
 85.0 °C readings, −127 °C readings, dropouts (NaN) and a stuck stretch (the reading frozen),
 and acceleration glitches (a few samples far off).
 
@@ -61,6 +63,12 @@ class Weekend:
     warmups: list[tuple[float, float]] = field(default_factory=list)  # (size, T), x
     steps: list[tuple[float, float]] = field(default_factory=list)  # (time, size), x
     excursions: list[tuple[float, float, float]] = field(default_factory=list)  # (t0, t1, size)
+    drift: float = 0.0  # m/s³: a linear drift of x about the record's middle
+    #: periodic disturbances of x: (f0 Hz, amplitudes of harmonics 1, 2, … m/s², sideband
+    #: offset Hz, modulation depth): A_k·(1 + depth·sin 2π f_m t)·sin(2π k f0 t + φ_k)
+    periodic: list[tuple[float, tuple[float, ...], float, float]] = field(default_factory=list)
+    #: a pump whose frequency moves linearly: (f at the start Hz, f at the end Hz, amplitude)
+    pump: tuple[float, float, float] | None = None
     faults_85: int = 0
     faults_127: int = 0
     dropouts_s: list[tuple[float, float]] = field(default_factory=list)  # (start, length)
@@ -136,6 +144,16 @@ def make(seed: int, w: Weekend) -> tuple[NDArray, NDArray, list[str], dict[str, 
         acc[:, 0] += np.where(t >= ts, size, 0.0)
     for t0, t1, size in w.excursions:
         acc[:, 0] += np.where((t >= t0) & (t < t1), size, 0.0)
+    if w.drift:
+        acc[:, 0] += w.drift * (t - 0.5 * n * dt)
+    for f0, amps, fm, depth in w.periodic:
+        env = 1.0 + depth * np.sin(2 * math.pi * fm * t) if depth else 1.0
+        for k, a in enumerate(amps, start=1):
+            acc[:, 0] += a * env * np.sin(2 * math.pi * k * f0 * t + rng.uniform(0, 2 * math.pi))
+    if w.pump is not None:
+        fa, fb, a = w.pump
+        span = n * dt
+        acc[:, 0] += a * np.sin(2 * math.pi * (fa * t + 0.5 * (fb - fa) / span * t**2))
     for tg, k, size in w.glitches:
         i = int(tg * w.rate_hz)
         acc[i:i + k] += size

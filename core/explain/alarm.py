@@ -1,0 +1,43 @@
+"""One false-alarm level per axis for everything ``avard explain`` searches for.
+
+Every cause explain may claim on an axis is a search (over lags and channels, over places
+and shapes of transients, over correlation times), and an axis without any cause must come
+out clean at ``ALPHA_AXIS`` for all of them together, not at each test's own level. The
+level is split between the searches (Bonferroni: the chance of any false claim is at most
+the sum of the shares), and each search splits its share again over its own trials:
+
+- ``TEMPERATURE``: the thermal regression asks z ≥ 5 (``thermal_fit.Z_TEMPERATURE``) over
+  about 50 correlated lag and channel trials, 50·2Φ(−5) = 2.9e-5, inside this share;
+- ``TRANSIENTS``: the compound search (``transients.find_compound``) at each stage, a third
+  to each family (steps at ≤ 256 grid times, excursions at their pairs, warm-ups at 48 time
+  constants), each family's share Bonferroni-split over its trials (``bonferroni_z``); on
+  an axis with no transient only the first stage can claim falsely;
+- ``DRIFT``: the time-domain likelihood ratio of a drift against a random walk, χ²(1);
+- ``GAUSS_MARKOV``: Davies' bound on the maximum of the T scan
+  (``gauss_markov.Z_GAUSS_MARKOV``).
+
+Bonferroni over correlated trials (adjacent step times, nearby T) is conservative: the
+benchmark's null axes measure what the level really is (``python -m benchmarks
+explain_weekend --rows null``; docs/explain.md). The sinusoids are analyze's line finder, at
+its own 1 % per spectrum, part of the base model and not a claim of explain's.
+"""
+
+from __future__ import annotations
+
+from statistics import NormalDist
+
+__all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "TEMPERATURE", "TRANSIENTS",
+           "bonferroni_z"]
+
+TEMPERATURE = 2.5e-4
+TRANSIENTS = 5e-4
+DRIFT = 2.5e-4
+GAUSS_MARKOV = 5e-3
+#: The chance of any false claim on an axis with nothing to find (at most the shares' sum).
+ALPHA_AXIS = TEMPERATURE + TRANSIENTS + DRIFT + GAUSS_MARKOV
+
+
+def bonferroni_z(alpha: float, trials: int) -> float:
+    """|z| a two-sided Gaussian statistic must reach so that the largest of ``trials`` of
+    them passes by chance at most ``alpha`` of the time (Φ⁻¹(1 − α/(2·trials)))."""
+    return NormalDist().inv_cdf(1.0 - alpha / (2.0 * max(1, trials)))

@@ -1,0 +1,573 @@
+"""Compound transients of one axis: several bias steps, excursions (a step up and back down),
+a warm-up and a deterministic drift, found one after another and fitted together.
+
+Everything acts on the slow view's block means (at most ``MAX_BLOCKS`` of them), by
+generalised least squares with the noise covariance of white, flicker and random-walk noise
+N, B, K (``causes._Gls``): the data and every column are whitened, so a column's z is
+c'·r/√(c'·c') with c' the whitened column and r the whitened residual, both with the offset,
+the slope and the effects already found projected out (Frisch–Waugh–Lovell).
+
+**The search** (``find_compound``), one effect per stage, up to ``MAX_EFFECTS``:
+
+1. the noise is the caller's fit of the axis with every effect found so far removed
+   (``NoiseOf``), so an effect found does not raise the floor that hides the next one;
+2. three families are scanned on the residual: a step at every grid time (≤ ``GRID`` of
+   them), an excursion at every pair of grid times (its up and its down the same size), a
+   warm-up e^(−t/T) on a log grid of T; each family's largest |z| is compared with its
+   Bonferroni threshold (``alarm.bonferroni_z`` at its share of the axis's level over its
+   number of trials), and the family that passes by the largest margin proposes;
+3. the proposal is tested again with the noise refitted with it removed as well: a single
+   step's own AVAR reads as random walk, and K made of the step would hide it (the issue's
+   2e-4 m/s² step at 12.8 σ, not claimed); it is kept when it still passes there, and its
+   size is then checked by its interval (``causes.size_z``) at the same z.
+
+The z's are divided by √(Birge ratio) of the whitened residual when that exceeds 1: a
+noise model the record does not follow widens the test instead of passing everything.
+
+**The drift** (``test_drift``): a slope b·t against the random walk that can make the same
+wander, in the time domain. The offset, the found transients and, under the alternative, the
+slope are fitted by GLS at each K on a log grid (N and B held at the fitted values: they are
+set by the short τ, where a drift shows nothing), and −2 ln L (Gaussian, the covariance's
+log-determinant included) is minimised over K under either hypothesis; the likelihood ratio
+is χ²(1) under a random walk with no drift, tested at its share of the axis's level. The
+AVAR cannot tell a ramp from a random walk on one record (both rise at long τ); the time
+domain can: a drift's increments are all of one sign and size, a walk's are not.
+
+**The joint fit** (``refine_compound``): the nonlinear parameters (step times, excursion
+edges, T) are profiled one at a time with the others held, two rounds; 68 % intervals: a
+time from its profile likelihood (``causes._weight_interval``, a change point's χ² is no
+parabola), T by Δχ² = s² (``causes._profile_interval``), a size from its own profile
+envelope (``causes._size_interval``) with the other effects' columns in the fit; s² the
+Birge ratio max(1, χ²/dof).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from avard.core.explain import alarm
+from avard.core.explain import causes as cz
+from numpy.typing import NDArray
+
+__all__ = ["MAX_EFFECTS", "NoiseOf", "find_compound", "refine_compound", "robust_noise",
+           "signal_of",
+           "test_drift"]
+
+#: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
+NoiseOf = Callable[[NDArray[np.float64]], dict[str, float]]
+
+#: Most block means the search and the joint fit use (longer views are averaged further).
+MAX_BLOCKS = 512
+#: Most grid times a step or an excursion edge is scanned at.
+GRID = 256
+#: Most effects found on one axis.
+MAX_EFFECTS = 8
+#: A proposal enters the forward search when its z reaches this fraction of its threshold.
+FORWARD_MARGIN = 0.75
+#: Two opposite steps are one excursion when their sum is within this many standard errors
+#: of zero (at 2, one excursion in ten of the benchmark's 1 h records stayed two steps: the
+#: random walk moves the level between the edges).
+PAIR_SIGMA = 3.0
+#: Points of the warm-up's T scan (log grid from 2 blocks to a quarter of the record).
+T_SCAN = 48
+#: K grid of the drift's likelihood ratio: a factor ``K_SPAN`` either side of the fitted K.
+K_GRID, K_SPAN = 25, 30.0
+#: Blocks of the drift's time-domain likelihood (its question lives at the longest scales).
+DRIFT_BLOCKS = 256
+
+TRANSIENT_CAUSES = ("bias_step", "excursion", "warmup")
+
+
+@dataclass(frozen=True)
+class _Proposal:
+    cause: str
+    params: dict[str, float]
+    z: float
+    threshold: float
+    trials: int
+
+    @property
+    def margin(self) -> float:
+        return abs(self.z) / self.threshold
+
+
+def _column(cause: str, p: dict[str, float], t: NDArray, dt: float) -> NDArray[np.float64]:
+    """The block-averaged shape of a unit effect (size 1) on block centres ``t``."""
+    if cause == "bias_step":
+        return np.asarray(cz._step_blocks(t, dt, [p["time_s"]])[:, 0])
+    if cause == "excursion":
+        h = cz._step_blocks(t, dt, [p["start_s"], p["end_s"]])
+        return np.asarray(h[:, 0] - h[:, 1])
+    if cause == "warmup":
+        return np.asarray(np.exp(-t / p["time_constant_s"]))
+    raise ValueError(f"{cause} is not a compound transient")  # a bug
+
+
+def _gls(y: NDArray, rate_hz: float, noise: dict[str, float]) -> cz._Gls | None:
+    try:
+        return cz._Gls(y, rate_hz, noise, MAX_BLOCKS)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _residual(g: cz._Gls, fixed: list[NDArray]) -> tuple[NDArray, NDArray, float]:
+    """(Q, whitened residual, Birge s²) with [1, t] and the ``fixed`` whitened columns out."""
+    q, _ = np.linalg.qr(np.column_stack([g.wbase, *fixed]))
+    r = g.wy - q @ (q.T @ g.wy)
+    dof = max(1, len(r) - q.shape[1])
+    return q, r, max(1.0, float(r @ r) / dof)
+
+
+#: A column whose projection keeps less than this fraction of its norm² is taken as already
+#: in the fit (a step where one was found): its z would be round-off over round-off.
+_COLLINEAR = 1e-6
+
+
+def _norms(wc: NDArray, c: NDArray) -> tuple[NDArray, NDArray]:
+    """(c'·c' floored, whether the projected column keeps enough of the whitened one)."""
+    d = np.einsum("ij,ij->j", c, c)
+    ok = d > _COLLINEAR * np.einsum("ij,ij->j", wc, wc)
+    return np.maximum(d, 1e-300), ok
+
+
+def _scan(g: cz._Gls, fixed: list[NDArray], alpha: float) -> list[_Proposal]:
+    """Each family's best proposal on the residual of ``g`` with ``fixed`` out (module doc)."""
+    t, dt = g.t, g.dt
+    M = len(t)
+    q, r, s2 = _residual(g, fixed)
+    s = math.sqrt(s2)
+    share = alpha / len(TRANSIENT_CAUSES)
+    out: list[_Proposal] = []
+    # steps and excursions: edges on a grid of block boundaries, 4 blocks from either end
+    stride = max(1, math.ceil((M - 8) / GRID))
+    edges = np.arange(4, M - 3, stride) * dt
+    wc = g.white(cz._step_blocks(t, dt, edges))
+    c = wc - q @ (q.T @ wc)
+    a = c.T @ r
+    d, ok = _norms(wc, c)
+    z = np.where(ok, a / np.sqrt(d) / s, 0.0)
+    i = int(np.argmax(np.abs(z)))
+    n_steps = len(edges)
+    out.append(_Proposal("bias_step", {"time_s": float(edges[i]), "size": float(a[i] / d[i])},
+                         float(z[i]), alarm.bonferroni_z(share, n_steps), n_steps))
+    if n_steps >= 3:
+        S = c.T @ c
+        num = a[:, None] - a[None, :]
+        den = d[:, None] + d[None, :] - 2.0 * S
+        iu = np.triu_indices(n_steps, k=2)  # at least two grid steps long
+        raw = np.einsum("ij,ij->j", wc, wc)
+        # a box already in the fit (or collinear with it) leaves nothing to test
+        live = den[iu] > _COLLINEAR * (raw[iu[0]] + raw[iu[1]])
+        zz = np.where(live, num[iu] / np.sqrt(np.maximum(den[iu], 1e-300)) / s, 0.0)
+        k = int(np.argmax(np.abs(zz)))
+        i0, i1 = int(iu[0][k]), int(iu[1][k])
+        out.append(_Proposal("excursion", {"start_s": float(edges[i0]),
+                                           "end_s": float(edges[i1]),
+                                           "size": float(num[i0, i1] / den[i0, i1])},
+                             float(zz[k]), alarm.bonferroni_z(share, len(zz)), len(zz)))
+    record_s = M * dt
+    if record_s / 4 > 2 * dt:
+        grid = np.geomspace(2 * dt, record_s / 4, T_SCAN)
+        wc = g.white(np.exp(-t[:, None] / grid[None, :]))
+        c = wc - q @ (q.T @ wc)
+        a = c.T @ r
+        d, ok = _norms(wc, c)
+        z = np.where(ok, a / np.sqrt(d) / s, 0.0)
+        i = int(np.argmax(np.abs(z)))
+        out.append(_Proposal("warmup", {"time_constant_s": float(grid[i]),
+                                        "size": float(a[i] / d[i])},
+                             float(z[i]), alarm.bonferroni_z(share, T_SCAN), T_SCAN))
+    return out
+
+
+def _as_candidate(p: _Proposal, note: str) -> cz.Candidate:
+    ev = (f"largest {p.cause.replace('_', ' ')} of {p.trials} tried is {abs(p.z):.3g} σ by "
+          f"generalised least squares with the noise fitted with the other effects removed "
+          f"(test: ≥ {p.threshold:.3g}, the Bonferroni split of the axis's false-alarm level "
+          f"{alarm.ALPHA_AXIS:g} over its trials){note}")
+    return cz.Candidate(p.cause, p.margin >= 1.0, dict(p.params), abs(p.z), p.threshold, ev)
+
+
+def signal_of(cands: list[cz.Candidate], n: int, rate_hz: float) -> NDArray[np.float64]:
+    """The summed signal of ``cands`` on n samples at ``rate_hz``."""
+    total = np.zeros(n)
+    for c in cands:
+        total += cz.cause_signal(c, n, rate_hz)
+    return total
+
+
+def _joint_sizes(g: cz._Gls, cands: list[cz.Candidate]) -> list[cz.Candidate]:
+    """The sizes of ``cands`` fitted together by GLS (their shapes held)."""
+    if not cands:
+        return cands
+    cols = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in cands]
+    _chi, coef, _ = g.chi2(cols)
+    return [replace(c, params={**c.params, "size": float(coef[2 + i])})
+            for i, c in enumerate(cands)]
+
+
+def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]:
+    """N, B, K for the forward search, from a robust Allan variance of ``y`` (block means at
+    ``rate_hz`` per second): at each octave τ, (1.4826·MAD of the differences of adjacent
+    τ-means)²/2, which equals the AVAR for Gaussian noise (NIST SP 1065 eq. 6 with a robust
+    spread) and is moved little by the few differences a step or an excursion not yet
+    removed makes, where the plain AVAR reads them as random walk. N is the caller's (the
+    short τ, where transients show nothing); B² and K² ≥ 0 are fitted by least squares
+    relative to the robust AVAR, each τ weighted by its number of differences."""
+    from scipy.optimize import nnls
+
+    taus, v, w = [], [], []
+    m = 1
+    while len(y) // m >= 17:
+        yb = cz.block_means(y, m)
+        d = np.diff(yb)
+        taus.append(m / rate_hz)
+        v.append((1.4826 * float(np.median(np.abs(d - np.median(d))))) ** 2 / 2.0)
+        w.append(math.sqrt(len(d)))
+        m *= 2
+    tau, var, wt = np.array(taus), np.array(v), np.array(w)
+    ok = var > 0
+    if np.count_nonzero(ok) < 3:
+        return {"N": n_white, "B": 0.0, "K": 0.0}
+    tau, var, wt = tau[ok], var[ok], wt[ok]
+    rest = var - n_white**2 / tau
+    a = np.column_stack([np.full_like(tau, 0.6643**2), tau / 3.0]) * (wt / var)[:, None]
+    coef, _ = nnls(a, rest * wt / var)
+    return {"N": n_white, "B": math.sqrt(coef[0]), "K": math.sqrt(coef[1])}
+
+
+def _z_in_fit(g: cz._Gls, cands: list[cz.Candidate]) -> list[float]:
+    """Each candidate's |z| with the others' columns in the fit (Birge-scaled)."""
+    cols = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in cands]
+    out = []
+    for i, col in enumerate(cols):
+        q, r, s2 = _residual(g, cols[:i] + cols[i + 1:])
+        c = col - q @ (q.T @ col)
+        cc = float(c @ c)
+        ok = cc > _COLLINEAR * float(col @ col)
+        out.append(abs(float(c @ r)) / math.sqrt(cc * s2) if ok else 0.0)
+    return out
+
+
+def _edges(c: cz.Candidate) -> list[float]:
+    if c.cause == "bias_step":
+        return [c.params["time_s"]]
+    if c.cause == "excursion":
+        return [c.params["start_s"], c.params["end_s"]]
+    return []
+
+
+def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
+    """The forward search's proposals as atoms: an excursion that shares an edge (within
+    ``tol`` s) with another proposal becomes its two steps (the greedy order may have cut a
+    step and an excursion into two overlapping boxes), and steps at one time become one."""
+    out: list[cz.Candidate] = []
+    for i, c in enumerate(tent):
+        others = [e for j, o in enumerate(tent) if j != i for e in _edges(o)]
+        if c.cause == "excursion" and any(abs(e - x) <= tol for e in _edges(c) for x in others):
+            sz = c.params["size"]
+            out += [replace(c, cause="bias_step", params={"time_s": c.params["start_s"],
+                                                          "size": sz}),
+                    replace(c, cause="bias_step", params={"time_s": c.params["end_s"],
+                                                          "size": -sz})]
+        else:
+            out.append(c)
+    steps = sorted((c for c in out if c.cause == "bias_step"), key=lambda c: c.params["time_s"])
+    merged: list[cz.Candidate] = []
+    for c in steps:
+        if merged and c.params["time_s"] - merged[-1].params["time_s"] <= tol:
+            m = merged[-1]
+            keep = m if abs(m.params["size"]) >= abs(c.params["size"]) else c
+            merged[-1] = replace(keep, params={**keep.params, "size": m.params["size"]
+                                               + c.params["size"]})
+        else:
+            merged.append(c)
+    return [c for c in out if c.cause != "bias_step"] + merged
+
+
+def _pair_excursions(cands: list[cz.Candidate], alpha: float) -> list[cz.Candidate]:
+    """Steps read as excursions: in time order, a step and a later one of the opposite sign
+    with nothing unpaired between them (nested like brackets) are one excursion when their
+    sizes are consistent with a return to the level before (|s₁ + s₂| within ``PAIR_SIGMA``
+    combined standard errors); its size the mean of |s₁| and |s₂| with the first's sign. It
+    is then tested as an excursion (the family's threshold at its most trials)."""
+    steps = sorted((c for c in cands if c.cause == "bias_step"),
+                   key=lambda c: c.params["time_s"])
+    rest = [c for c in cands if c.cause != "bias_step"]
+
+    def se(c: cz.Candidate) -> float:
+        lo, hi = c.intervals.get("size", [math.nan, math.nan])
+        return 0.5 * (hi - lo)
+
+    stack: list[cz.Candidate] = []
+    out: list[cz.Candidate] = []
+    for c in steps:
+        if stack:
+            a = stack[-1]
+            s1, s2 = a.params["size"], c.params["size"]
+            tol = PAIR_SIGMA * math.hypot(se(a), se(c))
+            if s1 * s2 < 0 and math.isfinite(tol) and abs(s1 + s2) <= tol:
+                stack.pop()
+                size = math.copysign(0.5 * (abs(s1) + abs(s2)), s1)
+                out.append(cz.Candidate(
+                    "excursion", True, {"start_s": a.params["time_s"],
+                                        "end_s": c.params["time_s"], "size": size},
+                    min(a.statistic, c.statistic),
+                    # the excursion family's test (its most trials: every pair of grid times)
+                    alarm.bonferroni_z(alpha / len(TRANSIENT_CAUSES), GRID * (GRID - 1) // 2),
+                    f"two steps that return to the level before them (sizes {s1:.3g} and "
+                    f"{s2:.3g} m/s², their sum within twice its standard error): "
+                    f"{a.detail.get('test', a.evidence)}; and {c.detail.get('test', c.evidence)}"))
+                continue
+        stack.append(c)
+    return rest + out + stack
+
+
+def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
+                  alpha: float = alarm.TRANSIENTS) -> tuple[list[cz.Candidate],
+                                                            list[cz.Candidate]]:
+    """(found, not found) on one axis's slow view ``y`` at ``rate_hz`` blocks per second:
+    the effects that passed, fitted together with 68 % intervals (``refine_compound``), and
+    the ones proposed that did not pass (their evidence says why; when none was proposed,
+    each family's best). ``noise_of(signal)``: N, B, K of the axis with ``signal`` removed.
+    ``alpha``: this search's share of the axis's false-alarm level (``alarm``).
+
+    Forward, then backward: effects are proposed one at a time, the noise refitted with the
+    ones proposed so far removed, while the best proposal reaches ``FORWARD_MARGIN`` of its
+    threshold (an effect not yet removed raises the floor of the others, so a real one may
+    sit below its threshold until they are out); then each proposal is tested in the joint
+    fit against the noise with all proposals removed, and the weakest that fails its
+    threshold is dropped, the noise refitted, until all pass."""
+    n = len(y)
+    tent: list[cz.Candidate] = []
+    first: list[cz.Candidate] = []
+    n_white = noise_of(np.zeros(n)).get("N", 0.0)
+    for _stage in range(MAX_EFFECTS):
+        noise = robust_noise(y - signal_of(tent, n, rate_hz), rate_hz, n_white)
+        g = _gls(y, rate_hz, noise)
+        if g is None:
+            break
+        fixed = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in tent]
+        props = _scan(g, fixed, alpha)
+        if not tent:
+            first = [_as_candidate(p, "") for p in props]
+        best = max(props, key=lambda p: p.margin)
+        if best.margin < FORWARD_MARGIN:
+            break
+        tent = _joint_sizes(g, [*tent, _as_candidate(best, "")])
+    if tent:
+        # the proposals' shapes refined together (the scan's grid T and times are coarse,
+        # and what a misplaced shape leaves behind reads as noise in the test below)
+        tent = _normalise(tent, 2 * len(y) / rate_hz / GRID)
+        tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
+                                                        rate_hz, n_white), tent)
+        # two steps that return to the level before them are tested as one excursion
+        tent = _pair_excursions(tent, alpha)
+    dropped: list[cz.Candidate] = []
+    while tent:
+        g = _gls(y, rate_hz, noise_of(signal_of(tent, n, rate_hz)))
+        if g is None:
+            return [], first
+        zs = _z_in_fit(g, tent)
+        margins = [z / c.threshold for z, c in zip(zs, tent, strict=True)]
+        k = int(np.argmin(margins))
+        if margins[k] >= 1.0:
+            tent = [replace(c, statistic=z) for c, z in zip(tent, zs, strict=True)]
+            break
+        c = tent.pop(k)
+        dropped.append(replace(c, passed=False, statistic=zs[k], evidence=c.evidence + (
+            f"; not claimed: in the joint fit, against the noise with every effect proposed "
+            f"removed, it is {zs[k]:.3g} σ (test: ≥ {c.threshold:.3g})")))
+        tent = _joint_sizes(g, tent)
+    if not tent:
+        return [], dropped or first
+    out = refine_compound(y, rate_hz, noise_of(signal_of(tent, n, rate_hz)), tent)
+    paired = _pair_excursions(out, alpha)
+    if len(paired) < len(out):
+        out = refine_compound(y, rate_hz, noise_of(signal_of(paired, n, rate_hz)), paired)
+    # a size must be as far from zero as the test asked of its z
+    kept = [c for c in out if cz.size_z(c) >= c.threshold]
+    dropped += [replace(c, passed=False, intervals={}, evidence=c.evidence + (
+        f"; not claimed: in the joint fit its size is {cz.size_z(c):.3g} standard errors "
+        f"from zero, below the test's {c.threshold:.3g}")) for c in out if c not in kept]
+    if len(kept) < len(out) and kept:
+        kept = refine_compound(y, rate_hz, noise_of(signal_of(kept, n, rate_hz)), kept)
+    return kept, dropped
+
+
+def _grid_for(c: cz.Candidate, key: str, g: cz._Gls) -> NDArray[np.float64]:
+    """The profile grid of one nonlinear parameter around its value."""
+    record_s = len(g.t) * g.dt
+    v = c.params[key]
+    if key == "time_constant_s":
+        return np.geomspace(max(v / 8, 2 * g.dt), max(min(v * 8, record_s / 2), 4 * g.dt),
+                            cz.T_GRID)
+    lo, hi = 4 * g.dt, record_s - 4 * g.dt
+    if c.cause == "excursion":  # the edges may not cross
+        if key == "start_s":
+            hi = c.params["end_s"] - g.dt
+        else:
+            lo = c.params["start_s"] + g.dt
+    half = 6 * g.dt
+    return np.linspace(max(v - half, lo), min(v + half, hi), 97)
+
+
+_NONLINEAR = {"bias_step": ("time_s",), "excursion": ("start_s", "end_s"),
+              "warmup": ("time_constant_s",)}
+
+
+def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
+                    cands: list[cz.Candidate]) -> list[cz.Candidate]:
+    """``cands`` fitted together by GLS with the noise ``noise``: parameters and 68 %
+    intervals (module doc). On a covariance that will not factor they come back unchanged."""
+    g = _gls(y, rate_hz, noise)
+    if g is None or not cands:
+        return cands
+    cands = list(cands)
+    prof: dict[tuple[int, str], tuple[NDArray, NDArray, NDArray, NDArray]] = {}
+    for _round in range(2):
+        for i, c in enumerate(cands):
+            others = [g.white(_column(o.cause, o.params, g.t, g.dt))
+                      for j, o in enumerate(cands) if j != i]
+            for key in _NONLINEAR[c.cause]:
+                grid = _grid_for(c, key, g)
+                shapes = np.column_stack([_column(c.cause, {**c.params, key: float(v)},
+                                                  g.t, g.dt) for v in grid])
+                chi, size, var = g.profile(g.white(shapes), others)
+                if key == "time_constant_s":
+                    best = cz._vertex(grid, chi)
+                else:
+                    best = cz._weight_interval(grid, chi, 1.0)[1]
+                cands[i] = c = replace(c, params={**c.params, key: float(best)})
+                prof[(i, key)] = (grid, chi, size, var)
+    cols = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in cands]
+    chi, coef, _cov = g.chi2(cols)
+    n_par = 2 + sum(1 + len(_NONLINEAR[c.cause]) for c in cands)
+    dof = max(1, len(g.yb) - n_par)
+    s2 = max(1.0, chi / dof)
+    out: list[cz.Candidate] = []
+    together = f" ({len(cands)} effects fitted together)" if len(cands) > 1 else ""
+    for i, c in enumerate(cands):
+        iv: dict[str, list[float]] = {}
+        size_iv: tuple[float, float] | None = None
+        for key in _NONLINEAR[c.cause]:
+            grid, chi_p, sz, var = prof[(i, key)]
+            if key == "time_constant_s":
+                iv[key] = list(cz._profile_interval(grid, chi_p, s2))
+            else:
+                lo, _mid, hi = cz._weight_interval(grid, chi_p, s2)
+                iv[key] = [lo, hi]
+            # the size's interval from the profile over the parameter it is most tied to
+            if size_iv is None or key == "time_constant_s":
+                size_iv = cz._size_interval(chi_p, sz, var, s2)
+        size = float(coef[2 + i])
+        assert size_iv is not None
+        # the profile's size is at the grid's best point; centre the interval's widths on
+        # the joint fit's size
+        lo, hi = size_iv
+        mid = 0.5 * (lo + hi)
+        iv["size"] = [size - (mid - lo), size + (hi - mid)]
+        params = {**c.params, "size": size}
+        text = "; ".join(f"{k} {params[k]:.5g} [{iv[k][0]:.5g}, {iv[k][1]:.5g}]"
+                         for k in (*_NONLINEAR[c.cause], "size"))
+        test = c.detail.get("test", c.evidence)
+        out.append(replace(c, params=params, intervals=iv, detail={**c.detail, "test": test},
+                           evidence=f"{test}; joint GLS fit{together}, χ²/dof "
+                           f"{chi / dof:.3g}: {text} (SI units, 68 %)"))
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# drift against a random walk
+
+
+def _neg2_loglik(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float], k: float,
+                 cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
+    """(−2 ln L, GLS coefficients, their covariance) of block means ``yb`` on ``cols`` with
+    the covariance of N, B, K = ``k`` (constants dropped)."""
+    c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), k)
+    L = np.linalg.cholesky(c)
+    from scipy.linalg import solve_triangular
+
+    a = solve_triangular(L, np.column_stack(cols), lower=True)
+    wy = solve_triangular(L, yb, lower=True)
+    coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
+    r = wy - a @ coef
+    logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
+    return logdet + float(r @ r), coef, np.linalg.pinv(a.T @ a)
+
+
+def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
+               transients: list[cz.Candidate], alpha: float = alarm.DRIFT) -> cz.Candidate:
+    """A deterministic drift (``params``: ``rate`` in m/s² per s) against a random walk, by
+    the time-domain likelihood ratio with K profiled (module doc); ``transients`` found on
+    the axis are fitted beside it. Passed when the ratio exceeds χ²(1)'s quantile at
+    ``alpha`` and the slope's interval at that z excludes zero."""
+    b = max(1, len(y) // DRIFT_BLOCKS)
+    yb = cz.block_means(y, b)
+    dt = b / rate_hz
+    t = (np.arange(len(yb)) + 0.5) * dt
+    record_s = len(yb) * dt
+    z_thr = alarm.bonferroni_z(alpha, 1)
+    k0 = noise.get("K", 0.0)
+    n_w = noise.get("N", 0.0)
+    # a K scale the record can resolve when the fit has none: one block's white σ over the
+    # record
+    k_ref = k0 if k0 > 0 else n_w / record_s
+    if not k_ref > 0:
+        return cz.Candidate("drift", False, evidence="drift test: no noise level to test "
+                            "against (N and K are zero)")
+    ks = np.concatenate([[0.0], np.geomspace(k_ref / K_SPAN, k_ref * K_SPAN, K_GRID)])
+    base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
+    tc = t - t.mean()
+    try:
+        h0 = [_neg2_loglik(yb, t, dt, noise, float(k), base)[0] for k in ks]
+        h1 = [_neg2_loglik(yb, t, dt, noise, float(k), [*base, tc]) for k in ks]
+    except np.linalg.LinAlgError:
+        return cz.Candidate("drift", False, evidence="drift test: the noise covariance would "
+                            "not factor")
+    j = int(np.argmin([h[0] for h in h1]))
+    lr = max(0.0, min(h0) - h1[j][0])
+    z = math.sqrt(lr)
+    slope = float(h1[j][1][-1])
+    se = math.sqrt(float(h1[j][2][-1, -1]))
+    k_hat0, k_hat1 = float(ks[int(np.argmin(h0))]), float(ks[j])
+    passed = z >= z_thr and abs(slope) >= z_thr * se
+    edge = "" if 0 < j < len(ks) - 1 else " (K at the end of its grid)"
+    ev = (f"time-domain likelihood ratio of a drift against a random walk, K profiled: "
+          f"√Δ(−2 ln L) = {z:.3g} (test: ≥ {z_thr:.3g}, χ²(1) at {alpha:g}); the walk alone "
+          f"wants K {k_hat0:.3g}, with the drift K {k_hat1:.3g} m/s²·√s{edge}; drift "
+          f"{slope:.3g} ± {se:.2g} m/s³")
+    return cz.Candidate("drift", passed, {"rate": slope},
+                        z, z_thr, ev, intervals={"rate": [slope - se, slope + se]})
+
+
+def min_detectable_excursion(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                             duration_s: float, z: float = 5.0, blocks: int = 1024) -> float:
+    """The stated minimum of an excursion (m/s²): z standard errors of its size in the GLS
+    fit (its Fisher information) with noise N, B, K over ``record_s``, the excursion
+    ``duration_s`` long in the middle of the record."""
+    dt = record_s / blocks
+    t = (np.arange(blocks) + 0.5) * dt
+    g_cov = cz._noise_cov(t, dt, n_white, b_inst, k_rrw)
+    L = np.linalg.cholesky(g_cov)
+    t0 = 0.5 * (record_s - duration_s)
+    cols = np.column_stack([np.ones_like(t), t, _column(
+        "excursion", {"start_s": t0, "end_s": t0 + duration_s}, t, dt)])
+    a = np.linalg.solve(L, cols)
+    return float(z * math.sqrt(np.linalg.inv(a.T @ a)[2, 2]))
+
+
+def min_detectable_drift(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                         z: float = 5.0, blocks: int = DRIFT_BLOCKS) -> float:
+    """The stated minimum of a drift (m/s³): z standard errors of its slope in the GLS fit
+    with noise N, B, K over ``record_s`` (the Fisher information of the slope, the random
+    walk in the covariance)."""
+    dt = record_s / blocks
+    t = (np.arange(blocks) + 0.5) * dt
+    L = np.linalg.cholesky(cz._noise_cov(t, dt, n_white, b_inst, k_rrw))
+    a = np.linalg.solve(L, np.column_stack([np.ones_like(t), t - t.mean()]))
+    return float(z * math.sqrt(np.linalg.inv(a.T @ a)[1, 1]))
