@@ -253,11 +253,31 @@ class EmulatedAdxl355:
         self.produced = 0  # sets produced since the last start of measurement
         self.produced_total = 0  # sets produced over the emulator's life
         self.lost = 0  # sets overwritten by newer data (overrun)
+        #: sets the part's own time line had due while it made none, between its first
+        #: measurement and the next it made (a stall, standby after a power cycle or a reset):
+        #: with ``produced_total`` the samples a gap-sized-by-time record accounts for
+        self.missed_total = 0
+        self._idle_since: tuple[float, float] | None = None   # (t, rate) production stopped
         self.stalled = False
         self._reset_state()
 
     # -- state ---------------------------------------------------------------------------
+    def _production_stops(self) -> None:
+        """The part stops making sets now (it was making them): its time line goes on."""
+        if self._measuring and not self.stalled and self._idle_since is None:
+            self._update()
+            self._idle_since = (self.clock.monotonic(), self.true_odr_hz)
+
+    def _production_resumes(self) -> None:
+        """The part makes sets again from now: the sets its time line had due meanwhile."""
+        if self._idle_since is not None and self._measuring and not self.stalled:
+            t0, rate = self._idle_since
+            self.missed_total += max(0, round((self.clock.monotonic() - t0) * rate))
+            self._idle_since = None
+
     def _reset_state(self) -> None:
+        if hasattr(self, "regs"):
+            self._production_stops()
         self.regs = bytearray(R.N_REGISTERS)
         for reg in R.REGISTERS.values():
             self.regs[reg.address] = reg.reset
@@ -339,6 +359,7 @@ class EmulatedAdxl355:
     def stop_producing(self) -> None:
         """The part keeps answering on the bus but produces no new samples."""
         with self.lock:
+            self._production_stops()
             self._update()
             self.stalled = True
 
@@ -347,6 +368,7 @@ class EmulatedAdxl355:
         with self.lock:
             self.stalled = False
             self._t_start = self.clock.monotonic() - self.produced / self.true_odr_hz
+            self._production_resumes()
 
     def set_odr_error_ppm(self, ppm: float) -> None:
         """Change the oscillator error from now on (a temperature-driven drift), without
@@ -544,6 +566,7 @@ class EmulatedAdxl355:
         if a == R.ADDR["POWER_CTL"]:
             standby = bool(value & R.POWER_STANDBY)
             if standby and self._measuring:
+                self._production_stops()
                 self._measuring = False
                 self.fifo.clear()  # entering standby clears the FIFO
                 self._ovr = False
@@ -551,6 +574,7 @@ class EmulatedAdxl355:
                 self._measuring = True
                 self._t_start = self.clock.monotonic()
                 self.produced = 0
+                self._production_resumes()
         self.regs[a] = value & 0xFF
 
     # -- SPI framing -----------------------------------------------------------------------

@@ -285,6 +285,28 @@ def test_device_stops_producing_and_resumes_without_catching_up():
     assert entries(bus) == 15 * 3 and emu.produced == 15
 
 
+def test_the_time_line_counts_what_a_stall_or_a_power_cycle_did_not_make():
+    """A gap is sized by time (daemon/service/acquisition.py), so the soak's truth is the
+    part's time line: the sets made (those due before a power cycle among them, though no
+    bus access asked for them) and the sets due while it made none."""
+    emu, bus, clock = make(odr_code=2)          # 1000 Hz
+    start(bus)
+    clock.advance(0.010)
+    emu.stop_producing()
+    clock.advance(1.0)
+    emu.resume_producing()
+    assert emu.produced_total == 10 and emu.missed_total == 1000
+    clock.advance(0.020)                        # 20 sets due, no bus access since
+    emu.power_cycle()
+    assert emu.produced_total == 30             # made, then lost with the power
+    clock.advance(0.5)                          # standby: nothing made, the time line goes on
+    bus.write(A["FILTER"], 2)
+    start(bus)
+    assert emu.missed_total == 1500
+    clock.advance(0.005)
+    assert entries(bus) == 5 * 3 and emu.produced_total == 35
+
+
 def test_drop_fifo_entries_leaves_the_fifo_mid_set():
     emu, bus, clock = make()
     start(bus)
