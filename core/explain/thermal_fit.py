@@ -195,15 +195,26 @@ class OctaveSums:
     n: NDArray[np.int64]
     s2: NDArray[np.float64]
 
+    def _padded(self, k: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """(n, s2) with zeros for the octaves past this one's (a part shorter than 2m, or
+        all inside a hole, counted no difference there)."""
+        pad = k - len(self.ms)
+        return (np.pad(self.n, (0, pad)), np.pad(self.s2, ((0, pad), (0, 0), (0, 0))))
+
+    def _union(self, other: OctaveSums) -> NDArray[np.int64]:
+        return self.ms if len(self.ms) >= len(other.ms) else other.ms
+
     def __add__(self, other: OctaveSums) -> OctaveSums:
-        k = min(len(self.ms), len(other.ms))
-        return OctaveSums(self.ms[:k], self.n[:k] + other.n[:k], self.s2[:k] + other.s2[:k])
+        # the octaves of the longer: truncating to the shorter let one part inside a hole
+        # (no octave) or a short one drop every long τ of the whole record's sums
+        ms = self._union(other)
+        (n1, s1), (n2, s2) = self._padded(len(ms)), other._padded(len(ms))
+        return OctaveSums(ms, n1 + n2, s1 + s2)
 
     def __sub__(self, other: OctaveSums) -> OctaveSums:
-        k = min(len(self.ms), len(other.ms))
-        return OctaveSums(self.ms, self.n - np.pad(other.n[:k], (0, len(self.ms) - k)),
-                          self.s2 - np.pad(other.s2[:k], ((0, len(self.ms) - k), (0, 0),
-                                                           (0, 0))))
+        ms = self._union(other)
+        (n1, s1), (n2, s2) = self._padded(len(ms)), other._padded(len(ms))
+        return OctaveSums(ms, n1 - n2, s1 - s2)
 
     def cov(self) -> NDArray[np.float64]:
         """Allan covariance (K, C, C), NaN where no difference was counted."""

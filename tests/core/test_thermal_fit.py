@@ -140,6 +140,46 @@ def test_lag_scan_sums_equal_the_streaming_estimators_covariance(holes):
     assert np.max(np.abs(fast.cov() - res.cov) / scale) < 1e-12
 
 
+def test_part_sums_inside_a_hole_do_not_shorten_the_records_sums():
+    """The jackknife's parts: one lies inside a hole (no octave), others are cut short by it.
+    Their sums, and all parts but one, equal the streaming accumulators of the parts merged
+    (as before the fast path): adding them used to keep only the octaves of the shortest
+    part, which dropped every long τ and took a z = 81 coupling to z = 1.1."""
+    import itertools
+
+    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.explain.thermal_fit import JACKKNIFE_GROUPS, feed, octave_sums
+
+    rng = np.random.default_rng(8)
+    X = np.cumsum(rng.standard_normal((20_000, 2)), axis=0) * 0.01 + rng.standard_normal(
+        (20_000, 2))
+    keep = np.ones(len(X), dtype=bool)
+    keep[3_900:6_300] = False  # the third part (4000-6000) is all hole
+    edges = np.linspace(0, len(X), JACKKNIFE_GROUPS + 1).astype(int)
+    pieces = [octave_sums(X[a:b], keep[a:b]) for a, b in itertools.pairwise(edges)]
+    assert len(pieces[2].ms) == 0
+    whole = sum(pieces[1:], start=pieces[0])
+
+    def merged(skip: int | None) -> object:
+        accs = []
+        for g, (a, b) in enumerate(itertools.pairwise(edges)):
+            if g != skip:
+                sa = StreamingAllan(2, 1.0)
+                feed(sa, X[a:b], keep[a:b])
+                accs.append(sa)
+        acc = StreamingAllan.from_state(accs[0].state())
+        for sa in accs[1:]:
+            acc.merge(sa)
+        return acc.result()
+
+    for sums, res in [(whole, merged(None)), (whole - pieces[0], merged(0)),
+                      (whole - pieces[2], merged(2))]:
+        assert np.array_equal(sums.n, res.n)
+        ok = sums.n > 0
+        scale = np.abs(res.cov[ok]).max(axis=(1, 2))[:, None, None]
+        assert np.max(np.abs(sums.cov()[ok] - res.cov[ok]) / scale) < 1e-12
+
+
 @pytest.mark.parametrize("lag_s", [-60.0, 4.0, 300.0, 20_000.0])
 def test_without_start_equals_the_projection_on_the_whole_record(lag_s):
     """The start-up projection, computed where e^(−t/τ_L) lives, equals the full-length
