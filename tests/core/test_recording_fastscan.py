@@ -119,6 +119,19 @@ def _both(path: Path, monkeypatch: pytest.MonkeyPatch, **kw: Any
     return fast, slow
 
 
+def _stretches_counted(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The blocks of each stretch the scan hands the walk from now on."""
+    taken: list[int] = []
+    real = rawscan.stretch_record
+
+    def counted(run, stretch):  # type: ignore[no-untyped-def]
+        taken.append(len(stretch.i0))
+        return real(run, stretch)
+
+    monkeypatch.setattr(rawscan, "stretch_record", counted)
+    return taken
+
+
 def _assert_same(fast: Any, slow: Any) -> None:
     if isinstance(slow, Exception):
         assert type(fast) is type(slow) and str(fast) == str(slow)
@@ -152,14 +165,7 @@ def _copy(recording: Path, tmp_path: Path) -> Path:
 
 def test_the_fast_scan_is_the_general_one_on_a_clean_recording(recording: Path,
                                                                 monkeypatch) -> None:
-    taken: list[int] = []
-    real = rawscan.stretch_record
-
-    def counted(run, stretch):  # type: ignore[no-untyped-def]
-        taken.append(len(stretch.i0))
-        return real(run, stretch)
-
-    monkeypatch.setattr(rawscan, "stretch_record", counted)
+    taken = _stretches_counted(monkeypatch)
     fast, slow = _both(recording, monkeypatch)
     # the fast path was taken: every raw block read in C, in a few stretches
     assert isinstance(fast, RecordingSource) and sum(taken) == len(fast._plan.i0)
@@ -497,13 +503,6 @@ def test_header_copies_between_blocks_read_the_same(tmp_path: Path, monkeypatch)
     assert [r.rate_hz for r in fast.info.recording.runs] == [125.03]
     (rec / f"{a}_00000000_x.avr").write_bytes(b"".join(parts))
     # and header records cut no stretch
-    taken: list[int] = []
-    real = rawscan.stretch_record
-
-    def counted(run, stretch):  # type: ignore[no-untyped-def]
-        taken.append(len(stretch.i0))
-        return real(run, stretch)
-
-    monkeypatch.setattr(rawscan, "stretch_record", counted)
+    taken = _stretches_counted(monkeypatch)
     assert open_record(rec, runs=[a]).info.n_samples == n_full
     assert taken == [3, 4, 3, 2, 1]
