@@ -506,3 +506,48 @@ def test_header_copies_between_blocks_read_the_same(tmp_path: Path, monkeypatch)
     taken = _stretches_counted(monkeypatch)
     assert open_record(rec, runs=[a]).info.n_samples == n_full
     assert taken == [3, 4, 3, 2, 1]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["raw", "raw", "raw", "head", "head", "bad head",
+                                           "jump"]),
+                          st.sampled_from(["a", "b"]), st.integers(0, 3)),
+                min_size=1, max_size=30))
+def test_header_records_anywhere_read_the_same(steps: list[tuple[str, str, int]]) -> None:
+    """Fuzz: raw blocks, header records (readable with a new rate, or undecodable) and index
+    jumps back of two runs in any order in one segment: the fast path reads what the general
+    one reads, headers in stretches or not."""
+    import tempfile
+
+    runs = {"a": "n00000001-x-a", "b": "n00000002-x-b"}
+    at = {"a": 0, "b": 100_000}
+    parts = []
+    for what, r, k in steps:
+        run = runs[r]
+        if what == "raw":
+            counts = np.full((5 + k, 3), at[r], dtype=np.int32)
+            parts.append(frame(frames.encode(frames.raw_record(run, 0, at[r], counts, 0.0,
+                                                               0.0))))
+            at[r] += 5 + k
+        elif what == "jump":
+            at[r] = max(at[r] - 7 * k, 0 if r == "a" else 100_000)
+        else:
+            rate = RATE + 0.01 * k
+            payload = frames.encode(frames.header_record(
+                run, rate_hz=rate, t_mono=0.0, t_real=0.0, i0=at[r],
+                # compatible rates (as wide as the fit's uncertainty): the record's rate is
+                # their mean, so it shows each run's newest header
+                scale_m_s2_per_count=SCALE, timebase={"odr_hz": rate, "odr_u_hz": 0.5},
+                nominal_odr_hz=RATE))
+            if what == "bad head":
+                bad = msgpack.unpackb(payload)
+                bad["v"] = 2
+                payload = msgpack.packb(bad)
+            parts.append(frame(payload))
+    with tempfile.TemporaryDirectory() as tmp, pytest.MonkeyPatch.context() as mp:
+        rec = Path(tmp) / "rec"
+        rec.mkdir()
+        (rec / f"{runs['a']}_00000000_x.avr").write_bytes(b"".join(parts))
+        for pick in (None, [runs["a"]]):
+            fast, slow = _both(rec, mp, runs=pick)
+            _assert_same(fast, slow)
