@@ -516,7 +516,7 @@ def test_header_copies_between_blocks_read_the_same(tmp_path: Path, monkeypatch)
 def test_header_records_anywhere_read_the_same(steps: list[tuple[str, str, int]]) -> None:
     """Fuzz: raw blocks, header records (readable with a new rate, or undecodable) and index
     jumps back of two runs in any order in one segment: the fast path reads what the general
-    one reads, headers in stretches or not."""
+    one reads, headers in stretches or not, in chunks of any size."""
     import tempfile
 
     runs = {"a": "n00000001-x-a", "b": "n00000002-x-b"}
@@ -548,6 +548,8 @@ def test_header_records_anywhere_read_the_same(steps: list[tuple[str, str, int]]
         rec = Path(tmp) / "rec"
         rec.mkdir()
         (rec / f"{runs['a']}_00000000_x.avr").write_bytes(b"".join(parts))
-        for pick in (None, [runs["a"]]):
+        for pick, chunk in ((None, rawscan.CHUNK), ([runs["a"]], rawscan.CHUNK),
+                            ([runs["a"]], 257)):      # a chunk ends within most stretches
+            mp.setattr(rawscan, "CHUNK", chunk)
             fast, slow = _both(rec, mp, runs=pick)
             _assert_same(fast, slow)
