@@ -18,10 +18,10 @@
  *       buf in the frames walked. entries: bytes holding ENTRY_FIELDS int64 per frame that
  *       is not a temp/avar/checkpoint/status record (those are checked, then skipped as the
  *       Python scan skips them by their kind): offset (base + position in buf), payload
- *       length, code (1: a raw record read here; 2: decode it in Python), i0, n, offset of
- *       the counts (base + position), offset of the run id (base + position), its length,
- *       and 1 when the entry before it in this call is a raw record read here of the same run
- *       (else 0).
+ *       length, code (1: a raw record read here; 2: decode it in Python; 3: the same, its
+ *       kind "header"), i0, n, offset of the counts (base + position), offset of the run id
+ *       (base + position), its length, and 1 when the entry before it in this call, past any
+ *       header entries, is a raw record read here of the same run (else 0).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -30,7 +30,7 @@
 #include <zlib.h>
 
 #define ENTRY_FIELDS 9
-#define API 2
+#define API 3
 
 /* CRC-32 (zlib's) by carry-less multiplication where the CPU has it (x86-64 PCLMULQDQ and
  * SSE4.1, checked at run time): zlib's table loop was about half the C loop's time on a long
@@ -332,9 +332,11 @@ parse_raw(const unsigned char *pay, size_t len, int64_t *i0, int64_t *n,
     return more == 0 && c.p == c.end;
 }
 
-/* The record's kind when it is one the scan skips (frames.encode writes "kind" first). */
+/* The record's kind from its first bytes (frames.encode writes "kind" first), compared with
+ * ``name`` as source.py's _peek_kind compares it (a string cut short by the payload's end is
+ * what is left of it, as Python's slice). */
 static int
-skipped_kind(const unsigned char *pay, size_t len)
+kind_is(const unsigned char *pay, size_t len, const char *name)
 {
     if (len < 1)
         return 0;
@@ -345,12 +347,17 @@ skipped_kind(const unsigned char *pay, size_t len)
     int size = (int)pay[i + 5] - 0xa0;
     if (size < 0 || size >= 32)
         return 0;
-    /* as Python's slice: a string cut short by the payload's end is what is left of it */
     size_t have = len - i - 6 < (size_t)size ? len - i - 6 : (size_t)size;
-    const unsigned char *k = pay + i + 6;
+    return have == strlen(name) && memcmp(pay + i + 6, name, have) == 0;
+}
+
+/* Whether the record is of a kind the scan skips. */
+static int
+skipped_kind(const unsigned char *pay, size_t len)
+{
     static const char *names[] = {"temp", "avar", "checkpoint", "status"};
     for (int j = 0; j < 4; j++)
-        if (have == strlen(names[j]) && memcmp(k, names[j], have) == 0)
+        if (kind_is(pay, len, names[j]))
             return 1;
     return 0;
 }
@@ -404,7 +411,8 @@ scan(PyObject *self, PyObject *args)
             int raw = parse_raw(pay, n, &i0, &k, &counts, &run, &run_len);
             e[0] = base + (int64_t)pos;
             e[1] = n;
-            e[2] = raw ? 1 : 2;
+            int head = !raw && kind_is(pay, n, "header");
+            e[2] = raw ? 1 : head ? 3 : 2;
             e[3] = raw ? i0 : 0;
             e[4] = raw ? k : 0;
             e[5] = raw ? base + (int64_t)(counts - buf) : -1;
@@ -412,8 +420,12 @@ scan(PyObject *self, PyObject *args)
             e[7] = raw ? (int64_t)run_len : 0;
             e[8] = raw && prev_run != NULL && prev_len == run_len
                    && memcmp(prev_run, run, run_len) == 0;
-            prev_run = raw ? run : NULL;
-            prev_len = run_len;
+            if (raw) {
+                prev_run = run;
+                prev_len = run_len;
+            }
+            else if (!head)             /* header records do not part a raw one from the last */
+                prev_run = NULL;
             count++;
         }
         pos += 8 + (size_t)n;

@@ -23,11 +23,12 @@ the general one on clean and damaged recordings.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Generator, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
 import numpy as np
+from avard.core.errors import FormatError
 from avard.core.io.recording import FRAME_HEADER, Frame
 from numpy.typing import NDArray
 
@@ -50,7 +51,7 @@ def _load() -> Any:
 _framescan: Any = _load()
 
 #: The interface this module calls: a module built from another ``_framescan.c`` is not used.
-API = 2
+API = 3
 #: Bytes of a segment handed to the C loop at once (a frame longer than this is read whole).
 CHUNK = 1 << 20
 
@@ -63,7 +64,8 @@ def available() -> bool:
 @dataclass(frozen=True)
 class Stretch:
     """Raw blocks of one run in one file, each continuing the last one's sample index, whose
-    frames checked and whose records are laid out as ``frames.raw_record`` writes them."""
+    frames checked and whose records are laid out as ``frames.raw_record`` writes them; with
+    the header records between them (the service's copies every minute), kept in place."""
 
     file: str
     number: int                       # the file's place in the recording's file list
@@ -74,16 +76,45 @@ class Stretch:
     i0: NDArray[np.int64]             # first sample index of each block
     n: NDArray[np.int64]              # samples of each block
     counts: NDArray[np.int64]         # file offset of each block's counts (<i4, (n, 3))
+    # header frames between the blocks: (blocks before it, frame), in file order
+    headers: tuple[tuple[int, Frame], ...] = ()
 
-    def records(self, max_bytes: int) -> Iterator[dict[str, Any]]:
+    def copies(self, run: str, max_bytes: int) -> list[dict[str, Any]] | None:
+        """The header records between the blocks when every one decodes and is of ``run``
+        (copies of a header the walk knows, which only renew its newest header: the walk
+        may take them after the blocks), else None."""
+        from avard.core.io import frames as wire
+
+        out = []
+        for _, fr in self.headers:
+            try:
+                rec = wire.decode(fr.payload, max_bytes=max_bytes)
+            except FormatError:
+                return None
+            if rec["kind"] != "header" or rec["run"] != run:
+                return None
+            out.append(rec)
+        return out
+
+    def records(self, decoded: Callable[[Frame], dict[str, Any] | None], max_bytes: int
+                ) -> Iterator[dict[str, Any]]:
         """The blocks as the general decoder reads them (``frames.decode``), each tagged with
-        ``_at`` as the scan tags a raw record: what the walk takes where the stretch cannot
-        be taken whole (a run without its header yet, indices met before)."""
+        ``_at`` as the scan tags a raw record, and the headers between them in place (through
+        ``decoded``, the reader's decode-or-report): what the walk takes where the stretch
+        cannot be taken whole (a run without its header yet, indices met before, a header
+        between that is not a readable copy)."""
         from avard.core.io import frames as wire
 
         hdr = FRAME_HEADER.size
-        for off, size, at in zip(self.offsets.tolist(), self.lengths.tolist(),
-                                 self.counts.tolist(), strict=True):
+        heads = iter(self.headers)
+        nxt = next(heads, None)
+        for k, (off, size, at) in enumerate(zip(self.offsets.tolist(), self.lengths.tolist(),
+                                                self.counts.tolist(), strict=True)):
+            while nxt is not None and nxt[0] == k:
+                got = decoded(nxt[1])
+                if got is not None:
+                    yield got
+                nxt = next(heads, None)
             rel = off - self.base + hdr
             rec = wire.decode(self.data[rel:rel + size], max_bytes=max_bytes)
             rec["_at"] = (self.number, at, int(rec["i0"]))
@@ -139,21 +170,39 @@ def spans(cont: NDArray[np.bool_]) -> Iterator[tuple[int, int]]:
 
 def _entries(e: NDArray[np.int64], data: bytes, base: int, name: str, number: int
              ) -> Iterator[Frame | tuple[str, Stretch]]:
-    """The C loop's entries as frames to decode and stretches of raw blocks."""
+    """The C loop's entries as frames to decode and stretches of raw blocks (a stretch goes
+    on across header records, which it carries in place)."""
     if not len(e):
         return
     hdr = FRAME_HEADER.size
     off, size, code, i0, n, counts = (e[:, k] for k in range(6))
-    raw = code == 1
-    # an entry continues the stretch before it: both raw, same run, the next index
-    cont = np.zeros(len(e), dtype=bool)
-    cont[1:] = raw[1:] & raw[:-1] & (e[1:, 8] == 1) & (i0[1:] == i0[:-1] + n[:-1])
-    for a, b in spans(cont):
-        if not raw[a]:
-            rel = int(off[a]) - base + hdr
-            yield Frame(name, int(off[a]), data[rel:rel + int(size[a])])
-            continue
-        r0 = int(e[a, 6]) - base
-        run = data[r0:r0 + int(e[a, 7])].decode("ascii")
-        yield run, Stretch(name, number, data, base, off[a:b], size[a:b], i0[a:b], n[a:b],
-                           counts[a:b])
+
+    def frame_at(k: int) -> Frame:
+        rel = int(off[k]) - base + hdr
+        return Frame(name, int(off[k]), data[rel:rel + int(size[k])])
+
+    raws = np.flatnonzero(code == 1)
+    heads = np.cumsum(code == 3)
+    # a raw entry continues the raw entry before it: the same run (the C loop's flag), the
+    # next index, and only header records between them
+    cont = np.zeros(len(raws), dtype=bool)
+    if len(raws) > 1:
+        a, b = raws[:-1], raws[1:]
+        cont[1:] = ((e[b, 8] == 1) & (i0[b] == i0[a] + n[a])
+                    & (heads[b] - heads[a] == b - a - 1))
+    at = 0                                   # the next entry not yielded
+    for p, q in spans(cont):
+        first, last = int(raws[p]), int(raws[q - 1])
+        for k in range(at, first):
+            yield frame_at(k)
+        inside = raws[p:q]
+        hk = np.flatnonzero(code[first + 1:last] == 3) + first + 1
+        between = [(int(j), frame_at(int(k)))
+                   for j, k in zip(np.searchsorted(inside, hk), hk, strict=True)]
+        r0 = int(e[first, 6]) - base
+        run = data[r0:r0 + int(e[first, 7])].decode("ascii")
+        yield run, Stretch(name, number, data, base, off[inside], size[inside], i0[inside],
+                           n[inside], counts[inside], tuple(between))
+        at = last + 1
+    for k in range(at, len(e)):
+        yield frame_at(k)

@@ -781,17 +781,24 @@ MAX_HEADERLESS_SAMPLES = 1 << 22
 
 
 def _taken(rec: dict[str, Any], headers: dict[str, dict[str, Any]], seen: _IndexSet,
-           max_bytes: int) -> Iterable[dict[str, Any]]:
+           reader: RecordingReader) -> Iterable[dict[str, Any]]:
     """The records one item of the reader stands for. A stretch (``_stretch``: consecutive
     raw blocks of one run, each continuing the last one's index, from the scan's C loop,
-    core/io/rawscan.py) is taken as one raw block when its run's header is known and its
-    indices are all new: the walk then does for it what it does for its blocks one by one
-    (one range seen, the run's next index after its last block, damage before it charged to
-    its first). Otherwise its blocks are decoded one by one by the general decoder."""
+    core/io/rawscan.py, with the header records between them) is taken as one raw block when
+    its run's header is known, its indices are all new and every header between is a
+    readable copy of that run's header: the walk then does for it what it does for its blocks
+    one by one (one range seen, the run's next index after its last block, damage before it
+    charged to its first), and the copies after it, which only renew the run's newest header,
+    in their order. Otherwise its blocks and headers are decoded one by one, in place."""
     stretch = rec.get("_stretch")
-    if stretch is None or (rec["run"] in headers and seen.in_order(int(rec["i0"]))):
+    if stretch is None:
         return (rec,)
-    return stretch.records(max_bytes)  # type: ignore[no-any-return]
+    run = rec["run"]
+    if run in headers and seen.in_order(int(rec["i0"])):
+        copies = stretch.copies(run, reader.max_bytes)
+        if copies is not None:
+            return (rec, *copies)
+    return stretch.records(reader.decoded, reader.max_bytes)  # type: ignore[no-any-return]
 
 
 def walk(reader: RecordingReader, report: WalkReport | None = None
@@ -872,7 +879,7 @@ def walk(reader: RecordingReader, report: WalkReport | None = None
     for item in reader:
         # a stretch of raw blocks read by the scan's C loop (core/io/rawscan.py) is one
         # block where that is the same as its blocks one by one, else its blocks
-        for rec in _taken(item, headers, seen_idx, reader.max_bytes):
+        for rec in _taken(item, headers, seen_idx, reader):
             if len(reader.problems) > n_problems:
                 carry = carry or str(reader.problems[n_problems])
                 n_problems = len(reader.problems)

@@ -119,6 +119,19 @@ def _both(path: Path, monkeypatch: pytest.MonkeyPatch, **kw: Any
     return fast, slow
 
 
+def _stretches_counted(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The blocks of each stretch the scan hands the walk from now on."""
+    taken: list[int] = []
+    real = rawscan.stretch_record
+
+    def counted(run, stretch):  # type: ignore[no-untyped-def]
+        taken.append(len(stretch.i0))
+        return real(run, stretch)
+
+    monkeypatch.setattr(rawscan, "stretch_record", counted)
+    return taken
+
+
 def _assert_same(fast: Any, slow: Any) -> None:
     if isinstance(slow, Exception):
         assert type(fast) is type(slow) and str(fast) == str(slow)
@@ -152,19 +165,13 @@ def _copy(recording: Path, tmp_path: Path) -> Path:
 
 def test_the_fast_scan_is_the_general_one_on_a_clean_recording(recording: Path,
                                                                 monkeypatch) -> None:
-    taken: list[int] = []
-    real = rawscan.stretch_record
-
-    def counted(run, stretch):  # type: ignore[no-untyped-def]
-        taken.append(len(stretch.i0))
-        return real(run, stretch)
-
-    monkeypatch.setattr(rawscan, "stretch_record", counted)
+    taken = _stretches_counted(monkeypatch)
     fast, slow = _both(recording, monkeypatch)
-    # the fast path was taken: every raw block read in C, in a few stretches (the header
-    # copies every 5 s and the segment ends cut them)
+    # the fast path was taken: every raw block read in C, in a few stretches
     assert isinstance(fast, RecordingSource) and sum(taken) == len(fast._plan.i0)
     assert len(taken) < sum(taken) / 5
+    # header copies (every 5 s) cut no stretch: segment ends and gap records do
+    assert len(taken) <= len(_segments(recording)) + len(fast.info.recording.gaps)
     _assert_same(fast, slow)
     assert not isinstance(fast, Exception)
     summary = fast.info.recording
@@ -443,3 +450,106 @@ def test_the_frame_loops_crc_at_the_folds_boundaries(size: int) -> None:
     bad[len(bad) // 2] ^= 1
     consumed, status, _ = _framescan.scan(bytes(bad), 0, 1 << 24)
     assert (consumed, status) == (0, 1)
+
+
+def test_header_copies_between_blocks_read_the_same(tmp_path: Path, monkeypatch) -> None:
+    """Header records between one run's raw blocks: copies with a newer rate fit (the newest
+    one is the run's rate), a copy whose CRC checks but whose record does not decode, a
+    header of another run, a run whose first header comes after its first blocks, and
+    blocks met before with a copy between them: the stretch goes on across a readable copy
+    and is taken in place otherwise, read alike by both paths."""
+    a, b, c = "n00000001-x-a", "n00000002-x-b", "n00000003-x-c"
+
+    def head(run: str, i0: int, rate: float = RATE, *, v: int = 1) -> bytes:
+        rec = frames.header_record(run, rate_hz=rate, t_mono=0.0, t_real=0.0, i0=i0,
+                                   scale_m_s2_per_count=SCALE,
+                                   timebase={"odr_hz": rate, "odr_u_hz": 1e-4},
+                                   nominal_odr_hz=RATE)
+        payload = frames.encode(rec)
+        if v != 1:                               # checks by CRC, refused by decode
+            bad = msgpack.unpackb(payload)
+            bad["v"] = v
+            payload = msgpack.packb(bad)
+        return frame(payload)
+
+    def raw(run: str, i0: int, n: int = 10) -> bytes:
+        counts = np.arange(3 * n, dtype=np.int32).reshape(n, 3) + i0
+        return frame(frames.encode(frames.raw_record(run, 0, i0, counts, 0.0, 0.0)))
+
+    parts = [head(a, 0), raw(a, 0), head(a, 10, 125.01), raw(a, 10), head(a, 20, 125.02),
+             head(a, 20, 125.03), raw(a, 20),                # copies read: taken whole
+             raw(c, 9000), head(c, 9010), raw(c, 9010), raw(c, 9020), head(c, 9030),
+             raw(c, 9030),                                    # the run's first header within
+             raw(a, 30), head(a, 40, v=2), raw(a, 40), head(b, 5000),
+             raw(a, 50),                                      # undecodable, another run's
+             head(a, 60, 125.04), raw(a, 30), head(a, 40, 125.05), raw(a, 40),  # met before
+             raw(a, 60)]
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    (rec / f"{a}_00000000_x.avr").write_bytes(b"".join(parts))
+    fast, slow = _both(rec, monkeypatch, runs=[a])
+    _assert_same(fast, slow)
+    assert isinstance(fast, RecordingSource) and fast.info.recording is not None
+    summary = fast.info.recording
+    assert sum("undecodable" in p for p in summary.problems) == 1
+    assert summary.samples_duplicated == 20
+    assert [r.rate_hz for r in summary.runs] == [125.05]
+    n_full = fast.info.n_samples
+    # the copies of a stretch taken whole are the run's newest header when they are the last
+    (rec / f"{a}_00000000_x.avr").write_bytes(b"".join(parts[:7]))
+    fast, slow = _both(rec, monkeypatch, runs=[a])
+    _assert_same(fast, slow)
+    assert isinstance(fast, RecordingSource) and fast.info.recording is not None
+    assert [r.rate_hz for r in fast.info.recording.runs] == [125.03]
+    (rec / f"{a}_00000000_x.avr").write_bytes(b"".join(parts))
+    # and header records cut no stretch
+    taken = _stretches_counted(monkeypatch)
+    assert open_record(rec, runs=[a]).info.n_samples == n_full
+    assert taken == [3, 4, 3, 2, 1]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["raw", "raw", "raw", "head", "head", "bad head",
+                                           "jump"]),
+                          st.sampled_from(["a", "b"]), st.integers(0, 3)),
+                min_size=1, max_size=30))
+def test_header_records_anywhere_read_the_same(steps: list[tuple[str, str, int]]) -> None:
+    """Fuzz: raw blocks, header records (readable with a new rate, or undecodable) and index
+    jumps back of two runs in any order in one segment: the fast path reads what the general
+    one reads, headers in stretches or not, in chunks of any size."""
+    import tempfile
+
+    runs = {"a": "n00000001-x-a", "b": "n00000002-x-b"}
+    at = {"a": 0, "b": 100_000}
+    parts = []
+    for what, r, k in steps:
+        run = runs[r]
+        if what == "raw":
+            counts = np.full((5 + k, 3), at[r], dtype=np.int32)
+            parts.append(frame(frames.encode(frames.raw_record(run, 0, at[r], counts, 0.0,
+                                                               0.0))))
+            at[r] += 5 + k
+        elif what == "jump":
+            at[r] = max(at[r] - 7 * k, 0 if r == "a" else 100_000)
+        else:
+            rate = RATE + 0.01 * k
+            payload = frames.encode(frames.header_record(
+                run, rate_hz=rate, t_mono=0.0, t_real=0.0, i0=at[r],
+                # compatible rates (as wide as the fit's uncertainty): the record's rate is
+                # their mean, so it shows each run's newest header
+                scale_m_s2_per_count=SCALE, timebase={"odr_hz": rate, "odr_u_hz": 0.5},
+                nominal_odr_hz=RATE))
+            if what == "bad head":
+                bad = msgpack.unpackb(payload)
+                bad["v"] = 2
+                payload = msgpack.packb(bad)
+            parts.append(frame(payload))
+    with tempfile.TemporaryDirectory() as tmp, pytest.MonkeyPatch.context() as mp:
+        rec = Path(tmp) / "rec"
+        rec.mkdir()
+        (rec / f"{runs['a']}_00000000_x.avr").write_bytes(b"".join(parts))
+        for pick, chunk in ((None, rawscan.CHUNK), ([runs["a"]], rawscan.CHUNK),
+                            ([runs["a"]], 257)):      # a chunk ends within most stretches
+            mp.setattr(rawscan, "CHUNK", chunk)
+            fast, slow = _both(rec, mp, runs=pick)
+            _assert_same(fast, slow)
