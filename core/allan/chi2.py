@@ -158,8 +158,9 @@ def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
     """χ²_k(p) for every p of ``ps`` and every k: shape (len(ps), *k.shape), row j the
     ``chi2_ppf(ps[j], k)``. One Newton iteration over all of them at once (an interval over a
     grid of probabilities costs one call, not one per probability); each entry stops changing
-    once it has converged, so it is the same whatever else is in the call
-    (tests/core/test_chi2.py holds the rows equal to ``chi2_ppf`` one p at a time)."""
+    once it has converged, so it is the same whatever else is in the call, and equal k
+    (the separation's parts share their EDF) are computed once (tests/core/test_chi2.py
+    holds the rows equal to ``chi2_ppf`` one p, and one k, at a time)."""
     p_list = [float(p) for p in ps]
     for p in p_list:
         if not 0.0 < p < 1.0:
@@ -168,7 +169,9 @@ def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
     out_shape = (len(p_list), *k_arr.shape)
     if not p_list or k_arr.size == 0:
         return np.empty(out_shape)
-    a1 = k_arr.ravel() / 2.0
+    # Equal k have equal quantiles (each entry is computed on its own): compute each once.
+    k_unique, where = np.unique(k_arr.ravel(), return_inverse=True)
+    a1 = k_unique / 2.0
     a = np.tile(a1, len(p_list))
     p_col = np.repeat(np.array(p_list), a1.size)
     # Wilson–Hilferty start: (χ²/k)^(1/3) is nearly normal with mean 1 − 2/(9k), var 2/(9k).
@@ -193,7 +196,7 @@ def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
         todo[todo] = np.abs(new - xt) > 1e-13 * np.abs(xt)
         if not todo.any():
             break
-    return (2.0 * x).reshape(out_shape)
+    return (2.0 * x).reshape(len(p_list), a1.size)[:, where.ravel()].reshape(out_shape)
 
 
 def _erfinv(y: float) -> float:

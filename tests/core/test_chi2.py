@@ -82,8 +82,9 @@ def test_the_grid_of_quantiles_equals_one_probability_at_a_time() -> None:
     """chi2_ppf_grid (the separation's intervals ask for 64 probabilities at once) is the
     fast path beside chi2_ppf: every row equal to chi2_ppf of its p over the same k, and
     every entry to chi2_ppf of one p and one k, across the start for a < 1, the series, the
-    continued fraction and the quadrature (a ≥ 50)."""
+    continued fraction and the quadrature (a ≥ 50), with k repeated and in any order."""
     k = np.concatenate([np.geomspace(0.3, 1e7, 40), [1.0, 2.0, 99.9, 100.0, 100.1, 782.03]])
+    k = np.concatenate([k, k[::3]])           # repeated EDF (computed once) come back each
     ps = (np.arange(64) + 0.5) / 64
     grid = chi2_ppf_grid(ps, k)
     assert grid.shape == (64, k.size)
