@@ -18,6 +18,7 @@ iteration from the Wilson–Hilferty start.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -150,34 +151,52 @@ def chi2_sf(x: ArrayLike, k: ArrayLike) -> NDArray[np.float64]:
 def chi2_ppf(p: float, k: ArrayLike) -> NDArray[np.float64]:
     """χ²_k(p): the p-quantile of the chi-squared distribution with k degrees of freedom
     (k > 0 and finite, 0 < p < 1), as 2·P⁻¹(k/2, p)."""
-    if not 0.0 < p < 1.0:
-        raise ValueError(f"chi2_ppf: p = {p} must lie strictly between 0 and 1")
+    return chi2_ppf_grid([p], k)[0]
+
+
+def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
+    """χ²_k(p) for every p of ``ps`` and every k: shape (len(ps), *k.shape), row j the
+    ``chi2_ppf(ps[j], k)``. One Newton iteration over all of them at once (an interval over a
+    grid of probabilities costs one call, not one per probability); each entry stops changing
+    once it has converged, so it is the same whatever else is in the call, and equal k
+    (the separation's parts share their EDF) are computed once (tests/core/test_chi2.py
+    holds the rows equal to ``chi2_ppf`` one p, and one k, at a time)."""
+    p_list = [float(p) for p in ps]
+    for p in p_list:
+        if not 0.0 < p < 1.0:
+            raise ValueError(f"chi2_ppf: p = {p} must lie strictly between 0 and 1")
     k_arr = np.asarray(k, dtype=np.float64)
-    a = k_arr.ravel() / 2.0
-    if a.size == 0:
-        return np.empty(k_arr.shape)
+    out_shape = (len(p_list), *k_arr.shape)
+    if not p_list or k_arr.size == 0:
+        return np.empty(out_shape)
+    # Equal k have equal quantiles (each entry is computed on its own): compute each once.
+    k_unique, where = np.unique(k_arr.ravel(), return_inverse=True)
+    a1 = k_unique / 2.0
+    a = np.tile(a1, len(p_list))
+    p_col = np.repeat(np.array(p_list), a1.size)
     # Wilson–Hilferty start: (χ²/k)^(1/3) is nearly normal with mean 1 − 2/(9k), var 2/(9k).
-    z = math.sqrt(2.0) * _erfinv(2.0 * p - 1.0)
+    z = np.repeat(np.array([math.sqrt(2.0) * _erfinv(2.0 * p - 1.0) for p in p_list]), a1.size)
     kk = 2.0 * a
     h = 2.0 / (9.0 * kk)
     x = np.maximum(0.5 * kk * (1.0 - h + z * np.sqrt(h)) ** 3, 1e-3 * a)
     # For small shapes the lower tail behaves as P ≈ xᵃ/Γ(a+1): start from its inverse.
     small = a < 1.0
     if small.any():
-        x0 = np.exp((math.log(p) + _lgamma(a[small] + 1.0)) / a[small])
+        log_p = np.repeat(np.array([math.log(p) for p in p_list]), a1.size)[small]
+        x0 = np.exp((log_p + _lgamma(a[small] + 1.0)) / a[small])
         x[small] = np.minimum(x[small], x0)
     todo = np.ones(a.shape, dtype=bool)
     for _ in range(60):
-        at, xt = a[todo], x[todo]
+        at, xt, pt = a[todo], x[todo], p_col[todo]
         lower, upper = gammainc_pq(at, xt)
         # Newton on whichever tail is the smaller number (its relative error is the least).
-        step = np.where(lower < 0.5, lower - p, (1.0 - p) - upper) / _density(at, xt)
+        step = np.where(lower < 0.5, lower - pt, (1.0 - pt) - upper) / _density(at, xt)
         new = np.where(xt - step <= 0.0, 0.5 * xt, xt - step)   # never step through zero
         x[todo] = new
         todo[todo] = np.abs(new - xt) > 1e-13 * np.abs(xt)
         if not todo.any():
             break
-    return (2.0 * x).reshape(k_arr.shape)
+    return (2.0 * x).reshape(len(p_list), a1.size)[:, where.ravel()].reshape(out_shape)
 
 
 def _erfinv(y: float) -> float:

@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from avard.core.allan.chi2 import chi2_ppf
+from avard.core.allan.chi2 import chi2_ppf_grid
 from avard.core.allan.cross import PairMoments
 from avard.core.allan.deviations import AllanResult, allan_variance
 from avard.core.errors import AvardError, DataError, FormatError
@@ -456,7 +456,7 @@ def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: 
     b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_hat, 0.0, None)
     tail = (1.0 - ci) / 2.0
     grid = (np.arange(_GRID) + 0.5) / _GRID
-    xq = np.array([chi2_ppf(float(p), nu) for p in grid])       # (J, M)
+    xq = chi2_ppf_grid(grid, nu)                                 # (J, M)
     x_over = xq / nu                                             # χ²_ν/ν quantile points
 
     def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:

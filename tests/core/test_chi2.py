@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from avard.core.allan.chi2 import chi2_ppf, chi2_ppf_stable32, gammainc_pq
+from avard.core.allan.chi2 import chi2_ppf, chi2_ppf_grid, chi2_ppf_stable32, gammainc_pq
 from scipy.special import gammainc, gammaincc, gammaincinv
 
 K = np.concatenate([np.geomspace(0.2, 1e9, 300), [1.0, 2.0, 3.0, 99.9, 100.0, 100.1]])
@@ -76,3 +76,30 @@ def test_each_quantile_is_the_same_whatever_else_is_in_the_vector() -> None:
         vec = chi2_ppf(p, k)
         one = np.array([chi2_ppf(p, np.array([v]))[0] for v in k])
         np.testing.assert_array_equal(vec, one)
+
+
+def test_the_grid_of_quantiles_equals_one_probability_at_a_time() -> None:
+    """chi2_ppf_grid (the separation's intervals ask for 64 probabilities at once) is the
+    fast path beside chi2_ppf: every row equal to chi2_ppf of its p over the same k, and
+    every entry to chi2_ppf of one p and one k, across the start for a < 1, the series, the
+    continued fraction and the quadrature (a ≥ 50), with k repeated and in any order."""
+    k = np.concatenate([np.geomspace(0.3, 1e7, 40), [1.0, 2.0, 99.9, 100.0, 100.1, 782.03]])
+    k = np.concatenate([k, k[::3]])           # repeated EDF (computed once) come back each
+    ps = (np.arange(64) + 0.5) / 64
+    grid = chi2_ppf_grid(ps, k)
+    assert grid.shape == (64, k.size)
+    for j, p in enumerate(ps):
+        np.testing.assert_array_equal(grid[j], chi2_ppf(float(p), k))
+    for j in (0, 5, 31, 63):
+        one = np.array([chi2_ppf(float(ps[j]), np.array([v]))[0] for v in k])
+        np.testing.assert_array_equal(grid[j], one)
+    np.testing.assert_allclose(grid[[0, 63]], 2.0 * gammaincinv(k / 2.0, ps[[0, 63], None]),
+                               rtol=1e-10)
+
+
+def test_the_grid_shapes_and_bad_p() -> None:
+    assert chi2_ppf_grid([0.1, 0.9], np.full((4, 3), 7.0)).shape == (2, 4, 3)
+    assert chi2_ppf_grid([], np.ones(5)).shape == (0, 5)
+    assert chi2_ppf_grid([0.5], np.zeros((0, 3))).shape == (1, 0, 3)
+    with pytest.raises(ValueError, match="strictly between"):
+        chi2_ppf_grid([0.5, 0.0], np.ones(3))

@@ -100,6 +100,36 @@ def test_the_interval_reduces_to_the_chi_squared_one_for_a_single_channel() -> N
     assert not ul.any() and np.allclose(nu_eff, nu)
 
 
+def test_the_interval_is_the_same_with_quantiles_one_probability_at_a_time(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """covariance_interval takes its χ² quantiles from chi2_ppf_grid (one call for the whole
+    grid); with them from chi2_ppf one probability at a time (the general path) every end,
+    flag and EDF must be the same, for estimates above, at and below zero and EDF from 1 to
+    10⁵ (series, fraction and quadrature)."""
+    from avard.core.allan import chi2
+    from avard.core.analysis import separate
+
+    rng = np.random.default_rng(7)
+    nu = np.concatenate([[1.0, 1.7, 40.0, 99.9, 100.0, 3e3], np.geomspace(2.0, 1e5, 14)])
+    s = rng.uniform(0.5, 2.0, nu.size)
+    s[::4] *= -0.4
+    s[3] = 0.0
+    big_p, big_q = s + rng.uniform(0.0, 3.0, nu.size), s + rng.uniform(0.0, 3.0, nu.size)
+    fast = covariance_interval(s, big_p, big_q, nu, 0.683)
+    calls: list[int] = []
+
+    def one_at_a_time(ps: list[float], k: np.ndarray) -> np.ndarray:
+        calls.append(len(ps))
+        return np.array([chi2.chi2_ppf(float(p), k) for p in ps])
+
+    monkeypatch.setattr(separate, "chi2_ppf_grid", one_at_a_time)
+    general = covariance_interval(s, big_p, big_q, nu, 0.683)
+    assert calls == [separate._GRID]
+    assert fast[2].any() and not fast[2].all()          # both kinds of interval are held
+    for f, g in zip(fast, general, strict=True):
+        np.testing.assert_allclose(f, g, rtol=1e-9, atol=0)
+
+
 def _rec(n: int, rate: float = RATE, t0: float | None = None, seed: int = 0,
          names: tuple[str, ...] = ("x", "z"), u: float = 0.0) -> SensorRecord:
     a = np.random.default_rng(seed).normal(size=(n, len(names)))
