@@ -155,7 +155,9 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     workers = _workers(options.workers, int(total))
     if info.format is not RecordFormat.NPZ:
         workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
-    groups = _split_for_workers(oadev_pass_groups(sel, int(total)), workers)
+    # one worker's passes (also the fallback of a parallel analysis the screen cuts); the
+    # workers' own groups are made from them (_parallel_groups)
+    groups = oadev_pass_groups(sel, int(total))
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
 
@@ -600,7 +602,7 @@ def _analyze_passes(
     kw: dict[str, float] = {"ci": options.ci}
     if corner is not None and lsb is not None:
         kw["rounding_lsb"] = lsb
-    todo: list[tuple[int, int, _PassResult, Any, list[dict[str, Any]]]] = []
+    todo: list[tuple[int, int, _PassResult, int, list[dict[str, Any]]]] = []
     spectra = []
     for chans, one in results:
         welch = one.welch
