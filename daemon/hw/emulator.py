@@ -259,6 +259,7 @@ class EmulatedAdxl355:
         self.missed_total = 0
         self._idle_since: tuple[float, float] | None = None   # (t, rate) production stopped
         self.stalled = False
+        self._measuring = False
         self._reset_state()
 
     # -- state ---------------------------------------------------------------------------
@@ -276,8 +277,7 @@ class EmulatedAdxl355:
             self._idle_since = None
 
     def _reset_state(self) -> None:
-        if hasattr(self, "regs"):
-            self._production_stops()
+        self._production_stops()     # a reset or a power cycle while measuring
         self.regs = bytearray(R.N_REGISTERS)
         for reg in R.REGISTERS.values():
             self.regs[reg.address] = reg.reset
