@@ -160,14 +160,10 @@ class RigService(Supervised):
         lane_hooks = dataclasses.replace(hooks, publisher=self._lane_publisher,
                                          request_server=lambda _svc: _NoRequestServer())
         wirings = tuple(wiring(s.bus) for s in built.spec.sensors)
-        self.lanes = tuple(
-            Service(lane_config(config, k), rig, run_id=self.run_id, hooks=lane_hooks,
-                    own_reader=False,
-                    rig_facts=RigFacts(self.names, k, self.sync, wirings, names[0]))
-            for k, rig in enumerate(built.lanes))
         # The live separation of the first 2–3 sensors (rig_separation.py): every lane's avar
         # record carries it, so a subscriber to any one sensor sees the rig's separation.
         self.separation: RigSeparation | None = None
+        sep = None
         if len(names) >= 2:
             sep = self.separation = RigSeparation(
                 names, config.sensor.odr_hz,
@@ -177,9 +173,14 @@ class RigService(Supervised):
                 log.warning("the live separation takes the first %d sensors (%s); %s are "
                             "recorded but not separated", len(sep.names),
                             ", ".join(sep.names), ", ".join(sep.left_out))
-            for lane in self.lanes:
-                lane.avar_fields = sep.fields_for(lane.sensor_name)
-                lane.status_fields = lambda: {"separation": sep.status()}
+        status = None if sep is None else (lambda: {"separation": sep.status()})
+        self.lanes = tuple(
+            Service(lane_config(config, k), rig, run_id=self.run_id, hooks=lane_hooks,
+                    own_reader=False,
+                    rig_facts=RigFacts(self.names, k, self.sync, wirings, names[0]),
+                    avar_fields=None if sep is None else sep.fields_for(names[k]),
+                    status_fields=status)
+            for k, rig in enumerate(built.lanes))
         self.bank = built.temperature_bank
         self.alignment_interval_s = float(alignment_interval_s)
         self._next_alignment = 0.0

@@ -272,7 +272,9 @@ class Service(Supervised):
 
     def __init__(self, config: Config, rig: Rig, *, run_id: str | None = None,
                  notifier: Any = None, hooks: ServiceHooks | None = None,
-                 rig_facts: RigFacts | None = None, own_reader: bool = True) -> None:
+                 rig_facts: RigFacts | None = None, own_reader: bool = True,
+                 avar_fields: Callable[[], dict[str, Any]] | None = None,
+                 status_fields: Callable[[], dict[str, Any]] | None = None) -> None:
         if not isinstance(config, Config):
             # the contract is typed: build the Config at the edge (config_types.load/as_config)
             raise TypeError(f"Service takes a config_types.Config, not {type(config).__name__}")
@@ -342,9 +344,9 @@ class Service(Supervised):
                                     time_before_first_drain=self._time_before_first_drain)
         self.snapshots = SnapshotBoard(fit_record)
         #: optional fields of every ``avar`` record (RigService: the live separation)
-        self.avar_fields: Callable[[], dict[str, Any]] | None = None
+        self.avar_fields = avar_fields
         #: optional fields of the status (RigService: the live separation's slips and pairs)
-        self.status_fields: Callable[[], dict[str, Any]] | None = None
+        self.status_fields = status_fields
 
     # -- helpers ------------------------------------------------------------------------
     def _fresh_allan(self) -> Any:
