@@ -46,9 +46,9 @@ log = logging.getLogger("avard.daemon.service")
 SLIP_SAMPLES = 0.75
 #: Seconds of sample time between two computations of the live separation, at least: its
 #: intervals (separate.covariance_interval, χ² quantiles for every τ, part and axis) cost
-#: about half a second of CPU for three sensors, more than a second of one sensor's whole
-#: service; in between, the ``avar`` records carry the last one computed (its ``n_samples``
-#: says how much data it covers).
+#: many times an Allan snapshot, more than seconds of one sensor's whole service
+#: (docs/service.md has the figure); in between, the ``avar`` records carry the last one
+#: computed (its ``n_samples`` says how much data it covers).
 SEPARATION_INTERVAL_S = 60.0
 #: ... and once the run is long, when it has grown by this fraction since the last (a
 #: separation of a day moves little in a minute) ...
