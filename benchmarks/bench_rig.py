@@ -1,23 +1,31 @@
-"""CPU of the service per second with several sensors against one, at real time (issue 28).
+"""A rig of several sensors against one, on the real clock (issue 28): overruns, FIFO
+high-water marks, CPU per second and memory.
 
-``python -m benchmarks rig [--seconds S] [--sensors 3] [--odr 125]``
+``python -m benchmarks rig [--seconds S] [--sensors 3] [--odr 125] [--clock real|virtual]
+[--hog N] [--no-rt]``
 
-Three runs in this process, one after the other, each at ``--speed 1`` (real time) for
-``--seconds`` of clock, recording into a temporary directory and publishing on loopback (no
-subscriber), at ``--odr``:
+Two runs in this process, one after the other, each for ``--seconds`` of clock, recording into
+a temporary directory and publishing on loopback (no subscriber), at ``--odr``:
 
-- ``service``: today's one-sensor service (daemon/compose.py simulated_service, preset
-  quiet-lab: the simulator's DS18B20s too);
-- ``rig of 1``: the RigService over one emulated ADXL355 (daemon/hw/simulation.emulated_rig);
-- ``rig of N``: the RigService over N emulated ADXL355s on one bed, one reader thread (a
-  simulated rig's virtual clock is stepped by its reader), with the live separation of the
-  first three (daemon/service/rig_separation.py; its thread's CPU is printed apart: the
-  computation at stop is once per run, so a short run overstates it per second).
+- ``rig of 1``: the RigService over one emulated ADXL355 (SPI0 CE0);
+- ``rig of N``: the RigService over N emulated ADXL355s on one bed (SPI0 CE0, SPI0 CE1,
+  I2C 0x53, SPI1, I2C 0x1D, the first N: their emulated transports), with the live
+  separation of the first three (daemon/service/rig_separation.py).
 
-Measured: CPU seconds of the process (all threads, ``time.process_time``) per second of clock,
-and per run the overruns, estimated losses and unaccounted losses summed over the sensors
-(each must be 0). The check of issue 28: rig of N ≤ N × the one-sensor figure, 0 overruns.
-Wall-clock pacing depends on the machine's load: report the ratios, and say the load.
+``--clock real`` (the default): the emulated parts make their sets on CLOCK_MONOTONIC whether
+read or not (daemon/hw/rig.py ``describe_rig(real_clock=True)``), and each bus has its reader
+thread as on the Pi, so a reader that wakes late overruns a FIFO exactly as the part would.
+``--clock virtual``: the reader steps a virtual clock paced at real time (one reader; no
+overrun is possible), and a third run, today's one-sensor service (daemon/compose.py
+simulated_service), comes first. ``--hog N`` runs N CPU-bound processes (``yes``) beside it.
+
+Printed per sensor: overruns, estimated and unaccounted losses (each must be 0), the FIFO's
+high-water mark (the most entries of 96 a drain found; 96 entries = 32 sets = 0.256 s at
+125 Hz: the deadline), the longest interval between two drains and the margin left to the
+deadline by it. Per run: CPU seconds of the process (all threads, ``time.process_time``) per
+second of clock, per thread name (from /proc/self/task), and peak RSS sampled every 0.5 s.
+The check of issue 28: rig of N ≤ N × rig of 1 in the same run, 0 overruns. Wall-clock pacing
+depends on the machine's load: report the ratios, and say the load.
 """
 
 from __future__ import annotations
@@ -25,70 +33,174 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import subprocess
 import tempfile
+import threading
 import time
+from collections import defaultdict
+from dataclasses import dataclass, field
 from typing import Any
 
 from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config, validate_config
 from avard.daemon.config_types import Config
-from avard.daemon.hw.rig import build_lanes, describe_rig
+from avard.daemon.hw.pacing import FIFO_SETS
+from avard.daemon.hw.registers import FIFO_LOCATIONS
+from avard.daemon.hw.rig import build_lanes, describe_rig, wiring
 from avard.daemon.service.rig_service import RigService
 
+#: In this order: three sensors are SPI0's two chip selects (one reader drains both) and I2C;
+#: four add SPI1, five I2C's second address.
 _SENSORS = [{"name": "left", "spi_device": 0}, {"name": "right", "spi_device": 1},
-            {"name": "far", "spi_bus": 1}, {"name": "i2c", "bus": "i2c", "i2c_address": 0x53},
+            {"name": "i2c", "bus": "i2c", "i2c_address": 0x53}, {"name": "far", "spi_bus": 1},
             {"name": "i2c2", "bus": "i2c", "i2c_address": 0x1D}]
+_PAGE = os.sysconf("SC_PAGE_SIZE")
+_TICK = os.sysconf("SC_CLK_TCK")
 
 
-def _common(odr: float, data_dir: str) -> dict[str, Any]:
+@dataclass
+class Lane:
+    name: str
+    wiring: str
+    overruns: int
+    lost: int
+    unaccounted: int
+    samples: int
+    fifo_high_water: int
+    max_interval_s: float
+
+
+@dataclass
+class Run:
+    name: str
+    seconds: float
+    cpu_s: float
+    rss_peak_mb: float
+    lanes: list[Lane]
+    threads: dict[str, float] = field(default_factory=dict)   # CPU-s by thread name
+    note: str = ""
+
+    @property
+    def cpu_per_s(self) -> float:
+        return self.cpu_s / self.seconds
+
+
+class Sampler:
+    """Peak RSS and each thread's CPU (utime + stime of /proc/self/task/TID/stat, by the
+    Python thread's name), read every ``interval_s`` while a run lasts (a thread that ends
+    keeps its last reading: its last interval is lost, the process time is not)."""
+
+    def __init__(self, interval_s: float = 0.5) -> None:
+        self.interval_s = interval_s
+        self.rss_peak = 0
+        self._cpu: dict[int, tuple[str, float]] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="bench-sampler", daemon=True)
+
+    def __enter__(self) -> Sampler:
+        self._read()
+        self._base = {tid: c for tid, (_n, c) in self._cpu.items()}
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._read()
+
+    def _read(self) -> None:
+        with open("/proc/self/statm") as f:
+            self.rss_peak = max(self.rss_peak, int(f.read().split()[1]) * _PAGE)
+        names = {t.native_id: t.name for t in threading.enumerate()}
+        for tid, name in names.items():
+            try:
+                with open(f"/proc/self/task/{tid}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except (OSError, TypeError):
+                continue
+            self._cpu[int(tid or 0)] = (name, (int(fields[11]) + int(fields[12])) / _TICK)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            self._read()
+
+    def by_name(self) -> dict[str, float]:
+        out: dict[str, float] = defaultdict(float)
+        for tid, (name, cpu) in self._cpu.items():
+            if name != "bench-sampler":
+                out[name] += cpu - self._base.get(tid, 0.0)
+        return dict(out)
+
+
+def _raw(odr: float, data_dir: str, n: int) -> dict[str, Any]:
     return {"recording": {"data_dir": data_dir},
             "publish": {"endpoint": "tcp://127.0.0.1:0", "request_endpoint": "tcp://127.0.0.1:0",
                         "hwm": 1_000_000},
-            "service": {"status_log_interval_s": 3600.0}, "temperature": {"ds18b20": False}}
+            "service": {"status_log_interval_s": 3600.0}, "temperature": {"ds18b20": False},
+            "sensor": [{**s, "odr_hz": odr} for s in _SENSORS[:n]]}
 
 
-def _measure(svc: Any, seconds: float) -> tuple[float, float]:
-    c0, w0 = time.process_time(), time.monotonic()
-    svc.run(seconds)
-    return time.process_time() - c0, time.monotonic() - w0
+def _lane(lane: Any, where: str) -> Lane:
+    a = lane.acq
+    return Lane(lane.sensor_name, where, a.overruns, a.lost_estimate, a.unaccounted, a.samples,
+                a.fifo_high_water, a.max_drain_interval_s)
 
 
-def _losses(lanes: list[Any]) -> tuple[int, int, int]:
-    acqs = [lane.acq for lane in lanes]
-    return (sum(a.overruns for a in acqs), sum(a.lost_estimate for a in acqs),
-            sum(a.unaccounted for a in acqs))
+def _timed(name: str, svc: Any, seconds: float) -> tuple[Run, Sampler]:
+    with Sampler() as sampler:
+        c0 = time.process_time()
+        svc.run(seconds)
+        cpu = time.process_time() - c0
+    return Run(name, seconds, cpu, sampler.rss_peak / 1e6, [], sampler.by_name()), sampler
 
 
-def run_one(odr: float, seconds: float) -> tuple[float, tuple[int, int, int]]:
+def run_service(odr: float, seconds: float) -> Run:
+    """Today's one-sensor service on the stepped clock paced at real time."""
     with tempfile.TemporaryDirectory() as d:
-        raw = _common(odr, d)
         cfg = load_config(None, **{"sensor.odr_hz": odr, "recording.data_dir": d,
-                                   "publish.endpoint": raw["publish"]["endpoint"],
-                                   "publish.request_endpoint": raw["publish"]["request_endpoint"],
+                                   "publish.endpoint": "tcp://127.0.0.1:0",
+                                   "publish.request_endpoint": "tcp://127.0.0.1:0",
                                    "publish.hwm": 1_000_000,
                                    "service.status_log_interval_s": 3600.0})
         svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, speed=1.0)
-        cpu, _wall = _measure(svc, seconds)
-        return cpu / seconds, _losses([svc])
+        run, _s = _timed("service (1 sensor)", svc, seconds)
+        run.lanes = [_lane(svc, "SPI0 CE0")]
+        return run
 
 
-def run_rig(odr: float, seconds: float, n: int) -> tuple[float, tuple[int, int, int]]:
+def run_rig(odr: float, seconds: float, n: int, *, real_clock: bool, rt: bool = True) -> Run:
     with tempfile.TemporaryDirectory() as d:
-        raw = _common(odr, d)
-        raw["sensor"] = [{**s, "odr_hz": odr} for s in _SENSORS[:n]]
-        if n == 1:
-            raw["sensor"] = [{**_SENSORS[0], "odr_hz": odr}]
-        config = Config.from_dict(validate_config(raw))
-        svc = RigService(config, build_lanes(describe_rig(config, simulate="quiet-lab", seed=1,
-                                                          speed=1.0)))
-        cpu, _wall = _measure(svc, seconds)
+        config = Config.from_dict(validate_config(_raw(odr, d, n)))
+        spec = describe_rig(config, simulate="quiet-lab", seed=1, speed=1.0,
+                            real_clock=real_clock)
+        svc = RigService(config, build_lanes(spec),
+                         **({} if rt else {"reader_rt_priority": 0}))
+        run, _s = _timed(f"rig of {n}", svc, seconds)
+        run.lanes = [_lane(lane, wiring(s.bus))
+                     for lane, s in zip(svc.lanes, spec.sensors, strict=True)]
+        granted = sum(r.realtime for r in svc.readers)
+        run.note = f"{len(svc.readers)} reader thread(s), {granted} of them SCHED_FIFO"
         if svc.separation is not None:
-            # the live separation's thread (rig_separation.py), within the figure above
             sep = svc.separation.cpu_s
-            print(f"  rig of {n}: live separation thread {sep['feed'] / seconds:.4f} CPU-s/s "
-                  f"aligning and feeding the pairs, {sep['separation']:.2f} CPU-s computing "
-                  f"{svc.separation.stage.computed} separations (the last at stop)")
-        return cpu / seconds, _losses(list(svc.lanes))
+            run.note += (f"; live separation: {sep['feed'] / seconds:.4f} CPU-s/s aligning "
+                         f"and feeding the pairs, {sep['separation']:.2f} CPU-s computing "
+                         f"{svc.separation.stage.computed} separations (the last at stop)")
+        return run
+
+
+def _print_run(run: Run, odr: float) -> None:
+    deadline = FIFO_SETS / odr
+    print(f"{run.name}: {run.cpu_per_s:.4f} CPU-s/s, peak RSS {run.rss_peak_mb:.1f} MB; "
+          f"{run.note}")
+    print(f"  {'sensor':<8}{'wiring':<32}{'samples':>9}{'overruns':>9}{'lost':>6}"
+          f"{'unacc.':>7}{'FIFO max':>10}{'drain max':>11}{'margin':>9}")
+    for ln in run.lanes:
+        print(f"  {ln.name:<8}{ln.wiring:<32}{ln.samples:>9d}{ln.overruns:>9d}{ln.lost:>6d}"
+              f"{ln.unaccounted:>7d}{ln.fifo_high_water:>5d}/{FIFO_LOCATIONS:<4d}"
+              f"{ln.max_interval_s:>10.3f}s{deadline - ln.max_interval_s:>8.3f}s")
+    threads = sorted(run.threads.items(), key=lambda kv: -kv[1])
+    print("  CPU-s/s by thread: " + ", ".join(f"{n} {c / run.seconds:.4f}"
+                                              for n, c in threads if c > 0))
 
 
 def main(argv: list[str]) -> int:
@@ -97,20 +209,36 @@ def main(argv: list[str]) -> int:
     p.add_argument("--seconds", type=float, default=30.0, help="clock seconds per run")
     p.add_argument("--sensors", type=int, default=3, choices=range(2, len(_SENSORS) + 1))
     p.add_argument("--odr", type=float, default=125.0)
+    p.add_argument("--clock", choices=("real", "virtual"), default="real")
+    p.add_argument("--hog", type=int, default=0, help="CPU-bound processes beside the runs")
+    p.add_argument("--no-rt", action="store_true",
+                   help="readers at normal priority (by default they ask for SCHED_FIFO)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    print(f"rig benchmark: {args.seconds:g} s each at {args.odr:g} Hz, real time; load "
-          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    one, l1 = run_one(args.odr, args.seconds)
-    rig1, lr1 = run_rig(args.odr, args.seconds, 1)
-    rign, lrn = run_rig(args.odr, args.seconds, args.sensors)
-    rows = [("service (1 sensor)", one, l1), ("rig of 1", rig1, lr1),
-            (f"rig of {args.sensors}", rign, lrn)]
-    print(f"{'run':<20}{'CPU-s/s':>10}{'overruns':>10}{'lost':>8}{'unacc.':>8}")
-    for name, cpu, (ov, lost, un) in rows:
-        print(f"{name:<20}{cpu:>10.4f}{ov:>10d}{lost:>8d}{un:>8d}")
-    print(f"rig of {args.sensors} / service (1 sensor): {rign / one:.2f} "
-          f"(asked ≤ {args.sensors}); / rig of 1: {rign / rig1:.2f}")
-    ok = rign <= args.sensors * one and lrn[0] == 0
+    real = args.clock == "real"
+    print(f"rig benchmark: {args.seconds:g} s each at {args.odr:g} Hz on the {args.clock} "
+          f"clock, {args.hog} CPU hog(s); load {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
+          f"cores; FIFO deadline {FIFO_SETS / args.odr:.3f} s ({FIFO_LOCATIONS} entries)")
+    hogs = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(args.hog)]
+    try:
+        runs = [] if real else [run_service(args.odr, args.seconds)]
+        rt = not args.no_rt
+        runs.append(run_rig(args.odr, args.seconds, 1, real_clock=real, rt=rt))
+        runs.append(run_rig(args.odr, args.seconds, args.sensors, real_clock=real, rt=rt))
+    finally:
+        for h in hogs:
+            h.terminate()
+            h.wait()
+    for run in runs:
+        _print_run(run, args.odr)
+    one, rig = runs[-2], runs[-1]
+    ratio = rig.cpu_per_s / one.cpu_per_s
+    overruns = sum(ln.overruns for ln in rig.lanes)
+    losses = sum(ln.lost + ln.unaccounted for ln in rig.lanes)
+    margin = FIFO_SETS / args.odr - max(ln.max_interval_s for ln in rig.lanes)
+    print(f"rig of {args.sensors} / rig of 1: {ratio:.2f} (asked ≤ {args.sensors}); "
+          f"overruns {overruns}, losses {losses}; least margin to the FIFO deadline "
+          f"{margin:.3f} s of {FIFO_SETS / args.odr:.3f}; load now {os.getloadavg()[0]:.1f}")
+    ok = ratio <= args.sensors and overruns == 0 and losses == 0
     print("check:", "met" if ok else "NOT met")
     return 0

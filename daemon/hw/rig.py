@@ -75,7 +75,9 @@ class SensorSpec:
 @dataclass(frozen=True)
 class ClockSpec:
     """The rig's clock: the host's (``system``) or the emulator's stepped ``virtual`` clock,
-    which a simulated rig (``simulate`` names the simulator preset) runs on."""
+    which a simulated rig (``simulate`` names the simulator preset) runs on. A simulated rig
+    on the ``system`` clock makes its sets on CLOCK_MONOTONIC as the parts do, whether read
+    or not: a reader that comes late overruns their FIFOs (the real-clock check)."""
 
     kind: str = "system"
     simulate: str | None = None
@@ -83,6 +85,12 @@ class ClockSpec:
     odr_error_ppm: float | None = None
     #: the virtual clock runs at most this many times real time (None: as fast as it can)
     speed: float | None = None
+
+    @property
+    def stepped(self) -> bool:
+        """Time is the virtual clock the reader steps: waiting for a slow consumer costs
+        nothing, and no FIFO can overrun."""
+        return self.kind == "virtual"
 
 
 @dataclass(frozen=True)
@@ -117,9 +125,11 @@ class RigSpec:
 
 
 def describe_rig(config: Config, *, simulate: str | None = None, seed: int | None = None,
-                 odr_error_ppm: float | None = None, speed: float | None = 1.0) -> RigSpec:
+                 odr_error_ppm: float | None = None, speed: float | None = 1.0,
+                 real_clock: bool = False) -> RigSpec:
     """The rig ``config`` describes, on :func:`choose_backend`'s backend; a simulated rig's
-    virtual clock runs at most ``speed`` times real time (None: as fast as it can)."""
+    virtual clock runs at most ``speed`` times real time (None: as fast as it can), or with
+    ``real_clock`` its emulated parts run on the host's clock (``speed`` is then 1)."""
     preset = choose_backend(simulate)
     if preset is not None:
         from avard.core.sim.presets import PRESETS
@@ -127,7 +137,8 @@ def describe_rig(config: Config, *, simulate: str | None = None, seed: int | Non
         if preset not in PRESETS:
             raise ConfigError(f"--simulate {preset!r}: unknown preset; choose one of "
                               f"{', '.join(sorted(PRESETS))}")
-        clock = ClockSpec("virtual", preset, seed, odr_error_ppm, speed)
+        clock = (ClockSpec("system", preset, seed, odr_error_ppm) if real_clock
+                 else ClockSpec("virtual", preset, seed, odr_error_ppm, speed))
     else:
         clock = ClockSpec()
     return RigSpec(tuple(SensorSpec.from_config(s) for s in config.rig_sensors), clock,
@@ -175,6 +186,11 @@ class Rig:
     parts: Mapping[str, object] = field(default_factory=dict)   # emulator, simulator (tests)
     #: what the rig started and the service's stop ends (the reader process)
     closers: tuple[Callable[[], None], ...] = ()
+    #: the part's start of measurement, left to its reader thread just before the first
+    #: drain (None: measuring already): on the real clock the FIFO fills from the start on,
+    #: and the service's own start-up (lanes, sockets, restore) can outlast it (0.256 s at
+    #: 125 Hz), which cost the first drain an overrun
+    start_measuring: Callable[[], None] | None = None
 
     def close(self) -> None:
         """End what the rig started (the service calls it when it stops)."""
@@ -225,11 +241,12 @@ def open_sensor(config: Config, *, simulate: str | None = None, seed: int | None
 
 
 def bring_up(dev: Adxl355, sensor: SensorSpec | SensorConfig, *, int1: bool = False,
-             self_test: bool = False,
+             self_test: bool = False, start: bool = True,
              found: Callable[[DeviceInfo], None] | None = None) -> BringUp:
     """The one start-up sequence of the ADXL355: probe the IDs, reset, optionally run the
     self-test (at ±8 g), configure the range and rate (and the FIFO watermark on INT1 when a
-    reader waits on it), start measuring. ``found`` is told the IDs as soon as they are read
+    reader waits on it), start measuring (unless ``start`` is False: then the reader starts
+    it, :attr:`Rig.start_measuring`). ``found`` is told the IDs as soon as they are read
     (``avard probe`` prints them even when a later step fails)."""
     info = dev.probe()
     if found is not None:
@@ -240,7 +257,8 @@ def bring_up(dev: Adxl355, sensor: SensorSpec | SensorConfig, *, int1: bool = Fa
         dev.configure(range_g=SELF_TEST_RANGE_G, odr_hz=sensor.odr_hz)
         st = dev.self_test()
     dev.configure(range_g=sensor.range_g, odr_hz=sensor.odr_hz, **watermark_settings(int1))
-    dev.start()
+    if start:
+        dev.start()
     return BringUp(info, st)
 
 
@@ -319,11 +337,12 @@ def _hardware(spec: RigSpec) -> Rig:
 
         interrupt = GpiodPin(s.int1_gpio)
     opened = _open_hardware(s)
-    info = bring_up(opened.driver, s, int1=interrupt is not None).info
+    info = bring_up(opened.driver, s, int1=interrupt is not None, start=False).info
     return Rig(spec, opened.driver, opened.clock,
                {"device": info.name, "partid": info.partid, "revid": info.revid,
                 "bus": s.bus.kind, "name": s.name},
-               temperature_bank=_ds18b20_bank(spec.temperature), interrupt=interrupt)
+               temperature_bank=_ds18b20_bank(spec.temperature), interrupt=interrupt,
+               start_measuring=opened.driver.start)
 
 
 def _hardware_in_reader_process(spec: RigSpec) -> Rig:
@@ -373,6 +392,8 @@ def build_lanes(spec: RigSpec) -> RigLanes:
     """The described rig of several sensors, each configured and started (a sensor that does
     not answer at start refuses the whole rig: the config says it is there)."""
     lane_spec = [RigSpec((s,), spec.clock, spec.temperature) for s in spec.sensors]
+    from avard.daemon.hw.timebase import SystemClock
+
     if spec.simulate is not None:
         from avard.daemon.hw.simulation import BedSpec, emulated_rig
 
@@ -380,38 +401,51 @@ def build_lanes(spec: RigSpec) -> RigLanes:
         if len(rates) > 1:
             raise ConfigError("a simulated rig runs every sensor at one odr_hz; found "
                               f"{', '.join(f'{r:g}' for r in sorted(rates))} Hz")
+        stepped = spec.clock.stepped
         clock, emulated = emulated_rig(spec.sensors, spec.simulate,
-                                       bed=BedSpec(seed=spec.clock.seed), seed=spec.clock.seed)
+                                       bed=BedSpec(seed=spec.clock.seed), seed=spec.clock.seed,
+                                       clock=None if stepped else SystemClock())
         lanes = []
         for ls, s, (_name, dev, _emu) in zip(lane_spec, spec.sensors, emulated, strict=True):
-            bring_up(dev, s)
+            bring_up(dev, s, start=stepped)
             lanes.append(Rig(ls, dev, clock, {"device": "ADXL355 (emulated)",
                                               "preset": spec.simulate, "name": s.name,
-                                              "bus": s.bus.kind, "wiring": wiring(s.bus)}))
-        return RigLanes(spec, tuple(lanes), (tuple(range(len(lanes))),), clock,
+                                              "bus": s.bus.kind, "wiring": wiring(s.bus)},
+                             start_measuring=None if stepped else dev.start))
+        # a stepped clock has one reader (it steps the clock); on the real clock, one per
+        # bus as on the Pi
+        readers = ((tuple(range(len(lanes))),) if stepped
+                   else bus_readers(spec.sensors))
+        return RigLanes(spec, tuple(lanes), readers, clock,
                         parts={"emulators": [e for _n, _d, e in emulated]})
-    from avard.daemon.hw.timebase import SystemClock
-
     system = SystemClock()
     bank = _ds18b20_bank(spec.temperature)
     names = tuple(bank.names) if bank is not None else ()
     lanes = []
-    groups: dict[tuple[str, int], list[int]] = {}
-    for k, (ls, s) in enumerate(zip(lane_spec, spec.sensors, strict=True)):
+    for ls, s in zip(lane_spec, spec.sensors, strict=True):
         interrupt = None
         if s.int1_gpio:
             from avard.daemon.hw.interrupt import GpiodPin
 
             interrupt = GpiodPin(s.int1_gpio)
         opened = _open_hardware(s)
-        info = bring_up(opened.driver, s, int1=interrupt is not None).info
+        info = bring_up(opened.driver, s, int1=interrupt is not None, start=False).info
         lanes.append(Rig(ls, opened.driver, system,
                          {"device": info.name, "partid": info.partid, "revid": info.revid,
                           "bus": s.bus.kind, "wiring": wiring(s.bus), "name": s.name},
-                         interrupt=interrupt, extra_temperature_names=names))
-        groups.setdefault((s.bus.kind, s.bus.number), []).append(k)
-    return RigLanes(spec, tuple(lanes), tuple(tuple(g) for g in groups.values()), system,
+                         interrupt=interrupt, extra_temperature_names=names,
+                         start_measuring=opened.driver.start))
+    return RigLanes(spec, tuple(lanes), bus_readers(spec.sensors), system,
                     temperature_bank=bank)
+
+
+def bus_readers(sensors: tuple[SensorSpec, ...]) -> tuple[tuple[int, ...], ...]:
+    """The sensors (by index) each reader drains: one reader per bus (SPI0's two chip
+    selects share one, as do the I2C addresses of one bus)."""
+    groups: dict[tuple[str, int], list[int]] = {}
+    for k, s in enumerate(sensors):
+        groups.setdefault((s.bus.kind, s.bus.number), []).append(k)
+    return tuple(tuple(g) for g in groups.values())
 
 
 def _ds18b20_bank(t: TemperatureConfig) -> Ds18b20Bank | None:

@@ -269,20 +269,22 @@ class BedMotion:
 
 
 def emulated_rig(sensors: Sequence[SensorSpec], preset: str, *, bed: BedSpec = BedSpec(),
-                 seed: int | None = None) -> tuple[VirtualClock, list[tuple[str, Adxl355,
-                                                                           EmulatedAdxl355]]]:
+                 seed: int | None = None, clock: Any = None
+                 ) -> tuple[Any, list[tuple[str, Adxl355, EmulatedAdxl355]]]:
     """Several ADXL355s (each over its described emulated transport: SPI bus/chip select or
-    I2C address) on one virtual clock, each the simulator's ``preset`` (its own noise, its own
-    seed) plus the one :class:`BedMotion`, each feeling it at its own sampling instants:
-    (clock, [(name, driver, emulator)]), not yet brought up. All sensors run at the first
-    one's ODR."""
+    I2C address) on one clock (a stepped virtual one unless ``clock`` is given: the host's
+    makes the parts produce on CLOCK_MONOTONIC, read or not), each the simulator's ``preset``
+    (its own noise, its own seed) plus the one :class:`BedMotion`, each feeling it at its own
+    sampling instants: (clock, [(name, driver, emulator)]), not yet brought up. All sensors
+    run at the first one's ODR."""
     from avard.core.sim.simulate import SensorSimulator, make_config
     from avard.daemon.hw.emulator import FakeSMBus
     from avard.daemon.hw.registers import STANDARD_GRAVITY, sensitivity_lsb_per_g
     from avard.daemon.hw.transport import I2cBus
 
     odr = sensors[0].odr_hz
-    clock = VirtualClock(epoch=time.time() - 1000.0)
+    if clock is None:
+        clock = VirtualClock(epoch=time.time() - 1000.0)
     motion = BedMotion(bed, len(sensors), odr, clock.monotonic())
     rng = np.random.default_rng(seed)
     out = []

@@ -43,6 +43,7 @@ from avard.daemon.hw.interrupt import InterruptPin
 from avard.daemon.hw.pacing import drain_period_s
 from avard.daemon.hw.registers import FIFO_LOCATIONS, FIFO_OVERRUN_LOCATIONS
 from avard.daemon.hw.source import GapReason, SampleSource
+from avard.daemon.hw.thread_priority import raise_thread_priority
 from avard.daemon.hw.timebase import TimeBase
 from avard.daemon.service.ring import Ring
 
@@ -95,7 +96,8 @@ class Acquisition:
                  start_index: int = 0, backpressure: bool = False,
                  on_clock_step: Callable[[float], None] | None = None,
                  stop_at: float | None = None,
-                 interrupt: InterruptPin | None = None) -> None:
+                 interrupt: InterruptPin | None = None,
+                 start_measuring: Callable[[], None] | None = None) -> None:
         self.sensor = sensor
         self.ring = ring
         self.tb = timebase
@@ -126,12 +128,16 @@ class Acquisition:
         self._next_chip = 0.0
         self._next_recover = 0.0
         self.max_drain_interval_s = 0.0   # longest drain-to-drain interval (benchmarks)
+        #: the most FIFO entries (of 96) a drain found: how near the FIFO came to overrunning
+        self.fifo_high_water = 0
         # (t_mono, index) of the newest set of the last good drain (complete, no gap), or of
         # the set before the first when measurement started: where counting from time starts
         started = getattr(sensor, "t_started", None)
         self._anchor: tuple[float, float] | None = (
             None if started is None else (float(started), float(start_index) - 1.0))
         self.unaccounted = 0      # losses found by the time check, not reported by the chip
+        # the part's start of measurement when its reader begins (hw/rig.py Rig.start_measuring)
+        self._start_measuring = start_measuring
         self._overrun_after_read = False   # an overrun seen after a burst: its gap is next
         self._outage: _Outage | None = None   # a stall since the last samples
         self._stop = threading.Event()
@@ -156,6 +162,16 @@ class Acquisition:
             self._reader.stop(timeout)
         else:
             self.request_stop()
+
+    def begin(self) -> None:
+        """On the reader thread, before the first drain: start the part measuring if its rig
+        left that to the reader, and count losses from that start."""
+        if self._start_measuring is None:
+            return
+        self._start_measuring()
+        started = getattr(self.sensor, "t_started", None)
+        if started is not None:
+            self._anchor = (float(started), float(self.next_index) - 1.0)
 
     def request_stop(self) -> None:
         """End the drains (and a wait for slow consumers) soon; the reader joins."""
@@ -222,6 +238,7 @@ class Acquisition:
                 self._try_recover(t)
             return 0
         self._consecutive_errors = 0
+        self.fifo_high_water = max(self.fifo_high_water, int(getattr(d, "fifo_entries", 0)))
         counts = np.asarray(d.counts, dtype=np.int32)
         n = int(counts.shape[0])
         t_mono, t_real = float(d.t_mono), float(d.t_real)
@@ -420,7 +437,7 @@ class BusReader:
     (the one that raised its exception, the others :class:`StoppedWithBus`). INT1 paces a
     reader of one sensor that has the pin; a shared bus drains on the timer."""
 
-    def __init__(self, members: Sequence[Acquisition]) -> None:
+    def __init__(self, members: Sequence[Acquisition], *, rt_priority: int = 0) -> None:
         if not members:
             raise ValueError("a bus reader needs at least one sensor")
         self.members = tuple(members)
@@ -429,6 +446,11 @@ class BusReader:
         self.speed = lead.speed
         self.stop_at = lead.stop_at
         self.interrupt = lead.interrupt if len(self.members) == 1 else None
+        #: SCHED_FIFO priority the thread asks for (0: none; refused without the right,
+        #: thread_priority.py): a rig's bus readers on the real clock, as the one-sensor
+        #: reader process does
+        self.rt_priority = int(rt_priority)
+        self.realtime = False          # SCHED_FIFO granted
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -459,6 +481,11 @@ class BusReader:
         wait_for_drain = (getattr(polling.sensor, "wait_for_drain", None)
                           if len(self.members) == 1 else None)
         try:
+            if self.rt_priority:
+                self.realtime = raise_thread_priority(self.rt_priority)
+            for m in self.members:
+                polling = m
+                m.begin()
             wall0 = time.monotonic()
             t0 = self.clock.monotonic()
             next_t = t0
@@ -509,8 +536,8 @@ class BusReader:
                     m.error = StoppedWithBus(exc)
 
 
-def share_reader(acqs: Sequence[Acquisition]) -> BusReader:
+def share_reader(acqs: Sequence[Acquisition], *, rt_priority: int = 0) -> BusReader:
     """One reader thread for several sensors on one bus (docs/architecture.md, "Several
     sensors"): the :class:`BusReader` to start and stop; the sensors' own start() is never
     called."""
-    return BusReader(acqs)
+    return BusReader(acqs, rt_priority=rt_priority)

@@ -26,6 +26,7 @@ from avard.core.errors import ConfigError, FormatError, ServiceFault
 from avard.core.io import frames
 from avard.core.io.recording import SEGMENT_SUFFIX, first_record, order_segments, run_order
 from avard.daemon.config_types import Config
+from avard.daemon.hw.drain_process import READER_RT_PRIORITY
 from avard.daemon.hw.rig import RigLanes, wiring
 from avard.daemon.service.acquisition import BusReader, StoppedWithBus, share_reader
 from avard.daemon.service.alignment import Alignment, align
@@ -142,11 +143,13 @@ class RigService(Supervised):
 
     def __init__(self, config: Config, built: RigLanes, *, run_id: str | None = None,
                  notifier: Any = None, hooks: ServiceHooks | None = None,
-                 alignment_interval_s: float = ALIGNMENT_INTERVAL_S) -> None:
+                 alignment_interval_s: float = ALIGNMENT_INTERVAL_S,
+                 reader_rt_priority: int = READER_RT_PRIORITY) -> None:
         clock = built.clock
         super().__init__(config, clock, notifier, built.spec.clock.speed)
         hooks = hooks or ServiceHooks()
         self.built = built
+        self.reader_rt_priority = int(reader_rt_priority)
         names = [s.name for s in built.spec.sensors]
         self.names = tuple(names)
         self.run_id = run_id or rig_run_id(config.recording.data_dir, names, clock.realtime())
@@ -242,10 +245,13 @@ class RigService(Supervised):
                         for lane in chosen])
             sep.start()
         acqs = [lane.acq for lane in self.lanes]
+        # on the real clock each bus's reader asks for SCHED_FIFO, as the one-sensor reader
+        # process does (allowed by systemd/realtime.conf; refused, it runs as it is)
+        rt = 0 if self.built.spec.clock.stepped else self.reader_rt_priority
         for group in self.built.readers:
             members = [a for a in (acqs[k] for k in group) if a is not None]
             assert len(members) == len(group)
-            self.readers.append(share_reader(members))
+            self.readers.append(share_reader(members, rt_priority=rt))
         if before_acquisition is not None:
             before_acquisition()
         for reader in self.readers:

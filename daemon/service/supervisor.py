@@ -298,6 +298,8 @@ class Service(Supervised):
         if self.boot_id is None and isinstance(clock, SystemClock):
             self.boot_id = kernel_boot_id()
         self.simulate = rig.simulate
+        #: the reader steps a virtual clock (a simulation not on the real clock)
+        self.stepped = rig.spec.clock.stepped
         self.bank = rig.temperature_bank       # a ds18b20.Ds18b20Bank (its threads read)
         self._temp_ok: dict[str, bool] = {}
         self.sensor_info = dict(rig.info)
@@ -509,12 +511,13 @@ class Service(Supervised):
                                run_id=self.run_id, speed=self.speed, on_tick=self._on_tick,
                                start_index=self.start_index,
                                on_clock_step=self._on_clock_step,
-                               backpressure=self.simulate is not None,
-                               interrupt=self.interrupt, stop_at=stop_at)
+                               backpressure=self.stepped,
+                               interrupt=self.interrupt, stop_at=stop_at,
+                               start_measuring=self.rig.start_measuring)
         rate = self.timebase_rate
         # Stages take what accumulated over a batch time instead of every drain; not when a
         # simulation runs unpaced (its reader waits for them: batching would slow it).
-        paced = not (self.simulate is not None and self.speed is None)
+        paced = not (self.stepped and self.speed is None)
         acfg = cfg.allan
         self.workers.append(AllanStage(
             self.ring.consumer("allan"), self.allan, self.feed, run_id=self.run_id,
