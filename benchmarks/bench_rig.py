@@ -13,8 +13,11 @@ a temporary directory and publishing on loopback (no subscriber), at ``--odr``:
   separation of the first three (daemon/service/rig_separation.py).
 
 ``--clock real`` (the default): the emulated parts make their sets on CLOCK_MONOTONIC whether
-read or not (daemon/hw/rig.py ``describe_rig(real_clock=True)``), and each bus has its reader
-thread as on the Pi, so a reader that wakes late overruns a FIFO exactly as the part would.
+read or not (daemon/hw/rig.py ``describe_rig(real_clock=True)``), so a reader that comes late
+overruns a FIFO exactly as the part would. ``--reader process`` (the default, as the Pi's buses
+are built): the parts are made and drained in one reader process (they share the bed);
+``--reader thread``: each bus has its reader thread in the service (SCHED_FIFO unless
+``--no-rt``).
 ``--clock virtual``: the reader steps a virtual clock paced at real time (one reader; no
 overrun is possible), and a third run, today's one-sensor service (daemon/compose.py
 simulated_service), comes first. ``--hog N`` runs N CPU-bound processes (``yes``) beside it.
@@ -23,7 +26,8 @@ Printed per sensor: overruns, estimated and unaccounted losses (each must be 0),
 high-water mark (the most entries of 96 a drain found; 96 entries = 32 sets = 0.256 s at
 125 Hz: the deadline), the longest interval between two drains and the margin left to the
 deadline by it. Per run: CPU seconds of the process (all threads, ``time.process_time``) per
-second of clock, per thread name (from /proc/self/task), and peak RSS sampled every 0.5 s.
+second of clock with the reader processes' (they end at stop), per thread name (from
+/proc/self/task), and the service's peak RSS sampled every 0.5 s.
 The check of issue 28: rig of N ≤ N × rig of 1 in the same run, 0 overruns. Wall-clock pacing
 depends on the machine's load: report the ratios, and say the load.
 """
@@ -148,10 +152,14 @@ def _lane(lane: Any, where: str) -> Lane:
 
 def _timed(name: str, svc: Any, seconds: float) -> tuple[Run, Sampler]:
     with Sampler() as sampler:
-        c0 = time.process_time()
-        svc.run(seconds)
-        cpu = time.process_time() - c0
-    return Run(name, seconds, cpu, sampler.rss_peak / 1e6, [], sampler.by_name()), sampler
+        c0, k0 = time.process_time(), os.times()
+        svc.run(seconds)        # its reader processes end (and are waited for) at stop
+        cpu, k1 = time.process_time() - c0, os.times()
+    children = (k1.children_user - k0.children_user) + (k1.children_system - k0.children_system)
+    threads = sampler.by_name()
+    if children:
+        threads["reader process(es)"] = children
+    return Run(name, seconds, cpu + children, sampler.rss_peak / 1e6, [], threads), sampler
 
 
 def run_service(odr: float, seconds: float) -> Run:
@@ -168,18 +176,21 @@ def run_service(odr: float, seconds: float) -> Run:
         return run
 
 
-def run_rig(odr: float, seconds: float, n: int, *, real_clock: bool, rt: bool = True) -> Run:
+def run_rig(odr: float, seconds: float, n: int, *, real_clock: bool, rt: bool = True,
+            reader: str = "process") -> Run:
     with tempfile.TemporaryDirectory() as d:
         config = Config.from_dict(validate_config(_raw(odr, d, n)))
         spec = describe_rig(config, simulate="quiet-lab", seed=1, speed=1.0,
                             real_clock=real_clock)
-        svc = RigService(config, build_lanes(spec),
+        svc = RigService(config, build_lanes(spec, reader_process=reader == "process"),
                          **({} if rt else {"reader_rt_priority": 0}))
         run, _s = _timed(f"rig of {n}", svc, seconds)
         run.lanes = [_lane(lane, wiring(s.bus))
                      for lane, s in zip(svc.lanes, spec.sensors, strict=True)]
         granted = sum(r.realtime for r in svc.readers)
-        run.note = f"{len(svc.readers)} reader thread(s), {granted} of them SCHED_FIFO"
+        procs = {lane.sensor_info.get("reader") for lane in svc.lanes} - {None}
+        run.note = (f"{len(svc.readers)} reader thread(s), {granted} of them SCHED_FIFO"
+                    + (f", draining {', '.join(sorted(map(str, procs)))}" if procs else ""))
         if svc.separation is not None:
             sep = svc.separation.cpu_s
             run.note += (f"; live separation: {sep['feed'] / seconds:.4f} CPU-s/s aligning "
@@ -211,6 +222,9 @@ def main(argv: list[str]) -> int:
     p.add_argument("--odr", type=float, default=125.0)
     p.add_argument("--clock", choices=("real", "virtual"), default="real")
     p.add_argument("--hog", type=int, default=0, help="CPU-bound processes beside the runs")
+    p.add_argument("--reader", choices=("process", "thread"), default="process",
+                   help="on the real clock: the parts drained by a reader process (as "
+                        "daemon/hw/rig.py builds the Pi's buses) or by the service's threads")
     p.add_argument("--no-rt", action="store_true",
                    help="readers at normal priority (by default they ask for SCHED_FIFO)")
     args = p.parse_args(argv)
@@ -223,8 +237,10 @@ def main(argv: list[str]) -> int:
     try:
         runs = [] if real else [run_service(args.odr, args.seconds)]
         rt = not args.no_rt
-        runs.append(run_rig(args.odr, args.seconds, 1, real_clock=real, rt=rt))
-        runs.append(run_rig(args.odr, args.seconds, args.sensors, real_clock=real, rt=rt))
+        runs.append(run_rig(args.odr, args.seconds, 1, real_clock=real, rt=rt,
+                            reader=args.reader))
+        runs.append(run_rig(args.odr, args.seconds, args.sensors, real_clock=real, rt=rt,
+                            reader=args.reader))
     finally:
         for h in hogs:
             h.terminate()

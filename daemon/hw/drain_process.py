@@ -73,8 +73,9 @@ PIPE_BUF = 4096
 
 # -- the wire --------------------------------------------------------------------------------
 # length, kind, flags, n_sets, reasons, status, fifo_entries, dropped, post_entries, index0,
-# then t_mono, t_real, t_mono_end, since_last_s, t_burst, t_burst_end, t_real_u, t_post
-_HEAD = struct.Struct("<HBBHHBBHhq8d")
+# chip (which of the child's parts), then t_mono, t_real, t_mono_end, since_last_s, t_burst,
+# t_burst_end, t_real_u, t_post
+_HEAD = struct.Struct("<HBBHHBBHhqB8d")
 _DRAIN, _ERROR, _TEMP, _STARTED = 1, 2, 3, 4
 _F_OVERRUN, _F_COMPLETE, _F_IN_DRAIN, _F_SINCE = 1, 2, 4, 8
 _E_HARDWARE, _E_STALLED = 0, 1
@@ -85,12 +86,12 @@ MAX_SETS = (PIPE_BUF - _HEAD.size) // 12
 
 def _pack(kind: int, *, flags: int = 0, counts: bytes = b"", n: int = 0, reasons: int = 0,
           status: int = 0, entries: int = 0, dropped: int = 0, post: int = -1,
-          index0: int = 0, times: tuple[float, ...] = (0.0,) * 8) -> bytes:
+          index0: int = 0, chip: int = 0, times: tuple[float, ...] = (0.0,) * 8) -> bytes:
     return _HEAD.pack(_HEAD.size + len(counts), kind, flags, n, reasons, status, entries,
-                      dropped, post, index0, *times) + counts
+                      dropped, post, index0, chip, *times) + counts
 
 
-def encode_drain(d: Drain, extra: tuple[GapReason, ...] = ()) -> bytes:
+def encode_drain(d: Drain, extra: tuple[GapReason, ...] = (), chip: int = 0) -> bytes:
     """One drain as one message (``extra``: reasons the child adds, e.g. a dropped backlog)."""
     counts = np.ascontiguousarray(d.counts, dtype="<i4")
     if counts.shape[0] > MAX_SETS:
@@ -103,14 +104,14 @@ def encode_drain(d: Drain, extra: tuple[GapReason, ...] = ()) -> bytes:
     return _pack(_DRAIN, flags=flags, counts=counts.tobytes(), n=counts.shape[0],
                  reasons=mask, status=d.status & 0xFF, entries=d.fifo_entries & 0xFF,
                  dropped=min(d.dropped_entries, 0xFFFF), post=d.post_entries,
-                 index0=d.index0,
+                 index0=d.index0, chip=chip,
                  times=(d.t_mono, d.t_real, d.t_mono_end,
                         d.since_last_s if d.since_last_s is not None else 0.0,
                         d.t_burst, d.t_burst_end, d.t_real_u, d.t_post))
 
 
 def _decode_drain(head: tuple[int | float, ...], body: bytes) -> Drain:
-    (_len, _kind, flags, n, mask, status, entries, dropped, post, index0,
+    (_len, _kind, flags, n, mask, status, entries, dropped, post, index0, _chip,
      t_mono, t_real, t_end, since, t_burst, t_burst_end, t_real_u, t_post) = head
     reasons = [r.value for i, r in enumerate(_REASONS) if int(mask) >> i & 1]
     counts = np.frombuffer(body, dtype="<i4").reshape(int(n), 3).astype(np.int32)
@@ -125,10 +126,14 @@ def _decode_drain(head: tuple[int | float, ...], body: bytes) -> Drain:
                  t_post=float(t_post), post_entries=int(post))
 
 
-def encode_error(exc: HardwareError) -> bytes:
+def encode_error(exc: HardwareError, chip: int = 0) -> bytes:
     code = _E_STALLED if isinstance(exc, DeviceStalledError) else _E_HARDWARE
     text = str(exc).encode("utf-8", "replace")[:PIPE_BUF - _HEAD.size - 8]
-    return _pack(_ERROR, flags=code, counts=text)
+    return _pack(_ERROR, flags=code, counts=text, chip=chip)
+
+
+#: A value an opener is called with (JSON's).
+Param = str | int | float | None
 
 
 @dataclass(frozen=True)
@@ -136,14 +141,16 @@ class ReaderSpec:
     """What the child is told: how to open the started driver, and how to run it.
 
     ``opener`` is ``module:function``, called with ``params`` as keyword arguments; it returns
-    the driver, started (probed, reset, configured, measuring)."""
+    the driver, started (probed, reset, configured, measuring), or ``chips`` of them (the
+    parts of one bus, or of an emulated rig: drained in turn, each its own messages)."""
 
     opener: str
-    params: dict[str, str | int | float] = field(default_factory=dict)
+    params: dict[str, Param | list[dict[str, Param]]] = field(default_factory=dict)
     poll_hz: float = 4.0
     rt_priority: int = 0
     chip_interval_s: float = 1.0
     fill: float = FILL_TARGET_PROCESS
+    chips: int = 1
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -194,7 +201,39 @@ def open_emulated(odr_hz: float, source: str = "counter", range_g: int = 2,
     return dev
 
 
-def _resolve(opener: str) -> Callable[..., Adxl355]:
+def open_hardware_bus(chips: list[dict[str, Param]]) -> list[Adxl355]:
+    """The ADXL355s of one bus (SPI0's chip selects, one I2C bus's addresses), each brought up
+    as :func:`open_hardware` does: one reader process drains them in turn."""
+    return [open_hardware(str(c["kind"]), int(c["number"] or 0), int(c["device"] or 0),
+                          int(c["address"] or 0), int(c["speed_hz"] or 0),
+                          int(c["range_g"] or 2), float(c["odr_hz"] or 0.0),
+                          float(c["temp_intercept_lsb"] or 0.0))
+            for c in chips]
+
+
+def open_emulated_rig(sensors: list[dict[str, Param]], preset: str,
+                      seed: int | None = None) -> list[Adxl355]:
+    """An emulated rig (daemon/hw/simulation.emulated_rig: its parts share one bed, so they
+    live in one process) on the real clock, each part over its emulated transport, brought
+    up. ``sensors``: each one's ``name``, ``kind``, ``number``, ``device``, ``address``,
+    ``range_g`` and ``odr_hz``."""
+    from avard.daemon.hw.rig import BusSpec, SensorSpec, bring_up
+    from avard.daemon.hw.simulation import BedSpec, emulated_rig
+    from avard.daemon.hw.timebase import SystemClock
+
+    specs = [SensorSpec(str(s["name"]), BusSpec(str(s["kind"]), int(s["number"] or 0),
+                                                device=int(s["device"] or 0),
+                                                address=int(s["address"] or 0)),
+                        range_g=int(s["range_g"] or 2), odr_hz=float(s["odr_hz"] or 0.0))
+             for s in sensors]
+    _clock, parts = emulated_rig(specs, preset, bed=BedSpec(seed=seed), seed=seed,
+                                 clock=SystemClock())
+    for spec, (_name, dev, _emu) in zip(specs, parts, strict=True):
+        bring_up(dev, spec)
+    return [dev for _n, dev, _e in parts]
+
+
+def _resolve(opener: str) -> Callable[..., Adxl355 | list[Adxl355]]:
     module, _, name = opener.partition(":")
     fn = getattr(importlib.import_module(module), name)
     if not callable(fn):
@@ -212,13 +251,24 @@ class _Writer:
         self.limit = limit
         self.pending: deque[bytes] = deque()
         self.dropped = 0          # drains dropped since the last one sent
+        self.dropped_chips: set[int] = set()    # whose drains they were
 
     def send(self, msg: bytes) -> None:
         self.pending.append(msg)
         self.flush()
         while len(self.pending) > self.limit:
-            self.pending.popleft()
+            gone = self.pending.popleft()
             self.dropped += 1
+            self.dropped_chips.add(int(_HEAD.unpack_from(gone)[10]))
+
+    def took_drops(self, chip: int) -> bool:
+        """Whether drains of ``chip`` were dropped since its last drain was sent (then
+        forgotten: the next drain of that chip says so)."""
+        if chip not in self.dropped_chips:
+            return False
+        self.dropped_chips.discard(chip)
+        self.dropped = 0 if not self.dropped_chips else self.dropped
+        return True
 
     def flush(self) -> None:
         while self.pending:
@@ -237,7 +287,7 @@ def child_main(spec: ReaderSpec, out_fd: int, cmd_fd: int) -> int:
         fcntl.fcntl(out_fd, _F_SETPIPE_SZ, PIPE_BYTES)
     writer = _Writer(out_fd, limit=1 << 16)   # set from the drain period below
     try:
-        dev = _resolve(spec.opener)(**spec.params)
+        opened = _resolve(spec.opener)(**spec.params)
     except HardwareError as exc:
         os.set_blocking(out_fd, True)
         os.write(out_fd, encode_error(exc))
@@ -249,14 +299,19 @@ def child_main(spec: ReaderSpec, out_fd: int, cmd_fd: int) -> int:
     gc.collect()
     gc.freeze()
 
-    def started() -> None:
-        writer.send(_pack(_STARTED, times=(float(dev.t_started or 0.0), dev.odr_hz,
-                                           dev.group_delay_samples, dev.scale_mps2,
-                                           0.0, 0.0, 0.0, 0.0)))
+    devs: list[Adxl355] = opened if isinstance(opened, list) else [opened]
 
-    started()
-    period = drain_period_s(dev.odr_hz, spec.poll_hz, spec.fill)
-    writer.limit = max(1, round(BACKLOG_S / period))
+    def started(k: int) -> None:
+        dev = devs[k]
+        writer.send(_pack(_STARTED, chip=k,
+                          times=(float(dev.t_started or 0.0), dev.odr_hz,
+                                 dev.group_delay_samples, dev.scale_mps2,
+                                 0.0, 0.0, 0.0, 0.0)))
+
+    for k in range(len(devs)):
+        started(k)
+    period = min(drain_period_s(dev.odr_hz, spec.poll_hz, spec.fill) for dev in devs)
+    writer.limit = max(1, round(len(devs) * BACKLOG_S / period))
     next_t = time.monotonic()
     next_chip = next_t
     while True:
@@ -267,24 +322,30 @@ def child_main(spec: ReaderSpec, out_fd: int, cmd_fd: int) -> int:
         if cmd is not None:
             if cmd == b"" or b"q" in cmd:
                 break
-            if b"r" in cmd:
+            # "r" and the chip's number, one byte: recover that part
+            for k in {cmd[i + 1] if i + 1 < len(cmd) else 0
+                      for i, c in enumerate(cmd) if c == ord("r")}:
+                if k >= len(devs):
+                    continue
                 try:
-                    dev.recover()
-                    started()
+                    devs[k].recover()
+                    started(k)
                 except HardwareError as exc:
-                    writer.send(encode_error(exc))
-        try:
-            d = dev.drain()
-            extra = (GapReason.READER_BACKLOG,) if writer.dropped else ()
-            writer.dropped = 0
-            writer.send(encode_drain(d, extra))
-        except HardwareError as exc:
-            writer.send(encode_error(exc))
+                    writer.send(encode_error(exc, k))
+        for k, dev in enumerate(devs):
+            try:
+                d = dev.drain()
+                extra = (GapReason.READER_BACKLOG,) if writer.took_drops(k) else ()
+                writer.send(encode_drain(d, extra, k))
+            except HardwareError as exc:
+                writer.send(encode_error(exc, k))
         now = time.monotonic()
         if now >= next_chip:
             next_chip = now + spec.chip_interval_s
-            with contextlib.suppress(HardwareError):
-                writer.send(_pack(_TEMP, times=(now, dev.read_temperature_c()) + (0.0,) * 6))
+            for k, dev in enumerate(devs):
+                with contextlib.suppress(HardwareError):
+                    writer.send(_pack(_TEMP, chip=k,
+                                      times=(now, dev.read_temperature_c()) + (0.0,) * 6))
         writer.flush()
         next_t += period
         now = time.monotonic()
@@ -292,16 +353,33 @@ def child_main(spec: ReaderSpec, out_fd: int, cmd_fd: int) -> int:
             next_t = now
         if next_t > now:
             time.sleep(next_t - now)
-    with contextlib.suppress(HardwareError):
-        dev.close()
+    for dev in devs:
+        with contextlib.suppress(HardwareError):
+            dev.close()
     return 0
 
 
 # -- the service side ------------------------------------------------------------------------
-class ReaderProcess:
-    """A :class:`~avard.daemon.hw.source.SampleSource` whose drains come from the child.
+@dataclass
+class _Chip:
+    """What the service side knows of one of the child's parts."""
 
-    :meth:`start` starts the child and waits until the part measures (its ``started``
+    queue: deque[Drain | HardwareError] = field(default_factory=deque)
+    t_started: float | None = None
+    odr_hz: float = math.nan
+    group_delay: float = 0.0
+    scale: float = 0.0
+    temperature: float | None = None
+    # a new child's first drain follows the old child's last one across a restart of the
+    # part (brought up again): it says so
+    restarted: bool = False
+
+
+class ReaderProcess:
+    """A :class:`~avard.daemon.hw.source.SampleSource` whose drains come from the child (its
+    first part's; :meth:`source` gives each part of a child that drains several).
+
+    :meth:`start` starts the child and waits until every part measures (its ``started``
     message) or the child fails (its error, raised here). The reader thread calls
     :meth:`wait_for_drain`, then :meth:`drain` for each drain the child made."""
 
@@ -313,16 +391,8 @@ class ReaderProcess:
         self._cmd = -1
         self._buf = bytearray()
         self._eof = False
-        self._odr_hz = math.nan
-        self._group_delay = 0.0
-        self._scale = 0.0
-        self.t_started: float | None = None
-        self._temperature: float | None = None
-        self._queue: deque[Drain | HardwareError] = deque()
+        self.chips = [_Chip() for _ in range(max(1, spec.chips))]
         self.restarts = 0
-        # a new child's first drain follows the old child's last one across a restart of
-        # the part (brought up again): it says so
-        self._restarted = False
 
     # -- lifecycle
     def start(self) -> ReaderProcess:
@@ -340,10 +410,11 @@ class ReaderProcess:
         self._out, self._cmd = out_r, cmd_w
         self._buf.clear()
         self._eof = False
-        self._queue.clear()
-        self.t_started = None
+        for c in self.chips:
+            c.queue.clear()
+            c.t_started = None
         deadline = time.monotonic() + self.start_timeout_s
-        while self.t_started is None:
+        while any(c.t_started is None for c in self.chips):
             left = deadline - time.monotonic()
             if left <= 0 or self._eof:
                 self.close()
@@ -351,10 +422,11 @@ class ReaderProcess:
                                     f"({'it exited' if self._eof else 'timed out'}); see "
                                     "its messages above")
             self._read(left)
-            if self._queue and isinstance(self._queue[0], HardwareError):
-                err = self._queue.popleft()
-                self.close()
-                raise err
+            for c in self.chips:
+                if c.queue and isinstance(c.queue[0], HardwareError):
+                    err = c.queue.popleft()
+                    self.close()
+                    raise err
         return self
 
     def close(self) -> None:
@@ -378,9 +450,13 @@ class ReaderProcess:
     def pid(self) -> int | None:
         return None if self._proc is None else self._proc.pid
 
+    def source(self, chip: int) -> ChipSource:
+        """The SampleSource of the child's part number ``chip``."""
+        return ChipSource(self, chip)
+
     # -- the pipe
     def _read(self, timeout: float) -> None:
-        """Wait up to ``timeout`` for bytes; parse every whole message into the queue."""
+        """Wait up to ``timeout`` for bytes; parse every whole message into the queues."""
         if self._eof or self._out < 0:
             return
         ready, _, _ = select.select([self._out], [], [], max(0.0, timeout))
@@ -406,85 +482,143 @@ class ReaderProcess:
     def _message(self, msg: bytes) -> None:
         head = _HEAD.unpack_from(msg)
         kind, body = int(head[1]), msg[_HEAD.size:]
-        times = head[10:]
+        chip = self.chips[int(head[10])]
+        times = head[11:]
         if kind == _DRAIN:
-            self._queue.append(_decode_drain(head, body))
+            chip.queue.append(_decode_drain(head, body))
         elif kind == _ERROR:
             text = body.decode("utf-8", "replace")
-            self._queue.append(DeviceStalledError(text) if int(head[2]) == _E_STALLED
-                               else HardwareError(text))
+            chip.queue.append(DeviceStalledError(text) if int(head[2]) == _E_STALLED
+                              else HardwareError(text))
         elif kind == _TEMP:
-            self._temperature = float(times[1])
+            chip.temperature = float(times[1])
         elif kind == _STARTED:
-            self.t_started = float(times[0])
-            self._odr_hz, self._group_delay, self._scale = (float(times[1]), float(times[2]),
-                                                            float(times[3]))
+            chip.t_started = float(times[0])
+            chip.odr_hz, chip.group_delay, chip.scale = (float(times[1]), float(times[2]),
+                                                         float(times[3]))
+
+    def ready(self, chip: int = 0) -> bool:
+        """A drain (or an error) of ``chip`` is queued, or the child has ended (its drain
+        then says so)."""
+        return bool(self.chips[chip].queue) or self._eof
 
     def wait_for_drain(self, timeout: float) -> bool:
-        """True when a drain (or an error) is ready for :meth:`drain`, after waiting at most
-        ``timeout`` s. A child that died is reported (by :meth:`drain`) once per timeout."""
-        if not self._queue:
+        """True when a drain (or an error) is ready for :meth:`drain` (of any part), after
+        waiting at most ``timeout`` s. A child that died is reported (by :meth:`drain`) once
+        per timeout."""
+        if not any(c.queue for c in self.chips):
             self._read(timeout)
-        if not self._queue and self._eof:
+        if not any(c.queue for c in self.chips) and self._eof:
             time.sleep(timeout)
             return True
-        return bool(self._queue)
+        return any(bool(c.queue) for c in self.chips)
 
-    # -- SampleSource
+    # -- SampleSource (the first part)
+    @property
+    def t_started(self) -> float | None:
+        return self.chips[0].t_started
+
     @property
     def odr_hz(self) -> float:
-        return self._odr_hz
+        return self.chips[0].odr_hz
 
     @property
     def group_delay_samples(self) -> float:
-        return self._group_delay
+        return self.chips[0].group_delay
 
     @property
     def scale_mps2(self) -> float:
-        return self._scale
+        return self.chips[0].scale
 
-    def drain(self, max_sets: int | None = None) -> Drain:
-        """The child's next drain, as it made it (``max_sets`` is the child's to apply)."""
-        if not self._queue:
+    def drain(self, max_sets: int | None = None, *, chip: int = 0) -> Drain:
+        """The child's next drain of ``chip``, as it made it (``max_sets`` is the child's to
+        apply)."""
+        c = self.chips[chip]
+        if not c.queue:
             self._read(0.0)
-        if not self._queue:
+        if not c.queue:
             if self._eof:
                 code = None if self._proc is None else self._proc.poll()
                 raise HardwareError(f"the reader process ended (exit status {code})")
             raise HardwareError("no drain from the reader process")
-        item = self._queue.popleft()
+        item = c.queue.popleft()
         if isinstance(item, HardwareError):
             raise item
-        if self._restarted:
-            self._restarted = False
+        if c.restarted:
+            c.restarted = False
             reasons = ",".join(filter(None, (item.gap_reason, GapReason.RESTART.value)))
             item = replace(item, overrun=True, gap_reason=reasons)
         return item
 
-    def read_temperature_c(self) -> float:
+    def read_temperature_c(self, chip: int = 0) -> float:
         """The chip temperature the child read last (it reads it every chip_interval_s)."""
-        if self._temperature is None:
+        t = self.chips[chip].temperature
+        if t is None:
             raise HardwareError("no chip temperature from the reader process yet")
-        return self._temperature
+        return t
 
-    def recover(self) -> ReaderProcess:
-        """Ask the child to recover the part; a child that ended is started again."""
+    def recover(self, chip: int = 0) -> ReaderProcess:
+        """Ask the child to recover the part; a child that ended is started again (every
+        part of it restarts)."""
         if self._eof or self._proc is None or self._proc.poll() is not None:
             self.close()
             self.restarts += 1
             self.start()
-            self._restarted = True
+            for c in self.chips:
+                c.restarted = True
             return self
         try:
-            os.write(self._cmd, b"r")
+            os.write(self._cmd, b"r" + bytes((chip,)))
         except OSError as exc:
             if exc.errno != errno.EPIPE:
                 raise HardwareError(f"cannot reach the reader process: {exc}") from exc
         return self
 
 
+class ChipSource:
+    """One part of a reader process that drains several (a bus's, an emulated rig's): the
+    SampleSource its sensor's reader thread drains, sharing the process's pipe."""
+
+    def __init__(self, process: ReaderProcess, chip: int) -> None:
+        self.process = process
+        self.chip = int(chip)
+
+    @property
+    def t_started(self) -> float | None:
+        return self.process.chips[self.chip].t_started
+
+    @property
+    def odr_hz(self) -> float:
+        return self.process.chips[self.chip].odr_hz
+
+    @property
+    def group_delay_samples(self) -> float:
+        return self.process.chips[self.chip].group_delay
+
+    @property
+    def scale_mps2(self) -> float:
+        return self.process.chips[self.chip].scale
+
+    def ready(self) -> bool:
+        return self.process.ready(self.chip)
+
+    def wait_for_drain(self, timeout: float) -> bool:
+        return self.process.wait_for_drain(timeout)
+
+    def drain(self, max_sets: int | None = None) -> Drain:
+        return self.process.drain(max_sets, chip=self.chip)
+
+    def read_temperature_c(self) -> float:
+        return self.process.read_temperature_c(self.chip)
+
+    def recover(self) -> ChipSource:
+        self.process.recover(self.chip)
+        return self
+
+
 #: mypy holds ReaderProcess to the SampleSource contract the reader thread is written against
 _check: type[SampleSource] = ReaderProcess
+_check_chip: type[SampleSource] = ChipSource
 
 
 def main(argv: list[str]) -> int:

@@ -27,6 +27,7 @@ from avard.daemon.hw.pacing import reader_in_process, watermark_settings
 
 if TYPE_CHECKING:
     from avard.daemon.hw.adxl355 import Adxl355, DeviceInfo, SelfTestResult
+    from avard.daemon.hw.drain_process import ReaderProcess
     from avard.daemon.hw.ds18b20 import Ds18b20Bank, TemperatureReading
     from avard.daemon.hw.interrupt import InterruptPin
     from avard.daemon.hw.source import SampleSource
@@ -37,6 +38,9 @@ log = logging.getLogger(__name__)
 BACKEND_ENV = "AVARD_BACKEND"
 #: What the reader process opens on the hardware (drain_process.py's ``module:function``).
 HARDWARE_OPENER = "avard.daemon.hw.drain_process:open_hardware"
+#: ... the ADXL355s of one bus, and an emulated rig on the real clock
+HARDWARE_BUS_OPENER = "avard.daemon.hw.drain_process:open_hardware_bus"
+EMULATED_RIG_OPENER = "avard.daemon.hw.drain_process:open_emulated_rig"
 
 # -- the rig as data ----------------------------------------------------------------------------
 
@@ -355,16 +359,20 @@ def _hardware_in_reader_process(spec: RigSpec) -> Rig:
     s = spec.sensors[0]
     b = s.bus
     reader = ReaderProcess(ReaderSpec(
-        HARDWARE_OPENER,
-        {"kind": b.kind, "number": b.number, "device": b.device, "address": b.address,
-         "speed_hz": b.speed_hz, "range_g": s.range_g, "odr_hz": s.odr_hz,
-         "temp_intercept_lsb": s.temp_intercept_lsb},
-        poll_hz=s.poll_hz, rt_priority=READER_RT_PRIORITY,
+        HARDWARE_OPENER, _chip_params(s), poll_hz=s.poll_hz, rt_priority=READER_RT_PRIORITY,
         chip_interval_s=spec.temperature.chip_interval_s)).start()
     return Rig(spec, reader, SystemClock(),
                {"device": "ADXL355", "bus": b.kind, "name": s.name,
                 "reader": f"process {reader.pid}"},
                temperature_bank=_ds18b20_bank(spec.temperature), closers=(reader.close,))
+
+
+def _chip_params(s: SensorSpec) -> dict[str, str | int | float | None]:
+    """What a reader process's opener is told of one ADXL355 (drain_process.py)."""
+    b = s.bus
+    return {"kind": b.kind, "number": b.number, "device": b.device, "address": b.address,
+            "speed_hz": b.speed_hz, "range_g": s.range_g, "odr_hz": s.odr_hz,
+            "temp_intercept_lsb": s.temp_intercept_lsb}
 
 
 @dataclass(frozen=True)
@@ -388,12 +396,22 @@ def wiring(bus: BusSpec) -> str:
             else f"/dev/i2c-{bus.number} address 0x{bus.address:02X}")
 
 
-def build_lanes(spec: RigSpec) -> RigLanes:
+def build_lanes(spec: RigSpec, *, reader_process: bool = True) -> RigLanes:
     """The described rig of several sensors, each configured and started (a sensor that does
-    not answer at start refuses the whole rig: the config says it is there)."""
+    not answer at start refuses the whole rig: the config says it is there).
+
+    On the real clock each bus is drained by a reader process (drain_process.py, SCHED_FIFO
+    where allowed; an emulated rig's parts share one bed, so one process drains them all),
+    unless ``reader_process`` is False or a sensor of the bus waits on INT1: then by a reader
+    thread of the service (acquisition.BusReader). A reader thread shares the interpreter
+    lock with the service's other threads: when the thread that holds it is pre-empted by a
+    busy neighbour, every reader thread waits with it (three sensors overran together that
+    way at 125 Hz, SCHED_FIFO or not; docs/service.md)."""
     lane_spec = [RigSpec((s,), spec.clock, spec.temperature) for s in spec.sensors]
     from avard.daemon.hw.timebase import SystemClock
 
+    if spec.simulate is not None and not spec.clock.stepped and reader_process:
+        return _emulated_in_reader_process(spec, lane_spec)
     if spec.simulate is not None:
         from avard.daemon.hw.simulation import BedSpec, emulated_rig
 
@@ -421,22 +439,79 @@ def build_lanes(spec: RigSpec) -> RigLanes:
     system = SystemClock()
     bank = _ds18b20_bank(spec.temperature)
     names = tuple(bank.names) if bank is not None else ()
-    lanes = []
-    for ls, s in zip(lane_spec, spec.sensors, strict=True):
-        interrupt = None
-        if s.int1_gpio:
-            from avard.daemon.hw.interrupt import GpiodPin
+    by_index: dict[int, Rig] = {}
+    started: list[Callable[[], None]] = []
+    try:
+        for group in bus_readers(spec.sensors):
+            chips = [spec.sensors[k] for k in group]
+            if reader_process and not any(s.int1_gpio for s in chips):
+                proc = _bus_process(chips, spec)
+                started.append(proc.close)
+                for j, k in enumerate(group):
+                    s = spec.sensors[k]
+                    info = {"device": "ADXL355", "bus": s.bus.kind, "wiring": wiring(s.bus),
+                            "name": s.name, "reader": f"process {proc.pid}"}
+                    by_index[k] = Rig(lane_spec[k], proc.source(j), system, info,
+                                      extra_temperature_names=names, closers=(proc.close,))
+                continue
+            for k in group:
+                by_index[k] = _thread_lane(lane_spec[k], spec.sensors[k], system, names)
+    except BaseException:
+        for close in started:
+            close()
+        raise
+    return RigLanes(spec, tuple(by_index[k] for k in range(len(spec.sensors))),
+                    bus_readers(spec.sensors), system, temperature_bank=bank)
 
-            interrupt = GpiodPin(s.int1_gpio)
-        opened = _open_hardware(s)
-        info = bring_up(opened.driver, s, int1=interrupt is not None, start=False).info
-        lanes.append(Rig(ls, opened.driver, system,
-                         {"device": info.name, "partid": info.partid, "revid": info.revid,
-                          "bus": s.bus.kind, "wiring": wiring(s.bus), "name": s.name},
-                         interrupt=interrupt, extra_temperature_names=names,
-                         start_measuring=opened.driver.start))
-    return RigLanes(spec, tuple(lanes), bus_readers(spec.sensors), system,
-                    temperature_bank=bank)
+
+def _thread_lane(ls: RigSpec, s: SensorSpec, system: Clock, names: tuple[str, ...]) -> Rig:
+    """A sensor drained by a reader thread of the service: configured, its start of
+    measurement left to that thread."""
+    interrupt = None
+    if s.int1_gpio:
+        from avard.daemon.hw.interrupt import GpiodPin
+
+        interrupt = GpiodPin(s.int1_gpio)
+    opened = _open_hardware(s)
+    info = bring_up(opened.driver, s, int1=interrupt is not None, start=False).info
+    return Rig(ls, opened.driver, system,
+               {"device": info.name, "partid": info.partid, "revid": info.revid,
+                "bus": s.bus.kind, "wiring": wiring(s.bus), "name": s.name},
+               interrupt=interrupt, extra_temperature_names=names,
+               start_measuring=opened.driver.start)
+
+
+def _bus_process(chips: list[SensorSpec], spec: RigSpec) -> ReaderProcess:
+    """The reader process of one bus's ADXL355s, started (they measure)."""
+    from avard.daemon.hw.drain_process import READER_RT_PRIORITY, ReaderProcess, ReaderSpec
+
+    return ReaderProcess(ReaderSpec(
+        HARDWARE_BUS_OPENER, {"chips": [_chip_params(s) for s in chips]},
+        poll_hz=max(s.poll_hz for s in chips), rt_priority=READER_RT_PRIORITY,
+        chip_interval_s=spec.temperature.chip_interval_s, chips=len(chips))).start()
+
+
+def _emulated_in_reader_process(spec: RigSpec, lane_spec: list[RigSpec]) -> RigLanes:
+    """An emulated rig on the real clock, its parts made and drained in one reader process
+    (they share the bed's motion) as a bus's parts are on the Pi."""
+    from avard.daemon.hw.drain_process import READER_RT_PRIORITY, ReaderProcess, ReaderSpec
+    from avard.daemon.hw.timebase import SystemClock
+
+    assert spec.simulate is not None
+    sensors = [{**_chip_params(s), "name": s.name} for s in spec.sensors]
+    proc = ReaderProcess(ReaderSpec(
+        EMULATED_RIG_OPENER, {"sensors": sensors, "preset": spec.simulate,
+                              "seed": spec.clock.seed},
+        poll_hz=max(s.poll_hz for s in spec.sensors), rt_priority=READER_RT_PRIORITY,
+        chip_interval_s=spec.temperature.chip_interval_s, chips=len(spec.sensors))).start()
+    system = SystemClock()
+    lanes = tuple(Rig(ls, proc.source(k), system,
+                      {"device": "ADXL355 (emulated)", "preset": spec.simulate, "name": s.name,
+                       "bus": s.bus.kind, "wiring": wiring(s.bus),
+                       "reader": f"process {proc.pid}"}, closers=(proc.close,))
+                  for k, (ls, s) in enumerate(zip(lane_spec, spec.sensors, strict=True)))
+    return RigLanes(spec, lanes, (tuple(range(len(lanes))),), system,
+                    parts={"reader_process": proc})
 
 
 def bus_readers(sensors: tuple[SensorSpec, ...]) -> tuple[tuple[int, ...], ...]:

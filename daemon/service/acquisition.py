@@ -476,10 +476,9 @@ class BusReader:
 
     def _run(self) -> None:
         polling = self.members[0]   # the sensor being drained: blamed if the thread dies
-        # a reader process (hw/drain_process.py) paces its one chip itself: its drains are
-        # taken as they come
-        wait_for_drain = (getattr(polling.sensor, "wait_for_drain", None)
-                          if len(self.members) == 1 else None)
+        # a reader process (hw/drain_process.py) paces its chips itself: their drains are
+        # taken as they come (the members are the parts of one process)
+        wait_for_drain = getattr(polling.sensor, "wait_for_drain", None)
         try:
             if self.rt_priority:
                 self.realtime = raise_thread_priority(self.rt_priority)
@@ -496,7 +495,11 @@ class BusReader:
                     break
                 if wait_for_drain is not None:
                     if wait_for_drain(_PACE_SLEEP_MAX_S):
-                        polling.poll_once()
+                        for m in self.members:
+                            ready = getattr(m.sensor, "ready", None)
+                            if ready is None or ready():
+                                polling = m
+                                m.poll_once()
                     continue
                 for m in self.members:
                     # one sensor's fault is its own (poll_once marks it); the bus goes on

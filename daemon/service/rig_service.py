@@ -245,12 +245,14 @@ class RigService(Supervised):
                         for lane in chosen])
             sep.start()
         acqs = [lane.acq for lane in self.lanes]
-        # on the real clock each bus's reader asks for SCHED_FIFO, as the one-sensor reader
-        # process does (allowed by systemd/realtime.conf; refused, it runs as it is)
-        rt = 0 if self.built.spec.clock.stepped else self.reader_rt_priority
         for group in self.built.readers:
             members = [a for a in (acqs[k] for k in group) if a is not None]
             assert len(members) == len(group)
+            # a bus drained by this thread on the real clock: it asks for SCHED_FIFO, as the
+            # reader process does (allowed by systemd/realtime.conf; refused, it runs as it
+            # is); a reader process has the deadline itself, its thread here only the pipe
+            own = not any(hasattr(a.sensor, "wait_for_drain") for a in members)
+            rt = self.reader_rt_priority if own and not self.built.spec.clock.stepped else 0
             self.readers.append(share_reader(members, rt_priority=rt))
         if before_acquisition is not None:
             before_acquisition()

@@ -253,10 +253,33 @@ def test_one_reader_per_bus_on_hardware(monkeypatch: pytest.MonkeyPatch) -> None
     monkeypatch.setattr(rig_mod, "_open_hardware", lambda s: rig_mod._still(s, 0.0))
     monkeypatch.setattr(rig_mod, "_ds18b20_bank", lambda t: None)
     config = Config.from_dict(validate_config({"sensor": [LEFT, RIGHT, SPI1, FAR]}))
-    built = build_lanes(describe_rig(config))
+    built = build_lanes(describe_rig(config), reader_process=False)
     assert built.readers == ((0, 1), (2,), (3,))
     assert [lane.info["wiring"] for lane in built.lanes] == [
         "/dev/spidev0.0", "/dev/spidev0.1", "/dev/spidev1.0", "/dev/i2c-1 address 0x53"]
+    # by default each bus is drained by a reader process of its own, its parts in turn
+    procs: list[Any] = []
+
+    class FakeProcess:
+        pid = 4242
+
+        def __init__(self, chips: list[Any]) -> None:
+            self.chips = [c.name for c in chips]
+            procs.append(self)
+
+        def source(self, k: int) -> tuple[str, int]:
+            return ("source", k)
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(rig_mod, "_bus_process", lambda chips, spec: FakeProcess(chips))
+    built = build_lanes(describe_rig(config))
+    assert [p.chips for p in procs] == [["left", "right"], ["spi1"], ["far"]]
+    assert built.readers == ((0, 1), (2,), (3,))
+    assert [lane.sensor for lane in built.lanes] == [("source", 0), ("source", 1),
+                                                      ("source", 0), ("source", 0)]
+    assert all(lane.info["reader"] == "process 4242" for lane in built.lanes)
 
 
 def test_one_sensor_entry_runs_todays_service_in_data_dir_itself(tmp_path: Path) -> None:
