@@ -26,8 +26,9 @@ Printed per sensor: overruns, estimated and unaccounted losses (each must be 0),
 high-water mark (the most entries of 96 a drain found; 96 entries = 32 sets = 0.256 s at
 125 Hz: the deadline), the longest interval between two drains and the margin left to the
 deadline by it. Per run: CPU seconds of the process (all threads, ``time.process_time``) per
-second of clock with the reader processes' (they end at stop), per thread name (from
-/proc/self/task), and the service's peak RSS sampled every 0.5 s.
+second of clock with the reader processes' while the run lasts (from /proc/PID/stat every
+0.5 s: their start-up is not in it), per thread name (from /proc/self/task), and the
+service's peak RSS sampled every 0.5 s.
 The check of issue 28: rig of N ≤ N × rig of 1 in the same run, 0 overruns. Wall-clock pacing
 depends on the machine's load: report the ratios, and say the load.
 """
@@ -94,8 +95,9 @@ class Sampler:
     Python thread's name), read every ``interval_s`` while a run lasts (a thread that ends
     keeps its last reading: its last interval is lost, the process time is not)."""
 
-    def __init__(self, interval_s: float = 0.5) -> None:
+    def __init__(self, interval_s: float = 0.5, children: tuple[int, ...] = ()) -> None:
         self.interval_s = interval_s
+        self.children = children        # reader processes' pids: their CPU while they run
         self.rss_peak = 0
         self._cpu: dict[int, tuple[str, float]] = {}
         self._stop = threading.Event()
@@ -116,9 +118,12 @@ class Sampler:
         with open("/proc/self/statm") as f:
             self.rss_peak = max(self.rss_peak, int(f.read().split()[1]) * _PAGE)
         names = {t.native_id: t.name for t in threading.enumerate()}
-        for tid, name in names.items():
+        paths = {tid: (name, f"/proc/self/task/{tid}/stat") for tid, name in names.items()}
+        paths.update({-pid: ("reader process(es)", f"/proc/{pid}/stat")
+                      for pid in self.children})
+        for tid, (name, path) in paths.items():
             try:
-                with open(f"/proc/self/task/{tid}/stat") as f:
+                with open(path) as f:
                     fields = f.read().rsplit(")", 1)[1].split()
             except (OSError, TypeError):
                 continue
@@ -150,16 +155,17 @@ def _lane(lane: Any, where: str) -> Lane:
                 a.fifo_high_water, a.max_drain_interval_s)
 
 
-def _timed(name: str, svc: Any, seconds: float) -> tuple[Run, Sampler]:
-    with Sampler() as sampler:
-        c0, k0 = time.process_time(), os.times()
-        svc.run(seconds)        # its reader processes end (and are waited for) at stop
-        cpu, k1 = time.process_time() - c0, os.times()
-    children = (k1.children_user - k0.children_user) + (k1.children_system - k0.children_system)
+def _timed(name: str, svc: Any, seconds: float, children: tuple[int, ...] = ()
+           ) -> tuple[Run, Sampler]:
+    with Sampler(children=children) as sampler:
+        c0 = time.process_time()
+        svc.run(seconds)
+        cpu = time.process_time() - c0
     threads = sampler.by_name()
-    if children:
-        threads["reader process(es)"] = children
-    return Run(name, seconds, cpu + children, sampler.rss_peak / 1e6, [], threads), sampler
+    # the reader processes' CPU while the run lasted (read every 0.5 s until they end at
+    # stop; their start-up, before the run, is not in it)
+    return Run(name, seconds, cpu + threads.get("reader process(es)", 0.0),
+               sampler.rss_peak / 1e6, [], threads), sampler
 
 
 def run_service(odr: float, seconds: float) -> Run:
@@ -182,9 +188,11 @@ def run_rig(odr: float, seconds: float, n: int, *, real_clock: bool, rt: bool = 
         config = Config.from_dict(validate_config(_raw(odr, d, n)))
         spec = describe_rig(config, simulate="quiet-lab", seed=1, speed=1.0,
                             real_clock=real_clock)
-        svc = RigService(config, build_lanes(spec, reader_process=reader == "process"),
-                         **({} if rt else {"reader_rt_priority": 0}))
-        run, _s = _timed(f"rig of {n}", svc, seconds)
+        built = build_lanes(spec, reader_process=reader == "process")
+        svc = RigService(config, built, **({} if rt else {"reader_rt_priority": 0}))
+        pids = {int(str(lane.info["reader"]).split()[-1]) for lane in built.lanes
+                if "reader" in lane.info}
+        run, _s = _timed(f"rig of {n}", svc, seconds, tuple(sorted(pids)))
         run.lanes = [_lane(lane, wiring(s.bus))
                      for lane, s in zip(svc.lanes, spec.sensors, strict=True)]
         granted = sum(r.realtime for r in svc.readers)
@@ -252,6 +260,15 @@ def main(argv: list[str]) -> int:
     overruns = sum(ln.overruns for ln in rig.lanes)
     losses = sum(ln.lost + ln.unaccounted for ln in rig.lanes)
     margin = FIFO_SETS / args.odr - max(ln.max_interval_s for ln in rig.lanes)
+    def share(run: Run, readers: bool) -> float:
+        r = run.threads.get("reader process(es)", 0.0)
+        return (r if readers else run.cpu_s - r) / run.seconds
+
+    if "reader process(es)" in rig.threads and share(one, True) > 0:
+        print(f"  of which the service process {share(rig, False) / share(one, False):.2f}× "
+              f"({share(rig, False):.4f} / {share(one, False):.4f} CPU-s/s), the reader "
+              f"processes {share(rig, True) / share(one, True):.2f}× "
+              f"({share(rig, True):.4f} / {share(one, True):.4f})")
     print(f"rig of {args.sensors} / rig of 1: {ratio:.2f} (asked ≤ {args.sensors}); "
           f"overruns {overruns}, losses {losses}; least margin to the FIFO deadline "
           f"{margin:.3f} s of {FIFO_SETS / args.odr:.3f}; load now {os.getloadavg()[0]:.1f}")
