@@ -50,18 +50,24 @@ def run(args: argparse.Namespace) -> int:
         summary.append(f"  {len(rig)} sensors, each recorded in DATA_DIR/NAME:")
     for s in rig:     # every sensor's rate, drain and real-time note, not only the first's
         poll_hz = effective_poll_hz({"sensor": {"odr_hz": s.odr_hz, "poll_hz": s.poll_hz}})
-        if not several and reader_in_process(bool(s.int1_gpio)):
+        # a rig's bus is drained by a reader process unless one of its sensors waits on INT1
+        int1 = any(o.int1_gpio for o in rig
+                   if (o.bus, o.bus_number) == (s.bus, s.bus_number)) if several \
+            else bool(s.int1_gpio)
+        in_process = reader_in_process(int1)
+        if in_process:
             hz = 1.0 / drain_period_s(s.odr_hz, s.poll_hz, FILL_TARGET_PROCESS)
-            drains = (f"drained at {hz:g} Hz by a reader process on the hardware (SCHED_FIFO "
-                      "needs the drop-in systemd/realtime.conf)")
+            drains = (f"drained at {hz:g} Hz by {'its bus' if several else 'a'} reader "
+                      "process on the hardware (SCHED_FIFO needs the drop-in "
+                      "systemd/realtime.conf)")
         else:
             drains = (f"drained at {poll_hz:g} Hz"
-                      + (" by its bus's reader thread" if several else ""))
+                      + (" by its bus's reader thread (INT1 on the bus)" if several else ""))
         where = f"{s.name}: {wiring(SensorSpec.from_config(s).bus)}, " if several else ""
         indent = "  " if several else ""
         summary.append(f"  {indent}{where}ADXL355 at {s.odr_hz:g} Hz ODR, ±{s.range_g} g, "
                        f"{drains}" + (f", sync {s.sync}" if several else ""))
-        note = realtime_note(s, rig=several)
+        note = realtime_note(s, rig=several and not in_process)
         if note:
             summary.append(f"  {indent}note: {note}")
     if config.recording.enabled:
@@ -85,7 +91,8 @@ HELD_HZ_THREAD = 125.0
 def realtime_note(sensor: SensorConfig, *, rig: bool = False) -> str:
     """What was measured at this ODR on the real clock beside a CPU-bound process (pacing.py's
     HELD_HZ_PROCESS_FIFO, docs/service.md), when it is not "no overrun"; "" when it is.
-    ``rig``: the sensor is one of several, drained by its bus's reader thread."""
+    ``rig``: the sensor is one of several, drained by its bus's reader thread (a sensor of
+    its bus waits on INT1)."""
     odr = sensor.odr_hz
     after = ("; each overrun is a recorded gap of counted size (docs/service.md, python -m "
              "benchmarks realtime)")
@@ -93,11 +100,12 @@ def realtime_note(sensor: SensorConfig, *, rig: bool = False) -> str:
         if odr <= HELD_HZ_THREAD:
             return ""
         return (f"at {odr:g} Hz ({sensor.name}) the FIFO holds {32e3 / odr:.3g} ms: the "
-                "sensors of a rig are "
-                "drained by a reader thread per bus, which shares the GIL with the service's "
+                "sensors of a bus with INT1 are "
+                "drained by a reader thread, which shares the GIL with the service's "
                 f"other threads and held only {HELD_HZ_THREAD:g} Hz free of FIFO overruns "
                 "beside a CPU-bound process (the reader process, which held "
-                f"{HELD_HZ_PROCESS_FIFO:g} Hz, drains a one-sensor config)" + after)
+                f"{HELD_HZ_PROCESS_FIFO:g} Hz for one sensor, drains a bus without INT1)"
+                + after)
     if sensor.int1_gpio:
         return ("with INT1 the FIFO is drained by the service's thread, which shares the GIL "
                 "and was not measured free of FIFO overruns beside a CPU-bound process; "

@@ -29,9 +29,16 @@ def test_check_config_of_one_sensor_entry_says_no_rig(tmp_path: Path,
 def test_check_config_says_every_sensors_drain_and_real_time_note(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = _check_config(tmp_path, '[[sensor]]\nname = "left"\n\n'
-                        '[[sensor]]\nname = "right"\nspi_device = 1\nodr_hz = 1000.0\n', capsys)
-    assert "2 sensors, each recorded in DATA_DIR/NAME" in out
+                        '[[sensor]]\nname = "right"\nspi_device = 1\nodr_hz = 1000.0\n\n'
+                        '[[sensor]]\nname = "far"\nspi_bus = 1\nodr_hz = 1000.0\n'
+                        'int1_gpio = "gpiochip0:25"\n', capsys)
+    assert "3 sensors, each recorded in DATA_DIR/NAME" in out
     assert "left: /dev/spidev0.0, ADXL355 at 125 Hz ODR" in out
-    assert "right: /dev/spidev0.1, ADXL355 at 1000 Hz ODR" in out
-    assert "drained at 62.5 Hz" in out              # right's FIFO half full at 1000 Hz
-    assert "note: at 1000 Hz (right)" in out
+    # SPI0's bus is drained by a reader process (a quarter of the FIFO: 125 Hz at 1000 Hz)
+    assert ("right: /dev/spidev0.1, ADXL355 at 1000 Hz ODR, ±2 g, drained at 125 Hz by its "
+            "bus reader process") in out
+    assert "note: at 1000 Hz the FIFO holds 32 ms" in out
+    # a bus with INT1: its reader thread, at the FIFO half full, and the thread's note
+    assert ("far: /dev/spidev1.0, ADXL355 at 1000 Hz ODR, ±2 g, drained at 62.5 Hz by its "
+            "bus's reader thread (INT1 on the bus)") in out
+    assert "note: at 1000 Hz (far)" in out
