@@ -194,3 +194,58 @@ def test_one_reader_process_drains_several_parts_every_set_accounted_and_restart
     finally:
         reader.stop()
         rp.close()
+
+
+def test_a_bus_whose_reader_process_fails_to_start_closes_those_started_before(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from avard.core.errors import HardwareError
+
+    closed: list[str] = []
+
+    class Started:
+        pid = 1
+
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def source(self, k: int) -> int:
+            return k
+
+        def close(self) -> None:
+            closed.append(self.name)
+
+    def bus_process(chips: list[Any], spec: Any) -> Started:
+        if chips[0].bus.kind == "i2c":
+            raise HardwareError("no ADXL355 at /dev/i2c-1 address 0x53")
+        return Started(chips[0].name)
+
+    monkeypatch.setattr(rig_mod, "_bus_process", bus_process)
+    monkeypatch.setattr(rig_mod, "_ds18b20_bank", lambda t: None)
+    config = Config.from_dict(validate_config({"sensor": SENSORS}))
+    with pytest.raises(HardwareError, match="0x53"):
+        build_lanes(describe_rig(config))
+    assert closed == ["left"]              # SPI0's process, started before I2C's failed
+
+
+def test_each_part_of_a_reader_process_gets_its_own_drains_errors_and_temperature() -> None:
+    import numpy as np
+    from avard.core.errors import DeviceStalledError, HardwareError
+    from avard.daemon.hw.adxl355 import Drain
+
+    rp = DP.ReaderProcess(DP.ReaderSpec("unused:opener", chips=3))
+    counts = np.arange(12, dtype=np.int32).reshape(4, 3)
+    for k in (2, 0):
+        rp._message(DP.encode_drain(Drain(counts + k, False, 1.0 + k, 2.0, 0), chip=k))
+    rp._message(DP.encode_error(DeviceStalledError("part 1 is silent"), 1))
+    rp._message(DP._pack(DP._TEMP, chip=2, times=(1.0, 24.5) + (0.0,) * 6))
+    a, b, c = (rp.source(k) for k in range(3))
+    assert a.ready() and b.ready() and c.ready()
+    got_a, got_c = a.drain(), c.drain()
+    assert got_a.t_mono == 1.0 and got_c.t_mono == 3.0
+    assert np.array_equal(got_a.counts, counts) and np.array_equal(got_c.counts, counts + 2)
+    with pytest.raises(DeviceStalledError, match="part 1"):
+        b.drain()
+    assert not (a.ready() or b.ready() or c.ready())
+    assert c.read_temperature_c() == 24.5
+    with pytest.raises(HardwareError):
+        a.read_temperature_c()           # part 0 has not said its temperature
