@@ -379,8 +379,10 @@ def _chip_params(s: SensorSpec) -> dict[str, str | int | float | None]:
 class RigLanes:
     """A rig of several sensors built: one single-sensor :class:`Rig` per sensor (a *lane*,
     sharing the clock), which lanes one reader thread drains (by index into ``lanes``: one
-    reader per bus; a simulated rig has one, since its reader steps the virtual clock), and
-    the DS18B20 bank every lane hears."""
+    reader per bus, taking the drains of the bus's reader process where it has one; a
+    simulated rig has one, since its reader steps the virtual clock, and so has an emulated
+    rig on the real clock, whose one reader process makes and drains every part), and the
+    DS18B20 bank every lane hears."""
 
     spec: RigSpec
     lanes: tuple[Rig, ...]
