@@ -154,13 +154,22 @@ def chi2_ppf(p: float, k: ArrayLike) -> NDArray[np.float64]:
     return chi2_ppf_grid([p], k)[0]
 
 
+#: Quantile columns already computed, by (the probabilities, k): each entry is computed on its
+#: own, so a stored column is the very one a new call would give. A live separation asks for
+#: the same 64 probabilities on each axis with mostly the same EDFs; a bounded store, emptied
+#: when full (a long run's EDFs grow with its samples and are not asked again).
+_COLUMNS: dict[tuple[tuple[float, ...], float], NDArray[np.float64]] = {}
+_COLUMNS_MAX = 1024
+
+
 def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
     """χ²_k(p) for every p of ``ps`` and every k: shape (len(ps), *k.shape), row j the
     ``chi2_ppf(ps[j], k)``. One Newton iteration over all of them at once (an interval over a
     grid of probabilities costs one call, not one per probability); each entry stops changing
     once it has converged, so it is the same whatever else is in the call, and equal k
-    (the separation's parts share their EDF) are computed once (tests/core/test_chi2.py
-    holds the rows equal to ``chi2_ppf`` one p, and one k, at a time)."""
+    (the separation's parts share their EDF) are computed once, as are those an earlier call
+    computed for the same probabilities (tests/core/test_chi2.py holds the rows equal to
+    ``chi2_ppf`` one p, and one k, at a time, and a stored column to a fresh one)."""
     p_list = [float(p) for p in ps]
     for p in p_list:
         if not 0.0 < p < 1.0:
@@ -171,6 +180,22 @@ def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
         return np.empty(out_shape)
     # Equal k have equal quantiles (each entry is computed on its own): compute each once.
     k_unique, where = np.unique(k_arr.ravel(), return_inverse=True)
+    key = tuple(p_list)
+    cols = [_COLUMNS.get((key, float(kv))) for kv in k_unique]
+    missing = [i for i, c in enumerate(cols) if c is None]
+    if missing:
+        fresh = _ppf_columns(p_list, k_unique[missing])
+        if len(_COLUMNS) + len(missing) > _COLUMNS_MAX:
+            _COLUMNS.clear()
+        for j, i in enumerate(missing):
+            cols[i] = col = fresh[:, j].copy()
+            _COLUMNS[(key, float(k_unique[i]))] = col
+    table = np.stack([c for c in cols if c is not None], axis=1)      # (len(ps), unique k)
+    return table[:, where.ravel()].reshape(out_shape)
+
+
+def _ppf_columns(p_list: list[float], k_unique: NDArray[np.float64]) -> NDArray[np.float64]:
+    """χ²_k(p), (len(p_list), len(k_unique)): the Newton iteration of chi2_ppf_grid."""
     a1 = k_unique / 2.0
     a = np.tile(a1, len(p_list))
     p_col = np.repeat(np.array(p_list), a1.size)
@@ -196,7 +221,8 @@ def chi2_ppf_grid(ps: Sequence[float], k: ArrayLike) -> NDArray[np.float64]:
         todo[todo] = np.abs(new - xt) > 1e-13 * np.abs(xt)
         if not todo.any():
             break
-    return (2.0 * x).reshape(len(p_list), a1.size)[:, where.ravel()].reshape(out_shape)
+    out: NDArray[np.float64] = (2.0 * x).reshape(len(p_list), a1.size)
+    return out
 
 
 def _erfinv(y: float) -> float:

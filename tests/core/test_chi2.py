@@ -103,3 +103,27 @@ def test_the_grid_shapes_and_bad_p() -> None:
     assert chi2_ppf_grid([0.5], np.zeros((0, 3))).shape == (1, 0, 3)
     with pytest.raises(ValueError, match="strictly between"):
         chi2_ppf_grid([0.5, 0.0], np.ones(3))
+
+
+def test_a_stored_quantile_column_is_the_one_a_fresh_call_gives() -> None:
+    """chi2_ppf_grid keeps the columns it computed (the live separation asks for the same
+    probabilities on each axis, with mostly the same EDFs): a call served partly from them
+    equals, bit for bit, the same call computed afresh, and the store stays bounded."""
+    from avard.core.allan import chi2
+
+    ps = [(j + 0.5) / 64 for j in range(64)]
+    first = np.array([2.3e4, 1.1e4, 850.5, 41.1, 9.05, 2.79, 1.06])
+    second = np.array([2.3e4, 1.1e4, 850.5, 19.7, 7.05, 2.79, 1.06, 0.4])   # mostly repeats
+    chi2._COLUMNS.clear()
+    chi2_ppf_grid(ps, first)
+    assert len(chi2._COLUMNS) == first.size
+    served = chi2_ppf_grid(ps, second)
+    assert len(chi2._COLUMNS) == first.size + 3          # only the new EDFs were computed
+    chi2._COLUMNS.clear()
+    fresh = chi2_ppf_grid(ps, second)
+    assert np.array_equal(served, fresh)
+    served[0, 0] = -1.0                                   # a caller's array is its own
+    assert chi2_ppf_grid(ps, second)[0, 0] == fresh[0, 0]
+    for i in range(chi2._COLUMNS_MAX // 100 + 2):         # never more than the bound
+        chi2_ppf_grid(ps, np.arange(100) + 1000.0 * (i + 1))
+        assert len(chi2._COLUMNS) <= chi2._COLUMNS_MAX
