@@ -435,7 +435,10 @@ class BusReader:
     their drain periods, until stopped or the first sensor's ``stop_at``. It owns what the
     sensors share: the thread, stop, ``finished`` and, when it dies, each sensor's ``error``
     (the one that raised its exception, the others :class:`StoppedWithBus`). INT1 paces a
-    reader of one sensor that has the pin; a shared bus drains on the timer."""
+    reader of one sensor that has the pin; a shared bus drains on the timer; a bus drained by
+    a reader process (hw/drain_process.py) takes each part's drains as they come. On its
+    thread it first starts the parts its rig left to it (``Rig.start_measuring``) and, asked
+    to (``rt_priority``), raises itself to SCHED_FIFO."""
 
     def __init__(self, members: Sequence[Acquisition], *, rt_priority: int = 0) -> None:
         if not members:

@@ -190,6 +190,8 @@ def test_one_reader_process_drains_several_parts_every_set_accounted_and_restart
         for ring, acq, b in zip(rings, acqs, before, strict=True):
             restart = [g for g in ring.gaps if "restart" in g["reason"]]
             assert acq.error is None and len(restart) == 1 and restart[0]["i0"] >= b
+            # the new child brought every part up: none is reset once more on top
+            assert not [g for g in ring.gaps if "recovered" in g["reason"]]
             assert acq.next_index > restart[0]["i0"] + restart[0]["n"]
     finally:
         reader.stop()
