@@ -42,7 +42,9 @@ Where SP 1065 and Stable32 differ (both are offered: ``edf_convention``):
   1253-point record) is reproduced within 1.8e-4 (tests/core/test_stable32_longtau.py).
   Not at AF 1, α −1, where Table 5's form is below one degree of freedom and Stable32 prints
   Table 9's to 3e-3. ``"stable32"`` takes that rule; at flicker PM its EDF is the larger
-  (50.7 against OHDEV's 32.8 at PHASE.DAT's AF 128), so ``"sp1065"`` stays the default.
+  (50.7 against OHDEV's 32.8 at PHASE.DAT's AF 128), so ``"sp1065"`` stays the default;
+  simulated flicker PM shows both conservative there (HTOT's spread over 300 records of 1001
+  points: EDF 82 and 42 at m = 128 and 256; tests/core/test_longtau.py).
 * Bias: HTOT is divided by SP 1065's factor for its noise type (0.995 white FM, 0.851 flicker,
   0.771 random walk, 0.717 and 0.679 for α = −3, −4), as Stable32 prints it; TOTVAR by
   1 − a·τ/T (a = 0.481 flicker FM, 0.750 random-walk FM; SP 1065 §5.2.11); MTOT, TTOT and
