@@ -600,7 +600,9 @@ class LongTauCurve:
 
 #: TOTVAR's bias against AVAR, 1 − a·τ/T, by the model component's cause (NIST SP 1065
 #: §5.2.11: a = 1/(3 ln 2) for flicker FM, 3/4 for random-walk FM; 0 for white FM, and for
-#: the components that are white at τ far beyond their corner or time constant).
+#: the components that are white at τ far beyond their corner or time constant). A
+#: sinusoid's part is taken as its AVAR: at the τ tested its AVAR is small (it falls as
+#: 1/τ² beyond its period) and only the differences reaching into the reflection differ.
 TOTVAR_BIAS = {"bias_instability": 1.0 / (3.0 * math.log(2.0)),
                "lowpass_flicker": 1.0 / (3.0 * math.log(2.0)), "rate_random_walk": 0.75}
 
