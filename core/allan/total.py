@@ -28,7 +28,7 @@ from avard.core.allan.extension import reflect
 from avard.core.allan.modified import window_second_differences
 from numpy.typing import NDArray
 
-__all__ = ["subsequence_sums", "totvar_sums"]
+__all__ = ["ramp_totvar_ratio", "subsequence_sums", "totvar_sums"]
 
 # Elements of the extended-subsequence block processed at once (8 bytes each): 16 MiB.
 BLOCK_ELEMENTS = 1 << 21
@@ -70,3 +70,23 @@ def subsequence_sums(z: NDArray[np.float64], m: int) -> tuple[float, int]:
         d = window_second_differences(ext, m, 0, 6 * m)
         total += float(np.einsum("ij,ij->", d, d)) / (6 * m * m * m)
     return total, count
+
+
+def ramp_totvar_ratio(n_phase: int, m: int) -> float:
+    """TOTVAR over AVAR of a linear rate ramp (a quadratic phase) on ``n_phase`` points at
+    averaging factor m: the bias of TOTVAR for a ramp, exact on the grid. Odd reflection
+    turns the phase's curvature over at each end, so the differences that reach into the
+    extension see none of the ramp: about 1 − 0.93·τ/T (0.53 at T/2), where the AVAR of the
+    ramp is R²τ²/2 at every τ. NaN beyond m = (N − 1)/2."""
+    s, c = totvar_sums(_unit_curvature(n_phase), m)
+    if c == 0:
+        return float("nan")
+    # the ramp's AVAR: its second difference is m² everywhere, so Σ/(2m²·count) = m²/2
+    return s / (2.0 * m * m * c) / (m * m / 2.0)
+
+
+def _unit_curvature(n_phase: int) -> NDArray[np.float64]:
+    """x_k = (k − c)²/2, centred (a line added to the phase changes no second difference,
+    nor the odd reflection's, so centring only keeps the numbers small)."""
+    t = np.arange(n_phase, dtype=np.float64) - (n_phase - 1) / 2.0
+    return 0.5 * t * t

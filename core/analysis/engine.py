@@ -622,6 +622,12 @@ def _analyze_passes(
     for (k, j, one, i, lines), job, fit in zip(todo, fit_args, fits, strict=True):
         if isinstance(fit, str):
             raise FitError(f"{source}, channel {names[i]}: {fit}")
+        if estimator == "oadev" and reread is not None:
+            # a ramp claimed from an OADEV that stops at N/4 is tested against the
+            # channel's TOTVAR out to T/2, read again only then (long_tau_check)
+            from avard.core.analysis.long_tau_check import check_ramp
+
+            fit = check_ramp(fit, reread(i), n, rate)
         welch = one.welch
         f, spectrum = spectra[k]
         chan_psd = None

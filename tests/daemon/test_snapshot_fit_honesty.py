@@ -74,11 +74,12 @@ def test_a_ramp_seen_only_at_the_longest_tau_is_not_yet_resolved(tmp_path) -> No
 
 
 
-def _ramp_claims(seeds: tuple[int, ...], tmp_path) -> tuple[int, int, int, int]:
+def _ramp_claims(seeds: tuple[int, ...], tmp_path) -> tuple[int, int, int, int, int, int]:
     """Over 41 and 55 min of each seed: (x and y axis fits, live ramps claimed resolved on
     x or y, the same on z, axes where analyze of the same samples with the service's
-    estimator says the same of R and K as the live fit)."""
-    claimed, claimed_z, same, total = 0, 0, 0, 0
+    estimator says the same of R and K as the live fit, axes where analyze's default OADEV
+    claims R resolved, those of them where the live fit does not)."""
+    claimed, claimed_z, same, total, by_oadev, beyond_live = 0, 0, 0, 0, 0, 0
     for seed in seeds:
         y_full, rate = quiet_lab(55, seed)
         for minutes in (41, 55):
@@ -92,8 +93,16 @@ def _ramp_claims(seeds: tuple[int, ...], tmp_path) -> tuple[int, int, int, int]:
             np.savez(path, accel=y, rate_hz=rate, axes=np.array(["x", "y", "z"]))
             an = analyze(open_record(path), AnalyzeOptions(
                 estimator="cascade", filter_corner_hz=rate / 4, find_sinusoids=False))
+            # analyze's default OADEV stops at N/4; its ramps are tested against the TOTVAR
+            # out to T/2 (core/analysis/long_tau_check.py)
+            oadev = analyze(open_record(path), AnalyzeOptions(filter_corner_hz=rate / 4,
+                                                              find_sinusoids=False))
             for axis, fit in fits.items():
                 ramp = fit.terms["rate_ramp"]
+                off_r = oadev.channels[axis].fit.terms["rate_ramp"]
+                if off_r.present and off_r.note is None:
+                    by_oadev += 1
+                    beyond_live += not (ramp.present and ramp.note is None)
                 if axis == "z":
                     claimed_z += ramp.present and ramp.note is None
                 else:
@@ -103,7 +112,7 @@ def _ramp_claims(seeds: tuple[int, ...], tmp_path) -> tuple[int, int, int, int]:
                 same += all((off[t].present, off[t].note) == (fit.terms[t].present,
                                                               fit.terms[t].note)
                             for t in ("rate_ramp", "rate_random_walk"))
-    return total, claimed, claimed_z, same
+    return total, claimed, claimed_z, same, by_oadev, beyond_live
 
 
 def test_no_ramp_is_claimed_on_quiet_lab_seeds_4_and_5(tmp_path) -> None:
@@ -112,9 +121,11 @@ def test_no_ramp_is_claimed_on_quiet_lab_seeds_4_and_5(tmp_path) -> None:
     while the snapshot's own τ beyond the fit (524 and 1049 s: too few averages to fit, not
     to test) measured 0.5× and 0.02× the ramp's prediction there (fit._refuted_beyond). On
     41 and 55 min of seeds 4 and 5 no ramp is claimed resolved on any axis, and analyze
-    of the same samples with the service's estimator says the same of R and K on each."""
-    total, claimed, claimed_z, same = _ramp_claims((4, 5), tmp_path)
-    assert (total, claimed, claimed_z, same) == (8, 0, 0, 12)
+    of the same samples with the service's estimator says the same of R and K on each.
+    analyze's default OADEV (to N/4) had claimed seed 5's x ramp at 41 and 55 min; the
+    TOTVAR out to T/2 now refutes it there too."""
+    total, claimed, claimed_z, same, by_oadev, beyond_live = _ramp_claims((4, 5), tmp_path)
+    assert (total, claimed, claimed_z, same, by_oadev, beyond_live) == (8, 0, 0, 12, 0, 0)
 
 
 @pytest.mark.slow
@@ -122,7 +133,12 @@ def test_no_ramp_is_claimed_on_quiet_lab_across_seeds(tmp_path) -> None:
     """The same over twelve seeds. x and y (48 fits): no ramp claimed resolved. z carries
     the preset's warm-up (2e-4 m/s² settling with a 600 s time constant), a monotonic drift
     that a ramp describes over these minutes; it is counted, not asserted absent (measured:
-    seed 11 at 41 and 55 min, 2 of 24). Every one of the 72 axes: analyze says the same."""
-    total, claimed, claimed_z, same = _ramp_claims(tuple(range(12)), tmp_path)
+    seed 11 at 41 and 55 min, 2 of 24). Every one of the 72 axes: analyze says the same.
+    analyze's default OADEV, which stops at N/4, had claimed R on 5 of the 72 (seed 0 z at
+    55 min, seed 5 x at 41 and 55, seed 11 z at 41 and 55); with the TOTVAR out to T/2 it
+    claims it on 1 (seed 11 z at 41 min), never where the live fit does not."""
+    total, claimed, claimed_z, same, by_oadev, beyond_live = _ramp_claims(tuple(range(12)),
+                                                                          tmp_path)
     assert (total, claimed, same) == (48, 0, 72)
     assert claimed_z <= 2
+    assert by_oadev <= claimed + claimed_z and beyond_live == 0
