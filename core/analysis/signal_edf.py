@@ -83,14 +83,11 @@ def signal_share(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
     return np.nan_to_num(share, nan=0.0)
 
 
-#: The power-law type (α of S_y ∝ f^α) whose Greenhall–Riley EDF bounds each noise cause's:
-#: white and filtered white are white FM; flicker, flicker FM; a random walk and a
-#: Gauss–Markov process (a random walk below its T, the reddest type it can look like),
-#: random-walk FM; quantization noise is given white FM's, the most any FM type has (the
-#: EDF stays within the record's support).
-_CAUSE_ALPHA = {"velocity_random_walk": 0, "white": 0, "filter": 0, "lowpass_white": 0,
-                "quantization": 0, "bias_instability": -1, "lowpass_flicker": -1,
-                "rate_random_walk": -2, "gauss_markov": -2}
+#: The power-law type whose Greenhall–Riley EDF bounds each noise cause's: the fit's
+#: (``fit.CAUSE_ALPHA``), except quantization, given white FM's (the most any FM type has:
+#: the EDF stays within the record's support), and a Gauss–Markov process, given a random
+#: walk's (what it looks like below its T, the reddest type it can be).
+_CAUSE_OVERRIDES = {"quantization": 0, "gauss_markov": -2}
 
 
 def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
@@ -102,6 +99,8 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
     the point bound at their upper value (θ + σ, or the upper limit of an absent term), the
     others at their lower (θ − σ, not below 0). NaN where the fit has a noise cause it
     cannot type, or no noise at that τ."""
+    from avard.core.model.fit import CAUSE_ALPHA  # (the fit module loads with the fit)
+
     tau = np.asarray(allan.tau, dtype=float)
     n_phase = _n_phase(allan)
     cov = np.asarray(fit.theta_cov, dtype=float)
@@ -110,7 +109,7 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
     for j, comp in enumerate(fit.components):
         if comp.psd(fit.rate_hz) is None:
             continue  # deterministic (signal_share)
-        alpha = _CAUSE_ALPHA.get(comp.cause)
+        alpha = {**CAUSE_ALPHA, **_CAUSE_OVERRIDES}.get(comp.cause)
         if alpha is None:
             return np.full(len(tau), math.nan)
         theta = float(fit.theta[j])

@@ -57,8 +57,9 @@ from avard.core.model.nnls import nnls
 from avard.core.model.terms import TERMS, UNITS
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Component", "ModelChi2", "NoiseFit", "TermEstimate", "avar_estimate_covariance",
-           "fit_noise", "model_chi2", "model_components", "slope_method"]
+__all__ = ["CAUSE_ALPHA", "Component", "ModelChi2", "NoiseFit", "TermEstimate",
+           "avar_estimate_covariance", "fit_noise", "model_chi2", "model_components",
+           "slope_method"]
 
 
 @dataclass
@@ -253,7 +254,7 @@ def model_components(terms: Iterable[str], extra: Sequence[Mapping] = (), *, rat
 
 #: The power-law type (α of S_y ∝ f^α) of each noise cause, for its Greenhall–Riley EDF;
 #: a cause not listed (a Gauss–Markov process, which is no one power law) keeps Whittle's.
-_CAUSE_ALPHA = {"quantization": 2, "velocity_random_walk": 0, "white": 0, "filter": 0,
+CAUSE_ALPHA = {"quantization": 2, "velocity_random_walk": 0, "white": 0, "filter": 0,
                 "lowpass_white": 0, "bias_instability": -1, "lowpass_flicker": -1,
                 "rate_random_walk": -2}
 
@@ -273,7 +274,7 @@ def _covariance_kernels(components: Sequence[Component], m: NDArray[np.int64],
     g = np.ones((K, A))
     tau = np.asarray(m, dtype=float) / rate_hz
     for a, comp in enumerate(components):
-        alpha = _CAUSE_ALPHA.get(comp.cause)
+        alpha = CAUSE_ALPHA.get(comp.cause)
         if alpha is None:
             continue
         b = comp.basis(tau, rate_hz)
