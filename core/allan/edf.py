@@ -31,7 +31,8 @@ from avard.core.allan.chi2 import chi2_ppf, chi2_ppf_stable32
 from avard.core.errors import DataError
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["QUANTILES", "chi2_interval", "edf_greenhall", "edf_simple"]
+__all__ = ["QUANTILES", "chi2_interval", "edf_greenhall", "edf_mixture_bound", "edf_simple",
+           "edf_with_signal"]
 
 # GR switch to the asymptotic forms beyond this many terms of the basic sum.
 _J_MAX = 100
@@ -188,6 +189,51 @@ def edf_greenhall(alpha: int, d: int, m: int, stride: int, n_phase: int) -> floa
 def edf_simple(n_diff: int) -> float:
     """Crude EDF = number of differences; only for comparison with the GR value."""
     return float(n_diff)
+
+
+def edf_with_signal(edf: ArrayLike, share: ArrayLike) -> NDArray[np.float64]:
+    """EDF of a variance estimate a known share of whose expectation is deterministic.
+
+    An estimate V = S + V_n of a deterministic part S (a rate ramp, a sinusoid) and a noise
+    part V_n with EDF ν (ν·V_n/E[V_n] ~ χ²_ν) is, with the noise's cross term with the
+    signal taken as large as a Gaussian quadratic form allows, a non-central χ²:
+    ν·V/E[V_n] ~ χ'²(ν, λ), λ = ν·S/E[V_n]. Matched in its first two moments to a scaled
+    central χ² (NIST SP 1065 eq. 40 then applies unchanged), its EDF is
+
+        2 E[V]²/Var[V] = (ν + λ)²/(ν + 2λ) = ν / (1 − f²),   f = S/(S + E[V_n]),
+
+    the share ``f`` of the expected variance that does not scatter. It is ν at f = 0 (noise
+    alone: the interval is exactly the noise's), grows without bound as f → 1, and is never
+    below ν. The cross term of a smooth signal is smaller than the non-central χ²'s (its
+    differences weigh the noise nearly evenly, and their sum telescopes), so the estimate
+    scatters less still: the interval this EDF gives is never narrower than the data
+    support, as long as ``f`` is not overstated (the caller takes the part it is sure of).
+    Entries with a non-finite EDF stay as they are; ``share`` is clipped to [0, 0.99].
+    """
+    e = np.asarray(edf, dtype=np.float64)
+    f = np.clip(np.nan_to_num(np.asarray(share, dtype=np.float64), nan=0.0), 0.0, 0.99)
+    return e / (1.0 - f * f)
+
+
+def edf_mixture_bound(levels: ArrayLike, edfs: ArrayLike) -> NDArray[np.float64]:
+    """A lower bound on the EDF of a variance estimate of a sum of independent Gaussian
+    noises, from each one's part of the variance (``levels``, shape (J, K)) and its own EDF
+    (``edfs``, (J, K): the Greenhall–Riley EDF of its pure type at the same m and N).
+
+    Each noise's estimate is a quadratic form yᵀAy of its own covariance C_j, and Var of the
+    sum is Σ_ij 2 tr(C_i A C_j A) ≤ (Σ_j √(2 tr((C_j A)²)))² = (Σ_j N_j √(2/ν_j))² by
+    Cauchy–Schwarz, so
+
+        EDF ≥ (Σ_j N_j)² / (Σ_j N_j/√ν_j)²,
+
+    which lies between the least and the largest ν_j (equal to ν when one noise holds it
+    all). NaN where no level is positive."""
+    lv = np.atleast_2d(np.asarray(levels, dtype=np.float64))
+    nu = np.atleast_2d(np.asarray(edfs, dtype=np.float64))
+    num = np.sum(lv, axis=0)
+    den = np.sum(np.where(lv > 0, lv / np.sqrt(nu), 0.0), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num**2 / den**2, np.nan)
 
 
 QUANTILES = ("exact", "stable32")

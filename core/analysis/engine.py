@@ -33,6 +33,7 @@ import numpy as np
 from avard.core.allan.noise_id import check_noise_id
 from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
+from avard.core.analysis.signal_edf import with_signal_edf
 from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_nperseg
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
@@ -639,7 +640,10 @@ def _analyze_passes(
 
             chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
             chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
-        out[names[i]] = ChannelAnalysis(names[i], job.allan, fit, lines, estimator, chan_psd)
+        # the printed interval: the part of the AVAR the fit's resolved deterministic terms
+        # hold does not scatter (signal_edf.py; unchanged on noise alone)
+        out[names[i]] = ChannelAnalysis(names[i], with_signal_edf(job.allan, fit), fit, lines,
+                                        estimator, chan_psd)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,

@@ -33,6 +33,7 @@ from avard.core.allan.edf import edf_total
 from avard.core.allan.extension import centred_phase, decimate
 from avard.core.allan.total import ramp_totvar_ratio, totvar_sums
 from avard.core.model.fit import (
+    CAUSE_ALPHA,
     LongTauCurve,
     NoiseFit,
     refuted_by,
@@ -44,10 +45,6 @@ __all__ = ["DECIMATED_POINTS", "check_ramp", "totvar_curve"]
 
 #: The channel is averaged by the smallest power of two that leaves at most this many points.
 DECIMATED_POINTS = 1 << 16
-#: SP 1065 Table 7 has rows for the FM types only: α of each model component's noise at long
-#: τ (white-like components, quantization included, read as white FM there).
-_ALPHA = {"bias_instability": -1, "lowpass_flicker": -1, "rate_random_walk": -2}
-
 _Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 
 
@@ -103,7 +100,9 @@ def _dominant_alpha(fit: NoiseFit, tau: float) -> int:
             continue
         part = float(th * c.basis(np.array([tau]), fit.rate_hz)[0])
         if part > best:
-            best, alpha = part, _ALPHA.get(c.cause, 0)
+            # SP 1065 Table 7 has rows for the FM types only: white-like components,
+            # quantization included, are read as white FM at long τ
+            best, alpha = part, min(0, CAUSE_ALPHA.get(c.cause, 0))
     return alpha
 
 

@@ -1,6 +1,7 @@
 """Coverage of the printed OADEV intervals on records from a generator written apart from
 avard (tests/support/coverage_gen.py; issue 24): the slow set runs the benchmark's own
-function (benchmarks/bench_coverage.py, its table in docs/analysis.md)."""
+function (benchmarks/bench_coverage.py, its table in docs/analysis.md) on what ``avard
+analyze`` prints (the fit's EDF included, core/analysis/signal_edf.py)."""
 
 from __future__ import annotations
 
@@ -14,13 +15,13 @@ from benchmarks.bench_coverage import BAND, coverage
 def test_intervals_cover_the_truth_on_noise(hours: int) -> None:
     """White + flicker + random walk, 200 records: at every τ with ≥ 5 averages the 68.3 %
     interval holds the closed-form AVAR in at least 60 % of the records, and in 60–76 % at
-    all but two τ, none above 80 % (measured: 1 h and 12 h within 60–76 % at every τ; 60 h
-    at 77.5 % and 76.5 % at 8 s and 4096 s, 14 of 16 inside; a share of 200 records has a
-    standard error of 3.3 points, and neighbouring τ share their records)."""
+    all but one τ, none above 80 % (measured: 1 h and 12 h within 60–76 % at every τ; 60 h
+    at 77.5 % at 8 s, 15 of 16 inside; a share of 200 records has a standard error of 3.3
+    points, and neighbouring τ share their records)."""
     c = coverage(hours, "plain", 200, seed=1)
     detail = list(zip(c.tau, c.share, strict=True))
     assert all(c.share >= BAND[0]), detail
-    assert len(c.outside()) <= 2 and all(c.share <= 0.80), detail
+    assert len(c.outside()) <= 1 and all(c.share <= 0.80), detail
 
 
 @pytest.mark.slow
@@ -28,11 +29,27 @@ def test_intervals_cover_the_truth_on_noise(hours: int) -> None:
 @pytest.mark.parametrize("hours", [1, 12, 60])
 def test_intervals_are_never_too_narrow_with_a_signal(hours: int, mix: str) -> None:
     """With a slow sinusoid or a drift added: the interval holds the truth in at least 60 %
-    of the records at every τ (measured 62.5–65 % at the lowest). Where the signal makes
-    much of the AVAR they over-cover (measured up to 90 %): a deterministic part scatters
-    less than the χ² of any noise type says, and the EDF may not exceed what an FM type
-    gives (docs/analysis.md, "Coverage of the intervals")."""
+    of the records at every τ. Where the signal makes much of the AVAR they over-cover
+    (measured up to 90 %): the fit cannot resolve these signals (a sinusoid of six cycles a
+    record, a drift it cannot tell from the random walk), so the printed EDF is the noise's,
+    and a deterministic part scatters less than any noise type's χ² says
+    (docs/analysis.md, "Coverage of the intervals")."""
     c = coverage(hours, mix, 200, seed=1)
     detail = list(zip(c.tau, c.share, c.signal, strict=True))
     assert all(c.share >= BAND[0]), detail
     assert all(c.share <= 0.92), detail
+
+
+@pytest.mark.slow
+def test_a_resolved_ramp_narrows_the_interval_and_never_too_far() -> None:
+    """A drift ten times as steep ("steep", 1 h): the fit resolves it as a ramp in most
+    records and the printed EDF rises where it holds the AVAR; the interval still holds the
+    truth in at least 60 % of the records at every τ (measured 65–100 %: the EDF stays
+    within the record's support, which a ramp's estimate scatters far below)."""
+    c = coverage(1, "steep", 200, seed=1)
+    detail = list(zip(c.tau, c.share, c.fit_share, c.edf_mean, strict=True))
+    assert all(c.share >= BAND[0]), detail
+    assert c.fit_raised.max() >= 0.9, detail
+    assert c.fit_share[-1] > 0.5, detail
+    plain = coverage(1, "plain", 200, seed=1)
+    assert c.edf_mean[-1] > 1.2 * plain.edf_mean[-1], detail

@@ -297,7 +297,10 @@ def test_added_covariance_enters_the_fit() -> None:
     wide = fit_noise(res, added_cov=np.outer(j, j))
     b0, b1 = plain.terms["bias_instability"], wide.terms["bias_instability"]
     assert b0.present and b1.present
-    assert b1.hi - b1.lo > 1.5 * (b0.hi - b0.lo)
+    # measured 1.49×: the plain interval is the one of Greenhall–Riley's finite-record
+    # variances (fit._covariance_kernels, issue 24), wider at the long τ than Whittle's
+    # first-order one, against which this was 1.5× and more
+    assert b1.hi - b1.lo > 1.4 * (b0.hi - b0.lo)
     with pytest.raises(FitError, match="added_cov"):
         fit_noise(res, added_cov=np.zeros((2, 2)))
 

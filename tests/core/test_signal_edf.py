@@ -1,0 +1,171 @@
+"""The printed OADEV's EDF where the fit's deterministic terms hold part of the AVAR (issue 24,
+core/analysis/signal_edf.py): the non-central χ² moment-matched, given only for terms the fit
+resolves, at their lower 1σ bound, within the record's support; noise alone unchanged."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from avard.core.allan.deviations import AllanResult, allan_variance
+from avard.core.allan.edf import (
+    chi2_interval,
+    edf_greenhall,
+    edf_mixture_bound,
+    edf_with_signal,
+)
+from avard.core.allan.noise_id import SPREAD_LAG1
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.results import ChannelAnalysis
+from avard.core.analysis.signal_edf import (
+    signal_share,
+    unresolved_noise_edf,
+    with_signal_edf,
+)
+from avard.core.io.source import RecordFormat, RecordInfo, StreamSource
+
+from tests.core.test_noise_id_rate import support
+from tests.support.coverage_gen import Mix, record
+
+RATE = 10.0
+N = 36000  # 1 h at 10 Hz
+
+
+def _analyze(y: np.ndarray) -> ChannelAnalysis:
+    info = RecordInfo(source="test", format=RecordFormat.STREAM, rate_hz=RATE, names=("x",),
+                      n_samples=len(y))
+    return analyze(StreamSource(info, iter([(y[:, None], None, False)]))).channels["x"]
+
+
+def _record(drift: float, seed: int = 3, q2: float = 0.0) -> np.ndarray:
+    return record(Mix(1.0, 0.02, q2, drift=drift), N, np.random.default_rng(seed))[0]
+
+
+@pytest.mark.parametrize("nu", [1.5, 4.0, 30.0])
+@pytest.mark.parametrize("f", [0.0, 0.3, 0.8])
+def test_edf_is_the_noncentral_chi2_moment_match(nu: float, f: float) -> None:
+    """ν/(1 − f²) is 2E²/Var of ν·V/E[V_n] ~ χ'²(ν, λ = ν f/(1 − f)), and a Monte Carlo of
+    that non-central χ² scatters with it."""
+    lam = nu * f / (1 - f)
+    assert edf_with_signal(nu, f) == pytest.approx((nu + lam) ** 2 / (nu + 2 * lam), rel=1e-12)
+    draws = np.random.default_rng(1).noncentral_chisquare(nu, lam, 400_000) if lam > 0 else \
+        np.random.default_rng(1).chisquare(nu, 400_000)
+    seen = 2 * draws.mean() ** 2 / draws.var()
+    assert seen == pytest.approx(float(edf_with_signal(nu, f)), rel=0.02)
+
+
+def test_the_mixture_bound_holds_on_simulated_estimates() -> None:
+    """White + random walk of equal AVAR at the τ read: the EDF the OADEV estimates scatter
+    with (Monte Carlo, 600 records) is at least the Cauchy–Schwarz bound from the two
+    types' own Greenhall–Riley EDFs, which lies between them (so it is more than the least
+    EDF of the two, what the estimator takes when it cannot tell them apart)."""
+    rng = np.random.default_rng(2)
+    n, m = 4096, 256
+    s2, q2 = 1.0, 6.0 / (2 * m * m + 1)        # white s²/m = walk q²(2m²+1)/(6m) at m
+    est = []
+    for _ in range(600):
+        y = rng.normal(scale=np.sqrt(s2), size=n) + np.cumsum(
+            rng.normal(scale=np.sqrt(q2), size=n))
+        est.append(allan_variance(y, 1.0, [float(m)], alpha=0).var[0])
+    est_a = np.array(est)
+    seen = 2 * est_a.mean() ** 2 / est_a.var()
+    nus = np.array([[edf_greenhall(0, 2, m, 1, n + 1)], [edf_greenhall(-2, 2, m, 1, n + 1)]])
+    levels = np.array([[s2 / m], [q2 * (2 * m * m + 1) / (6 * m)]])
+    bound = float(edf_mixture_bound(levels, nus)[0])
+    assert nus.min() < bound < nus.max()
+    assert bound > 1.2 * nus.min()
+    assert seen >= 0.85 * bound, (seen, bound, nus.ravel())  # 600 records: ±8 % on seen
+    # one noise alone: its own EDF
+    assert float(edf_mixture_bound(levels[:1], nus[:1])[0]) == pytest.approx(nus[0, 0])
+
+
+def test_noise_alone_is_the_estimators_where_it_identified_one_type() -> None:
+    """White noise alone: no deterministic share; where the estimator had enough averages to
+    identify one type (≥ SPREAD_LAG1) the printed EDF and bounds are its own; with fewer,
+    where it took the least EDF of the types it could not tell apart, the fit's white-only
+    model may raise it, up to white FM's own EDF and no further."""
+    y = np.random.default_rng(5).normal(size=N)
+    ch = _analyze(y)
+    assert not np.any(signal_share(ch.fit, ch.allan) > 0)
+    r = allan_variance(y, RATE)
+    k = len(ch.allan.tau)
+    many = N / ch.allan.m >= SPREAD_LAG1
+    np.testing.assert_allclose(ch.allan.edf[many], r.edf[:k][many], rtol=1e-12)
+    np.testing.assert_allclose(ch.allan.hi[many], r.hi[:k][many], rtol=1e-12)
+    few = ~many & np.isfinite(ch.allan.edf)
+    white = np.array([edf_greenhall(0, 2, int(m), 1, N + 1) for m in ch.allan.m[few]])
+    assert np.all(ch.allan.edf[few] >= r.edf[:k][few] * (1 - 1e-12))
+    assert np.all(ch.allan.edf[few] <= white * (1 + 1e-12))
+    assert np.any(ch.allan.edf[few] > r.edf[:k][few])  # raised where the estimator could not tell
+
+
+@pytest.mark.parametrize("drift", [0.0, 1e-4, 3e-4])
+def test_printed_edf_keeps_to_the_support(drift: float) -> None:
+    """White + flicker + random walk with and without a ramp, through analyze: every printed
+    EDF is at least the estimator's and at most what the record supports."""
+    for seed in (1, 2):
+        y = _record(drift, seed, q2=1e-6)
+        ch = _analyze(y)
+        r = allan_variance(y, RATE)
+        k = len(ch.allan.tau)
+        ok = np.isfinite(ch.allan.edf)
+        assert np.all(ch.allan.edf[ok] >= r.edf[:k][ok] * (1 - 1e-12))
+        assert np.all(ch.allan.edf[ok] <= support(ch.allan)[ok] * (1 + 1e-12))
+
+
+def test_a_resolved_ramp_raises_the_edf_where_it_holds_the_avar() -> None:
+    """A ramp the fit resolves (present, no note): where it holds most of the AVAR the EDF
+    rises (an interval from the noise's EDF would be wider than the data support), never
+    above the record's support, never below the noise's; the bounds are the χ² bounds of
+    the new EDF; at short τ, where the ramp holds nothing, nothing changes."""
+    y = _record(3e-4)
+    ch = _analyze(y)
+    ramp = ch.fit.terms["rate_ramp"]
+    assert ramp.present and ramp.note is None
+    r = allan_variance(y, RATE)
+    k = len(ch.allan.tau)
+    base, new = r.edf[:k], ch.allan.edf
+    share = signal_share(ch.fit, r)[:k]
+    assert share[-1] > 0.5 and share[0] < 1e-6
+    noise = np.fmax(base, unresolved_noise_edf(ch.fit, ch.allan))
+    assert new[-1] > 1.3 * noise[-1]                     # raised where the ramp dominates
+    assert np.all(new >= noise * (1 - 1e-12))            # never below the noise's
+    assert np.all(new <= support(ch.allan) * (1 + 1e-12))  # never above the support
+    np.testing.assert_allclose(new[:4], noise[:4], rtol=1e-12)
+    lo, hi = chi2_interval(ch.allan.var, new, ch.allan.ci)
+    np.testing.assert_allclose(ch.allan.lo, lo, rtol=1e-12)
+    np.testing.assert_allclose(ch.allan.hi, hi, rtol=1e-12)
+
+
+def test_a_ramp_the_fit_does_not_resolve_changes_nothing() -> None:
+    """A ramp the fit keeps only as "not yet resolved" or reads as a random walk: no share
+    is given to it (it is read as noise)."""
+    found = 0
+    for seed in range(3, 9):
+        y = _record(1e-4, seed, q2=1e-6)
+        ch = _analyze(y)
+        ramp = ch.fit.terms["rate_ramp"]
+        if ramp.present and ramp.note is None:
+            continue
+        if ramp.present or ch.fit.terms["rate_random_walk"].present:
+            found += 1
+            assert not np.any(signal_share(ch.fit, ch.allan) > 0)
+    assert found >= 1  # the case occurred
+
+
+def test_the_share_is_the_part_the_fit_is_sure_of() -> None:
+    """The share uses the ramp at its lower 1σ bound over the larger of the measured and
+    modelled AVAR: below the point value's share at every τ."""
+    ch = _analyze(_record(3e-4))
+    tau = ch.allan.tau
+    point = ch.fit.component_avars(tau)["rate_ramp"] / np.fmax(ch.allan.var,
+                                                              ch.fit.model_avar(tau))
+    share = signal_share(ch.fit, ch.allan)
+    assert np.all(share <= point * (1 + 1e-12)) and np.any(share < point)
+
+
+def test_a_hadamard_result_is_left_alone() -> None:
+    """The fit's basis is the AVAR: a Hadamard result is returned as it is."""
+    y = _record(3e-4)
+    ch = _analyze(y)
+    h: AllanResult = allan_variance(y, RATE, kind="ohvar")
+    assert with_signal_edf(h, ch.fit) is h
