@@ -261,13 +261,15 @@ def _edges(c: cz.Candidate) -> list[float]:
 
 
 def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
-    """The forward search's proposals as atoms: an excursion that shares an edge (within
-    ``tol`` s) with another proposal becomes its two steps (the greedy order may have cut a
-    step and an excursion into two overlapping boxes), and steps at one time become one."""
+    """The forward search's proposals as atoms: every excursion becomes its two steps, each
+    with its own size, and steps at one time (within ``tol`` s) become one. Which edges
+    belong together is decided after the joint fit, by ``_pair_excursions``: the greedy order
+    picks the box of the largest margin, and on a record with a step after an excursion that
+    is often the excursion's down edge paired with the later step (one box of their mean
+    size, its up edge left a lone step), which no refinement of the box's edges undoes."""
     out: list[cz.Candidate] = []
-    for i, c in enumerate(tent):
-        others = [e for j, o in enumerate(tent) if j != i for e in _edges(o)]
-        if c.cause == "excursion" and any(abs(e - x) <= tol for e in _edges(c) for x in others):
+    for c in tent:
+        if c.cause == "excursion":
             sz = c.params["size"]
             out += [replace(c, cause="bias_step", params={"time_s": c.params["start_s"],
                                                           "size": sz}),

@@ -83,6 +83,29 @@ def test_two_steps_an_excursion_and_a_warmup_on_one_axis(tmp_path):
         assert not [f for f in ex.channels[a].claimed if f.cause != "sinusoid"]
 
 
+def test_an_excursion_before_a_step_is_not_boxed_with_the_step(tmp_path):
+    """The benchmark's compound 4 h record (seed 24500): the forward search's best box was the
+    excursion's down edge (−3.3e-4 at 7700 s) with the later step (+6e-4 at 11520 s), one
+    excursion of their mean size −4.8e-4 from 7700 to 11520 s and the excursion's up edge a
+    lone step; the old code refined the box's edges but never its pairing. Every proposal is
+    now split into its steps and paired after the joint fit."""
+    from benchmarks.bench_explain_weekend import rows_events
+
+    r = {e.name: e for e in rows_events()}["compound 4 h"]
+    x = _explain(tmp_path, 24500, r.weekend).channels["x"]
+    got = {f.cause: [] for f in x.claimed}
+    for f in x.claimed:
+        got[f.cause].append(f)
+    (exc,) = got["excursion"]
+    assert (exc.params["start_s"], exc.params["end_s"]) == pytest.approx((6700, 7700), abs=60)
+    want = dict(r.expect[3][1])
+    assert exc.params["size"] == pytest.approx(want["size"], rel=0.2)
+    steps = sorted(got["bias_step"], key=lambda f: f.params["time_s"])
+    assert [f.params["time_s"] for f in steps] == pytest.approx([4320, 11520], abs=60)
+    for f in steps:
+        assert f.params["size"] == pytest.approx(r.expect[1][1]["size"], rel=0.2)
+
+
 def test_a_lone_step_is_not_hidden_by_the_k_it_makes(tmp_path):
     """The issue's circular case: one 2e-4 m/s² step on a 4 h record, found at 12.8 robust σ
     and then not claimed because the noise fit's K was the step itself."""
