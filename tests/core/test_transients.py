@@ -129,7 +129,9 @@ def _walk(seed: int, rate: float = 1.0, k: float = K, drift: float = 0.0):
 
 def test_a_drift_is_told_from_a_random_walk_in_the_time_domain():
     # the issue's record: 5e-8 m/s³ over 4 h (7.2e-4 m/s² in all) read as K = 1.9e-6
-    d = tr.test_drift(_walk(1, k=0.0, drift=5e-8), 1.0, {"N": N, "B": 0.0, "K": 1.9e-6}, [])
+    # (the interval on the noise refitted with the drift removed, as the engine does)
+    y = _walk(1, k=0.0, drift=5e-8)
+    d = tr.test_drift(y, 1.0, {"N": N, "B": 0.0, "K": 1.9e-6}, [], noise_of=_noise_of(y, 1.0))
     assert d.passed, d.evidence
     lo, hi = d.intervals["rate"]
     assert d.params["rate"] == pytest.approx(5e-8, rel=0.2) and lo < 5e-8 < hi + (hi - lo)
@@ -137,6 +139,22 @@ def test_a_drift_is_told_from_a_random_walk_in_the_time_domain():
     m = tr.min_detectable_drift(N, 0.0, K, REC_S)
     d = tr.test_drift(_walk(2, drift=3 * m), 1.0, {"N": N, "B": 0.0, "K": K}, [])
     assert d.passed and d.params["rate"] == pytest.approx(3 * m, rel=0.3), d.evidence
+
+
+def test_a_drifts_interval_is_drawn_on_the_noise_with_the_drift_removed(tmp_path):
+    """The benchmark's drift 4 h record (seed 26500): beside the fitted slope the likelihood
+    put K at 0 (the end of its grid), and the slope's standard error there, 2.8e-9 m/s³, was
+    a sixth of what the true noise gives; the interval [2.601e-7, 2.657e-7] missed the true
+    2.544e-7. It is now the GLS error on the axis's noise refitted with the drift removed."""
+    from benchmarks.bench_explain_weekend import rows_events
+
+    r = {e.name: e for e in rows_events()}["drift 4 h"]
+    x = _explain(tmp_path, 26500, r.weekend).channels["x"]
+    (d,) = [f for f in x.claimed if f.cause == "drift"]
+    lo, hi = d.intervals["rate"]
+    sigma = tr.min_detectable_drift(N, B, K, REC_S) / 5.0  # the slope's σ on the true noise
+    assert 0.5 * sigma <= 0.5 * (hi - lo) <= 2.0 * sigma, (lo, hi, sigma)
+    assert lo <= r.weekend.drift <= hi
 
 
 @pytest.mark.parametrize("seed", [11, 12, 13])
