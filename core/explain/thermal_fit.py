@@ -690,8 +690,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the coefficient's interval carries the lag's by the delta method, dĉ/dL from the scan
     # (the test's z stays the fixed-lag one: the lag search is in its threshold)
     if 0 < k < len(scan) - 1 and not (open_lo or open_hi):
-        slope = (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
-        se = math.hypot(se, slope * 0.5 * (lag_hi - lag_lo))
+        se = math.hypot(se, _coef_slope(scan, k, lag_lo, lag_hi) * 0.5 * (lag_hi - lag_lo))
     others = {}
     for j, sc in best.items():
         if j != jb:
@@ -699,6 +698,18 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
             others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0))
+
+
+def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
+    """dĉ/dL over the lag's interval [lo, hi]: the least-squares slope of ĉ on the lags in it
+    (the neighbours of ``k`` when fewer than three): ĉ jumps with z where a negative lag's
+    shortest τ drops an octave, and the neighbours' difference across such a jump, times the
+    interval's half-width, made a coefficient ±150 % wide."""
+    x = np.array([p.lag for p in scan if lo <= p.lag <= hi])
+    if len(x) < 3 or np.ptp(x) <= 0:
+        return (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
+    c = np.array([p.c for p in scan if lo <= p.lag <= hi])
+    return float(np.polyfit(x, c, 1)[0])
 
 
 def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:

@@ -273,3 +273,22 @@ def test_lag_interval_of_a_faulty_log_record_is_not_pinned_on_a_jump(tmp_path):
     lo, hi = f.intervals["lag_s"]
     assert lo <= r.lag_s <= hi, (lo, hi)
     assert 10.0 <= hi - lo <= 120.0, (lo, hi)  # the lag to ±20 s or so at the 30-min cycle
+
+
+def test_the_coefficients_slope_over_the_lag_steps_over_a_jump():
+    """ĉ over the lags of a negative-lag record jumps (7.7e-4 → 7.0e-4 m/s²/K across 0.24 s,
+    where the shortest τ drops an octave); the neighbours' difference there, 3e-4 per s,
+    times a lag interval of ±10 s put ±3e-3 (±400 %) on the coefficient. The slope is now
+    the least-squares one over the lags inside the interval."""
+    from avard.core.explain.thermal_fit import ScanPoint, _coef_slope
+
+    z = np.zeros(0)
+    lags = np.linspace(-20.0, 0.0, 81)  # the fine grid: 0.25 s
+    cs = np.where(lags < -12.7, 7.7e-4, 7.0e-4) + 1e-7 * lags
+    scan = [ScanPoint(float(L), float(c), 1e-5, 20.0, z) for L, c in zip(lags, cs, strict=True)]
+    k = int(np.searchsorted(lags, -12.7))  # the first lag after the jump
+    neighbours = (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
+    slope = _coef_slope(scan, k, -20.0, 0.0)
+    assert abs(neighbours) > 1e-4
+    # the jump spread over the interval: 7e-5 over 20 s, 3.5e-6 per s, not 1.4e-4
+    assert abs(slope) < 1e-5
