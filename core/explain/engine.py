@@ -781,7 +781,7 @@ def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: Therm
                                                                             rate_b)), kept)
                      if kept else [])
     drift = tr.test_drift(work, rate_b, noise_of(tr.signal_of(found, len(work), rate_b)),
-                          found)
+                          found, noise_of=noise_of)
     return ([*found, drift], missed) if drift.passed else (found, [*missed, drift])
 
 

@@ -645,16 +645,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                 extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj, ref, floor)
                 per_axis = [_merge(a, b) for a, b in zip(per_axis, extra, strict=True)]
         if lag_intervals:
-            # the lag's jackknife on the lags between the coarse grid's neighbours of each
-            # axis's best (the parts' sums cost a scan each: not on the whole grid)
-            window: set[float] = set()
-            for sc in per_axis:
-                b = sc[int(np.argmax([p.z for p in sc]))].lag
-                lo_w = max((g for g in grid if g < b), default=b)
-                hi_w = min((g for g in grid if g > b), default=b)
-                window.update(p.lag for p in sc if lo_w <= p.lag <= hi_w)
-            jk = _scan(Ys, Ts[:, j], sorted(window), rate_s, hj, ref, floor, parts=True)
-            per_axis = [_merge(a, b) for a, b in zip(per_axis, jk, strict=True)]
+            per_axis = _with_lag_jackknife(per_axis, grid, Ys, Ts[:, j], rate_s, hj, ref,
+                                           floor)
         scans[j] = per_axis
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
     return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
@@ -698,8 +690,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the coefficient's interval carries the lag's by the delta method, dĉ/dL from the scan
     # (the test's z stays the fixed-lag one: the lag search is in its threshold)
     if 0 < k < len(scan) - 1 and not (open_lo or open_hi):
-        slope = (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
-        se = math.hypot(se, slope * 0.5 * (lag_hi - lag_lo))
+        se = math.hypot(se, _coef_slope(scan, k, lag_lo, lag_hi) * 0.5 * (lag_hi - lag_lo))
     others = {}
     for j, sc in best.items():
         if j != jb:
@@ -707,6 +698,18 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
             others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0))
+
+
+def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
+    """dĉ/dL over the lag's interval [lo, hi]: the least-squares slope of ĉ on the lags in it
+    (the neighbours of ``k`` when fewer than three): ĉ jumps with z where a negative lag's
+    shortest τ drops an octave, and the neighbours' difference across such a jump, times the
+    interval's half-width, made a coefficient ±150 % wide."""
+    x = np.array([p.lag for p in scan if lo <= p.lag <= hi])
+    if len(x) < 3 or np.ptp(x) <= 0:
+        return (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
+    c = np.array([p.c for p in scan if lo <= p.lag <= hi])
+    return float(np.polyfit(x, c, 1)[0])
 
 
 def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:
@@ -725,34 +728,111 @@ def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:
     return float(lags[i]), i
 
 
+#: Coarse-grid lags either side of an axis's best lag that its lag's jackknife spans: the
+#: leave-one-out best lags must have room to move (between the first neighbours only, a lag
+#: of 0 s known to ±20 s at the HVAC period had a window of −16…−10 s, and the picks piled at
+#: its ends).
+JACKKNIFE_SPAN = 2
+#: … and at least the lags round the best whose z is within this fraction of the largest: the
+#: lag's uncertainty is in seconds, the coarse grid geometric, so near 0 two neighbours span
+#: a few seconds where the z² over the lags is flat over tens.
+JACKKNIFE_Z_DROP = 0.05
+
+
+def _with_lag_jackknife(per_axis: list[list[ScanPoint]], grid: NDArray, Ys: NDArray,
+                        T: NDArray, rate_hz: float, holes: list[tuple[int, int]], ref: Any,
+                        floor: float) -> list[list[ScanPoint]]:
+    """Each axis's scan with the parts' z (``ScanPoint.zg``) on the lags of its own window:
+    those within ``JACKKNIFE_SPAN`` coarse-grid lags of its best, widened to the run of lags
+    round it whose z is within ``JACKKNIFE_Z_DROP`` of the best's. One scan of the parts'
+    sums serves the union of the windows (they cost a scan each: not the whole grid), each
+    axis takes the points of its own window only (the union's other stretches made its
+    leave-one-out lags jump between two windows). The points' own (lag, ĉ, se, z) stay the
+    scan's: the estimate is not changed by its interval."""
+    g = sorted(float(v) for v in grid)
+    windows = []
+    for sc in per_axis:
+        k = int(np.argmax([p.z for p in sc]))
+        b, z_min = sc[k].lag, (1.0 - JACKKNIFE_Z_DROP) * sc[k].z
+        below = [v for v in g if v < b][-JACKKNIFE_SPAN:] or [b]
+        above = [v for v in g if v > b][:JACKKNIFE_SPAN] or [b]
+        lo, hi = k, k
+        while lo > 0 and sc[lo - 1].z >= z_min:
+            lo -= 1
+        while hi < len(sc) - 1 and sc[hi + 1].z >= z_min:
+            hi += 1
+        # as far either side as the farther run end: the run stops at a jump of z (a
+        # negative lag's shortest τ moving an octave), which the parts' regressions,
+        # on one shortest τ, do not have
+        w = max(b - below[0], above[-1] - b, b - sc[lo].lag, sc[hi].lag - b)
+        windows.append((b - w, b + w))
+    lags = sorted({p.lag for sc, (w0, w1) in zip(per_axis, windows, strict=True)
+                   for p in sc if w0 <= p.lag <= w1})
+    jk = _scan(Ys, T, lags, rate_hz, holes, ref, floor, parts=True)
+    out = []
+    for sc, parts, (w0, w1) in zip(per_axis, jk, windows, strict=True):
+        zg = {p.lag: p.zg for p in parts if w0 <= p.lag <= w1}
+        out.append([p._replace(zg=zg[p.lag]) if p.lag in zg else p for p in sc])
+    return out
+
+
+def _smooth_peak(lags: NDArray, z: NDArray) -> tuple[float, bool]:
+    """(lag, at an end): the vertex of the least-squares parabola through z² over ``lags``
+    kept inside them, or the largest z where the parabola opens upwards; "at an end" when it
+    sits on the first or last lag. Over the whole window, not three points: z² is flat
+    against the lag's uncertainty and jagged at the fine grid's step (the readings' rounding
+    smoothed a little more or less), and it jumps where a negative lag's shortest τ
+    (``min_tau_for``) drops an octave: a three-point vertex sat on a jag or a jump, every
+    leave-one-out lag on the same one, and the interval was 0.1 s wide."""
+    f = np.asarray(z, dtype=float) ** 2
+    x = np.asarray(lags, dtype=float)
+    if len(x) >= 3:
+        xm, xs = float(x.mean()), float(np.ptp(x)) or 1.0
+        a, b, _c = np.polyfit((x - xm) / xs, f, 2)
+        if a < 0:
+            v = xm - xs * b / (2 * a)
+            return float(np.clip(v, x[0], x[-1])), not x[0] < v < x[-1]
+    i = int(np.argmax(f))
+    return float(x[i]), i in (0, len(x) - 1)
+
+
 def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
-    """(low, high, open low, open high): the lag's 68 % interval, the best lag ± its
-    delete-a-group jackknife standard error (the best lag of the record with each of its
-    ``JACKKNIFE_GROUPS`` parts left out: se² = (G−1)/G·Σ(L_(−g) − mean)²), over the lags
-    that carry the parts' z (``ScanPoint.zg``; none: the estimate alone).
+    """(low, high, open low, open high): the lag's 68 % interval, the best lag ± t₀.₈₄(G−1)
+    times its delete-a-group jackknife standard error (the best lag of the record with each
+    of its ``JACKKNIFE_GROUPS`` parts left out, ``_smooth_peak`` of the parts' z over the
+    window: se² = (G−1)/G·Σ(L_(−g) − mean)², a t quantile for its G − 1 degrees of freedom),
+    over the lags that carry the parts' z (``ScanPoint.zg``, ``_with_lag_jackknife``; none:
+    the estimate alone). A leave-one-out lag on the window's end carries that end of the
+    interval to the window's end at least; open when that is the first or last lag tried.
 
     Not the profile of the analytic z² over the lags: the regressor carries noise the axis
     does not (the readings' rounding, the logger's own noise), and smoothing it away by a
     longer trial lag raises z² by a share of z² itself (≈ 500 at z 22), far above the Δ = 1
     that draws the interval: a true lag 0 came out at 26 s [24.7, 28.8] (68 %), and the
     intervals of 32 records held the true lag in none. The jackknife measures how far the
-    best lag moves with the data, whatever moves it. An end whose leave-one-out lags reach
-    the first or last lag examined is open (its end the last lag examined)."""
+    best lag moves with the data, whatever moves it."""
+    from scipy.stats import t as student_t
+
     lags = [p.lag for p in scan]
     best, _i = _peak(lags, np.array([p.z for p in scan]))
     sub = [p for p in scan if len(p.zg)]
     if len(sub) < 3:
         return best, best, k == 0, k == len(scan) - 1
-    sl = [p.lag for p in sub]
+    sl = np.array([p.lag for p in sub])
     zg = np.array([p.zg for p in sub])  # (lags, G)
     G = zg.shape[1]
-    picks = [_peak(sl, zg[:, g]) for g in range(G)]
+    picks = [_smooth_peak(sl, zg[:, g]) for g in range(G)]
     lg = np.array([p[0] for p in picks])
     se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
-    open_lo = any(p[1] == 0 for p in picks) or k == 0
-    open_hi = any(p[1] == len(sl) - 1 for p in picks) or k == len(scan) - 1
-    lo = min(sl[0], best) if open_lo else best - se
-    hi = max(sl[-1], best) if open_hi else best + se
+    se *= float(student_t.ppf(0.84, G - 1))
+    # a leave-one-out lag on the window's end says the lag may be beyond it: that end of the
+    # interval reaches the window's end at least, and is open when that is the search's end
+    at_lo = any(p[1] and p[0] <= sl[0] for p in picks)
+    at_hi = any(p[1] and p[0] >= sl[-1] for p in picks)
+    lo = min(best - se, float(sl[0])) if at_lo else best - se
+    hi = max(best + se, float(sl[-1])) if at_hi else best + se
+    open_lo = k == 0 or (at_lo and sl[0] <= lags[0])
+    open_hi = k == len(scan) - 1 or (at_hi and sl[-1] >= lags[-1])
     return lo, hi, open_lo, open_hi
 
 

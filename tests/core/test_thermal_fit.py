@@ -252,3 +252,43 @@ def test_scan_merge_counts_each_lag_once():
     a = [ScanPoint(1.0, 0, 1, 1, z), ScanPoint(2.0, 0, 1, 2, z)]
     b = [ScanPoint(2.0, 0, 1, 2, z), ScanPoint(1.5, 0, 1, 3, z)]
     assert [p.lag for p in _merge(a, b)] == [1.0, 1.5, 2.0]
+
+
+def test_lag_interval_of_a_faulty_log_record_is_not_pinned_on_a_jump(tmp_path):
+    """The benchmark's faulty-log record, seed 24100 (true lag 0): the z over the lags jumps
+    where a negative lag's shortest τ drops an octave (−12.8 s here), every leave-one-out
+    best lag sat on that jump, and the interval was [−14.16, −14.06] s. The parts' best lags
+    are now the vertices of z² over a window as wide as the lag's uncertainty."""
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
+
+    from benchmarks.bench_explain_weekend import rows
+    from tests.support.weekend import save
+
+    r = {w.name: w for w in rows()}["faulty log"]
+    ex = explain_file(open_record(str(save(24100, r.weekend, tmp_path / "w.npz"))),
+                      ExplainOptions(heldout=False))
+    (f,) = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    lo, hi = f.intervals["lag_s"]
+    assert lo <= r.lag_s <= hi, (lo, hi)
+    assert 10.0 <= hi - lo <= 120.0, (lo, hi)  # the lag to ±20 s or so at the 30-min cycle
+
+
+def test_the_coefficients_slope_over_the_lag_steps_over_a_jump():
+    """ĉ over the lags of a negative-lag record jumps (7.7e-4 → 7.0e-4 m/s²/K across 0.24 s,
+    where the shortest τ drops an octave); the neighbours' difference there, 3e-4 per s,
+    times a lag interval of ±10 s put ±3e-3 (±400 %) on the coefficient. The slope is now
+    the least-squares one over the lags inside the interval."""
+    from avard.core.explain.thermal_fit import ScanPoint, _coef_slope
+
+    z = np.zeros(0)
+    lags = np.linspace(-20.0, 0.0, 81)  # the fine grid: 0.25 s
+    cs = np.where(lags < -12.7, 7.7e-4, 7.0e-4) + 1e-7 * lags
+    scan = [ScanPoint(float(L), float(c), 1e-5, 20.0, z) for L, c in zip(lags, cs, strict=True)]
+    k = int(np.searchsorted(lags, -12.7))  # the first lag after the jump
+    neighbours = (scan[k + 1].c - scan[k - 1].c) / (scan[k + 1].lag - scan[k - 1].lag)
+    slope = _coef_slope(scan, k, -20.0, 0.0)
+    assert abs(neighbours) > 1e-4
+    # the jump spread over the interval: 7e-5 over 20 s, 3.5e-6 per s, not 1.4e-4
+    assert abs(slope) < 1e-5
