@@ -621,9 +621,20 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         kw["rounding_lsb"] = float(lsb)
     extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
 
+    # the transients' search asks for the same removed signal more than once (nothing
+    # found: the search's first noise and the drift test's are both "nothing removed"); each
+    # answer costs an Allan pass over the slow view and a GLS fit, so it is kept by content
+    noise_seen: dict[bytes, dict[str, float]] = {}
+
     def noise_without(d: NDArray[np.float64]) -> dict[str, float]:
         """N, B, K of analyze's model fitted to the axis with the thermal signal and ``d``
         removed: each transient is tested against noise with the others (and itself) out."""
+        key = np.ascontiguousarray(d, dtype=float).tobytes()
+        if key not in noise_seen:
+            noise_seen[key] = _noise_of_removed(d)
+        return dict(noise_seen[key])
+
+    def _noise_of_removed(d: NDArray[np.float64]) -> dict[str, float]:
         if not np.any(d) and not np.any(signal):
             return _noise_levels(base)
         cv = compensated_avar(allan.var, tau, allan2(y_slow, signal + d, rate_b), 1.0)
