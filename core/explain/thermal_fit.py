@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
@@ -50,7 +51,6 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
-from scipy import signal as sps
 
 __all__ = [
     "Z_TEMPERATURE",
@@ -94,9 +94,20 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     if lag_s == 0:
         return T.copy()
     b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
-    zi = sps.lfilter_zi(b, a) * T[0]
-    out, _ = sps.lfilter(b, a, T, zi=zi)
-    return np.asarray(out, dtype=float)
+    c = kernels.compiled()
+    if c is None or len(T) == 0:  # the general path
+        from scipy import signal as sps
+
+        zi = sps.lfilter_zi(b, a) * T[0]
+        out, _ = sps.lfilter(b, a, T, zi=zi)
+        return np.asarray(out, dtype=float)
+    # the compiled loop (lfilter's operations, bit for bit: tests/core/test_kernels.py), from
+    # the steady state lfilter_zi solves for, by the same solve: importing scipy.signal for
+    # it cost explain more CPU than all its filtering
+    zi = np.linalg.solve(np.eye(1) - np.array([[-a[1]]]), np.array([b[1] - a[1] * b[0]]))
+    y = np.empty(len(T))
+    c.first_order(np.ascontiguousarray(T), b[0], b[1], a[1], float(zi[0] * T[0]), y)
+    return y
 
 
 def allan2(y: NDArray, u: NDArray, rate_hz: float,
