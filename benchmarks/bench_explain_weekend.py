@@ -56,7 +56,7 @@ import math
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -313,6 +313,8 @@ class RecordScore:
     in_c: bool = False  # the coefficient inside its 68 % interval
     in_l: bool = False  # the lag inside its 68 % interval
     cpu_s: float = 0.0
+    #: each false claim as "cause on axis"
+    false_claims: list[str] = field(default_factory=list)
 
 
 def score_record(r: Row, seed: int) -> RecordScore:
@@ -335,6 +337,7 @@ def score_record(r: Row, seed: int) -> RecordScore:
         other = [f for f in ch.claimed
                  if f.cause not in ("sinusoid", "periodic") and f not in mine]
         sc.false += bool(other)
+        sc.false_claims += [f"{f.cause} on {a}" for f in other]
         sc.unexplained += ch.verdict is not None and not ch.verdict.explained
         if a != "x" or not r.coefficient or not mine:
             continue
@@ -423,6 +426,12 @@ def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
               f"{_rate(false, axes, True) if axes else '—':>24s} "
               f"{sum(s.unexplained for s in got):>12d} "
               f"{sum(s.cpu_s for s in got) / max(n, 1):9.1f}", flush=True)
+        fc: dict[str, int] = {}
+        for s in got:
+            for k in s.false_claims:
+                fc[k] = fc.get(k, 0) + 1
+        if fc:
+            print(f"{'':22s} false: " + ", ".join(f"{k} ×{v}" for k, v in sorted(fc.items())))
 
 
 def outside_rows() -> list[Row]:
