@@ -106,6 +106,11 @@ def block_size(rate_hz: float, n_samples: int | None) -> int:
     return 1 << math.ceil(math.log2(want))
 
 
+def _after(carry: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``x`` after the rows ``carry`` left from the last block (``x`` itself when none)."""
+    return np.concatenate([carry, x]) if len(carry) else x
+
+
 class SlowView:
     """Block means (``b`` samples each) of C axes and k temperature channels; a temperature
     block without a reading (DS18B20 every 0.75 s) is NaN until ``finish`` interpolates it."""
@@ -119,21 +124,23 @@ class SlowView:
         self.n_temps = n_temps
 
     def update(self, accel: NDArray, temp: NDArray | None) -> None:
-        a = np.concatenate([self._carry_a, np.asarray(accel, dtype=float)])
+        # the carry is empty when the blocks are whole multiples of b (the usual case): then
+        # the block itself, not a copy of it
+        a = _after(self._carry_a, np.asarray(accel, dtype=float))
         nb = len(a) // self.b
         self._acc.append(a[:nb * self.b].reshape(nb, self.b, a.shape[1]).mean(axis=1))
-        self._carry_a = a[nb * self.b:]
+        self._carry_a = a[nb * self.b:].copy()  # not a view of a block its reader may reuse
         if self.n_temps:
             t = (np.full((len(accel), self.n_temps), np.nan) if temp is None
                  else np.asarray(temp, dtype=float).reshape(len(accel), -1))
-            t = np.concatenate([self._carry_t, t])
+            t = _after(self._carry_t, t)
             blk = t[:nb * self.b].reshape(nb, self.b, self.n_temps)
             ok = np.isfinite(blk)
             cnt = ok.sum(axis=1)
             with np.errstate(invalid="ignore", divide="ignore"):
                 self._tmp.append(np.where(cnt > 0, np.where(ok, blk, 0.0).sum(axis=1) / cnt,
                                           np.nan))
-            self._carry_t = t[nb * self.b:]
+            self._carry_t = t[nb * self.b:].copy()
 
     def finish(self, holes: Sequence[Sequence[tuple[float, float]]] = (),
                rate_b: float = 1.0
