@@ -1,14 +1,16 @@
 """`avard explain` against `avard analyze` on the same file: peak memory and time, in one run;
 then detection power on records from a generator written apart from the simulator.
 
-    python -m benchmarks explain [--hours 60] [--file REC.npz] [--cases 20] [--skip-power]
-                                 [--skip-resources] [--rows ROW,...]
+    python -m benchmarks explain [--hours 60] [--preset paper-table3] [--file REC.npz]
+                                 [--cases 20] [--skip-power] [--skip-resources] [--rows ROW,...]
 
-Part 1 (resources). A `paper-table3` record (``avard simulate --preset paper-table3 --hours H
---seed 1``, or ``--file``) is analysed by ``avard analyze`` and explained by ``avard explain``,
-each in its own process (``--json``, output discarded); the table gives each one's peak
-resident memory (ru_maxrss) and CPU time, and explain's ratio to analyze (targets: memory
-≤ 2×, time ≤ 3×). analyze is the reference measured in the same run.
+Part 1 (resources). A simulated record (``avard simulate --preset PRESET --hours H --seed 1``;
+the issue's two: ``--hours 60``, and ``--preset quiet-lab --hours 12``, whose two temperature
+channels the lag scan runs over; or ``--file``) is analysed by ``avard analyze`` and
+explained by ``avard explain``, each in its own process (``--json``, output discarded);
+the table gives each one's peak resident memory (ru_maxrss) and CPU time, and explain's
+ratio to analyze (targets: memory ≤ 2×, time ≤ 3×). analyze is the reference measured in
+the same run.
 
 Part 2 (detection power, tests/support/hidden.py: a generator written apart from the
 simulator). Per row, ``--cases`` records of 4 h at 10 Hz (N 1.6e-4 m/s/√s, B 2e-5 m/s²,
@@ -296,6 +298,9 @@ def power(cases: int, seed0: int, only: list[str] | None = None) -> None:
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks explain")
     ap.add_argument("--hours", type=float, default=60.0)
+    ap.add_argument("--preset", default="paper-table3",
+                    help="the simulator's preset of the resources' record (quiet-lab: two "
+                    "temperature channels)")
     ap.add_argument("--file", help="an existing record instead of simulating one")
     ap.add_argument("--cases", type=int, default=20)
     ap.add_argument("--seed0", type=int, default=9000)
@@ -316,13 +321,13 @@ def main(argv: list[str]) -> int:
         with tempfile.TemporaryDirectory() as d:
             path = args.file
             if path is None:
-                path = str(Path(d) / "table3.npz")
+                path = str(Path(d) / f"{args.preset}.npz")
                 t0 = time.perf_counter()
                 subprocess.run([sys.executable, "-m", "avard.daemon.cli", "simulate",
-                                "--preset", "paper-table3", "--hours", str(args.hours),
+                                "--preset", args.preset, "--hours", str(args.hours),
                                 "--seed", "1", "--out", path], check=True,
                                stdout=subprocess.DEVNULL)
-                print(f"paper-table3, {args.hours:g} h, seed 1 (simulated in "
+                print(f"{args.preset}, {args.hours:g} h, seed 1 (simulated in "
                       f"{time.perf_counter() - t0:.0f} s)")
             resources(path)
     if not args.skip_power:

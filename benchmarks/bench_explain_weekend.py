@@ -51,11 +51,12 @@ any other claim is a false claim. Rates with one-sided 95 % Clopper–Pearson bo
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -297,13 +298,89 @@ def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
               flush=True)
 
 
-def run(cases: int, seed0: int, only: list[str] | None) -> None:
+@dataclass
+class RecordScore:
+    """What one weekend record of a ``rows()`` row measured (``score_record``): one line of a
+    ``--results`` file, so a long row can be resumed and run in several processes."""
+
+    row: str
+    seed: int
+    axes: int = 0
+    false: int = 0
+    unexplained: int = 0
+    claimed: bool = False  # the class's cause on x with the right mechanism (lag sign)
+    params: bool = False  # and its parameters within 20 % (a lag within 20 % or 30 s)
+    in_c: bool = False  # the coefficient inside its 68 % interval
+    in_l: bool = False  # the lag inside its 68 % interval
+    cpu_s: float = 0.0
+    #: each false claim as "cause on axis"
+    false_claims: list[str] = field(default_factory=list)
+
+
+def score_record(r: Row, seed: int) -> RecordScore:
+    """Make the record of row ``r`` with ``seed``, explain it and score it."""
     from avard.core.explain.engine import explain_file
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
 
     from tests.support.weekend import save
 
+    sc = RecordScore(r.name, seed)
+    with tempfile.TemporaryDirectory() as d:
+        path = save(seed, r.weekend, Path(d) / "w.npz")
+        t0 = time.process_time()
+        ex = explain_file(open_record(path), ExplainOptions(heldout=False))
+        sc.cpu_s = time.process_time() - t0
+    for a, ch in ex.channels.items():
+        sc.axes += 1
+        mine = [f for f in ch.claimed if f.cause == "temperature" and a == "x" and r.coefficient]
+        other = [f for f in ch.claimed
+                 if f.cause not in ("sinusoid", "periodic") and f not in mine]
+        sc.false += bool(other)
+        sc.false_claims += [f"{f.cause} on {a}" for f in other]
+        sc.unexplained += ch.verdict is not None and not ch.verdict.explained
+        if a != "x" or not r.coefficient or not mine:
+            continue
+        p, iv = mine[0].params, mine[0].intervals
+        right_sign = (p["lag_s"] < 0) == (r.lag_s < 0) or abs(r.lag_s) < 30
+        c_ok = abs(p["coefficient"] / r.coefficient - 1) <= 0.2
+        l_ok = abs(p["lag_s"] - r.lag_s) <= max(0.2 * abs(r.lag_s), 30.0)
+        sc.claimed = right_sign
+        sc.params = right_sign and c_ok and l_ok
+        lo, hi = iv.get("coefficient", [math.nan, math.nan])
+        sc.in_c = bool(lo <= r.coefficient <= hi)
+        lo, hi = iv.get("lag_s", [math.nan, math.nan])
+        sc.in_l = bool(lo <= r.lag_s <= hi)
+    return sc
+
+
+def _score_job(job: tuple[str, int]) -> RecordScore:
+    """``score_record`` by row name (what a worker process is sent)."""
+    name, seed = job
+    return score_record(next(r for r in rows() if r.name == name), seed)
+
+
+def _load_results(path: Path | None) -> dict[tuple[str, int], RecordScore]:
+    """The records already scored in a ``--results`` file (one JSON object a line); a last
+    line cut by a kill is skipped (its record runs again)."""
+    done: dict[tuple[str, int], RecordScore] = {}
+    if path is None or not path.exists():
+        return done
+    for line in path.read_text().splitlines():
+        try:
+            sc = RecordScore(**json.loads(line))
+        except (ValueError, TypeError):
+            continue
+        done[(sc.row, sc.seed)] = sc
+    return done
+
+
+def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
+        results: Path | None = None) -> None:
+    """Each row's ``cases`` records (seeds ``seed0 + 1000·j + i``, j the row's place among
+    those selected), ``jobs`` records at a time in worker processes; with ``results``, each
+    record's score is appended there as it ends and records already there are not run again
+    (a long row resumes where a stopped run left it). The table counts the records scored."""
     todo = [r for r in rows() if not only or any(r.name.startswith(o) for o in only)]
     if not todo:
         return
@@ -311,46 +388,50 @@ def run(cases: int, seed0: int, only: list[str] | None) -> None:
           f"B {B:g} m/s², K {K:g} m/s²·√s, {RATE:g} Hz:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
+    done = _load_results(results)
+    want = [(r.name, seed0 + 1000 * j + i) for j, r in enumerate(todo) for i in range(cases)]
+    # records interleaved across rows, so a run stopped early has some of every row
+    want.sort(key=lambda k: k[1] % 1000)
+    left = [k for k in want if k not in done]
+    if done:
+        print(f"  {len(want) - len(left)} of {len(want)} records already in {results}")
+
+    def keep(sc: RecordScore) -> None:
+        done[(sc.row, sc.seed)] = sc
+        if results is not None:
+            with results.open("a") as f:
+                f.write(json.dumps(asdict(sc)) + "\n")
+
+    if jobs > 1 and len(left) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(jobs) as pool:
+            for sc in pool.map(_score_job, left):
+                keep(sc)
+    else:
+        for k in left:
+            keep(_score_job(k))
     print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 % c / L':>14s} "
           f"{'false claims (axes)':>24s} {'unexplained':>12s} {'CPU s/rec':>9s}")
-    for j, r in enumerate(todo):
-        n = ok = par = in_c = in_l = false = axes = unexpl = 0
-        cpu = 0.0
-        with tempfile.TemporaryDirectory() as d:
-            for i in range(cases):
-                seed = seed0 + 1000 * j + i
-                path = save(seed, r.weekend, Path(d) / "w.npz")
-                t0 = time.process_time()
-                ex = explain_file(open_record(path), ExplainOptions(heldout=False))
-                cpu += time.process_time() - t0
-                n += 1
-                for a, ch in ex.channels.items():
-                    axes += 1
-                    mine = [f for f in ch.claimed if f.cause == "temperature"
-                            and a == "x" and r.coefficient]
-                    other = [f for f in ch.claimed
-                             if f.cause not in ("sinusoid", "periodic") and f not in mine]
-                    false += bool(other)
-                    unexpl += ch.verdict is not None and not ch.verdict.explained
-                    if a != "x" or not r.coefficient:
-                        continue
-                    if mine:
-                        p, iv = mine[0].params, mine[0].intervals
-                        right_sign = (p["lag_s"] < 0) == (r.lag_s < 0) or abs(r.lag_s) < 30
-                        ok += right_sign
-                        c_ok = abs(p["coefficient"] / r.coefficient - 1) <= 0.2
-                        l_ok = abs(p["lag_s"] - r.lag_s) <= max(0.2 * abs(r.lag_s), 30.0)
-                        par += right_sign and c_ok and l_ok
-                        lo, hi = iv.get("coefficient", [math.nan, math.nan])
-                        in_c += lo <= r.coefficient <= hi
-                        lo, hi = iv.get("lag_s", [math.nan, math.nan])
-                        in_l += lo <= r.lag_s <= hi
+    for r in todo:
+        got = [done[k] for k in want if k[0] == r.name and k in done]
+        n = len(got)
         hid = n if r.coefficient else 0
+        ok, par = sum(s.claimed for s in got), sum(s.params for s in got)
+        in_c, in_l = sum(s.in_c for s in got), sum(s.in_l for s in got)
+        axes, false = sum(s.axes for s in got), sum(s.false for s in got)
         print(f"{r.name:22s} {_rate(ok, hid, False) if hid else '—':>22s} "
               f"{_rate(par, hid, False) if hid else '—':>22s} "
               f"{(f'{in_c}/{hid} {in_l}/{hid}' if hid else '—'):>14s} "
-              f"{_rate(false, axes, True):>24s} {unexpl:>12d} {cpu / max(n, 1):9.1f}",
-              flush=True)
+              f"{_rate(false, axes, True) if axes else '—':>24s} "
+              f"{sum(s.unexplained for s in got):>12d} "
+              f"{sum(s.cpu_s for s in got) / max(n, 1):9.1f}", flush=True)
+        fc: dict[str, int] = {}
+        for s in got:
+            for k in s.false_claims:
+                fc[k] = fc.get(k, 0) + 1
+        if fc:
+            print(f"{'':22s} false: " + ", ".join(f"{k} ×{v}" for k, v in sorted(fc.items())))
 
 
 def outside_rows() -> list[Row]:
@@ -423,6 +504,11 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--cases", type=int, default=40)
     ap.add_argument("--seed0", type=int, default=23000)
     ap.add_argument("--rows", help="comma-separated row-name prefixes")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="records of the rows() run at a time, each in a worker process")
+    ap.add_argument("--results", type=Path,
+                    help="append each rows() record's score to this file (JSON lines) and "
+                    "skip the records already there: a stopped run resumes")
     ap.add_argument("--outside", action="store_true",
                     help="the mechanisms outside the candidate set (outside_rows) instead")
     args = ap.parse_args(argv)
@@ -430,6 +516,6 @@ def main(argv: list[str]) -> int:
     if args.outside:
         run_outside(args.cases, args.seed0, only)
     else:
-        run(args.cases, args.seed0, only)
+        run(args.cases, args.seed0, only, args.jobs, args.results)
         run_events(args.cases, args.seed0, only)
     return 0

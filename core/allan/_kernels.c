@@ -42,6 +42,12 @@
  *       ends as numpy's pad(mode="reflect") does (x_{-j} = x_j, x_{n-1+j} = x_{n-1-j}); y
  *       may be strided (a column of a block), n > 2 half. One pass with a moving window sum
  *       where numpy pads, sums cumulatively and subtracts (five passes and two temporaries).
+ *   first_order(x, b0, b1, a1, z, out) -> the last state
+ *       y_i = z + b0 x_i, then z = b1 x_i - a1 y_i, from the state z given: scipy.signal's
+ *       lfilter([b0, b1], [1, a1], x, zi=[z]) (direct form II transposed), the same
+ *       operations in the same order. avard explain's thermal lag (thermal_fit.lag_filter)
+ *       filters the slow view with it, so explain need not import scipy.signal (and with
+ *       it scipy.stats), which cost more CPU than all its filtering.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -483,6 +489,46 @@ kernels_local_residual(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Py_RETURN_NONE;
 }
 
+/* first_order(x, b0, b1, a1, z, out): the first-order IIR filter y_i = z + b0 x_i,
+   z <- b1 x_i - a1 y_i (a0 = 1), from the state z; scipy.signal.lfilter's direct form II
+   transposed, the same operations in the same order (the thermal lag of avard explain,
+   core/explain/thermal_fit.lag_filter; general path: lfilter itself). Returns the last z. */
+static PyObject *
+kernels_first_order(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    Py_buffer v, o;
+    if (nargs != 6) {
+        PyErr_SetString(PyExc_TypeError, "first_order(x, b0, b1, a1, z, out) takes 6 arguments");
+        return NULL;
+    }
+    const double b0 = PyFloat_AsDouble(args[1]), b1 = PyFloat_AsDouble(args[2]),
+                 a1 = PyFloat_AsDouble(args[3]);
+    double z = PyFloat_AsDouble(args[4]);
+    if (PyErr_Occurred())
+        return NULL;
+    if (get_in_out(args[0], args[5], &v, &o, 0, "x") < 0)
+        return NULL;
+    const Py_ssize_t n = v.shape[0];
+    if (o.shape[0] != n) {
+        PyErr_SetString(PyExc_ValueError, "out must be as long as x");
+        return release2(&v, &o);
+    }
+    const double *x = v.buf;
+    double *y = o.buf;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < n; i++) {
+        const double xi = x[i];
+        const double yi = z + b0 * xi;
+        y[i] = yi;
+        z = b1 * xi - a1 * yi;
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&v);
+    PyBuffer_Release(&o);
+    return PyFloat_FromDouble(z);
+}
+
 static PyMethodDef kernels_methods[] = {
     {"sumsq", (PyCFunction)(void (*)(void))kernels_sumsq, METH_FASTCALL,
      "sumsq(x0, x1, x2): sum of ((x2 - x1) - (x1 - x0))**2 over float64 vectors"},
@@ -496,6 +542,8 @@ static PyMethodDef kernels_methods[] = {
      "lag_sums(x, m, ref, out, old): the averages' sum and lag products, added to out"},
     {"local_residual", (PyCFunction)(void (*)(void))kernels_local_residual, METH_FASTCALL,
      "local_residual(y, half, out): out = |y - y[0] - its reflected moving mean|"},
+    {"first_order", (PyCFunction)(void (*)(void))kernels_first_order, METH_FASTCALL,
+     "first_order(x, b0, b1, a1, z, out): lfilter([b0, b1], [1, a1], x, zi=[z]); last z"},
     {NULL, NULL, 0, NULL},
 };
 
@@ -507,7 +555,7 @@ static struct PyModuleDef kernels_module = {
 };
 
 /* The interface version avard.core.allan.kernels expects (its API): raise both together. */
-#define KERNELS_API 3
+#define KERNELS_API 4
 
 PyMODINIT_FUNC
 PyInit__kernels(void)

@@ -19,6 +19,10 @@ that stays for installs without a compiler (and for counts and covariances):
 * ``local_residual(y, half, out)``: the input screen's |sample − its neighbours' mean|
   (``core/io/screen.py``; general path ``screen._local_residual``): one pass where numpy
   pads, sums cumulatively and subtracts.
+* ``first_order(x, b0, b1, a1, z, out)``: a first-order IIR filter, scipy.signal.lfilter's
+  operations in its order (explain's thermal lag, ``thermal_fit.lag_filter``; general path
+  lfilter itself): explain then does not import scipy.signal, whose import (scipy.stats with
+  it) cost more CPU than the filtering.
 
 The extension is optional (setup.py): without a compiler avard installs and runs on the
 numpy path, which gives the same results to rounding (``tests/core/test_kernels.py`` holds
@@ -42,7 +46,7 @@ __all__ = ["API", "compiled", "second_differences", "switched_off", "use_compile
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
 #: ``_kernels.c`` (a stale build left in a source tree) is not used.
-API = 3
+API = 4
 
 
 def switched_off() -> bool:

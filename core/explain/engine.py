@@ -106,6 +106,26 @@ def block_size(rate_hz: float, n_samples: int | None) -> int:
     return 1 << math.ceil(math.log2(want))
 
 
+def _after(carry: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``x`` after the rows ``carry`` left from the last block (``x`` itself when none)."""
+    return np.concatenate([carry, x]) if len(carry) else x
+
+
+def _reading_means(t: NDArray[np.float64], b: int) -> NDArray[np.float64]:
+    """The mean of the finite readings in each block of ``b`` rows of ``t`` (n, k), NaN where
+    a block holds none. A DS18B20 reads every 0.75 s, so nearly every value is NaN: the few
+    readings are summed into their blocks by ``bincount``, in row order as a sum over the
+    block adds them (the zeros a masked sum adds between them change no bit), instead of
+    five passes over every value."""
+    nb, k = len(t) // b, t.shape[1]
+    r, c = np.nonzero(np.isfinite(t))
+    where = (r // b) * k + c
+    s = np.bincount(where, weights=t[r, c], minlength=nb * k).reshape(nb, k)
+    cnt = np.bincount(where, minlength=nb * k).reshape(nb, k)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(cnt > 0, s / cnt, np.nan)
+
+
 class SlowView:
     """Block means (``b`` samples each) of C axes and k temperature channels; a temperature
     block without a reading (DS18B20 every 0.75 s) is NaN until ``finish`` interpolates it."""
@@ -119,21 +139,18 @@ class SlowView:
         self.n_temps = n_temps
 
     def update(self, accel: NDArray, temp: NDArray | None) -> None:
-        a = np.concatenate([self._carry_a, np.asarray(accel, dtype=float)])
+        # the carry is empty when the blocks are whole multiples of b (the usual case): then
+        # the block itself, not a copy of it
+        a = _after(self._carry_a, np.asarray(accel, dtype=float))
         nb = len(a) // self.b
         self._acc.append(a[:nb * self.b].reshape(nb, self.b, a.shape[1]).mean(axis=1))
-        self._carry_a = a[nb * self.b:]
+        self._carry_a = a[nb * self.b:].copy()  # not a view of a block its reader may reuse
         if self.n_temps:
             t = (np.full((len(accel), self.n_temps), np.nan) if temp is None
                  else np.asarray(temp, dtype=float).reshape(len(accel), -1))
-            t = np.concatenate([self._carry_t, t])
-            blk = t[:nb * self.b].reshape(nb, self.b, self.n_temps)
-            ok = np.isfinite(blk)
-            cnt = ok.sum(axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                self._tmp.append(np.where(cnt > 0, np.where(ok, blk, 0.0).sum(axis=1) / cnt,
-                                          np.nan))
-            self._carry_t = t[nb * self.b:]
+            t = _after(self._carry_t, t)
+            self._tmp.append(_reading_means(t[:nb * self.b], self.b))
+            self._carry_t = t[nb * self.b:].copy()
 
     def finish(self, holes: Sequence[Sequence[tuple[float, float]]] = (),
                rate_b: float = 1.0
@@ -621,9 +638,20 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         kw["rounding_lsb"] = float(lsb)
     extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
 
+    # the transients' search asks for the same removed signal more than once (nothing
+    # found: the search's first noise and the drift test's are both "nothing removed"); each
+    # answer costs an Allan pass over the slow view and a GLS fit, so it is kept by content
+    noise_seen: dict[bytes, dict[str, float]] = {}
+
     def noise_without(d: NDArray[np.float64]) -> dict[str, float]:
         """N, B, K of analyze's model fitted to the axis with the thermal signal and ``d``
         removed: each transient is tested against noise with the others (and itself) out."""
+        key = np.ascontiguousarray(d, dtype=float).tobytes()
+        if key not in noise_seen:
+            noise_seen[key] = _noise_of_removed(d)
+        return dict(noise_seen[key])
+
+    def _noise_of_removed(d: NDArray[np.float64]) -> dict[str, float]:
         if not np.any(d) and not np.any(signal):
             return _noise_levels(base)
         cv = compensated_avar(allan.var, tau, allan2(y_slow, signal + d, rate_b), 1.0)

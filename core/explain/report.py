@@ -21,7 +21,6 @@ from avard.core.model.fit import NoiseFit, TermEstimate
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from avard.core.plot import pyplot, save_figure
 from numpy.typing import NDArray
-from scipy.stats import chi2 as chi2_dist
 
 _UNICODE = (("^2", "²"), ("^3", "³"), ("sqrt(s)", "√s"), ("sqrt(Hz)", "√Hz"))
 
@@ -130,6 +129,8 @@ def summary(ex: Explanation) -> str:
 def band(var_model: NDArray, edf: NDArray, ci: float = 0.683) -> tuple[NDArray, NDArray]:
     """Where a measurement with EDF ν falls with probability ``ci`` if the model is right:
     σ²·χ²_ν(q)/ν (NIST SP 1065 eq. 40)."""
+    from scipy.stats import chi2 as chi2_dist  # the plots only: not on explain's text path
+
     e = np.maximum(np.asarray(edf, dtype=float), 1e-3)
     return (var_model * chi2_dist.ppf(0.5 - ci / 2, e) / e,
             var_model * chi2_dist.ppf(0.5 + ci / 2, e) / e)

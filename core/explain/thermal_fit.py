@@ -32,12 +32,14 @@ thermal share falls as τ³: a smooth signal's AVAR ∝ τ², white noise's ∝ 
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
+from avard.core.allan import kernels
 from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
@@ -49,7 +51,6 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
-from scipy import signal as sps
 
 __all__ = [
     "Z_TEMPERATURE",
@@ -93,9 +94,20 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     if lag_s == 0:
         return T.copy()
     b, a = lag_coefficients(lag_s, 1.0 / rate_hz)
-    zi = sps.lfilter_zi(b, a) * T[0]
-    out, _ = sps.lfilter(b, a, T, zi=zi)
-    return np.asarray(out, dtype=float)
+    c = kernels.compiled()
+    if c is None or len(T) == 0:  # the general path
+        from scipy import signal as sps
+
+        zi = sps.lfilter_zi(b, a) * T[0]
+        out, _ = sps.lfilter(b, a, T, zi=zi)
+        return np.asarray(out, dtype=float)
+    # the compiled loop (lfilter's operations, bit for bit: tests/core/test_kernels.py), from
+    # the steady state lfilter_zi solves for, by the same solve: importing scipy.signal for
+    # it cost explain more CPU than all its filtering
+    zi = np.linalg.solve(np.eye(1) - np.array([[-a[1]]]), np.array([b[1] - a[1] * b[0]]))
+    y = np.empty(len(T))
+    c.first_order(np.ascontiguousarray(T), b[0], b[1], a[1], float(zi[0] * T[0]), y)
+    return y
 
 
 def allan2(y: NDArray, u: NDArray, rate_hz: float,
@@ -121,6 +133,16 @@ def regression_terms(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     return tau[ok], cyu[ok], vu[ok], vy[ok], edf_y[ok]
 
 
+@functools.lru_cache(maxsize=64)
+def _rho(k: int) -> NDArray[np.float64]:
+    """The assumed correlation of neighbouring octaves' c_k, ``_RHO``^|i − j| (k, k): the
+    same few sizes for every lag of a scan, so made once each (read-only)."""
+    idx = np.arange(k)
+    rho = _RHO ** np.abs(np.subtract.outer(idx, idx))
+    rho.flags.writeable = False
+    return rho
+
+
 def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
                     ) -> tuple[float, float, int]:
     """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
@@ -133,8 +155,7 @@ def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
     se = np.sqrt(r / (vu * nu))
     w = 1.0 / se**2
     chat = float(np.sum(w * c) / np.sum(w))
-    idx = np.arange(len(c))
-    rho = _RHO ** np.abs(np.subtract.outer(idx, idx))
+    rho = _rho(len(c))
     ws = w * se
     var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
     return chat, math.sqrt(var), len(c)
@@ -199,6 +220,8 @@ class OctaveSums:
         """(n, s2) with zeros for the octaves past this one's (a part shorter than 2m, or
         all inside a hole, counted no difference there)."""
         pad = k - len(self.ms)
+        if pad == 0:  # the usual case: np.pad's copy was most of a jackknife scan's cost
+            return self.n, self.s2
         return (np.pad(self.n, (0, pad)), np.pad(self.s2, ((0, pad), (0, 0), (0, 0))))
 
     def _union(self, other: OctaveSums) -> NDArray[np.int64]:
@@ -217,7 +240,15 @@ class OctaveSums:
         return OctaveSums(ms, n1 - n2, s1 - s2)
 
     def cov(self) -> NDArray[np.float64]:
-        """Allan covariance (K, C, C), NaN where no difference was counted."""
+        """Allan covariance (K, C, C), NaN where no difference was counted (made once: the
+        lag scan reads it for every axis; read-only)."""
+        if "_cov" not in self.__dict__:
+            c = self._make_cov()
+            c.flags.writeable = False
+            object.__setattr__(self, "_cov", c)
+        return self.__dict__["_cov"]  # type: ignore[no-any-return]
+
+    def _make_cov(self) -> NDArray[np.float64]:
         scale = NORM[2] * self.ms.astype(float) ** 2 * np.maximum(self.n, 1)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where((self.n > 0)[:, None, None], self.s2 / scale[:, None, None],
@@ -568,10 +599,12 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
                   for a, b in itertools.pairwise(edges)] if parts else []
         whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
         mt = min_tau_for(float(L), floor_s)
+        # the leave-one-out sums once per lag, for every axis (their covariance is cached)
+        rests = [whole - ps for ps in pieces]
         for j in range(C):
             c, se, z = _z(cov_view(sums, rate_hz, edf[:, j], n_ref, (j, C)), mt)
-            zg = np.array([_z(cov_view(whole - ps, rate_hz, edf[:, j], n_ref, (j, C)), mt)[2]
-                           for ps in pieces])
+            zg = np.array([_z(cov_view(rest, rate_hz, edf[:, j], n_ref, (j, C)), mt)[2]
+                           for rest in rests])
             out[j].append(ScanPoint(float(L), c, se, z, zg))
     return out
 

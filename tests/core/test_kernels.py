@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -307,3 +308,64 @@ def test_local_residual_equals_numpy(compiled: None, n: int) -> None:
         assert got[3] and got[30_001] and got[50_000]
     with pytest.raises(ValueError, match="len"):
         c.local_residual(np.zeros(16), 8, np.zeros(16))
+
+
+def test_first_order_is_lfilter_bit_for_bit(compiled: None) -> None:
+    """explain's thermal lag (``thermal_fit.lag_filter``) on the compiled loop: the very bits
+    of scipy.signal.lfilter from its lfilter_zi steady state, for lags of either sign from a
+    fraction of a block to longer than the record, and through the whole lag scan."""
+    from avard.core.explain.thermal_fit import lag_filter
+    from avard.core.sim.thermal import lag_coefficients
+    from scipy import signal as sps
+
+    c = kernels.compiled()
+    assert c is not None
+    rng = np.random.default_rng(23)
+    T = 21.0 + np.cumsum(rng.normal(0.0, 0.01, 20_001)) + 0.0625 * rng.integers(0, 3, 20_001)
+    for lag in (0.3, 4.0, 37.5, 600.0, 1e6):
+        b, a = lag_coefficients(lag, 0.8)
+        out = np.empty(len(T))
+        last = c.first_order(T, b[0], b[1], a[1], 0.7, out)
+        ref, zf = sps.lfilter(b, a, T, zi=[0.7])
+        np.testing.assert_array_equal(out, ref)
+        assert last == zf[0]
+        for sign in (1.0, -1.0):
+            fast = lag_filter(T, sign * lag, 1.25)
+            kernels.use_compiled(False)
+            try:
+                slow = lag_filter(T, sign * lag, 1.25)
+            finally:
+                kernels.use_compiled(True)
+            np.testing.assert_array_equal(fast, slow)
+    with pytest.raises(ValueError, match="as long as x"):
+        c.first_order(T[:5], 1.0, 0.0, 0.0, 0.0, np.empty(4))
+
+
+def test_explain_with_the_compiled_lag_equals_scipys(compiled: None, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """A whole explanation on a seeded weekend record (a coupling through a lag, the lag scan,
+    its jackknife, the held-out halves) is the same with the compiled thermal lag as with
+    scipy's lfilter (the other kernels on in both): every finding, parameter and interval,
+    bit for bit."""
+    from types import SimpleNamespace
+
+    from avard.core.explain import thermal_fit
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
+
+    from tests.support.weekend import Weekend, save
+
+    w = Weekend(hours=2.0, die_tau_s=300.0, plate_tau_s=0.0, coefficient=(8e-4, 0.0, 0.0))
+    path = save(23017, w, tmp_path / "w.npz")
+
+    def claims() -> list[tuple[str, str, dict[str, float], dict[str, list[float]]]]:
+        ex = explain_file(open_record(str(path)), ExplainOptions(heldout=True))
+        return [(a, f.cause, f.params, f.intervals) for a, ch in ex.channels.items()
+                for f in ch.findings]
+
+    fast = claims()
+    monkeypatch.setattr(thermal_fit, "kernels", SimpleNamespace(compiled=lambda: None))
+    slow = claims()
+    assert any(c[1] == "temperature" for c in fast)
+    assert fast == slow

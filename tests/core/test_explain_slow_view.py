@@ -1,0 +1,50 @@
+"""explain's slow view (``engine.SlowView``): the temperature block means by ``bincount`` of
+the few readings equal the masked mean over every value they replaced, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+from avard.core.explain.engine import SlowView, _reading_means
+
+
+def _masked_means(t: np.ndarray, b: int) -> np.ndarray:
+    """The general formula: the finite values of each block summed (zeros elsewhere) over
+    their count."""
+    nb = len(t) // b
+    blk = t[:nb * b].reshape(nb, b, t.shape[1])
+    ok = np.isfinite(blk)
+    cnt = ok.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(cnt > 0, np.where(ok, blk, 0.0).sum(axis=1) / cnt, np.nan)
+
+
+def test_reading_means_equal_the_masked_mean_bit_for_bit() -> None:
+    rng = np.random.default_rng(5)
+    for b, every in ((64, 94), (128, 94), (256, 3), (16, 1)):
+        t = np.full((20_000, 3), np.nan)
+        for j in range(3):  # DS18B20 readings, rounded, a different phase per channel
+            t[j::every, j] = np.round((21 + rng.normal(0, 0.3, len(t[j::every]))) / 0.0625
+                                      ) * 0.0625
+        t[100:3000, 1] = np.nan  # a dropout: blocks without a reading
+        t[7, 0], t[9, 2] = np.inf, -np.inf  # never a reading
+        got = _reading_means(t[:len(t) // b * b], b)
+        np.testing.assert_array_equal(got, _masked_means(t, b))
+        assert np.isnan(got[3000 // b - 1, 1])
+
+
+def test_slow_view_of_blocks_that_leave_a_carry() -> None:
+    """Blocks of any length (a carry between them) give the means of the whole record, and
+    a block the reader reuses afterwards does not change the carry."""
+    rng = np.random.default_rng(6)
+    a = rng.normal(0, 1e-3, (10_000, 3))
+    t = np.full((10_000, 1), np.nan)
+    t[::94, 0] = 21.0 + rng.normal(0, 0.1, len(t[::94]))
+    view = SlowView(64, 3, 1)
+    buf_a, buf_t = np.empty((1000, 3)), np.empty((1000, 1))
+    for i in range(0, 10_000, 1000):
+        buf_a[:], buf_t[:] = a[i:i + 1000], t[i:i + 1000]
+        view.update(buf_a, buf_t)  # the same buffers every time, as a reader may reuse them
+    y, temp = view.finish()
+    nb = 10_000 // 64
+    np.testing.assert_allclose(y, a[:nb * 64].reshape(nb, 64, 3).mean(axis=1), rtol=1e-12)
+    assert temp is not None and np.all(np.isfinite(temp))
