@@ -689,8 +689,9 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
                   floors) for a in range(Y.shape[1])]
     if paths:
-        fits = [_with_path(f, Y[:, a], temps, holes, floors) if f.passed else f
-                for a, f in enumerate(fits)]
+        # on every axis: a response the one lag cannot follow (quadratic, hysteresis) may
+        # fail the one-lag test and pass its own
+        fits = [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
     return fits
 
 
@@ -711,11 +712,15 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
                      floors.get(j, 0.0), keep)
     if pf.kind == "one_lag":
-        return replace(fit, path=pf)
+        return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen
+    # an extension passed its own test (its extra term's z at the paths' share, held out
+    # better than one lag and than nothing): on an axis whose one-lag z failed, that test is
+    # the claim's
+    test = {} if fit.passed else {"z": s.z_extra, "threshold": pf.z_threshold}
     return replace(fit, path=pf, coefficient=float(s.beta[0]), coef_se=float(s.beta_se[0]),
                    lag_s=float(s.theta[0]), lag_lo=float(s.theta_lo[0]),
-                   lag_hi=float(s.theta_hi[0]), lag_open=s.open_end)
+                   lag_hi=float(s.theta_hi[0]), lag_open=s.open_end, **test)
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,

@@ -28,10 +28,11 @@ minimises it (iteratively reweighted: weights ν_k/r_k); θ is the grid point of
 
 **Choice by held-out likelihood.** Each candidate is fitted (θ and β) on one half of the
 record and its deviance measured on the other half with those values (β and θ fixed); both
-folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``one_lag`` only
-when its H is lower by ``HELDOUT_MARGIN`` and its extra term passes its own test (a Wald z
-from the delete-a-part jackknife ≥ ``alarm.bonferroni_z(alarm.THERMAL_PATHS, trials)``, the
-trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
+folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``one_lag``
+(and over no coupling at all) only when its H is lower by ``HELDOUT_MARGIN`` and its extra
+term passes its own test (a Wald z from the delete-a-part jackknife ≥
+``alarm.bonferroni_z(alarm.THERMAL_PATHS, trials)``, the trials all grid points of all
+extensions): the false-alarm budget per axis holds the paths'
 share. A candidate whose θ sits at the end of its grid is open, and is preferred over one
 with an interior optimum only when better by ``OPEN_MARGIN`` in addition.
 
@@ -283,6 +284,8 @@ class PathFit:
     rate_hz: float
     margin: float = HELDOUT_MARGIN
     notes: list[str] = field(default_factory=list)
+    #: held-out −2 ln L of no coupling at all
+    none_heldout: float = math.nan
 
     @property
     def kind(self) -> str:
@@ -475,6 +478,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             tuple(float(t - s) for t, s in zip(theta, tse, strict=True)),
             tuple(float(t + s) for t, s in zip(theta, tse, strict=True)),
             z_extra, open_end, ts[i].cols)
+    # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
+    # test failed, one lag is no reference)
+    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
     ref = scores["one_lag"]
     notes = []
     passing = []
@@ -482,7 +488,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if kind == "one_lag":
             continue
         need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
-        if sc.heldout < ref.heldout - need and sc.z_extra >= z_thr:
+        if sc.heldout < min(ref.heldout, none_h) - need and sc.z_extra >= z_thr:
             passing.append(sc)
         elif sc.heldout < ref.heldout - need:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
@@ -494,7 +500,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # parameters (two lags can mimic a derivative: u_L1 − u_L2 ∝ d/dt of a smoothed T)
         near = [sc for sc in passing if sc.heldout <= top + HELDOUT_MARGIN]
         best = min(near, key=lambda sc: (len(sc.theta) + len(sc.beta), sc.heldout))
-    return PathFit(best, scores, z_thr, rate_hz, notes=notes)
+    return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
 
 
 def slow_rounding_floor(T: NDArray, rate_hz: float, snr: float = 10.0) -> float:
