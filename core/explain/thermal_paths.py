@@ -319,7 +319,8 @@ class PathFit:
         end = " (open: θ at the end of its grid)" if s.open_end else ""
         return (f"thermal path: {s.kind} ({txt}; 68 %){end};"
                 f" held-out Δ(−2 ln L) against one lag: {ranks} (an extension needs "
-                f"< −{self.margin:g} and its own z ≥ {self.z_threshold:.3g})")
+                f"< −{self.margin:g} and its own z ≥ {self.z_threshold:.3g})"
+                + "".join(f"; {n}" for n in self.notes))
 
     def to_dict(self) -> dict[str, object]:
         p, iv = self.params()
@@ -500,6 +501,12 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # parameters (two lags can mimic a derivative: u_L1 − u_L2 ∝ d/dt of a smoothed T)
         near = [sc for sc in passing if sc.heldout <= top + HELDOUT_MARGIN]
         best = min(near, key=lambda sc: (len(sc.theta) + len(sc.beta), sc.heldout))
+        rivals = [sc.kind for sc in passing
+                  if sc is not best and abs(sc.heldout - best.heldout) <= HELDOUT_MARGIN]
+        if rivals:
+            notes.append("not told apart on this record from " + ", ".join(rivals)
+                         + f" (held out within {HELDOUT_MARGIN:g}: at one drive frequency a "
+                         "second path and a dT/dt term both shift gain and phase)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
 
 
