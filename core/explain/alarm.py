@@ -13,6 +13,9 @@ the sum of the shares), and each search splits its share again over its own tria
   constants), each family's share Bonferroni-split over its trials (``bonferroni_z``); on
   an axis with no transient only the first stage can claim falsely;
 - ``DRIFT``: the time-domain likelihood ratio of a drift against a random walk, χ²(1);
+- ``THERMAL_PATHS``: the extensions of the one-lag thermal model (two paths, quadratic,
+  dT/dt, hysteresis, ``thermal_paths``): the extra term's jackknife z at this share
+  Bonferroni-split over every grid point of every extension;
 - ``GAUSS_MARKOV``: Davies' bound on the maximum of the T scan
   (``gauss_markov.Z_GAUSS_MARKOV``).
 
@@ -26,15 +29,16 @@ from __future__ import annotations
 
 from statistics import NormalDist
 
-__all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "TEMPERATURE", "TRANSIENTS",
-           "bonferroni_z"]
+__all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "TEMPERATURE", "THERMAL_PATHS",
+           "TRANSIENTS", "bonferroni_z"]
 
 TEMPERATURE = 2.5e-4
 TRANSIENTS = 5e-4
 DRIFT = 2.5e-4
 GAUSS_MARKOV = 5e-3
+THERMAL_PATHS = 2.5e-4
 #: The chance of any false claim on an axis with nothing to find (at most the shares' sum).
-ALPHA_AXIS = TEMPERATURE + TRANSIENTS + DRIFT + GAUSS_MARKOV
+ALPHA_AXIS = TEMPERATURE + TRANSIENTS + DRIFT + GAUSS_MARKOV + THERMAL_PATHS
 
 
 def bonferroni_z(alpha: float, trials: int) -> float:

@@ -97,6 +97,8 @@ class Finding:
     model_dependent: bool = False
     #: the intervals withheld because held-out data reject the model (None: not withheld)
     intervals_if_model_held: dict[str, list[float]] | None = None
+    #: the temperature cause's thermal path (``thermal_paths.CANDIDATES``), else None
+    mechanism: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"cause": self.cause, "claimed": self.claimed,
@@ -108,6 +110,8 @@ class Finding:
             d["intervals_if_model_held"] = self.intervals_if_model_held
         if self.channel is not None:
             d["channel"] = self.channel
+        if self.mechanism is not None:
+            d["mechanism"] = self.mechanism
         return d
 
 

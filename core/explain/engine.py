@@ -473,7 +473,8 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
                      for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
                  for i, j in enumerate(t_ok)} if screen is not None else None
         th_fits = list(fit_thermal_axes(y_slow[:, cols], t_slow[:, t_ok],
-                                        [tnames[k] for k in t_ok], rate_b, holes))
+                                        [tnames[k] for k in t_ok], rate_b, holes,
+                                        paths=True))
     out: dict[str, ChannelExplanation] = {}
     for (name, ch), th in zip(an.channels.items(), th_fits, strict=True):
         if stage is not None:

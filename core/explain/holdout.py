@@ -269,7 +269,22 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     d_fit = np.zeros(len(fit.y))
     d_held = np.zeros(len(held.y))
     skip = 0
-    if c.thermal_channel is not None and u_fit is not None and u_held is not None:
+    wt = c.whole_thermal
+    if (c.thermal_channel is not None and u_fit is not None and u_held is not None
+            and wt is not None and wt.path is not None and wt.mechanism != "one_lag"):
+        # a thermal path beyond one lag: its θ and coefficients from the whole record (its
+        # own held-out choice is ``thermal_paths``'), the signal run over each part's whole
+        # logged series so that a part starts in the state the sensor was in
+        th0 = replace(wt, channel_index=0)
+        sf = th0.signal(u_fit[0][:, None])[u_fit[1]]
+        sh = th0.signal(u_held[0][:, None])[u_held[1]]
+        d_fit += sf - sf.mean()
+        d_held += sh - sh.mean()
+        longest = max(abs(x) for x in wt.path.chosen.theta[:2]) if wt.path.kind in (
+            "two_path",) else abs(wt.lag_s)
+        if held.first and longest > 0:
+            skip = math.ceil(HELD_SETTLE_LAGS * longest * held.rate(rate_b))
+    elif c.thermal_channel is not None and u_fit is not None and u_held is not None:
         part_t = u_fit[0][u_fit[1]][:, None]
         if refit:
             th = fit.thermal if fit.thermal is not None else \

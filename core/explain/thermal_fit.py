@@ -36,7 +36,7 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from avard.core.allan import kernels
@@ -51,6 +51,9 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from avard.core.explain.thermal_paths import PathFit
 
 __all__ = [
     "Z_TEMPERATURE",
@@ -441,6 +444,14 @@ class ThermalFit:
     threshold: float = Z_TEMPERATURE
     #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
     lag_open: bool = False
+    #: the thermal path chosen by held-out likelihood (``thermal_paths``; None: not
+    #: examined). When it is not one lag, ``coefficient``/``coef_se`` are its linear
+    #: coupling's and ``lag_s`` its first lag, and ``signal`` is the path's
+    path: PathFit | None = field(default=None, repr=False)
+
+    @property
+    def mechanism(self) -> str:
+        return "one_lag" if self.path is None else self.path.kind
 
     @property
     def passed(self) -> bool:
@@ -456,6 +467,12 @@ class ThermalFit:
         the axis ``y`` given, the start-up difference β·e^(−t/τ_L) is fitted to y − ĉu by
         least squares (with an offset and a drift) and included, so it is not mistaken for
         a warm-up."""
+        if self.path is not None and self.path.kind != "one_lag":
+            # the path's signal, scaled with the linear coefficient (the engine moves it by
+            # its standard error for the removal's covariance)
+            b0 = float(self.path.chosen.beta[0])
+            k = self.coefficient / b0 if b0 else 1.0
+            return k * self.path.signal(temps[:, self.channel_index], y)
         u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
         d = self.coefficient * (u - u.mean())
         if y is None or self.lag_s == 0:
@@ -468,6 +485,9 @@ class ThermalFit:
 
 
     def evidence(self) -> str:
+        if self.path is not None and self.path.kind != "one_lag":
+            return (f"the axis follows temperature '{self.channel}' (z = {self.z:.3g}, test "
+                    f"z ≥ {self.threshold:g}) by {self.path.summary()}")
         lo, hi = self.coef_interval
         path = ("a first-order lag of" if self.lag_s >= 0 else
                 "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
@@ -487,10 +507,15 @@ class ThermalFit:
         from avard.core.explain.causes import Finding
 
         lo, hi = self.coef_interval
+        if self.path is not None and self.path.kind != "one_lag":
+            p, iv = self.path.params()
+            return Finding("temperature", False, p, iv, self.z, self.threshold,
+                           self.evidence(), channel=self.channel, mechanism=self.mechanism)
         return Finding("temperature", False,
                        {"coefficient": self.coefficient, "lag_s": self.lag_s},
                        {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},
-                       self.z, self.threshold, self.evidence(), channel=self.channel)
+                       self.z, self.threshold, self.evidence(), channel=self.channel,
+                       mechanism=self.mechanism)
 
     def to_dict(self) -> dict[str, Any]:
         lo, hi = self.coef_interval
@@ -498,7 +523,9 @@ class ThermalFit:
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
                 "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
                 "z": self.z,
-                "threshold": self.threshold, "passed": self.passed, "others": self.others}
+                "threshold": self.threshold, "passed": self.passed, "others": self.others,
+                "mechanism": self.mechanism,
+                "path": None if self.path is None else self.path.to_dict()}
 
 
 #: The longest negative lag tried (s): a DS18B20 in its TO-92 package on a plate lags the die
@@ -641,14 +668,16 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
 
 
 def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
-                     holes: Holes | None = None, lag_intervals: bool = True
-                     ) -> list[ThermalFit]:
+                     holes: Holes | None = None, lag_intervals: bool = True,
+                     paths: bool = False) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
     channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
     masked readings), left out of its regression with the lag's settling after them.
     ``lag_intervals`` False: no jackknife of the lag (the held-out halves need only the
-    estimates); the lag's interval is then the estimate itself."""
+    estimates); the lag's interval is then the estimate itself. ``paths``: for each axis
+    whose coupling passes its test, the thermal path beyond one lag chosen by held-out
+    likelihood (``thermal_paths.choose_path``) on its driving channel."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
@@ -682,8 +711,41 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                                            floor)
         scans[j] = per_axis
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
-    return [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
+    fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
                   floors) for a in range(Y.shape[1])]
+    if paths:
+        # on every axis: a response the one lag cannot follow (quadratic, hysteresis) may
+        # fail the one-lag test and pass its own
+        fits = [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
+    return fits
+
+
+def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
+               floors: dict[int, float]) -> ThermalFit:
+    """``fit`` with the thermal path chosen on its driving channel; when the path is not one
+    lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
+    from dataclasses import replace
+
+    from avard.core.explain.thermal_paths import choose_path
+
+    j = fit.channel_index
+    keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
+                     fit.rate_hz)
+    ref = fit.allan
+    edf = np.asarray(ref.edf, dtype=float)
+    edf = edf[:, 0] if edf.ndim == 2 else edf
+    pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
+                     floors.get(j, 0.0), keep)
+    if pf.kind == "one_lag":
+        return replace(fit, path=pf) if fit.passed else fit
+    s = pf.chosen
+    # an extension passed its own test (its extra term's z at the paths' share, held out
+    # better than one lag and than nothing): on an axis whose one-lag z failed, that test is
+    # the claim's
+    test = {} if fit.passed else {"z": s.z_extra, "threshold": pf.z_threshold}
+    return replace(fit, path=pf, coefficient=float(s.beta[0]), coef_se=float(s.beta_se[0]),
+                   lag_s=float(s.theta[0]), lag_lo=float(s.theta_lo[0]),
+                   lag_hi=float(s.theta_hi[0]), lag_open=s.open_end, **test)
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,

@@ -60,6 +60,15 @@ class Weekend:
     rate_coupling: float = 0.0  # m/s² per K/s on dT_die/dt, x only
     hysteresis_c: float = 0.0  # m/s²: ±h by the sign of the die's last move > 0.05 K, x only
     second_path: tuple[float, float] = (0.0, 0.0)  # (coefficient, die τ) of a 2nd path, x
+    # mechanisms outside explain's thermal candidates (issue 23 item 5), x only:
+    #: (m/s²/K³, K): a cubic response above a threshold, c₃·max(T_die − mean − T₀, 0)³
+    threshold_cubic: tuple[float, float] = (0.0, 0.0)
+    #: (m/s², period s): a humidity-like third channel that is not logged: a cycle of its own
+    #: period whose phase wanders (a slow random walk of ±1 rad over the record)
+    unlogged: tuple[float, float] = (0.0, 0.0)
+    #: fractional change of the linear coefficient over the record (a tempco that ages:
+    #: c·(1 + drift·(t/record − ½)))
+    tempco_drift: float = 0.0
     warmups: list[tuple[float, float]] = field(default_factory=list)  # (size, T), x
     steps: list[tuple[float, float]] = field(default_factory=list)  # (time, size), x
     excursions: list[tuple[float, float, float]] = field(default_factory=list)  # (t0, t1, size)
@@ -138,6 +147,15 @@ def make(seed: int, w: Weekend) -> tuple[NDArray, NDArray, list[str], dict[str, 
     if w.second_path[0]:
         d2 = _lag(plate, w.second_path[1], dt)
         acc[:, 0] += w.second_path[0] * (d2 - d2.mean())
+    if w.threshold_cubic[0]:
+        x = np.maximum(dm - w.threshold_cubic[1], 0.0) ** 3
+        acc[:, 0] += w.threshold_cubic[0] * (x - x.mean())
+    if w.unlogged[0]:
+        wander = np.cumsum(rng.standard_normal(n)) / math.sqrt(n)
+        h = np.sin(2 * math.pi * t / w.unlogged[1] + ph[2] + wander)
+        acc[:, 0] += w.unlogged[0] * (h - h.mean())
+    if w.tempco_drift:
+        acc[:, 0] += w.coefficient[0] * w.tempco_drift * (t / (n * dt) - 0.5) * dm
     for size, T in w.warmups:
         acc[:, 0] += size * np.exp(-t / T)
     for ts, size in w.steps:

@@ -1,0 +1,596 @@
+"""Thermal paths beyond one first-order lag, chosen by held-out likelihood (issue 23 item 4).
+
+``thermal_fit`` finds the driving channel and one lag of either sign. The physics may need
+more; the candidates, each a linear model in regressors built from the driving channel T
+(slow view, °C) with its nonlinear parameter θ on a grid:
+
+- ``one_lag``: c·u_L, u_L = ``lag_filter(T, L)`` (θ = L, either sign);
+- ``two_path``: c₁·u_L1 + c₂·u_L2, 0 ≤ L1 < L2 (two first-order paths, e.g. plate → die and
+  room → die; θ = (L1, L2));
+- ``quadratic``: c·u_L + q·(u_L − ū)² (m/s²/K²);
+- ``rate``: c·u_L + r·du/dt (m/s² per K/s), du/dt the derivative of u_L through a
+  ``RATE_SMOOTH_S`` lag ((u_L − lag(u_L, s))/s exactly: the readings' 0.0625 K steps would
+  make a raw gradient spikes);
+- ``hysteresis``: c·u_L + h·p_w, p_w = (v − P_w[v])/(w/2) ∈ [−1, 1] the play (backlash)
+  operator of width w (K) on v = lag(u_L, ``RATE_SMOOTH_S``), a one-parameter Preisach-lite:
+  p_w is +1 after a rise, −1 after a fall, and crosses over while the temperature turns back
+  by w (θ = (L, w)).
+
+Every candidate also carries the lag filter's unknown start state (e^(−t/|L|) per lag, a
+nuisance regressor, as ``thermal_fit.without_start``).
+
+**Estimator.** The Allan covariance of (y, all regressors) at octave τ (``thermal_fit.
+octave_sums``: one pass gives every candidate, since it is bilinear), on ``PARTS`` contiguous
+parts whose sums add exactly. For coefficients β of a regressor subset the residual AVAR at
+τ_k is r_k(β) = V_yy − 2βᵀV_uy + βᵀV_uuβ; with a free noise level per τ and ν_k independent
+differences (the axis's EDF), −2 ln L = Σ_k ν_k ln r_k(β) + const (the deviance D). β
+minimises it (iteratively reweighted: weights ν_k/r_k); θ is the grid point of least D.
+
+**Choice by held-out likelihood.** Each candidate is fitted (θ and β) on one half of the
+record and its deviance measured on the other half with those values (β and θ fixed); both
+folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``one_lag``
+(and over no coupling at all) only when its H is lower by ``HELDOUT_MARGIN`` and its extra
+term passes its own test (a Wald z from the delete-a-part jackknife ≥
+``alarm.bonferroni_z(alarm.THERMAL_PATHS, trials)``, the trials all grid points of all
+extensions): the false-alarm budget per axis holds the paths'
+share. A candidate whose θ sits at the end of its grid is open, and is preferred over one
+with an interior optimum only when better by ``OPEN_MARGIN`` in addition.
+
+**Intervals (68 %).** Coefficients: delete-a-part jackknife over the ``PARTS`` parts with θ
+fixed (red noise breaks the analytic ones, as in ``thermal_fit``). θ: the jackknife of θ
+re-chosen with each part left out, each best grid point refined by a parabola in ln L
+through its neighbours (continuous between grid points).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain import alarm
+from avard.core.explain.causes import noise_psd
+from avard.core.explain.thermal_fit import (
+    DS18B20_CONVERSION_S,
+    DS18B20_STEP_K,
+    OctaveSums,
+    lag_filter,
+    min_tau_for,
+    octave_sums,
+)
+from numpy.typing import NDArray
+
+__all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
+           "min_detectable_path", "path_columns"]
+
+CANDIDATES = ("one_lag", "two_path", "quadratic", "rate", "hysteresis")
+#: Lags (s) of the grid the extensions search (besides the one-lag fit's own lag).
+LAG_GRID_S = (0.0, 15.0, 30.0, 60.0, 120.0, 240.0, 480.0, 900.0, 1800.0, 3600.0)
+#: Play widths (K) of the hysteresis candidate.
+WIDTHS_K = (0.025, 0.05, 0.1, 0.2, 0.4)
+#: Smoothing lag (s) before the derivative and the play (the readings' 0.0625 K steps).
+RATE_SMOOTH_S = 30.0
+#: Contiguous parts: the halves of the held-out choice are parts 0…4 and 5…9; the jackknife
+#: leaves each out in turn.
+PARTS = 10
+#: Δ(held-out −2 ln L) an extension must win by over one lag (docs/explain.md: on records
+#: whose truth is one lag the extensions' held-out Δ stayed above it).
+HELDOUT_MARGIN = 6.0
+#: and further, for a candidate whose θ sits at the end of its grid (open).
+OPEN_MARGIN = 6.0
+#: Most block means the fit runs on (as the lag scan).
+FIT_POINTS = 1 << 14
+
+
+class Column(NamedTuple):
+    kind: str  # "u", "start", "quad", "rate", "play"
+    lag: float
+    width: float = 0.0
+
+
+def _play(v: NDArray, w: float) -> NDArray[np.float64]:
+    """(v − P_w[v])/(w/2): the play operator's normalised lead over its output (+1 after a
+    rise, −1 after a fall). P starts at v[0]."""
+    h = 0.5 * w
+    out = np.empty(len(v))
+    p = float(v[0])
+    for i, x in enumerate(np.asarray(v, dtype=float).tolist()):
+        if x - p > h:
+            p = x - h
+        elif p - x > h:
+            p = x + h
+        out[i] = (x - p) / h
+    return out
+
+
+def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.float64]:
+    """The regressors ``cols`` built from the driving channel ``T`` (°C) on the slow view,
+    each with its mean removed (the start state's with its own)."""
+    T = np.asarray(T, dtype=float)
+    M = len(T)
+    t = np.arange(M) / rate_hz
+    cache: dict[float, NDArray] = {}
+
+    def u(L: float) -> NDArray:
+        if L not in cache:
+            cache[L] = lag_filter(T, L, rate_hz)
+        return cache[L]
+
+    out = np.empty((M, len(cols)))
+    for i, c in enumerate(cols):
+        if c.kind == "u":
+            x = u(c.lag)
+        elif c.kind == "start":
+            x = np.exp(-t / abs(c.lag)) if c.lag else np.zeros(M)
+        elif c.kind == "quad":
+            x = (u(c.lag) - u(c.lag).mean()) ** 2
+        elif c.kind == "rate":
+            x = (u(c.lag) - lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
+        elif c.kind == "play":
+            x = _play(lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz), c.width)
+        else:  # pragma: no cover - the kinds are this module's own
+            raise ValueError(c.kind)
+        out[:, i] = x - x.mean()
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# the pooled Allan-covariance fit of a regressor subset
+
+
+@dataclass(frozen=True)
+class _View:
+    """Allan covariance (K, C, C) of (y, regressors…), the axis's EDF ν (K,) and the noise
+    AVAR s (K,) the residual is weighed against, at the τ used."""
+
+    cov: NDArray[np.float64]
+    nu: NDArray[np.float64]
+    s: NDArray[np.float64]
+
+
+def _view(sums: OctaveSums, edf_ref: NDArray, n_ref: NDArray, ok_tau: NDArray[np.bool_],
+          s_ref: NDArray | None = None) -> _View:
+    k = min(len(sums.ms), len(edf_ref), len(ok_tau))
+    cov = sums.cov()[:k]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nu = np.asarray(edf_ref[:k], float) * sums.n[:k] / np.asarray(n_ref[:k], float)
+    s = cov[:, 0, 0] if s_ref is None else np.asarray(s_ref[:k], float)
+    good = (ok_tau[:k] & np.isfinite(nu) & (nu >= 3) & np.all(np.isfinite(cov), axis=(1, 2))
+            & np.isfinite(s) & (s > 0))
+    return _View(cov[good], nu[good], s[good])
+
+
+def _resid(v: _View, idx: list[int], beta: NDArray) -> NDArray[np.float64]:
+    """The residual AVAR r_k(β) = V_yy − 2βᵀV_uy + βᵀV_uuβ."""
+    c = v.cov
+    vy = c[:, 0, 0]
+    if not idx:
+        return np.asarray(vy, dtype=float)
+    vuy = c[:, idx, 0]
+    vuu = c[:, idx][:, :, idx]
+    r = vy - 2 * vuy @ beta + np.einsum("i,kij,j->k", beta, vuu, beta)
+    return np.asarray(r, dtype=float)
+
+
+def _fit(v: _View, idx: list[int]) -> NDArray[np.float64]:
+    """β minimising Σ_k ν_k r_k(β)/s_k (weighted normal equations)."""
+    if not len(v.nu) or not idx:
+        return np.zeros(len(idx))
+    c = v.cov
+    w = v.nu / v.s
+    A = np.einsum("k,kij->ij", w, c[:, idx][:, :, idx])
+    b = w @ c[:, idx, 0]
+    d = np.diag(A)
+    # a regressor this view does not see (a start state in a part after the start) stays 0
+    live = np.flatnonzero(d > 1e-14 * max(float(d.max()), 1e-300))
+    out = np.zeros(len(idx))
+    if len(live):
+        sc = np.sqrt(d[live])
+        out[live] = np.linalg.lstsq(A[np.ix_(live, live)] / np.outer(sc, sc), b[live] / sc,
+                                    rcond=1e-10)[0] / sc
+    return out
+
+
+def _held_dev(v: _View, idx: list[int], beta: NDArray, n: int) -> float:
+    """The deviance on held-out data of a model whose first ``n`` coefficients (the
+    couplings) are ``beta[:n]``, fitted elsewhere; the rest (the lag filter's start states,
+    which belong to the record's start and not to the sensor) are refitted here."""
+    if not len(v.nu):
+        return 0.0
+    # the view of (y − Σ β_i u_i, nuisance…) by the linear map of the channels
+    C = v.cov.shape[1]
+    A = np.zeros((1 + len(idx) - n, C))
+    A[0, 0] = 1.0
+    A[0, idx[:n]] -= beta[:n]
+    for r, j in enumerate(idx[n:], start=1):
+        A[r, j] = 1.0
+    w = _View(np.einsum("ri,kij,sj->krs", A, v.cov, A), v.nu, v.s)
+    rest = list(range(1, A.shape[0]))
+    return _dev(w, rest, _fit(w, rest))
+
+
+def _dev(v: _View, idx: list[int], beta: NDArray) -> float:
+    """Σ_k ν_k r_k(β)/s_k: −2 ln L up to a constant, the Allan differences Gaussian with the
+    noise AVAR s_k (the one-lag model's residual on the whole record, the same weights for
+    every candidate), ν_k of them independent at τ_k. A noise level free at each τ instead
+    (Σ ν ln r) let three regressors cancel the few differences of the longest τ exactly and
+    ran to −∞ there."""
+    if not len(v.nu):
+        return 0.0
+    return float(np.sum(v.nu * _resid(v, idx, beta) / v.s))
+
+
+# --------------------------------------------------------------------------------------------
+# candidates and their grids
+
+
+class Trial(NamedTuple):
+    """One grid point of one candidate: θ, the regressor columns (the first the linear
+    coupling's, then the extension's, then the start states), how many are couplings."""
+
+    theta: tuple[float, ...]
+    cols: tuple[Column, ...]
+    n_terms: int
+
+
+def _start(*lags: float) -> tuple[Column, ...]:
+    return tuple(Column("start", L) for L in sorted({abs(x) for x in lags if x}))
+
+
+def trials(kind: str, lags: list[float]) -> list[Trial]:
+    pos = sorted({x for x in lags if x >= 0})
+    if kind == "one_lag":
+        return [Trial((L,), (Column("u", L), *_start(L)), 1) for L in lags]
+    if kind == "two_path":
+        return [Trial((a, b), (Column("u", a), Column("u", b), *_start(a, b)), 2)
+                for a, b in itertools.combinations(pos, 2)]
+    if kind == "quadratic":
+        return [Trial((L,), (Column("u", L), Column("quad", L), *_start(L)), 2) for L in lags]
+    if kind == "rate":
+        return [Trial((L,), (Column("u", L), Column("rate", L), *_start(L)), 2) for L in lags]
+    if kind == "hysteresis":
+        return [Trial((L, w), (Column("u", L), Column("play", L, w), *_start(L)), 2)
+                for L in lags for w in WIDTHS_K]
+    raise ValueError(kind)
+
+
+@dataclass
+class PathScore:
+    """One candidate on one axis: its held-out −2 ln L (``heldout``, both folds), the θ and
+    coefficients fitted on the whole record with 68 % intervals, the extra term's z."""
+
+    kind: str
+    heldout: float
+    theta: tuple[float, ...]
+    beta: NDArray[np.float64]
+    beta_se: NDArray[np.float64]
+    theta_lo: tuple[float, ...]
+    theta_hi: tuple[float, ...]
+    z_extra: float
+    open_end: bool
+    cols: tuple[Column, ...] = ()
+
+
+@dataclass
+class PathFit:
+    """The thermal path chosen for one axis among ``CANDIDATES`` (module doc)."""
+
+    chosen: PathScore
+    scores: dict[str, PathScore]
+    z_threshold: float
+    rate_hz: float
+    margin: float = HELDOUT_MARGIN
+    notes: list[str] = field(default_factory=list)
+    #: held-out −2 ln L of no coupling at all
+    none_heldout: float = math.nan
+
+    @property
+    def kind(self) -> str:
+        return self.chosen.kind
+
+    def signal(self, T: NDArray, y: NDArray | None = None) -> NDArray[np.float64]:
+        """The chosen model's signal on the slow view (m/s²); with ``y``, the start states
+        fitted (least squares with an offset and a drift), else left out."""
+        s = self.chosen
+        X = path_columns(T, list(s.cols), self.rate_hz)
+        n = s_terms(s)
+        d = X[:, :n] @ s.beta[:n]
+        if y is None or X.shape[1] == n:
+            return np.asarray(d, dtype=float)
+        t = np.arange(len(d)) / self.rate_hz
+        a = np.column_stack([np.ones_like(t), t, X[:, n:]])
+        coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
+        return np.asarray(d + X[:, n:] @ coef[2:], dtype=float)
+
+    def params(self) -> tuple[dict[str, float], dict[str, list[float]]]:
+        """The chosen candidate's parameters (SI) and their 68 % intervals."""
+        return describe(self.chosen)
+
+    def summary(self) -> str:
+        s = self.chosen
+        p, iv = describe(s)
+        txt = ", ".join(f"{k} {v:.4g} [{iv[k][0]:.4g}, {iv[k][1]:.4g}]" if k in iv
+                        else f"{k} {v:.4g}" for k, v in p.items())
+        ranks = ", ".join(f"{k} {v.heldout - self.scores['one_lag'].heldout:+.3g}"
+                          for k, v in self.scores.items() if k != "one_lag")
+        end = " (open: θ at the end of its grid)" if s.open_end else ""
+        return (f"thermal path: {s.kind} ({txt}; 68 %){end};"
+                f" held-out Δ(−2 ln L) against one lag: {ranks} (an extension needs "
+                f"< −{self.margin:g} and its own z ≥ {self.z_threshold:.3g})"
+                + "".join(f"; {n}" for n in self.notes))
+
+    def to_dict(self) -> dict[str, object]:
+        p, iv = self.params()
+        return {"mechanism": self.kind, "params": p, "intervals": iv,
+                "open": self.chosen.open_end, "z_extra": self.chosen.z_extra,
+                "z_threshold": self.z_threshold, "margin": self.margin,
+                "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
+                "notes": self.notes}
+
+
+def s_terms(s: PathScore) -> int:
+    return sum(1 for c in s.cols if c.kind != "start")
+
+
+_NAMES = {"one_lag": (("coefficient",), ("lag_s",)),
+          "two_path": (("coefficient", "coefficient_2"), ("lag_s", "lag_2_s")),
+          "quadratic": (("coefficient", "quadratic"), ("lag_s",)),
+          "rate": (("coefficient", "rate_coupling"), ("lag_s",)),
+          "hysteresis": (("coefficient", "hysteresis"), ("lag_s", "width_k"))}
+
+
+def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
+    bn, tn = _NAMES[s.kind]
+    p: dict[str, float] = {}
+    iv: dict[str, list[float]] = {}
+    for i, k in enumerate(bn):
+        p[k] = float(s.beta[i])
+        iv[k] = [float(s.beta[i] - s.beta_se[i]), float(s.beta[i] + s.beta_se[i])]
+    for i, k in enumerate(tn):
+        p[k] = float(s.theta[i])
+        iv[k] = [float(s.theta_lo[i]), float(s.theta_hi[i])]
+    return p, iv
+
+
+# --------------------------------------------------------------------------------------------
+# the choice
+
+
+def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
+    """θ of trial ``i`` refined coordinate-wise by a parabola in ln(θ) (θ > 0) through its
+    grid neighbours along that coordinate (the others fixed)."""
+    th = list(ts[i].theta)
+    for d in range(len(th)):
+        same = [(t.theta[d], float(devs[j])) for j, t in enumerate(ts)
+                if all(t.theta[e] == ts[i].theta[e] for e in range(len(th)) if e != d)]
+        same.sort()
+        xs = [x for x, _ in same]
+        k = xs.index(th[d])
+        if 0 < k < len(xs) - 1 and xs[k - 1] > 0:
+            x = np.log(np.array(xs[k - 1:k + 2]))
+            f = np.array([v for _, v in same[k - 1:k + 2]])
+            den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
+            a = (x[2] * (f[1] - f[0]) + x[1] * (f[0] - f[2]) + x[0] * (f[2] - f[1])) / den
+            b = (x[2] ** 2 * (f[0] - f[1]) + x[1] ** 2 * (f[2] - f[0])
+                 + x[0] ** 2 * (f[1] - f[2])) / den
+            if a > 0:
+                th[d] = float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))
+    return tuple(th)
+
+
+def _at_end(ts: list[Trial], i: int, widths: tuple[int, ...] = ()) -> bool:
+    """θ of trial ``i`` at the end of its grid: a lag at the longest lag tried, a width
+    (coordinates ``widths``) at either end (the shortest lag, 0 or the one-lag fit's own,
+    is a value, not a search's edge)."""
+    for d in range(len(ts[i].theta)):
+        vals = sorted({t.theta[d] for t in ts})
+        ends = (vals[0], vals[-1]) if d in widths else (vals[-1],)
+        if len(vals) > 2 and ts[i].theta[d] in ends:
+            return True
+    return False
+
+
+def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
+                edf_ref: NDArray, floor_s: float = 0.0,
+                keep: NDArray[np.bool_] | None = None) -> PathFit:
+    """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
+    ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
+    the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
+    channel's rounding floor (``thermal_fit.rounding_floor_tau``); ``keep`` the blocks
+    outside the log's holes."""
+    y = np.asarray(y, dtype=float)
+    T = np.asarray(T, dtype=float)
+    f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
+    m = (len(y) // f) * f
+    ys, Ts = y[:m].reshape(-1, f).mean(axis=1), T[:m].reshape(-1, f).mean(axis=1)
+    ks: NDArray[np.bool_] | None = (None if keep is None else
+                                    np.asarray(keep[:m].reshape(-1, f).all(axis=1)))
+    rate = rate_hz / f
+    record_s = len(ys) / rate
+    lags = sorted({float(x) for x in LAG_GRID_S if x <= record_s / 8} | {round(lag0, 3)})
+    per_kind = {k: trials(k, lags) for k in CANDIDATES}
+    cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
+    where = {c: i + 1 for i, c in enumerate(cols)}
+    X = np.column_stack([ys, path_columns(Ts, cols, rate)])
+    edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
+    parts = [octave_sums(X[a:b], None if ks is None else ks[a:b])
+             for a, b in itertools.pairwise(edges)]
+    whole = sum(parts[1:], start=parts[0])
+    half = [sum(parts[1:PARTS // 2], start=parts[0]),
+            sum(parts[PARTS // 2 + 1:], start=parts[PARTS // 2])]
+    # τ from the shortest the regression may use (the DS18B20's conversion, the channel's
+    # rounding floor, a negative lag's own) — the same for every candidate, so their
+    # deviances compare
+    # (not thermal_fit's 2|L| for a negative lag: it left a −128 s record three octaves to
+    # tell the candidates apart; the sawtooth floor already keeps the rounding out)
+    min_tau = max(min_tau_for(0.0, floor_s), slow_rounding_floor(Ts, rate))
+    ms = whole.ms
+    ok_tau = (ms / rate) >= min_tau
+    # the axis's EDF at this view's octaves: the whole slow view's, by τ
+    edf_v = _edf_at(ms / rate, tau_ref, edf_ref)
+    n_v = whole.n
+    # the weights: the one-lag model's residual AVAR at the one-lag fit's own lag, on the
+    # whole record (includes what one lag leaves: an extension that removes it gains)
+    v0 = _view(whole, edf_v, n_v, np.ones(len(ms), dtype=bool))
+    one = [where[c] for c in trials("one_lag", [round(lag0, 3)])[0].cols]
+    full = whole.cov()
+    s_ref = np.full(len(ms), np.nan)
+    r0 = _resid(_View(full, np.ones(len(ms)), np.ones(len(ms))), one,
+                _fit(_View(v0.cov, v0.nu, v0.cov[:, 0, 0]), one))
+    s_ref[:] = np.where(r0 > 1e-6 * full[:, 0, 0], r0, 1e-6 * full[:, 0, 0])
+    vw = _view(whole, edf_v, n_v, ok_tau, s_ref)
+    vh = [_view(h, edf_v, n_v, ok_tau, s_ref) for h in half]
+    vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
+    n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
+    z_thr = alarm.bonferroni_z(alarm.THERMAL_PATHS, n_ext)
+    scores: dict[str, PathScore] = {}
+    for kind in CANDIDATES:
+        ts = per_kind[kind]
+        idx = [[where[c] for c in t.cols] for t in ts]
+        held = 0.0
+        for a, b in ((0, 1), (1, 0)):
+            fits = [_fit(vh[a], ix) for ix in idx]
+            devs = np.array([_dev(vh[a], ix, bb) for ix, bb in zip(idx, fits, strict=True)])
+            i = int(np.argmin(devs))
+            held += _held_dev(vh[b], idx[i], fits[i], ts[i].n_terms)
+        fits = [_fit(vw, ix) for ix in idx]
+        devs = np.array([_dev(vw, ix, bb) for ix, bb in zip(idx, fits, strict=True)])
+        i = int(np.argmin(devs))
+        theta = _refined(ts, devs, i)
+        # jackknife with θ fixed (coefficients) and θ re-chosen (θ)
+        jb = np.array([_fit(v, idx[i]) for v in vjk])
+        G = len(vjk)
+        se = np.sqrt((G - 1) / G * np.sum((jb - jb.mean(axis=0)) ** 2, axis=0))
+        jt = []
+        for v in vjk:
+            dv = np.array([_dev(v, ix, _fit(v, ix)) for ix in idx])
+            jt.append(_refined(ts, dv, int(np.argmin(dv))))
+        jt_a = np.array(jt)
+        tse = np.sqrt((G - 1) / G * np.sum((jt_a - jt_a.mean(axis=0)) ** 2, axis=0))
+        n = ts[i].n_terms
+        z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
+                   if n > 1 else math.inf)
+        open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
+        scores[kind] = PathScore(
+            kind, held, theta, fits[i][:n], se[:n],
+            tuple(float(t - s) for t, s in zip(theta, tse, strict=True)),
+            tuple(float(t + s) for t, s in zip(theta, tse, strict=True)),
+            z_extra, open_end, ts[i].cols)
+    # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
+    # test failed, one lag is no reference)
+    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
+    ref = scores["one_lag"]
+    notes = []
+    passing = []
+    for kind, sc in scores.items():
+        if kind == "one_lag":
+            continue
+        need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
+        if sc.heldout < min(ref.heldout, none_h) - need and sc.z_extra >= z_thr:
+            passing.append(sc)
+        elif sc.heldout < ref.heldout - need:
+            notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
+                         f"its extra term's z {sc.z_extra:.3g} < {z_thr:.3g}")
+    best = ref
+    if passing:
+        top = min(sc.heldout for sc in passing)
+        # parsimony: of the extensions within the margin of the best, the one with fewest
+        # parameters (two lags can mimic a derivative: u_L1 − u_L2 ∝ d/dt of a smoothed T)
+        near = [sc for sc in passing if sc.heldout <= top + HELDOUT_MARGIN]
+        best = min(near, key=lambda sc: (len(sc.theta) + len(sc.beta), sc.heldout))
+        rivals = [sc.kind for sc in passing
+                  if sc is not best and abs(sc.heldout - best.heldout) <= HELDOUT_MARGIN]
+        if rivals:
+            notes.append("not told apart on this record from " + ", ".join(rivals)
+                         + f" (held out within {HELDOUT_MARGIN:g}: at one drive frequency a "
+                         "second path and a dT/dt term both shift gain and phase)")
+    return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
+
+
+def slow_rounding_floor(T: NDArray, rate_hz: float, snr: float = 10.0) -> float:
+    """The shortest octave τ (s) where the channel's AVAR stands ``snr`` times above its
+    readings' rounding, the rounding taken as a sawtooth: a temperature moving at |dT/dt|
+    crosses a 0.0625 K step every q/|dT/dt| s, so its rounding error (variance q²/12) stays
+    correlated that long, AVAR ≈ q²/12·t_c/τ with t_c = max(t_read, q/rms(dT/dt)).
+    ``thermal_fit.rounding_floor_tau`` takes the rounding as white at the read interval; on a
+    slowly turning room that is ≈ 100× too low at its floor (a lag-0 coupling's per-τ
+    coefficient was 0.2–0.9× the truth at τ 16–64 s, and two lags whose difference smooths
+    the steps away beat the true single lag held out)."""
+    T = np.asarray(T, dtype=float)
+    if len(T) < 16:
+        return 0.0
+    slope = float(np.sqrt(np.mean(np.diff(T) ** 2))) * rate_hz
+    # the differences of a rounded series are mostly steps: the slope from 1-minute means
+    k = max(1, round(60.0 * rate_hz))
+    if len(T) > 4 * k:
+        Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
+        slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
+    tc = max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
+    sa = StreamingAllan(1, rate_hz)
+    sa.update(T[:, None])
+    res = sa.result()
+    tau = np.asarray(res.tau, dtype=float)
+    var = np.asarray(res.var, dtype=float)
+    ok = np.isfinite(var) & (var >= snr * DS18B20_STEP_K**2 / 12.0 * tc / tau)
+    for i in range(len(tau)):
+        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
+            return float(tau[i])
+    return math.inf
+
+
+def _edf_at(tau: NDArray, tau_ref: NDArray, edf_ref: NDArray) -> NDArray[np.float64]:
+    """The axis's EDF at ``tau``, interpolated in ln τ from the whole slow view's (the EDF
+    at a τ does not depend on how finely the record was averaged below it)."""
+    tr = np.asarray(tau_ref, float)
+    er = np.asarray(edf_ref, float)
+    ok = np.isfinite(er) & (er > 0) & (tr > 0)
+    if not np.any(ok):
+        return np.zeros(len(tau))
+    return np.asarray(np.exp(np.interp(np.log(tau), np.log(tr[ok]), np.log(er[ok]),
+                                       right=-np.inf)), dtype=float)
+
+
+# --------------------------------------------------------------------------------------------
+# stated minima (docs/explain.md)
+
+
+def min_detectable_path(kind: str, n_white: float, b_inst: float, k_rrw: float,
+                        record_s: float, amplitude_c: float, period_s: float,
+                        lag_s: float = 0.0, lag2_s: float = 0.0,
+                        z: float = 5.0) -> float:
+    """The smallest extra term of candidate ``kind`` the GLS fit detects at ``z`` on average,
+    for a ±``amplitude_c`` sinusoid of ``period_s`` at the die (after the first path
+    ``lag_s``), with the linear coupling fitted beside it (its lag known): the Fisher
+    information of the linear coefficients of c·u + e·x on the noise PSD S(f) (N, B, K,
+    NIST SP 1065 Table 5), one sinusoidal component of amplitude a known to
+    σ_a(f) = √(2 S(f)/T) per quadrature.
+
+    - two_path (m/s²/K, the second coefficient): x = lag(T, lag2) at f0; with H_1, H_2 the
+      two lags' responses, I = (A/σ_a)²·Re(H Hᴴ), e_min = z·√((I⁻¹)₂₂);
+    - quadratic (m/s²/K²): (u − ū)² is −(a²/2)·cos 2ω t, e_min = z·σ_a(2f0)·2/a²;
+    - rate (m/s² per K/s): du/dt = ωa in quadrature with u, e_min = z·σ_a(f0)/(ωa);
+    - hysteresis (m/s²): a ±h square wave switching at the turning points (quadrature with u
+      at f0), odd harmonics 4h/(πk): h_min = z/√(Σ_k odd (4/(πk))²/σ_a(k f0)²).
+    """
+    f0 = 1.0 / period_s
+
+    def sig(f: float) -> float:
+        return math.sqrt(2 * noise_psd(f, n_white, b_inst, k_rrw) / record_s)
+
+    a = amplitude_c
+    w = 2 * math.pi * f0
+    if kind == "two_path":
+        H = np.array([1.0 / (1 + 1j * w * lag_s), 1.0 / (1 + 1j * w * lag2_s)])
+        info = (a / sig(f0)) ** 2 * np.real(np.outer(H, H.conj()))
+        return z * math.sqrt(float(np.linalg.inv(info)[1, 1]))
+    if kind == "quadratic":
+        return z * sig(2 * f0) * 2 / a**2
+    if kind == "rate":
+        return z * sig(f0) / (w * a)
+    if kind == "hysteresis":
+        s = sum((4 / (math.pi * k)) ** 2 / sig(k * f0) ** 2 for k in range(1, 40, 2))
+        return z / math.sqrt(s)
+    raise ValueError(kind)

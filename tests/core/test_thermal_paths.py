@@ -1,0 +1,115 @@
+"""Thermal paths beyond one lag (issue 23 item 4): the candidates, the choice by held-out
+likelihood, and the stated minima; records from the independent weekend generator."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from avard.core.explain import alarm
+from avard.core.explain.thermal_fit import _axes_reference, fit_thermal_axes, rounding_floor_tau
+from avard.core.explain.thermal_paths import (
+    _play,
+    choose_path,
+    min_detectable_path,
+    slow_rounding_floor,
+)
+
+from tests.support.weekend import Weekend, make
+
+C = 2e-3
+BASE = Weekend(hours=4.0, rate_hz=10.0, die_tau_s=30.0, sensor_tau_s=30.0,
+               coefficient=(C, 0.0, 0.0))
+
+
+def _slow(w: Weekend, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """x and the logged plate as 1 s block means (readings interpolated across blocks)."""
+    acc, temps, _names, _truth = make(seed, w)
+    b = int(w.rate_hz)
+    n = len(acc) // b * b
+    y = acc[:n, 0].reshape(-1, b).mean(axis=1)
+    blocks = temps[:n, 0].reshape(-1, b)
+    has = np.isfinite(blocks).any(axis=1)
+    T = np.full(len(blocks), np.nan)
+    T[has] = np.nanmean(blocks[has], axis=1)
+    T = np.interp(np.arange(len(T)), np.flatnonzero(has), T[has])
+    return y, T
+
+
+def _path(y: np.ndarray, T: np.ndarray):
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, lag_intervals=False)[0]
+    ref = _axes_reference(y[:, None], 1.0)
+    edf = np.asarray(ref.edf, dtype=float).reshape(len(ref.tau), -1)[:, 0]
+    return choose_path(y, T, 1.0, th.lag_s, np.asarray(ref.tau, float), edf,
+                       rounding_floor_tau(T, 1.0))
+
+
+def test_the_play_operator_is_plus_one_after_a_rise_and_minus_one_after_a_fall():
+    v = np.concatenate([np.linspace(0, 1, 101), np.linspace(1, 0, 101)[1:]])
+    p = _play(v, 0.2)
+    assert p[100] == pytest.approx(1.0)  # at the top, after the rise
+    assert p[-1] == pytest.approx(-1.0)  # at the bottom, after the fall
+    # it crosses over while the temperature turns back by the width: at 0.1 K below the top
+    # it is half way
+    assert p[110] == pytest.approx(0.0, abs=1e-9)
+    assert np.all(np.abs(p) <= 1.0 + 1e-12)
+
+
+def test_one_lag_stays_one_lag():
+    y, T = _slow(BASE, 5)
+    pf = _path(y, T)
+    assert pf.kind == "one_lag"
+    assert pf.chosen.beta[0] == pytest.approx(C, rel=0.1)
+
+
+def test_a_quadratic_response_is_chosen_by_held_out_likelihood_with_its_parameters():
+    y, T = _slow(replace(BASE, quadratic=40 * C), 5)
+    pf = _path(y, T)
+    assert pf.kind == "quadratic"
+    p, iv = pf.params()
+    assert p["quadratic"] == pytest.approx(40 * C, rel=0.1)
+    assert p["coefficient"] == pytest.approx(C, rel=0.2)
+    assert iv["quadratic"][0] < p["quadratic"] < iv["quadratic"][1]
+    # the held-out −2 ln L of the chosen one beats one lag by more than the margin
+    assert pf.scores["quadratic"].heldout < pf.scores["one_lag"].heldout - pf.margin
+
+
+def test_the_sawtooth_rounding_floor_is_above_the_white_one_on_a_slow_room():
+    _y, T = _slow(BASE, 5)
+    assert slow_rounding_floor(T, 1.0) > rounding_floor_tau(T, 1.0)
+
+
+def test_the_paths_share_is_in_the_per_axis_level():
+    assert alarm.THERMAL_PATHS > 0
+    assert alarm.bonferroni_z(alarm.THERMAL_PATHS, 100) > 4.5
+
+
+@pytest.mark.parametrize("kind", ["two_path", "quadratic", "rate", "hysteresis"])
+def test_stated_minima_scale_with_z_and_fall_with_the_record(kind: str):
+    args = (1.6e-4, 2e-5, 2e-6)
+    a = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0)
+    b = min_detectable_path(kind, *args, 16 * 3600, 0.2, 1800.0, 0.0, 870.0)
+    c = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0, z=10.0)
+    assert c == pytest.approx(2 * a)
+    assert b == pytest.approx(a / 2)  # σ_a ∝ 1/√T
+    assert math.isfinite(a) and a > 0
+
+
+def test_a_response_one_lag_cannot_follow_is_claimed_by_its_own_test():
+    # a quadratic response ten times the linear one: the one-lag z fails (it sees the
+    # quadratic's 2f₀ as noise), the quadratic passes its own test and is the claim
+    y, T = _slow(replace(BASE, quadratic=40 * C), 5)
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
+    assert th.passed and th.mechanism == "quadratic"
+    f = th.finding()
+    assert f.mechanism == "quadratic"
+    assert f.params["quadratic"] == pytest.approx(40 * C, rel=0.1)
+
+
+def test_a_null_axis_claims_no_path():
+    y, T = _slow(replace(BASE, coefficient=(0.0, 0.0, 0.0)), 6)
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
+    assert not th.passed
+    assert th.path is None
