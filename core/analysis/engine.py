@@ -557,7 +557,7 @@ def _analyze_passes(
     results: list[tuple[list[int], _PassResult]] = []
     if parallel is not None and grid is not None and total is not None and \
             reread is not None:  # R(n) is read again after a parallel pass
-        from avard.core.analysis.parallel import ShortRead
+        from avard.core.analysis.parallel import ScreenCut, ShortRead
 
         groups = parallel.groups or [chans for chans, _b, _t in passes]
         try:
@@ -565,9 +565,13 @@ def _analyze_passes(
                                        reread, options.quantiles, options.noise_id,
                                        progress, len(passes) / len(groups), all_total)
         except ShortRead as exc:
-            # the screen's cuts are gaps no plan knew of: one worker needs no plan
+            # the screen's cuts are gaps no plan knew of: one worker needs no plan, and
+            # takes the chunks' verdicts instead of judging the record again
             log.info("%s: the parallel pass read short (%s); analysed on one worker",
                      source, exc)
+            if (isinstance(exc, ScreenCut) and exc.verdicts is not None
+                    and exc.block is not None and parallel.screened is not None):
+                parallel.screened.judged(exc.block, exc.verdicts)
             results = []
         if any(one.n != results[0][1].n for _c, one in results):
             raise DataError(f"{source}: the passes read different sample counts "

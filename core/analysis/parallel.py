@@ -50,6 +50,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
@@ -57,8 +58,8 @@ from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
-__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "PassSpec", "ScreenCut", "ShortRead",
-           "default_workers", "plan_chunks", "plan_passes", "run_passes"]
+__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ChunkResult", "PassSpec", "ScreenCut",
+           "ShortRead", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
@@ -95,7 +96,28 @@ class ShortRead(DataError):
 
 class ScreenCut(ShortRead):
     """A chunk's input screen (``_Job.screen``) found acceleration to cut: a gap the chunk
-    plan does not know of, so the record is analysed on one worker, as ``ShortRead``."""
+    plan does not know of, so the record is analysed on one worker, as ``ShortRead``.
+    ``verdicts``: the rows the screen cuts, {block offset: rows in the block} for the blocks
+    with any, judged by the chunks on every axis over the whole record (block by block as a
+    one-worker read in blocks of ``block`` samples would), so that read need not judge the
+    record again (``ScreenedSource.judged``); None when the chunks did not judge it all."""
+
+    def __init__(self, message: str, verdicts: dict[int, NDArray[np.intp]] | None = None,
+                 block: int | None = None) -> None:
+        super().__init__(message)
+        self.verdicts = verdicts
+        self.block = block
+
+
+@dataclass(frozen=True)
+class ChunkResult:
+    """What a chunk sends back: its OADEV part and Welch power sums, or None for both when
+    the input screen cut something (the record is then read on one worker), and the screen's
+    verdicts on the blocks it owns ({block offset: rows cut}, the blocks with any)."""
+
+    part: OadevPart | None
+    power: WelchPart | None
+    cuts: dict[int, NDArray[np.intp]]
 
 
 @dataclass(frozen=True)
@@ -203,23 +225,37 @@ class _Job:
     screen: list[int] | None = None
 
 
+class _Flag(Protocol):
+    """A flag the chunks of one analysis share (a ``multiprocessing`` event)."""
+
+    def is_set(self) -> bool: ...
+
+    def set(self) -> None: ...
+
+
 #: The jobs of this forked worker process (``_take_jobs``): one list per process, never
-#: shared between concurrent analyses (each starts processes of its own).
+#: shared between concurrent analyses (each starts processes of its own), and the flag its
+#: chunks set when the screen cuts (then every chunk only judges what it owns).
 _JOBS: list[_Job] = []
+_CUT: _Flag | None = None
 
 
-def _take_jobs(jobs: list[_Job]) -> None:
-    global _JOBS
-    _JOBS = jobs
+def _take_jobs(jobs: list[_Job], cut: _Flag | None = None) -> None:
+    global _JOBS, _CUT
+    _JOBS, _CUT = jobs, cut
 
 
-def _chunk_part(p: int, i: int) -> tuple[OadevPart, WelchPart | None]:
+def _chunk_part(p: int, i: int) -> ChunkResult:
     """Chunk i of pass p, in a forked local worker (the jobs handed to it at its start)."""
-    return chunk_part(_JOBS[p], i)
+    return chunk_part(_JOBS[p], i, _CUT)
 
 
-def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
-    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
+def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
+    """Chunk i's OADEV part and Welch power sums (a worker's task), with the input screen's
+    verdicts on the blocks it owns. Once the screen cuts anything (here, or in another chunk
+    of the analysis: ``cut``, which it then sets), the sums are of no use (the record is
+    read on one worker) and the chunk only judges the rest of its blocks, so that read can
+    take the verdicts instead of judging the record again."""
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
@@ -232,12 +268,23 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
     pos = 0
+    cuts: dict[int, NDArray[np.intp]] = {}
+    judging = False  # only the screen's verdicts are still wanted
     for accel, segment_end in job.read(verify=job.verify and last):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
         if job.screen and ch.start <= lo < ch.stop:
-            _screen(a[:, job.screen], lo)
+            bad = _screen(a[:, job.screen])
+            if bad is not None:
+                cuts[lo] = bad
+            if cuts and cut is not None and not cut.is_set():
+                cut.set()  # the other chunks' sums are of no use either
+        if cuts or (cut is not None and cut.is_set()):
+            judging = True
+            if hi >= ch.stop or not job.screen:
+                break
+            continue
         if job.take is not None:
             a = a[:, job.take]
         # from the record's start: what comes before the chunk advances the running sum
@@ -252,22 +299,23 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
             acc.gap()
             if welch is not None:
                 welch.gap()
-    if pos < ch.read_to:
+    if pos < (ch.stop if judging and job.screen else ch.read_to):
         raise ShortRead(f"read {pos} samples where the record had {ch.read_to}: the input "
                         "screen cut rows out, or the file changed while it was analysed")
-    return acc.part(), (None if welch is None else welch.part())
+    if judging:
+        return ChunkResult(None, None, cuts)
+    return ChunkResult(acc.part(), None if welch is None else welch.part(), cuts)
 
 
-def _screen(a: NDArray[np.float64], offset: int) -> None:
+def _screen(a: NDArray[np.float64]) -> NDArray[np.intp] | None:
     """The input screen's verdict on one block a chunk owns (its columns; a one-worker read's
-    block, since chunks start on a block boundary). Any cut is a gap the plan does not know:
-    the analysis is then read on one worker (``ScreenCut``)."""
+    block, since chunks start on a block boundary): the rows it cuts, None for none. Any cut
+    is a gap the plan does not know: the analysis is then read on one worker
+    (``ScreenCut``)."""
     from avard.core.io.screen import screen_accel
 
     bad = screen_accel(a)
-    if bad.any():
-        raise ScreenCut(f"the input screen cuts {int(bad.sum())} samples from sample "
-                        f"{offset + int(np.argmax(bad))} on")
+    return np.flatnonzero(bad) if bad.any() else None
 
 
 @dataclass(frozen=True)
@@ -344,7 +392,7 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
             for ps, chunks in zip(passes, plans, strict=True)]
     tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
                    key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
-    parts: dict[tuple[int, int], tuple[OadevPart, WelchPart | None]] = {}
+    parts: dict[tuple[int, int], ChunkResult] = {}
     done = 0
     if len(tasks) == 1 and executor is None:
         parts[tasks[0]] = chunk_part(jobs[0], 0)
@@ -352,9 +400,11 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
         # forked local processes get the jobs when they start (only task numbers cross to
         # them, so ``read`` may be any callable); another executor (Dask's) gets them pickled
         own = executor is None
+        ctx = multiprocessing.get_context("fork")
+        cut = ctx.Event() if own and screen_block is not None else None
         pool = executor or ProcessPoolExecutor(
-            min(workers, len(tasks)), mp_context=multiprocessing.get_context("fork"),
-            initializer=_take_jobs, initargs=(jobs,))
+            min(workers, len(tasks)), mp_context=ctx, initializer=_take_jobs,
+            initargs=(jobs, cut))
         try:
             ps_, is_ = [t[0] for t in tasks], [t[1] for t in tasks]
             results = (pool.map(_chunk_part, ps_, is_) if own else
@@ -373,13 +423,16 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
         finally:
             if own:
                 pool.shutdown(wait=True, cancel_futures=True)
+    if any(r.part is None for r in parts.values()):
+        raise _screen_cut(parts, screen_block)
     out = []
     for p, job in enumerate(jobs):
         total: OadevPart | None = None
         welch = (WelchAccumulator(len(job.names), rate_hz, nperseg) if nperseg is not None
                  else None)
         for i in range(len(job.chunks)):
-            part, power = parts[(p, i)]
+            part, power = parts[(p, i)].part, parts[(p, i)].power
+            assert part is not None
             total = part if total is None else total + part
             if welch is not None and power is not None:
                 welch.add(power)
@@ -388,6 +441,19 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
                                          defer_rn=True)
         out.append((acc, welch, total.n_samples))
     return out
+
+
+def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) -> ScreenCut:
+    """The ``ScreenCut`` of chunks of which some found rows to cut: the rows every chunk's
+    screen cut, per block (a row is cut when any axis says so: the union of the passes'
+    verdicts on their own axes, each margin included, is the verdict on all of them)."""
+    verdicts: dict[int, NDArray[np.intp]] = {}
+    for r in parts.values():
+        for off, rows in r.cuts.items():
+            verdicts[off] = np.union1d(verdicts[off], rows) if off in verdicts else rows
+    first = min(off + int(rows[0]) for off, rows in verdicts.items())
+    return ScreenCut(f"the input screen cuts {sum(len(r) for r in verdicts.values())} samples"
+                     f" from sample {first} on", verdicts, block)
 
 
 @dataclass(frozen=True)

@@ -231,10 +231,10 @@ def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> Non
     np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
     real = parallel.chunk_part
 
-    def dies_on_the_second(job, i):
+    def dies_on_the_second(job, i, *flag):
         if i == 1 or job.names == ["ch1"]:  # a chunk of the second channel, or the second
             os._exit(9)  # the forked worker vanishes, as under the OOM killer
-        return real(job, i)
+        return real(job, i, *flag)
 
     monkeypatch.setattr(parallel, "chunk_part", dies_on_the_second)
     with pytest.raises(AvardError, match=r"worker process .* died"):
@@ -354,3 +354,92 @@ def test_the_passes_are_planned_for_the_soonest_end() -> None:
         for p in plan:  # every pass covers the record once
             assert p[0].start == 0 and p[-1].stop == n
             assert all(a.stop == b.start for a, b in itertools.pairwise(p))
+
+
+def _counted_screen(monkeypatch) -> list[int]:
+    """Count the input screen's judgments of a block in this process (forked workers count
+    in their own copies)."""
+    from avard.core.io import screen
+
+    calls = [0]
+    real = screen.screen_accel
+
+    def counted(a):
+        calls[0] += 1
+        return real(a)
+
+    monkeypatch.setattr(screen, "screen_accel", counted)
+    return calls
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_after_a_screen_cut_one_worker_takes_the_chunks_verdicts(tmp_path, monkeypatch,
+                                                                 workers) -> None:
+    """Shocks in several chunks, on different axes (one of them an axis a pass of its own
+    reads, one in the record's last block): the one-worker read that follows the chunks'
+    cut judges nothing again, and cuts exactly the rows, with the same log and ADEV, as one
+    worker judging the record itself."""
+    rng = np.random.default_rng(21)
+    n = 1 << 18
+    y = rng.normal(0, 1e-3, (n, 3))
+    y[30000:30002, 0] += 0.3
+    y[150000, 2] += 0.3
+    y[200000:200004, 1] -= 0.3
+    y[n - 5, 2] += 0.3
+    path = tmp_path / "shocks.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    calls = _counted_screen(monkeypatch)
+    one = analyze(open_record(path))
+    judged_by_one = calls[0]
+    calls[0] = 0
+    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
+    assert judged_by_one > 0 and calls[0] == 0
+    cut = [(s.channel, s.kind, s.first, s.last) for s in one.meta["screen"].stretches]
+    assert len(cut) == 4
+    assert cut == [(s.channel, s.kind, s.first, s.last) for s in par.meta["screen"].stretches]
+    assert par.n_samples == one.n_samples
+    for name, ch in one.channels.items():
+        np.testing.assert_array_equal(par.channels[name].allan.dev, ch.allan.dev)
+        np.testing.assert_array_equal(par.channels[name].allan.alpha, ch.allan.alpha)
+
+
+def test_a_chunk_told_of_a_cut_only_judges_the_blocks_it_owns() -> None:
+    """Once another chunk's screen cut something (the shared flag), a chunk's sums are of no
+    use: it sends none, only its verdicts on its own blocks (none outside them), and a chunk
+    that finds a cut itself sets the flag for the others."""
+    from avard.core.analysis import parallel
+
+    class Flag:
+        def __init__(self, on: bool) -> None:
+            self.on = on
+
+        def is_set(self) -> bool:
+            return self.on
+
+        def set(self) -> None:
+            self.on = True
+
+    rng = np.random.default_rng(5)
+    n, block = 1 << 16, 1 << 13
+    y = rng.normal(0, 1e-3, (n, 2))
+    y[1000, 0] += 0.5  # in the first chunk, before the second's own blocks
+    y[40000, 1] += 0.5  # in the second chunk's
+
+    def read(verify: bool = False):
+        for i in range(0, n, block):
+            yield y[i:i + block], False
+
+    job = parallel._Job(read, None, ["x", "y"], 100.0, 2 ** np.arange(8), None, n, False,
+                        [parallel.Chunk(0, 32768, 33792), parallel.Chunk(32768, n, n)],
+                        screen=[0, 1])
+    second = parallel.chunk_part(job, 1, Flag(True))
+    assert second.part is None and second.power is None
+    assert list(second.cuts) == [40000 // block * block]
+    assert 40000 % block in second.cuts[40000 // block * block]
+    flag = Flag(False)
+    first = parallel.chunk_part(job, 0, flag)
+    assert first.part is None and flag.on and list(first.cuts) == [0]
+    clean = parallel._Job(read, None, ["x", "y"], 100.0, 2 ** np.arange(8), None, n, False,
+                          job.chunks, screen=None)
+    whole = parallel.chunk_part(clean, 1, Flag(False))
+    assert whole.part is not None and not whole.cuts
