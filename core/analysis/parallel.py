@@ -31,7 +31,9 @@ than one worker's (``engine._parallel_groups``), so the workers together hold no
 histories than one worker does. With the input screen on, each chunk judges the blocks it
 owns, each axis on its own (a row is cut when any axis says so: the first pass also judges
 the axes no pass analyses); a cut is a gap the plan does not know, and the record is then
-analysed on one worker (``ScreenCut``).
+analysed on one worker (``ScreenCut``), which takes the chunks' verdicts instead of judging
+the record again: once any chunk cuts (a flag the forked workers share), every chunk only
+judges the rest of the blocks it owns.
 
 The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
 context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
