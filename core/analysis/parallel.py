@@ -282,9 +282,9 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
                 cuts[lo] = bad
             if cuts and cut is not None and not cut.is_set():
                 cut.set()  # the other chunks' sums are of no use either
-        if cuts or (cut is not None and cut.is_set()):
+        if job.screen and (cuts or (cut is not None and cut.is_set())):
             judging = True
-            if hi >= ch.stop or not job.screen:
+            if hi >= ch.stop:
                 break
             continue
         if job.take is not None:
@@ -301,7 +301,7 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
             acc.gap()
             if welch is not None:
                 welch.gap()
-    if pos < (ch.stop if judging and job.screen else ch.read_to):
+    if pos < (ch.stop if judging else ch.read_to):
         raise ShortRead(f"read {pos} samples where the record had {ch.read_to}: the input "
                         "screen cut rows out, or the file changed while it was analysed")
     if judging:
@@ -453,6 +453,8 @@ def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) ->
     for r in parts.values():
         for off, rows in r.cuts.items():
             verdicts[off] = np.union1d(verdicts[off], rows) if off in verdicts else rows
+    if not verdicts:  # no chunk says what it cut: the one-worker read judges it all again
+        return ScreenCut("the input screen cut samples", None, block)
     first = min(off + int(rows[0]) for off, rows in verdicts.items())
     return ScreenCut(f"the input screen cuts {sum(len(r) for r in verdicts.values())} samples"
                      f" from sample {first} on", verdicts, block)
