@@ -49,7 +49,7 @@ import math
 import multiprocessing
 import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Protocol
@@ -372,6 +372,8 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
                nperseg: int | None, n_total: int, bounds: Sequence[int], workers: int, *,
                progress: Callable[[int], None] | None = None,
                executor: Executor | None = None, screen_block: int | None = None,
+               on_pass: Callable[[int, OverlappingAllan, WelchAccumulator | None, int], None]
+               | None = None,
                ) -> list[tuple[OverlappingAllan, WelchAccumulator | None, int]]:
     """The OADEV passes ``passes`` over one record, their chunks (``plan_passes``) run
     together on ``workers`` processes, longest first: per pass the OADEV accumulator
@@ -383,7 +385,10 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     screen, as a one-worker read in blocks of that size would (so chunks start on its
     multiples); ``ScreenCut`` when it would cut anything. R(n) is left to the caller: the
     accumulators are ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does
-    after one pass."""
+    after one pass. ``on_pass(p, acc, welch, n)``: called with pass p's sums as soon as its
+    last chunk is in, while the workers go on with the others (the caller finishes that
+    pass meanwhile: its results and fits are then off the serial end), unless the screen
+    has cut anything."""
     align = alignment(grid, nperseg)
     if screen_block is not None:
         align = align * screen_block // math.gcd(align, screen_block)
@@ -395,40 +400,15 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
                    key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
     parts: dict[tuple[int, int], ChunkResult] = {}
+    wholes: dict[int, tuple[OverlappingAllan, WelchAccumulator | None, int]] = {}
+    left = [len(job.chunks) for job in jobs]
     done = 0
-    if len(tasks) == 1 and executor is None:
-        parts[tasks[0]] = chunk_part(jobs[0], 0)
-    else:
-        # forked local processes get the jobs when they start (only task numbers cross to
-        # them, so ``read`` may be any callable); another executor (Dask's) gets them pickled
-        own = executor is None
-        ctx = multiprocessing.get_context("fork")
-        cut = ctx.Event() if own and screen_block is not None else None
-        pool = executor or ProcessPoolExecutor(
-            min(workers, len(tasks)), mp_context=ctx, initializer=_take_jobs,
-            initargs=(jobs, cut))
-        try:
-            ps_, is_ = [t[0] for t in tasks], [t[1] for t in tasks]
-            results = (pool.map(_chunk_part, ps_, is_) if own else
-                       pool.map(chunk_part, [jobs[p] for p in ps_], is_))
-            for t, one in zip(tasks, results, strict=True):
-                parts[t] = one
-                ch = jobs[t[0]].chunks[t[1]]
-                done += ch.stop - ch.start
-                if progress is not None:
-                    progress(done)
-        except BrokenProcessPool as exc:
-            # a worker killed (out of memory, a signal): said, never waited for forever
-            raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
-                             "run again with fewer --workers (each holds an OADEV "
-                             "history of its own) or --workers 1") from exc
-        finally:
-            if own:
-                pool.shutdown(wait=True, cancel_futures=True)
-    if any(r.part is None for r in parts.values()):
-        raise _screen_cut(parts, screen_block)
-    out = []
-    for p, job in enumerate(jobs):
+
+    def whole(p: int) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
+        """Pass p's chunks added up: what one pass over the record holds."""
+        if p in wholes:
+            return wholes[p]
+        job = jobs[p]
         total: OadevPart | None = None
         welch = (WelchAccumulator(len(job.names), rate_hz, nperseg) if nperseg is not None
                  else None)
@@ -441,8 +421,51 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
         assert total is not None
         acc = OverlappingAllan.from_part(total, rate_hz, names=job.names, n_total=n,
                                          defer_rn=True)
-        out.append((acc, welch, total.n_samples))
-    return out
+        wholes[p] = (acc, welch, total.n_samples)
+        return wholes[p]
+
+    def take(t: tuple[int, int], one: ChunkResult) -> None:
+        nonlocal done
+        parts[t] = one
+        ch = jobs[t[0]].chunks[t[1]]
+        done += ch.stop - ch.start
+        if progress is not None:
+            progress(done)
+        left[t[0]] -= 1
+        if on_pass is not None and left[t[0]] == 0 and all(
+                r.part is not None for r in parts.values()):
+            # while the workers go on with the other passes' chunks
+            on_pass(t[0], *whole(t[0]))
+
+    if len(tasks) == 1 and executor is None:
+        take(tasks[0], chunk_part(jobs[0], 0))
+    else:
+        # forked local processes get the jobs when they start (only task numbers cross to
+        # them, so ``read`` may be any callable); another executor (Dask's) gets them pickled
+        own = executor is None
+        ctx = multiprocessing.get_context("fork")
+        cut = ctx.Event() if own and screen_block is not None else None
+        pool = executor or ProcessPoolExecutor(
+            min(workers, len(tasks)), mp_context=ctx, initializer=_take_jobs,
+            initargs=(jobs, cut))
+        try:
+            # submitted longest first; taken as they end, so a pass is finished as soon as
+            # its last chunk is in
+            futures = {(pool.submit(_chunk_part, p, i) if own else
+                        pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
+            for fut in as_completed(futures):
+                take(futures[fut], fut.result())
+        except BrokenProcessPool as exc:
+            # a worker killed (out of memory, a signal): said, never waited for forever
+            raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
+                             "run again with fewer --workers (each holds an OADEV "
+                             "history of its own) or --workers 1") from exc
+        finally:
+            if own:
+                pool.shutdown(wait=True, cancel_futures=True)
+    if any(r.part is None for r in parts.values()):
+        raise _screen_cut(parts, screen_block)
+    return [whole(p) for p in range(len(jobs))]
 
 
 def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) -> ScreenCut:

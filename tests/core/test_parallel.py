@@ -4,6 +4,7 @@ of the OADEV and of the spectrum, the parts added up — equal to one pass over 
 from __future__ import annotations
 
 import itertools
+from functools import partial
 
 import numpy as np
 import pytest
@@ -443,3 +444,42 @@ def test_a_chunk_told_of_a_cut_only_judges_the_blocks_it_owns() -> None:
                           job.chunks, screen=None)
     whole = parallel.chunk_part(clean, 1, Flag(False))
     assert whole.part is not None and not whole.cuts
+
+
+def test_a_pass_is_handed_on_as_soon_as_its_chunks_are_in() -> None:
+    """``run_passes(on_pass=...)`` gives a pass's sums while the other passes' chunks still
+    run (analyze fits it meanwhile): here the second pass's chunks wait until the first
+    pass has been handed on, which they would never see if passes were handed on at the
+    end; and what is handed on is what run_passes returns."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from avard.core.analysis.parallel import PassSpec, run_passes
+
+    rng = np.random.default_rng(8)
+    n = 1 << 14
+    y = rng.normal(0, 1e-3, (n, 2))
+    first_in = threading.Event()
+    waited: list[bool] = []
+
+    def read(col: int, *, verify: bool = False):
+        if col == 1:
+            waited.append(first_in.wait(60))  # a chunk of the second pass
+        for i in range(0, n, 4096):
+            yield y[i:i + 4096, col:col + 1], False
+
+    handed: dict[int, tuple] = {}
+
+    def on_pass(p, acc, welch, got):
+        handed[p] = (acc, welch, got)
+        if p == 0:
+            first_in.set()
+
+    specs = [PassSpec(partial(read, c), None, [f"ch{c}"]) for c in (0, 1)]
+    with ThreadPoolExecutor(4) as ex:
+        out = run_passes(specs, 100.0, 2 ** np.arange(6), None, n, [0, n], 2, executor=ex,
+                         on_pass=on_pass)
+    assert waited and all(waited)
+    assert sorted(handed) == [0, 1]
+    for p in (0, 1):
+        assert handed[p][0] is out[p][0] and handed[p][2] == out[p][2] == n
