@@ -35,6 +35,10 @@ analysed on one worker (``ScreenCut``), which takes the chunks' verdicts instead
 the record again: once any chunk cuts (a flag the forked workers share), every chunk only
 judges the rest of the blocks it owns.
 
+The parent takes the chunks as they end and hands each pass on as soon as its last chunk is
+in (``run_passes(on_pass=…)``), so the engine finishes and fits it while the workers
+analyse the others.
+
 The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
 context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
 back only its part, a few numbers per τ and the spectrum's power sums. A worker that dies
