@@ -60,6 +60,7 @@ from typing import Protocol
 
 import numpy as np
 from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
+from avard.core.allan.scratch import reuse_histories
 from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
@@ -249,6 +250,8 @@ _CUT: _Flag | None = None
 def _take_jobs(jobs: list[_Job], cut: _Flag | None = None) -> None:
     global _JOBS, _CUT
     _JOBS, _CUT = jobs, cut
+    # a worker's chunks after its first take the first's OADEV ring, its pages mapped
+    reuse_histories()
 
 
 def _chunk_part(p: int, i: int) -> ChunkResult:

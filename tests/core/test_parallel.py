@@ -483,3 +483,26 @@ def test_a_pass_is_handed_on_as_soon_as_its_chunks_are_in() -> None:
     assert sorted(handed) == [0, 1]
     for p in (0, 1):
         assert handed[p][0] is out[p][0] and handed[p][2] == out[p][2] == n
+
+
+def test_a_worker_hands_out_a_history_again_only_when_nothing_refers_to_it(monkeypatch):
+    """A worker's later chunks take an earlier chunk's OADEV ring (its pages mapped), never
+    while any array made from it lives, and always zeroed; an idle one too small for the
+    next is given back rather than kept beside it."""
+    from avard.core.allan import scratch
+
+    monkeypatch.setattr(scratch, "_reused", [])  # as reuse_histories() in a worker
+    a = scratch.mapped_zeros((2, 1000))
+    a[:] = 5.0
+    view = a[:, 10:20]
+    del a
+    b = scratch.mapped_zeros((2, 1000))
+    assert b.base is not view.base and not b.any()  # a slice still holds the first
+    b[:] = 7.0
+    del view, b
+    c = scratch.mapped_zeros((2, 500))
+    assert len(scratch._reused) == 2 and any(c.base is x for x in scratch._reused)
+    assert not c.any()
+    del c
+    d = scratch.mapped_zeros((3, 1000))  # larger than both, which are idle
+    assert len(scratch._reused) == 1 and d.base is scratch._reused[0]
