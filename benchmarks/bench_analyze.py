@@ -20,10 +20,13 @@ then go from the file to the deviations); on a third, each whole worker process 
 start.
 
 With ``--workers N`` it also runs ``analyze(path, workers=N)`` (the exact parallel analysis,
-``core/analysis/parallel.py``) beside ``analyze(path)`` in the same run and prints wall time,
-CPU (the workers' included) and the peak memory of the whole process tree (the sum of the
-processes' proportional set sizes, sampled every 10 ms), with the largest ADEV difference
-and whether α, EDF and the terms' presence agree.
+``core/analysis/parallel.py``) beside ``analyze(path)`` in the same run, ``--repeat`` times
+alternated, and prints each run's wall time and the CPU seconds of the parent and of every
+worker process, the CPU on the longest path against one worker's (what the wall ratio is
+on an idle machine), the peak memory of the whole process tree (the sum of the processes'
+proportional set sizes, sampled every 10 ms in runs of their own: the sampler's CPU would
+otherwise fall on the workers' cores), with the largest ADEV difference and whether α, EDF
+and the terms' presence agree.
 """
 
 from __future__ import annotations
@@ -158,32 +161,112 @@ def _children(pid: int) -> list[int]:
         return []
 
 
-def worker_parallel(path: str, workers: str) -> dict:
-    """``analyze(path, workers=N)`` (N = 1 for the reference) with its wall time, the CPU of
-    the process and its workers, and the peak of the process tree's resident memory."""
+def _log_task(kind: str) -> None:
+    """One line per task a worker process ends (its pid and CPU seconds since its fork) in
+    the file ``AVARD_BENCH_TASKLOG`` names: the per-worker CPU of a parallel run."""
+    path = os.environ.get("AVARD_BENCH_TASKLOG")
+    if path:
+        with open(path, "a") as f:
+            f.write(f"{kind} {os.getpid()} {time.process_time():.6f}\n")
+
+
+def _logged_chunk(p: int, i: int) -> Any:
+    try:
+        return _INNER["chunk"](p, i)
+    finally:
+        _log_task("chunk")
+
+
+def _logged_fit(job: Any) -> Any:
+    try:
+        return _INNER["fit"](job)
+    finally:
+        _log_task("fit")
+
+
+_INNER: dict[str, Any] = {}
+
+
+def _sample_tree(peak: list[float], stop: Any) -> None:
+    while not stop.wait(0.01):
+        peak[0] = max(peak[0], _tree_rss_mb())
+
+
+def worker_parallel(path: str, workers: str, mode: str = "time") -> dict:
+    """``analyze(path, workers=N)`` (N = 1 for the reference).
+
+    ``mode="time"``: its wall time and the CPU seconds of the process and of each worker
+    process (the chunks' and the fits'), nothing else running in the process. ``mode=
+    "memory"``: the peak of the process tree's memory, sampled every 10 ms by a thread.
+    The two are separate runs because the sampler is not free: reading /proc/PID/smaps_rollup
+    of the tree costs milliseconds of CPU per sample, which on a 2-core machine the
+    workers of a parallel run pay and a one-worker run (one core left idle) does not."""
+    import tempfile
     import threading
 
-    from avard.core.analysis.engine import analyze
+    from avard.core.analysis import engine, parallel
     from avard.core.analysis.options import AnalyzeOptions
     from avard.core.io.source import open_record
 
+    log = tempfile.NamedTemporaryFile(prefix="avard-bench-tasks-", delete=False)
+    log.close()
+    os.environ["AVARD_BENCH_TASKLOG"] = log.name
+    phase: dict[str, float] = {}
+    if mode == "time":
+        # forked workers run these (the pools take the functions by module and name)
+        _INNER["chunk"], _INNER["fit"] = parallel._chunk_part, engine._fit_one
+        parallel._chunk_part = _logged_chunk  # type: ignore[assignment]
+        engine._fit_one = _logged_fit  # type: ignore[assignment]
+        passes = parallel.run_passes
+
+        def timed_passes(*args: Any, **kwargs: Any) -> Any:
+            # the parent's CPU while its chunk workers run (it finishes and fits the passes
+            # whose chunks are in meanwhile); the pass handed on last comes after the last
+            # chunk, so its share is the parent's serial end
+            handed = kwargs.get("on_pass")
+            if handed is not None:
+                def timed_pass(*a: Any) -> None:
+                    t0 = time.process_time()
+                    try:
+                        handed(*a)
+                    finally:
+                        phase["last"] = time.process_time() - t0
+
+                kwargs["on_pass"] = timed_pass
+            phase["start"] = time.process_time()
+            try:
+                return passes(*args, **kwargs)
+            finally:
+                phase["end"] = time.process_time()
+
+        parallel.run_passes = timed_passes  # type: ignore[assignment]
     peak = [0.0]
     stop = threading.Event()
-
-    def sample() -> None:
-        while not stop.wait(0.01):
-            peak[0] = max(peak[0], _tree_rss_mb())
-
-    t = threading.Thread(target=sample, daemon=True)
-    t.start()
+    t = threading.Thread(target=_sample_tree, args=(peak, stop), daemon=True)
+    if mode == "memory":
+        t.start()
+    c0 = time.process_time()
     t0 = time.monotonic()
-    an = analyze(open_record(path), AnalyzeOptions(workers=int(workers)))
+    an = engine.analyze(open_record(path), AnalyzeOptions(workers=int(workers)))
     wall = time.monotonic() - t0
-    stop.set()
-    t.join()
+    parent = time.process_time() - c0
+    if mode == "memory":
+        stop.set()
+        t.join()
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    out: dict[str, Any] = {"wall_s": wall, "peak_tree_mb": peak[0],
-                           "cpu_s": _process_cpu_s() + kids.ru_utime + kids.ru_stime,
+    per: dict[str, dict[int, float]] = {"chunk": {}, "fit": {}}
+    with open(log.name) as f:
+        for line in f:
+            kind, pid, cpu = line.split()
+            if int(pid) != os.getpid():  # the parent's own fits are in its CPU
+                per[kind][int(pid)] = max(per[kind].get(int(pid), 0.0), float(cpu))
+    os.unlink(log.name)
+    during = phase.get("end", 0.0) - phase.get("start", 0.0) - phase.get("last", 0.0)
+    out: dict[str, Any] = {"wall_s": wall, "peak_tree_mb": peak[0], "parent_cpu_s": parent,
+                           "parent_during_chunks_cpu_s": during,
+                           "cpu_s": parent + kids.ru_utime + kids.ru_stime,
+                           "chunk_workers_cpu_s": sorted(per["chunk"].values()),
+                           "fit_workers_cpu_s": sorted(per["fit"].values()),
                            "channels": {}}
     for name, ch in an.channels.items():
         out["channels"][name] = {
@@ -215,6 +298,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--hours", type=float, default=60.0, help="record length (default 60 h)")
     ap.add_argument("--workers", type=int, default=None, metavar="N",
                     help="also analyze(path, workers=N) against one worker, in the same run")
+    ap.add_argument("--repeat", type=int, default=3, metavar="K",
+                    help="with --workers: timed runs of each, alternated (default 3)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as tmp:
         path, n = make_npz(Path(tmp), args.hours)
@@ -223,8 +308,14 @@ def main(argv: list[str]) -> int:
         ref = _run("allantools", path)
         ours = _run("analyze", path)
         if args.workers:
-            one = _run("parallel", path, "1")
-            par = _run("parallel", path, str(args.workers))
+            load = os.getloadavg()[0]
+            runs: list[tuple[dict, dict]] = []
+            for _ in range(max(1, args.repeat)):  # alternated: a load change hits both
+                runs.append((_run("parallel", path, "1"),
+                             _run("parallel", path, str(args.workers))))
+            mem = (_run("parallel", path, "1", "memory"),
+                   _run("parallel", path, str(args.workers), "memory"))
+            load = max(load, os.getloadavg()[0])
     k = min(len(ref["adev_x"]), len(ours["adev_x"]))
     agree = float(np.max(np.abs(np.array(ours["adev_x"][:k]) / np.array(ref["adev_x"][:k])
                                 - 1.0)))
@@ -258,11 +349,27 @@ def main(argv: list[str]) -> int:
     for what, sec in ours["split"].items():
         print(f"{what:<56} | {sec:5.2f} | {sec / ours['cpu_s']:.0%}")
     if args.workers:
-        _print_parallel(one, par, args.workers)
+        _print_parallel(runs, mem, args.workers, load)
     return 0
 
 
-def _print_parallel(one: dict, par: dict, workers: int) -> None:
+def _critical_cpu(run: dict, workers: int) -> float:
+    """What the run's wall time would be on an idle machine with a core per worker whose
+    cores do not slow each other, from its CPU seconds: the parent's serial part (before
+    and after its chunk workers run), plus the chunk phase, which lasts at least as long as
+    the busiest chunk worker and as the CPU of all chunk workers and of the parent meanwhile
+    shared among the cores, plus the busiest fit worker's (a fit pool runs while the parent
+    waits)."""
+    chunks = run["chunk_workers_cpu_s"]
+    during = run.get("parent_during_chunks_cpu_s", 0.0)
+    phase = max(max(chunks, default=0.0), (sum(chunks) + during) / max(1, workers))
+    return (run["parent_cpu_s"] - during + (phase if chunks else during)
+            + max(run["fit_workers_cpu_s"], default=0.0))
+
+
+def _print_parallel(runs: list[tuple[dict, dict]], mem: tuple[dict, dict], workers: int,
+                    load: float) -> None:
+    one, par = runs[-1]
     rel = max(float(np.max(np.abs(np.array(p["adev"]) / np.array(o["adev"]) - 1.0)))
               for o, p in zip(one["channels"].values(), par["channels"].values(),
                               strict=True))
@@ -272,14 +379,29 @@ def _print_parallel(one: dict, par: dict, workers: int) -> None:
     edf = max(float(np.max(np.abs(np.array(p["edf"]) / np.array(o["edf"]) - 1.0)))
               for o, p in zip(one["channels"].values(), par["channels"].values(),
                               strict=True))
+    med = float(np.median([p["wall_s"] / o["wall_s"] for o, p in runs]))
+    best = min(p["wall_s"] for _o, p in runs) / min(o["wall_s"] for o, _p in runs)
+    crit = [_critical_cpu(p, workers) / o["parent_cpu_s"] for o, p in runs]
+    loaded = ": the machine was loaded, wall times are not an idle one's" if load > 0.5 else ""
     print(f"\nanalyze on {workers} workers against 1 (same record, same run; "
-          f"{os.cpu_count()} cores here)")
-    print(f"  wall s:            {one['wall_s']:.2f} → {par['wall_s']:.2f}  "
-          f"ratio {par['wall_s'] / one['wall_s']:.2f} (target ≤ 0.6 on 2 cores)")
-    print(f"  CPU s (all procs): {one['cpu_s']:.2f} → {par['cpu_s']:.2f}")
-    print(f"  peak memory of the process tree, MB: {one['peak_tree_mb']:.0f} → "
-          f"{par['peak_tree_mb']:.0f}  ratio {par['peak_tree_mb'] / one['peak_tree_mb']:.2f} "
-          "(target ≤ 1.5)")
+          f"{os.cpu_count()} cores here, load average up to {load:.1f}{loaded})")
+    for k, (o, p) in enumerate(runs):
+        print(f"  run {k + 1}: wall s {o['wall_s']:.2f} → {p['wall_s']:.2f} (ratio "
+              f"{p['wall_s'] / o['wall_s']:.2f}); CPU s: one worker {o['parent_cpu_s']:.2f}; "
+              f"{workers} workers: parent {p['parent_cpu_s']:.2f} (of which "
+              f"{p['parent_during_chunks_cpu_s']:.2f} while chunks ran), chunk workers "
+              f"{' + '.join(f'{c:.2f}' for c in p['chunk_workers_cpu_s'])}, fit workers "
+              f"{' + '.join(f'{c:.2f}' for c in p['fit_workers_cpu_s']) or '-'}")
+    print(f"  wall ratio: median {med:.2f}, fastest against fastest {best:.2f} "
+          "(target ≤ 0.6 on 2 cores)")
+    print(f"  CPU on the longest path (the parent's serial part, the chunk phase: its busiest "
+          f"worker or all CPU then over {workers} cores, the busiest fit worker) against one "
+          f"worker's CPU: {min(crit):.2f}–{max(crit):.2f} (the wall ratio of an idle machine "
+          "whose cores do not slow each other)")
+    print(f"  CPU s, all processes: {one['cpu_s']:.2f} → {par['cpu_s']:.2f}")
+    print(f"  peak memory of the process tree (separate runs, sampled every 10 ms), MB: "
+          f"{mem[0]['peak_tree_mb']:.0f} → {mem[1]['peak_tree_mb']:.0f}  ratio "
+          f"{mem[1]['peak_tree_mb'] / mem[0]['peak_tree_mb']:.2f} (target ≤ 1.5)")
     print(f"  largest |ADEV ratio − 1|: {rel:.1e} (target ≤ 1e-12); EDF {edf:.1e}; "
           f"α and term presence {'equal' if same else 'DIFFER'}")
 

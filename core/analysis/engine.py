@@ -25,7 +25,7 @@ import logging
 import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
@@ -432,11 +432,14 @@ class _Parallel:
 def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], rate: float,
                      grid: NDArray[np.int64], nper: int | None, total: int,
                      reread: _Reread | None, quantiles: str, noise_id: str,
-                     progress: ProgressFn | None, scale: float, all_total: int | None
+                     progress: ProgressFn | None, scale: float, all_total: int | None,
+                     on_result: Callable[[int, list[int], _PassResult], None] | None = None
                      ) -> list[tuple[list[int], _PassResult]]:
     """``_one_pass`` of the OADEV for every group of channels, the record cut into chunks
     and all of them run together on the workers (``parallel.run_passes``). The first pass
-    checks the file's CRC, as one pass does (its last chunk reads to the end)."""
+    checks the file's CRC, as one pass does (its last chunk reads to the end).
+    ``on_result(k, channels, result)``: each group's result as soon as it is made, most of
+    them while the workers still analyse the others (the caller fits them meanwhile)."""
     from avard.core.analysis.parallel import PassSpec, run_passes
 
     def step(samples: int) -> None:
@@ -455,18 +458,35 @@ def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], 
         specs.append(PassSpec(partial(par.read, cols), list(range(len(chans))) if extra
                               else None, [names[i] for i in chans], verify=k == 0,
                               screen=list(range(len(cols))) if screen else None))
+    finished: dict[int, _PassResult] = {}
+
+    def again_for(chans: list[int]) -> _Reread | None:
+        if reread is None:
+            return None
+        return lambda j: reread(chans[j])
+
+    def early(p: int, sa: OverlappingAllan, welch: WelchAccumulator | None, n: int) -> None:
+        # a pass whose chunks are all in is finished while the workers go on, unless it
+        # reads the record again for R(n): that read goes through the screen, whose verdict
+        # on the chunks still out is not known yet
+        if on_result is None or (reread is not None and n >= 16
+                                 and sa.rn_needed(noise_id)):
+            return
+        finished[p] = _finish_pass(sa, welch, n, again_for(groups[p]), quantiles, noise_id)
+        on_result(p, groups[p], finished[p])
+
     parts = run_passes(specs, rate, grid, nper, total, par.bounds, par.workers,
                        progress=step, executor=par.executor,
-                       screen_block=par.block if screen else None)
+                       screen_block=par.block if screen else None, on_pass=early)
     if par.screened is not None:
         par.screened.judged_clean(par.block)  # later reads cut nothing, as the chunks found
     out = []
-    for chans, (sa, welch, n) in zip(groups, parts, strict=True):
-        again = None
-        if reread is not None:
-            def again(j: int, chans: list[int] = chans) -> _Blocks:
-                return reread(chans[j])
-        out.append((chans, _finish_pass(sa, welch, n, again, quantiles, noise_id)))
+    for p, (chans, (sa, welch, n)) in enumerate(zip(groups, parts, strict=True)):
+        if p not in finished:
+            finished[p] = _finish_pass(sa, welch, n, again_for(chans), quantiles, noise_id)
+            if on_result is not None:
+                on_result(p, chans, finished[p])
+        out.append((chans, finished[p]))
     return out
 
 
@@ -556,20 +576,46 @@ def _analyze_passes(
         nper = welch_nperseg(total)
     all_total = None if total is None else int(total) * len(passes)
     results: list[tuple[list[int], _PassResult]] = []
+    # "auto": the record's own corner, carried by its RecordInfo whatever path it came by
+    corner = (info.filter_corner_hz if options.filter_corner_hz == "auto"
+              else options.filter_corner_hz)
+    # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
+    # fit holds as a fixed term (simulated records and recordings carry the LSB)
+    lsb = info.lsb_mps2
+    kw: dict[str, float] = {"ci": options.ci}
+    if corner is not None and lsb is not None:
+        kw["rounding_lsb"] = lsb
+    prep = _FitPrep(corner, options.filter_corner_hz == "auto", kw, find_sinusoids)
+    # the passes' lines and fits, by position in ``results``: a parallel analysis makes
+    # those of a pass whose chunks are all in while its workers analyse the others (so
+    # they are off the serial end; a pass cut short by the screen wastes them)
+    fitted: dict[int, _PassFits] = {}
+
+    def fit_early(k: int, chans: list[int], one: _PassResult) -> None:
+        if one.allan is not None:  # else too short: said below
+            pf = _pass_fit_jobs(one, len(chans), prep)
+            fitted[k] = replace(pf, fits=[_fit_one(job) for job in pf.jobs])
+
     if parallel is not None and grid is not None and total is not None and \
             reread is not None:  # R(n) is read again after a parallel pass
-        from avard.core.analysis.parallel import ShortRead
+        from avard.core.analysis.parallel import ScreenCut, ShortRead
 
         groups = parallel.groups or [chans for chans, _b, _t in passes]
         try:
             results = _parallel_passes(parallel, groups, names, rate, grid, nper, int(total),
                                        reread, options.quantiles, options.noise_id,
-                                       progress, len(passes) / len(groups), all_total)
+                                       progress, len(passes) / len(groups), all_total,
+                                       on_result=fit_early)
         except ShortRead as exc:
-            # the screen's cuts are gaps no plan knew of: one worker needs no plan
+            # the screen's cuts are gaps no plan knew of: one worker needs no plan, and
+            # takes the chunks' verdicts instead of judging the record again
             log.info("%s: the parallel pass read short (%s); analysed on one worker",
                      source, exc)
+            if (isinstance(exc, ScreenCut) and exc.verdicts is not None
+                    and exc.block is not None and parallel.screened is not None):
+                parallel.screened.judged(exc.block, exc.verdicts)
             results = []
+            fitted.clear()  # of passes the screen then cut
         if any(one.n != results[0][1].n for _c, one in results):
             raise DataError(f"{source}: the passes read different sample counts "
                             f"({sorted({one.n for _c, one in results})}); the file changed "
@@ -593,58 +639,89 @@ def _analyze_passes(
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "
                         "least a few hundred samples")
-    # "auto": the record's own corner, carried by its RecordInfo whatever path it came by
-    corner = (info.filter_corner_hz if options.filter_corner_hz == "auto"
-              else options.filter_corner_hz)
-    # an ADXL355 record rounds to its LSB after the chip filter: unfiltered white noise the
-    # fit holds as a fixed term (simulated records and recordings carry the LSB)
-    lsb = info.lsb_mps2
+    todo = [k for k in range(len(results)) if k not in fitted]
+    more = [_pass_fit_jobs(results[k][1], len(results[k][0]), prep) for k in todo]
+    fits = iter(_fit_all([job for pf in more for job in pf.jobs],
+                         parallel.workers if parallel is not None
+                         and parallel.executor is None else 1))
+    for k, pf in zip(todo, more, strict=True):
+        fitted[k] = replace(pf, fits=[next(fits) for _ in pf.jobs])
     out: dict[str, ChannelAnalysis] = {}
-    kw: dict[str, float] = {"ci": options.ci}
-    if corner is not None and lsb is not None:
-        kw["rounding_lsb"] = lsb
-    todo: list[tuple[int, int, _PassResult, int, list[dict[str, Any]]]] = []
-    spectra = []
-    for chans, one in results:
-        welch = one.welch
-        f, spectrum = (welch.result() if welch is not None else (None, None))
-        spectra.append((f, spectrum))
+    for k, (chans, one) in enumerate(results):
+        pf = fitted[k]
+        welch, f, spectrum, fits_k = one.welch, pf.f, pf.spectrum, pf.fits
+        assert fits_k is not None
         for j, i in enumerate(chans):
-            lines = []
-            if welch is not None and spectrum is not None and find_sinusoids:
-                lines = find_lines(f, spectrum[:, j], welch.n_seg)
-            todo.append((len(spectra) - 1, j, one, i, lines))
-    fit_args = [_FitJob(one.allan.channel(j), corner,
-                        [{"cause": "sinusoid", "params": dict(ln)} for ln in lines],
-                        options.filter_corner_hz == "auto", kw)
-                for _k, j, one, _i, lines in todo]
-    fits = _fit_all(fit_args, parallel.workers if parallel is not None
-                    and parallel.executor is None else 1)
-    for (k, j, one, i, lines), job, fit in zip(todo, fit_args, fits, strict=True):
-        if isinstance(fit, str):
-            raise FitError(f"{source}, channel {names[i]}: {fit}")
-        if estimator == "oadev" and reread is not None:
-            # a ramp claimed from an OADEV that stops at N/4 is tested against the
-            # channel's TOTVAR out to T/2, read again only then (long_tau_check)
-            from avard.core.analysis.long_tau_check import check_ramp
+            lines, job, fit = pf.lines[j], pf.jobs[j], fits_k[j]
+            if isinstance(fit, str):
+                raise FitError(f"{source}, channel {names[i]}: {fit}")
+            if estimator == "oadev" and reread is not None:
+                # a ramp claimed from an OADEV that stops at N/4 is tested against the
+                # channel's TOTVAR out to T/2, read again only then (long_tau_check)
+                from avard.core.analysis.long_tau_check import check_ramp
 
-            fit = check_ramp(fit, reread(i), n, rate)
-        welch = one.welch
-        f, spectrum = spectra[k]
-        chan_psd = None
-        if psd:
-            if welch is None or spectrum is None or welch.n_seg < 1:
-                raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
-                                "needs at least 1024)")
-            from avard.core.analysis.psd import channel_psd, white_density
-
-            chan_psd = channel_psd(f, spectrum[:, j], welch.n_seg, lines=lines)
-            chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
-        # the printed interval: the part of the AVAR the fit's resolved deterministic terms
-        # hold does not scatter (signal_edf.py; unchanged on noise alone)
-        out[names[i]] = ChannelAnalysis(names[i], with_signal_edf(job.allan, fit), fit, lines,
-                                        estimator, chan_psd)
+                fit = check_ramp(fit, reread(i), n, rate)
+            out[names[i]] = _channel(names[i], job, fit, lines, estimator, psd, welch, f,
+                                     None if spectrum is None else spectrum[:, j], rate,
+                                     corner, source, n)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
                     meta={**meta, "filter_corner_hz": corner}, estimator=estimator, info=info)
+
+
+def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
+             estimator: str, psd: bool, welch: WelchAccumulator | None,
+             f: NDArray[np.float64] | None, spectrum: NDArray[np.float64] | None,
+             rate: float, corner: float | None, source: str, n: int) -> ChannelAnalysis:
+    """One channel's analysis from its fit, with its PSD when asked for."""
+    chan_psd = None
+    if psd:
+        if welch is None or spectrum is None or f is None or welch.n_seg < 1:
+            raise DataError(f"{source}: {n} samples are too few for a spectrum (--psd "
+                            "needs at least 1024)")
+        from avard.core.analysis.psd import channel_psd, white_density
+
+        chan_psd = channel_psd(f, spectrum, welch.n_seg, lines=lines)
+        chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
+    # the printed interval: the part of the AVAR the fit's resolved deterministic terms
+    # hold does not scatter (signal_edf.py; unchanged on noise alone)
+    return ChannelAnalysis(name, with_signal_edf(job.allan, fit), fit, lines, estimator,
+                           chan_psd)
+
+
+@dataclass(frozen=True)
+class _FitPrep:
+    """What every channel's lines and fit take from the options and the record."""
+
+    corner: float | None
+    auto_corner: bool
+    kw: dict[str, float]
+    find_sinusoids: bool
+
+
+@dataclass(frozen=True)
+class _PassFits:
+    """A pass's spectrum and, per channel, the lines found in it, its fit job and its fit
+    (or the ``FitError``'s message; None until fitted)."""
+
+    f: NDArray[np.float64] | None
+    spectrum: NDArray[np.float64] | None
+    lines: list[list[dict[str, float]]]
+    jobs: list[_FitJob]
+    fits: list[Any] | None = None
+
+
+def _pass_fit_jobs(one: _PassResult, n_channels: int, prep: _FitPrep) -> _PassFits:
+    """A pass's spectrum, the lines in each channel's and the channels' fit jobs."""
+    welch = one.welch
+    f, spectrum = welch.result() if welch is not None else (None, None)
+    lines: list[list[dict[str, float]]] = []
+    for j in range(n_channels):
+        lines.append(find_lines(f, spectrum[:, j], welch.n_seg)
+                     if welch is not None and spectrum is not None and prep.find_sinusoids
+                     else [])
+    jobs = [_FitJob(one.allan.channel(j), prep.corner,
+                    [{"cause": "sinusoid", "params": dict(ln)} for ln in lines[j]],
+                    prep.auto_corner, prep.kw) for j in range(n_channels)]
+    return _PassFits(f, spectrum, lines, jobs)

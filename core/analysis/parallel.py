@@ -31,7 +31,13 @@ than one worker's (``engine._parallel_groups``), so the workers together hold no
 histories than one worker does. With the input screen on, each chunk judges the blocks it
 owns, each axis on its own (a row is cut when any axis says so: the first pass also judges
 the axes no pass analyses); a cut is a gap the plan does not know, and the record is then
-analysed on one worker (``ScreenCut``).
+analysed on one worker (``ScreenCut``), which takes the chunks' verdicts instead of judging
+the record again: once any chunk cuts (a flag the forked workers share), every chunk only
+judges the rest of the blocks it owns.
+
+The parent takes the chunks as they end and hands each pass on as soon as its last chunk is
+in (``run_passes(on_pass=…)``), so the engine finishes and fits it while the workers
+analyse the others.
 
 The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing``'s "fork"
 context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
@@ -47,18 +53,20 @@ import math
 import multiprocessing
 import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
+from avard.core.allan.scratch import reuse_histories
 from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
-__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "PassSpec", "ScreenCut", "ShortRead",
-           "default_workers", "plan_chunks", "plan_passes", "run_passes"]
+__all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ChunkResult", "PassSpec", "ScreenCut",
+           "ShortRead", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
@@ -95,7 +103,28 @@ class ShortRead(DataError):
 
 class ScreenCut(ShortRead):
     """A chunk's input screen (``_Job.screen``) found acceleration to cut: a gap the chunk
-    plan does not know of, so the record is analysed on one worker, as ``ShortRead``."""
+    plan does not know of, so the record is analysed on one worker, as ``ShortRead``.
+    ``verdicts``: the rows the screen cuts, {block offset: rows in the block} for the blocks
+    with any, judged by the chunks on every axis over the whole record (block by block as a
+    one-worker read in blocks of ``block`` samples would), so that read need not judge the
+    record again (``ScreenedSource.judged``); None when the chunks did not judge it all."""
+
+    def __init__(self, message: str, verdicts: dict[int, NDArray[np.intp]] | None = None,
+                 block: int | None = None) -> None:
+        super().__init__(message)
+        self.verdicts = verdicts
+        self.block = block
+
+
+@dataclass(frozen=True)
+class ChunkResult:
+    """What a chunk sends back: its OADEV part and Welch power sums, or None for both when
+    the input screen cut something (the record is then read on one worker), and the screen's
+    verdicts on the blocks it owns ({block offset: rows cut}, the blocks with any)."""
+
+    part: OadevPart | None
+    power: WelchPart | None
+    cuts: dict[int, NDArray[np.intp]]
 
 
 @dataclass(frozen=True)
@@ -203,23 +232,39 @@ class _Job:
     screen: list[int] | None = None
 
 
+class _Flag(Protocol):
+    """A flag the chunks of one analysis share (a ``multiprocessing`` event)."""
+
+    def is_set(self) -> bool: ...
+
+    def set(self) -> None: ...
+
+
 #: The jobs of this forked worker process (``_take_jobs``): one list per process, never
-#: shared between concurrent analyses (each starts processes of its own).
+#: shared between concurrent analyses (each starts processes of its own), and the flag its
+#: chunks set when the screen cuts (then every chunk only judges what it owns).
 _JOBS: list[_Job] = []
+_CUT: _Flag | None = None
 
 
-def _take_jobs(jobs: list[_Job]) -> None:
-    global _JOBS
-    _JOBS = jobs
+def _take_jobs(jobs: list[_Job], cut: _Flag | None = None) -> None:
+    global _JOBS, _CUT
+    _JOBS, _CUT = jobs, cut
+    # a worker's chunks after its first take the first's OADEV ring, its pages mapped
+    reuse_histories()
 
 
-def _chunk_part(p: int, i: int) -> tuple[OadevPart, WelchPart | None]:
+def _chunk_part(p: int, i: int) -> ChunkResult:
     """Chunk i of pass p, in a forked local worker (the jobs handed to it at its start)."""
-    return chunk_part(_JOBS[p], i)
+    return chunk_part(_JOBS[p], i, _CUT)
 
 
-def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
-    """Chunk i's OADEV part and Welch power sums (a worker's task)."""
+def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
+    """Chunk i's OADEV part and Welch power sums (a worker's task), with the input screen's
+    verdicts on the blocks it owns. Once the screen cuts anything (here, or in another chunk
+    of the analysis: ``cut``, which it then sets), the sums are of no use (the record is
+    read on one worker) and the chunk only judges the rest of its blocks, so that read can
+    take the verdicts instead of judging the record again."""
     ch = job.chunks[i]
     last = ch.stop >= job.n_total
     c = len(job.names)
@@ -232,12 +277,23 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
     pos = 0
+    cuts: dict[int, NDArray[np.intp]] = {}
+    judging = False  # only the screen's verdicts are still wanted
     for accel, segment_end in job.read(verify=job.verify and last):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
         if job.screen and ch.start <= lo < ch.stop:
-            _screen(a[:, job.screen], lo)
+            bad = _screen(a[:, job.screen])
+            if bad is not None:
+                cuts[lo] = bad
+            if cuts and cut is not None and not cut.is_set():
+                cut.set()  # the other chunks' sums are of no use either
+        if job.screen and (cuts or (cut is not None and cut.is_set())):
+            judging = True
+            if hi >= ch.stop:
+                break
+            continue
         if job.take is not None:
             a = a[:, job.take]
         # from the record's start: what comes before the chunk advances the running sum
@@ -252,22 +308,23 @@ def chunk_part(job: _Job, i: int) -> tuple[OadevPart, WelchPart | None]:
             acc.gap()
             if welch is not None:
                 welch.gap()
-    if pos < ch.read_to:
+    if pos < (ch.stop if judging else ch.read_to):
         raise ShortRead(f"read {pos} samples where the record had {ch.read_to}: the input "
                         "screen cut rows out, or the file changed while it was analysed")
-    return acc.part(), (None if welch is None else welch.part())
+    if judging:
+        return ChunkResult(None, None, cuts)
+    return ChunkResult(acc.part(), None if welch is None else welch.part(), cuts)
 
 
-def _screen(a: NDArray[np.float64], offset: int) -> None:
+def _screen(a: NDArray[np.float64]) -> NDArray[np.intp] | None:
     """The input screen's verdict on one block a chunk owns (its columns; a one-worker read's
-    block, since chunks start on a block boundary). Any cut is a gap the plan does not know:
-    the analysis is then read on one worker (``ScreenCut``)."""
+    block, since chunks start on a block boundary): the rows it cuts, None for none. Any cut
+    is a gap the plan does not know: the analysis is then read on one worker
+    (``ScreenCut``)."""
     from avard.core.io.screen import screen_accel
 
     bad = screen_accel(a)
-    if bad.any():
-        raise ScreenCut(f"the input screen cuts {int(bad.sum())} samples from sample "
-                        f"{offset + int(np.argmax(bad))} on")
+    return np.flatnonzero(bad) if bad.any() else None
 
 
 @dataclass(frozen=True)
@@ -322,6 +379,8 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
                nperseg: int | None, n_total: int, bounds: Sequence[int], workers: int, *,
                progress: Callable[[int], None] | None = None,
                executor: Executor | None = None, screen_block: int | None = None,
+               on_pass: Callable[[int, OverlappingAllan, WelchAccumulator | None, int], None]
+               | None = None,
                ) -> list[tuple[OverlappingAllan, WelchAccumulator | None, int]]:
     """The OADEV passes ``passes`` over one record, their chunks (``plan_passes``) run
     together on ``workers`` processes, longest first: per pass the OADEV accumulator
@@ -333,7 +392,10 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     screen, as a one-worker read in blocks of that size would (so chunks start on its
     multiples); ``ScreenCut`` when it would cut anything. R(n) is left to the caller: the
     accumulators are ``defer_rn`` (``rn_needed``/``set_rn``), as analyze of a file does
-    after one pass."""
+    after one pass. ``on_pass(p, acc, welch, n)``: called with pass p's sums as soon as its
+    last chunk is in, while the workers go on with the others (the caller finishes that
+    pass meanwhile: its results and fits are then off the serial end), unless the screen
+    has cut anything."""
     align = alignment(grid, nperseg)
     if screen_block is not None:
         align = align * screen_block // math.gcd(align, screen_block)
@@ -344,27 +406,62 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
             for ps, chunks in zip(passes, plans, strict=True)]
     tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
                    key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
-    parts: dict[tuple[int, int], tuple[OadevPart, WelchPart | None]] = {}
+    parts: dict[tuple[int, int], ChunkResult] = {}
+    wholes: dict[int, tuple[OverlappingAllan, WelchAccumulator | None, int]] = {}
+    left = [len(job.chunks) for job in jobs]
     done = 0
+
+    def whole(p: int) -> tuple[OverlappingAllan, WelchAccumulator | None, int]:
+        """Pass p's chunks added up: what one pass over the record holds."""
+        if p in wholes:
+            return wholes[p]
+        job = jobs[p]
+        total: OadevPart | None = None
+        welch = (WelchAccumulator(len(job.names), rate_hz, nperseg) if nperseg is not None
+                 else None)
+        for i in range(len(job.chunks)):
+            part, power = parts[(p, i)].part, parts[(p, i)].power
+            assert part is not None
+            total = part if total is None else total + part
+            if welch is not None and power is not None:
+                welch.add(power)
+        assert total is not None
+        acc = OverlappingAllan.from_part(total, rate_hz, names=job.names, n_total=n,
+                                         defer_rn=True)
+        wholes[p] = (acc, welch, total.n_samples)
+        return wholes[p]
+
+    def take(t: tuple[int, int], one: ChunkResult) -> None:
+        nonlocal done
+        parts[t] = one
+        ch = jobs[t[0]].chunks[t[1]]
+        done += ch.stop - ch.start
+        if progress is not None:
+            progress(done)
+        left[t[0]] -= 1
+        if on_pass is not None and left[t[0]] == 0 and all(
+                r.part is not None for r in parts.values()):
+            # while the workers go on with the other passes' chunks
+            on_pass(t[0], *whole(t[0]))
+
     if len(tasks) == 1 and executor is None:
-        parts[tasks[0]] = chunk_part(jobs[0], 0)
+        take(tasks[0], chunk_part(jobs[0], 0))
     else:
         # forked local processes get the jobs when they start (only task numbers cross to
         # them, so ``read`` may be any callable); another executor (Dask's) gets them pickled
         own = executor is None
+        ctx = multiprocessing.get_context("fork")
+        cut = ctx.Event() if own and screen_block is not None else None
         pool = executor or ProcessPoolExecutor(
-            min(workers, len(tasks)), mp_context=multiprocessing.get_context("fork"),
-            initializer=_take_jobs, initargs=(jobs,))
+            min(workers, len(tasks)), mp_context=ctx, initializer=_take_jobs,
+            initargs=(jobs, cut))
         try:
-            ps_, is_ = [t[0] for t in tasks], [t[1] for t in tasks]
-            results = (pool.map(_chunk_part, ps_, is_) if own else
-                       pool.map(chunk_part, [jobs[p] for p in ps_], is_))
-            for t, one in zip(tasks, results, strict=True):
-                parts[t] = one
-                ch = jobs[t[0]].chunks[t[1]]
-                done += ch.stop - ch.start
-                if progress is not None:
-                    progress(done)
+            # submitted longest first; taken as they end, so a pass is finished as soon as
+            # its last chunk is in
+            futures = {(pool.submit(_chunk_part, p, i) if own else
+                        pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
+            for fut in as_completed(futures):
+                take(futures[fut], fut.result())
         except BrokenProcessPool as exc:
             # a worker killed (out of memory, a signal): said, never waited for forever
             raise AvardError(f"a worker process of the parallel analysis died ({exc}); "
@@ -373,21 +470,24 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
         finally:
             if own:
                 pool.shutdown(wait=True, cancel_futures=True)
-    out = []
-    for p, job in enumerate(jobs):
-        total: OadevPart | None = None
-        welch = (WelchAccumulator(len(job.names), rate_hz, nperseg) if nperseg is not None
-                 else None)
-        for i in range(len(job.chunks)):
-            part, power = parts[(p, i)]
-            total = part if total is None else total + part
-            if welch is not None and power is not None:
-                welch.add(power)
-        assert total is not None
-        acc = OverlappingAllan.from_part(total, rate_hz, names=job.names, n_total=n,
-                                         defer_rn=True)
-        out.append((acc, welch, total.n_samples))
-    return out
+    if any(r.part is None for r in parts.values()):
+        raise _screen_cut(parts, screen_block)
+    return [whole(p) for p in range(len(jobs))]
+
+
+def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) -> ScreenCut:
+    """The ``ScreenCut`` of chunks of which some found rows to cut: the rows every chunk's
+    screen cut, per block (a row is cut when any axis says so: the union of the passes'
+    verdicts on their own axes, each margin included, is the verdict on all of them)."""
+    verdicts: dict[int, NDArray[np.intp]] = {}
+    for r in parts.values():
+        for off, rows in r.cuts.items():
+            verdicts[off] = np.union1d(verdicts[off], rows) if off in verdicts else rows
+    if not verdicts:  # no chunk says what it cut: the one-worker read judges it all again
+        return ScreenCut("the input screen cut samples", None, block)
+    first = min(off + int(rows[0]) for off, rows in verdicts.items())
+    return ScreenCut(f"the input screen cuts {sum(len(r) for r in verdicts.values())} samples"
+                     f" from sample {first} on", verdicts, block)
 
 
 @dataclass(frozen=True)

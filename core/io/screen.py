@@ -43,7 +43,7 @@ Masked temperature readings become NaN (the slow view then has no reading there)
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -445,8 +445,16 @@ class ScreenedSource:
         ``block`` samples (the chunks of a parallel analysis, ``parallel.ScreenCut``
         otherwise), and nothing is to be cut: later reads take that verdict, and the log
         says the screen ran."""
-        self._verdicts[block] = {}
-        if self.log is None:
+        self.judged(block, {})
+
+    def judged(self, block: int, cuts: Mapping[int, NDArray[np.intp]]) -> None:
+        """The record's acceleration was judged elsewhere on every axis, block by block in
+        blocks of ``block`` samples (the chunks of a parallel analysis, which found rows to
+        cut: ``parallel.ScreenCut``): ``cuts`` {block offset: rows cut} for the blocks with
+        any. Later reads cut those rows without judging again, and the next complete read's
+        log says what was cut (nothing cut: the log says the screen ran)."""
+        self._verdicts[block] = dict(cuts)
+        if not cuts and self.log is None:
             self.log = ScreenLog(float(self.source.info.rate_hz), done=True)
 
     @property

@@ -4,6 +4,7 @@ of the OADEV and of the spectrum, the parts added up — equal to one pass over 
 from __future__ import annotations
 
 import itertools
+from functools import partial
 
 import numpy as np
 import pytest
@@ -231,10 +232,10 @@ def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> Non
     np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
     real = parallel.chunk_part
 
-    def dies_on_the_second(job, i):
+    def dies_on_the_second(job, i, *flag):
         if i == 1 or job.names == ["ch1"]:  # a chunk of the second channel, or the second
             os._exit(9)  # the forked worker vanishes, as under the OOM killer
-        return real(job, i)
+        return real(job, i, *flag)
 
     monkeypatch.setattr(parallel, "chunk_part", dies_on_the_second)
     with pytest.raises(AvardError, match=r"worker process .* died"):
@@ -354,3 +355,154 @@ def test_the_passes_are_planned_for_the_soonest_end() -> None:
         for p in plan:  # every pass covers the record once
             assert p[0].start == 0 and p[-1].stop == n
             assert all(a.stop == b.start for a, b in itertools.pairwise(p))
+
+
+def _counted_screen(monkeypatch) -> list[int]:
+    """Count the input screen's judgments of a block in this process (forked workers count
+    in their own copies)."""
+    from avard.core.io import screen
+
+    calls = [0]
+    real = screen.screen_accel
+
+    def counted(a):
+        calls[0] += 1
+        return real(a)
+
+    monkeypatch.setattr(screen, "screen_accel", counted)
+    return calls
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_after_a_screen_cut_one_worker_takes_the_chunks_verdicts(tmp_path, monkeypatch,
+                                                                 workers) -> None:
+    """Shocks in several chunks, on different axes (one of them an axis a pass of its own
+    reads, one in the record's last block): the one-worker read that follows the chunks'
+    cut judges nothing again, and cuts exactly the rows, with the same log and ADEV, as one
+    worker judging the record itself."""
+    rng = np.random.default_rng(21)
+    n = 1 << 18
+    y = rng.normal(0, 1e-3, (n, 3))
+    y[30000:30002, 0] += 0.3
+    y[150000, 2] += 0.3
+    y[200000:200004, 1] -= 0.3
+    y[n - 5, 2] += 0.3
+    path = tmp_path / "shocks.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    calls = _counted_screen(monkeypatch)
+    one = analyze(open_record(path))
+    judged_by_one = calls[0]
+    calls[0] = 0
+    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
+    assert judged_by_one > 0 and calls[0] == 0
+    cut = [(s.channel, s.kind, s.first, s.last) for s in one.meta["screen"].stretches]
+    assert len(cut) == 4
+    assert cut == [(s.channel, s.kind, s.first, s.last) for s in par.meta["screen"].stretches]
+    assert par.n_samples == one.n_samples
+    for name, ch in one.channels.items():
+        np.testing.assert_array_equal(par.channels[name].allan.dev, ch.allan.dev)
+        np.testing.assert_array_equal(par.channels[name].allan.alpha, ch.allan.alpha)
+
+
+def test_a_chunk_told_of_a_cut_only_judges_the_blocks_it_owns() -> None:
+    """Once another chunk's screen cut something (the shared flag), a chunk's sums are of no
+    use: it sends none, only its verdicts on its own blocks (none outside them), and a chunk
+    that finds a cut itself sets the flag for the others."""
+    from avard.core.analysis import parallel
+
+    class Flag:
+        def __init__(self, on: bool) -> None:
+            self.on = on
+
+        def is_set(self) -> bool:
+            return self.on
+
+        def set(self) -> None:
+            self.on = True
+
+    rng = np.random.default_rng(5)
+    n, block = 1 << 16, 1 << 13
+    y = rng.normal(0, 1e-3, (n, 2))
+    y[1000, 0] += 0.5  # in the first chunk, before the second's own blocks
+    y[40000, 1] += 0.5  # in the second chunk's
+
+    def read(verify: bool = False):
+        for i in range(0, n, block):
+            yield y[i:i + block], False
+
+    job = parallel._Job(read, None, ["x", "y"], 100.0, 2 ** np.arange(8), None, n, False,
+                        [parallel.Chunk(0, 32768, 33792), parallel.Chunk(32768, n, n)],
+                        screen=[0, 1])
+    second = parallel.chunk_part(job, 1, Flag(True))
+    assert second.part is None and second.power is None
+    assert list(second.cuts) == [40000 // block * block]
+    assert 40000 % block in second.cuts[40000 // block * block]
+    flag = Flag(False)
+    first = parallel.chunk_part(job, 0, flag)
+    assert first.part is None and flag.on and list(first.cuts) == [0]
+    clean = parallel._Job(read, None, ["x", "y"], 100.0, 2 ** np.arange(8), None, n, False,
+                          job.chunks, screen=None)
+    whole = parallel.chunk_part(clean, 1, Flag(False))
+    assert whole.part is not None and not whole.cuts
+
+
+def test_a_pass_is_handed_on_as_soon_as_its_chunks_are_in() -> None:
+    """``run_passes(on_pass=...)`` gives a pass's sums while the other passes' chunks still
+    run (analyze fits it meanwhile): here the second pass's chunks wait until the first
+    pass has been handed on, which they would never see if passes were handed on at the
+    end; and what is handed on is what run_passes returns."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from avard.core.analysis.parallel import PassSpec, run_passes
+
+    rng = np.random.default_rng(8)
+    n = 1 << 14
+    y = rng.normal(0, 1e-3, (n, 2))
+    first_in = threading.Event()
+    waited: list[bool] = []
+
+    def read(col: int, *, verify: bool = False):
+        if col == 1:
+            waited.append(first_in.wait(60))  # a chunk of the second pass
+        for i in range(0, n, 4096):
+            yield y[i:i + 4096, col:col + 1], False
+
+    handed: dict[int, tuple] = {}
+
+    def on_pass(p, acc, welch, got):
+        handed[p] = (acc, welch, got)
+        if p == 0:
+            first_in.set()
+
+    specs = [PassSpec(partial(read, c), None, [f"ch{c}"]) for c in (0, 1)]
+    with ThreadPoolExecutor(4) as ex:
+        out = run_passes(specs, 100.0, 2 ** np.arange(6), None, n, [0, n], 2, executor=ex,
+                         on_pass=on_pass)
+    assert waited and all(waited)
+    assert sorted(handed) == [0, 1]
+    for p in (0, 1):
+        assert handed[p][0] is out[p][0] and handed[p][2] == out[p][2] == n
+
+
+def test_a_worker_hands_out_a_history_again_only_when_nothing_refers_to_it(monkeypatch):
+    """A worker's later chunks take an earlier chunk's OADEV ring (its pages mapped), never
+    while any array made from it lives, and always zeroed; an idle one too small for the
+    next is given back rather than kept beside it."""
+    from avard.core.allan import scratch
+
+    monkeypatch.setattr(scratch, "_reused", [])  # as reuse_histories() in a worker
+    a = scratch.mapped_zeros((2, 1000))
+    a[:] = 5.0
+    view = a[:, 10:20]
+    del a
+    b = scratch.mapped_zeros((2, 1000))
+    assert b.base is not view.base and not b.any()  # a slice still holds the first
+    b[:] = 7.0
+    del view, b
+    c = scratch.mapped_zeros((2, 500))
+    assert len(scratch._reused) == 2 and any(c.base is x for x in scratch._reused)
+    assert not c.any()
+    del c
+    d = scratch.mapped_zeros((3, 1000))  # larger than both, which are idle
+    assert len(scratch._reused) == 1 and d.base is scratch._reused[0]
