@@ -33,7 +33,10 @@ noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags). The
 interval inverts (3) in S, holding the other sensors' parts P − S and Q − S at their
 estimates: S_hi is where the observed Ŝ falls at the lower (1 − ci)/2 tail, S_lo at the upper
 one. Where S_lo reaches 0 (every negative estimate, and positive ones the data cannot tell
-from 0) the result is an **upper limit** S_hi: never a negative variance or a NaN.
+from 0) the result is an **upper limit** S_hi: never a negative variance or a NaN. S_hi is
+never below the one a zero estimate (same P, Q, ν) gives, the experiment's sensitivity:
+inverted alone, (3) would pull the limit of an estimate far below 0 towards 0 (Feldman &
+Cousins 1998, §V), an interval narrower than the data support.
 A coverage test on records from a generator written apart from the simulator
 (tests/support/colocated.py) holds the self-noise intervals to their nominal 68 %.
 """
@@ -446,53 +449,74 @@ def _verdict(own: Part, common: Part) -> Verdict:
 def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
                         ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                     NDArray[np.bool_], NDArray[np.float64]]:
-    """The ``ci`` interval [lo, hi] of variances S estimated by Ŝ = mean ½UV (eq. 3), from
-    the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit`` where
-    lo is 0; and the EDF of a χ² with the same relative variance, 2S²/Var Ŝ (for the fit's
-    weights)."""
+    """The ``ci`` interval [lo, hi] of variances S ≥ 0 estimated by Ŝ = mean ½UV (eq. 3),
+    from the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit``
+    where lo is 0; and the EDF of a χ² with the same relative variance, 2S²/Var Ŝ (for the
+    fit's weights).
+
+    A Neyman construction with the physical boundary S ≥ 0 (module docstring, docs/
+    separate.md): the other parts held at P − Ŝ⁺, Q − Ŝ⁺ (Ŝ⁺ = max(Ŝ, 0)), each S accepts
+    the central ``ci`` of Ŝ's distribution, except the S below the sensitivity S* (the
+    upper end a zero estimate gets), which accept everything below their ``ci`` quantile.
+    Every S is then covered with probability ``ci``, no interval is empty, and an upper end
+    is never below S*: an estimate far below 0 gets S*, not an end pulled towards 0."""
     s_hat = np.asarray(est, dtype=np.float64)
     nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
-    b_p = np.clip(np.asarray(big_p, dtype=np.float64) - s_hat, 0.0, None)
-    b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_hat, 0.0, None)
+    s_plus = np.clip(s_hat, 0.0, None)
+    b_p = np.clip(np.asarray(big_p, dtype=np.float64) - s_plus, 0.0, None)
+    b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_plus, 0.0, None)
     tail = (1.0 - ci) / 2.0
     grid = (np.arange(_GRID) + 0.5) / _GRID
     xq = chi2_ppf_grid(grid, nu)                                 # (J, M)
     x_over = xq / nu                                             # χ²_ν/ν quantile points
 
-    def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:
-        """P(Ŝ ≤ observed | S = s_true), per estimate."""
-        r = np.sqrt((s_true + b_p) * (s_true + b_q))
+    def cdf(s_true: NDArray[np.float64], x: NDArray[np.float64],
+            at: NDArray[np.intp]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``."""
+        bp, bq, xo = b_p[at], b_q[at], x_over[:, at]
+        r = np.sqrt((s_true + bp) * (s_true + bq))
         lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
-        vals = lp * x_over[:, None, :] - lm * x_over[None, :, :]
-        return np.mean(vals <= s_hat, axis=(0, 1))
+        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
+        return np.mean(vals <= x, axis=(0, 1))
 
-    scale = np.maximum.reduce([np.abs(s_hat), b_p, b_q, np.full_like(s_hat, 1e-300)])
+    def solve(level: float, x: NDArray[np.float64], at: NDArray[np.intp],
+              top: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
+        a, b = np.zeros(len(at)), top.copy()
+        for _ in range(_BISECT):
+            mid = (a + b) / 2.0
+            below = cdf(mid, x, at) <= level
+            b = np.where(below, mid, b)
+            a = np.where(below, a, mid)
+        return b
+
+    every = np.arange(len(s_hat))
+    scale = np.maximum.reduce([s_plus, b_p, b_q, np.full_like(s_hat, 1e-300)])
     top = 4.0 * scale
-    for _ in range(200):                      # S_hi lies below top: grow it until so
-        need = cdf(top) > tail
+    for _ in range(200):                      # the upper end lies below top: grow it until so
+        need = cdf(top, s_plus, every) > tail
         if not np.any(need):
             break
         top = np.where(need, top * 2.0, top)
-    lo_s, hi_s = np.zeros_like(s_hat), top.copy()
-    for _ in range(_BISECT):                   # hi: the S at which Ŝ is at the lower tail
-        mid = (lo_s + hi_s) / 2.0
-        low_tail = cdf(mid) <= tail
-        hi_s = np.where(low_tail, mid, hi_s)
-        lo_s = np.where(low_tail, lo_s, mid)
-    upper_end = hi_s
-    at_zero = 1.0 - cdf(np.zeros_like(s_hat))  # P(Ŝ ≥ observed | S = 0)
-    upper_limit = at_zero > tail
-    a, b = np.zeros_like(s_hat), upper_end.copy()
-    for _ in range(_BISECT):                   # lo: the S at which Ŝ is at the upper tail
-        mid = (a + b) / 2.0
-        beyond = 1.0 - cdf(mid) <= tail
-        a = np.where(beyond, mid, a)
-        b = np.where(beyond, b, mid)
-    lower_end = np.where(upper_limit, 0.0, a)
-    s_pos = np.clip(s_hat, 0.0, None)
-    var_hat = ((s_pos + b_p) * (s_pos + b_q) + s_pos**2) / nu
+    # hi: the S whose central region starts at the estimate; below 0, at 0 (that is S*)
+    upper_end = solve(tail, s_plus, every, top)
+    # lo = 0 where no S > 0 puts the estimate above its region: beyond S = 0's ci quantile
+    upper_limit = 1.0 - cdf(np.zeros_like(s_hat), s_hat, every) > 1.0 - ci
+    lower_end = np.zeros_like(s_hat)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        central = solve(1.0 - tail, s_hat[two], two, upper_end[two])
+        lower_end[two] = central
+        # where that lies below S* the S accepting the estimate are the one-sided ones
+        near = cdf(central, np.zeros(len(two)), two) > tail
+        if np.any(near):
+            at = two[near]
+            s_star = solve(tail, np.zeros(len(at)), at, upper_end[at])
+            one_sided = solve(ci, s_hat[at], at, upper_end[at])
+            lower_end[at] = np.minimum(one_sided, s_star)
+    var_hat = ((s_plus + b_p) * (s_plus + b_q) + s_plus**2) / nu
     with np.errstate(divide="ignore", invalid="ignore"):
-        nu_eff = np.where(var_hat > 0, 2.0 * s_pos**2 / var_hat, 0.0)
+        nu_eff = np.where(var_hat > 0, 2.0 * s_plus**2 / var_hat, 0.0)
     return lower_end, upper_end, upper_limit, nu_eff
 
 
@@ -632,3 +656,4 @@ def _resample(y: NDArray[np.float64], rate: float, t0: float, t_a: float, new_ra
     edges = t_a + np.arange(n + 1) / new_rate
     at = np.column_stack([np.interp(edges, t_old, phase[:, c]) for c in range(y.shape[1])])
     return np.diff(at, axis=0) * new_rate
+

@@ -130,6 +130,50 @@ def test_the_interval_is_the_same_with_quantiles_one_probability_at_a_time(
         np.testing.assert_allclose(f, g, rtol=1e-9, atol=0)
 
 
+def test_an_estimate_far_below_zero_keeps_the_upper_limit_a_zero_estimate_gives() -> None:
+    """The sensitivity floor (Feldman & Cousins 1998 §V): inverting eq. 3 at an estimate far
+    below 0 alone puts the upper end near 0 (every S then makes the observation a lower-tail
+    one); the upper end must never fall below the one a zero estimate with the same P, Q and
+    ν gives, and an estimate further below 0 never gets a tighter limit than a higher one."""
+    big_p, big_q, nu = 1.0e4, 2.0, 50.0         # the bed 10⁴ × this sensor's own noise
+    sd = math.sqrt(big_p * big_q / nu)          # Var Ŝ at S = 0 (eq. 3)
+    s = np.array([-30.0, -10.0, -3.0, -1.0, -0.3, 0.0, 0.3, 1.0, 3.0]) * sd
+    k = len(s)
+    lo, hi, ul, _ = covariance_interval(s, np.full(k, big_p), np.full(k, big_q),
+                                        np.full(k, nu), 0.683)
+    at_zero = hi[5]
+    assert at_zero > 0.5 * sd                   # about one standard deviation of Ŝ at S = 0
+    assert np.all(hi[:5] >= at_zero * (1 - 1e-12)), hi / at_zero
+    np.testing.assert_allclose(hi[:3], at_zero, rtol=1e-12)   # far below: exactly the floor
+    assert np.all(np.diff(hi) >= -1e-12 * at_zero), hi / at_zero
+    assert np.all(ul[:6]) and np.all(lo[:6] == 0.0)
+    # a positive estimate's interval is the plain inversion of eq. 3 (the floor never binds)
+    alone = covariance_interval(s[6:], np.full(3, big_p), np.full(3, big_q), np.full(3, nu))
+    np.testing.assert_array_equal(alone[1], hi[6:])
+    np.testing.assert_array_equal(alone[0], lo[6:])
+
+
+def test_a_sensor_far_below_the_bed_gets_limits_that_do_not_collapse() -> None:
+    """Two sensors whose own noise is 0.01× the bed's (records from the generator written
+    apart from core/sim): the self-noise estimates are often far below 0; no upper end may
+    fall orders of magnitude below the truth (without the floor some reached 10⁻³ of it)."""
+    from tests.support.colocated import draw_record
+
+    rng = np.random.default_rng(4)
+    n, rate, worst, negative = 1 << 13, 20.0, np.inf, 0
+    for _ in range(12):
+        rec = draw_record(rng, 2, length=n, rate_hz=rate, ratio=100.0)
+        sep = separate(list(rec.y[:, :, None]), rate, sensors=["a", "b"], axes=["z"],
+                       fit=False)
+        ax = sep.axes[0]
+        for i, noise in enumerate(rec.sensors):
+            part = ax.self_noise[i]
+            negative += int(np.sum(part.var < 0))
+            worst = min(worst, float(np.min(part.hi / noise.avar(ax.m, n, rate))))
+    assert negative >= 20
+    assert worst >= 0.1, worst
+
+
 def _rec(n: int, rate: float = RATE, t0: float | None = None, seed: int = 0,
          names: tuple[str, ...] = ("x", "z"), u: float = 0.0) -> SensorRecord:
     a = np.random.default_rng(seed).normal(size=(n, len(names)))
