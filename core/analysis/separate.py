@@ -657,3 +657,158 @@ def _resample(y: NDArray[np.float64], rate: float, t0: float, t_a: float, new_ra
     at = np.column_stack([np.interp(edges, t_old, phase[:, c]) for c in range(y.shape[1])])
     return np.diff(at, axis=0) * new_rate
 
+
+# -- recordings of several runs: aligned run by run, as the live separation aligns them -------
+
+#: How far (in samples) the live aligner lets the fitted position of a partner's sample move
+#: from the one in use before it slips (daemon/service/separation_stage.SLIP_SAMPLES).
+_SLIP_SAMPLES = 0.75
+
+
+@dataclass(frozen=True)
+class AlignedRun:
+    """One run of 2 or 3 co-located sensors' recordings on the first sensor's ticks:
+    ``index`` (S, n) each sensor's own sample index at each tick (−1 where it has none),
+    ``accel`` (S, n, A) m/s² (meaningless where the index is −1)."""
+
+    run: str
+    index: NDArray[np.int64]
+    accel: NDArray[np.float64]
+
+
+def _runs_of(rec: SensorRecord) -> dict[str, tuple[dict[str, Any], NDArray[np.intp]]]:
+    """A recording's runs: run id → (the first header of it, the rows of its samples)."""
+    headers = [h for h in rec.meta.get("headers") or [] if isinstance(h.get("i0"), int)]
+    index = np.asarray(rec.meta.get("index"), dtype=np.int64)
+    if not headers or len(index) != len(rec.accel):
+        raise DataError(f"{rec.source or 'a record'}: aligning run by run needs a recording "
+                        "(its headers and sample indices)")
+    starts = np.array([int(h["i0"]) for h in headers], dtype=np.int64)
+    order = np.argsort(starts, kind="stable")
+    starts = starts[order]
+    which = np.searchsorted(starts, index, side="right") - 1    # the header each sample follows
+    out: dict[str, tuple[dict[str, Any], NDArray[np.intp]]] = {}
+    for k in range(len(starts)):
+        h = headers[int(order[k])]
+        rows = np.flatnonzero(which == k)
+        run = str(h.get("run"))
+        if run in out:                         # a header copy of the same run
+            out[run] = (out[run][0], np.concatenate([out[run][1], rows]))
+        elif len(rows):
+            out[run] = (h, rows)
+    return out
+
+
+def _time_line(h: dict[str, Any], rate: float) -> tuple[float, int, float]:
+    t = h.get("t_real")
+    r = h.get("rate_hz", rate)
+    if not isinstance(t, int | float) or not isinstance(r, int | float) or not r > 0:
+        raise DataError(f"run {h.get('run')!r}: its header has no time (t_real) or rate")
+    return float(t), int(h["i0"]), float(r)
+
+
+def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
+    """Recordings of 2 or 3 co-located sensors aligned run by run (a restart, in a rig all
+    sensors' recordings change run together), by the live aligner's rule
+    (daemon/service/separation_stage.Aligner): in each run the first sensor's indices are the
+    ticks, from its first sample of the run to its last; another sensor's sample at a tick is
+    the one its run's time line (header ``t_real`` at ``i0``, ``rate_hz``) puts nearest the
+    tick's time at the run's first tick, then the next one per tick (no slip: a constant
+    offset within a run); a tick is kept up to the first whose sample of another sensor
+    lies beyond that sensor's last of the run (the live aligner's rule at stop).
+    Runs not in every recording are left out. The same function aligns the tail a live
+    separation replays after a restart (daemon/service/rig_separation.py)."""
+    if len(records) not in (2, 3):
+        raise DataError(f"separate takes 2 or 3 records of co-located sensors, not "
+                        f"{len(records)}")
+    runs = [_runs_of(r) for r in records]
+    out: list[AlignedRun] = []
+    ref_runs = sorted(runs[0].items(), key=lambda kv: int(kv[1][0]["i0"]))
+    for run, (h0, rows0) in ref_runs:
+        if not all(run in r for r in runs[1:]):
+            continue
+        idx0 = np.asarray(records[0].meta["index"])[rows0]
+        ticks = np.arange(int(idx0.min()), int(idx0.max()) + 1, dtype=np.int64)
+        t0, i0, r0 = _time_line(h0, records[0].rate_hz)
+        t_tick = t0 + (ticks - i0) / r0
+        keep = len(ticks)
+        partner: list[NDArray[np.int64]] = [ticks]
+        for rec, rr in zip(records[1:], runs[1:], strict=True):
+            h, rows = rr[run]
+            ts, i_s, rs = _time_line(h, rec.rate_hz)
+            x = i_s + (t_tick - ts) * rs
+            own = np.asarray(rec.meta["index"])[rows]
+            first = int(np.rint(x[0]))
+            keep = min(keep, int(own.max()) + 1 - first)     # up to its last of the run
+            partner.append(first + np.arange(len(ticks), dtype=np.int64))
+        if keep <= 0:
+            continue
+        n_s, n_ax = len(records), records[0].accel.shape[1]
+        index = np.full((n_s, keep), -1, dtype=np.int64)
+        accel = np.zeros((n_s, keep, n_ax))
+        for s, (rec, rr) in enumerate(zip(records, runs, strict=True)):
+            rows = rr[run][1]
+            own = np.asarray(rec.meta["index"])[rows]
+            order = np.argsort(own, kind="stable")
+            own, rows = own[order], rows[order]
+            want = partner[s][:keep]
+            pos = np.minimum(np.searchsorted(own, want), len(own) - 1)
+            ok = own[pos] == want
+            index[s, ok] = want[ok]
+            accel[s, ok] = rec.accel[rows[pos[ok]]]
+        out.append(AlignedRun(run, index, accel))
+    if not out:
+        raise DataError("the recordings share no run; co-located sensors must be recorded "
+                        "by one rig at the same time")
+    return out
+
+
+def is_multi_run(records: Sequence[SensorRecord]) -> bool:
+    """Whether every record is a recording holding more than one run (a restart): such
+    records are separated run by run (:func:`separate_runs`), never as one stretch."""
+    def runs(r: SensorRecord) -> int:
+        hs = r.meta.get("headers") or []
+        return len({h.get("run") for h in hs}) if r.meta.get("index") is not None else 0
+    return all(runs(r) > 1 for r in records)
+
+
+def separation_of_pairs(pairs: Mapping[tuple[int, int], Any], sensors: Sequence[str],
+                        rate_hz: float, ci: float, notes: Sequence[str] = (),
+                        sources: Sequence[str] = ()) -> Separation:
+    """The separation of what pair accumulators (:class:`~avard.core.allan.cross.CrossAllan`
+    per pair of ``PAIRS``) hold, τ labelled with ``rate_hz``: the live separation's and
+    :func:`separate_runs`'s one way from the pairs to the result. DataError while no τ has
+    enough averages in every pair."""
+    moments = {p: acc.moments(ci) for p, acc in pairs.items()}
+    first = next(iter(pairs.values()))
+    axes = tuple(separate_moments({p: m[c] for p, m in moments.items()}, len(sensors), ax, ci)
+                 for c, ax in enumerate(first.axes))
+    axes = tuple(replace(ax, tau=ax.m / float(rate_hz)) for ax in axes)
+    method = "groslambert covariance" if len(sensors) == 2 else "three-cornered hat"
+    n = min(acc.n_samples for acc in pairs.values())
+    return Separation(tuple(sensors), method, float(rate_hz), n, ci, axes, tuple(notes),
+                      tuple(sources))
+
+
+def separate_runs(runs: Sequence[AlignedRun], rate_hz: float, *, sensors: Sequence[str],
+                  axes: Sequence[str], ci: float = 0.683, overlap: int = 8,
+                  notes: Sequence[str] = (), sources: Sequence[str] = ()) -> Separation:
+    """Separate recordings aligned run by run (:func:`aligned_runs`): each pair's streaming
+    Allan moments (partially overlapping, stride m/``overlap``: the live separation's) fed
+    every run's rows, a gap at each missing row and between runs, so no difference straddles
+    a restart or a loss. No fit (the live separation has none either)."""
+    from avard.core.allan.cross import CrossAllan
+
+    s = len(sensors)
+    if s not in PAIRS:
+        raise DataError(f"separate takes 2 or 3 co-located sensors, not {s}")
+    pairs = {p: CrossAllan(rate_hz, axes=axes, overlap=overlap,
+                           sensors=(sensors[p[0]], sensors[p[1]])) for p in PAIRS[s]}
+    for run in runs:
+        for (i, j), acc in pairs.items():
+            acc.feed(run.index[i], run.index[j], run.accel[i], run.accel[j])
+            acc.gap()
+    note = (f"aligned run by run ({len(runs)} runs: a restart is a gap for every pair); "
+            f"partially overlapping Allan moments (stride m/{overlap} above m = {overlap}), "
+            "as the live separation keeps them")
+    return separation_of_pairs(pairs, sensors, rate_hz, ci, (*notes, note), sources)

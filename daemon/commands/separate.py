@@ -24,7 +24,15 @@ import math
 import sys
 
 import numpy as np
-from avard.core.analysis.separate import Separation, align, read_sensor, separate
+from avard.core.analysis.separate import (
+    Separation,
+    align,
+    aligned_runs,
+    is_multi_run,
+    read_sensor,
+    separate,
+    separate_runs,
+)
 from avard.core.errors import AvardError, DataError
 from avard.core.io.outputs import check_plot_output, finite_for_json
 from avard.daemon.commands._options import add_channels_argument, filter_corner, split_channels
@@ -74,6 +82,12 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         raise DataError(f"--rate {rate_hz}: a sample rate must be a positive number of Hz")
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
     sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
+    if is_multi_run(records):          # a restart in every recording: run by run, as live
+        if channels and list(channels) != list(records[0].names):
+            raise DataError("--channels: recordings of several runs are separated on every "
+                            "axis (x y z)")
+        return separate_runs(aligned_runs(records), records[0].rate_hz,
+                             sensors=sensor_names, axes=records[0].names, sources=paths)
     aligned = align(records, channels)
     corner: float | None
     if filter_corner_hz == "auto":
