@@ -45,6 +45,17 @@ class Coverage:
     hi_over_truth: dict[int, np.ndarray] = field(default_factory=dict)
     #: sensors → (intervals, K) whether each was an upper limit
     was_limit: dict[int, np.ndarray] = field(default_factory=dict)
+    #: sensors → (intervals, K) whether each held the truth
+    held_each: dict[int, np.ndarray] = field(default_factory=dict)
+
+    def rate_of(self, limits: bool) -> np.ndarray:
+        """Per τ, the share holding the truth among the upper limits (``limits``) or the
+        two-sided intervals, both sensor counts together (NaN where there are none)."""
+        held = np.concatenate([self.held_each[s] for s in sorted(self.held_each)])
+        lim = np.concatenate([self.was_limit[s] for s in sorted(self.was_limit)])
+        pick = lim if limits else ~lim
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return (held & pick).sum(axis=0) / pick.sum(axis=0)
 
     def limit_over_truth(self, s: int, q: float = 0.5) -> np.ndarray:
         """Per τ, the ``q`` quantile of (upper limit / truth) as ADEV over the upper limits
@@ -69,6 +80,7 @@ def coverage_run(records: int = 120, seed: int = 2026, length: int = 1 << 17,
     rng = np.random.default_rng(seed)
     ratio_of = {} if ratios is None else {"ratio": None}
     hot: dict[int, list[np.ndarray]] = {}
+    got: dict[int, list[np.ndarray]] = {}
     lim: dict[int, list[np.ndarray]] = {}
     held: dict[int, np.ndarray] = {}
     total: dict[int, np.ndarray] = {}
@@ -98,7 +110,9 @@ def coverage_run(records: int = 120, seed: int = 2026, length: int = 1 << 17,
         for i, noise in enumerate(rec.sensors):
             truth = noise.avar(ax.m, length, rate_hz)
             part = ax.self_noise[i]
-            h += (part.lo <= truth) & (truth <= part.hi)
+            ok = (part.lo <= truth) & (truth <= part.hi)
+            h += ok
+            got.setdefault(s, []).append(ok)
             t += 1
             upper += part.upper_limit
             hot.setdefault(s, []).append(np.sqrt(part.hi / truth))
@@ -115,18 +129,24 @@ def coverage_run(records: int = 120, seed: int = 2026, length: int = 1 << 17,
     return Coverage(tau, averages, held, total, upper, n_within, n_fitted, n_no_fit,
                     cpu / records, cpu_ref / records, records,
                     {k: np.array(v) for k, v in hot.items()},
-                    {k: np.array(v) for k, v in lim.items()})
+                    {k: np.array(v) for k, v in lim.items()},
+                    {k: np.array(v) for k, v in got.items()})
 
 
 def table(cov: Coverage) -> str:
-    lines = ["| τ (s) | averages | 2 sensors | 3 sensors | all | upper limits |",
-             "|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| τ (s) | averages | 2 sensors | 3 sensors | all | upper limits | of which "
+             "held | two-sided held |", "|---:|---:|---:|---:|---:|---:|---:|---:|"]
     r2, r3, ra = cov.rate(2), cov.rate(3), cov.rate()
+    r_ul, r_two = cov.rate_of(True), cov.rate_of(False)
+
+    def pc(x: float) -> str:
+        return "–" if not np.isfinite(x) else f"{100 * x:.1f} %"
+
     for k, t in enumerate(cov.tau):
         mark = "" if cov.averages[k] >= MIN_AVERAGES else " (< 5 averages, not held)"
         lines.append(f"| {t:.4g} | {cov.averages[k]} | {100 * r2[k]:.1f} % | "
                      f"{100 * r3[k]:.1f} % | {100 * ra[k]:.1f} %{mark} | "
-                     f"{cov.upper_limits[k]} |")
+                     f"{cov.upper_limits[k]} | {pc(r_ul[k])} | {pc(r_two[k])} |")
     return "\n".join(lines)
 
 

@@ -336,10 +336,14 @@ def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
     moments = {pair: PairMoments.from_result(res, pair[0], pair[1], s + k, len(cols[0]))
                for k, pair in enumerate(pairs)}
     sep = separate_moments(moments, s, axis, ci)
-    if not fit:
-        return sep
+    return _fitted(sep, rate, ci, filter_corner_hz) if fit else sep
+
+
+def _fitted(sep: AxisSeparation, rate: float, ci: float,
+            filter_corner_hz: float | None) -> AxisSeparation:
+    """The axis with the IEEE terms fitted to each sensor's self-noise (the one fit)."""
     fits, problems = [], []
-    for i in range(s):
+    for i in range(len(sep.self_noise)):
         f, problem = _fit(sep.self_result(i, rate, ci), filter_corner_hz)
         fits.append(f)
         problems.append(problem)
@@ -449,74 +453,68 @@ def _verdict(own: Part, common: Part) -> Verdict:
 def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
                         ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                     NDArray[np.bool_], NDArray[np.float64]]:
-    """The ``ci`` interval [lo, hi] of variances S ≥ 0 estimated by Ŝ = mean ½UV (eq. 3),
-    from the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit``
-    where lo is 0; and the EDF of a χ² with the same relative variance, 2S²/Var Ŝ (for the
-    fit's weights).
-
-    A Neyman construction with the physical boundary S ≥ 0 (module docstring, docs/
-    separate.md): the other parts held at P − Ŝ⁺, Q − Ŝ⁺ (Ŝ⁺ = max(Ŝ, 0)), each S accepts
-    the central ``ci`` of Ŝ's distribution, except the S below the sensitivity S* (the
-    upper end a zero estimate gets), which accept everything below their ``ci`` quantile.
-    Every S is then covered with probability ``ci``, no interval is empty, and an upper end
-    is never below S*: an estimate far below 0 gets S*, not an end pulled towards 0."""
-    s_hat = np.asarray(est, dtype=np.float64)
-    nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
-    s_plus = np.clip(s_hat, 0.0, None)
-    b_p = np.clip(np.asarray(big_p, dtype=np.float64) - s_plus, 0.0, None)
-    b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_plus, 0.0, None)
+    """The ``ci`` interval [lo, hi] of variances S estimated by Ŝ = mean ½UV (eq. 3), from
+    the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit`` where
+    lo is 0, hi then never below a zero estimate's (the sensitivity floor); and the EDF of
+    a χ² with the same relative variance, 2S²/Var Ŝ (for the fit's weights)."""
+    s_obs = np.asarray(est, dtype=np.float64)
+    nu_obs = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
+    p_obs = np.asarray(big_p, dtype=np.float64)
+    q_obs = np.asarray(big_q, dtype=np.float64)
+    # The sensitivity floor: a negative estimate's upper end is never below the one a zero
+    # estimate with the same P, Q and ν gives. Inverting (3) at an estimate far below 0 alone
+    # would pull the upper end towards 0 (every S then puts the observation in its lower
+    # tail: the empty-interval problem of Feldman & Cousins 1998, §V), an interval narrower
+    # than the data support. The zero estimates ride along as extra entries of one pass.
+    neg = np.flatnonzero(s_obs < 0.0)
+    m_obs = len(s_obs)
+    s_hat = np.concatenate([s_obs, np.zeros(len(neg))])
+    nu = np.concatenate([nu_obs, nu_obs[neg]])
+    b_p = np.clip(np.concatenate([p_obs, p_obs[neg]]) - s_hat, 0.0, None)
+    b_q = np.clip(np.concatenate([q_obs, q_obs[neg]]) - s_hat, 0.0, None)
     tail = (1.0 - ci) / 2.0
     grid = (np.arange(_GRID) + 0.5) / _GRID
     xq = chi2_ppf_grid(grid, nu)                                 # (J, M)
     x_over = xq / nu                                             # χ²_ν/ν quantile points
 
-    def cdf(s_true: NDArray[np.float64], x: NDArray[np.float64],
-            at: NDArray[np.intp]) -> NDArray[np.float64]:
-        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``."""
-        bp, bq, xo = b_p[at], b_q[at], x_over[:, at]
-        r = np.sqrt((s_true + bp) * (s_true + bq))
+    def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ observed | S = s_true), per estimate."""
+        r = np.sqrt((s_true + b_p) * (s_true + b_q))
         lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
-        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
-        return np.mean(vals <= x, axis=(0, 1))
+        vals = lp * x_over[:, None, :] - lm * x_over[None, :, :]
+        return np.mean(vals <= s_hat, axis=(0, 1))
 
-    def solve(level: float, x: NDArray[np.float64], at: NDArray[np.intp],
-              top: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
-        a, b = np.zeros(len(at)), top.copy()
-        for _ in range(_BISECT):
-            mid = (a + b) / 2.0
-            below = cdf(mid, x, at) <= level
-            b = np.where(below, mid, b)
-            a = np.where(below, a, mid)
-        return b
-
-    every = np.arange(len(s_hat))
-    scale = np.maximum.reduce([s_plus, b_p, b_q, np.full_like(s_hat, 1e-300)])
+    scale = np.maximum.reduce([np.abs(s_hat), b_p, b_q, np.full_like(s_hat, 1e-300)])
     top = 4.0 * scale
-    for _ in range(200):                      # the upper end lies below top: grow it until so
-        need = cdf(top, s_plus, every) > tail
+    for _ in range(200):                      # S_hi lies below top: grow it until so
+        need = cdf(top) > tail
         if not np.any(need):
             break
         top = np.where(need, top * 2.0, top)
-    # hi: the S whose central region starts at the estimate; below 0, at 0 (that is S*)
-    upper_end = solve(tail, s_plus, every, top)
-    # lo = 0 where no S > 0 puts the estimate above its region: beyond S = 0's ci quantile
-    upper_limit = 1.0 - cdf(np.zeros_like(s_hat), s_hat, every) > 1.0 - ci
-    lower_end = np.zeros_like(s_hat)
-    two = np.flatnonzero(~upper_limit)
-    if len(two):
-        central = solve(1.0 - tail, s_hat[two], two, upper_end[two])
-        lower_end[two] = central
-        # where that lies below S* the S accepting the estimate are the one-sided ones
-        near = cdf(central, np.zeros(len(two)), two) > tail
-        if np.any(near):
-            at = two[near]
-            s_star = solve(tail, np.zeros(len(at)), at, upper_end[at])
-            one_sided = solve(ci, s_hat[at], at, upper_end[at])
-            lower_end[at] = np.minimum(one_sided, s_star)
-    var_hat = ((s_plus + b_p) * (s_plus + b_q) + s_plus**2) / nu
+    lo_s, hi_s = np.zeros_like(s_hat), top.copy()
+    for _ in range(_BISECT):                   # hi: the S at which Ŝ is at the lower tail
+        mid = (lo_s + hi_s) / 2.0
+        low_tail = cdf(mid) <= tail
+        hi_s = np.where(low_tail, mid, hi_s)
+        lo_s = np.where(low_tail, lo_s, mid)
+    upper_end = hi_s
+    upper_end[neg] = np.maximum(upper_end[neg], upper_end[m_obs:])      # the floor
+    s_hat, b_p, b_q, x_over, nu = (s_hat[:m_obs], b_p[:m_obs], b_q[:m_obs],
+                                   x_over[:, :m_obs], nu[:m_obs])
+    upper_end = upper_end[:m_obs]
+    at_zero = 1.0 - cdf(np.zeros_like(s_hat))  # P(Ŝ ≥ observed | S = 0)
+    upper_limit = at_zero > tail
+    a, b = np.zeros_like(s_hat), upper_end.copy()
+    for _ in range(_BISECT):                   # lo: the S at which Ŝ is at the upper tail
+        mid = (a + b) / 2.0
+        beyond = 1.0 - cdf(mid) <= tail
+        a = np.where(beyond, mid, a)
+        b = np.where(beyond, b, mid)
+    lower_end = np.where(upper_limit, 0.0, a)
+    s_pos = np.clip(s_hat, 0.0, None)
+    var_hat = ((s_pos + b_p) * (s_pos + b_q) + s_pos**2) / nu
     with np.errstate(divide="ignore", invalid="ignore"):
-        nu_eff = np.where(var_hat > 0, 2.0 * s_plus**2 / var_hat, 0.0)
+        nu_eff = np.where(var_hat > 0, 2.0 * s_pos**2 / var_hat, 0.0)
     return lower_end, upper_end, upper_limit, nu_eff
 
 
@@ -716,8 +714,9 @@ def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
     tick's time at the run's first tick, then the next one per tick (no slip: a constant
     offset within a run); a tick is kept up to the first whose sample of another sensor
     lies beyond that sensor's last of the run (the live aligner's rule at stop).
-    Runs not in every recording are left out. The same function aligns the tail a live
-    separation replays after a restart (daemon/service/rig_separation.py)."""
+    Runs not in every recording are left out (none shared: an empty list). The same
+    function aligns the tail a live separation replays after a restart
+    (daemon/service/rig_separation.py)."""
     if len(records) not in (2, 3):
         raise DataError(f"separate takes 2 or 3 records of co-located sensors, not "
                         f"{len(records)}")
@@ -757,9 +756,6 @@ def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
             index[s, ok] = want[ok]
             accel[s, ok] = rec.accel[rows[pos[ok]]]
         out.append(AlignedRun(run, index, accel))
-    if not out:
-        raise DataError("the recordings share no run; co-located sensors must be recorded "
-                        "by one rig at the same time")
     return out
 
 
@@ -792,16 +788,21 @@ def separation_of_pairs(pairs: Mapping[tuple[int, int], Any], sensors: Sequence[
 
 def separate_runs(runs: Sequence[AlignedRun], rate_hz: float, *, sensors: Sequence[str],
                   axes: Sequence[str], ci: float = 0.683, overlap: int = 8,
+                  fit: bool = False, filter_corner_hz: float | None = None,
                   notes: Sequence[str] = (), sources: Sequence[str] = ()) -> Separation:
     """Separate recordings aligned run by run (:func:`aligned_runs`): each pair's streaming
     Allan moments (partially overlapping, stride m/``overlap``: the live separation's) fed
     every run's rows, a gap at each missing row and between runs, so no difference straddles
-    a restart or a loss. No fit (the live separation has none either)."""
+    a restart or a loss; with ``fit`` the IEEE terms of each self-noise, as :func:`separate`
+    (the live separation has none)."""
     from avard.core.allan.cross import CrossAllan
 
     s = len(sensors)
     if s not in PAIRS:
         raise DataError(f"separate takes 2 or 3 co-located sensors, not {s}")
+    if not runs:
+        raise DataError("the recordings share no run; co-located sensors must be recorded "
+                        "by one rig at the same time")
     pairs = {p: CrossAllan(rate_hz, axes=axes, overlap=overlap,
                            sensors=(sensors[p[0]], sensors[p[1]])) for p in PAIRS[s]}
     for run in runs:
@@ -811,4 +812,8 @@ def separate_runs(runs: Sequence[AlignedRun], rate_hz: float, *, sensors: Sequen
     note = (f"aligned run by run ({len(runs)} runs: a restart is a gap for every pair); "
             f"partially overlapping Allan moments (stride m/{overlap} above m = {overlap}), "
             "as the live separation keeps them")
-    return separation_of_pairs(pairs, sensors, rate_hz, ci, (*notes, note), sources)
+    sep = separation_of_pairs(pairs, sensors, rate_hz, ci, (*notes, note), sources)
+    if not fit:
+        return sep
+    return replace(sep, filter_corner_hz=filter_corner_hz, axes=tuple(
+        _fitted(ax, rate_hz, ci, filter_corner_hz) for ax in sep.axes))

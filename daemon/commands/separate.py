@@ -82,13 +82,13 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         raise DataError(f"--rate {rate_hz}: a sample rate must be a positive number of Hz")
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
     sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
+    runs = None
     if is_multi_run(records):          # a restart in every recording: run by run, as live
         if channels and list(channels) != list(records[0].names):
             raise DataError("--channels: recordings of several runs are separated on every "
                             "axis (x y z)")
-        return separate_runs(aligned_runs(records), records[0].rate_hz,
-                             sensors=sensor_names, axes=records[0].names, sources=paths)
-    aligned = align(records, channels)
+        runs = aligned_runs(records)
+    aligned = align(records, channels) if runs is None else None
     corner: float | None
     if filter_corner_hz == "auto":
         from avard.core.io.source import open_record
@@ -99,6 +99,11 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         corner = corners.pop() if len(corners) == 1 else None
     else:
         corner = filter_corner_hz if isinstance(filter_corner_hz, float) else None
+    if runs is not None:
+        return separate_runs(runs, records[0].rate_hz, sensors=sensor_names,
+                             axes=records[0].names, fit=True, filter_corner_hz=corner,
+                             sources=paths)
+    assert aligned is not None
     return separate(aligned.accels, aligned.rate_hz, sensors=sensor_names, axes=aligned.axes,
                     filter_corner_hz=corner, notes=aligned.notes, sources=paths)
 

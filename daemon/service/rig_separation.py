@@ -44,6 +44,7 @@ from typing import Any, Protocol
 import msgpack
 import numpy as np
 from avard.core.allan.feed import scale_of
+from avard.core.allan.replay import segments_to_read
 from avard.core.analysis.separate import AlignedRun, SensorRecord, aligned_runs
 from avard.core.errors import AvardError, FormatError
 from avard.core.io.recording import (
@@ -80,18 +81,6 @@ FEED_BATCH_S = 0.25
 MAX_REPLAY_S = 3 * 3600.0
 
 
-def _segments_from(directory: Path, after: int | None) -> list[Path]:
-    """A recording's segments holding the samples from index ``after`` on (all when None),
-    in data order (as core/allan/replay.py reads them for the Allan restore)."""
-    keyed = keyed_segments(f for f in directory.glob("*" + SEGMENT_SUFFIX) if f.is_file())
-    keep = 0
-    if after is not None:
-        for k, (key, _seg) in enumerate(keyed):
-            if key.i0 <= after:
-                keep = k
-    return [seg for _, seg in keyed[keep:]]
-
-
 def _first_recorded(directory: Path) -> int | None:
     keyed = keyed_segments(f for f in directory.glob("*" + SEGMENT_SUFFIX) if f.is_file())
     return int(keyed[0][0].i0) if keyed else None
@@ -102,7 +91,7 @@ def read_tail(directory: Path, after: int | None, before: int | None = None) -> 
     (the index the lane's run starts at: what a restart's lanes restored), through the one
     walk (core/io/recording.walk): its samples in m/s², their indices and every run's header
     (what core/analysis/separate.aligned_runs needs)."""
-    segs = _segments_from(directory, after)
+    segs = segments_to_read(directory, after)
     headers: list[dict[str, Any]] = []
     blocks: list[NDArray[np.float64]] = []
     index: list[NDArray[np.int64]] = []
@@ -290,18 +279,11 @@ class RigSeparation:
                 return                                 # a new rig: nothing to restore
             if all(len(t.accel) for t in tails):
                 runs = aligned_runs(tails)
-        except AvardError as exc:
-            if "share no run" not in str(exc):
-                log.error("the live separation cannot replay the recordings (%s): what they "
-                          "hold after its checkpoint is a gap for the pairs", exc)
-                hole = {n: max(0, start_index[n] - after.get(n, start_index[n]))
-                        for n in self.names}
-                problem = {**problem, "replay_error": str(exc)}
-        except OSError as exc:
-            log.error("the live separation cannot read the recordings (%s): what they hold "
+        except (AvardError, OSError) as exc:
+            log.error("the live separation cannot replay the recordings (%s): what they hold "
                       "after its checkpoint is a gap for the pairs", exc)
-            hole = {n: max(0, start_index[n] - after.get(n, start_index[n]))
-                    for n in self.names}
+            runs = []
+            hole = {n: max(0, start_index[n] - after.get(n, 0)) for n in self.names}
             problem = {**problem, "replay_error": str(exc)}
         for run in runs:
             for (i, j), acc in self.stage.pairs.items():

@@ -24,8 +24,9 @@ def test_self_noise_intervals_hold_the_truth_at_their_level_and_n_is_unbiased() 
 
 @pytest.mark.slow
 def test_far_below_the_bed_the_limits_hold_the_truth_and_are_not_trivially_wide() -> None:
-    """The sensors' own noise 0.1× down to 0.01× the common input: most self-noise results
-    are upper limits at the sensitivity floor. Every τ with ≥ 5 averages (m ≥ 2, below)
+    """The sensors' own noise 0.1× down to 0.01× the common input: with two sensors many
+    self-noise results are upper limits at the sensitivity floor. Every τ with ≥ 5 averages
+    (m ≥ 2, below)
     holds the truth at least at the nominal 68 %, within two binomial standard errors of the
     intervals counted there, and at ≥ 68 % pooled over those τ; and at ≤ 90 % (an upper
     limit far above the truth everywhere would hold it always, and say nothing). At m = 1
@@ -41,4 +42,4 @@ def test_far_below_the_bed_the_limits_hold_the_truth_and_are_not_trivially_wide(
             assert floor[k] <= rate[k] <= 0.90, (s, cov.tau[k], rate[k], floor[k])
         pooled = cov.held[s][counted].sum() / n[counted].sum()
         assert pooled >= 0.68, (s, pooled)
-        assert cov.was_limit[s][:, counted].mean() > (0.3 if s == 2 else 0.0)
+        assert cov.was_limit[s][:, counted].mean() > (0.2 if s == 2 else 0.0)

@@ -211,7 +211,7 @@ def test_a_restart_replays_the_recordings_and_equals_avard_separate(tmp_path: Pa
     _assert_equal_separations(live, offline)
     # `avard separate DATA_DIR` takes the same way for a recording of several runs
     cli = load_and_separate([str(root)])
-    assert any("run by run" in n for n in cli.notes)
+    assert any("run by run" in n for n in cli.notes) and len(cli.axes[0].fits) == 3
     _assert_equal_separations(live, cli)
 
 
