@@ -305,7 +305,7 @@ class RigSeparation:
         self._n_since = {p: acc.n_samples for p, acc in self.stage.pairs.items()}
         state = "restored" if saved is not None else problem.get("state", "rebuilt")
         self.restored = {**problem, "state": state, "n_samples": self.stage.n_samples,
-                         "replayed": True, "replayed_rows": replayed,
+                         "replayed": "replay_error" not in problem, "replayed_rows": replayed,
                          "hole_samples": {n: hole.get(n, 0) for n in self.names}}
         log.info("live separation %s: %d aligned samples, %s rows replayed from the "
                  "recordings, hole %s", self.restored["state"], self.stage.n_samples,

@@ -253,6 +253,7 @@ def test_a_recording_that_cannot_be_read_is_a_hole_of_its_size(
     svc.separation.restore(start)
     got = svc.separation.restored
     assert got["state"] == "restored" and "Input/output error" in got["replay_error"]
+    assert got["replayed"] is False
     assert all(0 < h <= 2600 for h in got["hole_samples"].values()), got
     assert {acc.sensors: acc.n_samples for acc in svc.separation.stage.pairs.values()} == held
     assert svc.separation.violations == 0
