@@ -86,6 +86,13 @@ def _first_recorded(directory: Path) -> int | None:
     return int(keyed[0][0].i0) if keyed else None
 
 
+def _run_at(tail: SensorRecord, index: int) -> str | None:
+    """The run of a recording's tail that sample ``index`` belongs to (the last header at or
+    before it), None when the tail does not reach back to it."""
+    before = [h for h in tail.meta.get("headers", []) if int(h["i0"]) <= index]
+    return str(max(before, key=lambda h: int(h["i0"]))["run"]) if before else None
+
+
 def read_tail(directory: Path, after: int | None, before: int | None = None) -> SensorRecord:
     """A sensor's recording from sample index ``after`` on (all when None) up to ``before``
     (the index the lane's run starts at: what a restart's lanes restored), through the one
@@ -274,7 +281,9 @@ class RigSeparation:
                 if oldest is not None and oldest < floor:
                     hole[name] = floor - oldest
                     first = floor
-                tails.append(read_tail(self.data_dir / name, first, start_index[name]))
+                # from the last sample the state holds: the run it belongs to is read too
+                tails.append(read_tail(self.data_dir / name, None if first is None
+                                       else max(0, first - 1), start_index[name]))
             if saved is None and not problem and not any(len(t.accel) for t in tails):
                 return                                 # a new rig: nothing to restore
             if all(len(t.accel) for t in tails):
@@ -288,6 +297,8 @@ class RigSeparation:
         for run in runs:
             for (i, j), acc in self.stage.pairs.items():
                 last = acc.last_fed
+                if last is not None and run.run != _run_at(tails[i], last[0]):
+                    acc.gap()      # a later run than the state's last row: a restart between
                 lim_a = last[0] if last is not None else after.get(self.names[i], 0) - 1
                 lim_b = last[1] if last is not None else after.get(self.names[j], 0) - 1
                 rows = (run.index[i] > lim_a) & (run.index[j] > lim_b)

@@ -215,6 +215,32 @@ def test_a_restart_replays_the_recordings_and_equals_avard_separate(tmp_path: Pa
     _assert_equal_separations(live, cli)
 
 
+def test_a_run_killed_before_its_first_checkpoint_is_replayed_with_the_next_restart(
+        tmp_path: Path) -> None:
+    """Two restarts: the second run is killed before its first separation checkpoint (its
+    state file is still the first run's last), so the third run's restore replays the whole
+    second run from the recordings: three runs, each a segment, equal to avard separate."""
+    root = tmp_path / "rec"
+    _rig(_config(root), Captured()).run(30.0)
+    first_state = (root / STATE_FILE).read_bytes()
+    _rig(_config(root), Captured(), seed=2).run(20.0)
+    (root / STATE_FILE).write_bytes(first_state)             # the kill of the second run
+    pub = Captured()
+    third = _rig(_config(root), pub, seed=3)
+    third.run(20.0)
+    st = third.lanes[0].final_status["separation"]
+    names = tuple(third.separation.names)
+    runs = aligned_runs([read_sensor(root / n) for n in names])
+    assert len(runs) == 3 and st["invariant_violations"] == 0
+    second = _offline_rows(runs[1:2], names)
+    assert st["restored"]["replayed_rows"] == {f"{a}-{b}": n for (a, b), n in second.items()}
+    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
+            and "separation" in r][-1]
+    assert live is not None
+    _assert_equal_separations(live, separate_runs(runs, live.rate_hz, sensors=names,
+                                                  axes=("x", "y", "z")))
+
+
 def test_a_state_file_removed_behind_its_back_is_rebuilt_from_the_recordings(
         tmp_path: Path) -> None:
     root = tmp_path / "rec"
