@@ -760,12 +760,13 @@ def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
 
 
 def is_multi_run(records: Sequence[SensorRecord]) -> bool:
-    """Whether every record is a recording holding more than one run (a restart): such
-    records are separated run by run (:func:`separate_runs`), never as one stretch."""
+    """Whether any record is a recording holding more than one run (a restart): such
+    records are separated run by run (:func:`separate_runs`), never as one stretch (a record
+    without runs beside them is then refused by :func:`aligned_runs`, not concatenated)."""
     def runs(r: SensorRecord) -> int:
         hs = r.meta.get("headers") or []
         return len({h.get("run") for h in hs}) if r.meta.get("index") is not None else 0
-    return all(runs(r) > 1 for r in records)
+    return any(runs(r) > 1 for r in records)
 
 
 def separation_of_pairs(pairs: Mapping[tuple[int, int], Any], sensors: Sequence[str],
@@ -809,7 +810,8 @@ def separate_runs(runs: Sequence[AlignedRun], rate_hz: float, *, sensors: Sequen
         for (i, j), acc in pairs.items():
             acc.feed(run.index[i], run.index[j], run.accel[i], run.accel[j])
             acc.gap()
-    note = (f"aligned run by run ({len(runs)} runs: a restart is a gap for every pair); "
+    note = (f"aligned run by run ({len(runs)} run{'s' if len(runs) != 1 else ''}: a restart "
+            "is a gap for every pair); "
             f"partially overlapping Allan moments (stride m/{overlap} above m = {overlap}), "
             "as the live separation keeps them")
     sep = separation_of_pairs(pairs, sensors, rate_hz, ci, (*notes, note), sources)

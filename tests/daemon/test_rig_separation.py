@@ -319,11 +319,20 @@ def test_a_rig_of_four_separates_its_first_three_and_says_so(tmp_path: Path) -> 
 def test_a_sensor_added_between_runs_starts_the_pairs_afresh(tmp_path: Path) -> None:
     root = tmp_path / "rec"
     _rig(_config(root, SENSORS[:2]), Captured()).run(5.0)
-    svc = _rig(_config(root), Captured())
+    pub = Captured()
+    svc = _rig(_config(root), pub)
     svc.run(5.0)
     assert svc.separation is not None
     assert svc.separation.restored["state"] == "unusable"
     assert "separates ['left', 'right', 'far']" in svc.separation.restored["detail"]
+    # avard separate takes the run the three share, as the live separation does (the first
+    # run's samples of left and right are not concatenated with the second's)
+    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
+            and "separation" in r][-1]
+    assert live is not None
+    cli = load_and_separate([str(root)])
+    assert any("run by run (1 run:" in n for n in cli.notes)
+    _assert_equal_separations(live, cli)
 
 
 def test_the_snapshot_request_keeps_the_last_separation_beside_later_snapshots() -> None:
