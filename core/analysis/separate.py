@@ -760,13 +760,18 @@ def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
 
 
 def is_multi_run(records: Sequence[SensorRecord]) -> bool:
-    """Whether any record is a recording holding more than one run (a restart): such
-    records are separated run by run (:func:`separate_runs`), never as one stretch (a record
-    without runs beside them is then refused by :func:`aligned_runs`, not concatenated)."""
-    def runs(r: SensorRecord) -> int:
+    """Whether any record is a recording holding more than one run (a restart) or a loss (a
+    jump in its sample index): such records are separated run by run
+    (:func:`separate_runs`: a gap at every missing row), never as one stretch whose
+    differences would straddle the loss (a record without runs beside them is then refused
+    by :func:`aligned_runs`, not concatenated)."""
+    def segmented(r: SensorRecord) -> bool:
+        index = r.meta.get("index")
+        if index is None or not len(index):
+            return False
         hs = r.meta.get("headers") or []
-        return len({h.get("run") for h in hs}) if r.meta.get("index") is not None else 0
-    return any(runs(r) > 1 for r in records)
+        return len({h.get("run") for h in hs}) > 1 or bool(np.any(np.diff(index) != 1))
+    return any(segmented(r) for r in records)
 
 
 def separation_of_pairs(pairs: Mapping[tuple[int, int], Any], sensors: Sequence[str],

@@ -239,3 +239,45 @@ def test_sensors_started_a_fraction_of_a_sample_apart_pair_as_the_live_aligner_d
     np.testing.assert_array_equal(al.accels[1], b.accel[:n])
     np.testing.assert_array_equal(al.accels[2], c.accel[:n])
     assert n == 999
+
+
+def test_a_recording_with_a_loss_is_separated_without_differences_across_it() -> None:
+    """Recordings whose index jumps (samples lost by one sensor, others by the other) go the
+    run-by-run way: the rows a sensor lacks are missing for its pairs, no difference
+    straddles a loss, and the moments up to m = 8 (fully overlapping there) are those of the
+    contiguous stretches both sensors hold, pooled by their counts of differences."""
+    from avard.core.allan.deviations import allan_variance
+    from avard.core.analysis.separate import aligned_runs, is_multi_run, separate_runs
+
+    rng = np.random.default_rng(21)
+    n, rate = 20_000, 125.0
+    bed = rng.normal(0, 2e-4, n)
+    ys = [bed + rng.normal(0, s, n) for s in (3e-4, 5e-4)]
+    lost = [np.arange(5000, 5050), np.arange(12000, 12100)]        # a's loss, b's loss
+    recs = []
+    for name, y, gone in zip("ab", ys, lost, strict=True):
+        keep = np.setdiff1d(np.arange(n), gone)
+        recs.append(SensorRecord(y[keep][:, None], ("z",), rate, source=name, meta={
+            "index": keep, "headers": [{"run": "r1", "i0": 0, "t_real": 1000.0,
+                                        "rate_hz": rate}]}))
+    assert is_multi_run(recs)
+    runs = aligned_runs(recs)
+    assert len(runs) == 1
+    both = (runs[0].index >= 0).all(axis=0)
+    assert int(both.sum()) == n - 150
+    sep = separate_runs(runs, rate, sensors=["a", "b"], axes=["z"])
+    assert sep.n_samples == n - 150
+    ax = sep.axes[0]
+    # the reference: each contiguous stretch both hold, batch OAVAR, pooled by differences
+    edges = [0, 5000, 5050, 12000, 12100, n]
+    num = np.zeros(len(ax.m))
+    den = np.zeros(len(ax.m))
+    for lo, hi in zip(edges[::2], edges[1::2], strict=True):
+        a, b = ys[0][lo:hi], ys[1][lo:hi]
+        res = allan_variance(np.column_stack([a, b, a - b]), rate, ax.m / rate, kind="oavar")
+        k = np.isin(ax.m, res.m)
+        at = np.searchsorted(res.m, ax.m[k])
+        num[k] += (res.var[at, 0] - res.cov[at, 0, 1]) * res.n[at]
+        den[k] += res.n[at]
+    short = ax.m <= 8
+    np.testing.assert_allclose(ax.self_noise[0].var[short], (num / den)[short], rtol=1e-9)
