@@ -148,6 +148,14 @@ def _offline_rows(runs: list[AlignedRun], names: tuple[str, ...]) -> dict[tuple[
             for i, j in PAIRS[len(names)]}
 
 
+def _last_published(pub: Captured) -> Separation:
+    """The last separation the lanes published."""
+    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
+            and "separation" in r][-1]
+    assert live is not None
+    return live
+
+
 def _assert_equal_separations(live: Separation, offline: Separation) -> None:
     assert live.n_samples == offline.n_samples
     for x, y in zip(live.axes, offline.axes, strict=True):
@@ -204,9 +212,7 @@ def test_a_restart_replays_the_recordings_and_equals_avard_separate(tmp_path: Pa
         assert st["restored"]["replayed_rows"][key] == first_run[acc.sensors] - held[
             acc.sensors]
         assert acc.n_segments >= 2                                  # the restart is a gap
-    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
-            and "separation" in r][-1]
-    assert live is not None
+    live = _last_published(pub)
     offline = separate_runs(runs, live.rate_hz, sensors=names, axes=("x", "y", "z"))
     _assert_equal_separations(live, offline)
     # `avard separate DATA_DIR` takes the same way for a recording of several runs
@@ -234,9 +240,7 @@ def test_a_run_killed_before_its_first_checkpoint_is_replayed_with_the_next_rest
     assert len(runs) == 3 and st["invariant_violations"] == 0
     second = _offline_rows(runs[1:2], names)
     assert st["restored"]["replayed_rows"] == {f"{a}-{b}": n for (a, b), n in second.items()}
-    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
-            and "separation" in r][-1]
-    assert live is not None
+    live = _last_published(pub)
     _assert_equal_separations(live, separate_runs(runs, live.rate_hz, sensors=names,
                                                   axes=("x", "y", "z")))
 
@@ -255,9 +259,7 @@ def test_a_state_file_removed_behind_its_back_is_rebuilt_from_the_recordings(
     assert st["invariant_violations"] == 0
     names = tuple(again.separation.names)
     runs = aligned_runs([read_sensor(root / n) for n in names])
-    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
-            and "separation" in r][-1]
-    assert live is not None
+    live = _last_published(pub)
     _assert_equal_separations(live, separate_runs(runs, live.rate_hz, sensors=names,
                                                   axes=("x", "y", "z")))
 
@@ -327,9 +329,7 @@ def test_a_sensor_added_between_runs_starts_the_pairs_afresh(tmp_path: Path) -> 
     assert "separates ['left', 'right', 'far']" in svc.separation.restored["detail"]
     # avard separate takes the run the three share, as the live separation does (the first
     # run's samples of left and right are not concatenated with the second's)
-    live = [separation_of(r) for _t, r in pub.sent if r["kind"] == "avar"
-            and "separation" in r][-1]
-    assert live is not None
+    live = _last_published(pub)
     cli = load_and_separate([str(root)])
     assert any("run by run (1 run:" in n for n in cli.notes)
     _assert_equal_separations(live, cli)
