@@ -22,6 +22,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 
 import numpy as np
 from avard.core.analysis.separate import (
@@ -83,10 +84,14 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
     sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
     runs = None
-    if is_multi_run(records):          # a restart in every recording: run by run, as live
-        if channels and list(channels) != list(records[0].names):
-            raise DataError("--channels: recordings of several runs are separated on every "
-                            "axis (x y z)")
+    if is_multi_run(records):          # a restart or a loss in a recording: run by run
+        if channels:
+            missing = [c for c in channels if not all(c in r.names for r in records)]
+            if missing:
+                raise DataError(f"--channels {', '.join(missing)}: not a channel every "
+                                "record has")
+            records = [replace(r, accel=r.accel[:, [r.names.index(c) for c in channels]],
+                               names=tuple(channels)) for r in records]
         runs = aligned_runs(records)
     aligned = align(records, channels) if runs is None else None
     corner: float | None

@@ -5,6 +5,7 @@ recordings; the pairs' counts across a kill and a restart; the status."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ from avard.core.analysis.separate import (
     separate,
     separate_runs,
 )
+from avard.core.errors import DataError
 from avard.daemon.commands.separate import load_and_separate
 from avard.daemon.compose import compose_rig
 from avard.daemon.config import validate_config
@@ -333,6 +335,11 @@ def test_a_sensor_added_between_runs_starts_the_pairs_afresh(tmp_path: Path) -> 
     cli = load_and_separate([str(root)])
     assert any("run by run (1 run:" in n for n in cli.notes)
     _assert_equal_separations(live, cli)
+    z = load_and_separate([str(root)], channels=["z"])          # one axis: the same numbers
+    assert [ax.axis for ax in z.axes] == ["z"]
+    _assert_equal_separations(replace(live, axes=live.axes[2:]), z)
+    with pytest.raises(DataError, match="--channels q"):
+        load_and_separate([str(root)], channels=["q"])
 
 
 def test_the_snapshot_request_keeps_the_last_separation_beside_later_snapshots() -> None:
