@@ -29,14 +29,19 @@ form), so the estimate is distributed as
 with ν the equivalent degrees of freedom of the overlapping estimator (Greenhall's EDF, SP
 1065 eq. 41, for the noise identified on U's and V's series): their geometric mean, which the
 Cauchy–Schwarz inequality makes a lower bound of the product's EDF when U and V differ in
-noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags). The
-interval inverts (3) in S, holding the other sensors' parts P − S and Q − S at their
-estimates: S_hi is where the observed Ŝ falls at the lower (1 − ci)/2 tail, S_lo at the upper
-one. Where S_lo reaches 0 (every negative estimate, and positive ones the data cannot tell
-from 0) the result is an **upper limit** S_hi: never a negative variance or a NaN. S_hi is
-never below the one a zero estimate (same P, Q, ν) gives, the experiment's sensitivity:
-inverted alone, (3) would pull the limit of an estimate far below 0 towards 0 (Feldman &
-Cousins 1998, §V), an interval narrower than the data support.
+noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags).
+
+The interval is a Neyman construction in S ≥ 0 (:func:`covariance_interval`): each S tested
+gets (3) with P and Q at the observed P̂ and Q̂, i.e. the other sensors' parts P − S and
+Q − S evaluated at the S tested (never below 0), not at the estimate Ŝ. Holding them at Ŝ
+mis-states the spread where another part's estimate is negative and clipped to 0 (a sensor
+far below the bed: at S = 0 the modelled spread collapsed, half the estimates fell above
+its 68 % quantile). Each S accepts the central ``ci`` of (3), or everything below its
+``ci`` quantile where S lies below the sensitivity S* (the upper end a zero estimate gets;
+the boundary S ≥ 0 as in Feldman & Cousins 1998): every S is covered at ``ci``, no interval
+is empty, and an upper end is never below S*, so an estimate far below 0 gets S*, never an
+end pulled towards 0. Where S = 0 accepts the estimate the result is an **upper limit**:
+never a negative variance or a NaN.
 A coverage test on records from a generator written apart from the simulator
 (tests/support/colocated.py) holds the self-noise intervals to their nominal 68 %.
 """
@@ -453,68 +458,75 @@ def _verdict(own: Part, common: Part) -> Verdict:
 def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
                         ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                     NDArray[np.bool_], NDArray[np.float64]]:
-    """The ``ci`` interval [lo, hi] of variances S estimated by Ŝ = mean ½UV (eq. 3), from
-    the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit`` where
-    lo is 0, hi then never below a zero estimate's (the sensitivity floor); and the EDF of
-    a χ² with the same relative variance, 2S²/Var Ŝ (for the fit's weights)."""
-    s_obs = np.asarray(est, dtype=np.float64)
-    nu_obs = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
-    p_obs = np.asarray(big_p, dtype=np.float64)
-    q_obs = np.asarray(big_q, dtype=np.float64)
-    # The sensitivity floor: a negative estimate's upper end is never below the one a zero
-    # estimate with the same P, Q and ν gives. Inverting (3) at an estimate far below 0 alone
-    # would pull the upper end towards 0 (every S then puts the observation in its lower
-    # tail: the empty-interval problem of Feldman & Cousins 1998, §V), an interval narrower
-    # than the data support. The zero estimates ride along as extra entries of one pass.
-    neg = np.flatnonzero(s_obs < 0.0)
-    m_obs = len(s_obs)
-    s_hat = np.concatenate([s_obs, np.zeros(len(neg))])
-    nu = np.concatenate([nu_obs, nu_obs[neg]])
-    b_p = np.clip(np.concatenate([p_obs, p_obs[neg]]) - s_hat, 0.0, None)
-    b_q = np.clip(np.concatenate([q_obs, q_obs[neg]]) - s_hat, 0.0, None)
+    """The ``ci`` interval [lo, hi] of variances S ≥ 0 estimated by Ŝ = mean ½UV (eq. 3),
+    from the estimate, P̂ and Q̂ (the estimated E[½U²], E[½V²]) and the EDF ν;
+    ``upper_limit`` where lo is 0; and the EDF of a χ² with the same relative variance,
+    2S²/Var Ŝ (for the fit's weights).
+
+    A Neyman construction (module docstring): each hypothesised S gets the distribution (3)
+    with P and Q at P̂ and Q̂ (the other parts P − S and Q − S evaluated at the S tested, never
+    below 0), and accepts the central ``ci`` of it, or everything below its ``ci`` quantile
+    where S lies below the sensitivity S* (the upper end a zero estimate gets: the physical
+    boundary S ≥ 0, as Feldman & Cousins' unified construction treats it). The interval is
+    the S that accept the estimate: every S is covered with probability ``ci``, no interval is
+    empty, and an upper end is never below S*."""
+    s_hat = np.asarray(est, dtype=np.float64)
+    nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
+    big_p = np.clip(np.asarray(big_p, dtype=np.float64), 0.0, None)
+    big_q = np.clip(np.asarray(big_q, dtype=np.float64), 0.0, None)
+    s_plus = np.clip(s_hat, 0.0, None)
     tail = (1.0 - ci) / 2.0
     grid = (np.arange(_GRID) + 0.5) / _GRID
-    xq = chi2_ppf_grid(grid, nu)                                 # (J, M)
-    x_over = xq / nu                                             # χ²_ν/ν quantile points
+    x_over = chi2_ppf_grid(grid, nu) / nu                        # χ²_ν/ν quantile points
 
-    def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:
-        """P(Ŝ ≤ observed | S = s_true), per estimate."""
-        r = np.sqrt((s_true + b_p) * (s_true + b_q))
+    def cdf(s_true: NDArray[np.float64], x: NDArray[np.float64],
+            at: NDArray[np.intp]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``: (3) with P − S and Q − S at
+        P̂ − S and Q̂ − S (≥ 0), so √(PQ) stays the observed one while S ≤ P̂, Q̂."""
+        r = np.sqrt(np.maximum(big_p[at], s_true) * np.maximum(big_q[at], s_true))
         lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
-        vals = lp * x_over[:, None, :] - lm * x_over[None, :, :]
-        return np.mean(vals <= s_hat, axis=(0, 1))
+        xo = x_over[:, at]
+        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
+        return np.mean(vals <= x, axis=(0, 1))
 
-    scale = np.maximum.reduce([np.abs(s_hat), b_p, b_q, np.full_like(s_hat, 1e-300)])
-    top = 4.0 * scale
-    for _ in range(200):                      # S_hi lies below top: grow it until so
-        need = cdf(top) > tail
+    def solve(level: float, x: NDArray[np.float64], at: NDArray[np.intp],
+              top: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
+        a, b = np.zeros(len(at)), top.copy()
+        for _ in range(_BISECT):
+            mid = (a + b) / 2.0
+            below = cdf(mid, x, at) <= level
+            b = np.where(below, mid, b)
+            a = np.where(below, a, mid)
+        return b
+
+    every = np.arange(len(s_hat))
+    top = 4.0 * np.maximum.reduce([s_plus, big_p, big_q, np.full_like(s_hat, 1e-300)])
+    for _ in range(200):                      # the upper end lies below top: grow it until so
+        need = cdf(top, s_plus, every) > tail
         if not np.any(need):
             break
         top = np.where(need, top * 2.0, top)
-    lo_s, hi_s = np.zeros_like(s_hat), top.copy()
-    for _ in range(_BISECT):                   # hi: the S at which Ŝ is at the lower tail
-        mid = (lo_s + hi_s) / 2.0
-        low_tail = cdf(mid) <= tail
-        hi_s = np.where(low_tail, mid, hi_s)
-        lo_s = np.where(low_tail, lo_s, mid)
-    upper_end = hi_s
-    upper_end[neg] = np.maximum(upper_end[neg], upper_end[m_obs:])      # the floor
-    s_hat, b_p, b_q, x_over, nu = (s_hat[:m_obs], b_p[:m_obs], b_q[:m_obs],
-                                   x_over[:, :m_obs], nu[:m_obs])
-    upper_end = upper_end[:m_obs]
-    at_zero = 1.0 - cdf(np.zeros_like(s_hat))  # P(Ŝ ≥ observed | S = 0)
-    upper_limit = at_zero > tail
-    a, b = np.zeros_like(s_hat), upper_end.copy()
-    for _ in range(_BISECT):                   # lo: the S at which Ŝ is at the upper tail
-        mid = (a + b) / 2.0
-        beyond = 1.0 - cdf(mid) <= tail
-        a = np.where(beyond, mid, a)
-        b = np.where(beyond, b, mid)
-    lower_end = np.where(upper_limit, 0.0, a)
-    s_pos = np.clip(s_hat, 0.0, None)
-    var_hat = ((s_pos + b_p) * (s_pos + b_q) + s_pos**2) / nu
+    # hi: the S whose central region starts at the estimate; an estimate below 0 gets S*
+    # (every S below S* accepts it), never an end pulled towards 0 (Feldman & Cousins §V)
+    upper_end = solve(tail, s_plus, every, top)
+    # lo = 0 where S = 0 accepts the estimate: below S = 0's ci quantile
+    upper_limit = cdf(np.zeros_like(s_hat), s_hat, every) <= ci
+    lower_end = np.zeros_like(s_hat)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        central = solve(1.0 - tail, s_hat[two], two, upper_end[two])
+        lower_end[two] = central
+        # where that lies below S* the S accepting the estimate are the one-sided ones
+        near = cdf(central, np.zeros(len(two)), two) > tail
+        if np.any(near):
+            at = two[near]
+            s_star = solve(tail, np.zeros(len(at)), at, upper_end[at])
+            one_sided = solve(ci, s_hat[at], at, upper_end[at])
+            lower_end[at] = np.minimum(one_sided, s_star)
+    var_hat = (big_p * big_q + s_plus**2) / nu
     with np.errstate(divide="ignore", invalid="ignore"):
-        nu_eff = np.where(var_hat > 0, 2.0 * s_pos**2 / var_hat, 0.0)
+        nu_eff = np.where(var_hat > 0, 2.0 * s_plus**2 / var_hat, 0.0)
     return lower_end, upper_end, upper_limit, nu_eff
 
 

@@ -87,16 +87,21 @@ def test_a_sensor_without_own_noise_gets_upper_limits_never_a_negative_or_nan() 
         assert all(v is None for v, u in zip(ul["adev"], ul["upper_limit"], strict=True) if u)
 
 
-def test_the_interval_reduces_to_the_chi_squared_one_for_a_single_channel() -> None:
-    """With U = V (P = Q = S) eq. 3 is one scaled χ²_ν: the ends must be the familiar
-    ν S / χ²_ν(1 − p) and ν S / χ²_ν(p)."""
+def test_the_interval_for_a_single_channel_holds_the_chi_squared_one() -> None:
+    """With U = V (P = Q = S) eq. 3 is one scaled χ²_ν, whose interval is the familiar
+    [ν S / χ²_ν(1 − p), ν S / χ²_ν(p)]. The construction holds √(PQ) at the observed P̂Q̂
+    for every S tested (covariance_interval), so its upper end is that one exactly, and its
+    lower end lies below it (never narrower), by less as ν grows (P̂'s own spread shrinks)."""
     from avard.core.allan.chi2 import chi2_ppf
 
-    s, nu = np.array([2.0, 2.0]), np.array([10.0, 40.0])
+    s, nu = np.full(3, 2.0), np.array([10.0, 40.0, 1000.0])
     lo, hi, ul, nu_eff = covariance_interval(s, s, s, nu, 0.683)
     want_lo = nu * s / chi2_ppf(0.8415, nu)
     want_hi = nu * s / chi2_ppf(0.1585, nu)
-    assert np.allclose(lo, want_lo, rtol=0.04) and np.allclose(hi, want_hi, rtol=0.04)
+    assert np.allclose(hi, want_hi, rtol=0.04)
+    assert np.all(lo <= want_lo * 1.01)
+    assert np.all(np.diff(lo / want_lo) > 0)             # the widening shrinks with ν
+    assert lo[-1] >= 0.96 * want_lo[-1] and lo[0] >= 0.85 * want_lo[0]
     assert not ul.any() and np.allclose(nu_eff, nu)
 
 
