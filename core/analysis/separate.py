@@ -68,6 +68,9 @@ MIN_AVERAGES = 2
 #: about 1/_GRID of probability.
 _GRID = 64
 _BISECT = 40
+#: Below this EDF P̂ and Q̂ are too uncertain to be held in the interval's spread (fewer
+#: than about 5 averages): covariance_interval widens to the hull of two constructions.
+_FEW_NU = 4.0
 
 
 # -- the estimator --------------------------------------------------------------------------
@@ -455,6 +458,100 @@ def _verdict(own: Part, common: Part) -> Verdict:
     return Verdict(state, factor, least)
 
 
+class _Spread:
+    """The distribution (3) of the estimates Ŝ at S tested, on one χ²_ν quantile grid: the
+    other parts P − S and Q − S either evaluated at the S tested (``at_tested``: P, Q held
+    at P̂, Q̂) or held at ``ref`` (P̂ − ref, Q̂ − ref), never below 0."""
+
+    def __init__(self, big_p: NDArray[np.float64], big_q: NDArray[np.float64],
+                 x_over: NDArray[np.float64], ref: NDArray[np.float64] | None) -> None:
+        self.p, self.q, self.x_over = big_p, big_q, x_over
+        self.b_p = None if ref is None else np.clip(big_p - ref, 0.0, None)
+        self.b_q = None if ref is None else np.clip(big_q - ref, 0.0, None)
+
+    def cdf(self, s_true: NDArray[np.float64], x: NDArray[np.float64],
+            at: NDArray[np.intp]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``."""
+        if self.b_p is None or self.b_q is None:
+            r = np.sqrt(np.maximum(self.p[at], s_true) * np.maximum(self.q[at], s_true))
+        else:
+            r = np.sqrt((s_true + self.b_p[at]) * (s_true + self.b_q[at]))
+        lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
+        xo = self.x_over[:, at]
+        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
+        return np.mean(vals <= x, axis=(0, 1))
+
+    def solve(self, level: float, x: NDArray[np.float64], at: NDArray[np.intp],
+              top: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
+        a, b = np.zeros(len(at)), top.copy()
+        for _ in range(_BISECT):
+            mid = (a + b) / 2.0
+            below = self.cdf(mid, x, at) <= level
+            b = np.where(below, mid, b)
+            a = np.where(below, a, mid)
+        return b
+
+    def top(self, x: NDArray[np.float64], tail: float) -> NDArray[np.float64]:
+        """An S above the upper end of every estimate ``x`` (grown until so)."""
+        every = np.arange(len(x))
+        top = 4.0 * np.maximum.reduce([np.abs(x), self.p, self.q, np.full_like(x, 1e-300)])
+        for _ in range(200):
+            need = self.cdf(top, x, every) > tail
+            if not np.any(need):
+                break
+            top = np.where(need, top * 2.0, top)
+        return top
+
+
+def _belt(s_hat: NDArray[np.float64], spread: _Spread, ci: float
+          ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The Neyman belt with the boundary S ≥ 0: each S accepts the central ``ci``, or all
+    below its ``ci`` quantile where S lies below the sensitivity S*."""
+    tail = (1.0 - ci) / 2.0
+    every = np.arange(len(s_hat))
+    s_plus = np.clip(s_hat, 0.0, None)
+    # hi: the S whose central region starts at the estimate; an estimate below 0 gets S*
+    upper_end = spread.solve(tail, s_plus, every, spread.top(s_plus, tail))
+    # lo = 0 where S = 0 accepts the estimate: below S = 0's ci quantile
+    upper_limit = spread.cdf(np.zeros_like(s_hat), s_hat, every) <= ci
+    lower_end = np.zeros_like(s_hat)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        central = spread.solve(1.0 - tail, s_hat[two], two, upper_end[two])
+        lower_end[two] = central
+        # where that lies below S* the S accepting the estimate are the one-sided ones
+        near = spread.cdf(central, np.zeros(len(two)), two) > tail
+        if np.any(near):
+            at = two[near]
+            s_star = spread.solve(tail, np.zeros(len(at)), at, upper_end[at])
+            one_sided = spread.solve(ci, s_hat[at], at, upper_end[at])
+            lower_end[at] = np.minimum(one_sided, s_star)
+    return lower_end, upper_end, upper_limit
+
+
+def _central_with_floor(s_hat: NDArray[np.float64], big_p: NDArray[np.float64],
+                        big_q: NDArray[np.float64], x_over: NDArray[np.float64], ci: float
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The central ``ci`` inversion of (3) with the other parts held at the estimate, an
+    upper limit where its lower end reaches 0, that limit never below a zero estimate's."""
+    tail = (1.0 - ci) / 2.0
+    both = np.concatenate([s_hat, np.zeros_like(s_hat)])      # the zero estimates ride along
+    spread = _Spread(np.concatenate([big_p, big_p]), np.concatenate([big_q, big_q]),
+                     np.concatenate([x_over, x_over], axis=1), both)
+    every = np.arange(len(both))
+    hi = spread.solve(tail, both, every, spread.top(both, tail))
+    k = len(s_hat)
+    upper_end = np.maximum(hi[:k], hi[k:])                    # the floor
+    mine = np.arange(k)
+    upper_limit = 1.0 - spread.cdf(np.zeros(k), s_hat, mine) > tail
+    lower_end = np.zeros(k)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        lower_end[two] = spread.solve(1.0 - tail, s_hat[two], two, upper_end[two])
+    return lower_end, upper_end, upper_limit
+
+
 def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
                         ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                     NDArray[np.bool_], NDArray[np.float64]]:
@@ -468,62 +565,26 @@ def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: 
     below 0), and accepts the central ``ci`` of it, or everything below its ``ci`` quantile
     where S lies below the sensitivity S* (the upper end a zero estimate gets: the physical
     boundary S ≥ 0, as Feldman & Cousins' unified construction treats it). The interval is
-    the S that accept the estimate: every S is covered with probability ``ci``, no interval is
-    empty, and an upper end is never below S*."""
+    the S that accept the estimate: no interval is empty, and an upper end is never below S*.
+
+    Below ν = :data:`_FEW_NU` (fewer than about 5 averages) P̂ and Q̂ are too uncertain to be
+    held: there the interval is the hull of this one and the central inversion with the other
+    parts held at the estimate and a zero estimate's upper end as floor (wider there)."""
     s_hat = np.asarray(est, dtype=np.float64)
     nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
     big_p = np.clip(np.asarray(big_p, dtype=np.float64), 0.0, None)
     big_q = np.clip(np.asarray(big_q, dtype=np.float64), 0.0, None)
+    x_over = chi2_ppf_grid((np.arange(_GRID) + 0.5) / _GRID, nu) / nu
+    lower_end, upper_end, upper_limit = _belt(s_hat, _Spread(big_p, big_q, x_over, None), ci)
+    few = np.flatnonzero(nu < _FEW_NU)
+    if len(few):
+        lo2, hi2, ul2 = _central_with_floor(s_hat[few], big_p[few], big_q[few],
+                                            x_over[:, few], ci)
+        lower_end[few] = np.minimum(lower_end[few], lo2)
+        upper_end[few] = np.maximum(upper_end[few], hi2)
+        upper_limit[few] |= ul2
+        lower_end[upper_limit] = 0.0
     s_plus = np.clip(s_hat, 0.0, None)
-    tail = (1.0 - ci) / 2.0
-    grid = (np.arange(_GRID) + 0.5) / _GRID
-    x_over = chi2_ppf_grid(grid, nu) / nu                        # χ²_ν/ν quantile points
-
-    def cdf(s_true: NDArray[np.float64], x: NDArray[np.float64],
-            at: NDArray[np.intp]) -> NDArray[np.float64]:
-        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``: (3) with P − S and Q − S at
-        P̂ − S and Q̂ − S (≥ 0), so √(PQ) stays the observed one while S ≤ P̂, Q̂."""
-        r = np.sqrt(np.maximum(big_p[at], s_true) * np.maximum(big_q[at], s_true))
-        lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
-        xo = x_over[:, at]
-        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
-        return np.mean(vals <= x, axis=(0, 1))
-
-    def solve(level: float, x: NDArray[np.float64], at: NDArray[np.intp],
-              top: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
-        a, b = np.zeros(len(at)), top.copy()
-        for _ in range(_BISECT):
-            mid = (a + b) / 2.0
-            below = cdf(mid, x, at) <= level
-            b = np.where(below, mid, b)
-            a = np.where(below, a, mid)
-        return b
-
-    every = np.arange(len(s_hat))
-    top = 4.0 * np.maximum.reduce([s_plus, big_p, big_q, np.full_like(s_hat, 1e-300)])
-    for _ in range(200):                      # the upper end lies below top: grow it until so
-        need = cdf(top, s_plus, every) > tail
-        if not np.any(need):
-            break
-        top = np.where(need, top * 2.0, top)
-    # hi: the S whose central region starts at the estimate; an estimate below 0 gets S*
-    # (every S below S* accepts it), never an end pulled towards 0 (Feldman & Cousins §V)
-    upper_end = solve(tail, s_plus, every, top)
-    # lo = 0 where S = 0 accepts the estimate: below S = 0's ci quantile
-    upper_limit = cdf(np.zeros_like(s_hat), s_hat, every) <= ci
-    lower_end = np.zeros_like(s_hat)
-    two = np.flatnonzero(~upper_limit)
-    if len(two):
-        central = solve(1.0 - tail, s_hat[two], two, upper_end[two])
-        lower_end[two] = central
-        # where that lies below S* the S accepting the estimate are the one-sided ones
-        near = cdf(central, np.zeros(len(two)), two) > tail
-        if np.any(near):
-            at = two[near]
-            s_star = solve(tail, np.zeros(len(at)), at, upper_end[at])
-            one_sided = solve(ci, s_hat[at], at, upper_end[at])
-            lower_end[at] = np.minimum(one_sided, s_star)
     var_hat = (big_p * big_q + s_plus**2) / nu
     with np.errstate(divide="ignore", invalid="ignore"):
         nu_eff = np.where(var_hat > 0, 2.0 * s_plus**2 / var_hat, 0.0)
