@@ -113,6 +113,12 @@ class CrossAllan:
         return self._acc.rate_hz
 
     @property
+    def last_fed(self) -> tuple[int, int] | None:
+        """Each sensor's index of the last row :meth:`feed` added (None after a gap): a
+        replay continues after it."""
+        return self._last
+
+    @property
     def n_samples(self) -> int:
         """Aligned sample pairs accumulated (all segments)."""
         return self._acc.n_samples

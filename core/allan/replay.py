@@ -29,9 +29,10 @@ class ReplayExtent:
     end_index: int
 
 
-def _segments_to_read(directory: str | Path, after: int | None) -> list[Path]:
+def segments_to_read(directory: str | Path, after: int | None) -> list[Path]:
     """The segments holding the samples from index ``after`` on (all when None): from the
-    newest whose first sample index is at or before ``after``, in data order."""
+    newest whose first sample index is at or before ``after``, in data order (also the live
+    separation's replay after a restart, daemon/service/rig_separation.read_tail)."""
     d = Path(directory)
     keyed = keyed_segments(f for f in d.glob("*" + SEGMENT_SUFFIX) if f.is_file())
     keep = 0
@@ -45,7 +46,7 @@ def _segments_to_read(directory: str | Path, after: int | None) -> list[Path]:
 def replay_extent(directory: str | Path, after: int | None) -> ReplayExtent:
     """How much :func:`replay_after` would read, from the segments' keys and ends (a few
     small reads per file), so a long replay can be announced before it starts."""
-    segs = _segments_to_read(directory, after)
+    segs = segments_to_read(directory, after)
     if not segs:
         return ReplayExtent(0, 0, 0, 0)
     first = segment_key(segs[0]).i0 if after is None else after
@@ -62,7 +63,7 @@ def replay_after(directory: str | Path, feed: AllanFeed, after: int | None) -> i
     the newest segment whose first sample index is at or before ``after`` (segments in data
     order, from their frames), so a long recording is not read again at every restart.
     Returns the number of samples fed."""
-    segs = _segments_to_read(directory, after)
+    segs = segments_to_read(directory, after)
     if not segs:
         return 0
     reader = RecordingReader(segs[0])               # one file: not ordered a second time

@@ -29,11 +29,19 @@ form), so the estimate is distributed as
 with ν the equivalent degrees of freedom of the overlapping estimator (Greenhall's EDF, SP
 1065 eq. 41, for the noise identified on U's and V's series): their geometric mean, which the
 Cauchy–Schwarz inequality makes a lower bound of the product's EDF when U and V differ in
-noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags). The
-interval inverts (3) in S, holding the other sensors' parts P − S and Q − S at their
-estimates: S_hi is where the observed Ŝ falls at the lower (1 − ci)/2 tail, S_lo at the upper
-one. Where S_lo reaches 0 (every negative estimate, and positive ones the data cannot tell
-from 0) the result is an **upper limit** S_hi: never a negative variance or a NaN.
+noise type (Σρ_Uρ_V ≤ (Σρ_U² Σρ_V²)^½ over the lags).
+
+The interval is a Neyman construction in S ≥ 0 (:func:`covariance_interval`): each S tested
+gets (3) with P and Q at the observed P̂ and Q̂, i.e. the other sensors' parts P − S and
+Q − S evaluated at the S tested (never below 0), not at the estimate Ŝ. Holding them at Ŝ
+mis-states the spread where another part's estimate is negative and clipped to 0 (a sensor
+far below the bed: at S = 0 the modelled spread collapsed, half the estimates fell above
+its 68 % quantile). Each S accepts the central ``ci`` of (3), or everything below its
+``ci`` quantile where S lies below the sensitivity S* (the upper end a zero estimate gets;
+the boundary S ≥ 0 as in Feldman & Cousins 1998): every S is covered at ``ci``, no interval
+is empty, and an upper end is never below S*, so an estimate far below 0 gets S*, never an
+end pulled towards 0. Where S = 0 accepts the estimate the result is an **upper limit**:
+never a negative variance or a NaN.
 A coverage test on records from a generator written apart from the simulator
 (tests/support/colocated.py) holds the self-noise intervals to their nominal 68 %.
 """
@@ -60,6 +68,9 @@ MIN_AVERAGES = 2
 #: about 1/_GRID of probability.
 _GRID = 64
 _BISECT = 40
+#: Below this EDF P̂ and Q̂ are too uncertain to be held in the interval's spread (fewer
+#: than about 5 averages): covariance_interval widens to the hull of two constructions.
+_FEW_NU = 4.0
 
 
 # -- the estimator --------------------------------------------------------------------------
@@ -333,10 +344,14 @@ def _separate_axis(cols: list[NDArray[np.float64]], rate: float, axis: str,
     moments = {pair: PairMoments.from_result(res, pair[0], pair[1], s + k, len(cols[0]))
                for k, pair in enumerate(pairs)}
     sep = separate_moments(moments, s, axis, ci)
-    if not fit:
-        return sep
+    return _fitted(sep, rate, ci, filter_corner_hz) if fit else sep
+
+
+def _fitted(sep: AxisSeparation, rate: float, ci: float,
+            filter_corner_hz: float | None) -> AxisSeparation:
+    """The axis with the IEEE terms fitted to each sensor's self-noise (the one fit)."""
     fits, problems = [], []
-    for i in range(s):
+    for i in range(len(sep.self_noise)):
         f, problem = _fit(sep.self_result(i, rate, ci), filter_corner_hz)
         fits.append(f)
         problems.append(problem)
@@ -443,56 +458,136 @@ def _verdict(own: Part, common: Part) -> Verdict:
     return Verdict(state, factor, least)
 
 
+class _Spread:
+    """The distribution (3) of the estimates Ŝ at S tested, on one χ²_ν quantile grid: the
+    other parts P − S and Q − S either evaluated at the S tested (``at_tested``: P, Q held
+    at P̂, Q̂) or held at ``ref`` (P̂ − ref, Q̂ − ref), never below 0."""
+
+    def __init__(self, big_p: NDArray[np.float64], big_q: NDArray[np.float64],
+                 x_over: NDArray[np.float64], ref: NDArray[np.float64] | None) -> None:
+        self.p, self.q, self.x_over = big_p, big_q, x_over
+        self.b_p = None if ref is None else np.clip(big_p - ref, 0.0, None)
+        self.b_q = None if ref is None else np.clip(big_q - ref, 0.0, None)
+
+    def cdf(self, s_true: NDArray[np.float64], x: NDArray[np.float64],
+            at: NDArray[np.intp]) -> NDArray[np.float64]:
+        """P(Ŝ ≤ x | S = s_true) for the estimates ``at``."""
+        if self.b_p is None or self.b_q is None:
+            r = np.sqrt(np.maximum(self.p[at], s_true) * np.maximum(self.q[at], s_true))
+        else:
+            r = np.sqrt((s_true + self.b_p[at]) * (s_true + self.b_q[at]))
+        lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
+        xo = self.x_over[:, at]
+        vals = lp * xo[:, None, :] - lm * xo[None, :, :]
+        return np.mean(vals <= x, axis=(0, 1))
+
+    def solve(self, level: float, x: NDArray[np.float64], at: NDArray[np.intp],
+              top: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The S in [0, top] at which P(Ŝ ≤ x | S) falls to ``level`` (it falls with S)."""
+        a, b = np.zeros(len(at)), top.copy()
+        for _ in range(_BISECT):
+            mid = (a + b) / 2.0
+            below = self.cdf(mid, x, at) <= level
+            b = np.where(below, mid, b)
+            a = np.where(below, a, mid)
+        return b
+
+    def top(self, x: NDArray[np.float64], tail: float) -> NDArray[np.float64]:
+        """An S above the upper end of every estimate ``x`` (grown until so)."""
+        every = np.arange(len(x))
+        top = 4.0 * np.maximum.reduce([np.abs(x), self.p, self.q, np.full_like(x, 1e-300)])
+        for _ in range(200):
+            need = self.cdf(top, x, every) > tail
+            if not np.any(need):
+                break
+            top = np.where(need, top * 2.0, top)
+        return top
+
+
+def _belt(s_hat: NDArray[np.float64], spread: _Spread, ci: float
+          ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The Neyman belt with the boundary S ≥ 0: each S accepts the central ``ci``, or all
+    below its ``ci`` quantile where S lies below the sensitivity S*."""
+    tail = (1.0 - ci) / 2.0
+    every = np.arange(len(s_hat))
+    s_plus = np.clip(s_hat, 0.0, None)
+    # hi: the S whose central region starts at the estimate; an estimate below 0 gets S*
+    upper_end = spread.solve(tail, s_plus, every, spread.top(s_plus, tail))
+    # lo = 0 where S = 0 accepts the estimate: below S = 0's ci quantile
+    upper_limit = spread.cdf(np.zeros_like(s_hat), s_hat, every) <= ci
+    lower_end = np.zeros_like(s_hat)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        central = spread.solve(1.0 - tail, s_hat[two], two, upper_end[two])
+        lower_end[two] = central
+        # where that lies below S* the S accepting the estimate are the one-sided ones
+        near = spread.cdf(central, np.zeros(len(two)), two) > tail
+        if np.any(near):
+            at = two[near]
+            s_star = spread.solve(tail, np.zeros(len(at)), at, upper_end[at])
+            one_sided = spread.solve(ci, s_hat[at], at, upper_end[at])
+            lower_end[at] = np.minimum(one_sided, s_star)
+    return lower_end, upper_end, upper_limit
+
+
+def _central_with_floor(s_hat: NDArray[np.float64], big_p: NDArray[np.float64],
+                        big_q: NDArray[np.float64], x_over: NDArray[np.float64], ci: float
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The central ``ci`` inversion of (3) with the other parts held at the estimate, an
+    upper limit where its lower end reaches 0, that limit never below a zero estimate's."""
+    tail = (1.0 - ci) / 2.0
+    both = np.concatenate([s_hat, np.zeros_like(s_hat)])      # the zero estimates ride along
+    spread = _Spread(np.concatenate([big_p, big_p]), np.concatenate([big_q, big_q]),
+                     np.concatenate([x_over, x_over], axis=1), both)
+    every = np.arange(len(both))
+    hi = spread.solve(tail, both, every, spread.top(both, tail))
+    k = len(s_hat)
+    upper_end = np.maximum(hi[:k], hi[k:])                    # the floor
+    mine = np.arange(k)
+    upper_limit = 1.0 - spread.cdf(np.zeros(k), s_hat, mine) > tail
+    lower_end = np.zeros(k)
+    two = np.flatnonzero(~upper_limit)
+    if len(two):
+        lower_end[two] = spread.solve(1.0 - tail, s_hat[two], two, upper_end[two])
+    return lower_end, upper_end, upper_limit
+
+
 def covariance_interval(est: ArrayLike, big_p: ArrayLike, big_q: ArrayLike, nu: ArrayLike,
                         ci: float = 0.683) -> tuple[NDArray[np.float64], NDArray[np.float64],
                                                     NDArray[np.bool_], NDArray[np.float64]]:
-    """The ``ci`` interval [lo, hi] of variances S estimated by Ŝ = mean ½UV (eq. 3), from
-    the estimate, P = E[½U²], Q = E[½V²] (estimated) and the EDF ν; ``upper_limit`` where
-    lo is 0; and the EDF of a χ² with the same relative variance, 2S²/Var Ŝ (for the fit's
-    weights)."""
+    """The ``ci`` interval [lo, hi] of variances S ≥ 0 estimated by Ŝ = mean ½UV (eq. 3),
+    from the estimate, P̂ and Q̂ (the estimated E[½U²], E[½V²]) and the EDF ν;
+    ``upper_limit`` where lo is 0; and the EDF of a χ² with the same relative variance,
+    2S²/Var Ŝ (for the fit's weights).
+
+    A Neyman construction (module docstring): each hypothesised S gets the distribution (3)
+    with P and Q at P̂ and Q̂ (the other parts P − S and Q − S evaluated at the S tested, never
+    below 0), and accepts the central ``ci`` of it, or everything below its ``ci`` quantile
+    where S lies below the sensitivity S* (the upper end a zero estimate gets: the physical
+    boundary S ≥ 0, as Feldman & Cousins' unified construction treats it). The interval is
+    the S that accept the estimate: no interval is empty, and an upper end is never below S*.
+
+    Below ν = :data:`_FEW_NU` (fewer than about 5 averages) P̂ and Q̂ are too uncertain to be
+    held: there the interval is the hull of this one and the central inversion with the other
+    parts held at the estimate and a zero estimate's upper end as floor (wider there)."""
     s_hat = np.asarray(est, dtype=np.float64)
     nu = np.clip(np.asarray(nu, dtype=np.float64), 1.0, None)
-    b_p = np.clip(np.asarray(big_p, dtype=np.float64) - s_hat, 0.0, None)
-    b_q = np.clip(np.asarray(big_q, dtype=np.float64) - s_hat, 0.0, None)
-    tail = (1.0 - ci) / 2.0
-    grid = (np.arange(_GRID) + 0.5) / _GRID
-    xq = chi2_ppf_grid(grid, nu)                                 # (J, M)
-    x_over = xq / nu                                             # χ²_ν/ν quantile points
-
-    def cdf(s_true: NDArray[np.float64]) -> NDArray[np.float64]:
-        """P(Ŝ ≤ observed | S = s_true), per estimate."""
-        r = np.sqrt((s_true + b_p) * (s_true + b_q))
-        lp, lm = (r + s_true) / 2.0, (r - s_true) / 2.0
-        vals = lp * x_over[:, None, :] - lm * x_over[None, :, :]
-        return np.mean(vals <= s_hat, axis=(0, 1))
-
-    scale = np.maximum.reduce([np.abs(s_hat), b_p, b_q, np.full_like(s_hat, 1e-300)])
-    top = 4.0 * scale
-    for _ in range(200):                      # S_hi lies below top: grow it until so
-        need = cdf(top) > tail
-        if not np.any(need):
-            break
-        top = np.where(need, top * 2.0, top)
-    lo_s, hi_s = np.zeros_like(s_hat), top.copy()
-    for _ in range(_BISECT):                   # hi: the S at which Ŝ is at the lower tail
-        mid = (lo_s + hi_s) / 2.0
-        low_tail = cdf(mid) <= tail
-        hi_s = np.where(low_tail, mid, hi_s)
-        lo_s = np.where(low_tail, lo_s, mid)
-    upper_end = hi_s
-    at_zero = 1.0 - cdf(np.zeros_like(s_hat))  # P(Ŝ ≥ observed | S = 0)
-    upper_limit = at_zero > tail
-    a, b = np.zeros_like(s_hat), upper_end.copy()
-    for _ in range(_BISECT):                   # lo: the S at which Ŝ is at the upper tail
-        mid = (a + b) / 2.0
-        beyond = 1.0 - cdf(mid) <= tail
-        a = np.where(beyond, mid, a)
-        b = np.where(beyond, b, mid)
-    lower_end = np.where(upper_limit, 0.0, a)
-    s_pos = np.clip(s_hat, 0.0, None)
-    var_hat = ((s_pos + b_p) * (s_pos + b_q) + s_pos**2) / nu
+    big_p = np.clip(np.asarray(big_p, dtype=np.float64), 0.0, None)
+    big_q = np.clip(np.asarray(big_q, dtype=np.float64), 0.0, None)
+    x_over = chi2_ppf_grid((np.arange(_GRID) + 0.5) / _GRID, nu) / nu
+    lower_end, upper_end, upper_limit = _belt(s_hat, _Spread(big_p, big_q, x_over, None), ci)
+    few = np.flatnonzero(nu < _FEW_NU)
+    if len(few):
+        lo2, hi2, ul2 = _central_with_floor(s_hat[few], big_p[few], big_q[few],
+                                            x_over[:, few], ci)
+        lower_end[few] = np.minimum(lower_end[few], lo2)
+        upper_end[few] = np.maximum(upper_end[few], hi2)
+        upper_limit[few] |= ul2
+        lower_end[upper_limit] = 0.0
+    s_plus = np.clip(s_hat, 0.0, None)
+    var_hat = (big_p * big_q + s_plus**2) / nu
     with np.errstate(divide="ignore", invalid="ignore"):
-        nu_eff = np.where(var_hat > 0, 2.0 * s_pos**2 / var_hat, 0.0)
+        nu_eff = np.where(var_hat > 0, 2.0 * s_plus**2 / var_hat, 0.0)
     return lower_end, upper_end, upper_limit, nu_eff
 
 
@@ -632,3 +727,173 @@ def _resample(y: NDArray[np.float64], rate: float, t0: float, t_a: float, new_ra
     edges = t_a + np.arange(n + 1) / new_rate
     at = np.column_stack([np.interp(edges, t_old, phase[:, c]) for c in range(y.shape[1])])
     return np.diff(at, axis=0) * new_rate
+
+
+# -- recordings of several runs: aligned run by run, as the live separation aligns them -------
+
+#: How far (in samples) the live aligner lets the fitted position of a partner's sample move
+#: from the one in use before it slips (daemon/service/separation_stage.SLIP_SAMPLES).
+_SLIP_SAMPLES = 0.75
+
+
+@dataclass(frozen=True)
+class AlignedRun:
+    """One run of 2 or 3 co-located sensors' recordings on the first sensor's ticks:
+    ``index`` (S, n) each sensor's own sample index at each tick (−1 where it has none),
+    ``accel`` (S, n, A) m/s² (meaningless where the index is −1)."""
+
+    run: str
+    index: NDArray[np.int64]
+    accel: NDArray[np.float64]
+
+
+def _runs_of(rec: SensorRecord) -> dict[str, tuple[dict[str, Any], NDArray[np.intp]]]:
+    """A recording's runs: run id → (the first header of it, the rows of its samples)."""
+    headers = [h for h in rec.meta.get("headers") or [] if isinstance(h.get("i0"), int)]
+    index = np.asarray(rec.meta.get("index"), dtype=np.int64)
+    if not headers or len(index) != len(rec.accel):
+        raise DataError(f"{rec.source or 'a record'}: aligning run by run needs a recording "
+                        "(its headers and sample indices)")
+    starts = np.array([int(h["i0"]) for h in headers], dtype=np.int64)
+    order = np.argsort(starts, kind="stable")
+    starts = starts[order]
+    which = np.searchsorted(starts, index, side="right") - 1    # the header each sample follows
+    out: dict[str, tuple[dict[str, Any], NDArray[np.intp]]] = {}
+    for k in range(len(starts)):
+        h = headers[int(order[k])]
+        rows = np.flatnonzero(which == k)
+        run = str(h.get("run"))
+        if run in out:                         # a header copy of the same run
+            out[run] = (out[run][0], np.concatenate([out[run][1], rows]))
+        elif len(rows):
+            out[run] = (h, rows)
+    return out
+
+
+def _time_line(h: dict[str, Any], rate: float) -> tuple[float, int, float]:
+    t = h.get("t_real")
+    r = h.get("rate_hz", rate)
+    if not isinstance(t, int | float) or not isinstance(r, int | float) or not r > 0:
+        raise DataError(f"run {h.get('run')!r}: its header has no time (t_real) or rate")
+    return float(t), int(h["i0"]), float(r)
+
+
+def aligned_runs(records: Sequence[SensorRecord]) -> list[AlignedRun]:
+    """Recordings of 2 or 3 co-located sensors aligned run by run (a restart, in a rig all
+    sensors' recordings change run together), by the live aligner's rule
+    (daemon/service/separation_stage.Aligner): in each run the first sensor's indices are the
+    ticks, from its first sample of the run to its last; another sensor's sample at a tick is
+    the one its run's time line (header ``t_real`` at ``i0``, ``rate_hz``) puts nearest the
+    tick's time at the run's first tick, then the next one per tick (no slip: a constant
+    offset within a run); a tick is kept up to the first whose sample of another sensor
+    lies beyond that sensor's last of the run (the live aligner's rule at stop).
+    Runs not in every recording are left out (none shared: an empty list). The same
+    function aligns the tail a live separation replays after a restart
+    (daemon/service/rig_separation.py)."""
+    if len(records) not in (2, 3):
+        raise DataError(f"separate takes 2 or 3 records of co-located sensors, not "
+                        f"{len(records)}")
+    runs = [_runs_of(r) for r in records]
+    out: list[AlignedRun] = []
+    ref_runs = sorted(runs[0].items(), key=lambda kv: int(kv[1][0]["i0"]))
+    for run, (h0, rows0) in ref_runs:
+        if not all(run in r for r in runs[1:]):
+            continue
+        idx0 = np.asarray(records[0].meta["index"])[rows0]
+        ticks = np.arange(int(idx0.min()), int(idx0.max()) + 1, dtype=np.int64)
+        t0, i0, r0 = _time_line(h0, records[0].rate_hz)
+        t_tick = t0 + (ticks - i0) / r0
+        keep = len(ticks)
+        partner: list[NDArray[np.int64]] = [ticks]
+        for rec, rr in zip(records[1:], runs[1:], strict=True):
+            h, rows = rr[run]
+            ts, i_s, rs = _time_line(h, rec.rate_hz)
+            x = i_s + (t_tick - ts) * rs
+            own = np.asarray(rec.meta["index"])[rows]
+            first = int(np.rint(x[0]))
+            keep = min(keep, int(own.max()) + 1 - first)     # up to its last of the run
+            partner.append(first + np.arange(len(ticks), dtype=np.int64))
+        if keep <= 0:
+            continue
+        n_s, n_ax = len(records), records[0].accel.shape[1]
+        index = np.full((n_s, keep), -1, dtype=np.int64)
+        accel = np.zeros((n_s, keep, n_ax))
+        for s, (rec, rr) in enumerate(zip(records, runs, strict=True)):
+            rows = rr[run][1]
+            own = np.asarray(rec.meta["index"])[rows]
+            order = np.argsort(own, kind="stable")
+            own, rows = own[order], rows[order]
+            want = partner[s][:keep]
+            pos = np.minimum(np.searchsorted(own, want), len(own) - 1)
+            ok = own[pos] == want
+            index[s, ok] = want[ok]
+            accel[s, ok] = rec.accel[rows[pos[ok]]]
+        out.append(AlignedRun(run, index, accel))
+    return out
+
+
+def is_multi_run(records: Sequence[SensorRecord]) -> bool:
+    """Whether any record is a recording holding more than one run (a restart) or a loss (a
+    jump in its sample index): such records are separated run by run
+    (:func:`separate_runs`: a gap at every missing row), never as one stretch whose
+    differences would straddle the loss (a record without runs beside them is then refused
+    by :func:`aligned_runs`, not concatenated)."""
+    def segmented(r: SensorRecord) -> bool:
+        index = r.meta.get("index")
+        if index is None or not len(index):
+            return False
+        hs = r.meta.get("headers") or []
+        return len({h.get("run") for h in hs}) > 1 or bool(np.any(np.diff(index) != 1))
+    return any(segmented(r) for r in records)
+
+
+def separation_of_pairs(pairs: Mapping[tuple[int, int], Any], sensors: Sequence[str],
+                        rate_hz: float, ci: float, notes: Sequence[str] = (),
+                        sources: Sequence[str] = ()) -> Separation:
+    """The separation of what pair accumulators (:class:`~avard.core.allan.cross.CrossAllan`
+    per pair of ``PAIRS``) hold, τ labelled with ``rate_hz``: the live separation's and
+    :func:`separate_runs`'s one way from the pairs to the result. DataError while no τ has
+    enough averages in every pair."""
+    moments = {p: acc.moments(ci) for p, acc in pairs.items()}
+    first = next(iter(pairs.values()))
+    axes = tuple(separate_moments({p: m[c] for p, m in moments.items()}, len(sensors), ax, ci)
+                 for c, ax in enumerate(first.axes))
+    axes = tuple(replace(ax, tau=ax.m / float(rate_hz)) for ax in axes)
+    method = "groslambert covariance" if len(sensors) == 2 else "three-cornered hat"
+    n = min(acc.n_samples for acc in pairs.values())
+    return Separation(tuple(sensors), method, float(rate_hz), n, ci, axes, tuple(notes),
+                      tuple(sources))
+
+
+def separate_runs(runs: Sequence[AlignedRun], rate_hz: float, *, sensors: Sequence[str],
+                  axes: Sequence[str], ci: float = 0.683, overlap: int = 8,
+                  fit: bool = False, filter_corner_hz: float | None = None,
+                  notes: Sequence[str] = (), sources: Sequence[str] = ()) -> Separation:
+    """Separate recordings aligned run by run (:func:`aligned_runs`): each pair's streaming
+    Allan moments (partially overlapping, stride m/``overlap``: the live separation's) fed
+    every run's rows, a gap at each missing row and between runs, so no difference straddles
+    a restart or a loss; with ``fit`` the IEEE terms of each self-noise, as :func:`separate`
+    (the live separation has none)."""
+    from avard.core.allan.cross import CrossAllan
+
+    s = len(sensors)
+    if s not in PAIRS:
+        raise DataError(f"separate takes 2 or 3 co-located sensors, not {s}")
+    if not runs:
+        raise DataError("the recordings share no run; co-located sensors must be recorded "
+                        "by one rig at the same time")
+    pairs = {p: CrossAllan(rate_hz, axes=axes, overlap=overlap,
+                           sensors=(sensors[p[0]], sensors[p[1]])) for p in PAIRS[s]}
+    for run in runs:
+        for (i, j), acc in pairs.items():
+            acc.feed(run.index[i], run.index[j], run.accel[i], run.accel[j])
+            acc.gap()
+    note = (f"aligned run by run ({len(runs)} run{'s' if len(runs) != 1 else ''}: a restart "
+            "is a gap for every pair); "
+            f"partially overlapping Allan moments (stride m/{overlap} above m = {overlap}), "
+            "as the live separation keeps them")
+    sep = separation_of_pairs(pairs, sensors, rate_hz, ci, (*notes, note), sources)
+    if not fit:
+        return sep
+    return replace(sep, filter_corner_hz=filter_corner_hz, axes=tuple(
+        _fitted(ax, rate_hz, ci, filter_corner_hz) for ax in sep.axes))

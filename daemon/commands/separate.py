@@ -22,9 +22,18 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 
 import numpy as np
-from avard.core.analysis.separate import Separation, align, read_sensor, separate
+from avard.core.analysis.separate import (
+    Separation,
+    align,
+    aligned_runs,
+    is_multi_run,
+    read_sensor,
+    separate,
+    separate_runs,
+)
 from avard.core.errors import AvardError, DataError
 from avard.core.io.outputs import check_plot_output, finite_for_json
 from avard.daemon.commands._options import add_channels_argument, filter_corner, split_channels
@@ -74,7 +83,17 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         raise DataError(f"--rate {rate_hz}: a sample rate must be a positive number of Hz")
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
     sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
-    aligned = align(records, channels)
+    runs = None
+    if is_multi_run(records):          # a restart or a loss in a recording: run by run
+        if channels:
+            missing = [c for c in channels if not all(c in r.names for r in records)]
+            if missing:
+                raise DataError(f"--channels {', '.join(missing)}: not a channel every "
+                                "record has")
+            records = [replace(r, accel=r.accel[:, [r.names.index(c) for c in channels]],
+                               names=tuple(channels)) for r in records]
+        runs = aligned_runs(records)
+    aligned = align(records, channels) if runs is None else None
     corner: float | None
     if filter_corner_hz == "auto":
         from avard.core.io.source import open_record
@@ -85,6 +104,11 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         corner = corners.pop() if len(corners) == 1 else None
     else:
         corner = filter_corner_hz if isinstance(filter_corner_hz, float) else None
+    if runs is not None:
+        return separate_runs(runs, records[0].rate_hz, sensors=sensor_names,
+                             axes=records[0].names, fit=True, filter_corner_hz=corner,
+                             sources=paths)
+    assert aligned is not None
     return separate(aligned.accels, aligned.rate_hz, sensors=sensor_names, axes=aligned.axes,
                     filter_corner_hz=corner, notes=aligned.notes, sources=paths)
 

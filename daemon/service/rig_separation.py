@@ -19,12 +19,16 @@ lane's final ``avar`` record covers every aligned sample.
 
 Checkpoint: every ``checkpoint_interval_s`` of the reference sensor's samples (and at stop)
 ``separation-state.ckpt`` in the rig's ``data_dir`` holds the pairs' state and each sensor's
-next index. A restart restores it; what was recorded between that checkpoint and the restart
-is *not* replayed into the pairs: it is a hole, which the index jump makes a gap for every
-pair, and ``status`` says how many samples of each sensor it holds. A state that claims
-samples beyond what a sensor's recording now holds (a crash lost the recording's tail) is
-dropped: the pairs start afresh (said in the log and the status). After a restart the
-run-time check holds each pair's sample count to grow by exactly the aligned rows it was fed.
+next index. A restart restores it and replays what each sensor's recording (``data_dir/NAME``)
+holds after it, up to the index the lane restored to, aligned run by run by the offline rule
+(core/analysis/separate.aligned_runs: the one ``avard separate`` applies to recordings of
+several runs), each pair after its last fed row; then every pair's segment ends (the
+restart). So a kill between the lanes' checkpoints and this one loses nothing, and the
+published separation equals ``avard separate`` on the recordings. With no usable state (none,
+unreadable, or claiming samples a recording no longer holds: a crash lost its tail) the pairs
+are rebuilt from the recordings' newest :data:`MAX_REPLAY_S` of samples. The run-time check
+holds each pair to grow by exactly the rows replayed or fed into it; recorded samples that
+could not be replayed are counted per sensor in the status (``restored.hole_samples``).
 """
 
 from __future__ import annotations
@@ -39,8 +43,18 @@ from typing import Any, Protocol
 
 import msgpack
 import numpy as np
+from avard.core.allan.feed import scale_of
+from avard.core.allan.replay import segments_to_read
+from avard.core.analysis.separate import AlignedRun, SensorRecord, aligned_runs
 from avard.core.errors import AvardError, FormatError
-from avard.core.io.recording import frame, scan_frames
+from avard.core.io.recording import (
+    SEGMENT_SUFFIX,
+    RecordingReader,
+    frame,
+    keyed_segments,
+    scan_frames,
+    walk,
+)
 from avard.daemon.service.recorder import write_atomic
 from avard.daemon.service.ring import Chunk, Consumer
 from avard.daemon.service.separation_stage import (
@@ -51,6 +65,7 @@ from avard.daemon.service.separation_stage import (
     SeparationStage,
 )
 from avard.daemon.service.stage import Stage, split_chunk
+from numpy.typing import NDArray
 
 log = logging.getLogger("avard.daemon.service")
 
@@ -60,6 +75,56 @@ STATE_FILE = "separation-state.ckpt"
 MAX_SENSORS = 3
 #: Seconds of samples a SeparationFeed lets accumulate between ring reads (as the Allan stage).
 FEED_BATCH_S = 0.25
+#: The most of each sensor's newest recorded samples a restart replays into the pairs (in
+#: memory: three axes of float64, about 10 MB per sensor at 125 Hz); older samples the
+#: state does not hold are a hole, counted in the status.
+MAX_REPLAY_S = 3 * 3600.0
+
+
+def _first_recorded(directory: Path) -> int | None:
+    keyed = keyed_segments(f for f in directory.glob("*" + SEGMENT_SUFFIX) if f.is_file())
+    return int(keyed[0][0].i0) if keyed else None
+
+
+def _run_at(tail: SensorRecord, index: int) -> str | None:
+    """The run of a recording's tail that sample ``index`` belongs to (the last header at or
+    before it), None when the tail does not reach back to it."""
+    before = [h for h in tail.meta.get("headers", []) if int(h["i0"]) <= index]
+    return str(max(before, key=lambda h: int(h["i0"]))["run"]) if before else None
+
+
+def read_tail(directory: Path, after: int | None, before: int | None = None) -> SensorRecord:
+    """A sensor's recording from sample index ``after`` on (all when None) up to ``before``
+    (the index the lane's run starts at: what a restart's lanes restored), through the one
+    walk (core/io/recording.walk): its samples in m/s², their indices and every run's header
+    (what core/analysis/separate.aligned_runs needs)."""
+    segs = segments_to_read(directory, after)
+    headers: list[dict[str, Any]] = []
+    blocks: list[NDArray[np.float64]] = []
+    index: list[NDArray[np.int64]] = []
+    scale = 0.0
+    rate = 0.0
+    if segs:
+        reader = RecordingReader(segs[0])
+        reader.files = segs
+        for rec in walk(reader):
+            kind = rec["kind"]
+            if kind == "header":
+                headers.append({k: v for k, v in rec.items() if k != "config"})
+                scale = scale_of(rec)
+                rate = float(rec.get("rate_hz", rate) or rate)
+            elif kind == "raw":
+                i0, n = int(rec["i0"]), int(rec["n"])
+                skip = 0 if after is None else max(0, min(n, after - i0))
+                stop = n if before is None else max(skip, min(n, before - i0))
+                if skip < stop:
+                    counts = np.asarray(rec["counts"], dtype=np.float64)[skip:stop, :3]
+                    blocks.append(counts * scale)
+                    index.append(i0 + skip + np.arange(stop - skip, dtype=np.int64))
+    accel = np.concatenate(blocks) if blocks else np.zeros((0, 3))
+    idx = np.concatenate(index) if index else np.zeros(0, dtype=np.int64)
+    return SensorRecord(accel, ("x", "y", "z"), rate if rate > 0 else 1.0, source=str(directory),
+                        meta={"index": idx, "headers": headers})
 
 
 class FittedRate(Protocol):
@@ -146,44 +211,116 @@ class RigSeparation:
 
     # -- restore and checkpoint ----------------------------------------------------------
     def restore(self, start_index: dict[str, int]) -> None:
-        """Continue from the state file, if there is a usable one (module docstring)."""
+        """Continue from the state file, then replay what the sensors' recordings hold after
+        it (module docstring); with no usable state, replay the recordings whole (up to
+        :data:`MAX_REPLAY_S` of the newest samples; older ones are a hole, said with its
+        size)."""
         if self.data_dir is None:
             return
         path = self.data_dir / STATE_FILE
-        if not path.exists():
-            return
+        saved: dict[str, int] | None = None
+        problem: dict[str, Any] = {}
+        if path.exists():
+            try:
+                frs = list(scan_frames(path.read_bytes(), str(path)))
+                if not frs:
+                    raise FormatError("no valid frame in it")
+                rec = msgpack.unpackb(frs[0].payload, raw=False, strict_map_key=False)
+                if rec.get("kind") != "separation_checkpoint" or rec.get("v") != 1:
+                    raise FormatError("not a version-1 separation checkpoint")
+                if list(rec.get("sensors", [])) != list(self.names):
+                    raise FormatError(f"it is of sensors {rec.get('sensors')}, this rig "
+                                      f"separates {list(self.names)}")
+                stage = SeparationStage.from_state(rec["state"])
+                saved = {str(k): int(v) for k, v in rec["next"].items()}
+            except (AvardError, OSError, KeyError, TypeError, ValueError,
+                    msgpack.UnpackException) as exc:
+                log.warning("the live separation's checkpoint %s is not usable (%s): the "
+                            "pairs are rebuilt from the recordings", path, exc)
+                problem = {"state": "unusable", "detail": str(exc)}
+                saved = None
+            if saved is not None:
+                ahead = {n: saved[n] - start_index[n] for n in self.names
+                         if saved.get(n, 0) > start_index[n]}
+                if ahead:
+                    log.warning("the live separation's checkpoint holds samples the "
+                                "recordings no longer do (%s): the pairs are rebuilt from "
+                                "the recordings", ahead)
+                    problem = {"state": "dropped", "ahead": ahead}
+                    saved = None
+            if saved is not None:
+                stage.interval_s = self.stage.interval_s
+                self.stage = stage
+        self._replay(saved, start_index, problem)
+
+    def _replay(self, saved: dict[str, int] | None, start_index: dict[str, int],
+                problem: dict[str, Any]) -> None:
+        """Feed the pairs every aligned row the recordings hold after what the state holds
+        (each pair after its last fed row), aligned run by run by the one offline rule
+        (core/analysis/separate.aligned_runs), then end every pair's segment (the restart).
+        The run-time check: each pair grew by exactly the rows replayed into it; what the
+        recordings hold that could not be replayed is a hole, counted per sensor."""
+        assert self.data_dir is not None
+        base = {p: acc.n_samples for p, acc in self.stage.pairs.items()}
+        after = dict(saved) if saved is not None else {}
+        for (i, j), acc in self.stage.pairs.items():
+            last = acc.last_fed
+            if last is not None:
+                for name, v in ((self.names[i], last[0] + 1), (self.names[j], last[1] + 1)):
+                    after[name] = min(after.get(name, v), v)
+        cap = int(MAX_REPLAY_S * self.nominal_odr)
+        hole: dict[str, int] = {}
+        replayed = {f"{a.sensors[0]}-{a.sensors[1]}": 0 for a in self.stage.pairs.values()}
+        runs: list[AlignedRun] = []
         try:
-            frs = list(scan_frames(path.read_bytes(), str(path)))
-            if not frs:
-                raise FormatError("no valid frame in it")
-            rec = msgpack.unpackb(frs[0].payload, raw=False, strict_map_key=False)
-            if rec.get("kind") != "separation_checkpoint" or rec.get("v") != 1:
-                raise FormatError("not a version-1 separation checkpoint")
-            if list(rec.get("sensors", [])) != list(self.names):
-                raise FormatError(f"it is of sensors {rec.get('sensors')}, this rig "
-                                  f"separates {list(self.names)}")
-            stage = SeparationStage.from_state(rec["state"])
-            saved = {str(k): int(v) for k, v in rec["next"].items()}
-        except (AvardError, OSError, KeyError, TypeError, ValueError,
-                msgpack.UnpackException) as exc:
-            log.warning("the live separation starts afresh: %s is not usable (%s)", path, exc)
-            self.restored = {"state": "unusable", "detail": str(exc)}
-            return
-        ahead = {n: saved[n] - start_index[n] for n in self.names
-                 if saved.get(n, 0) > start_index[n]}
-        if ahead:
-            log.warning("the live separation starts afresh: its checkpoint holds samples the "
-                        "recordings no longer do (%s)", ahead)
-            self.restored = {"state": "dropped", "ahead": ahead}
-            return
-        stage.interval_s = self.stage.interval_s
-        self.stage = stage
-        self._n_since = {p: acc.n_samples for p, acc in stage.pairs.items()}
-        hole = {n: start_index[n] - saved.get(n, start_index[n]) for n in self.names}
-        self.restored = {"state": "restored", "n_samples": stage.n_samples,
-                         "hole_samples": hole, "replayed": False}
-        log.info("live separation restored (%d aligned samples); the %s samples recorded "
-                 "after its checkpoint are a gap for the pairs", stage.n_samples, hole)
+            tails = []
+            for name in self.names:
+                first = after.get(name)
+                floor = start_index[name] - cap
+                oldest = first if first is not None else _first_recorded(self.data_dir / name)
+                if oldest is not None and oldest < floor:
+                    hole[name] = floor - oldest
+                    first = floor
+                # from the last sample the state holds: the run it belongs to is read too
+                tails.append(read_tail(self.data_dir / name, None if first is None
+                                       else max(0, first - 1), start_index[name]))
+            if saved is None and not problem and not any(len(t.accel) for t in tails):
+                return                                 # a new rig: nothing to restore
+            if all(len(t.accel) for t in tails):
+                runs = aligned_runs(tails)
+        except (AvardError, OSError) as exc:
+            log.error("the live separation cannot replay the recordings (%s): what they hold "
+                      "after its checkpoint is a gap for the pairs", exc)
+            runs = []
+            hole = {n: max(0, start_index[n] - after.get(n, 0)) for n in self.names}
+            problem = {**problem, "replay_error": str(exc)}
+        for run in runs:
+            for (i, j), acc in self.stage.pairs.items():
+                last = acc.last_fed
+                if last is not None and run.run != _run_at(tails[i], last[0]):
+                    acc.gap()      # a later run than the state's last row: a restart between
+                lim_a = last[0] if last is not None else after.get(self.names[i], 0) - 1
+                lim_b = last[1] if last is not None else after.get(self.names[j], 0) - 1
+                rows = (run.index[i] > lim_a) & (run.index[j] > lim_b)
+                got = acc.feed(run.index[i][rows], run.index[j][rows],
+                               run.accel[i][rows], run.accel[j][rows])
+                replayed[f"{acc.sensors[0]}-{acc.sensors[1]}"] += got
+        for p, acc in self.stage.pairs.items():
+            acc.gap()                                  # the restart: no difference across it
+            key = f"{acc.sensors[0]}-{acc.sensors[1]}"
+            if acc.n_samples != base[p] + replayed[key]:
+                self.violations += 1
+                log.error("invariant violated: the live separation's pair %s grew by %d "
+                          "samples in the replay while %d rows were replayed", key,
+                          acc.n_samples - base[p], replayed[key])
+        self._n_since = {p: acc.n_samples for p, acc in self.stage.pairs.items()}
+        state = "restored" if saved is not None else problem.get("state", "rebuilt")
+        self.restored = {**problem, "state": state, "n_samples": self.stage.n_samples,
+                         "replayed": "replay_error" not in problem, "replayed_rows": replayed,
+                         "hole_samples": {n: hole.get(n, 0) for n in self.names}}
+        log.info("live separation %s: %d aligned samples, %s rows replayed from the "
+                 "recordings, hole %s", self.restored["state"], self.stage.n_samples,
+                 replayed, self.restored["hole_samples"])
 
     def checkpoint(self) -> None:
         """Save the pairs' state and each sensor's next index; check the pairs' counts."""
@@ -260,7 +397,7 @@ class RigSeparation:
     def _take(self, *, final: bool = False) -> None:
         """Feed every aligned tick; compute the separation and checkpoint when due."""
         c0 = time.thread_time()
-        while (blk := self.aligner.pop()) is not None:
+        while (blk := self.aligner.pop(final=final)) is not None:
             self._feed(blk)
         c1 = time.thread_time()
         fields = self.stage.record_fields(self._rate(), force=final)

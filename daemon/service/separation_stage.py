@@ -29,12 +29,12 @@ import logging
 import math
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 from avard.core.allan.cross import CrossAllan
-from avard.core.analysis.separate import PAIRS, Separation, separate_moments
+from avard.core.analysis.separate import PAIRS, Separation, separation_of_pairs
 from avard.core.errors import DataError, FormatError
 from numpy.typing import NDArray
 
@@ -157,9 +157,12 @@ class Aligner:
         with self._lock:
             self._push(block, clock)
 
-    def pop(self) -> AlignedBlock | None:
+    def pop(self, *, final: bool = False) -> AlignedBlock | None:
+        """The ticks every sensor has reported up to; ``final`` (at stop, every sample
+        pushed): every tick whose followed sample of each sensor is in, the rule
+        core/analysis/separate.aligned_runs applies to a recorded run's end."""
         with self._lock:
-            return self._pop()
+            return self._pop(final)
 
     def _push(self, block: SensorBlock, clock: SensorClock) -> None:
         p = self._p.get(block.name)
@@ -182,7 +185,7 @@ class Aligner:
         if self._next is None and block.name == self.names[0] and n:
             self._next = block.i0
 
-    def _pop(self) -> AlignedBlock | None:
+    def _pop(self, final: bool = False) -> AlignedBlock | None:
         ref = self._p[self.names[0]]
         if self._next is None or ref.end is None or ref.clock is None:
             return None
@@ -199,8 +202,11 @@ class Aligner:
                 continue
             x = p.clock.index_at(t)
             mapped[name] = x
-            # a followed index is within SLIP_SAMPLES of x: below end − 1 it is reported
-            limit = min(limit, int(np.searchsorted(x, p.end - 1.0)))
+            if final:     # every sample is reported: a tick is whole if its partner is in
+                past = np.flatnonzero(self._follow(name, x, commit=False) >= p.end)
+                limit = min(limit, int(past[0]) if len(past) else len(x))
+            else:         # a followed index is within SLIP_SAMPLES of x: below end − 1 it
+                limit = min(limit, int(np.searchsorted(x, p.end - 1.0)))  # is reported
         wait = int(self.max_wait_s / ref.clock.period_s)
         forced = limit < len(ticks) - wait
         if forced:        # a late sensor's ticks are taken as missing for it
@@ -231,16 +237,18 @@ class Aligner:
         self._next = int(ticks[-1]) + 1
         return AlignedBlock(self.names, index, accel)
 
-    def _follow(self, name: str, x: NDArray[np.float64]) -> NDArray[np.int64]:
+    def _follow(self, name: str, x: NDArray[np.float64], *,
+                commit: bool = True) -> NDArray[np.int64]:
         """Sensor indices for fitted positions ``x``: each the previous one plus one while that
-        stays within :data:`SLIP_SAMPLES` of the fit, else the nearest (a slip)."""
+        stays within :data:`SLIP_SAMPLES` of the fit, else the nearest (a slip); ``commit``
+        False: only look (the position and the slips count stay)."""
         p = self._p[name]
         out = np.empty(len(x), dtype=np.int64)
         k = 0
         prev = p.last
         while k < len(x):
             if prev is None or abs(x[k] - (prev + 1)) > SLIP_SAMPLES:
-                if prev is not None:
+                if prev is not None and commit:
                     self.slips[name] += 1
                 prev = int(np.rint(x[k])) - 1
             run = prev + 1 + np.arange(len(x) - k, dtype=np.int64)
@@ -249,7 +257,8 @@ class Aligner:
             out[k:k + stop] = run[:stop]
             k += stop
             prev = int(out[k - 1])
-        p.last = prev
+        if commit:
+            p.last = prev
         return out
 
 
@@ -314,23 +323,17 @@ class SeparationStage:
         rate; default the nominal); None while no τ has enough averages in every pair."""
         rate = float(rate_hz) if rate_hz else self.rate_hz
         self.flush()
+        segments = {f"{acc.sensors[0]}-{acc.sensors[1]}": acc.n_segments
+                    for acc in self.pairs.values()}
         try:
-            moments = {p: acc.moments(self.ci) for p, acc in self.pairs.items()}
-            axes = tuple(separate_moments({p: m[c] for p, m in moments.items()},
-                                          len(self.sensors), ax, self.ci)
-                         for c, ax in enumerate(self.axes))
+            return separation_of_pairs(
+                self.pairs, self.sensors, rate, self.ci,
+                notes=("live: partially overlapping Allan moments (stride m/8 above m = 8), "
+                       "pairs aligned by index and fitted time base; segments per pair "
+                       + ", ".join(f"{k} {v}" for k, v in segments.items()),))
         except DataError as exc:
             log.debug("no live separation yet: %s", exc)
             return None
-        axes = tuple(replace(ax, tau=ax.m / rate) for ax in axes)
-        method = "groslambert covariance" if len(self.sensors) == 2 else "three-cornered hat"
-        segments = {f"{acc.sensors[0]}-{acc.sensors[1]}": acc.n_segments
-                    for acc in self.pairs.values()}
-        return Separation(self.sensors, method, rate, self.n_samples, self.ci, axes,
-                          notes=("live: partially overlapping Allan moments (stride m/8 "
-                                 "above m = 8), pairs aligned by index and fitted time base; "
-                                 "segments per pair " + ", ".join(
-                                     f"{k} {v}" for k, v in segments.items()),))
 
     def record_fields(self, rate_hz: float | None = None, *,
                       force: bool = False) -> dict[str, Any]:

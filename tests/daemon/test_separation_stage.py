@@ -102,7 +102,9 @@ def test_live_separation_equals_offline_on_the_emulated_rig(n_sensors: int) -> N
             np.testing.assert_array_equal(p.upper_limit, q.upper_limit)
             np.testing.assert_array_less(np.abs(p.var - q.var), 1e-12 * scale)
             np.testing.assert_allclose(p.hi, q.hi, rtol=1e-12)
-            np.testing.assert_allclose(p.lo, q.lo, rtol=1e-12)
+            # lo is found by bisection to 2⁻⁴⁰ of its bracket (up to the upper end): the
+            # moments' 1e-13 rounding can move it by one step, so held as var is, to the scale
+            np.testing.assert_array_less(np.abs(p.lo - q.lo), 1e-12 * (np.abs(q.lo) + scale))
     # the bed is found: white 1e-4 m/s/√s, ADEV 1e-4 m/s² at τ = 1 s
     z = live.axes[2]
     k = int(np.argmin(np.abs(z.tau - 1.0)))
