@@ -660,7 +660,7 @@ def _analyze_passes(
                 # channel's TOTVAR out to T/2, read again only then (long_tau_check)
                 from avard.core.analysis.long_tau_check import check_ramp
 
-                fit = check_ramp(fit, reread(i), n, rate)
+                fit = check_ramp(fit, partial(reread, i), n, rate)
             out[names[i]] = _channel(names[i], job, fit, lines, estimator, psd, welch, f,
                                      None if spectrum is None else spectrum[:, j], rate,
                                      corner, source, n)

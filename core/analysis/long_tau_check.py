@@ -26,7 +26,7 @@ cannot be read again (a one-shot stream) is not tested; the fit stands as the OA
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 from avard.core.allan.edf import edf_total
@@ -48,15 +48,16 @@ DECIMATED_POINTS = 1 << 16
 _Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 
 
-def check_ramp(fit: NoiseFit, blocks: _Blocks, n_samples: int, rate_hz: float, *,
+def check_ramp(fit: NoiseFit, read: Callable[[], _Blocks], n_samples: int, rate_hz: float, *,
                min_averages: float = 8.0) -> NoiseFit:
     """``fit`` as it is, or with its long-τ terms flagged "not yet resolved" when it claims
-    a rate ramp resolved that the channel's TOTVAR beyond the fit refutes. ``blocks``: the
-    channel read again ((n, 1) samples, True where a segment ends); read only when needed."""
+    a rate ramp resolved that the channel's TOTVAR beyond the fit refutes. ``read()``: the
+    channel read again ((n, 1) samples, True where a segment ends); called (and the record
+    opened again) only when a ramp is claimed."""
     ramp = fit.terms.get("rate_ramp")
     if ramp is None or not ramp.present or ramp.note is not None:
         return fit
-    curve = totvar_curve(fit, blocks, n_samples, rate_hz, min_averages=min_averages)
+    curve = totvar_curve(fit, read(), n_samples, rate_hz, min_averages=min_averages)
     if curve is None or not refuted_by(fit, curve):
         return fit
     return with_long_tau_refuted(fit)
