@@ -140,6 +140,8 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
     of the AVAR."""
     if allan.kind not in _ALLAN_KINDS or np.asarray(allan.var).ndim != 1:
         return allan
+    if allan.noise_id == "stable32":
+        return allan  # Stable32's own rules, kept for row-by-row comparison (issue 24)
     return with_share_edf(allan, signal_share(fit, allan), unresolved_noise_edf(fit, allan))
 
 
