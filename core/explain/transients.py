@@ -283,8 +283,9 @@ def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
         if merged and c.params["time_s"] - merged[-1].params["time_s"] <= tol:
             m = merged[-1]
             keep = m if abs(m.params["size"]) >= abs(c.params["size"]) else c
+            # the parts' intervals do not hold for their sum: none until it is refitted
             merged[-1] = replace(keep, params={**keep.params, "size": m.params["size"]
-                                               + c.params["size"]})
+                                               + c.params["size"]}, intervals={})
         else:
             merged.append(c)
     return [c for c in out if c.cause != "bias_step"] + merged
@@ -363,9 +364,14 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     if tent:
         # the proposals' shapes refined together (the scan's grid T and times are coarse,
         # and what a misplaced shape leaves behind reads as noise in the test below)
-        tent = _normalise(tent, 2 * len(y) / rate_hz / GRID)
+        tol = 2 * len(y) / rate_hz / GRID
+        tent = _normalise(tent, tol)
         tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
                                                         rate_hz, n_white), tent)
+        # edges the refinement drew to one time are one step: two steps a sample apart are
+        # collinear, their sizes huge and opposite, and read as an excursion they would hide
+        # the step they stand for
+        tent = _normalise(tent, tol)
         # two steps that return to the level before them are tested as one excursion
         tent = _pair_excursions(tent, alpha)
     dropped: list[cz.Candidate] = []
@@ -377,7 +383,9 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         margins = [z / c.threshold for z, c in zip(zs, tent, strict=True)]
         k = int(np.argmin(margins))
         if margins[k] >= 1.0:
-            tent = [replace(c, statistic=z) for c, z in zip(tent, zs, strict=True)]
+            # every one passes its test in the joint fit (a proposal may have come in below
+            # its threshold, or as the edge of an excursion that did not pass)
+            tent = [replace(c, statistic=z, passed=True) for c, z in zip(tent, zs, strict=True)]
             break
         c = tent.pop(k)
         dropped.append(replace(c, passed=False, statistic=zs[k], evidence=c.evidence + (
