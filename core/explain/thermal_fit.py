@@ -76,6 +76,9 @@ JACKKNIFE_GROUPS = 10
 SCAN_POINTS = 1 << 15
 #: DS18B20 conversion time (s): the temperature says nothing faster than this.
 DS18B20_CONVERSION_S = 0.75
+#: The lag filter's start state (``ThermalFit.signal``) is fitted over the record's first this
+#: many lags: e^(−t/τ_L) is below 1e-8 at the end, and a random walk moves the level little.
+START_FIT_LAGS = 20.0
 #: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
 _RHO = 0.5
 
@@ -465,8 +468,14 @@ class ThermalFit:
         """ĉ·(lagged driving channel − its mean) on the slow view (m/s²). The sensor's
         temperature at the record's start is unknown (the lag filter starts at T[0]); with
         the axis ``y`` given, the start-up difference β·e^(−t/τ_L) is fitted to y − ĉu by
-        least squares (with an offset and a drift) and included, so it is not mistaken for
-        a warm-up."""
+        least squares and included, so it is not mistaken for a warm-up.
+
+        β is fitted against the level of the record's first ``START_FIT_LAGS`` lags (an
+        offset and a drift over that stretch), not the whole record's: a random walk or
+        flicker puts the axis's level at the start anywhere from the whole record's line,
+        and a whole-record fit takes that difference into β, leaving −(difference)·(1 −
+        e^(−t/τ_L)) in the residual, a warm-up with the lag's time constant (claimed on 10
+        of 120 coupled axes of the 24 h weekend benchmark)."""
         if self.path is not None and self.path.kind != "one_lag":
             # the path's signal, scaled with the linear coefficient (the engine moves it by
             # its standard error for the removal's covariance)
@@ -479,8 +488,9 @@ class ThermalFit:
             return d
         t = np.arange(len(u)) / self.rate_hz
         e = np.exp(-t / abs(self.lag_s))
-        a = np.column_stack([np.ones_like(t), t, e])
-        coef, *_ = np.linalg.lstsq(a, np.asarray(y, dtype=float) - d, rcond=None)
+        m = min(len(t), max(8, math.ceil(START_FIT_LAGS * abs(self.lag_s) * self.rate_hz)))
+        a = np.column_stack([np.ones(m), t[:m], e[:m]])
+        coef, *_ = np.linalg.lstsq(a, np.asarray(y[:m], dtype=float) - d[:m], rcond=None)
         return d + coef[2] * (e - e.mean())
 
 

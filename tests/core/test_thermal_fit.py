@@ -292,3 +292,26 @@ def test_the_coefficients_slope_over_the_lag_steps_over_a_jump():
     assert abs(neighbours) > 1e-4
     # the jump spread over the interval: 7e-5 over 20 s, 3.5e-6 per s, not 1.4e-4
     assert abs(slope) < 1e-5
+
+
+def test_start_state_is_fitted_against_the_level_at_the_start() -> None:
+    """The lag filter's start state β·e^(−t/τ_L) is fitted against the axis's level over the
+    record's first lags, not against the whole record's line: a random walk leaves the level
+    at the start away from that line, and a whole-record fit took the difference into β, so
+    the residual kept −difference·(1 − e^(−t/τ_L)), a warm-up with the lag's time constant
+    (issue 23: the typical-tempco weekend rows' false "warmup on x"). Here the axis is the
+    coupling (no start-up settling at all) plus a level 5e-4 m/s² away from the rest of the
+    record over its first quarter: β must stay at the settling the data hold, none."""
+    from avard.core.explain.thermal_fit import ThermalFit
+
+    rate, lag, n = 1.0, 300.0, 24 * 3600
+    t = np.arange(n) / rate
+    temps = (21.0 + 0.5 * np.sin(2 * math.pi * t / 1800.0))[:, None]
+    th = ThermalFit("ambient", 0, 2e-4, 1e-5, lag, lag - 20, lag + 20, 20.0, rate)
+    coupled = th.signal(temps)
+    y = coupled + np.where(t < n / 4, 5e-4, 0.0)
+    start = th.signal(temps, y) - coupled
+    # the fitted settling at t = 0 (the start term has its mean taken out; its first value
+    # less its last is β)
+    beta = float(start[0] - start[-1])
+    assert abs(beta) < 1e-6
