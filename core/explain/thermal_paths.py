@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from avard.core.allan.beta import t_two_sided
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
@@ -76,6 +77,9 @@ RATE_SMOOTH_S = 30.0
 #: Contiguous parts: the halves of the held-out choice are parts 0…4 and 5…9; the jackknife
 #: leaves each out in turn.
 PARTS = 10
+#: t₀.₈₄(PARTS − 1): a jackknife standard error from PARTS parts has PARTS − 1 degrees of
+#: freedom, so its 68 % interval is ± this many standard errors, not ± 1.
+T68 = t_two_sided(0.32, PARTS - 1)
 #: Δ(held-out −2 ln L) an extension must win by over one lag (docs/explain.md: on records
 #: whose truth is one lag the extensions' held-out Δ stayed above it).
 HELDOUT_MARGIN = 6.0
@@ -359,6 +363,14 @@ def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
 # the choice
 
 
+def _jk_se(est: NDArray) -> NDArray[np.float64]:
+    """The delete-a-part jackknife standard error of each column of ``est`` (G, p):
+    √((G − 1)/G·Σ(x_(−g) − mean)²)."""
+    G = len(est)
+    return np.asarray(np.sqrt((G - 1) / G * np.sum((est - est.mean(axis=0)) ** 2, axis=0)),
+                      dtype=float)
+
+
 def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
     """θ of trial ``i`` refined coordinate-wise by a parabola in ln(θ) (θ > 0) through its
     grid neighbours along that coordinate (the others fixed)."""
@@ -445,7 +457,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     vh = [_view(h, edf_v, n_v, ok_tau, s_ref) for h in half]
     vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
     n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
-    z_thr = alarm.bonferroni_z(alarm.THERMAL_PATHS, n_ext)
+    z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
     scores: dict[str, PathScore] = {}
     for kind in CANDIDATES:
         ts = per_kind[kind]
@@ -460,22 +472,27 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         devs = np.array([_dev(vw, ix, bb) for ix, bb in zip(idx, fits, strict=True)])
         i = int(np.argmin(devs))
         theta = _refined(ts, devs, i)
-        # jackknife with θ fixed (coefficients) and θ re-chosen (θ)
-        jb = np.array([_fit(v, idx[i]) for v in vjk])
-        G = len(vjk)
-        se = np.sqrt((G - 1) / G * np.sum((jb - jb.mean(axis=0)) ** 2, axis=0))
-        jt = []
-        for v in vjk:
-            dv = np.array([_dev(v, ix, _fit(v, ix)) for ix in idx])
-            jt.append(_refined(ts, dv, int(np.argmin(dv))))
-        jt_a = np.array(jt)
-        tse = np.sqrt((G - 1) / G * np.sum((jt_a - jt_a.mean(axis=0)) ** 2, axis=0))
         n = ts[i].n_terms
+        # jackknife with θ fixed (the extra term's test) and with θ re-chosen in each
+        # delete-a-part fit (θ, and the coefficients' intervals: a dT/dt term and a second
+        # path trade with the first lag at one drive frequency, so with θ fixed their
+        # intervals left the lag's share out and held the truth in 0 of 78)
+        jb = np.array([_fit(v, idx[i]) for v in vjk])
+        se = _jk_se(jb)
+        jt, jr = [], []
+        for v in vjk:
+            fv = [_fit(v, ix) for ix in idx]
+            dv = np.array([_dev(v, ix, bb) for ix, bb in zip(idx, fv, strict=True)])
+            g = int(np.argmin(dv))
+            jt.append(_refined(ts, dv, g))
+            jr.append(fv[g][:n])
+        tse = _jk_se(np.array(jt)) * T68
+        se_iv = np.maximum(se[:n], _jk_se(np.array(jr))) * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
         open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
         scores[kind] = PathScore(
-            kind, held, theta, fits[i][:n], se[:n],
+            kind, held, theta, fits[i][:n], se_iv,
             tuple(float(t - s) for t, s in zip(theta, tse, strict=True)),
             tuple(float(t + s) for t, s in zip(theta, tse, strict=True)),
             z_extra, open_end, ts[i].cols)

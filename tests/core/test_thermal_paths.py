@@ -11,6 +11,8 @@ import pytest
 from avard.core.explain import alarm
 from avard.core.explain.thermal_fit import _axes_reference, fit_thermal_axes, rounding_floor_tau
 from avard.core.explain.thermal_paths import (
+    PARTS,
+    _jk_se,
     _play,
     choose_path,
     min_detectable_path,
@@ -84,6 +86,36 @@ def test_the_sawtooth_rounding_floor_is_above_the_white_one_on_a_slow_room():
 def test_the_paths_share_is_in_the_per_axis_level():
     assert alarm.THERMAL_PATHS > 0
     assert alarm.bonferroni_z(alarm.THERMAL_PATHS, 100) > 4.5
+    # the extra term's z is a jackknife ratio over PARTS parts: Student's t with PARTS − 1
+    # dof (t₉ two-sided at 1e-3 is 4.781 in the tables), far above the normal quantile at a
+    # Bonferroni share
+    assert alarm.bonferroni_t(1e-3, 1, 9) == pytest.approx(4.781, abs=5e-4)
+    assert alarm.bonferroni_t(alarm.THERMAL_PATHS, 100, PARTS - 1) > 9.0
+    assert (alarm.bonferroni_t(alarm.THERMAL_PATHS, 100, PARTS - 1)
+            > 1.8 * alarm.bonferroni_z(alarm.THERMAL_PATHS, 100))
+
+
+def test_a_null_jackknife_z_passes_the_t_threshold_at_its_rate_and_the_normal_one_far_more():
+    # the delete-a-part jackknife of a linear statistic over PARTS parts with no effect: the
+    # ratio estimate/se is t with PARTS − 1 dof, so the t threshold holds its level and the
+    # normal quantile (the old threshold) lets several times the level through
+    rng = np.random.default_rng(23)
+    reps, alpha = 200_000, 1e-3
+    parts = rng.standard_normal((PARTS, reps))
+    est = parts.mean(axis=0)
+    loo = (parts.sum(axis=0) - parts) / (PARTS - 1)  # the mean with each part left out
+    z = np.abs(est) / _jk_se(loo)
+    rate_t = float(np.mean(z >= alarm.bonferroni_t(alpha, 1, PARTS - 1)))
+    rate_n = float(np.mean(z >= alarm.bonferroni_z(alpha, 1)))
+    sd = math.sqrt(alpha * (1 - alpha) / reps)
+    assert abs(rate_t - alpha) < 4 * sd
+    assert rate_n > 5 * alpha
+
+
+def test_a_path_fit_uses_the_t_threshold():
+    y, T = _slow(BASE, 5)
+    pf = _path(y, T)
+    assert pf.z_threshold > 9.0
 
 
 @pytest.mark.parametrize("kind", ["two_path", "quadratic", "rate", "hysteresis"])
