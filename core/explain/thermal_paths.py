@@ -83,6 +83,9 @@ T68 = t_two_sided(0.32, PARTS - 1)
 #: Δ(held-out −2 ln L) an extension must win by over one lag (docs/explain.md: on records
 #: whose truth is one lag the extensions' held-out Δ stayed above it).
 HELDOUT_MARGIN = 6.0
+#: Δ(−2 ln L) on the whole record within which grid points of θ count as fits as good as
+#: the best for the intervals (the profile over θ): the held-out choice's own margin.
+PROFILE_DELTA = HELDOUT_MARGIN
 #: and further, for a candidate whose θ sits at the end of its grid (open).
 OPEN_MARGIN = 6.0
 #: Most block means the fit runs on (as the lag scan).
@@ -276,6 +279,12 @@ class PathScore:
     z_extra: float
     open_end: bool
     cols: tuple[Column, ...] = ()
+    #: the coefficients' 68 % interval (the jackknife's, widened to the profile over θ)
+    beta_lo: tuple[float, ...] = ()
+    beta_hi: tuple[float, ...] = ()
+    #: False: a coefficient changes sign over the θ the data cannot tell from the best, so
+    #: the parameters are model-dependent and carry no interval
+    resolved: bool = True
 
 
 @dataclass
@@ -352,11 +361,12 @@ def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
     iv: dict[str, list[float]] = {}
     for i, k in enumerate(bn):
         p[k] = float(s.beta[i])
-        iv[k] = [float(s.beta[i] - s.beta_se[i]), float(s.beta[i] + s.beta_se[i])]
+        iv[k] = ([s.beta_lo[i], s.beta_hi[i]] if s.beta_lo else
+                 [float(s.beta[i] - s.beta_se[i]), float(s.beta[i] + s.beta_se[i])])
     for i, k in enumerate(tn):
         p[k] = float(s.theta[i])
         iv[k] = [float(s.theta_lo[i]), float(s.theta_hi[i])]
-    return p, iv
+    return p, (iv if s.resolved else {})
 
 
 # --------------------------------------------------------------------------------------------
@@ -369,6 +379,18 @@ def _jk_se(est: NDArray) -> NDArray[np.float64]:
     G = len(est)
     return np.asarray(np.sqrt((G - 1) / G * np.sum((est - est.mean(axis=0)) ** 2, axis=0)),
                       dtype=float)
+
+
+def _grid_cell(ts: list[Trial], i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per coordinate of θ, half way from trial ``i``'s grid value to its neighbours along
+    that coordinate's grid (the value itself at the grid's ends)."""
+    lo, hi = [], []
+    for d, x in enumerate(ts[i].theta):
+        vals = sorted({t.theta[d] for t in ts})
+        k = vals.index(x)
+        lo.append(0.5 * (vals[k - 1] + x) if k > 0 else x)
+        hi.append(0.5 * (vals[k + 1] + x) if k + 1 < len(vals) else x)
+    return np.array(lo), np.array(hi)
 
 
 def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
@@ -490,12 +512,29 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         se_iv = np.maximum(se[:n], _jk_se(np.array(jr))) * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
+        # the profile over θ: every grid point the held-out choice could not tell from the
+        # best (deviance within HELDOUT_MARGIN) is as good a fit, so its coefficients and θ
+        # belong in the intervals; a coefficient whose sign flips across them is not resolved
+        flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + PROFILE_DELTA]
+        pb = np.array([fits[j][:n] for j in flat])
+        pt = np.array([ts[j].theta for j in flat])
+        resolved = kind == "one_lag" or not bool(np.any((pb.min(axis=0) < 0)
+                                                        & (pb.max(axis=0) > 0)))
         open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
+        b_lo, b_hi = fits[i][:n] - se_iv, fits[i][:n] + se_iv
+        t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
+        # never narrower than the grid resolves: to half way to the neighbouring grid
+        # points at least (every part re-choosing the same grid point gave a zero width)
+        g_lo, g_hi = _grid_cell(ts, i)
+        t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
+        if kind != "one_lag":
+            b_lo, b_hi = np.minimum(b_lo, pb.min(axis=0)), np.maximum(b_hi, pb.max(axis=0))
+            t_lo, t_hi = np.minimum(t_lo, pt.min(axis=0)), np.maximum(t_hi, pt.max(axis=0))
         scores[kind] = PathScore(
             kind, held, theta, fits[i][:n], se_iv,
-            tuple(float(t - s) for t, s in zip(theta, tse, strict=True)),
-            tuple(float(t + s) for t, s in zip(theta, tse, strict=True)),
-            z_extra, open_end, ts[i].cols)
+            tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
+            z_extra, open_end, ts[i].cols, tuple(float(x) for x in b_lo),
+            tuple(float(x) for x in b_hi), resolved)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
     none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
@@ -524,6 +563,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             notes.append("not told apart on this record from " + ", ".join(rivals)
                          + f" (held out within {HELDOUT_MARGIN:g}: at one drive frequency a "
                          "second path and a dT/dt term both shift gain and phase)")
+    if not best.resolved:
+        notes.append(f"parameters not resolved (model-dependent, no interval): a coefficient "
+                     f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
+                     "best (the extra term trades with the lag at one drive frequency)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
 
 
