@@ -30,16 +30,20 @@ minimises it (iteratively reweighted: weights ν_k/r_k); θ is the grid point of
 record and its deviance measured on the other half with those values (β and θ fixed); both
 folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``one_lag``
 (and over no coupling at all) only when its H is lower by ``HELDOUT_MARGIN`` and its extra
-term passes its own test (a Wald z from the delete-a-part jackknife ≥
-``alarm.bonferroni_z(alarm.THERMAL_PATHS, trials)``, the trials all grid points of all
-extensions): the false-alarm budget per axis holds the paths'
+term passes its own test (a Wald z from the delete-a-part jackknife, Student's t with
+``PARTS`` − 1 dof, ≥ ``alarm.bonferroni_t(alarm.THERMAL_PATHS, trials, PARTS − 1)``, the
+trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
 share. A candidate whose θ sits at the end of its grid is open, and is preferred over one
 with an interior optimum only when better by ``OPEN_MARGIN`` in addition.
 
-**Intervals (68 %).** Coefficients: delete-a-part jackknife over the ``PARTS`` parts with θ
-fixed (red noise breaks the analytic ones, as in ``thermal_fit``). θ: the jackknife of θ
-re-chosen with each part left out, each best grid point refined by a parabola in ln L
-through its neighbours (continuous between grid points).
+**Intervals (68 %, ± ``T68`` jackknife standard errors).** Coefficients: the larger of the
+delete-a-part jackknife over the ``PARTS`` parts with θ fixed and with θ re-chosen (red
+noise breaks the analytic ones, as in ``thermal_fit``), widened to the profile over θ (the
+coefficients at every grid point within ``PROFILE_DELTA`` of the best deviance). θ: the
+jackknife of θ re-chosen with each part left out, each best grid point refined by a
+parabola in ln L through its neighbours, widened to the same profile and to half way to the
+neighbouring grid points at least. A coefficient that changes sign over the profile: the
+parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
 """
 
 from __future__ import annotations
