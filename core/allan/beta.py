@@ -221,6 +221,12 @@ def f_isf(q: float, dfn: float, dfd: float) -> float:
     return _f_from_logit(t, dfn, dfd)
 
 
+def t_two_sided(q: float, dof: float) -> float:
+    """|t| with Pr(|T| > t) = q for Student's t with ``dof`` degrees of freedom: T² is
+    F(1, dof), so t = √(F(1, dof) upper quantile at q) (A&S 26.7.8 via 26.6.2)."""
+    return math.sqrt(f_isf(q, 1.0, dof))
+
+
 def f_ppf(p: float, dfn: float, dfd: float) -> float:
     """The F(ν₁ = dfn, ν₂ = dfd) lower quantile: f with Pr(F ≤ f) = p (scipy's ``fdtri``)."""
     _check_probability(p, "f_ppf")

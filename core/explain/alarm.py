@@ -15,7 +15,9 @@ the sum of the shares), and each search splits its share again over its own tria
 - ``DRIFT``: the time-domain likelihood ratio of a drift against a random walk, χ²(1);
 - ``THERMAL_PATHS``: the extensions of the one-lag thermal model (two paths, quadratic,
   dT/dt, hysteresis, ``thermal_paths``): the extra term's jackknife z at this share
-  Bonferroni-split over every grid point of every extension;
+  Bonferroni-split over every grid point of every extension (``bonferroni_t``: a
+  delete-a-part jackknife over G parts makes the ratio Student's t with G − 1 degrees of
+  freedom, not a normal; the normal quantile let ~10× the share through);
 - ``GAUSS_MARKOV``: Davies' bound on the maximum of the T scan
   (``gauss_markov.Z_GAUSS_MARKOV``).
 
@@ -29,8 +31,10 @@ from __future__ import annotations
 
 from statistics import NormalDist
 
+from avard.core.allan.beta import t_two_sided
+
 __all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "TEMPERATURE", "THERMAL_PATHS",
-           "TRANSIENTS", "bonferroni_z"]
+           "TRANSIENTS", "bonferroni_t", "bonferroni_z"]
 
 TEMPERATURE = 2.5e-4
 TRANSIENTS = 5e-4
@@ -45,3 +49,10 @@ def bonferroni_z(alpha: float, trials: int) -> float:
     """|z| a two-sided Gaussian statistic must reach so that the largest of ``trials`` of
     them passes by chance at most ``alpha`` of the time (Φ⁻¹(1 − α/(2·trials)))."""
     return NormalDist().inv_cdf(1.0 - alpha / (2.0 * max(1, trials)))
+
+
+def bonferroni_t(alpha: float, trials: int, dof: int) -> float:
+    """|t| a two-sided Student-t statistic with ``dof`` degrees of freedom (a jackknife
+    ratio over dof + 1 parts) must reach so that the largest of ``trials`` of them passes by
+    chance at most ``alpha`` of the time (the t quantile at α/(2·trials) per side)."""
+    return t_two_sided(alpha / max(1, trials), float(dof))

@@ -520,7 +520,8 @@ class ThermalFit:
         if self.path is not None and self.path.kind != "one_lag":
             p, iv = self.path.params()
             return Finding("temperature", False, p, iv, self.z, self.threshold,
-                           self.evidence(), channel=self.channel, mechanism=self.mechanism)
+                           self.evidence(), channel=self.channel, mechanism=self.mechanism,
+                           model_dependent=not self.path.chosen.resolved)
         return Finding("temperature", False,
                        {"coefficient": self.coefficient, "lag_s": self.lag_s},
                        {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},

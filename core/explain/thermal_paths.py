@@ -30,16 +30,20 @@ minimises it (iteratively reweighted: weights ν_k/r_k); θ is the grid point of
 record and its deviance measured on the other half with those values (β and θ fixed); both
 folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``one_lag``
 (and over no coupling at all) only when its H is lower by ``HELDOUT_MARGIN`` and its extra
-term passes its own test (a Wald z from the delete-a-part jackknife ≥
-``alarm.bonferroni_z(alarm.THERMAL_PATHS, trials)``, the trials all grid points of all
-extensions): the false-alarm budget per axis holds the paths'
+term passes its own test (a Wald z from the delete-a-part jackknife, Student's t with
+``PARTS`` − 1 dof, ≥ ``alarm.bonferroni_t(alarm.THERMAL_PATHS, trials, PARTS − 1)``, the
+trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
 share. A candidate whose θ sits at the end of its grid is open, and is preferred over one
 with an interior optimum only when better by ``OPEN_MARGIN`` in addition.
 
-**Intervals (68 %).** Coefficients: delete-a-part jackknife over the ``PARTS`` parts with θ
-fixed (red noise breaks the analytic ones, as in ``thermal_fit``). θ: the jackknife of θ
-re-chosen with each part left out, each best grid point refined by a parabola in ln L
-through its neighbours (continuous between grid points).
+**Intervals (68 %, ± ``T68`` jackknife standard errors).** Coefficients: the larger of the
+delete-a-part jackknife over the ``PARTS`` parts with θ fixed and with θ re-chosen (red
+noise breaks the analytic ones, as in ``thermal_fit``), widened to the profile over θ (the
+coefficients at every grid point within ``PROFILE_DELTA`` of the best deviance). θ: the
+jackknife of θ re-chosen with each part left out, each best grid point refined by a
+parabola in ln L through its neighbours, widened to the same profile and to half way to the
+neighbouring grid points at least. A coefficient that changes sign over the profile: the
+parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from avard.core.allan.beta import t_two_sided
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
@@ -76,9 +81,15 @@ RATE_SMOOTH_S = 30.0
 #: Contiguous parts: the halves of the held-out choice are parts 0…4 and 5…9; the jackknife
 #: leaves each out in turn.
 PARTS = 10
+#: t₀.₈₄(PARTS − 1): a jackknife standard error from PARTS parts has PARTS − 1 degrees of
+#: freedom, so its 68 % interval is ± this many standard errors, not ± 1.
+T68 = t_two_sided(0.32, PARTS - 1)
 #: Δ(held-out −2 ln L) an extension must win by over one lag (docs/explain.md: on records
 #: whose truth is one lag the extensions' held-out Δ stayed above it).
 HELDOUT_MARGIN = 6.0
+#: Δ(−2 ln L) on the whole record within which grid points of θ count as fits as good as
+#: the best for the intervals (the profile over θ): the held-out choice's own margin.
+PROFILE_DELTA = HELDOUT_MARGIN
 #: and further, for a candidate whose θ sits at the end of its grid (open).
 OPEN_MARGIN = 6.0
 #: Most block means the fit runs on (as the lag scan).
@@ -272,6 +283,12 @@ class PathScore:
     z_extra: float
     open_end: bool
     cols: tuple[Column, ...] = ()
+    #: the coefficients' 68 % interval (the jackknife's, widened to the profile over θ)
+    beta_lo: tuple[float, ...] = ()
+    beta_hi: tuple[float, ...] = ()
+    #: False: a coefficient changes sign over the θ the data cannot tell from the best, so
+    #: the parameters are model-dependent and carry no interval
+    resolved: bool = True
 
 
 @dataclass
@@ -348,15 +365,36 @@ def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
     iv: dict[str, list[float]] = {}
     for i, k in enumerate(bn):
         p[k] = float(s.beta[i])
-        iv[k] = [float(s.beta[i] - s.beta_se[i]), float(s.beta[i] + s.beta_se[i])]
+        iv[k] = ([s.beta_lo[i], s.beta_hi[i]] if s.beta_lo else
+                 [float(s.beta[i] - s.beta_se[i]), float(s.beta[i] + s.beta_se[i])])
     for i, k in enumerate(tn):
         p[k] = float(s.theta[i])
         iv[k] = [float(s.theta_lo[i]), float(s.theta_hi[i])]
-    return p, iv
+    return p, (iv if s.resolved else {})
 
 
 # --------------------------------------------------------------------------------------------
 # the choice
+
+
+def _jk_se(est: NDArray) -> NDArray[np.float64]:
+    """The delete-a-part jackknife standard error of each column of ``est`` (G, p):
+    √((G − 1)/G·Σ(x_(−g) − mean)²)."""
+    G = len(est)
+    return np.asarray(np.sqrt((G - 1) / G * np.sum((est - est.mean(axis=0)) ** 2, axis=0)),
+                      dtype=float)
+
+
+def _grid_cell(ts: list[Trial], i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per coordinate of θ, half way from trial ``i``'s grid value to its neighbours along
+    that coordinate's grid (the value itself at the grid's ends)."""
+    lo, hi = [], []
+    for d, x in enumerate(ts[i].theta):
+        vals = sorted({t.theta[d] for t in ts})
+        k = vals.index(x)
+        lo.append(0.5 * (vals[k - 1] + x) if k > 0 else x)
+        hi.append(0.5 * (vals[k + 1] + x) if k + 1 < len(vals) else x)
+    return np.array(lo), np.array(hi)
 
 
 def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
@@ -445,7 +483,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     vh = [_view(h, edf_v, n_v, ok_tau, s_ref) for h in half]
     vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
     n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
-    z_thr = alarm.bonferroni_z(alarm.THERMAL_PATHS, n_ext)
+    z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
     scores: dict[str, PathScore] = {}
     for kind in CANDIDATES:
         ts = per_kind[kind]
@@ -460,25 +498,47 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         devs = np.array([_dev(vw, ix, bb) for ix, bb in zip(idx, fits, strict=True)])
         i = int(np.argmin(devs))
         theta = _refined(ts, devs, i)
-        # jackknife with θ fixed (coefficients) and θ re-chosen (θ)
-        jb = np.array([_fit(v, idx[i]) for v in vjk])
-        G = len(vjk)
-        se = np.sqrt((G - 1) / G * np.sum((jb - jb.mean(axis=0)) ** 2, axis=0))
-        jt = []
-        for v in vjk:
-            dv = np.array([_dev(v, ix, _fit(v, ix)) for ix in idx])
-            jt.append(_refined(ts, dv, int(np.argmin(dv))))
-        jt_a = np.array(jt)
-        tse = np.sqrt((G - 1) / G * np.sum((jt_a - jt_a.mean(axis=0)) ** 2, axis=0))
         n = ts[i].n_terms
+        # jackknife with θ fixed (the extra term's test) and with θ re-chosen in each
+        # delete-a-part fit (θ, and the coefficients' intervals: a dT/dt term and a second
+        # path trade with the first lag at one drive frequency, so with θ fixed their
+        # intervals left the lag's share out and held the truth in 0 of 78)
+        jb = np.array([_fit(v, idx[i]) for v in vjk])
+        se = _jk_se(jb)
+        jt, jr = [], []
+        for v in vjk:
+            fv = [_fit(v, ix) for ix in idx]
+            dv = np.array([_dev(v, ix, bb) for ix, bb in zip(idx, fv, strict=True)])
+            g = int(np.argmin(dv))
+            jt.append(_refined(ts, dv, g))
+            jr.append(fv[g][:n])
+        tse = _jk_se(np.array(jt)) * T68
+        se_iv = np.maximum(se[:n], _jk_se(np.array(jr))) * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
+        # the profile over θ: every grid point the held-out choice could not tell from the
+        # best (deviance within HELDOUT_MARGIN) is as good a fit, so its coefficients and θ
+        # belong in the intervals; a coefficient whose sign flips across them is not resolved
+        flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + PROFILE_DELTA]
+        pb = np.array([fits[j][:n] for j in flat])
+        pt = np.array([ts[j].theta for j in flat])
+        resolved = kind == "one_lag" or not bool(np.any((pb.min(axis=0) < 0)
+                                                        & (pb.max(axis=0) > 0)))
         open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
+        b_lo, b_hi = fits[i][:n] - se_iv, fits[i][:n] + se_iv
+        t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
+        # never narrower than the grid resolves: to half way to the neighbouring grid
+        # points at least (every part re-choosing the same grid point gave a zero width)
+        g_lo, g_hi = _grid_cell(ts, i)
+        t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
+        if kind != "one_lag":
+            b_lo, b_hi = np.minimum(b_lo, pb.min(axis=0)), np.maximum(b_hi, pb.max(axis=0))
+            t_lo, t_hi = np.minimum(t_lo, pt.min(axis=0)), np.maximum(t_hi, pt.max(axis=0))
         scores[kind] = PathScore(
-            kind, held, theta, fits[i][:n], se[:n],
-            tuple(float(t - s) for t, s in zip(theta, tse, strict=True)),
-            tuple(float(t + s) for t, s in zip(theta, tse, strict=True)),
-            z_extra, open_end, ts[i].cols)
+            kind, held, theta, fits[i][:n], se_iv,
+            tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
+            z_extra, open_end, ts[i].cols, tuple(float(x) for x in b_lo),
+            tuple(float(x) for x in b_hi), resolved)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
     none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
@@ -507,6 +567,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             notes.append("not told apart on this record from " + ", ".join(rivals)
                          + f" (held out within {HELDOUT_MARGIN:g}: at one drive frequency a "
                          "second path and a dT/dt term both shift gain and phase)")
+    if not best.resolved:
+        notes.append(f"parameters not resolved (model-dependent, no interval): a coefficient "
+                     f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
+                     "best (the extra term trades with the lag at one drive frequency)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
 
 

@@ -14,6 +14,7 @@ from avard.core.allan.beta import (
     f_isf,
     f_isf_array,
     f_ppf,
+    t_two_sided,
 )
 from avard.core.allan.chi2 import chi2_sf
 from avard.core.analysis.spectrum import line_threshold
@@ -154,3 +155,17 @@ def test_line_threshold_is_the_f_upper_quantile() -> None:
     np.testing.assert_array_equal(f_isf_array(0.01 / n_bins, nu, nu_bg), thr)
     assert float(line_threshold(n_bins, 40, 60.0)) == pytest.approx(
         float(fdtri(72.0, 60 * 72.0 * 2 / math.pi, 1.0 - 0.01 / n_bins)), rel=1e-8)
+
+
+def test_student_t_two_sided_quantile_in_closed_form_and_against_scipy() -> None:
+    from scipy.stats import t as student_t
+
+    # one dof (Cauchy): Pr(|T| > t) = 1 − (2/π)·atan t; two dof: 1 − t/√(2 + t²)
+    for q in (0.5, 0.05, 1e-3, 1e-6):
+        assert t_two_sided(q, 1) == pytest.approx(math.tan(0.5 * math.pi * (1 - q)), rel=1e-9)
+        t2 = t_two_sided(q, 2)
+        assert 1 - t2 / math.sqrt(2 + t2 * t2) == pytest.approx(q, rel=1e-9)
+    # the published table value t₉ at two-sided 1e-3 is 4.781
+    assert t_two_sided(1e-3, 9) == pytest.approx(4.781, abs=5e-4)
+    for q, dof in ((0.32, 9), (1e-6, 9), (0.01, 30)):
+        assert t_two_sided(q, dof) == pytest.approx(float(student_t.isf(q / 2, dof)), rel=1e-9)

@@ -11,10 +11,14 @@ import pytest
 from avard.core.explain import alarm
 from avard.core.explain.thermal_fit import _axes_reference, fit_thermal_axes, rounding_floor_tau
 from avard.core.explain.thermal_paths import (
+    PARTS,
+    _grid_cell,
+    _jk_se,
     _play,
     choose_path,
     min_detectable_path,
     slow_rounding_floor,
+    trials,
 )
 
 from tests.support.weekend import Weekend, make
@@ -84,6 +88,36 @@ def test_the_sawtooth_rounding_floor_is_above_the_white_one_on_a_slow_room():
 def test_the_paths_share_is_in_the_per_axis_level():
     assert alarm.THERMAL_PATHS > 0
     assert alarm.bonferroni_z(alarm.THERMAL_PATHS, 100) > 4.5
+    # the extra term's z is a jackknife ratio over PARTS parts: Student's t with PARTS − 1
+    # dof (t₉ two-sided at 1e-3 is 4.781 in the tables), far above the normal quantile at a
+    # Bonferroni share
+    assert alarm.bonferroni_t(1e-3, 1, 9) == pytest.approx(4.781, abs=5e-4)
+    assert alarm.bonferroni_t(alarm.THERMAL_PATHS, 100, PARTS - 1) > 9.0
+    assert (alarm.bonferroni_t(alarm.THERMAL_PATHS, 100, PARTS - 1)
+            > 1.8 * alarm.bonferroni_z(alarm.THERMAL_PATHS, 100))
+
+
+def test_a_null_jackknife_z_passes_the_t_threshold_at_its_rate_and_the_normal_one_far_more():
+    # the delete-a-part jackknife of a linear statistic over PARTS parts with no effect: the
+    # ratio estimate/se is t with PARTS − 1 dof, so the t threshold holds its level and the
+    # normal quantile (the old threshold) lets several times the level through
+    rng = np.random.default_rng(23)
+    reps, alpha = 200_000, 1e-3
+    parts = rng.standard_normal((PARTS, reps))
+    est = parts.mean(axis=0)
+    loo = (parts.sum(axis=0) - parts) / (PARTS - 1)  # the mean with each part left out
+    z = np.abs(est) / _jk_se(loo)
+    rate_t = float(np.mean(z >= alarm.bonferroni_t(alpha, 1, PARTS - 1)))
+    rate_n = float(np.mean(z >= alarm.bonferroni_z(alpha, 1)))
+    sd = math.sqrt(alpha * (1 - alpha) / reps)
+    assert abs(rate_t - alpha) < 4 * sd
+    assert rate_n > 5 * alpha
+
+
+def test_a_path_fit_uses_the_t_threshold():
+    y, T = _slow(BASE, 5)
+    pf = _path(y, T)
+    assert pf.z_threshold > 9.0
 
 
 @pytest.mark.parametrize("kind", ["two_path", "quadratic", "rate", "hysteresis"])
@@ -113,3 +147,33 @@ def test_a_null_axis_claims_no_path():
     th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
     assert not th.passed
     assert th.path is None
+
+
+def test_a_rate_term_the_lag_can_trade_with_is_reported_as_not_resolved_without_interval():
+    # c·T + r·dT/dt at one drive frequency: the rate term and the first lag trade along a
+    # ridge (a lead is either), so over the lags as good as the best the coefficient changes
+    # sign; before, c and r came out wrong with ±3 % intervals that held the truth in 0/78
+    y, T = _slow(replace(BASE, rate_coupling=1.0), 5)
+    pf = _path(y, T)
+    assert pf.kind == "rate"
+    assert not pf.chosen.resolved
+    p, iv = pf.params()
+    assert "rate_coupling" in p and iv == {}
+    assert "not resolved" in pf.summary()
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
+    f = th.finding()
+    assert f.mechanism == "rate" and f.model_dependent and f.intervals == {}
+
+
+def test_a_lag_interval_is_never_narrower_than_its_grid_cell():
+    # one lag chosen at a grid point every delete-a-part fit re-chooses: the interval spans
+    # half way to the neighbouring grid points at least, never zero width
+    y, T = _slow(replace(BASE, rate_coupling=0.25), 5)
+    s = _path(y, T).scores["one_lag"]
+    assert s.theta_lo[0] <= s.theta[0] <= s.theta_hi[0]
+    assert s.theta_hi[0] - s.theta_lo[0] > 50.0  # the grid's neighbours here are ≥ 100 s off
+    lo, hi = _grid_cell(trials("one_lag", [0.0, 15.0, 30.0, 60.0]), 2)
+    assert (lo[0], hi[0]) == (22.5, 45.0)
+    # (0, 15): L2 = 15 is the shortest L2 there is (L2 > L1)
+    lo, hi = _grid_cell(trials("two_path", [0.0, 15.0, 30.0, 60.0]), 0)
+    assert lo.tolist() == [0.0, 15.0] and hi.tolist() == [7.5, 22.5]
