@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from avard.core.allan import kernels
+from avard.core.allan.beta import t_two_sided
 from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
@@ -917,8 +918,6 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     that draws the interval: a true lag 0 came out at 26 s [24.7, 28.8] (68 %), and the
     intervals of 32 records held the true lag in none. The jackknife measures how far the
     best lag moves with the data, whatever moves it."""
-    from scipy.stats import t as student_t
-
     lags = [p.lag for p in scan]
     best, _i = _peak(lags, np.array([p.z for p in scan]))
     sub = [p for p in scan if len(p.zg)]
@@ -930,7 +929,7 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     picks = [_smooth_peak(sl, zg[:, g]) for g in range(G)]
     lg = np.array([p[0] for p in picks])
     se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
-    se *= float(student_t.ppf(0.84, G - 1))
+    se *= t_two_sided(0.32, G - 1)  # t₀.₈₄ of the jackknife's G − 1 dof
     # a leave-one-out lag on the window's end says the lag may be beyond it: that end of the
     # interval reaches the window's end at least, and is open when that is the search's end
     at_lo = any(p[1] and p[0] <= sl[0] for p in picks)
