@@ -21,7 +21,7 @@ from html import escape
 from typing import Any
 
 import numpy as np
-from avard.core.model.fit import NOT_RESOLVED
+from avard.core.analysis.live_fit import is_not_resolved
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 from avard.daemon.web.state import SILENT_S, RunState, Series, Snapshot
@@ -462,7 +462,7 @@ def _term_cell(est: Any, T: float, target: float) -> str:
         hi = est.hi
         bound = f" <small>(&lt; {_e(hi)} {unit})</small>" if isinstance(hi, float) else ""
         return f'<span class="absent">absent</span>{bound}'
-    if getattr(est, "note", None) == NOT_RESOLVED:  # only the longest τ shows it
+    if is_not_resolved(getattr(est, "note", None)):  # no interval, no time to target
         return (f"{_e(est.value)} <small>{unit}</small>"
                 f'<br><small class="absent">not yet resolved</small>')
     more = time_to_target(est.value, est.lo, est.hi, T, target)
