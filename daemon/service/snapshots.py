@@ -144,12 +144,15 @@ def snapshot_fits(snap: AllanSnapshot, *, filter_corner_hz: float | None = None
     except ImportError:  # the analysis side is optional for a watcher
         return {}
     out = {}
+    # the rounding of the published counts, as analyze takes it from the recording's scale
+    kw = {} if snap.lsb_mps2 is None else {"rounding_lsb": snap.lsb_mps2}
     for c, name in enumerate(snap.names):
         if name not in ACCEL_CHANNELS:
             continue
         try:
             out[name] = fit_channel(snap.channel(c), ci=snap.ci,
-                                    filter_corner_hz=filter_corner_hz or snap.rate_hz / 4)
+                                    filter_corner_hz=filter_corner_hz or snap.rate_hz / 4,
+                                    **kw)
         except (AvardError, IndexError, ValueError, TypeError) as exc:
             log.debug("no fit for %s: %s", name, exc)
     return out

@@ -29,8 +29,12 @@ def _claimed(fit) -> set[str]:
     return {k for k, t in fit.terms.items() if t.present and t.note is None}
 
 
+LSB = make_config("quiet-lab").lsb_mps2
+
+
 def _live(y: np.ndarray, rate: float, gap_at: int | None = None) -> dict:
-    """The service's snapshot fit: the cascade fed one minute a block, as the service does."""
+    """The service's snapshot: the cascade fed one minute a block, with the feed's scale
+    (the rounding LSB analyze reads from the record), as the service publishes it."""
     sa = StreamingAllan(3, rate, names=AXES)
     step = int(60 * rate)
     for i in range(0, y.shape[0], step):
@@ -40,7 +44,7 @@ def _live(y: np.ndarray, rate: float, gap_at: int | None = None) -> dict:
             sa.update(y[gap_at:i + step])
         else:
             sa.update(y[i:i + step])
-    return sa.snapshot().to_dict()
+    return {**sa.snapshot().to_dict(), "lsb_mps2": LSB}
 
 
 def _record(tmp_path: Path, preset: str, minutes: float, seed: int,
@@ -88,7 +92,7 @@ def test_the_live_fit_claims_no_term_analyze_does_not(tmp_path, seed, axis) -> N
     y). Terms both claim agree: the centre within half of analyze's half-width, the widths
     (each fit's Birge factor √(χ²/dof) divided out) within 10 %. What separates the two is
     the cascade's decimation alone (differences every m/8 samples above m = 8, ≥ 98 % of
-    the OADEV's EDF; the fits' options, the rounding LSB aside, are analyze's)."""
+    the OADEV's EDF; the fits' options, the rounding LSB included, are analyze's)."""
     path, y, rate = _record(tmp_path, "quiet-lab", 55, seed)
     for _ax, _t, centre, width in _compare(path, y, rate):
         assert abs(centre) <= 0.5 and abs(width - 1) <= 0.1, (_ax, _t, centre, width)
