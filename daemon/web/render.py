@@ -270,13 +270,14 @@ def _legend(items: Sequence[tuple[str, str]], *, dashed_last: bool = False) -> s
 
 
 def adev_html(state: RunState) -> str:
-    snap = state.snapshot
+    latest = state.snapshot
+    snap = state.shown()   # its fit's intervals (analyze's EDF rule) once it is fitted
     if snap is None:
         return '<p class="waiting">No Allan snapshot yet (the service sends one every ' \
                '<code>allan.snapshot_interval_s</code>).</p>'
     ci = snap.data.ci
     fitted = state.fitted
-    note = ("model curve: fit of this snapshot" if fitted is snap else
+    note = ("model curve: fit of this snapshot" if fitted is latest else
             "model curve: fit of an earlier snapshot" if fitted is not None else
             "model curve: fit pending")
     out = [f'<p class="note">{snap.n_samples} samples = {fmt_duration(snap.duration_s)} of '
@@ -478,7 +479,7 @@ def _when(more: float | None) -> str:
 
 def targets_html(state: RunState, target: float) -> str:
     """Per τ and axis: relative half-width of the ADEV interval and the time until ±target."""
-    snap = state.snapshot
+    snap = state.shown()
     if snap is None:
         return '<p class="waiting">Waiting for an Allan snapshot.</p>'
     d = snap.data

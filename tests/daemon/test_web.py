@@ -216,6 +216,28 @@ def test_the_adev_plot_has_every_finite_point_of_every_axis_and_the_model():
     assert 'data-term="velocity_random_walk"' in html and "absent" in html
 
 
+def test_the_fitted_snapshot_is_drawn_with_the_intervals_its_fit_supports():
+    """Once the latest snapshot is fitted, the page draws its ADEV with the EDF the fit
+    supports (analyze's rule, signal_edf; live_fit.fit_channel), the same numbers the
+    service's fit record and watch give; before, the snapshot's own."""
+    from avard.daemon.service.snapshots import fit_intervals, fit_record, snapshot_fits
+
+    state = RunState()
+    d = snapshot_dict()
+    state.set_snapshot({"snapshot": d})
+    snap = state.snapshot
+    assert state.shown() is snap
+    fits = snapshot_fits(snap.data)
+    state.set_fits({k: cf.fit for k, cf in fits.items()}, snap, fit_intervals(snap.data, fits))
+    shown = state.shown().data
+    record = fit_record({"snapshot": d})
+    for c, axis in enumerate("xyz"):
+        np.testing.assert_array_equal(shown.lo[:, c], fits[axis].allan.lo)
+        np.testing.assert_allclose(shown.hi[:, c], record[axis]["hi"], rtol=1e-12)
+    assert np.any(shown.edf[:, :3] != snap.data.edf[:, :3])  # the fit raised some EDF
+    assert "fit of this snapshot" in render.adev_html(state)
+
+
 def test_time_to_target_per_tau_follows_the_interval_width():
     state = RunState()
     state.set_snapshot({"snapshot": snapshot_dict()})
