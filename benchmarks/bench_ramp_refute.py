@@ -3,7 +3,8 @@
 Two rows:
 
 * **quiet-lab (no ramp)**: seeds × 41 and 55 min × 3 axes. Counted: the live snapshot fit
-  (cascade, one snapshot a minute) claiming a rate ramp resolved; ``avard analyze`` with its
+  (cascade, one snapshot a minute) claiming a rate ramp resolved, or any term analyze of
+  the same samples does not claim; ``avard analyze`` with its
   default OADEV (to N/4) claiming it, with the TOTVAR test out to T/2
   (core/analysis/long_tau_check.py) and without it; analyze's claims the live fit does not
   make.
@@ -51,7 +52,8 @@ def quiet_lab_row(seeds: int, tmp: Path) -> dict[str, int]:
     from avard.core.sim.simulate import SensorSimulator
     from avard.daemon.service.snapshots import fit_snapshot
 
-    out = {"fits": 0, "live": 0, "analyze": 0, "analyze_without_test": 0, "analyze_not_live": 0}
+    out = {"fits": 0, "live": 0, "analyze": 0, "analyze_without_test": 0, "analyze_not_live": 0,
+           "live_any_term_analyze_not": 0}
     cfg = make_config("quiet-lab")
     rate = cfg.rate_hz
     for seed in range(seeds):
@@ -73,6 +75,11 @@ def quiet_lab_row(seeds: int, tmp: Path) -> dict[str, int]:
                 out["analyze"] += an
                 out["analyze_without_test"] += _claimed(off.channels[axis].fit.terms["rate_ramp"])
                 out["analyze_not_live"] += an and not lv
+                # any term (N, B, K, R, Q) the live fit claims and analyze of the same
+                # samples does not (issue 24: one fit, live and offline)
+                claims = {t for t, e in fit.terms.items() if _claimed(e)}
+                out["live_any_term_analyze_not"] += bool(claims - {
+                    t for t, e in on.channels[axis].fit.terms.items() if _claimed(e)})
     return out
 
 
