@@ -122,7 +122,13 @@ def test_minutes_of_quiet_lab_show_no_long_tau_term_with_an_interval(tmp_path) -
             for ax in ("x", "y"):
                 assert not (_claimed(fits[ax].fit) & set(LONG_TAU_TERMS)), (seed, minutes, ax)
             view = WatchView(clock=lambda: 0.0)
-            view.set_snapshot({"snapshot": snap, "fit": fit_record({"snapshot": snap})})
+            record = fit_record({"snapshot": snap})
+            view.set_snapshot({"snapshot": snap, "fit": record})
+            # watch draws the ADEV bars the service's fit sent (analyze's EDF rule)
+            for c, ax in enumerate(AXES):
+                assert view.snapshot is not None
+                np.testing.assert_array_equal(view.snapshot.hi[:, c], record[ax]["hi"])
+                np.testing.assert_array_equal(fits[ax].allan.hi, record[ax]["hi"])
             channel = ""
             for line in view._render_fit()[0]:
                 if line.startswith("  ") and line.strip().endswith(":"):
