@@ -20,10 +20,18 @@ with that much to spare (``decimation_guard``):
   a claimed term moved by 0.07 (standard deviation) between the two curves on 78 axes.
 * **another reading as good.** A claimed bias instability, rate random walk or rate ramp
   (the terms that make the long end of the curve) is fitted away: when the curve refitted
-  without it (the other terms free to take its place) is within the presence test's
-  margin in Gaussian likelihood (χ² + ln det C, each model with its own covariance), the
-  record reads as well without it, and which of the two readings a fit picks rests on a
-  few per cent at its longest τ: "not yet resolved" too.
+  without it (the other terms free to take its place) is within the margin's Δχ²,
+  (2.33 + 0.5)² − 2.33², in Gaussian likelihood (χ² + ln det C, each model with its own
+  covariance), the record reads as well without it, and which of the two readings a fit
+  picks rests on a few per cent at its longest τ: "not yet resolved" too. K and R read the
+  long end together: one of them in doubt flags the other (as ``fit.with_long_tau_refuted``
+  does).
+
+Measured on 252 axes of quiet-lab, datasheet and paper-table3 records of 10 min–2 h: the
+live claims analyze's of the same samples did not make went from 6 to 0; what it costs is
+claims held back ("not yet resolved" where analyze claims): none of paper-table3's strong
+B and K, most of quiet-lab's B and K (its air-conditioning and warm-up read as noise),
+3 of 18 on 2 h of datasheet noise (docs/analysis.md, "One fit, live and offline").
 
 The flagged term keeps its value in the model (the curve needs it) and shows no interval
 and no time to target; ``signal_edf`` counts only resolved terms, so the printed EDF then
