@@ -128,8 +128,8 @@ class AllanSnapshot:
             if kind not in ("pavar", "phvar"):
                 raise FormatError(f"snapshot kind {kind!r} is not pavar or phvar")
             lsb = d.get("lsb_mps2")
-            if lsb is not None and not (isinstance(lsb, int | float) and math.isfinite(lsb)
-                                        and lsb > 0):
+            if lsb is not None and (isinstance(lsb, bool) or not (
+                    isinstance(lsb, int | float) and math.isfinite(lsb) and lsb > 0)):
                 raise FormatError(f"snapshot lsb_mps2 {lsb!r} is not a positive number")
             return cls(tau, per_tau["m"], per_tau["stride"], per_ch["avar"], cov, per_tau["n"],
                        per_ch["edf"], per_ch["lo"], per_ch["hi"], per_ch["alpha"],

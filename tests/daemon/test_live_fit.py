@@ -176,3 +176,16 @@ def test_the_first_hour_of_quiet_lab_claims_nothing_analyze_does_not(tmp_path) -
                 if extra:
                     bad.append((seed, minutes, ax, sorted(extra)))
     assert not bad, bad
+
+
+@pytest.mark.parametrize("lsb", [-1.0, 0.0, float("nan"), "3.8e-5", [1], True])
+def test_a_snapshot_with_a_bad_lsb_is_refused_in_one_line(lsb: object) -> None:
+    """The snapshot's ``lsb_mps2`` enters the fit as its rounding term: one that is not a
+    positive number is refused by the one decoder (FormatError naming it), never fitted."""
+    from avard.core.errors import FormatError
+
+    rng = np.random.default_rng(0)
+    sa = StreamingAllan(3, 125.0, names=AXES)
+    sa.update(rng.normal(size=(4096, 3)))
+    with pytest.raises(FormatError, match="lsb_mps2"):
+        AllanSnapshot.from_dict({**sa.snapshot().to_dict(), "lsb_mps2": lsb})
