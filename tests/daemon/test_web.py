@@ -238,6 +238,30 @@ def test_the_fitted_snapshot_is_drawn_with_the_intervals_its_fit_supports():
     assert "fit of this snapshot" in render.adev_html(state)
 
 
+def test_a_term_the_live_guard_holds_back_shows_no_interval_and_no_time_to_target():
+    """A term flagged by the decimation guard (live_fit.OTHER_READING, NEAR_THRESHOLD)
+    is shown as watch shows it: its value and "not yet resolved", no interval."""
+    from dataclasses import replace
+
+    from avard.core.analysis.live_fit import NEAR_THRESHOLD, OTHER_READING
+    from avard.daemon.service.snapshots import fit_snapshot
+
+    state = RunState()
+    state.set_snapshot({"snapshot": snapshot_dict()})
+    snap = state.snapshot
+    fits = fit_snapshot(snap.data)
+    for note in (OTHER_READING, NEAR_THRESHOLD):
+        n = fits["x"].terms["velocity_random_walk"]
+        held = replace(fits["x"], terms={**fits["x"].terms,
+                                         "velocity_random_walk": replace(n, note=note)})
+        state.set_fits({**fits, "x": held}, snap)
+        html = render.fit_html(state, 0.1)
+        row = re.search(r'<tr data-term="velocity_random_walk">(.*?)</tr>', html, re.S)
+        assert row is not None
+        x_cell = re.findall(r"<td>(.*?)</td>", row[1], re.S)[0]
+        assert "not yet resolved" in x_cell and "[" not in x_cell and "more" not in x_cell
+
+
 def test_time_to_target_per_tau_follows_the_interval_width():
     state = RunState()
     state.set_snapshot({"snapshot": snapshot_dict()})
