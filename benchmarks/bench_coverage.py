@@ -1,7 +1,7 @@
 """Coverage of avard's printed OADEV intervals on records from an independent generator.
 
 ``python -m benchmarks coverage [--records 200] [--hours 1,12,60] [--mixes plain,sine,drift]
-[--noise-id avard] [--seed 1] [--path analyze|estimator] [--workers 1]``
+[--noise-id avard] [--seed 1] [--path analyze|estimator|live] [--workers 1]``
 
 Records come from tests/support/coverage_gen.py (numpy only, nothing of avard's): white +
 flicker + random walk ("plain"), the same plus a slow sinusoid of random phase ("sine"), plus
@@ -18,7 +18,9 @@ counted; the issue asks 60–76 % at every such τ.
 ``--path analyze`` (the default) counts the interval ``avard analyze`` prints: the record
 goes through ``analysis.engine.analyze`` as a stream (input screen, Welch lines, fit, and
 the fit's deterministic share of the EDF: ``analysis/signal_edf.py``); ``--path estimator``
-the bare estimator's (``allan_variance``), without the fit. ``--workers 2`` runs the
+the bare estimator's (``allan_variance``), without the fit; ``--path live`` the service's
+snapshot (the cascade fed a minute at a time, ``analysis/live_fit.fit_channel``: its fit
+and analyze's EDF rule on it). ``--workers 2`` runs the
 (length, mix) rows on two processes.
 
 With 200 records a share has a standard error of 3.3 points, so 60–76 % is ±2.4 standard
@@ -73,6 +75,19 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
     if path == "estimator":
         r = allan_variance(y, rate, noise_id=noise_id)
         return r, np.zeros(len(r.tau))
+    if path == "live":
+        # the service's snapshot: the cascade fed a minute at a time, its one fit
+        # (live_fit.fit_channel: the decimation guard and analyze's signal_edf)
+        from avard.core.allan.streaming import StreamingAllan
+        from avard.core.analysis.live_fit import fit_channel
+        from avard.core.analysis.signal_edf import signal_share as share_of
+
+        sa = StreamingAllan(1, rate, names=["x"])
+        step = max(1, int(60 * rate))
+        for i in range(0, len(y), step):
+            sa.update(y[i:i + step])
+        cf = fit_channel(sa.snapshot().channel(0))
+        return cf.allan, share_of(cf.fit, cf.allan)
     from avard.core.analysis.engine import analyze
     from avard.core.analysis.options import AnalyzeOptions
     from avard.core.analysis.signal_edf import signal_share
@@ -169,7 +184,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--mixes", default="plain,sine,drift")
     ap.add_argument("--noise-id", default="avard")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--path", choices=("analyze", "estimator"), default="analyze")
+    ap.add_argument("--path", choices=("analyze", "estimator", "live"), default="analyze")
     ap.add_argument("--workers", type=int, default=1, help="processes for the rows (≤ 2)")
     ap.add_argument("--detail", action="store_true", help="print the share at every τ")
     args = ap.parse_args(argv)

@@ -89,11 +89,17 @@ class AllanSnapshot:
     ci: float
     rate_hz: float
     kind: str = "pavar"  # "phvar" for a Hadamard accumulator
+    #: the quantization step of the acceleration channels (m/s²) when the publisher knows
+    #: it (the service: its feed's scale), for the fit's rounding term, as analyze takes it
+    #: from a recording; None when unknown
+    lsb_mps2: float | None = None
 
     def to_dict(self) -> dict:
         """Plain lists/numbers, msgpack- and JSON-able (units: s, (input unit)²)."""
         out: dict = {"n_samples": int(self.n_samples), "names": list(self.names),
                      "ci": float(self.ci), "rate_hz": float(self.rate_hz), "kind": self.kind}
+        if self.lsb_mps2 is not None:
+            out["lsb_mps2"] = float(self.lsb_mps2)
         for key in ("tau", "m", "stride", "avar", "cov", "n", "edf", "lo", "hi", "alpha"):
             out[key] = np.asarray(getattr(self, key)).tolist()
         return out
@@ -121,10 +127,14 @@ class AllanSnapshot:
             kind = d.get("kind", "pavar")
             if kind not in ("pavar", "phvar"):
                 raise FormatError(f"snapshot kind {kind!r} is not pavar or phvar")
+            lsb = d.get("lsb_mps2")
+            if lsb is not None and (isinstance(lsb, bool) or not (
+                    isinstance(lsb, int | float) and math.isfinite(lsb) and lsb > 0)):
+                raise FormatError(f"snapshot lsb_mps2 {lsb!r} is not a positive number")
             return cls(tau, per_tau["m"], per_tau["stride"], per_ch["avar"], cov, per_tau["n"],
                        per_ch["edf"], per_ch["lo"], per_ch["hi"], per_ch["alpha"],
                        int(d["n_samples"]), tuple(names), float(d["ci"]), float(d["rate_hz"]),
-                       str(kind))
+                       str(kind), None if lsb is None else float(lsb))
         except KeyError as exc:
             raise FormatError(f"an Allan snapshot lacks {exc}; it is not one") from None
         except (TypeError, ValueError, OverflowError) as exc:

@@ -503,11 +503,14 @@ class _FitJob:
 
 def _fit_one(job: _FitJob) -> Any:
     """The fit, or the ``FitError``'s message (an exception need not cross a process)."""
+    from avard.core.analysis.live_fit import decimation_guard
     from avard.core.model.fit import fit_noise
 
+    kw = {"filter_corner_hz": job.corner, "extra": job.extra, "check_filter": job.check_filter,
+          **job.kw}
     try:
-        return fit_noise(job.allan, filter_corner_hz=job.corner, extra=job.extra,
-                         check_filter=job.check_filter, **job.kw)
+        # the cascade's claims with the live fit's margin (live_fit.py); the OADEV's as fitted
+        return decimation_guard(fit_noise(job.allan, **kw), job.allan, fit_kw=kw)
     except FitError as exc:
         return str(exc)
 

@@ -25,8 +25,9 @@ event of one record, not a property of the sensor: it predicts nothing in anothe
 a step nothing in the other half (its continuation is constant).
 
 Misfit: the generalised χ² of the held-out AVAR against each model's prediction, with the
-covariance ``fit_noise`` models (Whittle kernels of the model's own components, NIST SP 1065
-§5.3 for the diagonal), over the τ both fits used and the held-out part resolves
+covariance ``fit_noise`` models (each power law's variance at each τ Greenhall and Riley's
+finite-record one, NIST SP 1065 §5.3, the correlations between τ from Whittle's kernels of
+the model's own spectrum), over the τ both fits used and the held-out part resolves
 (``fit.model_chi2`` with ``predictive``). No parameter is fitted on those points, so a model
 that describes the sensor gives χ² ≈ n (the number of τ). The gain is
 

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import AllanSnapshot
+from avard.core.analysis.live_fit import is_not_resolved
 from avard.core.errors import FormatError, NetworkError
-from avard.core.model.fit import NOT_RESOLVED
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.net.subscriber import (
     Message,
@@ -40,7 +40,7 @@ from avard.daemon.net.subscriber import (
     add_client_arguments,
     subscriber_from_args,
 )
-from avard.daemon.service.snapshots import ACCEL_CHANNELS, fit_snapshot
+from avard.daemon.service.snapshots import ACCEL_CHANNELS, fit_intervals, snapshot_fits
 
 log = logging.getLogger(__name__)
 
@@ -166,6 +166,7 @@ class WatchView:
             self._fits = {"x": fit} if "terms" in fit else {
                 k: v for k, v in fit.items() if isinstance(v, dict) and "terms" in v}
             self.fit_source = "service"
+            self._take_intervals(self._fits)
         elif self.fit_locally:
             self._fit_due = True
             self.fit_source = "fitted here"
@@ -210,10 +211,29 @@ class WatchView:
             self.events = [*self.events[-4:], str(what)]
 
     def _fit_here(self) -> dict[str, dict[str, Any]]:
-        """Fit each acceleration channel of the snapshot with avard.core.model.fit."""
+        """Fit each acceleration channel of the snapshot (the service's one snapshot fit,
+        ``snapshots.snapshot_fits``); its ADEV intervals then are those the fit supports."""
         if self.snapshot is None:
             return {}
-        return {name: fit.to_dict() for name, fit in fit_snapshot(self.snapshot).items()}
+        fits = snapshot_fits(self.snapshot)
+        self.snapshot = fit_intervals(self.snapshot, fits)
+        return {name: cf.fit.to_dict() for name, cf in fits.items()}
+
+    def _take_intervals(self, fits: dict[str, dict[str, Any]]) -> None:
+        """The ADEV intervals the service's fit supports (its ``edf``/``lo``/``hi`` per τ:
+        what analyze prints), where it sent them for this snapshot's τ."""
+        snap = self.snapshot
+        if snap is None:
+            return
+        lo, hi = np.array(snap.lo, dtype=float), np.array(snap.hi, dtype=float)
+        for c, name in enumerate(snap.names):
+            f = fits.get(name, {})
+            a, b = f.get("lo"), f.get("hi")
+            if isinstance(a, list) and isinstance(b, list) and len(a) == len(b) == len(snap.tau):
+                lo[:, c], hi[:, c] = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        from dataclasses import replace
+
+        self.snapshot = replace(snap, lo=lo, hi=hi)
 
     # ---- rendering ------------------------------------------------------------------------
 
@@ -255,6 +275,10 @@ class WatchView:
         if self.events:
             extra.append("events    " + "; ".join(self.events))
         # a snapshot or fit from a newer or broken service must not end the view
+        try:
+            self.fits  # noqa: B018 (fitted first: the ADEV's intervals are those it supports)
+        except (ValueError, TypeError, KeyError, IndexError, AttributeError) as exc:
+            log.debug("no fit for this view: %s", exc)
         adev = self._section("ADEV", self._render_adev, w)
         fit = self._section("fit", self._render_fit, w)
         # the full forms first; then compact ones until the essentials fit the height
@@ -361,7 +385,7 @@ class WatchView:
                     full.append(f"    {term:<22} not resolved{bound}")
                     continue
                 v, a, b = est["value"], est.get("lo"), est.get("hi")
-                if est.get("note") == NOT_RESOLVED:  # only the longest τ shows it
+                if is_not_resolved(est.get("note")):  # no interval, no time to target
                     full.append(f"    {term:<22} {v:.3e} {unit:<14} not yet resolved")
                     continue
                 interval = (f"[{a:.3e}, {b:.3e}]" if a is not None and b is not None
@@ -387,7 +411,7 @@ class WatchView:
                 v, a, b = est.get("value"), est.get("lo"), est.get("hi")
                 if not est.get("present") or v is None:
                     cell = f"< {b:.2e}" if isinstance(b, int | float) else "absent"
-                elif est.get("note") == NOT_RESOLVED:
+                elif is_not_resolved(est.get("note")):
                     cell = f"{v:.3e} not yet resolved"
                 else:
                     half = (f"±{_pct((b - a) / (2 * abs(v)) * 100)}%"

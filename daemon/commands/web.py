@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
 async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) -> int:
     from aiohttp import web
     from avard.core.io.source import RecordingSource, sensor_path
-    from avard.daemon.service.snapshots import fit_snapshot
+    from avard.daemon.service.snapshots import snapshot_fits
     from avard.daemon.web.app import Hub, make_app
     from avard.daemon.web.feed import Feed
     from avard.daemon.web.state import RunState
@@ -123,7 +123,7 @@ async def _serve(args: argparse.Namespace, sub: object, host: str, port: int) ->
         with contextlib.suppress(NotImplementedError, RuntimeError):
             loop.add_signal_handler(sig, stop.set)
     state = RunState(history=args.history)
-    feed = Feed(sub, state, fit=None if args.no_fit else fit_snapshot,
+    feed = Feed(sub, state, fit=None if args.no_fit else snapshot_fits,
                 fit_interval_s=args.fit_interval,
                 history=None if args.history is None
                 else RecordingSource(sensor_path(args.history, args.sensor)))

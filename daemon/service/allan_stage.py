@@ -122,7 +122,8 @@ class AllanStage(Stage):
         relabel_tau(snap, float(self.rate_hz()))
         snap.update(channels=self.feed.channels,
                     units=["m/s^2"] * 3 + ["degC"] * len(self.feed.temp_names),
-                    allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"])
+                    allan_rate_hz=float(self.allan.rate_hz), fitted_rate_hz=snap["rate_hz"],
+                    lsb_mps2=float(self.feed.scale))  # the fit's rounding term, as analyze's
         rec = frames.avar_record(self.run_id, 0, self.i_end(),
                                  int(self.allan.n_samples), snap, self._t,
                                  self._t + self.real_offset)

@@ -20,6 +20,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from avard.core.allan.streaming import AllanSnapshot
 from avard.core.analysis.separate import Separation
 from avard.core.errors import AvardError
@@ -127,34 +128,67 @@ class SnapshotBoard:
 ACCEL_CHANNELS = ("x", "y", "z")
 
 
-def fit_snapshot(snap: AllanSnapshot, *, filter_corner_hz: float | None = None
-                 ) -> dict[str, Any]:
-    """The noise fit (``avard.core.model.fit.NoiseFit``) of each acceleration channel of a
-    decoded Allan snapshot (``AllanSnapshot.from_dict``); {} without the analysis side.
+def snapshot_fits(snap: AllanSnapshot, *, filter_corner_hz: float | None = None
+                  ) -> dict[str, Any]:
+    """The fit of each acceleration channel of a decoded Allan snapshot
+    (``AllanSnapshot.from_dict``) with the channel's curve at the EDF the fit supports: a
+    ``core.analysis.live_fit.ChannelFit`` per channel (``live_fit.fit_channel``: analyze's
+    fit, its claims held to the decimated curve's margin, analyze's ``with_signal_edf``);
+    {} without the analysis side.
 
     The one snapshot fit: the service's ``snapshot`` replies, ``avard watch`` and ``avard web``
     all call it, so they show the same terms. The ADXL355's digital low-pass sits at ODR/4
     (``filter_corner_hz`` defaults to the snapshot's rate / 4)."""
     try:
-        from avard.core.model.fit import fit_noise
+        from avard.core.analysis.live_fit import fit_channel
     except ImportError:  # the analysis side is optional for a watcher
         return {}
     out = {}
+    # the rounding of the published counts, as analyze takes it from the recording's scale
+    kw = {} if snap.lsb_mps2 is None else {"rounding_lsb": snap.lsb_mps2}
     for c, name in enumerate(snap.names):
         if name not in ACCEL_CHANNELS:
             continue
         try:
-            out[name] = fit_noise(snap.channel(c), ci=snap.ci,
-                                  filter_corner_hz=filter_corner_hz or snap.rate_hz / 4)
+            out[name] = fit_channel(snap.channel(c), ci=snap.ci,
+                                    filter_corner_hz=filter_corner_hz or snap.rate_hz / 4,
+                                    **kw)
         except (AvardError, IndexError, ValueError, TypeError) as exc:
             log.debug("no fit for %s: %s", name, exc)
     return out
 
 
+def fit_snapshot(snap: AllanSnapshot, *, filter_corner_hz: float | None = None
+                 ) -> dict[str, Any]:
+    """The noise fit (``avard.core.model.fit.NoiseFit``) of each acceleration channel of
+    :func:`snapshot_fits`."""
+    return {name: cf.fit for name, cf in
+            snapshot_fits(snap, filter_corner_hz=filter_corner_hz).items()}
+
+
+def fit_intervals(snap: AllanSnapshot, fits: dict[str, Any]) -> AllanSnapshot:
+    """``snap`` with each fitted channel's EDF and bounds those of its fit
+    (:func:`snapshot_fits`: analyze's ``with_signal_edf``), the others as published."""
+    from dataclasses import replace
+
+    edf, lo, hi = (np.array(a, dtype=float) for a in (snap.edf, snap.lo, snap.hi))
+    for c, name in enumerate(snap.names):
+        cf = fits.get(name)
+        if cf is None or len(cf.allan.edf) != len(snap.tau):
+            continue
+        edf[:, c], lo[:, c], hi[:, c] = cf.allan.edf, cf.allan.lo, cf.allan.hi
+    return replace(snap, edf=edf, lo=lo, hi=hi)
+
+
 def fit_record(rec: dict[str, Any]) -> dict[str, Any]:
-    """The service's fit of an ``avar`` record: :func:`fit_snapshot` as plain dicts."""
+    """The service's fit of an ``avar`` record: :func:`snapshot_fits` as plain dicts, each
+    channel's with the EDF and bounds of its curve the fit supports (``"edf"``, ``"lo"``,
+    ``"hi"``: per τ of the snapshot, what analyze prints)."""
     snap = AllanSnapshot.from_dict(rec["snapshot"])
-    return {name: fit.to_dict() for name, fit in fit_snapshot(snap).items()}
+    return {name: {**cf.fit.to_dict(), "edf": np.asarray(cf.allan.edf).tolist(),
+                   "lo": np.asarray(cf.allan.lo).tolist(),
+                   "hi": np.asarray(cf.allan.hi).tolist()}
+            for name, cf in snapshot_fits(snap).items()}
 
 
 def separation_of(rec: dict[str, Any]) -> Separation | None:

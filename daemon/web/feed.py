@@ -20,6 +20,7 @@ from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import FormatError, NetworkError
 from avard.core.io.source import RecordingSource
 from avard.daemon.net.subscriber import Subscriber
+from avard.daemon.service.snapshots import fit_intervals
 from avard.daemon.web.state import RunState, Snapshot
 
 log = logging.getLogger(__name__)
@@ -146,4 +147,8 @@ class Feed:
                             exc)
                 continue
             log.debug("fitted %d samples in %.2f s", snap.n_samples, time.monotonic() - last)
-            self.state.set_fits(fits, snap)
+            # the one snapshot fit's ChannelFit: its terms, and the ADEV intervals it supports
+            channel_fits = {k: v for k, v in fits.items() if hasattr(v, "allan")}
+            self.state.set_fits({k: getattr(v, "fit", v) for k, v in fits.items()}, snap,
+                                fit_intervals(snap.data, channel_fits) if channel_fits
+                                else None)

@@ -21,7 +21,7 @@ from html import escape
 from typing import Any
 
 import numpy as np
-from avard.core.model.fit import NOT_RESOLVED
+from avard.core.analysis.live_fit import is_not_resolved
 from avard.core.model.terms import SYMBOLS
 from avard.daemon.commands.watch import fmt_duration, time_to_target
 from avard.daemon.web.state import SILENT_S, RunState, Series, Snapshot
@@ -270,13 +270,14 @@ def _legend(items: Sequence[tuple[str, str]], *, dashed_last: bool = False) -> s
 
 
 def adev_html(state: RunState) -> str:
-    snap = state.snapshot
+    latest = state.snapshot
+    snap = state.shown()   # its fit's intervals (analyze's EDF rule) once it is fitted
     if snap is None:
         return '<p class="waiting">No Allan snapshot yet (the service sends one every ' \
                '<code>allan.snapshot_interval_s</code>).</p>'
     ci = snap.data.ci
     fitted = state.fitted
-    note = ("model curve: fit of this snapshot" if fitted is snap else
+    note = ("model curve: fit of this snapshot" if fitted is latest else
             "model curve: fit of an earlier snapshot" if fitted is not None else
             "model curve: fit pending")
     out = [f'<p class="note">{snap.n_samples} samples = {fmt_duration(snap.duration_s)} of '
@@ -462,7 +463,7 @@ def _term_cell(est: Any, T: float, target: float) -> str:
         hi = est.hi
         bound = f" <small>(&lt; {_e(hi)} {unit})</small>" if isinstance(hi, float) else ""
         return f'<span class="absent">absent</span>{bound}'
-    if getattr(est, "note", None) == NOT_RESOLVED:  # only the longest τ shows it
+    if is_not_resolved(getattr(est, "note", None)):  # no interval, no time to target
         return (f"{_e(est.value)} <small>{unit}</small>"
                 f'<br><small class="absent">not yet resolved</small>')
     more = time_to_target(est.value, est.lo, est.hi, T, target)
@@ -478,7 +479,7 @@ def _when(more: float | None) -> str:
 
 def targets_html(state: RunState, target: float) -> str:
     """Per τ and axis: relative half-width of the ADEV interval and the time until ±target."""
-    snap = state.snapshot
+    snap = state.shown()
     if snap is None:
         return '<p class="waiting">Waiting for an Allan snapshot.</p>'
     d = snap.data

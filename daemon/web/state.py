@@ -128,6 +128,8 @@ class RunState:
     separation: Separation | None = None    # the live separation of co-located sensors
     fits: dict[str, Any] = field(default_factory=dict)   # axis → NoiseFit of ``fitted``
     fitted: Snapshot | None = None
+    #: ``fitted`` with the ADEV intervals its fit supports (analyze's EDF rule), or None
+    fitted_intervals: Snapshot | None = None
     temperatures: dict[str, Series] = field(default_factory=dict)
     latest_temps: dict[str, float | None] = field(default_factory=dict)
     timeline: deque[TimelineItem] = field(default_factory=lambda: deque(maxlen=MAX_EVENTS))
@@ -351,9 +353,21 @@ class RunState:
             snap = self.snapshot
             return None if snap is None or snap is self.fitted else snap
 
-    def set_fits(self, fits: dict[str, Any], snapshot: Snapshot) -> None:
+    def set_fits(self, fits: dict[str, Any], snapshot: Snapshot,
+                 intervals: AllanSnapshot | None = None) -> None:
         """The fit of ``snapshot`` (kept even when a newer snapshot arrived meanwhile: the
-        page says which snapshot the fit belongs to)."""
+        page says which snapshot the fit belongs to); ``intervals``: its data with the ADEV
+        intervals the fit supports (``snapshots.fit_intervals``)."""
         with self.lock:
             self.fits, self.fitted = fits, snapshot
+            self.fitted_intervals = None if intervals is None else \
+                Snapshot(intervals, snapshot.received, snapshot.n_samples)
             self.version += 1
+
+    def shown(self) -> Snapshot | None:
+        """The snapshot to draw: the latest, with its fit's intervals once it is fitted."""
+        with self.lock:
+            snap = self.snapshot
+            if snap is not None and snap is self.fitted and self.fitted_intervals is not None:
+                return self.fitted_intervals
+            return snap

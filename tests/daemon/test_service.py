@@ -243,6 +243,11 @@ def test_request_socket_answers_status_snapshot_recent(tmp_path: Path) -> None:
     assert set(fit) == {"x", "y", "z"}
     vrw = fit["x"]["terms"]["velocity_random_walk"]
     assert vrw["unit"] == "m/s/sqrt(s)" and vrw["lo"] <= vrw["value"] <= vrw["hi"]
+    # the fit's ADEV bars (analyze's EDF rule) per τ of that snapshot, and the LSB it used
+    snap = answers["snapshot"]["snapshot"]
+    assert len(fit["x"]["hi"]) == len(fit["x"]["edf"]) == len(snap["tau"])
+    assert np.all(np.asarray(fit["x"]["edf"]) >= np.asarray(snap["edf"])[:, 0])
+    assert snap["lsb_mps2"] > 0
 
 
 def test_ds18b20_through_w1thermsensor_drops_out_and_returns(tmp_path: Path) -> None:

@@ -133,12 +133,18 @@ def test_no_ramp_is_claimed_on_quiet_lab_across_seeds(tmp_path) -> None:
     """The same over twelve seeds. x and y (48 fits): no ramp claimed resolved. z carries
     the preset's warm-up (2e-4 m/s² settling with a 600 s time constant), a monotonic drift
     that a ramp describes over these minutes; it is counted, not asserted absent (measured:
-    seed 11 at 41 and 55 min, 2 of 24). Every one of the 72 axes: analyze says the same.
+    seed 11 at 41 and 55 min, 2 of 24, before the decimation guard; 0 since: near the
+    threshold, the live fit holds a decimated curve's claim back, core/analysis/live_fit.py).
+    Every one of the 72 axes: analyze with the service's estimator says the same.
     analyze's default OADEV, which stops at N/4, had claimed R on 5 of the 72 (seed 0 z at
     55 min, seed 5 x at 41 and 55, seed 11 z at 41 and 55); with the TOTVAR out to T/2 it
-    claims it on 1 (seed 11 z at 41 min), never where the live fit does not."""
+    claims it on 1 (seed 11 z at 41 min, the warm-up, which the live fit holds back as near
+    its threshold). The live fit claims no ramp analyze does not (issue 24: one fit, live
+    and offline; tests/daemon/test_live_fit.py holds it for every term)."""
     total, claimed, claimed_z, same, by_oadev, beyond_live = _ramp_claims(tuple(range(12)),
                                                                           tmp_path)
     assert (total, claimed, same) == (48, 0, 72)
     assert claimed_z <= 2
-    assert by_oadev <= claimed + claimed_z and beyond_live == 0
+    assert by_oadev <= 1 and beyond_live <= by_oadev
+    # every ramp the live fit claims, analyze's OADEV claims too
+    assert claimed + claimed_z <= by_oadev - beyond_live

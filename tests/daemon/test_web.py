@@ -216,6 +216,52 @@ def test_the_adev_plot_has_every_finite_point_of_every_axis_and_the_model():
     assert 'data-term="velocity_random_walk"' in html and "absent" in html
 
 
+def test_the_fitted_snapshot_is_drawn_with_the_intervals_its_fit_supports():
+    """Once the latest snapshot is fitted, the page draws its ADEV with the EDF the fit
+    supports (analyze's rule, signal_edf; live_fit.fit_channel), the same numbers the
+    service's fit record and watch give; before, the snapshot's own."""
+    from avard.daemon.service.snapshots import fit_intervals, fit_record, snapshot_fits
+
+    state = RunState()
+    d = snapshot_dict()
+    state.set_snapshot({"snapshot": d})
+    snap = state.snapshot
+    assert state.shown() is snap
+    fits = snapshot_fits(snap.data)
+    state.set_fits({k: cf.fit for k, cf in fits.items()}, snap, fit_intervals(snap.data, fits))
+    shown = state.shown().data
+    record = fit_record({"snapshot": d})
+    for c, axis in enumerate("xyz"):
+        np.testing.assert_array_equal(shown.lo[:, c], fits[axis].allan.lo)
+        np.testing.assert_allclose(shown.hi[:, c], record[axis]["hi"], rtol=1e-12)
+    assert np.any(shown.edf[:, :3] != snap.data.edf[:, :3])  # the fit raised some EDF
+    assert "fit of this snapshot" in render.adev_html(state)
+
+
+def test_a_term_the_live_guard_holds_back_shows_no_interval_and_no_time_to_target():
+    """A term flagged by the decimation guard (live_fit.OTHER_READING, NEAR_THRESHOLD)
+    is shown as watch shows it: its value and "not yet resolved", no interval."""
+    from dataclasses import replace
+
+    from avard.core.analysis.live_fit import NEAR_THRESHOLD, OTHER_READING
+    from avard.daemon.service.snapshots import fit_snapshot
+
+    state = RunState()
+    state.set_snapshot({"snapshot": snapshot_dict()})
+    snap = state.snapshot
+    fits = fit_snapshot(snap.data)
+    for note in (OTHER_READING, NEAR_THRESHOLD):
+        n = fits["x"].terms["velocity_random_walk"]
+        held = replace(fits["x"], terms={**fits["x"].terms,
+                                         "velocity_random_walk": replace(n, note=note)})
+        state.set_fits({**fits, "x": held}, snap)
+        html = render.fit_html(state, 0.1)
+        row = re.search(r'<tr data-term="velocity_random_walk">(.*?)</tr>', html, re.S)
+        assert row is not None
+        x_cell = re.findall(r"<td>(.*?)</td>", row[1], re.S)[0]
+        assert "not yet resolved" in x_cell and "[" not in x_cell and "more" not in x_cell
+
+
 def test_time_to_target_per_tau_follows_the_interval_width():
     state = RunState()
     state.set_snapshot({"snapshot": snapshot_dict()})

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from avard.core.allan.feed import AllanFeed
-from avard.core.allan.streaming import StreamingAllan
+from avard.core.allan.streaming import AllanSnapshot, StreamingAllan
 from avard.core.errors import AvardError
 from avard.core.io import frames
 from avard.daemon.service.allan_stage import AllanStage
@@ -56,6 +56,9 @@ def test_every_snapshot_array_keeps_its_shape_through_the_wire() -> None:
     assert snap["units"] == ["m/s^2"] * 3 + ["degC"] * 2
     # τ is labelled with the fitted rate handed to the stage, not the accumulators' nominal one
     assert snap["tau"][0] == pytest.approx(snap["m"][0] / 124.9)
+    # the feed's scale, which the snapshot fit takes as the rounding LSB (analyze's rule)
+    assert snap["lsb_mps2"] == 1e-5
+    assert AllanSnapshot.from_dict(snap).lsb_mps2 == 1e-5
 
 
 def test_snapshot_request_before_the_first_record_is_a_clear_error_then_the_record() -> None:
