@@ -42,6 +42,26 @@ def test_sumsq_equals_numpy(compiled: None) -> None:
     assert c.sumsq(x[:0], x[:0], x[:0]) == 0.0
 
 
+def test_sumsq_is_its_four_lane_sum_bit_for_bit(compiled: None) -> None:
+    """``sumsq`` is exactly its definition's four partial sums (difference i into lane
+    i mod 4, the last n mod 4 into lane 0, then (s0 + s1) + (s2 + s3)), whichever copy of
+    the loop the loader picked for this CPU (an AVX2 one on x86-64): Python's floats, the
+    same IEEE operations in the same order, give the very bits."""
+    c = kernels.compiled()
+    assert c is not None
+    rng = np.random.default_rng(29)
+    x = np.cumsum(rng.standard_normal(30_011)) * 1e-3 + 9.81
+    for m, n in [(1, 5), (2, 4_099), (7, 10_002), (1_024, 20_001)]:
+        x0, x1, x2 = x[:n].tolist(), x[m:m + n].tolist(), x[2 * m:2 * m + n].tolist()
+        lanes = [0.0, 0.0, 0.0, 0.0]
+        n4 = n - n % 4
+        for i in range(n):
+            d = (x2[i] - x1[i]) - (x1[i] - x0[i])
+            lanes[i % 4 if i < n4 else 0] += d * d
+        want = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+        assert c.sumsq(x[:n], x[m:m + n], x[2 * m:2 * m + n]) == want
+
+
 def test_sumsq_refuses_what_it_cannot_read(compiled: None) -> None:
     c = kernels.compiled()
     assert c is not None
