@@ -19,6 +19,13 @@ the record outside); on a second row allantools' loading of the .npz counted too
 then go from the file to the deviations); on a third, each whole worker process from its
 start.
 
+Both workers import their modules from bytecode compiled once, in an untimed warm-up run on a
+short record, as installed packages do (pip compiles it at install). ``--bytecode
+environment`` leaves that to the environment instead: with PYTHONDONTWRITEBYTECODE=1 and no
+bytecode beside the sources (an editable install that never wrote any), every module analyze
+imports while it runs is compiled inside its timed call, at every run (allantools, installed,
+has its bytecode either way).
+
 With ``--workers N`` it also runs ``analyze(path, workers=N)`` (the exact parallel analysis,
 ``core/analysis/parallel.py``) beside ``analyze(path)`` in the same run, ``--repeat`` times
 alternated, and prints each run's wall time and the CPU seconds of the parent and of every
@@ -280,8 +287,17 @@ WORKERS = {"analyze": worker_analyze, "allantools": worker_allantools,
            "parallel": worker_parallel}
 
 
+#: Where the workers keep their modules' bytecode (``--bytecode cached``), or None.
+_PYCACHE: str | None = None
+
+
 def _run(kind: str, path: Path, *extra: str) -> dict:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    if _PYCACHE is not None:
+        # as an installed package runs (pip compiles its bytecode at install): modules are
+        # compiled once, not at every import of every run
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = _PYCACHE
     cmd = [sys.executable, "-m", "benchmarks.bench_analyze", "--worker", kind, str(path),
            *extra]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env,
@@ -300,11 +316,25 @@ def main(argv: list[str]) -> int:
                     help="also analyze(path, workers=N) against one worker, in the same run")
     ap.add_argument("--repeat", type=int, default=3, metavar="K",
                     help="with --workers: timed runs of each, alternated (default 3)")
+    ap.add_argument("--bytecode", choices=("cached", "environment"), default="cached",
+                    help="cached (default): the workers' modules compiled once, in a warm-up "
+                         "run, as an installed avard and allantools run; environment: as "
+                         "this environment says (PYTHONDONTWRITEBYTECODE=1 compiles every "
+                         "module analyze imports inside its timed call, at every run)")
     args = ap.parse_args(argv)
+    global _PYCACHE
     with tempfile.TemporaryDirectory(prefix="avard-bench-") as tmp:
         path, n = make_npz(Path(tmp), args.hours)
         print(f"record: {args.hours:g} h at {RATE_HZ:g} Hz = {n:,} samples × 3 axes, "
               f"{path.stat().st_size / 1e6:.0f} MB .npz (float64 m/s²)")
+        if args.bytecode == "cached":
+            _PYCACHE = str(Path(tmp) / "pycache")
+            (Path(tmp) / "warm").mkdir()
+            warm, _n = make_npz(Path(tmp) / "warm", 0.25)
+            for kind, extra in (("allantools", ()), ("analyze", ()),
+                                *((("parallel", ("1",)), ("parallel", (str(args.workers),)))
+                                  if args.workers else ())):
+                _run(kind, warm, *extra)  # untimed: the imports' bytecode compiled once
         ref = _run("allantools", path)
         ours = _run("analyze", path)
         if args.workers:
@@ -342,6 +372,11 @@ def main(argv: list[str]) -> int:
     print("-|-".join("-" * wi for wi in w))
     for r in rows:
         print(" | ".join(c.ljust(wi) for c, wi in zip(r, w, strict=True)))
+    env_bc = os.environ.get("PYTHONDONTWRITEBYTECODE", "")
+    bytecode = ("compiled once in a warm-up run, as installed packages run" if _PYCACHE
+                else f"as the environment says (PYTHONDONTWRITEBYTECODE={env_bc!r})")
+    print(f"\nBytecode: {bytecode}. Load average {os.getloadavg()[0]:.1f} on "
+          f"{os.cpu_count()} cores after the runs.")
     print("\nCPU seconds, one BLAS thread in both processes; peak RSS is VmHWM of each. "
           "avard's OADEV loop: " + ("compiled (core/allan/_kernels.c)" if ours["compiled"]
                                     else "numpy (the compiled loop is not built)") + ".")

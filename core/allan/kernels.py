@@ -7,7 +7,9 @@ that stays for installs without a compiler (and for counts and covariances):
   X_{i+m}, X_{i+2m} of a phase record the sum behind the fully overlapping AVAR (NIST SP
   1065 eq. 12). numpy needs three element-wise passes (``second_differences``) and a dot
   product; the loop reads the three spans once (1.3 → 0.37 ns per sample and τ, in the
-  cache). ``sumsq_mod`` adds the modified AVAR's running sums for ``noise_id.RnSums``
+  cache). ``sumsq_ring(ring, spans, out)`` is the same sums for every channel at many τ in
+  one call, read straight from ``OverlappingAllan``'s ring (wrapped spans included, no
+  copy). ``sumsq_mod`` adds the modified AVAR's running sums for ``noise_id.RnSums``
   (general path ``RnSums.push``).
 * ``running_sum(y, offset, carry, out)``: the running sum of a (strided) column less an
   offset, numpy's subtract-and-cumsum bit for bit (``OverlappingAllan``'s ring).
@@ -46,7 +48,7 @@ __all__ = ["API", "compiled", "second_differences", "switched_off", "use_compile
 
 #: The interface this module calls (``_kernels.API``): a module built from another version of
 #: ``_kernels.c`` (a stale build left in a source tree) is not used.
-API = 4
+API = 5
 
 
 def switched_off() -> bool:

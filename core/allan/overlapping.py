@@ -356,6 +356,10 @@ class OverlappingAllan:
         # segment position (D_i spans samples i … i + 2m − 1 of the segment)
         own = None if self._own_until is None else self._own_until - self._seg_first
         first = self._own_from - self._seg_first  # a chunk's first own difference
+        # the compiled loop's spans (lo, m, count) of every τ, summed in one call after the
+        # loop (nothing in it changes the ring or the sums)
+        spans: list[tuple[int, int, int]] = []
+        span_k: list[int] = []
         for k, m in enumerate(self.ms.tolist()):
             lo = max(0, p0 - 2 * m, first)  # first new difference D_lo (its last point ≥ p0)
             hi = p1 - 2 * m  # differences D_i, i < hi
@@ -368,7 +372,10 @@ class OverlappingAllan:
                     # R(n) matters only while B1 decides (< MIN_POINTS averages)
                     rk = self._rn[k] = None
                 self._n[k] += count
-                if kern is not None:
+                if kern is not None and rk is None:
+                    spans.append((lo, m, count))
+                    span_k.append(k)
+                elif kern is not None:
                     self._compiled_sums(k, m, lo, count, kern, rk)
                 else:
                     self._numpy_sums(k, m, lo, count, buf, window, as_float, rk)
@@ -382,6 +389,8 @@ class OverlappingAllan:
                     self._feed(k, self._interval_sums(m, q0, last))
             elif self._due[k] is not None:
                 self._guard_due(k)  # no new average, but the next piece still moves the ring
+        if spans:
+            self._ring_sums(span_k, spans, kern)
 
     def _past_averages(self, k: int, m: int, own: int, q0: int, last: int) -> int:
         """For a chunk of a parallel analysis: the averages of τ k ending at q0 … last (step
@@ -477,6 +486,17 @@ class OverlappingAllan:
             return
         for ch in range(self.n_channels):
             s2[ch, ch] += kern.sumsq(x0[ch], x1[ch], x2[ch])
+
+    def _ring_sums(self, ks: list[int], spans: list[tuple[int, int, int]], kern: Any) -> None:
+        """Σ D² of every channel at the τ ``ks``, each over its span (lo, m, count) as
+        ``_compiled_sums`` takes it, by one call of the compiled loop: the same sums (the
+        loop's very bits), added to the same diagonal entries."""
+        assert self._ring is not None
+        c = self.n_channels
+        got = np.empty((len(spans), c))
+        kern.sumsq_ring(self._ring, np.array(spans, dtype=np.int64), got)
+        ch = np.arange(c)
+        self._s2[np.array(ks)[:, None], ch, ch] += got  # s2[k, ch, ch], each entry once
 
     def _numpy_sums(self, k: int, m: int, lo: int, count: int, buf: NDArray, window: NDArray,
                     as_float: NDArray, rk: RnSums | None) -> None:

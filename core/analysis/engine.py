@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from avard.core.allan.noise_id import check_noise_id
+from avard.core.allan.scratch import histories_passed_on
 from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.signal_edf import with_signal_edf
@@ -624,20 +625,21 @@ def _analyze_passes(
                             f"({sorted({one.n for _c, one in results})}); the file changed "
                             "while it was analysed")
     done = 0
-    for chans, blocks, take in passes if not results else ():
-        again = None
-        if reread is not None:
-            def again(j: int, chans: list[int] = chans) -> _Blocks:
-                return reread(chans[j])
-        one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
-                        nper, progress, done, all_total, options.quantiles,
-                        None if total is None else int(total), again, options.noise_id)
-        if results and one.n != results[0][1].n:
-            raise DataError(f"{source}: read {one.n} samples on one pass and "
-                            f"{results[0][1].n} on another; the file changed while it was "
-                            "analysed")
-        done += one.n
-        results.append((chans, one))
+    with histories_passed_on():  # each pass takes over the last one's mapped history
+        for chans, blocks, take in passes if not results else ():
+            again = None
+            if reread is not None:
+                def again(j: int, chans: list[int] = chans) -> _Blocks:
+                    return reread(chans[j])
+            one = _one_pass(blocks, take, [names[i] for i in chans], rate, estimator, grid,
+                            nper, progress, done, all_total, options.quantiles,
+                            None if total is None else int(total), again, options.noise_id)
+            if results and one.n != results[0][1].n:
+                raise DataError(f"{source}: read {one.n} samples on one pass and "
+                                f"{results[0][1].n} on another; the file changed while it "
+                                "was analysed")
+            done += one.n
+            results.append((chans, one))
     n = results[0][1].n
     if n < 16:
         raise DataError(f"{source}: only {n} samples; the Allan variance needs a record of at "

@@ -29,29 +29,16 @@ from typing import Any, BinaryIO
 
 import numpy as np
 from avard.core.errors import FormatError
+from avard.core.io.crc import FRAMESCAN_API, load_framescan
 from avard.core.io.recording import FRAME_HEADER, Frame
 from numpy.typing import NDArray
 
-
-def _load() -> Any:
-    """The compiled frame loop, or None: not built (no compiler at install, setup.py), or
-    switched off by ``AVARD_NO_C_KERNELS`` (the one switch for every compiled path,
-    core/allan/kernels.py); the general reader then does it all."""
-    from avard.core.allan.kernels import switched_off
-
-    if switched_off():
-        return None
-    try:
-        from avard.core.io import _framescan as built  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    return built
-
-
+#: The compiled frame loop, or None (core/io/crc.py loads it for both of its users)
+_load = load_framescan
 _framescan: Any = _load()
 
 #: The interface this module calls: a module built from another ``_framescan.c`` is not used.
-API = 3
+API = FRAMESCAN_API
 #: Bytes of a segment handed to the C loop at once (a frame longer than this is read whole).
 CHUNK = 1 << 20
 

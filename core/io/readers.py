@@ -28,7 +28,6 @@ import math
 import re
 import struct
 import zipfile
-import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import IO, Any
 import numpy as np
 from avard.core.errors import DataError, FormatError
 from avard.core.finite import first_nonfinite_row
+from avard.core.io.crc import crc32
 from numpy.typing import NDArray
 
 __all__ = ["Record", "check_rate", "iter_blocks", "load_record", "record_info", "record_kind"]
@@ -205,7 +205,7 @@ class _StoredRows:
             self.fh.close()
             raise FormatError(f"{p}: the zip entry of {member._name} cannot be read ({exc}); "
                               "the file is damaged: copy or write it again") from exc
-        self.crc: int | None = zlib.crc32(npy_head) if verify else None
+        self.crc: int | None = crc32(npy_head) if verify else None
         self._buf = np.empty(0, dtype=self.dtype)
 
     def rows(self, n: int) -> NDArray:
@@ -218,7 +218,7 @@ class _StoredRows:
         got = self.fh.readinto(view) or 0
         k = got // self.row_bytes
         if self.crc is not None:
-            self.crc = zlib.crc32(view[:got], self.crc)
+            self.crc = crc32(view[:got], self.crc)
         self.left -= k
         if self.left == 0 and self.crc is not None and self.crc != self.expected_crc:
             raise FormatError(f"{self.where}: accel fails its CRC-32 check; the file is damaged "

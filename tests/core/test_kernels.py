@@ -42,6 +42,26 @@ def test_sumsq_equals_numpy(compiled: None) -> None:
     assert c.sumsq(x[:0], x[:0], x[:0]) == 0.0
 
 
+def test_sumsq_is_its_four_lane_sum_bit_for_bit(compiled: None) -> None:
+    """``sumsq`` is exactly its definition's four partial sums (difference i into lane
+    i mod 4, the last n mod 4 into lane 0, then (s0 + s1) + (s2 + s3)), whichever copy of
+    the loop the loader picked for this CPU (an AVX2 one on x86-64): Python's floats, the
+    same IEEE operations in the same order, give the very bits."""
+    c = kernels.compiled()
+    assert c is not None
+    rng = np.random.default_rng(29)
+    x = np.cumsum(rng.standard_normal(30_011)) * 1e-3 + 9.81
+    for m, n in [(1, 5), (2, 4_099), (7, 10_002), (1_024, 20_001)]:
+        x0, x1, x2 = x[:n].tolist(), x[m:m + n].tolist(), x[2 * m:2 * m + n].tolist()
+        lanes = [0.0, 0.0, 0.0, 0.0]
+        n4 = n - n % 4
+        for i in range(n):
+            d = (x2[i] - x1[i]) - (x1[i] - x0[i])
+            lanes[i % 4 if i < n4 else 0] += d * d
+        want = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+        assert c.sumsq(x[:n], x[m:m + n], x[2 * m:2 * m + n]) == want
+
+
 def test_sumsq_refuses_what_it_cannot_read(compiled: None) -> None:
     c = kernels.compiled()
     assert c is not None
@@ -52,6 +72,43 @@ def test_sumsq_refuses_what_it_cannot_read(compiled: None) -> None:
         c.sumsq(x[::2], x[:5], x[:5])  # strided: not contiguous
     with pytest.raises(TypeError, match="float64"):
         c.sumsq(np.zeros(5, np.float32), x[:5], x[:5])
+
+
+def test_sumsq_ring_is_sumsq_on_the_spans_bit_for_bit(compiled: None) -> None:
+    """``sumsq_ring`` (every channel at many τ in one call, straight from the OADEV's ring)
+    gives each span's ``sumsq`` to the bit, where a span lies whole in the ring and where
+    x0, x1, x2 or all three wrap round its end (the loop then runs between the wrap points,
+    each difference in its lane), for lengths of every remainder mod 4 and none."""
+    c = kernels.compiled()
+    assert c is not None
+    rng = np.random.default_rng(17)
+    cap = 1000
+    ring = np.cumsum(rng.standard_normal((3, cap)), axis=1) + 1e4
+
+    def span(ch: int, p: int, n: int) -> np.ndarray:
+        return ring[ch, np.arange(p, p + n) % cap]  # a copy, in order across the end
+
+    rows = [(0, 1, 0), (0, 1, 1), (5, 3, 7), (0, 17, 966), (990, 1, 9), (985, 2, 13),
+            (600, 150, 131), (700, 120, 257), (2_997, 1, 1000 - 2), (10_400, 333, 334),
+            (980, 7, 1000), (421, 499, 2)]
+    spans = np.array(rows, dtype=np.int64)
+    out = np.full((len(rows), 3), np.nan)
+    c.sumsq_ring(ring, spans, out)
+    wrapped = 0
+    for j, (lo, m, n) in enumerate(rows):
+        wrapped += any((p % cap) + n > cap for p in (lo, lo + m, lo + 2 * m))
+        for ch in range(3):
+            want = c.sumsq(span(ch, lo, n), span(ch, lo + m, n), span(ch, lo + 2 * m, n))
+            assert out[j, ch] == want, (lo, m, n, ch)
+    assert wrapped >= 6  # the cases above do wrap, each of the three spans in some
+    with pytest.raises(ValueError, match="span"):
+        c.sumsq_ring(ring, np.array([[0, 0, 5]], dtype=np.int64), np.empty((1, 3)))
+    with pytest.raises(ValueError, match="span"):
+        c.sumsq_ring(ring, np.array([[0, 1, cap + 1]], dtype=np.int64), np.empty((1, 3)))
+    with pytest.raises(ValueError, match="out"):
+        c.sumsq_ring(ring, spans, np.empty((len(rows), 2)))
+    with pytest.raises(TypeError, match="int64"):
+        c.sumsq_ring(ring, spans.astype(np.float64), out)
 
 
 def test_rn_sums_push_phase_equals_push(compiled: None) -> None:

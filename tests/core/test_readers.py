@@ -188,7 +188,16 @@ def test_npz_columns_alone_and_without_temperatures(tmp_path: Path, compressed: 
         iter_blocks(p, columns=[3])
 
 
-def test_a_damaged_stored_npz_fails_its_crc_unless_told_not_to_check(tmp_path: Path) -> None:
+@pytest.mark.parametrize("loop", ["compiled", "zlib"])
+def test_a_damaged_stored_npz_fails_its_crc_unless_told_not_to_check(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, loop: str) -> None:
+    """By the compiled CRC loop (core/io/crc.py, when built) and by zlib's alike."""
+    from avard.core.io import crc
+
+    if loop == "zlib":
+        monkeypatch.setattr(crc, "_compiled", None)
+    elif crc._compiled is None:
+        pytest.skip("the compiled frame loop is not built or switched off")
     accel = np.random.default_rng(5).normal(size=(5_000, 3))
     p = _npz(tmp_path / "d.npz", accel=accel, rate_hz=10.0)
     raw = bytearray(p.read_bytes())
@@ -201,3 +210,21 @@ def test_a_damaged_stored_npz_fails_its_crc_unless_told_not_to_check(tmp_path: P
     # a later pass over a file its first pass checked: read as stored, no check
     n = sum(len(a) for a, _ in iter_blocks(p, block=1000, verify=False)[1])
     assert n == 5_000
+
+
+def test_the_readers_crc_is_zlibs_on_the_buffers_the_reader_hands_it() -> None:
+    """``crc.crc32`` on memoryviews of float64 blocks cut at any byte (the reader's
+    ``readinto`` views and their tails), chained from any start, is zlib's."""
+    import zlib
+
+    from avard.core.io import crc
+
+    rng = np.random.default_rng(11)
+    block = rng.normal(size=(4_099, 3))
+    view = block.data.cast("B")
+    start = 0
+    for cut in (0, 1, 63, 64, 65, 4_099 * 24 - 17, 4_099 * 24):
+        part = view[:cut]
+        assert crc.crc32(part, start) == zlib.crc32(part, start)
+        start = zlib.crc32(part, start)
+    assert crc.crc32(b"", 0xFFFFFFFF) == zlib.crc32(b"", 0xFFFFFFFF)

@@ -170,3 +170,57 @@ def test_a_second_read_cuts_the_same_rows_without_judging_again(tmp_path, monkey
     for (a, _t, _e), (b, _u, _f) in zip(first, again, strict=True):
         np.testing.assert_array_equal(a[:, 2], b[:, 0])
     assert src.log is not None and src.log.counts() == {"shock": 1}
+
+
+def test_the_median_floor_skips_only_blocks_the_exact_scale_also_passes(monkeypatch):
+    """The screen skips a block's median where a proven floor of it already leaves every
+    sample below the test (``_median_floor``): on blocks from clean Gaussian noise to tails
+    heavy enough that samples sit at the threshold, quantised to a few LSB (ties), a dead
+    axis (median 0) and a non-finite value, the verdicts are those of the exact median on
+    every block, and the floor is never above the median it stands for."""
+    import avard.core.io.screen as screen_mod
+
+    rng = np.random.default_rng(2024)
+    blocks = []
+    for k in range(48):
+        n = int(rng.choice([40, 1000, 65536]))
+        kind = k % 6
+        if kind == 0:
+            a = rng.standard_normal((n, 3))
+        elif kind in (1, 2):  # Student t: 3 and 6 dof put samples either side of 12 σ
+            a = rng.standard_t(3 if kind == 1 else 6, (n, 3))
+        elif kind == 3:  # a few LSB of noise: the distances take few values
+            a = np.round(rng.standard_normal((n, 3)) * 1.5) * 0.25
+        elif kind == 4:  # a dead axis beside a live one with a shock
+            a = rng.standard_normal((n, 3))
+            a[:, 1] = 9.81
+            a[n // 2, 0] += 40.0
+        else:  # a shock near the threshold on a wandering axis
+            a = np.cumsum(0.01 * rng.standard_normal((n, 3)), axis=0)
+            a += rng.standard_normal((n, 3))
+            a[n // 3, 2] += rng.uniform(6.0, 14.0)
+        blocks.append(a)
+    inf_block = rng.standard_normal((1000, 3))
+    inf_block[500, 0] = np.inf
+    blocks.append(inf_block)
+
+    floors = []
+    real = screen_mod._median_floor
+
+    def recorded(x):
+        v = real(x)
+        floors.append((v, float(np.median(x))))
+        return v
+
+    # (numpy's path of the statistic warns on inf − inf; analyze never hands it an inf)
+    with np.errstate(invalid="ignore"):
+        monkeypatch.setattr(screen_mod, "_median_floor", recorded)
+        fast = [screen_accel(a) for a in blocks]
+        monkeypatch.setattr(screen_mod, "_median_floor", lambda x: 0.0)
+        exact = [screen_accel(a) for a in blocks]
+    for f, e in zip(fast, exact, strict=True):
+        np.testing.assert_array_equal(f, e)
+    assert all(v <= med or math.isnan(med) for v, med in floors)
+    assert sum(v > 0 for v, _m in floors) > len(floors) // 2  # the floor is found on most
+    assert sum(v == 0 for v, _m in floors) > 0  # and refused where it is not proven
+    assert sum(e.any() for e in exact) >= 8 and sum(not e.any() for e in exact) >= 8
