@@ -65,14 +65,34 @@ def mix_for(kind: str, n: int, rate_hz: float) -> Mix:
     raise SystemExit(f"unknown mix {kind!r}; use plain, sine, drift or steep")
 
 
-def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze"
-            ) -> tuple[AllanResult, np.ndarray]:
+#: where each printed EDF came from (``--detail``): the estimator's own rule, raised by the
+#: fit's noise mixture bound, raised by a resolved deterministic share, held at the record's
+#: support (the cap bound: what the raise asked for was more)
+RULES = ("own", "mixture", "share", "cap")
+
+
+def edf_rules(printed_edf: np.ndarray, own: np.ndarray, mixture: np.ndarray,
+              share: np.ndarray, cap: np.ndarray) -> np.ndarray:
+    """One row per τ of RULES: 1 where that rule set the printed EDF (the cap may be set
+    with the raise that hit it)."""
+    tol = 1e-9
+    at_own = np.abs(printed_edf - own) <= tol * own
+    at_cap = (np.abs(printed_edf - cap) <= tol * cap) & ~at_own
+    raised_by_mix = ~at_own & (np.nan_to_num(mixture) > own) & ~(share > 0)
+    raised_by_share = ~at_own & (share > 0)
+    return np.array([at_own, raised_by_mix, raised_by_share, at_cap], dtype=float).T
+
+
+def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze",
+            detail: bool = False) -> tuple[AllanResult, np.ndarray, np.ndarray | None]:
     """The OADEV result whose interval is counted: what ``avard analyze`` prints (the
     default options, the record a one-channel stream), or the bare estimator's; with the
-    share of the AVAR the fit's resolved deterministic terms were given at each τ."""
+    share of the AVAR the fit's resolved deterministic terms were given at each τ, and with
+    ``detail`` which rule set each τ's EDF (``edf_rules``; the estimator is run again for
+    its own EDF)."""
     if path == "estimator":
         r = allan_variance(y, rate, noise_id=noise_id)
-        return r, np.zeros(len(r.tau))
+        return r, np.zeros(len(r.tau)), None
     from avard.core.analysis.engine import analyze
     from avard.core.analysis.options import AnalyzeOptions
     from avard.core.analysis.signal_edf import signal_share
@@ -82,7 +102,18 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
                       names=("x",), n_samples=len(y))
     blocks = ((y[i:i + 65536, None], None, False) for i in range(0, len(y), 65536))
     ch = analyze(StreamSource(info, blocks), AnalyzeOptions(noise_id=noise_id)).channels["x"]
-    return ch.allan, signal_share(ch.fit, ch.allan)
+    share = signal_share(ch.fit, ch.allan)
+    rules = None
+    if detail:
+        from avard.core.allan.noise_id import fm_support_edf
+        from avard.core.analysis.signal_edf import unresolved_noise_edf
+
+        a = ch.allan
+        k = len(a.tau)
+        own = allan_variance(y, rate, noise_id=noise_id).edf[:k]
+        cap = np.array([fm_support_edf(2, int(m), 1, len(y) + 1) for m in a.m])
+        rules = edf_rules(np.asarray(a.edf), own, unresolved_noise_edf(ch.fit, a), share, cap)
+    return ch.allan, share, rules
 
 
 @dataclass(frozen=True)
@@ -108,6 +139,8 @@ class Coverage:
     # what the same records' intervals would cover with the true deterministic share given
     # to ``signal_edf.with_share_edf`` (an oracle: what the non-central EDF can do at best)
     share_known: np.ndarray
+    # (``--detail``) per τ, the share of records whose EDF each of RULES set
+    rules: np.ndarray | None = None
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -115,18 +148,22 @@ class Coverage:
 
 
 def coverage(hours: int, mix_kind: str, records: int, seed: int,
-             noise_id: str = "avard", path: str = "analyze") -> Coverage:
+             noise_id: str = "avard", path: str = "analyze", detail: bool = False
+             ) -> Coverage:
     """The coverage of one (length, mix) over ``records`` records."""
     rate = LENGTHS[hours]
     n = round(hours * 3600 * rate)
     mix = mix_for(mix_kind, n, rate)
     rng = np.random.default_rng([seed, hours, MIXES.index(mix_kind)])
     lo, hi, clean_var, edf, var, alpha, shares, results = [], [], [], [], [], [], [], []
+    rules = []
     ms = None
     for _ in range(records):
         y, clean = record(mix, n, rng)
-        r, share = printed(y, rate, noise_id, path)
+        r, share, rule = printed(y, rate, noise_id, path, detail)
         keep = n // r.m >= MIN_AVERAGES
+        if rule is not None:
+            rules.append(rule[keep])
         shares.append(share[keep])
         ms = r.m[keep]
         lo.append(r.lo[keep])
@@ -154,10 +191,11 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
         known /= len(results)
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),
                     np.mean(edf, axis=0), signal / truth, seen, np.mean(alpha, axis=0),
-                    np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known)
+                    np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known,
+                    np.mean(rules, axis=0) if rules else None)
 
 
-def _row(job: tuple[int, str, int, int, str, str]) -> Coverage:
+def _row(job: tuple[int, str, int, int, str, str, bool]) -> Coverage:
     return coverage(*job)
 
 
@@ -183,7 +221,7 @@ def main(argv: list[str]) -> int:
     print("| record | mix | τ counted (s) | lowest | highest | τ outside 60–76 % |")
     print("|---|---|---|---|---|---|")
     bad = 0
-    jobs = [(h, kind, args.records, args.seed, args.noise_id, args.path)
+    jobs = [(h, kind, args.records, args.seed, args.noise_id, args.path, args.detail)
             for h in hours for kind in args.mixes.split(",")]
     pool = None
     if args.workers > 1:
@@ -208,6 +246,10 @@ def main(argv: list[str]) -> int:
                       f"seen {v:10.1f}  mean α {a:5.2f}  signal {g:6.1%} of the AVAR  "
                       f"fit's share {fs:6.1%} (given in {fr:6.1%} of records)  "
                       f"with the true share {k:6.1%}")
+            if c.rules is not None:
+                for t, row in zip(c.tau, c.rules, strict=True):
+                    print(f"    τ {t:9.1f} s  EDF set by: " + "  ".join(
+                        f"{name} {v:6.1%}" for name, v in zip(RULES, row, strict=True)))
     if pool is not None:
         pool.close()
         pool.join()  # (its CPU is counted once it is reaped)

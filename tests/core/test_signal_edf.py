@@ -1,8 +1,11 @@
 """The printed OADEV's EDF where the fit's deterministic terms hold part of the AVAR (issue 24,
-core/analysis/signal_edf.py): the non-central χ² moment-matched, given only for terms the fit
-resolves, at their lower 1σ bound, within the record's support; noise alone unchanged."""
+core/analysis/signal_edf.py): the noise part's scatter (within the record's support) plus the
+exact cross term of the terms the fit resolves (core/analysis/cross_term.py); the
+non-central χ² moment match for the strided estimators; noise alone unchanged."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,9 +17,11 @@ from avard.core.allan.edf import (
     edf_with_signal,
 )
 from avard.core.allan.noise_id import SPREAD_LAG1
+from avard.core.analysis.cross_term import cross_term_variance
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.results import ChannelAnalysis
 from avard.core.analysis.signal_edf import (
+    noise_part_edf,
     signal_share,
     unresolved_noise_edf,
     with_signal_edf,
@@ -24,7 +29,7 @@ from avard.core.analysis.signal_edf import (
 from avard.core.io.source import RecordFormat, RecordInfo, StreamSource
 
 from tests.core.test_noise_id_rate import support
-from tests.support.coverage_gen import Mix, record
+from tests.support.coverage_gen import Mix, flicker, record
 
 RATE = 10.0
 N = 36000  # 1 h at 10 Hz
@@ -101,7 +106,9 @@ def test_noise_alone_is_the_estimators_where_it_identified_one_type() -> None:
 @pytest.mark.parametrize("drift", [0.0, 1e-4, 3e-4])
 def test_printed_edf_keeps_to_the_support(drift: float) -> None:
     """White + flicker + random walk with and without a ramp, through analyze: every printed
-    EDF is at least the estimator's and at most what the record supports."""
+    EDF is at least the estimator's; the noise part's EDF is at most what the record
+    supports, and so is the printed EDF wherever the fit resolved no deterministic share
+    (only a resolved ramp's or sinusoid's part, which does not scatter, may take it past)."""
     for seed in (1, 2):
         y = _record(drift, seed, q2=1e-6)
         ch = _analyze(y)
@@ -109,14 +116,25 @@ def test_printed_edf_keeps_to_the_support(drift: float) -> None:
         k = len(ch.allan.tau)
         ok = np.isfinite(ch.allan.edf)
         assert np.all(ch.allan.edf[ok] >= r.edf[:k][ok] * (1 - 1e-12))
-        assert np.all(ch.allan.edf[ok] <= support(ch.allan)[ok] * (1 + 1e-12))
+        cap = support(ch.allan)
+        noise = noise_part_edf(replace(ch.allan, edf=r.edf[:k]),
+                               unresolved_noise_edf(ch.fit, ch.allan))
+        noise_at_estimator = noise_part_edf(r)[:k]
+        assert np.all(noise[ok] <= cap[ok] * (1 + 1e-12))
+        assert np.all(noise_at_estimator[ok] <= cap[ok] * (1 + 1e-12))
+        plain = ok & ~(signal_share(ch.fit, ch.allan) > 0)
+        assert np.all(ch.allan.edf[plain] <= cap[plain] * (1 + 1e-12))
+        if drift == 0.0:
+            assert np.all(plain == ok)  # no share given on noise alone
 
 
 def test_a_resolved_ramp_raises_the_edf_where_it_holds_the_avar() -> None:
     """A ramp the fit resolves (present, no note): where it holds most of the AVAR the EDF
-    rises (an interval from the noise's EDF would be wider than the data support), never
-    above the record's support, never below the noise's; the bounds are the χ² bounds of
-    the new EDF; at short τ, where the ramp holds nothing, nothing changes."""
+    rises past the record's support (an interval from any noise type's χ² would be wider
+    than the estimate's scatter), to the EDF of the noise part plus the ramp's exact cross
+    term (``parts_edf``), never below the noise's; the noise part stays within the support;
+    the bounds are the χ² bounds of the new EDF; at short τ, where the ramp holds nothing,
+    nothing changes."""
     y = _record(3e-4)
     ch = _analyze(y)
     ramp = ch.fit.terms["rate_ramp"]
@@ -126,14 +144,50 @@ def test_a_resolved_ramp_raises_the_edf_where_it_holds_the_avar() -> None:
     base, new = r.edf[:k], ch.allan.edf
     share = signal_share(ch.fit, r)[:k]
     assert share[-1] > 0.5 and share[0] < 1e-6
-    noise = np.fmax(base, unresolved_noise_edf(ch.fit, ch.allan))
-    assert new[-1] > 1.3 * noise[-1]                     # raised where the ramp dominates
+    est = replace(ch.allan, edf=base)
+    noise = noise_part_edf(est, unresolved_noise_edf(ch.fit, ch.allan))
+    cap = support(ch.allan)
+    assert np.all(noise <= cap * (1 + 1e-12))           # the noise part within the support
+    assert new[-1] > 3 * cap[-1]                         # the ramp's part past it
     assert np.all(new >= noise * (1 - 1e-12))            # never below the noise's
-    assert np.all(new <= support(ch.allan) * (1 + 1e-12))  # never above the support
     np.testing.assert_allclose(new[:4], noise[:4], rtol=1e-12)
     lo, hi = chi2_interval(ch.allan.var, new, ch.allan.ci)
     np.testing.assert_allclose(ch.allan.lo, lo, rtol=1e-12)
     np.testing.assert_allclose(ch.allan.hi, hi, rtol=1e-12)
+
+
+@pytest.mark.parametrize("noise", ["white", "flicker", "walk"])
+@pytest.mark.parametrize(("m", "cycles"), [(1, 0), (16, 0), (256, 0), (16, 6), (256, 6)])
+def test_the_cross_term_is_the_simulated_one(noise: str, m: int, cycles: int) -> None:
+    """The cross term of a ramp (cycles 0) or a sinusoid (6 cycles a record) with white,
+    flicker (the independent generator's) and random-walk noise: its variance over 600
+    records is ``cross_term_variance`` times the signal's own AVAR (±6 % Monte Carlo at
+    2σ, and a margin for the flicker series' finite spectrum)."""
+    n = 4096
+    rng = np.random.default_rng([7, m, cycles])
+    t = np.arange(n, dtype=float)
+    signal = 1e-3 * t if cycles == 0 else np.sin(2 * np.pi * cycles * t / n + 0.7)
+
+    def diffs(x: np.ndarray) -> np.ndarray:
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        avg = (c[m:] - c[:-m]) / m
+        return (avg[m:] - avg[:-m]) / np.sqrt(2.0)
+
+    a = diffs(signal)
+    psds = {"white": lambda nu: np.ones_like(nu),
+            "flicker": lambda nu: 0.5 / np.abs(nu),  # the generator's h/f one-sided, h = 1
+            "walk": lambda nu: 0.25 / np.sin(np.pi * nu) ** 2}
+    cross = []
+    for _ in range(600):
+        if noise == "white":
+            x = rng.normal(size=n)
+        elif noise == "flicker":
+            x = flicker(n, 1.0, rng)
+        else:
+            x = np.cumsum(rng.normal(size=n))
+        cross.append(2.0 / len(a) * float(np.sum(a * diffs(x))))
+    want = float(np.mean(a * a)) * cross_term_variance(psds[noise], m, len(a), cycles / n)
+    assert np.var(cross) == pytest.approx(want, rel=0.15)
 
 
 def test_a_ramp_the_fit_does_not_resolve_changes_nothing() -> None:
