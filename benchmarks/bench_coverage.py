@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,6 +82,13 @@ def edf_rules(printed_edf: np.ndarray, own: np.ndarray, mixture: np.ndarray,
     raised_by_mix = ~at_own & (np.nan_to_num(mixture) > own) & ~(share > 0)
     raised_by_share = ~at_own & (share > 0)
     return np.array([at_own, raised_by_mix, raised_by_share, at_cap], dtype=float).T
+
+
+def true_psd(mix: Mix) -> Callable[[np.ndarray], np.ndarray]:
+    """The generated noise's two-sided PSD in cycles per sample (the flicker's Fourier
+    series read as its continuous 1/f spectrum)."""
+    return lambda nu: (mix.s2 + mix.h / (2.0 * np.abs(nu))
+                       + mix.q2 / (4.0 * np.sin(np.pi * nu) ** 2))
 
 
 def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze",
@@ -136,11 +144,15 @@ class Coverage:
     # estimator path), and the share of records where it was given any at that τ
     fit_share: np.ndarray
     fit_raised: np.ndarray
-    # what the same records' intervals would cover with the true deterministic share given
-    # to ``signal_edf.with_share_edf`` (an oracle: what the non-central EDF can do at best)
+    # what the same records' intervals would cover with the true deterministic part and the
+    # generator's spectrum given to the printed rule (``signal_edf.with_parts_edf``: the
+    # noise part's EDF and the exact cross term; an oracle, what resolving can do at best)
     share_known: np.ndarray
     # (``--detail``) per τ, the share of records whose EDF each of RULES set
     rules: np.ndarray | None = None
+    # (``--detail``) the EDF the noise part alone scatters with (the record less its
+    # noise-free signal, through the bare estimator): what the noise's printed EDF aims at
+    noise_seen: np.ndarray | None = None
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -156,7 +168,8 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     mix = mix_for(mix_kind, n, rate)
     rng = np.random.default_rng([seed, hours, MIXES.index(mix_kind)])
     lo, hi, clean_var, edf, var, alpha, shares, results = [], [], [], [], [], [], [], []
-    rules = []
+    rules: list[np.ndarray] = []
+    noise_only: list[np.ndarray] = []
     ms = None
     for _ in range(records):
         y, clean = record(mix, n, rng)
@@ -164,6 +177,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
         keep = n // r.m >= MIN_AVERAGES
         if rule is not None:
             rules.append(rule[keep])
+            noise_only.append(allan_variance(y - clean, rate, r.m[keep] / rate).var)
         shares.append(share[keep])
         ms = r.m[keep]
         lo.append(r.lo[keep])
@@ -182,17 +196,25 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
     known = np.zeros(len(ms))
     if clean_var:
-        from avard.core.analysis.signal_edf import with_share_edf
+        from avard.core.analysis.signal_edf import with_parts_edf
 
+        f0 = 1.0 / mix.sine_period if mix.sine_amplitude else 0.0
         for r in results:
             k = len(ms)
-            o = with_share_edf(r, np.concatenate([signal / truth, np.zeros(len(r.m) - k)]))
+            pad = np.zeros(len(r.m) - k)
+            # the oracle: the true deterministic part and the generator's own spectrum
+            # given to the printed rule (what resolving the signal could do at best)
+            o = with_parts_edf(r, [(np.concatenate([signal, pad]), f0)],
+                               np.concatenate([truth, pad + 1.0]),
+                               np.concatenate([noise, pad + 1.0]), true_psd(mix))
             known += (o.lo[:k] <= truth) & (truth <= o.hi[:k])
         known /= len(results)
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),
                     np.mean(edf, axis=0), signal / truth, seen, np.mean(alpha, axis=0),
                     np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known,
-                    np.mean(rules, axis=0) if rules else None)
+                    np.mean(rules, axis=0) if rules else None,
+                    2.0 * noise**2 / np.mean((np.array(noise_only) - noise) ** 2, axis=0)
+                    if noise_only else None)
 
 
 def _row(job: tuple[int, str, int, int, str, str, bool]) -> Coverage:
@@ -224,6 +246,7 @@ def main(argv: list[str]) -> int:
     jobs = [(h, kind, args.records, args.seed, args.noise_id, args.path, args.detail)
             for h in hours for kind in args.mixes.split(",")]
     pool = None
+    rows: Iterator[Coverage]
     if args.workers > 1:
         import multiprocessing
 
@@ -245,11 +268,12 @@ def main(argv: list[str]) -> int:
                 print(f"    τ {t:9.1f} s  coverage {s:6.1%}  mean EDF {e:10.1f}  "
                       f"seen {v:10.1f}  mean α {a:5.2f}  signal {g:6.1%} of the AVAR  "
                       f"fit's share {fs:6.1%} (given in {fr:6.1%} of records)  "
-                      f"with the true share {k:6.1%}")
-            if c.rules is not None:
-                for t, row in zip(c.tau, c.rules, strict=True):
+                      f"with the true part {k:6.1%}")
+            if c.rules is not None and c.noise_seen is not None:
+                for t, row, ns in zip(c.tau, c.rules, c.noise_seen, strict=True):
                     print(f"    τ {t:9.1f} s  EDF set by: " + "  ".join(
-                        f"{name} {v:6.1%}" for name, v in zip(RULES, row, strict=True)))
+                        f"{name} {v:6.1%}" for name, v in zip(RULES, row, strict=True))
+                        + f"  (noise alone scatters with {ns:9.1f})")
     if pool is not None:
         pool.close()
         pool.join()  # (its CPU is counted once it is reaped)

@@ -249,7 +249,10 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
     each part adds its exact cross term with the noise, S_j·``cross_term_variance`` under
     the fitted noise spectrum ``psd`` (a deterministic part does not scatter itself):
 
-        EDF = 2T² / (2N²/ν + Σ_j S_j·c_j).
+        EDF = 2T² / (2N²/ν + Σ_j S_j·c_j + Σ_j S_j²·p_j),
+
+    p_j the spread of a sinusoid's own OADEV over its phase (``phase_spread``; 0 for a
+    ramp).
 
     The support caps the noise's EDF only: where the deterministic part dominates, the
     estimate scatters far less than any noise type's χ² says, and the EDF says so. The
@@ -269,10 +272,25 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
     for s, f0 in parts:
         c = np.array([cross_term_variance(psd, int(m), int(n), f0) if sj > 0 else 0.0
                       for m, n, sj in zip(allan.m, allan.n, s, strict=True)])
-        cross += s * c
+        cross += s * c + s**2 * phase_spread(allan.n, f0)
     with np.errstate(invalid="ignore", divide="ignore"):
         edf = 2.0 * total**2 / (2.0 * noise**2 / nu + cross)
     return np.where(np.isfinite(nu) & (sure > 0), np.fmax(edf, nu), nu)
+
+
+def phase_spread(n_diff: NDArray[np.int64], f0: float) -> NDArray[np.float64]:
+    """The variance, per unit S², of a sinusoid's own OADEV over ``n_diff`` differences
+    across its phase (the AVAR is the phase average; a record holding a fraction of a
+    cycle more or less weighs one phase more): (1/M)Σ sin²(2πν₀k + φ) = ½ − the
+    Dirichlet sum's cos(2φ + …) term, so Var = ½·(sin(2πν₀M)/(M sin(2πν₀)))². None for a
+    ramp (ν₀ = 0)."""
+    m = np.asarray(n_diff, dtype=float)
+    if f0 <= 0:
+        return np.zeros(len(m))
+    den = m * np.sin(2 * np.pi * f0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(np.abs(den) > 0, np.sin(2 * np.pi * f0 * m) / den, 1.0)
+    return 0.5 * rel**2
 
 
 def with_parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
