@@ -31,7 +31,7 @@ import argparse
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult, allan_variance
@@ -96,8 +96,8 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
     """The OADEV result whose interval is counted: what ``avard analyze`` prints (the
     default options, the record a one-channel stream), or the bare estimator's; with the
     share of the AVAR the fit's resolved deterministic terms were given at each τ, and with
-    ``detail`` which rule set each τ's EDF (``edf_rules``; the estimator is run again for
-    its own EDF)."""
+    ``detail`` which rule set each τ's EDF (``edf_rules``) and, in a last column, the
+    estimator's own EDF (it is run again for it)."""
     if path == "estimator":
         r = allan_variance(y, rate, noise_id=noise_id)
         return r, np.zeros(len(r.tau)), None
@@ -120,7 +120,8 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
         k = len(a.tau)
         own = allan_variance(y, rate, noise_id=noise_id).edf[:k]
         cap = np.array([fm_support_edf(2, int(m), 1, len(y) + 1) for m in a.m])
-        rules = edf_rules(np.asarray(a.edf), own, unresolved_noise_edf(ch.fit, a), share, cap)
+        rules = np.column_stack([edf_rules(np.asarray(a.edf), own,
+                                           unresolved_noise_edf(ch.fit, a), share, cap), own])
     return ch.allan, share, rules
 
 
@@ -169,14 +170,17 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     rng = np.random.default_rng([seed, hours, MIXES.index(mix_kind)])
     lo, hi, clean_var, edf, var, alpha, shares, results = [], [], [], [], [], [], [], []
     rules: list[np.ndarray] = []
+    own: list[np.ndarray] = []  # the estimator's own EDF (the oracle's noise part)
     noise_only: list[np.ndarray] = []
     ms = None
     for _ in range(records):
         y, clean = record(mix, n, rng)
         r, share, rule = printed(y, rate, noise_id, path, detail)
+        if rule is not None:
+            own.append(rule[:, len(RULES)])
         keep = n // r.m >= MIN_AVERAGES
         if rule is not None:
-            rules.append(rule[keep])
+            rules.append(rule[keep, :len(RULES)])
             noise_only.append(allan_variance(y - clean, rate, r.m[keep] / rate).var)
         shares.append(share[keep])
         ms = r.m[keep]
@@ -194,19 +198,21 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
     seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
-    known = np.zeros(len(ms))
-    if clean_var:
+    known = np.full(len(ms), np.nan)
+    if clean_var and own:
+        known[:] = 0.0
         from avard.core.analysis.signal_edf import with_parts_edf
 
         f0 = 1.0 / mix.sine_period if mix.sine_amplitude else 0.0
-        for r in results:
+        for r, own_edf in zip(results, own, strict=True):
             k = len(ms)
             pad = np.zeros(len(r.m) - k)
             # the oracle: the true deterministic part and the generator's own spectrum
             # given to the printed rule (what resolving the signal could do at best)
-            o = with_parts_edf(r, [(np.concatenate([signal, pad]), f0)],
+            o = with_parts_edf(replace(r, edf=own_edf), [(np.concatenate([signal, pad]), f0)],
                                np.concatenate([truth, pad + 1.0]),
-                               np.concatenate([noise, pad + 1.0]), true_psd(mix))
+                               np.concatenate([noise, pad + 1.0]), true_psd(mix),
+                               within_support=False)
             known += (o.lo[:k] <= truth) & (truth <= o.hi[:k])
         known /= len(results)
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),

@@ -218,11 +218,12 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
         return with_share_edf(allan, np.zeros(len(allan.tau)), noise)
     parts = signal_parts(fit, allan, lower=False)
     point = np.sum([s for s, _f in parts], axis=0)
+    low = np.sum([s for s, _f in signal_parts(fit, allan)], axis=0)
     total = _total(fit, allan, point)
     # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR leaves
-    # beside the deterministic terms' point values, the larger
+    # beside the deterministic terms at their lower 1σ, the larger
     return with_parts_edf(allan, parts, total, np.fmax(noise_upper(fit, allan),
-                                                       total - point),
+                                                       total - low),
                           noise_psd(fit), noise)
 
 
@@ -233,15 +234,20 @@ def noise_part_edf(allan: AllanResult, noise_edf: NDArray[np.float64] | None = N
     at that m and N, ``noise_id.fm_support_edf``) and never below the estimator's own."""
     edf = np.asarray(allan.edf, dtype=float)
     base = edf if noise_edf is None else np.fmax(edf, noise_edf)
-    cap = np.array([fm_support_edf(2, int(m), int(s), int(p))
-                    for m, s, p in zip(allan.m, allan.stride, _n_phase(allan), strict=True)])
-    return np.where(np.isfinite(edf), np.maximum(edf, np.fmin(base, cap)), edf)
+    return np.where(np.isfinite(edf), np.maximum(edf, np.fmin(base, _support(allan))), edf)
+
+
+def _support(allan: AllanResult) -> NDArray[np.float64]:
+    """The record's support at each τ: the most EDF any FM type gives (``fm_support_edf``)."""
+    return np.array([fm_support_edf(2, int(m), int(s), int(p))
+                     for m, s, p in zip(allan.m, allan.stride, _n_phase(allan), strict=True)])
 
 
 def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
               total: NDArray[np.float64], noise_avar: NDArray[np.float64],
               psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-              noise_edf: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+              noise_edf: NDArray[np.float64] | None = None, *, within_support: bool = True
+              ) -> NDArray[np.float64]:
     """The EDF 2T²/Var of an OADEV estimate whose expectation T (``total``) holds the
     deterministic ``parts`` (their AVAR S_j, frequency ν_j in cycles per sample) and the
     noise's ``noise_avar`` N: the noise part scatters with ``noise_part_edf`` ν (capped at
@@ -254,11 +260,16 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
     p_j the spread of a sinusoid's own OADEV over its phase (``phase_spread``; 0 for a
     ramp).
 
-    The support caps the noise's EDF only: where the deterministic part dominates, the
-    estimate scatters far less than any noise type's χ² says, and the EDF says so. The
-    deterministic share is held below 0.99 (as ``edf.edf_with_signal``). For the estimators
-    with a stride (the cascade), whose cross term this does not model, the non-central
-    ν/(1 − f²) within the support."""
+    The support caps the noise's EDF, and with ``within_support`` (what analyze prints)
+    the whole EDF too. Where a known deterministic part dominates the estimate scatters far
+    less than any noise type's χ² says, and ``within_support=False`` says so (the coverage
+    benchmark's oracle, given the true part and spectrum, covers 60–80 % with it). The
+    AVAR fit's own parts cannot lift it: at the longest τ it cannot split the AVAR between
+    a ramp and a random walk, and takes the walk's share for the ramp's, so the noise part
+    comes out too small (12 h "steep" records: the EDF 480–570 where the estimates scatter
+    with 240–300, coverage 58 %; docs/analysis.md). The deterministic share is held below
+    0.99 (as ``edf.edf_with_signal``). For the estimators with a stride (the cascade),
+    whose cross term this does not model, the non-central ν/(1 − f²) within the support."""
     nu = noise_part_edf(allan, noise_edf)
     sure = np.zeros(len(allan.tau))
     for s, _f0 in parts:
@@ -275,6 +286,8 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
         cross += s * c + s**2 * phase_spread(allan.n, f0)
     with np.errstate(invalid="ignore", divide="ignore"):
         edf = 2.0 * total**2 / (2.0 * noise**2 / nu + cross)
+    if within_support:
+        edf = np.fmin(edf, _support(allan))
     return np.where(np.isfinite(nu) & (sure > 0), np.fmax(edf, nu), nu)
 
 
@@ -296,9 +309,11 @@ def phase_spread(n_diff: NDArray[np.int64], f0: float) -> NDArray[np.float64]:
 def with_parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
                    total: NDArray[np.float64], noise_avar: NDArray[np.float64],
                    psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-                   noise_edf: NDArray[np.float64] | None = None) -> AllanResult:
+                   noise_edf: NDArray[np.float64] | None = None, *,
+                   within_support: bool = True) -> AllanResult:
     """``allan`` with ``parts_edf`` and its χ² bounds (unchanged where it is the same)."""
-    new = parts_edf(allan, parts, total, noise_avar, psd, noise_edf)
+    new = parts_edf(allan, parts, total, noise_avar, psd, noise_edf,
+                    within_support=within_support)
     edf = np.asarray(allan.edf, dtype=float)
     new = np.where(np.isfinite(edf), np.maximum(new, edf), edf)
     if np.array_equal(new, edf):
@@ -328,9 +343,7 @@ def with_share_edf(allan: AllanResult, share: NDArray[np.float64],
     base = edf if noise_edf is None else np.fmax(edf, noise_edf)
     if not np.any(share > 0) and not np.any(base > edf):
         return allan
-    n_phase = _n_phase(allan)
-    cap = np.array([fm_support_edf(2, int(m), int(s), int(p))
-                    for m, s, p in zip(allan.m, allan.stride, n_phase, strict=True)])
+    cap = _support(allan)
     raised = edf_with_signal(base, share)
     # never above the record's support, never below the estimator's own EDF
     new = np.where(np.isfinite(edf), np.maximum(edf, np.fmin(raised, cap)), edf)
