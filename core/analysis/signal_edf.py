@@ -12,17 +12,23 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
   with the composition taken the way that lowers the bound (each term at θ ± σ, an absent
   one at its upper limit), at the τ where the estimator could not tell the types apart
   (fewer than ``noise_id.SPREAD_LAG1`` averages).
-* **A deterministic share.** A rate ramp or a sinusoid adds to the Allan variance without
-  scattering: the estimate at a τ where such a term holds a share f of the expectation is a
-  non-central χ², and ``edf.edf_with_signal`` gives the moment-matched EDF ν/(1 − f²).
-  Only terms the fit resolves count (present, with no "ramp or random walk" or "not yet
-  resolved" note: a ramp the record cannot tell from a random walk is read as the walk),
-  each at its lower 1σ bound, over the larger of the measured and modelled AVAR
-  (``signal_share``).
+* **A deterministic part.** A rate ramp or a sinusoid adds to the Allan variance without
+  scattering: the estimate's variance is the noise part's plus the part's cross term with
+  the noise, computed exactly under the fitted spectrum (``cross_term.py``), and for a
+  sinusoid the spread of its own OADEV over its phase (``parts_edf``). Only terms the fit
+  resolves count (present, with no "ramp or random walk" or "not yet resolved" note: a
+  ramp the record cannot tell from a random walk is read as the walk), at their point
+  values, the noise part the larger of the fitted noise at θ + σ and what the measured
+  AVAR leaves beside the terms at their lower 1σ (``signal_parts``, ``noise_upper``). The
+  strided estimators (the cascade) keep the non-central χ²'s ν/(1 − f²)
+  (``edf.edf_with_signal``), whose cross term is the largest a Gaussian form allows.
 
 The printed EDF is never below the estimator's own and never above what the record
 supports (``noise_id.fm_support_edf``: the most any FM type gives at that m and N, the rule
-every printed EDF keeps). Where neither raises it, the result is returned unchanged.
+every printed EDF keeps): the AVAR fit cannot split the longest τ between a ramp and a
+random walk, so its parts may not take the EDF past it (``parts_edf(within_support=
+False)`` is for a part known apart from the AVAR). Where neither raises it, the result is
+returned unchanged.
 """
 
 from __future__ import annotations
