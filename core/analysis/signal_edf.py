@@ -298,9 +298,13 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
         for k, (m, n, sk) in enumerate(zip(allan.m, allan.n, s, strict=True)):
             if sk >= _EXACT_SHARE * total[k]:
                 c[k] = cross_term_variance(psd, int(m), int(n), f0)
-        cross += s * np.nan_to_num(c) + s**2 * phase_spread(allan.n, f0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # (a cross term that is not a number is not "no scatter": the Gaussian bound)
+            c = np.where(np.isfinite(c), c, 4.0 * noise / nu)
+        cross += s * c + s**2 * phase_spread(allan.n, f0)
     with np.errstate(invalid="ignore", divide="ignore"):
         edf = 2.0 * total**2 / (2.0 * noise**2 / nu + cross)
+    edf = np.where(np.isfinite(edf), edf, nu)  # (no differences at a τ: the noise's)
     if within_support:
         edf = np.fmin(edf, _support(allan))
     return np.where(np.isfinite(nu) & (sure > 0), np.fmax(edf, nu), nu)

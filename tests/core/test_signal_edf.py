@@ -273,3 +273,17 @@ def test_the_printed_rule_with_the_true_part_is_the_simulated_scatter(cycles: in
     assert got == pytest.approx(seen, rel=0.25), (got, seen, signal / truth)
     f = signal / truth
     assert got > 1.5 * min(edf_noise / (1 - f * f), float(support(one)[0]))
+
+
+def test_a_cross_term_that_cannot_be_computed_is_the_gaussian_bound() -> None:
+    """A τ whose cross term is not a number (a spectrum that cannot be evaluated there) is
+    given the largest cross term a Gaussian quadratic form allows, 4SN/ν, i.e. the
+    non-central χ²'s ν/(1 − f²): a NaN is not read as "no scatter" and raised to the
+    support."""
+    n, m = 4096, 64
+    r = allan_variance(np.random.default_rng(4).normal(size=n), 1.0, [float(m)])
+    red = replace(r, edf=r.edf / 3)  # (a redder type's EDF, below the support)
+    got = parts_edf(red, [(np.array([3.0 / m]), 0.0)], np.array([4.0 / m]),
+                    np.array([1.0 / m]), lambda nu: np.full_like(nu, np.nan))
+    np.testing.assert_allclose(got, edf_with_signal(red.edf, 0.75), rtol=1e-12)
+    assert got[0] < float(support(red)[0])
