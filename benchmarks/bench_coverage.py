@@ -32,7 +32,8 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult, allan_variance
@@ -67,14 +68,41 @@ def mix_for(kind: str, n: int, rate_hz: float) -> Mix:
     raise SystemExit(f"unknown mix {kind!r}; use plain, sine, drift or steep")
 
 
-def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze"
-            ) -> tuple[AllanResult, np.ndarray]:
+#: where each printed EDF came from (``--detail``): the estimator's own rule, raised by the
+#: fit's noise mixture bound, raised by a resolved deterministic share, held at the record's
+#: support (the cap bound: what the raise asked for was more)
+RULES = ("own", "mixture", "share", "cap")
+
+
+def edf_rules(printed_edf: np.ndarray, own: np.ndarray, mixture: np.ndarray,
+              share: np.ndarray, cap: np.ndarray) -> np.ndarray:
+    """One row per τ of RULES: 1 where that rule set the printed EDF (the cap may be set
+    with the raise that hit it)."""
+    tol = 1e-9
+    at_own = np.abs(printed_edf - own) <= tol * own
+    at_cap = (np.abs(printed_edf - cap) <= tol * cap) & ~at_own
+    raised_by_mix = ~at_own & (np.nan_to_num(mixture) > own) & ~(share > 0)
+    raised_by_share = ~at_own & (share > 0)
+    return np.array([at_own, raised_by_mix, raised_by_share, at_cap], dtype=float).T
+
+
+def true_psd(mix: Mix) -> Callable[[np.ndarray], np.ndarray]:
+    """The generated noise's two-sided PSD in cycles per sample (the flicker's Fourier
+    series read as its continuous 1/f spectrum)."""
+    return lambda nu: (mix.s2 + mix.h / (2.0 * np.abs(nu))
+                       + mix.q2 / (4.0 * np.sin(np.pi * nu) ** 2))
+
+
+def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze",
+            detail: bool = False) -> tuple[AllanResult, np.ndarray, np.ndarray | None]:
     """The OADEV result whose interval is counted: what ``avard analyze`` prints (the
     default options, the record a one-channel stream), or the bare estimator's; with the
-    share of the AVAR the fit's resolved deterministic terms were given at each τ."""
+    share of the AVAR the fit's resolved deterministic terms were given at each τ, and with
+    ``detail`` which rule set each τ's EDF (``edf_rules``) and, in a last column, the
+    estimator's own EDF (it is run again for it)."""
     if path == "estimator":
         r = allan_variance(y, rate, noise_id=noise_id)
-        return r, np.zeros(len(r.tau))
+        return r, np.zeros(len(r.tau)), None
     if path == "live":
         # the service's snapshot: the cascade fed a minute at a time, its one fit
         # (live_fit.fit_channel: the decimation guard and analyze's signal_edf)
@@ -87,7 +115,7 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
         for i in range(0, len(y), step):
             sa.update(y[i:i + step])
         cf = fit_channel(sa.snapshot().channel(0))
-        return cf.allan, share_of(cf.fit, cf.allan)
+        return cf.allan, share_of(cf.fit, cf.allan), None
     from avard.core.analysis.engine import analyze
     from avard.core.analysis.options import AnalyzeOptions
     from avard.core.analysis.signal_edf import signal_share
@@ -97,7 +125,19 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
                       names=("x",), n_samples=len(y))
     blocks = ((y[i:i + 65536, None], None, False) for i in range(0, len(y), 65536))
     ch = analyze(StreamSource(info, blocks), AnalyzeOptions(noise_id=noise_id)).channels["x"]
-    return ch.allan, signal_share(ch.fit, ch.allan)
+    share = signal_share(ch.fit, ch.allan)
+    rules = None
+    if detail:
+        from avard.core.allan.noise_id import fm_support_edf
+        from avard.core.analysis.signal_edf import unresolved_noise_edf
+
+        a = ch.allan
+        k = len(a.tau)
+        own = allan_variance(y, rate, noise_id=noise_id).edf[:k]
+        cap = np.array([fm_support_edf(2, int(m), 1, len(y) + 1) for m in a.m])
+        rules = np.column_stack([edf_rules(np.asarray(a.edf), own,
+                                           unresolved_noise_edf(ch.fit, a), share, cap), own])
+    return ch.allan, share, rules
 
 
 @dataclass(frozen=True)
@@ -120,9 +160,15 @@ class Coverage:
     # estimator path), and the share of records where it was given any at that τ
     fit_share: np.ndarray
     fit_raised: np.ndarray
-    # what the same records' intervals would cover with the true deterministic share given
-    # to ``signal_edf.with_share_edf`` (an oracle: what the non-central EDF can do at best)
+    # what the same records' intervals would cover with the true deterministic part and the
+    # generator's spectrum given to the printed rule (``signal_edf.with_parts_edf``: the
+    # noise part's EDF and the exact cross term; an oracle, what resolving can do at best)
     share_known: np.ndarray
+    # (``--detail``) per τ, the share of records whose EDF each of RULES set
+    rules: np.ndarray | None = None
+    # (``--detail``) the EDF the noise part alone scatters with (the record less its
+    # noise-free signal, through the bare estimator): what the noise's printed EDF aims at
+    noise_seen: np.ndarray | None = None
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -130,18 +176,27 @@ class Coverage:
 
 
 def coverage(hours: int, mix_kind: str, records: int, seed: int,
-             noise_id: str = "avard", path: str = "analyze") -> Coverage:
+             noise_id: str = "avard", path: str = "analyze", detail: bool = False
+             ) -> Coverage:
     """The coverage of one (length, mix) over ``records`` records."""
     rate = LENGTHS[hours]
     n = round(hours * 3600 * rate)
     mix = mix_for(mix_kind, n, rate)
     rng = np.random.default_rng([seed, hours, MIXES.index(mix_kind)])
     lo, hi, clean_var, edf, var, alpha, shares, results = [], [], [], [], [], [], [], []
+    rules: list[np.ndarray] = []
+    own: list[np.ndarray] = []  # the estimator's own EDF (the oracle's noise part)
+    noise_only: list[np.ndarray] = []
     ms = None
     for _ in range(records):
         y, clean = record(mix, n, rng)
-        r, share = printed(y, rate, noise_id, path)
+        r, share, rule = printed(y, rate, noise_id, path, detail)
+        if rule is not None:
+            own.append(rule[:, len(RULES)])
         keep = n // r.m >= MIN_AVERAGES
+        if rule is not None:
+            rules.append(rule[keep, :len(RULES)])
+            noise_only.append(allan_variance(y - clean, rate, r.m[keep] / rate).var)
         shares.append(share[keep])
         ms = r.m[keep]
         lo.append(r.lo[keep])
@@ -158,21 +213,69 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
     seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
-    known = np.zeros(len(ms))
-    if clean_var:
-        from avard.core.analysis.signal_edf import with_share_edf
+    known = np.full(len(ms), np.nan)
+    if clean_var and own:
+        known[:] = 0.0
+        from avard.core.analysis.signal_edf import with_parts_edf
 
-        for r in results:
+        f0 = 1.0 / mix.sine_period if mix.sine_amplitude else 0.0
+        for r, own_edf in zip(results, own, strict=True):
             k = len(ms)
-            o = with_share_edf(r, np.concatenate([signal / truth, np.zeros(len(r.m) - k)]))
+            pad = np.zeros(len(r.m) - k)
+            # the oracle: the true deterministic part and the generator's own spectrum
+            # given to the printed rule (what resolving the signal could do at best)
+            o = with_parts_edf(replace(r, edf=own_edf), [(np.concatenate([signal, pad]), f0)],
+                               np.concatenate([truth, pad + 1.0]),
+                               np.concatenate([noise, pad + 1.0]), true_psd(mix),
+                               within_support=False)
             known += (o.lo[:k] <= truth) & (truth <= o.hi[:k])
         known /= len(results)
     return Coverage(hours, mix_kind, records, ms / rate, inside.mean(axis=0),
                     np.mean(edf, axis=0), signal / truth, seen, np.mean(alpha, axis=0),
-                    np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known)
+                    np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known,
+                    np.mean(rules, axis=0) if rules else None,
+                    2.0 * noise**2 / np.mean((np.array(noise_only) - noise) ** 2, axis=0)
+                    if noise_only else None)
 
 
-def _row(job: tuple[int, str, int, int, str, str]) -> Coverage:
+def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
+    """Would a least-squares drift, tested under the fitted noise, be an honest claim?
+    (``--drift-test``; a measurement for the time-domain drift docs/analysis.md asks for,
+    nothing avard prints.) Per record: the OLS slope of the record, and its standard error
+    under the noise the fit finds with no ramp term (each component at θ + σ,
+    ``signal_edf.noise_psd``), ∫S(ν)|W(ν)|²dν with W the slope's weights' transfer; the
+    share of records past |z| = 2.58 and 3.29 (1 % and 0.1 % two-sided) and z's spread,
+    which is 1 where the null model is right."""
+    import numpy.fft as fft
+    from avard.core.analysis.signal_edf import noise_psd
+    from avard.core.model.fit import fit_noise
+    from avard.core.model.terms import TERMS
+
+    rate = LENGTHS[hours]
+    n = round(hours * 3600 * rate)
+    mix = mix_for(kind, n, rate)
+    rng = np.random.default_rng([seed, hours, MIXES.index(kind), 77])
+    i = np.arange(n, dtype=float)
+    w = i - i.mean()
+    w /= np.sum(w * w)
+    size = 8 * n
+    gain = np.abs(fft.rfft(w, size))[1:] ** 2
+    nu = np.arange(1, len(gain) + 1) / size
+    no_ramp = [t for t in TERMS if t != "rate_ramp"]
+    z = []
+    se = math.nan
+    for _ in range(records):
+        y, _clean = record(mix, n, rng)
+        fit = fit_noise(allan_variance(y, rate), terms=no_ramp)
+        se = math.sqrt(2.0 * float(np.sum(noise_psd(fit)(nu) * gain)) / size)
+        z.append(float(np.sum(w * y)) / se)
+    za = np.array(z)
+    return (f"{hours} h {kind}: |z| > 2.58 in {np.mean(np.abs(za) > 2.576):.1%}, > 3.29 in "
+            f"{np.mean(np.abs(za) > 3.29):.1%}; z mean {za.mean():.2f}, spread {za.std():.2f}"
+            f"; the true drift is {mix.drift / se:.1f} of the last record's standard error")
+
+
+def _row(job: tuple[int, str, int, int, str, str, bool]) -> Coverage:
     return coverage(*job)
 
 
@@ -187,20 +290,29 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--path", choices=("analyze", "estimator", "live"), default="analyze")
     ap.add_argument("--workers", type=int, default=1, help="processes for the rows (≤ 2)")
     ap.add_argument("--detail", action="store_true", help="print the share at every τ")
+    ap.add_argument("--drift-test", action="store_true",
+                    help="instead: how a least-squares drift tested under the fitted noise "
+                         "would claim on each mix (drift_test)")
     args = ap.parse_args(argv)
     hours = [int(h) for h in args.hours.split(",")]
     if any(h not in LENGTHS for h in hours):
         ap.error(f"--hours takes some of {sorted(LENGTHS)}")
     cpu0 = time.process_time()
+    if args.drift_test:
+        for h in hours:
+            for kind in args.mixes.split(","):
+                print(drift_test(h, kind, args.records, args.seed), flush=True)
+        return 0
     print(f"OADEV 68.3 % interval coverage ({args.path}), noise_id={args.noise_id}, "
           f"{args.records} records per row, τ with >= {MIN_AVERAGES} averages (asked: "
           f"{BAND[0]:.0%}–{BAND[1]:.0%})")
     print("| record | mix | τ counted (s) | lowest | highest | τ outside 60–76 % |")
     print("|---|---|---|---|---|---|")
     bad = 0
-    jobs = [(h, kind, args.records, args.seed, args.noise_id, args.path)
+    jobs = [(h, kind, args.records, args.seed, args.noise_id, args.path, args.detail)
             for h in hours for kind in args.mixes.split(",")]
     pool = None
+    rows: Iterator[Coverage]
     if args.workers > 1:
         import multiprocessing
 
@@ -222,7 +334,12 @@ def main(argv: list[str]) -> int:
                 print(f"    τ {t:9.1f} s  coverage {s:6.1%}  mean EDF {e:10.1f}  "
                       f"seen {v:10.1f}  mean α {a:5.2f}  signal {g:6.1%} of the AVAR  "
                       f"fit's share {fs:6.1%} (given in {fr:6.1%} of records)  "
-                      f"with the true share {k:6.1%}")
+                      f"with the true part {k:6.1%}")
+            if c.rules is not None and c.noise_seen is not None:
+                for t, row, ns in zip(c.tau, c.rules, c.noise_seen, strict=True):
+                    print(f"    τ {t:9.1f} s  EDF set by: " + "  ".join(
+                        f"{name} {v:6.1%}" for name, v in zip(RULES, row, strict=True))
+                        + f"  (noise alone scatters with {ns:9.1f})")
     if pool is not None:
         pool.close()
         pool.join()  # (its CPU is counted once it is reaped)

@@ -12,22 +12,29 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
   with the composition taken the way that lowers the bound (each term at θ ± σ, an absent
   one at its upper limit), at the τ where the estimator could not tell the types apart
   (fewer than ``noise_id.SPREAD_LAG1`` averages).
-* **A deterministic share.** A rate ramp or a sinusoid adds to the Allan variance without
-  scattering: the estimate at a τ where such a term holds a share f of the expectation is a
-  non-central χ², and ``edf.edf_with_signal`` gives the moment-matched EDF ν/(1 − f²).
-  Only terms the fit resolves count (present, with no "ramp or random walk" or "not yet
-  resolved" note: a ramp the record cannot tell from a random walk is read as the walk),
-  each at its lower 1σ bound, over the larger of the measured and modelled AVAR
-  (``signal_share``).
+* **A deterministic part.** A rate ramp or a sinusoid adds to the Allan variance without
+  scattering: the estimate's variance is the noise part's plus the part's cross term with
+  the noise, computed exactly under the fitted spectrum (``cross_term.py``), and for a
+  sinusoid the spread of its own OADEV over its phase (``parts_edf``). Only terms the fit
+  resolves count (present, with no "ramp or random walk" or "not yet resolved" note: a
+  ramp the record cannot tell from a random walk is read as the walk), at their point
+  values, the noise part the larger of the fitted noise at θ + σ and what the measured
+  AVAR leaves beside the terms at their lower 1σ (``signal_parts``, ``noise_upper``). The
+  strided estimators (the cascade) keep the non-central χ²'s ν/(1 − f²)
+  (``edf.edf_with_signal``), whose cross term is the largest a Gaussian form allows.
 
 The printed EDF is never below the estimator's own and never above what the record
 supports (``noise_id.fm_support_edf``: the most any FM type gives at that m and N, the rule
-every printed EDF keeps). Where neither raises it, the result is returned unchanged.
+every printed EDF keeps): the AVAR fit cannot split the longest τ between a ramp and a
+random walk, so its parts may not take the EDF past it (``parts_edf(within_support=
+False)`` is for a part known apart from the AVAR). Where neither raises it, the result is
+returned unchanged.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -39,14 +46,19 @@ from avard.core.allan.edf import (
     edf_with_signal,
 )
 from avard.core.allan.noise_id import SPREAD_LAG1, fm_support_edf
+from avard.core.analysis.cross_term import cross_term_variance
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from avard.core.allan.deviations import AllanResult
     from avard.core.model.fit import NoiseFit
 
-__all__ = ["model_edf", "signal_share", "unresolved_noise_edf", "with_share_edf",
+__all__ = ["model_edf", "noise_part_edf", "noise_psd", "parts_edf", "signal_parts",
+           "signal_share", "unresolved_noise_edf", "with_parts_edf", "with_share_edf",
            "with_signal_edf"]
+
+#: The share of the AVAR above which a deterministic part's cross term is computed exactly.
+_EXACT_SHARE = 1e-3
 
 #: The estimators whose variance the fit's AVAR basis describes (Allan, not Hadamard).
 _ALLAN_KINDS = ("oavar", "avar", "pavar")
@@ -57,12 +69,14 @@ def _n_phase(allan: AllanResult) -> NDArray[np.int64]:
     return np.asarray((np.maximum(allan.n, 1) - 1) * allan.stride + 2 * allan.m + 1)
 
 
-def signal_share(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
-    """The share of the AVAR at each τ of ``allan`` (one channel) that the fit's resolved
-    deterministic terms hold at their lower 1σ bound (module docstring); 0 where none."""
+def signal_parts(fit: NoiseFit, allan: AllanResult, *, lower: bool = True
+                 ) -> list[tuple[NDArray[np.float64], float]]:
+    """The fit's resolved deterministic terms (module docstring), each as (its AVAR at each
+    τ of ``allan`` at its lower 1σ bound, or its point value with ``lower=False``, its
+    frequency in cycles per sample: 0 for a ramp). Empty where none is resolved."""
     tau = np.asarray(allan.tau, dtype=float)
-    sure = np.zeros(len(tau))
     cov = np.asarray(fit.theta_cov, dtype=float)
+    out: list[tuple[NDArray[np.float64], float]] = []
     for j, comp in enumerate(fit.components):
         theta = float(fit.theta[j]) if j < len(fit.theta) else 0.0
         if theta <= 0 or comp.fixed_value is not None or comp.psd(fit.rate_hz) is not None:
@@ -73,14 +87,79 @@ def signal_share(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
         se = math.sqrt(max(float(cov[j, j]), 0.0)) if j < len(cov) else math.inf
         low = max(theta - se, 0.0)
         if low > 0:
-            sure += low * comp.basis(tau, fit.rate_hz)
+            f0 = float(comp.params.get("frequency_hz", 0.0)) / float(fit.rate_hz)
+            out.append(((low if lower else theta) * comp.basis(tau, fit.rate_hz), f0))
+    return out
+
+
+def _noise_upper_levels(fit: NoiseFit) -> list[tuple[float, int]]:
+    """(θ at its upper 1σ, component index) of each present noise component: θ + σ, a
+    fixed one at its value. Not an absent term at its upper limit: beside a resolved ramp
+    a random walk's limit is loose (the two share the longest τ), and a cross term from it
+    set the steep drift's EDF at 40–50 where its estimates scatter with 1300–2400 (so did
+    the most the measured AVAR allows it at any τ)."""
+    cov = np.asarray(fit.theta_cov, dtype=float)
+    out = []
+    for j, comp in enumerate(fit.components):
+        if j >= len(fit.theta) or comp.psd(fit.rate_hz) is None:
+            continue
+        theta = float(fit.theta[j])
+        se = math.sqrt(max(float(cov[j, j]), 0.0)) if comp.fixed_value is None and \
+            j < len(cov) else 0.0
+        if theta > 0:
+            out.append((theta + se, j))
+    return out
+
+
+def noise_upper(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
+    """The fitted noise's AVAR at each τ of ``allan`` with each noise component at its upper
+    1σ (``_noise_upper_levels``): what the noise part of the estimate is at most, read from
+    every τ."""
+    tau = np.asarray(allan.tau, dtype=float)
+    out = np.zeros(len(tau))
+    for level, j in _noise_upper_levels(fit):
+        out += level * fit.components[j].basis(tau, fit.rate_hz)
+    return out
+
+
+def _total(fit: NoiseFit, allan: AllanResult, sure: NDArray[np.float64]
+           ) -> NDArray[np.float64]:
+    """The expected AVAR the shares are taken of: the larger of the measured and modelled
+    (and never below the deterministic part itself)."""
+    var = np.asarray(allan.var, dtype=float)
+    return np.fmax(np.fmax(var, fit.model_avar(np.asarray(allan.tau, dtype=float))), sure)
+
+
+def signal_share(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
+    """The share of the AVAR at each τ of ``allan`` (one channel) that the fit's resolved
+    deterministic terms hold at their lower 1σ bound (module docstring); 0 where none."""
+    parts = signal_parts(fit, allan)
+    sure = np.zeros(len(allan.tau))
+    for s, _f0 in parts:
+        sure += s
     if not np.any(sure > 0):
         return sure
-    var = np.asarray(allan.var, dtype=float)
-    total = np.fmax(np.fmax(var, fit.model_avar(tau)), sure)
+    total = _total(fit, allan, sure)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(total > 0, sure / total, 0.0)
     return np.nan_to_num(share, nan=0.0)
+
+
+def noise_psd(fit: NoiseFit) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    """The fitted noise's two-sided PSD (cycles per sample), each present component at its
+    upper 1σ (``_noise_upper_levels``). The cross term weighs the record's ends, where a
+    random walk the fit left out would scatter it: the steep drift's records (1 h, whose
+    generator has a random walk below the flicker floor) scatter at 409.6 s with an EDF of
+    about 1300–1550, where this gives 1800 (docs/analysis.md)."""
+    comps = [(level, p) for level, j in _noise_upper_levels(fit)
+             if (p := fit.components[j].psd(fit.rate_hz)) is not None]
+
+    def psd(nu: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.zeros(len(nu))
+        for level, p in comps:
+            out += level * np.asarray(p(nu), dtype=float)
+        return out
+    return psd
 
 
 #: The power-law type whose Greenhall–Riley EDF bounds each noise cause's: the fit's
@@ -135,14 +214,132 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
 
 def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
     """``allan`` (one channel) with the EDF the fit supports: the noise's at least
-    ``model_edf`` and raised by ``signal_share`` (module docstring); unchanged where the
-    estimator's own EDF is already the larger and no resolved deterministic term holds part
-    of the AVAR."""
+    ``model_edf``, and where resolved deterministic terms hold part of the AVAR, the EDF of
+    the noise's scatter plus their exact cross term with it (``with_parts_edf``); unchanged
+    where the estimator's own EDF is already the larger and no resolved deterministic term
+    holds part of the AVAR."""
     if allan.kind not in _ALLAN_KINDS or np.asarray(allan.var).ndim != 1:
         return allan
     if allan.noise_id == "stable32":
         return allan  # Stable32's own rules, kept for row-by-row comparison (issue 24)
-    return with_share_edf(allan, signal_share(fit, allan), unresolved_noise_edf(fit, allan))
+    noise = unresolved_noise_edf(fit, allan)
+    if not signal_parts(fit, allan):  # (resolved: at its lower bound, above zero)
+        return with_share_edf(allan, np.zeros(len(allan.tau)), noise)
+    parts = signal_parts(fit, allan, lower=False)
+    point = np.sum([s for s, _f in parts], axis=0)
+    low = np.sum([s for s, _f in signal_parts(fit, allan)], axis=0)
+    total = _total(fit, allan, point)
+    # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR leaves
+    # beside the deterministic terms at their lower 1σ, the larger
+    return with_parts_edf(allan, parts, total, np.fmax(noise_upper(fit, allan),
+                                                       total - low),
+                          noise_psd(fit), noise)
+
+
+def noise_part_edf(allan: AllanResult, noise_edf: NDArray[np.float64] | None = None
+                   ) -> NDArray[np.float64]:
+    """The EDF the noise part of each τ's estimate is given: the larger of the estimator's
+    and ``noise_edf`` (NaN: none), within the record's support (the most any FM type gives
+    at that m and N, ``noise_id.fm_support_edf``) and never below the estimator's own."""
+    edf = np.asarray(allan.edf, dtype=float)
+    base = edf if noise_edf is None else np.fmax(edf, noise_edf)
+    return np.where(np.isfinite(edf), np.maximum(edf, np.fmin(base, _support(allan))), edf)
+
+
+def _support(allan: AllanResult) -> NDArray[np.float64]:
+    """The record's support at each τ: the most EDF any FM type gives (``fm_support_edf``)."""
+    return np.array([fm_support_edf(2, int(m), int(s), int(p))
+                     for m, s, p in zip(allan.m, allan.stride, _n_phase(allan), strict=True)])
+
+
+def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
+              total: NDArray[np.float64], noise_avar: NDArray[np.float64],
+              psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+              noise_edf: NDArray[np.float64] | None = None, *, within_support: bool = True
+              ) -> NDArray[np.float64]:
+    """The EDF 2T²/Var of an OADEV estimate whose expectation T (``total``) holds the
+    deterministic ``parts`` (their AVAR S_j, frequency ν_j in cycles per sample) and the
+    noise's ``noise_avar`` N: the noise part scatters with ``noise_part_edf`` ν (capped at
+    the support), and
+    each part adds its exact cross term with the noise, S_j·``cross_term_variance`` under
+    the fitted noise spectrum ``psd`` (a deterministic part does not scatter itself):
+
+        EDF = 2T² / (2N²/ν + Σ_j S_j·c_j + Σ_j S_j²·p_j),
+
+    p_j the spread of a sinusoid's own OADEV over its phase (``phase_spread``; 0 for a
+    ramp).
+
+    The support caps the noise's EDF, and with ``within_support`` (what analyze prints)
+    the whole EDF too. Where a known deterministic part dominates the estimate scatters far
+    less than any noise type's χ² says, and ``within_support=False`` says so (the coverage
+    benchmark's oracle, given the true part and spectrum, covers 60–80 % with it). The
+    AVAR fit's own parts cannot lift it: at the longest τ it cannot split the AVAR between
+    a ramp and a random walk, and takes the walk's share for the ramp's, so the noise part
+    comes out too small (12 h "steep" records: the EDF 480–570 where the estimates scatter
+    with 240–300, coverage 58 %; docs/analysis.md). The deterministic share is held below
+    0.99 (as ``edf.edf_with_signal``). For the estimators with a stride (the cascade),
+    whose cross term this does not model, the non-central ν/(1 − f²) within the support."""
+    nu = noise_part_edf(allan, noise_edf)
+    sure = np.zeros(len(allan.tau))
+    for s, _f0 in parts:
+        sure += s
+    noise = np.clip(noise_avar, 0.01 * total, total)
+    if np.any(np.asarray(allan.stride) != 1):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share = np.nan_to_num(np.where((total > 0) & (sure > 0), 1.0 - noise / total, 0.0))
+        return with_share_edf(allan, share, noise_edf).edf
+    cross = np.zeros(len(allan.tau))
+    for s, f0 in parts:
+        # where the part holds under 0.1 % of the AVAR its cross term is taken at the most a
+        # Gaussian quadratic form allows, 4SN/ν (under 0.2 % of the variance: not worth the
+        # quadrature)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.where(s < _EXACT_SHARE * total, 4.0 * noise / nu, 0.0)
+        for k, (m, n, sk) in enumerate(zip(allan.m, allan.n, s, strict=True)):
+            if sk >= _EXACT_SHARE * total[k]:
+                c[k] = cross_term_variance(psd, int(m), int(n), f0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # (a cross term that is not a number is not "no scatter": the Gaussian bound)
+            c = np.where(np.isfinite(c), c, 4.0 * noise / nu)
+        cross += s * c + s**2 * phase_spread(allan.n, f0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edf = 2.0 * total**2 / (2.0 * noise**2 / nu + cross)
+    edf = np.where(np.isfinite(edf), edf, nu)  # (no differences at a τ: the noise's)
+    if within_support:
+        edf = np.fmin(edf, _support(allan))
+    return np.where(np.isfinite(nu) & (sure > 0), np.fmax(edf, nu), nu)
+
+
+def phase_spread(n_diff: NDArray[np.int64], f0: float) -> NDArray[np.float64]:
+    """The variance, per unit S², of a sinusoid's own OADEV over ``n_diff`` differences
+    across its phase (the AVAR is the phase average; a record holding a fraction of a
+    cycle more or less weighs one phase more): (1/M)Σ sin²(2πν₀k + φ) = ½ − the
+    Dirichlet sum's cos(2φ + …) term, so Var = ½·(sin(2πν₀M)/(M sin(2πν₀)))². None for a
+    ramp (ν₀ = 0)."""
+    m = np.asarray(n_diff, dtype=float)
+    if f0 <= 0:
+        return np.zeros(len(m))
+    den = m * np.sin(2 * np.pi * f0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(np.abs(den) > 0, np.sin(2 * np.pi * f0 * m) / den, 1.0)
+    return 0.5 * rel**2
+
+
+def with_parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
+                   total: NDArray[np.float64], noise_avar: NDArray[np.float64],
+                   psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                   noise_edf: NDArray[np.float64] | None = None, *,
+                   within_support: bool = True) -> AllanResult:
+    """``allan`` with ``parts_edf`` and its χ² bounds (unchanged where it is the same)."""
+    new = parts_edf(allan, parts, total, noise_avar, psd, noise_edf,
+                    within_support=within_support)
+    edf = np.asarray(allan.edf, dtype=float)
+    new = np.where(np.isfinite(edf), np.maximum(new, edf), edf)
+    if np.array_equal(new, edf):
+        return allan
+    lo, hi = chi2_interval(allan.var, new, allan.ci, allan.quantiles)
+    return replace(allan, edf=new, lo=np.where(np.isfinite(new), lo, allan.lo),
+                   hi=np.where(np.isfinite(new), hi, allan.hi))
 
 
 def unresolved_noise_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
@@ -165,9 +362,7 @@ def with_share_edf(allan: AllanResult, share: NDArray[np.float64],
     base = edf if noise_edf is None else np.fmax(edf, noise_edf)
     if not np.any(share > 0) and not np.any(base > edf):
         return allan
-    n_phase = _n_phase(allan)
-    cap = np.array([fm_support_edf(2, int(m), int(s), int(p))
-                    for m, s, p in zip(allan.m, allan.stride, n_phase, strict=True)])
+    cap = _support(allan)
     raised = edf_with_signal(base, share)
     # never above the record's support, never below the estimator's own EDF
     new = np.where(np.isfinite(edf), np.maximum(edf, np.fmin(raised, cap)), edf)
