@@ -818,8 +818,13 @@ def _rounding_gain(thermal: ThermalFit) -> float:
     """The coefficient through which the logged readings' rounding reaches the residual: ĉ
     times the L1 norm of the path's impulse response, the largest factor it can put on a
     bounded error: 1 for a lag, 3 for a negative lag's lead-lag 2δ − h_lag (a 2× factor, its
-    high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records)."""
-    return thermal.coefficient * (3.0 if thermal.lag_s < 0 else 1.0)
+    high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records); for
+    a thermal path beyond one lag, the L1 norm of all its linear terms
+    (``PathFit.rounding_gain``: a two-path fit's second coefficient counts as much as its
+    first)."""
+    if thermal.path is not None and thermal.path.kind != "one_lag":
+        return thermal.path.rounding_gain()
+    return abs(thermal.coefficient) * (3.0 if thermal.lag_s < 0 else 1.0)
 
 
 def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,

@@ -326,6 +326,25 @@ class PathFit:
         """The chosen candidate's parameters (SI) and their 68 % intervals."""
         return describe(self.chosen)
 
+    def rounding_gain(self) -> float:
+        """The L1 norm of the chosen path's response to an error in the logged readings
+        (m/s² per K): Σ |β_i|·‖h_i‖₁ over its linear regressors, the largest factor the path
+        can put on a bounded error (the readings' rounding). A lag's ‖h‖₁ is 1, a negative
+        lag's lead-lag 2δ − h_lag 3; the dT/dt column (δ − h_s)/s multiplies either by 2/s.
+        Every path's term counts: a two-path fit's coefficients are often large and of
+        opposite sign, so the first alone says little of what its sum passes. The quadratic
+        and the play operator's columns are not linear in the error and are left out (the
+        linear term beside them carries the rounding at first order)."""
+        s = self.chosen
+        g = 0.0
+        for c, b in zip(s.cols, s.beta, strict=False):
+            norm = 3.0 if c.lag < 0 else 1.0
+            if c.kind == "u":
+                g += abs(float(b)) * norm
+            elif c.kind == "rate":
+                g += abs(float(b)) * norm * 2.0 / RATE_SMOOTH_S
+        return g
+
     def summary(self) -> str:
         s = self.chosen
         p, iv = describe(s)

@@ -177,3 +177,31 @@ def test_a_lag_interval_is_never_narrower_than_its_grid_cell():
     # (0, 15): L2 = 15 is the shortest L2 there is (L2 > L1)
     lo, hi = _grid_cell(trials("two_path", [0.0, 15.0, 30.0, 60.0]), 0)
     assert lo.tolist() == [0.0, 15.0] and hi.tolist() == [7.5, 22.5]
+
+
+def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
+    # a two-path fit of a plain lag (seed 99000 of the explain benchmark once read so):
+    # 0.0106 and −0.0077 through 240 and 480 s pass the readings' rounding with up to
+    # 0.0183 m/s²/K, not the first path's 0.0106 the engine's floors took before
+    from avard.core.explain.engine import _rounding_gain
+    from avard.core.explain.thermal_paths import Column, PathFit, PathScore
+
+    def fit(kind: str, theta: tuple[float, ...], beta: list[float],
+            cols: tuple[Column, ...]) -> PathFit:
+        s = PathScore(kind, 0.0, theta, np.array(beta), np.zeros(len(beta)), theta, theta,
+                      20.0, False, cols)
+        return PathFit(s, {kind: s}, 10.0, 1.0)
+
+    two = fit("two_path", (240.0, 480.0), [0.0106, -0.0077],
+              (Column("u", 240.0), Column("u", 480.0), Column("start", 240.0),
+               Column("start", 480.0)))
+    assert two.rounding_gain() == pytest.approx(0.0183)
+    # a dT/dt column (δ − h_s)/s passes a step with L1 norm 2/s; a negative lag's lead-lag 3
+    rate = fit("rate", (-60.0,), [1e-3, 0.3],
+               (Column("u", -60.0), Column("rate", -60.0), Column("start", 60.0)))
+    assert rate.rounding_gain() == pytest.approx(3 * (1e-3 + 0.3 * 2 / 30.0))
+    y, T = _slow(BASE, 5)
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, lag_intervals=False)[0]
+    assert _rounding_gain(replace(th, path=two)) == pytest.approx(0.0183)
+    assert _rounding_gain(th) == pytest.approx(abs(th.coefficient))
+    assert _rounding_gain(replace(th, coefficient=-C, lag_s=-60.0)) == pytest.approx(3 * C)
