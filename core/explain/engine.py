@@ -716,13 +716,16 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                 cand.statistic, cand.threshold, cand.evidence))
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
                                    kw if added is None else {**kw, "added_cov": added})
-    if gm.claimed and thermal is not None and thermal.passed:
+    # a bump that passed the scan's statistic, claimed or not for another reason (T not
+    # located): the rounding floor is said too, it is the reason that holds for the bump's σ
+    if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
+            and thermal.passed):
         floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
         if gm.params.get("sigma", 0.0) < floor:
             gm = replace(gm, claimed=False, intervals={}, evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
                 "temperature's 0.0625 K rounding through the coupling "
-                f"({abs(thermal.coefficient):.3g} m/s²/K), which can look like a bump"))
+                f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
     findings.append(gm)
     if gm_fit is not None:

@@ -205,3 +205,36 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     assert _rounding_gain(replace(th, path=two)) == pytest.approx(0.0183)
     assert _rounding_gain(th) == pytest.approx(abs(th.coefficient))
     assert _rounding_gain(replace(th, coefficient=-C, lag_s=-60.0)) == pytest.approx(3 * C)
+
+
+def test_two_paths_at_one_drive_frequency_are_named_with_the_dt_term_they_look_like():
+    # a second path through 900 s beside the lag-0 coupling, the room one HVAC sine: a
+    # dT/dt term sets the same gain and phase at that one frequency, and the room's weak
+    # wander is all that tells them apart (docs/explain.md: the best dT/dt model fits the
+    # true two-path signal to a non-centrality of 0.1–2.3 with unrounded readings). The
+    # finding names both as equally supported, with no interval, never one alone with one
+    y, T = _slow(replace(BASE, second_path=(-4 * C, 900.0)), 5)
+    pf = _path(y, T)
+    named = {pf.kind, *pf.alternatives}
+    assert named == {"two_path", "rate"}
+    assert pf.model_dependent and pf.params()[1] == {}
+    assert "two paths" in pf.summary() and "cannot tell them apart" in pf.summary()
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
+    f = th.finding()
+    assert {f.mechanism, *f.alternatives} == {"two_path", "rate"}
+    assert f.model_dependent and f.intervals == {}
+    assert set(f.to_dict()["mechanism_alternatives"]) | {f.mechanism} == {"two_path", "rate"}
+
+
+def test_the_rounding_a_long_lag_passes_is_less_and_a_lead_lag_more():
+    from avard.core.explain.thermal_paths import sawtooth_avar
+
+    rate = 0.625
+    t = np.arange(9000) / rate
+    T = np.round((21 + 0.2 * np.sin(2 * math.pi * t / 1800)) / 0.0625) * 0.0625
+    tau = np.array([204.8, 409.6, 819.2])
+    r0, r_long, r_neg = (sawtooth_avar(T, rate, tau, L) for L in (0.0, 1800.0, -60.0))
+    # unfiltered: white at these τ, q²/12·t_c/τ (halves per octave)
+    assert r0[1] / r0[0] == pytest.approx(0.5, rel=0.15)
+    assert np.all(r_long < 0.1 * r0) and np.all(r_neg > r0)
+    assert np.all(r0 <= 2 * 0.0625**2 / 12)
