@@ -722,7 +722,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             and thermal.passed):
         floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
         if gm.params.get("sigma", 0.0) < floor:
-            gm = replace(gm, claimed=False, intervals={}, evidence=gm.evidence + (
+            gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
+                         evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
                 "temperature's 0.0625 K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
