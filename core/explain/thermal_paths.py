@@ -33,8 +33,13 @@ folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``o
 term passes its own test (a Wald z from the delete-a-part jackknife, Student's t with
 ``PARTS`` − 1 dof, ≥ ``alarm.bonferroni_t(alarm.THERMAL_PATHS, trials, PARTS − 1)``, the
 trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
-share. A candidate whose θ sits at the end of its grid is open, and is preferred over one
-with an interior optimum only when better by ``OPEN_MARGIN`` in addition.
+share. The margin grows by the share of the held-out deviance the readings' rounding through
+the one-lag coupling makes up (``_View.rounding_share``): a path that smooths the 0.0625 K
+steps gains that much without physics. A candidate whose θ sits at the end of its grid is
+open, and is preferred over one with an interior optimum only when better by
+``OPEN_MARGIN`` in addition. Other extensions that beat one lag so and predict within the
+margin of the chosen one are named beside it (``PathFit.alternatives``): at one drive
+frequency two paths and a dT/dt term cannot be told apart, and the record says so.
 
 **Intervals (68 %, ± ``T68`` jackknife standard errors).** Coefficients: the larger of the
 delete-a-part jackknife over the ``PARTS`` parts with θ fixed and with θ re-chosen (red
