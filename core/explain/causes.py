@@ -99,6 +99,9 @@ class Finding:
     intervals_if_model_held: dict[str, list[float]] | None = None
     #: the temperature cause's thermal path (``thermal_paths.CANDIDATES``), else None
     mechanism: str | None = None
+    #: other thermal paths the record supports as well as ``mechanism`` (it cannot tell
+    #: them apart)
+    alternatives: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"cause": self.cause, "claimed": self.claimed,
@@ -112,6 +115,8 @@ class Finding:
             d["channel"] = self.channel
         if self.mechanism is not None:
             d["mechanism"] = self.mechanism
+        if self.alternatives:
+            d["mechanism_alternatives"] = list(self.alternatives)
         return d
 
 

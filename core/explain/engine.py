@@ -716,13 +716,17 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                 cand.statistic, cand.threshold, cand.evidence))
     gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
                                    kw if added is None else {**kw, "added_cov": added})
-    if gm.claimed and thermal is not None and thermal.passed:
+    # a bump that passed the scan's statistic, claimed or not for another reason (T not
+    # located): the rounding floor is said too, it is the reason that holds for the bump's σ
+    if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
+            and thermal.passed):
         floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
         if gm.params.get("sigma", 0.0) < floor:
-            gm = replace(gm, claimed=False, intervals={}, evidence=gm.evidence + (
+            gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
+                         evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
                 "temperature's 0.0625 K rounding through the coupling "
-                f"({abs(thermal.coefficient):.3g} m/s²/K), which can look like a bump"))
+                f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
     findings.append(gm)
     if gm_fit is not None:
@@ -818,8 +822,13 @@ def _rounding_gain(thermal: ThermalFit) -> float:
     """The coefficient through which the logged readings' rounding reaches the residual: ĉ
     times the L1 norm of the path's impulse response, the largest factor it can put on a
     bounded error: 1 for a lag, 3 for a negative lag's lead-lag 2δ − h_lag (a 2× factor, its
-    high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records)."""
-    return thermal.coefficient * (3.0 if thermal.lag_s < 0 else 1.0)
+    high-frequency gain, left Gauss–Markov claims of 1.02× the floor on 3 of 3 records); for
+    a thermal path beyond one lag, the L1 norm of all its linear terms
+    (``PathFit.rounding_gain``: a two-path fit's second coefficient counts as much as its
+    first)."""
+    if thermal.path is not None and thermal.path.kind != "one_lag":
+        return thermal.path.rounding_gain()
+    return abs(thermal.coefficient) * (3.0 if thermal.lag_s < 0 else 1.0)
 
 
 def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,

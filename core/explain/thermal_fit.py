@@ -522,7 +522,8 @@ class ThermalFit:
             p, iv = self.path.params()
             return Finding("temperature", False, p, iv, self.z, self.threshold,
                            self.evidence(), channel=self.channel, mechanism=self.mechanism,
-                           model_dependent=not self.path.chosen.resolved)
+                           model_dependent=self.path.model_dependent,
+                           alternatives=self.path.alternatives)
         return Finding("temperature", False,
                        {"coefficient": self.coefficient, "lag_s": self.lag_s},
                        {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},

@@ -177,3 +177,64 @@ def test_a_lag_interval_is_never_narrower_than_its_grid_cell():
     # (0, 15): L2 = 15 is the shortest L2 there is (L2 > L1)
     lo, hi = _grid_cell(trials("two_path", [0.0, 15.0, 30.0, 60.0]), 0)
     assert lo.tolist() == [0.0, 15.0] and hi.tolist() == [7.5, 22.5]
+
+
+def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
+    # a two-path fit of a plain lag (seed 99000 of the explain benchmark once read so):
+    # 0.0106 and −0.0077 through 240 and 480 s pass the readings' rounding with up to
+    # 0.0183 m/s²/K, not the first path's 0.0106 the engine's floors took before
+    from avard.core.explain.engine import _rounding_gain
+    from avard.core.explain.thermal_paths import Column, PathFit, PathScore
+
+    def fit(kind: str, theta: tuple[float, ...], beta: list[float],
+            cols: tuple[Column, ...]) -> PathFit:
+        s = PathScore(kind, 0.0, theta, np.array(beta), np.zeros(len(beta)), theta, theta,
+                      20.0, False, cols)
+        return PathFit(s, {kind: s}, 10.0, 1.0)
+
+    two = fit("two_path", (240.0, 480.0), [0.0106, -0.0077],
+              (Column("u", 240.0), Column("u", 480.0), Column("start", 240.0),
+               Column("start", 480.0)))
+    assert two.rounding_gain() == pytest.approx(0.0183)
+    # a dT/dt column (δ − h_s)/s passes a step with L1 norm 2/s; a negative lag's lead-lag 3
+    rate = fit("rate", (-60.0,), [1e-3, 0.3],
+               (Column("u", -60.0), Column("rate", -60.0), Column("start", 60.0)))
+    assert rate.rounding_gain() == pytest.approx(3 * (1e-3 + 0.3 * 2 / 30.0))
+    y, T = _slow(BASE, 5)
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, lag_intervals=False)[0]
+    assert _rounding_gain(replace(th, path=two)) == pytest.approx(0.0183)
+    assert _rounding_gain(th) == pytest.approx(abs(th.coefficient))
+    assert _rounding_gain(replace(th, coefficient=-C, lag_s=-60.0)) == pytest.approx(3 * C)
+
+
+def test_two_paths_at_one_drive_frequency_are_named_with_the_dt_term_they_look_like():
+    # a second path through 900 s beside the lag-0 coupling, the room one HVAC sine: a
+    # dT/dt term sets the same gain and phase at that one frequency, and the room's weak
+    # wander is all that tells them apart (docs/explain.md: the best dT/dt model fits the
+    # true two-path signal to a non-centrality of 0.1–2.3 with unrounded readings). The
+    # finding names both as equally supported, with no interval, never one alone with one
+    y, T = _slow(replace(BASE, second_path=(-4 * C, 900.0)), 5)
+    pf = _path(y, T)
+    named = {pf.kind, *pf.alternatives}
+    assert named == {"two_path", "rate"}
+    assert pf.model_dependent and pf.params()[1] == {}
+    assert "two paths" in pf.summary() and "cannot tell them apart" in pf.summary()
+    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
+    f = th.finding()
+    assert {f.mechanism, *f.alternatives} == {"two_path", "rate"}
+    assert f.model_dependent and f.intervals == {}
+    assert set(f.to_dict()["mechanism_alternatives"]) | {f.mechanism} == {"two_path", "rate"}
+
+
+def test_the_rounding_a_long_lag_passes_is_less_and_a_lead_lag_more():
+    from avard.core.explain.thermal_paths import sawtooth_avar
+
+    rate = 0.625
+    t = np.arange(9000) / rate
+    T = np.round((21 + 0.2 * np.sin(2 * math.pi * t / 1800)) / 0.0625) * 0.0625
+    tau = np.array([204.8, 409.6, 819.2])
+    r0, r_long, r_neg = (sawtooth_avar(T, rate, tau, L) for L in (0.0, 1800.0, -60.0))
+    # unfiltered: white at these τ, q²/12·t_c/τ (halves per octave)
+    assert r0[1] / r0[0] == pytest.approx(0.5, rel=0.15)
+    assert np.all(r_long < 0.1 * r0) and np.all(r_neg > r0)
+    assert np.all(r0 <= 2 * 0.0625**2 / 12)
