@@ -154,6 +154,34 @@ def test_welch_parts_add_up_to_one_spectrum() -> None:
     np.testing.assert_allclose(total.result()[1], one.result()[1], rtol=1e-12)
 
 
+def test_a_long_block_gives_the_spectrum_of_one_worker_blocks() -> None:
+    """A block longer than ``SEGMENT_BATCH`` (a parallel chunk's) has its segments
+    transformed a batch at a time: the same segments and power sums as one-worker blocks."""
+    from avard.core.analysis import spectrum
+
+    rng = np.random.default_rng(8)
+    n, nper = 3 * spectrum.SEGMENT_BATCH + 777, 2048
+    y = rng.normal(0, 1e-3, (n, 2)) + 1e-3 * np.sin(np.arange(n) / 30.0)[:, None]
+    calls = []
+    real = np.fft.rfft
+
+    def counted(a, *args, **kwargs):
+        calls.append(a.shape[0])
+        return real(a, *args, **kwargs)
+
+    long_, short = WelchAccumulator(2, 100.0, nper), WelchAccumulator(2, 100.0, nper)
+    np.fft.rfft, saved = counted, np.fft.rfft
+    try:
+        long_.update(y)
+    finally:
+        np.fft.rfft = saved
+    for i in range(0, n, spectrum.SEGMENT_BATCH):
+        short.update(y[i:i + spectrum.SEGMENT_BATCH])
+    assert long_.n_seg == short.n_seg == (n - nper) // (nper // 2) + 1
+    assert max(calls) <= spectrum.SEGMENT_BATCH // (nper // 2) + 1 and len(calls) >= 3
+    np.testing.assert_allclose(long_.part().power, short.part().power, rtol=1e-12)
+
+
 def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
     bounds = [0, 1000, 70000, 100000]
     chunks = plan_chunks(bounds, 3, 4096, 16384)
