@@ -490,7 +490,12 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
             futures = {(pool.submit(_chunk_part, p, i) if own else
                         pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
             for fut in as_completed(futures):
-                take(futures[fut], fut.result())
+                one = fut.result()
+                if own and len(parts) == len(tasks) - 1:
+                    # the last chunk is in: the workers exit (their histories unmapped) while
+                    # this process finishes the last pass, not after it
+                    pool.shutdown(wait=False)
+                take(futures[fut], one)
         except BrokenProcessPool as exc:
             # a worker killed (out of memory, a signal): said, never waited for forever
             raise AvardError(f"a worker process of the parallel analysis died ({exc}); "

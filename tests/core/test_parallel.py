@@ -604,3 +604,24 @@ def test_a_chunk_reading_longer_blocks_judges_each_screen_block_alone(monkeypatc
     np.testing.assert_array_equal(a.alpha, b.alpha)
     power = parts[0].power.power + parts[1].power.power
     np.testing.assert_allclose(power, welch.part().power, rtol=1e-12)
+
+
+def test_the_workers_exit_by_themselves_once_the_last_chunk_is_in(tmp_path) -> None:
+    """The workers are told to exit when the last chunk is in (they unmap their histories
+    while the parent finishes the last pass): none is left running, each ended cleanly, and
+    the result is one worker's."""
+    import multiprocessing
+
+    rng = np.random.default_rng(31)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3))
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    par = analyze(open_record(path), AnalyzeOptions(workers=2))
+    children = multiprocessing.active_children()
+    for child in children:
+        child.join(timeout=120)  # a bound on a hang, not a timing
+    assert all(not c.is_alive() and c.exitcode == 0 for c in children)
+    one = analyze(open_record(path))
+    for name, ch in one.channels.items():
+        np.testing.assert_allclose(par.channels[name].allan.dev, ch.allan.dev, rtol=1e-12)
