@@ -21,10 +21,12 @@ if TYPE_CHECKING:
 # spectrum and sinusoid detection
 
 
-#: Segments are transformed at once as many as a block of this many new samples brings
-#: (analyze's one-worker block, whose segments all go in one batch): a parallel chunk's
-#: longer blocks keep the transform buffers of one.
-SEGMENT_BATCH = 1 << 16
+#: Segments are transformed at once as many as a block of this many new samples brings:
+#: two of analyze's one-worker blocks (whose segments all go in one batch, as before), so a
+#: parallel chunk's four-block reads keep the transform buffers of two. A transform has a
+#: fixed cost (its plan, the window and mean passes' Python), so batches of one block each
+#: would cost the chunks more than the two-block buffers do.
+SEGMENT_BATCH = 1 << 17
 
 
 @dataclass(frozen=True)
