@@ -43,7 +43,15 @@ The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing
 context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
 back only its part, a few numbers per τ and the spectrum's power sums. A worker that dies
 (killed, out of memory) ends the analysis with an error that says so, instead of a wait for
-its chunk.
+its chunk. The workers are told to exit when the last chunk is in, so their exit overlaps
+the parent's finishing of the last pass.
+
+A pass here holds fewer channels than a one-worker pass, so a local chunk reads
+``CHUNK_BLOCKS`` one-worker blocks at a time and takes OADEV pieces of as many
+channel-samples (``chunk_piece``): what each read, piece and spectrum batch costs in Python
+is paid for as many samples as on one worker. The input screen still judges each one-worker
+block on its own (``_Job.screen_block``), and the reader and the spectrum bound what a long
+block holds (``readers.READ_ROWS``, ``spectrum.SEGMENT_BATCH``).
 """
 
 from __future__ import annotations
