@@ -260,6 +260,12 @@ def worker_parallel(path: str, workers: str, mode: str = "time") -> dict:
     if mode == "memory":
         stop.set()
         t.join()
+    # the chunk workers exit while the parent finishes the last pass: their CPU counts once
+    # they are reaped
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.join()
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     per: dict[str, dict[int, float]] = {"chunk": {}, "fit": {}}
     with open(log.name) as f:

@@ -174,7 +174,11 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
         # chunk plan knows of, and is then read on one worker)
         screened = source if isinstance(source, ScreenedSource) else None
         raw = source.source if screened is not None else source
-        parallel = _Parallel(workers, partial(_accel_columns, raw, block), (0, int(total)),
+        from avard.core.analysis.parallel import CHUNK_BLOCKS
+
+        # the chunks read longer blocks (the screen still judges each of ``block``)
+        parallel = _Parallel(workers, partial(_accel_columns, raw, CHUNK_BLOCKS * block),
+                             (0, int(total)),
                              screened=screened, block=block,
                              groups=_parallel_groups(groups, sel, workers),
                              n_columns=len(info.names))

@@ -43,7 +43,15 @@ The workers are forked processes (a ``ProcessPoolExecutor`` on ``multiprocessing
 context): each inherits the jobs (how to read the record, the τ grid, the chunks) and sends
 back only its part, a few numbers per τ and the spectrum's power sums. A worker that dies
 (killed, out of memory) ends the analysis with an error that says so, instead of a wait for
-its chunk.
+its chunk. The workers are told to exit when the last chunk is in, so their exit overlaps
+the parent's finishing of the last pass.
+
+A pass here holds fewer channels than a one-worker pass, so a local chunk reads
+``CHUNK_BLOCKS`` one-worker blocks at a time and takes OADEV pieces of as many
+channel-samples (``chunk_piece``): what each read, piece and spectrum batch costs in Python
+is paid for as many samples as on one worker. The input screen still judges each one-worker
+block on its own (``_Job.screen_block``), and the reader and the spectrum bound what a long
+block holds (``readers.READ_ROWS``, ``spectrum.SEGMENT_BATCH``).
 """
 
 from __future__ import annotations
@@ -59,7 +67,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from avard.core.allan.overlapping import LADDER_REACH, OadevPart, OverlappingAllan
+from avard.core.allan.overlapping import LADDER_REACH, PIECE, OadevPart, OverlappingAllan
 from avard.core.allan.scratch import reuse_histories
 from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
@@ -218,7 +226,9 @@ class _Job:
     from its start, of which the columns ``take`` (None: all) are the pass's channels; the
     chunk that reads to the record's end checks the file's CRC when ``verify``. ``screen``:
     the columns whose blocks each chunk judges by the input screen over the samples it owns
-    (``ScreenCut`` when it would cut), None for none."""
+    (``ScreenCut`` when it would cut), None for none, in blocks of ``screen_block`` samples
+    from the record's start (a one-worker read's: ``read``'s blocks are whole multiples of
+    it, ``CHUNK_BLOCKS`` of them on a local analysis)."""
 
     read: Callable[..., Blocks]
     take: list[int] | None
@@ -230,6 +240,7 @@ class _Job:
     verify: bool
     chunks: list[Chunk]
     screen: list[int] | None = None
+    screen_block: int | None = None
 
 
 class _Flag(Protocol):
@@ -259,6 +270,21 @@ def _chunk_part(p: int, i: int) -> ChunkResult:
     return chunk_part(_JOBS[p], i, _CUT)
 
 
+#: A local chunk reads the record in blocks of this many one-worker blocks (the screen's):
+#: a parallel pass holds fewer channels than a one-worker pass (one each on two workers),
+#: and what every block and OADEV piece costs in Python (a few dozen numpy calls per τ,
+#: per read and per spectrum batch, whatever their length) would otherwise be paid for
+#: fewer samples. The screen still judges each one-worker block on its own.
+CHUNK_BLOCKS = 4
+
+
+def chunk_piece(n_channels: int) -> int:
+    """The OADEV piece of a chunk's accumulator of ``n_channels``: ``CHUNK_BLOCKS`` ×
+    ``PIECE`` samples of one channel, as many channel-samples as a four-channel piece
+    (``PIECE`` at least). A longer piece only splits the sums differently (rounding)."""
+    return PIECE * max(1, CHUNK_BLOCKS // max(1, n_channels))
+
+
 def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
     """Chunk i's OADEV part and Welch power sums (a worker's task), with the input screen's
     verdicts on the blocks it owns. Once the screen cuts anything (here, or in another chunk
@@ -271,7 +297,7 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
     # R(n) is never part of a chunk: the caller reads it again after the pass (defer_rn)
     acc = OverlappingAllan(c, job.rate_hz, job.grid, names=job.names, n_total=job.n_total,
                            defer_rn=True, own_from=ch.start,
-                           own_until=None if last else ch.stop)
+                           own_until=None if last else ch.stop, piece=chunk_piece(c))
     welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
              else None)
     # the Welch segments that start before ``stop`` end by half a segment past it
@@ -279,14 +305,24 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
     pos = 0
     cuts: dict[int, NDArray[np.intp]] = {}
     judging = False  # only the screen's verdicts are still wanted
+    sb = job.screen_block
     for accel, segment_end in job.read(verify=job.verify and last):
         lo, hi = pos, min(pos + len(accel), ch.read_to)
         pos = hi
         a = accel[:hi - lo]
-        if job.screen and ch.start <= lo < ch.stop:
-            bad = _screen(a[:, job.screen])
-            if bad is not None:
-                cuts[lo] = bad
+        if job.screen and lo < ch.stop and hi > ch.start:
+            # each one-worker block (of ``screen_block`` samples from the record's start)
+            # the chunk owns, judged on its own, as that read would judge it
+            step = sb or len(a)
+            # the screen's columns taken (a copy) only when they are not the whole block
+            cols = None if job.screen == list(range(accel.shape[1])) else job.screen
+            for b0 in range(lo, hi, step):
+                if not ch.start <= b0 < ch.stop:
+                    continue
+                blk = accel[b0 - lo:b0 - lo + step]  # whole, even past read_to
+                bad = _screen(blk if cols is None else blk[:, cols])
+                if bad is not None:
+                    cuts[b0] = bad
             if cuts and cut is not None and not cut.is_set():
                 cut.set()  # the other chunks' sums are of no use either
         if job.screen and (cuts or (cut is not None and cut.is_set())):
@@ -402,7 +438,8 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     n = int(n_total)
     plans = plan_passes(len(passes), bounds, workers, align, reach(grid, nperseg))
     jobs = [_Job(ps.read, ps.take, ps.names, float(rate_hz), grid, nperseg, n, ps.verify,
-                 chunks, screen=ps.screen if screen_block is not None else None)
+                 chunks, screen=ps.screen if screen_block is not None else None,
+                 screen_block=screen_block)
             for ps, chunks in zip(passes, plans, strict=True)]
     tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
                    key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
@@ -461,7 +498,12 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
             futures = {(pool.submit(_chunk_part, p, i) if own else
                         pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
             for fut in as_completed(futures):
-                take(futures[fut], fut.result())
+                one = fut.result()
+                if own and len(parts) == len(tasks) - 1:
+                    # the last chunk is in: the workers exit (their histories unmapped) while
+                    # this process finishes the last pass, not after it
+                    pool.shutdown(wait=False)
+                take(futures[fut], one)
         except BrokenProcessPool as exc:
             # a worker killed (out of memory, a signal): said, never waited for forever
             raise AvardError(f"a worker process of the parallel analysis died ({exc}); "

@@ -21,6 +21,14 @@ if TYPE_CHECKING:
 # spectrum and sinusoid detection
 
 
+#: Segments are transformed at once as many as a block of this many new samples brings:
+#: two of analyze's one-worker blocks (whose segments all go in one batch, as before), so a
+#: parallel chunk's four-block reads keep the transform buffers of two. A transform has a
+#: fixed cost (its plan, the window and mean passes' Python), so batches of one block each
+#: would cost the chunks more than the two-block buffers do.
+SEGMENT_BATCH = 1 << 17
+
+
 @dataclass(frozen=True)
 class WelchPart:
     """A stretch's Welch power sums: Σ |X|² per channel and bin over its ``n_seg``
@@ -72,12 +80,27 @@ class WelchAccumulator:
         np.subtract(a.T, self._ref[:, None], out=self._cm[:, held:total])
         step = self.L // 2
         k = (total - self.L) // step + 1 if total >= self.L else 0
+        # the block's segments in batches, each the most a block of SEGMENT_BATCH new
+        # samples brings (a longer block's would otherwise all sit in the transform buffers)
+        batch = SEGMENT_BATCH // step + 1
+        for b in range(0, k, batch):
+            self._segments(b * step, min(batch, k - b))
+        # the samples of the next, still incomplete segment move to the front
+        rest = total - k * step
         if k > 0:
-            # all the block's segments at once (k, C, L), strided over the channel-major
+            self._cm[:, :rest] = self._cm[:, k * step:total]
+        self._held = rest
+
+    def _segments(self, first: int, k: int) -> None:
+        """The power of the k segments starting at sample ``first`` of the channel-major
+        buffer, added up."""
+        step = self.L // 2
+        if k > 0:
+            # the segments at once (k, C, L), strided over the channel-major
             # buffer: one window product, one batched FFT per block (contiguous rows into
             # reused buffers: a transform of fresh, page-faulted memory or of one segment at
             # a time measured twice as slow)
-            cm = self._cm
+            cm = self._cm[:, first:]
             rows, cols = cm.strides
             segs = np.lib.stride_tricks.as_strided(cm, (k, self.c, self.L),
                                                    (step * cols, rows, cols), writeable=False)
@@ -99,11 +122,6 @@ class WelchAccumulator:
                 np.square(parts, out=parts)
                 self._power += parts.sum(axis=0).reshape(self.c, nf, 2).sum(axis=2)
             self.n_seg += k
-        # the samples of the next, still incomplete segment move to the front
-        rest = total - k * step
-        if k > 0:
-            self._cm[:, :rest] = self._cm[:, k * step:total]
-        self._held = rest
 
     def gap(self) -> None:
         """A break in the data: the partial segment is dropped, none spans the gap."""

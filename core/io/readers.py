@@ -307,6 +307,21 @@ def _check_finite(a: NDArray, offset: int, where: str) -> None:
                         "the record there or fill the hole before analysing")
 
 
+#: The most rows of an .npz member read at once when only some columns are wanted (a read
+#: takes every column of its rows).
+READ_ROWS = 1 << 16
+
+
+def _rows(acc: _NpzMember | _StoredRows, n: int, done: int, total: int, p: Path) -> NDArray:
+    """The member's next ≤ n rows, 2-d; a member that ends before ``total`` rows is
+    truncated."""
+    raw = acc.rows(n)
+    if len(raw) == 0:
+        raise FormatError(f"{p}: accel ends after {done} of {total} samples; the file is "
+                          "truncated")
+    return raw[:, None] if raw.ndim == 1 else raw
+
+
 def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int] | None,
                 temperature: bool, verify: bool
                 ) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64] | None]]:
@@ -321,19 +336,20 @@ def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int
         done = 0
         try:
             while done < meta["n_samples"]:
-                raw = acc.rows(block)
-                if len(raw) == 0:
-                    raise FormatError(f"{p}: accel ends after {done} of {meta['n_samples']} "
-                                      "samples; the file is truncated")
-                if raw.ndim == 1:
-                    raw = raw[:, None]
                 if columns is None:
-                    a = raw.astype(np.float64)
+                    a = _rows(acc, block, done, meta["n_samples"], p).astype(np.float64)
                 else:
-                    # only the columns asked for are converted (one copy, column by column)
-                    a = np.empty((len(raw), len(columns)))
-                    for j, col in enumerate(columns):
-                        a[:, j] = raw[:, col]
+                    # only the columns asked for are converted (one copy, column by column),
+                    # read READ_ROWS rows at a time: a long block of a few columns never
+                    # holds every column's rows at once
+                    a = np.empty((min(block, meta["n_samples"] - done), len(columns)))
+                    got = 0
+                    while got < len(a):
+                        raw = _rows(acc, min(READ_ROWS, len(a) - got), done + got,
+                                    meta["n_samples"], p)
+                        for j, col in enumerate(columns):
+                            a[got:got + len(raw), j] = raw[:, col]
+                        got += len(raw)
                 _check_finite(a, done, str(p))
                 t = None
                 if tm is not None:

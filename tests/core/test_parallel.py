@@ -154,6 +154,34 @@ def test_welch_parts_add_up_to_one_spectrum() -> None:
     np.testing.assert_allclose(total.result()[1], one.result()[1], rtol=1e-12)
 
 
+def test_a_long_block_gives_the_spectrum_of_one_worker_blocks() -> None:
+    """A block longer than ``SEGMENT_BATCH`` (a parallel chunk's) has its segments
+    transformed a batch at a time: the same segments and power sums as one-worker blocks."""
+    from avard.core.analysis import spectrum
+
+    rng = np.random.default_rng(8)
+    n, nper = 3 * spectrum.SEGMENT_BATCH + 777, 2048
+    y = rng.normal(0, 1e-3, (n, 2)) + 1e-3 * np.sin(np.arange(n) / 30.0)[:, None]
+    calls = []
+    real = np.fft.rfft
+
+    def counted(a, *args, **kwargs):
+        calls.append(a.shape[0])
+        return real(a, *args, **kwargs)
+
+    long_, short = WelchAccumulator(2, 100.0, nper), WelchAccumulator(2, 100.0, nper)
+    np.fft.rfft, saved = counted, np.fft.rfft
+    try:
+        long_.update(y)
+    finally:
+        np.fft.rfft = saved
+    for i in range(0, n, spectrum.SEGMENT_BATCH):
+        short.update(y[i:i + spectrum.SEGMENT_BATCH])
+    assert long_.n_seg == short.n_seg == (n - nper) // (nper // 2) + 1
+    assert max(calls) <= spectrum.SEGMENT_BATCH // (nper // 2) + 1 and len(calls) >= 3
+    np.testing.assert_allclose(long_.part().power, short.part().power, rtol=1e-12)
+
+
 def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
     bounds = [0, 1000, 70000, 100000]
     chunks = plan_chunks(bounds, 3, 4096, 16384)
@@ -506,3 +534,94 @@ def test_a_worker_hands_out_a_history_again_only_when_nothing_refers_to_it(monke
     del c
     d = scratch.mapped_zeros((3, 1000))  # larger than both, which are idle
     assert len(scratch._reused) == 1 and d.base is scratch._reused[0]
+
+
+def test_a_chunk_reading_longer_blocks_judges_each_screen_block_alone(monkeypatch
+                                                                     ) -> None:
+    """A local chunk reads ``CHUNK_BLOCKS`` one-worker blocks at a time (and takes longer
+    OADEV pieces): the input screen still judges each one-worker block it owns on its own
+    (a chunk starting inside a read block included), once each, with the verdicts one
+    worker's screen gives that block; and on a clean record the chunks' parts, read in long
+    blocks, add up to one pass in one-worker blocks."""
+    from avard.core.analysis import parallel
+    from avard.core.io import screen
+
+    rng = np.random.default_rng(29)
+    n, sb = 1 << 16, 1 << 11
+    big = parallel.CHUNK_BLOCKS * sb
+    clean = rng.normal(0, 1e-3, (n, 2)) + np.cumsum(rng.normal(0, 2e-6, (n, 2)), axis=0)
+    y = clean.copy()
+    y[5000, 0] += 0.5  # first chunk, third one-worker block of the first read block
+    y[3 * sb + 7, 1] -= 0.5  # the second chunk's first block, inside that read block
+    y[n - 3, 0] += 0.5  # the record's last block
+    grid = 2 ** np.arange(9)
+    cut = 3 * sb  # inside the first read block
+    chunks = [parallel.Chunk(0, cut, cut + LADDER_REACH * int(grid[-1])),
+              parallel.Chunk(cut, n, n)]
+
+    def reader(data, size):
+        def read(verify: bool = False):
+            for i in range(0, n, size):
+                yield data[i:i + size], False
+        return read
+
+    judged = []
+    real = screen.screen_accel
+
+    def counted(a):
+        judged.append(len(a))
+        return real(a)
+
+    job = parallel._Job(reader(y, big), None, ["x", "y"], 100.0, grid, None, n, False,
+                        chunks, screen=[0, 1], screen_block=sb)
+    monkeypatch.setattr(screen, "screen_accel", counted)
+    got = [parallel.chunk_part(job, i) for i in range(2)]
+    monkeypatch.setattr(screen, "screen_accel", real)
+    assert judged == [sb] * (n // sb)  # every one-worker block once, whole
+    want = {}
+    for b0 in range(0, n, sb):
+        bad = real(y[b0:b0 + sb])
+        if bad.any():
+            want[b0] = np.flatnonzero(bad)
+    assert sorted(want) == [4096, 3 * sb, n - sb]
+    assert sorted(got[0].cuts) == [4096] and sorted(got[1].cuts) == [3 * sb, n - sb]
+    for r in got:
+        for b0, rows in r.cuts.items():
+            np.testing.assert_array_equal(rows, want[b0])
+    job = parallel._Job(reader(clean, big), None, ["x", "y"], 100.0, grid, 1024, n, False,
+                        chunks, screen=[0, 1], screen_block=sb)
+    parts = [parallel.chunk_part(job, i) for i in range(2)]
+    assert all(not r.cuts for r in parts)
+    total = parts[0].part + parts[1].part
+    one = OverlappingAllan(2, 100.0, grid, n_total=n, defer_rn=True)
+    welch = WelchAccumulator(2, 100.0, 1024)
+    for blk, _end in reader(clean, sb)():
+        one.update(blk)
+        welch.update(blk)
+    a = OverlappingAllan.from_part(total, 100.0, n_total=n, defer_rn=True).result()
+    b = one.result()
+    np.testing.assert_allclose(a.dev, b.dev, rtol=1e-12)
+    np.testing.assert_array_equal(a.alpha, b.alpha)
+    power = parts[0].power.power + parts[1].power.power
+    np.testing.assert_allclose(power, welch.part().power, rtol=1e-12)
+
+
+def test_the_workers_exit_by_themselves_once_the_last_chunk_is_in(tmp_path) -> None:
+    """The workers are told to exit when the last chunk is in (they unmap their histories
+    while the parent finishes the last pass): none is left running, each ended cleanly, and
+    the result is one worker's."""
+    import multiprocessing
+
+    rng = np.random.default_rng(31)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3))
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    par = analyze(open_record(path), AnalyzeOptions(workers=2))
+    children = multiprocessing.active_children()
+    for child in children:
+        child.join(timeout=120)  # a bound on a hang, not a timing
+    assert all(not c.is_alive() and c.exitcode == 0 for c in children)
+    one = analyze(open_record(path))
+    for name, ch in one.channels.items():
+        np.testing.assert_allclose(par.channels[name].allan.dev, ch.allan.dev, rtol=1e-12)

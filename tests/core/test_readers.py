@@ -188,6 +188,41 @@ def test_npz_columns_alone_and_without_temperatures(tmp_path: Path, compressed: 
         iter_blocks(p, columns=[3])
 
 
+@pytest.mark.parametrize("compressed", [False, True])
+def test_npz_columns_in_blocks_longer_than_one_read(tmp_path: Path, compressed: bool,
+                                                    monkeypatch) -> None:
+    """A block of chosen columns longer than ``READ_ROWS`` (a parallel chunk's) is read
+    in pieces of at most that many rows: the same values and block lengths, its CRC still
+    checked over the whole member, and a member that ends early still said to be
+    truncated."""
+    from avard.core.io import readers
+
+    monkeypatch.setattr(readers, "READ_ROWS", 1000)
+    accel = np.random.default_rng(6).normal(size=(9_500, 3))
+    p = _npz(tmp_path / "c.npz", compressed, accel=accel, rate_hz=10.0)
+    _meta, blocks = iter_blocks(p, block=4000, columns=[2, 0], temperature=False)
+    parts = [a for a, _ in blocks]
+    assert [len(a) for a in parts] == [4000, 4000, 1500]
+    np.testing.assert_array_equal(np.concatenate(parts), accel[:, [2, 0]])
+    if not compressed:  # a flipped bit in the last read block's rows: the CRC says so
+        raw = bytearray(p.read_bytes())
+        raw[raw.index(accel[9_000].tobytes())] ^= 0x01
+        bad = tmp_path / "bad.npz"
+        bad.write_bytes(bytes(raw))
+        with pytest.raises(FormatError, match="CRC"):
+            for _ in iter_blocks(bad, block=4000, columns=[1])[1]:
+                pass
+    with zipfile.ZipFile(p) as zf:
+        data = zf.read("accel.npy")
+    with zipfile.ZipFile(tmp_path / "short.npz", "w") as zf:
+        zf.writestr("accel.npy", data[:-24 * 2000])
+        zf.writestr("rate_hz.npy", _npy(10.0))
+    with pytest.raises(FormatError, match=r"ends after 7500 of 9500 samples; the file is "
+                                          "truncated"):
+        for _ in iter_blocks(tmp_path / "short.npz", block=4000, columns=[0])[1]:
+            pass
+
+
 @pytest.mark.parametrize("loop", ["compiled", "zlib"])
 def test_a_damaged_stored_npz_fails_its_crc_unless_told_not_to_check(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, loop: str) -> None:
