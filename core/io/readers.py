@@ -189,7 +189,13 @@ class _StoredRows:
         info = zf.getinfo(member._name)
         self.shape, self.dtype = member.shape, member.dtype
         self.row_bytes = int(np.prod(self.shape[1:], dtype=np.int64)) * self.dtype.itemsize
-        self.left = self.shape[0]
+        # Rows are read up to the member's own end, never past it: a member whose npy header
+        # promises more rows than the zip entry holds (a file cut and re-zipped, a bad writer)
+        # would otherwise read the next entry's bytes as samples. The caller says "ends after
+        # N" for a short member; its CRC is not checked (the truncation is the finding).
+        stored_rows = max(0, info.compress_size - member.data_offset) // self.row_bytes
+        self.left = min(self.shape[0], stored_rows)
+        self.short = stored_rows < self.shape[0]
         self.expected_crc = info.CRC
         self.where = str(p)
         self.fh = open(p, "rb")  # closed by close(), as the zip members' handles
@@ -220,7 +226,8 @@ class _StoredRows:
         if self.crc is not None:
             self.crc = crc32(view[:got], self.crc)
         self.left -= k
-        if self.left == 0 and self.crc is not None and self.crc != self.expected_crc:
+        if (self.left == 0 and not self.short and self.crc is not None
+                and self.crc != self.expected_crc):
             raise FormatError(f"{self.where}: accel fails its CRC-32 check; the file is damaged "
                               "(copy or write it again)")
         a = self._buf[:k * self.row_bytes // self.dtype.itemsize]

@@ -221,6 +221,17 @@ def test_npz_columns_in_blocks_longer_than_one_read(tmp_path: Path, compressed: 
                                           "truncated"):
         for _ in iter_blocks(tmp_path / "short.npz", block=4000, columns=[0])[1]:
             pass
+    # a short member followed by an entry larger than what it lacks: the rows stop at the
+    # member's end, the next entry's bytes are never read as samples
+    with zipfile.ZipFile(tmp_path / "short2.npz", "w") as zf:
+        zf.writestr("accel.npy", data[:-24 * 2000])
+        zf.writestr("rate_hz.npy", _npy(10.0))
+        zf.writestr("notes.npy", _npy(np.ones(10_000)))
+    for verify_columns in ([0], None):
+        with pytest.raises(FormatError, match=r"ends after 7500 of 9500 samples"):
+            for _ in iter_blocks(tmp_path / "short2.npz", block=4000,
+                                 columns=verify_columns)[1]:
+                pass
 
 
 @pytest.mark.parametrize("loop", ["compiled", "zlib"])
