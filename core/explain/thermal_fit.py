@@ -330,21 +330,47 @@ DS18B20_STEP_K = 0.0625
 ROUNDING_SNR = 10.0
 
 
-def rounding_floor_tau(T: NDArray, rate_hz: float) -> float:
+def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
+    """How long (s) the logged channel ``T`` (slow view) keeps one rounding error: a
+    temperature moving at |dT/dt| crosses a 0.0625 K step every q/|dT/dt| s, and between
+    crossings its rounding error is one slowly moving value of the sawtooth, not a new draw
+    per reading; never less than the read interval (the rounding as white noise). |dT/dt|
+    from 1-minute means (the differences of a rounded series are mostly its steps)."""
+    T = np.asarray(T, dtype=float)
+    if len(T) < 2:
+        return DS18B20_CONVERSION_S
+    slope = float(np.sqrt(np.mean(np.diff(T) ** 2))) * rate_hz
+    k = max(1, round(60.0 * rate_hz))
+    if len(T) > 4 * k:
+        Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
+        slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
+    return max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
+
+
+def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
-    least ``ROUNDING_SNR`` times more than its readings' rounding: AVAR_T(τ) ≥ SNR ·
-    (q²/12)·t_read/τ at that τ and the next octave (the rounding of readings every t_read
-    as white noise). Below it the regressor is mostly rounding: an error in the variable
-    that pulls ĉ towards 0 and, as a lag smooths the steps away, favours positive lags (a
-    true lag of 0 was found at 26 s [24.7, 28.8] on a faulty-log record of 4 h, the z² over
-    the lags dominated by how much of the rounding each trial lag smoothed)."""
+    least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
+    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ and the next octave, t_c the time one rounding
+    error lasts (``rounding_correlation_s``). Below it the regressor is mostly rounding: an
+    error in the variable that pulls ĉ towards 0 and, as a longer trial lag smooths the
+    steps away, favours positive lags.
+
+    The rounding taken as white at the read interval (t_c = 0.75 s) put the floor of a
+    slowly turning room ≈ 3 octaves too low: on the faulty-log benchmark records (a true lag
+    of 0) the best lag came out +7 s on average with a spread of 15 s, the rounding-free
+    log's 0.6 ± 10.6; with the sawtooth 1.2 ± 10.2 (12 seeds). ``thermal_paths`` found the
+    same for the per-τ coefficients (0.2–0.9× the truth at τ 16–64 s)."""
+    T = np.asarray(T, dtype=float)
+    if len(T) < 16:
+        return 0.0
+    tc = rounding_correlation_s(T, rate_hz)
     sa = StreamingAllan(1, rate_hz)
-    sa.update(np.asarray(T, dtype=float)[:, None])
+    sa.update(T[:, None])
     res = sa.result()
     tau = np.asarray(res.tau, dtype=float)
     var = np.asarray(res.var, dtype=float)
-    q = DS18B20_STEP_K**2 / 12.0 * DS18B20_CONVERSION_S / tau
-    ok = np.isfinite(var) & (var >= ROUNDING_SNR * q)
+    q = DS18B20_STEP_K**2 / 12.0 * tc / tau
+    ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
         # the first τ above the rounding with the next octave above it too (a sinusoid's
         # AVAR dips at multiples of its period)

@@ -55,12 +55,9 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
-from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
 from avard.core.explain.thermal_fit import (
-    DS18B20_CONVERSION_S,
-    DS18B20_STEP_K,
     OctaveSums,
     lag_filter,
     min_tau_for,
@@ -463,8 +460,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     # rounding floor, a negative lag's own) — the same for every candidate, so their
     # deviances compare
     # (not thermal_fit's 2|L| for a negative lag: it left a −128 s record three octaves to
-    # tell the candidates apart; the sawtooth floor already keeps the rounding out)
-    min_tau = max(min_tau_for(0.0, floor_s), slow_rounding_floor(Ts, rate))
+    # tell the candidates apart; the sawtooth floor, ``floor_s``, already keeps the rounding
+    # out)
+    min_tau = min_tau_for(0.0, floor_s)
     ms = whole.ms
     ok_tau = (ms / rate) >= min_tau
     # the axis's EDF at this view's octaves: the whole slow view's, by τ
@@ -572,37 +570,6 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                      f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
                      "best (the extra term trades with the lag at one drive frequency)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h)
-
-
-def slow_rounding_floor(T: NDArray, rate_hz: float, snr: float = 10.0) -> float:
-    """The shortest octave τ (s) where the channel's AVAR stands ``snr`` times above its
-    readings' rounding, the rounding taken as a sawtooth: a temperature moving at |dT/dt|
-    crosses a 0.0625 K step every q/|dT/dt| s, so its rounding error (variance q²/12) stays
-    correlated that long, AVAR ≈ q²/12·t_c/τ with t_c = max(t_read, q/rms(dT/dt)).
-    ``thermal_fit.rounding_floor_tau`` takes the rounding as white at the read interval; on a
-    slowly turning room that is ≈ 100× too low at its floor (a lag-0 coupling's per-τ
-    coefficient was 0.2–0.9× the truth at τ 16–64 s, and two lags whose difference smooths
-    the steps away beat the true single lag held out)."""
-    T = np.asarray(T, dtype=float)
-    if len(T) < 16:
-        return 0.0
-    slope = float(np.sqrt(np.mean(np.diff(T) ** 2))) * rate_hz
-    # the differences of a rounded series are mostly steps: the slope from 1-minute means
-    k = max(1, round(60.0 * rate_hz))
-    if len(T) > 4 * k:
-        Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
-        slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    tc = max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
-    sa = StreamingAllan(1, rate_hz)
-    sa.update(T[:, None])
-    res = sa.result()
-    tau = np.asarray(res.tau, dtype=float)
-    var = np.asarray(res.var, dtype=float)
-    ok = np.isfinite(var) & (var >= snr * DS18B20_STEP_K**2 / 12.0 * tc / tau)
-    for i in range(len(tau)):
-        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
-            return float(tau[i])
-    return math.inf
 
 
 def _edf_at(tau: NDArray, tau_ref: NDArray, edf_ref: NDArray) -> NDArray[np.float64]:

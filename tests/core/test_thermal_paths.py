@@ -9,7 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from avard.core.explain import alarm
-from avard.core.explain.thermal_fit import _axes_reference, fit_thermal_axes, rounding_floor_tau
+from avard.core.explain.thermal_fit import (
+    DS18B20_CONVERSION_S,
+    _axes_reference,
+    fit_thermal_axes,
+    rounding_correlation_s,
+    rounding_floor_tau,
+)
 from avard.core.explain.thermal_paths import (
     PARTS,
     _grid_cell,
@@ -17,7 +23,6 @@ from avard.core.explain.thermal_paths import (
     _play,
     choose_path,
     min_detectable_path,
-    slow_rounding_floor,
     trials,
 )
 
@@ -80,9 +85,14 @@ def test_a_quadratic_response_is_chosen_by_held_out_likelihood_with_its_paramete
     assert pf.scores["quadratic"].heldout < pf.scores["one_lag"].heldout - pf.margin
 
 
-def test_the_sawtooth_rounding_floor_is_above_the_white_one_on_a_slow_room():
+def test_the_rounding_is_a_sawtooth_on_a_slow_room_and_its_floor_is_above_the_white_one():
+    """A slowly turning room crosses a 0.0625 K step every minute or two: one rounding error
+    lasts that long, not a read interval, and the floor is octaves above the white rule's."""
     _y, T = _slow(BASE, 5)
-    assert slow_rounding_floor(T, 1.0) > rounding_floor_tau(T, 1.0)
+    assert rounding_correlation_s(T, 1.0) > 20 * DS18B20_CONVERSION_S
+    # the floor with the rounding white at the read interval: ≥ 2 octaves lower
+    assert rounding_floor_tau(T, 1.0) >= 4 * rounding_floor_tau(
+        T, 1.0, snr=10.0 * DS18B20_CONVERSION_S / rounding_correlation_s(T, 1.0))
 
 
 def test_the_paths_share_is_in_the_per_axis_level():
