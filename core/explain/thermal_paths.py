@@ -8,9 +8,12 @@ more; the candidates, each a linear model in regressors built from the driving c
 - ``two_path``: c₁·u_L1 + c₂·u_L2, 0 ≤ L1 < L2 (two first-order paths, e.g. plate → die and
   room → die; θ = (L1, L2));
 - ``quadratic``: c·u_L + q·(u_L − ū)² (m/s²/K²);
-- ``rate``: c·u_L + r·du/dt (m/s² per K/s), du/dt the derivative of u_L through a
-  ``RATE_SMOOTH_S`` lag ((u_L − lag(u_L, s))/s exactly: the readings' 0.0625 K steps would
-  make a raw gradient spikes);
+- ``rate``: c·u_L + r·dT/dt (m/s² per K/s, L ≥ 0), dT/dt of the logged channel smoothed
+  forward and back through a ``RATE_SMOOTH_S`` lag (jω/(1 + ω²s²): no phase; the readings'
+  0.0625 K steps would make a raw gradient spikes). The rate term on the channel itself and
+  the static coupling through its own lag: as c·u_L + r·du_L/dt, (c + jωr)/(1 + jωL) at
+  one drive frequency, c crossed zero along the ridge L trades on, and was not resolved;
+  a negative L (a lead-lag, T + a·dT/dt) would be a second rate term;
 - ``hysteresis``: c·u_L + h·p_w, p_w = (v − P_w[v])/(w/2) ∈ [−1, 1] the play (backlash)
   operator of width w (K) on v = lag(u_L, ``RATE_SMOOTH_S``), a one-parameter Preisach-lite:
   p_w is +1 after a rise, −1 after a fall, and crosses over while the temperature turns back
@@ -61,7 +64,7 @@ from avard.core.explain.thermal_fit import (
     OctaveSums,
     lag_filter,
     min_tau_for,
-    octave_sums,
+    octave_sums_by_part,
 )
 from numpy.typing import NDArray
 
@@ -136,7 +139,11 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.f
         elif c.kind == "quad":
             x = (u(c.lag) - u(c.lag).mean()) ** 2
         elif c.kind == "rate":
+            # d/dt of u smoothed forward and back through RATE_SMOOTH_S: jω/(1 + ω²s²), no
+            # phase (the forward lag alone delayed the derivative by s, 6° at the HVAC
+            # cycle, which the static lag then made up for: L and r 10–20 % off)
             x = (u(c.lag) - lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
+            x = lag_filter(x[::-1], RATE_SMOOTH_S, rate_hz)[::-1]
         elif c.kind == "play":
             x = _play(lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz), c.width)
         else:  # pragma: no cover - the kinds are this module's own
@@ -258,7 +265,7 @@ def trials(kind: str, lags: list[float]) -> list[Trial]:
     if kind == "quadratic":
         return [Trial((L,), (Column("u", L), Column("quad", L), *_start(L)), 2) for L in lags]
     if kind == "rate":
-        return [Trial((L,), (Column("u", L), Column("rate", L), *_start(L)), 2) for L in lags]
+        return [Trial((L,), (Column("u", L), Column("rate", 0.0), *_start(L)), 2) for L in pos]
     if kind == "hysteresis":
         return [Trial((L, w), (Column("u", L), Column("play", L, w), *_start(L)), 2)
                 for L in lags for w in WIDTHS_K]
@@ -451,8 +458,15 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     where = {c: i + 1 for i, c in enumerate(cols)}
     X = np.column_stack([ys, path_columns(Ts, cols, rate)])
     edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
-    parts = [octave_sums(X[a:b], None if ks is None else ks[a:b])
-             for a, b in itertools.pairwise(edges)]
+    # each part the differences whose middle it holds, at every octave of the record (each
+    # part's own sums stopped at τ ≤ part/2, 410 s on a 4 h record: two octaves above the
+    # sawtooth floor, where a rate term, a second path and the lag were one ridge); no
+    # difference crosses the middle, so the first and last five parts are each half's own
+    # sums (the held-out half shares no difference with the fitted one), from one pass
+    mid = int(edges[PARTS // 2])
+    cut = np.ones(len(X), dtype=bool) if ks is None else ks.copy()
+    cut[mid] = False
+    parts = octave_sums_by_part(X, edges, cut)
     whole = sum(parts[1:], start=parts[0])
     half = [sum(parts[1:PARTS // 2], start=parts[0]),
             sum(parts[PARTS // 2 + 1:], start=parts[PARTS // 2])]
