@@ -836,7 +836,9 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     jb = max(zmax, key=rank)
     scan = best[jb]
     k = int(np.argmax([s.z for s in scan]))
-    L = scan[k].lag
+    # the lag its interval is about (the estimator the leave-one-out lags are), not the grid
+    # point: the fine grid's step (≈ 1 s at −60 s) is as large as the lag's spread there
+    L = best_lag(scan, k)
     mt = min_tau_for(L, (floors or {}).get(jb, 0.0))
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
@@ -961,6 +963,15 @@ def _smooth_peak(lags: NDArray, z: NDArray) -> tuple[float, bool]:
     return float(x[i]), i in (0, len(x) - 1)
 
 
+def best_lag(scan: list[ScanPoint], k: int) -> float:
+    """The axis's lag from its scan (``k`` the lag of the largest z): the vertex of the
+    parabola through z² at the largest z and its neighbours (``_peak``), the centre of its
+    interval (``lag_interval``). Not the grid point: reported at the fine grid's points
+    (≈ 1 s steps at −60 s, as wide as the lag's spread there) the negative-lag records'
+    lags sat up to half a step from the centre of their ±2 s intervals."""
+    return _peak([p.lag for p in scan], np.array([p.z for p in scan]))[0]
+
+
 def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
     """(low, high, open low, open high): the lag's 68 % interval, the best lag ± t₀.₈₄(G−1)
     times its delete-a-group jackknife standard error (the best lag of the record with each
@@ -977,7 +988,7 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     intervals of 32 records held the true lag in none. The jackknife measures how far the
     best lag moves with the data, whatever moves it."""
     lags = [p.lag for p in scan]
-    best, _i = _peak(lags, np.array([p.z for p in scan]))
+    best = best_lag(scan, k)
     sub = [p for p in scan if len(p.zg)]
     if len(sub) < 3:
         return best, best, k == 0, k == len(scan) - 1
