@@ -268,24 +268,7 @@ def octave_sums(X: NDArray, keep: NDArray[np.bool_] | None = None, levels: int =
     same grids, without the noise identification (the lag scan needs only the covariance;
     the axis's EDF does not depend on the trial lag). A test holds it equal to the
     accumulator's covariance."""
-    X = np.asarray(X, dtype=float)
-    runs = kept_runs(len(X), keep)
-    longest = max((b - a for a, b in runs), default=0)
-    ms = [1 << k for k in range(levels) if 2 * (1 << k) <= longest]
-    sums = [DifferenceSums.zeros(X.shape[1]) for _ in ms]
-    for a, b in runs:
-        if b - a < 2:
-            continue
-        p = segment_phase(X[a:b], False)
-        for k, m in enumerate(ms):
-            if 2 * m > b - a:
-                break
-            st = 1 if m <= overlap else m // overlap
-            grid_sums(p[::st] if st > 1 else p, m // st, 0, sums[k], 2)
-    return OctaveSums(np.asarray(ms, dtype=np.int64),
-                      np.asarray([x.n for x in sums], dtype=np.int64),
-                      np.asarray([x.s2 for x in sums], dtype=float).reshape(
-                          len(ms), X.shape[1], X.shape[1]))
+    return octave_sums_by_part(X, np.array([0, len(X)]), keep, levels, overlap)[0]
 
 
 def octave_sums_by_part(X: NDArray, edges: NDArray, keep: NDArray[np.bool_] | None = None,
