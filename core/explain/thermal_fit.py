@@ -22,7 +22,8 @@ it is too optimistic (the noise differences are not independent across a slow re
 the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
 (``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
 shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
-interval is the analytic profile widened to the same scale: {τ_L : z² ≥ z²_max − (se/se_a)²}.
+interval is the lag's own delete-a-group jackknife (``lag_interval``); the parts hold the
+Allan differences whose middle they hold, at every octave (``octave_sums_by_part``).
 Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
