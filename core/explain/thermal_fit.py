@@ -22,7 +22,8 @@ it is too optimistic (the noise differences are not independent across a slow re
 the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
 (``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
 shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
-interval is the analytic profile widened to the same scale: {τ_L : z² ≥ z²_max − (se/se_a)²}.
+interval is the lag's own delete-a-group jackknife (``lag_interval``); the parts hold the
+Allan differences whose middle they hold, at every octave (``octave_sums_by_part``).
 Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
@@ -33,7 +34,6 @@ thermal share falls as τ³: a smooth signal's AVAR ∝ τ², white noise's ∝ 
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -269,11 +269,28 @@ def octave_sums(X: NDArray, keep: NDArray[np.bool_] | None = None, levels: int =
     same grids, without the noise identification (the lag scan needs only the covariance;
     the axis's EDF does not depend on the trial lag). A test holds it equal to the
     accumulator's covariance."""
+    return octave_sums_by_part(X, np.array([0, len(X)]), keep, levels, overlap)[0]
+
+
+def octave_sums_by_part(X: NDArray, edges: NDArray, keep: NDArray[np.bool_] | None = None,
+                        levels: int = 40, overlap: int = DEFAULT_OVERLAP) -> list[OctaveSums]:
+    """:func:`octave_sums` of ``X`` split among the contiguous parts [edges[g], edges[g+1]):
+    each Allan difference of the whole record goes to the part that holds its middle, so
+    the parts add up to the whole record's sums at *every* octave, and the whole minus one
+    part is the record with that part's differences left out (the delete-a-group
+    jackknife).
+
+    Not the sums of each part on its own: those have no octave longer than half a part, so
+    a jackknife on them fitted the lag and the coefficient on τ ≤ part/2 only (≈ 400 s on a
+    4 h record, below the HVAC cycle's τ ≈ 900 s where the coupling shows most): the
+    leave-one-out lags scattered twice as far as the record's own lag does and centred
+    elsewhere (a faulty-log record: best lag 19 s, the ten leave-one-out lags −10…17 s)."""
     X = np.asarray(X, dtype=float)
+    G = len(edges) - 1
     runs = kept_runs(len(X), keep)
     longest = max((b - a for a, b in runs), default=0)
     ms = [1 << k for k in range(levels) if 2 * (1 << k) <= longest]
-    sums = [DifferenceSums.zeros(X.shape[1]) for _ in ms]
+    sums = [[DifferenceSums.zeros(X.shape[1]) for _ in ms] for _ in range(G)]
     for a, b in runs:
         if b - a < 2:
             continue
@@ -282,11 +299,19 @@ def octave_sums(X: NDArray, keep: NDArray[np.bool_] | None = None, levels: int =
             if 2 * m > b - a:
                 break
             st = 1 if m <= overlap else m // overlap
-            grid_sums(p[::st] if st > 1 else p, m // st, 0, sums[k], 2)
-    return OctaveSums(np.asarray(ms, dtype=np.int64),
-                      np.asarray([x.n for x in sums], dtype=np.int64),
-                      np.asarray([x.s2 for x in sums], dtype=float).reshape(
-                          len(ms), X.shape[1], X.shape[1]))
+            q = p[::st] if st > 1 else p
+            sp = m // st
+            n_d = len(q) - 2 * sp
+            # difference j spans samples a + j·st … + 2m: it goes to the part of its middle
+            cut = np.clip(-((a + m - np.asarray(edges, dtype=np.int64)) // st), 0, n_d)
+            for g in range(G):
+                j0, j1 = int(cut[g]), int(cut[g + 1])
+                if j1 > j0:
+                    grid_sums(q[j0:j1 + 2 * sp], sp, 0, sums[g][k], 2)
+    return [OctaveSums(np.asarray(ms, dtype=np.int64),
+                       np.asarray([x.n for x in sg], dtype=np.int64),
+                       np.asarray([x.s2 for x in sg], dtype=float).reshape(
+                           len(ms), X.shape[1], X.shape[1])) for sg in sums]
 
 
 @dataclass(frozen=True)
@@ -330,21 +355,47 @@ DS18B20_STEP_K = 0.0625
 ROUNDING_SNR = 10.0
 
 
-def rounding_floor_tau(T: NDArray, rate_hz: float) -> float:
+def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
+    """How long (s) the logged channel ``T`` (slow view) keeps one rounding error: a
+    temperature moving at |dT/dt| crosses a 0.0625 K step every q/|dT/dt| s, and between
+    crossings its rounding error is one slowly moving value of the sawtooth, not a new draw
+    per reading; never less than the read interval (the rounding as white noise). |dT/dt|
+    from 1-minute means (the differences of a rounded series are mostly its steps)."""
+    T = np.asarray(T, dtype=float)
+    if len(T) < 2:
+        return DS18B20_CONVERSION_S
+    slope = float(np.sqrt(np.mean(np.diff(T) ** 2))) * rate_hz
+    k = max(1, round(60.0 * rate_hz))
+    if len(T) > 4 * k:
+        Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
+        slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
+    return max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
+
+
+def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
-    least ``ROUNDING_SNR`` times more than its readings' rounding: AVAR_T(τ) ≥ SNR ·
-    (q²/12)·t_read/τ at that τ and the next octave (the rounding of readings every t_read
-    as white noise). Below it the regressor is mostly rounding: an error in the variable
-    that pulls ĉ towards 0 and, as a lag smooths the steps away, favours positive lags (a
-    true lag of 0 was found at 26 s [24.7, 28.8] on a faulty-log record of 4 h, the z² over
-    the lags dominated by how much of the rounding each trial lag smoothed)."""
+    least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
+    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ and the next octave, t_c the time one rounding
+    error lasts (``rounding_correlation_s``). Below it the regressor is mostly rounding: an
+    error in the variable that pulls ĉ towards 0 and, as a longer trial lag smooths the
+    steps away, favours positive lags.
+
+    The rounding taken as white at the read interval (t_c = 0.75 s) put the floor of a
+    slowly turning room ≈ 3 octaves too low: on the faulty-log benchmark records (a true lag
+    of 0) the best lag came out +7 s on average with a spread of 15 s, the rounding-free
+    log's 0.6 ± 10.6; with the sawtooth 1.2 ± 10.2 (12 seeds). ``thermal_paths`` found the
+    same for the per-τ coefficients (0.2–0.9× the truth at τ 16–64 s)."""
+    T = np.asarray(T, dtype=float)
+    if len(T) < 16:
+        return 0.0
+    tc = rounding_correlation_s(T, rate_hz)
     sa = StreamingAllan(1, rate_hz)
-    sa.update(np.asarray(T, dtype=float)[:, None])
+    sa.update(T[:, None])
     res = sa.result()
     tau = np.asarray(res.tau, dtype=float)
     var = np.asarray(res.var, dtype=float)
-    q = DS18B20_STEP_K**2 / 12.0 * DS18B20_CONVERSION_S / tau
-    ok = np.isfinite(var) & (var >= ROUNDING_SNR * q)
+    q = DS18B20_STEP_K**2 / 12.0 * tc / tau
+    ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
         # the first τ above the rounding with the next octave above it too (a sinusoid's
         # AVAR dips at multiples of its period)
@@ -374,19 +425,11 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
     n_ref = np.asarray(ref.n, dtype=float)
     edges = np.linspace(0, M, groups + 1).astype(int)
-    parts = [octave_sums(X[a:b], None if keep is None else keep[a:b])
-             for a, b in itertools.pairwise(edges)]
-    full = parts[0]
-    for ps in parts[1:]:
-        full = full + ps
+    parts = octave_sums_by_part(X, edges, keep)
+    full = sum(parts[1:], start=parts[0])
     c_all, _se, _n = tempco_from_cov(cov_view(full, rate_hz, edf_ref, n_ref), min_tau_s)
-    cs = []
-    for g in range(groups):
-        rest = [ps for h, ps in enumerate(parts) if h != g]
-        acc = rest[0]
-        for ps in rest[1:]:
-            acc = acc + ps
-        cs.append(tempco_from_cov(cov_view(acc, rate_hz, edf_ref, n_ref), min_tau_s)[0])
+    cs = [tempco_from_cov(cov_view(full - ps, rate_hz, edf_ref, n_ref), min_tau_s)[0]
+          for ps in parts]
     c = np.asarray(cs)
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
@@ -635,8 +678,7 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
         X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
         keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
         sums = octave_sums(X, keep)
-        pieces = [octave_sums(X[a:b], None if keep is None else keep[a:b])
-                  for a, b in itertools.pairwise(edges)] if parts else []
+        pieces = octave_sums_by_part(X, edges, keep) if parts else []
         whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
         mt = min_tau_for(float(L), floor_s)
         # the leave-one-out sums once per lag, for every axis (their covariance is cached)
@@ -779,7 +821,9 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     jb = max(zmax, key=rank)
     scan = best[jb]
     k = int(np.argmax([s.z for s in scan]))
-    L = scan[k].lag
+    # the lag its interval is about (the estimator the leave-one-out lags are), not the grid
+    # point: the fine grid's step (≈ 1 s at −60 s) is as large as the lag's spread there
+    L = best_lag(scan, k)
     mt = min_tau_for(L, (floors or {}).get(jb, 0.0))
     u = lag_filter(temps[:, jb], L, rate_hz)
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
@@ -904,6 +948,15 @@ def _smooth_peak(lags: NDArray, z: NDArray) -> tuple[float, bool]:
     return float(x[i]), i in (0, len(x) - 1)
 
 
+def best_lag(scan: list[ScanPoint], k: int) -> float:
+    """The axis's lag from its scan (``k`` the lag of the largest z): the vertex of the
+    parabola through z² at the largest z and its neighbours (``_peak``), the centre of its
+    interval (``lag_interval``). Not the grid point: reported at the fine grid's points
+    (≈ 1 s steps at −60 s, as wide as the lag's spread there) the negative-lag records'
+    lags sat up to half a step from the centre of their ±2 s intervals."""
+    return _peak([p.lag for p in scan], np.array([p.z for p in scan]))[0]
+
+
 def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
     """(low, high, open low, open high): the lag's 68 % interval, the best lag ± t₀.₈₄(G−1)
     times its delete-a-group jackknife standard error (the best lag of the record with each
@@ -920,7 +973,7 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     intervals of 32 records held the true lag in none. The jackknife measures how far the
     best lag moves with the data, whatever moves it."""
     lags = [p.lag for p in scan]
-    best, _i = _peak(lags, np.array([p.z for p in scan]))
+    best = best_lag(scan, k)
     sub = [p for p in scan if len(p.zg)]
     if len(sub) < 3:
         return best, best, k == 0, k == len(scan) - 1

@@ -8,9 +8,12 @@ more; the candidates, each a linear model in regressors built from the driving c
 - ``two_path``: c₁·u_L1 + c₂·u_L2, 0 ≤ L1 < L2 (two first-order paths, e.g. plate → die and
   room → die; θ = (L1, L2));
 - ``quadratic``: c·u_L + q·(u_L − ū)² (m/s²/K²);
-- ``rate``: c·u_L + r·du/dt (m/s² per K/s), du/dt the derivative of u_L through a
-  ``RATE_SMOOTH_S`` lag ((u_L − lag(u_L, s))/s exactly: the readings' 0.0625 K steps would
-  make a raw gradient spikes);
+- ``rate``: c·u_L + r·dT/dt (m/s² per K/s, L ≥ 0), dT/dt of the logged channel smoothed
+  forward and back through a ``RATE_SMOOTH_S`` lag (jω/(1 + ω²s²): no phase; the readings'
+  0.0625 K steps would make a raw gradient spikes). The rate term on the channel itself and
+  the static coupling through its own lag: as c·u_L + r·du_L/dt, (c + jωr)/(1 + jωL) at
+  one drive frequency, c crossed zero along the ridge L trades on, and was not resolved;
+  a negative L (a lead-lag, T + a·dT/dt) would be a second rate term;
 - ``hysteresis``: c·u_L + h·p_w, p_w = (v − P_w[v])/(w/2) ∈ [−1, 1] the play (backlash)
   operator of width w (K) on v = lag(u_L, ``RATE_SMOOTH_S``), a one-parameter Preisach-lite:
   p_w is +1 after a rise, −1 after a fall, and crosses over while the temperature turns back
@@ -60,16 +63,15 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
-from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
 from avard.core.explain.thermal_fit import (
-    DS18B20_CONVERSION_S,
     DS18B20_STEP_K,
     OctaveSums,
     lag_filter,
     min_tau_for,
-    octave_sums,
+    octave_sums_by_part,
+    rounding_correlation_s,
 )
 from numpy.typing import NDArray
 
@@ -147,7 +149,11 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.f
         elif c.kind == "quad":
             x = (u(c.lag) - u(c.lag).mean()) ** 2
         elif c.kind == "rate":
+            # d/dt of u smoothed forward and back through RATE_SMOOTH_S: jω/(1 + ω²s²), no
+            # phase (the forward lag alone delayed the derivative by s, 6° at the HVAC
+            # cycle, which the static lag then made up for: L and r 10–20 % off)
             x = (u(c.lag) - lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
+            x = lag_filter(x[::-1], RATE_SMOOTH_S, rate_hz)[::-1]
         elif c.kind == "play":
             x = _play(lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz), c.width)
         else:  # pragma: no cover - the kinds are this module's own
@@ -282,7 +288,7 @@ def trials(kind: str, lags: list[float]) -> list[Trial]:
     if kind == "quadratic":
         return [Trial((L,), (Column("u", L), Column("quad", L), *_start(L)), 2) for L in lags]
     if kind == "rate":
-        return [Trial((L,), (Column("u", L), Column("rate", L), *_start(L)), 2) for L in lags]
+        return [Trial((L,), (Column("u", L), Column("rate", 0.0), *_start(L)), 2) for L in pos]
     if kind == "hysteresis":
         return [Trial((L, w), (Column("u", L), Column("play", L, w), *_start(L)), 2)
                 for L in lags for w in WIDTHS_K]
@@ -512,8 +518,15 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     where = {c: i + 1 for i, c in enumerate(cols)}
     X = np.column_stack([ys, path_columns(Ts, cols, rate)])
     edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
-    parts = [octave_sums(X[a:b], None if ks is None else ks[a:b])
-             for a, b in itertools.pairwise(edges)]
+    # each part the differences whose middle it holds, at every octave of the record (each
+    # part's own sums stopped at τ ≤ part/2, 410 s on a 4 h record: two octaves above the
+    # sawtooth floor, where a rate term, a second path and the lag were one ridge); no
+    # difference crosses the middle, so the first and last five parts are each half's own
+    # sums (the held-out half shares no difference with the fitted one), from one pass
+    mid = int(edges[PARTS // 2])
+    cut = np.ones(len(X), dtype=bool) if ks is None else ks.copy()
+    cut[mid] = False
+    parts = octave_sums_by_part(X, edges, cut)
     whole = sum(parts[1:], start=parts[0])
     half = [sum(parts[1:PARTS // 2], start=parts[0]),
             sum(parts[PARTS // 2 + 1:], start=parts[PARTS // 2])]
@@ -521,8 +534,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     # rounding floor, a negative lag's own) — the same for every candidate, so their
     # deviances compare
     # (not thermal_fit's 2|L| for a negative lag: it left a −128 s record three octaves to
-    # tell the candidates apart; the sawtooth floor already keeps the rounding out)
-    min_tau = max(min_tau_for(0.0, floor_s), slow_rounding_floor(Ts, rate))
+    # tell the candidates apart; the sawtooth floor, ``floor_s``, already keeps the rounding
+    # out)
+    min_tau = min_tau_for(0.0, floor_s)
     ms = whole.ms
     ok_tau = (ms / rate) >= min_tau
     # the axis's EDF at this view's octaves: the whole slow view's, by τ
@@ -663,55 +677,18 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                    rounding=rounding_gain, alternatives=alternatives)
 
 
-def slow_rounding_floor(T: NDArray, rate_hz: float, snr: float = 10.0) -> float:
-    """The shortest octave τ (s) where the channel's AVAR stands ``snr`` times above its
-    readings' rounding, the rounding taken as a sawtooth: a temperature moving at |dT/dt|
-    crosses a 0.0625 K step every q/|dT/dt| s, so its rounding error (variance q²/12) stays
-    correlated that long, AVAR ≈ q²/12·t_c/τ with t_c = max(t_read, q/rms(dT/dt)).
-    ``thermal_fit.rounding_floor_tau`` takes the rounding as white at the read interval; on a
-    slowly turning room that is ≈ 100× too low at its floor (a lag-0 coupling's per-τ
-    coefficient was 0.2–0.9× the truth at τ 16–64 s, and two lags whose difference smooths
-    the steps away beat the true single lag held out)."""
-    T = np.asarray(T, dtype=float)
-    if len(T) < 16:
-        return 0.0
-    tc = _sawtooth_time(T, rate_hz)
-    sa = StreamingAllan(1, rate_hz)
-    sa.update(T[:, None])
-    res = sa.result()
-    tau = np.asarray(res.tau, dtype=float)
-    var = np.asarray(res.var, dtype=float)
-    ok = np.isfinite(var) & (var >= snr * DS18B20_STEP_K**2 / 12.0 * tc / tau)
-    for i in range(len(tau)):
-        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
-            return float(tau[i])
-    return math.inf
-
-
-def _sawtooth_time(T: NDArray, rate_hz: float) -> float:
-    """How long (s) the readings' rounding error stays correlated: q/rms(dT/dt), at least
-    the DS18B20's conversion; the slope from 1-minute means (the differences of a rounded
-    series are mostly steps)."""
-    slope = float(np.sqrt(np.mean(np.diff(T) ** 2))) * rate_hz
-    k = max(1, round(60.0 * rate_hz))
-    if len(T) > 4 * k:
-        Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
-        slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    return max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
-
-
 def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
                   lag_s: float = 0.0) -> NDArray[np.float64]:
     """The readings' rounding AVAR (K²) at ``tau`` seen through ``lag_filter`` of ``lag_s``:
-    the rounding as a sawtooth (``slow_rounding_floor``), white at τ above its correlation
-    time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's |H(f)|² applied
-    in the AVAR's integral ∫ h₀|H|²·2 sin⁴(πfτ)/(πfτ)² df (NIST SP 1065 eq. 10's transfer
-    function); a long lag passes little of it at τ below the lag."""
+    the rounding as a sawtooth (``thermal_fit.rounding_correlation_s``), white at τ above
+    its correlation time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's
+    |H(f)|² applied in the AVAR's integral ∫ h₀|H|²·2 sin⁴(πfτ)/(πfτ)² df (NIST SP 1065
+    eq. 10's transfer function); a long lag passes little of it at τ below the lag."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
         return np.zeros(len(tau))
-    tc = _sawtooth_time(T, rate_hz)
+    tc = rounding_correlation_s(T, rate_hz)
     q2 = DS18B20_STEP_K**2 / 12.0
     h0 = 2.0 * q2 * tc
     # f up to the correlation time's 1/(2 t_c), where the white model ends

@@ -9,7 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from avard.core.explain import alarm
-from avard.core.explain.thermal_fit import _axes_reference, fit_thermal_axes, rounding_floor_tau
+from avard.core.explain.thermal_fit import (
+    DS18B20_CONVERSION_S,
+    _axes_reference,
+    fit_thermal_axes,
+    rounding_correlation_s,
+    rounding_floor_tau,
+)
 from avard.core.explain.thermal_paths import (
     PARTS,
     _grid_cell,
@@ -17,7 +23,6 @@ from avard.core.explain.thermal_paths import (
     _play,
     choose_path,
     min_detectable_path,
-    slow_rounding_floor,
     trials,
 )
 
@@ -80,9 +85,14 @@ def test_a_quadratic_response_is_chosen_by_held_out_likelihood_with_its_paramete
     assert pf.scores["quadratic"].heldout < pf.scores["one_lag"].heldout - pf.margin
 
 
-def test_the_sawtooth_rounding_floor_is_above_the_white_one_on_a_slow_room():
+def test_the_rounding_is_a_sawtooth_on_a_slow_room_and_its_floor_is_above_the_white_one():
+    """A slowly turning room crosses a 0.0625 K step every minute or two: one rounding error
+    lasts that long, not a read interval, and the floor is octaves above the white rule's."""
     _y, T = _slow(BASE, 5)
-    assert slow_rounding_floor(T, 1.0) > rounding_floor_tau(T, 1.0)
+    assert rounding_correlation_s(T, 1.0) > 20 * DS18B20_CONVERSION_S
+    # the floor with the rounding white at the read interval: ≥ 2 octaves lower
+    assert rounding_floor_tau(T, 1.0) >= 4 * rounding_floor_tau(
+        T, 1.0, snr=10.0 * DS18B20_CONVERSION_S / rounding_correlation_s(T, 1.0))
 
 
 def test_the_paths_share_is_in_the_per_axis_level():
@@ -149,20 +159,25 @@ def test_a_null_axis_claims_no_path():
     assert th.path is None
 
 
-def test_a_rate_term_the_lag_can_trade_with_is_reported_as_not_resolved_without_interval():
-    # c·T + r·dT/dt at one drive frequency: the rate term and the first lag trade along a
-    # ridge (a lead is either), so over the lags as good as the best the coefficient changes
-    # sign; before, c and r came out wrong with ±3 % intervals that held the truth in 0/78
+def test_a_rate_term_is_resolved_with_the_static_coupling_through_its_own_lag():
+    """c·T + r·dT/dt. Parameterised as c·u_L + r·d(u_L)/dt the rate term and the lag traded
+    along a ridge at one drive frequency ((c + jωr)/(1 + jωL) fixes two numbers of three: c
+    crossed zero along it, "not resolved"); the derivative through a forward lag also
+    delayed it by 30 s. Now r multiplies dT/dt of the logged channel (zero phase), the
+    static coupling has its own lag L ≥ 0 (a negative one would be a second rate term):
+    along what is left of the ridge c stays c₀(1 + ω²L²) > 0 and r = r₀ + c₀L."""
     y, T = _slow(replace(BASE, rate_coupling=1.0), 5)
     pf = _path(y, T)
     assert pf.kind == "rate"
-    assert not pf.chosen.resolved
+    assert pf.chosen.resolved
     p, iv = pf.params()
-    assert "rate_coupling" in p and iv == {}
-    assert "not resolved" in pf.summary()
-    th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, paths=True)[0]
-    f = th.finding()
-    assert f.mechanism == "rate" and f.model_dependent and f.intervals == {}
+    assert p["rate_coupling"] == pytest.approx(1.0, rel=0.1)
+    assert p["coefficient"] == pytest.approx(C, rel=0.1)
+    assert iv["rate_coupling"][0] <= 1.0 <= iv["rate_coupling"][1]
+    assert iv["coefficient"][0] <= C <= iv["coefficient"][1]
+    assert "not resolved" not in pf.summary()
+    # the rate candidate tries no negative lag
+    assert all(t.theta[0] >= 0 for t in trials("rate", [-60.0, 0.0, 15.0]))
 
 
 def test_a_lag_interval_is_never_narrower_than_its_grid_cell():
