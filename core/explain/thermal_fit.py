@@ -67,6 +67,7 @@ __all__ = [
     "min_detectable_tempco",
     "signal_avar_on",
     "tempco_from_cov",
+    "with_paths",
     "without_start",
 ]
 
@@ -768,11 +769,20 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
                   floors) for a in range(Y.shape[1])]
-    if paths:
-        # on every axis: a response the one lag cannot follow (quadratic, hysteresis) may
-        # fail the one-lag test and pass its own
-        fits = [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
-    return fits
+    return with_paths(fits, Y, temps, holes, floors) if paths else fits
+
+
+def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,
+               floors: dict[int, float] | None = None) -> list[ThermalFit]:
+    """``fits`` (``fit_thermal_axes`` of the columns of ``Y``) each with the thermal path
+    chosen on its driving channel (``thermal_paths.choose_path``), on every axis: a response
+    the one lag cannot follow (quadratic, hysteresis) may fail the one-lag test and pass its
+    own. ``floors``: each channel's rounding floor (τ s), computed when not given."""
+    Y = np.asarray(Y, dtype=float)
+    if floors is None:
+        floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
+                  for j in range(temps.shape[1])} if fits else {}
+    return [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,

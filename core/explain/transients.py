@@ -53,8 +53,7 @@ from avard.core.explain import causes as cz
 from numpy.typing import NDArray
 
 __all__ = ["MAX_EFFECTS", "NoiseOf", "find_compound", "refine_compound", "robust_noise",
-           "signal_of",
-           "test_drift"]
+           "signal_of", "test_drift", "warmup_beyond_start"]
 
 #: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
 NoiseOf = Callable[[NDArray[np.float64]], dict[str, float]]
@@ -168,19 +167,55 @@ def _scan(g: cz._Gls, fixed: list[NDArray], alpha: float) -> list[_Proposal]:
                                            "end_s": float(edges[i1]),
                                            "size": float(num[i0, i1] / den[i0, i1])},
                              float(zz[k]), alarm.bonferroni_z(share, len(zz)), len(zz)))
-    record_s = M * dt
-    if record_s / 4 > 2 * dt:
-        grid = np.geomspace(2 * dt, record_s / 4, T_SCAN)
-        wc = g.white(np.exp(-t[:, None] / grid[None, :]))
-        c = wc - q @ (q.T @ wc)
-        a = c.T @ r
-        d, ok = _norms(wc, c)
-        z = np.where(ok, a / np.sqrt(d) / s, 0.0)
-        i = int(np.argmax(np.abs(z)))
-        out.append(_Proposal("warmup", {"time_constant_s": float(grid[i]),
-                                        "size": float(a[i] / d[i])},
-                             float(z[i]), alarm.bonferroni_z(share, T_SCAN), T_SCAN))
+    warm = _warmup_proposal(g, q, r, s, share)
+    if warm is not None:
+        out.append(warm)
     return out
+
+
+def _warmup_proposal(g: cz._Gls, q: NDArray, r: NDArray, s: float, share: float
+                     ) -> _Proposal | None:
+    """The warm-up family's best proposal e^(−t/T) (T on a log grid from 2 blocks to a
+    quarter of the record) on the whitened residual ``r`` with the columns of ``q`` out."""
+    t, dt = g.t, g.dt
+    record_s = len(t) * dt
+    if not record_s / 4 > 2 * dt:
+        return None
+    grid = np.geomspace(2 * dt, record_s / 4, T_SCAN)
+    wc = g.white(np.exp(-t[:, None] / grid[None, :]))
+    c = wc - q @ (q.T @ wc)
+    a = c.T @ r
+    d, ok = _norms(wc, c)
+    z = np.where(ok, a / np.sqrt(d) / s, 0.0)
+    i = int(np.argmax(np.abs(z)))
+    return _Proposal("warmup", {"time_constant_s": float(grid[i]), "size": float(a[i] / d[i])},
+                     float(z[i]), alarm.bonferroni_z(share, T_SCAN), T_SCAN)
+
+
+def warmup_beyond_start(y: NDArray, rate_hz: float, noise: dict[str, float],
+                        lag_s: float) -> cz.Candidate:
+    """A warm-up e^(−t/T) of ``y`` (an axis with its thermal signal removed, the lag filter
+    started in steady state) tested against the lag filter's unknown start state, the
+    settling e^(−t/|lag_s|) with any size, which is in the null model (with the offset and
+    the slope): the warm-up family's scan and threshold of the compound search
+    (``find_compound``'s first stage), on the residual of that model. A warm-up whose T is
+    near the lag is collinear with the start state and is not seen here; one that passes is
+    more than the start state can make, whatever its size.
+
+    This is no claim: ``engine`` removes a warm-up that passes before it chooses the thermal
+    path and fits the start state, which a warm-up otherwise takes over (the start state
+    absorbs it, or a path with a long second lag or a dT/dt term does), and the compound
+    search then tests and claims it as usual."""
+    g = _gls(y, rate_hz, noise)
+    if g is None:
+        return cz.Candidate("warmup", False, evidence="the noise covariance is singular")
+    fixed = [g.white(np.exp(-g.t / abs(lag_s)))] if lag_s else []
+    q, r, s2 = _residual(g, fixed)
+    p = _warmup_proposal(g, q, r, math.sqrt(s2), alarm.TRANSIENTS / len(TRANSIENT_CAUSES))
+    if p is None:
+        return cz.Candidate("warmup", False, evidence="the record is too short for a warm-up")
+    return _as_candidate(p, f", beside the lag filter's start state (e^(−t/{abs(lag_s):.4g} s))"
+                         if lag_s else "")
 
 
 def _as_candidate(p: _Proposal, note: str) -> cz.Candidate:
@@ -260,9 +295,13 @@ def _edges(c: cz.Candidate) -> list[float]:
     return []
 
 
-def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
+def _normalise(tent: list[cz.Candidate], tol: float, step_threshold: float
+               ) -> list[cz.Candidate]:
     """The forward search's proposals as atoms: every excursion becomes its two steps, each
-    with its own size, and steps at one time (within ``tol`` s) become one. Which edges
+    with its own size and the step family's ``step_threshold`` (a step at a grid time is in
+    that family's Bonferroni count, whichever family proposed it; its edges kept the
+    excursion family's larger one, 5.71 for 4.90), and steps at one time (within ``tol`` s)
+    become one. Which edges
     belong together is decided after the joint fit, by ``_pair_excursions``: the greedy order
     picks the box of the largest margin, and on a record with a step after an excursion that
     is often the excursion's down edge paired with the later step (one box of their mean
@@ -271,10 +310,10 @@ def _normalise(tent: list[cz.Candidate], tol: float) -> list[cz.Candidate]:
     for c in tent:
         if c.cause == "excursion":
             sz = c.params["size"]
-            out += [replace(c, cause="bias_step", params={"time_s": c.params["start_s"],
-                                                          "size": sz}),
-                    replace(c, cause="bias_step", params={"time_s": c.params["end_s"],
-                                                          "size": -sz})]
+            out += [replace(c, cause="bias_step", threshold=step_threshold,
+                            params={"time_s": c.params["start_s"], "size": sz}),
+                    replace(c, cause="bias_step", threshold=step_threshold,
+                            params={"time_s": c.params["end_s"], "size": -sz})]
         else:
             out.append(c)
     steps = sorted((c for c in out if c.cause == "bias_step"), key=lambda c: c.params["time_s"])
@@ -355,6 +394,9 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
             break
         fixed = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in tent]
         props = _scan(g, fixed, alpha)
+        # the step family's threshold (its trials are the grid's times, the same at every
+        # stage): an excursion's edge, once a step of its own, is tested at it
+        step_threshold = next(p.threshold for p in props if p.cause == "bias_step")
         if not tent:
             first = [_as_candidate(p, "") for p in props]
         best = max(props, key=lambda p: p.margin)
@@ -365,13 +407,13 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         # the proposals' shapes refined together (the scan's grid T and times are coarse,
         # and what a misplaced shape leaves behind reads as noise in the test below)
         tol = 2 * len(y) / rate_hz / GRID
-        tent = _normalise(tent, tol)
+        tent = _normalise(tent, tol, step_threshold)
         tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
                                                         rate_hz, n_white), tent)
         # edges the refinement drew to one time are one step: two steps a sample apart are
         # collinear, their sizes huge and opposite, and read as an excursion they would hide
         # the step they stand for
-        tent = _normalise(tent, tol)
+        tent = _normalise(tent, tol, step_threshold)
         # two steps that return to the level before them are tested as one excursion
         tent = _pair_excursions(tent, alpha)
     dropped: list[cz.Candidate] = []

@@ -271,3 +271,32 @@ def test_event_rows_at_three_times_their_minimum(row):
     assert sc.params >= 0.95 * sc.n, sc
     assert sc.intervals and 0.60 <= sc.inside / sc.intervals <= 0.76, sc
     assert sc.false <= 1, sc
+
+
+def test_an_excursions_edge_left_as_a_step_is_tested_as_a_step():
+    """A small step up at 5000 s and a larger step down at 6500 s: the forward search
+    proposes them as an excursion, whose edges become steps; the sizes do not return to the
+    level before, so they stay two steps. Each is a step at a grid time, inside the step
+    family's Bonferroni count, and is tested at that family's threshold (4.97 here), not at
+    the excursion family's (5.84, every pair of grid times): with the excursion's, the step
+    up (z 5.26) was dropped and only the step down claimed."""
+    y = _walk(6)
+    t = np.arange(len(y))
+    y = y + np.where(t >= 5000, 1.2e-4, 0.0) + np.where(t >= 6500, -4e-4, 0.0)
+    found, _ = tr.find_compound(y, 1.0, _noise_of(y, 1.0))
+    assert [c.cause for c in found] == ["bias_step", "bias_step"], [
+        (c.cause, c.params, c.statistic, c.threshold) for c in found]
+    up, down = sorted(found, key=lambda c: c.params["time_s"])
+    assert up.params["time_s"] == pytest.approx(5000, abs=60)
+    assert down.params["time_s"] == pytest.approx(6500, abs=60)
+    share = alarm.TRANSIENTS / len(tr.TRANSIENT_CAUSES)
+    excursion = alarm.bonferroni_z(share, tr.GRID * (tr.GRID - 1) // 2)
+    for c in (up, down):
+        assert c.threshold < alarm.bonferroni_z(share, tr.GRID) + 1e-9
+        assert c.threshold < excursion - 0.5
+    assert up.threshold <= up.statistic < excursion
+    # the split itself: an excursion's edges take the threshold they are handed
+    box = cz.Candidate("excursion", True, {"start_s": 100.0, "end_s": 900.0, "size": 1e-3},
+                       6.0, excursion, "")
+    edges = tr._normalise([box], 10.0, 4.9)
+    assert [(c.cause, c.threshold) for c in edges] == [("bias_step", 4.9)] * 2
