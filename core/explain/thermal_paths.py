@@ -388,13 +388,14 @@ class PathFit:
 
     def summary(self) -> str:
         s = self.chosen
-        p, iv = describe(s)
+        p, iv = self.params()  # no interval where another mechanism fits as well
         txt = ", ".join(f"{k} {v:.4g} [{iv[k][0]:.4g}, {iv[k][1]:.4g}]" if k in iv
                         else f"{k} {v:.4g}" for k, v in p.items())
+        txt += "; 68 %" if iv else ""
         ranks = ", ".join(f"{k} {v.heldout - self.scores['one_lag'].heldout:+.3g}"
                           for k, v in self.scores.items() if k != "one_lag")
         end = " (open: θ at the end of its grid)" if s.open_end else ""
-        return (f"thermal path: {s.kind} ({txt}; 68 %){end};"
+        return (f"thermal path: {s.kind} ({txt}){end};"
                 f" held-out Δ(−2 ln L) against one lag: {ranks} (an extension needs "
                 f"< −{self.margin + self.rounding:.3g}, the margin {self.margin:g} and the "
                 f"readings' rounding through the coupling {self.rounding:.3g}, and its own "
