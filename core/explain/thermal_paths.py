@@ -605,9 +605,13 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + PROFILE_DELTA]
         pb = np.array([fits[j][:n] for j in flat])
         pt = np.array([ts[j].theta for j in flat])
-        resolved = kind == "one_lag" or not bool(np.any((pb.min(axis=0) < 0)
-                                                        & (pb.max(axis=0) > 0)))
         open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
+        # an extension's θ at the end of its grid is a bound, not an estimate: its
+        # coefficients trade with a θ the search did not bound (two long lags of opposite
+        # sign fitted a typical-tempco record's slow wander, 1800 and 3600 s, with ±6 %
+        # intervals), so they carry no interval either
+        resolved = kind == "one_lag" or not (open_end or bool(np.any(
+            (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
         b_lo, b_hi = fits[i][:n] - se_iv, fits[i][:n] + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
@@ -670,7 +674,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          "second path and a dT/dt term both set a gain and a phase: a drive "
                          "with more than one frequency tells them apart); parameters "
                          "model-dependent, no interval")
-    if not best.resolved:
+    if not best.resolved and best.open_end:
+        notes.append("parameters not resolved (model-dependent, no interval): θ at the end "
+                     "of its search grid, so the coefficients trade with a θ the search did "
+                     "not bound")
+    elif not best.resolved:
         notes.append(f"parameters not resolved (model-dependent, no interval): a coefficient "
                      f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
                      "best (the extra term trades with the lag at one drive frequency)")

@@ -271,3 +271,23 @@ def test_the_rounding_a_long_lag_passes_is_less_and_a_lead_lag_more():
     assert r0[1] / r0[0] == pytest.approx(0.5, rel=0.15)
     assert np.all(r_long < 0.1 * r0) and np.all(r_neg > r0)
     assert np.all(r0 <= 2 * 0.0625**2 / 12)
+
+
+def test_an_extension_whose_theta_sits_at_the_end_of_its_grid_carries_no_interval():
+    # a typical-tempco weekend record (2e-4 m/s²/K through 5 min from the ambient channel,
+    # benchmark row "typical tempco 24 h", seed 25006): two lags of opposite sign through
+    # 1800 and 3600 s, the lag grid's end, fitted the slow wander held out better than one
+    # lag and were printed with ±6 % intervals. A θ at the grid's end is a bound, not an
+    # estimate: whatever path is chosen, none with a lag at the grid's end has an interval.
+    from avard.core.explain.thermal_paths import LAG_GRID_S
+
+    from benchmarks.bench_explain_weekend import explain_weekend, rows
+
+    row = next(r for r in rows() if r.name.startswith("typical tempco 24"))
+    ex, _cpu = explain_weekend(row.weekend, 25006)
+    temps = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    assert temps  # the coupling is real and claimed
+    for f in temps:
+        lags = [v for k, v in f.params.items() if k.startswith("lag")]
+        if f.mechanism not in (None, "one_lag") and max(lags) >= LAG_GRID_S[-1]:
+            assert f.model_dependent and f.intervals == {}, (f.mechanism, f.params)
