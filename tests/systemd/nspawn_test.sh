@@ -126,11 +126,14 @@ fi
 in_ct() {
     nsenter -t "$LEADER" -a env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 "$@"
 }
-# Until its PID 1 has opened its private bus, systemctl cannot connect: retry until it can.
+# Until its PID 1 has opened its private bus, systemctl cannot connect, and just before it
+# has, it answers "offline" (the manager is not up yet; seen once on a loaded CI machine):
+# retry either until the deadline.
 boot_deadline=$(( $(date +%s) + 90 ))
 while :; do
     state=$(in_ct timeout 90 systemctl is-system-running --wait 2>&1 || true)
-    [[ "$state" == *"Failed to connect"* ]] && [ "$(date +%s)" -lt "$boot_deadline" ] || break
+    [[ "$state" == *"Failed to connect"* || "$state" == offline ]] \
+        && [ "$(date +%s)" -lt "$boot_deadline" ] || break
     sleep 0.5
 done
 case "$state" in
