@@ -339,6 +339,10 @@ def _usable(result: Any, min_edf: float, min_averages: float,
     return np.flatnonzero(ok)
 
 
+#: ``_fit_active``'s result: θ, Cov θ[active], the AVAR covariance C and the χ² of the fit.
+_ActiveFit = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]
+
+
 @dataclass
 class _Problem:
     """The fixed ingredients of one channel's fit over the τ points kept."""
@@ -353,6 +357,9 @@ class _Problem:
     m_tau: NDArray[np.float64]  # (K,) τ of the points (s)
     # (K, K) covariance from outside the noise model (the uncertainty of a removed signal)
     added: NDArray[np.float64] | None = None
+    # ``_fit_active``'s results by (points, components, iterations): the selection, its
+    # ramp/walk comparison, the long-τ check and the final fit ask for the same ones
+    fits: dict[tuple[bytes, tuple[int, ...], int], _ActiveFit] = field(default_factory=dict)
 
 
 def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
@@ -420,7 +427,22 @@ def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], 
 
 
 def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 8
-                ) -> tuple[NDArray, NDArray, NDArray, float]:
+                ) -> _ActiveFit:
+    """``_fit_once``, computed once per problem for each (points, components): a pure
+    function of them, so the cached result is the one a new call would give bit for bit
+    (its arrays are read-only, so no caller can change what another one reads)."""
+    key = (np.asarray(idx, dtype=np.intp).tobytes(), tuple(active), iterations)
+    got = p.fits.get(key)
+    if got is None:
+        got = _fit_once(p, idx, active, iterations)
+        for arr in got[:3]:
+            arr.flags.writeable = False
+        p.fits[key] = got
+    return got
+
+
+def _fit_once(p: _Problem, idx: NDArray, active: list[int], iterations: int
+              ) -> _ActiveFit:
     """Iterated GLS fit, θ ≥ 0, on points ``idx`` with components ``active``: the covariance
     of the AVAR estimates is recomputed from the current model until θ settles.
 
@@ -488,12 +510,20 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
     y = p.y[idx]
     crit = z_present**2
 
+    done: dict[tuple[int, ...], tuple[float, NDArray]] = {}
+
     def chi2(active: list[int]) -> tuple[float, NDArray]:
-        if not active:
-            r = T @ y
-            return float(r @ r), np.zeros(0)
-        th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
-        return c2, th
+        # the forward, backward and upper-limit passes ask for the same subsets again: one
+        # fit each (a pure function of the subset under the one covariance T)
+        key = tuple(active)
+        if key not in done:
+            if not active:
+                r = T @ y
+                done[key] = float(r @ r), np.zeros(0)
+            else:
+                th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
+                done[key] = c2, th
+        return done[key]
 
     z_all = np.full(A, np.nan)
     active: list[int] = []
