@@ -252,7 +252,7 @@ def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]
     removed makes, where the plain AVAR reads them as random walk. N is the caller's (the
     short τ, where transients show nothing); B² and K² ≥ 0 are fitted by least squares
     relative to the robust AVAR, each τ weighted by its number of differences."""
-    from scipy.optimize import nnls
+    from avard.core.model.nnls import nnls  # the noise fit's: not scipy.optimize's import
 
     taus, v, w = [], [], []
     m = 1
@@ -270,7 +270,11 @@ def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]
     tau, var, wt = tau[ok], var[ok], wt[ok]
     rest = var - n_white**2 / tau
     a = np.column_stack([np.full_like(tau, 0.6643**2), tau / 3.0]) * (wt / var)[:, None]
-    coef, _ = nnls(a, rest * wt / var)
+    # columns to unit norm first, as the noise fit does (B² and K² differ by decades)
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0
+    coef, _ = nnls(a / scale, rest * wt / var)
+    coef = coef / scale
     return {"N": n_white, "B": math.sqrt(coef[0]), "K": math.sqrt(coef[1])}
 
 
