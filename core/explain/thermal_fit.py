@@ -678,9 +678,11 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
         u = lag_filter(T, float(L), rate_hz)
         X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
         keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
-        sums = octave_sums(X, keep)
+        # with parts, the whole record's sums are theirs added up (every difference goes
+        # to one part): one pass over the record, not two
         pieces = octave_sums_by_part(X, edges, keep) if parts else []
-        whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
+        whole = sum(pieces[1:], start=pieces[0]) if pieces else octave_sums(X, keep)
+        sums = whole
         mt = min_tau_for(float(L), floor_s)
         # the leave-one-out sums once per lag, for every axis (their covariance is cached)
         rests = [whole - ps for ps in pieces]

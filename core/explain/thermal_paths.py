@@ -116,15 +116,20 @@ def _play(v: NDArray, w: float) -> NDArray[np.float64]:
     """(v − P_w[v])/(w/2): the play operator's normalised lead over its output (+1 after a
     rise, −1 after a fall). P starts at v[0]."""
     h = 0.5 * w
-    out = np.empty(len(v))
+    v = np.asarray(v, dtype=float)
+    # the recursion in Python floats, its output gathered in a list (a NumPy element store
+    # per sample cost as much as the recursion); the lead is the same IEEE arithmetic as
+    # elementwise NumPy, so the result is the same bits
+    track: list[float] = []
+    keep = track.append
     p = float(v[0])
-    for i, x in enumerate(np.asarray(v, dtype=float).tolist()):
+    for x in v.tolist():
         if x - p > h:
             p = x - h
         elif p - x > h:
             p = x + h
-        out[i] = (x - p) / h
-    return out
+        keep(p)
+    return (v - np.array(track)) / h
 
 
 def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.float64]:
