@@ -54,7 +54,7 @@ from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from avard.core.explain.thermal_paths import PathFit
+    from avard.core.explain.thermal_paths import Column, PathFit
 
 __all__ = [
     "Z_TEMPERATURE",
@@ -784,11 +784,16 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     if floors is None:
         floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
                   for j in range(temps.shape[1])} if fits else {}
-    return [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
+    # the path regressors of a channel, built once for all the axes it drives (the same
+    # slow view of the same channel: the same columns)
+    columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
+    return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}))
+            for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
-               floors: dict[int, float]) -> ThermalFit:
+               floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None
+               ) -> ThermalFit:
     """``fit`` with the thermal path chosen on its driving channel; when the path is not one
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
@@ -802,7 +807,7 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     edf = np.asarray(ref.edf, dtype=float)
     edf = edf[:, 0] if edf.ndim == 2 else edf
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep)
+                     floors.get(j, 0.0), keep, columns)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen
