@@ -540,12 +540,10 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
 # drift against a random walk
 
 
-def _neg2_loglik(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float], k: float,
-                 cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
+def _neg2_loglik(yb: NDArray, L: NDArray, cols: list[NDArray]
+                 ) -> tuple[float, NDArray, NDArray]:
     """(−2 ln L, GLS coefficients, their covariance) of block means ``yb`` on ``cols`` with
-    the covariance of N, B, K = ``k`` (constants dropped)."""
-    c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), k)
-    L = np.linalg.cholesky(c)
+    the noise covariance whose Cholesky factor is ``L`` (constants dropped)."""
     from scipy.linalg import solve_triangular
 
     a = solve_triangular(L, np.column_stack(cols), lower=True)
@@ -606,8 +604,11 @@ def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
     base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
     tc = t - t.mean()
     try:
-        h0 = [_neg2_loglik(yb, t, dt, noise, float(k), base)[0] for k in ks]
-        h1 = [_neg2_loglik(yb, t, dt, noise, float(k), [*base, tc]) for k in ks]
+        # one factor per K serves the fits with and without the drift
+        factors = [np.linalg.cholesky(cz._noise_cov(t, dt, n_w, noise.get("B", 0.0), float(k)))
+                   for k in ks]
+        h0 = [_neg2_loglik(yb, L, base)[0] for L in factors]
+        h1 = [_neg2_loglik(yb, L, [*base, tc]) for L in factors]
     except np.linalg.LinAlgError:
         return cz.Candidate("drift", False, evidence="drift test: the noise covariance would "
                             "not factor")
