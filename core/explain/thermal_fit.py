@@ -45,7 +45,7 @@ from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
     DifferenceSums,
-    grid_sums,
+    grid_sums_by_part,
     segment_phase,
 )
 from avard.core.allan.streaming import StreamingAllan
@@ -305,10 +305,7 @@ def octave_sums_by_part(X: NDArray, edges: NDArray, keep: NDArray[np.bool_] | No
             n_d = len(q) - 2 * sp
             # difference j spans samples a + j·st … + 2m: it goes to the part of its middle
             cut = np.clip(-((a + m - np.asarray(edges, dtype=np.int64)) // st), 0, n_d)
-            for g in range(G):
-                j0, j1 = int(cut[g]), int(cut[g + 1])
-                if j1 > j0:
-                    grid_sums(q[j0:j1 + 2 * sp], sp, 0, sums[g][k], 2)
+            grid_sums_by_part(q, sp, cut, [sums[g][k] for g in range(G)])
     return [OctaveSums(np.asarray(ms, dtype=np.int64),
                        np.asarray([x.n for x in sg], dtype=np.int64),
                        np.asarray([x.s2 for x in sg], dtype=float).reshape(
