@@ -109,7 +109,9 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
         only θ ≥ 0), the profile over the nuisance terms that T is chosen on."""
         if (T, free) not in fits:
             comp = {"cause": "gauss_markov", "params": {"T": float(T)}}
-            opts = {**kw, "z_present": 0.0} if free else kw
+            # the profile fits are read for −2 ln L and the component alone: no upper
+            # limits of the absent noise terms (the same numbers otherwise)
+            opts = {**kw, "z_present": 0.0, "upper_limits": False} if free else kw
             try:
                 f: NoiseFit | None = fit_noise(res, filter_corner_hz=corner,
                                                extra=[*extra, comp], **opts)
@@ -160,7 +162,7 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     rise = max(1.0, free.chi2_dof)
     try:
         none = fit_noise(res, filter_corner_hz=corner, extra=list(extra),
-                         **{**kw, "z_present": 0.0})
+                         **{**kw, "z_present": 0.0, "upper_limits": False})
         z = math.sqrt(max(_nll(none) - _nll(free), 0.0) / rise)
     except FitError:
         z = 0.0

@@ -480,7 +480,8 @@ def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
 
 
 def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
-                  ramp: int | None = None, walk: int | None = None
+                  ramp: int | None = None, walk: int | None = None,
+                  upper_limits: bool = True
                   ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64], bool]:
     """Stepwise selection by the likelihood-ratio test on the correlated, EDF-weighted
     residuals: a component is kept when removing it raises χ² by at least z_present²
@@ -584,7 +585,8 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
             cand = sorted([*active, a])
             c2, th = chi2(cand)
             z_all[a] = math.sqrt(max(cur - c2, 0.0))
-            upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
+            if upper_limits:
+                upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
     return active, z_all, upper, ambiguous
 
 
@@ -841,6 +843,7 @@ def fit_noise(
     filter_min_m: int = 2,
     added_cov: ArrayLike | None = None,
     check_filter: bool = True,
+    upper_limits: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -865,6 +868,9 @@ def fit_noise(
     the filter model is checked against the curve: when it misfits (χ² upper tail < 1e-3)
     and the curve fitted without it shows no bent short τ, the fit without it is returned
     (``filter_corner_hz`` None: the record has no such filter).
+    ``upper_limits`` False: the absent terms' upper limits are not computed (their
+    ``upper`` None; every other field the same), for a caller that reads only the
+    likelihood and the extra components (the Gauss–Markov scan's profile fits).
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -932,7 +938,8 @@ def fit_noise(
     labels = [comps[a].label for a in fitted]
     ramp = labels.index("rate_ramp") if "rate_ramp" in labels else None
     walk = labels.index("rate_random_walk") if "rate_random_walk" in labels else None
-    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk)
+    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk,
+                                                    upper_limits)
     # kept in the model (the curve needs them), but flagged: a display says "not yet
     # resolved" instead of an interval and a time to target
     unresolved = [a for a in active if labels[a] in LONG_TAU_TERMS
@@ -1044,7 +1051,7 @@ def fit_noise(
                       z_present=z_present, min_edf=min_edf, min_averages=min_averages,
                       drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
                       rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
-                      added_cov=added_cov)
+                      added_cov=added_cov, upper_limits=upper_limits)
     unbent = plain.tau_min_s <= float(tau[keep[0]])
     better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
     return plain if unbent and better else fit
