@@ -229,6 +229,31 @@ def grid_sums(q: NDArray, sp: int, h: int, sums: DifferenceSums, d: int) -> None
         a = b
 
 
+def grid_sums_by_part(q: NDArray, sp: int, cuts: NDArray, parts: list[DifferenceSums]
+                      ) -> None:
+    """``grid_sums(q[j0:j1 + 2·sp], sp, 0, part, 2)`` for each part's range [j0, j1) of
+    second differences (``cuts`` (G+1,) ascending, ``parts`` (G,)), with the differences of
+    the whole grid taken once instead of once per part: the same elementwise subtractions
+    and the same Gram products of the same rows, so the same sums bit for bit (a test holds
+    them equal). Falls back to ``grid_sums`` where that one would work in chunks."""
+    n_d = q.shape[0] - 2 * sp
+    if n_d <= 0:
+        return
+    if n_d > max(_CHUNK, sp) or q.dtype != np.float64:
+        for g, part in enumerate(parts):
+            j0, j1 = int(cuts[g]), int(cuts[g + 1])
+            if j1 > j0:
+                grid_sums(q[j0:j1 + 2 * sp], sp, 0, part, 2)
+        return
+    e = np.subtract(q[sp:], q[:-sp])
+    diff2 = np.subtract(e[sp:], e[:-sp])
+    for g, part in enumerate(parts):
+        j0, j1 = int(cuts[g]), int(cuts[g + 1])
+        if j1 > j0:
+            part.n += j1 - j0
+            part.s2 += gram(diff2[j0:j1])
+
+
 def _compiled_sums(p: NDArray, m: int, d: int, sums: DifferenceSums) -> bool:
     """The fully overlapping sums of one float64 channel by the compiled loop
     (``kernels``): Σ (X_{i+2m} − 2X_{i+m} + X_i)² read in one pass (d = 2), and for d = 3 the

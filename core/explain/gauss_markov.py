@@ -47,6 +47,7 @@ import numpy as np
 from avard.core.errors import FitError
 from avard.core.explain.causes import Finding
 from avard.core.model import terms as mdl
+from avard.core.model.bounded import minimize_bounded
 from avard.core.model.fit import (
     NoiseFit,
     avar_estimate_covariance,
@@ -54,7 +55,6 @@ from avard.core.model.fit import (
     model_components,
 )
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
 
 __all__ = ["GM_FALSE_CLAIM_RATE", "GM_GRID", "Z_GAUSS_MARKOV", "gm_fisher",
            "min_detectable_gauss_markov", "scan_arc_length", "scan_directions",
@@ -109,7 +109,9 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
         only θ ≥ 0), the profile over the nuisance terms that T is chosen on."""
         if (T, free) not in fits:
             comp = {"cause": "gauss_markov", "params": {"T": float(T)}}
-            opts = {**kw, "z_present": 0.0} if free else kw
+            # the profile fits are read for −2 ln L and the component alone: no upper
+            # limits of the absent noise terms (the same numbers otherwise)
+            opts = {**kw, "z_present": 0.0, "upper_limits": False} if free else kw
             try:
                 f: NoiseFit | None = fit_noise(res, filter_corner_hz=corner,
                                                extra=[*extra, comp], **opts)
@@ -138,8 +140,7 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
                        "in the GLS fit"), None
     # refine between the neighbouring grid points (bounded, in ln T)
     a, b = math.log(grid[max(k - 1, 0)]), math.log(grid[min(k + 1, GM_GRID - 1)])
-    opt = minimize_scalar(crit, bounds=(a, b), method="bounded",
-                          options={"xatol": 0.01, "maxiter": 25})
+    opt = minimize_bounded(crit, a, b, xatol=0.01, maxiter=25)
     T = float(math.exp(opt.x)) if opt.fun < vals[k] else float(grid[k])
     free = fit_at(T, True)
     f = fit_at(T, False)
@@ -161,7 +162,7 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     rise = max(1.0, free.chi2_dof)
     try:
         none = fit_noise(res, filter_corner_hz=corner, extra=list(extra),
-                         **{**kw, "z_present": 0.0})
+                         **{**kw, "z_present": 0.0, "upper_limits": False})
         z = math.sqrt(max(_nll(none) - _nll(free), 0.0) / rise)
     except FitError:
         z = 0.0

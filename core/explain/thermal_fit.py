@@ -45,7 +45,7 @@ from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
     DifferenceSums,
-    grid_sums,
+    grid_sums_by_part,
     segment_phase,
 )
 from avard.core.allan.streaming import StreamingAllan
@@ -54,7 +54,7 @@ from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from avard.core.explain.thermal_paths import PathFit
+    from avard.core.explain.thermal_paths import Column, PathFit
 
 __all__ = [
     "Z_TEMPERATURE",
@@ -305,10 +305,7 @@ def octave_sums_by_part(X: NDArray, edges: NDArray, keep: NDArray[np.bool_] | No
             n_d = len(q) - 2 * sp
             # difference j spans samples a + j·st … + 2m: it goes to the part of its middle
             cut = np.clip(-((a + m - np.asarray(edges, dtype=np.int64)) // st), 0, n_d)
-            for g in range(G):
-                j0, j1 = int(cut[g]), int(cut[g + 1])
-                if j1 > j0:
-                    grid_sums(q[j0:j1 + 2 * sp], sp, 0, sums[g][k], 2)
+            grid_sums_by_part(q, sp, cut, [sums[g][k] for g in range(G)])
     return [OctaveSums(np.asarray(ms, dtype=np.int64),
                        np.asarray([x.n for x in sg], dtype=np.int64),
                        np.asarray([x.s2 for x in sg], dtype=float).reshape(
@@ -678,9 +675,11 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
         u = lag_filter(T, float(L), rate_hz)
         X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
         keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
-        sums = octave_sums(X, keep)
+        # with parts, the whole record's sums are theirs added up (every difference goes
+        # to one part): one pass over the record, not two
         pieces = octave_sums_by_part(X, edges, keep) if parts else []
-        whole = sum(pieces[1:], start=pieces[0]) if pieces else sums
+        whole = sum(pieces[1:], start=pieces[0]) if pieces else octave_sums(X, keep)
+        sums = whole
         mt = min_tau_for(float(L), floor_s)
         # the leave-one-out sums once per lag, for every axis (their covariance is cached)
         rests = [whole - ps for ps in pieces]
@@ -782,11 +781,16 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     if floors is None:
         floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
                   for j in range(temps.shape[1])} if fits else {}
-    return [_with_path(f, Y[:, a], temps, holes, floors) for a, f in enumerate(fits)]
+    # the path regressors of a channel, built once for all the axes it drives (the same
+    # slow view of the same channel: the same columns)
+    columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
+    return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}))
+            for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
-               floors: dict[int, float]) -> ThermalFit:
+               floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None
+               ) -> ThermalFit:
     """``fit`` with the thermal path chosen on its driving channel; when the path is not one
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
@@ -800,7 +804,7 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     edf = np.asarray(ref.edf, dtype=float)
     edf = edf[:, 0] if edf.ndim == 2 else edf
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep)
+                     floors.get(j, 0.0), keep, columns)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen

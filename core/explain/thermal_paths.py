@@ -116,22 +116,32 @@ def _play(v: NDArray, w: float) -> NDArray[np.float64]:
     """(v − P_w[v])/(w/2): the play operator's normalised lead over its output (+1 after a
     rise, −1 after a fall). P starts at v[0]."""
     h = 0.5 * w
-    out = np.empty(len(v))
+    v = np.asarray(v, dtype=float)
+    # the recursion in Python floats, its output gathered in a list (a NumPy element store
+    # per sample cost as much as the recursion); the lead is the same IEEE arithmetic as
+    # elementwise NumPy, so the result is the same bits
+    track: list[float] = []
+    keep = track.append
     p = float(v[0])
-    for i, x in enumerate(np.asarray(v, dtype=float).tolist()):
+    for x in v.tolist():
         if x - p > h:
             p = x - h
         elif p - x > h:
             p = x + h
-        out[i] = (x - p) / h
-    return out
+        keep(p)
+    return (v - np.array(track)) / h
 
 
-def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.float64]:
+def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
+                 done: dict[Column, NDArray[np.float64]] | None = None
+                 ) -> NDArray[np.float64]:
     """The regressors ``cols`` built from the driving channel ``T`` (°C) on the slow view,
-    each with its mean removed (the start state's with its own)."""
+    each with its mean removed (the start state's with its own). ``done``: the columns
+    already built from this same ``T`` and ``rate_hz`` (the other axes driven by the
+    channel), read and added to."""
     T = np.asarray(T, dtype=float)
     M = len(T)
+    done = {} if done is None else done
     t = np.arange(M) / rate_hz
     cache: dict[float, NDArray] = {}
 
@@ -142,6 +152,9 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.f
 
     out = np.empty((M, len(cols)))
     for i, c in enumerate(cols):
+        if c in done:
+            out[:, i] = done[c]
+            continue
         if c.kind == "u":
             x = u(c.lag)
         elif c.kind == "start":
@@ -159,6 +172,7 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float) -> NDArray[np.f
         else:  # pragma: no cover - the kinds are this module's own
             raise ValueError(c.kind)
         out[:, i] = x - x.mean()
+        done[c] = out[:, i].copy()
     return out
 
 
@@ -498,12 +512,14 @@ def _at_end(ts: list[Trial], i: int, widths: tuple[int, ...] = ()) -> bool:
 
 def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
                 edf_ref: NDArray, floor_s: float = 0.0,
-                keep: NDArray[np.bool_] | None = None) -> PathFit:
+                keep: NDArray[np.bool_] | None = None,
+                columns: dict[Column, NDArray[np.float64]] | None = None) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
     channel's rounding floor (``thermal_fit.rounding_floor_tau``); ``keep`` the blocks
-    outside the log's holes."""
+    outside the log's holes; ``columns`` the regressors already built from this ``T`` for
+    another axis of the same length and rate (``path_columns``'s ``done``)."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -517,7 +533,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     per_kind = {k: trials(k, lags) for k in CANDIDATES}
     cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
     where = {c: i + 1 for i, c in enumerate(cols)}
-    X = np.column_stack([ys, path_columns(Ts, cols, rate)])
+    X = np.column_stack([ys, path_columns(Ts, cols, rate, columns)])
     edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
     # each part the differences whose middle it holds, at every octave of the record (each
     # part's own sums stopped at τ ≤ part/2, 410 s on a 4 h record: two octaves above the

@@ -252,7 +252,7 @@ def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]
     removed makes, where the plain AVAR reads them as random walk. N is the caller's (the
     short τ, where transients show nothing); B² and K² ≥ 0 are fitted by least squares
     relative to the robust AVAR, each τ weighted by its number of differences."""
-    from scipy.optimize import nnls
+    from avard.core.model.nnls import nnls  # the noise fit's: not scipy.optimize's import
 
     taus, v, w = [], [], []
     m = 1
@@ -270,7 +270,11 @@ def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]
     tau, var, wt = tau[ok], var[ok], wt[ok]
     rest = var - n_white**2 / tau
     a = np.column_stack([np.full_like(tau, 0.6643**2), tau / 3.0]) * (wt / var)[:, None]
-    coef, _ = nnls(a, rest * wt / var)
+    # columns to unit norm first, as the noise fit does (B² and K² differ by decades)
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0
+    coef, _ = nnls(a / scale, rest * wt / var)
+    coef = coef / scale
     return {"N": n_white, "B": math.sqrt(coef[0]), "K": math.sqrt(coef[1])}
 
 
@@ -536,12 +540,10 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
 # drift against a random walk
 
 
-def _neg2_loglik(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float], k: float,
-                 cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
+def _neg2_loglik(yb: NDArray, L: NDArray, cols: list[NDArray]
+                 ) -> tuple[float, NDArray, NDArray]:
     """(−2 ln L, GLS coefficients, their covariance) of block means ``yb`` on ``cols`` with
-    the covariance of N, B, K = ``k`` (constants dropped)."""
-    c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), k)
-    L = np.linalg.cholesky(c)
+    the noise covariance whose Cholesky factor is ``L`` (constants dropped)."""
     from scipy.linalg import solve_triangular
 
     a = solve_triangular(L, np.column_stack(cols), lower=True)
@@ -602,8 +604,11 @@ def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
     base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
     tc = t - t.mean()
     try:
-        h0 = [_neg2_loglik(yb, t, dt, noise, float(k), base)[0] for k in ks]
-        h1 = [_neg2_loglik(yb, t, dt, noise, float(k), [*base, tc]) for k in ks]
+        # one factor per K serves the fits with and without the drift
+        factors = [np.linalg.cholesky(cz._noise_cov(t, dt, n_w, noise.get("B", 0.0), float(k)))
+                   for k in ks]
+        h0 = [_neg2_loglik(yb, L, base)[0] for L in factors]
+        h1 = [_neg2_loglik(yb, L, [*base, tc]) for L in factors]
     except np.linalg.LinAlgError:
         return cz.Candidate("drift", False, evidence="drift test: the noise covariance would "
                             "not factor")

@@ -339,6 +339,10 @@ def _usable(result: Any, min_edf: float, min_averages: float,
     return np.flatnonzero(ok)
 
 
+#: ``_fit_active``'s result: θ, Cov θ[active], the AVAR covariance C and the χ² of the fit.
+_ActiveFit = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]
+
+
 @dataclass
 class _Problem:
     """The fixed ingredients of one channel's fit over the τ points kept."""
@@ -353,6 +357,9 @@ class _Problem:
     m_tau: NDArray[np.float64]  # (K,) τ of the points (s)
     # (K, K) covariance from outside the noise model (the uncertainty of a removed signal)
     added: NDArray[np.float64] | None = None
+    # ``_fit_active``'s results by (points, components, iterations): the selection, its
+    # ramp/walk comparison, the long-τ check and the final fit ask for the same ones
+    fits: dict[tuple[bytes, tuple[int, ...], int], _ActiveFit] = field(default_factory=dict)
 
 
 def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
@@ -420,7 +427,22 @@ def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], 
 
 
 def _fit_active(p: _Problem, idx: NDArray, active: list[int], iterations: int = 8
-                ) -> tuple[NDArray, NDArray, NDArray, float]:
+                ) -> _ActiveFit:
+    """``_fit_once``, computed once per problem for each (points, components): a pure
+    function of them, so the cached result is the one a new call would give bit for bit
+    (its arrays are read-only, so no caller can change what another one reads)."""
+    key = (np.asarray(idx, dtype=np.intp).tobytes(), tuple(active), iterations)
+    got = p.fits.get(key)
+    if got is None:
+        got = _fit_once(p, idx, active, iterations)
+        for arr in got[:3]:
+            arr.flags.writeable = False
+        p.fits[key] = got
+    return got
+
+
+def _fit_once(p: _Problem, idx: NDArray, active: list[int], iterations: int
+              ) -> _ActiveFit:
     """Iterated GLS fit, θ ≥ 0, on points ``idx`` with components ``active``: the covariance
     of the AVAR estimates is recomputed from the current model until θ settles.
 
@@ -458,7 +480,8 @@ def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
 
 
 def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
-                  ramp: int | None = None, walk: int | None = None
+                  ramp: int | None = None, walk: int | None = None,
+                  upper_limits: bool = True
                   ) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64], bool]:
     """Stepwise selection by the likelihood-ratio test on the correlated, EDF-weighted
     residuals: a component is kept when removing it raises χ² by at least z_present²
@@ -488,12 +511,20 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
     y = p.y[idx]
     crit = z_present**2
 
+    done: dict[tuple[int, ...], tuple[float, NDArray]] = {}
+
     def chi2(active: list[int]) -> tuple[float, NDArray]:
-        if not active:
-            r = T @ y
-            return float(r @ r), np.zeros(0)
-        th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
-        return c2, th
+        # the forward, backward and upper-limit passes ask for the same subsets again: one
+        # fit each (a pure function of the subset under the one covariance T)
+        key = tuple(active)
+        if key not in done:
+            if not active:
+                r = T @ y
+                done[key] = float(r @ r), np.zeros(0)
+            else:
+                th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
+                done[key] = c2, th
+        return done[key]
 
     z_all = np.full(A, np.nan)
     active: list[int] = []
@@ -554,7 +585,8 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
             cand = sorted([*active, a])
             c2, th = chi2(cand)
             z_all[a] = math.sqrt(max(cur - c2, 0.0))
-            upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
+            if upper_limits:
+                upper[a] = _upper_limit(p, idx, cand, a, z_present, T)
     return active, z_all, upper, ambiguous
 
 
@@ -811,6 +843,7 @@ def fit_noise(
     filter_min_m: int = 2,
     added_cov: ArrayLike | None = None,
     check_filter: bool = True,
+    upper_limits: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -835,6 +868,9 @@ def fit_noise(
     the filter model is checked against the curve: when it misfits (χ² upper tail < 1e-3)
     and the curve fitted without it shows no bent short τ, the fit without it is returned
     (``filter_corner_hz`` None: the record has no such filter).
+    ``upper_limits`` False: the absent terms' upper limits are not computed (their
+    ``upper`` None; every other field the same), for a caller that reads only the
+    likelihood and the extra components (the Gauss–Markov scan's profile fits).
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -902,7 +938,8 @@ def fit_noise(
     labels = [comps[a].label for a in fitted]
     ramp = labels.index("rate_ramp") if "rate_ramp" in labels else None
     walk = labels.index("rate_random_walk") if "rate_random_walk" in labels else None
-    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk)
+    active, z_all, upper, ambiguous = _select_terms(p, idx, A, z_present, ramp, walk,
+                                                    upper_limits)
     # kept in the model (the curve needs them), but flagged: a display says "not yet
     # resolved" instead of an interval and a time to target
     unresolved = [a for a in active if labels[a] in LONG_TAU_TERMS
@@ -1014,7 +1051,7 @@ def fit_noise(
                       z_present=z_present, min_edf=min_edf, min_averages=min_averages,
                       drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
                       rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
-                      added_cov=added_cov)
+                      added_cov=added_cov, upper_limits=upper_limits)
     unbent = plain.tau_min_s <= float(tau[keep[0]])
     better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
     return plain if unbent and better else fit

@@ -1,0 +1,29 @@
+"""fit_noise(upper_limits=False): the absent terms' upper limits are not computed, and every
+other number of the fit is the same bit for bit (the Gauss–Markov scan's profile fits read
+−2 ln L and the component alone)."""
+
+from __future__ import annotations
+
+import numpy as np
+from avard.core.allan.deviations import allan_variance
+from avard.core.model.fit import fit_noise
+
+
+def test_only_the_upper_limits_go() -> None:
+    rng = np.random.default_rng(4)
+    rate = 10.0
+    y = 1e-4 * np.sqrt(rate) * rng.standard_normal(1 << 16)  # white: B, K, Q, ramp absent
+    res = allan_variance(y, rate)
+    for z in (2.33, 0.0):
+        full = fit_noise(res, z_present=z)
+        lean = fit_noise(res, z_present=z, upper_limits=False)
+        absent = [n for n, t in full.terms.items() if not t.present]
+        assert absent and any(full.terms[n].upper is not None for n in absent)
+        for name, t in full.terms.items():
+            u = lean.terms[name]
+            assert u.upper is None or t.present
+            assert (u.value, u.lo, u.hi, u.present, u.z) == (t.value, t.lo, t.hi, t.present,
+                                                             t.z)
+        assert lean.chi2_dof == full.chi2_dof and lean.log_det_cov == full.log_det_cov
+        assert np.array_equal(lean.theta, full.theta)
+        assert np.array_equal(lean.theta_cov, full.theta_cov)
