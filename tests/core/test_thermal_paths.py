@@ -273,7 +273,7 @@ def test_the_rounding_a_long_lag_passes_is_less_and_a_lead_lag_more():
     assert np.all(r0 <= 2 * 0.0625**2 / 12)
 
 
-def test_an_extension_whose_theta_sits_at_the_end_of_its_grid_carries_no_interval():
+def test_an_extension_whose_theta_sits_at_the_end_of_its_grid_is_not_chosen():
     # a typical-tempco weekend record (2e-4 m/s²/K through 5 min from the ambient channel,
     # benchmark row "typical tempco 24 h", seed 25006): two lags of opposite sign through
     # 1800 and 3600 s, the lag grid's end, fitted the slow wander held out better than one
@@ -287,6 +287,8 @@ def test_an_extension_whose_theta_sits_at_the_end_of_its_grid_carries_no_interva
     ex, _cpu = explain_weekend(row.weekend, 25006)
     temps = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
     assert temps  # the coupling is real and claimed
+    # and an open extension is not chosen over one lag at all (OPEN_MARGIN)
+    assert [f.mechanism for f in temps] == ["one_lag"], [(f.mechanism, f.params) for f in temps]
     for f in temps:
         lags = [v for k, v in f.params.items() if k.startswith("lag")]
         if f.mechanism not in (None, "one_lag") and max(lags) >= LAG_GRID_S[-1]:
