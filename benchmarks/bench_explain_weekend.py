@@ -62,7 +62,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -310,7 +310,7 @@ def score_events(r: Event, cases: int, seed0: int,
 
 
 def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
-    todo = [r for r in rows_events() if not only or any(r.name.startswith(o) for o in only)]
+    todo = _selected(rows_events(), only)
     if not todo:
         return
     print(f"\nevent rows (tests/support/weekend.py), {cases} per row:")
@@ -399,18 +399,33 @@ def _score_job(job: tuple[str, int]) -> RecordScore:
     return score_record(next(r for r in rows() if r.name == name), seed)
 
 
-def _load_results(path: Path | None) -> dict[tuple[str, int], RecordScore]:
-    """The records already scored in a ``--results`` file (one JSON object a line); a last
-    line cut by a kill is skipped (its record runs again)."""
-    done: dict[tuple[str, int], RecordScore] = {}
+class _Named(Protocol):
+    name: str
+
+
+_R = TypeVar("_R", bound=_Named)
+_S = TypeVar("_S")
+
+
+def _selected(rows: list[_R], only: list[str] | None) -> list[_R]:
+    """The rows whose names start with one of ``only`` (all without it)."""
+    return [r for r in rows if not only or any(r.name.startswith(o) for o in only)]
+
+
+def _load_results(path: Path | None, make: Callable[[dict[str, Any]], _S]
+                  ) -> dict[tuple[str, int], _S]:
+    """The records already scored in a ``--results`` file (one JSON object a line, read by
+    ``make``); a last line cut by a kill, or a line of another kind of row (``make`` raises
+    ValueError or TypeError), is skipped (its record runs again)."""
+    done: dict[tuple[str, int], _S] = {}
     if path is None or not path.exists():
         return done
     for line in path.read_text().splitlines():
         try:
-            sc = RecordScore(**json.loads(line))
-        except (ValueError, TypeError):
+            d = json.loads(line)
+            done[(d["row"], d["seed"])] = make(d)
+        except (ValueError, TypeError, KeyError):
             continue
-        done[(sc.row, sc.seed)] = sc
     return done
 
 
@@ -442,14 +457,14 @@ def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     those selected), ``jobs`` records at a time in worker processes; with ``results``, each
     record's score is appended there as it ends and records already there are not run again
     (a long row resumes where a stopped run left it). The table counts the records scored."""
-    todo = [r for r in rows() if not only or any(r.name.startswith(o) for o in only)]
+    todo = _selected(rows(), only)
     if not todo:
         return
     print(f"weekend records (tests/support/weekend.py), {cases} per row, N {N:g} m/s/√s, "
           f"B {B:g} m/s², K {K:g} m/s²·√s, {RATE:g} Hz:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
-    done = _load_results(results)
+    done = _load_results(results, lambda d: RecordScore(**d))
     want = [(r.name, seed0 + 1000 * j + i) for j, r in enumerate(todo) for i in range(cases)]
     # records interleaved across rows, so a run stopped early has some of every row
     want.sort(key=lambda k: k[1] % 1000)
@@ -650,6 +665,13 @@ def _path_job(job: tuple[str, int]) -> PathRecord:
     return score_path_record(next(r for r in rows_paths() if r.name == name), seed)
 
 
+def _path_record(d: dict[str, Any]) -> PathRecord:
+    """A ``--results`` line of a thermal-path row (one of another row has no ``chosen``)."""
+    if "chosen" not in d:
+        raise ValueError("not a thermal-path record")
+    return PathRecord(**d)
+
+
 def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
               results: Path | None = None) -> None:
     """``rows_paths``: x right when its temperature finding is claimed with the row's
@@ -659,21 +681,13 @@ def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     row's mechanism is the chosen one; y and z are null axes. Seeds ``seed0 + 7000 + 1000·j
     + i`` (j the row's place among those selected), ``jobs`` records at a time, resumable
     through ``results`` as ``run``."""
-    todo = [r for r in rows_paths() if not only or any(r.name.startswith(o) for o in only)]
+    todo = _selected(rows_paths(), only)
     if not todo:
         return
     print(f"\nthermal-path rows (tests/support/weekend.py), {cases} per row:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
-    done: dict[tuple[str, int], PathRecord] = {}
-    if results is not None and results.exists():
-        for line in results.read_text().splitlines():
-            try:
-                d = json.loads(line)
-                if "chosen" in d:
-                    done[(d["row"], d["seed"])] = PathRecord(**d)
-            except (ValueError, TypeError):
-                continue
+    done = _load_results(results, _path_record)
     want = [(r.name, seed0 + 7000 + 1000 * j + i) for j, r in enumerate(todo)
             for i in range(cases)]
     want.sort(key=lambda k: k[1] % 1000)
@@ -752,7 +766,7 @@ def run_outside(cases: int, seed0: int, only: list[str] | None) -> None:
 
     from tests.support.weekend import save
 
-    todo = [r for r in outside_rows() if not only or any(r.name.startswith(o) for o in only)]
+    todo = _selected(outside_rows(), only)
     print(f"mechanisms outside the candidate set, {cases} records per row (x axis):")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
