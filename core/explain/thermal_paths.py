@@ -583,7 +583,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     # against a known systematic, not noise: on a plain 2-minute lag at z 118, two lags of
     # opposite sign at 240 and 480 s smoothed the rounding and won by 16 held out)
     c_one = float(_fit(_View(v0.cov, v0.nu, v0.cov[:, 0, 0]), one)[0])
-    rounding_gain = sum(v.rounding_share(c_one) for v in vh)
+    rounding_dev = sum(v.rounding_share(c_one) for v in vh)  # Δ(−2 ln L) the rounding makes up
     vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
     n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
     z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
@@ -656,19 +656,19 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if kind == "one_lag":
             continue
         need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
-        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_gain:
+        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_dev:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but its "
                          "θ sits at the end of its search grid (open): a bound, not chosen")
-        if sc.heldout < min(ref.heldout, none_h) - need - rounding_gain and (
+        if sc.heldout < min(ref.heldout, none_h) - need - rounding_dev and (
                 sc.z_extra >= z_thr):
             passing.append(sc)
-        elif sc.heldout < ref.heldout - need - rounding_gain:
+        elif sc.heldout < ref.heldout - need - rounding_dev:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"its extra term's z {sc.z_extra:.3g} < {z_thr:.3g}")
         elif sc.heldout < ref.heldout - need:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"by less than the readings' rounding through the coupling makes "
-                         f"up of the held-out deviance ({rounding_gain:.3g}): a path that "
+                         f"up of the held-out deviance ({rounding_dev:.3g}): a path that "
                          "smooths the 0.0625 K steps gains that much without physics")
     best = ref
     alternatives: tuple[str, ...] = ()
@@ -689,7 +689,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             sc.kind for sc in scores.values()
             if sc.kind not in ("one_lag", best.kind)
             and sc.heldout <= best.heldout + HELDOUT_MARGIN
-            and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - rounding_gain)
+            and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - rounding_dev)
         if alternatives:
             names = " or ".join(PATH_NAMES[k] for k in (best.kind, *alternatives))
             notes.append(f"{names}: this record cannot tell them apart (held-out −2 ln L "
@@ -706,7 +706,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                      f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
                      "best (the extra term trades with the lag at one drive frequency)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
-                   rounding=rounding_gain, alternatives=alternatives)
+                   rounding=rounding_dev, alternatives=alternatives)
 
 
 def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
