@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from avard.core.allan.noise_id import check_noise_id
 from avard.core.allan.scratch import histories_passed_on
+from avard.core.analysis.drift import BlockMeans, drift_block
 from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.signal_edf import with_signal_edf
@@ -329,6 +330,8 @@ class _PassResult:
     allan: Any  # AllanResult of the pass's channels, τ without differences dropped
     welch: WelchAccumulator | None
     n: int  # samples read
+    #: the channels' block means for the drift test (None: a parallel pass, read again)
+    means: BlockMeans | None = None
 
 
 def _one_pass(blocks: _Blocks, take: list[int] | None,
@@ -353,21 +356,28 @@ def _one_pass(blocks: _Blocks, take: list[int] | None,
     else:
         sa = StreamingAllan(len(names), rate, names=names)
     welch = WelchAccumulator(len(names), rate, nper) if nper is not None else None
+    # the drift test's block means, carried here so that a one-shot stream has them
+    means = (BlockMeans(len(names), drift_block(n_record))
+             if estimator == "oadev" and n_record is not None else None)
     n = 0
     for accel, segment_end in blocks:
         a = accel if take is None else accel[:, take]
         sa.update(a)
         if welch is not None:
             welch.update(a)
+        if means is not None:
+            means.update(a)
         n += len(a)
         if segment_end:
             # a gap in the recording: no Allan difference and no spectrum segment spans it
             sa.gap()
             if welch is not None:
                 welch.gap()
+            if means is not None:
+                means.gap()
         if progress is not None:
             progress(done + n, total)
-    return _finish_pass(sa, welch, n, reread, quantiles, noise_id)
+    return replace(_finish_pass(sa, welch, n, reread, quantiles, noise_id), means=means)
 
 
 def _finish_pass(sa: OverlappingAllan | StreamingAllan, welch: WelchAccumulator | None, n: int,
@@ -670,19 +680,55 @@ def _analyze_passes(
                 from avard.core.analysis.long_tau_check import check_ramp
 
                 fit = check_ramp(fit, partial(reread, i), n, rate)
+            apart = False
+            if estimator == "oadev":
+                # a drift the time domain tells from a random walk (analysis/drift.py)
+                fit, apart = _drift(fit, job, one.means, j, partial(reread, i)
+                                    if reread is not None else None, n)
             out[names[i]] = _channel(names[i], job, fit, lines, estimator, psd, welch, f,
                                      None if spectrum is None else spectrum[:, j], rate,
-                                     corner, source, n)
+                                     corner, source, n, within_support=not apart)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
                     meta={**meta, "filter_corner_hz": corner}, estimator=estimator, info=info)
 
 
+def _drift(fit: Any, job: _FitJob, means: BlockMeans | None, j: int,
+           again: Callable[[], _Blocks] | None, n: int) -> tuple[Any, bool]:
+    """(``fit``, or it with the drift the time domain finds as a resolved ramp; whether it
+    found one) of one channel: the block means the pass carried (``means``, column ``j``)
+    or, after a parallel pass, the channel read again (``again``)."""
+    from avard.core.analysis.drift import resolve_drift
+    from avard.core.model.fit import fit_noise
+
+    b = drift_block(n)
+    if means is not None:
+        yb = means.longest()[:, j]
+    elif again is not None:
+        one = BlockMeans(1, b)
+        for accel, segment_end in again():
+            one.update(accel)
+            if segment_end:
+                one.gap()
+        yb = one.longest()[:, 0]
+    else:
+        return fit, False
+    rate = float(job.allan.rate_hz)
+
+    def refit(less: Any, **kw: Any) -> Any:  # the channel's own fit on the AVAR less a ramp
+        return fit_noise(less, filter_corner_hz=job.corner, extra=job.extra,
+                         check_filter=job.check_filter, **{**job.kw, **kw})
+
+    new, _test = resolve_drift(fit, job.allan, yb, b / rate, refit)
+    return new, new is not fit
+
+
 def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
              estimator: str, psd: bool, welch: WelchAccumulator | None,
              f: NDArray[np.float64] | None, spectrum: NDArray[np.float64] | None,
-             rate: float, corner: float | None, source: str, n: int) -> ChannelAnalysis:
+             rate: float, corner: float | None, source: str, n: int, *,
+             within_support: bool = True) -> ChannelAnalysis:
     """One channel's analysis from its fit, with its PSD when asked for."""
     chan_psd = None
     if psd:
@@ -695,8 +741,9 @@ def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
         chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
     # the printed interval: the part of the AVAR the fit's resolved deterministic terms
     # hold does not scatter (signal_edf.py; unchanged on noise alone)
-    return ChannelAnalysis(name, with_signal_edf(job.allan, fit), fit, lines, estimator,
-                           chan_psd)
+    return ChannelAnalysis(name, with_signal_edf(job.allan, fit,
+                                                 within_support=within_support),
+                           fit, lines, estimator, chan_psd)
 
 
 @dataclass(frozen=True)

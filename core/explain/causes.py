@@ -440,20 +440,11 @@ def apply_floor(cand: Candidate, noise: dict[str, float], record_s: float,
 
 def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw: float
                ) -> NDArray:
-    """Covariance ((m/s²)²) of block means (length ``block_s``, centres ``t``) of white,
-    flicker and random-walk rate noise: N²/block on the diagonal; flicker as noise_gen's
-    ladder of Gauss–Markov processes (Σ σ_k² e^(−|Δt|/T_k)); random walk K²·min(t_i, t_j)
-    (its start value is the offset column)."""
-    from avard.core.sim.noise_gen import flicker_ladder
+    """Covariance of block means of white, flicker and random-walk rate noise: analyze's
+    drift test's (``analysis.drift.block_noise_cov``), one model for both."""
+    from avard.core.analysis.drift import block_noise_cov
 
-    dtt = np.abs(np.subtract.outer(t, t))
-    c = np.diag(np.full(len(t), n_white**2 / block_s))
-    if b_inst > 0:
-        for T, s in flicker_ladder([b_inst], block_s, 10 * float(t[-1] + block_s), 2.0):
-            c += float(np.asarray(s)[0]) ** 2 * np.exp(-dtt / T)
-    if k_rrw > 0:
-        c += k_rrw**2 * np.minimum.outer(t, t)
-    return c
+    return block_noise_cov(t, block_s, n_white, b_inst, k_rrw)
 
 
 # --------------------------------------------------------------------------------------------

@@ -25,13 +25,14 @@ The z's are divided by √(Birge ratio) of the whitened residual when that excee
 noise model the record does not follow widens the test instead of passing everything.
 
 **The drift** (``test_drift``): a slope b·t against the random walk that can make the same
-wander, in the time domain. The offset, the found transients and, under the alternative, the
-slope are fitted by GLS at each K on a log grid (N and B held at the fitted values: they are
-set by the short τ, where a drift shows nothing), and −2 ln L (Gaussian, the covariance's
-log-determinant included) is minimised over K under either hypothesis; the likelihood ratio
-is χ²(1) under a random walk with no drift, tested at its share of the axis's level. The
-AVAR cannot tell a ramp from a random walk on one record (both rise at long τ); the time
-domain can: a drift's increments are all of one sign and size, a walk's are not.
+wander, in the time domain, by the one test analyze uses too (``analysis.drift``): the
+offset, the found transients and, under the alternative, the slope are fitted by GLS with K
+profiled over a range reaching well past the noise's own K (N and B held at the fitted
+values: they are set by the short τ, where a drift shows nothing); the likelihood ratio is
+χ²(1) under a random walk with no drift, tested at its share of the axis's level, and a
+drift whose two halves want two lines (a step) is not one. The AVAR cannot tell a ramp from
+a random walk on one record (both rise at long τ); the time domain can: a drift's
+increments are all of one sign and size, a walk's are not.
 
 **The joint fit** (``refine_compound``): the nonlinear parameters (step times, excursion
 edges, T) are profiled one at a time with the others held, two rounds; 68 % intervals: a
@@ -48,6 +49,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from avard.core.analysis.drift import DRIFT_BLOCKS, drift_likelihood
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
 from numpy.typing import NDArray
@@ -72,10 +74,6 @@ FORWARD_MARGIN = 0.75
 PAIR_SIGMA = 3.0
 #: Points of the warm-up's T scan (log grid from 2 blocks to a quarter of the record).
 T_SCAN = 48
-#: K grid of the drift's likelihood ratio: a factor ``K_SPAN`` either side of the fitted K.
-K_GRID, K_SPAN = 25, 30.0
-#: Blocks of the drift's time-domain likelihood (its question lives at the longest scales).
-DRIFT_BLOCKS = 256
 
 TRANSIENT_CAUSES = ("bias_step", "excursion", "warmup")
 
@@ -540,20 +538,6 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
 # drift against a random walk
 
 
-def _neg2_loglik(yb: NDArray, L: NDArray, cols: list[NDArray]
-                 ) -> tuple[float, NDArray, NDArray]:
-    """(−2 ln L, GLS coefficients, their covariance) of block means ``yb`` on ``cols`` with
-    the noise covariance whose Cholesky factor is ``L`` (constants dropped)."""
-    from scipy.linalg import solve_triangular
-
-    a = solve_triangular(L, np.column_stack(cols), lower=True)
-    wy = solve_triangular(L, yb, lower=True)
-    coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
-    r = wy - a @ coef
-    logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
-    return logdet + float(r @ r), coef, np.linalg.pinv(a.T @ a)
-
-
 def _slope_fit(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float],
                cols: list[NDArray]) -> tuple[float, float]:
     """(slope, its standard error) of block means ``yb`` on ``cols`` + the centred time by
@@ -590,42 +574,31 @@ def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
     yb = cz.block_means(y, b)
     dt = b / rate_hz
     t = (np.arange(len(yb)) + 0.5) * dt
-    record_s = len(yb) * dt
     z_thr = alarm.bonferroni_z(alpha, 1)
-    k0 = noise.get("K", 0.0)
     n_w = noise.get("N", 0.0)
-    # a K scale the record can resolve when the fit has none: one block's white σ over the
-    # record
-    k_ref = k0 if k0 > 0 else n_w / record_s
-    if not k_ref > 0:
+    if not (noise.get("K", 0.0) > 0 or n_w > 0):
         return cz.Candidate("drift", False, evidence="drift test: no noise level to test "
                             "against (N and K are zero)")
-    ks = np.concatenate([[0.0], np.geomspace(k_ref / K_SPAN, k_ref * K_SPAN, K_GRID)])
-    base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
-    tc = t - t.mean()
+    base = [_column(c.cause, c.params, t, dt) for c in transients]
     try:
-        # one factor per K serves the fits with and without the drift
-        factors = [np.linalg.cholesky(cz._noise_cov(t, dt, n_w, noise.get("B", 0.0), float(k)))
-                   for k in ks]
-        h0 = [_neg2_loglik(yb, L, base)[0] for L in factors]
-        h1 = [_neg2_loglik(yb, L, [*base, tc]) for L in factors]
+        # analyze's test (analysis/drift.py): K profiled past the noise's own K
+        lik = drift_likelihood(yb, t, dt, n_w, noise.get("B", 0.0), noise.get("K", 0.0), base)
     except np.linalg.LinAlgError:
         return cz.Candidate("drift", False, evidence="drift test: the noise covariance would "
                             "not factor")
-    j = int(np.argmin([h[0] for h in h1]))
-    lr = max(0.0, min(h0) - h1[j][0])
-    z = math.sqrt(lr)
-    slope = float(h1[j][1][-1])
+    z, slope = abs(lik.z), lik.slope
     if noise_of is not None:
         ramp = slope * ((np.arange(len(y)) + 0.5) / rate_hz - 0.5 * len(y) / rate_hz)
         noise = noise_of(signal_of(transients, len(y), rate_hz) + ramp)
     try:
-        slope, se = _slope_fit(yb, t, dt, noise, base)
+        slope, se = _slope_fit(yb, t, dt, noise, [np.ones_like(t), *base])
     except np.linalg.LinAlgError:
-        se = math.sqrt(float(h1[j][2][-1, -1]))
-    k_hat0, k_hat1 = float(ks[int(np.argmin(h0))]), float(ks[j])
-    passed = z >= z_thr and abs(slope) >= z_thr * se
-    edge = "" if 0 < j < len(ks) - 1 else " (K at the end of its grid)"
+        se = lik.slope_se
+    k_hat0, k_hat1 = lik.k_walk, lik.k_drift
+    passed = lik.passes(z_thr) and abs(slope) >= z_thr * se
+    edge = " (K at the top of its grid)" if lik.at_edge else ""
+    if lik.step_like:
+        edge += "; one line per half fits better (a step, not a drift)"
     ev = (f"time-domain likelihood ratio of a drift against a random walk, K profiled: "
           f"√Δ(−2 ln L) = {z:.3g} (test: ≥ {z_thr:.3g}, χ²(1) at {alpha:g}); the walk alone "
           f"wants K {k_hat0:.3g}, with the drift K {k_hat1:.3g} m/s²·√s{edge}; drift "

@@ -1,0 +1,366 @@
+"""A deterministic drift told from a rate random walk in the time domain: the one test
+``avard analyze`` (the printed EDF, issue 24) and ``avard explain`` (a drift cause, issue 23)
+share.
+
+The Allan variance cannot tell a rate ramp R (AVAR R²τ²/2) from a rate random walk K (K²τ/3)
+on one record: both rise at the longest τ, and the AVAR fit reads such a rise as the walk
+("ramp or random walk", ``fit.RAMP_OR_WALK``). The time domain can: a drift's increments are
+all of one sign and size, a walk's are not. So on the record's block means ȳ_i (at most
+``DRIFT_BLOCKS`` of them) the Gaussian likelihood of an offset alone (H0) and of an offset
+and a slope (H1) is computed under white, flicker and random-walk noise N, B, K
+(``block_noise_cov``), with K *profiled*, free over a range that reaches ``K_SPAN`` times
+beyond the AVAR fit's upper value for it (its 68 % upper bound where present, its one-sided
+upper limit where absent) and four decades below; N and B, which the short and middle τ pin
+down, at the fit's values. z = ±√(−2 ln L0 + 2 ln L1) (the slope's sign) is N(0, 1) under a
+random walk with no drift.
+
+**Why not a least-squares slope against the AVAR fit's K.** That test was measured and not
+kept: on 12 h white + flicker + random-walk records whose walk meets the flicker floor at a
+fifteenth of the record, the AVAR fit finds no K on 36 of 40 (the τ it fits stop at T/8),
+and a slope tested against the noise it does find passed the 0.1 % level on 13 % of records
+with no drift, its z spread 2.4 times too wide; explain's likelihood, whose K grid was
+centred on the fit's K (or, with none, on N/T), could not reach the true walk either (12 of
+40 records past 2.58, z spread 2.6). With K profiled over a range reaching past what the
+AVAR allows, the same records give z spread 0.99–1.05 at 1 h, 12 h and 60 h (``python -m
+benchmarks coverage --drift-test``, docs/analysis.md).
+
+The profile is cheap: with C₀ = L Lᵀ the white and flicker covariance and M = min(t_i, t_j)
+the walk's, L⁻¹ M L⁻ᵀ = V Λ Vᵀ once, every K's covariance is diagonal in the rotated basis
+(1 + K²λ_i), so a fine K grid costs one Cholesky factor and one eigen-decomposition.
+
+**A step is not a drift.** A level step inside the record has a slope too, and a random
+walk can make either; a drift's slope is the same in both halves of the record. A passed
+drift is refuted when one line per half (offset and slope each, K profiled) fits better
+than one line by χ²(2) at ``HALVES_LEVEL``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from statistics import NormalDist
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from avard.core.allan.deviations import AllanResult
+    from avard.core.model.fit import NoiseFit
+
+__all__ = [
+    "DRIFT_BLOCKS",
+    "LEVEL",
+    "BlockMeans",
+    "DriftLikelihood",
+    "block_noise_cov",
+    "channel_drift",
+    "drift_block",
+    "drift_likelihood",
+    "resolve_drift",
+    "two_sided_z",
+]
+
+#: Most block means the likelihood uses (its question lives at the longest scales).
+DRIFT_BLOCKS = 256
+#: K's profile reaches this factor beyond the larger of the fit's upper K and N/T ...
+K_SPAN = 30.0
+#: ... and this many decades below it (and K = 0), on ``K_POINTS`` log-spaced points.
+K_DECADES, K_POINTS = 4.0, 121
+#: Fewest blocks a drift is tested on.
+MIN_BLOCKS = 32
+#: χ²(2)'s level at which one line per half refutes a drift (a step, not a drift).
+HALVES_LEVEL = 0.01
+
+
+def block_noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float,
+                    k_rrw: float) -> NDArray[np.float64]:
+    """Covariance ((m/s²)²) of block means (length ``block_s``, centres ``t``) of white,
+    flicker and random-walk rate noise: N²/block on the diagonal; flicker as noise_gen's
+    ladder of Gauss–Markov processes (Σ σ_k² e^(−|Δt|/T_k)); random walk K²·min(t_i, t_j)
+    (its start value is the offset column)."""
+    from avard.core.sim.noise_gen import flicker_ladder
+
+    dtt = np.abs(np.subtract.outer(t, t))
+    c = np.diag(np.full(len(t), n_white**2 / block_s))
+    if b_inst > 0:
+        for T, s in flicker_ladder([b_inst], block_s, 10 * float(t[-1] + block_s), 2.0):
+            c += float(np.asarray(s)[0]) ** 2 * np.exp(-dtt / T)
+    if k_rrw > 0:
+        c += k_rrw**2 * np.minimum.outer(t, t)
+    return np.asarray(c, dtype=np.float64)
+
+
+class _Profile:
+    """The block means and columns whitened once for every K (module docstring)."""
+
+    def __init__(self, yb: NDArray, t: NDArray, block_s: float, n_white: float,
+                 b_inst: float) -> None:
+        from scipy.linalg import eigh, solve_triangular
+
+        c0 = block_noise_cov(t, block_s, n_white, b_inst, 0.0)
+        L = np.linalg.cholesky(c0)  # LinAlgError: the caller says "would not factor"
+        walk = np.minimum.outer(t, t)
+        a = solve_triangular(L, walk, lower=True)
+        a = solve_triangular(L, a.T, lower=True)
+        lam, V = eigh(0.5 * (a + a.T))
+        self.lam = np.maximum(lam, 0.0)
+        self.logdet0 = 2.0 * float(np.sum(np.log(np.diag(L))))
+        self._white = lambda x: V.T @ solve_triangular(L, x, lower=True)
+        self.wy = self._white(np.asarray(yb, dtype=float))
+
+    def white(self, cols: NDArray) -> NDArray[np.float64]:
+        return np.asarray(self._white(cols))
+
+    def fit(self, k: float, wx: NDArray) -> tuple[float, NDArray, NDArray, float]:
+        """(−2 ln L up to a constant, GLS coefficients, their covariance, χ²) at walk K
+        of the whitened columns ``wx``."""
+        s = 1.0 + k * k * self.lam
+        d = 1.0 / np.sqrt(s)
+        a, b = wx * d[:, None], self.wy * d
+        coef, *_ = np.linalg.lstsq(a, b, rcond=None)
+        r = b - a @ coef
+        chi2 = float(r @ r)
+        return (self.logdet0 + float(np.sum(np.log(s))) + chi2, coef,
+                np.linalg.pinv(a.T @ a), chi2)
+
+    def best(self, ks: NDArray, wx: NDArray) -> tuple[int, float]:
+        """(index in ``ks``, −2 ln L) of the K that fits ``wx`` best."""
+        nll = [self.fit(float(k), wx)[0] for k in ks]
+        j = int(np.argmin(nll))
+        return j, float(nll[j])
+
+    def slope_profile(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
+                      ) -> NDArray[np.float64]:
+        """−2 ln L at each of ``slopes`` (the slope column ``wt`` fixed, the columns ``w0``
+        fitted), K profiled over ``ks``: the slope's profile likelihood."""
+        s = 1.0 + np.outer(ks * ks, self.lam)  # (K, blocks)
+        d = 1.0 / np.sqrt(s)
+        logdet = self.logdet0 + np.sum(np.log(s), axis=1)
+        out = np.full(len(slopes), np.inf)
+        for i, b in enumerate(slopes):
+            r = (self.wy - b * wt)[None, :] * d  # (K, blocks)
+            x = w0[None, :, :] * d[:, :, None]  # (K, blocks, p)
+            xtx = np.einsum("kbp,kbq->kpq", x, x)
+            xtr = np.einsum("kbp,kb->kp", x, r)
+            coef = np.linalg.solve(xtx, xtr[:, :, None])[:, :, 0]
+            res = r - np.einsum("kbp,kp->kb", x, coef)
+            out[i] = float(np.min(logdet + np.einsum("kb,kb->k", res, res)))
+        return out
+
+
+@dataclass(frozen=True)
+class DriftLikelihood:
+    """``drift_likelihood``'s answer. ``z``: ±√Δ(−2 ln L) of a slope against a random walk
+    with K profiled (the slope's sign); ``slope`` the GLS slope (input unit per s) at
+    ``k_drift``, the K the likelihood picks beside it (``k_walk``: the K the walk alone
+    wants), ``slope_lo``/``slope_hi`` its 68 % profile-likelihood interval (Δ(−2 ln L) ≤ 1,
+    K profiled at every slope: the walk's uncertainty is in it), ``slope_se`` its half-width;
+    ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one line per half over one
+    line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``); ``blocks`` used,
+    ``record_s`` they span."""
+
+    z: float
+    slope: float
+    slope_lo: float
+    slope_hi: float
+    k_walk: float
+    k_drift: float
+    k_top: float
+    halves_gain: float
+    blocks: int
+    record_s: float
+
+    @property
+    def slope_se(self) -> float:
+        return 0.5 * (self.slope_hi - self.slope_lo)
+
+    @property
+    def at_edge(self) -> bool:
+        """K at its grid's top under either hypothesis (the walk may be larger still)."""
+        return max(self.k_walk, self.k_drift) >= self.k_top * (1 - 1e-9)
+
+    @property
+    def step_like(self) -> bool:
+        """One line per half fits better than one line by χ²(2) at ``HALVES_LEVEL``."""
+        return self.halves_gain > -2.0 * math.log(HALVES_LEVEL)
+
+    def passes(self, z_threshold: float) -> bool:
+        """|z| at or past ``z_threshold`` (the slope's profile likelihood at zero that far
+        above its minimum), and not a step."""
+        return abs(self.z) >= z_threshold and not self.step_like
+
+
+def two_sided_z(level: float) -> float:
+    """|z| of a two-sided test at ``level`` (a slope's sign is free)."""
+    return NormalDist().inv_cdf(1.0 - 0.5 * level)
+
+
+def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_inst: float,
+                     k_scale: float, base: Sequence[NDArray] = ()) -> DriftLikelihood:
+    """The time-domain likelihood ratio of a drift against a random walk (module docstring)
+    on block means ``yb`` (centres ``t``, s; length ``block_s``) with white N and flicker B
+    at the given values and K profiled up to ``K_SPAN``·max(``k_scale``, N/T); ``base``:
+    further columns fitted under both hypotheses (the offset is always there: explain's
+    transients). The slope's interval is its profile likelihood's, K profiled at every
+    slope: the GLS error at the K picked beside the slope alone was a sixth of the true
+    scatter where that K fell to 0 (explain's drift records). Raises
+    ``np.linalg.LinAlgError`` when the noise covariance does not factor."""
+    t = np.asarray(t, dtype=float)
+    record_s = len(t) * block_s
+    top = K_SPAN * max(float(k_scale), n_white / record_s)
+    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-K_DECADES, top, K_POINTS)])
+    prof = _Profile(yb, t, block_s, n_white, b_inst)
+    one = np.ones_like(t)
+    tc = t - t.mean()
+    w0 = prof.white(np.column_stack([one, *base]))
+    w1 = np.column_stack([w0, prof.white(tc)])
+    i, h0 = prof.best(ks, w0)
+    j, h1 = prof.best(ks, w1)
+    lr = max(0.0, h0 - h1)
+    _nll, coef, _cov, _chi2 = prof.fit(float(ks[j]), w1)
+    slope = float(coef[-1])
+    # the profile over slopes: a first span from the GLS error at the walk's own K (the
+    # widest of the two), then the Δ = 1 crossings on a finer one
+    wide = math.sqrt(max(float(prof.fit(float(ks[i]), w1)[2][-1, -1]), 0.0))
+    lo, hi = _crossings(prof, ks, w0, w1[:, -1], slope, max(wide, abs(slope) * 1e-6))
+    # one line per half (a step makes two flat halves, a drift one slope)
+    half = (t >= np.median(t)).astype(float)
+    w2 = np.column_stack([w0, prof.white(np.column_stack([half, tc, tc * half]))])
+    _k2, h2 = prof.best(ks, w2)
+    return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
+                           float(ks[j]), float(top), max(0.0, h1 - h2), len(t), record_s)
+
+
+def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: float,
+               span: float) -> tuple[float, float]:
+    """Where the slope's profile −2 ln L rises by 1 either side of its minimum (searched
+    over ±4·``span``, widened while it has not risen that far at the ends)."""
+    for _ in range(4):
+        grid = slope + span * np.linspace(-4.0, 4.0, 81)
+        prof_ = prof.slope_profile(ks, w0, wt, grid)
+        k = int(np.argmin(prof_))
+        lim = float(prof_[k]) + 1.0
+        if prof_[0] > lim and prof_[-1] > lim:
+            below = np.flatnonzero(prof_ <= lim)
+            a, b = int(below[0]), int(below[-1])
+            lo = float(np.interp(lim, [prof_[a], prof_[a - 1]], [grid[a], grid[a - 1]]))
+            hi = float(np.interp(lim, [prof_[b], prof_[b + 1]], [grid[b], grid[b + 1]]))
+            return lo, hi
+        span *= 3.0
+    return -math.inf, math.inf
+
+
+class BlockMeans:
+    """Block means of C channels, ``block`` samples each, kept for the longest stretch
+    without a gap (no block straddles one): what the drift test reads, carried by the pass
+    that computes the OADEV, so a one-shot stream needs no second read."""
+
+    def __init__(self, n_channels: int, block: int) -> None:
+        self.block = max(1, int(block))
+        self._rest = np.zeros((0, n_channels))
+        self._current: list[NDArray] = []
+        self._best = np.zeros((0, n_channels))
+
+    def update(self, a: NDArray) -> None:
+        a = np.asarray(a, dtype=float)
+        if a.ndim == 1:
+            a = a[:, None]
+        col = np.concatenate([self._rest, a]) if len(self._rest) else a
+        k = len(col) // self.block * self.block
+        if k:
+            self._current.append(col[:k].reshape(-1, self.block, col.shape[1]).mean(axis=1))
+        self._rest = col[k:].copy()
+
+    def gap(self) -> None:
+        seg = np.concatenate(self._current) if self._current else self._best[:0]
+        if len(seg) > len(self._best):
+            self._best = seg
+        self._current, self._rest = [], self._rest[:0]
+
+    def longest(self) -> NDArray[np.float64]:
+        """(blocks, C) means of the longest stretch so far (the current one included)."""
+        seg = np.concatenate(self._current) if self._current else self._best[:0]
+        return np.asarray(seg if len(seg) > len(self._best) else self._best)
+
+
+def drift_block(n_samples: int) -> int:
+    """Samples per block for a record of ``n_samples``: at most ``DRIFT_BLOCKS`` blocks."""
+    return max(1, -(-int(n_samples) // DRIFT_BLOCKS))
+
+
+# --------------------------------------------------------------------------------------------
+# analyze: a detected drift made a resolved ramp
+
+
+#: analyze's level for a drift: two-sided 1 % (the slope's sign is free).
+LEVEL = 0.01
+
+
+def _k_upper(fit: NoiseFit) -> float:
+    """The most K the AVAR fit allows: its 68 % upper bound where present, its one-sided
+    upper limit where absent (0 where it has neither)."""
+    k = fit.terms.get("rate_random_walk")
+    if k is None:
+        return 0.0
+    return float((k.hi if k.present else k.upper) or 0.0)
+
+
+def channel_drift(fit: NoiseFit, means: NDArray, block_s: float) -> DriftLikelihood | None:
+    """``drift_likelihood`` of one channel's block means (``BlockMeans.longest``) with the
+    fit's N and B and K's profile reaching past the fit's upper K; None where the record has
+    fewer than ``MIN_BLOCKS`` blocks or the covariance does not factor."""
+    yb = np.asarray(means, dtype=float).reshape(-1)
+    if len(yb) < MIN_BLOCKS or not np.all(np.isfinite(yb)):
+        return None
+    t = (np.arange(len(yb)) + 0.5) * block_s
+    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
+    b_i = float(fit.terms["bias_instability"].value or 0.0)
+    if not n_w > 0:
+        return None
+    try:
+        return drift_likelihood(yb, t, block_s, n_w, b_i, _k_upper(fit))
+    except np.linalg.LinAlgError:
+        return None
+
+
+def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: float,
+                  refit: Callable[..., NoiseFit], level: float = LEVEL
+                  ) -> tuple[NoiseFit, DriftLikelihood | None]:
+    """``fit`` with a drift the time domain finds (``channel_drift`` past ``level``) as a
+    resolved rate ramp: R the GLS slope, its interval the slope's profile-likelihood one
+    (K profiled), and the noise terms refitted (``refit(allan, terms=..., added_cov=...)``,
+    the channel's own ``fit_noise`` arguments) on the AVAR less the ramp's R²τ²/2, the
+    removed part's uncertainty added to the AVAR's covariance, so K is no longer made of the
+    drift. ``fit`` unchanged (and the test, or None) where no drift passes or the refit
+    fails."""
+    from avard.core.errors import FitError
+    from avard.core.model.fit import Component, TermEstimate
+    from avard.core.model.terms import TERMS, UNITS
+
+    lik = channel_drift(fit, means, block_s)
+    if lik is None or not lik.passes(two_sided_z(level)):
+        return fit, lik
+    tau = np.asarray(allan.tau, dtype=float)
+    g = tau**2 / 2.0
+    r, se = abs(lik.slope), lik.slope_se
+    var_r2 = 4.0 * r * r * se**2 + 2.0 * se**4
+    less = replace(allan, var=np.asarray(allan.var, dtype=float) - r * r * g)
+    try:
+        noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"],
+                      added_cov=var_r2 * np.outer(g, g))
+    except FitError:
+        return fit, lik
+    ramp = Component("rate_ramp", "rate_ramp", {}, "value", UNITS["rate_ramp"])
+    k = len(noise.theta)
+    cov = np.zeros((k + 1, k + 1))
+    cov[:k, :k] = noise.theta_cov
+    cov[k, k] = var_r2
+    lo, hi = sorted((abs(lik.slope_lo), abs(lik.slope_hi)))
+    if lik.slope_lo * lik.slope_hi <= 0:
+        lo = 0.0
+    terms = {**noise.terms, "rate_ramp": TermEstimate(r, lo, hi, UNITS["rate_ramp"], True,
+                                                      abs(lik.z))}
+    return replace(noise, terms=terms, components=[*noise.components, ramp],
+                   theta=np.append(noise.theta, r * r), theta_cov=cov), lik
