@@ -1,0 +1,138 @@
+"""The time-domain drift test analyze and explain share (core/analysis/drift.py, issues 23
+and 24): calibrated on records with no drift, and its adversaries (a pure random walk, a
+drift beside a walk of similar size, a drift across a gap, a step that looks like a drift).
+Records from tests/support/coverage_gen.py, the generator written apart from avard."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from avard.core.allan.deviations import allan_variance
+from avard.core.analysis import drift as dr
+from avard.core.analysis.engine import analyze
+from avard.core.analysis.options import AnalyzeOptions
+from avard.core.io.source import RecordFormat, RecordInfo, StreamSource
+from avard.core.model.fit import fit_noise
+from avard.core.model.terms import TERMS
+
+from benchmarks.bench_coverage import mix_for
+from tests.support.coverage_gen import Mix, record
+
+N_12H = 43200  # 12 h at 1 Hz
+
+
+def _lik(y: np.ndarray, rate: float = 1.0) -> dr.DriftLikelihood:
+    b = dr.drift_block(len(y))
+    yb = y[: len(y) // b * b].reshape(-1, b).mean(axis=1)
+    lik = dr.channel_drift(fit_noise(allan_variance(y, rate)), yb, b / rate)
+    assert lik is not None
+    return lik
+
+
+def test_no_drift_gives_z_of_unit_spread_and_no_claim_past_the_level():
+    """12 h of white + flicker + random walk whose walk meets the flicker floor at a
+    fifteenth of the record: the AVAR fit finds no K on most of them, and a slope tested
+    against the noise it does find spread 2.4× too wide (13 % past the 0.1 % level). With
+    K profiled past the fit's upper K, z is N(0, 1)."""
+    mix = mix_for("plain", N_12H, 1.0)
+    rng = np.random.default_rng(2401)
+    z = np.array([_lik(record(mix, N_12H, rng)[0]).z for _ in range(30)])
+    assert 0.7 <= z.std() <= 1.35, z
+    assert abs(z.mean()) < 0.6, z
+    assert np.max(np.abs(z)) < dr.two_sided_z(1e-3), z
+
+
+def test_a_pure_random_walk_is_not_a_drift():
+    """A strong walk (the record's wander is all walk) and white noise: no drift."""
+    rng = np.random.default_rng(7)
+    hits = 0
+    for _ in range(10):
+        y = rng.normal(size=N_12H) + np.cumsum(rng.normal(scale=0.02, size=N_12H))
+        lik = _lik(y)
+        hits += lik.passes(dr.two_sided_z(dr.LEVEL))
+        assert not lik.at_edge, lik
+    assert hits == 0
+
+
+def test_a_drift_beside_a_walk_of_similar_size_is_found_and_its_interval_holds_it():
+    """The drift moves the rate by as much over the record as the walk's standard
+    deviation over the record (the AVAR cannot tell them apart); the slope's profile
+    interval holds it in about 68 % of records."""
+    rng = np.random.default_rng(11)
+    q = 0.01
+    slope = 6.0 * q / math.sqrt(N_12H)  # ≈ 5.5 σ of the walk's own OLS slope
+    held = found = 0
+    for _ in range(12):
+        y = rng.normal(size=N_12H) + np.cumsum(rng.normal(scale=q, size=N_12H))
+        lik = _lik(y + slope * np.arange(N_12H))
+        found += lik.passes(dr.two_sided_z(dr.LEVEL))
+        held += lik.slope_lo <= slope <= lik.slope_hi
+    assert found >= 9
+    assert 5 <= held <= 12
+
+
+@pytest.mark.parametrize("size", [0.3, 3.0, 10.0])
+def test_a_step_that_looks_like_a_drift_is_not_one(size):
+    """A level step has a least-squares slope too (at 10, 40 times the record's white σ
+    over a block); the walk K profiled in the likelihood takes it (a walk makes steps), and
+    the slope against it stays below the level. (One line per half, the second guard,
+    would refute it if it passed.)"""
+    mix = mix_for("plain", N_12H, 1.0)
+    for at in (0.3, 0.5):
+        y, _ = record(mix, N_12H, np.random.default_rng(6))
+        y = y + np.where(np.arange(N_12H) >= int(N_12H * at), size, 0.0)
+        lik = _lik(y)
+        assert not lik.passes(dr.two_sided_z(dr.LEVEL)), (at, lik)
+        assert lik.k_walk > 0.5 * math.sqrt(mix.q2)
+
+
+def test_block_means_keep_the_longest_stretch_between_gaps():
+    bm = dr.BlockMeans(2, 4)
+    bm.update(np.ones((10, 2)))  # two blocks and a rest of 2
+    bm.gap()
+    bm.update(np.arange(26.0).reshape(13, 2))  # three blocks
+    assert bm.longest().shape == (3, 2)
+    np.testing.assert_allclose(bm.longest()[0], [3.0, 4.0])
+    bm.gap()
+    bm.update(np.zeros((4, 2)))
+    assert bm.longest().shape == (3, 2)
+
+
+def _analyze(y: np.ndarray, rate: float, gap_at: int | None = None):
+    info = RecordInfo(source="drift", format=RecordFormat.STREAM, rate_hz=rate,
+                      names=("x",), n_samples=len(y))
+    cut = [0, len(y)] if gap_at is None else [0, gap_at, len(y)]
+    blocks = [(y[a:b, None], None, b != len(y)) for a, b in itertools.pairwise(cut)]
+    return analyze(StreamSource(info, blocks), AnalyzeOptions()).channels["x"]
+
+
+@pytest.mark.parametrize("gap_at", [None, 9000])
+def test_analyze_resolves_a_found_drift_as_a_ramp_with_k_refitted_without_it(gap_at):
+    """12 h, a drift 12 σ of its slope beside the benchmark's walk: the AVAR fit alone
+    reads it as "ramp or random walk"; analyze claims the ramp from the time domain, its
+    interval holds the truth within two half-widths, and the walk refitted without it is
+    below what the drift made of it. Across a gap the longest stretch is tested."""
+    mix = mix_for("plain", N_12H, 1.0)
+    rng = np.random.default_rng(3)
+    y, _ = record(mix, N_12H, rng)
+    slope = 4 * mix_for("drift", N_12H, 1.0).drift
+    y = y + slope * np.arange(N_12H)
+    ch = _analyze(y, 1.0, gap_at)
+    r = ch.fit.terms["rate_ramp"]
+    assert r.present and r.note is None
+    assert r.lo is not None and r.hi is not None and r.value is not None
+    half = 0.5 * (r.hi - r.lo)
+    assert r.lo - half <= slope <= r.hi + half, (r, slope)
+    no_ramp = fit_noise(ch.allan, terms=[t for t in TERMS if t != "rate_ramp"])
+    k0 = no_ramp.terms["rate_random_walk"].value
+    assert k0 is not None and (ch.fit.terms["rate_random_walk"].value or 0.0) < 0.5 * k0
+
+
+def test_analyze_claims_no_drift_on_a_record_without_one():
+    mix = Mix(s2=1.0, h=0.02, q2=1e-5)
+    y, _ = record(mix, N_12H, np.random.default_rng(9))
+    ch = _analyze(y, 1.0)
+    assert not ch.fit.terms["rate_ramp"].present or ch.fit.terms["rate_ramp"].note is not None
