@@ -239,40 +239,35 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
 
 
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
-    """Would a least-squares drift, tested under the fitted noise, be an honest claim?
-    (``--drift-test``; a measurement for the time-domain drift docs/analysis.md asks for,
-    nothing avard prints.) Per record: the OLS slope of the record, and its standard error
-    under the noise the fit finds with no ramp term (each component at θ + σ,
-    ``signal_edf.noise_psd``), ∫S(ν)|W(ν)|²dν with W the slope's weights' transfer; the
-    share of records past |z| = 2.58 and 3.29 (1 % and 0.1 % two-sided) and z's spread,
-    which is 1 where the null model is right."""
-    import numpy.fft as fft
-    from avard.core.analysis.signal_edf import noise_psd
+    """The calibration of analyze's time-domain drift test (``--drift-test``;
+    ``analysis.drift.channel_drift``, the test analyze and explain share): per record the
+    likelihood ratio's signed z of a drift against a random walk (K profiled past the AVAR
+    fit's upper K), on the block means the engine uses. The share of records past analyze's
+    level (two-sided 1 %) and past 0.1 %, z's mean and spread (1 where the null is right),
+    and how often the slope's 68 % profile interval holds the true drift."""
+    from avard.core.analysis import drift as dr
     from avard.core.model.fit import fit_noise
-    from avard.core.model.terms import TERMS
 
     rate = LENGTHS[hours]
     n = round(hours * 3600 * rate)
     mix = mix_for(kind, n, rate)
     rng = np.random.default_rng([seed, hours, MIXES.index(kind), 77])
-    i = np.arange(n, dtype=float)
-    w = i - i.mean()
-    w /= np.sum(w * w)
-    size = 8 * n
-    gain = np.abs(fft.rfft(w, size))[1:] ** 2
-    nu = np.arange(1, len(gain) + 1) / size
-    no_ramp = [t for t in TERMS if t != "rate_ramp"]
-    z = []
-    se = math.nan
+    b = dr.drift_block(n)
+    z, held = [], 0
     for _ in range(records):
         y, _clean = record(mix, n, rng)
-        fit = fit_noise(allan_variance(y, rate), terms=no_ramp)
-        se = math.sqrt(2.0 * float(np.sum(noise_psd(fit)(nu) * gain)) / size)
-        z.append(float(np.sum(w * y)) / se)
+        lik = dr.channel_drift(fit_noise(allan_variance(y, rate)),
+                               y[: n // b * b].reshape(-1, b).mean(axis=1), b / rate)
+        if lik is None:
+            continue
+        z.append(lik.z)
+        held += lik.slope_lo <= mix.drift * rate <= lik.slope_hi
     za = np.array(z)
-    return (f"{hours} h {kind}: |z| > 2.58 in {np.mean(np.abs(za) > 2.576):.1%}, > 3.29 in "
-            f"{np.mean(np.abs(za) > 3.29):.1%}; z mean {za.mean():.2f}, spread {za.std():.2f}"
-            f"; the true drift is {mix.drift / se:.1f} of the last record's standard error")
+    return (f"{hours} h {kind}: past {dr.two_sided_z(dr.LEVEL):.2f} (analyze's level) in "
+            f"{np.mean(np.abs(za) >= dr.two_sided_z(dr.LEVEL)):.1%}, past 3.29 in "
+            f"{np.mean(np.abs(za) > 3.29):.1%}; z mean {za.mean():.2f}, spread {za.std():.2f}; "
+            f"the slope's 68 % interval holds the true drift in {held / max(1, len(za)):.1%} "
+            f"({len(za)} records tested)")
 
 
 def _row(job: tuple[int, str, int, int, str, str, bool]) -> Coverage:
@@ -291,8 +286,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--workers", type=int, default=1, help="processes for the rows (≤ 2)")
     ap.add_argument("--detail", action="store_true", help="print the share at every τ")
     ap.add_argument("--drift-test", action="store_true",
-                    help="instead: how a least-squares drift tested under the fitted noise "
-                         "would claim on each mix (drift_test)")
+                    help="instead: the calibration of analyze's time-domain drift test on "
+                         "each mix (drift_test)")
     args = ap.parse_args(argv)
     hours = [int(h) for h in args.hours.split(",")]
     if any(h not in LENGTHS for h in hours):

@@ -363,4 +363,5 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     terms = {**noise.terms, "rate_ramp": TermEstimate(r, lo, hi, UNITS["rate_ramp"], True,
                                                       abs(lik.z))}
     return replace(noise, terms=terms, components=[*noise.components, ramp],
-                   theta=np.append(noise.theta, r * r), theta_cov=cov), lik
+                   theta=np.append(noise.theta, r * r), theta_cov=cov,
+                   resolved_apart=("rate_ramp",)), lik

@@ -680,14 +680,13 @@ def _analyze_passes(
                 from avard.core.analysis.long_tau_check import check_ramp
 
                 fit = check_ramp(fit, partial(reread, i), n, rate)
-            apart = False
             if estimator == "oadev":
                 # a drift the time domain tells from a random walk (analysis/drift.py)
-                fit, apart = _drift(fit, job, one.means, j, partial(reread, i)
-                                    if reread is not None else None, n)
+                fit = _drift(fit, job, one.means, j, partial(reread, i)
+                             if reread is not None else None, n)
             out[names[i]] = _channel(names[i], job, fit, lines, estimator, psd, welch, f,
                                      None if spectrum is None else spectrum[:, j], rate,
-                                     corner, source, n, within_support=not apart)
+                                     corner, source, n)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
@@ -695,10 +694,10 @@ def _analyze_passes(
 
 
 def _drift(fit: Any, job: _FitJob, means: BlockMeans | None, j: int,
-           again: Callable[[], _Blocks] | None, n: int) -> tuple[Any, bool]:
-    """(``fit``, or it with the drift the time domain finds as a resolved ramp; whether it
-    found one) of one channel: the block means the pass carried (``means``, column ``j``)
-    or, after a parallel pass, the channel read again (``again``)."""
+           again: Callable[[], _Blocks] | None, n: int) -> Any:
+    """``fit``, or it with the drift the time domain finds as a resolved ramp, of one
+    channel: the block means the pass carried (``means``, column ``j``) or, after a
+    parallel pass, the channel read again (``again``)."""
     from avard.core.analysis.drift import resolve_drift
     from avard.core.model.fit import fit_noise
 
@@ -713,22 +712,20 @@ def _drift(fit: Any, job: _FitJob, means: BlockMeans | None, j: int,
                 one.gap()
         yb = one.longest()[:, 0]
     else:
-        return fit, False
+        return fit
     rate = float(job.allan.rate_hz)
 
     def refit(less: Any, **kw: Any) -> Any:  # the channel's own fit on the AVAR less a ramp
         return fit_noise(less, filter_corner_hz=job.corner, extra=job.extra,
                          check_filter=job.check_filter, **{**job.kw, **kw})
 
-    new, _test = resolve_drift(fit, job.allan, yb, b / rate, refit)
-    return new, new is not fit
+    return resolve_drift(fit, job.allan, yb, b / rate, refit)[0]
 
 
 def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
              estimator: str, psd: bool, welch: WelchAccumulator | None,
              f: NDArray[np.float64] | None, spectrum: NDArray[np.float64] | None,
-             rate: float, corner: float | None, source: str, n: int, *,
-             within_support: bool = True) -> ChannelAnalysis:
+             rate: float, corner: float | None, source: str, n: int) -> ChannelAnalysis:
     """One channel's analysis from its fit, with its PSD when asked for."""
     chan_psd = None
     if psd:
@@ -741,9 +738,8 @@ def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
         chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
     # the printed interval: the part of the AVAR the fit's resolved deterministic terms
     # hold does not scatter (signal_edf.py; unchanged on noise alone)
-    return ChannelAnalysis(name, with_signal_edf(job.allan, fit,
-                                                 within_support=within_support),
-                           fit, lines, estimator, chan_psd)
+    return ChannelAnalysis(name, with_signal_edf(job.allan, fit), fit, lines, estimator,
+                           chan_psd)
 
 
 @dataclass(frozen=True)

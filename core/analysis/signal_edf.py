@@ -212,15 +212,14 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
     return edf_mixture_bound(worst, nus)
 
 
-def with_signal_edf(allan: AllanResult, fit: NoiseFit, *, within_support: bool = True
-                    ) -> AllanResult:
+def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
     """``allan`` (one channel) with the EDF the fit supports: the noise's at least
     ``model_edf``, and where resolved deterministic terms hold part of the AVAR, the EDF of
     the noise's scatter plus their exact cross term with it (``with_parts_edf``); unchanged
     where the estimator's own EDF is already the larger and no resolved deterministic term
-    holds part of the AVAR. ``within_support=False`` where the fit's deterministic part was
-    resolved apart from the AVAR (a drift the time domain found, ``analysis/drift.py``):
-    the whole EDF may then pass the record's support (its noise part may not)."""
+    holds part of the AVAR. Where the fit's deterministic part was resolved apart from the
+    AVAR (``fit.resolved_apart``: a drift the time domain found, ``analysis/drift.py``) the
+    whole EDF may pass the record's support (its noise part may not)."""
     if allan.kind not in _ALLAN_KINDS or np.asarray(allan.var).ndim != 1:
         return allan
     if allan.noise_id == "stable32":
@@ -236,7 +235,8 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit, *, within_support: bool =
     # beside the deterministic terms at their lower 1σ, the larger
     return with_parts_edf(allan, parts, total, np.fmax(noise_upper(fit, allan),
                                                        total - low),
-                          noise_psd(fit), noise, within_support=within_support)
+                          noise_psd(fit), noise,
+                          within_support=not fit.resolved_apart)
 
 
 def noise_part_edf(allan: AllanResult, noise_edf: NDArray[np.float64] | None = None

@@ -151,6 +151,10 @@ class NoiseFit:
     #: covariances differ (a nonlinear parameter scanned outside the fit, e.g. a
     #: Gauss–Markov T); χ² alone favours the model that predicts the larger scatter
     log_det_cov: float = math.nan
+    #: the deterministic terms resolved apart from the AVAR (a drift the time domain told
+    #: from a random walk, ``analysis.drift``): their part may take the printed EDF past the
+    #: record's support (``analysis.signal_edf``), which the AVAR fit's own parts may not
+    resolved_apart: tuple[str, ...] = ()
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
