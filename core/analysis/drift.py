@@ -127,9 +127,13 @@ class _Profile:
 
     def best(self, ks: NDArray, wx: NDArray) -> tuple[int, float]:
         """(index in ``ks``, −2 ln L) of the K that fits ``wx`` best."""
-        nll = [self.fit(float(k), wx)[0] for k in ks]
-        j = int(np.argmin(nll))
+        j, nll = self.k_profile(ks, wx)
         return j, float(nll[j])
+
+    def k_profile(self, ks: NDArray, wx: NDArray) -> tuple[int, NDArray[np.float64]]:
+        """(index of the best K in ``ks``, −2 ln L at each K) of the columns ``wx``."""
+        nll = np.array([self.fit(float(k), wx)[0] for k in ks])
+        return int(np.argmin(nll)), nll
 
     def slope_profile(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
                       ) -> NDArray[np.float64]:
@@ -155,7 +159,9 @@ class DriftLikelihood:
     """``drift_likelihood``'s answer. ``z``: ±√Δ(−2 ln L) of a slope against a random walk
     with K profiled (the slope's sign); ``slope`` the GLS slope (input unit per s) at
     ``k_drift``, the K the likelihood picks beside it (``k_walk``: the K the walk alone
-    wants), ``slope_lo``/``slope_hi`` its 68 % profile-likelihood interval (Δ(−2 ln L) ≤ 1,
+    wants; ``k_drift_hi`` the top of its Δ(−2 ln L) ≤ 1 range beside the slope, the most
+    walk the time domain allows), ``slope_lo``/``slope_hi`` its 68 % profile-likelihood
+    interval (Δ(−2 ln L) ≤ 1,
     K profiled at every slope: the walk's uncertainty is in it), ``slope_se`` its half-width;
     ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one line per half over one
     line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``); ``blocks`` used,
@@ -167,6 +173,7 @@ class DriftLikelihood:
     slope_hi: float
     k_walk: float
     k_drift: float
+    k_drift_hi: float
     k_top: float
     halves_gain: float
     blocks: int
@@ -217,7 +224,11 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     w0 = prof.white(np.column_stack([one, *base]))
     w1 = np.column_stack([w0, prof.white(tc)])
     i, h0 = prof.best(ks, w0)
-    j, h1 = prof.best(ks, w1)
+    j, nll1 = prof.k_profile(ks, w1)
+    h1 = float(nll1[j])
+    # the K range beside the slope: up to the first grid point past Δ = 1 (or the top)
+    past = np.flatnonzero((np.arange(len(ks)) > j) & (nll1 > h1 + 1.0))
+    k_hi = float(ks[past[0]] if past.size else ks[-1])
     lr = max(0.0, h0 - h1)
     _nll, coef, _cov, _chi2 = prof.fit(float(ks[j]), w1)
     slope = float(coef[-1])
@@ -230,7 +241,8 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     w2 = np.column_stack([w0, prof.white(np.column_stack([half, tc, tc * half]))])
     _k2, h2 = prof.best(ks, w2)
     return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
-                           float(ks[j]), float(top), max(0.0, h1 - h2), len(t), record_s)
+                           float(ks[j]), k_hi, float(top), max(0.0, h1 - h2), len(t),
+                           record_s)
 
 
 def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: float,
@@ -352,6 +364,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
                       added_cov=var_r2 * np.outer(g, g))
     except FitError:
         return fit, lik
+    noise = _walk_from_time_domain(noise, lik)
     ramp = Component("rate_ramp", "rate_ramp", {}, "value", UNITS["rate_ramp"])
     k = len(noise.theta)
     cov = np.zeros((k + 1, k + 1))
@@ -365,3 +378,35 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     return replace(noise, terms=terms, components=[*noise.components, ramp],
                    theta=np.append(noise.theta, r * r), theta_cov=cov,
                    resolved_apart=("rate_ramp",)), lik
+
+
+def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
+    """``noise`` (the AVAR fit less the ramp) with its walk K at least what the time domain
+    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. The AVAR fit's τ stop
+    at T/8 and, with the removed ramp's uncertainty, often find no K at 12 h; a ramp's cross
+    term with the noise weighs the record's ends, where the walk dominates, so without it
+    the printed EDF of the 12 h "steep" records was 2–3 times what their estimates scatter
+    with (coverage 50–53 % at 1024–4096 s)."""
+    from avard.core.model.fit import TermEstimate
+
+    j = next((i for i, c in enumerate(noise.components) if c.cause == "rate_random_walk"),
+             None)
+    up = lik.k_drift_hi**2
+    if j is None or not up > 0:
+        return noise
+    theta = float(noise.theta[j])
+    se = math.sqrt(max(float(noise.theta_cov[j, j]), 0.0))
+    if theta > 0 and theta + se >= up:
+        return noise
+    point = max(theta, lik.k_drift**2, 0.5 * up)  # (noise_psd drops a θ of 0)
+    new_theta = np.array(noise.theta, dtype=float)
+    new_theta[j] = point
+    cov = np.array(noise.theta_cov, dtype=float)
+    cov[j, :] = 0.0
+    cov[:, j] = 0.0
+    cov[j, j] = max(up - point, 0.0) ** 2
+    old = noise.terms["rate_random_walk"]
+    term = TermEstimate(math.sqrt(point), math.sqrt(max(2.0 * point - up, 0.0)),
+                        math.sqrt(max(up, point)), old.unit, True, old.z)
+    return replace(noise, theta=new_theta, theta_cov=cov,
+                   terms={**noise.terms, "rate_random_walk": term})
