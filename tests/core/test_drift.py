@@ -114,7 +114,9 @@ def test_analyze_resolves_a_found_drift_as_a_ramp_with_k_refitted_without_it(gap
     """12 h, a drift 12 σ of its slope beside the benchmark's walk: the AVAR fit alone
     reads it as "ramp or random walk"; analyze claims the ramp from the time domain, its
     interval holds the truth within two half-widths, and the walk refitted without it is
-    below what the drift made of it. Across a gap the longest stretch is tested."""
+    below what the drift made of it and holds the generator's (the time domain's K range
+    beside the drift where the AVAR refit finds none). Across a gap the longest stretch is
+    tested."""
     mix = mix_for("plain", N_12H, 1.0)
     rng = np.random.default_rng(3)
     y, _ = record(mix, N_12H, rng)
@@ -128,7 +130,10 @@ def test_analyze_resolves_a_found_drift_as_a_ramp_with_k_refitted_without_it(gap
     assert r.lo - half <= slope <= r.hi + half, (r, slope)
     no_ramp = fit_noise(ch.allan, terms=[t for t in TERMS if t != "rate_ramp"])
     k0 = no_ramp.terms["rate_random_walk"].value
-    assert k0 is not None and (ch.fit.terms["rate_random_walk"].value or 0.0) < 0.5 * k0
+    k = ch.fit.terms["rate_random_walk"]
+    assert k0 is not None and k.value is not None and k.value < 0.75 * k0
+    assert k.lo is not None and k.hi is not None
+    assert k.lo <= math.sqrt(mix.q2) <= k.hi + (k.hi - k.lo)  # the generator's walk
 
 
 def test_analyze_claims_no_drift_on_a_record_without_one():
