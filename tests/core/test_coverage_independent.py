@@ -30,10 +30,11 @@ def test_intervals_cover_the_truth_on_noise(hours: int) -> None:
 def test_intervals_are_never_too_narrow_with_a_signal(hours: int, mix: str) -> None:
     """With a slow sinusoid or a drift added: the interval holds the truth in at least 60 %
     of the records at every τ. Where the signal makes much of the AVAR they over-cover
-    (measured up to 90 %): the fit cannot resolve these signals (a sinusoid of six cycles a
-    record, a drift it cannot tell from the random walk), so the printed EDF is the noise's,
-    and a deterministic part scatters less than any noise type's χ² says
-    (docs/analysis.md, "Coverage of the intervals")."""
+    (measured up to 90 %): the fit cannot resolve a sinusoid of six cycles a record, and the
+    time domain finds the drift (about three standard errors of its slope) in 46–85 % of
+    the records (analysis/drift.py), so elsewhere the printed EDF is the noise's, and a
+    deterministic part scatters less than any noise type's χ² says (docs/analysis.md,
+    "Coverage of the intervals")."""
     c = coverage(hours, mix, 200, seed=1)
     detail = list(zip(c.tau, c.share, c.signal, strict=True))
     assert all(c.share >= BAND[0]), detail
@@ -42,14 +43,15 @@ def test_intervals_are_never_too_narrow_with_a_signal(hours: int, mix: str) -> N
 
 @pytest.mark.slow
 def test_a_resolved_ramp_narrows_the_interval_and_never_too_far() -> None:
-    """A drift ten times as steep ("steep", 1 h): the fit resolves it as a ramp in most
-    records and the printed EDF rises where it holds the AVAR; the interval still holds the
-    truth in at least 60 % of the records at every τ (measured 65–100 %: the EDF stays
-    within the record's support, which a ramp's estimate scatters far below; the AVAR fit
-    cannot lift it, docs/analysis.md)."""
+    """A drift ten times as steep ("steep", 1 h): the time domain resolves it as a ramp in
+    most records (analysis/drift.py) and the printed EDF rises where it holds the AVAR,
+    past the record's support (the part is known apart from the AVAR); the interval still
+    holds the truth in at least 60 % of the records at every τ, and no longer in 100 % where
+    the ramp dominates (docs/analysis.md)."""
     c = coverage(1, "steep", 200, seed=1)
     detail = list(zip(c.tau, c.share, c.fit_share, c.edf_mean, strict=True))
     assert all(c.share >= BAND[0]), detail
+    assert c.share.max() <= 0.85, detail
     assert c.fit_raised.max() >= 0.9, detail
     assert c.fit_share[-1] > 0.5, detail
     plain = coverage(1, "plain", 200, seed=1)
@@ -63,9 +65,9 @@ def test_the_exact_cross_term_covers_given_the_true_part(hours: int, mix: str) -
     """The printed rule (the noise part's EDF and the exact cross term, signal_edf.parts_edf)
     given the true deterministic part and the generator's spectrum, past the support for
     that part (the oracle): the same records' intervals hold the truth in 60–78 % at every
-    τ (measured 62.5–77 %), where the printed ones reach 84.5–100 %. What the fit would
-    print if it resolved the drift in the time domain (docs/analysis.md)."""
+    τ (measured 62.5–77 %). The printed ones, where the time domain resolves the drift
+    (analysis/drift.py), are never narrower than that allows (docs/analysis.md)."""
     c = coverage(hours, mix, 200, seed=1, detail=True)
     detail = list(zip(c.tau, c.share, c.share_known, c.signal, strict=True))
     assert all(BAND[0] <= k <= 0.78 for k in c.share_known), detail
-    assert c.share.max() > 0.80, detail  # (what is printed today over-covers)
+    assert all(c.share >= BAND[0]), detail
