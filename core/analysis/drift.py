@@ -21,8 +21,9 @@ and a slope tested against the noise it does find passed the 0.1 % level on 13 %
 with no drift, its z spread 2.4 times too wide; explain's likelihood, whose K grid was
 centred on the fit's K (or, with none, on N/T), could not reach the true walk either (12 of
 40 records past 2.58, z spread 2.6). With K profiled over a range reaching past what the
-AVAR allows, the same records give z spread 0.99–1.05 at 1 h, 12 h and 60 h (``python -m
-benchmarks coverage --drift-test``, docs/analysis.md).
+AVAR allows, the benchmark's records give z spread 1.02–1.09 at 1 h, 12 h and 60 h and
+0–3 % past the two-sided 1 % level, 200 records each (``python -m benchmarks coverage
+--drift-test``, docs/analysis.md).
 
 The profile is cheap: with C₀ = L Lᵀ the white and flicker covariance and M = min(t_i, t_j)
 the walk's, L⁻¹ M L⁻ᵀ = V Λ Vᵀ once, every K's covariance is diagonal in the rotated basis
@@ -52,6 +53,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DRIFT_BLOCKS",
     "LEVEL",
+    "MIN_BLOCKS",
     "BlockMeans",
     "DriftLikelihood",
     "block_noise_cov",
@@ -161,11 +163,10 @@ class DriftLikelihood:
     ``k_drift``, the K the likelihood picks beside it (``k_walk``: the K the walk alone
     wants; ``k_drift_hi`` the top of its Δ(−2 ln L) ≤ 1 range beside the slope, the most
     walk the time domain allows), ``slope_lo``/``slope_hi`` its 68 % profile-likelihood
-    interval (Δ(−2 ln L) ≤ 1,
-    K profiled at every slope: the walk's uncertainty is in it), ``slope_se`` its half-width;
-    ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one line per half over one
-    line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``); ``blocks`` used,
-    ``record_s`` they span."""
+    interval (Δ(−2 ln L) ≤ 1, K profiled at every slope: the walk's uncertainty is in it),
+    ``slope_se`` its half-width; ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of
+    one line per half over one line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``);
+    ``blocks`` used, ``record_s`` they span."""
 
     z: float
     slope: float
@@ -195,8 +196,9 @@ class DriftLikelihood:
 
     def passes(self, z_threshold: float) -> bool:
         """|z| at or past ``z_threshold`` (the slope's profile likelihood at zero that far
-        above its minimum), and not a step."""
-        return abs(self.z) >= z_threshold and not self.step_like
+        above its minimum), not a step, and K inside its grid (at the top, a larger walk
+        was not tried: no claim)."""
+        return abs(self.z) >= z_threshold and not self.step_like and not self.at_edge
 
 
 def two_sided_z(level: float) -> float:

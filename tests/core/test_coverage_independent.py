@@ -51,7 +51,7 @@ def test_a_resolved_ramp_narrows_the_interval_and_never_too_far() -> None:
     c = coverage(1, "steep", 200, seed=1)
     detail = list(zip(c.tau, c.share, c.fit_share, c.edf_mean, strict=True))
     assert all(c.share >= BAND[0]), detail
-    assert c.share.max() <= 0.85, detail
+    assert c.share.max() <= 0.90, detail  # (100 % before the drift test)
     assert c.fit_raised.max() >= 0.9, detail
     assert c.fit_share[-1] > 0.5, detail
     plain = coverage(1, "plain", 200, seed=1)
