@@ -141,3 +141,21 @@ def test_analyze_claims_no_drift_on_a_record_without_one():
     y, _ = record(mix, N_12H, np.random.default_rng(9))
     ch = _analyze(y, 1.0)
     assert not ch.fit.terms["rate_ramp"].present or ch.fit.terms["rate_ramp"].note is not None
+
+
+def test_a_parallel_analysis_reads_the_block_means_again_and_finds_the_same_drift(tmp_path):
+    """After a parallel pass (no block means carried) the channel is read again for them:
+    the same ramp and walk as one pass's."""
+    from avard.core.io.source import open_record
+
+    mix = mix_for("plain", N_12H, 1.0)
+    y, _ = record(mix, N_12H, np.random.default_rng(3))
+    y = y + 4 * mix_for("drift", N_12H, 1.0).drift * np.arange(N_12H)
+    path = tmp_path / "d.npz"
+    np.savez(path, accel=y[:, None], rate_hz=1.0, axes=np.array(["x"]))
+    one = analyze(open_record(path), AnalyzeOptions()).channels["x"].fit
+    par = analyze(open_record(path), AnalyzeOptions(workers=2)).channels["x"].fit
+    assert one.resolved_apart == par.resolved_apart == ("rate_ramp",)
+    for term in ("rate_ramp", "rate_random_walk"):
+        a, b = one.terms[term], par.terms[term]
+        assert a.value is not None and b.value == pytest.approx(a.value, rel=1e-9)
