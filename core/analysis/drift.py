@@ -281,11 +281,20 @@ class BlockMeans:
         a = np.asarray(a, dtype=float)
         if a.ndim == 1:
             a = a[:, None]
-        col = np.concatenate([self._rest, a]) if len(self._rest) else a
-        k = len(col) // self.block * self.block
+        b = self.block
+        if len(self._rest):  # complete the pending block first (no copy of the whole block)
+            head = min(b - len(self._rest), len(a))
+            self._rest = np.concatenate([self._rest, a[:head]])
+            a = a[head:]
+            if len(self._rest) < b:
+                return
+            self._current.append(self._rest.mean(axis=0, keepdims=True))
+            self._rest = self._rest[:0]
+        k = len(a) // b * b
         if k:
-            self._current.append(col[:k].reshape(-1, self.block, col.shape[1]).mean(axis=1))
-        self._rest = col[k:].copy()
+            self._current.append(a[:k].reshape(-1, b, a.shape[1]).mean(axis=1))
+        if k < len(a):
+            self._rest = a[k:].copy()
 
     def gap(self) -> None:
         seg = np.concatenate(self._current) if self._current else self._best[:0]

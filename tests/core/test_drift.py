@@ -99,6 +99,17 @@ def test_block_means_keep_the_longest_stretch_between_gaps():
     bm.gap()
     bm.update(np.zeros((4, 2)))
     assert bm.longest().shape == (3, 2)
+    # any cut of the stream into pieces gives the one-shot means
+    y = np.random.default_rng(0).normal(size=(10007, 2))
+    for size in (1, 7, 1000, 20000):
+        bm, i = dr.BlockMeans(2, size), 0
+        for step in (3, 500, 17, 4096, 1, 2000):
+            bm.update(y[i:i + step])
+            i += step
+        bm.update(y[i:])
+        n = len(y) // size * size
+        np.testing.assert_allclose(bm.longest(), y[:n].reshape(-1, size, 2).mean(axis=1),
+                                   rtol=1e-12)
 
 
 def _analyze(y: np.ndarray, rate: float, gap_at: int | None = None):
