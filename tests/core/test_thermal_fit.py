@@ -352,11 +352,11 @@ def test_the_lag_and_its_interval_are_one_estimator_the_vertex_of_1_over_z2():
 
 
 def test_a_negative_lag_records_interval_holds_the_true_lag(tmp_path):
-    """The benchmark's negative-lag record, seed 23003 (the logged DS18B20 120 s behind the
-    plate, the die 60 s: a true lag of −60 s): the reported lag −57.5 s with the interval
-    [−59.2, −55.8] missed the truth when the lag was a three-point vertex, its interval the
-    jackknife of another estimator, and the temperature 0.35 s early. Now one estimator
-    gives both and the interval holds −60 s."""
+    """The benchmark's negative-lag record, seed 23016 (the logged DS18B20 120 s behind the
+    plate, the die 60 s: a true lag of −60 s): its interval missed the truth when the lag
+    was a three-point vertex and its interval the jackknife of a window's parabola in z²
+    (−57.4 s [−59.3, −55.5] with the temperature aligned; the benchmark missed it before
+    too). Now one estimator gives both and the interval holds −60 s."""
     from avard.core.explain.engine import explain_file
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
@@ -365,7 +365,7 @@ def test_a_negative_lag_records_interval_holds_the_true_lag(tmp_path):
     from tests.support.weekend import save
 
     r = {w.name: w for w in rows()}["negative lag"]
-    ex = explain_file(open_record(str(save(23003, r.weekend, tmp_path / "w.npz"))),
+    ex = explain_file(open_record(str(save(23016, r.weekend, tmp_path / "w.npz"))),
                       ExplainOptions(heldout=False))
     (f,) = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
     lo, hi = f.intervals["lag_s"]
