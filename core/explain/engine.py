@@ -112,19 +112,29 @@ def _after(carry: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.flo
     return np.concatenate([carry, x]) if len(carry) else x
 
 
-def _reading_means(t: NDArray[np.float64], b: int) -> NDArray[np.float64]:
-    """The mean of the finite readings in each block of ``b`` rows of ``t`` (n, k), NaN where
-    a block holds none. A DS18B20 reads every 0.75 s, so nearly every value is NaN: the few
-    readings are summed into their blocks by ``bincount``, in row order as a sum over the
-    block adds them (the zeros a masked sum adds between them change no bit), instead of
-    five passes over every value."""
+def _reading_means(t: NDArray[np.float64], b: int
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(means, times): the mean of the finite readings in each block of ``b`` rows of ``t``
+    (n, k), and the mean row of those readings in the block, as a fraction of a block from
+    the block's centre (the acceleration's block mean is at the centre); NaN where a block
+    holds none. A DS18B20 reads every 0.75 s, so nearly every value is NaN: the few readings
+    are summed into their blocks by ``bincount``, in row order as a sum over the block adds
+    them (the zeros a masked sum adds between them change no bit), instead of five passes
+    over every value.
+
+    The times are what :meth:`SlowView.finish` places each mean at: a 10 Hz record read
+    every 8 rows holds its readings at rows 0 and 8 of a 16-row block, 0.35 s before the
+    acceleration's centre, and a mean taken as the block's own value read the temperature
+    0.35 s early (a +0.35 s bias on every lag)."""
     nb, k = len(t) // b, t.shape[1]
     r, c = np.nonzero(np.isfinite(t))
     where = (r // b) * k + c
     s = np.bincount(where, weights=t[r, c], minlength=nb * k).reshape(nb, k)
     cnt = np.bincount(where, minlength=nb * k).reshape(nb, k)
+    rows = np.bincount(where, weights=(r % b).astype(float), minlength=nb * k).reshape(nb, k)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(cnt > 0, s / cnt, np.nan)
+        return (np.where(cnt > 0, s / cnt, np.nan),
+                np.where(cnt > 0, (rows / cnt - 0.5 * (b - 1)) / b, np.nan))
 
 
 class SlowView:
@@ -135,6 +145,8 @@ class SlowView:
         self.b = int(b)
         self._acc: list[NDArray[np.float64]] = []
         self._tmp: list[NDArray[np.float64]] = []
+        #: per block, where its readings' mean sits (fraction of a block from its centre)
+        self._when: list[NDArray[np.float64]] = []
         self._carry_a = np.zeros((0, n_axes))
         self._carry_t = np.zeros((0, n_temps))
         self.n_temps = n_temps
@@ -150,7 +162,9 @@ class SlowView:
             t = (np.full((len(accel), self.n_temps), np.nan) if temp is None
                  else np.asarray(temp, dtype=float).reshape(len(accel), -1))
             t = _after(self._carry_t, t)
-            self._tmp.append(_reading_means(t[:nb * self.b], self.b))
+            means, when = _reading_means(t[:nb * self.b], self.b)
+            self._tmp.append(means)
+            self._when.append(when)
             self._carry_t = t[nb * self.b:].copy()
 
     def finish(self, holes: Sequence[Sequence[tuple[float, float]]] = (),
@@ -165,6 +179,9 @@ class SlowView:
             return acc, None
         tmp = np.concatenate(self._tmp)
         idx = np.arange(len(tmp))
+        # each block's readings' mean at the time of its readings, interpolated onto the
+        # block centres the acceleration's means sit at (``_reading_means``)
+        at = idx[:, None] + np.concatenate(self._when)
         for j, spans in enumerate(holes):
             for t0, t1 in spans:
                 tmp[max(0, math.floor(t0 * rate_b)):math.ceil(t1 * rate_b) + 1, j] = np.nan
@@ -173,7 +190,7 @@ class SlowView:
             if np.count_nonzero(ok) < 2:
                 tmp[:, j] = np.nan
             else:
-                tmp[:, j] = np.interp(idx, idx[ok], tmp[ok, j])
+                tmp[:, j] = np.interp(idx, at[ok, j], tmp[ok, j])
         return acc, tmp
 
 

@@ -878,22 +878,6 @@ def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
     return float(np.polyfit(x, c, 1)[0])
 
 
-def _peak(lags: list[float], z: NDArray) -> tuple[float, int]:
-    """The lag of the largest z (a parabola through it and its neighbours in z², its vertex
-    kept between them), and the index of the largest."""
-    i = int(np.argmax(z))
-    if 0 < i < len(lags) - 1:
-        x = np.asarray(lags[i - 1:i + 2], dtype=float)
-        f = np.asarray(z[i - 1:i + 2], dtype=float) ** 2
-        den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
-        a = (x[2] * (f[1] - f[0]) + x[1] * (f[0] - f[2]) + x[0] * (f[2] - f[1])) / den
-        b = (x[2] ** 2 * (f[0] - f[1]) + x[1] ** 2 * (f[2] - f[0])
-             + x[0] ** 2 * (f[1] - f[2])) / den
-        if a < 0:
-            return float(np.clip(-b / (2 * a), x[0], x[2])), i
-    return float(lags[i]), i
-
-
 #: Coarse-grid lags either side of an axis's best lag that its lag's jackknife spans: the
 #: leave-one-out best lags must have room to move (between the first neighbours only, a lag
 #: of 0 s known to ±20 s at the HVAC period had a window of −16…−10 s, and the picks piled at
@@ -942,43 +926,109 @@ def _with_lag_jackknife(per_axis: list[list[ScanPoint]], grid: NDArray, Ys: NDAr
     return out
 
 
-def _smooth_peak(lags: NDArray, z: NDArray) -> tuple[float, bool]:
-    """(lag, at an end): the vertex of the least-squares parabola through z² over ``lags``
-    kept inside them, or the largest z where the parabola opens upwards; "at an end" when it
-    sits on the first or last lag. Over the whole window, not three points: z² is flat
-    against the lag's uncertainty and jagged at the fine grid's step (the readings' rounding
-    smoothed a little more or less), and it jumps where a negative lag's shortest τ
-    (``min_tau_for``) drops an octave: a three-point vertex sat on a jag or a jump, every
-    leave-one-out lag on the same one, and the interval was 0.1 s wide."""
-    f = np.asarray(z, dtype=float) ** 2
-    x = np.asarray(lags, dtype=float)
-    if len(x) >= 3:
-        xm, xs = float(x.mean()), float(np.ptp(x)) or 1.0
-        a, b, _c = np.polyfit((x - xm) / xs, f, 2)
-        if a < 0:
-            v = xm - xs * b / (2 * a)
-            return float(np.clip(v, x[0], x[-1])), not x[0] < v < x[-1]
-    i = int(np.argmax(f))
-    return float(x[i]), i in (0, len(x) - 1)
+#: The lag estimator's kernel reaches from the largest z to the farther of the lags either
+#: side where z² has fallen to this fraction of its largest (``_kernel_width``): the
+#: profile's top, where 1/z² is a parabola in the lag. Wider, the quadratic reads the
+#: profile's flanks, which are not symmetric (a lag acts through its phase, atan(ωL)): on
+#: the typical-tempco records, whose z² is flat within 2 % over hundreds of seconds, a kernel
+#: to where z² halves put 3 of 40 lags beyond 20 % of the truth (1 of 40 at this width, as
+#: the three-point vertex).
+LAG_KERNEL_DROP = 0.98
+#: Times the kernel is re-centred on its own vertex.
+LAG_KERNEL_STEPS = 3
+
+
+def _lag_support(scan: list[ScanPoint]) -> list[ScanPoint]:
+    """The lags the lag estimator reads: those that carry the parts' z (the jackknife's
+    window, ``_with_lag_jackknife``), so the record and its leave-one-out parts are read on
+    the same lags; all of them when there are fewer than three (no jackknife)."""
+    sub = [p for p in scan if len(p.zg)]
+    return sub if len(sub) >= 3 else list(scan)
+
+
+def _kernel_width(x: NDArray, f: NDArray, k: int) -> float:
+    """The kernel's half-width: from ``x[k]`` (the least ``f`` = 1/z²) to the farther of the
+    nearest lags either side where ``f`` has risen to ``f[k]/LAG_KERNEL_DROP`` (the end of
+    ``x`` where it never does), at least the next lag either side."""
+    lim = f[k] / LAG_KERNEL_DROP
+    lo = np.flatnonzero(f[:k] >= lim)
+    hi = np.flatnonzero(f[k + 1:] >= lim)
+    dl = x[k] - (x[lo[-1]] if len(lo) else x[0])
+    dh = (x[k + 1 + hi[0]] if len(hi) else x[-1]) - x[k]
+    step = max(x[min(k + 1, len(x) - 1)] - x[k], x[k] - x[max(k - 1, 0)])
+    return float(max(dl, dh, step)) * (1.0 + 1e-9)
+
+
+def _lag_vertex(x: NDArray, z: NDArray, k: int, h: float) -> tuple[float, bool]:
+    """(lag, at an end): the vertex of the local quadratic of 1/z² over the lags ``x``, a
+    biweight kernel of half-width ``h`` centred at ``x[k]`` and re-centred on its own vertex
+    ``LAG_KERNEL_STEPS`` times; "at an end" when the vertex leaves ``x`` (kept on its end)
+    or the quadratic opens downwards (then the lag of the largest z).
+
+    1/z² is what the lag's profile likelihood moves with: a regression of y on the lagged
+    channel leaves the share 1/(1 + z²/ν) ≈ ν/z² of the axis's variance, −2 ln L = ν ln of
+    it, and a lag off by δ adds ∝ δ² to that share. It is a parabola round its least where
+    z² itself is a sharp peak (1/(a + bδ²)): a parabola in z² over the jackknife's window
+    (−95…−25 s round a −60 s lag) sat 10–20 s off the peak, and a three-point vertex sits on
+    the fine grid's jags (z² is jagged at the grid's step: the readings' rounding smoothed a
+    little more or less). The kernel weighs the points the data hold the lag by, smoothly,
+    so the same function of the data serves the record and each leave-one-out part."""
+    z = np.asarray(z, dtype=float)
+    f = 1.0 / np.maximum(z * z, 1e-300)
+    c = float(x[k])
+    i = int(np.argmax(z))
+    for _ in range(LAG_KERNEL_STEPS):
+        u = (x - c) / h
+        w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+        on = w > 0
+        if np.count_nonzero(on) < 3:
+            break
+        xs, fs, ws = x[on], f[on], np.sqrt(w[on])
+        xm, sc = float(np.mean(xs)), float(np.ptp(xs)) or 1.0
+        t = (xs - xm) / sc
+        # scaled by the least f: 1/z² spans 1e-5…1e-2 between records
+        A = np.column_stack([t * t, t, np.ones_like(t)]) * ws[:, None]
+        qa, qb, _qc = np.linalg.lstsq(A, fs / f[i] * ws, rcond=None)[0]
+        if not qa > 0:
+            return float(x[i]), i in (0, len(x) - 1)
+        c = xm - sc * qb / (2.0 * qa)
+        if not x[0] < c < x[-1]:
+            return float(np.clip(c, x[0], x[-1])), True
+    return float(c), False
+
+
+def _lag_estimate(scan: list[ScanPoint]) -> tuple[float, NDArray[np.float64], int, float]:
+    """(lag, the support's lags, the index there of the largest z, kernel half-width) of a
+    scan: ``_lag_vertex`` on ``_lag_support``."""
+    sub = _lag_support(scan)
+    x = np.array([p.lag for p in sub], dtype=float)
+    z = np.array([p.z for p in sub], dtype=float)
+    k = int(np.argmax(z))
+    h = _kernel_width(x, 1.0 / np.maximum(z * z, 1e-300), k)
+    return _lag_vertex(x, z, k, h)[0], x, k, h
 
 
 def best_lag(scan: list[ScanPoint], k: int) -> float:
-    """The axis's lag from its scan (``k`` the lag of the largest z): the vertex of the
-    parabola through z² at the largest z and its neighbours (``_peak``), the centre of its
-    interval (``lag_interval``). Not the grid point: reported at the fine grid's points
-    (≈ 1 s steps at −60 s, as wide as the lag's spread there) the negative-lag records'
-    lags sat up to half a step from the centre of their ±2 s intervals."""
-    return _peak([p.lag for p in scan], np.array([p.z for p in scan]))[0]
+    """The axis's lag from its scan: the vertex of the local quadratic of 1/z² round the
+    largest z (``_lag_vertex``), on the lags its jackknife reads, the same estimator each
+    leave-one-out part's lag is (``lag_interval``). Not the grid point (the fine grid's
+    step, ≈ 1 s at −60 s, is as wide as the lag's spread there), and not a different
+    estimator from the interval's: a three-point vertex reported beside the jackknife of a
+    window's parabola sat about the interval's half-width from its centre, and the
+    negative-lag records' intervals held the truth in 50 %. ``k`` (the grid index of the
+    largest z) is not used: the support's own largest is."""
+    return _lag_estimate(scan)[0]
 
 
 def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, bool]:
-    """(low, high, open low, open high): the lag's 68 % interval, the best lag ± t₀.₈₄(G−1)
-    times its delete-a-group jackknife standard error (the best lag of the record with each
-    of its ``JACKKNIFE_GROUPS`` parts left out, ``_smooth_peak`` of the parts' z over the
-    window: se² = (G−1)/G·Σ(L_(−g) − mean)², a t quantile for its G − 1 degrees of freedom),
-    over the lags that carry the parts' z (``ScanPoint.zg``, ``_with_lag_jackknife``; none:
-    the estimate alone). A leave-one-out lag on the window's end carries that end of the
-    interval to the window's end at least; open when that is the first or last lag tried.
+    """(low, high, open low, open high): the lag's 68 % interval, the best lag (``best_lag``)
+    ± t₀.₈₄(G−1) times its delete-a-group jackknife standard error: the same estimator on
+    the z of the record with each of its ``JACKKNIFE_GROUPS`` parts left out (``ScanPoint.
+    zg``, ``_with_lag_jackknife``), the same lags and kernel width, se² = (G−1)/G·Σ(L_(−g) −
+    mean)², a t quantile for its G − 1 degrees of freedom; never narrower than half the grid's
+    step either side of the lag (the lags tried resolve no finer); without the parts' z the
+    estimate alone. A leave-one-out lag on the support's end carries that end of the
+    interval to the support's end at least; open when that is the first or last lag tried.
 
     Not the profile of the analytic z² over the lags: the regressor carries noise the axis
     does not (the readings' rounding, the logger's own noise), and smoothing it away by a
@@ -987,23 +1037,29 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     intervals of 32 records held the true lag in none. The jackknife measures how far the
     best lag moves with the data, whatever moves it."""
     lags = [p.lag for p in scan]
-    best = best_lag(scan, k)
+    best, sl, kk, h = _lag_estimate(scan)
     sub = [p for p in scan if len(p.zg)]
     if len(sub) < 3:
         return best, best, k == 0, k == len(scan) - 1
-    sl = np.array([p.lag for p in sub])
     zg = np.array([p.zg for p in sub])  # (lags, G)
     G = zg.shape[1]
-    picks = [_smooth_peak(sl, zg[:, g]) for g in range(G)]
+    picks = [_lag_vertex(sl, zg[:, g], kk, h) for g in range(G)]
     lg = np.array([p[0] for p in picks])
     se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
     se *= t_two_sided(0.32, G - 1)  # t₀.₈₄ of the jackknife's G − 1 dof
-    # a leave-one-out lag on the window's end says the lag may be beyond it: that end of the
-    # interval reaches the window's end at least, and is open when that is the search's end
+    # the grid's resolution: half way to the lags tried either side of the estimate
+    i = int(np.searchsorted(lags, best))
+    below = best - lags[i - 1] if i > 0 else 0.0
+    above = lags[i] - best if i < len(lags) and lags[i] > best else (
+        lags[i + 1] - best if i + 1 < len(lags) else 0.0)
+    lo, hi = best - max(se, 0.5 * below), best + max(se, 0.5 * above)
+    # a leave-one-out lag on the support's end says the lag may be beyond it: that end of
+    # the interval reaches the support's end at least, and is open when that is the
+    # search's end
     at_lo = any(p[1] and p[0] <= sl[0] for p in picks)
     at_hi = any(p[1] and p[0] >= sl[-1] for p in picks)
-    lo = min(best - se, float(sl[0])) if at_lo else best - se
-    hi = max(best + se, float(sl[-1])) if at_hi else best + se
+    lo = min(lo, float(sl[0])) if at_lo else lo
+    hi = max(hi, float(sl[-1])) if at_hi else hi
     open_lo = k == 0 or (at_lo and sl[0] <= lags[0])
     open_hi = k == len(scan) - 1 or (at_hi and sl[-1] >= lags[-1])
     return lo, hi, open_lo, open_hi

@@ -49,7 +49,9 @@ frequency two paths and a dT/dt term cannot be told apart, and the record says s
 **Intervals (68 %, ± ``T68`` jackknife standard errors).** Coefficients: the larger of the
 delete-a-part jackknife over the ``PARTS`` parts with θ fixed and with θ re-chosen (red
 noise breaks the analytic ones, as in ``thermal_fit``), widened to the profile over θ (the
-coefficients at every grid point within ``PROFILE_DELTA`` of the best deviance). θ: the
+coefficients at every grid point within ``PROFILE_DELTA`` = 1 of the best deviance, times
+the Birge factor where the best fit's deviance exceeds its dof: the 68 % profile on one
+parameter; the held-out margin chooses the model only). θ: the
 jackknife of θ re-chosen with each part left out, each best grid point refined by a
 parabola in ln L through its neighbours, widened to the same profile and to half way to the
 neighbouring grid points at least. A coefficient that changes sign over the profile: the
@@ -100,8 +102,12 @@ T68 = t_two_sided(0.32, PARTS - 1)
 #: whose truth is one lag the extensions' held-out Δ stayed above it).
 HELDOUT_MARGIN = 6.0
 #: Δ(−2 ln L) on the whole record within which grid points of θ count as fits as good as
-#: the best for the intervals (the profile over θ): the held-out choice's own margin.
-PROFILE_DELTA = HELDOUT_MARGIN
+#: the best for the 68 % intervals (the profile over θ): χ²₁'s 68.27 % point, the profile
+#: interval on one parameter, times the best fit's Birge factor where its deviance exceeds
+#: its degrees of freedom (``profile_delta``). Not the held-out choice's margin (6): as the
+#: intervals' Δ it let grid points 2.4 σ from the best into every 68 % interval (two paths
+#: held the truth in 33 of 34, dT/dt 15 of 16).
+PROFILE_DELTA = 1.0
 #: and further, for a candidate whose θ sits at the end of its grid (open): never chosen, its
 #: θ is a bound the search did not close (a margin of 6 let grid-end lags of opposite sign fit
 #: a typical-tempco record's slow wander)
@@ -334,6 +340,8 @@ class PathScore:
     #: False: a coefficient changes sign over the θ the data cannot tell from the best, so
     #: the parameters are model-dependent and carry no interval
     resolved: bool = True
+    #: the Δ(−2 ln L) of the profile over θ its intervals were widened to (``profile_delta``)
+    profile_delta: float = PROFILE_DELTA
 
 
 @dataclass
@@ -466,6 +474,16 @@ def _jk_se(est: NDArray) -> NDArray[np.float64]:
     G = len(est)
     return np.asarray(np.sqrt((G - 1) / G * np.sum((est - est.mean(axis=0)) ** 2, axis=0)),
                       dtype=float)
+
+
+def profile_delta(dev: float, nu: NDArray, n_params: int) -> float:
+    """The Δ(−2 ln L) of a 68 % profile interval on one parameter for a best fit of deviance
+    ``dev`` on differences ``nu`` (ν_k per τ) with ``n_params`` fitted: ``PROFILE_DELTA``
+    times the Birge factor dev/dof where it exceeds 1 (the residual scatters more than the
+    weights say: the deviance's scale is that much too small), never less."""
+    dof = float(np.sum(nu)) - n_params
+    birge = dev / dof if dof > 0 else math.inf
+    return PROFILE_DELTA * max(1.0, birge)
 
 
 def _grid_cell(ts: list[Trial], i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -619,10 +637,12 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         se_iv = np.maximum(se[:n], _jk_se(np.array(jr))) * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
-        # the profile over θ: every grid point the held-out choice could not tell from the
-        # best (deviance within HELDOUT_MARGIN) is as good a fit, so its coefficients and θ
-        # belong in the intervals; a coefficient whose sign flips across them is not resolved
-        flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + PROFILE_DELTA]
+        # the profile over θ: every grid point within the 68 % profile Δ of the best (one
+        # parameter's, scaled by the Birge factor) is as good a fit at that level, so its
+        # coefficients and θ belong in the intervals; a coefficient whose sign flips across
+        # them is not resolved (the held-out margin chooses the model, not the interval)
+        delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]))
+        flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + delta]
         pb = np.array([fits[j][:n] for j in flat])
         pt = np.array([ts[j].theta for j in flat])
         open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else ())
@@ -645,7 +665,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             kind, held, theta, fits[i][:n], se_iv,
             tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
             z_extra, open_end, ts[i].cols, tuple(float(x) for x in b_lo),
-            tuple(float(x) for x in b_hi), resolved)
+            tuple(float(x) for x in b_hi), resolved, delta)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
     none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
@@ -703,7 +723,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                      "not bound")
     elif not best.resolved:
         notes.append(f"parameters not resolved (model-dependent, no interval): a coefficient "
-                     f"changes sign over the θ within Δ(−2 ln L) {PROFILE_DELTA:g} of the "
+                     f"changes sign over the θ within Δ(−2 ln L) {best.profile_delta:.3g} of the "
                      "best (the extra term trades with the lag at one drive frequency)")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
                    rounding=rounding_dev, alternatives=alternatives)

@@ -27,7 +27,7 @@ def test_reading_means_equal_the_masked_mean_bit_for_bit() -> None:
                                       ) * 0.0625
         t[100:3000, 1] = np.nan  # a dropout: blocks without a reading
         t[7, 0], t[9, 2] = np.inf, -np.inf  # never a reading
-        got = _reading_means(t[:len(t) // b * b], b)
+        got, _when = _reading_means(t[:len(t) // b * b], b)
         np.testing.assert_array_equal(got, _masked_means(t, b))
         assert np.isnan(got[3000 // b - 1, 1])
 
@@ -48,3 +48,27 @@ def test_slow_view_of_blocks_that_leave_a_carry() -> None:
     nb = 10_000 // 64
     np.testing.assert_allclose(y, a[:nb * 64].reshape(nb, 64, 3).mean(axis=1), rtol=1e-12)
     assert temp is not None and np.all(np.isfinite(temp))
+
+
+def test_temperature_means_sit_at_the_acceleration_block_centres() -> None:
+    """A DS18B20 read every 8 rows of a 10 Hz record holds its readings at rows 0 and 8 of
+    each 16-row block, 3.5 rows (0.35 s) before the block's centre, where the acceleration's
+    block mean sits. Each block's temperature is the readings' value at that centre: a
+    linear ramp read so comes out at the centre's time exactly (the readings' mean taken
+    as the block's own value was the ramp 0.35 s early, a +0.35 s bias on every lag)."""
+    rate, b, every, n = 10.0, 16, 8, 16 * 400
+    t_s = np.arange(n) / rate
+    temp = np.full((n, 2), np.nan)
+    temp[::every, 0] = 20.0 + 0.01 * t_s[::every]  # 0.01 K/s
+    temp[3::every, 1] = 20.0 + 0.01 * t_s[3::every]  # another phase: rows 3 and 11
+    view = SlowView(b, 1, 2)
+    view.update(np.zeros((n, 1)), temp)
+    _y, got = view.finish()
+    assert got is not None
+    centre = (np.arange(n // b) * b + 0.5 * (b - 1)) / rate
+    inner = slice(1, -1)  # the ends are held at the first and last readings
+    np.testing.assert_allclose(got[inner, 0], 20.0 + 0.01 * centre[inner], atol=1e-9)
+    np.testing.assert_allclose(got[inner, 1], 20.0 + 0.01 * centre[inner], atol=1e-9)
+    _m, when = _reading_means(temp, b)
+    np.testing.assert_allclose(when[:, 0], (4.0 - 7.5) / b)
+    np.testing.assert_allclose(when[:, 1], (7.0 - 7.5) / b)
