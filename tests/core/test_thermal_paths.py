@@ -245,16 +245,18 @@ def test_two_paths_are_told_from_a_dt_term_by_the_wander_and_a_dt_term_is_named_
     # with intervals that hold the truth.
     assert pf.kind == "two_path" and pf.alternatives == ()
     assert not pf.model_dependent
-    _p, iv = pf.params()
+    p, iv = pf.params()
     truth = {"coefficient": C, "coefficient_2": -4 * C, "lag_2_s": 900.0}
     for k, v in truth.items():
         assert iv[k][0] <= v <= iv[k][1], k
-    # the first path's lag (truth 0) is estimated at 95 s on this record, its interval
-    # [15, 180] s: the profile over θ at the 68 % Δ = 1 (lagint23; the held-out margin of 6
-    # reached the grid point 0 and held the truth in 33 of 34 of the benchmark's two-path
-    # intervals). A 68 % interval misses on a third of records; the benchmark measures the
-    # coverage, this record holds the lag within the benchmark's 30 s of its interval
-    assert iv["lag_s"][0] - 30.0 <= 0.0 <= iv["lag_s"][1]
+    # the first path's lag (truth 0) is estimated at 95 s on this record, its 68 % interval
+    # [15, 180] s: the profile over θ at Δ = 1 (the held-out margin of 6 reached the grid
+    # point 0 and held the truth in 33 of 34 of the benchmark's two-path intervals). A 68 %
+    # interval misses on a third of records (the benchmark measures that coverage); what
+    # this record must hold is its 95 % interval, each side twice the 68 % one's
+    lag = p["lag_s"]
+    lo, hi = iv["lag_s"]
+    assert lag - 2 * (lag - lo) <= 0.0 <= lag + 2 * (hi - lag)
     assert "cannot tell them apart" not in pf.summary()
     # where the two cannot be told apart (the dT/dt record of the test above), both are
     # named on the finding too, its parameters model-dependent and without intervals
