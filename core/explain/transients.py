@@ -50,6 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
+from avard.core.model.triangular import LowerSolver
 from numpy.typing import NDArray
 
 __all__ = ["MAX_EFFECTS", "NoiseOf", "find_compound", "refine_compound", "robust_noise",
@@ -540,17 +541,12 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
 # drift against a random walk
 
 
-def _neg2_loglik(yb: NDArray, L: NDArray, cols: list[NDArray]
-                 ) -> tuple[float, NDArray, NDArray]:
-    """(−2 ln L, GLS coefficients, their covariance) of block means ``yb`` on ``cols`` with
-    the noise covariance whose Cholesky factor is ``L`` (constants dropped)."""
-    from scipy.linalg import solve_triangular
-
-    a = solve_triangular(L, np.column_stack(cols), lower=True)
-    wy = solve_triangular(L, yb, lower=True)
+def _neg2_loglik(wy: NDArray, a: NDArray, logdet: float) -> tuple[float, NDArray, NDArray]:
+    """(−2 ln L, GLS coefficients, their covariance) of block means on columns, both
+    whitened (``wy``, ``a``) by the noise covariance's Cholesky factor, ``logdet`` the
+    covariance's ln det (constants dropped)."""
     coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
     r = wy - a @ coef
-    logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
     return logdet + float(r @ r), coef, np.linalg.pinv(a.T @ a)
 
 
@@ -559,12 +555,10 @@ def _slope_fit(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float],
     """(slope, its standard error) of block means ``yb`` on ``cols`` + the centred time by
     GLS with the noise N, B, K of ``noise``, the error scaled by √(Birge ratio) when the
     whitened residual's χ²/dof exceeds 1 (a noise model the data do not follow widens it)."""
-    from scipy.linalg import solve_triangular
-
     c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
-    L = np.linalg.cholesky(c)
-    a = solve_triangular(L, np.column_stack([*cols, t - t.mean()]), lower=True)
-    wy = solve_triangular(L, yb, lower=True)
+    L = LowerSolver(np.linalg.cholesky(c))
+    a = L.solve(np.column_stack([*cols, t - t.mean()]))
+    wy = L.solve(yb)
     coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
     r = wy - a @ coef
     s2 = max(1.0, float(r @ r) / max(1, len(r) - a.shape[1]))
@@ -604,11 +598,15 @@ def test_drift(y: NDArray, rate_hz: float, noise: dict[str, float],
     base = [np.ones_like(t)] + [_column(c.cause, c.params, t, dt) for c in transients]
     tc = t - t.mean()
     try:
-        # one factor per K serves the fits with and without the drift
-        factors = [np.linalg.cholesky(cz._noise_cov(t, dt, n_w, noise.get("B", 0.0), float(k)))
-                   for k in ks]
-        h0 = [_neg2_loglik(yb, L, base)[0] for L in factors]
-        h1 = [_neg2_loglik(yb, L, [*base, tc]) for L in factors]
+        # one factor per K whitens the data and the columns of the fits with and without
+        # the drift
+        h0, h1 = [], []
+        for k in ks:
+            L = np.linalg.cholesky(cz._noise_cov(t, dt, n_w, noise.get("B", 0.0), float(k)))
+            w = LowerSolver(L).solve(np.column_stack([yb, *base, tc]))
+            logdet = 2.0 * float(np.sum(np.log(np.diag(L))))
+            h0.append(_neg2_loglik(w[:, 0], w[:, 1:-1], logdet)[0])
+            h1.append(_neg2_loglik(w[:, 0], w[:, 1:], logdet))
     except np.linalg.LinAlgError:
         return cz.Candidate("drift", False, evidence="drift test: the noise covariance would "
                             "not factor")
