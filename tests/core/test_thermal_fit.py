@@ -3,6 +3,7 @@ computation."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -208,6 +209,33 @@ def test_sums_by_part_add_up_to_the_records_at_every_octave():
     assert sum(p.n[long] > 0 for p in parts) >= 3
     # a part all inside the hole holds no difference's middle at the short octaves
     assert parts[2].n[0] == 0
+
+
+def test_a_lag_two_refinements_reach_up_to_rounding_is_scanned_once():
+    """Two axes whose best lags are neighbours on the coarse grid refine overlapping ranges:
+    their geometric steps meet at the same lags up to rounding (on most neighbouring pairs
+    of a 12 h record's grid). The fine lags scanned hold each lag once, none the same as a
+    lag already scanned, and lose none that is new."""
+    from avard.core.explain.thermal_fit import SAME_LAG_REL, _distinct, _lag_grid, _refine
+
+    grid = [float(v) for v in _lag_grid(43_200.0, 0.48789062499999997)]
+    twice = 0
+    for k in range(1, len(grid) - 2):
+        fine = set(_refine(grid, grid[k], 13)) | set(_refine(grid, grid[k + 1], 13))
+        new = _distinct(fine, set(grid))
+        assert new == sorted(new)
+        have = np.array(sorted([*grid, *new]))
+        gaps = np.abs(np.diff(have)) / np.maximum(np.abs(have[1:]), np.abs(have[:-1]))
+        assert np.all(gaps > SAME_LAG_REL)
+        # every candidate is scanned or the same as one that is
+        for v in fine:
+            assert np.min(np.abs(have - v)) <= SAME_LAG_REL * max(abs(v), 1.0)
+        raw = sorted(fine - set(grid))
+        twice += any(abs(a - b) <= SAME_LAG_REL * max(abs(a), abs(b))
+                     for a, b in itertools.pairwise(raw))
+    assert twice >= 10  # the case is real on this grid (28 of 38 pairs)
+    assert _distinct({2002.8092465883287, 1000.0, 3000.0}, {2002.8092465883267, 3000.0}) \
+        == [1000.0]
 
 
 @pytest.mark.parametrize("lag_s", [-60.0, 4.0, 300.0, 20_000.0])
