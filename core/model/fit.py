@@ -889,6 +889,7 @@ def fit_noise(
     added_cov: ArrayLike | None = None,
     check_filter: bool = True,
     upper_limits: bool = True,
+    long_tau_notes: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -916,6 +917,9 @@ def fit_noise(
     ``upper_limits`` False: the absent terms' upper limits are not computed (their
     ``upper`` None; every other field the same), for a caller that reads only the
     likelihood and the extra components (the Gauss–Markov scan's profile fits).
+    ``long_tau_notes`` False: whether the present long-τ terms rest on the longest τ alone
+    (a fit without it) or are refuted by the τ beyond the fit is not checked (their
+    ``note`` stays None; every number the same), for the same callers.
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -987,7 +991,7 @@ def fit_noise(
                                                     upper_limits)
     # kept in the model (the curve needs them), but flagged: a display says "not yet
     # resolved" instead of an interval and a time to target
-    unresolved = [a for a in active if labels[a] in LONG_TAU_TERMS
+    unresolved = [a for a in active if long_tau_notes and labels[a] in LONG_TAU_TERMS
                   and _rests_on_longest(p, idx, active, a, z_present**2, ramp, walk)]
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
@@ -1021,8 +1025,9 @@ def fit_noise(
                         1.0)
         cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    if active and _refuted_beyond(result, keep[idx[-1]], comps, fitted, theta, fixed,
-                                  theta_fixed, active, cov, rate, z_present, min_averages):
+    if long_tau_notes and active and _refuted_beyond(
+            result, keep[idx[-1]], comps, fitted, theta, fixed, theta_fixed, active, cov,
+            rate, z_present, min_averages):
         unresolved += [a for a in active if labels[a] in LONG_TAU_TERMS and a not in unresolved]
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
@@ -1096,7 +1101,8 @@ def fit_noise(
                       z_present=z_present, min_edf=min_edf, min_averages=min_averages,
                       drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
                       rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
-                      added_cov=added_cov, upper_limits=upper_limits)
+                      added_cov=added_cov, upper_limits=upper_limits,
+                      long_tau_notes=long_tau_notes)
     unbent = plain.tau_min_s <= float(tau[keep[0]])
     better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
     return plain if unbent and better else fit
