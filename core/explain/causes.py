@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from avard.core.model.triangular import LowerSolver
 from avard.core.sim.thermal import DS18B20_STEP_C
 from numpy.typing import NDArray
 
@@ -508,8 +509,6 @@ class _Gls:
 
     def __init__(self, y: NDArray, rate_hz: float, noise: dict[str, float],
                  max_blocks: int) -> None:
-        from scipy.linalg import solve_triangular
-
         b = max(1, len(y) // max_blocks)
         self.yb = block_means(y, b)
         self.dt = b / rate_hz
@@ -522,15 +521,14 @@ class _Gls:
         self._sd = np.sqrt(diag) if not np.any(c - np.diag(diag)) else None
         if self._sd is None:
             # LinAlgError: the caller keeps the detector's values
-            self._L = np.linalg.cholesky(c)
-        self._solve = solve_triangular
+            self._white = LowerSolver(np.linalg.cholesky(c))
         self.wy = self.white(self.yb)
         self.wbase = self.white(np.column_stack([np.ones_like(self.t), self.t]))
 
     def white(self, cols: NDArray) -> NDArray:
         if self._sd is not None:
             return np.asarray(cols / (self._sd if cols.ndim == 1 else self._sd[:, None]))
-        return np.asarray(self._solve(self._L, cols, lower=True))
+        return self._white.solve(cols)
 
     def chi2(self, cols: list[NDArray]) -> tuple[float, NDArray, NDArray]:
         """(χ², coefficients, (AᵀA)⁻¹) of the whitened data on [1, t] + ``cols`` (whitened)."""

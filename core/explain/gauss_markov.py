@@ -89,6 +89,11 @@ T_MARGIN = 4.0
 T_MARGIN_HI = 16.0
 
 
+#: ``fit_noise`` options of the scan's profile fits: every noise term free (only θ ≥ 0), and
+#: nothing computed that the scan does not read (upper limits, long-τ notes).
+_PROFILE: dict[str, Any] = {"z_present": 0.0, "upper_limits": False, "long_tau_notes": False}
+
+
 def _nll(f: NoiseFit) -> float:
     return f.chi2_dof * f.dof + f.log_det_cov
 
@@ -110,8 +115,8 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
         if (T, free) not in fits:
             comp = {"cause": "gauss_markov", "params": {"T": float(T)}}
             # the profile fits are read for −2 ln L and the component alone: no upper
-            # limits of the absent noise terms (the same numbers otherwise)
-            opts = {**kw, "z_present": 0.0, "upper_limits": False} if free else kw
+            # limits of the absent noise terms and no long-τ notes (the same numbers)
+            opts = {**kw, **_PROFILE} if free else kw
             try:
                 f: NoiseFit | None = fit_noise(res, filter_corner_hz=corner,
                                                extra=[*extra, comp], **opts)
@@ -161,8 +166,7 @@ def scan_gauss_markov(res: Any, fit0: NoiseFit, corner: Any, extra: Sequence[dic
     # 4.5–5.2 on records with a transient removed, where √Δ(−2 ln L) stayed at 1.7–3.8
     rise = max(1.0, free.chi2_dof)
     try:
-        none = fit_noise(res, filter_corner_hz=corner, extra=list(extra),
-                         **{**kw, "z_present": 0.0, "upper_limits": False})
+        none = fit_noise(res, filter_corner_hz=corner, extra=list(extra), **{**kw, **_PROFILE})
         z = math.sqrt(max(_nll(none) - _nll(free), 0.0) / rise)
     except FitError:
         z = 0.0

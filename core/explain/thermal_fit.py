@@ -45,6 +45,7 @@ from avard.core.allan.deviations import (
     DEFAULT_OVERLAP,
     NORM,
     DifferenceSums,
+    gram,
     grid_sums_by_part,
     segment_phase,
 )
@@ -310,6 +311,121 @@ def octave_sums_by_part(X: NDArray, edges: NDArray, keep: NDArray[np.bool_] | No
                        np.asarray([x.n for x in sg], dtype=np.int64),
                        np.asarray([x.s2 for x in sg], dtype=float).reshape(
                            len(ms), X.shape[1], X.shape[1])) for sg in sums]
+
+
+@dataclass(frozen=True)
+class AxesDifferences:
+    """The axes' part of the lag scan's difference sums, the same for every trial lag: per
+    octave (``ms``, stride ``st``, ``sp`` = m/st) the second differences ``d`` (n_k, C) of
+    the centred axes ``centred`` (M, C), each part's (``edges``) Σ D Dᵀ ``gram`` (G, C, C)
+    and its range of differences ``cuts`` (G + 1,), as ``octave_sums_by_part`` assigns them
+    (:func:`lag_octave_sums`)."""
+
+    centred: NDArray[np.float64]
+    ms: list[int]
+    st: list[int]
+    sp: list[int]
+    d: list[NDArray[np.float64]]
+    cuts: list[NDArray[np.int64]]
+    gram: list[NDArray[np.float64]]
+
+
+def axes_differences(Y: NDArray, edges: NDArray, levels: int = 40,
+                     overlap: int = DEFAULT_OVERLAP) -> AxesDifferences:
+    """The axes' second differences at every octave of ``Y`` (M, C), for the parts
+    [edges[g], edges[g+1]) (``[0, M]``: the whole record), once for all trial lags."""
+    Yc = np.asarray(Y, dtype=float)
+    Yc = Yc - Yc.mean(axis=0)
+    M = len(Yc)
+    ms = [1 << k for k in range(levels) if 2 * (1 << k) <= M]
+    p = segment_phase(Yc, False)
+    sts, sps, ds, cuts, grams = [], [], [], [], []
+    e64 = np.asarray(edges, dtype=np.int64)
+    for m in ms:
+        st = 1 if m <= overlap else m // overlap
+        q = p[::st] if st > 1 else p
+        sp = m // st
+        n_d = len(q) - 2 * sp
+        e = q[sp:] - q[:-sp]
+        d = np.ascontiguousarray(e[sp:] - e[:-sp])
+        cut = np.clip(-((m - e64) // st), 0, n_d)
+        sts.append(st)
+        sps.append(sp)
+        ds.append(d)
+        cuts.append(cut)
+        grams.append(np.array([gram(d[int(cut[g]):int(cut[g + 1])])
+                               for g in range(len(cut) - 1)]))
+    return AxesDifferences(Yc, ms, sts, sps, ds, cuts, grams)
+
+
+def lag_octave_sums(axes: AxesDifferences, u: NDArray, lag_s: float, rate_hz: float
+                    ) -> list[OctaveSums]:
+    """``octave_sums_by_part(without_start(column_stack([Y, u]), lag_s, rate_hz), edges)``
+    (no holes) from the axes' differences computed once (``axes_differences(Y, edges)``):
+    the lag scan's sums with only the lagged temperature ``u`` differenced per lag.
+
+    ``without_start`` takes from every column the mean and its multiple w of the start-up
+    shape e^(−t/τ_L) (ẽ: e on its first n_e rows, 0 after); second differences drop the
+    mean, so an axis's differences are D(Y) − D(ẽ)·w_Y, and its sums Σ D Dᵀ follow from the
+    axes' own (``axes.gram``) by D(ẽ)'s products on its support (the first n_e rows): the
+    same numbers as the general path to rounding (a test holds them together), at a quarter
+    of its work for three axes. The general path stays for a record with holes (their
+    settling changes the kept runs with the lag)."""
+    C = axes.centred.shape[1]
+    M = len(axes.centred)
+    uc = without_start(np.asarray(u, dtype=float)[:, None], lag_s, rate_hz)[:, 0]
+    pu = segment_phase(uc[:, None], False)[:, 0]
+    # the start-up shape's phase and each axis's share of it (w_Y), as without_start has it
+    w = np.zeros(C)
+    pe: NDArray[np.float64] | None = None
+    n_e = 0
+    if lag_s != 0:
+        n_e = min(M, math.ceil(37.0 * abs(lag_s) * rate_hz) + 1)
+        e = np.exp(-np.arange(n_e) / (rate_hz * abs(lag_s)))
+        mean_e = float(e.sum()) / M
+        vv = float(np.einsum("i,i->", e, e)) - M * mean_e**2
+        if vv > 0:
+            w = (e @ axes.centred[:n_e]) / vv
+            pe = np.empty(M + 1)
+            pe[0] = 0.0
+            np.cumsum(e, out=pe[1:n_e + 1])
+            pe[n_e + 1:] = pe[n_e]
+    G = len(axes.cuts[0]) - 1 if axes.cuts else 0
+    n = np.zeros((G, len(axes.ms)), dtype=np.int64)
+    s2 = np.zeros((G, len(axes.ms), C + 1, C + 1))
+    for k in range(len(axes.ms)):
+        st, sp, dy, cut = axes.st[k], axes.sp[k], axes.d[k], axes.cuts[k]
+        q = pu[::st] if st > 1 else pu
+        eu = q[sp:] - q[:-sp]
+        du = eu[sp:] - eu[:-sp]
+        de: NDArray[np.float64] | None = None
+        if pe is not None:
+            # D(ẽ) is 0 (to the bit: its phase is constant there) from the first difference
+            # that starts at or after n_e on
+            ns = min(len(du), -(-n_e // st))
+            qe = (pe[::st] if st > 1 else pe)[:ns + 2 * sp]
+            ee = qe[sp:] - qe[:-sp]
+            de = ee[sp:] - ee[:-sp]
+        for g in range(G):
+            j0, j1 = int(cut[g]), int(cut[g + 1])
+            if j1 <= j0:
+                continue
+            yy = axes.gram[k][g].copy()
+            yu = dy[j0:j1].T @ du[j0:j1]
+            uu = float(du[j0:j1] @ du[j0:j1])
+            if de is not None and j0 < len(de):
+                s1 = min(j1, len(de))
+                a = dy[j0:s1].T @ de[j0:s1]
+                e2 = float(de[j0:s1] @ de[j0:s1])
+                yy += e2 * np.outer(w, w) - np.outer(a, w) - np.outer(w, a)
+                yy = 0.5 * (yy + yy.T)
+                yu = yu - w * float(de[j0:s1] @ du[j0:s1])
+            n[g, k] = j1 - j0
+            s2[g, k, :C, :C] = yy
+            s2[g, k, :C, C] = s2[g, k, C, :C] = yu
+            s2[g, k, C, C] = uu
+    ms = np.asarray(axes.ms, dtype=np.int64)
+    return [OctaveSums(ms, n[g], s2[g]) for g in range(G)]
 
 
 @dataclass(frozen=True)
@@ -671,14 +787,22 @@ def _scan(Y: NDArray, T: NDArray, lags: Any, rate_hz: float,
     n_ref = np.asarray(ref.n, dtype=float)
     edges = np.linspace(0, len(Y), JACKKNIFE_GROUPS + 1).astype(int)
     out: list[list[ScanPoint]] = [[] for _ in range(C)]
+    # without holes the axes' differences are the same at every lag: taken once
+    axes = None if holes else axes_differences(
+        Y, edges if parts else np.array([0, len(Y)]))
     for L in lags:
         u = lag_filter(T, float(L), rate_hz)
-        X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
-        keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
-        # with parts, the whole record's sums are theirs added up (every difference goes
-        # to one part): one pass over the record, not two
-        pieces = octave_sums_by_part(X, edges, keep) if parts else []
-        whole = sum(pieces[1:], start=pieces[0]) if pieces else octave_sums(X, keep)
+        if axes is not None:
+            got = lag_octave_sums(axes, u, float(L), rate_hz)
+            pieces = got if parts else []
+            whole = sum(got[1:], start=got[0]) if parts else got[0]
+        else:
+            X = without_start(np.column_stack([Y, u]), float(L), rate_hz)
+            keep = hole_mask(len(Y), holes or [], float(L), rate_hz)
+            # with parts, the whole record's sums are theirs added up (every difference
+            # goes to one part): one pass over the record, not two
+            pieces = octave_sums_by_part(X, edges, keep) if parts else []
+            whole = sum(pieces[1:], start=pieces[0]) if pieces else octave_sums(X, keep)
         sums = whole
         mt = min_tau_for(float(L), floor_s)
         # the leave-one-out sums once per lag, for every axis (their covariance is cached)
@@ -707,6 +831,31 @@ def _refine(lags: list[float], best: float, n: int) -> list[float]:
     if a * b > 0:
         return (math.copysign(1.0, a) * np.geomspace(abs(a), abs(b), n)).tolist()
     return np.linspace(a, b, n).tolist()
+
+
+#: Lags closer than this (relative) are one lag to the scan.
+SAME_LAG_REL = 1e-9
+
+
+def _distinct(cands: set[float], have: set[float]) -> list[float]:
+    """The lags of ``cands`` (sorted) that are neither in ``have`` nor the same as one of
+    them or as each other to ``SAME_LAG_REL``. Overlapping refinements of several axes give
+    one lag twice up to rounding (geometric steps from different ends: 2002.8092465883267
+    and …287 s on a 12 h quiet-lab record). Scanned twice, the two held the same z to
+    1e-12: which of them took the largest z (and so where the next refinement went) was
+    decided by rounding, and a parabola through the best lag and such a neighbour
+    (``_peak``) put its vertex where rounding put it (the other channel's lag 1970 or
+    2003 s by the order of a sum, on that record; 3 of 8 records moved their lag or a
+    held-out χ² when a sum's rounding changed)."""
+    out: list[float] = []
+    ref = np.array(sorted(have), dtype=float)
+    for v in sorted(cands):
+        if np.any(np.abs(ref - v) <= SAME_LAG_REL * np.maximum(np.abs(ref), abs(v))):
+            continue
+        if out and abs(out[-1] - v) <= SAME_LAG_REL * max(abs(v), abs(out[-1])):
+            continue
+        out.append(v)
+    return out
 
 
 def _axes_reference(Y: NDArray, rate_hz: float) -> Any:
@@ -757,9 +906,9 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             for sc in per_axis:
                 lags = [p.lag for p in sc]
                 fine.update(_refine(lags, lags[int(np.argmax([p.z for p in sc]))], n_fine))
-            fine -= {p.lag for sc in per_axis for p in sc}
-            if fine:
-                extra = _scan(Ys, Ts[:, j], sorted(fine), rate_s, hj, ref, floor)
+            new = _distinct(fine, {p.lag for sc in per_axis for p in sc})
+            if new:
+                extra = _scan(Ys, Ts[:, j], new, rate_s, hj, ref, floor)
                 per_axis = [_merge(a, b) for a, b in zip(per_axis, extra, strict=True)]
         if lag_intervals:
             per_axis = _with_lag_jackknife(per_axis, grid, Ys, Ts[:, j], rate_s, hj, ref,

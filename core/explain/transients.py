@@ -52,6 +52,7 @@ import numpy as np
 from avard.core.analysis.drift import DRIFT_BLOCKS, drift_likelihood
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
+from avard.core.model.triangular import LowerSolver
 from numpy.typing import NDArray
 
 __all__ = ["MAX_EFFECTS", "NoiseOf", "find_compound", "refine_compound", "robust_noise",
@@ -543,12 +544,10 @@ def _slope_fit(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float],
     """(slope, its standard error) of block means ``yb`` on ``cols`` + the centred time by
     GLS with the noise N, B, K of ``noise``, the error scaled by √(Birge ratio) when the
     whitened residual's χ²/dof exceeds 1 (a noise model the data do not follow widens it)."""
-    from scipy.linalg import solve_triangular
-
     c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
-    L = np.linalg.cholesky(c)
-    a = solve_triangular(L, np.column_stack([*cols, t - t.mean()]), lower=True)
-    wy = solve_triangular(L, yb, lower=True)
+    L = LowerSolver(np.linalg.cholesky(c))
+    a = L.solve(np.column_stack([*cols, t - t.mean()]))
+    wy = L.solve(yb)
     coef, *_ = np.linalg.lstsq(a, wy, rcond=None)
     r = wy - a @ coef
     s2 = max(1.0, float(r @ r) / max(1, len(r) - a.shape[1]))

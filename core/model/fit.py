@@ -364,6 +364,38 @@ class _Problem:
     # ``_fit_active``'s results by (points, components, iterations): the selection, its
     # ramp/walk comparison, the long-τ check and the final fit ask for the same ones
     fits: dict[tuple[bytes, tuple[int, ...], int], _ActiveFit] = field(default_factory=dict)
+    # ``_at``'s slices by points: every iteration of every fit on the same points takes them
+    subsets: dict[bytes, _Subset] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Subset:
+    """The fixed ingredients of ``_avar_cov`` at some points ``idx`` of a ``_Problem``: G's
+    block, max(M_k, M_l), the basis, the fixed components' AVAR, the EDF floor, the added
+    covariance (the same arrays every call would slice)."""
+
+    G: NDArray[np.float64]
+    MM: NDArray[np.float64]
+    X: NDArray[np.float64]
+    fixed: NDArray[np.float64]
+    edf_floor: NDArray[np.float64]
+    added: NDArray[np.float64] | None
+
+
+def _at(p: _Problem, idx: NDArray) -> _Subset:
+    """``p``'s ingredients at points ``idx``, sliced once per problem and points."""
+    key = np.asarray(idx, dtype=np.intp).tobytes()
+    got = p.subsets.get(key)
+    if got is None:
+        M = p.M[idx]
+        got = _Subset(p.G[np.ix_(idx, idx)], np.maximum.outer(M, M), p.X[idx], p.fixed[idx],
+                      p.edf_floor[idx],
+                      None if p.added is None else p.added[np.ix_(idx, idx)])
+        for arr in (got.G, got.MM, got.X, got.fixed, got.edf_floor, got.added):
+            if arr is not None:
+                arr.flags.writeable = False
+        p.subsets[key] = got
+    return got
 
 
 def _theta_full(p: _Problem, theta: NDArray) -> NDArray:
@@ -374,17 +406,16 @@ def _avar_cov(p: _Problem, theta: NDArray, idx: NDArray) -> NDArray[np.float64]:
     """Modelled covariance matrix of the AVAR estimates at points ``idx`` (Whittle form),
     with a floor so that deterministic-only models keep finite weights."""
     th = _theta_full(p, theta)
-    G = p.G[np.ix_(idx, idx)]
-    q = np.einsum("klab,a,b->kl", G, th, th)
-    M = p.M[idx]
-    C = 2.0 * q / np.maximum.outer(M, M)
-    model = p.X[idx] @ theta + p.fixed[idx]
-    floor = 2.0 * model**2 / p.edf_floor[idx]
+    sub = _at(p, idx)
+    q = np.einsum("klab,a,b->kl", sub.G, th, th)
+    C = 2.0 * q / sub.MM
+    model = sub.X @ theta + sub.fixed
+    floor = 2.0 * model**2 / sub.edf_floor
     d = np.diag(C).copy()
     bump = np.maximum(floor - d, 0.0)
     C[np.diag_indices_from(C)] = d + bump
-    if p.added is not None:
-        C += p.added[np.ix_(idx, idx)]
+    if sub.added is not None:
+        C += sub.added
     return C
 
 
@@ -419,11 +450,13 @@ def _gls_scaled(A: NDArray, b: NDArray) -> tuple[NDArray[np.float64], NDArray[np
     return coef / scale, _param_cov(A)
 
 
-def _gls_nnls(X: NDArray, y: NDArray, T: NDArray) -> tuple[NDArray[np.float64], float]:
+def _gls_nnls(X: NDArray, y: NDArray, T: NDArray, Ty: NDArray | None = None
+              ) -> tuple[NDArray[np.float64], float]:
     """Non-negative generalised least squares: min ‖T(y − Xθ)‖², θ ≥ 0; returns (θ, χ²).
-    Columns are scaled to unit norm first because the basis spans many decades."""
+    Columns are scaled to unit norm first because the basis spans many decades. ``Ty``:
+    T·y when the caller has it (the selection's subsets share one T)."""
     A = T @ X
-    b = T @ y
+    b = T @ y if Ty is None else Ty
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
     sol, rnorm = nnls(A / scale, b, maxiter=50 * X.shape[1] + 100)
@@ -463,7 +496,7 @@ def _fit_once(p: _Problem, idx: NDArray, active: list[int], iterations: int
         C = _avar_cov(p, theta, idx)
         new = np.zeros(A)
         new[active], _ = _gls_nnls(X, y, _whitener(C))
-        done = np.allclose(new, theta, rtol=1e-5, atol=0)
+        done = _settled(new, theta)
         theta = new
         if done:
             break
@@ -473,6 +506,15 @@ def _fit_once(p: _Problem, idx: NDArray, active: list[int], iterations: int
     cov = _param_cov(TX)
     r = T @ (y - X @ theta[active])
     return theta, cov, C, float(r @ r)
+
+
+def _settled(new: NDArray, old: NDArray) -> bool:
+    """``np.allclose(new, old, rtol=1e-5, atol=0)``, the iteration's stop: |new − old| ≤
+    1e-5·|old| everywhere, the same comparison without allclose's per-call overhead where
+    both are finite (allclose itself otherwise: its rules for infinities and NaN)."""
+    if not (np.all(np.isfinite(new)) and np.all(np.isfinite(old))):
+        return bool(np.allclose(new, old, rtol=1e-5, atol=0))
+    return bool(np.all(np.abs(new - old) <= 1e-5 * np.abs(old)))
 
 
 def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
@@ -513,6 +555,8 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
     _, _, C_star, _ = _fit_active(p, idx, base)
     T = _whitener(C_star)
     y = p.y[idx]
+    Ty = T @ y
+    Xi = _at(p, idx).X
     crit = z_present**2
 
     done: dict[tuple[int, ...], tuple[float, NDArray]] = {}
@@ -526,7 +570,8 @@ def _select_terms(p: _Problem, idx: NDArray, A: int, z_present: float,
                 r = T @ y
                 done[key] = float(r @ r), np.zeros(0)
             else:
-                th, c2 = _gls_nnls(p.X[np.ix_(idx, np.asarray(active, dtype=np.intp))], y, T)
+                th, c2 = _gls_nnls(np.ascontiguousarray(Xi[:, np.asarray(active, dtype=np.intp)]),
+                                   y, T, Ty)
                 done[key] = c2, th
         return done[key]
 
@@ -848,6 +893,7 @@ def fit_noise(
     added_cov: ArrayLike | None = None,
     check_filter: bool = True,
     upper_limits: bool = True,
+    long_tau_notes: bool = True,
 ) -> NoiseFit:
     """Fit the IEEE terms (and ``extra`` components) to one channel's Allan variance.
 
@@ -875,6 +921,9 @@ def fit_noise(
     ``upper_limits`` False: the absent terms' upper limits are not computed (their
     ``upper`` None; every other field the same), for a caller that reads only the
     likelihood and the extra components (the Gauss–Markov scan's profile fits).
+    ``long_tau_notes`` False: whether the present long-τ terms rest on the longest τ alone
+    (a fit without it) or are refuted by the τ beyond the fit is not checked (their
+    ``note`` stays None; every number the same), for the same callers.
     See the module docstring for the method and the tests.
     """
     var = np.asarray(result.var, dtype=float)
@@ -946,7 +995,7 @@ def fit_noise(
                                                     upper_limits)
     # kept in the model (the curve needs them), but flagged: a display says "not yet
     # resolved" instead of an interval and a time to target
-    unresolved = [a for a in active if labels[a] in LONG_TAU_TERMS
+    unresolved = [a for a in active if long_tau_notes and labels[a] in LONG_TAU_TERMS
                   and _rests_on_longest(p, idx, active, a, z_present**2, ramp, walk)]
     if active:
         theta, cov, C, chi2 = _fit_active(p, idx, active)
@@ -980,8 +1029,9 @@ def fit_noise(
                         1.0)
         cov = cov * np.outer(grow, grow)
     se_active = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    if active and _refuted_beyond(result, keep[idx[-1]], comps, fitted, theta, fixed,
-                                  theta_fixed, active, cov, rate, z_present, min_averages):
+    if long_tau_notes and active and _refuted_beyond(
+            result, keep[idx[-1]], comps, fitted, theta, fixed, theta_fixed, active, cov,
+            rate, z_present, min_averages):
         unresolved += [a for a in active if labels[a] in LONG_TAU_TERMS and a not in unresolved]
 
     # the standard normal quantile from the standard library: importing scipy.stats for it
@@ -1055,7 +1105,8 @@ def fit_noise(
                       z_present=z_present, min_edf=min_edf, min_averages=min_averages,
                       drop_z=drop_z, max_drop=max_drop, birge_scale=birge_scale,
                       rounding_lsb=rounding_lsb, filter_min_m=filter_min_m,
-                      added_cov=added_cov, upper_limits=upper_limits)
+                      added_cov=added_cov, upper_limits=upper_limits,
+                      long_tau_notes=long_tau_notes)
     unbent = plain.tau_min_s <= float(tau[keep[0]])
     better = not _misfit(plain) or plain.chi2_dof < 0.5 * fit.chi2_dof
     return plain if unbent and better else fit

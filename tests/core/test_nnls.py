@@ -62,3 +62,63 @@ def test_all_negative_and_degenerate() -> None:
         nnls(np.ones(3), np.ones(3))
     x, r = nnls(np.zeros((3, 0)), np.array([3.0, 4.0, 0.0]))  # no unknowns: b is the residual
     assert x.shape == (0,) and r == pytest.approx(5.0)
+
+
+def _array_nnls(a: np.ndarray, b: np.ndarray, maxiter: int | None = None
+                ) -> tuple[np.ndarray, float]:
+    """Lawson–Hanson written on numpy arrays (the form ``nnls`` had before its bookkeeping
+    moved to Python floats): the reference it must equal to the bit."""
+    m, n = a.shape
+    limit = 3 * n if maxiter is None else int(maxiter)
+    x = np.zeros(n)
+    passive = np.zeros(n, dtype=bool)
+    tol = 10.0 * np.finfo(float).eps * max(m, n) * max(1.0, float(np.abs(a).sum(axis=0).max()))
+    w = a.T @ b
+    stuck = np.zeros(n, dtype=bool)
+    steps = 0
+    while not (passive | stuck).all():
+        free = np.where(~(passive | stuck), w, -np.inf)
+        j = int(np.argmax(free))
+        if free[j] <= tol:
+            break
+        passive[j] = True
+        first = True
+        while True:
+            z = np.zeros(n)
+            z[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+            if np.all(z[passive] > 0):
+                break
+            if first and z[j] <= 0:
+                passive[j] = False
+                stuck[j] = True
+                z = x
+                break
+            first = False
+            steps += 1
+            if steps > limit:
+                raise FitError("no convergence")
+            neg = passive & (z <= 0)
+            step = np.min(x[neg] / (x[neg] - z[neg]))
+            x = x + step * (z - x)
+            passive &= x > tol
+            x[~passive] = 0.0
+        x = z
+        w = a.T @ (b - a @ x)
+    return x, float(np.linalg.norm(a @ x - b))
+
+
+@pytest.mark.parametrize("seed", range(0, 600, 3))
+def test_equals_the_array_form_to_the_bit(seed: int) -> None:
+    """The same x and residual, bit for bit, as the array form, on random problems over
+    decades, with a repeated column (a tie) and with the noise fit's shapes (unit columns)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(3):
+        m, n = int(rng.integers(3, 30)), int(rng.integers(1, 12))
+        a = rng.standard_normal((m, n)) * 10.0 ** rng.uniform(-3, 3, n)
+        if n > 1 and rng.uniform() < 0.3:
+            a[:, 0] = a[:, -1]
+        b = rng.standard_normal(m)
+        for aa in (a, a / np.linalg.norm(a, axis=0)):
+            x, r = nnls(aa, b)
+            ref, rref = _array_nnls(aa, b)
+            assert np.array_equal(x, ref) and r == rref

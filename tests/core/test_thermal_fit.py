@@ -3,6 +3,7 @@ computation."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -208,6 +209,98 @@ def test_sums_by_part_add_up_to_the_records_at_every_octave():
     assert sum(p.n[long] > 0 for p in parts) >= 3
     # a part all inside the hole holds no difference's middle at the short octaves
     assert parts[2].n[0] == 0
+
+
+def test_a_lag_two_refinements_reach_up_to_rounding_is_scanned_once():
+    """Two axes whose best lags are neighbours on the coarse grid refine overlapping ranges:
+    their geometric steps meet at the same lags up to rounding (on most neighbouring pairs
+    of a 12 h record's grid). The fine lags scanned hold each lag once, none the same as a
+    lag already scanned, and lose none that is new."""
+    from avard.core.explain.thermal_fit import SAME_LAG_REL, _distinct, _lag_grid, _refine
+
+    grid = [float(v) for v in _lag_grid(43_200.0, 0.48789062499999997)]
+    twice = 0
+    for k in range(1, len(grid) - 2):
+        fine = set(_refine(grid, grid[k], 13)) | set(_refine(grid, grid[k + 1], 13))
+        new = _distinct(fine, set(grid))
+        assert new == sorted(new)
+        have = np.array(sorted([*grid, *new]))
+        gaps = np.abs(np.diff(have)) / np.maximum(np.abs(have[1:]), np.abs(have[:-1]))
+        assert np.all(gaps > SAME_LAG_REL)
+        # every candidate is scanned or the same as one that is
+        for v in fine:
+            assert np.min(np.abs(have - v)) <= SAME_LAG_REL * max(abs(v), 1.0)
+        raw = sorted(fine - set(grid))
+        twice += any(abs(a - b) <= SAME_LAG_REL * max(abs(a), abs(b))
+                     for a, b in itertools.pairwise(raw))
+    assert twice >= 10  # the case is real on this grid (28 of 38 pairs)
+    assert _distinct({2002.8092465883287, 1000.0, 3000.0}, {2002.8092465883267, 3000.0}) \
+        == [1000.0]
+
+
+@pytest.mark.parametrize("lag_s", [0.0, -60.0, 4.0, 300.0, 20_000.0])
+@pytest.mark.parametrize("parts", [False, True])
+def test_lag_octave_sums_equal_the_general_path(lag_s, parts):
+    """The lag scan's fast path (the axes differenced once, only the lagged temperature per
+    lag, the start-up shape's share taken out of the axes' sums on its support) gives the
+    sums of the general path (``without_start`` on every column, then
+    ``octave_sums_by_part``), for the whole record and the jackknife's parts, at every
+    octave, for lags whose start-up shape lives on a few rows, on most and on all of them
+    (20 000 s at 0.5 Hz is longer than the record), and for lag 0 (no shape)."""
+    from avard.core.explain.thermal_fit import (
+        JACKKNIFE_GROUPS,
+        axes_differences,
+        lag_filter,
+        lag_octave_sums,
+        octave_sums_by_part,
+        without_start,
+    )
+
+    rng = np.random.default_rng(11)
+    n, rate = 9_001, 0.5
+    T = 21.0 + np.cumsum(rng.standard_normal(n)) * 0.01
+    # axes with an offset, a random walk and the start-up settling itself in them
+    Y = (np.array([3e-3, -9.81, 0.2]) + np.cumsum(rng.standard_normal((n, 3)), axis=0) * 1e-6
+         + rng.standard_normal((n, 3)) * 1e-4
+         + np.outer(np.exp(-np.arange(n) / (rate * 300.0)), [2e-4, 0.0, -1e-4]))
+    edges = (np.linspace(0, n, JACKKNIFE_GROUPS + 1).astype(int) if parts
+             else np.array([0, n]))
+    u = lag_filter(T, lag_s, rate)
+    fast = lag_octave_sums(axes_differences(Y, edges), u, lag_s, rate)
+    slow = octave_sums_by_part(without_start(np.column_stack([Y, u]), lag_s, rate), edges)
+    assert len(fast) == len(slow) == len(edges) - 1
+    for f, s in zip(fast, slow, strict=True):
+        assert np.array_equal(f.ms, s.ms) and np.array_equal(f.n, s.n)
+        ok = s.n > 0
+        # each entry to rounding, against √(Σ D_a² Σ D_b²): the two differ by up to 2e-10
+        # where the shape spans the record, and are as far (to 1e-3 of it) from the sums
+        # taken in extended precision
+        d = np.sqrt(np.einsum("kii->ki", s.s2[ok]))
+        rel = np.abs(f.s2[ok] - s.s2[ok]) / (d[:, :, None] * d[:, None, :])
+        assert np.max(rel) < 1e-9, np.max(rel)
+        assert np.all(f.s2[~ok] == 0)
+
+
+@pytest.mark.parametrize("parts", [False, True])
+def test_the_lag_scan_without_holes_equals_its_general_path(parts):
+    """``_scan`` end to end: without holes (the fast sums) and with a hole past the record's
+    end (a keep mask that keeps every row: the general path on the same data), the same
+    ĉ, se, z and leave-one-out z at every lag, to rounding."""
+    from avard.core.explain.thermal_fit import _scan
+
+    y, T = _rounded_cycle_record(3, 120.0, 3e-3, hours=2.0)
+    Y = np.column_stack([y, 0.5 * y[::-1], np.random.default_rng(2).standard_normal(len(y))])
+    lags = [-300.0, -20.0, 0.0, 8.0, 120.0, 1500.0]
+    fast = _scan(Y, T[:, 0], lags, 1.0, parts=parts)
+    general = _scan(Y, T[:, 0], lags, 1.0, holes=[(len(y) + 10, len(y) + 11)], parts=parts)
+    for fa, ga in zip(fast, general, strict=True):
+        for f, g in zip(fa, ga, strict=True):
+            assert f.lag == g.lag
+            assert f.c == pytest.approx(g.c, rel=1e-9, abs=1e-15)
+            assert f.se == pytest.approx(g.se, rel=1e-9)
+            assert f.z == pytest.approx(g.z, rel=1e-9, abs=1e-12)
+            assert len(f.zg) == len(g.zg) == (10 if parts else 0)
+            assert np.allclose(f.zg, g.zg, rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("lag_s", [-60.0, 4.0, 300.0, 20_000.0])
