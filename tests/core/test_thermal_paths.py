@@ -78,6 +78,14 @@ def test_the_reconstruction_from_the_readings_crossings_is_closer_than_the_readi
     assert np.std(s - T) < np.std(r - T) / 4
     # and never leaves a plain reading's own cell
     assert np.all(np.abs(s - r) <= 0.0625 / 2 + 1e-12)
+    # a stable room (one reading throughout) is left as read, and readings that toggle
+    # between two steps every second (a real DS18B20's noise at a step's edge) stay finite,
+    # inside their cells
+    flat = np.full(3600, 21.0625)
+    assert np.array_equal(crossing_reconstruction(flat), flat)
+    toggling = 21.0 + 0.0625 * (np.arange(3600) % 2)
+    z = crossing_reconstruction(toggling)
+    assert np.all(np.isfinite(z)) and np.all(np.abs(z - toggling) <= 0.0625 / 2 + 1e-12)
 
 
 def test_one_lag_stays_one_lag():
