@@ -131,8 +131,8 @@ LEANING = ("hysteresis",)
 #: one on data the fit did not see. On hysteresis records one lag was kept with ±4 %
 #: intervals at lags of −100 to −200 s that other seeds' estimates lie outside (the
 #: relay predicting better by 9.9 at z 9.3 on one of 20; with the play before, by 2.4–9.9 on
-#: 11 of 17); on one-lag records (faulty log, negative lag, typical tempco: 25) the relay
-#: predicted better by up to 6.4, but at z ≤ 4.2
+#: 11 of 17); on one-lag records (faulty log and negative lag, 10 each) the relay predicted
+#: better by 2 or more on two (by 6.4 and 3.4, faulty log), at z 4.2 and 1.1
 LEAN_MARGIN = 2.0
 #: Most block means the fit runs on (as the lag scan).
 FIT_POINTS = 1 << 14
