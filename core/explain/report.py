@@ -115,9 +115,12 @@ def summary(ex: Explanation) -> str:
                                   if k in f.intervals else "")
                 for k, v in f.params.items())
             if f.model_dependent:
+                rejects = ch.verdict is not None and ch.verdict.heldout_rejects
                 params += ("; model-dependent" if f.intervals_if_model_held is None else
                            "; model-dependent, no interval: the held-out data reject the "
-                           "extended model")
+                           "extended model" if rejects else
+                           "; model-dependent, no interval: a non-linear path predicts the "
+                           "held-out data better (below)")
             lines.append(f"  FOUND {f.cause}: {params} (SI units)")
             lines.append(f"        {f.evidence}")
         lines.append("  IEEE coefficients (base → extended, 68 % interval):")

@@ -681,9 +681,19 @@ class ThermalFit:
                            self.evidence(), channel=self.channel, mechanism=self.mechanism,
                            model_dependent=self.path.model_dependent,
                            alternatives=self.path.alternatives)
+        iv = {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]}
+        if self.path is not None and self.path.leaning:
+            # one lag kept while a non-linear candidate predicts the held-out halves better:
+            # its coefficient and lag are a linear model's, no interval (``--json`` keeps them
+            # as ``intervals_if_model_held``)
+            note = next(n for n in self.path.notes if n.startswith("one lag kept"))
+            return Finding("temperature", False,
+                           {"coefficient": self.coefficient, "lag_s": self.lag_s}, {},
+                           self.z, self.threshold, f"{self.evidence()}; {note}",
+                           channel=self.channel, mechanism=self.mechanism,
+                           model_dependent=True, intervals_if_model_held=iv)
         return Finding("temperature", False,
-                       {"coefficient": self.coefficient, "lag_s": self.lag_s},
-                       {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]},
+                       {"coefficient": self.coefficient, "lag_s": self.lag_s}, iv,
                        self.z, self.threshold, self.evidence(), channel=self.channel,
                        mechanism=self.mechanism)
 
