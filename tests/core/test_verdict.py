@@ -31,13 +31,36 @@ def test_judge_in_sample_and_held_out():
     assert judge(1.0, 12, [], heldout_chi2=45.0, heldout_n=11).explained
 
 
-def test_compensation_worse_at():
+def test_judge_never_says_fits_without_a_test():
+    """No dof or a χ² that is not finite: the line does not say the model fits."""
+    for chi2, dof in ((math.nan, 12), (1.0, 0), (math.inf, 5)):
+        v = judge(chi2, dof, [])
+        assert not v.explained and not v.tested
+        assert v.line().startswith("NOT TESTED") and "model-dependent" in v.line()
+        assert v.to_dict()["tested"] is False
+
+
+def test_a_held_out_p_under_alpha_within_the_ratio_says_why_it_is_not_a_rejection():
+    v = judge(1.0, 12, [], heldout_chi2=45.0, heldout_n=11)
+    assert v.explained and v.heldout_p is not None and v.heldout_p < 0.01
+    assert "not a rejection" in v.line()
+    assert "not a rejection" not in judge(1.0, 12, [], heldout_chi2=12.0,
+                                          heldout_n=11).line()
+
+
+def test_the_misfit_line_gives_each_range_its_size_in_adev():
+    bad = judge(4.0, 12, [{"tau_range_s": [300.0, 1200.0], "max_sigma": 5.2,
+                           "direction": "above", "adev_ratio": 1.83}])
+    assert "300…1.2e+03 s (up to +5.2 σ, ADEV 1.83× the model's)" in bad.line()
+
+
+def test_compensation_worse_at_every_tau_fitted_or_not():
     tau = np.array([1.0, 2.0, 4.0, 8.0])
-    var = np.ones(4)
-    hi = 1.2 * var
+    hi = 1.2 * np.ones(4)
     comp = np.array([0.5, 1.1, 1.5, 3.0])
-    used = np.array([True, True, True, False])
-    assert compensation_worse_at(tau, var, hi, comp, used) == [4.0]
+    assert compensation_worse_at(tau, hi, comp) == [4.0, 8.0]
+    comp[2:] = [np.nan, 1.0]
+    assert compensation_worse_at(tau, hi, comp) == []
 
 
 def test_a_dT_dt_coupling_is_unexplained_and_its_parameters_model_dependent(tmp_path):
