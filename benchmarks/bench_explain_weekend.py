@@ -15,7 +15,9 @@ log faults), each class at 3× its stated minimum, written down here *before* th
   5-minute lag from the ambient channel (not 3× a minimum: the realistic level; the docs'
   table gives the minimum there).
 - ``null, faulty log``: nothing coupled, the same faults; ``null, insensitive sensor in a
-  cycling room``: coefficient 0, a ±1 °C 20-minute compressor cycle on top of the HVAC.
+  cycling room``: coefficient 0, a ±1 °C 20-minute compressor cycle on top of the HVAC;
+  ``null, setback room``: coefficient 0, the room falling 2 K over the record (a trend in
+  the logged temperature that any slow noise of an axis can look like).
 
 Event rows (issue 23 items 2, 3 and 6), each effect on x, stated minima written down here
 before the run (``rows_events``):
@@ -125,6 +127,10 @@ def rows() -> list[Row]:
                                            plate_tau_s=0.0, die_tau_s=300.0,
                                            coefficient=(2e-4, 0, 0)), 2e-4, 300.0,
             "as above, 60 h"),
+        # last, so the rows above keep their seeds in a run of every row
+        Row("null, setback room", replace(base, room_ramp_c=-2.0), 0.0, 0.0,
+            "nothing coupled, the room falling 2 K over the record (a weekend setback) on "
+            "the HVAC cycle"),
     ]
 
 
