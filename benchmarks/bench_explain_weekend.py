@@ -63,6 +63,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
@@ -399,12 +400,6 @@ def score_record(r: Row, seed: int) -> RecordScore:
     return sc
 
 
-def _score_job(job: tuple[str, int]) -> RecordScore:
-    """``score_record`` by row name (what a worker process is sent)."""
-    name, seed = job
-    return score_record(next(r for r in rows() if r.name == name), seed)
-
-
 class _Named(Protocol):
     name: str
 
@@ -433,6 +428,16 @@ def _load_results(path: Path | None, make: Callable[[dict[str, Any]], _S]
         except (ValueError, TypeError, KeyError):
             continue
     return done
+
+
+def _reader(cls: Callable[..., _S], key: str) -> Callable[[dict[str, Any]], _S]:
+    """A ``--results`` line's reader for records of ``cls``: a line without ``key`` (one of
+    another kind of row) raises ValueError, so ``_load_results`` skips it."""
+    def read(d: dict[str, Any]) -> _S:
+        if key not in d:
+            raise ValueError(f"not a record with {key!r}")
+        return cls(**d)
+    return read
 
 
 def _score_all(left: list[tuple[str, int]], job: Callable[[tuple[str, int]], Any], jobs: int,
@@ -478,7 +483,7 @@ def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     if done:
         print(f"  {len(want) - len(left)} of {len(want)} records already in {results}")
 
-    _score_all(left, _score_job, jobs, results, done)
+    _score_all(left, partial(_job, "plain"), jobs, results, done)
     print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 % c / L':>14s} "
           f"{'false claims (axes)':>24s} {'unexplained':>12s} {'CPU s/rec':>9s}")
     for r in todo:
@@ -666,18 +671,6 @@ def score_path_record(r: PathRow, seed: int) -> PathRecord:
     return sc
 
 
-def _path_job(job: tuple[str, int]) -> PathRecord:
-    name, seed = job
-    return score_path_record(next(r for r in rows_paths() if r.name == name), seed)
-
-
-def _path_record(d: dict[str, Any]) -> PathRecord:
-    """A ``--results`` line of a thermal-path row (one of another row has no ``chosen``)."""
-    if "chosen" not in d:
-        raise ValueError("not a thermal-path record")
-    return PathRecord(**d)
-
-
 def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
               results: Path | None = None) -> None:
     """``rows_paths``: x right when its temperature finding is claimed with the row's
@@ -693,13 +686,13 @@ def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     print(f"\nthermal-path rows (tests/support/weekend.py), {cases} per row:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
-    done = _load_results(results, _path_record)
+    done = _load_results(results, _reader(PathRecord, "chosen"))
     want = [(r.name, seed0 + 7000 + 1000 * j + i) for j, r in enumerate(todo)
             for i in range(cases)]
     want.sort(key=lambda k: k[1] % 1000)
     left = [k for k in want if k not in done]
 
-    _score_all(left, _path_job, jobs, results, done)
+    _score_all(left, partial(_job, "path"), jobs, results, done)
     print(f"\n{'row':18s} {'right (alone)':>20s} {'named':>20s} {'params ≤ 20 %':>20s} "
           f"{'in 68 %':>8s} {'no interval':>11s} {'chosen instead':>34s} "
           f"{'false claims (y, z)':>22s} {'CPU s/rec':>9s}")
@@ -892,18 +885,6 @@ def score_outside_record(r: OutsideRow, seed: int) -> OutsideRecord:
     return sc
 
 
-def _outside_job(job: tuple[str, int]) -> OutsideRecord:
-    name, seed = job
-    return score_outside_record(next(r for r in outside_rows() if r.name == name), seed)
-
-
-def _outside_record(d: dict[str, Any]) -> OutsideRecord:
-    """A ``--results`` line of an outside row (one of another row has no ``said``)."""
-    if "said" not in d:
-        raise ValueError("not an outside record")
-    return OutsideRecord(**d)
-
-
 def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
                 results: Path | None = None) -> None:
     """The ``outside_rows`` (seeds ``seed0 + 1000·j + i``, j the row's place in the whole
@@ -921,13 +902,13 @@ def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     print(f"mechanisms beside the coupling on x, {cases} records per row (held out: halves):")
     for r in todo:
         print(f"  {r.name}{' (a candidate now)' if r.candidate else ''}: {r.minimum}")
-    done = _load_results(results, _outside_record)
+    done = _load_results(results, _reader(OutsideRecord, "said"))
     want = [(r.name, seed0 + 1000 * allrows.index(r) + i) for r in todo for i in range(cases)]
     want.sort(key=lambda k: k[1] % 1000)
     left = [k for k in want if k not in done]
     if len(left) < len(want):
         print(f"  {len(want) - len(left)} of {len(want)} records already in {results}")
-    _score_all(left, _outside_job, jobs, results, done)
+    _score_all(left, partial(_job, "outside"), jobs, results, done)
     print(f"\n{'row':16s} {'fails χ² 1 %':>12s} {'unexplained | fails':>24s} "
           f"{'held out rejects':>16s} {'explained, claimed':>18s} {'±5 % | rej / unexpl':>19s} "
           f"{'not model-dep.':>14s} {'comp. worse shown':>17s} {'false (y, z)':>22s} "
@@ -961,6 +942,17 @@ def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
         print(f"{'':16s} read as: " + ", ".join(f"{k} ×{v}" for k, v in sorted(extra.items())))
     if pool and any(not r.candidate for r in todo):
         line("pooled, outside", pool)
+
+
+def _job(kind: str, job: tuple[str, int]) -> Any:
+    """Score the record (row name, seed) of the rows of ``kind`` ("plain": ``rows``, "path",
+    "outside"): what a worker process is sent (a partial of this, by name)."""
+    kinds: dict[str, tuple[Callable[[], list[Any]], Callable[[Any, int], Any]]] = {
+        "plain": (rows, score_record), "path": (rows_paths, score_path_record),
+        "outside": (outside_rows, score_outside_record)}
+    make, score = kinds[kind]
+    name, seed = job
+    return score(next(r for r in make() if r.name == name), seed)
 
 
 def main(argv: list[str]) -> int:
