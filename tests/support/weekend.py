@@ -7,6 +7,10 @@ die (``die_tau_s``, behind the plate) and → logged DS18B20 (``sensor_tau_s`` b
 rounded to 0.0625 K, one reading every 0.75 s). The accelerometer sees the *die*:
 coefficient·T_die (+ optional terms in T_die², dT_die/dt, or a hysteresis), so a logged
 sensor slower than the die is a negative lag, and two paths are two time constants.
+Mechanisms outside explain's candidates (x only): a cubic response above a threshold, a cycle
+from an unlogged channel, a tempco that ages or switches (a sign flip mid-run), a die lag that
+drifts, a humidity- or pressure-like front on the 12 h tide, a tilt following a setback room
+through the building's slow time constant, and a response to (dT/dt)².
 
 Noise: white (N), flicker (B) by Kasdin's fractional-difference filter (h_k = h_{k−1}·(k − 1
 + α/2)/k, α = 1 for 1/f in rate, applied by FFT convolution), random walk (K).
