@@ -269,8 +269,7 @@ class ChannelExplanation:
 
     def _worse(self, comp_var: NDArray[np.float64]) -> list[float]:
         a = self.base.allan
-        tau = np.asarray(a.tau, dtype=float)
-        return compensation_worse_at(tau, a.var, a.hi, comp_var, _used(self.base.fit, tau))
+        return compensation_worse_at(np.asarray(a.tau, dtype=float), a.hi, comp_var)
 
     def judge(self, held: ChannelHoldout | None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
@@ -342,7 +341,8 @@ class Explanation:
 def misfit_ranges(tau: NDArray, var: NDArray, model_var: NDArray, edf: NDArray,
                   sigma: float = MISFIT_SIGMA) -> list[dict[str, Any]]:
     """Contiguous τ ranges where |z| ≥ sigma, z = (σ̂² − σ²)/(σ²√(2/ν)) (var(σ̂²) = 2σ⁴/ν,
-    NIST SP 1065 §5.3), with the largest |z| and its direction."""
+    NIST SP 1065 §5.3), with the largest |z|, its direction and the measured ADEV over the
+    model's there (σ̂/σ, the misfit's size in the curve's own terms)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         z = (var - model_var) / (model_var * np.sqrt(2.0 / edf))
     z = np.where(np.isfinite(z), z, 0.0)
@@ -356,6 +356,8 @@ def misfit_ranges(tau: NDArray, var: NDArray, model_var: NDArray, edf: NDArray,
             k = i + int(np.argmax(np.abs(z[i:j + 1])))
             out.append({"tau_range_s": [float(tau[i]), float(tau[j])],
                         "max_sigma": float(z[k]),
+                        "adev_ratio": float(np.sqrt(var[k] / model_var[k]))
+                        if var[k] > 0 and model_var[k] > 0 else math.nan,
                         "direction": "above" if z[k] > 0 else "below"})
             i = j + 1
         else:

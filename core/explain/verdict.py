@@ -12,16 +12,21 @@ A χ² test of the extended fit, at ``ALPHA`` (1 %):
 
 When either fails, the axis is **unexplained**: one line beside the gain gives χ²/dof with its
 p-value, the held-out χ²/n with its p-value and the τ ranges where the extended model still
-misses by more than 3 σ with their sizes. The claimed causes' parameters are then
-*model-dependent* (they are the best values of a model the data reject), and where the
-held-out data reject it no interval is printed for them (a ±3 % interval of a rejected
-mechanism is a confident wrong answer); ``--json`` keeps them under
-``intervals_if_model_held``.
+misses by more than 3 σ with their sizes (in σ, and as the measured ADEV over the model's).
+An extended fit whose χ² cannot be tested (no dof, χ² not finite) is never said to fit: the
+line says "NOT TESTED" and the axis is treated as unexplained (its parameters model-dependent).
+A held-out χ² beyond χ²(n) at 1 % but within ``HELDOUT_RATIO``·n is said to be so beside its
+p-value, so a p under 1 % is never printed beside "fits" without its reason.
+
+When the axis is unexplained the claimed causes' parameters are *model-dependent* (the best
+values of a model the data reject), and where the held-out data reject it no interval is
+printed for them (a ±3 % interval of a rejected mechanism is a confident wrong answer);
+``--json`` keeps them under ``intervals_if_model_held``.
 
 The compensated ADEV is given only where it does not make the ADEV worse than the
-uncompensated one beyond the latter's 68 % interval at any fitted τ: a compensation that adds
-variance somewhere removes the wrong signal (two thermal paths through one lag made the ADEV
-1.4× worse at τ 2–5 min).
+uncompensated one beyond the latter's 68 % interval at any τ (fitted or not: the user reads
+the whole curve): a compensation that adds variance somewhere removes the wrong signal (two
+thermal paths through one lag made the ADEV 1.4× worse at τ 2–5 min).
 """
 
 from __future__ import annotations
@@ -68,6 +73,9 @@ class Verdict:
     heldout_n: int = 0
     heldout_p: float | None = None
     misfit: list[dict[str, Any]] = field(default_factory=list)
+    #: False when the extended fit's χ² could not be tested (no dof, χ² not finite): then
+    #: ``explained`` is False too (nothing said it fits)
+    tested: bool = True
 
     @property
     def heldout_rejects(self) -> bool:
@@ -78,19 +86,26 @@ class Verdict:
     def line(self) -> str:
         """The one line beside the gain."""
         ins = f"χ²/dof {self.chi2_dof:.3g} on {self.dof} dof (p {self.p_value:.2g})"
-        held = ("" if self.heldout_p is None else
-                f", held out χ² {self.heldout_chi2:.4g} on n = {self.heldout_n} τ "
-                f"(p {self.heldout_p:.2g})")
+        held = ""
+        if self.heldout_p is not None:
+            held = (f", held out χ² {self.heldout_chi2:.4g} on n = {self.heldout_n} τ "
+                    f"(p {self.heldout_p:.2g}")
+            if self.heldout_p < ALPHA and not self.heldout_rejects:
+                held += (f"; within {HELDOUT_RATIO:g}·n, the spread of held-out halves of a "
+                         "described sensor: not a rejection")
+            held += ")"
         if self.explained:
             return f"the extended model fits: {ins}{held} (test at {ALPHA:.0%})"
-        where = "; ".join(f"{r['direction']} at τ {r['tau_range_s'][0]:.3g}…"
-                          f"{r['tau_range_s'][1]:.3g} s (up to {r['max_sigma']:+.3g} σ)"
-                          for r in self.misfit) or "no single τ range beyond 3 σ"
+        if not self.tested:
+            return (f"NOT TESTED: the extended fit's χ² cannot be tested ({ins}){held}; the "
+                    "claimed causes' parameters are model-dependent")
+        where = "; ".join(_misfit_text(r) for r in self.misfit) or "no single τ range beyond 3 σ"
         return (f"UNEXPLAINED: the extended model still misfits, {ins}{held}; {where}; the "
                 "claimed causes' parameters are model-dependent")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"explained": self.explained, "chi2_dof": self.chi2_dof, "dof": self.dof,
+        return {"explained": self.explained, "tested": self.tested,
+                "chi2_dof": self.chi2_dof, "dof": self.dof,
                 "p_value": self.p_value, "heldout_chi2": self.heldout_chi2,
                 "heldout_n": self.heldout_n, "heldout_p": self.heldout_p,
                 "alpha": ALPHA, "misfit": self.misfit, "line": self.line()}
@@ -105,14 +120,27 @@ def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
           else _chi2_sf(heldout_chi2, heldout_n))
     held_bad = (hp is not None and hp < ALPHA and heldout_chi2 is not None
                 and heldout_chi2 > HELDOUT_RATIO * heldout_n)
-    bad = (math.isfinite(p) and p < ALPHA) or held_bad
+    tested = math.isfinite(p)
+    bad = not tested or p < ALPHA or held_bad
     return Verdict(not bad, chi2_dof, dof, p, heldout_chi2 if hp is not None else None,
-                   heldout_n if hp is not None else 0, hp, misfit if bad else [])
+                   heldout_n if hp is not None else 0, hp, misfit if bad else [], tested)
 
 
-def compensation_worse_at(tau: NDArray, var: NDArray, hi: NDArray, comp_var: NDArray,
-                          used: NDArray[np.bool_]) -> list[float]:
-    """The fitted τ where the compensated AVAR exceeds the uncompensated one's upper 68 %
-    bound (the compensation added variance there)."""
-    worse = used & np.isfinite(comp_var) & np.isfinite(hi) & (comp_var > hi)
-    return [float(t) for t in np.asarray(tau)[worse]]
+def _misfit_text(r: dict[str, Any]) -> str:
+    """One misfit range: where, which way, how far in σ and, when known, in ADEV."""
+    size = f"up to {r['max_sigma']:+.3g} σ"
+    ratio = r.get("adev_ratio")
+    if ratio is not None and math.isfinite(ratio):
+        size += f", ADEV {ratio:.3g}× the model's"
+    return (f"{r['direction']} at τ {r['tau_range_s'][0]:.3g}…{r['tau_range_s'][1]:.3g} s "
+            f"({size})")
+
+
+def compensation_worse_at(tau: NDArray, hi: NDArray, comp_var: NDArray) -> list[float]:
+    """The τ (every one where both exist, fitted or not) where the compensated AVAR exceeds
+    the uncompensated one's upper 68 % bound ``hi`` (the compensation added variance there)."""
+    c, h = np.asarray(comp_var, dtype=float), np.asarray(hi, dtype=float)
+    ok = np.isfinite(c) & np.isfinite(h)
+    worse = np.zeros(len(c), dtype=bool)
+    worse[ok] = c[ok] > h[ok]
+    return [float(t) for t in np.asarray(tau, dtype=float)[worse]]

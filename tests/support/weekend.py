@@ -7,6 +7,10 @@ die (``die_tau_s``, behind the plate) and → logged DS18B20 (``sensor_tau_s`` b
 rounded to 0.0625 K, one reading every 0.75 s). The accelerometer sees the *die*:
 coefficient·T_die (+ optional terms in T_die², dT_die/dt, or a hysteresis), so a logged
 sensor slower than the die is a negative lag, and two paths are two time constants.
+Mechanisms outside explain's candidates (x only): a cubic response above a threshold, a cycle
+from an unlogged channel, a tempco that ages or switches (a sign flip mid-run), a die lag that
+drifts, a humidity- or pressure-like front on the 12 h tide, a tilt following a setback room
+through the building's slow time constant, and a response to (dT/dt)².
 
 Noise: white (N), flicker (B) by Kasdin's fractional-difference filter (h_k = h_{k−1}·(k − 1
 + α/2)/k, α = 1 for 1/f in rate, applied by FFT convolution), random walk (K).
@@ -69,6 +73,25 @@ class Weekend:
     #: fractional change of the linear coefficient over the record (a tempco that ages:
     #: c·(1 + drift·(t/record − ½)))
     tempco_drift: float = 0.0
+    #: (fraction of the record, factor): from that time on the linear coefficient is
+    #: factor·c (a mount that slips, a screw that loosens: −1 flips its sign)
+    tempco_switch: tuple[float, float] = (0.0, 1.0)
+    #: s: the die's time constant moves linearly from die_tau_s to die_tau_s + this over the
+    #: record (the air flow round the board changes: a lag that drifts)
+    lag_drift_s: float = 0.0
+    #: (m/s², s): a humidity- or pressure-like disturbance with no logged channel: a weather
+    #: front (a logistic rise of this size over the given width, at a random time in the
+    #: record's middle half) on half this size of the 12 h atmospheric tide
+    humidity: tuple[float, float] = (0.0, 0.0)
+    #: K over the record: the room's setback, a linear fall of the room (the HVAC still
+    #: cycling on it)
+    room_ramp_c: float = 0.0
+    #: (m/s²/K, s): a tilt that follows the *room* through the building's own slow time
+    #: constant (a slab, far beyond explain's lag grid)
+    slab: tuple[float, float] = (0.0, 0.0)
+    #: m/s² per (K/s)²: a response to the square of the die's rate of change (a gradient's
+    #: stress, of either sign of the rate)
+    rate_squared: float = 0.0
     warmups: list[tuple[float, float]] = field(default_factory=list)  # (size, T), x
     steps: list[tuple[float, float]] = field(default_factory=list)  # (time, size), x
     excursions: list[tuple[float, float, float]] = field(default_factory=list)  # (t0, t1, size)
@@ -99,6 +122,17 @@ def _lag(u: NDArray, tau: float, dt: float) -> NDArray:
     return out
 
 
+def _lag_varying(u: NDArray, tau: NDArray, dt: float) -> NDArray:
+    """First-order lag whose time constant moves (``tau`` per sample), from steady state."""
+    a = np.exp(-dt / np.maximum(tau, 1e-9))
+    out = np.empty_like(u)
+    y = float(u[0])
+    for i, (v, ai) in enumerate(zip(u.tolist(), a.tolist(), strict=True)):
+        y = ai * y + (1 - ai) * v
+        out[i] = y
+    return out
+
+
 def _kasdin_flicker(n: int, rng: np.random.Generator) -> NDArray:
     """Flicker (1/f) noise by Kasdin's fractional-difference filter (α = 1) on unit white
     noise, the whole record long: one-sided PSD 1/(π f) at low f, i.e. AVAR 2 ln 2/π
@@ -121,8 +155,12 @@ def make(seed: int, w: Weekend) -> tuple[NDArray, NDArray, list[str], dict[str, 
         room += w.compressor_c * np.tanh(4 * np.sin(2 * math.pi * t / w.compressor_period_s
                                                     + ph[1]))
     room += w.wander_c * np.cumsum(rng.standard_normal(n)) / math.sqrt(n)
+    room += w.room_ramp_c * (t / (n * dt) - 0.5)
     plate = _lag(room, w.plate_tau_s, dt)
-    die = _lag(plate, w.die_tau_s, dt)
+    if w.lag_drift_s:
+        die = _lag_varying(plate, w.die_tau_s + w.lag_drift_s * t / (n * dt), dt)
+    else:
+        die = _lag(plate, w.die_tau_s, dt)
     sensor = _lag(plate, w.sensor_tau_s, dt)
     acc = w.N * math.sqrt(w.rate_hz) * rng.standard_normal((n, 3))
     for j in range(3):  # AVAR (2 ln 2/π)·B² (NIST SP 1065 Table 5's flicker floor)
@@ -156,6 +194,21 @@ def make(seed: int, w: Weekend) -> tuple[NDArray, NDArray, list[str], dict[str, 
         acc[:, 0] += w.unlogged[0] * (h - h.mean())
     if w.tempco_drift:
         acc[:, 0] += w.coefficient[0] * w.tempco_drift * (t / (n * dt) - 0.5) * dm
+    if w.tempco_switch[1] != 1.0:
+        after = t >= w.tempco_switch[0] * n * dt
+        acc[:, 0] += w.coefficient[0] * (w.tempco_switch[1] - 1.0) * np.where(after, dm, 0.0)
+    if w.humidity[0]:
+        t0 = rng.uniform(0.25, 0.75) * n * dt
+        front = 1.0 / (1.0 + np.exp(-(t - t0) / max(w.humidity[1], dt)))
+        tide = 0.5 * np.sin(2 * math.pi * t / 43200.0 + rng.uniform(0, 2 * math.pi))
+        h = w.humidity[0] * (front + tide)
+        acc[:, 0] += h - h.mean()
+    if w.slab[0]:
+        s = _lag(room, w.slab[1], dt)
+        acc[:, 0] += w.slab[0] * (s - s.mean())
+    if w.rate_squared:
+        r2 = np.gradient(die, dt) ** 2
+        acc[:, 0] += w.rate_squared * (r2 - r2.mean())
     for size, T in w.warmups:
         acc[:, 0] += size * np.exp(-t / T)
     for ts, size in w.steps:
