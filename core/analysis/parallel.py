@@ -14,10 +14,13 @@ in it. The parts then add up to what one pass over the whole record holds, to th
 of the sums, so the ADEV, its noise identification (α), EDF and intervals, the spectrum and
 the fit are the single-worker ones (``tests/core/test_parallel.py``).
 
-Cuts fall on multiples of ``alignment`` counted from the start of the segment (the stretch
-between gaps) they are in: the OADEV's averages and the Welch segments are aligned to that
-start, and a cut elsewhere would shift them. Records without any stretch longer than two
-alignments run on one worker.
+Cuts fall on multiples of ``alignment`` (the Welch hop, and the input screen's block)
+counted from the start of the segment (the stretch between gaps) they are in: the Welch
+segments and the screen's blocks are aligned to that start, and a cut elsewhere would shift
+them. The OADEV's averages need no such cut: an average that straddles a cut is the
+earlier chunk's, which reads on past its end anyway, and the later chunk's first own
+average is the next one on that τ's grid, so the chunks can be evened out to a hop's
+samples. Records without any stretch longer than two alignments run on one worker.
 
 What stays single-worker: the cascade estimator (``--estimator cascade``: the service's
 streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
@@ -145,14 +148,14 @@ class Chunk:
     read_to: int
 
 
-def alignment(grid: NDArray[np.int64], nperseg: int | None) -> int:
-    """The step cuts fall on: a multiple of every m of the grid and of the Welch hop (all
-    powers of two, so the largest of them)."""
-    steps = [int(m) for m in grid] + ([nperseg // 2] if nperseg else [])
-    out = 1
-    for s in steps:
-        out = out * s // math.gcd(out, s)
-    return out
+def alignment(nperseg: int | None) -> int:
+    """The step cuts fall on: the Welch hop (a chunk's segments start at its first sample,
+    so a cut elsewhere would shift them), 1 without a spectrum. The OADEV needs none: a
+    chunk owns the differences and the averages of every τ that start in it (an average
+    that straddles a cut is the earlier chunk's: ``OverlappingAllan(own_from=…)``), so the
+    plan can even out the chunks' work to a hop's samples, not to the longest τ's (a
+    quarter of a 60 h record)."""
+    return nperseg // 2 if nperseg else 1
 
 
 def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
@@ -164,8 +167,9 @@ def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
 #: What a chunk's own samples cost against the samples it only reads (the differences at
 #: every τ, the spectrum and the screen against a read and a running sum): the chunk plan
 #: evens out reads + OWN_COST × owned samples. Every chunk reads from the record's start,
-#: and all but the last on past their end, so the last owns the most.
-OWN_COST = 3.0
+#: and all but the last on past their end, so the last owns the most. Fitted to the chunks
+#: of one 60 h axis cut at several points (their CPU against what they read and own).
+OWN_COST = 4.0
 
 
 def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[float]:
@@ -432,7 +436,7 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     last chunk is in, while the workers go on with the others (the caller finishes that
     pass meanwhile: its results and fits are then off the serial end), unless the screen
     has cut anything."""
-    align = alignment(grid, nperseg)
+    align = alignment(nperseg)
     if screen_block is not None:
         align = align * screen_block // math.gcd(align, screen_block)
     n = int(n_total)
