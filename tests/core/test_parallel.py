@@ -228,6 +228,95 @@ def test_analyze_on_workers_equals_one_worker(tmp_path, workers) -> None:
                 assert f.value == pytest.approx(e.value, rel=1e-9)
 
 
+def _spy_plans(monkeypatch) -> list[list[list[Chunk]]]:
+    """The chunk plans of the parallel analyses that follow."""
+    from avard.core.analysis import parallel
+
+    plans: list[list[list[Chunk]]] = []
+    real = parallel.plan_passes
+
+    def spy(*args, **kwargs):
+        plans.append(real(*args, **kwargs))
+        return plans[-1]
+
+    monkeypatch.setattr(parallel, "plan_passes", spy)
+    return plans
+
+
+def _assert_one_workers(one, par) -> None:
+    """``par`` has ``one``'s ADEV, α and EDF to 1e-12, its lines and its terms' presence."""
+    assert par.n_samples == one.n_samples
+    for name, ch in one.channels.items():
+        a, b = ch.allan, par.channels[name].allan
+        np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
+        np.testing.assert_array_equal(b.alpha, a.alpha)
+        np.testing.assert_allclose(b.edf, a.edf, rtol=1e-12)
+        assert [ln["frequency_hz"] for ln in par.channels[name].lines] == pytest.approx(
+            [ln["frequency_hz"] for ln in ch.lines], rel=1e-12)
+        assert {t: e.present for t, e in par.channels[name].fit.terms.items()} == \
+            {t: e.present for t, e in ch.fit.terms.items()}
+
+
+def _off_grid(plan: list[list[Chunk]], bounds: list[int], m_max: int) -> bool:
+    """Some cut of ``plan`` falls off the longest τ's grid of its segment."""
+    cuts = [c.start for chunks in plan for c in chunks[1:]]
+    return any((c - max(b for b in bounds[:-1] if b <= c)) % m_max for c in cuts)
+
+
+def test_cuts_off_the_tau_grid_with_gaps_equal_one_worker(tmp_path, monkeypatch) -> None:
+    """Records pooled as the segments of one (a gap between each), one channel cut into 2
+    and 3 chunks: the cuts fall on the Welch hop, off the longest τ's grid, so averages of
+    the long τ straddle them; the result is one worker's."""
+    from avard.core.analysis.engine import analyze_records
+
+    rng = np.random.default_rng(40)
+    paths = []
+    for k, n in enumerate((70000, 23000, 52000)):
+        y = rng.normal(0, 1e-3, n) + np.cumsum(rng.normal(0, 2e-6, n))
+        y += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
+        p = tmp_path / f"r{k}.npz"
+        np.savez(p, accel=y + 9.81, rate_hz=100.0)
+        paths.append(p)
+    from avard.core.analysis import engine
+
+    plans = _spy_plans(monkeypatch)
+    ladders: list[list[Lag1Ladder]] = []  # the noise identification's sums behind α
+    finish = engine._finish_pass
+
+    def kept(sa, *args, **kwargs):
+        ladders.append(list(sa._ladders))
+        return finish(sa, *args, **kwargs)
+
+    monkeypatch.setattr(engine, "_finish_pass", kept)
+    one = analyze_records([open_record(p) for p in paths])
+    for chunks in (2, 3):
+        par = analyze_records([open_record(p) for p in paths], chunks=chunks)
+        m_max = int(par.channels["ch0"].allan.m[-1])
+        assert len(plans[-1][0]) == chunks
+        assert _off_grid(plans[-1], [0, 70000, 93000, 145000], m_max)
+        _assert_one_workers(one, par)
+        assert max(_ladder_gap(a, b) for a, b in zip(ladders[0], ladders[-1],
+                                                      strict=True)) < 1e-12
+
+
+def test_three_axes_cut_off_the_tau_grid_equal_one_worker(tmp_path, monkeypatch) -> None:
+    """Three axes on two workers, the input screen judging blocks of 4096 in the chunks:
+    the cut pass is cut on the screen's blocks, off the longest τ's grid; the result is one
+    worker's."""
+    rng = np.random.default_rng(41)
+    n = 150000
+    y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
+    y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y + np.array([0.0, 0.0, 9.81]), rate_hz=100.0)
+    plans = _spy_plans(monkeypatch)
+    one = analyze(open_record(path), AnalyzeOptions(block=4096))
+    par = analyze(open_record(path), AnalyzeOptions(block=4096, workers=2))
+    assert sorted(len(p) for p in plans[-1]) == [1, 1, 2]
+    assert _off_grid(plans[-1], [0, n], int(par.channels["x"].allan.m[-1]))
+    _assert_one_workers(one, par)
+
+
 def test_analyze_on_workers_reads_r_n_again_as_one_worker(tmp_path) -> None:
     """A channel whose long τ B1 calls PM gets its deferred R(n) read again after the
     parallel pass, as after one pass: the same α at every τ."""
