@@ -77,7 +77,7 @@ from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
 __all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ChunkResult", "PassSpec", "ScreenCut",
-           "ShortRead", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
+           "ShortRead", "cores", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
@@ -93,6 +93,11 @@ PARALLEL_MIN_SAMPLES = 1 << 22
 Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 
 
+def cores() -> int:
+    """The cores this process may run on."""
+    return max(1, len(os.sched_getaffinity(0)))
+
+
 def default_workers() -> int:
     """1 on a machine with less than 2 GB of memory, else the cores, at most 4."""
     try:
@@ -103,7 +108,7 @@ def default_workers() -> int:
         total = 0
     if total < SMALL_MACHINE_BYTES:
         return 1
-    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0))))
+    return min(MAX_WORKERS, cores())
 
 
 class ShortRead(DataError):
@@ -395,21 +400,30 @@ def _makespan(costs: list[float], workers: int) -> float:
     return max(loads)
 
 
+#: The most plans ``plan_passes`` compares (ways to cut the passes); beyond, every pass is
+#: cut alike (many passes, or a machine of many cores).
+PLAN_CHOICES = 2000
+
+
 def plan_passes(n_passes: int, bounds: Sequence[int], workers: int, align: int,
                 reach_: int) -> list[list[Chunk]]:
     """How many chunks each of ``n_passes`` passes is cut into, so that the passes' chunks,
     run longest first on ``workers`` processes, end soonest: a pass analysed whole reads
     the record once, and each cut makes its chunks read the record's start and the reach
     past their ends again, so e.g. three channels on two workers are two whole passes and
-    one cut in two. Ties go to fewer chunks."""
+    one cut in two. Ties go to fewer chunks, and to cutting the later passes (the first
+    checks the file's CRC)."""
     n = int(bounds[-1])
     options = [plan_chunks(bounds, k, align, reach_) for k in range(1, workers + 1)]
     costs = [_chunk_costs(o, n) for o in options]
-    if n_passes > 6:  # every pass cut alike: the choices per pass would be too many
+    if math.comb(len(options) + n_passes - 1, n_passes) > PLAN_CHOICES:
+        # every pass cut alike: the choices per pass would be too many
         k = min(range(len(options)), key=lambda j: (_makespan(costs[j] * n_passes, workers),
                                                     j))
         return [options[k]] * n_passes
-    combo = min(itertools.product(range(len(options)), repeat=n_passes),
+    # the passes are of one record, so only how many are cut how often matters: each
+    # choice once, in ascending order (the later passes cut most)
+    combo = min(itertools.combinations_with_replacement(range(len(options)), n_passes),
                 key=lambda ks: (_makespan([c for k in ks for c in costs[k]], workers),
                                 sum(len(costs[k]) for k in ks)))
     return [options[k] for k in combo]

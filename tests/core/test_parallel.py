@@ -201,7 +201,10 @@ def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
 
 
 @pytest.mark.parametrize("workers", [2, 3])
-def test_analyze_on_workers_equals_one_worker(tmp_path, workers) -> None:
+def test_analyze_on_workers_equals_one_worker(tmp_path, monkeypatch, workers) -> None:
+    from avard.core.analysis import parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 4)  # three workers even on two cores
     rng = np.random.default_rng(11)
     n = 1 << 17
     y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
@@ -363,6 +366,48 @@ def test_a_worker_that_dies_is_an_error_not_a_wait(tmp_path, monkeypatch) -> Non
         analyze(open_record(path), AnalyzeOptions(workers=2))
 
 
+def test_more_workers_than_cores_run_on_the_cores_and_say_so(tmp_path, monkeypatch,
+                                                             caplog) -> None:
+    """--workers far above the cores: one line says so, the analysis runs on as many
+    processes as cores (more would be no faster and would each hold a history) and its
+    result is one worker's; planning such a count stays a few comparisons."""
+    from avard.core.analysis import parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 2)
+    pools: list[int] = []
+    real_pool = parallel.ProcessPoolExecutor
+
+    def counted(n, **kwargs):
+        pools.append(n)
+        return real_pool(n, **kwargs)
+
+    monkeypatch.setattr(parallel, "ProcessPoolExecutor", counted)
+    rng = np.random.default_rng(12)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y + np.array([0.0, 0.0, 9.81]), rate_hz=100.0)
+    one = analyze(open_record(path))
+    with caplog.at_level("WARNING", logger="avard.core.analysis.engine"):
+        par = analyze(open_record(path), AnalyzeOptions(workers=64))
+    said = [r.getMessage() for r in caplog.records if "workers=64" in r.getMessage()]
+    assert len(said) == 1 and "2 worker processes" in said[0]
+    assert pools and max(pools) <= 2
+    _assert_one_workers(one, par)
+    made = [0]
+    makespan = parallel._makespan
+
+    def count(*args):
+        made[0] += 1
+        return makespan(*args)
+
+    monkeypatch.setattr(parallel, "_makespan", count)
+    plan = parallel.plan_passes(3, [0, 1 << 24], 64, 8192, 1 << 22)
+    assert made[0] <= 64 and len(plan) == 3
+    for chunks in plan:
+        assert chunks[0].start == 0 and chunks[-1].stop == 1 << 24
+
+
 def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeypatch) -> None:
     """The record changes under the workers (a chunk finds fewer samples than planned): said,
     not a silently shorter analysis."""
@@ -501,6 +546,9 @@ def test_after_a_screen_cut_one_worker_takes_the_chunks_verdicts(tmp_path, monke
     reads, one in the record's last block): the one-worker read that follows the chunks'
     cut judges nothing again, and cuts exactly the rows, with the same log and ADEV, as one
     worker judging the record itself."""
+    from avard.core.analysis import parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 4)  # three workers even on two cores
     rng = np.random.default_rng(21)
     n = 1 << 18
     y = rng.normal(0, 1e-3, (n, 3))
