@@ -422,6 +422,30 @@ def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeyp
         parallel.chunk_part(job, 1)
 
 
+def test_a_record_shorter_than_its_header_is_refused_on_workers_as_on_one(tmp_path) -> None:
+    """An .npz whose accel header promises more rows than its member holds (a copy cut
+    short): the chunks past its end read short, and the analysis ends in the one line one
+    worker gives, never an ADEV of the rows that are there."""
+    import io
+    import zipfile
+
+    from avard.core.errors import FormatError
+
+    rng = np.random.default_rng(8)
+    y = rng.normal(0, 1e-3, (1 << 17, 3))
+    raw = io.BytesIO()
+    np.lib.format.write_array(raw, y)
+    rate = io.BytesIO()
+    np.lib.format.write_array(rate, np.float64(100.0))
+    path = tmp_path / "short.npz"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as z:
+        z.writestr("accel.npy", raw.getvalue()[:len(raw.getvalue()) - y.nbytes // 3])
+        z.writestr("rate_hz.npy", rate.getvalue())
+    for workers in (1, 2):
+        with pytest.raises(FormatError, match="truncated"):
+            analyze(open_record(path), AnalyzeOptions(workers=workers, block=8192))
+
+
 def test_a_damaged_npz_is_refused_on_workers_as_on_one(tmp_path) -> None:
     """The parallel pass checks the member's CRC as the first pass of one worker does: a
     flipped bit is an error, never an ADEV."""
