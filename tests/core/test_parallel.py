@@ -200,20 +200,9 @@ def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
     assert alignment(1 << 14) == 8192 and alignment(None) == 1
 
 
-@pytest.mark.parametrize("workers", [2, 3])
-def test_analyze_on_workers_equals_one_worker(tmp_path, monkeypatch, workers) -> None:
-    from avard.core.analysis import parallel
-
-    monkeypatch.setattr(parallel, "cores", lambda: 4)  # three workers even on two cores
-    rng = np.random.default_rng(11)
-    n = 1 << 17
-    y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
-    y += np.array([0.0, 0.0, 9.81])
-    y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
-    path = tmp_path / "r.npz"
-    np.savez(path, accel=y, rate_hz=100.0)
-    one = analyze(open_record(path))
-    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
+def _assert_one_workers(one, par) -> None:
+    """``par`` has ``one``'s ADEV, α and EDF to 1e-12, its lines (frequency 1e-12,
+    amplitude 1e-9) and its terms (presence, value 1e-9)."""
     assert par.n_samples == one.n_samples
     for name, ch in one.channels.items():
         a, b = ch.allan, par.channels[name].allan
@@ -231,6 +220,23 @@ def test_analyze_on_workers_equals_one_worker(tmp_path, monkeypatch, workers) ->
                 assert f.value == pytest.approx(e.value, rel=1e-9)
 
 
+@pytest.mark.parametrize("workers", [2, 3])
+def test_analyze_on_workers_equals_one_worker(tmp_path, monkeypatch, workers) -> None:
+    from avard.core.analysis import parallel
+
+    monkeypatch.setattr(parallel, "cores", lambda: 4)  # three workers even on two cores
+    rng = np.random.default_rng(11)
+    n = 1 << 17
+    y = rng.normal(0, 1e-3, (n, 3)) + np.cumsum(rng.normal(0, 2e-6, (n, 3)), axis=0)
+    y += np.array([0.0, 0.0, 9.81])
+    y[:, 1] += 3e-4 * np.sin(2 * np.pi * 1.7 * np.arange(n) / 100.0)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=y, rate_hz=100.0)
+    one = analyze(open_record(path))
+    par = analyze(open_record(path), AnalyzeOptions(workers=workers))
+    _assert_one_workers(one, par)
+
+
 def _spy_plans(monkeypatch) -> list[list[list[Chunk]]]:
     """The chunk plans of the parallel analyses that follow."""
     from avard.core.analysis import parallel
@@ -244,20 +250,6 @@ def _spy_plans(monkeypatch) -> list[list[list[Chunk]]]:
 
     monkeypatch.setattr(parallel, "plan_passes", spy)
     return plans
-
-
-def _assert_one_workers(one, par) -> None:
-    """``par`` has ``one``'s ADEV, α and EDF to 1e-12, its lines and its terms' presence."""
-    assert par.n_samples == one.n_samples
-    for name, ch in one.channels.items():
-        a, b = ch.allan, par.channels[name].allan
-        np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
-        np.testing.assert_array_equal(b.alpha, a.alpha)
-        np.testing.assert_allclose(b.edf, a.edf, rtol=1e-12)
-        assert [ln["frequency_hz"] for ln in par.channels[name].lines] == pytest.approx(
-            [ln["frequency_hz"] for ln in ch.lines], rel=1e-12)
-        assert {t: e.present for t, e in par.channels[name].fit.terms.items()} == \
-            {t: e.present for t, e in ch.fit.terms.items()}
 
 
 def _off_grid(plan: list[list[Chunk]], bounds: list[int], m_max: int) -> bool:
@@ -406,6 +398,34 @@ def test_more_workers_than_cores_run_on_the_cores_and_say_so(tmp_path, monkeypat
     assert made[0] <= 64 and len(plan) == 3
     for chunks in plan:
         assert chunks[0].start == 0 and chunks[-1].stop == 1 << 24
+
+
+def test_the_workers_are_forked_with_the_parents_objects_frozen(tmp_path, monkeypatch):
+    """The workers start with this process's objects out of the collector's reach (their
+    collections would otherwise copy every page those objects sit on), and this process
+    gets them back once the workers are forked."""
+    import gc
+    import os
+
+    from avard.core.analysis import parallel
+
+    seen = tmp_path / "frozen"
+    real = parallel.chunk_part
+
+    def noted(job, i, *flag):
+        with open(seen, "a") as f:
+            f.write(f"{os.getpid()} {gc.get_freeze_count()}\n")
+        return real(job, i, *flag)
+
+    monkeypatch.setattr(parallel, "chunk_part", noted)
+    rng = np.random.default_rng(5)
+    path = tmp_path / "r.npz"
+    np.savez(path, accel=rng.normal(0, 1e-3, (1 << 16, 2)), rate_hz=100.0)
+    assert gc.get_freeze_count() == 0
+    analyze(open_record(path), AnalyzeOptions(workers=2))
+    rows = [line.split() for line in seen.read_text().splitlines()]
+    assert rows and all(int(pid) != os.getpid() and int(n) > 1000 for pid, n in rows)
+    assert gc.get_freeze_count() == 0
 
 
 def test_a_record_cut_short_while_the_workers_read_is_an_error(tmp_path, monkeypatch) -> None:
