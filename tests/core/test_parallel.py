@@ -810,3 +810,61 @@ def test_the_workers_exit_by_themselves_once_the_last_chunk_is_in(tmp_path) -> N
     one = analyze(open_record(path))
     for name, ch in one.channels.items():
         np.testing.assert_allclose(par.channels[name].allan.dev, ch.allan.dev, rtol=1e-12)
+
+
+def _white_records(tmp_path, n: int = 1 << 14) -> list:
+    """The x axis of white-noise-only records (seeds 1, 2, 3, 9) on which one and two
+    workers' last-bit differences once chose a different composition in
+    ``signal_edf.model_edf`` (the white FM type's EDF ties the point bound there)."""
+    paths = []
+    for seed in (1, 2, 3, 9):
+        y = np.random.default_rng(seed).normal(0, 1e-3, (n, 3))[:, 0]
+        p = tmp_path / f"w{seed}.npz"
+        np.savez(p, accel=y, rate_hz=100.0)
+        paths.append(p)
+    return paths
+
+
+def test_white_noise_alone_gives_one_workers_edf_on_two(tmp_path) -> None:
+    """On white noise alone the printed EDF (the model bound, at the long τ) is one
+    worker's to 1e-12, as are the ADEV, α and terms: the tie between the white FM type's
+    EDF and the bound is not decided by the last bit of two sums of the same AVAR."""
+    from avard.core.analysis.engine import analyze_records
+
+    for path in _white_records(tmp_path):
+        one = analyze_records([open_record(path)])
+        par = analyze_records([open_record(path)], chunks=2)
+        assert not np.array_equal(par.channels["ch0"].allan.dev,
+                                  one.channels["ch0"].allan.dev)  # (really summed apart)
+        _assert_one_workers(one, par)
+
+
+def test_model_edf_does_not_amplify_the_last_bit_of_the_fit(tmp_path, monkeypatch) -> None:
+    """θ moved by 1e-13 relative (each way, and each component alone) moves the printed
+    EDF by under 1e-9 relative on white noise alone, where the model bound decides it."""
+    from dataclasses import replace
+
+    from avard.core.analysis import engine, signal_edf
+
+    seen = []
+    real = signal_edf.with_signal_edf
+
+    def kept(allan, fit):
+        seen.append((allan, fit))
+        return real(allan, fit)
+
+    monkeypatch.setattr(engine, "with_signal_edf", kept)
+    for path in _white_records(tmp_path):
+        analyze(open_record(path))
+    assert len(seen) == 4
+    raised = 0
+    for allan, fit in seen:
+        base = real(allan, fit).edf
+        raised += int(np.any(base > allan.edf))  # the bound does set the printed EDF
+        for k in [None, *range(len(fit.theta))]:
+            for sign in (1.0, -1.0):
+                step = np.full(len(fit.theta), 1e-13 * sign) if k is None else \
+                    np.where(np.arange(len(fit.theta)) == k, 1e-13 * sign, 0.0)
+                moved = real(allan, replace(fit, theta=fit.theta * (1.0 + step))).edf
+                np.testing.assert_allclose(moved, base, rtol=1e-9)
+    assert raised == 4
