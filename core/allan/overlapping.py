@@ -381,6 +381,10 @@ class OverlappingAllan:
                     self._numpy_sums(k, m, lo, count, buf, window, as_float, rk)
             # non-overlapping m-averages (as sums X_{(j+1)m} − X_{jm}) ending at new points
             q0 = max(m, -(-p0 // m) * m)
+            if first > 0:
+                # a chunk's averages are those that start in it: the one that straddles
+                # its start (a cut off this τ's grid) is the chunk's before
+                q0 = max(q0, -(-(first + m) // m) * m)
             last = q0 + ((p1 - 1 - q0) // m) * m
             if own is not None and q0 <= last:
                 last = self._past_averages(k, m, own, q0, last)

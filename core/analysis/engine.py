@@ -189,12 +189,19 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
 
 def _workers(workers: int | str, n_samples: int) -> int:
     """``AnalyzeOptions.workers`` as a number: ``"auto"`` is ``parallel.default_workers()``
-    for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1."""
-    if workers == "auto":
-        from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, default_workers
+    for records of ``PARALLEL_MIN_SAMPLES`` or more, else 1; a number, at most the cores
+    (said when it is cut: more processes than cores run no sooner, and each holds an OADEV
+    history of its own, which could shorten the τ grid the memory allows)."""
+    from avard.core.analysis.parallel import PARALLEL_MIN_SAMPLES, cores, default_workers
 
+    if workers == "auto":
         return default_workers() if n_samples >= PARALLEL_MIN_SAMPLES else 1
     assert isinstance(workers, int)  # AnalyzeOptions checked it when it was made
+    if workers > cores():
+        log.warning("workers=%d: this machine lets analyze use %d cores; running %d worker "
+                    "processes (more would be no faster and would hold more memory)",
+                    workers, cores(), cores())
+        return cores()
     return workers
 
 

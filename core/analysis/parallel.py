@@ -14,10 +14,13 @@ in it. The parts then add up to what one pass over the whole record holds, to th
 of the sums, so the ADEV, its noise identification (α), EDF and intervals, the spectrum and
 the fit are the single-worker ones (``tests/core/test_parallel.py``).
 
-Cuts fall on multiples of ``alignment`` counted from the start of the segment (the stretch
-between gaps) they are in: the OADEV's averages and the Welch segments are aligned to that
-start, and a cut elsewhere would shift them. Records without any stretch longer than two
-alignments run on one worker.
+Cuts fall on multiples of ``alignment`` (the Welch hop, and the input screen's block)
+counted from the start of the segment (the stretch between gaps) they are in: the Welch
+segments and the screen's blocks are aligned to that start, and a cut elsewhere would shift
+them. The OADEV's averages need no such cut: an average that straddles a cut is the
+earlier chunk's, which reads on past its end anyway, and the later chunk's first own
+average is the next one on that τ's grid, so the chunks can be evened out to a hop's
+samples. Records without any stretch longer than two alignments run on one worker.
 
 What stays single-worker: the cascade estimator (``--estimator cascade``: the service's
 streaming accumulator, whose stride the chunks would shift), the R(n) sums (read again for
@@ -56,6 +59,7 @@ block holds (``readers.READ_ROWS``, ``spectrum.SEGMENT_BATCH``).
 
 from __future__ import annotations
 
+import gc
 import itertools
 import math
 import multiprocessing
@@ -63,6 +67,7 @@ import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -74,7 +79,7 @@ from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
 
 __all__ = ["MAX_WORKERS", "PARALLEL_MIN_SAMPLES", "Chunk", "ChunkResult", "PassSpec", "ScreenCut",
-           "ShortRead", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
+           "ShortRead", "cores", "default_workers", "plan_chunks", "plan_passes", "run_passes"]
 
 #: The most workers ``default_workers`` proposes: a Raspberry Pi's four cores.
 MAX_WORKERS = 4
@@ -90,6 +95,11 @@ PARALLEL_MIN_SAMPLES = 1 << 22
 Blocks = Iterable[tuple[NDArray[np.float64], bool]]
 
 
+def cores() -> int:
+    """The cores this process may run on."""
+    return max(1, len(os.sched_getaffinity(0)))
+
+
 def default_workers() -> int:
     """1 on a machine with less than 2 GB of memory, else the cores, at most 4."""
     try:
@@ -100,7 +110,7 @@ def default_workers() -> int:
         total = 0
     if total < SMALL_MACHINE_BYTES:
         return 1
-    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0))))
+    return min(MAX_WORKERS, cores())
 
 
 class ShortRead(DataError):
@@ -145,14 +155,14 @@ class Chunk:
     read_to: int
 
 
-def alignment(grid: NDArray[np.int64], nperseg: int | None) -> int:
-    """The step cuts fall on: a multiple of every m of the grid and of the Welch hop (all
-    powers of two, so the largest of them)."""
-    steps = [int(m) for m in grid] + ([nperseg // 2] if nperseg else [])
-    out = 1
-    for s in steps:
-        out = out * s // math.gcd(out, s)
-    return out
+def alignment(nperseg: int | None) -> int:
+    """The step cuts fall on: the Welch hop (a chunk's segments start at its first sample,
+    so a cut elsewhere would shift them), 1 without a spectrum. The OADEV needs none: a
+    chunk owns the differences and the averages of every τ that start in it (an average
+    that straddles a cut is the earlier chunk's: ``OverlappingAllan(own_from=…)``), so the
+    plan can even out the chunks' work to a hop's samples, not to the longest τ's (a
+    quarter of a 60 h record)."""
+    return nperseg // 2 if nperseg else 1
 
 
 def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
@@ -164,8 +174,9 @@ def reach(grid: NDArray[np.int64], nperseg: int | None) -> int:
 #: What a chunk's own samples cost against the samples it only reads (the differences at
 #: every τ, the spectrum and the screen against a read and a running sum): the chunk plan
 #: evens out reads + OWN_COST × owned samples. Every chunk reads from the record's start,
-#: and all but the last on past their end, so the last owns the most.
-OWN_COST = 3.0
+#: and all but the last on past their end, so the last owns the most. Fitted to the chunks
+#: of one 60 h axis cut at several points (their CPU against what they read and own).
+OWN_COST = 4.0
 
 
 def _ideal_cuts(n: int, workers: int, reach_: int, own_cost: float) -> list[float]:
@@ -391,21 +402,30 @@ def _makespan(costs: list[float], workers: int) -> float:
     return max(loads)
 
 
+#: The most plans ``plan_passes`` compares (ways to cut the passes); beyond, every pass is
+#: cut alike (many passes, or a machine of many cores).
+PLAN_CHOICES = 2000
+
+
 def plan_passes(n_passes: int, bounds: Sequence[int], workers: int, align: int,
                 reach_: int) -> list[list[Chunk]]:
     """How many chunks each of ``n_passes`` passes is cut into, so that the passes' chunks,
     run longest first on ``workers`` processes, end soonest: a pass analysed whole reads
     the record once, and each cut makes its chunks read the record's start and the reach
     past their ends again, so e.g. three channels on two workers are two whole passes and
-    one cut in two. Ties go to fewer chunks."""
+    one cut in two. Ties go to fewer chunks, and to cutting the later passes (the first
+    checks the file's CRC)."""
     n = int(bounds[-1])
     options = [plan_chunks(bounds, k, align, reach_) for k in range(1, workers + 1)]
     costs = [_chunk_costs(o, n) for o in options]
-    if n_passes > 6:  # every pass cut alike: the choices per pass would be too many
+    if math.comb(len(options) + n_passes - 1, n_passes) > PLAN_CHOICES:
+        # every pass cut alike: the choices per pass would be too many
         k = min(range(len(options)), key=lambda j: (_makespan(costs[j] * n_passes, workers),
                                                     j))
         return [options[k]] * n_passes
-    combo = min(itertools.product(range(len(options)), repeat=n_passes),
+    # the passes are of one record, so only how many are cut how often matters: each
+    # choice once, in ascending order (the later passes cut most)
+    combo = min(itertools.combinations_with_replacement(range(len(options)), n_passes),
                 key=lambda ks: (_makespan([c for k in ks for c in costs[k]], workers),
                                 sum(len(costs[k]) for k in ks)))
     return [options[k] for k in combo]
@@ -432,7 +452,7 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     last chunk is in, while the workers go on with the others (the caller finishes that
     pass meanwhile: its results and fits are then off the serial end), unless the screen
     has cut anything."""
-    align = alignment(grid, nperseg)
+    align = alignment(nperseg)
     if screen_block is not None:
         align = align * screen_block // math.gcd(align, screen_block)
     n = int(n_total)
@@ -495,8 +515,9 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
         try:
             # submitted longest first; taken as they end, so a pass is finished as soon as
             # its last chunk is in
-            futures = {(pool.submit(_chunk_part, p, i) if own else
-                        pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
+            with _frozen_heap(own):
+                futures = {(pool.submit(_chunk_part, p, i) if own else
+                            pool.submit(chunk_part, jobs[p], i)): (p, i) for p, i in tasks}
             for fut in as_completed(futures):
                 one = fut.result()
                 if own and len(parts) == len(tasks) - 1:
@@ -515,6 +536,21 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     if any(r.part is None for r in parts.values()):
         raise _screen_cut(parts, screen_block)
     return [whole(p) for p in range(len(jobs))]
+
+
+@contextmanager
+def _frozen_heap(forking: bool) -> Iterator[None]:
+    """While the workers are forked (at the pool's first task): this process's objects out
+    of the garbage collector's reach (``gc.freeze``), so a worker's collections do not
+    write to every inherited object and copy the pages they sit on (about 4 MB a worker)."""
+    if not forking:
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) -> ScreenCut:

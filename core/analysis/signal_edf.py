@@ -60,6 +60,11 @@ __all__ = ["model_edf", "noise_part_edf", "noise_psd", "parts_edf", "signal_part
 #: The share of the AVAR above which a deterministic part's cross term is computed exactly.
 _EXACT_SHARE = 1e-3
 
+#: The relative gap within which a noise type's EDF is taken to tie ``model_edf``'s point
+#: bound: far above the last-bit error of the bound (~1e-15), and where the other types
+#: hold so little of the point bound that the type all but holds it alone.
+_TIE = 1e-9
+
 #: The estimators whose variance the fit's AVAR basis describes (Allan, not Hadamard).
 _ALLAN_KINDS = ("oavar", "avar", "pavar")
 
@@ -207,8 +212,14 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
         return np.full(len(tau), math.nan)
     nus = np.array([nu for _p, _l, _u, nu in parts])
     point = edf_mixture_bound([p for p, _l, _u, _nu in parts], nus)
-    # the composition that lowers the bound: types below it at their upper value
-    worst = [np.where(nu < point, up, lo) for _p, lo, up, nu in parts]
+    # the composition that lowers the bound: types below it at their upper value. A type
+    # whose own EDF ties the point bound (one α holds all of it, e.g. white FM, or white FM
+    # beside an absent quantization given white FM's EDF) is not below it: the bound gives
+    # its ν back only to the last bit, and that bit differs between two sums of the same
+    # AVAR (one worker's and several's, issue 29), so it is decided beyond a relative
+    # _TIE. At its lower value is the side that lowers the bound: the others moved, the
+    # bound lies below the tied ν, where more of that type would raise it.
+    worst = [np.where(nu < point * (1.0 - _TIE), up, lo) for _p, lo, up, nu in parts]
     return edf_mixture_bound(worst, nus)
 
 
