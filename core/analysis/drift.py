@@ -99,17 +99,20 @@ class _Profile:
 
     def __init__(self, yb: NDArray, t: NDArray, block_s: float, n_white: float,
                  b_inst: float) -> None:
-        from scipy.linalg import eigh, solve_triangular
+        # numpy and the project's triangular solver, not scipy.linalg: analyze imports no
+        # scipy (its import would cost more than every solve here)
+        from avard.core.model.triangular import LowerSolver
 
         c0 = block_noise_cov(t, block_s, n_white, b_inst, 0.0)
         L = np.linalg.cholesky(c0)  # LinAlgError: the caller says "would not factor"
+        low = LowerSolver(L)
         walk = np.minimum.outer(t, t)
-        a = solve_triangular(L, walk, lower=True)
-        a = solve_triangular(L, a.T, lower=True)
-        lam, V = eigh(0.5 * (a + a.T))
+        a = low.solve(walk)
+        a = low.solve(np.ascontiguousarray(a.T))
+        lam, V = np.linalg.eigh(0.5 * (a + a.T))
         self.lam = np.maximum(lam, 0.0)
         self.logdet0 = 2.0 * float(np.sum(np.log(np.diag(L))))
-        self._white = lambda x: V.T @ solve_triangular(L, x, lower=True)
+        self._white = lambda x: V.T @ low.solve(x)
         self.wy = self._white(np.asarray(yb, dtype=float))
 
     def white(self, cols: NDArray) -> NDArray[np.float64]:
@@ -134,7 +137,17 @@ class _Profile:
 
     def k_profile(self, ks: NDArray, wx: NDArray) -> tuple[int, NDArray[np.float64]]:
         """(index of the best K in ``ks``, −2 ln L at each K) of the columns ``wx``."""
-        nll = np.array([self.fit(float(k), wx)[0] for k in ks])
+        # every K at once (the rotated basis makes each K's covariance diagonal): the same
+        # −2 ln L as ``fit`` per K, held equal by tests/core/test_drift.py
+        s = 1.0 + np.outer(ks * ks, self.lam)  # (K, blocks)
+        d = 1.0 / np.sqrt(s)
+        x = wx[None, :, :] * d[:, :, None]  # (K, blocks, p)
+        r = self.wy[None, :] * d
+        xtx = np.einsum("kbp,kbq->kpq", x, x)
+        xtr = np.einsum("kbp,kb->kp", x, r)
+        coef = _solve_each(xtx, xtr)
+        res = r - np.einsum("kbp,kp->kb", x, coef)
+        nll = self.logdet0 + np.sum(np.log(s), axis=1) + np.einsum("kb,kb->k", res, res)
         return int(np.argmin(nll)), nll
 
     def slope_profile(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
@@ -154,6 +167,15 @@ class _Profile:
             res = r - np.einsum("kbp,kp->kb", x, coef)
             out[i] = float(np.min(logdet + np.einsum("kb,kb->k", res, res)))
         return out
+
+
+def _solve_each(xtx: NDArray, xtr: NDArray) -> NDArray[np.float64]:
+    """Each K's normal equations solved (least squares where one is singular)."""
+    try:
+        return np.asarray(np.linalg.solve(xtx, xtr[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:
+        return np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(xtx, xtr,
+                                                                            strict=True)])
 
 
 @dataclass(frozen=True)
@@ -266,6 +288,15 @@ def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: flo
     return -math.inf, math.inf
 
 
+def _block_sums(a: NDArray, b: int) -> NDArray[np.float64]:
+    """Sums of consecutive ``b``-row blocks of ``a`` (its length a multiple of ``b``), by one
+    reduction for a whole block or a pending one completed (the same sums either way, so a
+    cut of the stream anywhere gives the one-shot means). ``reduceat`` along the rows, not a
+    mean over the middle axis of (blocks, b, C), which strides over C columns and cost the
+    pass more than its Allan sums."""
+    return np.asarray(np.add.reduceat(a, np.arange(0, len(a), b), axis=0))
+
+
 class BlockMeans:
     """Block means of C channels, ``block`` samples each, kept for the longest stretch
     without a gap (no block straddles one): what the drift test reads, carried by the pass
@@ -288,11 +319,11 @@ class BlockMeans:
             a = a[head:]
             if len(self._rest) < b:
                 return
-            self._current.append(self._rest.mean(axis=0, keepdims=True))
+            self._current.append(_block_sums(self._rest, b) / b)
             self._rest = self._rest[:0]
         k = len(a) // b * b
         if k:
-            self._current.append(a[:k].reshape(-1, b, a.shape[1]).mean(axis=1))
+            self._current.append(_block_sums(a[:k], b) / b)
         if k < len(a):
             self._rest = a[k:].copy()
 

@@ -170,3 +170,22 @@ def test_a_parallel_analysis_reads_the_block_means_again_and_finds_the_same_drif
     for term in ("rate_ramp", "rate_random_walk"):
         a, b = one.terms[term], par.terms[term]
         assert a.value is not None and b.value == pytest.approx(a.value, rel=1e-9)
+
+
+@pytest.mark.parametrize("cols", [1, 2, 4])
+def test_the_k_profile_at_every_k_at_once_equals_one_fit_per_k(cols):
+    """``_Profile.k_profile`` solves every K's normal equations at once; each −2 ln L must
+    equal the per-K least-squares fit (``_Profile.fit``), the general path it replaces."""
+    rng = np.random.default_rng(cols)
+    n, bs = 200, 600.0
+    t = (np.arange(n) + 0.5) * bs
+    y = rng.normal(0, 1e-5, n) + np.cumsum(rng.normal(0, 3e-7, n))
+    prof = dr._Profile(y, t, bs, 2e-4, 1e-5)
+    x = np.column_stack([np.ones(n), t - t.mean(), (t > t[n // 3]).astype(float),
+                         np.sin(t / 3e4)][:cols])
+    wx = prof.white(x)
+    ks = np.concatenate([[0.0], np.geomspace(1e-10, 1e-5, 40)])
+    j, nll = prof.k_profile(ks, wx)
+    each = np.array([prof.fit(float(k), wx)[0] for k in ks])
+    np.testing.assert_allclose(nll, each, rtol=1e-10, atol=1e-8)
+    assert j == int(np.argmin(each))
