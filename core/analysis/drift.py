@@ -55,6 +55,8 @@ __all__ = [
     "LEVEL",
     "MIN_BLOCKS",
     "BlockMeans",
+    "BlockSums",
+    "BlockSumsPart",
     "DriftLikelihood",
     "block_noise_cov",
     "channel_drift",
@@ -337,6 +339,101 @@ class BlockMeans:
         """(blocks, C) means of the longest stretch so far (the current one included)."""
         seg = np.concatenate(self._current) if self._current else self._best[:0]
         return np.asarray(seg if len(seg) > len(self._best) else self._best)
+
+
+class BlockSums:
+    """``BlockMeans`` over the samples one chunk of a parallel pass owns
+    (``analysis/parallel.py``): fed the record from its start as the chunk is (the
+    stretches between gaps, and so the blocks, are counted from where each stretch starts),
+    it keeps the sums and row counts of the blocks it owns rows of, keyed by (stretch start,
+    block). The chunks' parts add up (``BlockSumsPart.__add__``) to the one pass's blocks;
+    a block a cut splits is summed in two pieces, so its mean equals the one pass's to
+    rounding, not to the bit."""
+
+    def __init__(self, n_channels: int, block: int, own_from: int = 0,
+                 own_until: int | None = None) -> None:
+        self.block = max(1, int(block))
+        self._c = int(n_channels)
+        self._own = (int(own_from), own_until)
+        self._pos = 0
+        self._start = 0  # where the current stretch began
+        self._sums: dict[tuple[int, int], NDArray[np.float64]] = {}
+        self._counts: dict[tuple[int, int], int] = {}
+        self._pend: list[NDArray] = []  # rows of one block not yet complete
+        self._key: tuple[int, int] | None = None
+
+    def update(self, a: NDArray) -> None:
+        a = np.asarray(a, dtype=float)
+        if a.ndim == 1:
+            a = a[:, None]
+        lo = self._pos
+        self._pos += len(a)
+        own_from, own_until = self._own
+        s, e = max(lo, own_from), min(self._pos, self._pos if own_until is None else own_until)
+        if s >= e:
+            return
+        x, b, st = a[s - lo:e - lo], self.block, self._start
+        first = (s - st) // b
+        cuts = st + np.arange(first + 1, (e - 1 - st) // b + 1) * b - s
+        for k, piece in enumerate(np.split(x, cuts)):
+            key = (st, first + k)
+            if key != self._key:
+                self._flush()
+                self._key = key
+            self._pend.append(piece)
+            if sum(len(p) for p in self._pend) >= b:
+                self._flush()
+
+    def _flush(self) -> None:
+        if self._key is None or not self._pend:
+            return
+        rows = np.concatenate(self._pend) if len(self._pend) > 1 else self._pend[0]
+        total = _block_sums(rows, len(rows))[0]
+        self._sums[self._key] = self._sums.get(self._key, 0.0) + total
+        self._counts[self._key] = self._counts.get(self._key, 0) + len(rows)
+        self._pend, self._key = [], None
+
+    def gap(self) -> None:
+        self._flush()
+        self._start = self._pos
+
+    def part(self) -> BlockSumsPart:
+        self._flush()
+        return BlockSumsPart(self.block, self._c, dict(self._sums), dict(self._counts))
+
+
+@dataclass(frozen=True)
+class BlockSumsPart:
+    """A chunk's ``BlockSums``: added up over a pass's chunks, ``longest`` gives what one
+    ``BlockMeans`` over the record gives (to rounding in the blocks a cut splits)."""
+
+    block: int
+    n_channels: int
+    sums: dict[tuple[int, int], NDArray[np.float64]]
+    counts: dict[tuple[int, int], int]
+
+    def __add__(self, other: BlockSumsPart) -> BlockSumsPart:
+        sums, counts = dict(self.sums), dict(self.counts)
+        for key, v in other.sums.items():
+            sums[key] = sums[key] + v if key in sums else v
+            counts[key] = counts.get(key, 0) + other.counts[key]
+        return BlockSumsPart(self.block, self.n_channels, sums, counts)
+
+    def longest(self) -> NDArray[np.float64]:
+        """(blocks, C) means of the longest stretch's whole blocks (the first of equal
+        ones, as ``BlockMeans``)."""
+        full: dict[int, list[int]] = {}
+        for (st, k), c in self.counts.items():
+            if c == self.block:
+                full.setdefault(st, []).append(k)
+        best: tuple[int, int] | None = None  # (blocks, stretch start)
+        for st in sorted(full):
+            if best is None or len(full[st]) > best[0]:
+                best = (len(full[st]), st)
+        if best is None:
+            return np.zeros((0, self.n_channels))
+        st = best[1]
+        return np.stack([self.sums[(st, k)] / self.block for k in sorted(full[st])])
 
 
 def drift_block(n_samples: int) -> int:

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from avard.core.allan.noise_id import check_noise_id
 from avard.core.allan.scratch import histories_passed_on
-from avard.core.analysis.drift import BlockMeans, drift_block
+from avard.core.analysis.drift import BlockMeans, BlockSumsPart, drift_block
 from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.signal_edf import with_signal_edf
@@ -337,8 +337,9 @@ class _PassResult:
     allan: Any  # AllanResult of the pass's channels, τ without differences dropped
     welch: WelchAccumulator | None
     n: int  # samples read
-    #: the channels' block means for the drift test (None: a parallel pass, read again)
-    means: BlockMeans | None = None
+    #: the channels' block means for the drift test (None: none kept; the channel is then
+    #: read again)
+    means: BlockMeans | BlockSumsPart | None = None
 
 
 def _one_pass(blocks: _Blocks, take: list[int] | None,
@@ -494,18 +495,27 @@ def _parallel_passes(par: _Parallel, groups: list[list[int]], names: list[str], 
         if on_result is None or (reread is not None and n >= 16
                                  and sa.rn_needed(noise_id)):
             return
-        finished[p] = _finish_pass(sa, welch, n, again_for(groups[p]), quantiles, noise_id)
+        finished[p] = finish(p, sa, welch, n)
         on_result(p, groups[p], finished[p])
+
+    # the drift test's block means kept by the chunks (analysis/drift.py: none read again)
+    means: dict[int, BlockSumsPart] = {}
+
+    def finish(p: int, sa: OverlappingAllan, welch: WelchAccumulator | None, n: int
+               ) -> _PassResult:
+        one = _finish_pass(sa, welch, n, again_for(groups[p]), quantiles, noise_id)
+        return replace(one, means=means.get(p))
 
     parts = run_passes(specs, rate, grid, nper, total, par.bounds, par.workers,
                        progress=step, executor=par.executor,
-                       screen_block=par.block if screen else None, on_pass=early)
+                       screen_block=par.block if screen else None, on_pass=early,
+                       means_block=drift_block(total), means_out=means)
     if par.screened is not None:
         par.screened.judged_clean(par.block)  # later reads cut nothing, as the chunks found
     out = []
     for p, (chans, (sa, welch, n)) in enumerate(zip(groups, parts, strict=True)):
         if p not in finished:
-            finished[p] = _finish_pass(sa, welch, n, again_for(chans), quantiles, noise_id)
+            finished[p] = finish(p, sa, welch, n)
             if on_result is not None:
                 on_result(p, chans, finished[p])
         out.append((chans, finished[p]))
@@ -700,15 +710,15 @@ def _analyze_passes(
                     meta={**meta, "filter_corner_hz": corner}, estimator=estimator, info=info)
 
 
-def _drift(fit: Any, job: _FitJob, means: BlockMeans | None, j: int,
+def _drift(fit: Any, job: _FitJob, means: BlockMeans | BlockSumsPart | None, j: int,
            again: Callable[[], _Blocks] | None, n: int) -> Any:
     """``fit``, or it with the drift the time domain finds as a resolved ramp, of one
-    channel: the block means the pass carried (``means``, column ``j``) or, after a
-    parallel pass, the channel read again (``again``)."""
+    channel: the block means the pass carried (``means``, column ``j``; a parallel pass's
+    chunks keep them too), or else the channel read again (``again``)."""
     from avard.core.analysis.drift import resolve_drift
     from avard.core.model.fit import fit_noise
 
-    b = drift_block(n)
+    b = means.block if means is not None else drift_block(n)
     if means is not None:
         yb = means.longest()[:, j]
     elif again is not None:

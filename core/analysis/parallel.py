@@ -74,6 +74,7 @@ from typing import Protocol
 import numpy as np
 from avard.core.allan.overlapping import LADDER_REACH, PIECE, OadevPart, OverlappingAllan
 from avard.core.allan.scratch import reuse_histories
+from avard.core.analysis.drift import BlockSums, BlockSumsPart
 from avard.core.analysis.spectrum import WelchAccumulator, WelchPart
 from avard.core.errors import AvardError, DataError
 from numpy.typing import NDArray
@@ -143,6 +144,8 @@ class ChunkResult:
     part: OadevPart | None
     power: WelchPart | None
     cuts: dict[int, NDArray[np.intp]]
+    #: the drift test's block sums over the rows the chunk owns (None: not asked)
+    means: BlockSumsPart | None = None
 
 
 @dataclass(frozen=True)
@@ -252,6 +255,8 @@ class _Job:
     chunks: list[Chunk]
     screen: list[int] | None = None
     screen_block: int | None = None
+    #: samples per block of the drift test's block means (None: none kept)
+    means_block: int | None = None
 
 
 class _Flag(Protocol):
@@ -311,6 +316,8 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
                            own_until=None if last else ch.stop, piece=chunk_piece(c))
     welch = (WelchAccumulator(c, job.rate_hz, job.nperseg) if job.nperseg is not None
              else None)
+    means = (BlockSums(c, job.means_block, ch.start, None if last else ch.stop)
+             if job.means_block is not None else None)
     # the Welch segments that start before ``stop`` end by half a segment past it
     welch_to = ch.read_to if last or job.nperseg is None else ch.stop + job.nperseg // 2
     pos = 0
@@ -349,18 +356,23 @@ def chunk_part(job: _Job, i: int, cut: _Flag | None = None) -> ChunkResult:
         acc.update(a)
         if welch is not None and hi > ch.start and lo < welch_to:
             welch.update(a[max(0, ch.start - lo):welch_to - lo])
+        if means is not None:
+            means.update(a)
         if hi >= ch.read_to:
             break
         if segment_end:
             acc.gap()
             if welch is not None:
                 welch.gap()
+            if means is not None:
+                means.gap()
     if pos < (ch.stop if judging else ch.read_to):
         raise ShortRead(f"read {pos} samples where the record had {ch.read_to}: the input "
                         "screen cut rows out, or the file changed while it was analysed")
     if judging:
         return ChunkResult(None, None, cuts)
-    return ChunkResult(acc.part(), None if welch is None else welch.part(), cuts)
+    return ChunkResult(acc.part(), None if welch is None else welch.part(), cuts,
+                       None if means is None else means.part())
 
 
 def _screen(a: NDArray[np.float64]) -> NDArray[np.intp] | None:
@@ -436,7 +448,8 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
                progress: Callable[[int], None] | None = None,
                executor: Executor | None = None, screen_block: int | None = None,
                on_pass: Callable[[int, OverlappingAllan, WelchAccumulator | None, int], None]
-               | None = None,
+               | None = None, means_block: int | None = None,
+               means_out: dict[int, BlockSumsPart] | None = None,
                ) -> list[tuple[OverlappingAllan, WelchAccumulator | None, int]]:
     """The OADEV passes ``passes`` over one record, their chunks (``plan_passes``) run
     together on ``workers`` processes, longest first: per pass the OADEV accumulator
@@ -451,7 +464,10 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     after one pass. ``on_pass(p, acc, welch, n)``: called with pass p's sums as soon as its
     last chunk is in, while the workers go on with the others (the caller finishes that
     pass meanwhile: its results and fits are then off the serial end), unless the screen
-    has cut anything."""
+    has cut anything. ``means_block``: the chunks also keep the drift test's block sums
+    (``drift.BlockSums``) in blocks of that many samples, each pass's added up into
+    ``means_out[p]`` before ``on_pass`` hears of it (the one pass's ``BlockMeans``, so a
+    parallel analysis reads no channel again for its drift test)."""
     align = alignment(nperseg)
     if screen_block is not None:
         align = align * screen_block // math.gcd(align, screen_block)
@@ -459,7 +475,7 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
     plans = plan_passes(len(passes), bounds, workers, align, reach(grid, nperseg))
     jobs = [_Job(ps.read, ps.take, ps.names, float(rate_hz), grid, nperseg, n, ps.verify,
                  chunks, screen=ps.screen if screen_block is not None else None,
-                 screen_block=screen_block)
+                 screen_block=screen_block, means_block=means_block)
             for ps, chunks in zip(passes, plans, strict=True)]
     tasks = sorted(((p, i) for p, job in enumerate(jobs) for i in range(len(job.chunks))),
                    key=lambda t: -_chunk_costs([jobs[t[0]].chunks[t[1]]], n)[0])
@@ -483,6 +499,13 @@ def run_passes(passes: Sequence[PassSpec], rate_hz: float, grid: NDArray[np.int6
             if welch is not None and power is not None:
                 welch.add(power)
         assert total is not None
+        if means_out is not None and means_block is not None:
+            sums = [m for i in range(len(job.chunks)) if (m := parts[(p, i)].means) is not None]
+            if len(sums) == len(job.chunks):
+                added = sums[0]
+                for m in sums[1:]:
+                    added = added + m
+                means_out[p] = added
         acc = OverlappingAllan.from_part(total, rate_hz, names=job.names, n_total=n,
                                          defer_rn=True)
         wholes[p] = (acc, welch, total.n_samples)

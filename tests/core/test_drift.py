@@ -154,9 +154,12 @@ def test_analyze_claims_no_drift_on_a_record_without_one():
     assert not ch.fit.terms["rate_ramp"].present or ch.fit.terms["rate_ramp"].note is not None
 
 
-def test_a_parallel_analysis_reads_the_block_means_again_and_finds_the_same_drift(tmp_path):
-    """After a parallel pass (no block means carried) the channel is read again for them:
-    the same ramp and walk as one pass's."""
+def test_a_parallel_analysis_keeps_the_block_means_in_its_chunks_and_finds_the_same_drift(
+        tmp_path, monkeypatch):
+    """A parallel pass's chunks keep the block sums of the rows they own (``BlockSums``),
+    so no channel is read again for the drift test (that read would be the parallel
+    analysis's serial end): the same ramp and walk as one pass's."""
+    from avard.core.analysis import engine
     from avard.core.io.source import open_record
 
     mix = mix_for("plain", N_12H, 1.0)
@@ -165,6 +168,11 @@ def test_a_parallel_analysis_reads_the_block_means_again_and_finds_the_same_drif
     path = tmp_path / "d.npz"
     np.savez(path, accel=y[:, None], rate_hz=1.0, axes=np.array(["x"]))
     one = analyze(open_record(path), AnalyzeOptions()).channels["x"].fit
+
+    def no_reread(*_a, **_k):
+        raise AssertionError("the parallel analysis built block means of its own")
+
+    monkeypatch.setattr(engine, "BlockMeans", no_reread)
     par = analyze(open_record(path), AnalyzeOptions(workers=2)).channels["x"].fit
     assert one.resolved_apart == par.resolved_apart == ("rate_ramp",)
     for term in ("rate_ramp", "rate_random_walk"):
@@ -189,3 +197,37 @@ def test_the_k_profile_at_every_k_at_once_equals_one_fit_per_k(cols):
     each = np.array([prof.fit(float(k), wx)[0] for k in ks])
     np.testing.assert_allclose(nll, each, rtol=1e-10, atol=1e-8)
     assert j == int(np.argmin(each))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_block_sums_of_chunks_add_up_to_one_passs_block_means(seed):
+    """A parallel pass's chunks each keep the block sums of the rows they own
+    (``BlockSums``), fed from the record's start in pieces of any size, with gaps; added
+    up they give what ``BlockMeans`` over the whole record gives: the same blocks of the
+    same (longest) stretch, equal to rounding where a cut splits a block."""
+    rng = np.random.default_rng(seed)
+    n, c = int(rng.integers(3000, 9000)), int(rng.integers(1, 4))
+    y = rng.normal(0, 1, (n, c)) + 5.0
+    gaps = sorted(int(g) for g in rng.integers(1, n - 1, int(rng.integers(0, 3))))
+    edges = sorted({0, n, *gaps, *(int(p) for p in rng.integers(1, n - 1, 12))})
+    b = int(rng.integers(7, 90))
+
+    def feed(acc):
+        for lo, hi in itertools.pairwise(edges):
+            acc.update(y[lo:hi])
+            if hi in gaps:
+                acc.gap()
+        return acc
+
+    one = feed(dr.BlockMeans(c, b)).longest()
+    cuts = sorted({0, n, *(int(p) for p in rng.integers(1, n - 1, int(rng.integers(1, 4))))})
+    parts = [feed(dr.BlockSums(c, b, lo, None if hi == n else hi)).part()
+             for lo, hi in itertools.pairwise(cuts)]
+    total = parts[0]
+    for p in parts[1:]:
+        total = total + p
+    got = total.longest()
+    assert got.shape == one.shape and len(one) > 0
+    np.testing.assert_allclose(got, one, rtol=1e-13, atol=0)
+    whole = feed(dr.BlockSums(c, b)).part().longest()
+    np.testing.assert_array_equal(whole, one)  # uncut: the one pass's sums to the bit
