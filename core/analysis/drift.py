@@ -291,11 +291,11 @@ def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: flo
 
 
 def _block_sums(a: NDArray, b: int) -> NDArray[np.float64]:
-    """Sums of consecutive ``b``-row blocks of ``a`` (its length a multiple of ``b``), by one
-    reduction for a whole block or a pending one completed (the same sums either way, so a
-    cut of the stream anywhere gives the one-shot means). ``reduceat`` along the rows, not a
-    mean over the middle axis of (blocks, b, C), which strides over C columns and cost the
-    pass more than its Allan sums."""
+    """Sums of consecutive ``b``-row blocks of ``a`` (its length a multiple of ``b``), each
+    one sequential reduction; a block the stream hands in pieces is the sum of its pieces'
+    sums (equal to one reduction to rounding). ``reduceat`` along the rows, not a mean over
+    the middle axis of (blocks, b, C), which strides over C columns and cost the pass more
+    than its Allan sums."""
     return np.asarray(np.add.reduceat(a, np.arange(0, len(a), b), axis=0))
 
 
@@ -306,7 +306,10 @@ class BlockMeans:
 
     def __init__(self, n_channels: int, block: int) -> None:
         self.block = max(1, int(block))
-        self._rest = np.zeros((0, n_channels))
+        # the pending block's sum and rows: a block is summed piece by piece as the pass
+        # hands the pieces in (copying its rows together cost the pass more than its sums)
+        self._rest = np.zeros(n_channels)
+        self._rest_n = 0
         self._current: list[NDArray] = []
         self._best = np.zeros((0, n_channels))
 
@@ -315,25 +318,27 @@ class BlockMeans:
         if a.ndim == 1:
             a = a[:, None]
         b = self.block
-        if len(self._rest):  # complete the pending block first (no copy of the whole block)
-            head = min(b - len(self._rest), len(a))
-            self._rest = np.concatenate([self._rest, a[:head]])
+        if self._rest_n:  # complete the pending block first
+            head = min(b - self._rest_n, len(a))
+            self._rest = self._rest + _block_sums(a[:head], head)[0]
+            self._rest_n += head
             a = a[head:]
-            if len(self._rest) < b:
+            if self._rest_n < b:
                 return
-            self._current.append(_block_sums(self._rest, b) / b)
-            self._rest = self._rest[:0]
+            self._current.append(self._rest[None, :] / b)
+            self._rest_n = 0
         k = len(a) // b * b
         if k:
             self._current.append(_block_sums(a[:k], b) / b)
         if k < len(a):
-            self._rest = a[k:].copy()
+            self._rest = _block_sums(a[k:], len(a) - k)[0]
+            self._rest_n = len(a) - k
 
     def gap(self) -> None:
         seg = np.concatenate(self._current) if self._current else self._best[:0]
         if len(seg) > len(self._best):
             self._best = seg
-        self._current, self._rest = [], self._rest[:0]
+        self._current, self._rest_n = [], 0
 
     def longest(self) -> NDArray[np.float64]:
         """(blocks, C) means of the longest stretch so far (the current one included)."""
@@ -359,7 +364,9 @@ class BlockSums:
         self._start = 0  # where the current stretch began
         self._sums: dict[tuple[int, int], NDArray[np.float64]] = {}
         self._counts: dict[tuple[int, int], int] = {}
-        self._pend: list[NDArray] = []  # rows of one block not yet complete
+        # the sum and rows of one block not yet complete
+        self._pend_sum: NDArray[np.float64] = np.zeros(self._c)
+        self._pend_n = 0
         self._key: tuple[int, int] | None = None
 
     def update(self, a: NDArray) -> None:
@@ -380,18 +387,20 @@ class BlockSums:
             if key != self._key:
                 self._flush()
                 self._key = key
-            self._pend.append(piece)
-            if sum(len(p) for p in self._pend) >= b:
+            # summed piece by piece, as ``BlockMeans`` sums a block the pass hands in pieces
+            total = _block_sums(piece, len(piece))[0]
+            self._pend_sum = total if self._pend_n == 0 else self._pend_sum + total
+            self._pend_n += len(piece)
+            if self._pend_n >= b:
                 self._flush()
 
     def _flush(self) -> None:
-        if self._key is None or not self._pend:
+        if self._key is None or not self._pend_n:
             return
-        rows = np.concatenate(self._pend) if len(self._pend) > 1 else self._pend[0]
-        total = _block_sums(rows, len(rows))[0]
-        self._sums[self._key] = self._sums.get(self._key, 0.0) + total
-        self._counts[self._key] = self._counts.get(self._key, 0) + len(rows)
-        self._pend, self._key = [], None
+        self._sums[self._key] = (self._sums[self._key] + self._pend_sum
+                                 if self._key in self._sums else self._pend_sum)
+        self._counts[self._key] = self._counts.get(self._key, 0) + self._pend_n
+        self._pend_n, self._key = 0, None
 
     def gap(self) -> None:
         self._flush()
