@@ -141,40 +141,58 @@ class _Profile:
         """(index of the best K in ``ks``, −2 ln L at each K) of the columns ``wx``."""
         # every K at once (the rotated basis makes each K's covariance diagonal): the same
         # −2 ln L as ``fit`` per K, held equal by tests/core/test_drift.py
-        s = 1.0 + np.outer(ks * ks, self.lam)  # (K, blocks)
-        d = 1.0 / np.sqrt(s)
-        x = wx[None, :, :] * d[:, :, None]  # (K, blocks, p)
-        r = self.wy[None, :] * d
-        xtx = np.einsum("kbp,kbq->kpq", x, x)
-        xtr = np.einsum("kbp,kb->kp", x, r)
-        coef = _solve_each(xtx, xtr)
-        res = r - np.einsum("kbp,kp->kb", x, coef)
-        nll = self.logdet0 + np.sum(np.log(s), axis=1) + np.einsum("kb,kb->k", res, res)
+        nll = self._nll_each_k(self._over_k(ks, wx), self.wy, _solve_each)
         return int(np.argmin(nll)), nll
 
     def slope_profile(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
                       ) -> NDArray[np.float64]:
         """−2 ln L at each of ``slopes`` (the slope column ``wt`` fixed, the columns ``w0``
         fitted), K profiled over ``ks``: the slope's profile likelihood."""
-        s = 1.0 + np.outer(ks * ks, self.lam)  # (K, blocks)
-        d = 1.0 / np.sqrt(s)
-        logdet = self.logdet0 + np.sum(np.log(s), axis=1)
+        basis = self._over_k(ks, w0)  # the columns' side is the same at every slope
         out = np.full(len(slopes), np.inf)
         for i, b in enumerate(slopes):
-            r = (self.wy - b * wt)[None, :] * d  # (K, blocks)
-            x = w0[None, :, :] * d[:, :, None]  # (K, blocks, p)
-            xtx = np.einsum("kbp,kbq->kpq", x, x)
-            xtr = np.einsum("kbp,kb->kp", x, r)
-            coef = np.linalg.solve(xtx, xtr[:, :, None])[:, :, 0]
-            res = r - np.einsum("kbp,kp->kb", x, coef)
-            out[i] = float(np.min(logdet + np.einsum("kb,kb->k", res, res)))
+            out[i] = float(np.min(self._nll_each_k(basis, self.wy - b * wt, _solve_strict)))
         return out
+
+    def _over_k(self, ks: NDArray, wx: NDArray) -> _OverK:
+        """The columns ``wx`` weighted for every K of ``ks`` and their normal matrices."""
+        s = 1.0 + np.outer(ks * ks, self.lam)  # (K, blocks)
+        d = 1.0 / np.sqrt(s)
+        x = wx[None, :, :] * d[:, :, None]  # (K, blocks, p)
+        return _OverK(d, self.logdet0 + np.sum(np.log(s), axis=1), x,
+                      np.einsum("kbp,kbq->kpq", x, x))
+
+    @staticmethod
+    def _nll_each_k(k: _OverK, wy: NDArray,
+                    solve: Callable[[NDArray, NDArray], NDArray[np.float64]]
+                    ) -> NDArray[np.float64]:
+        """−2 ln L at each K of the whitened data ``wy`` on ``k``'s columns."""
+        r = wy[None, :] * k.d  # (K, blocks)
+        coef = solve(k.xtx, np.einsum("kbp,kb->kp", k.x, r))
+        res = r - np.einsum("kbp,kp->kb", k.x, coef)
+        return np.asarray(k.logdet + np.einsum("kb,kb->k", res, res))
+
+
+@dataclass(frozen=True)
+class _OverK:
+    """Columns weighted for each K of a grid (``_Profile._over_k``): the weights ``d``
+    (K, blocks), each K's ln det, the weighted columns ``x`` (K, blocks, p), ``xtx``."""
+
+    d: NDArray[np.float64]
+    logdet: NDArray[np.float64]
+    x: NDArray[np.float64]
+    xtx: NDArray[np.float64]
+
+
+def _solve_strict(xtx: NDArray, xtr: NDArray) -> NDArray[np.float64]:
+    """Each K's normal equations solved (``LinAlgError`` where one is singular)."""
+    return np.asarray(np.linalg.solve(xtx, xtr[:, :, None])[:, :, 0])
 
 
 def _solve_each(xtx: NDArray, xtr: NDArray) -> NDArray[np.float64]:
     """Each K's normal equations solved (least squares where one is singular)."""
     try:
-        return np.asarray(np.linalg.solve(xtx, xtr[:, :, None])[:, :, 0])
+        return _solve_strict(xtx, xtr)
     except np.linalg.LinAlgError:
         return np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(xtx, xtr,
                                                                             strict=True)])
@@ -299,61 +317,14 @@ def _block_sums(a: NDArray, b: int) -> NDArray[np.float64]:
     return np.asarray(np.add.reduceat(a, np.arange(0, len(a), b), axis=0))
 
 
-class BlockMeans:
-    """Block means of C channels, ``block`` samples each, kept for the longest stretch
-    without a gap (no block straddles one): what the drift test reads, carried by the pass
-    that computes the OADEV, so a one-shot stream needs no second read."""
-
-    def __init__(self, n_channels: int, block: int) -> None:
-        self.block = max(1, int(block))
-        # the pending block's sum and rows: a block is summed piece by piece as the pass
-        # hands the pieces in (copying its rows together cost the pass more than its sums)
-        self._rest = np.zeros(n_channels)
-        self._rest_n = 0
-        self._current: list[NDArray] = []
-        self._best = np.zeros((0, n_channels))
-
-    def update(self, a: NDArray) -> None:
-        a = np.asarray(a, dtype=float)
-        if a.ndim == 1:
-            a = a[:, None]
-        b = self.block
-        if self._rest_n:  # complete the pending block first
-            head = min(b - self._rest_n, len(a))
-            self._rest = self._rest + _block_sums(a[:head], head)[0]
-            self._rest_n += head
-            a = a[head:]
-            if self._rest_n < b:
-                return
-            self._current.append(self._rest[None, :] / b)
-            self._rest_n = 0
-        k = len(a) // b * b
-        if k:
-            self._current.append(_block_sums(a[:k], b) / b)
-        if k < len(a):
-            self._rest = _block_sums(a[k:], len(a) - k)[0]
-            self._rest_n = len(a) - k
-
-    def gap(self) -> None:
-        seg = np.concatenate(self._current) if self._current else self._best[:0]
-        if len(seg) > len(self._best):
-            self._best = seg
-        self._current, self._rest_n = [], 0
-
-    def longest(self) -> NDArray[np.float64]:
-        """(blocks, C) means of the longest stretch so far (the current one included)."""
-        seg = np.concatenate(self._current) if self._current else self._best[:0]
-        return np.asarray(seg if len(seg) > len(self._best) else self._best)
-
-
 class BlockSums:
-    """``BlockMeans`` over the samples one chunk of a parallel pass owns
-    (``analysis/parallel.py``): fed the record from its start as the chunk is (the
-    stretches between gaps, and so the blocks, are counted from where each stretch starts),
-    it keeps the sums and row counts of the blocks it owns rows of, keyed by (stretch start,
-    block). The chunks' parts add up (``BlockSumsPart.__add__``) to the one pass's blocks;
-    a block a cut splits is summed in two pieces, so its mean equals the one pass's to
-    rounding, not to the bit."""
+    """The drift test's block sums over the rows [``own_from``, ``own_until``) of a record
+    (a chunk of a parallel pass, ``analysis/parallel.py``; every row for ``BlockMeans``):
+    fed the record from its start (the stretches between gaps, and so the blocks, are
+    counted from where each stretch starts), it keeps the sums and row counts of the blocks
+    it owns rows of, keyed by (stretch start, block). The chunks' parts add up
+    (``BlockSumsPart.__add__``) to the one pass's blocks; a block a cut splits is summed in
+    two pieces, so its mean equals the one pass's to rounding, not to the bit."""
 
     def __init__(self, n_channels: int, block: int, own_from: int = 0,
                  own_until: int | None = None) -> None:
@@ -443,6 +414,20 @@ class BlockSumsPart:
             return np.zeros((0, self.n_channels))
         st = best[1]
         return np.stack([self.sums[(st, k)] / self.block for k in sorted(full[st])])
+
+
+class BlockMeans(BlockSums):
+    """Block means of C channels, ``block`` samples each, kept for the longest stretch
+    without a gap (no block straddles one): what the drift test reads, carried by the pass
+    that computes the OADEV, so a one-shot stream needs no second read. ``BlockSums`` owning
+    every row: one piece of code for the one pass and the parallel chunks."""
+
+    def __init__(self, n_channels: int, block: int) -> None:
+        super().__init__(n_channels, block)
+
+    def longest(self) -> NDArray[np.float64]:
+        """(blocks, C) means of the longest stretch so far (the current one included)."""
+        return self.part().longest()
 
 
 def drift_block(n_samples: int) -> int:

@@ -204,7 +204,8 @@ def test_block_sums_of_chunks_add_up_to_one_passs_block_means(seed):
     """A parallel pass's chunks each keep the block sums of the rows they own
     (``BlockSums``), fed from the record's start in pieces of any size, with gaps; added
     up they give what ``BlockMeans`` over the whole record gives: the same blocks of the
-    same (longest) stretch, equal to rounding where a cut splits a block."""
+    same (longest) stretch, equal to rounding where a cut splits a block, and the means
+    taken directly from the rows."""
     rng = np.random.default_rng(seed)
     n, c = int(rng.integers(3000, 9000)), int(rng.integers(1, 4))
     y = rng.normal(0, 1, (n, c)) + 5.0
@@ -229,5 +230,9 @@ def test_block_sums_of_chunks_add_up_to_one_passs_block_means(seed):
     got = total.longest()
     assert got.shape == one.shape and len(one) > 0
     np.testing.assert_allclose(got, one, rtol=1e-13, atol=0)
-    whole = feed(dr.BlockSums(c, b)).part().longest()
-    np.testing.assert_array_equal(whole, one)  # uncut: the one pass's sums to the bit
+    # and both are the longest stretch's block means (the first of equal ones), directly
+    starts, ends = [0, *gaps], [*gaps, n]
+    whole = [(e - s) // b for s, e in zip(starts, ends, strict=True)]
+    s0, k = starts[whole.index(max(whole))], max(whole)
+    np.testing.assert_allclose(one, y[s0:s0 + k * b].reshape(-1, b, c).mean(axis=1),
+                               rtol=1e-12)
