@@ -163,11 +163,6 @@ def _filter_key(rate_hz: float, corner_hz: float) -> float:
     return float(f"{wn:.7g}")
 
 
-def _lowpass_autocov(rate_hz: float, corner_hz: float, order: int) -> NDArray[np.float64]:
-    """:func:`_lowpass_autocov_wn` at this rate and corner (cached by the normalised corner)."""
-    return _lowpass_autocov_wn(_filter_key(rate_hz, corner_hz), order)
-
-
 @lru_cache(maxsize=32)
 def _lowpass_autocov_wn(wn: float, order: int) -> NDArray[np.float64]:
     """Autocovariance r(k), k = 0…L, of unit-variance white noise through a Butterworth low-pass
@@ -219,9 +214,23 @@ def lowpass_white_avar(
     """
     t = _tau(tau)
     m = np.maximum(np.rint(t * rate_hz).astype(np.int64), 1)
-    r = _lowpass_autocov(float(rate_hz), float(corner_hz), int(order))
+    wn = _filter_key(rate_hz, corner_hz)
+    unit = (_lowpass_white_unit(m.tobytes(), wn, int(order)) if m.ndim == 1
+            else _avar_from_autocov(m, _lowpass_autocov_wn(wn, int(order))))
     # per-sample variance of the white input is N²·fs (one-sided PSD 2N², allan.md)
-    return float(N) ** 2 * rate_hz * _avar_from_autocov(m, r)
+    return float(N) ** 2 * rate_hz * unit
+
+
+@lru_cache(maxsize=256)
+def _lowpass_white_unit(m_bytes: bytes, wn: float, order: int) -> NDArray[np.float64]:
+    """``_avar_from_autocov`` of the filter's autocovariance at the averaging factors
+    ``m_bytes`` (int64): the same numbers for every fit on these τ, and its loop over m was
+    the costliest part of building a fit's columns (the Gauss–Markov scan builds a fit per
+    correlation time, each with the filtered white column and its covariance kernels)."""
+    out = _avar_from_autocov(np.frombuffer(m_bytes, dtype=np.int64),
+                             _lowpass_autocov_wn(wn, order))
+    out.setflags(write=False)
+    return out
 
 
 def lowpass_gain2(nu: NDArray[np.float64], rate_hz: float, corner_hz: float,

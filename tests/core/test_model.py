@@ -219,6 +219,25 @@ def test_filter_terms_are_computed_once_per_corner_not_per_fitted_rate() -> None
     assert not np.allclose(other, first, rtol=1e-3, atol=0)
 
 
+def test_lowpass_white_avar_cached_equals_the_direct_sum_to_the_bit() -> None:
+    """The filtered white AVAR is cached per averaging factors and corner (a fit per
+    Gauss–Markov T builds the same column and kernels again): every call, first or repeated,
+    equals the direct sum over the autocovariance bit for bit, and a caller
+    cannot change what the next one reads."""
+    rate, corner = 124.9, 31.225
+    r = M._lowpass_autocov_wn(M._filter_key(rate, corner), 2)
+    for m in (np.array([1, 2, 3, 4, 8, 16, 1024, 70000]), np.array([5]), 2 ** np.arange(20)):
+        tau = m / rate
+        direct = 3e-4**2 * rate * M._avar_from_autocov(m, r)
+        for _ in range(2):  # a miss, then a hit
+            got = M.lowpass_white_avar(tau, 3e-4, rate, corner)
+            assert got.tobytes() == direct.tobytes()
+            got *= 2.0  # the caller's own array
+    with pytest.raises(ValueError):  # the cached curve itself is read-only
+        M._lowpass_white_unit(np.array([1, 2], dtype=np.int64).tobytes(),
+                              M._filter_key(rate, corner), 2)[0] = 0.0
+
+
 def test_covariance_kernels_cached_equal_the_direct_quadrature():
     """The kernels, cached per pair of component PSDs (a Gauss–Markov T scan recomputes only
     its own component's share), equal the direct sum over every pair's quadrature, for any
