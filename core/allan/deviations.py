@@ -664,12 +664,9 @@ def result_from_sums(
     for integer counts, None when unknown: then no PM type anywhere).
     """
     d = KINDS[kind]
-    norm = NORM[d]
     k_count = len(ms)
     c = s2.shape[1] if s2.ndim == 3 else 1
-    scale = norm * ms.astype(np.float64) ** 2 * np.maximum(n, 1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cov = np.where((n > 0)[:, None, None], s2 / scale[:, None, None], np.nan)
+    cov = covariance_from_sums(kind, ms, n, s2)
     var = np.diagonal(cov, axis1=1, axis2=2).copy() if k_count else np.zeros((0, c))
     if alpha is not None:
         alphas = _given_alphas(alpha, var, d)
@@ -709,6 +706,18 @@ def result_from_sums(
         quantiles=quantiles,
         noise_id=noise_id,
     )
+
+
+def covariance_from_sums(kind: str, ms: NDArray[np.int64], n: NDArray[np.int64],
+                         s2: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The Allan covariance (K, C, C) of difference sums: n (K,) differences, s2 (K, C, C) =
+    Σ D Dᵀ, each normalised as its kind's variance (NaN where n is 0). ``result_from_sums``'
+    ``cov``, and all of it a caller that reads only the covariance needs
+    (``StreamingAllan.covariance``)."""
+    scale = NORM[KINDS[kind]] * ms.astype(np.float64) ** 2 * np.maximum(n, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(np.where((n > 0)[:, None, None], s2 / scale[:, None, None], np.nan),
+                          dtype=np.float64)
 
 
 def _fill_alphas(ident: NDArray[np.float64], var: NDArray[np.float64], ms: NDArray[np.int64],

@@ -41,6 +41,7 @@ from avard.core.allan.deviations import (
     AllanResult,
     DifferenceSums,
     checked_block,
+    covariance_from_sums,
     finish_result,
     grid_sums,
 )
@@ -50,7 +51,7 @@ from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FormatError
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["AllanSnapshot", "StreamingAllan"]
+__all__ = ["AllanCovariance", "AllanSnapshot", "StreamingAllan"]
 
 STATE_VERSION = 3  # 3: noise identification by Lag1Ladder sums
 # Small blocks (one FIFO drain) are collected up to this many samples before the cascade runs:
@@ -63,6 +64,15 @@ _EXACT_FLOAT = 2.0**53  # integers below this are exact in float64
 # calls whatever its size, and a long-τ level gets only a few averages per block. The ladder's
 # sums are exact for any split, so results never depend on it.
 _LADDER_BATCH = 4096
+
+
+@dataclass(frozen=True)
+class AllanCovariance:
+    """``StreamingAllan.covariance``: τ (K,) s and the Allan covariance cov (K, C, C) in
+    (input unit)², as ``AllanResult``'s ``tau`` and ``cov``."""
+
+    tau: NDArray[np.float64]
+    cov: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -465,6 +475,24 @@ class StreamingAllan:
             [lev.ladder for lev in levels], ci=ci, one_d=self.n_channels == 1, names=self.names,
             weights=weights, quantiles=quantiles, noise_id=noise_id,
         )
+
+    @one_blas_thread
+    def covariance(self) -> AllanCovariance:
+        """τ (s) and the Allan covariance (K, C, C) alone: ``result().tau`` and
+        ``result().cov`` to the bit, without the noise identification, EDF and bounds that
+        ``result`` computes (most of its cost) for a caller that reads only the covariance
+        (``avard explain``'s compensated AVAR: an Allan pass per removed signal)."""
+        self._settle()
+        levels = self._active()
+        if not levels:
+            raise DataError(
+                f"no Allan variance yet: {self.n_samples} samples in the longest segment is "
+                "too few for τ = 2 τ0; feed more samples"
+            )
+        ms = np.array([lev.m for lev in levels], dtype=np.int64)
+        n = np.array([lev.sums.n for lev in levels], dtype=np.int64)
+        s2 = np.array([lev.sums.s2 for lev in levels], dtype=np.float64)
+        return AllanCovariance(ms / self.rate_hz, covariance_from_sums(self.kind, ms, n, s2))
 
     def snapshot(self, ci: float = 0.683) -> AllanSnapshot:
         """τ, AVAR per channel, covariance, counts, EDF and CI, at the current point."""

@@ -70,7 +70,6 @@ from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     HOLE_SETTLE_LAGS,
     ThermalFit,
-    allan2,
     compensated_avar,
     fit_thermal_axes,
     signal_avar_on,
@@ -662,6 +661,18 @@ def _signal_variations(thermal: ThermalFit | None, temps: NDArray | None, y: NDA
     return out
 
 
+def removed_avar(var: NDArray, tau: NDArray, y: NDArray, d: NDArray, rate_b: float
+                 ) -> NDArray[np.float64]:
+    """``var`` (the axis's AVAR at ``tau``) with the signal ``d`` removed from the slow view
+    ``y`` (``compensated_avar`` at coefficient 1), from the Allan covariance of (y, d) alone:
+    ``StreamingAllan.covariance``, ``thermal_fit.allan2``'s τ and covariance to the bit
+    without the noise identification and EDF it computes and this never reads (an Allan
+    pass per removed signal: every transient tried, every parameter moved)."""
+    sa = StreamingAllan(2, rate_b)
+    sa.update(np.column_stack([y, d]))
+    return compensated_avar(var, tau, sa.covariance(), 1.0)
+
+
 def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, rate_b: float,
                        variations: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
                        ) -> NDArray[np.float64]:
@@ -674,8 +685,8 @@ def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, r
     k = len(tau)
     cov = np.zeros((k, k))
     for up, down in variations:
-        hi = compensated_avar(var, tau, allan2(y, total + up, rate_b), 1.0)
-        lo = compensated_avar(var, tau, allan2(y, total + down, rate_b), 1.0)
+        hi = removed_avar(var, tau, y, total + up, rate_b)
+        lo = removed_avar(var, tau, y, total + down, rate_b)
         j = np.where(np.isfinite(hi - lo), 0.5 * (hi - lo), 0.0)
         cov += np.outer(j, j)
     return cov
@@ -707,7 +718,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             findings.append(f)
             if thermal.passed or always_compensate:
                 d, with_start = _thermal_signal(thermal, temps, y_slow, rate_b, settled)
-                thermal_only = compensated_avar(allan.var, tau, allan2(y_slow, d, rate_b), 1.0)
+                thermal_only = removed_avar(allan.var, tau, y_slow, d, rate_b)
                 if thermal.passed:
                     signal += d
                     curves["temperature"] = signal_avar_on(d, rate_b, tau)
@@ -735,7 +746,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     def _noise_of_removed(d: NDArray[np.float64]) -> dict[str, float]:
         if not np.any(d) and not np.any(signal):
             return _noise_levels(base)
-        cv = compensated_avar(allan.var, tau, allan2(y_slow, signal + d, rate_b), 1.0)
+        cv = removed_avar(allan.var, tau, y_slow, signal + d, rate_b)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
         try:
             fit = fit_noise(replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio),
@@ -768,7 +779,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             d = cz.cause_signal(c, len(y_slow), rate_b)
             total += d
             curves[_label(c, i, cands)] = signal_avar_on(d, rate_b, tau)
-        cv = compensated_avar(allan.var, tau, allan2(y_slow, total, rate_b), 1.0)
+        cv = removed_avar(allan.var, tau, y_slow, total, rate_b)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
         # the removed signal's parameters are estimates: their uncertainty enters the same

@@ -6,8 +6,8 @@ covariance is tests/core/test_fit.py::test_added_covariance_enters_the_fit)."""
 from __future__ import annotations
 
 import numpy as np
-from avard.core.explain.engine import removal_covariance
-from avard.core.explain.thermal_fit import allan2, lag_filter
+from avard.core.explain.engine import removal_covariance, removed_avar
+from avard.core.explain.thermal_fit import allan2, compensated_avar, lag_filter
 
 
 def test_removal_covariance_is_the_delta_method_of_the_compensated_avar() -> None:
@@ -36,3 +36,21 @@ def test_removal_covariance_is_the_delta_method_of_the_compensated_avar() -> Non
     np.testing.assert_allclose(cov, np.outer(j, j), rtol=1e-6, atol=1e-12 * np.abs(j).max()**2)
     # nothing removed with an uncertainty: nothing added
     assert not removal_covariance(var, tau, y, c * u, rate, []).any()
+
+
+def test_removed_avar_is_the_compensated_avar_of_the_full_allan_result_to_the_bit() -> None:
+    """Explain removes each signal through the Allan covariance alone
+    (``StreamingAllan.covariance``); it gives ``compensated_avar`` of ``allan2``'s full result
+    to the bit: at the estimator's τ, between them (interpolated) and below them, for a
+    coupling, a step and nothing removed."""
+    rng = np.random.default_rng(9)
+    rate, n = 2.0, 20_000
+    t = np.arange(n) / rate
+    u = lag_filter(0.5 * np.sin(2 * np.pi * t / 1800.0), 300.0, rate)
+    y = 2e-3 * u + 1e-4 * rng.standard_normal(n) + np.cumsum(1e-6 * rng.standard_normal(n))
+    ref = allan2(y, u, rate)
+    tau = np.concatenate([[0.1], np.asarray(ref.tau, float)[:-1] * 1.3])
+    var = 1e-8 / tau + 1e-10
+    for d in (2e-3 * u, np.where(t > 3000.0, 5e-4, 0.0), np.zeros(n)):
+        want = compensated_avar(var, tau, allan2(y, d, rate), 1.0)
+        assert removed_avar(var, tau, y, d, rate).tobytes() == want.tobytes()

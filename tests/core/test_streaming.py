@@ -370,3 +370,26 @@ def test_cascade_noise_id_sums_equal_the_plain_computation() -> None:
             for ch in range(2):
                 want = _pooled_r1([q[:, ch] for q in parts])
                 assert lev.ladder.r1(k)[ch] == pytest.approx(want, abs=1e-9), (m, k, ch)
+
+
+@pytest.mark.parametrize("hadamard", [False, True])
+def test_covariance_alone_is_the_results_covariance_to_the_bit(hadamard: bool) -> None:
+    """``covariance()`` (explain's compensated AVAR reads only τ and the covariance) gives
+    ``result()``'s τ and covariance to the bit: one and three channels, with a gap, blocks of
+    any size, integer counts; and it refuses too few samples as ``result`` does."""
+    rng = np.random.default_rng(11)
+    for c, integer in ((1, False), (3, False), (2, True)):
+        x = np.cumsum(rng.standard_normal((30_000, c)), axis=0)
+        if integer:
+            x = np.rint(1000 * x).astype(np.int64)
+        sa = StreamingAllan(c, 7.5, hadamard=hadamard)
+        for a, b in ((0, 1000), (1000, 1003), (1003, 20_000)):
+            sa.update(x[a:b])
+        sa.gap()
+        sa.update(x[20_000:])
+        got = sa.covariance()
+        res = sa.result()
+        assert got.tau.tobytes() == res.tau.tobytes()
+        assert res.cov is not None and got.cov.tobytes() == res.cov.tobytes()
+    with pytest.raises(DataError, match="no Allan variance yet"):
+        StreamingAllan(1, 1.0).covariance()
