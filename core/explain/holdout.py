@@ -43,7 +43,7 @@ The AVAR here is the slow view's (τ ≥ one block), where every cause acts.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -78,6 +78,9 @@ DEFINITION = ("gain = 1 − χ²_ext/χ²_base: generalised χ² (covariance mod
               "model (the claimed causes, parameters fitted on the fit part only, their "
               "predicted signals removed from the held-out part); 0 = no better, 1 = perfect, "
               "< 0 = worse. χ² ≈ n (the number of held-out τ) when a model predicts the data.")
+
+
+AvarOf = Callable[[NDArray, float], Any]
 
 
 def _avar(y: NDArray, rate_hz: float) -> Any:
@@ -327,12 +330,14 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
 
 
 def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
-          u_fit: Temps, u_held: Temps) -> Fold:
-    """Fit both models on ``fit`` and measure their held-out χ² on ``held``."""
+          u_fit: Temps, u_held: Temps, avar: AvarOf | None = None) -> Fold:
+    """Fit both models on ``fit`` and measure their held-out χ² on ``held``. ``avar``: the
+    Allan variance of a series (``_avar`` by default; ``_channel`` keeps it by content)."""
+    avar = _avar if avar is None else avar
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
     extra = [{"cause": "sinusoid", "params": {"frequency_hz": ln["frequency_hz"]}}
              for ln in c.lines if 0 < ln["frequency_hz"] < nyq]
-    base = fit_noise(_avar(fit.y, rate_b), extra=extra)
+    base = fit_noise(avar(fit.y, rate_b), extra=extra)
     if c.names:
         d_fit, d_held, skip = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
         if len(held.y) - skip < MIN_PART_POINTS:
@@ -340,11 +345,11 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
                            "(the thermal lag's unknown start state) are left out")
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext = fit_noise(_avar(fit.y - d_fit, rate_b), extra=[*extra, *gm])
-        held_var = _avar(held.y[skip:], held.rate(rate_b))
-        held_ext = _avar((held.y - d_held)[skip:], held.rate(rate_b))
+        ext = fit_noise(avar(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        held_var = avar(held.y[skip:], held.rate(rate_b))
+        held_ext = avar((held.y - d_held)[skip:], held.rate(rate_b))
     else:
-        held_var = _avar(held.y, held.rate(rate_b))
+        held_var = avar(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -383,10 +388,21 @@ def claims_of(ch: Any, temp_names: Sequence[str]) -> Claims:
 def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float,
              refit: bool, temps_of: Any) -> ChannelHoldout:
     out = ChannelHoldout(name, c.names)
+    # a part is the fit part of one fold and the held-out part of the other (split, when
+    # nothing is left out at its start, or nothing is claimed): its Allan variance, a pure
+    # function of its values and rate, is computed once
+    seen: dict[tuple[bytes, float], Any] = {}
+
+    def avar(y: NDArray, rate: float) -> Any:
+        key = (np.ascontiguousarray(y, dtype=float).tobytes(), float(rate))
+        if key not in seen:
+            seen[key] = _avar(y, rate)
+        return seen[key]
+
     try:
         for fit, held in folds:
             u_fit, u_held = temps_of(fit), temps_of(held)
-            out.folds.append(_fold(fit, held, c, rate_b, refit, u_fit, u_held))
+            out.folds.append(_fold(fit, held, c, rate_b, refit, u_fit, u_held, avar))
     except (FitError, DataError) as exc:
         out.folds = []
         out.reason = f"held-out fit failed: {exc}"

@@ -144,3 +144,31 @@ def test_a_warmup_is_an_event_and_predicts_no_other_data(tmp_path):
     assert first.chi2_ext != first.chi2_base  # the first half's noise is fitted without it
     assert ch.note is not None and "event" in ch.note
     assert ex.to_dict()["holdout"]["channels"]["x"]["note"] == ch.note
+
+
+def test_each_parts_allan_variance_is_computed_once_and_is_the_same(monkeypatch):
+    """A half is the fit part of one fold and the held-out part of the other: its Allan
+    variance is computed once per axis (kept by content), and every fold's χ² is the one
+    each fold computes with its own passes."""
+    from avard.core.explain import holdout as ho_mod
+
+    calls: list[int] = []
+    real = ho_mod._avar
+
+    def counted(y, rate):
+        calls.append(len(y))
+        return real(y, rate)
+
+    monkeypatch.setattr(ho_mod, "_avar", counted)
+    rng = np.random.default_rng(3)
+    y_slow = np.cumsum(rng.standard_normal((2048, 1)) * 1e-4, axis=0) + \
+        1e-3 * rng.standard_normal((2048, 1))
+    plain = ho_mod.Claims()
+    A = ho_mod.Part(y_slow[:1024, 0], 0.0, "first half", True)
+    B = ho_mod.Part(y_slow[1024:, 0], 1024.0, "second half", False)
+    got = ho_mod._channel("x", plain, [(A, B), (B, A)], 1.0, True, lambda p: None)
+    assert len(calls) == 2  # each half once, not once per fold and side
+    calls.clear()
+    want = [ho_mod._fold(f, h, plain, 1.0, True, None, None) for f, h in ((A, B), (B, A))]
+    assert len(calls) == 4
+    assert got.reason is None and got.folds == want
