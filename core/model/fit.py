@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from statistics import NormalDist
 from typing import Any
 
@@ -276,22 +277,45 @@ def _covariance_kernels(components: Sequence[Component], m: NDArray[np.int64],
     G = mdl.avar_covariance_kernels(m, [c.psd(rate_hz) for c in components])
     K, A = len(m), len(components)
     g = np.ones((K, A))
-    tau = np.asarray(m, dtype=float) / rate_hz
+    # the strides as the loop reads them (int() of each, as astype truncates)
+    on = (np.asarray(m, dtype=np.int64).tobytes(), np.asarray(stride).astype(np.int64).tobytes(),
+          np.asarray(M, dtype=np.float64).tobytes(), float(rate_hz))
     for a, comp in enumerate(components):
         alpha = CAUSE_ALPHA.get(comp.cause)
         if alpha is None:
             continue
-        b = comp.basis(tau, rate_hz)
-        for k in range(K):
-            if G[k, k, a, a] <= 0 or not b[k] > 0:
-                continue
-            whittle = b[k] ** 2 * M[k] / G[k, k, a, a]
-            gr = edf_greenhall(alpha, 2, int(m[k]), max(int(stride[k]), 1), int(M[k]) + 1)
-            if math.isfinite(gr) and gr > 0:
-                g[k, a] = whittle / gr
+        g[:, a] = _gr_scale(comp.cause, comp.value_key, tuple(sorted(comp.params.items())),
+                            alpha, np.ascontiguousarray(G[:, :, a, a].diagonal()).tobytes(),
+                            *on)
     r = np.sqrt(np.sqrt(g))  # (K, A): g^¼
     return G * (r[:, None, :, None] * r[:, None, None, :] * r[None, :, :, None]
                 * r[None, :, None, :])
+
+
+@lru_cache(maxsize=1024)
+def _gr_scale(cause: str, value_key: str, params: tuple[tuple[str, float], ...], alpha: int,
+              diag: bytes, m: bytes, stride: bytes, M: bytes, rate_hz: float
+              ) -> NDArray[np.float64]:
+    """Whittle's variance of one component alone at each τ over Greenhall and Riley's
+    (``_covariance_kernels``' g), from its kernels' diagonal ``diag`` and the τ (``m``,
+    ``stride``, ``M``: the arrays' bytes): a pure function of them, the same for every fit on
+    these τ (a Gauss–Markov scan fits once per correlation time, every other component
+    unchanged), so computed once (read-only)."""
+    mk = np.frombuffer(m, dtype=np.int64)
+    st = np.frombuffer(stride, dtype=np.int64)
+    Mk = np.frombuffer(M, dtype=np.float64)
+    d = np.frombuffer(diag, dtype=np.float64)
+    b = Component(cause, cause, dict(params), value_key, "").basis(mk / rate_hz, rate_hz)
+    out = np.ones(len(mk))
+    for k in range(len(mk)):
+        if d[k] <= 0 or not b[k] > 0:
+            continue
+        whittle = b[k] ** 2 * Mk[k] / d[k]
+        gr = edf_greenhall(alpha, 2, int(mk[k]), max(int(st[k]), 1), int(Mk[k]) + 1)
+        if math.isfinite(gr) and gr > 0:
+            out[k] = whittle / gr
+    out.setflags(write=False)
+    return out
 
 
 def avar_estimate_covariance(components: Sequence[Component], theta: ArrayLike,

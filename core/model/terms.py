@@ -460,15 +460,26 @@ def avar_covariance_kernels(m: ArrayLike, psds: list[PsdFn | None]) -> NDArray[n
     """
     mkey = tuple(int(x) for x in np.asarray(m, dtype=np.int64))
     K, A = len(mkey), len(psds)
-    _nu, _w, _starts, pairs = _kernel_nodes(mkey)
-    kk = np.array([k for k, _ in pairs], dtype=np.intp)
-    jj = np.array([j for _, j in pairs], dtype=np.intp)
     G = np.zeros((K, K, A, A))
     for a in range(A):
         for b in range(a, A):
-            g = _pair_integrals(mkey, psds[a], psds[b])
-            G[kk, jj, a, b] = G[jj, kk, a, b] = G[kk, jj, b, a] = G[jj, kk, b, a] = g
+            G[:, :, a, b] = G[:, :, b, a] = _pair_square(mkey, psds[a], psds[b])
     return G
+
+
+@lru_cache(maxsize=128)
+def _pair_square(mkey: tuple[int, ...], pa: PsdFn | None, pb: PsdFn | None
+                 ) -> NDArray[np.float64]:
+    """``_pair_integrals`` of a pair of components as the symmetric (K, K) matrix of τ pairs
+    (read-only): the kernels of a fit are assembled from these, the same for every fit with
+    these components on these τ."""
+    _nu, _w, _starts, pairs = _kernel_nodes(mkey)
+    kk = np.array([k for k, _ in pairs], dtype=np.intp)
+    jj = np.array([j for _, j in pairs], dtype=np.intp)
+    out = np.zeros((len(mkey), len(mkey)))
+    out[kk, jj] = out[jj, kk] = _pair_integrals(mkey, pa, pb)
+    out.setflags(write=False)
+    return out
 
 
 def lowpass_flicker_avar(

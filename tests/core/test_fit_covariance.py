@@ -87,3 +87,42 @@ def test_the_chi2_test_rejects_few_pure_noise_records() -> None:
     rejected = float(np.mean(np.array(p) < 0.01))
     assert rejected <= 0.03, rejected
     assert float(np.mean(c2)) <= 1.04
+
+
+def test_covariance_kernels_cached_scale_equals_the_direct_loop_to_the_bit() -> None:
+    """The Greenhall–Riley scale of each component's kernels is kept per component and τ (a
+    Gauss–Markov scan fits once per T, every other component the same): the kernels equal
+    the direct loop over τ bit for bit, on a first and a repeated call, with integer and
+    float strides, and the scan's new component changes only its own share."""
+    import math
+
+    from avard.core.model import fit as F
+
+    rate = 124.9
+    m = np.array([2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096], dtype=np.int64)
+    M = np.full(len(m), 5.4e6) - 2.0 * m
+
+    def direct(comps, stride):
+        G = mdl.avar_covariance_kernels(m, [c.psd(rate) for c in comps])
+        g = np.ones((len(m), len(comps)))
+        b_all = [c.basis(m / rate, rate) for c in comps]
+        for a, comp in enumerate(comps):
+            alpha = F.CAUSE_ALPHA.get(comp.cause)
+            if alpha is None:
+                continue
+            for k in range(len(m)):
+                if G[k, k, a, a] <= 0 or not b_all[a][k] > 0:
+                    continue
+                gr = edf_greenhall(alpha, 2, int(m[k]), max(int(stride[k]), 1), int(M[k]) + 1)
+                if math.isfinite(gr) and gr > 0:
+                    g[k, a] = b_all[a][k] ** 2 * M[k] / G[k, k, a, a] / gr
+        r = np.sqrt(np.sqrt(g))
+        return G * (r[:, None, :, None] * r[:, None, None, :] * r[None, :, :, None]
+                    * r[None, :, None, :])
+
+    for T in (3.0, 40.0, 3.0):
+        comps = F.model_components(mdl.TERMS, [{"cause": "gauss_markov", "params": {"T": T}}],
+                                   filter_corner_hz=rate / 4, rate_hz=rate)
+        for stride in (np.ones(len(m), dtype=np.int64), np.maximum(m // 8, 1).astype(float)):
+            got = F._covariance_kernels(comps, m, stride, M, rate)
+            assert got.tobytes() == direct(comps, stride).tobytes()
