@@ -122,3 +122,25 @@ def test_equals_the_array_form_to_the_bit(seed: int) -> None:
             x, r = nnls(aa, b)
             ref, rref = _array_nnls(aa, b)
             assert np.array_equal(x, ref) and r == rref
+
+
+def test_the_subproblems_solve_is_numpys_lstsq_to_the_bit() -> None:
+    """The subproblems call numpy's own least-squares gufunc without ``lstsq``'s wrapper: the
+    same solution bit for bit on tall, square, wide, rank-deficient and badly scaled
+    problems, and a non-finite problem still raises numpy's LinAlgError."""
+    from avard.core.model.nnls import _lstsq
+
+    rng = np.random.default_rng(12)
+    for _ in range(400):
+        m, n = int(rng.integers(1, 30)), int(rng.integers(1, 12))
+        a = rng.standard_normal((m, n)) * 10.0 ** rng.uniform(-6, 6, n)
+        if n > 1 and rng.random() < 0.2:
+            a[:, -1] = a[:, 0]  # rank-deficient
+        b = rng.standard_normal(m)
+        want = np.linalg.lstsq(a, b, rcond=None)[0]
+        assert np.array(_lstsq(a, b)).tobytes() == want.tobytes()
+    bad = np.array([[1.0, np.nan], [0.0, 1.0], [2.0, 1.0]])
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.lstsq(bad, np.ones(3), rcond=None)
+    with pytest.raises(np.linalg.LinAlgError):
+        _lstsq(bad, np.ones(3))
