@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -500,6 +501,27 @@ def _profile_interval(x: NDArray, chi: NDArray, rise: float) -> tuple[float, flo
     return lo, hi
 
 
+@lru_cache(maxsize=8)
+def _noise_whitener(n: int, dt: float, n_white: float, b_inst: float, k_rrw: float
+                    ) -> tuple[NDArray[np.float64] | None, LowerSolver | None]:
+    """(σ per block, None) for white noise alone, else (None, the Cholesky factor's solver)
+    of the noise covariance (``_noise_cov``) of ``n`` block means ``dt`` s long. A pure
+    function of the noise levels and the blocks: an axis's searches ask for the same noise
+    more than once (its noise with nothing removed, or with the same transients out), and
+    each factorisation of the covariance costs as much as the search's fits, so it is kept
+    (the same numbers; the solver is read-only)."""
+    t = (np.arange(n) + 0.5) * dt
+    c = _noise_cov(t, dt, n_white, b_inst, k_rrw)
+    diag = np.diag(c)
+    # fast path: white noise alone (B = K = 0) has a diagonal covariance, whitened by
+    # dividing by its σ (the Cholesky factor is that diagonal; tests hold them equal)
+    if not np.any(c - np.diag(diag)):
+        sd = np.sqrt(diag)
+        sd.setflags(write=False)
+        return sd, None
+    return None, LowerSolver(np.linalg.cholesky(c))
+
+
 class _Gls:
     """GLS of block means (≤ ``max_blocks``) on [1, t] plus the transients' columns, with the
     noise covariance of analyze's fitted N, B, K (``_noise_cov``): the data and every column
@@ -513,15 +535,11 @@ class _Gls:
         self.yb = block_means(y, b)
         self.dt = b / rate_hz
         self.t = (np.arange(len(self.yb)) + 0.5) * self.dt
-        c = _noise_cov(self.t, self.dt, noise.get("N", 0.0), noise.get("B", 0.0),
-                       noise.get("K", 0.0))
-        diag = np.diag(c)
-        # fast path: white noise alone (B = K = 0) has a diagonal covariance, whitened by
-        # dividing by its σ (the Cholesky factor is that diagonal; tests hold them equal)
-        self._sd = np.sqrt(diag) if not np.any(c - np.diag(diag)) else None
-        if self._sd is None:
-            # LinAlgError: the caller keeps the detector's values
-            self._white = LowerSolver(np.linalg.cholesky(c))
+        # LinAlgError: the caller keeps the detector's values
+        self._sd, white = _noise_whitener(len(self.yb), self.dt, noise.get("N", 0.0),
+                                          noise.get("B", 0.0), noise.get("K", 0.0))
+        if white is not None:
+            self._white = white
         self.wy = self.white(self.yb)
         self.wbase = self.white(np.column_stack([np.ones_like(self.t), self.t]))
 

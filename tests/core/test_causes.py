@@ -318,3 +318,32 @@ def test_a_gauss_markov_bump_from_the_temperature_rounding_is_not_claimed(tmp_pa
     # located)
     if gm.statistic >= gm.threshold:
         assert "rounding through the coupling" in gm.evidence
+
+
+def test_the_gls_noise_whitener_is_kept_and_whitens_as_a_fresh_factorisation() -> None:
+    """The noise covariance's factor is kept per (blocks, levels): a second GLS on the same
+    noise reuses it and whitens exactly as a fresh Cholesky factorisation does, to the bit;
+    other levels get their own; white noise alone keeps its diagonal fast path."""
+    from avard.core.explain.causes import _Gls, _noise_cov, _noise_whitener
+    from avard.core.model.triangular import LowerSolver
+
+    rng = np.random.default_rng(8)
+    rate = 2.0
+    y = np.cumsum(rng.standard_normal(8192)) * 1e-6 + 1e-4 * rng.standard_normal(8192)
+    for noise in ({"N": 1.5e-4, "B": 2e-5, "K": 4e-7}, {"N": 1.5e-4, "B": 2e-5, "K": 0.0},
+                  {"N": 1.5e-4, "B": 0.0, "K": 0.0}):
+        first = _Gls(y, rate, noise, 256)
+        hits = _noise_whitener.cache_info().hits
+        again = _Gls(y + 1e-5, rate, noise, 256)
+        assert _noise_whitener.cache_info().hits == hits + 1
+        c = _noise_cov(first.t, first.dt, noise["N"], noise["B"], noise["K"])
+        if noise["B"] == noise["K"] == 0.0:
+            want_wy = again.yb / np.sqrt(np.diag(c))
+            assert again._sd is not None
+            assert again.wy.tobytes() == want_wy.tobytes()
+            continue
+        fresh = LowerSolver(np.linalg.cholesky(c))
+        assert again.wy.tobytes() == fresh.solve(again.yb).tobytes()
+        base = np.column_stack([np.ones_like(first.t), first.t])
+        assert again.wbase.tobytes() == fresh.solve(base).tobytes()
+        assert first.wy.tobytes() == fresh.solve(first.yb).tobytes()
