@@ -437,7 +437,7 @@ def _avar_cov(p: _Problem, theta: NDArray, idx: NDArray) -> NDArray[np.float64]:
     floor = 2.0 * model**2 / sub.edf_floor
     d = np.diag(C).copy()
     bump = np.maximum(floor - d, 0.0)
-    C[np.diag_indices_from(C)] = d + bump
+    C.flat[:: len(C) + 1] = d + bump  # the diagonal
     if sub.added is not None:
         C += sub.added
     return C
@@ -447,7 +447,7 @@ def _whitener(C: NDArray) -> NDArray[np.float64]:
     """T with T·C·Tᵀ = I on C's numerically non-null subspace (eigen-decomposition of the
     correlation matrix; directions below 1e-10 of the largest eigenvalue are dropped)."""
     d = np.sqrt(np.diag(C))
-    R = C / np.outer(d, d)
+    R = C / (d[:, None] * d[None, :])  # np.outer's product
     w, V = np.linalg.eigh(R)
     keep = w > 1e-10 * w.max()
     return (V[:, keep] / np.sqrt(w[keep])).T / d
@@ -481,7 +481,7 @@ def _gls_nnls(X: NDArray, y: NDArray, T: NDArray, Ty: NDArray | None = None
     T·y when the caller has it (the selection's subsets share one T)."""
     A = T @ X
     b = T @ y if Ty is None else Ty
-    scale = np.linalg.norm(A, axis=0)
+    scale = np.sqrt(np.add.reduce(A * A, axis=0))  # np.linalg.norm(A, axis=0), as it sums
     scale[scale == 0] = 1.0
     sol, rnorm = nnls(A / scale, b, maxiter=50 * X.shape[1] + 100)
     return sol / scale, float(rnorm**2)
@@ -536,9 +536,9 @@ def _settled(new: NDArray, old: NDArray) -> bool:
     """``np.allclose(new, old, rtol=1e-5, atol=0)``, the iteration's stop: |new − old| ≤
     1e-5·|old| everywhere, the same comparison without allclose's per-call overhead where
     both are finite (allclose itself otherwise: its rules for infinities and NaN)."""
-    if not (np.all(np.isfinite(new)) and np.all(np.isfinite(old))):
+    if not (np.isfinite(new).all() and np.isfinite(old).all()):
         return bool(np.allclose(new, old, rtol=1e-5, atol=0))
-    return bool(np.all(np.abs(new - old) <= 1e-5 * np.abs(old)))
+    return bool((np.abs(new - old) <= 1e-5 * np.abs(old)).all())
 
 
 def _neg_log_lik(p: _Problem, idx: NDArray, active: list[int]) -> float:
