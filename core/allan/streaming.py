@@ -451,6 +451,18 @@ class StreamingAllan:
     def _active(self) -> list[_Level]:
         return [lev for lev in self._levels if lev.sums.n > 0]
 
+    def _settled_levels(self) -> list[_Level]:
+        """The levels holding differences, the sums complete; DataError when there are none
+        (``result`` and ``covariance``)."""
+        self._settle()
+        levels = self._active()
+        if not levels:
+            raise DataError(
+                f"no Allan variance yet: {self.n_samples} samples in the longest segment is "
+                "too few for τ = 2 τ0; feed more samples"
+            )
+        return levels
+
     @one_blas_thread
     def result(self, weights: ArrayLike | None = None, ci: float = 0.683,
                quantiles: str = "exact", noise_id: str = "avard") -> AllanResult:
@@ -461,13 +473,7 @@ class StreamingAllan:
         ``quantiles="stable32"``: bounds with Stable32's χ² quantiles (``edf.chi2_interval``);
         ``noise_id``: the B1 rule for the overlapping levels (``noise_id.NOISE_IDS``).
         """
-        self._settle()
-        levels = self._active()
-        if not levels:
-            raise DataError(
-                f"no Allan variance yet: {self.n_samples} samples in the longest segment is "
-                "too few for τ = 2 τ0; feed more samples"
-            )
+        levels = self._settled_levels()
         ms = np.array([lev.m for lev in levels], dtype=np.int64)
         strides = np.array([lev.stride for lev in levels], dtype=np.int64)
         return finish_result(
@@ -482,13 +488,7 @@ class StreamingAllan:
         ``result().cov`` to the bit, without the noise identification, EDF and bounds that
         ``result`` computes (most of its cost) for a caller that reads only the covariance
         (``avard explain``'s compensated AVAR: an Allan pass per removed signal)."""
-        self._settle()
-        levels = self._active()
-        if not levels:
-            raise DataError(
-                f"no Allan variance yet: {self.n_samples} samples in the longest segment is "
-                "too few for τ = 2 τ0; feed more samples"
-            )
+        levels = self._settled_levels()
         ms = np.array([lev.m for lev in levels], dtype=np.int64)
         n = np.array([lev.sums.n for lev in levels], dtype=np.int64)
         s2 = np.array([lev.sums.s2 for lev in levels], dtype=np.float64)
