@@ -227,6 +227,14 @@ class DriftLikelihood:
         return 0.5 * (self.slope_hi - self.slope_lo)
 
     @property
+    def floor(self) -> float:
+        """The least |slope| of its 68 % interval: 0 where the interval holds zero, or where
+        the test cannot speak (a step, or K at its grid's top)."""
+        if self.slope_lo * self.slope_hi <= 0 or self.step_like or self.at_edge:
+            return 0.0
+        return min(abs(self.slope_lo), abs(self.slope_hi))
+
+    @property
     def at_edge(self) -> bool:
         """K at its grid's top under either hypothesis (the walk may be larger still)."""
         return max(self.k_walk, self.k_drift) >= self.k_top * (1 - 1e-9)
@@ -485,8 +493,10 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     from avard.core.model.terms import TERMS, UNITS
 
     lik = channel_drift(fit, means, block_s)
-    if lik is None or not lik.passes(two_sided_z(level)):
+    if lik is None:
         return fit, lik
+    if not lik.passes(two_sided_z(level)):
+        return replace(fit, drift_floor=lik.floor), lik
     tau = np.asarray(allan.tau, dtype=float)
     g = tau**2 / 2.0
     r, se = abs(lik.slope), lik.slope_se

@@ -22,6 +22,15 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
   AVAR leaves beside the terms at their lower 1σ (``signal_parts``, ``noise_upper``). The
   strided estimators (the cascade) keep the non-central χ²'s ν/(1 − f²)
   (``edf.edf_with_signal``), whose cross term is the largest a Gaussian form allows.
+* **A drift the time domain holds** (``analysis/drift.py``). Resolved apart from the AVAR
+  (``fit.resolved_apart``), the split of the AVAR between ramp and noise has the fit's own
+  uncertainty, and the noise part is its root mean square over it, √(N̂² + Var N̂)
+  (``_noise_expected``): the estimate's variance 2N²/ν is an expectation over that split,
+  and its value at the split's worst 1σ point counted the uncertainty into a 68 % interval
+  twice. Not resolved (the test short of its level) but with the slope's 68 % interval
+  clear of zero (``fit.drift_floor``), the ramp at that interval's near end is a part that
+  does not scatter, the noise part what the AVAR leaves beside it, within the support
+  (``_with_floor_edf``): no claim is made, the terms and the model stay the AVAR fit's.
 
 The printed EDF is never below the estimator's own and never above what the record
 supports (``noise_id.fm_support_edf``: the most any FM type gives at that m and N, the rule
@@ -237,17 +246,61 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
         return allan  # Stable32's own rules, kept for row-by-row comparison (issue 24)
     noise = unresolved_noise_edf(fit, allan)
     if not signal_parts(fit, allan):  # (resolved: at its lower bound, above zero)
+        if fit.drift_floor > 0:
+            return _with_floor_edf(allan, fit, noise)
         return with_share_edf(allan, np.zeros(len(allan.tau)), noise)
     parts = signal_parts(fit, allan, lower=False)
     point = np.sum([s for s, _f in parts], axis=0)
     low = np.sum([s for s, _f in signal_parts(fit, allan)], axis=0)
     total = _total(fit, allan, point)
-    # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR leaves
-    # beside the deterministic terms at their lower 1σ, the larger
-    return with_parts_edf(allan, parts, total, np.fmax(noise_upper(fit, allan),
-                                                       total - low),
-                          noise_psd(fit), noise,
+    if fit.resolved_apart:
+        noise_part = _noise_expected(fit, allan, total - point)
+    else:
+        # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR
+        # leaves beside the deterministic terms at their lower 1σ, the larger
+        noise_part = np.fmax(noise_upper(fit, allan), total - low)
+    return with_parts_edf(allan, parts, total, noise_part, noise_psd(fit), noise,
                           within_support=not fit.resolved_apart)
+
+
+def _with_floor_edf(allan: AllanResult, fit: NoiseFit, noise_edf: NDArray[np.float64]
+                    ) -> AllanResult:
+    """``allan`` with the EDF of a drift the time domain found but did not resolve
+    (``fit.drift_floor``): the ramp at its 68 % interval's near end holds that much of the
+    AVAR without scattering; the noise part is what the AVAR leaves beside it, with the
+    noise's own EDF; within the record's support (the AVAR fit read the ramp as a walk)."""
+    tau = np.asarray(allan.tau, dtype=float)
+    part = fit.drift_floor**2 * tau**2 / 2.0
+    total = _total(fit, allan, part)
+    return with_parts_edf(allan, [(part, 0.0)], total, total - part, noise_psd(fit),
+                          noise_edf)
+
+
+def _noise_expected(fit: NoiseFit, allan: AllanResult, left: NDArray[np.float64]
+                    ) -> NDArray[np.float64]:
+    """The noise part's root mean square over the fit's uncertainty, √(N̂² + Var N̂), where
+    the deterministic part was resolved apart from the AVAR (``fit.resolved_apart``), so the
+    split of the AVAR between it and the noise has a known uncertainty: the estimate's
+    variance 2N²/ν is an expectation over that split, E N² = N̂² + Var N̂, not its value at
+    the split's worst 1σ point (which counted the split's uncertainty into a 68 % interval
+    twice: the 1 h drift records the time domain resolved covered 80 % at 409.6 s). N̂ the
+    larger of the fitted noise (its covariance from the fit) and what the measured AVAR
+    ``left`` beside the deterministic part at its point value (the part's variance)."""
+    tau = np.asarray(allan.tau, dtype=float)
+    cov = np.asarray(fit.theta_cov, dtype=float)
+    k = len(fit.theta)
+    b = np.zeros((k, len(tau)))
+    noisy = np.zeros(k, dtype=bool)
+    for j, comp in enumerate(fit.components[:k]):
+        b[j] = comp.basis(tau, fit.rate_hz)
+        noisy[j] = comp.psd(fit.rate_hz) is not None
+    theta = np.asarray(fit.theta, dtype=float)
+    bn, bs = b * noisy[:, None], b * ~noisy[:, None]
+    fitted = theta @ bn
+    var_fitted = np.einsum("it,ij,jt->t", bn, cov, bn)
+    var_part = np.einsum("it,ij,jt->t", bs, cov, bs)
+    return np.asarray(np.fmax(np.sqrt(fitted**2 + np.maximum(var_fitted, 0.0)),
+                              np.sqrt(np.maximum(left, 0.0)**2 + np.maximum(var_part, 0.0))))
 
 
 def noise_part_edf(allan: AllanResult, noise_edf: NDArray[np.float64] | None = None

@@ -156,6 +156,12 @@ class NoiseFit:
     #: from a random walk, ``analysis.drift``): their part may take the printed EDF past the
     #: record's support (``analysis.signal_edf``), which the AVAR fit's own parts may not
     resolved_apart: tuple[str, ...] = ()
+    #: a drift the time domain found beside the noise but did not resolve (``analysis.drift``:
+    #: its slope's 68 % interval clear of zero, the test short of its level): the rate ramp
+    #: (input unit per s) at that interval's near end, 0 where none. The AVAR holds at least
+    #: that ramp at the 68 % level; it does not scatter (``analysis.signal_edf``), and it is
+    #: no claim: the terms and the model are the AVAR fit's
+    drift_floor: float = 0.0
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""

@@ -25,7 +25,23 @@ def test_intervals_cover_the_truth_on_noise(hours: int) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mix", ["sine", "drift"])
+@pytest.mark.parametrize("hours", [1, 12, 60])
+def test_intervals_cover_the_truth_beside_a_drift(hours: int) -> None:
+    """White + flicker + random walk and a linear drift whose AVAR equals the noise's at
+    T/10, 200 records: the time domain resolves the drift in 46–85 % of them, the others
+    carry its slope interval's near end as a floor (analysis/drift.py, signal_edf.py); at
+    every τ with ≥ 5 averages the interval holds the truth in at least 60 %, in 60–76 % at
+    all but one τ, none above 80 % (measured: 1 h 62.5–72.0 %, 12 h 64.5–77.5 % with 77.5 %
+    at 512 s, 60 h 62.5–75.5 %; before the floor and the resolved ramp's rms noise part up
+    to 83.5 %, at four τ of 12 h)."""
+    c = coverage(hours, "drift", 200, seed=1)
+    detail = list(zip(c.tau, c.share, c.signal, strict=True))
+    assert all(c.share >= BAND[0]), detail
+    assert len(c.outside()) <= 1 and all(c.share <= 0.80), detail
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mix", ["sine"])
 @pytest.mark.parametrize("hours", [1, 12, 60])
 def test_intervals_are_never_too_narrow_with_a_signal(hours: int, mix: str) -> None:
     """With a slow sinusoid or a drift added: the interval holds the truth in at least 60 %

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -236,3 +237,55 @@ def test_block_sums_of_chunks_add_up_to_one_passs_block_means(seed):
     s0, k = starts[whole.index(max(whole))], max(whole)
     np.testing.assert_allclose(one, y[s0:s0 + k * b].reshape(-1, b, c).mean(axis=1),
                                rtol=1e-12)
+
+
+@pytest.mark.parametrize(("seed", "floored"), [(2401, True), (2406, False)])
+def test_a_drift_short_of_the_level_is_no_claim_but_its_floor_holds_part_of_the_avar(
+        seed, floored):
+    """The benchmark's 12 h drift is about 2.6 standard errors of its slope against the walk
+    (against a walk of known K, exactly √(20/3): no test at the 1 % level finds it in more
+    than about half the records). Where the test falls short of its level (seed 2401, z
+    1.7) no ramp is claimed: the terms are the AVAR fit's, the walk the fit read. But the
+    slope's 68 % interval is clear of zero, so the fit carries its near end
+    (``drift_floor``): that much of the AVAR does not scatter, and the printed EDF at the
+    longest τ rises above the noise's, within the record's support, never below the
+    estimator's. Where the interval holds zero (seed 2406, z 0.8) nothing is carried and the
+    printed EDF is the noise's."""
+    from avard.core.analysis.signal_edf import with_signal_edf
+
+    from tests.core.test_noise_id_rate import support
+
+    mix = mix_for("drift", N_12H, 1.0)
+    y, _ = record(mix, N_12H, np.random.default_rng(seed))
+    lik = _lik(y)
+    assert not lik.passes(dr.two_sided_z(dr.LEVEL))
+    ch = _analyze(y, 1.0)
+    assert not ch.fit.resolved_apart
+    assert not ch.fit.terms["rate_ramp"].present or ch.fit.terms["rate_ramp"].note
+    assert (ch.fit.drift_floor > 0) is floored
+    if floored:
+        lo, hi = sorted((abs(lik.slope_lo), abs(lik.slope_hi)))
+        assert ch.fit.drift_floor == pytest.approx(lo, rel=0.05) and lo < abs(lik.slope) < hi
+    est = allan_variance(y, 1.0).edf[:len(ch.allan.tau)]
+    noise = with_signal_edf(replace(ch.allan, edf=est), replace(ch.fit, drift_floor=0.0))
+    ok = np.isfinite(ch.allan.edf)
+    assert np.all(ch.allan.edf[ok] >= est[ok] * (1 - 1e-12))
+    assert np.all(ch.allan.edf[ok] <= support(ch.allan)[ok] * (1 + 1e-12))
+    if floored:
+        assert ch.allan.edf[-1] > 1.1 * noise.edf[-1]
+        np.testing.assert_allclose(ch.allan.edf[:6], noise.edf[:6], rtol=1e-9)
+    else:
+        np.testing.assert_array_equal(ch.allan.edf, noise.edf)
+
+
+def test_the_floor_is_the_intervals_near_end_and_nothing_where_the_test_cannot_speak():
+    base = dict(z=1.8, slope=2.0, k_walk=1.0, k_drift=0.5, k_drift_hi=0.8, k_top=10.0,
+                halves_gain=0.0, blocks=256, record_s=1.0)
+    assert dr.DriftLikelihood(slope_lo=1.0, slope_hi=3.0, **base).floor == 1.0
+    assert dr.DriftLikelihood(slope_lo=-3.0, slope_hi=-1.5,
+                              **{**base, "slope": -2.0}).floor == 1.5
+    assert dr.DriftLikelihood(slope_lo=-0.1, slope_hi=3.0, **base).floor == 0.0
+    step = {**base, "halves_gain": 20.0}
+    assert dr.DriftLikelihood(slope_lo=1.0, slope_hi=3.0, **step).floor == 0.0
+    edge = {**base, "k_walk": 10.0}
+    assert dr.DriftLikelihood(slope_lo=1.0, slope_hi=3.0, **edge).floor == 0.0

@@ -308,3 +308,28 @@ def test_a_cross_term_that_cannot_be_computed_is_the_gaussian_bound() -> None:
                     np.array([1.0 / m]), lambda nu: np.full_like(nu, np.nan))
     np.testing.assert_allclose(got, edf_with_signal(red.edf, 0.75), rtol=1e-12)
     assert got[0] < float(support(red)[0])
+
+
+def test_a_resolved_ramps_noise_part_is_its_rms_over_the_fits_uncertainty() -> None:
+    """A ramp the time domain resolved apart from the AVAR: the estimate's variance 2N²/ν is
+    an expectation over the uncertain split of the AVAR between ramp and noise, so the
+    noise part is √(N̂² + Var N̂), not its value at the split's worst 1σ point (which
+    counted that uncertainty into a 68 % interval twice: the 1 h drift records covered 80 %
+    at 409.6 s). So the printed EDF lies between the worst-point rule's (the AVAR fit's own
+    parts, within the support) and the EDF with the fit's uncertainty taken away, and it
+    falls as that uncertainty grows."""
+    y = _record(3e-4)
+    ch = _analyze(y)
+    assert ch.fit.resolved_apart == ("rate_ramp",)
+    k = len(ch.allan.tau)
+    est = replace(ch.allan, edf=allan_variance(y, RATE).edf[:k])
+    cap = support(ch.allan)
+    new = with_signal_edf(est, ch.fit).edf
+    worst = with_signal_edf(est, replace(ch.fit, resolved_apart=())).edf
+    sure = with_signal_edf(est, replace(ch.fit, theta_cov=np.zeros_like(ch.fit.theta_cov)))
+    looser = with_signal_edf(est, replace(ch.fit, theta_cov=4.0 * ch.fit.theta_cov)).edf
+    ok = np.isfinite(new)
+    assert np.all(np.fmin(new, cap)[ok] >= worst[ok] * (1 - 1e-12))
+    assert np.all(new[ok] <= sure.edf[ok] * (1 + 1e-12))
+    assert np.all(looser[ok] <= new[ok] * (1 + 1e-12))
+    assert new[-1] > worst[-1] and looser[-1] < new[-1] < sure.edf[-1]
