@@ -4,7 +4,7 @@ the few readings equal the masked mean over every value they replaced, bit for b
 from __future__ import annotations
 
 import numpy as np
-from avard.core.explain.engine import SlowView, _reading_means
+from avard.core.explain.engine import SlowView, _reading_means, slow_block_means
 
 
 def _masked_means(t: np.ndarray, b: int) -> np.ndarray:
@@ -72,3 +72,22 @@ def test_temperature_means_sit_at_the_acceleration_block_centres() -> None:
     _m, when = _reading_means(temp, b)
     np.testing.assert_allclose(when[:, 0], (4.0 - 7.5) / b)
     np.testing.assert_allclose(when[:, 1], (7.0 - 7.5) / b)
+
+
+def test_block_means_equal_numpys_mean_bit_for_bit() -> None:
+    """The slow view's block means (whole row slices added in order) equal numpy's mean over
+    the blocks to the bit: one to six channels, short and long blocks, signed zeros, NaN,
+    values of very different size, and no whole block at all."""
+    rng = np.random.default_rng(17)
+    for c in (1, 2, 3, 6):
+        for b, nb in ((1, 50), (2, 40), (7, 30), (128, 512), (128, 100), (1024, 64), (3, 0)):
+            a = (rng.standard_normal((nb * b, c)) * 10.0 ** rng.uniform(-12, 3, (nb * b, 1))
+                 + 9.80665)
+            if nb:
+                a[rng.integers(0, nb * b, 5)] = -0.0
+                a[rng.integers(0, nb * b), 0] = np.nan
+                a[:b] = -0.0  # a block of negative zeros: numpy's mean gives +0.0
+            for x in (a, np.asfortranarray(a)):  # rows in order, and columns in order
+                want = x.reshape(nb, b, c).mean(axis=1)
+                got = slow_block_means(x, b)
+                assert got.shape == want.shape and got.tobytes() == want.tobytes(), (c, b, nb)
