@@ -83,7 +83,11 @@ def block_noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float,
     """Covariance ((m/s²)²) of block means (length ``block_s``, centres ``t``) of white,
     flicker and random-walk rate noise: N²/block on the diagonal; flicker as noise_gen's
     ladder of Gauss–Markov processes (Σ σ_k² e^(−|Δt|/T_k)); random walk K²·min(t_i, t_j)
-    (its start value is the offset column)."""
+    off the diagonal and K²·(t_i − block/6) on it, the mean of min(s, u) over one block's
+    s and u (its start value is the offset column). (K²·t_i on the diagonal, as before,
+    added white noise of K²·block/6 the means do not have: where the walk holds the block
+    scale, ten times the white's N²/block on a 12 h record, the likelihood read the walk's
+    low end as a slow sinusoid, ``slow_sine.py``.)"""
     from avard.core.sim.noise_gen import flicker_ladder
 
     dtt = np.abs(np.subtract.outer(t, t))
@@ -92,8 +96,13 @@ def block_noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float,
         for T, s in flicker_ladder([b_inst], block_s, 10 * float(t[-1] + block_s), 2.0):
             c += float(np.asarray(s)[0]) ** 2 * np.exp(-dtt / T)
     if k_rrw > 0:
-        c += k_rrw**2 * np.minimum.outer(t, t)
+        c += k_rrw**2 * _walk_cov(t, block_s)
     return np.asarray(c, dtype=np.float64)
+
+
+def _walk_cov(t: NDArray, block_s: float) -> NDArray[np.float64]:
+    """The covariance of a unit random walk's block means (``block_noise_cov``)."""
+    return np.asarray(np.minimum.outer(t, t) - np.eye(len(t)) * (block_s / 6.0))
 
 
 class _Profile:
@@ -108,7 +117,7 @@ class _Profile:
         c0 = block_noise_cov(t, block_s, n_white, b_inst, 0.0)
         L = np.linalg.cholesky(c0)  # LinAlgError: the caller says "would not factor"
         low = LowerSolver(L)
-        walk = np.minimum.outer(t, t)
+        walk = _walk_cov(t, block_s)
         a = low.solve(walk)
         a = low.solve(np.ascontiguousarray(a.T))
         lam, V = np.linalg.eigh(0.5 * (a + a.T))
