@@ -128,3 +128,62 @@ def test_the_false_alarm_level_holds_under_the_noise_it_is_told() -> None:
         peaks.append(r.statistic)
     assert hits <= 5, hits
     assert np.quantile(peaks, 0.9) > threshold(70.0 - FROM_CYCLES) - 6.0
+
+
+def test_every_k_and_frequency_at_once_equals_the_drift_tests_per_k_profile() -> None:
+    """``_Scan.at`` sums every K and frequency at once; Λ must equal the least −2 ln L over K
+    of the offset and slope less that of the same with the sinusoid's two columns, each from
+    the drift test's own per-K profile (``drift._Profile.k_profile``), the general path."""
+    from avard.core.analysis import drift as dr
+    from avard.core.analysis.slow_sine import _Scan
+
+    rng = np.random.default_rng(4)
+    j, bs = 200, 300.0
+    t = (np.arange(j) + 0.5) * bs
+    yb = rng.normal(0, 0.05, j) + np.cumsum(rng.normal(0, 0.01, j)) \
+        + 0.05 * np.sin(2 * np.pi * 7.3 * t / (j * bs))
+    scan = _Scan(yb, bs, 1.0, 0.2, 3e-4)
+    cycles = np.array([2.5, 7.3, 19.0, 55.0])
+    stat, coef, _cov = scan.at(cycles)
+    prof = scan.prof
+    top = dr.K_SPAN * max(3e-4, 1.0 / (j * bs))
+    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-dr.K_DECADES, top, 25)])
+    base = [np.ones(j), t - t.mean()]
+    h0 = float(np.min(prof.k_profile(ks, prof.white(np.column_stack(base)))[1]))
+    for f, s, c in zip(cycles, stat, coef, strict=True):
+        arg = 2 * np.pi * f * t / (j * bs)
+        cols = np.column_stack([*base, np.cos(arg), np.sin(arg)])
+        k, nll = prof.k_profile(ks, prof.white(cols))
+        assert s == pytest.approx(h0 - float(nll[k]), rel=1e-8, abs=1e-8)
+        gls = prof.fit(float(ks[k]), prof.white(cols))[1]
+        np.testing.assert_allclose(c, gls[2:], rtol=1e-6, atol=1e-12)
+
+
+def test_a_parallel_analysis_and_a_gap_find_the_same_sine(tmp_path) -> None:
+    """Two workers (the chunks' block sums added up, ``drift.BlockSums``) find the one
+    worker's sinusoid and print its EDF; a record with a gap is searched on its longest
+    stretch and finds it there."""
+    from avard.core.io.source import open_record
+
+    y = record(BASE, N, np.random.default_rng(21))[0] + _sine(8.0, 0.9, 0.2)
+    path = tmp_path / "s.npz"
+    np.savez(path, accel=y[:, None], rate_hz=RATE, axes=np.array(["x"]))
+    one = analyze(open_record(path), AnalyzeOptions()).channels["x"]
+    par = analyze(open_record(path), AnalyzeOptions(workers=2)).channels["x"]
+    assert one.slow is not None and one.slow.sine is not None, one.slow
+    assert par.slow is not None and par.slow.sine is not None, par.slow
+    assert par.slow.sine.frequency_hz == pytest.approx(one.slow.sine.frequency_hz, rel=1e-9)
+    assert par.slow.sine.amplitude == pytest.approx(one.slow.sine.amplitude, rel=1e-7)
+    np.testing.assert_allclose(par.allan.edf, one.allan.edf, rtol=1e-7)
+    # a gap at a third of the record: the longest stretch holds two thirds of the cycles
+    cut = N // 3
+    info = RecordInfo(source="gap", format=RecordFormat.STREAM, rate_hz=RATE, names=("x",),
+                      n_samples=N)
+    gapped = analyze(StreamSource(info, iter([(y[:cut, None], None, True),
+                                              (y[cut:, None], None, False)])),
+                     AnalyzeOptions()).channels["x"]
+    assert gapped.slow is not None and gapped.slow.sine is not None, gapped.slow
+    assert gapped.slow.sine.frequency_hz == pytest.approx(8.0 / N, rel=0.03)
+    # (the band in cycles of the stretch searched: two thirds of the record's)
+    assert gapped.slow.band_cycles[1] == pytest.approx(2 / 3 * one.slow.band_cycles[1],
+                                                       rel=0.02)
