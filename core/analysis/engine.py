@@ -757,8 +757,10 @@ def _slow_sine(base: Any, fit: Any, job: _FitJob, means: BlockMeans | BlockSumsP
     from avard.core.analysis.slow_sine import resolve_slow_sine, welch_top_hz
 
     rate = float(job.allan.rate_hz)
+    lines = [float(e["params"]["frequency_hz"]) for e in job.extra
+             if e.get("cause") == "sinusoid"]
     return resolve_slow_sine(base, fit, job.allan, means.longest()[:, j], means.block / rate,
-                             welch_top_hz(n, rate), _refit(job))
+                             welch_top_hz(n, rate), _refit(job), lines)
 
 
 def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],

@@ -39,7 +39,7 @@ attenuation; both uncertainties carry into the AVAR (``avar_cov``). A sinusoid s
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -69,6 +69,8 @@ FINE_HALF, FINE_STEP = 0.75, 1.0 / 32.0
 K_POINTS = 25
 #: A candidate is confirmed with the flicker's B profiled over these factors of the fit's.
 B_FACTORS = (0.5, 0.71, 1.41, 2.0)
+#: A line the Welch finder found within this many of its bins of a slow sinusoid is it.
+LINE_BINS = 3.0
 #: Fewest block means searched (as the drift test).
 MIN_MEANS = 32
 
@@ -354,8 +356,8 @@ def avar_cov(sine: SlowSine, tau: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def resolve_slow_sine(base: NoiseFit, fit: NoiseFit, allan: AllanResult, means: NDArray,
-                      block_s: float, top_hz: float, refit: Callable[..., NoiseFit]
-                      ) -> tuple[SlowSearch, NoiseFit | None]:
+                      block_s: float, top_hz: float, refit: Callable[..., NoiseFit],
+                      lines_hz: Sequence[float] = ()) -> tuple[SlowSearch, NoiseFit | None]:
     """The search on one channel's block means against ``base`` (the channel's AVAR fit:
     its N and B, K's range past its upper K), and where it resolves a sinusoid, the fit that
     sets the printed EDF: the noise refitted (``refit(allan, added_cov=...)``, the channel's
@@ -363,7 +365,10 @@ def resolve_slow_sine(base: NoiseFit, fit: NoiseFit, allan: AllanResult, means: 
     the AVAR's covariance (the walk and the flicker no longer made of it), a drift ``fit``
     resolved apart resolved again beside it (``drift.resolve_drift``), and the sinusoid
     appended as a resolved part (``resolved_apart``: it may take the EDF past the record's
-    support, ``signal_edf``). None where none is resolved or a refit fails."""
+    support, ``signal_edf``). None where none is resolved or a refit fails, or where one of
+    the line finder's ``lines_hz`` lies within ``LINE_BINS`` of its bins (``top_hz`` is its
+    first tested, ``welch_top_hz``) of the sinusoid: near the band's top both see one
+    sinusoid, and the fit holds it already."""
     from avard.core.analysis.drift import _k_upper, resolve_drift
     from avard.core.errors import FitError
     from avard.core.model.fit import Component
@@ -375,6 +380,13 @@ def resolve_slow_sine(base: NoiseFit, fit: NoiseFit, allan: AllanResult, means: 
     sine = search.sine
     if sine is None:
         return search, None
+    from avard.core.analysis.spectrum import LINE_LOBE
+
+    bin_hz = top_hz / (LINE_LOBE + 5)  # (top_hz is welch_top_hz: that bin's frequency)
+    near = [f for f in lines_hz if abs(f - sine.frequency_hz) <= LINE_BINS * bin_hz]
+    if near:
+        return replace(search, sine=None, note=f"not resolved here: the line finder's line at "
+                       f"{near[0]:.4g} Hz is this sinusoid"), None
     tau = np.asarray(allan.tau, dtype=float)
     added = avar_cov(sine, tau)
     less = replace(allan, var=np.asarray(allan.var, dtype=float)

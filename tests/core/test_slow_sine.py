@@ -187,3 +187,15 @@ def test_a_parallel_analysis_and_a_gap_find_the_same_sine(tmp_path) -> None:
     # (the band in cycles of the stretch searched: two thirds of the record's)
     assert gapped.slow.band_cycles[1] == pytest.approx(2 / 3 * one.slow.band_cycles[1],
                                                        rel=0.02)
+
+
+def test_a_sine_the_line_finder_has_is_not_counted_twice() -> None:
+    """Just below the line finder's first tested bin (73.6 cycles of a 12 h record) both see
+    a strong sinusoid at 73 cycles: the line finder's line stands, the slow search says so
+    and resolves nothing (the fit holds the line already)."""
+    y = record(BASE, N, np.random.default_rng(5))[0] + _sine(73.0, 0.8, 0.3)
+    ch = _analyze(y)
+    assert any(abs(ln["frequency_hz"] * N - 73.0) < 1.0 for ln in ch.lines), ch.lines
+    assert ch.slow is not None and ch.slow.sine is None, ch.slow
+    assert ch.slow.note.startswith("not resolved here: the line finder's line"), ch.slow.note
+    assert ch.slow_fit is None
