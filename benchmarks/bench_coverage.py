@@ -93,6 +93,11 @@ def true_psd(mix: Mix) -> Callable[[np.ndarray], np.ndarray]:
                        + mix.q2 / (4.0 * np.sin(np.pi * nu) ** 2))
 
 
+#: per record analysed in this process: whether the slow-sinusoid search resolved one
+#: (``ChannelAnalysis.slow``; on a record without one, a false detection)
+SLOW_FOUND: list[bool] = []
+
+
 def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze",
             detail: bool = False) -> tuple[AllanResult, np.ndarray, np.ndarray | None]:
     """The OADEV result whose interval is counted: what ``avard analyze`` prints (the
@@ -125,7 +130,9 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
                       names=("x",), n_samples=len(y))
     blocks = ((y[i:i + 65536, None], None, False) for i in range(0, len(y), 65536))
     ch = analyze(StreamSource(info, blocks), AnalyzeOptions(noise_id=noise_id)).channels["x"]
-    share = signal_share(ch.fit, ch.allan)
+    SLOW_FOUND.append(ch.slow is not None and ch.slow.sine is not None)
+    fit = ch.fit if ch.slow_fit is None else ch.slow_fit  # (the fit the EDF is from)
+    share = signal_share(fit, ch.allan)
     rules = None
     if detail:
         from avard.core.allan.noise_id import fm_support_edf
@@ -136,7 +143,7 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
         own = allan_variance(y, rate, noise_id=noise_id).edf[:k]
         cap = np.array([fm_support_edf(2, int(m), 1, len(y) + 1) for m in a.m])
         rules = np.column_stack([edf_rules(np.asarray(a.edf), own,
-                                           unresolved_noise_edf(ch.fit, a), share, cap), own])
+                                           unresolved_noise_edf(fit, a), share, cap), own])
     return ch.allan, share, rules
 
 
@@ -169,6 +176,11 @@ class Coverage:
     # (``--detail``) the EDF the noise part alone scatters with (the record less its
     # noise-free signal, through the bare estimator): what the noise's printed EDF aims at
     noise_seen: np.ndarray | None = None
+    # records where the slow-sinusoid search resolved one (analyze path), and the share of
+    # those (and of the others) whose interval holds the truth at each τ
+    slow_found: int = 0
+    share_found: np.ndarray | None = None
+    share_unfound: np.ndarray | None = None
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -188,6 +200,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     own: list[np.ndarray] = []  # the estimator's own EDF (the oracle's noise part)
     noise_only: list[np.ndarray] = []
     ms = None
+    found0 = len(SLOW_FOUND)
     for _ in range(records):
         y, clean = record(mix, n, rng)
         r, share, rule = printed(y, rate, noise_id, path, detail)
@@ -212,6 +225,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     signal = np.mean(clean_var, axis=0) if clean_var else np.zeros(len(ms))
     truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
+    found = np.array(SLOW_FOUND[found0:] or [False] * records, dtype=bool)
     seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
     known = np.full(len(ms), np.nan)
     if clean_var and own:
@@ -235,7 +249,9 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
                     np.mean(shares, axis=0), np.mean(np.array(shares) > 0, axis=0), known,
                     np.mean(rules, axis=0) if rules else None,
                     2.0 * noise**2 / np.mean((np.array(noise_only) - noise) ** 2, axis=0)
-                    if noise_only else None)
+                    if noise_only else None, int(np.sum(found)),
+                    inside[found].mean(axis=0) if found.any() else None,
+                    inside[~found].mean(axis=0) if (~found).any() else None)
 
 
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
@@ -322,6 +338,10 @@ def main(argv: list[str]) -> int:
         print(f"| {h} h at {LENGTHS[h]:g} Hz | {kind} | {c.tau[0]:g}–{c.tau[-1]:g} "
               f"({len(c.tau)}) | {c.share.min():.1%} | {c.share.max():.1%} | "
               f"{', '.join(f'{t:g}' for t in out) or 'none'} |", flush=True)
+        if args.path == "analyze":
+            print(f"    slow sinusoid resolved in {c.slow_found} of {c.records} records"
+                  + (" (each a false detection: this mix has none)" if kind != "sine"
+                     else ""), flush=True)
         if args.detail:
             for t, s, e, g, v, a, fs, fr, k in zip(c.tau, c.share, c.edf_mean, c.signal,
                                                    c.edf_seen, c.alpha_mean, c.fit_share,
@@ -330,6 +350,10 @@ def main(argv: list[str]) -> int:
                       f"seen {v:10.1f}  mean α {a:5.2f}  signal {g:6.1%} of the AVAR  "
                       f"fit's share {fs:6.1%} (given in {fr:6.1%} of records)  "
                       f"with the true part {k:6.1%}")
+            for name, sh in (("resolved", c.share_found), ("not resolved", c.share_unfound)):
+                if sh is not None and c.slow_found:
+                    print(f"    coverage where a slow sinusoid was {name}: "
+                          + " ".join(f"{v:.0%}" for v in sh))
             if c.rules is not None and c.noise_seen is not None:
                 for t, row, ns in zip(c.tau, c.rules, c.noise_seen, strict=True):
                     print(f"    τ {t:9.1f} s  EDF set by: " + "  ".join(

@@ -697,13 +697,18 @@ def _analyze_passes(
                 from avard.core.analysis.long_tau_check import check_ramp
 
                 fit = check_ramp(fit, partial(reread, i), n, rate)
+            slow = slow_fit = None
             if estimator == "oadev":
+                base = fit
                 # a drift the time domain tells from a random walk (analysis/drift.py)
                 fit = _drift(fit, job, one.means, j, partial(reread, i)
                              if reread is not None else None, n)
+                if prep.find_sinusoids and one.means is not None:
+                    # a slow sinusoid below the line finder's band (analysis/slow_sine.py)
+                    slow, slow_fit = _slow_sine(base, fit, job, one.means, j, n)
             out[names[i]] = _channel(names[i], job, fit, lines, estimator, psd, welch, f,
                                      None if spectrum is None else spectrum[:, j], rate,
-                                     corner, source, n)
+                                     corner, source, n, slow, slow_fit)
     # channels in the record's order, whatever the passes
     out = {names[i]: out[names[i]] for i in sorted(i for chans, _r in results for i in chans)}
     return Analysis(source=source, rate_hz=rate, n_samples=n, channels=out,
@@ -716,7 +721,6 @@ def _drift(fit: Any, job: _FitJob, means: BlockMeans | BlockSumsPart | None, j: 
     channel: the block means the pass carried (``means``, column ``j``; a parallel pass's
     chunks keep them too), or else the channel read again (``again``)."""
     from avard.core.analysis.drift import resolve_drift
-    from avard.core.model.fit import fit_noise
 
     b = means.block if means is not None else drift_block(n)
     if means is not None:
@@ -731,19 +735,42 @@ def _drift(fit: Any, job: _FitJob, means: BlockMeans | BlockSumsPart | None, j: 
     else:
         return fit
     rate = float(job.allan.rate_hz)
+    return resolve_drift(fit, job.allan, yb, b / rate, _refit(job))[0]
 
-    def refit(less: Any, **kw: Any) -> Any:  # the channel's own fit on the AVAR less a ramp
+
+def _refit(job: _FitJob) -> Callable[..., Any]:
+    """The channel's own fit on an AVAR less a resolved part (``fit_noise`` with the job's
+    arguments, and those the caller adds: terms, added_cov)."""
+    from avard.core.model.fit import fit_noise
+
+    def refit(less: Any, **kw: Any) -> Any:
         return fit_noise(less, filter_corner_hz=job.corner, extra=job.extra,
                          check_filter=job.check_filter, **{**job.kw, **kw})
+    return refit
 
-    return resolve_drift(fit, job.allan, yb, b / rate, refit)[0]
+
+def _slow_sine(base: Any, fit: Any, job: _FitJob, means: BlockMeans | BlockSumsPart, j: int,
+               n: int) -> tuple[Any, Any]:
+    """The slow-sinusoid search on one channel's block means (``means``, column ``j``)
+    against its AVAR fit ``base``, and the fit with what it resolves, which sets the printed
+    EDF (``fit``: the channel's, a drift resolved or not; ``slow_sine.resolve_slow_sine``)."""
+    from avard.core.analysis.slow_sine import resolve_slow_sine, welch_top_hz
+
+    rate = float(job.allan.rate_hz)
+    lines = [float(e["params"]["frequency_hz"]) for e in job.extra
+             if e.get("cause") == "sinusoid"]
+    return resolve_slow_sine(base, fit, job.allan, means.longest()[:, j], means.block / rate,
+                             welch_top_hz(n, rate), _refit(job), lines)
 
 
 def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
              estimator: str, psd: bool, welch: WelchAccumulator | None,
              f: NDArray[np.float64] | None, spectrum: NDArray[np.float64] | None,
-             rate: float, corner: float | None, source: str, n: int) -> ChannelAnalysis:
-    """One channel's analysis from its fit, with its PSD when asked for."""
+             rate: float, corner: float | None, source: str, n: int,
+             slow: Any = None, slow_fit: Any = None) -> ChannelAnalysis:
+    """One channel's analysis from its fit, with its PSD when asked for; ``slow``: the
+    slow-sinusoid search, ``slow_fit`` the fit with what it resolved, which sets the printed
+    EDF (``fit`` stays the base model explain reads)."""
     chan_psd = None
     if psd:
         if welch is None or spectrum is None or f is None or welch.n_seg < 1:
@@ -755,8 +782,9 @@ def _channel(name: str, job: _FitJob, fit: Any, lines: list[dict[str, float]],
         chan_psd.white = white_density(chan_psd, fit, rate, filter_corner_hz=corner)
     # the printed interval: the part of the AVAR the fit's resolved deterministic terms
     # hold does not scatter (signal_edf.py; unchanged on noise alone)
-    return ChannelAnalysis(name, with_signal_edf(job.allan, fit), fit, lines, estimator,
-                           chan_psd)
+    return ChannelAnalysis(name, with_signal_edf(job.allan, fit if slow_fit is None
+                                                 else slow_fit),
+                           fit, lines, estimator, chan_psd, slow, slow_fit)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from avard.core.model.fit import RAMP_OR_WALK
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 
 if TYPE_CHECKING:
-    pass
+    from avard.core.analysis.slow_sine import SlowSearch
 
 # ---------------------------------------------------------------------------------------------
 # text, csv, kalibr
@@ -81,6 +81,8 @@ def format_table(an: Analysis) -> str:
             lines.append(f"  sinusoids: {s}")
         else:
             lines.append("  sinusoids: none found")
+        if ch.slow is not None:
+            lines.append(f"  slow sinusoid (below the line search): {_slow_text(ch.slow)}")
         if ch.psd is not None:
             lines.extend(_psd_lines(ch))
         chi = "n/a" if not math.isfinite(fit.chi2_dof) else f"{fit.chi2_dof:.2f}"
@@ -172,3 +174,14 @@ def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
         f"update_rate: {an.rate_hz:.6g}   # Hz",
     ]
     return "\n".join(out) + "\n"
+
+
+def _slow_text(slow: SlowSearch) -> str:
+    """The slow-sinusoid search in one line: the sinusoid with its intervals, or why none
+    is claimed."""
+    s = slow.sine
+    if s is None:
+        return slow.note
+    return (f"{s.frequency_hz:.4g} Hz ({s.frequency_lo_hz:.4g} … {s.frequency_hi_hz:.4g} Hz, "
+            f"{s.cycles:.3g} cycles) × {s.amplitude:.3g} m/s² ({s.amplitude_lo:.3g} … "
+            f"{s.amplitude_hi:.3g}); counted in the intervals above, not in the terms")

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from avard.core.analysis.slow_sine import SlowSearch
     from avard.core.io.source import RecordInfo
     from avard.core.model.fit import NoiseFit
 
@@ -37,6 +38,11 @@ class ChannelAnalysis:
     lines: list[dict[str, float]] = field(default_factory=list)
     estimator: str = "oadev"
     psd: Any = None  # psd.ChannelPsd when asked for (analyze(psd=True))
+    #: the search for a slow sinusoid below the line finder's band (``slow_sine.py``; None:
+    #: not run), and the fit with the one it resolved (None: none), which sets the printed
+    #: EDF; ``fit`` is without it, the base model ``avard explain`` reads
+    slow: SlowSearch | None = None
+    slow_fit: NoiseFit | None = None
 
     def to_dict(self) -> dict[str, Any]:
         a = self.allan
@@ -56,6 +62,8 @@ class ChannelAnalysis:
                            **({"disturbance": int(s["group"])} if "group" in s else {})}
                           for s in self.lines]
         d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
+        if self.slow is not None:
+            d["slow_sinusoid"] = self.slow.to_dict()
         if self.psd is not None:
             d["psd"] = self.psd.to_dict()
         return d

@@ -154,7 +154,16 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     assert list(d["channels"]) == ["x", "z"]
     for cname, ch in d["channels"].items():
         assert set(ch) == {"estimator", "tau_s", "adev", "adev_lo", "adev_hi", "edf", "alpha",
-                           "units", "terms", "sinusoids", "fit"}
+                           "units", "terms", "sinusoids", "fit", "slow_sinusoid"}
+        # issue 24: the slow-sinusoid search below the line finder's band, what it found or
+        # why nothing is claimed
+        slow = ch["slow_sinusoid"]
+        assert {"note", "band_cycles_per_record", "statistic", "threshold",
+                "units"} <= set(slow)
+        if "frequency_hz" in slow:
+            lo, hi = slow["frequency_interval_hz"]
+            assert lo <= slow["frequency_hz"] <= hi
+            assert slow["units"]["amplitude"] == "m/s^2"
         assert ch["estimator"] == "oadev"
         k = len(ch["tau_s"])
         assert all(len(ch[key]) == k for key in ("adev", "adev_lo", "adev_hi", "edf", "alpha"))
