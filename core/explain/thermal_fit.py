@@ -52,6 +52,7 @@ from avard.core.allan.deviations import (
     segment_phase,
 )
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
@@ -75,6 +76,8 @@ __all__ = [
 ]
 
 Z_TEMPERATURE = 5.0
+#: The lag and channel trials the coupling search looks at, about (``alarm``'s budget).
+SCAN_TRIALS = 50
 #: Contiguous parts of the record for the jackknife standard error of the coefficient.
 JACKKNIFE_GROUPS = 10
 #: Most block means the lag scan runs on.
@@ -360,13 +363,16 @@ class CouplingTest(NamedTuple):
 
     @property
     def threshold(self) -> float:
-        """``Z_TEMPERATURE`` where the se is known, else the |t| of the same two-sided tail
-        with ``dof`` degrees of freedom: an se estimated from a few slow octaves' noise is
-        itself a random number, and z = ĉ/se is then a t (a null axis in a setback room
-        passed z 5 at 5.8 with its noise's level from ≈ 8 degrees of freedom)."""
+        """``Z_TEMPERATURE``, or where the se rests on few degrees of freedom more: the |t|
+        of ``dof`` degrees of freedom at the per-trial share of the axis's false-alarm
+        budget for the coupling search (``alarm.TEMPERATURE`` over ``SCAN_TRIALS``, what
+        z ≥ 5 holds with room to spare for a normal z). An se estimated from a few slow
+        octaves' noise is itself a random number, and z = ĉ/se is then a t: a null axis in
+        a setback room passed z 5 at 5.8, its se resting on ≈ 6 degrees of freedom."""
         if not math.isfinite(self.dof):
             return Z_TEMPERATURE
-        return t_two_sided(math.erfc(Z_TEMPERATURE / math.sqrt(2.0)), max(self.dof, 1.0))
+        return max(Z_TEMPERATURE, t_two_sided(alarm.TEMPERATURE / SCAN_TRIALS,
+                                              max(self.dof, 1.0)))
 
 
 def coupling_test(res: Any, spectra: OctaveSpectra,
@@ -820,6 +826,8 @@ class ThermalFit:
     #: the z its test needs (``CouplingTest.threshold``: more than ``Z_TEMPERATURE`` where
     #: the se rests on few degrees of freedom)
     threshold: float = Z_TEMPERATURE
+    #: the degrees of freedom the test's se rests on (∞: ``threshold`` is the normal's)
+    threshold_dof: float = math.inf
     #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
     lag_open: bool = False
     #: the thermal path chosen by held-out likelihood (``thermal_paths``; None: not
@@ -881,12 +889,18 @@ class ThermalFit:
                f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
-               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
+               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
         if self.others:
             txt += "; other channels: " + ", ".join(
                 f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
                 for k, v in self.others.items())
         return txt
+
+    @property
+    def _dof_note(self) -> str:
+        if not math.isfinite(self.threshold_dof):
+            return ""
+        return f", its se's degrees of freedom {self.threshold_dof:.3g}"
 
     def finding(self) -> Any:
         from avard.core.explain.causes import Finding
@@ -920,7 +934,10 @@ class ThermalFit:
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
                 "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
                 "z": self.z,
-                "threshold": self.threshold, "passed": self.passed, "others": self.others,
+                "threshold": self.threshold,
+                "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
+                                  else None),
+                "passed": self.passed, "others": self.others,
                 "mechanism": self.mechanism,
                 "path": None if self.path is None else self.path.to_dict()}
 
@@ -1246,7 +1263,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
             others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0),
-                      threshold=test.threshold)
+                      threshold=test.threshold, threshold_dof=test.dof)
 
 
 def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
