@@ -15,18 +15,22 @@ Allan differences of y on those of u is c_k = Cov_A(y, u)/AVAR(u), with variance
 r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: the number of
 independent differences). Differencing removes the offset and whitens flicker and random walk,
 so the regression is valid under the axis's own noise. The c_k are combined with inverse-
-variance weights; the octaves share data and see the same slow noise, and the combined
-variance includes their correlation as this regressor and the axis's noise make it
-(``octave_spectra``: ≈ 0.5 between neighbours for white noise and a white regressor, near 1
-for a trend under red noise): this analytic z picks the lag (maximum of z²
-over a log grid refined around the best point) and the channel (largest z). Under red noise
-it is too optimistic (the noise differences are not independent across a slow regressor), so
-the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
-(``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
-shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
-interval is the lag's own delete-a-group jackknife (``lag_interval``); the parts hold the
-Allan differences whose middle they hold, at every octave (``octave_sums_by_part``).
-Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
+variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
+combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
+over a log grid refined around the best point) and the channel (largest z), one covariance
+for every lag and channel compared. At the chosen lag the test's analytic se is the
+regressor's own (``octave_spectra``, ``coupling_test``: the octaves see the same slow noise,
+near one number for a trend under red noise), its threshold the t of the degrees of freedom
+that se rests on. Under red noise the EDF model is too optimistic (the noise differences are
+not independent across a slow regressor), so the reported standard error of ĉ is the larger
+of that se and a delete-a-group jackknife over 10 contiguous parts
+(``jackknife_tempco``: its parts can be shorter than the noise's correlation at the
+regressor's period), z = ĉ/se, and the lag's 68 % interval is the lag's own delete-a-group
+jackknife (``lag_interval``); the parts hold the Allan differences whose middle they hold,
+at every octave (``octave_sums_by_part``). Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and
+channel search look at ≈ 50 correlated trials), or the t of the se's degrees of freedom at
+the search's share of the axis's false-alarm budget where that is more
+(``CouplingTest.threshold``).
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
 ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
