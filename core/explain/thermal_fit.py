@@ -392,6 +392,10 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     # covariance's, which for a white regressor is the EDF model's and for a trend is the
     # ends' (the EDF model, Σ of independent differences, is ×3 too wide there)
     var, dof = spectra.variance(np.flatnonzero(_kept(res, min_tau_s)), got.r, got.w, got.nu)
+    if not (math.isfinite(var) and var > 0):
+        # the spectra do not see an octave the Allan result holds (a regressor flat on the
+        # block means they were taken on): no se from them, so none the test can pass with
+        return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
     return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof)
 
 
