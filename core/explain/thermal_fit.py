@@ -17,14 +17,20 @@ independent differences). Differencing removes the offset and whitens flicker an
 so the regression is valid under the axis's own noise. The c_k are combined with inverse-
 variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
 combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
-over a log grid refined around the best point) and the channel (largest z). Under red noise
-it is too optimistic (the noise differences are not independent across a slow regressor), so
-the reported standard error of ĉ is a delete-a-group jackknife over 10 contiguous parts
-(``jackknife_tempco``); the larger of the two is reported (the jackknife's parts can be
-shorter than the noise's correlation at the regressor's period), z = ĉ/se, and the lag's 68 %
-interval is the lag's own delete-a-group jackknife (``lag_interval``); the parts hold the
-Allan differences whose middle they hold, at every octave (``octave_sums_by_part``).
-Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and channel search look at ≈ 50 correlated trials).
+over a log grid refined around the best point) and the channel (largest z), one covariance
+for every lag and channel compared. At the chosen lag the test's analytic se is the
+regressor's own (``octave_spectra``, ``coupling_test``: the octaves see the same slow noise,
+near one number for a trend under red noise), its threshold the t of the degrees of freedom
+that se rests on. Under red noise the EDF model is too optimistic (the noise differences are
+not independent across a slow regressor), so the reported standard error of ĉ is the larger
+of that se and a delete-a-group jackknife over 10 contiguous parts
+(``jackknife_tempco``: its parts can be shorter than the noise's correlation at the
+regressor's period), z = ĉ/se, and the lag's 68 % interval is the lag's own delete-a-group
+jackknife (``lag_interval``); the parts hold the Allan differences whose middle they hold,
+at every octave (``octave_sums_by_part``). Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and
+channel search look at ≈ 50 correlated trials), or the t of the se's degrees of freedom at
+the search's share of the axis's false-alarm budget where that is more
+(``CouplingTest.threshold``).
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
 ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
@@ -50,6 +56,7 @@ from avard.core.allan.deviations import (
     segment_phase,
 )
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
@@ -73,6 +80,8 @@ __all__ = [
 ]
 
 Z_TEMPERATURE = 5.0
+#: The lag and channel trials the coupling search looks at, about (``alarm``'s budget).
+SCAN_TRIALS = 50
 #: Contiguous parts of the record for the jackknife standard error of the coefficient.
 JACKKNIFE_GROUPS = 10
 #: Most block means the lag scan runs on.
@@ -128,46 +137,266 @@ def allan2(y: NDArray, u: NDArray, rate_hz: float,
     return sa.result()
 
 
+def _kept(res: Any, min_tau_s: float) -> NDArray[np.bool_]:
+    """The rows (τ) of a two-channel Allan result the regression uses."""
+    cov = np.asarray(res.cov, dtype=float)
+    tau = np.asarray(res.tau, dtype=float)
+    edf = np.asarray(res.edf, dtype=float)
+    edf_y = edf[:, 0] if edf.ndim == 2 else edf
+    vy, vu = cov[:, 0, 0], cov[:, 1, 1]
+    return np.asarray(np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (tau >= min_tau_s)
+                      & np.isfinite(edf_y) & (edf_y >= 3))
+
+
 def regression_terms(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
                      ) -> tuple[NDArray[np.float64], ...]:
     """(τ, Cov_A(y, u), AVAR_u, AVAR_y, ν_y) at the τ the regression uses, from a
     two-channel Allan result (axis, temperature)."""
     cov = np.asarray(res.cov, dtype=float)
-    tau = np.asarray(res.tau, dtype=float)
     edf = np.asarray(res.edf, dtype=float)
     edf_y = edf[:, 0] if edf.ndim == 2 else edf
-    vy, vu, cyu = cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]
-    ok = (np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (tau >= min_tau_s)
-          & np.isfinite(edf_y) & (edf_y >= 3))
-    return tau[ok], cyu[ok], vu[ok], vy[ok], edf_y[ok]
+    ok = _kept(res, min_tau_s)
+    return (np.asarray(res.tau, dtype=float)[ok], cov[ok, 0, 1], cov[ok, 1, 1],
+            cov[ok, 0, 0], edf_y[ok])
 
 
 @functools.lru_cache(maxsize=64)
 def _rho(k: int) -> NDArray[np.float64]:
-    """The assumed correlation of neighbouring octaves' c_k, ``_RHO``^|i − j| (k, k): the
-    same few sizes for every lag of a scan, so made once each (read-only)."""
+    """The correlation of neighbouring octaves' c_k for a white regressor and white noise,
+    ``_RHO``^|i − j| (k, k): where no regressor's ``octave_spectra`` is at hand; the same
+    few sizes every time, so made once each (read-only)."""
     idx = np.arange(k)
     rho = _RHO ** np.abs(np.subtract.outer(idx, idx))
     rho.flags.writeable = False
     return rho
 
 
+#: Block means in the shortest octave read that ``octave_spectra`` keeps (its spectra on
+#: block means of a power of two samples).
+SPECTRA_BLOCKS = 16
+#: Log-frequency bins per octave of the regression vectors' cross-spectra
+#: (``OctaveSpectra``): the axis's noise spectrum is smooth on that scale.
+_BINS_PER_OCTAVE = 4
+
+
+@dataclass(frozen=True)
+class OctaveSpectra:
+    """The cross-spectra of the octaves' regression vectors a_k = H_kᵀ D_u^k for one
+    regressor u (``octave_spectra``), summed in log-frequency bins: ``P`` (B, K, K) at bin
+    frequencies ``f`` (B,) (cycles per sample), the octaves ``ms`` (K,) samples; with an
+    axis's noise level, the covariance of the octaves' coefficients."""
+
+    ms: NDArray[np.int64]
+    f: NDArray[np.float64]
+    P: NDArray[np.float64]
+    #: Σ D_u² per octave (c_k's denominator) and the regressor's length (samples), both
+    #: on the block means of ``step`` samples the spectra were taken on (``f`` too)
+    su: NDArray[np.float64]
+    n: int
+    step: int = 1
+
+    def _noise(self, rows: NDArray, avar: NDArray
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(S (B,), λ (B, K)): the axis's noise spectrum at the bins for the AVAR ``avar``
+        at the octaves ``rows`` (indices into ``ms``), and how each bin's ln S is made of
+        the octaves' ln AVAR (its interpolation weights: the variance's share of each
+        octave's estimate, for its degrees of freedom).
+
+        Its two-sided spectrum per sample is taken as S(f) = m·AVAR at f = 1/(2m) (exact
+        for white noise, within a factor ≈ 3 for a random walk), log-log interpolated;
+        below the longest octave the record cannot say: the reddest noise the sensor's model
+        has (rate random walk, f⁻²), which is what a trend's ends see most (the slope of the
+        last octaves instead: a null axis whose slow noise followed a setback room passed
+        at z 5.7; the cost, a white axis on a pure ramp, an se wider than its scatter);
+        above the shortest, the slope of the last three held, clipped to f⁰ … f⁻²."""
+        ms = self.ms[rows].astype(float) / self.step
+        lf = np.log(1.0 / (2.0 * ms))[::-1]
+        ls = np.log(ms * np.maximum(avar, 1e-300))[::-1]
+        x = np.log(self.f)
+        K = len(lf)
+        lam = np.empty((len(x), K))
+        for k in range(K):  # the weights np.interp gives each octave, ends held
+            lam[:, k] = np.interp(x, lf, np.eye(K)[k])
+        S = lam @ ls
+        if K >= 2:
+            j = min(3, K)
+            lo, hi = x < lf[0], x > lf[-1]
+            s_hi = np.clip(np.polyfit(lf[-j:], ls[-j:], 1)[0], -2.0, 0.0)
+            S[lo] = ls[0] - 2.0 * (x[lo] - lf[0])
+            S[hi] = ls[-1] + s_hi * (x[hi] - lf[-1])
+        # lam's columns run longest octave first (lf ascends): back to the rows' order
+        return np.exp(S), lam[:, ::-1]
+
+    def _gram(self, rows: NDArray, S: NDArray) -> NDArray[np.float64]:
+        # Var⟨a, e⟩ = ∫|A(f)|²S(f)df over ±½ = (1/N)·Σ_{f>0} |A|²S on the 2N-point grid
+        G = np.einsum("b,bkl->kl", S, self.P[:, rows][:, :, rows]) / self.n
+        su = self.su[rows]
+        return np.asarray(G / np.outer(su, su), dtype=float)
+
+    def covariance(self, rows: NDArray, avar: NDArray) -> NDArray[np.float64]:
+        """Cov(c_k, c_l) (K, K) over the octaves ``rows`` (indices into ``ms``) for axis noise
+        whose AVAR is ``avar`` there (the spectrum of ``_noise``)."""
+        return self._gram(rows, self._noise(rows, avar)[0])
+
+    def variance(self, rows: NDArray, avar: NDArray, w: NDArray, edf: NDArray
+                 ) -> tuple[float, float]:
+        """(Var Σ w_k c_k / Σ w_k, its degrees of freedom) for the octaves ``rows``, the axis's
+        noise AVAR ``avar`` there with ``edf`` each: the variance is a sum of the bins'
+        S·(wᵀP w), each bin's S a product of the octaves' AVAR to the powers λ, so
+        octave k carries a_k = Σ_b S_b·(wᵀP_b w)·λ_bk of it, and by Satterthwaite its
+        estimate has (Σ a_k)²/Σ(a_k²/ν_k) degrees of freedom."""
+        S, lam = self._noise(rows, avar)
+        su = self.su[rows]
+        wn = w / su / float(np.sum(w))
+        q = np.einsum("bkl,k,l->b", self.P[:, rows][:, :, rows], wn, wn) / self.n
+        share = (S * q) @ lam
+        var = float(np.sum(S * q))
+        den = float(np.sum(share ** 2 / np.asarray(edf, dtype=float)))
+        return var, (var * var / den if den > 0 else math.inf)
+
+
+def octave_spectra(u: NDArray, ms: NDArray, min_m: float = 0.0) -> OctaveSpectra:
+    """The regression vectors' cross-spectra of regressor ``u`` at octaves ``ms`` (samples,
+    fully overlapping differences); octaves shorter than ``min_m`` samples (below the
+    regression's shortest τ: never read) left zero, most of its cost spared.
+
+    Why: with D_u fixed, c_k's error is ⟨a_k, e⟩/Σ D_u² (e the axis's noise, a_k = H_kᵀ D_u,
+    H_k the octave's Allan difference), so Cov(c_k, c_l) ∝ Σ_f A_k(f)·A_l*(f)·S_e(f). For a
+    white regressor and white noise neighbours come out near ``_RHO`` = 0.5. For a regressor
+    that is mostly a trend (a setback room) D_u is nearly constant and a_k telescopes onto the
+    record's two ends at every octave: red noise there (random walk, flicker) is the same
+    few slow numbers for every octave, whose c_k are then nearly one number: the fixed 0.5
+    gave the combination a standard error far below its scatter (2 false couplings in 45
+    null axes)."""
+    ms = np.asarray(ms, dtype=np.int64)
+    # on block means of ``step`` samples, the shortest octave read ≥ SPECTRA_BLOCKS of them:
+    # a difference of block means is the full rate's difference at a stride of ``step``
+    # (as the streaming estimator strides its long octaves), and the octaves read are slow
+    # (the rounding floor: minutes), so their spectra cost 1/step of the full rate's
+    step = 1 << max(0, math.floor(math.log2(max(min_m, 1.0) / SPECTRA_BLOCKS) + 1e-9))
+    u = np.asarray(u, dtype=float)
+    if step > 1:
+        u = u[:len(u) // step * step].reshape(-1, step).mean(axis=1)
+    N = len(u)
+    S = np.concatenate([[0.0], np.cumsum(u - u.mean())])
+    A = np.zeros((len(ms), N))
+    su = np.full(len(ms), np.inf)
+    for k, m_full in enumerate(ms.tolist()):
+        m = m_full // step
+        if 2 * m > N or m_full < min_m * (1 - 1e-9) or m < 1:  # τ·rate's rounding
+            continue
+        n_d = N - 2 * m + 1
+        # D(i) = mean of u[i+m:i+2m] − mean of u[i:i+m], i = 0 … n_d − 1
+        D = (S[2 * m:2 * m + n_d] - 2.0 * S[m:m + n_d] + S[:n_d]) / m
+        su[k] = float(np.einsum("i,i->", D, D))
+        # a(t) = Σ_i D(i)·h(t − i), h = −1/m on [0, m), +1/m on [m, 2m): window sums of D
+        # (C the cumulative sum of D held at its ends, read as slices, not gathered)
+        # C[j + 2m − 1] = Σ D(i < j) for j clipped to 0 … n_d
+        cs = np.cumsum(D)
+        C = np.concatenate([np.zeros(2 * m), cs, np.full(2 * m - 1, cs[-1])])
+        c0, c1, c2 = C[:N], C[m:m + N], C[2 * m:2 * m + N]
+        A[k] = ((c1 - c0) - (c2 - c1)) / m
+    rows = np.flatnonzero(np.isfinite(su))
+    F = np.zeros((len(ms), N), dtype=complex)
+    F[rows] = np.fft.rfft(A[rows], n=2 * N, axis=1)[:, 1:]
+    f = np.arange(1, F.shape[1] + 1) / (2.0 * N)
+    edges = 2.0 ** (np.arange(math.floor(math.log2(f[0]) * _BINS_PER_OCTAVE),
+                              1 + math.ceil(math.log2(f[-1]) * _BINS_PER_OCTAVE))
+                    / _BINS_PER_OCTAVE)
+    b = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, len(edges) - 2)
+    B = len(edges) - 1
+    P = np.zeros((B, len(ms), len(ms)))
+    # f rises, so each bin is one slice of F; Re(F·Fᴴ) = Fr·Frᵀ + Fi·Fiᵀ in real products
+    Fr, Fi = np.ascontiguousarray(F.real), np.ascontiguousarray(F.imag)
+    cut = np.searchsorted(b, np.arange(B + 1))
+    for i in range(B):
+        lo, hi = cut[i], cut[i + 1]
+        if hi > lo:
+            P[i] = Fr[:, lo:hi] @ Fr[:, lo:hi].T + Fi[:, lo:hi] @ Fi[:, lo:hi].T
+    fc = np.sqrt(edges[:-1] * edges[1:])
+    used = np.abs(P).sum(axis=(1, 2)) > 0
+    return OctaveSpectra(ms, fc[used], P[used], su, N, step)
+
+
 def tempco_from_cov(res: Any, min_tau_s: float = 2 * DS18B20_CONVERSION_S
                     ) -> tuple[float, float, int]:
     """(ĉ, se, points used) from a two-channel AllanResult (axis, temperature): the
-    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc)."""
+    inverse-variance combination over τ of c_k = Cov_A/AVAR_u (module doc), the octaves'
+    correlation a white regressor's under white noise (``_rho``), the same for every lag and
+    channel a scan compares (``coupling_test``: the regressor's own)."""
+    got = _octave_coefficients(res, min_tau_s)
+    if got is None:
+        return 0.0, math.inf, 0
+    ws = got.w * got.se
+    var = float(ws @ _rho(len(ws)) @ ws) / float(np.sum(got.w)) ** 2
+    return got.chat, math.sqrt(var), len(ws)
+
+
+class _Octaves(NamedTuple):
+    """The regression's octaves: ĉ, c_k, their EDF-model se_k, weights w_k, residual AVAR
+    r_k and the axis's EDF ν_k."""
+
+    chat: float
+    c: NDArray[np.float64]
+    se: NDArray[np.float64]
+    w: NDArray[np.float64]
+    r: NDArray[np.float64]
+    nu: NDArray[np.float64]
+
+
+def _octave_coefficients(res: Any, min_tau_s: float) -> _Octaves | None:
+    """The octaves at the τ the regression uses (None: no τ)."""
     _tau, cyu, vu, vy, nu = regression_terms(res, min_tau_s)
     if len(cyu) == 0:
-        return 0.0, math.inf, 0
+        return None
     c = cyu / vu
     r = np.maximum(vy - cyu**2 / vu, 1e-300)
     se = np.sqrt(r / (vu * nu))
     w = 1.0 / se**2
-    chat = float(np.sum(w * c) / np.sum(w))
-    rho = _rho(len(c))
-    ws = w * se
-    var = float(ws @ rho @ ws) / float(np.sum(w)) ** 2
-    return chat, math.sqrt(var), len(c)
+    return _Octaves(float(np.sum(w * c) / np.sum(w)), c, se, w, r, nu)
+
+
+class CouplingTest(NamedTuple):
+    """ĉ, its standard error, the octaves used, and the degrees of freedom the se rests on
+    (∞ for the per-octave EDF model of ``_rho``); ``threshold`` the z that test needs."""
+
+    c: float
+    se: float
+    points: int
+    dof: float
+
+    @property
+    def threshold(self) -> float:
+        """``Z_TEMPERATURE``, or where the se rests on few degrees of freedom more: the |t|
+        of ``dof`` degrees of freedom at the per-trial share of the axis's false-alarm
+        budget for the coupling search (``alarm.TEMPERATURE`` over ``SCAN_TRIALS``, what
+        z ≥ 5 holds with room to spare for a normal z). An se estimated from a few slow
+        octaves' noise is itself a random number, and z = ĉ/se is then a t: a null axis in
+        a setback room passed z 5 at 5.8, its se resting on ≈ 6 degrees of freedom."""
+        if not math.isfinite(self.dof):
+            return Z_TEMPERATURE
+        return max(Z_TEMPERATURE, t_two_sided(alarm.TEMPERATURE / SCAN_TRIALS,
+                                              max(self.dof, 1.0)))
+
+
+def coupling_test(res: Any, spectra: OctaveSpectra,
+                  min_tau_s: float = 2 * DS18B20_CONVERSION_S) -> CouplingTest:
+    """:func:`tempco_from_cov`'s ĉ with the se and its degrees of freedom from the octaves'
+    covariance as this regressor (its ``spectra``, rows those of ``res``:
+    ``octave_spectra``) and the axis's residual noise make it: it holds what the per-octave
+    EDF cannot, the slow noise every octave of a trend or a slow cycle shares."""
+    got = _octave_coefficients(res, min_tau_s)
+    if got is None:
+        return CouplingTest(0.0, math.inf, 0, math.inf)
+    # ĉ keeps its weights (any weights give it without bias); its variance is this
+    # covariance's, which for a white regressor is the EDF model's and for a trend is the
+    # ends' (the EDF model, Σ of independent differences, is ×3 too wide there)
+    var, dof = spectra.variance(np.flatnonzero(_kept(res, min_tau_s)), got.r, got.w, got.nu)
+    if not (math.isfinite(var) and var > 0):
+        # the spectra do not see an octave the Allan result holds (a regressor flat on the
+        # block means they were taken on): no se from them, so none the test can pass with
+        return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
+    return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof)
 
 
 #: Lags after a hole in the temperature log that stay out of the regression (the lag filter
@@ -602,7 +831,11 @@ class ThermalFit:
     others: dict[str, dict[str, float]] = field(default_factory=dict)
     allan: Any = field(default=None, repr=False)
 
+    #: the z its test needs (``CouplingTest.threshold``: more than ``Z_TEMPERATURE`` where
+    #: the se rests on few degrees of freedom)
     threshold: float = Z_TEMPERATURE
+    #: the degrees of freedom the test's se rests on (∞: ``threshold`` is the normal's)
+    threshold_dof: float = math.inf
     #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
     lag_open: bool = False
     #: the thermal path chosen by held-out likelihood (``thermal_paths``; None: not
@@ -664,12 +897,18 @@ class ThermalFit:
                f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
-               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:g})")
+               f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
         if self.others:
             txt += "; other channels: " + ", ".join(
                 f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
                 for k, v in self.others.items())
         return txt
+
+    @property
+    def _dof_note(self) -> str:
+        if not math.isfinite(self.threshold_dof):
+            return ""
+        return f", its se's degrees of freedom {self.threshold_dof:.3g}"
 
     def finding(self) -> Any:
         from avard.core.explain.causes import Finding
@@ -703,7 +942,10 @@ class ThermalFit:
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
                 "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
                 "z": self.z,
-                "threshold": self.threshold, "passed": self.passed, "others": self.others,
+                "threshold": self.threshold,
+                "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
+                                  else None),
+                "passed": self.passed, "others": self.others,
                 "mechanism": self.mechanism,
                 "path": None if self.path is None else self.path.to_dict()}
 
@@ -1002,7 +1244,13 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     yu = without_start(np.column_stack([y, u]), L, rate_hz)
     keep = hole_mask(len(y), (holes or {}).get(jb, []), L, rate_hz)
     res = allan2(yu[:, 0], yu[:, 1], rate_hz, keep)
-    c, se_a, _n = tempco_from_cov(res, mt)
+    ms = np.rint(np.asarray(res.tau, dtype=float) * rate_hz).astype(np.int64)
+    # the test's analytic se from this regressor's own octave covariance (once per axis:
+    # the scan compares lags and channels under one common covariance, ``_rho``, which a
+    # regressor's own made unequal: a 20-min lag on the ambient channel lost to the plate
+    # through 59 s, its smoother regressor's octaves more alike)
+    test = coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
+    c, se_a = test.c, test.se
     _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
                                        ref=res)
     # the larger of the two: the jackknife's parts may be shorter than the noise's
@@ -1022,7 +1270,8 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
             kk = int(np.argmax([s.z for s in sc]))
             others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
-                      others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0))
+                      others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0),
+                      threshold=test.threshold, threshold_dof=test.dof)
 
 
 def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
