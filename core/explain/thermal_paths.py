@@ -42,13 +42,18 @@ term passes its own test (a Wald z from the delete-a-part jackknife, Student's t
 trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
 share. The margin grows by the share of the held-out deviance the readings' rounding through
 the one-lag coupling makes up (``_View.rounding_share``): a path that smooths the 0.0625 K
-steps gains that much without physics. A candidate whose θ sits at the end of its grid is
+steps gains that much without physics; a linear candidate (two paths, dT/dt) only by what
+it passes less of that rounding than one lag does, through its own |H|² (``_smoothing``).
+A candidate whose θ sits at the end of its grid is
 open and never chosen over one lag (``OPEN_MARGIN`` is infinite): its θ is a bound, not an
 estimate, and on typical-tempco records two lags of opposite sign at 1800 and 3600 s won the
 held-out test by fitting the room's slow wander (3 of 20 records; one lag 20 of 20 without
 them); a note names it. Other extensions that beat one lag so and predict within the
 margin of the chosen one are named beside it (``PathFit.alternatives``): at one drive
-frequency two paths and a dT/dt term cannot be told apart, and the record says so. One lag
+frequency two paths and a dT/dt term cannot be told apart, and the record says so; an
+alternative passes every test the chosen one had to. Two paths of opposite sign that
+nearly cancel and predict no better than a chosen dT/dt term are its limit (u_L1 − u_L2 ≈
+(L2 − L1)·du/dt below 1/L2), the same mechanism, noted and not named (``_mimic``). One lag
 kept while the hysteresis predicts the held-out halves better by ``LEAN_MARGIN`` (short of
 what choosing it needs): one lag's coefficient and lag are then a linear model's reading of
 a response no linear path has, model-dependent and printed with no interval
@@ -64,6 +69,12 @@ jackknife of θ re-chosen with each part left out, each best grid point refined 
 parabola in ln L through its neighbours, widened to the same profile and to half way to the
 neighbouring grid points at least. A coefficient that changes sign over the profile: the
 parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
+For two paths and dT/dt, when they may be chosen, θ is continuous instead (``_refine``): a
+local grid around the coarse optimum and a parabola per lag, on the whole record and in
+each delete-a-part fit, so the jackknife with θ re-chosen is the estimator's spread and not
+the coarse grid's steps; their profile's Δ is scaled by the Birge factor either way
+(``profile_delta(two_sided=True)``: the one-lag weights hold the signal one lag leaves, so
+the deviance is several times too small a scale).
 """
 
 from __future__ import annotations
@@ -128,6 +139,11 @@ OPEN_MARGIN = math.inf
 #: The cancellation |c₁ + c₂|/max|cᵢ| under which a two-path fit of opposite signs is the
 #: dT/dt term's limit (``_derivative_limit``) and not named beside a chosen dT/dt term
 DERIVATIVE_KAPPA = 0.25
+#: Δ(held-out −2 ln L) by which such a two-path fit may predict better than the dT/dt term
+#: and still count as its limit (``_mimic``): a likelihood ratio of e, as ``LEAN_MARGIN``
+#: (on the dT/dt rows the limit predicted at most 0.2 better; on a true two-path record
+#: with a compressor a cancelling fit predicted 3.4 better)
+DERIVATIVE_MARGIN = 2.0
 #: The candidates whose predicting better, short of being chosen, makes one lag's linear
 #: coefficient and lag a model's reading rather than the sensor's (``LEAN_MARGIN``): the
 #: hysteresis, a response no linear path has. Not the quadratic: on 24 h typical-tempco
@@ -473,6 +489,9 @@ class PathFit:
     #: (by ``LEAN_MARGIN``, short of what choosing them needs): one lag's linear coefficient
     #: and lag are then a linear model's reading of a non-linear response
     leaning: tuple[str, ...] = ()
+    #: per linear extension, what it passes less of that rounding than one lag (its share
+    #: to beat instead of ``rounding``: ``_smoothing``)
+    own_rounding: dict[str, float] = field(default_factory=dict)
 
     @property
     def model_dependent(self) -> bool:
@@ -536,8 +555,10 @@ class PathFit:
         return (f"thermal path: {s.kind} ({txt}){end};"
                 f" held-out Δ(−2 ln L) against one lag: {ranks} (an extension needs "
                 f"< −{self.margin + self.rounding:.3g}, the margin {self.margin:g} and the "
-                f"readings' rounding through the coupling {self.rounding:.3g}, and its own "
-                f"z ≥ {self.z_threshold:.3g})"
+                f"readings' rounding through the coupling {self.rounding:.3g}"
+                + "".join(f", for {PATH_NAMES[k]} what it passes less of it {v:.3g}"
+                          for k, v in self.own_rounding.items())
+                + f", and its own z ≥ {self.z_threshold:.3g})"
                 + "".join(f"; {n}" for n in self.notes))
 
     def to_dict(self) -> dict[str, object]:
@@ -547,6 +568,7 @@ class PathFit:
                 "open": self.chosen.open_end, "z_extra": self.chosen.z_extra,
                 "z_threshold": self.z_threshold, "margin": self.margin,
                 "rounding_share": self.rounding,
+                "rounding_share_own": dict(self.own_rounding),
                 "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
                 "notes": self.notes}
 
@@ -700,6 +722,24 @@ def _fine_trials(kind: str, theta: tuple[float, ...], lags: list[float]) -> list
         [(a,) for a in axes[0]] if kind == "rate" else
         [(a, b) for a in axes[0] for b in axes[1] if a < b])
     return [Trial(p, _path_cols(kind, p), 2) for p in pts]
+
+
+def _smoothing(r_one: NDArray, halves: list[OctaveSums],
+               weigh_r: Callable[[OctaveSums, NDArray], _View], Ts: NDArray, rate: float,
+               tau: NDArray, cols: tuple[Column, ...], beta: NDArray) -> float:
+    """What a linear path (``cols``, ``beta``) gains on the held-out halves over one lag by
+    passing less of the readings' rounding: Σ_k ν_k·min(1, (R₁ − R)₊/s_k) over both halves,
+    R₁ the rounding AVAR (m/s²)² through the one-lag coupling (``r_one``), R through the
+    path's own |H|² (``sawtooth_avar``, ``_path_gain2``): at most the one lag's whole share
+    (``_View.rounding_share``). Two paths whose first is at lag 0 pass the rounding as one
+    lag does and gain little by smoothing (a compressor record's two paths were refused for
+    a share of 34 that a one-lag lead-lag of −144 s passes, up to 4× the readings' own);
+    two lags of opposite sign at 240 and 480 s beside a one lag of 125 s pass less of it,
+    and the rounding they do not pass is 24 of the held-out deviance where
+    they won by 18 (one lag's whole share 116)."""
+    r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(cols, beta))
+    less = np.maximum(0.0, np.asarray(r_one, dtype=float) - r)
+    return float(sum(weigh_r(h, less).rounding_share(1.0) for h in halves))
 
 
 def _vertex(ts: list[Trial], devs: NDArray, betas: NDArray
@@ -872,6 +912,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     def weigh(sums: OctaveSums) -> _View:
         return _view(sums, edf_v, n_v, ok_tau, s_ref)
 
+    def weigh_r(sums: OctaveSums, r: NDArray) -> _View:
+        return _view(sums, edf_v, n_v, ok_tau, s_ref, r)
+
+    smoothing: dict[str, float] = {}
+
     scores: dict[str, PathScore] = {}
     for kind in CANDIDATES:
         ts = per_kind[kind]
@@ -926,8 +971,13 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # points at least (every part re-choosing the same grid point gave a zero width)
         g_lo, g_hi = _grid_cell(ts, i)
         t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
+        # what this candidate gains over one lag by passing less of the readings' rounding
+        # (``_smoothing``); a non-linear one is taken to pass none
+        smoothing[kind] = (rounding_dev if kind not in REFINED or rounding_dev <= 0 else
+                           _smoothing(c_one**2 * r_ref, half, weigh_r, Ts, rate, ms / rate,
+                                      ts[i].cols, fits[i]))
         if kind in REFINED and not open_end and z_extra >= z_thr and held < min(
-                scores["one_lag"].heldout, none_h) - HELDOUT_MARGIN - rounding_dev:
+                scores["one_lag"].heldout, none_h) - HELDOUT_MARGIN - smoothing[kind]:
             # a candidate that may be chosen: θ continuous, in the whole record and in each
             # delete-a-part fit (``_refine``), so the intervals are the estimator's spread,
             # not the coarse grid's steps; the profile over the coarse grid is kept beyond
@@ -961,19 +1011,20 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if kind == "one_lag":
             continue
         need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
-        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_dev:
+        rounding_k = smoothing[kind]
+        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but its "
                          "θ sits at the end of its search grid (open): a bound, not chosen")
-        if sc.heldout < min(ref.heldout, none_h) - need - rounding_dev and (
+        if sc.heldout < min(ref.heldout, none_h) - need - rounding_k and (
                 sc.z_extra >= z_thr):
             passing.append(sc)
-        elif sc.heldout < ref.heldout - need - rounding_dev:
+        elif sc.heldout < ref.heldout - need - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"its extra term's z {sc.z_extra:.3g} < {z_thr:.3g}")
         elif sc.heldout < ref.heldout - need:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"by less than the readings' rounding through the coupling makes "
-                         f"up of the held-out deviance ({rounding_dev:.3g}): a path that "
+                         f"up of the held-out deviance ({rounding_k:.3g}): a path that "
                          "smooths the 0.0625 K steps gains that much without physics")
     best = ref
     alternatives: tuple[str, ...] = ()
@@ -995,10 +1046,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         alternatives = tuple(
             sc.kind for sc in passing
             if sc.kind != best.kind and sc.heldout <= best.heldout + HELDOUT_MARGIN
-            and not (best.kind == "rate" and sc.kind == "two_path" and _derivative_limit(sc)))
+            and not (best.kind == "rate" and sc.kind == "two_path" and _mimic(sc, best)))
         mimic = scores.get("two_path")
         if (best.kind == "rate" and mimic is not None and mimic in passing
-                and mimic.heldout <= best.heldout + HELDOUT_MARGIN and _derivative_limit(mimic)):
+                and mimic.heldout <= best.heldout + HELDOUT_MARGIN and _mimic(mimic, best)):
             notes.append(
                 f"two paths of opposite sign that nearly cancel ({mimic.beta[0]:.3g} and "
                 f"{mimic.beta[1]:.3g} m/s²/K through {mimic.theta[0]:.4g} and "
@@ -1031,7 +1082,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                      "resolve it; one lag's coefficient and lag are a linear model's reading, "
                      "model-dependent, no interval")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
-                   rounding=rounding_dev, alternatives=alternatives, leaning=leaning)
+                   rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
+                   own_rounding={k: v for k, v in smoothing.items() if k in REFINED})
 
 
 def _derivative_limit(sc: PathScore) -> bool:
@@ -1042,6 +1094,16 @@ def _derivative_limit(sc: PathScore) -> bool:
     candidate with one parameter more. Two real paths need no such cancellation."""
     c1, c2 = float(sc.beta[0]), float(sc.beta[1])
     return c1 * c2 < 0 and abs(c1 + c2) < DERIVATIVE_KAPPA * max(abs(c1), abs(c2))
+
+
+def _mimic(two: PathScore, rate: PathScore) -> bool:
+    """Two paths that are the chosen dT/dt term's limit (``_derivative_limit``) and predict
+    the held-out halves no better than it by more than ``DERIVATIVE_MARGIN``: the same
+    mechanism with a parameter more, not a rival. A two-path fit that predicts better is
+    named beside it even when its coefficients nearly cancel (on a true two-path record
+    with a compressor the fit slid along the paths' ridge to |c₁ + c₂| 0.14 of the larger,
+    predicting better by 3.4)."""
+    return _derivative_limit(two) and two.heldout >= rate.heldout - DERIVATIVE_MARGIN
 
 
 def _leaning(best: PathScore, scores: dict[str, PathScore]) -> tuple[str, ...]:
@@ -1056,13 +1118,15 @@ def _leaning(best: PathScore, scores: dict[str, PathScore]) -> tuple[str, ...]:
                  and scores[k].z_extra >= LEAN_T)
 
 
-def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
-                  lag_s: float = 0.0) -> NDArray[np.float64]:
+def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
+                  gain2: Callable[[NDArray], NDArray] | None = None) -> NDArray[np.float64]:
     """The readings' rounding AVAR (K²) at ``tau`` seen through ``lag_filter`` of ``lag_s``:
     the rounding as a sawtooth (``thermal_fit.rounding_correlation_s``), white at τ above
     its correlation time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's
     |H(f)|² applied in the AVAR's integral ∫ h₀|H|²·2 sin⁴(πfτ)/(πfτ)² df (NIST SP 1065
-    eq. 10's transfer function); a long lag passes little of it at τ below the lag."""
+    eq. 10's transfer function); a long lag passes little of it at τ below the lag.
+    ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
+    its coefficients in it, and not capped at the readings' own 2q²/12)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
@@ -1074,13 +1138,40 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
     f = np.geomspace(1e-7, 0.5 / tc, 4000)
     w2 = (2 * np.pi * f) ** 2
     a = abs(lag_s)
-    H2 = (np.ones_like(f) if lag_s == 0 else 1.0 / (1.0 + w2 * a * a) if lag_s > 0
+    H2 = (gain2(f) if gain2 is not None else np.ones_like(f) if lag_s == 0
+          else 1.0 / (1.0 + w2 * a * a) if lag_s > 0
           else (1.0 + 4.0 * w2 * a * a) / (1.0 + w2 * a * a))
     out = np.empty(len(tau))
     for i, t in enumerate(tau.tolist()):
         x = np.pi * f * t
         out[i] = np.trapezoid(h0 * H2 * 2.0 * np.sin(x) ** 4 / x**2, f) if t > 0 else 0.0
+    if gain2 is not None:
+        return np.asarray(out, dtype=float)
     return np.asarray(np.minimum(out, 2.0 * q2), dtype=float)
+
+
+def _path_gain2(cols: tuple[Column, ...], beta: NDArray) -> Callable[[NDArray], NDArray]:
+    """|H(f)|² of a linear path's couplings (m/s²/K)²: Σ β_i·H_i(f) over its "u" columns
+    (a lag 1/(1 + jωL), a negative one's lead-lag (1 + 2jωa)/(1 + jωa)) and its "rate"
+    column (jω/(1 + ω²s²), ``path_columns``); the start states carry no rounding."""
+    terms = [(c, float(b)) for c, b in zip(cols, beta, strict=False) if c.kind in ("u", "rate")]
+
+    def g(f: NDArray) -> NDArray:
+        w = 2j * np.pi * np.asarray(f, dtype=float)
+        H = np.zeros(len(w), dtype=complex)
+        for c, b in terms:
+            a = abs(c.lag)
+            if c.kind == "rate":
+                H += b * w / (1 - (w * RATE_SMOOTH_S) ** 2)
+            elif c.lag > 0:
+                H += b / (1 + w * a)
+            elif c.lag < 0:
+                H += b * (1 + 2 * w * a) / (1 + w * a)
+            else:
+                H += b
+        return np.abs(H) ** 2
+
+    return g
 
 
 def _edf_at(tau: NDArray, tau_ref: NDArray, edf_ref: NDArray) -> NDArray[np.float64]:

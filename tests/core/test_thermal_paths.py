@@ -13,6 +13,7 @@ from avard.core.explain.thermal_fit import (
     DS18B20_CONVERSION_S,
     _axes_reference,
     fit_thermal_axes,
+    octave_sums_by_part,
     rounding_correlation_s,
     rounding_floor_tau,
 )
@@ -412,3 +413,92 @@ def test_a_hysteresis_is_chosen_with_its_size_and_the_linear_coupling():
     for k, v in row.truth.items():
         assert p[k] == pytest.approx(v, rel=0.2), (k, p[k], v)
         assert iv[k][0] <= v <= iv[k][1], (k, iv[k], v)
+
+
+def test_theta_is_refined_between_the_local_grid_points_with_the_coefficients():
+    """``_vertex``: on a deviance quadratic in the warped lag, the vertex between grid points
+    and the coefficients moved with it (their own quadratics); at the local grid's edge the
+    grid point (a bound, not an extrapolation); two paths lag by lag along their ridge."""
+    from avard.core.explain.thermal_paths import _fine_trials, _unwarp, _vertex, _warp
+
+    ts = _fine_trials("rate", (60.0,), [0.0, 15.0, 30.0, 60.0, 120.0, 240.0])
+    assert ts[0].theta[0] == 15.0 and ts[-1].theta[0] == 240.0
+    assert len(ts) == 4 * 3 + 1  # two coarse steps each side of 60 s, each split in three
+    w = np.array([_warp(t.theta[0]) for t in ts])
+    best = _warp(50.0)
+    devs = 7.0 * (w - best) ** 2
+    betas = np.column_stack([1e-3 + 2e-4 * (w - best), 0.3 - 0.1 * (w - best) ** 2])
+    theta, beta = _vertex(ts, devs, betas)
+    assert theta[0] == pytest.approx(50.0, rel=1e-6)
+    assert theta[0] not in [t.theta[0] for t in ts]
+    assert beta == pytest.approx([1e-3, 0.3], rel=1e-6)
+    # the least deviance at the local grid's edge: the grid point
+    theta, beta = _vertex(ts, (w - _warp(500.0)) ** 2, betas)
+    assert theta == (240.0,) and beta == pytest.approx(betas[-1])
+    # two paths: each lag in turn, L1 < L2 kept
+    ts2 = _fine_trials("two_path", (30.0, 900.0), [0.0, 15.0, 30.0, 60.0, 480.0, 900.0])
+    assert all(t.theta[0] < t.theta[1] for t in ts2)
+    w2 = np.array([[_warp(x) for x in t.theta] for t in ts2])
+    d2 = (w2[:, 0] - _warp(40.0)) ** 2 + 3 * (w2[:, 1] - _warp(700.0)) ** 2
+    theta, _ = _vertex(ts2, d2, np.zeros((len(ts2), 2)))
+    assert theta == pytest.approx((40.0, 700.0), rel=1e-6)
+    assert _unwarp(_warp(123.0)) == pytest.approx(123.0)
+
+
+def test_a_paths_rounding_is_its_own_transfer_and_a_lag_0_path_gains_nothing_by_smoothing():
+    """``_path_gain2`` puts a path's |H|² in the rounding's AVAR integral: one lag through it
+    is ``sawtooth_avar`` of that lag times the coefficient² (below the readings' cap); two
+    paths with a first at lag 0 pass the rounding one lag at lag 0 does and more, so they
+    gain nothing over it by smoothing (``_smoothing`` 0); two lags of opposite sign at 240
+    and 480 s do."""
+    from avard.core.explain.thermal_paths import (
+        Column,
+        _path_gain2,
+        _smoothing,
+        _view,
+        sawtooth_avar,
+    )
+
+    y, T = _slow(BASE, 5)
+    tau = np.array([204.8, 409.6, 819.2, 1638.4])
+    one = sawtooth_avar(T, 1.0, tau, 120.0)
+    via = sawtooth_avar(T, 1.0, tau, gain2=_path_gain2((Column("u", 120.0),), np.array([2.0])))
+    assert via == pytest.approx(4.0 * one, rel=1e-9)
+    lead = sawtooth_avar(T, 1.0, tau, -60.0)
+    assert sawtooth_avar(T, 1.0, tau, gain2=_path_gain2(
+        (Column("u", -60.0),), np.array([1.0]))) == pytest.approx(lead, rel=1e-9)
+    # the sums of a record's halves, weighed as choose_path does (s: a noise AVAR)
+    X = np.column_stack([y, T])
+    halves = octave_sums_by_part(X, np.array([0, len(X) // 2, len(X)]))
+    ms = halves[0].ms
+
+    def weigh_r(h, r):
+        k = len(h.ms)
+        return _view(h, np.full(k, 50.0), h.n, np.ones(k, dtype=bool), np.full(k, 1e-12),
+                     np.asarray(r)[:k])
+
+    tau_h = ms / 1.0
+    r_one = C**2 * sawtooth_avar(T, 1.0, tau_h, 0.0)
+    same = (Column("u", 0.0), Column("u", 900.0), Column("start", 900.0))
+    assert _smoothing(r_one, halves, weigh_r, T, 1.0, tau_h, same,
+                      np.array([C, 0.5 * C, 0.0])) == 0.0
+    apart = (Column("u", 240.0), Column("u", 480.0))
+    assert _smoothing(r_one, halves, weigh_r, T, 1.0, tau_h, apart,
+                      np.array([5 * C, -4 * C])) > 0.0
+
+
+def test_a_two_path_fit_is_the_dt_terms_limit_only_when_it_cancels_and_predicts_no_better():
+    from avard.core.explain.thermal_paths import PathScore, _mimic
+
+    def score(kind: str, beta: list[float], heldout: float) -> PathScore:
+        return PathScore(kind, heldout, (30.0, 60.0), np.array(beta), np.zeros(2),
+                         (0.0, 0.0), (0.0, 0.0), 20.0, False)
+
+    rate = score("rate", [8e-4, 0.23], -40.0)
+    cancelling = score("two_path", [0.0200, -0.0199], -40.2)
+    assert _derivative_limit(cancelling) and _mimic(cancelling, rate)
+    # predicting better than the dT/dt term by more than a likelihood ratio of e: a rival
+    assert not _mimic(score("two_path", [0.0200, -0.0199], -43.4), rate)
+    # two real paths need no cancellation, nor do two of one sign
+    assert not _derivative_limit(score("two_path", [8e-4, -2.7e-3], -40.0))
+    assert not _derivative_limit(score("two_path", [0.02, 0.0199], -40.0))
