@@ -502,3 +502,35 @@ def test_a_two_path_fit_is_the_dt_terms_limit_only_when_it_cancels_and_predicts_
     # two real paths need no cancellation, nor do two of one sign
     assert not _derivative_limit(score("two_path", [8e-4, -2.7e-3], -40.0))
     assert not _derivative_limit(score("two_path", [0.02, 0.0199], -40.0))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("kind", "extra", "truth", "least"), [
+    ("rate", {"rate_coupling": 0.23}, {"rate_coupling": 0.23}, 9),
+    ("two_path", {"second_path": (-2.7e-3, 900.0)}, {"coefficient_2": -2.7e-3}, 8),
+])
+def test_the_path_rows_choose_alone_and_their_68_percent_intervals_hold_about_68_percent(
+        kind: str, extra: dict, truth: dict, least: int):
+    """The benchmark's dT/dt and two-path rows at their sizes (a coupling of 8e-4 m/s²/K at
+    lag 0, the extra term at 3× its stated minimum), ten records each: the mechanism chosen
+    alone on ``least`` (dT/dt: its short-lag two-path rival is its limit, not a rival, 10 of
+    10 here; two paths: 8 of 10 here, 18 of 20 on the benchmark, the misses a dT/dt term
+    named beside it or, once, alone: the issue's 95 % is not met) and the coefficients' 68 %
+    intervals, θ continuous in the jackknife and the profile on the deviance's own scale,
+    holding the truth in 45–90 % (the binomial band of 68 % on about twenty intervals: they
+    over-covered, 30 of 34 and 14 of 16, with θ re-chosen on the coarse grid)."""
+    c = 8e-4
+    w = replace(BASE, coefficient=(c, 0.0, 0.0), **extra)
+    alone = inside = total = 0
+    for seed in range(10):
+        pf = _path(*_slow(w, 100 + seed))
+        if pf.kind != kind or pf.alternatives:
+            continue
+        alone += 1
+        _, iv = pf.params()
+        for k, v in {"coefficient": c, **truth}.items():
+            if k in iv:
+                total += 1
+                inside += iv[k][0] <= v <= iv[k][1]
+    assert alone >= least, alone
+    assert total >= 10 and 0.45 <= inside / total <= 0.9, (inside, total)
