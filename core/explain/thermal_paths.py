@@ -42,13 +42,18 @@ term passes its own test (a Wald z from the delete-a-part jackknife, Student's t
 trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
 share. The margin grows by the share of the held-out deviance the readings' rounding through
 the one-lag coupling makes up (``_View.rounding_share``): a path that smooths the 0.0625 K
-steps gains that much without physics. A candidate whose θ sits at the end of its grid is
+steps gains that much without physics; a linear candidate (two paths, dT/dt) only by what
+it passes less of that rounding than one lag does, through its own |H|² (``_smoothing``).
+A candidate whose θ sits at the end of its grid is
 open and never chosen over one lag (``OPEN_MARGIN`` is infinite): its θ is a bound, not an
 estimate, and on typical-tempco records two lags of opposite sign at 1800 and 3600 s won the
 held-out test by fitting the room's slow wander (3 of 20 records; one lag 20 of 20 without
 them); a note names it. Other extensions that beat one lag so and predict within the
 margin of the chosen one are named beside it (``PathFit.alternatives``): at one drive
-frequency two paths and a dT/dt term cannot be told apart, and the record says so. One lag
+frequency two paths and a dT/dt term cannot be told apart, and the record says so; an
+alternative passes every test the chosen one had to. Two paths of opposite sign that
+nearly cancel and predict no better than a chosen dT/dt term are its limit (u_L1 − u_L2 ≈
+(L2 − L1)·du/dt below 1/L2), the same mechanism, noted and not named (``_mimic``). One lag
 kept while the hysteresis predicts the held-out halves better by ``LEAN_MARGIN`` (short of
 what choosing it needs): one lag's coefficient and lag are then a linear model's reading of
 a response no linear path has, model-dependent and printed with no interval
@@ -64,12 +69,19 @@ jackknife of θ re-chosen with each part left out, each best grid point refined 
 parabola in ln L through its neighbours, widened to the same profile and to half way to the
 neighbouring grid points at least. A coefficient that changes sign over the profile: the
 parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
+For two paths and dT/dt, when they may be chosen, θ is continuous instead (``_refine``): a
+local grid around the coarse optimum and a parabola per lag, on the whole record and in
+each delete-a-part fit, so the jackknife with θ re-chosen is the estimator's spread and not
+the coarse grid's steps; their profile's Δ is scaled by the Birge factor either way
+(``profile_delta(two_sided=True)``: the one-lag weights hold the signal one lag leaves, so
+the deviance is several times too small a scale).
 """
 
 from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -124,6 +136,14 @@ PROFILE_DELTA = 1.0
 #: θ is a bound the search did not close (a margin of 6 let grid-end lags of opposite sign fit
 #: a typical-tempco record's slow wander)
 OPEN_MARGIN = math.inf
+#: The cancellation |c₁ + c₂|/max|cᵢ| under which a two-path fit of opposite signs is the
+#: dT/dt term's limit (``_derivative_limit``) and not named beside a chosen dT/dt term
+DERIVATIVE_KAPPA = 0.25
+#: Δ(held-out −2 ln L) by which such a two-path fit may predict better than the dT/dt term
+#: and still count as its limit (``_mimic``): a likelihood ratio of e, as ``LEAN_MARGIN``
+#: (on the dT/dt rows the limit predicted at most 0.2 better; on a true two-path record
+#: with a compressor a cancelling fit predicted 3.4 better)
+DERIVATIVE_MARGIN = 2.0
 #: The candidates whose predicting better, short of being chosen, makes one lag's linear
 #: coefficient and lag a model's reading rather than the sensor's (``LEAN_MARGIN``): the
 #: hysteresis, a response no linear path has. Not the quadratic: on 24 h typical-tempco
@@ -325,6 +345,9 @@ def _view(sums: OctaveSums, edf_ref: NDArray, n_ref: NDArray, ok_tau: NDArray[np
                  None if r_ref is None else np.asarray(r_ref[:k], float)[good])
 
 
+#: the view of some sums on an axis's weights (``_view`` with its EDF, τ and s bound)
+_Weights = Callable[[OctaveSums], _View]
+
 def _resid(v: _View, idx: list[int], beta: NDArray) -> NDArray[np.float64]:
     """The residual AVAR r_k(β) = V_yy − 2βᵀV_uy + βᵀV_uuβ."""
     c = v.cov
@@ -466,6 +489,9 @@ class PathFit:
     #: (by ``LEAN_MARGIN``, short of what choosing them needs): one lag's linear coefficient
     #: and lag are then a linear model's reading of a non-linear response
     leaning: tuple[str, ...] = ()
+    #: per linear extension, what it passes less of that rounding than one lag (its share
+    #: to beat instead of ``rounding``: ``_smoothing``)
+    own_rounding: dict[str, float] = field(default_factory=dict)
 
     @property
     def model_dependent(self) -> bool:
@@ -529,8 +555,10 @@ class PathFit:
         return (f"thermal path: {s.kind} ({txt}){end};"
                 f" held-out Δ(−2 ln L) against one lag: {ranks} (an extension needs "
                 f"< −{self.margin + self.rounding:.3g}, the margin {self.margin:g} and the "
-                f"readings' rounding through the coupling {self.rounding:.3g}, and its own "
-                f"z ≥ {self.z_threshold:.3g})"
+                f"readings' rounding through the coupling {self.rounding:.3g}"
+                + "".join(f", for {PATH_NAMES[k]} what it passes less of it {v:.3g}"
+                          for k, v in self.own_rounding.items())
+                + f", and its own z ≥ {self.z_threshold:.3g})"
                 + "".join(f"; {n}" for n in self.notes))
 
     def to_dict(self) -> dict[str, object]:
@@ -540,6 +568,7 @@ class PathFit:
                 "open": self.chosen.open_end, "z_extra": self.chosen.z_extra,
                 "z_threshold": self.z_threshold, "margin": self.margin,
                 "rounding_share": self.rounding,
+                "rounding_share_own": dict(self.own_rounding),
                 "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
                 "notes": self.notes}
 
@@ -581,14 +610,20 @@ def _jk_se(est: NDArray) -> NDArray[np.float64]:
                       dtype=float)
 
 
-def profile_delta(dev: float, nu: NDArray, n_params: int) -> float:
+def profile_delta(dev: float, nu: NDArray, n_params: int, two_sided: bool = False) -> float:
     """The Δ(−2 ln L) of a 68 % profile interval on one parameter for a best fit of deviance
     ``dev`` on differences ``nu`` (ν_k per τ) with ``n_params`` fitted: ``PROFILE_DELTA``
     times the Birge factor dev/dof where it exceeds 1 (the residual scatters more than the
-    weights say: the deviance's scale is that much too small), never less."""
+    weights say: the deviance's scale is that much too small), never less; ``two_sided``:
+    times the Birge factor either way, the deviance put on its own scale. The weights are
+    the one-lag residual, which on a record with a second path or a dT/dt term holds the
+    signal one lag leaves: the best extension's deviance is then 0.1–0.3 of its dof, and
+    Δ = 1 on that scale is a 3–7 unit step on the data's, a profile that reached grid
+    points far along the two paths' ridge (two paths' intervals held the truth in 30 of
+    34)."""
     dof = float(np.sum(nu)) - n_params
     birge = dev / dof if dof > 0 else math.inf
-    return PROFILE_DELTA * max(1.0, birge)
+    return PROFILE_DELTA * (birge if two_sided else max(1.0, birge))
 
 
 def _grid_cell(ts: list[Trial], i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -635,6 +670,166 @@ def _at_end(ts: list[Trial], i: int, widths: tuple[int, ...] = ()) -> bool:
         if len(vals) > 2 and ts[i].theta[d] in ends:
             return True
     return False
+
+
+# --------------------------------------------------------------------------------------------
+# θ refined continuously for the intervals of a candidate that may be chosen
+
+#: The candidates whose θ is refined on a local grid before their intervals are made
+#: (``_refine``): the ones whose coefficients trade with θ along a ridge, so that a θ
+#: re-chosen on the coarse grid in each delete-a-part fit jumps a whole grid step and drags
+#: the coefficients with it (two paths on seed 30000: ±4.9e-3 with θ re-chosen on the grid,
+#: ±3.5e-5 with θ fixed, on a coefficient of 1.0e-3).
+REFINED = ("two_path", "rate")
+#: The local grid's reach, in coarse grid steps either side of the best lag, and how many
+#: local steps a coarse one is split into: two paths trade their lags and coefficients
+#: along a ridge that a window of one coarse step each side cut off (the record's own
+#: optimum at the window's edge on seed 30000, so every part was clipped there too).
+FINE_REACH, FINE_SPLIT = 2, 3
+#: The lags' scale (s) of the local grid's spacing: even in ln(1 + L/scale), i.e. in lag
+#: near 0 (where the grid starts at 0 s) and in ln L above it.
+FINE_SCALE_S = 10.0
+
+
+def _warp(lag: float) -> float:
+    return math.log1p(lag / FINE_SCALE_S)
+
+
+def _unwarp(s: float) -> float:
+    return FINE_SCALE_S * math.expm1(s)
+
+
+def _path_cols(kind: str, theta: tuple[float, ...]) -> tuple[Column, ...]:
+    """The regressor columns of a ``REFINED`` candidate at θ (as ``trials``)."""
+    if kind == "rate":
+        return (Column("u", theta[0]), Column("rate", 0.0), *_start(theta[0]))
+    return (Column("u", theta[0]), Column("u", theta[1]), *_start(*theta))
+
+
+def _fine_trials(kind: str, theta: tuple[float, ...], lags: list[float]) -> list[Trial]:
+    """The local grid of ``kind`` around its coarse optimum θ: per lag, from ``FINE_REACH``
+    coarse grid points below to as many above (as far as the grid goes), each coarse step
+    split in ``FINE_SPLIT`` evenly in ``_warp``; two paths keep L1 < L2."""
+    pos = sorted({x for x in lags if x >= 0})
+    axes = []
+    for x in theta:
+        k = pos.index(x)
+        span = pos[max(k - FINE_REACH, 0):k + FINE_REACH + 1]
+        vals = {round(_unwarp(w), 3) for a, b in itertools.pairwise(span)
+                for w in np.linspace(_warp(a), _warp(b), FINE_SPLIT + 1)}
+        axes.append(sorted(vals | {x}))
+    pts: list[tuple[float, ...]] = (
+        [(a,) for a in axes[0]] if kind == "rate" else
+        [(a, b) for a in axes[0] for b in axes[1] if a < b])
+    return [Trial(p, _path_cols(kind, p), 2) for p in pts]
+
+
+def _smoothing(r_one: NDArray, halves: list[OctaveSums],
+               weigh_r: Callable[[OctaveSums, NDArray], _View], Ts: NDArray, rate: float,
+               tau: NDArray, cols: tuple[Column, ...], beta: NDArray) -> float:
+    """What a linear path (``cols``, ``beta``) gains on the held-out halves over one lag by
+    passing less of the readings' rounding: Σ_k ν_k·min(1, (R₁ − R)₊/s_k) over both halves,
+    R₁ the rounding AVAR (m/s²)² through the one-lag coupling (``r_one``), R through the
+    path's own |H|² (``sawtooth_avar``, ``_path_gain2``): at most the one lag's whole share
+    (``_View.rounding_share``). Two paths whose first is at lag 0 pass the rounding as one
+    lag does and gain little by smoothing (a compressor record's two paths were refused for
+    a share of 34 that a one-lag lead-lag of −144 s passes, up to 4× the readings' own);
+    two lags of opposite sign at 240 and 480 s beside a one lag of 125 s pass less of it,
+    and the rounding they do not pass is 24 of the held-out deviance where
+    they won by 18 (one lag's whole share 116)."""
+    r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(cols, beta))
+    less = np.maximum(0.0, np.asarray(r_one, dtype=float) - r)
+    return float(sum(weigh_r(h, less).rounding_share(1.0) for h in halves))
+
+
+def _vertex(ts: list[Trial], devs: NDArray, betas: NDArray
+            ) -> tuple[tuple[float, ...], NDArray[np.float64]]:
+    """θ and the coefficients at the least deviance over the local grid ``ts``, refined
+    continuously: along each lag in turn (the others at the best point), a parabola in
+    ``_warp`` through the best point and its two neighbours on that lag, its vertex where
+    it is convex (within one local step: beyond that it is the next point's to claim), the
+    coefficients moved by the same parabolas through theirs (they vary smoothly with θ).
+    Lag by lag, not a joint quadratic: two paths' deviance is a ridge, on which a joint
+    quadratic is seldom convex. At the grid point where a lag has no neighbour on a side
+    (the local grid's edge: a bound, not an interpolation)."""
+    i = int(np.argmin(devs))
+    th = list(ts[i].theta)
+    beta = np.array(betas[i], dtype=float)
+    at = {t.theta: j for j, t in enumerate(ts)}
+    for d in range(len(th)):
+        vals = sorted({t.theta[d] for t in ts
+                       if all(t.theta[e] == ts[i].theta[e] for e in range(len(th)) if e != d)})
+        k = vals.index(ts[i].theta[d])
+        if not 0 < k < len(vals) - 1:
+            continue
+        js = [at[tuple(v if e == d else ts[i].theta[e] for e in range(len(th)))]
+              for v in vals[k - 1:k + 2]]
+        x = np.array([_warp(v) for v in vals[k - 1:k + 2]]) - _warp(vals[k])
+        f = devs[js]
+        V = np.column_stack([np.ones(3), x, x * x])
+        _, a1, a2 = np.linalg.solve(V, f)
+        if a2 <= 0:
+            continue
+        xv = float(np.clip(-a1 / (2 * a2), x[0], x[2]))
+        cb = np.linalg.solve(V, betas[js])
+        beta += cb[1] * xv + cb[2] * xv * xv
+        th[d] = _unwarp(_warp(vals[k]) + xv)
+    if len(th) == 2 and th[0] >= th[1]:
+        return ts[i].theta, np.asarray(betas[i], dtype=float)
+    return tuple(th), beta
+
+
+class _Refined(NamedTuple):
+    theta: tuple[float, ...]
+    beta: NDArray[np.float64]
+    beta_lo: NDArray[np.float64]
+    beta_hi: NDArray[np.float64]
+    theta_lo: NDArray[np.float64]
+    theta_hi: NDArray[np.float64]
+    #: the coefficients and θ over the local grid's points within the profile Δ of its best
+    profile: NDArray[np.float64]
+    profile_theta: NDArray[np.float64]
+    #: the local grid's least deviance on the whole record
+    least: float
+
+
+def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray, Ts: NDArray,
+            rate: float, edges: NDArray, cut: NDArray[np.bool_], weigh: _Weights,
+            delta: float, columns: dict[Column, NDArray[np.float64]] | None) -> _Refined:
+    """θ of a ``REFINED`` candidate refined continuously (``_vertex`` on ``_fine_trials``)
+    on the whole record and in every delete-a-part fit, from one more pass of the Allan
+    covariance over the local grid's regressors: the coefficients' 68 % interval is then
+    the larger of the jackknife with θ fixed and with θ re-chosen, both at the estimator's
+    resolution, not the coarse grid's, and θ's is the jackknife of θ re-chosen."""
+    fine = _fine_trials(kind, theta, lags)
+    cols = sorted({c for t in fine for c in t.cols})
+    where = {c: j + 1 for j, c in enumerate(cols)}
+    # a copy: the local grid's columns are this axis's own, not worth keeping for others
+    X = np.column_stack([ys, path_columns(Ts, cols, rate, dict(columns or {}))])
+    parts = octave_sums_by_part(X, edges, cut)
+    whole = sum(parts[1:], start=parts[0])
+    idx = [[where[c] for c in t.cols] for t in fine]
+    n = 2
+
+    def best(v: _View) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
+        fits = [_fit(v, ix) for ix in idx]
+        devs = np.array([_dev(v, ix, b) for ix, b in zip(idx, fits, strict=True)])
+        coef = np.array([f[:n] for f in fits])
+        th, b = _vertex(fine, devs, coef)
+        return th, b, devs, coef
+
+    vw = weigh(whole)
+    th, b, devs, fits = best(vw)
+    vjk = [weigh(whole - p) for p in parts]
+    g = int(np.argmin(devs))
+    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk]))
+    jk = [best(v)[:2] for v in vjk]
+    se_re = _jk_se(np.array([x[1] for x in jk]))
+    tse = _jk_se(np.array([x[0] for x in jk])) * T68
+    se = np.maximum(se_fixed, se_re) * T68
+    flat = devs <= devs.min() + delta
+    return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
+                    fits[flat], np.array([t.theta for t in fine])[flat], float(devs.min()))
 
 
 def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
@@ -710,6 +905,18 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
     n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
     z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
+    # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
+    # test failed, one lag is no reference)
+    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
+
+    def weigh(sums: OctaveSums) -> _View:
+        return _view(sums, edf_v, n_v, ok_tau, s_ref)
+
+    def weigh_r(sums: OctaveSums, r: NDArray) -> _View:
+        return _view(sums, edf_v, n_v, ok_tau, s_ref, r)
+
+    smoothing: dict[str, float] = {}
+
     scores: dict[str, PathScore] = {}
     for kind in CANDIDATES:
         ts = per_kind[kind]
@@ -757,23 +964,46 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # intervals), so they carry no interval either
         resolved = kind == "one_lag" or not (open_end or bool(np.any(
             (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
-        b_lo, b_hi = fits[i][:n] - se_iv, fits[i][:n] + se_iv
+        beta, cols_i = fits[i][:n], ts[i].cols
+        b_lo, b_hi = beta - se_iv, beta + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
         # points at least (every part re-choosing the same grid point gave a zero width)
         g_lo, g_hi = _grid_cell(ts, i)
         t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
+        # what this candidate gains over one lag by passing less of the readings' rounding
+        # (``_smoothing``); a non-linear one is taken to pass none
+        smoothing[kind] = (rounding_dev if kind not in REFINED or rounding_dev <= 0 else
+                           _smoothing(c_one**2 * r_ref, half, weigh_r, Ts, rate, ms / rate,
+                                      ts[i].cols, fits[i]))
+        if kind in REFINED and not open_end and z_extra >= z_thr and held < min(
+                scores["one_lag"].heldout, none_h) - HELDOUT_MARGIN - smoothing[kind]:
+            # a candidate that may be chosen: θ continuous, in the whole record and in each
+            # delete-a-part fit (``_refine``), so the intervals are the estimator's spread,
+            # not the coarse grid's steps; the profile over the coarse grid is kept beyond
+            # the local grid's reach
+            # (the profile's Δ on the deviance's own scale, ``profile_delta``: with θ
+            # continuous in the jackknife, the profile no longer stands in for the grid)
+            delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]), two_sided=True)
+            fr = _refine(kind, ts[i].theta, lags, ys, Ts, rate, edges, cut, weigh, delta,
+                         columns)
+            theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
+            b_lo, b_hi = fr.beta_lo, fr.beta_hi
+            t_lo, t_hi = np.minimum(fr.theta_lo, g_lo), np.maximum(fr.theta_hi, g_hi)
+            flat = [j for j in range(len(ts)) if devs[j] <= fr.least + delta]
+            pb = np.vstack([np.reshape([fits[j][:n] for j in flat], (-1, n)), fr.profile])
+            pt = np.vstack([np.reshape([ts[j].theta for j in flat], (-1, len(theta))),
+                            fr.profile_theta])
+            se_iv = 0.5 * (b_hi - b_lo)
+            resolved = not bool(np.any((pb.min(axis=0) < 0) & (pb.max(axis=0) > 0)))
         if kind != "one_lag":
             b_lo, b_hi = np.minimum(b_lo, pb.min(axis=0)), np.maximum(b_hi, pb.max(axis=0))
             t_lo, t_hi = np.minimum(t_lo, pt.min(axis=0)), np.maximum(t_hi, pt.max(axis=0))
         scores[kind] = PathScore(
-            kind, held, theta, fits[i][:n], se_iv,
+            kind, held, theta, beta, se_iv,
             tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
-            z_extra, open_end, ts[i].cols, tuple(float(x) for x in b_lo),
+            z_extra, open_end, cols_i, tuple(float(x) for x in b_lo),
             tuple(float(x) for x in b_hi), resolved, delta)
-    # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
-    # test failed, one lag is no reference)
-    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
     ref = scores["one_lag"]
     notes = []
     passing = []
@@ -781,19 +1011,20 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if kind == "one_lag":
             continue
         need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
-        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_dev:
+        rounding_k = smoothing[kind]
+        if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but its "
                          "θ sits at the end of its search grid (open): a bound, not chosen")
-        if sc.heldout < min(ref.heldout, none_h) - need - rounding_dev and (
+        if sc.heldout < min(ref.heldout, none_h) - need - rounding_k and (
                 sc.z_extra >= z_thr):
             passing.append(sc)
-        elif sc.heldout < ref.heldout - need - rounding_dev:
+        elif sc.heldout < ref.heldout - need - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"its extra term's z {sc.z_extra:.3g} < {z_thr:.3g}")
         elif sc.heldout < ref.heldout - need:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"by less than the readings' rounding through the coupling makes "
-                         f"up of the held-out deviance ({rounding_dev:.3g}): a path that "
+                         f"up of the held-out deviance ({rounding_k:.3g}): a path that "
                          "smooths the 0.0625 K steps gains that much without physics")
     best = ref
     alternatives: tuple[str, ...] = ()
@@ -810,11 +1041,21 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # record the best dT/dt model fits a true two-path signal to a non-centrality of
         # 0.1–2.3 even with unrounded readings and every frequency, far below what a 95 %
         # choice needs), so the record names both and resolves neither's parameters
+        # (an alternative passes every test the chosen one had to: a θ at its grid's end or
+        # an extra term under the threshold is no rival, as it could not have been chosen)
         alternatives = tuple(
-            sc.kind for sc in scores.values()
-            if sc.kind not in ("one_lag", best.kind)
-            and sc.heldout <= best.heldout + HELDOUT_MARGIN
-            and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - rounding_dev)
+            sc.kind for sc in passing
+            if sc.kind != best.kind and sc.heldout <= best.heldout + HELDOUT_MARGIN
+            and not (best.kind == "rate" and sc.kind == "two_path" and _mimic(sc, best)))
+        mimic = scores.get("two_path")
+        if (best.kind == "rate" and mimic is not None and mimic in passing
+                and mimic.heldout <= best.heldout + HELDOUT_MARGIN and _mimic(mimic, best)):
+            notes.append(
+                f"two paths of opposite sign that nearly cancel ({mimic.beta[0]:.3g} and "
+                f"{mimic.beta[1]:.3g} m/s²/K through {mimic.theta[0]:.4g} and "
+                f"{mimic.theta[1]:.4g} s) fit as well: a difference of two lags is a smoothed "
+                "derivative, the dT/dt term's limit with a parameter more, so the same "
+                "mechanism (not named beside it)")
         if alternatives:
             names = " or ".join(PATH_NAMES[k] for k in (best.kind, *alternatives))
             notes.append(f"{names}: this record cannot tell them apart (held-out −2 ln L "
@@ -841,7 +1082,28 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                      "resolve it; one lag's coefficient and lag are a linear model's reading, "
                      "model-dependent, no interval")
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
-                   rounding=rounding_dev, alternatives=alternatives, leaning=leaning)
+                   rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
+                   own_rounding={k: v for k, v in smoothing.items() if k in REFINED})
+
+
+def _derivative_limit(sc: PathScore) -> bool:
+    """A two-path fit in the dT/dt term's limit: c₁u_L1 + c₂u_L2 = (c₁ + c₂)u_L1 +
+    c₂(u_L2 − u_L1), and u_L2 − u_L1 → −(L2 − L1)·du/dt at the frequencies below 1/L2, so two
+    paths of opposite sign whose coefficients nearly cancel (|c₁ + c₂| under
+    ``DERIVATIVE_KAPPA`` of the larger) are a static coupling plus a derivative, the rate
+    candidate with one parameter more. Two real paths need no such cancellation."""
+    c1, c2 = float(sc.beta[0]), float(sc.beta[1])
+    return c1 * c2 < 0 and abs(c1 + c2) < DERIVATIVE_KAPPA * max(abs(c1), abs(c2))
+
+
+def _mimic(two: PathScore, rate: PathScore) -> bool:
+    """Two paths that are the chosen dT/dt term's limit (``_derivative_limit``) and predict
+    the held-out halves no better than it by more than ``DERIVATIVE_MARGIN``: the same
+    mechanism with a parameter more, not a rival. A two-path fit that predicts better is
+    named beside it even when its coefficients nearly cancel (on a true two-path record
+    with a compressor the fit slid along the paths' ridge to |c₁ + c₂| 0.14 of the larger,
+    predicting better by 3.4)."""
+    return _derivative_limit(two) and two.heldout >= rate.heldout - DERIVATIVE_MARGIN
 
 
 def _leaning(best: PathScore, scores: dict[str, PathScore]) -> tuple[str, ...]:
@@ -856,13 +1118,15 @@ def _leaning(best: PathScore, scores: dict[str, PathScore]) -> tuple[str, ...]:
                  and scores[k].z_extra >= LEAN_T)
 
 
-def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
-                  lag_s: float = 0.0) -> NDArray[np.float64]:
+def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
+                  gain2: Callable[[NDArray], NDArray] | None = None) -> NDArray[np.float64]:
     """The readings' rounding AVAR (K²) at ``tau`` seen through ``lag_filter`` of ``lag_s``:
     the rounding as a sawtooth (``thermal_fit.rounding_correlation_s``), white at τ above
     its correlation time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's
     |H(f)|² applied in the AVAR's integral ∫ h₀|H|²·2 sin⁴(πfτ)/(πfτ)² df (NIST SP 1065
-    eq. 10's transfer function); a long lag passes little of it at τ below the lag."""
+    eq. 10's transfer function); a long lag passes little of it at τ below the lag.
+    ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
+    its coefficients in it, and not capped at the readings' own 2q²/12)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
@@ -874,13 +1138,40 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray,
     f = np.geomspace(1e-7, 0.5 / tc, 4000)
     w2 = (2 * np.pi * f) ** 2
     a = abs(lag_s)
-    H2 = (np.ones_like(f) if lag_s == 0 else 1.0 / (1.0 + w2 * a * a) if lag_s > 0
+    H2 = (gain2(f) if gain2 is not None else np.ones_like(f) if lag_s == 0
+          else 1.0 / (1.0 + w2 * a * a) if lag_s > 0
           else (1.0 + 4.0 * w2 * a * a) / (1.0 + w2 * a * a))
     out = np.empty(len(tau))
     for i, t in enumerate(tau.tolist()):
         x = np.pi * f * t
         out[i] = np.trapezoid(h0 * H2 * 2.0 * np.sin(x) ** 4 / x**2, f) if t > 0 else 0.0
+    if gain2 is not None:
+        return np.asarray(out, dtype=float)
     return np.asarray(np.minimum(out, 2.0 * q2), dtype=float)
+
+
+def _path_gain2(cols: tuple[Column, ...], beta: NDArray) -> Callable[[NDArray], NDArray]:
+    """|H(f)|² of a linear path's couplings (m/s²/K)²: Σ β_i·H_i(f) over its "u" columns
+    (a lag 1/(1 + jωL), a negative one's lead-lag (1 + 2jωa)/(1 + jωa)) and its "rate"
+    column (jω/(1 + ω²s²), ``path_columns``); the start states carry no rounding."""
+    terms = [(c, float(b)) for c, b in zip(cols, beta, strict=False) if c.kind in ("u", "rate")]
+
+    def g(f: NDArray) -> NDArray:
+        w = 2j * np.pi * np.asarray(f, dtype=float)
+        H = np.zeros(len(w), dtype=complex)
+        for c, b in terms:
+            a = abs(c.lag)
+            if c.kind == "rate":
+                H += b * w / (1 - (w * RATE_SMOOTH_S) ** 2)
+            elif c.lag > 0:
+                H += b / (1 + w * a)
+            elif c.lag < 0:
+                H += b * (1 + 2 * w * a) / (1 + w * a)
+            else:
+                H += b
+        return np.abs(H) ** 2
+
+    return g
 
 
 def _edf_at(tau: NDArray, tau_ref: NDArray, edf_ref: NDArray) -> NDArray[np.float64]:
