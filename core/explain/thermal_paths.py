@@ -18,9 +18,13 @@ more; the candidates, each a linear model in regressors built from the driving c
   Preisach elementary hysteron (``_relay``: +1 once the temperature rose w above its last
   minimum, −1 once it fell w below its last maximum) on lag(T̂, L), T̂ the temperature behind
   the readings (``crossing_reconstruction``: the 0.0625 K rounding an error in the
-  regressor, not a signal); θ = (L, w). A play operator (a lead that crosses over while the
-  temperature turns back by w) on the readings themselves was the candidate before; on the
-  hysteresis row it was chosen on 3 of 20 records, the relay on T̂ on 19 of 20
+  regressor, not a signal); θ = (L, w), L also over the short negative lags
+  ``HYSTERESIS_LEADS_S`` (the lag and the width trade along a ridge through a lag of 0);
+  its coefficients and θ averaged over the grid points within the 68 % profile's Δ, each
+  by its likelihood (``AVERAGED``), not read at the best one. A play operator (a lead that
+  crosses over while the temperature turns back by w) on the readings themselves was the
+  candidate before; on the hysteresis row it was chosen on 3 of 20 records, the relay on T̂
+  on 19 of 20
   (docs/explain.md).
 
 Every candidate also carries the lag filter's unknown start state (e^(−t/|L|) per lag, a
@@ -100,6 +104,12 @@ LAG_GRID_S = (0.0, 15.0, 30.0, 60.0, 120.0, 240.0, 480.0, 900.0, 1800.0, 3600.0)
 #: temperature fitted 0.025–0.045 K for a true 0.05 on 7 of 20 records, at the grid's end
 #: when it began at 0.025).
 WIDTHS_K = (0.0125, 0.025, 0.05, 0.1, 0.2, 0.4)
+#: Negative lags (s, as their size) the hysteresis also tries: the logged sensor may lag the
+#: die, and the relay's lag and width trade along a ridge (a later switch by a longer lag or
+#: a wider relay) that runs through a true lag of 0 to both sides; with lags ≥ 0 only (and
+#: the one-lag fit's own) the ridge was cut at 0 and the average over it (``AVERAGED``)
+#: leaned to positive lags with h 9 % high (10 records of the hysteresis row)
+HYSTERESIS_LEADS_S = (15.0, 30.0, 60.0, 120.0)
 #: Smoothing lag (s) before the derivative (the readings' 0.0625 K steps).
 RATE_SMOOTH_S = 30.0
 #: Contiguous parts: the halves of the held-out choice are parts 0…4 and 5…9; the jackknife
@@ -142,6 +152,14 @@ LEANING = ("hysteresis",)
 LEAN_MARGIN = 2.0
 #: Most block means the fit runs on (as the lag scan).
 FIT_POINTS = 1 << 14
+#: The candidates whose coefficients and θ are averaged over θ's grid, each grid point
+#: weighed by its likelihood (``_averaged``), not read at the best grid point: the
+#: hysteresis's lag and width trade along a ridge (a later switch by a longer lag or a
+#: wider relay, the same switch time at one drive amplitude) whose deviance is flat within
+#: 1–2 from (0 s, 0.05 K) to (120 s, 0.0125 K), and the coefficients move along it (c
+#: 0.86×, h 1.29× at (60 s, 0.025 K) on seed 30008, ΔD 0.2 below the truth's point):
+#: the best grid point is noise's choice along the ridge
+AVERAGED = ("hysteresis",)
 
 
 class Column(NamedTuple):
@@ -414,8 +432,9 @@ def trials(kind: str, lags: list[float]) -> list[Trial]:
     if kind == "rate":
         return [Trial((L,), (Column("u", L), Column("rate", 0.0), *_start(L)), 2) for L in pos]
     if kind == "hysteresis":
+        both = sorted(set(lags) | {-x for x in HYSTERESIS_LEADS_S})
         return [Trial((L, w), (Column("u", L), Column("relay", L, w), *_start(L)), 2)
-                for L in lags for w in WIDTHS_K]
+                for L in both for w in WIDTHS_K]
     raise ValueError(kind)
 
 
@@ -625,6 +644,37 @@ def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
     return tuple(th)
 
 
+def _weights(devs: NDArray, delta: float) -> NDArray[np.float64]:
+    """Each grid point's likelihood relative to the best, exp(−ΔD/2) with the deviance's
+    scale ``delta`` (``profile_delta``: 1, or the Birge factor), normalised, over the
+    points within ``delta`` of the best (the 68 % profile's, as the intervals' widening):
+    over the whole grid the many points 2–3 σ off (ΔD 5–9, a tenth of the weight on the
+    hysteresis row's seed 30000) carried sizes far from the ridge's (h 0.5× and −0.5×) into
+    the average's spread, ±27 % on a size the records scatter by ±8 %."""
+    dd = devs - devs.min()
+    w = np.where(dd <= delta, np.exp(-dd / (2.0 * delta)), 0.0)
+    return np.asarray(w / w.sum(), dtype=float)
+
+
+def _averaged(fits: list[NDArray], devs: NDArray, n: int,
+              delta: float) -> NDArray[np.float64]:
+    """The first ``n`` coefficients averaged over the grid of θ, each grid point weighed by
+    its likelihood (``_weights``): θ a nuisance integrated out on the grid, not chosen."""
+    w = _weights(devs, delta)
+    return np.asarray(np.einsum("j,ji->i", w, np.array([f[:n] for f in fits])), dtype=float)
+
+
+def _averaged_theta(ts: list[Trial], devs: NDArray, delta: float) -> tuple[float, ...]:
+    """θ averaged over its grid as ``_averaged`` (a width, > 0 on a geometric grid, in ln)."""
+    w = _weights(devs, delta)
+    th = np.array([t.theta for t in ts], dtype=float)
+    out = []
+    for d in range(th.shape[1]):
+        x = th[:, d]
+        out.append(float(np.exp(w @ np.log(x))) if np.all(x > 0) else float(w @ x))
+    return tuple(out)
+
+
 def _at_end(ts: list[Trial], i: int, widths: tuple[int, ...] = ()) -> bool:
     """θ of trial ``i`` at the end of its grid: a lag at the longest lag tried, a width
     (coordinates ``widths``) at either end (the shortest lag, 0 or the one-lag fit's own,
@@ -725,28 +775,45 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         i = int(np.argmin(devs))
         theta = _refined(ts, devs, i)
         n = ts[i].n_terms
+        delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]))
+        avg = kind in AVERAGED
+        beta = _averaged(fits, devs, n, delta) if avg else fits[i][:n]
+        theta = _averaged_theta(ts, devs, delta) if avg else theta
         # jackknife with θ fixed (the extra term's test) and with θ re-chosen in each
         # delete-a-part fit (θ, and the coefficients' intervals: a dT/dt term and a second
         # path trade with the first lag at one drive frequency, so with θ fixed their
         # intervals left the lag's share out and held the truth in 0 of 78)
         jb = np.array([_fit(v, idx[i]) for v in vjk])
         se = _jk_se(jb)
-        jt, jr = [], []
+        jt, jr, jf = [], [], []
         for v in vjk:
             fv = [_fit(v, ix) for ix in idx]
+            jf.append([f[:n] for f in fv])
             dv = np.array([_dev(v, ix, bb) for ix, bb in zip(idx, fv, strict=True)])
             g = int(np.argmin(dv))
-            jt.append(_refined(ts, dv, g))
-            jr.append(fv[g][:n])
+            if avg:
+                dg = profile_delta(float(dv[g]), v.nu, len(idx[g]))
+                jt.append(_averaged_theta(ts, dv, dg))
+                jr.append(_averaged(fv, dv, n, dg))
+            else:
+                jt.append(_refined(ts, dv, g))
+                jr.append(fv[g][:n])
         tse = _jk_se(np.array(jt)) * T68
-        se_iv = np.maximum(se[:n], _jk_se(np.array(jr))) * T68
+        se_iv = np.maximum(se[:n], _jk_se(np.array(jr)))
+        if avg:
+            # the average's spread: each grid point's own (its jackknife with θ fixed) and
+            # the points' scatter about the average, weighed as the average is
+            w = _weights(devs, delta)
+            se_g = np.array([_jk_se(np.array([p[j] for p in jf])) for j in range(len(ts))])
+            dev_g = np.array([f[:n] for f in fits]) - beta
+            se_iv = np.maximum(se_iv, np.sqrt(w @ (se_g**2 + dev_g**2)))
+        se_iv = se_iv * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
         # the profile over θ: every grid point within the 68 % profile Δ of the best (one
         # parameter's, scaled by the Birge factor) is as good a fit at that level, so its
         # coefficients and θ belong in the intervals; a coefficient whose sign flips across
         # them is not resolved (the held-out margin chooses the model, not the interval)
-        delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]))
         flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + delta]
         pb = np.array([fits[j][:n] for j in flat])
         pt = np.array([ts[j].theta for j in flat])
@@ -757,17 +824,19 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # intervals), so they carry no interval either
         resolved = kind == "one_lag" or not (open_end or bool(np.any(
             (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
-        b_lo, b_hi = fits[i][:n] - se_iv, fits[i][:n] + se_iv
+        b_lo, b_hi = beta - se_iv, beta + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
         # points at least (every part re-choosing the same grid point gave a zero width)
         g_lo, g_hi = _grid_cell(ts, i)
         t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
-        if kind != "one_lag":
+        if kind != "one_lag" and not avg:
+            # (an average over θ carries the points' scatter in its standard error already)
             b_lo, b_hi = np.minimum(b_lo, pb.min(axis=0)), np.maximum(b_hi, pb.max(axis=0))
+        if kind != "one_lag":
             t_lo, t_hi = np.minimum(t_lo, pt.min(axis=0)), np.maximum(t_hi, pt.max(axis=0))
         scores[kind] = PathScore(
-            kind, held, theta, fits[i][:n], se_iv,
+            kind, held, theta, beta, se_iv,
             tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
             z_extra, open_end, ts[i].cols, tuple(float(x) for x in b_lo),
             tuple(float(x) for x in b_hi), resolved, delta)

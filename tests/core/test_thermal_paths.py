@@ -198,6 +198,40 @@ def test_the_hysteresis_minimum_is_the_fishers_with_the_coupling_and_the_switch_
     assert got > 1.2 * 5.0 / math.sqrt(known)
 
 
+def test_an_average_over_theta_weighs_the_points_within_the_profile_by_their_likelihood():
+    """The hysteresis's coefficients are averaged over the grid points within the 68 %
+    profile's Δ of the best (exp(−ΔD/2Δ) each), not read at the best point: two points
+    equally good give their midpoint, a point a little worse counts less, a point beyond Δ
+    not at all; θ likewise (a width in ln, a lag of either sign as it is)."""
+    from avard.core.explain.thermal_paths import Trial, _averaged, _averaged_theta, _weights
+
+    devs = np.array([10.0, 10.0, 10.5, 13.0])
+    w = _weights(devs, 1.0)
+    assert w[3] == 0.0 and w[0] == w[1] > w[2] > 0 and w.sum() == pytest.approx(1.0)
+    assert w[2] / w[0] == pytest.approx(math.exp(-0.25))
+    # a Birge factor of 4 widens the set and flattens the weights
+    w4 = _weights(devs, 4.0)
+    assert w4[3] > 0 and w4[2] / w4[0] == pytest.approx(math.exp(-0.5 / 8))
+    fits = [np.array([1.0, 2.0, 9.0]), np.array([3.0, 4.0, 9.0]), np.array([2.0, 3.0, 9.0]),
+            np.array([100.0, 100.0, 9.0])]
+    got = _averaged(fits, np.array([5.0, 5.0, 50.0, 50.0]), 2, 1.0)
+    assert got == pytest.approx([2.0, 3.0])  # the midpoint; the start state's left out
+    ts = [Trial((-30.0, 0.025), (), 2), Trial((30.0, 0.1), (), 2)]
+    lag, width = _averaged_theta(ts, np.array([0.0, 0.0]), 1.0)
+    assert lag == pytest.approx(0.0) and width == pytest.approx(0.05)
+
+
+def test_the_hysteresis_tries_lags_of_either_sign():
+    """The relay's lag and width trade along a ridge through a true lag of 0: the
+    hysteresis's grid reaches the same short lags either side (the logged sensor may lag the
+    die), not only the one-lag fit's own negative lag."""
+    from avard.core.explain.thermal_paths import HYSTERESIS_LEADS_S
+
+    got = {t.theta[0] for t in trials("hysteresis", [0.0, 15.0, 30.0, -94.5])}
+    assert {-x for x in HYSTERESIS_LEADS_S} <= got and {0.0, 15.0, 30.0, -94.5} <= got
+    assert all(t.cols[1].lag == t.theta[0] for t in trials("hysteresis", [0.0]))
+
+
 def test_a_response_one_lag_cannot_follow_is_claimed_by_its_own_test():
     # a quadratic response ten times the linear one: the one-lag z fails (it sees the
     # quadratic's 2f₀ as noise), the quadratic passes its own test and is the claim
