@@ -69,6 +69,40 @@ def test_the_relay_switches_once_the_temperature_turns_back_by_its_width():
     assert r[-1] == -1.0 and set(np.unique(r)) == {-1.0, 1.0}
 
 
+def _relay_by_sample(v: np.ndarray, w: float) -> np.ndarray:
+    """The relay sample by sample (the reference ``_relay`` equals)."""
+    state, ext = 1.0, float(v[0])
+    out = []
+    for x in np.asarray(v, dtype=float).tolist():
+        if state > 0:
+            if x > ext:
+                ext = x
+            elif ext - x > w:
+                state, ext = -1.0, x
+        else:
+            if x < ext:
+                ext = x
+            elif x - ext > w:
+                state, ext = 1.0, x
+        out.append(state)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_relay_switch_by_switch_equals_the_relay_sample_by_sample(seed: int):
+    # a random walk, a noisy sine (switches at the turns) and rounded readings (ties at the
+    # extremum), at widths from 0 (every turn) to one no sample reaches, lengths across the
+    # search window's 256 and its doublings
+    rng = np.random.default_rng(seed)
+    for n in (1, 2, 255, 256, 257, 1500, 6000):
+        for v in (np.cumsum(rng.standard_normal(n)) * 0.01,
+                  0.2 * np.sin(np.arange(n) / rng.uniform(5, 300))
+                  + 0.01 * rng.standard_normal(n),
+                  np.round(rng.standard_normal(n) * 3) / 16):
+            for w in (0.0, 0.0125, 0.05, 0.4, 5.0):
+                assert np.array_equal(_relay(v, w), _relay_by_sample(v, w)), (n, w)
+
+
 def test_the_reconstruction_from_the_readings_crossings_is_closer_than_the_readings():
     # a slowly turning room read at 0.0625 K: the staircase is off by up to half a step, the
     # spline through the times it crosses each step's middle follows the temperature itself
