@@ -68,6 +68,11 @@ jackknife of θ re-chosen with each part left out, each best grid point refined 
 parabola in ln L through its neighbours, widened to the same profile and to half way to the
 neighbouring grid points at least. A coefficient that changes sign over the profile: the
 parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
+An ``AVERAGED`` candidate (the hysteresis) reports the likelihood-weighted average over the
+profile's grid points instead of the best one, and its coefficients' interval is ± ``T68``
+times the larger of the jackknifes above (the average taken again in each part) and the
+average's own spread (each point's θ-fixed jackknife and its distance from the average,
+weighed as the average), not widened to the profile's ends, which that spread holds.
 """
 
 from __future__ import annotations
