@@ -70,9 +70,8 @@ neighbouring grid points at least. A coefficient that changes sign over the prof
 parameters are not resolved (``PathScore.resolved`` False), reported with no interval.
 An ``AVERAGED`` candidate (the hysteresis) reports the likelihood-weighted average over the
 profile's grid points instead of the best one, and its coefficients' interval is ± ``T68``
-times the larger of the jackknifes above (the average taken again in each part) and the
-average's own spread (each point's θ-fixed jackknife and its distance from the average,
-weighed as the average), not widened to the profile's ends, which that spread holds.
+times the average's own jackknife (the average taken again in each part), not widened to
+the profile's ends (the average does not jump between them as a best point does).
 """
 
 from __future__ import annotations
@@ -806,10 +805,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # intervals left the lag's share out and held the truth in 0 of 78)
         jb = np.array([_fit(v, idx[i]) for v in vjk])
         se = _jk_se(jb)
-        jt, jr, jf = [], [], []
+        jt, jr = [], []
         for v in vjk:
             fv = [_fit(v, ix) for ix in idx]
-            jf.append([f[:n] for f in fv])
             dv = np.array([_dev(v, ix, bb) for ix, bb in zip(idx, fv, strict=True)])
             g = int(np.argmin(dv))
             if avg:
@@ -822,12 +820,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         tse = _jk_se(np.array(jt)) * T68
         se_iv = np.maximum(se[:n], _jk_se(np.array(jr)))
         if avg:
-            # the average's spread: each grid point's own (its jackknife with θ fixed) and
-            # the points' scatter about the average, weighed as the average is
-            w = _weights(devs, delta)
-            se_g = np.array([_jk_se(np.array([p[j] for p in jf])) for j in range(len(ts))])
-            dev_g = np.array([f[:n] for f in fits]) - beta
-            se_iv = np.maximum(se_iv, np.sqrt(w @ (se_g**2 + dev_g**2)))
+            # the average's own jackknife (the average taken again in each part) is its
+            # standard error; the larger of it and the best point's θ-fixed one and the
+            # average's spread over the points (Σ w·(se² + d²)) is the largest of noisy
+            # 9-dof estimates, and held the hysteresis row's truth in 64 of 78 (82 %)
+            se_iv = _jk_se(np.array(jr))
         se_iv = se_iv * T68
         z_extra = (float(np.min(np.abs(fits[i][1:n]) / np.maximum(se[1:n], 1e-300)))
                    if n > 1 else math.inf)
@@ -852,7 +849,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         g_lo, g_hi = _grid_cell(ts, i)
         t_lo, t_hi = np.minimum(t_lo, g_lo), np.maximum(t_hi, g_hi)
         if kind != "one_lag" and not avg:
-            # (an average over θ carries the points' scatter in its standard error already)
+            # (an average over θ moves little with the points' scatter: its own jackknife)
             b_lo, b_hi = np.minimum(b_lo, pb.min(axis=0)), np.maximum(b_hi, pb.max(axis=0))
         if kind != "one_lag":
             t_lo, t_hi = np.minimum(t_lo, pt.min(axis=0)), np.maximum(t_hi, pt.max(axis=0))
