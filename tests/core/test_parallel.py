@@ -201,14 +201,19 @@ def test_chunks_are_cut_on_the_alignment_of_their_own_segment() -> None:
 
 
 def _assert_one_workers(one, par) -> None:
-    """``par`` has ``one``'s ADEV, α and EDF to 1e-12, its lines (frequency 1e-12,
-    amplitude 1e-9) and its terms (presence, value 1e-9)."""
+    """``par`` has ``one``'s ADEV and α to 1e-12, its EDF, lines (frequency 1e-12,
+    amplitude 1e-9) and terms (presence, value 1e-9) to 1e-9. The EDF is the fit's: a
+    drift the time domain holds short of its level sets the longest τ's EDF through its
+    floor (``NoiseFit.drift_floor``), a continuous function of the block means, which a cut
+    stream sums in another order (equal to one pass's to 1e-13,
+    ``test_block_sums_of_chunks_add_up_to_one_passs_block_means``); the likelihood's
+    profile carries that to 2e-12 of the EDF, so the EDF is held as the terms are."""
     assert par.n_samples == one.n_samples
     for name, ch in one.channels.items():
         a, b = ch.allan, par.channels[name].allan
         np.testing.assert_allclose(b.dev, a.dev, rtol=1e-12)
         np.testing.assert_array_equal(b.alpha, a.alpha)
-        np.testing.assert_allclose(b.edf, a.edf, rtol=1e-12)
+        np.testing.assert_allclose(b.edf, a.edf, rtol=1e-9)
         assert len(par.channels[name].lines) == len(ch.lines)
         for la, lb in zip(ch.lines, par.channels[name].lines, strict=True):
             assert lb["frequency_hz"] == pytest.approx(la["frequency_hz"], rel=1e-12)
