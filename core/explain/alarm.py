@@ -7,7 +7,9 @@ level is split between the searches (Bonferroni: the chance of any false claim i
 the sum of the shares), and each search splits its share again over its own trials:
 
 - ``TEMPERATURE``: the thermal regression asks z ≥ 5 (``thermal_fit.Z_TEMPERATURE``) over
-  about 50 correlated lag and channel trials, 50·2Φ(−5) = 2.9e-5, inside this share;
+  about 50 correlated lag and channel trials, 50·2Φ(−5) = 2.9e-5, inside this share; where
+  the coefficient's se rests on few slow octaves (its Satterthwaite dof), the two-sided t
+  at this share over those trials if larger (``CouplingTest.threshold``);
 - ``TRANSIENTS``: the compound search (``transients.find_compound``) at each stage, a third
   to each family (steps at ≤ 256 grid times, excursions at their pairs, warm-ups at 48 time
   constants), each family's share Bonferroni-split over its trials (``bonferroni_z``); on
