@@ -261,7 +261,7 @@ def search_slow_sine(means: NDArray, block_s: float, n_white: float, b_inst: flo
     # a candidate: confirmed with the flicker's level profiled too (B at the fit's value
     # is itself an estimate; a B that fell low leaves the means' middle band in excess),
     # only here, where it costs a factor and a decomposition per B
-    confirmed = _with_flicker_profiled(scan, yb, block_s, n_white, b_inst, k_scale, fine)
+    confirmed = _with_flicker_profiled(scan, st, yb, block_s, n_white, b_inst, k_scale, fine)
     if confirmed < thr:
         return SlowSearch(None, "none above the false-alarm level with the flicker level "
                           "profiled", band, confirmed, thr, f_hat / record_s)
@@ -303,13 +303,15 @@ def search_slow_sine(means: NDArray, block_s: float, n_white: float, b_inst: flo
                       thr, f_hat / record_s)
 
 
-def _with_flicker_profiled(scan: _Scan, yb: NDArray, block_s: float, n_white: float,
-                           b_inst: float, k_scale: float, cycles: NDArray) -> float:
+def _with_flicker_profiled(scan: _Scan, stat: NDArray, yb: NDArray, block_s: float,
+                           n_white: float, b_inst: float, k_scale: float, cycles: NDArray
+                           ) -> float:
     """The largest Λ over ``cycles`` with B profiled over ``B_FACTORS`` of ``b_inst`` beside
-    K (``scan``: at ``b_inst`` itself): the least −2 ln L₀ over every B and K against the
-    least −2 ln L₁ at each frequency over every B and K."""
+    K (``scan``: at ``b_inst`` itself, where Λ at ``cycles`` is ``stat``, the caller's
+    ``scan.at(cycles)``): the least −2 ln L₀ over every B and K against the least −2 ln L₁
+    at each frequency over every B and K."""
     nll0 = [float(np.min(scan.nll0))]
-    nll1 = [nll0[0] - scan.at(cycles)[0]]
+    nll1 = [nll0[0] - np.asarray(stat, dtype=float)]
     if b_inst > 0:
         for factor in B_FACTORS:
             try:
