@@ -677,19 +677,27 @@ def _grid_cell(ts: list[Trial], i: int) -> tuple[NDArray[np.float64], NDArray[np
     return np.array(lo), np.array(hi)
 
 
+def _about(ts: list[Trial], i: int, d: int) -> list[int] | None:
+    """The grid points on coordinate ``d``'s line through trial ``i`` (every other
+    coordinate as ``i``'s) just below ``i``, ``i`` itself and just above, in θ_d's order;
+    None where ``i`` is that line's end (a bound, no neighbour to interpolate with)."""
+    line = sorted((t.theta[d], j) for j, t in enumerate(ts)
+                  if all(t.theta[e] == ts[i].theta[e] for e in range(len(t.theta)) if e != d))
+    k = [j for _x, j in line].index(i)
+    if not 0 < k < len(line) - 1:
+        return None
+    return [j for _x, j in line[k - 1:k + 2]]
+
+
 def _refined(ts: list[Trial], devs: NDArray, i: int) -> tuple[float, ...]:
     """θ of trial ``i`` refined coordinate-wise by a parabola in ln(θ) (θ > 0) through its
     grid neighbours along that coordinate (the others fixed)."""
     th = list(ts[i].theta)
     for d in range(len(th)):
-        same = [(t.theta[d], float(devs[j])) for j, t in enumerate(ts)
-                if all(t.theta[e] == ts[i].theta[e] for e in range(len(th)) if e != d)]
-        same.sort()
-        xs = [x for x, _ in same]
-        k = xs.index(th[d])
-        if 0 < k < len(xs) - 1 and xs[k - 1] > 0:
-            x = np.log(np.array(xs[k - 1:k + 2]))
-            f = np.array([v for _, v in same[k - 1:k + 2]])
+        js = _about(ts, i, d)
+        if js is not None and ts[js[0]].theta[d] > 0:
+            x = np.log(np.array([ts[j].theta[d] for j in js]))
+            f = np.array([float(devs[j]) for j in js])
             den = (x[0] - x[1]) * (x[0] - x[2]) * (x[1] - x[2])
             a = (x[2] * (f[1] - f[0]) + x[1] * (f[0] - f[2]) + x[0] * (f[2] - f[1])) / den
             b = (x[2] ** 2 * (f[0] - f[1]) + x[1] ** 2 * (f[2] - f[0])
@@ -825,16 +833,11 @@ def _vertex(ts: list[Trial], devs: NDArray, betas: NDArray
     i = int(np.argmin(devs))
     th = list(ts[i].theta)
     beta = np.array(betas[i], dtype=float)
-    at = {t.theta: j for j, t in enumerate(ts)}
     for d in range(len(th)):
-        vals = sorted({t.theta[d] for t in ts
-                       if all(t.theta[e] == ts[i].theta[e] for e in range(len(th)) if e != d)})
-        k = vals.index(ts[i].theta[d])
-        if not 0 < k < len(vals) - 1:
+        js = _about(ts, i, d)
+        if js is None:
             continue
-        js = [at[tuple(v if e == d else ts[i].theta[e] for e in range(len(th)))]
-              for v in vals[k - 1:k + 2]]
-        x = np.array([_warp(v) for v in vals[k - 1:k + 2]]) - _warp(vals[k])
+        x = np.array([_warp(ts[j].theta[d]) for j in js]) - _warp(ts[i].theta[d])
         f = devs[js]
         V = np.column_stack([np.ones(3), x, x * x])
         _, a1, a2 = np.linalg.solve(V, f)
@@ -843,7 +846,7 @@ def _vertex(ts: list[Trial], devs: NDArray, betas: NDArray
         xv = float(np.clip(-a1 / (2 * a2), x[0], x[2]))
         cb = np.linalg.solve(V, betas[js])
         beta += cb[1] * xv + cb[2] * xv * xv
-        th[d] = _unwarp(_warp(vals[k]) + xv)
+        th[d] = _unwarp(_warp(ts[i].theta[d]) + xv)
     if len(th) == 2 and th[0] >= th[1]:
         return ts[i].theta, np.asarray(betas[i], dtype=float)
     return tuple(th), beta
