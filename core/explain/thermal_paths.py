@@ -504,6 +504,9 @@ class PathScore:
     resolved: bool = True
     #: the Δ(−2 ln L) of the profile over θ its intervals were widened to (``profile_delta``)
     profile_delta: float = PROFILE_DELTA
+    #: a refined dT/dt term's r − c·L (``net_rate``) and its 68 % interval: reported as its
+    #: ``rate_coupling`` (``describe``); () otherwise
+    net: tuple[float, ...] = ()
 
 
 @dataclass
@@ -624,6 +627,10 @@ _NAMES = {"one_lag": (("coefficient",), ("lag_s",)),
 
 
 def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """The candidate's parameters (SI) and their 68 % intervals. A refined dT/dt term
+    reports as ``rate_coupling`` its r − c·L (``net_rate``, what the data resolve) and the
+    fitted split as ``rate_coupling_beside_lag`` (r with the static lag ``lag_s`` beside it)
+    with no interval: along the ridge r and L are not resolved apart."""
     bn, tn = _NAMES[s.kind]
     p: dict[str, float] = {}
     iv: dict[str, list[float]] = {}
@@ -634,6 +641,12 @@ def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
     for i, k in enumerate(tn):
         p[k] = float(s.theta[i])
         iv[k] = [float(s.theta_lo[i]), float(s.theta_hi[i])]
+    if s.kind == "rate" and s.net:
+        p["rate_coupling_beside_lag"] = p["rate_coupling"]
+        # the interval spans the ridge: r − c·L's own (L = 0's end) and the split's at L
+        lo, hi = iv.pop("rate_coupling")
+        p["rate_coupling"] = s.net[0]
+        iv["rate_coupling"] = [min(s.net[1], lo), max(s.net[2], hi)]
     return p, (iv if s.resolved else {})
 
 
@@ -864,6 +877,8 @@ class _Refined(NamedTuple):
     profile_theta: NDArray[np.float64]
     #: the local grid's least deviance on the whole record
     least: float
+    #: the dT/dt term's r − c·L (``net_rate``) and its 68 % interval; () for two paths
+    net: tuple[float, ...] = ()
 
 
 def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray, Ts: NDArray,
@@ -901,8 +916,29 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     tse = _jk_se(np.array([x[0] for x in jk])) * T68
     se = np.maximum(se_fixed, se_re) * T68
     flat = devs <= devs.min() + delta
+    thetas = np.array([t.theta for t in fine])
+    net: tuple[float, ...] = ()
+    if kind == "rate":
+        # r − c·L, what the response resolves where r and L apart trade (``net_rate``): its
+        # jackknife with θ re-chosen, widened to the local profile's points
+        m = net_rate(b, th)
+        m_se = float(_jk_se(np.array([[net_rate(x[1], x[0])] for x in jk]))[0]) * T68
+        pm = [net_rate(f, t) for f, t in zip(fits[flat], thetas[flat], strict=True)]
+        net = (m, min(m - m_se, *pm), max(m + m_se, *pm))
     return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
-                    fits[flat], np.array([t.theta for t in fine])[flat], float(devs.min()))
+                    fits[flat], thetas[flat], float(devs.min()), net)
+
+
+def net_rate(beta: NDArray, theta: tuple[float, ...] | NDArray) -> float:
+    """The dT/dt term's coupling net of the static lag's share, r − c·L (m/s² per K/s):
+    c·lag(T, L) = c·T − c·L·dT/dt + O(ω²L²), so at a true static lag near 0 a lag L and a
+    dT/dt term r trade along r − c·L = const on every drive (the Fisher information of
+    (c, r, L) is singular there: ``min_detectable_path``) and only the second order, c·ω²L²
+    (1–2 % of c at L = 30 s on a 20-min cycle), tells them apart; the readings' rounding
+    bends the response by as much, and L settled at 12–35 s with r 20–50 % high. This
+    combination, the response's dT/dt coefficient at low frequency, is what the data
+    resolve; it is r where the static lag is 0."""
+    return float(beta[1]) - float(beta[0]) * float(theta[0])
 
 
 def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
@@ -995,6 +1031,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         ts = per_kind[kind]
         idx = [[where[c] for c in t.cols] for t in ts]
         held = 0.0
+        net: tuple[float, ...] = ()
         for a, b in ((0, 1), (1, 0)):
             fits = [_fit(vh[a], ix) for ix in idx]
             devs = np.array([_dev(vh[a], ix, bb) for ix, bb in zip(idx, fits, strict=True)])
@@ -1075,6 +1112,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]), two_sided=True)
             fr = _refine(kind, ts[i].theta, lags, ys, Ts, rate, edges, cut, weigh, delta,
                          columns)
+            net = fr.net
             theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
             b_lo, b_hi = fr.beta_lo, fr.beta_hi
             t_lo, t_hi = np.minimum(fr.theta_lo, g_lo), np.maximum(fr.theta_hi, g_hi)
@@ -1093,7 +1131,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             kind, held, theta, beta, se_iv,
             tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
             z_extra, open_end, cols_i, tuple(float(x) for x in b_lo),
-            tuple(float(x) for x in b_hi), resolved, delta)
+            tuple(float(x) for x in b_hi), resolved, delta, net)
     ref = scores["one_lag"]
     notes = []
     passing = []
@@ -1280,21 +1318,43 @@ def _edf_at(tau: NDArray, tau_ref: NDArray, edf_ref: NDArray) -> NDArray[np.floa
 # stated minima (docs/explain.md)
 
 
+def _response_derivatives(kind: str, w: float, lag_s: float, lag2_s: float,
+                          lags_known: bool) -> NDArray[np.complex128]:
+    """∂G/∂p of a linear path's complex response G(ω) at ``w`` (rad/s), one row per
+    parameter p the GLS fit estimates: two_path (c₁, c₂ and, with the lags unknown, c₁·L1
+    and c₂·L2); rate (c, r and c·L). A lag enters as its coefficient times it (∂G/∂L_i
+    divided by c_i): the other parameters' standard errors do not depend on how a nuisance
+    column is scaled, so the minimum holds for any non-zero c_i."""
+    h1, h2 = 1.0 / (1 + 1j * w * lag_s), 1.0 / (1 + 1j * w * lag2_s)
+    if kind == "two_path":
+        rows = [h1, h2] + ([] if lags_known else [-1j * w * h1**2, -1j * w * h2**2])
+    else:
+        rows = [h1, 1j * w] + ([] if lags_known else [-1j * w * h1**2])
+    return np.array(rows, dtype=complex)
+
+
 def min_detectable_path(kind: str, n_white: float, b_inst: float, k_rrw: float,
                         record_s: float, amplitude_c: float, period_s: float,
                         lag_s: float = 0.0, lag2_s: float = 0.0,
-                        z: float = 5.0) -> float:
+                        z: float = 5.0, lines: tuple[tuple[float, float], ...] = (),
+                        lags_known: bool = False) -> float:
     """The smallest extra term of candidate ``kind`` the GLS fit detects at ``z`` on average,
     for a ±``amplitude_c`` sinusoid of ``period_s`` at the die (after the first path
-    ``lag_s``), with the linear coupling fitted beside it (its lag known): the Fisher
-    information of the linear coefficients of c·u + e·x on the noise PSD S(f) (N, B, K,
-    NIST SP 1065 Table 5), one sinusoidal component of amplitude a known to
-    σ_a(f) = √(2 S(f)/T) per quadrature.
+    ``lag_s``) and the further drive ``lines`` ((amplitude at the die K, period s) each), with
+    the linear coupling fitted beside it: the Fisher information of the fit's parameters on
+    the noise PSD S(f) (N, B, K, NIST SP 1065 Table 5), one sinusoidal component of
+    amplitude a known to σ_a(f) = √(2 S(f)/T) per quadrature.
 
-    - two_path (m/s²/K, the second coefficient): x = lag(T, lag2) at f0; with H_1, H_2 the
-      two lags' responses, I = (A/σ_a)²·Re(H Hᴴ), e_min = z·√((I⁻¹)₂₂);
+    - two_path (m/s²/K, the second coefficient), rate (m/s² per K/s): every parameter the
+      fit estimates unknown, the lags too (``lags_known``: only the coefficients, the
+      minimum before, optimistic): with ∂G/∂p the response's derivatives at each line
+      (``_response_derivatives``), I = Σ_lines (a/σ_a(f))²·Re(∂G ∂Gᴴ), e_min =
+      z·√((I⁻¹)_ee). On one drive line the response is one complex number, 2 real ones,
+      and two paths (c₁, c₂, L1, L2) or a dT/dt term (c, r, L: r − c·L and c(1 + ω²L²) are
+      all one line tells) have more: I is singular and the minimum infinite (``math.inf``):
+      there is no finite minimum with the lags unknown, the record's other content (its
+      wander, its start) is all that tells them;
     - quadratic (m/s²/K²): (u − ū)² is −(a²/2)·cos 2ω t, e_min = z·σ_a(2f0)·2/a²;
-    - rate (m/s² per K/s): du/dt = ωa in quadrature with u, e_min = z·σ_a(f0)/(ωa);
     - hysteresis (m/s²): a ±h square wave switching a phase φ after each turn of the drive,
       odd harmonics 4h/(πk)·e^(−ikφ): h_min = z/√(Σ_k odd ≥ 3 (4/(πk))²/σ_a(k f0)²). The
       fundamental tells nothing of h: the fit estimates the linear coupling's gain and phase
@@ -1310,15 +1370,19 @@ def min_detectable_path(kind: str, n_white: float, b_inst: float, k_rrw: float,
         return math.sqrt(2 * noise_psd(f, n_white, b_inst, k_rrw) / record_s)
 
     a = amplitude_c
-    w = 2 * math.pi * f0
-    if kind == "two_path":
-        H = np.array([1.0 / (1 + 1j * w * lag_s), 1.0 / (1 + 1j * w * lag2_s)])
-        info = (a / sig(f0)) ** 2 * np.real(np.outer(H, H.conj()))
+    if kind in ("two_path", "rate"):
+        info: NDArray[np.float64] | None = None
+        for amp, period in ((a, period_s), *lines):
+            d = _response_derivatives(kind, 2 * math.pi / period, lag_s, lag2_s, lags_known)
+            add = (amp / sig(1.0 / period)) ** 2 * np.real(np.outer(d, d.conj()))
+            info = add if info is None else info + add
+        assert info is not None
+        ev = np.linalg.eigvalsh(info)
+        if ev[0] <= 1e-10 * ev[-1]:
+            return math.inf
         return z * math.sqrt(float(np.linalg.inv(info)[1, 1]))
     if kind == "quadratic":
         return z * sig(2 * f0) * 2 / a**2
-    if kind == "rate":
-        return z * sig(f0) / (w * a)
     if kind == "hysteresis":
         s = sum((4 / (math.pi * k)) ** 2 / sig(k * f0) ** 2 for k in range(3, 40, 2))
         return z / math.sqrt(s)

@@ -193,10 +193,15 @@ def test_a_path_fit_uses_the_t_threshold():
 
 @pytest.mark.parametrize("kind", ["two_path", "quadratic", "rate", "hysteresis"])
 def test_stated_minima_scale_with_z_and_fall_with_the_record(kind: str):
+    """Two paths on two drive lines (on one they have no finite minimum with the lags
+    unknown); the dT/dt term's is the minimum of r − c·L (the lag known: with it free r
+    alone has none at a true lag of 0)."""
     args = (1.6e-4, 2e-5, 2e-6)
-    a = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0)
-    b = min_detectable_path(kind, *args, 16 * 3600, 0.2, 1800.0, 0.0, 870.0)
-    c = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0, z=10.0)
+    kw = {"lines": ((0.05, 1200.0),)} if kind == "two_path" else {}
+    kw = {"lags_known": True} if kind == "rate" else kw
+    a = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0, **kw)
+    b = min_detectable_path(kind, *args, 16 * 3600, 0.2, 1800.0, 0.0, 870.0, **kw)
+    c = min_detectable_path(kind, *args, 4 * 3600, 0.2, 1800.0, 0.0, 870.0, z=10.0, **kw)
     assert c == pytest.approx(2 * a)
     assert b == pytest.approx(a / 2)  # σ_a ∝ 1/√T
     assert math.isfinite(a) and a > 0
@@ -682,3 +687,126 @@ def test_a_quadratic_start_is_not_taken_out_as_a_warm_up_before_the_path_is_chos
     assert th and th[0].mechanism == "quadratic"
     assert th[0].params["quadratic"] == pytest.approx(row.truth["quadratic"], rel=0.2)
     assert not [f for f in ex.channels["x"].claimed if f.cause == "warmup"]
+
+
+def _fisher_se(G, p0, lines, sig, i, h=1e-6):
+    """The standard error of parameter ``i`` of the complex response ``G(ω, p)`` from its
+    numerical Jacobian (central differences, relative step ``h``) at each drive line
+    (amplitude K, period s), noise σ_a per quadrature: an independent Fisher calculation."""
+    info = np.zeros((len(p0), len(p0)))
+    for a, period in lines:
+        w = 2 * math.pi / period
+        d = np.zeros(len(p0), complex)
+        for j in range(len(p0)):
+            step = h * max(abs(p0[j]), 1.0)
+            up, dn = list(p0), list(p0)
+            up[j] += step
+            dn[j] -= step
+            d[j] = (G(w, up) - G(w, dn)) / (2 * step)
+        info += (a / sig(1 / period)) ** 2 * np.real(np.outer(d, d.conj()))
+    ev = np.linalg.eigvalsh(info / np.outer(np.sqrt(np.diag(info)), np.sqrt(np.diag(info))))
+    return math.inf if ev[0] < 1e-9 else math.sqrt(float(np.linalg.inv(info)[i, i]))
+
+
+def test_the_two_path_minimum_is_the_fishers_with_the_lags_unknown():
+    """The GLS fit estimates both lags beside both coefficients. The Fisher information of
+    (c₁, c₂, L1, L2) from the response's numerical Jacobian at each drive line: on the HVAC
+    line alone it is singular (one complex number, four unknowns: no finite minimum, where
+    the lags known gave 9.0e-4 m/s²/K), on the HVAC and the compressor's fundamental c₂'s
+    standard error times z is the stated minimum, whatever the coefficients' sizes, and
+    about ten times the minimum with the lags known."""
+    from avard.core.explain.causes import noise_psd
+
+    N, B, K, rec = 1.6e-4, 2e-5, 2e-6, 4 * 3600.0
+
+    def sig(f: float) -> float:
+        return math.sqrt(2 * noise_psd(f, N, B, K) / rec)
+
+    def G(w, p):
+        return p[0] / (1 + 1j * w * p[2]) + p[1] / (1 + 1j * w * p[3])
+
+    hvac, comp = (0.214, 1800.0), (0.0465, 1200.0)
+    one = min_detectable_path("two_path", N, B, K, rec, *hvac, 0.0, 870.0)
+    assert one == math.inf
+    assert _fisher_se(G, [8e-4, -2.7e-3, 0.0, 870.0], [hvac], sig, 1) == math.inf
+    known = min_detectable_path("two_path", N, B, K, rec, *hvac, 0.0, 870.0, lags_known=True)
+    assert known == pytest.approx(9.0e-4, rel=0.01)
+    got = min_detectable_path("two_path", N, B, K, rec, *hvac, 0.0, 870.0, lines=(comp,))
+    for p0 in ([8e-4, -2.7e-3, 0.0, 870.0], [3e-3, 5e-3, 0.0, 870.0]):
+        assert got == pytest.approx(5.0 * _fisher_se(G, p0, [hvac, comp], sig, 1), rel=1e-4)
+    was = min_detectable_path("two_path", N, B, K, rec, *hvac, 0.0, 870.0, lines=(comp,),
+                              lags_known=True)
+    assert got > 5 * was
+
+
+def test_the_rate_term_and_a_lag_of_zero_are_one_parameter_to_first_order():
+    """c·lag(T, L) = c·T − c·L·dT/dt + O(L²): at a true static lag of 0 the lag's derivative
+    is the dT/dt term's on every drive, so with L unknown r has no finite minimum (two lines
+    or ten), and what the fit resolves is r − c·L, whose standard error (the Jacobian of
+    (c, r − c·L) with L left free) is the stated minimum with the lag known."""
+    from avard.core.explain.causes import noise_psd
+
+    N, B, K, rec = 1.6e-4, 2e-5, 2e-6, 4 * 3600.0
+
+    def sig(f: float) -> float:
+        return math.sqrt(2 * noise_psd(f, N, B, K) / rec)
+
+    def G(w, p):  # (c, r, L)
+        return p[0] / (1 + 1j * w * p[2]) + 1j * w * p[1]
+
+    def G_net(w, p):  # (c, m = r − c·L, L)
+        return p[0] / (1 + 1j * w * p[2]) + 1j * w * (p[1] + p[0] * p[2])
+
+    lines = [(0.214, 1800.0), (0.0465, 1200.0), (0.0043, 400.0)]
+    assert min_detectable_path("rate", N, B, K, rec, *lines[0], lines=tuple(lines[1:])) \
+        == math.inf
+    assert _fisher_se(G, [8e-4, 0.06, 0.0], lines, sig, 1) == math.inf
+    known = min_detectable_path("rate", N, B, K, rec, *lines[0], lines=tuple(lines[1:]),
+                                lags_known=True)
+    se = _fisher_se(lambda w, p: G(w, [p[0], p[1], 0.0]), [8e-4, 0.06], lines, sig, 1)
+    assert known == pytest.approx(5.0 * se, rel=1e-4)
+    # the L column of (c, m, L) vanishes at L = 0: m's se is the known-lag one
+    eps = 1e-3
+    for _a, period in lines:
+        w = 2 * math.pi / period
+        dL = (G_net(w, [8e-4, 0.06, eps]) - G_net(w, [8e-4, 0.06, -eps])) / (2 * eps)
+        assert abs(dL) < 1e-6 * abs(1j * w * 0.06)
+
+
+def test_a_short_static_lag_is_a_rate_term_to_first_order():
+    """c·lag(T, L) = c·T − c·L·dT/dt + O(ω²L²): what is left after the first order falls as
+    L², so at a true lag near 0 a lag and a dT/dt term trade (r − c·L fixed) and only the
+    second order tells them apart."""
+    from avard.core.explain.thermal_fit import lag_filter
+
+    t = np.arange(0, 4 * 3600.0, 1.0)
+    T = 0.2 * np.sin(2 * np.pi * t / 1800) + 0.05 * np.sin(2 * np.pi * t / 1200 + 1.0)
+    dT = np.gradient(T, 1.0)
+    keep = t > 1800  # past the filter's start
+    left = []
+    for L in (10.0, 20.0):
+        first = T - L * dT
+        left.append(float(np.sqrt(np.mean((lag_filter(T, L, 1.0) - first)[keep] ** 2))))
+        assert left[-1] < 0.1 * L * float(np.sqrt(np.mean(dT[keep] ** 2)))
+    assert left[1] / left[0] == pytest.approx(4.0, rel=0.15)
+
+
+def test_a_rate_term_reports_r_net_of_its_static_lag_and_the_split_without_interval():
+    """``describe`` of a refined dT/dt term: ``rate_coupling`` is r − c·L (``net_rate``,
+    what the data resolve), its interval spans the ridge from that to the split's at the
+    fitted L; the split r is ``rate_coupling_beside_lag`` with no interval; c and L keep
+    theirs."""
+    from avard.core.explain.thermal_paths import PathScore, describe, net_rate
+
+    beta = np.array([1e-3, 0.08, 0.0])
+    assert net_rate(beta, (20.0,)) == pytest.approx(0.06)
+    s = PathScore("rate", 0.0, (20.0,), beta, np.array([1e-5, 2e-3]), (5.0,), (30.0,), 12.0,
+                  False, (), (0.98e-3, 0.077), (1.02e-3, 0.083), True, 1.0,
+                  (0.06, 0.058, 0.062))
+    p, iv = describe(s)
+    assert p["rate_coupling"] == 0.06 and iv["rate_coupling"] == [0.058, 0.083]
+    assert p["rate_coupling_beside_lag"] == 0.08 and "rate_coupling_beside_lag" not in iv
+    assert iv["coefficient"] == [0.98e-3, 1.02e-3] and iv["lag_s"] == [5.0, 30.0]
+    # a dT/dt term that was not refined (never chosen) and two paths report as before
+    p0, iv0 = describe(replace(s, net=()))
+    assert p0["rate_coupling"] == 0.08 and iv0["rate_coupling"] == [0.077, 0.083]
