@@ -584,16 +584,20 @@ COMPRESSOR_C, COMPRESSOR_S = 1.0, 1200.0
 
 def min_two_lines(kind: str, lines: list[tuple[float, float]], lag2: float) -> float:
     """The stated minimum of ``kind`` (two_path: c₂ through ``lag2`` beside a lag-0 path,
-    both lags unknown; rate: r − c·L, the combination a dT/dt term beside a lag resolves) on
+    the lags known; rate: r − c·L, the combination a dT/dt term beside a lag resolves) on
     a drive of several lines ``(amplitude at the die K, period s)``:
     ``thermal_paths.min_detectable_path`` (Fisher information of the GLS fit, σ_a(f) =
     √(2S(f)/T) per quadrature, z = 5), the lines' informations added; the compressor's
     harmonics are left out (with them the two-path minimum is 0.93 of this)."""
     from avard.core.explain.thermal_paths import min_detectable_path
 
+    # the compressor two-path row keeps the lags-known minimum too: at the lags-unknown size
+    # (11× larger c₂) the generator's second path, lag(plate, 900 s) behind a sensor itself
+    # 30 s behind the plate, is outside every candidate by 5 % of c₂, which is then most of
+    # c₁ (docs/explain.md): that row would measure the generator, not explain
     (a0, p0), *more = lines
     return min_detectable_path(kind, N, B, K, HOURS * 3600, a0, p0, 0.0, lag2,
-                               lines=tuple(more), lags_known=kind == "rate")
+                               lines=tuple(more), lags_known=True)
 
 
 def rows_compressor(base: Any, A: float, c: float) -> list[PathRow]:
