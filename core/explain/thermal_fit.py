@@ -128,6 +128,40 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     return y
 
 
+def derounded(T: NDArray) -> NDArray[np.float64]:
+    """The logged channel ``T`` (slow view, readings interpolated between their times) with
+    its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
+    run of equal values), the temperature passed the threshold between two neighbouring
+    runs' levels half way between them, so those crossings, (time, mid-level), are knots of
+    a straight-line interpolation (held before the first and after the last); ``T`` itself
+    where it holds fewer than two runs. NaN stays NaN."""
+    T = np.asarray(T, dtype=float)
+    out = T.copy()
+    ok = np.flatnonzero(np.isfinite(T))
+    if len(ok) < 4:
+        return out
+    v = T[ok]
+    same = np.diff(v) == 0.0
+    # runs of equal values: starts and ends (inclusive) of each run of ``same``
+    edge = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    if len(starts) < 2:
+        return out
+    at = 0.5 * (ok[ends[:-1]] + ok[starts[1:]])
+    level = 0.5 * (v[ends[:-1]] + v[starts[1:]])
+    # a run whose neighbours are both on one side of it is a turning point: the
+    # temperature went past the threshold and back, by up to a step: its level at its
+    # middle
+    lv = v[starts]
+    turn = np.flatnonzero((lv[1:-1] - lv[:-2]) * (lv[1:-1] - lv[2:]) > 0) + 1
+    at = np.concatenate([at, 0.5 * (ok[starts[turn]] + ok[ends[turn]])])
+    level = np.concatenate([level, lv[turn]])
+    o = np.argsort(at, kind="stable")
+    at, level = at[o], level[o]
+    out[ok] = np.interp(ok, at, level)
+    return out
+
+
 def allan2(y: NDArray, u: NDArray, rate_hz: float,
            keep: NDArray[np.bool_] | None = None) -> Any:
     """Allan variances and covariance of (y, u) with the streaming estimator (rows outside
@@ -873,7 +907,9 @@ class ThermalFit:
             b0 = float(self.path.chosen.beta[0])
             k = self.coefficient / b0 if b0 else 1.0
             return k * self.path.signal(temps[:, self.channel_index], y)
-        u = lag_filter(temps[:, self.channel_index], self.lag_s, self.rate_hz)
+        # the readings' rounding is not in the axis (the die is not rounded): removed with
+        # the signal, it is added to the compensated axis (``derounded``)
+        u = lag_filter(derounded(temps[:, self.channel_index]), self.lag_s, self.rate_hz)
         d = self.coefficient * (u - u.mean())
         if y is None or self.lag_s == 0:
             return d
