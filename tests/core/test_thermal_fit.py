@@ -688,3 +688,34 @@ def test_a_negative_lag_records_coupling_is_explained_not_its_readings_rounding(
     assert f.params["lag_s"] < 0
     assert ch.verdict is not None and ch.verdict.explained, ch.verdict.line()
     assert ch.verdict.chi2_dof < 3.0
+
+
+@pytest.mark.parametrize("kind", ["white", "flicker", "random walk"])
+def test_the_spectrum_an_interval_reads_is_the_noises_own_at_each_octave(kind):
+    """The coefficient's interval reads the axis's noise spectrum from its AVAR
+    (``OctaveSpectra._noise``, ``shaped``): for power-law noise it is the noise's own
+    two-sided spectrum, not m·AVAR (white noise's level, which is 1.4× flicker's and 3.3×
+    a random walk's, NIST SP 1065 eq. 10: the intervals of the typical-tempco 60 h and the
+    faulty-log rows, where the rate random walk dominates at the HVAC period, held the
+    truth on 80–96 % of records). The test's level stays m·AVAR."""
+    from avard.core.explain.thermal_fit import octave_spectra
+
+    rng = np.random.default_rng(5)
+    u = np.cumsum(rng.normal(size=1 << 13))
+    ms = 2 ** np.arange(2, 9)
+    sp = octave_spectra(u, ms)
+    rows = np.arange(len(ms))
+    m = ms.astype(float)
+    h = 1e-6
+    # AVAR at m samples and the two-sided spectrum per sample (rate 1) of each noise
+    avar, two_sided = {
+        "white": (h / m, lambda f: h * np.ones_like(f)),
+        "flicker": (2 * math.log(2) * h * np.ones_like(m), lambda f: h / (2 * f)),
+        "random walk": (2 * math.pi**2 / 3 * h * m, lambda f: h / (2 * f * f)),
+    }[kind]
+    inside = (sp.f > 1 / (2 * m[-2])) & (sp.f < 1 / (2 * m[1]))
+    got, _lam = sp._noise(rows, avar, shaped=True)
+    assert got[inside] == pytest.approx(two_sided(sp.f[inside]), rel=0.05)
+    plain, _lam = sp._noise(rows, avar)
+    ratio = {"white": 1.0, "flicker": 2 * math.log(2), "random walk": math.pi**2 / 3}[kind]
+    assert plain[inside] == pytest.approx(ratio * two_sided(sp.f[inside]), rel=0.05)
