@@ -133,8 +133,9 @@ def derounded(T: NDArray) -> NDArray[np.float64]:
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
     runs' levels half way between them, so those crossings, (time, mid-level), are knots of
-    a straight-line interpolation (held before the first and after the last); ``T`` itself
-    where it holds fewer than two runs. NaN stays NaN."""
+    a straight-line interpolation, with the turning points' runs at their middles and the
+    first and last readings as they are; ``T`` itself where it holds fewer than two runs.
+    NaN stays NaN."""
     T = np.asarray(T, dtype=float)
     out = T.copy()
     ok = np.flatnonzero(np.isfinite(T))
@@ -149,13 +150,27 @@ def derounded(T: NDArray) -> NDArray[np.float64]:
         return out
     at = 0.5 * (ok[ends[:-1]] + ok[starts[1:]])
     level = 0.5 * (v[ends[:-1]] + v[starts[1:]])
+    # runs more than one step apart are a temperature moving faster than the readings dwell:
+    # there the readings between them are the knots, as they are (the rounding is small
+    # beside the change; a straight line across a fast stretch bent the record's start)
+    lv = v[starts]
+    jump = np.abs(np.diff(lv))
+    fast = jump > 1.5 * float(np.median(jump))
+    if np.any(fast):
+        keep_mid = ~fast
+        at, level = at[keep_mid], level[keep_mid]
+        inner = np.concatenate([np.arange(ends[p], starts[p + 1] + 1)
+                                for p in np.flatnonzero(fast)])
+        at = np.concatenate([at, ok[inner].astype(float)])
+        level = np.concatenate([level, v[inner]])
     # a run whose neighbours are both on one side of it is a turning point: the
     # temperature went past the threshold and back, by up to a step: its level at its
     # middle
-    lv = v[starts]
     turn = np.flatnonzero((lv[1:-1] - lv[:-2]) * (lv[1:-1] - lv[2:]) > 0) + 1
-    at = np.concatenate([at, 0.5 * (ok[starts[turn]] + ok[ends[turn]])])
-    level = np.concatenate([level, lv[turn]])
+    # the record's ends at their own readings (held at the first crossing's mid-level, the
+    # first run was a step of q/2 at the start: a warm-up to the transients' search)
+    at = np.concatenate([at, 0.5 * (ok[starts[turn]] + ok[ends[turn]]), [ok[0], ok[-1]]])
+    level = np.concatenate([level, lv[turn], [v[0], v[-1]]])
     o = np.argsort(at, kind="stable")
     at, level = at[o], level[o]
     out[ok] = np.interp(ok, at, level)

@@ -658,6 +658,12 @@ def test_derounded_takes_the_readings_rounding_out_of_a_slow_temperature():
     for k, share in ((8, 0.15), (32, 0.25), (128, 0.5)):  # 6.4, 25.6, 102.4 s
         assert np.std(got[k:] - got[:-k]) < share * np.std(err[k:] - err[:-k]), k
     assert np.max(np.abs(got)) < DS18B20_STEP_K
+    # a fast stretch (the heating coming on: 2 K in a minute) between slow ones is read as
+    # its readings, not drawn straight across
+    fast = np.clip((t - 7200.0) / 60.0, 0.0, 1.0) * 2.0
+    read = np.round(np.interp(t_read, t, true + fast) / DS18B20_STEP_K) * DS18B20_STEP_K
+    got = derounded(np.interp(t, t_read, read)) - (true + fast)
+    assert np.max(np.abs(got)) < DS18B20_STEP_K
     # NaN stays NaN; a channel that never repeats a value is returned as it is
     gap = logged.copy()
     gap[100:120] = np.nan
