@@ -7,11 +7,12 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
 * **The noise's composition.** With few averages the estimator cannot identify the noise
   type and takes the least EDF of every FM type (``noise_id.physical_alpha_edf``), the
   reddest type's, even where the fitted model says white and flicker noise hold most of
-  the AVAR there. ``model_edf`` bounds the EDF of the fitted mixture from below
-  (``edf.edf_mixture_bound``, Cauchy–Schwarz over the types' own Greenhall–Riley EDFs),
-  with the composition taken the way that lowers the bound (each term at θ ± σ, an absent
-  one at its upper limit), at the τ where the estimator could not tell the types apart
-  (fewer than ``noise_id.SPREAD_LAG1`` averages).
+  the AVAR there. ``model_edf`` gives the EDF of the fitted mixture (``edf.edf_mixture``:
+  Greenhall–Riley's quadratic form with the sum of the types' covariances of differences,
+  which the Cauchy–Schwarz bound ``edf.edf_mixture_bound`` that it replaced took as fully
+  correlated), with the composition taken the way that lowers it (each term at θ ± σ, an
+  absent one at its upper limit), at the τ where the estimator could not tell the types
+  apart (fewer than ``noise_id.SPREAD_LAG1`` averages).
 * **A deterministic part.** A rate ramp or a sinusoid adds to the Allan variance without
   scattering: the estimate's variance is the noise part's plus the part's cross term with
   the noise, computed exactly under the fitted spectrum (``cross_term.py``), and for a
@@ -51,7 +52,7 @@ import numpy as np
 from avard.core.allan.edf import (
     chi2_interval,
     edf_greenhall,
-    edf_mixture_bound,
+    edf_mixture,
     edf_with_signal,
 )
 from avard.core.allan.noise_id import SPREAD_LAG1, fm_support_edf
@@ -184,19 +185,20 @@ _CAUSE_OVERRIDES = {"quantization": 0, "gauss_markov": -2}
 
 
 def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
-    """A lower bound on the EDF of each τ's estimate under the fitted noise model
-    (``edf.edf_mixture_bound`` over the fit's noise components, each with the Greenhall–Riley
-    EDF of its type). The fit reads the composition across every τ, which one τ of few
-    averages cannot (there the estimator's own rule takes the least EDF of every FM type).
-    The composition is taken the way that lowers the bound: the types whose own EDF is below
-    the point bound at their upper value (θ + σ, or the upper limit of an absent term), the
-    others at their lower (θ − σ, not below 0). NaN where the fit has a noise cause it
-    cannot type, or no noise at that τ."""
+    """The EDF of each τ's estimate under the fitted noise model: the mixture's own
+    (``edf.edf_mixture``: Greenhall–Riley's quadratic-form EDF with the sum of the
+    components' covariances of differences, rate data's exact phase), the fit reading the
+    composition across every τ, which one τ of few averages cannot (there the estimator's
+    own rule takes the least EDF of every FM type). The composition is taken the way that
+    lowers it: the types whose own EDF is below the point value at their upper value (θ + σ,
+    or the upper limit of an absent term), the others at their lower (θ − σ, not below 0).
+    NaN where the fit has a noise cause it cannot type, or no noise at that τ."""
     from avard.core.model.fit import CAUSE_ALPHA  # (the fit module loads with the fit)
 
     tau = np.asarray(allan.tau, dtype=float)
     n_phase = _n_phase(allan)
     cov = np.asarray(fit.theta_cov, dtype=float)
+    alphas: list[int] = []
     parts: list[tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
                       NDArray[np.float64]]] = []
     for j, comp in enumerate(fit.components):
@@ -214,22 +216,30 @@ def model_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
         if upper <= 0:
             continue
         b = comp.basis(tau, fit.rate_hz)
-        nu = np.array([edf_greenhall(alpha, 2, int(m), int(s), int(p))
+        nu = np.array([edf_greenhall(alpha, 2, int(m), int(s), int(p), rate_data=alpha <= 0)
                        for m, s, p in zip(allan.m, allan.stride, n_phase, strict=True)])
+        alphas.append(int(alpha))
         parts.append((theta * b, max(theta - se, 0.0) * b, upper * b, nu))
     if not parts:
         return np.full(len(tau), math.nan)
-    nus = np.array([nu for _p, _l, _u, nu in parts])
-    point = edf_mixture_bound([p for p, _l, _u, _nu in parts], nus)
-    # the composition that lowers the bound: types below it at their upper value. A type
-    # whose own EDF ties the point bound (one α holds all of it, e.g. white FM, or white FM
-    # beside an absent quantization given white FM's EDF) is not below it: the bound gives
-    # its ν back only to the last bit, and that bit differs between two sums of the same
-    # AVAR (one worker's and several's, issue 29), so it is decided beyond a relative
-    # _TIE. At its lower value is the side that lowers the bound: the others moved, the
-    # bound lies below the tied ν, where more of that type would raise it.
+
+    def mixture(levels: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+        lv = np.array(levels)
+        return np.array([edf_mixture(tuple(alphas), lv[:, k], 2, int(m), int(s), int(p),
+                                     rate_data=True)
+                         for k, (m, s, p) in enumerate(zip(allan.m, allan.stride, n_phase,
+                                                           strict=True))])
+
+    point = mixture([p for p, _l, _u, _nu in parts])
+    # the composition that lowers it: types below it at their upper value. A type whose
+    # own EDF ties the point value (one α holds all of it, e.g. white FM, or white FM
+    # beside an absent quantization given white FM's EDF) is not below it: the mixture
+    # gives its ν back only to the last bit, and that bit differs between two sums of the
+    # same AVAR (one worker's and several's, issue 29), so it is decided beyond a relative
+    # _TIE. At its lower value is the side that lowers it: the others moved, the value
+    # lies below the tied ν, where more of that type would raise it.
     worst = [np.where(nu < point * (1.0 - _TIE), up, lo) for _p, lo, up, nu in parts]
-    return edf_mixture_bound(worst, nus)
+    return mixture(worst)
 
 
 def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
