@@ -423,7 +423,12 @@ def unresolved_noise_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float6
     """``model_edf`` where the estimator took the least EDF of several types it could not
     tell apart (fewer than ``SPREAD_LAG1`` averages), NaN elsewhere: with more averages its
     identification stands (the model bound there read the generator's flicker above what
-    it scatters with, and the 60 h drift records fell to 60.5 % coverage at 64 s)."""
+    it scatters with, and the 60 h drift records fell to 60.5 % coverage at 64 s). Under
+    avard's rule only (``--noise-id avard``): the mixture is of rate data's FM types, its
+    phase the samples' exact sum; under "powerlaw" (clock phase data) the estimator's
+    identification stands, as it prints it from the API (NBS14 through analyze: every τ)."""
+    if allan.noise_id != "avard":
+        return np.full(len(allan.tau), math.nan)
     noise = model_edf(fit, allan)
     n_phase = _n_phase(allan)
     noise[(n_phase - 1) / allan.m >= SPREAD_LAG1] = math.nan
