@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from avard.core.allan.deviations import (
     AllanResult,
-    edf_greenhall,
     allan_variance,
     avar,
+    edf_greenhall,
     oavar,
     ohvar,
     pavar,

@@ -175,7 +175,7 @@ def test_mixture_edf_of_one_type_is_its_own_and_never_below_the_bound() -> None:
 
     for m, n_phase in ((4, 4097), (64, 4097), (512, 36001), (4096, 36001)):
         nus = [edf_greenhall(a, 2, m, 1, n_phase, rate_data=True) for a in (0, -1, -2)]
-        for k, a in enumerate((0, -1, -2)):
+        for k in range(3):
             lv = [0.0, 0.0, 0.0]
             lv[k] = 3.0
             assert edf_mixture((0, -1, -2), lv, 2, m, 1, n_phase, rate_data=True) == \
