@@ -1018,7 +1018,9 @@ def physical_alpha_edf(alpha: int, var: float, d: int, m: int, stride: int, n_ph
     lowest = 2 - 2 * d
     a = int(min(max(alpha, lowest), 2 if pm else 0))
     cands = plausible_alphas(a, n_averages, d, pm, stride < m)
-    edfs = [edf_greenhall(b, d, m, stride, n_phase) for b in cands]
+    # rate data: the phase is the samples' exact running sum (``edf_greenhall``'s
+    # ``rate_data``; PM types, the rounding's, keep GR's one-sample averaging)
+    edfs = [edf_greenhall(b, d, m, stride, n_phase, rate_data=b <= 0) for b in cands]
     finite = [e for e in edfs if math.isfinite(e)]
     return a, min(finite) if finite else math.nan
 
@@ -1030,6 +1032,7 @@ def fm_support_edf(d: int, m: int, stride: int, n_phase: int) -> float:
     (their differences are less anti-correlated)."""
     from avard.core.allan.edf import edf_greenhall
 
-    vals = [edf_greenhall(a, d, m, stride, n_phase) for a in range(2 - 2 * d, 1)]
+    vals = [edf_greenhall(a, d, m, stride, n_phase, rate_data=True)
+            for a in range(2 - 2 * d, 1)]
     finite = [v for v in vals if math.isfinite(v)]
     return max(finite) if finite else math.nan

@@ -9,6 +9,7 @@ from avard.core.allan.deviations import (
     AllanResult,
     allan_variance,
     avar,
+    edf_greenhall,
     oavar,
     ohvar,
     pavar,
@@ -203,10 +204,12 @@ def test_noise_identification_in_result() -> None:
     wpm = oavar(d, 1.0, [1, 4, 16, 64], noise_id="powerlaw")
     assert np.all(wpm.alpha == 2)
     # the default reads rate data: float samples with no known LSB hold no PM type, so the
-    # white-PM record is read as white FM, with white FM's EDF (the most any FM type gives)
+    # white-PM record is read as white FM, with white FM's EDF for rate data (the phase the
+    # samples' exact running sum: GR's F = ∞, edf.edf_greenhall's rate_data)
     rate = oavar(d, 1.0, [1, 4, 16, 64])
     assert np.all(rate.alpha == 0)
-    np.testing.assert_allclose(rate.edf, oavar(d, 1.0, [1, 4, 16, 64], alpha=0).edf)
+    np.testing.assert_allclose(rate.edf, [edf_greenhall(0, 2, m, 1, len(d) + 1, rate_data=True)
+                                          for m in (1, 4, 16, 64)])
 
 
 def test_gaps_split_segments() -> None:

@@ -333,3 +333,31 @@ def test_a_resolved_ramps_noise_part_is_its_rms_over_the_fits_uncertainty() -> N
     assert np.all(new[ok] <= sure.edf[ok] * (1 + 1e-12))
     assert np.all(looser[ok] <= new[ok] * (1 + 1e-12))
     assert new[-1] > worst[-1] and looser[-1] < new[-1] < sure.edf[-1]
+
+
+def test_the_mixture_sets_the_edf_where_the_estimator_read_a_walk_on_a_mixture() -> None:
+    """White + random walk meeting at 5 s: with many averages, where the estimator's lag-1
+    identification reads the walk (α = −2, the least EDF of the FM types) on what the fit
+    reads as a mixture, the printed EDF is the fitted mixture's (``model_edf``, within the
+    support), above the walk's own; where it reads white FM its identification stands."""
+    from avard.core.analysis.signal_edf import model_edf
+
+    raised = 0
+    for seed in (1, 2, 3):
+        rng = np.random.default_rng(seed)
+        y = rng.normal(size=N) + np.cumsum(rng.normal(scale=np.sqrt(3.0 / 50**2), size=N))
+        ch = _analyze(y)
+        assert not ch.fit.resolved_apart and not np.any(signal_share(ch.fit, ch.allan) > 0)
+        r = allan_variance(y, RATE)
+        k = len(ch.allan.tau)
+        own = r.edf[:k]
+        many = N / ch.allan.m >= SPREAD_LAG1
+        walk = many & (ch.allan.alpha == -2)
+        other = many & (ch.allan.alpha > -2)
+        assert walk.any() and other.any()
+        # (the stream's sums against one array's: the last bits of the AVAR)
+        np.testing.assert_allclose(ch.allan.edf[other], own[other], rtol=1e-6)
+        want = np.maximum(own, np.fmin(model_edf(ch.fit, ch.allan), support(ch.allan)))
+        np.testing.assert_allclose(ch.allan.edf[walk], want[walk], rtol=1e-6)
+        raised += int(np.sum(ch.allan.edf[walk] > own[walk] * 1.05))
+    assert raised >= 3
