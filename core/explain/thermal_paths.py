@@ -7,7 +7,10 @@ more; the candidates, each a linear model in regressors built from the driving c
 - ``one_lag``: c·u_L, u_L = ``lag_filter(T, L)`` (θ = L, either sign);
 - ``two_path``: c₁·u_L1 + c₂·u_L2, 0 ≤ L1 < L2 (two first-order paths, e.g. plate → die and
   room → die; θ = (L1, L2));
-- ``quadratic``: c·u_L + q·(u_L − ū)² (m/s²/K²);
+- ``quadratic``: c·u_L + q·(v_L − v̄)² (m/s²/K²), v_L = lag(T̂, L) on the temperature
+  behind the readings (``crossing_reconstruction``, as the relay below: squared, their
+  rounding is an error every part shares), L also over the one-lag fit's leads
+  (``quadratic_leads``);
 - ``rate``: c·u_L + r·dT/dt (m/s² per K/s, L ≥ 0), dT/dt of the logged channel smoothed
   forward and back through a ``RATE_SMOOTH_S`` lag (jω/(1 + ω²s²): no phase; the readings'
   0.0625 K steps would make a raw gradient spikes). The rate term on the channel itself and
