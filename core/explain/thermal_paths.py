@@ -109,6 +109,7 @@ from avard.core.explain.thermal_fit import (
     octave_sums_by_part,
     rounding_correlation_s,
 )
+from avard.core.model.nnls import _lstsq
 from numpy.typing import NDArray
 
 __all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
@@ -427,8 +428,10 @@ def _fit(v: _View, idx: list[int]) -> NDArray[np.float64]:
     out = np.zeros(len(idx))
     if len(live):
         sc = np.sqrt(d[live])
-        out[live] = np.linalg.lstsq(A[np.ix_(live, live)] / np.outer(sc, sc), b[live] / sc,
-                                    rcond=1e-10)[0] / sc
+        # (numpy's lstsq to the bit, without its per-call checks: thousands of these small
+        # solves per axis)
+        out[live] = np.array(_lstsq(A[np.ix_(live, live)] / np.outer(sc, sc), b[live] / sc,
+                                    rcond=1e-10)) / sc
     return out
 
 
