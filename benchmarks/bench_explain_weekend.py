@@ -546,6 +546,7 @@ def rows_paths() -> list[PathRow]:
     """The thermal candidates beyond one lag (issue 23 item 4), each extra term at 3× its
     stated minimum (``thermal_paths.min_detectable_path``, written in docs/explain.md before
     the run) beside a linear coupling at 3× the one-lag minimum (lag 0)."""
+    from avard.core.explain.causes import min_detectable_warmup
     from avard.core.explain.thermal_paths import min_detectable_path
 
     base, A, c = _path_base()
@@ -559,6 +560,7 @@ def rows_paths() -> list[PathRow]:
                                        lags_known=kind in ("two_path", "rate"))
 
     c2, q, r, h = mn("two_path"), mn("quadratic"), mn("rate"), mn("hysteresis")
+    ww = 3 * min_detectable_warmup(N, B, K, 900.0)
     return [
         PathRow("path: two paths", replace(base, second_path=(-c2, 900.0)), "two_path",
                 {"coefficient": c, "coefficient_2": -c2, "lag_2_s": 870.0},
@@ -574,7 +576,18 @@ def rows_paths() -> list[PathRow]:
                 {"coefficient": c, "hysteresis": h},
                 f"{c:.3g} m/s²/K and ±{h:.3g} m/s² switching 0.05 K after a turn"),
         *rows_compressor(base, A, c),
+        # last, so the rows above keep their seeds in a run of every row: the quadratic row
+        # with the logged sensor 90 s behind the plate (the die 30 s: the die 60 s ahead of
+        # the log, a lead-lag of about −60 s), and beside a warm-up at 3× the event rows'
+        # minimum (the coupled-axis warm-up row's size and T)
+        PathRow("path lead: quadratic", replace(base, quadratic=q, sensor_tau_s=90.0),
+                "quadratic", {"coefficient": c, "quadratic": q, "lag_s": -60.0},
+                f"{c:.3g} m/s²/K and {q:.3g} m/s²/K², the die 60 s ahead of the log"),
+        PathRow("path+warm-up: quadratic", replace(base, quadratic=q, warmups=[(ww, 900.0)]),
+                "quadratic", {"coefficient": c, "quadratic": q},
+                f"{c:.3g} m/s²/K and {q:.3g} m/s²/K² beside a {ww:.3g} m/s² warm-up (T 900 s)"),
     ]
+
 
 
 #: The compressor's square-ish cycle of the compressor rows (the weekend generator's

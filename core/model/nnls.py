@@ -41,17 +41,19 @@ def _svd_failed(_err: str, _flag: int) -> None:
     raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
 
 
-def _lstsq(a: NDArray[np.float64], b: NDArray[np.float64]) -> list[float]:
-    """``numpy.linalg.lstsq(a, b, rcond=None)[0]`` for float64 a (m, n) and b (m,): the same
-    gufunc on the same arrays with the same rcond (eps·max(m, n)), so the same numbers to
-    the bit (``tests/core/test_nnls.py``), without lstsq's per-call conversions and checks,
-    a third of its cost on the noise fit's (≈ 20 × ≤ 10) problems."""
+def _lstsq(a: NDArray[np.float64], b: NDArray[np.float64],
+           rcond: float | None = None) -> list[float]:
+    """``numpy.linalg.lstsq(a, b, rcond)[0]`` for float64 a (m, n) and b (m,): the same
+    gufunc on the same arrays with the same rcond (None: eps·max(m, n)), so the same numbers
+    to the bit (``tests/core/test_nnls.py``), without lstsq's per-call conversions and
+    checks, a third of its cost on the noise fit's (≈ 20 × ≤ 10) problems."""
     m, n = a.shape
     if _GELSD is None or m == 0:
-        return list(np.linalg.lstsq(a, b, rcond=None)[0].tolist())
+        return list(np.linalg.lstsq(a, b, rcond=rcond)[0].tolist())
     with np.errstate(call=_svd_failed, invalid="call", over="ignore", divide="ignore",
                      under="ignore"):
-        x = _GELSD(a, b[:, None], _EPS * max(m, n), signature="ddd->ddid")[0]
+        x = _GELSD(a, b[:, None], _EPS * max(m, n) if rcond is None else rcond,
+                   signature="ddd->ddid")[0]
     return list(x[:, 0].tolist())
 
 

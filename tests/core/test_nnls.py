@@ -127,7 +127,8 @@ def test_equals_the_array_form_to_the_bit(seed: int) -> None:
 def test_the_subproblems_solve_is_numpys_lstsq_to_the_bit() -> None:
     """The subproblems call numpy's own least-squares gufunc without ``lstsq``'s wrapper: the
     same solution bit for bit on tall, square, wide, rank-deficient and badly scaled
-    problems, and a non-finite problem still raises numpy's LinAlgError."""
+    problems, with its own rcond or a given one, and a non-finite problem still raises
+    numpy's LinAlgError."""
     from avard.core.model.nnls import _lstsq
 
     rng = np.random.default_rng(12)
@@ -139,6 +140,10 @@ def test_the_subproblems_solve_is_numpys_lstsq_to_the_bit() -> None:
         b = rng.standard_normal(m)
         want = np.linalg.lstsq(a, b, rcond=None)[0]
         assert np.array(_lstsq(a, b)).tobytes() == want.tobytes()
+        # and with a given rcond (thermal_paths' pooled fit: 1e-10)
+        for rc in (1e-10, 1e-3):
+            want = np.linalg.lstsq(a, b, rcond=rc)[0]
+            assert np.array(_lstsq(a, b, rcond=rc)).tobytes() == want.tobytes()
     bad = np.array([[1.0, np.nan], [0.0, 1.0], [2.0, 1.0]])
     with pytest.raises(np.linalg.LinAlgError):
         np.linalg.lstsq(bad, np.ones(3), rcond=None)
