@@ -31,9 +31,9 @@ and a slope tested against the noise it does find passed the 0.1 % level on 13 %
 with no drift, its z spread 2.4 times too wide; explain's likelihood, whose K grid was
 centred on the fit's K (or, with none, on N/T), could not reach the true walk either (12 of
 40 records past 2.58, z spread 2.6). With K profiled over a range reaching past what the
-AVAR allows, the benchmark's records give z spread 1.02–1.09 at 1 h, 12 h and 60 h and
-0–3 % past the two-sided 1 % level, 200 records each (``python -m benchmarks coverage
---drift-test``, docs/analysis.md).
+AVAR allows, and the Bartlett factor, the benchmark's plain records pass in 0.0 %, 1.8 % and
+1.0 % at 1 h, 12 h and 60 h (400 each, z spread 0.99–1.09; ``python -m benchmarks
+drift_null``, docs/analysis.md).
 
 The profile is cheap: with C₀ = L Lᵀ the white and flicker covariance and M = min(t_i, t_j)
 the walk's, L⁻¹ M L⁻ᵀ = V Λ Vᵀ once, every K's covariance is diagonal in the rotated basis
