@@ -11,7 +11,7 @@ carries for the drift test (``drift.BlockMeans``, ≤ 256 means of the longest s
 a gap): no channel is read again.
 
 **The test.** The Gaussian likelihood of the means under white, flicker and random-walk
-noise (``drift.block_noise_cov`` as block means hold it; N and B at the AVAR fit's point
+noise (``drift.block_noise_cov``, as block means hold it; N and B at the AVAR fit's point
 values, K *profiled* over
 the drift test's range, four decades below to ``drift.K_SPAN`` times past the fit's upper K)
 with an offset and a slope (a drift is not a sinusoid) against the same with a sinusoid of
@@ -162,8 +162,7 @@ class _Scan:
         j = len(yb)
         self.t = (np.arange(j) + 0.5) * block_s
         self.record_s = j * block_s
-        # (the means' covariance as the means hold it: drift.block_noise_cov's as_means)
-        self.prof = _Profile(yb, self.t, block_s, n_white, b_inst, as_means=True)
+        self.prof = _Profile(yb, self.t, block_s, n_white, b_inst)
         top = K_SPAN * max(float(k_scale), n_white / self.record_s)
         ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-K_DECADES, top, K_POINTS)])
         s = 1.0 + np.outer(ks * ks, self.prof.lam)  # (K, J): each K's covariance, rotated

@@ -118,7 +118,7 @@ def test_the_false_alarm_level_holds_under_the_noise_it_is_told() -> None:
     rng = np.random.default_rng(5)
     j, block_s, n_w, b_i, k = 256, 168.75, 1.0, 0.16, 2e-3
     t = (np.arange(j) + 0.5) * block_s
-    chol = np.linalg.cholesky(block_noise_cov(t, block_s, n_w, b_i, k, as_means=True))
+    chol = np.linalg.cholesky(block_noise_cov(t, block_s, n_w, b_i, k))
     top_hz = 70.0 / (j * block_s)
     hits, peaks = 0, []
     for _ in range(150):
