@@ -575,23 +575,24 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
         if w is not None:
             Yw[:, a] -= w
     out: list[ThermalFit | None] = list(with_paths(fits, Yw, temps, holes))
-    # a warm-up found on the one-lag residual may be a quadratic path's own start: q·(u − ū)²
-    # is largest where the temperature is farthest from its mean, often the record's first
-    # minutes (the plate settling from where it started), and one lag leaves that in its
-    # residual. Taken out, it bent the quadratic fit on the first part of the record (q 30 %
-    # low, the part's jackknife value 40 % from the others, the extra term's z under the
-    # threshold: the quadratic row right on 6 of 10). So where the path chosen without the
-    # warm-up is one lag, it is chosen again on the axis as recorded, and a quadratic chosen
-    # there whose residual shows no warm-up beyond the start state explains that start
-    # itself: the warm-up goes back in. Only a path whose start is fixed by the logged
-    # temperature (the quadratic: no free size or time constant there); a long second lag or
-    # a dT/dt term takes a real warm-up over (the reason it is taken out first).
-    back = [a for a, w in enumerate(settled)
-            if w is not None and (th := out[a]) is not None and th.mechanism == "one_lag"]
+    # a warm-up found on the one-lag residual may be a path's own start: q·(u − ū)² is
+    # largest where the temperature is farthest from its mean, often the record's first
+    # minutes (the plate settling from where it started), and a second path through the
+    # plate's long lag settles with it; one lag leaves either in its residual. Taken out, it
+    # bent the quadratic fit on the first part of the record (the quadratic row right on 6 of
+    # 10) and took the second path's start with it (the two-path + compressor row: one lag or
+    # a dT/dt term chosen on the rest, where two paths predicted the record as recorded
+    # better by 70). So on every axis a warm-up was taken out of, the path is chosen again
+    # on the axis as recorded, and an extension chosen there whose signal from the logged
+    # temperature alone (no start state fitted: nothing of free size or time constant)
+    # leaves no warm-up beyond the start state explains that start itself: the warm-up goes
+    # back in. A real warm-up is not the logged temperature's (a 900 s warm-up beside a
+    # 300 s lag from a channel that does not settle stays in that residual and stays out).
+    back = [a for a, w in enumerate(settled) if w is not None and out[a] is not None]
     if back:
         again = with_paths([fits[a] for a in back], Y[:, back], temps, holes)
         for a, th in zip(back, again, strict=True):
-            if th.mechanism == "quadratic" and not tr.warmup_beyond_start(
+            if th.mechanism != "one_lag" and not tr.warmup_beyond_start(
                     Y[:, a] - th.signal(temps), rate_b, nzs[a], th.lag_s).passed:
                 out[a], settled[a] = th, None
     # the path choice starts from the one lag's fit (its lag, its Allan reference), which the
