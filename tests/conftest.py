@@ -10,6 +10,15 @@ import pytest
 # w1thermsensor runs modprobe on import unless told not to; tests never load kernel modules.
 os.environ.setdefault("W1THERMSENSOR_NO_KERNEL_MODULE", "1")
 
+# One BLAS thread per test process, as the service runs (daemon/blas_threads.py), set before
+# numpy loads its BLAS. The suite runs one process per core (`pytest -n 2`): a BLAS pool per
+# process on top would only oversubscribe the cores, and OpenBLAS busy-waits, so the tests'
+# own numpy work (long dot products in the studies' estimators) spent several times its CPU
+# spinning. Children that check the BLAS setting strip these variables themselves
+# (test_blas.py, test_cmd_run.py, test_cmd_analyze.py); an explicit setting wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 IMUDATA = SHARED / "data" / "imudata"
 

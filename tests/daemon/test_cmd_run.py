@@ -101,11 +101,13 @@ def test_killed_process_restarts_with_gap_and_restored_accumulators(tmp_path: Pa
 def test_sigterm_flushes_and_sighup_reopens(tmp_path: Path) -> None:
     p = _start(tmp_path, "--speed", "20")
     try:
+        # samples on disk before each signal (counts, not sleeps)
         _wait_for(lambda: any((tmp_path / "rec").glob("*.avr")))
-        time.sleep(1.0)
+        _wait_for(lambda: _recorded_samples(tmp_path / "rec") > 0)
         p.send_signal(signal.SIGHUP)
         _wait_for(lambda: len(list((tmp_path / "rec").glob("*.avr"))) >= 2)
-        time.sleep(0.5)
+        n_reopen = _recorded_samples(tmp_path / "rec")
+        _wait_for(lambda: _recorded_samples(tmp_path / "rec") > n_reopen)
         p.send_signal(signal.SIGTERM)
         # The promise is systemd's: stopped before TimeoutStopSec= (else it is SIGKILLed).
         # TimeoutExpired fails the test; no wall-time figure tighter than that contract.
