@@ -918,7 +918,7 @@ def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: Therm
     (``causes.transient_floor``), one in a hole of the driving log (``_not_in_hole``), or a
     warm-up the lag filter's fitted start state can make (T within a factor 3 of the lag,
     size within ``start_span``, the removed signal's swing over its first three lags) is not
-    claimed, and the others are refitted without it."""
+    claimed, and the others are refitted and tested again without it."""
     found, missed = tr.find_compound(work, rate_b, noise_of)
     if found and thermal is not None and thermal.passed:
         record_s = len(work) / rate_b
@@ -942,10 +942,10 @@ def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: Therm
             checked.append(c)
         kept = [c for c in checked if c.passed]
         if len(kept) < len(found):
-            missed = [c for c in checked if not c.passed] + missed
-            found = (tr.refine_compound(work, rate_b, noise_of(tr.signal_of(kept, len(work),
-                                                                            rate_b)), kept)
-                     if kept else [])
+            # the others refitted without it, and tested again in that fit (each claim's
+            # statistic and sentence are those of the fit it is reported with)
+            found, lost = tr.confirm_compound(work, rate_b, noise_of, kept)
+            missed = [c for c in checked if not c.passed] + lost + missed
     drift = tr.test_drift(work, rate_b, noise_of(tr.signal_of(found, len(work), rate_b)),
                           found, noise_of=noise_of)
     return ([*found, drift], missed) if drift.passed else (found, [*missed, drift])
