@@ -463,13 +463,13 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     # ĉ keeps its weights (any weights give it without bias); its variance is this
     # covariance's, which for a white regressor is the EDF model's and for a trend is the
     # ends' (the EDF model, Σ of independent differences, is ×3 too wide there)
-    var, dof = spectra.variance(np.flatnonzero(_kept(res, min_tau_s)), got.r, got.w, got.nu)
+    rows = np.flatnonzero(_kept(res, min_tau_s))
+    var, dof = spectra.variance(rows, got.r, got.w, got.nu)
     if not (math.isfinite(var) and var > 0):
         # the spectra do not see an octave the Allan result holds (a regressor flat on the
         # block means they were taken on): no se from them, so none the test can pass with
         return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
-    var_iv, _dof = spectra.variance(np.flatnonzero(_kept(res, min_tau_s)), got.r, got.w,
-                                    got.nu, shaped=True)
+    var_iv, _dof = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
     se_iv = math.sqrt(var_iv) if math.isfinite(var_iv) and var_iv > 0 else math.sqrt(var)
     return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof, se_iv)
 
@@ -1333,7 +1333,8 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the larger of the two: the jackknife's parts may be shorter than the noise's
     # correlation at the regressor's period, where it is too small itself; the test's z
     # with the test's se, the interval with the spectrum's level from the AVAR's slope
-    z = abs(c) / max(se_jk, se_a) if max(se_jk, se_a) > 0 else 0.0
+    se_test = max(se_jk, se_a)
+    z = abs(c) / se_test if se_test > 0 else 0.0
     se = max(se_jk, test.se_interval)
     lag_lo, lag_hi, open_lo, open_hi = lag_interval(scan, k)
     # ĉ is the coefficient at the chosen lag; the lag is an estimate too, and for a lag long

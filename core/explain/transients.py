@@ -306,10 +306,9 @@ def _on_grid(c: cz.Candidate, g: cz._Gls) -> list[dict[str, float]]:
         near.append(sorted({float(grid[k]) for k in (j - 1, j) if 0 <= k < len(grid)}))
     # an excursion the scan tries is at least two grid steps long
     min_len = 1.5 * (edges[1] - edges[0]) if len(edges) > 1 else 0.0
-    out = [p for p in ({**c.params, **dict(zip(keys, v, strict=True))}
-                       for v in itertools.product(*near))
-           if c.cause != "excursion" or p["end_s"] - p["start_s"] >= min_len]
-    return out
+    return [p for p in ({**c.params, **dict(zip(keys, v, strict=True))}
+                        for v in itertools.product(*near))
+            if c.cause != "excursion" or p["end_s"] - p["start_s"] >= min_len]
 
 
 def _z_in_fit(g: cz._Gls, cands: list[cz.Candidate], on_grid: bool = False) -> list[float]:
