@@ -372,6 +372,11 @@ class _View:
     s: NDArray[np.float64]
     #: the logged readings' rounding AVAR (K²) at these τ (``sawtooth_avar``), or zeros
     rounding: NDArray[np.float64] | None = None
+    #: per regressor subset (``_blocks``): its covariance blocks and its fit, kept because
+    #: every candidate's grid is fitted (``_fit``) and then scored (``_dev``) on the same
+    #: views, and the jackknife fits the best point again on views that fitted it already
+    _memo: dict[tuple[int, ...], _Blocks] = field(default_factory=dict, init=False,
+                                                  compare=False, repr=False)
 
     def rounding_share(self, coefficient: float) -> float:
         """Σ_k ν_k·min(1, c²R_k/s_k): the part of this view's deviance the readings'
@@ -400,15 +405,40 @@ def _view(sums: OctaveSums, edf_ref: NDArray, n_ref: NDArray, ok_tau: NDArray[np
 #: the view of some sums on an axis's weights (``_view`` with its EDF, τ and s bound)
 _Weights = Callable[[OctaveSums], _View]
 
+class _Blocks:
+    """The covariance blocks of one regressor subset ``idx`` of a view: V_uy (K, n) and
+    V_uu (K, n, n), gathered once (the same numbers, in the same memory order, as
+    ``c[:, idx, 0]`` and ``c[:, idx][:, :, idx]``, so every sum over them adds in the same
+    order: ``test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does``), and its fit
+    β once computed (``_fit``, a pure function of the view and ``idx``)."""
+
+    __slots__ = ("beta", "vuu", "vuy")
+
+    def __init__(self, c: NDArray[np.float64], idx: list[int]) -> None:
+        ia = np.asarray(idx, dtype=np.intp)
+        self.vuy: NDArray[np.float64] = c[:, ia, 0]
+        # one gather, not two: the second index runs along the first axis of the gathered
+        # block, so the transpose has the plain indexing's strides (τ fastest)
+        self.vuu: NDArray[np.float64] = c[:, ia[None, :], ia[:, None]].transpose(0, 2, 1)
+        self.beta: NDArray[np.float64] | None = None
+
+
+def _blocks(v: _View, idx: list[int]) -> _Blocks:
+    key = tuple(idx)
+    got = v._memo.get(key)
+    if got is None:
+        got = v._memo[key] = _Blocks(v.cov, idx)
+    return got
+
+
 def _resid(v: _View, idx: list[int], beta: NDArray) -> NDArray[np.float64]:
     """The residual AVAR r_k(β) = V_yy − 2βᵀV_uy + βᵀV_uuβ."""
     c = v.cov
     vy = c[:, 0, 0]
     if not idx:
         return np.asarray(vy, dtype=float)
-    vuy = c[:, idx, 0]
-    vuu = c[:, idx][:, :, idx]
-    r = vy - 2 * vuy @ beta + np.einsum("i,kij,j->k", beta, vuu, beta)
+    bl = _blocks(v, idx)
+    r = vy - 2 * bl.vuy @ beta + np.einsum("i,kij,j->k", beta, bl.vuu, beta)
     return np.asarray(r, dtype=float)
 
 
@@ -416,19 +446,27 @@ def _fit(v: _View, idx: list[int]) -> NDArray[np.float64]:
     """β minimising Σ_k ν_k r_k(β)/s_k (weighted normal equations)."""
     if not len(v.nu) or not idx:
         return np.zeros(len(idx))
-    c = v.cov
+    bl = _blocks(v, idx)
+    if bl.beta is None:
+        bl.beta = _solve(v, bl)
+        bl.beta.flags.writeable = False
+    return bl.beta.copy()
+
+
+def _solve(v: _View, bl: _Blocks) -> NDArray[np.float64]:
     w = v.nu / v.s
-    A = np.einsum("k,kij->ij", w, c[:, idx][:, :, idx])
-    b = w @ c[:, idx, 0]
+    A = np.einsum("k,kij->ij", w, bl.vuu)
+    b = w @ bl.vuy
     d = np.diag(A)
     # a regressor this view does not see (a start state in a part after the start) stays 0
     live = np.flatnonzero(d > 1e-14 * max(float(d.max()), 1e-300))
-    out = np.zeros(len(idx))
+    out = np.zeros(len(d))
     if len(live):
         sc = np.sqrt(d[live])
         # (numpy's lstsq to the bit, without its per-call checks: thousands of these small
-        # solves per axis)
-        out[live] = np.array(_lstsq(A[np.ix_(live, live)] / np.outer(sc, sc), b[live] / sc,
+        # solves per axis; np.outer's product and np.ix_'s block, without their overhead)
+        sub = A if len(live) == len(d) else A[live[:, None], live]
+        out[live] = np.array(_lstsq(sub / (sc[:, None] * sc[None, :]), b[live] / sc,
                                     rcond=1e-10)) / sc
     return out
 

@@ -931,3 +931,52 @@ def test_a_second_paths_start_is_not_taken_out_as_a_warm_up_before_the_path_is_c
     assert th and th[0].mechanism == "two_path" and not th[0].alternatives
     assert th[0].params["coefficient_2"] == pytest.approx(row.truth["coefficient_2"], rel=0.2)
     assert not [f for f in ex.channels["x"].claimed if f.cause == "warmup"]
+
+
+def test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does() -> None:
+    """``_fit`` and ``_resid`` read a regressor subset's covariance blocks once per view
+    (``_blocks``: one gather, kept) and ``_fit`` keeps its solution: the same numbers to the
+    bit as the plain indexing ``c[:, idx][:, :, idx]`` and a fresh solve (the candidates'
+    deviances are compared and the least chosen: a last-bit change moved a chosen lag on
+    near-ties), on views of many sizes, with dead regressors, asked twice."""
+    from avard.core.explain.thermal_paths import _dev, _fit, _resid, _View
+    from avard.core.model.nnls import _lstsq
+
+    def plain_fit(v: _View, idx: list[int]) -> np.ndarray:
+        c = v.cov
+        w = v.nu / v.s
+        A = np.einsum("k,kij->ij", w, c[:, idx][:, :, idx])
+        b = w @ c[:, idx, 0]
+        d = np.diag(A)
+        live = np.flatnonzero(d > 1e-14 * max(float(d.max()), 1e-300))
+        out = np.zeros(len(idx))
+        if len(live):
+            sc = np.sqrt(d[live])
+            out[live] = np.array(_lstsq(A[np.ix_(live, live)] / np.outer(sc, sc),
+                                        b[live] / sc, rcond=1e-10)) / sc
+        return out
+
+    def plain_resid(v: _View, idx: list[int], beta: np.ndarray) -> np.ndarray:
+        c = v.cov
+        return np.asarray(c[:, 0, 0] - 2 * c[:, idx, 0] @ beta
+                          + np.einsum("i,kij,j->k", beta, c[:, idx][:, :, idx], beta))
+
+    rng = np.random.default_rng(23)
+    for _ in range(300):
+        K, C = int(rng.integers(1, 16)), int(rng.integers(2, 60))
+        X = rng.standard_normal((K, C, 3 * C))
+        cov = X @ X.transpose(0, 2, 1)
+        dead = rng.integers(1, C)
+        cov[:, dead, :] = cov[:, :, dead] = 0.0  # a regressor the view does not see
+        v = _View(cov, rng.random(K) * 40 + 3, rng.random(K) + 0.5)
+        for _ in range(6):
+            n = int(rng.integers(1, min(C - 1, 6) + 1))
+            idx = sorted(int(i) for i in rng.choice(np.arange(1, C), n, replace=False))
+            want = plain_fit(v, idx)
+            for _ in range(2):  # the second reading is the kept one
+                got = _fit(v, idx)
+                assert np.array_equal(got, want)
+                assert np.array_equal(_resid(v, idx, got), plain_resid(v, idx, want))
+                assert _dev(v, idx, got) == float(np.sum(v.nu * plain_resid(v, idx, want) / v.s))
+            got[:] = 0.0  # a caller's copy: the kept solution is not changed through it
+            assert np.array_equal(_fit(v, idx), want)
