@@ -697,6 +697,9 @@ def lag_octave_sums(axes: AxesDifferences, u: NDArray, lag_s: float, rate_hz: fl
     G = len(axes.cuts[0]) - 1 if axes.cuts else 0
     n = np.zeros((G, len(axes.ms)), dtype=np.int64)
     s2 = np.zeros((G, len(axes.ms), C + 1, C + 1))
+    # np.outer's products by broadcasting (the same multiplications, without its per-call
+    # conversions: a lag scan makes this loop's few small products thousands of times)
+    ww = w[:, None] * w[None, :]
     for k in range(len(axes.ms)):
         st, sp, dy, cut = axes.st[k], axes.sp[k], axes.d[k], axes.cuts[k]
         q = pu[::st] if st > 1 else pu
@@ -714,14 +717,15 @@ def lag_octave_sums(axes: AxesDifferences, u: NDArray, lag_s: float, rate_hz: fl
             j0, j1 = int(cut[g]), int(cut[g + 1])
             if j1 <= j0:
                 continue
-            yy = axes.gram[k][g].copy()
-            yu = dy[j0:j1].T @ du[j0:j1]
-            uu = float(du[j0:j1] @ du[j0:j1])
+            yy = axes.gram[k][g]
+            dug = du[j0:j1]
+            yu = dy[j0:j1].T @ dug
+            uu = float(dug @ dug)
             if de is not None and j0 < len(de):
                 s1 = min(j1, len(de))
                 a = dy[j0:s1].T @ de[j0:s1]
                 e2 = float(de[j0:s1] @ de[j0:s1])
-                yy += e2 * np.outer(w, w) - np.outer(a, w) - np.outer(w, a)
+                yy = yy + (e2 * ww - a[:, None] * w[None, :] - w[:, None] * a[None, :])
                 yy = 0.5 * (yy + yy.T)
                 yu = yu - w * float(de[j0:s1] @ du[j0:s1])
             n[g, k] = j1 - j0
@@ -742,6 +746,15 @@ class CovView:
     edf: NDArray[np.float64]
 
 
+def covariance_block(c: NDArray[np.float64], idx: list[int]) -> NDArray[np.float64]:
+    """``c[:, idx][:, :, idx]`` of a covariance stack (K, C, C) in one gather, not two: the
+    same numbers in the same memory order (τ fastest), so every sum over it adds in the same
+    order (the second index runs along the gathered block's first axis; the transpose has
+    the plain indexing's strides: ``test_a_covariance_block_is_the_plain_indexing``)."""
+    ia = np.asarray(idx, dtype=np.intp)
+    return c[:, ia[None, :], ia[:, None]].transpose(0, 2, 1)
+
+
 def cov_view(sums: OctaveSums, rate_hz: float, edf_ref: NDArray, n_ref: NDArray,
              cols: tuple[int, int] = (0, 1)) -> CovView:
     """The (axis, temperature) slice ``cols`` of ``sums`` with the axis's EDF ``edf_ref``
@@ -749,8 +762,7 @@ def cov_view(sums: OctaveSums, rate_hz: float, edf_ref: NDArray, n_ref: NDArray,
     is proportional to the differences for the lag's few settling blocks left out, or a
     jackknife's parts)."""
     k = min(len(sums.ms), len(edf_ref))
-    sel = list(cols)
-    cov = sums.cov()[:k][:, sel][:, :, sel]
+    cov = covariance_block(sums.cov()[:k], list(cols))
     with np.errstate(invalid="ignore", divide="ignore"):
         edf = np.asarray(edf_ref[:k], float) * sums.n[:k] / np.asarray(n_ref[:k], float)
     return CovView(sums.ms[:k] / rate_hz, cov, np.column_stack([edf, edf]))

@@ -107,6 +107,7 @@ from avard.core.explain.thermal_fit import (
     DS18B20_STEP_K,
     OctaveSums,
     _lag_grid,
+    covariance_block,
     lag_filter,
     min_tau_for,
     octave_sums_by_part,
@@ -407,19 +408,16 @@ _Weights = Callable[[OctaveSums], _View]
 
 class _Blocks:
     """The covariance blocks of one regressor subset ``idx`` of a view: V_uy (K, n) and
-    V_uu (K, n, n), gathered once (the same numbers, in the same memory order, as
-    ``c[:, idx, 0]`` and ``c[:, idx][:, :, idx]``, so every sum over them adds in the same
-    order: ``test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does``), and its fit
-    β once computed (``_fit``, a pure function of the view and ``idx``)."""
+    V_uu (K, n, n), gathered once (``thermal_fit.covariance_block``: the same numbers in the
+    same memory order as the plain indexing,
+    ``test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does``), and its fit β once
+    computed (``_fit``, a pure function of the view and ``idx``)."""
 
     __slots__ = ("beta", "vuu", "vuy")
 
     def __init__(self, c: NDArray[np.float64], idx: list[int]) -> None:
-        ia = np.asarray(idx, dtype=np.intp)
-        self.vuy: NDArray[np.float64] = c[:, ia, 0]
-        # one gather, not two: the second index runs along the first axis of the gathered
-        # block, so the transpose has the plain indexing's strides (τ fastest)
-        self.vuu: NDArray[np.float64] = c[:, ia[None, :], ia[:, None]].transpose(0, 2, 1)
+        self.vuy: NDArray[np.float64] = c[:, idx, 0]
+        self.vuu: NDArray[np.float64] = covariance_block(c, idx)
         self.beta: NDArray[np.float64] | None = None
 
 

@@ -725,3 +725,29 @@ def test_the_spectrum_an_interval_reads_is_the_noises_own_at_each_octave(kind):
     plain, _lam = sp._noise(rows, avar)
     ratio = {"white": 1.0, "flicker": 2 * math.log(2), "random walk": math.pi**2 / 3}[kind]
     assert plain[inside] == pytest.approx(ratio * two_sided(sp.f[inside]), rel=0.05)
+
+
+def test_a_covariance_block_is_the_plain_indexing() -> None:
+    """``covariance_block`` (one gather) gives ``c[:, idx][:, :, idx]``'s numbers in its
+    memory order (τ fastest), so an einsum over it adds in the same order, to the bit; and
+    ``lag_octave_sums``' broadcast products are np.outer's."""
+    from avard.core.explain.thermal_fit import covariance_block
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        K, C = int(rng.integers(1, 16)), int(rng.integers(2, 60))
+        c = rng.standard_normal((K, C, C))
+        idx = [int(i) for i in rng.choice(C, int(rng.integers(1, min(C, 6) + 1)),
+                                          replace=False)]
+        plain, got = c[:, idx][:, :, idx], covariance_block(c, idx)
+        # (a dimension of one element has no order: numpy may give it any stride)
+        assert np.array_equal(got, plain) and all(
+            a == b for a, b, n in zip(got.strides, plain.strides, got.shape, strict=True)
+            if n > 1)
+        w, beta = rng.random(K), rng.standard_normal(len(idx))
+        assert np.array_equal(np.einsum("k,kij->ij", w, got),
+                              np.einsum("k,kij->ij", w, plain))
+        assert np.array_equal(np.einsum("i,kij,j->k", beta, got, beta),
+                              np.einsum("i,kij,j->k", beta, plain, beta))
+        a, v = rng.standard_normal(C), rng.standard_normal(C)
+        assert np.array_equal(np.outer(a, v), a[:, None] * v[None, :])
