@@ -97,6 +97,7 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -379,6 +380,11 @@ class _View:
     _memo: dict[tuple[int, ...], _Blocks] = field(default_factory=dict, init=False,
                                                   compare=False, repr=False)
 
+    @cached_property
+    def weights(self) -> NDArray[np.float64]:
+        """ν/s, each τ's weight in the normal equations (``_fit``)."""
+        return np.asarray(self.nu / self.s, dtype=np.float64)
+
     def rounding_share(self, coefficient: float) -> float:
         """Σ_k ν_k·min(1, c²R_k/s_k): the part of this view's deviance the readings'
         rounding passed through a coupling ``coefficient`` makes up. A model that passes
@@ -452,20 +458,24 @@ def _fit(v: _View, idx: list[int]) -> NDArray[np.float64]:
 
 
 def _solve(v: _View, bl: _Blocks) -> NDArray[np.float64]:
-    w = v.nu / v.s
+    # (the same operations as np.diag, np.max, np.outer and np.ix_ make, without their
+    # wrappers' per-call cost: thousands of these small solves per axis; the weights ν/s
+    # divided once per view)
+    w = v.weights
     A = np.einsum("k,kij->ij", w, bl.vuu)
     b = w @ bl.vuy
-    d = np.diag(A)
+    d = A.diagonal()
     # a regressor this view does not see (a start state in a part after the start) stays 0
-    live = np.flatnonzero(d > 1e-14 * max(float(d.max()), 1e-300))
+    live = np.flatnonzero(d > 1e-14 * max(float(np.maximum.reduce(d)), 1e-300))
     out = np.zeros(len(d))
-    if len(live):
+    if len(live) == len(d):
+        sc = np.sqrt(d)
+        out[:] = np.array(_lstsq(A / (sc[:, None] * sc[None, :]), b / sc, rcond=1e-10)) / sc
+    elif len(live):
         sc = np.sqrt(d[live])
-        # (numpy's lstsq to the bit, without its per-call checks: thousands of these small
-        # solves per axis; np.outer's product and np.ix_'s block, without their overhead)
-        sub = A if len(live) == len(d) else A[live[:, None], live]
-        out[live] = np.array(_lstsq(sub / (sc[:, None] * sc[None, :]), b[live] / sc,
-                                    rcond=1e-10)) / sc
+        # (numpy's lstsq to the bit, without its per-call checks)
+        out[live] = np.array(_lstsq(A[live[:, None], live] / (sc[:, None] * sc[None, :]),
+                                    b[live] / sc, rcond=1e-10)) / sc
     return out
 
 
