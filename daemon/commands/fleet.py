@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import socket
 import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ThreadPoolExecutor
@@ -100,6 +101,18 @@ def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
     return out
 
 
+def _reachable(address: str) -> None:
+    """Raise OSError at once where nothing listens at a tcp:// scheduler address: Dask's
+    Client retries a refused connection until its timeout, so a typo would cost 5 s."""
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme != "tcp" or not parts.hostname or parts.port is None:
+        return                                 # other transports: Dask's own check
+    with socket.create_connection((parts.hostname, parts.port), timeout=5.0):
+        pass
+
+
 def _client(args: argparse.Namespace) -> Any:
     try:
         from distributed import Client, LocalCluster
@@ -108,6 +121,7 @@ def _client(args: argparse.Namespace) -> Any:
                         "(from a checkout: .venv/bin/pip install -e '.[fleet]')") from exc
     if args.scheduler:
         try:
+            _reachable(args.scheduler)
             return Client(args.scheduler, timeout="5s")
         except (OSError, TimeoutError) as exc:
             raise DataError(f"--scheduler {args.scheduler}: no Dask scheduler answers there "

@@ -79,6 +79,8 @@ def _numpy_avar(path: Path, rate: float, overlap: int,
         if not seg:
             continue
         y = np.concatenate(seg)
+        if not len(y):                         # recorded before every channel had a reading
+            continue
         n_total += len(y)
         x = np.concatenate([np.zeros((1, 3)), np.cumsum(y - y[0], axis=0)]) / rate
         for k, m in enumerate(ms):
@@ -90,6 +92,36 @@ def _numpy_avar(path: Path, rate: float, overlap: int,
     tau = ms / rate
     return (n_total, sums / (2 * tau[:, None] ** 2 * counts[:, None]),
             [n for n in lengths if n])
+
+
+def _wait_for_fed_sample(path: Path, before: int, timeout_s: float = 60.0) -> bool:
+    """Wait until the newest run (the one after ``before`` earlier runs) has a raw sample
+    recorded at or after the first index where every temperature channel has a reading: the
+    first sample the service feeds to the accumulators. Polls the recording (a torn tail is
+    what a live writer leaves, and the reader skips it)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        runs: list[str] = []
+        names: dict[str, list[str]] = {}
+        first: dict[str, int] = {}
+        last_raw = -1
+        for r in RecordingReader(path):
+            if r["kind"] == "header" and r["run"] not in names:
+                runs.append(r["run"])
+                names[r["run"]] = list(r["temperature_channels"])
+            if not runs or r.get("run") != runs[-1]:
+                continue
+            if r["kind"] == "temp":
+                for name, v in zip(r["names"], r["values_c"], strict=True):
+                    if v is not None:
+                        first.setdefault(name, r["i0"])
+            elif r["kind"] == "raw":
+                last_raw = max(last_raw, r["i0"] + r["n"] - 1)
+        if (len(runs) > before and len(first) == len(names[runs[-1]])
+                and last_raw >= max(first.values(), default=0)):
+            return True
+        time.sleep(0.05)
+    return False
 
 
 def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_path):
@@ -104,7 +136,9 @@ def test_runs_killed_before_their_first_checkpoint_are_replayed_on_restore(tmp_p
             notify.drain()                     # READY=1 of this run, not of the last
             p = _spawn(tmp_path, notify, 10 + k)
             assert notify.wait_ready(), "no READY=1 within 60 s"
-            time.sleep(1.5)                    # samples are recorded; no checkpoint is due
+            # a sample the service fed is on disk; no checkpoint is due (one hour away)
+            assert _wait_for_fed_sample(tmp_path / "rec", before=k + 1), \
+                "no fed sample recorded within 60 s"
             p.send_signal(signal.SIGKILL)
             p.wait(timeout=30)
             assert ckpt.read_bytes() == first_ckpt   # killed before its first checkpoint
