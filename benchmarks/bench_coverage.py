@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from avard.core.allan.deviations import AllanResult, allan_variance
 
-from tests.support.coverage_gen import Mix, noise_avar, record
+from tests.support.coverage_gen import Mix, flicker_avar, noise_avar, record
 
 LENGTHS = {1: 10.0, 12: 1.0, 60: 1.0}  # hours: sample rate (Hz)
 TAU_WHITE_FLICKER = 30.0  # s: white meets the flicker floor
@@ -181,10 +181,27 @@ class Coverage:
     slow_found: int = 0
     share_found: np.ndarray | None = None
     share_unfound: np.ndarray | None = None
+    # (``--detail``) the EDF the generator's noise mixture has at each τ (``noise_edf``):
+    # what ``noise_seen`` scatters about over many records; a row's records whose noise
+    # scatters far from it are lucky or unlucky at that τ, whatever the printed rule
+    noise_expected: np.ndarray | None = None
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
                 if not BAND[0] <= s <= BAND[1]]
+
+
+def noise_edf(mix: Mix, n: int, ms: np.ndarray) -> np.ndarray:
+    """The EDF of the OADEV of the generator's white + flicker + random walk at averaging
+    factors ``ms`` of an n-sample record: the mixture's Greenhall–Riley quadratic form
+    (``edf.edf_mixture``, rate data's exact phase) at the generator's own composition."""
+    from avard.core.allan.edf import edf_mixture
+
+    m = np.asarray(ms, dtype=float)
+    levels = np.array([mix.s2 / m, flicker_avar(n, mix.h, m),
+                       mix.q2 * (2 * m * m + 1) / (6 * m)])
+    return np.array([edf_mixture((0, -1, -2), levels[:, k], 2, int(mk), 1, n + 1,
+                                 rate_data=True) for k, mk in enumerate(m)])
 
 
 def coverage(hours: int, mix_kind: str, records: int, seed: int,
@@ -251,7 +268,8 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
                     2.0 * noise**2 / np.mean((np.array(noise_only) - noise) ** 2, axis=0)
                     if noise_only else None, int(np.sum(found)),
                     inside[found].mean(axis=0) if found.any() else None,
-                    inside[~found].mean(axis=0) if (~found).any() else None)
+                    inside[~found].mean(axis=0) if (~found).any() else None,
+                    noise_edf(mix, n, ms) if noise_only else None)
 
 
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
@@ -355,10 +373,14 @@ def main(argv: list[str]) -> int:
                     print(f"    coverage where a slow sinusoid was {name}: "
                           + " ".join(f"{v:.0%}" for v in sh))
             if c.rules is not None and c.noise_seen is not None:
-                for t, row, ns in zip(c.tau, c.rules, c.noise_seen, strict=True):
+                expected = (c.noise_expected if c.noise_expected is not None
+                            else np.full(len(c.tau), np.nan))
+                for t, row, ns, ne in zip(c.tau, c.rules, c.noise_seen, expected,
+                                          strict=True):
                     print(f"    τ {t:9.1f} s  EDF set by: " + "  ".join(
                         f"{name} {v:6.1%}" for name, v in zip(RULES, row, strict=True))
-                        + f"  (noise alone scatters with {ns:9.1f})")
+                        + f"  (noise alone scatters with {ns:9.1f}; the generator's "
+                        f"mixture has {ne:9.1f})")
     if pool is not None:
         pool.close()
         pool.join()  # (its CPU is counted once it is reaped)

@@ -109,3 +109,28 @@ def test_the_exact_cross_term_covers_given_the_true_part(hours: int, mix: str) -
     detail = list(zip(c.tau, c.share, c.share_known, c.signal, strict=True))
     assert all(BAND[0] <= k <= 0.78 for k in c.share_known), detail
     assert all(c.share >= BAND[0]), detail
+
+
+def test_the_generators_noise_edf_is_its_scatter() -> None:
+    """``noise_edf`` (the benchmark's ``--detail`` column that says whether a row's records
+    are lucky at a τ): one type alone gives that type's Greenhall–Riley EDF, and on a short
+    white + flicker + random-walk record the simulated scatter of the noise's OADEV over
+    400 records, as an EDF, lies within 25 % of it (about 3.5 of its standard errors)."""
+    import numpy as np
+    from avard.core.allan.deviations import allan_variance
+    from avard.core.allan.edf import edf_greenhall
+
+    from benchmarks.bench_coverage import noise_edf
+    from tests.support.coverage_gen import Mix, noise_avar, record
+
+    n, ms = 4096, np.array([4, 32, 128])
+    white = noise_edf(Mix(s2=1.0, h=0.0, q2=0.0), n, ms)
+    assert white == pytest.approx([edf_greenhall(0, 2, int(m), 1, n + 1, rate_data=True)
+                                   for m in ms], rel=1e-9)
+    mix = Mix(s2=1.0, h=0.05, q2=1e-5)
+    expected = noise_edf(mix, n, ms)
+    truth = noise_avar(mix, n, ms)
+    rng = np.random.default_rng(12)
+    est = np.array([allan_variance(record(mix, n, rng)[0], 1.0, ms).var for _ in range(400)])
+    seen = 2.0 * truth**2 / np.mean((est - truth) ** 2, axis=0)
+    np.testing.assert_allclose(seen, expected, rtol=0.25)
