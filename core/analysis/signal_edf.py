@@ -424,48 +424,30 @@ def with_parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], fl
                    hi=np.where(np.isfinite(new), hi, allan.hi))
 
 
-#: The reddest FM type of the Allan variance: its EDF is the least any FM type gives.
-_REDDEST = -2
-
-
 def unresolved_noise_edf(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
-    """``model_edf`` where the estimator's EDF is the least of every FM type: where it
-    took the least EDF of several types it could not tell apart (fewer than
-    ``SPREAD_LAG1`` averages), and where its identification read the reddest type (α = −2)
-    on what the fit reads as a mixture. NaN elsewhere, where its identification of white
-    or flicker FM stands.
-
-    With few averages its lower bound (``model_edf(exact=False)``): the types cannot be told
-    apart there, and the issue asks the least EDF the plausible noises allow (the exact
-    mixture there took the 12 h sine records at 2048 s to 59.5 % coverage, the bound keeps
-    60.5 %). Where the estimator read the reddest type, the mixture's own.
-
-    Why the reddest reading too: the lag-1 ACF reads one α from the averages' spectrum,
-    which a random walk holding a sixth of the AVAR already reddens to −2, and a mixture's
-    estimate scatters with more EDF than its reddest type's (more than the Cauchy–Schwarz
-    bound, ``edf.edf_mixture``): the coverage benchmark's 60 h plain records at 512–4096 s,
-    read α ≈ −1.8 to −2, scatter with EDF 483, 242, 121, 64 (200 records) where the
-    estimator printed 413, 198, 97, 56 and the generator's mixture gives 512, 253, 123, 58.
-    Where it reads flicker or white FM the two agree to about 10 % (64 s: printed 3960,
-    scattered 4155, mixture 4415), and the Cauchy–Schwarz bound taken there at every τ
-    once read the drift records' flicker above their scatter (60 h drift, 64 s: 60.5 %
-    coverage), so the identification stands there.
-
-    Under avard's rule only (``--noise-id avard``): the mixture is of rate data's FM types,
-    its phase the samples' exact sum; under "powerlaw" (clock phase data) the estimator's
-    identification stands, as it prints it from the API (NBS14 through analyze: every τ)."""
+    """``model_edf`` at every τ of avard's rule: the fitted mixture's lower bound where the
+    estimator took the least EDF of several types it could not tell apart (fewer than
+    ``SPREAD_LAG1`` averages; ``model_edf(exact=False)``: the issue asks the least EDF the
+    plausible noises allow), the mixture's own where it identified one type (the lag-1 ACF
+    reads one α from a mixture's averages and rounds it: white + flicker at 16–64 s of
+    the coverage benchmark's 12 h and 60 h records read as flicker FM, whose EDF is 10–20 %
+    below the mixture's, which their estimates scatter with). Measured on the benchmark
+    (docs/analysis.md, "Coverage of the intervals"). NaN under "powerlaw" and "stable32":
+    there the estimator's identification stands, as it prints it from the API (NBS14
+    through analyze: every τ)."""
     if allan.noise_id != "avard":
         return np.full(len(allan.tau), math.nan)
     n_phase = _n_phase(allan)
     few = (n_phase - 1) / allan.m < SPREAD_LAG1
-    reddest = np.asarray(allan.alpha, dtype=float) <= _REDDEST
     noise = np.full(len(allan.tau), math.nan)
     if np.any(few):
         # the identification uncertain: the least the mixture can have (the issue's rule,
         # the least EDF where the types cannot be told apart)
         noise[few] = model_edf(fit, allan, exact=False)[few]
-    if np.any(reddest & ~few):
-        noise[reddest & ~few] = model_edf(fit, allan)[reddest & ~few]
+    if np.any(~few):
+        # every identified τ: the fitted mixture's own (the estimator's one type is read
+        # from a mixture's averages and rounded; its EDF is that type's)
+        noise[~few] = model_edf(fit, allan)[~few]
     return noise
 
 
