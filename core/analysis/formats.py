@@ -75,6 +75,7 @@ def format_table(an: Analysis) -> str:
             # the ramp-or-walk note is on both K and R: said once, under K
             if e.note and (e.note != RAMP_OR_WALK or t == "rate_random_walk"):
                 lines.append(f"    {e.note}")
+        lines.extend(_drift_lines(ch))
         if ch.lines:
             s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"
                           for ln in ch.lines)
@@ -96,6 +97,20 @@ def format_table(an: Analysis) -> str:
                 lines.append(f"  note: the five-term model does not describe this curve "
                              f"(p = {p:.1g}); see `avard explain` for what else is in it")
     return "\n".join(lines)
+
+
+def _drift_lines(ch: ChannelAnalysis) -> list[str]:
+    """Where R came from, and a drift found short of its level (``drift_summary``)."""
+    d = ch.drift_summary()
+    out = []
+    if d["rate_ramp_from"] == "time_domain":
+        out.append("  R from the time domain: the block means' slope, tested against a "
+                   "random walk, resolved apart from the AVAR (K refitted without it)")
+    if d["floor"] > 0:
+        out.append(f"  drift: a ramp of at least {_fmt(d['floor'])} {d['unit']} (68 %) the "
+                   "time domain finds short of its level; not claimed, but counted in the "
+                   "intervals at long τ")
+    return out
 
 
 def _psd_lines(ch: ChannelAnalysis) -> list[str]:

@@ -44,6 +44,22 @@ class ChannelAnalysis:
     slow: SlowSearch | None = None
     slow_fit: NoiseFit | None = None
 
+    def drift_summary(self) -> dict[str, Any]:
+        """Where the rate ramp R comes from and the drift floor (``analysis/drift.py``):
+        ``rate_ramp_from`` "time_domain" (the block means' GLS slope tested against a random
+        walk resolved it apart from the AVAR), "allan_fit" (the AVAR fit's own term) or None
+        (no R claimed); ``floor``: the ramp at the slope's 68 % interval's near end where the
+        time domain finds a drift short of its level (0: none; no claim, but that much of
+        the AVAR does not scatter and the printed EDF counts it), in ``unit``."""
+        from avard.core.model.terms import UNITS
+
+        fit = self.fit
+        r = fit.terms.get("rate_ramp")
+        source = ("time_domain" if "rate_ramp" in fit.resolved_apart
+                  else "allan_fit" if r is not None and r.present else None)
+        return {"rate_ramp_from": source, "floor": float(fit.drift_floor),
+                "unit": UNITS["rate_ramp"]}
+
     def to_dict(self) -> dict[str, Any]:
         a = self.allan
         d: dict[str, Any] = {
@@ -62,6 +78,7 @@ class ChannelAnalysis:
                            **({"disturbance": int(s["group"])} if "group" in s else {})}
                           for s in self.lines]
         d["fit"] = {k: _num(v) for k, v in fd["fit"].items()}
+        d["drift"] = self.drift_summary()
         if self.slow is not None:
             d["slow_sinusoid"] = self.slow.to_dict()
         if self.psd is not None:

@@ -137,6 +137,12 @@ def test_analyze_resolves_a_found_drift_as_a_ramp_with_k_refitted_without_it(gap
     ch = _analyze(y, 1.0, gap_at)
     r = ch.fit.terms["rate_ramp"]
     assert r.present and r.note is None
+    assert ch.to_dict()["drift"]["rate_ramp_from"] == "time_domain"   # said in the JSON
+    from avard.core.analysis.formats import format_table
+    from avard.core.analysis.results import Analysis
+
+    text = format_table(Analysis("drift", 1.0, len(y), {"x": ch}))     # and in the table
+    assert "R from the time domain" in text
     assert r.lo is not None and r.hi is not None and r.value is not None
     half = 0.5 * (r.hi - r.lo)
     assert r.lo - half <= slope <= r.hi + half, (r, slope)
@@ -263,6 +269,9 @@ def test_a_drift_short_of_the_level_is_no_claim_but_its_floor_holds_part_of_the_
     assert not ch.fit.resolved_apart
     assert not ch.fit.terms["rate_ramp"].present or ch.fit.terms["rate_ramp"].note
     assert (ch.fit.drift_floor > 0) is floored
+    said = ch.to_dict()["drift"]                               # and in the JSON
+    assert said["rate_ramp_from"] != "time_domain"
+    assert said["floor"] == ch.fit.drift_floor and said["unit"] == "m/s^3"
     if floored:
         lo, hi = sorted((abs(lik.slope_lo), abs(lik.slope_hi)))
         assert ch.fit.drift_floor == pytest.approx(lo, rel=0.05) and lo < abs(lik.slope) < hi
