@@ -342,7 +342,7 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     # 0.0106 and −0.0077 through 240 and 480 s pass the readings' rounding with up to
     # 0.0183 m/s²/K, not the first path's 0.0106 the engine's floors took before
     from avard.core.explain.engine import _rounding_gain
-    from avard.core.explain.thermal_paths import Column, PathFit, PathScore
+    from avard.core.explain.thermal_paths import RATE_SMOOTH_S, Column, PathFit, PathScore
 
     def fit(kind: str, theta: tuple[float, ...], beta: list[float],
             cols: tuple[Column, ...]) -> PathFit:
@@ -357,7 +357,7 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     # a dT/dt column (δ − h_s)/s passes a step with L1 norm 2/s; a negative lag's lead-lag 3
     rate = fit("rate", (-60.0,), [1e-3, 0.3],
                (Column("u", -60.0), Column("rate", -60.0), Column("start", 60.0)))
-    assert rate.rounding_gain() == pytest.approx(3 * (1e-3 + 0.3 * 2 / 30.0))
+    assert rate.rounding_gain() == pytest.approx(3 * (1e-3 + 0.3 * 2 / RATE_SMOOTH_S))
     y, T = _slow(BASE, 5)
     th = fit_thermal_axes(y[:, None], T[:, None], ["plate"], 1.0, lag_intervals=False)[0]
     assert _rounding_gain(replace(th, path=two)) == pytest.approx(0.0183)
