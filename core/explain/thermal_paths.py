@@ -11,12 +11,9 @@ more; the candidates, each a linear model in regressors built from the driving c
   behind the readings (``crossing_reconstruction``, as the relay below: squared, their
   rounding is an error every part shares), L also over the one-lag fit's leads
   (``quadratic_leads``);
-- ``rate``: c·u_L + r·dT/dt (m/s² per K/s, L ≥ 0), dT/dt of the temperature behind the
-  readings (``crossing_reconstruction``, as the quadratic and the relay) smoothed forward
-  and back through a ``RATE_SMOOTH_S`` lag (jω/(1 + ω²s²): no phase; the readings' 0.0625 K
-  steps would make a raw gradient spikes, and the reconstruction lets the smoothing be
-  short, where on the readings it had to be 30 s and took 18 % off a compressor's third
-  harmonic: r − c·L 6 % high). The rate term on the channel itself and
+- ``rate``: c·u_L + r·dT/dt (m/s² per K/s, L ≥ 0), dT/dt of the logged channel smoothed
+  forward and back through a ``RATE_SMOOTH_S`` lag (jω/(1 + ω²s²): no phase; the readings'
+  0.0625 K steps would make a raw gradient spikes). The rate term on the channel itself and
   the static coupling through its own lag: as c·u_L + r·du_L/dt, (c + jωr)/(1 + jωL) at
   one drive frequency, c crossed zero along the ridge L trades on, and was not resolved;
   a negative L (a lead-lag, T + a·dT/dt) would be a second rate term;
@@ -139,12 +136,8 @@ WIDTHS_K = (0.0125, 0.025, 0.05, 0.1, 0.2, 0.4)
 #: the lags of the ridge's flat part (ΔD ≤ 1.2 to 60 s on seed 30008), not the 120 s whose
 #: 6 more relays cost the candidate 3 % more than before the leads
 HYSTERESIS_LEADS_S = (15.0, 30.0, 60.0)
-#: Smoothing lag (s) before the derivative of the temperature behind the readings: a gain
-#: 1/(1 + ω²s²), 0.98 at a 400 s period (a 20-minute compressor's third harmonic). On the
-#: readings themselves it was 30 s (0.82 there; shorter, their steps came through as a
-#: rate), and the compressor dT/dt row's r − c·L came out 6.6 % high with its truth in 4
-#: of 10 intervals (9 of 10, 1.3 % high, after: docs/explain.md, comp23c)
-RATE_SMOOTH_S = 10.0
+#: Smoothing lag (s) before the derivative (the readings' 0.0625 K steps).
+RATE_SMOOTH_S = 30.0
 #: Contiguous parts: the halves of the held-out choice are parts 0…4 and 5…9; the jackknife
 #: leaves each out in turn.
 PARTS = 10
@@ -347,13 +340,10 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
             v = lag_filter(behind(), c.lag, rate_hz)
             x = (v - v.mean()) ** 2
         elif c.kind == "rate":
-            # d/dt of the temperature behind the readings (``RATE_SMOOTH_S``: their rounding
-            # an error in the regressor, as the quadratic's) smoothed forward and back
-            # through RATE_SMOOTH_S: jω/(1 + ω²s²), no phase (the forward lag alone delayed
-            # the derivative by s, 6° at the HVAC cycle, which the static lag then made up
-            # for: L and r 10–20 % off)
-            v = lag_filter(behind(), c.lag, rate_hz)
-            x = (v - lag_filter(v, RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
+            # d/dt of u smoothed forward and back through RATE_SMOOTH_S: jω/(1 + ω²s²), no
+            # phase (the forward lag alone delayed the derivative by s, 6° at the HVAC
+            # cycle, which the static lag then made up for: L and r 10–20 % off)
+            x = (u(c.lag) - lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
             x = lag_filter(x[::-1], RATE_SMOOTH_S, rate_hz)[::-1]
         elif c.kind == "relay":
             # on the temperature behind the readings (their rounding an error in the
