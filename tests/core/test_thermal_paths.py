@@ -980,3 +980,40 @@ def test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does() -> None:
                 assert _dev(v, idx, got) == float(np.sum(v.nu * plain_resid(v, idx, want) / v.s))
             got[:] = 0.0  # a caller's copy: the kept solution is not changed through it
             assert np.array_equal(_fit(v, idx), want)
+
+
+def test_the_compressor_two_path_rows_truth_is_the_candidate_that_holds_the_generator():
+    """The weekend generator's second path is lag(plate, 900 s) while the logged sensor is
+    lag(plate, 30 s): by partial fractions that is exactly (30/900)·sensor + (29/30)·
+    lag(sensor, 900 s), so the row's truth is the two-path candidate at lags 0 and 900 s
+    with c + c₂/30 and 29c₂/30 (``two_path_truth``), not lag(sensor, 870 s) with c and c₂,
+    which no candidate holds (the row's truth before: its intervals scored the generator's
+    approximation)."""
+    from avard.core.explain.thermal_fit import lag_filter
+
+    from benchmarks.bench_explain_weekend import rows_paths, two_path_truth
+    from tests.support.weekend import _lag
+
+    rate = 1.0
+    t = np.arange(4 * 3600) / rate
+    room = (0.5 * np.sin(2 * np.pi * t / 1800) + np.tanh(4 * np.sin(2 * np.pi * t / 1200))
+            + 0.05 * np.cumsum(np.random.default_rng(3).standard_normal(len(t))) / 120)
+    plate = _lag(room, 600.0, 1 / rate)
+    sensor, second = _lag(plate, 30.0, 1 / rate), _lag(plate, 900.0, 1 / rate)
+    c, c2 = 8e-4, -1.4e-3
+    y = c * sensor + c2 * second
+    want = two_path_truth(c, c2, 900.0, 30.0)
+    got = (want["coefficient"] * sensor
+           + want["coefficient_2"] * lag_filter(sensor, want["lag_2_s"], rate))
+    settled = slice(3600, None)  # past the filters' differing start states
+    # (to the two discrete filters' rounding: 1e-5 of the second path's signal)
+    scale = np.std(c2 * second[settled])
+    assert np.max(np.abs(got - y)[settled]) < 1e-4 * scale
+    # the old truth, lag(sensor, 870 s) with c and c₂, misses by a share of c₂'s signal
+    old = c * sensor + c2 * lag_filter(sensor, 870.0, rate)
+    assert np.std((old - y)[settled]) > 0.02 * scale
+    row = next(r for r in rows_paths() if r.name == "path+compressor: two paths")
+    c2_row = row.weekend.second_path[0]
+    assert row.truth["lag_2_s"] == row.weekend.second_path[1] == 900.0
+    assert row.truth["coefficient_2"] == pytest.approx(c2_row * 29 / 30)
+    assert row.truth["coefficient"] == pytest.approx(row.weekend.coefficient[0] + c2_row / 30)
