@@ -567,10 +567,10 @@ class PathFit:
     #: per linear extension, what it passes less of that rounding than one lag (its share
     #: to beat instead of ``rounding``: ``_smoothing``)
     own_rounding: dict[str, float] = field(default_factory=dict)
-    #: extensions that passed every test and predict the held-out halves within the margin
-    #: of the chosen one but are not named beside it, because they hold it in their limit
-    #: with a parameter more (two paths beside a dT/dt term, ``_mimic``): the record does
-    #: not tell them from it either (the notes say which)
+    #: extensions that predict the held-out halves within the margin of the chosen one (or
+    #: better) but are not named beside it, because they hold it in their limit with a
+    #: parameter more (two paths beside a dT/dt term, ``_mimic``) or their θ sits at the end
+    #: of its grid (open): the record does not tell them from it either (the notes say which)
     as_well: tuple[str, ...] = ()
 
     @property
@@ -1367,6 +1367,16 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          "second path and a dT/dt term both set a gain and a phase: a drive "
                          "with more than one frequency tells them apart); parameters "
                          "model-dependent, no interval")
+    # an extension that beats one lag as choosing needs and predicts at least as well as the
+    # chosen one, but whose θ sits at its grid's end (open, never chosen: a bound): the
+    # record supports it as well, its note says so, and it is listed with ``as_well`` (on
+    # the two-path row two paths through the one-lag fit's 3600 s predicted 26 better than
+    # the dT/dt term chosen, on a record whose start tells them apart poorly)
+    as_well += tuple(
+        k for k, sc in scores.items()
+        if k not in (best.kind, "one_lag", *alternatives, *as_well) and sc.open_end
+        and sc.z_extra >= z_thr and sc.heldout <= best.heldout + HELDOUT_MARGIN
+        and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - smoothing[k])
     if not best.resolved and best.open_end:
         notes.append("parameters not resolved (model-dependent, no interval): θ at the end "
                      "of its search grid, so the coefficients trade with a θ the search did "

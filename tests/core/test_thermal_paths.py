@@ -659,7 +659,9 @@ def test_the_path_rows_choose_alone_and_their_68_percent_intervals_hold_about_68
     named beside it or, once, alone: the issue's 95 % is not met) and the coefficients' 68 %
     intervals, θ continuous in the jackknife and the profile on the deviance's own scale,
     holding the truth in 45–90 % (the binomial band of 68 % on about twenty intervals: they
-    over-covered, 30 of 34 and 14 of 16, with θ re-chosen on the coarse grid)."""
+    over-covered, 30 of 34 and 14 of 16, with θ re-chosen on the coarse grid). Two paths on
+    this one-line drive give c₁ and c₂ no interval ("not resolved", paths23c): theirs are the
+    gain and phase at the drive, against the generator's own response there."""
     c = 8e-4
     w = replace(BASE, coefficient=(c, 0.0, 0.0), **extra)
     alone = inside = total = 0
@@ -1011,3 +1013,32 @@ def test_two_path_parameters_wider_than_ten_percent_are_not_resolved():
     # one line (96 % of the channel): none of the four keeps its interval
     one = describe(replace(s, drive=(*s.drive[:7], 0.96)))[1]
     assert set(one) == {"gain_at_drive", "phase_at_drive_rad"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("seed", "chosen"), [(30006, "rate"), (30017, "two_path")])
+def test_two_paths_on_one_drive_line_report_what_the_record_resolves(seed: int, chosen: str):
+    """The benchmark's two-path row on two records whose plate starts near its cycle (the
+    dT/dt rival's non-centrality 5.2 and 1.3, under the 10.8 a 95 % choice needs): 30006
+    keeps the dT/dt term and lists two paths as fitting as well (through the one-lag fit's
+    3600 s, open: a bound, predicting better); 30017 chooses two paths, c₁, c₂ and the lags
+    far along the ridge and "not resolved", the response at the drive within 5 % and
+    0.1 rad of the generator's with 68 % intervals."""
+    from benchmarks.bench_explain_weekend import _true_response, explain_weekend, rows_paths
+
+    row = next(r for r in rows_paths() if r.name == "path: two paths")
+    ex, _ = explain_weekend(row.weekend, seed)
+    th = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    assert th and th[0].mechanism == chosen
+    pf = ex.channels["x"].thermal.path
+    if chosen == "rate":
+        assert "two_path" in pf.as_well and "two_path" not in th[0].alternatives
+        assert pf.to_dict()["mechanism_fits_as_well"] == ["two_path"]
+        return
+    p, iv = th[0].params, th[0].intervals
+    assert not {"coefficient", "coefficient_2", "lag_s", "lag_2_s"} & set(iv)
+    assert "not resolved (no interval: the drive is one line" in th[0].evidence
+    g = _true_response(row.weekend, p["drive_period_s"])
+    assert p["gain_at_drive"] == pytest.approx(abs(g), rel=0.05)
+    assert abs(p["phase_at_drive_rad"] - np.angle(g)) < 0.1
+    assert {"gain_at_drive", "phase_at_drive_rad"} <= set(iv)
