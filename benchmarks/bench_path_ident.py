@@ -26,6 +26,13 @@ Preisach elementary hysteron, explain's candidate now). ``--reconstruct`` (with
 rounded readings cross (k + ½)·0.0625 K, kept inside each reading's own cell), the rounding
 an error in the regressor. docs/explain.md ("Hysteresis: a relay on the temperature behind
 the readings") gives the figures.
+
+The ``rate`` rival here is c·u_L + r·du_L/dt, which holds two paths (0, L) exactly
+(r·du_L/dt = (r/L)·(T − u_L)): explain's dT/dt candidate is r·dT/dt of the channel itself
+since lag23, which does not. ``record_resolves`` (paths23c) measures explain's candidate on
+each record's own drive, in the time domain with the noise's exact covariance and the
+lags' start states as nuisances: λ 1.3–110 on the two-path row's default seeds
+(docs/explain.md, "Two paths on one drive line: what each record resolves").
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ import math
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -165,3 +173,102 @@ def main(argv: list[str]) -> int:
     print("a 95 % choice between the truth and its best rival needs λ ≳ 11 "
           f"(P(right) = Φ(√λ/2)); Φ(√λ/2) at λ = 2: {0.5 * (1 + math.erf(1 / 2)):.2f}")
     return 0
+
+
+# --------------------------------------------------------------------------------------------
+# what one record of the two-path row resolves (paths23c): GLS in the time domain on block
+# means with the noise's exact covariance, the lag filters' start states as nuisances
+
+#: Samples per block mean of the identifiability calculation (40 s at 10 Hz)
+ID_BLOCK = 400
+#: The non-centrality a 95 % choice between two models needs: Φ(√λ/2) = 0.95
+LAMBDA_95 = (2 * 1.6448536269514722) ** 2
+#: The rival dT/dt term's static lags (s) the calculation tries
+RATE_LAGS = (0, 5, 10, 15, 20, 30, 45, 60, 90, 120, 180, 240, 360, 480, 600, 900, 1200, 1800)
+
+
+def block_noise_cov(n: int, m: int, rate_hz: float, n_white: float, b_inst: float,
+                    k_rrw: float) -> NDArray:
+    """The exact covariance of the means of ``m``-sample blocks of the weekend generator's
+    noise over ``n`` samples: white (N²·rate per sample), a random walk from zero at the
+    record's start (K²·Δt·(min(i, j) + 1)) and Kasdin's flicker filter run from the start
+    (Σ_k h_(i−k)·h_(j−k), h the generator's coefficients): both start at the record's start,
+    so neither is stationary, and the block means' covariance is summed directly."""
+    nb = n // m
+    dt = 1.0 / rate_hz
+    C = np.eye(nb) * n_white**2 * rate_hz / m
+    i = np.arange(nb * m).reshape(nb, m) + 1.0
+    mid = i.mean(axis=1)
+    rw = np.minimum.outer(mid, mid)
+    for a in range(nb):
+        rw[a, a] = float(np.minimum.outer(i[a], i[a]).mean())
+    C += k_rrw**2 * dt * rw
+    k = np.arange(1, n)
+    h = np.concatenate([[1.0], np.cumprod((k - 1 + 0.5) / k)])
+    hc = np.concatenate([[0.0], np.cumsum(h)])
+    starts = np.arange(nb) * m
+    for k0 in range(0, n, 4000):
+        kk = np.arange(k0, min(n, k0 + 4000))
+        hi = np.clip(starts[:, None] + m - kk[None, :], 0, n)
+        lo = np.clip(starts[:, None] - kk[None, :], 0, n)
+        A = (hc[hi] - hc[lo]) / m
+        C += b_inst**2 * (A @ A.T)
+    return C
+
+
+def record_resolves(weekend: Any, seed: int, truth: dict[str, float],
+                    whiten: NDArray) -> dict[str, float]:
+    """What record ``seed`` of a two-path row (``weekend``: lag 0 and c₂ through the plate's
+    900 s) can resolve, from its own noise-free drive (the logged channel not rounded) and
+    ``whiten`` (the Cholesky factor of the inverse block-noise covariance,
+    ``block_noise_cov``): ``lambda_rate``, the non-centrality between the true signal and
+    the best dT/dt term of explain's candidate (c·u_L + r·dT/dt of the channel, L on
+    ``RATE_LAGS``, the start state a nuisance); ``sd_coefficient``, ``sd_coefficient_2``,
+    ``sd_lag_s``, ``sd_lag_2_s``: the Cramér–Rao standard deviations of the two-path
+    model's four parameters, all unknown (the start states and an offset nuisances)."""
+    from avard.core.explain.thermal_fit import lag_filter
+    from avard.core.explain.thermal_paths import Column, path_columns
+
+    import tests.support.weekend as wk
+
+    w = replace(weekend, N=0.0, B=0.0, K=0.0)
+    old = wk.STEP_C
+    wk.STEP_C = 1e-12
+    try:
+        acc, temps, _names, _truth = wk.make(seed, w)
+    finally:
+        wk.STEP_C = old
+    rate = float(w.rate_hz)
+    n = len(acc)
+    T = temps[:, 0]
+    have = np.flatnonzero(np.isfinite(T))
+    T = np.interp(np.arange(n), have, T[have])
+    m = ID_BLOCK
+    nb = n // m
+
+    def blocks(x: NDArray) -> NDArray:
+        return np.asarray(x[:nb * m].reshape(nb, m).mean(axis=1))
+
+    t = (np.arange(nb) + 0.5) * m / rate
+    y = blocks(acc[:, 0])
+
+    def resid(X: NDArray) -> float:
+        A, b = whiten.T @ X, whiten.T @ y
+        beta, *_ = np.linalg.lstsq(A, b, rcond=None)
+        r = b - A @ beta
+        return float(r @ r)
+
+    u = {L: blocks(lag_filter(T, float(L), rate)) for L in RATE_LAGS}
+    dT = blocks(path_columns(T, [Column("rate", 0.0)], rate)[:, 0])
+    one = np.ones(nb)
+    lam = min(resid(np.column_stack([u[L], dT, one] + ([np.exp(-t / L)] if L else [])))
+              for L in RATE_LAGS)
+    c1, c2, L2 = truth["coefficient"], truth["coefficient_2"], truth["lag_2_s"]
+    u2 = {d: blocks(lag_filter(T, L2 + d, rate)) for d in (-1.0, 1.0)}
+    J = np.column_stack([u[0], c1 * (blocks(lag_filter(T, 1.0, rate)) - u[0]),
+                         0.5 * (u2[1.0] + u2[-1.0]), c2 * 0.5 * (u2[1.0] - u2[-1.0]),
+                         one, np.exp(-t / L2)])
+    A = whiten.T @ J
+    sd = np.sqrt(np.diag(np.linalg.inv(A.T @ A))[:4])
+    return {"lambda_rate": lam, "sd_coefficient": float(sd[0]), "sd_lag_s": float(sd[1]),
+            "sd_coefficient_2": float(sd[2]), "sd_lag_2_s": float(sd[3])}
