@@ -938,30 +938,31 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     whole = sum(parts[1:], start=parts[0])
     idx = [[where[c] for c in t.cols] for t in fine]
     n = 2
-    least: float | None = None
+    # the coefficients' octaves: a dT/dt term's from its rate floor (``_rate_floor``), θ and
+    # the deviance still on every τ the candidates were compared on (the short τ hold what
+    # places L along the ridge: with them left out too, L slid to 60–120 s and c 9–25 % high)
+    parts_c = parts
     if kind == "rate":
-        # the local grid's least deviance on every τ the candidates were compared on (the
-        # coarse profile's points are counted against it)
-        v_all = weigh(whole)
-        least = min(_dev(v_all, ix, _fit(v_all, ix)) for ix in idx)
         m_min = _rate_floor(Ts, rate, whole, where[Column("u", theta[0])],
                             where[Column("rate", 0.0)], theta[0], min_tau)
-        parts = [_from_octave(p, m_min) for p in parts]
-        whole = sum(parts[1:], start=parts[0])
+        parts_c = [_from_octave(p, m_min) for p in parts]
+    whole_c = sum(parts_c[1:], start=parts_c[0])
 
-    def best(v: _View) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
+    def best(v: _View, vc: _View
+             ) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
         fits = [_fit(v, ix) for ix in idx]
         devs = np.array([_dev(v, ix, b) for ix, b in zip(idx, fits, strict=True)])
-        coef = np.array([f[:n] for f in fits])
+        coef = np.array([f[:n] for f in (fits if vc is v else [_fit(vc, ix) for ix in idx])])
         th, b = _vertex(fine, devs, coef)
         return th, b, devs, coef
 
     vw = weigh(whole)
-    th, b, devs, fits = best(vw)
+    th, b, devs, fits = best(vw, vw if parts_c is parts else weigh(whole_c))
     vjk = [weigh(whole - p) for p in parts]
+    vjk_c = vjk if parts_c is parts else [weigh(whole_c - p) for p in parts_c]
     g = int(np.argmin(devs))
-    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk]))
-    jk = [best(v)[:2] for v in vjk]
+    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk_c]))
+    jk = [best(v, vc)[:2] for v, vc in zip(vjk, vjk_c, strict=True)]
     se_re = _jk_se(np.array([x[1] for x in jk]))
     tse = _jk_se(np.array([x[0] for x in jk])) * T68
     se = np.maximum(se_fixed, se_re) * T68
@@ -976,13 +977,12 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
         pm = [net_rate(f, t) for f, t in zip(fits[flat], thetas[flat], strict=True)]
         net = (m, min(m - m_se, *pm), max(m + m_se, *pm))
     return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
-                    fits[flat], thetas[flat],
-                    float(devs.min() if least is None else least), net)
+                    fits[flat], thetas[flat], float(devs.min()), net)
 
 
 def _rate_floor(Ts: NDArray, rate: float, whole: OctaveSums, iu: int, ir: int, lag: float,
                 min_tau: float) -> int:
-    """The shortest octave (samples) a dT/dt term's refined fit reads: the first from
+    """The shortest octave (samples) a dT/dt term's refined coefficients read: the first from
     ``min_tau`` (the linear column's rounding floor) where the readings' rounding is no
     larger a share of the rate column's Allan variance than it is of the linear column's
     (columns ``iu``, ``ir`` of ``whole``) at that floor, by the same model
