@@ -82,7 +82,10 @@ parameters are not resolved (``PathScore.resolved`` False), reported with no int
 For two paths and dT/dt, when they may be chosen, θ is continuous instead (``_refine``): a
 local grid around the coarse optimum and a parabola per lag, on the whole record and in
 each delete-a-part fit, so the jackknife with θ re-chosen is the estimator's spread and not
-the coarse grid's steps; their profile's Δ is scaled by the Birge factor either way
+the coarse grid's steps (a dT/dt term's from the octave where the readings' rounding is no
+larger a share of its rate column than of the linear column at the rounding floor,
+``_rate_floor``: an error in the regressor pulled r − c·L low there); their profile's Δ is
+scaled by the Birge factor either way
 (``profile_delta(two_sided=True)``: the one-lag weights hold the signal one lag leaves, so
 the deviance is several times too small a scale).
 An ``AVERAGED`` candidate (the hysteresis) reports the likelihood-weighted average over the
@@ -736,10 +739,14 @@ def describe(s: PathScore) -> tuple[dict[str, float], dict[str, list[float]]]:
             del iv[k]
     if s.kind == "rate" and s.net:
         p["rate_coupling_beside_lag"] = p["rate_coupling"]
-        # the interval spans the ridge: r − c·L's own (L = 0's end) and the split's at L
-        lo, hi = iv.pop("rate_coupling")
+        # r − c·L's own interval (its jackknife with θ re-chosen, widened to the local
+        # profile): r − c·L is the same anywhere along the ridge, so not widened to the
+        # split's interval at the fitted L (that hull held the truth on 96 % of the dT/dt
+        # row's records: it hedged r − c·L's 3 % bias from the readings' rounding, which
+        # ``_rate_floor`` now keeps out)
+        iv.pop("rate_coupling")
         p["rate_coupling"] = s.net[0]
-        iv["rate_coupling"] = [min(s.net[1], lo), max(s.net[2], hi)]
+        iv["rate_coupling"] = [s.net[1], s.net[2]]
     return p, (iv if s.resolved else {})
 
 
@@ -1025,7 +1032,8 @@ class _Refined(NamedTuple):
 def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray, Ts: NDArray,
             rate: float, edges: NDArray, cut: NDArray[np.bool_], weigh: _Weights,
             delta: float, columns: dict[Column, NDArray[np.float64]] | None,
-            period_s: float = math.nan, share: float = math.nan) -> _Refined:
+            period_s: float = math.nan, share: float = math.nan,
+            min_tau: float = 0.0) -> _Refined:
     """θ of a ``REFINED`` candidate refined continuously (``_vertex`` on ``_fine_trials``)
     on the whole record and in every delete-a-part fit, from one more pass of the Allan
     covariance over the local grid's regressors: the coefficients' 68 % interval is then
@@ -1040,20 +1048,31 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     whole = sum(parts[1:], start=parts[0])
     idx = [[where[c] for c in t.cols] for t in fine]
     n = 2
+    # the coefficients' octaves: a dT/dt term's from its rate floor (``_rate_floor``), θ and
+    # the deviance still on every τ the candidates were compared on (the short τ hold what
+    # places L along the ridge: with them left out too, L slid to 60–120 s and c 9–25 % high)
+    parts_c = parts
+    if kind == "rate":
+        m_min = _rate_floor(Ts, rate, whole, where[Column("u", theta[0])],
+                            where[Column("rate", 0.0)], theta[0], min_tau)
+        parts_c = [_from_octave(p, m_min) for p in parts]
+    whole_c = sum(parts_c[1:], start=parts_c[0])
 
-    def best(v: _View) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
+    def best(v: _View, vc: _View
+             ) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
         fits = [_fit(v, ix) for ix in idx]
         devs = np.array([_dev(v, ix, b) for ix, b in zip(idx, fits, strict=True)])
-        coef = np.array([f[:n] for f in fits])
+        coef = np.array([f[:n] for f in (fits if vc is v else [_fit(vc, ix) for ix in idx])])
         th, b = _vertex(fine, devs, coef)
         return th, b, devs, coef
 
     vw = weigh(whole)
-    th, b, devs, fits = best(vw)
+    th, b, devs, fits = best(vw, vw if parts_c is parts else weigh(whole_c))
     vjk = [weigh(whole - p) for p in parts]
+    vjk_c = vjk if parts_c is parts else [weigh(whole_c - p) for p in parts_c]
     g = int(np.argmin(devs))
-    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk]))
-    jk = [best(v)[:2] for v in vjk]
+    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk_c]))
+    jk = [best(v, vc)[:2] for v, vc in zip(vjk, vjk_c, strict=True)]
     se_re = _jk_se(np.array([x[1] for x in jk]))
     tse = _jk_se(np.array([x[0] for x in jk])) * T68
     se = np.maximum(se_fixed, se_re) * T68
@@ -1127,6 +1146,37 @@ def drive_line(T: NDArray, rate_hz: float) -> tuple[float, float]:
             f = i + 0.5 * (a - c) / den
     share = float(p[max(i - 2, 1):i + 3].sum() / p[1:].sum())
     return float(n / (f * rate_hz)), share
+
+
+def _rate_floor(Ts: NDArray, rate: float, whole: OctaveSums, iu: int, ir: int, lag: float,
+                min_tau: float) -> int:
+    """The shortest octave (samples) a dT/dt term's refined coefficients read: the first from
+    ``min_tau`` (the linear column's rounding floor) where the readings' rounding is no
+    larger a share of the rate column's Allan variance than it is of the linear column's
+    (columns ``iu``, ``ir`` of ``whole``) at that floor, by the same model
+    (``sawtooth_avar``). A derivative passes the rounding's short periods ×ω² where the
+    drive's is small: at the linear column's floor (205 s on the dT/dt row) the rounding's
+    modelled share of the rate column's Allan variance was 9× its share of the linear
+    column's, an error in the regressor that every part of the record shares (the
+    jackknife does not see it) and that pulled r − c·L 3 % low (errors in variables)."""
+    ms = whole.ms
+    tau = ms / rate
+    cov = whole.cov()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share_u = sawtooth_avar(Ts, rate, tau, lag) / cov[:, iu, iu]
+        share_r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(
+            (Column("rate", 0.0),), np.ones(1))) / cov[:, ir, ir]
+    from_floor = np.flatnonzero(tau >= min_tau * (1 - 1e-9))
+    if not len(from_floor) or not np.isfinite(share_u[from_floor[0]]):
+        return int(ms[0])
+    k0 = int(from_floor[0])
+    ok = [k for k in from_floor.tolist() if share_r[k] <= share_u[k0]]
+    return int(ms[ok[0]]) if ok else int(ms[k0])
+
+
+def _from_octave(s: OctaveSums, m_min: int) -> OctaveSums:
+    """The sums ``s`` with the octaves shorter than ``m_min`` samples counted empty."""
+    return OctaveSums(s.ms, np.where(s.ms >= m_min, s.n, 0), s.s2)
 
 
 def net_rate(beta: NDArray, theta: tuple[float, ...] | NDArray) -> float:
@@ -1317,7 +1367,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             # continuous in the jackknife, the profile no longer stands in for the grid)
             delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]), two_sided=True)
             fr = _refine(kind, ts[i].theta, lags, ys, Ts, rate, edges, cut, weigh, delta,
-                         columns, period, share)
+                         columns, period, share, min_tau)
             net, drive = fr.net, fr.drive
             theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
             b_lo, b_hi = fr.beta_lo, fr.beta_hi
