@@ -565,10 +565,13 @@ def rows_paths() -> list[PathRow]:
     c2, q, r, h = mn("two_path"), mn("quadratic"), mn("rate"), mn("hysteresis")
     ww = 3 * min_detectable_warmup(N, B, K, 900.0)
     return [
+        # the truth the two-path candidate holds exactly (``two_path_truth``), as the
+        # compressor row's
         PathRow("path: two paths", replace(base, second_path=(-c2, 900.0)), "two_path",
-                {"coefficient": c, "coefficient_2": -c2, "lag_2_s": 870.0},
-                f"{c:.3g} m/s²/K (lag 0) and {-c2:.3g} through the plate's 900 s (the logged "
-                "sensor's 30 s: L2 ≈ 870 s)", resolve=True),
+                two_path_truth(c, -c2, 900.0, base.sensor_tau_s),
+                f"{c:.3g} m/s²/K (lag 0) and {-c2:.3g} through the plate's 900 s (from the "
+                "logged sensor, 30 s behind the plate: exactly two paths at 0 and 900 s)",
+                resolve=True),
         PathRow("path: quadratic", replace(base, quadratic=q), "quadratic",
                 {"coefficient": c, "quadratic": q},
                 f"{c:.3g} m/s²/K and {q:.3g} m/s²/K² on (T − mean)²"),
