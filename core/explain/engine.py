@@ -597,21 +597,28 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     # 70). So the path is also chosen with nothing beside it, and an extension chosen there
     # whose signal from the logged temperature alone (nothing of free size or time constant)
     # leaves no warm-up beyond the start state explains that start itself: it is kept, and
-    # no warm-up. A real warm-up is not the logged temperature's and stays in its residual
+    # no warm-up, where it also predicts the held-out halves better than one lag by the
+    # margin with the warm-up beside it (the two-path + compressor record: by 102, there
+    # at its grid's end). One whose gain is the warm-up's is not: the logged temperature
+    # settles at the start too, and a dT/dt term with a 424 s lag read a 900 s warm-up
+    # beside one lag from that settling (its Δ −55 alone, +1.3 beside the warm-up)
     back = list(found)
     alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
                      strict=True))
     for a, th in alone.items():
-        if th.mechanism != "one_lag" and not tr.warmup_beyond_start(
-                Y[:, a] - th.signal(temps), rate_b, nzs[a], th.lag_s).passed:
+        if (th.mechanism != "one_lag" and _gain_beside(out[a], th.mechanism)
+                and not tr.warmup_beyond_start(Y[:, a] - th.signal(temps), rate_b, nzs[a],
+                                               th.lag_s).passed):
             out[a] = th
             del found[a]
-    # the path choice starts from the one lag's fit (its lag, its Allan reference), which the
-    # warm-up moved (a 900 s warm-up beside a 300 s lag: 313–345 s); where that start
-    # chose an extension, the one lag is refitted without the warm-up's first estimate and
-    # the path chosen again beside it; an axis whose path stays one lag keeps its fit (a
-    # refit is 15 % of explain's CPU on a 12 h quiet-lab record)
-    redo = [a for a in found if (th := out[a]) is not None and th.mechanism != "one_lag"]
+    # the path choice starts from the one lag's fit (its lag, its Allan reference, its
+    # test), which the warm-up moved (a 900 s warm-up beside a 300 s lag: 313–345 s; beside
+    # a lag of 0, z 5.3 against 6.2 for a coupling at 3× its minimum); where that start
+    # chose an extension or failed its test, the one lag is refitted without the warm-up's
+    # first estimate and the path chosen again beside it; an axis whose one lag passes and
+    # stays keeps its fit (a refit is 15 % of explain's CPU on a 12 h quiet-lab record)
+    redo = [a for a in found if (th := out[a]) is not None
+            and (th.mechanism != "one_lag" or not th.passed)]
     if redo:
         Yw = Y[:, redo] - np.column_stack([first[a] for a in redo])
         again = with_paths(fit_thermal_axes(Yw, temps, tnames, rate_b, holes), Y[:, redo],
@@ -630,6 +637,17 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
             settled[a] = cz.cause_signal(tr.refine_compound(r, rate_b, nzs[a], [c])[0],
                                          len(Y), rate_b)
     return out, settled
+
+
+def _gain_beside(th: ThermalFit | None, kind: str) -> bool:
+    """Whether the path ``kind`` predicts the held-out halves better than one lag by the
+    margin an extension needs in ``th``'s path choice (made with a warm-up beside every
+    candidate); False where that choice kept no path (one lag failed its test and no
+    extension passed)."""
+    pf = None if th is None else th.path
+    if pf is None or kind not in pf.scores:
+        return False
+    return pf.scores[kind].heldout < pf.scores["one_lag"].heldout - pf.margin
 
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
