@@ -583,6 +583,12 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
             # its T and size refined by the compound search's joint fit, without the
             # start state (the scan's size is the share left beside it)
             c = tr.refine_compound(r, rate_b, nz, [c])[0]
+            if c.params["time_constant_s"] > len(Y) / rate_b / 4:
+                # refined beyond the scan's longest T (a quarter of the record): a slow
+                # trend of the record, not a warm-up to hold beside the paths (T 6105 s on
+                # a 4 h record beside a plain 300 s lag: two paths won beside it)
+                moved.discard(a)
+                continue
             found[a] = (float(c.params["time_constant_s"]),)
             first[a] = cz.cause_signal(c, len(Y), rate_b)
     # the path chosen with the warm-up beside every candidate, its size fitted jointly with
