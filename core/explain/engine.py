@@ -546,67 +546,119 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     thermal model's start state (its own settling e^(−t/τ_L), of any size) or, on an axis
     whose warm-up is not near the lag, by a path with a long second lag or a dT/dt term
     (issue 23: a 2.4e-3 m/s², 15-minute warm-up beside a 5-minute lag was read as two paths or
-    a rate term, or left unclaimed as the start state's). So the one-lag fit comes first, and
-    a warm-up that passes the compound search's warm-up test against the start state
-    (``transients.warmup_beyond_start``) on the axis with that coupling removed is taken out
-    before the path is chosen, and ``_explain_channel`` fits no start state beside it. The
-    one lag is refitted without it only where the path chosen is not one lag (below): a
-    warm-up far from the lag is little like the cycle the regression follows (a 900 s
-    warm-up beside a 300 s lag: lag 313–345 s, coefficient within 11 %, on four records).
-    It is claimed, or not, by the compound search as any warm-up."""
+    a rate term, or left unclaimed as the start state's); taken out before the path is
+    chosen, it takes a quadratic's or a second path's own start with it. So the one-lag fit
+    comes first, a warm-up that passes the compound search's warm-up test against the start
+    state (``transients.warmup_beyond_start``) on the axis with that coupling removed gives
+    its T, and the path is chosen with the warm-up as a nuisance beside every candidate
+    (``thermal_paths.choose_path``'s ``warmups``: its size fitted jointly with each, on the
+    axis as recorded). The warm-up is then tested again beside the path chosen, and one that
+    passes is ``_explain_channel``'s, which fits no start state beside it. It is claimed, or
+    not, by the compound search as any warm-up."""
     fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes)
     settled: list[NDArray[np.float64] | None] = [None] * len(fits)
     nzs: dict[int, dict[str, float]] = {}
+    found: dict[int, tuple[float, ...]] = {}
+    first: dict[int, NDArray[np.float64]] = {}
+    moved: set[int] = set()  # found only without the one lag's start state
     for a, th in enumerate(fits):
-        if th.passed:
-            r = Y[:, a] - th.signal(temps)
-            # the noise of the axis with the coupling out, by the robust Allan variance that
-            # a few large differences (the warm-up's) move little: analyze's fit counts the
-            # thermal cycle as noise (K 6× the truth beside a 2e-3 m/s²/K coupling)
-            nz = nzs[a] = tr.robust_noise(r, rate_b, noise[a]["N"])
-            c = tr.warmup_beyond_start(r, rate_b, nz, th.lag_s)
+        # every axis: a quadratic or a relay the one lag cannot follow may fail the one-lag
+        # test and pass its own (``with_paths``), beside a warm-up as well
+        r = Y[:, a] - th.signal(temps)
+        # the noise of the axis with the coupling out, by the robust Allan variance that
+        # a few large differences (the warm-up's) move little: analyze's fit counts the
+        # thermal cycle as noise (K 6× the truth beside a 2e-3 m/s²/K coupling)
+        nz = nzs[a] = tr.robust_noise(r, rate_b, noise[a]["N"])
+        c = tr.warmup_beyond_start(r, rate_b, nz, th.lag_s)
+        if not c.passed and th.lag_s:
+            # the one lag's own start state is no reference where the warm-up moved that
+            # lag: beside a quadratic a 900 s warm-up pulled it to a lead of −398 s, whose
+            # start state e^(−t/398) took the warm-up up (4.4–4.6 σ against 4.64). Found
+            # here it is only a nuisance beside the paths; it is tested again beside the
+            # path chosen (below) and claimed, or not, by the compound search
+            c = tr.warmup_beyond_start(r, rate_b, nz, 0.0)
             if c.passed:
-                # its T and size refined by the compound search's joint fit, without the
-                # start state (the scan's size is the share left beside it)
-                c = tr.refine_compound(r, rate_b, nz, [c])[0]
-                settled[a] = cz.cause_signal(c, len(Y), rate_b)
-    Yw = Y.copy()
-    for a, w in enumerate(settled):
-        if w is not None:
-            Yw[:, a] -= w
-    out: list[ThermalFit | None] = list(with_paths(fits, Yw, temps, holes))
-    # a warm-up found on the one-lag residual may be a path's own start: q·(u − ū)² is
-    # largest where the temperature is farthest from its mean, often the record's first
-    # minutes (the plate settling from where it started), and a second path through the
-    # plate's long lag settles with it; one lag leaves either in its residual. Taken out, it
-    # bent the quadratic fit on the first part of the record (the quadratic row right on 6 of
-    # 10) and took the second path's start with it (the two-path + compressor row: one lag or
-    # a dT/dt term chosen on the rest, where two paths predicted the record as recorded
-    # better by 70). So on every axis a warm-up was taken out of, the path is chosen again
-    # on the axis as recorded, and an extension chosen there whose signal from the logged
-    # temperature alone (no start state fitted: nothing of free size or time constant)
-    # leaves no warm-up beyond the start state explains that start itself: the warm-up goes
-    # back in. A real warm-up is not the logged temperature's (a 900 s warm-up beside a
-    # 300 s lag from a channel that does not settle stays in that residual and stays out).
-    back = [a for a, w in enumerate(settled) if w is not None and out[a] is not None]
-    if back:
-        again = with_paths([fits[a] for a in back], Y[:, back], temps, holes)
-        for a, th in zip(back, again, strict=True):
-            if th.mechanism != "one_lag" and not tr.warmup_beyond_start(
-                    Y[:, a] - th.signal(temps), rate_b, nzs[a], th.lag_s).passed:
-                out[a], settled[a] = th, None
-    # the path choice starts from the one lag's fit (its lag, its Allan reference), which the
-    # warm-up moved (a 900 s warm-up beside a 300 s lag: 313–345 s); where that start
-    # chose an extension, the one lag is refitted without the warm-up and the path chosen
-    # again (3 of 6 records chose dT/dt or two paths, none after); an axis whose path stays
-    # one lag keeps its fit (a refit is 15 % of explain's CPU on a 12 h quiet-lab record)
-    redo = [a for a, w in enumerate(settled)
-            if w is not None and (th := out[a]) is not None and th.mechanism != "one_lag"]
+                moved.add(a)
+        if c.passed:
+            # its T and size refined by the compound search's joint fit, without the
+            # start state (the scan's size is the share left beside it)
+            c = tr.refine_compound(r, rate_b, nz, [c])[0]
+            if c.params["time_constant_s"] > len(Y) / rate_b / 4:
+                # refined beyond the scan's longest T (a quarter of the record): a slow
+                # trend of the record, not a warm-up to hold beside the paths (T 6105 s on
+                # a 4 h record beside a plain 300 s lag: two paths won beside it)
+                moved.discard(a)
+                continue
+            found[a] = (float(c.params["time_constant_s"]),)
+            first[a] = cz.cause_signal(c, len(Y), rate_b)
+    # the path chosen with the warm-up beside every candidate, its size fitted jointly with
+    # each (``choose_path``'s ``warmups``), on the axis as recorded: a warm-up taken out
+    # before the choice took a quadratic's own start with it (q·(u − ū)² is largest where
+    # the temperature is farthest from its mean, often the record's first minutes: the
+    # warm-up came out 1.5× its size, and the quadratic row beside a real warm-up was right
+    # on 1 of 40), or a second path's (the two-path + compressor row), and one left in was
+    # taken over by a path with a long second lag or a dT/dt term
+    out: list[ThermalFit | None] = list(with_paths(fits, Y, temps, holes, warmups=found))
+    # what was found may be a path's own start: a second path through the plate's long lag
+    # settles with the plate, and one lag leaves that start in its residual (a "warm-up" of
+    # T 3266 s on a two-path + compressor record: beside it, two paths ran to their grid's
+    # end and a dT/dt term was chosen, where two paths alone predict the record better by
+    # 70). So the path is also chosen with nothing beside it, and an extension chosen there
+    # whose signal from the logged temperature alone (nothing of free size or time constant)
+    # leaves no warm-up beyond the start state explains that start itself: it is kept, and
+    # no warm-up, where it also predicts the held-out halves better than one lag by the
+    # margin with the warm-up beside it (the two-path + compressor record: by 102, there
+    # at its grid's end). One whose gain is the warm-up's is not: the logged temperature
+    # settles at the start too, and a dT/dt term with a 424 s lag read a 900 s warm-up
+    # beside one lag from that settling (its Δ −55 alone, +1.3 beside the warm-up)
+    back = list(found)
+    alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
+                     strict=True))
+    for a, th in alone.items():
+        if (th.mechanism != "one_lag" and _gain_beside(out[a], th.mechanism)
+                and not tr.warmup_beyond_start(Y[:, a] - th.signal(temps), rate_b, nzs[a],
+                                               th.lag_s).passed):
+            out[a] = th
+            del found[a]
+    # the path choice starts from the one lag's fit (its lag, its Allan reference, its
+    # test), which the warm-up moved (a 900 s warm-up beside a 300 s lag: 313–345 s; beside
+    # a lag of 0, z 5.3 against 6.2 for a coupling at 3× its minimum); where that start
+    # chose an extension or failed its test, or its start state took the warm-up up (found
+    # only without it: a lead of −398 s kept beside a lag-0 coupling, c 0.57 of the truth),
+    # the one lag is refitted without the warm-up's first estimate and the path chosen again
+    # beside it; an axis whose one lag passes and stays keeps its fit (a refit is 15 % of
+    # explain's CPU on a 12 h quiet-lab record)
+    redo = [a for a in found if (th := out[a]) is not None
+            and (th.mechanism != "one_lag" or not th.passed or a in moved)]
     if redo:
-        again = fit_thermal_axes(Yw[:, redo], temps, tnames, rate_b, holes, paths=True)
+        Yw = Y[:, redo] - np.column_stack([first[a] for a in redo])
+        again = with_paths(fit_thermal_axes(Yw, temps, tnames, rate_b, holes), Y[:, redo],
+                           temps, holes, warmups={i: found[a] for i, a in enumerate(redo)})
         for a, th in zip(redo, again, strict=True):
             out[a] = th
+    # the warm-up is then a cause of its own where it is still beyond the start state beside
+    # the path chosen (its T and size refitted there, on the axis less that path's signal)
+    for a in found:
+        th = out[a]
+        if th is None or not th.passed:
+            continue
+        r = Y[:, a] - th.signal(temps)
+        c = tr.warmup_beyond_start(r, rate_b, nzs[a], th.lag_s)
+        if c.passed:
+            settled[a] = cz.cause_signal(tr.refine_compound(r, rate_b, nzs[a], [c])[0],
+                                         len(Y), rate_b)
     return out, settled
+
+
+def _gain_beside(th: ThermalFit | None, kind: str) -> bool:
+    """Whether the path ``kind`` predicts the held-out halves better than one lag by the
+    margin an extension needs in ``th``'s path choice (made with a warm-up beside every
+    candidate); False where that choice kept no path (one lag failed its test and no
+    extension passed)."""
+    pf = None if th is None else th.path
+    if pf is None or kind not in pf.scores:
+        return False
+    return pf.scores[kind].heldout < pf.scores["one_lag"].heldout - pf.margin
 
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,

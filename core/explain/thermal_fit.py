@@ -1214,7 +1214,8 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
 
 def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
                      holes: Holes | None = None, lag_intervals: bool = True,
-                     paths: bool = False) -> list[ThermalFit]:
+                     paths: bool = False,
+                     warmups: dict[int, tuple[float, ...]] | None = None) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
     channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
@@ -1222,7 +1223,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     ``lag_intervals`` False: no jackknife of the lag (the held-out halves need only the
     estimates); the lag's interval is then the estimate itself. ``paths``: for each axis
     whose coupling passes its test, the thermal path beyond one lag chosen by held-out
-    likelihood (``thermal_paths.choose_path``) on its driving channel."""
+    likelihood (``thermal_paths.choose_path``) on its driving channel, beside the warm-ups
+    ``warmups`` (``with_paths``)."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
     record_s = len(Y) / rate_hz
@@ -1258,15 +1260,18 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
                   floors) for a in range(Y.shape[1])]
-    return with_paths(fits, Y, temps, holes, floors) if paths else fits
+    return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
 
 
 def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,
-               floors: dict[int, float] | None = None) -> list[ThermalFit]:
+               floors: dict[int, float] | None = None,
+               warmups: dict[int, tuple[float, ...]] | None = None) -> list[ThermalFit]:
     """``fits`` (``fit_thermal_axes`` of the columns of ``Y``) each with the thermal path
     chosen on its driving channel (``thermal_paths.choose_path``), on every axis: a response
     the one lag cannot follow (quadratic, hysteresis) may fail the one-lag test and pass its
-    own. ``floors``: each channel's rounding floor (τ s), computed when not given."""
+    own. ``floors``: each channel's rounding floor (τ s), computed when not given;
+    ``warmups``: per axis, the time constants (s) of the warm-ups found on it, fitted as
+    nuisance beside every candidate."""
     Y = np.asarray(Y, dtype=float)
     if floors is None:
         floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
@@ -1274,13 +1279,14 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     # the path regressors of a channel, built once for all the axes it drives (the same
     # slow view of the same channel: the same columns)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
-    return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}))
+    return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}),
+                       (warmups or {}).get(a, ()))
             for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
-               floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None
-               ) -> ThermalFit:
+               floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None,
+               warmups: tuple[float, ...] = ()) -> ThermalFit:
     """``fit`` with the thermal path chosen on its driving channel; when the path is not one
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
@@ -1294,7 +1300,7 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     edf = np.asarray(ref.edf, dtype=float)
     edf = edf[:, 0] if edf.ndim == 2 else edf
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep, columns)
+                     floors.get(j, 0.0), keep, columns, warmups)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen

@@ -197,7 +197,7 @@ AVERAGED = ("hysteresis",)
 
 
 class Column(NamedTuple):
-    kind: str  # "u", "start", "quad", "rate", "relay"
+    kind: str  # "u", "start", "quad", "rate", "relay", "warmup"
     lag: float
     width: float = 0.0
 
@@ -333,7 +333,7 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
             continue
         if c.kind == "u":
             x = u(c.lag)
-        elif c.kind == "start":
+        elif c.kind in NUISANCE:
             x = np.exp(-t / abs(c.lag)) if c.lag else np.zeros(M)
         elif c.kind == "quad":
             # on the temperature behind the readings, as the relay (below): squared, the
@@ -524,6 +524,18 @@ class Trial(NamedTuple):
     n_terms: int
 
 
+#: The time constants, as multiples of a warm-up's found one, of the nuisance columns
+#: e^(−t/T) that stand for it beside every candidate (``choose_path``'s ``warmups``): its
+#: T was found on the one-lag residual, which a quadratic's own start bends (T 696 s for
+#: 900), and a shape fixed at that T left the rest for the quadratic to take in the parts
+#: it lives in (its jackknife z 7 for 26 with the T known); sums of these three follow a
+#: warm-up's e^(−t/T') for T' from T/2 to 2T
+WARMUP_SPAN = (0.5, 1.0, 2.0)
+#: The column kinds that are nuisance beside a candidate's couplings: the lag filter's start
+#: state and a warm-up found beside the coupling (``choose_path``'s ``warmups``)
+NUISANCE = ("start", "warmup")
+
+
 def _start(*lags: float) -> tuple[Column, ...]:
     return tuple(Column("start", L) for L in sorted({abs(x) for x in lags if x}))
 
@@ -704,7 +716,7 @@ class PathFit:
 
 
 def s_terms(s: PathScore) -> int:
-    return sum(1 for c in s.cols if c.kind != "start")
+    return sum(1 for c in s.cols if c.kind not in NUISANCE)
 
 
 _NAMES = {"one_lag": (("coefficient",), ("lag_s",)),
@@ -1033,13 +1045,14 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
             rate: float, edges: NDArray, cut: NDArray[np.bool_], weigh: _Weights,
             delta: float, columns: dict[Column, NDArray[np.float64]] | None,
             period_s: float = math.nan, share: float = math.nan,
-            min_tau: float = 0.0) -> _Refined:
+            min_tau: float = 0.0, extra: tuple[Column, ...] = ()) -> _Refined:
     """θ of a ``REFINED`` candidate refined continuously (``_vertex`` on ``_fine_trials``)
     on the whole record and in every delete-a-part fit, from one more pass of the Allan
     covariance over the local grid's regressors: the coefficients' 68 % interval is then
     the larger of the jackknife with θ fixed and with θ re-chosen, both at the estimator's
-    resolution, not the coarse grid's, and θ's is the jackknife of θ re-chosen."""
-    fine = _fine_trials(kind, theta, lags)
+    resolution, not the coarse grid's, and θ's is the jackknife of θ re-chosen. ``extra``:
+    the nuisance warm-up columns beside every point (``choose_path``)."""
+    fine = [t._replace(cols=t.cols + extra) for t in _fine_trials(kind, theta, lags)]
     cols = sorted({c for t in fine for c in t.cols})
     where = {c: j + 1 for j, c in enumerate(cols)}
     # a copy: the local grid's columns are this axis's own, not worth keeping for others
@@ -1194,13 +1207,20 @@ def net_rate(beta: NDArray, theta: tuple[float, ...] | NDArray) -> float:
 def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
                 edf_ref: NDArray, floor_s: float = 0.0,
                 keep: NDArray[np.bool_] | None = None,
-                columns: dict[Column, NDArray[np.float64]] | None = None) -> PathFit:
+                columns: dict[Column, NDArray[np.float64]] | None = None,
+                warmups: tuple[float, ...] = ()) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
     channel's rounding floor (``thermal_fit.rounding_floor_tau``); ``keep`` the blocks
     outside the log's holes; ``columns`` the regressors already built from this ``T`` for
-    another axis of the same length and rate (``path_columns``'s ``done``)."""
+    another axis of the same length and rate (``path_columns``'s ``done``); ``warmups``
+    the time constants (s) of warm-ups e^(−t/T) found beside the coupling, each a nuisance
+    column beside every candidate (as the start states: its size fitted with each
+    candidate's couplings, refitted on the held-out half), so every candidate is compared
+    with the warm-up removed jointly, none with a warm-up removed before it that took part
+    of its own start (a quadratic's: the temperature farthest from its mean in the first
+    minutes) or gave it its own."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -1212,7 +1232,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     record_s = len(ys) / rate
     lags = sorted({float(x) for x in LAG_GRID_S if x <= record_s / 8} | {round(lag0, 3)})
     leads = quadratic_leads(record_s, rate)
-    per_kind = {k: trials(k, lags, leads) for k in CANDIDATES}
+    extra = tuple(Column("warmup", round(float(x) * k, 3))
+                  for x in sorted(set(warmups)) for k in WARMUP_SPAN)
+    per_kind = {k: [t._replace(cols=t.cols + extra) for t in trials(k, lags, leads)]
+                for k in CANDIDATES}
     cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
     where = {c: i + 1 for i, c in enumerate(cols)}
     X = np.column_stack([ys, path_columns(Ts, cols, rate, columns)])
@@ -1247,7 +1270,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     # those, the deviances grow 3–14× on the dT/dt and hysteresis rows and the margins
     # calibrated on this scale no longer hold; left as it is)
     v0 = _view(whole, edf_v, n_v, np.ones(len(ms), dtype=bool))
-    one = [where[c] for c in trials("one_lag", [round(lag0, 3)])[0].cols]
+    one = [where[c] for c in trials("one_lag", [round(lag0, 3)])[0].cols + extra]
     full = whole.cov()
     s_ref = np.full(len(ms), np.nan)
     r0 = _resid(_View(full, np.ones(len(ms)), np.ones(len(ms))), one,
@@ -1345,7 +1368,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # intervals), so they carry no interval either
         resolved = kind == "one_lag" or not (open_end or bool(np.any(
             (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
-        cols_i = ts[i].cols  # (beta: the best point's, or the average's above)
+        # (beta: the best point's, or the average's above; the warm-ups beside it are the
+        # record's, not the path's: its signal fits no size of theirs)
+        cols_i = tuple(c for c in ts[i].cols if c.kind != "warmup")
         b_lo, b_hi = beta - se_iv, beta + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
@@ -1367,7 +1392,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             # continuous in the jackknife, the profile no longer stands in for the grid)
             delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]), two_sided=True)
             fr = _refine(kind, ts[i].theta, lags, ys, Ts, rate, edges, cut, weigh, delta,
-                         columns, period, share, min_tau)
+                         columns, period, share, min_tau, extra)
             net, drive = fr.net, fr.drive
             theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
             b_lo, b_hi = fr.beta_lo, fr.beta_hi
