@@ -98,7 +98,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import NamedTuple
@@ -118,7 +118,7 @@ from avard.core.explain.thermal_fit import (
     rounding_correlation_s,
 )
 from avard.core.model.nnls import _lstsq
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
            "min_detectable_path", "path_columns"]
@@ -1096,9 +1096,9 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
         # r − c·L, what the response resolves where r and L apart trade (``net_rate``): its
         # jackknife with θ re-chosen, widened to the local profile's points
         m = net_rate(b, th)
-        m_se = float(_jk_se(np.array([[net_rate(x[1], x[0])] for x in jk]))[0]) * T68
-        pm = [net_rate(f, t) for f, t in zip(fits[flat], thetas[flat], strict=True)]
-        net = (m, min(m - m_se, *pm), max(m + m_se, *pm))
+        net = (m, *_widened(m, [net_rate(x[1], x[0]) for x in jk],
+                            [net_rate(f, t) for f, t in zip(fits[flat], thetas[flat],
+                                                            strict=True)]))
     drive: tuple[float, ...] = ()
     if kind == "two_path" and math.isfinite(period_s):
         # the response at the drive's period, what a drive of one line resolves whatever the
@@ -1107,17 +1107,22 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
         gj = np.array([drive_response(x[1], x[0], period_s) for x in jk])
         gp = np.array([drive_response(f, t, period_s) for f, t in
                        zip(fits[flat], thetas[flat], strict=True)])
-        gse = _jk_se(np.abs(gj)[:, None])[0] * T68
-        # the phase's spread about the record's own (no wrap: the parts' phases sit close)
-        dph = np.angle(gj * np.conj(g0))
-        pse = _jk_se(dph[:, None])[0] * T68
-        pp = np.angle(gp * np.conj(g0))
         a, ph = float(abs(g0)), float(np.angle(g0))
-        drive = tuple(float(x) for x in (
-            period_s, a, min(a - gse, *np.abs(gp)), max(a + gse, *np.abs(gp)),
-            ph, ph + min(-pse, *pp), ph + max(pse, *pp), share))
+        a_lo, a_hi = _widened(a, np.abs(gj), np.abs(gp))
+        # the phase's spread about the record's own (no wrap: the parts' phases sit close)
+        d_lo, d_hi = _widened(0.0, np.angle(gj * np.conj(g0)), np.angle(gp * np.conj(g0)))
+        drive = tuple(float(x) for x in (period_s, a, a_lo, a_hi, ph, ph + d_lo, ph + d_hi,
+                                         share))
     return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
                     fits[flat], thetas[flat], float(devs.min()), net, drive)
+
+
+def _widened(value: float, parts: ArrayLike, points: Iterable[float]) -> tuple[float, float]:
+    """``value``'s 68 % interval as ``_refine`` makes a derived quantity's: the jackknife of
+    its delete-a-part values ``parts`` (θ re-chosen in each), widened to take in its values
+    at the local profile's points ``points``."""
+    se = float(_jk_se(np.asarray(parts, dtype=float)[:, None])[0]) * T68
+    return float(min(value - se, *points)), float(max(value + se, *points))
 
 
 def drive_response(beta: NDArray, theta: tuple[float, ...] | NDArray,
