@@ -102,8 +102,9 @@ def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
 
 
 def _reachable(address: str) -> None:
-    """Raise OSError at once where nothing listens at a tcp:// scheduler address: Dask's
-    Client retries a refused connection until its timeout, so a typo would cost 5 s."""
+    """Raise OSError at once where nothing listens at a tcp:// scheduler address (Dask's
+    Client retries a refused connection until its timeout, so a typo would cost 5 s), and
+    ValueError where its port is malformed."""
     from urllib.parse import urlsplit
 
     parts = urlsplit(address if "://" in address else f"tcp://{address}")
@@ -123,6 +124,9 @@ def _client(args: argparse.Namespace) -> Any:
         try:
             _reachable(args.scheduler)
             return Client(args.scheduler, timeout="5s")
+        except ValueError as exc:              # a malformed address (port, missing parts)
+            raise DataError(f"--scheduler {args.scheduler}: not a scheduler address ({exc}); "
+                            "give one as tcp://HOST:PORT") from exc
         except (OSError, TimeoutError) as exc:
             raise DataError(f"--scheduler {args.scheduler}: no Dask scheduler answers there "
                             f"({exc}); start one (dask scheduler) or leave --scheduler out "

@@ -98,6 +98,8 @@ def test_by_sensor_pools_a_sensors_records(fleet: list[Path], tmp_path: Path) ->
 @pytest.mark.parametrize("args, message", [
     (["missing.npz"], "no such file"),
     (["{a}", "--scheduler", "tcp://127.0.0.1:1"], "no Dask scheduler"),
+    (["{a}", "--scheduler", "tcp://127.0.0.1:99999"], "not a scheduler address"),
+    (["{a}", "--scheduler", "tcp://127.0.0.1"], "not a scheduler address"),
     (["{a}", "--workers", "0"], "--workers 0"),
     (["{a}", "{nosensor}", "--by", "sensor"], "names no sensor"),
 ])
