@@ -80,13 +80,14 @@ def flicker_ladder(
     """
     r = 10.0 ** (1.0 / per_decade)
     n = max(1, math.ceil(math.log(tmax_s / tmin_s) / math.log(r)) + 1)
-    b = np.asarray(b, dtype=float)
-    sigma = b * math.sqrt(math.log(r) / math.pi)
+    sigma: NDArray[np.float64] = (np.asarray(b, dtype=float)
+                                  * math.sqrt(math.log(r) / math.pi))
     ts = [tmin_s * r**k for k in range(n)]
     scale = np.ones(n)
     if dt_s is not None and tmin_s <= 2.0 * dt_s and n > END_RUNGS:
         scale[:END_RUNGS] = _end_correction(ts, dt_s, math.log(r) / math.pi)
-    return [(t, sigma * math.sqrt(f)) for t, f in zip(ts, scale, strict=True)]
+    return [(float(t), sigma * math.sqrt(float(f)))
+            for t, f in zip(ts, scale, strict=True)]
 
 
 def _end_correction(ts: Sequence[float], dt_s: float, w: float) -> NDArray[np.float64]:
@@ -262,6 +263,8 @@ class Level:
     request), so only the last two points are kept between calls.
     """
 
+    h: int  # this grid's step, in samples of the finest grid
+
     def __init__(self, h: int, n_columns: int, sources: list[Source],
                  coarser: Level | None) -> None:
         if coarser is not None and coarser.h % h:
@@ -336,8 +339,8 @@ def lerp(coarse: NDArray[np.float64], q: int, start: int, out: NDArray[np.float6
         return
     head = first_full * q - start
     if head:
-        k = first_full - 1
-        out[:, :head] = coarse[:, k, None] + d[:, k, None] * w[q - head :]
+        i = first_full - 1
+        out[:, :head] = coarse[:, i, None] + d[:, i, None] * w[q - head :]
     n_full = last_full - first_full
     body = out[:, head : head + n_full * q].reshape(out.shape[0], n_full, q)
     np.multiply(d[:, first_full:last_full, None], w, out=body)

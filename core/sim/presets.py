@@ -164,7 +164,8 @@ TABLE3_K_PRINTED = (2.1559e-5, 0.0, 9.1834e-5)     # printed unit m/s²/√s; se
 #: table self-consistent: the N+B+K ADEV minimum is then 1.01× the reported floor 0.664·B on X
 #: (1.39× with K per √s), and B stays the dominant term out to τ ≈ 10⁴ s as the paper's text
 #: says (with K per √s, K would dominate from τ ≈ 3 s). docs/table3.md shows both readings.
-TABLE3_K_PER_SQRT_S = tuple(k / 60.0 for k in TABLE3_K_PRINTED)
+TABLE3_K_PER_SQRT_S = (TABLE3_K_PRINTED[0] / 60.0, TABLE3_K_PRINTED[1] / 60.0,
+                       TABLE3_K_PRINTED[2] / 60.0)
 
 
 def _paper_table3() -> SimConfig:
@@ -226,18 +227,17 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
                     "sinusoids are a list of [axis, amplitude_mps2, frequency_hz(, phase_rad)], "
                     f"e.g. '[[2, 1e-4, 0.5]]'; got {s!r}"
                 )
-            vals = [_float(key, v) for v in s] + [0.0] * (4 - len(s))
-            out.append(tuple(vals))
+            out.append(tuple([_float(key, v) for v in s] + [0.0] * (4 - len(s))))
         return tuple(out)
     if key == "axes":
         seq = value.split(",") if isinstance(value, str) else list(value)
         return tuple(str(s) for s in seq)
     if key == "ds18b20_offset_c":
         seq = value if isinstance(value, list | tuple) else [value, value]
-        vals = tuple(_float(key, v) for v in seq)
-        if len(vals) != 2:
+        pair = tuple(_float(key, v) for v in seq)
+        if len(pair) != 2:
             raise ConfigError("ds18b20_offset_c takes two values (plate, ambient)")
-        return vals
+        return pair
     if key == "range_g":
         return int(_float(key, value))
     if default is None or key in ("flicker_tmin_s", "tempco_ref_c"):
