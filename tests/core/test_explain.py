@@ -125,26 +125,28 @@ def test_null_record_is_clean(tmp_path):
         assert math.isclose(ch.gain, 1.0)
 
 
-def _warmup_case(tmp_path):
+@pytest.fixture(scope="module")
+def warmup_case(tmp_path_factory):
+    """One warm-up record explained once for the two tests that read it."""
     size = 3 * min_detectable_warmup(1.6e-4, 2e-5, 2e-6, 900.0)
-    path, _ = _file(tmp_path, 7, Truth(warmup=(size, 900.0)))
+    path, _ = _file(tmp_path_factory.mktemp("warmup"), 7, Truth(warmup=(size, 900.0)))
     return size, explain_file(open_record(path))
 
 
-def test_warmup_found_with_its_size(tmp_path):
+def test_warmup_found_with_its_size(warmup_case):
     """A 15-minute warm-up at 3× its stated minimum size, on every axis: found, nothing
     else claimed, its size within 20 %."""
-    size, ex = _warmup_case(tmp_path)
+    size, ex = warmup_case
     for ch in ex.channels.values():
         claimed = {f.cause: f for f in ch.claimed}
         assert set(claimed) == {"warmup"}, [f.evidence for f in ch.claimed]
         assert claimed["warmup"].params["size"] == pytest.approx(size, rel=0.2)
 
 
-def test_warmup_time_constant_within_20_percent(tmp_path):
+def test_warmup_time_constant_within_20_percent(warmup_case):
     """Its time constant by generalised least squares with analyze's noise model (ordinary
     least squares scattered 15 % here and missed 20 % on one axis)."""
-    _, ex = _warmup_case(tmp_path)
+    _, ex = warmup_case
     for ch in ex.channels.values():
         p = {f.cause: f for f in ch.claimed}["warmup"].params
         assert p["time_constant_s"] == pytest.approx(900.0, rel=0.2)
