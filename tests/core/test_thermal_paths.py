@@ -62,6 +62,20 @@ def _path(y: np.ndarray, T: np.ndarray):
                        rounding_floor_tau(T, 1.0))
 
 
+@pytest.fixture(scope="module")
+def base_path():
+    """The plain one-lag record's path choice, made once for the tests that only read it."""
+    return _path(*_slow(BASE, 5))
+
+
+@pytest.fixture(scope="module")
+def two_path_record():
+    """A second path through 900 s beside the lag-0 coupling: the record and its path
+    choice, made once for the tests that read it."""
+    y, T = _slow(replace(BASE, second_path=(-4 * C, 900.0)), 5)
+    return y, T, _path(y, T)
+
+
 def test_the_relay_switches_once_the_temperature_turns_back_by_its_width():
     v = np.concatenate([np.linspace(0, 1, 101), np.linspace(1, 0, 101)[1:]])
     r = _relay(v, 0.2)
@@ -125,9 +139,8 @@ def test_the_reconstruction_from_the_readings_crossings_is_closer_than_the_readi
     assert np.all(np.isfinite(z)) and np.all(np.abs(z - toggling) <= 0.0625 / 2 + 1e-12)
 
 
-def test_one_lag_stays_one_lag():
-    y, T = _slow(BASE, 5)
-    pf = _path(y, T)
+def test_one_lag_stays_one_lag(base_path):
+    pf = base_path
     assert pf.kind == "one_lag"
     assert pf.chosen.beta[0] == pytest.approx(C, rel=0.1)
     # a plain lag: no non-linear candidate predicts better, the parameters keep intervals
@@ -185,9 +198,8 @@ def test_a_null_jackknife_z_passes_the_t_threshold_at_its_rate_and_the_normal_on
     assert rate_n > 5 * alpha
 
 
-def test_a_path_fit_uses_the_t_threshold():
-    y, T = _slow(BASE, 5)
-    pf = _path(y, T)
+def test_a_path_fit_uses_the_t_threshold(base_path):
+    pf = base_path
     assert pf.z_threshold > 9.0
 
 
@@ -368,13 +380,13 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     assert _rounding_gain(replace(th, coefficient=-C, lag_s=-60.0)) == pytest.approx(3 * C)
 
 
-def test_two_paths_are_told_from_a_dt_term_by_the_wander_and_a_dt_term_is_named_with_two_paths():
+def test_two_paths_are_told_from_a_dt_term_by_the_wander_and_a_dt_term_is_named_with_two_paths(
+        two_path_record):
     # a second path through 900 s beside the lag-0 coupling, the room one HVAC sine: a
     # dT/dt term sets the same gain and phase at that one frequency, and the room's weak
     # wander is all that tells them apart. Where it does not, the finding names both as
     # equally supported, with no interval, never one alone with one
-    y, T = _slow(replace(BASE, second_path=(-4 * C, 900.0)), 5)
-    pf = _path(y, T)
+    y, T, pf = two_path_record
     # Since the paths' fit sees every octave (lag23), the room's slow wander, where two
     # paths pass c₁ + c₂ and a dT/dt term its static c, tells them apart on this record:
     # the dT/dt term is held out +27 behind one lag, two paths −73 ahead. Two paths alone,
@@ -467,7 +479,8 @@ def test_the_profile_delta_is_one_parameters_68_percent_scaled_by_the_birge_fact
     assert profile_delta(204.0, nu, 2, two_sided=True) == pytest.approx(2.0)
 
 
-def test_the_path_intervals_use_the_68_percent_profile_on_the_deviances_own_scale(monkeypatch):
+def test_the_path_intervals_use_the_68_percent_profile_on_the_deviances_own_scale(
+        monkeypatch, two_path_record):
     """On a two-path calibration record (BASE with a second path through 900 s, seed 5) the
     chosen two paths' intervals are widened to the points within its ``profile_delta`` of
     the best, Δ = 1 times the Birge factor either way (``two_sided``): the weights are the
@@ -477,8 +490,7 @@ def test_the_path_intervals_use_the_68_percent_profile_on_the_deviances_own_scal
     6 either: with it the intervals are wider."""
     import avard.core.explain.thermal_paths as tp
 
-    y, T = _slow(replace(BASE, second_path=(-4 * C, 900.0)), 5)
-    pf = _path(y, T)
+    y, T, pf = two_path_record
     s = pf.scores["two_path"]
     assert pf.kind == "two_path"
     assert s.profile_delta < 1.0 == profile_delta(0.5, np.array([1.0, 2.0]), 2)
