@@ -249,32 +249,38 @@ def _inject_faults(rng, accel, temp, idx, spec) -> dict[str, list]:
         "stuck_s": [],
         "accel_glitch_s": [],
     }
-    ridx = idx[(idx > n * 0.05) & (idx < n * 0.95)]
-    for _ in range(3):
-        i = int(rng.choice(ridx))
-        temp[i, 0] = 85.0
-        out["power_on_85_s"].append(i / rate)
-    for _ in range(2):
-        i = int(rng.choice(ridx))
-        temp[i, int(rng.integers(0, 2))] = -127.0
-        out["read_error_s"].append(i / rate)
-    for _ in range(2):
-        i = int(rng.choice(ridx))
-        temp[i, 0] += 2.5
-        out["spike_s"].append(i / rate)
     # a dropout of 20 min on the plate log (a record of under 3 h gets 8 min)
-    dur = (1200.0 if spec.hours >= 3 else 480.0) * rate
-    s0 = int(rng.uniform(0.3, 0.6) * n)
-    temp[s0 : s0 + int(dur), 0] = np.nan
+    dur = int((1200.0 if spec.hours >= 3 else 480.0) * rate)
+    s0 = int(rng.uniform(0.3, 0.55) * n)
+    temp[s0 : s0 + dur, 0] = np.nan
     out["dropout_s"].append([s0 / rate, (s0 + dur) / rate])
-    # a stuck run of 40 min on the ambient log (the last value repeated)
-    s1 = int(rng.uniform(0.65, 0.8) * n)
-    e1 = s1 + int(2400 * rate)
+    # a stuck run of 40 min on the ambient log (the last value repeated), cut at the record's
+    # end: the screen's rule needs 30 min, so a shorter one is not a fault it can see
+    s1 = int(rng.uniform(0.6, 0.75) * n)
+    e1 = min(s1 + int(2400 * rate), n)
     col = temp[:, 1]
     last = col[s1 - 10 * int(rate) : s1][~np.isnan(col[s1 - 10 * int(rate) : s1])][-1]
     m = ~np.isnan(col[s1:e1])
     col[s1:e1][m] = last
     out["stuck_s"].append([s1 / rate, e1 / rate])
+    # single faulty readings: outside the dropout and the stuck run, apart from each other
+    ridx = idx[(idx > n * 0.05) & (idx < n * 0.95)]
+    ridx = ridx[
+        ((ridx < s0 - 5 * rate) | (ridx > s0 + dur + 5 * rate))
+        & ((ridx < s1 - 5 * rate) | (ridx > e1))
+    ]
+    picks = rng.choice(ridx, 7, replace=False)
+    while np.min(np.diff(np.sort(picks))) < 10 * rate:
+        picks = rng.choice(ridx, 7, replace=False)
+    for i in picks[:3]:
+        temp[i, 0] = 85.0
+        out["power_on_85_s"].append(i / rate)
+    for i in picks[3:5]:
+        temp[i, int(rng.integers(0, 2))] = -127.0
+        out["read_error_s"].append(i / rate)
+    for i in picks[5:]:
+        temp[i, 0] += 2.5
+        out["spike_s"].append(i / rate)
     # acceleration: a 3-sample start-up glitch and one shock
     accel[1:4, :] += 0.6
     k = int(rng.uniform(0.2, 0.8) * n)
