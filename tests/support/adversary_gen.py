@@ -327,9 +327,22 @@ def _die_swing(temps: dict) -> tuple[float, np.ndarray]:
 
 
 def make_record(
-    kind: str, seed: int, path: str | Path, hours: float | None = None, factor: float = 3.0
+    kind: str,
+    seed: int,
+    path: str | Path,
+    hours: float | None = None,
+    factor: float = 3.0,
+    logged: tuple[str, ...] = ("plate", "ambient"),
+    pump_band_hz: float = 0.1,
 ) -> dict:
-    """Write one record of class ``kind`` and its truth file; return the truth."""
+    """Write one record of class ``kind`` and its truth file; return the truth. ``factor``:
+    the hidden effect's size in its stated minima (the pump's amplitude in units of
+    2e-4/3 m/s²); ``logged``: the DS18B20 channels the record holds (plate, ambient);
+    ``pump_band_hz``: how far the pump's line sweeps (linearly, from 3.05 Hz).
+
+    The ambient sensor reads the room through 40 s, the die is the room through the plate's
+    and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
+    would need at low frequency (τ_plate + τ_die − 40 s)."""
     rng0 = np.random.default_rng(seed + 7919)
     path = Path(path)
     noise = dict(DEFAULT_NOISE)
@@ -465,10 +478,10 @@ def make_record(
                 "step_min": smin,
             }
         if kind == "pump":
-            f_a, f_b = 3.05, 3.15
+            f_a, f_b = 3.05, 3.05 + pump_band_hz
             ph = 2 * math.pi * (f_a * t + (f_b - f_a) * t**2 / (2 * t[-1]))
             amp = 30 * noise["x"][0] / math.sqrt(t_rec)
-            amp = max(amp, 2e-4)
+            amp = max(amp, 2e-4) * factor / 3.0
             sig["x"] = amp * np.sin(ph)
             truth["axes"]["x"] = {
                 "cause": "periodic",
@@ -495,7 +508,11 @@ def make_record(
         tau_sensor=spec.tau_sensor,
         t_read=spec.t_read,
         faults=fl,
+        ambient_equivalent_lag_s=spec.tau_plate + spec.tau_die - 40.0,
     )
+    keep = [i for i, name in enumerate(("plate", "ambient")) if name in logged]
+    arrays["temperature_c"] = arrays["temperature_c"][:, keep]
+    arrays["temperature_names"] = arrays["temperature_names"][keep]
     for ax in "xyz":
         truth["axes"].setdefault(ax, {"cause": None})
     np.savez(path, **arrays)
