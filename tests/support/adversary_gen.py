@@ -199,7 +199,7 @@ def die_amplitude(spec: Spec, f0: float, room_amp: float) -> float:
     return room_amp * lag_gain(f0, spec.tau_plate) * lag_gain(f0, spec.tau_die)
 
 
-def synthesize(spec: Spec, seed: int, effects) -> tuple[dict, dict]:
+def synthesize(spec: Spec, seed: int | list[int], effects) -> tuple[dict, dict]:
     """Return (npz arrays, thermal truth). ``effects(t, temps) -> {axis: signal}``."""
     rng = np.random.default_rng(seed)
     n = round(spec.hours * 3600 * spec.rate)
@@ -343,7 +343,9 @@ def make_record(
     The ambient sensor reads the room through 40 s, the die is the room through the plate's
     and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
     would need at low frequency (τ_plate + τ_die − 40 s)."""
-    rng0 = np.random.default_rng(seed + 7919)
+    # every class draws its own noise: the null axes of two classes at one seed are not one
+    ki = KINDS.index(kind)
+    rng0 = np.random.default_rng([seed, ki, 7919])
     path = Path(path)
     noise = dict(DEFAULT_NOISE)
     rate = float(rng0.choice([8.0, 10.0, 12.5]))
@@ -452,7 +454,11 @@ def make_record(
         if kind == "compound":
             T = float(rng.uniform(600, 1500))
             wmin = 6 * math.sqrt(2 * avar(T, *nx)) / 0.40
-            smin = 6 * min(math.sqrt(2 * avar(w_, *nx)) for w_ in np.geomspace(10, t_rec / 4, 30))
+            # windows of at least record/100: docs/explain.md's step minima (1 h … 24 h) come
+            # out of 6·min_w √(2·AVAR(w)) only so (its steps sit on a grid of 100 times)
+            smin = 6 * min(
+                math.sqrt(2 * avar(w_, *nx)) for w_ in np.geomspace(t_rec / 100, t_rec / 4, 30)
+            )
             wsz = factor * wmin * float(rng.choice([-1.0, 1.0]))
             ssz = factor * smin
             t1, t2 = sorted(rng.uniform(0.2, 0.8, 2) * t_rec)
@@ -497,7 +503,7 @@ def make_record(
             truth["axes"]["x"] = {"cause": "drift", "rate_mps3": d, "min": d_min}
         return sig
 
-    arrays, fl = synthesize(spec, seed, effects)
+    arrays, fl = synthesize(spec, [seed, ki], effects)
     truth.update(
         hours=h,
         rate_hz=rate,
