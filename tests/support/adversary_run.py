@@ -2,6 +2,7 @@
 
     python -m tests.support.adversary_run run OUT.jsonl PLAN.json   # one explain at a time
     python -m tests.support.adversary_run table OUT.jsonl [...]     # the Markdown rows
+    python -m tests.support.adversary_run coverage HOURS N SEED0    # issue 24's ADEV intervals
 
 PLAN.json is a list of ``[kind, seed, hours or null, {make_record keywords}]``. Each record
 is written to a temporary directory, explained with one BLAS thread under ``nice``, scored
@@ -224,8 +225,47 @@ def table(files: list[str]) -> list[str]:
     return out
 
 
+def coverage(hours: float, n: int, seed0: int) -> list[str]:
+    """Issue 24's check on this generator: ``avard analyze --json`` of ``n`` records of white
+    + flicker + random walk (the drift class with no drift), and how often each printed τ's
+    68 % ADEV interval holds the closed-form ADEV of the generated processes, at τ ≥ 1 s
+    with ≥ 5 non-overlapping averages, per rate and decade of τ."""
+    import math
+
+    avard = str(Path(sys.executable).with_name("avard"))
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    hit: collections.Counter = collections.Counter()
+    tot: collections.Counter = collections.Counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "noise.npz"
+        for seed in range(seed0, seed0 + n):
+            tr = gen.make_record("drift", seed, p, hours, 0.0)
+            pr = subprocess.run(
+                ["nice", avard, "analyze", str(p), "--json"],
+                capture_output=True,
+                text=True,
+                env=env,
+                check=True,
+            )
+            d = json.loads(pr.stdout)
+            for ax in "xyz":
+                c = d["channels"][ax]
+                for tau, lo, hi in zip(c["tau_s"], c["adev_lo"], c["adev_hi"], strict=True):
+                    if tau < 1.0 or tau > hours * 3600 / 5:
+                        continue
+                    key = (tr["rate_hz"], 10 ** min(3, math.floor(math.log10(tau))))
+                    tot[key] += 1
+                    hit[key] += lo <= math.sqrt(gen.avar(tau, *tr["noise"][ax])) <= hi
+    return [
+        f"{r:g} Hz, τ from {t:g} s: {hit[(r, t)]}/{tot[(r, t)]} = {hit[(r, t)] / tot[(r, t)]:.0%}"
+        for r, t in sorted(tot)
+    ]
+
+
 if __name__ == "__main__":  # pragma: no cover - a command-line tool
     if sys.argv[1] == "run":
         run(sys.argv[2], sys.argv[3])
+    elif sys.argv[1] == "coverage":
+        print("\n".join(coverage(float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))))
     else:
         print("\n".join(table(sys.argv[2:])))
