@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
+from avard.core.analysis.spectrum import line_groups
 from avard.core.errors import FitError
 from avard.core.model.fit import RAMP_OR_WALK
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
@@ -21,6 +22,29 @@ if TYPE_CHECKING:
 
 def _fmt(v: float | None) -> str:
     return "—" if v is None else f"{v:.4g}"
+
+
+def _lines_text(found: list[dict[str, float]]) -> str:
+    """The line finder's lines as its periodic disturbances (``spectrum.line_groups``, as
+    explain reports them): one entry per disturbance, its amplitude with the 68 % interval,
+    a drifting line's band, harmonics, sidebands and how many lines it gathers (a pump swept
+    over 0.02 Hz was printed as 7 separate sinusoids)."""
+    parts = []
+    for g in line_groups(found):
+        iv = (f" [{g.amplitude_lo:.3g}, {g.amplitude_hi:.3g}]"
+              if math.isfinite(g.amplitude_lo) and math.isfinite(g.amplitude_hi) else "")
+        extra = []
+        if g.band_hz is not None:
+            extra.append(f"drifting over {g.band_hz[0]:.5g}–{g.band_hz[1]:.5g} Hz")
+        if len(g.harmonics) > 1:
+            extra.append("harmonics " + ", ".join(str(k) for k in g.harmonics))
+        if g.modulation_hz is not None:
+            extra.append(f"sidebands ±{g.modulation_hz:.4g} Hz")
+        if g.members > 1:
+            extra.append(f"{g.members} lines, one disturbance")
+        parts.append(f"{g.frequency_hz:.4g} Hz × {g.amplitude:.3g}{iv} m/s²"
+                     + (f" ({'; '.join(extra)})" if extra else ""))
+    return ", ".join(parts)
 
 
 def format_table(an: Analysis) -> str:
@@ -77,9 +101,7 @@ def format_table(an: Analysis) -> str:
                 lines.append(f"    {e.note}")
         lines.extend(_drift_lines(ch))
         if ch.lines:
-            s = ", ".join(f"{ln['frequency_hz']:.4g} Hz × {ln['amplitude']:.3g} m/s²"
-                          for ln in ch.lines)
-            lines.append(f"  sinusoids: {s}")
+            lines.append(f"  sinusoids: {_lines_text(ch.lines)}")
         else:
             lines.append("  sinusoids: none found")
         if ch.slow is not None:

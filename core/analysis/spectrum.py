@@ -385,12 +385,16 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
             # Hann skirt would otherwise join it to a sideband a few bins away
             between = psd[k1 + LEAK_BINS + 1:k - LEAK_BINS]
             m = len(between)
+            own = bands[i]
+            # either band holds the other's line: a later line's band grown back over an
+            # earlier line (a pump swept over 0.02 Hz was a drifting line and, inside its
+            # band, a "steady" one)
             joined = (span is not None and span[0] <= k <= span[1]) or (
+                own is not None and own[0] <= k1) or (
                 m > 0 and float(np.mean(between))
                 > wide((k1 + k) // 2) * (1.0 + 3.0 * math.sqrt(2.0 / (nu * m))))
             if joined:
                 clusters[-1].append(i)
-                own = bands[i]
                 lo_k = min(x for x in (span[0] if span else k1, own[0] if own else k))
                 hi_k = max(x for x in (span[1] if span else k, own[1] if own else k))
                 spans[-1] = (lo_k, hi_k)

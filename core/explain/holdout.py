@@ -192,6 +192,14 @@ class Holdout:
                     "it predicts no other data, so there is no held-out gain to measure; "
                     "each cause's own test is the evidence (per-axis χ² in 'channels')")
         if self.gain is None:
+            # an axis with a claim whose held-out fit failed is not "nothing claimed" (a lag
+            # of 1837 s on a 4 h record left too little of each half, and the text said no
+            # cause was claimed beside a FOUND temperature)
+            failed = [f"{k}: {c.reason}" for k, c in self.channels.items()
+                      if c.causes and c.reason is not None]
+            if failed:
+                return ("the axes with a claimed cause could not be held out ("
+                        + "; ".join(failed) + ")")
             return "no cause claimed on any axis: the extended model is the base model"
         return None
 

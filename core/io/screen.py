@@ -98,6 +98,16 @@ KIND_TEXT = {"startup_glitch": "start-up glitch", "shock": "isolated shock",
              "read_error": "read error (-127 °C or out of range)",
              "power_on_85": "85.0 °C power-on value", "spike": "spike",
              "dropout": "dropout (no reading)", "stuck": "stuck reading"}
+# the plural where an "s" at the end would land inside the kind's parenthesis
+_KIND_PLURAL = {"read_error": "read errors (-127 °C or out of range)",
+                "dropout": "dropouts (no reading)"}
+
+
+def _kind_text(kind: str, n: int) -> str:
+    """``n`` stretches of ``kind`` in words: "1 dropout (no reading)", "2 read errors (…)"."""
+    if n == 1:
+        return f"1 {KIND_TEXT.get(kind, kind)}"
+    return f"{n} {_KIND_PLURAL.get(kind) or KIND_TEXT.get(kind, kind) + 's'}"
 
 
 @dataclass
@@ -140,15 +150,15 @@ class ScreenLog:
             return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
                     "dropout or stuck reading)"]
         c = self.counts()
-        head = "screened: " + ", ".join(f"{n} {KIND_TEXT.get(k, k)}{'' if n == 1 else 's'}"
-                                        for k, n in sorted(c.items()))
+        head = "screened: " + ", ".join(_kind_text(k, n) for k, n in sorted(c.items()))
         if self.samples_masked():
             head += f"; {self.samples_masked()} acceleration samples cut out as gaps"
         out = [head]
         for s in self.stretches[:limit]:
+            unit = "sample" if s.kind in ("startup_glitch", "shock") else "reading"
             out.append(f"  {s.channel}: {KIND_TEXT.get(s.kind, s.kind)} at "
                        f"{s.start_s:.6g}–{s.end_s:.6g} s ({s.count} "
-                       f"{'readings' if s.kind not in ('startup_glitch', 'shock') else 'samples'})")
+                       f"{unit}{'' if s.count == 1 else 's'})")
         if len(self.stretches) > limit:
             out.append(f"  … and {len(self.stretches) - limit} more (--json lists all)")
         return out

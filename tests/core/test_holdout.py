@@ -172,3 +172,20 @@ def test_each_parts_allan_variance_is_computed_once_and_is_the_same(monkeypatch)
     want = [ho_mod._fold(f, h, plain, 1.0, True, None, None) for f, h in ((A, B), (B, A))]
     assert len(calls) == 4
     assert got.reason is None and got.folds == want
+
+
+def test_a_claim_whose_held_out_fit_failed_is_not_called_no_claim():
+    """A false hysteresis claim on the adversary's z axis (dtdt, seed 323, plate only: a lag
+    of 1837 s on 4 h) left each half too short once the lag's start was left out; the text
+    said "no cause claimed on any axis" beside the FOUND temperature. It names the failure."""
+    from avard.core.explain.holdout import ChannelHoldout, Holdout
+
+    fail = "held-out fit failed: the held-out part is too short once its first 5740 blocks"
+    ho = Holdout("split", "rec.npz", 1.6, {"y": ChannelHoldout("y", []),
+                                           "z": ChannelHoldout("z", ["temperature"],
+                                                               reason=fail)})
+    assert ho.gain is None
+    why = ho.why_no_gain or ""
+    assert "no cause claimed" not in why and "z: " + fail in why
+    ho_none = Holdout("split", "rec.npz", 1.6, {"y": ChannelHoldout("y", [])})
+    assert "no cause claimed" in (ho_none.why_no_gain or "")

@@ -224,3 +224,34 @@ def test_the_median_floor_skips_only_blocks_the_exact_scale_also_passes(monkeypa
     assert sum(v > 0 for v, _m in floors) > len(floors) // 2  # the floor is found on most
     assert sum(v == 0 for v, _m in floors) > 0  # and refused where it is not proven
     assert sum(e.any() for e in exact) >= 8 and sum(not e.any() for e in exact) >= 8
+
+
+def test_every_fault_of_a_generator_written_apart_is_screened_and_said_in_words(tmp_path):
+    """The adversary's generator (tests/support/adversary_gen.py: its own DS18B20 model, read
+    every 1 or 2 s, its own faults): every 85.0 °C, −127 °C, spike, dropout and 30-min+ stuck
+    run it injects is masked at its time, and the text counts them in plain words (it read
+    "2 read error (-127 °C or out of range)s" and "(1 readings)")."""
+    from avard.core.io.screen import ScreenedSource
+
+    from tests.support.adversary_gen import make_record as adversary_record
+
+    truth = adversary_record("null_faulty", 202, tmp_path / "faulty.npz", hours=2.0)
+    src = ScreenedSource(open_record(tmp_path / "faulty.npz"))
+    for _ in src.blocks():
+        pass
+    log = src.log
+    assert log is not None
+    f = truth["faults"]
+    assert log.counts() == {"power_on_85": 3, "read_error": 2, "spike": 2, "dropout": 1,
+                            "stuck": 1, "startup_glitch": 1, "shock": 1}
+    for kind, key in (("power_on_85", "power_on_85_s"), ("read_error", "read_error_s"),
+                      ("spike", "spike_s")):
+        starts = [s.start_s for s in log.stretches if s.kind == kind]
+        assert all(min(abs(t - s) for s in starts) < 1.0 for t in f[key]), (kind, starts)
+    (d0, d1), = f["dropout_s"]
+    (drop,) = [s for s in log.stretches if s.kind == "dropout"]
+    assert abs(drop.start_s - d0) < 3.0 and abs(drop.end_s - d1) < 3.0
+    text = "\n".join(log.lines(limit=20))
+    assert "2 read errors (-127 °C or out of range)" in text and ")s" not in text
+    assert "1 dropout (no reading)" in text and "3 85.0 °C power-on values" in text
+    assert "(1 reading)" in text and "(1 readings)" not in text

@@ -335,3 +335,29 @@ def test_an_excursions_edge_left_as_a_step_is_tested_as_a_step():
                        6.0, excursion, "")
     edges = tr._normalise([box], 10.0, 4.9)
     assert [(c.cause, c.threshold) for c in edges] == [("bias_step", 4.9)] * 2
+
+
+def test_a_pump_swept_over_a_narrow_band_is_one_disturbance_in_analyze_too(tmp_path):
+    """The adversary's generator (tests/support/adversary_gen.py): a pump swept 3.05 → 3.07 Hz
+    over 1 h. The finder sees two lines; the later one's band, grown back over the earlier
+    one, made one drifting line and one "steady" line inside its band, and analyze's table
+    printed every line of a disturbance as a separate sinusoid. Now: one disturbance, its
+    band, the amplitude of its power (2e-4 m/s² true) with its interval, in both."""
+    from avard.core.analysis.formats import _lines_text
+
+    from tests.support.adversary_gen import make_record as adversary_record
+
+    truth = adversary_record("pump", 110, tmp_path / "pump.npz", 1.0, pump_band_hz=0.02)
+    x = np.load(tmp_path / "pump.npz")["accel"][:, 0]
+    w = WelchAccumulator(1, truth["rate_hz"], welch_nperseg(len(x)))
+    w.update((x - x.mean())[:, None])
+    f, p = w.result()
+    lines = find_lines(f, p[:, 0], w.n_seg)
+    (g,) = line_groups(lines)
+    assert g.kind == "drifting" and g.band_hz is not None
+    assert g.band_hz[0] == pytest.approx(3.05, abs=0.015)
+    assert g.band_hz[1] == pytest.approx(3.07, abs=0.015)
+    assert g.amplitude == pytest.approx(truth["axes"]["x"]["amplitude"], rel=0.1)
+    text = _lines_text(lines)
+    assert text.count("Hz ×") == 1 and "drifting over" in text, text
+    assert f"[{g.amplitude_lo:.3g}, {g.amplitude_hi:.3g}]" in text
