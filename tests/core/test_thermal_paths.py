@@ -1036,6 +1036,31 @@ def test_the_compressor_two_path_rows_truth_is_the_candidate_that_holds_the_gene
     assert row.truth["lag_2_s"] == row.weekend.second_path[1] == 900.0
     assert row.truth["coefficient_2"] == pytest.approx(c2_row * 29 / 30)
     assert row.truth["coefficient"] == pytest.approx(row.weekend.coefficient[0] + c2_row / 30)
+    # the row's size (comp23e): the candidate's c₂ at 3× the fit's own stated minimum, the
+    # lags unknown, on the drive with the compressor's harmonics (docs/explain.md); the
+    # cycle's fundamental is 1.238 of its ±1 °C, and with the lags known the minimum is
+    # over ten times smaller (the row's size before, one the fit cannot resolve)
+    from avard.core.explain.thermal_paths import min_detectable_path
+
+    from benchmarks.bench_explain_weekend import (
+        HOURS,
+        PERIOD,
+        B,
+        K,
+        N,
+        _path_base,
+        compressor_harmonics,
+        min_two_path_compressor,
+    )
+    assert compressor_harmonics()[0][0] == pytest.approx(1.238, abs=1e-3)
+    A = _path_base()[1]
+    m = min_two_path_compressor(A)
+    assert row.truth["coefficient_2"] == pytest.approx(-3 * m)
+    more = tuple((a / math.hypot(1, 2 * math.pi / p * 600) / math.hypot(1, 2 * math.pi / p * 30),
+                  p) for a, p in compressor_harmonics())
+    known = min_detectable_path("two_path", N, B, K, HOURS * 3600, A, PERIOD, 0.0, 900.0,
+                                lines=more, lags_known=True)
+    assert 10 * known < m < math.inf
 
 
 def test_the_drive_is_the_logged_channels_strongest_line_and_its_share():
