@@ -1281,3 +1281,53 @@ def test_a_warm_up_beside_one_lag_is_not_read_as_a_dt_dt_term():
     assert "warmup" in x
     assert x["warmup"].params["size"] == pytest.approx(ww, rel=0.2)
     assert x["warmup"].params["time_constant_s"] == pytest.approx(900.0, rel=0.2)
+
+
+def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_information():
+    """``_leverage_jk_se`` (two paths' coefficients, comp23e): a linear fit on ten parts of
+    which the first holds half the information of the regressor, as a record's start holds
+    most of what tells two paths' lags. Over many records the ordinary delete-a-part
+    jackknife's variance overstates the estimate's scatter (deleting the rich part moves
+    the fit by var_(−g) − var); the leverage-weighted one (Wu 1986) matches it, and with
+    equal parts the two are the same number."""
+    from avard.core.explain.thermal_paths import _jk_se, _leverage_jk_se, _unit_map, _View
+
+    rng = np.random.default_rng(2323)
+    sizes = [40] + [5] * 9  # the first part's regressor also 9× larger in spread below
+    scale = [3.0] + [1.0] * 9
+    M = _unit_map([1, 2], 3)
+    est, v_ord, v_w = [], [], []
+    for _ in range(250):
+        grams = []
+        for n, s in zip(sizes, scale, strict=True):
+            X = np.column_stack([s * rng.standard_normal(n), np.ones(n)])
+            y = X @ np.array([2.0, 0.5]) + rng.standard_normal(n)
+            Z = np.column_stack([y, X])
+            grams.append(Z.T @ Z)
+        whole = sum(grams)
+
+        def view(g: np.ndarray) -> _View:
+            return _View(g[None], np.ones(1), np.ones(1))
+
+        parts = [view(whole - g) for g in grams]
+        fits = np.array([np.linalg.solve((whole - g)[1:, 1:], (whole - g)[1:, 0])
+                         for g in grams])
+        est.append(np.linalg.solve(whole[1:, 1:], whole[1:, 0])[0])
+        v_ord.append(_jk_se(fits)[0] ** 2)
+        v_w.append(_leverage_jk_se(view(whole), parts, M, 2)[0] ** 2)
+    true = float(np.var(est))
+    assert np.mean(v_ord) > 3 * true
+    assert np.mean(v_w) == pytest.approx(true, rel=0.3)
+    # equal parts: the weights are (G − 1)/G each, the ordinary jackknife's (about the
+    # whole's value rather than the parts' mean: the same to the parts' spread's square)
+    grams = []
+    for _ in range(10):
+        X = np.column_stack([rng.standard_normal(20), np.ones(20)])
+        X = X - X.mean(axis=0) * [1, 0]
+        Z = np.column_stack([X @ [2.0, 0.5] + rng.standard_normal(20), X])
+        grams.append(Z.T @ Z)
+    whole = sum(grams)
+    fits = np.array([np.linalg.solve((whole - g)[1:, 1:], (whole - g)[1:, 0]) for g in grams])
+    w = _leverage_jk_se(_View(whole[None], np.ones(1), np.ones(1)),
+                        [_View((whole - g)[None], np.ones(1), np.ones(1)) for g in grams], M, 2)
+    assert w[0] == pytest.approx(_jk_se(fits)[0], rel=0.15)
