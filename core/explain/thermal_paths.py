@@ -1087,12 +1087,15 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk_c]))
     jk = [best(v, vc)[:2] for v, vc in zip(vjk, vjk_c, strict=True)]
     se_re = _jk_se(np.array([x[1] for x in jk]))
-    if kind == "two_path":
+    if kind == "two_path" and share < ONE_LINE_SHARE:
         # the parts hold unequal shares of what tells c₁ and c₂ (the record's start, where
         # the plate settles, tells the lags most): the jackknife weighted by each part's
         # leverage (``_leverage_jk_se``), θ fixed and θ free to first order (the fit
         # linearised in the lags: re-chosen in a part without the start, θ slid along the
-        # ridge by 2–6 times what the whole record's fit scatters over records)
+        # ridge by 2–6 times what the whole record's fit scatters over records). Not on a
+        # drive of one line: there c₁ and c₂ are not resolved whatever their interval, and
+        # the first order of a ridge is no measure of it (c₁'s standard error, which sizes
+        # the removed signal's uncertainty, moved alone along it)
         se_fixed = _leverage_jk_se(vw, vjk, _unit_map(idx[g], X.shape[1]), n)
         se_re = _leverage_jk_se(vw, vjk, _slope_map(fine, g, where, fits[g], X.shape[1]), n)
     tse = _jk_se(np.array([x[0] for x in jk])) * T68
