@@ -1296,7 +1296,7 @@ def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_i
     sizes = [40] + [5] * 9  # the first part's regressor also 9× larger in spread below
     scale = [3.0] + [1.0] * 9
     M = _unit_map([1, 2], 3)
-    est, v_ord, v_w = [], [], []
+    est, v_ord, v_w, dofs = [], [], [], []
     for _ in range(250):
         grams = []
         for n, s in zip(sizes, scale, strict=True):
@@ -1314,10 +1314,14 @@ def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_i
                          for g in grams])
         est.append(np.linalg.solve(whole[1:, 1:], whole[1:, 0])[0])
         v_ord.append(_jk_se(fits)[0] ** 2)
-        v_w.append(_leverage_jk_se(view(whole), parts, M, 2)[0] ** 2)
+        se, nu = _leverage_jk_se(view(whole), parts, M, 2)
+        v_w.append(se[0] ** 2)
+        dofs.append(nu[0])
     true = float(np.var(est))
     assert np.mean(v_ord) > 3 * true
     assert np.mean(v_w) == pytest.approx(true, rel=0.3)
+    # the one rich part leaves few degrees of freedom (Satterthwaite), not the parts' 9
+    assert 1 <= np.median(dofs) < 4
     # equal parts: the weights are (G − 1)/G each, the ordinary jackknife's (about the
     # whole's value rather than the parts' mean: the same to the parts' spread's square)
     grams = []
@@ -1328,6 +1332,8 @@ def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_i
         grams.append(Z.T @ Z)
     whole = sum(grams)
     fits = np.array([np.linalg.solve((whole - g)[1:, 1:], (whole - g)[1:, 0]) for g in grams])
-    w = _leverage_jk_se(_View(whole[None], np.ones(1), np.ones(1)),
-                        [_View((whole - g)[None], np.ones(1), np.ones(1)) for g in grams], M, 2)
+    w, nu = _leverage_jk_se(_View(whole[None], np.ones(1), np.ones(1)),
+                            [_View((whole - g)[None], np.ones(1), np.ones(1)) for g in grams],
+                            M, 2)
     assert w[0] == pytest.approx(_jk_se(fits)[0], rel=0.15)
+    assert nu[0] == pytest.approx(9, abs=1.5)
