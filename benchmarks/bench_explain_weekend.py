@@ -610,11 +610,36 @@ def min_two_lines(kind: str, lines: list[tuple[float, float]], lag2: float) -> f
     harmonics are left out (with them the two-path minimum is 0.93 of this)."""
     from avard.core.explain.thermal_paths import min_detectable_path
 
-    # the compressor two-path row keeps the lags-known minimum (the size the row has been
-    # measured at; docs/explain.md: the lags-unknown one is 11× larger)
     (a0, p0), *more = lines
     return min_detectable_path(kind, N, B, K, HOURS * 3600, a0, p0, 0.0, lag2,
                                lines=tuple(more), lags_known=True)
+
+
+def compressor_harmonics(k_max: int = 15) -> list[tuple[float, float]]:
+    """The compressor cycle's odd harmonics 1, 3, … ``k_max`` at the room: (amplitude K,
+    period s) of compressor_c·tanh(4 sin ωt) (the weekend generator's), its Fourier
+    coefficients taken numerically (1.238, 0.337, 0.142, … of compressor_c)."""
+    x = np.linspace(0.0, 2 * math.pi, 1 << 12, endpoint=False)
+    co = 2 * np.abs(np.fft.rfft(np.tanh(4 * np.sin(x)))) / len(x)
+    return [(float(co[k]) * COMPRESSOR_C, COMPRESSOR_S / k) for k in range(1, k_max + 1, 2)]
+
+
+def min_two_path_compressor(a_hvac: float) -> float:
+    """The stated minimum of the compressor two-path row's second path (docs/explain.md,
+    "Stated minima of the extensions"): the candidate's c₂ through lag(sensor, 900 s) beside
+    a lag-0 path, every parameter the GLS fit estimates unknown, the lags too
+    (``thermal_paths.min_detectable_path(..., lags_known=False)``), on the record's drive at
+    the die: the HVAC (``a_hvac`` K) and the compressor's odd harmonics up to the 15th, each
+    through the plate's and the die's lags."""
+    from avard.core.explain.thermal_paths import min_detectable_path
+
+    def at_die(amp: float, period: float) -> tuple[float, float]:
+        w = 2 * math.pi / period
+        return amp / math.hypot(1.0, w * PLATE_TAU) / math.hypot(1.0, w * 30.0), period
+
+    more = tuple(at_die(a, p) for a, p in compressor_harmonics())
+    return min_detectable_path("two_path", N, B, K, HOURS * 3600, a_hvac, PERIOD, 0.0, 900.0,
+                               lines=more, lags_known=False)
 
 
 def two_path_truth(c: float, c2: float, lag2_s: float, sensor_s: float) -> dict[str, float]:
@@ -639,14 +664,19 @@ def rows_compressor(base: Any, A: float, c: float) -> list[PathRow]:
     drive frequency the two cannot be told apart by any method (docs/explain.md: the best
     dT/dt model fits a true two-path signal to a non-centrality of 0.1–2.3); with two lines a
     GLS on every frequency below the paths' τ floor separates them (28–38). Each extra term at
-    3× its stated minimum on this drive (``min_two_lines``)."""
+    3× its stated minimum on this drive: r − c·L at 3× ``min_two_lines``; the second path's
+    candidate c₂ (at lag 900 s from the logged sensor, ``two_path_truth``) at 3× the fit's
+    own minimum with the lags unknown (``min_two_path_compressor``), so the generator's c₂ is
+    that over 1 − 30/900 (docs/explain.md: before, 3× the lags-known minimum, a size the fit
+    cannot resolve c₂ and L2 at)."""
     w_c = 2 * math.pi / COMPRESSOR_S
     a_c = (1.238 * COMPRESSOR_C / math.hypot(1.0, w_c * PLATE_TAU)
            / math.hypot(1.0, w_c * 30.0))
     lines = [(A, PERIOD), (a_c, COMPRESSOR_S)]
-    c2, r = 3 * min_two_lines("two_path", lines, 870.0), 3 * min_two_lines("rate", lines, 0)
+    r = 3 * min_two_lines("rate", lines, 0)
     comp = replace(base, compressor_c=COMPRESSOR_C, compressor_period_s=COMPRESSOR_S)
     assert comp.die_tau_s == comp.sensor_tau_s  # the first path at lag 0 (two_path_truth)
+    c2 = 3 * min_two_path_compressor(A) / (1.0 - comp.sensor_tau_s / 900.0)
     two = two_path_truth(c, -c2, 900.0, comp.sensor_tau_s)
     return [
         PathRow("path+compressor: two paths", replace(comp, second_path=(-c2, 900.0)),

@@ -1087,6 +1087,18 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk_c]))
     jk = [best(v, vc)[:2] for v, vc in zip(vjk, vjk_c, strict=True)]
     se_re = _jk_se(np.array([x[1] for x in jk]))
+    if kind == "two_path" and share < ONE_LINE_SHARE:
+        # the parts hold unequal shares of what tells c₁ and c₂ (the record's start, where
+        # the plate settles, tells the lags most): the jackknife weighted by each part's
+        # leverage (``_leverage_jk_se``), θ fixed and θ free to first order (the fit
+        # linearised in the lags: re-chosen in a part without the start, θ slid along the
+        # ridge by 2–6 times what the whole record's fit scatters over records). Not on a
+        # drive of one line: there c₁ and c₂ are not resolved whatever their interval, and
+        # the first order of a ridge is no measure of it (c₁'s standard error, which sizes
+        # the removed signal's uncertainty, moved alone along it)
+        se_fixed = _t68_scaled(_leverage_jk_se(vw, vjk, _unit_map(idx[g], X.shape[1]), n))
+        se_re = _t68_scaled(_leverage_jk_se(
+            vw, vjk, _slope_map(fine, g, where, fits[g], X.shape[1]), n))
     tse = _jk_se(np.array([x[0] for x in jk])) * T68
     se = np.maximum(se_fixed, se_re) * T68
     flat = devs <= devs.min() + delta
@@ -1115,6 +1127,92 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
                                          share))
     return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
                     fits[flat], thetas[flat], float(devs.min()), net, drive)
+
+
+def _unit_map(idx: list[int], width: int) -> NDArray[np.float64]:
+    """The map from the columns of X (``width``, y first) to the regressors ``idx``."""
+    M = np.zeros((width, len(idx)))
+    M[idx, np.arange(len(idx))] = 1.0
+    return M
+
+
+def _slope_map(fine: list[Trial], g: int, where: dict[Column, int], beta: NDArray,
+               width: int) -> NDArray[np.float64]:
+    """The two paths' fit at the local grid's point ``g`` linearised in its lags: the map
+    from the columns of X to (u(L1), u(L2), c₁·∂u/∂L1, c₂·∂u/∂L2, the rest of ``g``'s
+    regressors), each slope a difference of the u columns at ``g``'s neighbours along that
+    lag (one-sided at the local grid's edge). Its information is that of every parameter
+    the fit estimates, the lags too."""
+    t = fine[g]
+    idx = [where[c] for c in t.cols]
+    M = _unit_map(idx, width)
+    slopes = []
+    for d in range(2):
+        line = sorted({u.theta[d] for u in fine
+                       if all(u.theta[e] == t.theta[e] for e in range(2) if e != d)})
+        k = line.index(t.theta[d])
+        lo, hi = line[max(k - 1, 0)], line[min(k + 1, len(line) - 1)]
+        col = np.zeros(width)
+        if hi > lo:
+            col[where[Column("u", hi)]] += beta[d] / (hi - lo)
+            col[where[Column("u", lo)]] -= beta[d] / (hi - lo)
+        slopes.append(col)
+    return np.column_stack([M[:, :2], *slopes, M[:, 2:]])
+
+
+def _gls_on(v: _View, M: NDArray, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The first ``n`` coefficients of the GLS of view ``v``'s y on the regressors ``M``
+    maps X's columns to (those the view does not see left out, as ``_solve``), and their
+    variances up to one scale (the inverse information's diagonal); infinite variances
+    where one of the ``n`` is not seen."""
+    S = np.einsum("k,kij->ij", v.weights, v.cov)
+    A, r = M.T @ S @ M, M.T @ S[:, 0]
+    d = A.diagonal()
+    live = np.flatnonzero(d > 1e-14 * max(float(d.max()), 1e-300))
+    if not set(range(n)) <= set(live.tolist()):
+        return np.zeros(n), np.full(n, np.inf)
+    sc = np.sqrt(d[live])
+    inv = np.linalg.pinv(A[np.ix_(live, live)] / np.outer(sc, sc), rcond=1e-10)
+    beta = inv @ (r[live] / sc) / sc
+    return (np.asarray(beta[:n], dtype=float),
+            np.asarray(np.diagonal(inv)[:n] / d[:n], dtype=float))
+
+
+def _leverage_jk_se(whole: _View, parts: list[_View], M: NDArray,
+                    n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The delete-a-part jackknife standard error of the first ``n`` coefficients of the GLS
+    on the regressors ``M`` maps X's columns to (``_gls_on``; "whole", "parts": the views of
+    the record and of it without each part), each part's squared deviation weighted by its
+    leverage's complement 1 − h_g = var(whole)/var(without part g): Σ_g (1 − h_g)(β_(−g) −
+    β̂)², the weighted jackknife (Wu 1986, Ann. Statist. 14, 1261–1295) for a part. With
+    equal parts this is the ordinary jackknife ((G − 1)/G Σ); where one part holds a large
+    share of the information (a record's start tells two paths' lags most) deleting it
+    moves the fit by about var_(−g) − var, not by its share of var, and the ordinary
+    jackknife counts that whole. Each term is one squared deviation of expectation h_g·var
+    (linear theory: (var/var_(−g))·(var_(−g) − var)), so the sum is divided by Σ h_g (1 with
+    equal parts, and where the parts' information adds; 1.2–1.6 for two paths' θ-free fit,
+    where the start's regressors are the first part's alone) and has ν = (Σ h_g)²/Σ h_g²
+    degrees of freedom (Satterthwaite): G − 1 with equal parts, down to 1 where one part
+    holds all. Returns (the standard errors, ν)."""
+    value, full = _gls_on(whole, M, n)
+    out, lev, lev2 = np.zeros(n), np.zeros(n), np.zeros(n)
+    for v in parts:
+        est, drop = _gls_on(v, M, n)
+        keep = np.where(np.isfinite(drop) & (drop > 0), np.clip(full / drop, 0.0, 1.0), 0.0)
+        out += keep * (est - value) ** 2
+        lev, lev2 = lev + (1 - keep), lev2 + (1 - keep) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nu = np.clip(np.nan_to_num(lev**2 / lev2, nan=1.0), 1.0, len(parts) - 1)
+    return (np.asarray(np.sqrt(out / np.maximum(lev, 1e-12)), dtype=float),
+            np.asarray(nu, dtype=float))
+
+
+def _t68_scaled(se_nu: tuple[NDArray, NDArray]) -> NDArray[np.float64]:
+    """A standard error with ν degrees of freedom (``_leverage_jk_se``) scaled by
+    t(ν)/``T68``, so ``T68`` times it is t(ν)'s 68 % half-width."""
+    se, nu = se_nu
+    t = np.array([t_two_sided(0.32, float(x)) for x in nu]) / T68
+    return np.asarray(se * t, dtype=float)
 
 
 def _widened(value: float, parts: ArrayLike, points: Iterable[float]) -> tuple[float, float]:

@@ -1048,6 +1048,31 @@ def test_the_compressor_two_path_rows_truth_is_the_candidate_that_holds_the_gene
     assert row.truth["lag_2_s"] == row.weekend.second_path[1] == 900.0
     assert row.truth["coefficient_2"] == pytest.approx(c2_row * 29 / 30)
     assert row.truth["coefficient"] == pytest.approx(row.weekend.coefficient[0] + c2_row / 30)
+    # the row's size (comp23e): the candidate's c₂ at 3× the fit's own stated minimum, the
+    # lags unknown, on the drive with the compressor's harmonics (docs/explain.md); the
+    # cycle's fundamental is 1.238 of its ±1 °C, and with the lags known the minimum is
+    # over ten times smaller (the row's size before, one the fit cannot resolve)
+    from avard.core.explain.thermal_paths import min_detectable_path
+
+    from benchmarks.bench_explain_weekend import (
+        HOURS,
+        PERIOD,
+        B,
+        K,
+        N,
+        _path_base,
+        compressor_harmonics,
+        min_two_path_compressor,
+    )
+    assert compressor_harmonics()[0][0] == pytest.approx(1.238, abs=1e-3)
+    A = _path_base()[1]
+    m = min_two_path_compressor(A)
+    assert row.truth["coefficient_2"] == pytest.approx(-3 * m)
+    more = tuple((a / math.hypot(1, 2 * math.pi / p * 600) / math.hypot(1, 2 * math.pi / p * 30),
+                  p) for a, p in compressor_harmonics())
+    known = min_detectable_path("two_path", N, B, K, HOURS * 3600, A, PERIOD, 0.0, 900.0,
+                                lines=more, lags_known=True)
+    assert 10 * known < m < math.inf
 
 
 def test_the_drive_is_the_logged_channels_strongest_line_and_its_share():
@@ -1268,3 +1293,59 @@ def test_a_warm_up_beside_one_lag_is_not_read_as_a_dt_dt_term():
     assert "warmup" in x
     assert x["warmup"].params["size"] == pytest.approx(ww, rel=0.2)
     assert x["warmup"].params["time_constant_s"] == pytest.approx(900.0, rel=0.2)
+
+
+def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_information():
+    """``_leverage_jk_se`` (two paths' coefficients, comp23e): a linear fit on ten parts of
+    which the first holds half the information of the regressor, as a record's start holds
+    most of what tells two paths' lags. Over many records the ordinary delete-a-part
+    jackknife's variance overstates the estimate's scatter (deleting the rich part moves
+    the fit by var_(−g) − var); the leverage-weighted one (Wu 1986) matches it, and with
+    equal parts the two are the same number."""
+    from avard.core.explain.thermal_paths import _jk_se, _leverage_jk_se, _unit_map, _View
+
+    rng = np.random.default_rng(2323)
+    sizes = [40] + [5] * 9  # the first part's regressor also 9× larger in spread below
+    scale = [3.0] + [1.0] * 9
+    M = _unit_map([1, 2], 3)
+    est, v_ord, v_w, dofs = [], [], [], []
+    for _ in range(250):
+        grams = []
+        for n, s in zip(sizes, scale, strict=True):
+            X = np.column_stack([s * rng.standard_normal(n), np.ones(n)])
+            y = X @ np.array([2.0, 0.5]) + rng.standard_normal(n)
+            Z = np.column_stack([y, X])
+            grams.append(Z.T @ Z)
+        whole = sum(grams)
+
+        def view(g: np.ndarray) -> _View:
+            return _View(g[None], np.ones(1), np.ones(1))
+
+        parts = [view(whole - g) for g in grams]
+        fits = np.array([np.linalg.solve((whole - g)[1:, 1:], (whole - g)[1:, 0])
+                         for g in grams])
+        est.append(np.linalg.solve(whole[1:, 1:], whole[1:, 0])[0])
+        v_ord.append(_jk_se(fits)[0] ** 2)
+        se, nu = _leverage_jk_se(view(whole), parts, M, 2)
+        v_w.append(se[0] ** 2)
+        dofs.append(nu[0])
+    true = float(np.var(est))
+    assert np.mean(v_ord) > 3 * true
+    assert np.mean(v_w) == pytest.approx(true, rel=0.3)
+    # the one rich part leaves few degrees of freedom (Satterthwaite), not the parts' 9
+    assert 1 <= np.median(dofs) < 4
+    # equal parts: the weights are (G − 1)/G each, the ordinary jackknife's (about the
+    # whole's value rather than the parts' mean: the same to the parts' spread's square)
+    grams = []
+    for _ in range(10):
+        X = np.column_stack([rng.standard_normal(20), np.ones(20)])
+        X = X - X.mean(axis=0) * [1, 0]
+        Z = np.column_stack([X @ [2.0, 0.5] + rng.standard_normal(20), X])
+        grams.append(Z.T @ Z)
+    whole = sum(grams)
+    fits = np.array([np.linalg.solve((whole - g)[1:, 1:], (whole - g)[1:, 0]) for g in grams])
+    w, nu = _leverage_jk_se(_View(whole[None], np.ones(1), np.ones(1)),
+                            [_View((whole - g)[None], np.ones(1), np.ones(1)) for g in grams],
+                            M, 2)
+    assert w[0] == pytest.approx(_jk_se(fits)[0], rel=0.15)
+    assert nu[0] == pytest.approx(9, abs=1.5)
