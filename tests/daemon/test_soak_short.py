@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from benchmarks.bench_soak import MAX_RSS_GROWTH, format_result, run_soak
 
-
 HOURS = 1.25
 
 
