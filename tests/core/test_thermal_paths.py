@@ -322,6 +322,12 @@ def test_a_rate_term_is_resolved_with_the_static_coupling_through_its_own_lag():
     lo, hi = iv["rate_coupling"]
     assert abs(p["rate_coupling"] - 1.0) <= hi - lo
     assert iv["coefficient"][0] <= C <= iv["coefficient"][1]
+    # r and c are read through the rate column's smoothing gain (``_ungained``), a small
+    # step on one HVAC line; the signal explain subtracts keeps the fitted coefficients of
+    # the smoothed column, the least-squares ones
+    s = pf.chosen
+    assert len(s.fitted) == 2 and s.beta[1] != s.fitted[1]
+    assert 0.95 < s.beta[1] / s.fitted[1] < 1.05
     # the rate candidate tries no negative lag
     assert all(t.theta[0] >= 0 for t in trials("rate", [-60.0, 0.0, 15.0]))
 
