@@ -16,7 +16,12 @@ more; the candidates, each a linear model in regressors built from the driving c
   0.0625 K steps would make a raw gradient spikes). The rate term on the channel itself and
   the static coupling through its own lag: as c·u_L + r·du_L/dt, (c + jωr)/(1 + jωL) at
   one drive frequency, c crossed zero along the ridge L trades on, and was not resolved;
-  a negative L (a lead-lag, T + a·dT/dt) would be a second rate term;
+  a negative L (a lead-lag, T + a·dT/dt) would be a second rate term. The smoothing's gain
+  1/(1 + ω²s²) falls on whatever lines the drive has (a compressor's third harmonic: 0.82),
+  and the fit made r up for it; a refined term's coefficients are read back through the
+  gain its own columns and weights give the unsmoothed slope of the temperature behind the
+  readings (``_ungained``), while θ, the deviance and the choice stay on the smoothed
+  column (that slope as the regressor moved the one-line fit along its (c, r, L) ridge);
 - ``hysteresis``: c·u_L + h·r_w, r_w ∈ {−1, +1} a non-ideal relay of width w (K), the
   Preisach elementary hysteron (``_relay``: +1 once the temperature rose w above its last
   minimum, −1 once it fell w below its last maximum) on lag(T̂, L), T̂ the temperature behind
@@ -197,7 +202,7 @@ AVERAGED = ("hysteresis",)
 
 
 class Column(NamedTuple):
-    kind: str  # "u", "start", "quad", "rate", "relay", "warmup"
+    kind: str  # "u", "start", "quad", "rate", "slope", "relay", "warmup"
     lag: float
     width: float = 0.0
 
@@ -350,6 +355,12 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
             # cycle, which the static lag then made up for: L and r 10–20 % off)
             x = (u(c.lag) - lag_filter(u(c.lag), RATE_SMOOTH_S, rate_hz)) / RATE_SMOOTH_S
             x = lag_filter(x[::-1], RATE_SMOOTH_S, rate_hz)[::-1]
+        elif c.kind == "slope":
+            # dT̂/dt of the temperature behind the readings, unsmoothed: the dT/dt term's
+            # reference, what the smoothed "rate" column stands for (``_ungained``); not a
+            # regressor of any candidate
+            x = np.gradient(lag_filter(behind(), c.lag, rate_hz) if c.lag else behind(),
+                            1.0 / rate_hz)
         elif c.kind == "relay":
             # on the temperature behind the readings (their rounding an error in the
             # regressor, not a signal): a relay on the staircase switches at the first
@@ -460,13 +471,13 @@ def _fit(v: _View, idx: list[int]) -> NDArray[np.float64]:
     return bl.beta.copy()
 
 
-def _solve(v: _View, bl: _Blocks) -> NDArray[np.float64]:
+def _solve(v: _View, bl: _Blocks, vuy: NDArray | None = None) -> NDArray[np.float64]:
     # (the same operations as np.diag, np.max, np.outer and np.ix_ make, without their
     # wrappers' per-call cost: thousands of these small solves per axis; the weights ν/s
-    # divided once per view)
+    # divided once per view); ``vuy``: another column's V_u· in y's place
     w = v.weights
     A = np.einsum("k,kij->ij", w, bl.vuu)
-    b = w @ bl.vuy
+    b = w @ (bl.vuy if vuy is None else vuy)
     d = A.diagonal()
     # a regressor this view does not see (a start state in a part after the start) stays 0
     live = np.flatnonzero(d > 1e-14 * max(float(np.maximum.reduce(d)), 1e-300))
@@ -479,6 +490,32 @@ def _solve(v: _View, bl: _Blocks) -> NDArray[np.float64]:
         # (numpy's lstsq to the bit, without its per-call checks)
         out[live] = np.array(_lstsq(A[live[:, None], live] / (sc[:, None] * sc[None, :]),
                                     b[live] / sc, rcond=1e-10)) / sc
+    return out
+
+
+def _ungained(v: _View, idx: list[int], beta: NDArray, ref: int) -> NDArray[np.float64]:
+    """A dT/dt fit's coefficients ``beta`` (columns ``idx``: the static lag's, the smoothed
+    rate column's, nuisance) read back through the smoothing's gain: the fit is linear in y
+    (``_fit``), so a response r·x to the true rate x (column ``ref``, ``Column("slope")``)
+    comes out as r·γ, γ = x's own fit on the same columns and weights; the smoothing's
+    1/(1 + ω²s²) on whatever lines the drive has (a compressor's harmonics: 0.82 at its
+    third) puts γ_rate above 1 and γ_lag beside it. r = β_rate/γ_rate and c = β_lag −
+    r·γ_lag. The fit itself (θ, the deviance, the choice) stays on the smoothed column: the
+    reference only calibrates it, on the record's own drive. A γ_rate that is not positive
+    (a reference that does not follow the column) leaves ``beta`` as it is."""
+    if not len(v.nu):
+        return np.array(beta, dtype=float)
+    return _through(beta, _solve(v, _blocks(v, idx), v.cov[:, idx, ref]))
+
+
+def _through(beta: NDArray, gain: ArrayLike) -> NDArray[np.float64]:
+    """``beta`` (c, r, …) read through a dT/dt column's gain γ (``_ungained``)."""
+    out = np.array(beta, dtype=float)
+    g = np.asarray(gain, dtype=float)
+    if len(g) < 2 or not (math.isfinite(g[1]) and g[1] > 0):
+        return out
+    out[1] = beta[1] / g[1]
+    out[0] = beta[0] - out[1] * g[0]
     return out
 
 
@@ -601,6 +638,18 @@ class PathScore:
     #: refined two paths: the response at the drive (``_Refined.drive``), reported as
     #: ``drive_period_s``, ``gain_at_drive`` and ``phase_at_drive_rad`` (``describe``)
     drive: tuple[float, ...] = ()
+    #: the couplings as fitted to ``cols`` where ``beta`` reads them through a column's gain
+    #: (a refined dT/dt term: ``_ungained``), for the signal; () where they are ``beta``
+    fitted: tuple[float, ...] = ()
+
+    @property
+    def beta_fitted(self) -> NDArray[np.float64]:
+        """The coefficients that go with ``cols`` (the signal's, the rounding's)."""
+        if not self.fitted:
+            return self.beta
+        out = np.array(self.beta, dtype=float)
+        out[:len(self.fitted)] = self.fitted
+        return out
 
 
 @dataclass
@@ -651,7 +700,7 @@ class PathFit:
         s = self.chosen
         X = path_columns(T, list(s.cols), self.rate_hz)
         n = s_terms(s)
-        d = X[:, :n] @ s.beta[:n]
+        d = X[:, :n] @ s.beta_fitted[:n]
         if y is None or X.shape[1] == n:
             return np.asarray(d, dtype=float)
         t = np.arange(len(d)) / self.rate_hz
@@ -676,7 +725,7 @@ class PathFit:
         linear term beside them carries the rounding at first order)."""
         s = self.chosen
         g = 0.0
-        for c, b in zip(s.cols, s.beta, strict=False):
+        for c, b in zip(s.cols, s.beta_fitted, strict=False):
             norm = 3.0 if c.lag < 0 else 1.0
             if c.kind == "u":
                 g += abs(float(b)) * norm
@@ -1039,6 +1088,11 @@ class _Refined(NamedTuple):
     #: interval, phase and its 68 % interval, the line's share of the channel,
     #: ``drive_line``); () otherwise
     drive: tuple[float, ...] = ()
+    #: a dT/dt term: its column's gain (γ_lag, γ_rate) at the best local grid point, which
+    #: ``beta`` and the profile are read through (``_ungained``); () otherwise
+    gain: tuple[float, ...] = ()
+    #: the coefficients as fitted to the columns (``beta`` before the gain), the signal's
+    fitted: NDArray[np.float64] | None = None
 
 
 def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray, Ts: NDArray,
@@ -1053,7 +1107,9 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     resolution, not the coarse grid's, and θ's is the jackknife of θ re-chosen. ``extra``:
     the nuisance warm-up columns beside every point (``choose_path``)."""
     fine = [t._replace(cols=t.cols + extra) for t in _fine_trials(kind, theta, lags)]
-    cols = sorted({c for t in fine for c in t.cols})
+    # a dT/dt term's reference beside them (``_ungained``)
+    slope = (Column("slope", 0.0),) if kind == "rate" else ()
+    cols = sorted({c for t in fine for c in t.cols} | set(slope))
     where = {c: j + 1 for j, c in enumerate(cols)}
     # a copy: the local grid's columns are this axis's own, not worth keeping for others
     X = np.column_stack([ys, path_columns(Ts, cols, rate, dict(columns or {}))])
@@ -1071,20 +1127,33 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
         parts_c = [_from_octave(p, m_min) for p in parts]
     whole_c = sum(parts_c[1:], start=parts_c[0])
 
+    def read(vc: _View, ix: list[int], f: NDArray) -> NDArray[np.float64]:
+        # the coefficients as reported: a dT/dt term's through its smoothing's gain
+        return _ungained(vc, ix, f, where[slope[0]])[:n] if slope else f[:n]
+
     def best(v: _View, vc: _View
              ) -> tuple[tuple[float, ...], NDArray[np.float64], NDArray, NDArray]:
         fits = [_fit(v, ix) for ix in idx]
         devs = np.array([_dev(v, ix, b) for ix, b in zip(idx, fits, strict=True)])
-        coef = np.array([f[:n] for f in (fits if vc is v else [_fit(vc, ix) for ix in idx])])
+        coef = np.array([read(vc, ix, f) for ix, f in zip(
+            idx, fits if vc is v else [_fit(vc, ix) for ix in idx], strict=True)])
         th, b = _vertex(fine, devs, coef)
         return th, b, devs, coef
 
     vw = weigh(whole)
-    th, b, devs, fits = best(vw, vw if parts_c is parts else weigh(whole_c))
+    vwc = vw if parts_c is parts else weigh(whole_c)
+    th, b, devs, fits = best(vw, vwc)
     vjk = [weigh(whole - p) for p in parts]
     vjk_c = vjk if parts_c is parts else [weigh(whole_c - p) for p in parts_c]
     g = int(np.argmin(devs))
-    se_fixed = _jk_se(np.array([_fit(v, idx[g])[:n] for v in vjk_c]))
+    # the coefficients that go with the columns (the signal's), and the gain read through
+    gain: tuple[float, ...] = ()
+    fitted = b
+    if slope:
+        gain = tuple(float(x) for x in _solve(vwc, _blocks(vwc, idx[g]),
+                                              vwc.cov[:, idx[g], where[slope[0]]])[:2])
+        fitted = _vertex(fine, devs, np.array([_fit(vwc, ix)[:n] for ix in idx]))[1]
+    se_fixed = _jk_se(np.array([read(v, idx[g], _fit(v, idx[g])) for v in vjk_c]))
     jk = [best(v, vc)[:2] for v, vc in zip(vjk, vjk_c, strict=True)]
     se_re = _jk_se(np.array([x[1] for x in jk]))
     if kind == "two_path" and share < ONE_LINE_SHARE:
@@ -1126,7 +1195,7 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
         drive = tuple(float(x) for x in (period_s, a, a_lo, a_hi, ph, ph + d_lo, ph + d_hi,
                                          share))
     return _Refined(th, b, b - se, b + se, np.asarray(th) - tse, np.asarray(th) + tse,
-                    fits[flat], thetas[flat], float(devs.min()), net, drive)
+                    fits[flat], thetas[flat], float(devs.min()), net, drive, gain, fitted)
 
 
 def _unit_map(idx: list[int], width: int) -> NDArray[np.float64]:
@@ -1411,6 +1480,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         ts = per_kind[kind]
         idx = [[where[c] for c in t.cols] for t in ts]
         held = 0.0
+        fitted: NDArray | None = None
         net: tuple[float, ...] = ()
         drive: tuple[float, ...] = ()
         for a, b in ((0, 1), (1, 0)):
@@ -1498,10 +1568,13 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          columns, period, share, min_tau, extra)
             net, drive = fr.net, fr.drive
             theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
+            fitted = None if fr.fitted is None or not fr.gain else fr.fitted
             b_lo, b_hi = fr.beta_lo, fr.beta_hi
             t_lo, t_hi = np.minimum(fr.theta_lo, g_lo), np.maximum(fr.theta_hi, g_hi)
             flat = [j for j in range(len(ts)) if devs[j] <= fr.least + delta]
-            pb = np.vstack([np.reshape([fits[j][:n] for j in flat], (-1, n)), fr.profile])
+            # (the coarse grid's points read through the same gain as the local ones)
+            pb = np.vstack([np.reshape([_through(fits[j][:n], fr.gain) for j in flat],
+                                       (-1, n)), fr.profile])
             pt = np.vstack([np.reshape([ts[j].theta for j in flat], (-1, len(theta))),
                             fr.profile_theta])
             se_iv = 0.5 * (b_hi - b_lo)
@@ -1515,7 +1588,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             kind, held, theta, beta, se_iv,
             tuple(float(x) for x in t_lo), tuple(float(x) for x in t_hi),
             z_extra, open_end, cols_i, tuple(float(x) for x in b_lo),
-            tuple(float(x) for x in b_hi), resolved, delta, net, drive)
+            tuple(float(x) for x in b_hi), resolved, delta, net, drive,
+            () if fitted is None else tuple(float(x) for x in fitted))
     ref = scores["one_lag"]
     notes = []
     passing = []
