@@ -245,18 +245,21 @@ def test_block_sums_of_chunks_add_up_to_one_passs_block_means(seed):
                                rtol=1e-12)
 
 
-@pytest.mark.parametrize(("seed", "floored"), [(2401, True), (2406, False)])
+@pytest.mark.parametrize(("seed", "floored"), [(2453, True), (2473, False)])
 def test_a_drift_short_of_the_level_is_no_claim_but_its_floor_holds_part_of_the_avar(
         seed, floored):
     """The benchmark's 12 h drift is about 2.6 standard errors of its slope against the walk
     (against a walk of known K, exactly √(20/3): no test at the 1 % level finds it in more
-    than about half the records). Where the test falls short of its level (seed 2401, z
-    1.7) no ramp is claimed: the terms are the AVAR fit's, the walk the fit read. But the
+    than about half the records). Where the test falls short of its level (seed 2453, z
+    2.1) no ramp is claimed: the terms are the AVAR fit's, the walk the fit read. But the
     slope's 68 % interval is clear of zero, so the fit carries its near end
     (``drift_floor``): that much of the AVAR does not scatter, and the printed EDF at the
     longest τ rises above the noise's, within the record's support, never below the
-    estimator's. Where the interval holds zero (seed 2406, z 0.8) nothing is carried and the
-    printed EDF is the noise's."""
+    estimator's. Where the interval holds zero (seed 2473, z 0.75) nothing is carried and the
+    printed EDF is the noise's. (Seeds 2401 and 2406 were these two cases until the fit found
+    the random walk their AVAR misfit without, χ²/dof 4.9 on 2401; with it in the model the
+    floor is a small share of the longest τ's AVAR there (EDF 3.48 with and without it), and
+    2406 now carries a floor.)"""
     from avard.core.analysis.signal_edf import with_signal_edf
 
     from tests.core.test_noise_id_rate import support
