@@ -619,7 +619,12 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     # off and the warm-up never claimed; or alone two paths of opposite sign that nearly
     # cancel, 381 and 480 s, the dT/dt term's own limit), so the fit made beside the
     # warm-up stands and the warm-up is tested beside it below (``_same_path``)
-    back = list(found)
+    # (only where an extension other than the one chosen beside the warm-up gains over
+    # one lag there as ``_gain_beside`` asks: elsewhere the choice alone cannot replace
+    # it, and it is a second path choice on the axis)
+    back = [a for a in found if (o := out[a]) is not None and o.path is not None
+            and any(k not in ("one_lag", o.mechanism) and _gain_beside(o, k)
+                    for k in o.path.scores)]
     alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
                      strict=True))
     for a, th in alone.items():
