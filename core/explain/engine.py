@@ -618,18 +618,26 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     # with the rate term taking the warm-up from the temperature's start, r and c 20–40 %
     # off and the warm-up never claimed; or alone two paths of opposite sign that nearly
     # cancel, 381 and 480 s, the dT/dt term's own limit), so the fit made beside the
-    # warm-up stands and the warm-up is tested beside it below (``_same_path``)
-    # (only where an extension other than the one chosen beside the warm-up gains over
-    # one lag there as ``_gain_beside`` asks: elsewhere the choice alone cannot replace
-    # it, and it is a second path choice on the axis)
+    # warm-up stands and the warm-up is tested beside it below (``_same_path``) — where
+    # the warm-up is still beyond the start state beside that fit; where it is not, it was
+    # that path's own start (a second path through the plate's 900 s, chosen both ways:
+    # beside the "warm-up", T 2471 s, its L2 came out 628 s, alone 1005 s) and the fit
+    # alone, which explains it, is kept as before
+    # (only where an extension gains over one lag beside the warm-up as ``_gain_beside``
+    # asks, other than the one chosen there where the warm-up stands beside it: elsewhere
+    # the choice alone cannot replace it, and it is a second path choice on the axis)
+    stands = {a: o is not None and o.passed and tr.warmup_beyond_start(
+        Y[:, a] - o.signal(temps), rate_b, nzs[a], o.lag_s).passed
+        for a in found if (o := out[a]) is not None and o.mechanism != "one_lag"}
     back = [a for a in found if (o := out[a]) is not None and o.path is not None
-            and any(k not in ("one_lag", o.mechanism) and _gain_beside(o, k)
-                    for k in o.path.scores)]
+            and any(k != "one_lag" and (k != o.mechanism or not stands.get(a, False))
+                    and _gain_beside(o, k) for k in o.path.scores)]
     alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
                      strict=True))
     for a, th in alone.items():
         o = out[a]
-        if (o is not None and th.mechanism != "one_lag" and not _same_path(th, o)
+        if (o is not None and th.mechanism != "one_lag"
+                and not (stands.get(a, False) and _same_path(th, o))
                 and _gain_beside(o, th.mechanism)
                 and not tr.warmup_beyond_start(Y[:, a] - th.signal(temps), rate_b, nzs[a],
                                                th.lag_s).passed):
