@@ -1227,6 +1227,19 @@ def _count_path_choices(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     return calls
 
 
+def _path_and_warm_up_claimed(ex, row):  # type: ignore[no-untyped-def]
+    """x's claims of a path row's record beside a warm-up: the row's mechanism alone, its
+    parameters within 20 %, and the warm-up (T within 20 % of 900 s), by cause."""
+    x = {f.cause: f for f in ex.channels["x"].claimed}
+    assert "temperature" in x and x["temperature"].mechanism == row.mechanism
+    assert not x["temperature"].alternatives
+    for k, v in row.truth.items():
+        assert x["temperature"].params[k] == pytest.approx(v, rel=0.2), k
+    assert "warmup" in x
+    assert x["warmup"].params["time_constant_s"] == pytest.approx(900.0, rel=0.2)
+    return x
+
+
 def test_a_quadratic_beside_a_real_warm_up_is_chosen_and_the_warm_up_claimed(
         monkeypatch: pytest.MonkeyPatch):
     """The benchmark's quadratic row beside a real warm-up (2.39e-3 m/s², T 900 s, 3× the
@@ -1245,14 +1258,8 @@ def test_a_quadratic_beside_a_real_warm_up_is_chosen_and_the_warm_up_claimed(
     # no extension but the quadratic gains over one lag beside the warm-up, so the choice
     # with nothing beside it could not replace it and is not made
     assert not any(calls), calls
-    x = {f.cause: f for f in ex.channels["x"].claimed}
-    assert "temperature" in x and x["temperature"].mechanism == "quadratic"
-    assert not x["temperature"].alternatives
-    for k, v in row.truth.items():
-        assert x["temperature"].params[k] == pytest.approx(v, rel=0.2), k
-    assert "warmup" in x
+    x = _path_and_warm_up_claimed(ex, row)
     assert x["warmup"].params["size"] == pytest.approx(row.weekend.warmups[0][0], rel=0.2)
-    assert x["warmup"].params["time_constant_s"] == pytest.approx(900.0, rel=0.2)
 
 
 def test_a_warm_up_beside_one_lag_is_not_read_as_a_dt_dt_term(
@@ -1298,10 +1305,4 @@ def test_a_dt_dt_term_beside_a_real_warm_up_keeps_its_fit_and_the_warm_up_claime
 
     row = next(r for r in rows_paths() if r.name == "path+warm-up: dT/dt")
     ex, _ = explain_weekend(row.weekend, seed)
-    x = {f.cause: f for f in ex.channels["x"].claimed}
-    assert "temperature" in x and x["temperature"].mechanism == "rate"
-    assert not x["temperature"].alternatives
-    for k, v in row.truth.items():
-        assert x["temperature"].params[k] == pytest.approx(v, rel=0.2), k
-    assert "warmup" in x
-    assert x["warmup"].params["time_constant_s"] == pytest.approx(900.0, rel=0.2)
+    _path_and_warm_up_claimed(ex, row)
