@@ -592,6 +592,24 @@ def rows_paths() -> list[PathRow]:
         PathRow("path+warm-up: quadratic", replace(base, quadratic=q, warmups=[(ww, 900.0)]),
                 "quadratic", {"coefficient": c, "quadratic": q},
                 f"{c:.3g} m/s²/K and {q:.3g} m/s²/K² beside a {ww:.3g} m/s² warm-up (T 900 s)"),
+        # the class "a path beside a warm-up" (issue 23 item 3 with item 4), after the rows
+        # above so they keep their seeds: each one-line path row's record with the same
+        # warm-up on x (3× the event rows' minimum, T 900 s); right only where the warm-up
+        # is claimed beside the path (``PathRecord.warmup``)
+        PathRow("path+warm-up: dT/dt", replace(base, rate_coupling=r, warmups=[(ww, 900.0)]),
+                "rate", {"coefficient": c, "rate_coupling": r},
+                f"{c:.3g} m/s²/K and {r:.3g} m/s² per K/s beside a {ww:.3g} m/s² warm-up "
+                "(T 900 s)"),
+        PathRow("path+warm-up: hysteresis",
+                replace(base, hysteresis_c=h, warmups=[(ww, 900.0)]), "hysteresis",
+                {"coefficient": c, "hysteresis": h},
+                f"{c:.3g} m/s²/K and ±{h:.3g} m/s² switching 0.05 K after a turn beside a "
+                f"{ww:.3g} m/s² warm-up (T 900 s)"),
+        PathRow("path+warm-up: two paths",
+                replace(base, second_path=(-c2, 900.0), warmups=[(ww, 900.0)]), "two_path",
+                two_path_truth(c, -c2, 900.0, base.sensor_tau_s),
+                f"{c:.3g} m/s²/K (lag 0) and {-c2:.3g} through the plate's 900 s beside a "
+                f"{ww:.3g} m/s² warm-up (T 900 s)", resolve=True),
     ]
 
 
@@ -727,6 +745,8 @@ class PathRecord:
     not_resolved_ok: int = 0
     #: extensions explain found to fit as well but did not name (``PathFit.as_well``)
     as_well: list[str] = field(default_factory=list)
+    #: a warm-up claimed on x (the rows with one: right only with it)
+    warmup: bool = False
 
 
 def score_path_record(r: PathRow, seed: int) -> PathRecord:
@@ -747,6 +767,7 @@ def score_path_record(r: PathRow, seed: int) -> PathRecord:
                 sc.inside += iv[k][0] <= v <= iv[k][1]
     sc.false = sum(bool([f for f in ex.channels[ax].claimed
                          if f.cause not in ("sinusoid", "periodic")]) for ax in ("y", "z"))
+    sc.warmup = any(f.cause == "warmup" for f in ex.channels["x"].claimed)
     if r.resolve:
         thermal = ex.channels["x"].thermal
         if th and thermal is not None and thermal.path is not None:
@@ -860,6 +881,13 @@ def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
               f"{f'{inside}/{total}':>8s} {sum(g.unresolved for g in got):>11d} {inst:>34s} "
               f"{_rate(sum(g.false for g in got), 2 * n, True):>22s} "
               f"{sum(g.cpu_s for g in got) / max(n, 1):9.1f}", flush=True)
+        if r.weekend.warmups:
+            both = sum(g.chosen == r.mechanism and not g.alternatives and g.warmup
+                       for g in got)
+            print(f"{'':18s} beside its warm-up: warm-up claimed on x "
+                  f"{_rate(sum(g.warmup for g in got), n, False)}; right and the warm-up "
+                  f"claimed {_rate(both, n, False)}; params ≤ 20 % with it "
+                  f"{_rate(sum(g.params and g.warmup for g in got), n, False)}", flush=True)
         if r.resolve:
             from benchmarks.bench_path_ident import LAMBDA_95
 

@@ -75,6 +75,7 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
     with_paths,
 )
+from avard.core.explain.thermal_paths import _derivative_limit, _mimic
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
@@ -610,12 +611,34 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     # margin with the warm-up beside it (the two-path + compressor record: by 102, there
     # at its grid's end). One whose gain is the warm-up's is not: the logged temperature
     # settles at the start too, and a dT/dt term with a 424 s lag read a 900 s warm-up
-    # beside one lag from that settling (its Δ −55 alone, +1.3 beside the warm-up)
-    back = list(found)
+    # beside one lag from that settling (its Δ −55 alone, +1.3 beside the warm-up). Nor is
+    # one of the mechanism chosen beside the warm-up: both choices name the same path, and
+    # the one with nothing beside it differs only in having read the warm-up into that
+    # path's own parameters (a dT/dt term beside a 900 s warm-up: chosen both ways, alone
+    # with the rate term taking the warm-up from the temperature's start, r and c 20–40 %
+    # off and the warm-up never claimed; or alone two paths of opposite sign that nearly
+    # cancel, 381 and 480 s, the dT/dt term's own limit), so the fit made beside the
+    # warm-up stands and the warm-up is tested beside it below (``_same_path``) — where
+    # the warm-up is still beyond the start state beside that fit; where it is not, it was
+    # that path's own start (a second path through the plate's 900 s, chosen both ways:
+    # beside the "warm-up", T 2471 s, its L2 came out 628 s, alone 1005 s) and the fit
+    # alone, which explains it, is kept as before
+    # (only where an extension gains over one lag beside the warm-up as ``_gain_beside``
+    # asks, other than the one chosen there where the warm-up stands beside it: elsewhere
+    # the choice alone cannot replace it, and it is a second path choice on the axis)
+    stands = {a: o is not None and o.passed and tr.warmup_beyond_start(
+        Y[:, a] - o.signal(temps), rate_b, nzs[a], o.lag_s).passed
+        for a in found if (o := out[a]) is not None and o.mechanism != "one_lag"}
+    back = [a for a in found if (o := out[a]) is not None and o.path is not None
+            and any(k != "one_lag" and (k != o.mechanism or not stands.get(a, False))
+                    and _gain_beside(o, k) for k in o.path.scores)]
     alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
                      strict=True))
     for a, th in alone.items():
-        if (th.mechanism != "one_lag" and _gain_beside(out[a], th.mechanism)
+        o = out[a]
+        if (o is not None and th.mechanism != "one_lag"
+                and not (stands.get(a, False) and _same_path(th, o))
+                and _gain_beside(o, th.mechanism)
                 and not tr.warmup_beyond_start(Y[:, a] - th.signal(temps), rate_b, nzs[a],
                                                th.lag_s).passed):
             out[a] = th
@@ -648,6 +671,23 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
             settled[a] = cz.cause_signal(tr.refine_compound(r, rate_b, nzs[a], [c])[0],
                                          len(Y), rate_b)
     return out, settled
+
+
+def _same_path(alone: ThermalFit, beside: ThermalFit) -> bool:
+    """Whether the path chosen with nothing beside the warm-up (``alone``) is the mechanism
+    chosen beside it: the same candidate, or two paths where the dT/dt term was chosen
+    beside it and two paths are that term's reading with a parameter more, by either of
+    ``thermal_paths``' rules: alone in its limit (``_derivative_limit``: opposite signs that
+    nearly cancel, a static coupling plus a smoothed derivative), or beside the warm-up
+    predicting the held-out halves no better than it by the margin (``_mimic``)."""
+    if alone.mechanism == beside.mechanism:
+        return True
+    if not (alone.mechanism == "two_path" and beside.mechanism == "rate"
+            and alone.path is not None and beside.path is not None):
+        return False
+    two = beside.path.scores.get("two_path")
+    return _derivative_limit(alone.path.chosen) or (
+        two is not None and _mimic(two, beside.path.chosen))
 
 
 def _gain_beside(th: ThermalFit | None, kind: str) -> bool:
