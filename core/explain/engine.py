@@ -75,7 +75,7 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
     with_paths,
 )
-from avard.core.explain.thermal_paths import _derivative_limit, _mimic
+from avard.core.explain.thermal_paths import reads_as_rate
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
@@ -676,18 +676,13 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
 def _same_path(alone: ThermalFit, beside: ThermalFit) -> bool:
     """Whether the path chosen with nothing beside the warm-up (``alone``) is the mechanism
     chosen beside it: the same candidate, or two paths where the dT/dt term was chosen
-    beside it and two paths are that term's reading with a parameter more, by either of
-    ``thermal_paths``' rules: alone in its limit (``_derivative_limit``: opposite signs that
-    nearly cancel, a static coupling plus a smoothed derivative), or beside the warm-up
-    predicting the held-out halves no better than it by the margin (``_mimic``)."""
+    beside it and two paths are that term's reading with a parameter more
+    (``thermal_paths.reads_as_rate``)."""
     if alone.mechanism == beside.mechanism:
         return True
-    if not (alone.mechanism == "two_path" and beside.mechanism == "rate"
-            and alone.path is not None and beside.path is not None):
-        return False
-    two = beside.path.scores.get("two_path")
-    return _derivative_limit(alone.path.chosen) or (
-        two is not None and _mimic(two, beside.path.chosen))
+    return (alone.mechanism == "two_path" and beside.mechanism == "rate"
+            and alone.path is not None and beside.path is not None
+            and reads_as_rate(alone.path, beside.path))
 
 
 def _gain_beside(th: ThermalFit | None, kind: str) -> bool:

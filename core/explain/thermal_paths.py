@@ -126,7 +126,7 @@ from avard.core.model.nnls import _lstsq
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
-           "min_detectable_path", "path_columns"]
+           "min_detectable_path", "path_columns", "reads_as_rate"]
 
 CANDIDATES = ("one_lag", "two_path", "quadratic", "rate", "hysteresis")
 #: What each candidate is called in a sentence.
@@ -1726,6 +1726,16 @@ def _derivative_limit(sc: PathScore) -> bool:
     candidate with one parameter more. Two real paths need no such cancellation."""
     c1, c2 = float(sc.beta[0]), float(sc.beta[1])
     return c1 * c2 < 0 and abs(c1 + c2) < DERIVATIVE_KAPPA * max(abs(c1), abs(c2))
+
+
+def reads_as_rate(two: PathFit, rate: PathFit) -> bool:
+    """Whether the path choice ``two`` (two paths chosen) is the dT/dt term chosen in
+    ``rate`` read with a parameter more, by this module's two rules: in its own limit
+    (``_derivative_limit``), or, in ``rate``'s scores, two paths predicting the held-out
+    halves no better than the dT/dt term by the margin (``_mimic``). explain's engine asks
+    it of the choice made with nothing beside a warm-up against the one made beside it."""
+    sc = rate.scores.get("two_path")
+    return _derivative_limit(two.chosen) or (sc is not None and _mimic(sc, rate.chosen))
 
 
 def _mimic(two: PathScore, rate: PathScore) -> bool:
