@@ -36,7 +36,12 @@ from avard.core.analysis.drift import BlockMeans, BlockSumsPart, drift_block
 from avard.core.analysis.options import DEFAULT_OPTIONS, AnalyzeOptions
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.signal_edf import with_signal_edf
-from avard.core.analysis.spectrum import WelchAccumulator, find_lines, welch_nperseg
+from avard.core.analysis.spectrum import (
+    WelchAccumulator,
+    find_lines,
+    line_components,
+    welch_nperseg,
+)
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.io.screen import ScreenedSource
@@ -819,6 +824,6 @@ def _pass_fit_jobs(one: _PassResult, n_channels: int, prep: _FitPrep) -> _PassFi
                      if welch is not None and spectrum is not None and prep.find_sinusoids
                      else [])
     jobs = [_FitJob(one.allan.channel(j), prep.corner,
-                    [{"cause": "sinusoid", "params": dict(ln)} for ln in lines[j]],
+                    [{"cause": "sinusoid", "params": ln} for ln in line_components(lines[j])],
                     prep.auto_corner, prep.kw) for j in range(n_channels)]
     return _PassFits(f, spectrum, lines, jobs)

@@ -160,7 +160,7 @@ def welch_nperseg(total: int | None) -> int:
     return 1 << 14 if total is None else min(1 << 14, 1 << int(math.log2(total / 8)))
 
 
-def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: float = 0.01
+def line_threshold(n_bins: int, n_seg: float, n_bg: NDArray | float, p_false: float = 0.01
                    ) -> NDArray[np.float64]:
     """The bin/background ratio a line must exceed (``find_lines``' test): bins are
     χ²(ν)/ν with ν ≈ 1.8·segments, the background a median of ``n_bg`` bins carrying about
@@ -174,7 +174,21 @@ def line_threshold(n_bins: int, n_seg: int, n_bg: NDArray | float, p_false: floa
     return f_isf_array(p_false / n_bins, nu, nu_bg)
 
 
-def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
+#: Rebinnings (adjacent bins averaged) at which a second search looks for a disturbance whose
+#: power is spread over a band wider than the fine search's background window (a pump swept
+#: over many bins raises that window's median as much as the bin it tests, so no bin of the
+#: band stands out) — the coarser spectrum's window reaches the background outside the band.
+BROAD_REBIN = (8, 64)
+#: The share of the false-line probability each broad rebinning is given (the fine search
+#: keeps all of its own: its lines are the ones the rest of avard models).
+BROAD_P_SHARE = 0.1
+#: Adjacent Hann bins of a Welch spectrum share about a quarter of their power's variance
+#: (the window's amplitude overlap is ½): a mean of m bins has the degrees of freedom of
+#: m / (1 + 2·¼) independent ones.
+HANN_NEIGHBOUR_FACTOR = 1.5
+
+
+def find_lines(f: NDArray, psd: NDArray, n_seg: float, *, p_false: float = 0.01,
                max_lines: int = 8, half_width: int = LINE_HALF_WIDTH
                ) -> list[dict[str, float]]:
     """Sinusoids in a Welch PSD of one channel: bins standing above the local background by
@@ -196,6 +210,18 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
     background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
     {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
     """
+    lines = _find_at(f, psd, n_seg, p_false, half_width)
+    lines += _broad_lines(f, psd, n_seg, p_false, half_width, lines)
+    lines.sort(key=lambda d: -d["amplitude"])
+    for ln in lines:
+        del ln["bin"]
+    return lines[:max_lines]
+
+
+def _find_at(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_width: int
+             ) -> list[dict[str, float]]:
+    """``find_lines``' search at the spectrum's own resolution: the lines with their group
+    marks (``_group``) and the bin each was found at."""
     lobe, min_side = LINE_LOBE, 4
     if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
         return []
@@ -245,10 +271,110 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: int, *, p_false: float = 0.01,
         else:
             k += 1
     _group(lines, f, psd, nu, med_ratio)
-    lines.sort(key=lambda d: -d["amplitude"])
-    for ln in lines:
-        del ln["bin"]
-    return lines[:max_lines]
+    return lines
+
+
+def _side_background(psd: NDArray, k1: int, k2: int, nu: float) -> float:
+    """The mean background level under a band [k1, k2) of bins: the median of as many bins
+    again (at least ``WIDE_HALF_WIDTH``) either side of it, DC and Nyquist left out, over
+    the median/mean ratio of a bin's χ²(ν)/ν. A window centred on the band would hold the
+    band itself, whose raised bins lift its median (a band of a third of the window read
+    the amplitude a few % low)."""
+    from avard.core.allan.chi2 import chi2_ppf
+
+    w = max(k2 - k1, WIDE_HALF_WIDTH)
+    side = np.r_[psd[max(1, k1 - w):max(1, k1)], psd[min(len(psd) - 1, k2):
+                                                     min(len(psd) - 1, k2 + w)]]
+    if len(side) == 0:
+        return math.nan
+    return float(np.median(side)) / (float(chi2_ppf(0.5, nu)) / nu)
+
+
+def _band_edges(f: NDArray, psd: NDArray, lo_hz: float, hi_hz: float, m: int, nu: float
+                ) -> tuple[float, float, float]:
+    """A broad disturbance's band on the fine spectrum and the background beside it
+    (``_side_background``): where the PSD's running mean over ``m`` bins crosses half way
+    from the background to the band's mean level. The coarse bins place the edges only to
+    within one of them, and a band swept at a steady rate is flat, so its half-level points
+    are its ends."""
+    df = float(f[1] - f[0])
+    k_lo = max(1, int(np.searchsorted(f, lo_hz)) - m)
+    k_hi = min(len(f) - 1, int(np.searchsorted(f, hi_hz)) + m)
+    bg = _side_background(psd, k_lo, k_hi, nu)
+    inner = psd[int(np.searchsorted(f, lo_hz)):int(np.searchsorted(f, hi_hz)) + 1]
+    level = float(np.mean(inner)) if len(inner) else bg
+    if k_hi - k_lo < 2 * m or not level > bg:
+        return lo_hz, hi_hz, bg
+    run = np.convolve(psd[k_lo:k_hi], np.ones(m) / m, mode="same")
+    above = np.flatnonzero(run > bg + 0.5 * (level - bg))
+    if len(above) == 0:
+        return lo_hz, hi_hz, bg
+    return float(f[k_lo + above[0]] - 0.5 * df), float(f[k_lo + above[-1]] + 0.5 * df), bg
+
+
+def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_width: int,
+                 fine: list[dict[str, float]]) -> list[dict[str, float]]:
+    """Disturbances spread over more bins than the fine search's window sees: the search of
+    ``_find_at`` on the spectrum averaged over ``BROAD_REBIN`` adjacent bins (DC and Nyquist
+    left out), degrees of freedom scaled by m / ``HANN_NEIGHBOUR_FACTOR``, each rebinning at
+    ``BROAD_P_SHARE`` of the false-line probability. A broad group is kept only where no line
+    of a finer search lies within its band (or main lobe): what the fine search found it
+    describes better. Each kept group is one line of its own: a drifting disturbance over
+    the band it raises (``_band_edges``), its amplitude from the band's whole power above
+    the background on the fine spectrum (the coarse lines' lobes would count the band's
+    power in pieces, each a little high)."""
+    out: list[dict[str, float]] = []
+    taken: list[tuple[float, float]] = []
+    for ln in fine:
+        lo_hz, hi_hz = ln.get("band_lo_hz", math.nan), ln.get("band_hi_hz", math.nan)
+        if not (math.isfinite(lo_hz) and math.isfinite(hi_hz)):
+            lo_hz = hi_hz = ln["frequency_hz"]
+        taken.append((lo_hz, hi_hz))
+    df = float(f[1] - f[0])
+    nu = max(2.0, 1.8 * n_seg)
+    group_id = 1000.0
+    for m in BROAD_REBIN:
+        n_c = (len(f) - 2) // m
+        if n_c < 4 * half_width:
+            break
+        sl = slice(1, 1 + n_c * m)
+        f_c = f[sl].reshape(n_c, m).mean(axis=1)
+        psd_c = psd[sl].reshape(n_c, m).mean(axis=1)
+        found = _find_at(f_c, psd_c, n_seg * m / HANN_NEIGHBOUR_FACTOR, p_false * BROAD_P_SHARE,
+                         half_width)
+        df_c = float(f_c[1] - f_c[0])
+        by: dict[float, list[dict[str, float]]] = {}
+        for ln in found:
+            by.setdefault(ln["group"], []).append(ln)
+        for members in by.values():
+            lo_hz = min(ln["band_lo_hz"] if math.isfinite(ln["band_lo_hz"])
+                        else ln["frequency_hz"] - LINE_LOBE * df_c for ln in members)
+            hi_hz = max(ln["band_hi_hz"] if math.isfinite(ln["band_hi_hz"])
+                        else ln["frequency_hz"] + LINE_LOBE * df_c for ln in members)
+            if any(a <= hi_hz + df_c and b >= lo_hz - df_c for a, b in taken):
+                continue
+            lo_hz, hi_hz, bg = _band_edges(f, psd, lo_hz, hi_hz, m, nu)
+            taken.append((lo_hz, hi_hz))
+            k1 = max(1, int(np.searchsorted(f, lo_hz)) - LINE_LOBE)
+            k2 = min(len(f) - 1, int(np.searchsorted(f, hi_hz)) + LINE_LOBE + 1)
+            if not math.isfinite(bg) or k2 <= k1:
+                continue
+            raised = psd[k1:k2] - bg
+            power = max(float(np.sum(raised)) * df, 0.0)
+            excess = np.clip(raised, 0.0, None)
+            if power <= 0 or not np.sum(excess) > 0:
+                continue
+            a_lo, a_hi = _amplitude_interval(power, excess, np.full(len(excess), bg), nu, df)
+            fc = float(np.sum(excess * f[k1:k2]) / np.sum(excess))
+            a = math.sqrt(2.0 * power)
+            out.append({"frequency_hz": fc, "amplitude": a, "amplitude_lo": a_lo,
+                        "amplitude_hi": a_hi, "bin": 0.0, "group": group_id, "harmonic": 1.0,
+                        "modulation_hz": 0.0, "group_frequency_hz": fc, "group_amplitude": a,
+                        "group_amplitude_lo": a_lo, "group_amplitude_hi": a_hi,
+                        "band_lo_hz": lo_hz, "band_hi_hz": hi_hz,
+                        "members": float(len(members))})
+            group_id += 1.0
+    return out
 
 
 #: Neighbouring Hann bins share about half their noise: the variance of a sum over a line's
@@ -411,9 +537,11 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
             continue
         k1 = min(int(lines[c[0]]["bin"]) - LINE_LOBE, span[0] if span else len(psd))
         k2 = max(int(lines[c[-1]]["bin"]) + LINE_LOBE, span[1] if span else 0) + 1
-        b = wide((k1 + k2) // 2)
+        b = _side_background(psd, k1, k2, nu)
+        if not math.isfinite(b):
+            b = wide((k1 + k2) // 2)
         excess = np.clip(psd[k1:k2] - b, 0.0, None)
-        power = float(np.sum(excess) * df)
+        power = max(float(np.sum(psd[k1:k2] - b)) * df, 0.0)
         lo, hi = _amplitude_interval(power, excess, np.full(len(excess), b), nu, df)
         fc = float(np.sum(excess * f[k1:k2]) / max(np.sum(excess), 1e-300))
         reps.append({"f": fc, "a": math.sqrt(2.0 * power), "lo": lo, "hi": hi,
@@ -500,4 +628,29 @@ def line_groups(lines: list[dict[str, float]]) -> list[LineGroup]:
             band if all(math.isfinite(x) for x in band) else None, tuple(harm),
             fm if fm > 0 else None, len(members)))
     out.sort(key=lambda g: -g.amplitude)
+    return out
+
+
+def line_components(lines: list[dict[str, float]]) -> list[dict[str, float]]:
+    """The lines of ``find_lines`` as the sinusoid components a fit models: a steady line as
+    itself, and the lines of a drifting disturbance (marked with its band) as one line over
+    that band with the band's whole amplitude (``terms.swept_sinusoid_avar``). The finder's
+    lines inside a band each hold only their main lobe's share of its power; modelled one by
+    one as steady lines they left most of it to the noise terms (a quantization term made of
+    a swept pump)."""
+    out: list[dict[str, float]] = []
+    seen: set[tuple[float, float]] = set()
+    for ln in lines:
+        lo, hi = ln.get("band_lo_hz", math.nan), ln.get("band_hi_hz", math.nan)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            out.append(dict(ln))
+            continue
+        key = (ln.get("group", math.nan), ln.get("group_frequency_hz", math.nan))
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append({**ln, "frequency_hz": ln.get("group_frequency_hz", ln["frequency_hz"]),
+                    "amplitude": ln.get("group_amplitude", ln["amplitude"]),
+                    "amplitude_lo": ln.get("group_amplitude_lo", ln["amplitude_lo"]),
+                    "amplitude_hi": ln.get("group_amplitude_hi", ln["amplitude_hi"])})
     return out

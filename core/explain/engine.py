@@ -52,7 +52,7 @@ import numpy as np
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.engine import ProgressFn, analyze
 from avard.core.analysis.results import Analysis, ChannelAnalysis
-from avard.core.analysis.spectrum import LineGroup, line_groups
+from avard.core.analysis.spectrum import LineGroup, line_components, line_groups
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
@@ -856,7 +856,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     kw: dict[str, Any] = {}
     if corner is not None and isinstance(lsb, int | float) and lsb > 0:
         kw["rounding_lsb"] = float(lsb)
-    extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": dict(ln)} for ln in ch.lines]
+    extra: list[dict[str, Any]] = [{"cause": "sinusoid", "params": ln}
+                                   for ln in line_components(ch.lines)]
 
     # the transients' search asks for the same removed signal more than once (nothing
     # found: the search's first noise and the drift test's are both "nothing removed"); each

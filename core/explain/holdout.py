@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.streaming import StreamingAllan
+from avard.core.analysis.spectrum import line_components
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import (
@@ -343,8 +344,10 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     Allan variance of a series (``_avar`` by default; ``_channel`` keeps it by content)."""
     avar = _avar if avar is None else avar
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
-    extra = [{"cause": "sinusoid", "params": {"frequency_hz": ln["frequency_hz"]}}
-             for ln in c.lines if 0 < ln["frequency_hz"] < nyq]
+    # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
+    extra = [{"cause": "sinusoid", "params": {k: ln[k] for k in (
+        "frequency_hz", "band_lo_hz", "band_hi_hz") if k in ln}}
+             for ln in line_components(c.lines) if 0 < ln["frequency_hz"] < nyq]
     base = fit_noise(avar(fit.y, rate_b), extra=extra)
     if c.names:
         d_fit, d_held, skip = _signals(fit, held, c, rate_b, refit, u_fit, u_held)

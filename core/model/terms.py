@@ -92,14 +92,42 @@ def term_avar(term: str, tau: ArrayLike, value: float) -> NDArray[np.float64]:
     raise FitError(f"unknown noise term {term!r}; choose one of {', '.join(TERMS)}")
 
 
-def sinusoid_avar(tau: ArrayLike, amplitude: float, frequency_hz: float) -> NDArray[np.float64]:
-    """AVAR of A·sin(2πf0 t): A²·(sin²(πf0τ)/(πf0τ))² (IEEE 952 eq. C.21).
+def sinusoid_avar(tau: ArrayLike, amplitude: float, frequency_hz: float,
+                  rate_hz: float | None = None) -> NDArray[np.float64]:
+    """AVAR of A·sin(2πf0 t): A²·(sin²(πf0τ)/(πf0τ))² (IEEE 952 eq. C.21), the continuous
+    average's. The peak ADEV is ≈ 0.7246·A at τ ≈ 0.371/f0.
 
-    The peak ADEV is ≈ 0.7246·A at τ ≈ 0.371/f0.
+    With ``rate_hz``, of the sinusoid sampled at that rate and averaged over m = τ·rate
+    samples: the mean's gain is sin(πf0τ)/(m·sin(πf0/rate)), so πf0τ in the denominator
+    becomes m·sin(πf0/rate). The two differ where f0 is not small beside the rate (a 3 Hz
+    line sampled at 10 Hz: the continuous form is 28 % low at every τ).
     """
     t = _tau(tau)
     x = math.pi * float(frequency_hz) * t
-    return float(amplitude) ** 2 * (np.sin(x) ** 2 / x) ** 2
+    den = x if rate_hz is None else t * float(rate_hz) * math.sin(
+        math.pi * float(frequency_hz) / float(rate_hz))
+    return float(amplitude) ** 2 * (np.sin(x) ** 2 / den) ** 2
+
+
+#: Frequencies a swept line's band is averaged over (the mean of sin⁴(πfτ)/(πfτ)² over the
+#: band needs its oscillation in f, period 1/τ, sampled at the longest τ it still shapes).
+SWEEP_POINTS = 256
+
+
+def swept_sinusoid_avar(tau: ArrayLike, amplitude: float, lo_hz: float, hi_hz: float,
+                        rate_hz: float | None = None) -> NDArray[np.float64]:
+    """AVAR of a line of amplitude A swept at a steady rate over [lo_hz, hi_hz] (a pump whose
+    speed drifts): where τ is short beside the sweep, the record is a succession of steady
+    sinusoids, and its AVAR the mean of ``sinusoid_avar`` over the frequencies it passes
+    through, equally long at each (its sampled form with ``rate_hz``). Where τ spans many
+    periods of the band's spread (τ ≫ 1/(hi − lo)) the steady line's nulls at τ = k/f fill
+    in: the mean tends to (3/8)·A²/(πτ)² times the band's mean of 1/f²."""
+    t = _tau(tau)
+    f = np.linspace(float(lo_hz), float(hi_hz), SWEEP_POINTS)
+    x = math.pi * f[None, :] * t[:, None]
+    den = x if rate_hz is None else t[:, None] * float(rate_hz) * np.sin(
+        math.pi * f[None, :] / float(rate_hz))
+    return float(amplitude) ** 2 * np.mean((np.sin(x) ** 2 / den) ** 2, axis=1)
 
 
 def gauss_markov_avar(tau: ArrayLike, sigma: float, T: float) -> NDArray[np.float64]:
@@ -259,7 +287,10 @@ def component_avar(cause: str, tau: ArrayLike, params: Mapping[str, float], *,
     if cause in TERMS:
         return term_avar(cause, tau, params["value"])
     if cause == "sinusoid":
-        return sinusoid_avar(tau, params["amplitude"], params["frequency_hz"])
+        lo, hi = params.get("band_lo_hz", math.nan), params.get("band_hi_hz", math.nan)
+        if math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi:
+            return swept_sinusoid_avar(tau, params["amplitude"], lo, hi, rate_hz)
+        return sinusoid_avar(tau, params["amplitude"], params["frequency_hz"], rate_hz)
     if cause == "gauss_markov":
         T = params["T"] if "T" in params else params["time_constant_s"]
         return gauss_markov_avar(tau, params["sigma"], T)
