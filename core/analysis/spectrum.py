@@ -182,10 +182,15 @@ BROAD_REBIN = (8, 64)
 #: The share of the false-line probability each broad rebinning is given (the fine search
 #: keeps all of its own: its lines are the ones the rest of avard models).
 BROAD_P_SHARE = 0.1
-#: Adjacent Hann bins of a Welch spectrum share about a quarter of their power's variance
-#: (the window's amplitude overlap is ½): a mean of m bins has the degrees of freedom of
-#: m / (1 + 2·¼) independent ones.
-HANN_NEIGHBOUR_FACTOR = 1.5
+
+
+def hann_neighbour_factor(m: int) -> float:
+    """How many times the variance of a mean of m adjacent bins of a Hann-windowed
+    periodogram exceeds that of m independent ones: the window's spectral kernel is
+    (−¼, ½, −¼), so a bin's Fourier amplitude correlates −2/3 with its neighbour's and 1/6
+    with the next one's, and their powers 4/9 and 1/36 (a mean of m bins has the degrees
+    of freedom of m over this many independent bins: 1.82 at m = 8, 1.94 for large m)."""
+    return 1.0 + 2.0 * (4.0 / 9.0) * (m - 1) / m + 2.0 * (1.0 / 36.0) * max(m - 2, 0) / m
 
 
 def find_lines(f: NDArray, psd: NDArray, n_seg: float, *, p_false: float = 0.01,
@@ -316,7 +321,7 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
                  fine: list[dict[str, float]]) -> list[dict[str, float]]:
     """Disturbances spread over more bins than the fine search's window sees: the search of
     ``_find_at`` on the spectrum averaged over ``BROAD_REBIN`` adjacent bins (DC and Nyquist
-    left out), degrees of freedom scaled by m / ``HANN_NEIGHBOUR_FACTOR``, each rebinning at
+    left out), degrees of freedom scaled by m / ``hann_neighbour_factor(m)``, each rebinning at
     ``BROAD_P_SHARE`` of the false-line probability. A broad group is kept only where no line
     of a finer search lies within its band (or main lobe): what the fine search found it
     describes better. Each kept group is one line of its own: a drifting disturbance over
@@ -340,7 +345,7 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
         sl = slice(1, 1 + n_c * m)
         f_c = f[sl].reshape(n_c, m).mean(axis=1)
         psd_c = psd[sl].reshape(n_c, m).mean(axis=1)
-        found = _find_at(f_c, psd_c, n_seg * m / HANN_NEIGHBOUR_FACTOR, p_false * BROAD_P_SHARE,
+        found = _find_at(f_c, psd_c, n_seg * m / hann_neighbour_factor(m), p_false * BROAD_P_SHARE,
                          half_width)
         df_c = float(f_c[1] - f_c[0])
         by: dict[float, list[dict[str, float]]] = {}
