@@ -377,6 +377,7 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
                         "modulation_hz": 0.0, "group_frequency_hz": fc, "group_amplitude": a,
                         "group_amplitude_lo": a_lo, "group_amplitude_hi": a_hi,
                         "band_lo_hz": lo_hz, "band_hi_hz": hi_hz,
+                        "sweep_lo_hz": lo_hz, "sweep_hi_hz": hi_hz,
                         "members": float(len(members))})
             group_id += 1.0
     return out
@@ -637,25 +638,36 @@ def line_groups(lines: list[dict[str, float]]) -> list[LineGroup]:
 
 
 def line_components(lines: list[dict[str, float]]) -> list[dict[str, float]]:
-    """The lines of ``find_lines`` as the sinusoid components a fit models: a steady line as
-    itself, and the lines of a drifting disturbance (marked with its band) as one line over
-    that band with the band's whole amplitude (``terms.swept_sinusoid_avar``). The finder's
-    lines inside a band each hold only their main lobe's share of its power; modelled one by
-    one as steady lines they left most of it to the noise terms (a quantization term made of
-    a swept pump)."""
+    """The lines of ``find_lines`` as the sinusoid components a fit models: each line the
+    finder placed as a steady line at its frequency, and the power of a drifting
+    disturbance that its lines do not hold as one line swept over its band
+    (``sweep_lo_hz``/``sweep_hi_hz``, ``terms.swept_sinusoid_avar``). A line of the broad
+    search is all band. The finder's lines inside a band hold only their main lobes' share
+    of its power; the rest, modelled by nobody, went to the noise terms (a quantization
+    term made of a swept pump). It is added only where it exceeds the standard error of
+    the band's power: a wandering line whose power stays in its lobe (a real ADIS16405's
+    0.56 Hz) is its lines, not a sweep."""
     out: list[dict[str, float]] = []
-    seen: set[tuple[float, float]] = set()
+    clusters: dict[tuple[float, float], list[dict[str, float]]] = {}
     for ln in lines:
         lo, hi = ln.get("band_lo_hz", math.nan), ln.get("band_hi_hz", math.nan)
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            out.append(dict(ln))
+        if "sweep_lo_hz" in ln:
+            out.append({k: ln[k] for k in ("frequency_hz", "amplitude", "sweep_lo_hz",
+                                           "sweep_hi_hz")})
             continue
-        key = (ln.get("group", math.nan), ln.get("group_frequency_hz", math.nan))
-        if key in seen:
-            continue
-        seen.add(key)
-        out.append({**ln, "frequency_hz": ln.get("group_frequency_hz", ln["frequency_hz"]),
-                    "amplitude": ln.get("group_amplitude", ln["amplitude"]),
-                    "amplitude_lo": ln.get("group_amplitude_lo", ln["amplitude_lo"]),
-                    "amplitude_hi": ln.get("group_amplitude_hi", ln["amplitude_hi"])})
+        out.append(dict(ln))
+        if math.isfinite(lo) and math.isfinite(hi) and lo < hi:
+            key = (ln.get("group", math.nan), ln.get("group_frequency_hz", math.nan))
+            clusters.setdefault(key, []).append(ln)
+    for members in clusters.values():
+        m0 = members[0]
+        a, a_lo, a_hi = (m0.get("group_amplitude", math.nan),
+                         m0.get("group_amplitude_lo", math.nan),
+                         m0.get("group_amplitude_hi", math.nan))
+        rest = 0.5 * a * a - sum(0.5 * ln["amplitude"] ** 2 for ln in members)
+        se = 0.25 * (a_hi * a_hi - a_lo * a_lo)
+        if math.isfinite(rest) and math.isfinite(se) and rest > se:
+            out.append({"frequency_hz": m0["group_frequency_hz"],
+                        "amplitude": math.sqrt(2.0 * rest),
+                        "sweep_lo_hz": m0["band_lo_hz"], "sweep_hi_hz": m0["band_hi_hz"]})
     return out

@@ -346,7 +346,7 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
     # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
     extra = [{"cause": "sinusoid", "params": {k: ln[k] for k in (
-        "frequency_hz", "band_lo_hz", "band_hi_hz") if k in ln}}
+        "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
              for ln in line_components(c.lines) if 0 < ln["frequency_hz"] < nyq]
     base = fit_noise(avar(fit.y, rate_b), extra=extra)
     if c.names:

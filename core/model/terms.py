@@ -281,13 +281,14 @@ def component_avar(cause: str, tau: ArrayLike, params: Mapping[str, float], *,
     """AVAR of one named component with its parameters.
 
     ``cause`` is an IEEE term name (params ``{"value": ...}``), ``"sinusoid"``
-    (``amplitude``, ``frequency_hz``), ``"gauss_markov"`` (``sigma``, ``T``) or ``"filter"``
+    (``amplitude``, ``frequency_hz``; swept at a steady rate with ``sweep_lo_hz`` and
+    ``sweep_hi_hz``), ``"gauss_markov"`` (``sigma``, ``T``) or ``"filter"``
     / ``"lowpass_white"`` (``N``, ``corner_hz``, optional ``order``; needs ``rate_hz``).
     """
     if cause in TERMS:
         return term_avar(cause, tau, params["value"])
     if cause == "sinusoid":
-        lo, hi = params.get("band_lo_hz", math.nan), params.get("band_hi_hz", math.nan)
+        lo, hi = params.get("sweep_lo_hz", math.nan), params.get("sweep_hi_hz", math.nan)
         if math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi:
             return swept_sinusoid_avar(tau, params["amplitude"], lo, hi, rate_hz)
         return sinusoid_avar(tau, params["amplitude"], params["frequency_hz"], rate_hz)

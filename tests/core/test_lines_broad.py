@@ -64,7 +64,7 @@ def test_a_pump_swept_over_a_wide_band_is_one_drifting_finding_with_its_band() -
     # the fit is given one component over the band with the band's amplitude
     (comp,) = line_components(find_lines(f, p, n_seg))
     assert comp["amplitude"] == pytest.approx(g.amplitude)
-    assert (comp["band_lo_hz"], comp["band_hi_hz"]) == pytest.approx(g.band_hz)
+    assert (comp["sweep_lo_hz"], comp["sweep_hi_hz"]) == pytest.approx(g.band_hz)
 
 
 def test_the_broad_search_adds_no_line_to_null_spectra() -> None:
