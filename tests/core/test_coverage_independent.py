@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 from benchmarks.bench_coverage import BAND, coverage
+from tests.support.coverage_gen import Mix
 
 #: measured on the sine rows (200 records, seed 1; docs/analysis.md): records where the
 #: slow-sinusoid search resolved the sinusoid, and the highest coverage share over τ
@@ -134,3 +135,61 @@ def test_the_generators_noise_edf_is_its_scatter() -> None:
     est = np.array([allan_variance(record(mix, n, rng)[0], 1.0, ms).var for _ in range(400)])
     seen = 2.0 * truth**2 / np.mean((est - truth) ** 2, axis=0)
     np.testing.assert_allclose(seen, expected, rtol=0.25)
+
+
+def _exact_generator_edf(mix: Mix, n: int, m: int) -> float:
+    """The EDF 2E²/Var of the OADEV at averaging factor m of the generator's own process,
+    exactly, with numpy alone: the OADEV is (1/2M)Σ_k D_k², D_k the difference of adjacent
+    m-averages, a stationary Gaussian sequence whose covariance C(l) is the white's and the
+    walk's (their weights' autocorrelation) plus the flicker's line spectrum
+    Σ_j P_j|H_m(f_j)|² cos(2π f_j l) (one FFT on the series' own period), so
+    EDF = M²C(0)² / Σ_l (M − |l|)C(l)²."""
+    import numpy as np
+
+    from tests.support.coverage_gen import PERIODS, _flicker_power
+
+    big_m = n - 2 * m + 1
+    length = PERIODS * n
+    f, p = _flicker_power(n, mix.h)
+    x = np.pi * f
+    g = np.zeros(length)
+    g[1:length // 2] = p * 4 * np.sin(x * m) ** 2 * (np.sin(x * m) / (m * np.sin(x))) ** 2
+    c = np.fft.fft(g).real[:big_m]
+    w = np.concatenate([-np.ones(m), np.ones(m)]) / m  # the samples' weights in D
+    c[:2 * m] += mix.s2 * np.correlate(w, w, "full")[2 * m - 1:]
+    v = np.concatenate([np.arange(1, m + 1), np.arange(m - 1, 0, -1)]) / m  # the walk's steps'
+    c[:2 * m - 1] += mix.q2 * np.correlate(v, v, "full")[2 * m - 2:]
+    lag = np.arange(1, big_m)
+    return float(big_m**2 * c[0] ** 2
+                 / (big_m * c[0] ** 2 + 2 * np.sum((big_m - lag) * c[1:] ** 2)))
+
+
+@pytest.mark.parametrize(("hours", "taus"), [(1, (12.8, 204.8, 409.6)),
+                                             (12, (16.0, 1024.0, 8192.0)),
+                                             (60, (4.0, 64.0, 32768.0))])
+def test_the_generators_noise_edf_is_its_exact_edf(hours: int, taus: tuple[float, ...]
+                                                   ) -> None:
+    """``noise_edf`` (Greenhall–Riley's quadratic form of the mixture, ``edf.edf_mixture``,
+    rate data's phase) is the exact EDF of the generator's discrete process (a flicker of
+    lines on four record lengths, not an ideal 1/f) within 1 % at the benchmark's own
+    geometries and mixes, from the cells the coverage tables discuss: a row whose records'
+    noise scatters far from it is lucky or unlucky there, whatever the printed rule, and
+    where the printed EDF equals it the interval has the class's width (docs/analysis.md,
+    "The cells outside the band, re-measured")."""
+    import numpy as np
+
+    from benchmarks.bench_coverage import LENGTHS, mix_for, noise_edf
+
+    rate = LENGTHS[hours]
+    n = round(hours * 3600 * rate)
+    mix = mix_for("plain", n, rate)
+    ms = np.array([round(t * rate) for t in taus])
+    exact = [_exact_generator_edf(mix, n, int(m)) for m in ms]
+    np.testing.assert_allclose(noise_edf(mix, n, ms), exact, rtol=0.01)
+    # the exact form itself, on white noise alone: Greenhall–Riley's white FM (rate data) is
+    # that process's exact EDF
+    from avard.core.allan.edf import edf_greenhall
+
+    m = int(ms[-1])
+    assert _exact_generator_edf(Mix(s2=1.0, h=0.0, q2=0.0), n, m) == pytest.approx(
+        edf_greenhall(0, 2, m, 1, n + 1, rate_data=True), rel=1e-4)
