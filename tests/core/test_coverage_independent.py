@@ -21,8 +21,8 @@ SINE_HIGHEST = {1: 0.855, 12: 0.77, 60: 0.805}
 def test_intervals_cover_the_truth_on_noise(hours: int) -> None:
     """White + flicker + random walk, 200 records: at every τ with ≥ 5 averages the 68.3 %
     interval holds the closed-form AVAR in at least 60 % of the records, and in 60–76 % at
-    all but one τ, none above 80 % (measured: 1 h and 12 h within 60–76 % at every τ; 60 h
-    at 77.5 % at 8 s, 15 of 16 inside; a share of 200 records has a standard error of 3.3
+    all but one τ, none above 80 % (measured on 8196a88: 1 h 66.5–74.0 %, 12 h 67.0–72.5 %,
+    60 h 63.5–75.0 %, every τ inside; a share of 200 records has a standard error of 3.3
     points, and neighbouring τ share their records)."""
     c = coverage(hours, "plain", 200, seed=1)
     detail = list(zip(c.tau, c.share, strict=True))
@@ -41,9 +41,11 @@ def test_intervals_cover_the_truth_beside_a_drift(hours: int) -> None:
     T/10, 200 records: the time domain resolves the drift in 46–85 % of them, the others
     carry its slope interval's near end as a floor (analysis/drift.py, signal_edf.py); at
     every τ with ≥ 5 averages the interval holds the truth in at least 60 %, in 60–76 % at
-    all but one τ, none above 80 % (measured: 1 h 62.5–72.0 %, 12 h 64.5–77.5 % with 77.5 %
-    at 512 s, 60 h 62.5–75.5 %; before the floor and the resolved ramp's rms noise part up
-    to 83.5 %, at four τ of 12 h)."""
+    all but one τ, none above 80 % (measured on 8196a88: 1 h 61.5–73.0 %, 12 h 64.0–77.0 %
+    with 77.0 % at 8192 s, 60 h 59.5–75.0 %: 64 s is one record short of 60 %, where the
+    printed EDF is the generator's exact one and these records scatter 18 % below it, so
+    the 60 h case fails on that tree; docs/analysis.md, "Every row re-measured"; before the
+    floor and the resolved ramp's rms noise part up to 83.5 %, at four τ of 12 h)."""
     c = coverage(hours, "drift", 200, seed=1)
     detail = list(zip(c.tau, c.share, c.signal, strict=True))
     assert all(c.share >= BAND[0]), detail
