@@ -21,7 +21,10 @@ the fit's deterministic share of the EDF: ``analysis/signal_edf.py``); ``--path 
 the bare estimator's (``allan_variance``), without the fit; ``--path live`` the service's
 snapshot (the cascade fed a minute at a time, ``analysis/live_fit.fit_channel``: its fit
 and analyze's EDF rule on it). ``--workers 2`` runs the
-(length, mix) rows on two processes.
+(length, mix) rows on two processes. ``--detail`` prints the share at every τ, and on the
+analyze path split by what the record resolved: the slow sinusoid found or not, the drift
+test's verdict (resolved, a floor, neither), since a deterministic part the record cannot
+resolve does not scatter inside an interval that is given the noise's EDF.
 
 With 200 records a share has a standard error of 3.3 points, so 60–76 % is ±2.4 standard
 errors about 68.3 %: one τ in 60 falls outside by chance alone.
@@ -96,6 +99,11 @@ def true_psd(mix: Mix) -> Callable[[np.ndarray], np.ndarray]:
 #: per record analysed in this process: whether the slow-sinusoid search resolved one
 #: (``ChannelAnalysis.slow``; on a record without one, a false detection)
 SLOW_FOUND: list[bool] = []
+#: per record analysed in this process: the time-domain drift test's verdict on the fit the
+#: EDF is from (``DRIFT_VERDICTS``): a drift the record cannot resolve leaves a part that does
+#: not scatter inside an interval given the noise's EDF, so the shares differ by verdict
+DRIFT_VERDICT: list[str] = []
+DRIFT_VERDICTS = ("resolved", "floor", "neither")
 
 
 def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "analyze",
@@ -132,6 +140,8 @@ def printed(y: np.ndarray, rate: float, noise_id: str = "avard", path: str = "an
     ch = analyze(StreamSource(info, blocks), AnalyzeOptions(noise_id=noise_id)).channels["x"]
     SLOW_FOUND.append(ch.slow is not None and ch.slow.sine is not None)
     fit = ch.fit if ch.slow_fit is None else ch.slow_fit  # (the fit the EDF is from)
+    DRIFT_VERDICT.append("resolved" if "rate_ramp" in fit.resolved_apart
+                         else "floor" if fit.drift_floor > 0 else "neither")
     share = signal_share(fit, ch.allan)
     rules = None
     if detail:
@@ -185,6 +195,8 @@ class Coverage:
     # what ``noise_seen`` scatters about over many records; a row's records whose noise
     # scatters far from it are lucky or unlucky at that τ, whatever the printed rule
     noise_expected: np.ndarray | None = None
+    # (analyze path) per DRIFT_VERDICTS, the records with that verdict and their shares
+    by_verdict: tuple[tuple[str, int, np.ndarray], ...] = ()
 
     def outside(self) -> list[float]:
         return [float(t) for t, s in zip(self.tau, self.share, strict=True)
@@ -218,6 +230,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     noise_only: list[np.ndarray] = []
     ms = None
     found0 = len(SLOW_FOUND)
+    verdict0 = len(DRIFT_VERDICT)
     for _ in range(records):
         y, clean = record(mix, n, rng)
         r, share, rule = printed(y, rate, noise_id, path, detail)
@@ -243,6 +256,9 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
     truth = noise + signal
     inside = (np.array(lo) <= truth) & (truth <= np.array(hi))
     found = np.array(SLOW_FOUND[found0:] or [False] * records, dtype=bool)
+    verdicts = np.array(DRIFT_VERDICT[verdict0:])
+    by_verdict = tuple((v, int(np.sum(verdicts == v)), inside[verdicts == v].mean(axis=0))
+                       for v in DRIFT_VERDICTS if len(verdicts) and np.any(verdicts == v))
     seen = 2.0 * truth**2 / np.mean((np.array(var) - truth) ** 2, axis=0)
     known = np.full(len(ms), np.nan)
     if clean_var and own:
@@ -269,7 +285,7 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
                     if noise_only else None, int(np.sum(found)),
                     inside[found].mean(axis=0) if found.any() else None,
                     inside[~found].mean(axis=0) if (~found).any() else None,
-                    noise_edf(mix, n, ms) if noise_only else None)
+                    noise_edf(mix, n, ms) if noise_only else None, by_verdict)
 
 
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
@@ -372,6 +388,9 @@ def main(argv: list[str]) -> int:
                 if sh is not None and c.slow_found:
                     print(f"    coverage where a slow sinusoid was {name}: "
                           + " ".join(f"{v:.0%}" for v in sh))
+            for verdict, count, sh in c.by_verdict:
+                print(f"    coverage where the drift test's verdict was {verdict} "
+                      f"({count} records): " + " ".join(f"{v:.0%}" for v in sh))
             if c.rules is not None and c.noise_seen is not None:
                 expected = (c.noise_expected if c.noise_expected is not None
                             else np.full(len(c.tau), np.nan))
