@@ -925,6 +925,14 @@ class ThermalFit:
     threshold_dof: float = math.inf
     #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
     lag_open: bool = False
+    #: the scan's z of this channel at its best lag, on the covariance common to every lag
+    #: and channel the scan compares (the other channels' ``others[...]["z"]``)
+    scan_z: float = math.nan
+    #: with more than one channel logged, what chose this one (``_choose_channel``): its
+    #: held-out −2 ln L, the lag it was scored at, the rounding's share of it, its scan z
+    channel_choice: dict[str, float] = field(default_factory=dict)
+    #: the channels the record does not tell apart from this one, in words ("" if none)
+    channel_note: str = ""
     #: the thermal path chosen by held-out likelihood (``thermal_paths``; None: not
     #: examined). When it is not one lag, ``coefficient``/``coef_se`` are its linear
     #: coupling's and ``lag_s`` its first lag, and ``signal`` is the path's
@@ -977,7 +985,7 @@ class ThermalFit:
     def evidence(self) -> str:
         if self.path is not None and self.path.kind != "one_lag":
             return (f"the axis follows temperature '{self.channel}' (z = {self.z:.3g}, test "
-                    f"z ≥ {self.threshold:g}) by {self.path.summary()}")
+                    f"z ≥ {self.threshold:g}) by {self.path.summary()}{self._channels_text}")
         lo, hi = self.coef_interval
         path = ("a first-order lag of" if self.lag_s >= 0 else
                 "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
@@ -987,10 +995,33 @@ class ThermalFit:
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
-        if self.others:
-            txt += "; other channels: " + ", ".join(
+        return txt + self._channels_text
+
+    @property
+    def _channels_text(self) -> str:
+        """How the channel was chosen, every channel by the same numbers: the held-out
+        −2 ln L of one lag each, then the scan's z on its one covariance (the chosen
+        channel's test z above is another statistic: not beside the others')."""
+        if not self.others:
+            return ""
+        if not self.channel_choice:
+            return "; other channels: " + ", ".join(
                 f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
                 for k, v in self.others.items())
+        rows = {self.channel: self.channel_choice, **self.others}
+
+        def one(k: str, v: dict[str, float]) -> str:
+            mark = " (chosen)" if k == self.channel else ""
+            end = ", open" if v.get("open") else ""
+            return f"'{k}'{mark} {v['heldout']:.4g} at lag {v['heldout_lag_s']:.4g} s{end}"
+
+        txt = ("; channels by held-out −2 ln L of one lag each (fitted on one half of the "
+               "record, scored on the other; lower is better): "
+               + ", ".join(one(k, v) for k, v in rows.items())
+               + "; scan z on one covariance: "
+               + ", ".join(f"'{k}' {v['scan_z']:.3g}" for k, v in rows.items()))
+        if self.channel_note:
+            txt += "; " + self.channel_note
         return txt
 
     @property
@@ -1035,6 +1066,8 @@ class ThermalFit:
                 "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
                                   else None),
                 "passed": self.passed, "others": self.others,
+                "channel_choice": self.channel_choice or None,
+                "channel_note": self.channel_note or None,
                 "mechanism": self.mechanism,
                 "path": None if self.path is None else self.path.to_dict()}
 
@@ -1329,6 +1362,10 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
         return zmax[j] ** 2 - (OPEN_END_MARGIN if at_end(best[j]) else 0.0)
 
     jb = max(zmax, key=rank)
+    compared: dict[str, dict[str, float]] = {}
+    note = ""
+    if len(best) > 1:
+        jb, compared, note = _choose_channel(y, temps, names, rate_hz, best, holes, floors)
     scan = best[jb]
     k = int(np.argmax([s.z for s in scan]))
     # the lag its interval is about (the estimator the leave-one-out lags are), not the grid
@@ -1365,10 +1402,83 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     for j, sc in best.items():
         if j != jb:
             kk = int(np.argmax([s.z for s in sc]))
-            others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
+            others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c,
+                                **compared.get(names[j], {})}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0),
-                      threshold=test.threshold, threshold_dof=test.dof)
+                      threshold=test.threshold, threshold_dof=test.dof,
+                      scan_z=scan[k].z, channel_choice=compared.get(names[jb], {}),
+                      channel_note=note)
+
+
+#: How much lower a channel's held-out −2 ln L (``holdout.channel_heldout``) must be for it
+#: to drive an axis rather than another channel: at least the margin ``thermal_paths`` asks
+#: of a path over one lag (``HELDOUT_MARGIN``) ...
+CHANNEL_MARGIN = 6.0
+#: ... and this many standard errors of the difference, from its spread over the record's
+#: parts (``holdout.ChannelPath.versus``): two channels that both describe the path differ
+#: in held-out −2 ln L by the record's noise and by the readings' rounding (a channel seen
+#: through a long lag passes less of its 0.0625 K steps), on a scale that grows with the
+#: coupling, not by the fixed margin a nested model's extra term is held to. Student's t
+#: with the parts' 9 degrees of freedom at 5 %, two-sided.
+CHANNEL_T = t_two_sided(0.05, 9)
+
+
+def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+                    best: dict[int, list[ScanPoint]], holes: Holes | None,
+                    floors: dict[int, float] | None
+                    ) -> tuple[int, dict[str, dict[str, float]], str]:
+    """The channel that drives axis ``y``, by the held-out likelihood of each channel
+    through its own lag (``holdout.channel_heldout``), not by the scan's z: (its index, per
+    channel name what was compared, a note when the record does not tell channels apart).
+
+    A channel whose scan's best lag sits at the end of the lags tried (open) pays
+    ``OPEN_END_MARGIN`` beside one with an interior optimum. Channels whose held-out −2 ln L
+    is within ``max(CHANNEL_MARGIN, CHANNEL_T·se)`` of the best describe the axis equally:
+    the room seen through the plate's long lag is the plate's own path, and on a record
+    that holds nothing the plate does not pass on, the two cannot be told apart (a long lag
+    also filters the readings' rounding, so the farther channel often predicts a little
+    better). Among those the more direct path is reported, by one fixed order, never by
+    the record's luck: an interior optimum before an open one, then the shortest |lag| (the
+    channel nearest the die in the heat's path: a longer lag on another channel is that
+    path with the lags between them added, and a lag long against the drive's period
+    trades with its coefficient, which it leaves unresolved), then a positive lag before a
+    negative one, then the lower held-out −2 ln L."""
+    from avard.core.explain.holdout import channel_heldout
+
+    ks = {j: int(np.argmax([s.z for s in sc])) for j, sc in best.items()}
+    lags0 = {j: best_lag(sc, ks[j]) for j, sc in best.items()}
+    is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
+    interior = not all(is_open.values())
+    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
+    cost = {j: hp[j].heldout + (OPEN_END_MARGIN if is_open[j] and interior else 0.0)
+            for j in best}
+    j0 = min(cost, key=lambda j: (cost[j], abs(lags0[j])))
+    spread = {j: hp[j].versus(hp[j0])[1] for j in best}
+    need = {j: max(CHANNEL_MARGIN, CHANNEL_T * spread[j]) for j in best}
+    tied = [j for j in best if cost[j] <= cost[j0] + need[j]]
+    jb = min(tied, key=lambda j: (is_open[j], abs(lags0[j]), lags0[j] < 0, cost[j]))
+    compared = {names[j]: {"heldout": hp[j].heldout, "heldout_lag_s": lags0[j],
+                           "heldout_coefficient": hp[j].coefficient,
+                           "heldout_margin_vs_best": need[j],
+                           "heldout_rounding": hp[j].rounding, "scan_z": best[j][ks[j]].z,
+                           "open": float(is_open[j])}
+                for j in best}
+    note = ""
+    if len(tied) > 1:
+        others = [j for j in tied if j != jb]
+        who = " and ".join(f"'{names[j]}' (through {lags0[j]:.4g} s)" for j in others)
+        note = (f"{who} describe{'s' if len(others) == 1 else ''} the axis as well (held-out "
+                f"−2 ln L within {max(need[j] for j in tied):.3g} of the best: "
+                f"{CHANNEL_MARGIN:g}, or {CHANNEL_T:.3g} standard errors of the difference "
+                "over the record's parts): this record cannot tell the channels apart; "
+                f"'{names[jb]}', the more direct path (the shortest interior lag), is "
+                "reported, the other channel being that path seen through the lags between "
+                "them, whose coefficient trades with its lag")
+    elif jb != max(best, key=lambda j: best[j][ks[j]].z):
+        note = (f"'{names[jb]}' predicts the held-out halves better than the channel of "
+                "the larger scan z, by more than the margin")
+    return jb, compared, note
 
 
 def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:
