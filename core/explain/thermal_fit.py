@@ -16,9 +16,12 @@ r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: th
 independent differences). Differencing removes the offset and whitens flicker and random walk,
 so the regression is valid under the axis's own noise. The c_k are combined with inverse-
 variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
-combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
-over a log grid refined around the best point) and the channel (largest z), one covariance
-for every lag and channel compared. At the chosen lag the test's analytic se is the
+combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks each channel's lag
+(maximum of z² over a log grid refined around the best point), one covariance for every lag
+and channel compared. Which channel drives is decided by each channel's held-out likelihood
+through its own lag (``_choose_channel``, ``holdout.channel_heldout``), not by this z: the
+room seen through the plate's long lag is a second description of a coupling through the
+plate, and its smoother regressor took the larger z. At the chosen lag the test's analytic se is the
 regressor's own (``octave_spectra``, ``coupling_test``: the octaves see the same slow noise,
 near one number for a trend under red noise), its threshold the t of the degrees of freedom
 that se rests on. Under red noise the EDF model is too optimistic (the noise differences are
@@ -904,7 +907,8 @@ def compensated_avar(var: NDArray, tau: NDArray, res: Any, coefficient: float
 class ThermalFit:
     """The thermal model of one axis (SI units). ``channel`` drives it through a first-order
     lag ``lag_s`` [lag_lo, lag_hi] with ``coefficient`` [coef_lo, coef_hi] m/s²/K (68 %);
-    ``z`` its test statistic; ``others``: the best z and lag of every other channel."""
+    ``z`` its test statistic; ``others``: the best z and lag of every other channel, and with
+    more than one channel what chose between them (``_choose_channel``)."""
 
     channel: str
     channel_index: int
