@@ -593,7 +593,7 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
         kj = hole_mask(len(y), (holes or {}).get(j, []), max(abs(L0), 60.0), rate_hz)
         if kj is not None:
             keep &= kj
-    cut = keep[:m].reshape(-1, f).all(axis=1)
+    cut: NDArray[np.bool_] = np.asarray(keep[:m].reshape(-1, f).all(axis=1), dtype=bool)
     blocks = [ys]
     idx: dict[int, list[int]] = {}
     for j, L0 in lags0.items():
