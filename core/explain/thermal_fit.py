@@ -1419,13 +1419,23 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
 #: to drive an axis rather than another channel: at least the margin ``thermal_paths`` asks
 #: of a path over one lag (``HELDOUT_MARGIN``) ...
 CHANNEL_MARGIN = 6.0
-#: ... and this many standard errors of the difference, from its spread over the record's
+#: ... or this many standard errors of the difference, from its spread over the record's
 #: parts (``holdout.ChannelPath.versus``): two channels that both describe the path differ
-#: in held-out −2 ln L by the record's noise and by the readings' rounding (a channel seen
-#: through a long lag passes less of its 0.0625 K steps), on a scale that grows with the
-#: coupling, not by the fixed margin a nested model's extra term is held to. Student's t
-#: with the parts' 9 degrees of freedom at 5 %, two-sided.
+#: in held-out −2 ln L by the record's noise on a scale that grows with the coupling, not
+#: by the fixed margin a nested model's extra term is held to. Student's t with the parts'
+#: 9 degrees of freedom at 5 %, two-sided. To either is added what the readings' 0.0625 K
+#: rounding through the worse channel's coupling makes up of its held-out deviance beyond
+#: the better one's (``ChannelPath.rounding``): an error of the regressor, not of the path,
+#: which a channel seen through a long lag smooths away.
 CHANNEL_T = t_two_sided(0.05, 9)
+
+
+def path_distance(lag_s: float) -> float:
+    """How far a channel is from the die along the heat's path, for a lag of either sign: a
+    positive lag is the lag itself (the channel upstream of the die); a negative lag −a is
+    the lead-lag of a logged sensor 2a and a die a behind one point (``lag_filter``), so the
+    path from the channel to the die runs back through that point, 3a long."""
+    return lag_s if lag_s >= 0 else 3.0 * abs(lag_s)
 
 
 def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
@@ -1438,16 +1448,18 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
 
     A channel whose scan's best lag sits at the end of the lags tried (open) pays
     ``OPEN_END_MARGIN`` beside one with an interior optimum. Channels whose held-out −2 ln L
-    is within ``max(CHANNEL_MARGIN, CHANNEL_T·se)`` of the best describe the axis equally:
+    is within ``max(CHANNEL_MARGIN, CHANNEL_T·se)`` of the best, plus what the readings'
+    rounding makes up of it beyond the best's (``ChannelPath.rounding``), describe the axis
+    equally:
     the room seen through the plate's long lag is the plate's own path, and on a record
     that holds nothing the plate does not pass on, the two cannot be told apart (a long lag
     also filters the readings' rounding, so the farther channel often predicts a little
     better). Among those the more direct path is reported, by one fixed order, never by
-    the record's luck: an interior optimum before an open one, then the shortest |lag| (the
-    channel nearest the die in the heat's path: a longer lag on another channel is that
-    path with the lags between them added, and a lag long against the drive's period
-    trades with its coefficient, which it leaves unresolved), then a positive lag before a
-    negative one, then the lower held-out −2 ln L."""
+    the record's luck: an interior optimum before an open one, then the channel nearest
+    the die along the heat's path (``path_distance``: a longer lag on another channel is
+    that path with the lags between them added, and a lag long against the drive's period
+    trades with its coefficient, which it leaves unresolved), then the lower held-out
+    −2 ln L."""
     from avard.core.explain.holdout import channel_heldout
 
     ks = {j: int(np.argmax([s.z for s in sc])) for j, sc in best.items()}
@@ -1457,11 +1469,13 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
     hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
     cost = {j: hp[j].heldout + (OPEN_END_MARGIN if is_open[j] and interior else 0.0)
             for j in best}
-    j0 = min(cost, key=lambda j: (cost[j], abs(lags0[j])))
+    dist = {j: path_distance(lags0[j]) for j in best}
+    j0 = min(cost, key=lambda j: (cost[j], dist[j]))
     spread = {j: hp[j].versus(hp[j0])[1] for j in best}
-    need = {j: max(CHANNEL_MARGIN, CHANNEL_T * spread[j]) for j in best}
+    need = {j: max(CHANNEL_MARGIN, CHANNEL_T * spread[j])
+            + max(0.0, hp[j].rounding - hp[j0].rounding) for j in best}
     tied = [j for j in best if cost[j] <= cost[j0] + need[j]]
-    jb = min(tied, key=lambda j: (is_open[j], abs(lags0[j]), lags0[j] < 0, cost[j]))
+    jb = min(tied, key=lambda j: (is_open[j], dist[j], cost[j]))
     compared = {names[j]: {"heldout": hp[j].heldout, "heldout_lag_s": lags0[j],
                            "heldout_coefficient": hp[j].coefficient,
                            "heldout_margin_vs_best": need[j],
@@ -1474,11 +1488,11 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
         who = " and ".join(f"'{names[j]}' (through {lags0[j]:.4g} s)" for j in others)
         note = (f"{who} describe{'s' if len(others) == 1 else ''} the axis as well (held-out "
                 f"−2 ln L within {max(need[j] for j in tied):.3g} of the best: "
-                f"{CHANNEL_MARGIN:g}, or {CHANNEL_T:.3g} standard errors of the difference "
-                "over the record's parts): this record cannot tell the channels apart; "
-                f"'{names[jb]}', the more direct path (the shortest interior lag), is "
-                "reported, the other channel being that path seen through the lags between "
-                "them, whose coefficient trades with its lag")
+                f"{CHANNEL_MARGIN:g} or {CHANNEL_T:.3g} standard errors of the difference "
+                "over the record's parts, and the readings' rounding's share): this record "
+                f"cannot tell the channels apart; '{names[jb]}', the more direct path (the "
+                "nearest the die, interior), is reported, the other channel being that path "
+                "seen through the lags between them, whose coefficient trades with its lag")
     elif jb != max(best, key=lambda j: best[j][ks[j]].z):
         note = (f"'{names[jb]}' predicts the held-out halves better than the channel of "
                 "the larger scan z, by more than the margin")
