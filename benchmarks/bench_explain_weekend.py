@@ -83,6 +83,8 @@ class Row:
     coefficient: float  # hidden on x (0: a null row)
     lag_s: float  # the lag explain should find (negative: the sensor lags the die)
     minimum: str
+    #: the logged channel the coupling must be claimed on ("": any, the row logs one)
+    channel: str = ""
 
 
 def _plate_swing(amp: float = AMP) -> float:
@@ -105,6 +107,10 @@ def rows() -> list[Row]:
     lag_min = det * z_lag / 5.0
     neg = max(det, lag_min)
     faulty = min_detectable_tempco(N, B, K, rec_s, A, PERIOD, 0.0)
+    # the plate sensor 30 s behind the plate, the die as well: the rule at lag 0 on that
+    # sensor's swing
+    both = min_detectable_tempco(N, B, K, rec_s, _plate_swing() / math.hypot(1.0, w * 30.0),
+                                 PERIOD, 0.0)
     base = Weekend(hours=HOURS, rate_hz=RATE, N=N, B=B, K=K)
     faults = dict(faults_85=3, faults_127=2, dropouts_s=[(6000.0, 1500.0)],
                   glitches=[(0.0, 3, 0.5)])
@@ -132,6 +138,14 @@ def rows() -> list[Row]:
         Row("null, setback room", replace(base, room_ramp_c=-2.0), 0.0, 0.0,
             "nothing coupled, the room falling 2 K over the record (a weekend setback) on "
             "the HVAC cycle"),
+        # (chan23c) both channels logged, the coupling through the plate: the ambient seen
+        # through the plate's 600 s (and the die's 30) is the tempting other description
+        Row("two channels, plate at lag 0",
+            replace(base, die_tau_s=30.0, sensor_tau_s=30.0, logged=("plate", "ambient"),
+                    coefficient=(3 * both, 0, 0)), 3 * both, 0.0,
+            f"plate and ambient logged, die and plate sensor 30 s behind the plate (lag 0): "
+            f"minimum {both:.3g} m/s²/K on the plate sensor's swing, hidden {3 * both:.3g}; "
+            "right only on the plate channel", channel="plate"),
     ]
 
 
@@ -388,7 +402,8 @@ def score_record(r: Row, seed: int) -> RecordScore:
         sc.mechanism = "+".join([str(mine[0].mechanism), *mine[0].alternatives])
         # every row of rows() hides one plain lag: another path is the wrong mechanism
         right_sign = ((p["lag_s"] < 0) == (r.lag_s < 0) or abs(r.lag_s) < 30) and (
-            mine[0].mechanism in (None, "one_lag"))
+            mine[0].mechanism in (None, "one_lag")) and (
+            not r.channel or mine[0].channel == r.channel)
         c_ok = abs(p["coefficient"] / r.coefficient - 1) <= 0.2
         l_ok = abs(p["lag_s"] - r.lag_s) <= max(0.2 * abs(r.lag_s), 30.0)
         sc.claimed = right_sign

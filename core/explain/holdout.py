@@ -524,3 +524,165 @@ def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray 
 
         ho.channels[name] = _channel(name, c, [(fit, held)], rate_b, False, temps_of)
     return ho
+
+
+# --------------------------------------------------------------------------------------------
+# which logged channel drives an axis, by held-out likelihood (issue 23, item 4)
+
+
+@dataclass(frozen=True)
+class ChannelPath:
+    """One logged channel as the driver of one axis through one lag of either sign: its
+    held-out −2 ln L (``heldout``, both folds: the coefficient fitted on one half of the
+    record, its deviance measured on the other, the lag filter's start state refitted there),
+    at the channel's own lag ``lag_s``; ``coefficient`` the whole record's; ``rounding`` the
+    share of the held-out deviance the readings' 0.0625 K rounding through that coupling
+    makes up (``thermal_paths._View.rounding_share``, reported). The channels of one axis
+    share their τ, weights and blocks, so their deviances compare."""
+
+    index: int
+    heldout: float
+    lag_s: float
+    coefficient: float
+    rounding: float
+    #: ``heldout`` split over the record's ``thermal_paths.PARTS`` parts (each held-out
+    #: half's deviance is the sum of its parts': the Allan difference sums add), in the
+    #: record's order: what the spread of a difference between two channels is read from
+    parts: tuple[float, ...] = ()
+
+    def versus(self, other: ChannelPath) -> tuple[float, float]:
+        """(this channel's held-out −2 ln L less ``other``'s, the standard error of that
+        difference from its spread over the parts: √(P/(P − 1)·Σ(d_p − d̄)²) for P parts, a
+        delete-a-part jackknife's of a sum)."""
+        d = np.asarray(self.parts, dtype=float) - np.asarray(other.parts, dtype=float)
+        P = len(d)
+        se = math.sqrt(P / (P - 1) * float(np.sum((d - d.mean()) ** 2))) if P > 1 else 0.0
+        return self.heldout - other.heldout, se
+
+
+def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz: float,
+                    floors: dict[int, float] | None = None,
+                    holes: dict[int, list[tuple[int, int]]] | None = None,
+                    columns: dict[int, dict[Any, NDArray[np.float64]]] | None = None
+                    ) -> dict[int, ChannelPath]:
+    """Each channel ``j`` of ``lags0`` as the driver of axis ``y`` (slow view at
+    ``rate_hz``) through its own lag ``lags0[j]`` (s, the lag scan's on the whole record),
+    scored as ``thermal_paths.choose_path`` scores its candidates: the coefficient fitted on
+    one half, −2 ln L of the other half with it (the start state refitted there), both
+    folds added (``_fit``, ``_dev``, ``_held_dev``, one pass of ``octave_sums_by_part``).
+
+    The lag is each channel's whole-record one, not re-chosen on each half: on the paths'
+    coarse grid (0, 15, 30, 60, 120 s …) a half re-chose a 56 s plate lag as −15 and 120 s
+    and lost 40 in held-out −2 ln L for it, while a long lag's error is taken up by its
+    coefficient (a lag long against the drive's period trades with it), so re-choosing on
+    the halves favoured the farther channel on every quiet-lab record tried.
+
+    So the channels compare, every channel's deviance is on one footing: the τ from the
+    largest of the channels' rounding floors (``floors``), the blocks outside every
+    channel's holes (``holes``, with their settling), and one noise AVAR to weigh the
+    residual against, the residual of all the channels together at their own lags on the
+    whole record (what none of them explains). ``columns``: per channel, the regressors
+    already built for another axis (``path_columns``' ``done``)."""
+    from avard.core.explain import thermal_paths as tp
+    from avard.core.explain.thermal_fit import hole_mask, min_tau_for, octave_sums_by_part
+
+    y = np.asarray(y, dtype=float)
+    f = 1 << max(0, math.ceil(math.log2(len(y) / tp.FIT_POINTS)))
+    m = (len(y) // f) * f
+    ys = y[:m].reshape(-1, f).mean(axis=1)
+    rate = rate_hz / f
+    keep = np.ones(len(y), dtype=bool)
+    for j, L0 in lags0.items():
+        kj = hole_mask(len(y), (holes or {}).get(j, []), max(abs(L0), 60.0), rate_hz)
+        if kj is not None:
+            keep &= kj
+    cut: NDArray[np.bool_] = np.asarray(keep[:m].reshape(-1, f).all(axis=1), dtype=bool)
+    blocks = [ys]
+    idx: dict[int, list[int]] = {}
+    for j, L0 in lags0.items():
+        # (the coupling's column first, then its start state: ``trials``' order)
+        cols = list(tp.trials("one_lag", [round(L0, 3)])[0].cols)
+        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+        done = None if columns is None else columns.setdefault(j, {})
+        first = 1 + sum(b.shape[1] for b in blocks[1:])
+        idx[j] = list(range(first, first + len(cols)))
+        blocks.append(tp.path_columns(T, cols, rate, done))
+    X = np.column_stack(blocks)
+    # each part the differences whose middle it holds, none across the middle: the first
+    # and last five parts add up to each half's own sums (as ``choose_path``)
+    edges = np.linspace(0, len(ys), tp.PARTS + 1).astype(int)
+    cut[int(edges[tp.PARTS // 2])] = False
+    parts = octave_sums_by_part(X, edges, cut)
+    whole = sum(parts[1:], start=parts[0])
+    halves = [parts[:tp.PARTS // 2], parts[tp.PARTS // 2:]]
+    half = [sum(h[1:], start=h[0]) for h in halves]
+    ms = whole.ms
+    ok_tau = (ms / rate) >= min_tau_for(0.0, max((floors or {}).get(j, 0.0) for j in lags0))
+    ref = _avar(ys, rate)
+    edf = tp._edf_at(ms / rate, np.asarray(ref.tau, float),
+                     np.asarray(ref.edf, float).reshape(len(ref.tau), -1)[:, 0])
+    # the weights: the residual of every channel at its own lag on the whole record, the
+    # same for each channel (each channel's own one-lag residual, as choose_path weighs its
+    # candidates, would give each its own scale)
+    joint = [i for ix in idx.values() for i in ix]
+    v0 = tp._view(whole, edf, whole.n, np.ones(len(ms), dtype=bool))
+    full = whole.cov()
+    r0 = tp._resid(tp._View(full, np.ones(len(ms)), np.ones(len(ms))), joint,
+                   tp._fit(tp._View(v0.cov, v0.nu, v0.cov[:, 0, 0]), joint))
+    s_ref = np.where(r0 > 1e-6 * full[:, 0, 0], r0, 1e-6 * full[:, 0, 0])
+    vw = tp._view(whole, edf, whole.n, ok_tau, s_ref)
+    out: dict[int, ChannelPath] = {}
+    for j, L0 in lags0.items():
+        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+        r_ref = tp.sawtooth_avar(T, rate, ms / rate, L0)
+        vh = [tp._view(h, edf, whole.n, ok_tau, s_ref, r_ref) for h in half]
+        held, per_part = 0.0, []
+        for a, b in ((0, 1), (1, 0)):
+            beta = tp._fit(vh[a], idx[j])
+            held += tp._held_dev(vh[b], idx[j], beta, 1)
+            per_part += _part_devs(half[b], halves[b], idx[j], beta[:1], edf, whole.n, ok_tau,
+                                   s_ref)
+        # (per_part in the record's order: the first half's parts were scored second)
+        per_part = per_part[tp.PARTS // 2:] + per_part[:tp.PARTS // 2]
+        c = float(tp._fit(vw, idx[j])[0])
+        out[j] = ChannelPath(j, held, float(L0), c, sum(v.rounding_share(c) for v in vh),
+                             tuple(per_part))
+    return out
+
+
+def _part_devs(half: Any, parts: list[Any], idx: list[int], beta: NDArray, edf: NDArray,
+               n_ref: NDArray, ok_tau: NDArray, s_ref: NDArray) -> list[float]:
+    """The held-out deviance of one half (``thermal_paths._held_dev`` of a model whose
+    couplings ``beta`` on columns ``idx[:len(beta)]`` were fitted on the other half, its
+    nuisance columns refitted on this one) split over the half's ``parts``: with β and the
+    nuisance fixed the residual is one linear combination of the columns, and ν·r of the
+    half is the sum of its parts' (the Allan difference sums add, ν ∝ their count)."""
+    from avard.core.explain import thermal_paths as tp
+
+    k = min(len(half.ms), len(edf), len(ok_tau))
+    covh = half.cov()[:k]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nuh = np.asarray(edf[:k], float) * half.n[:k] / np.asarray(n_ref[:k], float)
+    s = np.asarray(s_ref[:k], float)
+    good = (ok_tau[:k] & np.isfinite(nuh) & (nuh >= 3)
+            & np.all(np.isfinite(covh), axis=(1, 2)) & np.isfinite(s) & (s > 0))
+    n = len(beta)
+    C = covh.shape[1]
+    A = np.zeros((1 + len(idx) - n, C))
+    A[0, 0] = 1.0
+    A[0, idx[:n]] -= beta
+    for r, j in enumerate(idx[n:], start=1):
+        A[r, j] = 1.0
+    v = tp._View(np.einsum("ri,kij,sj->krs", A, covh[good], A), nuh[good], s[good])
+    rest = list(range(1, A.shape[0]))
+    g = tp._fit(v, rest) if len(v.nu) else np.zeros(len(rest))
+    vec = A[0] - g @ A[1:] if rest else A[0]
+    out = []
+    for p in parts:
+        cp = p.cov()[:k][good]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nup = np.asarray(edf[:k], float)[good] * p.n[:k][good] / np.asarray(n_ref[:k],
+                                                                              float)[good]
+            r = np.einsum("i,kij,j->k", vec, np.nan_to_num(cp), vec)
+        out.append(float(np.sum(np.nan_to_num(nup * r / s[good]))))
+    return out

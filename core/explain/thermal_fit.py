@@ -16,9 +16,12 @@ r_k/(AVAR(u)·ν_k) (r_k the residual AVAR, ν_k the EDF of the axis at τ_k: th
 independent differences). Differencing removes the offset and whitens flicker and random walk,
 so the regression is valid under the axis's own noise. The c_k are combined with inverse-
 variance weights; neighbouring octaves share data (correlation ≈ 0.5, fit.py), which the
-combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks the lag (maximum of z²
-over a log grid refined around the best point) and the channel (largest z), one covariance
-for every lag and channel compared. At the chosen lag the test's analytic se is the
+combined variance includes (ρ_kl = 0.5^|k−l|): this analytic z picks each channel's lag
+(maximum of z² over a log grid refined around the best point), one covariance for every lag
+and channel compared. Which channel drives is decided by each channel's held-out likelihood
+through its own lag (``_choose_channel``, ``holdout.channel_heldout``), not by this z: the
+room seen through the plate's long lag is a second description of a coupling through the
+plate, and its smoother regressor took the larger z. At the chosen lag the test's analytic se is the
 regressor's own (``octave_spectra``, ``coupling_test``: the octaves see the same slow noise,
 near one number for a trend under red noise), its threshold the t of the degrees of freedom
 that se rests on. Under red noise the EDF model is too optimistic (the noise differences are
@@ -904,7 +907,8 @@ def compensated_avar(var: NDArray, tau: NDArray, res: Any, coefficient: float
 class ThermalFit:
     """The thermal model of one axis (SI units). ``channel`` drives it through a first-order
     lag ``lag_s`` [lag_lo, lag_hi] with ``coefficient`` [coef_lo, coef_hi] m/s²/K (68 %);
-    ``z`` its test statistic; ``others``: the best z and lag of every other channel."""
+    ``z`` its test statistic; ``others``: the best z and lag of every other channel, and with
+    more than one channel what chose between them (``_choose_channel``)."""
 
     channel: str
     channel_index: int
@@ -925,6 +929,14 @@ class ThermalFit:
     threshold_dof: float = math.inf
     #: the lag's interval reaches the longest lag tried (record/4): its upper end is open
     lag_open: bool = False
+    #: the scan's z of this channel at its best lag, on the covariance common to every lag
+    #: and channel the scan compares (the other channels' ``others[...]["z"]``)
+    scan_z: float = math.nan
+    #: with more than one channel logged, what chose this one (``_choose_channel``): its
+    #: held-out −2 ln L, the lag it was scored at, the rounding's share of it, its scan z
+    channel_choice: dict[str, float] = field(default_factory=dict)
+    #: the channels the record does not tell apart from this one, in words ("" if none)
+    channel_note: str = ""
     #: the thermal path chosen by held-out likelihood (``thermal_paths``; None: not
     #: examined). When it is not one lag, ``coefficient``/``coef_se`` are its linear
     #: coupling's and ``lag_s`` its first lag, and ``signal`` is the path's
@@ -977,7 +989,7 @@ class ThermalFit:
     def evidence(self) -> str:
         if self.path is not None and self.path.kind != "one_lag":
             return (f"the axis follows temperature '{self.channel}' (z = {self.z:.3g}, test "
-                    f"z ≥ {self.threshold:g}) by {self.path.summary()}")
+                    f"z ≥ {self.threshold:g}) by {self.path.summary()}{self._channels_text}")
         lo, hi = self.coef_interval
         path = ("a first-order lag of" if self.lag_s >= 0 else
                 "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
@@ -987,10 +999,33 @@ class ThermalFit:
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
                f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
-        if self.others:
-            txt += "; other channels: " + ", ".join(
+        return txt + self._channels_text
+
+    @property
+    def _channels_text(self) -> str:
+        """How the channel was chosen, every channel by the same numbers: the held-out
+        −2 ln L of one lag each, then the scan's z on its one covariance (the chosen
+        channel's test z above is another statistic: not beside the others')."""
+        if not self.others:
+            return ""
+        if not self.channel_choice:
+            return "; other channels: " + ", ".join(
                 f"'{k}' z = {v['z']:.3g} at lag {v['lag_s']:.4g} s"
                 for k, v in self.others.items())
+        rows = {self.channel: self.channel_choice, **self.others}
+
+        def one(k: str, v: dict[str, float]) -> str:
+            mark = " (chosen)" if k == self.channel else ""
+            end = ", open" if v.get("open") else ""
+            return f"'{k}'{mark} {v['heldout']:.4g} at lag {v['heldout_lag_s']:.4g} s{end}"
+
+        txt = ("; channels by held-out −2 ln L of one lag each (fitted on one half of the "
+               "record, scored on the other; lower is better): "
+               + ", ".join(one(k, v) for k, v in rows.items())
+               + "; scan z on one covariance: "
+               + ", ".join(f"'{k}' {v['scan_z']:.3g}" for k, v in rows.items()))
+        if self.channel_note:
+            txt += "; " + self.channel_note
         return txt
 
     @property
@@ -1035,6 +1070,8 @@ class ThermalFit:
                 "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
                                   else None),
                 "passed": self.passed, "others": self.others,
+                "channel_choice": self.channel_choice or None,
+                "channel_note": self.channel_note or None,
                 "mechanism": self.mechanism,
                 "path": None if self.path is None else self.path.to_dict()}
 
@@ -1329,6 +1366,10 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
         return zmax[j] ** 2 - (OPEN_END_MARGIN if at_end(best[j]) else 0.0)
 
     jb = max(zmax, key=rank)
+    compared: dict[str, dict[str, float]] = {}
+    note = ""
+    if len(best) > 1:
+        jb, compared, note = _choose_channel(y, temps, names, rate_hz, best, holes, floors)
     scan = best[jb]
     k = int(np.argmax([s.z for s in scan]))
     # the lag its interval is about (the estimator the leave-one-out lags are), not the grid
@@ -1365,10 +1406,97 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     for j, sc in best.items():
         if j != jb:
             kk = int(np.argmax([s.z for s in sc]))
-            others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c}
+            others[names[j]] = {"z": sc[kk].z, "lag_s": sc[kk].lag, "coefficient": sc[kk].c,
+                                **compared.get(names[j], {})}
     return ThermalFit(names[jb], jb, c, se, L, min(lag_lo, L), max(lag_hi, L), z, rate_hz,
                       others, res, lag_open=open_hi or (open_lo and scan[0].lag < 0),
-                      threshold=test.threshold, threshold_dof=test.dof)
+                      threshold=test.threshold, threshold_dof=test.dof,
+                      scan_z=scan[k].z, channel_choice=compared.get(names[jb], {}),
+                      channel_note=note)
+
+
+#: How much lower a channel's held-out −2 ln L (``holdout.channel_heldout``) must be for it
+#: to drive an axis rather than another channel: at least the margin ``thermal_paths`` asks
+#: of a path over one lag (``HELDOUT_MARGIN``) ...
+CHANNEL_MARGIN = 6.0
+#: ... or this many standard errors of the difference, from its spread over the record's
+#: parts (``holdout.ChannelPath.versus``): two channels that both describe the path differ
+#: in held-out −2 ln L by the record's noise on a scale that grows with the coupling, not
+#: by the fixed margin a nested model's extra term is held to. Student's t with the parts'
+#: 9 degrees of freedom at 5 %, two-sided. To either is added what the readings' 0.0625 K
+#: rounding through the worse channel's coupling makes up of its held-out deviance beyond
+#: the better one's (``ChannelPath.rounding``): an error of the regressor, not of the path,
+#: which a channel seen through a long lag smooths away.
+CHANNEL_T = t_two_sided(0.05, 9)
+
+
+def path_distance(lag_s: float) -> float:
+    """How far a channel is from the die along the heat's path, for a lag of either sign: a
+    positive lag is the lag itself (the channel upstream of the die); a negative lag −a is
+    the lead-lag of a logged sensor 2a and a die a behind one point (``lag_filter``), so the
+    path from the channel to the die runs back through that point, 3a long."""
+    return lag_s if lag_s >= 0 else 3.0 * abs(lag_s)
+
+
+def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
+                    best: dict[int, list[ScanPoint]], holes: Holes | None,
+                    floors: dict[int, float] | None
+                    ) -> tuple[int, dict[str, dict[str, float]], str]:
+    """The channel that drives axis ``y``, by the held-out likelihood of each channel
+    through its own lag (``holdout.channel_heldout``), not by the scan's z: (its index, per
+    channel name what was compared, a note when the record does not tell channels apart).
+
+    A channel whose scan's best lag sits at the end of the lags tried (open) pays
+    ``OPEN_END_MARGIN`` beside one with an interior optimum. Channels whose held-out −2 ln L
+    is within ``max(CHANNEL_MARGIN, CHANNEL_T·se)`` of the best, plus what the readings'
+    rounding makes up of it beyond the best's (``ChannelPath.rounding``), describe the axis
+    equally:
+    the room seen through the plate's long lag is the plate's own path, and on a record
+    that holds nothing the plate does not pass on, the two cannot be told apart (a long lag
+    also filters the readings' rounding, so the farther channel often predicts a little
+    better). Among those the more direct path is reported, by one fixed order, never by
+    the record's luck: an interior optimum before an open one, then the channel nearest
+    the die along the heat's path (``path_distance``: a longer lag on another channel is
+    that path with the lags between them added, and a lag long against the drive's period
+    trades with its coefficient, which it leaves unresolved), then the lower held-out
+    −2 ln L."""
+    from avard.core.explain.holdout import channel_heldout
+
+    ks = {j: int(np.argmax([s.z for s in sc])) for j, sc in best.items()}
+    lags0 = {j: best_lag(sc, ks[j]) for j, sc in best.items()}
+    is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
+    interior = not all(is_open.values())
+    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
+    cost = {j: hp[j].heldout + (OPEN_END_MARGIN if is_open[j] and interior else 0.0)
+            for j in best}
+    dist = {j: path_distance(lags0[j]) for j in best}
+    j0 = min(cost, key=lambda j: (cost[j], dist[j]))
+    spread = {j: hp[j].versus(hp[j0])[1] for j in best}
+    need = {j: max(CHANNEL_MARGIN, CHANNEL_T * spread[j])
+            + max(0.0, hp[j].rounding - hp[j0].rounding) for j in best}
+    tied = [j for j in best if cost[j] <= cost[j0] + need[j]]
+    jb = min(tied, key=lambda j: (is_open[j], dist[j], cost[j]))
+    compared = {names[j]: {"heldout": hp[j].heldout, "heldout_lag_s": lags0[j],
+                           "heldout_coefficient": hp[j].coefficient,
+                           "heldout_margin_vs_best": need[j],
+                           "heldout_rounding": hp[j].rounding, "scan_z": best[j][ks[j]].z,
+                           "open": float(is_open[j])}
+                for j in best}
+    note = ""
+    if len(tied) > 1:
+        others = [j for j in tied if j != jb]
+        who = " and ".join(f"'{names[j]}' (through {lags0[j]:.4g} s)" for j in others)
+        note = (f"{who} describe{'s' if len(others) == 1 else ''} the axis as well (held-out "
+                f"−2 ln L within {max(need[j] for j in tied):.3g} of the best: "
+                f"{CHANNEL_MARGIN:g} or {CHANNEL_T:.3g} standard errors of the difference "
+                "over the record's parts, and the readings' rounding's share): this record "
+                f"cannot tell the channels apart; '{names[jb]}', the more direct path (the "
+                "nearest the die, interior), is reported, the other channel being that path "
+                "seen through the lags between them, whose coefficient trades with its lag")
+    elif jb != max(best, key=lambda j: best[j][ks[j]].z):
+        note = (f"'{names[jb]}' predicts the held-out halves better than the channel of "
+                "the larger scan z, by more than the margin")
+    return jb, compared, note
 
 
 def _coef_slope(scan: list[ScanPoint], k: int, lo: float, hi: float) -> float:

@@ -111,7 +111,19 @@ def test_long_lag_is_found_on_its_channel(tmp_path, logged):
     path, _ = _file(tmp_path, 21, truth, logged=logged)
     th = explain_file(open_record(path),
                       ExplainOptions(channels=("x",), heldout=False)).channels["x"].thermal
-    assert th is not None and th.passed and th.channel == "ambient"
+    assert th is not None and th.passed
+    if len(logged) == 2 and th.channel == "plate":
+        # with both logged the channels are compared by held-out likelihood (chan23c): here
+        # the plate through a short lag predicts the held-out halves as well as the ambient
+        # through 20 minutes (within 2.26 standard errors of the difference), so the record
+        # cannot tell them apart and the rule reports the shorter path; the ambient must be
+        # named beside it, with its own lag and coefficient within 20 %
+        assert "'ambient'" in th.channel_note and "cannot tell" in th.channel_note
+        amb = th.others["ambient"]
+        assert amb["lag_s"] == pytest.approx(1200.0, rel=0.2)
+        assert amb["coefficient"] == pytest.approx(c, rel=0.2)
+        return
+    assert th.channel == "ambient"
     assert th.coefficient == pytest.approx(c, rel=0.2)
     assert th.lag_s == pytest.approx(1200.0, rel=0.2)
 
