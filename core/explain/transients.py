@@ -56,16 +56,21 @@ from avard.core.explain import causes as cz
 from avard.core.model.triangular import LowerSolver
 from numpy.typing import NDArray
 
-__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound", "refine_compound",
-           "robust_noise", "signal_of", "test_drift", "warmup_beyond_start"]
+__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound",
+           "min_detectable_warmup_in_fit", "refine_compound", "robust_noise", "signal_of",
+           "test_drift", "warmup_beyond_start"]
 
 #: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
 NoiseOf = Callable[[NDArray[np.float64]], dict[str, float]]
 
 #: Most block means the search and the joint fit use (longer views are averaged further).
 MAX_BLOCKS = 512
-#: Most grid times a step or an excursion edge is scanned at.
-GRID = 256
+#: Most grid times a step or an excursion edge is scanned at: every block boundary. On a
+#: long record the random walk dominates each block's noise, and a step's whitened column is
+#: then nearly an impulse at the boundary it crosses: a grid of every second boundary sees a
+#: step inside an odd block only by the part of it its block mean carries (an up edge at
+#: 0.05 of a block, on 60 h, was 0 σ where its down edge was 10 σ).
+GRID = MAX_BLOCKS
 #: Most effects found on one axis.
 MAX_EFFECTS = 8
 #: A proposal enters the forward search when its z reaches this fraction of its threshold.
@@ -450,7 +455,7 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     if tent:
         # the proposals' shapes refined together (the scan's grid T and times are coarse,
         # and what a misplaced shape leaves behind reads as noise in the test below)
-        tol = 2 * len(y) / rate_hz / GRID
+        tol = 4 * len(y) / rate_hz / MAX_BLOCKS
         tent = _normalise(tent, tol, step_threshold)
         tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
                                                         rate_hz, n_white), tent)
@@ -515,9 +520,32 @@ def confirm_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
                 f"{c.evidence}")) for z, sz, c in zip(zs, szs, cands, strict=True)], dropped
         dropped.append(replace(cands[k], passed=False, statistic=zs[k], intervals={},
                                evidence=cands[k].evidence + "; not claimed: " + _final_test(
-                                   zs[k], szs[k], cands[k].threshold, len(cands))))
+                                   zs[k], szs[k], cands[k].threshold, len(cands))
+                               + _trend_note(cands[k], zs[k], szs[k], noise, n / rate_hz,
+                                             cands)))
         cands.pop(k)
     return [], dropped
+
+
+def _trend_note(c: cz.Candidate, z: float, size_z: float, noise: dict[str, float],
+                record_s: float, cands: list[cz.Candidate]) -> str:
+    """Why a warm-up whose shape passes its test is not claimed on its size: with T free and
+    the offset and slope in the fit, a long T's e^(−t/T) is mostly their line, and what is
+    left (its curvature) trades its size against T; the stated minimum in that fit
+    (``min_detectable_warmup_in_fit``) says how large it would have to be. Said only where
+    that minimum is the reason: the one warm-up of ``cands``, its size below it."""
+    if (c.cause != "warmup" or not (z >= c.threshold > size_z)
+            or sum(o.cause == "warmup" for o in cands) != 1):
+        return ""
+    T = c.params["time_constant_s"]
+    m = min_detectable_warmup_in_fit(noise.get("N", 0.0), noise.get("B", 0.0),
+                                     noise.get("K", 0.0), record_s, T, c.threshold)
+    if abs(c.params["size"]) >= m:
+        return ""
+    return (f"; a warm-up this long (T {T:.4g} s, {T / record_s:.2g} of the record) cannot be "
+            f"told from the record's trend here: with the offset, the slope and T fitted "
+            f"beside it, its size must reach {m:.3g} m/s² to be {c.threshold:.3g} standard "
+            f"errors from zero on this noise (its size {abs(c.params['size']):.3g})")
 
 
 def _final_test(z: float, size_z: float, threshold: float, n_effects: int) -> str:
@@ -697,6 +725,24 @@ def min_detectable_excursion(n_white: float, b_inst: float, k_rrw: float, record
     cols = np.column_stack([np.ones_like(t), t, _column(
         "excursion", {"start_s": t0, "end_s": t0 + duration_s}, t, dt)])
     a = np.linalg.solve(L, cols)
+    return float(z * math.sqrt(np.linalg.inv(a.T @ a)[2, 2]))
+
+
+def min_detectable_warmup_in_fit(n_white: float, b_inst: float, k_rrw: float,
+                                 record_s: float, time_constant_s: float, z: float = 5.0,
+                                 blocks: int = MAX_BLOCKS) -> float:
+    """The stated minimum of a warm-up in the compound fit (m/s²): z standard errors of its
+    size by GLS with noise N, B, K over ``record_s``, with the offset, the slope and its T
+    fitted beside it (the Fisher information with the column ∂/∂T; a scale of that column
+    leaves the size's error unchanged, so the minimum does not depend on the size). For
+    T ≪ record it is ``causes.min_detectable_warmup``'s regime; from T ≈ record/6 on, the
+    line and T take most of e^(−t/T) and the minimum rises well above it."""
+    dt = record_s / blocks
+    t = (np.arange(blocks) + 0.5) * dt
+    L = np.linalg.cholesky(cz._noise_cov(t, dt, n_white, b_inst, k_rrw))
+    e = np.exp(-t / time_constant_s)
+    a = np.linalg.solve(L, np.column_stack([np.ones_like(t), t, e,
+                                            t / time_constant_s**2 * e]))
     return float(z * math.sqrt(np.linalg.inv(a.T @ a)[2, 2]))
 
 
