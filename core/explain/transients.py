@@ -11,9 +11,9 @@ the slope and the effects already found projected out (Frisch–Waugh–Lovell).
 
 1. the noise is the caller's fit of the axis with every effect found so far removed
    (``NoiseOf``), so an effect found does not raise the floor that hides the next one;
-2. three families are scanned on the residual: a step at every grid time (≤ ``GRID`` of
-   them), an excursion at every pair of grid times (its up and its down the same size), a
-   warm-up e^(−t/T) on a log grid of T; each family's largest |z| is compared with its
+2. three families are scanned on the residual: a step at every block boundary (≤ ``GRID``
+   of them, 4 blocks from either end), an excursion at every pair of them (its up and its
+   down the same size), a warm-up e^(−t/T) on a log grid of T; each family's largest |z| is compared with its
    Bonferroni threshold (``alarm.bonferroni_z`` at its share of the axis's level over its
    number of trials), and the family that passes by the largest margin proposes;
 3. the proposal is tested again with the noise refitted with it removed as well: a single
@@ -33,6 +33,10 @@ values: they are set by the short τ, where a drift shows nothing); the likeliho
 drift whose two halves want two lines (a step) is not one. The AVAR cannot tell a ramp from
 a random walk on one record (both rise at long τ); the time domain can: a drift's
 increments are all of one sign and size, a walk's are not.
+
+**The test in the joint fit** (``confirm_compound``): each effect's z on the scan's grid
+and its size's distance from zero (``_size_zs``: a lone warm-up's by the likelihood ratio
+at zero) must both reach its family's threshold.
 
 **The joint fit** (``refine_compound``): the nonlinear parameters (step times, excursion
 edges, T) are profiled one at a time with the others held, two rounds; 68 % intervals: a
@@ -68,8 +72,8 @@ MAX_BLOCKS = 512
 #: Most grid times a step or an excursion edge is scanned at: every block boundary. On a
 #: long record the random walk dominates each block's noise, and a step's whitened column is
 #: then nearly an impulse at the boundary it crosses: a grid of every second boundary sees a
-#: step inside an odd block only by the part of it its block mean carries (an up edge at
-#: 0.05 of a block, on 60 h, was 0 σ where its down edge was 10 σ).
+#: step inside a skipped block only by the part of it its block mean carries (a 60 h
+#: record's up edges were missed so, and its excursions read as permanent steps).
 GRID = MAX_BLOCKS
 #: Most effects found on one axis.
 MAX_EFFECTS = 8
@@ -534,11 +538,11 @@ def _size_zs(g: cz._Gls, cands: list[cz.Candidate]) -> list[float]:
     zero, √(Δχ²/s²) at its fitted T with the other effects' sizes refitted (the profile
     envelope's value at zero is the fit without it, whatever T). With the offset and the
     slope in the fit a long T's e^(−t/T) is mostly their line, its size trades against T
-    along a curved ridge, and the 68 % half-width scaled linearly put zero at 1.9–4 standard
-    errors where the likelihood put it at 4.4–10 (the adversary's 1 h compound 301–303,
-    T ≥ record/6). Two warm-ups keep the scaled half-width: their columns can trade with
-    each other (two of ±1.2 m/s² with T 124 and 131 s), which the ratio at one's zero, the
-    other's T held, does not see."""
+    along a curved ridge, and the 68 % half-width scaled linearly puts zero far nearer than
+    the likelihood does (a warm-up of T ≥ record/6 many σ as a shape was not claimed). Two
+    warm-ups keep the scaled half-width: their columns can trade with each other (two
+    opposite ones a grid step apart in T), which the ratio at one's zero, the other's T
+    held, does not see."""
     refined = _z_in_fit(g, cands)
     lone = sum(c.cause == "warmup" for c in cands) == 1
     return [z if (c.cause == "warmup" and lone) else cz.size_z(c)
