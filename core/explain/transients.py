@@ -14,8 +14,9 @@ the slope and the effects already found projected out (Frisch–Waugh–Lovell).
 2. three families are scanned on the residual: a step at every block boundary (≤ ``GRID``
    of them, 4 blocks from either end), an excursion at every pair of them (its up and its
    down the same size), a warm-up e^(−t/T) on a log grid of T; each family's largest |z|
-   is compared with its Bonferroni threshold (``alarm.bonferroni_z`` at its share of the axis's level over its
-   number of trials), and the family that passes by the largest margin proposes;
+   is compared with its Bonferroni threshold (``alarm.bonferroni_z`` at its share of the
+   axis's level over its number of trials), and the family that passes by the largest
+   margin proposes;
 3. the proposal is tested again with the noise refitted with it removed as well: a single
    step's own AVAR reads as random walk, and K made of the step would hide it (the issue's
    2e-4 m/s² step at 12.8 σ, not claimed); it is kept when it still passes there, and its
