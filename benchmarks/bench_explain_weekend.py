@@ -27,6 +27,9 @@ before the run (``rows_events``):
   ``causes.min_detectable_step`` (at 30 % and 80 % of the record), and an excursion (1000 s,
   or an eighth of the record) in the middle at 3× ``transients.min_detectable_excursion``
   (the Fisher information of its size in the GLS fit with the noise, z = 5);
+- ``compound 60 h`` (the last row, trans23c): a warm-up (T 900 s) at 3× its minimum and two
+  excursions (9 h from 35.69 % and 3 h from 61.77 % of the record) each at 3× its
+  ``min_detectable_excursion``, their edges at no fixed place in the slow view's blocks;
 - ``drift 4 h``: a linear drift at 3× ``transients.min_detectable_drift`` (the Fisher
   information of the slope, the random walk K in the covariance, z = 5) beside K = 2e-6;
 - ``pump 12→12.4 Hz``: 1 h at 50 Hz, its amplitude at 3× the steady line's minimum
@@ -231,6 +234,22 @@ def rows_events() -> list[Event]:
                                     "modulation_hz": 0.05})],
                      f"fundamental {a1:.3g} m/s² (sidebands {a1 / 4:.3g}), harmonics "
                      f"{3 * m[2]:.3g}, {3 * m[3]:.3g}"))
+    # issue 23's longest record (trans23c): a warm-up, a long excursion and a short one, their
+    # edges at fractions of the record that fall at no fixed place in the slow view's blocks
+    # (the adversary's 60 h up edges sat inside odd blocks, which the scan skipped)
+    rec = 60 * 3600.0
+    w = 3 * min_detectable_warmup(N, B, K, 900.0)
+    boxes = [(0.3569 * rec, 0.5069 * rec), (0.6177 * rec, 0.6677 * rec)]
+    sizes = [3 * min_detectable_excursion(N, B, K, rec, b - a) for a, b in boxes]
+    out.append(Event(
+        "compound 60 h",
+        Weekend(hours=60.0, rate_hz=RATE, N=N, B=B, K=K, warmups=[(w, 900.0)],
+                excursions=[(a, b, sz) for (a, b), sz in zip(boxes, sizes, strict=True)]),
+        [("warmup", {"time_constant_s": 900.0, "size": w}),
+         *[("excursion", {"start_s": a, "end_s": b, "size": sz})
+           for (a, b), sz in zip(boxes, sizes, strict=True)]],
+        f"warm-up {w:.3g} m/s² (T 900 s), excursions {sizes[0]:.3g} (9 h) and {sizes[1]:.3g} "
+        f"(3 h)"))
     return out
 
 

@@ -11,11 +11,12 @@ the slope and the effects already found projected out (Frisch–Waugh–Lovell).
 
 1. the noise is the caller's fit of the axis with every effect found so far removed
    (``NoiseOf``), so an effect found does not raise the floor that hides the next one;
-2. three families are scanned on the residual: a step at every grid time (≤ ``GRID`` of
-   them), an excursion at every pair of grid times (its up and its down the same size), a
-   warm-up e^(−t/T) on a log grid of T; each family's largest |z| is compared with its
-   Bonferroni threshold (``alarm.bonferroni_z`` at its share of the axis's level over its
-   number of trials), and the family that passes by the largest margin proposes;
+2. three families are scanned on the residual: a step at every block boundary (≤ ``GRID``
+   of them, 4 blocks from either end), an excursion at every pair of them (its up and its
+   down the same size), a warm-up e^(−t/T) on a log grid of T; each family's largest |z|
+   is compared with its Bonferroni threshold (``alarm.bonferroni_z`` at its share of the
+   axis's level over its number of trials), and the family that passes by the largest
+   margin proposes;
 3. the proposal is tested again with the noise refitted with it removed as well: a single
    step's own AVAR reads as random walk, and K made of the step would hide it (the issue's
    2e-4 m/s² step at 12.8 σ, not claimed); it is kept when it still passes there, and its
@@ -33,6 +34,10 @@ values: they are set by the short τ, where a drift shows nothing); the likeliho
 drift whose two halves want two lines (a step) is not one. The AVAR cannot tell a ramp from
 a random walk on one record (both rise at long τ); the time domain can: a drift's
 increments are all of one sign and size, a walk's are not.
+
+**The test in the joint fit** (``confirm_compound``): each effect's z on the scan's grid
+and its size's distance from zero (``_size_zs``: a lone warm-up's by the likelihood ratio
+at zero) must both reach its family's threshold.
 
 **The joint fit** (``refine_compound``): the nonlinear parameters (step times, excursion
 edges, T) are profiled one at a time with the others held, two rounds; 68 % intervals: a
@@ -56,16 +61,21 @@ from avard.core.explain import causes as cz
 from avard.core.model.triangular import LowerSolver
 from numpy.typing import NDArray
 
-__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound", "refine_compound",
-           "robust_noise", "signal_of", "test_drift", "warmup_beyond_start"]
+__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound",
+           "min_detectable_warmup_in_fit", "refine_compound", "robust_noise", "signal_of",
+           "test_drift", "warmup_beyond_start"]
 
 #: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
 NoiseOf = Callable[[NDArray[np.float64]], dict[str, float]]
 
 #: Most block means the search and the joint fit use (longer views are averaged further).
 MAX_BLOCKS = 512
-#: Most grid times a step or an excursion edge is scanned at.
-GRID = 256
+#: Most grid times a step or an excursion edge is scanned at: every block boundary. On a
+#: long record the random walk dominates each block's noise, and a step's whitened column is
+#: then nearly an impulse at the boundary it crosses: a grid of every second boundary sees a
+#: step inside a skipped block only by the part of it its block mean carries (a 60 h
+#: record's up edges were missed so, and its excursions read as permanent steps).
+GRID = MAX_BLOCKS
 #: Most effects found on one axis.
 MAX_EFFECTS = 8
 #: A proposal enters the forward search when its z reaches this fraction of its threshold.
@@ -450,7 +460,7 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     if tent:
         # the proposals' shapes refined together (the scan's grid T and times are coarse,
         # and what a misplaced shape leaves behind reads as noise in the test below)
-        tol = 2 * len(y) / rate_hz / GRID
+        tol = 4 * len(y) / rate_hz / MAX_BLOCKS
         tent = _normalise(tent, tol, step_threshold)
         tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
                                                         rate_hz, n_white), tent)
@@ -490,7 +500,7 @@ def confirm_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     """(claimed, not claimed): ``cands`` fitted together (``refine_compound``) against the
     noise with all of them removed, and each tested in that fit, the fit they are reported
     with: its z on the scan's grid (``_z_in_fit``) and its size's distance from zero in
-    standard errors (``causes.size_z``) must both reach its threshold; the one furthest
+    standard errors (``_size_zs``) must both reach its threshold; the one furthest
     below is dropped and the rest refitted until all pass. The statistic and the sentence of
     a claim are this test's: a claim never stands on an earlier fit's z (a pair of steps
     read as one excursion, a refit after a transient was taken out) nor on a threshold other
@@ -506,7 +516,7 @@ def confirm_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
             return [], dropped + [replace(c, passed=False, intervals={}, evidence=c.evidence + (
                 "; not claimed: the noise covariance would not factor")) for c in cands]
         zs = _z_in_fit(g, cands, on_grid=True)
-        szs = [cz.size_z(c) for c in cands]
+        szs = _size_zs(g, cands)
         margins = [min(z, sz) / c.threshold for z, sz, c in zip(zs, szs, cands, strict=True)]
         k = int(np.argmin(margins))
         if margins[k] >= 1.0:
@@ -515,9 +525,47 @@ def confirm_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
                 f"{c.evidence}")) for z, sz, c in zip(zs, szs, cands, strict=True)], dropped
         dropped.append(replace(cands[k], passed=False, statistic=zs[k], intervals={},
                                evidence=cands[k].evidence + "; not claimed: " + _final_test(
-                                   zs[k], szs[k], cands[k].threshold, len(cands))))
+                                   zs[k], szs[k], cands[k].threshold, len(cands))
+                               + _trend_note(cands[k], noise, n / rate_hz)))
         cands.pop(k)
     return [], dropped
+
+
+def _size_zs(g: cz._Gls, cands: list[cz.Candidate]) -> list[float]:
+    """Each size's distance from zero in standard errors, for ``confirm_compound``'s test.
+
+    A step's or an excursion's: its 68 % interval's half on zero's side, scaled
+    (``causes.size_z``). A warm-up's, where it is the only one: the likelihood ratio of size
+    zero, √(Δχ²/s²) at its fitted T with the other effects' sizes refitted (the profile
+    envelope's value at zero is the fit without it, whatever T). With the offset and the
+    slope in the fit a long T's e^(−t/T) is mostly their line, its size trades against T
+    along a curved ridge, and the 68 % half-width scaled linearly puts zero far nearer than
+    the likelihood does (a warm-up of T ≥ record/6 many σ as a shape was not claimed). Two
+    warm-ups keep the scaled half-width: their columns can trade with each other (two
+    opposite ones a grid step apart in T), which the ratio at one's zero, the other's T
+    held, does not see."""
+    refined = _z_in_fit(g, cands)
+    lone = sum(c.cause == "warmup" for c in cands) == 1
+    return [z if (c.cause == "warmup" and lone) else cz.size_z(c)
+            for z, c in zip(refined, cands, strict=True)]
+
+
+def _trend_note(c: cz.Candidate, noise: dict[str, float], record_s: float) -> str:
+    """A warm-up not claimed whose size is below its stated minimum in the compound fit
+    (``min_detectable_warmup_in_fit``, the offset, the slope and T fitted beside it): at a
+    long T that minimum is several times the lone warm-up's, and the finding says so."""
+    if c.cause != "warmup":
+        return ""
+    T = c.params["time_constant_s"]
+    m = min_detectable_warmup_in_fit(noise.get("N", 0.0), noise.get("B", 0.0),
+                                     noise.get("K", 0.0), record_s, T, c.threshold)
+    if abs(c.params["size"]) >= m:
+        return ""
+    return (f"; its size {abs(c.params['size']):.3g} m/s² is below the stated minimum of a "
+            f"warm-up of T {T:.4g} s ({T / record_s:.2g} of the record) on this record and "
+            f"noise, {m:.3g} m/s² ({c.threshold:.3g} standard errors with the offset, the "
+            f"slope and T fitted beside it: a warm-up this long is told from the record's "
+            f"trend only above it)")
 
 
 def _final_test(z: float, size_z: float, threshold: float, n_effects: int) -> str:
@@ -697,6 +745,24 @@ def min_detectable_excursion(n_white: float, b_inst: float, k_rrw: float, record
     cols = np.column_stack([np.ones_like(t), t, _column(
         "excursion", {"start_s": t0, "end_s": t0 + duration_s}, t, dt)])
     a = np.linalg.solve(L, cols)
+    return float(z * math.sqrt(np.linalg.inv(a.T @ a)[2, 2]))
+
+
+def min_detectable_warmup_in_fit(n_white: float, b_inst: float, k_rrw: float,
+                                 record_s: float, time_constant_s: float, z: float = 5.0,
+                                 blocks: int = MAX_BLOCKS) -> float:
+    """The stated minimum of a warm-up in the compound fit (m/s²): z standard errors of its
+    size by GLS with noise N, B, K over ``record_s``, with the offset, the slope and its T
+    fitted beside it (the Fisher information with the column ∂/∂T; a scale of that column
+    leaves the size's error unchanged, so the minimum does not depend on the size). For
+    T ≪ record it is ``causes.min_detectable_warmup``'s regime; from T ≈ record/6 on, the
+    line and T take most of e^(−t/T) and the minimum rises well above it."""
+    dt = record_s / blocks
+    t = (np.arange(blocks) + 0.5) * dt
+    L = np.linalg.cholesky(cz._noise_cov(t, dt, n_white, b_inst, k_rrw))
+    e = np.exp(-t / time_constant_s)
+    a = np.linalg.solve(L, np.column_stack([np.ones_like(t), t, e,
+                                            t / time_constant_s**2 * e]))
     return float(z * math.sqrt(np.linalg.inv(a.T @ a)[2, 2]))
 
 
