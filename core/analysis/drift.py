@@ -72,6 +72,7 @@ __all__ = [
     "channel_drift",
     "drift_block",
     "drift_likelihood",
+    "mean_difference",
     "resolve_drift",
     "two_sided_z",
 ]
@@ -585,15 +586,29 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     if lik is None:
         return fit, lik
     if not lik.passes(two_sided_z(level)):
-        return replace(fit, drift_floor=lik.floor), lik
+        return _no_ramp(fit, allan, lik, refit, level), lik
     tau = np.asarray(allan.tau, dtype=float)
     g = tau**2 / 2.0
     r, se = abs(lik.slope), lik.slope_se
     var_r2 = 4.0 * r * r * se**2 + 2.0 * se**4
-    less = replace(allan, var=np.asarray(allan.var, dtype=float) - r * r * g)
+    # The AVAR of the record less the fitted line, not the AVAR less R̂²τ²/2: each Allan
+    # difference loses R̂τ, so the variance loses R̂τ·D(τ) − R̂²τ²/2 with D the mean
+    # difference at τ. D holds the noise's own mean difference, which the ramp multiplies
+    # (a cross term R·τ·D_noise the size of the walk's whole AVAR at the longest τ when the
+    # ramp is a few times its detectable minimum, and no model of it): subtracting R̂²τ²/2
+    # left it in, and K beside a resolved ramp scattered far beyond its interval.
+    d = mean_difference(np.asarray(means, dtype=float).reshape(-1), block_s, tau)
+    known = np.isfinite(d)
+    removed = np.where(known, lik.slope * tau * np.where(known, d, 0.0) - lik.slope**2 * g,
+                       r * r * g)
+    # what is left uncertain: (R − R̂)·τ·D_noise and (R − R̂)²τ²/2, both of the slope's
+    # error, not of the ramp's size (R̂²'s own variance where D is not known)
+    dn = np.where(known, tau * (np.where(known, d, 0.0) - lik.slope * tau), 0.0)
+    added = se**2 * np.outer(dn, dn) + 2.0 * se**4 * np.outer(g, g)
+    added[np.ix_(~known, ~known)] = var_r2 * np.outer(g[~known], g[~known])
+    less = replace(allan, var=np.asarray(allan.var, dtype=float) - removed)
     try:
-        noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"],
-                      added_cov=var_r2 * np.outer(g, g))
+        noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"], added_cov=added)
     except FitError:
         return fit, lik
     noise = _walk_from_time_domain(noise, lik)
@@ -610,6 +625,63 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     return replace(noise, terms=terms, components=[*noise.components, ramp],
                    theta=np.append(noise.theta, r * r), theta_cov=cov,
                    resolved_apart=("rate_ramp",)), lik
+
+
+def mean_difference(means: NDArray, block_s: float, tau: NDArray) -> NDArray[np.float64]:
+    """The mean of the overlapping Allan differences ȳ(t+τ) − ȳ(t) at each ``tau`` (the
+    averages over τ, every start t in the record), from the block means ``means`` (each
+    ``block_s`` long, the record read as piecewise constant): with S the running integral
+    and I its integral, (1/τ(T−2τ))·∫₀^{T−2τ} S(t+2τ) − 2S(t+τ) + S(t) dt, exact in I. NaN
+    where 2τ ≥ T (no difference fits)."""
+    y = np.asarray(means, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    nb = len(y)
+    T = nb * block_s
+    out = np.full(tau.shape, np.nan)
+    if nb == 0:
+        return out
+    S = np.concatenate([[0.0], np.cumsum(y) * block_s])
+    I_edges = np.concatenate([[0.0], np.cumsum(0.5 * (S[:-1] + S[1:]) * block_s)])
+
+    def integral(t: NDArray) -> NDArray[np.float64]:
+        k = np.clip(np.floor(t / block_s).astype(int), 0, nb - 1)
+        u = t - k * block_s
+        return I_edges[k] + S[k] * u + y[k] * u * u / 2.0
+
+    ok = (tau > 0) & (2.0 * tau < T)
+    tk = tau[ok]
+    full = I_edges[-1]
+    num = (full - integral(2.0 * tk) - 2.0 * (integral(T - tk) - integral(tk))
+           + integral(T - 2.0 * tk))
+    out[ok] = num / (tk * (T - 2.0 * tk))
+    return out
+
+
+def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
+             refit: Callable[..., NoiseFit], level: float) -> NoiseFit:
+    """``fit`` where the time domain finds no drift past ``level``: its floor kept, and a
+    rate ramp the AVAR fit claimed there not claimed. The AVAR fit's ramp test weighs the
+    ramp against a walk through the long-τ points alone, which a walk's realisation that
+    happens to curve like τ² passes (a no-ramp record of the adversary's drift class, seed
+    305: R present, K absent); the block means, which tell a drift's one-signed increments
+    from a walk's, did not find it. The AVAR is then refitted without R (K takes the rise,
+    as the fit reads "ramp or random walk"), and R is absent with the time domain's upper
+    limit at the test's level: |slope| + z·(its 68 % half-width)."""
+    from avard.core.errors import FitError
+    from avard.core.model.fit import TermEstimate
+    from avard.core.model.terms import TERMS, UNITS
+
+    r = fit.terms.get("rate_ramp")
+    if r is None or not r.present or "rate_ramp" in fit.resolved_apart:
+        return replace(fit, drift_floor=lik.floor)
+    try:
+        noise = refit(allan, terms=[t for t in TERMS if t != "rate_ramp"])
+    except FitError:
+        return replace(fit, drift_floor=lik.floor)
+    upper = abs(lik.slope) + two_sided_z(level) * lik.slope_se
+    absent = TermEstimate(None, None, None, UNITS["rate_ramp"], False, abs(lik.z),
+                          upper if math.isfinite(upper) else None)
+    return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor)
 
 
 def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
