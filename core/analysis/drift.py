@@ -702,6 +702,25 @@ def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
     se = math.sqrt(max(float(noise.theta_cov[j, j]), 0.0))
     if theta > 0 and theta + se >= up:
         return noise
+    old = noise.terms["rate_random_walk"]
+    if theta > 0 and old.present:
+        # Two estimates of one walk, the AVAR's and the block means': the interval reaches
+        # the time domain's top, the value stays the AVAR's. (Taking the time domain's
+        # value whenever it was the higher kept the larger of two scattered estimates, and
+        # the interval beside a resolved ramp held the generator's K on under half of the
+        # adversary's drift records.)
+        wide = up - theta
+        cov = np.array(noise.theta_cov, dtype=float)
+        grow = wide / se if se > 0 else 0.0
+        if grow > 0:
+            cov[j, :] *= grow
+            cov[:, j] *= grow
+        else:
+            cov[j, :] = 0.0
+            cov[:, j] = 0.0
+            cov[j, j] = wide * wide
+        term = replace(old, lo=math.sqrt(max(theta - wide, 0.0)), hi=math.sqrt(up))
+        return replace(noise, theta_cov=cov, terms={**noise.terms, "rate_random_walk": term})
     point = max(theta, lik.k_drift**2, 0.5 * up)  # (noise_psd drops a θ of 0)
     new_theta = np.array(noise.theta, dtype=float)
     new_theta[j] = point
@@ -709,7 +728,6 @@ def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
     cov[j, :] = 0.0
     cov[:, j] = 0.0
     cov[j, j] = max(up - point, 0.0) ** 2
-    old = noise.terms["rate_random_walk"]
     term = TermEstimate(math.sqrt(point), math.sqrt(max(2.0 * point - up, 0.0)),
                         math.sqrt(max(up, point)), old.unit, True, old.z)
     return replace(noise, theta=new_theta, theta_cov=cov,
