@@ -574,10 +574,10 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     """``fit`` with a drift the time domain finds (``channel_drift`` past ``level``) as a
     resolved rate ramp: R the GLS slope, its interval the slope's profile-likelihood one
     (K profiled), and the noise terms refitted (``refit(allan, terms=..., added_cov=...)``,
-    the channel's own ``fit_noise`` arguments) on the AVAR less the ramp's R²τ²/2, the
-    removed part's uncertainty added to the AVAR's covariance, so K is no longer made of the
-    drift. ``fit`` unchanged (and the test, or None) where no drift passes or the refit
-    fails."""
+    the channel's own ``fit_noise`` arguments) on the AVAR of the record less the fitted
+    line (``mean_difference``), what is left uncertain added to the AVAR's covariance, so K
+    is no longer made of the drift. Where no drift passes, a ramp the AVAR fit claimed is
+    not (``_no_ramp``); ``fit`` unchanged (and the test, or None) where the refit fails."""
     from avard.core.errors import FitError
     from avard.core.model.fit import Component, TermEstimate
     from avard.core.model.terms import TERMS, UNITS
@@ -685,9 +685,11 @@ def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
 
 
 def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
-    """``noise`` (the AVAR fit less the ramp) with its walk K at least what the time domain
-    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. The AVAR fit's τ stop
-    at T/8 and, with the removed ramp's uncertainty, often find no K at 12 h; a ramp's cross
+    """``noise`` (the AVAR fit less the ramp) with its walk K reaching what the time domain
+    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. Where the AVAR finds
+    K, its value is kept and its interval widened to that top; where it finds none, the time
+    domain's K stands. The AVAR fit's τ stop at T/8 and, with the fitted line taking the
+    walk's own linear part, often find no K; a ramp's cross
     term with the noise weighs the record's ends, where the walk dominates, so without it
     the printed EDF of the 12 h "steep" records was 2–3 times what their estimates scatter
     with (coverage 50–53 % at 1024–4096 s)."""
