@@ -72,6 +72,7 @@ __all__ = [
     "channel_drift",
     "drift_block",
     "drift_likelihood",
+    "mean_difference",
     "resolve_drift",
     "two_sided_z",
 ]
@@ -573,10 +574,10 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     """``fit`` with a drift the time domain finds (``channel_drift`` past ``level``) as a
     resolved rate ramp: R the GLS slope, its interval the slope's profile-likelihood one
     (K profiled), and the noise terms refitted (``refit(allan, terms=..., added_cov=...)``,
-    the channel's own ``fit_noise`` arguments) on the AVAR less the ramp's R²τ²/2, the
-    removed part's uncertainty added to the AVAR's covariance, so K is no longer made of the
-    drift. ``fit`` unchanged (and the test, or None) where no drift passes or the refit
-    fails."""
+    the channel's own ``fit_noise`` arguments) on the AVAR of the record less the fitted
+    line (``mean_difference``), what is left uncertain added to the AVAR's covariance, so K
+    is no longer made of the drift. Where no drift passes, a ramp the AVAR fit claimed is
+    not (``_no_ramp``); ``fit`` unchanged (and the test, or None) where the refit fails."""
     from avard.core.errors import FitError
     from avard.core.model.fit import Component, TermEstimate
     from avard.core.model.terms import TERMS, UNITS
@@ -585,15 +586,29 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     if lik is None:
         return fit, lik
     if not lik.passes(two_sided_z(level)):
-        return replace(fit, drift_floor=lik.floor), lik
+        return _no_ramp(fit, allan, lik, refit, level), lik
     tau = np.asarray(allan.tau, dtype=float)
     g = tau**2 / 2.0
     r, se = abs(lik.slope), lik.slope_se
     var_r2 = 4.0 * r * r * se**2 + 2.0 * se**4
-    less = replace(allan, var=np.asarray(allan.var, dtype=float) - r * r * g)
+    # The AVAR of the record less the fitted line, not the AVAR less R̂²τ²/2: each Allan
+    # difference loses R̂τ, so the variance loses R̂τ·D(τ) − R̂²τ²/2 with D the mean
+    # difference at τ. D holds the noise's own mean difference, which the ramp multiplies
+    # (a cross term R·τ·D_noise the size of the walk's whole AVAR at the longest τ when the
+    # ramp is a few times its detectable minimum, and no model of it): subtracting R̂²τ²/2
+    # left it in, and K beside a resolved ramp scattered far beyond its interval.
+    d = mean_difference(np.asarray(means, dtype=float).reshape(-1), block_s, tau)
+    known = np.isfinite(d)
+    removed = np.where(known, lik.slope * tau * np.where(known, d, 0.0) - lik.slope**2 * g,
+                       r * r * g)
+    # what is left uncertain: (R − R̂)·τ·D_noise and (R − R̂)²τ²/2, both of the slope's
+    # error, not of the ramp's size (R̂²'s own variance where D is not known)
+    dn = np.where(known, tau * (np.where(known, d, 0.0) - lik.slope * tau), 0.0)
+    added = se**2 * np.outer(dn, dn) + 2.0 * se**4 * np.outer(g, g)
+    added[np.ix_(~known, ~known)] = var_r2 * np.outer(g[~known], g[~known])
+    less = replace(allan, var=np.asarray(allan.var, dtype=float) - removed)
     try:
-        noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"],
-                      added_cov=var_r2 * np.outer(g, g))
+        noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"], added_cov=added)
     except FitError:
         return fit, lik
     noise = _walk_from_time_domain(noise, lik)
@@ -612,10 +627,69 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
                    resolved_apart=("rate_ramp",)), lik
 
 
+def mean_difference(means: NDArray, block_s: float, tau: NDArray) -> NDArray[np.float64]:
+    """The mean of the overlapping Allan differences ȳ(t+τ) − ȳ(t) at each ``tau`` (the
+    averages over τ, every start t in the record), from the block means ``means`` (each
+    ``block_s`` long, the record read as piecewise constant): with S the running integral
+    and I its integral, (1/τ(T−2τ))·∫₀^{T−2τ} S(t+2τ) − 2S(t+τ) + S(t) dt, exact in I. NaN
+    where 2τ ≥ T (no difference fits)."""
+    y = np.asarray(means, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    nb = len(y)
+    T = nb * block_s
+    out = np.full(tau.shape, np.nan)
+    if nb == 0:
+        return out
+    S = np.concatenate([[0.0], np.cumsum(y) * block_s])
+    I_edges = np.concatenate([[0.0], np.cumsum(0.5 * (S[:-1] + S[1:]) * block_s)])
+
+    def integral(t: NDArray) -> NDArray[np.float64]:
+        k = np.clip(np.floor(t / block_s).astype(int), 0, nb - 1)
+        u = t - k * block_s
+        return I_edges[k] + S[k] * u + y[k] * u * u / 2.0
+
+    ok = (tau > 0) & (2.0 * tau < T)
+    tk = tau[ok]
+    full = I_edges[-1]
+    num = (full - integral(2.0 * tk) - 2.0 * (integral(T - tk) - integral(tk))
+           + integral(T - 2.0 * tk))
+    out[ok] = num / (tk * (T - 2.0 * tk))
+    return out
+
+
+def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
+             refit: Callable[..., NoiseFit], level: float) -> NoiseFit:
+    """``fit`` where the time domain finds no drift past ``level``: its floor kept, and a
+    rate ramp the AVAR fit claimed there not claimed. The AVAR fit's ramp test weighs the
+    ramp against a walk through the long-τ points alone, which a walk's realisation that
+    happens to curve like τ² passes (a no-ramp record of the adversary's drift class, seed
+    305: R present, K absent); the block means, which tell a drift's one-signed increments
+    from a walk's, did not find it. The AVAR is then refitted without R (K takes the rise,
+    as the fit reads "ramp or random walk"), and R is absent with the time domain's upper
+    limit at the test's level: |slope| + z·(its 68 % half-width)."""
+    from avard.core.errors import FitError
+    from avard.core.model.fit import TermEstimate
+    from avard.core.model.terms import TERMS, UNITS
+
+    r = fit.terms.get("rate_ramp")
+    if r is None or not r.present or "rate_ramp" in fit.resolved_apart:
+        return replace(fit, drift_floor=lik.floor)
+    try:
+        noise = refit(allan, terms=[t for t in TERMS if t != "rate_ramp"])
+    except FitError:
+        return replace(fit, drift_floor=lik.floor)
+    upper = abs(lik.slope) + two_sided_z(level) * lik.slope_se
+    absent = TermEstimate(None, None, None, UNITS["rate_ramp"], False, abs(lik.z),
+                          upper if math.isfinite(upper) else None)
+    return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor)
+
+
 def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
-    """``noise`` (the AVAR fit less the ramp) with its walk K at least what the time domain
-    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. The AVAR fit's τ stop
-    at T/8 and, with the removed ramp's uncertainty, often find no K at 12 h; a ramp's cross
+    """``noise`` (the AVAR fit less the ramp) with its walk K reaching what the time domain
+    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. Where the AVAR finds
+    K, its value is kept and its interval widened to that top; where it finds none, the time
+    domain's K stands. The AVAR fit's τ stop at T/8 and, with the fitted line taking the
+    walk's own linear part, often find no K; a ramp's cross
     term with the noise weighs the record's ends, where the walk dominates, so without it
     the printed EDF of the 12 h "steep" records was 2–3 times what their estimates scatter
     with (coverage 50–53 % at 1024–4096 s)."""
@@ -630,6 +704,25 @@ def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
     se = math.sqrt(max(float(noise.theta_cov[j, j]), 0.0))
     if theta > 0 and theta + se >= up:
         return noise
+    old = noise.terms["rate_random_walk"]
+    if theta > 0 and old.present:
+        # Two estimates of one walk, the AVAR's and the block means': the interval reaches
+        # the time domain's top, the value stays the AVAR's. (Taking the time domain's
+        # value whenever it was the higher kept the larger of two scattered estimates, and
+        # the interval beside a resolved ramp held the generator's K on under half of the
+        # adversary's drift records.)
+        wide = up - theta
+        cov = np.array(noise.theta_cov, dtype=float)
+        grow = wide / se if se > 0 else 0.0
+        if grow > 0:
+            cov[j, :] *= grow
+            cov[:, j] *= grow
+        else:
+            cov[j, :] = 0.0
+            cov[:, j] = 0.0
+            cov[j, j] = wide * wide
+        term = replace(old, lo=math.sqrt(max(theta - wide, 0.0)), hi=math.sqrt(up))
+        return replace(noise, theta_cov=cov, terms={**noise.terms, "rate_random_walk": term})
     point = max(theta, lik.k_drift**2, 0.5 * up)  # (noise_psd drops a θ of 0)
     new_theta = np.array(noise.theta, dtype=float)
     new_theta[j] = point
@@ -637,7 +730,6 @@ def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
     cov[j, :] = 0.0
     cov[:, j] = 0.0
     cov[j, j] = max(up - point, 0.0) ** 2
-    old = noise.terms["rate_random_walk"]
     term = TermEstimate(math.sqrt(point), math.sqrt(max(2.0 * point - up, 0.0)),
                         math.sqrt(max(up, point)), old.unit, True, old.z)
     return replace(noise, theta=new_theta, theta_cov=cov,
