@@ -126,7 +126,7 @@ from avard.core.model.nnls import _lstsq
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
-           "min_detectable_path", "path_columns", "reads_as_rate"]
+           "min_detectable_path", "path_columns", "rate_reading", "reads_as_rate"]
 
 CANDIDATES = ("one_lag", "two_path", "quadratic", "rate", "hysteresis")
 #: What each candidate is called in a sentence.
@@ -1638,20 +1638,28 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             sc.kind for sc in passing
             if sc.kind != best.kind and sc.heldout <= best.heldout + HELDOUT_MARGIN
             and (_n_params(sc) <= _n_params(best) or sc.heldout < best.heldout)
-            and not (best.kind == "rate" and sc.kind == "two_path" and _mimic(sc, best)))
+            and not (best.kind == "rate" and sc.kind == "two_path" and _held_by_rate(sc, best)))
         mimic = scores.get("two_path")
         if (best.kind == "rate" and mimic is not None and mimic in passing
-                and mimic.heldout <= best.heldout + HELDOUT_MARGIN and _mimic(mimic, best)):
+                and mimic.heldout <= best.heldout + HELDOUT_MARGIN
+                and _held_by_rate(mimic, best)):
             as_well = ("two_path",)
             how = ("of opposite sign that nearly cancel " if _derivative_limit(mimic)
                    else "")
+            d_two = mimic.heldout - best.heldout
             notes.append(
                 f"two paths {how}({mimic.beta[0]:.3g} and "
                 f"{mimic.beta[1]:.3g} m/s²/K through {mimic.theta[0]:.4g} and "
-                f"{mimic.theta[1]:.4g} s) fit as well: a difference of two lags is a smoothed "
-                "derivative, two paths hold the dT/dt term in their limit with a parameter "
-                f"more, and predict it no better by the margin {HELDOUT_MARGIN:g} an "
-                "extension needs over the model it holds, so "
+                f"{mimic.theta[1]:.4g} s) fit as well"
+                + (f" or better (held out Δ {d_two:+.3g} against the dT/dt term)"
+                   if d_two < 0 else "")
+                + ": a difference of two lags is a smoothed derivative, two paths hold the "
+                "dT/dt term in their limit with a parameter more, and "
+                + ("these cancel: a static coupling and the derivative of the temperature "
+                   "behind a lag, so "
+                   if how else
+                   f"predict it no better by the margin {HELDOUT_MARGIN:g} an extension needs "
+                   "over the model it holds, so ")
                 + ("the same mechanism (not named beside it)" if how else
                    # (coefficients that do not cancel: a response of its own, which this
                    # record does not tell from the dT/dt term; the simpler is reported, and
@@ -1736,6 +1744,60 @@ def reads_as_rate(two: PathFit, rate: PathFit) -> bool:
     it of the choice made with nothing beside a warm-up against the one made beside it."""
     sc = rate.scores.get("two_path")
     return _derivative_limit(two.chosen) or (sc is not None and _mimic(sc, rate.chosen))
+
+
+def _passes(pf: PathFit, sc: PathScore) -> bool:
+    """Whether the extension ``sc`` passes every test choosing needs in ``pf``'s choice: its
+    θ inside its grid, its extra term's z at the threshold, held out better than one lag and
+    than no coupling by the margin and its own share of the rounding (``choose_path``)."""
+    ref = pf.scores["one_lag"]
+    return (not sc.open_end and sc.z_extra >= pf.z_threshold
+            and sc.heldout < min(ref.heldout, pf.none_heldout) - pf.margin
+            - pf.own_rounding.get(sc.kind, pf.rounding))
+
+
+def rate_reading(pf: PathFit, alone: PathFit) -> PathFit | None:
+    """``pf`` with the dT/dt term chosen where two paths were chosen in its limit
+    (``_derivative_limit``: a static coupling plus the derivative of the temperature behind a
+    lag, the dT/dt term with a parameter more) and the dT/dt term passes every test choosing
+    needs (``_passes``); the two paths are then listed with ``as_well`` and named in a note.
+    None where that is not so, or where ``alone`` (the same axis's choice made with nothing
+    beside the warm-up) is not the dT/dt term or two paths in its limit. explain's engine
+    asks it of the choice made beside a warm-up, where two such paths bring two start states
+    of free size and a lag on the derivative that take up what the warm-up's fixed shapes
+    leave of it; ``alone`` tells whether the record's start is a second path's
+    (``engine._rate_beside``)."""
+    two, rate = pf.chosen, pf.scores.get("rate")
+    if (two.kind != "two_path" or rate is None or not _derivative_limit(two)
+            or not _passes(pf, rate)):
+        return None
+    if not (alone.kind == "rate" or (alone.kind == "two_path"
+                                     and _derivative_limit(alone.chosen))):
+        return None
+    d_two = two.heldout - rate.heldout
+    notes = [n for n in pf.notes if n.split(" ", 1)[0] in CANDIDATES]
+    notes.append(
+        f"two paths of opposite sign that nearly cancel ({two.beta[0]:.3g} and "
+        f"{two.beta[1]:.3g} m/s²/K through {two.theta[0]:.4g} and {two.theta[1]:.4g} s) "
+        f"predict the held-out halves better by {-d_two:.3g} beside the warm-up: a static "
+        "coupling and the derivative of the temperature behind a lag, the dT/dt term with a "
+        "parameter more, whose two start states and derivative's lag trade with the "
+        "warm-up's shape; without the warm-up beside them the record's start reads as the "
+        "dT/dt term too, so they are its reading (the dT/dt term reported)")
+    if not rate.resolved:
+        notes.append(f"parameters not resolved (model-dependent, no interval): a coefficient "
+                     f"changes sign over the θ within Δ(−2 ln L) {rate.profile_delta:.3g} of "
+                     "the best (the extra term trades with the lag at one drive frequency)")
+    return replace(pf, chosen=rate, notes=notes,
+                   alternatives=tuple(k for k in pf.alternatives if k != "rate"),
+                   as_well=("two_path", *(k for k in pf.as_well if k != "rate")))
+
+
+def _held_by_rate(two: PathScore, rate: PathScore) -> bool:
+    """Two paths that are the chosen dT/dt term's reading with a parameter more, not a rival:
+    in its limit (``_derivative_limit``) or predicting it no better by the margin
+    (``_mimic``)."""
+    return _derivative_limit(two) or _mimic(two, rate)
 
 
 def _mimic(two: PathScore, rate: PathScore) -> bool:
