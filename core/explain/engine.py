@@ -75,7 +75,11 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
     with_paths,
 )
-from avard.core.explain.thermal_paths import rate_reading, reads_as_rate
+from avard.core.explain.thermal_paths import (
+    rate_reading,
+    reads_as_rate,
+    second_path_reading,
+)
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
@@ -667,10 +671,16 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                            temps, holes, warmups={i: found[a] for i, a in enumerate(redo)})
         for a, th in zip(redo, again, strict=True):
             out[a] = th
-    # and so again on the refit's choice
+    # and so again on the refit's choice; where the choice alone is two paths of their own
+    # response and the dT/dt term stands beside the warm-up, the finding names both
+    # readings (``thermal_paths.second_path_reading``)
     for a in found:
         if (th := out[a]) is not None and (r := _rate_beside(th, alone.get(a))) is not None:
             out[a] = r
+        if ((th := out[a]) is not None and th.path is not None
+                and (al := alone.get(a)) is not None and al.path is not None
+                and (pf := second_path_reading(th.path, al.path)) is not None):
+            out[a] = replace(th, path=pf)
     # the warm-up is then a cause of its own where it is still beyond the start state beside
     # the path chosen (its T and size refitted there, on the axis less that path's signal)
     for a in found:

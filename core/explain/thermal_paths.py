@@ -126,7 +126,8 @@ from avard.core.model.nnls import _lstsq
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
-           "min_detectable_path", "path_columns", "rate_reading", "reads_as_rate"]
+           "min_detectable_path", "path_columns", "rate_reading", "reads_as_rate",
+           "second_path_reading"]
 
 CANDIDATES = ("one_lag", "two_path", "quadratic", "rate", "hysteresis")
 #: What each candidate is called in a sentence.
@@ -1795,6 +1796,29 @@ def rate_reading(pf: PathFit, alone: PathFit) -> PathFit | None:
     return replace(pf, chosen=rate, notes=notes,
                    alternatives=tuple(k for k in pf.alternatives if k != "rate"),
                    as_well=("two_path", *(k for k in pf.as_well if k != "rate")))
+
+
+def second_path_reading(beside: PathFit, alone: PathFit) -> PathFit | None:
+    """``beside`` (the dT/dt term chosen with a warm-up beside every candidate) with the
+    other reading named, where ``alone`` (the choice made with nothing beside the warm-up)
+    is two paths that are not the term's reading (``reads_as_rate``): a second path through
+    a long lag settles at the record's start as a warm-up does, and beside the warm-up's
+    shapes two paths lose that start and fall to the term's limit or their grid's end, so
+    the record holds both "the dT/dt term and a warm-up" and "two paths, their start in
+    place of (part of) the warm-up" (on two-path records beside a warm-up, alone, two paths
+    near their truth; on dT/dt records beside one, alone, two paths of that shape too).
+    Two paths are listed with ``as_well`` and the note names both; None elsewhere."""
+    if beside.kind != "rate" or alone.kind != "two_path" or reads_as_rate(alone, beside):
+        return None
+    two = alone.chosen
+    note = (f"without the warm-up beside them, two paths are chosen ({two.beta[0]:.3g} and "
+            f"{two.beta[1]:.3g} m/s²/K through {two.theta[0]:.4g} and {two.theta[1]:.4g} s, "
+            "not the dT/dt term's limit): a second path through a long lag settles at the "
+            "start as a warm-up does, so this record does not tell the dT/dt term beside a "
+            "warm-up from two paths whose start is (part of) that warm-up; the first is "
+            "reported")
+    return replace(beside, notes=[*beside.notes, note],
+                   as_well=("two_path", *(k for k in beside.as_well if k != "two_path")))
 
 
 def _held_by_rate(two: PathScore, rate: PathScore) -> bool:

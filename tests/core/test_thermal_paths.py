@@ -1532,3 +1532,21 @@ def test_the_dt_term_is_named_beside_one_lag_where_it_is_that_lag_at_the_drive(b
         assert "r/c" in note
     assert "rate" not in base_path.as_well
     assert base_path.kind == "one_lag"
+
+
+def test_the_dt_term_beside_a_warm_up_names_two_paths_the_choice_alone_finds():
+    """Two paths at 0 and 900 s beside a 900 s warm-up (seed 40002): beside the warm-up's
+    shapes the second path's start is the warm-up's and the dT/dt term is chosen; alone, two
+    paths near their truth (not the term's limit). The record holds both readings, and the
+    finding must name both rather than the term alone."""
+    from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
+
+    r = next(x for x in rows_paths() if x.name == "path+warm-up: two paths")
+    ex, _ = explain_weekend(r.weekend, 40002)
+    ch = ex.channels["x"]
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and ch.thermal is not None and ch.thermal.path is not None
+    pf = ch.thermal.path
+    assert th[0].mechanism == "two_path" or (
+        "two_path" in (*th[0].alternatives, *pf.as_well)
+        and any(n.startswith("without the warm-up beside them, two paths") for n in pf.notes))
