@@ -76,6 +76,7 @@ from avard.core.explain.thermal_fit import (
     with_paths,
 )
 from avard.core.explain.thermal_paths import (
+    both_readings,
     rate_reading,
     reads_as_rate,
     second_path_reading,
@@ -672,14 +673,15 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
         for a, th in zip(redo, again, strict=True):
             out[a] = th
     # and so again on the refit's choice; where the choice alone is two paths of their own
-    # response and the dT/dt term stands beside the warm-up, the finding names both
-    # readings (``thermal_paths.second_path_reading``)
+    # response and the dT/dt term stands beside the warm-up, or two paths in its limit, the
+    # finding names both readings (``thermal_paths.second_path_reading``, ``both_readings``)
     for a in found:
         if (th := out[a]) is not None and (r := _rate_beside(th, alone.get(a))) is not None:
             out[a] = r
         if ((th := out[a]) is not None and th.path is not None
                 and (al := alone.get(a)) is not None and al.path is not None
-                and (pf := second_path_reading(th.path, al.path)) is not None):
+                and (pf := (second_path_reading(th.path, al.path)
+                            or both_readings(th.path, al.path))) is not None):
             out[a] = replace(th, path=pf)
     # the warm-up is then a cause of its own where it is still beyond the start state beside
     # the path chosen (its T and size refitted there, on the axis less that path's signal)

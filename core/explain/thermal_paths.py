@@ -125,9 +125,19 @@ from avard.core.explain.thermal_fit import (
 from avard.core.model.nnls import _lstsq
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["CANDIDATES", "HELDOUT_MARGIN", "PathFit", "PathScore", "choose_path",
-           "min_detectable_path", "path_columns", "rate_reading", "reads_as_rate",
-           "second_path_reading"]
+__all__ = [
+    "CANDIDATES",
+    "HELDOUT_MARGIN",
+    "PathFit",
+    "PathScore",
+    "both_readings",
+    "choose_path",
+    "min_detectable_path",
+    "path_columns",
+    "rate_reading",
+    "reads_as_rate",
+    "second_path_reading",
+]
 
 CANDIDATES = ("one_lag", "two_path", "quadratic", "rate", "hysteresis")
 #: What each candidate is called in a sentence.
@@ -1796,6 +1806,32 @@ def rate_reading(pf: PathFit, alone: PathFit) -> PathFit | None:
     return replace(pf, chosen=rate, notes=notes,
                    alternatives=tuple(k for k in pf.alternatives if k != "rate"),
                    as_well=("two_path", *(k for k in pf.as_well if k != "rate")))
+
+
+def both_readings(beside: PathFit, alone: PathFit) -> PathFit | None:
+    """``beside`` (two paths chosen beside a warm-up in the dT/dt term's limit, the term
+    passing every test too) with the term named as an alternative, where ``alone`` (the
+    choice made with nothing beside the warm-up) is two paths of their own response (not in
+    that limit): the record then holds both "the dT/dt term beside the warm-up" and "two
+    paths whose start is (part of) the warm-up", and the fit beside the warm-up, in the
+    limit, is neither's parameters (dT/dt records and two-path records beside a warm-up both
+    show this signature). The mechanism is named with both, no interval; None elsewhere."""
+    two, rate = beside.chosen, beside.scores.get("rate")
+    if (two.kind != "two_path" or rate is None or not _derivative_limit(two)
+            or not _passes(beside, rate) or alone.kind != "two_path"
+            or _derivative_limit(alone.chosen)):
+        return None
+    a = alone.chosen
+    note = (f"two paths beside the warm-up sit in the dT/dt term's limit ({two.beta[0]:.3g} "
+            f"and {two.beta[1]:.3g} m/s²/K through {two.theta[0]:.4g} and "
+            f"{two.theta[1]:.4g} s, nearly cancelling) and the dT/dt term passes too; "
+            f"without the warm-up, two paths of their own ({a.beta[0]:.3g} and "
+            f"{a.beta[1]:.3g} through {a.theta[0]:.4g} and {a.theta[1]:.4g} s): a second "
+            "path's start and a warm-up are one shape at the record's start, so this record "
+            "does not tell the dT/dt term beside a warm-up from two paths whose start is "
+            "(part of) it; parameters model-dependent, no interval")
+    return replace(beside, notes=[*beside.notes, note],
+                   alternatives=("rate", *(k for k in beside.alternatives if k != "rate")))
 
 
 def second_path_reading(beside: PathFit, alone: PathFit) -> PathFit | None:
