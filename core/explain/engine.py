@@ -75,7 +75,12 @@ from avard.core.explain.thermal_fit import (
     signal_avar_on,
     with_paths,
 )
-from avard.core.explain.thermal_paths import reads_as_rate
+from avard.core.explain.thermal_paths import (
+    both_readings,
+    rate_reading,
+    reads_as_rate,
+    second_path_reading,
+)
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
@@ -634,6 +639,14 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                     and _gain_beside(o, k) for k in o.path.scores)]
     alone = dict(zip(back, with_paths([fits[a] for a in back], Y[:, back], temps, holes),
                      strict=True))
+    # two paths in the dT/dt term's limit chosen beside the warm-up are that term's reading
+    # where the choice alone reads as the term too (``_rate_beside``): read so before the
+    # choice alone is weighed against it, with the warm-up tested beside the term
+    for a, th in alone.items():
+        if (o := out[a]) is not None and (rr := _rate_beside(o, th)) is not None:
+            out[a] = rr
+            stands[a] = rr.passed and tr.warmup_beyond_start(
+                Y[:, a] - rr.signal(temps), rate_b, nzs[a], rr.lag_s).passed
     for a, th in alone.items():
         o = out[a]
         if (o is not None and th.mechanism != "one_lag"
@@ -659,6 +672,17 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                            temps, holes, warmups={i: found[a] for i, a in enumerate(redo)})
         for a, th in zip(redo, again, strict=True):
             out[a] = th
+    # and so again on the refit's choice; where the choice alone is two paths of their own
+    # response and the dT/dt term stands beside the warm-up, or two paths in its limit, the
+    # finding names both readings (``thermal_paths.second_path_reading``, ``both_readings``)
+    for a in found:
+        if (th := out[a]) is not None and (r := _rate_beside(th, alone.get(a))) is not None:
+            out[a] = r
+        if ((th := out[a]) is not None and th.path is not None
+                and (al := alone.get(a)) is not None and al.path is not None
+                and (pf := (second_path_reading(th.path, al.path)
+                            or both_readings(th.path, al.path))) is not None):
+            out[a] = replace(th, path=pf)
     # the warm-up is then a cause of its own where it is still beyond the start state beside
     # the path chosen (its T and size refitted there, on the axis less that path's signal)
     for a in found:
@@ -683,6 +707,30 @@ def _same_path(alone: ThermalFit, beside: ThermalFit) -> bool:
     return (alone.mechanism == "two_path" and beside.mechanism == "rate"
             and alone.path is not None and beside.path is not None
             and reads_as_rate(alone.path, beside.path))
+
+
+def _rate_beside(beside: ThermalFit, alone: ThermalFit | None) -> ThermalFit | None:
+    """``beside`` (the path chosen with the warm-up beside every candidate) with the dT/dt
+    term chosen, where two paths in its limit were chosen there, the term passes every test
+    too (``thermal_paths.rate_reading``) and the choice made with nothing beside the warm-up
+    (``alone``) reads as the term as well: the term itself, or two paths in its limit. Beside
+    a warm-up, two such paths bring two start states of free size and a lag on the
+    derivative that take up what the warm-up's fixed shapes leave, and beat a true dT/dt
+    term by 6–11 held out; but a second path through a long lag settles at the start as a
+    warm-up does, so beside the warm-up two true paths fall into that limit too, and only
+    the choice without it, where the record's start is the second path's, tells them: two
+    paths of their own response there (not in the limit) leave the choice beside the
+    warm-up as it was. None where nothing changes."""
+    if beside.path is None or alone is None or alone.path is None:
+        return None
+    pf = rate_reading(beside.path, alone.path)
+    if pf is None:
+        return None
+    s = pf.chosen
+    return replace(beside, path=pf, coefficient=float(s.beta[0]),
+                   coef_se=float(s.beta_se[0]), lag_s=float(s.theta[0]),
+                   lag_lo=float(s.theta_lo[0]), lag_hi=float(s.theta_hi[0]),
+                   lag_open=s.open_end)
 
 
 def _gain_beside(th: ThermalFit | None, kind: str) -> bool:

@@ -1487,3 +1487,83 @@ def test_a_dt_dt_term_beside_a_real_warm_up_keeps_its_fit_and_the_warm_up_claime
     row = next(r for r in rows_paths() if r.name == "path+warm-up: dT/dt")
     ex, _ = explain_weekend(row.weekend, seed)
     _path_and_warm_up_claimed(ex, row)
+
+
+@pytest.mark.parametrize(("row", "seed", "mechanism"), [
+    ("path+warm-up: dT/dt", 38001, "rate"),
+    ("path+warm-up: two paths", 40000, "two_path"),
+])
+def test_two_paths_in_the_dt_terms_limit_beside_a_warm_up_are_read_by_the_choice_alone(
+        row: str, seed: int, mechanism: str):
+    """Beside a warm-up, two paths of opposite sign that nearly cancel (the dT/dt term's
+    limit, a parameter more, with two start states of free size) beat a true dT/dt term held
+    out, and a second path's start is taken up by the warm-up's shapes, so two true paths
+    fall into that limit too. The choice made with nothing beside the warm-up tells them:
+    38001 (dT/dt, two paths at 191/240 s chosen beside the warm-up and the warm-up never
+    claimed before) reads as the term alone too, so the term is chosen with the warm-up
+    claimed and two paths listed as fitting as well; 40000 (two paths at 0 and 900 s) alone
+    chooses two paths of their own response, and two paths stay (the dT/dt term named beside
+    them where the fit beside the warm-up is in its limit: ``both_readings``)."""
+    from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
+
+    r = next(x for x in rows_paths() if x.name == row)
+    ex, _ = explain_weekend(r.weekend, seed)
+    ch = ex.channels["x"]
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and th[0].mechanism == mechanism
+    if mechanism == "rate":
+        assert not th[0].alternatives
+        assert any(f.cause == "warmup" for f in ch.claimed)
+        assert ch.thermal is not None and ch.thermal.path is not None
+        assert "two_path" in ch.thermal.path.as_well
+        for k, v in r.truth.items():
+            assert th[0].params[k] == pytest.approx(v, rel=0.2)
+
+
+def test_the_dt_term_is_named_beside_one_lag_where_it_is_that_lag_at_the_drive(base_path):
+    """c·T + r·dT/dt with r/c = −L is one lag L at the drive (c' = c(1 + ω²L²)): on a record
+    of that truth (r/c = −300 s, a 1800 s drive: c' about twice c) one lag is kept with its
+    coefficient about twice the coupling, and the finding must say the dT/dt term fits as
+    well (or choose it); a lag-0 coupling, where both readings are one coefficient, names
+    nothing beside it."""
+    w = replace(BASE, coefficient=(C / 2, 0.0, 0.0), rate_coupling=-C / 2 * 300.0)
+    pf = _path(*_slow(w, 1))
+    assert pf.kind == "rate" or "rate" in pf.as_well
+    if pf.kind == "one_lag":
+        note = next(n for n in pf.notes if n.startswith("the dT/dt term fits as well"))
+        assert "r/c" in note
+    assert "rate" not in base_path.as_well
+    assert base_path.kind == "one_lag"
+
+
+def test_the_dt_term_beside_a_warm_up_names_two_paths_the_choice_alone_finds():
+    """Two paths at 0 and 900 s beside a 900 s warm-up (seed 40002): beside the warm-up's
+    shapes the second path's start is the warm-up's and the dT/dt term is chosen; alone, two
+    paths near their truth (not the term's limit). The record holds both readings, and the
+    finding must name both rather than the term alone."""
+    from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
+
+    r = next(x for x in rows_paths() if x.name == "path+warm-up: two paths")
+    ex, _ = explain_weekend(r.weekend, 40002)
+    ch = ex.channels["x"]
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and ch.thermal is not None and ch.thermal.path is not None
+    pf = ch.thermal.path
+    assert th[0].mechanism == "two_path" or (
+        "two_path" in (*th[0].alternatives, *pf.as_well)
+        and any(n.startswith("without the warm-up beside them, two paths") for n in pf.notes))
+
+
+def test_two_paths_in_the_dt_terms_limit_beside_a_warm_up_name_the_term_where_alone_is_not():
+    """A dT/dt term beside a warm-up (seed 98000): beside the warm-up two paths in the
+    term's limit (125/172 s) are chosen, alone two paths of their own (106/611 s), the
+    signature two true paths beside a warm-up show too. The record does not tell them
+    apart, so the term must be named, not two paths claimed alone (``both_readings``)."""
+    from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
+
+    r = next(x for x in rows_paths() if x.name == "path+warm-up: dT/dt")
+    ex, _ = explain_weekend(r.weekend, 98000)
+    th = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    assert th and "rate" in (th[0].mechanism, *th[0].alternatives)
+    if th[0].alternatives:
+        assert not th[0].intervals
