@@ -56,8 +56,8 @@ from avard.core.explain import causes as cz
 from avard.core.model.triangular import LowerSolver
 from numpy.typing import NDArray
 
-__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound", "profiled_z",
-           "refine_compound", "robust_noise", "signal_of", "test_drift", "warmup_beyond_start"]
+__all__ = ["MAX_EFFECTS", "NoiseOf", "confirm_compound", "find_compound", "refine_compound",
+           "robust_noise", "signal_of", "test_drift", "warmup_beyond_start"]
 
 #: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
 NoiseOf = Callable[[NDArray[np.float64]], dict[str, float]]
@@ -507,75 +507,26 @@ def confirm_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
                 "; not claimed: the noise covariance would not factor")) for c in cands]
         zs = _z_in_fit(g, cands, on_grid=True)
         szs = [cz.size_z(c) for c in cands]
-        # (resc24b) and each hypothesis on its own noise: see ``profiled_z``
-        lrs = profiled_z(g, noise, cands)
-        margins = [min(z, sz, lr) / c.threshold
-                   for z, sz, lr, c in zip(zs, szs, lrs, cands, strict=True)]
+        margins = [min(z, sz) / c.threshold for z, sz, c in zip(zs, szs, cands, strict=True)]
         k = int(np.argmin(margins))
         if margins[k] >= 1.0:
             return [replace(c, passed=True, statistic=z, evidence=(
-                f"claimed: {_final_test(z, sz, c.threshold, len(cands), lr)}; the search: "
-                f"{c.evidence}")) for z, sz, lr, c in zip(zs, szs, lrs, cands, strict=True)
-                ], dropped
+                f"claimed: {_final_test(z, sz, c.threshold, len(cands))}; the search: "
+                f"{c.evidence}")) for z, sz, c in zip(zs, szs, cands, strict=True)], dropped
         dropped.append(replace(cands[k], passed=False, statistic=zs[k], intervals={},
                                evidence=cands[k].evidence + "; not claimed: " + _final_test(
-                                   zs[k], szs[k], cands[k].threshold, len(cands), lrs[k])))
+                                   zs[k], szs[k], cands[k].threshold, len(cands))))
         cands.pop(k)
     return [], dropped
 
 
-def _final_test(z: float, size_z: float, threshold: float, n_effects: int,
-                lr_z: float = math.inf) -> str:
+def _final_test(z: float, size_z: float, threshold: float, n_effects: int) -> str:
     """The sentence of ``confirm_compound``'s test of one effect."""
     together = f" with {n_effects - 1} other effects" if n_effects > 1 else ""
-    lr = (f", and with the walk K profiled under each hypothesis (with and without it) "
-          f"√Δ(−2 ln L) = {lr_z:.3g}" if math.isfinite(lr_z) else "")
     return (f"in the joint fit{together}, against the noise with every effect claimed removed,"
             f" it is {z:.3g} σ on the scan's grid and its size {size_z:.3g} standard errors "
-            f"from zero{lr} (test: {'all' if lr else 'both'} ≥ {threshold:.3g}, its family's "
-            f"Bonferroni split of the axis's false-alarm level {alarm.ALPHA_AXIS:g})")
-
-
-def profiled_z(g: cz._Gls, noise: dict[str, float], cands: list[cz.Candidate]
-               ) -> list[float]:
-    """Each candidate's √Δ(−2 ln L) on the scan's grid (``_on_grid``, the largest over its
-    shapes there) between the time-domain fits without and with it, the others' columns,
-    the offset and the slope in both, N and B at ``noise``'s and the walk K profiled under
-    each hypothesis on its own (``analysis.drift``'s likelihood, K from 0 to well past
-    ``noise``'s). ``inf`` where the covariance will not factor (the z test alone decides).
-
-    Why (resc24b): the z test's noise is fitted with every effect removed (a real step's
-    AVAR would otherwise read as K and hide it), but a removed effect was fitted to this
-    record: on a null axis it takes the walk's own wander with it, and the noise it is then
-    tested against is lower than the record's (docs/explain.md, resc24b: the faulty-log
-    row's false excursion). With K profiled under each hypothesis, neither the K an effect
-    makes (without it) nor the K its fit takes away (with it) is the other hypothesis's
-    floor."""
-    from avard.core.analysis.drift import K_DECADES, K_POINTS, K_SPAN, _Profile
-
-    n_w, b_i = noise.get("N", 0.0), noise.get("B", 0.0)
-    if not n_w > 0:
-        return [math.inf] * len(cands)
-    t, dt = g.t, g.dt
-    try:
-        prof = _Profile(g.yb, t, dt, n_w, b_i)
-    except np.linalg.LinAlgError:
-        return [math.inf] * len(cands)
-    top = K_SPAN * max(noise.get("K", 0.0), n_w / (len(t) * dt))
-    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-K_DECADES, top, K_POINTS)])
-    cols = [_column(c.cause, c.params, t, dt) for c in cands]
-    base = [np.ones_like(t), t - t.mean()]
-    out = []
-    for i, c in enumerate(cands):
-        w0 = prof.white(np.column_stack([*base, *cols[:i], *cols[i + 1:]]))
-        _j, h0 = prof.best(ks, w0)
-        best = 0.0
-        for p in _on_grid(c, g):
-            w1 = np.column_stack([w0, prof.white(_column(c.cause, p, t, dt))])
-            _j1, h1 = prof.best(ks, w1)
-            best = max(best, h0 - h1)
-        out.append(math.sqrt(best))
-    return out
+            f"from zero (test: both ≥ {threshold:.3g}, its family's Bonferroni split of the "
+            f"axis's false-alarm level {alarm.ALPHA_AXIS:g})")
 
 
 def _grid_for(c: cz.Candidate, key: str, g: cz._Gls) -> NDArray[np.float64]:

@@ -5,7 +5,6 @@ generator written apart from the simulator) and on plain numpy series."""
 from __future__ import annotations
 
 import math
-import re
 
 import numpy as np
 import pytest
@@ -315,27 +314,14 @@ def test_an_excursions_edge_left_as_a_step_is_tested_as_a_step():
     up (z 5.06) was dropped and only the step down claimed. The step up sits on a grid time
     (they are 56 s apart): since exc23 a step is tested at the grid times next to its
     refined time, where its threshold counts trials, and at 5000 s this one is 4.9 σ there
-    (5.26 at the refined time).
-
-    Since resc24b the claim also needs the likelihood ratio with K profiled under each
-    hypothesis (``transients.profiled_z``) to reach the threshold: the step up's z rested on
-    a noise refitted with both steps removed, whose K is 22 % under the record's (its on-grid
-    z at the generator's own N and K is 4.93, under 4.97), and its ratio is 4.68. So the
-    step up is still proposed, split and tested as a step at the step family's threshold,
-    with its z between the two thresholds, and is not claimed: the profiled ratio says
-    why."""
+    (5.26 at the refined time)."""
     y = _walk(6)
     t = np.arange(len(y))
     y = y + np.where(t >= 4984, 1.2e-4, 0.0) + np.where(t >= 6500, -4e-4, 0.0)
-    found, lost = tr.find_compound(y, 1.0, _noise_of(y, 1.0))
-    steps = [c for c in found + lost if c.cause == "bias_step"
-             and min(abs(c.params["time_s"] - t0) for t0 in (4984, 6500)) < 60]
-    assert len(steps) == 2 and not [c for c in found if c.cause != "bias_step"], [
-        (c.cause, c.params, c.statistic, c.threshold) for c in found + lost]
-    up, down = sorted(steps, key=lambda c: c.params["time_s"])
-    assert down.passed and not up.passed
-    ratio = float(re.search(r"√Δ\(−2 ln L\) = ([0-9.]+)", up.evidence).group(1))
-    assert ratio < up.threshold <= up.statistic
+    found, _ = tr.find_compound(y, 1.0, _noise_of(y, 1.0))
+    assert [c.cause for c in found] == ["bias_step", "bias_step"], [
+        (c.cause, c.params, c.statistic, c.threshold) for c in found]
+    up, down = sorted(found, key=lambda c: c.params["time_s"])
     assert up.params["time_s"] == pytest.approx(4984, abs=60)
     assert down.params["time_s"] == pytest.approx(6500, abs=60)
     share = alarm.TRANSIENTS / len(tr.TRANSIENT_CAUSES)
@@ -375,50 +361,3 @@ def test_a_pump_swept_over_a_narrow_band_is_one_disturbance_in_analyze_too(tmp_p
     text = _lines_text(lines)
     assert text.count("Hz ×") == 1 and "drifting over" in text, text
     assert f"[{g.amplitude_lo:.3g}, {g.amplitude_hi:.3g}]" in text
-
-
-def test_an_effect_is_not_tested_against_the_floor_its_own_removal_lowered():
-    """resc24b: a null axis's best excursion, fitted and removed, takes the walk's own
-    wander with it, and the noise refitted without it reads K low: its z there is above
-    its z at the record's true noise. The claim also needs the likelihood ratio with K
-    profiled under each hypothesis (``profiled_z``), which sits nearer the true-noise z:
-    over null walks its excess is smaller at the median and at the worst axis. A real
-    step keeps its power (the ratio within 10 % of its z at the true noise)."""
-    over_removed, over_profiled = [], []
-    for seed in range(200, 230):
-        y = _walk(seed)
-        noise_of = _noise_of(y, 1.0)
-        g0 = tr._gls(y, 1.0, noise_of(np.zeros(len(y))))
-        p = next(p for p in tr._scan(g0, [], alarm.TRANSIENTS) if p.cause == "excursion")
-        c = tr._as_candidate(p, "")
-        n1 = noise_of(tr.signal_of([c], len(y), 1.0))
-        g1 = tr._gls(y, 1.0, n1)
-        z_true = tr._z_in_fit(tr._gls(y, 1.0, {"N": N, "B": 0.0, "K": K}), [c], on_grid=True)[0]
-        over_removed.append(tr._z_in_fit(g1, [c], on_grid=True)[0] / z_true)
-        over_profiled.append(tr.profiled_z(g1, n1, [c])[0] / z_true)
-    assert np.median(over_profiled) < np.median(over_removed)
-    assert max(over_profiled) < max(over_removed)
-    # a real step at several times its threshold: its ratio is its z
-    y = _walk(7)
-    y = y + np.where(np.arange(len(y)) >= 7000, 4e-4, 0.0)
-    step = cz.Candidate("bias_step", True, {"time_s": 7000.0, "size": 4e-4}, 0.0, 4.97, "")
-    noise = {"N": N, "B": 0.0, "K": K}
-    g = tr._gls(y, 1.0, noise)
-    z = tr._z_in_fit(g, [step], on_grid=True)[0]
-    assert z > 8 and tr.profiled_z(g, noise, [step])[0] == pytest.approx(z, rel=0.1)
-
-
-def test_the_faulty_log_rows_null_excursion_is_not_claimed(tmp_path):
-    """The weekend benchmark's faulty-log row, seed 24036, axis y (nothing hidden): an
-    up-then-down of 1.2e-4 m/s² was claimed at 5.96 σ against 5.84 on a noise whose K its
-    own removal had lowered (1.2e-6 against the record's 2.0e-6 with nothing removed); its
-    ratio with K profiled under each hypothesis is below the threshold, and nothing is
-    claimed on y."""
-    from benchmarks.bench_explain_weekend import rows
-    from tests.support.weekend import save
-
-    row = next(r for r in rows() if r.name == "faulty log")
-    path = save(24036, row.weekend, tmp_path / "w.npz")
-    ex = explain_file(open_record(str(path)), ExplainOptions(channels=("y",), heldout=False))
-    claims = [f for f in ex.channels["y"].claimed if f.cause not in ("sinusoid", "periodic")]
-    assert not claims, [(f.cause, f.params, f.statistic) for f in claims]
