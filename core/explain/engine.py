@@ -302,9 +302,14 @@ class ChannelExplanation:
         are model-dependent, and their intervals are withheld where held-out data reject."""
         # a warm-up or a step predicts nothing in other data: no held-out test of them
         hx: tuple[float | None, int] = (None, 0)
+        missing: str | None = None
         if held is not None and held.folds and held.note is None:
             hx = (held.chi2_ext, held.n_points)
-        self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx)
+        elif held is not None and held.causes and held.note is None:
+            # asked, a mechanism to predict, and no fold ran: the in-sample χ² is not the test
+            missing = held.reason or "no held-out fold could be fitted"
+        self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx,
+                             heldout_missing=missing)
         if self.verdict.explained:
             return
         for f in self.findings:

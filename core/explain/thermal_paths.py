@@ -1387,6 +1387,26 @@ def net_rate(beta: NDArray, theta: tuple[float, ...] | NDArray) -> float:
     return float(beta[1]) - float(beta[0]) * float(theta[0])
 
 
+def _settles_past_half(kind: str, theta: tuple[float, ...], n_blocks: int,
+                       rate_hz: float) -> str | None:
+    """Why the extension ``kind`` at ``theta`` cannot be held out on a slow view of
+    ``n_blocks`` at ``rate_hz`` (None when it can): explain's held-out measure leaves each
+    held-out half's first ``holdout.HELD_SETTLE_LAGS`` longest lags out (the lag filter's
+    unknown start state) and needs ``holdout.MIN_PART_POINTS`` blocks after them (resc24b)."""
+    from avard.core.explain.holdout import HELD_SETTLE_LAGS, MIN_PART_POINTS
+
+    lags = [abs(v) for v, name in zip(theta, _NAMES[kind][1], strict=False)
+            if name.endswith("_s")]
+    longest = max(lags, default=0.0)
+    left = n_blocks // 2 - math.ceil(HELD_SETTLE_LAGS * longest * rate_hz)
+    if left >= MIN_PART_POINTS:
+        return None
+    return (f"{PATH_NAMES[kind]} not chosen: its lag {longest:.4g} s leaves "
+            f"{max(left, 0)} blocks of each held-out half once its first "
+            f"{HELD_SETTLE_LAGS:g} lags (the unknown start state) are out, fewer than the "
+            f"{MIN_PART_POINTS} a held-out test needs")
+
+
 def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: NDArray,
                 edf_ref: NDArray, floor_s: float = 0.0,
                 keep: NDArray[np.bool_] | None = None,
@@ -1606,6 +1626,14 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     passing = []
     for kind, sc in scores.items():
         if kind == "one_lag":
+            continue
+        unheld = _settles_past_half(kind, sc.theta, len(y), rate_hz)
+        if unheld is not None:
+            # (resc24b) chosen by held-out likelihood only where explain's held-out measure
+            # can test it: a lag whose unknown start state fills a half leaves nothing to
+            # hold out, and its start-state column and slow relay traded with a null axis's
+            # wander (a hysteresis at 1837 s on 4 h, z 14 against 10.95, "fits" untested)
+            notes.append(unheld)
             continue
         need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
         rounding_k = smoothing[kind]

@@ -18,6 +18,15 @@ line says "NOT TESTED" and the axis is treated as unexplained (its parameters mo
 A held-out χ² beyond χ²(n) at 1 % but within ``HELDOUT_RATIO``·n is said to be so beside its
 p-value, so a p under 1 % is never printed beside "fits" without its reason.
 
+Where the held-out test was asked for an axis with a claimed mechanism that predicts other
+data (not only events) and could not run (its held-out fit failed: e.g. a lag whose start
+state leaves too little of each half), the in-sample χ² alone does not say the axis is
+described: the in-sample fit holds the mechanism's own parameters, chosen on that very
+record, and a wrong mechanism passes it (an adversary's null axis read as hysteresis at a
+lag of 1837 s on 4 h). The line then says "NOT HELD OUT" with the reason, the axis is not
+explained and the claimed causes' parameters are model-dependent (their intervals are
+printed, marked so: no held-out data rejected them either).
+
 When the axis is unexplained the claimed causes' parameters are *model-dependent* (the best
 values of a model the data reject), and where the held-out data reject it no interval is
 printed for them (a ±3 % interval of a rejected mechanism is a confident wrong answer);
@@ -76,6 +85,9 @@ class Verdict:
     #: False when the extended fit's χ² could not be tested (no dof, χ² not finite): then
     #: ``explained`` is False too (nothing said it fits)
     tested: bool = True
+    #: why the held-out test asked for this axis's claims could not run (then ``explained``
+    #: is False); None when it ran, was not asked, or does not apply (events only)
+    heldout_missing: str | None = None
 
     @property
     def heldout_rejects(self) -> bool:
@@ -96,6 +108,11 @@ class Verdict:
             held += ")"
         if self.explained:
             return f"the extended model fits: {ins}{held} (test at {ALPHA:.0%})"
+        if self.tested and self.heldout_missing is not None and self.p_value >= ALPHA:
+            return (f"NOT HELD OUT: the held-out test of the claimed mechanism could not run "
+                    f"({self.heldout_missing}); in sample {ins} (test at {ALPHA:.0%}), which "
+                    "the mechanism's own fitted parameters pass whether or not it is the "
+                    "right one; the claimed causes' parameters are model-dependent")
         if not self.tested:
             return (f"NOT TESTED: the extended fit's χ² cannot be tested ({ins}){held}; the "
                     "claimed causes' parameters are model-dependent")
@@ -108,22 +125,27 @@ class Verdict:
                 "chi2_dof": self.chi2_dof, "dof": self.dof,
                 "p_value": self.p_value, "heldout_chi2": self.heldout_chi2,
                 "heldout_n": self.heldout_n, "heldout_p": self.heldout_p,
+                "heldout_missing": self.heldout_missing,
                 "alpha": ALPHA, "misfit": self.misfit, "line": self.line()}
 
 
 def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
-          heldout_chi2: float | None = None, heldout_n: int = 0) -> Verdict:
+          heldout_chi2: float | None = None, heldout_n: int = 0,
+          heldout_missing: str | None = None) -> Verdict:
     """The verdict from the extended fit's χ²/dof and dof, its misfit ranges, and (when
-    measured) its held-out χ² on n τ."""
+    measured) its held-out χ² on n τ. ``heldout_missing``: why a held-out test asked for
+    this axis's claims could not run (the axis is then not explained, module doc)."""
     p = _chi2_sf(chi2_dof * dof, dof)
     hp = (None if heldout_chi2 is None or heldout_n <= 0 or not math.isfinite(heldout_chi2)
           else _chi2_sf(heldout_chi2, heldout_n))
     held_bad = (hp is not None and hp < ALPHA and heldout_chi2 is not None
                 and heldout_chi2 > HELDOUT_RATIO * heldout_n)
     tested = math.isfinite(p)
-    bad = not tested or p < ALPHA or held_bad
+    missing = heldout_missing if hp is None else None
+    bad = not tested or p < ALPHA or held_bad or missing is not None
     return Verdict(not bad, chi2_dof, dof, p, heldout_chi2 if hp is not None else None,
-                   heldout_n if hp is not None else 0, hp, misfit if bad else [], tested)
+                   heldout_n if hp is not None else 0, hp, misfit if bad else [], tested,
+                   missing)
 
 
 def _misfit_text(r: dict[str, Any]) -> str:

@@ -1567,3 +1567,43 @@ def test_two_paths_in_the_dt_terms_limit_beside_a_warm_up_name_the_term_where_al
     assert th and "rate" in (th[0].mechanism, *th[0].alternatives)
     if th[0].alternatives:
         assert not th[0].intervals
+
+
+@pytest.mark.parametrize("hours", [1.0, 4.0, 24.0])
+def test_an_extension_is_chosen_only_where_its_start_state_leaves_a_half_to_hold_out(hours):
+    """resc24b: an extension chosen by held-out likelihood must be one explain's held-out
+    measure can test: a lag whose unknown start state (``HELD_SETTLE_LAGS`` lags) fills a
+    held-out half is refused, for every record length, at the lag where what is left falls
+    below ``MIN_PART_POINTS``; a lag that leaves enough is not."""
+    from avard.core.explain.holdout import HELD_SETTLE_LAGS, MIN_PART_POINTS
+    from avard.core.explain.thermal_paths import _settles_past_half
+
+    rate = 1 / 1.6  # the slow view's blocks per second
+    n = int(hours * 3600 * rate)
+    edge = (n // 2 - MIN_PART_POINTS) / (HELD_SETTLE_LAGS * rate)  # longest lag held out
+    for kind, theta in (("hysteresis", (1.05 * edge, 0.05)), ("two_path", (0.0, 1.05 * edge)),
+                        ("rate", (-1.05 * edge,)), ("quadratic", (1.05 * edge,))):
+        why = _settles_past_half(kind, theta, n, rate)
+        assert why is not None and "not chosen" in why
+    assert _settles_past_half("hysteresis", (0.9 * edge, 5.0), n, rate) is None
+    assert _settles_past_half("two_path", (0.0, 0.9 * edge), n, rate) is None
+
+
+def test_a_null_axis_is_not_read_as_hysteresis_through_a_lag_its_halves_cannot_hold(tmp_path):
+    """The adversary's generator (tests/support/adversary_gen.py), dtdt 323 with the plate
+    logged: its z axis holds no coupling, and a hysteresis through 1837 s on 4 h passed at
+    z 14.1 against 10.95 while the held-out measure could not run, and the verdict said the
+    model fits. Nothing is claimed on it now, and the verdict has a held-out test."""
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
+
+    from tests.support.adversary_gen import make_record as adversary_record
+
+    path = tmp_path / "d.npz"
+    truth = adversary_record("dtdt", 323, path, logged=("plate",))
+    assert truth["axes"]["z"]["cause"] is None
+    ex = explain_file(open_record(str(path)), ExplainOptions(channels=("z",)))
+    ch = ex.channels["z"]
+    assert not [f for f in ch.claimed if f.cause not in ("sinusoid", "periodic")]
+    assert ch.verdict is not None and ch.verdict.heldout_missing is None

@@ -159,3 +159,45 @@ def test_a_compensation_below_the_fitted_taus_no_longer_adds_the_readings_roundi
 def test_outside_mechanisms_whose_fit_fails_are_said_unexplained(name, seed):
     """One failing record of each other outside row (seeds from the benchmark's run)."""
     _check_unexplained_honestly(_outside(name, seed))
+
+
+def test_a_held_out_test_that_could_not_run_is_not_called_a_fit():
+    """A claimed mechanism whose held-out fit failed (resc24b): the in-sample χ² passes (the
+    mechanism's own parameters were fitted there), so the line must not say "fits"; it says
+    the held-out test could not run and why, and the parameters are model-dependent."""
+    why = "held-out fit failed: the held-out part is too short"
+    v = judge(1.11, 13, [], heldout_missing=why)
+    assert not v.explained and v.tested and v.heldout_n == 0
+    line = v.line()
+    assert line.startswith("NOT HELD OUT") and why in line and "fits" not in line
+    assert "model-dependent" in line and v.to_dict()["heldout_missing"] == why
+    # a held-out χ² that ran is the test: the reason of a missing one does not stand
+    assert judge(1.11, 13, [], heldout_chi2=20.0, heldout_n=20, heldout_missing=why).explained
+    # an in-sample failure is still said as such
+    assert judge(4.0, 13, [], heldout_missing=why).line().startswith("UNEXPLAINED")
+
+
+def test_the_channel_verdict_marks_claims_whose_held_out_fit_failed_model_dependent():
+    """``ChannelExplanation.judge`` with a held-out axis that has a claimed mechanism and no
+    fold (its fit failed): not explained, the claim model-dependent, its intervals kept (no
+    held-out data rejected them) and said to be so."""
+    from types import SimpleNamespace
+
+    from avard.core.explain.causes import Finding
+    from avard.core.explain.engine import ChannelExplanation
+    from avard.core.explain.holdout import ChannelHoldout
+
+    f = Finding("temperature", True, {"coefficient": 1e-3}, {"coefficient": [9e-4, 1.1e-3]},
+                14.0, 11.0, "")
+    ch = SimpleNamespace(extended=SimpleNamespace(chi2_dof=1.1, dof=13), ext_misfit=[],
+                         findings=[f], verdict=None)
+    held = ChannelHoldout("z", ["temperature"], reason="held-out fit failed: too short")
+    ChannelExplanation.judge(ch, held)  # type: ignore[arg-type]
+    assert not ch.verdict.explained and "too short" in ch.verdict.line()
+    assert f.model_dependent and f.intervals == {"coefficient": [9e-4, 1.1e-3]}
+    # events only (a warm-up): no held-out test applies, the in-sample verdict stands
+    ev = Finding("warmup", True, {"size": 1e-4}, {}, 9.0, 4.6, "")
+    ch2 = SimpleNamespace(extended=SimpleNamespace(chi2_dof=1.1, dof=13), ext_misfit=[],
+                          findings=[ev], verdict=None)
+    ChannelExplanation.judge(ch2, ChannelHoldout("z", ["warmup"]))  # type: ignore[arg-type]
+    assert ch2.verdict.explained and not ev.model_dependent
