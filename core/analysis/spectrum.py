@@ -211,9 +211,12 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: float, *, p_false: float = 0.01,
     Test: each bin is χ²(ν)/ν × background with ν ≈ 1.8·segments (Hann, 50 % overlap; Welch
     1967), the background an estimate with ≈ (2/π)·ν per bin it is the median of, so the
     ratio is F(ν, ν_bg)-distributed; the threshold keeps the chance of one false line per
-    spectrum at ``p_false`` (Bonferroni over the bins). Amplitude: A = √(2P), P = Σ (PSD −
-    background)·Δf over the main lobe (±2 bins). Returns up to ``max_lines`` lines
-    {"frequency_hz", "amplitude"} (m/s² for acceleration), strongest first.
+    spectrum at ``p_false`` (Bonferroni over the bins). Beside it a broad search
+    (``_broad_lines``, ``BROAD_REBIN``) finds a disturbance swept over more bins than the
+    window, at ``BROAD_P_SHARE`` of ``p_false`` per rebinning (so 1.2·``p_false`` in all).
+    Amplitude: A = √(2P), P = Σ (PSD − background)·Δf over the main lobe (±2 bins).
+    Returns up to ``max_lines`` lines {"frequency_hz", "amplitude"} (m/s² for
+    acceleration), strongest first.
     """
     lines = _find_at(f, psd, n_seg, p_false, half_width)
     lines += _broad_lines(f, psd, n_seg, p_false, half_width, lines)
@@ -329,6 +332,8 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
     the background on the fine spectrum (the coarse lines' lobes would count the band's
     power in pieces, each a little high)."""
     out: list[dict[str, float]] = []
+    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
+        return out
     taken: list[tuple[float, float]] = []
     for ln in fine:
         lo_hz, hi_hz = ln.get("band_lo_hz", math.nan), ln.get("band_hi_hz", math.nan)

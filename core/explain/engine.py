@@ -60,6 +60,9 @@ from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import (
+    EVENTS as HELD_EVENTS,
+)
+from avard.core.explain.holdout import (
     ChannelHoldout,
     Holdout,
     check_compatible,
@@ -296,10 +299,12 @@ class ChannelExplanation:
         a = self.base.allan
         return compensation_worse_at(np.asarray(a.tau, dtype=float), a.hi, comp_var)
 
-    def judge(self, held: ChannelHoldout | None) -> None:
+    def judge(self, held: ChannelHoldout | None, record_reason: str | None = None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
-        ``holdout.ChannelHoldout`` or None); when it fails, the claimed causes' parameters
-        are model-dependent, and their intervals are withheld where held-out data reject."""
+        ``holdout.ChannelHoldout`` or None; ``record_reason``: why the held-out test asked
+        for could not run on the record at all); when it fails, the claimed causes'
+        parameters are model-dependent, and their intervals are withheld where held-out
+        data reject."""
         # a warm-up or a step predicts nothing in other data: no held-out test of them
         hx: tuple[float | None, int] = (None, 0)
         missing: str | None = None
@@ -308,6 +313,11 @@ class ChannelExplanation:
         elif held is not None and held.causes and held.note is None:
             # asked, a mechanism to predict, and no fold ran: the in-sample χ² is not the test
             missing = held.reason or "no held-out fold could be fitted"
+        elif held is None and record_reason is not None and any(
+                f.claimed and f.cause not in (*HELD_EVENTS, "sinusoid", "periodic")
+                for f in self.findings):
+            # asked, and the record itself could not be split (too short): the same
+            missing = record_reason
         self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx,
                              heldout_missing=missing)
         if self.verdict.explained:
@@ -544,7 +554,7 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held)
     for name, ch_ex in out.items():
-        ch_ex.judge(ho.channels.get(name))
+        ch_ex.judge(ho.channels.get(name), ho.reason)
     return Explanation(an, out, t_allan, b / rate, ho, screen=screen)
 
 
@@ -732,10 +742,14 @@ def _rate_beside(beside: ThermalFit, alone: ThermalFit | None) -> ThermalFit | N
     if pf is None:
         return None
     s = pf.chosen
+    # where one lag failed its test, the axis's z is the chosen extension's extra term's
+    # (``thermal_fit.with_paths``): it becomes the dT/dt term's, not the two paths' it was
+    was = beside.path.chosen
+    test = {"z": s.z_extra} if math.isclose(beside.z, was.z_extra) else {}
     return replace(beside, path=pf, coefficient=float(s.beta[0]),
                    coef_se=float(s.beta_se[0]), lag_s=float(s.theta[0]),
                    lag_lo=float(s.theta_lo[0]), lag_hi=float(s.theta_hi[0]),
-                   lag_open=s.open_end)
+                   lag_open=s.open_end, **test)
 
 
 def _gain_beside(th: ThermalFit | None, kind: str) -> bool:

@@ -347,7 +347,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
     extra = [{"cause": "sinusoid", "params": {k: ln[k] for k in (
         "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
-             for ln in line_components(c.lines) if 0 < ln["frequency_hz"] < nyq]
+             for ln in line_components(c.lines)
+             if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
     base = fit_noise(avar(fit.y, rate_b), extra=extra)
     if c.names:
         d_fit, d_held, skip = _signals(fit, held, c, rate_b, refit, u_fit, u_held)

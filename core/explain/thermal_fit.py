@@ -1467,14 +1467,15 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
     is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
     interior = not all(is_open.values())
     hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
-    cost = {j: hp[j].heldout + (OPEN_END_MARGIN if is_open[j] and interior else 0.0)
-            for j in best}
+    # a channel whose held-out fit gave no number (NaN) can neither win nor tie
+    cost = {j: (hp[j].heldout if math.isfinite(hp[j].heldout) else math.inf)
+            + (OPEN_END_MARGIN if is_open[j] and interior else 0.0) for j in best}
     dist = {j: path_distance(lags0[j]) for j in best}
     j0 = min(cost, key=lambda j: (cost[j], dist[j]))
     spread = {j: hp[j].versus(hp[j0])[1] for j in best}
     need = {j: max(CHANNEL_MARGIN, CHANNEL_T * spread[j])
             + max(0.0, hp[j].rounding - hp[j0].rounding) for j in best}
-    tied = [j for j in best if cost[j] <= cost[j0] + need[j]]
+    tied = [j0, *(j for j in best if j != j0 and cost[j] <= cost[j0] + need[j])]
     jb = min(tied, key=lambda j: (is_open[j], dist[j], cost[j]))
     compared = {names[j]: {"heldout": hp[j].heldout, "heldout_lag_s": lags0[j],
                            "heldout_coefficient": hp[j].coefficient,

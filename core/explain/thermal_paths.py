@@ -1624,11 +1624,13 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     ref = scores["one_lag"]
     notes = []
     passing = []
+    refused = []
     for kind, sc in scores.items():
         if kind == "one_lag":
             continue
         unheld = _settles_past_half(kind, sc.theta, len(y), rate_hz)
         if unheld is not None:
+            refused.append(kind)
             # (resc24b) chosen by held-out likelihood only where explain's held-out measure
             # can test it: a lag whose unknown start state fills a half leaves nothing to
             # hold out, and its start-state column and slow relay traded with a null axis's
@@ -1651,6 +1653,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          f"by less than the readings' rounding through the coupling makes "
                          f"up of the held-out deviance ({rounding_k:.3g}): a path that "
                          "smooths the 0.0625 K steps gains that much without physics")
+    # a refused extension is no candidate for any later reading either (``rate_reading``,
+    # the alternatives and ``as_well`` read ``scores``)
+    for kind in refused:
+        del scores[kind]
     best = ref
     alternatives: tuple[str, ...] = ()
     as_well: tuple[str, ...] = ()
@@ -1964,6 +1970,9 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
     if len(T) < 16:
         return np.zeros(len(tau))
     tc = rounding_correlation_s(T, rate_hz)
+    if not (math.isfinite(tc) and tc > 0):
+        # a channel that never crosses a step (constant, or stuck): no sawtooth to see
+        return np.zeros(len(tau))
     q2 = DS18B20_STEP_K**2 / 12.0
     h0 = 2.0 * q2 * tc
     # f up to the correlation time's 1/(2 t_c), where the white model ends

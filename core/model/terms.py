@@ -99,7 +99,7 @@ def sinusoid_avar(tau: ArrayLike, amplitude: float, frequency_hz: float,
 
     With ``rate_hz``, of the sinusoid sampled at that rate and averaged over m = τ·rate
     samples: the mean's gain is sin(πf0τ)/(m·sin(πf0/rate)), so πf0τ in the denominator
-    becomes m·sin(πf0/rate). The two differ where f0 is not small beside the rate (a 3 Hz
+    becomes m·sin(πf0/rate). The two differ where f0 is not small beside the rate (a 3.1 Hz
     line sampled at 10 Hz: the continuous form is 28 % low at every τ).
     """
     t = _tau(tau)

@@ -144,3 +144,18 @@ def test_the_room_through_its_own_lag_stays_the_ambient(tmp_path):
     assert th.lag_s == pytest.approx(300.0, rel=0.2)
     assert th.coefficient == pytest.approx(2e-3, rel=0.2)
     assert not th.channel_note or "'plate'" in th.channel_note
+
+
+def test_a_channel_that_never_moves_is_compared_without_a_traceback():
+    """Two channels, one of them constant (a sensor stuck from the start): its readings have
+    no rounding sawtooth to model, and the choice keeps the channel that moves."""
+    from avard.core.explain.thermal_fit import fit_thermal_axes
+
+    rng = np.random.default_rng(4)
+    rate, n = 1.0, 4 * 3600
+    t = np.arange(n) / rate
+    room = 21.0 + 0.6 * np.sin(2 * math.pi * t / 1800.0)
+    y = 3e-3 * (room - 21.0) + 2e-4 * rng.standard_normal(n)
+    temps = np.column_stack([np.round(room / 0.0625) * 0.0625, np.full(n, 21.0)])
+    (th,) = fit_thermal_axes(y[:, None], temps, ["plate", "stuck"], rate)
+    assert th is not None and th.channel == "plate" and th.passed

@@ -121,3 +121,10 @@ def test_analyze_models_a_swept_pump_instead_of_making_noise_terms_of_it(
     assert ch["fit"]["chi2_dof"] < 3.0
     q = ch["terms"]["quantization"]
     assert not q["present"] or q["value"] < 1e-5
+
+
+def test_a_spectrum_too_short_to_search_holds_no_line() -> None:
+    """The broad search asks what the fine one does of its input: a spectrum of a few bins
+    (or one segment) is no line, not an IndexError."""
+    assert find_lines(np.array([0.0]), np.array([1.0]), 5) == []
+    assert find_lines(np.linspace(0.0, 5.0, 300), np.ones(300), 1) == []
