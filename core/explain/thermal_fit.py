@@ -1336,8 +1336,13 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     ref = fit.allan
     edf = np.asarray(ref.edf, dtype=float)
     edf = edf[:, 0] if edf.ndim == 2 else edf
+    # an extension that explain's held-out measure cannot test is refused only where it would
+    # be the claim's whole basis (the one lag failed its own test): on a null axis a slow
+    # relay at 1837 s on 4 h passed its extra term's z untested; where the one lag is
+    # claimed, a second path through a long lag is the better reading and the verdict says
+    # whether the held-out test could run
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep, columns, warmups)
+                     floors.get(j, 0.0), keep, columns, warmups, held_only=not fit.passed)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen

@@ -1411,7 +1411,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 edf_ref: NDArray, floor_s: float = 0.0,
                 keep: NDArray[np.bool_] | None = None,
                 columns: dict[Column, NDArray[np.float64]] | None = None,
-                warmups: tuple[float, ...] = ()) -> PathFit:
+                warmups: tuple[float, ...] = (), held_only: bool = True) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
@@ -1423,7 +1423,10 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     candidate's couplings, refitted on the held-out half), so every candidate is compared
     with the warm-up removed jointly, none with a warm-up removed before it that took part
     of its own start (a quadratic's: the temperature farthest from its mean in the first
-    minutes) or gave it its own."""
+    minutes) or gave it its own. ``held_only``: an extension whose longest lag leaves
+    explain's held-out measure too little of each half (``_settles_past_half``) is refused,
+    and named beside the chosen path where it predicts as well (``thermal_fit.with_paths``
+    asks it only where the one lag failed its own test)."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -1628,7 +1631,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     for kind, sc in scores.items():
         if kind == "one_lag":
             continue
-        unheld = _settles_past_half(kind, sc.theta, len(y), rate_hz)
+        unheld = _settles_past_half(kind, sc.theta, len(y), rate_hz) if held_only else None
         if unheld is not None:
             refused.append(kind)
             # (resc24b) chosen by held-out likelihood only where explain's held-out measure
@@ -1655,8 +1658,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          "smooths the 0.0625 K steps gains that much without physics")
     # a refused extension is no candidate for any later reading either (``rate_reading``,
     # the alternatives and ``as_well`` read ``scores``)
-    for kind in refused:
-        del scores[kind]
+    refused_sc = {kind: scores.pop(kind) for kind in refused}
     best = ref
     alternatives: tuple[str, ...] = ()
     as_well: tuple[str, ...] = ()
@@ -1728,6 +1730,27 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if k not in (best.kind, "one_lag", *alternatives, *as_well) and sc.open_end
         and sc.z_extra >= z_thr and sc.heldout <= best.heldout + HELDOUT_MARGIN
         and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - smoothing[k])
+    # a refused extension that passes every other test and predicts at least as well as the
+    # chosen path is named beside it: the record supports it, only explain's held-out test
+    # could not check it (a second path through a lag of half the record's length beside a
+    # dT/dt term chosen instead: the reading, not the physics, decides); where it predicts
+    # better by the margin it is an alternative (no interval), else a reading as well
+    for k, sc in refused_sc.items():
+        if not (sc.z_extra >= z_thr and not sc.open_end
+                and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - smoothing[k]
+                and sc.heldout <= best.heldout + HELDOUT_MARGIN) or best.kind == "one_lag":
+            continue
+        if sc.heldout < best.heldout - HELDOUT_MARGIN:
+            alternatives = (*alternatives, k)
+            how = "predicts better"
+        else:
+            as_well = (*as_well, k)
+            how = "predicts as well"
+        notes.append(f"{PATH_NAMES[k]} {how} (held out Δ {sc.heldout - best.heldout:+.3g} "
+                     f"against the chosen {PATH_NAMES[best.kind]}) but its lag leaves "
+                     "explain's held-out test nothing to check it on: named, not chosen"
+                     + ("; parameters model-dependent, no interval"
+                        if how == "predicts better" else ""))
     if not best.resolved and best.open_end:
         notes.append("parameters not resolved (model-dependent, no interval): θ at the end "
                      "of its search grid, so the coefficients trade with a θ the search did "

@@ -1607,3 +1607,19 @@ def test_a_null_axis_is_not_read_as_hysteresis_through_a_lag_its_halves_cannot_h
     ch = ex.channels["z"]
     assert not [f for f in ch.claimed if f.cause not in ("sinusoid", "periodic")]
     assert ch.verdict is not None and ch.verdict.heldout_missing is None
+
+
+def test_two_paths_the_held_out_test_cannot_check_are_named_beside_the_reading_chosen():
+    """A two-path record (the benchmark's row, seed 23014) whose second lag fits at 2102 s
+    on 4 h: explain's held-out test cannot check it (its start state fills each half), so
+    it is not chosen where the one lag fails its own test; the dT/dt term is, and the two
+    paths, which predict better, are named beside it with no interval rather than dropped
+    (dropped, the record read as a confident dT/dt term)."""
+    from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
+
+    r = next(x for x in rows_paths() if x.name == "path: two paths")
+    ex, _ = explain_weekend(r.weekend, 23014)
+    (th,) = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    assert "two_path" in (th.mechanism, *th.alternatives)
+    if th.mechanism != "two_path":
+        assert not th.intervals
