@@ -1373,8 +1373,14 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     jb = max(zmax, key=rank)
     compared: dict[str, dict[str, float]] = {}
     note = ""
-    if len(best) > 1:
-        jb, compared, note = _choose_channel(y, temps, names, rate_hz, best, holes, floors)
+    # a channel whose readings never stand above their own rounding at any τ (rounding
+    # floor infinite: a plate that barely moves) has no τ to regress on: it cannot drive
+    usable = {j: sc for j, sc in best.items()
+              if math.isfinite((floors or {}).get(j, 0.0))}
+    if len(usable) > 1:
+        jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors)
+    elif len(usable) == 1:
+        jb = next(iter(usable))
     scan = best[jb]
     k = int(np.argmax([s.z for s in scan]))
     # the lag its interval is about (the estimator the leave-one-out lags are), not the grid

@@ -159,3 +159,19 @@ def test_a_channel_that_never_moves_is_compared_without_a_traceback():
     temps = np.column_stack([np.round(room / 0.0625) * 0.0625, np.full(n, 21.0)])
     (th,) = fit_thermal_axes(y[:, None], temps, ["plate", "stuck"], rate)
     assert th is not None and th.channel == "plate" and th.passed
+
+
+def test_a_channel_below_its_own_rounding_at_every_tau_cannot_drive(tmp_path):
+    """The adversary's compound record 305 (4 h): its plate log barely moves, so the
+    readings never stand above their rounding (the rounding floor is infinite) and both
+    channels' held-out scores are 0. The tie went to the plate by its path distance and the
+    coupling test then had no τ to start from (an OverflowError, a traceback); a channel
+    with no τ to regress on is no candidate."""
+    from tests.support.adversary_gen import make_record as adversary
+
+    rec = tmp_path / "c305.npz"
+    adversary("compound", 305, rec, 4.0)
+    ex = explain_file(open_record(str(rec)), ExplainOptions(heldout=False))
+    assert "warmup" in {f.cause for f in ex.channels["x"].claimed}
+    for ch in ex.channels.values():
+        assert ch.thermal is None or ch.thermal.channel == "ambient"
