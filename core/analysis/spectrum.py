@@ -218,6 +218,8 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: float, *, p_false: float = 0.01,
     Returns up to ``max_lines`` lines {"frequency_hz", "amplitude"} (m/s² for
     acceleration), strongest first.
     """
+    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
+        return []
     lines = _find_at(f, psd, n_seg, p_false, half_width)
     lines += _broad_lines(f, psd, n_seg, p_false, half_width, lines)
     lines.sort(key=lambda d: -d["amplitude"])
@@ -228,11 +230,10 @@ def find_lines(f: NDArray, psd: NDArray, n_seg: float, *, p_false: float = 0.01,
 
 def _find_at(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_width: int
              ) -> list[dict[str, float]]:
-    """``find_lines``' search at the spectrum's own resolution: the lines with their group
-    marks (``_group``) and the bin each was found at."""
+    """``find_lines``' search at the spectrum's own resolution (which checks the spectrum
+    is long enough, averaged and finite): the lines with their group marks (``_group``) and
+    the bin each was found at."""
     lobe, min_side = LINE_LOBE, 4
-    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
-        return []
     from avard.core.allan.chi2 import chi2_ppf
 
     nu = max(2.0, 1.8 * n_seg)
@@ -282,24 +283,22 @@ def _find_at(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_width:
     return lines
 
 
-def _side_background(psd: NDArray, k1: int, k2: int, nu: float) -> float:
+def _side_background(psd: NDArray, k1: int, k2: int, med_ratio: float) -> float:
     """The mean background level under a band [k1, k2) of bins: the median of as many bins
     again (at least ``WIDE_HALF_WIDTH``) either side of it, DC and Nyquist left out, over
     the median/mean ratio of a bin's χ²(ν)/ν. A window centred on the band would hold the
     band itself, whose raised bins lift its median (a band of a third of the window read
     the amplitude a few % low)."""
-    from avard.core.allan.chi2 import chi2_ppf
-
     w = max(k2 - k1, WIDE_HALF_WIDTH)
     side = np.r_[psd[max(1, k1 - w):max(1, k1)], psd[min(len(psd) - 1, k2):
                                                      min(len(psd) - 1, k2 + w)]]
     if len(side) == 0:
         return math.nan
-    return float(np.median(side)) / (float(chi2_ppf(0.5, nu)) / nu)
+    return float(np.median(side)) / med_ratio
 
 
-def _band_edges(f: NDArray, psd: NDArray, lo_hz: float, hi_hz: float, m: int, nu: float
-                ) -> tuple[float, float, float]:
+def _band_edges(f: NDArray, psd: NDArray, lo_hz: float, hi_hz: float, m: int,
+                med_ratio: float) -> tuple[float, float, float]:
     """A broad disturbance's band on the fine spectrum and the background beside it
     (``_side_background``): where the PSD's running mean over ``m`` bins crosses half way
     from the background to the band's mean level. The coarse bins place the edges only to
@@ -308,7 +307,7 @@ def _band_edges(f: NDArray, psd: NDArray, lo_hz: float, hi_hz: float, m: int, nu
     df = float(f[1] - f[0])
     k_lo = max(1, int(np.searchsorted(f, lo_hz)) - m)
     k_hi = min(len(f) - 1, int(np.searchsorted(f, hi_hz)) + m)
-    bg = _side_background(psd, k_lo, k_hi, nu)
+    bg = _side_background(psd, k_lo, k_hi, med_ratio)
     inner = psd[int(np.searchsorted(f, lo_hz)):int(np.searchsorted(f, hi_hz)) + 1]
     level = float(np.mean(inner)) if len(inner) else bg
     if k_hi - k_lo < 2 * m or not level > bg:
@@ -332,16 +331,17 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
     the background on the fine spectrum (the coarse lines' lobes would count the band's
     power in pieces, each a little high)."""
     out: list[dict[str, float]] = []
-    if n_seg < 2 or len(f) < 4 * half_width or not np.all(np.isfinite(psd)):
-        return out
     taken: list[tuple[float, float]] = []
     for ln in fine:
         lo_hz, hi_hz = ln.get("band_lo_hz", math.nan), ln.get("band_hi_hz", math.nan)
         if not (math.isfinite(lo_hz) and math.isfinite(hi_hz)):
             lo_hz = hi_hz = ln["frequency_hz"]
         taken.append((lo_hz, hi_hz))
+    from avard.core.allan.chi2 import chi2_ppf
+
     df = float(f[1] - f[0])
     nu = max(2.0, 1.8 * n_seg)
+    med_ratio = float(chi2_ppf(0.5, nu)) / nu
     group_id = 1000.0
     for m in BROAD_REBIN:
         n_c = (len(f) - 2) // m
@@ -363,7 +363,7 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
                         else ln["frequency_hz"] + LINE_LOBE * df_c for ln in members)
             if any(a <= hi_hz + df_c and b >= lo_hz - df_c for a, b in taken):
                 continue
-            lo_hz, hi_hz, bg = _band_edges(f, psd, lo_hz, hi_hz, m, nu)
+            lo_hz, hi_hz, bg = _band_edges(f, psd, lo_hz, hi_hz, m, med_ratio)
             taken.append((lo_hz, hi_hz))
             k1 = max(1, int(np.searchsorted(f, lo_hz)) - LINE_LOBE)
             k2 = min(len(f) - 1, int(np.searchsorted(f, hi_hz)) + LINE_LOBE + 1)
@@ -548,7 +548,7 @@ def _group(lines: list[dict[str, float]], f: NDArray, psd: NDArray, nu: float,
             continue
         k1 = min(int(lines[c[0]]["bin"]) - LINE_LOBE, span[0] if span else len(psd))
         k2 = max(int(lines[c[-1]]["bin"]) + LINE_LOBE, span[1] if span else 0) + 1
-        b = _side_background(psd, k1, k2, nu)
+        b = _side_background(psd, k1, k2, med_ratio)
         if not math.isfinite(b):
             b = wide((k1 + k2) // 2)
         excess = np.clip(psd[k1:k2] - b, 0.0, None)

@@ -1625,6 +1625,15 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             tuple(float(x) for x in b_hi), resolved, delta, net, drive,
             () if fitted is None else tuple(float(x) for x in fitted))
     ref = scores["one_lag"]
+
+    def beats(sc: PathScore) -> bool:
+        # what an extension needs to be chosen: held out better than one lag and than no
+        # coupling by the margin (more where its θ is open) and by what the readings'
+        # rounding through it makes up, and its extra term's z at the threshold
+        need = HELDOUT_MARGIN + (OPEN_MARGIN if sc.open_end else 0.0)
+        return (sc.heldout < min(ref.heldout, none_h) - need - smoothing[sc.kind]
+                and sc.z_extra >= z_thr)
+
     notes = []
     passing = []
     refused = []
@@ -1645,8 +1654,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         if sc.open_end and sc.heldout < ref.heldout - HELDOUT_MARGIN - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but its "
                          "θ sits at the end of its search grid (open): a bound, not chosen")
-        if sc.heldout < min(ref.heldout, none_h) - need - rounding_k and (
-                sc.z_extra >= z_thr):
+        if beats(sc):
             passing.append(sc)
         elif sc.heldout < ref.heldout - need - rounding_k:
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
@@ -1736,9 +1744,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     # dT/dt term chosen instead: the reading, not the physics, decides); where it predicts
     # better by the margin it is an alternative (no interval), else a reading as well
     for k, sc in refused_sc.items():
-        if not (sc.z_extra >= z_thr and not sc.open_end
-                and sc.heldout < min(ref.heldout, none_h) - HELDOUT_MARGIN - smoothing[k]
-                and sc.heldout <= best.heldout + HELDOUT_MARGIN) or best.kind == "one_lag":
+        if (best.kind == "one_lag" or sc.open_end or not beats(sc)
+                or sc.heldout > best.heldout + HELDOUT_MARGIN):
             continue
         if sc.heldout < best.heldout - HELDOUT_MARGIN:
             alternatives = (*alternatives, k)

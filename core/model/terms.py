@@ -103,10 +103,15 @@ def sinusoid_avar(tau: ArrayLike, amplitude: float, frequency_hz: float,
     line sampled at 10 Hz: the continuous form is 28 % low at every τ).
     """
     t = _tau(tau)
-    x = math.pi * float(frequency_hz) * t
-    den = x if rate_hz is None else t * float(rate_hz) * math.sin(
-        math.pi * float(frequency_hz) / float(rate_hz))
-    return float(amplitude) ** 2 * (np.sin(x) ** 2 / den) ** 2
+    return float(amplitude) ** 2 * _unit_sine_avar(t, np.float64(frequency_hz), rate_hz)
+
+
+def _unit_sine_avar(t: NDArray, f: NDArray | np.float64, rate_hz: float | None
+                    ) -> NDArray[np.float64]:
+    """``sinusoid_avar`` of unit amplitude, broadcast over τ ``t`` and frequencies ``f``."""
+    x = math.pi * f * t
+    den = x if rate_hz is None else t * float(rate_hz) * np.sin(math.pi * f / float(rate_hz))
+    return np.asarray((np.sin(x) ** 2 / den) ** 2, dtype=np.float64)
 
 
 #: Frequencies a swept line's band is averaged over (the mean of sin⁴(πfτ)/(πfτ)² over the
@@ -124,10 +129,8 @@ def swept_sinusoid_avar(tau: ArrayLike, amplitude: float, lo_hz: float, hi_hz: f
     in: the mean tends to (3/8)·A²/(πτ)² times the band's mean of 1/f²."""
     t = _tau(tau)
     f = np.linspace(float(lo_hz), float(hi_hz), SWEEP_POINTS)
-    x = math.pi * f[None, :] * t[:, None]
-    den = x if rate_hz is None else t[:, None] * float(rate_hz) * np.sin(
-        math.pi * f[None, :] / float(rate_hz))
-    return float(amplitude) ** 2 * np.mean((np.sin(x) ** 2 / den) ** 2, axis=1)
+    return float(amplitude) ** 2 * np.mean(_unit_sine_avar(t[:, None], f[None, :], rate_hz),
+                                           axis=1)
 
 
 def gauss_markov_avar(tau: ArrayLike, sigma: float, T: float) -> NDArray[np.float64]:
