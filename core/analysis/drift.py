@@ -599,11 +599,11 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     # left it in, and K beside a resolved ramp scattered far beyond its interval.
     d = mean_difference(np.asarray(means, dtype=float).reshape(-1), block_s, tau)
     known = np.isfinite(d)
-    removed = np.where(known, lik.slope * tau * np.where(known, d, 0.0) - lik.slope**2 * g,
-                       r * r * g)
+    d0 = np.where(known, d, 0.0)
+    removed = np.where(known, lik.slope * tau * d0 - lik.slope**2 * g, r * r * g)
     # what is left uncertain: (R − R̂)·τ·D_noise and (R − R̂)²τ²/2, both of the slope's
     # error, not of the ramp's size (R̂²'s own variance where D is not known)
-    dn = np.where(known, tau * (np.where(known, d, 0.0) - lik.slope * tau), 0.0)
+    dn = np.where(known, tau * (d0 - lik.slope * tau), 0.0)
     added = se**2 * np.outer(dn, dn) + 2.0 * se**4 * np.outer(g, g)
     added[np.ix_(~known, ~known)] = var_r2 * np.outer(g[~known], g[~known])
     less = replace(allan, var=np.asarray(allan.var, dtype=float) - removed)

@@ -60,9 +60,7 @@ from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
 from avard.core.explain.holdout import (
-    EVENTS as HELD_EVENTS,
-)
-from avard.core.explain.holdout import (
+    EVENTS,
     ChannelHoldout,
     Holdout,
     check_compatible,
@@ -314,7 +312,7 @@ class ChannelExplanation:
             # asked, a mechanism to predict, and no fold ran: the in-sample χ² is not the test
             missing = held.reason or "no held-out fold could be fitted"
         elif held is None and record_reason is not None and any(
-                f.claimed and f.cause not in (*HELD_EVENTS, "sinusoid", "periodic")
+                f.claimed and f.cause not in (*EVENTS, "sinusoid", "periodic")
                 for f in self.findings):
             # asked, and the record itself could not be split (too short): the same
             missing = record_reason

@@ -600,14 +600,14 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     cut: NDArray[np.bool_] = np.asarray(keep[:m].reshape(-1, f).all(axis=1), dtype=bool)
     blocks = [ys]
     idx: dict[int, list[int]] = {}
+    Ts = {j: np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1) for j in lags0}
     for j, L0 in lags0.items():
         # (the coupling's column first, then its start state: ``trials``' order)
         cols = list(tp.trials("one_lag", [round(L0, 3)])[0].cols)
-        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
         done = None if columns is None else columns.setdefault(j, {})
         first = 1 + sum(b.shape[1] for b in blocks[1:])
         idx[j] = list(range(first, first + len(cols)))
-        blocks.append(tp.path_columns(T, cols, rate, done))
+        blocks.append(tp.path_columns(Ts[j], cols, rate, done))
     X = np.column_stack(blocks)
     # each part the differences whose middle it holds, none across the middle: the first
     # and last five parts add up to each half's own sums (as ``choose_path``)
@@ -634,8 +634,7 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     vw = tp._view(whole, edf, whole.n, ok_tau, s_ref)
     out: dict[int, ChannelPath] = {}
     for j, L0 in lags0.items():
-        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
-        r_ref = tp.sawtooth_avar(T, rate, ms / rate, L0)
+        r_ref = tp.sawtooth_avar(Ts[j], rate, ms / rate, L0)
         vh = [tp._view(h, edf, whole.n, ok_tau, s_ref, r_ref) for h in half]
         held, per_part = 0.0, []
         for a, b in ((0, 1), (1, 0)):

@@ -544,9 +544,10 @@ def _size_zs(g: cz._Gls, cands: list[cz.Candidate]) -> list[float]:
     warm-ups keep the scaled half-width: their columns can trade with each other (two
     opposite ones a grid step apart in T), which the ratio at one's zero, the other's T
     held, does not see."""
-    refined = _z_in_fit(g, cands)
-    lone = sum(c.cause == "warmup" for c in cands) == 1
-    return [z if (c.cause == "warmup" and lone) else cz.size_z(c)
+    if sum(c.cause == "warmup" for c in cands) != 1:
+        return [cz.size_z(c) for c in cands]
+    refined = _z_in_fit(g, cands)   # (each effect's profile: only where a lone warm-up asks)
+    return [z if c.cause == "warmup" else cz.size_z(c)
             for z, c in zip(refined, cands, strict=True)]
 
 
