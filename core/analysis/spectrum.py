@@ -342,7 +342,7 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
     df = float(f[1] - f[0])
     nu = max(2.0, 1.8 * n_seg)
     med_ratio = float(chi2_ppf(0.5, nu)) / nu
-    group_id = 1000.0
+    group_base = 1000.0   # each rebinning's groups apart from the fine search's and each other
     for m in BROAD_REBIN:
         n_c = (len(f) - 2) // m
         if n_c < 4 * half_width:
@@ -353,9 +353,12 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
         found = _find_at(f_c, psd_c, n_seg * m / hann_neighbour_factor(m), p_false * BROAD_P_SHARE,
                          half_width)
         df_c = float(f_c[1] - f_c[0])
-        by: dict[float, list[dict[str, float]]] = {}
+        # one broad line per cluster of the coarse search (a band, or a line), keeping the
+        # coarse grouping's marks: a swept fundamental and its swept harmonic are two bands
+        # of one disturbance, not one band over both
+        by: dict[tuple[float, float], list[dict[str, float]]] = {}
         for ln in found:
-            by.setdefault(ln["group"], []).append(ln)
+            by.setdefault((ln["group"], ln["group_frequency_hz"]), []).append(ln)
         for members in by.values():
             lo_hz = min(ln["band_lo_hz"] if math.isfinite(ln["band_lo_hz"])
                         else ln["frequency_hz"] - LINE_LOBE * df_c for ln in members)
@@ -378,13 +381,15 @@ def _broad_lines(f: NDArray, psd: NDArray, n_seg: float, p_false: float, half_wi
             fc = float(np.sum(excess * f[k1:k2]) / np.sum(excess))
             a = math.sqrt(2.0 * power)
             out.append({"frequency_hz": fc, "amplitude": a, "amplitude_lo": a_lo,
-                        "amplitude_hi": a_hi, "bin": 0.0, "group": group_id, "harmonic": 1.0,
-                        "modulation_hz": 0.0, "group_frequency_hz": fc, "group_amplitude": a,
+                        "amplitude_hi": a_hi, "bin": 0.0, "group": group_base + members[0]["group"],
+                        "harmonic": members[0]["harmonic"],
+                        "modulation_hz": members[0]["modulation_hz"],
+                        "group_frequency_hz": fc, "group_amplitude": a,
                         "group_amplitude_lo": a_lo, "group_amplitude_hi": a_hi,
                         "band_lo_hz": lo_hz, "band_hi_hz": hi_hz,
                         "sweep_lo_hz": lo_hz, "sweep_hi_hz": hi_hz,
                         "members": float(len(members))})
-            group_id += 1.0
+        group_base += 1000.0
     return out
 
 

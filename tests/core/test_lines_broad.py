@@ -128,3 +128,21 @@ def test_a_spectrum_too_short_to_search_holds_no_line() -> None:
     (or one segment) is no line, not an IndexError."""
     assert find_lines(np.array([0.0]), np.array([1.0]), 5) == []
     assert find_lines(np.linspace(0.0, 5.0, 300), np.ones(300), 1) == []
+
+
+def test_a_swept_pump_and_its_swept_harmonic_are_one_disturbance_with_two_bands() -> None:
+    """Two effects at once: a pump swept 1.05 → 1.15 Hz and its second harmonic (2.10 →
+    2.30 Hz), each wider than the fine search's window. The coarse search marks the second
+    as the first's harmonic; read as one band from 1.05 to 2.3 Hz (the two clusters taken
+    together) the finding placed a disturbance where there is none."""
+    n = int(RATE * HOURS * 3600)
+    t = np.arange(n) / RATE
+    rng = np.random.default_rng(12)
+    y = (1.5e-4 * math.sqrt(RATE) * rng.standard_normal(n)
+         + 1e-3 * np.sin(2 * math.pi * (1.05 * t + 0.10 * t**2 / (2 * t[-1])))
+         + 4e-4 * np.sin(2 * math.pi * (2.10 * t + 0.20 * t**2 / (2 * t[-1]))))
+    (g,) = line_groups(find_lines(*_spectrum(y)))
+    assert g.harmonics == (1, 2) and g.band_hz is not None
+    assert g.band_hz[0] == pytest.approx(1.05, abs=0.01)
+    assert g.band_hz[1] == pytest.approx(1.15, abs=0.01)
+    assert g.amplitude == pytest.approx(1e-3, rel=0.05)
