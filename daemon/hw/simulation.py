@@ -16,6 +16,7 @@ overruns from host scheduling jitter.
 from __future__ import annotations
 
 import math
+import shutil
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -34,6 +35,9 @@ from avard.daemon.hw.w1_sysfs import SysfsTree
 if TYPE_CHECKING:
     from avard.daemon.hw.rig import SensorSpec
 
+#: The folder of the simulated 1-Wire tree inside the directory its owner gives
+#: (:attr:`SimulatedSensors.workdir`: the service's recording directory).
+W1_DIR = ".simulated-w1"
 
 
 @dataclass
@@ -57,6 +61,10 @@ class SimulatedSensors:
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
     _lost: set[str] = field(default_factory=set)
     _bus: Any = None
+    #: where the fake 1-Wire tree is made (compose.py gives the service's recording
+    #: directory): a folder of /tmp stayed behind whenever the process was killed
+    workdir: Path | None = None
+    _tmp: Any = None
 
     batch: int = 4096
     _buf: Any = None
@@ -114,16 +122,34 @@ class SimulatedSensors:
         return self.chip_c
 
     def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
-        """The fake sysfs tree (in a temporary folder, removed with this object) and the
-        bank reading it, made at the first conversion."""
+        """The fake sysfs tree and the bank reading it, made at the first conversion."""
         if self._bus is None:
-            tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
-            tree = SysfsTree(Path(tmp.name) / "devices")
+            root = self._w1_root()
+            tree = SysfsTree(root / "devices")
             bank = Ds18b20Bank(dict(zip(self.names, self.ids, strict=True)),
                                interval_s=self.interval_s, base_directory=tree.base,
                                clock=self.clock)
-            self._bus = (tmp, tree, bank)
+            self._bus = (root, tree, bank)
         return self._bus[1], self._bus[2]
+
+    def _w1_root(self) -> Path:
+        """The tree's folder: :data:`W1_DIR` in :attr:`workdir`, replacing the one a killed
+        process left there (one service records into a directory, as one owns its state
+        file), so a kill leaves at most that one small folder, inside its owner's directory,
+        until the next start; without a ``workdir``, a new temporary folder."""
+        if self.workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
+            return Path(self._tmp.name)
+        root = Path(self.workdir) / W1_DIR
+        shutil.rmtree(root, ignore_errors=True)
+        root.mkdir(parents=True)
+        return root
+
+    def close(self) -> None:
+        """Remove the fake 1-Wire tree (the service's stop calls it through the rig)."""
+        if self._bus is not None:
+            shutil.rmtree(self._bus[0], ignore_errors=True)
+            self._bus = None
 
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
