@@ -83,6 +83,10 @@ class FileOps:
     def fsync(self, f: IO[bytes]) -> None:
         os.fsync(f.fileno())
 
+    def stat(self, f: IO[bytes]) -> os.stat_result:
+        """The open segment's inode: its links (0 once deleted) and size."""
+        return os.fstat(f.fileno())
+
     def truncate(self, f: IO[bytes], size: int) -> None:
         # ftruncate on the descriptor: no buffer to flush first, and shrinking a file needs
         # no free blocks, so this works on a full disk.
@@ -171,6 +175,11 @@ class Recorder:
         self._rate_hz = 0.0        # the output rate the records give (fitted, else nominal)
         self.errors = 0
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
+        #: the open segment's sample records (raw, gap): (byte offset after the frame, i0,
+        #: index after it, t_mono, t_real), to name what a deleted or emptied segment took
+        self._marks: list[tuple[int, int, int, float, float]] = []
+        self._records_in_segment = 0
+        self.segments_removed = 0    # open segments deleted or cut short behind our back
 
     # -- public -------------------------------------------------------------------------
     @property
@@ -193,6 +202,7 @@ class Recorder:
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
                 "samples_lost": self.samples_lost, "torn_frames": self.torn_frames,
+                "segments_removed": self.segments_removed,
                 "free_bytes": free}
 
     def write(self, record: dict[str, Any]) -> bool:
@@ -201,6 +211,9 @@ class Recorder:
         with self._lock:
             now = self.clock()
             if self.paused and not self._try_resume(now):
+                self._remember_lost(record)
+                return False
+            if self._f is not None and not self._segment_intact(now):
                 self._remember_lost(record)
                 return False
             if self._f is None or now - self._opened_at >= self.segment_s:
@@ -269,6 +282,12 @@ class Recorder:
         self._size += len(data)
         self.bytes += len(data)
         self.records += 1
+        self._records_in_segment += 1
+        if record["kind"] in ("raw", "gap") and "i0" in record:
+            i0 = int(record["i0"])
+            self._marks.append((self._size, i0, i0 + int(record.get("n", 0)),
+                                float(record.get("t_mono", 0.0)),
+                                float(record.get("t_real", 0.0))))
         self._note_time(record)
         self._dirty = True
         return True
@@ -325,6 +344,9 @@ class Recorder:
         name = f"{self.run_id}_{self._segment_no:08d}_{stamp}{SEGMENT_SUFFIX}"
         path = self.dir / name
         try:
+            # the directory too: removed with everything in it while the service ran, the
+            # recording goes on in it again instead of pausing until someone makes it
+            self.dir.mkdir(parents=True, exist_ok=True)
             self._f = self.ops.open_append(path)
         except OSError as exc:
             self._failed(exc, "open")
@@ -332,6 +354,8 @@ class Recorder:
         self._segment_no += 1
         self.path = path
         self._size = 0
+        self._marks = []
+        self._records_in_segment = 0
         self._opened_at = now
         self.segments_written += 1
         log.info("recording into %s", path)
@@ -341,6 +365,43 @@ class Recorder:
         if self.lost is not None:
             self._flush_lost()
         self._retention()
+        return True
+
+    def _segment_intact(self, now: float) -> bool:
+        """Whether the open segment still holds what was written to it. Deleted (also when
+        a directory or another file took its name) or cut short (``: > segment``, logrotate's
+        copytruncate), the records written there are gone, and so would be everything
+        appended until the next rotation, up to ``segment_s`` later, with no word of it.
+        Then: close it, and say what it lost as a gap (reason ``segment_removed``) at the
+        start of the next segment, whose records the caller writes next. A file grown behind
+        our back is left alone (the reader skips what is not a frame)."""
+        assert self._f is not None
+        try:
+            st = self.ops.stat(self._f)
+        except OSError:
+            return True             # cannot tell; the write itself will report a failure
+        if st.st_nlink > 0 and st.st_size >= self._size:
+            return True
+        kept = 0 if st.st_nlink == 0 else st.st_size
+        lost = [m for m in self._marks if m[0] > kept]
+        records = self._records_in_segment if kept == 0 else len(lost)
+        how = "deleted" if st.st_nlink == 0 else f"cut to {st.st_size} bytes"
+        self.segments_removed += 1
+        log.error("the open segment %s was %s behind the recorder's back; %s; continuing "
+                  "in a new segment", self.path, how,
+                  f"samples [{lost[0][1]}, {max(m[2] for m in lost)}) went with it "
+                  "(recorded as a segment_removed gap)" if lost
+                  else "no sample record went with it")
+        self._close_file_quietly()
+        if not self._rotate(now):
+            return False
+        if lost:
+            i0 = lost[0][1]
+            n = max(m[2] for m in lost) - i0
+            rec = frames.gap_record(self.run_id, 0, i0, n, lost[0][3], lost[0][4],
+                                    "segment_removed", how=how, lost_records=records)
+            if not self._append(rec):
+                return False
         return True
 
     def _flush_lost(self) -> None:

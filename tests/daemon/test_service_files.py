@@ -7,6 +7,7 @@ the reader's tick at a chosen simulated time, so what happens depends on the dat
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -72,3 +73,95 @@ def _run(data: Path, seconds: float, seed: int, **over: object) -> Service:
     svc, _sims, _emu = simulated_service(_config(data, **over), "quiet-lab", seed=seed)
     svc.run(seconds)
     return svc
+
+
+# -- the open segment deleted, emptied, cut short or replaced behind the recorder's back -------
+
+RATE = 125.0
+ACT_AT = int(14 * RATE)          # the first raw block at or after this index finds it done
+
+
+def _act(path: Path, how: str) -> None:
+    if how == "deleted":
+        path.unlink()
+    elif how == "emptied":                       # `: > segment`, logrotate's copytruncate
+        with open(path, "r+b") as f:
+            f.truncate(0)
+    elif how == "cut_in_half":
+        with open(path, "r+b") as f:
+            f.truncate(path.stat().st_size // 2)
+    elif how == "replaced_by_a_directory":
+        path.unlink()
+        path.mkdir()
+    elif how == "recording_directory_removed":
+        shutil.rmtree(path.parent)
+    else:
+        raise ValueError(how)
+
+
+def _tiles(spans: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """Sorted [i0, i1) spans merged where they touch; overlaps fail."""
+    out: list[tuple[int, int]] = []
+    for i0, i1 in sorted(spans):
+        if out and i0 < out[-1][1]:
+            raise AssertionError(f"[{i0}, {i1}) overlaps [{out[-1][0]}, {out[-1][1]})")
+        if out and i0 == out[-1][1]:
+            out[-1] = (out[-1][0], i1)
+        else:
+            out.append((i0, i1))
+    return out
+
+
+@pytest.mark.parametrize("how", ["deleted", "emptied", "cut_in_half",
+                                 "replaced_by_a_directory", "recording_directory_removed"])
+def test_an_open_segment_changed_behind_the_recorders_back_becomes_a_recorded_gap(tmp_path,
+                                                                                  how):
+    """The recorder wrote on into a deleted (or emptied) segment until its next rotation,
+    up to ``segment_s`` (an hour by default) later: every record of that time went nowhere,
+    no gap said so, the status said "writing". It now notices at its next write, records
+    what the segment took as a ``segment_removed`` gap at the start of a new segment, and
+    goes on recording there: the recording's blocks and gaps tile every acquired index."""
+    from avard.daemon.service.recorder import Recorder
+    from avard.daemon.service.supervisor import ServiceHooks
+
+    data = tmp_path / "rec"
+    done: dict[str, object] = {}
+
+    class ChangedBehindItsBack(Recorder):
+        """Acts on its own open segment just before the first raw block at or after
+        ACT_AT: in the recorder's thread, so which records it takes depends on the data."""
+
+        def write(self, record: dict) -> bool:
+            if (not done and record.get("kind") == "raw" and record["i0"] >= ACT_AT
+                    and self.path is not None):
+                done["path"], done["i0"] = self.path, record["i0"]
+                _act(self.path, how)
+            return super().write(record)
+
+    def recorder(svc: Service) -> Recorder:
+        r = svc.config.recording
+        return ChangedBehindItsBack(svc.data_dir, svc.run_id, svc.run_header.for_segment,
+                                    segment_s=r.segment_s, clock=svc.clock.monotonic,
+                                    realtime=svc.clock.realtime)
+
+    cfg = _config(data, **{"recording.segment_s": 3600.0})
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3,
+                                         hooks=ServiceHooks(recorder=recorder))
+    svc.run(30.0)
+    assert done, "the segment was never acted on"
+    recs = list(RecordingReader(data))
+    gaps = [r for r in recs if r["kind"] == "gap"]
+    assert [g["reason"] for g in gaps] == ["segment_removed"]
+    gap = gaps[0]
+    # the samples the segment took, up to the block that found it: nothing else is missing
+    # and nothing is claimed twice
+    assert gap["i0"] + gap["n"] == done["i0"] and gap["n"] > 0
+    raw = [(r["i0"], r["i0"] + r["n"]) for r in recs if r["kind"] == "raw"]
+    assert _tiles([*raw, (gap["i0"], gap["i0"] + gap["n"])]) == [(0, svc.final_status["samples"])]
+    if how == "cut_in_half":
+        assert any(i1 <= gap["i0"] for _, i1 in raw)      # the kept half is still read
+    # it went on recording, in a new segment that starts with the gap
+    assert raw[-1][1] == svc.final_status["samples"]
+    segs = [p for p in data.glob("*.avr") if p.is_file()]
+    assert len(segs) >= 2 if how == "cut_in_half" else len(segs) >= 1
+    assert svc.final_status["disk"]["state"] == "writing"
