@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Protocol
 
 from avard.core.allan.feed import AllanFeed
@@ -36,6 +37,7 @@ from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import Rig
 from avard.daemon.hw.timebase import SystemClock, TimeBase
 from avard.daemon.service.acquisition import Acquisition
+from avard.daemon.service import dirlock
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
 from avard.daemon.service.header import RunHeader, time_of_index
@@ -335,6 +337,7 @@ class Service(Supervised):
         self._publisher_factory = hooks.publisher
         self._request_factory = hooks.request_server
         self.recorder: Any = None
+        self._dir_lock: Path | None = None
         self.publisher: Any = None
         self.request_server: Any = None
         self.acq: Acquisition | None = None
@@ -504,6 +507,8 @@ class Service(Supervised):
         recording = cfg.recording.enabled
         if recording:
             self._check_data_dir()
+            # one service per recording directory, held until stop() (dirlock.py)
+            self._dir_lock = dirlock.hold(self.data_dir)
             self.restore()
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
                                poll_hz=cfg.sensor.poll_hz,
@@ -668,6 +673,9 @@ class Service(Supervised):
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None
+        if self._dir_lock is not None:   # every writer of the directory has stopped
+            dirlock.release(self._dir_lock)
+            self._dir_lock = None
 
 
 def _default_recorder(svc: Service) -> Any:

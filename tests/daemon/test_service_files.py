@@ -7,7 +7,10 @@ the reader's tick at a chosen simulated time, so what happens depends on the dat
 
 from __future__ import annotations
 
+import os
 import shutil
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -165,3 +168,66 @@ def test_an_open_segment_changed_behind_the_recorders_back_becomes_a_recorded_ga
     segs = [p for p in data.glob("*.avr") if p.is_file()]
     assert len(segs) >= 2 if how == "cut_in_half" else len(segs) >= 1
     assert svc.final_status["disk"]["state"] == "writing"
+
+
+# -- two services, one recording directory ------------------------------------------------------
+
+
+def test_a_second_avard_run_on_a_recording_directory_in_use_stops_with_one_line(tmp_path):
+    """Two services on one directory both took the next run sequence number, both continued
+    the index from the recording's end and wrote the same indices with different samples
+    (the reader kept one stream and dropped the other as duplicates), replaced each other's
+    state file, and on hardware the second one's start-up reset the first one's sensor. The
+    second ``avard run`` now stops before it opens the sensor: one line, exit status 2; the
+    first is not disturbed."""
+    data = tmp_path / "rec"
+    _run(data, 6.0, 1)
+    first, _s, _e = simulated_service(_config(data), "quiet-lab", seed=2)
+    second: dict[str, object] = {}
+
+    def another_run_meanwhile() -> None:
+        # the first holds the directory (its restore is done, it is about to record)
+        out = subprocess.run(
+            [sys.executable, "-m", "avard.daemon.cli", "run", "--simulate", "quiet-lab",
+             "--speed", "0", "--duration", "2", "--data-dir", str(data)],
+            capture_output=True, text=True, timeout=120, cwd=tmp_path)
+        second["status"], second["stderr"] = out.returncode, out.stderr
+
+    first.run(6.0, before_acquisition=another_run_meanwhile)
+    assert second["status"] == 2, second
+    said = [line for line in str(second["stderr"]).splitlines()
+            if "another avard process" in line]
+    assert len(said) == 1 and f"(pid {os.getpid()})" in said[0], second["stderr"]
+    assert "Traceback" not in str(second["stderr"])
+    # the first run alone wrote after the first: one restart gap, every index once
+    recs = list(RecordingReader(data))
+    assert [g["reason"] for g in recs if g["kind"] == "gap"] == ["restart"]
+    raw = [(r["i0"], r["i0"] + r["n"]) for r in recs if r["kind"] == "raw"]
+    assert _tiles(raw)[-1][1] == raw[-1][1]
+    assert len({r["run"] for r in recs if r["kind"] == "raw"}) == 2
+
+
+def test_a_service_refused_by_the_lock_never_opens_a_segment_and_a_killed_holder_frees_it(
+        tmp_path):
+    """The lock is the kernel's, on an open file: it goes with its process however the
+    process ends, so a SIGKILLed service never keeps its restart out."""
+    from avard.core.errors import ConfigError
+
+    data = tmp_path / "rec"
+    _run(data, 3.0, 1)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom avard.daemon.service import dirlock\n"
+         "dirlock.hold(sys.argv[1]); print('held', flush=True); time.sleep(120)", str(data)],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        before = sorted(p.name for p in data.iterdir())
+        svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=2)
+        with pytest.raises(ConfigError, match=rf"another avard process \(pid {holder.pid}\)"):
+            svc.run(3.0)
+        assert sorted(p.name for p in data.iterdir()) == before
+    finally:
+        holder.kill()
+        holder.wait()
+    svc = _run(data, 3.0, 3)
+    assert svc.final_status["samples"] > 0
