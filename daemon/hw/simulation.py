@@ -141,7 +141,10 @@ class SimulatedSensors:
             self._tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
             return Path(self._tmp.name)
         root = Path(self.workdir) / W1_DIR
-        shutil.rmtree(root, ignore_errors=True)
+        if root.is_symlink() or (root.exists() and not root.is_dir()):
+            root.unlink()           # a link is removed, never followed
+        else:
+            shutil.rmtree(root, ignore_errors=True)
         root.mkdir(parents=True)
         return root
 

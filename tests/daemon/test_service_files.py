@@ -72,6 +72,27 @@ def test_the_simulated_one_wire_tree_lives_in_the_recording_directory_never_in_t
     assert list(tmp.iterdir()) == []
 
 
+
+@pytest.mark.parametrize("left", ["a_file", "a_link_to_a_directory"])
+def test_what_stands_in_the_one_wire_folders_place_is_replaced_and_never_followed(tmp_path,
+                                                                                  left):
+    data = tmp_path / "rec"
+    data.mkdir()
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep").write_text("not the service's\n")
+    if left == "a_file":
+        (data / W1_DIR).write_text("junk\n")
+    else:
+        (data / W1_DIR).symlink_to(outside, target_is_directory=True)
+    svc, sims, _emu = simulated_service(_config(data), "quiet-lab", seed=1)
+    svc.run(4.0)
+    read = {n for r in RecordingReader(data) if r["kind"] == "temp"
+            for n, v in zip(r["names"], r["values_c"], strict=True) if v is not None}
+    assert set(sims.names) <= read
+    assert not (data / W1_DIR).exists() and not (data / W1_DIR).is_symlink()
+    assert [p.name for p in outside.iterdir()] == ["keep"]
+
 def _run(data: Path, seconds: float, seed: int, **over: object) -> Service:
     svc, _sims, _emu = simulated_service(_config(data, **over), "quiet-lab", seed=seed)
     svc.run(seconds)
