@@ -15,6 +15,8 @@ overruns from host scheduling jitter.
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
 import shutil
 import tempfile
@@ -27,13 +29,15 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from avard.daemon.config_types import Config, as_config
 from avard.daemon.hw.adxl355 import Adxl355
-from avard.daemon.hw.ds18b20 import Ds18b20Bank
+from avard.daemon.hw.ds18b20 import ERROR, Ds18b20Bank
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.hw.w1_sysfs import SysfsTree
 
 if TYPE_CHECKING:
     from avard.daemon.hw.rig import SensorSpec
+
+log = logging.getLogger(__name__)
 
 #: The folder of the simulated 1-Wire tree inside the directory its owner gives
 #: (:attr:`SimulatedSensors.workdir`: the service's recording directory).
@@ -65,6 +69,7 @@ class SimulatedSensors:
     #: directory): a folder of /tmp stayed behind whenever the process was killed
     workdir: Path | None = None
     _tmp: Any = None
+    _write_problem: str | None = None    # why the tree could not be written (said once)
 
     batch: int = 4096
     _buf: Any = None
@@ -163,20 +168,45 @@ class SimulatedSensors:
         if math.isnan(plate):
             return
         self._next = t_mono + self.interval_s
-        tree, bank = self._one_wire()
+        # The tree is files on this host's disk (the kernel's sysfs never fails to be
+        # written): a full disk or a full fd table must not end the reader thread. A sensor
+        # whose file could not be written reads as failed this round, never as the value
+        # its file held from before.
+        failed: dict[str, str] = {}
+        try:
+            tree, bank = self._one_wire()
+        except OSError as exc:
+            self._cannot_write(exc)
+            return
         for name, sid, v in zip(self.names, self.ids, (plate, ambient),
                                 strict=True):
             lost = name in self.fail
-            if lost and name not in self._lost:
-                tree.remove(sid)
-                self._lost.add(name)
-            elif not lost and name in self._lost:
-                tree.restore(sid)
-                self._lost.discard(name)
-            if not lost:
-                tree.set_temperature(sid, v)
+            try:
+                if lost and name not in self._lost:
+                    tree.remove(sid)
+                    self._lost.add(name)
+                elif not lost and name in self._lost:
+                    tree.restore(sid)
+                    self._lost.discard(name)
+                if not lost:
+                    tree.set_temperature(sid, v)
+            except OSError as exc:
+                failed[name] = f"simulated w1_slave not written: {exc}"
+                self._cannot_write(exc)
+        if not failed and self._write_problem is not None:
+            log.info("the simulated 1-Wire files are written again")
+            self._write_problem = None
         for reading in bank.read_all():
+            if reading.name in failed:
+                reading = dataclasses.replace(reading, value_c=math.nan, status=ERROR,
+                                              detail=failed[reading.name])
             deliver(reading)
+
+    def _cannot_write(self, exc: OSError) -> None:
+        if self._write_problem is None:
+            log.warning("cannot write the simulated 1-Wire files (%s); their DS18B20 "
+                        "readings fail until they can", exc)
+        self._write_problem = str(exc)
 
 
 def open_simulated(sensor: SensorSpec, preset: str, *, seed: int | None = None,

@@ -36,8 +36,8 @@ from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import Rig
 from avard.daemon.hw.timebase import SystemClock, TimeBase
-from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service import dirlock
+from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
 from avard.daemon.service.header import RunHeader, time_of_index

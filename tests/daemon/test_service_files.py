@@ -93,6 +93,103 @@ def test_what_stands_in_the_one_wire_folders_place_is_replaced_and_never_followe
     assert not (data / W1_DIR).exists() and not (data / W1_DIR).is_symlink()
     assert [p.name for p in outside.iterdir()] == ["keep"]
 
+
+def _sensor_events(data: Path) -> list[tuple[str, str, str]]:
+    return [(r["name"], r["detail"]["sensor"], r["detail"]["status"])
+            for r in RecordingReader(data)
+            if r["kind"] == "event" and r["name"] in ("sensor_lost", "sensor_back")]
+
+
+def test_a_full_disk_under_the_simulated_one_wire_tree_fails_its_readings_not_the_reader(
+        tmp_path, monkeypatch):
+    """The tree now shares the recording's disk: a write refused with ENOSPC ended the
+    reader thread (ServiceFault, exit 70). Now each refused sensor reads as failed for that
+    round (never as the value its file held before), and comes back when the disk does."""
+    import errno
+
+    from avard.daemon.hw.w1_sysfs import SysfsTree
+
+    data = tmp_path / "rec"
+    full = {"on": False}
+    write = SysfsTree._write
+
+    def refused(self: SysfsTree, sensor_id: str, text: str) -> None:
+        if full["on"]:
+            raise OSError(errno.ENOSPC, "No space left on device (injected)")
+        write(self, sensor_id, text)
+
+    monkeypatch.setattr(SysfsTree, "_write", refused)
+    box: dict[str, Service] = {}
+
+    def disk(t_mono: float) -> None:
+        full["on"] = 5.0 <= t_mono - box["svc"].t_start < 9.0
+
+    svc, sims, _emu = simulated_service(_config(data), "quiet-lab", seed=1, after_tick=disk)
+    box["svc"] = svc
+    svc.run(14.0)
+    events = _sensor_events(data)
+    assert sorted(events) == sorted(
+        [("sensor_lost", n, "error") for n in sims.names]
+        + [("sensor_back", n, "ok") for n in sims.names]), events
+    temps = [r for r in RecordingReader(data) if r["kind"] == "temp"]
+    values = {n: [v for r in temps for m, v in zip(r["names"], r["values_c"], strict=True)
+                  if m == n] for n in sims.names}
+    for name, vs in values.items():
+        assert vs[-1] is not None and None in vs, (name, vs)
+
+
+def test_a_full_fd_table_under_the_simulated_service_is_ridden_through(tmp_path):
+    """Every descriptor of the process taken for a while (``RLIMIT_NOFILE`` reached): the
+    simulated DS18B20 files could not be written and the reader thread died of it. Now the
+    service rides through: the DS18B20s read as failed with the host's error (not as a
+    missing sensor), the checkpoint that could not be saved is saved at the next one, and
+    what the accumulators hold equals what the recording holds."""
+    import resource
+
+    from avard.core.allan.streaming import StreamingAllan
+    from avard.core.io import frames
+    from avard.core.io.recording import replay_allan, scan_frames
+    from avard.daemon.service.checkpoint import STATE_FILE
+
+    data = tmp_path / "rec"
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    taken: list[int] = []
+    box: dict[str, Service] = {}
+
+    def fds(t_mono: float) -> None:
+        t = t_mono - box["svc"].t_start
+        if 5.0 <= t < 13.0 and not taken:
+            # a lower soft limit, so that filling it costs a few hundred opens
+            in_use = len(os.listdir("/proc/self/fd"))
+            resource.setrlimit(resource.RLIMIT_NOFILE, (min(soft, in_use + 64), hard))
+            try:
+                while True:
+                    taken.append(os.open(os.devnull, os.O_RDONLY))
+            except OSError:
+                pass
+        elif t >= 13.0 and taken:
+            while taken:
+                os.close(taken.pop())
+            resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+    cfg = _config(data, **{"recording.segment_s": 3600.0})
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, after_tick=fds)
+    box["svc"] = svc
+    try:
+        svc.run(20.0)
+    finally:
+        while taken:
+            os.close(taken.pop())
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    lost = [e for e in _sensor_events(data) if e[0] == "sensor_lost"]
+    assert lost and {e[2] for e in lost} == {"error"}, lost
+    state = frames.decode(next(scan_frames((data / STATE_FILE).read_bytes())).payload)
+    final = StreamingAllan.from_state(state["state"]).snapshot()
+    offline = replay_allan(data).snapshot()
+    assert final.n_samples == offline.n_samples == int(svc.allan.n_samples)
+    raw = [(r["i0"], r["i0"] + r["n"]) for r in RecordingReader(data) if r["kind"] == "raw"]
+    assert _tiles(raw) == [(0, svc.final_status["samples"])]
+
 def _run(data: Path, seconds: float, seed: int, **over: object) -> Service:
     svc, _sims, _emu = simulated_service(_config(data, **over), "quiet-lab", seed=seed)
     svc.run(seconds)
@@ -118,7 +215,12 @@ def _act(path: Path, how: str) -> None:
         path.unlink()
         path.mkdir()
     elif how == "recording_directory_removed":
-        shutil.rmtree(path.parent)
+        # moved out of its place first: the simulated 1-Wire files are written into it from
+        # another thread, and rmtree in place races with them
+        gone = path.parent.with_name(path.parent.name + ".gone")
+        path.parent.rename(gone)
+        while gone.exists():
+            shutil.rmtree(gone, ignore_errors=True)
     else:
         raise ValueError(how)
 
