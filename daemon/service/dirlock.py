@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import logging
 import os
 import threading
 from collections.abc import Iterator
@@ -27,6 +28,8 @@ from pathlib import Path
 from avard.core.errors import ConfigError
 
 LOCK_FILE = ".avard.lock"
+
+log = logging.getLogger(__name__)
 
 _guard = threading.Lock()
 _held: dict[Path, list[int]] = {}       # directory → [fd, holders in this process]
@@ -50,6 +53,14 @@ def hold(directory: str | Path) -> Path:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
         except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                # a full disk at the very first start: the service records nothing until
+                # space returns anyway, and it must start to say so (and be restarted);
+                # exit status 2 would keep systemd from ever restarting it
+                log.warning("cannot create %s in %s (%s); running without the one-service "
+                            "lock", LOCK_FILE, d, exc.strerror)
+                _held[key] = [-1, 1]
+                return key
             raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot open its lock file "
                               f"{LOCK_FILE} ({exc.strerror})") from None
         try:
@@ -84,7 +95,8 @@ def release(key: Path) -> None:
         entry[1] -= 1
         if entry[1] == 0:
             del _held[key]
-            os.close(entry[0])
+            if entry[0] >= 0:
+                os.close(entry[0])
 
 
 @contextmanager

@@ -550,12 +550,20 @@ def write_atomic(path: Path, data: bytes) -> None:
     the old file stays whole and no partial ``.tmp`` is left behind."""
     tmp = path.with_suffix(".tmp")
     try:
-        with open(tmp, "wb", buffering=0) as f:
+        # A temporary file left by a process killed inside this write, or a link put in its
+        # place, is removed, never written through: opening it for writing followed a
+        # symlink and overwrote whatever it pointed at.
+        if tmp.is_symlink() or tmp.is_file():
+            tmp.unlink()
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC,
+                     0o644)
+        with open(fd, "wb", buffering=0) as f:
             FileOps().write(f, data)
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError:
-        tmp.unlink(missing_ok=True)
+        if tmp.is_symlink() or tmp.is_file():
+            tmp.unlink(missing_ok=True)
         raise
 
 

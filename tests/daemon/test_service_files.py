@@ -354,3 +354,23 @@ def test_a_service_refused_by_the_lock_never_opens_a_segment_and_a_killed_holder
         holder.wait()
     svc = _run(data, 3.0, 3)
     assert svc.final_status["samples"] > 0
+
+
+
+def test_a_temporary_state_file_left_in_place_is_replaced_never_written_through(tmp_path):
+    """A process killed inside a checkpoint write leaves ``allan-state.tmp``; a link in its
+    place was followed, and the checkpoint overwrote whatever it pointed at."""
+    from avard.daemon.service.checkpoint import STATE_FILE, read_state
+
+    data = tmp_path / "rec"
+    data.mkdir()
+    outside = tmp_path / "not-the-services"
+    outside.write_bytes(b"keep me\n")
+    (data / STATE_FILE).with_suffix(".tmp").symlink_to(outside)
+    svc = _run(data, 6.0, 1)
+    assert outside.read_bytes() == b"keep me\n"
+    state = read_state(data)
+    assert state.problem is None and state.record is not None
+    assert state.record["n_samples"] == int(svc.allan.n_samples) > 0
+    assert not (data / STATE_FILE).with_suffix(".tmp").exists()
+    assert not (data / STATE_FILE).with_suffix(".tmp").is_symlink()
