@@ -31,6 +31,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 import threading
 import time
 from collections.abc import Callable
@@ -108,6 +109,8 @@ class FileOps:
                 st = p.stat()
             except FileNotFoundError:
                 continue
+            if not stat.S_ISREG(st.st_mode):
+                continue            # a directory in a segment's place is not ours to delete
             out.append((p, st.st_size, st.st_mtime))
         return out
 
@@ -650,7 +653,9 @@ def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | Non
     d = Path(data_dir)
     if not d.is_dir():
         return None
-    ordered = order_segments(d.glob("*" + SEGMENT_SUFFIX))
+    # files only: a directory in a segment's place has no frames, and sorted among them
+    # it set off the warning below about names that do not sort in data order
+    ordered = order_segments(f for f in d.glob("*" + SEGMENT_SUFFIX) if f.is_file())
     by_name = sorted(ordered, key=lambda p: p.name)
     if by_name != ordered:
         # the invariant "order comes from the data" holds (every reader orders by the

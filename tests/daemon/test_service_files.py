@@ -374,3 +374,25 @@ def test_a_temporary_state_file_left_in_place_is_replaced_never_written_through(
     assert state.record["n_samples"] == int(svc.allan.n_samples) > 0
     assert not (data / STATE_FILE).with_suffix(".tmp").exists()
     assert not (data / STATE_FILE).with_suffix(".tmp").is_symlink()
+
+
+
+def test_a_directory_in_a_closed_segments_place_is_neither_read_nor_deleted(tmp_path, caplog):
+    """Between runs a segment replaced by a directory: the next runs restore, record and
+    rotate as before; no warning that names do not sort (the directory was sorted among the
+    segments), and retention never tries to delete it."""
+    over: dict[str, object] = {"recording.segment_s": 10.0}
+    data = tmp_path / "rec"
+    _run(data, 25.0, 1, **over)
+    segs = sorted(data.glob("*.avr"))
+    assert len(segs) >= 3
+    segs[1].unlink()
+    segs[1].mkdir()
+    caplog.set_level("INFO", logger="avard.daemon.service")
+    # retention that wants every closed segment gone
+    svc = _run(data, 25.0, 2, **over, **{"recording.retention_max_bytes": 1})
+    said = [r.getMessage() for r in caplog.records]
+    assert not [m for m in said if "do not sort" in m or "cannot delete" in m], said
+    assert segs[1].is_dir() and svc.restored is not None
+    assert not segs[0].exists()
+    assert svc.final_status["disk"]["state"] == "writing"
