@@ -396,3 +396,35 @@ def test_a_directory_in_a_closed_segments_place_is_neither_read_nor_deleted(tmp_
     assert segs[1].is_dir() and svc.restored is not None
     assert not segs[0].exists()
     assert svc.final_status["disk"]["state"] == "writing"
+
+
+def test_a_killed_avard_run_leaves_nothing_in_tmp_and_the_next_run_cleans_up(tmp_path):
+    """The real process, SIGKILLed once its simulated DS18B20s have been read: its temporary
+    directory stays empty (before, an ``avard-sim-w1-*`` folder stayed there for good); what
+    it left in its own recording directory the next run replaces and removes at its stop."""
+    import signal
+    import time
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    data = tmp_path / "rec"
+    env = dict(os.environ, TMPDIR=str(tmp))
+    args = [sys.executable, "-m", "avard.daemon.cli", "run", "--simulate", "quiet-lab",
+            "--data-dir", str(data)]
+    proc = subprocess.Popen([*args, "--speed", "20"], env=env, cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120.0          # a bound on a hang, not a measurement
+        while not list((data / W1_DIR / "devices").glob("28-*/w1_slave")):
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert list(tmp.iterdir()) == []
+    assert (data / W1_DIR).is_dir()
+    done = subprocess.run([*args, "--speed", "0", "--duration", "3"], env=env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert not (data / W1_DIR).exists()
+    assert list(tmp.iterdir()) == []
