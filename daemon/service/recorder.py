@@ -183,6 +183,7 @@ class Recorder:
         self._marks: list[tuple[int, int, int, float, float]] = []
         self._records_in_segment = 0
         self.segments_removed = 0    # open segments deleted or cut short behind our back
+        self._removed: list[dict[str, Any]] = []   # their gaps, for the next segment
 
     # -- public -------------------------------------------------------------------------
     @property
@@ -216,9 +217,8 @@ class Recorder:
             if self.paused and not self._try_resume(now):
                 self._remember_lost(record)
                 return False
-            if self._f is not None and not self._segment_intact(now):
-                self._remember_lost(record)
-                return False
+            if self._f is not None:
+                self._check_segment()
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
                     self._remember_lost(record)
@@ -252,10 +252,16 @@ class Recorder:
         """SIGHUP: close the current segment; the next record opens a new one."""
         with self._lock:
             log.info("reopening the recording (SIGHUP)")
+            if self._f is not None:
+                self._check_segment()       # removed before the SIGHUP: said in the next
             self._close_file()
 
     def close(self) -> None:
         with self._lock:
+            if self._f is not None:
+                self._check_segment()
+            if self._removed and not self.paused:
+                self._rotate(self.clock())  # a last segment to say what went
             if self.lost is not None and not self.paused:
                 self._flush_lost()
             self._close_file()
@@ -365,26 +371,29 @@ class Recorder:
         self._header_at = now
         if not self._append(self._header()):
             return False
+        while self._removed and self._append(self._removed[0]):
+            self._removed.pop(0)            # earlier samples than a pause's loss: first
         if self.lost is not None:
             self._flush_lost()
         self._retention()
         return True
 
-    def _segment_intact(self, now: float) -> bool:
+    def _check_segment(self) -> None:
         """Whether the open segment still holds what was written to it. Deleted (also when
         a directory or another file took its name) or cut short (``: > segment``, logrotate's
         copytruncate), the records written there are gone, and so would be everything
         appended until the next rotation, up to ``segment_s`` later, with no word of it.
-        Then: close it, and say what it lost as a gap (reason ``segment_removed``) at the
-        start of the next segment, whose records the caller writes next. A file grown behind
-        our back is left alone (the reader skips what is not a frame)."""
+        Then: close it, and keep what it lost as a gap (reason ``segment_removed``) for the
+        start of the next segment, which the caller opens next (kept across a pause: a
+        failed open does not lose it). A file grown behind our back is left alone (the
+        reader skips what is not a frame)."""
         assert self._f is not None
         try:
             st = self.ops.stat(self._f)
         except OSError:
-            return True             # cannot tell; the write itself will report a failure
+            return                  # cannot tell; the write itself will report a failure
         if st.st_nlink > 0 and st.st_size >= self._size:
-            return True
+            return
         kept = 0 if st.st_nlink == 0 else st.st_size
         lost = [m for m in self._marks if m[0] > kept]
         records = self._records_in_segment if kept == 0 else len(lost)
@@ -396,16 +405,12 @@ class Recorder:
                   "(recorded as a segment_removed gap)" if lost
                   else "no sample record went with it")
         self._close_file_quietly()
-        if not self._rotate(now):
-            return False
         if lost:
             i0 = lost[0][1]
             n = max(m[2] for m in lost) - i0
-            rec = frames.gap_record(self.run_id, 0, i0, n, lost[0][3], lost[0][4],
-                                    "segment_removed", how=how, lost_records=records)
-            if not self._append(rec):
-                return False
-        return True
+            self._removed.append(frames.gap_record(
+                self.run_id, 0, i0, n, lost[0][3], lost[0][4], "segment_removed", how=how,
+                lost_records=records))
 
     def _flush_lost(self) -> None:
         lost = self.lost
