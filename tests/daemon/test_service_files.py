@@ -479,3 +479,52 @@ def test_a_segment_deleted_just_before_a_reopen_or_the_stop_is_still_a_recorded_
     assert gap["i0"] + gap["n"] == (done["i0"] if then == "sighup" else samples)
     raw = [(r["i0"], r["i0"] + r["n"]) for r in recs if r["kind"] == "raw"]
     assert _tiles([*raw, (gap["i0"], gap["i0"] + gap["n"])]) == [(0, samples)]
+
+
+@pytest.mark.slow
+def test_a_slow_disk_on_the_real_clock_costs_recorder_behind_gaps_of_the_right_size(tmp_path):
+    """A slow disk (each block's write takes longer than the ring holds) on the real clock,
+    where the reader does not wait for the recorder: the recorder's cursor falls off the
+    ring, and every sample it lost is in a ``recorder_behind`` gap: blocks and gaps tile
+    every acquired index, and it records again once the disk is fast. (Slow: real time.)"""
+    import time
+
+    from avard.daemon.compose import compose
+    from avard.daemon.config_types import Config
+    from avard.daemon.hw.rig import ClockSpec, Rig, RigSpec, SensorSpec, bring_up
+    from avard.daemon.hw.simulation import emulated_rig
+    from avard.daemon.hw.timebase import SystemClock
+    from avard.daemon.service.recorder import Recorder
+    from avard.daemon.service.supervisor import ServiceHooks
+
+    data = tmp_path / "rec"
+    cfg = Config.from_dict(load_config(None, **{
+        "recording.data_dir": str(data), "publish.enabled": False, "service.ring_s": 1.0,
+        "temperature.ds18b20": False}))
+    sensor = SensorSpec.from_config(cfg.sensor)
+    clock, parts = emulated_rig([sensor], "quiet-lab", seed=1, clock=SystemClock())
+    _name, dev, _emu = parts[0]
+    bring_up(dev, sensor)
+    rig = Rig(RigSpec((sensor,), ClockSpec("system", "quiet-lab"), cfg.temperature), dev,
+              clock, {"device": "ADXL355 (emulated, real clock)"})
+    slow_from, slow_to = int(2 * RATE), int(6 * RATE)     # the disk is slow for these blocks
+
+    class SlowDisk(Recorder):
+        def write(self, record: dict) -> bool:
+            if record.get("kind") == "raw" and slow_from <= record["i0"] < slow_to:
+                time.sleep(1.5)                           # longer than the 1 s ring
+            return super().write(record)
+
+    def recorder(svc: Service) -> Recorder:
+        return SlowDisk(svc.data_dir, svc.run_id, svc.run_header.for_segment,
+                        clock=svc.clock.monotonic, realtime=svc.clock.realtime)
+
+    svc = compose(cfg, rig, hooks=ServiceHooks(recorder=recorder))
+    svc.run(12.0)
+    recs = list(RecordingReader(data))
+    gaps = [r for r in recs if r["kind"] == "gap"]
+    assert "recorder_behind" in {g["reason"] for g in gaps}
+    raw = [(r["i0"], r["i0"] + r["n"]) for r in recs if r["kind"] == "raw"]
+    end = svc.final_status["index"]       # an overrun on a loaded machine is a gap as well
+    assert _tiles([*raw, *((g["i0"], g["i0"] + g["n"]) for g in gaps)]) == [(0, end)]
+    assert raw[-1][1] == end and raw[-1][0] >= slow_to
