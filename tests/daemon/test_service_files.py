@@ -291,6 +291,12 @@ def test_an_open_segment_changed_behind_the_recorders_back_becomes_a_recorded_ga
     segs = [p for p in data.glob("*.avr") if p.is_file()]
     assert len(segs) >= 2 if how == "cut_in_half" else len(segs) >= 1
     assert svc.final_status["disk"]["state"] == "writing"
+    assert svc.final_status["disk"]["segments_removed"] == 1
+    # the checkpoint at the stop was saved (into a recreated directory too)
+    from avard.daemon.service.checkpoint import read_state
+
+    state = read_state(data).record
+    assert state is not None and state["n_samples"] == int(svc.allan.n_samples)
 
 
 # -- two services, one recording directory ------------------------------------------------------
