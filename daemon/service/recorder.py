@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from avard.core.allan.feed import nominal_of
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
@@ -689,6 +690,25 @@ def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | Non
         span = end["n"] / float(end.get("rate_hz") or nominal_hz)
         return LastRecorded(int(end["i0"]) + int(end["n"]), float(end["t_mono"]) + span,
                             float(end["t_real"]) + span, boot)
+    return None
+
+
+def recorded_rate(data_dir: str | Path) -> tuple[str, float] | None:
+    """The run and nominal ODR (Hz) of the newest header in a recording directory (segments
+    in data order, newest first), or None when it holds none that says its ODR."""
+    d = Path(data_dir)
+    if not d.is_dir():
+        return None
+    for seg in reversed(order_segments(f for f in d.glob("*" + SEGMENT_SUFFIX) if f.is_file())):
+        try:
+            head = first_record(seg)
+        except (OSError, FormatError):
+            continue
+        if head is None or head.get("kind") != "header":
+            continue
+        nominal = nominal_of(head)
+        if nominal is not None:
+            return str(head.get("run")), nominal
     return None
 
 

@@ -47,6 +47,7 @@ from avard.daemon.service.recorder import (
     kernel_boot_id,
     last_recorded,
     new_run_id,
+    recorded_rate,
     restart_gap,
 )
 from avard.daemon.service.recorder_stage import RecorderStage
@@ -498,6 +499,20 @@ class Service(Supervised):
                 f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
                 f"({exc.strerror}); {DATA_DIR_ADVICE}") from None
 
+    def _check_recorded_rate(self) -> None:
+        """One recording directory holds one output data rate: a run at another ODR could
+        not join the restored accumulators (their τ are sample counts) and would make a
+        record that ``avard analyze`` refuses as a whole. Raises ConfigError saying what to do."""
+        got = recorded_rate(self.data_dir)
+        if got is not None and got[1] != float(self.odr):
+            run, nominal = got
+            raise ConfigError(
+                f"recording.data_dir = {str(self.data_dir)!r} holds a recording at a nominal "
+                f"{nominal:g} Hz (run {run}) and this configuration records at "
+                f"{float(self.odr):g} Hz: one recording directory holds one output data rate; "
+                "give this rate its own data directory (recording.data_dir or --data-dir), or "
+                "move the old segments out of this one")
+
     def start(self, before_acquisition: Callable[[], None] | None = None, *,
               stop_at: float | None = None) -> None:
         """Build the stages and start every thread, consumers before the reader;
@@ -509,6 +524,12 @@ class Service(Supervised):
             self._check_data_dir()
             # one service per recording directory, held until stop() (dirlock.py)
             self._dir_lock = dirlock.hold(self.data_dir)
+            try:
+                self._check_recorded_rate()
+            except ConfigError:
+                dirlock.release(self._dir_lock)
+                self._dir_lock = None
+                raise
             self.restore()
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
                                poll_hz=cfg.sensor.poll_hz,
