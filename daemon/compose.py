@@ -35,9 +35,16 @@ def compose(config: Config, spec: RigSpec | Rig, *, run_id: str | None = None,
     rig = spec if isinstance(spec, Rig) else build_rig(spec)
     if after_tick is not None:
         rig = dataclasses.replace(rig, on_tick=_chain(rig.on_tick, after_tick))
+    feed = rig.temperature_feed
+    if feed is not None:
+        # its files (the simulated 1-Wire tree) in the directory the service owns, removed
+        # when it stops: a killed process then leaves nothing in /tmp, and the next start in
+        # that directory replaces what it left
+        feed.workdir = config.recording.path
+        rig = dataclasses.replace(rig, closers=(*rig.closers, feed.close))
     svc = Service(config, rig, run_id=run_id, notifier=notifier, hooks=hooks)
-    if rig.temperature_feed is not None:
-        rig.temperature_feed.deliver = svc.temperature_reading
+    if feed is not None:
+        feed.deliver = svc.temperature_reading
     return svc
 
 

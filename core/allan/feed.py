@@ -13,7 +13,14 @@ from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
-from avard.core.errors import FormatError
+from avard.core.errors import DataError, FormatError
+
+
+def nominal_of(header: dict[str, Any]) -> float | None:
+    """A header's nominal output data rate (Hz: the ODR setting, not the fitted rate), or
+    None when it does not say (recordings of older versions)."""
+    v = header.get("nominal_odr_hz")
+    return float(v) if isinstance(v, int | float) and v > 0 else None
 
 
 def scale_of(header: dict[str, Any]) -> float:
@@ -98,6 +105,10 @@ class AllanFeed:
         self.skipped = 0
         self._open = False          # samples fed since the last gap()
         self.run: str | None = None
+        #: The nominal ODR (Hz) of the samples the accumulators hold: set by the first run's
+        #: header, or by whoever built the accumulators at a configured rate (the service's
+        #: restore). A run at another ODR cannot join them (their τ are counted in samples).
+        self.nominal_hz: float | None = None
         self._segments = Segmenter()
 
     @property
@@ -111,7 +122,7 @@ class AllanFeed:
                 "held": [float(v) for v in self._held],
                 "pending": [[int(i), [float(v) for v in h]] for i, h in self._pending],
                 "temp_names": list(self.temp_names), "scale": self.scale, "open": self._open,
-                "run": self.run}
+                "run": self.run, "nominal_hz": self.nominal_hz}
 
     @classmethod
     def from_state(cls, sink: Any, state: dict[str, Any]) -> AllanFeed:
@@ -125,6 +136,8 @@ class AllanFeed:
         feed._pending = [(int(i), np.array(h, dtype=float)) for i, h in state["pending"]]
         feed._open = bool(state.get("open", False))
         feed.run = feed._segments.run = state.get("run")
+        nominal = state.get("nominal_hz")
+        feed.nominal_hz = float(nominal) if isinstance(nominal, int | float) else None
         feed._segments.next_index = feed.next_index
         return feed
 
@@ -139,6 +152,7 @@ class AllanFeed:
             self.gap()
         if kind == "header":
             if rec["run"] != self.run:
+                self._same_rate(rec)
                 self.run = rec["run"]
                 self.scale = scale_of(rec)
                 self.temp_names = list(rec.get("temperature_channels", []))
@@ -151,6 +165,22 @@ class AllanFeed:
             self.temp(int(rec["i0"]), rec["names"], rec["values_c"])
         elif kind == "gap":
             self.gap()
+
+    def _same_rate(self, header: dict[str, Any]) -> None:
+        """A new run must be at the accumulators' nominal ODR: their τ are sample counts, so
+        samples at another rate would be averaged as if they were these (no error, a wrong
+        curve). Raises DataError naming both rates; the first run known sets the rate."""
+        nominal = nominal_of(header)
+        if nominal is None:
+            return
+        if self.nominal_hz is None:
+            self.nominal_hz = nominal
+        elif nominal != self.nominal_hz:
+            raise DataError(
+                f"run {header.get('run')!r} was recorded at a nominal {nominal:g} Hz and the "
+                f"accumulators hold samples at {self.nominal_hz:g} Hz: one set of Allan "
+                "accumulators holds one output data rate; keep each rate in its own data "
+                "directory, or analyse each run separately (avard analyze --run RUN)")
 
     def replay(self, records: Iterable[dict[str, Any]], *, after: int | None = None) -> int:
         """Feed every record of ``records`` (as :func:`walk` yields them), skipping samples

@@ -32,8 +32,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from avard.core.allan.feed import AllanFeed, Segmenter, scale_of
-from avard.core.errors import FormatError
+from avard.core.allan.feed import AllanFeed, Segmenter, nominal_of, scale_of
+from avard.core.errors import DataError, FormatError
 
 log = logging.getLogger(__name__)
 
@@ -1073,6 +1073,14 @@ def load_recording(path: str | Path, *, strict: bool = False) -> Any:
     temperature = None
     if tnames:
         temperature = _hold_on_grid(idx, tnames, temps)
+    # runs at another ODR setting are another record (their samples are not these τ): the
+    # record source refuses them the same way, by its rate rule
+    nominals = {run: nominal_of(h) for run, h in report.newest_header.items()}
+    if len({v for v in nominals.values() if v is not None}) > 1:
+        listed = "; ".join(f"run {run} at {v:g} Hz" for run, v in nominals.items()
+                           if v is not None)
+        raise DataError(f"{path}: runs at different output data rates ({listed}); they are "
+                        "not one record: analyse each separately with --run RUN")
     # each run's newest header carries its best fit of the output rate; runs are averaged
     fitted = {run: float(h["rate_hz"]) for run, h in report.newest_header.items()}
     rates = list(fitted.values())

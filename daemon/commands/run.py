@@ -11,6 +11,7 @@ SIGHUP reopens the recording files. Logs go to stderr.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 from typing import Any
 
@@ -23,6 +24,7 @@ from avard.daemon.config import (
     load_config,
 )
 from avard.daemon.config_types import Config
+from avard.daemon.service import dirlock
 from avard.daemon.service.sdnotify import Notifier
 from avard.daemon.service.supervisor import ServiceHooks, Supervised
 
@@ -83,7 +85,12 @@ def run(args: argparse.Namespace) -> int:
         log.warning("no --config: using the built-in defaults (as in config/avard.toml); "
                     "recording into %s", config.recording.data_dir)
     check_runtime(cfg)          # the same checks as `avard check-config`
-    notifier = Notifier()
-    svc = build(args, config, notifier=notifier)
-    svc.install_signals()
-    return svc.run(args.duration)
+    with contextlib.ExitStack() as stack:
+        if config.recording.enabled:
+            # before the rig is opened: a second service on this directory (a manual run
+            # beside the unit) stops here, before its start-up resets the first one's sensor
+            stack.enter_context(dirlock.held(config.recording.path))
+        notifier = Notifier()
+        svc = build(args, config, notifier=notifier)
+        svc.install_signals()
+        return svc.run(args.duration)

@@ -25,6 +25,7 @@ modules through the device tree overlay).
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import os
@@ -48,6 +49,9 @@ CRC = "crc"
 NOT_READY = "not_ready"
 RESET_VALUE = "reset_value"
 ERROR = "error"
+
+#: Errors of this host, not of the bus: the fd tables full, no memory.
+_HOST_ERRNOS = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOMEM})
 
 
 def import_w1thermsensor(no_kernel_module: bool = True) -> ModuleType:
@@ -146,8 +150,11 @@ class SensorReader:
         # so the file is read here once, with the same checks, and converted by w1thermsensor.
         try:
             lines = sensor.sensorpath.read_text().splitlines()
-        except OSError:
+        except OSError as exc:
             self._sensor = None  # build it again when the sensor is back
+            if exc.errno in _HOST_ERRNOS:
+                # this process cannot open a file: the sensor is not the one missing
+                return math.nan, ERROR, f"cannot read w1_slave: {exc.strerror}"
             return math.nan, MISSING, "w1_slave not present"
         if len(lines) < 2:
             return math.nan, NOT_READY, f"short w1_slave ({len(lines)} lines)"

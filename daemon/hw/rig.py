@@ -19,6 +19,7 @@ import logging
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from avard.core.errors import ConfigError, HardwareError
@@ -167,9 +168,14 @@ def choose_backend(simulate: str | None) -> str | None:
 
 class TemperatureFeed(Protocol):
     """Temperatures the rig produces itself (the simulated DS18B20s): they go to ``deliver``,
-    which the composition root points at the service's reading handler."""
+    which the composition root points at the service's reading handler. Files the feed needs
+    (the simulated 1-Wire tree) go in ``workdir``, which the composition root points at the
+    service's recording directory; ``close`` removes them."""
 
     deliver: Callable[[TemperatureReading], None] | None
+    workdir: Path | None
+
+    def close(self) -> None: ...
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,10 @@ overruns from host scheduling jitter.
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import math
+import shutil
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -26,7 +29,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from avard.daemon.config_types import Config, as_config
 from avard.daemon.hw.adxl355 import Adxl355
-from avard.daemon.hw.ds18b20 import Ds18b20Bank
+from avard.daemon.hw.ds18b20 import ERROR, Ds18b20Bank
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.hw.w1_sysfs import SysfsTree
@@ -34,6 +37,11 @@ from avard.daemon.hw.w1_sysfs import SysfsTree
 if TYPE_CHECKING:
     from avard.daemon.hw.rig import SensorSpec
 
+log = logging.getLogger(__name__)
+
+#: The folder of the simulated 1-Wire tree inside the directory its owner gives
+#: (:attr:`SimulatedSensors.workdir`: the service's recording directory).
+W1_DIR = ".simulated-w1"
 
 
 @dataclass
@@ -57,6 +65,11 @@ class SimulatedSensors:
     fail: set[str] = field(default_factory=set)   # simulated DS18B20 dropouts (by name)
     _lost: set[str] = field(default_factory=set)
     _bus: Any = None
+    #: where the fake 1-Wire tree is made (compose.py gives the service's recording
+    #: directory): a folder of /tmp stayed behind whenever the process was killed
+    workdir: Path | None = None
+    _tmp: Any = None
+    _write_problem: str | None = None    # why the tree could not be written (said once)
 
     batch: int = 4096
     _buf: Any = None
@@ -114,16 +127,37 @@ class SimulatedSensors:
         return self.chip_c
 
     def _one_wire(self) -> tuple[SysfsTree, Ds18b20Bank]:
-        """The fake sysfs tree (in a temporary folder, removed with this object) and the
-        bank reading it, made at the first conversion."""
+        """The fake sysfs tree and the bank reading it, made at the first conversion."""
         if self._bus is None:
-            tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
-            tree = SysfsTree(Path(tmp.name) / "devices")
+            root = self._w1_root()
+            tree = SysfsTree(root / "devices")
             bank = Ds18b20Bank(dict(zip(self.names, self.ids, strict=True)),
                                interval_s=self.interval_s, base_directory=tree.base,
                                clock=self.clock)
-            self._bus = (tmp, tree, bank)
+            self._bus = (root, tree, bank)
         return self._bus[1], self._bus[2]
+
+    def _w1_root(self) -> Path:
+        """The tree's folder: :data:`W1_DIR` in :attr:`workdir`, replacing the one a killed
+        process left there (one service records into a directory, as one owns its state
+        file), so a kill leaves at most that one small folder, inside its owner's directory,
+        until the next start; without a ``workdir``, a new temporary folder."""
+        if self.workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="avard-sim-w1-")
+            return Path(self._tmp.name)
+        root = Path(self.workdir) / W1_DIR
+        if root.is_symlink() or (root.exists() and not root.is_dir()):
+            root.unlink()           # a link is removed, never followed
+        else:
+            shutil.rmtree(root, ignore_errors=True)
+        root.mkdir(parents=True)
+        return root
+
+    def close(self) -> None:
+        """Remove the fake 1-Wire tree (the service's stop calls it through the rig)."""
+        if self._bus is not None:
+            shutil.rmtree(self._bus[0], ignore_errors=True)
+            self._bus = None
 
     def on_tick(self, t_mono: float) -> None:
         """Called by the reader thread after each poll: simulated DS18B20 conversions."""
@@ -134,20 +168,45 @@ class SimulatedSensors:
         if math.isnan(plate):
             return
         self._next = t_mono + self.interval_s
-        tree, bank = self._one_wire()
+        # The tree is files on this host's disk (the kernel's sysfs never fails to be
+        # written): a full disk or a full fd table must not end the reader thread. A sensor
+        # whose file could not be written reads as failed this round, never as the value
+        # its file held from before.
+        failed: dict[str, str] = {}
+        try:
+            tree, bank = self._one_wire()
+        except OSError as exc:
+            self._cannot_write(exc)
+            return
         for name, sid, v in zip(self.names, self.ids, (plate, ambient),
                                 strict=True):
             lost = name in self.fail
-            if lost and name not in self._lost:
-                tree.remove(sid)
-                self._lost.add(name)
-            elif not lost and name in self._lost:
-                tree.restore(sid)
-                self._lost.discard(name)
-            if not lost:
-                tree.set_temperature(sid, v)
+            try:
+                if lost and name not in self._lost:
+                    tree.remove(sid)
+                    self._lost.add(name)
+                elif not lost and name in self._lost:
+                    tree.restore(sid)
+                    self._lost.discard(name)
+                if not lost:
+                    tree.set_temperature(sid, v)
+            except OSError as exc:
+                failed[name] = f"simulated w1_slave not written: {exc}"
+                self._cannot_write(exc)
+        if not failed and self._write_problem is not None:
+            log.info("the simulated 1-Wire files are written again")
+            self._write_problem = None
         for reading in bank.read_all():
+            if reading.name in failed:
+                reading = dataclasses.replace(reading, value_c=math.nan, status=ERROR,
+                                              detail=failed[reading.name])
             deliver(reading)
+
+    def _cannot_write(self, exc: OSError) -> None:
+        if self._write_problem is None:
+            log.warning("cannot write the simulated 1-Wire files (%s); their DS18B20 "
+                        "readings fail until they can", exc)
+        self._write_problem = str(exc)
 
 
 def open_simulated(sensor: SensorSpec, preset: str, *, seed: int | None = None,

@@ -125,6 +125,7 @@ def _usable(ckpt: dict[str, Any], streaming_cls: Any, names: list[str],
     if list(allan.names) != list(names) or float(allan.rate_hz) != float(rate_hz):
         return Refused(f"its channels/rate ({allan.names} at {allan.rate_hz:g} Hz) differ from "
                        "this configuration", other_config=True)
+    feed.nominal_hz = float(rate_hz)       # a run recorded after it at another ODR is refused
     return feed, after
 
 
@@ -215,6 +216,7 @@ def restore_accumulators(data_dir: Path, streaming_cls: Any, names: list[str],
         run = ckpt["run"]
     elif fresh is not None:
         feed, after = AllanFeed(fresh(), 1.0, list(names[3:])), None  # headers set the scale
+        feed.nominal_hz = float(rate_hz)
         feed.origin = _first_index(data_dir)
         source = "the whole recording (it holds no usable checkpoint record)"
     else:

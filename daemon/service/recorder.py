@@ -31,6 +31,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 import threading
 import time
 from collections.abc import Callable
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from avard.core.allan.feed import nominal_of
 from avard.core.errors import FormatError
 from avard.core.io import frames
 from avard.core.io.recording import (
@@ -83,6 +85,10 @@ class FileOps:
     def fsync(self, f: IO[bytes]) -> None:
         os.fsync(f.fileno())
 
+    def stat(self, f: IO[bytes]) -> os.stat_result:
+        """The open segment's inode: its links (0 once deleted) and size."""
+        return os.fstat(f.fileno())
+
     def truncate(self, f: IO[bytes], size: int) -> None:
         # ftruncate on the descriptor: no buffer to flush first, and shrinking a file needs
         # no free blocks, so this works on a full disk.
@@ -104,6 +110,8 @@ class FileOps:
                 st = p.stat()
             except FileNotFoundError:
                 continue
+            if not stat.S_ISREG(st.st_mode):
+                continue            # a directory in a segment's place is not ours to delete
             out.append((p, st.st_size, st.st_mtime))
         return out
 
@@ -171,6 +179,12 @@ class Recorder:
         self._rate_hz = 0.0        # the output rate the records give (fitted, else nominal)
         self.errors = 0
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
+        #: the open segment's sample records (raw, gap): (byte offset after the frame, i0,
+        #: index after it, t_mono, t_real), to name what a deleted or emptied segment took
+        self._marks: list[tuple[int, int, int, float, float]] = []
+        self._records_in_segment = 0
+        self.segments_removed = 0    # open segments deleted or cut short behind our back
+        self._removed: list[dict[str, Any]] = []   # their gaps, for the next segment
 
     # -- public -------------------------------------------------------------------------
     @property
@@ -193,6 +207,7 @@ class Recorder:
                 "records": self.records, "bytes": self.bytes,
                 "segments": self.segments_written, "records_lost": self.records_lost,
                 "samples_lost": self.samples_lost, "torn_frames": self.torn_frames,
+                "segments_removed": self.segments_removed,
                 "free_bytes": free}
 
     def write(self, record: dict[str, Any]) -> bool:
@@ -203,6 +218,8 @@ class Recorder:
             if self.paused and not self._try_resume(now):
                 self._remember_lost(record)
                 return False
+            if self._f is not None:
+                self._check_segment()
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
                     self._remember_lost(record)
@@ -236,10 +253,16 @@ class Recorder:
         """SIGHUP: close the current segment; the next record opens a new one."""
         with self._lock:
             log.info("reopening the recording (SIGHUP)")
+            if self._f is not None:
+                self._check_segment()       # removed before the SIGHUP: said in the next
             self._close_file()
 
     def close(self) -> None:
         with self._lock:
+            if self._f is not None:
+                self._check_segment()
+            if self._removed and not self.paused:
+                self._rotate(self.clock())  # a last segment to say what went
             if self.lost is not None and not self.paused:
                 self._flush_lost()
             self._close_file()
@@ -269,6 +292,12 @@ class Recorder:
         self._size += len(data)
         self.bytes += len(data)
         self.records += 1
+        self._records_in_segment += 1
+        if record["kind"] in ("raw", "gap") and "i0" in record:
+            i0 = int(record["i0"])
+            self._marks.append((self._size, i0, i0 + int(record.get("n", 0)),
+                                float(record.get("t_mono", 0.0)),
+                                float(record.get("t_real", 0.0))))
         self._note_time(record)
         self._dirty = True
         return True
@@ -325,6 +354,9 @@ class Recorder:
         name = f"{self.run_id}_{self._segment_no:08d}_{stamp}{SEGMENT_SUFFIX}"
         path = self.dir / name
         try:
+            # the directory too: removed with everything in it while the service ran, the
+            # recording goes on in it again instead of pausing until someone makes it
+            self.dir.mkdir(parents=True, exist_ok=True)
             self._f = self.ops.open_append(path)
         except OSError as exc:
             self._failed(exc, "open")
@@ -332,16 +364,54 @@ class Recorder:
         self._segment_no += 1
         self.path = path
         self._size = 0
+        self._marks = []
+        self._records_in_segment = 0
         self._opened_at = now
         self.segments_written += 1
         log.info("recording into %s", path)
         self._header_at = now
         if not self._append(self._header()):
             return False
+        while self._removed and self._append(self._removed[0]):
+            self._removed.pop(0)            # earlier samples than a pause's loss: first
         if self.lost is not None:
             self._flush_lost()
         self._retention()
         return True
+
+    def _check_segment(self) -> None:
+        """Whether the open segment still holds what was written to it. Deleted (also when
+        a directory or another file took its name) or cut short (``: > segment``, logrotate's
+        copytruncate), the records written there are gone, and so would be everything
+        appended until the next rotation, up to ``segment_s`` later, with no word of it.
+        Then: close it, and keep what it lost as a gap (reason ``segment_removed``) for the
+        start of the next segment, which the caller opens next (kept across a pause: a
+        failed open does not lose it). A file grown behind our back is left alone (the
+        reader skips what is not a frame)."""
+        assert self._f is not None
+        try:
+            st = self.ops.stat(self._f)
+        except OSError:
+            return                  # cannot tell; the write itself will report a failure
+        if st.st_nlink > 0 and st.st_size >= self._size:
+            return
+        kept = 0 if st.st_nlink == 0 else st.st_size
+        lost = [m for m in self._marks if m[0] > kept]
+        records = self._records_in_segment if kept == 0 else len(lost)
+        how = "deleted" if st.st_nlink == 0 else f"cut to {st.st_size} bytes"
+        self.segments_removed += 1
+        log.error("the open segment %s was %s behind the recorder's back; %s; continuing "
+                  "in a new segment", self.path, how,
+                  f"samples [{lost[0][1]}, {max(m[2] for m in lost)}) went with it "
+                  "(recorded as a segment_removed gap)" if lost
+                  else "no sample record went with it")
+        self._close_file_quietly()
+        if lost:
+            i0 = lost[0][1]
+            n = max(m[2] for m in lost) - i0
+            self._removed.append(frames.gap_record(
+                self.run_id, 0, i0, n, lost[0][3], lost[0][4], "segment_removed", how=how,
+                lost_records=records))
 
     def _flush_lost(self) -> None:
         lost = self.lost
@@ -489,12 +559,20 @@ def write_atomic(path: Path, data: bytes) -> None:
     the old file stays whole and no partial ``.tmp`` is left behind."""
     tmp = path.with_suffix(".tmp")
     try:
-        with open(tmp, "wb", buffering=0) as f:
+        # A temporary file left by a process killed inside this write, or a link put in its
+        # place, is removed, never written through: opening it for writing followed a
+        # symlink and overwrote whatever it pointed at.
+        if tmp.is_symlink() or tmp.is_file():
+            tmp.unlink()
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC,
+                     0o644)
+        with open(fd, "wb", buffering=0) as f:
             FileOps().write(f, data)
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError:
-        tmp.unlink(missing_ok=True)
+        if tmp.is_symlink() or tmp.is_file():
+            tmp.unlink(missing_ok=True)
         raise
 
 
@@ -581,7 +659,9 @@ def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | Non
     d = Path(data_dir)
     if not d.is_dir():
         return None
-    ordered = order_segments(d.glob("*" + SEGMENT_SUFFIX))
+    # files only: a directory in a segment's place has no frames, and sorted among them
+    # it set off the warning below about names that do not sort in data order
+    ordered = order_segments(f for f in d.glob("*" + SEGMENT_SUFFIX) if f.is_file())
     by_name = sorted(ordered, key=lambda p: p.name)
     if by_name != ordered:
         # the invariant "order comes from the data" holds (every reader orders by the
@@ -610,6 +690,25 @@ def last_recorded(data_dir: str | Path, nominal_hz: float) -> LastRecorded | Non
         span = end["n"] / float(end.get("rate_hz") or nominal_hz)
         return LastRecorded(int(end["i0"]) + int(end["n"]), float(end["t_mono"]) + span,
                             float(end["t_real"]) + span, boot)
+    return None
+
+
+def recorded_rate(data_dir: str | Path) -> tuple[str, float] | None:
+    """The run and nominal ODR (Hz) of the newest header in a recording directory (segments
+    in data order, newest first), or None when it holds none that says its ODR."""
+    d = Path(data_dir)
+    if not d.is_dir():
+        return None
+    for seg in reversed(order_segments(f for f in d.glob("*" + SEGMENT_SUFFIX) if f.is_file())):
+        try:
+            head = first_record(seg)
+        except (OSError, FormatError):
+            continue
+        if head is None or head.get("kind") != "header":
+            continue
+        nominal = nominal_of(head)
+        if nominal is not None:
+            return str(head.get("run")), nominal
     return None
 
 

@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Protocol
 
 from avard.core.allan.feed import AllanFeed
@@ -35,6 +36,7 @@ from avard.daemon.config import DATA_DIR_ADVICE
 from avard.daemon.config_types import Config
 from avard.daemon.hw.rig import Rig
 from avard.daemon.hw.timebase import SystemClock, TimeBase
+from avard.daemon.service import dirlock
 from avard.daemon.service.acquisition import Acquisition
 from avard.daemon.service.allan_stage import AllanStage
 from avard.daemon.service.checkpoint import restore_accumulators, save_state
@@ -45,6 +47,7 @@ from avard.daemon.service.recorder import (
     kernel_boot_id,
     last_recorded,
     new_run_id,
+    recorded_rate,
     restart_gap,
 )
 from avard.daemon.service.recorder_stage import RecorderStage
@@ -335,6 +338,7 @@ class Service(Supervised):
         self._publisher_factory = hooks.publisher
         self._request_factory = hooks.request_server
         self.recorder: Any = None
+        self._dir_lock: Path | None = None
         self.publisher: Any = None
         self.request_server: Any = None
         self.acq: Acquisition | None = None
@@ -495,6 +499,20 @@ class Service(Supervised):
                 f"recording.data_dir = {str(self.data_dir)!r}: cannot write there "
                 f"({exc.strerror}); {DATA_DIR_ADVICE}") from None
 
+    def _check_recorded_rate(self) -> None:
+        """One recording directory holds one output data rate: a run at another ODR could
+        not join the restored accumulators (their τ are sample counts) and would make a
+        record that ``avard analyze`` refuses as a whole. Raises ConfigError saying what to do."""
+        got = recorded_rate(self.data_dir)
+        if got is not None and got[1] != float(self.odr):
+            run, nominal = got
+            raise ConfigError(
+                f"recording.data_dir = {str(self.data_dir)!r} holds a recording at a nominal "
+                f"{nominal:g} Hz (run {run}) and this configuration records at "
+                f"{float(self.odr):g} Hz: one recording directory holds one output data rate; "
+                "give this rate its own data directory (recording.data_dir or --data-dir), or "
+                "move the old segments out of this one")
+
     def start(self, before_acquisition: Callable[[], None] | None = None, *,
               stop_at: float | None = None) -> None:
         """Build the stages and start every thread, consumers before the reader;
@@ -504,6 +522,14 @@ class Service(Supervised):
         recording = cfg.recording.enabled
         if recording:
             self._check_data_dir()
+            # one service per recording directory, held until stop() (dirlock.py)
+            self._dir_lock = dirlock.hold(self.data_dir)
+            try:
+                self._check_recorded_rate()
+            except ConfigError:
+                dirlock.release(self._dir_lock)
+                self._dir_lock = None
+                raise
             self.restore()
         self.acq = Acquisition(self.sensor, self.ring, self.timebase, self.clock,
                                poll_hz=cfg.sensor.poll_hz,
@@ -668,6 +694,9 @@ class Service(Supervised):
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None
+        if self._dir_lock is not None:   # every writer of the directory has stopped
+            dirlock.release(self._dir_lock)
+            self._dir_lock = None
 
 
 def _default_recorder(svc: Service) -> Any:

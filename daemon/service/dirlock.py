@@ -1,0 +1,116 @@
+"""One service per recording directory: an exclusive ``flock`` on ``.avard.lock`` in it.
+
+Two services recording into one directory (a manual ``avard run`` beside the unit, with the
+unit's config) both took the same run sequence number, both continued the sample index from
+the same end of the recording, wrote the same indices twice with different samples and
+replaced each other's state file: the recording then held two streams under one index, and
+on hardware the second one's start-up reset the first one's sensor. The second process now
+stops before it opens the sensor, with one line naming the process that records there, and
+exit status 2.
+
+The lock belongs to the open file, so the kernel drops it when the process ends however it
+ends (SIGKILL, a power cut): a stale lock file never keeps a restart out. It is held from
+before the rig is opened (``avard run``) until the service has stopped; within one process
+it is counted (the command and the service it starts both hold it).
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import logging
+import os
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from avard.core.errors import ConfigError
+
+LOCK_FILE = ".avard.lock"
+
+log = logging.getLogger(__name__)
+
+_guard = threading.Lock()
+_held: dict[Path, list[int]] = {}       # directory → [fd, holders in this process]
+
+
+def _key(directory: Path) -> Path:
+    return Path(os.path.realpath(directory))
+
+
+def hold(directory: str | Path) -> Path:
+    """Lock ``directory`` (made if missing) for this process, or raise ConfigError naming
+    the process that holds it. Returns the key to :func:`release` it with."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    key = _key(d)
+    with _guard:
+        if key in _held:
+            _held[key][1] += 1
+            return key
+        path = key / LOCK_FILE
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                # a full disk at the very first start: the service records nothing until
+                # space returns anyway, and it must start to say so (and be restarted);
+                # exit status 2 would keep systemd from ever restarting it
+                log.warning("cannot create %s in %s (%s); running without the one-service "
+                            "lock", LOCK_FILE, d, exc.strerror)
+                _held[key] = [-1, 1]
+                return key
+            raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot open its lock file "
+                              f"{LOCK_FILE} ({exc.strerror})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            other = _holder(fd)
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot lock it "
+                                  f"({exc.strerror})") from None
+            raise ConfigError(
+                f"recording.data_dir = {str(d)!r}: another avard process"
+                f"{f' (pid {other})' if other else ''} is recording there; stop it "
+                "(systemctl stop avard) or give this one another data directory "
+                "(--data-dir)") from None
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError:
+            pass                # the pid is only for the message above
+        _held[key] = [fd, 1]
+        return key
+
+
+def release(key: Path) -> None:
+    """Drop one hold of :func:`hold`; the last one unlocks (the file stays: removing it
+    could race with another process that just opened it)."""
+    with _guard:
+        entry = _held.get(key)
+        if entry is None:
+            return
+        entry[1] -= 1
+        if entry[1] == 0:
+            del _held[key]
+            if entry[0] >= 0:
+                os.close(entry[0])
+
+
+@contextmanager
+def held(directory: str | Path) -> Iterator[Path]:
+    key = hold(directory)
+    try:
+        yield key
+    finally:
+        release(key)
+
+
+def _holder(fd: int) -> int | None:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        return int(text) if text.isdigit() else None
+    except OSError:
+        return None
