@@ -209,6 +209,17 @@ class _Profile:
         nll = self._nll_each_k(self._over_k(ks, wx), self.wy, _solve_each)
         return int(np.argmin(nll)), nll
 
+    def k_profile_reml(self, ks: NDArray, wx: NDArray) -> NDArray[np.float64]:
+        """−2 ln of K's restricted likelihood at each K of ``ks`` beside the columns ``wx``
+        (``k_profile`` plus ln det of the columns' GLS normal matrix): the likelihood of
+        the residuals the columns leave, which is what K's variance is read from where the
+        columns take part of the walk (a fitted slope takes the walk's own linear part, and
+        K's ordinary profile beside it is biased low by that much)."""
+        k = self._over_k(ks, wx)
+        nll = self._nll_each_k(k, self.wy, _solve_each)
+        sign, logdet = np.linalg.slogdet(k.xtx)
+        return np.asarray(np.where(sign > 0, nll + logdet, np.inf))
+
     def slope_profile(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
                       ) -> NDArray[np.float64]:
         """−2 ln L at each of ``slopes`` (the slope column ``wt`` fixed, the columns ``w0``
@@ -368,6 +379,86 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
                            float(ks[j]), k_hi, float(top), max(0.0, h1 - h2), len(t),
                            record_s, nu, beta)
+
+
+def _reml_range(ks: NDArray, nll: NDArray) -> tuple[float, float, float]:
+    """(the K of least ``nll``, and where ``nll`` rises by 1 below and above it): the least
+    from a parabola in K² through the grid's lowest point and its neighbours, each crossing
+    interpolated linearly in K² between the grid's points (0 where the profile has not
+    risen by 1 at K = 0; the grid's top where it has not at the top)."""
+    ks = np.asarray(ks, dtype=float)
+    nll = np.asarray(nll, dtype=float)
+    if not np.any(np.isfinite(nll)):
+        return math.nan, math.nan, math.nan
+    j = int(np.argmin(nll))
+    k2 = ks * ks
+    best, least = float(ks[j]), float(nll[j])
+    if 0 < j < len(ks) - 1 and np.all(np.isfinite(nll[j - 1:j + 2])):
+        a, b, c = np.polyfit(k2[j - 1:j + 2], nll[j - 1:j + 2], 2)
+        if a > 0 and k2[j - 1] < -b / (2 * a) < k2[j + 1]:
+            best = math.sqrt(-b / (2 * a))
+            least = min(least, float(c - b * b / (4 * a)))
+    lim = least + 1.0
+
+    def cross(a: int, b: int) -> float:  # between a (≤ lim) and b (> lim)
+        return math.sqrt(float(np.interp(lim, [nll[a], nll[b]], [k2[a], k2[b]])))
+
+    below = np.flatnonzero((np.arange(len(ks)) < j) & (nll > lim))
+    lo = cross(int(below[-1]) + 1, int(below[-1])) if below.size else 0.0
+    above = np.flatnonzero((np.arange(len(ks)) > j) & (nll > lim))
+    hi = cross(int(above[0]) - 1, int(above[0])) if above.size else float(ks[-1])
+    return best, min(lo, best), max(hi, best)
+
+
+#: B's grid for K's profile beside a slope (``walk_beside_slope``): 0 and this many points
+#: from a sixteenth of the largest B the AVAR fit allows to twice it.
+B_POINTS = 25
+
+
+def walk_beside_slope(fit: NoiseFit, means: NDArray, block_s: float
+                      ) -> tuple[float, float, float] | None:
+    """The walk K beside a fitted slope from the block means: (K, and its Δ(−2 ln L) ≤ 1
+    range below and above), None where it cannot be computed.
+
+    K's *restricted* likelihood (``_Profile.k_profile_reml``): the slope, fitted, takes the
+    walk's own linear part, and K's ordinary profile beside it is biased low by that much
+    (on means drawn from the model itself; tests/core/test_drift.py). N at the fit's value
+    (the short τ pin it); B *profiled* under what the AVAR fit knows of it, a Gaussian in
+    B² at the fit's θ and standard error (an absent B at 0, its upper limit z_present
+    standard errors above): B and K trade at the block means' scales, and a B held at a
+    value the fit got wrong (absent, on some of the adversary's drift records) moved K by
+    more than its range. Costs one factorisation per B; run only beside a resolved ramp."""
+    yb = np.asarray(means, dtype=float).reshape(-1)
+    if len(yb) < MIN_BLOCKS or not np.all(np.isfinite(yb)):
+        return None
+    t = (np.arange(len(yb)) + 0.5) * block_s
+    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
+    if not n_w > 0:
+        return None
+    b_term = fit.terms["bias_instability"]
+    j = next((i for i, c in enumerate(fit.components) if c.cause == "bias_instability"), None)
+    theta = float(fit.theta[j]) if j is not None and j < len(fit.theta) else 0.0
+    if b_term.present and theta > 0 and j is not None:
+        se = math.sqrt(max(float(fit.theta_cov[j, j]), 0.0))
+    else:
+        theta, se = 0.0, float(b_term.upper or 0.0) ** 2 / fit.z_present
+    b_top = max(math.sqrt(theta + se), float(b_term.hi or 0.0), float(b_term.upper or 0.0))
+    grid = (np.concatenate([[0.0], np.geomspace(b_top / 16.0, 2.0 * b_top, B_POINTS)])
+            if se > 0 and b_top > 0 else np.array([math.sqrt(theta)]))
+    top = K_SPAN * max(_k_upper(fit), n_w / (len(t) * block_s))
+    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-K_DECADES, top, K_POINTS)])
+    tc = t - t.mean()
+    nll = np.full(len(ks), np.inf)
+    for b in grid:
+        try:
+            prof = _Profile(yb, t, block_s, n_w, float(b))
+        except np.linalg.LinAlgError:
+            continue
+        w1 = np.column_stack([prof.white(np.ones_like(t)), prof.white(tc)])
+        pen = ((b * b - theta) / se) ** 2 if se > 0 else 0.0
+        nll = np.fmin(nll, prof.k_profile_reml(ks, w1) + pen)
+    k, lo, hi = _reml_range(ks, nll)
+    return (k, lo, hi) if math.isfinite(k) else None
 
 
 def walk_directions(lam: NDArray, k: float) -> float:
@@ -611,7 +702,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
         noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"], added_cov=added)
     except FitError:
         return fit, lik
-    noise = _walk_from_time_domain(noise, lik)
+    noise = _walk_from_time_domain(noise, lik, walk_beside_slope(fit, means, block_s))
     ramp = Component("rate_ramp", "rate_ramp", {}, "value", UNITS["rate_ramp"])
     k = len(noise.theta)
     cov = np.zeros((k + 1, k + 1))
@@ -684,34 +775,43 @@ def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
     return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor)
 
 
-def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
+def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood,
+                           walk: tuple[float, float, float] | None = None) -> NoiseFit:
     """``noise`` (the AVAR fit less the ramp) with its walk K reaching what the time domain
-    allows beside the drift: K's upper 1σ there is ``lik.k_drift_hi``. Where the AVAR finds
-    K, its value is kept and its interval widened to that top; where it finds none, the time
-    domain's K stands. The AVAR fit's τ stop at T/8 and, with the fitted line taking the
-    walk's own linear part, often find no K; a ramp's cross
-    term with the noise weighs the record's ends, where the walk dominates, so without it
-    the printed EDF of the 12 h "steep" records was 2–3 times what their estimates scatter
-    with (coverage 50–53 % at 1024–4096 s)."""
+    finds beside the drift, ``walk`` (``walk_beside_slope``: K and its range; without it,
+    the ordinary profile's K beside the slope, ``lik.k_drift``, its upper 1σ
+    ``lik.k_drift_hi`` mirrored below). Where the AVAR finds K, its value is kept and its
+    interval covers both estimates; where it finds none, the time domain's K stands. The
+    AVAR fit's τ stop at T/8 and, with the fitted line taking the walk's own linear part,
+    often find no K; a ramp's cross term with the noise weighs the record's ends, where the
+    walk dominates, so without it the printed EDF of the 12 h "steep" records was 2–3 times
+    what their estimates scatter with (coverage 50–53 % at 1024–4096 s)."""
     from avard.core.model.fit import TermEstimate
 
     j = next((i for i, c in enumerate(noise.components) if c.cause == "rate_random_walk"),
              None)
-    up = lik.k_drift_hi**2
+    if walk is None:
+        k_hi = lik.k_drift_hi
+        k = max(lik.k_drift, math.sqrt(0.5) * k_hi)  # (noise_psd drops a θ of 0)
+        walk = (k, math.sqrt(max(2.0 * k * k - k_hi * k_hi, 0.0)), k_hi)
+    k, k_lo, k_hi = walk
+    up = k_hi**2
     if j is None or not up > 0:
         return noise
     theta = float(noise.theta[j])
     se = math.sqrt(max(float(noise.theta_cov[j, j]), 0.0))
-    if theta > 0 and theta + se >= up:
-        return noise
     old = noise.terms["rate_random_walk"]
     if theta > 0 and old.present:
-        # Two estimates of one walk, the AVAR's and the block means': the interval reaches
-        # the time domain's top, the value stays the AVAR's. (Taking the time domain's
-        # value whenever it was the higher kept the larger of two scattered estimates, and
-        # the interval beside a resolved ramp held the generator's K on under half of the
-        # adversary's drift records.)
-        wide = up - theta
+        # Two estimates of one walk, the AVAR's and the block means': the interval covers
+        # both, the value stays the AVAR's. (Taking the time domain's value whenever it was
+        # the higher kept the larger of two scattered estimates, and the interval beside a
+        # resolved ramp held the generator's K on under half of the adversary's drift
+        # records.)
+        lo = min(float(old.lo if old.lo is not None else 0.0), k_lo)
+        hi = max(float(old.hi if old.hi is not None else 0.0), k_hi)
+        if lo >= (old.lo or 0.0) and hi <= (old.hi or 0.0):
+            return noise
+        wide = max(hi * hi - theta, se)  # θ's upper 1σ reaches the top (noise_psd)
         cov = np.array(noise.theta_cov, dtype=float)
         grow = wide / se if se > 0 else 0.0
         if grow > 0:
@@ -721,16 +821,15 @@ def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood) -> NoiseFit:
             cov[j, :] = 0.0
             cov[:, j] = 0.0
             cov[j, j] = wide * wide
-        term = replace(old, lo=math.sqrt(max(theta - wide, 0.0)), hi=math.sqrt(up))
+        term = replace(old, lo=lo, hi=hi)
         return replace(noise, theta_cov=cov, terms={**noise.terms, "rate_random_walk": term})
-    point = max(theta, lik.k_drift**2, 0.5 * up)  # (noise_psd drops a θ of 0)
+    point = k * k if k > 0 else 0.5 * up  # (noise_psd drops a θ of 0)
     new_theta = np.array(noise.theta, dtype=float)
     new_theta[j] = point
     cov = np.array(noise.theta_cov, dtype=float)
     cov[j, :] = 0.0
     cov[:, j] = 0.0
     cov[j, j] = max(up - point, 0.0) ** 2
-    term = TermEstimate(math.sqrt(point), math.sqrt(max(2.0 * point - up, 0.0)),
-                        math.sqrt(max(up, point)), old.unit, True, old.z)
+    term = TermEstimate(math.sqrt(point), min(k_lo, k), max(k_hi, k), old.unit, True, old.z)
     return replace(noise, theta=new_theta, theta_cov=cov,
                    terms={**noise.terms, "rate_random_walk": term})

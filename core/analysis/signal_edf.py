@@ -161,13 +161,22 @@ def signal_share(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
     return np.nan_to_num(share, nan=0.0)
 
 
-def noise_psd(fit: NoiseFit) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+def noise_psd(fit: NoiseFit, *, upper: bool = True
+              ) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
     """The fitted noise's two-sided PSD (cycles per sample), each present component at its
-    upper 1σ (``_noise_upper_levels``). The cross term weighs the record's ends, where a
-    random walk the fit left out would scatter it: the steep drift's records (1 h, whose
-    generator has a random walk below the flicker floor) scatter at 409.6 s with an EDF of
-    about 1300–1550, where this gives 1800 (docs/analysis.md)."""
-    comps = [(level, p) for level, j in _noise_upper_levels(fit)
+    upper 1σ (``_noise_upper_levels``), or with ``upper`` False at its value. The cross
+    term weighs the record's ends, where a random walk the fit left out would scatter it:
+    the steep drift's records (1 h, whose generator has a random walk below the flicker
+    floor) scatter at 409.6 s with an EDF of about 1300–1550, where this gives 1800
+    (docs/analysis.md). Beside a ramp resolved apart from the AVAR the walk is the time
+    domain's own estimate (``drift.walk_beside_slope``), and the cross term, linear in the
+    spectrum, is its mean over the fit's uncertainty at the point values (``upper``
+    False): at the upper 1σ it counted that uncertainty into a 68 % interval once more."""
+    levels = _noise_upper_levels(fit)
+    if not upper:
+        levels = [(float(fit.theta[j]) if fit.components[j].fixed_value is None else lv, j)
+                  for lv, j in levels]
+    comps = [(level, p) for level, j in levels
              if (p := fit.components[j].psd(fit.rate_hz)) is not None]
 
     def psd(nu: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -274,7 +283,8 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
         # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR
         # leaves beside the deterministic terms at their lower 1σ, the larger
         noise_part = np.fmax(noise_upper(fit, allan), total - low)
-    return with_parts_edf(allan, parts, total, noise_part, noise_psd(fit), noise,
+    return with_parts_edf(allan, parts, total, noise_part,
+                          noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart), noise,
                           within_support=not fit.resolved_apart)
 
 

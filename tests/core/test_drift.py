@@ -150,8 +150,32 @@ def test_analyze_resolves_a_found_drift_as_a_ramp_with_k_refitted_without_it(gap
     k0 = no_ramp.terms["rate_random_walk"].value
     k = ch.fit.terms["rate_random_walk"]
     assert k0 is not None and k.value is not None and k.value < 0.75 * k0
-    assert k.lo is not None and k.hi is not None
-    assert k.lo <= math.sqrt(mix.q2) <= k.hi + (k.hi - k.lo)  # the generator's walk
+    assert k.lo is not None and k.hi is not None and k.lo < k.value < k.hi
+    # (whether a 68 % interval holds the generator's walk is a share of records, not one
+    # record's: test_k_beside_a_resolved_ramp_holds_the_walk_as_often_as_it_claims)
+
+
+@pytest.mark.slow
+def test_k_beside_a_resolved_ramp_holds_the_walk_as_often_as_it_claims():
+    """The records of the test above, 24 seeds: where the ramp is resolved, K's 68 %
+    interval beside it holds the generator's walk in a share within a 68.3 % interval's
+    binomial 99 % range, and K is not biased (its median within 15 % of the walk's)."""
+    held, ratio = [], []
+    for seed in range(24):
+        mix = mix_for("plain", N_12H, 1.0)
+        y, _ = record(mix, N_12H, np.random.default_rng(seed))
+        ch = _analyze(y + 4 * mix_for("drift", N_12H, 1.0).drift * np.arange(N_12H), 1.0)
+        if "rate_ramp" not in ch.fit.resolved_apart:
+            continue
+        k, truth = ch.fit.terms["rate_random_walk"], math.sqrt(mix.q2)
+        assert k.value is not None and k.lo is not None and k.hi is not None
+        held.append(k.lo <= truth <= k.hi)
+        ratio.append(k.value / truth)
+    n, p = len(held), 0.683
+    assert n >= 20
+    spread = 2.58 * math.sqrt(n * p * (1 - p))
+    assert n * p - spread <= sum(held) <= n * p + spread, (sum(held), n)
+    assert 0.85 <= float(np.median(ratio)) <= 1.15, ratio
 
 
 def test_analyze_claims_no_drift_on_a_record_without_one():
@@ -359,6 +383,34 @@ def test_the_bartlett_factor_divides_the_likelihood_ratio_by_the_tables_value():
     assert all(dr.bartlett(v) >= 1.0 for v in (0.0, 0.5, 3.0, 10.0, 1e4))
     assert dr.bartlett(4.6) > 1.3  # a few walk directions: the ratio's tail is t-like
     assert dr.bartlett(0.0) == 1.0  # no walk: χ²(1) (the ratio is below it there)
+
+
+def test_ks_restricted_profile_beside_a_slope_is_unbiased_and_its_range_holds_k():
+    """On block means drawn from the model itself (white, flicker and a walk at known N, B,
+    K, plus a slope; 4 h in 256 blocks, the adversary's drift class), K's ordinary profile
+    beside the fitted slope comes out low (the slope takes the walk's own linear part);
+    its restricted likelihood (``walk_beside_slope``'s) does not, and its Δ(−2 ln L) ≤ 1
+    range holds the true K as often as a 68 % interval should (60–76 % of 200 draws)."""
+    rng = np.random.default_rng(5)
+    nb, bs = 256, 14400 / 256
+    n_w, b_i, k = 1.6e-4, 2e-5, 1.5e-6
+    t = (np.arange(nb) + 0.5) * bs
+    chol = np.linalg.cholesky(dr.block_noise_cov(t, bs, n_w, b_i, k))
+    top = dr.K_SPAN * k
+    ks = np.concatenate([[0.0], np.geomspace(top * 1e-4, top, dr.K_POINTS)])
+    prof = dr._Profile(np.zeros(nb), t, bs, n_w, b_i)
+    w1 = np.column_stack([prof.white(np.ones(nb)), prof.white(t - t.mean())])
+    held, ln_reml, ln_ml = 0, [], []
+    for _ in range(200):
+        prof.wy = prof.white(chol @ rng.standard_normal(nb) + 2e-7 * t)
+        j, _nll = prof.k_profile(ks, w1)
+        best, lo, hi = dr._reml_range(ks, prof.k_profile_reml(ks, w1))
+        held += lo <= k <= hi
+        ln_reml.append(math.log(best / k))
+        ln_ml.append(math.log(max(float(ks[j]), 1e-3 * k) / k))
+    assert 0.60 <= held / 200 <= 0.76, held
+    assert abs(np.mean(ln_reml)) < 0.1, np.mean(ln_reml)
+    assert np.mean(ln_ml) < np.mean(ln_reml) - 0.08, (np.mean(ln_ml), np.mean(ln_reml))
 
 
 @pytest.mark.slow

@@ -85,3 +85,18 @@ def test_k_beside_a_resolved_ramp_is_the_k_of_the_same_noise_without_it(tmp_path
     assert abs(k3.value / k0.value - 1.0) < 0.1, (k0, k3)
     assert k3.lo is not None and k3.hi is not None
     assert k3.lo <= 1.5e-6 <= k3.hi
+
+
+@pytest.mark.parametrize("seed", [332, 333])
+def test_k_beside_a_resolved_ramp_where_the_refit_finds_none_is_the_walks_own(tmp_path, seed):
+    """Where the AVAR refit beside the ramp finds no K, the time domain's K stands. Its
+    ordinary profile beside the fitted slope lost the walk's linear part to the slope (seed
+    332: 1.18e-6 [0.76e-6, 1.49e-6], 333: 1.07e-6 [0.42e-6, 1.45e-6], the generator's
+    1.5e-6 above both); K's restricted likelihood, B profiled under the AVAR fit's B,
+    gives the walk's own, its range either side of it its own."""
+    ch3, _ = _x(tmp_path, seed, 3.0)
+    assert "rate_ramp" in ch3.fit.resolved_apart
+    k3 = ch3.fit.terms["rate_random_walk"]
+    assert k3.present and k3.value is not None and k3.lo is not None and k3.hi is not None
+    assert 0 < k3.lo < k3.value < k3.hi
+    assert k3.lo <= 1.5e-6 <= k3.hi
