@@ -329,8 +329,7 @@ class Service(Supervised):
             streaming_cls = StreamingAllan
         self.streaming_cls = streaming_cls
         self.allan = self._fresh_allan()
-        self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
-        self.feed.run = self.run_id
+        self.feed = self._new_feed()
         self.start_index = 0
         self.restored: dict[str, Any] | None = None
         self._restart_gap: RestartGap | None = None
@@ -452,6 +451,15 @@ class Service(Supervised):
         if self.config.recording.enabled:
             save_state(self.data_dir, rec)
 
+    def _new_feed(self) -> AllanFeed:
+        """The live feed of the accumulators, at this run and this ODR. The ODR is set
+        here, not left to a header (the live feed never sees one): a checkpoint stored
+        ``"nominal_hz": null``, and whoever read it back knew no rate to refuse another by."""
+        feed = AllanFeed(self.allan, self.scale, self.temp_names)
+        feed.run = self.run_id
+        feed.nominal_hz = float(self.odr)
+        return feed
+
     def restore(self) -> None:
         """Restore the accumulators from the last checkpoint (with what was recorded after
         it replayed) and continue the sample index across the restart."""
@@ -463,8 +471,7 @@ class Service(Supervised):
             if got is not None:
                 # None: the restored state broke an invariant and was dropped (logged)
                 self.allan = got.allan if got.allan is not None else self._fresh_allan()
-                self.feed = AllanFeed(self.allan, self.scale, self.temp_names)
-                self.feed.run = self.run_id
+                self.feed = self._new_feed()
                 self.feed.cover(got.covered)
                 covered = got.covered
                 self.feed.origin = got.origin

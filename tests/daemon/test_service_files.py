@@ -534,3 +534,18 @@ def test_a_slow_disk_on_the_real_clock_costs_recorder_behind_gaps_of_the_right_s
     end = svc.final_status["index"]       # an overrun on a loaded machine is a gap as well
     assert _tiles([*raw, *((g["i0"], g["i0"] + g["n"]) for g in gaps)]) == [(0, end)]
     assert raw[-1][1] == end and raw[-1][0] >= slow_to
+
+
+def test_a_checkpoint_names_the_rate_of_the_samples_it_holds(tmp_path):
+    """The live feed never saw a header, so its ``nominal_hz`` stayed None and every
+    checkpoint stored ``"nominal_hz": null``: whoever read it back knew no rate to refuse a
+    run at another one by. Both the fresh feed and the one a restart restores carry it."""
+    from avard.daemon.service.checkpoint import read_state
+
+    data = tmp_path / "rec"
+    for seed in (1, 2):                 # the second run restores the first one's feed
+        svc = _run(data, 9.0, seed)
+        state = read_state(data)
+        assert state.record is not None
+        assert state.record["feed"]["nominal_hz"] == float(svc.odr) == 125.0
+    assert svc.restored is not None
