@@ -106,8 +106,9 @@ class AllanFeed:
         self._open = False          # samples fed since the last gap()
         self.run: str | None = None
         #: The nominal ODR (Hz) of the samples the accumulators hold: set by the first run's
-        #: header, or by whoever built the accumulators at a configured rate (the service's
-        #: restore). A run at another ODR cannot join them (their τ are counted in samples).
+        #: header, or by whoever built the accumulators at a configured rate (the service,
+        #: for its live feed and at its restore). A run at another ODR cannot join them
+        #: (their τ are counted in samples).
         self.nominal_hz: float | None = None
         self._segments = Segmenter()
 
