@@ -50,8 +50,20 @@ def hold(directory: str | Path) -> Path:
             _held[key][1] += 1
             return key
         path = key / LOCK_FILE
+        writable = True
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+            fd = _open(path)
+        except PermissionError:
+            # a lock file this user may not write: left root-owned 0644 by a manual `sudo
+            # avard run`, it made the unit (User=avard) exit 2, which RestartPreventExitStatus
+            # keeps down for good. flock needs only an open file, read-only will do; just
+            # the pid note for the refusal message is not written then.
+            try:
+                fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
+            except OSError as exc:
+                raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot open its lock "
+                                  f"file {LOCK_FILE} ({exc.strerror})") from None
+            writable = False
         except OSError as exc:
             if exc.errno in (errno.ENOSPC, errno.EDQUOT):
                 # a full disk at the very first start: the service records nothing until
@@ -76,11 +88,16 @@ def hold(directory: str | Path) -> Path:
                 f"{f' (pid {other})' if other else ''} is recording there; stop it "
                 "(systemctl stop avard) or give this one another data directory "
                 "(--data-dir)") from None
-        try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        except OSError:
-            pass                # the pid is only for the message above
+        if writable:
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            except OSError:
+                pass            # the pid is only for the message above
+        else:
+            log.warning("%s in %s is not writable by this user (left by a run as another "
+                        "user?): locked read-only, without this process's pid in it",
+                        LOCK_FILE, d)
         _held[key] = [fd, 1]
         return key
 
@@ -108,7 +125,25 @@ def held(directory: str | Path) -> Iterator[Path]:
         release(key)
 
 
+def _open(path: Path) -> int:
+    return os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+
+
 def _holder(fd: int) -> int | None:
+    """The pid holding the lock on ``fd``'s file: the kernel's (/proc/locks) first, since
+    a holder that could only open the file read-only wrote none and the note may be an
+    older process's; else the pid the holder wrote into the file."""
+    try:
+        st = os.fstat(fd)
+        where = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+        with open("/proc/locks") as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) >= 6 and parts[1] == "FLOCK" and parts[5] == where \
+                        and parts[4].isdigit():
+                    return int(parts[4])
+    except OSError:
+        pass
     try:
         text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
         return int(text) if text.isdigit() else None

@@ -549,3 +549,43 @@ def test_a_checkpoint_names_the_rate_of_the_samples_it_holds(tmp_path):
         assert state.record is not None
         assert state.record["feed"]["nominal_hz"] == float(svc.odr) == 125.0
     assert svc.restored is not None
+
+
+def test_a_lock_file_this_user_may_not_write_is_locked_read_only(tmp_path, monkeypatch):
+    """After a manual ``sudo avard run`` the lock file is root's, 0644: the unit (User=avard)
+    could not open it read-write, stopped with exit status 2, and RestartPreventExitStatus=2
+    kept it down for good. flock needs no write access: the service now locks it read-only
+    and records; a second process is still refused, naming the holder the kernel knows
+    (the file still names the old root run's pid, which this one could not replace).
+
+    The tests run as root, whom a 0444 mode does not stop: the refusal of a read-write open
+    is injected at os.open instead."""
+    import errno
+
+    from avard.daemon.service import dirlock
+
+    data = tmp_path / "rec"
+    data.mkdir()
+    (data / dirlock.LOCK_FILE).write_text("1\n")        # the sudo run's note
+    (data / dirlock.LOCK_FILE).chmod(0o444)
+    real_open = os.open
+
+    def as_another_user(path, flags, *args, **kwargs):
+        if str(path).endswith(dirlock.LOCK_FILE) and flags & (os.O_RDWR | os.O_WRONLY):
+            raise PermissionError(errno.EACCES, "Permission denied (injected)", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", as_another_user)
+    probe = ("import sys\nfrom avard.daemon.service import dirlock\n"
+             "try:\n    dirlock.hold(sys.argv[1])\nexcept Exception as e:\n    print(e)\n")
+    seen: dict[str, str] = {}
+
+    def another_process_meanwhile() -> None:
+        seen["said"] = subprocess.run([sys.executable, "-c", probe, str(data)],
+                                      capture_output=True, text=True, timeout=60).stdout
+
+    svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=1)
+    svc.run(4.0, before_acquisition=another_process_meanwhile)
+    assert svc.final_status["samples"] > 0
+    assert f"another avard process (pid {os.getpid()})" in seen["said"], seen
+    assert (data / dirlock.LOCK_FILE).read_text() == "1\n"
