@@ -37,10 +37,12 @@ def compose(config: Config, spec: RigSpec | Rig, *, run_id: str | None = None,
         rig = dataclasses.replace(rig, on_tick=_chain(rig.on_tick, after_tick))
     feed = rig.temperature_feed
     if feed is not None:
-        # its files (the simulated 1-Wire tree) in the directory the service owns, removed
-        # when it stops: a killed process then leaves nothing in /tmp, and the next start in
-        # that directory replaces what it left
-        feed.workdir = config.recording.path
+        # its files (the simulated 1-Wire tree) in the directory the service owns when it
+        # records (its lock covers them), removed when it stops: a killed process then leaves
+        # nothing in /tmp, and the next start in that directory replaces what it left.
+        # Without recording nothing locks that directory, and another service may record
+        # there and own its tree: a private temporary folder then (removed at the stop).
+        feed.workdir = config.recording.path if config.recording.enabled else None
         rig = dataclasses.replace(rig, closers=(*rig.closers, feed.close))
     svc = Service(config, rig, run_id=run_id, notifier=notifier, hooks=hooks)
     if feed is not None:

@@ -170,7 +170,8 @@ class TemperatureFeed(Protocol):
     """Temperatures the rig produces itself (the simulated DS18B20s): they go to ``deliver``,
     which the composition root points at the service's reading handler. Files the feed needs
     (the simulated 1-Wire tree) go in ``workdir``, which the composition root points at the
-    service's recording directory; ``close`` removes them."""
+    service's recording directory when it records (else None: a private temporary folder);
+    ``close`` removes them."""
 
     deliver: Callable[[TemperatureReading], None] | None
     workdir: Path | None

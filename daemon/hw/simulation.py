@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from avard.daemon.config_types import Config, as_config
 from avard.daemon.hw.adxl355 import Adxl355
-from avard.daemon.hw.ds18b20 import ERROR, Ds18b20Bank
+from avard.daemon.hw.ds18b20 import ERROR, Ds18b20Bank, TemperatureReading
 from avard.daemon.hw.emulator import EmulatedAdxl355, FakeSpiDev, VirtualClock
 from avard.daemon.hw.transport import SpiBus
 from avard.daemon.hw.w1_sysfs import SysfsTree
@@ -40,7 +40,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 #: The folder of the simulated 1-Wire tree inside the directory its owner gives
-#: (:attr:`SimulatedSensors.workdir`: the service's recording directory).
+#: (:attr:`SimulatedSensors.workdir`: the recording directory of a service that records).
 W1_DIR = ".simulated-w1"
 
 
@@ -66,7 +66,8 @@ class SimulatedSensors:
     _lost: set[str] = field(default_factory=set)
     _bus: Any = None
     #: where the fake 1-Wire tree is made (compose.py gives the service's recording
-    #: directory): a folder of /tmp stayed behind whenever the process was killed
+    #: directory, which its lock covers, when it records: a folder of /tmp stayed behind
+    #: whenever the process was killed); None: a private temporary folder
     workdir: Path | None = None
     _tmp: Any = None
     _write_problem: str | None = None    # why the tree could not be written (said once)
@@ -176,7 +177,13 @@ class SimulatedSensors:
         try:
             tree, bank = self._one_wire()
         except OSError as exc:
+            # no tree (a full disk at the first conversion): every sensor reads as failed,
+            # so the service marks them lost as it would a bus that is gone
             self._cannot_write(exc)
+            t_real = self.clock.realtime() if self.clock is not None else time.time()
+            for name, sid in zip(self.names, self.ids, strict=True):
+                deliver(TemperatureReading(name, sid, math.nan, ERROR, t_mono, t_real, 0.0,
+                                           f"simulated 1-Wire tree not made: {exc}"))
             return
         for name, sid, v in zip(self.names, self.ids, (plate, ambient),
                                 strict=True):

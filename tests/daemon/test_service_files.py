@@ -589,3 +589,68 @@ def test_a_lock_file_this_user_may_not_write_is_locked_read_only(tmp_path, monke
     assert svc.final_status["samples"] > 0
     assert f"another avard process (pid {os.getpid()})" in seen["said"], seen
     assert (data / dirlock.LOCK_FILE).read_text() == "1\n"
+
+
+def test_without_recording_the_simulated_one_wire_tree_stays_out_of_the_data_directory(
+        tmp_path, monkeypatch):
+    """A service that does not record holds no lock on ``recording.data_dir``: its tree went
+    there all the same, where the service that does record there keeps its own (and one's
+    start removed the other's). It is now a private temporary folder, removed at the stop."""
+    data = tmp_path / "rec"
+    data.mkdir()
+    theirs = data / W1_DIR / "devices" / "28-00000000a001"
+    theirs.mkdir(parents=True)                   # the recording service's tree
+    (theirs / "w1_slave").write_text("theirs\n")
+    cfg = _config(data, **{"recording.enabled": False})
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    seen: list[list[str]] = []
+
+    def look(t_mono: float) -> None:
+        if not seen and any(tmp.iterdir()):
+            seen.append(sorted(p.name for p in tmp.iterdir()))
+
+    svc, sims, _emu = simulated_service(cfg, "quiet-lab", seed=1, after_tick=look)
+    got: list[str] = []
+    handler = svc.temperature_reading
+    sims.deliver = lambda r: (got.append(r.status), handler(r))[1]
+    svc.run(6.0)
+    assert seen and seen[0][0].startswith("avard-sim-w1-"), seen
+    assert got and set(got) == {"ok"}, got
+    assert (theirs / "w1_slave").read_text() == "theirs\n"
+    assert sorted(p.name for p in data.iterdir()) == [W1_DIR]
+    assert list(tmp.iterdir()) == []                 # removed at the stop
+
+
+def test_a_simulated_one_wire_tree_that_cannot_be_made_fails_every_reading(tmp_path,
+                                                                          monkeypatch):
+    """The tree made at the first conversion on a full disk raised, and the tick returned
+    before delivering anything: no reading, no ``sensor_lost``, the DS18B20 channels just
+    stopped. Each sensor now reads as failed until the tree can be made."""
+    import errno
+
+    from avard.daemon.hw.simulation import SimulatedSensors
+
+    data = tmp_path / "rec"
+    full = {"on": True}
+    make = SimulatedSensors._w1_root
+
+    def refused(self: SimulatedSensors) -> Path:
+        if full["on"]:
+            raise OSError(errno.ENOSPC, "No space left on device (injected)")
+        return make(self)
+
+    monkeypatch.setattr(SimulatedSensors, "_w1_root", refused)
+    box: dict[str, Service] = {}
+
+    def disk(t_mono: float) -> None:
+        full["on"] = t_mono - box["svc"].t_start < 6.0
+
+    svc, sims, _emu = simulated_service(_config(data), "quiet-lab", seed=1, after_tick=disk)
+    box["svc"] = svc
+    svc.run(12.0)
+    events = _sensor_events(data)
+    assert sorted(events) == sorted(
+        [("sensor_lost", n, "error") for n in sims.names]
+        + [("sensor_back", n, "ok") for n in sims.names]), events
