@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import os
 from pathlib import Path
 
 import numpy as np
@@ -268,3 +269,48 @@ def test_a_failed_fsync_never_writes_the_state_file(tmp_path: Path) -> None:
     stage.handle(consumer.read())
     assert [r["i_end"] for r in stated] == [10]
     rec2.close()
+
+
+def test_a_segment_cut_short_counts_every_record_it_lost_not_only_the_sample_ones(
+        tmp_path: Path) -> None:
+    """``lost_records`` of a ``segment_removed`` gap counted only the raw and gap records
+    past the cut; the temperature readings and events written there went uncounted."""
+    clock, wall = Clock(), Clock()
+    rec = _make(tmp_path, clock, wall)
+    assert rec.write(_raw(0)) and rec.write(_raw(10))
+    assert rec.path is not None
+    keep = rec.path.stat().st_size
+    # past the cut: two events, a temperature reading and one raw block
+    assert rec.write(frames.event_record("x", 0, "note", 0.1, 1.7e9))
+    assert rec.write(frames.temp_record("x", 0, 20, ["a"], [21.0], 0.15, 1.7e9))
+    assert rec.write(_raw(20))
+    assert rec.write(frames.event_record("x", 0, "note", 0.2, 1.7e9))
+    os.truncate(rec.path, keep)
+    clock.t = 0.3
+    assert rec.write(_raw(30))
+    rec.close()
+    gaps = [r for r in RecordingReader(tmp_path) if r["kind"] == "gap"]
+    assert [(g["reason"], g["i0"], g["n"], g["lost_records"]) for g in gaps] == [
+        ("segment_removed", 20, 10, 4)]
+
+
+def test_the_record_marks_of_an_open_segment_stay_compact(tmp_path: Path) -> None:
+    """One tuple of five Python numbers per raw record, held for the whole segment: some
+    84 MB for an hour-long segment at block_s = 0.01. Columns of machine numbers now,
+    under 64 bytes a record (48 and the arrays' spare room)."""
+    import tracemalloc
+
+    clock, wall = Clock(), Clock()
+    rec = _make(tmp_path, clock, wall)
+    assert rec.write(_raw(0, 1))
+    n = 20_000
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        for k in range(1, n + 1):
+            rec.write(_raw(k, 1))
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert rec.segments_written == 1
+    assert grown / n < 64, grown / n
