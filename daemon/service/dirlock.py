@@ -102,6 +102,55 @@ def hold(directory: str | Path) -> Path:
         return key
 
 
+def recheck(directory: str | Path) -> str | None:
+    """Whether this process still holds ``directory``'s lock: None when it does (or holds
+    none there), else why not, for the recorder to pause on.
+
+    The lock is on an open file, not on a name: with the directory removed (``rm -r``) and
+    made again (the recorder does, to go on recording), this process still held the old,
+    deleted file, and a second service took a lock on the new one: two services in one
+    directory. The recorder calls this whenever it opens a segment: the file at the lock's
+    name is not the one held, so it is locked again; if another process has locked it
+    meanwhile, that one records there now and this one must not write beside it."""
+    key = _key(Path(directory))
+    with _guard:
+        entry = _held.get(key)
+        if entry is None or entry[0] < 0:
+            return None
+        path = key / LOCK_FILE
+        try:
+            held, now = os.fstat(entry[0]), os.stat(path, follow_symlinks=False)
+            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+                return None
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            return f"cannot check the lock file {path} ({exc.strerror})"
+        try:
+            fd = _open(path)
+        except OSError as exc:
+            return f"cannot open the lock file {path} again ({exc.strerror})"
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            other = _holder(fd)
+            os.close(fd)
+            return (f"{LOCK_FILE} in {str(directory)!r} was replaced (the directory removed "
+                    f"and made again?) and another avard process"
+                    f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
+                    "it records there now; this one does not write beside it")
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError:
+            pass
+        os.close(entry[0])
+        entry[0] = fd
+        log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
+                    LOCK_FILE, directory)
+        return None
+
+
 def release(key: Path) -> None:
     """Drop one hold of :func:`hold`; the last one unlocks (the file stays: removing it
     could race with another process that just opened it)."""

@@ -55,6 +55,7 @@ from avard.core.io.recording import (
     records_backwards,
     segment_end,
 )
+from avard.daemon.service import dirlock
 
 log = logging.getLogger(__name__)
 
@@ -395,6 +396,17 @@ class Recorder:
             # the directory too: removed with everything in it while the service ran, the
             # recording goes on in it again instead of pausing until someone makes it
             self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            self._failed(exc, "open")
+            return False
+        # made again, the directory has a new lock file, which another service may have
+        # locked: never a segment beside its own (paused and retried as a write error)
+        lost_lock = dirlock.recheck(self.dir)
+        if lost_lock is not None:
+            self.errors += 1
+            self._enter_full(lost_lock, "write_error")
+            return False
+        try:
             self._f = self.ops.open_append(path)
         except OSError as exc:
             self._failed(exc, "open")

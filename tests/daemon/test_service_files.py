@@ -13,6 +13,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import pytest
 from avard.core.io.recording import RecordingReader
@@ -654,3 +655,115 @@ def test_a_simulated_one_wire_tree_that_cannot_be_made_fails_every_reading(tmp_p
     assert sorted(events) == sorted(
         [("sensor_lost", n, "error") for n in sims.names]
         + [("sensor_back", n, "ok") for n in sims.names]), events
+
+
+def _remove(data: Path) -> None:
+    """``rm -r`` while the service's other writers (snapshots) may add files in it."""
+    while data.exists():
+        shutil.rmtree(data, ignore_errors=True)
+
+
+def _until(done: Any) -> None:
+    """Wait for another thread of the service to have done something (the bound is for a
+    hang, not a measurement)."""
+    import time
+
+    deadline = time.monotonic() + 60.0
+    while not done():
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+
+
+_PROBE = ("import sys\nfrom avard.daemon.service import dirlock\n"
+          "try:\n    dirlock.hold(sys.argv[1])\nexcept Exception as e:\n    print(e)\n"
+          "else:\n    print('locked', flush=True)\n    sys.stdin.read()\n")
+
+
+def test_a_recording_directory_removed_under_the_service_is_locked_again(tmp_path):
+    """``rm -r DIR`` under a running service: the recorder makes DIR again and records on,
+    but its lock stayed on the deleted file, and a second service locked the new one and
+    recorded beside it. The recorder now locks the new file when it opens its next segment,
+    and the second process is refused."""
+    data = tmp_path / "rec"
+    box: dict[str, Service] = {}
+    said: list[str] = []
+
+    def act(t_mono: float) -> None:
+        t = t_mono - box["svc"].t_start
+        if t >= 5.0 and not (tmp_path / "removed").exists():
+            (tmp_path / "removed").touch()
+            _remove(data)
+        elif t >= 8.0 and not said:
+            _until(lambda: box["svc"].recorder.segments_written > 1)   # it wrote again
+            said.append(subprocess.run([sys.executable, "-c", _PROBE, str(data)],
+                                       capture_output=True, text=True, timeout=60,
+                                       stdin=subprocess.DEVNULL).stdout)
+
+    svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=1, after_tick=act)
+    box["svc"] = svc
+    svc.run(12.0)
+    assert said and f"another avard process (pid {os.getpid()})" in said[0], said
+    gaps = [g["reason"] for g in RecordingReader(data) if g["kind"] == "gap"]
+    assert gaps == ["segment_removed"], gaps
+    assert svc.final_status["disk"]["state"] == "writing"
+
+
+def test_a_service_whose_removed_directory_another_locked_meanwhile_pauses(tmp_path):
+    """The directory removed and, before this service's next segment, another process
+    locked the new one: this service pauses (a write error saying so) instead of recording
+    beside it, and resumes once that process has gone, with a gap over what it missed."""
+    from avard.daemon.service.recorder import Recorder
+    from avard.daemon.service.supervisor import ServiceHooks
+
+    data = tmp_path / "rec"
+    box: dict[str, Any] = {}
+    paused: list[str] = []
+
+    def act(t_mono: float) -> None:
+        svc = box["svc"]
+        t = t_mono - svc.t_start
+        if t >= 5.0 and "holder" not in box:
+            with svc.recorder._lock:          # between two of its records
+                _remove(data)
+                box["before"] = (svc.recorder.records_lost, svc.recorder.segments_written)
+                holder = box["holder"] = subprocess.Popen(
+                    [sys.executable, "-c", _PROBE, str(data)], stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE, text=True)
+                assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        elif t >= 9.0 and "gone" not in box:
+            box["gone"] = True
+            # it has tried to write since: lost the records, or opened a segment
+            _until(lambda: (svc.recorder.records_lost, svc.recorder.segments_written)
+                   > box["before"])
+            st = svc.recorder.status()
+            paused.append(f"{st['state']}: {st['error']}")
+            paused.append(" ".join(sorted(p.name for p in data.glob("*.avr"))))
+            box["holder"].communicate("")       # it ends; the kernel drops its lock
+
+    def recorder(svc: Service) -> Recorder:
+        # retried on the virtual clock: the run takes less real time than one retry_s
+        return Recorder(svc.data_dir, svc.run_id, svc.run_header.for_segment,
+                        clock=svc.clock.monotonic, wall=svc.clock.monotonic,
+                        realtime=svc.clock.realtime, retry_s=1.0)
+
+    svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=1, after_tick=act,
+                                    hooks=ServiceHooks(recorder=recorder))
+    box["svc"] = svc
+    try:
+        svc.run(16.0)
+    finally:
+        if "holder" in box and box["holder"].poll() is None:
+            box["holder"].kill()
+            box["holder"].wait()
+    assert paused and paused[0].startswith("write_error: ") and \
+        "another avard process" in paused[0], paused
+    assert paused[1] == "", paused                  # nothing written beside the other
+    recs = list(RecordingReader(data))
+    gaps = {g["reason"]: (g["i0"], g["n"]) for g in recs if g["kind"] == "gap"}
+    assert set(gaps) == {"segment_removed", "write_error"}, gaps
+    raw = sorted((r["i0"], r["i0"] + r["n"]) for r in recs if r["kind"] == "raw")
+    # what was lost (the removed segment, then the pause) and what was written after it
+    # tile the indices from the removed segment's first sample on
+    spans = sorted([*raw, *((i0, i0 + n) for i0, n in gaps.values())])
+    assert _tiles(spans) == [(spans[0][0], spans[-1][1])], _tiles(spans)
+    assert svc.final_status["disk"]["state"] == "writing"
