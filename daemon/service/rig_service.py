@@ -28,6 +28,7 @@ from avard.core.io.recording import SEGMENT_SUFFIX, first_record, order_segments
 from avard.daemon.config_types import Config
 from avard.daemon.hw.drain_process import READER_RT_PRIORITY
 from avard.daemon.hw.rig import RigLanes, wiring
+from avard.daemon.service import dirlock
 from avard.daemon.service.acquisition import BusReader, StoppedWithBus, share_reader
 from avard.daemon.service.alignment import Alignment, align
 from avard.daemon.service.checkpoint import STATE_FILE
@@ -191,6 +192,8 @@ class RigService(Supervised):
         self.readers: list[BusReader] = []
         #: the lanes whose threads were started (stop() stops those: a start may fail midway)
         self._started: list[Service] = []
+        #: the lanes' directory locks taken before any lane starts (released by stop())
+        self._lane_locks: list[Path] = []
         #: each lane's samples when every lane had last advanced (the watchdog's count)
         self._seen: list[int] = [0] * len(self.lanes)
         self._advances = 0
@@ -226,8 +229,15 @@ class RigService(Supervised):
               stop_at: float | None = None) -> None:
         if self.config.recording.enabled:
             check_unmoved(self.config.recording.data_dir, self.names)
-            for lane in self.lanes:      # every lane's directory before any lane's threads
+            # Every lane's directory checked and locked, and its recorded rate, before any
+            # lane starts: lanes start one after another, so a second lane refused (another
+            # service records there, or at another ODR) had already written a run into the
+            # first one's directory. Held until stop() (each lane holds its own as well).
+            for lane in self.lanes:
                 lane._check_data_dir()
+                self._lane_locks.append(dirlock.hold(lane.data_dir))
+            for lane in self.lanes:
+                lane._check_recorded_rate()
         for lane in self.lanes:
             self._started.append(lane)
             lane.start(stop_at=stop_at)
@@ -286,6 +296,8 @@ class RigService(Supervised):
         if self.publisher is not None:
             self.publisher.close()
             self.publisher = None
+        while self._lane_locks:          # every lane has stopped writing
+            dirlock.release(self._lane_locks.pop())
 
     def check_threads(self, *, restart: bool = True) -> None:
         err = self.separation.error_of_threads() if self.separation is not None else None

@@ -293,3 +293,30 @@ def test_one_sensor_entry_runs_todays_service_in_data_dir_itself(tmp_path: Path)
     root = tmp_path / "rec"
     assert list(root.glob("*.avr")) and not [p for p in root.iterdir() if p.is_dir()]
     assert open_record(root).info.sensor_name == "right"
+
+
+def test_a_lane_refused_at_start_leaves_no_run_in_the_other_lanes(tmp_path: Path) -> None:
+    """Lanes started one after another, each checking its own recorded rate: with ``right``
+    holding a 250 Hz recording, the rig at 125 Hz was refused only once ``left`` had started
+    and written a run. Every lane's lock and rate are now checked before any lane starts;
+    nothing is left held."""
+    from avard.core.io.recording import RecordingReader
+    from avard.daemon.service import dirlock
+
+    rec = tmp_path / "rec"
+    _rig(_config(tmp_path, [{**LEFT, "odr_hz": 250}, {**RIGHT, "odr_hz": 250}])).run(2.0)
+    (rec / "right").rename(tmp_path / "right250")
+    for p in (rec / "left").iterdir():
+        p.unlink()
+    _rig(_config(tmp_path, [LEFT, RIGHT])).run(2.0)       # left now at 125 Hz
+    for p in (rec / "right").iterdir():
+        p.unlink()
+    (rec / "right").rmdir()
+    (tmp_path / "right250").rename(rec / "right")
+    before = sorted(p.name for p in (rec / "left").iterdir())
+    runs = {r["run"] for r in RecordingReader(rec / "left")}
+    with pytest.raises(ConfigError, match=r"/right' holds a recording at a nominal 250 Hz"):
+        _rig(_config(tmp_path, [LEFT, RIGHT])).run(2.0)
+    assert sorted(p.name for p in (rec / "left").iterdir()) == before
+    assert {r["run"] for r in RecordingReader(rec / "left")} == runs
+    assert dirlock._held == {}
