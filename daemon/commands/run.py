@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+from pathlib import Path
 from typing import Any
 
 from avard.core.errors import ConfigError
@@ -76,6 +77,14 @@ def build(args: argparse.Namespace, config: Config, notifier: Any = None,
     return compose_rig(config, spec, notifier=notifier, hooks=hooks)
 
 
+def lock_dirs(config: Config) -> list[Path]:
+    """The recording directories a service of ``config`` writes into: data_dir, and for a
+    rig of several sensors each sensor's data_dir/NAME (rig_service.lane_config)."""
+    root = config.recording.path
+    sensors = config.rig_sensors
+    return [root, *(root / s.name for s in sensors)] if len(sensors) > 1 else [root]
+
+
 def run(args: argparse.Namespace) -> int:
     _check_args(args)
     overrides = {"recording.data_dir": args.data_dir}
@@ -88,8 +97,12 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         if config.recording.enabled:
             # before the rig is opened: a second service on this directory (a manual run
-            # beside the unit) stops here, before its start-up resets the first one's sensor
-            stack.enter_context(dirlock.held(config.recording.path))
+            # beside the unit) stops here, before its start-up resets the first one's sensor.
+            # A rig records each sensor in data_dir/NAME: those too, or a rig started beside
+            # a one-sensor service on data_dir/NAME reset that service's sensor (build opens
+            # and resets every sensor) before its lane was refused.
+            for d in lock_dirs(config):
+                stack.enter_context(dirlock.held(d))
         notifier = Notifier()
         svc = build(args, config, notifier=notifier)
         svc.install_signals()

@@ -320,3 +320,44 @@ def test_a_lane_refused_at_start_leaves_no_run_in_the_other_lanes(tmp_path: Path
     assert sorted(p.name for p in (rec / "left").iterdir()) == before
     assert {r["run"] for r in RecordingReader(rec / "left")} == runs
     assert dirlock._held == {}
+
+
+def test_avard_run_of_a_rig_beside_a_service_on_one_lane_stops_before_opening_a_sensor(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``avard run`` locked only ``data_dir`` before building the rig; each lane's
+    ``data_dir/NAME`` was locked when the lane started, after every sensor had been opened
+    and reset: a rig started beside a one-sensor service on ``data_dir/left`` reset that
+    service's sensor before it was refused. Every lane's directory is now locked first."""
+    import subprocess
+    import sys
+
+    from avard.daemon import cli
+    from avard.daemon.commands import run as run_cmd
+
+    rec = tmp_path / "rec"
+    conf = tmp_path / "rig.toml"
+    conf.write_text(
+        '[[sensor]]\nname = "left"\nspi_device = 0\n'
+        '[[sensor]]\nname = "right"\nspi_device = 1\n'
+        f'[temperature]\nds18b20 = false\n[recording]\ndata_dir = "{rec}"\n'
+        '[publish]\nenabled = false\n')
+    built: list[object] = []
+    build = run_cmd.build
+    monkeypatch.setattr(run_cmd, "build", lambda *a, **k: built.append(a) or build(*a, **k))
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys\nfrom avard.daemon.service import dirlock\n"
+         "dirlock.hold(sys.argv[1]); print('held', flush=True); sys.stdin.read()",
+         str(rec / "left")], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        status = cli.main(["run", "--config", str(conf), "--simulate", "quiet-lab",
+                           "--speed", "0", "--duration", "2"])
+    finally:
+        holder.communicate("")
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert built == []                       # no sensor was opened
+    said = [line for line in err.splitlines() if "another avard process" in line]
+    assert len(said) == 1 and f"(pid {holder.pid})" in said[0] and "/left'" in said[0], err
+    assert "Traceback" not in err
