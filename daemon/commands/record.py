@@ -12,7 +12,9 @@ and in the sample indices) are first asked back from the service's ring buffer (
 with reason ``subscriber_loss`` (``--no-backfill``: gaps only). Other lost messages become an
 ``event`` naming the topic and count. Gaps the service itself
 announced are recorded as it sent them. A restart of the service (new run id) starts a new
-segment with the new header.
+segment with the new header; a restart at another output data rate ends the archive (status
+2, what was written stays): one recording directory holds one rate, as the service keeps
+it. ``--out`` is locked as the service locks its data directory (dirlock.py): one writer.
 """
 
 from __future__ import annotations
@@ -27,8 +29,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from avard.core.allan.feed import nominal_of
 from avard.core.allan.streaming import AllanSnapshot
-from avard.core.errors import FormatError, NetworkError, OutputError
+from avard.core.errors import ConfigError, FormatError, NetworkError, OutputError
 from avard.core.io import frames
 from avard.core.io.outputs import check_output_dir
 from avard.daemon.net.subscriber import (
@@ -38,7 +41,8 @@ from avard.daemon.net.subscriber import (
     check_stream_sensor,
     subscriber_from_args,
 )
-from avard.daemon.service.recorder import Recorder
+from avard.daemon.service import dirlock
+from avard.daemon.service.recorder import Recorder, recorded_rate
 
 log = logging.getLogger(__name__)
 
@@ -139,6 +143,7 @@ class StreamArchiver:
             return
         if self.recorder is None:
             header = self.header
+            self._check_rate(header)
             self.recorder = Recorder(self.out, header["run"], lambda: header,
                                      segment_s=self.segment_s, fsync_interval_s=self.fsync_s)
             waiting, self.pending = self.pending, []
@@ -149,6 +154,23 @@ class StreamArchiver:
                     self.dropped_waiting += 1
         if rec["kind"] != "header":
             self._write(msg)
+
+    def _check_rate(self, header: dict[str, Any]) -> None:
+        """One recording directory holds one output data rate, as the service keeps it
+        (``Service._check_recorded_rate``): a run at another ODR in ``--out`` made a record
+        that ``avard analyze`` refuses as a whole. Checked before each run's first segment,
+        so a service restarted at another rate mid-archive ends the archive (what is written
+        stays) with one line, instead of mixing rates."""
+        nominal = nominal_of(header)
+        got = recorded_rate(self.out)
+        if nominal is None or got is None or got[1] == nominal:
+            return
+        run, had = got
+        raise ConfigError(
+            f"--out {str(self.out)!r} holds a recording at a nominal {had:g} Hz (run {run}) "
+            f"and the stream's run {header.get('run')} is at {nominal:g} Hz: one recording "
+            "directory holds one output data rate; archive this rate into another directory "
+            "(--out); nothing of that run was written")
 
     def _write(self, msg: Message) -> None:
         assert self.recorder is not None
@@ -277,6 +299,17 @@ def check_out(path: str) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     out = check_out(args.out)
+    # one writer per recording directory, as the service (dirlock.py): two archives, or an
+    # archive beside a service, in one directory wrote the same indices twice
+    lock = dirlock.hold(out, what="--out", advice="stop it, or archive into another "
+                        "directory (--out)")
+    try:
+        return _archive(args, out)
+    finally:
+        dirlock.release(lock)
+
+
+def _archive(args: argparse.Namespace, out: Path) -> int:
     sub = subscriber_from_args(args)
     # set by SIGTERM, or by an embedding program/test through ``args.stop_event``
     stop: threading.Event = getattr(args, "stop_event", None) or threading.Event()

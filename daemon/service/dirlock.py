@@ -39,9 +39,16 @@ def _key(directory: Path) -> Path:
     return Path(os.path.realpath(directory))
 
 
-def hold(directory: str | Path) -> Path:
+#: What a refused process is told to do, by the option that named the directory.
+SERVICE_ADVICE = ("stop it (systemctl stop avard) or give this one another data directory "
+                  "(--data-dir)")
+
+
+def hold(directory: str | Path, *, what: str = "recording.data_dir =",
+         advice: str = SERVICE_ADVICE) -> Path:
     """Lock ``directory`` (made if missing) for this process, or raise ConfigError naming
-    the process that holds it. Returns the key to :func:`release` it with."""
+    the process that holds it (``what``: the setting that named the directory, ``advice``:
+    what to do). Returns the key to :func:`release` it with."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     key = _key(d)
@@ -61,7 +68,7 @@ def hold(directory: str | Path) -> Path:
             try:
                 fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
             except OSError as exc:
-                raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot open its lock "
+                raise ConfigError(f"{what} {str(d)!r}: cannot open its lock "
                                   f"file {LOCK_FILE} ({exc.strerror})") from None
             writable = False
         except OSError as exc:
@@ -73,7 +80,7 @@ def hold(directory: str | Path) -> Path:
                             "lock", LOCK_FILE, d, exc.strerror)
                 _held[key] = [-1, 1]
                 return key
-            raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot open its lock file "
+            raise ConfigError(f"{what} {str(d)!r}: cannot open its lock file "
                               f"{LOCK_FILE} ({exc.strerror})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -81,13 +88,11 @@ def hold(directory: str | Path) -> Path:
             other = _holder(fd)
             os.close(fd)
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                raise ConfigError(f"recording.data_dir = {str(d)!r}: cannot lock it "
+                raise ConfigError(f"{what} {str(d)!r}: cannot lock it "
                                   f"({exc.strerror})") from None
             raise ConfigError(
-                f"recording.data_dir = {str(d)!r}: another avard process"
-                f"{f' (pid {other})' if other else ''} is recording there; stop it "
-                "(systemctl stop avard) or give this one another data directory "
-                "(--data-dir)") from None
+                f"{what} {str(d)!r}: another avard process"
+                f"{f' (pid {other})' if other else ''} is recording there; {advice}") from None
         if writable:
             try:
                 os.ftruncate(fd, 0)
@@ -166,8 +171,8 @@ def release(key: Path) -> None:
 
 
 @contextmanager
-def held(directory: str | Path) -> Iterator[Path]:
-    key = hold(directory)
+def held(directory: str | Path, **how: str) -> Iterator[Path]:
+    key = hold(directory, **how)
     try:
         yield key
     finally:

@@ -25,9 +25,10 @@ from avard.daemon.net.publisher import RequestServer
 SCALE = 3.9e-6 * 9.80665
 
 
-def _header(run: str) -> dict:
-    return F.header_record(run, rate_hz=125.0, t_mono=0.0, t_real=1.7e9,
-                           scale_m_s2_per_count=SCALE, range_g=2.0, software="test")
+def _header(run: str, odr: float = 125.0) -> dict:
+    return F.header_record(run, rate_hz=odr, t_mono=0.0, t_real=1.7e9,
+                           scale_m_s2_per_count=SCALE, range_g=2.0, software="test",
+                           nominal_odr_hz=odr)
 
 
 class FakeService:
@@ -38,8 +39,9 @@ class FakeService:
         self.pub.bind("tcp://127.0.0.1:*")
         self.endpoint = self.pub.getsockopt_string(zmq.LAST_ENDPOINT)
         self.run = "run-1"
+        self.odr = 125.0
         self.ring: dict[int, tuple[np.ndarray, float]] | None = None  # index → (counts, t)
-        handlers = {"header": lambda a: _header(self.run), "recent": self._recent}
+        handlers = {"header": lambda a: _header(self.run, self.odr), "recent": self._recent}
         self.server = RequestServer("tcp://127.0.0.1:*", handlers).start()
 
     def _recent(self, args: dict) -> dict:
@@ -290,3 +292,72 @@ def test_record_archives_snapshots_its_readers_can_decode_and_says_which_it_coul
     events = [r for r in recs if r["kind"] == "event"]
     assert [e["name"] for e in events] == ["unreadable_snapshot"]
     assert "avar has shape" in events[0]["detail"]["error"]
+
+
+def test_record_refuses_a_directory_another_process_records_into(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """`avard record --out` wrote through the recorder without the directory lock: an archive
+    into a service's data directory (or two archives) wrote the same indices twice. It now
+    stops before connecting, with one line naming the holder, status 2."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "rec"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys\nfrom avard.daemon.service import dirlock\n"
+         "dirlock.hold(sys.argv[1]); print('held', flush=True); sys.stdin.read()", str(out)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        rc = cli.main(["record", "tcp://127.0.0.1:9", "--out", str(out), "--wait", "0.3"])
+    finally:
+        holder.communicate("")
+    err = capsys.readouterr().err
+    assert rc == 2
+    said = [line for line in err.splitlines() if "another avard process" in line]
+    assert len(said) == 1 and f"(pid {holder.pid})" in said[0] and "--out" in said[0], err
+    assert "nothing received" not in err and "Traceback" not in err
+    assert list(out.glob("*.avr")) == []
+
+
+def test_record_ends_the_archive_when_the_service_restarts_at_another_rate(
+        service: FakeService, tmp_path: Path) -> None:
+    """One recording directory holds one output data rate (the service refuses a second);
+    the archiver wrote a restarted service's run at another ODR into the same directory, a
+    record ``avard analyze`` refuses as a whole. It now ends with one line saying so, the
+    runs at the first rate archived and readable."""
+    from avard.core.errors import ConfigError
+
+    out = tmp_path / "archive"
+    parser = argparse.ArgumentParser()
+    record.add_arguments(parser)
+    args = parser.parse_args([service.endpoint, "--request", service.server.endpoint,
+                              "--out", str(out), "--wait", "60"])
+    args.stop_event = threading.Event()
+    result: dict = {}
+
+    def go() -> None:
+        try:
+            result["rc"] = record.run(args)
+        except ConfigError as exc:
+            result["error"] = str(exc)
+
+    thread = threading.Thread(target=go, daemon=True)
+    thread.start()
+    service.wait_subscribed()
+    for seq in range(3):
+        service.send("raw", _raw("run-1", seq, 32 * seq))
+    while sum(r["kind"] == "raw" for r in _read(out)) < 3:
+        assert thread.is_alive(), "record ended early"
+        time.sleep(0.02)
+    service.run, service.odr = "run-2", 250.0
+    service.send("header", _header("run-2", 250.0))
+    service.send("raw", _raw("run-2", 0, 0))
+    thread.join(30)
+    args.stop_event.set()
+    assert not thread.is_alive()
+    assert "rc" not in result, result
+    assert "holds a recording at a nominal 125 Hz (run run-1)" in result["error"]
+    assert "run-2 is at 250 Hz" in result["error"]
+    assert {r["run"] for r in RecordingReader(out)} == {"run-1"}
+    assert sum(r["n"] for r in RecordingReader(out) if r["kind"] == "raw") == 96
