@@ -57,20 +57,8 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
             _held[key][1] += 1
             return key
         path = key / LOCK_FILE
-        writable = True
         try:
-            fd = _open(path)
-        except PermissionError:
-            # a lock file this user may not write: left root-owned 0644 by a manual `sudo
-            # avard run`, it made the unit (User=avard) exit 2, which RestartPreventExitStatus
-            # keeps down for good. flock needs only an open file, read-only will do; just
-            # the pid note for the refusal message is not written then.
-            try:
-                fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
-            except OSError as exc:
-                raise ConfigError(f"{what} {str(d)!r}: cannot open its lock "
-                                  f"file {LOCK_FILE} ({exc.strerror})") from None
-            writable = False
+            fd, writable = _open(path)
         except OSError as exc:
             if exc.errno in (errno.ENOSPC, errno.EDQUOT):
                 # a full disk at the very first start: the service records nothing until
@@ -93,16 +81,7 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
             raise ConfigError(
                 f"{what} {str(d)!r}: another avard process"
                 f"{f' (pid {other})' if other else ''} is recording there; {advice}") from None
-        if writable:
-            try:
-                os.ftruncate(fd, 0)
-                os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-            except OSError:
-                pass            # the pid is only for the message above
-        else:
-            log.warning("%s in %s is not writable by this user (left by a run as another "
-                        "user?): locked read-only, without this process's pid in it",
-                        LOCK_FILE, d)
+        _note_pid(fd, writable, d)
         _held[key] = [fd, 1]
         return key
 
@@ -132,7 +111,7 @@ def recheck(directory: str | Path) -> str | None:
         except OSError as exc:
             return f"cannot check the lock file {path} ({exc.strerror})"
         try:
-            fd = _open(path)
+            fd, writable = _open(path)
         except OSError as exc:
             return f"cannot open the lock file {path} again ({exc.strerror})"
         try:
@@ -144,11 +123,7 @@ def recheck(directory: str | Path) -> str | None:
                     f"and made again?) and another avard process"
                     f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
                     "it records there now; this one does not write beside it")
-        try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        except OSError:
-            pass
+        _note_pid(fd, writable, directory)
         os.close(entry[0])
         entry[0] = fd
         log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
@@ -179,8 +154,30 @@ def held(directory: str | Path, **how: str) -> Iterator[Path]:
         release(key)
 
 
-def _open(path: Path) -> int:
-    return os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+def _open(path: Path) -> tuple[int, bool]:
+    """The lock file opened (made if missing), and whether it could be opened for writing.
+
+    A lock file this user may not write (left root-owned 0644 by a manual ``sudo avard
+    run``) made the unit (User=avard) exit 2, which RestartPreventExitStatus keeps down for
+    good. flock needs only an open file: read-only will do, only the pid note for a refused
+    process is not written then (it names the holder from /proc/locks, :func:`_holder`)."""
+    try:
+        return os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644), True
+    except PermissionError:
+        return os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW), False
+
+
+def _note_pid(fd: int, writable: bool, directory: str | Path) -> None:
+    if not writable:
+        log.warning("%s in %s is not writable by this user (left by a run as another "
+                    "user?): locked read-only, without this process's pid in it",
+                    LOCK_FILE, directory)
+        return
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+    except OSError:
+        pass                # the pid is only for the message of a refused process
 
 
 def _holder(fd: int) -> int | None:
