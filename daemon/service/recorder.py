@@ -227,6 +227,7 @@ class Recorder:
         self.errors = 0
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
         self._marks = _Marks()       # what the open segment holds, to name what it lost
+        self._lock_checked_at = -1e300   # record time of the last dirlock.recheck (write())
         self.segments_removed = 0    # open segments deleted or cut short behind our back
         self._removed: list[dict[str, Any]] = []   # their gaps, for the next segment
 
@@ -264,6 +265,20 @@ class Recorder:
                 return False
             if self._f is not None:
                 self._check_segment()
+            t_data = record.get("t_mono")
+            t_data = float(t_data) if isinstance(t_data, int | float) else now
+            if self._f is not None and abs(t_data - self._lock_checked_at) >= 1.0:
+                # the lock file removed alone (rm DIR/.avard.lock) leaves the segment as it
+                # is: checked once a second of the records' own time too, not only at the
+                # next rotation (a stat of each path component, some 30 µs: not at every
+                # record; the records' time, since a stage catching up writes many records
+                # at one clock reading)
+                self._lock_checked_at = t_data
+                lost_lock = dirlock.recheck(self.dir)
+                if lost_lock is not None:
+                    self._lost_lock(lost_lock)
+                    self._remember_lost(record)
+                    return False
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
                     self._remember_lost(record)
@@ -403,8 +418,7 @@ class Recorder:
         # locked: never a segment beside its own (paused and retried as a write error)
         lost_lock = dirlock.recheck(self.dir)
         if lost_lock is not None:
-            self.errors += 1
-            self._enter_full(lost_lock, "write_error")
+            self._lost_lock(lost_lock)
             return False
         try:
             self._f = self.ops.open_append(path)
@@ -427,6 +441,13 @@ class Recorder:
             self._flush_lost()
         self._retention()
         return True
+
+    def _lost_lock(self, why: str) -> None:
+        """Another process holds the directory's lock: pause (retried every retry_s, as a
+        write error) rather than write beside it; the open segment is closed."""
+        self.errors += 1
+        self._close_file()
+        self._enter_full(why, "write_error")
 
     def _check_segment(self) -> None:
         """Whether the open segment still holds what was written to it. Deleted (also when

@@ -767,3 +767,40 @@ def test_a_service_whose_removed_directory_another_locked_meanwhile_pauses(tmp_p
     spans = sorted([*raw, *((i0, i0 + n) for i0, n in gaps.values())])
     assert _tiles(spans) == [(spans[0][0], spans[-1][1])], _tiles(spans)
     assert svc.final_status["disk"]["state"] == "writing"
+
+
+def test_a_lock_file_removed_alone_is_locked_again_within_a_second_of_data(tmp_path):
+    """``rm DIR/.avard.lock`` leaves the open segment as it is, so nothing rotates: the
+    service held the deleted file for up to ``segment_s`` while a second one could lock a
+    new one. The recorder checks the lock once a second of data time. Acted on from the
+    recorder's own writes (at sample 5 s, then 8 s), so it depends on the data clock only."""
+    from avard.daemon.service import dirlock
+    from avard.daemon.service.recorder import Recorder
+    from avard.daemon.service.supervisor import ServiceHooks
+
+    data = tmp_path / "rec"
+    said: list[str] = []
+    removed: list[int] = []
+
+    class Acting(Recorder):
+        def write(self, record: dict[str, Any]) -> bool:
+            i0 = record.get("i0", 0) if record.get("kind") == "raw" else 0
+            if i0 >= 5 * RATE and not removed:
+                removed.append(i0)
+                (data / dirlock.LOCK_FILE).unlink()
+            elif i0 >= 8 * RATE and not said:
+                said.append(subprocess.run([sys.executable, "-c", _PROBE, str(data)],
+                                           capture_output=True, text=True, timeout=60,
+                                           stdin=subprocess.DEVNULL).stdout)
+            return super().write(record)
+
+    def recorder(svc: Service) -> Recorder:
+        return Acting(svc.data_dir, svc.run_id, svc.run_header.for_segment,
+                      clock=svc.clock.monotonic, realtime=svc.clock.realtime)
+
+    svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=1,
+                                    hooks=ServiceHooks(recorder=recorder))
+    svc.run(12.0)
+    assert said and f"another avard process (pid {os.getpid()})" in said[0], said
+    assert [g for g in RecordingReader(data) if g["kind"] == "gap"] == []
+    assert svc.final_status["disk"]["state"] == "writing"
