@@ -428,17 +428,33 @@ def _octave_coefficients(res: Any, min_tau_s: float) -> _Octaves | None:
 
 
 class CouplingTest(NamedTuple):
-    """ĉ, its standard error, the octaves used, and the degrees of freedom the se rests on
-    (∞ for the per-octave EDF model of ``_rho``); ``threshold`` the z that test needs."""
+    """ĉ, its standard error, the octaves used, and the degrees of freedom the test's se rests
+    on (∞ for the per-octave EDF model of ``_rho``); ``threshold`` the z that test needs.
+
+    The test's statistic is its own combination of the octaves (``c_test``, ``se_test``,
+    ``weights``): the one the octaves' covariance (the regressor's ``octave_spectra`` under
+    the axis's noise) makes most precise, with non-negative weights (``test_weights``). ĉ
+    keeps the EDF model's inverse-variance weights for the estimate and its interval."""
 
     c: float
     se: float
     points: int
     dof: float
     #: the se of ĉ's 68 % interval: the spectrum's level from the AVAR's local slope
-    #: (``OctaveSpectra._noise``'s ``shaped``); the test keeps ``se``, white noise's level at
+    #: (``OctaveSpectra._noise``'s ``shaped``); the test keeps white noise's level at
     #: every octave (its false-alarm rate was measured with it: the setback room's null axes)
     se_interval: float = math.inf
+    #: the test's combination of the octaves, its se (white noise's level) and its weights
+    #: (summing to 1, one per octave used); NaN/∞/() where there is no covariance
+    c_test: float = math.nan
+    se_test: float = math.inf
+    weights: tuple[float, ...] = ()
+
+    @property
+    def z(self) -> float:
+        """The test's statistic |c_test|/se_test (0 where it has no se)."""
+        ok = math.isfinite(self.se_test) and self.se_test > 0 and math.isfinite(self.c_test)
+        return abs(self.c_test) / self.se_test if ok else 0.0
 
     @property
     def threshold(self) -> float:
@@ -454,12 +470,59 @@ class CouplingTest(NamedTuple):
                                               max(self.dof, 1.0)))
 
 
+def test_weights(V: NDArray) -> NDArray[np.float64]:
+    """The non-negative weights w (Σw = 1) that make wᵀVw least for the octaves'
+    covariance ``V`` (K, K): the most precise combination of the octaves' coefficients that
+    never subtracts one octave from another. Unconstrained, the least-variance weights of
+    strongly correlated neighbours come out of opposite signs (+1.45, −0.54): a difference
+    that cancels their shared slow noise in the model, and that rests on the model's
+    correlation being exact where it is least known; non-negative, an octave the others
+    already carry is left out instead. Active set: the unconstrained solution on the
+    octaves kept, the most negative dropped until none is, then any dropped octave whose
+    gradient says it would lower the variance taken back."""
+    V = np.asarray(V, dtype=float)
+    K = len(V)
+    if K == 0:
+        return np.zeros(0)
+    d = np.sqrt(np.maximum(np.diag(V), 1e-300))
+    R = V / np.outer(d, d)  # scaled: the same weights for u = w·d
+    on = np.ones(K, dtype=bool)
+    u = np.zeros(K)
+    for _ in range(4 * K):
+        idx = np.flatnonzero(on)
+        sol = np.linalg.lstsq(R[np.ix_(idx, idx)], 1.0 / d[idx], rcond=1e-12)[0]
+        if np.any(sol <= 0):
+            on[idx[int(np.argmin(sol))]] = False
+            if not on.any():
+                on[int(np.argmin(np.diag(V)))] = True
+            continue
+        u = np.zeros(K)
+        u[idx] = sol
+        grad = R @ u  # (V w)_j / d_j with w = u / d: the variance's slope along octave j
+        lam = float(grad[idx] @ (1.0 / d[idx]) / np.sum(1.0 / d[idx] ** 2))
+        off = np.flatnonzero(~on)
+        better = off[grad[off] < lam / d[off] * (1 - 1e-9)] if len(off) else off
+        if len(better) == 0:
+            break
+        on[better[int(np.argmin(grad[better] * d[better]))]] = True
+    w = u / d
+    s = float(np.sum(w))
+    return w / s if s > 0 else np.full(K, 1.0 / K)
+
+
 def coupling_test(res: Any, spectra: OctaveSpectra,
                   min_tau_s: float = 2 * DS18B20_CONVERSION_S) -> CouplingTest:
     """:func:`tempco_from_cov`'s ĉ with the se and its degrees of freedom from the octaves'
     covariance as this regressor (its ``spectra``, rows those of ``res``:
     ``octave_spectra``) and the axis's residual noise make it: it holds what the per-octave
-    EDF cannot, the slow noise every octave of a trend or a slow cycle shares."""
+    EDF cannot, the slow noise every octave of a trend or a slow cycle shares.
+
+    The test's own combination (``test_weights`` of that covariance) is what the test
+    reads: the EDF model's weights trust each slow octave as independent, and where a slow
+    cycle (a day's) drives the regressor there, their shared red noise made the se twice
+    the least one and left it on ≈ 15–20 degrees of freedom (a t threshold of 6–7) while
+    the HVAC's octaves held the evidence (the datasheet-typical 2e-4 m/s²/K on 24 h of a
+    generator written apart: claimed on 4 of 10)."""
     got = _octave_coefficients(res, min_tau_s)
     if got is None:
         return CouplingTest(0.0, math.inf, 0, math.inf)
@@ -467,14 +530,19 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     # covariance's, which for a white regressor is the EDF model's and for a trend is the
     # ends' (the EDF model, Σ of independent differences, is ×3 too wide there)
     rows = np.flatnonzero(_kept(res, min_tau_s))
-    var, dof = spectra.variance(rows, got.r, got.w, got.nu)
+    var, dof_iv = spectra.variance(rows, got.r, got.w, got.nu)
     if not (math.isfinite(var) and var > 0):
         # the spectra do not see an octave the Allan result holds (a regressor flat on the
         # block means they were taken on): no se from them, so none the test can pass with
         return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
-    var_iv, _dof = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
+    var_iv, _ = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
     se_iv = math.sqrt(var_iv) if math.isfinite(var_iv) and var_iv > 0 else math.sqrt(var)
-    return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof, se_iv)
+    wt = test_weights(spectra.covariance(rows, got.r))
+    var_t, dof = spectra.variance(rows, got.r, wt, got.nu)
+    if not (math.isfinite(var_t) and var_t > 0):
+        wt, var_t, dof = got.w / float(np.sum(got.w)), var, dof_iv
+    return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof, se_iv,
+                        float(wt @ got.c), math.sqrt(var_t), tuple(float(x) for x in wt))
 
 
 #: Lags after a hole in the temperature log that stay out of the regression (the lag filter
@@ -841,7 +909,8 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
                      groups: int = JACKKNIFE_GROUPS,
                      min_tau_s: float = 2 * DS18B20_CONVERSION_S,
                      keep: NDArray[np.bool_] | None = None,
-                     ref: Any | None = None) -> tuple[float, float]:
+                     ref: Any | None = None,
+                     weights: tuple[float, ...] = ()) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
     error: the record in ``groups`` contiguous parts, each its own segment (their difference
     sums add exactly, ``OctaveSums``); ĉ_(−g) from all parts but g;
@@ -849,7 +918,10 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     Allan differences of the noise as independent across a slow regressor, which red noise
     (random walk, flicker at the HVAC period) violates; the jackknife does not assume it.
     ``ref``: the axis's Allan result on the whole record (its EDF, scaled to each
-    leave-one-out count; computed here when not given)."""
+    leave-one-out count; computed here when not given). ``weights``: fixed weights of the
+    octaves the whole record's regression uses (``CouplingTest.weights``, in τ order): ĉ
+    and each ĉ_(−g) are then that combination of their octaves' Cov_A/AVAR_u, the test's
+    statistic, not the inverse-variance one."""
     M = len(y)
     X = np.column_stack([y, u])
     if ref is None:
@@ -860,10 +932,24 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     edges = np.linspace(0, M, groups + 1).astype(int)
     parts = octave_sums_by_part(X, edges, keep)
     full = sum(parts[1:], start=parts[0])
-    c_all, _se, _n = tempco_from_cov(cov_view(full, rate_hz, edf_ref, n_ref), min_tau_s)
-    cs = [tempco_from_cov(cov_view(full - ps, rate_hz, edf_ref, n_ref), min_tau_s)[0]
-          for ps in parts]
-    c = np.asarray(cs)
+    whole = cov_view(full, rate_hz, edf_ref, n_ref)
+    rows = np.flatnonzero(_kept(whole, min_tau_s))
+    fixed = len(weights) == len(rows) and len(rows) > 0
+
+    def one(view: CovView) -> float:
+        if not fixed:
+            return tempco_from_cov(view, min_tau_s)[0]
+        cov = np.asarray(view.cov, dtype=float)[rows]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ck = cov[:, 0, 1] / cov[:, 1, 1]
+        ok = np.isfinite(ck)
+        w = np.asarray(weights, dtype=float)[ok]
+        return float(w @ ck[ok] / np.sum(w)) if np.sum(w) > 0 else math.nan
+
+    c_all = one(whole)
+    c = np.asarray([one(cov_view(full - ps, rate_hz, edf_ref, n_ref)) for ps in parts])
+    if not np.all(np.isfinite(c)):
+        return c_all, math.inf
     se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
     return c_all, se
 
@@ -1397,14 +1483,20 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # regressor's own made unequal: a 20-min lag on the ambient channel lost to the plate
     # through 59 s, its smoother regressor's octaves more alike)
     test = coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
-    c, se_a = test.c, test.se
+    c = test.c
     _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
                                        ref=res)
-    # the larger of the two: the jackknife's parts may be shorter than the noise's
-    # correlation at the regressor's period, where it is too small itself; the test's z
-    # with the test's se, the interval with the spectrum's level from the AVAR's slope
-    se_test = max(se_jk, se_a)
-    z = abs(c) / se_test if se_test > 0 else 0.0
+    # the test reads its own combination of the octaves (``coupling_test``), with its own
+    # jackknife: the larger of the two se, as the jackknife's parts may be shorter than the
+    # noise's correlation at the regressor's period, where it is too small itself; the
+    # interval is ĉ's, with the spectrum's level from the AVAR's slope
+    c_t, se_t, se_jk_t = c, test.se, se_jk
+    if test.weights:
+        c_t, se_t = test.c_test, test.se_test
+        se_jk_t = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
+                                   ref=res, weights=test.weights)[1]
+    se_test = max(se_jk_t, se_t)
+    z = abs(c_t) / se_test if se_test > 0 and math.isfinite(c_t) else 0.0
     se = max(se_jk, test.se_interval)
     lag_lo, lag_hi, open_lo, open_hi = lag_interval(scan, k)
     # ĉ is the coefficient at the chosen lag; the lag is an estimate too, and for a lag long
