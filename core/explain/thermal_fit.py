@@ -433,7 +433,7 @@ class CouplingTest(NamedTuple):
 
     The test's statistic is its own combination of the octaves (``c_test``, ``se_test``,
     ``weights``): the one the octaves' covariance (the regressor's ``octave_spectra`` under
-    the axis's noise) makes most precise, with non-negative weights (``test_weights``). ĉ
+    the axis's noise) makes most precise, with non-negative weights (``least_variance_weights``). ĉ
     keeps the EDF model's inverse-variance weights for the estimate and its interval."""
 
     c: float
@@ -470,7 +470,7 @@ class CouplingTest(NamedTuple):
                                               max(self.dof, 1.0)))
 
 
-def test_weights(V: NDArray) -> NDArray[np.float64]:
+def least_variance_weights(V: NDArray) -> NDArray[np.float64]:
     """The non-negative weights w (Σw = 1) that make wᵀVw least for the octaves'
     covariance ``V`` (K, K): the most precise combination of the octaves' coefficients that
     never subtracts one octave from another. Unconstrained, the least-variance weights of
@@ -517,7 +517,7 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     ``octave_spectra``) and the axis's residual noise make it: it holds what the per-octave
     EDF cannot, the slow noise every octave of a trend or a slow cycle shares.
 
-    The test's own combination (``test_weights`` of that covariance) is what the test
+    The test's own combination (``least_variance_weights`` of that covariance) is what the test
     reads: the EDF model's weights trust each slow octave as independent, and where a slow
     cycle (a day's) drives the regressor there, their shared red noise made the se twice
     the least one and left it on ≈ 15–20 degrees of freedom (a t threshold of 6–7) while
@@ -537,7 +537,7 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
         return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
     var_iv, _ = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
     se_iv = math.sqrt(var_iv) if math.isfinite(var_iv) and var_iv > 0 else math.sqrt(var)
-    wt = test_weights(spectra.covariance(rows, got.r))
+    wt = least_variance_weights(spectra.covariance(rows, got.r))
     var_t, dof = spectra.variance(rows, got.r, wt, got.nu)
     if not (math.isfinite(var_t) and var_t > 0):
         wt, var_t, dof = got.w / float(np.sum(got.w)), var, dof_iv
