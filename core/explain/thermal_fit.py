@@ -1381,8 +1381,11 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                                            floor)
         scans[j] = per_axis
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
+    # each channel's held-out regressors (``holdout.channel_heldout``), built once for every
+    # axis that scores the channel at the same lag (the same slow view of the same channel)
+    columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
-                  floors) for a in range(Y.shape[1])]
+                  floors, columns) for a in range(Y.shape[1])]
     return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
 
 
@@ -1443,8 +1446,10 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
           best: dict[int, list[ScanPoint]], holes: Holes | None = None,
-          floors: dict[int, float] | None = None) -> ThermalFit:
-    """The driving channel and lag of one axis from its scans, with the profile interval."""
+          floors: dict[int, float] | None = None,
+          columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None) -> ThermalFit:
+    """The driving channel and lag of one axis from its scans, with the profile interval;
+    ``columns``: per channel, the held-out regressors other axes built (``_choose_channel``)."""
     zmax = {j: max(s.z for s in sc) for j, sc in best.items()}
 
     def at_end(sc: list[ScanPoint]) -> bool:
@@ -1464,7 +1469,8 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     usable = {j: sc for j, sc in best.items()
               if math.isfinite((floors or {}).get(j, 0.0))}
     if len(usable) > 1:
-        jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors)
+        jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors,
+                                             columns)
     elif len(usable) == 1:
         jb = next(iter(usable))
     scan = best[jb]
@@ -1543,7 +1549,8 @@ def path_distance(lag_s: float) -> float:
 
 def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
                     best: dict[int, list[ScanPoint]], holes: Holes | None,
-                    floors: dict[int, float] | None
+                    floors: dict[int, float] | None,
+                    columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None
                     ) -> tuple[int, dict[str, dict[str, float]], str]:
     """The channel that drives axis ``y``, by the held-out likelihood of each channel
     through its own lag (``holdout.channel_heldout``), not by the scan's z: (its index, per
@@ -1562,14 +1569,15 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
     the die along the heat's path (``path_distance``: a longer lag on another channel is
     that path with the lags between them added, and a lag long against the drive's period
     trades with its coefficient, which it leaves unresolved), then the lower held-out
-    −2 ln L."""
+    −2 ln L. ``columns``: per channel, the held-out regressors already built for another axis
+    (``holdout.channel_heldout``)."""
     from avard.core.explain.holdout import channel_heldout
 
     ks = {j: int(np.argmax([s.z for s in sc])) for j, sc in best.items()}
     lags0 = {j: best_lag(sc, ks[j]) for j, sc in best.items()}
     is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
     interior = not all(is_open.values())
-    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
+    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes, columns)
     # a channel whose held-out fit gave no number (NaN) can neither win nor tie
     cost = {j: (hp[j].heldout if math.isfinite(hp[j].heldout) else math.inf)
             + (OPEN_END_MARGIN if is_open[j] and interior else 0.0) for j in best}
