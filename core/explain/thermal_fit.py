@@ -33,7 +33,12 @@ jackknife (``lag_interval``); the parts hold the Allan differences whose middle 
 at every octave (``octave_sums_by_part``). Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and
 channel search look at ≈ 50 correlated trials), or the t of the se's degrees of freedom at
 the search's share of the axis's false-alarm budget where that is more
-(``CouplingTest.threshold``).
+(``CouplingTest.threshold``). The test's z is its own combination of the octaves, the one
+of least variance under the regressor's octave covariance with non-negative weights
+(``least_variance_weights``; its jackknife with those weights fixed): where a day's cycle
+drives the slow octaves, the inverse-variance weights' shared red noise there doubled the
+se and took its degrees of freedom (so the threshold) with it. ĉ and its interval keep the
+inverse-variance weights.
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
 ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
