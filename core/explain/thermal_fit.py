@@ -881,7 +881,7 @@ def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
 def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
     least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
-    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ and the next octave, t_c the time one rounding
+    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ, t_c the time one rounding
     error lasts (``rounding_correlation_s``). Below it the regressor is mostly rounding: an
     error in the variable that pulls ĉ towards 0 and, as a longer trial lag smooths the
     steps away, favours positive lags.
@@ -903,9 +903,17 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) ->
     q = DS18B20_STEP_K**2 / 12.0 * tc / tau
     ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
-        # the first τ above the rounding with the next octave above it too (a sinusoid's
-        # AVAR dips at multiples of its period)
-        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
+        # the first τ above the rounding, whatever the octaves after it: a cycle's AVAR
+        # peaks near 0.37 of its period and dips towards its multiples, and a drive of one
+        # or two steps' swing (±0.5 K through 1100 s and 150 s) stood 23× above its
+        # rounding at 512 s and 9.7× at 1024 s, in the dip of its 1422 s cycle; asked for
+        # the next octave above too, the floor went to 4096 s, past the cycle (or to ∞ on
+        # a record with no slow octave above), and a coupling at 3× its minimum had no τ
+        # left (z 0). Octaves in such a dip stay in the regression as they do beyond any
+        # floor: their small AVAR_u weighs them little. (The rounding's model overstates
+        # it below t_c, where the sawtooth's AVAR rises as τ²: an octave does not pass by
+        # the model's error.)
+        if ok[i]:
             return float(tau[i]) if i > 0 else 0.0
     return math.inf
 
@@ -1493,7 +1501,10 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the scan compares lags and channels under one common covariance, ``_rho``, which a
     # regressor's own made unequal: a 20-min lag on the ambient channel lost to the plate
     # through 59 s, its smoother regressor's octaves more alike)
-    test = coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
+    # a channel below its rounding at every τ (an infinite floor: a half of a record whose
+    # drive is a step or two of the readings) leaves the test no τ: nothing to test
+    test = (coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
+            if math.isfinite(mt) else CouplingTest(0.0, math.inf, 0, math.inf))
     c = test.c
     _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
                                        ref=res)
