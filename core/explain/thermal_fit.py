@@ -36,8 +36,8 @@ the search's share of the axis's false-alarm budget where that is more
 (``CouplingTest.threshold``). The test's z is its own combination of the octaves, the one
 of least variance under the regressor's octave covariance with non-negative weights
 (``least_variance_weights``; its jackknife with those weights fixed): where a day's cycle
-drives the slow octaves, the inverse-variance weights' shared red noise there doubled the
-se and took its degrees of freedom (so the threshold) with it. ĉ and its interval keep the
+drives the slow octaves, the inverse-variance weights' shared red noise there set the
+se and its degrees of freedom (so the threshold). ĉ and its interval keep the
 inverse-variance weights.
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
@@ -438,8 +438,9 @@ class CouplingTest(NamedTuple):
 
     The test's statistic is its own combination of the octaves (``c_test``, ``se_test``,
     ``weights``): the one the octaves' covariance (the regressor's ``octave_spectra`` under
-    the axis's noise) makes most precise, with non-negative weights (``least_variance_weights``). ĉ
-    keeps the EDF model's inverse-variance weights for the estimate and its interval."""
+    the axis's noise) makes most precise, with non-negative weights
+    (``least_variance_weights``). ĉ keeps the EDF model's inverse-variance weights for the
+    estimate and its interval."""
 
     c: float
     se: float
@@ -479,10 +480,10 @@ def least_variance_weights(V: NDArray) -> NDArray[np.float64]:
     """The non-negative weights w (Σw = 1) that make wᵀVw least for the octaves'
     covariance ``V`` (K, K): the most precise combination of the octaves' coefficients that
     never subtracts one octave from another. Unconstrained, the least-variance weights of
-    strongly correlated neighbours come out of opposite signs (+1.45, −0.54): a difference
-    that cancels their shared slow noise in the model, and that rests on the model's
-    correlation being exact where it is least known; non-negative, an octave the others
-    already carry is left out instead. Active set: the unconstrained solution on the
+    strongly correlated neighbours come out of opposite signs: a difference that cancels
+    their shared slow noise in the model, and that rests on the model's correlation being
+    exact where it is least known; non-negative, an octave the others already carry is left
+    out instead. Active set: the unconstrained solution on the
     octaves kept, the most negative dropped until none is, then any dropped octave whose
     gradient says it would lower the variance taken back."""
     V = np.asarray(V, dtype=float)
@@ -522,12 +523,11 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     ``octave_spectra``) and the axis's residual noise make it: it holds what the per-octave
     EDF cannot, the slow noise every octave of a trend or a slow cycle shares.
 
-    The test's own combination (``least_variance_weights`` of that covariance) is what the test
-    reads: the EDF model's weights trust each slow octave as independent, and where a slow
-    cycle (a day's) drives the regressor there, their shared red noise made the se twice
-    the least one and left it on ≈ 15–20 degrees of freedom (a t threshold of 6–7) while
-    the HVAC's octaves held the evidence (the datasheet-typical 2e-4 m/s²/K on 24 h of a
-    generator written apart: claimed on 4 of 10)."""
+    The test reads its own combination (``least_variance_weights`` of that covariance): the
+    EDF model's weights trust each slow octave as independent, and where a slow cycle (a
+    day's) drives the regressor there, their shared red noise set the se and its few
+    degrees of freedom (so a t threshold well above 5) while faster octaves (the HVAC's)
+    held the evidence (docs/explain.md, chan23g)."""
     got = _octave_coefficients(res, min_tau_s)
     if got is None:
         return CouplingTest(0.0, math.inf, 0, math.inf)
@@ -904,12 +904,10 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) ->
     ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
         # the first τ above the rounding, whatever the octaves after it: a cycle's AVAR
-        # peaks near 0.37 of its period and dips towards its multiples, and a drive of one
-        # or two steps' swing (±0.5 K through 1100 s and 150 s) stood 23× above its
-        # rounding at 512 s and 9.7× at 1024 s, in the dip of its 1422 s cycle; asked for
-        # the next octave above too, the floor went to 4096 s, past the cycle (or to ∞ on
-        # a record with no slow octave above), and a coupling at 3× its minimum had no τ
-        # left (z 0). Octaves in such a dip stay in the regression as they do beyond any
+        # peaks below its period and dips towards its multiples, and for a drive of a step
+        # or two's swing the next octave can sit in that dip under the bar; asked to pass
+        # too, it put the floor past the cycle (or at ∞), leaving the coupling no τ (docs,
+        # chan23g). Octaves in such a dip stay in the regression as they do beyond any
         # floor: their small AVAR_u weighs them little. (The rounding's model overstates
         # it below t_c, where the sawtooth's AVAR rises as τ²: an octave does not pass by
         # the model's error.)

@@ -72,11 +72,10 @@ def test_the_test_weights_are_the_least_variance_non_negative_combination():
 def test_a_coupling_beside_a_days_cycle_is_claimed_at_1_5_times_its_hvac_minimum():
     """A day's ±1.2 K cycle beside the HVAC on the logged plate: the regressor's slow octaves
     are the day's, under the axis's red noise, and the EDF model's weights trusted each as
-    independent; their shared slow noise doubled the test's se and left it on ≈ 10–40
-    degrees of freedom (a t threshold of 5.3–8) while the HVAC's octaves held the evidence
-    (claimed on 2 of these 8 records before). At 1.5× the stated minimum of the HVAC alone
-    (``min_detectable_tempco``, z = 5, the day's cycle not counted) the coupling is claimed
-    on at least 7 of 8 records, its coefficient within 20 %; the same records with nothing
+    independent; their shared slow noise set the test's se and its few degrees of freedom
+    (a t threshold above 5) while the HVAC's octaves held the evidence. At 1.5× the stated
+    minimum of the HVAC alone (``min_detectable_tempco``, z = 5, the day's cycle not
+    counted) the coupling is claimed on at least 7 of 8 records, its coefficient within 20 %; the same records with nothing
     coupled claim nothing."""
     from avard.core.explain.thermal_fit import fit_thermal, min_detectable_tempco
 

@@ -35,8 +35,8 @@ def _small_swing(seed: int, period: float, coef: float = 0.0, hours: float = 4.0
 def test_the_floor_of_a_cycle_of_a_steps_swing_stays_below_its_period():
     """HVAC periods 1300–2300 s: the cycle's AVAR stands above its readings' rounding at
     the octave of its peak and dips below the bar at the next (towards the period); the
-    floor is that octave, never past the cycle (it went to 2048 s, or ∞ on a 4 h record
-    with no slower octave above the bar, when the next octave had to pass too)."""
+    floor is that octave, never past the cycle (where the next octave had to pass too, it
+    went past the cycle, or to ∞ on a record with no slower octave above the bar)."""
     from avard.core.explain.thermal_fit import rounding_floor_tau
 
     for seed, period in enumerate(np.linspace(1300.0, 2300.0, 11)):
@@ -46,9 +46,9 @@ def test_the_floor_of_a_cycle_of_a_steps_swing_stays_below_its_period():
 
 def test_a_coupling_through_a_steps_swing_is_claimed_at_3x_its_minimum():
     """At 3× the stated minimum (``min_detectable_tempco`` on the die's swing) the coupling
-    behind such a log is claimed with its coefficient within 20 % (at 1300 s: z 2.3 against
-    a threshold of 20, its se on 5 degrees of freedom, when the floor passed the cycle);
-    with nothing coupled nothing is."""
+    behind such a log is claimed with its coefficient within 20 % (where the floor passed
+    the cycle, the slow octaves left had few degrees of freedom and no evidence); with
+    nothing coupled nothing is."""
     from avard.core.explain.thermal_fit import fit_thermal, min_detectable_tempco
 
     for seed, period in enumerate((1300.0, 1400.0, 2000.0)):
