@@ -933,6 +933,15 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     octaves the whole record's regression uses (``CouplingTest.weights``, in τ order): ĉ
     and each ĉ_(−g) are then that combination of their octaves' Cov_A/AVAR_u, the test's
     statistic, not the inverse-variance one."""
+    whole, rest = _jackknife_views(y, u, rate_hz, groups, keep, ref)
+    return _jackknife_se(whole, rest, min_tau_s, weights)
+
+
+def _jackknife_views(y: NDArray, u: NDArray, rate_hz: float, groups: int,
+                     keep: NDArray[np.bool_] | None, ref: Any | None
+                     ) -> tuple[CovView, list[CovView]]:
+    """The whole record's covariance view and each delete-a-part one (one pass over the
+    record: ``octave_sums_by_part``), for :func:`jackknife_tempco`."""
     M = len(y)
     X = np.column_stack([y, u])
     if ref is None:
@@ -943,7 +952,14 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     edges = np.linspace(0, M, groups + 1).astype(int)
     parts = octave_sums_by_part(X, edges, keep)
     full = sum(parts[1:], start=parts[0])
-    whole = cov_view(full, rate_hz, edf_ref, n_ref)
+    return (cov_view(full, rate_hz, edf_ref, n_ref),
+            [cov_view(full - ps, rate_hz, edf_ref, n_ref) for ps in parts])
+
+
+def _jackknife_se(whole: CovView, rest: list[CovView], min_tau_s: float,
+                  weights: tuple[float, ...] = ()) -> tuple[float, float]:
+    """(ĉ, its delete-a-group jackknife se) from :func:`_jackknife_views`, ĉ the
+    inverse-variance combination or, with ``weights``, that fixed combination."""
     rows = np.flatnonzero(_kept(whole, min_tau_s))
     fixed = len(weights) == len(rows) and len(rows) > 0
 
@@ -958,11 +974,11 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
         return float(w @ ck[ok] / np.sum(w)) if np.sum(w) > 0 else math.nan
 
     c_all = one(whole)
-    c = np.asarray([one(cov_view(full - ps, rate_hz, edf_ref, n_ref)) for ps in parts])
+    c = np.asarray([one(v) for v in rest])
     if not np.all(np.isfinite(c)):
         return c_all, math.inf
-    se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
-    return c_all, se
+    g = len(rest)
+    return c_all, math.sqrt((g - 1) / g * float(np.sum((c - c.mean()) ** 2)))
 
 
 def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
@@ -1504,8 +1520,9 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     test = (coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
             if math.isfinite(mt) else CouplingTest(0.0, math.inf, 0, math.inf))
     c = test.c
-    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
-                                       ref=res)
+    # the record's parts once, for ĉ's jackknife and the test combination's
+    views = _jackknife_views(yu[:, 0], yu[:, 1], rate_hz, JACKKNIFE_GROUPS, keep, res)
+    se_jk = _jackknife_se(*views, mt)[1]
     # the test reads its own combination of the octaves (``coupling_test``), with its own
     # jackknife: the larger of the two se, as the jackknife's parts may be shorter than the
     # noise's correlation at the regressor's period, where it is too small itself; the
@@ -1513,8 +1530,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     c_t, se_t, se_jk_t = c, test.se, se_jk
     if test.weights:
         c_t, se_t = test.c_test, test.se_test
-        se_jk_t = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
-                                   ref=res, weights=test.weights)[1]
+        se_jk_t = _jackknife_se(*views, mt, test.weights)[1]
     se_test = max(se_jk_t, se_t)
     z = abs(c_t) / se_test if se_test > 0 and math.isfinite(c_t) else 0.0
     se = max(se_jk, test.se_interval)
