@@ -75,8 +75,8 @@ def test_a_coupling_beside_a_days_cycle_is_claimed_at_1_5_times_its_hvac_minimum
     independent; their shared slow noise set the test's se and its few degrees of freedom
     (a t threshold above 5) while the HVAC's octaves held the evidence. At 1.5× the stated
     minimum of the HVAC alone (``min_detectable_tempco``, z = 5, the day's cycle not
-    counted) the coupling is claimed on at least 7 of 8 records, its coefficient within 20 %; the same records with nothing
-    coupled claim nothing."""
+    counted) the coupling is claimed on at least 7 of 8 records, its coefficient within
+    20 %; the same records with nothing coupled claim nothing."""
     from avard.core.explain.thermal_fit import fit_thermal, min_detectable_tempco
 
     claimed, close, false = 0, 0, 0
