@@ -33,7 +33,12 @@ jackknife (``lag_interval``); the parts hold the Allan differences whose middle 
 at every octave (``octave_sums_by_part``). Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and
 channel search look at ≈ 50 correlated trials), or the t of the se's degrees of freedom at
 the search's share of the axis's false-alarm budget where that is more
-(``CouplingTest.threshold``).
+(``CouplingTest.threshold``). The test's z is its own combination of the octaves, the one
+of least variance under the regressor's octave covariance with non-negative weights
+(``least_variance_weights``; its jackknife with those weights fixed): where a day's cycle
+drives the slow octaves, the inverse-variance weights' shared red noise there set the
+se and its degrees of freedom (so the threshold). ĉ and its interval keep the
+inverse-variance weights.
 
 Compensated AVAR: AVAR(y − ĉu) = AVAR_y − 2ĉ·Cov_A + ĉ²·AVAR_u from the same covariance, as a
 ratio to AVAR_y applied to analyze's full-rate curve (below the slow view's first τ the
@@ -428,17 +433,34 @@ def _octave_coefficients(res: Any, min_tau_s: float) -> _Octaves | None:
 
 
 class CouplingTest(NamedTuple):
-    """ĉ, its standard error, the octaves used, and the degrees of freedom the se rests on
-    (∞ for the per-octave EDF model of ``_rho``); ``threshold`` the z that test needs."""
+    """ĉ, its standard error, the octaves used, and the degrees of freedom the test's se rests
+    on (∞ for the per-octave EDF model of ``_rho``); ``threshold`` the z that test needs.
+
+    The test's statistic is its own combination of the octaves (``c_test``, ``se_test``,
+    ``weights``): the one the octaves' covariance (the regressor's ``octave_spectra`` under
+    the axis's noise) makes most precise, with non-negative weights
+    (``least_variance_weights``). ĉ keeps the EDF model's inverse-variance weights for the
+    estimate and its interval."""
 
     c: float
     se: float
     points: int
     dof: float
     #: the se of ĉ's 68 % interval: the spectrum's level from the AVAR's local slope
-    #: (``OctaveSpectra._noise``'s ``shaped``); the test keeps ``se``, white noise's level at
+    #: (``OctaveSpectra._noise``'s ``shaped``); the test keeps white noise's level at
     #: every octave (its false-alarm rate was measured with it: the setback room's null axes)
     se_interval: float = math.inf
+    #: the test's combination of the octaves, its se (white noise's level) and its weights
+    #: (summing to 1, one per octave used); NaN/∞/() where there is no covariance
+    c_test: float = math.nan
+    se_test: float = math.inf
+    weights: tuple[float, ...] = ()
+
+    @property
+    def z(self) -> float:
+        """The test's statistic |c_test|/se_test (0 where it has no se)."""
+        ok = math.isfinite(self.se_test) and self.se_test > 0 and math.isfinite(self.c_test)
+        return abs(self.c_test) / self.se_test if ok else 0.0
 
     @property
     def threshold(self) -> float:
@@ -454,12 +476,58 @@ class CouplingTest(NamedTuple):
                                               max(self.dof, 1.0)))
 
 
+def least_variance_weights(V: NDArray) -> NDArray[np.float64]:
+    """The non-negative weights w (Σw = 1) that make wᵀVw least for the octaves'
+    covariance ``V`` (K, K): the most precise combination of the octaves' coefficients that
+    never subtracts one octave from another. Unconstrained, the least-variance weights of
+    strongly correlated neighbours come out of opposite signs: a difference that cancels
+    their shared slow noise in the model, and that rests on the model's correlation being
+    exact where it is least known; non-negative, an octave the others already carry is left
+    out instead. Active set: the unconstrained solution on the
+    octaves kept, the most negative dropped until none is, then any dropped octave whose
+    gradient says it would lower the variance taken back."""
+    V = np.asarray(V, dtype=float)
+    K = len(V)
+    if K == 0:
+        return np.zeros(0)
+    d = np.sqrt(np.maximum(np.diag(V), 1e-300))
+    R = V / np.outer(d, d)  # scaled: the same weights for u = w·d
+    on = np.ones(K, dtype=bool)
+    u = np.zeros(K)
+    for _ in range(4 * K):
+        idx = np.flatnonzero(on)
+        sol = np.linalg.lstsq(R[np.ix_(idx, idx)], 1.0 / d[idx], rcond=1e-12)[0]
+        if np.any(sol <= 0):
+            on[idx[int(np.argmin(sol))]] = False
+            if not on.any():
+                on[int(np.argmin(np.diag(V)))] = True
+            continue
+        u = np.zeros(K)
+        u[idx] = sol
+        grad = R @ u  # (V w)_j / d_j with w = u / d: the variance's slope along octave j
+        lam = float(grad[idx] @ (1.0 / d[idx]) / np.sum(1.0 / d[idx] ** 2))
+        off = np.flatnonzero(~on)
+        better = off[grad[off] < lam / d[off] * (1 - 1e-9)] if len(off) else off
+        if len(better) == 0:
+            break
+        on[better[int(np.argmin(grad[better] * d[better]))]] = True
+    w = u / d
+    s = float(np.sum(w))
+    return w / s if s > 0 else np.full(K, 1.0 / K)
+
+
 def coupling_test(res: Any, spectra: OctaveSpectra,
                   min_tau_s: float = 2 * DS18B20_CONVERSION_S) -> CouplingTest:
     """:func:`tempco_from_cov`'s ĉ with the se and its degrees of freedom from the octaves'
     covariance as this regressor (its ``spectra``, rows those of ``res``:
     ``octave_spectra``) and the axis's residual noise make it: it holds what the per-octave
-    EDF cannot, the slow noise every octave of a trend or a slow cycle shares."""
+    EDF cannot, the slow noise every octave of a trend or a slow cycle shares.
+
+    The test reads its own combination (``least_variance_weights`` of that covariance): the
+    EDF model's weights trust each slow octave as independent, and where a slow cycle (a
+    day's) drives the regressor there, their shared red noise set the se and its few
+    degrees of freedom (so a t threshold well above 5) while faster octaves (the HVAC's)
+    held the evidence (docs/explain.md, chan23g)."""
     got = _octave_coefficients(res, min_tau_s)
     if got is None:
         return CouplingTest(0.0, math.inf, 0, math.inf)
@@ -467,14 +535,19 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     # covariance's, which for a white regressor is the EDF model's and for a trend is the
     # ends' (the EDF model, Σ of independent differences, is ×3 too wide there)
     rows = np.flatnonzero(_kept(res, min_tau_s))
-    var, dof = spectra.variance(rows, got.r, got.w, got.nu)
+    var, dof_iv = spectra.variance(rows, got.r, got.w, got.nu)
     if not (math.isfinite(var) and var > 0):
         # the spectra do not see an octave the Allan result holds (a regressor flat on the
         # block means they were taken on): no se from them, so none the test can pass with
         return CouplingTest(got.chat, math.inf, len(got.w), math.inf)
-    var_iv, _dof = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
+    var_iv, _ = spectra.variance(rows, got.r, got.w, got.nu, shaped=True)
     se_iv = math.sqrt(var_iv) if math.isfinite(var_iv) and var_iv > 0 else math.sqrt(var)
-    return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof, se_iv)
+    wt = least_variance_weights(spectra.covariance(rows, got.r))
+    var_t, dof = spectra.variance(rows, got.r, wt, got.nu)
+    if not (math.isfinite(var_t) and var_t > 0):
+        wt, var_t, dof = got.w / float(np.sum(got.w)), var, dof_iv
+    return CouplingTest(got.chat, math.sqrt(var), len(got.w), dof, se_iv,
+                        float(wt @ got.c), math.sqrt(var_t), tuple(float(x) for x in wt))
 
 
 #: Lags after a hole in the temperature log that stay out of the regression (the lag filter
@@ -808,7 +881,7 @@ def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
 def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
     least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
-    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ and the next octave, t_c the time one rounding
+    AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ, t_c the time one rounding
     error lasts (``rounding_correlation_s``). Below it the regressor is mostly rounding: an
     error in the variable that pulls ĉ towards 0 and, as a longer trial lag smooths the
     steps away, favours positive lags.
@@ -830,9 +903,15 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) ->
     q = DS18B20_STEP_K**2 / 12.0 * tc / tau
     ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
-        # the first τ above the rounding with the next octave above it too (a sinusoid's
-        # AVAR dips at multiples of its period)
-        if ok[i] and (i + 1 == len(tau) or ok[i + 1]):
+        # the first τ above the rounding, whatever the octaves after it: a cycle's AVAR
+        # peaks below its period and dips towards its multiples, and for a drive of a step
+        # or two's swing the next octave can sit in that dip under the bar; asked to pass
+        # too, it put the floor past the cycle (or at ∞), leaving the coupling no τ (docs,
+        # chan23g). Octaves in such a dip stay in the regression as they do beyond any
+        # floor: their small AVAR_u weighs them little. (The rounding's model overstates
+        # it below t_c, where the sawtooth's AVAR rises as τ²: an octave does not pass by
+        # the model's error.)
+        if ok[i]:
             return float(tau[i]) if i > 0 else 0.0
     return math.inf
 
@@ -841,7 +920,8 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
                      groups: int = JACKKNIFE_GROUPS,
                      min_tau_s: float = 2 * DS18B20_CONVERSION_S,
                      keep: NDArray[np.bool_] | None = None,
-                     ref: Any | None = None) -> tuple[float, float]:
+                     ref: Any | None = None,
+                     weights: tuple[float, ...] = ()) -> tuple[float, float]:
     """(ĉ, se) of the Allan-covariance regression with a delete-a-group jackknife standard
     error: the record in ``groups`` contiguous parts, each its own segment (their difference
     sums add exactly, ``OctaveSums``); ĉ_(−g) from all parts but g;
@@ -849,7 +929,19 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     Allan differences of the noise as independent across a slow regressor, which red noise
     (random walk, flicker at the HVAC period) violates; the jackknife does not assume it.
     ``ref``: the axis's Allan result on the whole record (its EDF, scaled to each
-    leave-one-out count; computed here when not given)."""
+    leave-one-out count; computed here when not given). ``weights``: fixed weights of the
+    octaves the whole record's regression uses (``CouplingTest.weights``, in τ order): ĉ
+    and each ĉ_(−g) are then that combination of their octaves' Cov_A/AVAR_u, the test's
+    statistic, not the inverse-variance one."""
+    whole, rest = _jackknife_views(y, u, rate_hz, groups, keep, ref)
+    return _jackknife_se(whole, rest, min_tau_s, weights)
+
+
+def _jackknife_views(y: NDArray, u: NDArray, rate_hz: float, groups: int,
+                     keep: NDArray[np.bool_] | None, ref: Any | None
+                     ) -> tuple[CovView, list[CovView]]:
+    """The whole record's covariance view and each delete-a-part one (one pass over the
+    record: ``octave_sums_by_part``), for :func:`jackknife_tempco`."""
     M = len(y)
     X = np.column_stack([y, u])
     if ref is None:
@@ -860,12 +952,33 @@ def jackknife_tempco(y: NDArray, u: NDArray, rate_hz: float,
     edges = np.linspace(0, M, groups + 1).astype(int)
     parts = octave_sums_by_part(X, edges, keep)
     full = sum(parts[1:], start=parts[0])
-    c_all, _se, _n = tempco_from_cov(cov_view(full, rate_hz, edf_ref, n_ref), min_tau_s)
-    cs = [tempco_from_cov(cov_view(full - ps, rate_hz, edf_ref, n_ref), min_tau_s)[0]
-          for ps in parts]
-    c = np.asarray(cs)
-    se = math.sqrt((groups - 1) / groups * float(np.sum((c - c.mean()) ** 2)))
-    return c_all, se
+    return (cov_view(full, rate_hz, edf_ref, n_ref),
+            [cov_view(full - ps, rate_hz, edf_ref, n_ref) for ps in parts])
+
+
+def _jackknife_se(whole: CovView, rest: list[CovView], min_tau_s: float,
+                  weights: tuple[float, ...] = ()) -> tuple[float, float]:
+    """(ĉ, its delete-a-group jackknife se) from :func:`_jackknife_views`, ĉ the
+    inverse-variance combination or, with ``weights``, that fixed combination."""
+    rows = np.flatnonzero(_kept(whole, min_tau_s))
+    fixed = len(weights) == len(rows) and len(rows) > 0
+
+    def one(view: CovView) -> float:
+        if not fixed:
+            return tempco_from_cov(view, min_tau_s)[0]
+        cov = np.asarray(view.cov, dtype=float)[rows]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ck = cov[:, 0, 1] / cov[:, 1, 1]
+        ok = np.isfinite(ck)
+        w = np.asarray(weights, dtype=float)[ok]
+        return float(w @ ck[ok] / np.sum(w)) if np.sum(w) > 0 else math.nan
+
+    c_all = one(whole)
+    c = np.asarray([one(v) for v in rest])
+    if not np.all(np.isfinite(c)):
+        return c_all, math.inf
+    g = len(rest)
+    return c_all, math.sqrt((g - 1) / g * float(np.sum((c - c.mean()) ** 2)))
 
 
 def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
@@ -1295,8 +1408,11 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                                            floor)
         scans[j] = per_axis
     floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
+    # each channel's held-out regressors (``holdout.channel_heldout``), built once for every
+    # axis that scores the channel at the same lag (the same slow view of the same channel)
+    columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
-                  floors) for a in range(Y.shape[1])]
+                  floors, columns) for a in range(Y.shape[1])]
     return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
 
 
@@ -1357,8 +1473,10 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
           best: dict[int, list[ScanPoint]], holes: Holes | None = None,
-          floors: dict[int, float] | None = None) -> ThermalFit:
-    """The driving channel and lag of one axis from its scans, with the profile interval."""
+          floors: dict[int, float] | None = None,
+          columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None) -> ThermalFit:
+    """The driving channel and lag of one axis from its scans, with the profile interval;
+    ``columns``: per channel, the held-out regressors other axes built (``_choose_channel``)."""
     zmax = {j: max(s.z for s in sc) for j, sc in best.items()}
 
     def at_end(sc: list[ScanPoint]) -> bool:
@@ -1378,7 +1496,8 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     usable = {j: sc for j, sc in best.items()
               if math.isfinite((floors or {}).get(j, 0.0))}
     if len(usable) > 1:
-        jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors)
+        jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors,
+                                             columns)
     elif len(usable) == 1:
         jb = next(iter(usable))
     scan = best[jb]
@@ -1396,15 +1515,24 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the scan compares lags and channels under one common covariance, ``_rho``, which a
     # regressor's own made unequal: a 20-min lag on the ambient channel lost to the plate
     # through 59 s, its smoother regressor's octaves more alike)
-    test = coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
-    c, se_a = test.c, test.se
-    _c_parts, se_jk = jackknife_tempco(yu[:, 0], yu[:, 1], rate_hz, min_tau_s=mt, keep=keep,
-                                       ref=res)
-    # the larger of the two: the jackknife's parts may be shorter than the noise's
-    # correlation at the regressor's period, where it is too small itself; the test's z
-    # with the test's se, the interval with the spectrum's level from the AVAR's slope
-    se_test = max(se_jk, se_a)
-    z = abs(c) / se_test if se_test > 0 else 0.0
+    # a channel below its rounding at every τ (an infinite floor: a half of a record whose
+    # drive is a step or two of the readings) leaves the test no τ: nothing to test
+    test = (coupling_test(res, octave_spectra(yu[:, 1], ms, mt * rate_hz), mt)
+            if math.isfinite(mt) else CouplingTest(0.0, math.inf, 0, math.inf))
+    c = test.c
+    # the record's parts once, for ĉ's jackknife and the test combination's
+    views = _jackknife_views(yu[:, 0], yu[:, 1], rate_hz, JACKKNIFE_GROUPS, keep, res)
+    se_jk = _jackknife_se(*views, mt)[1]
+    # the test reads its own combination of the octaves (``coupling_test``), with its own
+    # jackknife: the larger of the two se, as the jackknife's parts may be shorter than the
+    # noise's correlation at the regressor's period, where it is too small itself; the
+    # interval is ĉ's, with the spectrum's level from the AVAR's slope
+    c_t, se_t, se_jk_t = c, test.se, se_jk
+    if test.weights:
+        c_t, se_t = test.c_test, test.se_test
+        se_jk_t = _jackknife_se(*views, mt, test.weights)[1]
+    se_test = max(se_jk_t, se_t)
+    z = abs(c_t) / se_test if se_test > 0 and math.isfinite(c_t) else 0.0
     se = max(se_jk, test.se_interval)
     lag_lo, lag_hi, open_lo, open_hi = lag_interval(scan, k)
     # ĉ is the coefficient at the chosen lag; the lag is an estimate too, and for a lag long
@@ -1451,7 +1579,8 @@ def path_distance(lag_s: float) -> float:
 
 def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
                     best: dict[int, list[ScanPoint]], holes: Holes | None,
-                    floors: dict[int, float] | None
+                    floors: dict[int, float] | None,
+                    columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None
                     ) -> tuple[int, dict[str, dict[str, float]], str]:
     """The channel that drives axis ``y``, by the held-out likelihood of each channel
     through its own lag (``holdout.channel_heldout``), not by the scan's z: (its index, per
@@ -1470,14 +1599,15 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
     the die along the heat's path (``path_distance``: a longer lag on another channel is
     that path with the lags between them added, and a lag long against the drive's period
     trades with its coefficient, which it leaves unresolved), then the lower held-out
-    −2 ln L."""
+    −2 ln L. ``columns``: per channel, the held-out regressors already built for another axis
+    (``holdout.channel_heldout``)."""
     from avard.core.explain.holdout import channel_heldout
 
     ks = {j: int(np.argmax([s.z for s in sc])) for j, sc in best.items()}
     lags0 = {j: best_lag(sc, ks[j]) for j, sc in best.items()}
     is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
     interior = not all(is_open.values())
-    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes)
+    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes, columns)
     # a channel whose held-out fit gave no number (NaN) can neither win nor tie
     cost = {j: (hp[j].heldout if math.isfinite(hp[j].heldout) else math.inf)
             + (OPEN_END_MARGIN if is_open[j] and interior else 0.0) for j in best}

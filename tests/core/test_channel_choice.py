@@ -166,7 +166,11 @@ def test_a_channel_below_its_own_rounding_at_every_tau_cannot_drive(tmp_path):
     readings never stand above their rounding (the rounding floor is infinite) and both
     channels' held-out scores are 0. The tie went to the plate by its path distance and the
     coupling test then had no τ to start from (an OverflowError, a traceback); a channel
-    with no τ to regress on is no candidate."""
+    with no τ to regress on is no candidate. (Since chan23g the floor is the first octave
+    above the rounding, not the first of two in a row: this plate's 1800 s cycle of about
+    one step stands 20× above it at 655 s alone, so it has a τ and may drive; the record
+    holds no coupling, and none is claimed. A channel with no τ at all:
+    ``test_a_channel_that_never_moves_is_compared_without_a_traceback``.)"""
     from tests.support.adversary_gen import make_record as adversary
 
     rec = tmp_path / "c305.npz"
@@ -174,4 +178,43 @@ def test_a_channel_below_its_own_rounding_at_every_tau_cannot_drive(tmp_path):
     ex = explain_file(open_record(str(rec)), ExplainOptions(heldout=False))
     assert "warmup" in {f.cause for f in ex.channels["x"].claimed}
     for ch in ex.channels.values():
-        assert ch.thermal is None or ch.thermal.channel == "ambient"
+        assert "temperature" not in {f.cause for f in ch.claimed}
+
+
+def test_the_channels_held_out_regressors_are_built_once_for_every_axis(monkeypatch):
+    """``channel_heldout``'s ``columns`` (chan23g): the regressors of a channel at one lag,
+    built for one axis, are read by the next axis scored at that lag, and give the same
+    held-out −2 ln L as built afresh; ``fit_thermal_axes`` hands one cache to every axis it
+    picks a channel for."""
+    import avard.core.explain.holdout as ho
+    from avard.core.explain import thermal_paths as tp
+    from avard.core.explain.thermal_fit import fit_thermal_axes
+
+    w, _c = _plate_at_lag_0(hours=2.0, rate_hz=1.0)
+    acc, temps, names, _truth = make(5, w)
+    lags = {0: 0.0, 1: 600.0}
+    fresh = [channel_heldout(acc[:, a], temps, lags, 1.0) for a in range(2)]
+    built = []
+    real = tp.path_columns
+
+    def counting(T, cols, rate_hz, done=None):
+        built.append(sum(c not in (done or {}) for c in cols))
+        return real(T, cols, rate_hz, done)
+
+    monkeypatch.setattr(tp, "path_columns", counting)
+    cache: dict = {}
+    cached = [channel_heldout(acc[:, a], temps, lags, 1.0, columns=cache) for a in range(2)]
+    assert sum(built[:2]) > 0 and sum(built[2:]) == 0  # the second axis builds nothing
+    for a in range(2):
+        for j in lags:
+            assert cached[a][j].heldout == pytest.approx(fresh[a][j].heldout, rel=1e-12)
+    seen = []
+    real_ch = ho.channel_heldout
+
+    def spy(*args, **kw):
+        seen.append(kw.get("columns", args[6] if len(args) > 6 else None))
+        return real_ch(*args, **kw)
+
+    monkeypatch.setattr(ho, "channel_heldout", spy)
+    fit_thermal_axes(acc[:, :2], temps, list(names), 1.0)
+    assert len(seen) == 2 and seen[0] is not None and seen[0] is seen[1]
