@@ -595,6 +595,38 @@ def _grid_for(c: cz.Candidate, key: str, g: cz._Gls) -> NDArray[np.float64]:
     return np.linspace(max(v - half, lo), min(v + half, hi), 97)
 
 
+#: Points of a change point's profile where its likelihood lives (``_time_profile``).
+TIME_FINE = 129
+#: The fewest of them the likelihood's bulk must span before the zoom stops.
+TIME_SPAN = 24
+
+
+def _time_profile(g: cz._Gls, c: cz.Candidate, key: str, others: list[NDArray],
+                  grid: NDArray, chi: NDArray
+                  ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]:
+    """A change point's profile (χ², size, its variance) on a grid fine enough for its
+    likelihood: zoomed onto where the likelihood on ``grid`` (``chi``) is not negligible,
+    again while its bulk spans fewer than ``TIME_SPAN`` points. A step many block σ tall is
+    located to a small fraction of a block: on the coarse grid (an eighth of a block, 21 s on
+    24 h) its likelihood sat on one or two points, and the interval drawn from them was the
+    grid's spacing, not the likelihood's width (a change point's time and size held the
+    truth in about half the 68 % intervals on 24 h)."""
+    for _zoom in range(3):
+        w = np.exp(-(chi - chi.min()) / 2.0)
+        live = np.flatnonzero(w > 1e-6)
+        bulk = np.count_nonzero(w > 0.01)
+        if bulk >= TIME_SPAN and len(grid) >= TIME_FINE:
+            break
+        a, b = max(int(live[0]) - 1, 0), min(int(live[-1]) + 1, len(grid) - 1)
+        if not grid[b] > grid[a]:
+            break
+        grid = np.linspace(float(grid[a]), float(grid[b]), TIME_FINE)
+        shapes = np.column_stack([_column(c.cause, {**c.params, key: float(v)}, g.t, g.dt)
+                                  for v in grid])
+        chi, size, var = g.profile(g.white(shapes), others)
+    return grid, (chi, size, var)
+
+
 _NONLINEAR = {"bias_step": ("time_s",), "excursion": ("start_s", "end_s"),
               "warmup": ("time_constant_s",)}
 
@@ -620,6 +652,7 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
                 if key == "time_constant_s":
                     best = cz._vertex(grid, chi)
                 else:
+                    grid, (chi, size, var) = _time_profile(g, c, key, others, grid, chi)
                     best = cz._weight_interval(grid, chi, 1.0)[1]
                 cands[i] = c = replace(c, params={**c.params, key: float(best)})
                 prof[(i, key)] = (grid, chi, size, var)

@@ -1,0 +1,61 @@
+"""The compound fit's 68 % intervals of a change point (trans23g): drawn from the profile
+likelihood on a grid fine enough for it, and without the half-step shift of its quantiles.
+
+Model-exact draws: block means of white, flicker and random-walk noise drawn from the very
+covariance the GLS uses (``causes._noise_cov``), so what is checked is the interval's
+construction, not the noise model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from avard.core.explain import causes as cz
+from avard.core.explain import transients as tr
+
+N, B, K = 1.6e-4, 2e-5, 2e-6
+
+
+def test_a_likelihood_on_one_grid_point_has_its_median_there():
+    """All the weight on one point: the median is that point, the interval symmetric about
+    it (the running sum put the whole weight below the point, the median half a step early)."""
+    x = np.arange(10.0)
+    chi = np.full(10, 1e4)
+    chi[6] = 0.0
+    lo, mid, hi = cz._weight_interval(x, chi, 1.0)
+    assert mid == pytest.approx(6.0)
+    assert 6.0 - lo == pytest.approx(hi - 6.0)
+    # a flat likelihood: the median is the middle of the grid
+    assert cz._weight_interval(x, np.zeros(10), 1.0)[1] == pytest.approx(4.5)
+
+
+def test_a_step_times_and_sizes_intervals_on_24_h_hold_the_truth_about_68_percent():
+    """A step at 3× its minimum on the 512 block means of 24 h (169 s blocks, where the walk
+    and the flicker are as large as the white in a block), its time anywhere in a block:
+    the refined time's and size's 68 % intervals hold the truth in 60–76 % of 300 draws
+    (binomial σ 2.7 %). Before, the time's profile was on an eighth of a block (21 s) where
+    its likelihood is ±5 s wide: the interval was the grid's spacing, the time half a grid
+    step early, and they held the truth in 42 % and 51 %."""
+    rec = 24 * 3600.0
+    m = tr.MAX_BLOCKS
+    dt = rec / m
+    t = (np.arange(m) + 0.5) * dt
+    chol = np.linalg.cholesky(cz._noise_cov(t, dt, N, B, K))
+    size = 3 * cz.min_detectable_step(N, B, K, rec)
+    rng = np.random.default_rng(7)
+    n = 300
+    held = {"time_s": 0, "size": 0}
+    errors = []
+    for _ in range(n):
+        ts = 0.3 * rec + rng.uniform(0, dt)
+        y = chol @ rng.standard_normal(m) + size * cz._step_blocks(t, dt, [ts])[:, 0]
+        start = cz.Candidate("bias_step", True, {"time_s": ts + rng.uniform(-dt, dt),
+                                                  "size": size}, 10.0, 5.0, "")
+        (out,) = tr.refine_compound(y, 1 / dt, {"N": N, "B": B, "K": K}, [start])
+        for key, truth in (("time_s", ts), ("size", size)):
+            lo, hi = out.intervals[key]
+            held[key] += lo <= truth <= hi
+        errors.append(out.params["time_s"] - ts)
+    for key in held:
+        assert 0.60 <= held[key] / n <= 0.76, (key, held[key])
+    # no shift: the mean error within 3 of its standard errors of zero
+    assert abs(np.mean(errors)) < 3 * np.std(errors) / np.sqrt(n)
