@@ -657,7 +657,7 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
                 cands[i] = c = replace(c, params={**c.params, key: float(best)})
                 prof[(i, key)] = (grid, chi, size, var)
     cols = [g.white(_column(c.cause, c.params, g.t, g.dt)) for c in cands]
-    chi, coef, _cov = g.chi2(cols)
+    chi, coef, cov = g.chi2(cols)
     n_par = 2 + sum(1 + len(_NONLINEAR[c.cause]) for c in cands)
     dof = max(1, len(g.yb) - n_par)
     s2 = max(1.0, chi / dof)
@@ -665,7 +665,12 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
     together = f" ({len(cands)} effects fitted together)" if len(cands) > 1 else ""
     for i, c in enumerate(cands):
         iv: dict[str, list[float]] = {}
-        size_iv: tuple[float, float] | None = None
+        # the size's variance with every shape held, and what each nonlinear parameter's
+        # uncertainty adds to it: its profile envelope's half-width² less that (an
+        # excursion's size moves with both edges; the envelope over one edge alone left the
+        # other's share out, and its interval held the truth in 61 % of model-exact draws)
+        held = float(cov[2 + i, 2 + i]) * s2
+        spread = held
         for key in _NONLINEAR[c.cause]:
             grid, chi_p, sz, var = prof[(i, key)]
             if key == "time_constant_s":
@@ -673,16 +678,12 @@ def refine_compound(y: NDArray, rate_hz: float, noise: dict[str, float],
             else:
                 lo, _mid, hi = cz._weight_interval(grid, chi_p, s2)
                 iv[key] = [lo, hi]
-            # the size's interval from the profile over the parameter it is most tied to
-            if size_iv is None or key == "time_constant_s":
-                size_iv = cz._size_interval(chi_p, sz, var, s2)
+            lo, hi = cz._size_interval(chi_p, sz, var, s2)
+            spread += max(0.0, (0.5 * (hi - lo)) ** 2 - held)
         size = float(coef[2 + i])
-        assert size_iv is not None
-        # the profile's size is at the grid's best point; centre the interval's widths on
-        # the joint fit's size
-        lo, hi = size_iv
-        mid = 0.5 * (lo + hi)
-        iv["size"] = [size - (mid - lo), size + (hi - mid)]
+        # centred on the joint fit's size (the profile's is at the grid's best point)
+        half = math.sqrt(spread)
+        iv["size"] = [size - half, size + half]
         params = {**c.params, "size": size}
         text = "; ".join(f"{k} {params[k]:.5g} [{iv[k][0]:.5g}, {iv[k][1]:.5g}]"
                          for k in (*_NONLINEAR[c.cause], "size"))
