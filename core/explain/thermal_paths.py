@@ -1780,9 +1780,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 f"resolved: the response at the drive's {per:.4g} s, gain "
                 f"{gain:.4g} m/s²/K [{gain_lo:.4g}, {gain_hi:.4g}] and phase {phi:+.3g} rad "
                 f"[{phi_lo:+.3g}, {phi_hi:+.3g}] (a lead when positive; 68 %)")
-    leaning = _leaning(best, scores)
     rival = (_rate_rival(best, scores, per_kind["rate"], where, vw, vh, half, weigh_r, Ts,
                          rate, ms / rate) if best.kind == "one_lag" else None)
+    leaning = _leaning(best, scores)
     reading = _rate_beside_lag(best, scores, period, rival)
     if reading and "rate" not in as_well:
         as_well += ("rate",)
@@ -2008,9 +2008,10 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
     of 277–320 s with c 1.7–1.9× its own). A rival: the candidate predicts the held-out
     halves no worse than one lag by the margin, or (``rival``, its reading at lag 0) the two
     signals are under ``RATE_APART`` apart in the regression's noise, or the reading
-    predicts no worse than one lag by the margin and the share of the held-out deviance its
-    derivative's rounding makes up beyond one lag's (the derivative of the readings'
-    staircase is an error in its regressor, not evidence against it; the candidate's own
+    predicts no worse than one lag by the margin and ``RATE_ROUNDING_SPAN`` times the share
+    of the held-out deviance its derivative's rounding is modelled to make up beyond one
+    lag's (the derivative of the readings' staircase is an error in its regressor, not
+    evidence against it, and that model is rough; the candidate's own
     held-out score, θ re-chosen on each half, can wander along the ridge to a long lag with
     r of the other sign on one half, which is not the reading named)."""
     rate = scores.get("rate")
@@ -2024,16 +2025,16 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
     own = rate.heldout <= best.heldout + HELDOUT_MARGIN
     close = rival is not None and rival.separation < RATE_APART
     masked = rival is not None and (rival.heldout_delta
-                                    <= HELDOUT_MARGIN + rival.rounding)
+                                    <= HELDOUT_MARGIN + RATE_ROUNDING_SPAN * rival.rounding)
     if not (own or close or masked):
         return ""
     if rival is not None:
         why = (f"their signals are {math.sqrt(max(rival.separation, 0.0)):.3g} σ apart on "
                f"this record (z² {rival.separation:.3g} < {RATE_APART:g})" if close else
                f"it predicts the held-out halves {rival.heldout_delta:+.3g} against one lag, "
-               f"no worse than the margin {HELDOUT_MARGIN:g} plus the {rival.rounding:.3g} "
-               "of the held-out deviance its derivative of the readings' 0.0625 K steps "
-               "makes up" if masked else
+               f"within the margin {HELDOUT_MARGIN:g} and {RATE_ROUNDING_SPAN:g}× the "
+               f"{rival.rounding:.3g} of the held-out deviance its derivative of the readings' "
+               "0.0625 K steps is modelled to make up" if masked else
                f"the dT/dt candidate predicts the held-out halves "
                f"{rate.heldout - best.heldout:+.3g} against one lag")
         return (f"one lag or a dT/dt term: this record cannot tell them apart ({why}); at "
@@ -2051,6 +2052,11 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
             "coupling)")
 
 
+#: How far the sawtooth model of the readings' rounding through a dT/dt reading
+#: (``_rate_rival``'s share) can be off, as a factor either way (short on records of a true
+#: dT/dt term, over on records of a true lag: docs/explain.md, paths23g): a held-out loss
+#: within the margin and this many shares is not evidence against the reading
+RATE_ROUNDING_SPAN = 3.0
 #: The non-centrality (z²) below which one lag's signal and the closest coupling plus dT/dt
 #: term on the channel itself are one reading on this record (``_rate_separation``): the
 #: z = 5 of every stated minimum. The held-out deviance of the wrong reading exceeds the
