@@ -1,0 +1,61 @@
+"""Thermal paths on records of the adversary's generator (tests/support/adversary_gen.py,
+written apart from avard: a jittered triangle HVAC, its own DS18B20 model): what the finding
+must say where the record does not tell two mechanisms apart (docs/explain.md, "Thermal
+paths on the adversary's records: the readings one lag stands for")."""
+
+from __future__ import annotations
+
+import pytest
+from avard.core.explain.engine import explain_file
+from avard.core.explain.options import ExplainOptions
+from avard.core.io.source import open_record
+
+from tests.support.adversary_gen import make_record as adversary_record
+
+
+def _x(tmp_path, kind: str, seed: int):  # type: ignore[no-untyped-def]
+    path = tmp_path / f"{kind}{seed}.npz"
+    truth = adversary_record(kind, seed, path, logged=("plate",))
+    ex = explain_file(open_record(str(path)), ExplainOptions(channels=("x",)))
+    return truth["axes"]["x"], ex.channels["x"]
+
+
+@pytest.mark.parametrize("seed", [405, 409])
+def test_a_dt_term_the_rounding_hides_is_named_beside_the_one_lag_kept(tmp_path, seed):
+    """dtdt 405 (plate only, HVAC alone, r/c = −343 s: the drive's 1/ω): one lag at ≈ 318 s
+    with c twice the coupling is kept. The true reading, c·T + r·dT/dt, predicts the held-out
+    halves 35 worse, but the derivative of the 0.0625 K staircase (a 0.18 K swing at the die)
+    passes its steps ×ω² and makes up more than that of the held-out deviance: the record
+    does not tell the two apart, and the finding must name the dT/dt term beside the lag with
+    its own reading, near the truth (on main it named nothing and printed one lag alone).
+    dtdt 409 likewise (one lag at ≈ 340 s; the reading predicts 3 better, within the margin
+    and its derivative's rounding)."""
+    truth, ch = _x(tmp_path, "dtdt", seed)
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and ch.thermal is not None and ch.thermal.path is not None
+    pf = ch.thermal.path
+    if th[0].mechanism == "rate":
+        return
+    assert th[0].mechanism in (None, "one_lag")
+    assert "rate" in pf.as_well
+    note = next(n for n in pf.notes if n.startswith("one lag or a dT/dt term"))
+    # the reading it names: "the coupling is C m/s²/K and r R m/s² per K/s"
+    c = float(note.split("the coupling is ")[1].split(" ")[0])
+    r = float(note.split(" and r ")[1].split(" ")[0])
+    assert c == pytest.approx(truth["coefficient_mps2_per_k"], rel=0.2)
+    assert r == pytest.approx(truth["r_mps2_per_k_per_s"], rel=0.2)
+
+
+def test_a_relay_that_predicts_as_well_as_one_lag_is_named_beside_it(tmp_path):
+    """hysteresis 404 (plate only; a relay of a quarter of the die's 0.11 K swing, h at 3×
+    the generator's minimum): one lag with a lead of ≈ 200 s is kept, and the relay predicts
+    the held-out halves a little better (by less than what makes one lag's parameters
+    model-dependent) with its term well past the leaning test's z. The record holds both
+    readings, so the relay must be named (chosen, leaning, or beside the lag); on main
+    nothing named it and one lag stood alone."""
+    _truth, ch = _x(tmp_path, "hysteresis", 404)
+    assert ch.thermal is not None and ch.thermal.path is not None
+    pf = ch.thermal.path
+    assert "hysteresis" in (pf.kind, *pf.alternatives, *pf.as_well, *pf.leaning)
+    if pf.kind == "one_lag" and "hysteresis" in pf.as_well:
+        assert any(n.startswith("one lag or hysteresis") for n in pf.notes)
