@@ -1168,9 +1168,10 @@ class ThermalFit:
                            self.z, self.threshold, f"{self.evidence()}; {note}",
                            channel=self.channel, mechanism=self.mechanism,
                            model_dependent=True, intervals_if_model_held=iv)
+        beside = "" if self.path is None else "".join(f"; {n}" for n in self.path.beside_lag)
         return Finding("temperature", False,
                        {"coefficient": self.coefficient, "lag_s": self.lag_s}, iv,
-                       self.z, self.threshold, self.evidence(), channel=self.channel,
+                       self.z, self.threshold, self.evidence() + beside, channel=self.channel,
                        mechanism=self.mechanism)
 
     def to_dict(self) -> dict[str, Any]:

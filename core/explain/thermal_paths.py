@@ -693,6 +693,9 @@ class PathFit:
     #: parameter more (two paths beside a dT/dt term, ``_mimic``) or their θ sits at the end
     #: of its grid (open): the record does not tell them from it either (the notes say which)
     as_well: tuple[str, ...] = ()
+    #: the notes naming another reading beside one lag kept (the dT/dt term, a relay): the
+    #: one-lag finding's text says them, not only ``--json``'s notes
+    beside_lag: tuple[str, ...] = ()
 
     @property
     def model_dependent(self) -> bool:
@@ -1784,13 +1787,14 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          rate, ms / rate) if best.kind == "one_lag" else None)
     leaning = _leaning(best, scores)
     reading = _rate_beside_lag(best, scores, period, rival)
+    beside_lag: list[str] = []
     if reading and "rate" not in as_well:
         as_well += ("rate",)
-        notes.append(reading)
+        beside_lag.append(reading)
     for k in _level(best, scores, leaning):
         sc = scores[k]
         as_well += (k,)
-        notes.append(
+        beside_lag.append(
             f"one lag or {PATH_NAMES[k]}: {PATH_NAMES[k]} predicts the held-out halves as "
             f"well (Δ {sc.heldout - best.heldout:+.3g}, short of the {LEAN_MARGIN:g} that "
             f"makes one lag's parameters model-dependent) with its term at z "
@@ -1798,6 +1802,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             "coupling (one lag's lead or lag), only its odd harmonics tell it, and this "
             "record does not resolve them; one lag's coefficient and lag hold for a linear "
             "path")
+    notes += beside_lag
     if leaning:
         names = " and ".join(f"{PATH_NAMES[k]} (Δ {scores[k].heldout - ref.heldout:+.3g})"
                              for k in leaning)
@@ -1810,7 +1815,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
-                   as_well=as_well)
+                   as_well=as_well, beside_lag=tuple(beside_lag))
 
 
 def _n_params(sc: PathScore) -> int:

@@ -39,6 +39,7 @@ def test_a_dt_term_the_rounding_hides_is_named_beside_the_one_lag_kept(tmp_path,
     assert th[0].mechanism in (None, "one_lag")
     assert "rate" in pf.as_well
     note = next(n for n in pf.notes if n.startswith("one lag or a dT/dt term"))
+    assert note in th[0].evidence        # said in the finding's text, not only in --json
     # the reading it names: "the coupling is C m/s²/K and r R m/s² per K/s"
     c = float(note.split("the coupling is ")[1].split(" ")[0])
     r = float(note.split(" and r ")[1].split(" ")[0])
@@ -58,4 +59,6 @@ def test_a_relay_that_predicts_as_well_as_one_lag_is_named_beside_it(tmp_path):
     pf = ch.thermal.path
     assert "hysteresis" in (pf.kind, *pf.alternatives, *pf.as_well, *pf.leaning)
     if pf.kind == "one_lag" and "hysteresis" in pf.as_well:
-        assert any(n.startswith("one lag or hysteresis") for n in pf.notes)
+        note = next(n for n in pf.notes if n.startswith("one lag or hysteresis"))
+        th = [f for f in ch.claimed if f.cause == "temperature"]
+        assert not th or note in th[0].evidence
