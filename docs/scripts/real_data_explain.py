@@ -15,6 +15,7 @@ from pathlib import Path
 
 from avard.core.explain.engine import explain_file
 from avard.core.explain.report import term_changes
+from avard.core.io.source import open_record
 from avard.core.model.terms import SYMBOLS
 
 HERE = Path(__file__).resolve().parent
@@ -55,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     t0 = time.time()
     for r, p in zip(RUNS, paths, strict=True):
-        ex = explain_file(str(p))
+        ex = explain_file(open_record(p))
         print(f"{r} done after {time.time() - t0:.0f} s", file=sys.stderr)
         md += [f"## {r}", ""]
         for name, ch in ex.channels.items():
