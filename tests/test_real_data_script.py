@@ -33,6 +33,8 @@ def test_the_real_data_page_is_written_from_records_of_the_imudata_layout(tmp_pa
         for axis in "xyz":
             assert f"### {run}, axis {axis}" in text
     assert text.count("| N velocity_random_walk |") == 9
+    # each axis says whether the extended model describes it (explain's verdict line)
+    assert text.count("\n- verdict: ") == 9
     # white noise of 2e-3 m/s² at 100 Hz: N = σ/√rate = 2e-4 m/s/√s on every axis
     ns = [float(line.split("|")[2].split()[0]) for line in text.splitlines()
           if line.startswith("| N velocity_random_walk |")]

@@ -66,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             md += [f"### {r}, axis {name}", "",
                    f"- base χ²/dof {ch.base.fit.chi2_dof:.3g}, extended "
                    f"{ch.extended.chi2_dof:.3g}, gain {ch.gain:.3g}",
+                   "- verdict: " + ("not judged" if ch.verdict is None else ch.verdict.line()),
                    f"- lines in analyze's model: {lines}",
                    "- misfit of the base model: " + ("; ".join(
                        f"{m['direction']} at τ {m['tau_range_s'][0]:.3g}–"
