@@ -11,6 +11,7 @@ variance of the recording (same samples, same AVAR).
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -194,7 +195,14 @@ def test_every_checkpoint_checks_the_accumulators_against_what_was_recorded(tmp_
     data = tmp_path / "rec"
     svc = _run(data, 13.0, 1)
     ckpts = [r for r in RecordingReader(data) if r["kind"] == "checkpoint"]
-    assert len(ckpts) >= 3
+    # How many checkpoints a run makes depends on how the threads were scheduled (at most
+    # one per chunk the Allan stage takes, and a lagging stage takes long chunks), so the
+    # test asks what does not: together the checks cover every recorded sample, each taking
+    # up where the last one ended, and each agrees with the recording.
+    raw = [(r["i0"], r["i0"] + r["n"]) for r in RecordingReader(data) if r["kind"] == "raw"]
+    spans = [(c["check"]["from"], c["check"]["to"]) for c in ckpts]
+    assert spans and spans[0][0] == raw[0][0] and spans[-1][1] == raw[-1][1], spans
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(spans)), spans
     for c in ckpts:
         check = c["check"]
         recorded = sum(max(0, min(r["i0"] + r["n"], check["to"]) - max(r["i0"], check["from"]))

@@ -723,6 +723,9 @@ def test_a_service_whose_removed_directory_another_locked_meanwhile_pauses(tmp_p
         svc = box["svc"]
         t = t_mono - svc.t_start
         if t >= 5.0 and "holder" not in box:
+            # the recorder's thread lags the reader's by however the threads were scheduled:
+            # the segment must hold samples when it goes (else nothing is segment_removed)
+            _until(lambda: len(svc.recorder._marks.at) > 0)
             with svc.recorder._lock:          # between two of its records
                 _remove(data)
                 box["before"] = (svc.recorder.records_lost, svc.recorder.segments_written)
