@@ -25,6 +25,8 @@ from avard.core.io.recording import RecordingReader, load_recording
 from avard.core.io.source import RecordFormat, StreamSource, open_record
 from avard.daemon.cli import main
 
+from .test_recording_rates import _mixed
+
 CONFIG = """
 [allan]
 snapshot_interval_s = 10.0
@@ -144,12 +146,13 @@ def test_a_copied_segment_is_counted_once_and_said_once(
 
 
 def test_runs_at_different_rates_are_refused_together_and_analysed_one_at_a_time(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rec = _record(tmp_path, "a", seconds=10.0, seed=1)
-    # the service refuses to record another rate into a directory (test_recording_rates):
-    # such a directory is one an older version left, or one runs were copied into
-    for seg in _segments(_record(tmp_path, "b", seconds=10.0, seed=2, odr=250.0)):
-        shutil.copy(seg, rec / seg.name)
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the service refuses to record another rate into a directory: such a directory is one
+    # an older version left, the second run continuing the first's sample index
+    # (test_recording_rates._mixed; a run recorded apart and copied in would start at
+    # index 0 again, and its samples would be the first run's duplicates)
+    rec = _mixed(tmp_path, monkeypatch)
     runs = sorted({p.name.split("_")[0] for p in _segments(rec)})
     assert len(runs) == 2
     with pytest.raises(DataError, match="incompatible rates") as err:
