@@ -153,6 +153,7 @@ def test_runs_at_different_rates_are_refused_together_and_analysed_one_at_a_time
     # (test_recording_rates._mixed; a run recorded apart and copied in would start at
     # index 0 again, and its samples would be the first run's duplicates)
     rec = _mixed(tmp_path, monkeypatch)
+    capsys.readouterr()        # what the two runs logged: the test reads analyze's line only
     runs = sorted({p.name.split("_")[0] for p in _segments(rec)})
     assert len(runs) == 2
     with pytest.raises(DataError, match="incompatible rates") as err:
