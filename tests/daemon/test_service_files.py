@@ -20,6 +20,7 @@ from avard.core.io.recording import RecordingReader
 from avard.daemon.compose import simulated_service
 from avard.daemon.config import load_config
 from avard.daemon.hw.simulation import W1_DIR
+from avard.daemon.service.recorder import Recorder
 from avard.daemon.service.supervisor import Service
 
 
@@ -197,6 +198,24 @@ def _run(data: Path, seconds: float, seed: int, **over: object) -> Service:
     return svc
 
 
+def _run_with_recorder(data: Path, recorder_cls: type[Recorder]) -> Service:
+    """30 s of a simulated service whose recorder is ``recorder_cls`` (hour-long segments,
+    so nothing rotates the acted-on segment away)."""
+    from avard.daemon.service.supervisor import ServiceHooks
+
+    def recorder(svc: Service) -> Recorder:
+        r = svc.config.recording
+        return recorder_cls(svc.data_dir, svc.run_id, svc.run_header.for_segment,
+                            segment_s=r.segment_s, clock=svc.clock.monotonic,
+                            realtime=svc.clock.realtime)
+
+    cfg = _config(data, **{"recording.segment_s": 3600.0})
+    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3,
+                                         hooks=ServiceHooks(recorder=recorder))
+    svc.run(30.0)
+    return svc
+
+
 # -- the open segment deleted, emptied, cut short or replaced behind the recorder's back -------
 
 RATE = 125.0
@@ -249,7 +268,6 @@ def test_an_open_segment_changed_behind_the_recorders_back_becomes_a_recorded_ga
     what the segment took as a ``segment_removed`` gap at the start of a new segment, and
     goes on recording there: the recording's blocks and gaps tile every acquired index."""
     from avard.daemon.service.recorder import Recorder
-    from avard.daemon.service.supervisor import ServiceHooks
 
     data = tmp_path / "rec"
     done: dict[str, object] = {}
@@ -265,16 +283,7 @@ def test_an_open_segment_changed_behind_the_recorders_back_becomes_a_recorded_ga
                 _act(self.path, how)
             return super().write(record)
 
-    def recorder(svc: Service) -> Recorder:
-        r = svc.config.recording
-        return ChangedBehindItsBack(svc.data_dir, svc.run_id, svc.run_header.for_segment,
-                                    segment_s=r.segment_s, clock=svc.clock.monotonic,
-                                    realtime=svc.clock.realtime)
-
-    cfg = _config(data, **{"recording.segment_s": 3600.0})
-    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3,
-                                         hooks=ServiceHooks(recorder=recorder))
-    svc.run(30.0)
+    svc = _run_with_recorder(data, ChangedBehindItsBack)
     assert done, "the segment was never acted on"
     recs = list(RecordingReader(data))
     gaps = [r for r in recs if r["kind"] == "gap"]
@@ -446,7 +455,6 @@ def test_a_segment_deleted_just_before_a_reopen_or_the_stop_is_still_a_recorded_
     stop, the same. The reopen and the stop now look first, and the gap goes into the next
     segment (at the stop, a last one made for it)."""
     from avard.daemon.service.recorder import Recorder
-    from avard.daemon.service.supervisor import ServiceHooks
 
     data = tmp_path / "rec"
     done: dict[str, object] = {}
@@ -466,16 +474,7 @@ def test_a_segment_deleted_just_before_a_reopen_or_the_stop_is_still_a_recorded_
                 self.path.unlink()
             super().close()
 
-    def recorder(svc: Service) -> Recorder:
-        r = svc.config.recording
-        return DeletedThen(svc.data_dir, svc.run_id, svc.run_header.for_segment,
-                           segment_s=r.segment_s, clock=svc.clock.monotonic,
-                           realtime=svc.clock.realtime)
-
-    cfg = _config(data, **{"recording.segment_s": 3600.0})
-    svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=3,
-                                         hooks=ServiceHooks(recorder=recorder))
-    svc.run(30.0)
+    svc = _run_with_recorder(data, DeletedThen)
     assert done
     recs = list(RecordingReader(data))
     gaps = [r for r in recs if r["kind"] == "gap"]
