@@ -678,7 +678,7 @@ def compressor_harmonics(k_max: int = 15) -> list[tuple[float, float]]:
 
 def min_two_path_compressor(a_hvac: float) -> float:
     """The stated minimum of the compressor two-path row's second path (docs/explain.md,
-    "Stated minima of the extensions"): the candidate's c₂ through lag(sensor, 900 s) beside
+    "Stated detection power (thermal paths)"): the candidate's c₂ through lag(sensor, 900 s) beside
     a lag-0 path, every parameter the GLS fit estimates unknown, the lags too
     (``thermal_paths.min_detectable_path(..., lags_known=False)``), on the record's drive at
     the die: the HVAC (``a_hvac`` K) and the compressor's odd harmonics up to the 15th, each
@@ -704,7 +704,7 @@ def two_path_truth(c: float, c2: float, lag2_s: float, sensor_s: float) -> dict[
     lag(sensor, L − s) with c and c₂, the row's truth before: that candidate is 1/(1 +
     jω(L − s)) against the true (1 + jωs)/(1 + jωL), a truth no fit can reach (c 6 % off,
     c₂ 3 %, L2 30 s on the compressor row), so the intervals were scored against the
-    generator's approximation, not the estimator (docs/explain.md)."""
+    generator's approximation, not the estimator (docs/log/explain.md)."""
     share = sensor_s / lag2_s
     return {"coefficient": c + c2 * share, "coefficient_2": c2 * (1.0 - share),
             "lag_2_s": lag2_s}
@@ -713,13 +713,13 @@ def two_path_truth(c: float, c2: float, lag2_s: float, sensor_s: float) -> dict[
 def rows_compressor(base: Any, A: float, c: float) -> list[PathRow]:
     """Two paths and dT/dt on a room with a second drive line: the HVAC sine and a ±1 °C
     20-minute compressor cycle (its fundamental 1.24 K at the room, 0.37 K at the die). At one
-    drive frequency the two cannot be told apart by any method (docs/explain.md: the best
+    drive frequency the two cannot be told apart by any method (docs/log/explain.md: the best
     dT/dt model fits a true two-path signal to a non-centrality of 0.1–2.3); with two lines a
     GLS on every frequency below the paths' τ floor separates them (28–38). Each extra term at
     3× its stated minimum on this drive: r − c·L at 3× ``min_two_lines``; the second path's
     candidate c₂ (at lag 900 s from the logged sensor, ``two_path_truth``) at 3× the fit's
     own minimum with the lags unknown (``min_two_path_compressor``), so the generator's c₂ is
-    that over 1 − 30/900 (docs/explain.md: before, 3× the lags-known minimum, a size the fit
+    that over 1 − 30/900 (docs/log/explain.md: before, 3× the lags-known minimum, a size the fit
     cannot resolve c₂ and L2 at)."""
     w_c = 2 * math.pi / COMPRESSOR_S
     a_c = (1.238 * COMPRESSOR_C / math.hypot(1.0, w_c * PLATE_TAU)
@@ -830,7 +830,7 @@ def _true_response(w: Any, period_s: float) -> complex:
 
 def score_resolved(r: PathRow, seed: int, sc: PathRecord, p: dict[str, float],
                    iv: dict[str, list[float]]) -> None:
-    """Score a ``resolve`` row's record on what the record resolves (docs/explain.md, "Two
+    """Score a ``resolve`` row's record on what the record resolves (docs/log/explain.md, "Two
     paths on one drive line"): right when two paths are chosen alone, or named (chosen,
     beside, or said to fit as well beside the dT/dt term they hold in their limit,
     ``PathFit.as_well``) where the dT/dt rival's non-centrality on this record is under

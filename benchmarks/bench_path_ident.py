@@ -12,7 +12,7 @@ domain, the metric the noise PSD of the rows' N, B, K (``causes.noise_psd``): λ
 coefficients by GLS). λ is what the best possible test sees of the difference: a 95 % choice
 between two models needs λ ≳ 11 (P(right) = Φ(√λ/2)). Readings are not rounded unless
 ``--rounded`` (the rounding is an error in the regressor, not information about the path), so
-λ is an upper bound for any estimator. docs/explain.md ("Which thermal paths a record can
+λ is an upper bound for any estimator. docs/log/explain.md ("Which thermal paths a record can
 tell apart") gives the figures: HVAC only 0.1–2.3, with the compressor 45–52 (28–38 below
 the paths' τ floor, ``--fmax 0.00244``).
 
@@ -24,7 +24,7 @@ Preisach elementary hysteron, explain's candidate now). ``--reconstruct`` (with
 ``--rounded``): the regressors built from the temperature behind the readings
 (``thermal_paths.crossing_reconstruction``: a natural cubic spline through the times the
 rounded readings cross (k + ½)·0.0625 K, kept inside each reading's own cell), the rounding
-an error in the regressor. docs/explain.md ("Hysteresis: a relay on the temperature behind
+an error in the regressor. docs/log/explain.md ("Hysteresis: a relay on the temperature behind
 the readings") gives the figures.
 
 The ``rate`` rival here is c·u_L + r·du_L/dt, which holds two paths (0, L) exactly
@@ -32,7 +32,7 @@ The ``rate`` rival here is c·u_L + r·du_L/dt, which holds two paths (0, L) exa
 since lag23, which does not. ``record_resolves`` (paths23c) measures explain's candidate on
 each record's own drive, in the time domain with the noise's exact covariance and the
 lags' start states as nuisances: λ 1.3–110 on the two-path row's default seeds
-(docs/explain.md, "Two paths on one drive line: what each record resolves").
+(docs/log/explain.md, "Two paths on one drive line: what each record resolves").
 """
 
 from __future__ import annotations

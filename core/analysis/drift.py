@@ -33,7 +33,7 @@ centred on the fit's K (or, with none, on N/T), could not reach the true walk ei
 40 records past 2.58, z spread 2.6). With K profiled over a range reaching past what the
 AVAR allows, and the Bartlett factor, the benchmark's plain records pass in 0.0 %, 1.8 % and
 1.0 % at 1 h, 12 h and 60 h (400 each, z spread 0.99–1.09; ``python -m benchmarks
-drift_null``, docs/analysis.md).
+drift_null``, docs/log/analysis.md).
 
 The profile is cheap: with C₀ = L Lᵀ the white and flicker covariance and M = min(t_i, t_j)
 the walk's, L⁻¹ M L⁻ᵀ = V Λ Vᵀ once, every K's covariance is diagonal in the rotated basis

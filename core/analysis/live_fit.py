@@ -31,7 +31,7 @@ Measured on 252 axes of quiet-lab, datasheet and paper-table3 records of 10 minâ
 live claims analyze's of the same samples did not make went from 6 to 0; what it costs is
 claims held back ("not yet resolved" where analyze claims): none of paper-table3's strong
 B and K, most of quiet-lab's B and K (its air-conditioning and warm-up read as noise),
-3 of 18 on 2 h of datasheet noise (docs/analysis.md, "One fit, live and offline").
+3 of 18 on 2 h of datasheet noise (docs/log/analysis.md, "One fit, live and offline").
 
 The flagged term keeps its value in the model (the curve needs it) and shows no interval
 and no time to target; ``signal_edf`` counts only resolved terms, so the printed EDF then

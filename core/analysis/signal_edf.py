@@ -168,7 +168,7 @@ def noise_psd(fit: NoiseFit, *, upper: bool = True
     term weighs the record's ends, where a random walk the fit left out would scatter it:
     the steep drift's records (1 h, whose generator has a random walk below the flicker
     floor) scatter at 409.6 s with an EDF of about 1300–1550, where this gives 1800
-    (docs/analysis.md). Beside a ramp resolved apart from the AVAR the walk is the time
+    (docs/log/analysis.md). Beside a ramp resolved apart from the AVAR the walk is the time
     domain's own estimate (``drift.walk_beside_slope``), and the cross term, linear in the
     spectrum, is its mean over the fit's uncertainty at the point values (``upper``
     False): at the upper 1σ it counted that uncertainty into a 68 % interval once more."""
@@ -368,7 +368,7 @@ def parts_edf(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]]
     AVAR fit's own parts cannot lift it: at the longest τ it cannot split the AVAR between
     a ramp and a random walk, and takes the walk's share for the ramp's, so the noise part
     comes out too small (12 h "steep" records: the EDF 480–570 where the estimates scatter
-    with 240–300, coverage 58 %; docs/analysis.md). The deterministic share is held below
+    with 240–300, coverage 58 %; docs/log/analysis.md). The deterministic share is held below
     0.99 (as ``edf.edf_with_signal``). For the estimators with a stride (the cascade),
     whose cross term this does not model, the non-central ν/(1 − f²) within the support."""
     nu = noise_part_edf(allan, noise_edf)

@@ -75,7 +75,7 @@ GM_FALSE_CLAIM_RATE = 0.005
 #: 4.2 (1 h) to 6.6 (60 h), at 4 kHz for 60 h 9.3; the bound reaches ``GM_FALSE_CLAIM_RATE``
 #: at u = 3.18, 3.30 and 3.40: 3.5 holds it below 0.5 % on all of them
 #: (tests/core/test_gauss_markov.py). The null study and the benchmark check it on the
-#: independent generator (docs/explain.md, "Stated detection power (Gauss–Markov)").
+#: independent generator (docs/log/explain.md, "Stated detection power (Gauss–Markov)").
 Z_GAUSS_MARKOV = 3.5
 #: −2 ln L of a T without a present component (finite: the 1-D minimiser needs numbers)
 _NO_FIT = 1e300

@@ -527,7 +527,7 @@ def coupling_test(res: Any, spectra: OctaveSpectra,
     EDF model's weights trust each slow octave as independent, and where a slow cycle (a
     day's) drives the regressor there, their shared red noise set the se and its few
     degrees of freedom (so a t threshold well above 5) while faster octaves (the HVAC's)
-    held the evidence (docs/explain.md, chan23g)."""
+    held the evidence (docs/log/explain.md, chan23g)."""
     got = _octave_coefficients(res, min_tau_s)
     if got is None:
         return CouplingTest(0.0, math.inf, 0, math.inf)

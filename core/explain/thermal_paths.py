@@ -33,7 +33,7 @@ more; the candidates, each a linear model in regressors built from the driving c
   crosses over while the temperature turns back by w) on the readings themselves was the
   candidate before; on the hysteresis row it was chosen on 3 of 20 records, the relay on T̂
   on 19 of 20
-  (docs/explain.md).
+  (docs/log/explain.md).
 
 Every candidate also carries the lag filter's unknown start state (e^(−t/|L|) per lag, a
 nuisance regressor, as ``thermal_fit.without_start``).
@@ -167,7 +167,7 @@ PARTS = 10
 T68 = t_two_sided(0.32, PARTS - 1)
 #: The jackknife z a ``LEANING`` candidate's extra term needs (``LEAN_MARGIN``): t₉ at 0.1 %
 LEAN_T = t_two_sided(0.001, PARTS - 1)
-#: Δ(held-out −2 ln L) an extension must win by over one lag (docs/explain.md: on records
+#: Δ(held-out −2 ln L) an extension must win by over one lag (docs/log/explain.md: on records
 #: whose truth is one lag the extensions' held-out Δ stayed above it).
 HELDOUT_MARGIN = 6.0
 #: Δ(−2 ln L) on the whole record within which grid points of θ count as fits as good as
@@ -986,7 +986,7 @@ FINE_SCALE_S = 10.0
 #: ``RESOLVED_LAG_S``), i.e. the value within ±20 % at two of its standard errors. On a drive
 #: of one line the four trade along a ridge; the Fisher information of all four on the weekend
 #: benchmark's records (the plate's start and the room's wander are all that add to the
-#: HVAC line) puts c₂ at ±15–180 % and L2 at ±25–120 % (docs/explain.md), so there they are
+#: HVAC line) puts c₂ at ±15–180 % and L2 at ±25–120 % (docs/log/explain.md), so there they are
 #: "not resolved" and what is reported with intervals is the response at the drive
 #: (``drive_response``), which every such record resolves to a few %.
 RESOLVED_REL = 0.1
@@ -1475,7 +1475,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     n_v = whole.n
     # the weights: the one-lag model's residual AVAR at the one-lag fit's own lag, on the
     # whole record (includes what one lag leaves: an extension that removes it gains).
-    # Fitted over every τ, not only the ones the candidates use (docs/explain.md: fitted on
+    # Fitted over every τ, not only the ones the candidates use (docs/log/explain.md: fitted on
     # those, the deviances grow 3–14× on the dT/dt and hysteresis rows and the margins
     # calibrated on this scale no longer hold; left as it is)
     v0 = _view(whole, edf_v, n_v, np.ones(len(ms), dtype=bool))
@@ -1682,7 +1682,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # every other extension that beats one lag as the chosen had to and predicts the
         # held-out halves as well (within the margin) is as well supported: at one drive
         # frequency a second path and a dT/dt term both set a gain and a phase, and only
-        # the room's weak wander tells them apart (docs/explain.md: on the benchmark's
+        # the room's weak wander tells them apart (docs/log/explain.md: on the benchmark's
         # record the best dT/dt model fits a true two-path signal to a non-centrality of
         # 0.1–2.3 even with unrounded readings and every frequency, far below what a 95 %
         # choice needs), so the record names both and resolves neither's parameters
@@ -1993,7 +1993,7 @@ def _rate_rival(best: PathScore, scores: dict[str, PathScore], rate_trials: list
     one lag, and how much of that the readings' rounding makes up: a derivative of a
     0.0625 K staircase passes its steps ×ω², and where the die swings a few steps only that
     error in the regressor, not the physics, makes the true reading predict worse than one
-    lag (docs/explain.md, paths23g). None where the rate candidate was refused or is open."""
+    lag (docs/log/explain.md, paths23g). None where the rate candidate was refused or is open."""
     sc = scores.get("rate")
     t0 = [t for t in rate_trials if t.theta == (0.0,)]
     if sc is None or sc.open_end or not t0:
@@ -2074,7 +2074,7 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
 
 #: How far the sawtooth model of the readings' rounding through a dT/dt reading
 #: (``_rate_rival``'s share) can be off, as a factor either way (short on records of a true
-#: dT/dt term, over on records of a true lag: docs/explain.md, paths23g): a held-out loss
+#: dT/dt term, over on records of a true lag: docs/log/explain.md, paths23g): a held-out loss
 #: within the margin and this many shares is not evidence against the reading
 RATE_ROUNDING_SPAN = 3.0
 #: The non-centrality (z²) below which one lag's signal and the closest coupling plus dT/dt

@@ -52,7 +52,7 @@ __all__ = ["ALPHA", "Verdict", "compensation_worse_at", "judge"]
 #: The level of the χ² tests that say "unexplained".
 ALPHA = 0.01
 #: The held-out test also asks χ²/n beyond this: models that describe the sensor reach 4.1·n
-#: on 2 h halves (docs/explain.md, ten correct thermal records: 0.7–4.1), because the noise
+#: on 2 h halves (docs/log/explain.md, ten correct thermal records: 0.7–4.1), because the noise
 #: terms chosen on one half (flicker or random walk at its longest τ) predict the other half
 #: only roughly; a mechanism the held-out data reject lies far beyond (two thermal paths
 #: through one lag: 15·n).

@@ -1,4 +1,4 @@
-"""Per-parameter check of an event row's 68 % intervals (trans23g, docs/explain.md).
+"""Per-parameter check of an event row's 68 % intervals (trans23g, docs/log/explain.md).
 
     python docs/scripts/compound_intervals.py run "compound 24" 23500 23540 OUT.jsonl
     python docs/scripts/compound_intervals.py table "compound 24" OUT.jsonl [...]

@@ -1,4 +1,4 @@
-"""The null study of the Gauss–Markov claim threshold (docs/explain.md, "Stated detection
+"""The null study of the Gauss–Markov claim threshold (docs/log/explain.md, "Stated detection
 power (Gauss–Markov)"): records without a Gauss–Markov process from tests/support/hidden.py
 (the generator written apart from the simulator; 4 h at 10 Hz, N = 1.6e-4 m/s/√s, B = 2e-5
 m/s², K = 2e-6 m/s²·√s, nothing hidden) through ``explain_file``; prints the quantiles of

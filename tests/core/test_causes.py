@@ -3,7 +3,8 @@ step in the same record are both found (they compose), and each comes with 68 % 
 from its generalised least-squares fit that hold the truth about 68 % of the time.
 
 Records come from tests/support/hidden.py, a generator written apart from the simulator;
-explain sees only the file. Sizes are 3× the stated minima (docs/explain.md "Transients")."""
+explain sees only the file. Sizes are 3× the stated minima (docs/explain.md "Stated detection
+power (transients)")."""
 
 from __future__ import annotations
 
@@ -149,7 +150,7 @@ def test_a_detection_is_claimed_by_its_interval_not_by_the_stated_minimum():
     (10001, "warmup", "z"),
 ])
 def test_the_benchmarks_false_claims_are_not_claimed(tmp_path, seed, row, axis):
-    """The two false claims the benchmark made (docs/explain.md "Benchmark") are below their
+    """The two false claims the benchmark made (docs/log/explain.md "Benchmark") are below their
     floor: the step is still tested and reported, but not claimed; the hidden cause is."""
     from benchmarks.bench_explain import cases_at_3x
 
@@ -284,7 +285,7 @@ def test_transient_intervals_hold_the_truth_about_68_percent(tmp_path):
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="known gap: the warm-up's T interval is a little wide "
                    "(115/150 = 77 % here, 221/300 = 74 % over seeds 400–449 and 500–549; "
-                   "docs/explain.md 'Transients')")
+                   "docs/log/explain.md 'Transients')")
 def test_warmup_time_constant_interval_is_not_wide(tmp_path):
     """The warm-up T's 68 % interval holds the truth in at most 76 % of the 150 axes."""
     held, counted = _study(tmp_path)[("warmup", "time_constant_s")]

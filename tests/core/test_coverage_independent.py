@@ -10,7 +10,7 @@ import pytest
 from benchmarks.bench_coverage import BAND, coverage
 from tests.support.coverage_gen import Mix
 
-#: measured on the sine rows (200 records, seed 1; docs/analysis.md): records where the
+#: measured on the sine rows (200 records, seed 1; docs/log/analysis.md): records where the
 #: slow-sinusoid search resolved the sinusoid, and the highest coverage share over τ
 SINE_FOUND = {1: 95, 12: 148, 60: 178}
 SINE_HIGHEST = {1: 0.855, 12: 0.77, 60: 0.805}
@@ -44,7 +44,7 @@ def test_intervals_cover_the_truth_beside_a_drift(hours: int) -> None:
     all but one τ, none above 80 % (measured on 8196a88: 1 h 61.5–73.0 %, 12 h 64.0–77.0 %
     with 77.0 % at 8192 s, 60 h 59.5–75.0 %: 64 s is one record short of 60 %, where the
     printed EDF is the generator's exact one and these records scatter 18 % below it, so
-    the 60 h case fails on that tree; docs/analysis.md, "Every row re-measured"; before the
+    the 60 h case fails on that tree; docs/log/analysis.md, "Every row re-measured"; before the
     floor and the resolved ramp's rms noise part up to 83.5 %, at four τ of 12 h)."""
     c = coverage(hours, "drift", 200, seed=1)
     detail = list(zip(c.tau, c.share, c.signal, strict=True))
@@ -177,7 +177,7 @@ def test_the_generators_noise_edf_is_its_exact_edf(hours: int, taus: tuple[float
     geometries and mixes, from the cells the coverage tables discuss: a row whose records'
     noise scatters far from it is lucky or unlucky there, whatever the printed rule, and
     where the printed EDF equals it the interval has the class's width (docs/analysis.md,
-    "The cells outside the band, re-measured")."""
+    "Coverage of the intervals")."""
     import numpy as np
 
     from benchmarks.bench_coverage import LENGTHS, mix_for, noise_edf

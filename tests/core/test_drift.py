@@ -440,7 +440,7 @@ def test_the_false_rate_on_plain_12h_records_is_within_a_1_percent_tests_range()
     """200 plain 12 h records of the generator written apart (white + flicker + random walk,
     the walk meeting the flicker floor at a fifteenth of the record: the few-directions case
     the Bartlett factor is for). With the block means' covariance and no factor 4.4 % of 800
-    such records passed (docs/analysis.md); the test must stay within a 1 % test's
+    such records passed (docs/log/analysis.md); the test must stay within a 1 % test's
     binomial 99 % range."""
     from benchmarks.bench_drift_null import _binomial_99
 

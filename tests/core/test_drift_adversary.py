@@ -1,5 +1,5 @@
 """analyze's rate ramp R and random walk K on the adversary's drift records (issue 24,
-docs/analysis.md "R and K on the adversary's drift records (drift24)"). Records from
+docs/log/analysis.md "R and K on the adversary's drift records (drift24)"). Records from
 tests/support/adversary_gen.py, written apart from avard: white + flicker + a walk
 K = 1.5e-6 m/s²·√s on x, 4 h, with (factor 3) or without (factor 0) a linear drift; the
 noise of one seed is the same with and without the drift."""

@@ -8,7 +8,7 @@ record goes through ``explain_file`` as a user's file would. Over 40 records (12
 T, the share of 68 % intervals of σ and of T that hold the truth must be 68.3 % within two
 binomial standard deviations (±8.5 % at 120 axes), and the cause claimed on every axis.
 
-Measured (2026-11-24): see docs/explain.md, "Stated detection power (Gauss–Markov)".
+Measured (2026-11-24): see docs/log/explain.md, "Stated detection power (Gauss–Markov)".
 """
 
 from __future__ import annotations

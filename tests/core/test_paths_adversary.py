@@ -1,6 +1,6 @@
 """Thermal paths on records of the adversary's generator (tests/support/adversary_gen.py,
 written apart from avard: a jittered triangle HVAC, its own DS18B20 model): what the finding
-must say where the record does not tell two mechanisms apart (docs/explain.md, "Thermal
+must say where the record does not tell two mechanisms apart (docs/log/explain.md, "Thermal
 paths on the adversary's records: the readings one lag stands for")."""
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ def _sine(cycles: float, amplitude: float, phase: float, n: int = N) -> np.ndarr
                                                (41.0, 5.5)])
 def test_a_slow_sine_of_any_period_is_resolved_and_raises_the_edf(cycles, phase) -> None:
     """A clear sinusoid: its AVAR at half its period (0.405 A²) nine times the noise's there
-    (the benchmark's has it equal: found in about half of such records, docs/analysis.md;
+    (the benchmark's has it equal: found in about half of such records, docs/log/analysis.md;
     at 3.3 cycles equal gives a statistic of about 5, four times about 19 against a
     threshold of 20: the walk and the slope take much of a sinusoid that slow)."""
     rng = np.random.default_rng(int(cycles * 10))

@@ -713,7 +713,7 @@ def test_the_hysteresis_rows_parameters_and_their_68_percent_intervals():
     the switch unknown, beside c at 3× the one-lag minimum) on 12 seeds: the hysteresis
     chosen with c and h within 20 % on at least 11, and the 68 % intervals holding the truth
     in 11–21 of the 24 (68 % ± 2.4 binomial σ; 40 records gave 54/78 and 40/40 within 20 %,
-    docs/explain.md). The largest of three standard errors held 82 %, above this band's
+    docs/log/explain.md). The largest of three standard errors held 82 %, above this band's
     centre by 1.7 σ on 24."""
     from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
 
