@@ -47,11 +47,14 @@ def main(argv: list[str] | None = None) -> int:
         "68 % intervals, presence test and line finder); the extended model refits the noise "
         "with the found signals removed. Gain: base χ²/dof over extended.",
         "",
-        "Bias steps on these runs are weak claims: they pass their test (≥ 6 robust σ of the "
-        "window contrasts), but the ADIS16405's coarse quantization and the wandering "
-        "0.56 Hz line make the contrasts less Gaussian than the test assumes, and removing "
-        "them does not always improve the noise fit (gain below 1). Read them as places to "
-        "look at in the time series, not established causes.",
+        "Bias steps and excursions on these runs are weak claims. They pass their test "
+        "(explain's compound search, `core/explain/transients.py`: each effect's z in a joint "
+        "GLS fit of the slow view with the noise covariance of N, B and K, and its size's "
+        "distance from zero, must both reach its family's Bonferroni threshold, about 5.1 σ "
+        "for a step and 6.1 σ for an excursion on these runs), but the ADIS16405's coarse "
+        "quantization and the wandering 0.56 Hz line are noise that covariance does not "
+        "model, and removing them does not always improve the noise fit (gain below 1). Read "
+        "them as places to look at in the time series, not established causes.",
         "",
     ]
     t0 = time.time()
