@@ -566,8 +566,10 @@ class RecordingSource:
     Opening scans it once (no samples kept): the runs and their rates, the sample count, the
     losses (damage, and every jump of a run's sample index that no gap record explains: a
     missing, emptied or replaced segment), the duplicates, and a read plan (where each kept
-    raw block's counts lie), so later reads take only those bytes. Temperatures are read
-    the first time a consumer asks for them. ``runs`` keeps only those runs."""
+    raw block's counts lie), so later reads take only those bytes, and where it skipped the
+    temperature records; those are read from there the first time a consumer asks for
+    temperatures, and reach the blocks as an .npz's do (each reading on its sample's row,
+    NaN between). ``runs`` keeps only those runs."""
 
     rereadable = True
 
