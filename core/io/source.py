@@ -388,6 +388,8 @@ _PLAN_WINDOW = 1 << 14
 
 #: Record kinds that hold no samples and no sample index the scan needs.
 _NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
+#: A temperature record's first bytes after its map's header (``_peek_kind``'s layout).
+_TEMP_KIND = b"\xa4kind\xa4temp"
 #: Record kinds the temperature pass does not decode (it needs the temperatures, and the
 #: headers the walk orders every record by).
 _NOT_TEMPERATURE = frozenset({"raw", "avar", "checkpoint", "status", "event", "gap"})
@@ -525,19 +527,22 @@ def _temp_record(payload: bytes, msgpack: Any, frames: Any) -> dict[str, Any] | 
     ``frames.decode`` (its full validation) and is dropped if that refuses it. ``msgpack``
     and ``frames``: the modules (imported once by the caller)."""
     try:
-        rec = msgpack.unpackb(payload, raw=False, strict_map_key=True, use_list=True,
-                              max_str_len=len(payload), max_bin_len=0,
-                              max_array_len=len(payload), max_map_len=len(payload),
-                              max_ext_len=0, timestamp=0)
+        # msgpack ≥ 1.0's defaults: str keys only, every length capped by the payload's
+        # size; an extension type comes back as an object the type checks below refuse
+        rec = msgpack.unpackb(payload)
     except (ValueError, TypeError, OverflowError, msgpack.UnpackException):
         rec = None
-    if (type(rec) is dict and rec.get("kind") == "temp" and type(rec.get("run")) is str
-            and type(rec.get("i0")) is int and rec["i0"] >= 0
-            and type(rec.get("names")) is list and type(rec.get("values_c")) is list
-            and len(rec["names"]) == len(rec["values_c"])
-            and all(type(x) is str for x in rec["names"])
-            and all(v is None or type(v) in (float, int) for v in rec["values_c"])):
-        return rec
+    if type(rec) is dict and rec.get("kind") == "temp":
+        names, vals, i0 = rec.get("names"), rec.get("values_c"), rec.get("i0")
+        if (type(i0) is int and i0 >= 0 and type(rec.get("run")) is str
+                and type(names) is list and type(vals) is list and len(names) == len(vals)):
+            if len(names) == 1:      # the service's: one reading a record
+                v = vals[0]
+                if type(names[0]) is str and (v is None or type(v) is float):
+                    return rec
+            elif (all(type(x) is str for x in names)
+                  and all(v is None or type(v) is float for v in vals)):
+                return rec
     try:
         got = frames.decode(payload)
     except FormatError:   # refused: not a reading (the walk's decode drops it too)
@@ -935,11 +940,14 @@ class RecordingSource:
                 if rec["kind"] != "temp" or (self.runs is not None
                                              and rec["run"] not in self.runs):
                     continue
+                i0 = int(rec["i0"])
                 for name, value in zip(rec["names"], rec["values_c"], strict=True):
                     if value is not None:
-                        idx, vals = readings.setdefault(name, (array("q"), array("d")))
-                        idx.append(int(rec["i0"]))
-                        vals.append(float(value))
+                        got = readings.get(name)
+                        if got is None:
+                            got = readings[name] = (array("q"), array("d"))
+                        got[0].append(i0)
+                        got[1].append(float(value))
             self._temps = []
             for name in self.info.temperature_names:
                 idx, vals = readings.pop(name, (array("q"), array("d")))
@@ -990,7 +998,9 @@ class RecordingSource:
                                 raise DataError(f"{f}: a frame at byte {at + p} is not where "
                                                 "the scan found one; the recording changed "
                                                 "while it was read (analyse a copy)")
-                            if _peek_kind(data[body:body + min(n, 48)]) == "temp":
+                            lead = data[body] if n else 0      # a fixmap's: the usual layout
+                            if (data.startswith(_TEMP_KIND, body + 1) if 0x80 <= lead <= 0x8F
+                                    else _peek_kind(data[body:body + min(n, 48)]) == "temp"):
                                 payload = data[body:body + n]
                                 if zlib.crc32(payload) & 0xFFFFFFFF != crc:
                                     raise DataError(f"{f}: the frame at byte {at + p} no "
