@@ -117,6 +117,8 @@ class ScreenLog:
     rate_hz: float
     stretches: list[Screened] = field(default_factory=list)
     done: bool = False
+    #: readings judged per temperature channel (filled at the end of the read)
+    readings: dict[str, int] = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -324,26 +326,37 @@ Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
 class _TempTrack:
-    """One temperature channel's readings seen so far (bounded: the reading values and their
-    sample index; ~2 per second of record), for the rules that need the neighbours or the
-    whole record (spikes across blocks, dropouts, stuck runs)."""
+    """One temperature channel's readings seen so far, for the rules that need the
+    neighbours or the whole record (spikes across blocks, dropouts, stuck runs): each
+    reading's sample index and value, in arrays grown by doubling. A reading is a finite
+    value on a row of a block, NaN between readings (what every record source hands over,
+    core/io/source.py), so this holds ~1 entry per second of record whatever the sample
+    rate: ``len(track)`` counts the readings kept."""
 
     def __init__(self) -> None:
-        self.idx: list[NDArray[np.int64]] = []
-        self.val: list[NDArray[np.float64]] = []
+        self._idx = np.zeros(64, dtype=np.int64)
+        self._val = np.zeros(64)
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
 
     def add(self, offset: int, col: NDArray[np.float64]) -> None:
         ok = np.flatnonzero(np.isfinite(col))
-        if len(ok):
-            self.idx.append(ok.astype(np.int64) + offset)
-            self.val.append(col[ok])
+        k = len(ok)
+        if not k:
+            return
+        if self._n + k > len(self._idx):
+            size = max(2 * len(self._idx), self._n + k)
+            self._idx = np.resize(self._idx, size)
+            self._val = np.resize(self._val, size)
+        self._idx[self._n:self._n + k] = ok + offset
+        self._val[self._n:self._n + k] = col[ok]
+        self._n += k
 
     def arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        if not self.idx:
-            return np.zeros(0, dtype=np.int64), np.zeros(0)
-        if len(self.idx) > 1:  # kept as one array, so a long record is joined once per block
-            self.idx, self.val = [np.concatenate(self.idx)], [np.concatenate(self.val)]
-        return self.idx[0], self.val[0]
+        """(sample indices, values) of the readings kept (views, not copies)."""
+        return self._idx[:self._n], self._val[:self._n]
 
 
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
@@ -406,6 +419,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         off, b = pending.pop(0)
         yield from emit(off, b, not pending)
     _whole_record_rules(tracks, tnames, log, rate_hz)
+    log.readings = {name: len(tr) for name, tr in zip(tnames, tracks, strict=True)}
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
 

@@ -23,6 +23,7 @@ was lost or duplicated; the detail is in ``info.recording`` (and analyze's JSON)
 from __future__ import annotations
 
 import enum
+import itertools
 import logging
 import math
 import os
@@ -387,6 +388,11 @@ _PLAN_WINDOW = 1 << 14
 
 #: Record kinds that hold no samples and no sample index the scan needs.
 _NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
+#: A temperature record's first bytes after its map's header (``_peek_kind``'s layout).
+_TEMP_KIND = b"\xa4kind\xa4temp"
+#: Record kinds the temperature pass does not decode (it needs the temperatures, and the
+#: headers the walk orders every record by).
+_NOT_TEMPERATURE = frozenset({"raw", "avar", "checkpoint", "status", "event", "gap"})
 
 
 def _peek_kind(payload: bytes) -> str | None:
@@ -464,6 +470,91 @@ class _Plan:
         self.cut.append(cut)
 
 
+class _TempPlaces:
+    """Where the scan skipped the temperature records, in walk order: byte ranges
+    ``[start, end)`` of file ``fidx`` that hold whole frames of the kinds the scan skips only
+    (temp, avar, checkpoint, status), their CRC checked by it. About 18 bytes a range, one
+    range between two raw blocks: ~3 MB for 24 h. ``ok`` False: not usable (more files than
+    the column holds); the temperatures are then read by a walk."""
+
+    def __init__(self) -> None:
+        self.fidx = array("H")
+        self.start = array("q")
+        self.end = array("q")
+        self.ok = True
+
+    def add(self, k: int, a: int, b: int) -> None:
+        if b <= a:
+            return
+        if k >= 1 << 16:
+            self.ok = False
+            return
+        self.fidx.append(k)
+        self.start.append(a)
+        self.end.append(b)
+
+    def around_stretch(self, k: int, last: int, st: Any) -> int:
+        """The ranges before and between the frames of a ``rawscan.Stretch`` (its raw blocks
+        and the headers among them), ``last`` the end of the frame before it; returns the
+        end of its last frame."""
+        from avard.core.io.recording import FRAME_HEADER
+
+        offs = np.asarray(st.offsets, dtype=np.int64)
+        lens = np.asarray(st.lengths, dtype=np.int64)
+        if st.headers:
+            offs = np.concatenate([offs, [fr.offset for _, fr in st.headers]])
+            lens = np.concatenate([lens, [len(fr.payload) for _, fr in st.headers]])
+            order = np.argsort(offs, kind="stable")
+            offs, lens = offs[order], lens[order]
+        ends = offs + FRAME_HEADER.size + lens
+        prev = np.concatenate([[last], ends[:-1]])
+        gap = offs > prev
+        m = int(np.count_nonzero(gap))
+        if m:
+            if k >= 1 << 16:
+                self.ok = False
+            else:
+                self.fidx.extend(array("H", [k]) * m)
+                self.start.frombytes(np.ascontiguousarray(prev[gap]).tobytes())
+                self.end.frombytes(np.ascontiguousarray(offs[gap]).tobytes())
+        return int(ends[-1]) if len(ends) else last
+
+
+def _temp_record(payload: bytes, msgpack: Any, frames: Any) -> dict[str, Any] | None:
+    """A temperature record's fields as the walk would give them, or None for a frame that
+    is no valid temperature record. The common layout (``frames.temp_record``'s) is checked
+    field by field after one bounded msgpack decode; anything else goes through
+    ``frames.decode`` (its full validation) and is dropped if that refuses it. ``msgpack``
+    and ``frames``: the modules (imported once by the caller)."""
+    try:
+        # msgpack ≥ 1.0's defaults: str keys only, every length capped by the payload's
+        # size; an extension type comes back as an object the type checks below refuse
+        rec = msgpack.unpackb(payload)
+    except (ValueError, TypeError, OverflowError, msgpack.UnpackException):
+        rec = None
+    if type(rec) is dict and rec.get("kind") == "temp":
+        names, vals, i0 = rec.get("names"), rec.get("values_c"), rec.get("i0")
+        if (type(i0) is int and i0 >= 0 and type(rec.get("run")) is str
+                and type(names) is list and type(vals) is list and len(names) == len(vals)):
+            if len(names) == 1:      # the service's: one reading a record
+                v = vals[0]
+                if type(names[0]) is str and (v is None or type(v) is float):
+                    return rec
+            elif (all(type(x) is str for x in names)
+                  and all(v is None or type(v) is float for v in vals)):
+                return rec
+    try:
+        got = frames.decode(payload)
+    except FormatError:   # refused: not a reading (the walk's decode drops it too)
+        return None
+    if got.get("kind") != "temp" or len(got["names"]) != len(got["values_c"]):
+        return None
+    if not all(v is None or (isinstance(v, int | float) and not isinstance(v, bool))
+               for v in got["values_c"]):
+        return None
+    return got
+
+
 class _RunTally:
     """What the scan counts for one run."""
 
@@ -480,8 +571,10 @@ class RecordingSource:
     Opening scans it once (no samples kept): the runs and their rates, the sample count, the
     losses (damage, and every jump of a run's sample index that no gap record explains: a
     missing, emptied or replaced segment), the duplicates, and a read plan (where each kept
-    raw block's counts lie), so later reads take only those bytes. Temperatures are read
-    the first time a consumer asks for them. ``runs`` keeps only those runs."""
+    raw block's counts lie), so later reads take only those bytes, and where it skipped the
+    temperature records; those are read from there the first time a consumer asks for
+    temperatures, and reach the blocks as an .npz's do (each reading on its sample's row,
+    NaN between). ``runs`` keeps only those runs."""
 
     rereadable = True
 
@@ -494,6 +587,7 @@ class RecordingSource:
         self._temps: list[tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None
         self._ends: dict[str, int] = {}          # bytes of each file the scan read
         self._plan: _Plan | None = None          # where the scan found each kept block
+        self._places: _TempPlaces | None = None  # where the scan skipped temperature records
         self.files: list[Path] = []
         self.entries: list[_SegmentFile] = []
 
@@ -510,14 +604,19 @@ class RecordingSource:
     # -- the walk both the scan and the blocks use -------------------------------------------
     def _walk(self, problems: list[Problem] | None = None, report: Any = None,
               where: list[str] | None = None, tag: bool = False,
-              skip: frozenset[str] = frozenset()) -> Iterator[dict[str, Any]]:
+              skip: frozenset[str] = frozenset(), places: _TempPlaces | None = None
+              ) -> Iterator[dict[str, Any]]:
         """The records of ``walk`` over this recording's files. The reader's problems go to
         ``problems`` (reported once, by the scan), not to the log at every pass; ``where``
         is kept at the file being read. ``tag``: each raw record gets ``_at`` = (file number,
         byte offset of its counts in that file or -1, its first index), what the scan's read
         plan needs (the walk passes it through, also to the parts of a duplicated block).
         ``skip``: record kinds not decoded at all (the scan needs no temperatures, Allan
-        snapshots or checkpoints: two thirds of a recording's decoding)."""
+        snapshots or checkpoints: two thirds of a recording's decoding). ``places``: where
+        the skipped temperature records lie is noted there (the byte ranges between the
+        frames the C loop hands back, which hold only skipped kinds, and each skipped
+        ``temp`` frame the general reader meets), so the temperatures are read later from
+        those bytes alone (``_temperature_tables``), not by a second walk of every record."""
         from avard.core.io import rawscan
         from avard.core.io.recording import FRAME_HEADER, RecordingReader, walk
 
@@ -551,6 +650,7 @@ class RecordingSource:
 
             def _fast_file(self, k: int, f: Path) -> Iterator[dict[str, Any]]:
                 name = str(f)
+                last = 0                    # the end of the last frame the C loop handed back
                 with os.fdopen(_open_segment(f), "rb") as fh:
                     frames = rawscan.scan_file(fh, name, k, self.max_bytes, ends.get(name))
                     while True:
@@ -560,9 +660,16 @@ class RecordingSource:
                             pos, clean = stop.value
                             break
                         if isinstance(got, tuple):
+                            if places is not None:
+                                last = places.around_stretch(k, last, got[1])
                             yield rawscan.stretch_record(*got)
                         else:
+                            if places is not None:
+                                places.add(k, last, got.offset)
+                                last = got.offset + FRAME_HEADER.size + len(got.payload)
                             yield from self._record(got)
+                if places is not None:
+                    places.add(k, last, pos)
                 if clean:
                     ends[name] = pos
                     return
@@ -572,8 +679,13 @@ class RecordingSource:
             def _record(self, fr: Frame) -> Iterator[dict[str, Any]]:
                 """One frame as RecordingReader reads it: skipped by its kind, decoded (an
                 undecodable one reported), a raw one tagged with where its counts lie."""
-                if skip and _peek_kind(fr.payload) in skip:
-                    return                  # CRC-checked, not decoded: no samples in it
+                if skip:
+                    kind = _peek_kind(fr.payload)
+                    if kind in skip:
+                        if places is not None and kind == "temp":
+                            places.add(self.number, fr.offset,
+                                       fr.offset + FRAME_HEADER.size + len(fr.payload))
+                        return              # CRC-checked, not decoded: no samples in it
                 rec = self.decoded(fr)
                 if rec is None:
                     return
@@ -644,7 +756,9 @@ class RecordingSource:
         plan = _Plan()
         cut = False
         scale = 0.0
-        for rec in self._walk(problems, report, where, tag=True, skip=_NO_SAMPLES):
+        places = _TempPlaces()
+        for rec in self._walk(problems, report, where, tag=True, skip=_NO_SAMPLES,
+                              places=places):
             kind, run = rec["kind"], rec["run"]
             reported()
             last_run = run
@@ -705,6 +819,7 @@ class RecordingSource:
         if n == 0:
             raise DataError(f"{self.path}: the recording holds no samples")
         self._plan = plan if plan.ok else None
+        self._places = places
         run_list = self._runs(tally, report.newest_header)
         rate, rate_u = self._rate(run_list, rate_hz)
         summary = RecordingSummary(
@@ -809,28 +924,95 @@ class RecordingSource:
                             r.samples_lost, len(mine), r.samples_duplicated, first)
 
     def _temperature_tables(self) -> list[tuple[NDArray[np.int64], NDArray[np.float64]]]:
-        """Each temperature channel's readings (sample index, °C) in index order, later
-        records winning at an equal index (as ``load_recording``'s hold): read by one more walk
-        the first time a consumer asks for temperatures (analyze never does, so its memory
-        holds none of the tens of MB a 60 h run's readings take)."""
+        """Each temperature channel's readings (sample index, °C) in index order, one per
+        index (a later record wins at an equal index, as ``load_recording``'s hold), a failed
+        read (None) no reading: read by one more walk the first time a consumer asks for
+        temperatures (analyze never does), from the byte ranges where the scan skipped them
+        (``_placed_records``: the raw blocks are not read again); without those, by one more
+        walk that decodes the temperature records only. About one reading a second a
+        channel: 60 h of three channels is ~10 MB here."""
         if self._temps is None:
             readings: dict[str, tuple[array[int], array[float]]] = {}
-            for rec in self._walk():
+            places = self._places
+            recs = (self._placed_records(places) if places is not None and places.ok
+                    else self._walk(skip=_NOT_TEMPERATURE))
+            for rec in recs:
                 if rec["kind"] != "temp" or (self.runs is not None
                                              and rec["run"] not in self.runs):
                     continue
+                i0 = int(rec["i0"])
                 for name, value in zip(rec["names"], rec["values_c"], strict=True):
                     if value is not None:
-                        idx, vals = readings.setdefault(name, (array("q"), array("d")))
-                        idx.append(int(rec["i0"]))
-                        vals.append(float(value))
+                        got = readings.get(name)
+                        if got is None:
+                            got = readings[name] = (array("q"), array("d"))
+                        got[0].append(i0)
+                        got[1].append(float(value))
             self._temps = []
             for name in self.info.temperature_names:
-                idx, vals = readings.get(name, (array("q"), array("d")))
-                st = np.array(idx, dtype=np.int64)
+                idx, vals = readings.pop(name, (array("q"), array("d")))
+                st = np.frombuffer(idx, dtype=np.int64) if len(idx) else np.zeros(0, np.int64)
+                v = np.frombuffer(vals, dtype=np.float64) if len(vals) else np.zeros(0)
                 order = np.argsort(st, kind="stable")
-                self._temps.append((st[order], np.array(vals, dtype=np.float64)[order]))
+                st, v = st[order], v[order]
+                last = np.ones(len(st), dtype=bool)   # the last record at each index wins
+                last[:-1] = st[1:] != st[:-1]
+                self._temps.append((st[last], v[last]))
         return self._temps
+
+    def _placed_records(self, places: _TempPlaces) -> Iterator[dict[str, Any]]:
+        """The temperature records in the ranges the scan noted (``_TempPlaces``), in walk
+        order: the ranges of a file read a run at a time (at most ``_READ_BYTES`` from the
+        first range's start), each frame's kind peeked, a temperature record's CRC checked
+        again and decoded (``_temp_record``), every other frame stepped over."""
+        import msgpack
+        from avard.core.io import frames
+        from avard.core.io.recording import FRAME_HEADER
+
+        hdr = FRAME_HEADER.size
+        fidx = np.frombuffer(places.fidx, dtype=np.uint16)
+        start = np.frombuffer(places.start, dtype=np.int64)
+        end = np.frombuffer(places.end, dtype=np.int64)
+        for a0, b0 in _file_spans(fidx):
+            k = int(fidx[a0])
+            f = self.files[k]
+            fd = _open_segment(f)
+            try:
+                a = a0
+                while a < b0:
+                    c = max(a + 1, a + int(np.searchsorted(end[a:b0], int(start[a])
+                                                          + _READ_BYTES, side="right")))
+                    at = int(start[a])
+                    size = int(end[c - 1]) - at
+                    data = os.pread(fd, size, at)
+                    if len(data) != size:
+                        raise DataError(f"{f}: shorter than when it was opened; the "
+                                        "recording changed while it was read (analyse a "
+                                        "copy)")
+                    for p, q in zip((start[a:c] - at).tolist(), (end[a:c] - at).tolist(),
+                                    strict=True):
+                        while p < q:
+                            n, crc = FRAME_HEADER.unpack_from(data, p)
+                            body = p + hdr
+                            if body + n > q:
+                                raise DataError(f"{f}: a frame at byte {at + p} is not where "
+                                                "the scan found one; the recording changed "
+                                                "while it was read (analyse a copy)")
+                            lead = data[body] if n else 0      # a fixmap's: the usual layout
+                            if (data.startswith(_TEMP_KIND, body + 1) if 0x80 <= lead <= 0x8F
+                                    else _peek_kind(data[body:body + min(n, 48)]) == "temp"):
+                                payload = data[body:body + n]
+                                if zlib.crc32(payload) & 0xFFFFFFFF != crc:
+                                    raise DataError(f"{f}: the frame at byte {at + p} no "
+                                                    "longer checks; the recording changed "
+                                                    "while it was read (analyse a copy)")
+                                rec = _temp_record(payload, msgpack, frames)
+                                if rec is not None:
+                                    yield rec
+                            p = body + n
+                    a = c
+            finally:
+                os.close(fd)
 
     def _walked(self) -> Iterator[_Piece]:
         """The raw pieces in walk order, by the general path: every record decoded and
@@ -925,7 +1107,9 @@ class RecordingSource:
                temperature: bool = True, verify: bool = True) -> Iterator[RecordBlock]:
         """The recording's samples in SI units, in blocks of at most ``block`` samples that
         end where the service's accumulators ended a segment (every gap record, run change
-        and index jump); temperatures held at their last reading (NaN before the first)."""
+        and index jump). Temperatures as an .npz or a CSV holds them: each reading on the
+        row of its sample index, NaN between readings (``_readings_on_rows``), so the screen
+        and explain see one reading per conversion of every source, not one per sample."""
         info = self.info
         _check_block(block)
         _check_columns(columns, info)
@@ -936,18 +1120,14 @@ class RecordingSource:
         fill = 0
         start = 0                      # sample index of buf[0]
         n = 0
+        after = [-(1 << 62)]           # the index after the last block's last row
 
         def flush(end: bool) -> RecordBlock:
             a = buf[:fill].copy()
             t = None
             if temps is not None:
-                idx = np.arange(start, start + fill, dtype=np.int64)
-                t = np.full((fill, len(temps)), np.nan)
-                for c, (st, v) in enumerate(temps):
-                    if len(st):
-                        k = np.searchsorted(st, idx, side="right") - 1
-                        have = k >= 0
-                        t[have, c] = v[k[have]]
+                t = _readings_on_rows(temps, start, fill, after[0])
+            after[0] = start + fill
             return a, t, end
 
         pieces = self._planned() if self._plan is not None else self._walked()
@@ -976,6 +1156,37 @@ class RecordingSource:
             raise DataError(f"{self.path}: read {n} samples, {info.n_samples} when it "
                             "was opened; the recording changed while it was read (analyse a "
                             "copy, or a recording the service has finished)")
+
+
+def _file_spans(col: NDArray[Any]) -> list[tuple[int, int]]:
+    """``[a, b)`` of each run of equal values in ``col``."""
+    if not len(col):
+        return []
+    cut = np.flatnonzero(col[1:] != col[:-1]) + 1
+    bounds = [0, *cut.tolist(), len(col)]
+    return list(itertools.pairwise(bounds))
+
+
+def _readings_on_rows(temps: Sequence[tuple[NDArray[np.int64], NDArray[np.float64]]],
+                      start: int, n: int, after: int) -> NDArray[np.float64]:
+    """A block's temperatures (n, k): the readings whose sample index lies in the block's
+    rows ``[start, start + n)`` on their row, NaN on every other row. A reading whose index
+    is no recorded sample (stamped during a gap, or before the first sample) goes to the first
+    row after it (``after``: the index after the block before, when the blocks run forward),
+    the last one there winning: what the old hold gave that row, and a hold of these blocks
+    is ``load_recording``'s hold."""
+    t = np.full((n, len(temps)), np.nan)
+    lo_index = after if after <= start else start
+    for c, (st, v) in enumerate(temps):
+        lo = int(np.searchsorted(st, lo_index))
+        hi = int(np.searchsorted(st, start + n))
+        if hi <= lo:
+            continue
+        rows = np.maximum(st[lo:hi] - start, 0)
+        last = np.ones(hi - lo, dtype=bool)       # one reading per row: the last
+        last[:-1] = rows[1:] != rows[:-1]
+        t[rows[last], c] = v[lo:hi][last]
+    return t
 
 
 def _one_file(reader: Any, f: Path, ends: dict[str, int], start: int | None = None

@@ -171,17 +171,42 @@ def test_runs_at_different_rates_are_refused_together_and_analysed_one_at_a_time
         assert [r["run"] for r in d["recording"]["runs"]] == [run]
 
 
+def _held(t: np.ndarray) -> np.ndarray:
+    """Each column's last finite value carried forward (NaN before the first)."""
+    ok = np.isfinite(t)
+    at = np.where(ok, np.arange(len(t))[:, None], -1)
+    np.maximum.accumulate(at, axis=0, out=at)
+    out = np.take_along_axis(t, np.maximum(at, 0), axis=0)
+    out[at < 0] = np.nan
+    return out
+
+
 def test_a_recording_streams_the_samples_load_recording_holds(recording: Path) -> None:
-    """The blocks of a recording are what the whole-record loader holds, sample for sample
-    and temperature for temperature, in blocks of any size; read twice, the same."""
+    """The blocks of a recording are what the whole-record loader holds, sample for sample,
+    in blocks of any size; read twice, the same. Temperatures come as an .npz holds them:
+    each reading on the row of its sample index and NaN between (one reading per
+    conversion, not one per sample), so that held they are the loader's hold."""
     whole = load_recording(recording)
+    raws = [r for r in RecordingReader(recording) if r["kind"] == "raw"]
+    index = np.concatenate([np.arange(r["i0"], r["i0"] + r["n"]) for r in raws])
+    assert np.all(np.diff(index) > 0)         # one run, no copy: the rows' indices
+    readings: dict[str, set[int]] = {}
+    for r in RecordingReader(recording):
+        if r["kind"] == "temp":
+            for name, v in zip(r["names"], r["values_c"], strict=True):
+                if v is not None and r["i0"] <= index[-1]:
+                    # the row of its index, or the first row after it
+                    readings.setdefault(name, set()).add(
+                        int(np.searchsorted(index, r["i0"])))
     src = open_record(recording)
     for block in (1000, 1 << 16):
         got = list(src.blocks(block))
         assert all(len(a) <= block for a, _t, _e in got)
         np.testing.assert_array_equal(np.concatenate([a for a, _t, _e in got]), whole.accel)
         temps = np.concatenate([t for _a, t, _e in got if t is not None])
-        np.testing.assert_array_equal(temps, whole.temperature_c)
+        np.testing.assert_array_equal(_held(temps), whole.temperature_c)
+        for j, name in enumerate(src.info.temperature_names):
+            assert set(np.flatnonzero(np.isfinite(temps[:, j])).tolist()) == readings[name]
     assert src.info.format is RecordFormat.RECORDING
     cols = np.concatenate([a for a, _t, _e in src.blocks(777, columns=[2])])
     np.testing.assert_array_equal(cols[:, 0], whole.accel[:, 2])
