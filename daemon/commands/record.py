@@ -42,7 +42,7 @@ from avard.daemon.net.subscriber import (
     subscriber_from_args,
 )
 from avard.daemon.service import dirlock
-from avard.daemon.service.recorder import Recorder, recorded_rate
+from avard.daemon.service.recorder import Recorder, rate_conflict
 
 log = logging.getLogger(__name__)
 
@@ -162,8 +162,8 @@ class StreamArchiver:
         so a service restarted at another rate mid-archive ends the archive (what is written
         stays) with one line, instead of mixing rates."""
         nominal = nominal_of(header)
-        got = recorded_rate(self.out)
-        if nominal is None or got is None or got[1] == nominal:
+        got = rate_conflict(self.out, nominal)
+        if got is None:
             return
         run, had = got
         raise ConfigError(

@@ -781,6 +781,19 @@ def recorded_rate(data_dir: str | Path) -> tuple[str, float] | None:
     return None
 
 
+def rate_conflict(data_dir: str | Path, nominal_hz: float | None) -> tuple[str, float] | None:
+    """The run and nominal ODR (Hz) of the newest recorded header in ``data_dir`` when that
+    rate is not ``nominal_hz``: one recording directory holds one output data rate (a run at
+    another ODR could not join the restored accumulators, whose τ are sample counts, and makes
+    a record ``avard analyze`` refuses as a whole). None when they agree, when the directory
+    holds no header that says its ODR, or when ``nominal_hz`` is None (a stream that does not
+    say its own). The service and ``avard record`` each say what to do in their own words."""
+    if nominal_hz is None:
+        return None
+    got = recorded_rate(data_dir)
+    return got if got is not None and got[1] != float(nominal_hz) else None
+
+
 def restart_gap(last: LastRecorded, *, boot_id: str | None, t_mono: float, t_real: float,
                 rate_hz: float) -> RestartGap:
     """How many samples a restart lost: from CLOCK_MONOTONIC when the last run was in this
