@@ -54,6 +54,13 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
     key = _key(d)
     with _guard:
         if key in _held:
+            # held by this process already (``avard run`` holds it from before the rig is
+            # opened, the service again at its start): the directory may have been removed
+            # and made again in between, while nothing was written, and another process
+            # may have locked the new one; the second hold checks, as the recorder does
+            lost = _recheck(key, d)
+            if lost is not None:
+                raise ConfigError(f"{what} {str(d)!r}: {lost}; {advice}")
             _held[key][1] += 1
             return key
         path = key / LOCK_FILE
@@ -98,37 +105,42 @@ def recheck(directory: str | Path) -> str | None:
     meanwhile, that one records there now and this one must not write beside it."""
     key = _key(Path(directory))
     with _guard:
-        entry = _held.get(key)
-        if entry is None or entry[0] < 0:
-            return None
-        path = key / LOCK_FILE
-        try:
-            held, now = os.fstat(entry[0]), os.stat(path, follow_symlinks=False)
-            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
-                return None
-        except FileNotFoundError:
-            pass
-        except OSError as exc:
-            return f"cannot check the lock file {path} ({exc.strerror})"
-        try:
-            fd, writable = _open(path)
-        except OSError as exc:
-            return f"cannot open the lock file {path} again ({exc.strerror})"
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            other = _holder(fd)
-            os.close(fd)
-            return (f"{LOCK_FILE} in {str(directory)!r} was replaced (the directory removed "
-                    f"and made again?) and another avard process"
-                    f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
-                    "it records there now; this one does not write beside it")
-        _note_pid(fd, writable, directory)
-        os.close(entry[0])
-        entry[0] = fd
-        log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
-                    LOCK_FILE, directory)
+        return _recheck(key, directory)
+
+
+def _recheck(key: Path, directory: str | Path) -> str | None:
+    """:func:`recheck` with ``_guard`` held."""
+    entry = _held.get(key)
+    if entry is None or entry[0] < 0:
         return None
+    path = key / LOCK_FILE
+    try:
+        held, now = os.fstat(entry[0]), os.stat(path, follow_symlinks=False)
+        if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+            return None
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        return f"cannot check the lock file {path} ({exc.strerror})"
+    try:
+        fd, writable = _open(path)
+    except OSError as exc:
+        return f"cannot open the lock file {path} again ({exc.strerror})"
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        other = _holder(fd)
+        os.close(fd)
+        return (f"{LOCK_FILE} in {str(directory)!r} was replaced (the directory removed "
+                f"and made again?) and another avard process"
+                f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
+                "it records there now; this one does not write beside it")
+    _note_pid(fd, writable, directory)
+    os.close(entry[0])
+    entry[0] = fd
+    log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
+                LOCK_FILE, directory)
+    return None
 
 
 def release(key: Path) -> None:

@@ -707,6 +707,51 @@ def test_a_recording_directory_removed_under_the_service_is_locked_again(tmp_pat
     assert svc.final_status["disk"]["state"] == "writing"
 
 
+def test_a_directory_made_again_while_its_holder_writes_nothing_is_checked_at_its_next_hold(
+        tmp_path):
+    """The lock is the directory's as it is: removed and made again by hand while the process
+    that held it writes nothing (``avard run`` between its own hold and the service's start,
+    a long start-up replay), the new directory is free and the first process to lock it
+    records there (the old holder holds a deleted file; nothing can tell another process
+    about it). The old holder finds out before it writes (the recorder's recheck, tested
+    above) and now also when it takes the lock again, as the service's start does after
+    ``avard run``'s: refused with one line naming the process there, where it used to count
+    one more hold of a lock it no longer had. Once that process has gone, it locks the new
+    directory again."""
+    from avard.core.errors import ConfigError
+    from avard.daemon.service import dirlock
+
+    data = tmp_path / "rec"
+
+    def probe() -> str:
+        return subprocess.run([sys.executable, "-c", _PROBE, str(data)], capture_output=True,
+                              text=True, timeout=60, stdin=subprocess.DEVNULL).stdout
+
+    key = dirlock.hold(data)
+    holder = None
+    try:
+        assert f"another avard process (pid {os.getpid()})" in probe()
+        shutil.rmtree(data)
+        data.mkdir()                                    # by hand
+        holder = subprocess.Popen([sys.executable, "-c", _PROBE, str(data)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        with pytest.raises(ConfigError, match=rf"another avard process \(pid {holder.pid}\)"):
+            dirlock.hold(data)
+        lost = dirlock.recheck(data)
+        assert lost is not None and f"pid {holder.pid}" in lost
+        holder.communicate("")                          # it ends; the kernel drops its lock
+        again = dirlock.hold(data)                      # the new directory's lock, now ours
+        dirlock.release(again)
+        assert f"another avard process (pid {os.getpid()})" in probe()
+    finally:
+        if holder is not None and holder.poll() is None:
+            holder.kill()
+            holder.wait()
+        dirlock.release(key)
+    assert probe().startswith("locked")                 # released for good
+
+
 def test_a_service_whose_removed_directory_another_locked_meanwhile_pauses(tmp_path):
     """The directory removed and, before this service's next segment, another process
     locked the new one: this service pauses (a write error saying so) instead of recording
