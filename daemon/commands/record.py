@@ -331,6 +331,9 @@ def _archive(args: argparse.Namespace, out: Path) -> int:
             if args.duration is not None and elapsed >= args.duration:
                 break
             if sub.stats.messages_received == 0 and elapsed >= args.wait:
+                if sub.stats.bad_messages:
+                    raise NetworkError(f"nothing readable from {args.endpoint} within "
+                                       f"{args.wait:g} s: {sub.stats.not_avard()}")
                 raise NetworkError(
                     f"nothing received from {args.endpoint} within {args.wait:g} s; is "
                     "`avard run` publishing there (and is this client's CURVE key authorised)?")

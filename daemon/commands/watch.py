@@ -481,6 +481,9 @@ def run(args: argparse.Namespace) -> int:
             now = time.monotonic()
             if limit is not None and view.snapshot is None:
                 if now - start > args.wait:
+                    if sub.stats.bad_messages and not sub.stats.messages_received:
+                        raise NetworkError(f"nothing readable from {args.endpoint} within "
+                                           f"{args.wait:g} s: {sub.stats.not_avard()}")
                     raise NetworkError(f"no Allan snapshot from {args.endpoint} within "
                                        f"{args.wait:g} s (is the service running?)")
                 continue
