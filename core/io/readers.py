@@ -280,6 +280,7 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         axes = [str(a) for a in np.atleast_1d(_small(zf, "axes", str(p)))]
         if len(axes) != c:
             raise DataError(f"{p}: {len(axes)} axis names for {c} accel columns; fix 'axes'")
+        _unique_names(axes, "axis name", "fix 'axes'", p)
         names = axes
     tshape = None
     tnames: list[str] = []
@@ -295,6 +296,7 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         if "temperature_names" in keys:
             tn = [str(a) for a in np.atleast_1d(_small(zf, "temperature_names", str(p)))]
             if len(tn) == k:
+                _unique_names(tn, "temperature name", "fix 'temperature_names'", p)
                 tnames = tn
     meta: dict[str, Any] = {"format": "npz", "n_samples": n, "rate_hz": rate, "names": names,
                             "temperature_names": tnames, "source": str(p),
@@ -305,6 +307,17 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
             meta["file_" + key if key == "source" else key] = v.item() if v.ndim == 0 else v
     meta["has_gyro"] = "gyro" in keys
     return meta
+
+
+def _unique_names(names: Sequence[str], what: str, fix: str, p: Path) -> None:
+    """Refuse a name given to two columns: channels are picked and reported by name, and the
+    second of two columns named alike went unreported (``--channels x`` took the first)."""
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise DataError(f"{p}: the {what} {name!r} is given to two columns "
+                            f"({', '.join(names)}); {fix}")
+        seen.add(name)
 
 
 def _check_finite(a: NDArray, offset: int, where: str) -> None:
@@ -376,7 +389,9 @@ def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int
 
 
 def _csv_open(p: Path) -> tuple[IO[str], list[str], str]:
-    fh = open(p, newline="", encoding="utf-8")  # closed by the caller
+    # utf-8-sig: a byte-order mark (spreadsheets' "CSV UTF-8" writes one) is not part of the
+    # first column's name: read as one, it hid the t column ("no time column")
+    fh = open(p, newline="", encoding="utf-8-sig")  # closed by the caller
     head = fh.readline()
     if not head.strip():
         fh.close()
@@ -403,6 +418,7 @@ def _csv_layout(p: Path, cols: list[str]) -> dict[str, Any]:
     if not accel:
         raise DataError(f"{p}: no acceleration column among {cols}; columns other than t, "
                         "temp_* and gyro_* are read as acceleration in m/s²")
+    _unique_names(cols, "column name", "name every column once in the header row", p)
     return {"t": tcol, "temp": temp, "gyro": gyro, "accel": accel}
 
 
