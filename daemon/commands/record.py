@@ -34,6 +34,7 @@ from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import ConfigError, FormatError, NetworkError, OutputError
 from avard.core.io import frames
 from avard.core.io.outputs import check_output_dir
+from avard.daemon.commands._options import check_seconds
 from avard.daemon.net.subscriber import (
     Message,
     Subscriber,
@@ -298,6 +299,11 @@ def check_out(path: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    for value, option, zero in ((args.segment, "--segment", False), (args.fsync, "--fsync", True),
+                                (args.duration, "--duration", False),
+                                (args.wait, "--wait", False),
+                                (args.timeout, "--timeout", False)):
+        check_seconds(value, option, zero=zero)
     out = check_out(args.out)
     # one writer per recording directory, as the service (dirlock.py): two archives, or an
     # archive beside a service, in one directory wrote the same indices twice

@@ -490,6 +490,9 @@ def subscriber_from_args(args: Any, topics: Iterable[str] = frames.TOPICS) -> Su
     from pathlib import Path
 
     check_client_endpoint(args.endpoint)
+    timeout = getattr(args, "timeout", None)
+    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+        raise ConfigError(f"--timeout {timeout:g}: give a number of seconds above 0")
     if args.request is not None:
         check_client_endpoint(args.request, "--request")
     if (args.server_key is None) != (args.client_key is None):
