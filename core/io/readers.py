@@ -263,8 +263,9 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
                         "needs accel (N, C) in m/s² and rate_hz")
     acc = _NpzMember(zf, "accel.npy", str(p))
     acc.close()
-    if len(acc.shape) not in (1, 2) or acc.shape[0] == 0:
-        raise DataError(f"{p}: accel has shape {acc.shape}; it must be (N,) or (N, C) with N > 0")
+    if len(acc.shape) not in (1, 2) or acc.shape[0] == 0 or 0 in acc.shape:
+        raise DataError(f"{p}: accel has shape {acc.shape}; it must be (N,) or (N, C) with "
+                        "N > 0 and C > 0")
     if acc.dtype.kind not in "iuf":
         raise DataError(f"{p}: accel has dtype {acc.dtype}; it must be numbers (m/s²)")
     n = int(acc.shape[0])
@@ -288,7 +289,11 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         t = _NpzMember(zf, "temperature_c.npy", str(p))
         t.close()
         tshape = t.shape
-        if tshape[0] != n or len(tshape) not in (1, 2):
+        if t.dtype.kind not in "iuf":
+            # strings went through analyze unread and ended explain in a ValueError
+            raise DataError(f"{p}: temperature_c has dtype {t.dtype}; it must be numbers "
+                            "(°C, NaN where a reading is missing)")
+        if len(tshape) not in (1, 2) or tshape[0] != n or 0 in tshape:
             raise DataError(f"{p}: temperature_c has shape {tshape}; it must be (N,) or (N, k) "
                             f"aligned with the {n} accel samples")
         k = 1 if len(tshape) == 1 else tshape[1]

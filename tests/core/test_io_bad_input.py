@@ -51,3 +51,21 @@ def test_two_npz_channels_under_one_name_are_refused(tmp_path, key) -> None:
     for read in (load_record, lambda p: open_record(p).info):
         with pytest.raises(DataError, match=rf"is given to two columns.*fix '{key}'"):
             read(p)
+
+
+@pytest.mark.parametrize("extra, said", [
+    ({"accel": np.zeros((N, 0))}, r"accel has shape \(4000, 0\).*C > 0"),
+    ({"temperature_c": np.array(["a"] * N)}, r"temperature_c has dtype <U1; it must be numbers"),
+    ({"temperature_c": np.float64(20.0)}, r"temperature_c has shape \(\)"),
+])
+def test_an_npz_whose_arrays_cannot_be_its_samples_is_refused(tmp_path, extra, said) -> None:
+    """Zero accel columns ended analyze in a ValueError traceback; temperatures as strings
+    went through analyze unread and ended explain in one; a 0-d temperature_c in an
+    IndexError."""
+    rng = np.random.default_rng(6)
+    arrays = {"accel": rng.normal(0, 1e-3, (N, 3)), "rate_hz": 100.0, **extra}
+    p = tmp_path / "bad.npz"
+    np.savez(p, **arrays)
+    for read in (load_record, lambda p: open_record(p).info):
+        with pytest.raises(DataError, match=said):
+            read(p)
