@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_file, check_plot_output
+from avard.core.io.outputs import check_output_file, check_outputs_apart, check_plot_output
 from avard.daemon.commands._options import add_channels_argument, split_channels
 
 if TYPE_CHECKING:
@@ -224,6 +224,9 @@ def run(args: argparse.Namespace) -> int:
         check_output_file(args.csv, what=f"--csv {args.csv}", suffixes=(".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    check_outputs_apart([*([(f"--csv {args.csv}", args.csv)] if args.csv else []),
+                         *([(f"--plot {args.plot}", args.plot)] if args.plot else [])],
+                        args.paths)
     if args.workers is not None and args.workers < 1:
         raise DataError(f"--workers {args.workers}: give a whole number of processes >= 1")
     if args.rate is not None and not args.rate > 0:
