@@ -32,7 +32,8 @@ LOCK_FILE = ".avard.lock"
 log = logging.getLogger(__name__)
 
 _guard = threading.Lock()
-_held: dict[Path, list[int]] = {}       # directory → [fd, holders in this process]
+#: directory → [fd, holders in this process, times its lock file was locked again]
+_held: dict[Path, list[int]] = {}
 
 
 def _key(directory: Path) -> Path:
@@ -73,7 +74,7 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
                 # exit status 2 would keep systemd from ever restarting it
                 log.warning("cannot create %s in %s (%s); running without the one-service "
                             "lock", LOCK_FILE, d, exc.strerror)
-                _held[key] = [-1, 1]
+                _held[key] = [-1, 1, 0]
                 return key
             raise ConfigError(f"{what} {str(d)!r}: cannot open its lock file "
                               f"{LOCK_FILE} ({exc.strerror})") from None
@@ -89,7 +90,7 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
                 f"{what} {str(d)!r}: another avard process"
                 f"{f' (pid {other})' if other else ''} is recording there; {advice}") from None
         _note_pid(fd, writable, d)
-        _held[key] = [fd, 1]
+        _held[key] = [fd, 1, 0]
         return key
 
 
@@ -138,9 +139,20 @@ def _recheck(key: Path, directory: str | Path) -> str | None:
     _note_pid(fd, writable, directory)
     os.close(entry[0])
     entry[0] = fd
+    entry[2] += 1
     log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
                 LOCK_FILE, directory)
     return None
+
+
+def generation(directory: str | Path) -> int:
+    """How many times this process has locked ``directory``'s lock file again (:func:`recheck`
+    found it gone or replaced): a writer that opened a file there under an earlier count
+    holds it in a directory that is no longer the one at the path (moved away, removed)."""
+    key = _key(Path(directory))
+    with _guard:
+        entry = _held.get(key)
+        return entry[2] if entry is not None else 0
 
 
 def release(key: Path) -> None:
