@@ -15,6 +15,7 @@ import os
 import pkgutil
 import sys
 from collections.abc import Sequence
+from typing import TextIO
 
 # One BLAS thread unless the user asks for more: avard's matrix products are small (C×C sums
 # of products, GLS fits), and a default thread pool on a loaded machine or a Pi's four slow
@@ -77,16 +78,35 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to ``sys.stderr`` as it is when a line is logged, not as it was when logging
+    was set up (as logging's own last-resort handler does): a handler bound to the stream of
+    the moment kept writing to it after the caller replaced and closed it (an in-process
+    ``main()`` under a test's capture left every later log line a 'Logging error')."""
+
+    def __init__(self) -> None:
+        logging.Handler.__init__(self)
+
+    @property
+    def stream(self) -> TextIO:  # type: ignore[override]
+        return sys.stderr
+
+
 def setup_logging(verbosity: int, narrates: bool = True) -> None:
     """Log to stderr in a form journald keeps: '<level-prefix>name: message', no timestamps
     (journald adds its own). INFO lines by default only for the commands that narrate (the
     service, web, record, simulate); the others print results and show INFO with -v, so
-    log lines are not mixed into what they print."""
+    log lines are not mixed into what they print.
+
+    Idempotent: a second call replaces the handler the first one added and leaves every
+    other handler of the root logger where it is (one ``main()`` after another in a process,
+    a test's log capture)."""
     level = logging.WARNING - 10 * min(verbosity + (1 if narrates else 0), 2)
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler()
     handler.setFormatter(formatter_for(sys.stderr))   # <N> priority prefixes for journald
     root = logging.getLogger()
-    root.handlers[:] = [handler]
+    root.handlers[:] = [h for h in root.handlers if not isinstance(h, _StderrHandler)]
+    root.addHandler(handler)
     root.setLevel(level)
 
 

@@ -1,8 +1,11 @@
-"""Shared test configuration: markers for slow statistical runs and real hardware."""
+"""Shared test configuration: markers for slow statistical runs and real hardware, and the
+root logger put back after every test."""
 
 from __future__ import annotations
 
+import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -44,3 +47,25 @@ def imudata_dir() -> Path:
     if not (IMUDATA / "adis16405_run1.npz").exists():
         pytest.skip(f"real data not present at {IMUDATA}")
     return IMUDATA
+
+
+def _pytests_own(handler: logging.Handler) -> bool:
+    """pytest's log capture handlers, which it adds and removes around each phase itself."""
+    return type(handler).__module__.startswith("_pytest")
+
+
+@pytest.fixture(autouse=True)
+def _root_logger_restored() -> Iterator[None]:
+    """The root logger's handlers and level as they were before the test.
+
+    A test that calls ``main()`` in-process (or any code that configures logging) left its
+    handler on the root logger, bound to that test's captured stderr; pytest closes that
+    capture, and every later test's log line became a 'Logging error' in its own stderr
+    (a test that read its stderr failed, or not, by the order the tests ran in). pytest's
+    own capture handlers are left to pytest: it swaps them at every phase."""
+    root = logging.getLogger()
+    handlers = [h for h in root.handlers if not _pytests_own(h)]
+    level = root.level
+    yield
+    root.handlers[:] = handlers + [h for h in root.handlers if _pytests_own(h)]
+    root.setLevel(level)

@@ -22,6 +22,7 @@ from avard.core.errors import OutputError, describe_os_error
 __all__ = [
     "check_output_dir",
     "check_output_file",
+    "check_outputs_apart",
     "check_plot_output",
     "free_bytes",
     "require_plot_extra",
@@ -79,6 +80,33 @@ def check_output_file(path: str | os.PathLike[str], *, what: str,
     else:
         _probe_write(folder, what)
     return p
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_outputs_apart(outputs: Iterable[tuple[str, str | os.PathLike[str]]],
+                        inputs: Iterable[str | os.PathLike[str]]) -> None:
+    """No output names a file read as input, and no two outputs name one file (``outputs``:
+    (option as typed, path)). ``avard analyze data.csv --export csv data.csv`` replaced the
+    record with its ADEV table, exit status 0; two exports to one path kept the last."""
+    ins = [Path(i) for i in inputs]
+    seen: list[tuple[str, Path]] = []
+    for what, path in outputs:
+        p = Path(path)
+        for i in ins:
+            if _same(p, i) or p.absolute() == i.absolute():
+                raise OutputError(f"{what}: {p} is the record read ({i}); writing it would "
+                                  "replace the data: write the output to another file")
+        for other, q in seen:
+            if _same(p, q) or p.absolute() == q.absolute():
+                raise OutputError(f"{other} and {what} name one file; give each output its "
+                                  "own file")
+        seen.append((what, p))
 
 
 def check_output_dir(path: str | os.PathLike[str], *, what: str, create: bool = False) -> Path:

@@ -263,8 +263,9 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
                         "needs accel (N, C) in m/s² and rate_hz")
     acc = _NpzMember(zf, "accel.npy", str(p))
     acc.close()
-    if len(acc.shape) not in (1, 2) or acc.shape[0] == 0:
-        raise DataError(f"{p}: accel has shape {acc.shape}; it must be (N,) or (N, C) with N > 0")
+    if len(acc.shape) not in (1, 2) or acc.shape[0] == 0 or 0 in acc.shape:
+        raise DataError(f"{p}: accel has shape {acc.shape}; it must be (N,) or (N, C) with "
+                        "N > 0 and C > 0")
     if acc.dtype.kind not in "iuf":
         raise DataError(f"{p}: accel has dtype {acc.dtype}; it must be numbers (m/s²)")
     n = int(acc.shape[0])
@@ -280,6 +281,7 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         axes = [str(a) for a in np.atleast_1d(_small(zf, "axes", str(p)))]
         if len(axes) != c:
             raise DataError(f"{p}: {len(axes)} axis names for {c} accel columns; fix 'axes'")
+        _unique_names(axes, "axis name", "fix 'axes'", p)
         names = axes
     tshape = None
     tnames: list[str] = []
@@ -287,7 +289,11 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         t = _NpzMember(zf, "temperature_c.npy", str(p))
         t.close()
         tshape = t.shape
-        if tshape[0] != n or len(tshape) not in (1, 2):
+        if t.dtype.kind not in "iuf":
+            # strings went through analyze unread and ended explain in a ValueError
+            raise DataError(f"{p}: temperature_c has dtype {t.dtype}; it must be numbers "
+                            "(°C, NaN where a reading is missing)")
+        if len(tshape) not in (1, 2) or tshape[0] != n or 0 in tshape:
             raise DataError(f"{p}: temperature_c has shape {tshape}; it must be (N,) or (N, k) "
                             f"aligned with the {n} accel samples")
         k = 1 if len(tshape) == 1 else tshape[1]
@@ -295,6 +301,7 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
         if "temperature_names" in keys:
             tn = [str(a) for a in np.atleast_1d(_small(zf, "temperature_names", str(p)))]
             if len(tn) == k:
+                _unique_names(tn, "temperature name", "fix 'temperature_names'", p)
                 tnames = tn
     meta: dict[str, Any] = {"format": "npz", "n_samples": n, "rate_hz": rate, "names": names,
                             "temperature_names": tnames, "source": str(p),
@@ -305,6 +312,17 @@ def _npz_meta(zf: zipfile.ZipFile, p: Path, rate_hz: float | None) -> dict[str, 
             meta["file_" + key if key == "source" else key] = v.item() if v.ndim == 0 else v
     meta["has_gyro"] = "gyro" in keys
     return meta
+
+
+def _unique_names(names: Sequence[str], what: str, fix: str, p: Path) -> None:
+    """Refuse a name given to two columns: channels are picked and reported by name, and the
+    second of two columns named alike went unreported (``--channels x`` took the first)."""
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise DataError(f"{p}: the {what} {name!r} is given to two columns "
+                            f"({', '.join(names)}); {fix}")
+        seen.add(name)
 
 
 def _check_finite(a: NDArray, offset: int, where: str) -> None:
@@ -376,7 +394,9 @@ def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int
 
 
 def _csv_open(p: Path) -> tuple[IO[str], list[str], str]:
-    fh = open(p, newline="", encoding="utf-8")  # closed by the caller
+    # utf-8-sig: a byte-order mark (spreadsheets' "CSV UTF-8" writes one) is not part of the
+    # first column's name: read as one, it hid the t column ("no time column")
+    fh = open(p, newline="", encoding="utf-8-sig")  # closed by the caller
     head = fh.readline()
     if not head.strip():
         fh.close()
@@ -403,6 +423,7 @@ def _csv_layout(p: Path, cols: list[str]) -> dict[str, Any]:
     if not accel:
         raise DataError(f"{p}: no acceleration column among {cols}; columns other than t, "
                         "temp_* and gyro_* are read as acceleration in m/s²")
+    _unique_names(cols, "column name", "name every column once in the header row", p)
     return {"t": tcol, "temp": temp, "gyro": gyro, "accel": accel}
 
 

@@ -854,20 +854,22 @@ class RecordingSource:
 
     def _runs(self, tally: dict[str, _RunTally], newest: dict[str, dict[str, Any]]
               ) -> list[RunSummary]:
+        from avard.core.allan.feed import nominal_of
+
         out = []
         for run, t in tally.items():
             h = newest.get(run, {})
             tb = h.get("timebase") or {}
             u = tb.get("odr_u_hz")
             fitted = isinstance(u, int | float) and u > 0
-            nominal = h.get("nominal_odr_hz")
             out.append(RunSummary(run, float(h.get("rate_hz", math.nan)),
                                   float(u) if isinstance(u, int | float) and fitted else 0.0,
                                   t.first, t.n, t.lost, t.dup,
                                   rate_fitted=fitted or not isinstance(tb.get("odr_hz"),
                                                                        int | float),
-                                  nominal_hz=float(nominal) if isinstance(
-                                      nominal, int | float) else None))
+                                  # the one reader of it (the loader's and the feed's): a
+                                  # value no avard writes (NaN, ≤ 0) says nothing, as none
+                                  nominal_hz=nominal_of(h)))
         return out
 
     def _rate(self, runs: list[RunSummary], rate_hz: float | None) -> tuple[float, float]:

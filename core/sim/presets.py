@@ -230,6 +230,8 @@ def _coerce(key: str, value: Any, default: Any) -> Any:
             out.append(tuple([_float(key, v) for v in s] + [0.0] * (4 - len(s))))
         return tuple(out)
     if key == "axes":
+        if not isinstance(value, str | list | tuple):     # `--set axes=0` is parsed as 0
+            raise ConfigError(f"axes names three axes, e.g. 'x,y,z'; got {value!r}")
         seq = value.split(",") if isinstance(value, str) else list(value)
         return tuple(str(s) for s in seq)
     if key == "ds18b20_offset_c":
@@ -256,8 +258,8 @@ def validate(cfg: SimConfig) -> SimConfig:
         raise ConfigError("odr_error_ppm must be within ±100000 ppm (±10 %)")
     if cfg.range_g not in ADXL355_LSB_PER_G:
         raise ConfigError(f"range_g={cfg.range_g} is not an ADXL355 range; choose 2, 4 or 8")
-    if len(cfg.axes) != 3:
-        raise ConfigError("axes must name three axes, e.g. 'x,y,z'")
+    if len(cfg.axes) != 3 or len(set(cfg.axes)) != 3:
+        raise ConfigError("axes must name three different axes, e.g. 'x,y,z'")
     for key in _NON_NEGATIVE_AXIS:
         vals = getattr(cfg, key)
         if any(v < 0 for v in vals):

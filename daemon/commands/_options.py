@@ -9,9 +9,22 @@ import argparse
 import math
 
 from avard.core.analysis.options import AnalyzeOptions
-from avard.core.errors import DataError
+from avard.core.errors import ConfigError, DataError
 
 CHANNELS_HELP = ("channels to use, by name or number: 'x z' or 'x,z' (default: all)")
+
+
+def check_seconds(value: float | None, option: str, *, zero: bool = False) -> None:
+    """ConfigError (one line, before any work) unless ``value`` is a finite number of seconds
+    above 0 (at least 0 with ``zero``); None (an option left out) passes. A negative
+    ``--interval`` had ``avard watch`` redraw at every message, ``--segment 0`` had ``avard
+    record`` start a new file at every record, a negative ``--duration`` ended it at once
+    with exit status 1 and no word on stderr."""
+    if value is None:
+        return
+    if not (math.isfinite(value) and (value >= 0 if zero else value > 0)):
+        raise ConfigError(f"{option} {value:g}: give a number of seconds "
+                          f"{'≥ 0' if zero else 'above 0'}")
 
 
 def add_channels_argument(parser: argparse.ArgumentParser) -> None:

@@ -32,7 +32,12 @@ from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import adev_csv, format_table, kalibr_yaml, psd_csv
 from avard.core.analysis.statistics import statistics_csv, statistics_table
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_file, check_plot_output, finite_for_json
+from avard.core.io.outputs import (
+    check_output_file,
+    check_outputs_apart,
+    check_plot_output,
+    finite_for_json,
+)
 from avard.core.io.source import open_record
 from avard.daemon.commands._options import (
     add_channels_argument,
@@ -144,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
                           suffixes=(".yaml", ".yml") if fmt == "kalibr" else (".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    check_outputs_apart([*((f"--export {fmt} {path}", path) for fmt, path in args.export),
+                         *([(f"--plot {args.plot}", args.plot)] if args.plot else [])],
+                        [args.data])
     _workers(args.workers)  # checked before the work
     if args.temperature and (args.quantiles != "exact" or args.noise_id != "avard"):
         raise DataError("--quantiles stable32 and --noise-id stable32 are not available with "

@@ -23,6 +23,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -119,6 +120,12 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout and not Path(args.holdout).exists():
         raise DataError(f"--holdout {args.holdout} does not exist; give the path of a second "
                         "record of the same sensor")
+    if args.holdout and os.path.samefile(args.data, args.holdout):
+        # the models then "predicted" the very samples they were fitted on: a held-out gain
+        # with nothing held out
+        raise DataError(f"--holdout {args.holdout} is the record explained ({args.data}): give "
+                        "a second record of the same sensor, or leave --holdout out (the "
+                        "record's halves then predict each other)")
     # both records opened (and a recording scanned) before any analysis
     options = ExplainOptions(**vars(analyze_options(args)), temperature=args.temperature)
     source = open_record(args.data, rate_hz=args.rate_hz, runs=args.run,

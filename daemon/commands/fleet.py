@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_file, check_plot_output
+from avard.core.io.outputs import check_output_file, check_outputs_apart, check_plot_output
 from avard.daemon.commands._options import add_channels_argument, split_channels
 
 if TYPE_CHECKING:
@@ -70,12 +70,40 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(needs the plot extra)")
 
 
+def _refuse_a_record_twice(paths: Sequence[str]) -> None:
+    """The same record named twice (``avard fleet *.npz lab.npz``) was two sensors of the
+    population: counted twice in its median and spread, with exit status 0."""
+    import os
+
+    for i, a in enumerate(paths):
+        for b in paths[i + 1:]:
+            if os.path.samefile(a, b):
+                raise DataError(f"{a} and {b} are the same record, given twice; name each "
+                                "sensor's record once")
+
+
+def _check_files(paths: Sequence[str]) -> None:
+    """Every .npz and CSV opened (their metadata only) before the cluster starts: a broken
+    one among many ended the run only once the workers had started, under their log lines.
+    A recording is checked by its own first read on a worker (opening it here would scan
+    every segment once more)."""
+    from avard.core.io.readers import record_kind
+    from avard.core.io.source import open_record
+
+    for p in paths:
+        _path, kind = record_kind(p)
+        if kind != "recording":
+            _ = open_record(p).info
+
+
 def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
     """Sensor name → its records, checked to exist before any work."""
     for p in paths:
         if not Path(p).exists():
             raise DataError(f"{p}: no such file or folder; give the records' paths")
+    _refuse_a_record_twice(paths)
     if by == "file":
+        _check_files(paths)
         names: dict[str, list[str]] = {}
         for p in paths:
             stem = Path(p).stem or Path(p).name
@@ -134,7 +162,11 @@ def _client(args: argparse.Namespace) -> Any:
     from avard.core.analysis.parallel import MAX_WORKERS, default_workers
 
     n = args.workers or max(1, min(MAX_WORKERS, default_workers()))
-    # Dask's INFO lines (workers starting, connections) would bury the table on a terminal
+    # Dask's INFO lines (workers starting, connections) would bury the table on a terminal;
+    # silence_logs quiets the workers' processes only: the scheduler runs in this one, and
+    # its loggers (at INFO by Dask's config) reached stderr through avard's root handler
+    if not getattr(args, "verbose", 0):
+        logging.getLogger("distributed").setLevel(logging.WARNING)
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=None, silence_logs=logging.WARNING)
     return Client(cluster)
@@ -192,6 +224,9 @@ def run(args: argparse.Namespace) -> int:
         check_output_file(args.csv, what=f"--csv {args.csv}", suffixes=(".csv",))
     if args.plot:
         check_plot_output(args.plot, what=f"--plot {args.plot}")
+    check_outputs_apart([*([(f"--csv {args.csv}", args.csv)] if args.csv else []),
+                         *([(f"--plot {args.plot}", args.plot)] if args.plot else [])],
+                        args.paths)
     if args.workers is not None and args.workers < 1:
         raise DataError(f"--workers {args.workers}: give a whole number of processes >= 1")
     if args.rate is not None and not args.rate > 0:

@@ -34,6 +34,7 @@ from avard.core.allan.streaming import AllanSnapshot
 from avard.core.errors import ConfigError, FormatError, NetworkError, OutputError
 from avard.core.io import frames
 from avard.core.io.outputs import check_output_dir
+from avard.daemon.commands._options import check_seconds
 from avard.daemon.net.subscriber import (
     Message,
     Subscriber,
@@ -42,7 +43,7 @@ from avard.daemon.net.subscriber import (
     subscriber_from_args,
 )
 from avard.daemon.service import dirlock
-from avard.daemon.service.recorder import Recorder, recorded_rate
+from avard.daemon.service.recorder import Recorder, rate_conflict
 
 log = logging.getLogger(__name__)
 
@@ -162,8 +163,8 @@ class StreamArchiver:
         so a service restarted at another rate mid-archive ends the archive (what is written
         stays) with one line, instead of mixing rates."""
         nominal = nominal_of(header)
-        got = recorded_rate(self.out)
-        if nominal is None or got is None or got[1] == nominal:
+        got = rate_conflict(self.out, nominal)
+        if got is None:
             return
         run, had = got
         raise ConfigError(
@@ -298,6 +299,11 @@ def check_out(path: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    for value, option, zero in ((args.segment, "--segment", False), (args.fsync, "--fsync", True),
+                                (args.duration, "--duration", False),
+                                (args.wait, "--wait", False),
+                                (args.timeout, "--timeout", False)):
+        check_seconds(value, option, zero=zero)
     out = check_out(args.out)
     # one writer per recording directory, as the service (dirlock.py): two archives, or an
     # archive beside a service, in one directory wrote the same indices twice
@@ -331,6 +337,9 @@ def _archive(args: argparse.Namespace, out: Path) -> int:
             if args.duration is not None and elapsed >= args.duration:
                 break
             if sub.stats.messages_received == 0 and elapsed >= args.wait:
+                if sub.stats.bad_messages:
+                    raise NetworkError(f"nothing readable from {args.endpoint} within "
+                                       f"{args.wait:g} s: {sub.stats.not_avard()}")
                 raise NetworkError(
                     f"nothing received from {args.endpoint} within {args.wait:g} s; is "
                     "`avard run` publishing there (and is this client's CURVE key authorised)?")

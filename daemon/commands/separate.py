@@ -81,7 +81,9 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
         raise DataError(f"--names: {len(names)} names for {len(paths)} records")
     if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
         raise DataError(f"--rate {rate_hz}: a sample rate must be a positive number of Hz")
+    _refuse_one_record_twice(paths)
     records = [read_sensor(p, rate_hz=rate_hz) for p in paths]
+    _refuse_one_record_twice(paths, records)
     sensor_names = names or _names_of(paths, [r.sensor_name for r in records])
     runs = None
     if is_multi_run(records):          # a restart or a loss in a recording: run by run
@@ -111,6 +113,32 @@ def load_and_separate(paths: list[str], *, names: list[str] | None = None,
     assert aligned is not None
     return separate(aligned.accels, aligned.rate_hz, sensors=sensor_names, axes=aligned.axes,
                     filter_corner_hz=corner, notes=aligned.notes, sources=paths)
+
+
+def _refuse_one_record_twice(paths: list[str], records: list | None = None) -> None:
+    """One record given twice (the same file, or a copy: the same samples) is no pair of
+    sensors: separated from itself it gave a self-noise of exactly 0 and a 'common input'
+    that was the sensor's own noise, as a result, with exit status 0."""
+    import os
+
+    import numpy as np
+
+    for i in range(len(paths)):
+        for j in range(i + 1, len(paths)):
+            a, b = paths[i], paths[j]
+            if records is None:
+                try:
+                    same = os.path.samefile(a, b)
+                except OSError:
+                    continue             # a missing or unreadable path: its read says so
+                why = "the same file"
+            else:
+                ra, rb = records[i], records[j]
+                same = ra.accel.shape == rb.accel.shape and np.array_equal(ra.accel, rb.accel)
+                why = "the same samples (a copy of one record?)"
+            if same:
+                raise DataError(f"{a} and {b} are {why}: separate needs the records of "
+                                "2 or 3 different sensors on one bed")
 
 
 def _names_of(paths: list[str], recorded: list[str | None]) -> list[str]:

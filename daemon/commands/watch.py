@@ -32,8 +32,9 @@ from typing import Any
 import numpy as np
 from avard.core.allan.streaming import AllanSnapshot
 from avard.core.analysis.live_fit import is_not_resolved
-from avard.core.errors import FormatError, NetworkError
+from avard.core.errors import ConfigError, FormatError, NetworkError
 from avard.core.model.terms import SYMBOLS
+from avard.daemon.commands._options import check_seconds
 from avard.daemon.net.subscriber import (
     Message,
     StreamStats,
@@ -460,9 +461,15 @@ def run(args: argparse.Namespace) -> int:
     try:
         taus = tuple(float(t) for t in args.taus.split(",") if t.strip())
     except ValueError:
-        from avard.core.errors import ConfigError
         raise ConfigError(f"--taus {args.taus!r}: give comma-separated seconds, "
                           "e.g. 0.1,1,10") from None
+    for value, option in ((args.interval, "--interval"), (args.wait, "--wait")):
+        check_seconds(value, option)
+    if args.count is not None and args.count < 1:
+        raise ConfigError(f"--count {args.count}: give a number of views ≥ 1")
+    if not (math.isfinite(args.target) and args.target > 0):
+        raise ConfigError(f"--target {args.target:g}: give the relative half-width to reach, "
+                          "above 0 (0.1 = ±10 %)")
     limit = 1 if args.once else args.count
     view = WatchView(target=args.target, taus=taus, fit_locally=not args.no_fit)
     sub = subscriber_from_args(args)
@@ -481,6 +488,9 @@ def run(args: argparse.Namespace) -> int:
             now = time.monotonic()
             if limit is not None and view.snapshot is None:
                 if now - start > args.wait:
+                    if sub.stats.bad_messages and not sub.stats.messages_received:
+                        raise NetworkError(f"nothing readable from {args.endpoint} within "
+                                           f"{args.wait:g} s: {sub.stats.not_avard()}")
                     raise NetworkError(f"no Allan snapshot from {args.endpoint} within "
                                        f"{args.wait:g} s (is the service running?)")
                 continue

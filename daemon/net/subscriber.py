@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -102,6 +103,17 @@ class StreamStats:
     first_index: int | None = None
     next_index: int | None = None   # index the next raw block should start at
     bad_messages: int = 0
+    first_bad: str | None = None    # what was wrong with the first undecodable message
+
+    def not_avard(self) -> str:
+        """'' when every message decoded; else a clause naming how many did not and why the
+        first did not, for a client that received nothing usable: "nothing received" was
+        wrong then, and sent the user looking for a service that was not running."""
+        if not self.bad_messages:
+            return ""
+        return (f"{self.bad_messages} message{'s' if self.bad_messages != 1 else ''} arrived "
+                f"that this avard cannot read (the first {self.first_bad}): is that address "
+                "an avard service of this version?")
 
     @property
     def messages_lost(self) -> int:
@@ -381,7 +393,7 @@ class Subscriber:
                     return None
             parts = self._sub.recv_multipart()
             if len(parts) != 2:
-                self.stats.bad_messages += 1
+                self._bad(f"{parts[0][:40]!r}", f"a message of {len(parts)} parts, not 2")
                 continue
             topic = parts[0].decode("ascii", "replace")
             _base, dot, name = topic.partition(".")
@@ -396,10 +408,21 @@ class Subscriber:
             try:
                 record = frames.decode(parts[1], max_bytes=self.max_bytes)
             except FormatError as exc:
-                self.stats.bad_messages += 1
-                log.warning("undecodable message on %r: %s", topic, exc)
+                self._bad(repr(topic), str(exc))
                 continue
             return self.tracker.observe(topic, record)
+
+    def _bad(self, topic: str, why: str) -> None:
+        """Count an undecodable message; log the first, then only at 10, 100, 1000, … of
+        them (a stream of junk logged a line per message, thousands a second)."""
+        st = self.stats
+        st.bad_messages += 1
+        if st.first_bad is None:
+            st.first_bad = f"on {topic}: {why}"
+            log.warning("undecodable message on %s: %s (further ones are counted)", topic, why)
+        elif math.log10(st.bad_messages).is_integer():
+            log.warning("%d undecodable messages so far (the last on %s: %s)",
+                        st.bad_messages, topic, why)
 
     def close(self) -> None:
         for sock in (self._sub, self._req):
@@ -467,6 +490,9 @@ def subscriber_from_args(args: Any, topics: Iterable[str] = frames.TOPICS) -> Su
     from pathlib import Path
 
     check_client_endpoint(args.endpoint)
+    timeout = getattr(args, "timeout", None)
+    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+        raise ConfigError(f"--timeout {timeout:g}: give a number of seconds above 0")
     if args.request is not None:
         check_client_endpoint(args.request, "--request")
     if (args.server_key is None) != (args.client_key is None):

@@ -32,7 +32,8 @@ LOCK_FILE = ".avard.lock"
 log = logging.getLogger(__name__)
 
 _guard = threading.Lock()
-_held: dict[Path, list[int]] = {}       # directory → [fd, holders in this process]
+#: directory → [fd, holders in this process, times its lock file was locked again]
+_held: dict[Path, list[int]] = {}
 
 
 def _key(directory: Path) -> Path:
@@ -54,6 +55,13 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
     key = _key(d)
     with _guard:
         if key in _held:
+            # held by this process already (``avard run`` holds it from before the rig is
+            # opened, the service again at its start): the directory may have been removed
+            # and made again in between, while nothing was written, and another process
+            # may have locked the new one; the second hold checks, as the recorder does
+            lost = _recheck(key, d)
+            if lost is not None:
+                raise ConfigError(f"{what} {str(d)!r}: {lost}; {advice}")
             _held[key][1] += 1
             return key
         path = key / LOCK_FILE
@@ -66,7 +74,7 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
                 # exit status 2 would keep systemd from ever restarting it
                 log.warning("cannot create %s in %s (%s); running without the one-service "
                             "lock", LOCK_FILE, d, exc.strerror)
-                _held[key] = [-1, 1]
+                _held[key] = [-1, 1, 0]
                 return key
             raise ConfigError(f"{what} {str(d)!r}: cannot open its lock file "
                               f"{LOCK_FILE} ({exc.strerror})") from None
@@ -82,7 +90,7 @@ def hold(directory: str | Path, *, what: str = "recording.data_dir =",
                 f"{what} {str(d)!r}: another avard process"
                 f"{f' (pid {other})' if other else ''} is recording there; {advice}") from None
         _note_pid(fd, writable, d)
-        _held[key] = [fd, 1]
+        _held[key] = [fd, 1, 0]
         return key
 
 
@@ -98,37 +106,53 @@ def recheck(directory: str | Path) -> str | None:
     meanwhile, that one records there now and this one must not write beside it."""
     key = _key(Path(directory))
     with _guard:
-        entry = _held.get(key)
-        if entry is None or entry[0] < 0:
-            return None
-        path = key / LOCK_FILE
-        try:
-            held, now = os.fstat(entry[0]), os.stat(path, follow_symlinks=False)
-            if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
-                return None
-        except FileNotFoundError:
-            pass
-        except OSError as exc:
-            return f"cannot check the lock file {path} ({exc.strerror})"
-        try:
-            fd, writable = _open(path)
-        except OSError as exc:
-            return f"cannot open the lock file {path} again ({exc.strerror})"
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            other = _holder(fd)
-            os.close(fd)
-            return (f"{LOCK_FILE} in {str(directory)!r} was replaced (the directory removed "
-                    f"and made again?) and another avard process"
-                    f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
-                    "it records there now; this one does not write beside it")
-        _note_pid(fd, writable, directory)
-        os.close(entry[0])
-        entry[0] = fd
-        log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
-                    LOCK_FILE, directory)
+        return _recheck(key, directory)
+
+
+def _recheck(key: Path, directory: str | Path) -> str | None:
+    """:func:`recheck` with ``_guard`` held."""
+    entry = _held.get(key)
+    if entry is None or entry[0] < 0:
         return None
+    path = key / LOCK_FILE
+    try:
+        held, now = os.fstat(entry[0]), os.stat(path, follow_symlinks=False)
+        if (held.st_dev, held.st_ino) == (now.st_dev, now.st_ino):
+            return None
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        return f"cannot check the lock file {path} ({exc.strerror})"
+    try:
+        fd, writable = _open(path)
+    except OSError as exc:
+        return f"cannot open the lock file {path} again ({exc.strerror})"
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        other = _holder(fd)
+        os.close(fd)
+        return (f"{LOCK_FILE} in {str(directory)!r} was replaced (the directory removed "
+                f"and made again?) and another avard process"
+                f"{f' (pid {other})' if other else ''} has locked it ({exc.strerror}): "
+                "it records there now; this one does not write beside it")
+    _note_pid(fd, writable, directory)
+    os.close(entry[0])
+    entry[0] = fd
+    entry[2] += 1
+    log.warning("%s in %s was gone or replaced (the directory removed?); locked it again",
+                LOCK_FILE, directory)
+    return None
+
+
+def generation(directory: str | Path) -> int:
+    """How many times this process has locked ``directory``'s lock file again (:func:`recheck`
+    found it gone or replaced): a writer that opened a file there under an earlier count
+    holds it in a directory that is no longer the one at the path (moved away, removed)."""
+    key = _key(Path(directory))
+    with _guard:
+        entry = _held.get(key)
+        return entry[2] if entry is not None else 0
 
 
 def release(key: Path) -> None:

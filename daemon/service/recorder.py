@@ -228,6 +228,7 @@ class Recorder:
         self.torn_frames = 0      # torn frames that could not be cut off (see _cut_torn_frame)
         self._marks = _Marks()       # what the open segment holds, to name what it lost
         self._lock_checked_at = -1e300   # record time of the last dirlock.recheck (write())
+        self._lock_gen = 0               # dirlock.generation when the open segment was opened
         self.segments_removed = 0    # open segments deleted or cut short behind our back
         self._removed: list[dict[str, Any]] = []   # their gaps, for the next segment
 
@@ -279,6 +280,21 @@ class Recorder:
                     self._lost_lock(lost_lock)
                     self._remember_lost(record)
                     return False
+                if dirlock.generation(self.dir) != self._lock_gen:
+                    # locked again: the directory at the path is not the one the open
+                    # segment is in (``mv DIR DIR.old; mkdir DIR``: the segment moved with
+                    # the old one, whole, so nothing else rotates); what follows goes to
+                    # the path, beside the state file, and the old segment keeps its part
+                    # (removed rather than moved, and the path made again between the
+                    # segment check above and the recheck: the segment check first, so its
+                    # samples are a segment_removed gap, not closed as if kept)
+                    self._check_segment()
+                    if self._f is not None:
+                        log.warning("%s was replaced (moved away and made again?); %s keeps "
+                                    "what was written before, recording goes on in %s",
+                                    self.dir, self.path.name if self.path else "the segment",
+                                    self.dir)
+                        self._close_file()
             if self._f is None or now - self._opened_at >= self.segment_s:
                 if not self._rotate(now):
                     self._remember_lost(record)
@@ -420,6 +436,7 @@ class Recorder:
         if lost_lock is not None:
             self._lost_lock(lost_lock)
             return False
+        self._lock_gen = dirlock.generation(self.dir)
         try:
             self._f = self.ops.open_append(path)
         except OSError as exc:
@@ -779,6 +796,19 @@ def recorded_rate(data_dir: str | Path) -> tuple[str, float] | None:
         if nominal is not None:
             return str(head.get("run")), nominal
     return None
+
+
+def rate_conflict(data_dir: str | Path, nominal_hz: float | None) -> tuple[str, float] | None:
+    """The run and nominal ODR (Hz) of the newest recorded header in ``data_dir`` when that
+    rate is not ``nominal_hz``: one recording directory holds one output data rate (a run at
+    another ODR could not join the restored accumulators, whose τ are sample counts, and makes
+    a record ``avard analyze`` refuses as a whole). None when they agree, when the directory
+    holds no header that says its ODR, or when ``nominal_hz`` is None (a stream that does not
+    say its own). The service and ``avard record`` each say what to do in their own words."""
+    if nominal_hz is None:
+        return None
+    got = recorded_rate(data_dir)
+    return got if got is not None and got[1] != float(nominal_hz) else None
 
 
 def restart_gap(last: LastRecorded, *, boot_id: str | None, t_mono: float, t_real: float,

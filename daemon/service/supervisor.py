@@ -47,7 +47,7 @@ from avard.daemon.service.recorder import (
     kernel_boot_id,
     last_recorded,
     new_run_id,
-    recorded_rate,
+    rate_conflict,
     restart_gap,
 )
 from avard.daemon.service.recorder_stage import RecorderStage
@@ -510,8 +510,8 @@ class Service(Supervised):
         """One recording directory holds one output data rate: a run at another ODR could
         not join the restored accumulators (their τ are sample counts) and would make a
         record that ``avard analyze`` refuses as a whole. Raises ConfigError saying what to do."""
-        got = recorded_rate(self.data_dir)
-        if got is not None and got[1] != float(self.odr):
+        got = rate_conflict(self.data_dir, float(self.odr))
+        if got is not None:
             run, nominal = got
             raise ConfigError(
                 f"recording.data_dir = {str(self.data_dir)!r} holds a recording at a nominal "

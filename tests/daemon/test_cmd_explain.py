@@ -5,6 +5,7 @@ status 2."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,6 +120,16 @@ def test_holdout_of_another_sensor_set_up_exit_2(thermal_file, tmp_path, capsys)
     assert len(err.strip().splitlines()) == 1 and "temperatures plate" in err
     assert cli.main(["explain", str(path), "--holdout", str(tmp_path / "none.npz")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_the_record_itself_as_its_holdout_is_refused(thermal_file, capsys):
+    """The models then 'predicted' the samples they were fitted on: a held-out gain with
+    nothing held out, exit status 0."""
+    path, _ = thermal_file
+    same = str(Path(path).parent / "." / Path(path).name)
+    assert cli.main(["explain", str(path), "--holdout", same]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "is the record explained" in err, err
 
 
 def test_analyze_temperature_option(thermal_file, capsys):

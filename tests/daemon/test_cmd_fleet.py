@@ -122,3 +122,40 @@ def test_avard_run_loads_nothing_of_dask() -> None:
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          check=True, timeout=120)
     assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("how", ["same path", "another spelling"])
+def test_one_record_named_twice_is_refused_before_any_work(
+        fleet: list[Path], monkeypatch, capsys, how: str) -> None:
+    """It was two sensors of the population (counted twice in its median and spread)."""
+    from avard.daemon.commands import fleet as fleet_cmd
+
+    monkeypatch.setattr(fleet_cmd, "_client", lambda args: pytest.fail("a cluster started"))
+    a = str(fleet[0])
+    b = a if how == "same path" else str(fleet[0].parent / "." / fleet[0].name)
+    assert main(["fleet", a, str(fleet[1]), b]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "given twice" in err, err
+
+
+def test_a_broken_file_among_the_records_is_named_before_the_cluster_starts(
+        fleet: list[Path], tmp_path: Path, monkeypatch, capsys) -> None:
+    from avard.daemon.commands import fleet as fleet_cmd
+
+    monkeypatch.setattr(fleet_cmd, "_client", lambda args: pytest.fail("a cluster started"))
+    broken = tmp_path / "unit99.npz"
+    broken.write_bytes(fleet[0].read_bytes()[:1000])
+    assert main(["fleet", *map(str, fleet[:3]), str(broken)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "unit99.npz" in err and "truncated" in err, err
+
+
+def test_the_local_clusters_log_lines_stay_off_stderr(fleet: list[Path]) -> None:
+    """The scheduler runs in avard's process, its loggers at INFO by Dask's config: some
+    thirty lines (scheduler start, workers, comms) reached stderr through avard's handler,
+    around a result or an error."""
+    r = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "fleet",
+                        *map(str, fleet[:2]), "--workers", "1"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == "" and r.stdout.startswith("Units SI"), r.stderr

@@ -77,3 +77,17 @@ def test_bad_input_is_one_line_and_status_2(tmp_path: Path, capsys: pytest.Captu
     assert cli.main(["separate", *args]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("how", ["same path", "another spelling", "a copy"])
+def test_one_record_given_twice_is_refused_in_one_line(tmp_path: Path, capsys, how: str) -> None:
+    """Separated from itself, a record gave a self-noise of exactly 0 and its own noise as the
+    'common input', with exit status 0."""
+    a = _write(tmp_path, ("a",))[0]
+    b = {"same path": a, "another spelling": str(Path(a).parent / "." / Path(a).name),
+         "a copy": str(tmp_path / "copy.npz")}[how]
+    if how == "a copy":
+        Path(b).write_bytes(Path(a).read_bytes())
+    assert cli.main(["separate", a, b]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "different sensors" in err, err

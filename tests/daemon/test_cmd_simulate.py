@@ -153,3 +153,16 @@ def test_impossible_lengths_are_one_line(tmp_path, capsys, hours: str, message: 
     assert main(["simulate", "--hours", hours, "--out", str(tmp_path / "x.npz")]) == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("axes", ["0", "-2", "x,x,z"])
+def test_axes_that_are_not_three_names_are_refused_in_one_line(tmp_path, capsys,
+                                                               axes: str) -> None:
+    """``--set axes=0`` (a number once parsed) ended in a TypeError traceback; ``x,x,z``
+    made a file whose second axis went unreported by every reader of it."""
+    out = tmp_path / "x.npz"
+    assert main(["simulate", "--hours", "0.001", "--seed", "1", "--out", str(out),
+                 "--set", f"axes={axes}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "axes" in err and "x,y,z" in err, err
+    assert not out.exists()

@@ -122,3 +122,18 @@ def test_loading_a_directory_that_mixes_rates_refuses_it_rather_than_average_the
     data = _mixed(tmp_path, monkeypatch)
     with pytest.raises(DataError, match=r"different output data rates.*125 Hz.*250 Hz"):
         load_record(data)
+
+
+def test_the_one_rate_rule_names_the_newest_run_at_another_rate(tmp_path):
+    """``rate_conflict`` is the rule both the service and ``avard record --out`` apply (each
+    says what to do in its own words): the newest header's run when its nominal ODR is not
+    the one asked, else None (no stated rate on either side is no conflict)."""
+    from avard.daemon.service.recorder import rate_conflict
+
+    data = tmp_path / "rec"
+    assert rate_conflict(data, 125.0) is None                 # no directory yet
+    _record(data, 125.0, 3.0, seed=5)
+    run = next(iter(_headers(data)))
+    assert rate_conflict(data, 125.0) is None
+    assert rate_conflict(data, None) is None
+    assert rate_conflict(data, 250.0) == (run, 125.0)

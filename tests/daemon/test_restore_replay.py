@@ -9,6 +9,8 @@ eq. 12 with the stride of ``avard.core.allan.streaming``), to 1e-12.
 
 from __future__ import annotations
 
+import itertools
+import math
 import signal
 import time
 from pathlib import Path
@@ -181,8 +183,18 @@ def test_the_first_checkpoint_comes_one_interval_after_the_first_sample(tmp_path
     svc, _sims, _emu = simulated_service(cfg, "quiet-lab", seed=2, speed=2.0)
     svc.run(17.0)
     recs = list(RecordingReader(tmp_path / "rec"))
-    t0 = min(r["t_mono"] for r in recs if r["kind"] == "raw")
-    ckpts = [r["t_mono"] - t0 for r in recs if r["kind"] == "checkpoint"]
-    # every 5 s of data from the first sample (to a FIFO drain), then one at the clean stop
-    assert len(ckpts) == 4
-    np.testing.assert_allclose(ckpts[:3], [5.0, 10.0, 15.0], atol=1.0)
+    raw = [r for r in recs if r["kind"] == "raw"]
+    t0 = min(r["t_mono"] for r in raw)         # the first sample's time (a block's first)
+    ckpts = [r for r in recs if r["kind"] == "checkpoint"]
+    # How many checkpoints come depends on how the threads were scheduled (at most one per
+    # chunk the Allan stage takes, and a lagging stage takes long chunks), so the test asks
+    # what does not: every checkpoint before the one of the clean stop comes at a sample time
+    # past a new deadline t0 + k·5 s (never before the first, and at most one per interval);
+    # the reader stops at 17 s of sample time, so there is at least one; and together their
+    # checks cover every recorded sample, each taking up where the last one ended.
+    due = [math.floor((c["t_mono"] - t0) / 5.0 + 1e-9) for c in ckpts[:-1]]
+    assert due and due[0] >= 1, [c["t_mono"] - t0 for c in ckpts]
+    assert all(a < b for a, b in itertools.pairwise(due)), due
+    spans = [(c["check"]["from"], c["check"]["to"]) for c in ckpts]
+    assert spans[0][0] == raw[0]["i0"] and spans[-1][1] == raw[-1]["i0"] + raw[-1]["n"], spans
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(spans)), spans

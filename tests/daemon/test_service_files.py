@@ -688,10 +688,16 @@ def test_a_recording_directory_removed_under_the_service_is_locked_again(tmp_pat
     said: list[str] = []
 
     def act(t_mono: float) -> None:
-        t = t_mono - box["svc"].t_start
+        svc = box["svc"]
+        t = t_mono - svc.t_start
         if t >= 5.0 and not (tmp_path / "removed").exists():
             (tmp_path / "removed").touch()
-            _remove(data)
+            # the recorder's thread lags the reader's by however the threads were scheduled:
+            # the segment must hold samples when it goes (else nothing is segment_removed,
+            # and the test failed now and then); removed between two of its records
+            _until(lambda: len(svc.recorder._marks.at) > 0)
+            with svc.recorder._lock:
+                _remove(data)
         elif t >= 8.0 and not said:
             _until(lambda: box["svc"].recorder.segments_written > 1)   # it wrote again
             said.append(subprocess.run([sys.executable, "-c", _PROBE, str(data)],
@@ -705,6 +711,89 @@ def test_a_recording_directory_removed_under_the_service_is_locked_again(tmp_pat
     gaps = [g["reason"] for g in RecordingReader(data) if g["kind"] == "gap"]
     assert gaps == ["segment_removed"], gaps
     assert svc.final_status["disk"]["state"] == "writing"
+
+
+def test_a_directory_made_again_while_its_holder_writes_nothing_is_checked_at_its_next_hold(
+        tmp_path):
+    """The lock is the directory's as it is: removed and made again by hand while the process
+    that held it writes nothing (``avard run`` between its own hold and the service's start,
+    a long start-up replay), the new directory is free and the first process to lock it
+    records there (the old holder holds a deleted file; nothing can tell another process
+    about it). The old holder finds out before it writes (the recorder's recheck, tested
+    above) and now also when it takes the lock again, as the service's start does after
+    ``avard run``'s: refused with one line naming the process there, where it used to count
+    one more hold of a lock it no longer had. Once that process has gone, it locks the new
+    directory again."""
+    from avard.core.errors import ConfigError
+    from avard.daemon.service import dirlock
+
+    data = tmp_path / "rec"
+
+    def probe() -> str:
+        return subprocess.run([sys.executable, "-c", _PROBE, str(data)], capture_output=True,
+                              text=True, timeout=60, stdin=subprocess.DEVNULL).stdout
+
+    key = dirlock.hold(data)
+    holder = None
+    try:
+        assert f"another avard process (pid {os.getpid()})" in probe()
+        shutil.rmtree(data)
+        data.mkdir()                                    # by hand
+        holder = subprocess.Popen([sys.executable, "-c", _PROBE, str(data)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        assert holder.stdout is not None and holder.stdout.readline() == "locked\n"
+        with pytest.raises(ConfigError, match=rf"another avard process \(pid {holder.pid}\)"):
+            dirlock.hold(data)
+        lost = dirlock.recheck(data)
+        assert lost is not None and f"pid {holder.pid}" in lost
+        holder.communicate("")                          # it ends; the kernel drops its lock
+        again = dirlock.hold(data)                      # the new directory's lock, now ours
+        dirlock.release(again)
+        assert f"another avard process (pid {os.getpid()})" in probe()
+    finally:
+        if holder is not None and holder.poll() is None:
+            holder.kill()
+            holder.wait()
+        dirlock.release(key)
+    assert probe().startswith("locked")                 # released for good
+
+
+def test_a_recording_directory_moved_away_and_made_again_is_recorded_in_from_then_on(tmp_path):
+    """``mv rec rec.old; mkdir rec`` under a running service: its open segment moved with
+    the old directory and stays whole, so nothing rotated: the service locked the new
+    directory (the recheck) but went on writing into rec.old for up to ``segment_s``, while
+    its state file went into rec, naming checkpoints recorded in rec.old. A lock taken again
+    now also starts a new segment in the directory at the path: the old one keeps what was
+    written before the move, the new one everything after, with nothing lost between."""
+    data, moved = tmp_path / "rec", tmp_path / "rec.old"
+    box: dict[str, Service] = {}
+
+    def act(t_mono: float) -> None:
+        svc = box["svc"]
+        if t_mono - svc.t_start >= 5.0 and not moved.exists():
+            _until(lambda: len(svc.recorder._marks.at) > 0)
+            with svc.recorder._lock:              # between two of its records
+                data.rename(moved)
+                data.mkdir()
+
+    svc, _s, _e = simulated_service(_config(data), "quiet-lab", seed=1, after_tick=act)
+    box["svc"] = svc
+    svc.run(12.0)
+    old = [r for r in RecordingReader(moved) if r["kind"] == "raw"]
+    new = [r for r in RecordingReader(data) if r["kind"] == "raw"]
+    assert old and new, (len(old), len(new))
+    spans = [(r["i0"], r["i0"] + r["n"]) for r in old + new]
+    assert _tiles(spans) == [(old[0]["i0"], new[-1]["i0"] + new[-1]["n"])], _tiles(spans)
+    assert max(r["i0"] for r in old) < min(r["i0"] for r in new)    # before, then after
+    assert not [g for g in RecordingReader(data) if g["kind"] == "gap"]
+    # the state file beside the new segments names a checkpoint recorded among them
+    from avard.core.io import frames
+    from avard.core.io.recording import scan_frames
+    from avard.daemon.service.checkpoint import STATE_FILE
+
+    state = frames.decode(next(scan_frames((data / STATE_FILE).read_bytes())).payload)
+    ckpts = {(c["run"], c["i_end"]) for c in RecordingReader(data) if c["kind"] == "checkpoint"}
+    assert (state["run"], state["i_end"]) in ckpts
 
 
 def test_a_service_whose_removed_directory_another_locked_meanwhile_pauses(tmp_path):
