@@ -365,6 +365,9 @@ class Explanation:
     holdout: Holdout | None = None
     #: what the input screen masked (core/io/screen.py), None for blocks that bypassed it
     screen: ScreenLog | None = None
+    #: the record's temperature channels the thermal model could not use, with why (a log
+    #: without two readings, or one value throughout): said, never dropped in silence
+    temperature_unused: dict[str, str] = field(default_factory=dict)
 
     @property
     def source(self) -> str:
@@ -382,6 +385,7 @@ class Explanation:
                 "holdout_gain": None if ho is None else ho["holdout_gain"],
                 "holdout": ho,
                 "screened": None if self.screen is None else self.screen.to_dict(),
+                "temperature_unused": dict(self.temperature_unused),
                 "channels": {k: v.to_dict() for k, v in self.channels.items()}}
 
 
@@ -425,6 +429,13 @@ def _used(fit: NoiseFit, tau: NDArray) -> NDArray[np.bool_]:
 
 
 Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
+
+
+def _why_unused(t: NDArray | None) -> str:
+    """Why a temperature channel's slow view cannot drive the thermal model."""
+    if t is None or not np.all(np.isfinite(t)):
+        return "fewer than two readings"
+    return f"one value throughout ({float(t[0]):.4g} °C): nothing to regress on"
 
 
 def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
@@ -527,6 +538,13 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     t_ok = [j for j in range(len(tnames))
             if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
             and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
+    unused = {tnames[j]: _why_unused(None if t_slow is None else t_slow[:, j])
+              for j in range(len(tnames))
+              if j not in t_ok and temperature in (None, tnames[j])}
+    if temperature is not None and temperature in unused:
+        raise DataError(f"temperature channel {temperature!r} has {unused[temperature]} in "
+                        "this record, so the thermal causes cannot be tested on it; name "
+                        "another channel, or leave the choice to explain")
     t_allan: dict[str, Any] = {}
     if t_slow is not None and t_ok and len(t_slow) >= 16:
         sa = StreamingAllan(len(t_ok), rate_b, names=[tnames[j] for j in t_ok])
@@ -560,13 +578,15 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     if not heldout and held is None:
         for ch_ex in out.values():
             ch_ex.judge(None)
-        return Explanation(an, out, t_allan, b / rate, screen=screen)
+        return Explanation(an, out, t_allan, b / rate, screen=screen,
+                           temperature_unused=unused)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held)
     for name, ch_ex in out.items():
         ch_ex.judge(ho.channels.get(name), ho.reason)
-    return Explanation(an, out, t_allan, b / rate, ho, screen=screen)
+    return Explanation(an, out, t_allan, b / rate, ho, screen=screen,
+                       temperature_unused=unused)
 
 
 def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,

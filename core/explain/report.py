@@ -92,6 +92,9 @@ def summary(ex: Explanation) -> str:
              f"{ALPHA_AXIS:.2g} per axis for all of explain's causes together."]
     if ex.screen is not None:
         lines += ex.screen.lines()
+    for nm, why in ex.temperature_unused.items():
+        lines.append(f"temperature channel {nm} not used: {why}; the thermal causes are not "
+                     "tested on it")
     lines += holdout_lines(ex)
     for name, ch in ex.channels.items():
         lines.append("")
