@@ -82,8 +82,9 @@ class Candidate:
 @dataclass
 class Finding:
     """One cause's outcome in ``avard explain``: parameters (SI) with 68 % intervals where it
-    has them, its own test (statistic against threshold, evidence), and whether its AVAR
-    component is present in the GLS fit beside the noise terms (``claimed`` needs both)."""
+    has them and its own test (statistic against threshold, evidence). A claimed signal is
+    removed before the noise refit; a claimed Gauss–Markov process is one of the extended
+    fit's components."""
 
     cause: str
     claimed: bool
@@ -92,7 +93,6 @@ class Finding:
     statistic: float
     threshold: float
     evidence: str
-    present_in_fit: bool = False
     scale: list[float | None] = field(default_factory=list)
     channel: str | None = None
     #: the extended model misfits (``verdict``): the parameters are a rejected model's best
@@ -109,7 +109,7 @@ class Finding:
         d: dict[str, Any] = {"cause": self.cause, "claimed": self.claimed,
                              "params": self.params, "intervals": self.intervals,
                              "statistic": self.statistic, "threshold": self.threshold,
-                             "present_in_fit": self.present_in_fit, "evidence": self.evidence,
+                             "evidence": self.evidence,
                              "model_dependent": self.model_dependent}
         if self.intervals_if_model_held is not None:
             d["intervals_if_model_held"] = self.intervals_if_model_held

@@ -256,8 +256,8 @@ class ChannelExplanation:
     ext_misfit: list[dict[str, Any]] = field(default_factory=list)
     #: whether the extended model describes the axis (``verdict.judge``), set by explain
     verdict: Verdict | None = None
-    #: fitted τ where the compensation makes the ADEV worse beyond its interval (then the
-    #: compensated ADEV is not given)
+    #: τ (fitted or not) where the compensation makes the ADEV worse beyond its interval
+    #: (then the compensated ADEV is not given)
     compensation_worse_s: list[float] = field(default_factory=list)
 
     def compensation_dict(self) -> dict[str, Any] | None:

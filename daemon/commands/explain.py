@@ -1,6 +1,9 @@
 """Model versus measurement: where avard analyze's fit of a record leaves the measurement,
-the physical cause (temperature through a first-order lag, warm-up, bias step), the model
-extended by it and the temperature-compensated Allan deviation.
+the physical cause, tested at one false-alarm level per axis (temperature through a
+first-order lag or a richer thermal path — two paths, quadratic, dT/dt, hysteresis —, a
+warm-up, bias steps, up-then-down excursions, a drift, a Gauss–Markov process, one periodic
+disturbance), the model extended by it with the gain on held-out data, the
+temperature-compensated Allan deviation, and per axis "explained" or "unexplained".
 
 Examples:
 
