@@ -25,6 +25,15 @@ the slope and the effects already found projected out (Frisch–Waugh–Lovell).
 The z's are divided by √(Birge ratio) of the whitened residual when that exceeds 1: a
 noise model the record does not follow widens the test instead of passing everything.
 
+**Which edges are one excursion** (``_pairing``): after the joint fit every excursion is
+its two steps, and the steps are paired anew, before the backward test, after each effect
+it drops and before the final test: of the pairings that nest like brackets, each pair a
+return to the level before within ``PAIR_SIGMA`` standard errors, the one with the most
+excursions, the fewest nested inside one of the other sign (with equal sizes the same
+signal as two in a row), then the largest likelihood. An excursion's edge whose partner
+pairs as well with an edge left alone is tested as a step (``_weakest_edge``): on a long
+record the walk's level shifts took true edges as partners.
+
 **The drift** (``test_drift``): a slope b·t against the random walk that can make the same
 wander, in the time domain, by the one test analyze uses too (``analysis.drift``): the
 offset, the found transients and, under the alternative, the slope are fitted by GLS with K
@@ -361,7 +370,7 @@ def _normalise(tent: list[cz.Candidate], tol: float, step_threshold: float
     that family's Bonferroni count, whichever family proposed it; its edges kept the
     excursion family's larger one, 5.71 for 4.90), and steps at one time (within ``tol`` s)
     become one. Which edges
-    belong together is decided after the joint fit, by ``_pair_excursions``: the greedy order
+    belong together is decided after the joint fit, by ``_pairing``: the greedy order
     picks the box of the largest margin, and on a record with a step after an excursion that
     is often the excursion's down edge paired with the later step (one box of their mean
     size, its up edge left a lone step), which no refinement of the box's edges undoes."""
@@ -433,8 +442,6 @@ def _pair_excursions(cands: list[cz.Candidate], alpha: float) -> list[cz.Candida
 #: Most pairings of one record's edges whose likelihoods are compared (past it, the greedy
 #: brackets of ``_pair_excursions``).
 MAX_PAIRINGS = 512
-PAIR_BY_LIKELIHOOD = True
-EDGE_TEST = True
 
 
 def _atoms(cands: list[cz.Candidate], step_threshold: float) -> list[cz.Candidate]:
@@ -675,7 +682,7 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         tent = _normalise(tent, tol, step_threshold)
         # two steps that return to the level before them are tested as one excursion
         g = _gls(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz), rate_hz, n_white))
-        tent = (_pairing(g, tent, step_threshold, alpha)[0] if g is not None and PAIR_BY_LIKELIHOOD
+        tent = (_pairing(g, tent, step_threshold, alpha)[0] if g is not None
                 else _pair_excursions(tent, alpha))
     dropped: list[cz.Candidate] = []
     while tent:
@@ -685,7 +692,7 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         zs = _z_in_fit(g, tent, on_grid=True)
         margins = [z / c.threshold for z, c in zip(zs, tent, strict=True)]
         k = int(np.argmin(margins))
-        edge = _weakest_edge(g, tent, step_threshold, alpha) if EDGE_TEST else None
+        edge = _weakest_edge(g, tent, step_threshold, alpha)
         if edge is not None and edge[0] < min(1.0, margins[k]):
             # an excursion's edge whose partner pairs as well with an edge left alone: the
             # two are one edge and a size more than the other pairing, tested as a step
@@ -708,14 +715,13 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
             f"; not claimed: in the joint fit, against the noise with every effect proposed "
             f"removed, it is {zs[k]:.3g} σ (test: ≥ {c.threshold:.3g})")))
         # the edges left pair anew: an edge dropped may have held one of a pair's places
-        tent = (_pairing(g, tent, step_threshold, alpha)[0] if PAIR_BY_LIKELIHOOD
-                else _joint_sizes(g, tent))
+        tent = _pairing(g, tent, step_threshold, alpha)[0]
     if not tent:
         return [], dropped or first
     noise = noise_of(signal_of(tent, n, rate_hz))
     out = refine_compound(y, rate_hz, noise, tent)
     g = _gls(y, rate_hz, noise)
-    out = (_pairing(g, out, step_threshold, alpha)[0] if g is not None and PAIR_BY_LIKELIHOOD
+    out = (_pairing(g, out, step_threshold, alpha)[0] if g is not None
            and any(c.cause == "bias_step" for c in out) else _pair_excursions(out, alpha))
     kept, lost = confirm_compound(y, rate_hz, noise_of, out)
     return kept, dropped + lost
