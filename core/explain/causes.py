@@ -15,12 +15,14 @@ a warm-up, a drift; one false-alarm budget, :mod:`avard.core.explain.alarm`). He
   look is asked (the thermal lag's start state, the hold-out's leftover step); their
   ``min_detectable_step`` / ``_warmup`` are the stated minima the docs give (power, never a
   floor);
-- ``refine_transients``: one warm-up and one step fitted together by GLS with the noise
-  model, with 68 % intervals (its profile helpers ``_weight_interval``,
-  ``_profile_interval``, ``_size_interval``, ``_vertex`` serve the compound fit too);
+- ``_Gls`` and the profile helpers ``_weight_interval``, ``_profile_interval``,
+  ``_size_interval``, ``_vertex``: the generalised least squares of block means with the
+  noise model and the 68 % intervals from its profiles, which the compound fit
+  (:mod:`avard.core.explain.transients`) uses; ``refine_transients`` (one warm-up and one
+  step fitted together) is its simplest use, kept as the reference its tests hold the GLS's
+  white-noise fast path and intervals to;
 - ``transient_floor``: what the logged temperature's 0.0625 K resolution makes through the
   fitted coupling; a transient below it is not claimed on a thermally coupled axis;
-- ``apply_floor``: a transient's size interval at ``Z_CLAIM`` must exclude zero.
 
 Temperature is :mod:`avard.core.explain.thermal_fit`; sinusoids are analyze's line finder
 (``spectrum.find_lines``, which also groups a periodic disturbance's lines); rate ramp, the
@@ -377,12 +379,6 @@ def gauss_markov_rounding_floor(coefficient: float) -> float:
     return abs(coefficient) * DS18B20_STEP_C / math.sqrt(12.0)
 
 
-#: The claim level of a passed transient's size: its GLS 68 % interval, scaled to this many
-#: standard errors, must exclude zero (two-sided 6e-5 for the one size at the place the
-#: detector chose; the detector's own 6-robust-σ threshold carries the search over places).
-Z_CLAIM = 4.0
-
-
 def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
                     coefficient: float = 0.0) -> tuple[float, str]:
     """The smallest size (m/s²) a passed transient may have to be claimed, and why: what the
@@ -396,7 +392,8 @@ def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
 
     The cause's *stated minimum* (``min_detectable_warmup``/``_step``) is not a floor: it is
     a statement of power for planning, and it is computed from noise levels a transient
-    itself inflates; a detection is decided by its test and its interval (``apply_floor``)."""
+    itself inflates; a detection is decided by its test and its interval
+    (``transients.confirm_compound``)."""
     rounding = abs(coefficient) * DS18B20_STEP_C
     return rounding, (f"what the logged temperature's {DS18B20_STEP_C:g} K resolution "
                       f"produces through the coupling ({abs(coefficient):.3g} m/s²/K × "
@@ -412,32 +409,6 @@ def size_z(cand: Candidate) -> float:
     if not (math.isfinite(se) and se > 0):
         return math.inf if size != 0 else 0.0
     return abs(size) / se
-
-
-def apply_floor(cand: Candidate, noise: dict[str, float], record_s: float,
-                coefficient: float = 0.0) -> Candidate:
-    """``cand`` unchanged when it is not passed, or when its size's interval at ``Z_CLAIM``
-    excludes zero and the size reaches ``transient_floor``; else not passed, with the reason
-    in its evidence. The stated minimum on this noise is said beside it, as power."""
-    if not cand.passed:
-        return cand
-    n_w, b_i, k_r = noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0)
-    own = (min_detectable_warmup(n_w, b_i, k_r, cand.params["time_constant_s"])
-           if cand.cause == "warmup" else min_detectable_step(n_w, b_i, k_r, record_s))
-    power = f"; stated minimum on this noise (power, not a floor) {own:.3g} m/s²"
-    size = abs(cand.params["size"])
-    z = size_z(cand)
-    if z < Z_CLAIM:
-        return replace(cand, passed=False, intervals={}, evidence=cand.evidence + power
-                       + f"; not claimed: size {size:.3g} m/s² is {z:.3g} standard errors "
-                       f"from zero, its interval at {Z_CLAIM:g} σ holds zero")
-    floor, why = transient_floor(cand, noise, record_s, coefficient)
-    if size >= floor:
-        return replace(cand, evidence=cand.evidence + power
-                       + f"; size {z:.3g} standard errors from zero")
-    return replace(cand, passed=False, intervals={},
-                   evidence=cand.evidence + power + f"; not claimed: size {size:.3g} m/s² "
-                   f"is below {why}")
 
 
 def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw: float
