@@ -1419,13 +1419,15 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
 
 def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,
                floors: dict[int, float] | None = None,
-               warmups: dict[int, tuple[float, ...]] | None = None) -> list[ThermalFit]:
+               warmups: dict[int, tuple[float, ...]] | None = None,
+               given: dict[int, tuple[NDArray, ...]] | None = None) -> list[ThermalFit]:
     """``fits`` (``fit_thermal_axes`` of the columns of ``Y``) each with the thermal path
     chosen on its driving channel (``thermal_paths.choose_path``), on every axis: a response
     the one lag cannot follow (quadratic, hysteresis) may fail the one-lag test and pass its
     own. ``floors``: each channel's rounding floor (τ s), computed when not given;
     ``warmups``: per axis, the time constants (s) of the warm-ups found on it, fitted as
-    nuisance beside every candidate."""
+    nuisance beside every candidate; ``given``: per axis, the signals of the transients found
+    on it, each a nuisance column of free size beside every candidate (``choose_path``)."""
     Y = np.asarray(Y, dtype=float)
     if floors is None:
         floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
@@ -1434,13 +1436,13 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     # slow view of the same channel: the same columns)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}),
-                       (warmups or {}).get(a, ()))
+                       (warmups or {}).get(a, ()), (given or {}).get(a, ()))
             for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
                floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None,
-               warmups: tuple[float, ...] = ()) -> ThermalFit:
+               warmups: tuple[float, ...] = (), given: tuple[NDArray, ...] = ()) -> ThermalFit:
     """``fit`` with the thermal path chosen on its driving channel; when the path is not one
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
@@ -1459,7 +1461,8 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     # claimed, a second path through a long lag is the better reading and the verdict says
     # whether the held-out test could run
     pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep, columns, warmups, held_only=not fit.passed)
+                     floors.get(j, 0.0), keep, columns, warmups, held_only=not fit.passed,
+                     given=given)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen

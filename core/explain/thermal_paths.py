@@ -213,7 +213,7 @@ AVERAGED = ("hysteresis",)
 
 
 class Column(NamedTuple):
-    kind: str  # "u", "start", "quad", "rate", "slope", "relay", "warmup"
+    kind: str  # "u", "start", "quad", "rate", "slope", "relay", "warmup", "given"
     lag: float
     width: float = 0.0
 
@@ -347,6 +347,8 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
         if c in done:
             out[:, i] = done[c]
             continue
+        if c.kind == "given":  # pragma: no cover - ``choose_path`` puts them in ``done``
+            raise ValueError("a given nuisance column is built by its caller")
         if c.kind == "u":
             x = u(c.lag)
         elif c.kind in NUISANCE:
@@ -580,8 +582,12 @@ class Trial(NamedTuple):
 #: warm-up's e^(−t/T') for T' from T/2 to 2T
 WARMUP_SPAN = (0.5, 1.0, 2.0)
 #: The column kinds that are nuisance beside a candidate's couplings: the lag filter's start
-#: state and a warm-up found beside the coupling (``choose_path``'s ``warmups``)
-NUISANCE = ("start", "warmup")
+#: state, a warm-up found beside the coupling (``choose_path``'s ``warmups``) and the
+#: signals of the transients found on the axis (``choose_path``'s ``given``)
+NUISANCE = ("start", "warmup", "given")
+#: The nuisance kinds that are the record's, not the path's: the path's signal fits no size
+#: of theirs (``PathScore.cols`` leaves them out)
+RECORD_NUISANCE = ("warmup", "given")
 
 
 def _start(*lags: float) -> tuple[Column, ...]:
@@ -1414,7 +1420,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 edf_ref: NDArray, floor_s: float = 0.0,
                 keep: NDArray[np.bool_] | None = None,
                 columns: dict[Column, NDArray[np.float64]] | None = None,
-                warmups: tuple[float, ...] = (), held_only: bool = True) -> PathFit:
+                warmups: tuple[float, ...] = (), held_only: bool = True,
+                given: tuple[NDArray, ...] = ()) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
@@ -1429,7 +1436,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     minutes) or gave it its own. ``held_only``: an extension whose longest lag leaves
     explain's held-out measure too little of each half (``_settles_past_half``) is refused,
     and named beside the chosen path where it predicts as well (``thermal_fit.with_paths``
-    asks it only where the one lag failed its own test)."""
+    asks it only where the one lag failed its own test). ``given``: signals on the slow view
+    (each of ``y``'s length) the record holds beside any coupling, the transients found on
+    the axis, each a nuisance column of free size beside every candidate as the warm-ups
+    are: a path on a short record switches or bends a few times, and a relay's two or three
+    switches took a warm-up and a bias step the coupling never held."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -1443,6 +1454,12 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     leads = quadratic_leads(record_s, rate)
     extra = tuple(Column("warmup", round(float(x) * k, 3))
                   for x in sorted(set(warmups)) for k in WARMUP_SPAN)
+    if given:
+        # (this axis's own: a copy of the channel's shared columns, not added to them)
+        gc = {Column("given", float(k)): np.asarray(g, dtype=float)[:m].reshape(-1, f).mean(axis=1)
+              for k, g in enumerate(given)}
+        columns = {**(columns or {}), **{c: x - x.mean() for c, x in gc.items()}}
+        extra += tuple(gc)
     per_kind = {k: [t._replace(cols=t.cols + extra) for t in trials(k, lags, leads)]
                 for k in CANDIDATES}
     cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
@@ -1580,7 +1597,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
         # (beta: the best point's, or the average's above; the warm-ups beside it are the
         # record's, not the path's: its signal fits no size of theirs)
-        cols_i = tuple(c for c in ts[i].cols if c.kind != "warmup")
+        cols_i = tuple(c for c in ts[i].cols if c.kind not in RECORD_NUISANCE)
         b_lo, b_hi = beta - se_iv, beta + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
