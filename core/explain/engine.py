@@ -73,11 +73,13 @@ from avard.core.explain.thermal_fit import (
     ThermalFit,
     compensated_avar,
     fit_thermal_axes,
+    path_of,
     signal_avar_on,
     with_paths,
 )
 from avard.core.explain.thermal_paths import (
     both_readings,
+    holds_beside,
     rate_reading,
     reads_as_rate,
     second_path_reading,
@@ -734,11 +736,8 @@ def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: 
         cands, _ = tr.find_compound(
             y, rate_b, lambda d, y=y, n=noise[a]["N"]: tr.robust_noise(y - d, rate_b, n))
         sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands if c.cause != "drift")
-        if not sig:
-            continue
-        th2 = with_paths([b0], Y[:, [a]], temps, holes, warmups={0: found.get(a, ())},
-                         given={0: sig})[0]
-        if not th2.passed or th2.mechanism == "one_lag":
+        if sig and not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
+                                            given=sig), th.mechanism):
             out[a] = b0
 
 

@@ -1447,22 +1447,7 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
 
-    from avard.core.explain.thermal_paths import choose_path
-
-    j = fit.channel_index
-    keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
-                     fit.rate_hz)
-    ref = fit.allan
-    edf = np.asarray(ref.edf, dtype=float)
-    edf = edf[:, 0] if edf.ndim == 2 else edf
-    # an extension that explain's held-out measure cannot test is refused only where it would
-    # be the claim's whole basis (the one lag failed its own test): on a null axis a slow
-    # relay at 1837 s on 4 h passed its extra term's z untested; where the one lag is
-    # claimed, a second path through a long lag is the better reading and the verdict says
-    # whether the held-out test could run
-    pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep, columns, warmups, held_only=not fit.passed,
-                     given=given)
+    pf = path_of(fit, y, temps, holes, floors, columns, warmups, given)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen
@@ -1473,6 +1458,33 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     return replace(fit, path=pf, coefficient=float(s.beta[0]), coef_se=float(s.beta_se[0]),
                    lag_s=float(s.theta[0]), lag_lo=float(s.theta_lo[0]),
                    lag_hi=float(s.theta_hi[0]), lag_open=s.open_end, **test)
+
+
+def path_of(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
+            floors: dict[int, float] | None = None,
+            columns: dict[Column, NDArray[np.float64]] | None = None,
+            warmups: tuple[float, ...] = (), given: tuple[NDArray, ...] = ()) -> PathFit:
+    """The path choice (``thermal_paths.choose_path``'s ``PathFit``) of axis ``y`` on
+    ``fit``'s driving channel, started from ``fit``'s one lag; ``floors`` each channel's
+    rounding floor (computed when not given)."""
+    from avard.core.explain.thermal_paths import choose_path
+
+    j = fit.channel_index
+    if floors is None or j not in floors:
+        floors = {**(floors or {}), j: rounding_floor_tau(temps[:, j], fit.rate_hz)}
+    keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
+                     fit.rate_hz)
+    ref = fit.allan
+    edf = np.asarray(ref.edf, dtype=float)
+    edf = edf[:, 0] if edf.ndim == 2 else edf
+    # an extension that explain's held-out measure cannot test is refused only where it would
+    # be the claim's whole basis (the one lag failed its own test): on a null axis a slow
+    # relay at 1837 s on 4 h passed its extra term's z untested; where the one lag is
+    # claimed, a second path through a long lag is the better reading and the verdict says
+    # whether the held-out test could run
+    return choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float),
+                       edf, floors.get(j, 0.0), keep, columns, warmups,
+                       held_only=not fit.passed, given=given)
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,

@@ -1516,7 +1516,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
-    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
+    # (beside the transients ``given``, fitted as beside every candidate: where they are the
+    # record's, nothing coupled is the transients alone)
+    g_ix = [where[c] for c in extra if c.kind == "given"]
+    none_h = sum(_held_dev(vh[b], g_ix, _fit(vh[a], g_ix), 0) if g_ix else
+                 _held_dev(vh[b], [], np.zeros(0), 0) for a, b in ((0, 1), (1, 0)))
 
     def weigh(sums: OctaveSums) -> _View:
         return _view(sums, edf_v, n_v, ok_tau, s_ref)
@@ -1833,6 +1837,20 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
                    as_well=as_well, beside_lag=tuple(beside_lag))
+
+
+def holds_beside(pf: PathFit, kind: str) -> bool:
+    """Whether the extension ``kind`` of the choice ``pf`` (made with the transients found on
+    the axis beside every candidate, ``choose_path``'s ``given``) still predicts the held-out
+    halves better than one lag and than the transients alone by the margin an extension
+    needs (its rounding share too, its θ inside its grid); its extra term's z passed its
+    test without them. A relay that took the transients it can mimic predicts no better
+    than they do."""
+    sc = pf.scores.get(kind)
+    if sc is None or sc.open_end:
+        return False
+    rounding = pf.own_rounding.get(kind, pf.rounding)
+    return sc.heldout < min(pf.scores["one_lag"].heldout, pf.none_heldout) - pf.margin - rounding
 
 
 def _n_params(sc: PathScore) -> int:
