@@ -1038,12 +1038,21 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
             and thermal.passed):
         floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
+        # and where a relay is chosen or named beside the path kept, what its switch times
+        # leave (``PathFit.relay_floor``): the removed relay's switch times are uncertain by
+        # its own intervals, and one lag kept leaves a named relay's odd harmonics
+        rf, rwhy = ((0.0, "") if thermal.path is None or temps is None
+                    else thermal.path.relay_floor(temps[:, thermal.channel_index]))
         if gm.params.get("sigma", 0.0) < floor:
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
                 "temperature's 0.0625 K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
+            gm_fit = None
+        elif gm.params.get("sigma", 0.0) < rf:
+            gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
+                         evidence=gm.evidence + f"; not claimed: σ is below {rwhy}")
             gm_fit = None
     findings.append(gm)
     if gm_fit is not None:

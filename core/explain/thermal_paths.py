@@ -753,6 +753,75 @@ class PathFit:
                 g += abs(float(b)) * norm * 2.0 / RATE_SMOOTH_S
         return g
 
+    def relay_floor(self, T: NDArray) -> tuple[float, str]:
+        """(σ m/s², why) a Gauss–Markov bump beside this path must exceed to be claimed where
+        a relay is chosen or named beside the path kept (0, "" elsewhere): the larger of
+
+        - the RMS of the relay term's switch-time error: the relay switches on the
+          temperature behind the readings, whose level is uncertain by the 0.0625 K
+          rounding (RMS q/√12), so each switch is off by about that over the temperature's
+          slope there (capped at the time to the next switch), a pulse of 2|h| for that
+          long: 2|h|·√(Σ δᵢ / record). Where the die swings a few steps the slope at a
+          switch is a few mK per minute and δ is a minute: pulses that recur twice a cycle
+          with a minute's correlation, which the scan reads as a Gauss–Markov process
+          (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s², T 25–26 s beside a
+          relay of h ≈ 1.1e-4 chosen right). Like ``causes.gauss_markov_rounding_floor``
+          it bounds from above (the reconstruction is no worse than the readings);
+        - where the relay is named beside another reading (one lag kept with the relay
+          ``as_well`` or ``leaning``, or an alternative), the RMS of the difference of the
+          two readings' signals: what the reading removed leaves of the one named beside
+          it, a relay's odd harmonics beside one lag (404: σ 7.1e-5, T 64 s)."""
+        sc = self.scores.get("hysteresis")
+        named = (self.kind, *self.alternatives, *self.as_well, *self.leaning)
+        relay = None if sc is None else next((c for c in sc.cols if c.kind == "relay"), None)
+        if sc is None or relay is None or "hysteresis" not in named or len(sc.beta) < 2:
+            return 0.0, ""
+        T = np.asarray(T, dtype=float)
+        v = lag_filter(crossing_reconstruction(T), relay.lag, self.rate_hz)
+        r = _relay(v, relay.width)
+        sw = np.flatnonzero(np.diff(r) != 0) + 1
+        record_s = len(T) / self.rate_hz
+        floor = 0.0
+        if len(sw):
+            slope = np.abs(np.gradient(v) * self.rate_hz)[sw]
+            gap = np.diff(np.concatenate([sw, [len(r)]])) / self.rate_hz
+            delta = np.minimum(DS18B20_STEP_K / math.sqrt(12.0)
+                               / np.maximum(slope, 1e-300), gap)
+            floor = 2 * abs(float(sc.beta[1])) * math.sqrt(float(np.sum(delta)) / record_s)
+        why = (f"{floor:.3g} m/s², the RMS of the relay's switch-time error (its switches "
+               "on the temperature behind the readings, uncertain by their 0.0625 K "
+               "rounding over the temperature's slope at each switch), which recurs twice a "
+               "cycle and can look like a bump")
+        # the relay at the ends of its lag's and width's 68 % intervals, the same h
+        behind = crossing_reconstruction(T)
+        moved = 0.0
+        for lag, w in ((sc.theta_lo[0], relay.width), (sc.theta_hi[0], relay.width),
+                       (relay.lag, sc.theta_lo[1]), (relay.lag, sc.theta_hi[1])):
+            if not (math.isfinite(lag) and math.isfinite(w)) or w <= 0:
+                continue
+            d = _relay(lag_filter(behind, lag, self.rate_hz), w) - r
+            moved = max(moved, abs(float(sc.beta[1])) * float(np.sqrt(np.mean(d**2))))
+        if moved > floor:
+            floor = moved
+            why = (f"{floor:.3g} m/s², the RMS of how far the relay term moves over its lag's "
+                   "and width's 68 % intervals (its switch times as uncertain as they), "
+                   "which recurs twice a cycle and can look like a bump")
+        if self.kind != "hysteresis":
+            d = self._score_signal(sc, T) - self._score_signal(self.chosen, T)
+            apart = float(np.sqrt(np.mean((d - d.mean()) ** 2)))
+            if apart > floor:
+                floor = apart
+                why = (f"{floor:.3g} m/s², the RMS of what the {PATH_NAMES[self.kind]} "
+                       "kept leaves of the relay named beside it (its odd harmonics), "
+                       "which can look like a bump")
+        return floor, why
+
+    def _score_signal(self, s: PathScore, T: NDArray) -> NDArray[np.float64]:
+        """Candidate ``s``'s coupling signal on the slow view (no start state)."""
+        X = path_columns(T, list(s.cols), self.rate_hz)
+        n = s_terms(s)
+        return np.asarray(X[:, :n] @ s.beta_fitted[:n], dtype=float)
+
     def summary(self) -> str:
         s = self.chosen
         p, iv = self.params()  # no interval where another mechanism fits as well
