@@ -1099,7 +1099,9 @@ class ThermalFit:
         return d + coef[2] * (e - e.mean())
 
 
-    def evidence(self) -> str:
+    def evidence(self, intervals: bool = True) -> str:
+        """The finding's text; ``intervals`` False: one lag's coefficient and lag without
+        their 68 % intervals (model-dependent: ``finding``)."""
         if self.path is not None and self.path.kind != "one_lag":
             return (f"the axis follows temperature '{self.channel}' (z = {self.z:.3g}, test "
                     f"z ≥ {self.threshold:g}) by {self.path.summary()}{self._channels_text}")
@@ -1107,10 +1109,12 @@ class ThermalFit:
         path = ("a first-order lag of" if self.lag_s >= 0 else
                 "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
                 " of")
+        lag_iv = f" [{self.lag_lo:.4g}, {self.lag_hi:.4g}]" if intervals else ""
+        c_iv = f" [{lo:.4g}, {hi:.4g}] (68 %)" if intervals else " (model-dependent, no interval)"
         txt = (f"the axis follows temperature '{self.channel}' through {path} "
-               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
+               f"{self.lag_s:.4g} s{lag_iv}"
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
-               f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
+               f"{self.coefficient:.4g} m/s²/K{c_iv}; Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
         return txt + self._channels_text
 
@@ -1158,6 +1162,17 @@ class ThermalFit:
                            model_dependent=self.path.model_dependent,
                            alternatives=self.path.alternatives)
         iv = {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]}
+        if self.path is not None and self.path.beside_better:
+            # a reading named beside the one lag kept predicts the held-out halves better
+            # (``PathFit.beside_better``): one lag's coefficient and lag are one of two
+            # readings, no interval (``--json`` keeps them as ``intervals_if_model_held``)
+            return Finding("temperature", False,
+                           {"coefficient": self.coefficient, "lag_s": self.lag_s}, {},
+                           self.z, self.threshold,
+                           self.evidence(intervals=False)
+                           + "".join(f"; {n}" for n in self.path.beside_lag),
+                           channel=self.channel, mechanism=self.mechanism,
+                           model_dependent=True, intervals_if_model_held=iv)
         if self.path is not None and self.path.leaning:
             # one lag kept while a non-linear candidate predicts the held-out halves better:
             # its coefficient and lag are a linear model's, no interval (``--json`` keeps them
@@ -1165,7 +1180,7 @@ class ThermalFit:
             note = next(n for n in self.path.notes if n.startswith("one lag kept"))
             return Finding("temperature", False,
                            {"coefficient": self.coefficient, "lag_s": self.lag_s}, {},
-                           self.z, self.threshold, f"{self.evidence()}; {note}",
+                           self.z, self.threshold, f"{self.evidence(intervals=False)}; {note}",
                            channel=self.channel, mechanism=self.mechanism,
                            model_dependent=True, intervals_if_model_held=iv)
         beside = "" if self.path is None else "".join(f"; {n}" for n in self.path.beside_lag)

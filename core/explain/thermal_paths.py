@@ -702,13 +702,20 @@ class PathFit:
     #: the notes naming another reading beside one lag kept (the dT/dt term, a relay): the
     #: one-lag finding's text says them, not only ``--json``'s notes
     beside_lag: tuple[str, ...] = ()
+    #: the readings named beside one lag kept (``beside_lag``) that predict the held-out
+    #: halves better than it by ``LEAN_MARGIN`` (the dT/dt reading, c·T + r·dT/dt): one
+    #: lag's coefficient is then one of two readings the record does not tell apart and the
+    #: data lean to the other, model-dependent with no interval (as ``leaning``)
+    beside_better: tuple[str, ...] = ()
 
     @property
     def model_dependent(self) -> bool:
         """The parameters depend on a model choice the data do not make: a coefficient
         changes sign over the θ as good as the best, another mechanism fits as well, or one
-        lag is kept while a non-linear candidate predicts better (``leaning``)."""
-        return not self.chosen.resolved or bool(self.alternatives) or bool(self.leaning)
+        lag is kept while a non-linear candidate predicts better (``leaning``) or a reading
+        named beside it does (``beside_better``)."""
+        return (not self.chosen.resolved or bool(self.alternatives) or bool(self.leaning)
+                or bool(self.beside_better))
 
     @property
     def kind(self) -> str:
@@ -732,7 +739,7 @@ class PathFit:
         """The chosen candidate's parameters (SI) and their 68 % intervals (none where another
         mechanism fits as well or a non-linear one predicts better: ``leaning``)."""
         p, iv = describe(self.chosen)
-        return p, ({} if self.alternatives or self.leaning else iv)
+        return p, ({} if self.alternatives or self.leaning or self.beside_better else iv)
 
     def rounding_gain(self) -> float:
         """The L1 norm of the chosen path's response to an error in the logged readings
@@ -850,6 +857,8 @@ class PathFit:
                 "rounding_share": self.rounding,
                 "rounding_share_own": dict(self.own_rounding),
                 "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
+                "model_dependent": self.model_dependent,
+                "readings_beside_predict_better": list(self.beside_better),
                 "notes": self.notes}
 
 
@@ -1878,9 +1887,19 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     leaning = _leaning(best, scores)
     reading = _rate_beside_lag(best, scores, period, rival)
     beside_lag: list[str] = []
+    beside_better: tuple[str, ...] = ()
     if reading and "rate" not in as_well:
         as_well += ("rate",)
         beside_lag.append(reading)
+        if rival is not None and rival.heldout_delta < -LEAN_MARGIN:
+            # the reading named beside one lag predicts the held-out halves better: one
+            # lag's coefficient (another value than the reading's) is model-dependent
+            beside_better = ("rate",)
+            beside_lag.append(
+                f"the dT/dt reading predicts the held-out halves better than one lag (Δ "
+                f"{rival.heldout_delta:+.3g}, beyond {LEAN_MARGIN:g}) but not by what "
+                "choosing needs: one lag's coefficient and lag are model-dependent, no "
+                "interval")
     for k in _level(best, scores, leaning):
         sc = scores[k]
         as_well += (k,)
@@ -1905,7 +1924,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
-                   as_well=as_well, beside_lag=tuple(beside_lag))
+                   as_well=as_well, beside_lag=tuple(beside_lag),
+                   beside_better=beside_better)
 
 
 def holds_beside(pf: PathFit, kind: str) -> bool:

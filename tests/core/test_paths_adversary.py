@@ -79,3 +79,26 @@ def test_no_gauss_markov_process_is_claimed_from_what_a_relay_leaves(tmp_path, s
     assert not [f for f in ch.claimed if f.cause == "gauss_markov"]
     gm = [f for f in ch.findings if f.cause == "gauss_markov"]
     assert gm and "relay" in gm[0].evidence
+
+
+def test_one_lag_beside_a_dt_reading_that_predicts_better_carries_no_interval(tmp_path):
+    """dtdt 409 (plate only): one lag (≈ 340 s, c twice the coupling) is kept and the dT/dt
+    reading named beside it predicts the held-out halves ≈ 3 better, beyond ``LEAN_MARGIN``
+    (short of choosing). The two readings give couplings a factor 2 apart, so one lag's
+    coefficient and lag are model-dependent: on main they were printed with ±5 % intervals
+    in the finding and its text. Now no interval (kept in ``intervals_if_model_held``), the
+    finding is marked model-dependent, its text prints no bracket, and ``--json``'s path
+    says which reading predicts better."""
+    _truth, ch = _x(tmp_path, "dtdt", 409)
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and ch.thermal is not None and ch.thermal.path is not None
+    pf = ch.thermal.path
+    if pf.kind == "rate":
+        return
+    assert pf.kind == "one_lag" and "rate" in pf.as_well
+    assert pf.beside_better == ("rate",)
+    f = th[0]
+    assert f.model_dependent and not f.intervals and f.intervals_if_model_held
+    assert "(68 %)" not in f.evidence and "model-dependent, no interval" in f.evidence
+    d = pf.to_dict()
+    assert d["model_dependent"] and d["readings_beside_predict_better"] == ["rate"]
