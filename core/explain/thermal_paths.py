@@ -1911,6 +1911,22 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             "coupling (one lag's lead or lag), only its odd harmonics tell it, and this "
             "record does not resolve them; one lag's coefficient and lag hold for a linear "
             "path")
+    # one lag kept while two paths predict the held-out halves as well with their second
+    # term unresolved: the record cannot tell them apart (at a drive line a second path is
+    # the first one's response times a complex factor, docs/explain.md paths23g: the
+    # adversary's two-path records, z 1.8–2.0), and one lag's coefficient is the response
+    # at the drive, not a first path's
+    two = scores.get("two_path")
+    if (best.kind == "one_lag" and two is not None and two.z_extra < z_thr
+            and two.heldout <= best.heldout + HELDOUT_MARGIN):
+        line = (f"one line holds {share:.0%} of the channel's variance, at {period:.4g} s"
+                if math.isfinite(share) and math.isfinite(period) else "")
+        beside_lag.append(
+            f"one lag or two paths: cannot tell (two paths predict the held-out halves "
+            f"within the margin of one lag, Δ {two.heldout - best.heldout:+.3g}, their "
+            f"second term unresolved, z {two.z_extra:.3g} < {z_thr:.3g}"
+            + (f"; {line}" if line else "") + "): one lag's coefficient and lag are the "
+            "response at the drive, not a first path's")
     notes += beside_lag
     if leaning:
         names = " and ".join(f"{PATH_NAMES[k]} (Δ {scores[k].heldout - ref.heldout:+.3g})"

@@ -102,3 +102,18 @@ def test_one_lag_beside_a_dt_reading_that_predicts_better_carries_no_interval(tm
     assert "(68 %)" not in f.evidence and "model-dependent, no interval" in f.evidence
     d = pf.to_dict()
     assert d["model_dependent"] and d["readings_beside_predict_better"] == ["rate"]
+
+
+def test_one_lag_kept_on_two_paths_names_both_readings(tmp_path):
+    """twopath 401 (plate only; a second path through the room's 1500 s): one lag is kept
+    with c ≈ c₁ + 0.75·c₂, the response at the drive, and two paths predict the held-out
+    halves as well with their second term at z ≈ 2, far from resolved (paths23g: out of
+    reach for any method at this drive). On main the finding named nothing; now its text
+    says "one lag or two paths: cannot tell"."""
+    _truth, ch = _x(tmp_path, "twopath", 401)
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and ch.thermal is not None and ch.thermal.path is not None
+    if ch.thermal.path.kind != "one_lag":
+        return
+    note = next(n for n in ch.thermal.path.notes if n.startswith("one lag or two paths"))
+    assert note in th[0].evidence
