@@ -86,11 +86,13 @@ from avard.core.explain.thermal_fit import (
     ThermalFit,
     compensated_avar,
     fit_thermal_axes,
+    path_of,
     signal_avar_on,
     with_paths,
 )
 from avard.core.explain.thermal_paths import (
     both_readings,
+    holds_beside,
     rate_reading,
     reads_as_rate,
     second_path_reading,
@@ -712,12 +714,14 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     # explain's CPU on a 12 h quiet-lab record)
     redo = [a for a in found if (th := out[a]) is not None
             and (th.mechanism != "one_lag" or not th.passed or a in moved)]
+    base: list[ThermalFit] = list(fits)  # each axis's one lag, the path choice's start
     if redo:
         Yw = Y[:, redo] - np.column_stack([first[a] for a in redo])
-        again = with_paths(fit_thermal_axes(Yw, temps, tnames, rate_b, holes), Y[:, redo],
-                           temps, holes, warmups={i: found[a] for i, a in enumerate(redo)})
-        for a, th in zip(redo, again, strict=True):
-            out[a] = th
+        refit = fit_thermal_axes(Yw, temps, tnames, rate_b, holes)
+        again = with_paths(refit, Y[:, redo], temps, holes,
+                           warmups={i: found[a] for i, a in enumerate(redo)})
+        for a, th, b0 in zip(redo, again, refit, strict=True):
+            out[a], base[a] = th, b0
     # and so again on the refit's choice; where the choice alone is two paths of their own
     # response and the dT/dt term stands beside the warm-up, or two paths in its limit, the
     # finding names both readings (``thermal_paths.second_path_reading``, ``both_readings``)
@@ -729,6 +733,7 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                 and (pf := (second_path_reading(th.path, al.path)
                             or both_readings(th.path, al.path))) is not None):
             out[a] = replace(th, path=pf)
+    _beside_transients(out, base, Y, temps, holes, found, rate_b, noise)
     # the warm-up is then a cause of its own where it is still beyond the start state beside
     # the path chosen (its T and size refitted there, on the axis less that path's signal)
     for a in found:
@@ -741,6 +746,32 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
             settled[a] = cz.cause_signal(tr.refine_compound(r, rate_b, nzs[a], [c])[0],
                                          len(Y), rate_b)
     return out, settled
+
+
+def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: NDArray,
+                       temps: NDArray, holes: dict[int, list[tuple[int, int]]] | None,
+                       found: dict[int, tuple[float, ...]], rate_b: float,
+                       noise: list[dict[str, float]]) -> None:
+    """``out`` with each path whose extension is the whole claim (the one lag failed its own
+    test) kept only where an extension is still chosen with the transients the compound
+    search finds on the axis (as recorded: nothing coupled is claimed there) beside every
+    candidate (``with_paths``'s ``given``); elsewhere the one lag's failed fit, no claim.
+    The path choice sees no transient but a warm-up: on a 1 h record with no coupling a
+    relay's two or three switches took the warm-up and a bias step, passed its extra term's
+    test and predicted the held-out halves better than nothing by the margin, and the axis
+    claimed a temperature coupling with hysteresis (issue 23's compound 1 h row). Where one
+    lag passes, the coupling's claim stands on its own test, and the path is not asked."""
+    for a, th in enumerate(out):
+        b0 = base[a]
+        if th is None or not th.passed or b0.passed or th.mechanism == "one_lag":
+            continue
+        y = Y[:, a]
+        cands, _ = tr.find_compound(
+            y, rate_b, lambda d, y=y, n=noise[a]["N"]: tr.robust_noise(y - d, rate_b, n))
+        sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands if c.cause != "drift")
+        if sig and not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
+                                            given=sig), th.mechanism):
+            out[a] = b0
 
 
 def _same_path(alone: ThermalFit, beside: ThermalFit) -> bool:
@@ -1040,12 +1071,21 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
             and thermal.passed):
         floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
+        # and where a relay is chosen or named beside the path kept, what its switch times
+        # leave (``PathFit.relay_floor``): the removed relay's switch times are uncertain by
+        # its own intervals, and one lag kept leaves a named relay's odd harmonics
+        rf, rwhy = ((0.0, "") if thermal.path is None or temps is None
+                    else thermal.path.relay_floor(temps[:, thermal.channel_index]))
         if gm.params.get("sigma", 0.0) < floor:
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
                 "temperature's 0.0625 K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
+            gm_fit = None
+        elif gm.params.get("sigma", 0.0) < rf:
+            gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
+                         evidence=gm.evidence + f"; not claimed: σ is below {rwhy}")
             gm_fit = None
     findings.append(gm)
     if gm_fit is not None:

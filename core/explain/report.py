@@ -122,7 +122,8 @@ def summary(ex: Explanation) -> str:
                 params += ("; model-dependent" if f.intervals_if_model_held is None else
                            "; model-dependent, no interval: the held-out data reject the "
                            "extended model" if rejects else
-                           "; model-dependent, no interval: a non-linear path predicts the "
+                           "; model-dependent, no interval: another reading of the path (a "
+                           "non-linear one, or the dT/dt term beside one lag) predicts the "
                            "held-out data better (below)")
             lines.append(f"  FOUND {f.cause}: {params} (SI units)")
             lines.append(f"        {f.evidence}")

@@ -1099,7 +1099,9 @@ class ThermalFit:
         return d + coef[2] * (e - e.mean())
 
 
-    def evidence(self) -> str:
+    def evidence(self, intervals: bool = True) -> str:
+        """The finding's text; ``intervals`` False: one lag's coefficient and lag without
+        their 68 % intervals (model-dependent: ``finding``)."""
         if self.path is not None and self.path.kind != "one_lag":
             return (f"the axis follows temperature '{self.channel}' (z = {self.z:.3g}, test "
                     f"z ≥ {self.threshold:g}) by {self.path.summary()}{self._channels_text}")
@@ -1107,10 +1109,12 @@ class ThermalFit:
         path = ("a first-order lag of" if self.lag_s >= 0 else
                 "a negative lag (the logged sensor lags the die; the die sees T + |lag|·dT/dt)"
                 " of")
+        lag_iv = f" [{self.lag_lo:.4g}, {self.lag_hi:.4g}]" if intervals else ""
+        c_iv = f" [{lo:.4g}, {hi:.4g}] (68 %)" if intervals else " (model-dependent, no interval)"
         txt = (f"the axis follows temperature '{self.channel}' through {path} "
-               f"{self.lag_s:.4g} s [{self.lag_lo:.4g}, {self.lag_hi:.4g}]"
+               f"{self.lag_s:.4g} s{lag_iv}"
                f"{' (open: at the end of the lags tried)' if self.lag_open else ''} with "
-               f"{self.coefficient:.4g} m/s²/K [{lo:.4g}, {hi:.4g}] (68 %); Allan-covariance "
+               f"{self.coefficient:.4g} m/s²/K{c_iv}; Allan-covariance "
                f"regression z = {self.z:.3g} (test: z ≥ {self.threshold:.3g}{self._dof_note})")
         return txt + self._channels_text
 
@@ -1158,6 +1162,17 @@ class ThermalFit:
                            model_dependent=self.path.model_dependent,
                            alternatives=self.path.alternatives)
         iv = {"coefficient": [lo, hi], "lag_s": [self.lag_lo, self.lag_hi]}
+        if self.path is not None and self.path.beside_better:
+            # a reading named beside the one lag kept predicts the held-out halves better
+            # (``PathFit.beside_better``): one lag's coefficient and lag are one of two
+            # readings, no interval (``--json`` keeps them as ``intervals_if_model_held``)
+            return Finding("temperature", False,
+                           {"coefficient": self.coefficient, "lag_s": self.lag_s}, {},
+                           self.z, self.threshold,
+                           self.evidence(intervals=False)
+                           + "".join(f"; {n}" for n in self.path.beside_lag),
+                           channel=self.channel, mechanism=self.mechanism,
+                           model_dependent=True, intervals_if_model_held=iv)
         if self.path is not None and self.path.leaning:
             # one lag kept while a non-linear candidate predicts the held-out halves better:
             # its coefficient and lag are a linear model's, no interval (``--json`` keeps them
@@ -1165,7 +1180,7 @@ class ThermalFit:
             note = next(n for n in self.path.notes if n.startswith("one lag kept"))
             return Finding("temperature", False,
                            {"coefficient": self.coefficient, "lag_s": self.lag_s}, {},
-                           self.z, self.threshold, f"{self.evidence()}; {note}",
+                           self.z, self.threshold, f"{self.evidence(intervals=False)}; {note}",
                            channel=self.channel, mechanism=self.mechanism,
                            model_dependent=True, intervals_if_model_held=iv)
         beside = "" if self.path is None else "".join(f"; {n}" for n in self.path.beside_lag)
@@ -1419,13 +1434,15 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
 
 def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,
                floors: dict[int, float] | None = None,
-               warmups: dict[int, tuple[float, ...]] | None = None) -> list[ThermalFit]:
+               warmups: dict[int, tuple[float, ...]] | None = None,
+               given: dict[int, tuple[NDArray, ...]] | None = None) -> list[ThermalFit]:
     """``fits`` (``fit_thermal_axes`` of the columns of ``Y``) each with the thermal path
     chosen on its driving channel (``thermal_paths.choose_path``), on every axis: a response
     the one lag cannot follow (quadratic, hysteresis) may fail the one-lag test and pass its
     own. ``floors``: each channel's rounding floor (τ s), computed when not given;
     ``warmups``: per axis, the time constants (s) of the warm-ups found on it, fitted as
-    nuisance beside every candidate."""
+    nuisance beside every candidate; ``given``: per axis, the signals of the transients found
+    on it, each a nuisance column of free size beside every candidate (``choose_path``)."""
     Y = np.asarray(Y, dtype=float)
     if floors is None:
         floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
@@ -1434,32 +1451,18 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     # slow view of the same channel: the same columns)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}),
-                       (warmups or {}).get(a, ()))
+                       (warmups or {}).get(a, ()), (given or {}).get(a, ()))
             for a, f in enumerate(fits)]
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
                floors: dict[int, float], columns: dict[Column, NDArray[np.float64]] | None = None,
-               warmups: tuple[float, ...] = ()) -> ThermalFit:
+               warmups: tuple[float, ...] = (), given: tuple[NDArray, ...] = ()) -> ThermalFit:
     """``fit`` with the thermal path chosen on its driving channel; when the path is not one
     lag, its linear coupling's coefficient and first lag stand in for the one lag's."""
     from dataclasses import replace
 
-    from avard.core.explain.thermal_paths import choose_path
-
-    j = fit.channel_index
-    keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
-                     fit.rate_hz)
-    ref = fit.allan
-    edf = np.asarray(ref.edf, dtype=float)
-    edf = edf[:, 0] if edf.ndim == 2 else edf
-    # an extension that explain's held-out measure cannot test is refused only where it would
-    # be the claim's whole basis (the one lag failed its own test): on a null axis a slow
-    # relay at 1837 s on 4 h passed its extra term's z untested; where the one lag is
-    # claimed, a second path through a long lag is the better reading and the verdict says
-    # whether the held-out test could run
-    pf = choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float), edf,
-                     floors.get(j, 0.0), keep, columns, warmups, held_only=not fit.passed)
+    pf = path_of(fit, y, temps, holes, floors, columns, warmups, given)
     if pf.kind == "one_lag":
         return replace(fit, path=pf) if fit.passed else fit
     s = pf.chosen
@@ -1470,6 +1473,33 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     return replace(fit, path=pf, coefficient=float(s.beta[0]), coef_se=float(s.beta_se[0]),
                    lag_s=float(s.theta[0]), lag_lo=float(s.theta_lo[0]),
                    lag_hi=float(s.theta_hi[0]), lag_open=s.open_end, **test)
+
+
+def path_of(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
+            floors: dict[int, float] | None = None,
+            columns: dict[Column, NDArray[np.float64]] | None = None,
+            warmups: tuple[float, ...] = (), given: tuple[NDArray, ...] = ()) -> PathFit:
+    """The path choice (``thermal_paths.choose_path``'s ``PathFit``) of axis ``y`` on
+    ``fit``'s driving channel, started from ``fit``'s one lag; ``floors`` each channel's
+    rounding floor (computed when not given)."""
+    from avard.core.explain.thermal_paths import choose_path
+
+    j = fit.channel_index
+    if floors is None or j not in floors:
+        floors = {**(floors or {}), j: rounding_floor_tau(temps[:, j], fit.rate_hz)}
+    keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
+                     fit.rate_hz)
+    ref = fit.allan
+    edf = np.asarray(ref.edf, dtype=float)
+    edf = edf[:, 0] if edf.ndim == 2 else edf
+    # an extension that explain's held-out measure cannot test is refused only where it would
+    # be the claim's whole basis (the one lag failed its own test): on a null axis a slow
+    # relay at 1837 s on 4 h passed its extra term's z untested; where the one lag is
+    # claimed, a second path through a long lag is the better reading and the verdict says
+    # whether the held-out test could run
+    return choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float),
+                       edf, floors.get(j, 0.0), keep, columns, warmups,
+                       held_only=not fit.passed, given=given)
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,

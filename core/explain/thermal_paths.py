@@ -213,7 +213,7 @@ AVERAGED = ("hysteresis",)
 
 
 class Column(NamedTuple):
-    kind: str  # "u", "start", "quad", "rate", "slope", "relay", "warmup"
+    kind: str  # "u", "start", "quad", "rate", "slope", "relay", "warmup", "given"
     lag: float
     width: float = 0.0
 
@@ -347,6 +347,8 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
         if c in done:
             out[:, i] = done[c]
             continue
+        if c.kind == "given":  # pragma: no cover - ``choose_path`` puts them in ``done``
+            raise ValueError("a given nuisance column is built by its caller")
         if c.kind == "u":
             x = u(c.lag)
         elif c.kind in NUISANCE:
@@ -580,8 +582,12 @@ class Trial(NamedTuple):
 #: warm-up's e^(−t/T') for T' from T/2 to 2T
 WARMUP_SPAN = (0.5, 1.0, 2.0)
 #: The column kinds that are nuisance beside a candidate's couplings: the lag filter's start
-#: state and a warm-up found beside the coupling (``choose_path``'s ``warmups``)
-NUISANCE = ("start", "warmup")
+#: state, a warm-up found beside the coupling (``choose_path``'s ``warmups``) and the
+#: signals of the transients found on the axis (``choose_path``'s ``given``)
+NUISANCE = ("start", "warmup", "given")
+#: The nuisance kinds that are the record's, not the path's: the path's signal fits no size
+#: of theirs (``PathScore.cols`` leaves them out)
+RECORD_NUISANCE = ("warmup", "given")
 
 
 def _start(*lags: float) -> tuple[Column, ...]:
@@ -696,13 +702,20 @@ class PathFit:
     #: the notes naming another reading beside one lag kept (the dT/dt term, a relay): the
     #: one-lag finding's text says them, not only ``--json``'s notes
     beside_lag: tuple[str, ...] = ()
+    #: the readings named beside one lag kept (``beside_lag``) that predict the held-out
+    #: halves better than it by ``LEAN_MARGIN`` (the dT/dt reading, c·T + r·dT/dt): one
+    #: lag's coefficient is then one of two readings the record does not tell apart and the
+    #: data lean to the other, model-dependent with no interval (as ``leaning``)
+    beside_better: tuple[str, ...] = ()
 
     @property
     def model_dependent(self) -> bool:
         """The parameters depend on a model choice the data do not make: a coefficient
         changes sign over the θ as good as the best, another mechanism fits as well, or one
-        lag is kept while a non-linear candidate predicts better (``leaning``)."""
-        return not self.chosen.resolved or bool(self.alternatives) or bool(self.leaning)
+        lag is kept while a non-linear candidate predicts better (``leaning``) or a reading
+        named beside it does (``beside_better``)."""
+        return (not self.chosen.resolved or bool(self.alternatives) or bool(self.leaning)
+                or bool(self.beside_better))
 
     @property
     def kind(self) -> str:
@@ -726,7 +739,7 @@ class PathFit:
         """The chosen candidate's parameters (SI) and their 68 % intervals (none where another
         mechanism fits as well or a non-linear one predicts better: ``leaning``)."""
         p, iv = describe(self.chosen)
-        return p, ({} if self.alternatives or self.leaning else iv)
+        return p, ({} if self.alternatives or self.leaning or self.beside_better else iv)
 
     def rounding_gain(self) -> float:
         """The L1 norm of the chosen path's response to an error in the logged readings
@@ -746,6 +759,75 @@ class PathFit:
             elif c.kind == "rate":
                 g += abs(float(b)) * norm * 2.0 / RATE_SMOOTH_S
         return g
+
+    def relay_floor(self, T: NDArray) -> tuple[float, str]:
+        """(σ m/s², why) a Gauss–Markov bump beside this path must exceed to be claimed where
+        a relay is chosen or named beside the path kept (0, "" elsewhere): the larger of
+
+        - the RMS of the relay term's switch-time error: the relay switches on the
+          temperature behind the readings, whose level is uncertain by the 0.0625 K
+          rounding (RMS q/√12), so each switch is off by about that over the temperature's
+          slope there (capped at the time to the next switch), a pulse of 2|h| for that
+          long: 2|h|·√(Σ δᵢ / record). Where the die swings a few steps the slope at a
+          switch is a few mK per minute and δ is a minute: pulses that recur twice a cycle
+          with a minute's correlation, which the scan reads as a Gauss–Markov process
+          (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s², T 25–26 s beside a
+          relay of h ≈ 1.1e-4 chosen right). Like ``causes.gauss_markov_rounding_floor``
+          it bounds from above (the reconstruction is no worse than the readings);
+        - where the relay is named beside another reading (one lag kept with the relay
+          ``as_well`` or ``leaning``, or an alternative), the RMS of the difference of the
+          two readings' signals: what the reading removed leaves of the one named beside
+          it, a relay's odd harmonics beside one lag (404: σ 7.1e-5, T 64 s)."""
+        sc = self.scores.get("hysteresis")
+        named = (self.kind, *self.alternatives, *self.as_well, *self.leaning)
+        relay = None if sc is None else next((c for c in sc.cols if c.kind == "relay"), None)
+        if sc is None or relay is None or "hysteresis" not in named or len(sc.beta) < 2:
+            return 0.0, ""
+        T = np.asarray(T, dtype=float)
+        v = lag_filter(crossing_reconstruction(T), relay.lag, self.rate_hz)
+        r = _relay(v, relay.width)
+        sw = np.flatnonzero(np.diff(r) != 0) + 1
+        record_s = len(T) / self.rate_hz
+        floor = 0.0
+        if len(sw):
+            slope = np.abs(np.gradient(v) * self.rate_hz)[sw]
+            gap = np.diff(np.concatenate([sw, [len(r)]])) / self.rate_hz
+            delta = np.minimum(DS18B20_STEP_K / math.sqrt(12.0)
+                               / np.maximum(slope, 1e-300), gap)
+            floor = 2 * abs(float(sc.beta[1])) * math.sqrt(float(np.sum(delta)) / record_s)
+        why = (f"{floor:.3g} m/s², the RMS of the relay's switch-time error (its switches "
+               "on the temperature behind the readings, uncertain by their 0.0625 K "
+               "rounding over the temperature's slope at each switch), which recurs twice a "
+               "cycle and can look like a bump")
+        # the relay at the ends of its lag's and width's 68 % intervals, the same h
+        behind = crossing_reconstruction(T)
+        moved = 0.0
+        for lag, w in ((sc.theta_lo[0], relay.width), (sc.theta_hi[0], relay.width),
+                       (relay.lag, sc.theta_lo[1]), (relay.lag, sc.theta_hi[1])):
+            if not (math.isfinite(lag) and math.isfinite(w)) or w <= 0:
+                continue
+            d = _relay(lag_filter(behind, lag, self.rate_hz), w) - r
+            moved = max(moved, abs(float(sc.beta[1])) * float(np.sqrt(np.mean(d**2))))
+        if moved > floor:
+            floor = moved
+            why = (f"{floor:.3g} m/s², the RMS of how far the relay term moves over its lag's "
+                   "and width's 68 % intervals (its switch times as uncertain as they), "
+                   "which recurs twice a cycle and can look like a bump")
+        if self.kind != "hysteresis":
+            d = self._score_signal(sc, T) - self._score_signal(self.chosen, T)
+            apart = float(np.sqrt(np.mean((d - d.mean()) ** 2)))
+            if apart > floor:
+                floor = apart
+                why = (f"{floor:.3g} m/s², the RMS of what the {PATH_NAMES[self.kind]} "
+                       "kept leaves of the relay named beside it (its odd harmonics), "
+                       "which can look like a bump")
+        return floor, why
+
+    def _score_signal(self, s: PathScore, T: NDArray) -> NDArray[np.float64]:
+        """Candidate ``s``'s coupling signal on the slow view (no start state)."""
+        X = path_columns(T, list(s.cols), self.rate_hz)
+        n = s_terms(s)
+        return np.asarray(X[:, :n] @ s.beta_fitted[:n], dtype=float)
 
     def summary(self) -> str:
         s = self.chosen
@@ -775,6 +857,8 @@ class PathFit:
                 "rounding_share": self.rounding,
                 "rounding_share_own": dict(self.own_rounding),
                 "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
+                "model_dependent": self.model_dependent,
+                "readings_beside_predict_better": list(self.beside_better),
                 "notes": self.notes}
 
 
@@ -1414,7 +1498,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 edf_ref: NDArray, floor_s: float = 0.0,
                 keep: NDArray[np.bool_] | None = None,
                 columns: dict[Column, NDArray[np.float64]] | None = None,
-                warmups: tuple[float, ...] = (), held_only: bool = True) -> PathFit:
+                warmups: tuple[float, ...] = (), held_only: bool = True,
+                given: tuple[NDArray, ...] = ()) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
@@ -1429,7 +1514,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     minutes) or gave it its own. ``held_only``: an extension whose longest lag leaves
     explain's held-out measure too little of each half (``_settles_past_half``) is refused,
     and named beside the chosen path where it predicts as well (``thermal_fit.with_paths``
-    asks it only where the one lag failed its own test)."""
+    asks it only where the one lag failed its own test). ``given``: signals on the slow view
+    (each of ``y``'s length) the record holds beside any coupling, the transients found on
+    the axis, each a nuisance column of free size beside every candidate as the warm-ups
+    are: a path on a short record switches or bends a few times, and a relay's two or three
+    switches took a warm-up and a bias step the coupling never held."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -1443,6 +1532,12 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     leads = quadratic_leads(record_s, rate)
     extra = tuple(Column("warmup", round(float(x) * k, 3))
                   for x in sorted(set(warmups)) for k in WARMUP_SPAN)
+    if given:
+        # (this axis's own: a copy of the channel's shared columns, not added to them)
+        gc = {Column("given", float(k)): np.asarray(g, dtype=float)[:m].reshape(-1, f).mean(axis=1)
+              for k, g in enumerate(given)}
+        columns = {**(columns or {}), **{c: x - x.mean() for c, x in gc.items()}}
+        extra += tuple(gc)
     per_kind = {k: [t._replace(cols=t.cols + extra) for t in trials(k, lags, leads)]
                 for k in CANDIDATES}
     cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
@@ -1499,7 +1594,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
-    none_h = sum(_held_dev(v, [], np.zeros(0), 0) for v in vh)
+    # (beside the transients ``given``, fitted as beside every candidate: where they are the
+    # record's, nothing coupled is the transients alone)
+    g_ix = [where[c] for c in extra if c.kind == "given"]
+    none_h = sum(_held_dev(vh[b], g_ix, _fit(vh[a], g_ix), 0) if g_ix else
+                 _held_dev(vh[b], [], np.zeros(0), 0) for a, b in ((0, 1), (1, 0)))
 
     def weigh(sums: OctaveSums) -> _View:
         return _view(sums, edf_v, n_v, ok_tau, s_ref)
@@ -1580,7 +1679,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             (pb.min(axis=0) < 0) & (pb.max(axis=0) > 0))))
         # (beta: the best point's, or the average's above; the warm-ups beside it are the
         # record's, not the path's: its signal fits no size of theirs)
-        cols_i = tuple(c for c in ts[i].cols if c.kind != "warmup")
+        cols_i = tuple(c for c in ts[i].cols if c.kind not in RECORD_NUISANCE)
         b_lo, b_hi = beta - se_iv, beta + se_iv
         t_lo, t_hi = np.asarray(theta) - tse, np.asarray(theta) + tse
         # never narrower than the grid resolves: to half way to the neighbouring grid
@@ -1788,9 +1887,19 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     leaning = _leaning(best, scores)
     reading = _rate_beside_lag(best, scores, period, rival)
     beside_lag: list[str] = []
+    beside_better: tuple[str, ...] = ()
     if reading and "rate" not in as_well:
         as_well += ("rate",)
         beside_lag.append(reading)
+        if rival is not None and rival.heldout_delta < -LEAN_MARGIN:
+            # the reading named beside one lag predicts the held-out halves better: one
+            # lag's coefficient (another value than the reading's) is model-dependent
+            beside_better = ("rate",)
+            beside_lag.append(
+                f"the dT/dt reading predicts the held-out halves better than one lag (Δ "
+                f"{rival.heldout_delta:+.3g}, beyond {LEAN_MARGIN:g}) but not by what "
+                "choosing needs: one lag's coefficient and lag are model-dependent, no "
+                "interval")
     for k in _level(best, scores, leaning):
         sc = scores[k]
         as_well += (k,)
@@ -1802,6 +1911,22 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             "coupling (one lag's lead or lag), only its odd harmonics tell it, and this "
             "record does not resolve them; one lag's coefficient and lag hold for a linear "
             "path")
+    # one lag kept while two paths predict the held-out halves as well with their second
+    # term unresolved: the record cannot tell them apart (at a drive line a second path is
+    # the first one's response times a complex factor, docs/explain.md paths23g: the
+    # adversary's two-path records, z 1.8–2.0), and one lag's coefficient is the response
+    # at the drive, not a first path's
+    two = scores.get("two_path")
+    if (best.kind == "one_lag" and two is not None and two.z_extra < z_thr
+            and two.heldout <= best.heldout + HELDOUT_MARGIN):
+        line = (f"one line holds {share:.0%} of the channel's variance, at {period:.4g} s"
+                if math.isfinite(share) and math.isfinite(period) else "")
+        beside_lag.append(
+            f"one lag or two paths: cannot tell (two paths predict the held-out halves "
+            f"within the margin of one lag, Δ {two.heldout - best.heldout:+.3g}, their "
+            f"second term unresolved, z {two.z_extra:.3g} < {z_thr:.3g}"
+            + (f"; {line}" if line else "") + "): one lag's coefficient and lag are the "
+            "response at the drive, not a first path's")
     notes += beside_lag
     if leaning:
         names = " and ".join(f"{PATH_NAMES[k]} (Δ {scores[k].heldout - ref.heldout:+.3g})"
@@ -1815,7 +1940,22 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     return PathFit(best, scores, z_thr, rate_hz, notes=notes, none_heldout=none_h,
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
-                   as_well=as_well, beside_lag=tuple(beside_lag))
+                   as_well=as_well, beside_lag=tuple(beside_lag),
+                   beside_better=beside_better)
+
+
+def holds_beside(pf: PathFit, kind: str) -> bool:
+    """Whether the extension ``kind`` of the choice ``pf`` (made with the transients found on
+    the axis beside every candidate, ``choose_path``'s ``given``) still predicts the held-out
+    halves better than one lag and than the transients alone by the margin an extension
+    needs (its rounding share too, its θ inside its grid); its extra term's z passed its
+    test without them. A relay that took the transients it can mimic predicts no better
+    than they do."""
+    sc = pf.scores.get(kind)
+    if sc is None or sc.open_end:
+        return False
+    rounding = pf.own_rounding.get(kind, pf.rounding)
+    return sc.heldout < min(pf.scores["one_lag"].heldout, pf.none_heldout) - pf.margin - rounding
 
 
 def _n_params(sc: PathScore) -> int:
