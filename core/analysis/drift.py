@@ -776,7 +776,7 @@ def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
                    drift_slope=_slope(lik))
 
 
-def _slope(lik: DriftLikelihood) -> tuple[float, float, float]:
+def _slope(lik: DriftLikelihood) -> tuple[float, float, float] | tuple[()]:
     """(slope, lo, hi) of the test where it carries a floor (``NoiseFit.drift_slope``), ()
     where it carries none."""
     if not lik.floor > 0:

@@ -165,7 +165,7 @@ class NoiseFit:
     #: beside ``drift_floor``, the drift test's GLS slope and its 68 % profile interval
     #: (slope, lo, hi; input unit per s), () where no floor is carried: the printed bounds
     #: of such a record take the ramp's uncertainty from the slope (``analysis.signal_edf``)
-    drift_slope: tuple[float, float, float] = ()
+    drift_slope: tuple[float, float, float] | tuple[()] = ()
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
