@@ -764,15 +764,24 @@ def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
 
     r = fit.terms.get("rate_ramp")
     if r is None or not r.present or "rate_ramp" in fit.resolved_apart:
-        return replace(fit, drift_floor=lik.floor)
+        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik))
     try:
         noise = refit(allan, terms=[t for t in TERMS if t != "rate_ramp"])
     except FitError:
-        return replace(fit, drift_floor=lik.floor)
+        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik))
     upper = abs(lik.slope) + two_sided_z(level) * lik.slope_se
     absent = TermEstimate(None, None, None, UNITS["rate_ramp"], False, abs(lik.z),
                           upper if math.isfinite(upper) else None)
-    return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor)
+    return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor,
+                   drift_slope=_slope(lik))
+
+
+def _slope(lik: DriftLikelihood) -> tuple[float, float, float] | tuple[()]:
+    """(slope, lo, hi) of the test where it carries a floor (``NoiseFit.drift_slope``), ()
+    where it carries none."""
+    if not lik.floor > 0:
+        return ()
+    return (float(lik.slope), float(lik.slope_lo), float(lik.slope_hi))
 
 
 def _walk_from_time_domain(noise: NoiseFit, lik: DriftLikelihood,

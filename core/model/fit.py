@@ -162,6 +162,10 @@ class NoiseFit:
     #: that ramp at the 68 % level; it does not scatter (``analysis.signal_edf``), and it is
     #: no claim: the terms and the model are the AVAR fit's
     drift_floor: float = 0.0
+    #: beside ``drift_floor``, the drift test's GLS slope and its 68 % profile interval
+    #: (slope, lo, hi; input unit per s), () where no floor is carried: the printed bounds
+    #: of such a record take the ramp's uncertainty from the slope (``analysis.signal_edf``)
+    drift_slope: tuple[float, float, float] | tuple[()] = ()
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""
