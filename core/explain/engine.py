@@ -543,10 +543,6 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     unused = {tnames[j]: _why_unused(None if t_slow is None else t_slow[:, j])
               for j in range(len(tnames))
               if j not in t_ok and temperature in (None, tnames[j])}
-    if temperature is not None and temperature in unused:
-        raise DataError(f"temperature channel {temperature!r} has {unused[temperature]} in "
-                        "this record, so the thermal causes cannot be tested on it; name "
-                        "another channel, or leave the choice to explain")
     t_allan: dict[str, Any] = {}
     if t_slow is not None and t_ok and len(t_slow) >= 16:
         sa = StreamingAllan(len(t_ok), rate_b, names=[tnames[j] for j in t_ok])

@@ -27,7 +27,8 @@ noise model the record does not follow widens the test instead of passing everyt
 
 **Which edges are one excursion** (``_pairing``): after the joint fit every excursion is
 its two steps, and the steps are paired anew, before the backward test, after each effect
-it drops and before the final test: of the pairings that nest like brackets, each pair a
+it drops and before the final test: of the pairings that nest like brackets (nothing
+unpaired inside a pair), each pair a
 return to the level before within ``PAIR_SIGMA`` standard errors, the one with the most
 excursions, the fewest nested inside one of the other sign (with equal sizes the same
 signal as two in a row), then the largest likelihood. An excursion's edge whose partner
@@ -527,13 +528,14 @@ def _columns(g: cz._Gls, rest: list[cz.Candidate], steps: list[cz.Candidate],
 def _pairing(g: cz._Gls, cands: list[cz.Candidate], step_threshold: float, alpha: float
              ) -> tuple[list[cz.Candidate], float]:
     """(``cands`` with their edges paired into excursions, the fit's χ²): of the pairings of
-    opposite steps that nest like brackets (no two excursions cross; an edge alone may sit
-    inside one), each pair's sizes consistent with a return to the level before (|s₁ + s₂|
-    within ``PAIR_SIGMA`` standard errors of their sum, from the GLS fit with every edge
-    free), the one with the most excursions whose joint fit has the largest likelihood. The
-    greedy brackets (``_pair_excursions``) paired the nearest consistent edges in time: a
-    step the walk made inside a long excursion then took one of its edges, and two
-    excursions were read as nested or joined across each other."""
+    opposite steps that nest like brackets (no two excursions cross, and nothing unpaired sits
+    inside one: an excursion with a lasting step inside it reads as three steps, which are all
+    claimed, the return to the level not said), each pair's sizes consistent with a return to
+    the level before (|s₁ + s₂| within ``PAIR_SIGMA`` standard errors of their sum, from the
+    GLS fit with every edge free), the one with the most excursions whose joint fit has the
+    largest likelihood. The greedy brackets (``_pair_excursions``) paired the nearest
+    consistent edges in time: a step the walk made inside a long excursion then took one of its
+    edges, and two excursions were read as nested or joined across each other."""
     atoms = _atoms(cands, step_threshold)
     steps = sorted((c for c in atoms if c.cause == "bias_step"), key=lambda c: c.params["time_s"])
     rest = [c for c in atoms if c.cause != "bias_step"]

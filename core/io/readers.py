@@ -393,11 +393,24 @@ def _npz_blocks(p: Path, meta: dict[str, Any], block: int, columns: Sequence[int
 # .csv
 
 
+def _not_utf8(p: Path) -> DataError:
+    """A CSV that is not UTF-8 (spreadsheets also write cp1252 and UTF-16), in one line."""
+    with open(p, "rb") as fh:
+        bom = fh.read(2)
+    kind = " (it is UTF-16)" if bom in (b"\xff\xfe", b"\xfe\xff") else ""
+    return DataError(f"{p}: not UTF-8 text{kind}; save the CSV as UTF-8 (\"CSV UTF-8\" in a "
+                     "spreadsheet) and give it again")
+
+
 def _csv_open(p: Path) -> tuple[IO[str], list[str], str]:
     # utf-8-sig: a byte-order mark (spreadsheets' "CSV UTF-8" writes one) is not part of the
     # first column's name: read as one, it hid the t column ("no time column")
     fh = open(p, newline="", encoding="utf-8-sig")  # closed by the caller
-    head = fh.readline()
+    try:
+        head = fh.readline()
+    except UnicodeDecodeError:
+        fh.close()
+        raise _not_utf8(p) from None
     if not head.strip():
         fh.close()
         raise DataError(f"{p}: empty file or empty first line; a .csv needs a header row")
@@ -431,7 +444,10 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
                 ) -> Iterator[tuple[int, NDArray[np.float64]]]:
     line0 = 2
     while True:
-        lines = [ln for ln in itertools.islice(fh, block) if ln.strip()]
+        try:
+            lines = [ln for ln in itertools.islice(fh, block) if ln.strip()]
+        except UnicodeDecodeError:
+            raise _not_utf8(p) from None
         if not lines:
             return
         try:

@@ -938,9 +938,15 @@ class RecordingSource:
             places = self._places
             recs = (self._placed_records(places) if places is not None and places.ok
                     else self._walk(skip=_NOT_TEMPERATURE))
+            # the runs whose header was read: the walk drops a headerless run's records (its
+            # samples are reported lost), and its readings, keyed by index alone, would land
+            # on another run's rows
+            summary = self.info.recording
+            known = None if summary is None else {r.run for r in summary.runs}
             for rec in recs:
                 if rec["kind"] != "temp" or (self.runs is not None
-                                             and rec["run"] not in self.runs):
+                                             and rec["run"] not in self.runs) or (
+                        known is not None and rec["run"] not in known):
                     continue
                 i0 = int(rec["i0"])
                 for name, value in zip(rec["names"], rec["values_c"], strict=True):

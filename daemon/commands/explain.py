@@ -137,6 +137,13 @@ def run(args: argparse.Namespace) -> int:
                else open_record(args.holdout, rate_hz=args.rate_hz, sensor=args.sensor))
     progress, stage = _progress()
     ex = explain_file(source, options, holdout=holdout, progress=progress, stage=stage)
+    if args.temperature in ex.temperature_unused:
+        # the one channel asked for cannot drive the thermal model: an explanation without
+        # it would answer another question than the one asked
+        raise DataError(f"--temperature {args.temperature}: the channel has "
+                        f"{ex.temperature_unused[args.temperature]} in this record, so the "
+                        "thermal causes cannot be tested on it; name another channel, or "
+                        "leave --temperature out")
     if args.report:
         path = write_report(ex, args.report)
         sys.stderr.write(f"avard explain: wrote the report to {path}\n")

@@ -82,7 +82,7 @@ def _refuse_a_record_twice(paths: Sequence[str]) -> None:
                                 "sensor's record once")
 
 
-def _check_files(paths: Sequence[str]) -> None:
+def _check_files(paths: Sequence[str], rate: float | None) -> None:
     """Every .npz and CSV opened (their metadata only) before the cluster starts: a broken
     one among many ended the run only once the workers had started, under their log lines.
     A recording is checked by its own first read on a worker (opening it here would scan
@@ -93,17 +93,17 @@ def _check_files(paths: Sequence[str]) -> None:
     for p in paths:
         _path, kind = record_kind(p)
         if kind != "recording":
-            _ = open_record(p).info
+            _ = open_record(p, rate_hz=rate).info
 
 
-def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
+def _groups(paths: Sequence[str], by: str, rate: float | None = None) -> dict[str, list[str]]:
     """Sensor name → its records, checked to exist before any work."""
     for p in paths:
         if not Path(p).exists():
             raise DataError(f"{p}: no such file or folder; give the records' paths")
     _refuse_a_record_twice(paths)
     if by == "file":
-        _check_files(paths)
+        _check_files(paths, rate)
         names: dict[str, list[str]] = {}
         for p in paths:
             stem = Path(p).stem or Path(p).name
@@ -115,7 +115,7 @@ def _groups(paths: Sequence[str], by: str) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     formats: dict[str, RecordFormat] = {}
     for p in paths:
-        info = open_record(p).info
+        info = open_record(p, rate_hz=rate).info
         sensor = info.sensor_name
         if not sensor:
             raise DataError(f"{p} names no sensor (no 'sensor' field); use --by file")
@@ -234,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
     from avard.daemon.commands.separate import rig_records
 
     # a rig's recording stands for its sensors' recordings (--sensor NAME: only those)
-    groups = _groups(rig_records(args.paths, args.sensor), args.by)
+    groups = _groups(rig_records(args.paths, args.sensor), args.by, args.rate)
     client = _client(args)
     try:
         analyses = analyse_fleet(groups, args, client.get_executor(), _progress())

@@ -274,3 +274,28 @@ def test_the_readers_crc_is_zlibs_on_the_buffers_the_reader_hands_it() -> None:
         assert crc.crc32(part, start) == zlib.crc32(part, start)
         start = zlib.crc32(part, start)
     assert crc.crc32(b"", 0xFFFFFFFF) == zlib.crc32(b"", 0xFFFFFFFF)
+
+
+@pytest.mark.parametrize(("encoding", "kind"), [("latin-1", "not UTF-8 text;"),
+                                                ("utf-16", "(it is UTF-16)")])
+def test_a_csv_not_in_utf8_is_one_line(tmp_path: Path, encoding: str, kind: str) -> None:
+    """Spreadsheets also write cp1252 and UTF-16: a UnicodeDecodeError traceback before."""
+    from avard.core.io.source import open_record
+
+    p = tmp_path / "lab.csv"
+    rows = "".join(f"{i / 10},0.1,0.2,9.8,{21 + i / 100}\n" for i in range(50))
+    p.write_bytes(("t,x,y,z,temp_°C\n" + rows).encode(encoding))
+    with pytest.raises(DataError, match="save the CSV as UTF-8") as exc:
+        list(open_record(str(p)).blocks(16))
+    assert kind in str(exc.value)
+
+
+def test_a_csv_turning_non_utf8_midway_is_one_line(tmp_path: Path) -> None:
+    from avard.core.io.source import open_record
+
+    p = tmp_path / "lab.csv"
+    good = "".join(f"{i / 10},0.1,0.2,9.8\n" for i in range(5000))
+    p.write_bytes(b"t,x,y,z\n" + good.encode() + "9999,0.1,0.2,9.8 °\n".encode("latin-1"))
+    with pytest.raises(DataError, match="not UTF-8 text"):
+        for _ in open_record(str(p)).blocks(256):
+            pass

@@ -184,3 +184,34 @@ def test_the_temperatures_read_where_the_scan_skipped_them_are_the_walks(faulty,
         for (i1, v1), (i2, v2) in zip(fast, slow, strict=True):
             np.testing.assert_array_equal(i1, i2)
             np.testing.assert_array_equal(v1, v2)
+
+
+def test_a_headerless_runs_readings_land_on_no_other_runs_rows(tmp_path: Path) -> None:
+    """A run whose header never survived is dropped by the walk (its samples reported lost);
+    its temperature records, read from the ranges the scan skipped and keyed by index alone,
+    landed on another run's rows (a 99 °C reading on r1's samples)."""
+    rate, rng = 100.0, np.random.default_rng(1)
+    d = tmp_path / "rec"
+    d.mkdir()
+
+    def run_records(run: str, with_header: bool, t_off: int, value: float | None,
+                    i_off: int) -> list[dict]:
+        seq = itertools.count(1)
+        recs = [frames.header_record(run, rate_hz=rate, t_mono=0.0, t_real=0.0,
+                                     scale_m_s2_per_count=SCALE,
+                                     temperature_channels=["t0"])] if with_header else []
+        for i0 in range(0, 1000, 100):
+            v = 20.0 + i0 / 1000 if value is None else value
+            recs.append(frames.temp_record(run, next(seq), i0 + t_off, ["t0"], [v],
+                                           (i0 + t_off) / rate, (i0 + t_off) / rate))
+            counts = rng.integers(-1000, 1000, size=(100, 3)).astype(np.int32)
+            recs.append(frames.raw_record(run, next(seq), i0 + i_off, counts,
+                                          (i0 + i_off) / rate, (i0 + i_off) / rate))
+        return recs
+
+    _write(d / "r1_00000000_a.avr", run_records("r1", True, 0, None, 0))
+    _write(d / "r2_00000000_b.avr", run_records("r2", False, 50, 99.0, 2000))
+    src = open_record(str(d))
+    temps = np.concatenate([t for _a, t, _end in src.blocks(1 << 12)])
+    assert not np.any(temps == 99.0)
+    assert np.count_nonzero(np.isfinite(temps)) == 10

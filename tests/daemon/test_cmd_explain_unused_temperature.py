@@ -1,6 +1,7 @@
 """A temperature channel the thermal model cannot use (no readings, or one value throughout)
-is said in the text and the JSON, never dropped in silence; asked for by ``--temperature``
-it is one line and exit status 2 (it was a summary that never mentioned the channel, exit 0)."""
+is said in the text and the JSON, never dropped in silence; asked for by ``avard explain
+--temperature`` it is one line and exit status 2 (it was a summary that never mentioned the
+channel, exit 0); ``avard analyze --temperature`` keeps its analysis and says the fit is absent."""
 
 from __future__ import annotations
 
@@ -45,4 +46,13 @@ def test_an_unusable_channel_asked_for_is_one_line_and_exit_2(record, capsys, ch
     assert cli.main(["explain", str(record), "--channels", "x", "--temperature", channel]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0]
-    assert f"temperature channel '{channel}'" in err[0] and "name another channel" in err[0]
+    assert f"--temperature {channel}: the channel has" in err[0]
+    assert "name another channel" in err[0]
+
+
+def test_analyze_with_an_unusable_channel_keeps_its_analysis(record, capsys):
+    """analyze --temperature runs explain's thermal fit beside its own result: a channel it
+    cannot use costs the thermal lines, never the analysis (the reviewer's regression)."""
+    assert cli.main(["analyze", str(record), "--channels", "x", "--temperature", "ambient"]) == 0
+    out = capsys.readouterr().out
+    assert "adev" in out.lower() and "no temperature fit" in out

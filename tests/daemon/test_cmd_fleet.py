@@ -159,3 +159,32 @@ def test_the_local_clusters_log_lines_stay_off_stderr(fleet: list[Path]) -> None
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stderr == "" and r.stdout.startswith("Units SI"), r.stderr
+
+
+class _Started(Exception):
+    """The cluster would start: every check before it passed."""
+
+
+def test_records_that_need_rate_are_read_with_it_before_the_cluster_starts(
+        tmp_path: Path, monkeypatch, capsys) -> None:
+    """The files are opened before the cluster starts, with ``--rate`` as the workers open
+    them: an .npz without ``rate_hz`` was refused there although the rate was given."""
+    from avard.daemon.commands import fleet as fleet_cmd
+
+    rng = np.random.default_rng(0)
+    paths = []
+    for k in "ab":
+        p = tmp_path / f"norate_{k}.npz"
+        np.savez(p, accel=rng.normal(size=(2000, 3)) * 1e-3)
+        paths.append(str(p))
+
+    def start(args):
+        raise _Started
+
+    monkeypatch.setattr(fleet_cmd, "_client", start)
+    with pytest.raises(_Started):
+        main(["fleet", *paths, "--rate", "100"])
+    # without the rate they are refused before it, in one line
+    assert main(["fleet", *paths]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--rate" in err, err
