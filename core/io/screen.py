@@ -240,7 +240,11 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
             # costliest step of the screen, is taken only where a sample could stand out
             continue
         scale = float(np.median(sub)) / 0.6745
-        if not scale > 0:
+        # a moving window sum leaves a rounding residue where the exact distance is 0: on a
+        # record on its LSB grid most samples equal their neighbours' mean, and a scale made
+        # of that residue (1e-21 of a 4e-5 m/s² step) cut every step as a shock; below the
+        # sum's own rounding the scale is 0, as the exact median is, and nothing is judged
+        if not scale > 4.0 * len(col) * np.finfo(float).eps * float(np.ptp(col)):
             continue
         # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
         cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.explain.engine import explain_file
@@ -255,3 +256,24 @@ def test_every_fault_of_a_generator_written_apart_is_screened_and_said_in_words(
     assert "2 read errors (-127 °C or out of range)" in text and ")s" not in text
     assert "1 dropout (no reading)" in text and "3 85.0 °C power-on values" in text
     assert "(1 reading)" in text and "(1 readings)" not in text
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_record_on_its_lsb_grid_is_not_cut_by_the_sums_rounding(compiled, monkeypatch):
+    """Noise of 0.2 LSB rounded to the ADXL355's 3.83e-5 m/s²: most samples equal their
+    neighbours' mean, the exact robust scale is 0 and nothing is judged. The compiled moving
+    sum left a residue of ~1e-21 there, which became the scale: every ±1 LSB sample was cut
+    as a 12 σ shock and analyze then called the channel constant."""
+    from avard.core.allan import kernels
+    from avard.core.io.screen import screen_accel
+
+    if compiled and kernels.compiled() is None:
+        pytest.skip("no compiled kernels here")
+    if not compiled:
+        monkeypatch.setattr(kernels, "compiled", lambda: None)
+    rng = np.random.default_rng(7)
+    lsb = 3.9e-6 * 9.80665
+    # a block as long as analyze reads (the residue grows with the window's run)
+    a = np.round(rng.normal(0.0, 0.2, (1 << 16, 3))) * lsb
+    assert np.count_nonzero(a) > 1000    # there are steps to cut
+    assert not screen_accel(a).any()
