@@ -466,6 +466,24 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
         line0 += len(lines)
 
 
+def _refuse_a_hole(t: NDArray, last_t: float, rate: float, done: int, p: Path) -> None:
+    """A jump of the t column past 1.5 sample spacings is missing samples: read end to end,
+    the hole would become a step or a shift in time that nothing records. A CSV carries no gap
+    records, so it is refused in one line (a recording carries its gaps)."""
+    tt = t if not math.isfinite(last_t) else np.concatenate([[last_t], t])
+    dt = np.diff(tt)
+    holes = np.flatnonzero(dt > 1.5 / rate)
+    if len(holes):
+        k = int(holes[0])
+        i = done + k - (0 if not math.isfinite(last_t) else 1)
+        gap = float(dt[k])
+        raise DataError(f"{p}: the t column jumps by {gap:.6g} s after t = {tt[k]:.6g} s "
+                        f"(sample {i + 1}) where its spacing is {1 / rate:.3g} s: about "
+                        f"{round(gap * rate) - 1} samples are missing; a CSV cannot carry "
+                        "the gap, so split the file at the hole (or give --rate HZ to read "
+                        "the samples end to end, the hole included)")
+
+
 def _rate_from_t(t: NDArray, p: Path) -> float:
     dt = np.diff(t)
     if len(dt) == 0:
@@ -517,6 +535,7 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
                     if t[0] <= last_t or np.any(np.diff(t) <= 0):
                         raise DataError(f"{p}: the t column does not increase near sample "
                                         f"{done}; times must be strictly increasing")
+                    _refuse_a_hole(t, last_t, rate, done, p)
                     last_t = float(t[-1])
                 acc = a[:, lay["accel"]]
                 _check_finite(acc, done, str(p))

@@ -299,3 +299,39 @@ def test_a_csv_turning_non_utf8_midway_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(DataError, match="not UTF-8 text"):
         for _ in open_record(str(p)).blocks(256):
             pass
+
+
+def _csv(p: Path, t: np.ndarray) -> Path:
+    rng = np.random.default_rng(3)
+    rows = "".join(f"{ti:.4f},{rng.normal():.6f},{rng.normal():.6f},{9.8 + rng.normal():.6f}\n"
+                   for ti in t)
+    p.write_text("t,x,y,z\n" + rows)
+    return p
+
+
+def test_a_hole_in_a_csvs_time_column_is_refused_in_one_line(tmp_path: Path) -> None:
+    """Ten minutes missing from a 5 Hz log: read end to end, the hole became a bias step at
+    its place and the record 10 minutes short, with nothing said (a CSV carries no gaps)."""
+    from avard.core.io.source import open_record
+
+    t = np.arange(0, 7200, 0.2)
+    t = t[(t < 3000) | (t >= 3600)]
+    p = _csv(tmp_path / "hole.csv", t)
+    with pytest.raises(DataError, match=r"jumps by 600.2 s after t = 2999.8 s \(sample 15000\)"
+                       r".*about 3000 samples are missing") as exc:
+        for _ in open_record(str(p)).blocks(4096):
+            pass
+    assert "--rate" in str(exc.value)
+    # the user may read it end to end on purpose: the rate given, t is not read
+    n = sum(len(a) for a, _t, _e in open_record(str(p), rate_hz=5.0).blocks(4096))
+    assert n == len(t)
+
+
+def test_a_jittered_time_column_is_no_hole(tmp_path: Path) -> None:
+    """A PC-stamped log's spacing wanders: up to 40 % either way is no missing sample."""
+    from avard.core.io.source import open_record
+
+    rng = np.random.default_rng(4)
+    t = np.cumsum(0.2 * (1 + rng.uniform(-0.4, 0.4, 20000)))
+    n = sum(len(a) for a, _t, _e in open_record(str(_csv(tmp_path / "j.csv", t))).blocks(4096))
+    assert n == len(t)
