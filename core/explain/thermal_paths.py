@@ -1968,6 +1968,16 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             f"second term unresolved, z {two.z_extra:.3g} < {z_thr:.3g}"
             + (f"; {line}" if line else "") + "): one lag's coefficient and lag are the "
             "response at the drive, not a first path's")
+    if math.isfinite(share) and share >= ONE_LINE_SHARE and math.isfinite(period):
+        # one drive line: a sinusoid of the axis at its period, of any phase, is a coupling
+        # through some lag of either sign, so a periodic disturbance at the room's cycle (a
+        # compressor's vibration) reads as this coupling; only the cycle's changing, or a
+        # second line, tells them apart
+        beside_lag.append(
+            f"the drive is one line ({share:.0%} of the channel's variance at {period:.4g} s): "
+            "a periodic disturbance of the axis at that period would read the same, so the "
+            "coupling rests on that one cycle (a record where the room's cycle changes, or a "
+            "second drive line, would tell them apart)")
     notes += beside_lag
     if leaning:
         names = " and ".join(f"{PATH_NAMES[k]} (Δ {scores[k].heldout - ref.heldout:+.3g})"
