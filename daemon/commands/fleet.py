@@ -167,8 +167,12 @@ def _client(args: argparse.Namespace) -> Any:
     # its loggers (at INFO by Dask's config) reached stderr through avard's root handler
     if not getattr(args, "verbose", 0):
         logging.getLogger("distributed").setLevel(logging.WARNING)
+    # no dashboard; the scheduler's HTTP routes still start, on 8787 by default, and a
+    # second local cluster (another fleet run, a notebook) made Dask warn on stderr that
+    # the port was taken: a free port of the system's choosing instead
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.WARNING)
+                           dashboard_address=None, silence_logs=logging.WARNING,
+                           scheduler_kwargs={"dashboard_address": ":0"})
     return Client(cluster)
 
 

@@ -153,10 +153,24 @@ def test_a_broken_file_among_the_records_is_named_before_the_cluster_starts(
 def test_the_local_clusters_log_lines_stay_off_stderr(fleet: list[Path]) -> None:
     """The scheduler runs in avard's process, its loggers at INFO by Dask's config: some
     thirty lines (scheduler start, workers, comms) reached stderr through avard's handler,
-    around a result or an error."""
-    r = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "fleet",
-                        *map(str, fleet[:2]), "--workers", "1"],
-                       capture_output=True, text=True, timeout=300)
+    around a result or an error. Another local cluster held Dask's default HTTP port 8787
+    (another test's fleet, beside this one under ``-n 2``): Dask warned on stderr that the
+    port was taken. Held here on purpose, so the case is met every run."""
+    import socket
+
+    holder = socket.socket()
+    holder.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        holder.bind(("", 8787))
+        holder.listen()
+    except OSError:
+        pass                        # held already, by something else: the same case
+    try:
+        r = subprocess.run([sys.executable, "-m", "avard.daemon.cli", "fleet",
+                            *map(str, fleet[:2]), "--workers", "1"],
+                           capture_output=True, text=True, timeout=300)
+    finally:
+        holder.close()
     assert r.returncode == 0, r.stderr
     assert r.stderr == "" and r.stdout.startswith("Units SI"), r.stderr
 
