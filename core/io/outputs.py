@@ -14,7 +14,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from avard.core.errors import OutputError, describe_os_error
@@ -25,7 +25,9 @@ __all__ = [
     "check_outputs_apart",
     "check_plot_output",
     "free_bytes",
+    "repeated_path",
     "require_plot_extra",
+    "same_file",
 ]
 
 #: Figure formats the Agg-based figures can always write (matplotlib's own list is larger,
@@ -82,11 +84,24 @@ def check_output_file(path: str | os.PathLike[str], *, what: str,
     return p
 
 
-def _same(a: Path, b: Path) -> bool:
+def same_file(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> bool:
+    """Whether two paths name one existing file (another spelling, a link): False where
+    either is missing or unreadable, whose own read or write then says so."""
     try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
+        return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def repeated_path(paths: Sequence[str | os.PathLike[str]]
+                  ) -> tuple[str | os.PathLike[str], str | os.PathLike[str]] | None:
+    """The first two of ``paths`` that name one file (``same_file``), or None: one record
+    given twice is no second sensor."""
+    for i, a in enumerate(paths):
+        for b in paths[i + 1:]:
+            if same_file(a, b):
+                return a, b
+    return None
 
 
 def check_outputs_apart(outputs: Iterable[tuple[str, str | os.PathLike[str]]],
@@ -99,11 +114,11 @@ def check_outputs_apart(outputs: Iterable[tuple[str, str | os.PathLike[str]]],
     for what, path in outputs:
         p = Path(path)
         for i in ins:
-            if _same(p, i) or p.absolute() == i.absolute():
+            if same_file(p, i) or p.absolute() == i.absolute():
                 raise OutputError(f"{what}: {p} is the record read ({i}); writing it would "
                                   "replace the data: write the output to another file")
         for other, q in seen:
-            if _same(p, q) or p.absolute() == q.absolute():
+            if same_file(p, q) or p.absolute() == q.absolute():
                 raise OutputError(f"{other} and {what} name one file; give each output its "
                                   "own file")
         seen.append((what, p))

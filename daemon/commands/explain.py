@@ -26,14 +26,13 @@ import argparse
 import json
 import logging
 import math
-import os
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_dir, require_plot_extra
+from avard.core.io.outputs import check_output_dir, require_plot_extra, same_file
 from avard.daemon.commands._options import (
     add_channels_argument,
     add_model_arguments,
@@ -123,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout and not Path(args.holdout).exists():
         raise DataError(f"--holdout {args.holdout} does not exist; give the path of a second "
                         "record of the same sensor")
-    if args.holdout and os.path.samefile(args.data, args.holdout):
+    if args.holdout and same_file(args.data, args.holdout):
         # the models then "predicted" the very samples they were fitted on: a held-out gain
         # with nothing held out
         raise DataError(f"--holdout {args.holdout} is the record explained ({args.data}): give "

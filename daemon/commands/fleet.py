@@ -30,7 +30,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from avard.core.errors import DataError
-from avard.core.io.outputs import check_output_file, check_outputs_apart, check_plot_output
+from avard.core.io.outputs import (
+    check_output_file,
+    check_outputs_apart,
+    check_plot_output,
+    repeated_path,
+)
 from avard.daemon.commands._options import add_channels_argument, split_channels
 
 if TYPE_CHECKING:
@@ -73,13 +78,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _refuse_a_record_twice(paths: Sequence[str]) -> None:
     """The same record named twice (``avard fleet *.npz lab.npz``) was two sensors of the
     population: counted twice in its median and spread, with exit status 0."""
-    import os
-
-    for i, a in enumerate(paths):
-        for b in paths[i + 1:]:
-            if os.path.samefile(a, b):
-                raise DataError(f"{a} and {b} are the same record, given twice; name each "
-                                "sensor's record once")
+    twice = repeated_path(paths)
+    if twice is not None:
+        a, b = twice
+        raise DataError(f"{a} and {b} are the same record, given twice; name each sensor's "
+                        "record once")
 
 
 def _check_files(paths: Sequence[str], rate: float | None) -> None:

@@ -119,26 +119,24 @@ def _refuse_one_record_twice(paths: list[str], records: list | None = None) -> N
     """One record given twice (the same file, or a copy: the same samples) is no pair of
     sensors: separated from itself it gave a self-noise of exactly 0 and a 'common input'
     that was the sensor's own noise, as a result, with exit status 0."""
-    import os
-
     import numpy as np
+    from avard.core.io.outputs import repeated_path
 
+    def refuse(a: str, b: str, why: str) -> None:
+        raise DataError(f"{a} and {b} are {why}: separate needs the records of 2 or 3 "
+                        "different sensors on one bed")
+
+    if records is None:
+        # a missing or unreadable path is no repeat: its read says what is wrong with it
+        twice = repeated_path(paths)
+        if twice is not None:
+            refuse(str(twice[0]), str(twice[1]), "the same file")
+        return
     for i in range(len(paths)):
         for j in range(i + 1, len(paths)):
-            a, b = paths[i], paths[j]
-            if records is None:
-                try:
-                    same = os.path.samefile(a, b)
-                except OSError:
-                    continue             # a missing or unreadable path: its read says so
-                why = "the same file"
-            else:
-                ra, rb = records[i], records[j]
-                same = ra.accel.shape == rb.accel.shape and np.array_equal(ra.accel, rb.accel)
-                why = "the same samples (a copy of one record?)"
-            if same:
-                raise DataError(f"{a} and {b} are {why}: separate needs the records of "
-                                "2 or 3 different sensors on one bed")
+            ra, rb = records[i], records[j]
+            if ra.accel.shape == rb.accel.shape and np.array_equal(ra.accel, rb.accel):
+                refuse(paths[i], paths[j], "the same samples (a copy of one record?)")
 
 
 def _names_of(paths: list[str], recorded: list[str | None]) -> list[str]:
