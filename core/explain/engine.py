@@ -433,11 +433,14 @@ def _used(fit: NoiseFit, tau: NDArray) -> NDArray[np.bool_]:
 Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
-def _why_unused(t: NDArray | None) -> str:
-    """Why a temperature channel's slow view cannot drive the thermal model."""
-    if t is None or not np.all(np.isfinite(t)):
+def _why_unused(t: NDArray | None) -> str | None:
+    """Why a temperature channel's slow view cannot drive the thermal model, or None where
+    it can (every block has a value, and they vary)."""
+    if t is None or not len(t) or not np.all(np.isfinite(t)):
         return "fewer than two readings"
-    return f"one value throughout ({float(t[0]):.4g} °C): nothing to regress on"
+    if not np.ptp(t) > 0:
+        return f"one value throughout ({float(t[0]):.4g} °C): nothing to regress on"
+    return None
 
 
 def _unknown_temperature(temperature: str, meta: dict[str, Any]) -> None:
@@ -537,12 +540,11 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     stuck = [[(x.start_s, x.end_s) for x in screen.stretches
               if x.channel == nm and x.kind == "stuck"] for nm in tnames] if screen else []
     y_slow, t_slow = slow.finish(stuck, rate_b)
-    t_ok = [j for j in range(len(tnames))
-            if t_slow is not None and np.all(np.isfinite(t_slow[:, j]))
-            and np.ptp(t_slow[:, j]) > 0 and temperature in (None, tnames[j])]
-    unused = {tnames[j]: _why_unused(None if t_slow is None else t_slow[:, j])
-              for j in range(len(tnames))
-              if j not in t_ok and temperature in (None, tnames[j])}
+    # the channels asked for (all, or ``--temperature``'s), each usable or said why not
+    why = {j: _why_unused(None if t_slow is None else t_slow[:, j])
+           for j in range(len(tnames)) if temperature in (None, tnames[j])}
+    t_ok = [j for j, w in why.items() if w is None]
+    unused = {tnames[j]: w for j, w in why.items() if w is not None}
     t_allan: dict[str, Any] = {}
     if t_slow is not None and t_ok and len(t_slow) >= 16:
         sa = StreamingAllan(len(t_ok), rate_b, names=[tnames[j] for j in t_ok])

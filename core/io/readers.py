@@ -466,16 +466,22 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
         line0 += len(lines)
 
 
-def _refuse_a_hole(t: NDArray, last_t: float, rate: float, done: int, p: Path) -> None:
-    """A jump of the t column past 1.5 sample spacings is missing samples: read end to end,
-    the hole would become a step or a shift in time that nothing records. A CSV carries no gap
-    records, so it is refused in one line (a recording carries its gaps)."""
-    tt = t if not math.isfinite(last_t) else np.concatenate([[last_t], t])
+def _check_times(t: NDArray, last_t: float, rate: float, done: int, p: Path) -> None:
+    """A chunk's t column (``last_t``: the chunk before's last time, −inf for the first)
+    strictly increasing, and without a jump past 1.5 sample spacings: that is missing
+    samples, and read end to end the hole would become a step or a shift in time that
+    nothing records. A CSV carries no gap records, so it is refused in one line (a
+    recording carries its gaps)."""
+    first = math.isfinite(last_t)
+    tt = np.concatenate([[last_t], t]) if first else t
     dt = np.diff(tt)
+    if np.any(dt <= 0):
+        raise DataError(f"{p}: the t column does not increase near sample {done}; times must "
+                        "be strictly increasing")
     holes = np.flatnonzero(dt > 1.5 / rate)
     if len(holes):
         k = int(holes[0])
-        i = done + k - (0 if not math.isfinite(last_t) else 1)
+        i = done + k - (1 if first else 0)    # the sample before the hole, from 0
         gap = float(dt[k])
         raise DataError(f"{p}: the t column jumps by {gap:.6g} s after t = {tt[k]:.6g} s "
                         f"(sample {i + 1}) where its spacing is {1 / rate:.3g} s: about "
@@ -532,10 +538,7 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
             for _, a in itertools.chain([first], chunks):
                 if lay["t"] is not None and rate_hz is None:
                     t = a[:, lay["t"]]
-                    if t[0] <= last_t or np.any(np.diff(t) <= 0):
-                        raise DataError(f"{p}: the t column does not increase near sample "
-                                        f"{done}; times must be strictly increasing")
-                    _refuse_a_hole(t, last_t, rate, done, p)
+                    _check_times(t, last_t, rate, done, p)
                     last_t = float(t[-1])
                 acc = a[:, lay["accel"]]
                 _check_finite(acc, done, str(p))
