@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from avard.core.allan.noise_id import check_noise_id
@@ -62,7 +62,7 @@ if TYPE_CHECKING:
 # peak (measured 190 → 129 MB peak for a 60 h, 3-axis analyze).
 
 
-__all__ = ["AnalyzeOptions", "analyze"]
+__all__ = ["AnalyzeOptions", "FirstPassTap", "analyze"]
 
 #: A progress callback: (samples read, total or None).
 ProgressFn = Callable[[int, int | None], None]
@@ -129,9 +129,38 @@ def _accel(source: RecordSource, block: int, columns: Sequence[int] | None,
         yield a, end
 
 
+class FirstPassTap(Protocol):
+    """What a caller sees of the record on analyze's first pass, so that it need not read
+    the record again (``avard explain``'s slow view): every block as the pass reads it,
+    every accel column and the temperatures (each reading on its row, NaN between), after
+    the input screen when the source is screened; ``end`` once the pass has read the whole
+    record. A parallel analysis (worker processes read the chunks) feeds no tap: ``end`` is
+    then never called, and the caller reads the record itself."""
+
+    def update(self, accel: NDArray[np.float64], temp: NDArray[np.float64] | None) -> None: ...
+
+    def end(self) -> None: ...
+
+
+def _tapped(source: RecordSource, block: int, tap: FirstPassTap
+            ) -> Iterator[tuple[NDArray[np.float64], bool]]:
+    """The first pass's blocks with every column and the temperatures, each shown to ``tap``
+    before the pass takes its columns (``_Pass``'s ``take``); ``tap.end()`` after the last."""
+    for a, t, end in source.blocks(block, columns=None, temperature=True, verify=True):
+        tap.update(a, t)
+        yield a, end
+    tap.end()
+
+
+def _take(chans: list[int], info: RecordInfo) -> list[int] | None:
+    """The columns a pass takes of blocks holding every column: None (the block itself, no
+    copy) when it takes them all."""
+    return None if chans == list(range(len(info.names))) else chans
+
+
 @one_blas_thread  # the fit and the spectrum too, not only the Allan pass (core/blas.py)
 def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
-            progress: ProgressFn | None = None) -> Analysis:
+            progress: ProgressFn | None = None, tap: FirstPassTap | None = None) -> Analysis:
     """Per-channel AVAR and spectrum of ``source`` (``core.io.source.open_record``, or a
     ``StreamSource`` of blocks from anywhere), and the noise fit, as ``options`` say.
 
@@ -142,13 +171,17 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     ``cascade`` estimator, is read once with every channel at a time. The fit models the
     record's own low-pass corner (``RecordInfo.filter_corner_hz``) with ``"auto"``, whatever
     path the blocks took.
+
+    ``tap``: shown every block of the first serial pass (``FirstPassTap``), which then reads
+    every column and the temperatures and takes its own channels from them: the same pass,
+    the same results.
     """
     check_noise_id(options.noise_id)
     if options.screen and not isinstance(source, ScreenedSource):
         # the input screen (core/io/screen.py): glitches and shocks cut out as gaps, said in
         # the results; explain screens once itself and hands analyze the screened blocks
         screened = ScreenedSource(source)
-        an = analyze(screened, options, progress=progress)
+        an = analyze(screened, options, progress=progress, tap=tap)
         an.meta["screen"] = screened.log
         return an
     info = source.info
@@ -158,8 +191,9 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
         total = _count_rows(info.source)
     block = options.block
     if options.estimator != "oadev" or not source.rereadable or total is None:
-        return _analyze_passes(info, total, [(sel, _accel(source, block, sel), None)],
-                               options=options, progress=progress)
+        one: _Pass = ((sel, _accel(source, block, sel), None) if tap is None
+                      else (sel, _tapped(source, block, tap), _take(sel, info)))
+        return _analyze_passes(info, total, [one], options=options, progress=progress)
     workers = _workers(options.workers, int(total))
     if info.format is not RecordFormat.NPZ:
         workers = 1  # a CSV's length is only bounded; a recording's gaps are found as it is read
@@ -168,6 +202,9 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     groups = oadev_pass_groups(sel, int(total))
     passes: list[_Pass] = [(g, _accel(source, block, g, verify=k == 0), None)
                            for k, g in enumerate(groups)]
+    if tap is not None:
+        # the first pass reads every column anyway when the screen judges them all
+        passes[0] = (groups[0], _tapped(source, block, tap), _take(groups[0], info))
 
     def reread(column: int) -> _Blocks:
         return _accel(source, block, [column], verify=False)

@@ -464,31 +464,62 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     if temperature is not None and temperature not in (meta.get("temperature_names") or []):
         _unknown_temperature(temperature, meta)
     # The base is `avard analyze` of the record itself, the same call: the same passes (one
-    # per channel group whose OADEV histories fit its budget, so the same peak memory: one
-    # pass over every channel, as explain_stream must do with blocks from anywhere, held all
-    # axes' histories at once, 3× analyze's peak on a 60 h record), then one more read of the
-    # record for the slow view, which keeps only block means. When analyze would read every
-    # channel in one pass anyway (``_one_pass``), that pass feeds the slow view too.
-    base = None
-    if source.rereadable and not _one_pass(source, options):
-        base = analyze(source, options, progress=progress)
+    # per channel group whose OADEV histories fit its budget, so the same peak memory; one
+    # pass over every channel, as explain_stream must do with blocks from anywhere, would
+    # hold all axes' histories at once, 3x analyze's peak on a 60 h record). Its first pass
+    # reads every column and the temperatures through the one screen and feeds the slow
+    # view (``FirstPassTap``): the record is read, screened and its temperatures decoded
+    # once. Only a parallel analysis, whose workers read the chunks, leaves the slow view to
+    # one more read.
+    if not source.rereadable:
+        return explain_stream(source, options, holdout=holdout, progress=progress,
+                              stage=stage)
+    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
+    tap = _SlowTap(source.info.rate_hz, source.info.n_samples, len(source.info.names),
+                   len(source.info.temperature_names))
+    an = analyze(screened, options, progress=progress, tap=tap)
+    if not tap.complete:
         if stage is not None:
             stage("reading the record's slow view (block means)")
-    return explain_stream(source, options, holdout=holdout, progress=progress, stage=stage,
-                          base=base)
+        # a fresh screen: the parallel chunks' verdicts told the log nothing of the
+        # temperatures, which this read screens
+        return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
+                              options, holdout=holdout, progress=progress, stage=stage,
+                              base=an)
+    an.meta["screen"] = screened.log
+    return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
+                      stage)
 
 
-def _one_pass(source: RecordSource, options: ExplainOptions) -> bool:
-    """Whether analyze would read this record in one pass of every channel on one process:
-    then the slow view is collected on that pass (``explain_stream`` hands analyze the same
-    screened blocks; the result is the same, the record is read and screened once, not twice)
-    at the same peak memory."""
-    n = source.info.n_samples
-    if n is None or options.estimator != "oadev" or options.workers != 1:
-        return False
-    from avard.core.analysis.engine import oadev_pass_groups
+class _SlowTap:
+    """The slow view fed by analyze's first pass (``analysis.engine.FirstPassTap``), or by
+    ``explain_stream``'s blocks; ``complete`` once it has seen the whole record."""
 
-    return len(oadev_pass_groups(list(range(len(source.info.names))), int(n))) == 1
+    def __init__(self, rate_hz: float, n_samples: int | None, n_axes: int,
+                 n_temps: int) -> None:
+        self.slow = SlowView(block_size(float(rate_hz), n_samples), n_axes, n_temps)
+        self.complete = False
+
+    def update(self, accel: NDArray[np.float64], temp: NDArray[np.float64] | None) -> None:
+        a = np.asarray(accel, dtype=float).reshape(len(accel), -1)
+        if self.slow.n_temps and temp is not None and np.asarray(temp).size:
+            self.slow.update(a, temp)
+        else:
+            self.slow.update(a, None)
+
+    def end(self) -> None:
+        self.complete = True
+
+
+def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str, Any]
+          ) -> tuple[dict[str, Any], Iterable[Any]] | None:
+    """The held-out record's description and its blocks (read when the held-out measure
+    asks), checked against this record's."""
+    if holdout is None:
+        return None
+    held = holdout.info.as_meta(), holdout.blocks(options.block)
+    check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
+    return held
 
 
 @one_blas_thread
@@ -498,45 +529,46 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     """``explain_file`` on blocks from anywhere (``core.io.source.StreamSource``: accel
     (n, C) m/s², temperature (n, k) °C or None, segment end). ``holdout``: a second record of
     the same sensor. ``base``: analyze's result for these blocks when the caller has it
-    (``explain_file``); the blocks then feed only the slow view."""
+    (``explain_file`` after a parallel analysis); the blocks then feed only the slow view."""
     # one screen for the slow view and the analysis: analyze is handed the screened blocks
     screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
     meta = source.info.as_meta()
     blocks = screened.blocks(options.block)
-    temperature, heldout = options.temperature, options.heldout
-    held = None
-    if holdout is not None:
-        held = holdout.info.as_meta(), holdout.blocks(options.block)
-    if held is not None:
-        check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
-    rate = float(meta["rate_hz"])
-    names = list(meta["names"])
+    held = _held(holdout, options, meta)
     tnames = list(meta.get("temperature_names") or [])
-    if temperature is not None and temperature not in tnames:
-        _unknown_temperature(temperature, meta)
-    b = block_size(rate, meta.get("n_samples"))
-    slow = SlowView(b, len(names), len(tnames))
+    if options.temperature is not None and options.temperature not in tnames:
+        _unknown_temperature(options.temperature, meta)
+    tap = _SlowTap(float(meta["rate_hz"]), meta.get("n_samples"), len(meta["names"]),
+                   len(tnames))
 
     def tee() -> Iterator[tuple[NDArray[np.float64], bool]]:
         for accel, temp, end in blocks:
             a = np.asarray(accel, dtype=float).reshape(len(accel), -1)
-            if tnames and temp is not None and np.asarray(temp).size:
-                slow.update(a, temp)
-            else:
-                slow.update(a, None)
+            tap.update(a, temp)
             yield a, end
 
     if base is None:
         an = analyze(StreamSource(source.info, ((a, None, end) for a, end in tee())),
                      replace(options, screen=False), progress=progress)
+        an.meta["screen"] = screened.log
     else:
         an = base
         for _ in tee():
             pass
+    return _explained(an, tap.slow, screened.log, meta, options, held, stage)
+
+
+def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],
+               options: ExplainOptions, held: tuple[dict[str, Any], Iterable[Any]] | None,
+               stage: StageFn | None) -> Explanation:
+    """The explanation of ``an`` (analyze's result) from the slow view of the same screened
+    blocks (``screen``: that screen's log), whichever read fed it."""
+    temperature, heldout = options.temperature, options.heldout
+    rate = float(meta["rate_hz"])
+    names = list(meta["names"])
+    tnames = list(meta.get("temperature_names") or [])
+    b = slow.b
     rate_b = rate / b
-    screen: ScreenLog | None = screened.log
-    if base is None:
-        an.meta["screen"] = screen
     stuck = [[(x.start_s, x.end_s) for x in screen.stretches
               if x.channel == nm and x.kind == "stuck"] for nm in tnames] if screen else []
     y_slow, t_slow = slow.finish(stuck, rate_b)
