@@ -30,7 +30,7 @@ import os
 import re
 import zlib
 from array import array
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -385,6 +385,10 @@ _READ_BYTES = 120 << 10
 _SKIP_BYTES = 1 << 14
 #: Blocks of the read plan looked at together by the fast path.
 _PLAN_WINDOW = 1 << 14
+#: Bytes of a segment whose temperature records are decoded together (a mapped window: its
+#: pages are dropped from the process after it, or when the file is done; an hourly
+#: segment is one window).
+_TEMP_WINDOW = 32 << 20
 
 #: Record kinds that hold no samples and no sample index the scan needs.
 _NO_SAMPLES = frozenset({"temp", "avar", "checkpoint", "status"})
@@ -928,39 +932,35 @@ class RecordingSource:
     def _temperature_tables(self) -> list[tuple[NDArray[np.int64], NDArray[np.float64]]]:
         """Each temperature channel's readings (sample index, °C) in index order, one per
         index (a later record wins at an equal index, as ``load_recording``'s hold), a failed
-        read (None) no reading: read by one more walk the first time a consumer asks for
-        temperatures (analyze never does), from the byte ranges where the scan skipped them
-        (``_placed_records``: the raw blocks are not read again); without those, by one more
-        walk that decodes the temperature records only. About one reading a second a
-        channel: 60 h of three channels is ~10 MB here."""
+        read (None) no reading: read the first time a consumer asks for temperatures
+        (analyze never does), from the byte ranges where the scan skipped them
+        (``_placed_readings``: the raw blocks are not read again, the records decoded in
+        bulk); without those, by one more walk that decodes the temperature records only.
+        About one reading a second a channel: 60 h of three channels is ~10 MB here."""
         if self._temps is None:
-            readings: dict[str, tuple[array[int], array[float]]] = {}
-            places = self._places
-            recs = (self._placed_records(places) if places is not None and places.ok
-                    else self._walk(skip=_NOT_TEMPERATURE))
             # the runs whose header was read: the walk drops a headerless run's records (its
             # samples are reported lost), and its readings, keyed by index alone, would land
             # on another run's rows
             summary = self.info.recording
             known = None if summary is None else {r.run for r in summary.runs}
-            for rec in recs:
-                if rec["kind"] != "temp" or (self.runs is not None
-                                             and rec["run"] not in self.runs) or (
-                        known is not None and rec["run"] not in known):
-                    continue
-                i0 = int(rec["i0"])
-                for name, value in zip(rec["names"], rec["values_c"], strict=True):
-                    if value is not None:
-                        got = readings.get(name)
-                        if got is None:
-                            got = readings[name] = (array("q"), array("d"))
-                        got[0].append(i0)
-                        got[1].append(float(value))
+
+            def keep(run: str) -> bool:
+                return ((self.runs is None or run in self.runs)
+                        and (known is None or run in known))
+
+            chunks: dict[str, tuple[list[NDArray[np.int64]], list[NDArray[np.float64]]]] = {}
+            places = self._places
+            got = (self._placed_readings(places, keep) if places is not None and places.ok
+                   else self._walked_readings(keep))
+            for name, idx, vals in got:
+                have = chunks.setdefault(name, ([], []))
+                have[0].append(idx)
+                have[1].append(vals)
             self._temps = []
             for name in self.info.temperature_names:
-                idx, vals = readings.pop(name, (array("q"), array("d")))
-                st = np.frombuffer(idx, dtype=np.int64) if len(idx) else np.zeros(0, np.int64)
-                v = np.frombuffer(vals, dtype=np.float64) if len(vals) else np.zeros(0)
+                ii, vv = chunks.pop(name, ([], []))
+                st = np.concatenate(ii) if ii else np.zeros(0, np.int64)
+                v = np.concatenate(vv) if vv else np.zeros(0)
                 order = np.argsort(st, kind="stable")
                 st, v = st[order], v[order]
                 last = np.ones(len(st), dtype=bool)   # the last record at each index wins
@@ -968,59 +968,145 @@ class RecordingSource:
                 self._temps.append((st[last], v[last]))
         return self._temps
 
-    def _placed_records(self, places: _TempPlaces) -> Iterator[dict[str, Any]]:
-        """The temperature records in the ranges the scan noted (``_TempPlaces``), in walk
-        order: the ranges of a file read a run at a time (at most ``_READ_BYTES`` from the
-        first range's start), each frame's kind peeked, a temperature record's CRC checked
-        again and decoded (``_temp_record``), every other frame stepped over."""
-        import msgpack
-        from avard.core.io import frames
-        from avard.core.io.recording import FRAME_HEADER
+    def _walked_readings(self, keep: Callable[[str], bool]
+                         ) -> Iterator[tuple[str, NDArray[np.int64], NDArray[np.float64]]]:
+        """(channel, indices, °C) of every reading, in walk order, by a walk that decodes the
+        temperature records only (no read plan, or places the scan could not note)."""
+        readings: dict[str, tuple[array[int], array[float]]] = {}
+        for rec in self._walk(skip=_NOT_TEMPERATURE):
+            if rec["kind"] != "temp" or not keep(rec["run"]):
+                continue
+            i0 = int(rec["i0"])
+            for name, value in zip(rec["names"], rec["values_c"], strict=True):
+                if value is not None:
+                    got = readings.get(name)
+                    if got is None:
+                        got = readings[name] = (array("q"), array("d"))
+                    got[0].append(i0)
+                    got[1].append(float(value))
+        for name, (idx, vals) in readings.items():
+            yield (name, np.frombuffer(idx, dtype=np.int64) if len(idx) else np.zeros(0, np.int64),
+                   np.frombuffer(vals, dtype=np.float64) if len(vals) else np.zeros(0))
 
-        hdr = FRAME_HEADER.size
+    def _placed_readings(self, places: _TempPlaces, keep: Callable[[str], bool]
+                         ) -> Iterator[tuple[str, NDArray[np.int64], NDArray[np.float64]]]:
+        """(channel, indices, °C) of the readings in the ranges the scan noted
+        (``_TempPlaces``), each channel's in walk order: a file mapped, its ranges taken a
+        window at a time, the frames in them found, each temperature frame's CRC checked
+        again and the records decoded together (``tempscan``: the service's layout in bulk,
+        any other through ``_temp_record``), every other frame stepped over."""
+        import mmap
+
+        import msgpack
+        from avard.core.io import frames, tempscan
+
         fidx = np.frombuffer(places.fidx, dtype=np.uint16)
         start = np.frombuffer(places.start, dtype=np.int64)
         end = np.frombuffer(places.end, dtype=np.int64)
+        kind = np.frombuffer(tempscan.TEMP_KIND, dtype=np.uint8)
+        page = mmap.PAGESIZE
         for a0, b0 in _file_spans(fidx):
-            k = int(fidx[a0])
-            f = self.files[k]
+            f = self.files[int(fidx[a0])]
             fd = _open_segment(f)
+            try:
+                if os.fstat(fd).st_size < int(end[a0:b0].max()):
+                    raise DataError(f"{f}: shorter than when it was opened; the recording "
+                                    "changed while it was read (analyse a copy)")
+                mm = mmap.mmap(fd, 0, access=mmap.ACCESS_READ)
+            finally:
+                os.close(fd)
+            buf = np.frombuffer(mm, dtype=np.uint8)
+            view = memoryview(mm)
             try:
                 a = a0
                 while a < b0:
                     c = max(a + 1, a + int(np.searchsorted(end[a:b0], int(start[a])
-                                                          + _READ_BYTES, side="right")))
-                    at = int(start[a])
-                    size = int(end[c - 1]) - at
-                    data = os.pread(fd, size, at)
-                    if len(data) != size:
-                        raise DataError(f"{f}: shorter than when it was opened; the "
-                                        "recording changed while it was read (analyse a "
-                                        "copy)")
-                    for p, q in zip((start[a:c] - at).tolist(), (end[a:c] - at).tolist(),
-                                    strict=True):
-                        while p < q:
-                            n, crc = FRAME_HEADER.unpack_from(data, p)
-                            body = p + hdr
-                            if body + n > q:
-                                raise DataError(f"{f}: a frame at byte {at + p} is not where "
-                                                "the scan found one; the recording changed "
-                                                "while it was read (analyse a copy)")
-                            lead = data[body] if n else 0      # a fixmap's: the usual layout
-                            if (data.startswith(_TEMP_KIND, body + 1) if 0x80 <= lead <= 0x8F
-                                    else _peek_kind(data[body:body + min(n, 48)]) == "temp"):
-                                payload = data[body:body + n]
-                                if zlib.crc32(payload) & 0xFFFFFFFF != crc:
-                                    raise DataError(f"{f}: the frame at byte {at + p} no "
-                                                    "longer checks; the recording changed "
-                                                    "while it was read (analyse a copy)")
-                                rec = _temp_record(payload, msgpack, frames)
-                                if rec is not None:
-                                    yield rec
-                            p = body + n
+                                                          + _TEMP_WINDOW, side="right")))
+                    try:
+                        fs = tempscan.frames_in(buf, start[a:c], end[a:c])
+                    except ValueError as exc:
+                        raise DataError(f"{f}: a frame at byte {exc.args[0]} is not where the "
+                                        "scan found one; the recording changed while it was "
+                                        "read (analyse a copy)") from None
+                    yield from self._window_readings(buf, view, fs, kind, keep, f,
+                                                     msgpack, frames)
+                    if c < b0 and hasattr(mm, "madvise"):
+                        # the pages read leave this process's RSS (the last window's go when
+                        # the file is closed)
+                        lo = int(start[a]) // page * page
+                        mm.madvise(mmap.MADV_DONTNEED, lo, int(end[c - 1]) - lo)
                     a = c
             finally:
-                os.close(fd)
+                del buf
+                view.release()
+                try:
+                    mm.close()
+                except BufferError:   # a view still held (an error on the way): the
+                    pass              # mapping goes with it
+
+    @staticmethod
+    def _window_readings(buf: NDArray[np.uint8], view: memoryview, fs: Any,
+                         kind: NDArray[np.uint8], keep: Callable[[str], bool], f: Path,
+                         msgpack: Any, frames: Any
+                         ) -> Iterator[tuple[str, NDArray[np.int64], NDArray[np.float64]]]:
+        """The readings of one window's frames (``tempscan.FrameSet``), per channel in frame
+        order."""
+        from avard.core.io import tempscan
+
+        last = len(buf) - 1
+        lead = buf[np.minimum(fs.body, last)]
+        fixmap = (lead >= 0x80) & (lead <= 0x8F) & (fs.n > 0)
+        temp = fixmap & (fs.n > len(kind)) & np.all(
+            buf[np.minimum(fs.body[:, None] + 1 + np.arange(len(kind)), last)] == kind, axis=1)
+        for k in np.flatnonzero(~fixmap & (fs.n > 0)).tolist():   # not the usual map header
+            b = int(fs.body[k])
+            temp[k] = _peek_kind(bytes(view[b:b + min(int(fs.n[k]), 48)])) == "temp"
+        at = np.flatnonzero(temp)
+        for b, n, crc in zip(fs.body[at].tolist(), fs.n[at].tolist(), fs.crc[at].tolist(),
+                             strict=True):
+            if zlib.crc32(view[b:b + n]) & 0xFFFFFFFF != crc:
+                raise DataError(f"{f}: the frame at byte {b - 8} no longer checks; the "
+                                "recording changed while it was read (analyse a copy)")
+        tr = tempscan.service_readings(buf, fs, temp)
+        names = list(tr.names)
+        frame, index, value = [tr.frame], [tr.index], [tr.value]
+        name = [tr.name]
+        run_ok = [np.array([keep(r) for r in tr.runs], dtype=bool)[tr.run]]
+        # the frames of another layout, decoded one by one as the walk would
+        o_frame: list[int] = []
+        o_index: list[int] = []
+        o_value: list[float] = []
+        o_name: list[int] = []
+        o_ok: list[bool] = []
+        for k in np.flatnonzero(temp & ~tr.decoded).tolist():
+            b = int(fs.body[k])
+            rec = _temp_record(bytes(view[b:b + int(fs.n[k])]), msgpack, frames)
+            if rec is None:
+                continue
+            ok = keep(rec["run"])
+            for nm, v in zip(rec["names"], rec["values_c"], strict=True):
+                if v is not None:
+                    if nm not in names:
+                        names.append(nm)
+                    o_frame.append(k)
+                    o_index.append(int(rec["i0"]))
+                    o_value.append(float(v))
+                    o_name.append(names.index(nm))
+                    o_ok.append(ok)
+        if o_frame:
+            frame.append(np.array(o_frame, dtype=np.int64))
+            index.append(np.array(o_index, dtype=np.int64))
+            value.append(np.array(o_value, dtype=np.float64))
+            name.append(np.array(o_name, dtype=np.int64))
+            run_ok.append(np.array(o_ok, dtype=bool))
+        fr = np.concatenate(frame)
+        order = np.argsort(fr, kind="stable")      # frame order, a frame's readings in order
+        idx, val = np.concatenate(index)[order], np.concatenate(value)[order]
+        nm_of, ok_of = np.concatenate(name)[order], np.concatenate(run_ok)[order]
+        for j, nm in enumerate(names):
+            sel = (nm_of == j) & ok_of
+            if sel.any():
+                yield nm, idx[sel], val[sel]
 
     def _walked(self) -> Iterator[_Piece]:
         """The raw pieces in walk order, by the general path: every record decoded and

@@ -124,13 +124,13 @@ def test_explain_reads_the_record_as_often_as_analyze(coupled, passes, monkeypat
     temperature records are decoded once."""
     rec, _npz_path = coupled
     decoded = Counter[str]()
-    placed = RecordingSource._placed_records
+    placed = RecordingSource._placed_readings
 
-    def counted_placed(self: RecordingSource, places: Any) -> Any:
+    def counted_placed(self: RecordingSource, places: Any, keep: Any) -> Any:
         decoded["tables"] += 1
-        return placed(self, places)
+        return placed(self, places, keep)
 
-    monkeypatch.setattr(RecordingSource, "_placed_records", counted_placed)
+    monkeypatch.setattr(RecordingSource, "_placed_readings", counted_placed)
     by_analyze = _Counted(open_record(rec))
     analyze(by_analyze, OPTIONS)
     by_explain = _Counted(open_record(rec))
