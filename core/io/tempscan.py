@@ -100,111 +100,52 @@ _MAX_ROW = 512
 _FEW = 16
 
 
-class _Cursor:
-    """Reading the service's layout in many frames at once, each frame's payload a row of
-    ``rows`` (padded past its end with whatever follows): a cursor per frame, ``ok`` False
-    for a frame once anything is not where the layout puts it (its later reads are then
-    meaningless but harmless: every index is kept inside the row)."""
-
-    def __init__(self, rows: NDArray[np.uint8], n: NDArray[np.int64]) -> None:
-        self.rows = rows
-        self.w = rows.shape[1]
-        self.ar = np.arange(len(rows))
-        self.n = n
-        self.c = np.zeros(len(rows), dtype=np.int64)
-        self.ok = np.ones(len(rows), dtype=bool)
-
-    def byte(self, k: int = 0) -> NDArray[np.int64]:
-        return self.rows[self.ar, np.minimum(self.c + k, self.w - 1)].astype(np.int64)
-
-    def take(self, k: int, w: int) -> NDArray[np.uint8]:
-        """``w`` bytes from each cursor + ``k``: a slice where the cursors agree (the usual
-        case: one run, one layout), else gathered."""
-        if len(self.c) and w:
-            c0 = int(self.c[0]) + k
-            if c0 + w <= self.w and bool(np.all(self.c == self.c[0])):
-                return self.rows[:, c0:c0 + w]
-        return self.rows[self.ar[:, None], np.minimum(self.c[:, None] + k + np.arange(w),
-                                                      self.w - 1)]
-
-    def expect(self, key: bytes) -> None:
-        self.ok &= np.all(self.take(0, len(key)) == np.frombuffer(key, dtype=np.uint8), axis=1)
-        self.c = self.c + len(key)
-
-    def uint(self) -> NDArray[np.int64]:
-        """A msgpack unsigned integer (positive fixint, uint 8/16/32/64 below 2^63)."""
-        s = self.byte()
-        width = np.select([s < 0x80, s == 0xCC, s == 0xCD, s == 0xCE, s == 0xCF],
-                          [1, 2, 3, 5, 9], 0)
-        self.ok &= width > 0
-        val = np.where(s < 0x80, s, 0).astype(np.uint64)
-        for w in (2, 3, 5, 9):
-            sel = np.flatnonzero(width == w)
-            if len(sel):
-                cols = np.minimum(self.c[sel, None] + 1 + np.arange(w - 1), self.w - 1)
-                big = self.rows[sel[:, None], cols].astype(np.uint64)
-                v = np.zeros(len(sel), dtype=np.uint64)
-                for j in range(w - 1):
-                    v = (v << np.uint64(8)) | big[:, j]
-                val[sel] = v
-        self.ok &= val < np.uint64(1 << 63)
-        self.c = self.c + width
-        return val.astype(np.int64)
-
-    def string(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """A msgpack fixstr or str 8: (offset of its bytes in the row, length)."""
-        s = self.byte()
-        fix = (s >= 0xA0) & (s <= 0xBF)
-        self.ok &= fix | (s == 0xD9)
-        size = np.where(fix, s & 0x1F, self.byte(1))
-        at = self.c + np.where(fix, 1, 2)
-        self.c = at + size
-        return at, size
-
-    def skip_float64(self) -> None:
-        self.ok &= self.byte() == 0xCB
-        self.c = self.c + 9
+#: Longest frame read in the service's layout (its records are ~150 bytes); a longer one
+#: goes to the general decode
+_MAX_ROW = 512
+#: Most distinct strings told apart by comparing rows with each one; beyond, by sorting
+_FEW = 16
 
 
-def _strings(rows: NDArray[np.uint8], at: NDArray[np.int64], size: NDArray[np.int64]
-             ) -> tuple[NDArray[np.int64], list[str], NDArray[np.bool_]]:
-    """Each string's position in the list of the distinct ones, and whether it is UTF-8
-    (a frame whose string is not goes to the general decode, which refuses it). The strings
-    (a run's name, a channel's) are few: each row is compared with each distinct one."""
-    n = len(at)
-    if not n:
-        return np.zeros(0, dtype=np.int64), [], np.zeros(0, dtype=bool)
-    w = int(size.max())
-    keys = np.zeros((n, w + 1), dtype=np.uint8)
-    keys[:, 0] = size                       # a str 8's length: below 256
-    if w:
-        cur = _Cursor(rows, size)
-        cur.c = at
-        keys[:, 1:] = np.where(np.arange(w) < size[:, None], cur.take(0, w), 0)
+def _str_head(rows: NDArray[np.uint8], ar: NDArray[np.int64], at: NDArray[np.int64]
+              ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.int64]]:
+    """A msgpack fixstr or str 8 at ``at`` of each row: (whether it is one, where its bytes
+    start, their length)."""
+    w = rows.shape[1] - 1
+    s = rows[ar, np.minimum(at, w)].astype(np.int64)
+    fix = (s >= 0xA0) & (s <= 0xBF)
+    size = np.where(fix, s & 0x1F, rows[ar, np.minimum(at + 1, w)])
+    return fix | (s == 0xD9), at + np.where(fix, 1, 2), size
+
+
+def _uint_width(rows: NDArray[np.uint8], ar: NDArray[np.int64], at: NDArray[np.int64]
+                ) -> NDArray[np.int64]:
+    """Bytes of a msgpack unsigned integer at ``at`` (positive fixint, uint 8/16/32/64), 0
+    for anything else."""
+    s = rows[ar, np.minimum(at, rows.shape[1] - 1)]
+    return np.select([s < 0x80, s == 0xCC, s == 0xCD, s == 0xCE, s == 0xCF],
+                     [1, 2, 3, 5, 9], 0)
+
+
+def _distinct(sub: NDArray[np.uint8]) -> tuple[NDArray[np.int64], list[bytes]]:
+    """Each row's position in the list of the distinct rows (a run's name, a channel's: few,
+    so each row is compared with each distinct one; beyond ``_FEW``, by sorting)."""
+    n = len(sub)
     inverse = np.full(n, -1, dtype=np.int64)
-    reps: list[NDArray[np.uint8]] = []
+    reps: list[bytes] = []
     left = np.arange(n)
     while len(left) and len(reps) < _FEW:
-        rep = keys[left[0]]
-        same = np.all(keys[left] == rep, axis=1)
+        rep = sub[left[0]]
+        same = np.all(sub[left] == rep, axis=1)
         inverse[left[same]] = len(reps)
-        reps.append(rep)
+        reps.append(rep.tobytes())
         left = left[~same]
     if len(left):
-        uniq, inv = np.unique(np.ascontiguousarray(keys[left]).view(
-            np.dtype((np.void, w + 1))).ravel(), return_inverse=True)
+        keys = np.ascontiguousarray(sub[left]).view(np.dtype((np.void, sub.shape[1]))).ravel()
+        uniq, inv = np.unique(keys, return_inverse=True)
         inverse[left] = len(reps) + inv.ravel()
-        reps += [np.frombuffer(bytes(u), dtype=np.uint8) for u in uniq]
-    out: list[str] = []
-    utf8 = np.ones(len(reps), dtype=bool)
-    for k, rep in enumerate(reps):
-        raw = rep.tobytes()
-        try:
-            out.append(raw[1:1 + raw[0]].decode("utf-8"))
-        except UnicodeDecodeError:
-            out.append("")
-            utf8[k] = False
-    return inverse, out, utf8[inverse]
+        reps += [bytes(u) for u in uniq]
+    return inverse, reps
 
 
 def _rows(buf: NDArray[np.uint8], body: NDArray[np.int64], w: int) -> NDArray[np.uint8]:
@@ -225,44 +166,106 @@ def service_readings(buf: NDArray[np.uint8], fs: FrameSet, temp: NDArray[np.bool
                      ) -> TempReadings:
     """The readings of the frames ``temp`` marks (kind ``temp``) that are laid out as the
     service writes them (``frames.temp_record``: ten keys in its order, one reading, ints
-    and strings in their usual encodings, the reading a float64 or nil)."""
+    and strings in their usual encodings, the reading a float64 or nil). Each frame's
+    fields are placed from its few type bytes; frames placed alike (one run, one channel,
+    the same integer widths: a handful a file) are then checked and read together, column
+    by column."""
     cand = np.flatnonzero(temp & (buf[np.minimum(fs.body, len(buf) - 1)] == _LEAD)
                           & (fs.n > 1 + len(TEMP_KIND)) & (fs.n <= _MAX_ROW))
     n = fs.n[cand]
-    cur = _Cursor(_rows(buf, fs.body[cand], int(n.max()) if len(n) else 0), n)
-    cur.c = cur.c + 1 + len(TEMP_KIND)        # the map's lead and kind, checked by the caller
-    cur.expect(_K_V)
-    cur.ok &= cur.byte() < 0x80               # the format version, a positive fixint
-    cur.c = cur.c + 1
-    cur.expect(_K_RUN)
-    run_at, run_n = cur.string()
-    cur.expect(_K_SEQ)
-    cur.uint()
-    cur.expect(_K_I0)
-    index = cur.uint()
-    cur.expect(_K_TMONO)
-    cur.skip_float64()
-    cur.expect(_K_TREAL)
-    cur.skip_float64()
-    cur.expect(_K_NAMES)
-    name_at, name_n = cur.string()
-    cur.expect(_K_VALUES)
-    lead = cur.byte()
+    if not len(cand):
+        z = np.zeros(0, dtype=np.int64)
+        return TempReadings(z, z, np.zeros(0), z, z, [], [], np.zeros(len(fs.body), bool))
+    rows = _rows(buf, fs.body[cand], int(n.max()))
+    ar = np.arange(len(cand))
+    # where each field lies: the run after the fixed head (map, kind, v), then seq, i0, two
+    # float64 times, the name (a one-string array), the reading, the source
+    head = 1 + len(TEMP_KIND) + len(_K_V) + 1
+    ok, run_at, run_n = _str_head(rows, ar, np.full(len(ar), head + len(_K_RUN)))
+    at_seq = run_at + run_n
+    ws = _uint_width(rows, ar, at_seq + len(_K_SEQ))
+    at_i0 = at_seq + len(_K_SEQ) + ws
+    wi = _uint_width(rows, ar, at_i0 + len(_K_I0))
+    at_t = at_i0 + len(_K_I0) + wi
+    at_names = at_t + 2 * (len(_K_TMONO) + 9)
+    name_ok, name_at, name_n = _str_head(rows, ar, at_names + len(_K_NAMES))
+    at_val = name_at + name_n
+    lead = rows[ar, np.minimum(at_val + len(_K_VALUES), rows.shape[1] - 1)]
     is_nil = lead == 0xC0
-    cur.ok &= is_nil | (lead == 0xCB)
-    value = np.ascontiguousarray(cur.take(1, 8)).view(">f8").ravel().astype(np.float64)
-    cur.c = cur.c + np.where(is_nil, 1, 9)
-    cur.expect(_K_SOURCE)
-    cur.string()
-    cur.ok &= cur.c == n
-    ok = np.flatnonzero(cur.ok)
-    rows = cur.rows[ok]
-    run, runs, run_utf8 = _strings(rows, run_at[ok], run_n[ok])
-    name, names, name_utf8 = _strings(rows, name_at[ok], name_n[ok])
-    good = run_utf8 & name_utf8
-    frame = cand[ok][good]
+    at_src = at_val + len(_K_VALUES) + np.where(is_nil, 1, 9)
+    src_ok, src_at, src_n = _str_head(rows, ar, at_src + len(_K_SOURCE))
+    ok &= name_ok & src_ok & (ws > 0) & (wi > 0) & (is_nil | (lead == 0xCB)) \
+        & (src_at + src_n == n)
+    # frames placed alike: one key of their field positions (each below 512: 9 bits)
+    places = np.stack([run_at, run_n, at_seq, at_i0, wi, name_at, name_n, at_val, is_nil,
+                       at_src, src_at, src_n])
+    sel = np.flatnonzero(ok)
+    key = np.zeros(len(sel), dtype=np.int64)
+    for row in places[:, sel]:
+        key = key * 512 + np.minimum(row, 511)
+    _, group = np.unique(key, return_inverse=True)
+    group = group.ravel()
+    got_frame, got_index, got_value, got_name, got_run = [], [], [], [], []
+    names: list[str] = []
+    runs: list[str] = []
     decoded = np.zeros(len(fs.body), dtype=bool)
-    decoded[frame] = True
-    keep = ~is_nil[ok][good]
-    return TempReadings(frame[keep], index[ok][good][keep], value[ok][good][keep],
-                        name[good][keep], run[good][keep], names, runs, decoded)
+    tmono = _K_TMONO + b"\xcb"
+    treal = _K_TREAL + b"\xcb"
+    for g in range(int(group.max()) + 1 if len(group) else 0):
+        idx = sel[group == g]
+        f = idx[0]
+        p = {k: int(v[f]) for k, v in (("run_at", run_at), ("run_n", run_n), ("seq", at_seq),
+                                        ("i0", at_i0), ("wi", wi), ("name_at", name_at),
+                                        ("name_n", name_n), ("val", at_val),
+                                        ("src", at_src))}
+        sub = rows[idx]
+        # every byte the layout fixes, checked at once
+        fixed = [(head - len(_K_V) - 1, _K_V), (head, _K_RUN), (p["seq"], _K_SEQ),
+                 (p["i0"], _K_I0), (int(at_t[f]), tmono),
+                 (int(at_t[f]) + len(tmono) + 8, treal), (int(at_names[f]), _K_NAMES),
+                 (p["val"], _K_VALUES), (p["src"], _K_SOURCE)]
+        cols = np.concatenate([np.arange(c0, c0 + len(k)) for c0, k in fixed])
+        want = np.frombuffer(b"".join(k for _c, k in fixed), dtype=np.uint8)
+        good = np.all(sub[:, cols] == want, axis=1) & (sub[:, head - 1] < 0x80)
+        # the index, big-endian after its type byte (a fixint is its own value)
+        w = p["wi"]
+        if w == 1:
+            index = sub[:, p["i0"] + len(_K_I0)].astype(np.uint64)
+        else:
+            index = np.zeros(len(idx), dtype=np.uint64)
+            for j in range(w - 1):
+                index = (index << np.uint64(8)) | sub[:, p["i0"] + len(_K_I0) + 1 + j]
+        good &= index < np.uint64(1 << 63)
+        run_k, run_reps = _distinct(sub[:, p["run_at"]:p["run_at"] + p["run_n"]])
+        name_k, name_reps = _distinct(sub[:, p["name_at"]:p["name_at"] + p["name_n"]])
+        # a string that is no UTF-8 leaves its frame to the general decode (which refuses it)
+        for reps, ks, out in ((run_reps, run_k, runs), (name_reps, name_k, names)):
+            to = np.full(len(reps), -1, dtype=np.int64)
+            for r, raw in enumerate(reps):
+                try:
+                    text = raw.decode("utf-8")
+                except UnicodeDecodeError:
+                    continue
+                if text not in out:
+                    out.append(text)
+                to[r] = out.index(text)
+            ks[:] = to[ks]
+            good &= ks >= 0
+        decoded[cand[idx[good]]] = True
+        if is_nil[f]:
+            continue                      # failed reads: decoded, no reading
+        v0 = p["val"] + len(_K_VALUES) + 1
+        value = np.ascontiguousarray(sub[:, v0:v0 + 8]).view(">f8").ravel()
+        got_frame.append(cand[idx[good]])
+        got_index.append(index[good].astype(np.int64))
+        got_value.append(value[good].astype(np.float64))
+        got_name.append(name_k[good])
+        got_run.append(run_k[good])
+    if not got_frame:
+        z = np.zeros(0, dtype=np.int64)
+        return TempReadings(z, z, np.zeros(0), z, z, names, runs, decoded)
+    frame = np.concatenate(got_frame)
+    order = np.argsort(frame, kind="stable")
+    return TempReadings(frame[order], np.concatenate(got_index)[order],
+                        np.concatenate(got_value)[order], np.concatenate(got_name)[order],
+                        np.concatenate(got_run)[order], names, runs, decoded)
