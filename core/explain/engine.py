@@ -478,6 +478,7 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     tap = _SlowTap(source.info.rate_hz, source.info.n_samples, len(source.info.names),
                    len(source.info.temperature_names))
     an = analyze(screened, options, progress=progress, tap=tap)
+    an.meta["screen"] = screened.log      # as analyze says it of a source it screens itself
     if not tap.complete:
         if stage is not None:
             stage("reading the record's slow view (block means)")
@@ -486,7 +487,6 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
         return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
                               options, holdout=holdout, progress=progress, stage=stage,
                               base=an)
-    an.meta["screen"] = screened.log
     return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
                       stage)
 

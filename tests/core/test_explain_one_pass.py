@@ -142,3 +142,27 @@ def test_explain_reads_the_record_as_often_as_analyze(coupled, passes, monkeypat
     assert sum(n for (c, _t), n in by_analyze.reads.items() if c is None) == 1
     assert len(by_analyze.reads) >= (1 if n_passes == 1 else 2)
     assert decoded["tables"] == 1                   # explain's; analyze reads none
+
+
+def test_after_a_parallel_analysis_the_slow_view_is_read_as_before(coupled, monkeypatch
+                                                                    ) -> None:
+    """Worker processes read an .npz's chunks, so analyze's pass feeds no slow view: explain
+    then reads it once more, as the two-read path did, and explains alike."""
+    from dataclasses import replace
+
+    from avard.core.explain import engine as explain_engine
+
+    _rec, npz = coupled
+    options = replace(OPTIONS, workers=2)
+    fed = Counter[str]()
+    end = explain_engine._SlowTap.end
+
+    def counted_end(self: Any) -> None:
+        fed["end"] += 1
+        end(self)
+
+    monkeypatch.setattr(explain_engine._SlowTap, "end", counted_end)
+    one = explain_file(open_record(npz), options)
+    assert fed["end"] == 0          # the parallel pass fed no slow view
+    base = analyze(open_record(npz), options)
+    assert _json(one) == _json(explain_stream(open_record(npz), options, base=base))
