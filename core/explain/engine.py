@@ -11,9 +11,11 @@ Streamed, in bounded memory:
    estimator and EDF, its line finder (``analysis.spectrum.find_lines``), its
    ``fit.fit_noise`` GLS with the modelled covariance, presence test, intervals and upper
    limits. Sinusoids found there are part of the base model.
-2. **Slow view.** On the way (a file: on one more read, unless analyze reads every channel in
-   one pass anyway), block means of every axis and temperature channel are kept (blocks of
-   2^k samples, at least ``BLOCK_S``, at most ``MAX_POINTS`` per channel: ≈ 2 MB a channel).
+2. **Slow view.** On analyze's first pass (``analysis.engine.FirstPassTap``: that pass reads
+   every column and the temperatures through the one screen; only a parallel analysis, whose
+   workers read the chunks, leaves it to one more read), block means of every axis and
+   temperature channel are kept (blocks of 2^k samples, at least ``BLOCK_S``, at most
+   ``MAX_POINTS`` per channel: ≈ 2 MB a channel).
    Everything explain adds acts on seconds or longer, so it is found there.
 3. **Causes**, each tested at its share of one false-alarm level per axis (``alarm``):
 
