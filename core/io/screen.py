@@ -17,7 +17,13 @@ stretches of at most 8 samples stand out (a step is never masked). Outliers with
 filter spreads a shock), and the stretch is cut out: the block is split there and a segment
 ends before it, so no Allan difference and no spectrum segment straddles it. In the first
 second of a record it is a ``startup_glitch``, later a ``shock``. At ``SHOCK_Z`` = 12 a
-Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample).
+Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample). On a
+record whose grid is coarse against its noise (noise below about one LSB) the distances take
+a few discrete values and their median is 0 or a fraction of a step: ±1 LSB samples were cut
+as shocks. There the scale is never below the grid's quantisation (q/√12 of the step q, the
+smallest change the block's axis makes, its 16/17 share in the distance) nor the distances'
+RMS below their 98th percentile (``grid_scale``), so a shock must stand ≥ 3.4 LSB out
+whatever the noise, and nothing is cut from quantisation.
 
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
@@ -43,6 +49,7 @@ Masked temperature readings become NaN (the slow view then has no reading there)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -140,7 +147,10 @@ class ScreenLog:
         return {"counts": self.counts(), "samples_masked": self.samples_masked(),
                 "stretches": [s.to_dict() for s in self.stretches],
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
-                          "median of its 17 neighbours (any axis), cut out as a gap; "
+                          "median of its 17 neighbours (any axis), cut out as a gap, the "
+                          "scale never below the grid's quantisation (q/√12) nor the "
+                          "distances' RMS below their 98th percentile on a grid coarse "
+                          "against the noise; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run"),
@@ -213,6 +223,50 @@ def _median_floor(x: NDArray[np.float64]) -> float:
     return v
 
 
+#: |N(0, 1)| below its 98th percentile (2.326): the RMS there is this share of σ
+#: (√(1 − 2·2.326·φ(2.326)/0.98)); the top 2 % hold any shock and are left out of the RMS.
+TRIM_Q, TRIM_RMS = 0.98, 0.9346
+#: the quantisation's share of a sample's distance from its 17 neighbours' mean: the grid
+#: step q rounds each sample by up to q/2 (RMS q/√12), and that distance keeps 16/17 of it.
+GRID_SHARE = math.sqrt(16.0 / 17.0 / 12.0)
+#: changes between samples a block's axis needs before its smallest one is taken as its grid
+GRID_MIN_CHANGES = 16
+
+
+def cand_all(dist: NDArray[np.float64]) -> NDArray[np.intp]:
+    """Every sample whose distance is not 0: the candidates where the median scale is 0."""
+    return np.flatnonzero(dist > 0)
+
+
+def grid_step(col: NDArray[np.float64]) -> float:
+    """The column's grid step (its smallest non-zero change between samples, above the
+    floating rounding of its values), 0.0 where it changes fewer than ``GRID_MIN_CHANGES``
+    times."""
+    d = np.abs(np.diff(col))
+    tiny = 64.0 * np.finfo(float).eps * float(np.max(np.abs(col))) if len(col) else 0.0
+    d = d[d > tiny]
+    # a column that changes a few times shows no grid (one shock on a dead axis is no step)
+    return float(d.min()) if len(d) >= GRID_MIN_CHANGES else 0.0
+
+
+def grid_scale(col: NDArray[np.float64], dist: NDArray[np.float64], scale: float) -> float:
+    """A floor of the robust scale on a record whose grid is coarse against its noise (the
+    grid step above a quarter of ``scale``, or a scale of 0): the grid's own quantisation
+    (q/√12, its share in the distance) and the distances' RMS below their 98th percentile
+    (a discrete distribution's median can be 0 or one step where its spread is not). On a
+    record finer than its noise, 0.0 (the median's scale stands)."""
+    q = grid_step(col)
+    if not q > 0 or (scale > 0 and q < 0.25 * scale):
+        return 0.0
+    d = dist[np.isfinite(dist)]
+    if not len(d):
+        return GRID_SHARE * q
+    top = float(np.quantile(d, TRIM_Q))
+    low = d[d <= top]
+    rms = float(np.sqrt(np.mean(low * low))) / TRIM_RMS if len(low) else 0.0
+    return max(GRID_SHARE * q, rms)
+
+
 def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
     with their margin. The scale is the robust spread of the sample's distance from its
@@ -243,11 +297,19 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
         # a moving window sum leaves a rounding residue where the exact distance is 0: on a
         # record on its LSB grid most samples equal their neighbours' mean, and a scale made
         # of that residue (1e-21 of a 4e-5 m/s² step) cut every step as a shock; below the
-        # sum's own rounding the scale is 0, as the exact median is, and nothing is judged
+        # sum's own rounding the scale is 0, as the exact median is
         if not scale > 4.0 * len(col) * np.finfo(float).eps * float(np.ptp(col)):
+            scale = 0.0
+        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale) if scale > 0 else cand_all(dist)
+        if not len(cand):
+            continue
+        # on a coarse grid the median of a few discrete distances is no scale: never below
+        # what the grid's quantisation and the distances' own spread support
+        scale = max(scale, grid_scale(col, sub, scale))
+        if not scale > 0:
             continue
         # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
-        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale)
+        cand = cand[dist[cand] > 0.5 * SHOCK_Z * scale]
         if not len(cand):
             continue
         med = _running_median(col, cand, SHOCK_HALF)
