@@ -78,6 +78,38 @@ def holdout_lines(ex: Explanation) -> list[str]:
     return out
 
 
+#: A temperature coupling whose z reaches this share of its threshold, and misses it, is said
+#: in the text (not only in ``--json`` and the report's table): a near miss on a short record
+#: is what a longer one would test again, and "findings: none" alone hid it.
+NEAR_MISS_SHARE = 0.5
+#: …and at least this z (where the threshold is the normal's 5, half of it is a z a null
+#: axis's best lag reaches often: no line for those)
+NEAR_MISS_MIN_Z = 4.0
+
+
+def near_miss_lines(findings: list[Any]) -> list[str]:
+    """One line per temperature finding not claimed whose z is below its threshold and at
+    least ``NEAR_MISS_SHARE`` of it (and ``NEAR_MISS_MIN_Z``): its coupling, its z and the
+    threshold (this record's: above 5 where the se rests on few degrees of freedom)."""
+    out = []
+    for f in findings:
+        if f.cause != "temperature" or f.claimed:
+            continue
+        z, thr = f.statistic, f.threshold
+        if not (math.isfinite(z) and math.isfinite(thr) and thr > 0):
+            continue
+        if not max(NEAR_MISS_SHARE * thr, NEAR_MISS_MIN_Z) <= z < thr:
+            continue
+        what = (f"a coupling of {f.params['coefficient']:.3g} m/s²/K"
+                if "coefficient" in f.params else "a coupling")
+        if "lag_s" in f.params:
+            what += f" (lag {f.params['lag_s']:.3g} s)"
+        on = f" to {f.channel}" if f.channel else ""
+        out.append(f"  temperature: {what}{on} at z {z:.3g}, below this record's threshold "
+                   f"{thr:.3g}: not claimed")
+    return out
+
+
 def _cell(v: float | None, fmt: str) -> str:
     """A number for the report's tables; "—" where there is none (never "nan": a held-out
     χ² without folds, a gain without a base misfit)."""
@@ -112,6 +144,7 @@ def summary(ex: Explanation) -> str:
         claimed = ch.claimed
         if not claimed:
             lines.append("  findings: none (no cause passed its test)")
+        lines += near_miss_lines(ch.findings)
         for f in claimed:
             params = ", ".join(
                 f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"

@@ -621,7 +621,9 @@ def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str 
                f"0.0625 K grid and their median {med:.4g} is a room in °F ({lo:g}–{hi:g} °F "
                f"is 10–40 °C); a coupling per K from °F would be 1.8× too small; not used "
                "(write the log in °C)")
-        return {"kind": "fahrenheit", "text": why}, why
+        return {"kind": "fahrenheit", "text": (
+            f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid, median "
+            f"{med:.4g}: a log in °F, not used by the thermal model")}, why
     if on < OFF_GRID_SHARE:
         return {"kind": "off_grid", "text": (
             f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid (another "
