@@ -50,3 +50,34 @@ def test_the_text_says_a_near_miss_below_findings_none(tmp_path):
     text = summary(ex)
     assert "findings: none" in text
     assert "at z 17.9, below this record's threshold 30.1: not claimed" in text
+
+
+def test_a_coupling_found_on_a_recording_of_short_runs_carries_the_caveat(tmp_path):
+    """Two 10-minute runs in one recording fold the second run's warm-up into the coupling
+    (issue 23: 1.7e-3 against a truth of ≈ 1.18e-3): not resolved per run, but said under the
+    coupling found, naming the runs; an .npz (no runs) and one long run say nothing."""
+    from avard.core.explain.report import runs_caveat
+    from avard.core.io.source import RecordFormat, RecordingSummary, RunSummary
+
+    rec, _ = make_record(12, hours=1.0, logged=("ambient",),
+                         truth=Truth(coefficient=(3e-3, 0, 0), lag_s=60.0))
+    ex = explain_file(open_record(save(rec, tmp_path / "r.npz")),
+                      ExplainOptions(channels=("x",), heldout=False))
+    assert [f.cause for f in ex.channels["x"].claimed] == ["temperature"]
+    assert runs_caveat(ex) is None and "caveat: this recording" not in summary(ex)
+    info = ex.analysis.info
+    assert info is not None
+
+    def runs(*minutes: float) -> RecordingSummary:
+        return RecordingSummary(
+            runs=tuple(RunSummary(f"run{i}", 10.0, 0.0, 0, int(m * 600), 0, 0)
+                       for i, m in enumerate(minutes)),
+            losses=(), duplicates=(), gaps=(), n_segments=len(minutes), files=(),
+            problems=(), dropped_bytes=0)
+
+    ex.analysis.info = replace(info, format=RecordFormat.RECORDING, recording=runs(10, 10))
+    text = summary(ex)
+    assert ("caveat: this recording is 2 runs (run0 10 min, run1 10 min); the thermal fit's "
+            "start state settles the first run's warm-up only") in text
+    ex.analysis.info = replace(info, recording=runs(600))
+    assert runs_caveat(ex) is None
