@@ -85,6 +85,9 @@ DS18B20_STEP_C = 0.0625
 OFF_GRID_SHARE = 0.5
 #: Readings whose median lies here (°F of a 10–40 °C room) and off the grid: a log in °F.
 FAHRENHEIT_ROOM = (50.0, 104.0)
+#: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
+#: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
+NOT_DS18B20 = frozenset({"chip"})
 #: Held-log detection, on a channel's first block: a value on at least this share of its rows.
 HELD_DENSE = 0.95
 #: A common divisor k of n run lengths is a cadence when k^n reaches this (chance ≤ 1e-4),
@@ -638,8 +641,8 @@ def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str 
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
-                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None
-                  ) -> Iterator[Block]:
+                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None,
+                  check_units: bool = True) -> Iterator[Block]:
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
@@ -649,7 +652,9 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     Temperature readings are judged with one block of look-ahead (a spike's right-hand
     neighbour may be in the next block), so each block is handed on when the next has been
     read; the stuck and dropout rules need the whole channel and are applied at the end
-    (they mask nothing analyze reads; explain masks its slow view by ``log.holes``)."""
+    (they mask nothing analyze reads; explain masks its slow view by ``log.holes``).
+    ``check_units``: judge each log's units by the DS18B20's grid (``units_note``; off for a
+    recording, whose daemon writes °C itself)."""
     tnames = list(temperature_names)
     tracks = [_TempTrack() for _ in tnames]
     held = [_Dehold() for _ in tnames]
@@ -706,7 +711,10 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         note = d.note(rate_hz)
         if note is not None:
             log.notes[name] = note
-        unit, refused = units_note(tr.arrays()[1])
+        if not check_units or name in NOT_DS18B20:
+            unit, refused = None, None
+        else:
+            unit, refused = units_note(tr.arrays()[1])
         if unit is not None:
             # one line per channel: a held log's note and its units' note joined
             log.notes[name] = unit if note is None else {
@@ -832,6 +840,7 @@ class ScreenedSource:
 
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
-                                 columns if known is None else None, judged)
+                                 columns if known is None else None, judged,
+                                 check_units=getattr(info.format, "value", None) != "recording")
         if known is None and log.done:
             self._verdicts[block] = found

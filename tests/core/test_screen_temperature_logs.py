@@ -28,16 +28,17 @@ def _held(col: np.ndarray) -> np.ndarray:
     return out
 
 
-def _screened(temp: np.ndarray, rate: float, block: int = 1 << 16
+def _screened(temp: np.ndarray, rate: float, block: int = 1 << 16,
+              names: list[str] | None = None, check_units: bool = True
               ) -> tuple[np.ndarray, ScreenLog]:
     n = len(temp)
     a = np.random.default_rng(0).normal(0.0, 1e-3, (n, 3))
     t2 = temp.reshape(n, -1)
     blocks = ((a[o:o + block], t2[o:o + block], o + block >= n) for o in range(0, n, block))
     log = ScreenLog(rate)
-    names = [f"t{j}" for j in range(t2.shape[1])]
+    names = names or [f"t{j}" for j in range(t2.shape[1])]
     out = np.concatenate([t for _, t, _ in screen_blocks(blocks, rate, list("xyz"), names,
-                                                          log)])
+                                                          log, check_units=check_units)])
     return out, log
 
 
@@ -182,3 +183,19 @@ def test_explain_on_a_held_log_fits_the_lag_of_its_readings(tmp_path):
     assert a is not None and b is not None
     assert b.lag_s == pytest.approx(a.lag_s, abs=0.05)
     assert "held at each reading" in summary(ex)
+
+
+def test_the_units_rule_leaves_the_chips_own_temperature_and_a_recording_alone():
+    """avard's ADXL355 die temperature ("chip", on its own ~0.11 K step) at 55 °C in a warm
+    enclosure is off the DS18B20's grid at a °F room's values: no DS18B20, not judged; nor is
+    a recording's log (its daemon writes °C); the same values from elsewhere are refused."""
+    rate, n = 10.0, 20_000
+    col = np.full(n, np.nan)
+    idx = np.arange(5, n, 10)
+    col[idx] = np.round((55.0 + 0.3 * np.sin(idx / 900.0)) / 0.1105) * 0.1105
+    _, log = _screened(col, rate, names=["chip"])
+    assert log.notes == {} and log.refused == {}
+    _, log = _screened(col, rate, check_units=False)
+    assert log.notes == {} and log.refused == {}
+    _, log = _screened(col, rate)
+    assert log.notes["t0"]["kind"] == "fahrenheit" and "t0" in log.refused
