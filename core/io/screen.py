@@ -88,7 +88,7 @@ FAHRENHEIT_ROOM = (50.0, 104.0)
 #: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
 #: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
 NOT_DS18B20 = frozenset({"chip"})
-#: Held-log detection, on a channel's first block: a value on at least this share of its rows.
+#: Held-log detection, on a channel's first rows: a value on at least this share of them.
 HELD_DENSE = 0.95
 #: A common divisor k of n run lengths is a cadence when k^n reaches this (chance ≤ 1e-4),
 #: with at least this many runs.
@@ -96,6 +96,11 @@ HELD_CHANCE, HELD_MIN_COMMON = 1e4, 3
 #: A cadence that is no whole number of samples: read from the first this many changes, at
 #: least this many, their phases' coherence at least this, among at most this many cadences.
 HELD_EVENTS, HELD_MIN_EVENTS, HELD_COHERENCE, HELD_MAX_CANDIDATES = 64, 32, 0.9, 400_000
+#: Runs that pin a common divisor as the cadence, not a multiple of it (2^-14 ≈ 6e-5),
+#: waited for where the log allows.
+HELD_PIN_RUNS = 14
+#: A dense log whose first rows hold too few runs is judged on up to this many rows.
+HELD_WAIT_SAMPLES = 1 << 19
 
 
 @dataclass(frozen=True)
@@ -456,8 +461,12 @@ class _TempTrack:
         return self._idx[:self._n], self._val[:self._n]
 
 
-def held_cadence(col: NDArray[np.float64]) -> tuple[float, str]:
-    """(c, why) for one channel's first block of temperatures ``col``: c ≥ 2 the cadence in
+class _Undecided(Exception):
+    """``held_cadence`` on a dense log with too few runs yet: more of the log may tell."""
+
+
+def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, str]:
+    """(c, why) for one channel's first rows of temperatures ``col``: c ≥ 2 the cadence in
     samples (not always whole: 0.75 s at 10 Hz is 7.5) of a *held* log (a value on every row
     that changes only on reading instants: a logger that repeats its last reading on each
     sample), 0.0 for a log of readings; ``why`` a note where a dense log's cadence cannot be
@@ -474,12 +483,16 @@ def held_cadence(col: NDArray[np.float64]) -> tuple[float, str]:
     on the cadence (a coherence of 0.9 among ~10^5 candidates has a chance < 1e-6 there).
     A log read on every sample (a thermistor, a DS18B20 at ≤ 1.33 Hz) has runs of no common
     cadence and is left as it is; a dense log with too few runs to tell is left as it is
-    and said."""
+    and said. ``final`` False: the caller can wait for more of the log (``_Undecided`` is
+    raised where more runs could decide, and where a common divisor rests on fewer than
+    ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
     v = np.asarray(col, dtype=float)
     fin = np.isfinite(v)
     if not len(v) or np.count_nonzero(fin) < HELD_DENSE * len(v):
         return 0.0, ""
     f = np.flatnonzero(fin)
+    if not final and len(f) < 2:
+        raise _Undecided
     x = v[f]
     starts = f[np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))]
     lengths = np.diff(starts)  # complete runs (the first and the open last are cut)
@@ -487,13 +500,21 @@ def held_cadence(col: NDArray[np.float64]) -> tuple[float, str]:
     n = len(lengths)
     g = int(np.gcd.reduce(lengths.astype(np.int64))) if n else 0
     if g >= 2 and n >= HELD_MIN_COMMON and n * math.log(g) >= math.log(HELD_CHANCE):
+        if n < HELD_PIN_RUNS and not final:
+            # held, but its cadence may be a multiple of the true one (n runs are all even
+            # multiples with a chance of 2^-n): more of the log pins it
+            raise _Undecided
         return float(g), ""
     c, _n = _fractional_cadence(starts[1:])
     if c > 0:
         return c, ""
-    if n and float(np.mean(lengths)) >= 2.0 and (g >= 2 or n < HELD_MIN_EVENTS):
-        return 0.0, (f"a value on every sample, its {n} complete runs of one value in the "
-                     "first block too few to tell a log held at each reading (each reading "
+    if len(f) >= 2 * len(starts) and (g >= 2 or n < HELD_MIN_EVENTS):
+        # runs of two samples or more on average, and too few of them to tell
+        if not final:
+            raise _Undecided
+        return 0.0, (f"a value on every sample, its {n} complete runs of one value in its "
+                     f"first {len(v)} samples too few to tell a log held at each reading (each "
+                     "reading "
                      "repeated until the next) from one read on every sample: taken as "
                      "read on every sample (if held, its lag is late by half a reading "
                      "interval)")
@@ -537,7 +558,7 @@ def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int]:
 
 class _Dehold:
     """One temperature channel read as readings: a held log (``held_cadence``, judged on the
-    channel's first block) becomes each run's first sample, and one sample every cadence
+    channel's first rows) becomes each run's first sample, and one sample every cadence
     while the run lasts (at least half a cadence before its end), NaN between, which is what
     a recording's source hands over (core/io/source.py: one reading per conversion, a stuck
     value included): a stable room's long constant stretch stays readings of its value, not
@@ -550,12 +571,19 @@ class _Dehold:
         self.start = 0  # the open run's first sample (record index)
         self.first = -1  # the first sample de-held
 
+    def decide(self, col: NDArray[np.float64], final: bool) -> bool:
+        """Judge the log on ``col`` (its first rows, as many as the screen has waited
+        for); False where it cannot yet and more rows may tell (not ``final``)."""
+        if self.k is not None:
+            return True
+        try:
+            self.k, self.why = held_cadence(col, final)
+        except _Undecided:
+            return False
+        return True
+
     def apply(self, off: int, col: NDArray[np.float64]) -> NDArray[np.float64]:
         col = np.asarray(col, dtype=float)
-        if self.k is None:
-            if not np.isfinite(col).any():
-                return col
-            self.k, self.why = held_cadence(col)
         k = self.k
         if not k or not len(col):
             return col
@@ -686,22 +714,54 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         for pa, pt, pe in pieces:
             yield (pa if cols is None else pa[:, cols]), pt, pe
 
-    for blk in blocks:
-        a, t, _end = blk
+    def take(off: int, blk: Block) -> Block:
+        """The block's temperatures read as readings (a held log's) and tracked."""
+        a, t, end = blk
         if t is not None and tnames:
             tt = np.asarray(t, dtype=float).reshape(len(a), -1)
-            cols_t = [d.apply(offset, tt[:, j]) for j, d in enumerate(held)]
+            cols_t = [d.apply(off, tt[:, j]) for j, d in enumerate(held)]
             if any(d.k for d in held):
                 # a held log read as readings: the block hands the readings on, NaN between
                 tt = np.stack(cols_t, axis=1)
-                blk = (a, tt if np.ndim(t) == 2 else tt[:, 0], _end)
+                blk = (a, tt if np.ndim(t) == 2 else tt[:, 0], end)
             for j, tr in enumerate(tracks):
-                tr.add(offset, tt[:, j])
-        pending.append((offset, blk))
-        offset += len(a)
+                tr.add(off, tt[:, j])
+        return blk
+
+    # a log with a value on every row whose first block holds too few runs to tell a held
+    # log is judged on more of it: the blocks wait (at most HELD_WAIT_SAMPLES rows, a few
+    # MB) until every channel is judged; a log of readings is judged on its first block
+    waiting: list[tuple[int, Block]] = []
+    waited = 0
+
+    def judge(final: bool) -> bool:
+        ok = True
+        for j, d in enumerate(held):
+            if d.k is not None:
+                continue
+            col = np.concatenate([
+                np.full(len(b[0]), np.nan) if b[1] is None
+                else np.asarray(b[1], dtype=float).reshape(len(b[0]), -1)[:, j]
+                for _, b in waiting])
+            ok = d.decide(col, final) and ok
+        return ok
+
+    for blk in blocks:
+        waiting.append((offset, blk))
+        offset += len(blk[0])
+        waited += len(blk[0])
+        if tnames and not judge(waited >= HELD_WAIT_SAMPLES):
+            continue
+        for off_w, b_w in waiting:
+            pending.append((off_w, take(off_w, b_w)))
+        waiting.clear()
         while len(pending) > 1:
             off, b = pending.pop(0)
             yield from emit(off, b, False)
+    if waiting:
+        judge(True)
+        for off_w, b_w in waiting:
+            pending.append((off_w, take(off_w, b_w)))
     while pending:
         off, b = pending.pop(0)
         yield from emit(off, b, not pending)

@@ -199,3 +199,20 @@ def test_the_units_rule_leaves_the_chips_own_temperature_and_a_recording_alone()
     assert log.notes == {} and log.refused == {}
     _, log = _screened(col, rate)
     assert log.notes["t0"]["kind"] == "fahrenheit" and "t0" in log.refused
+
+
+def test_a_held_log_of_a_stable_room_is_judged_on_more_than_its_first_block():
+    """125 Hz, a reading every 94 samples (0.752 s), held: the room sits on one step for the
+    first 9 minutes (the first block of 65536 rows holds no complete run) and then moves. The
+    blocks wait until the log tells (at most 2^19 rows): the readings are read from the
+    record's first row, and the text says nothing of "too few"."""
+    rate, n = 125.0, 400_000
+    col = np.full(n, np.nan)
+    idx = np.arange(10, n, 94)
+    t = idx / rate
+    room = np.where(t < 540.0, 21.31, 21.31 + 0.3 * np.sin((t - 540.0) / 300.0))
+    col[idx] = np.round(room / 0.0625) * 0.0625
+    out, log = _screened(_held(col), rate)
+    np.testing.assert_array_equal(np.isfinite(out[:, 0]), np.isfinite(col))
+    np.testing.assert_array_equal(out[idx, 0], col[idx])
+    assert log.notes["t0"]["kind"] == "held" and "from" not in log.notes["t0"]["text"]
