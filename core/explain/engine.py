@@ -435,9 +435,12 @@ def _used(fit: NoiseFit, tau: NDArray) -> NDArray[np.bool_]:
 Block = tuple[NDArray[np.float64], NDArray[np.float64] | None, bool]
 
 
-def _why_unused(t: NDArray | None) -> str | None:
+def _why_unused(t: NDArray | None, refused: str | None = None) -> str | None:
     """Why a temperature channel's slow view cannot drive the thermal model, or None where
-    it can (every block has a value, and they vary)."""
+    it can (every block has a value, and they vary). ``refused``: the input screen's reason
+    to refuse the log as a whole (a log in °F: ``ScreenLog.refused``)."""
+    if refused:
+        return refused
     if t is None or not len(t) or not np.all(np.isfinite(t)):
         return "fewer than two readings"
     if not np.ptp(t) > 0:
@@ -575,7 +578,8 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
               if x.channel == nm and x.kind == "stuck"] for nm in tnames] if screen else []
     y_slow, t_slow = slow.finish(stuck, rate_b)
     # the channels asked for (all, or ``--temperature``'s), each usable or said why not
-    why = {j: _why_unused(None if t_slow is None else t_slow[:, j])
+    why = {j: _why_unused(None if t_slow is None else t_slow[:, j],
+                          None if screen is None else screen.refused.get(tnames[j]))
            for j in range(len(tnames)) if temperature in (None, tnames[j])}
     t_ok = [j for j, w in why.items() if w is None]
     unused = {tnames[j]: w for j, w in why.items() if w is not None}

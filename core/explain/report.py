@@ -78,6 +78,64 @@ def holdout_lines(ex: Explanation) -> list[str]:
     return out
 
 
+#: A temperature coupling whose z reaches this share of its threshold, and misses it, is said
+#: in the text (not only in ``--json`` and the report's table): a near miss on a short record
+#: is what a longer one would test again, and "findings: none" alone hid it.
+NEAR_MISS_SHARE = 0.5
+#: …and at least this z (where the threshold is the normal's 5, half of it is a z a null
+#: axis's best lag reaches often: no line for those)
+NEAR_MISS_MIN_Z = 4.0
+
+
+def near_miss_lines(findings: list[Any]) -> list[str]:
+    """One line per temperature finding not claimed whose z is below its threshold and at
+    least ``NEAR_MISS_SHARE`` of it (and ``NEAR_MISS_MIN_Z``): its coupling, its z and the
+    threshold (this record's: above 5 where the se rests on few degrees of freedom)."""
+    out = []
+    for f in findings:
+        if f.cause != "temperature" or f.claimed:
+            continue
+        z, thr = f.statistic, f.threshold
+        if not (math.isfinite(z) and math.isfinite(thr) and thr > 0):
+            continue
+        if not max(NEAR_MISS_SHARE * thr, NEAR_MISS_MIN_Z) <= z < thr:
+            continue
+        what = (f"a coupling of {f.params['coefficient']:.3g} m/s²/K"
+                if "coefficient" in f.params else "a coupling")
+        if "lag_s" in f.params:
+            what += f" (lag {f.params['lag_s']:.3g} s)"
+        on = f" to {f.channel}" if f.channel else ""
+        out.append(f"  temperature: {what}{on} at z {z:.3g}, below this record's threshold "
+                   f"{thr:.3g}: not claimed")
+    return out
+
+
+#: A recording's runs shorter than this (s) each restart on a warm-up the thermal model's one
+#: start state (at the record's start) does not take.
+SHORT_RUN_S = 3600.0
+
+
+def runs_caveat(ex: Explanation) -> str | None:
+    """A caveat for a temperature coupling found on a recording of several runs, one of them
+    after the first shorter than ``SHORT_RUN_S``: the thermal fit's start state settles the
+    first run's warm-up only, so each later run's warm-up (the sensor and the plate starting
+    again from the room) is fitted as part of the coupling (issue 23: two 10-minute runs,
+    1.7e-3 [1.64e-3, 1.77e-3] m/s²/K against a truth of ≈ 1.18e-3). Not resolved per run
+    here; said, with the runs' lengths, where it applies. None elsewhere."""
+    info = ex.analysis.info
+    rec = None if info is None else info.recording
+    if rec is None:
+        return None
+    runs = [r for r in rec.runs if r.n_samples > 0]
+    if len(runs) < 2 or not any(r.n_samples / r.rate_hz < SHORT_RUN_S for r in runs[1:]):
+        return None
+    lengths = ", ".join(f"{r.run} {r.n_samples / r.rate_hz / 60:.3g} min" for r in runs)
+    return (f"caveat: this recording is {len(runs)} runs ({lengths}); the thermal fit's "
+            "start state settles the first run's warm-up only, and each later run's warm-up "
+            "is fitted as coupling: the coefficient may be biased (not resolved per run; "
+            "explain each run on its own, --run RUN, to check)")
+
+
 def _cell(v: float | None, fmt: str) -> str:
     """A number for the report's tables; "—" where there is none (never "nan": a held-out
     χ² without folds, a gain without a base misfit)."""
@@ -112,6 +170,7 @@ def summary(ex: Explanation) -> str:
         claimed = ch.claimed
         if not claimed:
             lines.append("  findings: none (no cause passed its test)")
+        lines += near_miss_lines(ch.findings)
         for f in claimed:
             params = ", ".join(
                 f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"
@@ -127,6 +186,9 @@ def summary(ex: Explanation) -> str:
                            "held-out data better (below)")
             lines.append(f"  FOUND {f.cause}: {params} (SI units)")
             lines.append(f"        {f.evidence}")
+            caveat = runs_caveat(ex) if f.cause == "temperature" else None
+            if caveat is not None:
+                lines.append(f"        {caveat}")
         lines.append("  IEEE coefficients (base → extended, 68 % interval):")
         for term, b, e in term_changes(ch):
             lines.append(f"    {SYMBOLS[term]} {term:21s} {b}  →  {e}")
@@ -289,6 +351,10 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
             thr = f"{f.threshold:g}" if math.isfinite(f.threshold) else "–"
             ev = f.evidence.replace("|", "\\|")
             md.append(f"| {f.cause} | {'yes' if f.claimed else 'no'} | {stat} | {thr} | {ev} |")
+        caveat = (runs_caveat(ex) if any(f.cause == "temperature" for f in ch.claimed)
+                  else None)
+        if caveat is not None:
+            md += ["", caveat[0].upper() + caveat[1:] + "."]
         md += ["", "### IEEE coefficients (68 % interval)", "",
                "| term | base | extended |", "|---|---|---|"]
         md += [f"| {SYMBOLS[t]} {t} | {b} | {e} |" for t, b, e in term_changes(ch)]

@@ -17,7 +17,13 @@ stretches of at most 8 samples stand out (a step is never masked). Outliers with
 filter spreads a shock), and the stretch is cut out: the block is split there and a segment
 ends before it, so no Allan difference and no spectrum segment straddles it. In the first
 second of a record it is a ``startup_glitch``, later a ``shock``. At ``SHOCK_Z`` = 12 a
-Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample).
+Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sample). On a
+record whose grid is coarse against its noise (noise below about one LSB) the distances take
+a few discrete values and their median is 0 or a fraction of a step: ±1 LSB samples were cut
+as shocks. There the scale is never below the grid's quantisation (q/√12 of the step q, the
+smallest change the block's axis makes, its 16/17 share in the distance) nor the distances'
+RMS below their 98th percentile (``grid_scale``), so a shock must stand ≥ 3.4 LSB out
+whatever the noise, and nothing is cut from quantisation.
 
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
@@ -43,6 +49,7 @@ Masked temperature readings become NaN (the slow view then has no reading there)
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -72,6 +79,28 @@ JUMP_C = 0.5
 DROPOUT_S, DROPOUT_READINGS = 10.0, 8.0
 #: The stuck rule: longer than this (s) and this factor times the channel's 95th-percentile run.
 STUCK_MIN_S, STUCK_FACTOR = 1800.0, 10.0
+#: The DS18B20's resolution (K): its readings (9–12 bits) are multiples of this.
+DS18B20_STEP_C = 0.0625
+#: A log is off the DS18B20's grid when fewer than this share of its readings lie on it.
+OFF_GRID_SHARE = 0.5
+#: Readings whose median lies here (°F of a 10–40 °C room) and off the grid: a log in °F.
+FAHRENHEIT_ROOM = (50.0, 104.0)
+#: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
+#: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
+NOT_DS18B20 = frozenset({"chip"})
+#: Held-log detection, on a channel's first rows: a value on at least this share of them.
+HELD_DENSE = 0.95
+#: A common divisor k of n run lengths is a cadence when k^n reaches this (chance ≤ 1e-4),
+#: with at least this many runs.
+HELD_CHANCE, HELD_MIN_COMMON = 1e4, 3
+#: A cadence that is no whole number of samples: read from the first this many changes, at
+#: least this many, their phases' coherence at least this, among at most this many cadences.
+HELD_EVENTS, HELD_MIN_EVENTS, HELD_COHERENCE, HELD_MAX_CANDIDATES = 64, 32, 0.9, 400_000
+#: Runs that pin a common divisor as the cadence, not a multiple of it (2^-14 ≈ 6e-5),
+#: waited for where the log allows.
+HELD_PIN_RUNS = 14
+#: A dense log whose first rows hold too few runs is judged on up to this many rows.
+HELD_WAIT_SAMPLES = 1 << 19
 
 
 @dataclass(frozen=True)
@@ -119,6 +148,11 @@ class ScreenLog:
     done: bool = False
     #: readings judged per temperature channel (filled at the end of the read)
     readings: dict[str, int] = field(default_factory=dict)
+    #: per temperature channel, what the screen found of the log as a whole (a held log
+    #: read as readings, readings off the DS18B20's grid, a log in °F): {kind, text}
+    notes: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: temperature channels the thermal model must not use, with why (a log in °F)
+    refused: dict[str, str] = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -139,18 +173,30 @@ class ScreenLog:
     def to_dict(self) -> dict[str, Any]:
         return {"counts": self.counts(), "samples_masked": self.samples_masked(),
                 "stretches": [s.to_dict() for s in self.stretches],
+                "notes": {k: dict(v) for k, v in self.notes.items()},
+                "refused": dict(self.refused),
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
-                          "median of its 17 neighbours (any axis), cut out as a gap; "
+                          "median of its 17 neighbours (any axis), cut out as a gap, the "
+                          "scale never below the grid's quantisation (q/√12) nor the "
+                          "distances' RMS below their 98th percentile on a grid coarse "
+                          "against the noise; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
-                          "of one value > 30 min and 10x the channel's 95th-percentile run"),
+                          "of one value > 30 min and 10x the channel's 95th-percentile run; "
+                          "a log with a value on every sample that changes only on a regular "
+                          "cadence is held: its readings are each run's first sample and "
+                          "one every cadence while the run lasts; readings off the 0.0625 K "
+                          "grid (under half on it) are noted, and refused as °F where their "
+                          "median is 50–104"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
-        """The text: one summary line, then up to ``limit`` stretches with their times."""
+        """The text: one summary line, then up to ``limit`` stretches with their times, then
+        one line per temperature channel the screen has a note on."""
+        notes = [f"  temperature {ch}: {n['text']}" for ch, n in self.notes.items()]
         if not self.stretches:
             return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
-                    "dropout or stuck reading)"]
+                    "dropout or stuck reading)", *notes]
         c = self.counts()
         head = "screened: " + ", ".join(_kind_text(k, n) for k, n in sorted(c.items()))
         if self.samples_masked():
@@ -163,7 +209,7 @@ class ScreenLog:
                        f"{unit}{'' if s.count == 1 else 's'})")
         if len(self.stretches) > limit:
             out.append(f"  … and {len(self.stretches) - limit} more (--json lists all)")
-        return out
+        return out + notes
 
 
 # --------------------------------------------------------------------------------------------
@@ -213,6 +259,50 @@ def _median_floor(x: NDArray[np.float64]) -> float:
     return v
 
 
+#: |N(0, 1)| below its 98th percentile (2.326): the RMS there is this share of σ
+#: (√(1 − 2·2.326·φ(2.326)/0.98)); the top 2 % hold any shock and are left out of the RMS.
+TRIM_Q, TRIM_RMS = 0.98, 0.9346
+#: the quantisation's share of a sample's distance from its 17 neighbours' mean: the grid
+#: step q rounds each sample by up to q/2 (RMS q/√12), and that distance keeps 16/17 of it.
+GRID_SHARE = math.sqrt(16.0 / 17.0 / 12.0)
+#: changes between samples a block's axis needs before its smallest one is taken as its grid
+GRID_MIN_CHANGES = 16
+
+
+def cand_all(dist: NDArray[np.float64]) -> NDArray[np.intp]:
+    """Every sample whose distance is not 0: the candidates where the median scale is 0."""
+    return np.flatnonzero(dist > 0)
+
+
+def grid_step(col: NDArray[np.float64]) -> float:
+    """The column's grid step (its smallest non-zero change between samples, above the
+    floating rounding of its values), 0.0 where it changes fewer than ``GRID_MIN_CHANGES``
+    times."""
+    d = np.abs(np.diff(col))
+    tiny = 64.0 * np.finfo(float).eps * float(np.max(np.abs(col))) if len(col) else 0.0
+    d = d[d > tiny]
+    # a column that changes a few times shows no grid (one shock on a dead axis is no step)
+    return float(d.min()) if len(d) >= GRID_MIN_CHANGES else 0.0
+
+
+def grid_scale(col: NDArray[np.float64], dist: NDArray[np.float64], scale: float) -> float:
+    """A floor of the robust scale on a record whose grid is coarse against its noise (the
+    grid step above a quarter of ``scale``, or a scale of 0): the grid's own quantisation
+    (q/√12, its share in the distance) and the distances' RMS below their 98th percentile
+    (a discrete distribution's median can be 0 or one step where its spread is not). On a
+    record finer than its noise, 0.0 (the median's scale stands)."""
+    q = grid_step(col)
+    if not q > 0 or (scale > 0 and q < 0.25 * scale):
+        return 0.0
+    d = dist[np.isfinite(dist)]
+    if not len(d):
+        return GRID_SHARE * q
+    top = float(np.quantile(d, TRIM_Q))
+    low = d[d <= top]
+    rms = float(np.sqrt(np.mean(low * low))) / TRIM_RMS if len(low) else 0.0
+    return max(GRID_SHARE * q, rms)
+
+
 def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
     with their margin. The scale is the robust spread of the sample's distance from its
@@ -243,11 +333,19 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
         # a moving window sum leaves a rounding residue where the exact distance is 0: on a
         # record on its LSB grid most samples equal their neighbours' mean, and a scale made
         # of that residue (1e-21 of a 4e-5 m/s² step) cut every step as a shock; below the
-        # sum's own rounding the scale is 0, as the exact median is, and nothing is judged
+        # sum's own rounding the scale is 0, as the exact median is
         if not scale > 4.0 * len(col) * np.finfo(float).eps * float(np.ptp(col)):
+            scale = 0.0
+        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale) if scale > 0 else cand_all(dist)
+        if not len(cand):
+            continue
+        # on a coarse grid the median of a few discrete distances is no scale: never below
+        # what the grid's quantisation and the distances' own spread support
+        scale = max(scale, grid_scale(col, sub, scale))
+        if not scale > 0:
             continue
         # an outlier of k ≤ SHOCK_HALF samples stands at least half out of the mean too
-        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale)
+        cand = cand[dist[cand] > 0.5 * SHOCK_Z * scale]
         if not len(cand):
             continue
         med = _running_median(col, cand, SHOCK_HALF)
@@ -363,11 +461,216 @@ class _TempTrack:
         return self._idx[:self._n], self._val[:self._n]
 
 
+class _Undecided(Exception):
+    """``held_cadence`` on a dense log with too few runs yet: more of the log may tell."""
+
+
+def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, str]:
+    """(c, why) for one channel's first rows of temperatures ``col``: c ≥ 2 the cadence in
+    samples (not always whole: 0.75 s at 10 Hz is 7.5) of a *held* log (a value on every row
+    that changes only on reading instants: a logger that repeats its last reading on each
+    sample), 0.0 for a log of readings; ``why`` a note where a dense log's cadence cannot be
+    told ('' otherwise).
+
+    The rule: a value on at least ``HELD_DENSE`` of the rows, and the n lengths of its
+    complete runs of one value (a room dwells many readings on one 0.0625 K step, so a run is
+    often many readings long) all a whole number of one cadence c: exactly (a common divisor
+    c ≥ 2: conversions on the sample grid), or within one sample (``_fractional_cadence``:
+    readings at a cadence that is no whole number of samples, or a jittering clock), for at
+    least 90 % of them. Chance must not do it: n runs of a log read on every sample are all
+    multiples of c with a chance of about c^-n, and that must be below 1/``HELD_CHANCE``
+    with n ≥ ``HELD_MIN_COMMON``; within a sample, ``HELD_MIN_EVENTS`` changes must agree
+    on the cadence (a coherence of 0.9 among ~10^5 candidates has a chance < 1e-6 there).
+    A log read on every sample (a thermistor, a DS18B20 at ≤ 1.33 Hz) has runs of no common
+    cadence and is left as it is; a dense log with too few runs to tell is left as it is
+    and said. ``final`` False: the caller can wait for more of the log (``_Undecided`` is
+    raised where more runs could decide, and where a common divisor rests on fewer than
+    ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
+    v = np.asarray(col, dtype=float)
+    fin = np.isfinite(v)
+    if not len(v) or np.count_nonzero(fin) < HELD_DENSE * len(v):
+        return 0.0, ""
+    f = np.flatnonzero(fin)
+    if not final and len(f) < 2:
+        raise _Undecided
+    x = v[f]
+    starts = f[np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))]
+    lengths = np.diff(starts)  # complete runs (the first and the open last are cut)
+    lengths = lengths[1:] if len(lengths) else lengths
+    n = len(lengths)
+    g = int(np.gcd.reduce(lengths.astype(np.int64))) if n else 0
+    if g >= 2 and n >= HELD_MIN_COMMON and n * math.log(g) >= math.log(HELD_CHANCE):
+        if n < HELD_PIN_RUNS and not final:
+            # held, but its cadence may be a multiple of the true one (n runs are all even
+            # multiples with a chance of 2^-n): more of the log pins it
+            raise _Undecided
+        return float(g), ""
+    c, _n = _fractional_cadence(starts[1:])
+    if c > 0:
+        return c, ""
+    if len(f) >= 2 * len(starts) and (g >= 2 or n < HELD_MIN_EVENTS):
+        # runs of two samples or more on average, and too few of them to tell
+        if not final:
+            raise _Undecided
+        return 0.0, (f"a value on every sample, its {n} complete runs of one value in its "
+                     f"first {len(v)} samples too few to tell a log held at each reading (each "
+                     "reading "
+                     "repeated until the next) from one read on every sample: taken as "
+                     "read on every sample (if held, its lag is late by half a reading "
+                     "interval)")
+    return 0.0, ""
+
+
+def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int]:
+    """(c, n): a cadence c (samples, ≥ 2.5, not always whole) on which the first
+    ``HELD_EVENTS`` change positions ``starts`` of a dense log lie, each within a sample's
+    rounding (their phases' coherence |mean e^(2πi p/c)| ≥ ``HELD_COHERENCE``: a reading
+    instant rounded up to the next sample is at most one sample late, a phase of at most
+    1/c), the largest such c, and the n positions it rests on; (0.0, n) where none.
+    Candidates: the cadences of which the shortest run is a whole number within a sample,
+    on a grid fine enough that the phase across the positions' span moves < 1/8 cycle."""
+    p = np.asarray(starts[:HELD_EVENTS], dtype=float)
+    n = len(p)
+    if n < HELD_MIN_EVENTS:
+        return 0.0, n
+    p = p - p[0]
+    span = float(p[-1])
+    gmin = float(np.min(np.diff(p)))
+    grids = []
+    for j in range(1, int((gmin + 1.0) / 2.5) + 1):
+        lo, hi = max(2.5, (gmin - 1.0) / j), (gmin + 1.0) / j
+        if hi > lo:
+            grids.append(np.arange(lo, hi, lo * lo / (8.0 * span)))
+    if not grids:
+        return 0.0, n
+    c = np.concatenate(grids)
+    if len(c) > HELD_MAX_CANDIDATES:
+        return 0.0, n
+    best = 0.0
+    for k in range(0, len(c), 4096):
+        cc = c[k:k + 4096]
+        r = np.abs(np.exp(2j * np.pi * p[None, :] / cc[:, None]).mean(axis=1))
+        hit = cc[r >= HELD_COHERENCE]
+        if len(hit):
+            best = max(best, float(hit.max()))
+    return best, n
+
+
+class _Dehold:
+    """One temperature channel read as readings: a held log (``held_cadence``, judged on the
+    channel's first rows) becomes each run's first sample, and one sample every cadence
+    while the run lasts (at least half a cadence before its end), NaN between, which is what
+    a recording's source hands over (core/io/source.py: one reading per conversion, a stuck
+    value included): a stable room's long constant stretch stays readings of its value, not
+    one reading and a hole. Other logs pass as they are."""
+
+    def __init__(self) -> None:
+        self.k: float | None = None  # undecided; 0: readings; ≥ 2: held, the cadence
+        self.why = ""
+        self.prev = math.nan  # the last row's value
+        self.start = 0  # the open run's first sample (record index)
+        self.first = -1  # the first sample de-held
+
+    def decide(self, col: NDArray[np.float64], final: bool) -> bool:
+        """Judge the log on ``col`` (its first rows, as many as the screen has waited
+        for); False where it cannot yet and more rows may tell (not ``final``)."""
+        if self.k is not None:
+            return True
+        try:
+            self.k, self.why = held_cadence(col, final)
+        except _Undecided:
+            return False
+        return True
+
+    def apply(self, off: int, col: NDArray[np.float64]) -> NDArray[np.float64]:
+        col = np.asarray(col, dtype=float)
+        k = self.k
+        if not k or not len(col):
+            return col
+        if self.first < 0:
+            self.first = off
+        n = len(col)
+        fin = np.isfinite(col)
+        prev = np.concatenate([[self.prev], col[:-1]])
+        new = fin & (col != prev)  # a change (a value after NaN included)
+        brk = np.flatnonzero(new | ~fin)  # where a run starts or stops
+        starts = np.flatnonzero(new)
+        carried = bool(fin[0] and not new[0])
+        s = np.concatenate([[self.start - off], starts]) if carried else starts
+        # each run's end (exclusive): the next change or NaN after its start; an open run
+        # (past the block's end) takes every cadence point in the block (with a common
+        # divisor its end is a whole cadence after each; a jittered one may end a sample
+        # short of the next, a reading placed by up to half a cadence on a constant value)
+        nxt = np.searchsorted(brk, s, side="right")
+        lim = (np.where(nxt < len(brk), brk[np.minimum(nxt, len(brk) - 1)], n + 0.5 * k)
+               if len(brk) else np.full(len(s), n + 0.5 * k))
+        extra = np.maximum(np.floor((lim - s) / k - 0.5), 0).astype(np.int64)
+        cnt = extra + 1
+        base = np.repeat(s, cnt)
+        step = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        pos = base + np.floor(k * step + 0.5).astype(np.int64)
+        pos = pos[(pos >= 0) & (pos < n)]
+        out = np.full(n, np.nan)
+        out[pos] = col[pos]
+        self.prev = float(col[-1])
+        if fin[-1]:
+            self.start = off + (int(starts[-1]) if len(starts) else self.start - off)
+        return out
+
+    def note(self, rate_hz: float) -> dict[str, str] | None:
+        if self.k:
+            since = "" if self.first <= 0 else f" from {self.first / rate_hz:.6g} s"
+            return {"kind": "held", "text": (
+                f"held at each reading (a value on every sample, changing only on a "
+                f"{self.k:.4g}-sample cadence, {self.k / rate_hz:.3g} s): read as "
+                f"readings{since} (each run's first sample, and one every {self.k:.4g} "
+                "samples while it lasts; the rest NaN)")}
+        if self.why:
+            return {"kind": "held_unknown", "text": self.why}
+        return None
+
+
+def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str | None]:
+    """(note, refusal) on a channel's readings as a whole: off the DS18B20's 0.0625 K grid
+    (under ``OFF_GRID_SHARE`` of the readings a multiple of it: a DS18B20 read in °C is on
+    it at any resolution) and with a median a room has in °F (``FAHRENHEIT_ROOM``: 10–40 °C
+    is 50–104 °F) it is a log in °F, refused for the thermal model (a coupling per K from
+    °F is 1.8× too small, silently); off the grid elsewhere it is another logger's °C, taken
+    with a note; on the grid at a °F room's values, a note that °C is assumed."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)
+          & (v >= DS18B20_MIN_C) & (v <= DS18B20_MAX_C)]
+    if len(v) < 8:
+        return None, None
+    r = v / DS18B20_STEP_C
+    on = float(np.mean(np.abs(r - np.rint(r)) < 1e-6))
+    med = float(np.median(v))
+    lo, hi = FAHRENHEIT_ROOM
+    room_f = lo <= med <= hi
+    if on < OFF_GRID_SHARE and room_f:
+        why = (f"taken for °F: {100 * (1 - on):.0f} % of its readings are off the DS18B20's "
+               f"0.0625 K grid and their median {med:.4g} is a room in °F ({lo:g}–{hi:g} °F "
+               f"is 10–40 °C); a coupling per K from °F would be 1.8× too small; not used "
+               "(write the log in °C)")
+        return {"kind": "fahrenheit", "text": (
+            f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid, median "
+            f"{med:.4g}: a log in °F, not used by the thermal model")}, why
+    if on < OFF_GRID_SHARE:
+        return {"kind": "off_grid", "text": (
+            f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid (another "
+            f"logger's?); median {med:.4g}, plausible in °C: taken as °C")}, None
+    if room_f:
+        return {"kind": "celsius_assumed", "text": (
+            f"readings on the DS18B20's 0.0625 K grid with median {med:.4g}: taken as °C "
+            f"(a room logged in °F would read {lo:g}–{hi:g} too, but off this grid)")}, None
+    return None, None
+
+
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
-                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None
-                  ) -> Iterator[Block]:
+                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None,
+                  check_units: bool = True) -> Iterator[Block]:
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
@@ -377,9 +680,12 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     Temperature readings are judged with one block of look-ahead (a spike's right-hand
     neighbour may be in the next block), so each block is handed on when the next has been
     read; the stuck and dropout rules need the whole channel and are applied at the end
-    (they mask nothing analyze reads; explain masks its slow view by ``log.holes``)."""
+    (they mask nothing analyze reads; explain masks its slow view by ``log.holes``).
+    ``check_units``: judge each log's units by the DS18B20's grid (``units_note``; off for a
+    recording, whose daemon writes °C itself)."""
     tnames = list(temperature_names)
     tracks = [_TempTrack() for _ in tnames]
+    held = [_Dehold() for _ in tnames]
     pending: list[tuple[int, Block]] = []
     offset = 0
     start_n = round(STARTUP_S * rate_hz)
@@ -408,22 +714,74 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         for pa, pt, pe in pieces:
             yield (pa if cols is None else pa[:, cols]), pt, pe
 
-    for blk in blocks:
-        a, t, _end = blk
+    def take(off: int, blk: Block) -> Block:
+        """The block's temperatures read as readings (a held log's) and tracked."""
+        a, t, end = blk
         if t is not None and tnames:
             tt = np.asarray(t, dtype=float).reshape(len(a), -1)
+            cols_t = [d.apply(off, tt[:, j]) for j, d in enumerate(held)]
+            if any(d.k for d in held):
+                # a held log read as readings: the block hands the readings on, NaN between
+                tt = np.stack(cols_t, axis=1)
+                blk = (a, tt if np.ndim(t) == 2 else tt[:, 0], end)
             for j, tr in enumerate(tracks):
-                tr.add(offset, tt[:, j])
-        pending.append((offset, blk))
-        offset += len(a)
+                tr.add(off, tt[:, j])
+        return blk
+
+    # a log with a value on every row whose first block holds too few runs to tell a held
+    # log is judged on more of it: the blocks wait (at most HELD_WAIT_SAMPLES rows, a few
+    # MB) until every channel is judged; a log of readings is judged on its first block
+    waiting: list[tuple[int, Block]] = []
+    waited = 0
+
+    def judge(final: bool) -> bool:
+        ok = True
+        for j, d in enumerate(held):
+            if d.k is not None:
+                continue
+            col = np.concatenate([
+                np.full(len(b[0]), np.nan) if b[1] is None
+                else np.asarray(b[1], dtype=float).reshape(len(b[0]), -1)[:, j]
+                for _, b in waiting])
+            ok = d.decide(col, final) and ok
+        return ok
+
+    for blk in blocks:
+        waiting.append((offset, blk))
+        offset += len(blk[0])
+        waited += len(blk[0])
+        if tnames and not judge(waited >= HELD_WAIT_SAMPLES):
+            continue
+        for off_w, b_w in waiting:
+            pending.append((off_w, take(off_w, b_w)))
+        waiting.clear()
         while len(pending) > 1:
             off, b = pending.pop(0)
             yield from emit(off, b, False)
+    if waiting:
+        judge(True)
+        for off_w, b_w in waiting:
+            pending.append((off_w, take(off_w, b_w)))
     while pending:
         off, b = pending.pop(0)
         yield from emit(off, b, not pending)
     _whole_record_rules(tracks, tnames, log, rate_hz)
     log.readings = {name: len(tr) for name, tr in zip(tnames, tracks, strict=True)}
+    for name, tr, d in zip(tnames, tracks, held, strict=True):
+        note = d.note(rate_hz)
+        if note is not None:
+            log.notes[name] = note
+        if not check_units or name in NOT_DS18B20:
+            unit, refused = None, None
+        else:
+            unit, refused = units_note(tr.arrays()[1])
+        if unit is not None:
+            # one line per channel: a held log's note and its units' note joined
+            log.notes[name] = unit if note is None else {
+                "kind": f"{note['kind']}+{unit['kind']}",
+                "text": f"{note['text']}; {unit['text']}"}
+        if refused is not None:
+            log.refused[name] = refused
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
 
@@ -542,6 +900,7 @@ class ScreenedSource:
 
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
-                                 columns if known is None else None, judged)
+                                 columns if known is None else None, judged,
+                                 check_units=getattr(info.format, "value", None) != "recording")
         if known is None and log.done:
             self._verdicts[block] = found

@@ -147,8 +147,12 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     assert set(d) == {"source", "rate_hz", "n_samples", "estimator", "estimator_description",
                       "channels", "screened"}
     # the input screen (core/io/screen.py) says what it masked: nothing on a clean record
-    assert set(d["screened"]) == {"counts", "samples_masked", "stretches", "rules", "units"}
+    # (``notes``/``refused``: what it found of each temperature log as a whole, and the logs
+    # the thermal model must not use: none on a clean record)
+    assert set(d["screened"]) == {"counts", "samples_masked", "stretches", "rules", "units",
+                                  "notes", "refused"}
     assert d["screened"]["counts"] == {} and d["screened"]["samples_masked"] == 0
+    assert d["screened"]["notes"] == {} and d["screened"]["refused"] == {}
     assert d["estimator"] == "oadev" and "OADEV" in d["estimator_description"]
     assert d["rate_hz"] == RATE and d["n_samples"] == 1 << 17
     assert list(d["channels"]) == ["x", "z"]
