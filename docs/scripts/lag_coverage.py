@@ -23,7 +23,6 @@ the generator's (1300–2300 s period, 0.5–0.9 K room swing through the plate'
 from __future__ import annotations
 
 import json
-import math
 import sys
 import tempfile
 from pathlib import Path
@@ -32,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from tests.support import adversary_gen as gen  # noqa: E402
+from tests.support import adversary_gen as gen
 
 #: name -> (hours, die lag s, sensor lag s, read interval s, coefficient m/s²/K, extra drive)
 REGIMES: dict[str, tuple[float, float, float, float, float, dict[str, float]]] = {
@@ -64,7 +63,9 @@ def make(regime: str, seed: int, path: Path) -> dict:
     drive = {"hvac_period": float(rng0.uniform(1300, 2300)),
              "hvac_amp": float(rng0.uniform(0.5, 0.9)), **extra}
     c = c0 * float(rng0.choice([-1.0, 1.0]))
-    spec = gen.Spec(kind=regime, hours=hours, rate=rate, noise={a: tuple(v / quiet for v in nbk) for a, nbk in gen.DEFAULT_NOISE.items()},
+    noise = {a: (nbk[0] / quiet, nbk[1] / quiet, nbk[2] / quiet)
+             for a, nbk in gen.DEFAULT_NOISE.items()}
+    spec = gen.Spec(kind=regime, hours=hours, rate=rate, noise=noise,
                     drive=drive, tau_plate=tau_plate, tau_die=die, tau_sensor=sensor, t_read=t_read)
 
     def effects(t, die_t, temps, rng):
