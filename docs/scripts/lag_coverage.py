@@ -5,6 +5,7 @@ project), in several lag regimes. Issue 23's bar: each parameter inside its 68 %
 
     OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py cache DIR REGIME N [SEED0]
     OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py score DIR [REGIME ...]
+    OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py cr DIR [REGIME ...]
 
 ``cache`` makes N records of REGIME, runs ``explain_file`` on each up to the thermal fit and
 keeps that fit's inputs (the slow view, the temperature channels, their screened holes) in
@@ -13,6 +14,10 @@ DIR/REGIME_SEED.npz with the truth: the thermal fit is then re-run on them by ``
 cost of explain, so that the lag interval's code can be compared on the same records.
 ``score`` prints, per regime, the x axis's lag and coefficient coverage, the lags' scatter
 and the mean half-width.
+
+``cr`` prints, per regime, the lags' scatter beside the mean Cramér–Rao deviation of the lag
+in each record's own noise (``lag_information_sd``) and the coverage the intervals would have
+with a floor at a share of it (a diagnostic: not what explain prints).
 
 Regimes (``REGIMES``): one plate-logged DS18B20, the die a first-order lag behind the plate
 (the sensor at the plate: the truth is that lag exactly), or the logged sensor lagging the
@@ -23,6 +28,7 @@ the generator's (1300–2300 s period, 0.5–0.9 K room swing through the plate'
 from __future__ import annotations
 
 import json
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -164,11 +170,65 @@ def score(out: Path, regimes: list[str]) -> list[str]:
     return lines
 
 
+def lag_information_sd(y, T, lag_s: float, c: float, rate_hz: float, half_bins: int = 8
+                       ) -> float:
+    """The Cramér–Rao deviation (s) of the lag of y = c·lag_filter(T, L) + offset + trend +
+    start state + noise: the Whittle information Σ_f 2|∂S/∂θ(f)|²/P(f) over the periodogram's
+    frequencies, the coefficient, offset, trend and start state e^(−t/|L|) as nuisances, P(f)
+    the residual's periodogram through a running median of ±``half_bins`` bins (÷ ln 2)."""
+    from avard.core.explain.thermal_fit import lag_filter
+
+    y = np.asarray(y, dtype=float)
+    n = len(y)
+    d_l = max(0.5 / rate_hz, 0.01 * abs(lag_s))
+    u = lag_filter(T, lag_s, rate_hz)
+    du = (lag_filter(T, lag_s + d_l, rate_hz) - lag_filter(T, lag_s - d_l, rate_hz)) / (2 * d_l)
+    cols = [u, c * du, np.ones(n), np.arange(n) / n]
+    if lag_s != 0:
+        cols.append(np.exp(-np.arange(n) / (rate_hz * abs(lag_s))))
+    X = np.column_stack(cols)
+    nuis = [0, *range(2, X.shape[1])]
+    res = y - X[:, nuis] @ np.linalg.lstsq(X[:, nuis], y, rcond=None)[0]
+    F = np.fft.rfft(X, axis=0)[1:]
+    R = np.abs(np.fft.rfft(res)[1:]) ** 2
+    win = np.lib.stride_tricks.sliding_window_view(np.pad(R, half_bins, mode="edge"),
+                                                   2 * half_bins + 1)
+    P = np.median(win, axis=1) / math.log(2.0)
+    info = 2.0 * np.real((F.conj().T / P) @ F)
+    return float(math.sqrt(np.linalg.pinv(info)[1, 1]))
+
+
+def cr(out: Path, regimes: list[str], shares=(0.0, 0.764, 1.0)) -> None:
+    from avard.core.explain.thermal_fit import READ_TIME_S
+
+    for rg in regimes:
+        files = sorted(out.glob(f"{rg}_*.npz"), key=lambda p: int(p.stem.split("_")[-1]))
+        if not files:
+            continue
+        rows = []
+        for f in files:
+            t, th = fit_x(f)
+            d = np.load(f)
+            sd = lag_information_sd(d["Y"][:, 0], d["temps"][:, 0], th.lag_s, th.coefficient,
+                                    float(d["rate"]))
+            rows.append((t["lag_s"], th.lag_s, th.lag_lo, th.lag_hi, sd))
+        L0, L, lo, hi, sd = np.array(rows, dtype=float).T
+        cov = []
+        for share in shares:
+            w = np.hypot(share * sd, READ_TIME_S)
+            held = (np.minimum(lo, L - w) <= L0) & (L0 <= np.maximum(hi, L + w))
+            cov.append(f"floor {share:g}·CR: {held.mean():.1%}")
+        print(f"{rg}: lag SD {np.std(L - L0, ddof=1):.3g} s, mean CR {sd.mean():.3g} s, "
+              f"mean half-width {np.mean(hi - lo) / 2:.3g} s; " + ", ".join(cov), flush=True)
+
+
 def main(argv: list[str]) -> int:
     if argv[0] == "cache":
         cache(Path(argv[1]), argv[2], int(argv[3]), int(argv[4]) if len(argv) > 4 else 0)
     elif argv[0] == "score":
         score(Path(argv[1]), argv[2:] or list(REGIMES))
+    elif argv[0] == "cr":
+        cr(Path(argv[1]), argv[2:] or list(REGIMES))
     else:
         print(__doc__)
         return 2
