@@ -99,6 +99,13 @@ DS18B20_CONVERSION_S = 0.75
 #: The lag filter's start state (``ThermalFit.signal``) is fitted over the record's first this
 #: many lags: e^(−t/τ_L) is below 1e-8 at the end, and a random walk moves the level little.
 START_FIT_LAGS = 20.0
+#: The standard uncertainty (s) of when a logged temperature was true, which the lag's
+#: interval carries beside its jackknife (``lag_interval``): a DS18B20 reading is the
+#: temperature at some moment of its conversion, logged at the conversion's end or later,
+#: and the record says not which; the lag is known to no better than half that window. It is
+#: the same on every part of the record, so the parts' spread never shows it, and where the
+#: record fixes the lag to a second or so it is as large as that spread.
+READ_TIME_S = DS18B20_CONVERSION_S / 2
 #: octave correlation of neighbouring AVAR estimates (fit.py: ≈ 0.5 for white noise)
 _RHO = 0.5
 
@@ -1831,7 +1838,8 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     ± t₀.₈₄(G−1) times its delete-a-group jackknife standard error: the same estimator on
     the z of the record with each of its ``JACKKNIFE_GROUPS`` parts left out (``ScanPoint.
     zg``, ``_with_lag_jackknife``), the same lags and kernel width, se² = (G−1)/G·Σ(L_(−g) −
-    mean)², a t quantile for its G − 1 degrees of freedom; never narrower than half the grid's
+    mean)², a t quantile for its G − 1 degrees of freedom, with the readings' time uncertainty
+    ``READ_TIME_S`` added in quadrature (no part moves it); never narrower than half the grid's
     step either side of the lag (the lags tried resolve no finer); without the parts' z the
     estimate alone. A leave-one-out lag on the support's end carries that end of the
     interval to the support's end at least; open when that is the first or last lag tried.
@@ -1853,6 +1861,8 @@ def lag_interval(scan: list[ScanPoint], k: int) -> tuple[float, float, bool, boo
     lg = np.array([p[0] for p in picks])
     se = math.sqrt((G - 1) / G * float(np.sum((lg - lg.mean()) ** 2)))
     se *= t_two_sided(0.32, G - 1)  # t₀.₈₄ of the jackknife's G − 1 dof
+    # the readings' own time: a systematic no part of the record moves, so no jackknife sees
+    se = math.hypot(se, READ_TIME_S)
     # the grid's resolution: half way to the lags tried either side of the estimate
     i = int(np.searchsorted(lags, best))
     below = best - lags[i - 1] if i > 0 else 0.0

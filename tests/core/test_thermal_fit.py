@@ -408,11 +408,12 @@ def test_the_lag_and_its_interval_are_one_estimator_the_vertex_of_1_over_z2():
     the scan: the local quadratic of 1/z² (the profile likelihood's share of the residual,
     a parabola in the lag's error where z² is a sharp peak). On z² = 1/(a + b(L − c)²) it
     is c exactly, whatever the grid; the parts' peaks at c_g give the interval
-    best ± t₀.₈₄(9)·jackknife se of the c_g, centred on the reported lag. (A parabola in z²
+    best ± √((t₀.₈₄(9)·jackknife se of the c_g)² + READ_TIME_S²), centred on the reported
+    lag. (A parabola in z²
     over the window and a three-point vertex beside it differed by about the interval's
     half-width, and the negative-lag row's intervals held the truth in 11 of 20.)"""
     from avard.core.allan.beta import t_two_sided
-    from avard.core.explain.thermal_fit import ScanPoint, best_lag, lag_interval
+    from avard.core.explain.thermal_fit import READ_TIME_S, ScanPoint, best_lag, lag_interval
 
     rng = np.random.default_rng(4)
     coarse = [-190.0, -110.0, -95.0, -88.0, -24.7, -15.7, -10.0]
@@ -433,15 +434,17 @@ def test_the_lag_and_its_interval_are_one_estimator_the_vertex_of_1_over_z2():
     lo, hi, open_lo, open_hi = lag_interval(scan, k)
     g = c0 + shifts
     se = math.sqrt(9 / 10 * float(np.sum((g - g.mean()) ** 2))) * t_two_sided(0.32, 9)
+    se = math.hypot(se, READ_TIME_S)  # the readings' time, which no part moves
     assert (lo, hi) == pytest.approx((best - se, best + se), abs=1e-6)
     assert not (open_lo or open_hi)
-    # parts that all agree with the record: the interval is the grid's resolution, half way
-    # to the lags tried either side, never a point
+    # parts that all agree with the record: the interval is the larger of the readings' time
+    # and the grid's resolution (half way to the lags tried either side), never a point
     same = [p._replace(zg=np.tile(p.z, 10)) if len(p.zg) else p for p in scan]
     lo, hi, _ol, _oh = lag_interval(same, k)
     i = int(np.searchsorted(lags, best))
-    assert (lo, hi) == pytest.approx((best - (best - lags[i - 1]) / 2,
-                                      best + (lags[i] - best) / 2), abs=1e-6)
+    assert (lo, hi) == pytest.approx(
+        (best - max(READ_TIME_S, (best - lags[i - 1]) / 2),
+         best + max(READ_TIME_S, (lags[i] - best) / 2)), abs=1e-6)
 
 
 def test_a_negative_lag_records_interval_holds_the_true_lag(tmp_path):
