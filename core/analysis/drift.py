@@ -415,8 +415,8 @@ def _reml_range(ks: NDArray, nll: NDArray) -> tuple[float, float, float]:
 B_POINTS = 25
 
 
-def walk_beside_slope(fit: NoiseFit, means: NDArray, block_s: float
-                      ) -> tuple[float, float, float] | None:
+def walk_beside_slope(fit: NoiseFit, means: NDArray, block_s: float,
+                      refit: NoiseFit | None = None) -> tuple[float, float, float] | None:
     """The walk K beside a fitted slope from the block means: (K, and its Δ(−2 ln L) ≤ 1
     range below and above), None where it cannot be computed.
 
@@ -427,7 +427,12 @@ def walk_beside_slope(fit: NoiseFit, means: NDArray, block_s: float
     B² at the fit's θ and standard error (an absent B at 0, its upper limit z_present
     standard errors above): B and K trade at the block means' scales, and a B held at a
     value the fit got wrong (absent, on some of the adversary's drift records) moved K by
-    more than its range. Costs one factorisation per B; run only beside a resolved ramp."""
+    more than its range. Where ``fit`` has no B and ``refit`` (the noise refitted on the
+    AVAR less the fitted line) has one, B is profiled under the refit's: a steep ramp holds
+    the AVAR from the flicker floor on, the first fit then finds no B, and B held near 0
+    gave K the block means' flicker (a walk below the flicker floor read far above its own
+    K, and the ramp's cross term with it). Costs one factorisation per B; run only beside
+    a resolved ramp."""
     yb = np.asarray(means, dtype=float).reshape(-1)
     if len(yb) < MIN_BLOCKS or not np.all(np.isfinite(yb)):
         return None
@@ -435,13 +440,19 @@ def walk_beside_slope(fit: NoiseFit, means: NDArray, block_s: float
     n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
     if not n_w > 0:
         return None
-    b_term = fit.terms["bias_instability"]
-    j = next((i for i, c in enumerate(fit.components) if c.cause == "bias_instability"), None)
-    theta = float(fit.theta[j]) if j is not None and j < len(fit.theta) else 0.0
-    if b_term.present and theta > 0 and j is not None:
-        se = math.sqrt(max(float(fit.theta_cov[j, j]), 0.0))
+    if refit is not None and not fit.terms["bias_instability"].present and \
+            refit.terms["bias_instability"].present:
+        b_fit = refit  # (N and K's range stay the first fit's: the short τ pin N)
     else:
-        theta, se = 0.0, float(b_term.upper or 0.0) ** 2 / fit.z_present
+        b_fit = fit
+    b_term = b_fit.terms["bias_instability"]
+    j = next((i for i, c in enumerate(b_fit.components) if c.cause == "bias_instability"),
+             None)
+    theta = float(b_fit.theta[j]) if j is not None and j < len(b_fit.theta) else 0.0
+    if b_term.present and theta > 0 and j is not None:
+        se = math.sqrt(max(float(b_fit.theta_cov[j, j]), 0.0))
+    else:
+        theta, se = 0.0, float(b_term.upper or 0.0) ** 2 / b_fit.z_present
     b_top = max(math.sqrt(theta + se), float(b_term.hi or 0.0), float(b_term.upper or 0.0))
     grid = (np.concatenate([[0.0], np.geomspace(b_top / 16.0, 2.0 * b_top, B_POINTS)])
             if se > 0 and b_top > 0 else np.array([math.sqrt(theta)]))
@@ -702,7 +713,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
         noise = refit(less, terms=[t for t in TERMS if t != "rate_ramp"], added_cov=added)
     except FitError:
         return fit, lik
-    noise = _walk_from_time_domain(noise, lik, walk_beside_slope(fit, means, block_s))
+    noise = _walk_from_time_domain(noise, lik, walk_beside_slope(fit, means, block_s, noise))
     ramp = Component("rate_ramp", "rate_ramp", {}, "value", UNITS["rate_ramp"])
     k = len(noise.theta)
     cov = np.zeros((k + 1, k + 1))
