@@ -237,10 +237,44 @@ def cmd_repro(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_paired(args: argparse.Namespace) -> int:
+    """The first ``--records`` records of a 'both' stream analysed three times: as drawn,
+    less their sinusoid, less their drift; the drift test's verdict and the slow sinusoid
+    search's each time, and the coverage at the longest printed τ."""
+    from benchmarks import bench_coverage as bc
+
+    hours = int(args.hours)
+    n, rate, lv = setup(hours, "both")
+    rng = np.random.default_rng([args.seed, hours, MIXES.index("both"), 2525])
+    ramp = lv.drift * np.arange(n, dtype=float)
+    tally: dict[str, dict[str, int]] = {}
+    for _ in range(args.records):
+        y, clean = gen.record(lv, n, rng)
+        sine = clean - ramp
+        for name, yy, part in (("as drawn", y, lv), ("less the sinusoid", y - sine,
+                                                        gen.Levels(lv.s2, lv.f2, lv.q2,
+                                                                   drift=lv.drift)),
+                               ("less the drift", y - ramp,
+                                gen.Levels(lv.s2, lv.f2, lv.q2, lv.amplitude, lv.period))):
+            r, _share, _ = bc.printed(yy, rate)
+            keep = np.flatnonzero((n // r.m) >= MIN_AVERAGES)
+            j = keep[-1]
+            t = float(gen.truth(part, r.m[j:j + 1])[0])
+            d = tally.setdefault(name, {})
+            for key in (f"drift {bc.DRIFT_VERDICT[-1]}",
+                        "sinusoid resolved" if bc.SLOW_FOUND[-1] else "sinusoid not resolved",
+                        "longest τ covered" if r.lo[j] <= t <= r.hi[j] else "longest τ missed"):
+                d[key] = d.get(key, 0) + 1
+    for name, d in tally.items():
+        print(f"{hours} h both, {args.records} records, {name}: "
+              + ", ".join(f"{k} {v}" for k, v in sorted(d.items())))
+    return 0
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("command", choices=("check", "run", "table", "repro"))
+    ap.add_argument("command", choices=("check", "run", "table", "repro", "paired"))
     ap.add_argument("--hours", default="1")
     ap.add_argument("--mixes", default="plain,sine,drift")
     ap.add_argument("--records", type=int, default=200)
@@ -251,7 +285,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--save", default="", help="repro: write the record here (.npz)")
     args = ap.parse_args(argv)
     return {"check": cmd_check, "run": cmd_run, "table": cmd_table,
-            "repro": cmd_repro}[args.command](args)
+            "repro": cmd_repro, "paired": cmd_paired}[args.command](args)
 
 
 if __name__ == "__main__":
