@@ -41,7 +41,10 @@ from avard.core.io.rates import format_rate, rates_compatible
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
     from avard.core.io.recording import Frame, Problem
+    from avard.core.io.tempscan import FrameSet
 
 __all__ = ["BLOCK", "Duplicate", "Gap", "Loss", "RecordBlock", "RecordFormat", "RecordInfo",
            "RecordSource", "RecordingSummary", "RunSummary", "StreamSource", "open_record"]
@@ -1045,9 +1048,9 @@ class RecordingSource:
                     pass              # mapping goes with it
 
     @staticmethod
-    def _window_readings(buf: NDArray[np.uint8], view: memoryview, fs: Any,
+    def _window_readings(buf: NDArray[np.uint8], view: memoryview, fs: FrameSet,
                          kind: NDArray[np.uint8], keep: Callable[[str], bool], f: Path,
-                         msgpack: Any, frames: Any
+                         msgpack: ModuleType, frames: ModuleType
                          ) -> Iterator[tuple[str, NDArray[np.int64], NDArray[np.float64]]]:
         """The readings of one window's frames (``tempscan.FrameSet``), per channel in frame
         order."""

@@ -100,13 +100,6 @@ _MAX_ROW = 512
 _FEW = 16
 
 
-#: Longest frame read in the service's layout (its records are ~150 bytes); a longer one
-#: goes to the general decode
-_MAX_ROW = 512
-#: Most distinct strings told apart by comparing rows with each one; beyond, by sorting
-_FEW = 16
-
-
 def _str_head(rows: NDArray[np.uint8], ar: NDArray[np.int64], at: NDArray[np.int64]
               ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.int64]]:
     """A msgpack fixstr or str 8 at ``at`` of each row: (whether it is one, where its bytes
