@@ -21,9 +21,11 @@ Gaussian record of 10^10 samples has no false mask (P(|z| > 12) ≈ 4e-33 per sa
 record whose grid is coarse against its noise (noise below about one LSB) the distances take
 a few discrete values and their median is 0 or a fraction of a step: ±1 LSB samples were cut
 as shocks. There the scale is never below the grid's quantisation (q/√12 of the step q, the
-smallest change the block's axis makes, its 16/17 share in the distance) nor the distances'
-RMS below their 98th percentile (``grid_scale``), so a shock must stand ≥ 3.4 LSB out
-whatever the noise, and nothing is cut from quantisation.
+smallest change the block's axis makes, its 16/17 share in the distance), and where the
+median's scale is below that, never below the distances' RMS below their 98th percentile
+either (``grid_scale``), so a shock must stand ≥ 3.4 LSB out whatever the noise, and nothing
+is cut from quantisation; where the median stands above the quantisation it is kept (the
+RMS would take a block's bursts of vibration for its noise).
 
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
@@ -83,8 +85,15 @@ STUCK_MIN_S, STUCK_FACTOR = 1800.0, 10.0
 DS18B20_STEP_C = 0.0625
 #: A log is off the DS18B20's grid when fewer than this share of its readings lie on it.
 OFF_GRID_SHARE = 0.5
-#: Readings whose median lies here (°F of a 10–40 °C room) and off the grid: a log in °F.
+#: Readings on the DS18B20's °C grid whose median lies here (°F of a 10–40 °C room): a note
+#: that °C is assumed.
 FAHRENHEIT_ROOM = (50.0, 104.0)
+#: A log in °F: at least this share of its distinct values on a DS18B20's grid in °F
+#: (32 + 0.1125·k), of at least this many distinct values (and off the °C grid).
+FAHRENHEIT_SHARE, FAHRENHEIT_MIN_VALUES = 0.8, 5
+#: A value is on a grid within this (°C or °F): a logger printing 2 decimals rounds a grid
+#: point by up to 0.005, and the float rounding of its text adds a little.
+PRINT_TOL = 0.006
 #: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
 #: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
 NOT_DS18B20 = frozenset({"chip"})
@@ -101,6 +110,9 @@ HELD_EVENTS, HELD_MIN_EVENTS, HELD_COHERENCE, HELD_MAX_CANDIDATES = 64, 32, 0.9,
 HELD_PIN_RUNS = 14
 #: A dense log whose first rows hold too few runs is judged on up to this many rows.
 HELD_WAIT_SAMPLES = 1 << 19
+#: A steady ramp (cannot tell): this share of the runs one multiple of the cadence and of
+#: the changes one sign.
+RAMP_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -177,17 +189,18 @@ class ScreenLog:
                 "refused": dict(self.refused),
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
-                          "scale never below the grid's quantisation (q/√12) nor the "
-                          "distances' RMS below their 98th percentile on a grid coarse "
-                          "against the noise; "
+                          "scale never below the grid's quantisation (q/√12) on a grid "
+                          "coarse against the noise, nor, where the median is below that, "
+                          "the distances' RMS below their 98th percentile; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run; "
                           "a log with a value on every sample that changes only on a regular "
                           "cadence is held: its readings are each run's first sample and "
                           "one every cadence while the run lasts; readings off the 0.0625 K "
-                          "grid (under half on it) are noted, and refused as °F where their "
-                          "median is 50–104"),
+                          "grid (under half of the distinct values on it) are noted, and "
+                          "refused as °F where most are on a DS18B20's grid in °F "
+                          "(32 + 0.1125·k)"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
@@ -265,6 +278,11 @@ TRIM_Q, TRIM_RMS = 0.98, 0.9346
 #: the quantisation's share of a sample's distance from its 17 neighbours' mean: the grid
 #: step q rounds each sample by up to q/2 (RMS q/√12), and that distance keeps 16/17 of it.
 GRID_SHARE = math.sqrt(16.0 / 17.0 / 12.0)
+#: the trimmed RMS (used where the median collapsed below the quantisation) is capped at this
+#: many times the quantisation: it restores the spread of noise of ~1/3 LSB the median lost
+#: (≈ 1.3× the quantisation), and no more; a block a third of it in vibration bursts would
+#: raise it above a 20 LSB shock
+GRID_RMS_CAP = 2.0
 #: changes between samples a block's axis needs before its smallest one is taken as its grid
 GRID_MIN_CHANGES = 16
 
@@ -288,19 +306,25 @@ def grid_step(col: NDArray[np.float64]) -> float:
 def grid_scale(col: NDArray[np.float64], dist: NDArray[np.float64], scale: float) -> float:
     """A floor of the robust scale on a record whose grid is coarse against its noise (the
     grid step above a quarter of ``scale``, or a scale of 0): the grid's own quantisation
-    (q/√12, its share in the distance) and the distances' RMS below their 98th percentile
-    (a discrete distribution's median can be 0 or one step where its spread is not). On a
-    record finer than its noise, 0.0 (the median's scale stands)."""
+    (q/√12, its share in the distance), and, only where the median's ``scale`` is below that
+    (a discrete distribution's median collapsed to 0 or a fraction of a step), the distances'
+    RMS below their 98th percentile, at most ``GRID_RMS_CAP`` times the quantisation. Not
+    above it: where the median stands at or over the
+    quantisation it measures the noise, robust to bursts of vibration holding up to half the
+    block, which the RMS is not (20–30 % of a block in ±30 LSB bursts raised the RMS above
+    a 40–80 LSB shock's distance, and the shock stayed in). On a record finer than its noise,
+    0.0 (the median's scale stands)."""
     q = grid_step(col)
     if not q > 0 or (scale > 0 and q < 0.25 * scale):
         return 0.0
+    floor = GRID_SHARE * q
     d = dist[np.isfinite(dist)]
-    if not len(d):
-        return GRID_SHARE * q
+    if not len(d) or scale >= floor:
+        return floor
     top = float(np.quantile(d, TRIM_Q))
     low = d[d <= top]
     rms = float(np.sqrt(np.mean(low * low))) / TRIM_RMS if len(low) else 0.0
-    return max(GRID_SHARE * q, rms)
+    return min(max(floor, rms), GRID_RMS_CAP * floor)
 
 
 def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -483,14 +507,23 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     on the cadence (a coherence of 0.9 among ~10^5 candidates has a chance < 1e-6 there).
     A log read on every sample (a thermistor, a DS18B20 at ≤ 1.33 Hz) has runs of no common
     cadence and is left as it is; a dense log with too few runs to tell is left as it is
-    and said. ``final`` False: the caller can wait for more of the log (``_Undecided`` is
+    and said. A steady ramp read on every sample without noise has runs all of one length
+    and changes all one way, which a held log whose every reading changes has too: where at
+    least ``RAMP_SHARE`` of the runs are one multiple of the cadence and of the changes one
+    sign (``_steady_ramp``) the log is left as it is and said ("cannot tell"); a held log in
+    a room that dwells and turns (runs of several multiples, changes both ways) is still
+    read as readings. Where the first changes lie too far apart for the cadences to be tried
+    (more than ``HELD_MAX_CANDIDATES``), it is said too. Density is judged over the finite
+    span (a log whose first rows are NaN is judged from its first value), and only a
+    channel's first rows are judged: a log held from midway on is not seen. ``final``
+    False: the caller can wait for more of the log (``_Undecided`` is
     raised where more runs could decide, and where a common divisor rests on fewer than
     ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
     v = np.asarray(col, dtype=float)
-    fin = np.isfinite(v)
-    if not len(v) or np.count_nonzero(fin) < HELD_DENSE * len(v):
+    f = np.flatnonzero(np.isfinite(v))
+    # dense over the finite span: a log that starts late (or ends early) is judged where it is
+    if not len(f) or len(f) < HELD_DENSE * (int(f[-1]) - int(f[0]) + 1):
         return 0.0, ""
-    f = np.flatnonzero(fin)
     if not final and len(f) < 2:
         raise _Undecided
     x = v[f]
@@ -504,35 +537,69 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
             # held, but its cadence may be a multiple of the true one (n runs are all even
             # multiples with a chance of 2^-n): more of the log pins it
             raise _Undecided
+        if _steady_ramp(lengths, g, x):
+            return 0.0, _cannot_tell(n, len(v), "all one length and its changes one way "
+                                     "(a steady ramp): cannot tell")
         return float(g), ""
-    c, _n = _fractional_cadence(starts[1:])
+    c, _n, capped = _fractional_cadence(starts[1:])
     if c > 0:
+        if _steady_ramp(lengths, c, x):
+            return 0.0, _cannot_tell(n, len(v), "all one length and its changes one way "
+                                     "(a steady ramp): cannot tell")
         return c, ""
+    if capped:
+        # too many cadences to try on the span of its first changes (a room that changes
+        # seldom at a high rate): no verdict either way, and said
+        return 0.0, _cannot_tell(n, len(v), "too far apart to read a cadence: cannot tell")
     if len(f) >= 2 * len(starts) and (g >= 2 or n < HELD_MIN_EVENTS):
         # runs of two samples or more on average, and too few of them to tell
         if not final:
             raise _Undecided
-        return 0.0, (f"a value on every sample, its {n} complete runs of one value in its "
-                     f"first {len(v)} samples too few to tell a log held at each reading (each "
-                     "reading "
-                     "repeated until the next) from one read on every sample: taken as "
-                     "read on every sample (if held, its lag is late by half a reading "
-                     "interval)")
+        return 0.0, _cannot_tell(n, len(v), "too few to tell")
     return 0.0, ""
 
 
-def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int]:
-    """(c, n): a cadence c (samples, ≥ 2.5, not always whole) on which the first
+def _cannot_tell(n: int, rows: int, why: str) -> str:
+    """The note on a dense log that cannot be told held or read on every sample."""
+    return (f"a value on every sample, its {n} complete runs of one value in its first "
+            f"{rows} samples {why} a log held at each reading (each reading "
+            "repeated until the next) from one read on every sample: taken as read on every "
+            "sample (if held, its lag is late by half a reading interval; judged on its first "
+            "rows only)")
+
+
+def _steady_ramp(lengths: NDArray[np.int64], c: float, x: NDArray[np.float64]) -> bool:
+    """A constant ramp read on every sample: at least ``RAMP_SHARE`` of the runs one
+    multiple of ``c`` (within a sample) and of the changes one sign. Its runs are all one
+    length and its steps one way, which is what a held log whose every reading changes reads
+    too: the two cannot be told apart, and de-holding a log read on every sample would keep
+    one row of each run and read the temperature up to a run early."""
+    if not len(lengths):
+        return False
+    m = np.rint(lengths / c).astype(np.int64)
+    same = float(np.max(np.bincount(m - m.min()))) / len(m)
+    d = np.diff(x)
+    d = d[d != 0]
+    if not len(d):
+        return False
+    one_way = max(np.count_nonzero(d > 0), np.count_nonzero(d < 0)) / len(d)
+    return bool(same >= RAMP_SHARE and one_way >= RAMP_SHARE)
+
+
+def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int, bool]:
+    """(c, n, capped): a cadence c (samples, ≥ 2.5, not always whole) on which the first
     ``HELD_EVENTS`` change positions ``starts`` of a dense log lie, each within a sample's
     rounding (their phases' coherence |mean e^(2πi p/c)| ≥ ``HELD_COHERENCE``: a reading
     instant rounded up to the next sample is at most one sample late, a phase of at most
-    1/c), the largest such c, and the n positions it rests on; (0.0, n) where none.
+    1/c), the largest such c, and the n positions it rests on; (0.0, n) where none;
+    ``capped`` where there were more than ``HELD_MAX_CANDIDATES`` cadences to try (none
+    tried: the caller says it cannot tell).
     Candidates: the cadences of which the shortest run is a whole number within a sample,
     on a grid fine enough that the phase across the positions' span moves < 1/8 cycle."""
     p = np.asarray(starts[:HELD_EVENTS], dtype=float)
     n = len(p)
     if n < HELD_MIN_EVENTS:
-        return 0.0, n
+        return 0.0, n, False
     p = p - p[0]
     span = float(p[-1])
     gmin = float(np.min(np.diff(p)))
@@ -542,10 +609,10 @@ def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int]:
         if hi > lo:
             grids.append(np.arange(lo, hi, lo * lo / (8.0 * span)))
     if not grids:
-        return 0.0, n
+        return 0.0, n, False
     c = np.concatenate(grids)
     if len(c) > HELD_MAX_CANDIDATES:
-        return 0.0, n
+        return 0.0, n, True
     best = 0.0
     for k in range(0, len(c), 4096):
         cc = c[k:k + 4096]
@@ -553,7 +620,7 @@ def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int]:
         hit = cc[r >= HELD_COHERENCE]
         if len(hit):
             best = max(best, float(hit.max()))
-    return best, n
+    return best, n, False
 
 
 class _Dehold:
@@ -630,39 +697,55 @@ class _Dehold:
         return None
 
 
+def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) -> float:
+    """The share of the distinct values ``v`` within ``tol`` of the grid origin + k·step."""
+    r = (v - origin) / step
+    return float(np.mean(np.abs(r - np.rint(r)) * step <= tol))
+
+
 def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str | None]:
-    """(note, refusal) on a channel's readings as a whole: off the DS18B20's 0.0625 K grid
-    (under ``OFF_GRID_SHARE`` of the readings a multiple of it: a DS18B20 read in °C is on
-    it at any resolution) and with a median a room has in °F (``FAHRENHEIT_ROOM``: 10–40 °C
-    is 50–104 °F) it is a log in °F, refused for the thermal model (a coupling per K from
-    °F is 1.8× too small, silently); off the grid elsewhere it is another logger's °C, taken
-    with a note; on the grid at a °F room's values, a note that °C is assumed."""
+    """(note, refusal) on a channel's readings as a whole, judged on its distinct values (a
+    stable room's one value, which may sit on any grid by chance, counts once).
+
+    A refusal needs positive evidence: most values (``FAHRENHEIT_SHARE``) on a DS18B20's grid
+    *in °F* (32 + 1.8·0.0625·k = 32 + 0.1125·k °F, within ``PRINT_TOL``: a logger printing
+    2 decimals) and under ``OFF_GRID_SHARE`` on its °C grid (multiples of 0.0625, within the
+    same printing), with at least ``FAHRENHEIT_MIN_VALUES`` values: a DS18B20 read in °F,
+    refused for the thermal model (a coupling per K from °F is 1.8× too small, silently).
+    Another logger's °C (a thermistor's 0.01 K, a 0.001 K logger) is on neither grid: off the
+    °C grid it is taken as °C with a note (which says to convert it if it is °F: off both
+    grids, °F cannot be told from a heated plate's °C); on the °C grid at a °F room's values
+    (``FAHRENHEIT_ROOM``), a note that °C is assumed."""
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)
           & (v >= DS18B20_MIN_C) & (v <= DS18B20_MAX_C)]
     if len(v) < 8:
         return None, None
-    r = v / DS18B20_STEP_C
-    on = float(np.mean(np.abs(r - np.rint(r)) < 1e-6))
+    u = np.unique(v)
+    on = _grid_share(u, 0.0, DS18B20_STEP_C, PRINT_TOL)
+    on_f = _grid_share(u, 32.0, 1.8 * DS18B20_STEP_C, PRINT_TOL)
     med = float(np.median(v))
     lo, hi = FAHRENHEIT_ROOM
     room_f = lo <= med <= hi
-    if on < OFF_GRID_SHARE and room_f:
-        why = (f"taken for °F: {100 * (1 - on):.0f} % of its readings are off the DS18B20's "
-               f"0.0625 K grid and their median {med:.4g} is a room in °F ({lo:g}–{hi:g} °F "
-               f"is 10–40 °C); a coupling per K from °F would be 1.8× too small; not used "
-               "(write the log in °C)")
+    if on < OFF_GRID_SHARE and on_f >= FAHRENHEIT_SHARE and len(u) >= FAHRENHEIT_MIN_VALUES:
+        why = (f"taken for °F: {100 * on_f:.0f} % of its {len(u)} distinct readings are on a "
+               f"DS18B20's grid in °F (32 + 0.1125·k) and {100 * (1 - on):.0f} % off its "
+               f"0.0625 K grid in °C (median {med:.4g}); a coupling per K from °F would be "
+               "1.8× too small; not used (write the log in °C)")
         return {"kind": "fahrenheit", "text": (
-            f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid, median "
-            f"{med:.4g}: a log in °F, not used by the thermal model")}, why
+            f"{100 * on_f:.0f} % of its distinct readings on a DS18B20's grid in °F "
+            f"(32 + 0.1125·k), median {med:.4g}: a log in °F, not used by the thermal "
+            "model")}, why
     if on < OFF_GRID_SHARE:
         return {"kind": "off_grid", "text": (
-            f"{100 * (1 - on):.0f} % of its readings off the DS18B20's 0.0625 K grid (another "
-            f"logger's?); median {med:.4g}, plausible in °C: taken as °C")}, None
+            f"{100 * (1 - on):.0f} % of its distinct readings off the DS18B20's 0.0625 K grid "
+            f"(another logger's?), median {med:.4g}: taken as °C; if it is °F, convert "
+            "it")}, None
     if room_f:
         return {"kind": "celsius_assumed", "text": (
             f"readings on the DS18B20's 0.0625 K grid with median {med:.4g}: taken as °C "
-            f"(a room logged in °F would read {lo:g}–{hi:g} too, but off this grid)")}, None
+            f"(a DS18B20 logged in °F would read {lo:g}–{hi:g} too, but on its 0.1125 °F "
+            "grid)")}, None
     return None, None
 
 

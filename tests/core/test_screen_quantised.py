@@ -59,3 +59,21 @@ def test_the_grid_floor_is_the_quantisation_and_stays_off_a_fine_record():
     dead = np.zeros(1 << 14)
     dead[100] = 40 * LSB
     assert grid_step(dead) == 0.0
+
+
+@pytest.mark.parametrize("noise, share, burst, shock", [
+    (1.5, 0.2, 30, 40), (1.5, 0.3, 30, 80), (1.0, 0.3, 20, 40), (0.4, 0.3, 10, 20)])
+def test_bursts_of_vibration_do_not_hide_a_shock(path, noise, share, burst, shock):
+    """Review of the grid floor: the distances' trimmed RMS, taken wherever the grid step
+    was over a quarter of the median's scale, took a block's bursts of vibration (20–30 %
+    of it at ±10–30 LSB) for its noise, and a 20–80 LSB shock in a quiet stretch was no
+    longer cut. The median stands where it is above the quantisation, and the RMS, used
+    only below it, is capped at a few times the quantisation."""
+    rng = np.random.default_rng(3)
+    n = 1 << 16
+    x = noise * rng.standard_normal((n, 3))
+    length = int(share * n)
+    x[10_000:10_000 + length] += burst * np.sin(2 * np.pi * 20 / 125 * np.arange(length))[:, None]
+    x[40_000, 0] += shock
+    bad = screen_accel(np.round(x) * LSB)
+    assert bad[40_000]

@@ -188,7 +188,8 @@ def test_explain_on_a_held_log_fits_the_lag_of_its_readings(tmp_path):
 def test_the_units_rule_leaves_the_chips_own_temperature_and_a_recording_alone():
     """avard's ADXL355 die temperature ("chip", on its own ~0.11 K step) at 55 °C in a warm
     enclosure is off the DS18B20's grid at a °F room's values: no DS18B20, not judged; nor is
-    a recording's log (its daemon writes °C); the same values from elsewhere are refused."""
+    a recording's log (its daemon writes °C); the same values from elsewhere are noted as off
+    the grid (they are on no DS18B20's °F grid either: no evidence of °F, not refused)."""
     rate, n = 10.0, 20_000
     col = np.full(n, np.nan)
     idx = np.arange(5, n, 10)
@@ -198,7 +199,7 @@ def test_the_units_rule_leaves_the_chips_own_temperature_and_a_recording_alone()
     _, log = _screened(col, rate, check_units=False)
     assert log.notes == {} and log.refused == {}
     _, log = _screened(col, rate)
-    assert log.notes["t0"]["kind"] == "fahrenheit" and "t0" in log.refused
+    assert log.notes["t0"]["kind"] == "off_grid" and log.refused == {}
 
 
 def test_a_held_log_of_a_stable_room_is_judged_on_more_than_its_first_block():
@@ -216,3 +217,113 @@ def test_a_held_log_of_a_stable_room_is_judged_on_more_than_its_first_block():
     np.testing.assert_array_equal(np.isfinite(out[:, 0]), np.isfinite(col))
     np.testing.assert_array_equal(out[idx, 0], col[idx])
     assert log.notes["t0"]["kind"] == "held" and "from" not in log.notes["t0"]["text"]
+
+
+def _ds18b20_f(c: np.ndarray) -> np.ndarray:
+    """A DS18B20's °C readings written in °F and printed with 2 decimals (%.2f)."""
+    return np.round(np.round(c / 0.0625) * 0.0625 * 1.8 + 32.0, 2)
+
+
+def test_a_warm_celsius_log_off_the_grid_is_not_refused_as_fahrenheit():
+    """Review of the units rule: a 55 °C plate logged by a thermistor to 0.01 K, an 80 °C
+    oven to 0.001 K and a DS18B20 at 55 °C printed with %.2f in °C were refused as °F (off
+    the 0.0625 K grid, median in 50–104). A refusal needs the readings on a DS18B20's grid
+    in °F; these are taken as °C (off the grid: a note that says to convert if °F)."""
+    rng = np.random.default_rng(0)
+    n = 20_000
+    plate = np.round(55 + 0.3 * np.sin(np.arange(n) / 3000) + 0.02 * rng.standard_normal(n), 2)
+    oven = np.round(80 + 0.1 * rng.standard_normal(n), 3)
+    for col in (plate, oven):
+        note, refused = units_note(col)
+        assert refused is None and note is not None and note["kind"] == "off_grid"
+        assert "taken as °C" in note["text"] and "convert" in note["text"]
+    # a DS18B20 in °C printed with 2 decimals (55.06, 55.12, 55.19): on its grid within
+    # its printing, so °C is assumed, not refused
+    ds = np.round(np.round((55 + 0.5 * rng.standard_normal(n)) / 0.0625) * 0.0625, 2)
+    assert {55.06, 55.19} <= set(ds.tolist())
+    note, refused = units_note(ds)
+    assert refused is None and note is not None and note["kind"] == "celsius_assumed"
+    # a stable room logged to 0.01 K whose few values happen to sit on the °F grid (23.45 °C
+    # is 32 + 0.1125·(−76)): judged on its distinct values, too few to be evidence
+    stable = np.full(n, 23.45)
+    stable[::97] = 23.46
+    assert units_note(stable)[1] is None
+    # a real DS18B20 in °F, printed with 2 decimals too, at a room's and at a plate's values:
+    # refused
+    for mid in (21.5, 45.0):
+        note, refused = units_note(_ds18b20_f(mid + 0.5 * rng.standard_normal(500)))
+        assert note is not None and note["kind"] == "fahrenheit" and refused is not None
+        assert "°F" in refused
+
+
+def test_a_heated_plate_in_celsius_off_the_grid_keeps_its_coupling(tmp_path):
+    """End to end (the reviewer's plate.py): a record coupled to its plate, the plate's log
+    moved to 55 °C and printed to 2 decimals: explain uses the channel (it was refused as °F
+    and the coupling lost) and claims the coupling; the log is a DS18B20's °C grid within its
+    printing, so the note says °C is assumed."""
+    from dataclasses import replace
+
+    rec, _ = make_record(12, hours=1.0, logged=("plate",),
+                         truth=Truth(coefficient=(3e-3, 0, 0), lag_s=60.0, drive="plate"))
+    hot = np.round(np.asarray(rec.temperature_c, float) + 34.0, 2)
+    ex = explain_file(open_record(save(replace(rec, temperature_c=hot), tmp_path / "p.npz")),
+                      ExplainOptions(channels=("x",), heldout=False))
+    assert "plate" not in ex.temperature_unused
+    d = json.loads(json.dumps(ex.to_dict(), default=str))
+    assert d["screened"]["notes"]["plate"]["kind"] == "celsius_assumed"
+    assert [f.cause for f in ex.channels["x"].claimed] == ["temperature"]
+
+
+def test_a_steady_ramp_read_on_every_sample_is_not_taken_for_held():
+    """Review of the held rule: a room warming 1 K/h read by a DS18B20 on every sample at
+    1 Hz, without noise, has runs of exactly 225 samples, all changes upward: main took it
+    for a log held on a 225-sample cadence and kept 292 of 65536 readings (read up to a run
+    early). Indistinguishable from a held log whose every reading changes: left as it is and
+    said ("cannot tell"); a thermistor's 0.01 K ramp likewise."""
+    n = 1 << 16
+    t = np.arange(n)
+    for col in (np.round((21 + t / 3600.0) / 0.0625) * 0.0625, np.round(21 + 2 * t / 3600.0, 2)):
+        c, why = held_cadence(col)
+        assert c == 0.0 and "cannot tell" in why and "steady ramp" in why
+        out, log = _screened(col, 1.0)
+        assert np.isfinite(out[:, 0]).all()
+        assert log.notes["t0"]["kind"].startswith("held_unknown")
+    # a held log of a ramp that dwells and turns (several multiples, both ways) is still held
+    rate, n = 12.5, 150_000
+    col = _readings(n, rate, 12)
+    assert held_cadence(_held(col)[:1 << 16])[0] == 12.0
+
+
+def test_a_held_log_starting_with_nan_is_judged_from_its_first_value():
+    """Review: density was judged on the first block's rows including leading NaN, so a held
+    log whose first 4000 rows (6 % of the block) are NaN was taken as readings, silently.
+    Judged over its finite span, it is read as its readings."""
+    rate, n = 12.5, 300_000
+    col = _readings(n, rate, 12)
+    hl = _held(col)
+    hl[:4000] = np.nan
+    out, log = _screened(hl, rate)
+    assert log.notes["t0"]["kind"] == "held"
+    # from its first change on (the first run is cut by the NaN: its readings' phase is not
+    # in the log), exactly the readings
+    s1 = 4001 + int(np.flatnonzero(np.diff(hl[4000:]) != 0)[0])
+    want = np.isfinite(col[s1:])
+    np.testing.assert_array_equal(np.isfinite(out[s1:, 0]), want)
+    np.testing.assert_array_equal(out[s1:, 0][want], col[s1:][want])
+
+
+def test_a_held_log_whose_cadence_cannot_be_tried_is_said():
+    """Review: a held log at 125 Hz (a reading every 0.75 s) in a room that changes seldom
+    has its first changes so far apart that more cadences than ``HELD_MAX_CANDIDATES`` were
+    to be tried: main took it as readings with no note. Now it says it cannot tell."""
+    from avard.core.io.screen import HELD_WAIT_SAMPLES
+
+    rate, n = 125.0, HELD_WAIT_SAMPLES
+    t = np.arange(n) / rate
+    room = 21.3 + 0.4 * np.sin(2 * np.pi * t / 1500.0)
+    col = np.full(n, np.nan)
+    idx = np.unique(np.floor(np.arange(5, n / 93.75) * 93.75).astype(int))
+    idx = idx[idx < n]
+    col[idx] = np.round(room[idx] / 0.0625) * 0.0625
+    c, why = held_cadence(_held(col), final=True)
+    assert c == 0.0 and "cannot tell" in why and "judged on its first rows" in why
