@@ -19,6 +19,8 @@ from avard.core.explain.thermal_fit import (
 )
 from avard.core.explain.thermal_paths import (
     HELDOUT_MARGIN,
+    LEAN_MARGIN,
+    LEAN_T,
     PARTS,
     _derivative_limit,
     _grid_cell,
@@ -506,29 +508,30 @@ def test_the_path_intervals_use_the_68_percent_profile_on_the_deviances_own_scal
     assert s.beta_hi[1] - s.beta_lo[1] < wide.beta_hi[1] - wide.beta_lo[1]
 
 
-def test_a_relay_under_the_search_threshold_is_chosen_where_the_one_lag_is_claimed():
-    # a hysteresis record (benchmark row "path: hysteresis", seed 30006: ±8.22e-5 m/s²
-    # switching 0.05 K after a turn beside 8.0e-4 m/s²/K) on which the relay's z (9.3) stays
-    # under the search's threshold (10.9) and predicts the held-out halves ≈ 10 better than
-    # one lag with the same nuisance columns. Before, one lag was kept at a lead with no
-    # interval ("leaning"); the one lag passes its own test here, so the relay's term is
-    # one test at the paths' share (``z_thresholds``) and the relay is chosen, its size and
-    # the linear coupling within 20 % and inside their 68 % intervals. (Where the relay
-    # predicts better by less than choosing needs, one lag is still kept with no interval:
-    # tests/core/test_paths_candidate_threshold.py)
+def test_one_lag_kept_beside_a_better_predicting_nonlinear_path_carries_no_interval():
+    # a hysteresis record (benchmark row "path: hysteresis", seed 30006: ±8.2e-5 m/s²
+    # switching 0.05 K after a turn beside 8.0e-4 m/s²/K) on which the relay's z stays under
+    # the search's threshold, so one lag is kept at a lead of about 100 s; with the play on
+    # the readings, the row's one-lag estimates lay at −100 to −200 s and 8.1e-4 to
+    # 1.06e-3 m/s²/K with ±4 % intervals that held other seeds' estimates out. The relay
+    # predicts the held-out halves better (Δ < −2 at z ≥ t₉'s 0.1 %): the linear reading is
+    # a model's, printed with no interval
     from benchmarks.bench_explain_weekend import explain_weekend, rows_paths
 
     row = next(r for r in rows_paths() if r.name == "path: hysteresis")
-    h_true, c_true = 8.22e-5, row.truth["coefficient"]
-    ex, _cpu = explain_weekend(replace(row.weekend, hysteresis_c=h_true), 30006)
+    # the row's size before its minimum left the fundamental out (3× the minimum of h
+    # alone): at the row's size now the relay is chosen on this seed
+    ex, _cpu = explain_weekend(replace(row.weekend, hysteresis_c=8.22e-5), 30006)
     temps = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
-    assert [f.mechanism for f in temps] == ["hysteresis"]
-    pf = ex.channels["x"].thermal.path
-    assert pf.z_threshold <= pf.chosen.z_extra < pf.z_search
+    assert [f.mechanism for f in temps] == ["one_lag"]
     f = temps[0]
-    for k, v in (("hysteresis", h_true), ("coefficient", c_true)):
-        assert f.params[k] == pytest.approx(v, rel=0.2)
-        assert f.intervals[k][0] <= v <= f.intervals[k][1]
+    assert f.model_dependent and f.intervals == {}
+    assert f.intervals_if_model_held and "coefficient" in f.intervals_if_model_held
+    assert "one lag kept, but hysteresis" in f.evidence
+    pf = ex.channels["x"].thermal.path
+    assert pf.leaning == ("hysteresis",)
+    h = pf.scores["hysteresis"]
+    assert h.heldout < pf.scores["one_lag"].heldout - LEAN_MARGIN and h.z_extra >= LEAN_T
 
 
 def test_a_hysteresis_is_chosen_with_its_size_and_the_linear_coupling():
