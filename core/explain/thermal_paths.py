@@ -51,13 +51,11 @@ folds add: H = D_B(fit on A) + D_A(fit on B). An extension is preferred over ``o
 (and over no coupling at all) only when its H is lower by ``HELDOUT_MARGIN`` and its extra
 term passes its own test (a Wald z from the delete-a-part jackknife, Student's t with
 ``PARTS`` − 1 dof, ≥ ``alarm.bonferroni_t(alarm.THERMAL_PATHS, trials, PARTS − 1)``, the
-trials all grid points of all extensions, where the extension would be the axis's whole
-claim; where the one lag passed its own test, one test at the paths' share,
-``z_thresholds``): the false-alarm budget per axis holds the paths' share. The margin
-grows by the share of the held-out deviance the readings' rounding through the one-lag
-coupling makes up (``_View.rounding_share``): a path that smooths the 0.0625 K steps gains
-that much without physics; a linear candidate (two paths, dT/dt) only by what it passes
-less of that rounding than one lag does, through its own |H|² (``_smoothing``).
+trials all grid points of all extensions): the false-alarm budget per axis holds the paths'
+share. The margin grows by the share of the held-out deviance the readings' rounding through
+the one-lag coupling makes up (``_View.rounding_share``): a path that smooths the 0.0625 K
+steps gains that much without physics; a linear candidate (two paths, dT/dt) only by what
+it passes less of that rounding than one lag does, through its own |H|² (``_smoothing``).
 A candidate whose θ sits at the end of its grid is
 open and never chosen over one lag (``OPEN_MARGIN`` is infinite): its θ is a bound, not an
 estimate, and on typical-tempco records two lags of opposite sign at 1800 and 3600 s won the
@@ -715,11 +713,6 @@ class PathFit:
     #: lag's coefficient is then one of two readings the record does not tell apart and the
     #: data lean to the other, model-dependent with no interval (as ``leaning``)
     beside_better: tuple[str, ...] = ()
-    #: how many grid points each extension searched (its share of the paths' trials)
-    n_trials: dict[str, int] = field(default_factory=dict)
-    #: the search's threshold (``z_thresholds``): ``z_threshold`` where the extension would
-    #: be the axis's whole claim; on a coupled axis ``z_threshold`` is the single test's
-    z_search: float = math.nan
 
     @property
     def model_dependent(self) -> bool:
@@ -866,12 +859,7 @@ class PathFit:
                 "mechanism_fits_as_well": list(self.as_well),
                 "params": p, "intervals": iv,
                 "open": self.chosen.open_end, "z_extra": self.chosen.z_extra,
-                "z_threshold": self.z_threshold,
-                # the search's, over every grid point of every extension: what an extension
-                # needs where it is the axis's whole claim (``z_thresholds``)
-                "z_threshold_search": (self.z_search if math.isfinite(self.z_search)
-                                       else self.z_threshold),
-                "margin": self.margin,
+                "z_threshold": self.z_threshold, "margin": self.margin,
                 "rounding_share": self.rounding,
                 "rounding_share_own": dict(self.own_rounding),
                 "heldout_minus2lnL": {k: v.heldout for k, v in self.scores.items()},
@@ -1522,7 +1510,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 keep: NDArray[np.bool_] | None = None,
                 columns: dict[Column, NDArray[np.float64]] | None = None,
                 warmups: tuple[float, ...] = (), held_only: bool = True,
-                given: tuple[NDArray, ...] = (), coupled: bool | None = None) -> PathFit:
+                given: tuple[NDArray, ...] = ()) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
@@ -1541,12 +1529,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     (each of ``y``'s length) the record holds beside any coupling, the transients found on
     the axis, each a nuisance column of free size beside every candidate as the warm-ups
     are: a path on a short record switches or bends a few times, and a relay's two or three
-    switches took a warm-up and a bias step the coupling never held. ``coupled``: whether
-    the one-lag coupling passed its own test on this axis (``thermal_fit``'s, at the
-    temperature's share of the per-axis level); None: ``not held_only``, as
-    ``thermal_fit.path_of`` passes it. It sets the z an extension's extra term needs
-    (``z_thresholds``)."""
-    coupled = (not held_only) if coupled is None else coupled
+    switches took a warm-up and a bias step the coupling never held."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -1619,7 +1602,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     rounding_dev = sum(v.rounding_share(c_one) for v in vh)  # Δ(−2 ln L) the rounding makes up
     vjk = [_view(whole - p, edf_v, n_v, ok_tau, s_ref) for p in parts]
     n_ext = sum(len(per_kind[k]) for k in CANDIDATES if k != "one_lag")
-    z_search, z_thr = z_thresholds(n_ext, coupled)
+    z_thr = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
     # no coupling at all, held out: an extension must beat it too (on an axis whose one-lag
     # test failed, one lag is no reference)
     # (beside the transients ``given``, fitted as beside every candidate: where they are the
@@ -1973,7 +1956,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     two = scores.get("two_path")
     d_raw = math.nan if two is None else two.heldout - best.heldout
     d_two = math.nan if two is None else min(d_raw, _over_one(two, best))
-    if (best.kind == "one_lag" and two is not None and two.z_extra < z_search
+    if (best.kind == "one_lag" and two is not None and two.z_extra < z_thr
             and d_two <= HELDOUT_MARGIN):
         line = (f"one line holds {share:.0%} of the channel's variance, at {period:.4g} s"
                 if math.isfinite(share) and math.isfinite(period) else "")
@@ -1982,7 +1965,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             f"within the margin of one lag on one score or both: Δ {d_raw:+.3g} with each "
             f"model's own start states refitted on the held-out half, "
             f"{_over_one(two, best):+.3g} with the same ones for both; their "
-            f"second term unresolved, z {two.z_extra:.3g} < {z_search:.3g}"
+            f"second term unresolved, z {two.z_extra:.3g} < {z_thr:.3g}"
             + (f"; {line}" if line else "") + "): one lag's coefficient and lag are the "
             "response at the drive, not a first path's")
     if math.isfinite(share) and share >= ONE_LINE_SHARE and math.isfinite(period):
@@ -2009,36 +1992,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
                    as_well=as_well, beside_lag=tuple(beside_lag),
-                   beside_better=beside_better,
-                   n_trials={k: len(per_kind[k]) for k in CANDIDATES if k != "one_lag"},
-                   z_search=z_search)
-
-
-def z_thresholds(n_ext: int, coupled: bool) -> tuple[float, float]:
-    """(the search's threshold, the one an extension's extra term needs on this axis) for a
-    jackknife z (Student's t, ``PARTS`` − 1 dof) over ``n_ext`` grid points of all the
-    extensions.
-
-    The search's: the paths' share of the per-axis level (``alarm.THERMAL_PATHS``)
-    Bonferroni-split over every grid point of every extension. That is what an extension
-    needs where it would be the axis's whole claim (the one lag failed its own test): on an
-    axis with nothing coupled its term is a search over those grid points.
-
-    Where the one lag passed its own test (``coupled``), the axis's temperature claim is
-    already made at the temperature's share; an extension then changes the mechanism, not
-    whether anything is claimed. On an axis with nothing to find such a claim needs the one
-    lag's false pass first, which the temperature's share already counts: the per-axis level
-    is the same whatever the extension's term is held to. Its term is then one test at the
-    paths' share (no search Bonferroni). What tells an extension from one lag on a coupled
-    axis is the held-out comparison with the same nuisance columns (``_matched``), not the
-    term's z: against a one-lag truth the jackknife z of a dT/dt term or a relay is no
-    Student's t centred on 0 (the term trades with the lag along a ridge, and a lead is a
-    dT/dt term at the drive), and measured on the adversary's one-lag records it reached
-    10–21 where the held-out comparison stayed within 3 of one lag
-    (docs/log/2026-11-28-cand25.md)."""
-    z_search = alarm.bonferroni_t(alarm.THERMAL_PATHS, n_ext, PARTS - 1)
-    return z_search, (alarm.bonferroni_t(alarm.THERMAL_PATHS, 1, PARTS - 1) if coupled
-                      else z_search)
+                   beside_better=beside_better)
 
 
 def holds_beside(pf: PathFit, kind: str) -> bool:
