@@ -2280,7 +2280,7 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
                 f"the drive's {period:.4g} s a lag of {lag:.4g} s is a coupling and a dT/dt "
                 f"term with r/c = {-lag:.4g} s, the same gain and phase; read so, the "
                 f"coupling is {rival.coefficient:.3g} m/s²/K and r {rival.r:.3g} m/s² per K/s "
-                f"(one lag's {c1:.3g} is {c1 / rival.coefficient:.3g}× that coupling), "
+                f"(one lag's {c1:.3g} is {_times(c1, rival.coefficient)} that coupling), "
                 "model-dependent")
     return (f"the dT/dt term fits as well as the one lag kept (held out Δ "
             f"{rate.heldout - best.heldout:+.3g}; its extra term's z {rate.z_extra:.3g}): at "
@@ -2289,6 +2289,11 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
             f"them apart there; read so, the coupling is {c1 / g:.3g} m/s²/K and r "
             f"{-c1 * lag / g:.3g} m/s² per K/s (one lag's {c1:.3g} is {g:.3g}× that "
             "coupling)")
+
+
+def _times(a: float, b: float) -> str:
+    """'a/b×' for the note's ratio, or 'not a multiple of' where b is 0."""
+    return f"{a / b:.3g}×" if b else "not a multiple of"
 
 
 #: How far the sawtooth model of the readings' rounding through a dT/dt reading
@@ -2309,10 +2314,13 @@ def _rate_separation(v: _View, where: dict[Column, int], lag_cols: tuple[Column,
     plus dT/dt term on the channel itself, c·T + r·dT/dt, on the whole record's weights:
     (λ, c, r) with λ the least deviance Σ_k ν_k r_k/s_k of their difference, the z² of that
     difference in the regression's own noise, and (c, r) the closest such reading; λ = ∞
-    where a column is not in ``where``."""
+    where a column is not in ``where`` or the view holds no τ (a record too short for the
+    path test's τ: there ``_fit`` gives zeros, which read as two signals 0 σ apart with a
+    coupling of 0)."""
     u0, rc = Column("u", 0.0), Column("rate", 0.0)
     lag = [c for c in lag_cols if c.kind == "u"]
-    if u0 not in where or rc not in where or not lag or lag[0] not in where:
+    if (u0 not in where or rc not in where or not lag or lag[0] not in where
+            or not len(v.nu)):
         return math.inf, math.nan, math.nan
     rows = [where[u0], where[rc], *(where[c] for c in lag_cols
                                     if c.kind in NUISANCE and c in where)]
