@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan import kernels
+from avard.core.io.source import RecordFormat
 from numpy.typing import NDArray
 
 __all__ = ["ScreenLog", "Screened", "screen_accel", "screen_blocks", "screen_record",
@@ -116,6 +117,22 @@ RAMP_SHARE = 0.9
 
 
 @dataclass(frozen=True)
+class LogNote:
+    """What the screen found of one temperature log as a whole: ``kind`` (held,
+    held_unknown, fahrenheit, off_grid, celsius_assumed; two joined by '+') and its one
+    line of text."""
+    kind: str
+    text: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"kind": self.kind, "text": self.text}
+
+    def joined(self, other: LogNote) -> LogNote:
+        """One line per channel: this note and ``other`` together."""
+        return LogNote(f"{self.kind}+{other.kind}", f"{self.text}; {other.text}")
+
+
+@dataclass(frozen=True)
 class Screened:
     """One masked (or, for a dropout, missing) stretch: the channel, what it is, its first and
     last sample (record index) and time (s from the record's start), and how many samples
@@ -162,7 +179,7 @@ class ScreenLog:
     readings: dict[str, int] = field(default_factory=dict)
     #: per temperature channel, what the screen found of the log as a whole (a held log
     #: read as readings, readings off the DS18B20's grid, a log in °F): {kind, text}
-    notes: dict[str, dict[str, str]] = field(default_factory=dict)
+    notes: dict[str, LogNote] = field(default_factory=dict)
     #: temperature channels the thermal model must not use, with why (a log in °F)
     refused: dict[str, str] = field(default_factory=dict)
 
@@ -185,7 +202,7 @@ class ScreenLog:
     def to_dict(self) -> dict[str, Any]:
         return {"counts": self.counts(), "samples_masked": self.samples_masked(),
                 "stretches": [s.to_dict() for s in self.stretches],
-                "notes": {k: dict(v) for k, v in self.notes.items()},
+                "notes": {k: v.to_dict() for k, v in self.notes.items()},
                 "refused": dict(self.refused),
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
@@ -206,7 +223,7 @@ class ScreenLog:
     def lines(self, limit: int = 8) -> list[str]:
         """The text: one summary line, then up to ``limit`` stretches with their times, then
         one line per temperature channel the screen has a note on."""
-        notes = [f"  temperature {ch}: {n['text']}" for ch, n in self.notes.items()]
+        notes = [f"  temperature {ch}: {n.text}" for ch, n in self.notes.items()]
         if not self.stretches:
             return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
                     "dropout or stuck reading)", *notes]
@@ -684,16 +701,16 @@ class _Dehold:
             self.start = off + (int(starts[-1]) if len(starts) else self.start - off)
         return out
 
-    def note(self, rate_hz: float) -> dict[str, str] | None:
+    def note(self, rate_hz: float) -> LogNote | None:
         if self.k:
             since = "" if self.first <= 0 else f" from {self.first / rate_hz:.6g} s"
-            return {"kind": "held", "text": (
+            return LogNote("held", (
                 f"held at each reading (a value on every sample, changing only on a "
                 f"{self.k:.4g}-sample cadence, {self.k / rate_hz:.3g} s): read as "
                 f"readings{since} (each run's first sample, and one every {self.k:.4g} "
-                "samples while it lasts; the rest NaN)")}
+                "samples while it lasts; the rest NaN)"))
         if self.why:
-            return {"kind": "held_unknown", "text": self.why}
+            return LogNote("held_unknown", self.why)
         return None
 
 
@@ -703,7 +720,7 @@ def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) 
     return float(np.mean(np.abs(r - np.rint(r)) * step <= tol))
 
 
-def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str | None]:
+def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]:
     """(note, refusal) on a channel's readings as a whole, judged on its distinct values (a
     stable room's one value, which may sit on any grid by chance, counts once).
 
@@ -732,20 +749,20 @@ def units_note(values: NDArray[np.float64]) -> tuple[dict[str, str] | None, str 
                f"DS18B20's grid in °F (32 + 0.1125·k) and {100 * (1 - on):.0f} % off its "
                f"0.0625 K grid in °C (median {med:.4g}); a coupling per K from °F would be "
                "1.8× too small; not used (write the log in °C)")
-        return {"kind": "fahrenheit", "text": (
+        return LogNote("fahrenheit", (
             f"{100 * on_f:.0f} % of its distinct readings on a DS18B20's grid in °F "
             f"(32 + 0.1125·k), median {med:.4g}: a log in °F, not used by the thermal "
-            "model")}, why
+            "model")), why
     if on < OFF_GRID_SHARE:
-        return {"kind": "off_grid", "text": (
+        return LogNote("off_grid", (
             f"{100 * (1 - on):.0f} % of its distinct readings off the DS18B20's 0.0625 K grid "
             f"(another logger's?), median {med:.4g}: taken as °C; if it is °F, convert "
-            "it")}, None
+            "it")), None
     if room_f:
-        return {"kind": "celsius_assumed", "text": (
+        return LogNote("celsius_assumed", (
             f"readings on the DS18B20's 0.0625 K grid with median {med:.4g}: taken as °C "
             f"(a DS18B20 logged in °F would read {lo:g}–{hi:g} too, but on its 0.1125 °F "
-            "grid)")}, None
+            "grid)")), None
     return None, None
 
 
@@ -860,9 +877,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             unit, refused = units_note(tr.arrays()[1])
         if unit is not None:
             # one line per channel: a held log's note and its units' note joined
-            log.notes[name] = unit if note is None else {
-                "kind": f"{note['kind']}+{unit['kind']}",
-                "text": f"{note['text']}; {unit['text']}"}
+            log.notes[name] = unit if note is None else note.joined(unit)
         if refused is not None:
             log.refused[name] = refused
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
@@ -984,6 +999,6 @@ class ScreenedSource:
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
                                  columns if known is None else None, judged,
-                                 check_units=getattr(info.format, "value", None) != "recording")
+                                 check_units=info.format is not RecordFormat.RECORDING)
         if known is None and log.done:
             self._verdicts[block] = found

@@ -69,7 +69,7 @@ def test_a_held_log_is_read_as_its_readings_and_said(block):
     out, log = _screened(_held(col), rate, block)
     np.testing.assert_array_equal(np.isfinite(out[:, 0]), np.isfinite(col))
     np.testing.assert_array_equal(out[np.isfinite(col), 0], col[np.isfinite(col)])
-    assert log.notes["t0"]["kind"] == "held"
+    assert log.notes["t0"].kind == "held"
     (line,) = [ln for ln in log.lines() if "temperature t0" in ln]
     assert "held at each reading" in line and "12-sample cadence" in line
     assert log.to_dict()["notes"]["t0"]["kind"] == "held"
@@ -106,7 +106,7 @@ def test_a_held_log_whose_cadence_is_no_whole_number_of_samples():
     # a change is a reading at its own row: the value changes where the readings' does
     ch = idx[1:][np.diff(col[idx]) != 0]
     assert np.all(np.isfinite(out[ch, 0]))
-    assert log.notes["t0"]["kind"] == "held"
+    assert log.notes["t0"].kind == "held"
 
 
 def test_a_log_read_on_every_sample_is_not_taken_for_held():
@@ -127,21 +127,21 @@ def test_a_dense_log_with_too_few_changes_says_it_cannot_tell():
     col[20_000:] = 21.375
     col[41_000:] = 21.4375
     _, log = _screened(col, rate)
-    assert log.notes["t0"]["kind"] == "held_unknown"
-    assert "too few to tell" in log.notes["t0"]["text"]
+    assert log.notes["t0"].kind == "held_unknown"
+    assert "too few to tell" in log.notes["t0"].text
 
 
 def test_units_rule_fahrenheit_off_grid_celsius_and_on_grid():
     rng = np.random.default_rng(2)
     c = np.round((21.5 + 0.5 * rng.standard_normal(500)) / 0.0625) * 0.0625
     note, refused = units_note(c * 1.8 + 32.0)
-    assert note is not None and note["kind"] == "fahrenheit" and refused is not None
+    assert note is not None and note.kind == "fahrenheit" and refused is not None
     assert "°F" in refused and "1.8" in refused
     note, refused = units_note(c + rng.normal(0, 0.01, len(c)))  # another logger, °C
-    assert note is not None and note["kind"] == "off_grid" and refused is None
+    assert note is not None and note.kind == "off_grid" and refused is None
     assert units_note(c) == (None, None)  # a DS18B20 in °C: nothing to say
     note, refused = units_note(c + 50.0)  # on the grid at a °F room's values
-    assert note is not None and note["kind"] == "celsius_assumed" and refused is None
+    assert note is not None and note.kind == "celsius_assumed" and refused is None
 
 
 def test_explain_refuses_a_log_in_fahrenheit_and_says_so(tmp_path):
@@ -199,7 +199,7 @@ def test_the_units_rule_leaves_the_chips_own_temperature_and_a_recording_alone()
     _, log = _screened(col, rate, check_units=False)
     assert log.notes == {} and log.refused == {}
     _, log = _screened(col, rate)
-    assert log.notes["t0"]["kind"] == "off_grid" and log.refused == {}
+    assert log.notes["t0"].kind == "off_grid" and log.refused == {}
 
 
 def test_a_held_log_of_a_stable_room_is_judged_on_more_than_its_first_block():
@@ -216,7 +216,7 @@ def test_a_held_log_of_a_stable_room_is_judged_on_more_than_its_first_block():
     out, log = _screened(_held(col), rate)
     np.testing.assert_array_equal(np.isfinite(out[:, 0]), np.isfinite(col))
     np.testing.assert_array_equal(out[idx, 0], col[idx])
-    assert log.notes["t0"]["kind"] == "held" and "from" not in log.notes["t0"]["text"]
+    assert log.notes["t0"].kind == "held" and "from" not in log.notes["t0"].text
 
 
 def _ds18b20_f(c: np.ndarray) -> np.ndarray:
@@ -235,14 +235,14 @@ def test_a_warm_celsius_log_off_the_grid_is_not_refused_as_fahrenheit():
     oven = np.round(80 + 0.1 * rng.standard_normal(n), 3)
     for col in (plate, oven):
         note, refused = units_note(col)
-        assert refused is None and note is not None and note["kind"] == "off_grid"
-        assert "taken as °C" in note["text"] and "convert" in note["text"]
+        assert refused is None and note is not None and note.kind == "off_grid"
+        assert "taken as °C" in note.text and "convert" in note.text
     # a DS18B20 in °C printed with 2 decimals (55.06, 55.12, 55.19): on its grid within
     # its printing, so °C is assumed, not refused
     ds = np.round(np.round((55 + 0.5 * rng.standard_normal(n)) / 0.0625) * 0.0625, 2)
     assert {55.06, 55.19} <= set(ds.tolist())
     note, refused = units_note(ds)
-    assert refused is None and note is not None and note["kind"] == "celsius_assumed"
+    assert refused is None and note is not None and note.kind == "celsius_assumed"
     # a stable room logged to 0.01 K whose few values happen to sit on the °F grid (23.45 °C
     # is 32 + 0.1125·(−76)): judged on its distinct values, too few to be evidence
     stable = np.full(n, 23.45)
@@ -252,7 +252,7 @@ def test_a_warm_celsius_log_off_the_grid_is_not_refused_as_fahrenheit():
     # refused
     for mid in (21.5, 45.0):
         note, refused = units_note(_ds18b20_f(mid + 0.5 * rng.standard_normal(500)))
-        assert note is not None and note["kind"] == "fahrenheit" and refused is not None
+        assert note is not None and note.kind == "fahrenheit" and refused is not None
         assert "°F" in refused
 
 
@@ -287,7 +287,7 @@ def test_a_steady_ramp_read_on_every_sample_is_not_taken_for_held():
         assert c == 0.0 and "cannot tell" in why and "steady ramp" in why
         out, log = _screened(col, 1.0)
         assert np.isfinite(out[:, 0]).all()
-        assert log.notes["t0"]["kind"].startswith("held_unknown")
+        assert log.notes["t0"].kind.startswith("held_unknown")
     # a held log of a ramp that dwells and turns (several multiples, both ways) is still held
     rate, n = 12.5, 150_000
     col = _readings(n, rate, 12)
@@ -303,7 +303,7 @@ def test_a_held_log_starting_with_nan_is_judged_from_its_first_value():
     hl = _held(col)
     hl[:4000] = np.nan
     out, log = _screened(hl, rate)
-    assert log.notes["t0"]["kind"] == "held"
+    assert log.notes["t0"].kind == "held"
     # from its first change on (the first run is cut by the NaN: its readings' phase is not
     # in the log), exactly the readings
     s1 = 4001 + int(np.flatnonzero(np.diff(hl[4000:]) != 0)[0])
