@@ -371,7 +371,11 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     # the profile over slopes: a first span from the GLS error at the walk's own K (the
     # widest of the two), then the Δ = 1 crossings on a finer one
     wide = math.sqrt(max(float(prof.fit(float(ks[i]), w1)[2][-1, -1]), 0.0))
-    lo, hi = _crossings(prof, ks, w0, w1[:, -1], slope, max(wide, abs(slope) * 1e-6))
+    # the interval at Δ(−2 ln L) ≤ β, not ≤ 1: the ratio the test divides by β is wider
+    # than χ²(1) by that factor, and its 68 % interval with it (at Δ ≤ 1 the driftless
+    # 12 h records' interval held the true slope in about half of them)
+    lo, hi = _crossings(prof, ks, w0, w1[:, -1], slope,
+                        max(wide * math.sqrt(beta), abs(slope) * 1e-6), beta)
     # one line per half (a step makes two flat halves, a drift one slope)
     half = (t >= np.median(t)).astype(float)
     w2 = np.column_stack([w0, prof.white(np.column_stack([half, tc, tc * half]))])
@@ -490,14 +494,15 @@ def bartlett(walk_dof: float) -> float:
 
 
 def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: float,
-               span: float) -> tuple[float, float]:
-    """Where the slope's profile −2 ln L rises by 1 either side of its minimum (searched
-    over ±4·``span``, widened while it has not risen that far at the ends)."""
+               span: float, rise: float = 1.0) -> tuple[float, float]:
+    """Where the slope's profile −2 ln L rises by ``rise`` (the Bartlett factor β: 1 for
+    a χ²(1) ratio) either side of its minimum (searched over ±4·``span``, widened while it
+    has not risen that far at the ends)."""
     for _ in range(4):
         grid = slope + span * np.linspace(-4.0, 4.0, 81)
         prof_ = prof.slope_profile(ks, w0, wt, grid)
         k = int(np.argmin(prof_))
-        lim = float(prof_[k]) + 1.0
+        lim = float(prof_[k]) + rise
         if prof_[0] > lim and prof_[-1] > lim:
             below = np.flatnonzero(prof_ <= lim)
             a, b = int(below[0]), int(below[-1])

@@ -112,6 +112,18 @@ class SlowSine:
     amplitude_lo: float
     amplitude_hi: float
     cycles: float
+    #: its GLS cosine and sine coefficients on the block means searched (centres t_i, phase
+    #: 2π·``cycles``·t_i/T, block-averaged as the means hold it): what ``less_sine`` takes off
+    means_coef: tuple[float, float] = (0.0, 0.0)
+
+    def less_sine(self, means: NDArray, block_s: float) -> NDArray[np.float64]:
+        """``means`` (the block means searched, each ``block_s`` long) less this sinusoid
+        as they hold it."""
+        yb = np.asarray(means, dtype=float).reshape(-1)
+        t = (np.arange(len(yb)) + 0.5) * block_s
+        arg = 2.0 * np.pi * self.cycles * t / (len(yb) * block_s)
+        c, s = self.means_coef
+        return np.asarray(yb - c * np.cos(arg) - s * np.sin(arg))
 
     @property
     def label(self) -> str:
@@ -297,7 +309,7 @@ def search_slow_sine(means: NDArray, block_s: float, n_white: float, b_inst: flo
         return SlowSearch(None, "not resolved: the amplitude's interval reaches zero", band,
                           peak_stat, thr, f_hat / record_s)
     sine = SlowSine(f_hat / record_s, lo / record_s, hi / record_s, amp / gain,
-                    (amp - sd) / gain, (amp + sd) / gain, f_hat)
+                    (amp - sd) / gain, (amp + sd) / gain, f_hat, (float(a[0]), float(a[1])))
     return SlowSearch(sine, f"a sinusoid of {f_hat:.3g} cycles per record", band, peak_stat,
                       thr, f_hat / record_s)
 
@@ -363,8 +375,9 @@ def resolve_slow_sine(base: NoiseFit, fit: NoiseFit, allan: AllanResult, means: 
     its N and B, K's range past its upper K), and where it resolves a sinusoid, the fit that
     sets the printed EDF: the noise refitted (``refit(allan, added_cov=...)``, the channel's
     own ``fit_noise`` arguments) on the AVAR less the sinusoid's, its uncertainty added to
-    the AVAR's covariance (the walk and the flicker no longer made of it), a drift ``fit``
-    resolved apart resolved again beside it (``drift.resolve_drift``), and the sinusoid
+    the AVAR's covariance (the walk and the flicker no longer made of it), the drift tested
+    again beside it on the means less the sinusoid (``drift.resolve_drift``: whatever
+    ``fit``, the channel's fit with the first test's verdict, said), and the sinusoid
     appended as a resolved part (``resolved_apart``: it may take the EDF past the record's
     support, ``signal_edf``). None where none is resolved or a refit fails, or where one of
     the line finder's ``lines_hz`` lies within ``LINE_BINS`` of its bins (``top_hz`` is its
@@ -399,8 +412,15 @@ def resolve_slow_sine(base: NoiseFit, fit: NoiseFit, allan: AllanResult, means: 
 
     try:
         noise = beside(less)
-        if fit.resolved_apart:
-            noise = resolve_drift(noise, less, means, block_s, beside)[0]
+        # The drift is tested again here, on the means less the sinusoid and against the
+        # noise refitted without it, whatever the first test (on the base fit) said: the
+        # sinusoid's AVAR went to the base fit's walk, whose wider K range and the
+        # sinusoid's own swing in the means hid a drift from that test (a drift and a
+        # slow sinusoid together: the drift resolved in a seventh of the records it was
+        # resolved in alone). The search fits an offset and a slope under both of its
+        # hypotheses, so a drift does not hide the sinusoid in turn.
+        noise = resolve_drift(noise, less, sine.less_sine(means, block_s), block_s,
+                              beside)[0]
     except FitError as exc:
         return replace(search, sine=None, note=f"not resolved: the fit beside the sinusoid "
                        f"failed ({exc})"), None

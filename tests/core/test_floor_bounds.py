@@ -20,10 +20,10 @@ from tests.core.test_noise_id_rate import support
 from tests.support.coverage_gen import record
 
 
-@pytest.mark.parametrize("seed", [2453, 2406])
+@pytest.mark.parametrize("seed", [2453, 2407])
 def test_a_floor_records_bounds_take_the_ramps_uncertainty_from_the_slope(seed: int) -> None:
     """12 h of the coverage generator's drift mix, the drift test short of its level but the
-    slope's 68 % interval clear of zero (seeds 2453 and 2406: z 2.1 and below): the fit
+    slope's 68 % interval clear of zero (seeds 2453 and 2407: z 2.1 and below): the fit
     carries the slope and its interval; where the ramp at the interval's top holds under
     0.1 % of the estimate the bounds are the printed EDF's χ² ones, exactly; at the longest
     τ, where the ramp holds most of the AVAR, they are the quadrature of the slope's and the

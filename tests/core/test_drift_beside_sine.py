@@ -1,0 +1,61 @@
+"""A drift beside a resolved slow sinusoid (issue 24, drift25): the drift test runs again on
+the block means less the sinusoid, against the noise refitted without it
+(``slow_sine.resolve_slow_sine``), whatever the first test on the base fit said. The records
+are the independent generator's (``tests/support/coverage_gen2.py``, adv25), drawn as its
+runner draws them (``docs/scripts/coverage_gen2_run.py repro --hours 12 --mixes both``)."""
+
+from __future__ import annotations
+
+import numpy as np
+from avard.core.analysis.slow_sine import SlowSine
+
+from tests.core.test_drift import _analyze
+from tests.support import coverage_gen2 as gen
+
+N_12H = 43_200
+
+
+def _both_12h(index: int) -> tuple[np.ndarray, gen.Levels]:
+    """Record ``index`` of the runner's 12 h "both" stream, seed 1: white + flicker
+    (corner 300 s) + walk (corner 10 000 s), a sinusoid of T/10 at 1.5 times the noise's
+    AVAR at its half period, a drift whose AVAR is the noise's at T/20."""
+    lv = gen.levels(N_12H, 300.0, 10_000.0, 1.0, sine_period=N_12H / 10, sine_gain=1.5,
+                    drift_at=1 / 20)
+    rng = np.random.default_rng([1, 12, 3, 2525])  # (seed 1, 12 h, mix "both")
+    for _ in range(index):
+        gen.record(lv, N_12H, rng)
+    return gen.record(lv, N_12H, rng)[0], lv
+
+
+def test_a_drift_the_sinusoid_hid_is_resolved_beside_it() -> None:
+    """Record 0 (true drift 4.40e-5 m/s³, true K 1.0e-3 m/s²/√s): the base fit's test does
+    not pass (its K carries the sinusoid's AVAR); beside the resolved sinusoid the drift is
+    resolved, its interval holds the true slope, and K, no longer made of the sinusoid or
+    the drift, reaches down to the truth (before: K 2.75e-3 [1.58e-3, 3.56e-3] beside the
+    sinusoid, R absent)."""
+    y, lv = _both_12h(0)
+    ch = _analyze(y, 1.0)
+    assert "rate_ramp" not in ch.fit.resolved_apart  # (the first test: hidden)
+    assert ch.slow is not None and ch.slow.sine is not None
+    fit = ch.slow_fit
+    assert fit is not None and "rate_ramp" in fit.resolved_apart
+    r = fit.terms["rate_ramp"]
+    assert r.present and r.lo <= lv.drift <= r.hi
+    k_true = float(np.sqrt(lv.q2))  # (1 Hz: K² = q²·rate)
+    k = fit.terms["rate_random_walk"]
+    assert k.lo is not None and k.lo <= k_true
+    assert k.hi is not None and k.hi > 0.5 * k_true
+
+
+def test_the_means_less_the_sinusoid_lose_it_and_keep_the_drift() -> None:
+    """``SlowSine.less_sine`` takes off what the search fitted: the means less it hold no
+    sinusoid at its frequency (their GLS-free projection on it is far below the
+    sinusoid's), and the slope stays."""
+    j, block_s = 256, 10.0
+    t = (np.arange(j) + 0.5) * block_s
+    cyc = 7.3
+    arg = 2 * np.pi * cyc * t / (j * block_s)
+    means = 0.5 * np.cos(arg) - 0.2 * np.sin(arg) + 1e-3 * t
+    sine = SlowSine(cyc / (j * block_s), 0, 1, 0.54, 0.5, 0.6, cyc, (0.5, -0.2))
+    less = sine.less_sine(means, block_s)
+    np.testing.assert_allclose(less, 1e-3 * t, atol=1e-12)
