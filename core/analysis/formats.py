@@ -106,6 +106,8 @@ def format_table(an: Analysis) -> str:
             lines.append("  sinusoids: none found")
         if ch.slow is not None:
             lines.append(f"  slow sinusoid (below the line search): {_slow_text(ch.slow)}")
+            if ch.slow_fit is not None:
+                lines.append(_beside_slow_text(ch))
         if ch.psd is not None:
             lines.extend(_psd_lines(ch))
         chi = "n/a" if not math.isfinite(fit.chi2_dof) else f"{fit.chi2_dof:.2f}"
@@ -211,6 +213,27 @@ def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
         f"update_rate: {an.rate_hz:.6g}   # Hz",
     ]
     return "\n".join(out) + "\n"
+
+
+def _beside_slow_text(ch: ChannelAnalysis) -> str:
+    """The terms beside a resolved slow sinusoid, in one line: the base model's terms above
+    read the sinusoid as noise (its AVAR lands in B, K or R), and a drift it hid from the
+    first drift test is tested again on the block means less it."""
+    fit = ch.slow_fit
+    assert fit is not None
+    parts = []
+    for t in ("bias_instability", "rate_random_walk", "rate_ramp"):
+        e = fit.terms[t]
+        parts.append(f"{SYMBOLS[t]} {_fmt(e.value)} [{_fmt(e.lo)}, {_fmt(e.hi)}]" if e.present
+                     else f"{SYMBOLS[t]} absent (< {_fmt(e.upper)})" if e.upper
+                     else f"{SYMBOLS[t]} absent")
+    d = ch.drift_summary(fit)
+    how = (", R from the time domain" if d["rate_ramp_from"] == "time_domain"
+           else f", a ramp of at least {_fmt(d['floor'])} short of its level"
+           if d["floor"] > 0 else "")
+    return (f"    beside it (the sinusoid removed): {'; '.join(parts)} (SI units{how}); the "
+            "terms above are the base model, which reads the sinusoid as noise "
+            "(`avard explain` tests what it is)")
 
 
 def _slow_text(slow: SlowSearch) -> str:

@@ -44,16 +44,17 @@ class ChannelAnalysis:
     slow: SlowSearch | None = None
     slow_fit: NoiseFit | None = None
 
-    def drift_summary(self) -> dict[str, Any]:
+    def drift_summary(self, fit: NoiseFit | None = None) -> dict[str, Any]:
         """Where the rate ramp R comes from and the drift floor (``analysis/drift.py``):
         ``rate_ramp_from`` "time_domain" (the block means' GLS slope tested against a random
         walk resolved it apart from the AVAR), "allan_fit" (the AVAR fit's own term) or None
         (no R claimed); ``floor``: the ramp at the slope's 68 % interval's near end where the
         time domain finds a drift short of its level (0: none; no claim, but that much of
-        the AVAR does not scatter and the printed EDF counts it), in ``unit``."""
+        the AVAR does not scatter and the printed EDF counts it), in ``unit``. ``fit``: another
+        fit of this channel (``slow_fit``) in place of the base model."""
         from avard.core.model.terms import UNITS
 
-        fit = self.fit
+        fit = self.fit if fit is None else fit
         r = fit.terms.get("rate_ramp")
         source = ("time_domain" if "rate_ramp" in fit.resolved_apart
                   else "allan_fit" if r is not None and r.present else None)
@@ -81,6 +82,12 @@ class ChannelAnalysis:
         d["drift"] = self.drift_summary()
         if self.slow is not None:
             d["slow_sinusoid"] = self.slow.to_dict()
+            if self.slow_fit is not None:
+                # the noise terms and the drift test beside the resolved sinusoid: the base
+                # model's terms above read it as noise (a K of the sinusoid's AVAR), and the
+                # drift it hid from the first test is tested again beside it
+                d["slow_sinusoid"]["terms_beside"] = self.slow_fit.to_dict()["terms"]
+                d["slow_sinusoid"]["drift_beside"] = self.drift_summary(self.slow_fit)
         if self.psd is not None:
             d["psd"] = self.psd.to_dict()
         return d

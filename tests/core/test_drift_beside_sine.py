@@ -59,3 +59,25 @@ def test_the_means_less_the_sinusoid_lose_it_and_keep_the_drift() -> None:
     sine = SlowSine(cyc / (j * block_s), 0, 1, 0.54, 0.5, 0.6, cyc, (0.5, -0.2))
     less = sine.less_sine(means, block_s)
     np.testing.assert_allclose(less, 1e-3 * t, atol=1e-12)
+
+
+def test_analyze_says_the_terms_beside_the_sinusoid_in_its_table_and_json() -> None:
+    """The table and JSON print the base model's terms (what `avard explain` starts from),
+    which read the sinusoid as noise (record 0: K 3.9e-3 where the truth is 1.0e-3, R
+    absent): the terms and the drift verdict beside the resolved sinusoid are said with
+    them, so the ramp the sinusoid hid and a K not made of it reach the user."""
+    from avard.core.analysis.formats import format_table
+    from avard.core.analysis.results import Analysis
+
+    y, lv = _both_12h(0)
+    ch = _analyze(y, 1.0)
+    an = Analysis(source="both", rate_hz=1.0, n_samples=len(y), channels={"x": ch})
+    text = format_table(an)
+    line = next(s for s in text.splitlines() if "beside it (the sinusoid removed)" in s)
+    assert "R from the time domain" in line
+    d = ch.to_dict()["slow_sinusoid"]
+    assert d["drift_beside"]["rate_ramp_from"] == "time_domain"
+    r = d["terms_beside"]["rate_ramp"]
+    assert r["present"] and r["lo"] <= lv.drift <= r["hi"]
+    # the base model's own verdict is unchanged: the table's terms are explain's base
+    assert ch.to_dict()["drift"]["rate_ramp_from"] is None
