@@ -212,6 +212,12 @@ def kalibr_yaml(an: Analysis, *, rostopic: str = "/imu0") -> str:
         f"rostopic: {rostopic}",
         f"update_rate: {an.rate_hz:.6g}   # Hz",
     ]
+    slow = [n for n, c in an.channels.items() if c.slow_fit is not None]
+    if slow:
+        # the base model's K, which reads a slow sinusoid as noise: conservative for a
+        # filter, but not the walk alone (the table's "beside it" line has that)
+        out.insert(2, f"# a slow sinusoid was resolved on {', '.join(slow)}: K there includes "
+                      "its Allan variance (conservative); `avard analyze` prints K beside it")
     return "\n".join(out) + "\n"
 
 
@@ -224,12 +230,15 @@ def _beside_slow_text(ch: ChannelAnalysis) -> str:
     parts = []
     for t in ("bias_instability", "rate_random_walk", "rate_ramp"):
         e = fit.terms[t]
-        parts.append(f"{SYMBOLS[t]} {_fmt(e.value)} [{_fmt(e.lo)}, {_fmt(e.hi)}]" if e.present
-                     else f"{SYMBOLS[t]} absent (< {_fmt(e.upper)})" if e.upper
+        # a term's note (not yet resolved, ramp or walk) as the table's own lines carry it,
+        # cut to its head: the JSON's terms_beside holds it whole
+        tag = f" ({e.note.split(':')[0]})" if e.present and e.note else ""
+        parts.append(f"{SYMBOLS[t]} {_fmt(e.value)} [{_fmt(e.lo)}, {_fmt(e.hi)}]{tag}"
+                     if e.present else f"{SYMBOLS[t]} absent (< {_fmt(e.upper)})" if e.upper
                      else f"{SYMBOLS[t]} absent")
     d = ch.drift_summary(fit)
     how = (", R from the time domain" if d["rate_ramp_from"] == "time_domain"
-           else f", a ramp of at least {_fmt(d['floor'])} short of its level"
+           else f", a ramp of at least {_fmt(d['floor'])} (68 %) short of its level"
            if d["floor"] > 0 else "")
     return (f"    beside it (the sinusoid removed): {'; '.join(parts)} (SI units{how}); the "
             "terms above are the base model, which reads the sinusoid as noise "

@@ -92,6 +92,13 @@ FAHRENHEIT_ROOM = (50.0, 104.0)
 #: A log in °F: at least this share of its distinct values on a DS18B20's grid in °F
 #: (32 + 0.1125·k), of at least this many distinct values (and off the °C grid).
 FAHRENHEIT_SHARE, FAHRENHEIT_MIN_VALUES = 0.8, 5
+#: ... at a °F room's values, fewer suffice: a value lands on the °F grid within the printing
+#: by chance about one time in nine, so three together about once in 800 (a stable room
+#: dwells on few values)
+FAHRENHEIT_MIN_VALUES_ROOM = 3
+#: A log printed this coarsely (every value a multiple of it) holds neither grid: its
+#: rounding is wider than both the °C grid's and the °F grid's steps
+COARSE_PRINT = 0.1
 #: A value is on a grid within this (°C or °F): a logger printing 2 decimals rounds a grid
 #: point by up to 0.005, and the float rounding of its text adds a little.
 PRINT_TOL = 0.006
@@ -727,12 +734,15 @@ def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]
     A refusal needs positive evidence: most values (``FAHRENHEIT_SHARE``) on a DS18B20's grid
     *in °F* (32 + 1.8·0.0625·k = 32 + 0.1125·k °F, within ``PRINT_TOL``: a logger printing
     2 decimals) and under ``OFF_GRID_SHARE`` on its °C grid (multiples of 0.0625, within the
-    same printing), with at least ``FAHRENHEIT_MIN_VALUES`` values: a DS18B20 read in °F,
+    same printing), with at least ``FAHRENHEIT_MIN_VALUES`` values (``…_ROOM`` at a °F room's
+    values): a DS18B20 read in °F,
     refused for the thermal model (a coupling per K from °F is 1.8× too small, silently).
     Another logger's °C (a thermistor's 0.01 K, a 0.001 K logger) is on neither grid: off the
     °C grid it is taken as °C with a note (which says to convert it if it is °F: off both
     grids, °F cannot be told from a heated plate's °C); on the °C grid at a °F room's values
-    (``FAHRENHEIT_ROOM``), a note that °C is assumed."""
+    (``FAHRENHEIT_ROOM``), a note that °C is assumed. A log printed to 0.1 (``COARSE_PRINT``)
+    holds neither grid: at a °F room's values the note says that °C and °F cannot be told
+    apart and °C is assumed (no refusal without evidence; a heated plate's °C is kept)."""
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)
           & (v >= DS18B20_MIN_C) & (v <= DS18B20_MAX_C)]
@@ -744,7 +754,15 @@ def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]
     med = float(np.median(v))
     lo, hi = FAHRENHEIT_ROOM
     room_f = lo <= med <= hi
-    if on < OFF_GRID_SHARE and on_f >= FAHRENHEIT_SHARE and len(u) >= FAHRENHEIT_MIN_VALUES:
+    least = FAHRENHEIT_MIN_VALUES_ROOM if room_f else FAHRENHEIT_MIN_VALUES
+    coarse = bool(np.all(np.abs(u / COARSE_PRINT - np.rint(u / COARSE_PRINT)) < 1e-6))
+    if coarse and room_f:
+        return LogNote("units_unknown", (
+            f"printed to {COARSE_PRINT:g}, which holds neither the DS18B20's 0.0625 K grid nor "
+            f"its 0.1125 °F grid: median {med:.4g} is a {(med - 32) / 1.8:.3g} °C room in °F "
+            f"or {med:.4g} °C, and this log cannot tell which; taken as °C (if it is °F, "
+            "convert it: a coupling per K from °F is 1.8× too small)")), None
+    if on < OFF_GRID_SHARE and on_f >= FAHRENHEIT_SHARE and len(u) >= least:
         why = (f"taken for °F: {100 * on_f:.0f} % of its {len(u)} distinct readings are on a "
                f"DS18B20's grid in °F (32 + 0.1125·k) and {100 * (1 - on):.0f} % off its "
                f"0.0625 K grid in °C (median {med:.4g}); a coupling per K from °F would be "

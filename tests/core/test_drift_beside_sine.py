@@ -6,6 +6,8 @@ runner draws them (``docs/scripts/coverage_gen2_run.py repro --hours 12 --mixes 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from avard.core.analysis.slow_sine import SlowSine
 
@@ -81,3 +83,34 @@ def test_analyze_says_the_terms_beside_the_sinusoid_in_its_table_and_json() -> N
     assert r["present"] and r["lo"] <= lv.drift <= r["hi"]
     # the base model's own verdict is unchanged: the table's terms are explain's base
     assert ch.to_dict()["drift"]["rate_ramp_from"] is None
+
+
+def test_the_beside_line_carries_the_terms_notes_and_kalibr_says_its_k_is_the_base_models(
+        ) -> None:
+    """review25b: the line beside the sinusoid printed a K the fit marks "not yet resolved"
+    as if resolved, and its floor without the "(68 %)" the table's drift line carries; the
+    kalibr export's K is the base model's (the sinusoid read as noise) without saying so."""
+    from avard.core.analysis.formats import _beside_slow_text, kalibr_yaml
+    from avard.core.analysis.results import Analysis
+    from avard.core.model.terms import SYMBOLS
+
+    y, _ = _both_12h(0)
+    ch = _analyze(y, 1.0)
+    assert ch.slow_fit is not None
+    line = _beside_slow_text(ch)
+    for t in ("bias_instability", "rate_random_walk", "rate_ramp"):
+        e = ch.slow_fit.terms[t]
+        part = next(p for p in line.split("; ") if f"{SYMBOLS[t]} " in p)
+        if e.present and e.note:
+            assert f"({e.note.split(':')[0]})" in part
+        else:
+            assert "(not yet resolved)" not in part and "(ramp or" not in part
+    # a K the fit holds "not yet resolved" is tagged so in the line
+    k = ch.slow_fit.terms["rate_random_walk"]
+    held = dataclasses.replace(k, note="not yet resolved: only the long end shows it")
+    ch2 = dataclasses.replace(ch, slow_fit=dataclasses.replace(
+        ch.slow_fit, terms={**ch.slow_fit.terms, "rate_random_walk": held}))
+    assert "[" in _beside_slow_text(ch2).split("K ")[1].split(";")[0]
+    assert "(not yet resolved)" in _beside_slow_text(ch2).split("K ")[1].split(";")[0]
+    an = Analysis(source="both", rate_hz=1.0, n_samples=len(y), channels={"x": ch})
+    assert "a slow sinusoid was resolved on x" in kalibr_yaml(an)

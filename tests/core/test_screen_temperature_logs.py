@@ -327,3 +327,27 @@ def test_a_held_log_whose_cadence_cannot_be_tried_is_said():
     col[idx] = np.round(room[idx] / 0.0625) * 0.0625
     c, why = held_cadence(_held(col), final=True)
     assert c == 0.0 and "cannot tell" in why and "judged on its first rows" in why
+
+
+def test_a_fahrenheit_log_printed_coarsely_or_on_few_values_is_not_taken_for_celsius_silently(
+        ) -> None:
+    """review25b: a °F log printed to one decimal holds neither grid (its rounding is wider
+    than both steps), and a stable °F room dwelling on three or four values fell below the
+    five distinct values the °F evidence asked for: both were taken as °C with the plain
+    off-grid note. Now a stable room's three values on the °F grid suffice at a °F room's
+    values (chance about 1 in 800), and a coarse log at those values says that it cannot
+    tell °C from °F (no refusal without evidence: a heated plate's °C printed to 0.1 keeps
+    its use)."""
+    rng = np.random.default_rng(1)
+    room = 20 + np.cumsum(rng.normal(0, 0.01, 5000))
+    ds = np.round(room / 0.0625) * 0.0625
+    note, refused = units_note(np.round(ds * 1.8 + 32, 1))
+    assert note is not None and note.kind == "units_unknown" and refused is None
+    assert "cannot tell" in note.text
+    few = np.repeat([20.0, 20.0625, 20.125], 50) * 1.8 + 32
+    note, refused = units_note(np.round(few, 2))
+    assert note is not None and note.kind == "fahrenheit" and refused is not None
+    note, refused = units_note(np.round(room + 35, 1))   # a 55 °C plate printed to 0.1
+    assert refused is None and note is not None and note.kind == "units_unknown"
+    note, refused = units_note(np.round(room, 1))        # a 20 °C room printed to 0.1
+    assert refused is None and note is not None and note.kind == "off_grid"
