@@ -153,12 +153,17 @@ def fit_x(f: Path) -> tuple[dict, object]:
     return json.loads(str(d["truth"])), fits[0]
 
 
+def _records(out: Path, regime: str) -> list[Path]:
+    """A regime's cached records, in seed order."""
+    return sorted(out.glob(f"{regime}_*.npz"), key=lambda p: int(p.stem.split("_")[-1]))
+
+
 def score(out: Path, regimes: list[str]) -> list[str]:
     lines = ["| regime | records | passed | lag in 68 % | c in 68 % | lag mean − truth | "
              "lag SD | mean lag half-width | lag SD / half-width |",
              "|---|---|---|---|---|---|---|---|---|"]
     for rg in regimes:
-        files = sorted(out.glob(f"{rg}_*.npz"), key=lambda p: int(p.stem.split("_")[-1]))
+        files = _records(out, rg)
         if not files:
             continue
         rows = []
@@ -212,7 +217,7 @@ def cr(out: Path, regimes: list[str], shares=(0.0, 0.764, 1.0)) -> None:
     from avard.core.explain.thermal_fit import READ_TIME_S
 
     for rg in regimes:
-        files = sorted(out.glob(f"{rg}_*.npz"), key=lambda p: int(p.stem.split("_")[-1]))
+        files = _records(out, rg)
         if not files:
             continue
         rows = []

@@ -21,6 +21,8 @@ from avard.core.io import source as source_mod
 from avard.core.io.recording import frame
 from avard.core.io.source import RecordingSource, open_record
 
+from tests.core.test_record_source_temperature import assert_same_tables
+
 RATE = 100.0
 SCALE = 1e-6
 NAMES = ["chip", "28-00000000plate", "28-0000000ambient"]
@@ -114,10 +116,5 @@ def test_bulk_decoded_tables_are_the_walks(tmp_path, monkeypatch, runs) -> None:
     odd = sum(written.values())
     assert 0 < general["frames"] <= odd
     src._temps, src._places = None, None
-    walked = src._temperature_tables()
-    assert [len(i) for i, _v in bulk] == [len(i) for i, _v in walked]
-    assert all(len(i) > 100 for i, _v in bulk)
-    for (i1, v1), (i2, v2) in zip(bulk, walked, strict=True):
-        np.testing.assert_array_equal(i1, i2)
-        np.testing.assert_array_equal(v1, v2)
+    assert_same_tables(bulk, src._temperature_tables(), 100)
     assert 99.0 not in np.concatenate([v for _i, v in bulk])
