@@ -30,6 +30,10 @@ from tests.support.coverage_gen import record
 
 #: χ²(1)'s 99 % point: the two-sided 1 % level squared
 CHI2_99 = 6.634896601021214
+#: χ²(1)'s 68.27 % point (one standard deviation squared): where a 68 % interval ends
+CHI2_68 = 1.0
+#: the share of a 68 % interval (±1σ)
+P68 = 0.6826894921370859
 #: the walk multiples and the bins of walk_directions of the table
 K_FACTORS = (0.1, 0.3, 0.6, 1.0, 2.0, 4.0, 10.0)
 NU_EDGES = (0.0, 0.3, 1.0, 2.0, 3.5, 6.0, 10.0, 20.0, 40.0, 80.0, 160.0, 400.0)
@@ -73,19 +77,25 @@ def table(draws: int, seed: int) -> str:
                 nus.append(dr.walk_directions(prof.lam, float(ks[i])))
                 lrs.append(max(0.0, h0 - h1))
     nu, lr = np.array(nus), np.array(lrs)
-    lines = ["| walk directions ν | draws | LR mean | LR 99 % / 6.63 |", "|---|---|---|---|"]
-    mids, betas = [], []
+    lines = ["| walk directions ν | draws | LR mean | LR 99 % / 6.63 | LR 68.3 % / 1 |",
+             "|---|---|---|---|---|"]
+    mids, betas, rises = [], [], []
     for lo, hi in itertools.pairwise(NU_EDGES):
         sel = (nu >= lo) & (nu < hi)
         if sel.sum() < 200:
             continue
         q = float(np.quantile(lr[sel], 0.99)) / CHI2_99
+        # the centre: where the 68 % interval's profile must rise (INTERVAL_RISE)
+        c = float(np.quantile(lr[sel], P68)) / CHI2_68
         mids.append(float(np.median(nu[sel])))
         betas.append(max(1.0, q))  # never below χ²(1): the test stays as conservative
+        rises.append(max(1.0, c))  # and the interval never narrower than Δ ≤ 1's
         lines.append(f"| {lo:g}–{hi:g} (median {mids[-1]:.2f}) | {sel.sum()} | "
-                     f"{lr[sel].mean():.3f} | {q:.3f} |")
+                     f"{lr[sel].mean():.3f} | {q:.3f} | {c:.3f} |")
     lines.append("BARTLETT_DOF = (" + ", ".join(f"{m:.3g}" for m in mids) + ")")
     lines.append("BARTLETT = (" + ", ".join(f"{b:.3f}" for b in betas) + ")")
+    lines.append("INTERVAL_RISE_DOF = BARTLETT_DOF")
+    lines.append("INTERVAL_RISE = (" + ", ".join(f"{r:.3f}" for r in rises) + ")")
     return "\n".join(lines)
 
 
