@@ -386,8 +386,7 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     wide = math.sqrt(max(float(prof.fit(float(ks[i]), w1)[2][-1, -1]), 0.0))
     # the interval at the ratio's own 68.3 % point (``interval_rise``), not at Δ ≤ 1 nor
     # at Δ ≤ β: where the walk holds a few directions the ratio's centre is inflated more
-    # than its 1 % tail β, and an interval at Δ ≤ β held the true slope in 55–65 % of the
-    # independent generator's records (drift25)
+    # than its 1 % tail β, and an interval at Δ ≤ β under-covered (drift25, slope25)
     rise = interval_rise(nu)
     lo, hi = _crossings(prof, ks, w0, w1[:, -1], slope,
                         max(wide * math.sqrt(rise), abs(slope) * 1e-6), rise)
