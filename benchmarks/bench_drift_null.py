@@ -13,7 +13,9 @@ factor (the likelihood ratio as χ²(1)).
 simulation from the model itself: block means drawn from ``block_noise_cov`` at the
 generator's N and B and K at several multiples of its, on the three lengths' geometries; the
 likelihood ratio's 99 % point over χ²(1)'s (6.63), binned by the walk's directions at the
-offset-only K (``walk_directions``, what the test computes from the data).
+offset-only K (``walk_directions``, what the test computes from the data); and the ratio's
+68.3 % point over χ²(1)'s (1) in the same bins, ``drift.INTERVAL_RISE`` (where the slope's
+68 % interval ends).
 """
 
 from __future__ import annotations
@@ -30,6 +32,10 @@ from tests.support.coverage_gen import record
 
 #: χ²(1)'s 99 % point: the two-sided 1 % level squared
 CHI2_99 = 6.634896601021214
+#: χ²(1)'s 68.27 % point (one standard deviation squared): where a 68 % interval ends
+CHI2_68 = 1.0
+#: the share of a 68 % interval (±1σ)
+P68 = 0.6826894921370859
 #: the walk multiples and the bins of walk_directions of the table
 K_FACTORS = (0.1, 0.3, 0.6, 1.0, 2.0, 4.0, 10.0)
 NU_EDGES = (0.0, 0.3, 1.0, 2.0, 3.5, 6.0, 10.0, 20.0, 40.0, 80.0, 160.0, 400.0)
@@ -51,7 +57,7 @@ def _truth(hours: int) -> tuple[float, float, float, float, int]:
 def table(draws: int, seed: int) -> str:
     from avard.core.analysis import drift as dr
 
-    nus, lrs = [], []
+    nus, nus1, lrs = [], [], []
     for hours in LENGTHS:
         n_w, b_i, k0, block_s, blocks = _truth(hours)
         t = (np.arange(blocks) + 0.5) * block_s
@@ -69,23 +75,44 @@ def table(draws: int, seed: int) -> str:
             for _ in range(draws):
                 prof.wy = sd * rng.normal(size=blocks)
                 i, h0 = prof.best(ks, w0)
-                _j, h1 = prof.best(ks, w1)
+                j, h1 = prof.best(ks, w1)
                 nus.append(dr.walk_directions(prof.lam, float(ks[i])))
+                nus1.append(dr.walk_directions(prof.lam, float(ks[j])))
                 lrs.append(max(0.0, h0 - h1))
-    nu, lr = np.array(nus), np.array(lrs)
-    lines = ["| walk directions ν | draws | LR mean | LR 99 % / 6.63 |", "|---|---|---|---|"]
-    mids, betas = [], []
+    nu, nu1, lr = np.array(nus), np.array(nus1), np.array(lrs)
+    lines = ["| walk directions ν | draws | LR mean | LR 99 % / 6.63 | LR 68.3 % / 1 |",
+             "|---|---|---|---|---|"]
+    mids, betas, rises0 = [], [], []
     for lo, hi in itertools.pairwise(NU_EDGES):
         sel = (nu >= lo) & (nu < hi)
         if sel.sum() < 200:
             continue
         q = float(np.quantile(lr[sel], 0.99)) / CHI2_99
+        c = float(np.quantile(lr[sel], P68)) / CHI2_68
         mids.append(float(np.median(nu[sel])))
         betas.append(max(1.0, q))  # never below χ²(1): the test stays as conservative
+        rises0.append(max(1.0, c))  # and the 68 % interval never narrower than Δ ≤ 1's
         lines.append(f"| {lo:g}–{hi:g} (median {mids[-1]:.2f}) | {sel.sum()} | "
-                     f"{lr[sel].mean():.3f} | {q:.3f} |")
+                     f"{lr[sel].mean():.3f} | {q:.3f} | {c:.3f} |")
     lines.append("BARTLETT_DOF = (" + ", ".join(f"{m:.3g}" for m in mids) + ")")
     lines.append("BARTLETT = (" + ", ".join(f"{b:.3f}" for b in betas) + ")")
+    lines.append("INTERVAL_RISE_DOF = BARTLETT_DOF")
+    lines.append("INTERVAL_RISE = (" + ", ".join(f"{r:.3f}" for r in rises0) + ")")
+    # measured, not used (slope25): the 68.3 % point by ν at the K beside the slope (the
+    # H1 fit's, which a true drift does not move). On the independent generator it covered
+    # the drift records better and the driftless ones worse than the table by ν0 above
+    lines += ["", "| ν beside the slope (not used) | draws | LR 68.3 % / 1 |", "|---|---|---|"]
+    mids1, rises = [], []
+    for lo, hi in itertools.pairwise(NU_EDGES):
+        sel = (nu1 >= lo) & (nu1 < hi)
+        if sel.sum() < 200:
+            continue
+        c = float(np.quantile(lr[sel], P68)) / CHI2_68
+        mids1.append(float(np.median(nu1[sel])))
+        rises.append(max(1.0, c))  # the interval never narrower than Δ ≤ 1's
+        lines.append(f"| {lo:g}–{hi:g} (median {mids1[-1]:.2f}) | {sel.sum()} | {c:.3f} |")
+    lines.append("by ν beside the slope: (" + ", ".join(f"{m:.3g}" for m in mids1) + "), ("
+                 + ", ".join(f"{r:.3f}" for r in rises) + ")")
     return "\n".join(lines)
 
 
