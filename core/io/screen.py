@@ -311,11 +311,6 @@ GRID_RMS_CAP = 2.0
 GRID_MIN_CHANGES = 16
 
 
-def cand_all(dist: NDArray[np.float64]) -> NDArray[np.intp]:
-    """Every sample whose distance is not 0: the candidates where the median scale is 0."""
-    return np.flatnonzero(dist > 0)
-
-
 def grid_step(col: NDArray[np.float64]) -> float:
     """The column's grid step (its smallest non-zero change between samples, above the
     floating rounding of its values), 0.0 where it changes fewer than ``GRID_MIN_CHANGES``
@@ -384,7 +379,8 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
         # sum's own rounding the scale is 0, as the exact median is
         if not scale > 4.0 * len(col) * np.finfo(float).eps * float(np.ptp(col)):
             scale = 0.0
-        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale) if scale > 0 else cand_all(dist)
+        # (a scale of 0: every sample whose distance is not 0 is a candidate)
+        cand = np.flatnonzero(dist > 0.5 * SHOCK_Z * scale)
         if not len(cand):
             continue
         # on a coarse grid the median of a few discrete distances is no scale: never below
