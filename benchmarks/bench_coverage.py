@@ -37,11 +37,15 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from avard.core.allan.deviations import AllanResult, allan_variance
 
 from tests.support.coverage_gen import Mix, flicker_avar, noise_avar, record
+
+if TYPE_CHECKING:
+    from avard.core.analysis.drift import DriftLikelihood
 
 LENGTHS = {1: 10.0, 12: 1.0, 60: 1.0}  # hours: sample rate (Hz)
 TAU_WHITE_FLICKER = 30.0  # s: white meets the flicker floor
@@ -288,6 +292,17 @@ def coverage(hours: int, mix_kind: str, records: int, seed: int,
                     noise_edf(mix, n, ms) if noise_only else None, by_verdict)
 
 
+def record_drift(y: np.ndarray, rate: float) -> DriftLikelihood | None:
+    """Analyze's time-domain drift test on one record as the engine runs it: the AVAR fit and
+    the block means of ``drift.drift_block`` (``drift.channel_drift``)."""
+    from avard.core.analysis import drift as dr
+    from avard.core.model.fit import fit_noise
+
+    n, b = len(y), dr.drift_block(len(y))
+    return dr.channel_drift(fit_noise(allan_variance(y, rate)),
+                            y[: n // b * b].reshape(-1, b).mean(axis=1), b / rate)
+
+
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
     """The calibration of analyze's time-domain drift test (``--drift-test``;
     ``analysis.drift.channel_drift``, the test analyze and explain share): per record the
@@ -296,18 +311,15 @@ def drift_test(hours: int, kind: str, records: int, seed: int) -> str:
     level (two-sided 1 %) and past 0.1 %, z's mean and spread (1 where the null is right),
     and how often the slope's 68 % profile interval holds the true drift."""
     from avard.core.analysis import drift as dr
-    from avard.core.model.fit import fit_noise
 
     rate = LENGTHS[hours]
     n = round(hours * 3600 * rate)
     mix = mix_for(kind, n, rate)
     rng = np.random.default_rng([seed, hours, MIXES.index(kind), 77])
-    b = dr.drift_block(n)
     z, held = [], 0
     for _ in range(records):
         y, _clean = record(mix, n, rng)
-        lik = dr.channel_drift(fit_noise(allan_variance(y, rate)),
-                               y[: n // b * b].reshape(-1, b).mean(axis=1), b / rate)
+        lik = record_drift(y, rate)
         if lik is None:
             continue
         z.append(lik.z)

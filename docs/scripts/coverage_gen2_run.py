@@ -277,20 +277,18 @@ def cmd_drift(args: argparse.Namespace) -> int:
     z and the slope's 68 % profile interval (``drift.channel_drift`` on the block means, the
     AVAR fit as analyze makes it), and how often that interval holds the true slope (0 on
     the plain mix)."""
-    from avard.core.allan.deviations import allan_variance
     from avard.core.analysis import drift as dr
-    from avard.core.model.fit import fit_noise
+
+    from benchmarks import bench_coverage as bc
 
     for hours in [int(h) for h in args.hours.split(",")]:
         for mix in args.mixes.split(","):
             n, rate, lv = setup(hours, mix)
             rng = np.random.default_rng([args.seed, hours, MIXES.index(mix), 77])
-            b = dr.drift_block(n)
             z, held, clear = [], 0, 0
             for _ in range(args.records):
                 y, _clean = gen.record(lv, n, rng)
-                lik = dr.channel_drift(fit_noise(allan_variance(y, rate)),
-                                       y[: n // b * b].reshape(-1, b).mean(axis=1), b / rate)
+                lik = bc.record_drift(y, rate)
                 if lik is None:
                     continue
                 z.append(lik.z)
