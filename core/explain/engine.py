@@ -390,7 +390,19 @@ class Explanation:
                 "holdout": ho,
                 "screened": None if self.screen is None else self.screen.to_dict(),
                 "temperature_unused": dict(self.temperature_unused),
-                "channels": {k: v.to_dict() for k, v in self.channels.items()}}
+                "channels": {k: {**v.to_dict(), "caveats": self.caveats(k)}
+                             for k, v in self.channels.items()}}
+
+    def caveats(self, channel: str) -> list[str]:
+        """The caveats said under the channel's findings in the text and the report (a
+        coupling on a recording of several short runs: ``report.runs_caveat``), for the
+        JSON: the same lines, so ``--json`` says what the text says."""
+        from avard.core.explain.report import runs_caveat  # report imports this module
+
+        ch = self.channels[channel]
+        caveat = (runs_caveat(self) if any(f.cause == "temperature" for f in ch.claimed)
+                  else None)
+        return [] if caveat is None else [caveat]
 
 
 # --------------------------------------------------------------------------------------------
