@@ -491,7 +491,8 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     if not source.rereadable:
         return explain_stream(source, options, holdout=holdout, progress=progress,
                               stage=stage)
-    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
+    screened = (source if isinstance(source, ScreenedSource)
+                else ScreenedSource(source, options.temperature_units))
     tap = _SlowTap(source.info.rate_hz, source.info.n_samples, len(source.info.names),
                    len(source.info.temperature_names))
     an = analyze(screened, options, progress=progress, tap=tap)
@@ -548,7 +549,8 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     the same sensor. ``base``: analyze's result for these blocks when the caller has it
     (``explain_file`` after a parallel analysis); the blocks then feed only the slow view."""
     # one screen for the slow view and the analysis: analyze is handed the screened blocks
-    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
+    screened = (source if isinstance(source, ScreenedSource)
+                else ScreenedSource(source, options.temperature_units))
     meta = source.info.as_meta()
     blocks = screened.blocks(options.block)
     held = _held(holdout, options, meta)

@@ -105,6 +105,25 @@ PRINT_TOL = 0.006
 #: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
 #: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
 NOT_DS18B20 = frozenset({"chip"})
+#: ``--temperature-units``: judged from the readings (auto), or said by the user: °C (never
+#: refused as °F) or °F (converted to °C before any rule, the 85 °C and −127 °C values
+#: included: 185 °F and −196.6 °F)
+TEMPERATURE_UNITS = ("auto", "C", "F")
+
+
+def temperature_units(text: str | None) -> str:
+    """``--temperature-units``'s value: "auto", "C" or "F" (any case, a leading ° allowed);
+    a ConfigError (one line) otherwise."""
+    from avard.core.errors import ConfigError
+
+    word = "auto" if text is None else str(text).strip().lstrip("°")
+    for u in TEMPERATURE_UNITS:
+        if word.lower() == u.lower():
+            return u
+    raise ConfigError(f"--temperature-units {text}: give auto (judged from the readings), "
+                      "C or F (the logs' units, said for every temperature log)")
+
+
 #: Held-log detection, on a channel's first rows: a value on at least this share of them.
 HELD_DENSE = 0.95
 #: A common divisor k of n run lengths is a cadence when k^n reaches this (chance ≤ 1e-4),
@@ -189,6 +208,8 @@ class ScreenLog:
     notes: dict[str, LogNote] = field(default_factory=dict)
     #: temperature channels the thermal model must not use, with why (a log in °F)
     refused: dict[str, str] = field(default_factory=dict)
+    #: the logs' units as asked (``--temperature-units``): auto, C or F
+    units: str = "auto"
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -211,6 +232,7 @@ class ScreenLog:
                 "stretches": [s.to_dict() for s in self.stretches],
                 "notes": {k: v.to_dict() for k, v in self.notes.items()},
                 "refused": dict(self.refused),
+                "temperature_units": self.units,
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
                           "scale never below the grid's quantisation (q/√12) on a grid "
@@ -224,7 +246,8 @@ class ScreenLog:
                           "one every cadence while the run lasts; readings off the 0.0625 K "
                           "grid (under half of the distinct values on it) are noted, and "
                           "refused as °F where most are on a DS18B20's grid in °F "
-                          "(32 + 0.1125·k)"),
+                          "(32 + 0.1125·k), unless --temperature-units says C or F (F: "
+                          "converted to °C before every rule)"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
@@ -796,8 +819,14 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     read; the stuck and dropout rules need the whole channel and are applied at the end
     (they mask nothing analyze reads; explain masks its slow view by ``log.holes``).
     ``check_units``: judge each log's units by the DS18B20's grid (``units_note``; off for a
-    recording, whose daemon writes °C itself)."""
+    recording, whose daemon writes °C itself). ``log.units`` (``--temperature-units``): "C"
+    takes every log as °C (a °F verdict is said, not acted on), "F" converts each log the
+    units rule judges to °C as it is read (before every rule: 85 °C is 185 °F)."""
     tnames = list(temperature_names)
+    # the logs converted from °F, as asked (avard's own die temperature and a recording's
+    # logs are °C whatever is said: the daemon writes them)
+    to_c = ([j for j, nm in enumerate(tnames) if check_units and nm not in NOT_DS18B20]
+            if log.units == "F" else [])
     tracks = [_TempTrack() for _ in tnames]
     held = [_Dehold() for _ in tnames]
     pending: list[tuple[int, Block]] = []
@@ -861,6 +890,11 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         return ok
 
     for blk in blocks:
+        if to_c and blk[1] is not None:
+            t0 = np.array(blk[1], dtype=float)
+            tv = t0.reshape(len(blk[0]), -1)
+            tv[:, to_c] = (tv[:, to_c] - 32.0) / 1.8
+            blk = (blk[0], t0, blk[2])
         waiting.append((offset, blk))
         offset += len(blk[0])
         waited += len(blk[0])
@@ -887,8 +921,23 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = note
         if not check_units or name in NOT_DS18B20:
             unit, refused = None, None
+            if log.units == "F":
+                unit = LogNote("units_given", (
+                    "not converted from °F: " + ("avard's own die temperature" if check_units
+                                                 else "a recording's log") + " is °C"))
+        elif log.units == "F":
+            unit, refused = LogNote("units_given", "converted from °F to °C as asked "
+                                    "(--temperature-units F)"), None
         else:
             unit, refused = units_note(tr.arrays()[1])
+            if log.units == "C":
+                # said by the user: taken as °C, and what the readings looked like said
+                evidence = ("" if refused is None else
+                            refused.split("; a coupling")[0].removeprefix("taken for °F: "))
+                seen = ("" if unit is None else f" (its readings look like °F: {evidence})"
+                        if refused is not None else f" (its readings: {unit.text})")
+                unit, refused = LogNote("units_given", "taken as °C as asked "
+                                        f"(--temperature-units C){seen}"), None
         if unit is not None:
             # one line per channel: a held log's note and its units' note joined
             log.notes[name] = unit if note is None else note.joined(unit)
@@ -954,8 +1003,10 @@ class ScreenedSource:
     first complete read's ``ScreenLog``, for the results. The screen judges every accel
     axis, so it reads all of them and hands on the ``columns`` asked for."""
 
-    def __init__(self, source: Any) -> None:
+    def __init__(self, source: Any, units: str = "auto") -> None:
         self.source = source
+        #: the logs' units as asked (``--temperature-units``: auto, C or F)
+        self.units = temperature_units(units)
         self.log: ScreenLog | None = None
         # the first complete read's verdicts, per block size: {offset: outlying rows} (only
         # blocks with any), so later passes (one per channel group) cut the very same rows
@@ -982,7 +1033,7 @@ class ScreenedSource:
         log says what was cut (nothing cut: the log says the screen ran)."""
         self._verdicts[block] = dict(cuts)
         if not cuts and self.log is None:
-            self.log = ScreenLog(float(self.source.info.rate_hz), done=True)
+            self.log = ScreenLog(float(self.source.info.rate_hz), done=True, units=self.units)
 
     @property
     def rereadable(self) -> bool:
@@ -991,7 +1042,7 @@ class ScreenedSource:
     def blocks(self, block: int = 1 << 16, *, columns: Sequence[int] | None = None,
                temperature: bool = True, verify: bool = True) -> Iterator[Block]:
         info = self.source.info
-        log = ScreenLog(float(info.rate_hz))
+        log = ScreenLog(float(info.rate_hz), units=self.units)
         if self.log is None:
             self.log = log
         known = self._verdicts.get(block)
