@@ -137,6 +137,16 @@ HELD_EVENTS, HELD_MIN_EVENTS, HELD_COHERENCE, HELD_MAX_CANDIDATES = 64, 32, 0.9,
 HELD_PIN_RUNS = 14
 #: A dense log whose first rows hold too few runs is judged on up to this many rows.
 HELD_WAIT_SAMPLES = 1 << 19
+#: A held stretch found after the first rows (the whole log is watched, block by block):
+#: the chance of a log read on every sample showing it, at most 1/this a test
+HELD_SWITCH_CHANCE = 1e9
+#: The changes of value kept per channel for that test (bounded, whatever the record's length)
+HELD_RING = 128
+#: A cadence that is no whole number of samples: a run's length within a sample's rounding
+#: and this share of it (a logger's clock against the sampler's) of a multiple of it
+HELD_TOL_SAMPLES, HELD_TOL_DRIFT = 1.0, 1e-4
+#: Stretches named in a log's note (the JSON lists all)
+HELD_NOTE_STRETCHES = 8
 #: A steady ramp (cannot tell): this share of the runs one multiple of the cadence and of
 #: the changes one sign.
 RAMP_SHARE = 0.9
@@ -149,13 +159,19 @@ class LogNote:
     line of text."""
     kind: str
     text: str
+    #: a log read in several stretches (held, as it is): {start_s, end_s, read, cadence_samples}
+    stretches: tuple[dict[str, Any], ...] = ()
 
-    def to_dict(self) -> dict[str, str]:
-        return {"kind": self.kind, "text": self.text}
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind, "text": self.text}
+        if self.stretches:
+            out["stretches"] = [dict(x) for x in self.stretches]
+        return out
 
     def joined(self, other: LogNote) -> LogNote:
         """One line per channel: this note and ``other`` together."""
-        return LogNote(f"{self.kind}+{other.kind}", f"{self.text}; {other.text}")
+        return LogNote(f"{self.kind}+{other.kind}", f"{self.text}; {other.text}",
+                       self.stretches + other.stretches)
 
 
 @dataclass(frozen=True)
@@ -563,16 +579,15 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     raised where more runs could decide, and where a common divisor rests on fewer than
     ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
     v = np.asarray(col, dtype=float)
-    f = np.flatnonzero(np.isfinite(v))
-    # dense over the finite span: a log that starts late (or ends early) is judged where it is
-    if not len(f) or len(f) < HELD_DENSE * (int(f[-1]) - int(f[0]) + 1):
+    fin = np.isfinite(v)
+    f = np.flatnonzero(fin)
+    if not _dense(fin, f):
         return 0.0, ""
     if not final and len(f) < 2:
         raise _Undecided
     x = v[f]
-    starts = f[np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))]
-    lengths = np.diff(starts)  # complete runs (the first and the open last are cut)
-    lengths = lengths[1:] if len(lengths) else lengths
+    p, lengths = _clean_runs(v, fin)
+    starts = np.concatenate([[f[0]], p])
     n = len(lengths)
     g = int(np.gcd.reduce(lengths.astype(np.int64))) if n else 0
     if g >= 2 and n >= HELD_MIN_COMMON and n * math.log(g) >= math.log(HELD_CHANCE):
@@ -602,13 +617,38 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     return 0.0, ""
 
 
+def _dense(fin: NDArray[np.bool_], f: NDArray[np.intp]) -> bool:
+    """A value on (nearly) every row: at least ``HELD_DENSE`` of the finite span finite (a
+    log that starts late or ends early is judged where it is), or of the finite rows that
+    many followed by a finite row (its NaN in a few long stretches, dropouts, not one
+    between each reading: a held log with a hole is still held)."""
+    if not len(f):
+        return False
+    if len(f) >= HELD_DENSE * (int(f[-1]) - int(f[0]) + 1):
+        return True
+    pairs = int(np.count_nonzero(fin[:-1] & fin[1:]))
+    return len(f) >= 2 and pairs >= HELD_DENSE * (len(f) - 1)
+
+
+def _clean_runs(v: NDArray[np.float64], fin: NDArray[np.bool_]
+                ) -> tuple[NDArray[np.intp], NDArray[np.int64]]:
+    """(p, lengths): the rows where the value changes between two finite rows (a held log's
+    reading instants; a change across NaN is not one, its reading may lie in the hole), and
+    the lengths of the complete runs between two of them with no NaN between (a run cut by
+    a dropout is no multiple of anything)."""
+    p = np.flatnonzero(fin[1:] & fin[:-1] & (v[1:] != v[:-1])) + 1
+    cnan = np.concatenate([[0], np.cumsum(~fin)])
+    d = np.diff(p).astype(np.int64)
+    return p, d[cnan[p[1:]] == cnan[p[:-1]]]
+
+
 def _cannot_tell(n: int, rows: int, why: str) -> str:
     """The note on a dense log that cannot be told held or read on every sample."""
     return (f"a value on every sample, its {n} complete runs of one value in its first "
             f"{rows} samples {why} a log held at each reading (each reading "
             "repeated until the next) from one read on every sample: taken as read on every "
             "sample (if held, its lag is late by half a reading interval; judged on its first "
-            "rows only)")
+            "rows, the rest of the log watched for a held stretch)")
 
 
 def _steady_ramp(lengths: NDArray[np.int64], c: float, x: NDArray[np.float64]) -> bool:
@@ -666,20 +706,106 @@ def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int, bool]:
     return best, n, False
 
 
+class _Stretch:
+    """One stretch of a temperature log read one way: from row ``start`` on, as it is
+    (``k`` 0) or held at each reading on a cadence of ``k`` samples, its reading instants
+    found from ``anchor`` (a change of value between two finite rows: a reading, -1 until
+    one is seen). ``runs``: complete runs found on the cadence (the evidence, for a whole
+    cadence shrunk to a divisor); ``why``: what is said of a stretch read as it is."""
+
+    __slots__ = ("anchor", "fit", "k", "runs", "start", "whole", "why")
+
+    def __init__(self, start: int, k: float, anchor: int = -1, runs: int = 0,
+                 why: str = "") -> None:
+        self.start, self.k, self.anchor, self.runs, self.why = start, k, anchor, runs, why
+        self.whole = float(k).is_integer()
+        # a cadence that is no whole number: the straight line through its changes (row
+        # against reading count from the first: n, Σm, Σx, Σm², Σmx), refined as the log
+        # goes on, so a long constant stretch's readings do not drift off their instants
+        self.fit = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+    def refine(self, p: NDArray[np.int64]) -> None:
+        """Take the changes ``p`` (on this stretch's cadence) into its cadence's fit."""
+        if self.whole or not len(p) or self.k <= 0:
+            return
+        f = self.fit
+        if f[0] < 0:
+            f[0] = float(p[0])
+        x = np.asarray(p, dtype=float) - f[0]
+        m = np.rint(x / self.k)
+        f[1] += len(x)
+        f[2] += float(m.sum())
+        f[3] += float(x.sum())
+        f[4] += float((m * m).sum())
+        f[5] += float((m * x).sum())
+        den = f[1] * f[4] - f[2] * f[2]
+        if f[1] >= HELD_MIN_EVENTS and den > 0:
+            k = (f[1] * f[5] - f[2] * f[3]) / den
+            if abs(k - self.k) < 0.5:
+                self.k = k
+
+
+def _on_cadence(d: NDArray[np.int64], k: float) -> NDArray[np.bool_]:
+    """Run lengths ``d`` that a held log on a cadence of ``k`` samples makes: whole
+    multiples of a whole cadence; within a sample's rounding (and the logger's clock drift,
+    ``HELD_TOL_DRIFT`` of the run) of a multiple ≥ 1 of a cadence that is no whole number."""
+    d = np.asarray(d, dtype=float)
+    if float(k).is_integer():
+        return np.asarray(d % k == 0) & (d > 0)
+    m = np.rint(d / k)
+    return np.asarray((m >= 1) & (np.abs(d - m * k) <= HELD_TOL_SAMPLES + HELD_TOL_DRIFT * d))
+
+
 class _Dehold:
-    """One temperature channel read as readings: a held log (``held_cadence``, judged on the
-    channel's first rows) becomes each run's first sample, and one sample every cadence
-    while the run lasts (at least half a cadence before its end), NaN between, which is what
-    a recording's source hands over (core/io/source.py: one reading per conversion, a stuck
+    """One temperature channel read as readings, stretch by stretch over the whole log.
+
+    The first rows are judged by ``held_cadence`` (the screen waits for them); from there on
+    every block is watched (``observe``, before the block is handed on: its rows and the one
+    block before it can still be read anew), in bounded memory (the last ``HELD_RING``
+    changes of value) and a cost linear in the rows:
+
+    - in a held stretch every change of value between two finite rows must lie on the
+      cadence from the change before it (``_on_cadence``); a whole cadence may shrink to a
+      divisor the stretch's runs still make significant; a change off it ends the stretch
+      there (the log is read as it is from that change on). A change across NaN (a dropout)
+      is not judged, and the reading instants go on from the last change before the hole
+      (its first value after the hole is a repeat of a reading made inside it, or on a
+      reading instant that lies on the same cadence: either way no reading's phase is lost);
+    - in a stretch read as it is, the latest complete runs are tested at each block for a
+      held stretch that has begun (a whole cadence: their common divisor, at a chance of
+      at most 1/``HELD_SWITCH_CHANCE`` for a log read on every sample, the test being made
+      at every block; a cadence that is no whole number: the last ``HELD_EVENTS`` changes'
+      phases, ``_fractional_cadence``), which then starts at its first run's change (its
+      rows still waiting are read anew; the screen waits, at most ``HELD_WAIT_SAMPLES``
+      rows, while such a test is close). A steady ramp is not taken (``_steady_ramp``: it
+      cannot be told from a held log) and said.
+
+    A held stretch becomes each reading instant's row (each change, and one every cadence
+    after it until half a cadence before the next), NaN between, which is what a
+    recording's source hands over (core/io/source.py: one reading per conversion, a stuck
     value included): a stable room's long constant stretch stays readings of its value, not
-    one reading and a hole. Other logs pass as they are."""
+    one reading and a hole."""
 
     def __init__(self) -> None:
-        self.k: float | None = None  # undecided; 0: readings; ≥ 2: held, the cadence
+        self.k: float | None = None  # the first rows' verdict: undecided; 0; ≥ 2 the cadence
         self.why = ""
-        self.prev = math.nan  # the last row's value
-        self.start = 0  # the open run's first sample (record index)
-        self.first = -1  # the first sample de-held
+        self.segs: list[_Stretch] = []  # the stretches not yet wholly handed on, in order
+        self.history: list[_Stretch] = []  # every stretch, for the note
+        self.rows = 0  # rows observed
+        self.released = 0  # rows handed on (read as their stretch says: fixed)
+        # the watch: the last row's value, the last change, a NaN since it, the last
+        # HELD_RING changes (row, value after it, the run before it complete)
+        self._prev, self._prev_fin = math.nan, False
+        self._last, self._nan_since = -1, True
+        self._rp = np.zeros(0, dtype=np.int64)
+        self._rv = np.zeros(0)
+        self._rc = np.zeros(0, dtype=bool)
+        self._since_try = 0
+        self.close = False  # a held stretch's test is close: the screen may wait for it
+        self.dense = False  # a value seen on two consecutive rows (a held stretch may come)
+        # the reading: the row before the next block's value, the last reading instant
+        self._aprev = math.nan
+        self._aanchor = -1
 
     def decide(self, col: NDArray[np.float64], final: bool) -> bool:
         """Judge the log on ``col`` (its first rows, as many as the screen has waited
@@ -690,54 +816,246 @@ class _Dehold:
             self.k, self.why = held_cadence(col, final)
         except _Undecided:
             return False
+        self._begin(_Stretch(0, self.k, why=self.why))
         return True
 
+    def _begin(self, seg: _Stretch) -> None:
+        """A new stretch from ``seg.start`` (which replaces a stretch of no rows yet; rows
+        handed on are read as they were)."""
+        seg.start = max(seg.start, self.released)
+        while self.segs and self.segs[-1].start >= seg.start:
+            self.segs.pop()
+            self.history.pop()
+        self.segs.append(seg)
+        self.history.append(seg)
+
+    # -- the watch ----------------------------------------------------------------------
+
+    def observe(self, off: int, col: NDArray[np.float64]) -> None:
+        """Watch the block of rows ``off`` … (after ``decide``): judge its changes of value
+        against the stretch being read, and test for a held stretch beginning."""
+        v = np.asarray(col, dtype=float)
+        n = len(v)
+        if not n:
+            return
+        fin = np.isfinite(v)
+        vv = np.concatenate([[self._prev], v])
+        ff = np.concatenate([[self._prev_fin], fin])
+        pair = ff[1:] & ff[:-1]
+        self.dense = self.dense or bool(pair.any())
+        i = np.flatnonzero(pair & (vv[1:] != vv[:-1]))  # block rows
+        cnan = np.concatenate([[0], np.cumsum(~fin)])
+        p = i + off
+        conn = np.empty(len(i), dtype=bool)
+        if len(i):
+            conn[0] = self._last >= 0 and not self._nan_since and cnan[i[0]] == 0
+            conn[1:] = cnan[i[1:]] == cnan[i[:-1]]
+        d = np.diff(np.concatenate([[self._last], p])).astype(np.int64)
+        j = 0
+        while j < len(p):
+            seg = self.segs[-1]
+            if seg.k <= 0:
+                break
+            if seg.anchor < 0:
+                seg.anchor = int(p[j])
+                j += 1
+                continue
+            ok = _on_cadence(d[j:], seg.k) | ~conn[j:]
+            bad = np.flatnonzero(~ok)
+            if not len(bad):
+                seg.runs += int(np.count_nonzero(conn[j:]))
+                seg.refine(p[j:][conn[j:]])
+                break
+            b = j + int(bad[0])
+            seg.runs += int(np.count_nonzero(conn[j:b]))
+            seg.refine(p[j:b][conn[j:b]])
+            g = math.gcd(int(seg.k), int(d[b])) if float(seg.k).is_integer() else 0
+            if g >= 2 and seg.runs < HELD_PIN_RUNS:
+                # a whole cadence read from few runs may be a multiple of the log's (n runs
+                # are all even multiples with a chance of 2^-n): its divisor (every change so
+                # far lies on it too); a cadence pinned by many runs is not shrunk by one run
+                # (a log read on every sample makes it a multiple of 2 one time in two)
+                seg.k = float(g)
+                seg.runs += 1
+                j = b + 1
+                continue
+            self._begin(_Stretch(int(p[b]), 0.0, why="its changes leave the cadence"))
+            j = b + 1
+        # the changes watched: the ring of the last ones before this block, and the block's
+        rp = np.concatenate([self._rp, p])
+        rv = np.concatenate([self._rv, v[i]])
+        rc = np.concatenate([self._rc, conn])
+        self._rp, self._rv, self._rc = rp[-HELD_RING:], rv[-HELD_RING:], rc[-HELD_RING:]
+        self._since_try += len(p)
+        if len(p):
+            self._last = int(p[-1])
+            self._nan_since = bool(cnan[n] - cnan[i[-1]] > 0)
+        else:
+            self._nan_since = self._nan_since or bool(cnan[n] > 0)
+        self._prev, self._prev_fin = float(v[-1]), bool(fin[-1])
+        self.rows = off + n
+        self.close = False
+        if self.segs[-1].k <= 0:
+            self._watch(rp, rv, rc)
+
+    def _watch(self, rp: NDArray[np.int64], rv: NDArray[np.float64],
+               rc: NDArray[np.bool_]) -> None:
+        """In a stretch read as it is: has a held one begun among the latest runs (the
+        changes ``rp``, the values after them ``rv``, the run before each complete ``rc``:
+        the last block's and the ring's before it)?"""
+        seg = self.segs[-1]
+        keep = rp >= seg.start
+        rp, rv, rc = rp[keep], rv[keep], rc[keep]
+        if len(rp) < 2:
+            return
+        runs = np.diff(rp).astype(np.int64)
+        ok = rc[1:]
+        # a whole cadence: the common divisor of the newest complete runs, the count of
+        # runs that makes it least likely by chance (c^-n)
+        r = runs[::-1]
+        stop = np.flatnonzero(~ok[::-1])
+        r = r[:int(stop[0]) if len(stop) else len(r)]
+        gs = np.gcd.accumulate(r) if len(r) else r
+        gs = gs[:int(np.argmax(gs < 2)) if (gs < 2).any() else len(gs)]
+        score, nr, g = 0.0, 0, 0
+        if len(gs):
+            scores = np.arange(1, len(gs) + 1) * np.log(gs.astype(float))
+            m = int(np.argmax(scores))
+            score, nr, g = float(scores[m]), m + 1, int(gs[m])
+        if nr >= HELD_MIN_COMMON and score >= math.log(HELD_SWITCH_CHANCE):
+            first = len(rp) - 1 - nr
+            if _steady_ramp(runs[first:], float(g), rv[first:]):
+                seg.why = ("its runs all one length and its changes one way (a steady "
+                           "ramp): cannot tell a held log from one read on every sample")
+                return
+            self._begin(_Stretch(int(rp[first]), float(g), int(rp[first]), nr))
+            return
+        self.close = score >= math.log(HELD_CHANCE)
+        # a cadence that is no whole number of samples: the last changes' phases
+        if self._since_try < HELD_MIN_EVENTS or len(rp) < HELD_EVENTS:
+            return
+        self._since_try = 0
+        c, _n, _capped = _fractional_cadence(rp[-HELD_EVENTS:])
+        if not c > 0:
+            return
+        on = _on_cadence(runs, c) & ok
+        nr = len(runs) - (int(np.flatnonzero(~on)[-1]) + 1 if (~on).any() else 0)
+        if nr < HELD_MIN_EVENTS:
+            return
+        first = len(rp) - 1 - nr
+        if _steady_ramp(runs[first:], c, rv[first:]):
+            seg.why = ("its runs all one length and its changes one way (a steady ramp): "
+                       "cannot tell a held log from one read on every sample")
+            return
+        seg = _Stretch(int(rp[first]), c, int(rp[first]), nr)
+        seg.refine(rp[first:])
+        self._begin(seg)
+
+    # -- the reading ----------------------------------------------------------------------
+
     def apply(self, off: int, col: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The block of rows ``off`` … read as its stretches say (handed on: fixed)."""
         col = np.asarray(col, dtype=float)
-        k = self.k
-        if not k or not len(col):
-            return col
-        if self.first < 0:
-            self.first = off
         n = len(col)
+        if not n or not self.segs:
+            return col
         fin = np.isfinite(col)
-        prev = np.concatenate([[self.prev], col[:-1]])
-        new = fin & (col != prev)  # a change (a value after NaN included)
-        brk = np.flatnonzero(new | ~fin)  # where a run starts or stops
-        starts = np.flatnonzero(new)
-        carried = bool(fin[0] and not new[0])
-        s = np.concatenate([[self.start - off], starts]) if carried else starts
-        # each run's end (exclusive): the next change or NaN after its start; an open run
-        # (past the block's end) takes every cadence point in the block (with a common
-        # divisor its end is a whole cadence after each; a jittered one may end a sample
-        # short of the next, a reading placed by up to half a cadence on a constant value)
-        nxt = np.searchsorted(brk, s, side="right")
-        lim = (np.where(nxt < len(brk), brk[np.minimum(nxt, len(brk) - 1)], n + 0.5 * k)
-               if len(brk) else np.full(len(s), n + 0.5 * k))
-        extra = np.maximum(np.floor((lim - s) / k - 0.5), 0).astype(np.int64)
-        cnt = extra + 1
-        base = np.repeat(s, cnt)
-        step = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        pos = base + np.floor(k * step + 0.5).astype(np.int64)
-        pos = pos[(pos >= 0) & (pos < n)]
-        out = np.full(n, np.nan)
-        out[pos] = col[pos]
-        self.prev = float(col[-1])
-        if fin[-1]:
-            self.start = off + (int(starts[-1]) if len(starts) else self.start - off)
+        vv = np.concatenate([[self._aprev], col])
+        ff = np.concatenate([[math.isfinite(self._aprev)], fin])
+        change = np.flatnonzero(ff[1:] & ff[:-1] & (vv[1:] != vv[:-1])) + off
+        out = col
+        # the stretches over these rows (those ended before them dropped: bounded)
+        while len(self.segs) > 1 and self.segs[1].start <= off:
+            self.segs.pop(0)
+        for s_i, seg in enumerate(self.segs):
+            lo = max(seg.start, off)
+            hi = min(self.segs[s_i + 1].start if s_i + 1 < len(self.segs) else off + n,
+                     off + n)
+            if seg.k <= 0:
+                self._aanchor = -1
+                continue
+            if hi <= lo:
+                continue
+            k = seg.k
+            a = change[(change >= lo) & (change < hi)]
+            pos = []
+            if seg.start <= self._aanchor < lo:
+                # the stretch goes on from the last reading instant before these rows (across
+                # a dropout too: its phase is the logger's, not the hole's)
+                starts = np.concatenate([[self._aanchor], a])
+            else:
+                anc = seg.anchor if seg.anchor >= 0 else int(a[0]) if len(a) else lo
+                if anc > lo:
+                    # the stretch's first rows: its instants run back from its first reading
+                    back = np.arange(1, int((anc - lo) / k) + 2)
+                    pos.append(anc - np.floor(k * back + 0.5).astype(np.int64))
+                starts = (np.concatenate([[anc], a[a > anc]]) if anc < hi
+                          else np.zeros(0, dtype=np.int64))
+            if len(starts):
+                # each instant's readings: it, and one every cadence until half a cadence
+                # before the next change (an open run: to the rows' end)
+                nxt = np.concatenate([starts[1:], [hi + 0.5 * k]]).astype(float)
+                extra = np.maximum(np.floor((nxt - starts) / k - 0.5), 0).astype(np.int64)
+                # an instant before these rows: from its first reading among them (a long
+                # constant stretch costs its rows, not its rows times its blocks)
+                skip = np.zeros(len(starts), dtype=np.int64)
+                skip[0] = max(0, math.floor((lo - int(starts[0])) / k) - 1)
+                cnt = np.maximum(extra + 1 - skip, 0)
+                base = np.repeat(starts, cnt)
+                step = (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+                        + np.repeat(skip, cnt))
+                pos.append(base + np.floor(k * step + 0.5).astype(np.int64))
+                self._aanchor = int(starts[-1])
+            pp = np.concatenate(pos) if pos else np.zeros(0, dtype=np.int64)
+            pp = pp[(pp >= lo) & (pp < hi)]
+            keep = np.zeros(hi - lo, dtype=bool)
+            keep[pp - lo] = True
+            if out is col:
+                out = col.copy()
+            piece = out[lo - off:hi - off]
+            piece[~keep] = np.nan
+        self._aprev = float(col[-1])
+        self.released = off + n
         return out
 
+    # -- the note -------------------------------------------------------------------------
+
     def note(self, rate_hz: float) -> LogNote | None:
-        if self.k:
-            since = "" if self.first <= 0 else f" from {self.first / rate_hz:.6g} s"
-            return LogNote("held", (
-                f"held at each reading (a value on every sample, changing only on a "
-                f"{self.k:.4g}-sample cadence, {self.k / rate_hz:.3g} s): read as "
-                f"readings{since} (each run's first sample, and one every {self.k:.4g} "
-                "samples while it lasts; the rest NaN)"))
-        if self.why:
-            return LogNote("held_unknown", self.why)
-        return None
+        hist = self.history
+        if not hist:
+            return None
+        if len(hist) == 1:
+            start, k, why = hist[0].start, hist[0].k, hist[0].why
+            if k:
+                since = "" if start <= 0 else f" from {start / rate_hz:.6g} s"
+                return LogNote("held", (
+                    f"held at each reading (a value on every sample, changing only on a "
+                    f"{k:.4g}-sample cadence, {k / rate_hz:.3g} s): read as "
+                    f"readings{since} (each run's first sample, and one every {k:.4g} "
+                    "samples while it lasts; the rest NaN)"))
+            return LogNote("held_unknown", why) if why else None
+        parts, stretches = [], []
+        for m, seg in enumerate(hist):
+            start, k, why = seg.start, seg.k, seg.why
+            end = hist[m + 1].start if m + 1 < len(hist) else self.rows
+            span = f"{start / rate_hz:.6g}–{end / rate_hz:.6g} s"
+            stretches.append({"start_s": start / rate_hz, "end_s": end / rate_hz,
+                              "read": "held" if k else "as_is",
+                              "cadence_samples": k if k else None})
+            if k:
+                parts.append(f"{span} held at each reading ({k:.4g}-sample cadence, "
+                             f"{k / rate_hz:.3g} s): read as readings")
+            else:
+                parts.append(f"{span} read as it is" + (f" ({why})" if why else ""))
+        shown = parts[:HELD_NOTE_STRETCHES]
+        more = len(parts) - len(shown)
+        kind = "held" if any(x.k for x in hist) else "held_unknown"
+        return LogNote(kind, (
+            f"a value on every sample, read in {len(hist)} stretches (its whole log "
+            "judged): " + "; ".join(shown) + (f"; … and {more} more (--json lists all)"
+                                                if more else "")
+            + " (a held stretch: each change and one reading every cadence after it, the "
+            "rest NaN)"), tuple(stretches))
 
 
 def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) -> float:
@@ -862,8 +1180,9 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         a, t, end = blk
         if t is not None and tnames:
             tt = np.asarray(t, dtype=float).reshape(len(a), -1)
-            cols_t = [d.apply(off, tt[:, j]) for j, d in enumerate(held)]
-            if any(d.k for d in held):
+            given = [tt[:, j] for j in range(tt.shape[1])]
+            cols_t = [d.apply(off, c) for c, d in zip(given, held, strict=True)]
+            if any(c is not g for c, g in zip(cols_t, given, strict=True)):
                 # a held log read as readings: the block hands the readings on, NaN between
                 tt = np.stack(cols_t, axis=1)
                 blk = (a, tt if np.ndim(t) == 2 else tt[:, 0], end)
@@ -889,6 +1208,15 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             ok = d.decide(col, final) and ok
         return ok
 
+    def observe(blks: list[tuple[int, Block]]) -> None:
+        """Each channel's log watched over these blocks (``_Dehold.observe``)."""
+        for off_w, (a, t, _end) in blks:
+            tt = (np.full((len(a), len(tnames)), np.nan) if t is None
+                  else np.asarray(t, dtype=float).reshape(len(a), -1))
+            for j, d in enumerate(held):
+                d.observe(off_w, tt[:, j])
+
+    observed = 0  # the waiting blocks already watched
     for blk in blocks:
         if to_c and blk[1] is not None:
             t0 = np.array(blk[1], dtype=float)
@@ -900,14 +1228,25 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         waited += len(blk[0])
         if tnames and not judge(waited >= HELD_WAIT_SAMPLES):
             continue
-        for off_w, b_w in waiting:
+        observe(waiting[observed:])
+        observed = len(waiting)
+        # every block but the newest is handed on (a held stretch found in it may begin in
+        # the block before: a log with a value on consecutive rows only), or none while a
+        # channel's test for a held stretch is close (at most HELD_WAIT_SAMPLES rows)
+        if (any(d.close for d in held)
+                and sum(len(b[0]) for _, b in waiting) < HELD_WAIT_SAMPLES):
+            continue
+        hold = 1 if any(d.dense for d in held) else 0
+        while len(waiting) > hold:
+            off_w, b_w = waiting.pop(0)
+            observed -= 1
             pending.append((off_w, take(off_w, b_w)))
-        waiting.clear()
         while len(pending) > 1:
             off, b = pending.pop(0)
             yield from emit(off, b, False)
     if waiting:
         judge(True)
+        observe(waiting[observed:])
         for off_w, b_w in waiting:
             pending.append((off_w, take(off_w, b_w)))
     while pending:
