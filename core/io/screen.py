@@ -711,49 +711,75 @@ class _Stretch:
     (``k`` 0) or held at each reading on a cadence of ``k`` samples, its reading instants
     found from ``anchor`` (a change of value between two finite rows: a reading, -1 until
     one is seen). ``runs``: complete runs found on the cadence (the evidence, for a whole
-    cadence shrunk to a divisor); ``why``: what is said of a stretch read as it is."""
+    cadence shrunk to a divisor); ``why``: what is said of a stretch read as it is;
+    ``whole``: a cadence of a whole number of samples (a common divisor, exact), else read
+    from the changes' phases, with its uncertainty ``dk`` (samples)."""
 
-    __slots__ = ("anchor", "fit", "k", "runs", "start", "whole", "why")
+    __slots__ = ("anchor", "dk", "fit", "k", "runs", "start", "whole", "why")
 
     def __init__(self, start: int, k: float, anchor: int = -1, runs: int = 0,
-                 why: str = "") -> None:
+                 why: str = "", whole: bool = True, dk: float = 0.0) -> None:
         self.start, self.k, self.anchor, self.runs, self.why = start, k, anchor, runs, why
-        self.whole = float(k).is_integer()
+        self.whole, self.dk = whole or k <= 0, dk
         # a cadence that is no whole number: the straight line through its changes (row
         # against reading count from the first: n, Σm, Σx, Σm², Σmx), refined as the log
         # goes on, so a long constant stretch's readings do not drift off their instants
         self.fit = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
     def refine(self, p: NDArray[np.int64]) -> None:
-        """Take the changes ``p`` (on this stretch's cadence) into its cadence's fit."""
-        if self.whole or not len(p) or self.k <= 0:
+        """Take the changes ``p`` (on this stretch's cadence, ascending) into its cadence's
+        fit, as far as their reading counts are beyond doubt (the cadence's uncertainty over
+        their distance from the first below half a cadence: the fit then narrows it)."""
+        if self.whole or not len(p):
             return
         f = self.fit
         if f[0] < 0:
             f[0] = float(p[0])
-        x = np.asarray(p, dtype=float) - f[0]
-        m = np.rint(x / self.k)
-        f[1] += len(x)
-        f[2] += float(m.sum())
-        f[3] += float(x.sum())
-        f[4] += float((m * m).sum())
-        f[5] += float((m * x).sum())
-        den = f[1] * f[4] - f[2] * f[2]
-        if f[1] >= HELD_MIN_EVENTS and den > 0:
+        x_all = np.asarray(p, dtype=float) - f[0]
+        while len(x_all):
+            lim = math.inf if self.dk <= 0 else 0.4 * self.k * self.k / self.dk
+            n_take = int(np.searchsorted(x_all, lim, side="right"))
+            if not n_take:
+                return
+            x, x_all = x_all[:n_take], x_all[n_take:]
+            m = np.rint(x / self.k)
+            f[1] += len(x)
+            f[2] += float(m.sum())
+            f[3] += float(x.sum())
+            f[4] += float((m * m).sum())
+            f[5] += float((m * x).sum())
+            den = f[1] * f[4] - f[2] * f[2]
+            if f[1] < HELD_MIN_EVENTS or not den > 0:
+                continue
             k = (f[1] * f[5] - f[2] * f[3]) / den
-            if abs(k - self.k) < 0.5:
-                self.k = k
+            if abs(k - self.k) >= 0.5:
+                return
+            self.k = k
+            # three standard errors of the slope, for residuals of a sample's rounding
+            # (σ ≈ 0.5 sample, on the safe side of √(1/12))
+            self.dk = 1.5 / math.sqrt(den / f[1])
 
 
-def _on_cadence(d: NDArray[np.int64], k: float) -> NDArray[np.bool_]:
+def _on_cadence(d: NDArray[np.int64], k: float, whole: bool = True, dk: float = 0.0
+                ) -> NDArray[np.bool_]:
     """Run lengths ``d`` that a held log on a cadence of ``k`` samples makes: whole
     multiples of a whole cadence; within a sample's rounding (and the logger's clock drift,
-    ``HELD_TOL_DRIFT`` of the run) of a multiple ≥ 1 of a cadence that is no whole number."""
+    ``HELD_TOL_DRIFT`` of the run, and the cadence's own uncertainty ``dk`` times the
+    readings it spans) of a multiple ≥ 1 of a cadence that is no whole number."""
     d = np.asarray(d, dtype=float)
-    if float(k).is_integer():
+    if whole:
         return np.asarray(d % k == 0) & (d > 0)
     m = np.rint(d / k)
-    return np.asarray((m >= 1) & (np.abs(d - m * k) <= HELD_TOL_SAMPLES + HELD_TOL_DRIFT * d))
+    tol = HELD_TOL_SAMPLES + HELD_TOL_DRIFT * d + m * dk
+    return np.asarray((m >= 1) & (np.abs(d - m * k) <= tol))
+
+
+def _phase_dk(p: NDArray[np.int64], k: float) -> float:
+    """The uncertainty of a cadence read from the phases of the changes ``p``
+    (``_fractional_cadence``: coherence ≥ 0.9 allows the phase to slide about a quarter of
+    a cycle across their span)."""
+    span = float(p[-1] - p[0]) if len(p) >= 2 else 0.0
+    return 0.3 * k * k / span if span > 0 else 0.5
 
 
 class _Dehold:
@@ -816,7 +842,11 @@ class _Dehold:
             self.k, self.why = held_cadence(col, final)
         except _Undecided:
             return False
-        self._begin(_Stretch(0, self.k, why=self.why))
+        whole, dk = float(self.k).is_integer(), 0.0
+        if self.k and not whole:
+            v = np.asarray(col, dtype=float)
+            dk = _phase_dk(_clean_runs(v, np.isfinite(v))[0][:HELD_EVENTS], self.k)
+        self._begin(_Stretch(0, self.k, why=self.why, whole=whole, dk=dk))
         return True
 
     def _begin(self, seg: _Stretch) -> None:
@@ -858,9 +888,10 @@ class _Dehold:
                 break
             if seg.anchor < 0:
                 seg.anchor = int(p[j])
+                seg.refine(p[j:j + 1])
                 j += 1
                 continue
-            ok = _on_cadence(d[j:], seg.k) | ~conn[j:]
+            ok = _on_cadence(d[j:], seg.k, seg.whole, seg.dk) | ~conn[j:]
             bad = np.flatnonzero(~ok)
             if not len(bad):
                 seg.runs += int(np.count_nonzero(conn[j:]))
@@ -869,7 +900,7 @@ class _Dehold:
             b = j + int(bad[0])
             seg.runs += int(np.count_nonzero(conn[j:b]))
             seg.refine(p[j:b][conn[j:b]])
-            g = math.gcd(int(seg.k), int(d[b])) if float(seg.k).is_integer() else 0
+            g = math.gcd(int(seg.k), int(d[b])) if seg.whole else 0
             if g >= 2 and seg.runs < HELD_PIN_RUNS:
                 # a whole cadence read from few runs may be a multiple of the log's (n runs
                 # are all even multiples with a chance of 2^-n): its divisor (every change so
@@ -930,7 +961,9 @@ class _Dehold:
                 return
             self._begin(_Stretch(int(rp[first]), float(g), int(rp[first]), nr))
             return
-        self.close = score >= math.log(HELD_CHANCE)
+        # close: two runs or more whose divisor is already unlikely by chance (one long run
+        # alone is a stable room's, read on every sample or not)
+        self.close = nr >= 2 and score >= math.log(HELD_CHANCE)
         # a cadence that is no whole number of samples: the last changes' phases
         if self._since_try < HELD_MIN_EVENTS or len(rp) < HELD_EVENTS:
             return
@@ -938,7 +971,8 @@ class _Dehold:
         c, _n, _capped = _fractional_cadence(rp[-HELD_EVENTS:])
         if not c > 0:
             return
-        on = _on_cadence(runs, c) & ok
+        dk = _phase_dk(rp[-HELD_EVENTS:], c)
+        on = _on_cadence(runs, c, False, dk) & ok
         nr = len(runs) - (int(np.flatnonzero(~on)[-1]) + 1 if (~on).any() else 0)
         if nr < HELD_MIN_EVENTS:
             return
@@ -947,7 +981,7 @@ class _Dehold:
             seg.why = ("its runs all one length and its changes one way (a steady ramp): "
                        "cannot tell a held log from one read on every sample")
             return
-        seg = _Stretch(int(rp[first]), c, int(rp[first]), nr)
+        seg = _Stretch(int(rp[first]), c, int(rp[first]), nr, whole=False, dk=dk)
         seg.refine(rp[first:])
         self._begin(seg)
 

@@ -220,3 +220,48 @@ def test_the_watch_keeps_bounded_memory():
             assert len(d._rp) <= HELD_RING and len(d.segs) <= 2
     finally:
         screen._Dehold = real  # type: ignore[misc]
+
+
+def test_a_held_log_at_a_real_ds18b20_cadence_keeps_its_readings_over_hours():
+    """125 Hz, a reading every 0.75 s (93.75 samples), held, 6 h in a room that dwells two
+    hours on one step: the cadence read from the first changes' phases is refined as the log
+    goes on (a straight line through the changes), so the watch finds no change off it and
+    every reading stays within a sample of its instant."""
+    rate, n, cad = 125.0, int(6 * 3600 * 125.0), 93.75
+    rng = np.random.default_rng(1)
+    idx = np.ceil(np.arange(1, int(n / cad)) * cad - 1e-9).astype(int)
+    idx = idx[idx < n]
+    t = idx / rate
+    room = 21.31 + 0.25 * np.sin(2 * np.pi * t / 20000.0) + 0.004 * rng.standard_normal(len(t))
+    room[(t > 3600) & (t < 3 * 3600)] = 21.31
+    col = np.full(n, np.nan)
+    col[idx] = np.round(room / 0.0625) * 0.0625
+    out, log = _screened(_held(col), rate)
+    note = log.notes["t0"]
+    assert note.kind == "held" and note.stretches == ()  # one stretch, held throughout
+    got = np.flatnonzero(np.isfinite(out[:, 0]))
+    near = np.searchsorted(idx, got)
+    dist = np.minimum(np.abs(got - idx[np.clip(near, 0, len(idx) - 1)]),
+                      np.abs(got - idx[np.clip(near - 1, 0, len(idx) - 1)]))
+    assert abs(len(got) - len(idx)) <= 1 and np.mean(dist <= 1) >= 0.9999
+
+
+def test_a_held_log_whose_cadence_changes_is_read_on_each():
+    """A logger set from a reading every 12 samples to one every 20 midway: two held
+    stretches, each read as its readings (from the second's first change on)."""
+    rate, n, mid = 12.5, 300_000, 150_007
+    a = _readings(n, rate, 12, seed=8)
+    b = _readings(n, rate, 20, seed=9)
+    col = np.where(np.arange(n) < mid, a, np.nan)
+    col[mid:] = b[mid:]
+    h = _held(col)
+    out, log = _screened(h, rate)
+    st = log.notes["t0"].stretches
+    assert [x["cadence_samples"] for x in st if x["read"] == "held"] == [12.0, 20.0]
+    s2 = round(st[-1]["start_s"] * rate)
+    assert mid <= s2 < mid + 3000
+    want = np.isfinite(col[s2:])
+    np.testing.assert_array_equal(np.isfinite(out[s2:, 0]), want)
+    np.testing.assert_array_equal(out[s2:, 0][want], col[s2:][want])
+    want = np.isfinite(col[:mid])
+    np.testing.assert_array_equal(np.isfinite(out[:mid, 0]), want)
