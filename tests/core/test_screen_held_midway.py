@@ -265,3 +265,28 @@ def test_a_held_log_whose_cadence_changes_is_read_on_each():
     np.testing.assert_array_equal(out[s2:, 0][want], col[s2:][want])
     want = np.isfinite(col[:mid])
     np.testing.assert_array_equal(np.isfinite(out[:mid, 0]), want)
+
+
+@pytest.mark.parametrize("block", [1 << 16, 5000])
+def test_a_faulty_held_log_is_screened_as_its_readings(block):
+    """A held log with a DS18B20's faults (85.0 °C power-on values, −127 °C read errors, a
+    25-minute dropout, all after its first block): the screen's verdicts and readings equal
+    those on the same log written with NaN between readings."""
+    rate, n = 12.5, 400_000
+    col = _readings(n, rate, 12, seed=11)
+    idx = np.flatnonzero(np.isfinite(col))
+    col[idx[9000]] = 85.0
+    col[idx[15000]] = -127.0
+    col[idx[21000]] = 85.0
+    col[idx[12000]:idx[12000] + 18_750] = np.nan  # 25 min, from a reading to mid-interval
+    h = _held(col)
+    h[idx[12000]:idx[12000] + 18_750] = np.nan
+    out, log = _screened(h, rate, block)
+    ref, rlog = _screened(col, rate, block)
+    np.testing.assert_array_equal(np.isfinite(out[:, 0]), np.isfinite(ref[:, 0]))
+    ok = np.isfinite(ref[:, 0])
+    np.testing.assert_array_equal(out[ok, 0], ref[ok, 0])
+    assert log.stretches == rlog.stretches
+    assert sorted(s.kind for s in log.stretches) == ["dropout", "power_on_85", "power_on_85",
+                                                      "read_error"]
+    assert log.notes["t0"].kind == "held"
