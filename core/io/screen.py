@@ -573,8 +573,11 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     a room that dwells and turns (runs of several multiples, changes both ways) is still
     read as readings. Where the first changes lie too far apart for the cadences to be tried
     (more than ``HELD_MAX_CANDIDATES``), it is said too. Density is judged over the finite
-    span (a log whose first rows are NaN is judged from its first value), and only a
-    channel's first rows are judged: a log held from midway on is not seen. ``final``
+    span (a log whose first rows are NaN is judged from its first value) or by its finite
+    rows' neighbours (``_dense``: a held log with a dropout is still dense), and its runs
+    between changes of two finite rows (``_clean_runs``). This is the verdict on a
+    channel's first rows; the rest of the log is watched stretch by stretch (``_Dehold``:
+    a log held from midway on, or read on every sample from midway on). ``final``
     False: the caller can wait for more of the log (``_Undecided`` is
     raised where more runs could decide, and where a common divisor rests on fewer than
     ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
