@@ -100,8 +100,8 @@ from avard.core.explain.thermal_paths import (
     second_path_reading,
 )
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
-from avard.core.io.screen import ScreenedSource, ScreenLog
-from avard.core.io.source import RecordSource, StreamSource
+from avard.core.io.screen import ScreenedSource, ScreenLog, fahrenheit_columns, to_celsius
+from avard.core.io.source import RecordFormat, RecordSource, StreamSource
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
 
@@ -537,6 +537,12 @@ def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str,
         return None
     held = holdout.info.as_meta(), holdout.blocks(options.block)
     check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
+    # --temperature-units F: the held-out record's logs in the same units as the record's
+    to_c = fahrenheit_columns(list(held[0].get("temperature_names") or []),
+                              options.temperature_units,
+                              holdout.info.format is not RecordFormat.RECORDING)
+    if to_c:
+        held = held[0], (to_celsius(b, to_c) for b in held[1])
     return held
 
 

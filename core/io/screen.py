@@ -1158,6 +1158,29 @@ def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]
     return None, None
 
 
+def fahrenheit_columns(temperature_names: Sequence[str], units: str,
+                       check_units: bool = True) -> list[int]:
+    """The temperature columns ``--temperature-units F`` converts: every log the units rule
+    judges (avard's own die temperature and a recording's logs are °C whatever is said: the
+    daemon writes them); none unless ``units`` is "F"."""
+    if units != "F" or not check_units:
+        return []
+    return [j for j, nm in enumerate(temperature_names) if nm not in NOT_DS18B20]
+
+
+def to_celsius(blk: Block, columns: Sequence[int]) -> Block:
+    """The block with its temperature ``columns`` converted from °F to °C (a copy)."""
+    if not columns or blk[1] is None:
+        return blk
+    t0 = np.array(blk[1], dtype=float)
+    tv = t0.reshape(len(blk[0]), -1)
+    # to 1e-9 K: a DS18B20's °F reading converts back onto its 0.0625 K grid exactly (the
+    # float residue of the division put every reading 1e-15 off it, and the thermal model
+    # reads a DS18B20's rounding from that grid)
+    tv[:, list(columns)] = np.round((tv[:, list(columns)] - 32.0) / 1.8, 9)
+    return blk[0], t0, blk[2]
+
+
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
@@ -1178,10 +1201,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     takes every log as °C (a °F verdict is said, not acted on), "F" converts each log the
     units rule judges to °C as it is read (before every rule: 85 °C is 185 °F)."""
     tnames = list(temperature_names)
-    # the logs converted from °F, as asked (avard's own die temperature and a recording's
-    # logs are °C whatever is said: the daemon writes them)
-    to_c = ([j for j, nm in enumerate(tnames) if check_units and nm not in NOT_DS18B20]
-            if log.units == "F" else [])
+    to_c = fahrenheit_columns(tnames, log.units, check_units)
     tracks = [_TempTrack() for _ in tnames]
     held = [_Dehold() for _ in tnames]
     pending: list[tuple[int, Block]] = []
@@ -1255,11 +1275,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
 
     observed = 0  # the waiting blocks already watched
     for blk in blocks:
-        if to_c and blk[1] is not None:
-            t0 = np.array(blk[1], dtype=float)
-            tv = t0.reshape(len(blk[0]), -1)
-            tv[:, to_c] = (tv[:, to_c] - 32.0) / 1.8
-            blk = (blk[0], t0, blk[2])
+        blk = to_celsius(blk, to_c)
         waiting.append((offset, blk))
         offset += len(blk[0])
         waited += len(blk[0])

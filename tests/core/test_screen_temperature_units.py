@@ -111,3 +111,26 @@ def test_a_bad_value_is_one_line_and_exit_2(tmp_path, capsys):
         assert main([cmd, str(path), "--temperature-units", "kelvin"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--temperature-units kelvin" in err[0]
+
+
+def test_f_converts_the_held_out_record_too(tmp_path):
+    """``--holdout FILE`` with ``F``: the held-out record's logs are converted as the
+    record's are (the models fitted per K predict it per K): the explanation of a °F pair
+    equals the °C pair's."""
+    paths = {}
+    for seed in (5, 6):
+        rec, _ = make_record(seed, hours=1.0, logged=("ambient",),
+                             truth=Truth(coefficient=(3e-3, 0, 0), lag_s=120.0))
+        paths["c", seed] = save(rec, tmp_path / f"c{seed}.npz")
+        rec.temperature_c[:, 0] = rec.temperature_c[:, 0] * 1.8 + 32.0
+        paths["f", seed] = save(rec, tmp_path / f"f{seed}.npz")
+    got = {}
+    for u, units in (("c", "auto"), ("f", "F")):
+        ex = explain_file(open_record(paths[u, 5]),
+                          ExplainOptions(channels=("x",), temperature_units=units),
+                          holdout=open_record(paths[u, 6]))
+        (f,) = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+        assert ex.holdout is not None
+        got[u] = (f.params["coefficient"], ex.to_dict()["holdout_gain"])
+    assert got["f"][0] == pytest.approx(got["c"][0], rel=1e-6)
+    assert got["f"][1] == pytest.approx(got["c"][1], rel=1e-6)
