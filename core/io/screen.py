@@ -904,6 +904,13 @@ class _Dehold:
             b = j + int(bad[0])
             seg.runs += int(np.count_nonzero(conn[j:b]))
             seg.refine(p[j:b][conn[j:b]])
+            if seg.whole and _on_cadence(d[b:b + 1], seg.k, False)[0]:
+                # a reading a sample late or early on a whole cadence: a jittering clock,
+                # not the log read otherwise; read from here within a sample (each change
+                # its own reading, as for a cadence that is no whole number)
+                seg.whole = False
+                j = b
+                continue
             g = math.gcd(int(seg.k), int(d[b])) if seg.whole else 0
             if g >= 2 and seg.runs < HELD_PIN_RUNS:
                 # a whole cadence read from few runs may be a multiple of the log's (n runs

@@ -290,3 +290,28 @@ def test_a_faulty_held_log_is_screened_as_its_readings(block):
     assert sorted(s.kind for s in log.stretches) == ["dropout", "power_on_85", "power_on_85",
                                                       "read_error"]
     assert log.notes["t0"].kind == "held"
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_held_log_whose_clock_jitters_after_its_first_rows_stays_one_stretch(seed):
+    """A whole 12-sample cadence in the first rows, then 2 % of the readings a sample late:
+    a jittering clock, not a log read otherwise. One held stretch throughout, every reading
+    within a sample of its row (a break at each late reading left ~9 runs a time as they
+    were, and the note a list of stretches)."""
+    rate, n = 12.5, 400_000
+    col = _readings(n, rate, 12, seed=seed)
+    idx = np.flatnonzero(np.isfinite(col))
+    rng = np.random.default_rng(seed)
+    late = idx[(idx > 200_000) & (rng.random(len(idx)) < 0.02)]
+    late = late[late + 1 < n]
+    col[late + 1] = col[late]
+    col[late] = np.nan
+    out, log = _screened(_held(col), rate)
+    assert log.notes["t0"].kind == "held" and log.notes["t0"].stretches == ()
+    ri = np.flatnonzero(np.isfinite(col))
+    got = np.flatnonzero(np.isfinite(out[:, 0]))
+    assert len(got) == len(ri)
+    near = np.searchsorted(ri, got)
+    dist = np.minimum(np.abs(got - ri[np.clip(near, 0, len(ri) - 1)]),
+                      np.abs(got - ri[np.clip(near - 1, 0, len(ri) - 1)]))
+    assert dist.max() <= 1
