@@ -1008,6 +1008,7 @@ class _Dehold:
         vv = np.concatenate([[self._aprev], col])
         ff = np.concatenate([[math.isfinite(self._aprev)], fin])
         change = np.flatnonzero(ff[1:] & ff[:-1] & (vv[1:] != vv[:-1])) + off
+        lone = fin & ~ff[:-1] & ~np.concatenate([fin[1:], [True]])
         out = col
         # the stretches over these rows (those ended before them dropped: bounded)
         while len(self.segs) > 1 and self.segs[1].start <= off:
@@ -1055,6 +1056,9 @@ class _Dehold:
             pp = pp[(pp >= lo) & (pp < hi)]
             keep = np.zeros(hi - lo, dtype=bool)
             keep[pp - lo] = True
+            # a reading alone between NaN is a reading whatever its phase (a held log never
+            # writes one: the log has gone over to NaN between readings)
+            keep |= lone[lo - off:hi - off]
             if out is col:
                 out = col.copy()
             piece = out[lo - off:hi - off]

@@ -315,3 +315,19 @@ def test_a_held_log_whose_clock_jitters_after_its_first_rows_stays_one_stretch(s
     dist = np.minimum(np.abs(got - ri[np.clip(near, 0, len(ri) - 1)]),
                       np.abs(got - ri[np.clip(near - 1, 0, len(ri) - 1)]))
     assert dist.max() <= 1
+
+
+def test_a_held_log_that_goes_over_to_nan_between_readings_keeps_every_reading():
+    """Held for its first part, then written with NaN between readings on another phase and
+    cadence (10 samples, 5 after the switch): every reading of the second part is handed on
+    (a reading alone between NaN is a reading whatever the held cadence's phase)."""
+    rate, n, mid = 12.5, 400_000, 200_003
+    h = _held(_readings(n, rate, 12, seed=4))
+    c2 = np.full(n, np.nan)
+    i2 = np.arange(mid + 5, n, 10)
+    c2[i2] = np.round((21.3 + 0.2 * np.sin(i2 / 5000.0)) / 0.0625) * 0.0625
+    mixed = h.copy()
+    mixed[mid:] = c2[mid:]
+    out, _log = _screened(mixed, rate)
+    np.testing.assert_array_equal(np.isfinite(out[mid:, 0]), np.isfinite(c2[mid:]))
+    np.testing.assert_array_equal(out[i2, 0], c2[i2])
