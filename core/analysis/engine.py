@@ -180,7 +180,7 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     if options.screen and not isinstance(source, ScreenedSource):
         # the input screen (core/io/screen.py): glitches and shocks cut out as gaps, said in
         # the results; explain screens once itself and hands analyze the screened blocks
-        screened = ScreenedSource(source)
+        screened = ScreenedSource(source, options.temperature_units)
         an = analyze(screened, options, progress=progress, tap=tap)
         an.meta["screen"] = screened.log
         return an

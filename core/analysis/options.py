@@ -30,6 +30,8 @@ class AnalyzeOptions:
     ``block``: samples per block read (memory is a few blocks).
     ``screen``: read the record through the input screen (``core/io/screen.py``: start-up
     glitches and shocks cut out as gaps, bad temperature readings masked, all said).
+    ``temperature_units``: the temperature logs' units for the screen (``--temperature-units``):
+    "auto" (judged from the readings: a DS18B20 log in °F refused), "C" or "F" (converted).
     ``workers``: processes for the OADEV of an .npz file, cut by time and added up exactly
     (``core/analysis/parallel.py``: the result is one worker's), or ``"auto"`` (1 on a
     machine under 2 GB or for records under 2**22 samples, else the cores, at most 4).
@@ -46,6 +48,7 @@ class AnalyzeOptions:
     block: int = BLOCK
     screen: bool = True
     workers: int | Literal["auto"] = 1
+    temperature_units: str = "auto"
 
     def __post_init__(self) -> None:
         w = self.workers

@@ -100,8 +100,8 @@ from avard.core.explain.thermal_paths import (
 )
 from avard.core.explain.thermal_paths.readings import holds_beside
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
-from avard.core.io.screen import ScreenedSource, ScreenLog
-from avard.core.io.source import RecordSource, StreamSource
+from avard.core.io.screen import ScreenedSource, ScreenLog, fahrenheit_columns, to_celsius
+from avard.core.io.source import RecordFormat, RecordSource, StreamSource
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
 
@@ -390,7 +390,19 @@ class Explanation:
                 "holdout": ho,
                 "screened": None if self.screen is None else self.screen.to_dict(),
                 "temperature_unused": dict(self.temperature_unused),
-                "channels": {k: v.to_dict() for k, v in self.channels.items()}}
+                "channels": {k: {**v.to_dict(), "caveats": self.caveats(k)}
+                             for k, v in self.channels.items()}}
+
+    def caveats(self, channel: str) -> list[str]:
+        """The caveats said under the channel's findings in the text and the report (a
+        coupling on a recording of several short runs: ``report.runs_caveat``), for the
+        JSON: the same lines, so ``--json`` says what the text says."""
+        from avard.core.explain.report import runs_caveat  # report imports this module
+
+        ch = self.channels[channel]
+        caveat = (runs_caveat(self) if any(f.cause == "temperature" for f in ch.claimed)
+                  else None)
+        return [] if caveat is None else [caveat]
 
 
 # --------------------------------------------------------------------------------------------
@@ -479,7 +491,8 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     if not source.rereadable:
         return explain_stream(source, options, holdout=holdout, progress=progress,
                               stage=stage)
-    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
+    screened = (source if isinstance(source, ScreenedSource)
+                else ScreenedSource(source, options.temperature_units))
     tap = _SlowTap(source.info.rate_hz, source.info.n_samples, len(source.info.names),
                    len(source.info.temperature_names))
     an = analyze(screened, options, progress=progress, tap=tap)
@@ -524,6 +537,12 @@ def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str,
         return None
     held = holdout.info.as_meta(), holdout.blocks(options.block)
     check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
+    # --temperature-units F: the held-out record's logs in the same units as the record's
+    to_c = fahrenheit_columns(list(held[0].get("temperature_names") or []),
+                              options.temperature_units,
+                              holdout.info.format is not RecordFormat.RECORDING)
+    if to_c:
+        held = held[0], (to_celsius(b, to_c) for b in held[1])
     return held
 
 
@@ -536,7 +555,8 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
     the same sensor. ``base``: analyze's result for these blocks when the caller has it
     (``explain_file`` after a parallel analysis); the blocks then feed only the slow view."""
     # one screen for the slow view and the analysis: analyze is handed the screened blocks
-    screened = source if isinstance(source, ScreenedSource) else ScreenedSource(source)
+    screened = (source if isinstance(source, ScreenedSource)
+                else ScreenedSource(source, options.temperature_units))
     meta = source.info.as_meta()
     blocks = screened.blocks(options.block)
     held = _held(holdout, options, meta)

@@ -105,6 +105,25 @@ PRINT_TOL = 0.006
 #: Temperature channels that are no DS18B20 (avard's own ADXL355 die temperature, on its own
 #: ~0.11 K step): the DS18B20 grid's units rule does not judge them.
 NOT_DS18B20 = frozenset({"chip"})
+#: ``--temperature-units``: judged from the readings (auto), or said by the user: °C (never
+#: refused as °F) or °F (converted to °C before any rule, the 85 °C and −127 °C values
+#: included: 185 °F and −196.6 °F)
+TEMPERATURE_UNITS = ("auto", "C", "F")
+
+
+def temperature_units(text: str | None) -> str:
+    """``--temperature-units``'s value: "auto", "C" or "F" (any case, a leading ° allowed);
+    a ConfigError (one line) otherwise."""
+    from avard.core.errors import ConfigError
+
+    word = "auto" if text is None else str(text).strip().lstrip("°")
+    for u in TEMPERATURE_UNITS:
+        if word.lower() == u.lower():
+            return u
+    raise ConfigError(f"--temperature-units {text}: give auto (judged from the readings), "
+                      "C or F (the logs' units, said for every temperature log)")
+
+
 #: Held-log detection, on a channel's first rows: a value on at least this share of them.
 HELD_DENSE = 0.95
 #: A common divisor k of n run lengths is a cadence when k^n reaches this (chance ≤ 1e-4),
@@ -118,6 +137,16 @@ HELD_EVENTS, HELD_MIN_EVENTS, HELD_COHERENCE, HELD_MAX_CANDIDATES = 64, 32, 0.9,
 HELD_PIN_RUNS = 14
 #: A dense log whose first rows hold too few runs is judged on up to this many rows.
 HELD_WAIT_SAMPLES = 1 << 19
+#: A held stretch found after the first rows (the whole log is watched, block by block):
+#: the chance of a log read on every sample showing it, at most 1/this a test
+HELD_SWITCH_CHANCE = 1e9
+#: The changes of value kept per channel for that test (bounded, whatever the record's length)
+HELD_RING = 128
+#: A cadence that is no whole number of samples: a run's length within a sample's rounding
+#: and this share of it (a logger's clock against the sampler's) of a multiple of it
+HELD_TOL_SAMPLES, HELD_TOL_DRIFT = 1.0, 1e-4
+#: Stretches named in a log's note (the JSON lists all)
+HELD_NOTE_STRETCHES = 8
 #: A steady ramp (cannot tell): this share of the runs one multiple of the cadence and of
 #: the changes one sign.
 RAMP_SHARE = 0.9
@@ -130,13 +159,19 @@ class LogNote:
     line of text."""
     kind: str
     text: str
+    #: a log read in several stretches (held, as it is): {start_s, end_s, read, cadence_samples}
+    stretches: tuple[dict[str, Any], ...] = ()
 
-    def to_dict(self) -> dict[str, str]:
-        return {"kind": self.kind, "text": self.text}
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind, "text": self.text}
+        if self.stretches:
+            out["stretches"] = [dict(x) for x in self.stretches]
+        return out
 
     def joined(self, other: LogNote) -> LogNote:
         """One line per channel: this note and ``other`` together."""
-        return LogNote(f"{self.kind}+{other.kind}", f"{self.text}; {other.text}")
+        return LogNote(f"{self.kind}+{other.kind}", f"{self.text}; {other.text}",
+                       self.stretches + other.stretches)
 
 
 @dataclass(frozen=True)
@@ -189,6 +224,8 @@ class ScreenLog:
     notes: dict[str, LogNote] = field(default_factory=dict)
     #: temperature channels the thermal model must not use, with why (a log in °F)
     refused: dict[str, str] = field(default_factory=dict)
+    #: the logs' units as asked (``--temperature-units``): auto, C or F
+    units: str = "auto"
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -211,6 +248,7 @@ class ScreenLog:
                 "stretches": [s.to_dict() for s in self.stretches],
                 "notes": {k: v.to_dict() for k, v in self.notes.items()},
                 "refused": dict(self.refused),
+                "temperature_units": self.units,
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
                           "scale never below the grid's quantisation (q/√12) on a grid "
@@ -220,11 +258,13 @@ class ScreenLog:
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run; "
                           "a log with a value on every sample that changes only on a regular "
-                          "cadence is held: its readings are each run's first sample and "
-                          "one every cadence while the run lasts; readings off the 0.0625 K "
+                          "cadence is held (judged over the whole log, stretch by stretch): "
+                          "its readings are each change and one every cadence after it "
+                          "until the next, across a dropout too; readings off the 0.0625 K "
                           "grid (under half of the distinct values on it) are noted, and "
                           "refused as °F where most are on a DS18B20's grid in °F "
-                          "(32 + 0.1125·k)"),
+                          "(32 + 0.1125·k), unless --temperature-units says C or F (F: "
+                          "converted to °C before every rule)"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
@@ -534,22 +574,24 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     a room that dwells and turns (runs of several multiples, changes both ways) is still
     read as readings. Where the first changes lie too far apart for the cadences to be tried
     (more than ``HELD_MAX_CANDIDATES``), it is said too. Density is judged over the finite
-    span (a log whose first rows are NaN is judged from its first value), and only a
-    channel's first rows are judged: a log held from midway on is not seen. ``final``
+    span (a log whose first rows are NaN is judged from its first value) or by its finite
+    rows' neighbours (``_dense``: a held log with a dropout is still dense), and its runs
+    between changes of two finite rows (``_clean_runs``). This is the verdict on a
+    channel's first rows; the rest of the log is watched stretch by stretch (``_Dehold``:
+    a log held from midway on, or read on every sample from midway on). ``final``
     False: the caller can wait for more of the log (``_Undecided`` is
     raised where more runs could decide, and where a common divisor rests on fewer than
     ``HELD_PIN_RUNS`` runs: it may be a multiple of the cadence)."""
     v = np.asarray(col, dtype=float)
-    f = np.flatnonzero(np.isfinite(v))
-    # dense over the finite span: a log that starts late (or ends early) is judged where it is
-    if not len(f) or len(f) < HELD_DENSE * (int(f[-1]) - int(f[0]) + 1):
+    fin = np.isfinite(v)
+    f = np.flatnonzero(fin)
+    if not _dense(fin, f):
         return 0.0, ""
     if not final and len(f) < 2:
         raise _Undecided
     x = v[f]
-    starts = f[np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))]
-    lengths = np.diff(starts)  # complete runs (the first and the open last are cut)
-    lengths = lengths[1:] if len(lengths) else lengths
+    p, lengths = _clean_runs(v, fin)
+    starts = np.concatenate([[f[0]], p])
     n = len(lengths)
     g = int(np.gcd.reduce(lengths.astype(np.int64))) if n else 0
     if g >= 2 and n >= HELD_MIN_COMMON and n * math.log(g) >= math.log(HELD_CHANCE):
@@ -579,13 +621,38 @@ def held_cadence(col: NDArray[np.float64], final: bool = True) -> tuple[float, s
     return 0.0, ""
 
 
+def _dense(fin: NDArray[np.bool_], f: NDArray[np.intp]) -> bool:
+    """A value on (nearly) every row: at least ``HELD_DENSE`` of the finite span finite (a
+    log that starts late or ends early is judged where it is), or of the finite rows that
+    many followed by a finite row (its NaN in a few long stretches, dropouts, not one
+    between each reading: a held log with a hole is still held)."""
+    if not len(f):
+        return False
+    if len(f) >= HELD_DENSE * (int(f[-1]) - int(f[0]) + 1):
+        return True
+    pairs = int(np.count_nonzero(fin[:-1] & fin[1:]))
+    return len(f) >= 2 and pairs >= HELD_DENSE * (len(f) - 1)
+
+
+def _clean_runs(v: NDArray[np.float64], fin: NDArray[np.bool_]
+                ) -> tuple[NDArray[np.intp], NDArray[np.int64]]:
+    """(p, lengths): the rows where the value changes between two finite rows (a held log's
+    reading instants; a change across NaN is not one, its reading may lie in the hole), and
+    the lengths of the complete runs between two of them with no NaN between (a run cut by
+    a dropout is no multiple of anything)."""
+    p = np.flatnonzero(fin[1:] & fin[:-1] & (v[1:] != v[:-1])) + 1
+    cnan = np.concatenate([[0], np.cumsum(~fin)])
+    d = np.diff(p).astype(np.int64)
+    return p, d[cnan[p[1:]] == cnan[p[:-1]]]
+
+
 def _cannot_tell(n: int, rows: int, why: str) -> str:
     """The note on a dense log that cannot be told held or read on every sample."""
     return (f"a value on every sample, its {n} complete runs of one value in its first "
             f"{rows} samples {why} a log held at each reading (each reading "
             "repeated until the next) from one read on every sample: taken as read on every "
             "sample (if held, its lag is late by half a reading interval; judged on its first "
-            "rows only)")
+            "rows, the rest of the log watched for a held stretch)")
 
 
 def _steady_ramp(lengths: NDArray[np.int64], c: float, x: NDArray[np.float64]) -> bool:
@@ -643,20 +710,132 @@ def _fractional_cadence(starts: NDArray[np.int64]) -> tuple[float, int, bool]:
     return best, n, False
 
 
+class _Stretch:
+    """One stretch of a temperature log read one way: from row ``start`` on, as it is
+    (``k`` 0) or held at each reading on a cadence of ``k`` samples, its reading instants
+    found from ``anchor`` (a change of value between two finite rows: a reading, -1 until
+    one is seen). ``runs``: complete runs found on the cadence (the evidence, for a whole
+    cadence shrunk to a divisor); ``why``: what is said of a stretch read as it is;
+    ``whole``: a cadence of a whole number of samples (a common divisor, exact), else read
+    from the changes' phases, with its uncertainty ``dk`` (samples)."""
+
+    __slots__ = ("anchor", "dk", "fit", "k", "runs", "start", "whole", "why")
+
+    def __init__(self, start: int, k: float, anchor: int = -1, runs: int = 0,
+                 why: str = "", whole: bool = True, dk: float = 0.0) -> None:
+        self.start, self.k, self.anchor, self.runs, self.why = start, k, anchor, runs, why
+        self.whole, self.dk = whole or k <= 0, dk
+        # a cadence that is no whole number: the straight line through its changes (row
+        # against reading count from the first: n, Σm, Σx, Σm², Σmx), refined as the log
+        # goes on, so a long constant stretch's readings do not drift off their instants
+        self.fit = [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+    def refine(self, p: NDArray[np.int64]) -> None:
+        """Take the changes ``p`` (on this stretch's cadence, ascending) into its cadence's
+        fit, as far as their reading counts are beyond doubt (the cadence's uncertainty over
+        their distance from the first below half a cadence: the fit then narrows it)."""
+        if self.whole or not len(p):
+            return
+        f = self.fit
+        if f[0] < 0:
+            f[0] = float(p[0])
+        x_all = np.asarray(p, dtype=float) - f[0]
+        while len(x_all):
+            lim = math.inf if self.dk <= 0 else 0.4 * self.k * self.k / self.dk
+            n_take = int(np.searchsorted(x_all, lim, side="right"))
+            if not n_take:
+                return
+            x, x_all = x_all[:n_take], x_all[n_take:]
+            m = np.rint(x / self.k)
+            f[1] += len(x)
+            f[2] += float(m.sum())
+            f[3] += float(x.sum())
+            f[4] += float((m * m).sum())
+            f[5] += float((m * x).sum())
+            den = f[1] * f[4] - f[2] * f[2]
+            if f[1] < HELD_MIN_EVENTS or not den > 0:
+                continue
+            k = (f[1] * f[5] - f[2] * f[3]) / den
+            if abs(k - self.k) >= 0.5:
+                return
+            self.k = k
+            # three standard errors of the slope, for residuals of a sample's rounding
+            # (σ ≈ 0.5 sample, on the safe side of √(1/12))
+            self.dk = 1.5 / math.sqrt(den / f[1])
+
+
+def _on_cadence(d: NDArray[np.int64], k: float, whole: bool = True, dk: float = 0.0
+                ) -> NDArray[np.bool_]:
+    """Run lengths ``d`` that a held log on a cadence of ``k`` samples makes: whole
+    multiples of a whole cadence; within a sample's rounding (and the logger's clock drift,
+    ``HELD_TOL_DRIFT`` of the run, and the cadence's own uncertainty ``dk`` times the
+    readings it spans) of a multiple ≥ 1 of a cadence that is no whole number."""
+    d = np.asarray(d, dtype=float)
+    if whole:
+        return np.asarray(d % k == 0) & (d > 0)
+    m = np.rint(d / k)
+    tol = HELD_TOL_SAMPLES + HELD_TOL_DRIFT * d + m * dk
+    return np.asarray((m >= 1) & (np.abs(d - m * k) <= tol))
+
+
+def _phase_dk(p: NDArray[np.int64], k: float) -> float:
+    """The uncertainty of a cadence read from the phases of the changes ``p``
+    (``_fractional_cadence``: coherence ≥ 0.9 allows the phase to slide about a quarter of
+    a cycle across their span)."""
+    span = float(p[-1] - p[0]) if len(p) >= 2 else 0.0
+    return 0.3 * k * k / span if span > 0 else 0.5
+
+
 class _Dehold:
-    """One temperature channel read as readings: a held log (``held_cadence``, judged on the
-    channel's first rows) becomes each run's first sample, and one sample every cadence
-    while the run lasts (at least half a cadence before its end), NaN between, which is what
-    a recording's source hands over (core/io/source.py: one reading per conversion, a stuck
+    """One temperature channel read as readings, stretch by stretch over the whole log.
+
+    The first rows are judged by ``held_cadence`` (the screen waits for them); from there on
+    every block is watched (``observe``, before the block is handed on: its rows and the one
+    block before it can still be read anew), in bounded memory (the last ``HELD_RING``
+    changes of value) and a cost linear in the rows:
+
+    - in a held stretch every change of value between two finite rows must lie on the
+      cadence from the change before it (``_on_cadence``); a whole cadence may shrink to a
+      divisor the stretch's runs still make significant; a change off it ends the stretch
+      there (the log is read as it is from that change on). A change across NaN (a dropout)
+      is not judged, and the reading instants go on from the last change before the hole
+      (its first value after the hole is a repeat of a reading made inside it, or on a
+      reading instant that lies on the same cadence: either way no reading's phase is lost);
+    - in a stretch read as it is, the latest complete runs are tested at each block for a
+      held stretch that has begun (a whole cadence: their common divisor, at a chance of
+      at most 1/``HELD_SWITCH_CHANCE`` for a log read on every sample, the test being made
+      at every block; a cadence that is no whole number: the last ``HELD_EVENTS`` changes'
+      phases, ``_fractional_cadence``), which then starts at its first run's change (its
+      rows still waiting are read anew; the screen waits, at most ``HELD_WAIT_SAMPLES``
+      rows, while such a test is close). A steady ramp is not taken (``_steady_ramp``: it
+      cannot be told from a held log) and said.
+
+    A held stretch becomes each reading instant's row (each change, and one every cadence
+    after it until half a cadence before the next), NaN between, which is what a
+    recording's source hands over (core/io/source.py: one reading per conversion, a stuck
     value included): a stable room's long constant stretch stays readings of its value, not
-    one reading and a hole. Other logs pass as they are."""
+    one reading and a hole."""
 
     def __init__(self) -> None:
-        self.k: float | None = None  # undecided; 0: readings; ≥ 2: held, the cadence
+        self.k: float | None = None  # the first rows' verdict: undecided; 0; ≥ 2 the cadence
         self.why = ""
-        self.prev = math.nan  # the last row's value
-        self.start = 0  # the open run's first sample (record index)
-        self.first = -1  # the first sample de-held
+        self.segs: list[_Stretch] = []  # the stretches not yet wholly handed on, in order
+        self.history: list[_Stretch] = []  # every stretch, for the note
+        self.rows = 0  # rows observed
+        self.released = 0  # rows handed on (read as their stretch says: fixed)
+        # the watch: the last row's value, the last change, a NaN since it, the last
+        # HELD_RING changes (row, value after it, the run before it complete)
+        self._prev, self._prev_fin = math.nan, False
+        self._last, self._nan_since = -1, True
+        self._rp = np.zeros(0, dtype=np.int64)
+        self._rv = np.zeros(0)
+        self._rc = np.zeros(0, dtype=bool)
+        self._since_try = 0
+        self.close = False  # a held stretch's test is close: the screen may wait for it
+        self.dense = False  # a value seen on two consecutive rows (a held stretch may come)
+        # the reading: the row before the next block's value, the last reading instant
+        self._aprev = math.nan
+        self._aanchor = -1
 
     def decide(self, col: NDArray[np.float64], final: bool) -> bool:
         """Judge the log on ``col`` (its first rows, as many as the screen has waited
@@ -667,54 +846,265 @@ class _Dehold:
             self.k, self.why = held_cadence(col, final)
         except _Undecided:
             return False
+        whole, dk = float(self.k).is_integer(), 0.0
+        if self.k and not whole:
+            v = np.asarray(col, dtype=float)
+            dk = _phase_dk(_clean_runs(v, np.isfinite(v))[0][:HELD_EVENTS], self.k)
+        self._begin(_Stretch(0, self.k, why=self.why, whole=whole, dk=dk))
         return True
 
+    def _begin(self, seg: _Stretch) -> None:
+        """A new stretch from ``seg.start`` (which replaces a stretch of no rows yet; rows
+        handed on are read as they were)."""
+        seg.start = max(seg.start, self.released)
+        while self.segs and self.segs[-1].start >= seg.start:
+            self.segs.pop()
+            self.history.pop()
+        self.segs.append(seg)
+        self.history.append(seg)
+
+    # -- the watch ----------------------------------------------------------------------
+
+    def observe(self, off: int, col: NDArray[np.float64]) -> None:
+        """Watch the block of rows ``off`` … (after ``decide``): judge its changes of value
+        against the stretch being read, and test for a held stretch beginning."""
+        v = np.asarray(col, dtype=float)
+        n = len(v)
+        if not n:
+            return
+        fin = np.isfinite(v)
+        vv = np.concatenate([[self._prev], v])
+        ff = np.concatenate([[self._prev_fin], fin])
+        pair = ff[1:] & ff[:-1]
+        self.dense = self.dense or bool(pair.any())
+        i = np.flatnonzero(pair & (vv[1:] != vv[:-1]))  # block rows
+        cnan = np.concatenate([[0], np.cumsum(~fin)])
+        p = i + off
+        conn = np.empty(len(i), dtype=bool)
+        if len(i):
+            conn[0] = self._last >= 0 and not self._nan_since and cnan[i[0]] == 0
+            conn[1:] = cnan[i[1:]] == cnan[i[:-1]]
+        d = np.diff(np.concatenate([[self._last], p])).astype(np.int64)
+        j = 0
+        while j < len(p):
+            seg = self.segs[-1]
+            if seg.k <= 0:
+                break
+            if seg.anchor < 0:
+                seg.anchor = int(p[j])
+                seg.refine(p[j:j + 1])
+                j += 1
+                continue
+            ok = _on_cadence(d[j:], seg.k, seg.whole, seg.dk) | ~conn[j:]
+            bad = np.flatnonzero(~ok)
+            if not len(bad):
+                seg.runs += int(np.count_nonzero(conn[j:]))
+                seg.refine(p[j:][conn[j:]])
+                break
+            b = j + int(bad[0])
+            seg.runs += int(np.count_nonzero(conn[j:b]))
+            seg.refine(p[j:b][conn[j:b]])
+            if seg.whole and _on_cadence(d[b:b + 1], seg.k, False)[0]:
+                # a reading a sample late or early on a whole cadence: a jittering clock,
+                # not the log read otherwise; read from here within a sample (each change
+                # its own reading, as for a cadence that is no whole number)
+                seg.whole = False
+                j = b
+                continue
+            g = math.gcd(int(seg.k), int(d[b])) if seg.whole else 0
+            if g >= 2 and seg.runs < HELD_PIN_RUNS:
+                # a whole cadence read from few runs may be a multiple of the log's (n runs
+                # are all even multiples with a chance of 2^-n): its divisor (every change so
+                # far lies on it too); a cadence pinned by many runs is not shrunk by one run
+                # (a log read on every sample makes it a multiple of 2 one time in two)
+                seg.k = float(g)
+                seg.runs += 1
+                j = b + 1
+                continue
+            self._begin(_Stretch(int(p[b]), 0.0, why="its changes leave the cadence"))
+            j = b + 1
+        # the changes watched: the ring of the last ones before this block, and the block's
+        rp = np.concatenate([self._rp, p])
+        rv = np.concatenate([self._rv, v[i]])
+        rc = np.concatenate([self._rc, conn])
+        self._rp, self._rv, self._rc = rp[-HELD_RING:], rv[-HELD_RING:], rc[-HELD_RING:]
+        self._since_try += len(p)
+        if len(p):
+            self._last = int(p[-1])
+            self._nan_since = bool(cnan[n] - cnan[i[-1]] > 0)
+        else:
+            self._nan_since = self._nan_since or bool(cnan[n] > 0)
+        self._prev, self._prev_fin = float(v[-1]), bool(fin[-1])
+        self.rows = off + n
+        self.close = False
+        if self.segs[-1].k <= 0:
+            self._watch(rp, rv, rc)
+
+    def _watch(self, rp: NDArray[np.int64], rv: NDArray[np.float64],
+               rc: NDArray[np.bool_]) -> None:
+        """In a stretch read as it is: has a held one begun among the latest runs (the
+        changes ``rp``, the values after them ``rv``, the run before each complete ``rc``:
+        the last block's and the ring's before it)?"""
+        seg = self.segs[-1]
+        keep = rp >= seg.start
+        rp, rv, rc = rp[keep], rv[keep], rc[keep]
+        if len(rp) < 2:
+            return
+        runs = np.diff(rp).astype(np.int64)
+        ok = rc[1:]
+        # a whole cadence: the common divisor of the newest complete runs, the count of
+        # runs that makes it least likely by chance (c^-n)
+        r = runs[::-1]
+        stop = np.flatnonzero(~ok[::-1])
+        r = r[:int(stop[0]) if len(stop) else len(r)]
+        gs = np.gcd.accumulate(r) if len(r) else r
+        gs = gs[:int(np.argmax(gs < 2)) if (gs < 2).any() else len(gs)]
+        score, nr, g = 0.0, 0, 0
+        if len(gs):
+            scores = np.arange(1, len(gs) + 1) * np.log(gs.astype(float))
+            m = int(np.argmax(scores))
+            score, nr, g = float(scores[m]), m + 1, int(gs[m])
+        if nr >= HELD_MIN_COMMON and score >= math.log(HELD_SWITCH_CHANCE):
+            first = len(rp) - 1 - nr
+            if _steady_ramp(runs[first:], float(g), rv[first:]):
+                seg.why = ("its runs all one length and its changes one way (a steady "
+                           "ramp): cannot tell a held log from one read on every sample")
+                return
+            self._begin(_Stretch(int(rp[first]), float(g), int(rp[first]), nr))
+            return
+        # close: two runs or more whose divisor is already unlikely by chance (one long run
+        # alone is a stable room's, read on every sample or not)
+        self.close = nr >= 2 and score >= math.log(HELD_CHANCE)
+        # a cadence that is no whole number of samples: the last changes' phases
+        if self._since_try < HELD_MIN_EVENTS or len(rp) < HELD_EVENTS:
+            return
+        self._since_try = 0
+        c, _n, _capped = _fractional_cadence(rp[-HELD_EVENTS:])
+        if not c > 0:
+            return
+        dk = _phase_dk(rp[-HELD_EVENTS:], c)
+        on = _on_cadence(runs, c, False, dk) & ok
+        nr = len(runs) - (int(np.flatnonzero(~on)[-1]) + 1 if (~on).any() else 0)
+        if nr < HELD_MIN_EVENTS:
+            return
+        first = len(rp) - 1 - nr
+        if _steady_ramp(runs[first:], c, rv[first:]):
+            seg.why = ("its runs all one length and its changes one way (a steady ramp): "
+                       "cannot tell a held log from one read on every sample")
+            return
+        seg = _Stretch(int(rp[first]), c, int(rp[first]), nr, whole=False, dk=dk)
+        seg.refine(rp[first:])
+        self._begin(seg)
+
+    # -- the reading ----------------------------------------------------------------------
+
     def apply(self, off: int, col: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The block of rows ``off`` … read as its stretches say (handed on: fixed)."""
         col = np.asarray(col, dtype=float)
-        k = self.k
-        if not k or not len(col):
-            return col
-        if self.first < 0:
-            self.first = off
         n = len(col)
+        if not n or not self.segs:
+            return col
         fin = np.isfinite(col)
-        prev = np.concatenate([[self.prev], col[:-1]])
-        new = fin & (col != prev)  # a change (a value after NaN included)
-        brk = np.flatnonzero(new | ~fin)  # where a run starts or stops
-        starts = np.flatnonzero(new)
-        carried = bool(fin[0] and not new[0])
-        s = np.concatenate([[self.start - off], starts]) if carried else starts
-        # each run's end (exclusive): the next change or NaN after its start; an open run
-        # (past the block's end) takes every cadence point in the block (with a common
-        # divisor its end is a whole cadence after each; a jittered one may end a sample
-        # short of the next, a reading placed by up to half a cadence on a constant value)
-        nxt = np.searchsorted(brk, s, side="right")
-        lim = (np.where(nxt < len(brk), brk[np.minimum(nxt, len(brk) - 1)], n + 0.5 * k)
-               if len(brk) else np.full(len(s), n + 0.5 * k))
-        extra = np.maximum(np.floor((lim - s) / k - 0.5), 0).astype(np.int64)
-        cnt = extra + 1
-        base = np.repeat(s, cnt)
-        step = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        pos = base + np.floor(k * step + 0.5).astype(np.int64)
-        pos = pos[(pos >= 0) & (pos < n)]
-        out = np.full(n, np.nan)
-        out[pos] = col[pos]
-        self.prev = float(col[-1])
-        if fin[-1]:
-            self.start = off + (int(starts[-1]) if len(starts) else self.start - off)
+        vv = np.concatenate([[self._aprev], col])
+        ff = np.concatenate([[math.isfinite(self._aprev)], fin])
+        change = np.flatnonzero(ff[1:] & ff[:-1] & (vv[1:] != vv[:-1])) + off
+        lone = fin & ~ff[:-1] & ~np.concatenate([fin[1:], [True]])
+        out = col
+        # the stretches over these rows (those ended before them dropped: bounded)
+        while len(self.segs) > 1 and self.segs[1].start <= off:
+            self.segs.pop(0)
+        for s_i, seg in enumerate(self.segs):
+            lo = max(seg.start, off)
+            hi = min(self.segs[s_i + 1].start if s_i + 1 < len(self.segs) else off + n,
+                     off + n)
+            if seg.k <= 0:
+                self._aanchor = -1
+                continue
+            if hi <= lo:
+                continue
+            k = seg.k
+            a = change[(change >= lo) & (change < hi)]
+            pos = []
+            if seg.start <= self._aanchor < lo:
+                # the stretch goes on from the last reading instant before these rows (across
+                # a dropout too: its phase is the logger's, not the hole's)
+                starts = np.concatenate([[self._aanchor], a])
+            else:
+                anc = seg.anchor if seg.anchor >= 0 else int(a[0]) if len(a) else lo
+                if anc > lo:
+                    # the stretch's first rows: its instants run back from its first reading
+                    back = np.arange(1, int((anc - lo) / k) + 2)
+                    pos.append(anc - np.floor(k * back + 0.5).astype(np.int64))
+                starts = (np.concatenate([[anc], a[a > anc]]) if anc < hi
+                          else np.zeros(0, dtype=np.int64))
+            if len(starts):
+                # each instant's readings: it, and one every cadence until half a cadence
+                # before the next change (an open run: to the rows' end)
+                nxt = np.concatenate([starts[1:], [hi + 0.5 * k]]).astype(float)
+                extra = np.maximum(np.floor((nxt - starts) / k - 0.5), 0).astype(np.int64)
+                # an instant before these rows: from its first reading among them (a long
+                # constant stretch costs its rows, not its rows times its blocks)
+                skip = np.zeros(len(starts), dtype=np.int64)
+                skip[0] = max(0, math.floor((lo - int(starts[0])) / k) - 1)
+                cnt = np.maximum(extra + 1 - skip, 0)
+                base = np.repeat(starts, cnt)
+                step = (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+                        + np.repeat(skip, cnt))
+                pos.append(base + np.floor(k * step + 0.5).astype(np.int64))
+                self._aanchor = int(starts[-1])
+            pp = np.concatenate(pos) if pos else np.zeros(0, dtype=np.int64)
+            pp = pp[(pp >= lo) & (pp < hi)]
+            keep = np.zeros(hi - lo, dtype=bool)
+            keep[pp - lo] = True
+            # a reading alone between NaN is a reading whatever its phase (a held log never
+            # writes one: the log has gone over to NaN between readings)
+            keep |= lone[lo - off:hi - off]
+            if out is col:
+                out = col.copy()
+            piece = out[lo - off:hi - off]
+            piece[~keep] = np.nan
+        self._aprev = float(col[-1])
+        self.released = off + n
         return out
 
+    # -- the note -------------------------------------------------------------------------
+
     def note(self, rate_hz: float) -> LogNote | None:
-        if self.k:
-            since = "" if self.first <= 0 else f" from {self.first / rate_hz:.6g} s"
-            return LogNote("held", (
-                f"held at each reading (a value on every sample, changing only on a "
-                f"{self.k:.4g}-sample cadence, {self.k / rate_hz:.3g} s): read as "
-                f"readings{since} (each run's first sample, and one every {self.k:.4g} "
-                "samples while it lasts; the rest NaN)"))
-        if self.why:
-            return LogNote("held_unknown", self.why)
-        return None
+        hist = self.history
+        if not hist:
+            return None
+        if len(hist) == 1:
+            start, k, why = hist[0].start, hist[0].k, hist[0].why
+            if k:
+                since = "" if start <= 0 else f" from {start / rate_hz:.6g} s"
+                return LogNote("held", (
+                    f"held at each reading (a value on every sample, changing only on a "
+                    f"{k:.4g}-sample cadence, {k / rate_hz:.3g} s): read as "
+                    f"readings{since} (each run's first sample, and one every {k:.4g} "
+                    "samples while it lasts; the rest NaN)"))
+            return LogNote("held_unknown", why) if why else None
+        parts, stretches = [], []
+        for m, seg in enumerate(hist):
+            start, k, why = seg.start, seg.k, seg.why
+            end = hist[m + 1].start if m + 1 < len(hist) else self.rows
+            span = f"{start / rate_hz:.6g}–{end / rate_hz:.6g} s"
+            stretches.append({"start_s": start / rate_hz, "end_s": end / rate_hz,
+                              "read": "held" if k else "as_is",
+                              "cadence_samples": k if k else None})
+            if k:
+                parts.append(f"{span} held at each reading ({k:.4g}-sample cadence, "
+                             f"{k / rate_hz:.3g} s): read as readings")
+            else:
+                parts.append(f"{span} read as it is" + (f" ({why})" if why else ""))
+        shown = parts[:HELD_NOTE_STRETCHES]
+        more = len(parts) - len(shown)
+        kind = "held" if any(x.k for x in hist) else "held_unknown"
+        return LogNote(kind, (
+            f"a value on every sample, read in {len(hist)} stretches (its whole log "
+            "judged): " + "; ".join(shown) + (f"; … and {more} more (--json lists all)"
+                                                if more else "")
+            + " (a held stretch: each change and one reading every cadence after it, the "
+            "rest NaN)"), tuple(stretches))
 
 
 def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) -> float:
@@ -780,6 +1170,29 @@ def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]
     return None, None
 
 
+def fahrenheit_columns(temperature_names: Sequence[str], units: str,
+                       check_units: bool = True) -> list[int]:
+    """The temperature columns ``--temperature-units F`` converts: every log the units rule
+    judges (avard's own die temperature and a recording's logs are °C whatever is said: the
+    daemon writes them); none unless ``units`` is "F"."""
+    if units != "F" or not check_units:
+        return []
+    return [j for j, nm in enumerate(temperature_names) if nm not in NOT_DS18B20]
+
+
+def to_celsius(blk: Block, columns: Sequence[int]) -> Block:
+    """The block with its temperature ``columns`` converted from °F to °C (a copy)."""
+    if not columns or blk[1] is None:
+        return blk
+    t0 = np.array(blk[1], dtype=float)
+    tv = t0.reshape(len(blk[0]), -1)
+    # to 1e-9 K: a DS18B20's °F reading converts back onto its 0.0625 K grid exactly (the
+    # float residue of the division put every reading 1e-15 off it, and the thermal model
+    # reads a DS18B20's rounding from that grid)
+    tv[:, list(columns)] = np.round((tv[:, list(columns)] - 32.0) / 1.8, 9)
+    return blk[0], t0, blk[2]
+
+
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
@@ -796,8 +1209,11 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     read; the stuck and dropout rules need the whole channel and are applied at the end
     (they mask nothing analyze reads; explain masks its slow view by ``log.holes``).
     ``check_units``: judge each log's units by the DS18B20's grid (``units_note``; off for a
-    recording, whose daemon writes °C itself)."""
+    recording, whose daemon writes °C itself). ``log.units`` (``--temperature-units``): "C"
+    takes every log as °C (a °F verdict is said, not acted on), "F" converts each log the
+    units rule judges to °C as it is read (before every rule: 85 °C is 185 °F)."""
     tnames = list(temperature_names)
+    to_c = fahrenheit_columns(tnames, log.units, check_units)
     tracks = [_TempTrack() for _ in tnames]
     held = [_Dehold() for _ in tnames]
     pending: list[tuple[int, Block]] = []
@@ -833,8 +1249,9 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         a, t, end = blk
         if t is not None and tnames:
             tt = np.asarray(t, dtype=float).reshape(len(a), -1)
-            cols_t = [d.apply(off, tt[:, j]) for j, d in enumerate(held)]
-            if any(d.k for d in held):
+            given = [tt[:, j] for j in range(tt.shape[1])]
+            cols_t = [d.apply(off, c) for c, d in zip(given, held, strict=True)]
+            if any(c is not g for c, g in zip(cols_t, given, strict=True)):
                 # a held log read as readings: the block hands the readings on, NaN between
                 tt = np.stack(cols_t, axis=1)
                 blk = (a, tt if np.ndim(t) == 2 else tt[:, 0], end)
@@ -860,20 +1277,41 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             ok = d.decide(col, final) and ok
         return ok
 
+    def observe(blks: list[tuple[int, Block]]) -> None:
+        """Each channel's log watched over these blocks (``_Dehold.observe``)."""
+        for off_w, (a, t, _end) in blks:
+            tt = (np.full((len(a), len(tnames)), np.nan) if t is None
+                  else np.asarray(t, dtype=float).reshape(len(a), -1))
+            for j, d in enumerate(held):
+                d.observe(off_w, tt[:, j])
+
+    observed = 0  # the waiting blocks already watched
     for blk in blocks:
+        blk = to_celsius(blk, to_c)
         waiting.append((offset, blk))
         offset += len(blk[0])
         waited += len(blk[0])
         if tnames and not judge(waited >= HELD_WAIT_SAMPLES):
             continue
-        for off_w, b_w in waiting:
+        observe(waiting[observed:])
+        observed = len(waiting)
+        # every block but the newest is handed on (a held stretch found in it may begin in
+        # the block before: a log with a value on consecutive rows only), or none while a
+        # channel's test for a held stretch is close (at most HELD_WAIT_SAMPLES rows)
+        if (any(d.close for d in held)
+                and sum(len(b[0]) for _, b in waiting) < HELD_WAIT_SAMPLES):
+            continue
+        hold = 1 if any(d.dense for d in held) else 0
+        while len(waiting) > hold:
+            off_w, b_w = waiting.pop(0)
+            observed -= 1
             pending.append((off_w, take(off_w, b_w)))
-        waiting.clear()
         while len(pending) > 1:
             off, b = pending.pop(0)
             yield from emit(off, b, False)
     if waiting:
         judge(True)
+        observe(waiting[observed:])
         for off_w, b_w in waiting:
             pending.append((off_w, take(off_w, b_w)))
     while pending:
@@ -887,8 +1325,23 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = note
         if not check_units or name in NOT_DS18B20:
             unit, refused = None, None
+            if log.units == "F":
+                unit = LogNote("units_given", (
+                    "not converted from °F: " + ("avard's own die temperature" if check_units
+                                                 else "a recording's log") + " is °C"))
+        elif log.units == "F":
+            unit, refused = LogNote("units_given", "converted from °F to °C as asked "
+                                    "(--temperature-units F)"), None
         else:
             unit, refused = units_note(tr.arrays()[1])
+            if log.units == "C":
+                # said by the user: taken as °C, and what the readings looked like said
+                evidence = ("" if refused is None else
+                            refused.split("; a coupling")[0].removeprefix("taken for °F: "))
+                seen = ("" if unit is None else f" (its readings look like °F: {evidence})"
+                        if refused is not None else f" (its readings: {unit.text})")
+                unit, refused = LogNote("units_given", "taken as °C as asked "
+                                        f"(--temperature-units C){seen}"), None
         if unit is not None:
             # one line per channel: a held log's note and its units' note joined
             log.notes[name] = unit if note is None else note.joined(unit)
@@ -954,8 +1407,10 @@ class ScreenedSource:
     first complete read's ``ScreenLog``, for the results. The screen judges every accel
     axis, so it reads all of them and hands on the ``columns`` asked for."""
 
-    def __init__(self, source: Any) -> None:
+    def __init__(self, source: Any, units: str = "auto") -> None:
         self.source = source
+        #: the logs' units as asked (``--temperature-units``: auto, C or F)
+        self.units = temperature_units(units)
         self.log: ScreenLog | None = None
         # the first complete read's verdicts, per block size: {offset: outlying rows} (only
         # blocks with any), so later passes (one per channel group) cut the very same rows
@@ -982,7 +1437,7 @@ class ScreenedSource:
         log says what was cut (nothing cut: the log says the screen ran)."""
         self._verdicts[block] = dict(cuts)
         if not cuts and self.log is None:
-            self.log = ScreenLog(float(self.source.info.rate_hz), done=True)
+            self.log = ScreenLog(float(self.source.info.rate_hz), done=True, units=self.units)
 
     @property
     def rereadable(self) -> bool:
@@ -991,7 +1446,7 @@ class ScreenedSource:
     def blocks(self, block: int = 1 << 16, *, columns: Sequence[int] | None = None,
                temperature: bool = True, verify: bool = True) -> Iterator[Block]:
         info = self.source.info
-        log = ScreenLog(float(info.rate_hz))
+        log = ScreenLog(float(info.rate_hz), units=self.units)
         if self.log is None:
             self.log = log
         known = self._verdicts.get(block)

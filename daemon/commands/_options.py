@@ -10,6 +10,7 @@ import math
 
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import ConfigError, DataError
+from avard.core.io.screen import temperature_units
 
 CHANNELS_HELP = ("channels to use, by name or number: 'x z' or 'x,z' (default: all)")
 
@@ -91,6 +92,15 @@ def add_run_argument(parser: argparse.ArgumentParser) -> None:
                              "differ are refused together, naming them")
 
 
+def add_temperature_units_argument(parser: argparse.ArgumentParser) -> None:
+    """``--temperature-units auto|C|F``: the temperature logs' units, for the input screen."""
+    parser.add_argument("--temperature-units", metavar="UNITS", default="auto",
+                        help="the temperature logs' units: auto (default: judged from the "
+                             "readings; a DS18B20 log in °F is refused for the thermal "
+                             "model, with the reason), C (take every log as °C) or F "
+                             "(convert every log from °F)")
+
+
 def analyze_options(args: argparse.Namespace) -> AnalyzeOptions:
     """The AnalyzeOptions of analyze's and explain's shared arguments."""
     channels = split_channels(args.channels)
@@ -99,4 +109,5 @@ def analyze_options(args: argparse.Namespace) -> AnalyzeOptions:
         filter_corner_hz=args.filter_corner, estimator=args.estimator,
         psd=bool(getattr(args, "psd", False)),
         quantiles=getattr(args, "quantiles", "exact"),
-        noise_id=getattr(args, "noise_id", "avard"))
+        noise_id=getattr(args, "noise_id", "avard"),
+        temperature_units=temperature_units(getattr(args, "temperature_units", "auto")))

@@ -44,6 +44,7 @@ from avard.daemon.commands._options import (
     add_model_arguments,
     add_run_argument,
     add_sensor_argument,
+    add_temperature_units_argument,
     analyze_options,
 )
 from avard.daemon.commands._progress import progress_printer
@@ -97,6 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="temperature channel to compensate: fit its first-order lag and "
                              "coefficient (m/s²/K) per axis and add the temperature-"
                              "compensated ADEV (see docs/explain.md)")
+    add_temperature_units_argument(parser)
     add_statistics_arguments(parser)
 
 

@@ -38,6 +38,7 @@ from avard.daemon.commands._options import (
     add_model_arguments,
     add_run_argument,
     add_sensor_argument,
+    add_temperature_units_argument,
     analyze_options,
 )
 
@@ -66,6 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--temperature", metavar="CHANNEL",
                         help="use only this temperature channel for the thermal model, and "
                              "report its compensated ADEV whatever its test says")
+    add_temperature_units_argument(parser)
 
 
 def _jsonable(x: Any) -> Any:

@@ -148,9 +148,11 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
                       "channels", "screened"}
     # the input screen (core/io/screen.py) says what it masked: nothing on a clean record
     # (``notes``/``refused``: what it found of each temperature log as a whole, and the logs
-    # the thermal model must not use: none on a clean record)
+    # the thermal model must not use: none on a clean record; ``temperature_units``: the
+    # logs' units as asked, --temperature-units, auto by default)
     assert set(d["screened"]) == {"counts", "samples_masked", "stretches", "rules", "units",
-                                  "notes", "refused"}
+                                  "notes", "refused", "temperature_units"}
+    assert d["screened"]["temperature_units"] == "auto"
     assert d["screened"]["counts"] == {} and d["screened"]["samples_masked"] == 0
     assert d["screened"]["notes"] == {} and d["screened"]["refused"] == {}
     assert d["estimator"] == "oadev" and "OADEV" in d["estimator_description"]
