@@ -316,7 +316,7 @@ def _agrees(payload: bytes) -> None:
     by its kind is a kind the scan skips."""
     e = _c_entries(payload)
     if not len(e):
-        from avard.core.io.source import _NO_SAMPLES, _peek_kind
+        from avard.core.io.recording_source import _NO_SAMPLES, _peek_kind
 
         assert _peek_kind(payload) in _NO_SAMPLES
         return

@@ -17,7 +17,7 @@ import msgpack
 import numpy as np
 import pytest
 from avard.core.io import frames, rawscan
-from avard.core.io import source as source_mod
+from avard.core.io import recording_source as source_mod
 from avard.core.io.recording import frame
 from avard.core.io.source import RecordingSource, open_record
 
