@@ -260,17 +260,18 @@ def make_record(kind: str, seed: int, hours: float, path: str | Path) -> dict:
     truth["t_read_s"] = t_read
     stated = rate
     if kind == "faults":
-        rr = rows.copy()
-        k85, k127 = int(rng.integers(5, 31)), int(rng.integers(5, 31))
-        pick = rng.choice(rr.size, size=k85 + k127, replace=False)
-        col = rng.integers(0, 2, size=pick.size)
-        temp[rr[pick[:k85]], col[:k85]] = 85.0
-        temp[rr[pick[k85:]], col[k85:]] = -127.0
         d0 = float(rng.uniform(0.05, 0.95)) * max(0.0, t_rec - 7200.0)
         i0, i1 = int(d0 * rate), int((d0 + 7200.0) * rate)
         which = int(rng.integers(0, 3))                 # plate, ambient or both
         cols = [0] if which == 0 else [1] if which == 1 else [0, 1]
         temp[i0:i1, cols] = np.nan
+        # the faulty readings fall on readings the dropout left (so the truth counts them)
+        rr = rows[(rows < i0) | (rows >= i1)]
+        k85, k127 = int(rng.integers(5, 31)), int(rng.integers(5, 31))
+        pick = rng.choice(rr.size, size=k85 + k127, replace=False)
+        col = rng.integers(0, 2, size=pick.size)
+        temp[rr[pick[:k85]], col[:k85]] = 85.0
+        temp[rr[pick[k85:]], col[k85:]] = -127.0
         truth.update(n_85=k85, n_minus127=k127, dropout_s=[d0, d0 + 7200.0],
                      dropout_channels=[("plate", "ambient")[c] for c in cols])
     if kind == "cadence":
