@@ -13,8 +13,12 @@ Scoring:
 - unexplained classes (x and y carry a mechanism outside the candidate set): an axis says
   "unexplained" when its verdict's `explained` is false. "In the check's domain" means the
   extended fit fails its χ² test at 1 % by explain's own numbers (in-sample p < 0.01, or the
-  held-out χ² beyond χ²(n) at 1 % and 5·n) *or* by the generator's oracle (the best one lag's
-  residual Allan variance ≥ 10× the noise's at some octave: no one lag describes the axis).
+  held-out χ² beyond χ²(n) at 1 % and 5·n) *or* by the generator's oracle (the best of one
+  lag, two lags, one lag + dT/dt and one lag + a quadratic, fitted to the noise-free truth
+  signal, leaves a residual Allan variance ≥ 10× the noise's at some octave).
+- ``order2`` axes said to fit by two paths: the printed response at the drive
+  (`gain_at_drive`, `phase_at_drive_rad`) against the truth's c·(1 + iω·15 s)/(1 + iωτ₂)²
+  (the logged channel is the plate through the DS18B20's own 15 s).
   A "confident wrong cause" is a claimed temperature finding on such an axis printed with an
   interval on its first coefficient narrower than ±10 % while the verdict says it fits.
 - null classes: a false claim is any claimed finding other than analyze's lines (sinusoid,
@@ -160,7 +164,7 @@ def table(path: str, detail: bool = False) -> list[str]:
                     ax = r["axes"][a]
                     v = ax["verdict"]
                     axes += 1
-                    orc = r["truth"]["axes"][a].get("oracle_one_lag") or {}
+                    orc = r["truth"]["axes"][a].get("oracle") or {}
                     in_dom = ((v.get("p_value") is not None and v["p_value"] < 0.01)
                               or _heldout_fails(v)
                               or orc.get("resid_over_noise_max", 0) >= 10)
@@ -180,7 +184,7 @@ def table(path: str, detail: bool = False) -> list[str]:
                         fails.append(
                             f"{kind} seed {r['seed']} {h:g} h axis {a}: said to fit "
                             f"(χ²/dof {v['chi2_dof']:.3g}, p {v['p_value']:.3g}, held out "
-                            f"{v['heldout_chi2']} on {v['heldout_n']}), oracle one-lag residual "
+                            f"{v['heldout_chi2']} on {v['heldout_n']}), oracle ({orc.get('best')}) residual "
                             f"{orc.get('resid_over_noise_max', float('nan')):.3g}× noise; claims "
                             + (", ".join(f"{f['cause']}/{f.get('mechanism')} {f['params']}"
                                          f" {f['intervals']}" for f in cl) or "none"))

@@ -133,6 +133,6 @@ def test_acceleration_gap(tmp_path, seed, mode):
         assert np.all(seg == seg[0])
 
 
-def test_oracle_says_one_lag_cannot_describe_a_remount(tmp_path):
+def test_oracle_says_no_candidate_describes_a_remount(tmp_path):
     tr = gen.make_record("remount", 6, 4.0, tmp_path / "o.npz")
-    assert tr["axes"]["x"]["oracle_one_lag"]["resid_over_noise_max"] > 10
+    assert tr["axes"]["x"]["oracle"]["resid_over_noise_max"] > 10
