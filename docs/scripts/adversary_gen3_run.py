@@ -142,19 +142,64 @@ def upper95(k: int, n: int) -> float:
     return hi
 
 
+def _order2(recs: list[dict]) -> list[str]:
+    """Two paths' printed response at the drive against the two-pole truth's."""
+    rows = ["| order2 hours | axes with a two-path claim | gain within 20 % | gain in its 68 % "
+            "interval | phase within 0.1 rad | phase in its interval | median half-width of "
+            "the gain's interval |", "|---|---|---|---|---|---|---|"]
+    for h in sorted({r["hours"] for r in recs if r["kind"] == "order2"}):
+        n = g20 = gin = p01 = pin = 0
+        widths = []
+        for r in recs:
+            if r["kind"] != "order2" or r["hours"] != h or r["rc"] != 0:
+                continue
+            for a in "xy":
+                t = r["truth"]["axes"][a]
+                for f in _claimed(r["axes"][a]):
+                    pa, iv = f["params"] or {}, f["intervals"] or {}
+                    if f["cause"] != "temperature" or "gain_at_drive" not in pa:
+                        continue
+                    w = 2 * math.pi / pa["drive_period_s"]
+                    hh = t["coefficient"] * (1 + 1j * w * 15.0) / (1 + 1j * w * t["pole_s"]) ** 2
+                    gain, ph = abs(hh), math.atan2(hh.imag, hh.real)
+                    n += 1
+                    g20 += abs(pa["gain_at_drive"] / gain - 1) <= 0.2
+                    dph = (pa["phase_at_drive_rad"] - ph + math.pi) % (2 * math.pi) - math.pi
+                    p01 += abs(dph) <= 0.1
+                    if "gain_at_drive" in iv:
+                        lo, hi = iv["gain_at_drive"]
+                        gin += lo <= gain <= hi
+                        widths.append((hi - lo) / 2 / pa["gain_at_drive"])
+                    if "phase_at_drive_rad" in iv:
+                        lo, hi = iv["phase_at_drive_rad"]
+                        pin += lo <= pa["phase_at_drive_rad"] - dph <= hi
+        med = f"{100 * sorted(widths)[len(widths) // 2]:.1f} %" if widths else "—"
+        rows.append(f"| {h:g} | {n} | {g20} | {gin} | {p01} | {pin} | {med} |")
+    return rows
+
+
 def table(path: str, detail: bool = False) -> list[str]:
     recs = [json.loads(x) for x in Path(path).read_text().splitlines()]
     out: list[str] = []
-    out.append("| class | hours | records (rc≠0) | axes | in domain | unexplained in domain | "
-               "said to fit in domain | confident wrong (fits, ±10 %) | claimed causes (axes) | "
-               "CPU-s/record |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|")
+    out.append("| class | hours | records | axes | D1: in-sample p < 1 % | unexplained in D1 | "
+               "D2: in-sample or held-out p < 1 % | unexplained in D2 | D3: oracle ≥ 10× | "
+               "unexplained in D3 | said to fit in D2 ∪ D3 (±10 % claim) | unexplained, a "
+               "±10 % interval printed (held-out p < 1 %) | claimed causes (axes) "
+               "| CPU-s/record |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     fails: list[str] = []
+
+    def pct(k: int, n: int) -> str:
+        return f"{k}/{n}" + (f" = {100 * k / n:.0f} %" if n else "")
+
     for kind in gen.UNEXPLAINED:
         for h in sorted({r["hours"] for r in recs if r["kind"] == kind}):
             rs = [r for r in recs if r["kind"] == kind and r["hours"] == h]
             bad = sum(r["rc"] != 0 for r in rs)
-            axes = dom = unx = fit = wrong = 0
+            axes = 0
+            dn = [0, 0, 0]
+            du = [0, 0, 0]
+            fit = wrong = printed = printed_hr = 0
             causes: dict[str, int] = {}
             for r in rs:
                 if r["rc"] != 0:
@@ -165,34 +210,49 @@ def table(path: str, detail: bool = False) -> list[str]:
                     v = ax["verdict"]
                     axes += 1
                     orc = r["truth"]["axes"][a].get("oracle") or {}
-                    in_dom = ((v.get("p_value") is not None and v["p_value"] < 0.01)
-                              or _heldout_fails(v)
-                              or orc.get("resid_over_noise_max", 0) >= 10)
+                    d1 = v.get("p_value") is not None and v["p_value"] < 0.01
+                    hp = v.get("heldout_p")
+                    d2 = d1 or (hp is not None and hp < 0.01)
+                    d3 = orc.get("resid_over_noise_max", 0) >= 10
+                    unx = not v["explained"]
+                    for i, d in enumerate((d1, d2, d3)):
+                        dn[i] += d
+                        du[i] += d and unx
                     cl = _claimed(ax)
                     for f in cl:
                         key = f["cause"] + (f"/{f['mechanism']}" if f.get("mechanism") else "")
                         causes[key] = causes.get(key, 0) + 1
-                    if not in_dom:
-                        continue
-                    dom += 1
-                    if not v["explained"]:
-                        unx += 1
-                    else:
-                        fit += 1
-                        nw = [f for f in cl if _narrow(f)]
-                        wrong += bool(nw)
+                    if unx and (d2 or d3) and any(_narrow(f) for f in cl):
+                        printed += 1
+                        printed_hr += hp is not None and hp < 0.01
                         fails.append(
-                            f"{kind} seed {r['seed']} {h:g} h axis {a}: said to fit "
-                            f"(χ²/dof {v['chi2_dof']:.3g}, p {v['p_value']:.3g}, held out "
-                            f"{v['heldout_chi2']} on {v['heldout_n']}), oracle ({orc.get('best')}) residual "
-                            f"{orc.get('resid_over_noise_max', float('nan')):.3g}× noise; claims "
-                            + (", ".join(f"{f['cause']}/{f.get('mechanism')} {f['params']}"
-                                         f" {f['intervals']}" for f in cl) or "none"))
+                            f"{kind} seed {r['seed']} {h:g} h axis {a}: unexplained, printed "
+                            f"(held out {v['heldout_chi2']} on {v['heldout_n']}, p {hp}): "
+                            + ", ".join(f"{f['cause']}/{f.get('mechanism')} {f['params']}"
+                                        f" {f['intervals']}" for f in cl if _narrow(f)))
+                    if not (d2 or d3) or unx:
+                        continue
+                    fit += 1
+                    nw = [f for f in cl if _narrow(f)]
+                    wrong += bool(nw)
+                    why = "D2 (held-out p < 1 % within 5·n)" if d2 else "D3 only"
+                    fails.append(
+                        f"{kind} seed {r['seed']} {h:g} h axis {a}: said to fit, {why} "
+                        f"(χ²/dof {v['chi2_dof']:.3g}, p {v['p_value']:.3g}, held out "
+                        f"{v['heldout_chi2']} on {v['heldout_n']}, p {hp}), oracle "
+                        f"({orc.get('best')}) residual "
+                        f"{orc.get('resid_over_noise_max', float('nan')):.3g}× noise; claims "
+                        + (", ".join(f"{f['cause']}/{f.get('mechanism')} {f['params']}"
+                                     f" {f['intervals']}" for f in cl) or "none"))
             cpu = sum(r["cpu"] for r in rs) / max(1, len(rs))
-            share = f"{unx}/{dom}" + (f" = {100 * unx / dom:.0f} %" if dom else "")
-            out.append(f"| {kind} | {h:g} | {len(rs)} ({bad}) | {axes} | {dom} | {share} | {fit} | "
-                       f"{wrong} | {', '.join(f'{k} {v}' for k, v in sorted(causes.items()))} | "
+            out.append(f"| {kind} | {h:g} | {len(rs)}" + (f" ({bad} failed)" if bad else "")
+                       + f" | {axes} | {dn[0]} | {pct(du[0], dn[0])} | {dn[1]} | "
+                       f"{pct(du[1], dn[1])} | {dn[2]} | {pct(du[2], dn[2])} | {fit} ({wrong}) | "
+                       f"{printed} ({printed_hr}) | "
+                       f"{', '.join(f'{k} {v}' for k, v in sorted(causes.items())) or '—'} | "
                        f"{cpu:.1f} |")
+    out.append("")
+    out += _order2(recs)
     out.append("")
     out.append("| null class | hours | records (rc≠0) | axes | false claims (axes) | 95 % upper | "
                "claims | line findings (axes) | unexplained axes | CPU-s/record |")
