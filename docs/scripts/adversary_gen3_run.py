@@ -18,7 +18,8 @@ Scoring:
   signal, leaves a residual Allan variance ≥ 10× the noise's at some octave).
 - ``order2`` axes said to fit by two paths: the printed response at the drive
   (`gain_at_drive`, `phase_at_drive_rad`) against the truth's c·(1 + iω·15 s)/(1 + iωτ₂)²
-  (the logged channel is the plate through the DS18B20's own 15 s).
+  (the logged channel is the plate through the DS18B20's own 15 s; on the ambient channel,
+  the room through 30 s, the plate's own lag τ_p is in the path too).
   A "confident wrong cause" is a claimed temperature finding on such an axis printed with an
   interval on its first coefficient narrower than ±10 % while the verdict says it fits.
 - null classes: a false claim is any claimed finding other than analyze's lines (sinusoid,
@@ -161,6 +162,9 @@ def _order2(recs: list[dict]) -> list[str]:
                         continue
                     w = 2 * math.pi / pa["drive_period_s"]
                     hh = t["coefficient"] * (1 + 1j * w * 15.0) / (1 + 1j * w * t["pole_s"]) ** 2
+                    if f.get("channel") == "ambient":     # the room: the plate's lag is in
+                        hh *= (1 + 1j * w * 30.0) / (1 + 1j * w * 15.0) / (
+                            1 + 1j * w * r["truth"]["tau_plate_s"])
                     gain, ph = abs(hh), math.atan2(hh.imag, hh.real)
                     n += 1
                     g20 += abs(pa["gain_at_drive"] / gain - 1) <= 0.2
