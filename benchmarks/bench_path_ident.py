@@ -105,7 +105,8 @@ def _play(v: NDArray, w: float) -> NDArray:
 
 def _hysteresis_rivals(T: NDArray) -> dict[str, list[tuple[tuple[float, ...], NDArray]]]:
     from avard.core.explain.thermal_fit import lag_filter
-    from avard.core.explain.thermal_paths import RATE_SMOOTH_S, _relay
+    from avard.core.explain.thermal_paths.columns import _relay
+    from avard.core.explain.thermal_paths.settings import RATE_SMOOTH_S
 
     u = {L: lag_filter(T, float(L), 1.0) for L in LAGS_H}
     v = {L: lag_filter(u[L], RATE_SMOOTH_S, 1.0) for L in LAGS_H}
@@ -162,7 +163,7 @@ def main(argv: list[str]) -> int:
     for seed in (int(s) for s in args.seeds.split(",")):
         y, T = _signals(row, seed, args.compressor)
         if args.reconstruct:
-            from avard.core.explain.thermal_paths import crossing_reconstruction
+            from avard.core.explain.thermal_paths.columns import crossing_reconstruction
 
             T = crossing_reconstruction(T)
         best = {k: min(((_lambda(y, X, args.fmax), th) for th, X in v), key=lambda t: t[0])
@@ -227,7 +228,8 @@ def record_resolves(weekend: Any, seed: int, truth: dict[str, float],
     ``sd_lag_s``, ``sd_lag_2_s``: the Cramér–Rao standard deviations of the two-path
     model's four parameters, all unknown (the start states and an offset nuisances)."""
     from avard.core.explain.thermal_fit import lag_filter
-    from avard.core.explain.thermal_paths import Column, path_columns
+    from avard.core.explain.thermal_paths import path_columns
+    from avard.core.explain.thermal_paths.columns import Column
 
     import tests.support.weekend as wk
 

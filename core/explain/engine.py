@@ -94,11 +94,11 @@ from avard.core.explain.thermal_fit import (
 )
 from avard.core.explain.thermal_paths import (
     both_readings,
-    holds_beside,
     rate_reading,
     reads_as_rate,
     second_path_reading,
 )
+from avard.core.explain.thermal_paths.readings import holds_beside
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource

@@ -584,11 +584,14 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     residual against, the residual of all the channels together at their own lags on the
     whole record (what none of them explains). ``columns``: per channel, the regressors
     already built for another axis (``path_columns``' ``done``)."""
-    from avard.core.explain import thermal_paths as tp
     from avard.core.explain.thermal_fit import hole_mask, min_tau_for, octave_sums_by_part
+    from avard.core.explain.thermal_paths.columns import path_columns, trials
+    from avard.core.explain.thermal_paths.deviance import _fit, _held_dev, _resid, _View, _view
+    from avard.core.explain.thermal_paths.rounding import _edf_at, sawtooth_avar
+    from avard.core.explain.thermal_paths.settings import FIT_POINTS, PARTS
 
     y = np.asarray(y, dtype=float)
-    f = 1 << max(0, math.ceil(math.log2(len(y) / tp.FIT_POINTS)))
+    f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
     m = (len(y) // f) * f
     ys = y[:m].reshape(-1, f).mean(axis=1)
     rate = rate_hz / f
@@ -603,48 +606,48 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     Ts = {j: np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1) for j in lags0}
     for j, L0 in lags0.items():
         # (the coupling's column first, then its start state: ``trials``' order)
-        cols = list(tp.trials("one_lag", [round(L0, 3)])[0].cols)
+        cols = list(trials("one_lag", [round(L0, 3)])[0].cols)
         done = None if columns is None else columns.setdefault(j, {})
         first = 1 + sum(b.shape[1] for b in blocks[1:])
         idx[j] = list(range(first, first + len(cols)))
-        blocks.append(tp.path_columns(Ts[j], cols, rate, done))
+        blocks.append(path_columns(Ts[j], cols, rate, done))
     X = np.column_stack(blocks)
     # each part the differences whose middle it holds, none across the middle: the first
     # and last five parts add up to each half's own sums (as ``choose_path``)
-    edges = np.linspace(0, len(ys), tp.PARTS + 1).astype(int)
-    cut[int(edges[tp.PARTS // 2])] = False
+    edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
+    cut[int(edges[PARTS // 2])] = False
     parts = octave_sums_by_part(X, edges, cut)
     whole = sum(parts[1:], start=parts[0])
-    halves = [parts[:tp.PARTS // 2], parts[tp.PARTS // 2:]]
+    halves = [parts[:PARTS // 2], parts[PARTS // 2:]]
     half = [sum(h[1:], start=h[0]) for h in halves]
     ms = whole.ms
     ok_tau = (ms / rate) >= min_tau_for(0.0, max((floors or {}).get(j, 0.0) for j in lags0))
     ref = _avar(ys, rate)
-    edf = tp._edf_at(ms / rate, np.asarray(ref.tau, float),
+    edf = _edf_at(ms / rate, np.asarray(ref.tau, float),
                      np.asarray(ref.edf, float).reshape(len(ref.tau), -1)[:, 0])
     # the weights: the residual of every channel at its own lag on the whole record, the
     # same for each channel (each channel's own one-lag residual, as choose_path weighs its
     # candidates, would give each its own scale)
     joint = [i for ix in idx.values() for i in ix]
-    v0 = tp._view(whole, edf, whole.n, np.ones(len(ms), dtype=bool))
+    v0 = _view(whole, edf, whole.n, np.ones(len(ms), dtype=bool))
     full = whole.cov()
-    r0 = tp._resid(tp._View(full, np.ones(len(ms)), np.ones(len(ms))), joint,
-                   tp._fit(tp._View(v0.cov, v0.nu, v0.cov[:, 0, 0]), joint))
+    r0 = _resid(_View(full, np.ones(len(ms)), np.ones(len(ms))), joint,
+                   _fit(_View(v0.cov, v0.nu, v0.cov[:, 0, 0]), joint))
     s_ref = np.where(r0 > 1e-6 * full[:, 0, 0], r0, 1e-6 * full[:, 0, 0])
-    vw = tp._view(whole, edf, whole.n, ok_tau, s_ref)
+    vw = _view(whole, edf, whole.n, ok_tau, s_ref)
     out: dict[int, ChannelPath] = {}
     for j, L0 in lags0.items():
-        r_ref = tp.sawtooth_avar(Ts[j], rate, ms / rate, L0)
-        vh = [tp._view(h, edf, whole.n, ok_tau, s_ref, r_ref) for h in half]
+        r_ref = sawtooth_avar(Ts[j], rate, ms / rate, L0)
+        vh = [_view(h, edf, whole.n, ok_tau, s_ref, r_ref) for h in half]
         held, per_part = 0.0, []
         for a, b in ((0, 1), (1, 0)):
-            beta = tp._fit(vh[a], idx[j])
-            held += tp._held_dev(vh[b], idx[j], beta, 1)
+            beta = _fit(vh[a], idx[j])
+            held += _held_dev(vh[b], idx[j], beta, 1)
             per_part += _part_devs(half[b], halves[b], idx[j], beta[:1], edf, whole.n, ok_tau,
                                    s_ref)
         # (per_part in the record's order: the first half's parts were scored second)
-        per_part = per_part[tp.PARTS // 2:] + per_part[:tp.PARTS // 2]
-        c = float(tp._fit(vw, idx[j])[0])
+        per_part = per_part[PARTS // 2:] + per_part[:PARTS // 2]
+        c = float(_fit(vw, idx[j])[0])
         out[j] = ChannelPath(j, held, float(L0), c, sum(v.rounding_share(c) for v in vh),
                              tuple(per_part))
     return out
@@ -657,7 +660,7 @@ def _part_devs(half: Any, parts: list[Any], idx: list[int], beta: NDArray, edf: 
     nuisance columns refitted on this one) split over the half's ``parts``: with β and the
     nuisance fixed the residual is one linear combination of the columns, and ν·r of the
     half is the sum of its parts' (the Allan difference sums add, ν ∝ their count)."""
-    from avard.core.explain import thermal_paths as tp
+    from avard.core.explain.thermal_paths.deviance import _fit, _View
 
     k = min(len(half.ms), len(edf), len(ok_tau))
     covh = half.cov()[:k]
@@ -673,9 +676,9 @@ def _part_devs(half: Any, parts: list[Any], idx: list[int], beta: NDArray, edf: 
     A[0, idx[:n]] -= beta
     for r, j in enumerate(idx[n:], start=1):
         A[r, j] = 1.0
-    v = tp._View(np.einsum("ri,kij,sj->krs", A, covh[good], A), nuh[good], s[good])
+    v = _View(np.einsum("ri,kij,sj->krs", A, covh[good], A), nuh[good], s[good])
     rest = list(range(1, A.shape[0]))
-    g = tp._fit(v, rest) if len(v.nu) else np.zeros(len(rest))
+    g = _fit(v, rest) if len(v.nu) else np.zeros(len(rest))
     vec = A[0] - g @ A[1:] if rest else A[0]
     out = []
     for p in parts:

@@ -70,7 +70,8 @@ from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from avard.core.explain.thermal_paths import Column, PathFit
+    from avard.core.explain.thermal_paths import PathFit
+    from avard.core.explain.thermal_paths.columns import Column
 
 __all__ = [
     "Z_TEMPERATURE",

@@ -187,21 +187,21 @@ def test_the_channels_held_out_regressors_are_built_once_for_every_axis(monkeypa
     held-out −2 ln L as built afresh; ``fit_thermal_axes`` hands one cache to every axis it
     picks a channel for."""
     import avard.core.explain.holdout as ho
-    from avard.core.explain import thermal_paths as tp
     from avard.core.explain.thermal_fit import fit_thermal_axes
+    from avard.core.explain.thermal_paths import columns as tp_columns
 
     w, _c = _plate_at_lag_0(hours=2.0, rate_hz=1.0)
     acc, temps, names, _truth = make(5, w)
     lags = {0: 0.0, 1: 600.0}
     fresh = [channel_heldout(acc[:, a], temps, lags, 1.0) for a in range(2)]
     built = []
-    real = tp.path_columns
+    real = tp_columns.path_columns
 
     def counting(T, cols, rate_hz, done=None):
         built.append(sum(c not in (done or {}) for c in cols))
         return real(T, cols, rate_hz, done)
 
-    monkeypatch.setattr(tp, "path_columns", counting)
+    monkeypatch.setattr(tp_columns, "path_columns", counting)
     cache: dict = {}
     cached = [channel_heldout(acc[:, a], temps, lags, 1.0, columns=cache) for a in range(2)]
     assert sum(built[:2]) > 0 and sum(built[2:]) == 0  # the second axis builds nothing

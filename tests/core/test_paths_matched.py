@@ -10,15 +10,10 @@ import pytest
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.thermal_fit import octave_sums_by_part
-from avard.core.explain.thermal_paths import (
-    HELDOUT_MARGIN,
-    Column,
-    _fit,
-    _held_dev,
-    _matched,
-    _view,
-    path_columns,
-)
+from avard.core.explain.thermal_paths import HELDOUT_MARGIN, path_columns
+from avard.core.explain.thermal_paths.columns import Column
+from avard.core.explain.thermal_paths.deviance import _fit, _held_dev, _view
+from avard.core.explain.thermal_paths.readings import _matched
 from avard.core.io.source import open_record
 
 from tests.core.test_thermal_paths import BASE, C, _slow

@@ -8,19 +8,21 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from avard.core.explain import thermal_paths
 from avard.core.explain.engine import explain_file
+from avard.core.explain.thermal_paths.columns import Column
+from avard.core.explain.thermal_paths.deviance import _View
+from avard.core.explain.thermal_paths.readings import _rate_separation
 from avard.core.io.source import open_record
 
 from tests.support.adversary_gen import make_record
 
 
 def test_a_view_without_tau_is_no_rival_reading() -> None:
-    empty = thermal_paths._View(np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0))
-    cols = (thermal_paths.Column("u", 60.0),)
-    where = {thermal_paths.Column("u", 0.0): 0, thermal_paths.Column("rate", 0.0): 1,
+    empty = _View(np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0))
+    cols = (Column("u", 60.0),)
+    where = {Column("u", 0.0): 0, Column("rate", 0.0): 1,
              cols[0]: 2}
-    lam, c, r = thermal_paths._rate_separation(empty, where, cols, 1e-3)
+    lam, c, r = _rate_separation(empty, where, cols, 1e-3)
     assert lam == float("inf") and np.isnan(c) and np.isnan(r)
 
 

@@ -17,21 +17,11 @@ from avard.core.explain.thermal_fit import (
     rounding_correlation_s,
     rounding_floor_tau,
 )
-from avard.core.explain.thermal_paths import (
-    HELDOUT_MARGIN,
-    LEAN_MARGIN,
-    LEAN_T,
-    PARTS,
-    _derivative_limit,
-    _grid_cell,
-    _jk_se,
-    _relay,
-    choose_path,
-    crossing_reconstruction,
-    min_detectable_path,
-    profile_delta,
-    trials,
-)
+from avard.core.explain.thermal_paths import HELDOUT_MARGIN, choose_path, min_detectable_path
+from avard.core.explain.thermal_paths.columns import _relay, crossing_reconstruction, trials
+from avard.core.explain.thermal_paths.profile import _grid_cell, _jk_se, profile_delta
+from avard.core.explain.thermal_paths.readings import _derivative_limit
+from avard.core.explain.thermal_paths.settings import LEAN_MARGIN, LEAN_T, PARTS
 
 from tests.support.weekend import Weekend, make
 
@@ -256,7 +246,8 @@ def test_an_average_over_theta_weighs_the_points_within_the_profile_by_their_lik
     profile's Δ of the best (exp(−ΔD/2Δ) each), not read at the best point: two points
     equally good give their midpoint, a point a little worse counts less, a point beyond Δ
     not at all; θ likewise (a width in ln, a lag of either sign as it is)."""
-    from avard.core.explain.thermal_paths import Trial, _averaged, _averaged_theta, _weights
+    from avard.core.explain.thermal_paths.columns import Trial
+    from avard.core.explain.thermal_paths.profile import _averaged, _averaged_theta, _weights
 
     devs = np.array([10.0, 10.0, 10.5, 13.0])
     w = _weights(devs, 1.0)
@@ -278,7 +269,7 @@ def test_the_hysteresis_tries_lags_of_either_sign():
     """The relay's lag and width trade along a ridge through a true lag of 0: the
     hysteresis's grid reaches the same short lags either side (the logged sensor may lag the
     die), not only the one-lag fit's own negative lag."""
-    from avard.core.explain.thermal_paths import HYSTERESIS_LEADS_S
+    from avard.core.explain.thermal_paths.settings import HYSTERESIS_LEADS_S
 
     got = {t.theta[0] for t in trials("hysteresis", [0.0, 15.0, 30.0, -94.5])}
     assert {-x for x in HYSTERESIS_LEADS_S} <= got and {0.0, 15.0, 30.0, -94.5} <= got
@@ -363,7 +354,8 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     # 0.0106 and −0.0077 through 240 and 480 s pass the readings' rounding with up to
     # 0.0183 m/s²/K, not the first path's 0.0106 the engine's floors took before
     from avard.core.explain.engine import _rounding_gain
-    from avard.core.explain.thermal_paths import Column, PathFit, PathScore
+    from avard.core.explain.thermal_paths import PathFit, PathScore
+    from avard.core.explain.thermal_paths.columns import Column
 
     def fit(kind: str, theta: tuple[float, ...], beta: list[float],
             cols: tuple[Column, ...]) -> PathFit:
@@ -434,7 +426,7 @@ def test_two_paths_are_told_from_a_dt_term_by_the_wander_and_a_dt_term_is_named_
 
 
 def test_the_rounding_a_long_lag_passes_is_less_and_a_lead_lag_more():
-    from avard.core.explain.thermal_paths import sawtooth_avar
+    from avard.core.explain.thermal_paths.rounding import sawtooth_avar
 
     rate = 0.625
     t = np.arange(9000) / rate
@@ -453,7 +445,7 @@ def test_an_extension_whose_theta_sits_at_the_end_of_its_grid_is_not_chosen():
     # 1800 and 3600 s, the lag grid's end, fitted the slow wander held out better than one
     # lag and were printed with ±6 % intervals. A θ at the grid's end is a bound, not an
     # estimate: whatever path is chosen, none with a lag at the grid's end has an interval.
-    from avard.core.explain.thermal_paths import LAG_GRID_S
+    from avard.core.explain.thermal_paths.settings import LAG_GRID_S
 
     from benchmarks.bench_explain_weekend import explain_weekend, rows
 
@@ -473,7 +465,8 @@ def test_the_profile_delta_is_one_parameters_68_percent_scaled_by_the_birge_fact
     """A 68 % profile interval on one parameter is Δ(−2 ln L) = 1 (χ²₁'s 68.27 % point),
     times the best fit's Birge factor (deviance over its dof) where that exceeds 1, never
     less; not the held-out choice's margin."""
-    from avard.core.explain.thermal_paths import HELDOUT_MARGIN, PROFILE_DELTA
+    from avard.core.explain.thermal_paths import HELDOUT_MARGIN
+    from avard.core.explain.thermal_paths.settings import PROFILE_DELTA
 
     assert PROFILE_DELTA == 1.0 and HELDOUT_MARGIN == 6.0
     nu = np.array([60.0, 30.0, 14.0])
@@ -494,15 +487,16 @@ def test_the_path_intervals_use_the_68_percent_profile_on_the_deviances_own_scal
     small part of its dof and Δ = 1 on that scale reached far along the ridge (the
     benchmark's two-path intervals held the truth in 30 of 34). Not the held-out margin of
     6 either: with it the intervals are wider."""
-    import avard.core.explain.thermal_paths as tp
+    import avard.core.explain.thermal_paths.profile as tp_profile
+    from avard.core.explain.thermal_paths import HELDOUT_MARGIN
 
     y, T, pf = two_path_record
     s = pf.scores["two_path"]
     assert pf.kind == "two_path"
     assert s.profile_delta < 1.0 == profile_delta(0.5, np.array([1.0, 2.0]), 2)
-    monkeypatch.setattr(tp, "PROFILE_DELTA", tp.HELDOUT_MARGIN)
+    monkeypatch.setattr(tp_profile, "PROFILE_DELTA", HELDOUT_MARGIN)
     wide = _path(y, T).scores["two_path"]
-    assert wide.profile_delta == pytest.approx(tp.HELDOUT_MARGIN * s.profile_delta)
+    assert wide.profile_delta == pytest.approx(HELDOUT_MARGIN * s.profile_delta)
     assert s.beta == pytest.approx(wide.beta)  # the fit itself does not depend on it
     assert wide.beta_lo[1] <= s.beta_lo[1] and s.beta_hi[1] <= wide.beta_hi[1]
     assert s.beta_hi[1] - s.beta_lo[1] < wide.beta_hi[1] - wide.beta_lo[1]
@@ -554,7 +548,7 @@ def test_theta_is_refined_between_the_local_grid_points_with_the_coefficients():
     """``_vertex``: on a deviance quadratic in the warped lag, the vertex between grid points
     and the coefficients moved with it (their own quadratics); at the local grid's edge the
     grid point (a bound, not an extrapolation); two paths lag by lag along their ridge."""
-    from avard.core.explain.thermal_paths import _fine_trials, _unwarp, _vertex, _warp
+    from avard.core.explain.thermal_paths.refine import _fine_trials, _unwarp, _vertex, _warp
 
     ts = _fine_trials("rate", (60.0,), [0.0, 15.0, 30.0, 60.0, 120.0, 240.0])
     assert ts[0].theta[0] == 15.0 and ts[-1].theta[0] == 240.0
@@ -586,13 +580,10 @@ def test_a_paths_rounding_is_its_own_transfer_and_a_lag_0_path_gains_nothing_by_
     paths with a first at lag 0 pass the rounding one lag at lag 0 does and more, so they
     gain nothing over it by smoothing (``_smoothing`` 0); two lags of opposite sign at 240
     and 480 s do."""
-    from avard.core.explain.thermal_paths import (
-        Column,
-        _path_gain2,
-        _smoothing,
-        _view,
-        sawtooth_avar,
-    )
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.deviance import _view
+    from avard.core.explain.thermal_paths.refine import _smoothing
+    from avard.core.explain.thermal_paths.rounding import _path_gain2, sawtooth_avar
 
     y, T = _slow(BASE, 5)
     tau = np.array([204.8, 409.6, 819.2, 1638.4])
@@ -628,7 +619,8 @@ def test_two_paths_rival_a_dt_term_only_when_they_beat_it_by_the_margin():
     not their coefficients cancel: on the dT/dt row's records a fit of cancellation 0.48
     (2.42e-3 and −4.62e-3 through 178 and 562 s) predicted 2.2 better and was named beside
     it under the cancellation rule this replaces."""
-    from avard.core.explain.thermal_paths import PathScore, _mimic
+    from avard.core.explain.thermal_paths import PathScore
+    from avard.core.explain.thermal_paths.readings import _mimic
 
     def score(kind: str, beta: list[float], heldout: float) -> PathScore:
         return PathScore(kind, heldout, (178.0, 562.0), np.array(beta), np.zeros(2),
@@ -860,7 +852,9 @@ def test_a_rate_term_reports_r_net_of_its_static_lag_and_the_split_without_inter
     what the data resolve) with its own interval (the same anywhere along the ridge: not
     widened to the split's at the fitted L, a hull that held the truth on 96 % of records);
     the split r is ``rate_coupling_beside_lag`` with no interval; c and L keep theirs."""
-    from avard.core.explain.thermal_paths import PathScore, describe, net_rate
+    from avard.core.explain.thermal_paths import PathScore
+    from avard.core.explain.thermal_paths.refine import net_rate
+    from avard.core.explain.thermal_paths.scores import describe
 
     beta = np.array([1e-3, 0.08, 0.0])
     assert net_rate(beta, (20.0,)) == pytest.approx(0.06)
@@ -882,13 +876,10 @@ def test_the_quadratic_tries_the_one_lag_fits_leads_through_the_same_filter():
     extensions' grid mirrored, each regressor the lead-lag ``lag_filter`` gives; a lag at
     the longest lead is a search's edge (open), as one at the longest lag."""
     from avard.core.explain.thermal_fit import _lag_grid, lag_filter
-    from avard.core.explain.thermal_paths import (
-        LAG_GRID_S,
-        Column,
-        _at_end,
-        path_columns,
-        quadratic_leads,
-    )
+    from avard.core.explain.thermal_paths import path_columns
+    from avard.core.explain.thermal_paths.columns import Column, quadratic_leads
+    from avard.core.explain.thermal_paths.profile import _at_end
+    from avard.core.explain.thermal_paths.settings import LAG_GRID_S
 
     leads = quadratic_leads(4 * 3600.0, 1.0)
     reach = -float(np.min(_lag_grid(4 * 3600.0, 1.0)))
@@ -976,7 +967,7 @@ def test_the_paths_fit_reads_its_blocks_as_the_plain_indexing_does() -> None:
     bit as the plain indexing ``c[:, idx][:, :, idx]`` and a fresh solve (the candidates'
     deviances are compared and the least chosen: a last-bit change moved a chosen lag on
     near-ties), on views of many sizes, with dead regressors, asked twice."""
-    from avard.core.explain.thermal_paths import _dev, _fit, _resid, _View
+    from avard.core.explain.thermal_paths.deviance import _dev, _fit, _resid, _View
     from avard.core.model.nnls import _lstsq
 
     def plain_fit(v: _View, idx: list[int]) -> np.ndarray:
@@ -1087,7 +1078,8 @@ def test_the_drive_is_the_logged_channels_strongest_line_and_its_share():
     and the readings' 0.0625 K rounding, within 1 %, holding over 90 % of the channel
     (``ONE_LINE_SHARE``: one line); a second line of 1.7× its size at 1200 s is the strongest
     then and holds under 90 %; NaN on a channel too short to hold one."""
-    from avard.core.explain.thermal_paths import ONE_LINE_SHARE, drive_line
+    from avard.core.explain.thermal_paths.refine import drive_line
+    from avard.core.explain.thermal_paths.settings import ONE_LINE_SHARE
 
     rng = np.random.default_rng(3)
     t = np.arange(4 * 3600.0)
@@ -1105,7 +1097,7 @@ def test_the_response_at_the_drive_is_one_number_along_the_two_paths_ridge():
     """Two splits into (c₁, L1, c₂, L2) with the same response at the drive's period have the
     same ``drive_response`` there (what one drive line resolves) and differ elsewhere (it is
     the drive's, not a constant of the fit); a lead is a positive phase."""
-    from avard.core.explain.thermal_paths import drive_response
+    from avard.core.explain.thermal_paths.refine import drive_response
 
     P = 1800.0
     w = 2 * math.pi / P
@@ -1126,7 +1118,8 @@ def test_two_path_parameters_wider_than_ten_percent_are_not_resolved():
     c₁, c₂ and the lags with theirs only where within ±10 % of the value (a lag: or ±15 s)
     and the drive is more than one line, the others "not resolved" (their values kept, no
     interval); on a drive of one line none of the four is resolved."""
-    from avard.core.explain.thermal_paths import PathScore, describe, unresolved
+    from avard.core.explain.thermal_paths import PathScore
+    from avard.core.explain.thermal_paths.scores import describe, unresolved
 
     s = PathScore("two_path", -80.0, (0.0, 870.0), np.array([8e-4, -2.7e-3]), np.zeros(2),
                   (-10.0, 570.0), (10.0, 1170.0), 20.0, False,
@@ -1195,14 +1188,10 @@ def test_a_rate_terms_fit_reads_the_octaves_where_the_rounding_is_no_larger_a_sh
     (``_rate_floor``: an octave or more above it), more than half of that is gone and c
     stays within 1 %."""
     from avard.core.explain.thermal_fit import octave_sums, rounding_floor_tau
-    from avard.core.explain.thermal_paths import (
-        Column,
-        _fit,
-        _from_octave,
-        _rate_floor,
-        _View,
-        path_columns,
-    )
+    from avard.core.explain.thermal_paths import path_columns
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.deviance import _fit, _View
+    from avard.core.explain.thermal_paths.refine import _from_octave, _rate_floor
 
     rate, c, r = 0.625, 8e-4, 0.23
     cols = [Column("u", 0.0), Column("rate", 0.0)]
@@ -1230,7 +1219,9 @@ def test_the_rate_floor_is_the_linear_floor_where_the_rate_column_passes_no_more
     rounding share there is already no larger (a column of a large, fast drive), and the
     first octave past it where it is (the modelled shares compared, not a fixed step)."""
     from avard.core.explain.thermal_fit import OctaveSums, rounding_floor_tau
-    from avard.core.explain.thermal_paths import Column, _path_gain2, _rate_floor, sawtooth_avar
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.refine import _rate_floor
+    from avard.core.explain.thermal_paths.rounding import _path_gain2, sawtooth_avar
 
     rate = 0.625
     _T, Tr = _rounded_room(1, rate)
@@ -1339,7 +1330,9 @@ def test_the_leverage_weighted_jackknife_is_unbiased_where_one_part_holds_most_i
     jackknife's variance overstates the estimate's scatter (deleting the rich part moves
     the fit by var_(−g) − var); the leverage-weighted one (Wu 1986) matches it, and with
     equal parts the two are the same number."""
-    from avard.core.explain.thermal_paths import _jk_se, _leverage_jk_se, _unit_map, _View
+    from avard.core.explain.thermal_paths.deviance import _View
+    from avard.core.explain.thermal_paths.profile import _jk_se
+    from avard.core.explain.thermal_paths.refine import _leverage_jk_se, _unit_map
 
     rng = np.random.default_rng(2323)
     sizes = [40] + [5] * 9  # the first part's regressor also 9× larger in spread below
@@ -1423,13 +1416,9 @@ def test_a_rate_term_is_read_through_its_columns_smoothing_on_any_drive(
     fit's own columns and weights give the unsmoothed slope of the temperature behind the
     readings (``_ungained``), r is within 1 % on every drive and c does not move."""
     from avard.core.explain.thermal_fit import octave_sums, rounding_floor_tau
-    from avard.core.explain.thermal_paths import (
-        Column,
-        _fit,
-        _ungained,
-        _View,
-        path_columns,
-    )
+    from avard.core.explain.thermal_paths import path_columns
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.deviance import _fit, _ungained, _View
 
     rate, c, r = 0.625, 8e-4, 0.06
     cols = [Column("u", 0.0), Column("rate", 0.0), Column("slope", 0.0)]
@@ -1577,7 +1566,7 @@ def test_an_extension_is_chosen_only_where_its_start_state_leaves_a_half_to_hold
     held-out half is refused, for every record length, at the lag where what is left falls
     below ``MIN_PART_POINTS``; a lag that leaves enough is not."""
     from avard.core.explain.holdout import HELD_SETTLE_LAGS, MIN_PART_POINTS
-    from avard.core.explain.thermal_paths import _settles_past_half
+    from avard.core.explain.thermal_paths.refine import _settles_past_half
 
     rate = 1 / 1.6  # the slow view's blocks per second
     n = int(hours * 3600 * rate)
