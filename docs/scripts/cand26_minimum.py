@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from tests.support import adversary_gen as gen  # noqa: E402
+from tests.support import adversary_gen as gen
 
 
 def H(w: np.ndarray, L: float) -> np.ndarray:
@@ -56,7 +56,7 @@ def triangle_lines(truth: dict, spec_period: float, room_amp: float, tau_plate=1
 
 
 if __name__ == "__main__":
-    from cand26_separation import caught  # noqa: E402
+    from cand26_separation import caught
 
     kind, s0, s1 = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
     for sd in range(s0, s1 + 1):
@@ -81,7 +81,7 @@ if __name__ == "__main__":
 def r_min_sep(lines, sig, c: float, lead: bool, z: float = 5.0) -> float:
     """The smallest |r| whose λ against every one-lag reading reaches z² (inf if none ≤ 1e6·
     the against-zero minimum)."""
-    q0 = sum((a * w / s) ** 2 for (a, w), s in zip(lines, sig))
+    q0 = sum((a * w / s) ** 2 for (a, w), s in zip(lines, sig, strict=True))
     r0 = z / math.sqrt(q0)  # the against-zero minimum on these lines
     sgn = 1.0 if (lead == (c > 0)) else -1.0
     lo, hi = r0, r0

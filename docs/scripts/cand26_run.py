@@ -26,9 +26,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from cand26_minimum import r_min_sep, triangle_lines  # noqa: E402
+from cand26_minimum import r_min_sep, triangle_lines
 
-from tests.support import adversary_gen as gen  # noqa: E402
+from tests.support import adversary_gen as gen
 
 
 def square_lines(period: float, amp: float, duty: float = 0.4, k_max: int = 15,
@@ -65,12 +65,12 @@ def record(seed: int, mult: float, path: Path) -> dict:
         t0 = gen.make_record("dtdt", seed, Path(d) / "a.npz", logged=("plate",))
     x = t0["axes"]["x"]
     c, r0 = x["coefficient_mps2_per_k"], x["r_mps2_per_k_per_s"]
-    rm = r_min_sep(lines, sig, c, lead=True) if True else None
     lead = r0 / c > 0
     rm = r_min_sep(lines, sig, c, lead=lead)
     scale = mult * rm / r0
     real = gen.np
-    proxy = types.SimpleNamespace(**{k: getattr(real, k) for k in dir(real) if not k.startswith("__")})
+    proxy = types.SimpleNamespace(**{k: getattr(real, k) for k in dir(real)
+                                     if not k.startswith("__")})
     proxy.gradient = lambda *a, **k: scale * real.gradient(*a, **k)
     gen.np = proxy
     try:

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from tests.support import adversary_gen as gen  # noqa: E402
+from tests.support import adversary_gen as gen
 
 
 def caught(kind: str, seed: int, factor: float = 3.0, **kw):
@@ -110,6 +110,7 @@ if __name__ == "__main__":
     factor = float(sys.argv[4]) if len(sys.argv) > 4 else 3.0
     for sd in range(s0, s1 + 1):
         o = separation(kind, sd, factor, logged=("plate",))
-        print(f"{kind} {sd} ×{factor:g}: c {o['c']:+.3g} r {o['r']:.3g} r/c {o['r_over_c_s']:+.0f} s "
+        print(f"{kind} {sd} ×{factor:g}: c {o['c']:+.3g} r {o['r']:.3g} "
+              f"r/c {o['r_over_c_s']:+.0f} s "
               f"λ0 {o['lam0']:.0f} λ_sep {o['lam_sep']:.1f} at L' {o['L_best']:+.0f} s "
               f"c' {o['c_best']:+.3g}", flush=True)
