@@ -95,3 +95,26 @@ def test_three_times_the_against_zero_minimum_is_not_told_from_one_lag():
         assert 1.5 * old < lead_min < 3.0 * old
         assert rate_lag_separation(N, B, K, REC, lines, -c, lag_min)[0] == pytest.approx(
             25.0, rel=1e-3)
+
+
+def test_the_adversarys_dtdt_sizes_follow_this_minimum():
+    """The adversary's generator (numpy only, apart from avard) recomputes each stated
+    minimum from the docs' derivation; its dT/dt class's r is its factor × the minimum
+    against one lag (``adversary_gen.rate_min`` on ``drive_lines``). Held here to the
+    project's ``min_detectable_rate`` on the generator's drives (HVAC alone and with the
+    compressor, either sign of c), so a change of the one shows in the other."""
+    from tests.support import adversary_gen as gen
+
+    nx = gen.DEFAULT_NOISE["x"]
+    for drive in ({"hvac_period": 1500.0, "hvac_amp": 0.7},
+                  {"hvac_period": 2100.0, "hvac_amp": 0.6, "comp_amp": 0.25,
+                   "comp_period": 800.0}):
+        lines = gen.drive_lines(drive, 1100.0, 45.0)
+        sig = [gen.sigma_a(w / (2 * math.pi), REC, *nx) for _, w in lines]
+        ours = tuple((a, 2 * math.pi / w) for a, w in lines)
+        w0, a0 = lines[0][1], lines[0][0]
+        r_zero = 5 * sig[0] / (w0 * a0)
+        for c in (9e-4, -9e-4):
+            theirs = gen.rate_min(lines, sig, c, r_zero, lead=c > 0)
+            assert theirs == pytest.approx(
+                min_detectable_rate(*nx, REC, ours, c, lead=c > 0), rel=0.01)
