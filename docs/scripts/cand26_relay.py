@@ -7,12 +7,13 @@ one lag (cand26): explain one record three ways and print the path choice's scor
 - ``exact``: every relay column the generator's own hysteresis (its play operator on the
   true die at its width), so the relay's shape and switch times are the truth's.
 
-    python docs/scripts/cand26_relay.py SEED0 SEED1 [MODE ...]
+    python docs/scripts/cand26_relay.py SEED0 SEED1 [MODE ...]   # FACTOR=6 to scale c and h
 """
 
 from __future__ import annotations
 
 import math
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -31,9 +32,11 @@ from cand26_separation import caught
 
 from tests.support import adversary_gen as gen
 
+FACTOR = float(os.environ.get("FACTOR", "3"))
+
 
 def run(seed: int, mode: str, kind: str = "hysteresis") -> list[str]:
-    truth, temps = caught(kind, seed, 3.0, logged=("plate",))
+    truth, temps = caught(kind, seed, FACTOR, logged=("plate",))
     ts, die = temps["ts"], temps["die"]
     x = truth["axes"]["x"]
     orig_cols = choose_mod.path_columns
@@ -68,7 +71,7 @@ def run(seed: int, mode: str, kind: str = "hysteresis") -> list[str]:
     try:
         with tempfile.TemporaryDirectory() as dd:
             p = Path(dd) / "r.npz"
-            truth = gen.make_record(kind, seed, p, logged=("plate",))
+            truth = gen.make_record(kind, seed, p, logged=("plate",), factor=FACTOR)
             ex = explain_file(open_record(str(p)))
     finally:
         choose_mod.path_columns = orig_cols

@@ -12,7 +12,10 @@ difference's DFT (Hann window, its power restored), f_k ≥ 1/T); the estimator'
 and its held-out halves are not modelled, so read the numbers as the record's content, not
 the code's score.
 
-    python docs/scripts/cand26_separation.py dtdt 400 419 [factor]
+    python docs/scripts/cand26_separation.py dtdt 400 419 [factor [shortest period s]]
+
+The shortest period counted (default none): what explain's fit sees, whose octave τ start at
+the channel's rounding floor (``choose_path``'s ``min_tau``), reaches periods of about 2τ.
 """
 
 from __future__ import annotations
@@ -65,11 +68,15 @@ def weights(n: int, nbk) -> tuple[np.ndarray, np.ndarray]:
     return f, s
 
 
+#: the highest frequency counted (Hz): ``CAP_PERIOD_S`` below, inf for the whole spectrum
+F_CAP = math.inf
+
+
 def lam(d: np.ndarray, f: np.ndarray, s: np.ndarray) -> float:
     n = len(d)
     w = np.hanning(n)
     D = np.fft.rfft((d - d.mean()) * w) / math.sqrt(np.mean(w * w))
-    ok = f >= 1.0 / n
+    ok = (f >= 1.0 / n) & (f <= F_CAP)
     return float(np.sum(2 * np.abs(D[ok]) ** 2 / (n * s[ok])))
 
 
@@ -89,7 +96,7 @@ def separation(kind: str, seed: int, factor: float = 3.0, **kw) -> dict:
     # L' on a fine grid both ways; c' by least squares in the same metric
     n = len(die)
     w = np.hanning(n)
-    ok = f >= 1.0 / n
+    ok = (f >= 1.0 / n) & (f <= F_CAP)
     Sg = np.fft.rfft((sig - sig.mean()) * w)[ok]
     for L in np.concatenate([-np.geomspace(5, 3600, 60)[::-1], [0.0], np.geomspace(5, 3600, 60)]):
         u = lag1(die, float(L))
@@ -108,6 +115,8 @@ def separation(kind: str, seed: int, factor: float = 3.0, **kw) -> dict:
 if __name__ == "__main__":
     kind, s0, s1 = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
     factor = float(sys.argv[4]) if len(sys.argv) > 4 else 3.0
+    if len(sys.argv) > 5:
+        F_CAP = 1.0 / float(sys.argv[5])
     for sd in range(s0, s1 + 1):
         o = separation(kind, sd, factor, logged=("plate",))
         print(f"{kind} {sd} ×{factor:g}: c {o['c']:+.3g} r {o['r']:.3g} "
