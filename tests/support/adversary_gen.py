@@ -391,11 +391,15 @@ def make_record(
     factor: float = 3.0,
     logged: tuple[str, ...] = ("plate", "ambient"),
     pump_band_hz: float = 0.1,
+    dtdt_minimum: str = "one_lag",
 ) -> dict:
     """Write one record of class ``kind`` and its truth file; return the truth. ``factor``:
     the hidden effect's size in its stated minima (the pump's amplitude in units of
     2e-4/3 m/s²); ``logged``: the DS18B20 channels the record holds (plate, ambient);
     ``pump_band_hz``: how far the pump's line sweeps (linearly, from 3.05 Hz).
+    ``dtdt_minimum``: what the dT/dt class's r is a multiple of, the minimum against every
+    one-lag reading ("one_lag") or the one against zero ("zero", the sizes before: a term one
+    lag reads to first order where c < 0).
 
     The ambient sensor reads the room through 40 s, the die is the room through the plate's
     and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
@@ -477,7 +481,8 @@ def make_record(
             lines = drive_lines(drive, spec.tau_plate, spec.tau_die)
             sl = [sigma_a(wl / (2 * math.pi), t_rec, *nx) for _, wl in lines]
             c_x = truth["axes"]["x"]["coefficient_mps2_per_k"]
-            r_min = rate_min(lines, sl, c_x, r_zero, lead=c_x > 0)
+            r_min = (r_zero if dtdt_minimum == "zero"
+                     else rate_min(lines, sl, c_x, r_zero, lead=c_x > 0))
             r = factor * r_min
             dudt = np.gradient(die_t, t)
             sig["x"] = sig["x"] + r * dudt
