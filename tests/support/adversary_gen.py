@@ -23,7 +23,11 @@ Noise conventions are the project's documented ones (one-sided PSD
 S(f) = 2N² + B²/(πf) + K²/(2π²f²), AVAR = N²/τ + (2 ln 2/π)B² + K²τ/3), so the stated minima
 below follow docs/explain.md's derivations: z = 5 standard errors of the GLS amplitude of a
 sinusoidal component, σ_a(f) = √(2S(f)/T) per quadrature; warm-up 6·√(2·AVAR(T))/0.40; step
-6·min_w √(2·AVAR(w)); drift 5·K·√(1.2/T) (least squares on a random walk).
+6·min_w √(2·AVAR(w)); drift 5·K·√(1.2/T) (least squares on a random walk); a dT/dt term
+beside its coupling (lag 0) the smallest r whose non-centrality against every one-lag reading
+reaches 25 on the drive's lines (``rate_min``: docs/log/2026-11-28-cand26.md; one lag reads
+c·T + r·dT/dt to first order, so the minimum against zero, 5σ_a/(ωa), was no minimum of the
+mechanism).
 
 ``make_record(kind, seed, path)`` writes ``path`` (.npz) and ``path`` + ``.truth.json``; the
 truth says, per axis, which cause is hidden and its parameters (SI units), and which axes are
@@ -64,6 +68,59 @@ def sigma_a(f: float, t_rec: float, n: float, b: float, k: float) -> float:
 
 def lag_gain(f: float, tau: float) -> float:
     return 1.0 / math.sqrt(1.0 + (2 * math.pi * f * tau) ** 2)
+
+
+def drive_lines(drive: dict, tau_plate: float, tau_die: float) -> list[tuple[float, float]]:
+    """The room's cycles as lines at the die, (amplitude K, ω rad/s): the HVAC triangle's odd
+    harmonics 8A/(π²k²) and the compressor's square wave's (its Fourier series taken
+    numerically), up to the 15th, each through the plate's and the die's lags."""
+    out = []
+    shapes = [(drive["hvac_period"], 8 * drive["hvac_amp"] / math.pi**2
+               * np.array([1.0 / (k * k) if k % 2 else 0.0 for k in range(16)]))]
+    if "comp_amp" in drive:
+        x = np.linspace(0.0, 1.0, 1 << 12, endpoint=False)
+        sq = np.where(x < 0.4, drive["comp_amp"], -drive["comp_amp"] * 0.4 / 0.6)
+        shapes.append((drive["comp_period"], 2 * np.abs(np.fft.rfft(sq))[:16] / x.size))
+    for period, amps in shapes:
+        for k in range(1, 16):
+            if amps[k] > 0:
+                f = k / period
+                out.append((float(amps[k]) * lag_gain(f, tau_plate) * lag_gain(f, tau_die),
+                            2 * math.pi * f))
+    return out
+
+
+def rate_separation(lines, sig, c: float, r: float) -> float:
+    """min over one-lag readings c'·H(ω, L') (L' ≥ 0 a lag 1/(1 + jωL'), L' < 0 the lead-lag
+    (1 + 2jωa)/(1 + jωa), a = −L', as docs/explain.md's negative lag) of
+    Σ_lines (a/σ_a)²·|c + jωr − c'·H|²: the z² at which a fit tells c·T + r·dT/dt from one
+    lag (a brute grid in L', c' by weighted least squares)."""
+    a = np.array([x[0] for x in lines])
+    w = np.array([x[1] for x in lines])
+    q = (a / np.array(sig)) ** 2
+    G = c + 1j * w * r
+    top = 1e3 * max(abs(r / c), float(np.max(1.0 / w)))
+    Ls = np.geomspace(0.5, top, 3000)
+    H = np.vstack([1.0 / (1 + 1j * np.outer(Ls, w)),
+                   (1 + 2j * np.outer(Ls, w)) / (1 + 1j * np.outer(Ls, w)),
+                   np.ones((1, w.size))])
+    cp = np.sum(q * np.real(G * H.conj()), axis=1) / np.sum(q * np.abs(H) ** 2, axis=1)
+    return float(np.min(np.sum(q * np.abs(G - cp[:, None] * H) ** 2, axis=1)))
+
+
+def rate_min(lines, sig, c: float, r0: float, lead: bool) -> float:
+    """The smallest r > 0 (r/c > 0 if ``lead``) with ``rate_separation`` ≥ 25, from the
+    minimum against zero ``r0`` up (bisection); inf past 1e4·r0 (one line and a lag)."""
+    sgn = 1.0 if lead == (c > 0) else -1.0
+    lo, hi = 0.0, r0
+    while rate_separation(lines, sig, c, sgn * hi) < 25.0:
+        lo, hi = hi, 2 * hi
+        if hi > 1e4 * r0:
+            return math.inf
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if rate_separation(lines, sig, c, sgn * mid) < 25.0 else (lo, mid)
+    return hi
 
 
 # --------------------------------------------------------------------------- synthesis
@@ -334,11 +391,15 @@ def make_record(
     factor: float = 3.0,
     logged: tuple[str, ...] = ("plate", "ambient"),
     pump_band_hz: float = 0.1,
+    dtdt_minimum: str = "one_lag",
 ) -> dict:
     """Write one record of class ``kind`` and its truth file; return the truth. ``factor``:
     the hidden effect's size in its stated minima (the pump's amplitude in units of
     2e-4/3 m/s²); ``logged``: the DS18B20 channels the record holds (plate, ambient);
     ``pump_band_hz``: how far the pump's line sweeps (linearly, from 3.05 Hz).
+    ``dtdt_minimum``: what the dT/dt class's r is a multiple of, the minimum against every
+    one-lag reading ("one_lag") or the one against zero ("zero", the sizes before: a term one
+    lag reads to first order where c < 0).
 
     The ambient sensor reads the room through 40 s, the die is the room through the plate's
     and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
@@ -413,11 +474,20 @@ def make_record(
             truth["axes"]["x"].update(mechanism="quadratic", q_mps2_per_k2=q, q_min=q_min)
         if kind == "dtdt":
             w = 2 * math.pi * f0
-            r_min = 5 * s0 / (w * a_die)
+            # against zero (the minimum before, kept in the truth), and against every one-lag
+            # reading beside the record's coupling (the stated minimum): r > 0, so a lead
+            # where c > 0 and a lag where c < 0
+            r_zero = 5 * s0 / (w * a_die)
+            lines = drive_lines(drive, spec.tau_plate, spec.tau_die)
+            sl = [sigma_a(wl / (2 * math.pi), t_rec, *nx) for _, wl in lines]
+            c_x = truth["axes"]["x"]["coefficient_mps2_per_k"]
+            r_min = (r_zero if dtdt_minimum == "zero"
+                     else rate_min(lines, sl, c_x, r_zero, lead=c_x > 0))
             r = factor * r_min
             dudt = np.gradient(die_t, t)
             sig["x"] = sig["x"] + r * dudt
-            truth["axes"]["x"].update(mechanism="dT/dt", r_mps2_per_k_per_s=r, r_min=r_min)
+            truth["axes"]["x"].update(mechanism="dT/dt", r_mps2_per_k_per_s=r, r_min=r_min,
+                                      r_min_zero=r_zero)
         if kind == "hysteresis":
             inv = sum(
                 (4 / (math.pi * k)) ** 2 / sigma_a(k * f0, t_rec, *nx) ** 2 for k in (3, 5, 7, 9)

@@ -103,7 +103,11 @@ from __future__ import annotations
 
 from avard.core.explain.thermal_paths.choose import choose_path
 from avard.core.explain.thermal_paths.columns import path_columns
-from avard.core.explain.thermal_paths.minima import min_detectable_path
+from avard.core.explain.thermal_paths.minima import (
+    min_detectable_path,
+    min_detectable_rate,
+    rate_lag_separation,
+)
 from avard.core.explain.thermal_paths.readings import (
     both_readings,
     rate_reading,
@@ -121,7 +125,9 @@ __all__ = [
     "both_readings",
     "choose_path",
     "min_detectable_path",
+    "min_detectable_rate",
     "path_columns",
+    "rate_lag_separation",
     "rate_reading",
     "reads_as_rate",
     "second_path_reading",

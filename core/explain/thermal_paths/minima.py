@@ -78,3 +78,106 @@ def min_detectable_path(kind: str, n_white: float, b_inst: float, k_rrw: float,
         s = sum((4 / (math.pi * k)) ** 2 / sig(k * f0) ** 2 for k in range(3, 40, 2))
         return z / math.sqrt(s)
     raise ValueError(kind)
+
+
+def _one_lag_response(w: NDArray, lag_s: float) -> NDArray[np.complex128]:
+    """One lag's response at ``w`` (rad/s), as the one-lag column builds it
+    (``thermal_fit.lag_filter``): 1/(1 + jωL) for L ≥ 0, the lead-lag (1 + 2jωa)/(1 + jωa),
+    a = −L, for L < 0."""
+    if lag_s >= 0:
+        return np.asarray(1.0 / (1 + 1j * w * lag_s), dtype=complex)
+    a = -lag_s
+    return np.asarray((1 + 2j * w * a) / (1 + 1j * w * a), dtype=complex)
+
+
+def _sep_lags(top: float) -> NDArray[np.float64]:
+    """The one-lag readings' lags (s) the separation searches, either sign, to ``top``."""
+    pos = np.geomspace(0.5, top, 241)
+    return np.concatenate([-pos[::-1], [0.0], pos])
+
+
+def rate_lag_separation(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                        lines: tuple[tuple[float, float], ...], coefficient: float,
+                        rate: float) -> tuple[float, float, float]:
+    """How far a coupling ``coefficient`` (m/s²/K) plus a dT/dt term ``rate`` (m/s² per
+    K/s) at a lag of 0 is from every one-lag reading c'·H(ω, L') (L' of either sign, the
+    one-lag column's lead-lag for L' < 0), on the drive ``lines`` ((amplitude at the die K,
+    period s) each): (λ, L', c') with λ = min over (c', L') of Σ_lines (a/σ_a(f))²·|c + jωr −
+    c'·H(ω, L')|², the non-centrality (z²) of the GLS fit's test of the dT/dt term against
+    the closest one-lag reading, and that reading. σ_a(f) = √(2 S(f)/T) per quadrature as in
+    ``min_detectable_path``."""
+    a = np.array([x[0] for x in lines], dtype=float)
+    w = np.array([2 * math.pi / x[1] for x in lines], dtype=float)
+    s2 = np.array([2 * noise_psd(1.0 / x[1], n_white, b_inst, k_rrw) / record_s
+                   for x in lines])
+    q = a * a / s2
+    G = coefficient + 1j * w * rate
+
+    def at(L: float) -> tuple[float, float]:
+        h = _one_lag_response(w, L)
+        cp = float(np.sum(q * np.real(G * h.conj())) / np.sum(q * np.abs(h) ** 2))
+        return float(np.sum(q * np.abs(G - cp * h) ** 2)), cp
+
+    # (to far beyond the lag c·T + r·dT/dt is to first order, r/c, and the drive's periods)
+    lags = _sep_lags(1e3 * max(abs(rate / coefficient) if coefficient else 0.0,
+                               float(np.max(1.0 / w))))
+    vals = [at(float(L))[0] for L in lags]
+    i = int(np.argmin(vals))
+    # golden-section on the bracket around the best grid point (λ is smooth in L')
+    lo, hi = float(lags[max(i - 1, 0)]), float(lags[min(i + 1, len(lags) - 1)])
+    g = (math.sqrt(5) - 1) / 2
+    for _ in range(60):
+        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        if at(m1)[0] < at(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    L = 0.5 * (lo + hi)
+    lam, cp = at(L)
+    if vals[i] < lam:
+        L = float(lags[i])
+        lam, cp = at(L)
+    return lam, L, cp
+
+
+def min_detectable_rate(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                        lines: tuple[tuple[float, float], ...], coefficient: float,
+                        lead: bool, z: float = 5.0) -> float:
+    """The stated minimum of a dT/dt term (m/s² per K/s, its size |r|) beside a coupling
+    ``coefficient`` at a lag of 0, on the drive ``lines`` ((amplitude at the die K, period s)
+    each): the smallest |r| whose separation from every one-lag reading
+    (``rate_lag_separation``) reaches z², with r/c > 0 (``lead``: c·T + r·dT/dt is a lead,
+    T ahead) or r/c < 0 (a lag). ``math.inf`` when none up to 10⁶× the term's minimum
+    against zero reaches it.
+
+    Why not the Fisher information of r in the fit (c, r, L): at a lag of 0 the lag's
+    derivative −jωc is the dT/dt term's jω times −c at every frequency, so the information is
+    singular on any drive (``min_detectable_path("rate")`` is ``math.inf`` there); the
+    minimum "with the lags known" is r against zero (what r − c·L resolves), which a one-lag
+    reading holds to first order: c·T(t − L) ≈ c·T − c·L·dT/dt. What tells the term from one
+    lag is the second order (one lag's gain falls as 1/√(1 + ω²L²) where c + jωr's rises; a
+    lead-lag's phase is at most asin(1/3)), which this non-centrality measures on every line
+    at once. On one line a lag (r/c < 0) is every phase one lag reaches: ``math.inf``."""
+    w = np.array([2 * math.pi / x[1] for x in lines], dtype=float)
+    a = np.array([x[0] for x in lines], dtype=float)
+    s2 = np.array([2 * noise_psd(1.0 / x[1], n_white, b_inst, k_rrw) / record_s
+                   for x in lines])
+    r0 = z / math.sqrt(float(np.sum((a * w) ** 2 / s2)))  # against zero
+    sgn = 1.0 if lead == (coefficient > 0) else -1.0
+
+    def sep(r: float) -> float:
+        return rate_lag_separation(n_white, b_inst, k_rrw, record_s, lines, coefficient,
+                                   sgn * r)[0]
+
+    lo, hi = 0.0, r0
+    while sep(hi) < z * z:
+        lo, hi = hi, 2 * hi
+        if hi > 1e6 * r0:
+            return math.inf
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if sep(mid) < z * z:
+            lo = mid
+        else:
+            hi = mid
+    return hi
