@@ -13,9 +13,9 @@ from avard.core.io.source import open_record
 from tests.support.adversary_gen import make_record as adversary_record
 
 
-def _x(tmp_path, kind: str, seed: int):  # type: ignore[no-untyped-def]
+def _x(tmp_path, kind: str, seed: int, **kw):  # type: ignore[no-untyped-def]
     path = tmp_path / f"{kind}{seed}.npz"
-    truth = adversary_record(kind, seed, path, logged=("plate",))
+    truth = adversary_record(kind, seed, path, logged=("plate",), **kw)
     ex = explain_file(open_record(str(path)), ExplainOptions(channels=("x",)))
     return truth["axes"]["x"], ex.channels["x"]
 
@@ -30,7 +30,9 @@ def test_a_dt_term_the_rounding_hides_is_named_beside_the_one_lag_kept(tmp_path,
     its own reading, near the truth (on main it named nothing and printed one lag alone).
     dtdt 409 likewise (one lag at ≈ 340 s; the reading predicts 3 better, within the margin
     and its derivative's rounding)."""
-    truth, ch = _x(tmp_path, "dtdt", seed)
+    # at the minimum against zero (the generator's default now sizes the term against one
+    # lag, cand26): the size where one lag and the dT/dt term are both readings of the record
+    truth, ch = _x(tmp_path, "dtdt", seed, dtdt_minimum="zero")
     th = [f for f in ch.claimed if f.cause == "temperature"]
     assert th and ch.thermal is not None and ch.thermal.path is not None
     pf = ch.thermal.path
@@ -89,7 +91,7 @@ def test_one_lag_beside_a_dt_reading_that_predicts_better_carries_no_interval(tm
     in the finding and its text. Now no interval (kept in ``intervals_if_model_held``), the
     finding is marked model-dependent, its text prints no bracket, and ``--json``'s path
     says which reading predicts better."""
-    _truth, ch = _x(tmp_path, "dtdt", 409)
+    _truth, ch = _x(tmp_path, "dtdt", 409, dtdt_minimum="zero")  # as above
     th = [f for f in ch.claimed if f.cause == "temperature"]
     assert th and ch.thermal is not None and ch.thermal.path is not None
     pf = ch.thermal.path
