@@ -78,7 +78,7 @@ def _held(ex: Explanation) -> tuple[float, float, float, int]:
 
 
 @pytest.mark.parametrize("held_seed", [4, 6])
-@pytest.mark.parametrize("faults", ["readings", "dropout", "all"])
+@pytest.mark.parametrize("faults", ["readings", "dropout", "accel", "all"])
 def test_a_faulty_held_out_record_predicts_as_the_same_record_clean(tmp_path, held_seed,
                                                                     faults):
     """The same held-out record, clean and with a weekend's faults: its held-out gain agrees
