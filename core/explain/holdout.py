@@ -83,7 +83,9 @@ DEFINITION = ("gain = 1 − χ²_ext/χ²_base: generalised χ² (covariance mod
               "< 0 = worse. χ² ≈ n (the number of held-out τ) when a model predicts the data.")
 
 
-AvarOf = Callable[[NDArray, float, "NDArray[np.bool_] | None"], Any]
+#: (series, blocks per second[, rows kept]) -> its Allan variance; the rows kept only where
+#: some are left out as gaps
+AvarOf = Callable[..., Any]
 
 
 def _avar(y: NDArray, rate_hz: float, keep: NDArray[np.bool_] | None = None) -> Any:
@@ -371,14 +373,17 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
           u_fit: Temps, u_held: Temps, avar: AvarOf | None = None) -> Fold:
     """Fit both models on ``fit`` and measure their held-out χ² on ``held``. ``avar``: the
     Allan variance of a series (``_avar`` by default; ``_channel`` keeps it by content)."""
-    avar = _avar if avar is None else avar
+    of = _avar if avar is None else avar
+
+    def av(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> Any:
+        return of(y, rate) if keep is None else of(y, rate, keep)
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
     # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
     extra = [{"cause": "sinusoid", "params": {k: ln[k] for k in (
         "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
              for ln in line_components(c.lines)
              if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
-    base = fit_noise(avar(fit.y, rate_b, None), extra=extra)
+    base = fit_noise(av(fit.y, rate_b), extra=extra)
     if c.names:
         d_fit, d_held, skip, lag = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
         # the held-out log's holes (the screen's dropouts and stuck runs): the prediction
@@ -396,11 +401,11 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext = fit_noise(avar(fit.y - d_fit, rate_b, None), extra=[*extra, *gm])
-        held_var = avar(held.y[skip:], held.rate(rate_b), ks)
-        held_ext = avar((held.y - d_held)[skip:], held.rate(rate_b), ks)
+        ext = fit_noise(av(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        held_var = av(held.y[skip:], held.rate(rate_b), ks)
+        held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
     else:
-        held_var = avar(held.y, held.rate(rate_b), None)
+        held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -448,7 +453,7 @@ def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float
         key = (np.ascontiguousarray(y, dtype=float).tobytes(), float(rate),
                b"" if keep is None else np.ascontiguousarray(keep).tobytes())
         if key not in seen:
-            seen[key] = _avar(y, rate, keep)
+            seen[key] = _avar(y, rate) if keep is None else _avar(y, rate, keep)
         return seen[key]
 
     try:
