@@ -160,3 +160,30 @@ def test_a_held_out_log_refused_as_fahrenheit_predicts_nothing(tmp_path):
     assert "°F" in c.reason
     assert "ambient" in ex.to_dict()["holdout_screened"]["refused"]
     assert ex.to_dict()["holdout_gain"] is None
+
+
+def test_a_held_out_log_held_at_each_reading_is_read_as_its_readings(tmp_path):
+    """A held-out log written on every sample (each reading held until the next), with the
+    weekend's faults in it: the same rule as the record's reads it as its readings (said in
+    the held-out screen's notes), and its gain agrees with the same record clean."""
+    clean = _explain(tmp_path, 4, None)
+    rec, _ = make_record(3, hours=HOURS, logged=("ambient",), truth=_truth())
+    base = save(rec, tmp_path / "base.npz")
+    held, _ = make_record(4, hours=HOURS, logged=("ambient",), truth=_truth())
+    _with_faults(held, "all")
+    t = held.temperature_c[:, 0]
+    fin = np.isfinite(t)
+    last = np.maximum.accumulate(np.where(fin, np.arange(len(t)), 0))
+    hold = t[last]
+    hold[:int(np.argmax(fin))] = np.nan
+    i0 = int(0.4 * len(t))  # the dropout of ``_with_faults``: the logger writes nothing
+    hold[i0:i0 + int(1500 * held.rate_hz)] = np.nan
+    held.temperature_c[:, 0] = hold
+    ex = explain_file(open_record(base), ExplainOptions(channels=("x",)),
+                      holdout=open_record(save(held, tmp_path / "held_log.npz")))
+    hs = ex.to_dict()["holdout_screened"]
+    assert hs["notes"]["ambient"]["kind"] == "held"
+    assert hs["counts"]["power_on_85"] == 3 and hs["counts"]["dropout"] == 1
+    g_c, *_ = _held(clean)
+    g_f, b_f, _e, n_f = _held(ex)
+    assert abs(g_f - g_c) <= 2 * math.sqrt(2 * n_f) / b_f, (g_f, g_c)
