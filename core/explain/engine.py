@@ -100,8 +100,8 @@ from avard.core.explain.thermal_paths import (
 )
 from avard.core.explain.thermal_paths.readings import holds_beside
 from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
-from avard.core.io.screen import ScreenedSource, ScreenLog, fahrenheit_columns, to_celsius
-from avard.core.io.source import RecordFormat, RecordSource, StreamSource
+from avard.core.io.screen import ScreenedSource, ScreenLog
+from avard.core.io.source import RecordSource, StreamSource
 from avard.core.model.fit import NoiseFit, fit_noise
 from numpy.typing import NDArray
 
@@ -389,6 +389,9 @@ class Explanation:
                 "holdout_gain": None if ho is None else ho["holdout_gain"],
                 "holdout": ho,
                 "screened": None if self.screen is None else self.screen.to_dict(),
+                # the held-out record's (--holdout FILE), screened by the same rules
+                "holdout_screened": None if self.holdout is None
+                else self.holdout.screen_dict(),
                 "temperature_unused": dict(self.temperature_unused),
                 "channels": {k: {**v.to_dict(), "caveats": self.caveats(k)}
                              for k, v in self.channels.items()}}
@@ -529,21 +532,24 @@ class _SlowTap:
         self.complete = True
 
 
+#: The held-out record: its description, its screened blocks (read when the held-out
+#: measure asks) and the screen they come through (its log complete once they are read).
+Held = tuple[dict[str, Any], Iterable[Any], ScreenedSource]
+
+
 def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str, Any]
-          ) -> tuple[dict[str, Any], Iterable[Any]] | None:
-    """The held-out record's description and its blocks (read when the held-out measure
-    asks), checked against this record's."""
+          ) -> Held | None:
+    """The held-out record, checked against this record's, read through the same input
+    screen as the record (``ScreenedSource``: the same rules, ``--temperature-units`` alike,
+    so a °F log is converted or refused as the record's is): its 85 °C values, read errors
+    and spikes are masked, its shocks cut out, its dropouts and stuck runs listed."""
     if holdout is None:
         return None
-    held = holdout.info.as_meta(), holdout.blocks(options.block)
-    check_compatible(meta, held[0], str(held[0].get("source", "holdout")))
-    # --temperature-units F: the held-out record's logs in the same units as the record's
-    to_c = fahrenheit_columns(list(held[0].get("temperature_names") or []),
-                              options.temperature_units,
-                              holdout.info.format is not RecordFormat.RECORDING)
-    if to_c:
-        held = held[0], (to_celsius(b, to_c) for b in held[1])
-    return held
+    h_meta = holdout.info.as_meta()
+    check_compatible(meta, h_meta, str(h_meta.get("source", "holdout")))
+    screened = (holdout if isinstance(holdout, ScreenedSource)
+                else ScreenedSource(holdout, options.temperature_units))
+    return h_meta, screened.blocks(options.block), screened
 
 
 @one_blas_thread
@@ -584,7 +590,7 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
 
 
 def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],
-               options: ExplainOptions, held: tuple[dict[str, Any], Iterable[Any]] | None,
+               options: ExplainOptions, held: Held | None,
                stage: StageFn | None) -> Explanation:
     """The explanation of ``an`` (analyze's result) from the slow view of the same screened
     blocks (``screen``: that screen's log), whichever read fed it."""
@@ -883,24 +889,38 @@ def _gain_beside(th: ThermalFit | None, kind: str) -> bool:
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
              tnames: list[str], names: list[str], rate_b: float, b: int, meta: dict[str, Any],
-             holdout: tuple[dict[str, Any], Iterable[Block]] | None) -> Holdout:
+             holdout: Held | None) -> Holdout:
     """The held-out measure (:mod:`avard.core.explain.holdout`): the record's halves, or the second
-    record streamed through a slow view with the same block (bounded memory)."""
+    record streamed through the input screen and a slow view with the same block (bounded
+    memory), its screen's holes gaps to the held-out estimators as the record's are to its
+    own."""
     if holdout is None:
         return holdout_split(out, y_slow, t_slow, tnames, names, rate_b,
                              str(meta.get("source", "stream")))
-    h_meta, h_blocks = holdout
+    h_meta, h_blocks, h_screened = holdout
     view = SlowView(b, len(names), len(tnames))
     for accel, temp, _end in h_blocks:
         a = np.asarray(accel, dtype=float).reshape(len(accel), -1)
         has_t = tnames and temp is not None and np.asarray(temp).size
         view.update(a, temp if has_t else None)
-    y_h, t_h = view.finish()
+    log = h_screened.log
+    held_rate_b = float(h_meta["rate_hz"]) / b
+    # as for the record (``_explained``): a stuck run is no reading of the temperature, and
+    # every hole of a second or more is a gap of the held-out Allan variance of an axis
+    # whose prediction runs through that log
+    stuck = [[(x.start_s, x.end_s) for x in log.stretches
+              if x.channel == nm and x.kind == "stuck"] for nm in tnames] if log else []
+    y_h, t_h = view.finish(stuck, held_rate_b)
+    holes = {j: [(math.floor(h0 * held_rate_b), math.ceil(h1 * held_rate_b))
+                 for h0, h1 in log.holes(nm) if h1 - h0 >= 1.0]
+             for j, nm in enumerate(tnames)} if log is not None else {}
+    refused = ({j: log.refused[nm] for j, nm in enumerate(tnames) if nm in log.refused}
+               if log is not None else {})
     # each side's τ in seconds of its own fitted rate (the rates agree by core.io.rates' rule,
     # they are not equal)
     return holdout_file(out, y_slow, t_slow, y_h, t_h, tnames, names, rate_b,
-                        str(h_meta.get("source", "holdout")),
-                        held_rate_b=float(h_meta["rate_hz"]) / b)
+                        str(h_meta.get("source", "holdout")), held_rate_b=held_rate_b,
+                        held_holes=holes, held_refused=refused, screen=log)
 
 
 def _noise_levels(fit: NoiseFit) -> dict[str, float]:

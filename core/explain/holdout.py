@@ -54,8 +54,10 @@ from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import (
     ThermalFit,
+    feed,
     fit_thermal,
     fit_thermal_axes,
+    hole_mask,
     lag_filter,
 )
 from avard.core.io.rates import format_rate, require_compatible
@@ -81,13 +83,16 @@ DEFINITION = ("gain = 1 − χ²_ext/χ²_base: generalised χ² (covariance mod
               "< 0 = worse. χ² ≈ n (the number of held-out τ) when a model predicts the data.")
 
 
-AvarOf = Callable[[NDArray, float], Any]
+#: (series, blocks per second[, rows kept]) -> its Allan variance; the rows kept only where
+#: some are left out as gaps
+AvarOf = Callable[..., Any]
 
 
-def _avar(y: NDArray, rate_hz: float) -> Any:
-    """Analyze's streaming estimator on one slow-view series."""
+def _avar(y: NDArray, rate_hz: float, keep: NDArray[np.bool_] | None = None) -> Any:
+    """Analyze's streaming estimator on one slow-view series; the rows ``keep`` leaves out
+    are gaps (no Allan difference spans them)."""
     sa = StreamingAllan(1, rate_hz)
-    sa.update(np.asarray(y, dtype=float)[:, None])
+    feed(sa, np.asarray(y, dtype=float)[:, None], keep)
     return sa.result()
 
 
@@ -166,6 +171,9 @@ class Holdout:
     block_s: float
     channels: dict[str, ChannelHoldout] = field(default_factory=dict)
     reason: str | None = None
+    #: what the input screen masked in the held-out record (``--holdout FILE``; a
+    #: ``core.io.screen.ScreenLog``), None for the record's own halves
+    screen: Any = None
 
     @property
     def gain(self) -> float | None:
@@ -204,6 +212,21 @@ class Holdout:
             return "no cause claimed on any axis: the extended model is the base model"
         return None
 
+    def screen_dict(self) -> dict[str, Any] | None:
+        """The held-out record's screen for the JSON (``holdout_screened``, beside the
+        record's ``screened``): the same shape, with the held-out record's name."""
+        if self.screen is None:
+            return None
+        return {"record": "held-out", "source": self.source, **self.screen.to_dict()}
+
+    def screen_lines(self, limit: int = 8) -> list[str]:
+        """The held-out record's screen in the text, each line said to be the held-out
+        record's (the record's own screen is said just before it)."""
+        if self.screen is None:
+            return []
+        first, *rest = self.screen.lines(limit)
+        return [f"held-out record {self.source}: {first}", *rest]
+
     def to_dict(self) -> dict[str, Any]:
         return {"mode": self.mode, "source": self.source, "holdout_gain": self.gain,
                 "definition": DEFINITION, "reason": self.why_no_gain,
@@ -230,6 +253,11 @@ class Part:
     #: the thermal model fitted on this part (split: one lag scan for all the axes that
     #: claim the same channel, ``_part_thermals``); None: fitted when needed
     thermal: ThermalFit | None = None
+    #: per temperature column, (first, last) blocks of this part where the input screen says
+    #: its log tells nothing of the temperature (a dropout, a stuck run): the held-out
+    #: prediction through that log is interpolated there, so those blocks and the lag's
+    #: settling after them are gaps of the held-out Allan variance (``_fold``)
+    holes: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
 
     def rate(self, default: float) -> float:
         return default if self.rate_b is None else self.rate_b
@@ -268,9 +296,10 @@ Temps = tuple[NDArray, slice] | None
 
 def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
              u_fit: Temps, u_held: Temps
-             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float]:
     """(signal on the fit part, its prediction on the held-out part, blocks to leave out at
-    the held-out part's start) of the claimed causes. ``u_fit``/``u_held``: (the claimed
+    the held-out part's start, the longest lag of the temperature prediction (s)) of the
+    claimed causes. ``u_fit``/``u_held``: (the claimed
     temperature channel of the part's record (°C), the part's slice of it), for the lag
     filter; ``refit``: fit the parameters on the fit part (split) or use the whole record's
     (file: the fit part is the whole record).
@@ -282,6 +311,7 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     d_fit = np.zeros(len(fit.y))
     d_held = np.zeros(len(held.y))
     skip = 0
+    longest = 0.0
     wt = c.whole_thermal
     if (c.thermal_channel is not None and u_fit is not None and u_held is not None
             and wt is not None and wt.path is not None and wt.mechanism != "one_lag"):
@@ -306,6 +336,7 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
             assert c.whole_thermal is not None
             th = replace(c.whole_thermal, channel_index=0)
         coef, lag = th.coefficient, th.lag_s
+        longest = abs(lag)
         if fit.first:
             d_fit += th.signal(part_t, fit.y)
         else:
@@ -335,33 +366,46 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
                                     cand.params["size"], t0_s=fit.t0_s)
         elif not refit and c.whole_step is not None:
             d_fit += cz.step_signal(len(fit.y), rate_b, *c.whole_step)
-    return d_fit, d_held, skip
+    return d_fit, d_held, skip, longest
 
 
 def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
           u_fit: Temps, u_held: Temps, avar: AvarOf | None = None) -> Fold:
     """Fit both models on ``fit`` and measure their held-out χ² on ``held``. ``avar``: the
     Allan variance of a series (``_avar`` by default; ``_channel`` keeps it by content)."""
-    avar = _avar if avar is None else avar
+    of = _avar if avar is None else avar
+
+    def av(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> Any:
+        return of(y, rate) if keep is None else of(y, rate, keep)
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
     # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
     extra = [{"cause": "sinusoid", "params": {k: ln[k] for k in (
         "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
              for ln in line_components(c.lines)
              if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
-    base = fit_noise(avar(fit.y, rate_b), extra=extra)
+    base = fit_noise(av(fit.y, rate_b), extra=extra)
     if c.names:
-        d_fit, d_held, skip = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
-        if len(held.y) - skip < MIN_PART_POINTS:
+        d_fit, d_held, skip, lag = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
+        # the held-out log's holes (the screen's dropouts and stuck runs): the prediction
+        # there runs on an interpolated temperature, so they and the lag's settling after
+        # them are gaps of both models' held-out Allan variance (as of the thermal fit's
+        # regression, ``thermal_fit.hole_mask``), never a misfit of the extended model
+        keep = (None if c.thermal_channel is None else
+                hole_mask(len(held.y), held.holes.get(c.thermal_channel, []), lag,
+                          held.rate(rate_b)))
+        kept = len(held.y) - skip if keep is None else int(np.count_nonzero(keep[skip:]))
+        if kept < MIN_PART_POINTS:
             raise FitError(f"the held-out part is too short once its first {skip} blocks "
-                           "(the thermal lag's unknown start state) are left out")
+                           "(the thermal lag's unknown start state) and its log's holes "
+                           "are left out")
+        ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext = fit_noise(avar(fit.y - d_fit, rate_b), extra=[*extra, *gm])
-        held_var = avar(held.y[skip:], held.rate(rate_b))
-        held_ext = avar((held.y - d_held)[skip:], held.rate(rate_b))
+        ext = fit_noise(av(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        held_var = av(held.y[skip:], held.rate(rate_b), ks)
+        held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
     else:
-        held_var = avar(held.y, held.rate(rate_b))
+        held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -403,12 +447,13 @@ def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float
     # a part is the fit part of one fold and the held-out part of the other (split, when
     # nothing is left out at its start, or nothing is claimed): its Allan variance, a pure
     # function of its values and rate, is computed once
-    seen: dict[tuple[bytes, float], Any] = {}
+    seen: dict[tuple[bytes, float, bytes], Any] = {}
 
-    def avar(y: NDArray, rate: float) -> Any:
-        key = (np.ascontiguousarray(y, dtype=float).tobytes(), float(rate))
+    def avar(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> Any:
+        key = (np.ascontiguousarray(y, dtype=float).tobytes(), float(rate),
+               b"" if keep is None else np.ascontiguousarray(keep).tobytes())
         if key not in seen:
-            seen[key] = _avar(y, rate)
+            seen[key] = _avar(y, rate) if keep is None else _avar(y, rate, keep)
         return seen[key]
 
     try:
@@ -502,11 +547,17 @@ def _rate_u(meta: dict[str, Any]) -> float:
 def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
                  y_held: NDArray, t_held: NDArray | None, t_names: Sequence[str],
                  names: Sequence[str], rate_b: float, source: str,
-                 held_rate_b: float | None = None) -> Holdout:
+                 held_rate_b: float | None = None,
+                 held_holes: dict[int, list[tuple[int, int]]] | None = None,
+                 held_refused: dict[int, str] | None = None, screen: Any = None) -> Holdout:
     """Models fitted on the whole record (its slow view ``y_slow``) predict a second record
     of the same sensor (its slow view ``y_held``, the same block in samples; ``held_rate_b``
-    its blocks per second by its own fitted rate, default ``rate_b``)."""
-    ho = Holdout("file", source, 1.0 / rate_b)
+    its blocks per second by its own fitted rate, default ``rate_b``). The held-out record
+    is screened as the record is (``screen``: its ``ScreenLog``): ``held_holes`` per
+    temperature column, its blocks where the log says nothing (gaps of the held-out Allan
+    variance of an axis that claims that channel); ``held_refused`` per column, why the
+    screen refused its log (a log in °F: nothing of it may predict)."""
+    ho = Holdout("file", source, 1.0 / rate_b, screen=screen)
     if len(y_held) < MIN_PART_POINTS:
         ho.reason = (f"held-out record too short: {len(y_held)} slow-view blocks of "
                      f"{1 / rate_b:.3g} s, it needs {MIN_PART_POINTS}")
@@ -515,7 +566,20 @@ def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray 
         j = list(names).index(name)
         c = claims_of(ch, t_names)
         fit = Part(y_slow[:, j], 0.0, "data", True)
-        held = Part(y_held[:, j], 0.0, "holdout", True, held_rate_b)
+        held = Part(y_held[:, j], 0.0, "holdout", True, held_rate_b,
+                    holes=dict(held_holes or {}))
+        k = c.thermal_channel
+        why = None if k is None else (held_refused or {}).get(k)
+        if why is None and k is not None and t_held is not None and np.count_nonzero(
+                np.isfinite(t_held[:, k])) < 2:
+            why = "no readings once screened"
+        if why is not None and k is not None:
+            # the claimed channel's held-out log cannot carry the prediction: said, not
+            # measured on a log the screen refused (a °F log read as °C predicts nonsense)
+            ho.channels[name] = ChannelHoldout(
+                name, c.names, reason=f"held-out fit failed: the held-out record's "
+                f"temperature log {t_names[k]} is not used ({why})")
+            continue
 
         def temps_of(p: Part, c: Claims = c) -> Temps:
             src = t_slow if p.label == "data" else t_held

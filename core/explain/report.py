@@ -150,6 +150,8 @@ def summary(ex: Explanation) -> str:
              f"{ALPHA_AXIS:.2g} per axis for all of explain's causes together."]
     if ex.screen is not None:
         lines += ex.screen.lines()
+    if ex.holdout is not None:
+        lines += ex.holdout.screen_lines()  # the held-out record's (--holdout FILE), labelled
     for nm, why in ex.temperature_unused.items():
         lines.append(f"temperature channel {nm} not used: {why}; the thermal causes are not "
                      "tested on it")
@@ -310,6 +312,9 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
     if ex.screen is not None:
         md += ["## Screened inputs", "", *[ln.strip() + "  " for ln in ex.screen.lines(50)],
                ""]
+    if ex.holdout is not None and ex.holdout.screen is not None:
+        md += ["## Screened inputs of the held-out record", "",
+               *[ln.strip() + "  " for ln in ex.holdout.screen_lines(50)], ""]
     if ex.holdout is not None:
         from avard.core.explain.holdout import DEFINITION
 

@@ -112,13 +112,25 @@ def _write(path: str, text: str) -> None:
         raise DataError(f"cannot write {p}: {exc.strerror}") from exc
 
 
-def _comp_line(name: str, v: dict | None) -> str:
+def _comp_line(name: str, v: dict | None, channel: str = "", unused: str | None = None,
+               refused: bool = False) -> str:
     """One line per axis: the verdict of the temperature test first, then the coefficient and
     the lag, each with its 68 % interval (the lag's marked open when it reaches the longest
-    lag tried)."""
+    lag tried). Without a fit, why: ``unused`` the reason the temperature ``channel`` was not
+    used (``Explanation.temperature_unused``), ``refused`` when the input screen refused its
+    log as a whole (a log whose readings are a DS18B20's in °F), which the user can overrule
+    with ``--temperature-units``."""
     if v is None:
-        return (f"channel {name}: no temperature fit (the channel is constant or the record "
-                "too short)")
+        if unused is None:
+            return (f"channel {name}: no temperature fit (the channel is constant or the "
+                    "record too short)")
+        line = f"channel {name}: no temperature fit: temperature channel '{channel}' not used "
+        line += f"by the screen ({unused})" if refused else f"({unused})"
+        if refused:
+            # the screen's verdict, not the user's: say how to overrule it
+            line += ("; if the log is in °F, --temperature-units F converts it to °C before "
+                     "every rule; if it is °C, --temperature-units C takes it as °C")
+        return line
     lo, hi = v["coefficient_interval"]
     llo, lhi = v["lag_interval_s"]
     z, zt = v["z"], v["threshold"]
@@ -172,10 +184,13 @@ def run(args: argparse.Namespace) -> int:
                           progress=progress_printer())
         an = ex.analysis
         comp = {k: c.compensation_dict() for k, c in ex.channels.items()}
+        unused = ex.temperature_unused.get(args.temperature)
+        refused = ex.screen is not None and args.temperature in ex.screen.refused
     else:
         an = analyze(source, replace(options, workers=_workers(args.workers)),
                      progress=progress_printer())
         comp = {}
+        unused, refused = None, False
     stats = run_statistics(source, an, request)
     if args.json:
         d = an.to_dict()
@@ -187,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         sys.stdout.write(format_table(an) + "\n")
         for k, v in comp.items():
-            sys.stdout.write(_comp_line(k, v) + "\n")
+            sys.stdout.write(_comp_line(k, v, args.temperature, unused, refused) + "\n")
         if stats is not None:
             sys.stdout.write(statistics_table(stats) + "\n")
     writers = {"kalibr": kalibr_yaml, "csv": adev_csv, "psd": psd_csv}
