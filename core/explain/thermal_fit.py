@@ -25,13 +25,10 @@ plate, and its smoother regressor took the larger z. At the chosen lag the test'
 regressor's own (``octave_spectra``, ``coupling_test``: the octaves see the same slow noise,
 near one number for a trend under red noise), its threshold the t of the degrees of freedom
 that se rests on. Under red noise the EDF model is too optimistic (the noise differences are
-not independent across a slow regressor), so the test's se is the larger of that se and a
-delete-a-group jackknife over 10 contiguous parts (``jackknife_tempco``: its parts can be
-shorter than the noise's correlation at the regressor's period), z = ĉ/se; ĉ's own
-standard error (its 68 % interval) is the root mean square of the jackknife's and the
-regressor's analytic se read at the spectrum's own level (``coefficient_se``: two estimates
-of one variance, averaged, where their larger is an upper bound), and the lag's 68 %
-interval is the lag's own delete-a-group
+not independent across a slow regressor), so the reported standard error of ĉ is the larger
+of that se and a delete-a-group jackknife over 10 contiguous parts
+(``jackknife_tempco``: its parts can be shorter than the noise's correlation at the
+regressor's period), z = ĉ/se, and the lag's 68 % interval is the lag's own delete-a-group
 jackknife (``lag_interval``); the parts hold the Allan differences whose middle they hold,
 at every octave (``octave_sums_by_part``). Test: z ≥ ``Z_TEMPERATURE`` (5: the lag and
 channel search look at ≈ 50 correlated trials), or the t of the se's degrees of freedom at
@@ -993,19 +990,19 @@ def _jackknife_se(whole: CovView, rest: list[CovView], min_tau_s: float,
 
 
 def coefficient_se(se_jk: float, se_analytic: float) -> float:
-    """The standard error of ĉ for its 68 % interval from its two estimates: the
-    delete-a-group jackknife ``se_jk`` (model-free, G − 1 degrees of freedom) and the
-    regressor's analytic ``se_analytic`` (``CouplingTest.se_interval``): the root mean square,
-    √((se_jk² + se_analytic²)/2), the average of two estimates of one variance.
+    """The standard error of ĉ for its 68 % interval from its two estimates, the
+    delete-a-group jackknife ``se_jk`` and the regressor's analytic ``se_analytic``
+    (``CouplingTest.se_interval``): the larger.
 
-    Not their larger: each scatters about the error's deviation (the jackknife's by about
-    1/√(2(G − 1)) ≈ 24 %), and the larger of two such draws is above it by construction, so
-    an interval of ± the larger held the truth more often than 68 % on every class of the
-    adversary's generator. The average still keeps half of the analytic variance where the
-    jackknife's parts are too short for the noise's correlation (its se too small), and half
-    of the jackknife's where the analytic model misses a noise. Infinite or NaN where either
-    is: no interval where one estimate could not be made."""
-    return math.sqrt(0.5 * (se_jk * se_jk + se_analytic * se_analytic))
+    The jackknife's parts can be shorter than the noise's correlation at the regressor's
+    period (its se then too small), the analytic model can miss a noise. Where both are
+    right the larger of the two scattered estimates is above the deviation (by about half
+    their spread), but the interval is ± one se on an error whose se is itself estimated,
+    and the lag's share (delta method) falls short where the coefficient trades with a long
+    lag: the root mean square of the two in its place lowered the coverage on every regime
+    of the adversary's generator and further below 68 % where it was short
+    (docs/log/2026-11-28-coef26.md). Infinite where either is."""
+    return max(se_jk, se_analytic)
 
 
 def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
@@ -1583,9 +1580,8 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     se_jk = _jackknife_se(*views, mt)[1]
     # the test reads its own combination of the octaves (``coupling_test``), with its own
     # jackknife: the larger of the two se, as the jackknife's parts may be shorter than the
-    # noise's correlation at the regressor's period, where it is too small itself (a
-    # conservative test); the interval is ĉ's, an estimate of its scatter, not a bound on it:
-    # ``coefficient_se`` of its jackknife and its analytic se at the spectrum's level
+    # noise's correlation at the regressor's period, where it is too small itself; the
+    # interval is ĉ's, with the spectrum's level from the AVAR's slope (``coefficient_se``)
     c_t, se_t, se_jk_t = c, test.se, se_jk
     if test.weights:
         c_t, se_t = test.c_test, test.se_test

@@ -24,8 +24,8 @@ the interval on ≥ 100 records, and on seeds it was not developed on.
 ``se`` prints, per regime, the coefficient's error scatter beside the parts of its standard
 error (``thermal_fit.coefficient_se``'s two estimates, the delete-a-group jackknife's and the
 analytic one, and the lag's share by the delta method), each as a ratio to the scatter, and
-the coverage of the interval from each rule: the two estimates' rms (what explain prints),
-their larger (the rule before coef26), either alone.
+the coverage of the interval from each rule: the two estimates' larger (what explain prints),
+their root mean square, either alone.
 
 ``cr`` prints, per regime, the lags' scatter beside the mean Cramér–Rao deviation of the lag
 in each record's own noise (``lag_information_sd``) and the coverage the intervals would have
@@ -258,7 +258,7 @@ def se_parts(out: Path, regimes: list[str]) -> list[str]:
         return got
 
     lines = ["| regime | records | ĉ − c SD | jackknife / SD | analytic / SD | lag's share / SD | "
-             "in 68 %: rms (printed) | larger | jackknife | analytic |",
+             "in 68 %: larger (printed) | rms | jackknife | analytic |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     tf.coefficient_se = spy
     try:
@@ -282,8 +282,8 @@ def se_parts(out: Path, regimes: list[str]) -> list[str]:
                 return f"{float(np.mean(np.abs(e) <= np.hypot(se, lag))):.1%}"
 
             lines.append(f"| {rg} | {len(e)} | {sd:.3g} | {rel(jk):.2f} | {rel(an):.2f} | "
-                         f"{rel(lag):.2f} | {held(np.sqrt(0.5 * (jk**2 + an**2)))} | "
-                         f"{held(np.maximum(jk, an))} | {held(jk)} | {held(an)} |")
+                         f"{rel(lag):.2f} | {held(np.maximum(jk, an))} | "
+                         f"{held(np.sqrt(0.5 * (jk**2 + an**2)))} | {held(jk)} | {held(an)} |")
             print(lines[-1], flush=True)
     finally:
         tf.coefficient_se = real
