@@ -77,6 +77,7 @@ __all__ = [
     "Z_TEMPERATURE",
     "ThermalFit",
     "allan2",
+    "coefficient_se",
     "compensated_avar",
     "fit_thermal",
     "fit_thermal_axes",
@@ -989,6 +990,22 @@ def _jackknife_se(whole: CovView, rest: list[CovView], min_tau_s: float,
     return c_all, math.sqrt((g - 1) / g * float(np.sum((c - c.mean()) ** 2)))
 
 
+def coefficient_se(se_jk: float, se_analytic: float) -> float:
+    """The standard error of ĉ for its 68 % interval from its two estimates, the
+    delete-a-group jackknife ``se_jk`` and the regressor's analytic ``se_analytic``
+    (``CouplingTest.se_interval``): the larger.
+
+    The jackknife's parts can be shorter than the noise's correlation at the regressor's
+    period (its se then too small), the analytic model can miss a noise. Where both are
+    right the larger of the two scattered estimates is above the deviation (by about half
+    their spread), but the interval is ± one se on an error whose se is itself estimated,
+    and the lag's share (delta method) falls short where the coefficient trades with a long
+    lag: the root mean square of the two in its place lowered the coverage on every regime
+    of the adversary's generator and further below 68 % where it was short
+    (docs/log/2026-11-28-coef26.md). Infinite where either is."""
+    return max(se_jk, se_analytic)
+
+
 def signal_avar_on(d: NDArray, rate_hz: float, tau: NDArray) -> NDArray[np.float64]:
     """AVAR ((m/s²)²) a slow signal ``d`` (sampled at ``rate_hz``) puts into a record, at the
     averaging times ``tau`` of the full-rate analysis: measured by the streaming estimator on
@@ -1565,14 +1582,14 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
     # the test reads its own combination of the octaves (``coupling_test``), with its own
     # jackknife: the larger of the two se, as the jackknife's parts may be shorter than the
     # noise's correlation at the regressor's period, where it is too small itself; the
-    # interval is ĉ's, with the spectrum's level from the AVAR's slope
+    # interval is ĉ's, with the spectrum's level from the AVAR's slope (``coefficient_se``)
     c_t, se_t, se_jk_t = c, test.se, se_jk
     if test.weights:
         c_t, se_t = test.c_test, test.se_test
         se_jk_t = _jackknife_se(*views, mt, test.weights)[1]
     se_test = max(se_jk_t, se_t)
     z = abs(c_t) / se_test if se_test > 0 and math.isfinite(c_t) else 0.0
-    se = max(se_jk, test.se_interval)
+    se = coefficient_se(se_jk, test.se_interval)
     lag_lo, lag_hi, open_lo, open_hi = lag_interval(scan, k)
     # ĉ is the coefficient at the chosen lag; the lag is an estimate too, and for a lag long
     # against the cycle (ωL ≫ 1) the two trade off (c/√(1 + ω²L²) is what the data fix):

@@ -6,6 +6,7 @@ project), in several lag regimes. Issue 23's bar: each parameter inside its 68 %
     OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py cache DIR REGIME N [SEED0]
     OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py score DIR [REGIME ...]
     OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py cr DIR [REGIME ...]
+    OMP_NUM_THREADS=1 nice .venv/bin/python docs/scripts/lag_coverage.py se DIR [REGIME ...]
 
 ``cache`` makes N records of REGIME, runs ``explain_file`` on each up to the thermal fit and
 keeps that fit's inputs (the slow view, the temperature channels, their screened holes) in
@@ -19,6 +20,12 @@ Forty records know a coverage of 68 % to ±7.4 points (its binomial standard err
 heavy-tailed lag's scatter to worse: seeds 0–39 of ``lag60q`` put the lags' scatter at 1.5×
 the jackknife's half-width, 140 other seeds (``cache DIR lag60q 140 100``) at 0.92×. Judge
 the interval on ≥ 100 records, and on seeds it was not developed on.
+
+``se`` prints, per regime, the coefficient's error scatter beside the parts of its standard
+error (``thermal_fit.coefficient_se``'s two estimates, the delete-a-group jackknife's and the
+analytic one, and the lag's share by the delta method), each as a ratio to the scatter, and
+the coverage of the interval from each rule: the two estimates' larger (what explain prints),
+their root mean square, either alone.
 
 ``cr`` prints, per regime, the lags' scatter beside the mean Cramér–Rao deviation of the lag
 in each record's own noise (``lag_information_sd``) and the coverage the intervals would have
@@ -237,6 +244,52 @@ def cr(out: Path, regimes: list[str], shares=(0.0, 0.764, 1.0)) -> None:
               f"mean half-width {np.mean(hi - lo) / 2:.3g} s; " + ", ".join(cov), flush=True)
 
 
+def se_parts(out: Path, regimes: list[str]) -> list[str]:
+    """The coefficient's standard error in its parts against its error's scatter (module
+    doc's ``se``)."""
+    from avard.core.explain import thermal_fit as tf
+
+    real = tf.coefficient_se
+    calls: list[tuple[float, float, float]] = []
+
+    def spy(se_jk: float, se_analytic: float) -> float:
+        got = real(se_jk, se_analytic)
+        calls.append((se_jk, se_analytic, got))
+        return got
+
+    lines = ["| regime | records | ĉ − c SD | jackknife / SD | analytic / SD | lag's share / SD | "
+             "in 68 %: larger (printed) | rms | jackknife | analytic |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    tf.coefficient_se = spy
+    try:
+        for rg in regimes:
+            rows = []
+            for f in _records(out, rg):
+                calls.clear()
+                t, th = fit_x(f)
+                jk, an, rms = calls[0]  # the x axis's, the first _pick
+                lag = math.sqrt(max(th.coef_se**2 - rms**2, 0.0))
+                rows.append((th.coefficient - t["coefficient"], jk, an, lag))
+            if not rows:
+                continue
+            e, jk, an, lag = np.array(rows, dtype=float).T
+            sd = float(np.std(e, ddof=1))
+
+            def rel(x, sd=sd):
+                return float(np.sqrt(np.mean(x**2))) / sd
+
+            def held(se, e=e, lag=lag):
+                return f"{float(np.mean(np.abs(e) <= np.hypot(se, lag))):.1%}"
+
+            lines.append(f"| {rg} | {len(e)} | {sd:.3g} | {rel(jk):.2f} | {rel(an):.2f} | "
+                         f"{rel(lag):.2f} | {held(np.maximum(jk, an))} | "
+                         f"{held(np.sqrt(0.5 * (jk**2 + an**2)))} | {held(jk)} | {held(an)} |")
+            print(lines[-1], flush=True)
+    finally:
+        tf.coefficient_se = real
+    return lines
+
+
 def main(argv: list[str]) -> int:
     if argv[0] == "cache":
         cache(Path(argv[1]), argv[2], int(argv[3]), int(argv[4]) if len(argv) > 4 else 0)
@@ -244,6 +297,8 @@ def main(argv: list[str]) -> int:
         score(Path(argv[1]), argv[2:] or list(REGIMES))
     elif argv[0] == "cr":
         cr(Path(argv[1]), argv[2:] or list(REGIMES))
+    elif argv[0] == "se":
+        se_parts(Path(argv[1]), argv[2:] or list(REGIMES))
     else:
         print(__doc__)
         return 2
