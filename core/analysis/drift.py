@@ -99,7 +99,8 @@ HALVES_LEVEL = 0.01
 BARTLETT_DOF = (0.0, 0.63, 1.48, 2.73, 4.63, 7.97, 14.3, 27.5, 65.7, 90.1, 170.0)
 BARTLETT = (1.0, 1.0, 1.101, 1.402, 1.436, 1.308, 1.033, 1.002, 1.0, 1.105, 1.077)
 #: The interval's rise (``interval_rise``): the same ratio's 68.3 % point over χ²(1)'s (1),
-#: by the same ν, never below 1; where the slope's 68 % interval ends on its profile −2 ln L.
+#: by the same ν, never below 1; where the slope's 68 % interval ends on its profile −2 ln L
+#: (each slope b at the ν of the means less b·t, its own null's: ``drift_likelihood``).
 #: Made by the same run as ``BARTLETT`` (same draws, same bins), 2026-11-28. Why not β:
 #: β is the ratio's 1 % tail, and where the walk holds a few directions the ratio's centre
 #: is inflated more than its tail (K's profile takes a share of the slope's scatter on

@@ -37,8 +37,9 @@ def test_a_drift_moves_the_interval_and_does_not_change_it(seed: int) -> None:
     """The same noise with and without a drift d (the generator's drift, whose AVAR equals
     the noise's at T/20), under the same N, B and K range: the likelihood of slope b on
     the drift record is the driftless one's at b − d, so the interval is the driftless
-    one moved by d, its width the same (to the bisection's precision). On main the drift record's interval was judged at
-    the ν the drift raised (rise about 1 against 1.7–2.9): narrower by a fifth or more."""
+    one moved by d, its width the same (to the bisection's precision). On main the drift
+    record's interval was judged at the ν the drift raised (rise about 1 against 1.8–2.6):
+    its ends moved by a tenth to a fifth of the width."""
     lv = gen.levels(N12, 300.0, 10_000.0, RATE, drift_at=1 / 20)
     y, clean = gen.record(lv, N12, np.random.default_rng([seed, 2611]))
     noise = y - clean
