@@ -308,8 +308,10 @@ class DriftLikelihood:
     test's ``bartlett`` β, nor the rise at the record's own ``walk_dof``, which a true drift
     raises), from the lowest such b to the highest; ``end_rises`` the rise at each end and
     ``interval_rise`` the one at the record's ν (the null of no drift); ``slope_se`` its
-    half-width; ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one line per
-    half over one line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``);
+    half-width; ``slope_sd`` the slope's standard error, the half-width of the profile's
+    Δ ≤ 1 interval, what a resolved ramp's uncertainty is propagated with
+    (``resolve_drift``); ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one
+    line per half over one line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``);
     ``blocks`` used, ``record_s`` they span."""
 
     z: float
@@ -327,6 +329,7 @@ class DriftLikelihood:
     bartlett: float = 1.0
     interval_rise: float = 1.0
     end_rises: tuple[float, float] = (1.0, 1.0)
+    slope_sd: float = math.nan
 
     @property
     def slope_se(self) -> float:
@@ -411,13 +414,19 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
         prof, ks, w0, w1[:, -1], slope,
         max(wide * math.sqrt(max(rise, max(INTERVAL_RISE))), abs(slope) * 1e-6),
         lambda k: interval_rise(walk_directions(prof.lam, float(k))))
+    # the slope's standard error, what a resolved ramp's uncertainty is propagated with:
+    # the profile's Δ ≤ 1 half-width (its curvature), not the 68 % interval's, which is
+    # set for coverage under the ratio's inflated centre and is wider than the slope's
+    # scatter (a drift moves neither)
+    lo1, hi1, _r = _crossings(prof, ks, w0, w1[:, -1], slope,
+                              max(wide, abs(slope) * 1e-6), 1.0)
     # one line per half (a step makes two flat halves, a drift one slope)
     half = (t >= np.median(t)).astype(float)
     w2 = np.column_stack([w0, prof.white(np.column_stack([half, tc, tc * half]))])
     _k2, h2 = prof.best(ks, w2)
     return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
                            float(ks[j]), k_hi, float(top), max(0.0, h1 - h2), len(t),
-                           record_s, nu, beta, rise, end_rises)
+                           record_s, nu, beta, rise, end_rises, 0.5 * (hi1 - lo1))
 
 
 def _reml_range(ks: NDArray, nll: NDArray) -> tuple[float, float, float]:
@@ -769,7 +778,10 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
         return _no_ramp(fit, allan, lik, refit, level), lik
     tau = np.asarray(allan.tau, dtype=float)
     g = tau**2 / 2.0
-    r, se = abs(lik.slope), lik.slope_se
+    # the ramp's uncertainty propagated with the slope's standard error (its scatter), not
+    # the 68 % interval's half-width (slope26: that made the AVAR intervals beside a
+    # resolved ramp wider than their estimates scatter at the longest τ)
+    r, se = abs(lik.slope), lik.slope_sd if math.isfinite(lik.slope_sd) else lik.slope_se
     var_r2 = 4.0 * r * r * se**2 + 2.0 * se**4
     # The AVAR of the record less the fitted line, not the AVAR less R̂²τ²/2: each Allan
     # difference loses R̂τ, so the variance loses R̂τ·D(τ) − R̂²τ²/2 with D the mean

@@ -58,6 +58,10 @@ def test_a_drift_moves_the_interval_and_does_not_change_it(seed: int) -> None:
     assert math.isclose(drift.slope - d, plain.slope, abs_tol=1e-3 * width)
     assert math.isclose(drift.slope_lo - d, plain.slope_lo, abs_tol=0.02 * width)
     assert math.isclose(drift.slope_hi - d, plain.slope_hi, abs_tol=0.02 * width)
+    # the standard error a resolved ramp is propagated with (Δ ≤ 1) does not move either,
+    # and is narrower than the 68 % interval's half-width (the ratio's centre is inflated)
+    assert math.isclose(drift.slope_sd, plain.slope_sd, rel_tol=0.02)
+    assert plain.slope_sd < plain.slope_se
 
 
 def test_each_end_stands_at_the_rise_of_its_own_null() -> None:
