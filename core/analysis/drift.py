@@ -99,7 +99,8 @@ HALVES_LEVEL = 0.01
 BARTLETT_DOF = (0.0, 0.63, 1.48, 2.73, 4.63, 7.97, 14.3, 27.5, 65.7, 90.1, 170.0)
 BARTLETT = (1.0, 1.0, 1.101, 1.402, 1.436, 1.308, 1.033, 1.002, 1.0, 1.105, 1.077)
 #: The interval's rise (``interval_rise``): the same ratio's 68.3 % point over χ²(1)'s (1),
-#: by the same ν, never below 1; where the slope's 68 % interval ends on its profile −2 ln L.
+#: by the same ν, never below 1; where the slope's 68 % interval ends on its profile −2 ln L
+#: (each slope b at the ν of the means less b·t, its own null's: ``drift_likelihood``).
 #: Made by the same run as ``BARTLETT`` (same draws, same bins), 2026-11-28. Why not β:
 #: β is the ratio's 1 % tail, and where the walk holds a few directions the ratio's centre
 #: is inflated more than its tail (K's profile takes a share of the slope's scatter on
@@ -234,11 +235,21 @@ class _Profile:
                       ) -> NDArray[np.float64]:
         """−2 ln L at each of ``slopes`` (the slope column ``wt`` fixed, the columns ``w0``
         fitted), K profiled over ``ks``: the slope's profile likelihood."""
+        return self.slope_profile_k(ks, w0, wt, slopes)[0]
+
+    def slope_profile_k(self, ks: NDArray, w0: NDArray, wt: NDArray, slopes: NDArray
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``slope_profile`` and, at each slope b, the K it is profiled at: the K the
+        means less the line b·t want under ``w0``'s columns alone (with ``w0`` the offset,
+        the drift test's offset-only K of those means)."""
         basis = self._over_k(ks, w0)  # the columns' side is the same at every slope
         out = np.full(len(slopes), np.inf)
+        at = np.zeros(len(slopes))
         for i, b in enumerate(slopes):
-            out[i] = float(np.min(self._nll_each_k(basis, self.wy - b * wt, _solve_strict)))
-        return out
+            nll = self._nll_each_k(basis, self.wy - b * wt, _solve_strict)
+            j = int(np.argmin(nll))
+            out[i], at[i] = float(nll[j]), float(ks[j])
+        return out, at
 
     def _over_k(self, ks: NDArray, wx: NDArray) -> _OverK:
         """The columns ``wx`` weighted for every K of ``ks`` and their normal matrices."""
@@ -291,11 +302,16 @@ class DriftLikelihood:
     ``k_drift``, the K the likelihood picks beside it (``k_walk``: the K the walk alone
     wants; ``k_drift_hi`` the top of its Δ(−2 ln L) ≤ 1 range beside the slope, the most
     walk the time domain allows), ``slope_lo``/``slope_hi`` its 68 % profile-likelihood
-    interval (K profiled at every slope: the walk's uncertainty is in it; it ends where
-    the profile has risen by ``interval_rise``, the ratio's 68.3 % point under the null at
-    its ``walk_dof``, not by 1 nor by the test's ``bartlett`` β), ``slope_se`` its
-    half-width; ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one line per
-    half over one line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``);
+    interval (K profiled at every slope: the walk's uncertainty is in it): the slopes b
+    whose profile stands above its minimum by at most the ratio's 68.3 % point under the
+    null b (``interval_rise`` at the walk directions of the means less b·t; not 1, nor the
+    test's ``bartlett`` β, nor the rise at the record's own ``walk_dof``, which a true drift
+    raises), from the lowest such b to the highest; ``end_rises`` the rise at each end and
+    ``interval_rise`` the one at the record's ν (the null of no drift); ``slope_se`` its
+    half-width; ``slope_sd`` the slope's standard error, the half-width of the profile's
+    Δ ≤ 1 interval, what a resolved ramp's uncertainty is propagated with
+    (``resolve_drift``); ``k_top`` the K grid's top; ``halves_gain``: Δ(−2 ln L) of one
+    line per half over one line (a step, not a drift, past χ²(2) at ``HALVES_LEVEL``);
     ``blocks`` used, ``record_s`` they span."""
 
     z: float
@@ -312,6 +328,8 @@ class DriftLikelihood:
     walk_dof: float = 0.0
     bartlett: float = 1.0
     interval_rise: float = 1.0
+    end_rises: tuple[float, float] = (1.0, 1.0)
+    slope_sd: float = math.nan
 
     @property
     def slope_se(self) -> float:
@@ -386,17 +404,29 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     wide = math.sqrt(max(float(prof.fit(float(ks[i]), w1)[2][-1, -1]), 0.0))
     # the interval at the ratio's own 68.3 % point (``interval_rise``), not at Δ ≤ 1 nor
     # at Δ ≤ β: where the walk holds a few directions the ratio's centre is inflated more
-    # than its 1 % tail β, and an interval at Δ ≤ β under-covered (drift25, slope25)
+    # than its 1 % tail β, and an interval at Δ ≤ β under-covered (drift25, slope25). Each
+    # slope b is judged at the rise of its own null, ν of the means less b·t (the test
+    # inverted), not at the record's ν: a true drift raises the record's (the offset-only K
+    # takes the drift), which put drift records on a rise of about 1 and their interval
+    # held the true slope far less often than a driftless record's (slope26)
     rise = interval_rise(nu)
-    lo, hi = _crossings(prof, ks, w0, w1[:, -1], slope,
-                        max(wide * math.sqrt(rise), abs(slope) * 1e-6), rise)
+    lo, hi, end_rises = _crossings(
+        prof, ks, w0, w1[:, -1], slope,
+        max(wide * math.sqrt(max(rise, max(INTERVAL_RISE))), abs(slope) * 1e-6),
+        lambda k: interval_rise(walk_directions(prof.lam, float(k))))
+    # the slope's standard error, what a resolved ramp's uncertainty is propagated with:
+    # the profile's Δ ≤ 1 half-width (its curvature), not the 68 % interval's, which is
+    # set for coverage under the ratio's inflated centre and is wider than the slope's
+    # scatter (a drift moves neither)
+    lo1, hi1, _r = _crossings(prof, ks, w0, w1[:, -1], slope,
+                              max(wide, abs(slope) * 1e-6), 1.0)
     # one line per half (a step makes two flat halves, a drift one slope)
     half = (t >= np.median(t)).astype(float)
     w2 = np.column_stack([w0, prof.white(np.column_stack([half, tc, tc * half]))])
     _k2, h2 = prof.best(ks, w2)
     return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
                            float(ks[j]), k_hi, float(top), max(0.0, h1 - h2), len(t),
-                           record_s, nu, beta, rise)
+                           record_s, nu, beta, rise, end_rises, 0.5 * (hi1 - lo1))
 
 
 def _reml_range(ks: NDArray, nll: NDArray) -> tuple[float, float, float]:
@@ -519,23 +549,50 @@ def interval_rise(walk_dof: float) -> float:
 
 
 def _crossings(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, slope: float,
-               span: float, rise: float = 1.0) -> tuple[float, float]:
-    """Where the slope's profile −2 ln L rises by ``rise`` (``interval_rise``: 1 for a
-    χ²(1) ratio) either side of its minimum (searched over ±4·``span``, widened while it
-    has not risen that far at the ends)."""
+               span: float, rise: float | Callable[[float], float] = 1.0
+               ) -> tuple[float, float, tuple[float, float]]:
+    """The slopes b whose profile −2 ln L stands at most ``rise`` above its minimum
+    (searched over ±4·``span`` about ``slope``, widened while the ends are still inside):
+    (lowest, highest, the rise at each). ``rise`` is a number (1 for a χ²(1) ratio) or a
+    function of the K each b is profiled at, the offset-only K of the means less b·t
+    (``_Profile.slope_profile_k``): each b tested at the rise of its own null
+    (``drift_likelihood``)."""
+    rise_of = rise if callable(rise) else (lambda _k, r=float(rise): r)
     for _ in range(4):
-        grid = slope + span * np.linspace(-4.0, 4.0, 81)
-        prof_ = prof.slope_profile(ks, w0, wt, grid)
-        k = int(np.argmin(prof_))
-        lim = float(prof_[k]) + rise
-        if prof_[0] > lim and prof_[-1] > lim:
-            below = np.flatnonzero(prof_ <= lim)
-            a, b = int(below[0]), int(below[-1])
-            lo = float(np.interp(lim, [prof_[a], prof_[a - 1]], [grid[a], grid[a - 1]]))
-            hi = float(np.interp(lim, [prof_[b], prof_[b + 1]], [grid[b], grid[b + 1]]))
-            return lo, hi
+        grid = slope + span * np.linspace(-4.0, 4.0, 161)
+        prof_, at = prof.slope_profile_k(ks, w0, wt, grid)
+        least = float(np.min(prof_))
+        over = prof_ - least - np.array([rise_of(k) for k in at])  # ≤ 0 inside
+        if over[0] > 0 and over[-1] > 0:
+            inside = np.flatnonzero(over <= 0)
+            a, b = int(inside[0]), int(inside[-1])
+            lo, r_lo = _edge(prof, ks, w0, wt, least, rise_of, grid[a], grid[a - 1])
+            hi, r_hi = _edge(prof, ks, w0, wt, least, rise_of, grid[b], grid[b + 1])
+            return lo, hi, (r_lo, r_hi)
         span *= 3.0
-    return -math.inf, math.inf
+    return -math.inf, math.inf, (math.nan, math.nan)
+
+
+def _edge(prof: _Profile, ks: NDArray, w0: NDArray, wt: NDArray, least: float,
+          rise_of: Callable[[float], float], inside: float, outside: float
+          ) -> tuple[float, float]:
+    """The end of the slopes ``_crossings`` keeps between ``inside`` (kept) and
+    ``outside`` (not), by bisection on the profile itself (the rise of a slope's own null
+    steps where its K does, so interpolating between grid points would not find it), and
+    the rise there."""
+    r_in = math.nan
+    for _ in range(30):
+        mid = 0.5 * (inside + outside)
+        p, k = prof.slope_profile_k(ks, w0, wt, np.array([mid]))
+        r = rise_of(float(k[0]))
+        if float(p[0]) - least <= r:
+            inside, r_in = mid, r
+        else:
+            outside = mid
+    if math.isnan(r_in):
+        k = prof.slope_profile_k(ks, w0, wt, np.array([inside]))[1]
+        r_in = rise_of(float(k[0]))
+    return float(inside), float(r_in)
 
 
 def _block_sums(a: NDArray, b: int) -> NDArray[np.float64]:
@@ -721,7 +778,10 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
         return _no_ramp(fit, allan, lik, refit, level), lik
     tau = np.asarray(allan.tau, dtype=float)
     g = tau**2 / 2.0
-    r, se = abs(lik.slope), lik.slope_se
+    # the ramp's uncertainty propagated with the slope's standard error (its scatter), not
+    # the 68 % interval's half-width (slope26: that made the AVAR intervals beside a
+    # resolved ramp wider than their estimates scatter at the longest τ)
+    r, se = abs(lik.slope), lik.slope_sd if math.isfinite(lik.slope_sd) else lik.slope_se
     var_r2 = 4.0 * r * r * se**2 + 2.0 * se**4
     # The AVAR of the record less the fitted line, not the AVAR less R̂²τ²/2: each Allan
     # difference loses R̂τ, so the variance loses R̂τ·D(τ) − R̂²τ²/2 with D the mean

@@ -21,9 +21,10 @@ def test_the_slope_interval_ends_where_the_profile_has_risen_by_the_rise() -> No
     """A driftless 12 h record of the independent generator (white + flicker, corner 300 s,
     + walk, corner 10 000 s) whose walk holds a few of the block means' directions (β about
     1.4): the slope's profile −2 ln L (K profiled, computed here apart from the test) stands
-    ``interval_rise`` above its minimum at both ends of the interval, so the interval is
-    √rise times as wide as the Δ = 1 one. (drift25 asserted β here; slope25 moved the
-    interval's end from β to the ratio's 68.3 % point.)"""
+    above its minimum at each end of the interval by ``interval_rise`` at that end's own
+    null (ν of the means less that slope, ``end_rises``), so the interval is √rise times
+    as wide as the Δ = 1 one. (drift25 asserted β here; slope25 moved the interval's end
+    from β to the ratio's 68.3 % point at the record's ν, slope26 to each end's own.)"""
     n, rate = 43_200, 1.0
     lv = gen.levels(n, 300.0, 10_000.0, rate)
     y, _clean = gen.record(lv, n, np.random.default_rng([7, 12]))
@@ -45,10 +46,14 @@ def test_the_slope_interval_ends_where_the_profile_has_risen_by_the_rise() -> No
     least = float(np.min(prof.slope_profile(ks, w0, wt, grid)))
     ends = prof.slope_profile(ks, w0, wt, np.array([lik.slope_lo, lik.slope_hi])) - least
     assert lik.interval_rise == dr.interval_rise(lik.walk_dof)
-    np.testing.assert_allclose(ends, lik.interval_rise, rtol=0.03)
+    # each end at the rise of its own null (slope26: ν of the means less that slope)
+    k_end = prof.slope_profile_k(ks, w0, wt, np.array([lik.slope_lo, lik.slope_hi]))[1]
+    own = [dr.interval_rise(dr.walk_directions(prof.lam, float(k))) for k in k_end]
+    np.testing.assert_allclose(lik.end_rises, own, rtol=1e-9)
+    np.testing.assert_allclose(ends, lik.end_rises, rtol=0.03)
     # the Δ = 1 interval lies inside, by about √rise
     one = prof.slope_profile(ks, w0, wt, lik.slope + (lik.slope_hi - lik.slope) /
-                             math.sqrt(lik.interval_rise) * np.array([1.0])) - least
+                             math.sqrt(lik.end_rises[1]) * np.array([1.0])) - least
     assert 0.9 < float(one[0]) < 1.1
 
 
