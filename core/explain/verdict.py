@@ -9,9 +9,12 @@ A χ² test of the extended fit, at ``ALPHA`` (1 %):
   χ²(n), n the held-out τ: each τ's residual weighed by the variance of the measurement and
   of the prediction, the latter the noise terms' and the claimed mechanism's parameters,
   fitted on the other half, carried to the predicted AVAR (``holdout.Fold.chi2_ext_pred``),
-  so a model that describes the sensor gives χ² ≈ n without a ratio over n that would also
-  hide a wrong one; not applied to an axis whose claims are only events (a warm-up, a step
-  predicts nothing in other data, by design).
+  and no ratio over n (one that excused correct records also hid wrong ones). The
+  prediction's variance from the noise terms' choice (flicker or random walk at the longest τ
+  of a half) and from a screened temperature log's interpolation is not carried, so a
+  described sensor still fails it somewhat more often than at ``ALPHA``: it then says
+  "unexplained" and keeps its intervals (below). Not applied to an axis whose claims are only
+  events (a warm-up, a step predicts nothing in other data, by design).
 
 When either fails, the axis is **unexplained**: one line beside the gain gives χ²/dof with its
 p-value, the held-out χ²/n with its p-value and the τ ranges where the extended model still
