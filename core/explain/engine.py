@@ -324,7 +324,9 @@ class ChannelExplanation:
         hx: tuple[float | None, int] = (None, 0)
         missing: str | None = None
         if held is not None and held.folds and held.note is None:
-            hx = (held.chi2_ext, held.n_points)
+            # with the prediction's own uncertainty: the mechanism's parameters were fitted
+            # on the other half (``holdout.Fold.chi2_ext_pred``)
+            hx = (held.chi2_ext_pred, held.n_points)
         elif held is not None and held.causes and held.note is None:
             # asked, a mechanism to predict, and no fold ran: the in-sample χ² is not the test
             missing = held.reason or "no held-out fold could be fitted"

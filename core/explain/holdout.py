@@ -110,10 +110,16 @@ class Fold:
     chi2_ext: float
     n_points: int
     tau_range_s: tuple[float, float]
+    #: ``chi2_ext`` with the uncertainty of the claimed mechanism's prediction added to the
+    #: covariance (``_prediction_cov``): the verdict's held-out test. ``chi2_ext`` (its
+    #: parameters taken as exact, as the base model's prediction is) makes the gain, so a
+    #: poorly determined mechanism gains nothing by its own uncertainty. NaN: not measured.
+    chi2_ext_pred: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         return {"fit_part": self.fit_part, "heldout_part": self.heldout_part,
                 "chi2_base": self.chi2_base, "chi2_extended": self.chi2_ext,
+                "chi2_extended_with_prediction": self.chi2_ext_pred,
                 "n_points": self.n_points, "tau_range_s": list(self.tau_range_s)}
 
 
@@ -133,6 +139,11 @@ class ChannelHoldout:
     @property
     def chi2_ext(self) -> float:
         return float(sum(f.chi2_ext for f in self.folds)) if self.folds else math.nan
+
+    @property
+    def chi2_ext_pred(self) -> float:
+        """``chi2_ext`` with the prediction's own uncertainty (``Fold.chi2_ext_pred``)."""
+        return float(sum(f.chi2_ext_pred for f in self.folds)) if self.folds else math.nan
 
     @property
     def n_points(self) -> int:
@@ -157,7 +168,8 @@ class ChannelHoldout:
 
     def to_dict(self) -> dict[str, Any]:
         return {"causes": self.causes, "chi2_base": self.chi2_base, "note": self.note,
-                "chi2_extended": self.chi2_ext, "n_points": self.n_points,
+                "chi2_extended": self.chi2_ext,
+                "chi2_extended_with_prediction": self.chi2_ext_pred, "n_points": self.n_points,
                 "gain": self.gain, "folds": [f.to_dict() for f in self.folds],
                 "reason": self.reason}
 
@@ -292,13 +304,17 @@ class Claims:
 
 
 Temps = tuple[NDArray, slice] | None
+#: a claimed mechanism's predicted held-out signal changed to the lower and the upper end of
+#: one of its parameters' 68 % intervals (added to the prediction)
+Spread = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 
 def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
              u_fit: Temps, u_held: Temps
-             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float]:
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float, list[Spread]]:
     """(signal on the fit part, its prediction on the held-out part, blocks to leave out at
-    the held-out part's start, the longest lag of the temperature prediction (s)) of the
+    the held-out part's start, the longest lag of the temperature prediction (s), the
+    prediction's changes at the ends of its parameters' 68 % intervals: ``Spread``) of the
     claimed causes. ``u_fit``/``u_held``: (the claimed
     temperature channel of the part's record (°C), the part's slice of it), for the lag
     filter; ``refit``: fit the parameters on the fit part (split) or use the whole record's
@@ -312,6 +328,7 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     d_held = np.zeros(len(held.y))
     skip = 0
     longest = 0.0
+    spread: list[Spread] = []
     wt = c.whole_thermal
     if (c.thermal_channel is not None and u_fit is not None and u_held is not None
             and wt is not None and wt.path is not None and wt.mechanism != "one_lag"):
@@ -323,6 +340,10 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         sh = th0.signal(u_held[0][:, None])[u_held[1]]
         d_fit += sf - sf.mean()
         d_held += sh - sh.mean()
+        # its response's size known to its coefficient's se (θ's own spread is not carried)
+        r = wt.coef_se / abs(wt.coefficient) if wt.coefficient else math.nan
+        if math.isfinite(r) and r > 0:
+            spread.append((-r * (sh - sh.mean()), r * (sh - sh.mean())))
         longest = max(abs(x) for x in wt.path.chosen.theta[:2]) if wt.path.kind in (
             "two_path",) else abs(wt.lag_s)
         if held.first and longest > 0:
@@ -346,6 +367,17 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
             d_fit += coef * (uf - uf.mean())
         uh = lag_filter(u_held[0], lag, held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
+        if math.isfinite(th.coef_se) and th.coef_se > 0:
+            spread.append((-th.coef_se * (uh - uh.mean()), th.coef_se * (uh - uh.mean())))
+        ends = []
+        for lg in (th.lag_lo, th.lag_hi):
+            if math.isfinite(lg) and lg != lag:
+                ul = lag_filter(u_held[0], lg, held.rate(rate_b))[u_held[1]]
+                ends.append(coef * ((ul - ul.mean()) - (uh - uh.mean())))
+            else:
+                ends.append(np.zeros(len(held.y)))
+        if any(e.any() for e in ends):
+            spread.append((ends[0], ends[1]))
         if held.first and lag != 0:
             skip = math.ceil(HELD_SETTLE_LAGS * abs(lag) * held.rate(rate_b))
     if c.warmup and fit.first:
@@ -366,7 +398,7 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
                                     cand.params["size"], t0_s=fit.t0_s)
         elif not refit and c.whole_step is not None:
             d_fit += cz.step_signal(len(fit.y), rate_b, *c.whole_step)
-    return d_fit, d_held, skip, longest
+    return d_fit, d_held, skip, longest, spread
 
 
 def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
@@ -385,7 +417,7 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
              if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
     base = fit_noise(av(fit.y, rate_b), extra=extra)
     if c.names:
-        d_fit, d_held, skip, lag = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
+        d_fit, d_held, skip, lag, spread = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
         # the held-out log's holes (the screen's dropouts and stuck runs): the prediction
         # there runs on an interpolated temperature, so they and the lag's settling after
         # them are gaps of both models' held-out Allan variance (as of the thermal fit's
@@ -404,9 +436,12 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ext = fit_noise(av(fit.y - d_fit, rate_b), extra=[*extra, *gm])
         held_var = av(held.y[skip:], held.rate(rate_b), ks)
         held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
+        pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
+                                   lambda y, r: av(y, r, ks))
     else:
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
+        pred_cov = None
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
     r = rate_b / held.rate(rate_b)
@@ -416,7 +451,32 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     nb, ne = cb.n_points, ce.n_points
     if nb != ne or nb == 0:
         raise FitError(f"no common held-out τ in {rng[0]:.3g}…{rng[1]:.3g} s")
-    return Fold(fit.label, held.label, cb.chi2, ce.chi2, nb, rng)
+    pred = (ce.chi2 if pred_cov is None else
+            model_chi2(ext, held_ext, rng, predictive=True, extra_cov=pred_cov).chi2)
+    return Fold(fit.label, held.label, cb.chi2, ce.chi2, nb, rng, pred)
+
+
+def _prediction_cov(y_ext: NDArray, skip: int, rate: float, spread: list[Spread],
+                    avar: AvarOf) -> NDArray[np.float64] | None:
+    """The covariance, over the held-out AVAR's τ, that the claimed mechanism's parameters'
+    uncertainty adds to the extended model's prediction (the delta method): the held-out
+    AVAR with the predicted signal removed, ``y_ext``, changes by g·δp when a parameter p
+    moves by δp; g·σ_p is half the difference of that AVAR with p at the two ends of its
+    68 % interval. Parameters taken as independent (each carries its own end pair).
+
+    Without it a mechanism fitted on one half is held to predict the other as if its
+    parameters were exact, and a correct one fails the held-out test by its own fitting
+    error: the held-out χ² then needs a ratio over n that also hides wrong mechanisms."""
+    if not spread:
+        return None
+    cols = []
+    for lo, hi in spread:
+        a = np.asarray(avar((y_ext - lo)[skip:], rate).var, dtype=float).ravel()
+        b = np.asarray(avar((y_ext - hi)[skip:], rate).var, dtype=float).ravel()
+        g = 0.5 * (b - a)
+        cols.append(np.where(np.isfinite(g), g, 0.0))
+    G = np.column_stack(cols)
+    return np.asarray(G @ G.T, dtype=float)
 
 
 # --------------------------------------------------------------------------------------------

@@ -1222,7 +1222,7 @@ class ModelChi2:
 
 def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | None = None, *,
                predictive: bool = False, min_edf: float = 3.0,
-               min_averages: float = 8.0) -> ModelChi2:
+               min_averages: float = 8.0, extra_cov: NDArray | None = None) -> ModelChi2:
     """χ² of a fixed, already fitted model on (other) Allan variance data; nothing is fitted.
 
     ``model``: a ``fit_noise`` result; ``result``: a single-channel ``AllanResult`` of rate
@@ -1239,6 +1239,8 @@ def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | No
     to C (independent of the data's scatter): the fit's parameter covariance carried to the
     prediction, X·Cov(θ)·Xᵀ, and for each IEEE term the fit left out, a standard error of
     U²/z_present on its θ from its upper limit U (the term is known only to lie below U).
+    ``extra_cov``: a further covariance of the prediction over all of ``result``'s τ (the
+    caller's, e.g. the uncertainty of a removed signal's parameters), added on the points used.
     Returns χ² NaN and n 0 when no τ qualifies.
     """
     idx = _usable(result, min_edf, min_averages, tau_range)
@@ -1263,6 +1265,8 @@ def model_chi2(model: NoiseFit, result: Any, tau_range: tuple[float, float] | No
             if te is not None and not te.present and te.upper:
                 se = te.upper**2 / model.z_present
                 C = C + se**2 * np.outer(X[:, k], X[:, k])
+    if extra_cov is not None:
+        C = C + np.asarray(extra_cov, dtype=float)[np.ix_(idx, idx)]
     r = _whitener(C) @ (var - X @ theta)
     return ModelChi2(float(r @ r), len(idx), tau)
 
