@@ -118,3 +118,134 @@ def test_the_adversarys_dtdt_sizes_follow_this_minimum():
             theirs = gen.rate_min(lines, sig, c, r_zero, lead=c > 0)
             assert theirs == pytest.approx(
                 min_detectable_rate(*nx, REC, ours, c, lead=c > 0), rel=0.01)
+
+
+# ------------------------------------------------------- as explain's fit sees the lines (cand26b)
+
+
+def test_the_analytic_rounding_floor_is_the_one_explain_finds_on_the_record():
+    """``minima.rounding_floor`` (the drive's AVAR against 10× the sawtooth's, on the octave τ
+    2ʲ/rate) is ``thermal_fit.rounding_floor_tau`` on a rounded record of that drive: the
+    floor the fit's τ start at, which the minima below depend on."""
+    from avard.core.explain.thermal_fit import rounding_floor_tau
+    from avard.core.explain.thermal_paths import rounding_floor
+
+    rate, rec = 10.0, 4 * 3600.0
+    t = np.arange(int(rate * rec)) / rate
+    rng = np.random.default_rng(3)
+    for amp, period in ((0.214, 1800.0), (0.09, 1500.0), (0.6, 2400.0)):
+        u = 21.3 + amp * np.sin(2 * math.pi * t / period) + 0.003 * rng.standard_normal(t.size)
+        T = np.round(u / 0.0625) * 0.0625
+        assert rounding_floor(((amp, period),), rate, rec) == pytest.approx(
+            rounding_floor_tau(T, rate), rel=1e-9)
+
+
+def test_the_fits_minimum_is_never_below_the_whole_spectrums():
+    """The fit weighs the lines by what the Allan covariance at τ ≥ the floor sees (W), the
+    noise at each line is σ²: its estimate's non-centrality (ΣW|ΔY|²)²/ΣW²σ²|ΔY|² is at most
+    Σ|ΔY|²/σ² (Cauchy–Schwarz). So on one line a dT/dt term's minimum is the whole
+    spectrum's (W cancels), on several it is no lower, and a floor past the harmonics
+    raises the relay's: its harmonics stop counting."""
+    from avard.core.explain.thermal_paths import (
+        fit_weights,
+        min_detectable_hysteresis_fit,
+        min_detectable_rate_fit,
+        one_lag_separation_fit,
+        relay_harmonics,
+    )
+
+    a, P, c = 0.2, 1800.0, 8e-4
+    one = ((a, P),)
+    assert min_detectable_rate_fit(N, B, K, REC, one, c, True, 204.8) == pytest.approx(
+        min_detectable_rate(N, B, K, REC, one, c, lead=True), rel=2e-3)
+    lines = _triangle(1500.0, 0.7)
+    for lead in (True, False):
+        assert (min_detectable_rate_fit(N, B, K, REC, lines, c, lead, 327.68)
+                >= 0.999 * min_detectable_rate(N, B, K, REC, lines, c, lead=lead))
+    # the relay on a sine: with W ∝ 1/σ² the separation is the whole spectrum's (the
+    # stated minimum on harmonics 3–39, the fundamental within one lag's reach)
+    per = P / np.arange(1, 40)
+    s2 = np.array([_s2(p) for p in per])
+    U = np.zeros(39, complex)
+    U[0] = a
+    R = relay_harmonics(U, 0.05)
+    old = min_detectable_path("hysteresis", N, B, K, REC, a, P)
+    lam = one_lag_separation_fit(per, U, c * U + old * R, 1 / s2, s2)[0]
+    assert lam == pytest.approx(25.0, rel=0.02)
+    h_fit = [min_detectable_hysteresis_fit(N, B, K, REC, P, U[:1], c, 0.05, fl)
+             for fl in (51.2, 204.8, 819.2)]
+    assert old * 0.999 <= h_fit[0] <= h_fit[1] < h_fit[2]
+    # the relay's harmonics are what W weighs less past the floor
+    W = fit_weights(N, B, K, REC, per, 819.2)
+    assert W[4] * s2[4] < 1e-2 * W[0] * s2[0]
+
+
+def test_the_relays_fundamental_counts_only_beyond_one_lags_reach():
+    """A relay switching once a sine drive a·cos θ has moved w back from its extreme turns at
+    cos θ = 1 − w/a after each peak: its +1 window is centred 90° − acos(1 − w/a) ahead of
+    the drive, so its fundamental leads by that (30° at w = a/2). Beside a coupling c the
+    response at the drive's line is c·a + h·R₁: where its phase is within one lag's reach
+    (−90°…asin(1/3) with either sign of c') the one-lag reading takes it whole (λ = 0), and
+    beyond it the distance to the lead-lag's ray is |Y|·sin(φ − asin 1/3)."""
+    from avard.core.explain.thermal_paths import one_lag_separation_fit, relay_harmonics
+
+    a, P = 0.12, 1800.0
+    U = np.array([a + 0j])
+    R1 = relay_harmonics(U, 0.5 * a, k_max=1)[0]
+    assert math.degrees(np.angle(R1)) == pytest.approx(30.0, abs=0.5)
+    assert abs(R1) == pytest.approx(4 / math.pi, rel=1e-3)
+    per, s2 = np.array([P]), np.array([_s2(P)])
+    W = 1.0 / s2
+    h = 6e-5
+    # a coupling of the relay's sign and larger: the phase under asin(1/3)
+    Y = 6e-4 * a + h * R1
+    assert math.degrees(np.angle(Y)) < 19.0
+    assert one_lag_separation_fit(per, U, np.array([Y]), W, s2)[0] < 1e-6
+    # a small coupling: the relay's 30° lead shows, beyond the lead-lag's 19.5°
+    Y = 5e-5 * a + h * R1
+    phi = float(np.angle(Y))
+    assert math.radians(21.0) < phi < math.radians(90.0)
+    want = abs(Y) ** 2 / s2[0] * math.sin(phi - math.asin(1 / 3)) ** 2
+    assert one_lag_separation_fit(per, U, np.array([Y]), W, s2)[0] == pytest.approx(
+        want, rel=1e-3)
+
+
+def test_the_adversarys_fit_minima_are_these():
+    """The adversary's generator (numpy only) recomputes the minima as the fit sees the lines
+    (``adversary_gen.rate_min_fit``, ``hyst_min_fit``, its floor and rounding): held here to
+    the project's ``min_detectable_rate_fit`` and ``min_detectable_hysteresis_fit`` within
+    1 % on its drives (HVAC triangle alone and with the compressor, either sign of c), so a
+    change of the one shows in the other."""
+    from avard.core.explain.thermal_paths import (
+        min_detectable_hysteresis_fit,
+        min_detectable_rate_fit,
+        rounding_floor,
+        rounding_time,
+    )
+
+    from tests.support import adversary_gen as gen
+
+    nx = gen.DEFAULT_NOISE["x"]
+    spec = gen.Spec(kind="dtdt", hours=4.0, rate=12.5, noise=gen.DEFAULT_NOISE)
+    for drive in ({"hvac_period": 1500.0, "hvac_amp": 0.7},
+                  {"hvac_period": 2100.0, "hvac_amp": 0.6, "comp_amp": 0.25,
+                   "comp_period": 800.0}):
+        lines = gen.drive_lines(drive, 1100.0, 45.0)
+        ours = tuple((a, 2 * math.pi / w) for a, w in lines)
+        logged = tuple((a, 2 * math.pi / w) for a, w in gen.drive_lines(drive, 1100.0, 45.0))
+        floor = rounding_floor(logged, 12.5, REC)
+        for c in (9e-4, -9e-4):
+            g_floor, g_c2tc = gen._fit_view(drive, spec, 12.5, REC, c)
+            assert g_floor == floor
+            c2tc = c * c * 0.0625**2 / 12 * rounding_time(logged)
+            assert g_c2tc == pytest.approx(c2tc, rel=1e-9)
+            assert gen.rate_min_fit(lines, REC, nx, c, c > 0, g_floor, g_c2tc) == pytest.approx(
+                min_detectable_rate_fit(*nx, REC, ours, c, c > 0, floor, c2tc), rel=0.01)
+            if "comp_amp" in drive:
+                continue
+            U = gen.triangle_at_die(drive["hvac_period"], drive["hvac_amp"], 1100.0, 45.0)
+            width = 0.5 * abs(U[0])
+            assert gen.hyst_min_fit(U, drive["hvac_period"], REC, nx, c, width, g_floor,
+                                    g_c2tc) == pytest.approx(
+                min_detectable_hysteresis_fit(*nx, REC, drive["hvac_period"], U, c, width,
+                                              floor, c2tc), rel=0.01)

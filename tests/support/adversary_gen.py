@@ -123,6 +123,129 @@ def rate_min(lines, sig, c: float, r0: float, lead: bool) -> float:
     return hi
 
 
+# ------------------------------------------------------- the minima as explain's fit sees them
+# (docs/log/2026-11-28-cand26b.md): the fit regresses Allan covariances at the octave τ from
+# the logged channel's rounding floor up; a line's weight there is W(f) = Σ_k ν_k·g(fτ_k)/r_k
+# (g(x) = sin⁴(πx)/(πx)², a unit sinusoid's AVAR; r_k the one-lag residual's AVAR, the noise
+# and the readings' rounding through the coupling; ν_k its EDF by NIST SP 1065's simple
+# formulas), the closest one-lag reading is the one the fit picks in W, and the size of what
+# it leaves is estimated to a variance Σ W²σ_a²|ΔY|²/(Σ W|ΔY|²)²: the stated minimum is the
+# size where that estimate's z is 5.
+
+def g_allan(x):
+    px = np.pi * np.asarray(x, dtype=float)
+    return np.sin(px) ** 4 / px**2
+
+
+def rounding_time(lines) -> float:
+    """(amplitude K, ω) lines of the logged channel: DS_STEP over its rms slope, ≥ 1 s."""
+    slope = math.sqrt(sum((w * a) ** 2 / 2 for a, w in lines))
+    return max(DS_STEP / slope, 1.0) if slope > 0 else math.inf
+
+
+def rounding_floor(lines, rate: float, t_rec: float) -> float:
+    """The first octave τ (2ʲ/rate) where the logged channel's AVAR reaches 10× its
+    rounding's (DS_STEP²/12)·t_c/τ."""
+    tc = rounding_time(lines)
+    tau = 1.0 / rate
+    while 2 * tau <= t_rec:
+        v = sum(a * a * float(g_allan(tau * w / (2 * math.pi))) for a, w in lines)
+        if v >= 10 * DS_STEP**2 / 12 * tc / tau:
+            return tau
+        tau *= 2
+    return math.inf
+
+
+def fit_weights(freqs, t_rec: float, nbk, floor: float, c2tc: float) -> np.ndarray:
+    n, b, k = nbk
+    f = np.asarray(freqs, dtype=float)
+    out = np.zeros(f.size)
+    tau = floor
+    while math.isfinite(tau) and 2 * tau <= t_rec:
+        x = t_rec / tau
+        parts = ((n * n + c2tc) / tau, TWO_LN2_PI * b * b, k * k * tau / 3)
+        nus = (1.5 * x - 2.0, 5 * x * x / (4 * (x + 3)), x - 3 + 4 / x)
+        den = sum(p * p / max(v, 1.0) for p, v in zip(parts, nus, strict=True))
+        nu = max(sum(parts) ** 2 / den, 1.0)
+        out += nu * g_allan(f * tau) / sum(parts)
+        tau *= 2
+    return out
+
+
+def sep_fit(w, U, Y, W, s2) -> float:
+    """z² of the fit's estimate of Y − c'H(ω, L')U, the one-lag reading the fit picks in W (a
+    brute grid in L' of either sign, c' by W-weighted least squares)."""
+    w = np.asarray(w, dtype=float)
+    top = 1e3 * float(np.max(1.0 / w))
+    Ls = np.geomspace(0.5, top, 3000)
+    H = np.vstack([1.0 / (1 + 1j * np.outer(Ls, w)),
+                   (1 + 2j * np.outer(Ls, w)) / (1 + 1j * np.outer(Ls, w)),
+                   np.ones((1, w.size))]) * U
+    cp = np.sum(W * np.real(Y * H.conj()), axis=1) / np.sum(W * np.abs(H) ** 2, axis=1)
+    d2 = np.abs(Y - cp[:, None] * H) ** 2
+    i = int(np.argmin(np.sum(W * d2, axis=1)))
+    return float(np.sum(W * d2[i]) ** 2 / np.sum(W * W * s2 * d2[i]))
+
+
+def size_at_z5(lam, start: float) -> float:
+    lo, hi = 0.0, start
+    while lam(hi) < 25.0:
+        lo, hi = hi, 2 * hi
+        if hi > 1e4 * start:
+            return math.inf
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lam(mid) < 25.0 else (lo, mid)
+    return hi
+
+
+def rate_min_fit(lines, t_rec: float, nbk, c: float, lead: bool, floor: float,
+                 c2tc: float) -> float:
+    """The smallest r (r/c > 0 if ``lead``) the fit tells from one lag at z = 5."""
+    a = np.array([x[0] for x in lines])
+    w = np.array([x[1] for x in lines])
+    f = w / (2 * math.pi)
+    W = fit_weights(f, t_rec, nbk, floor, c2tc)
+    s2 = np.array([sigma_a(x, t_rec, *nbk) ** 2 for x in f])
+    sgn = 1.0 if lead == (c > 0) else -1.0
+    start = 5 / math.sqrt(float(np.sum((a * w) ** 2 / s2)))
+    return size_at_z5(lambda r: sep_fit(w, a + 0j, (c + 1j * w * sgn * r) * a, W, s2), start)
+
+
+def relay_harmonics(U: np.ndarray, width: float) -> np.ndarray:
+    """Complex harmonics 1…len(U) of a ±1 relay switching once the periodic drive (harmonics
+    ``U``, K) has moved ``width`` back from its last extreme (``play``'s 2·half-width)."""
+    m = 1 << 12
+    th = np.arange(2 * m) / m
+    ks = np.arange(1, U.size + 1)
+    u = np.real(np.exp(2j * np.pi * np.outer(th, ks)) @ U)
+    out = play(u, width / 2)
+    return (2 * np.fft.fft(out[m:]) / m)[1:U.size + 1]
+
+
+def triangle_at_die(period: float, amp: float, tau_plate: float, tau_die: float,
+                    k_max: int = 39) -> np.ndarray:
+    """The HVAC triangle's complex harmonics 1…k_max at the die (8A/(π²k²)·(−1)^((k−1)/2)·
+    sin kωt, through the plate's and the die's lags)."""
+    out = np.zeros(k_max, dtype=complex)
+    for k in range(1, k_max + 1, 2):
+        w = 2 * math.pi * k / period
+        out[k - 1] = (8 * amp / (math.pi**2 * k * k) * (-1) ** ((k - 1) // 2) * -1j
+                      / complex(1, w * tau_plate) / complex(1, w * tau_die))
+    return out
+
+
+def hyst_min_fit(U: np.ndarray, period: float, t_rec: float, nbk, c: float, width: float,
+                 floor: float, c2tc: float) -> float:
+    """The smallest h the fit tells c·T + h·relay from one lag at z = 5."""
+    R = relay_harmonics(U, width)
+    f = np.arange(1, U.size + 1) / period
+    W = fit_weights(f, t_rec, nbk, floor, c2tc)
+    s2 = np.array([sigma_a(x, t_rec, *nbk) ** 2 for x in f])
+    start = 5 / math.sqrt(float(np.sum(np.abs(R) ** 2 / s2)))
+    return size_at_z5(lambda h: sep_fit(2 * math.pi * f, U, c * U + h * R, W, s2), start)
+
+
 # --------------------------------------------------------------------------- synthesis
 
 
@@ -370,6 +493,15 @@ KINDS = (
 )
 
 
+def _fit_view(drive: dict, spec: Spec, rate: float, t_rec: float, c: float
+              ) -> tuple[float, float]:
+    """(the logged plate channel's rounding floor, s; c²·(DS_STEP²/12)·t_c, its rounding's
+    white AVAR coefficient through the coupling) from the drive's lines at that sensor."""
+    logged = drive_lines(drive, spec.tau_plate, spec.tau_sensor)
+    return (rounding_floor(logged, rate, t_rec),
+            c * c * DS_STEP**2 / 12 * rounding_time(logged))
+
+
 def _die_swing(temps: dict) -> tuple[float, np.ndarray]:
     """Amplitude of the die's cycling (√2 × sd of the die minus its 2 h running mean)."""
     die = temps["die"]
@@ -391,15 +523,19 @@ def make_record(
     factor: float = 3.0,
     logged: tuple[str, ...] = ("plate", "ambient"),
     pump_band_hz: float = 0.1,
-    dtdt_minimum: str = "one_lag",
+    dtdt_minimum: str = "fit",
+    hysteresis_minimum: str = "fit",
 ) -> dict:
     """Write one record of class ``kind`` and its truth file; return the truth. ``factor``:
     the hidden effect's size in its stated minima (the pump's amplitude in units of
     2e-4/3 m/s²); ``logged``: the DS18B20 channels the record holds (plate, ambient);
     ``pump_band_hz``: how far the pump's line sweeps (linearly, from 3.05 Hz).
-    ``dtdt_minimum``: what the dT/dt class's r is a multiple of, the minimum against every
-    one-lag reading ("one_lag") or the one against zero ("zero", the sizes before: a term one
-    lag reads to first order where c < 0).
+    ``dtdt_minimum``: what the dT/dt class's r is a multiple of: the minimum against one lag
+    as explain's fit sees the drive's lines ("fit", from the logged plate's rounding floor
+    up, cand26b), against one lag on every line ("one_lag", cand26's) or against zero
+    ("zero", the sizes before: a term one lag reads to first order where c < 0).
+    ``hysteresis_minimum``: the relay's h against one lag as the fit sees the lines ("fit")
+    or its harmonics 3–9 on the whole spectrum ("harmonics", the sizes before).
 
     The ambient sensor reads the room through 40 s, the die is the room through the plate's
     and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
@@ -481,8 +617,13 @@ def make_record(
             lines = drive_lines(drive, spec.tau_plate, spec.tau_die)
             sl = [sigma_a(wl / (2 * math.pi), t_rec, *nx) for _, wl in lines]
             c_x = truth["axes"]["x"]["coefficient_mps2_per_k"]
-            r_min = (r_zero if dtdt_minimum == "zero"
-                     else rate_min(lines, sl, c_x, r_zero, lead=c_x > 0))
+            if dtdt_minimum == "zero":
+                r_min = r_zero
+            elif dtdt_minimum == "one_lag":  # every line counted (cand26's)
+                r_min = rate_min(lines, sl, c_x, r_zero, lead=c_x > 0)
+            else:  # as explain's fit sees the lines, from the logged plate's rounding floor
+                floor, c2tc = _fit_view(drive, spec, rate, t_rec, c_x)
+                r_min = rate_min_fit(lines, t_rec, nx, c_x, c_x > 0, floor, c2tc)
             r = factor * r_min
             dudt = np.gradient(die_t, t)
             sig["x"] = sig["x"] + r * dudt
@@ -492,9 +633,17 @@ def make_record(
             inv = sum(
                 (4 / (math.pi * k)) ** 2 / sigma_a(k * f0, t_rec, *nx) ** 2 for k in (3, 5, 7, 9)
             )
-            h_min = 5 / math.sqrt(inv)
-            hh = factor * h_min
             width = 0.25 * a_die
+            if hysteresis_minimum == "harmonics":  # harmonics 3–9, the whole spectrum
+                h_min = 5 / math.sqrt(inv)
+            else:  # against one lag, as explain's fit sees the lines (cand26b)
+                c_x = truth["axes"]["x"]["coefficient_mps2_per_k"]
+                floor, c2tc = _fit_view(drive, spec, rate, t_rec, c_x)
+                U = triangle_at_die(drive["hvac_period"], drive["hvac_amp"], spec.tau_plate,
+                                    spec.tau_die)
+                h_min = hyst_min_fit(U, drive["hvac_period"], t_rec, nx, c_x, 2 * width,
+                                     floor, c2tc)
+            hh = factor * h_min
             sig["x"] = sig["x"] + hh * play(die_t, width)
             truth["axes"]["x"].update(mechanism="hysteresis", h_mps2=hh, width_k=width, h_min=h_min)
         if kind == "twopath":

@@ -104,9 +104,16 @@ from __future__ import annotations
 from avard.core.explain.thermal_paths.choose import choose_path
 from avard.core.explain.thermal_paths.columns import path_columns
 from avard.core.explain.thermal_paths.minima import (
+    fit_weights,
+    min_detectable_hysteresis_fit,
     min_detectable_path,
     min_detectable_rate,
+    min_detectable_rate_fit,
+    one_lag_separation_fit,
     rate_lag_separation,
+    relay_harmonics,
+    rounding_floor,
+    rounding_time,
 )
 from avard.core.explain.thermal_paths.readings import (
     both_readings,
@@ -124,11 +131,18 @@ __all__ = [
     "PathScore",
     "both_readings",
     "choose_path",
+    "fit_weights",
+    "min_detectable_hysteresis_fit",
     "min_detectable_path",
     "min_detectable_rate",
+    "min_detectable_rate_fit",
+    "one_lag_separation_fit",
     "path_columns",
     "rate_lag_separation",
     "rate_reading",
     "reads_as_rate",
+    "relay_harmonics",
+    "rounding_floor",
+    "rounding_time",
     "second_path_reading",
 ]

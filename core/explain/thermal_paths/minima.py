@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from avard.core.explain.causes import noise_psd
@@ -181,3 +182,234 @@ def min_detectable_rate(n_white: float, b_inst: float, k_rrw: float, record_s: f
         else:
             hi = mid
     return hi
+
+
+# --------------------------------------------------------------------------- as explain's fit
+# runs it: the Allan covariance at the octave τ from the channel's rounding floor up
+# (docs/log/2026-11-28-cand26b.md, the derivation)
+
+#: The DS18B20's step (K), repeated here so the derivation reads whole (and the adversary's
+#: generator can copy it).
+_Q_STEP = 0.0625
+
+
+def _g(x: NDArray) -> NDArray[np.float64]:
+    """The AVAR of a unit-amplitude sinusoid at f·τ = ``x``: sin⁴(πx)/(πx)²."""
+    px = np.pi * np.asarray(x, dtype=float)
+    return np.asarray(np.sin(px) ** 4 / px**2, dtype=float)
+
+
+def rounding_time(lines: tuple[tuple[float, float], ...]) -> float:
+    """How long (s) one rounding error of the logged channel lasts (``thermal_fit.
+    rounding_correlation_s``): the step over the rms slope of the ``lines`` ((amplitude K,
+    period s) of the logged channel), never under 1 s."""
+    slope = math.sqrt(sum((2 * math.pi / p * a) ** 2 / 2 for a, p in lines))
+    return max(_Q_STEP / slope, 1.0) if slope > 0 else math.inf
+
+
+def rounding_floor(lines: tuple[tuple[float, float], ...], rate_hz: float, record_s: float,
+                   snr: float = 10.0) -> float:
+    """The channel's rounding floor (s) on a drive of ``lines`` ((amplitude K, period s) of the
+    logged channel), as ``thermal_fit.rounding_floor_tau`` finds it on the record: the first
+    octave τ (2ʲ/``rate_hz``) where the drive's AVAR Σ a²·sin⁴(πfτ)/(πfτ)² reaches ``snr``
+    times the rounding's (q²/12)·t_c/τ."""
+    tc = rounding_time(lines)
+    tau = 1.0 / rate_hz
+    while 2 * tau <= record_s:
+        v = sum(a * a * float(_g(np.array(tau / p))) for a, p in lines)
+        if v >= snr * _Q_STEP**2 / 12 * tc / tau:
+            return tau
+        tau *= 2
+    return math.inf
+
+
+def _edf(x: NDArray, parts: tuple[NDArray, NDArray, NDArray]) -> NDArray[np.float64]:
+    """The overlapping AVAR's EDF at T/τ = ``x`` for white, flicker and random-walk FM (NIST
+    SP 1065 §5.2's simple formulas, M ≫ m), the terms' AVAR ``parts`` mixed as
+    ν = (Σ σᵢ²)²/Σ(σᵢ⁴/νᵢ)."""
+    nu = (1.5 * x - 2.0, 5 * x * x / (4 * (x + 3)), x - 3 + 4 / x)
+    tot = sum(parts)
+    den = sum(p * p / np.maximum(n, 1.0) for p, n in zip(parts, nu, strict=True))
+    return np.asarray(np.maximum(tot * tot / den, 1.0), dtype=float)
+
+
+def fit_weights(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                periods: NDArray, floor_s: float, rounding_c2tc: float = 0.0
+                ) -> NDArray[np.float64]:
+    """What explain's deviance D = Σ_k ν_k ln r_k sees of a sinusoidal component of unit
+    amplitude at each of ``periods`` (s): W(f) = Σ_k ν_k·sin⁴(πfτ_k)/(πfτ_k)²/r_k over the
+    octave τ_k = floor_s·2ʲ ≤ record/2, r_k the one-lag residual's AVAR (the noise's N²/τ +
+    (2 ln 2/π)B² + K²τ/3 and the readings' rounding through the coupling,
+    ``rounding_c2tc`` = c²·(q²/12)·t_c, over τ), ν_k its EDF (``_edf``). W·|ΔY|² is the
+    deviance a residual sinusoid of amplitude |ΔY| adds: the GLS fit's Fisher information
+    per unit amplitude², line by line."""
+    p = np.asarray(periods, dtype=float)
+    out = np.zeros(p.size)
+    if not math.isfinite(floor_s) or floor_s <= 0:
+        return out
+    tau = floor_s
+    while 2 * tau <= record_s:
+        x = record_s / tau
+        white = (n_white**2 + rounding_c2tc) / tau
+        parts = (np.array(white), np.array(2 * math.log(2) / math.pi * b_inst**2),
+                 np.array(k_rrw**2 * tau / 3))
+        r = float(sum(parts))
+        nu = float(_edf(np.array(x), parts))
+        out += nu * _g(tau / p) / r
+        tau *= 2
+    return out
+
+
+def one_lag_separation_fit(periods: NDArray, drive: NDArray, response: NDArray,
+                           weights: NDArray, sig2: NDArray | None = None
+                           ) -> tuple[float, float, float]:
+    """min over one-lag readings c'·H(ω, L') (``_one_lag_response``, L' of either sign) of
+    Σ_lines W·|Y − c'·H·U|²: the deviance by which the hidden ``response`` Y (complex, m/s², per
+    line) beats the closest one-lag reading of the ``drive`` U (complex, K, per line), in the
+    fit's own metric ``weights`` W (``fit_weights``); (λ, L', c').
+
+    With ``sig2`` (σ_a² per quadrature at each line, √(2S(f)/T)²) λ is instead the
+    non-centrality of the fit's own estimate of that residual: the fit weighs the lines by W,
+    the noise at each line is σ², so the residual's size is estimated to a variance
+    Σ W²σ²|ΔY|²/(Σ W|ΔY|²)² and λ = (Σ W|ΔY|²)²/Σ W²σ²|ΔY|² (≤ Σ|ΔY|²/σ², the whole
+    spectrum's, equal where W ∝ 1/σ²: the Cauchy–Schwarz bound). The closest reading is
+    still the one the fit picks, in W."""
+    w = 2 * math.pi / np.asarray(periods, dtype=float)
+    U = np.asarray(drive, dtype=complex)
+    Y = np.asarray(response, dtype=complex)
+    q = np.asarray(weights, dtype=float)
+    if not np.any(q > 0):
+        return 0.0, 0.0, 0.0
+
+    def at(L: float) -> tuple[float, float]:
+        h = _one_lag_response(w, L) * U
+        den = float(np.sum(q * np.abs(h) ** 2))
+        cp = float(np.sum(q * np.real(Y * h.conj())) / den) if den > 0 else 0.0
+        return float(np.sum(q * np.abs(Y - cp * h) ** 2)), cp
+
+    lags = _sep_lags(1e3 * float(np.max(1.0 / w)))
+    vals = [at(float(L))[0] for L in lags]
+    i = int(np.argmin(vals))
+    lo, hi = float(lags[max(i - 1, 0)]), float(lags[min(i + 1, len(lags) - 1)])
+    g = (math.sqrt(5) - 1) / 2
+    for _ in range(60):
+        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        if at(m1)[0] < at(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    L = 0.5 * (lo + hi)
+    lam, cp = at(L)
+    if vals[i] < lam:
+        L = float(lags[i])
+        lam, cp = at(L)
+    if sig2 is None:
+        return lam, L, cp
+    d2 = np.abs(Y - cp * _one_lag_response(w, L) * U) ** 2
+    den = float(np.sum(q * q * np.asarray(sig2, dtype=float) * d2))
+    return (float(np.sum(q * d2)) ** 2 / den if den > 0 else 0.0), L, cp
+
+
+def relay_harmonics(drive: NDArray, width_k: float, k_max: int = 39) -> NDArray[np.complex128]:
+    """The complex amplitudes (harmonics 1…``k_max``, per unit h) of a ±1 relay that switches
+    once the periodic drive has moved ``width_k`` (K) back from its last extreme (the weekend
+    generator's and the adversary's play operator), the drive given by its complex harmonic
+    amplitudes ``drive`` (harmonic k at index k − 1, K), the same phase convention."""
+    m = 1 << 12
+    th = np.arange(2 * m) / m  # two periods: the second is the steady one
+    U = np.asarray(drive, dtype=complex)
+    ks = np.arange(1, U.size + 1)
+    u = np.real(np.exp(2j * np.pi * np.outer(th, ks)) @ U)
+    s, ref = 1.0, float(u[0])
+    out = np.empty(u.size)
+    for i, ui in enumerate(u.tolist()):
+        if s > 0:
+            ref = max(ref, ui)
+            if ui < ref - width_k:
+                s, ref = -1.0, ui
+        else:
+            ref = min(ref, ui)
+            if ui > ref + width_k:
+                s, ref = 1.0, ui
+        out[i] = s
+    c = 2 * np.fft.fft(out[m:]) / m
+    return np.asarray(c[1:k_max + 1], dtype=complex)
+
+
+def _sig2(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+          periods: NDArray) -> NDArray[np.float64]:
+    """σ_a² = 2S(f)/T per quadrature at each of ``periods`` (``min_detectable_path``'s)."""
+    return np.array([2 * noise_psd(1.0 / p, n_white, b_inst, k_rrw) / record_s
+                     for p in np.asarray(periods, dtype=float)])
+
+
+def _bisect_size(lam: Callable[[float], float], start: float, z: float) -> float:
+    """The smallest size s > 0 with ``lam(s)`` ≥ z² (doubling from ``start``, then
+    bisection); ``math.inf`` past 10⁶·start."""
+    lo, hi = 0.0, start
+    while lam(hi) < z * z:
+        lo, hi = hi, 2 * hi
+        if hi > 1e6 * start:
+            return math.inf
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if lam(mid) < z * z else (lo, mid)
+    return hi
+
+
+def min_detectable_rate_fit(n_white: float, b_inst: float, k_rrw: float, record_s: float,
+                            lines: tuple[tuple[float, float], ...], coefficient: float,
+                            lead: bool, floor_s: float, rounding_c2tc: float = 0.0,
+                            z: float = 5.0) -> float:
+    """The stated minimum of a dT/dt term (|r|, m/s² per K/s) against one lag as explain's fit
+    sees it: the smallest |r| (r/c > 0 if ``lead``) whose residual over the closest one-lag
+    reading the fit picks (lines weighed by ``fit_weights``, τ from the rounding floor
+    ``floor_s`` up) the fit estimates at z (``one_lag_separation_fit`` with σ²: the fit's
+    weights, the noise's variance at each line). The drive ``lines`` ((amplitude at the die K,
+    period s) each) are taken in phase (a lag is judged line by line, their relative phases
+    do not enter). ``math.inf`` where none does (one line and a lag)."""
+    per = np.array([p for _, p in lines], dtype=float)
+    U = np.array([a for a, _ in lines], dtype=complex)
+    W = fit_weights(n_white, b_inst, k_rrw, record_s, per, floor_s, rounding_c2tc)
+    s2 = _sig2(n_white, b_inst, k_rrw, record_s, per)
+    w = 2 * math.pi / per
+    sgn = 1.0 if lead == (coefficient > 0) else -1.0
+    if not np.any(W > 0):
+        return math.inf
+    start = z / math.sqrt(float(np.sum(np.abs(U * w) ** 2 / s2)))  # against zero
+
+    def lam(r: float) -> float:
+        return one_lag_separation_fit(per, U, (coefficient + 1j * w * sgn * r) * U, W, s2)[0]
+
+    return _bisect_size(lam, start, z)
+
+
+def min_detectable_hysteresis_fit(n_white: float, b_inst: float, k_rrw: float,
+                                  record_s: float, period_s: float, drive: NDArray,
+                                  coefficient: float, width_k: float, floor_s: float,
+                                  rounding_c2tc: float = 0.0, z: float = 5.0,
+                                  k_max: int = 39) -> float:
+    """The stated minimum of a relay (h, m/s²) against one lag as explain's fit sees it: the
+    smallest h whose residual over the closest one-lag reading of c·T + h·relay the fit picks
+    (lines weighed by ``fit_weights``, τ from ``floor_s`` up) the fit estimates at z
+    (``one_lag_separation_fit`` with σ²). The drive is periodic,
+    ``drive`` its complex harmonics at the die (k = 1, 2, …; K), ``width_k`` how far it moves
+    back from an extreme before the relay switches (``relay_harmonics``). The relay's
+    fundamental counts where it puts the response beyond one lag's reach (a coupling of the
+    other sign), its harmonics beyond what the drive's own harmonics through one lag take;
+    ``math.inf`` where none does."""
+    U = np.zeros(k_max, dtype=complex)
+    d = np.asarray(drive, dtype=complex)[:k_max]
+    U[:d.size] = d
+    R = relay_harmonics(U, width_k, k_max)
+    per = period_s / np.arange(1, k_max + 1)
+    W = fit_weights(n_white, b_inst, k_rrw, record_s, per, floor_s, rounding_c2tc)
+    s2 = _sig2(n_white, b_inst, k_rrw, record_s, per)
+    if not np.any(W > 0):
+        return math.inf
+    start = z / math.sqrt(float(np.sum(np.abs(R) ** 2 / s2)))  # against zero, in W
+
+    def lam(h: float) -> float:
+        return one_lag_separation_fit(per, U, coefficient * U + h * R, W, s2)[0]
+
+    return _bisect_size(lam, start, z)
