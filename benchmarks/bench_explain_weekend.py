@@ -596,11 +596,7 @@ def rows_paths() -> list[PathRow]:
         return 3 * min_detectable_path(kind, N, B, K, rec, A, PERIOD, 0.0, 870.0,
                                        lags_known=kind in ("two_path", "rate"))
 
-    c2, q = mn("two_path"), mn("quadratic")
-    # dT/dt and hysteresis: 3× their minimum against one lag as explain's fit sees the line
-    # (docs/log/2026-11-28-cand26b.md; a lead here, c and r of one sign)
-    r = 3 * min_path_fit("rate", ((A, PERIOD),), c)
-    h = 3 * min_path_fit("hysteresis", ((A, PERIOD),), c)
+    c2, q, r, h = mn("two_path"), mn("quadratic"), mn("rate"), mn("hysteresis")
     ww = 3 * min_detectable_warmup(N, B, K, 900.0)
     return [
         # the truth the two-path candidate holds exactly (``two_path_truth``), as the
@@ -698,39 +694,6 @@ def min_two_path_compressor(a_hvac: float) -> float:
                                lines=more, lags_known=False)
 
 
-def compressor_at_die() -> tuple[tuple[float, float], ...]:
-    """The compressor's odd harmonics 1–15 at the die (``compressor_harmonics`` through the
-    plate's and the die's 30 s lags): (amplitude K, period s) each."""
-    return tuple((a / math.hypot(1.0, 2 * math.pi / p * PLATE_TAU)
-                  / math.hypot(1.0, 2 * math.pi / p * 30.0), p)
-                 for a, p in compressor_harmonics())
-
-
-def min_path_fit(kind: str, lines: tuple[tuple[float, float], ...], c: float) -> float:
-    """The stated minimum of a dT/dt term (``kind`` rate, a lead: r/c > 0) or a relay
-    switching 0.05 K after a turn (hysteresis, on the first line alone, a sine) beside the
-    coupling ``c`` at lag 0, against one lag as explain's fit sees the drive ``lines`` ((amplitude
-    at the die K, period s); the logged sensor is the die here, 30 s behind the plate): τ from
-    the channel's rounding floor up, the lines weighed by the Allan covariance there
-    (``thermal_paths.min_detectable_rate_fit``, ``min_detectable_hysteresis_fit``;
-    docs/log/2026-11-28-cand26b.md)."""
-    from avard.core.explain.thermal_paths import (
-        min_detectable_hysteresis_fit,
-        min_detectable_rate_fit,
-        rounding_floor,
-        rounding_time,
-    )
-
-    rec = HOURS * 3600
-    floor = rounding_floor(lines, RATE, rec)
-    c2tc = c * c * 0.0625**2 / 12 * rounding_time(lines)
-    if kind == "rate":
-        return min_detectable_rate_fit(N, B, K, rec, lines, c, True, floor, c2tc)
-    a, period = lines[0]
-    return min_detectable_hysteresis_fit(N, B, K, rec, period, np.array([a + 0j]), c, 0.05,
-                                         floor, c2tc)
-
-
 def two_path_truth(c: float, c2: float, lag2_s: float, sensor_s: float) -> dict[str, float]:
     """The two-path candidate's parameters that hold a weekend record's coupling exactly:
     ``c`` on the die, which is the logged sensor (both ``sensor_s`` behind the plate: the
@@ -753,8 +716,7 @@ def rows_compressor(base: Any, A: float, c: float) -> list[PathRow]:
     drive frequency the two cannot be told apart by any method (docs/log/explain.md: the best
     dT/dt model fits a true two-path signal to a non-centrality of 0.1–2.3); with two lines a
     GLS on every frequency below the paths' τ floor separates them (28–38). Each extra term at
-    3× its stated minimum on this drive: r at 3× its minimum against one lag as explain's fit
-    sees the HVAC and the compressor's harmonics 1–15 (``min_path_fit``); the second path's
+    3× its stated minimum on this drive: r − c·L at 3× ``min_two_lines``; the second path's
     candidate c₂ (at lag 900 s from the logged sensor, ``two_path_truth``) at 3× the fit's
     own minimum with the lags unknown (``min_two_path_compressor``), so the generator's c₂ is
     that over 1 − 30/900 (docs/log/explain.md: before, 3× the lags-known minimum, a size the fit
@@ -762,7 +724,8 @@ def rows_compressor(base: Any, A: float, c: float) -> list[PathRow]:
     w_c = 2 * math.pi / COMPRESSOR_S
     a_c = (1.238 * COMPRESSOR_C / math.hypot(1.0, w_c * PLATE_TAU)
            / math.hypot(1.0, w_c * 30.0))
-    r = 3 * min_path_fit("rate", ((A, PERIOD), *compressor_at_die()), c)
+    lines = [(A, PERIOD), (a_c, COMPRESSOR_S)]
+    r = 3 * min_two_lines("rate", lines, 0)
     comp = replace(base, compressor_c=COMPRESSOR_C, compressor_period_s=COMPRESSOR_S)
     assert comp.die_tau_s == comp.sensor_tau_s  # the first path at lag 0 (two_path_truth)
     c2 = 3 * min_two_path_compressor(A) / (1.0 - comp.sensor_tau_s / 900.0)
