@@ -523,8 +523,8 @@ def make_record(
     factor: float = 3.0,
     logged: tuple[str, ...] = ("plate", "ambient"),
     pump_band_hz: float = 0.1,
-    dtdt_minimum: str = "fit",
-    hysteresis_minimum: str = "fit",
+    dtdt_minimum: str = "one_lag",
+    hysteresis_minimum: str = "harmonics",
 ) -> dict:
     """Write one record of class ``kind`` and its truth file; return the truth. ``factor``:
     the hidden effect's size in its stated minima (the pump's amplitude in units of
@@ -536,6 +536,9 @@ def make_record(
     ("zero", the sizes before: a term one lag reads to first order where c < 0).
     ``hysteresis_minimum``: the relay's h against one lag as the fit sees the lines ("fit")
     or its harmonics 3–9 on the whole spectrum ("harmonics", the sizes before).
+    The defaults are the stated minima docs/explain.md gives (dT/dt against one lag on every
+    line, cand26; hysteresis on its harmonics): cand26b's "fit" minima are measured (its log)
+    and not yet the stated ones, as the benchmark's rows are not tied to them.
 
     The ambient sensor reads the room through 40 s, the die is the room through the plate's
     and the die's lags: ``truth["ambient_equivalent_lag_s"]`` is the one lag that channel
