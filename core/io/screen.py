@@ -187,19 +187,27 @@ class Screened:
     start_s: float
     end_s: float
     count: int
+    #: the axes a held acceleration held (the rows are cut on every axis)
+    axes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"channel": self.channel, "kind": self.kind, "start_s": self.start_s,
-                "end_s": self.end_s, "first_sample": self.first, "last_sample": self.last,
-                "count": self.count}
+        out: dict[str, Any] = {
+            "channel": self.channel, "kind": self.kind, "start_s": self.start_s,
+            "end_s": self.end_s, "first_sample": self.first, "last_sample": self.last,
+            "count": self.count}
+        if self.axes:
+            out["axes"] = list(self.axes)
+        return out
 
 
 KIND_TEXT = {"startup_glitch": "start-up glitch", "shock": "isolated shock",
+             "held_accel": "held acceleration (identical samples)",
              "read_error": "read error (-127 °C or out of range)",
              "power_on_85": "85.0 °C power-on value", "spike": "spike",
              "dropout": "dropout (no reading)", "stuck": "stuck reading"}
 # the plural where an "s" at the end would land inside the kind's parenthesis
 _KIND_PLURAL = {"read_error": "read errors (-127 °C or out of range)",
+                "held_accel": "held accelerations (identical samples)",
                 "dropout": "dropouts (no reading)"}
 
 
@@ -208,6 +216,10 @@ def _kind_text(kind: str, n: int) -> str:
     if n == 1:
         return f"1 {KIND_TEXT.get(kind, kind)}"
     return f"{n} {_KIND_PLURAL.get(kind) or KIND_TEXT.get(kind, kind) + 's'}"
+
+
+#: The kinds cut out of the acceleration (every axis's rows)
+ACCEL_KINDS = ("startup_glitch", "shock", "held_accel")
 
 
 @dataclass
@@ -236,7 +248,7 @@ class ScreenLog:
 
     def samples_masked(self) -> int:
         """Acceleration samples cut out (every axis)."""
-        return sum(s.count for s in self.stretches if s.kind in ("startup_glitch", "shock"))
+        return sum(s.count for s in self.stretches if s.kind in ACCEL_KINDS)
 
     def holes(self, channel: str) -> list[tuple[float, float]]:
         """(start, end) s of the stretches of a temperature channel where the log says
@@ -253,7 +265,12 @@ class ScreenLog:
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
                           "scale never below the grid's quantisation (q/√12) on a grid "
                           "coarse against the noise, nor, where the median is below that, "
-                          "the distances' RMS below their 98th percentile; "
+                          "the distances' RMS below their 98th percentile; a run of "
+                          "identical samples on an axis (held or stuck: a repeated frame) "
+                          "longer than its axis's own chance of a repeat makes likely at "
+                          "1e-6 per record of up to 2^25 samples (measured as the chance "
+                          "that a run goes on, by counts of runs, at its 3σ upper bound; "
+                          "at least 16 samples), cut out as a gap; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run; "
@@ -272,16 +289,17 @@ class ScreenLog:
         one line per temperature channel the screen has a note on."""
         notes = [f"  temperature {ch}: {n.text}" for ch, n in self.notes.items()]
         if not self.stretches:
-            return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
-                    "dropout or stuck reading)", *notes]
+            return ["screened: nothing masked (no glitch, shock, held acceleration, read "
+                    "error, 85 °C, spike, dropout or stuck reading)", *notes]
         c = self.counts()
         head = "screened: " + ", ".join(_kind_text(k, n) for k, n in sorted(c.items()))
         if self.samples_masked():
             head += f"; {self.samples_masked()} acceleration samples cut out as gaps"
         out = [head]
         for s in self.stretches[:limit]:
-            unit = "sample" if s.kind in ("startup_glitch", "shock") else "reading"
-            out.append(f"  {s.channel}: {KIND_TEXT.get(s.kind, s.kind)} at "
+            unit = "sample" if s.kind in ACCEL_KINDS else "reading"
+            ch = f"{s.channel} ({', '.join(s.axes)})" if s.axes else s.channel
+            out.append(f"  {ch}: {KIND_TEXT.get(s.kind, s.kind)} at "
                        f"{s.start_s:.6g}–{s.end_s:.6g} s ({s.count} "
                        f"{unit}{'' if s.count == 1 else 's'})")
         if len(self.stretches) > limit:
@@ -451,6 +469,174 @@ def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     d = np.diff(m)
     return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(),
                     strict=True))
+
+
+# a held (stuck) accelerometer: a run of identical samples its own noise makes implausible
+
+#: A false alarm of the held rule at most this often per record (per axis) ...
+HELD_ALARM = 1e-6
+#: ... of up to this many samples (2^25: 74 h at 125 Hz, beyond the daemon's 60 h records); a
+#: longer record is counted by the rows seen
+HELD_RECORD_SAMPLES = 1 << 25
+#: A held stretch is at least this many identical samples whatever its chance (a repeated
+#: frame or two is no stretch the estimators need cut), and the parallel chunks (which judge
+#: each block on its own) send the record to one read where a block holds half of it
+#: (``held_suspect``: a run across a block boundary has half its length on one side)
+HELD_MIN_RUN = 16
+#: Runs of an axis reaching a length, at least, for the chance of going on from there to be
+#: measured (an axis with fewer runs than this is not judged: its chance of a repeat is
+#: unknown)
+HELD_MIN_RUNS = 200
+#: The measured chance of going on is taken at its upper bound, Wilson's at this many σ
+HELD_Z = 3.0
+#: Runs of this length and longer are counted together (the histogram's bound)
+HELD_HIST = 4096
+
+
+def _wilson_upper(k: NDArray[np.float64], n: NDArray[np.float64], z: float = HELD_Z
+                  ) -> NDArray[np.float64]:
+    """Wilson's upper bound of a binomial chance, k of n (elementwise, n > 0)."""
+    p = k / n
+    z2 = z * z
+    c = p + z2 / (2 * n)
+    w = z * np.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
+    return np.asarray(np.minimum(1.0, (c + w) / (1 + z2 / n)), dtype=float)
+
+
+def held_threshold(hist: NDArray[np.int64], rows: int) -> float:
+    """The shortest run of identical samples an axis's noise makes implausible, from the
+    lengths of its runs so far (``hist[L]``: runs of L samples, the last bin HELD_HIST and
+    more) over ``rows`` samples; inf where the axis has too few runs to tell.
+
+    A quiet axis on a coarse grid repeats values legitimately, and a chip filter's correlated
+    samples repeat in clusters, so the chance is measured on the axis itself, as the chance
+    that a run of length r goes on to r + 1, N(≥ r+1)/N(≥ r), by counts of *runs* (a held
+    stretch is one run whatever its length, so it cannot raise the chance that clears it).
+    Beyond the longest length R still reached by ``HELD_MIN_RUNS`` runs, a run goes on at
+    most at the largest of those chances (its Wilson upper bound at ``HELD_Z``; a mixture of
+    quiet and busy hours has its tail from the quiet ones), so P(run ≥ k) ≤ F(R)·q^(k−R). The
+    threshold is the k at which the runs of a record (``HELD_RECORD_SAMPLES`` rows, or the rows
+    seen, at the axis's runs per row) reach one that long by chance ``HELD_ALARM`` times."""
+    ge = np.cumsum(hist[::-1])[::-1].astype(float)  # ge[L]: runs of L samples or more
+    n1 = float(ge[1]) if len(ge) > 1 else 0.0
+    if n1 < HELD_MIN_RUNS or rows <= 0:
+        return math.inf
+    well = np.flatnonzero(ge[1:] >= HELD_MIN_RUNS) + 1  # lengths 1..R (ge is non-increasing)
+    r_top = int(well[-1])
+    if r_top >= HELD_HIST - 1:
+        return math.inf  # runs beyond the histogram are common: nothing to measure
+    r = np.arange(1, r_top + 1)
+    q = float(np.max(_wilson_upper(ge[r + 1], ge[r])))
+    if not q < 1.0:
+        return math.inf
+    runs = n1 / rows * max(HELD_RECORD_SAMPLES, rows)
+    f_top = float(ge[r_top]) / n1
+    extra = math.log(HELD_ALARM / (runs * f_top)) / math.log(q)
+    return float(max(HELD_MIN_RUN, r_top + max(0.0, math.ceil(extra))))
+
+
+def _max_run(col: NDArray[np.float64]) -> int:
+    """The longest run of identical consecutive samples in ``col``."""
+    if not len(col):
+        return 0
+    ch = np.flatnonzero(col[1:] != col[:-1])
+    edges = np.concatenate([[-1], ch, [len(col) - 1]])
+    return int(np.max(np.diff(edges)))
+
+
+def held_suspect(a: NDArray[np.float64]) -> bool:
+    """Whether the block (judged on its own, as a parallel chunk does) holds a run of at least
+    half ``HELD_MIN_RUN`` identical samples on an axis: then a held stretch may lie here (a run
+    across the block's boundary has half its length on one side), and the record is read
+    through the whole-record screen (``HeldAccel``) instead. A conservative test: it never
+    misses a held stretch, and sends a quiet, coarsely quantised record to one read."""
+    half = HELD_MIN_RUN // 2
+    return any(_max_run(np.asarray(a[:, j])) >= half for j in range(a.shape[1]))
+
+
+class HeldAccel:
+    """The held-acceleration rule over a whole read, block by block in bounded memory (a
+    histogram of run lengths per axis, and the runs long enough to be candidates that
+    reach rows not yet judged).
+
+    Per axis: a repeated frame repeats every axis, so each axis's own rule sees it; a stuck
+    channel of one axis is seen too; and a row cut when any axis says so is the verdict the
+    parallel chunks (each judging its own axes) can form. The blocks are ``feed``-ed in order
+    (ahead of the rows judged: the screen hands a block on with the next one read);
+    ``verdict`` judges a block's rows with every run seen so far. A run whose length already
+    clears its axis's threshold (``held_threshold``) is held on all its rows, its verdict kept
+    for the rows that come later; a run still open and short is judged again on the next
+    block (a run that is not yet judged held when its first rows are handed on, which needs a
+    threshold longer than a block, is cut from there on)."""
+
+    def __init__(self) -> None:
+        self.rows = 0
+        self.last: NDArray[np.float64] | None = None
+        self.start: NDArray[np.int64] | None = None  # record row where each open run began
+        self.hist: NDArray[np.int64] | None = None
+        #: per axis, runs of ≥ HELD_MIN_RUN samples reaching rows not yet judged: [first, last]
+        #: (last the run's end so far for the open one)
+        self.cand: list[list[list[int]]] = []
+        #: runs judged held: (axis, first) → True
+        self.held: set[tuple[int, int]] = set()
+
+    def feed(self, off: int, a: NDArray[np.float64]) -> None:
+        n, c = a.shape
+        if not n:
+            return
+        if self.last is None:
+            self.last = np.asarray(a[0], dtype=float).copy()
+            self.start = np.full(c, off, dtype=np.int64)
+            self.hist = np.zeros((c, HELD_HIST + 1), dtype=np.int64)
+            self.cand = [[] for _ in range(c)]
+            first = True
+        else:
+            first = False
+        assert self.start is not None and self.hist is not None
+        for j in range(c):
+            col = np.asarray(a[:, j], dtype=float)
+            new = np.flatnonzero(col[1:] != col[:-1]) + 1
+            if not first and not col[0] == self.last[j]:
+                new = np.concatenate([[0], new])
+            begins = np.concatenate([[self.start[j]], off + new])
+            lengths = np.diff(begins)  # the runs completed here
+            if len(lengths):
+                np.add.at(self.hist[j], np.minimum(lengths, HELD_HIST), 1)
+            cand = self.cand[j]
+            if cand and cand[-1][0] == self.start[j]:
+                cand.pop()  # the open run, seen again below (completed or still open)
+            for k in np.flatnonzero(lengths >= HELD_MIN_RUN):
+                cand.append([int(begins[k]), int(begins[k + 1]) - 1])
+            self.start[j] = begins[-1]
+            if off + n - self.start[j] >= HELD_MIN_RUN:
+                cand.append([int(self.start[j]), off + n - 1])
+            self.last[j] = col[-1]
+        self.rows = off + n
+
+    def verdict(self, off: int, n: int) -> NDArray[np.bool_]:
+        """(n, axes): the rows [off, off + n) held on each axis."""
+        c = 0 if self.hist is None else self.hist.shape[0]
+        out = np.zeros((n, c), dtype=bool)
+        if self.hist is None or not n:
+            return out
+        for j in range(c):
+            cand = self.cand[j]
+            if not cand:
+                continue
+            k = held_threshold(self.hist[j], self.rows)
+            for first, last in cand:
+                if last < off or first >= off + n:
+                    continue
+                key = (j, first)
+                if key not in self.held and last - first + 1 >= k:
+                    self.held.add(key)
+                if key in self.held:
+                    out[max(first, off) - off:min(last, off + n - 1) - off + 1, j] = True
+            self.cand[j] = [x for x in cand if x[1] >= off + n]
+        done = {key for key in self.held if key[1] < off + n}
+        open_firsts = {(j, x[0]) for j in range(c) for x in self.cand[j]}
+        self.held -= done - open_firsts
+        return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -1197,12 +1383,19 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
                   bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None,
-                  check_units: bool = True) -> Iterator[Block]:
+                  check_units: bool = True,
+                  held_rows: Callable[[int, int], NDArray[np.bool_]] | None = None,
+                  on_verdict: Callable[[int, NDArray[np.bool_], NDArray[np.bool_]], None]
+                  | None = None) -> Iterator[Block]:
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
     ``bad_rows(offset, block)``: the block's outlying rows (default ``screen_accel``; a
-    ``ScreenedSource`` hands the first read's verdicts to its later reads).
+    ``ScreenedSource`` hands the first read's verdicts to its later reads). Held acceleration
+    (``HeldAccel``, over the whole read: each block is fed to it when read, and judged when
+    handed on, a block later) is cut likewise; ``held_rows(offset, n)`` gives its verdict
+    instead ((n, axes) held flags: a later read's, which may read fewer axes).
+    ``on_verdict(offset, cut rows, held flags)``: each block's verdicts, for a later read.
 
     Temperature readings are judged with one block of look-ahead (a spike's right-hand
     neighbour may be in the next block), so each block is handed on when the next has been
@@ -1220,17 +1413,42 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     offset = 0
     start_n = round(STARTUP_S * rate_hz)
     cols = None if columns is None else list(columns)
+    detector = HeldAccel() if held_rows is None else None
+    # the log's held stretch that may go on into the next block (its index)
+    held_at = [-1]
 
     def emit(off: int, blk: Block, last: bool) -> Iterator[Block]:
         a, t, end = blk
         if t is not None and tnames:
             t = _mask_readings(off, t, tracks, tnames, log, rate_hz, final=last)
-        bad = screen_accel(a) if bad_rows is None else bad_rows(off, a)
-        runs = _runs(bad)
-        for f, l_ in runs:
+        shock = screen_accel(a) if bad_rows is None else bad_rows(off, a)
+        flags = (detector.verdict(off, len(a)) if detector is not None
+                 else held_rows(off, len(a)) if held_rows is not None
+                 else np.zeros((len(a), 0), dtype=bool))
+        held = flags.any(axis=1) if flags.shape[1] else np.zeros(len(a), dtype=bool)
+        if on_verdict is not None:
+            on_verdict(off, shock, flags)
+        for f, l_ in _runs(shock & ~held):
             kind = "startup_glitch" if off + f < start_n else "shock"
             log.stretches.append(Screened("accel", kind, off + f, off + l_, (off + f) / rate_hz,
                                           (off + l_ + 1) / rate_hz, l_ - f + 1))
+        for f, l_ in _runs(held):
+            axes = tuple(str(names[j]) if j < len(names) else str(j)
+                         for j in range(flags.shape[1]) if flags[f:l_ + 1, j].any())
+            k = held_at[0]
+            prev = log.stretches[k] if 0 <= k < len(log.stretches) else None
+            if prev is not None and prev.kind == "held_accel" and prev.last + 1 == off + f:
+                # a held stretch across the blocks' boundary: one stretch
+                log.stretches[k] = Screened(
+                    "accel", "held_accel", prev.first, off + l_, prev.start_s,
+                    (off + l_ + 1) / rate_hz, prev.count + l_ - f + 1,
+                    tuple(x for x in names if x in prev.axes or x in axes) or prev.axes)
+                continue
+            held_at[0] = len(log.stretches)
+            log.stretches.append(Screened("accel", "held_accel", off + f, off + l_,
+                                          (off + f) / rate_hz, (off + l_ + 1) / rate_hz,
+                                          l_ - f + 1, axes))
+        runs = _runs(shock | held)
         pos = 0
         pieces: list[Block] = []
         for f, l_ in runs:
@@ -1288,6 +1506,8 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     observed = 0  # the waiting blocks already watched
     for blk in blocks:
         blk = to_celsius(blk, to_c)
+        if detector is not None:
+            detector.feed(offset, np.asarray(blk[0], dtype=float))
         waiting.append((offset, blk))
         offset += len(blk[0])
         waited += len(blk[0])
@@ -1417,6 +1637,8 @@ class ScreenedSource:
         # without judging every axis again (the neighbours' medians cost as much as the
         # OADEV of a long record)
         self._verdicts: dict[int, dict[int, NDArray[np.intp]]] = {}
+        #: ... and its held acceleration: {offset: (rows, their (rows, axes) held flags)}
+        self._held: dict[int, dict[int, tuple[NDArray[np.intp], NDArray[np.bool_]]]] = {}
 
     @property
     def info(self) -> Any:
@@ -1436,6 +1658,9 @@ class ScreenedSource:
         any. Later reads cut those rows without judging again, and the next complete read's
         log says what was cut (nothing cut: the log says the screen ran)."""
         self._verdicts[block] = dict(cuts)
+        # the chunks' verdicts hold no held acceleration: a chunk that sees a run that may be
+        # one sends the record to be judged whole (``held_suspect``)
+        self._held[block] = {}
         if not cuts and self.log is None:
             self.log = ScreenLog(float(self.source.info.rate_hz), done=True, units=self.units)
 
@@ -1450,6 +1675,8 @@ class ScreenedSource:
         if self.log is None:
             self.log = log
         known = self._verdicts.get(block)
+        held_known = self._held.get(block, {})
+        n_axes = len(info.names)
         # judged once on every axis; later reads take only the columns asked for
         raw = self.source.blocks(block, columns=None if known is None else columns,
                                  temperature=temperature, verify=verify)
@@ -1465,9 +1692,26 @@ class ScreenedSource:
                 found[off] = np.flatnonzero(bad)
             return bad
 
+        found_held: dict[int, tuple[NDArray[np.intp], NDArray[np.bool_]]] = {}
+
+        def held_rows(off: int, n: int) -> NDArray[np.bool_]:
+            out = np.zeros((n, n_axes), dtype=bool)
+            if off in held_known:
+                rows, flags = held_known[off]
+                out[rows] = flags
+            return out
+
+        def keep(off: int, _cut: NDArray[np.bool_], flags: NDArray[np.bool_]) -> None:
+            rows = np.flatnonzero(flags.any(axis=1)) if flags.shape[1] else []
+            if len(rows):
+                found_held[off] = (np.asarray(rows, dtype=np.intp), flags[rows])
+
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
                                  columns if known is None else None, judged,
-                                 check_units=info.format is not RecordFormat.RECORDING)
+                                 check_units=info.format is not RecordFormat.RECORDING,
+                                 held_rows=None if known is None else held_rows,
+                                 on_verdict=keep if known is None else None)
         if known is None and log.done:
             self._verdicts[block] = found
+            self._held[block] = found_held
