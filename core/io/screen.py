@@ -404,12 +404,15 @@ def grid_scale(col: NDArray[np.float64], dist: NDArray[np.float64], scale: float
     return min(max(floor, rms), GRID_RMS_CAP * floor)
 
 
-def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
+def screen_accel(a: NDArray[np.float64], held: NDArray[np.bool_] | None = None
+                 ) -> NDArray[np.bool_]:
     """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
     with their margin. The scale is the robust spread of the sample's distance from its
     neighbours' mean (the same statistic, so a chip filter's correlated samples, whose first
     differences are small against their spread, are not taken for shocks); the median of the
-    neighbours is taken only where that distance already stands out."""
+    neighbours is taken only where that distance already stands out. ``held``: rows cut as
+    held acceleration, left out of the scale (their distances are 0: a block half held had
+    its scale collapse, and its live samples cut as shocks) and never shocks."""
     n = len(a)
     bad = np.zeros(n, dtype=bool)
     if n < 2 * SHOCK_HALF + 2:
@@ -422,8 +425,15 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
             kern.local_residual(col, SHOCK_HALF, dist)
         else:
             np.abs(_local_residual(col, SHOCK_HALF), out=dist)
+        if held is not None and held.any():
+            dist[held] = 0.0
+            live = dist[~held]
+            if len(live) < 2 * SHOCK_HALF + 2:
+                continue
+        else:
+            live = dist
         # every 4th sample gives the median to a few % on a block (and a quarter the work)
-        sub = dist[::4]
+        sub = live[::4]
         low = _median_floor(sub)
         if low > 0 and float(dist.max()) <= 0.5 * SHOCK_Z * (low / 0.6745):
             # no candidate under the exact scale either: it is ≥ low / 0.6745 (division and
@@ -487,52 +497,46 @@ HELD_MIN_RUN = 16
 #: measured (an axis with fewer runs than this is not judged: its chance of a repeat is
 #: unknown)
 HELD_MIN_RUNS = 200
-#: The measured chance of going on is taken at its upper bound, Wilson's at this many σ
-HELD_Z = 3.0
+#: Runs of an axis reaching a length, for the tail's decay to be measured to there (the
+#: longest few: a held stretch or two among them do not move it)
+HELD_TAIL_RUNS = 20
+#: The decay length measured on the tail's runs is taken this much longer (1 + 3/√20: three
+#: standard errors of a rate of 20 counts)
+HELD_TAIL_MARGIN = 1.0 + 3.0 / math.sqrt(20.0)
 #: Runs of this length and longer are counted together (the histogram's bound)
 HELD_HIST = 4096
 
 
-def _wilson_upper(k: NDArray[np.float64], n: NDArray[np.float64], z: float = HELD_Z
-                  ) -> NDArray[np.float64]:
-    """Wilson's upper bound of a binomial chance, k of n (elementwise, n > 0)."""
-    p = k / n
-    z2 = z * z
-    c = p + z2 / (2 * n)
-    w = z * np.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
-    return np.asarray(np.minimum(1.0, (c + w) / (1 + z2 / n)), dtype=float)
-
-
-def held_threshold(hist: NDArray[np.int64], rows: int) -> float:
+def held_threshold(hist: NDArray[np.int64], rows: int, seen: int | None = None) -> float:
     """The shortest run of identical samples an axis's noise makes implausible, from the
-    lengths of its runs so far (``hist[L]``: runs of L samples, the last bin HELD_HIST and
-    more) over ``rows`` samples; inf where the axis has too few runs to tell.
+    lengths of its runs (``hist[L]``: runs of L samples, the last bin HELD_HIST and more)
+    over ``rows`` samples (of ``seen`` read so far, ``rows`` by default); inf where the axis
+    has too few runs to tell.
 
     A quiet axis on a coarse grid repeats values legitimately, and a chip filter's correlated
-    samples repeat in clusters, so the chance is measured on the axis itself, as the chance
-    that a run of length r goes on to r + 1, N(≥ r+1)/N(≥ r), by counts of *runs* (a held
-    stretch is one run whatever its length, so it cannot raise the chance that clears it).
-    Beyond the longest length R still reached by ``HELD_MIN_RUNS`` runs, a run goes on at
-    most at the largest of those chances (its Wilson upper bound at ``HELD_Z``; a mixture of
-    quiet and busy hours has its tail from the quiet ones), so P(run ≥ k) ≤ F(R)·q^(k−R). The
-    threshold is the k at which the runs of a record (``HELD_RECORD_SAMPLES`` rows, or the rows
-    seen, at the axis's runs per row) reach one that long by chance ``HELD_ALARM`` times."""
+    samples repeat in clusters, so the chance is measured on the axis itself, by counts of
+    *runs* (a held stretch is one run whatever its length, so it cannot raise the chance that
+    clears it): the length L_a that ``HELD_MIN_RUNS`` runs reach and the length L_b that
+    ``HELD_TAIL_RUNS`` reach give the tail's decay length λ (runs reaching a length fall e-fold
+    every λ samples: a geometric tail, the chance of a repeat independent of the run so far,
+    measured on the longest runs, so a mixture of quiet and busy hours has its tail from the
+    quiet ones), taken ``HELD_TAIL_MARGIN`` longer for the few runs it is measured on. From
+    L_b on, P(run ≥ L_b + x) = F(L_b)·e^(−x/λ); the threshold is the length the runs of a
+    record (``HELD_RECORD_SAMPLES`` rows, or the rows seen, at the axis's runs per row) reach
+    by chance ``HELD_ALARM`` times, at least ``HELD_MIN_RUN``."""
     ge = np.cumsum(hist[::-1])[::-1].astype(float)  # ge[L]: runs of L samples or more
     n1 = float(ge[1]) if len(ge) > 1 else 0.0
     if n1 < HELD_MIN_RUNS or rows <= 0:
         return math.inf
-    well = np.flatnonzero(ge[1:] >= HELD_MIN_RUNS) + 1  # lengths 1..R (ge is non-increasing)
-    r_top = int(well[-1])
-    if r_top >= HELD_HIST - 1:
+    la = int(np.flatnonzero(ge >= HELD_MIN_RUNS)[-1])
+    lb = int(np.flatnonzero(ge >= HELD_TAIL_RUNS)[-1])
+    if lb >= HELD_HIST:
         return math.inf  # runs beyond the histogram are common: nothing to measure
-    r = np.arange(1, r_top + 1)
-    q = float(np.max(_wilson_upper(ge[r + 1], ge[r])))
-    if not q < 1.0:
-        return math.inf
-    runs = n1 / rows * max(HELD_RECORD_SAMPLES, rows)
-    f_top = float(ge[r_top]) / n1
-    extra = math.log(HELD_ALARM / (runs * f_top)) / math.log(q)
-    return float(max(HELD_MIN_RUN, r_top + max(0.0, math.ceil(extra))))
+    beyond = max(float(ge[lb + 1]), 0.5)  # the first length fewer runs reach
+    lam = (lb + 1 - la) / math.log(float(ge[la]) / beyond) * HELD_TAIL_MARGIN
+    runs = n1 / rows * max(HELD_RECORD_SAMPLES, rows if seen is None else seen)
+    extra = lam * math.log(max(1.0, runs * float(ge[lb]) / n1 / HELD_ALARM))
+    return float(max(HELD_MIN_RUN, lb + math.ceil(extra)))
 
 
 def _max_run(col: NDArray[np.float64]) -> int:
@@ -555,19 +559,21 @@ def held_suspect(a: NDArray[np.float64]) -> bool:
 
 
 class HeldAccel:
-    """The held-acceleration rule over a whole read, block by block in bounded memory (a
-    histogram of run lengths per axis, and the runs long enough to be candidates that
-    reach rows not yet judged).
+    """The held-acceleration rule over a whole read, block by block in bounded memory: per
+    axis a histogram of run lengths, each block's own (trimmed) while its rows may still be
+    judged, and the runs long enough to be candidates that reach rows not yet judged.
 
     Per axis: a repeated frame repeats every axis, so each axis's own rule sees it; a stuck
     channel of one axis is seen too; and a row cut when any axis says so is the verdict the
-    parallel chunks (each judging its own axes) can form. The blocks are ``feed``-ed in order
-    (ahead of the rows judged: the screen hands a block on with the next one read);
-    ``verdict`` judges a block's rows with every run seen so far. A run whose length already
-    clears its axis's threshold (``held_threshold``) is held on all its rows, its verdict kept
-    for the rows that come later; a run still open and short is judged again on the next
-    block (a run that is not yet judged held when its first rows are handed on, which needs a
-    threshold longer than a block, is cut from there on)."""
+    parallel chunks (each judging its own axes) can form. The blocks are ``feed``-ed in order,
+    ahead of the rows judged (the screen hands a block on once the next is read, and waits
+    while ``undecided``); ``verdict`` judges a block's rows. A run is held when its length
+    clears the longer of two thresholds (``held_threshold``): the whole read's, and that of
+    the runs from the run's own block on (so an axis that turns quiet, its runs long, is
+    judged by its new noise, and not before that noise is measured; a held stretch in a busy
+    record has the busy runs after it). A run judged held stays held on the rows that come
+    later; a run still open is judged again on the next block, and one longer than
+    ``HELD_WAIT_SAMPLES`` by the whole read's threshold alone."""
 
     def __init__(self) -> None:
         self.rows = 0
@@ -577,31 +583,35 @@ class HeldAccel:
         #: per axis, runs of ≥ HELD_MIN_RUN samples reaching rows not yet judged: [first, last]
         #: (last the run's end so far for the open one)
         self.cand: list[list[list[int]]] = []
-        #: runs judged held: (axis, first) → True
+        #: runs judged held: (axis, first)
         self.held: set[tuple[int, int]] = set()
+        #: the blocks' own run histograms (per axis, trimmed) while they may be needed:
+        #: (offset, rows, [hist per axis])
+        self.blocks: list[tuple[int, int, list[NDArray[np.int64]]]] = []
 
     def feed(self, off: int, a: NDArray[np.float64]) -> None:
         n, c = a.shape
         if not n:
             return
+        first = self.last is None
         if self.last is None:
             self.last = np.asarray(a[0], dtype=float).copy()
             self.start = np.full(c, off, dtype=np.int64)
             self.hist = np.zeros((c, HELD_HIST + 1), dtype=np.int64)
             self.cand = [[] for _ in range(c)]
-            first = True
-        else:
-            first = False
         assert self.start is not None and self.hist is not None
+        own: list[NDArray[np.int64]] = []
         for j in range(c):
             col = np.asarray(a[:, j], dtype=float)
             new = np.flatnonzero(col[1:] != col[:-1]) + 1
             if not first and not col[0] == self.last[j]:
                 new = np.concatenate([[0], new])
             begins = np.concatenate([[self.start[j]], off + new])
-            lengths = np.diff(begins)  # the runs completed here
-            if len(lengths):
-                np.add.at(self.hist[j], np.minimum(lengths, HELD_HIST), 1)
+            lengths = np.minimum(np.diff(begins), HELD_HIST)  # the runs completed here
+            h = np.bincount(lengths).astype(np.int64) if len(lengths) else np.zeros(
+                1, dtype=np.int64)
+            self.hist[j, :len(h)] += h
+            own.append(h)
             cand = self.cand[j]
             if cand and cand[-1][0] == self.start[j]:
                 cand.pop()  # the open run, seen again below (completed or still open)
@@ -611,7 +621,40 @@ class HeldAccel:
             if off + n - self.start[j] >= HELD_MIN_RUN:
                 cand.append([int(self.start[j]), off + n - 1])
             self.last[j] = col[-1]
+        self.blocks.append((off, n, own))
         self.rows = off + n
+
+    def _since(self, j: int, first: int) -> tuple[NDArray[np.int64], int]:
+        """Axis j's runs completed in the blocks from the one holding row ``first`` on."""
+        h = np.zeros(HELD_HIST + 1, dtype=np.int64)
+        rows = 0
+        for off, n, own in self.blocks:
+            if off + n > first:
+                h[:len(own[j])] += own[j]
+                rows += n
+        return h, rows
+
+    def _threshold(self, j: int, first: int, last: int) -> float:
+        assert self.hist is not None
+        k = held_threshold(self.hist[j], self.rows)
+        if last - first + 1 >= k and last - first + 1 < HELD_WAIT_SAMPLES:
+            h, rows = self._since(j, first)
+            k = max(k, held_threshold(h, rows, self.rows))
+        return k
+
+    def undecided(self) -> bool:
+        """An open run the whole read's threshold would hold, not yet judged held because the
+        runs after its start are too few to tell: the screen waits for more blocks (at most
+        ``HELD_WAIT_SAMPLES`` rows)."""
+        if self.hist is None:
+            return False
+        for j, cand in enumerate(self.cand):
+            if cand and cand[-1][1] == self.rows - 1 and (j, cand[-1][0]) not in self.held:
+                first, last = cand[-1]
+                if (last - first + 1 >= held_threshold(self.hist[j], self.rows)
+                        and not last - first + 1 >= self._threshold(j, first, last)):
+                    return True
+        return False
 
     def verdict(self, off: int, n: int) -> NDArray[np.bool_]:
         """(n, axes): the rows [off, off + n) held on each axis."""
@@ -621,21 +664,21 @@ class HeldAccel:
             return out
         for j in range(c):
             cand = self.cand[j]
-            if not cand:
-                continue
-            k = held_threshold(self.hist[j], self.rows)
             for first, last in cand:
                 if last < off or first >= off + n:
                     continue
                 key = (j, first)
-                if key not in self.held and last - first + 1 >= k:
+                if key not in self.held and last - first + 1 >= self._threshold(j, first,
+                                                                                last):
                     self.held.add(key)
                 if key in self.held:
                     out[max(first, off) - off:min(last, off + n - 1) - off + 1, j] = True
             self.cand[j] = [x for x in cand if x[1] >= off + n]
-        done = {key for key in self.held if key[1] < off + n}
-        open_firsts = {(j, x[0]) for j in range(c) for x in self.cand[j]}
-        self.held -= done - open_firsts
+        keep = {(j, x[0]) for j in range(c) for x in self.cand[j]}
+        self.held &= keep
+        # a block's own runs are needed while a candidate or a row still to judge is in it
+        low = min([off + n, *(x[0] for cand in self.cand for x in cand)])
+        self.blocks = [b for b in self.blocks if b[0] + b[1] > low]
         return out
 
 
@@ -1382,7 +1425,8 @@ def to_celsius(blk: Block, columns: Sequence[int]) -> Block:
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
-                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None,
+                  bad_rows: Callable[[int, NDArray[np.float64], NDArray[np.bool_]],
+                                     NDArray[np.bool_]] | None = None,
                   check_units: bool = True,
                   held_rows: Callable[[int, int], NDArray[np.bool_]] | None = None,
                   on_verdict: Callable[[int, NDArray[np.bool_], NDArray[np.bool_]], None]
@@ -1390,7 +1434,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
-    ``bad_rows(offset, block)``: the block's outlying rows (default ``screen_accel``; a
+    ``bad_rows(offset, block, held rows)``: the block's outlying rows (default ``screen_accel``; a
     ``ScreenedSource`` hands the first read's verdicts to its later reads). Held acceleration
     (``HeldAccel``, over the whole read: each block is fed to it when read, and judged when
     handed on, a block later) is cut likewise; ``held_rows(offset, n)`` gives its verdict
@@ -1421,11 +1465,12 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         a, t, end = blk
         if t is not None and tnames:
             t = _mask_readings(off, t, tracks, tnames, log, rate_hz, final=last)
-        shock = screen_accel(a) if bad_rows is None else bad_rows(off, a)
         flags = (detector.verdict(off, len(a)) if detector is not None
                  else held_rows(off, len(a)) if held_rows is not None
                  else np.zeros((len(a), 0), dtype=bool))
-        held = flags.any(axis=1) if flags.shape[1] else np.zeros(len(a), dtype=bool)
+        held: NDArray[np.bool_] = (np.asarray(flags.any(axis=1), dtype=bool) if flags.shape[1]
+                                   else np.zeros(len(a), dtype=bool))
+        shock = screen_accel(a, held) if bad_rows is None else bad_rows(off, a, held)
         if on_verdict is not None:
             on_verdict(off, shock, flags)
         for f, l_ in _runs(shock & ~held):
@@ -1518,7 +1563,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         # every block but the newest is handed on (a held stretch found in it may begin in
         # the block before: a log with a value on consecutive rows only), or none while a
         # channel's test for a held stretch is close (at most HELD_WAIT_SAMPLES rows)
-        if (any(d.close for d in held)
+        if ((any(d.close for d in held) or (detector is not None and detector.undecided()))
                 and sum(len(b[0]) for _, b in waiting) < HELD_WAIT_SAMPLES):
             continue
         hold = 1 if any(d.dense for d in held) else 0
@@ -1682,12 +1727,13 @@ class ScreenedSource:
                                  temperature=temperature, verify=verify)
         found: dict[int, NDArray[np.intp]] = {}
 
-        def judged(off: int, a: NDArray[np.float64]) -> NDArray[np.bool_]:
+        def judged(off: int, a: NDArray[np.float64], held: NDArray[np.bool_]
+                   ) -> NDArray[np.bool_]:
             if known is not None:
                 bad = np.zeros(len(a), dtype=bool)
                 bad[known.get(off, np.empty(0, dtype=np.intp))] = True
                 return bad
-            bad = screen_accel(a)
+            bad = screen_accel(a, held)
             if bad.any():
                 found[off] = np.flatnonzero(bad)
             return bad
@@ -1702,9 +1748,9 @@ class ScreenedSource:
             return out
 
         def keep(off: int, _cut: NDArray[np.bool_], flags: NDArray[np.bool_]) -> None:
-            rows = np.flatnonzero(flags.any(axis=1)) if flags.shape[1] else []
-            if len(rows):
-                found_held[off] = (np.asarray(rows, dtype=np.intp), flags[rows])
+            if flags.shape[1] and flags.any():
+                rows = np.flatnonzero(flags.any(axis=1))
+                found_held[off] = (rows, flags[rows])
 
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
