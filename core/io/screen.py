@@ -1470,7 +1470,8 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                  else np.zeros((len(a), 0), dtype=bool))
         held: NDArray[np.bool_] = (np.asarray(flags.any(axis=1), dtype=bool) if flags.shape[1]
                                    else np.zeros(len(a), dtype=bool))
-        shock = screen_accel(a, held) if bad_rows is None else bad_rows(off, a, held)
+        shock = (bad_rows(off, a, held) if bad_rows is not None
+                 else screen_accel(a, held) if held.any() else screen_accel(a))
         if on_verdict is not None:
             on_verdict(off, shock, flags)
         for f, l_ in _runs(shock & ~held):
@@ -1733,7 +1734,7 @@ class ScreenedSource:
                 bad = np.zeros(len(a), dtype=bool)
                 bad[known.get(off, np.empty(0, dtype=np.intp))] = True
                 return bad
-            bad = screen_accel(a, held)
+            bad = screen_accel(a, held) if held.any() else screen_accel(a)
             if bad.any():
                 found[off] = np.flatnonzero(bad)
             return bad
