@@ -582,12 +582,13 @@ class HeldAccel:
         self.hist: NDArray[np.int64] | None = None
         #: per axis, runs of ≥ HELD_MIN_RUN samples reaching rows not yet judged: [first, last]
         #: (last the run's end so far for the open one)
-        self.cand: list[list[list[int]]] = []
-        #: runs judged held: (axis, first)
-        self.held: set[tuple[int, int]] = set()
+        self.cand: list[NDArray[np.int64]] = []  # per axis, (k, 2)
+        #: per axis, whether each candidate is judged held
+        self.held: list[NDArray[np.bool_]] = []
         #: the blocks' own run histograms (per axis, trimmed) while they may be needed:
         #: (offset, rows, [hist per axis])
         self.blocks: list[tuple[int, int, list[NDArray[np.int64]]]] = []
+        self._cache: dict[int, tuple[int, float]] = {}
 
     def feed(self, off: int, a: NDArray[np.float64]) -> None:
         n, c = a.shape
@@ -598,7 +599,8 @@ class HeldAccel:
             self.last = np.asarray(a[0], dtype=float).copy()
             self.start = np.full(c, off, dtype=np.int64)
             self.hist = np.zeros((c, HELD_HIST + 1), dtype=np.int64)
-            self.cand = [[] for _ in range(c)]
+            self.cand = [np.zeros((0, 2), dtype=np.int64) for _ in range(c)]
+            self.held = [np.zeros(0, dtype=bool) for _ in range(c)]
         assert self.start is not None and self.hist is not None
         own: list[NDArray[np.int64]] = []
         for j in range(c):
@@ -612,14 +614,22 @@ class HeldAccel:
                 1, dtype=np.int64)
             self.hist[j, :len(h)] += h
             own.append(h)
-            cand = self.cand[j]
-            if cand and cand[-1][0] == self.start[j]:
-                cand.pop()  # the open run, seen again below (completed or still open)
-            for k in np.flatnonzero(lengths >= HELD_MIN_RUN):
-                cand.append([int(begins[k]), int(begins[k + 1]) - 1])
+            cand, held = self.cand[j], self.held[j]
+            was = False
+            if len(cand) and cand[-1, 0] == self.start[j]:
+                # the open run, seen again below (completed or still open), its verdict kept
+                was = bool(held[-1])
+                cand, held = cand[:-1], held[:-1]
+            k = np.flatnonzero(lengths >= HELD_MIN_RUN)
+            new_c = np.column_stack([begins[k], begins[k + 1] - 1]).astype(np.int64)
             self.start[j] = begins[-1]
             if off + n - self.start[j] >= HELD_MIN_RUN:
-                cand.append([int(self.start[j]), off + n - 1])
+                new_c = np.vstack([new_c, [[self.start[j], off + n - 1]]]).astype(np.int64)
+            new_h = np.zeros(len(new_c), dtype=bool)
+            if was and len(new_c) and new_c[0, 0] == begins[0]:
+                new_h[0] = True
+            self.cand[j] = np.vstack([cand, new_c]) if len(new_c) else cand
+            self.held[j] = np.concatenate([held, new_h])
             self.last[j] = col[-1]
         self.blocks.append((off, n, own))
         self.rows = off + n
@@ -634,9 +644,15 @@ class HeldAccel:
                 rows += n
         return h, rows
 
-    def _threshold(self, j: int, first: int, last: int) -> float:
+    def _whole(self, j: int) -> float:
+        """Axis j's threshold by the whole read so far (kept until the next block is fed)."""
         assert self.hist is not None
-        k = held_threshold(self.hist[j], self.rows)
+        if self._cache.get(j, (-1, 0.0))[0] != self.rows:
+            self._cache[j] = (self.rows, held_threshold(self.hist[j], self.rows))
+        return self._cache[j][1]
+
+    def _threshold(self, j: int, first: int, last: int) -> float:
+        k = self._whole(j)
         if last - first + 1 >= k and last - first + 1 < HELD_WAIT_SAMPLES:
             h, rows = self._since(j, first)
             k = max(k, held_threshold(h, rows, self.rows))
@@ -649,9 +665,9 @@ class HeldAccel:
         if self.hist is None:
             return False
         for j, cand in enumerate(self.cand):
-            if cand and cand[-1][1] == self.rows - 1 and (j, cand[-1][0]) not in self.held:
-                first, last = cand[-1]
-                if (last - first + 1 >= held_threshold(self.hist[j], self.rows)
+            if len(cand) and cand[-1, 1] == self.rows - 1 and not self.held[j][-1]:
+                first, last = int(cand[-1, 0]), int(cand[-1, 1])
+                if (last - first + 1 >= self._whole(j)
                         and not last - first + 1 >= self._threshold(j, first, last)):
                     return True
         return False
@@ -663,21 +679,20 @@ class HeldAccel:
         if self.hist is None or not n:
             return out
         for j in range(c):
-            cand = self.cand[j]
-            for first, last in cand:
-                if last < off or first >= off + n:
-                    continue
-                key = (j, first)
-                if key not in self.held and last - first + 1 >= self._threshold(j, first,
-                                                                                last):
-                    self.held.add(key)
-                if key in self.held:
-                    out[max(first, off) - off:min(last, off + n - 1) - off + 1, j] = True
-            self.cand[j] = [x for x in cand if x[1] >= off + n]
-        keep = {(j, x[0]) for j in range(c) for x in self.cand[j]}
-        self.held &= keep
+            cand, held = self.cand[j], self.held[j]
+            if not len(cand):
+                continue
+            f, la = cand[:, 0], cand[:, 1]
+            here = (la >= off) & (f < off + n)
+            # only a run longer than the whole read's threshold is judged further
+            for i in np.flatnonzero(here & ~held & (la - f + 1 >= self._whole(j))):
+                held[i] = la[i] - f[i] + 1 >= self._threshold(j, int(f[i]), int(la[i]))
+            for i in np.flatnonzero(here & held):
+                out[max(int(f[i]), off) - off:min(int(la[i]), off + n - 1) - off + 1, j] = True
+            keep = la >= off + n
+            self.cand[j], self.held[j] = cand[keep], held[keep]
         # a block's own runs are needed while a candidate or a row still to judge is in it
-        low = min([off + n, *(x[0] for cand in self.cand for x in cand)])
+        low = min([off + n, *(int(cand[:, 0].min()) for cand in self.cand if len(cand))])
         self.blocks = [b for b in self.blocks if b[0] + b[1] > low]
         return out
 
