@@ -27,6 +27,12 @@ either (``grid_scale``), so a shock must stand ≥ 3.4 LSB out whatever the nois
 is cut from quantisation; where the median stands above the quantisation it is kept (the
 RMS would take a block's bursts of vibration for its noise).
 
+A **held acceleration** (``held_accel``: a stuck FIFO, a driver repeating its last frame) is a
+run of identical samples on an axis longer than the axis's own chance of a repeat makes likely
+at ``HELD_ALARM`` per record (``held_threshold``, ``HeldAccel``: judged over the whole read in
+bounded memory, a run across blocks one stretch). It is cut out as a gap on every axis, like a
+shock, and its rows are left out of the shock rule's scale.
+
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
 - ``read_error``: −127 °C (the driver's value for a failed CRC or a missing device) or any
@@ -268,9 +274,11 @@ class ScreenLog:
                           "the distances' RMS below their 98th percentile; a run of "
                           "identical samples on an axis (held or stuck: a repeated frame) "
                           "longer than its axis's own chance of a repeat makes likely at "
-                          "1e-6 per record of up to 2^25 samples (measured as the chance "
-                          "that a run goes on, by counts of runs, at its 3σ upper bound; "
-                          "at least 16 samples), cut out as a gap; "
+                          "1e-6 per record of up to 2^25 samples (the tail of the axis's "
+                          "own run lengths, counted as runs: the decay from the length 200 "
+                          "runs reach to the length 20 reach, 1 + 3/√20 longer; the longer "
+                          "of the whole read's and the runs' from its own block on; at "
+                          "least 16 samples), cut out as a gap on every axis; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run; "
