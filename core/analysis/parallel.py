@@ -380,10 +380,19 @@ def _screen(a: NDArray[np.float64]) -> NDArray[np.intp] | None:
     block, since chunks start on a block boundary): the rows it cuts, None for none. Any cut
     is a gap the plan does not know: the analysis is then read on one worker
     (``ScreenCut``)."""
-    from avard.core.io.screen import screen_accel
+    from avard.core.io.screen import held_suspect, screen_accel
 
+    if held_suspect(a):
+        # a held acceleration is judged over the whole record (its axis's runs), which a
+        # chunk does not see: the record is read on one worker and judged there
+        return np.array([HELD_SUSPECT], dtype=np.intp)
     bad = screen_accel(a)
     return np.flatnonzero(bad) if bad.any() else None
+
+
+#: A chunk's verdict row that says "a held acceleration may lie here": no verdicts are
+#: handed on, the one-worker read judges the whole record (``_screen_cut``)
+HELD_SUSPECT = -1
 
 
 @dataclass(frozen=True)
@@ -586,6 +595,9 @@ def _screen_cut(parts: dict[tuple[int, int], ChunkResult], block: int | None) ->
             verdicts[off] = np.union1d(verdicts[off], rows) if off in verdicts else rows
     if not verdicts:  # no chunk says what it cut: the one-worker read judges it all again
         return ScreenCut("the input screen cut samples", None, block)
+    if any(len(rows) and rows[0] == HELD_SUSPECT for rows in verdicts.values()):
+        return ScreenCut("the input screen found a run of identical samples that may be a "
+                         "held acceleration", None, block)
     first = min(off + int(rows[0]) for off, rows in verdicts.items())
     return ScreenCut(f"the input screen cuts {sum(len(r) for r in verdicts.values())} samples"
                      f" from sample {first} on", verdicts, block)

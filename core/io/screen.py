@@ -27,6 +27,12 @@ either (``grid_scale``), so a shock must stand ≥ 3.4 LSB out whatever the nois
 is cut from quantisation; where the median stands above the quantisation it is kept (the
 RMS would take a block's bursts of vibration for its noise).
 
+A **held acceleration** (``held_accel``: a stuck FIFO, a driver repeating its last frame) is a
+run of identical samples on an axis longer than the axis's own chance of a repeat makes likely
+at ``HELD_ALARM`` per record (``held_threshold``, ``HeldAccel``: judged over the whole read in
+bounded memory, a run across blocks one stretch). It is cut out as a gap on every axis, like a
+shock, and its rows are left out of the shock rule's scale.
+
 **Temperature** (each DS18B20 channel, readings where the column is finite):
 
 - ``read_error``: −127 °C (the driver's value for a failed CRC or a missing device) or any
@@ -187,19 +193,27 @@ class Screened:
     start_s: float
     end_s: float
     count: int
+    #: the axes a held acceleration held (the rows are cut on every axis)
+    axes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"channel": self.channel, "kind": self.kind, "start_s": self.start_s,
-                "end_s": self.end_s, "first_sample": self.first, "last_sample": self.last,
-                "count": self.count}
+        out: dict[str, Any] = {
+            "channel": self.channel, "kind": self.kind, "start_s": self.start_s,
+            "end_s": self.end_s, "first_sample": self.first, "last_sample": self.last,
+            "count": self.count}
+        if self.axes:
+            out["axes"] = list(self.axes)
+        return out
 
 
 KIND_TEXT = {"startup_glitch": "start-up glitch", "shock": "isolated shock",
+             "held_accel": "held acceleration (identical samples)",
              "read_error": "read error (-127 °C or out of range)",
              "power_on_85": "85.0 °C power-on value", "spike": "spike",
              "dropout": "dropout (no reading)", "stuck": "stuck reading"}
 # the plural where an "s" at the end would land inside the kind's parenthesis
 _KIND_PLURAL = {"read_error": "read errors (-127 °C or out of range)",
+                "held_accel": "held accelerations (identical samples)",
                 "dropout": "dropouts (no reading)"}
 
 
@@ -208,6 +222,10 @@ def _kind_text(kind: str, n: int) -> str:
     if n == 1:
         return f"1 {KIND_TEXT.get(kind, kind)}"
     return f"{n} {_KIND_PLURAL.get(kind) or KIND_TEXT.get(kind, kind) + 's'}"
+
+
+#: The kinds cut out of the acceleration (every axis's rows)
+ACCEL_KINDS = ("startup_glitch", "shock", "held_accel")
 
 
 @dataclass
@@ -236,7 +254,7 @@ class ScreenLog:
 
     def samples_masked(self) -> int:
         """Acceleration samples cut out (every axis)."""
-        return sum(s.count for s in self.stretches if s.kind in ("startup_glitch", "shock"))
+        return sum(s.count for s in self.stretches if s.kind in ACCEL_KINDS)
 
     def holes(self, channel: str) -> list[tuple[float, float]]:
         """(start, end) s of the stretches of a temperature channel where the log says
@@ -253,7 +271,14 @@ class ScreenLog:
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
                           "scale never below the grid's quantisation (q/√12) on a grid "
                           "coarse against the noise, nor, where the median is below that, "
-                          "the distances' RMS below their 98th percentile; "
+                          "the distances' RMS below their 98th percentile; a run of "
+                          "identical samples on an axis (held or stuck: a repeated frame) "
+                          "longer than its axis's own chance of a repeat makes likely at "
+                          "1e-6 per record of up to 2^25 samples (the tail of the axis's "
+                          "own run lengths, counted as runs: the decay from the length 200 "
+                          "runs reach to the length 20 reach, 1 + 3/√20 longer; the longer "
+                          "of the whole read's and the runs' from its own block on; at "
+                          "least 16 samples), cut out as a gap on every axis; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
                           "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
                           "of one value > 30 min and 10x the channel's 95th-percentile run; "
@@ -272,16 +297,17 @@ class ScreenLog:
         one line per temperature channel the screen has a note on."""
         notes = [f"  temperature {ch}: {n.text}" for ch, n in self.notes.items()]
         if not self.stretches:
-            return ["screened: nothing masked (no glitch, shock, read error, 85 °C, spike, "
-                    "dropout or stuck reading)", *notes]
+            return ["screened: nothing masked (no glitch, shock, held acceleration, read "
+                    "error, 85 °C, spike, dropout or stuck reading)", *notes]
         c = self.counts()
         head = "screened: " + ", ".join(_kind_text(k, n) for k, n in sorted(c.items()))
         if self.samples_masked():
             head += f"; {self.samples_masked()} acceleration samples cut out as gaps"
         out = [head]
         for s in self.stretches[:limit]:
-            unit = "sample" if s.kind in ("startup_glitch", "shock") else "reading"
-            out.append(f"  {s.channel}: {KIND_TEXT.get(s.kind, s.kind)} at "
+            unit = "sample" if s.kind in ACCEL_KINDS else "reading"
+            ch = f"{s.channel} ({', '.join(s.axes)})" if s.axes else s.channel
+            out.append(f"  {ch}: {KIND_TEXT.get(s.kind, s.kind)} at "
                        f"{s.start_s:.6g}–{s.end_s:.6g} s ({s.count} "
                        f"{unit}{'' if s.count == 1 else 's'})")
         if len(self.stretches) > limit:
@@ -386,12 +412,15 @@ def grid_scale(col: NDArray[np.float64], dist: NDArray[np.float64], scale: float
     return min(max(floor, rms), GRID_RMS_CAP * floor)
 
 
-def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
+def screen_accel(a: NDArray[np.float64], held: NDArray[np.bool_] | None = None
+                 ) -> NDArray[np.bool_]:
     """Rows of ``a`` (n, C) that are outliers on some axis (the rule in the module's doc),
     with their margin. The scale is the robust spread of the sample's distance from its
     neighbours' mean (the same statistic, so a chip filter's correlated samples, whose first
     differences are small against their spread, are not taken for shocks); the median of the
-    neighbours is taken only where that distance already stands out."""
+    neighbours is taken only where that distance already stands out. ``held``: rows cut as
+    held acceleration, left out of the scale (their distances are 0: a block half held had
+    its scale collapse, and its live samples cut as shocks) and never shocks."""
     n = len(a)
     bad = np.zeros(n, dtype=bool)
     if n < 2 * SHOCK_HALF + 2:
@@ -404,8 +433,15 @@ def screen_accel(a: NDArray[np.float64]) -> NDArray[np.bool_]:
             kern.local_residual(col, SHOCK_HALF, dist)
         else:
             np.abs(_local_residual(col, SHOCK_HALF), out=dist)
+        if held is not None and held.any():
+            dist[held] = 0.0
+            live = dist[~held]
+            if len(live) < 2 * SHOCK_HALF + 2:
+                continue
+        else:
+            live = dist
         # every 4th sample gives the median to a few % on a block (and a quarter the work)
-        sub = dist[::4]
+        sub = live[::4]
         low = _median_floor(sub)
         if low > 0 and float(dist.max()) <= 0.5 * SHOCK_Z * (low / 0.6745):
             # no candidate under the exact scale either: it is ≥ low / 0.6745 (division and
@@ -451,6 +487,222 @@ def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     d = np.diff(m)
     return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(),
                     strict=True))
+
+
+# a held (stuck) accelerometer: a run of identical samples its own noise makes implausible
+
+#: A false alarm of the held rule at most this often per record (per axis) ...
+HELD_ALARM = 1e-6
+#: ... of up to this many samples (2^25: 74 h at 125 Hz, beyond the daemon's 60 h records); a
+#: longer record is counted by the rows seen
+HELD_RECORD_SAMPLES = 1 << 25
+#: A held stretch is at least this many identical samples whatever its chance (a repeated
+#: frame or two is no stretch the estimators need cut), and the parallel chunks (which judge
+#: each block on its own) send the record to one read where a block holds half of it
+#: (``held_suspect``: a run across a block boundary has half its length on one side)
+HELD_MIN_RUN = 16
+#: Runs of an axis reaching a length, at least, for the chance of going on from there to be
+#: measured (an axis with fewer runs than this is not judged: its chance of a repeat is
+#: unknown)
+HELD_MIN_RUNS = 200
+#: Runs of an axis reaching a length, for the tail's decay to be measured to there (the
+#: longest few: a held stretch or two among them do not move it)
+HELD_TAIL_RUNS = 20
+#: The decay length measured on the tail's runs is taken this much longer (1 + 3/√20: three
+#: standard errors of a rate of 20 counts)
+HELD_TAIL_MARGIN = 1.0 + 3.0 / math.sqrt(20.0)
+#: Runs of this length and longer are counted together (the histogram's bound)
+HELD_HIST = 4096
+
+
+def held_threshold(hist: NDArray[np.int64], rows: int, seen: int | None = None) -> float:
+    """The shortest run of identical samples an axis's noise makes implausible, from the
+    lengths of its runs (``hist[L]``: runs of L samples, the last bin HELD_HIST and more)
+    over ``rows`` samples (of ``seen`` read so far, ``rows`` by default); inf where the axis
+    has too few runs to tell.
+
+    A quiet axis on a coarse grid repeats values legitimately, and a chip filter's correlated
+    samples repeat in clusters, so the chance is measured on the axis itself, by counts of
+    *runs* (a held stretch is one run whatever its length, so it cannot raise the chance that
+    clears it): the length L_a that ``HELD_MIN_RUNS`` runs reach and the length L_b that
+    ``HELD_TAIL_RUNS`` reach give the tail's decay length λ (runs reaching a length fall e-fold
+    every λ samples: a geometric tail, the chance of a repeat independent of the run so far,
+    measured on the longest runs, so a mixture of quiet and busy hours has its tail from the
+    quiet ones), taken ``HELD_TAIL_MARGIN`` longer for the few runs it is measured on. From
+    L_b on, P(run ≥ L_b + x) = F(L_b)·e^(−x/λ); the threshold is the length the runs of a
+    record (``HELD_RECORD_SAMPLES`` rows, or the rows seen, at the axis's runs per row) reach
+    by chance ``HELD_ALARM`` times, at least ``HELD_MIN_RUN``."""
+    ge = np.cumsum(hist[::-1])[::-1].astype(float)  # ge[L]: runs of L samples or more
+    n1 = float(ge[1]) if len(ge) > 1 else 0.0
+    if n1 < HELD_MIN_RUNS or rows <= 0:
+        return math.inf
+    la = int(np.flatnonzero(ge >= HELD_MIN_RUNS)[-1])
+    lb = int(np.flatnonzero(ge >= HELD_TAIL_RUNS)[-1])
+    if lb >= HELD_HIST:
+        return math.inf  # runs beyond the histogram are common: nothing to measure
+    beyond = max(float(ge[lb + 1]), 0.5)  # the first length fewer runs reach
+    lam = (lb + 1 - la) / math.log(float(ge[la]) / beyond) * HELD_TAIL_MARGIN
+    runs = n1 / rows * max(HELD_RECORD_SAMPLES, rows if seen is None else seen)
+    extra = lam * math.log(max(1.0, runs * float(ge[lb]) / n1 / HELD_ALARM))
+    return float(max(HELD_MIN_RUN, lb + math.ceil(extra)))
+
+
+def _max_run(col: NDArray[np.float64]) -> int:
+    """The longest run of identical consecutive samples in ``col``."""
+    if not len(col):
+        return 0
+    ch = np.flatnonzero(col[1:] != col[:-1])
+    edges = np.concatenate([[-1], ch, [len(col) - 1]])
+    return int(np.max(np.diff(edges)))
+
+
+def held_suspect(a: NDArray[np.float64]) -> bool:
+    """Whether the block (judged on its own, as a parallel chunk does) holds a run of at least
+    half ``HELD_MIN_RUN`` identical samples on an axis: then a held stretch may lie here (a run
+    across the block's boundary has half its length on one side), and the record is read
+    through the whole-record screen (``HeldAccel``) instead. A conservative test: it never
+    misses a held stretch, and sends a quiet, coarsely quantised record to one read."""
+    half = HELD_MIN_RUN // 2
+    return any(_max_run(np.asarray(a[:, j])) >= half for j in range(a.shape[1]))
+
+
+class HeldAccel:
+    """The held-acceleration rule over a whole read, block by block in bounded memory: per
+    axis a histogram of run lengths, each block's own (trimmed) while its rows may still be
+    judged, and the runs long enough to be candidates that reach rows not yet judged.
+
+    Per axis: a repeated frame repeats every axis, so each axis's own rule sees it; a stuck
+    channel of one axis is seen too; and a row cut when any axis says so is the verdict the
+    parallel chunks (each judging its own axes) can form. The blocks are ``feed``-ed in order,
+    ahead of the rows judged (the screen hands a block on once the next is read, and waits
+    while ``undecided``); ``verdict`` judges a block's rows. A run is held when its length
+    clears the longer of two thresholds (``held_threshold``): the whole read's, and that of
+    the runs from the run's own block on (so an axis that turns quiet, its runs long, is
+    judged by its new noise, and not before that noise is measured; a held stretch in a busy
+    record has the busy runs after it). A run judged held stays held on the rows that come
+    later; a run still open is judged again on the next block, and one longer than
+    ``HELD_WAIT_SAMPLES`` by the whole read's threshold alone."""
+
+    def __init__(self) -> None:
+        self.rows = 0
+        self.last: NDArray[np.float64] | None = None
+        self.start: NDArray[np.int64] | None = None  # record row where each open run began
+        self.hist: NDArray[np.int64] | None = None
+        #: per axis, runs of ≥ HELD_MIN_RUN samples reaching rows not yet judged: [first, last]
+        #: (last the run's end so far for the open one)
+        self.cand: list[NDArray[np.int64]] = []  # per axis, (k, 2)
+        #: per axis, whether each candidate is judged held
+        self.held: list[NDArray[np.bool_]] = []
+        #: the blocks' own run histograms (per axis, trimmed) while they may be needed:
+        #: (offset, rows, [hist per axis])
+        self.blocks: list[tuple[int, int, list[NDArray[np.int64]]]] = []
+        self._cache: dict[int, tuple[int, float]] = {}
+
+    def feed(self, off: int, a: NDArray[np.float64]) -> None:
+        n, c = a.shape
+        if not n:
+            return
+        first = self.last is None
+        if self.last is None:
+            self.last = np.asarray(a[0], dtype=float).copy()
+            self.start = np.full(c, off, dtype=np.int64)
+            self.hist = np.zeros((c, HELD_HIST + 1), dtype=np.int64)
+            self.cand = [np.zeros((0, 2), dtype=np.int64) for _ in range(c)]
+            self.held = [np.zeros(0, dtype=bool) for _ in range(c)]
+        assert self.start is not None and self.hist is not None
+        own: list[NDArray[np.int64]] = []
+        for j in range(c):
+            col = np.asarray(a[:, j], dtype=float)
+            new = np.flatnonzero(col[1:] != col[:-1]) + 1
+            if not first and not col[0] == self.last[j]:
+                new = np.concatenate([[0], new])
+            begins = np.concatenate([[self.start[j]], off + new])
+            lengths = np.minimum(np.diff(begins), HELD_HIST)  # the runs completed here
+            h = np.bincount(lengths).astype(np.int64) if len(lengths) else np.zeros(
+                1, dtype=np.int64)
+            self.hist[j, :len(h)] += h
+            own.append(h)
+            cand, held = self.cand[j], self.held[j]
+            was = False
+            if len(cand) and cand[-1, 0] == self.start[j]:
+                # the open run, seen again below (completed or still open), its verdict kept
+                was = bool(held[-1])
+                cand, held = cand[:-1], held[:-1]
+            k = np.flatnonzero(lengths >= HELD_MIN_RUN)
+            new_c = np.column_stack([begins[k], begins[k + 1] - 1]).astype(np.int64)
+            self.start[j] = begins[-1]
+            if off + n - self.start[j] >= HELD_MIN_RUN:
+                new_c = np.vstack([new_c, [[self.start[j], off + n - 1]]]).astype(np.int64)
+            new_h = np.zeros(len(new_c), dtype=bool)
+            if was and len(new_c) and new_c[0, 0] == begins[0]:
+                new_h[0] = True
+            self.cand[j] = np.vstack([cand, new_c]) if len(new_c) else cand
+            self.held[j] = np.concatenate([held, new_h])
+            self.last[j] = col[-1]
+        self.blocks.append((off, n, own))
+        self.rows = off + n
+
+    def _since(self, j: int, first: int) -> tuple[NDArray[np.int64], int]:
+        """Axis j's runs completed in the blocks from the one holding row ``first`` on."""
+        h = np.zeros(HELD_HIST + 1, dtype=np.int64)
+        rows = 0
+        for off, n, own in self.blocks:
+            if off + n > first:
+                h[:len(own[j])] += own[j]
+                rows += n
+        return h, rows
+
+    def _whole(self, j: int) -> float:
+        """Axis j's threshold by the whole read so far (kept until the next block is fed)."""
+        assert self.hist is not None
+        if self._cache.get(j, (-1, 0.0))[0] != self.rows:
+            self._cache[j] = (self.rows, held_threshold(self.hist[j], self.rows))
+        return self._cache[j][1]
+
+    def _threshold(self, j: int, first: int, last: int) -> float:
+        k = self._whole(j)
+        if last - first + 1 >= k and last - first + 1 < HELD_WAIT_SAMPLES:
+            h, rows = self._since(j, first)
+            k = max(k, held_threshold(h, rows, self.rows))
+        return k
+
+    def undecided(self) -> bool:
+        """An open run the whole read's threshold would hold, not yet judged held because the
+        runs after its start are too few to tell: the screen waits for more blocks (at most
+        ``HELD_WAIT_SAMPLES`` rows)."""
+        if self.hist is None:
+            return False
+        for j, cand in enumerate(self.cand):
+            if len(cand) and cand[-1, 1] == self.rows - 1 and not self.held[j][-1]:
+                first, last = int(cand[-1, 0]), int(cand[-1, 1])
+                if (last - first + 1 >= self._whole(j)
+                        and not last - first + 1 >= self._threshold(j, first, last)):
+                    return True
+        return False
+
+    def verdict(self, off: int, n: int) -> NDArray[np.bool_]:
+        """(n, axes): the rows [off, off + n) held on each axis."""
+        c = 0 if self.hist is None else self.hist.shape[0]
+        out = np.zeros((n, c), dtype=bool)
+        if self.hist is None or not n:
+            return out
+        for j in range(c):
+            cand, held = self.cand[j], self.held[j]
+            if not len(cand):
+                continue
+            f, la = cand[:, 0], cand[:, 1]
+            here = (la >= off) & (f < off + n)
+            # only a run longer than the whole read's threshold is judged further
+            for i in np.flatnonzero(here & ~held & (la - f + 1 >= self._whole(j))):
+                held[i] = la[i] - f[i] + 1 >= self._threshold(j, int(f[i]), int(la[i]))
+            for i in np.flatnonzero(here & held):
+                out[max(int(f[i]), off) - off:min(int(la[i]), off + n - 1) - off + 1, j] = True
+            keep = la >= off + n
+            self.cand[j], self.held[j] = cand[keep], held[keep]
+        # a block's own runs are needed while a candidate or a row still to judge is in it
+        low = min([off + n, *(int(cand[:, 0].min()) for cand in self.cand if len(cand))])
+        self.blocks = [b for b in self.blocks if b[0] + b[1] > low]
+        return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -1196,13 +1448,21 @@ def to_celsius(blk: Block, columns: Sequence[int]) -> Block:
 def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                   temperature_names: Sequence[str], log: ScreenLog,
                   columns: Sequence[int] | None = None,
-                  bad_rows: Callable[[int, NDArray[np.float64]], NDArray[np.bool_]] | None = None,
-                  check_units: bool = True) -> Iterator[Block]:
+                  bad_rows: Callable[[int, NDArray[np.float64], NDArray[np.bool_]],
+                                     NDArray[np.bool_]] | None = None,
+                  check_units: bool = True,
+                  held_rows: Callable[[int, int], NDArray[np.bool_]] | None = None,
+                  on_verdict: Callable[[int, NDArray[np.bool_], NDArray[np.bool_]], None]
+                  | None = None) -> Iterator[Block]:
     """``blocks`` (all accel columns) with the outlying acceleration rows cut out (a segment
     ends before each cut) and the bad temperature readings set to NaN; what was masked goes
     to ``log``. ``columns``: the accel columns to hand on (after screening on all).
-    ``bad_rows(offset, block)``: the block's outlying rows (default ``screen_accel``; a
-    ``ScreenedSource`` hands the first read's verdicts to its later reads).
+    ``bad_rows(offset, block, held rows)``: the block's outlying rows (default ``screen_accel``; a
+    ``ScreenedSource`` hands the first read's verdicts to its later reads). Held acceleration
+    (``HeldAccel``, over the whole read: each block is fed to it when read, and judged when
+    handed on, a block later) is cut likewise; ``held_rows(offset, n)`` gives its verdict
+    instead ((n, axes) held flags: a later read's, which may read fewer axes).
+    ``on_verdict(offset, cut rows, held flags)``: each block's verdicts, for a later read.
 
     Temperature readings are judged with one block of look-ahead (a spike's right-hand
     neighbour may be in the next block), so each block is handed on when the next has been
@@ -1220,17 +1480,44 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     offset = 0
     start_n = round(STARTUP_S * rate_hz)
     cols = None if columns is None else list(columns)
+    detector = HeldAccel() if held_rows is None else None
+    # the log's held stretch that may go on into the next block (its index)
+    held_at = [-1]
 
     def emit(off: int, blk: Block, last: bool) -> Iterator[Block]:
         a, t, end = blk
         if t is not None and tnames:
             t = _mask_readings(off, t, tracks, tnames, log, rate_hz, final=last)
-        bad = screen_accel(a) if bad_rows is None else bad_rows(off, a)
-        runs = _runs(bad)
-        for f, l_ in runs:
+        flags = (detector.verdict(off, len(a)) if detector is not None
+                 else held_rows(off, len(a)) if held_rows is not None
+                 else np.zeros((len(a), 0), dtype=bool))
+        held: NDArray[np.bool_] = (np.asarray(flags.any(axis=1), dtype=bool) if flags.shape[1]
+                                   else np.zeros(len(a), dtype=bool))
+        shock = (bad_rows(off, a, held) if bad_rows is not None
+                 else screen_accel(a, held) if held.any() else screen_accel(a))
+        if on_verdict is not None:
+            on_verdict(off, shock, flags)
+        for f, l_ in _runs(shock & ~held):
             kind = "startup_glitch" if off + f < start_n else "shock"
             log.stretches.append(Screened("accel", kind, off + f, off + l_, (off + f) / rate_hz,
                                           (off + l_ + 1) / rate_hz, l_ - f + 1))
+        for f, l_ in _runs(held):
+            axes = tuple(str(names[j]) if j < len(names) else str(j)
+                         for j in range(flags.shape[1]) if flags[f:l_ + 1, j].any())
+            k = held_at[0]
+            prev = log.stretches[k] if 0 <= k < len(log.stretches) else None
+            if prev is not None and prev.kind == "held_accel" and prev.last + 1 == off + f:
+                # a held stretch across the blocks' boundary: one stretch
+                log.stretches[k] = Screened(
+                    "accel", "held_accel", prev.first, off + l_, prev.start_s,
+                    (off + l_ + 1) / rate_hz, prev.count + l_ - f + 1,
+                    tuple(x for x in names if x in prev.axes or x in axes) or prev.axes)
+                continue
+            held_at[0] = len(log.stretches)
+            log.stretches.append(Screened("accel", "held_accel", off + f, off + l_,
+                                          (off + f) / rate_hz, (off + l_ + 1) / rate_hz,
+                                          l_ - f + 1, axes))
+        runs = _runs(shock | held)
         pos = 0
         pieces: list[Block] = []
         for f, l_ in runs:
@@ -1288,6 +1575,8 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     observed = 0  # the waiting blocks already watched
     for blk in blocks:
         blk = to_celsius(blk, to_c)
+        if detector is not None:
+            detector.feed(offset, np.asarray(blk[0], dtype=float))
         waiting.append((offset, blk))
         offset += len(blk[0])
         waited += len(blk[0])
@@ -1298,7 +1587,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
         # every block but the newest is handed on (a held stretch found in it may begin in
         # the block before: a log with a value on consecutive rows only), or none while a
         # channel's test for a held stretch is close (at most HELD_WAIT_SAMPLES rows)
-        if (any(d.close for d in held)
+        if ((any(d.close for d in held) or (detector is not None and detector.undecided()))
                 and sum(len(b[0]) for _, b in waiting) < HELD_WAIT_SAMPLES):
             continue
         hold = 1 if any(d.dense for d in held) else 0
@@ -1417,6 +1706,8 @@ class ScreenedSource:
         # without judging every axis again (the neighbours' medians cost as much as the
         # OADEV of a long record)
         self._verdicts: dict[int, dict[int, NDArray[np.intp]]] = {}
+        #: ... and its held acceleration: {offset: (rows, their (rows, axes) held flags)}
+        self._held: dict[int, dict[int, tuple[NDArray[np.intp], NDArray[np.bool_]]]] = {}
 
     @property
     def info(self) -> Any:
@@ -1436,6 +1727,9 @@ class ScreenedSource:
         any. Later reads cut those rows without judging again, and the next complete read's
         log says what was cut (nothing cut: the log says the screen ran)."""
         self._verdicts[block] = dict(cuts)
+        # the chunks' verdicts hold no held acceleration: a chunk that sees a run that may be
+        # one sends the record to be judged whole (``held_suspect``)
+        self._held[block] = {}
         if not cuts and self.log is None:
             self.log = ScreenLog(float(self.source.info.rate_hz), done=True, units=self.units)
 
@@ -1450,24 +1744,44 @@ class ScreenedSource:
         if self.log is None:
             self.log = log
         known = self._verdicts.get(block)
+        held_known = self._held.get(block, {})
+        n_axes = len(info.names)
         # judged once on every axis; later reads take only the columns asked for
         raw = self.source.blocks(block, columns=None if known is None else columns,
                                  temperature=temperature, verify=verify)
         found: dict[int, NDArray[np.intp]] = {}
 
-        def judged(off: int, a: NDArray[np.float64]) -> NDArray[np.bool_]:
+        def judged(off: int, a: NDArray[np.float64], held: NDArray[np.bool_]
+                   ) -> NDArray[np.bool_]:
             if known is not None:
                 bad = np.zeros(len(a), dtype=bool)
                 bad[known.get(off, np.empty(0, dtype=np.intp))] = True
                 return bad
-            bad = screen_accel(a)
+            bad = screen_accel(a, held) if held.any() else screen_accel(a)
             if bad.any():
                 found[off] = np.flatnonzero(bad)
             return bad
 
+        found_held: dict[int, tuple[NDArray[np.intp], NDArray[np.bool_]]] = {}
+
+        def held_rows(off: int, n: int) -> NDArray[np.bool_]:
+            out = np.zeros((n, n_axes), dtype=bool)
+            if off in held_known:
+                rows, flags = held_known[off]
+                out[rows] = flags
+            return out
+
+        def keep(off: int, _cut: NDArray[np.bool_], flags: NDArray[np.bool_]) -> None:
+            if flags.shape[1] and flags.any():
+                rows = np.flatnonzero(flags.any(axis=1))
+                found_held[off] = (rows, flags[rows])
+
         yield from screen_blocks(raw, log.rate_hz, list(info.names),
                                  list(info.temperature_names), log,
                                  columns if known is None else None, judged,
-                                 check_units=info.format is not RecordFormat.RECORDING)
+                                 check_units=info.format is not RecordFormat.RECORDING,
+                                 held_rows=None if known is None else held_rows,
+                                 on_verdict=keep if known is None else None)
         if known is None and log.done:
             self._verdicts[block] = found
+            self._held[block] = found_held
