@@ -54,6 +54,7 @@ from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import (
     ThermalFit,
+    derounded,
     feed,
     fit_thermal,
     fit_thermal_axes,
@@ -363,9 +364,12 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         else:
             # the lag runs over the whole logged series the part belongs to, so the part
             # starts in the state the sensor was in
-            uf = lag_filter(u_fit[0], lag, rate_b)[u_fit[1]]
+            uf = lag_filter(derounded(u_fit[0]), lag, rate_b)[u_fit[1]]
             d_fit += coef * (uf - uf.mean())
-        uh = lag_filter(u_held[0], lag, held.rate(rate_b))[u_held[1]]
+        # the de-rounded log, as ``ThermalFit.signal`` removes it on the whole record: the
+        # readings' rounding is not in the axis, and a negative lag's lead-lag (gain 2 at
+        # high frequencies) would put it into the prediction as a misfit of the right model
+        uh = lag_filter(derounded(u_held[0]), lag, held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
         if math.isfinite(th.coef_se) and th.coef_se > 0:
             spread.append((-th.coef_se * (uh - uh.mean()), th.coef_se * (uh - uh.mean())))
