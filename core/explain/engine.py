@@ -648,7 +648,7 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
                            temperature_unused=unused)
     if stage is not None:
         stage("measuring the gain on held-out data")
-    ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held)
+    ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held, screen)
     for name, ch_ex in out.items():
         ch_ex.judge(ho.channels.get(name), ho.reason)
     return Explanation(an, out, t_allan, b / rate, ho, screen=screen,
@@ -891,14 +891,15 @@ def _gain_beside(th: ThermalFit | None, kind: str) -> bool:
 
 def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArray | None,
              tnames: list[str], names: list[str], rate_b: float, b: int, meta: dict[str, Any],
-             holdout: Held | None) -> Holdout:
+             holdout: Held | None, screen: ScreenLog | None = None) -> Holdout:
     """The held-out measure (:mod:`avard.core.explain.holdout`): the record's halves, or the second
     record streamed through the input screen and a slow view with the same block (bounded
-    memory), its screen's holes gaps to the held-out estimators as the record's are to its
-    own."""
+    memory). Each record's screen holes (``screen``: the record's) are gaps to the held-out
+    estimators on whichever side of a fold its blocks are, as they are to its own fit."""
+    holes = _log_holes(screen, tnames, rate_b)
     if holdout is None:
         return holdout_split(out, y_slow, t_slow, tnames, names, rate_b,
-                             str(meta.get("source", "stream")))
+                             str(meta.get("source", "stream")), holes)
     h_meta, h_blocks, h_screened = holdout
     view = SlowView(b, len(names), len(tnames))
     for accel, temp, _end in h_blocks:
@@ -913,16 +914,26 @@ def _holdout(out: dict[str, ChannelExplanation], y_slow: NDArray, t_slow: NDArra
     stuck = [[(x.start_s, x.end_s) for x in log.stretches
               if x.channel == nm and x.kind == "stuck"] for nm in tnames] if log else []
     y_h, t_h = view.finish(stuck, held_rate_b)
-    holes = {j: [(math.floor(h0 * held_rate_b), math.ceil(h1 * held_rate_b))
-                 for h0, h1 in log.holes(nm) if h1 - h0 >= 1.0]
-             for j, nm in enumerate(tnames)} if log is not None else {}
     refused = ({j: log.refused[nm] for j, nm in enumerate(tnames) if nm in log.refused}
                if log is not None else {})
     # each side's τ in seconds of its own fitted rate (the rates agree by core.io.rates' rule,
     # they are not equal)
     return holdout_file(out, y_slow, t_slow, y_h, t_h, tnames, names, rate_b,
                         str(h_meta.get("source", "holdout")), held_rate_b=held_rate_b,
-                        held_holes=holes, held_refused=refused, screen=log)
+                        held_holes=_log_holes(log, tnames, held_rate_b),
+                        held_refused=refused, screen=log)
+
+
+def _log_holes(log: ScreenLog | None, tnames: list[str], rate_b: float
+               ) -> dict[int, list[tuple[int, int]]]:
+    """Per temperature column, the (first, last) slow-view blocks (``rate_b`` blocks per
+    second) of every hole of a second or more the screen found in that log (a dropout, a
+    masked reading, a stuck run): blocks where the log says nothing of the temperature."""
+    if log is None:
+        return {}
+    return {j: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
+                for h0, h1 in log.holes(nm) if h1 - h0 >= 1.0]
+            for j, nm in enumerate(tnames)}
 
 
 def _noise_levels(fit: NoiseFit) -> dict[str, float]:

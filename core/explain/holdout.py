@@ -405,6 +405,26 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     return d_fit, d_held, skip, longest, spread
 
 
+def _kept(p: Part, channel: int | None, lag_s: float, rate_b: float
+          ) -> NDArray[np.bool_] | None:
+    """The blocks of ``p`` its Allan variance keeps (None: all) for an axis predicted through
+    temperature column ``channel`` with the longest lag ``lag_s``: its log's holes and the
+    lag's settling after them left out (``thermal_fit.hole_mask``)."""
+    if channel is None:
+        return None
+    return hole_mask(len(p.y), p.holes.get(channel, []), lag_s, p.rate(rate_b))
+
+
+def _part_holes(holes: dict[int, list[tuple[int, int]]] | None, lo: int, hi: int
+                ) -> dict[int, list[tuple[int, int]]]:
+    """The holes (per temperature column, (first, last) blocks of the record) of the part
+    made of the record's blocks ``lo``…``hi - 1``, on the part's own block index. A hole
+    that ends before the part's start is kept (at negative blocks): the lag runs over the
+    whole logged series, so its settling can reach into the part."""
+    return {j: [(a - lo, b - lo) for a, b in spans if a < hi]
+            for j, spans in (holes or {}).items()}
+
+
 def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
           u_fit: Temps, u_held: Temps, avar: AvarOf | None = None) -> Fold:
     """Fit both models on ``fit`` and measure their held-out χ² on ``held``. ``avar``: the
@@ -422,13 +442,14 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     base = fit_noise(av(fit.y, rate_b), extra=extra)
     if c.names:
         d_fit, d_held, skip, lag, spread = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
-        # the held-out log's holes (the screen's dropouts and stuck runs): the prediction
-        # there runs on an interpolated temperature, so they and the lag's settling after
-        # them are gaps of both models' held-out Allan variance (as of the thermal fit's
-        # regression, ``thermal_fit.hole_mask``), never a misfit of the extended model
-        keep = (None if c.thermal_channel is None else
-                hole_mask(len(held.y), held.holes.get(c.thermal_channel, []), lag,
-                          held.rate(rate_b)))
+        # the held-out part's log holes (the screen's dropouts, masked readings and stuck
+        # runs; a half of the record as a second record): the prediction there runs on an
+        # interpolated temperature, so they and the lag's settling after them are gaps of
+        # both models' held-out Allan variance (as of the thermal fit's regression,
+        # ``thermal_fit.hole_mask``), never a misfit of the extended model. On the fit part
+        # the thermal fit leaves them out of its regression; its Allan variance stays whole
+        # (a gapped one fits the noise model worse than the interpolation's residual costs)
+        keep = _kept(held, c.thermal_channel, lag, rate_b)
         kept = len(held.y) - skip if keep is None else int(np.count_nonzero(keep[skip:]))
         if kept < MIN_PART_POINTS:
             raise FitError(f"the held-out part is too short once its first {skip} blocks "
@@ -532,8 +553,12 @@ def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float
 
 def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
                   t_names: Sequence[str], names: Sequence[str], rate_b: float,
-                  source: str) -> Holdout:
-    """Two folds over the time-contiguous halves of the record's slow view (module doc)."""
+                  source: str, holes: dict[int, list[tuple[int, int]]] | None = None
+                  ) -> Holdout:
+    """Two folds over the time-contiguous halves of the record's slow view (module doc).
+    ``holes``: per temperature column, the record's blocks where the input screen says its
+    log tells nothing; each half carries its own (``Part.holes``), as a second record does
+    in ``holdout_file``, and its thermal fit leaves them out as the whole record's does."""
     M = len(y_slow)
     h = M // 2
     ho = Holdout("split", source, 1.0 / rate_b)
@@ -542,13 +567,15 @@ def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray
                      f"each half needs {MIN_PART_POINTS}")
         return ho
     claims = {name: claims_of(ch, t_names) for name, ch in explanations.items()}
-    thermals = _part_thermals(claims, y_slow, t_slow, names, rate_b, h)
+    halves = _part_holes(holes, 0, h), _part_holes(holes, h, M)
+    thermals = _part_thermals(claims, y_slow, t_slow, names, rate_b, h, halves)
     for name, c in claims.items():
         j = list(names).index(name)
         y = y_slow[:, j]
-        A = Part(y[:h], 0.0, "first half", True, thermal=thermals.get((name, True)))
+        A = Part(y[:h], 0.0, "first half", True, thermal=thermals.get((name, True)),
+                 holes=halves[0])
         B = Part(y[h:], h / rate_b, "second half", False,
-                 thermal=thermals.get((name, False)))
+                 thermal=thermals.get((name, False)), holes=halves[1])
 
         def temps_of(p: Part, c: Claims = c) -> Temps:
             if c.thermal_channel is None or t_slow is None:
@@ -560,12 +587,14 @@ def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray
 
 
 def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray | None,
-                   names: Sequence[str], rate_b: float, h: int
+                   names: Sequence[str], rate_b: float, h: int,
+                   halves: tuple[dict[int, list[tuple[int, int]]], ...] = ({}, {})
                    ) -> dict[tuple[str, bool], ThermalFit]:
     """The thermal model of every axis that claims a temperature channel, fitted on each half
     (key: (axis, first half?)): the axes that claim the same channel share one lag scan
-    (``fit_thermal_axes``), as on the whole record; each axis's own fit as
-    ``fit_thermal`` gives it alone."""
+    (``fit_thermal_axes``), as on the whole record, each half's log holes (``halves``, per
+    half and temperature column) left out of its regression as the whole record's are;
+    each axis's own fit as ``fit_thermal`` gives it alone."""
     out: dict[tuple[str, bool], ThermalFit] = {}
     if t_slow is None:
         return out
@@ -575,9 +604,10 @@ def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray |
             by_channel.setdefault(c.thermal_channel, []).append(name)
     for ch, axes in by_channel.items():
         cols = [list(names).index(a) for a in axes]
-        for first, part in ((True, slice(0, h)), (False, slice(h, None))):
+        for first, part, ph in ((True, slice(0, h), halves[0]),
+                                (False, slice(h, None), halves[1])):
             fits = fit_thermal_axes(y_slow[part][:, cols], t_slow[part, ch][:, None], ["t"],
-                                    rate_b, lag_intervals=False)
+                                    rate_b, {0: ph.get(ch, [])}, lag_intervals=False)
             out.update({(a, first): f for a, f in zip(axes, fits, strict=True)})
     return out
 
