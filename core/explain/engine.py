@@ -560,7 +560,8 @@ def _unused_held(blocks: Iterable[Block], screened: ScreenedSource, tnames: list
     reason, so that no prediction runs through it: a log of one value throughout (no
     variation to predict from) predicted the held-out axis as flat and called a correct
     model's gain −3e3 ("UNEXPLAINED") where the record's own side said "not used". Judged on
-    the screened readings (each log's least and greatest, and how many), in bounded memory."""
+    the screened readings (each log's least and greatest, and how many), in bounded memory;
+    a log the screen refused keeps the screen's reason."""
     k = len(tnames)
     lo, hi = np.full(k, np.inf), np.full(k, -np.inf)
     count = np.zeros(k, dtype=np.int64)
@@ -577,8 +578,8 @@ def _unused_held(blocks: Iterable[Block], screened: ScreenedSource, tnames: list
     if log is None:
         return
     for j, nm in enumerate(tnames):
-        seen = np.array([lo[j], hi[j]]) if count[j] >= 2 else None
-        why = _why_unused(seen, log.refused.get(nm))
+        # fewer than two readings: holdout_file says so itself ("no readings once screened")
+        why = None if count[j] < 2 else _why_unused(np.array([lo[j], hi[j]]))
         if why is not None:
             log.refused.setdefault(nm, why)
 
