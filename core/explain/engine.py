@@ -551,7 +551,39 @@ def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str,
     check_compatible(meta, h_meta, str(h_meta.get("source", "holdout")))
     screened = (holdout if isinstance(holdout, ScreenedSource)
                 else ScreenedSource(holdout, options.temperature_units))
-    return h_meta, screened.blocks(options.block), screened
+    return h_meta, _unused_held(screened.blocks(options.block), screened,
+                                list(h_meta.get("temperature_names") or [])), screened
+
+
+def _unused_held(blocks: Iterable[Block], screened: ScreenedSource, tnames: list[str]
+                 ) -> Iterator[Block]:
+    """``blocks`` handed on as they are; once read, each held-out log that the record's rule
+    (``_why_unused``) would not use is refused in the held-out screen's log, with that rule's
+    reason, so that no prediction runs through it: a log of one value throughout (no
+    variation to predict from) predicted the held-out axis as flat and called a correct
+    model's gain −3e3 ("UNEXPLAINED") where the record's own side said "not used". Judged on
+    the screened readings (each log's least and greatest, and how many), in bounded memory;
+    a log the screen refused keeps the screen's reason."""
+    k = len(tnames)
+    lo, hi = np.full(k, np.inf), np.full(k, -np.inf)
+    count = np.zeros(k, dtype=np.int64)
+    for blk in blocks:
+        temp = blk[1]
+        if k and temp is not None and np.asarray(temp).size:
+            t = np.asarray(temp, dtype=float).reshape(len(blk[0]), -1)
+            fin = np.isfinite(t)
+            count += fin.sum(axis=0)
+            lo = np.minimum(lo, np.where(fin, t, np.inf).min(axis=0, initial=np.inf))
+            hi = np.maximum(hi, np.where(fin, t, -np.inf).max(axis=0, initial=-np.inf))
+        yield blk
+    log = screened.log
+    if log is None:
+        return
+    for j, nm in enumerate(tnames):
+        # fewer than two readings: holdout_file says so itself ("no readings once screened")
+        why = None if count[j] < 2 else _why_unused(np.array([lo[j], hi[j]]))
+        if why is not None:
+            log.refused.setdefault(nm, why)
 
 
 @one_blas_thread

@@ -45,6 +45,13 @@ shock, and its rows are left out of the shock rule's scale.
 - ``dropout``: no reading for longer than ``DROPOUT_S`` (and ``DROPOUT_READINGS`` reading
   intervals); nothing to mask, but listed: explain never names a cause on another channel
   in such a hole (a hole in a log is not a cause);
+- ``log_starts_late`` / ``log_ends_early``: no reading between the record's start and the
+  log's first reading, or between its last reading and the record's end, for longer than a
+  dropout by the same rule: a hole like a dropout (the gaps between readings are all the
+  dropout rule sees; a log that stops midway and never comes back had none);
+- a log whose every reading is 85.0 °C is a DS18B20 that never converted (its power-on
+  value, forever): noted and refused for the thermal model (the per-reading rule has no good
+  neighbour to judge it by);
 - ``stuck``: a run of one identical value longer than ``STUCK_MIN_S`` *and* ``STUCK_FACTOR``
   times the 95th percentile of the channel's own runs. A DS18B20 in a stable room reads the
   same 0.0625 K step for hours, which is normal: its runs are all long, so the rule, made of
@@ -210,11 +217,15 @@ KIND_TEXT = {"startup_glitch": "start-up glitch", "shock": "isolated shock",
              "held_accel": "held acceleration (identical samples)",
              "read_error": "read error (-127 °C or out of range)",
              "power_on_85": "85.0 °C power-on value", "spike": "spike",
-             "dropout": "dropout (no reading)", "stuck": "stuck reading"}
+             "dropout": "dropout (no reading)", "stuck": "stuck reading",
+             "log_starts_late": "log starts late (no reading from the record's start)",
+             "log_ends_early": "log ends early (no reading to the record's end)"}
 # the plural where an "s" at the end would land inside the kind's parenthesis
 _KIND_PLURAL = {"read_error": "read errors (-127 °C or out of range)",
                 "held_accel": "held accelerations (identical samples)",
-                "dropout": "dropouts (no reading)"}
+                "dropout": "dropouts (no reading)",
+                "log_starts_late": "logs start late (no reading from the record's start)",
+                "log_ends_early": "logs end early (no reading to the record's end)"}
 
 
 def _kind_text(kind: str, n: int) -> str:
@@ -258,7 +269,8 @@ class ScreenLog:
 
     def holes(self, channel: str) -> list[tuple[float, float]]:
         """(start, end) s of the stretches of a temperature channel where the log says
-        nothing about the temperature (masked readings, dropouts, stuck runs)."""
+        nothing about the temperature (masked readings, dropouts, stuck runs, the span
+        before a late log's first reading and after an early-ending log's last)."""
         return [(s.start_s, s.end_s) for s in self.stretches if s.channel == channel]
 
     def to_dict(self) -> dict[str, Any]:
@@ -280,8 +292,11 @@ class ScreenLog:
                           "of the whole read's and the runs' from its own block on; at "
                           "least 16 samples), cut out as a gap on every axis; "
                           "temperature: -127 °C / out of range, 85.0 °C > 0.5 K from its "
-                          "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s, runs "
-                          "of one value > 30 min and 10x the channel's 95th-percentile run; "
+                          "neighbours, single-reading spikes > 0.5 K, dropouts > 10 s (and "
+                          "8 reading intervals), the same before a log's first reading and "
+                          "after its last, runs of one value > 30 min and 10x the channel's "
+                          "95th-percentile run; a log all 85.0 °C refused (a DS18B20 that "
+                          "never converted); "
                           "a log with a value on every sample that changes only on a regular "
                           "cadence is held (judged over the whole log, stretch by stretch): "
                           "its readings are each change and one every cadence after it "
@@ -297,6 +312,9 @@ class ScreenLog:
         one line per temperature channel the screen has a note on."""
         notes = [f"  temperature {ch}: {n.text}" for ch, n in self.notes.items()]
         if not self.stretches:
+            if any("power_on_85" in n.kind.split("+") for n in self.notes.values()):
+                # not "no 85 °C": a log all 85 °C is masked by no per-reading rule, its note says
+                return ["screened: nothing masked reading by reading", *notes]
             return ["screened: nothing masked (no glitch, shock, held acceleration, read "
                     "error, 85 °C, spike, dropout or stuck reading)", *notes]
         c = self.counts()
@@ -1422,6 +1440,41 @@ def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]
     return None, None
 
 
+def _never_converted(values: NDArray[np.float64]) -> LogNote | None:
+    """The note on a log whose every reading is 85.0 °C (at least three): a DS18B20 that
+    never converted a temperature, its power-on register read forever. The per-reading rule
+    masks an 85 °C reading by its good neighbours, and such a log has none, so it passed
+    as a room at 85 °C."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if len(v) < 3 or not np.all(v == POWER_ON_C):
+        return None
+    return LogNote("power_on_85", (
+        f"85.0 °C throughout ({len(v)} readings): a DS18B20's power-on value, the sensor never "
+        "converted a temperature; not used by the thermal model"))
+
+
+def _celsius_evidence(values: NDArray[np.float64]) -> str:
+    """For a log converted from °F as the user asked: what speaks against it, "" where
+    nothing does. The evidence mirrors ``units_note``'s for °F: most distinct readings as
+    given (before the conversion) on the DS18B20's 0.0625 K grid in °C and under half on
+    its grid in °F, of at least ``FAHRENHEIT_MIN_VALUES`` values (a stable room's one value
+    may sit on any grid by chance)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)] * 1.8 + 32.0   # the readings as the log gave them
+    v = v[(v != DS18B20_ERROR_C) & (v != POWER_ON_C)]
+    u = np.unique(np.round(v, 9))
+    if len(u) < FAHRENHEIT_MIN_VALUES:
+        return ""
+    on = _grid_share(u, 0.0, DS18B20_STEP_C, PRINT_TOL)
+    on_f = _grid_share(u, 32.0, 1.8 * DS18B20_STEP_C, PRINT_TOL)
+    if on < FAHRENHEIT_SHARE or on_f >= OFF_GRID_SHARE:
+        return ""
+    return (f"; its readings look like °C ({100 * on:.0f} % of its {len(u)} distinct readings "
+            f"on the 0.0625 K grid, {100 * on_f:.0f} % on a DS18B20's grid in °F): if they are, "
+            "a coupling per K from them is 1.8× too large")
+
+
 def fahrenheit_columns(temperature_names: Sequence[str], units: str,
                        check_units: bool = True) -> list[int]:
     """The temperature columns ``--temperature-units F`` converts: every log the units rule
@@ -1606,7 +1659,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
     while pending:
         off, b = pending.pop(0)
         yield from emit(off, b, not pending)
-    _whole_record_rules(tracks, tnames, log, rate_hz)
+    _whole_record_rules(tracks, tnames, log, rate_hz, offset)
     log.readings = {name: len(tr) for name, tr in zip(tnames, tracks, strict=True)}
     for name, tr, d in zip(tnames, tracks, held, strict=True):
         note = d.note(rate_hz)
@@ -1620,7 +1673,8 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                                                  else "a recording's log") + " is °C"))
         elif log.units == "F":
             unit, refused = LogNote("units_given", "converted from °F to °C as asked "
-                                    "(--temperature-units F)"), None
+                                    "(--temperature-units F)"
+                                    + _celsius_evidence(tr.arrays()[1])), None
         else:
             unit, refused = units_note(tr.arrays()[1])
             if log.units == "C":
@@ -1636,6 +1690,11 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = unit if note is None else note.joined(unit)
         if refused is not None:
             log.refused[name] = refused
+        dead = _never_converted(tr.arrays()[1])
+        if dead is not None and name not in NOT_DS18B20:
+            log.notes[name] = (dead if name not in log.notes
+                               else log.notes[name].joined(dead))
+            log.refused.setdefault(name, dead.text)
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
 
@@ -1661,8 +1720,9 @@ def _mask_readings(off: int, t: NDArray[np.float64], tracks: list[_TempTrack],
 
 
 def _whole_record_rules(tracks: list[_TempTrack], tnames: list[str], log: ScreenLog,
-                        rate_hz: float) -> None:
-    """Dropouts and stuck runs: rules that need the channel's whole record."""
+                        rate_hz: float, n_samples: int) -> None:
+    """Dropouts, a log's late start and early end, and stuck runs: rules that need the
+    channel's whole record (``n_samples``: the record's rows)."""
     for j, tr in enumerate(tracks):
         idx, val = tr.arrays()
         if len(idx) < 3:
@@ -1675,6 +1735,16 @@ def _whole_record_rules(tracks: list[_TempTrack], tnames: list[str], log: Screen
             log.stretches.append(Screened(tnames[j], "dropout", int(idx[k]) + 1,
                                           int(idx[k + 1]) - 1, float(sec[k]),
                                           float(sec[k + 1]), 0))
+        # the record's start and end bound the log as a reading would: a span there without
+        # a reading, longer than a dropout by the same rule, says nothing of the temperature
+        # either (a log with NaN between readings starts and ends within a reading interval)
+        end_s = n_samples / rate_hz
+        if sec[0] > hole:
+            log.stretches.append(Screened(tnames[j], "log_starts_late", 0, int(idx[0]) - 1,
+                                          0.0, float(sec[0]), 0))
+        if end_s - sec[-1] > hole:
+            log.stretches.append(Screened(tnames[j], "log_ends_early", int(idx[-1]) + 1,
+                                          n_samples - 1, float(sec[-1]), end_s, 0))
         for a, b in stuck_runs(sec, val):
             log.stretches.append(Screened(tnames[j], "stuck", int(idx[a]), int(idx[b]),
                                           float(sec[a]), float(sec[b]), b - a + 1))
