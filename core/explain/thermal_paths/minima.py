@@ -97,6 +97,29 @@ def _sep_lags(top: float) -> NDArray[np.float64]:
     return np.concatenate([-pos[::-1], [0.0], pos])
 
 
+def _closest_lag(at: Callable[[float], tuple[float, float]], lags: NDArray
+                 ) -> tuple[float, float, float]:
+    """(λ, L', c') at the one-lag reading closest by ``at`` over ``lags``: the best grid
+    point, then a golden-section search on the bracket around it (λ is smooth in L'), kept
+    only where it improves on the grid point."""
+    vals = [at(float(L))[0] for L in lags]
+    i = int(np.argmin(vals))
+    lo, hi = float(lags[max(i - 1, 0)]), float(lags[min(i + 1, len(lags) - 1)])
+    g = (math.sqrt(5) - 1) / 2
+    for _ in range(60):
+        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        if at(m1)[0] < at(m2)[0]:
+            hi = m2
+        else:
+            lo = m1
+    L = 0.5 * (lo + hi)
+    lam, cp = at(L)
+    if vals[i] < lam:
+        L = float(lags[i])
+        lam, cp = at(L)
+    return lam, L, cp
+
+
 def rate_lag_separation(n_white: float, b_inst: float, k_rrw: float, record_s: float,
                         lines: tuple[tuple[float, float], ...], coefficient: float,
                         rate: float) -> tuple[float, float, float]:
@@ -122,23 +145,7 @@ def rate_lag_separation(n_white: float, b_inst: float, k_rrw: float, record_s: f
     # (to far beyond the lag c·T + r·dT/dt is to first order, r/c, and the drive's periods)
     lags = _sep_lags(1e3 * max(abs(rate / coefficient) if coefficient else 0.0,
                                float(np.max(1.0 / w))))
-    vals = [at(float(L))[0] for L in lags]
-    i = int(np.argmin(vals))
-    # golden-section on the bracket around the best grid point (λ is smooth in L')
-    lo, hi = float(lags[max(i - 1, 0)]), float(lags[min(i + 1, len(lags) - 1)])
-    g = (math.sqrt(5) - 1) / 2
-    for _ in range(60):
-        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
-        if at(m1)[0] < at(m2)[0]:
-            hi = m2
-        else:
-            lo = m1
-    L = 0.5 * (lo + hi)
-    lam, cp = at(L)
-    if vals[i] < lam:
-        L = float(lags[i])
-        lam, cp = at(L)
-    return lam, L, cp
+    return _closest_lag(at, lags)
 
 
 def min_detectable_rate(n_white: float, b_inst: float, k_rrw: float, record_s: float,
@@ -288,21 +295,7 @@ def one_lag_separation_fit(periods: NDArray, drive: NDArray, response: NDArray,
         return float(np.sum(q * np.abs(Y - cp * h) ** 2)), cp
 
     lags = _sep_lags(1e3 * float(np.max(1.0 / w)))
-    vals = [at(float(L))[0] for L in lags]
-    i = int(np.argmin(vals))
-    lo, hi = float(lags[max(i - 1, 0)]), float(lags[min(i + 1, len(lags) - 1)])
-    g = (math.sqrt(5) - 1) / 2
-    for _ in range(60):
-        m1, m2 = hi - g * (hi - lo), lo + g * (hi - lo)
-        if at(m1)[0] < at(m2)[0]:
-            hi = m2
-        else:
-            lo = m1
-    L = 0.5 * (lo + hi)
-    lam, cp = at(L)
-    if vals[i] < lam:
-        L = float(lags[i])
-        lam, cp = at(L)
+    lam, L, cp = _closest_lag(at, lags)
     if sig2 is None:
         return lam, L, cp
     d2 = np.abs(Y - cp * _one_lag_response(w, L) * U) ** 2
