@@ -87,7 +87,9 @@ from avard.core.explain.thermal_fit import (
     HOLE_SETTLE_LAGS,
     ThermalFit,
     compensated_avar,
+    feed,
     fit_thermal_axes,
+    hole_mask,
     path_of,
     signal_avar_on,
     with_paths,
@@ -1039,21 +1041,23 @@ def _signal_variations(thermal: ThermalFit | None, temps: NDArray | None, y: NDA
     return out
 
 
-def removed_avar(var: NDArray, tau: NDArray, y: NDArray, d: NDArray, rate_b: float
-                 ) -> NDArray[np.float64]:
+def removed_avar(var: NDArray, tau: NDArray, y: NDArray, d: NDArray, rate_b: float,
+                 keep: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
     """``var`` (the axis's AVAR at ``tau``) with the signal ``d`` removed from the slow view
     ``y`` (``compensated_avar`` at coefficient 1), from the Allan covariance of (y, d) alone:
     ``StreamingAllan.covariance``, ``thermal_fit.allan2``'s τ and covariance to the bit
     without the noise identification and EDF it computes and this never reads (an Allan
-    pass per removed signal: every transient tried, every parameter moved)."""
+    pass per removed signal: every transient tried, every parameter moved). ``keep``: the
+    blocks the covariance reads (None: all); the others are gaps (``thermal_fit.feed``), so
+    ``var`` is scaled by what the removal takes off where ``d`` is known."""
     sa = StreamingAllan(2, rate_b)
-    sa.update(np.column_stack([y, d]))
+    feed(sa, np.column_stack([y, d]), keep)
     return compensated_avar(var, tau, sa.covariance(), 1.0)
 
 
 def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, rate_b: float,
-                       variations: list[tuple[NDArray[np.float64], NDArray[np.float64]]]
-                       ) -> NDArray[np.float64]:
+                       variations: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+                       keep: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
     """Covariance of the compensated AVAR at ``tau`` that the removed signal's parameters
     carry, by the delta method: for each parameter, J = [AVAR_c(θ + s) − AVAR_c(θ − s)]/2 (s
     its standard error; the central difference is exact for the thermal coefficient, on which
@@ -1063,11 +1067,28 @@ def removal_covariance(var: NDArray, tau: NDArray, y: NDArray, total: NDArray, r
     k = len(tau)
     cov = np.zeros((k, k))
     for up, down in variations:
-        hi = removed_avar(var, tau, y, total + up, rate_b)
-        lo = removed_avar(var, tau, y, total + down, rate_b)
+        hi = removed_avar(var, tau, y, total + up, rate_b, keep)
+        lo = removed_avar(var, tau, y, total + down, rate_b, keep)
         j = np.where(np.isfinite(hi - lo), 0.5 * (hi - lo), 0.0)
         cov += np.outer(j, j)
     return cov
+
+
+def _thermal_keep(thermal: ThermalFit | None, screen: ScreenLog | None, n: int,
+                  rate_b: float) -> NDArray[np.bool_] | None:
+    """The slow-view blocks the extended fit's Allan variance reads (None: all) for an axis
+    whose claimed thermal cause (``thermal``, None when none is claimed) runs on a logged
+    temperature: every hole of a second or more in that log (``_log_holes``) and the lag's
+    settling after it (``thermal_fit.hole_mask``, the longest lag of a two-path fit) are
+    gaps. There the removed signal is made of interpolated temperature; what it leaves in
+    the axis is the hole, never the model's misfit (a hole in a log is not a cause)."""
+    if thermal is None or screen is None:
+        return None
+    holes = _log_holes(screen, [thermal.channel], rate_b).get(0, [])
+    lag = abs(thermal.lag_s)
+    if thermal.path is not None and thermal.path.kind == "two_path":
+        lag = max(abs(x) for x in thermal.path.chosen.theta[:2])
+    return hole_mask(n, holes, lag, rate_b)
 
 
 def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
@@ -1158,7 +1179,9 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             d = cz.cause_signal(c, len(y_slow), rate_b)
             total += d
             curves[_label(c, i, cands)] = signal_avar_on(d, rate_b, tau)
-        cv = removed_avar(allan.var, tau, y_slow, total, rate_b)
+        keep = _thermal_keep(thermal if "temperature" in curves else None, holes,
+                             len(y_slow), rate_b)
+        cv = removed_avar(allan.var, tau, y_slow, total, rate_b, keep)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
         comp = replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio)
         # the removed signal's parameters are estimates: their uncertainty enters the same
@@ -1167,7 +1190,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             allan.var, tau, y_slow, total, rate_b,
             _signal_variations(thermal if "temperature" in curves else None, temps,
                                y_slow if settled is None else y_slow - settled,
-                               with_start, cands, rate_b))
+                               with_start, cands, rate_b), keep)
         try:
             fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, added_cov=added,
                             **kw)
