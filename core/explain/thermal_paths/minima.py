@@ -177,18 +177,7 @@ def min_detectable_rate(n_white: float, b_inst: float, k_rrw: float, record_s: f
         return rate_lag_separation(n_white, b_inst, k_rrw, record_s, lines, coefficient,
                                    sgn * r)[0]
 
-    lo, hi = 0.0, r0
-    while sep(hi) < z * z:
-        lo, hi = hi, 2 * hi
-        if hi > 1e6 * r0:
-            return math.inf
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        if sep(mid) < z * z:
-            lo = mid
-        else:
-            hi = mid
-    return hi
+    return _bisect_size(sep, r0, z)
 
 
 # --------------------------------------------------------------------------- as explain's fit
