@@ -17,6 +17,21 @@ from avard.core.model.fit import fit_noise
 from tests.support import coverage_gen2 as gen
 
 
+def slope_profile_about(fit, yb, t, block_s, lik):  # type: ignore[no-untyped-def]
+    """The drift test's slope profile rebuilt from its parts as ``channel_drift`` builds it
+    (the K grid, the whitened columns) and its least value near the fitted slope, so a test
+    can read the profile at the interval's ends: (profile, K grid, w0, wt, least)."""
+    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
+    b_i = float(fit.terms["bias_instability"].value or 0.0)
+    top = dr.K_SPAN * max(dr._k_upper(fit), n_w / (len(t) * block_s))
+    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-dr.K_DECADES, top, dr.K_POINTS)])
+    prof = dr._Profile(yb, t, block_s, n_w, b_i)
+    w0 = prof.white(np.ones((len(t), 1)))
+    wt = prof.white(t - t.mean())
+    grid = lik.slope + (lik.slope_hi - lik.slope_lo) * np.linspace(-0.05, 0.05, 41)
+    return prof, ks, w0, wt, float(np.min(prof.slope_profile(ks, w0, wt, grid)))
+
+
 def test_the_slope_interval_ends_where_the_profile_has_risen_by_the_rise() -> None:
     """A driftless 12 h record of the independent generator (white + flicker, corner 300 s,
     + walk, corner 10 000 s) whose walk holds a few of the block means' directions (β about
@@ -35,15 +50,7 @@ def test_the_slope_interval_ends_where_the_profile_has_risen_by_the_rise() -> No
     lik = dr.channel_drift(fit, yb, block_s)
     assert lik is not None and lik.bartlett > 1.2
     t = (np.arange(len(yb)) + 0.5) * block_s
-    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
-    b_i = float(fit.terms["bias_instability"].value or 0.0)
-    top = dr.K_SPAN * max(dr._k_upper(fit), n_w / (len(t) * block_s))
-    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-dr.K_DECADES, top, dr.K_POINTS)])
-    prof = dr._Profile(yb, t, block_s, n_w, b_i)
-    w0 = prof.white(np.ones((len(t), 1)))
-    wt = prof.white(t - t.mean())
-    grid = lik.slope + (lik.slope_hi - lik.slope_lo) * np.linspace(-0.05, 0.05, 41)
-    least = float(np.min(prof.slope_profile(ks, w0, wt, grid)))
+    prof, ks, w0, wt, least = slope_profile_about(fit, yb, t, block_s, lik)
     ends = prof.slope_profile(ks, w0, wt, np.array([lik.slope_lo, lik.slope_hi])) - least
     assert lik.interval_rise == dr.interval_rise(lik.walk_dof)
     # each end at the rise of its own null (slope26: ν of the means less that slope)

@@ -18,6 +18,7 @@ from avard.core.allan.deviations import allan_variance
 from avard.core.analysis import drift as dr
 from avard.core.model.fit import fit_noise
 
+from tests.core.test_drift_interval import slope_profile_about
 from tests.support import coverage_gen2 as gen
 
 # the independent generator's 12 h geometry (docs/scripts/coverage_gen2_run.py): 1 Hz,
@@ -76,15 +77,7 @@ def test_each_end_stands_at_the_rise_of_its_own_null() -> None:
     yb, t, block_s = _means(y)
     lik = dr.channel_drift(fit, yb, block_s)
     assert lik is not None and lik.interval_rise < 1.3  # the record's own ν: a drift's
-    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
-    b_i = float(fit.terms["bias_instability"].value or 0.0)
-    top = dr.K_SPAN * max(dr._k_upper(fit), n_w / (len(t) * block_s))
-    ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-dr.K_DECADES, top, dr.K_POINTS)])
-    prof = dr._Profile(yb, t, block_s, n_w, b_i)
-    w0 = prof.white(np.ones((len(t), 1)))
-    wt = prof.white(t - t.mean())
-    grid = lik.slope + (lik.slope_hi - lik.slope_lo) * np.linspace(-0.05, 0.05, 41)
-    least = float(np.min(prof.slope_profile(ks, w0, wt, grid)))
+    prof, ks, w0, wt, least = slope_profile_about(fit, yb, t, block_s, lik)
     ends = np.array([lik.slope_lo, lik.slope_hi])
     prof_end, k_end = prof.slope_profile_k(ks, w0, wt, ends)
     own = [dr.interval_rise(dr.walk_directions(prof.lam, float(k))) for k in k_end]
