@@ -7,21 +7,19 @@ publishes needs more than a topic name (core/io/frames.TOPICS, a rig's ``TOPIC.N
 the publisher now refuses inbound messages above ``MAX_SUBSCRIPTION_BYTES`` (ZMQ_MAXMSGSIZE:
 libzmq drops such a peer's connection, its trie entries go with it).
 
-The flooder is another process, so the RSS measured is the publisher's alone; the test waits
-on events (the flooder's own "status" subscription reaching the publisher, or its
-connection dropped and made again), never on wall time.
+The flooder and the publisher are processes of their own, so the RSS measured is the
+publisher's alone; the test waits on events (the flooder's own "status" subscription coming
+back through each connection, or not: the connection dropped), never on wall time.
 """
 
 from __future__ import annotations
 
-import os
+import json
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
-from avard.daemon.net.publisher import Publisher
 
 FLOODER = r"""
 import os, sys, zmq
@@ -48,7 +46,12 @@ sys.stdin.read()
 """
 
 
-def _rss_bytes() -> int:
+PUBLISHER = r"""
+import json, os, subprocess, sys, time
+from avard.daemon.net.publisher import Publisher
+
+
+def rss_bytes():
     with open("/proc/self/status") as f:
         for line in f:
             if line.startswith("VmRSS:"):
@@ -56,35 +59,43 @@ def _rss_bytes() -> int:
     raise AssertionError("no VmRSS in /proc/self/status")
 
 
+flooder, waves, n, size = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
+pub = Publisher("tcp://127.0.0.1:0", "run", check=False)
+before = rss_bytes()
+proc = subprocess.Popen([sys.executable, flooder, pub.endpoint, waves, n, size],
+                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+seen = []
+os.set_blocking(proc.stdout.fileno(), False)
+while proc.poll() is None:
+    pub.publish("status", {"kind": "status", "v": 1})
+    line = proc.stdout.readline().strip()
+    if line == "done":
+        break
+    if line:
+        seen.append(line)
+    time.sleep(0.002)      # pacing only: nothing is measured against time
+grown = rss_bytes() - before
+proc.kill()
+proc.wait()
+pub.close()
+print(json.dumps({"grown": grown, "seen": seen}))
+"""
+
+
 def _flood(tmp_path: Path, waves: int, n: int, size: int) -> tuple[int, list[str]]:
-    """RSS growth of this process (the publisher's) once every wave of ``n`` subscriptions
-    of ``size`` random bytes has reached the publisher, and what each wave saw."""
-    pub = Publisher("tcp://127.0.0.1:0", "run", check=False)
-    script = tmp_path / "flooder.py"
-    script.write_text(FLOODER)
-    before = _rss_bytes()
-    proc = subprocess.Popen([sys.executable, str(script), pub.endpoint, str(waves), str(n),
-                             str(size)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            text=True)
-    seen: list[str] = []
-    try:
-        assert proc.stdout is not None
-        os.set_blocking(proc.stdout.fileno(), False)
-        while proc.poll() is None:
-            pub.publish("status", {"kind": "status", "v": 1})
-            line = proc.stdout.readline().strip()
-            if line == "done":
-                break
-            if line:
-                seen.append(line)
-            time.sleep(0.002)      # pacing only: nothing is measured against time
-        assert len(seen) == waves, seen
-        grown = _rss_bytes() - before
-    finally:
-        proc.kill()
-        proc.wait()
-        pub.close()
-    return grown, seen
+    """RSS growth of the publisher's process once every wave of ``n`` subscriptions of
+    ``size`` random bytes has reached it, and what each wave saw. The publisher runs in a
+    process of its own: freed heap that the test process keeps from earlier tests would
+    hide the growth."""
+    (tmp_path / "flooder.py").write_text(FLOODER)
+    (tmp_path / "publisher.py").write_text(PUBLISHER)
+    out = subprocess.run([sys.executable, str(tmp_path / "publisher.py"),
+                          str(tmp_path / "flooder.py"), str(waves), str(n), str(size)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(got["seen"]) == waves, got
+    return int(got["grown"]), list(got["seen"])
 
 
 def test_one_oversized_subscription_does_not_take_the_services_memory(tmp_path: Path) -> None:
