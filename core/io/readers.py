@@ -96,6 +96,11 @@ def record_kind(path: str | Path) -> tuple[Path, str]:
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file or directory")
+    if not p.is_dir() and not p.is_file():
+        # a FIFO, device or socket: open() of a FIFO waits for a writer, so the command hung
+        # instead of saying what is wrong
+        raise DataError(f"{p}: not a regular file (a FIFO, device or socket); give an .npz, a "
+                        ".csv, or a recording directory / .avr segment")
     if _is_recording(p):
         return p, "recording"
     suffix = p.suffix.lower()

@@ -52,6 +52,12 @@ PUB_SNDBUF = 128 << 10
 #: in STALL_S (and the checks' spacing) in libzmq's queue, whatever the HWM: bytes, not
 #: messages; across subscribers at most MAX_SUBSCRIBERS times that.
 STALL_S = 10.0
+#: Largest message a subscriber may send the PUB socket (ZMQ_MAXMSGSIZE; libzmq drops a peer
+#: that sends more). A subscriber only ever sends subscriptions, and libzmq keeps each in
+#: its trie at one node per byte (some 25 bytes a node): one 4 MB subscription took the
+#: service's RSS from 17 to 473 MB. Topics are short (``raw``, ``status.NAME``); the cap
+#: leaves room for the CURVE handshake's commands, which the same limit applies to.
+MAX_SUBSCRIPTION_BYTES = 1024
 _LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 Handler = Callable[[dict[str, Any]], Mapping[str, Any]]
@@ -152,6 +158,7 @@ class Publisher:
                 self._curve = CurveServer(self._ctx, curve)
             self._sock = self._ctx.socket(zmq.PUB)
             self._sock.setsockopt(zmq.SNDHWM, hwm)
+            self._sock.setsockopt(zmq.MAXMSGSIZE, MAX_SUBSCRIPTION_BYTES)
             self._sock.setsockopt(zmq.SNDBUF, self.sndbuf)
             self._sock.setsockopt(zmq.LINGER, LINGER_MS)
             if self._curve is not None:
