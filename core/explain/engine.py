@@ -316,7 +316,8 @@ class ChannelExplanation:
         a = self.base.allan
         return compensation_worse_at(np.asarray(a.tau, dtype=float), a.hi, comp_var)
 
-    def judge(self, held: ChannelHoldout | None, record_reason: str | None = None) -> None:
+    def judge(self, held: ChannelHoldout | None, record_reason: str | None = None,
+              screen: ScreenLog | None = None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
         ``holdout.ChannelHoldout`` or None; ``record_reason``: why the held-out test asked
         for could not run on the record at all); when it fails, the claimed causes'
@@ -341,6 +342,12 @@ class ChannelExplanation:
                              heldout_missing=missing)
         if self.verdict.explained:
             return
+        chan = None if self.thermal is None else self.thermal.channel
+        coarse = None if screen is None or chan is None else screen.coarse(chan)
+        if coarse is not None:
+            # the misfit may be the log's own rounding, which the thermal model takes on the
+            # 12-bit step (``screen.ScreenLog.coarse``)
+            self.verdict = replace(self.verdict, suspect=f"temperature '{chan}' {coarse}")
         for f in self.findings:
             if f.claimed and f.cause not in ("sinusoid", "periodic"):
                 f.model_dependent = True
@@ -677,14 +684,14 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
                                      holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
-            ch_ex.judge(None)
+            ch_ex.judge(None, screen=screen)
         return Explanation(an, out, t_allan, b / rate, screen=screen,
                            temperature_unused=unused)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held, screen)
     for name, ch_ex in out.items():
-        ch_ex.judge(ho.channels.get(name), ho.reason)
+        ch_ex.judge(ho.channels.get(name), ho.reason, screen)
     return Explanation(an, out, t_allan, b / rate, ho, screen=screen,
                        temperature_unused=unused)
 

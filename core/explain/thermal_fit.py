@@ -1218,7 +1218,8 @@ class ThermalFit:
         lo, hi = self.coef_interval
         return {"channel": self.channel, "coefficient_mps2_per_k": self.coefficient,
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
-                "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
+                "lag_interval_s": [self.lag_lo, self.lag_hi],
+                "lag_interval_open": bool(self.lag_open),
                 "z": self.z,
                 "threshold": self.threshold,
                 "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
