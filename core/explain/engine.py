@@ -342,7 +342,7 @@ class ChannelExplanation:
                              heldout_missing=missing)
         if self.verdict.explained:
             return
-        chan = None if self.thermal is None else self.thermal.channel
+        chan = None if screen is None or self.thermal is None else self.thermal.channel
         coarse = None if screen is None or chan is None else screen.coarse(chan)
         if coarse is not None:
             # the misfit may be the log's own rounding, which the thermal model takes on the
