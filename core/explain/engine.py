@@ -91,6 +91,7 @@ from avard.core.explain.thermal_fit import (
     fit_thermal_axes,
     hole_mask,
     path_of,
+    reading_grid,
     signal_avar_on,
     with_paths,
 )
@@ -519,8 +520,9 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
         return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
                               options, holdout=holdout, progress=progress, stage=stage,
                               base=an)
-    return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
-                      stage)
+    with reading_grid(screened.log.rounding_grid(options.temperature)):
+        return _explained(an, tap.slow, screened.log, meta, options,
+                          _held(holdout, options, meta), stage)
 
 
 class _SlowTap:
@@ -629,7 +631,8 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         an = base
         for _ in tee():
             pass
-    return _explained(an, tap.slow, screened.log, meta, options, held, stage)
+    with reading_grid(screened.log.rounding_grid(options.temperature)):
+        return _explained(an, tap.slow, screened.log, meta, options, held, stage)
 
 
 def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],

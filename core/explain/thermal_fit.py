@@ -49,6 +49,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -145,15 +148,30 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     return y
 
 
-def derounded(T: NDArray) -> NDArray[np.float64]:
+def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
     """The logged channel ``T`` (slow view, readings interpolated between their times) with
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
     runs' levels half way between them, so those crossings, (time, mid-level), are knots of
     a straight-line interpolation, with the turning points' runs at their middles and the
     first and last readings as they are; ``T`` itself where it holds fewer than two runs.
-    NaN stays NaN."""
+    NaN stays NaN.
+
+    ``grid``: the readings' (step, origin), default the record's (``reading_grid``). On a
+    step coarser than the 12-bit one the straight lines miss the turns by up to half a
+    step for as long as the readings dwell there (through a lag, a misfit at τ of the
+    dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
+    cell instead (``thermal_paths.columns.crossing_reconstruction``)."""
     T = np.asarray(T, dtype=float)
+    q, origin = reading_step() if grid is None else grid
+    if q > DS18B20_STEP_K * (1.0 + 1e-6):
+        from avard.core.explain.thermal_paths.columns import crossing_reconstruction
+
+        out = T.copy()
+        fin = np.isfinite(T)
+        if np.count_nonzero(fin) >= 4:
+            out[fin] = crossing_reconstruction(T[fin] - origin, q) + origin
+        return out
     out = T.copy()
     ok = np.flatnonzero(np.isfinite(T))
     if len(ok) < 4:
@@ -865,12 +883,37 @@ def min_tau_for(lag_s: float, floor_s: float = 0.0) -> float:
 
 #: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
 DS18B20_STEP_K = 0.0625
+#: The (step K, origin) of the readings the thermal model fits: a log's own
+#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C), set by explain for the
+#: record (``reading_grid``). A context, not a parameter threaded through every call: the
+#: step is a property of the record that about fifteen rounding terms read in eight modules
+#: (the path candidates, their floors, the held-out test), each of which takes it explicitly
+#: too (``step``/``grid`` arguments) where its caller knows it.
+_GRID: ContextVar[tuple[float, float]] = ContextVar("avard_reading_grid",
+                                                     default=(DS18B20_STEP_K, 0.0))
+
+
+def reading_step() -> tuple[float, float]:
+    """The (step K, origin) of the readings in force (``reading_grid``), the DS18B20's 12-bit
+    (0.0625, 0) unless explain set the record's."""
+    return _GRID.get()
+
+
+@contextmanager
+def reading_grid(grid: tuple[float, float] | None) -> Iterator[None]:
+    """The thermal model's rounding terms on ``grid`` (step, origin) within the block (None:
+    the 12-bit default)."""
+    tok = _GRID.set((DS18B20_STEP_K, 0.0) if grid is None else grid)
+    try:
+        yield
+    finally:
+        _GRID.reset(tok)
 #: How far a channel's AVAR must stand above its readings' rounding for a τ to enter the
 #: regression: at 10 the rounding is ≤ 1/11 of the regressor's variance there.
 ROUNDING_SNR = 10.0
 
 
-def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
+def rounding_correlation_s(T: NDArray, rate_hz: float, step: float | None = None) -> float:
     """How long (s) the logged channel ``T`` (slow view) keeps one rounding error: a
     temperature moving at |dT/dt| crosses a 0.0625 K step every q/|dT/dt| s, and between
     crossings its rounding error is one slowly moving value of the sawtooth, not a new draw
@@ -884,10 +927,12 @@ def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
     if len(T) > 4 * k:
         Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
         slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    return max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
+    q = reading_step()[0] if step is None else step
+    return max(DS18B20_CONVERSION_S, q / slope if slope > 0 else math.inf)
 
 
-def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
+def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR,
+                       step: float | None = None) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
     least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
     AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ, t_c the time one rounding
@@ -903,13 +948,14 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) ->
     T = np.asarray(T, dtype=float)
     if len(T) < 16:
         return 0.0
-    tc = rounding_correlation_s(T, rate_hz)
+    step = reading_step()[0] if step is None else step
+    tc = rounding_correlation_s(T, rate_hz, step)
     sa = StreamingAllan(1, rate_hz)
     sa.update(T[:, None])
     res = sa.result()
     tau = np.asarray(res.tau, dtype=float)
     var = np.asarray(res.var, dtype=float)
-    q = DS18B20_STEP_K**2 / 12.0 * tc / tau
+    q = step**2 / 12.0 * tc / tau
     ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
         # the first τ above the rounding, whatever the octaves after it: a cycle's AVAR

@@ -269,6 +269,16 @@ class ScreenLog:
             return None
         return coarse_text(grid)
 
+    def rounding_grid(self, channel: str | None = None) -> tuple[float, float] | None:
+        """The (step, origin) the thermal model's rounding terms take for this record: the
+        coarsest of its usable logs' steps coarser than the 12-bit 0.0625 K (``channel``: only
+        that log's), None where none is (the 12-bit default). One step for the record: a
+        larger rounding only raises a finer channel's floors."""
+        grids = [g for nm, g in self.steps.items()
+                 if g is not None and channel in (None, nm) and nm not in self.refused
+                 and self.coarse(nm) is not None]
+        return max(grids, default=None)
+
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
         out: dict[str, int] = {}
