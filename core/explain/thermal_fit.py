@@ -161,7 +161,11 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     step coarser than the 12-bit one the straight lines miss the turns by up to half a
     step for as long as the readings dwell there (through a lag, a misfit at τ of the
     dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
-    cell instead (``thermal_paths.columns.crossing_reconstruction``)."""
+    cell instead (``thermal_paths.columns.crossing_reconstruction``), and before the first
+    crossing and after the last (``_crossing_ends``) the spline's slope goes on within the
+    reading's cell: held at the first knot's mid-level, the record's first dwell sat up to
+    half a coarse step off for minutes, a start the lag filter carries into the τ of the
+    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K)."""
     T = np.asarray(T, dtype=float)
     q, origin = reading_step() if grid is None else grid
     if q > DS18B20_STEP_K * (1.0 + 1e-6):
@@ -170,7 +174,8 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
         out = T.copy()
         fin = np.isfinite(T)
         if np.count_nonzero(fin) >= 4:
-            out[fin] = crossing_reconstruction(T[fin] - origin, q) + origin
+            v = T[fin] - origin
+            out[fin] = _crossing_ends(v, crossing_reconstruction(v, q), q) + origin
         return out
     out = T.copy()
     ok = np.flatnonzero(np.isfinite(T))
@@ -209,6 +214,51 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     o = np.argsort(at, kind="stable")
     at, level = at[o], level[o]
     out[ok] = np.interp(ok, at, level)
+    return out
+
+
+def coarse_regressor(temps: NDArray) -> NDArray[np.float64]:
+    """The temperature channels (M, k) the thermal regression reads: as logged on the 12-bit
+    step, the crossing reconstruction (``derounded``) on a coarser one (``reading_grid``). A
+    coarse quantiser's gain at the drive is not 1 (its describing function: 1.037 for a
+    ±0.5 K cycle on a 0.25 K step), an error in the variable no τ floor removes, which put
+    ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
+    amplitude. The rounding floors (``rounding_floor_tau``) stay the raw readings': the
+    sawtooth they model is the readings', and on the smooth reconstruction a slower slope
+    made the floor of a 0.5 K log infinite (no τ left to the regression)."""
+    temps = np.asarray(temps, dtype=float)
+    if reading_step()[0] <= DS18B20_STEP_K * (1.0 + 1e-6):
+        return temps
+    T = temps.reshape(len(temps), -1)
+    out = np.column_stack([derounded(T[:, j]) for j in range(T.shape[1])])
+    return out.reshape(temps.shape)
+
+
+#: Samples beyond the first (last) crossing whose slope the reconstruction carries back
+#: (forward) to the record's start (end): about a minute of a 1.6 s slow view, the time a
+#: room's cycle takes between neighbouring crossings of a coarse step.
+CROSSING_END_SPAN = 40
+
+
+def _crossing_ends(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
+    """``R`` (the crossing reconstruction of readings ``v`` on step ``q``) before the readings'
+    first change of level and after their last: the slope of ``R`` over
+    ``CROSSING_END_SPAN`` samples beyond it, carried to the record's end, within the
+    reading's cell there (the temperature was in it, and reached its edge at the crossing)."""
+    lev = np.round(v / q)
+    ch = np.flatnonzero(np.diff(lev) != 0)
+    out = np.array(R, dtype=float)
+    if len(ch) < 2:
+        return out
+    i0, i1 = int(ch[0]) + 1, int(ch[-1])
+    j = min(len(R) - 1, i0 + CROSSING_END_SPAN)
+    s = (R[j] - R[i0]) / max(j - i0, 1)
+    c = lev[0] * q
+    out[:i0] = np.clip(R[i0] + s * (np.arange(i0) - i0), c - q / 2, c + q / 2)
+    j = max(0, i1 - CROSSING_END_SPAN)
+    s = (R[i1] - R[j]) / max(i1 - j, 1)
+    c = lev[-1] * q
+    out[i1 + 1:] = np.clip(R[i1] + s * (np.arange(i1 + 1, len(R)) - i1), c - q / 2, c + q / 2)
     return out
 
 
@@ -1465,6 +1515,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     ``warmups`` (``with_paths``)."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
+    # the rounding floors stay the readings' own (``coarse_regressor``)
+    raw, temps = temps, coarse_regressor(temps)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
     # lags sought are minutes); the chosen lag is then fitted on the whole slow view
@@ -1478,7 +1530,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     ref = _axes_reference(Ys, rate_s)
     for j in range(temps.shape[1]):
         hj = [(a // f, b // f) for a, b in holes.get(j, [])]
-        floor = rounding_floor_tau(Ts[:, j], rate_s)
+        floor = rounding_floor_tau(raw[:m].reshape(-1, f, raw.shape[1]).mean(axis=1)[:, j],
+                                   rate_s)
         per_axis = [sorted(sc, key=lambda p: p.lag)
                     for sc in _scan(Ys, Ts[:, j], grid, rate_s, hj, ref, floor)]
         # coarse to fine: twice between the neighbouring lags of each axis's best
@@ -1495,7 +1548,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             per_axis = _with_lag_jackknife(per_axis, grid, Ys, Ts[:, j], rate_s, hj, ref,
                                            floor)
         scans[j] = per_axis
-    floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
+    floors = {j: rounding_floor_tau(raw[:, j], rate_hz) for j in scans}
     # each channel's held-out regressors (``holdout.channel_heldout``), built once for every
     # axis that scores the channel at the same lag (the same slow view of the same channel)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
