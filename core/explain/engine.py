@@ -344,11 +344,11 @@ class ChannelExplanation:
         if self.verdict.explained:
             return
         chan = None if screen is None or self.thermal is None else self.thermal.channel
-        coarse = None if screen is None or chan is None else screen.coarse(chan)
+        coarse = None if screen is None or chan is None else screen.coarse(chan, cause=True)
         if coarse is not None:
-            # the misfit may be the log's own rounding, which the thermal model takes on the
-            # 12-bit step (``screen.ScreenLog.coarse``)
-            self.verdict = replace(self.verdict, suspect=f"temperature '{chan}' {coarse}")
+            # the misfit may be the coarse log's, whose temperature the model reconstructs
+            # (``screen.ScreenLog.coarse``)
+            self.verdict = replace(self.verdict, suspect=f"temperature '{chan}': {coarse}")
         for f in self.findings:
             if f.claimed and f.cause not in ("sinusoid", "periodic"):
                 f.model_dependent = True

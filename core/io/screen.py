@@ -260,14 +260,15 @@ class ScreenLog:
     #: assumes the DS18B20's 12-bit ``DS18B20_STEP_C``
     steps: dict[str, tuple[float, float] | None] = field(default_factory=dict)
 
-    def coarse(self, channel: str) -> str | None:
-        """What is wrong with ``channel``'s readings for the thermal model's rounding, in
-        words, when they lie on a step coarser than the 12-bit 0.0625 K it assumes (a
-        DS18B20 at 9–11 bits, a °F log taken as °C, a coarse print); None otherwise."""
+    def coarse(self, channel: str, cause: bool = False) -> str | None:
+        """``channel``'s readings' step in words (``coarse_text``; ``cause``: as a possible
+        cause of a misfit, ``coarse_cause``) when it is coarser than the DS18B20's 12-bit
+        0.0625 K (a DS18B20 at 9–11 bits, a °F log taken as °C, a coarse print); None
+        otherwise."""
         grid = self.steps.get(channel)
         if grid is None or grid[0] <= DS18B20_STEP_C * (1.0 + 1e-6):
             return None
-        return coarse_text(grid)
+        return coarse_cause(grid) if cause else coarse_text(grid)
 
     def rounding_grid(self, channel: str | None = None) -> tuple[float, float] | None:
         """The (step, origin) the thermal model's rounding terms take for this record: the
@@ -335,8 +336,9 @@ class ScreenLog:
                           "found from its distinct values (the largest step with >= 95 % of "
                           "them on one grid and two pairs exactly one step apart: a "
                           "DS18B20's 9-12 bits in °C or °F, a print's 0.1, or the values' "
-                          "own spacing), a step coarser than the 12-bit 0.0625 K the "
-                          "thermal model's rounding assumes noted"),
+                          "own spacing), a step coarser than the 12-bit 0.0625 K noted "
+                          "(the thermal model then reconstructs the temperature from the "
+                          "readings' crossings and takes its rounding on that step)"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
@@ -1483,18 +1485,31 @@ def log_step(values: NDArray) -> tuple[float, float] | None:
     return None
 
 
-def coarse_text(grid: tuple[float, float]) -> str:
-    """A coarse grid in words, for a log's note and an unexplained verdict: "readings on a
-    0.25 K step (a DS18B20 at 10 bits?), coarser than the 12-bit 0.0625 K the thermal
-    model's rounding assumes"."""
+def _coarse_what(grid: tuple[float, float]) -> str:
+    """What a coarse grid may be: "a 0.25 K step (a DS18B20 at 10 bits?)"."""
     q, origin = grid
     fbits = {round(1.8 * k, 4): b for k, b in DS18B20_BITS.items()}
     what = (f"a DS18B20 at {DS18B20_BITS[q]} bits?" if q in DS18B20_BITS and origin == 0.0
             else f"a DS18B20 at {fbits[round(q, 4)]} bits read in °F and taken as °C?"
             if round(q, 4) in fbits else "a log printed to 0.1?" if q == COARSE_PRINT
             else "another logger's resolution?")
-    return (f"readings on a {q:g} K step ({what}), coarser than the 12-bit "
-            f"{DS18B20_STEP_C:g} K the thermal model's rounding assumes")
+    return f"a {q:g} K step ({what})"
+
+
+def coarse_text(grid: tuple[float, float]) -> str:
+    """A coarse grid in words, for a log's note: "readings on a 0.25 K step (a DS18B20 at 10
+    bits?), coarser than the 12-bit 0.0625 K: the thermal model takes the temperature
+    behind them from their crossings and its rounding on that step"."""
+    return (f"readings on {_coarse_what(grid)}, coarser than the 12-bit "
+            f"{DS18B20_STEP_C:g} K: the thermal model takes the temperature behind them from "
+            "their crossings and its rounding on that step")
+
+
+def coarse_cause(grid: tuple[float, float]) -> str:
+    """A coarse grid as a possible cause of an unexplained axis's misfit, in words."""
+    return (f"it reads on {_coarse_what(grid)}, coarser than the 12-bit "
+            f"{DS18B20_STEP_C:g} K: the temperature behind its readings, reconstructed from "
+            "their crossings, may be off by more than the model carries")
 
 
 def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]:
