@@ -329,3 +329,20 @@ def test_the_issues_coarse_record_fits():
     assert x.verdict is not None and x.verdict.explained, x.verdict.line()
     lo, hi = x.thermal.to_dict()["coefficient_interval"]
     assert lo <= TRUTH_C <= hi
+
+
+def test_a_fahrenheit_log_taken_as_celsius_is_one_lag_on_its_own_grid(tmp_path):
+    """A DS18B20 logged in °F and taken as °C as the user said (``--temperature-units C``): its
+    readings on a 0.1125 K step from 32 are modelled on that grid (before: two paths and a
+    warm-up claimed beside); the coupling per "K" is per °F, the truth / 1.8."""
+    rec, _ = make_record(3, hours=2.0, logged=("ambient",),
+                         truth=Truth(coefficient=(TRUTH_C, 0, 0), lag_s=300.0))
+    ok = np.isfinite(rec.temperature_c)
+    rec.temperature_c[ok] = np.round(rec.temperature_c[ok] * 1.8 + 32.0, 4)
+    ex = explain_file(open_record(save(rec, tmp_path / "f.npz")),
+                      ExplainOptions(channels=("x",), temperature_units="C"))
+    assert "0.1125 K step" in ex.screen.notes["ambient"].text
+    x = ex.channels["x"]
+    assert [f.cause for f in x.claimed] == ["temperature"]
+    assert x.thermal is not None and x.thermal.mechanism == "one_lag"
+    assert x.thermal.coefficient == pytest.approx(TRUTH_C / 1.8, rel=0.04)
