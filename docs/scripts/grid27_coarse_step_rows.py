@@ -4,7 +4,7 @@ explain's verdict, mechanism and coefficient against the truth, per step (grid27
 Records: ``tests/support/hidden.make_record(seed, hours=2, logged=("ambient",))`` with a
 3e-3 m/s²/K coupling through a 300 s lag, the log rounded to q (the generator's step set to q).
 Run from the repository: ``PYTHONPATH=. OMP_NUM_THREADS=1 nice .venv/bin/python
-docs/scripts/grid27_coarse_step_rows.py [SEEDS] [HOURS]``."""
+docs/scripts/grid27_coarse_step_rows.py [SEEDS] [HOURS] [FIRST_SEED]``."""
 
 from __future__ import annotations
 
@@ -48,11 +48,12 @@ def row(q: float, seed: int, hours: float, tmp: Path) -> dict:
 def main() -> None:
     seeds = int(sys.argv[1]) if len(sys.argv) > 1 else 6
     hours = float(sys.argv[2]) if len(sys.argv) > 2 else 2.0
+    first = int(sys.argv[3]) if len(sys.argv) > 3 else 1
     print(f"{'step K':>7} {'explained':>10} {'one lag':>8} {'c in 68 %':>10} "
           f"{'median c/truth':>15} {'median chi2/dof':>16}")
     with tempfile.TemporaryDirectory() as d:
         for q in (0.5, 0.25, 0.125, 0.0625):
-            rows = [row(q, 1 + s, hours, Path(d)) for s in range(seeds)]
+            rows = [row(q, first + s, hours, Path(d)) for s in range(seeds)]
             n = len(rows)
             cs = sorted(r["c"] / TRUTH_C for r in rows if r["c"] is not None)
             ch = sorted(r["chi2"] for r in rows)
@@ -62,7 +63,7 @@ def main() -> None:
                   f"{cs[len(cs) // 2] if cs else float('nan'):>15.4f} "
                   f"{ch[len(ch) // 2]:>16.3g}", flush=True)
             for s, r in enumerate(rows):
-                print(f"    seed {1 + s}: {r}", file=sys.stderr)
+                print(f"    seed {first + s}: {r}", file=sys.stderr)
 
 
 if __name__ == "__main__":
