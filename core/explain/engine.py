@@ -92,6 +92,7 @@ from avard.core.explain.thermal_fit import (
     hole_mask,
     path_of,
     reading_grid,
+    reading_step,
     signal_avar_on,
     with_paths,
 )
@@ -1234,7 +1235,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
-                "temperature's 0.0625 K rounding through the coupling "
+                f"temperature's {reading_step()[0]:g} K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
         elif gm.params.get("sigma", 0.0) < rf:
