@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 from avard.core.model.triangular import LowerSolver
-from avard.core.sim.thermal import DS18B20_STEP_C
 from numpy.typing import NDArray
 
 #: Causes explain tests beside analyze's model, and their parameters (SI units).
@@ -376,7 +375,7 @@ def gauss_markov_rounding_floor(coefficient: float) -> float:
     30 min), correlated like a Gauss–Markov process of that time (a plate-logged 2-minute-lag
     record of the benchmark, seed 99000: σ 3.9e-5 m/s², T 96 s, with c = 4.9e-3 m/s²/K, whose
     rounding RMS is 8.9e-5). The lag only shrinks it, so this bounds it from above."""
-    return abs(coefficient) * DS18B20_STEP_C / math.sqrt(12.0)
+    return abs(coefficient) * _step() / math.sqrt(12.0)
 
 
 def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
@@ -394,10 +393,19 @@ def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
     a statement of power for planning, and it is computed from noise levels a transient
     itself inflates; a detection is decided by its test and its interval
     (``transients.confirm_compound``)."""
-    rounding = abs(coefficient) * DS18B20_STEP_C
-    return rounding, (f"what the logged temperature's {DS18B20_STEP_C:g} K resolution "
+    q = _step()
+    rounding = abs(coefficient) * q
+    return rounding, (f"what the logged temperature's {q:g} K resolution "
                       f"produces through the coupling ({abs(coefficient):.3g} m/s²/K × "
-                      f"{DS18B20_STEP_C:g} K = {rounding:.3g} m/s²)")
+                      f"{q:g} K = {rounding:.3g} m/s²)")
+
+
+def _step() -> float:
+    """The logged readings' step (K): the record's (``thermal_fit.reading_grid``: the
+    DS18B20's 12-bit 0.0625 K unless the screen found a coarser log)."""
+    from avard.core.explain.thermal_fit import reading_step
+
+    return reading_step()[0]
 
 
 def size_z(cand: Candidate) -> float:

@@ -91,6 +91,8 @@ from avard.core.explain.thermal_fit import (
     fit_thermal_axes,
     hole_mask,
     path_of,
+    reading_grid,
+    reading_step,
     signal_avar_on,
     with_paths,
 )
@@ -316,7 +318,8 @@ class ChannelExplanation:
         a = self.base.allan
         return compensation_worse_at(np.asarray(a.tau, dtype=float), a.hi, comp_var)
 
-    def judge(self, held: ChannelHoldout | None, record_reason: str | None = None) -> None:
+    def judge(self, held: ChannelHoldout | None, record_reason: str | None = None,
+              screen: ScreenLog | None = None) -> None:
         """Set ``verdict`` from the extended fit and the held-out χ² (``held``: this axis's
         ``holdout.ChannelHoldout`` or None; ``record_reason``: why the held-out test asked
         for could not run on the record at all); when it fails, the claimed causes'
@@ -341,6 +344,12 @@ class ChannelExplanation:
                              heldout_missing=missing)
         if self.verdict.explained:
             return
+        chan = None if screen is None or self.thermal is None else self.thermal.channel
+        coarse = None if screen is None or chan is None else screen.coarse(chan, cause=True)
+        if coarse is not None:
+            # the misfit may be the coarse log's, whose temperature the model reconstructs
+            # (``screen.ScreenLog.coarse``)
+            self.verdict = replace(self.verdict, suspect=f"temperature '{chan}': {coarse}")
         for f in self.findings:
             if f.claimed and f.cause not in ("sinusoid", "periodic"):
                 f.model_dependent = True
@@ -512,8 +521,9 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
         return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
                               options, holdout=holdout, progress=progress, stage=stage,
                               base=an)
-    return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
-                      stage)
+    with reading_grid(screened.log.rounding_grid(options.temperature)):
+        return _explained(an, tap.slow, screened.log, meta, options,
+                          _held(holdout, options, meta), stage)
 
 
 class _SlowTap:
@@ -622,7 +632,8 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         an = base
         for _ in tee():
             pass
-    return _explained(an, tap.slow, screened.log, meta, options, held, stage)
+    with reading_grid(screened.log.rounding_grid(options.temperature)):
+        return _explained(an, tap.slow, screened.log, meta, options, held, stage)
 
 
 def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],
@@ -677,14 +688,14 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
                                      holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
-            ch_ex.judge(None)
+            ch_ex.judge(None, screen=screen)
         return Explanation(an, out, t_allan, b / rate, screen=screen,
                            temperature_unused=unused)
     if stage is not None:
         stage("measuring the gain on held-out data")
     ho = _holdout(out, y_slow, t_slow, tnames, names, rate_b, b, meta, held, screen)
     for name, ch_ex in out.items():
-        ch_ex.judge(ho.channels.get(name), ho.reason)
+        ch_ex.judge(ho.channels.get(name), ho.reason, screen)
     return Explanation(an, out, t_allan, b / rate, ho, screen=screen,
                        temperature_unused=unused)
 
@@ -1224,7 +1235,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
-                "temperature's 0.0625 K rounding through the coupling "
+                f"temperature's {reading_step()[0]:g} K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
         elif gm.params.get("sigma", 0.0) < rf:

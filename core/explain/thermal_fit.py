@@ -49,7 +49,10 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -145,15 +148,35 @@ def lag_filter(T: NDArray, lag_s: float, rate_hz: float) -> NDArray[np.float64]:
     return y
 
 
-def derounded(T: NDArray) -> NDArray[np.float64]:
+def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
     """The logged channel ``T`` (slow view, readings interpolated between their times) with
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
     runs' levels half way between them, so those crossings, (time, mid-level), are knots of
     a straight-line interpolation, with the turning points' runs at their middles and the
     first and last readings as they are; ``T`` itself where it holds fewer than two runs.
-    NaN stays NaN."""
+    NaN stays NaN.
+
+    ``grid``: the readings' (step, origin), default the record's (``reading_grid``). On a
+    step coarser than the 12-bit one the straight lines miss the turns by up to half a
+    step for as long as the readings dwell there (through a lag, a misfit at τ of the
+    dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
+    cell instead (``thermal_paths.columns.crossing_reconstruction``), and before the first
+    crossing and after the last (``_crossing_ends``) the spline's slope goes on within the
+    reading's cell: held at the first knot's mid-level, the record's first dwell sat up to
+    half a coarse step off for minutes, a start the lag filter carries into the τ of the
+    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K)."""
     T = np.asarray(T, dtype=float)
+    q, origin = reading_step() if grid is None else grid
+    if q > DS18B20_STEP_K * (1.0 + 1e-6):
+        from avard.core.explain.thermal_paths.columns import crossing_reconstruction
+
+        out = T.copy()
+        fin = np.isfinite(T)
+        if np.count_nonzero(fin) >= 4:
+            v = T[fin] - origin
+            out[fin] = _crossing_ends(v, crossing_reconstruction(v, q), q) + origin
+        return out
     out = T.copy()
     ok = np.flatnonzero(np.isfinite(T))
     if len(ok) < 4:
@@ -191,6 +214,79 @@ def derounded(T: NDArray) -> NDArray[np.float64]:
     o = np.argsort(at, kind="stable")
     at, level = at[o], level[o]
     out[ok] = np.interp(ok, at, level)
+    return out
+
+
+def coarse_regressor(temps: NDArray) -> NDArray[np.float64]:
+    """The temperature channels (M, k) the thermal regression reads: as logged on the 12-bit
+    step, the crossing reconstruction (``derounded``) on a coarser one (``reading_grid``). A
+    coarse quantiser's gain at the drive is not 1 (its describing function: 1.037 for a
+    ±0.5 K cycle on a 0.25 K step), an error in the variable no τ floor removes, which put
+    ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
+    amplitude. The rounding floors (``rounding_floor_tau``) stay the raw readings': the
+    sawtooth they model is the readings', and on the smooth reconstruction a slower slope
+    made the floor of a 0.5 K log infinite (no τ left to the regression)."""
+    temps = np.asarray(temps, dtype=float)
+    if reading_step()[0] <= DS18B20_STEP_K * (1.0 + 1e-6):
+        return temps
+    T = temps.reshape(len(temps), -1)
+    out = np.column_stack([derounded(T[:, j]) for j in range(T.shape[1])])
+    return out.reshape(temps.shape)
+
+
+def coarse_gain_se(fit: ThermalFit, raw: NDArray, recon: NDArray) -> ThermalFit:
+    """``fit`` with its coefficient's standard error widened by the reconstruction's gain
+    uncertainty when its channel reads on a coarse step (``coarse_regressor``; ``raw``, ``recon``
+    the channels as logged and as reconstructed, slow view). The quantiser's describing
+    function makes the raw readings' swing at the drive larger than the temperature's and the
+    crossings' spline, on a step a few times narrower than the swing, smaller or larger by
+    an amount no τ floor shows: ĉ from either brackets the truth (0.5 K step, ±0.5 K drive:
+    0.91× and 1.08× the truth). Half the bracket, √(AVAR_raw/AVAR_recon) − 1 at the τ of the
+    reconstruction's largest AVAR (the drive), is added in quadrature: 0.5 % at 0.125 K,
+    2 % at 0.25 K, 8 % at 0.5 K. The detection's z is the regression's (the gain's error
+    scales a coupling that is there; it makes none)."""
+    if reading_step()[0] <= DS18B20_STEP_K * (1.0 + 1e-6) or not (
+            math.isfinite(fit.coef_se) and math.isfinite(fit.coefficient)):
+        return fit
+    j = fit.channel_index
+    var = []
+    for col in (np.asarray(raw, dtype=float)[:, j], np.asarray(recon, dtype=float)[:, j]):
+        sa = StreamingAllan(1, fit.rate_hz)
+        sa.update(col[:, None])
+        var.append(np.asarray(sa.result().var, dtype=float))
+    ok = np.isfinite(var[0]) & np.isfinite(var[1]) & (var[1] > 0)
+    if not np.any(ok):
+        return fit
+    k = int(np.argmax(np.where(ok, var[1], -np.inf)))
+    rel = 0.5 * abs(math.sqrt(var[0][k] / var[1][k]) - 1.0)
+    return replace(fit, coef_se=math.hypot(fit.coef_se, rel * fit.coefficient))
+
+
+#: Samples beyond the first (last) crossing whose slope the reconstruction carries back
+#: (forward) to the record's start (end): about a minute of a 1.6 s slow view, the time a
+#: room's cycle takes between neighbouring crossings of a coarse step.
+CROSSING_END_SPAN = 40
+
+
+def _crossing_ends(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
+    """``R`` (the crossing reconstruction of readings ``v`` on step ``q``) before the readings'
+    first change of level and after their last: the slope of ``R`` over
+    ``CROSSING_END_SPAN`` samples beyond it, carried to the record's end, within the
+    reading's cell there (the temperature was in it, and reached its edge at the crossing)."""
+    lev = np.round(v / q)
+    ch = np.flatnonzero(np.diff(lev) != 0)
+    out = np.array(R, dtype=float)
+    if len(ch) < 2:
+        return out
+    i0, i1 = int(ch[0]) + 1, int(ch[-1])
+    j = min(len(R) - 1, i0 + CROSSING_END_SPAN)
+    s = (R[j] - R[i0]) / max(j - i0, 1)
+    c = lev[0] * q
+    out[:i0] = np.clip(R[i0] + s * (np.arange(i0) - i0), c - q / 2, c + q / 2)
+    j = max(0, i1 - CROSSING_END_SPAN)
+    s = (R[i1] - R[j]) / max(i1 - j, 1)
+    c = lev[-1] * q
+    out[i1 + 1:] = np.clip(R[i1] + s * (np.arange(i1 + 1, len(R)) - i1), c - q / 2, c + q / 2)
     return out
 
 
@@ -865,12 +961,37 @@ def min_tau_for(lag_s: float, floor_s: float = 0.0) -> float:
 
 #: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
 DS18B20_STEP_K = 0.0625
+#: The (step K, origin) of the readings the thermal model fits: a log's own
+#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C), set by explain for the
+#: record (``reading_grid``). A context, not a parameter threaded through every call: the
+#: step is a property of the record that about fifteen rounding terms read in eight modules
+#: (the path candidates, their floors, the held-out test), each of which takes it explicitly
+#: too (``step``/``grid`` arguments) where its caller knows it.
+_GRID: ContextVar[tuple[float, float]] = ContextVar("avard_reading_grid",
+                                                     default=(DS18B20_STEP_K, 0.0))
+
+
+def reading_step() -> tuple[float, float]:
+    """The (step K, origin) of the readings in force (``reading_grid``), the DS18B20's 12-bit
+    (0.0625, 0) unless explain set the record's."""
+    return _GRID.get()
+
+
+@contextmanager
+def reading_grid(grid: tuple[float, float] | None) -> Iterator[None]:
+    """The thermal model's rounding terms on ``grid`` (step, origin) within the block (None:
+    the 12-bit default)."""
+    tok = _GRID.set((DS18B20_STEP_K, 0.0) if grid is None else grid)
+    try:
+        yield
+    finally:
+        _GRID.reset(tok)
 #: How far a channel's AVAR must stand above its readings' rounding for a τ to enter the
 #: regression: at 10 the rounding is ≤ 1/11 of the regressor's variance there.
 ROUNDING_SNR = 10.0
 
 
-def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
+def rounding_correlation_s(T: NDArray, rate_hz: float, step: float | None = None) -> float:
     """How long (s) the logged channel ``T`` (slow view) keeps one rounding error: a
     temperature moving at |dT/dt| crosses a 0.0625 K step every q/|dT/dt| s, and between
     crossings its rounding error is one slowly moving value of the sawtooth, not a new draw
@@ -884,10 +1005,12 @@ def rounding_correlation_s(T: NDArray, rate_hz: float) -> float:
     if len(T) > 4 * k:
         Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
         slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    return max(DS18B20_CONVERSION_S, DS18B20_STEP_K / slope if slope > 0 else math.inf)
+    q = reading_step()[0] if step is None else step
+    return max(DS18B20_CONVERSION_S, q / slope if slope > 0 else math.inf)
 
 
-def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) -> float:
+def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR,
+                       step: float | None = None) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
     least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
     AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ, t_c the time one rounding
@@ -903,13 +1026,14 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR) ->
     T = np.asarray(T, dtype=float)
     if len(T) < 16:
         return 0.0
-    tc = rounding_correlation_s(T, rate_hz)
+    step = reading_step()[0] if step is None else step
+    tc = rounding_correlation_s(T, rate_hz, step)
     sa = StreamingAllan(1, rate_hz)
     sa.update(T[:, None])
     res = sa.result()
     tau = np.asarray(res.tau, dtype=float)
     var = np.asarray(res.var, dtype=float)
-    q = DS18B20_STEP_K**2 / 12.0 * tc / tau
+    q = step**2 / 12.0 * tc / tau
     ok = np.isfinite(var) & (var >= snr * q)
     for i in range(len(tau)):
         # the first τ above the rounding, whatever the octaves after it: a cycle's AVAR
@@ -1218,7 +1342,8 @@ class ThermalFit:
         lo, hi = self.coef_interval
         return {"channel": self.channel, "coefficient_mps2_per_k": self.coefficient,
                 "coefficient_interval": [lo, hi], "lag_s": self.lag_s,
-                "lag_interval_s": [self.lag_lo, self.lag_hi], "lag_interval_open": self.lag_open,
+                "lag_interval_s": [self.lag_lo, self.lag_hi],
+                "lag_interval_open": bool(self.lag_open),
                 "z": self.z,
                 "threshold": self.threshold,
                 "threshold_dof": (self.threshold_dof if math.isfinite(self.threshold_dof)
@@ -1418,6 +1543,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     ``warmups`` (``with_paths``)."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
+    # the rounding floors stay the readings' own (``coarse_regressor``)
+    raw, temps = temps, coarse_regressor(temps)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
     # lags sought are minutes); the chosen lag is then fitted on the whole slow view
@@ -1431,7 +1558,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     ref = _axes_reference(Ys, rate_s)
     for j in range(temps.shape[1]):
         hj = [(a // f, b // f) for a, b in holes.get(j, [])]
-        floor = rounding_floor_tau(Ts[:, j], rate_s)
+        floor = rounding_floor_tau(raw[:m].reshape(-1, f, raw.shape[1]).mean(axis=1)[:, j],
+                                   rate_s)
         per_axis = [sorted(sc, key=lambda p: p.lag)
                     for sc in _scan(Ys, Ts[:, j], grid, rate_s, hj, ref, floor)]
         # coarse to fine: twice between the neighbouring lags of each axis's best
@@ -1448,12 +1576,13 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             per_axis = _with_lag_jackknife(per_axis, grid, Ys, Ts[:, j], rate_s, hj, ref,
                                            floor)
         scans[j] = per_axis
-    floors = {j: rounding_floor_tau(temps[:, j], rate_hz) for j in scans}
+    floors = {j: rounding_floor_tau(raw[:, j], rate_hz) for j in scans}
     # each channel's held-out regressors (``holdout.channel_heldout``), built once for every
     # axis that scores the channel at the same lag (the same slow view of the same channel)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
                   floors, columns) for a in range(Y.shape[1])]
+    fits = [coarse_gain_se(ft, raw, temps) for ft in fits]
     return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
 
 

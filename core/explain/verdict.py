@@ -98,6 +98,10 @@ class Verdict:
     #: why the held-out test asked for this axis's claims could not run (then ``explained``
     #: is False); None when it ran, was not asked, or does not apply (events only)
     heldout_missing: str | None = None
+    #: what may cause the misfit though the model has no term for it, in words (a log of the
+    #: chosen channel on a coarser step than the thermal model's rounding assumes); said
+    #: only when the axis is not explained
+    suspect: str | None = None
 
     @property
     def heldout_fails(self) -> bool:
@@ -113,6 +117,11 @@ class Verdict:
 
     def line(self) -> str:
         """The one line beside the gain."""
+        if self.suspect and not self.explained:
+            return f"{self._line()}; a possible cause: {self.suspect}"
+        return self._line()
+
+    def _line(self) -> str:
         ins = f"χ²/dof {self.chi2_dof:.3g} on {self.dof} dof (p {self.p_value:.2g})"
         held = ""
         if self.heldout_p is not None:
@@ -138,6 +147,7 @@ class Verdict:
                 "p_value": self.p_value, "heldout_chi2": self.heldout_chi2,
                 "heldout_n": self.heldout_n, "heldout_p": self.heldout_p,
                 "heldout_missing": self.heldout_missing,
+                "possible_cause": None if self.explained else self.suspect,
                 "alpha": ALPHA, "misfit": self.misfit, "line": self.line()}
 
 

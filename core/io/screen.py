@@ -168,8 +168,8 @@ RAMP_SHARE = 0.9
 @dataclass(frozen=True)
 class LogNote:
     """What the screen found of one temperature log as a whole: ``kind`` (held,
-    held_unknown, fahrenheit, off_grid, celsius_assumed; two joined by '+') and its one
-    line of text."""
+    held_unknown, fahrenheit, off_grid, celsius_assumed, coarse_step; two joined by '+') and
+    its one line of text."""
     kind: str
     text: str
     #: a log read in several stretches (held, as it is): {start_s, end_s, read, cadence_samples}
@@ -255,6 +255,30 @@ class ScreenLog:
     refused: dict[str, str] = field(default_factory=dict)
     #: the logs' units as asked (``--temperature-units``): auto, C or F
     units: str = "auto"
+    #: per temperature channel, the (step K, origin) of its readings' grid (``log_step``;
+    #: None: on no grid found), filled at the end of the read; the thermal model's rounding
+    #: assumes the DS18B20's 12-bit ``DS18B20_STEP_C``
+    steps: dict[str, tuple[float, float] | None] = field(default_factory=dict)
+
+    def coarse(self, channel: str, cause: bool = False) -> str | None:
+        """``channel``'s readings' step in words (``coarse_text``; ``cause``: as a possible
+        cause of a misfit, ``coarse_cause``) when it is coarser than the DS18B20's 12-bit
+        0.0625 K (a DS18B20 at 9–11 bits, a °F log taken as °C, a coarse print); None
+        otherwise."""
+        grid = self.steps.get(channel)
+        if grid is None or grid[0] <= DS18B20_STEP_C * (1.0 + 1e-6):
+            return None
+        return coarse_cause(grid) if cause else coarse_text(grid)
+
+    def rounding_grid(self, channel: str | None = None) -> tuple[float, float] | None:
+        """The (step, origin) the thermal model's rounding terms take for this record: the
+        coarsest of its usable logs' steps coarser than the 12-bit 0.0625 K (``channel``: only
+        that log's), None where none is (the 12-bit default). One step for the record: a
+        larger rounding only raises a finer channel's floors."""
+        grids = [g for nm, g in self.steps.items()
+                 if g is not None and channel in (None, nm) and nm not in self.refused
+                 and self.coarse(nm) is not None]
+        return max(grids, default=None)
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -279,6 +303,10 @@ class ScreenLog:
                 "notes": {k: v.to_dict() for k, v in self.notes.items()},
                 "refused": dict(self.refused),
                 "temperature_units": self.units,
+                "reading_steps": {k: None if v is None else
+                                  {"step_k": v[0], "origin": v[1],
+                                   "coarse": bool(self.coarse(k))}
+                                  for k, v in self.steps.items()},
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
                           "median of its 17 neighbours (any axis), cut out as a gap, the "
                           "scale never below the grid's quantisation (q/√12) on a grid "
@@ -304,7 +332,13 @@ class ScreenLog:
                           "grid (under half of the distinct values on it) are noted, and "
                           "refused as °F where most are on a DS18B20's grid in °F "
                           "(32 + 0.1125·k), unless --temperature-units says C or F (F: "
-                          "converted to °C before every rule)"),
+                          "converted to °C before every rule); each log's reading step "
+                          "found from its distinct values (the largest step with >= 95 % of "
+                          "them on one grid and two pairs exactly one step apart: a "
+                          "DS18B20's 9-12 bits in °C or °F, a print's 0.1, or the values' "
+                          "own spacing), a step coarser than the 12-bit 0.0625 K noted "
+                          "(the thermal model then reconstructs the temperature from the "
+                          "readings' crossings and takes its rounding on that step)"),
                 "units": {"start_s": "s", "end_s": "s"}}
 
     def lines(self, limit: int = 8) -> list[str]:
@@ -1383,6 +1417,101 @@ def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) 
     return float(np.mean(np.abs(r - np.rint(r)) * step <= tol))
 
 
+#: Candidate steps (K) of a temperature log's readings, coarsest first: the DS18B20's four
+#: resolutions (9–12 bits) in °C, the same read in °F and taken as °C (1.8× each), a logger
+#: printing to 0.1 or 0.01.
+LOG_STEPS_K = (0.9, 0.5, 0.45, 0.25, 0.225, 0.125, 0.1125, 0.1, 0.0625, 0.01)
+#: The DS18B20's resolutions (K), 9 to 12 bits, and each one's bits.
+DS18B20_BITS = {0.5: 9, 0.25: 10, 0.125: 11, 0.0625: 12}
+#: A step holds a log when at least this share of its distinct values lie on its grid.
+LOG_STEP_SHARE = 0.95
+#: ... and its on-grid distinct values hold this many pairs exactly one step apart. A room's
+#: temperature is continuous, so a finer log's readings pass every level between two they
+#: visit: neighbours one coarse step apart with no reading between them are the coarse
+#: step's mark, where two or three values alone could be a stable room's dwell on any grid.
+LOG_STEP_NEIGHBOURS = 2
+#: The least number of distinct values that can show a step of the values' own spacing
+#: (one no candidate holds): fewer could be any spacing by chance.
+LOG_STEP_OWN_VALUES = 8
+
+
+def _on_step(u: NDArray[np.float64], q: float) -> tuple[float, float] | None:
+    """(q, origin) when the distinct values ``u`` hold the grid origin + k·q (module
+    constants ``LOG_STEP_*``), None when they do not; the origin their most common
+    remainder (0 for a grid through 0 within the print)."""
+    # on the grid within a 2-decimal print (``PRINT_TOL``), a fine step within a tenth of it
+    tol = min(PRINT_TOL, q / 10.0)
+    r = np.mod(u, q)
+    bins, counts = np.unique(np.rint(r / tol).astype(np.int64), return_counts=True)
+    m0 = float(bins[int(np.argmax(counts))]) * tol
+    dm = np.abs(r - m0)
+    best: tuple[float, NDArray[np.float64]] | None = None
+    for origin in (0.0, float(np.median(r[np.minimum(dm, q - dm) <= tol]))):
+        d = np.abs(r - origin)
+        on = u[np.minimum(d, q - d) <= tol]
+        if best is None or len(on) > len(best[1]):
+            best = (origin, on)
+    assert best is not None
+    origin, on = best
+    if len(on) < LOG_STEP_SHARE * len(u):
+        return None
+    if np.count_nonzero(np.abs(np.diff(on) - q) <= 2 * tol) < LOG_STEP_NEIGHBOURS:
+        return None
+    return q, (0.0 if min(origin, q - origin) <= tol else round(origin, 4))
+
+
+def log_step(values: NDArray) -> tuple[float, float] | None:
+    """(step K, origin) of a temperature log's readings, judged on its distinct values (the
+    error and power-on values left out): the coarsest candidate (``LOG_STEPS_K``) whose grid
+    holds them (``_on_step``); failing every candidate, the values' own spacing (their
+    median difference, with at least ``LOG_STEP_OWN_VALUES`` values) if it holds them. A
+    log too stable to show its step (its few values on the 12-bit grid) keeps the DS18B20's
+    0.0625 K; None when the log is on no grid (a logger's fine or unrounded values)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)]
+    u = np.unique(np.round(v, 6))
+    if len(u) == 0:
+        return (DS18B20_STEP_C, 0.0)
+    for q in LOG_STEPS_K:
+        found = _on_step(u, q)
+        if found is not None:
+            return found
+    if _grid_share(u, 0.0, DS18B20_STEP_C, PRINT_TOL) >= LOG_STEP_SHARE:
+        return (DS18B20_STEP_C, 0.0)
+    if len(u) >= LOG_STEP_OWN_VALUES:
+        q = round(float(np.median(np.diff(u))), 4)
+        if q > 0.0:
+            return _on_step(u, q)
+    return None
+
+
+def _coarse_what(grid: tuple[float, float]) -> str:
+    """What a coarse grid may be: "a 0.25 K step (a DS18B20 at 10 bits?)"."""
+    q, origin = grid
+    fbits = {round(1.8 * k, 4): b for k, b in DS18B20_BITS.items()}
+    what = (f"a DS18B20 at {DS18B20_BITS[q]} bits?" if q in DS18B20_BITS and origin == 0.0
+            else f"a DS18B20 at {fbits[round(q, 4)]} bits read in °F and taken as °C?"
+            if round(q, 4) in fbits else "a log printed to 0.1?" if q == COARSE_PRINT
+            else "another logger's resolution?")
+    return f"a {q:g} K step ({what})"
+
+
+def coarse_text(grid: tuple[float, float]) -> str:
+    """A coarse grid in words, for a log's note: "readings on a 0.25 K step (a DS18B20 at 10
+    bits?), coarser than the 12-bit 0.0625 K: the thermal model takes the temperature
+    behind them from their crossings and its rounding on that step"."""
+    return (f"readings on {_coarse_what(grid)}, coarser than the 12-bit "
+            f"{DS18B20_STEP_C:g} K: the thermal model takes the temperature behind them from "
+            "their crossings and its rounding on that step")
+
+
+def coarse_cause(grid: tuple[float, float]) -> str:
+    """A coarse grid as a possible cause of an unexplained axis's misfit, in words."""
+    return (f"it reads on {_coarse_what(grid)}, coarser than the 12-bit "
+            f"{DS18B20_STEP_C:g} K: the temperature behind its readings, reconstructed from "
+            "their crossings, may be off by more than the model carries")
+
+
 def units_note(values: NDArray[np.float64]) -> tuple[LogNote | None, str | None]:
     """(note, refusal) on a channel's readings as a whole, judged on its distinct values (a
     stable room's one value, which may sit on any grid by chance, counts once).
@@ -1685,6 +1814,19 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                         if refused is not None else f" (its readings: {unit.text})")
                 unit, refused = LogNote("units_given", "taken as °C as asked "
                                         f"(--temperature-units C){seen}"), None
+        grid = log_step(tr.arrays()[1]) if len(tr) else None
+        if grid is not None and ((check_units and name not in NOT_DS18B20)
+                                 or (grid[1] == 0.0 and grid[0] in DS18B20_BITS)):
+            # avard's own logs (the die's ~0.11 K LSB, a recording's) only on a DS18B20
+            # resolution the data show: the candidates' print tolerance would take the die's
+            # 0.1105 K for a °F DS18B20's 0.1125
+            log.steps[name] = grid
+        coarse = log.coarse(name)
+        if refused is None and coarse is not None:
+            # said beside the log's other note, under its kind: its rounding is not the one
+            # the thermal model's rounding terms assume (a refused log is used by no model)
+            unit = (LogNote("coarse_step", coarse) if unit is None else
+                    LogNote(unit.kind, f"{unit.text}; {coarse}", unit.stretches))
         if unit is not None:
             # one line per channel: a held log's note and its units' note joined
             log.notes[name] = unit if note is None else note.joined(unit)

@@ -11,6 +11,7 @@ from avard.core.explain.thermal_fit import (
     OctaveSums,
     min_tau_for,
     octave_sums_by_part,
+    reading_step,
 )
 from avard.core.explain.thermal_paths.columns import Column, path_columns, quadratic_leads, trials
 from avard.core.explain.thermal_paths.deviance import (
@@ -364,7 +365,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"by less than the readings' rounding through the coupling makes "
                          f"up of the held-out deviance ({rounding_k:.3g}): a path that "
-                         "smooths the 0.0625 K steps gains that much without physics")
+                         f"smooths the {reading_step()[0]:g} K steps gains that much without "
+                         "physics")
     # a refused extension is no candidate for any later reading either (``rate_reading``,
     # the alternatives and ``as_well`` read ``scores``)
     refused_sc = {kind: scores.pop(kind) for kind in refused}

@@ -11,6 +11,7 @@ from typing import NamedTuple
 import numpy as np
 from avard.core.explain.thermal_fit import (
     OctaveSums,
+    reading_step,
 )
 from avard.core.explain.thermal_paths.columns import Column, Trial
 from avard.core.explain.thermal_paths.deviance import _dev, _fit, _held_dev, _View
@@ -306,7 +307,7 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
                f"it predicts the held-out halves {rival.heldout_delta:+.3g} against one lag, "
                f"within the margin {HELDOUT_MARGIN:g} and {RATE_ROUNDING_SPAN:g}× the "
                f"{rival.rounding:.3g} of the held-out deviance its derivative of the readings' "
-               "0.0625 K steps is modelled to make up" if masked else
+               f"{reading_step()[0]:g} K steps is modelled to make up" if masked else
                f"the dT/dt candidate predicts the held-out halves "
                f"{rate.heldout - best.heldout:+.3g} against one lag")
         return (f"one lag or a dT/dt term: this record cannot tell them apart ({why}); at "

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 from avard.core.explain.thermal_fit import (
-    DS18B20_STEP_K,
+    reading_step,
     rounding_correlation_s,
 )
 from avard.core.explain.thermal_paths.columns import Column
@@ -16,23 +16,26 @@ from numpy.typing import NDArray
 
 
 def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
-                  gain2: Callable[[NDArray], NDArray] | None = None) -> NDArray[np.float64]:
+                  gain2: Callable[[NDArray], NDArray] | None = None,
+                  step: float | None = None) -> NDArray[np.float64]:
     """The readings' rounding AVAR (K²) at ``tau`` seen through ``lag_filter`` of ``lag_s``:
     the rounding as a sawtooth (``thermal_fit.rounding_correlation_s``), white at τ above
     its correlation time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's
     |H(f)|² applied in the AVAR's integral ∫ h₀|H|²·2 sin⁴(πfτ)/(πfτ)² df (NIST SP 1065
     eq. 10's transfer function); a long lag passes little of it at τ below the lag.
     ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
-    its coefficients in it, and not capped at the readings' own 2q²/12)."""
+    its coefficients in it, and not capped at the readings' own 2q²/12). ``step``: the
+    readings' step q (K), default the record's (``thermal_fit.reading_grid``)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
         return np.zeros(len(tau))
-    tc = rounding_correlation_s(T, rate_hz)
+    step = reading_step()[0] if step is None else step
+    tc = rounding_correlation_s(T, rate_hz, step)
     if not (math.isfinite(tc) and tc > 0):
         # a channel that never crosses a step (constant, or stuck): no sawtooth to see
         return np.zeros(len(tau))
-    q2 = DS18B20_STEP_K**2 / 12.0
+    q2 = step**2 / 12.0
     h0 = 2.0 * q2 * tc
     # f up to the correlation time's 1/(2 t_c), where the white model ends
     f = np.geomspace(1e-7, 0.5 / tc, 4000)

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from avard.core.explain.thermal_fit import (
-    DS18B20_STEP_K,
     lag_filter,
+    reading_step,
 )
 from avard.core.explain.thermal_paths.columns import (
     Column,
@@ -202,11 +202,12 @@ class PathFit:
         if len(sw):
             slope = np.abs(np.gradient(v) * self.rate_hz)[sw]
             gap = np.diff(np.concatenate([sw, [len(r)]])) / self.rate_hz
-            delta = np.minimum(DS18B20_STEP_K / math.sqrt(12.0)
+            delta = np.minimum(reading_step()[0] / math.sqrt(12.0)
                                / np.maximum(slope, 1e-300), gap)
             floor = 2 * abs(float(sc.beta[1])) * math.sqrt(float(np.sum(delta)) / record_s)
         why = (f"{floor:.3g} m/s², the RMS of the relay's switch-time error (its switches "
-               "on the temperature behind the readings, uncertain by their 0.0625 K "
+               "on the temperature behind the readings, uncertain by their "
+               f"{reading_step()[0]:g} K "
                "rounding over the temperature's slope at each switch), which recurs twice a "
                "cycle and can look like a bump")
         # the relay at the ends of its lag's and width's 68 % intervals, the same h
