@@ -1,0 +1,76 @@
+"""Two paths and the dT/dt term on a drive of one line are named beside each other
+(``thermal_paths.oneline``), with the response at the drive and its interval."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from avard.core.explain.thermal_paths import PathFit, PathScore
+from avard.core.explain.thermal_paths import minima as mm
+from avard.core.explain.thermal_paths.oneline import _rate_on_one_line
+from avard.core.explain.thermal_paths.scores import DRIVE_KEYS
+
+
+def _score(kind: str, beta: list[float]) -> PathScore:
+    return PathScore(kind, -100.0, (120.0, 152.0), np.array(beta), np.zeros(2),
+                     (100.0, 140.0), (130.0, 170.0), 40.0, False, (), (0.0, 0.0),
+                     (0.0, 0.0), True, 1.0, (),
+                     (1800.0, 1.9e-3, 1.7e-3, 2.0e-3, 1.1, 1.05, 1.15, 0.97))
+
+
+def test_only_two_paths_in_the_dt_terms_limit_on_one_line_read_as_it():
+    """Two paths of opposite sign that nearly cancel, on a drive of one line: the dT/dt
+    term's reading with a parameter more. Two paths of their own response (the two-path
+    row's truth, 8e-4 through 0 s and −2.7e-3 through 900 s) or a drive of more than one
+    line keep the margin rule."""
+    cancel = _score("two_path", [0.0224, -0.0234])
+    assert _rate_on_one_line(cancel, 0.97)
+    assert not _rate_on_one_line(cancel, 0.72)  # the compressor rows' drive
+    assert not _rate_on_one_line(cancel, math.nan)
+    assert not _rate_on_one_line(_score("two_path", [8e-4, -2.7e-3]), 0.97)
+    assert not _rate_on_one_line(_score("rate", [8e-4, 0.5]), 0.97)
+
+
+def test_readings_named_beside_each_other_keep_only_the_response_at_the_drive():
+    """Where another mechanism is named beside two paths, c₁, c₂ and the lags carry no
+    interval and the response at the drive, which both readings fit, keeps its own."""
+    two = _score("two_path", [0.0224, -0.0234])
+    pf = PathFit(two, {"two_path": two}, 10.0, 1.0, alternatives=("rate",))
+    p, iv = pf.params()
+    assert set(iv) == set(DRIVE_KEYS)
+    assert iv["gain_at_drive"] == [1.7e-3, 2.0e-3]
+    assert {"coefficient", "coefficient_2", "lag_s", "lag_2_s"} <= set(p)
+
+
+def test_a_dt_term_at_3x_the_fits_minimum_is_named_beside_two_paths_that_beat_it():
+    """The weekend benchmark's dT/dt record (8e-4 m/s²/K at lag 0) with r at 3× the minimum
+    against one lag as explain's fit sees the line (cand26b: 0.485 m/s² per K/s), seed
+    30019: two paths through 120 and 152 s of cancelling coefficients predict the held-out
+    halves better than a dT/dt term of the right size by more than the margin (9.5). One
+    line cannot tell the two readings apart: both are named, with the response at the drive
+    and its interval; before, two paths alone with nothing beside them."""
+    import benchmarks.bench_explain_weekend as bw
+
+    base, A, c = bw._path_base()
+    rec = bw.HOURS * 3600
+    hvac = ((A, bw.PERIOD),)
+    floor = mm.rounding_floor(hvac, bw.RATE, rec)
+    c2tc = c * c * mm._Q_STEP**2 / 12 * mm.rounding_time(hvac)
+    r = 3 * mm.min_detectable_rate_fit(bw.N, bw.B, bw.K, rec, hvac, c, True, floor, c2tc)
+    assert r == pytest.approx(0.485, rel=0.01)
+    ex, _ = bw.explain_weekend(replace(base, rate_coupling=r), 30019)
+    th = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
+    assert th
+    named = (th[0].mechanism, *th[0].alternatives)
+    assert "rate" in named and "two_path" in named
+    assert set(th[0].intervals) == set(DRIVE_KEYS)
+    # the response at the drive: the generator's own, within its tolerance
+    g = bw._true_response(replace(base, rate_coupling=r), th[0].params["drive_period_s"])
+    g += 2j * math.pi / th[0].params["drive_period_s"] * r * (
+        1 + 2j * math.pi / th[0].params["drive_period_s"] * base.sensor_tau_s) / (
+        1 + 2j * math.pi / th[0].params["drive_period_s"] * base.die_tau_s)
+    assert th[0].params["gain_at_drive"] == pytest.approx(abs(g), rel=0.2)
+    assert "cannot tell them apart" in th[0].evidence
