@@ -74,3 +74,43 @@ def test_a_dt_term_at_3x_the_fits_minimum_is_named_beside_two_paths_that_beat_it
         1 + 2j * math.pi / th[0].params["drive_period_s"] * base.die_tau_s)
     assert th[0].params["gain_at_drive"] == pytest.approx(abs(g), rel=0.2)
     assert "cannot tell them apart" in th[0].evidence
+
+
+def test_a_relays_narrowest_width_is_a_value_and_its_widest_an_edge():
+    """The hysteresis grid (lag, width): the narrowest width is an ideal relay's value (its
+    switch time is the lag's, which has grid on both sides), not a search's edge; the widest
+    width and the longest lag are edges (open)."""
+    from avard.core.explain.thermal_paths.columns import trials
+    from avard.core.explain.thermal_paths.profile import _at_end
+    from avard.core.explain.thermal_paths.settings import WIDTHS_K
+
+    ts = trials("hysteresis", [0.0, 60.0, 120.0, 240.0, 480.0])
+    where = {t.theta: k for k, t in enumerate(ts)}
+    assert not _at_end(ts, where[(240.0, WIDTHS_K[0])])
+    assert not _at_end(ts, where[(120.0, WIDTHS_K[2])])
+    assert _at_end(ts, where[(120.0, WIDTHS_K[-1])])
+    assert _at_end(ts, where[(480.0, WIDTHS_K[2])])
+
+
+@pytest.mark.parametrize("seed", [407, 416])
+def test_a_relay_against_a_coupling_of_the_other_sign_is_chosen(tmp_path, seed: int):
+    """The adversary's hysteresis class at 3× the relay's minimum as the fit sees the lines
+    (``hysteresis_minimum="fit"``), c < 0: the relay's fundamental opposite the coupling
+    puts the response where no one lag reaches. The relay predicts the held-out halves
+    best, its term past the search threshold, at the narrowest width with a lag of
+    120–240 s (the ridge along which width and lag trade); with that width read as the
+    grid's edge it was never chosen, and two paths were claimed instead."""
+    from avard.core.explain.engine import explain_file
+    from avard.core.explain.options import ExplainOptions
+    from avard.core.io.source import open_record
+
+    from tests.support.adversary_gen import make_record
+
+    path = tmp_path / f"hysteresis{seed}.npz"
+    truth = make_record("hysteresis", seed, path, logged=("plate",),
+                        hysteresis_minimum="fit")["axes"]["x"]
+    assert truth["coefficient_mps2_per_k"] < 0
+    ch = explain_file(open_record(str(path)), ExplainOptions(channels=("x",))).channels["x"]
+    th = [f for f in ch.claimed if f.cause == "temperature"]
+    assert th and th[0].mechanism == "hysteresis", [(f.mechanism, f.params) for f in th]
+    assert math.copysign(1.0, th[0].params["coefficient"]) == -1.0

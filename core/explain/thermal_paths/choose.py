@@ -259,8 +259,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + delta]
         pb = np.array([fits[j][:n] for j in flat])
         pt = np.array([ts[j].theta for j in flat])
-        open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else (),
-                           leads=kind == "quadratic")
+        open_end = _at_end(ts, i, leads=kind == "quadratic")
         # an extension's θ at the end of its grid is a bound, not an estimate: its
         # coefficients trade with a θ the search did not bound (two long lags of opposite
         # sign fitted a typical-tempco record's slow wander, 1800 and 3600 s, with ±6 %
