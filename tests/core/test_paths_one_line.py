@@ -8,10 +8,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from avard.core.explain.thermal_paths import PathFit, PathScore
+from avard.core.explain.thermal_paths import PathScore
 from avard.core.explain.thermal_paths import minima as mm
 from avard.core.explain.thermal_paths.oneline import _rate_on_one_line
-from avard.core.explain.thermal_paths.scores import DRIVE_KEYS
 
 
 def _score(kind: str, beta: list[float]) -> PathScore:
@@ -34,15 +33,19 @@ def test_only_two_paths_in_the_dt_terms_limit_on_one_line_read_as_it():
     assert not _rate_on_one_line(_score("rate", [8e-4, 0.5]), 0.97)
 
 
-def test_readings_named_beside_each_other_keep_only_the_response_at_the_drive():
-    """Where another mechanism is named beside two paths, c₁, c₂ and the lags carry no
-    interval and the response at the drive, which both readings fit, keeps its own."""
+def test_the_note_names_both_readings_with_the_response_at_the_drive_and_its_interval():
+    """The note that names the dT/dt term beside two paths on one line says both readings
+    and the response at the drive with its 68 % interval, which both readings fit."""
+    from avard.core.explain.thermal_paths.oneline import _one_line_note
+
     two = _score("two_path", [0.0224, -0.0234])
-    pf = PathFit(two, {"two_path": two}, 10.0, 1.0, alternatives=("rate",))
-    p, iv = pf.params()
-    assert set(iv) == set(DRIVE_KEYS)
-    assert iv["gain_at_drive"] == [1.7e-3, 2.0e-3]
-    assert {"coefficient", "coefficient_2", "lag_s", "lag_2_s"} <= set(p)
+    rate = replace(_score("rate", [7.8e-4, 0.5]), heldout=-90.5)
+    note = _one_line_note(two, rate, 1800.0, 0.97)
+    assert note.startswith("two paths or one lag plus a dT/dt term: this record cannot tell "
+                           "them apart")
+    assert "gain 0.0019 m/s²/K [0.0017, 0.002]" in note
+    assert "phase +1.1 rad [+1.05, +1.15]" in note
+    assert "worse by 9.5" in note
 
 
 def test_a_dt_term_at_3x_the_fits_minimum_is_named_beside_two_paths_that_beat_it():
@@ -66,14 +69,18 @@ def test_a_dt_term_at_3x_the_fits_minimum_is_named_beside_two_paths_that_beat_it
     assert th
     named = (th[0].mechanism, *th[0].alternatives)
     assert "rate" in named and "two_path" in named
-    assert set(th[0].intervals) == set(DRIVE_KEYS)
-    # the response at the drive: the generator's own, within its tolerance
+    # the mechanism's parameters are model-dependent (no interval); the response at the
+    # drive, the generator's own within its tolerance, is in the finding's text with its
+    # interval
+    assert th[0].model_dependent and th[0].intervals == {}
     g = bw._true_response(replace(base, rate_coupling=r), th[0].params["drive_period_s"])
     g += 2j * math.pi / th[0].params["drive_period_s"] * r * (
         1 + 2j * math.pi / th[0].params["drive_period_s"] * base.sensor_tau_s) / (
         1 + 2j * math.pi / th[0].params["drive_period_s"] * base.die_tau_s)
     assert th[0].params["gain_at_drive"] == pytest.approx(abs(g), rel=0.2)
-    assert "cannot tell them apart" in th[0].evidence
+    assert "two paths or one lag plus a dT/dt term: this record cannot tell them apart" in (
+        th[0].evidence)
+    assert f"gain {th[0].params['gain_at_drive']:.4g} m/s²/K [" in th[0].evidence
 
 
 def test_a_relays_narrowest_width_is_a_value_and_its_widest_an_edge():

@@ -149,11 +149,7 @@ class PathFit:
         """The chosen candidate's parameters (SI) and their 68 % intervals (none where another
         mechanism fits as well or a non-linear one predicts better: ``leaning``)."""
         p, iv = describe(self.chosen)
-        if self.alternatives or self.leaning or self.beside_better:
-            # the response at the drive is what every reading named shares (each fits the
-            # line): it keeps its interval, the mechanism's own parameters none
-            return p, {k: iv[k] for k in DRIVE_KEYS if k in iv}
-        return p, iv
+        return p, ({} if self.alternatives or self.leaning or self.beside_better else iv)
 
     def rounding_gain(self) -> float:
         """The L1 norm of the chosen path's response to an error in the logged readings
@@ -284,10 +280,6 @@ class PathFit:
 def s_terms(s: PathScore) -> int:
     return sum(1 for c in s.cols if c.kind not in NUISANCE)
 
-
-#: A two-path fit's response at the drive (``describe``): the same for every reading that fits
-#: the drive's line, so it keeps its interval where another mechanism is named beside it
-DRIVE_KEYS = ("gain_at_drive", "phase_at_drive_rad")
 
 _NAMES = {"one_lag": (("coefficient",), ("lag_s",)),
           "two_path": (("coefficient", "coefficient_2"), ("lag_s", "lag_2_s")),
