@@ -23,6 +23,7 @@ from avard.core.explain.thermal_paths.deviance import (
     _View,
     _view,
 )
+from avard.core.explain.thermal_paths.oneline import _one_line_note, _rate_on_one_line
 from avard.core.explain.thermal_paths.profile import (
     _at_end,
     _averaged,
@@ -259,8 +260,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         flat = [j for j in range(len(ts)) if devs[j] <= devs[i] + delta]
         pb = np.array([fits[j][:n] for j in flat])
         pt = np.array([ts[j].theta for j in flat])
-        open_end = _at_end(ts, i, (1,) if kind == "hysteresis" else (),
-                           leads=kind == "quadratic")
+        open_end = _at_end(ts, i, leads=kind == "quadratic")
         # an extension's θ at the end of its grid is a bound, not an estimate: its
         # coefficients trade with a θ the search did not bound (two long lags of opposite
         # sign fitted a typical-tempco record's slow wander, 1800 and 3600 s, with ±6 %
@@ -431,6 +431,11 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                          "second path and a dT/dt term both set a gain and a phase: a drive "
                          "with more than one frequency tells them apart); parameters "
                          "model-dependent, no interval")
+        rate_sc = scores.get("rate")
+        if (rate_sc is not None and rate_sc in passing and "rate" not in alternatives
+                and _rate_on_one_line(best, share)):
+            alternatives += ("rate",)
+            notes.append(_one_line_note(best, rate_sc, period, share))
     # an extension that beats one lag as choosing needs and predicts at least as well as the
     # chosen one, but whose θ sits at its grid's end (open, never chosen: a bound): the
     # record supports it as well, its note says so, and it is listed with ``as_well`` (on

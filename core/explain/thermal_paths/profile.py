@@ -108,15 +108,20 @@ def _averaged_theta(ts: list[Trial], devs: NDArray, delta: float) -> tuple[float
     return tuple(out)
 
 
-def _at_end(ts: list[Trial], i: int, widths: tuple[int, ...] = (),
-            leads: bool = False) -> bool:
+def _at_end(ts: list[Trial], i: int, leads: bool = False) -> bool:
     """θ of trial ``i`` at the end of its grid: a lag at the longest lag tried (``leads``:
-    or at the longest lead, a search's edge too), a width (coordinates ``widths``) at either
-    end (the shortest lag, 0 or the one-lag fit's own, is a value, not a search's edge)."""
+    or at the longest lead, a search's edge too), a width (the hysteresis's) at its widest.
+    The shortest lag, 0 or the one-lag fit's own, is a value, not a search's edge, and so
+    is the narrowest width (``WIDTHS_K[0]``, a fifth of the readings' 0.0625 K step): a
+    relay narrower than the temperature behind the readings resolves is an ideal one (it
+    switches on the last move's sign), and the switch time a narrower relay would move is
+    the lag's, which trades with the width along a ridge and has grid on both sides of the
+    best point. Read as an edge it kept the relay from records whose best point sat there
+    with its lag inside its grid: a relay against a coupling of the other sign (the
+    adversary's c < 0 records), where two paths or no coupling were claimed instead."""
     for d in range(len(ts[i].theta)):
         vals = sorted({t.theta[d] for t in ts})
-        ends = ((vals[0], vals[-1]) if d in widths or (leads and d == 0 and vals[0] < 0)
-                else (vals[-1],))
+        ends = (vals[0], vals[-1]) if leads and d == 0 and vals[0] < 0 else (vals[-1],)
         if len(vals) > 2 and ts[i].theta[d] in ends:
             return True
     return False
