@@ -521,9 +521,8 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
         return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
                               options, holdout=holdout, progress=progress, stage=stage,
                               base=an)
-    with reading_grid(screened.log.rounding_grid(options.temperature)):
-        return _explained(an, tap.slow, screened.log, meta, options,
-                          _held(holdout, options, meta), stage)
+    return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
+                      stage)
 
 
 class _SlowTap:
@@ -632,8 +631,7 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         an = base
         for _ in tee():
             pass
-    with reading_grid(screened.log.rounding_grid(options.temperature)):
-        return _explained(an, tap.slow, screened.log, meta, options, held, stage)
+    return _explained(an, tap.slow, screened.log, meta, options, held, stage)
 
 
 def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],
@@ -672,9 +670,13 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         holes = {i: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
                      for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
                  for i, j in enumerate(t_ok)} if screen is not None else None
+        # each log on its own step and origin (``screen.log_step``): a coarse log's
+        # reconstruction and rounding leave a finer log's fit as it is
+        grids = [None if screen is None else screen.rounding_grid(tnames[k]) for k in t_ok]
         th_fits, settled = _thermal_fits(y_slow[:, cols], t_slow[:, t_ok],
                                          [tnames[k] for k in t_ok], rate_b, holes,
-                                         [_noise_levels(ch.fit) for ch in an.channels.values()])
+                                         [_noise_levels(ch.fit) for ch in an.channels.values()],
+                                         grids)
     else:
         settled = [None] * len(cols)
     out: dict[str, ChannelExplanation] = {}
@@ -682,10 +684,12 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         if stage is not None:
             stage(f"explaining channel {name}")
         j = names.index(name)
-        out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
-                                     None if t_slow is None else t_slow[:, t_ok],
-                                     th, an, meta, always_compensate=temperature is not None,
-                                     holes=screen, settled=w0)
+        # the causes' rounding floors on the step of the log the axis's thermal model reads
+        with reading_grid(None if th is None else th.grid):
+            out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
+                                         None if t_slow is None else t_slow[:, t_ok],
+                                         th, an, meta, always_compensate=temperature is not None,
+                                         holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
             ch_ex.judge(None, screen=screen)
@@ -702,7 +706,8 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
 
 def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                   holes: dict[int, list[tuple[int, int]]] | None,
-                  noise: list[dict[str, float]]
+                  noise: list[dict[str, float]],
+                  grids: list[tuple[float, float] | None] | None = None
                   ) -> tuple[list[ThermalFit | None], list[NDArray[np.float64] | None]]:
     """(each axis's thermal model with its path, each axis's warm-up beyond the lag
     filter's start state or None). A warm-up at the record's start is taken over by the
@@ -718,7 +723,7 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     axis as recorded). The warm-up is then tested again beside the path chosen, and one that
     passes is ``_explain_channel``'s, which fits no start state beside it. It is claimed, or
     not, by the compound search as any warm-up."""
-    fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes)
+    fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes, grids=grids)
     settled: list[NDArray[np.float64] | None] = [None] * len(fits)
     nzs: dict[int, dict[str, float]] = {}
     found: dict[int, tuple[float, ...]] = {}
@@ -826,7 +831,7 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     base: list[ThermalFit] = list(fits)  # each axis's one lag, the path choice's start
     if redo:
         Yw = Y[:, redo] - np.column_stack([first[a] for a in redo])
-        refit = fit_thermal_axes(Yw, temps, tnames, rate_b, holes)
+        refit = fit_thermal_axes(Yw, temps, tnames, rate_b, holes, grids=grids)
         again = with_paths(refit, Y[:, redo], temps, holes,
                            warmups={i: found[a] for i, a in enumerate(redo)})
         for a, th, b0 in zip(redo, again, refit, strict=True):

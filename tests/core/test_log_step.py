@@ -96,10 +96,12 @@ def test_the_text_names_the_step_and_what_it_may_be():
     assert log.coarse("a") is None and log.coarse("b") is None and log.coarse("x") is None
     assert log.coarse("c") == coarse_text((0.125, 0.0))
     assert log.coarse("c", cause=True) == coarse_cause((0.125, 0.0))
-    assert log.rounding_grid() == (0.125, 0.0) and log.rounding_grid("a") is None
+    # each log on its own step: the coarse log's for it alone, the 12-bit default elsewhere
+    assert log.rounding_grid("c") == (0.125, 0.0)
+    assert log.rounding_grid("a") is None and log.rounding_grid("b") is None
     # a refused log is used by no model: its step is in force nowhere
     log.refused["c"] = "°F"
-    assert log.rounding_grid() is None
+    assert log.rounding_grid("c") is None
 
 
 def _screened(col: np.ndarray, units: str = "auto") -> ScreenLog:
@@ -128,7 +130,7 @@ def test_the_screen_notes_a_coarse_log_and_only_a_coarse_one():
     assert note.text == coarse_text((0.25, 0.0))
     assert f"temperature plate: {coarse_text((0.25, 0.0))}" in "\n".join(log.lines())
     d = log.to_dict()
-    assert d["reading_steps"]["plate"] == {"step_k": 0.25, "origin": 0.0, "coarse": True}
+    assert d["reading_steps"]["plate"] == {"step_k": 0.25, "origin_k": 0.0, "coarse": True}
     fine = _screened(_logged(0.0625))
     assert fine.notes == {}
     assert fine.to_dict()["reading_steps"]["plate"]["coarse"] is False
@@ -205,7 +207,7 @@ def test_a_12_bit_log_is_said_nowhere_and_explained_as_before(tmp_path, monkeypa
     ex = explain_file(open_record(path), ExplainOptions(channels=("x",)))
     d = json.loads(json.dumps(ex.to_dict(), default=str))
     assert d["screened"]["notes"] == {}
-    assert d["screened"]["reading_steps"]["ambient"] == {"step_k": 0.0625, "origin": 0.0,
+    assert d["screened"]["reading_steps"]["ambient"] == {"step_k": 0.0625, "origin_k": 0.0,
                                                          "coarse": False}
     assert "possible cause" not in summary(ex)
     # the coarse-step machinery off (no step found): the same explanation, to the bit
