@@ -432,3 +432,31 @@ def test_a_fahrenheit_log_taken_as_celsius_is_one_lag_on_its_own_grid(tmp_path):
     assert [f.cause for f in x.claimed] == ["temperature"]
     assert x.thermal is not None and x.thermal.mechanism == "one_lag"
     assert x.thermal.coefficient == pytest.approx(TRUTH_C / 1.8, rel=0.04)
+
+
+def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
+    """On a coarse log the one lag's se carries the reconstruction's gain uncertainty
+    (``coarse_gain_se``: ``gain_rel``); a path beyond one lag replaces the coefficient and
+    its se by its regression's, and that widening is added to it the same way (before: lost),
+    with the path chosen on the driving channel's own step in force."""
+    from types import SimpleNamespace
+
+    seen = []
+    chosen = SimpleNamespace(beta=[2e-3], beta_se=[1e-5], theta=[100.0], theta_lo=[90.0],
+                             theta_hi=[110.0], z_extra=5.0, open_end=False)
+
+    def fake_path_of(fit, *a, **k):
+        seen.append(thermal_fit.reading_step())
+        return SimpleNamespace(kind="two_path", chosen=chosen, z_threshold=3.0)
+
+    monkeypatch.setattr(thermal_fit, "path_of", fake_path_of)
+    y = np.zeros((64, 1))
+    temps = np.zeros((64, 1))
+    for rel, grid in ((0.0, (0.0625, 0.0)), (0.05, (0.25, 0.0))):
+        fit = thermal_fit.ThermalFit("t", 0, 3e-3, 2e-5, 300.0, 290.0, 310.0, 9.0, 1.0,
+                                     grid=grid, gain_rel=rel)
+        got = thermal_fit.with_paths([fit], y, temps, floors={0: 0.0})[0]
+        assert got.coefficient == 2e-3
+        assert got.coef_se == pytest.approx(math.hypot(1e-5, rel * 2e-3), rel=1e-12)
+        assert seen[-1] == grid
+    assert thermal_fit.reading_step() == (0.0625, 0.0)
