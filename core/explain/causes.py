@@ -401,8 +401,9 @@ def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
 
 
 def _step() -> float:
-    """The logged readings' step (K): the record's (``thermal_fit.reading_grid``: the
-    DS18B20's 12-bit 0.0625 K unless the screen found a coarser log)."""
+    """The logged readings' step (K): the driving channel's (``thermal_fit.reading_grid``,
+    set by explain around each axis: the DS18B20's 12-bit 0.0625 K unless the screen found
+    that log coarser)."""
     from avard.core.explain.thermal_fit import reading_step
 
     return reading_step()[0]

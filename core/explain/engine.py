@@ -722,7 +722,8 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     (``thermal_paths.choose_path``'s ``warmups``: its size fitted jointly with each, on the
     axis as recorded). The warm-up is then tested again beside the path chosen, and one that
     passes is ``_explain_channel``'s, which fits no start state beside it. It is claimed, or
-    not, by the compound search as any warm-up."""
+    not, by the compound search as any warm-up. ``grids``: each log's (step, origin), None
+    for the 12-bit default (``fit_thermal_axes``)."""
     fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes, grids=grids)
     settled: list[NDArray[np.float64] | None] = [None] * len(fits)
     nzs: dict[int, dict[str, float]] = {}

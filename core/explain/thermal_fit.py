@@ -983,19 +983,21 @@ def min_tau_for(lag_s: float, floor_s: float = 0.0) -> float:
 
 #: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
 DS18B20_STEP_K = 0.0625
-#: The (step K, origin) of the readings the thermal model fits: a log's own
-#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C), set by explain for the
-#: record (``reading_grid``). A context, not a parameter threaded through every call: the
-#: step is a property of the record that about fifteen rounding terms read in eight modules
-#: (the path candidates, their floors, the held-out test), each of which takes it explicitly
-#: too (``step``/``grid`` arguments) where its caller knows it.
+#: The (step K, origin) of the readings of the channel being modelled: a log's own
+#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C). Each log is read on its
+#: own: the fit takes every channel's grid explicitly (``fit_thermal_axes``' ``grids``,
+#: ``ThermalFit.grid``), and this context is set to the driving channel's only around what
+#: reads it without an argument for it (a path's candidates and floors, ``with_paths``; a
+#: path's signal, ``ThermalFit.signal``; the causes' rounding floors, engine's
+#: ``_explain_channel``). Never the record's: a coarse log must leave a finer one's model as
+#: it is.
 _GRID: ContextVar[tuple[float, float]] = ContextVar("avard_reading_grid",
                                                      default=(DS18B20_STEP_K, 0.0))
 
 
 def reading_step() -> tuple[float, float]:
     """The (step K, origin) of the readings in force (``reading_grid``), the DS18B20's 12-bit
-    (0.0625, 0) unless explain set the record's."""
+    (0.0625, 0) unless set to the modelled channel's."""
     return _GRID.get()
 
 
