@@ -92,7 +92,6 @@ from avard.core.explain.thermal_fit import (
     hole_mask,
     path_of,
     reading_grid,
-    reading_step,
     signal_avar_on,
     with_paths,
 )
@@ -1231,7 +1230,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     # located): the rounding floor is said too, it is the reason that holds for the bump's σ
     if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
             and thermal.passed):
-        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
+        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal), thermal.grid[0])
         # and where a relay is chosen or named beside the path kept, what its switch times
         # leave (``PathFit.relay_floor``): the removed relay's switch times are uncertain by
         # its own intervals, and one lag kept leaves a named relay's odd harmonics
@@ -1241,7 +1240,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
-                f"temperature's {reading_step()[0]:g} K rounding through the coupling "
+                f"temperature's {thermal.grid[0]:g} K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
         elif gm.params.get("sigma", 0.0) < rf:
@@ -1312,7 +1311,8 @@ def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: Therm
         lag = abs(thermal.lag_s)
         checked = []
         for c in found:
-            floor, why = cz.transient_floor(c, {}, record_s, _rounding_gain(thermal))
+            floor, why = cz.transient_floor(c, {}, record_s, _rounding_gain(thermal),
+                                            thermal.grid[0])
             T = c.params.get("time_constant_s", math.nan)
             if (c.cause == "warmup" and lag > 0 and lag / 3 <= T <= 3 * lag
                     and abs(c.params["size"]) <= start_span):
