@@ -8,13 +8,17 @@ A χ² test of the extended fit, at ``ALPHA`` (1 %):
 - held out: the extended model's held-out χ² (``holdout``, summed over the folds) against
   χ²(n), n the held-out τ: each τ's residual weighed by the variance of the measurement and
   of the prediction, the latter the noise terms' and the claimed mechanism's parameters,
-  fitted on the other half, carried to the predicted AVAR (``holdout.Fold.chi2_ext_pred``),
-  and no ratio over n (one that excused correct records also hid wrong ones). The
-  prediction's variance from the noise terms' choice (flicker or random walk at the longest τ
-  of a half) and from a screened temperature log's interpolation is not carried, so a
-  described sensor still fails it somewhat more often than at ``ALPHA``: it then says
-  "unexplained" and keeps its intervals (below). Not applied to an axis whose claims are only
-  events (a warm-up, a step predicts nothing in other data, by design).
+  fitted on the other half, carried to the predicted AVAR and, for the noise terms, to the
+  held-out estimator's scatter too (``holdout._noise_scatter``: a half that under-reads a
+  random walk or a flicker no longer weighs the other half's long τ with too small a
+  variance; ``holdout.Fold.chi2_ext_pred``), and no ratio over n (one that excused correct
+  records also hid wrong ones). On described sensors it then fails near ``ALPHA`` (halves
+  of white + flicker + random walk: 1–1.7 % at 1 %, somewhat conservative on 1 h records;
+  ``tests/core/test_heldout_calibration.py``). A screened temperature log's interpolation
+  error is still not carried (the holes themselves are gaps of the held-out Allan
+  variance), so a correct coupling seen through a faulty log can fail it: it then says
+  "unexplained" and keeps its intervals (below). Not applied to an axis whose claims are
+  only events (a warm-up, a step predicts nothing in other data, by design).
 
 When either fails, the axis is **unexplained**: one line beside the gain gives χ²/dof with its
 p-value, the held-out χ²/n with its p-value and the τ ranges where the extended model still
@@ -38,10 +42,9 @@ printed for them (a ±3 % interval of a rejected mechanism is a confident wrong 
 (``Verdict.heldout_rejects``) when the held-out test fails and either the in-sample test fails
 too (both the data it was fitted on and the data it predicts reject it) or the held-out χ² lies
 beyond ``HELDOUT_RATIO``·n. A held-out failure alone, with the in-sample fit passing and χ²
-within that ratio, says "unexplained" but keeps the intervals: the held-out χ² of records
-whose mechanism is right still fails at 1 % more often than 1 % (the noise terms and a faulty
-temperature log predict the other half only roughly, and that part of the prediction's
-variance is not carried), and withholding their intervals would remove correct ones.
+within that ratio, says "unexplained" but keeps the intervals: a correct coupling seen
+through a faulty temperature log predicts the other half only roughly (the interpolation
+over its holes is not carried), and withholding its intervals would remove correct ones.
 
 The compensated ADEV is given only where it does not make the ADEV worse than the
 uncompensated one beyond the latter's 68 % interval at any τ (fitted or not: the user reads
