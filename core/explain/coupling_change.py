@@ -67,6 +67,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
+from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
@@ -84,7 +85,7 @@ from avard.core.explain.thermal_fit import (
 from numpy.typing import NDArray
 
 __all__ = ["ALPHA", "GRID", "GROUPS", "CouplingChange", "change_line", "check", "mark",
-           "test_change"]
+           "find_change"]
 
 #: The test's share of the axis's false-alarm level (the size of each of ``alarm``'s shares).
 ALPHA = 2.5e-4
@@ -170,13 +171,17 @@ def _lag(p: Part, whole: float) -> str:
 def _part(y: NDArray, u: NDArray, keep: NDArray[np.bool_] | None, rate: float,
           mt: float) -> Part:
     """The Allan-covariance coupling of one part (a record of its own) with its se."""
-    if len(y) < 4 * GROUPS:
-        return Part(0.0, math.inf, GROUPS - 1.0)
-    res = allan2(y, u, rate, keep)
-    c, se_a, n = tempco_from_cov(res, mt)
-    if n == 0 or not math.isfinite(se_a):
-        return Part(c, math.inf, GROUPS - 1.0)
-    _c, se_jk = jackknife_tempco(y, u, rate, GROUPS, mt, keep, res)
+    none = Part(0.0, math.inf, GROUPS - 1.0)  # nothing to compare (z 0 for its split)
+    if len(y) < 4 * GROUPS or (keep is not None and np.count_nonzero(keep) < 4 * GROUPS):
+        return none
+    try:  # a part mostly inside a hole of the log has no octave to regress on
+        res = allan2(y, u, rate, keep)
+        c, se_a, n = tempco_from_cov(res, mt)
+        if n == 0 or not math.isfinite(se_a):
+            return none
+        _c, se_jk = jackknife_tempco(y, u, rate, GROUPS, mt, keep, res)
+    except (DataError, FitError, ValueError):
+        return none
     return Part(c, max(se_a, se_jk), GROUPS - 1.0)
 
 
@@ -189,7 +194,7 @@ def _z(p: Part, q: Part) -> tuple[float, float]:
     return abs(p.c - q.c) / math.sqrt(v), dof
 
 
-def test_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
+def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
                 trans: list[cz.Candidate], rate_b: float,
                 screen: Any | None = None) -> CouplingChange | None:
     """The test (module doc) on one axis's slow view ``y`` (``rate_b`` blocks per second)
@@ -233,27 +238,32 @@ def test_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         # coefficients with their se refitted on the parts it makes
         frac = _change_time(X, keep, rate, frac)
         k = int(round(frac * n))
-        p, q = (_refit(yc[a:b], temps[a:b], thermal, rate_b, screen, a)
-                for a, b in ((0, k), (k, n)))
+        p, q = at(frac)[2:]
+        p, q = (_refit(yc[a:b], temps[a:b], thermal, rate_b, screen, a, fb)
+                for (a, b), fb in (((0, k), p), ((k, n), q)))
     return CouplingChange(frac * M / rate, p, q, z, thr, thermal.channel, L, len(GRID),
                           n / rate_b)
 
 
 def _refit(y: NDArray, temps: NDArray, thermal: ThermalFit, rate_b: float,
-           screen: Any | None, first: int) -> Part:
+           screen: Any | None, first: int, fallback: Part) -> Part:
     """The coupling of one part (a record of its own) as explain fits a whole record's on
     the same channel (``fit_thermal_axes``: its own lag, the coefficient's interval with
     the lag's share): the numbers the line gives. A change of the coupling leaves the whole
     record's lag an average too (on a sign flip it moved 174 s to 642 s). ``first``: the
-    part's first block (its holes are the screen's, shifted)."""
+    part's first block (its holes are the screen's, shifted); ``fallback``: the test's own
+    fit of the part, kept where the refit cannot be made."""
     from avard.core.explain.thermal_fit import fit_thermal_axes
 
     j = thermal.channel_index
     holes = None if screen is None else {0: [
         (math.floor(h0 * rate_b) - first, math.ceil(h1 * rate_b) - first)
         for h0, h1 in screen.holes(thermal.channel) if h1 - h0 >= 1.0]}
-    fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]],
-                           [thermal.channel], rate_b, holes)[0]
+    try:
+        fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]],
+                               [thermal.channel], rate_b, holes)[0]
+    except (DataError, FitError, ValueError):
+        return fallback
     return Part(fit.coefficient, fit.coef_se, GROUPS - 1.0, fit.lag_s)
 
 
@@ -311,13 +321,13 @@ def check(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
           trans: list[cz.Candidate], missed: list[cz.Candidate], work: NDArray,
           rate_b: float, noise_of: tr.NoiseOf, screen: Any | None = None
           ) -> tuple[CouplingChange | None, list[cz.Candidate], list[cz.Candidate]]:
-    """(the test's outcome, claimed, not claimed transients): ``test_change``, then where
+    """(the test's outcome, claimed, not claimed transients): ``find_change``, then where
     the coupling changed, a step (or an excursion edge) at the change not claimed and the
     other transients refitted and tested again without it in ``work`` (the axis the
     compound search ran on, ``noise_of`` its noise), as ``engine._compound`` does for a
     transient taken out. The steps taken are kept in the outcome (``taken``) for
     ``mark``."""
-    change = test_change(y, temps, thermal, trans, rate_b, screen)
+    change = find_change(y, temps, thermal, trans, rate_b, screen)
     if change is None or not change.changed or not any(_near(c, change) for c in trans):
         return change, trans, missed
     taken = tuple(c for c in trans if _near(c, change))
