@@ -67,35 +67,44 @@ from typing import Any
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
+from avard.core.allan.deviations import NORM
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
 from avard.core.explain.thermal_fit import (
+    OctaveSums,
     ThermalFit,
     allan2,
+    axes_differences,
     hole_mask,
-    jackknife_tempco,
     lag_filter,
+    lag_octave_sums,
     min_tau_for,
+    octave_sums_by_part,
     rounding_floor_tau,
-    tempco_from_cov,
     without_start,
 )
 from numpy.typing import NDArray
 
-__all__ = ["ALPHA", "GRID", "GROUPS", "CouplingChange", "change_line", "check", "mark",
-           "find_change"]
+__all__ = ["ALPHA", "GRID", "LAGS", "SEGMENTS", "CouplingChange", "change_line", "check",
+           "find_change", "mark"]
 
 #: The test's share of the axis's false-alarm level (the size of each of ``alarm``'s shares).
 ALPHA = 2.5e-4
 #: Candidate change times, as fractions of the record (the search counted in the level).
 GRID = tuple(round(0.2 + 0.05 * i, 2) for i in range(13))
-#: Contiguous pieces of each part for its coefficient's jackknife se.
-GROUPS = 10
+#: Contiguous segments of the record (each Allan difference in the segment of its middle):
+#: a part is the segments before or after a grid time, its jackknife deletes one at a time.
+SEGMENTS = 40
+#: The lags (s) every logged channel is tried through (those up to an eighth of the
+#: record), beside the thermal fit's own channel and lag: on a coupling that changes sign
+#: the whole record's fit is an average, its lag anywhere (−1800 s on the ambient channel
+#: for a re-mount through the plate's 174 s).
+LAGS = (0.0, 40.0, 120.0, 300.0, 750.0, 1800.0)
 #: Most slow-view points the parts are regressed on (longer views are averaged further: the
 #: coupling acts on minutes, the octaves lost are seconds).
-MAX_POINTS = 1 << 15
+MAX_POINTS = 1 << 14
 CAUSE = "coupling_change"
 
 
@@ -168,21 +177,88 @@ def _lag(p: Part, whole: float) -> str:
     return f"{(p.lag_s if math.isfinite(p.lag_s) else whole):.3g} s"
 
 
-def _part(y: NDArray, u: NDArray, keep: NDArray[np.bool_] | None, rate: float,
-          mt: float) -> Part:
-    """The Allan-covariance coupling of one part (a record of its own) with its se."""
-    none = Part(0.0, math.inf, GROUPS - 1.0)  # nothing to compare (z 0 for its split)
-    if len(y) < 4 * GROUPS or (keep is not None and np.count_nonzero(keep) < 4 * GROUPS):
-        return none
-    try:  # a part mostly inside a hole of the log has no octave to regress on
-        res = allan2(y, u, rate, keep)
-        c, se_a, n = tempco_from_cov(res, mt)
-        if n == 0 or not math.isfinite(se_a):
-            return none
-        _c, se_jk = jackknife_tempco(y, u, rate, GROUPS, mt, keep, res)
-    except (DataError, FitError, ValueError):
-        return none
-    return Part(c, max(se_a, se_jk), GROUPS - 1.0)
+def _rho_matrix(k: int) -> NDArray[np.float64]:
+    """``thermal_fit._rho``: neighbouring octaves' correlation 0.5^|i − j|."""
+    i = np.arange(k)
+    return np.asarray(0.5 ** np.abs(i[:, None] - i[None, :]), dtype=float)
+
+
+def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
+                  n_ref: NDArray, mt: float) -> tuple[NDArray, NDArray]:
+    """``thermal_fit.tempco_from_cov`` of many difference sums at once: (ĉ, analytic se)
+    per row of ``n`` (S, K) differences and ``s2`` (S, K, 2, 2) their Σ D Dᵀ of (axis,
+    lagged temperature) at octaves ``ms``; the axis's EDF ``edf_ref`` of ``n_ref``
+    differences scaled to each row's count (``thermal_fit.cov_view``); octaves τ ≥ ``mt``
+    with an EDF of at least 3 (``thermal_fit._kept``). se ∞ where no octave is left."""
+    K = min(n.shape[1], len(edf_ref))
+    n, s2, msf = n[:, :K], s2[:, :K], ms[:K].astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = s2 / (NORM[2] * msf**2 * np.maximum(n, 1))[..., None, None]
+        vy, vu, cyu = cov[..., 0, 0], cov[..., 1, 1], cov[..., 0, 1]
+        nu = np.asarray(edf_ref[:K], float) * n / np.asarray(n_ref[:K], float)
+        ok = ((n > 0) & np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (msf / rate >= mt)
+              & np.isfinite(nu) & (nu >= 3))
+        ck = np.where(ok, cyu / vu, 0.0)
+        se_k = np.where(ok, np.sqrt(np.maximum(vy - cyu**2 / vu, 1e-300) / (vu * nu)), 1.0)
+    w = np.where(ok, 1.0 / se_k**2, 0.0)
+    sw = w.sum(axis=1)
+    ws = w * se_k
+    var = np.einsum("sk,kl,sl->s", ws, _rho_matrix(K), ws)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.where(sw > 0, (w * ck).sum(axis=1) / sw, 0.0)
+        se = np.where(sw > 0, np.sqrt(var) / sw, np.inf)
+    return c, se
+
+
+@dataclass(frozen=True)
+class _Split:
+    """One regressor's best split: z, its threshold, the split's fraction and the parts."""
+
+    z: float
+    threshold: float
+    frac: float
+    before: Part
+    after: Part
+
+
+def _splits(segs: list[OctaveSums], rate: float, edf_ref: NDArray, n_ref: NDArray,
+            mt: float, trials: int) -> _Split | None:
+    """z at every grid split from the segments' sums (``SEGMENTS``, each difference in the
+    segment of its middle: ``thermal_fit.octave_sums_by_part``): each part's ĉ and the larger
+    of its analytic se and its delete-a-segment jackknife se (the part's segments less
+    one: dof segments − 1), the best split by z over its threshold (t at ``ALPHA`` over
+    ``trials``, Satterthwaite's dof)."""
+    if not segs:
+        return None
+    K = max(len(x.ms) for x in segs)
+    ms = next(x.ms for x in segs if len(x.ms) == K)
+    padded = [x._padded(K) for x in segs]
+    n = np.array([p[0] for p in padded], dtype=float)
+    s2 = np.array([p[1] for p in padded], dtype=float)
+    G = len(segs)
+    Pn = np.concatenate([np.zeros((1, K)), np.cumsum(n, axis=0)])
+    Ps = np.concatenate([np.zeros((1, K, 2, 2)), np.cumsum(s2, axis=0)])
+    best: _Split | None = None
+    for frac in GRID:
+        k = round(frac * G)
+        parts = []
+        for lo, hi in ((0, k), (k, G)):
+            wn, ws = Pn[hi] - Pn[lo], Ps[hi] - Ps[lo]
+            # the whole part, then each of its segments left out in turn
+            rn = np.concatenate([wn[None], wn[None] - n[lo:hi]])
+            rs = np.concatenate([ws[None], ws[None] - s2[lo:hi]])
+            c, se = _coefficients(rn, rs, ms, rate, edf_ref, n_ref, mt)
+            g = hi - lo
+            cj = c[1:]
+            se_jk = (math.sqrt((g - 1) / g * float(np.sum((cj - cj.mean()) ** 2)))
+                     if g > 1 and np.all(np.isfinite(cj)) and np.all(np.isfinite(se[1:]))
+                     else math.inf)
+            parts.append(Part(float(c[0]), max(float(se[0]), se_jk), max(g - 1.0, 1.0)))
+        z, dof = _z(*parts)
+        thr = t_two_sided(ALPHA / trials, max(dof, 1.0))
+        if best is None or z / thr > best.z / best.threshold:
+            best = _Split(z, thr, frac, parts[0], parts[1])
+    return best
 
 
 def _z(p: Part, q: Part) -> tuple[float, float]:
@@ -194,58 +270,100 @@ def _z(p: Part, q: Part) -> tuple[float, float]:
     return abs(p.c - q.c) / math.sqrt(v), dof
 
 
+def _names(thermal: ThermalFit, k: int) -> list[str]:
+    """The temperature channels' names in column order: the thermal fit's ``others`` hold
+    the other channels in column order, its own sits at ``channel_index``."""
+    others = list(thermal.others)
+    if len(others) != k - 1:
+        return [thermal.channel if j == thermal.channel_index else f"channel {j}"
+                for j in range(k)]
+    others.insert(thermal.channel_index, thermal.channel)
+    return others
+
+
 def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
                 trans: list[cz.Candidate], rate_b: float,
                 screen: Any | None = None) -> CouplingChange | None:
     """The test (module doc) on one axis's slow view ``y`` (``rate_b`` blocks per second)
-    against ``thermal``'s channel and lag; ``trans``: the transients found on the axis
-    (taken out of ``y`` first); ``screen``: the input screen's log (its holes in the
-    channel's log are gaps). None where no coupling was tested or the record is too
-    short for the parts."""
+    against every logged channel ``temps`` through every lag of ``LAGS`` and the thermal
+    fit's own; ``trans``: the transients found on the axis (taken out of ``y`` first);
+    ``screen``: the input screen's log (its holes in a channel's log are gaps). None where
+    no coupling was tested or the record is too short for the parts."""
     if thermal is None or temps is None or len(y) < 2 * 256:
         return None
     n = len(y)
+    record_s = n / rate_b
     found = [c for c in trans if c.passed and c.cause != "drift"]
     yc = np.asarray(y, dtype=float) - (tr.signal_of(found, n, rate_b) if found else 0.0)
-    T = np.asarray(temps[:, thermal.channel_index], dtype=float)
-    L = float(thermal.lag_s)
-    mt = min_tau_for(L, rounding_floor_tau(T, rate_b))
-    if not math.isfinite(mt):
-        return None
-    X = without_start(np.column_stack([yc, lag_filter(T, L, rate_b)]), L, rate_b)
-    holes = [] if screen is None else [
-        (math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
-        for h0, h1 in screen.holes(thermal.channel) if h1 - h0 >= 1.0]
-    keep = hole_mask(n, holes, L, rate_b)
+    names = _names(thermal, temps.shape[1])
     f = 1 << max(0, math.ceil(math.log2(n / MAX_POINTS)))
-    if f > 1:
-        m = (n // f) * f
-        X = X[:m].reshape(-1, f, 2).mean(axis=1)
-        keep = None if keep is None else keep[:m].reshape(-1, f).all(axis=1)
+    m = (n // f) * f
     rate = rate_b / f
-    M = len(X)
-
-    def at(frac: float) -> tuple[float, float, Part, Part]:
-        k = int(round(frac * M))
-        p = _part(X[:k, 0], X[:k, 1], None if keep is None else keep[:k], rate, mt)
-        q = _part(X[k:, 0], X[k:, 1], None if keep is None else keep[k:], rate, mt)
-        z, dof = _z(p, q)
-        return z, t_two_sided(ALPHA / len(GRID), max(dof, 1.0)), p, q
-
-    z, thr, p, q, frac = max((at(fr) + (fr,) for fr in GRID), key=lambda r: r[0] / r[1])
-    if z >= thr:
-        # the time estimated after the test (the decision is the grid's), and the
-        # coefficients with their se refitted on the parts it makes
+    ys = yc[:m].reshape(-1, f).mean(axis=1)
+    M = len(ys)
+    edges = np.linspace(0, M, SEGMENTS + 1).astype(int)
+    ref = allan2(ys, ys, rate)  # the axis's EDF (the same for every regressor)
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
+    axes = None
+    regressors = [(j, float(L)) for j in range(temps.shape[1]) for L in LAGS
+                  if L <= record_s / 8]
+    if (thermal.channel_index, float(thermal.lag_s)) not in regressors:
+        regressors.append((thermal.channel_index, float(thermal.lag_s)))
+    trials = len(regressors) * len(GRID)
+    best: tuple[_Split, int, float] | None = None
+    chans = {j: np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+             for j in {j for j, _ in regressors}}
+    floors = {j: rounding_floor_tau(T, rate) for j, T in chans.items()
+              if np.all(np.isfinite(T)) and np.ptp(T) > 0}
+    for j, L in regressors:
+        if j not in floors:
+            continue
+        T = chans[j]
+        mt = min_tau_for(L, floors[j])
+        if not math.isfinite(mt):
+            continue
+        u = lag_filter(T, L, rate)
+        holes = [] if screen is None else [
+            (math.floor(h0 * rate), math.ceil(h1 * rate))
+            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0]
+        keep = hole_mask(M, holes, L, rate)
+        try:
+            if keep is None:
+                if axes is None:
+                    axes = axes_differences(ys[:, None], edges)
+                segs = lag_octave_sums(axes, u, L, rate)
+            else:
+                X = without_start(np.column_stack([ys, u]), L, rate)
+                segs = octave_sums_by_part(X, edges, keep)
+        except (DataError, FitError, ValueError):
+            continue
+        got = _splits(segs, rate, edf_ref, n_ref, mt, trials)
+        if got is not None and (best is None
+                                or got.z / got.threshold > best[0].z / best[0].threshold):
+            best = (got, j, L)
+    if best is None:
+        return None
+    sp, j, L = best
+    p, q, frac = sp.before, sp.after, sp.frac
+    if sp.z >= sp.threshold:
+        # the time estimated after the test (the decision is the grid's), and each part's
+        # coupling refitted on its own (its own lag) on the parts the time makes
+        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+        X = without_start(np.column_stack([ys, lag_filter(T, L, rate)]), L, rate)
+        keep = None if screen is None else hole_mask(M, [
+            (math.floor(h0 * rate), math.ceil(h1 * rate))
+            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0], L, rate)
         frac = _change_time(X, keep, rate, frac)
-        k = int(round(frac * n))
-        p, q = at(frac)[2:]
-        p, q = (_refit(yc[a:b], temps[a:b], thermal, rate_b, screen, a, fb)
+        k = round(frac * n)
+        p, q = (_refit(yc[a:b], temps[a:b], j, names[j], rate_b, screen, a, fb)
                 for (a, b), fb in (((0, k), p), ((k, n), q)))
-    return CouplingChange(frac * M / rate, p, q, z, thr, thermal.channel, L, len(GRID),
-                          n / rate_b)
+    return CouplingChange(frac * record_s, p, q, sp.z, sp.threshold, names[j], L, trials,
+                          record_s)
 
 
-def _refit(y: NDArray, temps: NDArray, thermal: ThermalFit, rate_b: float,
+def _refit(y: NDArray, temps: NDArray, j: int, name: str, rate_b: float,
            screen: Any | None, first: int, fallback: Part) -> Part:
     """The coupling of one part (a record of its own) as explain fits a whole record's on
     the same channel (``fit_thermal_axes``: its own lag, the coefficient's interval with
@@ -255,16 +373,15 @@ def _refit(y: NDArray, temps: NDArray, thermal: ThermalFit, rate_b: float,
     fit of the part, kept where the refit cannot be made."""
     from avard.core.explain.thermal_fit import fit_thermal_axes
 
-    j = thermal.channel_index
     holes = None if screen is None else {0: [
         (math.floor(h0 * rate_b) - first, math.ceil(h1 * rate_b) - first)
-        for h0, h1 in screen.holes(thermal.channel) if h1 - h0 >= 1.0]}
+        for h0, h1 in screen.holes(name) if h1 - h0 >= 1.0]}
     try:
-        fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]],
-                               [thermal.channel], rate_b, holes)[0]
+        fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]], [name],
+                               rate_b, holes)[0]
     except (DataError, FitError, ValueError):
         return fallback
-    return Part(fit.coefficient, fit.coef_se, GROUPS - 1.0, fit.lag_s)
+    return Part(fit.coefficient, fit.coef_se, fallback.dof, fit.lag_s)
 
 
 #: The block (s) whose means' differences estimate the change time (``_change_time``).
@@ -274,36 +391,40 @@ TIME_BLOCK_S = 60.0
 def _change_time(X: NDArray, keep: NDArray[np.bool_] | None, rate: float,
                  frac: float) -> float:
     """The change time (fraction of the record) within a grid step of the grid's best
-    ``frac``: the split that leaves the least residual when the differences of the axis's
-    ``TIME_BLOCK_S`` means are regressed on the lagged temperature's with one coefficient
-    before it and another after (the difference across the split left out: a jump there
-    is free). Differences, so a random walk's level does not pull the split; least squares,
-    an estimate (the z scan's best time is biased towards the side whose part is
-    cleaner)."""
+    ``frac``: the split that leaves the least residual when the axis's ``TIME_BLOCK_S``
+    means are regressed on the lagged temperature's, with an offset and a coefficient of
+    their own on each side (so a jump at the split is free). Levels, not differences: the
+    differences of minute means of a logged channel are mostly its 0.0625 K rounding,
+    which pulled their coefficient to a third of the truth and the split 450 s late; the
+    lagged temperature's swing in levels is many steps. Least squares, an estimate (the z
+    scan's best time leans towards the side whose part is cleaner)."""
     k = max(1, round(TIME_BLOCK_S * rate))
     m = len(X) // k
     if m < 16:
         return frac
     B = X[:m * k].reshape(m, k, 2).mean(axis=1)
-    ok = np.ones(m, dtype=bool) if keep is None else keep[:m * k].reshape(m, k).all(axis=1)
-    dy, du = np.diff(B[:, 0]), np.diff(B[:, 1])
-    good = ok[1:] & ok[:-1]
-    dy, du = np.where(good, dy, 0.0), np.where(good, du, 0.0)
-    cuu, cuy, cyy = (np.concatenate([[0.0], np.cumsum(v)]) for v in (du * du, du * dy, dy * dy))
+    ok = np.ones(m, dtype=bool)
+    if keep is not None:
+        ok = np.asarray(np.asarray(keep[:m * k]).reshape(m, k).all(axis=1), dtype=bool)
+    w = ok.astype(float)
+    yv, uv = np.where(ok, B[:, 0], 0.0), np.where(ok, B[:, 1], 0.0)
+    S = [np.concatenate([[0.0], np.cumsum(v)])
+         for v in (w, uv, yv, uv * uv, uv * yv, yv * yv)]
 
     def rss(lo: NDArray, hi: NDArray) -> NDArray:
-        uu, uy, yy = cuu[hi] - cuu[lo], cuy[hi] - cuy[lo], cyy[hi] - cyy[lo]
+        n_, su, sy, suu, suy, syy = (c[hi] - c[lo] for c in S)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.asarray(yy - np.where(uu > 0, uy**2 / uu, 0.0))
+            vu = suu - su**2 / n_
+            cuy = suy - su * sy / n_
+            r = syy - sy**2 / n_ - np.where(vu > 0, cuy**2 / vu, 0.0)
+        return np.asarray(np.where(n_ > 2, r, np.inf))
 
     step = GRID[1] - GRID[0]
-    n_d = len(dy)
-    j = np.arange(max(1, int((frac - step) * n_d)), min(n_d - 1, int((frac + step) * n_d)) + 1)
+    j = np.arange(max(2, int((frac - step) * m)), min(m - 2, int((frac + step) * m)) + 1)
     if len(j) == 0:
         return frac
-    # split before difference j: parts [0, j) and [j + 1, n_d), difference j (the jump) out
-    total = rss(np.zeros_like(j), j) + rss(j + 1, np.full_like(j, n_d))
-    return float((j[int(np.argmin(total))] + 1) / n_d)
+    total = rss(np.zeros_like(j), j) + rss(j, np.full_like(j, m))
+    return float(j[int(np.argmin(total))] / m)
 
 
 def _near(c: cz.Candidate, ch: CouplingChange) -> bool:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from benchmarks import bench_explain_weekend as bw  # noqa: E402
+from benchmarks import bench_explain_weekend as bw
 
 LINES = ("sinusoid", "periodic")
 
@@ -88,7 +88,7 @@ def selected(source: str, only: list[str] | None, seed0: int, cases: int):
 
 
 def main(argv: list[str]) -> int:
-    from avard.core.explain.coupling_change import CAUSE, change_line
+    from avard.core.explain.coupling_change import change_line
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--source", default="rows")
@@ -119,7 +119,6 @@ def main(argv: list[str]) -> int:
                 t["x_step"] += any(f.cause == "bias_step" for f in ch.claimed)
                 t["x_right"] += bool(want) and set(want) <= {f.cause for f in ch.claimed}
             if line is not None:
-                f = next(f for f in ch.findings if f.cause == CAUSE)
                 print(f"  {name} seed {seed} {ax}: {line}; claims "
                       f"{[g.cause for g in ch.claimed]}", flush=True)
             if other:
