@@ -10,42 +10,49 @@ is the two coefficients' average. This module tests for the change and says it.
 
 The test. On an axis where a thermal coupling was tested (``ThermalFit``, claimed or not:
 a coefficient that flips sign averages to nearly nothing, so the whole-record coupling may
-fail its own test), take the driving channel u through the fitted lag L (the whole
-record's), and the axis y less the transients the compound search found there (a found step
-is not left in a part's regression). For a candidate change time t_c split the record
-into the part before and the part after, each a record of its own (no Allan difference
-spans t_c), and in each fit the coupling by the Allan-covariance regression of
-``thermal_fit`` (ĉ = Σ w_k Cov_A(y, u)_k / AVAR_u,k over the octaves τ ≥ the channel's
-floor): a before, b after, each with the larger of its analytic se and its delete-a-group
-jackknife se over ``GROUPS`` contiguous pieces of the part (the jackknife does not assume
-the noise's differences independent across a slow regressor; red noise breaks that). The
-two parts share no difference, so under one coupling (a = b)
+fail its own test and its lag and channel be anywhere), take the axis y less the
+transients the compound search found there (a found step is not left in a part's
+regression) and, as regressor u, each logged channel through each lag of ``LAGS`` (those up
+to an eighth of the record) and the thermal fit's own channel and lag. The record is cut
+into ``SEGMENTS`` contiguous segments, and the Allan difference sums of (y, u) kept per
+segment (each difference in the segment of its middle: ``thermal_fit.octave_sums_by_part``,
+one pass a regressor). For a candidate change time t_c (a segment boundary) the part before
+is the segments before it and the part after the rest; in each the coupling is fitted by
+``thermal_fit``'s Allan-covariance regression (ĉ = inverse-variance combination over the
+octaves τ ≥ the channel's floor of Cov_A(y, u)/AVAR_u, ``tempco_from_cov``): a before, b
+after, each with the larger of its analytic se and its delete-a-segment jackknife se (the
+jackknife does not assume the noise's differences independent across a slow regressor; red
+noise breaks that). Under one coupling (a = b) the parts' estimates are independent but for
+the few long differences about t_c, and
 
     z(t_c) = (a − b) / √(se_a² + se_b²)
 
-is a Student-t-like ratio whose se rest on few pieces: its degrees of freedom are the
-Satterthwaite combination of the two jackknifes' (``GROUPS`` − 1 each). The change time is
+is a Student-t-like ratio whose se rest on few segments: its degrees of freedom are the
+Satterthwaite combination of the two jackknifes' (segments − 1 each). The change time is
 searched over a coarse grid (``GRID``: 20 % … 80 % of the record in steps of 5 %, 13 times;
 a part shorter than a fifth of the record holds too few of the slow octaves where a coupling
-shows), and the search is counted in the level: the change is said where at some grid time
-|z| ≥ t_{dof}(``ALPHA`` / (2·13)) (Bonferroni over the grid, two-sided). ``ALPHA`` is a
-share of the size of each of ``alarm``'s shares. This test claims no cause (it takes
-claims away), so it is not in ``alarm.ALPHA_AXIS``; its false alarms cost power (a real step
-at the wrong time would lose its claim) and are measured on the null rows
-(docs/log/2026-11-29-remount27.md).
+shows) and every regressor, and the whole search is counted in the level: the change is said
+where for some regressor and grid time |z| ≥ t_dof(``ALPHA`` / (regressors × 13)) two-sided
+(Bonferroni; 6–13 regressors: 78–221 trials, thresholds ≈ 7–9 on 4–12 h records). ``ALPHA`` is a share of
+the size of each of ``alarm``'s shares. This test claims no cause (it takes claims away), so
+it is not in ``alarm.ALPHA_AXIS``; its false alarms cost power (a real step at the wrong time
+would lose its claim) and are measured on the null rows (docs/log/2026-11-29-remount27.md).
 
 Why it does not fire on a described sensor: with one coupling a = b in expectation on any
-split; a real bias step at t_s beside a steady coupling is a constant in the part after
-t_s, which Allan differences of that part do not see (and the step the search found is
-taken out of y before, for the splits elsewhere). What it can read as a change is a
-coupling that is not the one lag it regresses on and whose one-lag projection differs
+split and through any regressor; a real bias step at t_s beside a steady coupling is a
+constant after t_s, which no Allan difference inside a part sees (and the step the search
+found is taken out of y before, for the splits elsewhere). What it can read as a change is
+a coupling that is not the one lag it regresses on and whose one-lag projection differs
 between parts because the temperature's spectrum does (a non-linear coupling where one half
 swings further): the rows of the adversary's generator measure that.
 
 Where the change is found, its time is estimated within a grid step of the best grid time
-(after the test: ``_change_time``, the split of least residual of the differences of minute
-means regressed on the lagged temperature's, one coefficient each side), the coefficients
-refitted on the parts it makes, and:
+(after the test: ``_change_time``, the split of least residual of the minute means regressed
+on the lagged temperature's, an offset and a coefficient each side; or, where the transient
+search found a step or an excursion edge within two grid steps, that jump's time, the nearest
+to the estimate), each part's coupling
+refitted as explain fits a record's (``fit_thermal_axes`` on that channel: its own lag, the
+interval with the lag's share), and:
 
 - one line in the text, the JSON (the channel's ``caveats`` and a finding of cause
   ``coupling_change``, never claimed) and the report: "the thermal coupling changed at
@@ -95,8 +102,11 @@ ALPHA = 2.5e-4
 #: Candidate change times, as fractions of the record (the search counted in the level).
 GRID = tuple(round(0.2 + 0.05 * i, 2) for i in range(13))
 #: Contiguous segments of the record (each Allan difference in the segment of its middle):
-#: a part is the segments before or after a grid time, its jackknife deletes one at a time.
-SEGMENTS = 40
+#: a part is the segments before or after a grid time (one segment a grid step), its
+#: jackknife deletes one at a time. 40 (two a grid step) gave the jackknife more degrees of
+#: freedom than its segments' shared slow noise leaves it: a null axis of a re-mount
+#: record said a change at z 6.0 against 5.7 (5.4 against 7.0 with 20).
+SEGMENTS = 20
 #: The lags (s) every logged channel is tried through (those up to an eighth of the
 #: record), beside the thermal fit's own channel and lag: on a coupling that changes sign
 #: the whole record's fit is an average, its lag anywhere (−1800 s on the ambient channel
@@ -111,7 +121,7 @@ CAUSE = "coupling_change"
 @dataclass(frozen=True)
 class Part:
     """The coupling fitted on one part of the record: ĉ (m/s²/K), its se and the dof of
-    that se (the jackknife's, GROUPS − 1)."""
+    that se (the jackknife's: the part's segments − 1)."""
 
     c: float
     se: float
@@ -356,6 +366,13 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
             (math.floor(h0 * rate), math.ceil(h1 * rate))
             for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0], L, rate)
         frac = _change_time(X, keep, rate, frac)
+        # a step or an excursion edge the transient search found near the change is its
+        # jump, timed to a second (the least squares in levels drifts with the axis's
+        # random walk: 770 s late on two 4 h re-mounts, their steps then still claimed)
+        near = [t for t in _event_times(found)
+                if abs(t / record_s - sp.frac) <= 2 * (GRID[1] - GRID[0])]
+        if near:
+            frac = min(near, key=lambda t: abs(t / record_s - frac)) / record_s
         k = round(frac * n)
         p, q = (_refit(yc[a:b], temps[a:b], j, names[j], rate_b, screen, a, fb)
                 for (a, b), fb in (((0, k), p), ((k, n), q)))
@@ -427,15 +444,22 @@ def _change_time(X: NDArray, keep: NDArray[np.bool_] | None, rate: float,
     return float(j[int(np.argmin(total))] / m)
 
 
-def _near(c: cz.Candidate, ch: CouplingChange) -> bool:
-    """Whether a passed step or excursion edge of ``c`` lies within the change's window."""
+def _times(c: cz.Candidate) -> list[float]:
+    """The times (s) a step or an excursion jumps at ([] for other causes)."""
     if c.cause == "bias_step":
-        times = [float(c.params.get("time_s", math.nan))]
-    elif c.cause == "excursion":
-        times = [float(c.params["start_s"]), float(c.params["end_s"])]
-    else:
-        return False
-    return any(abs(t - ch.time_s) <= ch.window_s for t in times)
+        return [float(c.params.get("time_s", math.nan))]
+    if c.cause == "excursion":
+        return [float(c.params["start_s"]), float(c.params["end_s"])]
+    return []
+
+
+def _event_times(cands: list[cz.Candidate]) -> list[float]:
+    return [t for c in cands if c.passed for t in _times(c) if math.isfinite(t)]
+
+
+def _near(c: cz.Candidate, ch: CouplingChange) -> bool:
+    """Whether a step or excursion edge of ``c`` lies within the change's window."""
+    return any(abs(t - ch.time_s) <= ch.window_s for t in _times(c))
 
 
 def check(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,

@@ -89,7 +89,7 @@ def test_a_remounted_sensor_is_said_and_its_jump_is_not_a_step(tmp_path):
         assert line is not None and line in text and line in doc["channels"][ax]["caveats"]
         f = next(f for f in ch.findings if f.cause == CAUSE)
         assert not f.claimed
-        assert abs(f.params["time_s"] - tr["change_s"]) <= 0.05 * 4 * 3600
+        assert abs(f.params["time_s"] - tr["change_s"]) <= 0.02 * 4 * 3600
         assert f.params["coefficient_before"] == pytest.approx(tr["coefficient_before"],
                                                                rel=0.2)
         assert f.params["coefficient_after"] == pytest.approx(tr["coefficient_after"],
