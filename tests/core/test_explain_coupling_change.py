@@ -122,3 +122,28 @@ def test_a_real_step_beside_a_steady_coupling_stays_a_claimed_step(tmp_path):
     # (model-dependent it may be, by the verdict's χ² tests; not by a change of coupling)
     assert steps[0].intervals and "coupling changed" not in steps[0].evidence
     assert any(f.cause == "temperature" for f in ch.claimed)
+
+
+def test_the_parts_coefficients_are_thermal_fits_regression():
+    """The parts' ĉ and analytic se, made for many sums at once, are ``tempco_from_cov``'s
+    on the same sums (the whole record's and one part's)."""
+    from avard.core.explain.coupling_change import _coefficients
+    from avard.core.explain.thermal_fit import allan2, cov_view, octave_sums_by_part
+    from avard.core.explain.thermal_fit import tempco_from_cov as tfc
+
+    y, T, _ = _slow(3, hours=2.0)
+    X = np.column_stack([y, T[:, 0]])
+    ref = allan2(y, y, RATE)
+    edf = np.asarray(ref.edf, dtype=float)
+    edf = edf[:, 0] if edf.ndim == 2 else edf
+    n_ref = np.asarray(ref.n, dtype=float)
+    segs = octave_sums_by_part(X, np.linspace(0, len(y), 5).astype(int))
+    whole = sum(segs[1:], start=segs[0])
+    for sums in (whole, segs[0] + segs[1]):
+        want = tfc(cov_view(sums, RATE, edf, n_ref), 4.0)
+        K = len(sums.ms)
+        c, se = _coefficients(sums.n[None].astype(float), sums.s2[None], sums.ms, RATE,
+                              edf, n_ref, 4.0)
+        assert K > 4
+        assert c[0] == pytest.approx(want[0], rel=1e-9)
+        assert se[0] == pytest.approx(want[1], rel=1e-9)
