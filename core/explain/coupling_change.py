@@ -33,8 +33,8 @@ searched over a coarse grid (``GRID``: 20 % … 80 % of the record in steps of 5
 a part shorter than a fifth of the record holds too few of the slow octaves where a coupling
 shows) and every regressor, and the whole search is counted in the level: the change is said
 where for some regressor and grid time |z| ≥ t_dof(``ALPHA`` / (regressors × 13)) two-sided
-(Bonferroni; 6–13 regressors: 78–221 trials, thresholds ≈ 7–9 on 4–12 h records). ``ALPHA`` is a share of
-the size of each of ``alarm``'s shares. This test claims no cause (it takes claims away), so
+(Bonferroni: 13 regressors and 169 trials on a two-channel 4 h record, thresholds ≈ 7–9
+there). ``ALPHA`` is a share of the size of each of ``alarm``'s shares. This test claims no cause (it takes claims away), so
 it is not in ``alarm.ALPHA_AXIS``; its false alarms cost power (a real step at the wrong time
 would lose its claim) and are measured on the null rows (docs/log/2026-11-29-remount27.md).
 
