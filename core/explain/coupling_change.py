@@ -34,9 +34,10 @@ a part shorter than a fifth of the record holds too few of the slow octaves wher
 shows) and every regressor, and the whole search is counted in the level: the change is said
 where for some regressor and grid time |z| ≥ t_dof(``ALPHA`` / (regressors × 13)) two-sided
 (Bonferroni: 13 regressors and 169 trials on a two-channel 4 h record, thresholds ≈ 7–9
-there). ``ALPHA`` is a share of the size of each of ``alarm``'s shares. This test claims no cause (it takes claims away), so
-it is not in ``alarm.ALPHA_AXIS``; its false alarms cost power (a real step at the wrong time
-would lose its claim) and are measured on the null rows (docs/log/2026-11-29-remount27.md).
+there). ``ALPHA`` is a share of the size of each of ``alarm``'s shares. This test claims no
+cause (it takes claims away), so it is not in ``alarm.ALPHA_AXIS``; its false alarms cost
+power (a real step at the wrong time would lose its claim) and are measured on the null rows
+(docs/log/2026-11-29-remount27.md).
 
 Why it does not fire on a described sensor: with one coupling a = b in expectation on any
 split and through any regressor; a real bias step at t_s beside a steady coupling is a
