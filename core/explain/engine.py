@@ -342,7 +342,8 @@ class ChannelExplanation:
             # asked, and the record itself could not be split (too short): the same
             missing = record_reason
         self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx,
-                             heldout_missing=missing)
+                             heldout_missing=missing,
+                             changed=cchange.change_line(self.findings))
         if self.verdict.explained:
             return
         chan = None if screen is None or self.thermal is None else self.thermal.channel

@@ -105,6 +105,10 @@ class Verdict:
     #: chosen channel on a coarser step than the thermal model's rounding assumes); said
     #: only when the axis is not explained
     suspect: str | None = None
+    #: the coupling-change line (``coupling_change``) where one thermal coupling does not
+    #: describe the record: then ``explained`` is False whatever the χ² say (a fit of the
+    #: average of two couplings can pass both tests on a long record)
+    changed: str | None = None
 
     @property
     def heldout_fails(self) -> bool:
@@ -132,6 +136,13 @@ class Verdict:
                     f"(p {self.heldout_p:.2g})")
         if self.explained:
             return f"the extended model fits: {ins}{held} (test at {ALPHA:.0%})"
+        changed = ("; one thermal coupling does not describe this record (it changed "
+                   "midway: CHANGED below)" if self.changed is not None else "")
+        if changed and self.tested and self.p_value >= ALPHA and not self.heldout_fails:
+            # both χ² pass (an average of two couplings can fit a long record): the change
+            # alone is why
+            return (f"UNEXPLAINED:{changed[1:]}; {ins}{held}; the claimed causes' parameters "
+                    "are model-dependent")
         if self.tested and self.heldout_missing is not None and self.p_value >= ALPHA:
             return (f"NOT HELD OUT: the held-out test of the claimed mechanism could not run "
                     f"({self.heldout_missing}); in sample {ins} (test at {ALPHA:.0%}), which "
@@ -141,8 +152,8 @@ class Verdict:
             return (f"NOT TESTED: the extended fit's χ² cannot be tested ({ins}){held}; the "
                     "claimed causes' parameters are model-dependent")
         where = "; ".join(_misfit_text(r) for r in self.misfit) or "no single τ range beyond 3 σ"
-        return (f"UNEXPLAINED: the extended model still misfits, {ins}{held}; {where}; the "
-                "claimed causes' parameters are model-dependent")
+        return (f"UNEXPLAINED: the extended model still misfits, {ins}{held}; {where}{changed}; "
+                "the claimed causes' parameters are model-dependent")
 
     def to_dict(self) -> dict[str, Any]:
         return {"explained": self.explained, "tested": self.tested,
@@ -151,15 +162,18 @@ class Verdict:
                 "heldout_n": self.heldout_n, "heldout_p": self.heldout_p,
                 "heldout_missing": self.heldout_missing,
                 "possible_cause": None if self.explained else self.suspect,
+                "coupling_changed": self.changed,
                 "alpha": ALPHA, "misfit": self.misfit, "line": self.line()}
 
 
 def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
           heldout_chi2: float | None = None, heldout_n: int = 0,
-          heldout_missing: str | None = None) -> Verdict:
+          heldout_missing: str | None = None, changed: str | None = None) -> Verdict:
     """The verdict from the extended fit's χ²/dof and dof, its misfit ranges, and (when
     measured) its held-out χ² on n τ. ``heldout_missing``: why a held-out test asked for
-    this axis's claims could not run (the axis is then not explained, module doc). The
+    this axis's claims could not run (the axis is then not explained, module doc);
+    ``changed``: the coupling-change line, when one coupling does not describe the record
+    (then not explained either). The
     held-out χ² is the one with the prediction's own variance (``holdout.Fold``), tested
     against χ²(n) as it stands."""
     p = _chi2_sf(chi2_dof * dof, dof)
@@ -168,10 +182,10 @@ def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
     held_bad = hp is not None and hp < ALPHA
     tested = math.isfinite(p)
     missing = heldout_missing if hp is None else None
-    bad = not tested or p < ALPHA or held_bad or missing is not None
+    bad = not tested or p < ALPHA or held_bad or missing is not None or changed is not None
     return Verdict(not bad, chi2_dof, dof, p, heldout_chi2 if hp is not None else None,
                    heldout_n if hp is not None else 0, hp, misfit if bad else [], tested,
-                   missing)
+                   missing, changed=changed)
 
 
 def _misfit_text(r: dict[str, Any]) -> str:
