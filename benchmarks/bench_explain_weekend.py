@@ -53,7 +53,13 @@ Per record: a claim of the class's cause on x with the right mechanism (the sign
 its parameters within 20 % (a lag within 20 % or 30 s), and inside their 68 % intervals;
 any other claim is a false claim. Rates with one-sided 95 % Clopper–Pearson bounds.
 
+Every row is explained as ``avard explain`` runs by default, with its held-out test
+(``--heldout on``); ``--heldout off`` scores them without it, as the tables before heldcal27
+did (their "unexplained" and interval columns then describe the in-sample test alone). The
+table's header says which.
+
     python -m benchmarks explain_weekend [--cases 40] [--seed0 23000] [--rows negative,...]
+        [--heldout on|off]
 """
 
 from __future__ import annotations
@@ -314,8 +320,9 @@ class EventScore:
 
 
 def score_events(r: Event, cases: int, seed0: int,
-                 progress: bool = False) -> EventScore:
-    """Explain ``cases`` records of the event row ``r`` (seeds from ``seed0``) and count."""
+                 progress: bool = False, heldout: bool = True) -> EventScore:
+    """Explain ``cases`` records of the event row ``r`` (seeds from ``seed0``) and count
+    (``heldout``: explain with its held-out test, as ``avard explain`` runs by default)."""
     from avard.core.explain.engine import explain_file
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
@@ -327,7 +334,7 @@ def score_events(r: Event, cases: int, seed0: int,
         for i in range(cases):
             path = save(seed0 + i, r.weekend, Path(d) / "w.npz")
             t0 = time.process_time()
-            ex = explain_file(open_record(path), ExplainOptions(heldout=False))
+            ex = explain_file(open_record(path), ExplainOptions(heldout=heldout))
             sc.cpu_s += time.process_time() - t0
             sc.n += 1
             a, b, c, t = _match(ex.channels["x"], r.expect, r.weekend.hours * 3600)
@@ -349,17 +356,17 @@ def score_events(r: Event, cases: int, seed0: int,
     return sc
 
 
-def run_events(cases: int, seed0: int, only: list[str] | None) -> None:
+def run_events(cases: int, seed0: int, only: list[str] | None, heldout: bool = True) -> None:
     todo = _selected(rows_events(), only)
     if not todo:
         return
-    print(f"\nevent rows (tests/support/weekend.py), {cases} per row:")
+    print(f"\nevent rows (tests/support/weekend.py), {cases} per row, {_held_text(heldout)}:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
     print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 %':>14s} "
           f"{'false claims (y, z)':>24s} {'CPU s/rec':>9s}")
     for j, r in enumerate(todo):
-        sc = score_events(r, cases, seed0 + 500 + 1000 * j, progress=True)
+        sc = score_events(r, cases, seed0 + 500 + 1000 * j, progress=True, heldout=heldout)
         print(f"{r.name:22s} {_rate(sc.right, sc.n, False):>22s} "
               f"{_rate(sc.params, sc.n, False):>22s} {f'{sc.inside}/{sc.intervals}':>14s} "
               f"{_rate(sc.false, sc.axes, True):>24s} {sc.cpu_s / max(sc.n, 1):9.1f}",
@@ -385,11 +392,15 @@ class RecordScore:
     false_claims: list[str] = field(default_factory=list)
     #: the thermal path x's claim was given (a plain lag must stay "one_lag"), "" if none
     mechanism: str = ""
+    #: scored with explain's held-out test (``--heldout on``, explain's default)
+    heldout: bool = True
 
 
 def explain_weekend(w: Any, seed: int, heldout: bool = False) -> tuple[Any, float]:
     """Make the weekend record ``w`` with ``seed`` and explain it (``heldout``: with the
-    held-out measure of its halves): (the explanation, its CPU seconds)."""
+    held-out measure of its halves; off by default for the tests that call this for a
+    record's claims alone, the scoring functions pass the benchmark's ``--heldout``):
+    (the explanation, its CPU seconds)."""
     from avard.core.explain.engine import explain_file
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
@@ -403,10 +414,11 @@ def explain_weekend(w: Any, seed: int, heldout: bool = False) -> tuple[Any, floa
         return ex, time.process_time() - t0
 
 
-def score_record(r: Row, seed: int) -> RecordScore:
-    """Make the record of row ``r`` with ``seed``, explain it and score it."""
-    sc = RecordScore(r.name, seed)
-    ex, sc.cpu_s = explain_weekend(r.weekend, seed)
+def score_record(r: Row, seed: int, heldout: bool = True) -> RecordScore:
+    """Make the record of row ``r`` with ``seed``, explain it (``heldout``: with its held-out
+    test, explain's default) and score it."""
+    sc = RecordScore(r.name, seed, heldout=heldout)
+    ex, sc.cpu_s = explain_weekend(r.weekend, seed, heldout=heldout)
     for a, ch in ex.channels.items():
         sc.axes += 1
         mine = [f for f in ch.claimed if f.cause == "temperature" and a == "x" and r.coefficient]
@@ -447,17 +459,21 @@ def _selected(rows: list[_R], only: list[str] | None) -> list[_R]:
     return [r for r in rows if not only or any(r.name.startswith(o) for o in only)]
 
 
-def _load_results(path: Path | None, make: Callable[[dict[str, Any]], _S]
-                  ) -> dict[tuple[str, int], _S]:
+def _load_results(path: Path | None, make: Callable[[dict[str, Any]], _S],
+                  heldout: bool = True) -> dict[tuple[str, int], _S]:
     """The records already scored in a ``--results`` file (one JSON object a line, read by
     ``make``); a last line cut by a kill, or a line of another kind of row (``make`` raises
-    ValueError or TypeError), is skipped (its record runs again)."""
+    ValueError or TypeError), is skipped (its record runs again), and so is a line scored
+    with the held-out test the other way than ``heldout`` (a line without the key was
+    scored before the switch: plain and path rows with it off, outside rows on)."""
     done: dict[tuple[str, int], _S] = {}
     if path is None or not path.exists():
         return done
     for line in path.read_text().splitlines():
         try:
             d = json.loads(line)
+            if bool(d.get("heldout", "said" in d)) != heldout:
+                continue
             done[(d["row"], d["seed"])] = make(d)
         except (ValueError, TypeError, KeyError):
             continue
@@ -496,8 +512,14 @@ def _score_all(left: list[tuple[str, int]], job: Callable[[tuple[str, int]], Any
             keep(job(k))
 
 
+def _held_text(heldout: bool) -> str:
+    """The table header's word on how its rows were scored."""
+    return ("held-out test on (explain's default)" if heldout else
+            "held-out test OFF (not explain's default: --heldout off)")
+
+
 def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
-        results: Path | None = None) -> None:
+        results: Path | None = None, heldout: bool = True) -> None:
     """Each row's ``cases`` records (seeds ``seed0 + 1000·j + i``, j the row's place among
     those selected), ``jobs`` records at a time in worker processes; with ``results``, each
     record's score is appended there as it ends and records already there are not run again
@@ -506,10 +528,10 @@ def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     if not todo:
         return
     print(f"weekend records (tests/support/weekend.py), {cases} per row, N {N:g} m/s/√s, "
-          f"B {B:g} m/s², K {K:g} m/s²·√s, {RATE:g} Hz:")
+          f"B {B:g} m/s², K {K:g} m/s²·√s, {RATE:g} Hz, {_held_text(heldout)}:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
-    done = _load_results(results, lambda d: RecordScore(**d))
+    done = _load_results(results, lambda d: RecordScore(**d), heldout)
     want = [(r.name, seed0 + 1000 * j + i) for j, r in enumerate(todo) for i in range(cases)]
     # records interleaved across rows, so a run stopped early has some of every row
     want.sort(key=lambda k: k[1] % 1000)
@@ -517,7 +539,7 @@ def run(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     if done:
         print(f"  {len(want) - len(left)} of {len(want)} records already in {results}")
 
-    _score_all(left, partial(_job, "plain"), jobs, results, done)
+    _score_all(left, partial(_job, "plain", heldout=heldout), jobs, results, done)
     print(f"\n{'row':22s} {'claimed right':>22s} {'params ≤ 20 %':>22s} {'in 68 % c / L':>14s} "
           f"{'false claims (axes)':>24s} {'unexplained':>12s} {'CPU s/rec':>9s}")
     for r in todo:
@@ -781,12 +803,17 @@ class PathRecord:
     as_well: list[str] = field(default_factory=list)
     #: a warm-up claimed on x (the rows with one: right only with it)
     warmup: bool = False
+    #: x's verdict says unexplained
+    unexplained: bool = False
+    #: scored with explain's held-out test (``--heldout on``, explain's default)
+    heldout: bool = True
 
 
-def score_path_record(r: PathRow, seed: int) -> PathRecord:
-    """Make the record of path row ``r`` with ``seed``, explain it and score it."""
-    sc = PathRecord(r.name, seed)
-    ex, sc.cpu_s = explain_weekend(r.weekend, seed)
+def score_path_record(r: PathRow, seed: int, heldout: bool = True) -> PathRecord:
+    """Make the record of path row ``r`` with ``seed``, explain it (``heldout``: with its
+    held-out test, explain's default) and score it."""
+    sc = PathRecord(r.name, seed, heldout=heldout)
+    ex, sc.cpu_s = explain_weekend(r.weekend, seed, heldout=heldout)
     th = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
     if th:
         sc.chosen = str(th[0].mechanism)
@@ -802,6 +829,8 @@ def score_path_record(r: PathRow, seed: int) -> PathRecord:
     sc.false = sum(bool([f for f in ex.channels[ax].claimed
                          if f.cause not in ("sinusoid", "periodic")]) for ax in ("y", "z"))
     sc.warmup = any(f.cause == "warmup" for f in ex.channels["x"].claimed)
+    v = ex.channels["x"].verdict
+    sc.unexplained = v is not None and not v.explained
     if r.resolve:
         thermal = ex.channels["x"].thermal
         if th and thermal is not None and thermal.path is not None:
@@ -874,7 +903,7 @@ def score_resolved(r: PathRow, seed: int, sc: PathRecord, p: dict[str, float],
 
 
 def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
-              results: Path | None = None) -> None:
+              results: Path | None = None, heldout: bool = True) -> None:
     """``rows_paths``: x right when its temperature finding is claimed with the row's
     mechanism and no other named beside it; "named" when the row's mechanism is the chosen
     one or one named as equally supported (the record cannot tell them apart); its
@@ -885,18 +914,19 @@ def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     todo = _selected(rows_paths(), only)
     if not todo:
         return
-    print(f"\nthermal-path rows (tests/support/weekend.py), {cases} per row:")
+    print(f"\nthermal-path rows (tests/support/weekend.py), {cases} per row, "
+          f"{_held_text(heldout)}:")
     for r in todo:
         print(f"  {r.name}: {r.minimum}")
-    done = _load_results(results, _reader(PathRecord, "chosen"))
+    done = _load_results(results, _reader(PathRecord, "chosen"), heldout)
     want = [(r.name, seed0 + 7000 + 1000 * j + i) for j, r in enumerate(todo)
             for i in range(cases)]
     want.sort(key=lambda k: k[1] % 1000)
     left = [k for k in want if k not in done]
 
-    _score_all(left, partial(_job, "path"), jobs, results, done)
+    _score_all(left, partial(_job, "path", heldout=heldout), jobs, results, done)
     print(f"\n{'row':18s} {'right (alone)':>20s} {'named':>20s} {'params ≤ 20 %':>20s} "
-          f"{'in 68 %':>8s} {'no interval':>11s} {'chosen instead':>34s} "
+          f"{'in 68 %':>8s} {'no interval':>11s} {'x unexpl.':>9s} {'chosen instead':>34s} "
           f"{'false claims (y, z)':>22s} {'CPU s/rec':>9s}")
     for r in todo:
         got = [done[k] for k in want if k[0] == r.name and k in done]
@@ -912,7 +942,8 @@ def run_paths(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
         inside, total = sum(g.inside for g in got), sum(g.total for g in got)
         print(f"{r.name:18s} {_rate(alone, n, False):>20s} {_rate(named, n, False):>20s} "
               f"{_rate(sum(g.params for g in got), n, False):>20s} "
-              f"{f'{inside}/{total}':>8s} {sum(g.unresolved for g in got):>11d} {inst:>34s} "
+              f"{f'{inside}/{total}':>8s} {sum(g.unresolved for g in got):>11d} "
+              f"{sum(g.unexplained for g in got):>9d} {inst:>34s} "
               f"{_rate(sum(g.false for g in got), 2 * n, True):>22s} "
               f"{sum(g.cpu_s for g in got) / max(n, 1):9.1f}", flush=True)
         if r.weekend.warmups:
@@ -1047,6 +1078,9 @@ class OutsideRecord:
     #: x's claims other than the coupling and lines (what the mechanism was read as)
     x_other: list[str] = field(default_factory=list)
     cpu_s: float = 0.0
+    #: scored with explain's held-out test (``--heldout on``, explain's default; the
+    #: outside rows' "unexplained" is about it)
+    heldout: bool = True
 
 
 def _tight(f: Any, rel: float = 0.05) -> bool:
@@ -1067,14 +1101,14 @@ def _worse_anywhere(ch: Any, comp_var: Any) -> bool:
     return bool(np.any(cv[ok] > hi[ok]))
 
 
-def score_outside_record(r: OutsideRow, seed: int) -> OutsideRecord:
-    """Make the record of outside row ``r`` with ``seed``, explain it (held out: its halves)
-    and score it."""
+def score_outside_record(r: OutsideRow, seed: int, heldout: bool = True) -> OutsideRecord:
+    """Make the record of outside row ``r`` with ``seed``, explain it (``heldout``: with the
+    held-out test of its halves, explain's default) and score it."""
     from avard.core.explain.report import summary
     from avard.core.explain.verdict import ALPHA
 
-    sc = OutsideRecord(r.name, seed)
-    ex, sc.cpu_s = explain_weekend(r.weekend, seed, heldout=True)
+    sc = OutsideRecord(r.name, seed, heldout=heldout)
+    ex, sc.cpu_s = explain_weekend(r.weekend, seed, heldout=heldout)
     for ax in ("y", "z"):
         other = [f for f in ex.channels[ax].claimed if f.cause not in ("sinusoid", "periodic")]
         sc.false += bool(other)
@@ -1111,7 +1145,7 @@ def score_outside_record(r: OutsideRow, seed: int) -> OutsideRecord:
 
 
 def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
-                results: Path | None = None) -> None:
+                results: Path | None = None, heldout: bool = True) -> None:
     """The ``outside_rows`` (seeds ``seed0 + 1000·j + i``, j the row's place in the whole
     list, so a row keeps its seeds whatever is selected), ``jobs`` records at a time,
     resumable through ``results``. Per row: x axes whose extended fit fails χ² at 1 %, of
@@ -1124,16 +1158,17 @@ def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
     todo = _selected(allrows, only)
     if not todo:
         return
-    print(f"mechanisms beside the coupling on x, {cases} records per row (held out: halves):")
+    print(f"mechanisms beside the coupling on x, {cases} records per row, "
+          f"{_held_text(heldout)} (held out: halves):")
     for r in todo:
         print(f"  {r.name}{' (a candidate now)' if r.candidate else ''}: {r.minimum}")
-    done = _load_results(results, _reader(OutsideRecord, "said"))
+    done = _load_results(results, _reader(OutsideRecord, "said"), heldout)
     want = [(r.name, seed0 + 1000 * allrows.index(r) + i) for r in todo for i in range(cases)]
     want.sort(key=lambda k: k[1] % 1000)
     left = [k for k in want if k not in done]
     if len(left) < len(want):
         print(f"  {len(want) - len(left)} of {len(want)} records already in {results}")
-    _score_all(left, partial(_job, "outside"), jobs, results, done)
+    _score_all(left, partial(_job, "outside", heldout=heldout), jobs, results, done)
     print(f"\n{'row':16s} {'fails χ² 1 %':>12s} {'unexplained | fails':>24s} "
           f"{'held out rejects':>16s} {'explained, claimed':>18s} {'±5 % | rej / unexpl':>19s} "
           f"{'not model-dep.':>14s} {'comp. worse shown':>17s} {'false (y, z)':>22s} "
@@ -1169,15 +1204,16 @@ def run_outside(cases: int, seed0: int, only: list[str] | None, jobs: int = 1,
         line("pooled, outside", pool)
 
 
-def _job(kind: str, job: tuple[str, int]) -> Any:
+def _job(kind: str, job: tuple[str, int], heldout: bool = True) -> Any:
     """Score the record (row name, seed) of the rows of ``kind`` ("plain": ``rows``, "path",
-    "outside"): what a worker process is sent (a partial of this, by name)."""
-    kinds: dict[str, tuple[Callable[[], list[Any]], Callable[[Any, int], Any]]] = {
+    "outside"), explained with its held-out test when ``heldout``: what a worker process is
+    sent (a partial of this, by name)."""
+    kinds: dict[str, tuple[Callable[[], list[Any]], Callable[..., Any]]] = {
         "plain": (rows, score_record), "path": (rows_paths, score_path_record),
         "outside": (outside_rows, score_outside_record)}
     make, score = kinds[kind]
     name, seed = job
-    return score(next(r for r in make() if r.name == name), seed)
+    return score(next(r for r in make() if r.name == name), seed, heldout=heldout)
 
 
 def main(argv: list[str]) -> int:
@@ -1192,12 +1228,16 @@ def main(argv: list[str]) -> int:
                     "skip the records already there: a stopped run resumes")
     ap.add_argument("--outside", action="store_true",
                     help="the mechanisms outside the candidate set (outside_rows) instead")
+    ap.add_argument("--heldout", choices=("on", "off"), default="on",
+                    help="explain each record with its held-out test (on: avard explain's "
+                    "default, what users run; off: the tables before heldcal27)")
     args = ap.parse_args(argv)
     only = args.rows.split(",") if args.rows else None
+    held = args.heldout == "on"
     if args.outside:
-        run_outside(args.cases, args.seed0, only, args.jobs, args.results)
+        run_outside(args.cases, args.seed0, only, args.jobs, args.results, held)
     else:
-        run(args.cases, args.seed0, only, args.jobs, args.results)
-        run_events(args.cases, args.seed0, only)
-        run_paths(args.cases, args.seed0, only, args.jobs, args.results)
+        run(args.cases, args.seed0, only, args.jobs, args.results, held)
+        run_events(args.cases, args.seed0, only, held)
+        run_paths(args.cases, args.seed0, only, args.jobs, args.results, held)
     return 0

@@ -71,6 +71,7 @@ from avard.core.analysis.spectrum import LineGroup, line_components, line_groups
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
+from avard.core.explain import coupling_change as cchange
 from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
 from avard.core.explain.gauss_markov import scan_gauss_markov
@@ -340,7 +341,8 @@ class ChannelExplanation:
             # asked, and the record itself could not be split (too short): the same
             missing = record_reason
         self.verdict = judge(self.extended.chi2_dof, self.extended.dof, self.ext_misfit, *hx,
-                             heldout_missing=missing)
+                             heldout_missing=missing,
+                             changed=cchange.change_line(self.findings))
         if self.verdict.explained:
             return
         chan = None if screen is None or self.thermal is None else self.thermal.channel
@@ -417,7 +419,8 @@ class Explanation:
         ch = self.channels[channel]
         caveat = (runs_caveat(self) if any(f.cause == "temperature" for f in ch.claimed)
                   else None)
-        return [] if caveat is None else [caveat]
+        change = cchange.change_line(ch.findings)
+        return [c for c in (change, caveat) if c is not None]
 
 
 # --------------------------------------------------------------------------------------------
@@ -1172,6 +1175,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         return _noise_levels(fit)
 
     missed: list[cz.Candidate] = []
+    change = None  # coupling_change: whether one coupling describes the record
     if len(y_slow) >= MIN_SLOW_POINTS:
         start = 0.0
         if with_start and thermal is not None:
@@ -1180,6 +1184,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             head = signal[:max(2, math.ceil(3 * abs(thermal.lag_s) * rate_b))]
             start = float(np.ptp(head))
         trans, missed = _compound(work, rate_b, noise_without, thermal, holes, start)
+        change, trans, missed = cchange.check(y_slow, temps, thermal, trans, missed, work,
+                                              rate_b, noise_without, holes)
 
     # the covariance of the compensated points that the removed signal's parameters carry
     # (``removal_covariance``): set by each ``extend``, given to every fit of those points
@@ -1251,6 +1257,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     if gm_fit is not None:
         ext = gm_fit
     findings += [_periodic_finding(g) for g in line_groups(ch.lines)]
+    findings = cchange.mark(change, findings)
     out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
                              thermal_only)
     if ext is not base:

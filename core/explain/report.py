@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.explain.alarm import ALPHA_AXIS
+from avard.core.explain.coupling_change import change_line
 from avard.core.explain.engine import ChannelExplanation, Explanation
 from avard.core.explain.thermal_fit import DS18B20_CONVERSION_S
 from avard.core.model.fit import NoiseFit, TermEstimate
@@ -162,6 +163,9 @@ def summary(ex: Explanation) -> str:
                      f"{_chi(ch.extended)}; gain {_cell(ch.gain, '.3g')}")
         if ch.verdict is not None:
             lines.append(f"  {ch.verdict.line()}")
+        change = change_line(ch.findings)
+        if change is not None:
+            lines.append(f"  CHANGED: {change}")
         if ch.misfit:
             for r in ch.misfit:
                 lines.append(f"  misfit {r['direction']} the base model at τ "
@@ -342,6 +346,8 @@ def write_report(ex: Explanation, outdir: str | Path) -> Path:
                f"χ²/dof: base {_chi(ch.base.fit)}, extended {_chi(ch.extended)}; gain "
                f"**{_cell(ch.gain, '.3g')}**.", "",
                *([] if ch.verdict is None else [ch.verdict.line(), ""]),
+               *([] if (cl := change_line(ch.findings)) is None
+                 else [f"**Changed:** {cl}.", ""]),
                "### Misfit of the base model", ""]
         if ch.misfit:
             md += ["| τ range (s) | direction | largest deviation (σ) |", "|---|---|---|"]

@@ -202,3 +202,19 @@ def test_the_channel_verdict_marks_claims_whose_held_out_fit_failed_model_depend
                           findings=[ev], verdict=None)
     ChannelExplanation.judge(ch2, ChannelHoldout("z", ["warmup"]))  # type: ignore[arg-type]
     assert ch2.verdict.explained and not ev.model_dependent
+
+
+def test_a_changed_coupling_is_never_said_to_fit() -> None:
+    """An axis whose thermal coupling changed midway (``coupling_change``) is unexplained
+    even where both χ² tests pass (a fit of the two couplings' average can pass them on a
+    long record): the line says why, the JSON carries the change line."""
+    line = "the thermal coupling changed at about 7200 s (…)"
+    v = judge(1.0, 20, [], 18.0, 20, changed=line)
+    assert not v.explained
+    assert v.line().startswith("UNEXPLAINED: one thermal coupling does not describe")
+    # where a χ² fails too, the misfit line keeps its ranges and adds the change
+    w = judge(9.0, 20, [], changed=line)
+    assert w.line().startswith("UNEXPLAINED: the extended model still misfits")
+    assert "changed midway" in w.line()
+    assert v.to_dict()["coupling_changed"] == line
+    assert judge(1.0, 20, [], 18.0, 20).explained

@@ -103,8 +103,9 @@ def test_the_verdict_reads_the_held_out_chi2_with_the_predictions_variance(tmp_p
     d = hx.to_dict()
     assert d["chi2_extended_with_prediction"] == hx.chi2_ext_pred
     assert all("chi2_extended_with_prediction" in f for f in d["folds"])
-    # axes that claim nothing: the prediction is the base model's, nothing added
+    # axes that claim nothing: the prediction is the base model's, only the noise terms'
+    # own scatter added (``holdout._noise_scatter``, heldcal27), which can only lower χ²
     for a in ("y", "z"):
         h = ex.holdout.channels[a]
         if not h.causes and h.folds:
-            assert h.chi2_ext_pred == h.chi2_ext
+            assert h.chi2_ext_pred <= h.chi2_ext * (1 + 1e-9)

@@ -15,12 +15,12 @@ term of the right size by more than the margin, and the term was not named.
 
 So where the drive is one line (``ONE_LINE_SHARE``), two paths in the dT/dt term's limit are
 chosen and the dT/dt term passes every test choosing needs on its own (held out better than
-one lag and than no coupling by the margin, its extra term's z at the search threshold, its
-θ inside its grid), the term is named beside them whatever the held-out gap between the two
-(``PathFit.alternatives``): the parameters of either are model-dependent, with no
-interval, and the note says the response at the drive, which both readings share, with
-its 68 % interval. Two paths that do not cancel are a response of their own and keep the
-margin rule."""
+one lag and than no coupling by the margin, or by the margin and ``OPEN_MARGIN`` where its
+θ sits at its grid's end, its extra term's z at the search threshold), the term is named
+beside them whatever the held-out gap between the two (``PathFit.alternatives``): the
+parameters of either are model-dependent, with no interval, and the note says the response
+at the drive, which both readings share, with its 68 % interval. Two paths that do not
+cancel are a response of their own and keep the margin rule."""
 
 from __future__ import annotations
 

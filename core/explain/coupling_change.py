@@ -1,0 +1,516 @@
+"""Whether one thermal coupling describes the whole record, or the coupling changed midway (a
+re-mounted or re-seated sensor, a loosened clamp): for ``avard explain``.
+
+Issue 23 item 5 asks for an honest "unexplained" that names the cause where it can. A
+coupling whose coefficient changes at some time t_s (sign flip or size change) is outside
+every thermal candidate (each is one fixed path for the whole record), and the axis jumps at
+t_s by (b − a)·u(t_s), u the lagged temperature: the transient search read that jump as a
+**bias step** with a ±3 % size and a ±1 s time, and the coupling fitted on the whole record
+is the two coefficients' average. This module tests for the change and says it.
+
+The test. On an axis where a thermal coupling was tested (``ThermalFit``, claimed or not:
+a coefficient that flips sign averages to nearly nothing, so the whole-record coupling may
+fail its own test and its lag and channel be anywhere), take the axis y less the
+transients the compound search found there (a found step is not left in a part's
+regression) and, as regressor u, each logged channel through each lag of ``LAGS`` (those up
+to an eighth of the record) and the thermal fit's own channel and lag. The record is cut
+into ``SEGMENTS`` contiguous segments, and the Allan difference sums of (y, u) kept per
+segment (each difference in the segment of its middle: ``thermal_fit.octave_sums_by_part``,
+one pass a regressor). For a candidate change time t_c (a segment boundary) the part before
+is the segments before it and the part after the rest; in each the coupling is fitted by
+``thermal_fit``'s Allan-covariance regression (ĉ = inverse-variance combination over the
+octaves τ ≥ the channel's floor of Cov_A(y, u)/AVAR_u, ``tempco_from_cov``): a before, b
+after, each with the larger of its analytic se and its delete-a-segment jackknife se (the
+jackknife does not assume the noise's differences independent across a slow regressor; red
+noise breaks that). Under one coupling (a = b) the parts' estimates are independent but for
+the few long differences about t_c, and
+
+    z(t_c) = (a − b) / √(se_a² + se_b²)
+
+is a Student-t-like ratio whose se rest on few segments: its degrees of freedom are the
+Satterthwaite combination of the two jackknifes' (segments − 1 each). The change time is
+searched over a coarse grid (``GRID``: 20 % … 80 % of the record in steps of 5 %, 13 times;
+a part shorter than a fifth of the record holds too few of the slow octaves where a coupling
+shows) and every regressor, and the whole search is counted in the level: the change is said
+where for some regressor and grid time |z| ≥ t_dof(``ALPHA`` / (regressors × 13)) two-sided
+(Bonferroni: 13 regressors and 169 trials on a two-channel 4 h record, thresholds ≈ 7–9
+there). ``ALPHA`` is a share of the size of each of ``alarm``'s shares. This test claims no
+cause (it takes claims away), so it is not in ``alarm.ALPHA_AXIS``; its false alarms cost
+power (a real step at the wrong time would lose its claim) and are measured on the null rows
+(docs/log/2026-11-29-remount27.md).
+
+Why it does not fire on a described sensor: with one coupling a = b in expectation on any
+split and through any regressor; a real bias step at t_s beside a steady coupling is a
+constant after t_s, which no Allan difference inside a part sees (and the step the search
+found is taken out of y before, for the splits elsewhere). What it can read as a change is
+a coupling that is not the one lag it regresses on and whose one-lag projection differs
+between parts because the temperature's spectrum does (a non-linear coupling where one half
+swings further): the rows of the adversary's generator measure that.
+
+Where the change is found, its time is estimated within a grid step of the best grid time
+(after the test: ``_change_time``, the split of least residual of the minute means regressed
+on the lagged temperature's, an offset and a coefficient each side; or, where the transient
+search found a step or an excursion edge within two grid steps, that jump's time, the nearest
+to the estimate), each part's coupling
+refitted as explain fits a record's (``fit_thermal_axes`` on that channel: its own lag, the
+interval with the lag's share), and:
+
+- one line in the text, the JSON (the channel's ``caveats`` and a finding of cause
+  ``coupling_change``, never claimed) and the report: "the thermal coupling changed at
+  about t s (coefficient a ± … before, b ± … after): a single coupling does not describe
+  this record";
+- a bias step or an excursion edge the compound search found within a grid step of that
+  time is not claimed (it is the coupling's change as the step model reads it): marked
+  model-dependent, its interval withheld (kept in ``--json`` as
+  ``intervals_if_model_held``), and the other transients refitted without it;
+- the whole-record coupling's finding, an average of two couplings, is model-dependent and
+  its interval withheld likewise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from avard.core.allan.beta import t_two_sided
+from avard.core.allan.deviations import NORM
+from avard.core.errors import DataError, FitError
+from avard.core.explain import causes as cz
+from avard.core.explain import transients as tr
+from avard.core.explain.causes import Finding
+from avard.core.explain.thermal_fit import (
+    OctaveSums,
+    ThermalFit,
+    allan2,
+    axes_differences,
+    hole_mask,
+    lag_filter,
+    lag_octave_sums,
+    min_tau_for,
+    octave_sums_by_part,
+    rounding_floor_tau,
+    without_start,
+)
+from numpy.typing import NDArray
+
+__all__ = ["ALPHA", "GRID", "LAGS", "SEGMENTS", "CouplingChange", "change_line", "check",
+           "find_change", "mark"]
+
+#: The test's share of the axis's false-alarm level (the size of each of ``alarm``'s shares).
+ALPHA = 2.5e-4
+#: Candidate change times, as fractions of the record (the search counted in the level).
+GRID = tuple(round(0.2 + 0.05 * i, 2) for i in range(13))
+#: Contiguous segments of the record (each Allan difference in the segment of its middle):
+#: a part is the segments before or after a grid time (one segment a grid step), its
+#: jackknife deletes one at a time. 40 (two a grid step) gave the jackknife more degrees of
+#: freedom than its segments' shared slow noise leaves it: a null axis of a re-mount
+#: record said a change at z 6.0 against 5.7 (5.4 against 7.0 with 20).
+SEGMENTS = 20
+#: The lags (s) every logged channel is tried through (those up to an eighth of the
+#: record), beside the thermal fit's own channel and lag: on a coupling that changes sign
+#: the whole record's fit is an average, its lag anywhere (−1800 s on the ambient channel
+#: for a re-mount through the plate's 174 s).
+LAGS = (0.0, 40.0, 120.0, 300.0, 750.0, 1800.0)
+#: Most slow-view points the parts are regressed on (longer views are averaged further: the
+#: coupling acts on minutes, the octaves lost are seconds).
+MAX_POINTS = 1 << 14
+CAUSE = "coupling_change"
+
+
+@dataclass(frozen=True)
+class Part:
+    """The coupling fitted on one part of the record: ĉ (m/s²/K), its se and the dof of
+    that se (the jackknife's: the part's segments − 1)."""
+
+    c: float
+    se: float
+    dof: float
+    #: the lag (s) the part's coupling was refitted through (NaN: the whole record's)
+    lag_s: float = math.nan
+
+
+@dataclass(frozen=True)
+class CouplingChange:
+    """The test's outcome on one axis: the best change time (s) with the coefficients
+    before and after it, z against its threshold, the channel and lag regressed on."""
+
+    time_s: float
+    before: Part
+    after: Part
+    z: float
+    threshold: float
+    channel: str
+    lag_s: float
+    trials: int
+    record_s: float
+    #: the transients found at the change and not claimed there (``check``)
+    taken: tuple[cz.Candidate, ...] = ()
+
+    @property
+    def changed(self) -> bool:
+        return self.z >= self.threshold
+
+    @property
+    def window_s(self) -> float:
+        """How far from ``time_s`` a found step is the change's (one coarse grid step)."""
+        return (GRID[1] - GRID[0]) * self.record_s
+
+    def line(self) -> str:
+        """The one line said in the text, the JSON and the report."""
+        b, a = self.before, self.after
+        return (f"the thermal coupling changed at about {self.time_s:.4g} s (coefficient "
+                f"{b.c:.3g} ± {b.se:.2g} before, {a.c:.3g} ± {a.se:.2g} after, m/s²/K on "
+                f"'{self.channel}' through {_lag(b, self.lag_s)} and {_lag(a, self.lag_s)}; "
+                f"z {self.z:.3g} against {self.threshold:.3g} over {self.trials} change "
+                "times): a single coupling does not describe this record")
+
+    def finding(self) -> Finding:
+        """Never claimed: a change of the coupling is no cause of its own; it says the
+        record is not one coupling (the evidence is the line, or why it was not said)."""
+        ev = (self.line() if self.changed else
+              f"one coupling before and after every change time tried: at the best, "
+              f"{self.time_s:.4g} s, {self.before.c:.3g} ± {self.before.se:.2g} before and "
+              f"{self.after.c:.3g} ± {self.after.se:.2g} after (m/s²/K), z {self.z:.3g} "
+              f"below {self.threshold:.3g}")
+        return Finding(CAUSE, False,
+                       {"time_s": self.time_s, "coefficient_before": self.before.c,
+                        "coefficient_after": self.after.c},
+                       {"coefficient_before": [self.before.c - self.before.se,
+                                               self.before.c + self.before.se],
+                        "coefficient_after": [self.after.c - self.after.se,
+                                              self.after.c + self.after.se]},
+                       self.z, self.threshold, ev, channel=self.channel)
+
+
+def _lag(p: Part, whole: float) -> str:
+    return f"{(p.lag_s if math.isfinite(p.lag_s) else whole):.3g} s"
+
+
+def _rho_matrix(k: int) -> NDArray[np.float64]:
+    """``thermal_fit._rho``: neighbouring octaves' correlation 0.5^|i − j|."""
+    i = np.arange(k)
+    return np.asarray(0.5 ** np.abs(i[:, None] - i[None, :]), dtype=float)
+
+
+def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
+                  n_ref: NDArray, mt: float) -> tuple[NDArray, NDArray]:
+    """``thermal_fit.tempco_from_cov`` of many difference sums at once: (ĉ, analytic se)
+    per row of ``n`` (S, K) differences and ``s2`` (S, K, 2, 2) their Σ D Dᵀ of (axis,
+    lagged temperature) at octaves ``ms``; the axis's EDF ``edf_ref`` of ``n_ref``
+    differences scaled to each row's count (``thermal_fit.cov_view``); octaves τ ≥ ``mt``
+    with an EDF of at least 3 (``thermal_fit._kept``). se ∞ where no octave is left."""
+    K = min(n.shape[1], len(edf_ref))
+    n, s2, msf = n[:, :K], s2[:, :K], ms[:K].astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = s2 / (NORM[2] * msf**2 * np.maximum(n, 1))[..., None, None]
+        vy, vu, cyu = cov[..., 0, 0], cov[..., 1, 1], cov[..., 0, 1]
+        nu = np.asarray(edf_ref[:K], float) * n / np.asarray(n_ref[:K], float)
+        ok = ((n > 0) & np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (msf / rate >= mt)
+              & np.isfinite(nu) & (nu >= 3))
+        ck = np.where(ok, cyu / vu, 0.0)
+        se_k = np.where(ok, np.sqrt(np.maximum(vy - cyu**2 / vu, 1e-300) / (vu * nu)), 1.0)
+    w = np.where(ok, 1.0 / se_k**2, 0.0)
+    sw = w.sum(axis=1)
+    ws = w * se_k
+    var = np.einsum("sk,kl,sl->s", ws, _rho_matrix(K), ws)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.where(sw > 0, (w * ck).sum(axis=1) / sw, 0.0)
+        se = np.where(sw > 0, np.sqrt(var) / sw, np.inf)
+    return c, se
+
+
+@dataclass(frozen=True)
+class _Split:
+    """One regressor's best split: z, its threshold, the split's fraction and the parts."""
+
+    z: float
+    threshold: float
+    frac: float
+    before: Part
+    after: Part
+
+
+def _splits(segs: list[OctaveSums], rate: float, edf_ref: NDArray, n_ref: NDArray,
+            mt: float, trials: int) -> _Split | None:
+    """z at every grid split from the segments' sums (``SEGMENTS``, each difference in the
+    segment of its middle: ``thermal_fit.octave_sums_by_part``): each part's ĉ and the larger
+    of its analytic se and its delete-a-segment jackknife se (the part's segments less
+    one: dof segments − 1), the best split by z over its threshold (t at ``ALPHA`` over
+    ``trials``, Satterthwaite's dof)."""
+    if not segs:
+        return None
+    K = max(len(x.ms) for x in segs)
+    ms = next(x.ms for x in segs if len(x.ms) == K)
+    padded = [x._padded(K) for x in segs]
+    n = np.array([p[0] for p in padded], dtype=float)
+    s2 = np.array([p[1] for p in padded], dtype=float)
+    G = len(segs)
+    Pn = np.concatenate([np.zeros((1, K)), np.cumsum(n, axis=0)])
+    Ps = np.concatenate([np.zeros((1, K, 2, 2)), np.cumsum(s2, axis=0)])
+    best: _Split | None = None
+    for frac in GRID:
+        k = round(frac * G)
+        parts = []
+        for lo, hi in ((0, k), (k, G)):
+            wn, ws = Pn[hi] - Pn[lo], Ps[hi] - Ps[lo]
+            # the whole part, then each of its segments left out in turn
+            rn = np.concatenate([wn[None], wn[None] - n[lo:hi]])
+            rs = np.concatenate([ws[None], ws[None] - s2[lo:hi]])
+            c, se = _coefficients(rn, rs, ms, rate, edf_ref, n_ref, mt)
+            g = hi - lo
+            cj = c[1:]
+            se_jk = (math.sqrt((g - 1) / g * float(np.sum((cj - cj.mean()) ** 2)))
+                     if g > 1 and np.all(np.isfinite(cj)) and np.all(np.isfinite(se[1:]))
+                     else math.inf)
+            parts.append(Part(float(c[0]), max(float(se[0]), se_jk), max(g - 1.0, 1.0)))
+        z, dof = _z(*parts)
+        thr = t_two_sided(ALPHA / trials, max(dof, 1.0))
+        if best is None or z / thr > best.z / best.threshold:
+            best = _Split(z, thr, frac, parts[0], parts[1])
+    return best
+
+
+def _z(p: Part, q: Part) -> tuple[float, float]:
+    """(|a − b|/√(se_a² + se_b²), its Satterthwaite degrees of freedom)."""
+    v = p.se**2 + q.se**2
+    if not (math.isfinite(v) and v > 0):
+        return 0.0, 1.0
+    dof = v**2 / (p.se**4 / p.dof + q.se**4 / q.dof)
+    return abs(p.c - q.c) / math.sqrt(v), dof
+
+
+def _names(thermal: ThermalFit, k: int) -> list[str]:
+    """The temperature channels' names in column order: the thermal fit's ``others`` hold
+    the other channels in column order, its own sits at ``channel_index``."""
+    others = list(thermal.others)
+    if len(others) != k - 1:
+        return [thermal.channel if j == thermal.channel_index else f"channel {j}"
+                for j in range(k)]
+    others.insert(thermal.channel_index, thermal.channel)
+    return others
+
+
+def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
+                trans: list[cz.Candidate], rate_b: float,
+                screen: Any | None = None) -> CouplingChange | None:
+    """The test (module doc) on one axis's slow view ``y`` (``rate_b`` blocks per second)
+    against every logged channel ``temps`` through every lag of ``LAGS`` and the thermal
+    fit's own; ``trans``: the transients found on the axis (taken out of ``y`` first);
+    ``screen``: the input screen's log (its holes in a channel's log are gaps). None where
+    no coupling was tested or the record is too short for the parts."""
+    if thermal is None or temps is None or len(y) < 2 * 256:
+        return None
+    n = len(y)
+    record_s = n / rate_b
+    found = [c for c in trans if c.passed and c.cause != "drift"]
+    yc = np.asarray(y, dtype=float) - (tr.signal_of(found, n, rate_b) if found else 0.0)
+    names = _names(thermal, temps.shape[1])
+    f = 1 << max(0, math.ceil(math.log2(n / MAX_POINTS)))
+    m = (n // f) * f
+    rate = rate_b / f
+    ys = yc[:m].reshape(-1, f).mean(axis=1)
+    M = len(ys)
+    edges = np.linspace(0, M, SEGMENTS + 1).astype(int)
+    ref = allan2(ys, ys, rate)  # the axis's EDF (the same for every regressor)
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
+    axes = None
+    regressors = [(j, float(L)) for j in range(temps.shape[1]) for L in LAGS
+                  if L <= record_s / 8]
+    if (thermal.channel_index, float(thermal.lag_s)) not in regressors:
+        regressors.append((thermal.channel_index, float(thermal.lag_s)))
+    trials = len(regressors) * len(GRID)
+    best: tuple[_Split, int, float] | None = None
+    chans = {j: np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+             for j in {j for j, _ in regressors}}
+    floors = {j: rounding_floor_tau(T, rate) for j, T in chans.items()
+              if np.all(np.isfinite(T)) and np.ptp(T) > 0}
+    for j, L in regressors:
+        if j not in floors:
+            continue
+        T = chans[j]
+        mt = min_tau_for(L, floors[j])
+        if not math.isfinite(mt):
+            continue
+        u = lag_filter(T, L, rate)
+        holes = [] if screen is None else [
+            (math.floor(h0 * rate), math.ceil(h1 * rate))
+            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0]
+        keep = hole_mask(M, holes, L, rate)
+        try:
+            if keep is None:
+                if axes is None:
+                    axes = axes_differences(ys[:, None], edges)
+                segs = lag_octave_sums(axes, u, L, rate)
+            else:
+                X = without_start(np.column_stack([ys, u]), L, rate)
+                segs = octave_sums_by_part(X, edges, keep)
+        except (DataError, FitError, ValueError):
+            continue
+        got = _splits(segs, rate, edf_ref, n_ref, mt, trials)
+        if got is not None and (best is None
+                                or got.z / got.threshold > best[0].z / best[0].threshold):
+            best = (got, j, L)
+    if best is None:
+        return None
+    sp, j, L = best
+    p, q, frac = sp.before, sp.after, sp.frac
+    if sp.z >= sp.threshold:
+        # the time estimated after the test (the decision is the grid's), and each part's
+        # coupling refitted on its own (its own lag) on the parts the time makes
+        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
+        X = without_start(np.column_stack([ys, lag_filter(T, L, rate)]), L, rate)
+        keep = None if screen is None else hole_mask(M, [
+            (math.floor(h0 * rate), math.ceil(h1 * rate))
+            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0], L, rate)
+        frac = _change_time(X, keep, rate, frac)
+        # a step or an excursion edge the transient search found near the change is its
+        # jump, timed to a second (the least squares in levels drifts with the axis's
+        # random walk: 770 s late on two 4 h re-mounts, their steps then still claimed)
+        near = [t for t in _event_times(found)
+                if abs(t / record_s - sp.frac) <= 2 * (GRID[1] - GRID[0])]
+        if near:
+            frac = min(near, key=lambda t: abs(t / record_s - frac)) / record_s
+        k = round(frac * n)
+        p, q = (_refit(yc[a:b], temps[a:b], j, names[j], rate_b, screen, a, fb)
+                for (a, b), fb in (((0, k), p), ((k, n), q)))
+    return CouplingChange(frac * record_s, p, q, sp.z, sp.threshold, names[j], L, trials,
+                          record_s)
+
+
+def _refit(y: NDArray, temps: NDArray, j: int, name: str, rate_b: float,
+           screen: Any | None, first: int, fallback: Part) -> Part:
+    """The coupling of one part (a record of its own) as explain fits a whole record's on
+    the same channel (``fit_thermal_axes``: its own lag, the coefficient's interval with
+    the lag's share): the numbers the line gives. A change of the coupling leaves the whole
+    record's lag an average too (on a sign flip it moved 174 s to 642 s). ``first``: the
+    part's first block (its holes are the screen's, shifted); ``fallback``: the test's own
+    fit of the part, kept where the refit cannot be made."""
+    from avard.core.explain.thermal_fit import fit_thermal_axes
+
+    holes = None if screen is None else {0: [
+        (math.floor(h0 * rate_b) - first, math.ceil(h1 * rate_b) - first)
+        for h0, h1 in screen.holes(name) if h1 - h0 >= 1.0]}
+    try:
+        fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]], [name],
+                               rate_b, holes)[0]
+    except (DataError, FitError, ValueError):
+        return fallback
+    return Part(fit.coefficient, fit.coef_se, fallback.dof, fit.lag_s)
+
+
+#: The block (s) whose means' differences estimate the change time (``_change_time``).
+TIME_BLOCK_S = 60.0
+
+
+def _change_time(X: NDArray, keep: NDArray[np.bool_] | None, rate: float,
+                 frac: float) -> float:
+    """The change time (fraction of the record) within a grid step of the grid's best
+    ``frac``: the split that leaves the least residual when the axis's ``TIME_BLOCK_S``
+    means are regressed on the lagged temperature's, with an offset and a coefficient of
+    their own on each side (so a jump at the split is free). Levels, not differences: the
+    differences of minute means of a logged channel are mostly its 0.0625 K rounding,
+    which pulled their coefficient to a third of the truth and the split 450 s late; the
+    lagged temperature's swing in levels is many steps. Least squares, an estimate (the z
+    scan's best time leans towards the side whose part is cleaner)."""
+    k = max(1, round(TIME_BLOCK_S * rate))
+    m = len(X) // k
+    if m < 16:
+        return frac
+    B = X[:m * k].reshape(m, k, 2).mean(axis=1)
+    ok = np.ones(m, dtype=bool)
+    if keep is not None:
+        ok = np.asarray(np.asarray(keep[:m * k]).reshape(m, k).all(axis=1), dtype=bool)
+    w = ok.astype(float)
+    yv, uv = np.where(ok, B[:, 0], 0.0), np.where(ok, B[:, 1], 0.0)
+    S = [np.concatenate([[0.0], np.cumsum(v)])
+         for v in (w, uv, yv, uv * uv, uv * yv, yv * yv)]
+
+    def rss(lo: NDArray, hi: NDArray) -> NDArray:
+        n_, su, sy, suu, suy, syy = (c[hi] - c[lo] for c in S)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vu = suu - su**2 / n_
+            cuy = suy - su * sy / n_
+            r = syy - sy**2 / n_ - np.where(vu > 0, cuy**2 / vu, 0.0)
+        return np.asarray(np.where(n_ > 2, r, np.inf))
+
+    step = GRID[1] - GRID[0]
+    j = np.arange(max(2, int((frac - step) * m)), min(m - 2, int((frac + step) * m)) + 1)
+    if len(j) == 0:
+        return frac
+    total = rss(np.zeros_like(j), j) + rss(j, np.full_like(j, m))
+    return float(j[int(np.argmin(total))] / m)
+
+
+def _times(c: cz.Candidate) -> list[float]:
+    """The times (s) a step or an excursion jumps at ([] for other causes)."""
+    if c.cause == "bias_step":
+        return [float(c.params.get("time_s", math.nan))]
+    if c.cause == "excursion":
+        return [float(c.params["start_s"]), float(c.params["end_s"])]
+    return []
+
+
+def _event_times(cands: list[cz.Candidate]) -> list[float]:
+    return [t for c in cands if c.passed for t in _times(c) if math.isfinite(t)]
+
+
+def _near(c: cz.Candidate, ch: CouplingChange) -> bool:
+    """Whether a step or excursion edge of ``c`` lies within the change's window."""
+    return any(abs(t - ch.time_s) <= ch.window_s for t in _times(c))
+
+
+def check(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
+          trans: list[cz.Candidate], missed: list[cz.Candidate], work: NDArray,
+          rate_b: float, noise_of: tr.NoiseOf, screen: Any | None = None
+          ) -> tuple[CouplingChange | None, list[cz.Candidate], list[cz.Candidate]]:
+    """(the test's outcome, claimed, not claimed transients): ``find_change``, then where
+    the coupling changed, a step (or an excursion edge) at the change not claimed and the
+    other transients refitted and tested again without it in ``work`` (the axis the
+    compound search ran on, ``noise_of`` its noise), as ``engine._compound`` does for a
+    transient taken out. The steps taken are kept in the outcome (``taken``) for
+    ``mark``."""
+    change = find_change(y, temps, thermal, trans, rate_b, screen)
+    if change is None or not change.changed or not any(_near(c, change) for c in trans):
+        return change, trans, missed
+    taken = tuple(c for c in trans if _near(c, change))
+    out = [replace(c, passed=False, intervals={}, evidence=c.evidence + (
+        f"; not claimed: at the time the thermal coupling changed (about "
+        f"{change.time_s:.4g} s), where the axis jumps by the change of the coupling times "
+        "the lagged temperature: model-dependent, its interval withheld"))
+        for c in taken]
+    kept = [c for c in trans if not _near(c, change) and c.cause != "drift"]
+    drift = [c for c in trans if c.cause == "drift"]
+    lost: list[cz.Candidate] = []
+    if kept:
+        kept, lost = tr.confirm_compound(work, rate_b, noise_of, kept)
+    return replace(change, taken=taken), [*kept, *drift], [*out, *lost, *missed]
+
+
+def mark(change: CouplingChange | None, findings: list[Finding]) -> list[Finding]:
+    """``findings`` with the test's own (never claimed) and, where the coupling changed,
+    the steps at the change and the whole-record coupling's finding marked model-dependent
+    with their intervals withheld (``--json`` keeps them as ``intervals_if_model_held``)."""
+    if change is None:
+        return findings
+    if change.changed:
+        for f in findings:
+            if f.cause == "temperature" and f.intervals:
+                f.model_dependent = True
+                f.intervals_if_model_held, f.intervals = f.intervals, {}
+            elif not f.claimed and f.cause in ("bias_step", "excursion"):
+                c = next((c for c in change.taken
+                          if c.cause == f.cause and c.params == f.params), None)
+                if c is not None:
+                    f.model_dependent = True
+                    f.intervals_if_model_held = dict(c.intervals)
+    return [*findings, change.finding()]
+
+
+def change_line(findings: list[Finding]) -> str | None:
+    """The line of a channel whose coupling changed (None elsewhere), from its findings."""
+    f = next((f for f in findings if f.cause == CAUSE and f.statistic >= f.threshold), None)
+    return None if f is None else f.evidence

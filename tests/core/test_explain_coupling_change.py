@@ -1,0 +1,149 @@
+"""A thermal coupling that changes midway (a re-mounted sensor) is said as such, and its jump
+is not claimed as a bias step; a real step beside a steady coupling stays a claimed step
+(core/explain/coupling_change.py; issue 23 item 5, the adversary's ``remount`` class)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from avard.core.explain.coupling_change import CAUSE, change_line, find_change
+from avard.core.explain.engine import explain_file
+from avard.core.explain.options import ExplainOptions
+from avard.core.explain.report import summary
+from avard.core.explain.thermal_fit import ThermalFit
+from avard.core.io.source import open_record
+from avard.daemon.commands.explain import _jsonable
+
+from tests.support.adversary_gen3 import make_record
+
+RATE = 1.0  # slow-view blocks per second
+
+
+def _slow(seed: int, hours: float = 4.0, switch: float | None = None, factor: float = -1.0,
+          c: float = 2e-3, step: tuple[float, float] | None = None
+          ) -> tuple[np.ndarray, np.ndarray, float]:
+    """A slow view (1 s blocks): a room cycle plus a wander as the logged channel (lag 0),
+    the axis c·T (×factor from ``switch``·record on), white noise of 1e-4 m/s² a block and
+    a random walk, and an optional (fraction, size) bias step. (y, temps (M, 1), change s)."""
+    rng = np.random.default_rng(seed)
+    n = int(hours * 3600 * RATE)
+    t = np.arange(n) / RATE
+    wander = np.cumsum(rng.standard_normal(n)) * 2e-3
+    T = 22.0 + 0.6 * np.sin(2 * np.pi * t / 1800.0 + rng.uniform(0, 6)) + wander
+    coef = np.full(n, c)
+    ts = math.nan
+    if switch is not None:
+        k = int(switch * n)
+        coef[k:] *= factor
+        ts = k / RATE
+    y = coef * (T - T.mean()) + 1e-4 * rng.standard_normal(n)
+    y += np.cumsum(rng.standard_normal(n)) * 2e-7
+    if step is not None:
+        y[int(step[0] * n):] += step[1]
+    return y, T[:, None], ts
+
+
+def _thermal(c: float = 2e-3) -> ThermalFit:
+    return ThermalFit("plate", 0, c, 1e-5, 0.0, 0.0, 0.0, 10.0, RATE)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_sign_flip_is_a_change_at_its_time_with_both_coefficients(seed):
+    y, T, ts = _slow(seed, switch=0.45, factor=-1.2)
+    ch = find_change(y, T, _thermal(), [], RATE)
+    assert ch is not None and ch.changed
+    assert abs(ch.time_s - ts) <= 0.02 * len(y) / RATE
+    assert ch.before.c == pytest.approx(2e-3, rel=0.1)
+    assert ch.after.c == pytest.approx(-2.4e-3, rel=0.1)
+    assert "a single coupling does not describe this record" in ch.line()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_one_coupling_with_a_step_it_did_not_see_is_no_change(seed):
+    """The step is not among the transients handed in (the search missed it): the split at
+    the step sees none, the others see it in one part, and one coupling stays one."""
+    y, T, _ = _slow(seed, step=(0.5, 3e-3))
+    ch = find_change(y, T, _thermal(), [], RATE)
+    assert ch is not None and not ch.changed
+    y, T, _ = _slow(100 + seed, c=0.0)  # and nothing coupled at all
+    ch = find_change(y, T, _thermal(0.0), [], RATE)
+    assert ch is not None and not ch.changed
+
+
+def test_a_remounted_sensor_is_said_and_its_jump_is_not_a_step(tmp_path):
+    """The adversary's re-mount (x: the sign flips, y: ×3.1, at 5981 s of 4 h): the line in
+    the text and the JSON, the coefficients before and after near the truth, and no bias step
+    claimed at the change (main printed it with ±3 % and ±1 s)."""
+    path = tmp_path / "r.npz"
+    truth = make_record("remount", 101, 4.0, path)
+    ex = explain_file(open_record(path), ExplainOptions(channels=("x", "y")))
+    text = summary(ex)
+    doc = ex.to_dict()
+    for ax in ("x", "y"):
+        tr = truth["axes"][ax]
+        ch = ex.channels[ax]
+        line = change_line(ch.findings)
+        assert line is not None and line in text and line in doc["channels"][ax]["caveats"]
+        f = next(f for f in ch.findings if f.cause == CAUSE)
+        assert not f.claimed
+        assert abs(f.params["time_s"] - tr["change_s"]) <= 0.02 * 4 * 3600
+        assert f.params["coefficient_before"] == pytest.approx(tr["coefficient_before"],
+                                                               rel=0.2)
+        assert f.params["coefficient_after"] == pytest.approx(tr["coefficient_after"],
+                                                              rel=0.2)
+        near = [g for g in ch.claimed if g.cause in ("bias_step", "excursion")]
+        assert not near, [g.params for g in near]
+        steps = [g for g in ch.findings if g.cause == "bias_step"
+                 and abs(g.params["time_s"] - tr["change_s"]) < 600]
+        assert steps and all(g.model_dependent and not g.intervals for g in steps)
+    # the finding serialises as the command writes it
+    json.dumps(_jsonable(doc), allow_nan=False)
+
+
+def test_a_real_step_beside_a_steady_coupling_stays_a_claimed_step(tmp_path):
+    """A 2e-3 m/s²/K coupling through 30 s and a 6e-4 m/s² bias step at mid-record: the step
+    is claimed with its interval, and no change is said."""
+    from dataclasses import replace
+
+    from tests.support.weekend import Weekend, save
+
+    rec = 4 * 3600.0
+    w = replace(Weekend(hours=4.0), coefficient=(2e-3, 0.0, 0.0), steps=[(0.5 * rec, 6e-4)])
+    ex = explain_file(open_record(save(5, w, tmp_path / "w.npz")),
+                      ExplainOptions(channels=("x",)))
+    ch = ex.channels["x"]
+    assert change_line(ch.findings) is None
+    assert "coupling changed" not in summary(ex)
+    steps = [f for f in ch.claimed if f.cause == "bias_step"]
+    assert len(steps) == 1 and abs(steps[0].params["time_s"] - 0.5 * rec) < 120
+    # (model-dependent it may be, by the verdict's χ² tests; not by a change of coupling)
+    assert steps[0].intervals and "coupling changed" not in steps[0].evidence
+    assert any(f.cause == "temperature" for f in ch.claimed)
+
+
+def test_the_parts_coefficients_are_thermal_fits_regression():
+    """The parts' ĉ and analytic se, made for many sums at once, are ``tempco_from_cov``'s
+    on the same sums (the whole record's and one part's)."""
+    from avard.core.explain.coupling_change import _coefficients
+    from avard.core.explain.thermal_fit import allan2, cov_view, octave_sums_by_part
+    from avard.core.explain.thermal_fit import tempco_from_cov as tfc
+
+    y, T, _ = _slow(3, hours=2.0)
+    X = np.column_stack([y, T[:, 0]])
+    ref = allan2(y, y, RATE)
+    edf = np.asarray(ref.edf, dtype=float)
+    edf = edf[:, 0] if edf.ndim == 2 else edf
+    n_ref = np.asarray(ref.n, dtype=float)
+    segs = octave_sums_by_part(X, np.linspace(0, len(y), 5).astype(int))
+    whole = sum(segs[1:], start=segs[0])
+    for sums in (whole, segs[0] + segs[1]):
+        want = tfc(cov_view(sums, RATE, edf, n_ref), 4.0)
+        K = len(sums.ms)
+        c, se = _coefficients(sums.n[None].astype(float), sums.s2[None], sums.ms, RATE,
+                              edf, n_ref, 4.0)
+        assert K > 4
+        assert c[0] == pytest.approx(want[0], rel=1e-9)
+        assert se[0] == pytest.approx(want[1], rel=1e-9)

@@ -1,0 +1,132 @@
+"""The held-out test's calibration on described sensors (heldcal27, issue 23 item 5).
+
+The held-out χ² weighs each τ's residual with the held-out estimator's covariance. That
+covariance is the Whittle form of the model's spectrum, a quadratic form in the noise terms'
+θ, and θ was fitted on the other half: ``holdout._noise_scatter`` adds its expectation over
+θ's distribution (E[C(θ)] − C(θ̂)), so a half that under-reads a random walk or a flicker
+does not judge the other half's long τ with too small a variance. Here: that addition is the
+expectation it claims to be (an exact check on a quadratic form), the fold χ² of halves of a
+white + flicker + random-walk sensor is not piled below 1 % (nor inflated away from it), and
+a held-out half with a signal the model does not have still fails at 1 %.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from avard.core.allan.streaming import StreamingAllan
+from avard.core.explain import holdout as ho
+from avard.core.explain.verdict import ALPHA, _chi2_sf
+from avard.core.model.fit import avar_estimate_covariance, fit_noise
+
+#: the weekend benchmark's sensor (tests/support/weekend.py): N m/s/√s, B m/s², K m/s²·√s
+N, B, K = 1.6e-4, 2e-5, 2e-6
+RATE, BLOCK, HOURS = 10.0, 16, 4.0  # explain's slow view of a 10 Hz record: 1.6 s blocks
+
+
+def _flicker(n: int, rng: np.random.Generator) -> np.ndarray:
+    """Kasdin's fractional-difference flicker (α = 1) on unit white noise: AVAR 2 ln 2/π per
+    unit B² (written here apart from the project's simulator, as the weekend generator's)."""
+    k = np.arange(1, n)
+    h = np.concatenate([[1.0], np.cumprod((k - 0.5) / k)])
+    size = 1 << math.ceil(math.log2(2 * n))
+    w = rng.standard_normal(n)
+    return np.fft.irfft(np.fft.rfft(w, size) * np.fft.rfft(h, size), size)[:n]
+
+
+def _slow_axis(seed: int) -> tuple[np.ndarray, float]:
+    """Block means of one described-sensor axis (white + flicker + random walk) and their
+    rate."""
+    rng = np.random.default_rng(seed)
+    n = int(HOURS * 3600 * RATE)
+    a = (N * math.sqrt(RATE) * rng.standard_normal(n) + B * _flicker(n, rng)
+         + K * math.sqrt(1 / RATE) * np.cumsum(rng.standard_normal(n)))
+    m = (n // BLOCK) * BLOCK
+    return a[:m].reshape(-1, BLOCK).mean(axis=1), RATE / BLOCK
+
+
+def _p_heldout(y: np.ndarray, rate_b: float, y_held_b: np.ndarray | None = None) -> float:
+    """The verdict's held-out p of an axis that claims nothing: both folds of its halves (the
+    second half replaced by ``y_held_b`` when given), χ² with the prediction's variance."""
+    h = len(y) // 2
+    second = y[h:] if y_held_b is None else y_held_b
+    A = ho.Part(y[:h], 0.0, "first half", True)
+    Bp = ho.Part(second, h / rate_b, "second half", False)
+    folds = [ho._fold(f, g, ho.Claims(), rate_b, True, None, None) for f, g in ((A, Bp),
+                                                                              (Bp, A))]
+    return _chi2_sf(sum(f.chi2_ext_pred for f in folds), sum(f.n_points for f in folds))
+
+
+def _avar(y: np.ndarray, rate: float):  # type: ignore[no-untyped-def]
+    sa = StreamingAllan(1, rate)
+    sa.update(np.asarray(y, dtype=float)[:, None])
+    return sa.result()
+
+
+def test_the_noise_scatter_is_the_estimators_covariance_averaged_over_the_fitted_terms():
+    """E[C(θ)] for θ ~ (θ̂, Cov θ), C quadratic in θ, is exactly the mean of C over the 2d
+    sigma points θ̂ ± √d·Lₖ (L a Cholesky factor of Cov θ): the scatter added must be that
+    mean less C(θ̂), whatever factor of Cov θ the function itself uses."""
+    y, rb = _slow_axis(7)
+    h = len(y) // 2
+    model = fit_noise(_avar(y[:h], rb))
+    held = _avar(y[h:], rb)
+    got = ho._noise_scatter(model, held)
+    comps = model.components
+    cov = np.array(model.theta_cov, dtype=float)
+    for k, c in enumerate(comps):  # the absent terms' standard error U²/z, θ̂ = 0
+        te = model.terms.get(c.label)
+        if te is not None and not te.present and te.upper:
+            cov[k, k] += (te.upper**2 / model.z_present) ** 2
+    act = [k for k in range(len(comps)) if cov[k, k] > 0]
+    assert act, "the fit has no uncertain term: nothing to check"
+    L = np.linalg.cholesky(cov[np.ix_(act, act)] + 1e-30 * np.eye(len(act)))
+    m = np.asarray(held.m)
+    stride = np.asarray(getattr(held, "stride", np.ones_like(m)), dtype=float)
+    n_samp = (np.asarray(held.n, float) - 1.0) * stride + 2.0 * m
+    theta = np.asarray(model.theta, dtype=float)
+
+    def C(th: np.ndarray) -> np.ndarray:
+        return avar_estimate_covariance(comps, th, m, n_samp, float(held.rate_hz), stride)
+
+    d = len(act)
+    mean = np.zeros((len(m), len(m)))
+    for k in range(d):
+        for s in (1.0, -1.0):
+            th = theta.copy()
+            th[act] += s * math.sqrt(d) * L[:, k]
+            mean += C(th) / (2 * d)
+    want = mean - C(theta)
+    ok = np.isfinite(want)
+    scale = np.sqrt(np.outer(np.diag(want), np.diag(want)))[ok]
+    assert np.all(np.abs(got[ok] - want[ok]) <= 1e-4 * scale + 1e-300)
+    assert np.all(np.diag(got) >= 0) and np.diag(got).max() > 0
+
+
+def test_described_sensor_halves_are_not_piled_below_one_percent():
+    """Sixty 4 h records of white + flicker + random walk (the weekend benchmark's levels),
+    each judged as the verdict judges an axis that claims nothing: a calibrated test at 1 %
+    fails ≤ 3 of 60 with probability 99.7 %, at 10 % ≤ 12 with 99.3 %; and it is not
+    inflated out of use either (below p 0.5 on ≥ 15 of 60: a calibrated one falls below 14
+    with probability 1e-5). Without the noise terms' scatter the held-out p of these records
+    fell below 10 % on 16 of 60."""
+    p = np.array([_p_heldout(*_slow_axis(seed)) for seed in range(1120, 1180)])
+    assert np.all(np.isfinite(p))
+    assert np.count_nonzero(p < ALPHA) <= 3, np.sort(p)[:6]
+    assert np.count_nonzero(p < 0.10) <= 12, np.sort(p)[:14]
+    assert np.count_nonzero(p < 0.50) >= 15, np.sort(p)
+
+
+def test_a_signal_the_model_does_not_have_still_fails_the_held_out_test():
+    """Outside the candidate set: a relay switching the bias by ±2·B every 5 minutes (a
+    10-minute square wave; no IEEE term, no line the fit carries) in the second half only.
+    The scatter the noise terms' uncertainty adds does not absorb it: the held-out test still
+    fails at 1 %, on each of five records."""
+    for seed in range(5):
+        y, rb = _slow_axis(300 + seed)
+        h = len(y) // 2
+        t = np.arange(len(y) - h) / rb
+        relay = 2.0 * B * np.sign(np.sin(2 * np.pi * t / 600.0 + seed))
+        p = _p_heldout(y, rb, y[h:] + relay)
+        assert p < ALPHA, (seed, p)
