@@ -366,7 +366,11 @@ def min_detectable_step(n_white: float, b_inst: float, k_rrw: float, record_s: f
     return float(Z_STEP * np.min(np.sqrt(2.0 * _noise_avar(w, n_white, b_inst, k_rrw))))
 
 
-def gauss_markov_rounding_floor(coefficient: float) -> float:
+#: The DS18B20's 12-bit reading step (K), the default of the rounding floors below.
+DS18B20_STEP_K = 0.0625
+
+
+def gauss_markov_rounding_floor(coefficient: float, step: float = DS18B20_STEP_K) -> float:
     """The σ (m/s²) a Gauss–Markov bump on a thermally coupled axis must exceed to be claimed:
     |c|·0.0625 K/√12, the RMS of the logged temperature's rounding error carried through the
     fitted coupling. The thermal model removes c·lag(T_logged); its residual keeps
@@ -374,12 +378,14 @@ def gauss_markov_rounding_floor(coefficient: float) -> float:
     a sawtooth whose period is the time to cross one reading step (≈ 80 s for ±0.215 °C over
     30 min), correlated like a Gauss–Markov process of that time (a plate-logged 2-minute-lag
     record of the benchmark, seed 99000: σ 3.9e-5 m/s², T 96 s, with c = 4.9e-3 m/s²/K, whose
-    rounding RMS is 8.9e-5). The lag only shrinks it, so this bounds it from above."""
-    return abs(coefficient) * _step() / math.sqrt(12.0)
+    rounding RMS is 8.9e-5). The lag only shrinks it, so this bounds it from above.
+    ``step``: the driving log's reading step (K; ``ThermalFit.grid``), 0.0625 K at 12 bits."""
+    return abs(coefficient) * step / math.sqrt(12.0)
 
 
 def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
-                    coefficient: float = 0.0) -> tuple[float, str]:
+                    coefficient: float = 0.0, step: float = DS18B20_STEP_K
+                    ) -> tuple[float, str]:
     """The smallest size (m/s²) a passed transient may have to be claimed, and why: what the
     logged temperature's resolution makes through the fitted coupling, |c|·0.0625 K (the
     DS18B20's step). The thermal model removes c·lag(T_logged), and the logged reading is the
@@ -392,20 +398,13 @@ def transient_floor(cand: Candidate, noise: dict[str, float], record_s: float,
     The cause's *stated minimum* (``min_detectable_warmup``/``_step``) is not a floor: it is
     a statement of power for planning, and it is computed from noise levels a transient
     itself inflates; a detection is decided by its test and its interval
-    (``transients.confirm_compound``)."""
-    q = _step()
+    (``transients.confirm_compound``). ``step``: the driving log's reading step (K;
+    ``ThermalFit.grid``), 0.0625 K at 12 bits."""
+    q = step
     rounding = abs(coefficient) * q
     return rounding, (f"what the logged temperature's {q:g} K resolution "
                       f"produces through the coupling ({abs(coefficient):.3g} m/s²/K × "
                       f"{q:g} K = {rounding:.3g} m/s²)")
-
-
-def _step() -> float:
-    """The logged readings' step (K): the record's (``thermal_fit.reading_grid``: the
-    DS18B20's 12-bit 0.0625 K unless the screen found a coarser log)."""
-    from avard.core.explain.thermal_fit import reading_step
-
-    return reading_step()[0]
 
 
 def size_z(cand: Candidate) -> float:

@@ -93,7 +93,6 @@ from avard.core.explain.thermal_fit import (
     hole_mask,
     path_of,
     reading_grid,
-    reading_step,
     signal_avar_on,
     with_paths,
 )
@@ -524,9 +523,8 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
         return explain_stream(source.source if isinstance(source, ScreenedSource) else source,
                               options, holdout=holdout, progress=progress, stage=stage,
                               base=an)
-    with reading_grid(screened.log.rounding_grid(options.temperature)):
-        return _explained(an, tap.slow, screened.log, meta, options,
-                          _held(holdout, options, meta), stage)
+    return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
+                      stage)
 
 
 class _SlowTap:
@@ -635,8 +633,7 @@ def explain_stream(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLA
         an = base
         for _ in tee():
             pass
-    with reading_grid(screened.log.rounding_grid(options.temperature)):
-        return _explained(an, tap.slow, screened.log, meta, options, held, stage)
+    return _explained(an, tap.slow, screened.log, meta, options, held, stage)
 
 
 def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dict[str, Any],
@@ -675,9 +672,13 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         holes = {i: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
                      for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
                  for i, j in enumerate(t_ok)} if screen is not None else None
+        # each log on its own step and origin (``screen.log_step``): a coarse log's
+        # reconstruction and rounding leave a finer log's fit as it is
+        grids = [None if screen is None else screen.rounding_grid(tnames[k]) for k in t_ok]
         th_fits, settled = _thermal_fits(y_slow[:, cols], t_slow[:, t_ok],
                                          [tnames[k] for k in t_ok], rate_b, holes,
-                                         [_noise_levels(ch.fit) for ch in an.channels.values()])
+                                         [_noise_levels(ch.fit) for ch in an.channels.values()],
+                                         grids)
     else:
         settled = [None] * len(cols)
     out: dict[str, ChannelExplanation] = {}
@@ -685,10 +686,12 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         if stage is not None:
             stage(f"explaining channel {name}")
         j = names.index(name)
-        out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
-                                     None if t_slow is None else t_slow[:, t_ok],
-                                     th, an, meta, always_compensate=temperature is not None,
-                                     holes=screen, settled=w0)
+        # the causes' rounding floors on the step of the log the axis's thermal model reads
+        with reading_grid(None if th is None else th.grid):
+            out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
+                                         None if t_slow is None else t_slow[:, t_ok],
+                                         th, an, meta, always_compensate=temperature is not None,
+                                         holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
             ch_ex.judge(None, screen=screen)
@@ -705,7 +708,8 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
 
 def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
                   holes: dict[int, list[tuple[int, int]]] | None,
-                  noise: list[dict[str, float]]
+                  noise: list[dict[str, float]],
+                  grids: list[tuple[float, float] | None] | None = None
                   ) -> tuple[list[ThermalFit | None], list[NDArray[np.float64] | None]]:
     """(each axis's thermal model with its path, each axis's warm-up beyond the lag
     filter's start state or None). A warm-up at the record's start is taken over by the
@@ -720,8 +724,9 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     (``thermal_paths.choose_path``'s ``warmups``: its size fitted jointly with each, on the
     axis as recorded). The warm-up is then tested again beside the path chosen, and one that
     passes is ``_explain_channel``'s, which fits no start state beside it. It is claimed, or
-    not, by the compound search as any warm-up."""
-    fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes)
+    not, by the compound search as any warm-up. ``grids``: each log's (step, origin), None
+    for the 12-bit default (``fit_thermal_axes``)."""
+    fits = fit_thermal_axes(Y, temps, tnames, rate_b, holes, grids=grids)
     settled: list[NDArray[np.float64] | None] = [None] * len(fits)
     nzs: dict[int, dict[str, float]] = {}
     found: dict[int, tuple[float, ...]] = {}
@@ -829,7 +834,7 @@ def _thermal_fits(Y: NDArray, temps: NDArray, tnames: list[str], rate_b: float,
     base: list[ThermalFit] = list(fits)  # each axis's one lag, the path choice's start
     if redo:
         Yw = Y[:, redo] - np.column_stack([first[a] for a in redo])
-        refit = fit_thermal_axes(Yw, temps, tnames, rate_b, holes)
+        refit = fit_thermal_axes(Yw, temps, tnames, rate_b, holes, grids=grids)
         again = with_paths(refit, Y[:, redo], temps, holes,
                            warmups={i: found[a] for i, a in enumerate(redo)})
         for a, th, b0 in zip(redo, again, refit, strict=True):
@@ -1231,7 +1236,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     # located): the rounding floor is said too, it is the reason that holds for the bump's σ
     if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
             and thermal.passed):
-        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal))
+        floor = cz.gauss_markov_rounding_floor(_rounding_gain(thermal), thermal.grid[0])
         # and where a relay is chosen or named beside the path kept, what its switch times
         # leave (``PathFit.relay_floor``): the removed relay's switch times are uncertain by
         # its own intervals, and one lag kept leaves a named relay's odd harmonics
@@ -1241,7 +1246,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + (
                 f"; not claimed: σ is below {floor:.3g} m/s², the RMS of the logged "
-                f"temperature's {reading_step()[0]:g} K rounding through the coupling "
+                f"temperature's {thermal.grid[0]:g} K rounding through the coupling "
                 f"({_rounding_gain(thermal):.3g} m/s²/K), which can look like a bump"))
             gm_fit = None
         elif gm.params.get("sigma", 0.0) < rf:
@@ -1313,7 +1318,8 @@ def _compound(work: NDArray, rate_b: float, noise_of: tr.NoiseOf, thermal: Therm
         lag = abs(thermal.lag_s)
         checked = []
         for c in found:
-            floor, why = cz.transient_floor(c, {}, record_s, _rounding_gain(thermal))
+            floor, why = cz.transient_floor(c, {}, record_s, _rounding_gain(thermal),
+                                            thermal.grid[0])
             T = c.params.get("time_constant_s", math.nan)
             if (c.cause == "warmup" and lag > 0 and lag / 3 <= T <= 3 * lag
                     and abs(c.params["size"]) <= start_span):

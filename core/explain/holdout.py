@@ -69,6 +69,7 @@ from avard.core.analysis.spectrum import line_components
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import (
+    DS18B20_STEP_K,
     ThermalFit,
     derounded,
     feed,
@@ -287,6 +288,10 @@ class Part:
     #: prediction through that log is interpolated there, so those blocks and the lag's
     #: settling after them are gaps of the held-out Allan variance (``_fold``)
     holes: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    #: the (step K, origin) of the claimed channel's readings in this part's record where it
+    #: is its own (a second record's logs screened for their own step); None: the thermal
+    #: model's (``ThermalFit.grid``)
+    grid: tuple[float, float] | None = None
 
     def rate(self, default: float) -> float:
         return default if self.rate_b is None else self.rate_b
@@ -354,7 +359,7 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         # logged series so that a part starts in the state the sensor was in
         th0 = replace(wt, channel_index=0)
         sf = th0.signal(u_fit[0][:, None])[u_fit[1]]
-        sh = th0.signal(u_held[0][:, None])[u_held[1]]
+        sh = replace(th0, grid=held.grid or th0.grid).signal(u_held[0][:, None])[u_held[1]]
         d_fit += sf - sf.mean()
         d_held += sh - sh.mean()
         # its response's size known to its coefficient's se (θ's own spread is not carried)
@@ -380,12 +385,13 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         else:
             # the lag runs over the whole logged series the part belongs to, so the part
             # starts in the state the sensor was in
-            uf = lag_filter(derounded(u_fit[0]), lag, rate_b)[u_fit[1]]
+            uf = lag_filter(derounded(u_fit[0], th.grid), lag, rate_b)[u_fit[1]]
             d_fit += coef * (uf - uf.mean())
         # the de-rounded log, as ``ThermalFit.signal`` removes it on the whole record: the
         # readings' rounding is not in the axis, and a negative lag's lead-lag (gain 2 at
         # high frequencies) would put it into the prediction as a misfit of the right model
-        uh = lag_filter(derounded(u_held[0]), lag, held.rate(rate_b))[u_held[1]]
+        uh = lag_filter(derounded(u_held[0], held.grid or th.grid), lag,
+                        held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
         if math.isfinite(th.coef_se) and th.coef_se > 0:
             spread.append((-th.coef_se * (uh - uh.mean()), th.coef_se * (uh - uh.mean())))
@@ -663,8 +669,10 @@ def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray |
         cols = [list(names).index(a) for a in axes]
         for first, part, ph in ((True, slice(0, h), halves[0]),
                                 (False, slice(h, None), halves[1])):
+            wt = claims[axes[0]].whole_thermal
             fits = fit_thermal_axes(y_slow[part][:, cols], t_slow[part, ch][:, None], ["t"],
-                                    rate_b, {0: ph.get(ch, [])}, lag_intervals=False)
+                                    rate_b, {0: ph.get(ch, [])}, lag_intervals=False,
+                                    grids=None if wt is None else [wt.grid])
             out.update({(a, first): f for a, f in zip(axes, fits, strict=True)})
     return out
 
@@ -717,9 +725,12 @@ def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray 
         j = list(names).index(name)
         c = claims_of(ch, t_names)
         fit = Part(y_slow[:, j], 0.0, "data", True)
-        held = Part(y_held[:, j], 0.0, "holdout", True, held_rate_b,
-                    holes=dict(held_holes or {}))
         k = c.thermal_channel
+        # the held-out log read on its own step (its screen's), not the record's
+        g = None if screen is None or k is None else (
+            screen.rounding_grid(t_names[k]) or (DS18B20_STEP_K, 0.0))
+        held = Part(y_held[:, j], 0.0, "holdout", True, held_rate_b,
+                    holes=dict(held_holes or {}), grid=g)
         why = None if k is None else (held_refused or {}).get(k)
         if why is None and k is not None and t_held is not None and np.count_nonzero(
                 np.isfinite(t_held[:, k])) < 2:
@@ -779,8 +790,8 @@ class ChannelPath:
 def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz: float,
                     floors: dict[int, float] | None = None,
                     holes: dict[int, list[tuple[int, int]]] | None = None,
-                    columns: dict[int, dict[Any, NDArray[np.float64]]] | None = None
-                    ) -> dict[int, ChannelPath]:
+                    columns: dict[int, dict[Any, NDArray[np.float64]]] | None = None,
+                    steps: dict[int, float] | None = None) -> dict[int, ChannelPath]:
     """Each channel ``j`` of ``lags0`` as the driver of axis ``y`` (slow view at
     ``rate_hz``) through its own lag ``lags0[j]`` (s, the lag scan's on the whole record),
     scored as ``thermal_paths.choose_path`` scores its candidates: the coefficient fitted on
@@ -798,7 +809,8 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     channel's holes (``holes``, with their settling), and one noise AVAR to weigh the
     residual against, the residual of all the channels together at their own lags on the
     whole record (what none of them explains). ``columns``: per channel, the regressors
-    already built for another axis (``path_columns``' ``done``)."""
+    already built for another axis (``path_columns``' ``done``); ``steps``: each channel's
+    reading step (K; default the 12-bit), its rounding's."""
     from avard.core.explain.thermal_fit import hole_mask, min_tau_for, octave_sums_by_part
     from avard.core.explain.thermal_paths.columns import path_columns, trials
     from avard.core.explain.thermal_paths.deviance import _fit, _held_dev, _resid, _View, _view
@@ -852,7 +864,7 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     vw = _view(whole, edf, whole.n, ok_tau, s_ref)
     out: dict[int, ChannelPath] = {}
     for j, L0 in lags0.items():
-        r_ref = sawtooth_avar(Ts[j], rate, ms / rate, L0)
+        r_ref = sawtooth_avar(Ts[j], rate, ms / rate, L0, step=(steps or {}).get(j))
         vh = [_view(h, edf, whole.n, ok_tau, s_ref, r_ref) for h in half]
         held, per_part = 0.0, []
         for a, b in ((0, 1), (1, 0)):

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field, replace
@@ -69,6 +69,7 @@ from avard.core.allan.deviations import (
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.explain import alarm
 from avard.core.explain.causes import noise_psd
+from avard.core.io.screen import is_coarse
 from avard.core.sim.thermal import lag_coefficients
 from numpy.typing import NDArray
 
@@ -157,7 +158,7 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     first and last readings as they are; ``T`` itself where it holds fewer than two runs.
     NaN stays NaN.
 
-    ``grid``: the readings' (step, origin), default the record's (``reading_grid``). On a
+    ``grid``: the readings' (step, origin), default the one in force (``reading_grid``). On a
     step coarser than the 12-bit one the straight lines miss the turns by up to half a
     step for as long as the readings dwell there (through a lag, a misfit at τ of the
     dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
@@ -165,17 +166,24 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     crossing and after the last (``_crossing_ends``) the spline's slope goes on within the
     reading's cell: held at the first knot's mid-level, the record's first dwell sat up to
     half a coarse step off for minutes, a start the lag filter carries into the τ of the
-    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K)."""
+    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K). A gap (NaN)
+    is bridged on the samples' own times, as the straight lines are: the spline is built on
+    the whole index with the gap's values a straight line between its neighbours (not on
+    the finite samples squeezed together, which ran it across the gap as if no time had
+    passed), and the gap stays NaN."""
     T = np.asarray(T, dtype=float)
     q, origin = reading_step() if grid is None else grid
-    if q > DS18B20_STEP_K * (1.0 + 1e-6):
+    if is_coarse(q):
         from avard.core.explain.thermal_paths.columns import crossing_reconstruction
 
         out = T.copy()
-        fin = np.isfinite(T)
-        if np.count_nonzero(fin) >= 4:
-            v = T[fin] - origin
-            out[fin] = _crossing_ends(v, crossing_reconstruction(v, q), q) + origin
+        ok = np.flatnonzero(np.isfinite(T))
+        if len(ok) >= 4:
+            # on the kept samples' own times: the gap bridged in a straight line (its values
+            # are off the grid, so the reconstruction does not clip them to a cell)
+            v = np.interp(np.arange(ok[0], ok[-1] + 1), ok, T[ok]) - origin
+            r = _crossing_ends(v, crossing_reconstruction(v, q), q) + origin
+            out[ok] = r[ok - ok[0]]
         return out
     out = T.copy()
     ok = np.flatnonzero(np.isfinite(T))
@@ -217,9 +225,20 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     return out
 
 
-def coarse_regressor(temps: NDArray) -> NDArray[np.float64]:
-    """The temperature channels (M, k) the thermal regression reads: as logged on the 12-bit
-    step, the crossing reconstruction (``derounded``) on a coarser one (``reading_grid``). A
+def channel_grids(grids: Sequence[tuple[float, float] | None] | None, k: int
+                  ) -> list[tuple[float, float]]:
+    """Each of ``k`` temperature channels' (step K, origin): ``grids``' (None, or a None
+    entry: the DS18B20's 12-bit (0.0625, 0))."""
+    return [(DS18B20_STEP_K, 0.0) if g is None else g
+            for g in (list(grids) if grids is not None else [None] * k)]
+
+
+def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None] | None = None
+                     ) -> NDArray[np.float64]:
+    """The temperature channels (M, k) the thermal regression reads, each on its own grid
+    (``grids``, per column; ``channel_grids``): as logged on the 12-bit step, the crossing
+    reconstruction (``derounded``) on a coarser one, column by column (a coarse log leaves a
+    finer one as logged). A
     coarse quantiser's gain at the drive is not 1 (its describing function: 1.037 for a
     ±0.5 K cycle on a 0.25 K step), an error in the variable no τ floor removes, which put
     ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
@@ -227,10 +246,12 @@ def coarse_regressor(temps: NDArray) -> NDArray[np.float64]:
     sawtooth they model is the readings', and on the smooth reconstruction a slower slope
     made the floor of a 0.5 K log infinite (no τ left to the regression)."""
     temps = np.asarray(temps, dtype=float)
-    if reading_step()[0] <= DS18B20_STEP_K * (1.0 + 1e-6):
-        return temps
     T = temps.reshape(len(temps), -1)
-    out = np.column_stack([derounded(T[:, j]) for j in range(T.shape[1])])
+    gs = channel_grids(grids, T.shape[1])
+    if not any(is_coarse(g[0]) for g in gs):
+        return temps
+    out = np.column_stack([derounded(T[:, j], g) if is_coarse(g[0]) else T[:, j]
+                           for j, g in enumerate(gs)])
     return out.reshape(temps.shape)
 
 
@@ -244,8 +265,9 @@ def coarse_gain_se(fit: ThermalFit, raw: NDArray, recon: NDArray) -> ThermalFit:
     0.91× and 1.08× the truth). Half the bracket, √(AVAR_raw/AVAR_recon) − 1 at the τ of the
     reconstruction's largest AVAR (the drive), is added in quadrature: 0.5 % at 0.125 K,
     2 % at 0.25 K, 8 % at 0.5 K. The detection's z is the regression's (the gain's error
-    scales a coupling that is there; it makes none)."""
-    if reading_step()[0] <= DS18B20_STEP_K * (1.0 + 1e-6) or not (
+    scales a coupling that is there; it makes none). The relative widening is kept on the fit
+    (``gain_rel``) for a path's coefficient beyond one lag (``_with_path``)."""
+    if not is_coarse(fit.grid[0]) or not (
             math.isfinite(fit.coef_se) and math.isfinite(fit.coefficient)):
         return fit
     j = fit.channel_index
@@ -259,7 +281,7 @@ def coarse_gain_se(fit: ThermalFit, raw: NDArray, recon: NDArray) -> ThermalFit:
         return fit
     k = int(np.argmax(np.where(ok, var[1], -np.inf)))
     rel = 0.5 * abs(math.sqrt(var[0][k] / var[1][k]) - 1.0)
-    return replace(fit, coef_se=math.hypot(fit.coef_se, rel * fit.coefficient))
+    return replace(fit, coef_se=math.hypot(fit.coef_se, rel * fit.coefficient), gain_rel=rel)
 
 
 #: Samples beyond the first (last) crossing whose slope the reconstruction carries back
@@ -961,19 +983,21 @@ def min_tau_for(lag_s: float, floor_s: float = 0.0) -> float:
 
 #: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
 DS18B20_STEP_K = 0.0625
-#: The (step K, origin) of the readings the thermal model fits: a log's own
-#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C), set by explain for the
-#: record (``reading_grid``). A context, not a parameter threaded through every call: the
-#: step is a property of the record that about fifteen rounding terms read in eight modules
-#: (the path candidates, their floors, the held-out test), each of which takes it explicitly
-#: too (``step``/``grid`` arguments) where its caller knows it.
+#: The (step K, origin) of the readings of the channel being modelled: a log's own
+#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C). Each log is read on its
+#: own: the fit takes every channel's grid explicitly (``fit_thermal_axes``' ``grids``,
+#: ``ThermalFit.grid``), and this context is set to the driving channel's only around what
+#: reads it without an argument for it (a path's candidates and floors, ``with_paths``; a
+#: path's signal, ``ThermalFit.signal``; the causes' rounding floors, engine's
+#: ``_explain_channel``). Never the record's: a coarse log must leave a finer one's model as
+#: it is.
 _GRID: ContextVar[tuple[float, float]] = ContextVar("avard_reading_grid",
                                                      default=(DS18B20_STEP_K, 0.0))
 
 
 def reading_step() -> tuple[float, float]:
     """The (step K, origin) of the readings in force (``reading_grid``), the DS18B20's 12-bit
-    (0.0625, 0) unless explain set the record's."""
+    (0.0625, 0) unless set to the modelled channel's."""
     return _GRID.get()
 
 
@@ -1203,6 +1227,12 @@ class ThermalFit:
     #: examined). When it is not one lag, ``coefficient``/``coef_se`` are its linear
     #: coupling's and ``lag_s`` its first lag, and ``signal`` is the path's
     path: PathFit | None = field(default=None, repr=False)
+    #: the (step K, origin) of the driving channel's readings (``screen.log_step``; the
+    #: DS18B20's 12-bit by default): its de-rounding and rounding terms are on it
+    grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)
+    #: on a coarse grid, the reconstruction's relative gain uncertainty carried in
+    #: ``coef_se`` (``coarse_gain_se``; 0 on the 12-bit step)
+    gain_rel: float = 0.0
 
     @property
     def mechanism(self) -> str:
@@ -1233,10 +1263,12 @@ class ThermalFit:
             # its standard error for the removal's covariance)
             b0 = float(self.path.chosen.beta[0])
             k = self.coefficient / b0 if b0 else 1.0
-            return k * self.path.signal(temps[:, self.channel_index], y)
+            with reading_grid(self.grid):
+                return k * self.path.signal(temps[:, self.channel_index], y)
         # the readings' rounding is not in the axis (the die is not rounded): removed with
         # the signal, it is added to the compensated axis (``derounded``)
-        u = lag_filter(derounded(temps[:, self.channel_index]), self.lag_s, self.rate_hz)
+        u = lag_filter(derounded(temps[:, self.channel_index], self.grid), self.lag_s,
+                       self.rate_hz)
         d = self.coefficient * (u - u.mean())
         if y is None or self.lag_s == 0:
             return d
@@ -1531,7 +1563,9 @@ def fit_thermal(y: NDArray, temps: NDArray, names: list[str], rate_hz: float) ->
 def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
                      holes: Holes | None = None, lag_intervals: bool = True,
                      paths: bool = False,
-                     warmups: dict[int, tuple[float, ...]] | None = None) -> list[ThermalFit]:
+                     warmups: dict[int, tuple[float, ...]] | None = None,
+                     grids: Sequence[tuple[float, float] | None] | None = None
+                     ) -> list[ThermalFit]:
     """The thermal model of every axis of ``Y`` (M, C) (slow view at ``rate_hz``) against the
     temperature channels ``temps`` (M, k) °C named ``names`` (see module doc). ``holes``: per
     channel, the blocks its log says nothing about (the input screen's dropouts, stuck runs,
@@ -1540,11 +1574,15 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     estimates); the lag's interval is then the estimate itself. ``paths``: for each axis
     whose coupling passes its test, the thermal path beyond one lag chosen by held-out
     likelihood (``thermal_paths.choose_path``) on its driving channel, beside the warm-ups
-    ``warmups`` (``with_paths``)."""
+    ``warmups`` (``with_paths``). ``grids``: each channel's (step K, origin) (None, or a
+    None entry: the 12-bit default; ``screen.ScreenLog.rounding_grid``): each channel's
+    regressor, rounding floor and coefficient's interval on its own step, so a coarse log
+    leaves a finer channel's fit as it is."""
     holes = holes or {}
     Y = np.asarray(Y, dtype=float)
+    gs = channel_grids(grids, np.asarray(temps).reshape(len(Y), -1).shape[1])
     # the rounding floors stay the readings' own (``coarse_regressor``)
-    raw, temps = temps, coarse_regressor(temps)
+    raw, temps = temps, coarse_regressor(temps, gs)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
     # lags sought are minutes); the chosen lag is then fitted on the whole slow view
@@ -1559,7 +1597,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     for j in range(temps.shape[1]):
         hj = [(a // f, b // f) for a, b in holes.get(j, [])]
         floor = rounding_floor_tau(raw[:m].reshape(-1, f, raw.shape[1]).mean(axis=1)[:, j],
-                                   rate_s)
+                                   rate_s, step=gs[j][0])
         per_axis = [sorted(sc, key=lambda p: p.lag)
                     for sc in _scan(Ys, Ts[:, j], grid, rate_s, hj, ref, floor)]
         # coarse to fine: twice between the neighbouring lags of each axis's best
@@ -1576,13 +1614,14 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
             per_axis = _with_lag_jackknife(per_axis, grid, Ys, Ts[:, j], rate_s, hj, ref,
                                            floor)
         scans[j] = per_axis
-    floors = {j: rounding_floor_tau(raw[:, j], rate_hz) for j in scans}
+    floors = {j: rounding_floor_tau(raw[:, j], rate_hz, step=gs[j][0]) for j in scans}
     # each channel's held-out regressors (``holdout.channel_heldout``), built once for every
     # axis that scores the channel at the same lag (the same slow view of the same channel)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     fits = [_pick(Y[:, a], temps, names, rate_hz, {j: scans[j][a] for j in scans}, holes,
-                  floors, columns) for a in range(Y.shape[1])]
-    fits = [coarse_gain_se(ft, raw, temps) for ft in fits]
+                  floors, columns, {j: g[0] for j, g in enumerate(gs)})
+            for a in range(Y.shape[1])]
+    fits = [coarse_gain_se(replace(ft, grid=gs[ft.channel_index]), raw, temps) for ft in fits]
     return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
 
 
@@ -1599,14 +1638,21 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     on it, each a nuisance column of free size beside every candidate (``choose_path``)."""
     Y = np.asarray(Y, dtype=float)
     if floors is None:
-        floors = {j: rounding_floor_tau(temps[:, j], fits[0].rate_hz)
-                  for j in range(temps.shape[1])} if fits else {}
+        # each driving channel's on its own step (``ThermalFit.grid``)
+        floors = {f.channel_index: rounding_floor_tau(temps[:, f.channel_index], f.rate_hz,
+                                                      step=f.grid[0]) for f in fits}
     # the path regressors of a channel, built once for all the axes it drives (the same
     # slow view of the same channel: the same columns)
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
-    return [_with_path(f, Y[:, a], temps, holes, floors, columns.setdefault(f.channel_index, {}),
-                       (warmups or {}).get(a, ()), (given or {}).get(a, ()))
-            for a, f in enumerate(fits)]
+    out = []
+    for a, f in enumerate(fits):
+        # the path's candidates, their rounding floors and texts on the driving channel's
+        # own step (``reading_grid``, read where the path modules have no argument for it)
+        with reading_grid(f.grid):
+            out.append(_with_path(f, Y[:, a], temps, holes, floors,
+                                  columns.setdefault(f.channel_index, {}),
+                                  (warmups or {}).get(a, ()), (given or {}).get(a, ())))
+    return out
 
 
 def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
@@ -1624,7 +1670,10 @@ def _with_path(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     # better than one lag and than nothing): on an axis whose one-lag z failed, that test is
     # the claim's
     test = {} if fit.passed else {"z": s.z_extra, "threshold": pf.z_threshold}
-    return replace(fit, path=pf, coefficient=float(s.beta[0]), coef_se=float(s.beta_se[0]),
+    # the path's se is its regression's: a coarse log's gain uncertainty (``coarse_gain_se``)
+    # is added to it as to the one lag's
+    b, se = float(s.beta[0]), float(s.beta_se[0])
+    return replace(fit, path=pf, coefficient=b, coef_se=math.hypot(se, fit.gain_rel * b),
                    lag_s=float(s.theta[0]), lag_lo=float(s.theta_lo[0]),
                    lag_hi=float(s.theta_hi[0]), lag_open=s.open_end, **test)
 
@@ -1640,7 +1689,8 @@ def path_of(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
 
     j = fit.channel_index
     if floors is None or j not in floors:
-        floors = {**(floors or {}), j: rounding_floor_tau(temps[:, j], fit.rate_hz)}
+        floors = {**(floors or {}), j: rounding_floor_tau(temps[:, j], fit.rate_hz,
+                                                          step=fit.grid[0])}
     keep = hole_mask(len(y), (holes or {}).get(j, []), max(abs(fit.lag_s), 60.0),
                      fit.rate_hz)
     ref = fit.allan
@@ -1659,9 +1709,11 @@ def path_of(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
           best: dict[int, list[ScanPoint]], holes: Holes | None = None,
           floors: dict[int, float] | None = None,
-          columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None) -> ThermalFit:
+          columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None,
+          steps: dict[int, float] | None = None) -> ThermalFit:
     """The driving channel and lag of one axis from its scans, with the profile interval;
-    ``columns``: per channel, the held-out regressors other axes built (``_choose_channel``)."""
+    ``columns``: per channel, the held-out regressors other axes built (``_choose_channel``);
+    ``steps``: each channel's reading step (K; default the 12-bit)."""
     zmax = {j: max(s.z for s in sc) for j, sc in best.items()}
 
     def at_end(sc: list[ScanPoint]) -> bool:
@@ -1682,7 +1734,7 @@ def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
               if math.isfinite((floors or {}).get(j, 0.0))}
     if len(usable) > 1:
         jb, compared, note = _choose_channel(y, temps, names, rate_hz, usable, holes, floors,
-                                             columns)
+                                             columns, steps)
     elif len(usable) == 1:
         jb = next(iter(usable))
     scan = best[jb]
@@ -1765,7 +1817,8 @@ def path_distance(lag_s: float) -> float:
 def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,
                     best: dict[int, list[ScanPoint]], holes: Holes | None,
                     floors: dict[int, float] | None,
-                    columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None
+                    columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None,
+                    steps: dict[int, float] | None = None
                     ) -> tuple[int, dict[str, dict[str, float]], str]:
     """The channel that drives axis ``y``, by the held-out likelihood of each channel
     through its own lag (``holdout.channel_heldout``), not by the scan's z: (its index, per
@@ -1792,7 +1845,7 @@ def _choose_channel(y: NDArray, temps: NDArray, names: list[str], rate_hz: float
     lags0 = {j: best_lag(sc, ks[j]) for j, sc in best.items()}
     is_open = {j: ks[j] in (0, len(sc) - 1) for j, sc in best.items()}
     interior = not all(is_open.values())
-    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes, columns)
+    hp = channel_heldout(y, temps, lags0, rate_hz, floors, holes, columns, steps)
     # a channel whose held-out fit gave no number (NaN) can neither win nor tie
     cost = {j: (hp[j].heldout if math.isfinite(hp[j].heldout) else math.inf)
             + (OPEN_END_MARGIN if is_open[j] and interior else 0.0) for j in best}

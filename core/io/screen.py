@@ -266,19 +266,19 @@ class ScreenLog:
         0.0625 K (a DS18B20 at 9–11 bits, a °F log taken as °C, a coarse print); None
         otherwise."""
         grid = self.steps.get(channel)
-        if grid is None or grid[0] <= DS18B20_STEP_C * (1.0 + 1e-6):
+        if grid is None or not is_coarse(grid[0]):
             return None
         return coarse_cause(grid) if cause else coarse_text(grid)
 
-    def rounding_grid(self, channel: str | None = None) -> tuple[float, float] | None:
-        """The (step, origin) the thermal model's rounding terms take for this record: the
-        coarsest of its usable logs' steps coarser than the 12-bit 0.0625 K (``channel``: only
-        that log's), None where none is (the 12-bit default). One step for the record: a
-        larger rounding only raises a finer channel's floors."""
-        grids = [g for nm, g in self.steps.items()
-                 if g is not None and channel in (None, nm) and nm not in self.refused
-                 and self.coarse(nm) is not None]
-        return max(grids, default=None)
+    def rounding_grid(self, channel: str) -> tuple[float, float] | None:
+        """The (step, origin) of ``channel``'s own readings where it is coarser than the
+        12-bit 0.0625 K and the log is used (not refused); None otherwise (the 12-bit
+        default). Each log is read on its own step and origin: a coarse log leaves the
+        reconstruction, the regressor and the rounding floors of a finer one as they are."""
+        grid = self.steps.get(channel)
+        if grid is None or channel in self.refused or self.coarse(channel) is None:
+            return None
+        return grid
 
     def counts(self) -> dict[str, int]:
         """Stretches per kind."""
@@ -304,7 +304,7 @@ class ScreenLog:
                 "refused": dict(self.refused),
                 "temperature_units": self.units,
                 "reading_steps": {k: None if v is None else
-                                  {"step_k": v[0], "origin": v[1],
+                                  {"step_k": v[0], "origin_k": v[1],
                                    "coarse": bool(self.coarse(k))}
                                   for k, v in self.steps.items()},
                 "rules": ("acceleration: a sample > 12 robust σ of the sample scale from the "
@@ -1415,6 +1415,13 @@ def _grid_share(v: NDArray[np.float64], origin: float, step: float, tol: float) 
     """The share of the distinct values ``v`` within ``tol`` of the grid origin + k·step."""
     r = (v - origin) / step
     return float(np.mean(np.abs(r - np.rint(r)) * step <= tol))
+
+
+def is_coarse(step: float) -> bool:
+    """Whether readings on ``step`` (K) are coarser than the DS18B20's 12-bit 0.0625 K, the
+    step the thermal model's 12-bit path assumes (its straight-line de-rounding, its
+    regressor as logged)."""
+    return step > DS18B20_STEP_C * (1.0 + 1e-6)
 
 
 #: Candidate steps (K) of a temperature log's readings, coarsest first: the DS18B20's four

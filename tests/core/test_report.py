@@ -149,9 +149,12 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
     # the input screen (core/io/screen.py) says what it masked: nothing on a clean record
     # (``notes``/``refused``: what it found of each temperature log as a whole, and the logs
     # the thermal model must not use: none on a clean record; ``temperature_units``: the
-    # logs' units as asked, --temperature-units, auto by default)
+    # logs' units as asked, --temperature-units, auto by default; ``reading_steps``: each
+    # log's reading step and origin, K, and whether it is coarser than the 12-bit 0.0625 K)
     assert set(d["screened"]) == {"counts", "samples_masked", "stretches", "rules", "units",
-                                  "notes", "refused", "temperature_units"}
+                                  "notes", "refused", "temperature_units", "reading_steps"}
+    for v in d["screened"]["reading_steps"].values():
+        assert v is None or (set(v) == {"step_k", "origin_k", "coarse"} and not v["coarse"])
     assert d["screened"]["temperature_units"] == "auto"
     assert d["screened"]["counts"] == {} and d["screened"]["samples_masked"] == 0
     assert d["screened"]["notes"] == {} and d["screened"]["refused"] == {}

@@ -12,6 +12,7 @@ from avard.core.explain.thermal_fit import (
     DS18B20_STEP_K,
     _lag_grid,
     lag_filter,
+    reading_step,
 )
 from avard.core.explain.thermal_paths.settings import (
     HYSTERESIS_LEADS_S,
@@ -150,7 +151,10 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
     def behind() -> NDArray:
         nonlocal smooth
         if smooth is None:
-            smooth = crossing_reconstruction(T)
+            # on the driving channel's own step and origin (``thermal_fit.reading_grid``):
+            # the 12-bit default would put a coarse log's knots between its levels
+            q, o = reading_step()
+            smooth = crossing_reconstruction(T - o, q) + o
         return smooth
 
     out = np.empty((M, len(cols)))

@@ -25,7 +25,7 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
     eq. 10's transfer function); a long lag passes little of it at τ below the lag.
     ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
     its coefficients in it, and not capped at the readings' own 2q²/12). ``step``: the
-    readings' step q (K), default the record's (``thermal_fit.reading_grid``)."""
+    readings' step q (K), default the one in force (``thermal_fit.reading_grid``)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
