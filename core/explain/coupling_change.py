@@ -80,18 +80,15 @@ from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
 from avard.core.explain.causes import Finding
-from avard.core.explain.thermal_fit import (
+from avard.core.explain.thermal_fit import ThermalFit, allan2, lag_filter, without_start
+from avard.core.explain.thermal_fit.holes import hole_mask
+from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+from avard.core.explain.thermal_fit.sums import (
     OctaveSums,
-    ThermalFit,
-    allan2,
     axes_differences,
-    hole_mask,
-    lag_filter,
     lag_octave_sums,
     min_tau_for,
     octave_sums_by_part,
-    rounding_floor_tau,
-    without_start,
 )
 from numpy.typing import NDArray
 

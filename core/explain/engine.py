@@ -85,17 +85,15 @@ from avard.core.explain.holdout import (
 )
 from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
-    HOLE_SETTLE_LAGS,
     ThermalFit,
     compensated_avar,
-    feed,
     fit_thermal_axes,
-    hole_mask,
-    path_of,
-    reading_grid,
     signal_avar_on,
     with_paths,
 )
+from avard.core.explain.thermal_fit.axes import path_of
+from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS, feed, hole_mask
+from avard.core.explain.thermal_fit.rounding import reading_grid
 from avard.core.explain.thermal_paths import (
     both_readings,
     rate_reading,

@@ -68,16 +68,10 @@ from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.spectrum import line_components
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
-from avard.core.explain.thermal_fit import (
-    DS18B20_STEP_K,
-    ThermalFit,
-    derounded,
-    feed,
-    fit_thermal,
-    fit_thermal_axes,
-    hole_mask,
-    lag_filter,
-)
+from avard.core.explain.thermal_fit import ThermalFit, fit_thermal, fit_thermal_axes, lag_filter
+from avard.core.explain.thermal_fit.coarse import derounded
+from avard.core.explain.thermal_fit.holes import feed, hole_mask
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.io.rates import format_rate, require_compatible
 from avard.core.model.fit import avar_estimate_covariance, fit_noise, model_chi2
 from numpy.typing import NDArray
@@ -811,7 +805,8 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     whole record (what none of them explains). ``columns``: per channel, the regressors
     already built for another axis (``path_columns``' ``done``); ``steps``: each channel's
     reading step (K; default the 12-bit), its rounding's."""
-    from avard.core.explain.thermal_fit import hole_mask, min_tau_for, octave_sums_by_part
+    from avard.core.explain.thermal_fit.holes import hole_mask
+    from avard.core.explain.thermal_fit.sums import min_tau_for, octave_sums_by_part
     from avard.core.explain.thermal_paths.columns import path_columns, trials
     from avard.core.explain.thermal_paths.deviance import _fit, _held_dev, _resid, _View, _view
     from avard.core.explain.thermal_paths.rounding import _edf_at, sawtooth_avar

@@ -17,7 +17,7 @@ import numpy as np
 from avard.core.explain.alarm import ALPHA_AXIS
 from avard.core.explain.coupling_change import change_line
 from avard.core.explain.engine import ChannelExplanation, Explanation
-from avard.core.explain.thermal_fit import DS18B20_CONVERSION_S
+from avard.core.explain.thermal_fit.settings import DS18B20_CONVERSION_S
 from avard.core.model.fit import NoiseFit, TermEstimate
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 from avard.core.plot import pyplot, save_figure

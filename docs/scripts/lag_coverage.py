@@ -221,7 +221,7 @@ def lag_information_sd(y, T, lag_s: float, c: float, rate_hz: float, half_bins: 
 
 
 def cr(out: Path, regimes: list[str], shares=(0.0, 0.764, 1.0)) -> None:
-    from avard.core.explain.thermal_fit import READ_TIME_S
+    from avard.core.explain.thermal_fit.settings import READ_TIME_S
 
     for rg in regimes:
         files = _records(out, rg)
@@ -247,7 +247,7 @@ def cr(out: Path, regimes: list[str], shares=(0.0, 0.764, 1.0)) -> None:
 def se_parts(out: Path, regimes: list[str]) -> list[str]:
     """The coefficient's standard error in its parts against its error's scatter (module
     doc's ``se``)."""
-    from avard.core.explain import thermal_fit as tf
+    from avard.core.explain.thermal_fit import axes as tf  # where _pick calls it
 
     real = tf.coefficient_se
     calls: list[tuple[float, float, float]] = []

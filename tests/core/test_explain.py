@@ -179,12 +179,12 @@ def test_bias_step_found_where_it_is(tmp_path):
 
 def test_lag_scan_on_a_coarser_view_finds_the_same(tmp_path, monkeypatch):
     """Long records scan the lags on at most SCAN_POINTS block means; the result holds."""
-    from avard.core.explain import thermal_fit
+    from avard.core.explain.thermal_fit import axes
 
     c = _three_times_minimum(AMBIENT, 600.0)
     path, _ = _file(tmp_path, 31, Truth(coefficient=(c, 0.0, 0.0), lag_s=600.0),
                     logged=("ambient",))
-    monkeypatch.setattr(thermal_fit, "SCAN_POINTS", 1024)
+    monkeypatch.setattr(axes, "SCAN_POINTS", 1024)  # read where the lags are scanned
     th = explain_file(open_record(path), ExplainOptions(channels=("x",))).channels["x"].thermal
     assert th is not None and th.passed
     assert th.coefficient == pytest.approx(c, rel=0.2)

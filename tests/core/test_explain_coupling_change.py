@@ -128,8 +128,9 @@ def test_the_parts_coefficients_are_thermal_fits_regression():
     """The parts' ĉ and analytic se, made for many sums at once, are ``tempco_from_cov``'s
     on the same sums (the whole record's and one part's)."""
     from avard.core.explain.coupling_change import _coefficients
-    from avard.core.explain.thermal_fit import allan2, cov_view, octave_sums_by_part
+    from avard.core.explain.thermal_fit import allan2
     from avard.core.explain.thermal_fit import tempco_from_cov as tfc
+    from avard.core.explain.thermal_fit.sums import cov_view, octave_sums_by_part
 
     y, T, _ = _slow(3, hours=2.0)
     X = np.column_stack([y, T[:, 0]])

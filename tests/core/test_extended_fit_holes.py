@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 from avard.core.explain.engine import _thermal_keep
-from avard.core.explain.thermal_fit import HOLE_SETTLE_LAGS
+from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS
 from avard.core.explain.verdict import ALPHA
 from avard.core.io.screen import Screened, ScreenLog
 

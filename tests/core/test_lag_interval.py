@@ -41,7 +41,8 @@ def test_the_lag_interval_carries_the_readings_time():
     readings' time uncertainty beside that spread (it was the spread alone, ±0.1–0.2 s, and
     missed the physical lag), so each end is at least that uncertainty from the lag and the
     intervals hold the physical lag as a 68 % interval should."""
-    from avard.core.explain.thermal_fit import READ_TIME_S, fit_thermal
+    from avard.core.explain.thermal_fit import fit_thermal
+    from avard.core.explain.thermal_fit.settings import READ_TIME_S
 
     assert READ_TIME_S == pytest.approx(0.375)
     lags, held = [], 0

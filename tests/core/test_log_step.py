@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from avard.core.allan.streaming import StreamingAllan
-from avard.core.explain import thermal_fit
 from avard.core.explain.engine import SlowView, explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary, write_report
+from avard.core.explain.thermal_fit import axes, coarse, rounding, signals
+from avard.core.explain.thermal_fit.fit import ThermalFit
 from avard.core.explain.thermal_paths.rounding import sawtooth_avar
 from avard.core.explain.verdict import judge
 from avard.core.io import screen as screen_mod
@@ -252,7 +253,7 @@ def _lagged_error_adev(recon, step: float, seed: int) -> float:
     sv.update(np.zeros((n, 1)), col[:, None])
     _, ts = sv.finish()
     truth = T[:len(ts) * b].reshape(-1, b).mean(axis=1)
-    e = thermal_fit.lag_filter(recon(ts[:, 0]) - truth, 300.0, rate / b)
+    e = signals.lag_filter(recon(ts[:, 0]) - truth, 300.0, rate / b)
     sa = StreamingAllan(1, rate / b)
     sa.update(e[:, None])
     res = sa.result()
@@ -268,7 +269,7 @@ def test_the_coarse_reconstruction_errs_less_through_a_lag_than_straight_lines(s
     # lines' error, within 2× the 12-bit log's own
     got = []
     for seed in (1, 2, 3):
-        got.append([_lagged_error_adev(lambda T, g=g: thermal_fit.derounded(T, g), s, seed)
+        got.append([_lagged_error_adev(lambda T, g=g: coarse.derounded(T, g), s, seed)
                     for g, s in (((0.0625, 0.0), step), ((step, 0.0), step),
                                  ((0.0625, 0.0), 0.0625))])
     lines, spline, fine = np.array(got).T
@@ -280,22 +281,22 @@ def test_the_coarse_reconstruction_errs_less_through_a_lag_than_straight_lines(s
 def test_the_12_bit_step_leaves_the_regressor_and_the_derounding_as_they_were():
     room = _room()
     T = np.round(room / 0.0625) * 0.0625
-    assert np.array_equal(thermal_fit.derounded(T), thermal_fit.derounded(T, (0.0625, 0.0)))
+    assert np.array_equal(coarse.derounded(T), coarse.derounded(T, (0.0625, 0.0)))
     temps = T[:, None]
-    assert np.array_equal(thermal_fit.coarse_regressor(temps), temps)
-    assert np.array_equal(thermal_fit.coarse_regressor(temps, [(0.0625, 0.0)]), temps)
+    assert np.array_equal(coarse.coarse_regressor(temps), temps)
+    assert np.array_equal(coarse.coarse_regressor(temps, [(0.0625, 0.0)]), temps)
     # a coarse column beside it: only that column is reconstructed, the 12-bit one is read
     # as logged, to the bit; the coarse one is the temperature behind its readings, closer
     # to the room than the readings are
     T4 = np.round(room / 0.25) * 0.25
-    both = thermal_fit.coarse_regressor(np.column_stack([T, T4]), [None, (0.25, 0.0)])
+    both = coarse.coarse_regressor(np.column_stack([T, T4]), [None, (0.25, 0.0)])
     assert np.array_equal(both[:, 0], T)
-    assert np.array_equal(both[:, 1], thermal_fit.derounded(T4, (0.25, 0.0)))
+    assert np.array_equal(both[:, 1], coarse.derounded(T4, (0.25, 0.0)))
     assert np.sqrt(np.mean((both[:, 1] - room) ** 2)) < 0.5 * np.sqrt(np.mean((T4 - room) ** 2))
     # the step in force (a path's candidates read it) is the one set, and only within
-    with thermal_fit.reading_grid((0.25, 0.0)):
-        assert thermal_fit.reading_step() == (0.25, 0.0)
-    assert thermal_fit.reading_step() == (0.0625, 0.0)
+    with rounding.reading_grid((0.25, 0.0)):
+        assert rounding.reading_step() == (0.25, 0.0)
+    assert rounding.reading_step() == (0.0625, 0.0)
     assert screen_mod.is_coarse(0.125) and not screen_mod.is_coarse(0.0625)
 
 
@@ -310,13 +311,13 @@ def test_the_coarse_reconstruction_runs_on_the_samples_times_across_a_gap():
     near = (np.abs(np.arange(len(t)) - 4000) < 1500) & (np.arange(len(t)) >= 3000)
 
     def err(X: np.ndarray) -> float:
-        d = thermal_fit.derounded(X, (0.25, 0.0))
+        d = coarse.derounded(X, (0.25, 0.0))
         ok = near & np.isfinite(X)
         return float(np.sqrt(np.mean((d - room)[ok] ** 2)))
 
     X = R.copy()
     X[4000:4700] = np.nan
-    assert np.all(np.isnan(thermal_fit.derounded(X, (0.25, 0.0))[4000:4700]))
+    assert np.all(np.isnan(coarse.derounded(X, (0.25, 0.0))[4000:4700]))
     assert err(X) < 2.0 * err(R)
     # and far below the readings' own error there
     assert err(X) < 0.2 * float(np.sqrt(np.mean((R - room)[near] ** 2)))
@@ -378,11 +379,11 @@ def test_the_rounding_terms_take_the_step_in_force():
     T = np.round(_room(n=20000) / 0.0625) * 0.0625
     tau = np.array([2048.0, 4096.0])
     base = sawtooth_avar(T, 1.0, tau)
-    tc = thermal_fit.rounding_correlation_s(T, 1.0)
-    with thermal_fit.reading_grid((0.125, 0.0)):
+    tc = rounding.rounding_correlation_s(T, 1.0)
+    with rounding.reading_grid((0.125, 0.0)):
         # a step twice as wide is crossed half as often and rounds twice as far: well above
         # the correlation time its white AVAR q²/12·t_c/τ is 8× the 12-bit one's
-        assert thermal_fit.rounding_correlation_s(T, 1.0) == pytest.approx(2 * tc)
+        assert rounding.rounding_correlation_s(T, 1.0) == pytest.approx(2 * tc)
         coarse = sawtooth_avar(T, 1.0, tau)
     assert np.all(coarse > 6.0 * base)
     assert np.array_equal(sawtooth_avar(T, 1.0, tau, step=0.125), coarse)
@@ -446,17 +447,17 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
                              theta_hi=[110.0], z_extra=5.0, open_end=False)
 
     def fake_path_of(fit, *a, **k):
-        seen.append(thermal_fit.reading_step())
+        seen.append(rounding.reading_step())
         return SimpleNamespace(kind="two_path", chosen=chosen, z_threshold=3.0)
 
-    monkeypatch.setattr(thermal_fit, "path_of", fake_path_of)
+    monkeypatch.setattr(axes, "path_of", fake_path_of)
     y = np.zeros((64, 1))
     temps = np.zeros((64, 1))
     for rel, grid in ((0.0, (0.0625, 0.0)), (0.05, (0.25, 0.0))):
-        fit = thermal_fit.ThermalFit("t", 0, 3e-3, 2e-5, 300.0, 290.0, 310.0, 9.0, 1.0,
-                                     grid=grid, gain_rel=rel)
-        got = thermal_fit.with_paths([fit], y, temps, floors={0: 0.0})[0]
+        fit = ThermalFit("t", 0, 3e-3, 2e-5, 300.0, 290.0, 310.0, 9.0, 1.0,
+                         grid=grid, gain_rel=rel)
+        got = axes.with_paths([fit], y, temps, floors={0: 0.0})[0]
         assert got.coefficient == 2e-3
         assert got.coef_se == pytest.approx(math.hypot(1e-5, rel * 2e-3), rel=1e-12)
         assert seen[-1] == grid
-    assert thermal_fit.reading_step() == (0.0625, 0.0)
+    assert rounding.reading_step() == (0.0625, 0.0)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
-from avard.core.explain.thermal_fit import octave_sums_by_part
+from avard.core.explain.thermal_fit.sums import octave_sums_by_part
 from avard.core.explain.thermal_paths import HELDOUT_MARGIN, path_columns
 from avard.core.explain.thermal_paths.columns import Column
 from avard.core.explain.thermal_paths.deviance import _fit, _held_dev, _view

@@ -126,7 +126,8 @@ def test_lag_scan_sums_equal_the_streaming_estimators_covariance(holes):
     identification) gives the streaming accumulator's Allan covariance and counts, gaps
     included (its every trial lag used to pay for a full ``StreamingAllan.result``)."""
     from avard.core.allan.streaming import StreamingAllan
-    from avard.core.explain.thermal_fit import feed, hole_mask, octave_sums
+    from avard.core.explain.thermal_fit.holes import feed, hole_mask
+    from avard.core.explain.thermal_fit.sums import octave_sums
 
     rng = np.random.default_rng(4)
     X = (np.cumsum(rng.standard_normal((20_000, 3)), axis=0) * 0.01
@@ -149,7 +150,9 @@ def test_part_sums_inside_a_hole_do_not_shorten_the_records_sums():
     import itertools
 
     from avard.core.allan.streaming import StreamingAllan
-    from avard.core.explain.thermal_fit import JACKKNIFE_GROUPS, feed, octave_sums
+    from avard.core.explain.thermal_fit.holes import feed
+    from avard.core.explain.thermal_fit.settings import JACKKNIFE_GROUPS
+    from avard.core.explain.thermal_fit.sums import octave_sums
 
     rng = np.random.default_rng(8)
     X = np.cumsum(rng.standard_normal((20_000, 2)), axis=0) * 0.01 + rng.standard_normal(
@@ -186,11 +189,8 @@ def test_sums_by_part_add_up_to_the_records_at_every_octave():
     so the parts add up to the whole record's sums at every octave (a hole included), and
     each part carries the long octaves (each part's own sums stopped at part/2: the
     leave-one-out lag and coefficient were fitted on the short τ only)."""
-    from avard.core.explain.thermal_fit import (
-        JACKKNIFE_GROUPS,
-        octave_sums,
-        octave_sums_by_part,
-    )
+    from avard.core.explain.thermal_fit.settings import JACKKNIFE_GROUPS
+    from avard.core.explain.thermal_fit.sums import octave_sums, octave_sums_by_part
 
     rng = np.random.default_rng(9)
     X = np.cumsum(rng.standard_normal((20_001, 2)), axis=0) * 0.01 + rng.standard_normal(
@@ -216,7 +216,8 @@ def test_a_lag_two_refinements_reach_up_to_rounding_is_scanned_once():
     their geometric steps meet at the same lags up to rounding (on most neighbouring pairs
     of a 12 h record's grid). The fine lags scanned hold each lag once, none the same as a
     lag already scanned, and lose none that is new."""
-    from avard.core.explain.thermal_fit import SAME_LAG_REL, _distinct, _lag_grid, _refine
+    from avard.core.explain.thermal_fit.axes import SAME_LAG_REL, _distinct
+    from avard.core.explain.thermal_fit.scan import _lag_grid, _refine
 
     grid = [float(v) for v in _lag_grid(43_200.0, 0.48789062499999997)]
     twice = 0
@@ -247,13 +248,12 @@ def test_lag_octave_sums_equal_the_general_path(lag_s, parts):
     ``octave_sums_by_part``), for the whole record and the jackknife's parts, at every
     octave, for lags whose start-up shape lives on a few rows, on most and on all of them
     (20 000 s at 0.5 Hz is longer than the record), and for lag 0 (no shape)."""
-    from avard.core.explain.thermal_fit import (
-        JACKKNIFE_GROUPS,
+    from avard.core.explain.thermal_fit import lag_filter, without_start
+    from avard.core.explain.thermal_fit.settings import JACKKNIFE_GROUPS
+    from avard.core.explain.thermal_fit.sums import (
         axes_differences,
-        lag_filter,
         lag_octave_sums,
         octave_sums_by_part,
-        without_start,
     )
 
     rng = np.random.default_rng(11)
@@ -286,7 +286,7 @@ def test_the_lag_scan_without_holes_equals_its_general_path(parts):
     """``_scan`` end to end: without holes (the fast sums) and with a hole past the record's
     end (a keep mask that keeps every row: the general path on the same data), the same
     ĉ, se, z and leave-one-out z at every lag, to rounding."""
-    from avard.core.explain.thermal_fit import _scan
+    from avard.core.explain.thermal_fit.scan import _scan
 
     y, T = _rounded_cycle_record(3, 120.0, 3e-3, hours=2.0)
     Y = np.column_stack([y, 0.5 * y[::-1], np.random.default_rng(2).standard_normal(len(y))])
@@ -339,7 +339,8 @@ def test_lag_interval_is_an_interval_around_the_lag_and_the_rounding_floor_appli
     """On one record whose logged channel is rounded to 0.0625 K: the short τ, where the
     regressor is mostly rounding, stay out (the floor), and the lag's interval surrounds the
     lag (the old one ended at the estimate when a refinement's end point was counted twice)."""
-    from avard.core.explain.thermal_fit import fit_thermal, rounding_floor_tau
+    from avard.core.explain.thermal_fit import fit_thermal
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
 
     y, T = _rounded_cycle_record(0, 120.0, 3e-3, hours=2.0)
     assert rounding_floor_tau(T[:, 0], 1.0) > 10.0
@@ -369,7 +370,7 @@ def test_lag_interval_holds_the_true_lag_about_68_percent_of_the_time():
 def test_scan_merge_counts_each_lag_once():
     """A refinement's end points are grid points: merged twice they ended the lag's interval
     at the estimate itself."""
-    from avard.core.explain.thermal_fit import ScanPoint, _merge
+    from avard.core.explain.thermal_fit.scan import ScanPoint, _merge
 
     z = np.zeros(3)
     a = [ScanPoint(1.0, 0, 1, 1, z), ScanPoint(2.0, 0, 1, 2, z)]
@@ -413,7 +414,9 @@ def test_the_lag_and_its_interval_are_one_estimator_the_vertex_of_1_over_z2():
     over the window and a three-point vertex beside it differed by about the interval's
     half-width, and the negative-lag row's intervals held the truth in 11 of 20.)"""
     from avard.core.allan.beta import t_two_sided
-    from avard.core.explain.thermal_fit import READ_TIME_S, ScanPoint, best_lag, lag_interval
+    from avard.core.explain.thermal_fit.lag import best_lag, lag_interval
+    from avard.core.explain.thermal_fit.scan import ScanPoint
+    from avard.core.explain.thermal_fit.settings import READ_TIME_S
 
     rng = np.random.default_rng(4)
     coarse = [-190.0, -110.0, -95.0, -88.0, -24.7, -15.7, -10.0]
@@ -475,7 +478,8 @@ def test_the_coefficients_slope_over_the_lag_steps_over_a_jump():
     where the shortest τ drops an octave); the neighbours' difference there, 3e-4 per s,
     times a lag interval of ±10 s put ±3e-3 (±400 %) on the coefficient. The slope is now
     the least-squares one over the lags inside the interval."""
-    from avard.core.explain.thermal_fit import ScanPoint, _coef_slope
+    from avard.core.explain.thermal_fit.channel import _coef_slope
+    from avard.core.explain.thermal_fit.scan import ScanPoint
 
     z = np.zeros(0)
     lags = np.linspace(-20.0, 0.0, 81)  # the fine grid: 0.25 s
@@ -516,7 +520,8 @@ def _null_z_and_spread(u: np.ndarray, draws: int, rng: np.random.Generator,
                        walk: bool) -> tuple[np.ndarray, np.ndarray]:
     """ĉ and its analytic se (with the regressor's octave covariance) on ``draws`` null axes
     (white noise, or a random walk when ``walk``) against the regressor ``u``."""
-    from avard.core.explain.thermal_fit import allan2, coupling_test, octave_spectra
+    from avard.core.explain.thermal_fit import allan2
+    from avard.core.explain.thermal_fit.octaves import coupling_test, octave_spectra
 
     res0 = allan2(rng.standard_normal(len(u)), u, 1.0)
     sp = octave_spectra(u, np.rint(np.asarray(res0.tau)).astype(np.int64))
@@ -533,7 +538,8 @@ def _null_z_and_spread(u: np.ndarray, draws: int, rng: np.random.Generator,
 def test_octaves_of_a_white_regressor_correlate_as_the_white_noise_model_says():
     """Neighbouring octaves' coefficients of a white regressor under white noise correlate
     ≈ 0.5 (the constant the combination assumed before it was derived from the data)."""
-    from avard.core.explain.thermal_fit import _RHO, octave_spectra
+    from avard.core.explain.thermal_fit.octaves import octave_spectra
+    from avard.core.explain.thermal_fit.settings import _RHO
 
     rng = np.random.default_rng(3)
     ms = np.array([1 << k for k in range(1, 10)])
@@ -568,7 +574,7 @@ def test_the_variance_is_the_octave_covariances_combination():
     """``OctaveSpectra.variance`` (the test's se², bin by bin for its degrees of freedom) is
     wᵀVw/(Σw)² of ``covariance``, and its degrees of freedom lie between the fewest and the
     sum of the octaves' EDF."""
-    from avard.core.explain.thermal_fit import octave_spectra
+    from avard.core.explain.thermal_fit.octaves import octave_spectra
 
     rng = np.random.default_rng(11)
     n = 4096
@@ -593,12 +599,8 @@ def test_the_tests_t_holds_its_level_where_the_se_rests_on_few_slow_octaves():
     degrees of freedom the null z exceed the 5 % and 1 % points at their rates; and a
     white regressor's threshold under white noise stays the normal one's."""
     from avard.core.allan.beta import t_two_sided
-    from avard.core.explain.thermal_fit import (
-        Z_TEMPERATURE,
-        allan2,
-        coupling_test,
-        octave_spectra,
-    )
+    from avard.core.explain.thermal_fit import Z_TEMPERATURE, allan2
+    from avard.core.explain.thermal_fit.octaves import coupling_test, octave_spectra
 
     rng = np.random.default_rng(7)
     n = 4096
@@ -648,7 +650,8 @@ def test_derounded_takes_the_readings_rounding_out_of_a_slow_temperature():
     thermal signal adds to the axis's AVAR there; the crossings of the steps' thresholds and
     the turning points' levels take most of them out, and stay within a step of the truth
     (at the turning points too)."""
-    from avard.core.explain.thermal_fit import DS18B20_STEP_K, derounded
+    from avard.core.explain.thermal_fit.coarse import derounded
+    from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 
     rate = 10.0 / 8
     t = np.arange(int(4 * 3600 * rate)) / rate
@@ -708,7 +711,7 @@ def test_the_spectrum_an_interval_reads_is_the_noises_own_at_each_octave(kind):
     a random walk's, NIST SP 1065 eq. 10: the intervals of the typical-tempco 60 h and the
     faulty-log rows, where the rate random walk dominates at the HVAC period, held the
     truth on 80–96 % of records). The test's level stays m·AVAR."""
-    from avard.core.explain.thermal_fit import octave_spectra
+    from avard.core.explain.thermal_fit.octaves import octave_spectra
 
     rng = np.random.default_rng(5)
     u = np.cumsum(rng.normal(size=1 << 13))
@@ -735,7 +738,7 @@ def test_a_covariance_block_is_the_plain_indexing() -> None:
     """``covariance_block`` (one gather) gives ``c[:, idx][:, :, idx]``'s numbers in its
     memory order (τ fastest), so an einsum over it adds in the same order, to the bit; and
     ``lag_octave_sums``' broadcast products are np.outer's."""
-    from avard.core.explain.thermal_fit import covariance_block
+    from avard.core.explain.thermal_fit.sums import covariance_block
 
     rng = np.random.default_rng(5)
     for _ in range(200):

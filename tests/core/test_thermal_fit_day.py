@@ -41,7 +41,7 @@ def test_the_test_weights_are_the_least_variance_non_negative_combination():
     the least wᵀVw of all non-negative weights (the best subset's unconstrained solution);
     where the unconstrained weights are all positive it is them, and where they are not
     (strongly correlated neighbours) no weight is negative."""
-    from avard.core.explain.thermal_fit import least_variance_weights
+    from avard.core.explain.thermal_fit.octaves import least_variance_weights
 
     rng = np.random.default_rng(3)
     negative_seen = 0

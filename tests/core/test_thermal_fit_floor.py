@@ -37,7 +37,7 @@ def test_the_floor_of_a_cycle_of_a_steps_swing_stays_below_its_period():
     the octave of its peak and dips below the bar at the next (towards the period); the
     floor is that octave, never past the cycle (where the next octave had to pass too, it
     went past the cycle, or to ∞ on a record with no slower octave above the bar)."""
-    from avard.core.explain.thermal_fit import rounding_floor_tau
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
 
     for seed, period in enumerate(np.linspace(1300.0, 2300.0, 11)):
         _y, T, _a = _small_swing(seed, float(period))

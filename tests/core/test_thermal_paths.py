@@ -9,14 +9,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from avard.core.explain import alarm
-from avard.core.explain.thermal_fit import (
-    DS18B20_CONVERSION_S,
-    _axes_reference,
-    fit_thermal_axes,
-    octave_sums_by_part,
-    rounding_correlation_s,
-    rounding_floor_tau,
-)
+from avard.core.explain.thermal_fit import fit_thermal_axes
+from avard.core.explain.thermal_fit.rounding import rounding_correlation_s, rounding_floor_tau
+from avard.core.explain.thermal_fit.scan import _axes_reference
+from avard.core.explain.thermal_fit.settings import DS18B20_CONVERSION_S
+from avard.core.explain.thermal_fit.sums import octave_sums_by_part
 from avard.core.explain.thermal_paths import HELDOUT_MARGIN, choose_path, min_detectable_path
 from avard.core.explain.thermal_paths.columns import _relay, crossing_reconstruction, trials
 from avard.core.explain.thermal_paths.profile import _grid_cell, _jk_se, profile_delta
@@ -875,7 +872,8 @@ def test_the_quadratic_tries_the_one_lag_fits_leads_through_the_same_filter():
     as the one-lag fit's own search does on the record (``thermal_fit._lag_grid``), the
     extensions' grid mirrored, each regressor the lead-lag ``lag_filter`` gives; a lag at
     the longest lead is a search's edge (open), as one at the longest lag."""
-    from avard.core.explain.thermal_fit import _lag_grid, lag_filter
+    from avard.core.explain.thermal_fit import lag_filter
+    from avard.core.explain.thermal_fit.scan import _lag_grid
     from avard.core.explain.thermal_paths import path_columns
     from avard.core.explain.thermal_paths.columns import Column, quadratic_leads
     from avard.core.explain.thermal_paths.profile import _at_end
@@ -1187,7 +1185,8 @@ def test_a_rate_terms_fit_reads_the_octaves_where_the_rounding_is_no_larger_a_sh
     rounding is no larger a share of the rate column than of the linear one at that floor
     (``_rate_floor``: an octave or more above it), more than half of that is gone and c
     stays within 1 %."""
-    from avard.core.explain.thermal_fit import octave_sums, rounding_floor_tau
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+    from avard.core.explain.thermal_fit.sums import octave_sums
     from avard.core.explain.thermal_paths import path_columns
     from avard.core.explain.thermal_paths.columns import Column
     from avard.core.explain.thermal_paths.deviance import _fit, _View
@@ -1218,7 +1217,8 @@ def test_the_rate_floor_is_the_linear_floor_where_the_rate_column_passes_no_more
     """``_rate_floor`` returns the linear column's floor itself where the rate column's
     rounding share there is already no larger (a column of a large, fast drive), and the
     first octave past it where it is (the modelled shares compared, not a fixed step)."""
-    from avard.core.explain.thermal_fit import OctaveSums, rounding_floor_tau
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+    from avard.core.explain.thermal_fit.sums import OctaveSums
     from avard.core.explain.thermal_paths.columns import Column
     from avard.core.explain.thermal_paths.refine import _rate_floor
     from avard.core.explain.thermal_paths.rounding import _path_gain2, sawtooth_avar
@@ -1415,7 +1415,8 @@ def test_a_rate_term_is_read_through_its_columns_smoothing_on_any_drive(
     gain), low on the HVAC alone (the rounding in the regressor). Read through the gain the
     fit's own columns and weights give the unsmoothed slope of the temperature behind the
     readings (``_ungained``), r is within 1 % on every drive and c does not move."""
-    from avard.core.explain.thermal_fit import octave_sums, rounding_floor_tau
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+    from avard.core.explain.thermal_fit.sums import octave_sums
     from avard.core.explain.thermal_paths import path_columns
     from avard.core.explain.thermal_paths.columns import Column
     from avard.core.explain.thermal_paths.deviance import _fit, _ungained, _View

@@ -127,7 +127,7 @@ def test_the_analytic_rounding_floor_is_the_one_explain_finds_on_the_record():
     """``minima.rounding_floor`` (the drive's AVAR against 10× the sawtooth's, on the octave τ
     2ʲ/rate) is ``thermal_fit.rounding_floor_tau`` on a rounded record of that drive: the
     floor the fit's τ start at, which the minima below depend on."""
-    from avard.core.explain.thermal_fit import rounding_floor_tau
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
     from avard.core.explain.thermal_paths import rounding_floor
 
     rate, rec = 10.0, 4 * 3600.0

@@ -7,12 +7,8 @@ from dataclasses import replace
 
 import numpy as np
 from avard.core.explain import alarm
-from avard.core.explain.thermal_fit import (
-    OctaveSums,
-    min_tau_for,
-    octave_sums_by_part,
-    reading_step,
-)
+from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.sums import OctaveSums, min_tau_for, octave_sums_by_part
 from avard.core.explain.thermal_paths.columns import Column, path_columns, quadratic_leads, trials
 from avard.core.explain.thermal_paths.deviance import (
     _dev,

@@ -8,12 +8,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from avard.core.explain.thermal_fit import (
-    DS18B20_STEP_K,
-    _lag_grid,
-    lag_filter,
-    reading_step,
-)
+from avard.core.explain.thermal_fit import lag_filter
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_step
+from avard.core.explain.thermal_fit.scan import _lag_grid
 from avard.core.explain.thermal_paths.settings import (
     HYSTERESIS_LEADS_S,
     LAG_GRID_S,

@@ -9,10 +9,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-from avard.core.explain.thermal_fit import (
-    OctaveSums,
-    covariance_block,
-)
+from avard.core.explain.thermal_fit.sums import OctaveSums, covariance_block
 from avard.core.model.nnls import _lstsq
 from numpy.typing import ArrayLike, NDArray
 

@@ -9,10 +9,8 @@ from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
-from avard.core.explain.thermal_fit import (
-    OctaveSums,
-    reading_step,
-)
+from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.sums import OctaveSums
 from avard.core.explain.thermal_paths.columns import Column, Trial
 from avard.core.explain.thermal_paths.deviance import _dev, _fit, _held_dev, _View
 from avard.core.explain.thermal_paths.rounding import _path_gain2, sawtooth_avar

@@ -10,10 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
-from avard.core.explain.thermal_fit import (
-    OctaveSums,
-    octave_sums_by_part,
-)
+from avard.core.explain.thermal_fit.sums import OctaveSums, octave_sums_by_part
 from avard.core.explain.thermal_paths.columns import Column, Trial, _start, path_columns
 from avard.core.explain.thermal_paths.deviance import (
     _blocks,

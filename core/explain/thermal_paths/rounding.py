@@ -6,10 +6,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from avard.core.explain.thermal_fit import (
-    reading_step,
-    rounding_correlation_s,
-)
+from avard.core.explain.thermal_fit.rounding import reading_step, rounding_correlation_s
 from avard.core.explain.thermal_paths.columns import Column
 from avard.core.explain.thermal_paths.settings import RATE_SMOOTH_S
 from numpy.typing import NDArray

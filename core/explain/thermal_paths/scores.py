@@ -7,10 +7,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from avard.core.explain.thermal_fit import (
-    lag_filter,
-    reading_step,
-)
+from avard.core.explain.thermal_fit import lag_filter
+from avard.core.explain.thermal_fit.rounding import reading_step
 from avard.core.explain.thermal_paths.columns import (
     Column,
     _relay,
