@@ -410,10 +410,9 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     # b·t are noise", and that noise's N and B are those of the record less a line, not of
     # the record: a true drift lowers the AVAR fit's B (the fit's long-τ terms take the
     # drift's rise and the flicker floor gives way), and under a B too low the walk takes
-    # more of the means' directions and the interval's rise is looked up too high (cov27:
-    # 12 h drift records of the independent generator held the true slope in 82.5 %, with
-    # the noise's own B in 75 %). The test's z stays at the record's N and B (its null is
-    # b = 0, whose noise is the record itself).
+    # more of the means' directions, so each slope is judged at a rise its noise does not
+    # have and the interval over-covers (cov27). The test's z stays at the record's N and B
+    # (its null is b = 0, whose noise is the record itself).
     noise_at = beside(slope) if beside is not None else None
     if noise_at is not None and noise_at[0] > 0 and (noise_at[0], noise_at[1]) != (
             n_white, b_inst):
