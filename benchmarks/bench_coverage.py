@@ -299,8 +299,9 @@ def record_drift(y: np.ndarray, rate: float) -> DriftLikelihood | None:
     from avard.core.model.fit import fit_noise
 
     n, b = len(y), dr.drift_block(len(y))
-    return dr.channel_drift(fit_noise(allan_variance(y, rate)),
-                            y[: n // b * b].reshape(-1, b).mean(axis=1), b / rate)
+    allan = allan_variance(y, rate)
+    return dr.channel_drift(fit_noise(allan), y[: n // b * b].reshape(-1, b).mean(axis=1),
+                            b / rate, allan)
 
 
 def drift_test(hours: int, kind: str, records: int, seed: int) -> str:

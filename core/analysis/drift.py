@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from statistics import NormalDist
 from typing import TYPE_CHECKING
 
@@ -366,14 +367,20 @@ def two_sided_z(level: float) -> float:
 
 
 def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_inst: float,
-                     k_scale: float, base: Sequence[NDArray] = ()) -> DriftLikelihood:
+                     k_scale: float, base: Sequence[NDArray] = (),
+                     beside: Callable[[float], tuple[float, float] | None] | None = None
+                     ) -> DriftLikelihood:
     """The time-domain likelihood ratio of a drift against a random walk (module docstring)
     on block means ``yb`` (centres ``t``, s; length ``block_s``) with white N and flicker B
     at the given values and K profiled up to ``K_SPAN``·max(``k_scale``, N/T); ``base``:
     further columns fitted under both hypotheses (the offset is always there: explain's
     transients). The slope's interval is its profile likelihood's, K profiled at every
     slope: the GLS error at the K picked beside the slope alone was a sixth of the true
-    scatter where that K fell to 0 (explain's drift records). Raises
+    scatter where that K fell to 0 (explain's drift records). ``beside``: given the GLS
+    slope, the white N and flicker B of the noise beside that line (``channel_drift``: the
+    AVAR refitted less the fitted line), which the slope's interval and standard error are
+    computed under; None (or ``beside`` absent) keeps the test's N and B. The test itself
+    (z, β) is always at ``n_white`` and ``b_inst``: its null is no drift. Raises
     ``np.linalg.LinAlgError`` when the noise covariance does not factor."""
     t = np.asarray(t, dtype=float)
     record_s = len(t) * block_s
@@ -399,9 +406,31 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     lr = max(0.0, h0 - h1) / beta
     _nll, coef, _cov, _chi2 = prof.fit(float(ks[j]), w1)
     slope = float(coef[-1])
+    # The interval is the test inverted: a slope b is judged as the null "the means less
+    # b·t are noise", and that noise's N and B are those of the record less a line, not of
+    # the record: a true drift lowers the AVAR fit's B (the fit's long-τ terms take the
+    # drift's rise and the flicker floor gives way), and under a B too low the walk takes
+    # more of the means' directions, so each slope is judged at a rise its noise does not
+    # have and the interval over-covers (cov27). The test's z stays at the record's N and B
+    # (its null is b = 0, whose noise is the record itself).
+    noise_at = beside(slope) if beside is not None else None
+    if noise_at is not None and noise_at[0] > 0 and (noise_at[0], noise_at[1]) != (
+            n_white, b_inst):
+        try:
+            iprof = _Profile(yb, t, block_s, float(noise_at[0]), float(noise_at[1]))
+        except np.linalg.LinAlgError:
+            iprof = prof
+    else:
+        iprof = prof
+    if iprof is not prof:
+        iw0 = iprof.white(np.column_stack([one, *base]))
+        iw1 = np.column_stack([iw0, iprof.white(tc)])
+        ii, _h = iprof.best(ks, iw0)
+    else:
+        iw0, iw1, ii = w0, w1, i
     # the profile over slopes: a first span from the GLS error at the walk's own K (the
     # widest of the two), then the Δ = 1 crossings on a finer one
-    wide = math.sqrt(max(float(prof.fit(float(ks[i]), w1)[2][-1, -1]), 0.0))
+    wide = math.sqrt(max(float(iprof.fit(float(ks[ii]), iw1)[2][-1, -1]), 0.0))
     # the interval at the ratio's own 68.3 % point (``interval_rise``), not at Δ ≤ 1 nor
     # at Δ ≤ β: where the walk holds a few directions the ratio's centre is inflated more
     # than its 1 % tail β, and an interval at Δ ≤ β under-covered (drift25, slope25). Each
@@ -411,14 +440,14 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     # held the true slope far less often than a driftless record's (slope26)
     rise = interval_rise(nu)
     lo, hi, end_rises = _crossings(
-        prof, ks, w0, w1[:, -1], slope,
+        iprof, ks, iw0, iw1[:, -1], slope,
         max(wide * math.sqrt(max(rise, max(INTERVAL_RISE))), abs(slope) * 1e-6),
-        lambda k: interval_rise(walk_directions(prof.lam, float(k))))
+        lambda k: interval_rise(walk_directions(iprof.lam, float(k))))
     # the slope's standard error, what a resolved ramp's uncertainty is propagated with:
     # the profile's Δ ≤ 1 half-width (its curvature), not the 68 % interval's, which is
     # set for coverage under the ratio's inflated centre and is wider than the slope's
     # scatter (a drift moves neither)
-    lo1, hi1, _r = _crossings(prof, ks, w0, w1[:, -1], slope,
+    lo1, hi1, _r = _crossings(iprof, ks, iw0, iw1[:, -1], slope,
                               max(wide, abs(slope) * 1e-6), 1.0)
     # one line per half (a step makes two flat halves, a drift one slope)
     half = (t >= np.median(t)).astype(float)
@@ -739,10 +768,17 @@ def _k_upper(fit: NoiseFit) -> float:
     return float((k.hi if k.present else k.upper) or 0.0)
 
 
-def channel_drift(fit: NoiseFit, means: NDArray, block_s: float) -> DriftLikelihood | None:
+def channel_drift(fit: NoiseFit, means: NDArray, block_s: float,
+                  allan: AllanResult | None = None, refit: Callable[..., NoiseFit] | None = None
+                  ) -> DriftLikelihood | None:
     """``drift_likelihood`` of one channel's block means (``BlockMeans.longest``) with the
     fit's N and B and K's profile reaching past the fit's upper K; None where the record has
-    fewer than ``MIN_BLOCKS`` blocks or the covariance does not factor."""
+    fewer than ``MIN_BLOCKS`` blocks or the covariance does not factor. With ``allan`` (the
+    channel's AVAR, which ``fit`` was fitted on) the slope's interval is computed under the
+    N and B of the AVAR less the fitted line, refitted by ``refit`` (the channel's own
+    ``fit_noise`` arguments; ``fit_noise`` itself by default) without a ramp: the noise of
+    the slopes the interval tests (``drift_likelihood``'s ``beside``). Where that refit
+    fails, the fit's N and B."""
     yb = np.asarray(means, dtype=float).reshape(-1)
     if len(yb) < MIN_BLOCKS or not np.all(np.isfinite(yb)):
         return None
@@ -751,10 +787,49 @@ def channel_drift(fit: NoiseFit, means: NDArray, block_s: float) -> DriftLikelih
     b_i = float(fit.terms["bias_instability"].value or 0.0)
     if not n_w > 0:
         return None
+    beside = None
+    if allan is not None:
+        beside = partial(_noise_beside_line, allan, yb, block_s, refit)
     try:
-        return drift_likelihood(yb, t, block_s, n_w, b_i, _k_upper(fit))
+        return drift_likelihood(yb, t, block_s, n_w, b_i, _k_upper(fit), beside=beside)
     except np.linalg.LinAlgError:
         return None
+
+
+def _noise_beside_line(allan: AllanResult, means: NDArray, block_s: float,
+                       refit: Callable[..., NoiseFit] | None, slope: float
+                       ) -> tuple[float, float] | None:
+    """(N, B) of the AVAR less the line ``slope``·t (``_line_removed``), refitted without a
+    ramp; None where the refit fails or finds no white N."""
+    from avard.core.errors import FitError
+    from avard.core.model.fit import fit_noise
+    from avard.core.model.terms import TERMS
+
+    fitter = refit if refit is not None else fit_noise
+    tau = np.asarray(allan.tau, dtype=float)
+    removed, _d, _known = _line_removed(means, block_s, tau, slope)
+    less = replace(allan, var=np.asarray(allan.var, dtype=float) - removed)
+    try:
+        noise = fitter(less, terms=[t for t in TERMS if t != "rate_ramp"])
+    except (FitError, np.linalg.LinAlgError, ValueError):
+        return None
+    n_w = float(noise.terms["velocity_random_walk"].value or 0.0)
+    if not n_w > 0:
+        return None
+    return n_w, float(noise.terms["bias_instability"].value or 0.0)
+
+
+def _line_removed(means: NDArray, block_s: float, tau: NDArray, slope: float
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """What the AVAR at ``tau`` loses when the line ``slope``·t is taken from the record
+    (``resolve_drift``), and the mean difference D at each τ (``mean_difference``; 0 where
+    not known) with where it is known."""
+    g = tau**2 / 2.0
+    d = mean_difference(np.asarray(means, dtype=float).reshape(-1), block_s, tau)
+    known = np.isfinite(d)
+    d0 = np.where(known, d, 0.0)
+    removed = np.where(known, slope * tau * d0 - slope**2 * g, slope * slope * g)
+    return np.asarray(removed, dtype=np.float64), np.asarray(d0, dtype=np.float64), known
 
 
 def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: float,
@@ -771,7 +846,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     from avard.core.model.fit import Component, TermEstimate
     from avard.core.model.terms import TERMS, UNITS
 
-    lik = channel_drift(fit, means, block_s)
+    lik = channel_drift(fit, means, block_s, allan, refit)
     if lik is None:
         return fit, lik
     if not lik.passes(two_sided_z(level)):
@@ -789,10 +864,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     # (a cross term R·τ·D_noise the size of the walk's whole AVAR at the longest τ when the
     # ramp is a few times its detectable minimum, and no model of it): subtracting R̂²τ²/2
     # left it in, and K beside a resolved ramp scattered far beyond its interval.
-    d = mean_difference(np.asarray(means, dtype=float).reshape(-1), block_s, tau)
-    known = np.isfinite(d)
-    d0 = np.where(known, d, 0.0)
-    removed = np.where(known, lik.slope * tau * d0 - lik.slope**2 * g, r * r * g)
+    removed, d0, known = _line_removed(means, block_s, tau, lik.slope)
     # what is left uncertain: (R − R̂)·τ·D_noise and (R − R̂)²τ²/2, both of the slope's
     # error, not of the ramp's size (R̂²'s own variance where D is not known)
     dn = np.where(known, tau * (d0 - lik.slope * tau), 0.0)
