@@ -157,11 +157,15 @@ class CouplingChange:
     def line(self) -> str:
         """The one line said in the text, the JSON and the report."""
         b, a = self.before, self.after
+        # the same one-lag projection of a path that is not one lag differs between parts
+        # whose temperature spectra differ (review27b: two 300 s lags in series under a
+        # cycle of 1200 s, then 7200 s, at z 7.9–8.1): the line says both readings
         return (f"the thermal coupling changed at about {self.time_s:.4g} s (coefficient "
                 f"{b.c:.3g} ± {b.se:.2g} before, {a.c:.3g} ± {a.se:.2g} after, m/s²/K on "
                 f"'{self.channel}' through {_lag(b, self.lag_s)} and {_lag(a, self.lag_s)}; "
                 f"z {self.z:.3g} against {self.threshold:.3g} over {self.trials} change "
-                "times): a single coupling does not describe this record")
+                "times), or its path is not one lag and the temperature's spectrum changed: "
+                "a single one-lag coupling does not describe this record")
 
     def finding(self) -> Finding:
         """Never claimed: a change of the coupling is no cause of its own; it says the
