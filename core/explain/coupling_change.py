@@ -144,6 +144,9 @@ class CouplingChange:
     record_s: float
     #: the transients found at the change and not claimed there (``check``)
     taken: tuple[cz.Candidate, ...] = ()
+    #: the holes (s) of the channel's log within a grid step of ``time_s``: a change there
+    #: is not seen where it happened, only somewhere across the hole
+    holes: tuple[tuple[float, float], ...] = ()
 
     @property
     def changed(self) -> bool:
@@ -160,7 +163,9 @@ class CouplingChange:
         # the same one-lag projection of a path that is not one lag differs between parts
         # whose temperature spectra differ (review27b: two 300 s lags in series under a
         # cycle of 1200 s, then 7200 s, at z 7.9–8.1): the line says both readings
-        return (f"the thermal coupling changed at about {self.time_s:.4g} s (coefficient "
+        where = "".join(f"; the log of '{self.channel}' has a hole at {h0:.4g}–{h1:.4g} s, "
+                        "where the change may lie" for h0, h1 in self.holes)
+        return (f"the thermal coupling changed at about {self.time_s:.4g} s{where} (coefficient "
                 f"{b.c:.3g} ± {b.se:.2g} before, {a.c:.3g} ± {a.se:.2g} after, m/s²/K on "
                 f"'{self.channel}' through {_lag(b, self.lag_s)} and {_lag(a, self.lag_s)}; "
                 f"z {self.z:.3g} against {self.threshold:.3g} over {self.trials} change "
@@ -378,8 +383,14 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         k = round(frac * n)
         p, q = (_refit(yc[a:b], temps[a:b], j, names[j], rate_b, screen, a, fb)
                 for (a, b), fb in (((0, k), p), ((k, n), q)))
-    return CouplingChange(frac * record_s, p, q, sp.z, sp.threshold, names[j], L, trials,
-                          record_s)
+    # a change inside a hole of the log (adv15: a re-mount at 5 576 s in a dropout at
+    # 4 996–6 501 s was placed at 6 468 and 7 200 s) is seen only across the hole
+    t_s, win = frac * record_s, (GRID[1] - GRID[0]) * record_s
+    holes = () if screen is None or sp.z < sp.threshold else tuple(
+        (float(h0), float(h1)) for h0, h1 in screen.holes(names[j])
+        if h1 - h0 >= 1.0 and h0 <= t_s + win and h1 >= t_s - win)
+    return CouplingChange(t_s, p, q, sp.z, sp.threshold, names[j], L, trials, record_s,
+                          holes=holes)
 
 
 def _refit(y: NDArray, temps: NDArray, j: int, name: str, rate_b: float,

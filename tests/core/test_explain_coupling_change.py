@@ -103,6 +103,33 @@ def test_a_remounted_sensor_is_said_and_its_jump_is_not_a_step(tmp_path):
     json.dumps(_jsonable(doc), allow_nan=False)
 
 
+def test_a_change_inside_a_hole_of_the_log_says_the_hole(tmp_path):
+    """The same re-mount with the driving log's readings removed for 25 minutes around the
+    change (a dropout): the change is seen only across the hole, and the line says so
+    (adv15: a change in a dropout was placed at the hole's end or 700 s after it, the hole
+    unsaid); the log's hole stays a hole, no cause on the axis."""
+    path = tmp_path / "r.npz"
+    truth = make_record("remount", 101, 4.0, path)
+    z = dict(np.load(path))
+    ts = truth["axes"]["x"]["change_s"]
+    rate = float(z["rate_hz"])
+    T = z["temperature_c"].copy()
+    a, b = int((ts - 600.0) * rate), int((ts + 900.0) * rate)
+    T[a:b, :] = np.nan
+    z["temperature_c"] = T
+    np.savez(path, **z)
+    ex = explain_file(open_record(path), ExplainOptions(channels=("x",)))
+    ch = ex.channels["x"]
+    f = next(f for f in ch.findings if f.cause == CAUSE)
+    line = change_line(ch.findings)
+    assert line is not None, f.evidence
+    assert " has a hole at " in line and "where the change may lie" in line
+    h0, h1 = (float(v) for v in line.split(" has a hole at ")[1].split(" s,")[0].split("–"))
+    assert h0 == pytest.approx(ts - 600.0, abs=30.0) and h1 == pytest.approx(ts + 900.0,
+                                                                                abs=30.0)
+    assert not [g for g in ch.claimed if g.cause in ("bias_step", "excursion")]
+
+
 def test_a_real_step_beside_a_steady_coupling_stays_a_claimed_step(tmp_path):
     """A 2e-3 m/s²/K coupling through 30 s and a 6e-4 m/s² bias step at mid-record: the step
     is claimed with its interval, and no change is said."""
