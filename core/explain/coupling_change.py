@@ -386,11 +386,11 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
     # a change inside a hole of the log (adv15: a re-mount at 5 576 s in a dropout at
     # 4 996–6 501 s was placed at 6 468 and 7 200 s) is seen only across the hole
     t_s, win = frac * record_s, (GRID[1] - GRID[0]) * record_s
-    holes = () if screen is None or sp.z < sp.threshold else tuple(
+    across = () if screen is None or sp.z < sp.threshold else tuple(
         (float(h0), float(h1)) for h0, h1 in screen.holes(names[j])
         if h1 - h0 >= 1.0 and h0 <= t_s + win and h1 >= t_s - win)
     return CouplingChange(t_s, p, q, sp.z, sp.threshold, names[j], L, trials, record_s,
-                          holes=holes)
+                          holes=across)
 
 
 def _refit(y: NDArray, temps: NDArray, j: int, name: str, rate_b: float,
