@@ -601,6 +601,25 @@ def _path_base() -> tuple[Any, float, float]:
     return base, A, c
 
 
+def fit_seen_sizes() -> tuple[Any, float, dict[int, float]]:
+    """(the path rows' record, and at 3× the minima as the fit sees the drive's lines
+    (cand26b): the dT/dt term's r (m/s² per K/s, a lead) and the relay's size for the
+    record's coupling of each sign, {+1: …, −1: …})."""
+    import numpy as np
+    from avard.core.explain.thermal_paths import minima as mm
+
+    base, A, c = _path_base()
+    rec = HOURS * 3600
+    hvac = ((A, PERIOD),)
+    floor = mm.rounding_floor(hvac, RATE, rec)
+    c2tc = c * c * mm._Q_STEP**2 / 12 * mm.rounding_time(hvac)
+    r = 3 * mm.min_detectable_rate_fit(N, B, K, rec, hvac, c, True, floor, c2tc)
+    U = np.array([A + 0j])
+    h = {s: 3 * mm.min_detectable_hysteresis_fit(N, B, K, rec, PERIOD, U, s * c, 0.05, floor,
+                                                 c2tc) for s in (1, -1)}
+    return base, r, h
+
+
 def rows_paths() -> list[PathRow]:
     """The thermal candidates beyond one lag (issue 23 item 4), each extra term at 3× its
     stated minimum (``thermal_paths.min_detectable_path``, written in docs/explain.md before

@@ -18,11 +18,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from avard.core.explain.thermal_paths import minima as mm
 
 from benchmarks import bench_explain_weekend as bw
 
@@ -30,15 +27,8 @@ _ROWS = bw.rows_paths
 
 
 def fit_rows() -> list:
-    base, A, c = bw._path_base()
-    rec = bw.HOURS * 3600
-    hvac = ((A, bw.PERIOD),)
-    floor = mm.rounding_floor(hvac, bw.RATE, rec)
-    c2tc = c * c * mm._Q_STEP**2 / 12 * mm.rounding_time(hvac)
-    r = 3 * mm.min_detectable_rate_fit(bw.N, bw.B, bw.K, rec, hvac, c, True, floor, c2tc)
-    U = np.array([A + 0j])
-    h = {s: 3 * mm.min_detectable_hysteresis_fit(bw.N, bw.B, bw.K, rec, bw.PERIOD, U, s * c,
-                                                 0.05, floor, c2tc) for s in (1, -1)}
+    base, r, h = bw.fit_seen_sizes()
+    c = base.coefficient[0]
     assert math.isfinite(r) and all(math.isfinite(v) for v in h.values())
     old = {row.name: row for row in _ROWS()}
     d, hy = old["path: dT/dt"], old["path: hysteresis"]

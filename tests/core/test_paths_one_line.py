@@ -9,7 +9,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from avard.core.explain.thermal_paths import PathScore
-from avard.core.explain.thermal_paths import minima as mm
 from avard.core.explain.thermal_paths.oneline import _rate_on_one_line
 
 
@@ -57,12 +56,7 @@ def test_a_dt_term_at_3x_the_fits_minimum_is_named_beside_two_paths_that_beat_it
     and its interval; before, two paths alone with nothing beside them."""
     import benchmarks.bench_explain_weekend as bw
 
-    base, A, c = bw._path_base()
-    rec = bw.HOURS * 3600
-    hvac = ((A, bw.PERIOD),)
-    floor = mm.rounding_floor(hvac, bw.RATE, rec)
-    c2tc = c * c * mm._Q_STEP**2 / 12 * mm.rounding_time(hvac)
-    r = 3 * mm.min_detectable_rate_fit(bw.N, bw.B, bw.K, rec, hvac, c, True, floor, c2tc)
+    base, r, _ = bw.fit_seen_sizes()
     assert r == pytest.approx(0.485, rel=0.01)
     ex, _ = bw.explain_weekend(replace(base, rate_coupling=r), 30019)
     th = [f for f in ex.channels["x"].claimed if f.cause == "temperature"]
