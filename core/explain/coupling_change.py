@@ -83,6 +83,7 @@ from avard.core.explain.causes import Finding
 from avard.core.explain.thermal_fit import ThermalFit, allan2, lag_filter, without_start
 from avard.core.explain.thermal_fit.holes import hole_mask
 from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+from avard.core.explain.thermal_fit.signals import _rho
 from avard.core.explain.thermal_fit.sums import (
     OctaveSums,
     axes_differences,
@@ -194,12 +195,6 @@ def _lag(p: Part, whole: float) -> str:
     return f"{(p.lag_s if math.isfinite(p.lag_s) else whole):.3g} s"
 
 
-def _rho_matrix(k: int) -> NDArray[np.float64]:
-    """``thermal_fit._rho``: neighbouring octaves' correlation 0.5^|i − j|."""
-    i = np.arange(k)
-    return np.asarray(0.5 ** np.abs(i[:, None] - i[None, :]), dtype=float)
-
-
 def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
                   n_ref: NDArray, mt: float) -> tuple[NDArray, NDArray]:
     """``thermal_fit.tempco_from_cov`` of many difference sums at once: (ĉ, analytic se)
@@ -220,7 +215,7 @@ def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: ND
     w = np.where(ok, 1.0 / se_k**2, 0.0)
     sw = w.sum(axis=1)
     ws = w * se_k
-    var = np.einsum("sk,kl,sl->s", ws, _rho_matrix(K), ws)
+    var = np.einsum("sk,kl,sl->s", ws, _rho(K), ws)
     with np.errstate(invalid="ignore", divide="ignore"):
         c = np.where(sw > 0, (w * ck).sum(axis=1) / sw, 0.0)
         se = np.where(sw > 0, np.sqrt(var) / sw, np.inf)
@@ -342,10 +337,8 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         if not math.isfinite(mt):
             continue
         u = lag_filter(T, L, rate)
-        holes = [] if screen is None else [
-            (math.floor(h0 * rate), math.ceil(h1 * rate))
-            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0]
-        keep = hole_mask(M, holes, L, rate)
+        keep = hole_mask(M, [] if screen is None else screen.hole_blocks(names[j], rate),
+                         L, rate)
         try:
             if keep is None:
                 if axes is None:
@@ -367,11 +360,9 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
     if sp.z >= sp.threshold:
         # the time estimated after the test (the decision is the grid's), and each part's
         # coupling refitted on its own (its own lag) on the parts the time makes
-        T = np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
-        X = without_start(np.column_stack([ys, lag_filter(T, L, rate)]), L, rate)
-        keep = None if screen is None else hole_mask(M, [
-            (math.floor(h0 * rate), math.ceil(h1 * rate))
-            for h0, h1 in screen.holes(names[j]) if h1 - h0 >= 1.0], L, rate)
+        X = without_start(np.column_stack([ys, lag_filter(chans[j], L, rate)]), L, rate)
+        keep = (None if screen is None else
+                hole_mask(M, screen.hole_blocks(names[j], rate), L, rate))
         frac = _change_time(X, keep, rate, frac)
         # a step or an excursion edge the transient search found near the change is its
         # jump, timed to a second (the least squares in levels drifts with the axis's
@@ -403,9 +394,7 @@ def _refit(y: NDArray, temps: NDArray, j: int, name: str, rate_b: float,
     fit of the part, kept where the refit cannot be made."""
     from avard.core.explain.thermal_fit import fit_thermal_axes
 
-    holes = None if screen is None else {0: [
-        (math.floor(h0 * rate_b) - first, math.ceil(h1 * rate_b) - first)
-        for h0, h1 in screen.holes(name) if h1 - h0 >= 1.0]}
+    holes = None if screen is None else {0: screen.hole_blocks(name, rate_b, first)}
     try:
         fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps[:, [j]], [name],
                                rate_b, holes)[0]

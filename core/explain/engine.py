@@ -667,9 +667,8 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         if stage is not None:
             stage("fitting the thermal model")
         # the screen's holes in each log: gaps of its regression, never the axis's response
-        holes = {i: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
-                     for h0, h1 in screen.holes(tnames[j]) if h1 - h0 >= 1.0]
-                 for i, j in enumerate(t_ok)} if screen is not None else None
+        holes = ({i: screen.hole_blocks(tnames[j], rate_b) for i, j in enumerate(t_ok)}
+                 if screen is not None else None)
         # each log on its own step and origin (``screen.log_step``): a coarse log's
         # reconstruction and rounding leave a finer log's fit as it is
         grids = [None if screen is None else screen.rounding_grid(tnames[k]) for k in t_ok]
@@ -982,9 +981,7 @@ def _log_holes(log: ScreenLog | None, tnames: list[str], rate_b: float
     masked reading, a stuck run): blocks where the log says nothing of the temperature."""
     if log is None:
         return {}
-    return {j: [(math.floor(h0 * rate_b), math.ceil(h1 * rate_b))
-                for h0, h1 in log.holes(nm) if h1 - h0 >= 1.0]
-            for j, nm in enumerate(tnames)}
+    return {j: log.hole_blocks(nm, rate_b) for j, nm in enumerate(tnames)}
 
 
 def _noise_levels(fit: NoiseFit) -> dict[str, float]:

@@ -297,6 +297,14 @@ class ScreenLog:
         before a late log's first reading and after an early-ending log's last)."""
         return [(s.start_s, s.end_s) for s in self.stretches if s.channel == channel]
 
+    def hole_blocks(self, channel: str, rate_hz: float, first: int = 0
+                    ) -> list[tuple[int, int]]:
+        """The holes of a second or more (``holes``) as (first, last) block indices at
+        ``rate_hz`` blocks per second, counted from block ``first`` (a part of the record):
+        the spans the thermal regression leaves out (``thermal_fit.hole_mask``)."""
+        return [(math.floor(h0 * rate_hz) - first, math.ceil(h1 * rate_hz) - first)
+                for h0, h1 in self.holes(channel) if h1 - h0 >= 1.0]
+
     def to_dict(self) -> dict[str, Any]:
         return {"counts": self.counts(), "samples_masked": self.samples_masked(),
                 "stretches": [s.to_dict() for s in self.stretches],
