@@ -1,6 +1,8 @@
 """``avard explain``: where the measurement leaves the fitted model, and why.
 
-- ``engine.py``      the explain pipeline on analyze's estimator and fit;
+- ``engine/``        the explain pipeline on analyze's estimator and fit (run: the entry
+                     points; slow: the slow view; thermal, compound, removal, channel:
+                     one axis's causes, claims and refit; misfit; results);
 - ``causes.py``      the time-domain causes: a warm-up transient and a bias step; the stated
                      minima of those and of a sinusoid (analyze's line finder);
 - ``gauss_markov.py`` a Gauss–Markov bump in the GLS fit, and its stated minimum;

@@ -471,7 +471,7 @@ def check(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
     """(the test's outcome, claimed, not claimed transients): ``find_change``, then where
     the coupling changed, a step (or an excursion edge) at the change not claimed and the
     other transients refitted and tested again without it in ``work`` (the axis the
-    compound search ran on, ``noise_of`` its noise), as ``engine._compound`` does for a
+    compound search ran on, ``noise_of`` its noise), as ``engine.compound._compound`` does for a
     transient taken out. The steps taken are kept in the outcome (``taken``) for
     ``mark``."""
     change = find_change(y, temps, thermal, trans, rate_b, screen)

@@ -109,11 +109,12 @@ class _Got(Exception):
 
 def cache(out: Path, regime: str, n: int, seed0: int = 0) -> None:
     from avard.core.explain import engine
+    from avard.core.explain.engine import thermal
     from avard.core.explain.options import ExplainOptions
     from avard.core.io.source import open_record
 
     out.mkdir(parents=True, exist_ok=True)
-    real = engine.fit_thermal_axes
+    real = thermal.fit_thermal_axes
     got: dict = {}
 
     def grab(Y, temps, tnames, rate_b, holes=None, *a, **k):
@@ -121,7 +122,7 @@ def cache(out: Path, regime: str, n: int, seed0: int = 0) -> None:
                    rate=float(rate_b), holes=holes or {})
         raise _Got
 
-    engine.fit_thermal_axes = grab
+    thermal.fit_thermal_axes = grab
     try:
         for seed in range(seed0, seed0 + n):
             f = out / f"{regime}_{seed}.npz"
@@ -145,7 +146,7 @@ def cache(out: Path, regime: str, n: int, seed0: int = 0) -> None:
                      **{f"hole_{k}": v for k, v in holes.items()})
             print(f"{regime} {seed} cached", flush=True)
     finally:
-        engine.fit_thermal_axes = real
+        thermal.fit_thermal_axes = real
 
 
 def fit_x(f: Path) -> tuple[dict, object]:

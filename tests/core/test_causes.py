@@ -133,7 +133,7 @@ def test_the_benchmarks_false_claims_are_not_claimed(tmp_path, seed, row, axis):
 def test_absent_noise_terms_enter_the_transients_gls_at_their_upper_limit():
     """A term the fit calls absent is not zero noise: the transients' GLS covariance (and
     their floor) takes it at its upper limit; a present one at its value."""
-    from avard.core.explain.engine import _noise_levels
+    from avard.core.explain.engine.removal import _noise_levels
     from avard.core.model.fit import NoiseFit, TermEstimate
 
     def term(value, upper=None):

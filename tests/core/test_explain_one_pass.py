@@ -150,18 +150,18 @@ def test_after_a_parallel_analysis_the_slow_view_is_read_as_before(coupled, monk
     then reads it once more, as the two-read path did, and explains alike."""
     from dataclasses import replace
 
-    from avard.core.explain import engine as explain_engine
+    from avard.core.explain.engine import slow
 
     _rec, npz = coupled
     options = replace(OPTIONS, workers=2)
     fed = Counter[str]()
-    end = explain_engine._SlowTap.end
+    end = slow._SlowTap.end
 
     def counted_end(self: Any) -> None:
         fed["end"] += 1
         end(self)
 
-    monkeypatch.setattr(explain_engine._SlowTap, "end", counted_end)
+    monkeypatch.setattr(slow._SlowTap, "end", counted_end)
     one = explain_file(open_record(npz), options)
     assert fed["end"] == 0          # the parallel pass fed no slow view
     base = analyze(open_record(npz), options)

@@ -6,7 +6,7 @@ covariance is tests/core/test_fit.py::test_added_covariance_enters_the_fit)."""
 from __future__ import annotations
 
 import numpy as np
-from avard.core.explain.engine import removal_covariance, removed_avar
+from avard.core.explain.engine.removal import removal_covariance, removed_avar
 from avard.core.explain.thermal_fit import allan2, compensated_avar, lag_filter
 
 

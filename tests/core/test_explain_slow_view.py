@@ -4,7 +4,8 @@ the few readings equal the masked mean over every value they replaced, bit for b
 from __future__ import annotations
 
 import numpy as np
-from avard.core.explain.engine import SlowView, _reading_means, slow_block_means
+from avard.core.explain.engine import SlowView
+from avard.core.explain.engine.slow import _reading_means, slow_block_means
 
 
 def _masked_means(t: np.ndarray, b: int) -> np.ndarray:

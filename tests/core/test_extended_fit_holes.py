@@ -1,11 +1,11 @@
-"""The whole record's extended fit (``engine._explain_channel``) leaves the holes of the log
+"""The whole record's extended fit (``engine.channel._explain_channel``) leaves the holes of the log
 its claimed thermal cause runs on out of its Allan variance, as the held-out halves do (issue 23
 item 1: "a masked stretch is a gap to the estimators … a hole in a log is never a cause on
 another channel"). Before, the thermal signal was removed from the whole record, across a
 25-minute dropout where it ran on the interpolated temperature, and the compensated Allan
 variance counted what that left as the model's misfit: a correct one-lag model was UNEXPLAINED
 (in-sample χ²/dof 11–16 on 13 dof) on every such record. Now the hole and the lag's settling
-after it are gaps (``engine._thermal_keep``, ``thermal_fit.hole_mask``)."""
+after it are gaps (``engine.thermal._thermal_keep``, ``thermal_fit.hole_mask``)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from avard.core.explain.engine import _thermal_keep
+from avard.core.explain.engine.thermal import _thermal_keep
 from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS
 from avard.core.explain.verdict import ALPHA
 from avard.core.io.screen import Screened, ScreenLog

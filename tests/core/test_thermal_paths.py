@@ -350,7 +350,7 @@ def test_the_rounding_gain_of_a_path_is_the_l1_norm_of_all_its_linear_terms():
     # a two-path fit of a plain lag (seed 99000 of the explain benchmark once read so):
     # 0.0106 and −0.0077 through 240 and 480 s pass the readings' rounding with up to
     # 0.0183 m/s²/K, not the first path's 0.0106 the engine's floors took before
-    from avard.core.explain.engine import _rounding_gain
+    from avard.core.explain.engine.compound import _rounding_gain
     from avard.core.explain.thermal_paths import PathFit, PathScore
     from avard.core.explain.thermal_paths.columns import Column
 
@@ -1248,16 +1248,16 @@ def test_the_rate_floor_is_the_linear_floor_where_the_rate_column_passes_no_more
 def _count_path_choices(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Record, per ``with_paths`` call of explain's engine, the axes it chose a path on
     with nothing beside the candidates (0 for a call with warm-ups beside them)."""
-    from avard.core.explain import engine
+    from avard.core.explain.engine import thermal
 
     calls: list[int] = []
-    real = engine.with_paths
+    real = thermal.with_paths
 
     def counted(fits, Y, *args, **kw):  # type: ignore[no-untyped-def]
         calls.append(0 if kw.get("warmups") else len(fits))
         return real(fits, Y, *args, **kw)
 
-    monkeypatch.setattr(engine, "with_paths", counted)
+    monkeypatch.setattr(thermal, "with_paths", counted)
     return calls
 
 

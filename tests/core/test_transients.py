@@ -263,7 +263,7 @@ def test_two_unrelated_steady_lines_stay_two_findings():
 
 def test_explain_reports_one_finding_per_disturbance():
     from avard.core.analysis.spectrum import LineGroup
-    from avard.core.explain.engine import _periodic_finding
+    from avard.core.explain.engine.channel import _periodic_finding
 
     steady = _periodic_finding(LineGroup(3.3, 1e-3, 0.9e-3, 1.1e-3, None, (1,), None, 1))
     assert steady.cause == "sinusoid" and steady.intervals == {"amplitude": [0.9e-3, 1.1e-3]}

@@ -114,7 +114,7 @@ def rate_reading(pf: PathFit, alone: PathFit) -> PathFit | None:
     asks it of the choice made beside a warm-up, where two such paths bring two start states
     of free size and a lag on the derivative that take up what the warm-up's fixed shapes
     leave of it; ``alone`` tells whether the record's start is a second path's
-    (``engine._rate_beside``)."""
+    (``engine.thermal._rate_beside``)."""
     two, rate = pf.chosen, pf.scores.get("rate")
     if (two.kind != "two_path" or rate is None or not _derivative_limit(two)
             or not _passes(pf, rate)):
