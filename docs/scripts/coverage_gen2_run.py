@@ -367,10 +367,13 @@ def cmd_ensemble(args: argparse.Namespace) -> int:
             for name, sel in groups:
                 if sel.sum() < 5 or sel.all():
                     continue
-                print(f"    {name} ({int(sel.sum())}), last 3 τ: " + "; ".join(
-                    f"{ms[j] / rate:g} s mean/truth {var[sel, j].mean() / t[j]:.3f} printed "
-                    f"{edf[sel, j].mean():.1f} cover {cover(edf[sel, j], var[sel, j], t[j]).mean():.0%}"
-                    for j in range(max(0, k - 3), k)))
+                cells = []
+                for j in range(max(0, k - 3), k):
+                    held = cover(edf[sel, j], var[sel, j], t[j]).mean()
+                    cells.append(f"{ms[j] / rate:g} s mean/truth "
+                                 f"{var[sel, j].mean() / t[j]:.3f} printed "
+                                 f"{edf[sel, j].mean():.1f} cover {held:.0%}")
+                print(f"    {name} ({int(sel.sum())}), last 3 τ: " + "; ".join(cells))
     return 0
 
 
