@@ -89,6 +89,23 @@ K_DECADES, K_POINTS = 4.0, 121
 MIN_BLOCKS = 32
 #: χ²(2)'s level at which one line per half refutes a drift (a step, not a drift).
 HALVES_LEVEL = 0.01
+
+#: The noise the slope's interval is computed under (``DriftLikelihood.interval_noise``,
+#: said in analyze's JSON and text where a drift is reported): the N and B of the AVAR
+#: refitted less the fitted line (``channel_drift`` given the AVAR); the AVAR fit's own
+#: (no AVAR given: explain's call, the model-draw benchmarks); and the two fallbacks to
+#: the fit's N and B where the refit was asked for and could not be used: it raised or
+#: found no white N, or the means' covariance under its N and B did not factor. A
+#: fallback interval is wider on drift records (the drift lowers the fit's B, cov27),
+#: so it is recorded rather than passed off as the refit's.
+INTERVAL_NOISE = {
+    "refit_less_line": "the noise refitted on the AVAR less the fitted line",
+    "fit": "the AVAR fit's N and B",
+    "fit_refit_failed": "the AVAR fit's N and B: the refit less the line failed or found "
+                        "no white N",
+    "fit_not_factored": "the AVAR fit's N and B: the means' covariance under the refit's "
+                        "N and B did not factor",
+}
 #: The Bartlett table (``bartlett``): the likelihood ratio's 99 % point under the null over
 #: χ²(1)'s, by the walk's directions at the offset-only K, never below 1 (where the walk is
 #: absent the ratio is below χ²(1), and the test stays as conservative as that). Made by
@@ -331,6 +348,9 @@ class DriftLikelihood:
     interval_rise: float = 1.0
     end_rises: tuple[float, float] = (1.0, 1.0)
     slope_sd: float = math.nan
+    #: the noise ``slope_lo``/``slope_hi`` and ``slope_sd`` were computed under: a key of
+    #: ``INTERVAL_NOISE``
+    interval_noise: str = "fit"
 
     @property
     def slope_se(self) -> float:
@@ -414,14 +434,18 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     # have and the interval over-covers (cov27). The test's z stays at the record's N and B
     # (its null is b = 0, whose noise is the record itself).
     noise_at = beside(slope) if beside is not None else None
-    if noise_at is not None and noise_at[0] > 0 and (noise_at[0], noise_at[1]) != (
-            n_white, b_inst):
-        try:
-            iprof = _Profile(yb, t, block_s, float(noise_at[0]), float(noise_at[1]))
-        except np.linalg.LinAlgError:
-            iprof = prof
-    else:
-        iprof = prof
+    iprof = prof
+    used = "fit"
+    if beside is not None:
+        # (a refit asked for and not usable falls back to the test's N and B, and says so)
+        used = "refit_less_line"
+        if noise_at is None or not noise_at[0] > 0:
+            used = "fit_refit_failed"
+        elif (noise_at[0], noise_at[1]) != (n_white, b_inst):
+            try:
+                iprof = _Profile(yb, t, block_s, float(noise_at[0]), float(noise_at[1]))
+            except np.linalg.LinAlgError:
+                used = "fit_not_factored"
     if iprof is not prof:
         iw0 = iprof.white(np.column_stack([one, *base]))
         iw1 = np.column_stack([iw0, iprof.white(tc)])
@@ -455,7 +479,7 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     _k2, h2 = prof.best(ks, w2)
     return DriftLikelihood(math.copysign(math.sqrt(lr), slope), slope, lo, hi, float(ks[i]),
                            float(ks[j]), k_hi, float(top), max(0.0, h1 - h2), len(t),
-                           record_s, nu, beta, rise, end_rises, 0.5 * (hi1 - lo1))
+                           record_s, nu, beta, rise, end_rises, 0.5 * (hi1 - lo1), used)
 
 
 def _reml_range(ks: NDArray, nll: NDArray) -> tuple[float, float, float]:
@@ -778,7 +802,7 @@ def channel_drift(fit: NoiseFit, means: NDArray, block_s: float,
     N and B of the AVAR less the fitted line, refitted by ``refit`` (the channel's own
     ``fit_noise`` arguments; ``fit_noise`` itself by default) without a ramp: the noise of
     the slopes the interval tests (``drift_likelihood``'s ``beside``). Where that refit
-    fails, the fit's N and B."""
+    fails, the fit's N and B, recorded (``DriftLikelihood.interval_noise``)."""
     yb = np.asarray(means, dtype=float).reshape(-1)
     if len(yb) < MIN_BLOCKS or not np.all(np.isfinite(yb)):
         return None
@@ -888,7 +912,7 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
                                                       abs(lik.z))}
     return replace(noise, terms=terms, components=[*noise.components, ramp],
                    theta=np.append(noise.theta, r * r), theta_cov=cov,
-                   resolved_apart=("rate_ramp",)), lik
+                   resolved_apart=("rate_ramp",), drift_interval_noise=lik.interval_noise), lik
 
 
 def mean_difference(means: NDArray, block_s: float, tau: NDArray) -> NDArray[np.float64]:
@@ -937,16 +961,18 @@ def _no_ramp(fit: NoiseFit, allan: AllanResult, lik: DriftLikelihood,
 
     r = fit.terms.get("rate_ramp")
     if r is None or not r.present or "rate_ramp" in fit.resolved_apart:
-        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik))
+        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik),
+                       drift_interval_noise=lik.interval_noise)
     try:
         noise = refit(allan, terms=[t for t in TERMS if t != "rate_ramp"])
     except FitError:
-        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik))
+        return replace(fit, drift_floor=lik.floor, drift_slope=_slope(lik),
+                       drift_interval_noise=lik.interval_noise)
     upper = abs(lik.slope) + two_sided_z(level) * lik.slope_se
     absent = TermEstimate(None, None, None, UNITS["rate_ramp"], False, abs(lik.z),
                           upper if math.isfinite(upper) else None)
     return replace(noise, terms={**noise.terms, "rate_ramp": absent}, drift_floor=lik.floor,
-                   drift_slope=_slope(lik))
+                   drift_slope=_slope(lik), drift_interval_noise=lik.interval_noise)
 
 
 def _slope(lik: DriftLikelihood) -> tuple[float, float, float] | tuple[()]:

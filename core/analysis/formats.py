@@ -134,7 +134,17 @@ def _drift_lines(ch: ChannelAnalysis) -> list[str]:
         out.append(f"  drift: a ramp of at least {_fmt(d['floor'])} {d['unit']} (68 %) the "
                    "time domain finds short of its level; not claimed, but counted in the "
                    "intervals at long τ")
+    if out and d["interval_noise"] not in (None, "refit_less_line"):
+        out.append(f"  drift: the slope's interval under {_interval_noise(d)}")
     return out
+
+
+def _interval_noise(d: dict[str, object]) -> str:
+    """The noise the drift's slope interval was computed under, in words."""
+    from avard.core.analysis.drift import INTERVAL_NOISE
+
+    key = str(d["interval_noise"])
+    return INTERVAL_NOISE.get(key, key)
 
 
 def _psd_lines(ch: ChannelAnalysis) -> list[str]:
@@ -240,6 +250,8 @@ def _beside_slow_text(ch: ChannelAnalysis) -> str:
     how = (", R from the time domain" if d["rate_ramp_from"] == "time_domain"
            else f", a ramp of at least {_fmt(d['floor'])} (68 %) short of its level"
            if d["floor"] > 0 else "")
+    if how and d["interval_noise"] not in (None, "refit_less_line"):
+        how += f", its interval under {_interval_noise(d)}"
     return (f"    beside it (the sinusoid removed): {'; '.join(parts)} (SI units{how}); the "
             "terms above are the base model, which reads the sinusoid as noise "
             "(`avard explain` tests what it is)")

@@ -50,16 +50,22 @@ class ChannelAnalysis:
         walk resolved it apart from the AVAR), "allan_fit" (the AVAR fit's own term) or None
         (no R claimed); ``floor``: the ramp at the slope's 68 % interval's near end where the
         time domain finds a drift short of its level (0: none; no claim, but that much of
-        the AVAR does not scatter and the printed EDF counts it), in ``unit``. ``fit``: another
-        fit of this channel (``slow_fit``) in place of the base model."""
+        the AVAR does not scatter and the printed EDF counts it), in ``unit``;
+        ``interval_noise``: where either is reported, the noise the slope's interval (R's
+        interval, the floor's end) was computed under, a key of ``drift.INTERVAL_NOISE``
+        ("refit_less_line", or a fallback to the AVAR fit's N and B that says why), None
+        where neither is. ``fit``: another fit of this channel (``slow_fit``) in place of
+        the base model."""
         from avard.core.model.terms import UNITS
 
         fit = self.fit if fit is None else fit
         r = fit.terms.get("rate_ramp")
         source = ("time_domain" if "rate_ramp" in fit.resolved_apart
                   else "allan_fit" if r is not None and r.present else None)
+        said = source == "time_domain" or fit.drift_floor > 0
         return {"rate_ramp_from": source, "floor": float(fit.drift_floor),
-                "unit": UNITS["rate_ramp"]}
+                "unit": UNITS["rate_ramp"],
+                "interval_noise": (fit.drift_interval_noise or None) if said else None}
 
     def to_dict(self) -> dict[str, Any]:
         a = self.allan

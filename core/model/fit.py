@@ -166,6 +166,11 @@ class NoiseFit:
     #: (slope, lo, hi; input unit per s), () where no floor is carried: the printed bounds
     #: of such a record take the ramp's uncertainty from the slope (``analysis.signal_edf``)
     drift_slope: tuple[float, float, float] | tuple[()] = ()
+    #: the noise the drift test's slope interval was computed under, where a drift is
+    #: reported (a ramp resolved from the time domain, or ``drift_floor``):
+    #: ``analysis.drift.INTERVAL_NOISE`` ("refit_less_line", "fit", or a fallback to the
+    #: fit's N and B that says why); "" where no interval was computed
+    drift_interval_noise: str = ""
 
     def component_avars(self, tau: ArrayLike) -> dict[str, NDArray[np.float64]]:
         """AVAR of each present component at τ, keyed by label (term name, 'sinusoid 50 Hz'…)."""

@@ -12,6 +12,8 @@ printed τ with at least ``MIN_AVERAGES`` non-overlapping averages (n // m ≥ 5
     .venv/bin/python docs/scripts/coverage_gen2_run.py table --hours 1,12,60
     .venv/bin/python docs/scripts/coverage_gen2_run.py repro --hours 1 --mixes plain \
         --index 39 --save /tmp/r.npz
+    .venv/bin/python docs/scripts/coverage_gen2_run.py ensemble --hours 1,12,60 \
+        --mixes sine,both
 
 ``run`` appends one JSON line per record to OUT/cov2-{hours}h-{mix}-s{seed}.jsonl (so a run
 cut short keeps its records and a second run continues the same stream of seeds);
@@ -271,6 +273,110 @@ def cmd_paired(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gen_psd(lv: gen.Levels):  # type: ignore[no-untyped-def]
+    """The generator's noise as a two-sided PSD in cycles per sample (the convention of
+    ``analysis.cross_term``: AVAR = ∫ S|H_m|²): white s², Kasdin–Walter flicker
+    σ_f²/|1 − e^(−2πiν)| = σ_f²/(2 sin πν), random walk q²/(4 sin² πν)."""
+    def psd(nu: np.ndarray) -> np.ndarray:
+        sn = np.abs(np.sin(np.pi * np.asarray(nu, dtype=float)))
+        with np.errstate(divide="ignore"):
+            return lv.s2 + lv.f2 / (2 * sn) + lv.q2 / (4 * sn * sn)
+    return psd
+
+
+def ensemble_edf(lv: gen.Levels, n: int, ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the EDF of the generator's noise alone, the EDF of the whole ensemble) of the OADEV
+    at each m: the noise mixture's Greenhall–Riley quadratic form at the generator's own
+    composition, and 2T²/(2N²/ν + S_r·c_r + S_s·c_s + S_s²·p), T the truth, S_r and S_s the
+    drift's and the random-phase sinusoid's AVAR, c their exact cross terms with the
+    noise under its true spectrum (``cross_term_variance``) and p the sinusoid's own spread
+    over its phase (``signal_edf.phase_spread``). Written from the generator's definitions;
+    the project supplies the quadrature (checked against the closed-form AVAR)."""
+    from avard.core.allan.edf import edf_mixture
+    from avard.core.analysis.cross_term import cross_term_variance
+    from avard.core.analysis.signal_edf import phase_spread
+
+    psd = _gen_psd(lv)
+    noise_nu, whole = [], []
+    for m in (int(v) for v in ms):
+        big_m = n - 2 * m + 1
+        lev = np.array([lv.s2 / m, lv.f2 * gen.flicker_unit_avar(np.array([m]))[0],
+                        lv.q2 * (2 * m * m + 1) / (6 * m)])
+        nu = edf_mixture((0, -1, -2), lev, 2, m, 1, n + 1, rate_data=True)
+        big_n = float(gen.noise_avar(lv, np.array([m]))[0])
+        s_r = 0.5 * (lv.drift * m) ** 2
+        s_s = float(gen.signal_avar(lv, np.array([m]))[0]) - s_r
+        var = 2 * big_n**2 / nu
+        if s_r > 0:
+            var += s_r * cross_term_variance(psd, m, big_m, 0.0)
+        if lv.amplitude and s_s > 0:
+            f0 = 1.0 / lv.period
+            var += s_s * cross_term_variance(psd, m, big_m, f0) + s_s**2 * float(
+                phase_spread(np.array([big_m]), f0)[0])
+        noise_nu.append(nu)
+        whole.append(2 * (big_n + s_r + s_s) ** 2 / var)
+    return np.array(noise_nu), np.array(whole)
+
+
+def cmd_ensemble(args: argparse.Namespace) -> int:
+    """The stored records (``run``'s OUT) against the generator's exact ensemble: per τ the
+    deterministic part's share of the truth, the noise's own EDF, the whole ensemble's EDF
+    (``ensemble_edf``), the record's support (white FM's EDF), the mean printed EDF and the
+    EDF the estimates scatter with, the coverage as printed, at the ensemble's EDF and at
+    the support; then, split by the slow-sinusoid search's verdict and the drift test's,
+    the estimates' mean over the truth, the mean printed EDF and the coverage (a verdict
+    made of the same record selects on its estimate)."""
+    from scipy.stats import chi2
+
+    def cover(nu: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
+        lo = nu * v / chi2.ppf(0.5 + 0.683 / 2, nu)
+        hi = nu * v / chi2.ppf(0.5 - 0.683 / 2, nu)
+        return (lo <= t) & (t <= hi)
+
+    for hours in [int(h) for h in args.hours.split(",")]:
+        for mix in args.mixes.split(","):
+            path = out_path(args, hours, mix)
+            if not path.exists():
+                continue
+            rows = [r for r in (json.loads(s) for s in path.open()) if "error" not in r]
+            rows = rows[: args.records]
+            n, rate, lv = setup(hours, mix)
+            k = min(len(r["m"]) for r in rows)
+            ms = np.array(rows[0]["m"][:k])
+            var = np.array([r["var"][:k] for r in rows])
+            edf = np.array([r["edf"][:k] for r in rows])
+            t = gen.truth(lv, ms)
+            share = gen.signal_avar(lv, ms) / t
+            noise_nu, whole = ensemble_edf(lv, n, ms)
+            wfm = np.array([white_fm_edf(n, int(m)) for m in ms])
+            slow = np.array([bool(r.get("slow")) for r in rows])
+            verdict = np.array([r.get("verdict") or "" for r in rows])
+            print(f"{hours} h {mix} ({len(rows)} records):")
+            print("    τ (s)   signal  noise EDF  ensemble EDF  support  printed  seen   "
+                  "cover: printed  at ensemble  at support")
+            for j in range(k):
+                v = var[:, j]
+                seen = 2 * t[j] ** 2 / np.mean((v - t[j]) ** 2)
+                print(f"  {ms[j] / rate:8.1f}  {share[j]:6.1%}  {noise_nu[j]:9.1f}  "
+                      f"{whole[j]:12.1f}  {wfm[j]:7.1f}  {edf[:, j].mean():7.1f}  {seen:5.1f}"
+                      f"   {cover(edf[:, j], v, t[j]).mean():6.1%}  "
+                      f"{cover(np.full(len(v), whole[j]), v, t[j]).mean():11.1%}  "
+                      f"{cover(np.full(len(v), wfm[j]), v, t[j]).mean():10.1%}")
+            groups = [("slow sinusoid resolved", slow), ("slow sinusoid not resolved", ~slow)]
+            groups += [(f"drift {g}", verdict == g) for g in ("resolved", "floor", "neither")]
+            for name, sel in groups:
+                if sel.sum() < 5 or sel.all():
+                    continue
+                cells = []
+                for j in range(max(0, k - 3), k):
+                    held = cover(edf[sel, j], var[sel, j], t[j]).mean()
+                    cells.append(f"{ms[j] / rate:g} s mean/truth "
+                                 f"{var[sel, j].mean() / t[j]:.3f} printed "
+                                 f"{edf[sel, j].mean():.1f} cover {held:.0%}")
+                print(f"    {name} ({int(sel.sum())}), last 3 τ: " + "; ".join(cells))
+    return 0
+
+
 def cmd_drift(args: argparse.Namespace) -> int:
     """The calibration of analyze's time-domain drift test on these records, as
     ``bench_coverage.drift_test`` measures it on the project's: per record the test's signed
@@ -308,7 +414,7 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("command", choices=("check", "run", "table", "repro", "paired",
-                                           "drift"))
+                                           "drift", "ensemble"))
     ap.add_argument("--hours", default="1")
     ap.add_argument("--mixes", default="plain,sine,drift")
     ap.add_argument("--records", type=int, default=200)
@@ -319,7 +425,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--save", default="", help="repro: write the record here (.npz)")
     args = ap.parse_args(argv)
     return {"check": cmd_check, "run": cmd_run, "table": cmd_table,
-            "repro": cmd_repro, "paired": cmd_paired, "drift": cmd_drift}[args.command](args)
+            "repro": cmd_repro, "paired": cmd_paired, "drift": cmd_drift,
+            "ensemble": cmd_ensemble}[args.command](args)
 
 
 if __name__ == "__main__":

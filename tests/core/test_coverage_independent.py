@@ -45,10 +45,19 @@ def test_intervals_cover_the_truth_beside_a_drift(hours: int) -> None:
     with 77.0 % at 8192 s, 60 h 59.5–75.0 %: 64 s is one record short of 60 %, where the
     printed EDF is the generator's exact one and these records scatter 18 % below it, so
     the 60 h case fails on that tree; docs/log/analysis.md, "Every row re-measured"; before the
-    floor and the resolved ramp's rms noise part up to 83.5 %, at four τ of 12 h)."""
+    floor and the resolved ramp's rms noise part up to 83.5 %, at four τ of 12 h). The
+    assertion is kept as the issue states it (cov27, cov28: the 60 h records' noise alone,
+    at the generator's exact EDF, covers 64 s in 59.5 % too; more records chosen after
+    seeing the failure would be a seed chosen by another name): a failure reports each τ's
+    share with its binomial standard error, so one record short reads as what it is."""
+    import math
+
     c = coverage(hours, "drift", 200, seed=1)
-    detail = list(zip(c.tau, c.share, c.signal, strict=True))
-    assert all(c.share >= BAND[0]), detail
+    detail = [(float(t), f"{s:.1%} ± {math.sqrt(s * (1 - s) / 200):.1%}", float(g))
+              for t, s, g in zip(c.tau, c.share, c.signal, strict=True)]
+    below = [f"τ {t:g} s: {s}" for (t, s, _g), v in zip(detail, c.share, strict=True)
+             if v < BAND[0]]
+    assert all(c.share >= BAND[0]), f"below 60 %: {below}; every τ: {detail}"
     assert len(c.outside()) <= 1 and all(c.share <= 0.80), detail
 
 

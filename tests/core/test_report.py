@@ -165,7 +165,7 @@ def test_analysis_json_has_exactly_the_issue_shape(lab_npz: Path) -> None:
         assert set(ch) == {"estimator", "tau_s", "adev", "adev_lo", "adev_hi", "edf", "alpha",
                            "units", "terms", "sinusoids", "fit", "slow_sinusoid", "drift"}
         # where R came from and the drift floor (analysis/drift.py), in SI
-        assert set(ch["drift"]) == {"rate_ramp_from", "floor", "unit"}
+        assert set(ch["drift"]) == {"rate_ramp_from", "floor", "unit", "interval_noise"}
         assert ch["drift"]["unit"] == "m/s^3" and ch["drift"]["floor"] >= 0
         # issue 24: the slow-sinusoid search below the line finder's band, what it found or
         # why nothing is claimed
