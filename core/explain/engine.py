@@ -93,7 +93,6 @@ from avard.core.explain.thermal_fit import (
 )
 from avard.core.explain.thermal_fit.axes import path_of
 from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS, feed, hole_mask
-from avard.core.explain.thermal_fit.rounding import reading_grid
 from avard.core.explain.thermal_paths import (
     both_readings,
     rate_reading,
@@ -683,12 +682,10 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         if stage is not None:
             stage(f"explaining channel {name}")
         j = names.index(name)
-        # the causes' rounding floors on the step of the log the axis's thermal model reads
-        with reading_grid(None if th is None else th.grid):
-            out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
-                                         None if t_slow is None else t_slow[:, t_ok],
-                                         th, an, meta, always_compensate=temperature is not None,
-                                         holes=screen, settled=w0)
+        out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
+                                     None if t_slow is None else t_slow[:, t_ok],
+                                     th, an, meta, always_compensate=temperature is not None,
+                                     holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
             ch_ex.judge(None, screen=screen)

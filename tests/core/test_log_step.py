@@ -4,7 +4,8 @@ it is coarser than the DS18B20's 12-bit 0.0625 K (issue 23 items 1 and 5: a DS18
 print) in analyze's and explain's text, JSON and report, named as a possible cause beside an
 axis it leaves unexplained, and modelled: the thermal model takes the temperature behind such
 readings from their crossings (``thermal_fit.derounded``, ``coarse_regressor``) and its
-rounding terms on the log's step (``thermal_fit.reading_grid``)."""
+rounding terms on the log's step (passed to each: ``ThermalFit.grid``, ``choose_path``'s
+``grid``)."""
 
 from __future__ import annotations
 
@@ -293,10 +294,8 @@ def test_the_12_bit_step_leaves_the_regressor_and_the_derounding_as_they_were():
     assert np.array_equal(both[:, 0], T)
     assert np.array_equal(both[:, 1], coarse.derounded(T4, (0.25, 0.0)))
     assert np.sqrt(np.mean((both[:, 1] - room) ** 2)) < 0.5 * np.sqrt(np.mean((T4 - room) ** 2))
-    # the step in force (a path's candidates read it) is the one set, and only within
-    with rounding.reading_grid((0.25, 0.0)):
-        assert rounding.reading_step() == (0.25, 0.0)
-    assert rounding.reading_step() == (0.0625, 0.0)
+    # no step in force: without a grid, the 12-bit one
+    assert np.array_equal(coarse.derounded(T4), coarse.derounded(T4, (0.0625, 0.0)))
     assert screen_mod.is_coarse(0.125) and not screen_mod.is_coarse(0.0625)
 
 
@@ -375,18 +374,17 @@ def test_a_held_out_record_is_modelled_on_its_own_logs_step(tmp_path, q_main, q_
     assert ex.channels["x"].verdict.explained
 
 
-def test_the_rounding_terms_take_the_step_in_force():
+def test_the_rounding_terms_take_the_step_given():
     T = np.round(_room(n=20000) / 0.0625) * 0.0625
     tau = np.array([2048.0, 4096.0])
     base = sawtooth_avar(T, 1.0, tau)
     tc = rounding.rounding_correlation_s(T, 1.0)
-    with rounding.reading_grid((0.125, 0.0)):
-        # a step twice as wide is crossed half as often and rounds twice as far: well above
-        # the correlation time its white AVAR q²/12·t_c/τ is 8× the 12-bit one's
-        assert rounding.rounding_correlation_s(T, 1.0) == pytest.approx(2 * tc)
-        coarse = sawtooth_avar(T, 1.0, tau)
+    # a step twice as wide is crossed half as often and rounds twice as far: well above
+    # the correlation time its white AVAR q²/12·t_c/τ is 8× the 12-bit one's
+    assert rounding.rounding_correlation_s(T, 1.0, 0.125) == pytest.approx(2 * tc)
+    coarse = sawtooth_avar(T, 1.0, tau, step=0.125)
     assert np.all(coarse > 6.0 * base)
-    assert np.array_equal(sawtooth_avar(T, 1.0, tau, step=0.125), coarse)
+    assert np.array_equal(sawtooth_avar(T, 1.0, tau, step=0.0625), base)
 
 
 @pytest.mark.parametrize("q", [0.125, 0.25])
@@ -439,7 +437,8 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
     """On a coarse log the one lag's se carries the reconstruction's gain uncertainty
     (``coarse_gain_se``: ``gain_rel``); a path beyond one lag replaces the coefficient and
     its se by its regression's, and that widening is added to it the same way (before: lost),
-    with the path chosen on the driving channel's own step in force."""
+    with the path chosen on the driving channel's own step (passed to ``path_of`` with the
+    fit, whose ``grid`` ``choose_path`` receives)."""
     from types import SimpleNamespace
 
     seen = []
@@ -447,7 +446,7 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
                              theta_hi=[110.0], z_extra=5.0, open_end=False)
 
     def fake_path_of(fit, *a, **k):
-        seen.append(rounding.reading_step())
+        seen.append(fit.grid)
         return SimpleNamespace(kind="two_path", chosen=chosen, z_threshold=3.0)
 
     monkeypatch.setattr(axes, "path_of", fake_path_of)
@@ -460,4 +459,3 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
         assert got.coefficient == 2e-3
         assert got.coef_se == pytest.approx(math.hypot(1e-5, rel * 2e-3), rel=1e-12)
         assert seen[-1] == grid
-    assert rounding.reading_step() == (0.0625, 0.0)

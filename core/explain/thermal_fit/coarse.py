@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     pass
-from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 
 
 def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
@@ -24,7 +24,7 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     first and last readings as they are; ``T`` itself where it holds fewer than two runs.
     NaN stays NaN.
 
-    ``grid``: the readings' (step, origin), default the one in force (``reading_grid``). On a
+    ``grid``: the readings' (step, origin), default the 12-bit (0.0625, 0). On a
     step coarser than the 12-bit one the straight lines miss the turns by up to half a
     step for as long as the readings dwell there (through a lag, a misfit at τ of the
     dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
@@ -38,7 +38,7 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     the finite samples squeezed together, which ran it across the gap as if no time had
     passed), and the gap stays NaN."""
     T = np.asarray(T, dtype=float)
-    q, origin = reading_step() if grid is None else grid
+    q, origin = (DS18B20_STEP_K, 0.0) if grid is None else grid
     if is_coarse(q):
         from avard.core.explain.thermal_paths.columns import crossing_reconstruction
 
@@ -147,3 +147,4 @@ def _crossing_ends(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
     c = lev[-1] * q
     out[i1 + 1:] = np.clip(R[i1] + s * (np.arange(i1 + 1, len(R)) - i1), c - q / 2, c + q / 2)
     return out
+

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from avard.core.explain.thermal_paths import PathFit
 from avard.core.explain.thermal_fit.coarse import derounded
-from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_grid
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.settings import START_FIT_LAGS, Z_TEMPERATURE
 from avard.core.explain.thermal_fit.signals import lag_filter
 
@@ -157,8 +157,7 @@ class ThermalFit:
             # its standard error for the removal's covariance)
             b0 = float(self.path.chosen.beta[0])
             k = self.coefficient / b0 if b0 else 1.0
-            with reading_grid(self.grid):
-                return k * self.path.signal(temps[:, self.channel_index], y)
+            return k * self.path.signal(temps[:, self.channel_index], y, self.grid)
         # the readings' rounding is not in the axis (the die is not rounded): removed with
         # the signal, it is added to the compensated axis (``derounded``)
         u = lag_filter(derounded(temps[:, self.channel_index], self.grid), self.lag_s,

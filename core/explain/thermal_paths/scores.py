@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from avard.core.explain.thermal_fit import lag_filter
-from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_paths.columns import (
     Column,
     _relay,
@@ -115,6 +115,10 @@ class PathFit:
     #: lag's coefficient is then one of two readings the record does not tell apart and the
     #: data lean to the other, model-dependent with no interval (as ``leaning``)
     beside_better: tuple[str, ...] = ()
+    #: the driving channel's readings' (step K, origin) the path was chosen on (its log's
+    #: own, ``choose_path``'s ``grid``): its signal's temperature behind the readings and
+    #: the relay's switch-time floor are on it
+    grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)
 
     @property
     def model_dependent(self) -> bool:
@@ -129,11 +133,13 @@ class PathFit:
     def kind(self) -> str:
         return self.chosen.kind
 
-    def signal(self, T: NDArray, y: NDArray | None = None) -> NDArray[np.float64]:
+    def signal(self, T: NDArray, y: NDArray | None = None,
+               grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
         """The chosen model's signal on the slow view (m/s²); with ``y``, the start states
-        fitted (least squares with an offset and a drift), else left out."""
+        fitted (least squares with an offset and a drift), else left out. ``grid``: ``T``'s
+        readings' (step K, origin) (a held-out log's own), default the path's ``grid``."""
         s = self.chosen
-        X = path_columns(T, list(s.cols), self.rate_hz)
+        X = path_columns(T, list(s.cols), self.rate_hz, grid=self.grid if grid is None else grid)
         n = s_terms(s)
         d = X[:, :n] @ s.beta_fitted[:n]
         if y is None or X.shape[1] == n:
@@ -200,12 +206,12 @@ class PathFit:
         if len(sw):
             slope = np.abs(np.gradient(v) * self.rate_hz)[sw]
             gap = np.diff(np.concatenate([sw, [len(r)]])) / self.rate_hz
-            delta = np.minimum(reading_step()[0] / math.sqrt(12.0)
+            delta = np.minimum(self.grid[0] / math.sqrt(12.0)
                                / np.maximum(slope, 1e-300), gap)
             floor = 2 * abs(float(sc.beta[1])) * math.sqrt(float(np.sum(delta)) / record_s)
         why = (f"{floor:.3g} m/s², the RMS of the relay's switch-time error (its switches "
                "on the temperature behind the readings, uncertain by their "
-               f"{reading_step()[0]:g} K "
+               f"{self.grid[0]:g} K "
                "rounding over the temperature's slope at each switch), which recurs twice a "
                "cycle and can look like a bump")
         # the relay at the ends of its lag's and width's 68 % intervals, the same h
@@ -234,7 +240,7 @@ class PathFit:
 
     def _score_signal(self, s: PathScore, T: NDArray) -> NDArray[np.float64]:
         """Candidate ``s``'s coupling signal on the slow view (no start state)."""
-        X = path_columns(T, list(s.cols), self.rate_hz)
+        X = path_columns(T, list(s.cols), self.rate_hz, grid=self.grid)
         n = s_terms(s)
         return np.asarray(X[:, :n] @ s.beta_fitted[:n], dtype=float)
 
