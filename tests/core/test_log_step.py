@@ -20,6 +20,7 @@ from avard.core.explain.engine import SlowView, explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary, write_report
 from avard.core.explain.thermal_fit import axes, coarse, rounding, signals
+from avard.core.explain.thermal_fit import fit as fit_mod
 from avard.core.explain.thermal_fit.fit import ThermalFit
 from avard.core.explain.thermal_paths.rounding import sawtooth_avar
 from avard.core.explain.verdict import judge
@@ -459,3 +460,61 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
         assert got.coefficient == 2e-3
         assert got.coef_se == pytest.approx(math.hypot(1e-5, rel * 2e-3), rel=1e-12)
         assert seen[-1] == grid
+
+
+def _drive_gain(true: np.ndarray, recon: np.ndarray, rate: float, lag: float = 300.0) -> float:
+    """ĉ/c when an axis c·(the true temperature through ``lag``) is regressed on ``recon``
+    through the same lag, in the Allan domain from 100 s (as the thermal fit reads it)."""
+    ut, ur = signals.lag_filter(true, lag, rate), signals.lag_filter(recon, lag, rate)
+    r = signals.allan2(ut, ur, rate)
+    cov, tau = np.asarray(r.cov), np.asarray(r.tau)
+    k = (tau >= 100.0) & (tau <= tau.max() / 4)
+    return float(np.sum(cov[k, 0, 1]) / np.sum(cov[k, 1, 1]))
+
+
+@pytest.mark.parametrize("q, origin, offset", [(0.5, 0.0, 0.0), (0.5, 0.0, 0.2),
+                                               (0.25, 0.0, 0.1), (0.125, 0.0, 0.0),
+                                               (0.1125, 0.1, 0.0)])
+def test_a_coarse_logs_turns_are_a_cycles_tops(q, origin, offset):
+    """A ±0.5 K cycle read on a coarse step: the reconstruction's gain at the drive (ĉ/c
+    through a 300 s lag) within 2 % of 1 wherever the cycle sits on the grid; the spline
+    alone (a parabola's tops) left a cycle that dwells a third of its period on its top
+    level 5–7 % low (ĉ that much high), and the interval's widening
+    (``coarse_gain_se``) is half the two readings' difference."""
+    rate = 1 / 0.75 / 2
+    room = _room(n=40000)[::2] + offset
+    T = np.round((room - origin) / q) * q + origin
+    tops = coarse.derounded(T, (q, origin))
+    assert abs(_drive_gain(room, tops, rate) - 1.0) < 0.02
+    if q == 0.5 and offset == 0.0:
+        assert _drive_gain(room, coarse.derounded(T, (q, origin), tops=False), rate) > 1.04
+    # inside each reading's cell
+    assert np.all(np.abs(tops - T) <= q / 2 + 1e-9)
+    fit = ThermalFit("t", 0, 3e-3, 3e-5, 300.0, 290.0, 310.0, 9.0, rate, grid=(q, origin))
+    got = fit_mod.coarse_gain_se(fit, T[:, None], tops[:, None])
+    assert 0.0 < got.gain_rel < 0.08
+    assert got.coef_se == pytest.approx(math.hypot(3e-5, got.gain_rel * 3e-3), rel=1e-12)
+
+
+def test_the_relay_floor_takes_the_logs_own_step():
+    """The relay's switch-time floor (``PathFit.relay_floor``) on the path's grid: the
+    temperature behind 0.5 K readings is uncertain by 0.5/√12 K, eight times 12 bits', so
+    its switches' error and floor are larger, and the text names the log's step."""
+    from types import SimpleNamespace
+
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.scores import PathFit
+
+    rate = 1 / 0.75 / 4
+    room = _room(n=40000)[::4]
+    relay = Column("relay", 60.0, 0.1)
+    sc = SimpleNamespace(kind="hysteresis", cols=(Column("u", 60.0), relay),
+                         beta=np.array([1e-3, 2e-4]), theta_lo=(math.nan, math.nan),
+                         theta_hi=(math.nan, math.nan))
+    floors = {}
+    for q in (0.0625, 0.5):
+        T = np.round(room / q) * q
+        pf = PathFit(sc, {"hysteresis": sc}, 3.0, rate, grid=(q, 0.0))
+        floors[q] = pf.relay_floor(T)
+    assert floors[0.5][0] > 2.0 * floors[0.0625][0] > 0.0
+    assert "0.5 K" in floors[0.5][1] and "0.0625 K" in floors[0.0625][1]

@@ -179,15 +179,16 @@ class PathFit:
         a relay is chosen or named beside the path kept (0, "" elsewhere): the larger of
 
         - the RMS of the relay term's switch-time error: the relay switches on the
-          temperature behind the readings, whose level is uncertain by the 0.0625 K
-          rounding (RMS q/√12), so each switch is off by about that over the temperature's
-          slope there (capped at the time to the next switch), a pulse of 2|h| for that
-          long: 2|h|·√(Σ δᵢ / record). Where the die swings a few steps the slope at a
-          switch is a few mK per minute and δ is a minute: pulses that recur twice a cycle
-          with a minute's correlation, which the scan reads as a Gauss–Markov process
-          (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s², T 25–26 s beside a
-          relay of h ≈ 1.1e-4 chosen right). Like ``causes.gauss_markov_rounding_floor``
-          it bounds from above (the reconstruction is no worse than the readings);
+          temperature behind the readings, whose level is uncertain by their rounding on
+          the log's own step q (``grid``; RMS q/√12), so each switch is off by about that
+          over the temperature's slope there (capped at the time to the next switch), a
+          pulse of 2|h| for that long: 2|h|·√(Σ δᵢ / record). Where the die swings a few
+          steps the slope at a switch is a few mK per minute and δ is a minute: pulses that
+          recur twice a cycle with a minute's correlation, which the scan reads as a
+          Gauss–Markov process (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s²,
+          T 25–26 s beside a relay of h ≈ 1.1e-4 chosen right). Like
+          ``causes.gauss_markov_rounding_floor`` it bounds from above (the reconstruction
+          is no worse than the readings);
         - where the relay is named beside another reading (one lag kept with the relay
           ``as_well`` or ``leaning``, or an alternative), the RMS of the difference of the
           two readings' signals: what the reading removed leaves of the one named beside
@@ -198,7 +199,12 @@ class PathFit:
         if sc is None or relay is None or "hysteresis" not in named or len(sc.beta) < 2:
             return 0.0, ""
         T = np.asarray(T, dtype=float)
-        v = lag_filter(crossing_reconstruction(T), relay.lag, self.rate_hz)
+        # the temperature behind the readings on the log's own step and origin, as the relay
+        # column was built (``path_columns``): on the 12-bit default a coarse log's knots sat
+        # between its levels, and its switch times' error was taken on 0.0625 K
+        q, o = self.grid
+        behind = crossing_reconstruction(T - o, q) + o
+        v = lag_filter(behind, relay.lag, self.rate_hz)
         r = _relay(v, relay.width)
         sw = np.flatnonzero(np.diff(r) != 0) + 1
         record_s = len(T) / self.rate_hz
@@ -215,7 +221,6 @@ class PathFit:
                "rounding over the temperature's slope at each switch), which recurs twice a "
                "cycle and can look like a bump")
         # the relay at the ends of its lag's and width's 68 % intervals, the same h
-        behind = crossing_reconstruction(T)
         moved = 0.0
         for lag, w in ((sc.theta_lo[0], relay.width), (sc.theta_hi[0], relay.width),
                        (relay.lag, sc.theta_lo[1]), (relay.lag, sc.theta_hi[1])):
