@@ -88,6 +88,30 @@ def test_a_stable_room_keeps_the_12_bit_step():
     assert log_step(np.concatenate([T, [85.0, -127.0]])) == (0.0625, 0.0)
 
 
+@pytest.mark.parametrize("q", [0.5, 0.25, 0.125, 0.1125])
+def test_a_stable_coarse_log_shows_its_step_in_time(q):
+    """A room too stable for its distinct values to show the step (two levels a coarse
+    step apart, the case above): its readings, 0.75 s apart, jump a whole step with no
+    level between, which a room never does on a finer log; with their times the step is
+    found. The same room on 12 bits (two neighbouring levels) keeps 0.0625 K."""
+    t = np.arange(9600) * 0.75
+    room = math.floor(22.0 / q) * q + q / 2 + 0.3 * q * np.sin(2 * math.pi * t / 1800.0)
+    T = np.round(room / q) * q
+    assert len(np.unique(T)) == 2
+    # (two values on no 12-bit level, as 0.1125 K's from 0 are, are on no grid by themselves)
+    assert log_step(T) in ((0.0625, 0.0), None)
+    assert log_step(T, t) == (q, 0.0)
+    # with a reading lost now and then (a gap longer than the jumps' bound is not read)
+    keep = np.ones(len(T), dtype=bool)
+    keep[::97] = False
+    assert log_step(T[keep], t[keep]) == (q, 0.0)
+    fine = np.round((22.03 + 0.04 * np.sin(2 * math.pi * t / 1800.0)) / 0.0625) * 0.0625
+    assert len(np.unique(fine)) == 2
+    assert log_step(fine, t) == (0.0625, 0.0)
+    # readings far apart (a log every minute) say nothing in time: a room can move a step
+    assert log_step(T[::80], t[::80]) == log_step(T)
+
+
 def test_the_text_names_the_step_and_what_it_may_be():
     assert coarse_text((0.25, 0.0)) == (
         "readings on a 0.25 K step (a DS18B20 at 10 bits?), coarser than the 12-bit "
