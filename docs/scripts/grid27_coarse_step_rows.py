@@ -41,8 +41,9 @@ def row(q: float, seed: int, hours: float, tmp: Path) -> dict:
     th = x.thermal
     out = {"explained": bool(x.verdict and x.verdict.explained), "mech": None, "c": None,
            "in": False, "chi2": x.extended.chi2_dof,
+           # (the record's temporary directory left out: it differs from run to run)
            "digest": hashlib.sha256(json.dumps(ex.to_dict(), sort_keys=True, default=repr)
-                                    .encode()).hexdigest()[:16]}
+                                    .replace(str(tmp), "").encode()).hexdigest()[:16]}
     if th is not None:
         d = th.to_dict()
         lo, hi = d.get("coefficient_interval") or (float("nan"), float("nan"))
