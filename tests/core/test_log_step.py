@@ -238,7 +238,7 @@ def test_a_12_bit_log_is_said_nowhere_and_explained_as_before(tmp_path, monkeypa
                                                          "coarse": False}
     assert "possible cause" not in summary(ex)
     # the coarse-step machinery off (no step found): the same explanation, to the bit
-    monkeypatch.setattr(screen_mod, "log_step", lambda v: None)
+    monkeypatch.setattr(screen_mod, "log_step", lambda v, t=None: None)
     again = explain_file(open_record(path), ExplainOptions(channels=("x",)))
     d2 = json.loads(json.dumps(again.to_dict(), default=str))
     d2["screened"].pop("reading_steps"), d["screened"].pop("reading_steps")
@@ -334,15 +334,18 @@ def test_the_coarse_reconstruction_runs_on_the_samples_times_across_a_gap():
     R = np.round(room / 0.25) * 0.25
     near = (np.abs(np.arange(len(t)) - 4000) < 1500) & (np.arange(len(t)) >= 3000)
 
-    def err(X: np.ndarray) -> float:
-        d = coarse.derounded(X, (0.25, 0.0))
+    def err(X: np.ndarray, tops: bool = True) -> float:
+        d = coarse.derounded(X, (0.25, 0.0), tops)
         ok = near & np.isfinite(X)
         return float(np.sqrt(np.mean((d - room)[ok] ** 2)))
 
     X = R.copy()
     X[4000:4700] = np.nan
     assert np.all(np.isnan(coarse.derounded(X, (0.25, 0.0))[4000:4700]))
-    assert err(X) < 2.0 * err(R)
+    # (the turns beside the gap keep the spline's own tops, ``_turn_tops``' ``real``: the
+    # bound is the spline's error without the gap, the cycle's tops being nearer still)
+    assert err(X) < 2.0 * err(R, tops=False)
+    assert err(R) < err(R, tops=False)
     # and far below the readings' own error there
     assert err(X) < 0.2 * float(np.sqrt(np.mean((R - room)[near] ** 2)))
 

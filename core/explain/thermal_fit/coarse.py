@@ -53,7 +53,8 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
             # are off the grid, so the reconstruction does not clip them to a cell)
             v = np.interp(np.arange(ok[0], ok[-1] + 1), ok, T[ok]) - origin
             r = _crossing_ends(v, crossing_reconstruction(v, q), q)
-            r = (_turn_tops(v, r, q) if tops else r) + origin
+            real = np.isfinite(T[ok[0]:ok[-1] + 1])
+            r = (_turn_tops(v, r, q, real) if tops else r) + origin
             out[ok] = r[ok - ok[0]]
         return out
     out = T.copy()
@@ -154,7 +155,8 @@ def _crossing_ends(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
     return out
 
 
-def _turn_tops(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
+def _turn_tops(v: NDArray, R: NDArray, q: float,
+               real: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
     """``R`` (the crossing reconstruction of readings ``v`` on step ``q``) with each turn's
     top (a run of readings on one level whose neighbours both lie on one side of it) raised
     as a cycle's top, not a parabola's. Between the two crossings of the threshold θ that
@@ -166,7 +168,9 @@ def _turn_tops(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
     turn's neighbouring turns of the same sense, two turns away (twice the nearest turn's
     distance at the record's ends); α is held below π/2 (a dwell of half the cycle: the
     threshold at the cycle's middle, where a cosine's slope is largest). The top stays
-    inside the reading's cell."""
+    inside the reading's cell. ``real``: the samples that are readings (not a gap's bridge);
+    a turn whose span or neighbouring runs reach into a gap is left as the spline has it
+    (its dwell and crossings are the bridge's, not the room's)."""
     lev = np.round(v / q)
     out = np.array(R, dtype=float)
     ch = np.flatnonzero(np.diff(lev) != 0)
@@ -182,6 +186,8 @@ def _turn_tops(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
     mid = 0.5 * (starts[turn] + ends[turn])
     for i, r in enumerate(turn.tolist()):
         a, b = int(starts[r]), int(ends[r])
+        if real is not None and not np.all(real[int(starts[r - 1]):int(ends[r + 1]) + 1]):
+            continue
         if i >= 1 and i + 1 < len(turn):
             period = mid[i + 1] - mid[i - 1]
         else:
