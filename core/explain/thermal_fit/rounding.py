@@ -27,7 +27,7 @@ DS18B20_STEP_K = 0.0625
 ROUNDING_SNR = 10.0
 
 
-def rounding_correlation_s(T: NDArray, rate_hz: float, step: float = DS18B20_STEP_K) -> float:
+def rounding_correlation_s(T: NDArray, rate_hz: float, step: float | None = None) -> float:
     """How long (s) the logged channel ``T`` (slow view) keeps one rounding error: a
     temperature moving at |dT/dt| crosses a 0.0625 K step every q/|dT/dt| s, and between
     crossings its rounding error is one slowly moving value of the sawtooth, not a new draw
@@ -41,11 +41,12 @@ def rounding_correlation_s(T: NDArray, rate_hz: float, step: float = DS18B20_STE
     if len(T) > 4 * k:
         Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
         slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    return max(DS18B20_CONVERSION_S, step / slope if slope > 0 else math.inf)
+    q = DS18B20_STEP_K if step is None else step
+    return max(DS18B20_CONVERSION_S, q / slope if slope > 0 else math.inf)
 
 
 def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR,
-                       step: float = DS18B20_STEP_K) -> float:
+                       step: float | None = None) -> float:
     """The shortest octave τ (s) from which the logged channel ``T`` (slow view) varies at
     least ``snr`` times more than its readings' rounding, the rounding taken as a sawtooth:
     AVAR_T(τ) ≥ snr·(q²/12)·t_c/τ at that τ, t_c the time one rounding
@@ -61,6 +62,7 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR,
     T = np.asarray(T, dtype=float)
     if len(T) < 16:
         return 0.0
+    step = DS18B20_STEP_K if step is None else step
     tc = rounding_correlation_s(T, rate_hz, step)
     sa = StreamingAllan(1, rate_hz)
     sa.update(T[:, None])

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
                   gain2: Callable[[NDArray], NDArray] | None = None,
-                  step: float = DS18B20_STEP_K) -> NDArray[np.float64]:
+                  step: float | None = None) -> NDArray[np.float64]:
     """The readings' rounding AVAR (K²) at ``tau`` seen through ``lag_filter`` of ``lag_s``:
     the rounding as a sawtooth (``thermal_fit.rounding_correlation_s``), white at τ above
     its correlation time t_c with AVAR q²/12·t_c/τ (white FM, h₀ = q²t_c/6), the filter's
@@ -22,11 +22,12 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
     eq. 10's transfer function); a long lag passes little of it at τ below the lag.
     ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
     its coefficients in it, and not capped at the readings' own 2q²/12). ``step``: the
-    readings' step q (K), default the 12-bit 0.0625 (``choose_path`` passes its channel's)."""
+    readings' step q (K), None the 12-bit 0.0625 (``choose_path`` passes its channel's)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
         return np.zeros(len(tau))
+    step = DS18B20_STEP_K if step is None else step
     tc = rounding_correlation_s(T, rate_hz, step)
     if not (math.isfinite(tc) and tc > 0):
         # a channel that never crosses a step (constant, or stuck): no sawtooth to see
