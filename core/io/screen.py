@@ -1448,9 +1448,16 @@ LOG_STEP_NEIGHBOURS = 2
 #: The least number of distinct values that can show a step of the values' own spacing
 #: (one no candidate holds): fewer could be any spacing by chance.
 LOG_STEP_OWN_VALUES = 8
+#: Readings at most this far apart (s) that differ by a whole coarse step show it in time
+#: when their distinct values cannot (a stable room on two or three levels): a room or a
+#: plate does not move 0.1 K in a few seconds, so a log whose every change between such
+#: readings is one step q (and at least ``LOG_STEP_NEIGHBOURS`` of them) reads on q; a
+#: finer log of the same room passes the levels between (``log_step``'s ``times``).
+LOG_STEP_JUMP_S = 5.0
 
 
-def _on_step(u: NDArray[np.float64], q: float) -> tuple[float, float] | None:
+def _on_step(u: NDArray[np.float64], q: float, neighbours: int = LOG_STEP_NEIGHBOURS
+             ) -> tuple[float, float] | None:
     """(q, origin) when the distinct values ``u`` hold the grid origin + k·q (module
     constants ``LOG_STEP_*``), None when they do not; the origin their most common
     remainder (0 for a grid through 0 within the print)."""
@@ -1470,25 +1477,35 @@ def _on_step(u: NDArray[np.float64], q: float) -> tuple[float, float] | None:
     origin, on = best
     if len(on) < LOG_STEP_SHARE * len(u):
         return None
-    if np.count_nonzero(np.abs(np.diff(on) - q) <= 2 * tol) < LOG_STEP_NEIGHBOURS:
+    if np.count_nonzero(np.abs(np.diff(on) - q) <= 2 * tol) < neighbours:
         return None
     return q, (0.0 if min(origin, q - origin) <= tol else round(origin, 4))
 
 
-def log_step(values: NDArray) -> tuple[float, float] | None:
+def log_step(values: NDArray, times: NDArray | None = None) -> tuple[float, float] | None:
     """(step K, origin) of a temperature log's readings, judged on its distinct values (the
     error and power-on values left out): the coarsest candidate (``LOG_STEPS_K``) whose grid
     holds them (``_on_step``); failing every candidate, the values' own spacing (their
-    median difference, with at least ``LOG_STEP_OWN_VALUES`` values) if it holds them. A
-    log too stable to show its step (its few values on the 12-bit grid) keeps the DS18B20's
-    0.0625 K; None when the log is on no grid (a logger's fine or unrounded values)."""
+    median difference, with at least ``LOG_STEP_OWN_VALUES`` values) if it holds them.
+
+    A log too stable to show its step in its distinct values (two or three levels: a
+    12-bit log dwelling on levels 0.125 apart has the same set) is judged in time where the
+    readings' ``times`` (s) are given (``_step_in_time``): every change between readings at
+    most ``LOG_STEP_JUMP_S`` apart one coarse step, at least ``LOG_STEP_NEIGHBOURS`` times,
+    is that step. Failing that, a log on the 12-bit grid keeps the DS18B20's 0.0625 K; None
+    when the log is on no grid (a logger's fine or unrounded values)."""
     v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)]
+    ok = np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)
+    v = v[ok]
     u = np.unique(np.round(v, 6))
     if len(u) == 0:
         return (DS18B20_STEP_C, 0.0)
     for q in LOG_STEPS_K:
         found = _on_step(u, q)
+        if found is not None:
+            return found
+    if times is not None:
+        found = _step_in_time(v, np.asarray(times, dtype=float)[ok], u)
         if found is not None:
             return found
     if _grid_share(u, 0.0, DS18B20_STEP_C, PRINT_TOL) >= LOG_STEP_SHARE:
@@ -1497,6 +1514,26 @@ def log_step(values: NDArray) -> tuple[float, float] | None:
         q = round(float(np.median(np.diff(u))), 4)
         if q > 0.0:
             return _on_step(u, q)
+    return None
+
+
+def _step_in_time(v: NDArray[np.float64], t: NDArray[np.float64], u: NDArray[np.float64]
+                  ) -> tuple[float, float] | None:
+    """(q, origin) of readings ``v`` at times ``t`` (s), distinct values ``u``, where every
+    change between readings at most ``LOG_STEP_JUMP_S`` apart is one coarse candidate step q
+    (within the print), at least ``LOG_STEP_NEIGHBOURS`` of them, and the values hold q's
+    grid (``_on_step`` without its neighbour pairs); None otherwise."""
+    if len(v) < 2:
+        return None
+    d = np.abs(np.diff(v))[np.diff(t) <= LOG_STEP_JUMP_S]
+    d = d[d > PRINT_TOL]
+    if len(d) < LOG_STEP_NEIGHBOURS:
+        return None
+    for q in LOG_STEPS_K:
+        if not is_coarse(q):
+            continue
+        if np.all(np.abs(d - q) <= 2 * min(PRINT_TOL, q / 10.0)):
+            return _on_step(u, q, neighbours=0)
     return None
 
 
@@ -1829,7 +1866,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
                         if refused is not None else f" (its readings: {unit.text})")
                 unit, refused = LogNote("units_given", "taken as °C as asked "
                                         f"(--temperature-units C){seen}"), None
-        grid = log_step(tr.arrays()[1]) if len(tr) else None
+        grid = log_step(tr.arrays()[1], tr.arrays()[0] / rate_hz) if len(tr) else None
         if grid is not None and ((check_units and name not in NOT_DS18B20)
                                  or (grid[1] == 0.0 and grid[0] in DS18B20_BITS)):
             # avard's own logs (the die's ~0.11 K LSB, a recording's) only on a DS18B20

@@ -4,10 +4,15 @@ explain's verdict, mechanism and coefficient against the truth, per step (grid27
 Records: ``tests/support/hidden.make_record(seed, hours=2, logged=("ambient",))`` with a
 3e-3 m/s²/K coupling through a 300 s lag, the log rounded to q (the generator's step set to q).
 Run from the repository: ``PYTHONPATH=. OMP_NUM_THREADS=1 nice .venv/bin/python
-docs/scripts/grid27_coarse_step_rows.py [SEEDS] [HOURS] [FIRST_SEED]``."""
+docs/scripts/grid27_coarse_step_rows.py [SEEDS] [HOURS] [FIRST_SEED] [STEPS]``, STEPS a
+comma-separated list of steps (K), default ``0.5,0.25,0.125,0.0625`` (``0.1125``: a °F log
+taken as °C, from 0). Each record's line on stderr ends with a digest of its whole
+explanation (``--json``), so two runs can be compared to the bit (coarse28)."""
 
 from __future__ import annotations
 
+import hashlib
+import json
 import sys
 import tempfile
 from pathlib import Path
@@ -35,7 +40,10 @@ def row(q: float, seed: int, hours: float, tmp: Path) -> dict:
     x = ex.channels["x"]
     th = x.thermal
     out = {"explained": bool(x.verdict and x.verdict.explained), "mech": None, "c": None,
-           "in": False, "chi2": x.extended.chi2_dof}
+           "in": False, "chi2": x.extended.chi2_dof,
+           # (the record's temporary directory left out: it differs from run to run)
+           "digest": hashlib.sha256(json.dumps(ex.to_dict(), sort_keys=True, default=repr)
+                                    .replace(str(tmp), "").encode()).hexdigest()[:16]}
     if th is not None:
         d = th.to_dict()
         lo, hi = d.get("coefficient_interval") or (float("nan"), float("nan"))
@@ -49,10 +57,12 @@ def main() -> None:
     seeds = int(sys.argv[1]) if len(sys.argv) > 1 else 6
     hours = float(sys.argv[2]) if len(sys.argv) > 2 else 2.0
     first = int(sys.argv[3]) if len(sys.argv) > 3 else 1
+    steps = ([float(v) for v in sys.argv[4].split(",")] if len(sys.argv) > 4
+             else [0.5, 0.25, 0.125, 0.0625])
     print(f"{'step K':>7} {'explained':>10} {'one lag':>8} {'c in 68 %':>10} "
           f"{'median c/truth':>15} {'median chi2/dof':>16}")
     with tempfile.TemporaryDirectory() as d:
-        for q in (0.5, 0.25, 0.125, 0.0625):
+        for q in steps:
             rows = [row(q, first + s, hours, Path(d)) for s in range(seeds)]
             n = len(rows)
             cs = sorted(r["c"] / TRUTH_C for r in rows if r["c"] is not None)

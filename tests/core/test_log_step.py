@@ -4,7 +4,8 @@ it is coarser than the DS18B20's 12-bit 0.0625 K (issue 23 items 1 and 5: a DS18
 print) in analyze's and explain's text, JSON and report, named as a possible cause beside an
 axis it leaves unexplained, and modelled: the thermal model takes the temperature behind such
 readings from their crossings (``thermal_fit.derounded``, ``coarse_regressor``) and its
-rounding terms on the log's step (``thermal_fit.reading_grid``)."""
+rounding terms on the log's step (passed to each: ``ThermalFit.grid``, ``choose_path``'s
+``grid``)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from avard.core.explain.engine import SlowView, explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary, write_report
 from avard.core.explain.thermal_fit import axes, coarse, rounding, signals
+from avard.core.explain.thermal_fit import fit as fit_mod
 from avard.core.explain.thermal_fit.fit import ThermalFit
 from avard.core.explain.thermal_paths.rounding import sawtooth_avar
 from avard.core.explain.verdict import judge
@@ -84,6 +86,30 @@ def test_a_stable_room_keeps_the_12_bit_step():
     assert log_step(T[:4000]) == (0.0625, 0.0)
     # the DS18B20's error and power-on values are no reading of the room
     assert log_step(np.concatenate([T, [85.0, -127.0]])) == (0.0625, 0.0)
+
+
+@pytest.mark.parametrize("q", [0.5, 0.25, 0.125, 0.1125])
+def test_a_stable_coarse_log_shows_its_step_in_time(q):
+    """A room too stable for its distinct values to show the step (two levels a coarse
+    step apart, the case above): its readings, 0.75 s apart, jump a whole step with no
+    level between, which a room never does on a finer log; with their times the step is
+    found. The same room on 12 bits (two neighbouring levels) keeps 0.0625 K."""
+    t = np.arange(9600) * 0.75
+    room = math.floor(22.0 / q) * q + q / 2 + 0.3 * q * np.sin(2 * math.pi * t / 1800.0)
+    T = np.round(room / q) * q
+    assert len(np.unique(T)) == 2
+    # (two values on no 12-bit level, as 0.1125 K's from 0 are, are on no grid by themselves)
+    assert log_step(T) in ((0.0625, 0.0), None)
+    assert log_step(T, t) == (q, 0.0)
+    # with a reading lost now and then (a gap longer than the jumps' bound is not read)
+    keep = np.ones(len(T), dtype=bool)
+    keep[::97] = False
+    assert log_step(T[keep], t[keep]) == (q, 0.0)
+    fine = np.round((22.03 + 0.04 * np.sin(2 * math.pi * t / 1800.0)) / 0.0625) * 0.0625
+    assert len(np.unique(fine)) == 2
+    assert log_step(fine, t) == (0.0625, 0.0)
+    # readings far apart (a log every minute) say nothing in time: a room can move a step
+    assert log_step(T[::80], t[::80]) == log_step(T)
 
 
 def test_the_text_names_the_step_and_what_it_may_be():
@@ -212,7 +238,7 @@ def test_a_12_bit_log_is_said_nowhere_and_explained_as_before(tmp_path, monkeypa
                                                          "coarse": False}
     assert "possible cause" not in summary(ex)
     # the coarse-step machinery off (no step found): the same explanation, to the bit
-    monkeypatch.setattr(screen_mod, "log_step", lambda v: None)
+    monkeypatch.setattr(screen_mod, "log_step", lambda v, t=None: None)
     again = explain_file(open_record(path), ExplainOptions(channels=("x",)))
     d2 = json.loads(json.dumps(again.to_dict(), default=str))
     d2["screened"].pop("reading_steps"), d["screened"].pop("reading_steps")
@@ -293,10 +319,8 @@ def test_the_12_bit_step_leaves_the_regressor_and_the_derounding_as_they_were():
     assert np.array_equal(both[:, 0], T)
     assert np.array_equal(both[:, 1], coarse.derounded(T4, (0.25, 0.0)))
     assert np.sqrt(np.mean((both[:, 1] - room) ** 2)) < 0.5 * np.sqrt(np.mean((T4 - room) ** 2))
-    # the step in force (a path's candidates read it) is the one set, and only within
-    with rounding.reading_grid((0.25, 0.0)):
-        assert rounding.reading_step() == (0.25, 0.0)
-    assert rounding.reading_step() == (0.0625, 0.0)
+    # no step in force: without a grid, the 12-bit one
+    assert np.array_equal(coarse.derounded(T4), coarse.derounded(T4, (0.0625, 0.0)))
     assert screen_mod.is_coarse(0.125) and not screen_mod.is_coarse(0.0625)
 
 
@@ -310,15 +334,18 @@ def test_the_coarse_reconstruction_runs_on_the_samples_times_across_a_gap():
     R = np.round(room / 0.25) * 0.25
     near = (np.abs(np.arange(len(t)) - 4000) < 1500) & (np.arange(len(t)) >= 3000)
 
-    def err(X: np.ndarray) -> float:
-        d = coarse.derounded(X, (0.25, 0.0))
+    def err(X: np.ndarray, tops: bool = True) -> float:
+        d = coarse.derounded(X, (0.25, 0.0), tops)
         ok = near & np.isfinite(X)
         return float(np.sqrt(np.mean((d - room)[ok] ** 2)))
 
     X = R.copy()
     X[4000:4700] = np.nan
     assert np.all(np.isnan(coarse.derounded(X, (0.25, 0.0))[4000:4700]))
-    assert err(X) < 2.0 * err(R)
+    # (the turns beside the gap keep the spline's own tops, ``_turn_tops``' ``real``: the
+    # bound is the spline's error without the gap, the cycle's tops being nearer still)
+    assert err(X) < 2.0 * err(R, tops=False)
+    assert err(R) < err(R, tops=False)
     # and far below the readings' own error there
     assert err(X) < 0.2 * float(np.sqrt(np.mean((R - room)[near] ** 2)))
 
@@ -375,18 +402,17 @@ def test_a_held_out_record_is_modelled_on_its_own_logs_step(tmp_path, q_main, q_
     assert ex.channels["x"].verdict.explained
 
 
-def test_the_rounding_terms_take_the_step_in_force():
+def test_the_rounding_terms_take_the_step_given():
     T = np.round(_room(n=20000) / 0.0625) * 0.0625
     tau = np.array([2048.0, 4096.0])
     base = sawtooth_avar(T, 1.0, tau)
     tc = rounding.rounding_correlation_s(T, 1.0)
-    with rounding.reading_grid((0.125, 0.0)):
-        # a step twice as wide is crossed half as often and rounds twice as far: well above
-        # the correlation time its white AVAR q²/12·t_c/τ is 8× the 12-bit one's
-        assert rounding.rounding_correlation_s(T, 1.0) == pytest.approx(2 * tc)
-        coarse = sawtooth_avar(T, 1.0, tau)
+    # a step twice as wide is crossed half as often and rounds twice as far: well above
+    # the correlation time its white AVAR q²/12·t_c/τ is 8× the 12-bit one's
+    assert rounding.rounding_correlation_s(T, 1.0, 0.125) == pytest.approx(2 * tc)
+    coarse = sawtooth_avar(T, 1.0, tau, step=0.125)
     assert np.all(coarse > 6.0 * base)
-    assert np.array_equal(sawtooth_avar(T, 1.0, tau, step=0.125), coarse)
+    assert np.array_equal(sawtooth_avar(T, 1.0, tau, step=0.0625), base)
 
 
 @pytest.mark.parametrize("q", [0.125, 0.25])
@@ -439,7 +465,8 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
     """On a coarse log the one lag's se carries the reconstruction's gain uncertainty
     (``coarse_gain_se``: ``gain_rel``); a path beyond one lag replaces the coefficient and
     its se by its regression's, and that widening is added to it the same way (before: lost),
-    with the path chosen on the driving channel's own step in force."""
+    with the path chosen on the driving channel's own step (passed to ``path_of`` with the
+    fit, whose ``grid`` ``choose_path`` receives)."""
     from types import SimpleNamespace
 
     seen = []
@@ -447,7 +474,7 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
                              theta_hi=[110.0], z_extra=5.0, open_end=False)
 
     def fake_path_of(fit, *a, **k):
-        seen.append(rounding.reading_step())
+        seen.append(fit.grid)
         return SimpleNamespace(kind="two_path", chosen=chosen, z_threshold=3.0)
 
     monkeypatch.setattr(axes, "path_of", fake_path_of)
@@ -460,4 +487,61 @@ def test_a_path_beyond_one_lag_keeps_the_coarse_gains_widening(monkeypatch):
         assert got.coefficient == 2e-3
         assert got.coef_se == pytest.approx(math.hypot(1e-5, rel * 2e-3), rel=1e-12)
         assert seen[-1] == grid
-    assert rounding.reading_step() == (0.0625, 0.0)
+
+
+def _drive_gain(true: np.ndarray, recon: np.ndarray, rate: float, lag: float = 300.0) -> float:
+    """ĉ/c when an axis c·(the true temperature through ``lag``) is regressed on ``recon``
+    through the same lag, in the Allan domain from 100 s (as the thermal fit reads it)."""
+    ut, ur = signals.lag_filter(true, lag, rate), signals.lag_filter(recon, lag, rate)
+    r = signals.allan2(ut, ur, rate)
+    cov, tau = np.asarray(r.cov), np.asarray(r.tau)
+    k = (tau >= 100.0) & (tau <= tau.max() / 4)
+    return float(np.sum(cov[k, 0, 1]) / np.sum(cov[k, 1, 1]))
+
+
+@pytest.mark.parametrize("q, origin, offset", [(0.5, 0.0, 0.0), (0.5, 0.0, 0.2),
+                                               (0.25, 0.0, 0.1), (0.125, 0.0, 0.0),
+                                               (0.1125, 0.1, 0.0)])
+def test_a_coarse_logs_turns_are_a_cycles_tops(q, origin, offset):
+    """A ±0.5 K cycle read on a coarse step: the reconstruction's gain at the drive (ĉ/c
+    through a 300 s lag) within 2 % of 1 wherever the cycle sits on the grid; the spline
+    alone (a parabola's tops) left a cycle that dwells a third of its period on its top
+    level 5–7 % low (ĉ that much high), and the interval's widening
+    (``coarse_gain_se``) is half the two readings' difference."""
+    rate = 1 / 0.75 / 2
+    room = _room(n=40000)[::2] + offset
+    T = np.round((room - origin) / q) * q + origin
+    tops = coarse.derounded(T, (q, origin))
+    assert abs(_drive_gain(room, tops, rate) - 1.0) < 0.02
+    if q == 0.5 and offset == 0.0:
+        assert _drive_gain(room, coarse.derounded(T, (q, origin), tops=False), rate) > 1.04
+    # inside each reading's cell
+    assert np.all(np.abs(tops - T) <= q / 2 + 1e-9)
+    fit = ThermalFit("t", 0, 3e-3, 3e-5, 300.0, 290.0, 310.0, 9.0, rate, grid=(q, origin))
+    got = fit_mod.coarse_gain_se(fit, T[:, None], tops[:, None])
+    assert 0.0 < got.gain_rel < 0.08
+    assert got.coef_se == pytest.approx(math.hypot(3e-5, got.gain_rel * 3e-3), rel=1e-12)
+
+
+def test_the_relay_floor_takes_the_logs_own_step():
+    """The relay's switch-time floor (``PathFit.relay_floor``) on the path's grid: the
+    temperature behind 0.5 K readings is uncertain by 0.5/√12 K, eight times 12 bits', so
+    its switches' error and floor are larger, and the text names the log's step."""
+    from types import SimpleNamespace
+
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.explain.thermal_paths.scores import PathFit
+
+    rate = 1 / 0.75 / 4
+    room = _room(n=40000)[::4]
+    relay = Column("relay", 60.0, 0.1)
+    sc = SimpleNamespace(kind="hysteresis", cols=(Column("u", 60.0), relay),
+                         beta=np.array([1e-3, 2e-4]), theta_lo=(math.nan, math.nan),
+                         theta_hi=(math.nan, math.nan))
+    floors = {}
+    for q in (0.0625, 0.5):
+        T = np.round(room / q) * q
+        pf = PathFit(sc, {"hysteresis": sc}, 3.0, rate, grid=(q, 0.0))
+        floors[q] = pf.relay_floor(T)
+    assert floors[0.5][0] > 2.0 * floors[0.0625][0] > 0.0
+    assert "0.5 K" in floors[0.5][1] and "0.0625 K" in floors[0.0625][1]

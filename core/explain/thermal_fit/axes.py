@@ -21,7 +21,7 @@ from avard.core.explain.thermal_fit.holes import Holes, hole_mask
 from avard.core.explain.thermal_fit.jackknife import _jackknife_se, _jackknife_views, coefficient_se
 from avard.core.explain.thermal_fit.lag import _with_lag_jackknife, best_lag, lag_interval
 from avard.core.explain.thermal_fit.octaves import CouplingTest, coupling_test, octave_spectra
-from avard.core.explain.thermal_fit.rounding import reading_grid, rounding_floor_tau
+from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
 from avard.core.explain.thermal_fit.scan import (
     OPEN_END_MARGIN,
     ScanPoint,
@@ -151,12 +151,9 @@ def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes 
     columns: dict[int, dict[Column, NDArray[np.float64]]] = {}
     out = []
     for a, f in enumerate(fits):
-        # the path's candidates, their rounding floors and texts on the driving channel's
-        # own step (``reading_grid``, read where the path modules have no argument for it)
-        with reading_grid(f.grid):
-            out.append(_with_path(f, Y[:, a], temps, holes, floors,
-                                  columns.setdefault(f.channel_index, {}),
-                                  (warmups or {}).get(a, ()), (given or {}).get(a, ())))
+        out.append(_with_path(f, Y[:, a], temps, holes, floors,
+                              columns.setdefault(f.channel_index, {}),
+                              (warmups or {}).get(a, ()), (given or {}).get(a, ())))
     return out
 
 
@@ -208,7 +205,7 @@ def path_of(fit: ThermalFit, y: NDArray, temps: NDArray, holes: Holes | None,
     # whether the held-out test could run
     return choose_path(y, temps[:, j], fit.rate_hz, fit.lag_s, np.asarray(ref.tau, float),
                        edf, floors.get(j, 0.0), keep, columns, warmups,
-                       held_only=not fit.passed, given=given)
+                       held_only=not fit.passed, given=given, grid=fit.grid)
 
 
 def _pick(y: NDArray, temps: NDArray, names: list[str], rate_hz: float,

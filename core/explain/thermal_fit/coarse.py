@@ -3,6 +3,7 @@ crossings at 12 bits, the crossing spline on a coarser step) and each channel's 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -12,10 +13,11 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     pass
-from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 
 
-def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
+def derounded(T: NDArray, grid: tuple[float, float] | None = None,
+              tops: bool = True) -> NDArray[np.float64]:
     """The logged channel ``T`` (slow view, readings interpolated between their times) with
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
@@ -24,7 +26,7 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     first and last readings as they are; ``T`` itself where it holds fewer than two runs.
     NaN stays NaN.
 
-    ``grid``: the readings' (step, origin), default the one in force (``reading_grid``). On a
+    ``grid``: the readings' (step, origin), default the 12-bit (0.0625, 0). On a
     step coarser than the 12-bit one the straight lines miss the turns by up to half a
     step for as long as the readings dwell there (through a lag, a misfit at τ of the
     dwell), so the readings' mid-level crossings carry a spline clipped to each reading's
@@ -36,9 +38,11 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
     is bridged on the samples' own times, as the straight lines are: the spline is built on
     the whole index with the gap's values a straight line between its neighbours (not on
     the finite samples squeezed together, which ran it across the gap as if no time had
-    passed), and the gap stays NaN."""
+    passed), and the gap stays NaN. On a coarse step the turns' tops are a cycle's
+    (``_turn_tops``) unless ``tops`` is False (the spline's own, a parabola's: the other
+    reading ``coarse_gain_se`` weighs it against)."""
     T = np.asarray(T, dtype=float)
-    q, origin = reading_step() if grid is None else grid
+    q, origin = (DS18B20_STEP_K, 0.0) if grid is None else grid
     if is_coarse(q):
         from avard.core.explain.thermal_paths.columns import crossing_reconstruction
 
@@ -48,7 +52,9 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None) -> NDArray[np
             # on the kept samples' own times: the gap bridged in a straight line (its values
             # are off the grid, so the reconstruction does not clip them to a cell)
             v = np.interp(np.arange(ok[0], ok[-1] + 1), ok, T[ok]) - origin
-            r = _crossing_ends(v, crossing_reconstruction(v, q), q) + origin
+            r = _crossing_ends(v, crossing_reconstruction(v, q), q)
+            real = np.isfinite(T[ok[0]:ok[-1] + 1])
+            r = (_turn_tops(v, r, q, real) if tops else r) + origin
             out[ok] = r[ok - ok[0]]
         return out
     out = T.copy()
@@ -146,4 +152,65 @@ def _crossing_ends(v: NDArray, R: NDArray, q: float) -> NDArray[np.float64]:
     s = (R[i1] - R[j]) / max(i1 - j, 1)
     c = lev[-1] * q
     out[i1 + 1:] = np.clip(R[i1] + s * (np.arange(i1 + 1, len(R)) - i1), c - q / 2, c + q / 2)
+    return out
+
+
+def _turn_tops(v: NDArray, R: NDArray, q: float,
+               real: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+    """``R`` (the crossing reconstruction of readings ``v`` on step ``q``) with each turn's
+    top (a run of readings on one level whose neighbours both lie on one side of it) raised
+    as a cycle's top, not a parabola's. Between the two crossings of the threshold θ that
+    bound the turn, D apart, the natural spline bulges as a cubic with its crossing slopes
+    s, about s·D/4 above θ, which is exact for a parabola; a cycle of period P turns as a
+    cosine, whose top above θ is 2(1 − cos α)/(α sin α) times that, α = πD/P (1 for a short
+    dwell, 1.10 for a dwell of a third of the cycle: a ±0.5 K cycle on a 0.5 K step, whose
+    tops the spline left 5–7 % of the swing low, ĉ as much high). P is the time between the
+    turn's neighbouring turns of the same sense, two turns away (twice the nearest turn's
+    distance at the record's ends); α is held below π/2 (a dwell of half the cycle: the
+    threshold at the cycle's middle, where a cosine's slope is largest). The top stays
+    inside the reading's cell. ``real``: the samples that are readings (not a gap's bridge);
+    a turn whose span or neighbouring runs reach into a gap is left as the spline has it
+    (its dwell and crossings are the bridge's, not the room's)."""
+    lev = np.round(v / q)
+    out = np.array(R, dtype=float)
+    ch = np.flatnonzero(np.diff(lev) != 0)
+    if len(ch) < 3:
+        return out
+    starts = np.concatenate([[0], ch + 1])
+    ends = np.concatenate([ch, [len(v) - 1]])
+    lv = lev[starts]
+    k = np.arange(1, len(lv) - 1)
+    turn = k[(lv[k] - lv[k - 1]) * (lv[k] - lv[k + 1]) > 0]
+    if len(turn) < 2:
+        return out
+    mid = 0.5 * (starts[turn] + ends[turn])
+    for i, r in enumerate(turn.tolist()):
+        a, b = int(starts[r]), int(ends[r])
+        if real is not None and not np.all(real[int(starts[r - 1]):int(ends[r + 1]) + 1]):
+            continue
+        if i >= 1 and i + 1 < len(turn):
+            period = mid[i + 1] - mid[i - 1]
+        else:
+            period = 2.0 * (mid[i + 1] - mid[i] if i == 0 else mid[i] - mid[i - 1])
+        if not period > 0:
+            continue
+        alpha = min(math.pi * (b - a + 1) / period, 0.499 * math.pi)
+        side = np.sign(lv[r] - lv[r - 1])
+        theta = (lv[r] - 0.5 * side) * q
+        bulge = side * (out[a:b + 1] - theta)
+        # the cosine's top: through θ at ±D/2 and through θ − q at the outer crossings,
+        # D' apart, where the neighbouring runs are plain steps down (not turns, not ends)
+        a0, b1 = int(starts[r - 1]), int(ends[r + 1])
+        outer = (r - 1 not in set(turn.tolist()) and r + 1 not in set(turn.tolist())
+                 and r - 1 > 0 and r + 1 < len(lv) - 1)
+        alpha2 = math.pi * (b1 - a0 + 1) / period
+        if outer and alpha < alpha2 < math.pi:
+            h = q * (1.0 - math.cos(alpha)) / (math.cos(alpha) - math.cos(alpha2))
+        else:
+            h = 2.0 * (1.0 - math.cos(alpha)) / (alpha * math.sin(alpha)) * float(bulge.max())
+        peak = float(bulge.max())
+        f = h / peak if peak > 0 else 1.0
+        top = theta + f * (out[a:b + 1] - theta)
+        c = lv[r] * q
+        out[a:b + 1] = np.clip(top, c - q / 2, c + q / 2)
     return out

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from avard.core.explain.thermal_paths import PathFit
 from avard.core.explain.thermal_fit.coarse import derounded
-from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_grid
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.settings import START_FIT_LAGS, Z_TEMPERATURE
 from avard.core.explain.thermal_fit.signals import lag_filter
 
@@ -22,21 +22,27 @@ from avard.core.explain.thermal_fit.signals import lag_filter
 def coarse_gain_se(fit: ThermalFit, raw: NDArray, recon: NDArray) -> ThermalFit:
     """``fit`` with its coefficient's standard error widened by the reconstruction's gain
     uncertainty when its channel reads on a coarse step (``coarse_regressor``; ``raw``, ``recon``
-    the channels as logged and as reconstructed, slow view). The quantiser's describing
-    function makes the raw readings' swing at the drive larger than the temperature's and the
-    crossings' spline, on a step a few times narrower than the swing, smaller or larger by
-    an amount no τ floor shows: ĉ from either brackets the truth (0.5 K step, ±0.5 K drive:
-    0.91× and 1.08× the truth). Half the bracket, √(AVAR_raw/AVAR_recon) − 1 at the τ of the
-    reconstruction's largest AVAR (the drive), is added in quadrature: 0.5 % at 0.125 K,
-    2 % at 0.25 K, 8 % at 0.5 K. The detection's z is the regression's (the gain's error
-    scales a coupling that is there; it makes none). The relative widening is kept on the fit
-    (``gain_rel``) for a path's coefficient beyond one lag (``_with_path``)."""
+    the channels as logged and as reconstructed, slow view). Between two crossings of one
+    threshold the readings do not say how far the temperature went: the reconstruction
+    takes each turn's top as a cycle's (a cosine's, ``coarse._turn_tops``); the spline
+    alone takes it as a parabola's, lower (its ĉ 5–7 % high on a ±0.5 K cycle at 0.5 K, the
+    cosine's within about 1 %). A drive whose turns are sharper or flatter than a cosine's
+    lies beyond either, so half the two readings' difference, |√(AVAR_spline/AVAR_recon) − 1|/2
+    at the τ of the reconstruction's largest AVAR (the drive), is added to the se in
+    quadrature. It scales with what the tops carry: a fraction of a percent where the swing
+    spans many steps, a few percent where it spans one or two. (The raw readings' ĉ, the
+    quantiser's describing function, bracketed the truth too, but from 2–9 % away whatever
+    the tops: half that bracket held the truth at 0.25 K on every record, more than 68 %.)
+    The detection's z is the regression's (the gain's error scales a coupling that is
+    there; it makes none). The relative widening is kept on the fit (``gain_rel``) for a
+    path's coefficient beyond one lag (``_with_path``)."""
     if not is_coarse(fit.grid[0]) or not (
             math.isfinite(fit.coef_se) and math.isfinite(fit.coefficient)):
         return fit
     j = fit.channel_index
     var = []
-    for col in (np.asarray(raw, dtype=float)[:, j], np.asarray(recon, dtype=float)[:, j]):
+    spline = derounded(np.asarray(raw, dtype=float)[:, j], fit.grid, tops=False)
+    for col in (spline, np.asarray(recon, dtype=float)[:, j]):
         sa = StreamingAllan(1, fit.rate_hz)
         sa.update(col[:, None])
         var.append(np.asarray(sa.result().var, dtype=float))
@@ -157,8 +163,7 @@ class ThermalFit:
             # its standard error for the removal's covariance)
             b0 = float(self.path.chosen.beta[0])
             k = self.coefficient / b0 if b0 else 1.0
-            with reading_grid(self.grid):
-                return k * self.path.signal(temps[:, self.channel_index], y)
+            return k * self.path.signal(temps[:, self.channel_index], y, self.grid)
         # the readings' rounding is not in the axis (the die is not rounded): removed with
         # the signal, it is added to the compensated axis (``derounded``)
         u = lag_filter(derounded(temps[:, self.channel_index], self.grid), self.lag_s,

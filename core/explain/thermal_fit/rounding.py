@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager
-from contextvars import ContextVar
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,33 +15,13 @@ from avard.core.explain.thermal_fit.settings import DS18B20_CONVERSION_S
 
 #: DS18B20 resolution (K) and the white-noise variance of its rounding, q²/12 (K²).
 DS18B20_STEP_K = 0.0625
-#: The (step K, origin) of the readings of the channel being modelled: a log's own
-#: (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log taken as °C). Each log is read on its
-#: own: the fit takes every channel's grid explicitly (``fit_thermal_axes``' ``grids``,
-#: ``ThermalFit.grid``), and this context is set to the driving channel's only around what
-#: reads it without an argument for it (a path's candidates and floors, ``with_paths``; a
-#: path's signal, ``ThermalFit.signal``; the causes' rounding floors, engine's
-#: ``_explain_channel``). Never the record's: a coarse log must leave a finer one's model as
-#: it is.
-_GRID: ContextVar[tuple[float, float]] = ContextVar("avard_reading_grid",
-                                                     default=(DS18B20_STEP_K, 0.0))
+#: A log's own (step K, origin) (``screen.log_step``: a DS18B20 at 9–11 bits, a °F log
+#: taken as °C) reaches every rounding term as an argument (``fit_thermal_axes``' ``grids``,
+#: ``ThermalFit.grid``, ``choose_path``'s ``grid``, ``PathFit.grid``): each log is modelled
+#: on its own step, and a coarse log leaves a finer one's model as it is. The default of
+#: every such argument is the 12-bit (0.0625, 0).
 
 
-def reading_step() -> tuple[float, float]:
-    """The (step K, origin) of the readings in force (``reading_grid``), the DS18B20's 12-bit
-    (0.0625, 0) unless set to the modelled channel's."""
-    return _GRID.get()
-
-
-@contextmanager
-def reading_grid(grid: tuple[float, float] | None) -> Iterator[None]:
-    """The thermal model's rounding terms on ``grid`` (step, origin) within the block (None:
-    the 12-bit default)."""
-    tok = _GRID.set((DS18B20_STEP_K, 0.0) if grid is None else grid)
-    try:
-        yield
-    finally:
-        _GRID.reset(tok)
 #: How far a channel's AVAR must stand above its readings' rounding for a τ to enter the
 #: regression: at 10 the rounding is ≤ 1/11 of the regressor's variance there.
 ROUNDING_SNR = 10.0
@@ -64,7 +41,7 @@ def rounding_correlation_s(T: NDArray, rate_hz: float, step: float | None = None
     if len(T) > 4 * k:
         Tm = T[:len(T) // k * k].reshape(-1, k).mean(axis=1)
         slope = float(np.sqrt(np.mean(np.diff(Tm) ** 2))) * rate_hz / k
-    q = reading_step()[0] if step is None else step
+    q = DS18B20_STEP_K if step is None else step
     return max(DS18B20_CONVERSION_S, q / slope if slope > 0 else math.inf)
 
 
@@ -85,7 +62,7 @@ def rounding_floor_tau(T: NDArray, rate_hz: float, snr: float = ROUNDING_SNR,
     T = np.asarray(T, dtype=float)
     if len(T) < 16:
         return 0.0
-    step = reading_step()[0] if step is None else step
+    step = DS18B20_STEP_K if step is None else step
     tc = rounding_correlation_s(T, rate_hz, step)
     sa = StreamingAllan(1, rate_hz)
     sa.update(T[:, None])

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 from avard.core.explain import alarm
-from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.sums import OctaveSums, min_tau_for, octave_sums_by_part
 from avard.core.explain.thermal_paths.columns import Column, path_columns, quadratic_leads, trials
 from avard.core.explain.thermal_paths.deviance import (
@@ -75,7 +75,8 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 keep: NDArray[np.bool_] | None = None,
                 columns: dict[Column, NDArray[np.float64]] | None = None,
                 warmups: tuple[float, ...] = (), held_only: bool = True,
-                given: tuple[NDArray, ...] = ()) -> PathFit:
+                given: tuple[NDArray, ...] = (),
+                grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)) -> PathFit:
     """The thermal path of axis ``y`` (slow view, m/s²) driven by channel ``T`` (°C) at
     ``rate_hz``, ``lag0`` the one-lag fit's lag (added to the grid); ``tau_ref``/``edf_ref``
     the axis's Allan τ (s) and EDF on the whole slow view; ``floor_s`` the
@@ -94,7 +95,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     (each of ``y``'s length) the record holds beside any coupling, the transients found on
     the axis, each a nuisance column of free size beside every candidate as the warm-ups
     are: a path on a short record switches or bends a few times, and a relay's two or three
-    switches took a warm-up and a bias step the coupling never held."""
+    switches took a warm-up and a bias step the coupling never held. ``grid``: ``T``'s
+    readings' (step K, origin), its log's own (``screen.log_step``; default the 12-bit):
+    the temperature behind the readings and every rounding term are on it."""
     y = np.asarray(y, dtype=float)
     T = np.asarray(T, dtype=float)
     f = 1 << max(0, math.ceil(math.log2(len(y) / FIT_POINTS)))
@@ -118,7 +121,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 for k in CANDIDATES}
     cols = sorted({c for ts in per_kind.values() for t in ts for c in t.cols})
     where = {c: i + 1 for i, c in enumerate(cols)}
-    X = np.column_stack([ys, path_columns(Ts, cols, rate, columns)])
+    X = np.column_stack([ys, path_columns(Ts, cols, rate, columns, grid)])
     edges = np.linspace(0, len(ys), PARTS + 1).astype(int)
     # each part the differences whose middle it holds, at every octave of the record (each
     # part's own sums stopped at τ ≤ part/2, 410 s on a 4 h record: two octaves above the
@@ -156,7 +159,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
     r0 = _resid(_View(full, np.ones(len(ms)), np.ones(len(ms))), one,
                 _fit(_View(v0.cov, v0.nu, v0.cov[:, 0, 0]), one))
     s_ref[:] = np.where(r0 > 1e-6 * full[:, 0, 0], r0, 1e-6 * full[:, 0, 0])
-    r_ref = sawtooth_avar(Ts, rate, ms / rate, lag0)
+    r_ref = sawtooth_avar(Ts, rate, ms / rate, lag0, step=grid[0])
     vw = _view(whole, edf_v, n_v, ok_tau, s_ref)
     vh = [_view(h, edf_v, n_v, ok_tau, s_ref, r_ref) for h in half]
     # what the readings' rounding through the one-lag coupling makes up of the held-out
@@ -276,7 +279,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
         # (``_smoothing``); a non-linear one is taken to pass none
         smoothing[kind] = (rounding_dev if kind not in REFINED or rounding_dev <= 0 else
                            _smoothing(c_one**2 * r_ref, half, weigh_r, Ts, rate, ms / rate,
-                                      ts[i].cols, fits[i]))
+                                      ts[i].cols, fits[i], grid[0]))
         if kind in REFINED and not open_end and z_extra >= z_thr and held < (
                 none_h - HELDOUT_MARGIN - smoothing[kind]) and matched[kind] < (
                 -HELDOUT_MARGIN - smoothing[kind]):
@@ -288,7 +291,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             # continuous in the jackknife, the profile no longer stands in for the grid)
             delta = profile_delta(float(devs[i]), vw.nu, len(idx[i]), two_sided=True)
             fr = _refine(kind, ts[i].theta, lags, ys, Ts, rate, edges, cut, weigh, delta,
-                         columns, period, share, min_tau, extra)
+                         columns, period, share, min_tau, extra, grid)
             net, drive = fr.net, fr.drive
             theta, beta, cols_i = fr.theta, fr.beta, _path_cols(kind, fr.theta)
             fitted = None if fr.fitted is None or not fr.gain else fr.fitted
@@ -361,7 +364,7 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
             notes.append(f"{kind} predicts better (Δ {sc.heldout - ref.heldout:+.3g}) but "
                          f"by less than the readings' rounding through the coupling makes "
                          f"up of the held-out deviance ({rounding_k:.3g}): a path that "
-                         f"smooths the {reading_step()[0]:g} K steps gains that much without "
+                         f"smooths the {grid[0]:g} K steps gains that much without "
                          "physics")
     # a refused extension is no candidate for any later reading either (``rate_reading``,
     # the alternatives and ``as_well`` read ``scores``)
@@ -486,9 +489,9 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                 f"{gain:.4g} m/s²/K [{gain_lo:.4g}, {gain_hi:.4g}] and phase {phi:+.3g} rad "
                 f"[{phi_lo:+.3g}, {phi_hi:+.3g}] (a lead when positive; 68 %)")
     rival = (_rate_rival(best, scores, per_kind["rate"], where, vw, vh, half, weigh_r, Ts,
-                         rate, ms / rate) if best.kind == "one_lag" else None)
+                         rate, ms / rate, grid[0]) if best.kind == "one_lag" else None)
     leaning = _leaning(best, scores)
-    reading = _rate_beside_lag(best, scores, period, rival)
+    reading = _rate_beside_lag(best, scores, period, rival, grid[0])
     beside_lag: list[str] = []
     beside_better: tuple[str, ...] = ()
     if reading and "rate" not in as_well:
@@ -562,4 +565,4 @@ def choose_path(y: NDArray, T: NDArray, rate_hz: float, lag0: float, tau_ref: ND
                    rounding=rounding_dev, alternatives=alternatives, leaning=leaning,
                    own_rounding={k: v for k, v in smoothing.items() if k in REFINED},
                    as_well=as_well, beside_lag=tuple(beside_lag),
-                   beside_better=beside_better)
+                   beside_better=beside_better, grid=grid)

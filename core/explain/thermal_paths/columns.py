@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.explain.thermal_fit import lag_filter
-from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.scan import _lag_grid
 from avard.core.explain.thermal_paths.settings import (
     HYSTERESIS_LEADS_S,
@@ -127,12 +127,12 @@ def _tridiagonal(lower: NDArray, diag: NDArray, upper: NDArray,
 
 
 def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
-                 done: dict[Column, NDArray[np.float64]] | None = None
-                 ) -> NDArray[np.float64]:
+                 done: dict[Column, NDArray[np.float64]] | None = None,
+                 grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)) -> NDArray[np.float64]:
     """The regressors ``cols`` built from the driving channel ``T`` (°C) on the slow view,
     each with its mean removed (the start state's with its own). ``done``: the columns
     already built from this same ``T`` and ``rate_hz`` (the other axes driven by the
-    channel), read and added to."""
+    channel), read and added to. ``grid``: ``T``'s readings' (step K, origin)."""
     T = np.asarray(T, dtype=float)
     M = len(T)
     done = {} if done is None else done
@@ -148,9 +148,9 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
     def behind() -> NDArray:
         nonlocal smooth
         if smooth is None:
-            # on the driving channel's own step and origin (``thermal_fit.reading_grid``):
-            # the 12-bit default would put a coarse log's knots between its levels
-            q, o = reading_step()
+            # on the driving channel's own step and origin: the 12-bit default would put a
+            # coarse log's knots between its levels
+            q, o = grid
             smooth = crossing_reconstruction(T - o, q) + o
         return smooth
 

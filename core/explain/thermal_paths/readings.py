@@ -9,7 +9,7 @@ from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
-from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.sums import OctaveSums
 from avard.core.explain.thermal_paths.columns import Column, Trial
 from avard.core.explain.thermal_paths.deviance import _dev, _fit, _held_dev, _View
@@ -237,7 +237,7 @@ def _rate_rival(best: PathScore, scores: dict[str, PathScore], rate_trials: list
                 where: dict[Column, int], whole: _View, halves: list[_View],
                 half_sums: list[OctaveSums],
                 weigh_r: Callable[[OctaveSums, NDArray], _View], Ts: NDArray, rate: float,
-                tau: NDArray) -> _RateRival | None:
+                tau: NDArray, step: float = DS18B20_STEP_K) -> _RateRival | None:
     """One lag's dT/dt reading, the rate candidate at lag 0 (c·T + r·dT/dt), which at the
     drive's line is the same gain and phase (``_rate_beside_lag``): how far apart the two
     signals are (``_rate_separation``), how the reading predicts the held-out halves against
@@ -256,15 +256,15 @@ def _rate_rival(best: PathScore, scores: dict[str, PathScore], rate_trials: list
     held = sum(_held_dev(halves[b], ix, _fit(halves[a], ix), t0[0].n_terms)
                for a, b in ((0, 1), (1, 0)))
     r_rate = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(
-        (Column("u", 0.0), Column("rate", 0.0)), np.array([c, r])))
-    r_one = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(best.cols, best.beta))
+        (Column("u", 0.0), Column("rate", 0.0)), np.array([c, r])), step=step)
+    r_one = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(best.cols, best.beta), step=step)
     more = np.maximum(0.0, r_rate - r_one)
     rho = float(sum(weigh_r(h, more).rounding_share(1.0) for h in half_sums))
     return _RateRival(lam, c, r, held - best.heldout, rho)
 
 
 def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: float,
-                     rival: _RateRival | None = None) -> str:
+                     rival: _RateRival | None = None, step: float = DS18B20_STEP_K) -> str:
     """The note naming the dT/dt term beside one lag kept where the record does not tell
     them apart ("" elsewhere). At one frequency ω a lag L is c'/(1 + iωL) = c(1 − iωL) with
     c = c'/(1 + ω²L²): c·T + r·dT/dt with r/c = −L, the same gain and phase at the drive.
@@ -305,7 +305,7 @@ def _rate_beside_lag(best: PathScore, scores: dict[str, PathScore], period: floa
                f"it predicts the held-out halves {rival.heldout_delta:+.3g} against one lag, "
                f"within the margin {HELDOUT_MARGIN:g} and {RATE_ROUNDING_SPAN:g}× the "
                f"{rival.rounding:.3g} of the held-out deviance its derivative of the readings' "
-               f"{reading_step()[0]:g} K steps is modelled to make up" if masked else
+               f"{step:g} K steps is modelled to make up" if masked else
                f"the dT/dt candidate predicts the held-out halves "
                f"{rate.heldout - best.heldout:+.3g} against one lag")
         return (f"one lag or a dT/dt term: this record cannot tell them apart ({why}); at "

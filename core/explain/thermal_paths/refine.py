@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_fit.sums import OctaveSums, octave_sums_by_part
 from avard.core.explain.thermal_paths.columns import Column, Trial, _start, path_columns
 from avard.core.explain.thermal_paths.deviance import (
@@ -77,7 +78,8 @@ def _fine_trials(kind: str, theta: tuple[float, ...], lags: list[float]) -> list
 
 def _smoothing(r_one: NDArray, halves: list[OctaveSums],
                weigh_r: Callable[[OctaveSums, NDArray], _View], Ts: NDArray, rate: float,
-               tau: NDArray, cols: tuple[Column, ...], beta: NDArray) -> float:
+               tau: NDArray, cols: tuple[Column, ...], beta: NDArray,
+               step: float = DS18B20_STEP_K) -> float:
     """What a linear path (``cols``, ``beta``) gains on the held-out halves over one lag by
     passing less of the readings' rounding: Σ_k ν_k·min(1, (R₁ − R)₊/s_k) over both halves,
     R₁ the rounding AVAR (m/s²)² through the one-lag coupling (``r_one``), R through the
@@ -88,7 +90,7 @@ def _smoothing(r_one: NDArray, halves: list[OctaveSums],
     two lags of opposite sign at 240 and 480 s beside a one lag of 125 s pass less of it,
     and the rounding they do not pass is 24 of the held-out deviance where
     they won by 18 (one lag's whole share 116)."""
-    r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(cols, beta))
+    r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(cols, beta), step=step)
     less = np.maximum(0.0, np.asarray(r_one, dtype=float) - r)
     return float(sum(weigh_r(h, less).rounding_share(1.0) for h in halves))
 
@@ -154,20 +156,22 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
             rate: float, edges: NDArray, cut: NDArray[np.bool_], weigh: _Weights,
             delta: float, columns: dict[Column, NDArray[np.float64]] | None,
             period_s: float = math.nan, share: float = math.nan,
-            min_tau: float = 0.0, extra: tuple[Column, ...] = ()) -> _Refined:
+            min_tau: float = 0.0, extra: tuple[Column, ...] = (),
+            grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)) -> _Refined:
     """θ of a ``REFINED`` candidate refined continuously (``_vertex`` on ``_fine_trials``)
     on the whole record and in every delete-a-part fit, from one more pass of the Allan
     covariance over the local grid's regressors: the coefficients' 68 % interval is then
     the larger of the jackknife with θ fixed and with θ re-chosen, both at the estimator's
     resolution, not the coarse grid's, and θ's is the jackknife of θ re-chosen. ``extra``:
-    the nuisance warm-up columns beside every point (``choose_path``)."""
+    the nuisance warm-up columns beside every point (``choose_path``); ``grid``: the
+    driving channel's readings' (step K, origin)."""
     fine = [t._replace(cols=t.cols + extra) for t in _fine_trials(kind, theta, lags)]
     # a dT/dt term's reference beside them (``_ungained``)
     slope = (Column("slope", 0.0),) if kind == "rate" else ()
     cols = sorted({c for t in fine for c in t.cols} | set(slope))
     where = {c: j + 1 for j, c in enumerate(cols)}
     # a copy: the local grid's columns are this axis's own, not worth keeping for others
-    X = np.column_stack([ys, path_columns(Ts, cols, rate, dict(columns or {}))])
+    X = np.column_stack([ys, path_columns(Ts, cols, rate, dict(columns or {}), grid)])
     parts = octave_sums_by_part(X, edges, cut)
     whole = sum(parts[1:], start=parts[0])
     idx = [[where[c] for c in t.cols] for t in fine]
@@ -178,7 +182,7 @@ def _refine(kind: str, theta: tuple[float, ...], lags: list[float], ys: NDArray,
     parts_c = parts
     if kind == "rate":
         m_min = _rate_floor(Ts, rate, whole, where[Column("u", theta[0])],
-                            where[Column("rate", 0.0)], theta[0], min_tau)
+                            where[Column("rate", 0.0)], theta[0], min_tau, grid[0])
         parts_c = [_from_octave(p, m_min) for p in parts]
     whole_c = sum(parts_c[1:], start=parts_c[0])
 
@@ -389,7 +393,7 @@ def drive_line(T: NDArray, rate_hz: float) -> tuple[float, float]:
 
 
 def _rate_floor(Ts: NDArray, rate: float, whole: OctaveSums, iu: int, ir: int, lag: float,
-                min_tau: float) -> int:
+                min_tau: float, step: float = DS18B20_STEP_K) -> int:
     """The shortest octave (samples) a dT/dt term's refined coefficients read: the first from
     ``min_tau`` (the linear column's rounding floor) where the readings' rounding is no
     larger a share of the rate column's Allan variance than it is of the linear column's
@@ -403,9 +407,9 @@ def _rate_floor(Ts: NDArray, rate: float, whole: OctaveSums, iu: int, ir: int, l
     tau = ms / rate
     cov = whole.cov()
     with np.errstate(invalid="ignore", divide="ignore"):
-        share_u = sawtooth_avar(Ts, rate, tau, lag) / cov[:, iu, iu]
+        share_u = sawtooth_avar(Ts, rate, tau, lag, step=step) / cov[:, iu, iu]
         share_r = sawtooth_avar(Ts, rate, tau, gain2=_path_gain2(
-            (Column("rate", 0.0),), np.ones(1))) / cov[:, ir, ir]
+            (Column("rate", 0.0),), np.ones(1)), step=step) / cov[:, ir, ir]
     from_floor = np.flatnonzero(tau >= min_tau * (1 - 1e-9))
     if not len(from_floor) or not np.isfinite(share_u[from_floor[0]]):
         return int(ms[0])

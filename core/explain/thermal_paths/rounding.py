@@ -6,7 +6,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from avard.core.explain.thermal_fit.rounding import reading_step, rounding_correlation_s
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K, rounding_correlation_s
 from avard.core.explain.thermal_paths.columns import Column
 from avard.core.explain.thermal_paths.settings import RATE_SMOOTH_S
 from numpy.typing import NDArray
@@ -22,12 +22,12 @@ def sawtooth_avar(T: NDArray, rate_hz: float, tau: NDArray, lag_s: float = 0.0,
     eq. 10's transfer function); a long lag passes little of it at τ below the lag.
     ``gain2``: |H(f)|² of another linear path instead (``_path_gain2``; then in (m/s²)²,
     its coefficients in it, and not capped at the readings' own 2q²/12). ``step``: the
-    readings' step q (K), default the one in force (``thermal_fit.reading_grid``)."""
+    readings' step q (K), None the 12-bit 0.0625 (``choose_path`` passes its channel's)."""
     T = np.asarray(T, dtype=float)
     tau = np.asarray(tau, dtype=float)
     if len(T) < 16:
         return np.zeros(len(tau))
-    step = reading_step()[0] if step is None else step
+    step = DS18B20_STEP_K if step is None else step
     tc = rounding_correlation_s(T, rate_hz, step)
     if not (math.isfinite(tc) and tc > 0):
         # a channel that never crosses a step (constant, or stuck): no sawtooth to see

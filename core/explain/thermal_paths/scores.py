@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from avard.core.explain.thermal_fit import lag_filter
-from avard.core.explain.thermal_fit.rounding import reading_step
+from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.explain.thermal_paths.columns import (
     Column,
     _relay,
@@ -115,6 +115,10 @@ class PathFit:
     #: lag's coefficient is then one of two readings the record does not tell apart and the
     #: data lean to the other, model-dependent with no interval (as ``leaning``)
     beside_better: tuple[str, ...] = ()
+    #: the driving channel's readings' (step K, origin) the path was chosen on (its log's
+    #: own, ``choose_path``'s ``grid``): its signal's temperature behind the readings and
+    #: the relay's switch-time floor are on it
+    grid: tuple[float, float] = (DS18B20_STEP_K, 0.0)
 
     @property
     def model_dependent(self) -> bool:
@@ -129,11 +133,13 @@ class PathFit:
     def kind(self) -> str:
         return self.chosen.kind
 
-    def signal(self, T: NDArray, y: NDArray | None = None) -> NDArray[np.float64]:
+    def signal(self, T: NDArray, y: NDArray | None = None,
+               grid: tuple[float, float] | None = None) -> NDArray[np.float64]:
         """The chosen model's signal on the slow view (m/s²); with ``y``, the start states
-        fitted (least squares with an offset and a drift), else left out."""
+        fitted (least squares with an offset and a drift), else left out. ``grid``: ``T``'s
+        readings' (step K, origin) (a held-out log's own), default the path's ``grid``."""
         s = self.chosen
-        X = path_columns(T, list(s.cols), self.rate_hz)
+        X = path_columns(T, list(s.cols), self.rate_hz, grid=self.grid if grid is None else grid)
         n = s_terms(s)
         d = X[:, :n] @ s.beta_fitted[:n]
         if y is None or X.shape[1] == n:
@@ -173,15 +179,16 @@ class PathFit:
         a relay is chosen or named beside the path kept (0, "" elsewhere): the larger of
 
         - the RMS of the relay term's switch-time error: the relay switches on the
-          temperature behind the readings, whose level is uncertain by the 0.0625 K
-          rounding (RMS q/√12), so each switch is off by about that over the temperature's
-          slope there (capped at the time to the next switch), a pulse of 2|h| for that
-          long: 2|h|·√(Σ δᵢ / record). Where the die swings a few steps the slope at a
-          switch is a few mK per minute and δ is a minute: pulses that recur twice a cycle
-          with a minute's correlation, which the scan reads as a Gauss–Markov process
-          (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s², T 25–26 s beside a
-          relay of h ≈ 1.1e-4 chosen right). Like ``causes.gauss_markov_rounding_floor``
-          it bounds from above (the reconstruction is no worse than the readings);
+          temperature behind the readings, whose level is uncertain by their rounding on
+          the log's own step q (``grid``; RMS q/√12), so each switch is off by about that
+          over the temperature's slope there (capped at the time to the next switch), a
+          pulse of 2|h| for that long: 2|h|·√(Σ δᵢ / record). Where the die swings a few
+          steps the slope at a switch is a few mK per minute and δ is a minute: pulses that
+          recur twice a cycle with a minute's correlation, which the scan reads as a
+          Gauss–Markov process (the adversary's hysteresis 413 and 415: σ 4.8–5.7e-5 m/s²,
+          T 25–26 s beside a relay of h ≈ 1.1e-4 chosen right). Like
+          ``causes.gauss_markov_rounding_floor`` it bounds from above (the reconstruction
+          is no worse than the readings);
         - where the relay is named beside another reading (one lag kept with the relay
           ``as_well`` or ``leaning``, or an alternative), the RMS of the difference of the
           two readings' signals: what the reading removed leaves of the one named beside
@@ -192,7 +199,12 @@ class PathFit:
         if sc is None or relay is None or "hysteresis" not in named or len(sc.beta) < 2:
             return 0.0, ""
         T = np.asarray(T, dtype=float)
-        v = lag_filter(crossing_reconstruction(T), relay.lag, self.rate_hz)
+        # the temperature behind the readings on the log's own step and origin, as the relay
+        # column was built (``path_columns``): on the 12-bit default a coarse log's knots sat
+        # between its levels, and its switch times' error was taken on 0.0625 K
+        q, o = self.grid
+        behind = crossing_reconstruction(T - o, q) + o
+        v = lag_filter(behind, relay.lag, self.rate_hz)
         r = _relay(v, relay.width)
         sw = np.flatnonzero(np.diff(r) != 0) + 1
         record_s = len(T) / self.rate_hz
@@ -200,16 +212,15 @@ class PathFit:
         if len(sw):
             slope = np.abs(np.gradient(v) * self.rate_hz)[sw]
             gap = np.diff(np.concatenate([sw, [len(r)]])) / self.rate_hz
-            delta = np.minimum(reading_step()[0] / math.sqrt(12.0)
+            delta = np.minimum(self.grid[0] / math.sqrt(12.0)
                                / np.maximum(slope, 1e-300), gap)
             floor = 2 * abs(float(sc.beta[1])) * math.sqrt(float(np.sum(delta)) / record_s)
         why = (f"{floor:.3g} m/s², the RMS of the relay's switch-time error (its switches "
                "on the temperature behind the readings, uncertain by their "
-               f"{reading_step()[0]:g} K "
+               f"{self.grid[0]:g} K "
                "rounding over the temperature's slope at each switch), which recurs twice a "
                "cycle and can look like a bump")
         # the relay at the ends of its lag's and width's 68 % intervals, the same h
-        behind = crossing_reconstruction(T)
         moved = 0.0
         for lag, w in ((sc.theta_lo[0], relay.width), (sc.theta_hi[0], relay.width),
                        (relay.lag, sc.theta_lo[1]), (relay.lag, sc.theta_hi[1])):
@@ -234,7 +245,7 @@ class PathFit:
 
     def _score_signal(self, s: PathScore, T: NDArray) -> NDArray[np.float64]:
         """Candidate ``s``'s coupling signal on the slow view (no start state)."""
-        X = path_columns(T, list(s.cols), self.rate_hz)
+        X = path_columns(T, list(s.cols), self.rate_hz, grid=self.grid)
         n = s_terms(s)
         return np.asarray(X[:, :n] @ s.beta_fitted[:n], dtype=float)
 
