@@ -28,7 +28,6 @@ from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     ThermalFit,
 )
-from avard.core.explain.thermal_fit.rounding import reading_grid
 from avard.core.io.screen import ScreenedSource, ScreenLog
 from avard.core.io.source import RecordSource, StreamSource
 from numpy.typing import NDArray
@@ -216,12 +215,10 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
         if stage is not None:
             stage(f"explaining channel {name}")
         j = names.index(name)
-        # the causes' rounding floors on the step of the log the axis's thermal model reads
-        with reading_grid(None if th is None else th.grid):
-            out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
-                                         None if t_slow is None else t_slow[:, t_ok],
-                                         th, an, meta, always_compensate=temperature is not None,
-                                         holes=screen, settled=w0)
+        out[name] = _explain_channel(ch, y_slow[:, j], rate_b,
+                                     None if t_slow is None else t_slow[:, t_ok],
+                                     th, an, meta, always_compensate=temperature is not None,
+                                     holes=screen, settled=w0)
     if not heldout and held is None:
         for ch_ex in out.values():
             ch_ex.judge(None, screen=screen)
