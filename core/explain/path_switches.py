@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import replace
+from itertools import pairwise
 from typing import NamedTuple
 
 import numpy as np
@@ -56,7 +57,7 @@ class Switch(NamedTuple):
 
 
 class Edge(NamedTuple):
-    index: int  # which transient
+    which: int  # the transient's place in the list
     time_s: float
     jump: float
 
@@ -84,12 +85,12 @@ def switches(e: NDArray, rate_hz: float) -> list[Switch]:
             j = i
             while j > 0 and sign[j - 1] == sign[i]:
                 j -= 1
-            idx.append(j)
+            idx.append(int(j))
         state = s
     if not idx:
         return []
     bounds = [0, *idx, len(e)]
-    means = [float(np.mean(e[a:b])) if b > a else 0.0 for a, b in zip(bounds, bounds[1:])]
+    means = [float(np.mean(e[a:b])) if b > a else 0.0 for a, b in pairwise(bounds)]
     return [Switch(i / rate_hz, means[k + 1] - means[k]) for k, i in enumerate(idx)]
 
 
@@ -175,8 +176,8 @@ def locked_to_path(cands: Sequence[cz.Candidate], e: NDArray, rate_hz: float,
     if p > alpha:
         return None
     own = tuple(k for k in range(len(cands))
-                if any(ed.index == k for ed in eds)
-                and all(o for ed, o in zip(eds, on, strict=True) if ed.index == k))
+                if any(ed.which == k for ed in eds)
+                and all(o for ed, o in zip(eds, on, strict=True) if ed.which == k))
     return Lock(own, sum(on), len(eds), p, window)
 
 
