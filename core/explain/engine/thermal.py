@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
+from avard.core.explain.path_switches import apart_from_path
 from avard.core.explain.thermal_fit import (
     ThermalFit,
     fit_thermal_axes,
@@ -206,7 +207,10 @@ def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: 
         y = Y[:, a]
         cands, _ = tr.find_compound(
             y, rate_b, lambda d, y=y, n=noise[a]["N"]: tr.robust_noise(y - d, rate_b, n))
-        sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands if c.cause != "drift")
+        # less those the path's own switches make: a relay's at every turn of the drive
+        # read as excursions, one a cycle, took the relay (``path_switches``)
+        out[a], cands = apart_from_path(th, [c for c in cands if c.cause != "drift"], temps)
+        sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands)
         if sig and not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
                                             given=sig), th.mechanism):
             out[a] = b0
