@@ -10,6 +10,7 @@
 - ``thermal_paths/`` thermal paths beyond one lag, chosen by held-out likelihood;
 - ``transients.py``  steps, excursions and a warm-up found one after another;
 - ``coupling_change.py`` whether one thermal coupling describes the record;
+- ``path_switches.py`` transients that are a thermal path's own switches;
 - ``holdout.py``     the gain of the extended model measured on held-out data;
 - ``verdict.py``     explained or unexplained, one line an axis;
 - ``report.py``      the text, JSON and figures.
