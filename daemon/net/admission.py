@@ -84,6 +84,7 @@ class ConnectionGate:
         self.what = what
         self.evict_newest = evict_newest
         self.port: int | None = None
+        self.path: str | None = None   # an ipc endpoint's socket file
         self._order = itertools.count()
         # fd → (accept order, monotonic time of its last valid request or None)
         self._fds: dict[int, tuple[int, float | None]] = {}
@@ -103,6 +104,9 @@ class ConnectionGate:
 
     def bound(self, endpoint: str) -> None:
         """The concrete endpoint the socket listens on (its port identifies our fds)."""
+        if endpoint.startswith("ipc://"):
+            self.path = endpoint[len("ipc://"):]
+            return
         _host, _sep, port = endpoint.rpartition(":")
         self.port = int(port) if port.isdigit() else None
 
@@ -177,8 +181,13 @@ class ConnectionGate:
         except OSError:
             return      # already closed by libzmq
         try:
-            # only ever a TCP connection of our own port (the fd could have been reused)
-            if self.port is None or s.getsockname()[1] == self.port:
+            # only ever a connection of our own endpoint (the fd could have been reused)
+            name = s.getsockname()
+            if self.path is not None:
+                ours = s.family == socket.AF_UNIX and name == self.path
+            else:
+                ours = self.port is None or name[1] == self.port
+            if ours:
                 s.shutdown(socket.SHUT_RDWR)
         except (OSError, IndexError, TypeError):
             pass
