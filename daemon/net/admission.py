@@ -53,17 +53,18 @@ HANDSHAKE_IVL_MS = 5000
 
 
 def fd_budget(wanted: int, *, what: str, others: int = 0,
-              soft_limit: int | None = None) -> int:
+              soft_limit: int | None = None, fds_each: int = 1) -> int:
     """The connection cap to use for ``wanted``: at most what fits beside ``others`` peers and
-    RESERVED_FDS under the soft RLIMIT_NOFILE (at least 1)."""
+    RESERVED_FDS under the soft RLIMIT_NOFILE (at least 1), each connection costing
+    ``fds_each`` descriptors (3 for a subscriber relayed by the publisher's guard)."""
     if soft_limit is None:
         soft_limit = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
     if soft_limit == resource.RLIM_INFINITY:
         return wanted
     room = soft_limit - RESERVED_FDS - others
-    if room >= wanted:
+    if room >= wanted * fds_each:
         return wanted
-    cap = max(1, room)
+    cap = max(1, room // fds_each)
     log.warning("%s: at most %d connections (not %d): the open-file limit is %d and %d fds "
                 "are kept for the recording; raise LimitNOFILE (ulimit -n)", what, cap, wanted,
                 soft_limit, RESERVED_FDS)
@@ -184,6 +185,8 @@ class ConnectionGate:
             # only ever a connection of our own endpoint (the fd could have been reused)
             name = s.getsockname()
             if self.path is not None:
+                if isinstance(name, bytes) and name[:1] == b"\0":   # abstract: "@name"
+                    name = "@" + name[1:].decode("utf-8", "replace")
                 ours = s.family == socket.AF_UNIX and name == self.path
             else:
                 ours = self.port is None or name[1] == self.port

@@ -8,9 +8,10 @@ every subscription it reads, per pipe, to unsubscribe them when the pipe ends (x
 the application sees any of it. So the filter has to sit before libzmq reads anything.
 
 :class:`SubscriptionFront` listens on the publisher's public endpoint and relays each
-subscriber's connection to the PUB socket, which is bound to a private ``ipc://`` endpoint
-(a 0700 directory). Bytes from the service to the subscriber pass through as they are. Bytes
-from the subscriber are parsed as ZMTP 3 frames (greeting, then ``flags, size, body``), and
+subscriber's connection to the PUB socket, which is bound to an abstract ``ipc://@…``
+endpoint that accepts connections from the service's own process only (``IPC_FILTER_PID``).
+Bytes from the service to the subscriber pass through as they are. Bytes from the subscriber
+are parsed as ZMTP 3 frames (greeting, then ``flags, size, body``), and
 each subscription or cancel — a message whose first byte is 1 or 0 (ZMTP 3.0) or a
 ``SUBSCRIBE``/``CANCEL`` command (3.1) — is passed on only when it can matter:
 
@@ -32,7 +33,6 @@ from __future__ import annotations
 
 import errno
 import logging
-import os
 import selectors
 import socket
 import threading
@@ -91,7 +91,7 @@ class SubscriptionFront:
 
     ``allowed(sub)`` says whether a subscription (bytes) can match a published topic; it is
     called from the guard's thread. ``listen`` is a bound, listening TCP socket; ``inner`` the
-    path of the PUB socket's ipc endpoint."""
+    address of the PUB socket's ipc endpoint (a leading NUL: the abstract namespace)."""
 
     def __init__(self, listen: socket.socket, inner: str, allowed: Callable[[bytes], bool], *,
                  max_connections: int, sndbuf: int, max_frame: int) -> None:
@@ -386,12 +386,3 @@ class SubscriptionFront:
             sock.close()
         if log_it and conn.dropped > 1:
             self._log_drops(conn, None)
-
-
-def private_ipc_dir() -> str:
-    """A fresh 0700 directory for the PUB socket's ipc endpoint: only the service's user (and
-    root) can connect to it, so nobody reaches the PUB socket around the guard."""
-    base = os.environ.get("XDG_RUNTIME_DIR") or None
-    import tempfile
-
-    return tempfile.mkdtemp(prefix="avard-pub-", dir=base)

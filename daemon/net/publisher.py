@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import errno
 import logging
-import shutil
+import os
+import secrets
 import socket
 import threading
 import time
@@ -36,7 +37,7 @@ from avard.daemon.net.admission import (
     fd_budget,
 )
 from avard.daemon.net.curve import CurveServer, CurveServerConfig
-from avard.daemon.net.front import SubscriptionFront, private_ipc_dir, topic_prefixes
+from avard.daemon.net.front import SubscriptionFront, topic_prefixes
 
 log = logging.getLogger(__name__)
 
@@ -193,7 +194,8 @@ class Publisher:
         self._ctx = zmq.Context()
         self._curve: CurveServer | None = None
         self._front: SubscriptionFront | None = None
-        self._ipc_dir: str | None = None
+        #: the PUB socket's own endpoint behind the guard (None: bound directly)
+        self.inner_endpoint: str | None = None
         self._lock = threading.Lock()
         self._seq: dict[str, int] = {}
         # the subscriptions that can match a topic this publisher sends (the guard's filter):
@@ -220,14 +222,26 @@ class Publisher:
                 self._curve.apply(self._sock)
             # Without CURVE, subscribers reach the PUB socket through the subscription guard
             # (front.py): it passes on only subscriptions that can match a published topic,
-            # so what a peer sends cannot grow libzmq's trie. Each subscriber then costs three
-            # fds (its TCP connection, both ends of the relay) instead of one.
-            listening = (_listen_tcp(endpoint, "publisher", allow_remote)
-                         if guard and curve is None and endpoint.startswith("tcp://")
-                         else None)
+            # so what a peer sends cannot grow libzmq's trie. The PUB socket listens on an
+            # abstract unix socket (nothing in the file system, nothing left by a SIGKILL)
+            # that accepts connections from this process only (SO_PEERCRED: the guard's),
+            # so nobody reaches it around the guard.
+            listening = None
+            if guard and curve is None:
+                try:
+                    self._sock.setsockopt(zmq.IPC_FILTER_PID, os.getpid())
+                except zmq.ZMQError:
+                    log.warning("publisher: libzmq cannot restrict an ipc endpoint to this "
+                                "process; subscriptions are not guarded")
+                else:
+                    listening = (_listen_tcp(endpoint, "publisher", allow_remote)
+                                 if endpoint.startswith("tcp://") else None)
+                    if listening is None:
+                        log.warning("publisher: %s is not a tcp://HOST:PORT this process "
+                                    "can bind itself; subscriptions are not guarded", endpoint)
             fds_each = 3 if listening is not None else 1
-            cap = max(1, fd_budget(fds_each * max_subscribers, what="publisher",
-                                   others=MAX_REQUEST_CONNECTIONS) // fds_each)
+            cap = fd_budget(max_subscribers, what="publisher", others=MAX_REQUEST_CONNECTIONS,
+                            fds_each=fds_each)
             # connection events: STATUS says how many subscribers are connected, and the
             # gate keeps them ≤ max_subscribers (admission.py: the fd table is bounded)
             self._gate = ConnectionGate(
@@ -235,21 +249,18 @@ class Publisher:
                 extra_events=zmq.EVENT_HANDSHAKE_FAILED_AUTH)
             if listening is not None:
                 lsock, self.endpoint = listening
+                name = f"avard-pub-{os.getpid()}-{secrets.token_hex(8)}"
+                self.inner_endpoint = f"ipc://@{name}"
                 try:
-                    self._ipc_dir = private_ipc_dir()
-                    inner = f"{self._ipc_dir}/pub"
-                    self._sock.bind(f"ipc://{inner}")
-                    self._gate.bound(f"ipc://{inner}")
+                    self._sock.bind(self.inner_endpoint)
                 except BaseException:
                     lsock.close()
                     raise
+                self._gate.bound(self.inner_endpoint)
                 self._front = SubscriptionFront(
-                    lsock, inner, self._allowed, max_connections=cap, sndbuf=self.sndbuf,
-                    max_frame=MAX_SUBSCRIPTION_BYTES)
+                    lsock, "\0" + name, self._allowed, max_connections=cap,
+                    sndbuf=self.sndbuf, max_frame=MAX_SUBSCRIPTION_BYTES)
             else:
-                if guard and curve is None:
-                    log.warning("publisher: %s is not a tcp://HOST:PORT this process can "
-                                "bind itself; subscriptions are not guarded", endpoint)
                 self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None,
                                       allow_remote)
                 self._gate.bound(self.endpoint)
@@ -361,9 +372,6 @@ class Publisher:
             self._curve.stop()
             self._curve = None
         self._ctx.term()
-        if getattr(self, "_ipc_dir", None):
-            shutil.rmtree(str(self._ipc_dir), ignore_errors=True)
-            self._ipc_dir = None
 
     def __enter__(self) -> Publisher:
         return self

@@ -51,7 +51,7 @@ for w in range(waves):
     keep.append(s)
     # the wave has reached the publisher when the status message comes back through it (or
     # the publisher dropped this connection and it never comes): pacing, nothing measured
-    got = s.poll(10_000)
+    got = s.poll(60_000)
     print("wave", w, "received" if got else "not received", flush=True)
 print("done", flush=True)
 sys.stdin.read()

@@ -205,3 +205,33 @@ def test_a_rigs_sensor_topics_can_be_subscribed_before_their_first_record() -> N
         assert pub.stats()["subscriptions_dropped"] == 1
         sub.close(linger=0)
     ctx.term()
+
+
+def test_nobody_reaches_the_pub_socket_around_the_guard() -> None:
+    """The PUB socket's own endpoint (abstract ``ipc://@…``, listed in /proc/net/unix for
+    anyone to see) takes connections from the service's process only: a subscriber in another
+    process that connects there is refused before any subscription is read."""
+    import subprocess
+    import sys
+
+    child = r"""
+import sys, zmq
+ctx = zmq.Context()
+s = ctx.socket(zmq.SUB)
+s.setsockopt(zmq.SUBSCRIBE, b"")
+mon = s.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED
+                           | zmq.EVENT_CLOSED)
+s.connect(sys.argv[1])
+from zmq.utils.monitor import recv_monitor_message
+ev = recv_monitor_message(mon)["event"]     # the first thing that happens to the connection
+print("handshake" if ev == zmq.EVENT_HANDSHAKE_SUCCEEDED else "refused", flush=True)
+"""
+    with Publisher(LOCAL, "run-g", check=False) as pub:
+        assert pub.inner_endpoint is not None and pub.inner_endpoint.startswith("ipc://@")
+        out = subprocess.run([sys.executable, "-c", child, pub.inner_endpoint],
+                             capture_output=True, text=True, timeout=60)
+        assert out.stdout.strip() == "refused", (out.stdout, out.stderr[-500:])
+        # the control: the public endpoint, from the same kind of child, is served
+        out = subprocess.run([sys.executable, "-c", child, pub.endpoint],
+                             capture_output=True, text=True, timeout=60)
+        assert out.stdout.strip() == "handshake", (out.stdout, out.stderr[-500:])
