@@ -47,6 +47,10 @@ RESERVED_FDS = 256
 MAX_REQUEST_CONNECTIONS = 64
 #: Connections the PUB socket holds at most (each subscriber's queue is bounded by the HWM).
 MAX_SUBSCRIBERS = 256
+#: Behind the publisher's subscription guard (daemon/net/front.py) a subscriber costs three
+#: descriptors (its TCP connection, both ends of the relay): the cap keeps the PUB side's
+#: descriptors where they were with MAX_SUBSCRIBERS direct connections.
+MAX_GUARDED_SUBSCRIBERS = MAX_SUBSCRIBERS // 3
 #: A TCP connection that has not completed the ZMTP greeting (and CURVE) in this time is
 #: closed by libzmq (its default is 30 s).
 HANDSHAKE_IVL_MS = 5000

@@ -43,10 +43,10 @@ log = logging.getLogger(__name__)
 
 GREETING_BYTES = 64
 #: Bytes read from a peer at once (either direction).
-CHUNK = 65536
+CHUNK = 16384
 #: Bytes queued towards a subscriber before the guard stops reading from the PUB socket for
 #: it (libzmq's own queue and its high-water mark take over from there, as without a guard).
-S2C_LIMIT = 65536
+S2C_LIMIT = 32768
 #: Bytes queued towards the PUB socket before the guard stops reading from the subscriber.
 C2S_LIMIT = 16384
 #: Log lines about dropped subscriptions: at most one per this many seconds (the count of
@@ -66,8 +66,8 @@ def topic_prefixes(topics: Iterable[str | bytes]) -> set[bytes]:
 
 
 class _Conn:
-    __slots__ = ("applied", "c2s_in", "c2s_out", "client", "closed", "dropped", "greeting",
-                 "inner", "mask_c", "mask_i", "more", "peer", "s2c_out", "subs")
+    __slots__ = ("applied", "c2s_in", "c2s_out", "client", "closed", "dropped", "full_since",
+                 "greeting", "inner", "mask_c", "mask_i", "more", "peer", "s2c_out", "subs")
 
     def __init__(self, client: socket.socket, inner: socket.socket, peer: str) -> None:
         self.client = client
@@ -84,6 +84,8 @@ class _Conn:
         self.mask_c = 0
         self.mask_i = 0
         self.closed = False
+        #: monotonic time since which s2c_out has stayed full (the subscriber does not read)
+        self.full_since: float | None = None
 
 
 class SubscriptionFront:
@@ -107,6 +109,7 @@ class SubscriptionFront:
         self.applied = 0            # subscriptions passed on to the PUB socket
         self.dropped = 0            # subscriptions that can match nothing published, or extra
         self.cancels_ignored = 0    # cancels of a subscription the connection does not hold
+        self.stalled = 0            # subscribers shut down for reading nothing (shed_stalled)
         self._conns: dict[int, _Conn] = {}   # fileno (either side) → connection
         self._sel = selectors.DefaultSelector()
         self._wake_r, self._wake_w = socket.socketpair()
@@ -129,6 +132,29 @@ class SubscriptionFront:
         return {"subscriptions_applied": self.applied, "subscriptions_dropped": self.dropped,
                 "cancels_ignored": self.cancels_ignored,
                 "protocol_closed": self.protocol_closed}
+
+    def shed_stalled(self, now: float, stall_s: float) -> int:
+        """Shut down every subscriber whose queue in the guard has stayed full for
+        ``stall_s`` (it reads nothing: its TCP send buffer is full and so is ours); the guard's
+        thread then sees the connection end and closes both sides, and libzmq frees its queue
+        for it. Called from the publisher's thread (``shutdown(2)`` is safe across threads;
+        a connection closed meanwhile raises OSError here, ignored). Returns how many."""
+        shed = 0
+        for conn in list(self._conns.values()):
+            since = conn.full_since
+            if conn.closed or since is None or now - since < stall_s:
+                continue
+            conn.full_since = None
+            try:
+                conn.client.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                continue
+            self.stalled += 1
+            shed += 1
+            (log.warning if self.stalled <= 10 or self.stalled % 1000 == 0 else log.debug)(
+                "publisher: subscriber %s read nothing for %.0f s: shut down (#%d), its "
+                "queues freed", conn.peer, stall_s, self.stalled)
+        return shed
 
     def stop(self, timeout: float = 2.0) -> None:
         self._stop = True
@@ -226,6 +252,9 @@ class SubscriptionFront:
         mi = 0
         if len(conn.s2c_out) < S2C_LIMIT:
             mi |= selectors.EVENT_READ
+            conn.full_since = None
+        elif conn.full_since is None:
+            conn.full_since = time.monotonic()
         if conn.c2s_out:
             mi |= selectors.EVENT_WRITE
         for sock, old, new in ((conn.client, conn.mask_c, mc), (conn.inner, conn.mask_i, mi)):

@@ -31,6 +31,7 @@ import zmq
 from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.io import frames
 from avard.daemon.net.admission import (
+    MAX_GUARDED_SUBSCRIBERS,
     MAX_REQUEST_CONNECTIONS,
     MAX_SUBSCRIBERS,
     ConnectionGate,
@@ -184,7 +185,7 @@ class Publisher:
     def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
                  hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
                  check: bool = True, allow_remote: bool = False,
-                 max_subscribers: int = MAX_SUBSCRIBERS, sndbuf: int = PUB_SNDBUF,
+                 max_subscribers: int | None = None, sndbuf: int = PUB_SNDBUF,
                  stall_s: float = STALL_S, topics: Iterable[str] = frames.TOPICS,
                  guard: bool = True) -> None:
         if hwm < 1:
@@ -240,6 +241,9 @@ class Publisher:
                         log.warning("publisher: %s is not a tcp://HOST:PORT this process "
                                     "can bind itself; subscriptions are not guarded", endpoint)
             fds_each = 3 if listening is not None else 1
+            if max_subscribers is None:
+                max_subscribers = (MAX_GUARDED_SUBSCRIBERS if listening is not None
+                                   else MAX_SUBSCRIBERS)
             cap = fd_budget(max_subscribers, what="publisher", others=MAX_REQUEST_CONNECTIONS,
                             fds_each=fds_each)
             # connection events: STATUS says how many subscribers are connected, and the
@@ -328,7 +332,12 @@ class Publisher:
             if ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
                 self.auth_failures += 1
                 log.warning("publisher refused a peer that failed CURVE authentication")
-        self._gate.shed_stalled(time.monotonic(), self.sndbuf // 2, self.stall_s)
+        now = time.monotonic()
+        self._gate.shed_stalled(now, self.sndbuf // 2, self.stall_s)
+        if self._front is not None:
+            # behind the guard the stall shows in the guard's queue for the subscriber first
+            # (the PUB socket's ipc peer is the guard, which stops reading for it)
+            self._front.shed_stalled(now, self.stall_s)
         self.peers = self._gate.connections
 
     def reload_keys(self) -> None:
@@ -344,7 +353,8 @@ class Publisher:
             st = {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
                   "peers": self.peers, "auth_failures": self.auth_failures,
                   "refused_connections": self._gate.evicted + (front.refused if front else 0),
-                  "stalled_shut_down": self._gate.stalled_evicted,
+                  "stalled_shut_down": self._gate.stalled_evicted
+                  + (front.stalled if front else 0),
                   "max_send_queue_bytes": self._gate.max_outq,
                   "subscriptions_guarded": front is not None,
                   "seq": dict(self._seq)}
