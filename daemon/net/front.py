@@ -118,6 +118,7 @@ class SubscriptionFront:
         self._stop = False
         self._last_log = -LOG_EVERY_S
         self._held_back = 0
+        self._listen_paused = False
         listen.setblocking(False)
         self._sel.register(listen, selectors.EVENT_READ, "listen")
         self._sel.register(self._wake_r, selectors.EVENT_READ, "wake")
@@ -207,9 +208,14 @@ class SubscriptionFront:
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as exc:
-                # EMFILE and friends: say so (rarely), and leave the peer in the backlog
+                # EMFILE and friends: say so, leave the peer in the backlog and stop looking
+                # at the listener until a connection ends (it would stay readable: a spin)
                 if exc.errno in (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM):
-                    log.warning("publisher guard: cannot accept: %s", exc.strerror)
+                    log.warning("publisher guard: cannot accept: %s; accepting again when a "
+                                "subscriber leaves", exc.strerror)
+                    if not self._listen_paused:
+                        self._sel.unregister(self.listen)
+                        self._listen_paused = True
                     return
                 continue
             self.accepted += 1
@@ -413,5 +419,8 @@ class SubscriptionFront:
                 except (KeyError, ValueError):
                     pass
             sock.close()
+        if self._listen_paused and not self._stop:
+            self._listen_paused = False
+            self._sel.register(self.listen, selectors.EVENT_READ, "listen")
         if log_it and conn.dropped > 1:
             self._log_drops(conn, None)
