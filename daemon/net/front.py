@@ -67,7 +67,8 @@ def topic_prefixes(topics: Iterable[str | bytes]) -> set[bytes]:
 
 class _Conn:
     __slots__ = ("applied", "c2s_in", "c2s_out", "client", "closed", "dropped", "full_since",
-                 "greeting", "inner", "mask_c", "mask_i", "more", "peer", "s2c_out", "subs")
+                 "greeting", "inner", "inner_eof", "mask_c", "mask_i", "more", "peer",
+                 "s2c_out", "subs")
 
     def __init__(self, client: socket.socket, inner: socket.socket, peer: str) -> None:
         self.client = client
@@ -84,6 +85,8 @@ class _Conn:
         self.mask_c = 0
         self.mask_i = 0
         self.closed = False
+        #: the PUB socket closed its end (the service stops): what it sent still goes out
+        self.inner_eof = False
         #: monotonic time since which s2c_out has stayed full (the subscriber does not read)
         self.full_since: float | None = None
 
@@ -119,6 +122,8 @@ class SubscriptionFront:
         self._last_log = -LOG_EVERY_S
         self._held_back = 0
         self._listen_paused = False
+        self._idle = threading.Event()        # set while no subscriber is connected
+        self._idle.set()
         listen.setblocking(False)
         self._sel.register(listen, selectors.EVENT_READ, "listen")
         self._sel.register(self._wake_r, selectors.EVENT_READ, "wake")
@@ -157,7 +162,12 @@ class SubscriptionFront:
                 "queues freed", conn.peer, stall_s, self.stalled)
         return shed
 
-    def stop(self, timeout: float = 2.0) -> None:
+    def stop(self, timeout: float = 2.0, drain_s: float = 0.0) -> None:
+        """Stop the thread and close every connection; with ``drain_s``, first wait that long
+        at most for the connections to end by themselves (the PUB socket closed: each one
+        ends once what the service sent is out)."""
+        if drain_s > 0:
+            self._idle.wait(drain_s)
         self._stop = True
         try:
             self._wake_w.send(b"x")
@@ -244,6 +254,7 @@ class SubscriptionFront:
                 pass
             peer = f"{addr[0]}:{addr[1]}" if isinstance(addr, tuple) else str(addr)
             conn = _Conn(client, inner, peer)
+            self._idle.clear()
             self._conns[client.fileno()] = conn
             self._conns[inner.fileno()] = conn
             self._update(conn)
@@ -256,12 +267,16 @@ class SubscriptionFront:
         if conn.s2c_out:
             mc |= selectors.EVENT_WRITE
         mi = 0
-        if len(conn.s2c_out) < S2C_LIMIT:
+        if conn.inner_eof:
+            conn.c2s_out.clear()     # nobody to pass it to
+            if conn.full_since is None:
+                conn.full_since = time.monotonic()   # it drains, or shed_stalled ends it
+        elif len(conn.s2c_out) < S2C_LIMIT:
             mi |= selectors.EVENT_READ
             conn.full_since = None
         elif conn.full_since is None:
             conn.full_since = time.monotonic()
-        if conn.c2s_out:
+        if conn.c2s_out and not conn.inner_eof:
             mi |= selectors.EVENT_WRITE
         for sock, old, new in ((conn.client, conn.mask_c, mc), (conn.inner, conn.mask_i, mi)):
             if old == new:
@@ -284,8 +299,10 @@ class SubscriptionFront:
                     data = None
                 if data is not None:
                     if not data:
-                        self._close(conn)
-                        return
+                        if client_side or not conn.s2c_out:
+                            self._close(conn)
+                            return
+                        conn.inner_eof = True   # the service's last records still go out
                     if client_side:
                         conn.c2s_in += data
                         if not self._parse(conn):
@@ -303,6 +320,9 @@ class SubscriptionFront:
                         continue
                     del out[:n]
         except OSError:
+            self._close(conn)
+            return
+        if conn.inner_eof and not conn.s2c_out:
             self._close(conn)
             return
         self._update(conn)
@@ -419,6 +439,8 @@ class SubscriptionFront:
                 except (KeyError, ValueError):
                     pass
             sock.close()
+        if not self._conns:
+            self._idle.set()
         if self._listen_paused and not self._stop:
             self._listen_paused = False
             self._sel.register(self.listen, selectors.EVENT_READ, "listen")

@@ -368,10 +368,6 @@ class Publisher:
             self._teardown()
 
     def _teardown(self) -> None:
-        front = getattr(self, "_front", None)
-        if front is not None:
-            front.stop()
-            self._front = None
         sock = getattr(self, "_sock", None)
         gate = getattr(self, "_gate", None)
         if gate is not None and sock is not None and not sock.closed:
@@ -381,7 +377,12 @@ class Publisher:
         if self._curve is not None:
             self._curve.stop()
             self._curve = None
-        self._ctx.term()
+        self._ctx.term()      # waits ≤ LINGER_MS for queued records, the guard relaying them
+        front = getattr(self, "_front", None)
+        if front is not None:
+            # then the guard: what it holds for a subscriber goes out first
+            front.stop(drain_s=LINGER_MS / 1000)
+            self._front = None
 
     def __enter__(self) -> Publisher:
         return self

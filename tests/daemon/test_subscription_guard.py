@@ -235,3 +235,26 @@ print("handshake" if ev == zmq.EVENT_HANDSHAKE_SUCCEEDED else "refused", flush=T
         out = subprocess.run([sys.executable, "-c", child, pub.endpoint],
                              capture_output=True, text=True, timeout=60)
         assert out.stdout.strip() == "handshake", (out.stdout, out.stderr[-500:])
+
+
+def test_the_last_records_before_close_still_reach_a_subscriber() -> None:
+    """At the service's stop, libzmq's linger flushes what is queued into the guard, and the
+    guard relays it before it closes the subscriber's connection (ten closes in a row)."""
+    for _ in range(10):
+        ctx = zmq.Context()
+        pub = Publisher(LOCAL, "run-g", check=False)
+        sub = ctx.socket(zmq.SUB)
+        sub.setsockopt(zmq.SUBSCRIBE, b"")
+        sub.connect(pub.endpoint)
+        _first_received(sub, lambda p=pub: p.publish("status", {"kind": "status", "v": 1}))
+        for i in range(200):
+            pub.publish("event", {"kind": "event", "v": 1, "i": i, "pad": b"x" * 2000})
+        pub.close()
+        last = -1
+        while last != 199 and sub.poll(DEADLINE_S * 1000):
+            topic, data = sub.recv_multipart()
+            if topic == b"event":
+                last = msgpack.unpackb(data)["i"]
+        assert last == 199
+        sub.close(linger=0)
+        ctx.term()
