@@ -4,7 +4,10 @@
 sequence number into the record and sends ``[topic, msgpack]`` without blocking: PUB drops
 messages for a subscriber whose queue is at the high-water mark (HWM), so a slow or stalled
 subscriber costs the service a bounded amount of memory and never stalls acquisition; the
-subscriber sees what it lost as holes in the sequence numbers.
+subscriber sees what it lost as holes in the sequence numbers. Without CURVE, subscribers reach
+the PUB socket through the subscription guard (daemon/net/front.py), which passes on only the
+subscriptions that can match a published topic: what peers send cannot grow libzmq's
+subscription trie.
 
 ``RequestServer`` owns one ROUTER socket in its own thread and answers requests
 ``{"op", "args", "id"}`` through a table of handlers (``snapshot``, ``status``, ``recent``,
