@@ -47,23 +47,28 @@ RESERVED_FDS = 256
 MAX_REQUEST_CONNECTIONS = 64
 #: Connections the PUB socket holds at most (each subscriber's queue is bounded by the HWM).
 MAX_SUBSCRIBERS = 256
+#: Behind the publisher's subscription guard (daemon/net/front.py) a subscriber costs three
+#: descriptors (its TCP connection, both ends of the relay): the cap keeps the PUB side's
+#: descriptors where they were with MAX_SUBSCRIBERS direct connections.
+MAX_GUARDED_SUBSCRIBERS = MAX_SUBSCRIBERS // 3
 #: A TCP connection that has not completed the ZMTP greeting (and CURVE) in this time is
 #: closed by libzmq (its default is 30 s).
 HANDSHAKE_IVL_MS = 5000
 
 
 def fd_budget(wanted: int, *, what: str, others: int = 0,
-              soft_limit: int | None = None) -> int:
+              soft_limit: int | None = None, fds_each: int = 1) -> int:
     """The connection cap to use for ``wanted``: at most what fits beside ``others`` peers and
-    RESERVED_FDS under the soft RLIMIT_NOFILE (at least 1)."""
+    RESERVED_FDS under the soft RLIMIT_NOFILE (at least 1), each connection costing
+    ``fds_each`` descriptors (3 for a subscriber relayed by the publisher's guard)."""
     if soft_limit is None:
         soft_limit = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
     if soft_limit == resource.RLIM_INFINITY:
         return wanted
     room = soft_limit - RESERVED_FDS - others
-    if room >= wanted:
+    if room >= wanted * fds_each:
         return wanted
-    cap = max(1, room)
+    cap = max(1, room // fds_each)
     log.warning("%s: at most %d connections (not %d): the open-file limit is %d and %d fds "
                 "are kept for the recording; raise LimitNOFILE (ulimit -n)", what, cap, wanted,
                 soft_limit, RESERVED_FDS)
@@ -84,6 +89,7 @@ class ConnectionGate:
         self.what = what
         self.evict_newest = evict_newest
         self.port: int | None = None
+        self.path: str | None = None   # an ipc endpoint's socket file
         self._order = itertools.count()
         # fd → (accept order, monotonic time of its last valid request or None)
         self._fds: dict[int, tuple[int, float | None]] = {}
@@ -103,6 +109,9 @@ class ConnectionGate:
 
     def bound(self, endpoint: str) -> None:
         """The concrete endpoint the socket listens on (its port identifies our fds)."""
+        if endpoint.startswith("ipc://"):
+            self.path = endpoint[len("ipc://"):]
+            return
         _host, _sep, port = endpoint.rpartition(":")
         self.port = int(port) if port.isdigit() else None
 
@@ -177,8 +186,15 @@ class ConnectionGate:
         except OSError:
             return      # already closed by libzmq
         try:
-            # only ever a TCP connection of our own port (the fd could have been reused)
-            if self.port is None or s.getsockname()[1] == self.port:
+            # only ever a connection of our own endpoint (the fd could have been reused)
+            name = s.getsockname()
+            if self.path is not None:
+                if isinstance(name, bytes) and name[:1] == b"\0":   # abstract: "@name"
+                    name = "@" + name[1:].decode("utf-8", "replace")
+                ours = s.family == socket.AF_UNIX and name == self.path
+            else:
+                ours = self.port is None or name[1] == self.port
+            if ours:
                 s.shutdown(socket.SHUT_RDWR)
         except (OSError, IndexError, TypeError):
             pass

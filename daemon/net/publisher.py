@@ -4,7 +4,10 @@
 sequence number into the record and sends ``[topic, msgpack]`` without blocking: PUB drops
 messages for a subscriber whose queue is at the high-water mark (HWM), so a slow or stalled
 subscriber costs the service a bounded amount of memory and never stalls acquisition; the
-subscriber sees what it lost as holes in the sequence numbers.
+subscriber sees what it lost as holes in the sequence numbers. Without CURVE, subscribers reach
+the PUB socket through the subscription guard (daemon/net/front.py), which passes on only the
+subscriptions that can match a published topic: what peers send cannot grow libzmq's
+subscription trie.
 
 ``RequestServer`` owns one ROUTER socket in its own thread and answers requests
 ``{"op", "args", "id"}`` through a table of handlers (``snapshot``, ``status``, ``recent``,
@@ -17,22 +20,28 @@ Both bind to 127.0.0.1 unless told otherwise, and both take an optional CURVE co
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
+import secrets
+import socket
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import zmq
 from avard.core.errors import AvardError, ConfigError, FormatError
 from avard.core.io import frames
 from avard.daemon.net.admission import (
+    MAX_GUARDED_SUBSCRIBERS,
     MAX_REQUEST_CONNECTIONS,
     MAX_SUBSCRIBERS,
     ConnectionGate,
     fd_budget,
 )
 from avard.daemon.net.curve import CurveServer, CurveServerConfig
+from avard.daemon.net.front import SubscriptionFront, topic_prefixes
 
 log = logging.getLogger(__name__)
 
@@ -97,12 +106,9 @@ def is_loopback(endpoint: str) -> bool:
     return host is None or host in _LOOPBACK_HOSTS
 
 
-def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool,
-          allow_remote: bool) -> str:
-    """Bind and return the actual endpoint (ephemeral ``:*`` or ``:0`` ports resolved).
-
-    Anything but loopback needs ``allow_remote`` (``[publish] allow_remote = true``).
-    """
+def _check_bind(endpoint: str, what: str, secured: bool, allow_remote: bool) -> str:
+    """The endpoint to bind (``:0`` → ``:*``), once it is allowed: anything but loopback needs
+    ``allow_remote`` (``[publish] allow_remote = true``)."""
     if endpoint.endswith(":0"):
         endpoint = endpoint[:-2] + ":*"
     if not is_loopback(endpoint):
@@ -116,14 +122,60 @@ def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool,
         else:
             log.warning("%s binds %s without CURVE: anyone who reaches this interface can "
                         "read the stream (enable [curve])", what, endpoint)
+    return endpoint
+
+
+def _bind_conflict(what: str, endpoint: str, strerror: str) -> ConfigError:
+    return ConfigError(f"{what} cannot bind {endpoint}: {strerror}; choose another "
+                       "endpoint or stop the process that holds it")
+
+
+def _bind(sock: zmq.Socket, endpoint: str, what: str, secured: bool,
+          allow_remote: bool) -> str:
+    """Bind and return the actual endpoint (ephemeral ``:*`` or ``:0`` ports resolved)."""
+    endpoint = _check_bind(endpoint, what, secured, allow_remote)
     if (endpoint_host(endpoint) or "").startswith("["):
         sock.setsockopt(zmq.IPV6, 1)  # libzmq needs it for tcp://[::1]:PORT
     try:
         sock.bind(endpoint)
     except zmq.ZMQError as exc:
-        raise ConfigError(f"{what} cannot bind {endpoint}: {exc.strerror}; choose another "
-                          "endpoint or stop the process that holds it") from None
+        raise _bind_conflict(what, endpoint, exc.strerror) from None
     return sock.getsockopt_string(zmq.LAST_ENDPOINT)
+
+
+def _listen_tcp(endpoint: str, what: str, allow_remote: bool) -> tuple[socket.socket, str] | None:
+    """A listening TCP socket for ``tcp://HOST:PORT`` as libzmq would bind it, and the
+    endpoint with the port resolved; None when Python cannot resolve HOST (libzmq also takes
+    interface names: those bind directly, without the subscription guard)."""
+    endpoint = _check_bind(endpoint, what, False, allow_remote)
+    host = endpoint_host(endpoint)
+    if host is None:
+        return None
+    port_s = endpoint.rpartition(":")[2]
+    port = 0 if port_s in ("*", "0") else int(port_s) if port_s.isdigit() else -1
+    if port < 0:
+        return None
+    name = "" if host == "*" else host.strip("[]")
+    try:
+        infos = socket.getaddrinfo(name or None, port, socket.AF_INET if host == "*"
+                                   else socket.AF_UNSPEC, socket.SOCK_STREAM, 0,
+                                   socket.AI_PASSIVE)
+    except OSError:
+        return None
+    family, type_, proto, _canon, addr = infos[0]
+    sock = socket.socket(family, type_, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as libzmq does
+        sock.bind(addr)
+        sock.listen(100)                                             # libzmq's backlog
+    except OSError as exc:
+        sock.close()
+        if exc.errno in (errno.EADDRINUSE, errno.EADDRNOTAVAIL, errno.EACCES):
+            raise _bind_conflict(what, endpoint, exc.strerror or str(exc)) from None
+        raise
+    bound_host, bound_port = sock.getsockname()[:2]
+    shown = f"[{bound_host}]" if family == socket.AF_INET6 else bound_host
+    return sock, f"tcp://{shown}:{bound_port}"
 
 
 class Publisher:
@@ -136,16 +188,25 @@ class Publisher:
     def __init__(self, endpoint: str = DEFAULT_PUB_ENDPOINT, run_id: str = "", *,
                  hwm: int = DEFAULT_HWM, curve: CurveServerConfig | None = None,
                  check: bool = True, allow_remote: bool = False,
-                 max_subscribers: int = MAX_SUBSCRIBERS, sndbuf: int = PUB_SNDBUF,
-                 stall_s: float = STALL_S) -> None:
+                 max_subscribers: int | None = None, sndbuf: int = PUB_SNDBUF,
+                 stall_s: float = STALL_S, topics: Iterable[str] = frames.TOPICS,
+                 guard: bool = True) -> None:
         if hwm < 1:
             raise ConfigError(f"publisher hwm={hwm}: must be at least 1 message")
         self.run_id = str(run_id)
         self.check = check
         self._ctx = zmq.Context()
         self._curve: CurveServer | None = None
+        self._front: SubscriptionFront | None = None
+        #: the PUB socket's own endpoint behind the guard (None: bound directly)
+        self.inner_endpoint: str | None = None
         self._lock = threading.Lock()
         self._seq: dict[str, int] = {}
+        # the subscriptions that can match a topic this publisher sends (the guard's filter):
+        # replaced whole, never changed in place, as the guard's thread reads it
+        self._topics: frozenset[str] = frozenset()
+        self._prefixes: frozenset[bytes] = frozenset({b""})
+        self.declare_topics(topics)
         self.sent = 0
         self.dropped = 0
         self.peers = 0
@@ -163,19 +224,69 @@ class Publisher:
             self._sock.setsockopt(zmq.LINGER, LINGER_MS)
             if self._curve is not None:
                 self._curve.apply(self._sock)
+            # Without CURVE, subscribers reach the PUB socket through the subscription guard
+            # (front.py): it passes on only subscriptions that can match a published topic,
+            # so what a peer sends cannot grow libzmq's trie. The PUB socket listens on an
+            # abstract unix socket (nothing in the file system, nothing left by a SIGKILL)
+            # that accepts connections from this process only (SO_PEERCRED: the guard's),
+            # so nobody reaches it around the guard.
+            listening = None
+            if guard and curve is None:
+                try:
+                    self._sock.setsockopt(zmq.IPC_FILTER_PID, os.getpid())
+                except zmq.ZMQError:
+                    log.warning("publisher: libzmq cannot restrict an ipc endpoint to this "
+                                "process; subscriptions are not guarded")
+                else:
+                    listening = (_listen_tcp(endpoint, "publisher", allow_remote)
+                                 if endpoint.startswith("tcp://") else None)
+                    if listening is None:
+                        log.warning("publisher: %s is not a tcp://HOST:PORT this process "
+                                    "can bind itself; subscriptions are not guarded", endpoint)
+            fds_each = 3 if listening is not None else 1
+            if max_subscribers is None:
+                max_subscribers = (MAX_GUARDED_SUBSCRIBERS if listening is not None
+                                   else MAX_SUBSCRIBERS)
+            cap = fd_budget(max_subscribers, what="publisher", others=MAX_REQUEST_CONNECTIONS,
+                            fds_each=fds_each)
             # connection events: STATUS says how many subscribers are connected, and the
             # gate keeps them ≤ max_subscribers (admission.py: the fd table is bounded)
             self._gate = ConnectionGate(
-                self._sock, fd_budget(max_subscribers, what="publisher",
-                                      others=MAX_REQUEST_CONNECTIONS),
-                "publisher", evict_newest=True, extra_events=zmq.EVENT_HANDSHAKE_FAILED_AUTH)
-            self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None,
-                                  allow_remote)
-            self._gate.bound(self.endpoint)
+                self._sock, cap, "publisher", evict_newest=True,
+                extra_events=zmq.EVENT_HANDSHAKE_FAILED_AUTH)
+            if listening is not None:
+                lsock, self.endpoint = listening
+                name = f"avard-pub-{os.getpid()}-{secrets.token_hex(8)}"
+                self.inner_endpoint = f"ipc://@{name}"
+                try:
+                    self._sock.bind(self.inner_endpoint)
+                except BaseException:
+                    lsock.close()
+                    raise
+                self._gate.bound(self.inner_endpoint)
+                self._front = SubscriptionFront(
+                    lsock, "\0" + name, self._allowed, max_connections=cap,
+                    sndbuf=self.sndbuf, max_frame=MAX_SUBSCRIPTION_BYTES)
+            else:
+                self.endpoint = _bind(self._sock, endpoint, "publisher", curve is not None,
+                                      allow_remote)
+                self._gate.bound(self.endpoint)
         except BaseException:
             self._teardown()
             raise
-        log.info("publishing on %s (run %s, hwm %d)", self.endpoint, self.run_id, hwm)
+        log.info("publishing on %s (run %s, hwm %d%s)", self.endpoint, self.run_id, hwm,
+                 ", subscriptions guarded" if self._front is not None else "")
+
+    def declare_topics(self, topics: Iterable[str]) -> None:
+        """Topics this publisher will send (before their first message): subscriptions to
+        their prefixes are passed on from then on. A topic sent is declared by sending it."""
+        new = set(topics) - self._topics
+        if new:
+            self._topics = self._topics | new
+            self._prefixes = self._prefixes | topic_prefixes(new)
+
+    def _allowed(self, sub: bytes) -> bool:
+        return sub in self._prefixes
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], run_id: str) -> Publisher:
@@ -197,6 +308,8 @@ class Publisher:
         """
         if topic is None:
             topic = frames.topic_of(record)
+        if topic not in self._topics:
+            self.declare_topics([topic])
         rec = dict(record)
         rec["run"] = self.run_id
         with self._lock:
@@ -222,7 +335,12 @@ class Publisher:
             if ev == zmq.EVENT_HANDSHAKE_FAILED_AUTH:
                 self.auth_failures += 1
                 log.warning("publisher refused a peer that failed CURVE authentication")
-        self._gate.shed_stalled(time.monotonic(), self.sndbuf // 2, self.stall_s)
+        now = time.monotonic()
+        self._gate.shed_stalled(now, self.sndbuf // 2, self.stall_s)
+        if self._front is not None:
+            # behind the guard the stall shows in the guard's queue for the subscriber first
+            # (the PUB socket's ipc peer is the guard, which stops reading for it)
+            self._front.shed_stalled(now, self.stall_s)
         self.peers = self._gate.connections
 
     def reload_keys(self) -> None:
@@ -234,12 +352,18 @@ class Publisher:
         """Counters for STATUS: sent, dropped locally, connected peers, refused peers, seqs."""
         with self._lock:
             self._poll_monitor()
-            return {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
-                    "peers": self.peers, "auth_failures": self.auth_failures,
-                    "refused_connections": self._gate.evicted,
-                    "stalled_shut_down": self._gate.stalled_evicted,
-                    "max_send_queue_bytes": self._gate.max_outq,
-                    "seq": dict(self._seq)}
+            front = self._front
+            st = {"endpoint": self.endpoint, "sent": self.sent, "dropped": self.dropped,
+                  "peers": self.peers, "auth_failures": self.auth_failures,
+                  "refused_connections": self._gate.evicted + (front.refused if front else 0),
+                  "stalled_shut_down": self._gate.stalled_evicted
+                  + (front.stalled if front else 0),
+                  "max_send_queue_bytes": self._gate.max_outq,
+                  "subscriptions_guarded": front is not None,
+                  "seq": dict(self._seq)}
+            if front is not None:
+                st.update(front.stats())
+            return st
 
     def close(self) -> None:
         """Close the socket (LINGER bounds the wait) and stop the authenticator."""
@@ -256,7 +380,12 @@ class Publisher:
         if self._curve is not None:
             self._curve.stop()
             self._curve = None
-        self._ctx.term()
+        self._ctx.term()      # waits ≤ LINGER_MS for queued records, the guard relaying them
+        front = getattr(self, "_front", None)
+        if front is not None:
+            # then the guard: what it holds for a subscriber goes out first
+            front.stop(drain_s=LINGER_MS / 1000)
+            self._front = None
 
     def __enter__(self) -> Publisher:
         return self

@@ -57,6 +57,11 @@ class SensorPublisher:
     def __init__(self, inner: Any, name: str) -> None:
         self.inner = inner
         self.name = name
+        # before the first record: a client may subscribe to raw.NAME before it is sent, and
+        # the publisher's subscription guard passes on only subscriptions to its topics
+        declare = getattr(inner, "declare_topics", None)
+        if declare is not None:
+            declare(f"{kind}.{name}" for kind in frames.TOPICS)
 
     def publish(self, topic: str | None, record: Mapping[str, Any]) -> int:
         base = topic if topic is not None else frames.topic_of(record)

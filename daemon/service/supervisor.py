@@ -435,6 +435,7 @@ class Service(Supervised):
             st["published"] = ps.get("sent", 0)
             st["publish_dropped"] = ps.get("dropped", 0)
             st["stalled_shut_down"] = ps.get("stalled_shut_down", 0)
+            st["subscriptions_dropped"] = ps.get("subscriptions_dropped", 0)
         if self.status_fields is not None:
             st.update(self.status_fields())
         return st

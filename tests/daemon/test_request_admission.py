@@ -121,3 +121,6 @@ def test_the_fd_budget_keeps_room_for_the_recording() -> None:
     assert fd_budget(64, what="t", others=100, soft_limit=400) == 400 - 256 - 100
     assert fd_budget(300, what="t", soft_limit=400) == 400 - 256
     assert fd_budget(300, what="t", soft_limit=100) == 1
+    # a subscriber behind the publisher's guard costs three descriptors (daemon28)
+    assert fd_budget(256, what="t", others=64, soft_limit=8192, fds_each=3) == 256
+    assert fd_budget(256, what="t", others=64, soft_limit=1024, fds_each=3) == (1024 - 320) // 3
