@@ -474,7 +474,9 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext = fit_noise(av(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        ext_extra = [*extra, *gm]
+        fit_ext = av(fit.y - d_fit, rate_b)
+        ext = fit_noise(fit_ext, extra=ext_extra)
         held_var = av(held.y[skip:], held.rate(rate_b), ks)
         held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
         pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
@@ -483,8 +485,10 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
         pred_cov = None
-    # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``)
-    noise_cov = _noise_scatter(ext, held_ext)
+        ext_extra, fit_ext = extra, av(fit.y, rate_b)
+    # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``),
+    # read from the fit part's short τ (``_scatter_model``)
+    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext, ext_extra), held_ext)
     pred_cov = noise_cov if pred_cov is None else pred_cov + noise_cov
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -497,6 +501,34 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         raise FitError(f"no common held-out τ in {rng[0]:.3g}…{rng[1]:.3g} s")
     pred = model_chi2(ext, held_ext, rng, predictive=True, extra_cov=pred_cov).chi2
     return Fold(fit.label, held.label, cb.chi2, ce.chi2, nb, rng, pred)
+
+
+#: The noise terms whose uncertainty the held-out scatter carries are fitted on the fit
+#: part's τ up to its longest over this factor (``_scatter_model``).
+SCATTER_TAU_FACTOR = 4.0
+
+
+def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
+    """The noise fit whose terms' uncertainty ``_noise_scatter`` carries: ``model``'s own
+    fit redone on the fit part's Allan variance ``fit_avar`` over τ up to
+    ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself when that fit fails).
+
+    Why not ``model``'s: a drive slower than the fit part that no candidate describes is
+    read there, on the longest τ, as random walk, flicker or a rate ramp of a level known
+    only to a few EDF, and its scatter then hides the very misfit the held-out test exists
+    to find (an unlogged drive longer than the record: p 0.0017 before the scatter, 0.15
+    with it). Below the longest octaves that drive cannot reach, and the terms' levels are
+    read where they are known; what the longest τ of a half under-reads (a random walk, a
+    flicker dropped) still carries its upper limit's standard error, as ``_noise_scatter``
+    gives it. Measured on halves of white + flicker + random-walk sensors with and without
+    a slow drive (the branch's log, docs/log/2026-11-29-heldpow28.md)."""
+    hi = model.tau_max_s / SCATTER_TAU_FACTOR
+    if not hi > model.tau_min_s:
+        return model
+    try:
+        return fit_noise(fit_avar, extra=list(extra), tau_range=(0.0, hi))
+    except (FitError, DataError, ValueError, np.linalg.LinAlgError):
+        return model
 
 
 def _noise_scatter(model: Any, result: Any) -> NDArray[np.float64]:
