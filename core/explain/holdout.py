@@ -455,7 +455,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
              for ln in line_components(c.lines)
              if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
-    base = fit_noise(av(fit.y, rate_b), extra=extra)
+    fit_base = av(fit.y, rate_b)
+    base = fit_noise(fit_base, extra=extra)
     if c.names:
         d_fit, d_held, skip, lag, spread = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
         # the held-out part's log holes (the screen's dropouts, masked readings and stuck
@@ -485,7 +486,7 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
         pred_cov = None
-        ext_extra, fit_ext = extra, av(fit.y, rate_b)
+        ext_extra, fit_ext = extra, fit_base
     # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``),
     # read from the fit part's short τ (``_scatter_model``)
     noise_cov = _noise_scatter(_scatter_model(fit_ext, ext, ext_extra), held_ext)
