@@ -52,7 +52,10 @@ halves) the folds that failed at 1 % were those whose half had under-read a long
 weighed as too small; averaging the prediction's mean over the neighbouring term choices
 (Akaike weights) moved the failures at 1 % from 5 % to 4 %, forcing every term into the
 prediction made them 9 %, and the expected scatter took them to 1–1.7 % on the same
-records. (1) and (2) are absent from ``chi2_ext``, which makes the gain (a poorly determined
+records. The terms whose uncertainty (2) carries are fitted on the fit part's τ below its
+longest octaves (``_scatter_model``): a drive slower than the part, outside every candidate,
+sits on those octaves and would otherwise widen the scatter that is to judge it.
+(1) and (2) are absent from ``chi2_ext``, which makes the gain (a poorly determined
 model gains nothing by its own uncertainty).
 """
 
@@ -514,15 +517,17 @@ def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
     fit redone on the fit part's Allan variance ``fit_avar`` over τ up to
     ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself when that fit fails).
 
-    Why not ``model``'s: a drive slower than the fit part that no candidate describes is
-    read there, on the longest τ, as random walk, flicker or a rate ramp of a level known
-    only to a few EDF, and its scatter then hides the very misfit the held-out test exists
-    to find (an unlogged drive longer than the record: p 0.0017 before the scatter, 0.15
-    with it). Below the longest octaves that drive cannot reach, and the terms' levels are
-    read where they are known; what the longest τ of a half under-reads (a random walk, a
-    flicker dropped) still carries its upper limit's standard error, as ``_noise_scatter``
-    gives it. Measured on halves of white + flicker + random-walk sensors with and without
-    a slow drive (the branch's log, docs/log/2026-11-29-heldpow28.md)."""
+    Why not ``model``'s: a drive slower than the fit part that no candidate describes sits
+    on its longest τ, where the terms are known to a few EDF; there it widens the upper
+    limits of the terms the fit leaves out (a random walk, a rate ramp) or takes the place
+    of the term that is there, and the scatter carried from those limits then hides in the
+    other half the very misfit the held-out test exists to find. Below the longest octaves
+    that drive cannot reach: the terms are read where they are known, and what the short τ
+    cannot tell (a random walk's level) still carries its own, honest, upper limit. On a
+    half without such a drive the short fit knows the long-τ terms less well than the whole
+    range does, so its scatter is often the larger: the held-out test stays calibrated on
+    described sensors (``tests/core/test_heldout_calibration.py``); the branch's log
+    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power."""
     hi = model.tau_max_s / SCATTER_TAU_FACTOR
     if not hi > model.tau_min_s:
         return model
