@@ -52,7 +52,10 @@ halves) the folds that failed at 1 % were those whose half had under-read a long
 weighed as too small; averaging the prediction's mean over the neighbouring term choices
 (Akaike weights) moved the failures at 1 % from 5 % to 4 %, forcing every term into the
 prediction made them 9 %, and the expected scatter took them to 1–1.7 % on the same
-records. (1) and (2) are absent from ``chi2_ext``, which makes the gain (a poorly determined
+records. The terms whose uncertainty (2) carries are fitted on the fit part's τ below its
+longest octaves (``_scatter_model``): a drive slower than the part, outside every candidate,
+sits on those octaves and would otherwise widen the scatter that is to judge it.
+(1) and (2) are absent from ``chi2_ext``, which makes the gain (a poorly determined
 model gains nothing by its own uncertainty).
 """
 
@@ -455,7 +458,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         "frequency_hz", "sweep_lo_hz", "sweep_hi_hz") if k in ln}}
              for ln in line_components(c.lines)
              if 0 < ln["frequency_hz"] and ln.get("sweep_hi_hz", ln["frequency_hz"]) < nyq]
-    base = fit_noise(av(fit.y, rate_b), extra=extra)
+    fit_base = av(fit.y, rate_b)
+    base = fit_noise(fit_base, extra=extra)
     if c.names:
         d_fit, d_held, skip, lag, spread = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
         # the held-out part's log holes (the screen's dropouts, masked readings and stuck
@@ -474,7 +478,9 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext = fit_noise(av(fit.y - d_fit, rate_b), extra=[*extra, *gm])
+        ext_extra = [*extra, *gm]
+        fit_ext = av(fit.y - d_fit, rate_b)
+        ext = fit_noise(fit_ext, extra=ext_extra)
         held_var = av(held.y[skip:], held.rate(rate_b), ks)
         held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
         pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
@@ -483,8 +489,10 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
         pred_cov = None
-    # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``)
-    noise_cov = _noise_scatter(ext, held_ext)
+        ext_extra, fit_ext = extra, fit_base
+    # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``),
+    # read from the fit part's short τ (``_scatter_model``)
+    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext, ext_extra), held_ext)
     pred_cov = noise_cov if pred_cov is None else pred_cov + noise_cov
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -497,6 +505,36 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         raise FitError(f"no common held-out τ in {rng[0]:.3g}…{rng[1]:.3g} s")
     pred = model_chi2(ext, held_ext, rng, predictive=True, extra_cov=pred_cov).chi2
     return Fold(fit.label, held.label, cb.chi2, ce.chi2, nb, rng, pred)
+
+
+#: The noise terms whose uncertainty the held-out scatter carries are fitted on the fit
+#: part's τ up to its longest over this factor (``_scatter_model``).
+SCATTER_TAU_FACTOR = 4.0
+
+
+def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
+    """The noise fit whose terms' uncertainty ``_noise_scatter`` carries: ``model``'s own
+    fit redone on the fit part's Allan variance ``fit_avar`` over τ up to
+    ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself when that fit fails).
+
+    Why not ``model``'s: a drive slower than the fit part that no candidate describes sits
+    on its longest τ, where the terms are known to a few EDF; there it widens the upper
+    limits of the terms the fit leaves out (a random walk, a rate ramp) or takes the place
+    of the term that is there, and the scatter carried from those limits then hides in the
+    other half the very misfit the held-out test exists to find. Below the longest octaves
+    that drive cannot reach: the terms are read where they are known, and what the short τ
+    cannot tell (a random walk's level) still carries its own, honest, upper limit. On a
+    half without such a drive the short fit knows the long-τ terms less well than the whole
+    range does, so its scatter is often the larger: the held-out test stays calibrated on
+    described sensors (``tests/core/test_heldout_calibration.py``); the branch's log
+    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power."""
+    hi = model.tau_max_s / SCATTER_TAU_FACTOR
+    if not hi > model.tau_min_s:
+        return model
+    try:
+        return fit_noise(fit_avar, extra=list(extra), tau_range=(0.0, hi))
+    except (FitError, DataError, ValueError, np.linalg.LinAlgError):
+        return model
 
 
 def _noise_scatter(model: Any, result: Any) -> NDArray[np.float64]:

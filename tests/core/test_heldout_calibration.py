@@ -130,3 +130,39 @@ def test_a_signal_the_model_does_not_have_still_fails_the_held_out_test():
         relay = 2.0 * B * np.sign(np.sin(2 * np.pi * t / 600.0 + seed))
         p = _p_heldout(y, rb, y[h:] + relay)
         assert p < ALPHA, (seed, p)
+
+
+def _drive_axis(seed: int, size_b: float) -> tuple[np.ndarray, float]:
+    """A described-sensor axis plus a sinusoidal drive of ``size_b``·B whose period is
+    1.1–2.5× the record (random phase): slower than the record, outside every candidate
+    (no logged channel, no line the fit resolves), read on each half as a random walk, a
+    flicker or a rate ramp."""
+    y, rb = _slow_axis(seed)
+    rng = np.random.default_rng(seed + 777)
+    period = len(y) / rb * rng.uniform(1.1, 2.5)
+    t = np.arange(len(y)) / rb
+    return y + size_b * B * np.sin(2 * np.pi * t / period + rng.uniform(0, 2 * np.pi)), rb
+
+
+def test_the_scatter_model_is_read_below_the_longest_octaves():
+    """The noise terms whose uncertainty the held-out scatter carries are fitted on the fit
+    part's τ up to a quarter of its longest (where a drive slower than the part cannot
+    reach), with the same components; a part too short for that keeps the whole-range fit."""
+    for seed in range(40, 43):
+        y, rb = _drive_axis(seed, 15.0)
+        h = len(y) // 2
+        fit_avar = _avar(y[:h], rb)
+        model = fit_noise(fit_avar)
+        short = ho._scatter_model(fit_avar, model, [])
+        assert short is not model
+        assert short.tau_max_s <= model.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
+        assert [c.label for c in short.components] == [c.label for c in model.components]
+        # the short fit reads the same white noise (its τ are where white noise is known)
+        n_full = model.terms["velocity_random_walk"].value
+        n_short = short.terms["velocity_random_walk"].value
+        assert n_full and n_short and abs(n_short / n_full - 1) < 0.05
+    y, rb = _slow_axis(40)
+    tiny = _avar(y[:600], rb)
+    m = fit_noise(tiny)
+    assert ho._scatter_model(tiny, m, []) is m or \
+        ho._scatter_model(tiny, m, []).tau_max_s <= m.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
