@@ -465,7 +465,10 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
                                holes)[0]
     except (DataError, FitError, ValueError):
         return fallback
-    return Part(fit.coefficient, fit.coef_se, fallback.dof, fit.lag_s, fit.channel)
+    # the se no smaller than the scan's own for the part (its delete-a-segment jackknife
+    # sees the segments' spread, where the refit's analytic share assumes its noise model)
+    se = max(fit.coef_se, fallback.se) if math.isfinite(fallback.se) else fit.coef_se
+    return Part(fit.coefficient, se, fallback.dof, fit.lag_s, fit.channel)
 
 
 #: The share of the record left out of each part either side of a change time estimated
