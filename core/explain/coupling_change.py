@@ -44,27 +44,62 @@ split and through any regressor; a real bias step at t_s beside a steady couplin
 constant after t_s, which no Allan difference inside a part sees (and the step the search
 found is taken out of y before, for the splits elsewhere). What it can read as a change is
 a coupling that is not the one lag it regresses on and whose one-lag projection differs
-between parts because the temperature's spectrum does (a non-linear coupling where one half
-swings further): the rows of the adversary's generator measure that.
+between parts because the temperature's spectrum does: ĉ weights the octaves by the
+drive's power there, so a fixed path through two lags in series (or a lag + dT/dt), whose
+response relative to one lag varies with frequency, projects on one lag differently under
+a 20-minute cycle than under a 2-hour one (review27b's record: z 7.9 against 7.7 with one
+coupling, never changed).
+
+The fixed-path test (``cross_split``), made where the scan fires, at its channel, lag and
+grid time. One fixed path of the richer form (the channel through three first-order lags,
+the scan's and the next of ``LAGS`` below and above it, ``path_lags``: a sum of lags holds
+two lags in series, a lag with a lead and a lag + dT/dt over the band a record drives) is
+fitted on one part (the Allan-covariance regression on the three at once, ``_multi``) and
+taken from the other part's axis; what is left there is regressed on the one-lag regressor
+(κ, ``_coefficients``), with the larger of its analytic se and the jackknife over both
+parts' segments (the fit's replicates and the tested part's). A fixed coupling of that
+form leaves κ ≈ 0 whatever the spectrum does between the parts; a coupling that changed
+leaves the change itself (for a one-lag re-mount, (b − a) times the lagged temperature).
+Both directions are made (fit before, test after, and the reverse: a fit on the part whose
+drive is narrow extrapolates poorly to the other) and the smaller |κ|/se over its
+threshold decides: t at ``ALPHA`` over the grid's 13 times (the time and regressor are the
+scan's; under a fixed richer path the scan's choice leans on the one-lag projection's
+difference, not on κ's noise; where no coupling is felt at all the scan's own level holds,
+as this test only takes lines away). The change is said (``changed``) where both tests
+pass; where the scan fires and the fixed path predicts the other part (or the test cannot
+be made), a hedged line (``hedged``) says the record does not tell a changed coupling from
+a fixed one that is not one lag under a spectrum that changed. A fixed path can mimic a
+change where the parts' spectra differ (a gain per band), so a real change under a changed
+room may be hedged too: the honest reading of such a record.
 
 Where the change is found, its time is estimated within a grid step of the best grid time
 (after the test: ``_change_time``, the split of least residual of the minute means regressed
 on the lagged temperature's, an offset and a coefficient each side; or, where the transient
 search found a step or an excursion edge within two grid steps, that jump's time, the nearest
 to the estimate), each part's coupling
-refitted as explain fits a record's (``fit_thermal_axes`` on that channel: its own lag, the
-interval with the lag's share), and:
+refitted as explain fits a record's (``fit_thermal_axes`` on every logged channel: its own
+channel and lag, the interval with the lag's share; the part less ``GUARD`` of the record
+either side of a time the levels estimated; the se no smaller than the scan's own for the
+part), and:
 
 - one line in the text, the JSON (the channel's ``caveats`` and a finding of cause
   ``coupling_change``, never claimed) and the report: "the thermal coupling changed at
-  about t s (coefficient a ± … before, b ± … after): a single coupling does not describe
-  this record";
-- a bias step or an excursion edge the compound search found within a grid step of that
-  time is not claimed (it is the coupling's change as the step model reads it): marked
-  model-dependent, its interval withheld (kept in ``--json`` as
+  about t s (coefficient a ± … before, b ± … after …): a single coupling does not describe
+  this record"; where hedged, the hedged line in the JSON (the caveats, the finding) and
+  appended to the whole-record temperature finding's evidence (the text and the report
+  print it with that finding), never "CHANGED";
+- (changed or hedged) a bias step or an excursion edge the compound search found within a
+  grid step of that time is not claimed (it is the coupling's change as the step model
+  reads it): marked model-dependent, its interval withheld (kept in ``--json`` as
   ``intervals_if_model_held``), and the other transients refitted without it;
-- the whole-record coupling's finding, an average of two couplings, is model-dependent and
-  its interval withheld likewise.
+- (changed or hedged) the whole-record coupling's finding, an average of two couplings or
+  one lag's reading of a path that is not one lag, is model-dependent and its interval
+  withheld likewise.
+
+A change of the lag alone (the coefficient kept) is not a hypothesis of its own: where it
+is large (60 s → 600 s on a synthetic 4 h record) the scan fires through the one-lag
+projection's difference and the refitted parts give both lags; a smaller one (60 → 240 s)
+was not seen.
 """
 
 from __future__ import annotations
@@ -74,7 +109,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from avard.core.allan.beta import f_isf, t_two_sided
+from avard.core.allan.beta import t_two_sided
 from avard.core.allan.deviations import NORM
 from avard.core.errors import DataError, FitError
 from avard.core.explain import causes as cz
@@ -183,8 +218,8 @@ class CouplingChange:
     def _numbers(self) -> str:
         b, a = self.before, self.after
         on = (f"on '{self.channel}' through {_lag(b, self.lag_s)} and {_lag(a, self.lag_s)}"
-              if not (b.channel and b.channel != self.channel or a.channel
-                      and a.channel != self.channel) else
+              if not ((b.channel and b.channel != self.channel)
+                      or (a.channel and a.channel != self.channel)) else
               f"on '{b.channel or self.channel}' through {_lag(b, self.lag_s)} and "
               f"'{a.channel or self.channel}' through {_lag(a, self.lag_s)}")
         return (f"coefficient {b.c:.3g} ± {b.se:.2g} before, {a.c:.3g} ± {a.se:.2g} after, "
