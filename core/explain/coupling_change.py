@@ -500,10 +500,60 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
                                holes)[0]
     except (DataError, FitError, ValueError):
         return fallback
-    # the se no smaller than the scan's own for the part (its delete-a-segment jackknife
-    # sees the segments' spread, where the refit's analytic share assumes its noise model)
-    se = max(fit.coef_se, fallback.se) if math.isfinite(fallback.se) else fit.coef_se
+    # the se no smaller than the part's own delete-a-segment jackknife at the refit's
+    # channel and lag (the segments' spread, where the refit's analytic share assumes its
+    # noise model)
+    i = names.index(fit.channel) if fit.channel in names else 0
+    se_jk = _part_jackknife(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
+                            fit.lag_s, rate_b, None if holes is None else holes.get(i))
+    se = max(fit.coef_se, se_jk) if math.isfinite(se_jk) else fit.coef_se
     return Part(fit.coefficient, se, fallback.dof, fit.lag_s, fit.channel)
+
+
+#: Segments of a part for its coefficient's jackknife (``_part_jackknife``).
+PART_SEGMENTS = 10
+
+
+def _part_jackknife(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
+                    holes: list[tuple[int, int]] | None) -> float:
+    """The delete-a-segment jackknife se of one part's one-lag coefficient through
+    ``lag_s`` (``PART_SEGMENTS`` segments, the part's own Allan-covariance regression as
+    the scan makes it); NaN where it cannot be made."""
+    n = len(y)
+    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
+    m = (n // f) * f
+    if m // f < 2 * 256 or not np.all(np.isfinite(lag_s)):
+        return math.nan
+    rate = rate_b / f
+    ys = y[:m].reshape(-1, f).mean(axis=1)
+    Ts = T[:m].reshape(-1, f).mean(axis=1)
+    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
+        return math.nan
+    mt = min_tau_for(lag_s, rounding_floor_tau(Ts, rate))
+    if not math.isfinite(mt):
+        return math.nan
+    M = len(ys)
+    keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s, rate)
+    try:
+        X = without_start(np.column_stack([ys, lag_filter(Ts, lag_s, rate)]), lag_s, rate)
+        segs = octave_sums_by_part(X, np.linspace(0, M, PART_SEGMENTS + 1).astype(int), keep)
+        ref = allan2(ys, ys, rate)
+    except (DataError, FitError, ValueError):
+        return math.nan
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    K = max(len(x.ms) for x in segs)
+    ms = next(x.ms for x in segs if len(x.ms) == K)
+    padded = [x._padded(K) for x in segs]
+    nn = np.array([q[0] for q in padded], dtype=float)
+    s2 = np.array([q[1] for q in padded], dtype=float)
+    wn, ws = nn.sum(axis=0), s2.sum(axis=0)
+    c, _ = _coefficients(wn[None] - nn, ws[None] - s2, ms, rate, edf_ref,
+                         np.asarray(ref.n, dtype=float), mt)
+    g = len(segs)
+    if not np.all(np.isfinite(c)):
+        return math.nan
+    return math.sqrt((g - 1) / g * float(np.sum((c - c.mean()) ** 2)))
 
 
 #: The share of the record left out of each part either side of a change time estimated
