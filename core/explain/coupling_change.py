@@ -50,10 +50,13 @@ response relative to one lag varies with frequency, projects on one lag differen
 a 20-minute cycle than under a 2-hour one (review27b's record: z 7.9 against 7.7 with one
 coupling, never changed).
 
-The fixed-path test (``cross_split``), made where the scan fires, at its channel, lag and
-grid time. One fixed path of the richer form (the channel through three first-order lags,
-the scan's and the next of ``LAGS`` below and above it, ``path_lags``: a sum of lags holds
-two lags in series, a lag with a lead and a lag + dT/dt over the band a record drives) is
+The fixed-path test (``cross_split``), made where the scan fires, on every channel whose
+own scan fires (each at its best lag and grid time; the smallest decides: the room's
+channel, three lags from a coupling through the plate's two, is read by three lags too
+coarsely on a 12 h record, where the plate's is not). One fixed path of the richer form
+(the channel through three first-order lags, the scan's and the next of ``LAGS`` below and
+above it, ``path_lags``: a sum of lags holds two lags in series, a lag with a lead and a
+lag + dT/dt over the band a record drives) is
 fitted on one part (the Allan-covariance regression on the three at once, ``_multi``) and
 taken from the other part's axis; what is left there is regressed on the one-lag regressor
 (κ, ``_coefficients``), with the larger of its analytic se and the jackknife over both
