@@ -751,10 +751,13 @@ def _multi(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
 
 def _path_regressors(T: NDArray, L: float, rate: float, record_s: float) -> list[NDArray]:
     """The richer fixed path's regressors on one channel ``T``: the channel through each of
-    ``path_lags`` (a sum of three first-order lags: two lags in series, a lag with a lead, a
-    one-lag + dT/dt path over the band the record drives, as one fixed response); the
-    first is the one-lag regressor itself."""
-    return [lag_filter(T, x, rate) for x in path_lags(L, record_s)]
+    ``path_lags`` and the rate of the first (a sum of three first-order lags and a dT/dt
+    term: two lags in series, a lag with a lead, a one-lag + dT/dt path over the band the
+    record drives, as one fixed response); the first is the one-lag regressor itself."""
+    R = [lag_filter(T, x, rate) for x in path_lags(L, record_s)]
+    # and the rate of the lagged temperature: a lead (a one-lag + dT/dt path with τ_r > 0)
+    # is no sum of lags (false changes on 5 of 20 such 12 h axes without it)
+    return [*R, np.gradient(R[0]) * rate]
 
 
 def path_lags(L: float, record_s: float) -> list[float]:
