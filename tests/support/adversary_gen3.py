@@ -43,6 +43,15 @@ Null classes (no axis feels anything; a false claim is any claimed cause):
 - ``accgap``: a 3-minute gap in the acceleration: spliced out (rows of both acceleration and
   temperature removed, the record continuous by its rows) on even seeds, the last sample
   held for 3 minutes on odd seeds.
+
+Steady couplings under a room whose cycle changes (change28; the coupling never changes, so
+a "the coupling changed" line is false there; x and y coupled, z uncoupled): the room's
+cycle period jumps (phase-continuous) at t_s from P₁ to P₂, one of them 900–1800 s and the
+other 4800–9000 s, in either order, so the temperature's spectrum differs between the parts:
+
+- ``spec2lag``: the die behind the plate through two lags in series (τ_a, τ_b 150–600 s);
+- ``specrate``: the die one lag behind the plate, the axis c·(d + τ_r·ḋ) (a one-lag plus
+  dT/dt path, τ_r ±(200–800) s).
 """
 
 from __future__ import annotations
@@ -56,7 +65,8 @@ import numpy as np
 DS_STEP = 0.0625
 UNEXPLAINED = ("remount", "order2", "unlogged", "multnoise", "cubic")
 NULLS = ("clockoff", "cadence", "faults", "room17", "accgap")
-KINDS = UNEXPLAINED + NULLS
+STEADY = ("spec2lag", "specrate")
+KINDS = UNEXPLAINED + NULLS + STEADY
 
 
 def lag1(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
@@ -180,13 +190,27 @@ def make_record(kind: str, seed: int, hours: float, path: str | Path) -> dict:
     period = 1020.0 if kind == "room17" else float(rng.uniform(1800, 7200))
     amp = float(rng.uniform(0.5, 2.0)) if kind == "room17" else float(rng.uniform(0.4, 1.2))
     room = _room(rng, tg, period, amp)
+    spec: dict = {}
+    if kind in STEADY:
+        # the cycle's period jumps at t_sw (phase continuous): the spectrum changes midway
+        t_sw = float(rng.uniform(0.35, 0.65)) * t_rec
+        ps = [float(rng.uniform(900, 1800)), float(rng.uniform(4800, 9000))]
+        if rng.random() < 0.5:
+            ps.reverse()
+        ph = np.where(tg < t_sw, tg / ps[0], t_sw / ps[0] + (tg - t_sw) / ps[1])
+        cyc = np.clip(1.4 * np.sin(2 * math.pi * ph + rng.uniform(0, 2 * math.pi)),
+                      -1.0, 1.0) * amp
+        room = _room(rng, tg, 1e12, 0.0) + cyc          # the wander, and the new cycle
+        period = ps[0]
+        spec = {"room_period_before_s": ps[0], "room_period_after_s": ps[1],
+                "spectrum_change_s": t_sw}
     tau_p = float(rng.uniform(300, 900))
     plate = lag1(room, 1.0, tau_p)
     l_die = float(rng.uniform(60, 300))
     die = lag1(plate, 1.0, l_die)
     truth: dict = {"kind": kind, "seed": seed, "hours": hours, "rate_hz": rate,
                    "room_period_s": period, "room_amp_k": amp, "tau_plate_s": tau_p,
-                   "die_lag_s": l_die, "axes": {}}
+                   "die_lag_s": l_die, "axes": {}, **spec}
     noise = {}
     sig_g = {a: np.zeros(tg.size) for a in "xyz"}
     for ax in "xyz":
@@ -238,6 +262,23 @@ def make_record(kind: str, seed: int, hours: float, path: str | Path) -> dict:
         for ax, f in (("x", 1.0), ("y", -0.8)):
             sig_g[ax] = a * f * np.tanh((d / w) ** 3)
             truth["axes"][ax].update(cause="cubic_saturating", amplitude=a * f, width_k=w)
+    elif kind == "spec2lag":
+        ta, tb = float(rng.uniform(150, 600)), float(rng.uniform(150, 600))
+        d2 = lag1(lag1(plate, 1.0, ta), 1.0, tb)
+        d2 = d2 - d2.mean()
+        c = float(rng.uniform(5e-4, 2e-3))
+        for ax, f in (("x", 1.0), ("y", -0.7)):
+            sig_g[ax] = c * f * d2
+            truth["axes"][ax].update(cause="steady_two_lags", coefficient=c * f,
+                                     lags_s=[ta, tb])
+    elif kind == "specrate":
+        tr_ = float(rng.uniform(200, 800)) * (1 if rng.random() < 0.5 else -1)
+        c = float(rng.uniform(5e-4, 2e-3))
+        dd = np.gradient(d)
+        for ax, f in (("x", 1.0), ("y", -0.7)):
+            sig_g[ax] = c * f * (d + tr_ * dd)
+            truth["axes"][ax].update(cause="steady_lag_rate", coefficient=c * f,
+                                     rate_s=tr_, lag_s=l_die)
     accel = np.empty((n, 3))
     offsets = (0.05, -0.03, 9.80665)
     noise_g = {}

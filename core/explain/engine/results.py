@@ -201,7 +201,7 @@ class Explanation:
         ch = self.channels[channel]
         caveat = (runs_caveat(self) if any(f.cause == "temperature" for f in ch.claimed)
                   else None)
-        change = cchange.change_line(ch.findings)
+        change = cchange.change_line(ch.findings) or cchange.hedged_line(ch.findings)
         return [c for c in (change, caveat) if c is not None]
 
 
