@@ -109,7 +109,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 from avard.core.allan.beta import t_two_sided
@@ -129,6 +128,7 @@ from avard.core.explain.thermal_fit.sums import (
     min_tau_for,
     octave_sums_by_part,
 )
+from avard.core.io.screen import ScreenLog
 from numpy.typing import NDArray
 
 __all__ = ["ALPHA", "GRID", "LAGS", "SEGMENTS", "CouplingChange", "change_line", "check",
@@ -380,7 +380,7 @@ def _names(thermal: ThermalFit, k: int) -> list[str]:
 
 def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
                 trans: list[cz.Candidate], rate_b: float,
-                screen: Any | None = None) -> CouplingChange | None:
+                screen: ScreenLog | None = None) -> CouplingChange | None:
     """The test (module doc) on one axis's slow view ``y`` (``rate_b`` blocks per second)
     against every logged channel ``temps`` through every lag of ``LAGS`` and the thermal
     fit's own; ``trans``: the transients found on the axis (taken out of ``y`` first);
@@ -413,8 +413,10 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
     by_channel: dict[int, tuple[_Split, float]] = {}
     chans = {j: np.asarray(temps[:m, j], dtype=float).reshape(-1, f).mean(axis=1)
              for j in {j for j, _ in regressors}}
-    floors = {j: rounding_floor_tau(T, rate) for j, T in chans.items()
-              if np.all(np.isfinite(T)) and np.ptp(T) > 0}
+    # each log's rounding floor on its own reading step (a coarse log's rounding reaches
+    # longer τ than a 12-bit one's)
+    floors = {j: rounding_floor_tau(T, rate, step=_step_of(screen, names[j]))
+              for j, T in chans.items() if np.all(np.isfinite(T)) and np.ptp(T) > 0}
     for j, L in regressors:
         if j not in floors:
             continue
@@ -500,8 +502,15 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
                           path_channel=pch)
 
 
+def _step_of(screen: ScreenLog | None, name: str) -> float | None:
+    """The reading step (K) of log ``name`` as the input screen found it; None (the 12-bit
+    DS18B20's) where there is no screen or no step."""
+    grid = None if screen is None else screen.rounding_grid(name)
+    return None if grid is None else grid[0]
+
+
 def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
-           screen: Any | None, first: int, fallback: Part) -> Part:
+           screen: ScreenLog | None, first: int, fallback: Part) -> Part:
     """The coupling of one part (a record of its own) as explain fits a whole record's
     (``fit_thermal_axes`` on every logged channel: its own channel and lag, the
     coefficient's interval with the lag's share): the numbers the line gives. A change of
@@ -517,7 +526,8 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
              {i: screen.hole_blocks(nm, rate_b, first) for i, nm in enumerate(names)})
     try:
         fit = fit_thermal_axes(np.asarray(y, dtype=float)[:, None], temps, names, rate_b,
-                               holes)[0]
+                               holes, grids=None if screen is None else
+                               [screen.rounding_grid(nm) for nm in names])[0]
     except (DataError, FitError, ValueError):
         return fallback
     # the se no smaller than the part's own delete-a-segment jackknife at the refit's
@@ -644,7 +654,7 @@ def _near(c: cz.Candidate, ch: CouplingChange) -> bool:
 
 def check(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
           trans: list[cz.Candidate], missed: list[cz.Candidate], work: NDArray,
-          rate_b: float, noise_of: tr.NoiseOf, screen: Any | None = None
+          rate_b: float, noise_of: tr.NoiseOf, screen: ScreenLog | None = None
           ) -> tuple[CouplingChange | None, list[cz.Candidate], list[cz.Candidate]]:
     """(the test's outcome, claimed, not claimed transients): ``find_change``, then where
     the coupling changed, a step (or an excursion edge) at the change not claimed and the

@@ -545,3 +545,26 @@ def test_the_relay_floor_takes_the_logs_own_step():
         floors[q] = pf.relay_floor(T)
     assert floors[0.5][0] > 2.0 * floors[0.0625][0] > 0.0
     assert "0.5 K" in floors[0.5][1] and "0.0625 K" in floors[0.0625][1]
+
+
+def test_the_coupling_change_scan_reads_each_log_on_its_own_step(tmp_path, monkeypatch):
+    """``coupling_change`` judges where a log's rounding ends, and refits each part, on the
+    log's own step: on the 12-bit default a 0.25 K log's rounding reaches octaves the scan
+    then reads as the coupling."""
+    from avard.core.explain import coupling_change as cc
+
+    steps: list[float | None] = []
+    real_floor = cc.rounding_floor_tau
+
+    def floor(T, rate, snr=rounding.ROUNDING_SNR, step=None):  # type: ignore[no-untyped-def]
+        steps.append(step)
+        return real_floor(T, rate, snr, step)
+
+    monkeypatch.setattr(cc, "rounding_floor_tau", floor)
+    explain_file(open_record(str(_record(tmp_path, 0.25, hours=1.0))),
+                 ExplainOptions(heldout=False))
+    assert steps and all(s == 0.25 for s in steps)
+    # and the refit of a part takes the screen's grid of every channel
+    log = _screened(np.round(_room(n=4000) / 0.25) * 0.25)
+    assert cc._step_of(log, "plate") == 0.25
+    assert cc._step_of(None, "plate") is None
