@@ -184,9 +184,15 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
     if len(turn) < 2:
         return out
     mid = 0.5 * (starts[turn] + ends[turn])
+    # which runs are turns, and the gap samples before each index, built once: a flickering
+    # log has a turn at almost every run, and a lookup rebuilt per turn was quadratic
+    is_turn = np.zeros(len(lv), dtype=bool)
+    is_turn[turn] = True
+    if real is not None:
+        holes = np.concatenate([[0], np.cumsum(~np.asarray(real, dtype=bool))])
     for i, r in enumerate(turn.tolist()):
         a, b = int(starts[r]), int(ends[r])
-        if real is not None and not np.all(real[int(starts[r - 1]):int(ends[r + 1]) + 1]):
+        if real is not None and holes[int(ends[r + 1]) + 1] > holes[int(starts[r - 1])]:
             continue
         if i >= 1 and i + 1 < len(turn):
             period = mid[i + 1] - mid[i - 1]
@@ -201,7 +207,7 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
         # the cosine's top: through θ at ±D/2 and through θ − q at the outer crossings,
         # D' apart, where the neighbouring runs are plain steps down (not turns, not ends)
         a0, b1 = int(starts[r - 1]), int(ends[r + 1])
-        outer = (r - 1 not in set(turn.tolist()) and r + 1 not in set(turn.tolist())
+        outer = (not is_turn[r - 1] and not is_turn[r + 1]
                  and r - 1 > 0 and r + 1 < len(lv) - 1)
         alpha2 = math.pi * (b1 - a0 + 1) / period
         if outer and alpha < alpha2 < math.pi:
