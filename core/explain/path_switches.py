@@ -34,8 +34,6 @@ import numpy as np
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import ThermalFit
-from avard.core.explain.thermal_paths.columns import path_columns
-from avard.core.explain.thermal_paths.scores import s_terms
 from numpy.typing import NDArray
 
 #: the level at which edges on the path's switches are more than chance: the thermal paths'
@@ -190,9 +188,9 @@ def apart_from_path(th: ThermalFit, cands: Sequence[cz.Candidate], temps: NDArra
     if pf is None or pf.kind == "one_lag" or not cands:
         return th, list(cands)
     s = pf.chosen
-    n = s_terms(s)
-    X = path_columns(temps[:, th.channel_index], list(s.cols[:n]), pf.rate_hz)
-    e = X[:, 1:n] @ np.asarray(s.beta_fitted[1:n], dtype=float)
+    # on the log's own grid, as the path was fitted (a coarse log's 12-bit reconstruction
+    # put the switches elsewhere)
+    e = pf.extension_signal(temps[:, th.channel_index])
     lock = locked_to_path(cands, e, pf.rate_hz, len(s.theta))
     if lock is None or not lock.own:
         return th, list(cands)

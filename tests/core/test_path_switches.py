@@ -122,3 +122,40 @@ def test_a_relay_against_a_coupling_of_the_other_sign_keeps_its_switches(tmp_pat
     assert x.thermal.coefficient < 0
     assert any("own switches" in n for n in x.thermal.path.notes)
     assert len([f for f in x.claimed if f.cause in ("excursion", "bias_step")]) <= 1
+
+
+def test_a_coarse_logs_switches_are_read_on_its_own_grid(monkeypatch):
+    """``apart_from_path`` reads the relay's switches on the temperature behind the readings
+    the path was fitted on (its log's own step), not the 12-bit reconstruction, whose
+    switches sit minutes from the path's on a 0.5 K log (review28a's ps_grid.py)."""
+    from avard.core.explain.thermal_fit import ThermalFit
+    from avard.core.explain.thermal_paths.columns import Column, path_columns
+    from avard.core.explain.thermal_paths.scores import PathFit, PathScore
+
+    q = 0.5
+    t = np.arange(4 * 3600) / RATE
+    rng = np.random.default_rng(1)
+    T = np.round((22.3 + 0.5 * np.sin(2 * np.pi * t / 1800)
+                  + 0.003 * rng.standard_normal(len(t))) / q) * q
+    cols = (Column("u", 60.0), Column("relay", 60.0, 0.2))
+    h = 1.5e-4
+    sc = PathScore("hysteresis", 0.0, (60.0, 0.2), np.array([1e-4, h]), np.array([1e-5, 1e-5]),
+                   (50.0, 0.1), (70.0, 0.3), 9.0, False, cols)
+    pf = PathFit(sc, {"hysteresis": sc}, 3.0, RATE, grid=(q, 0.0))
+    own = h * path_columns(T, list(cols), RATE, grid=(q, 0.0))[:, 1]
+    assert np.allclose(pf.extension_signal(T), own)
+    sq = ps.switches(own, RATE)
+    ups = [s for s in sq if s.jump > 0]
+    cands = [_exc(a.time_s, next(s.time_s for s in sq if s.time_s > a.time_s and s.jump < 0),
+                  a.jump) for a in ups[:-1]]
+    seen = []
+
+    def spy(cands, e, rate_hz, n_theta, **kw):
+        seen.append(np.asarray(e))
+        return None
+
+    monkeypatch.setattr(ps, "locked_to_path", spy)
+    th = ThermalFit("plate", 0, 1e-4, 1e-5, 60.0, 50.0, 70.0, 10.0, RATE, path=pf)
+    ps.apart_from_path(th, cands, T[:, None])
+    got = ps.switches(seen[0], RATE)
+    assert [s.time_s for s in got] == [s.time_s for s in sq]
