@@ -99,3 +99,26 @@ def test_flickering_log_work_grows_with_the_turns(monkeypatch):
     d = coarse.derounded(T, (q, 0.0))
     assert np.all(np.abs(d - T) <= q / 2 + 1e-12)  # within each reading's cell
     assert counted[0] <= 4 * n
+
+
+def test_a_bridged_gap_is_read_as_the_gap_it_was():
+    """The slow view bridges a log's hole (``SlowView.finish``), so ``derounded`` sees no NaN:
+    given the hole as ``real`` (``coarse_regressor``'s ``holes``), the reconstruction is the
+    one of the NaN gap, whose turns next to it are the spline's (review28a's gap.py)."""
+    rate = 10 / 16
+    t = np.arange(int(4 * 3600 * rate)) / rate
+    q = 0.25
+    R = np.round((22 + 0.5 * np.sin(2 * math.pi * t / 1800)) / q) * q
+    idx = np.arange(len(R))
+    for a, b in ((4000, 4700), (3900, 5600), (4100, 4200), (4400, 5100)):
+        X = R.copy()
+        X[a:b] = np.nan
+        ok = np.isfinite(X)
+        bridged = np.interp(idx, idx[ok], X[ok])
+        want = coarse.derounded(X, (q, 0.0))
+        got = coarse.derounded(bridged, (q, 0.0), real=ok)
+        assert np.allclose(got[ok], want[ok], rtol=0, atol=1e-12)
+        col = coarse.coarse_regressor(bridged[:, None], [(q, 0.0)], {0: [(a, b - 1)]})
+        assert np.allclose(col[ok, 0], want[ok], rtol=0, atol=1e-12)
+        # without the hole the bridge's turns are read as the room's
+        assert not np.allclose(coarse.derounded(bridged, (q, 0.0))[ok], want[ok], atol=1e-9)

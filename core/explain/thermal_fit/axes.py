@@ -87,7 +87,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     Y = np.asarray(Y, dtype=float)
     gs = channel_grids(grids, np.asarray(temps).reshape(len(Y), -1).shape[1])
     # the rounding floors stay the readings' own (``coarse_regressor``)
-    raw, temps = temps, coarse_regressor(temps, gs)
+    raw, temps = temps, coarse_regressor(temps, gs, holes)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
     # lags sought are minutes); the chosen lag is then fitted on the whole slow view

@@ -4,7 +4,7 @@ crossings at 12 bits, the crossing spline on a coarser step) and each channel's 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,7 +17,8 @@ from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 
 
 def derounded(T: NDArray, grid: tuple[float, float] | None = None,
-              tops: bool = True) -> NDArray[np.float64]:
+              tops: bool = True, real: NDArray[np.bool_] | None = None
+              ) -> NDArray[np.float64]:
     """The logged channel ``T`` (slow view, readings interpolated between their times) with
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
@@ -38,9 +39,11 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
     is bridged on the samples' own times, as the straight lines are: the spline is built on
     the whole index with the gap's values a straight line between its neighbours (not on
     the finite samples squeezed together, which ran it across the gap as if no time had
-    passed), and the gap stays NaN. On a coarse step the turns' tops are a cycle's
-    (``_turn_tops``) unless ``tops`` is False (the spline's own, a parabola's: the other
-    reading ``coarse_gain_se`` weighs it against)."""
+    passed), and the gap stays NaN. ``real``: the samples that are readings, where ``T``
+    holds a gap already bridged (the slow view interpolates its holes: ``SlowView.finish``),
+    the gap then as a NaN's (None: every finite sample). On a coarse step the turns' tops
+    are a cycle's (``_turn_tops``) unless ``tops`` is False (the spline's own, a
+    parabola's: the other reading ``coarse_gain_se`` weighs it against)."""
     T = np.asarray(T, dtype=float)
     q, origin = (DS18B20_STEP_K, 0.0) if grid is None else grid
     if is_coarse(q):
@@ -53,8 +56,10 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
             # are off the grid, so the reconstruction does not clip them to a cell)
             v = np.interp(np.arange(ok[0], ok[-1] + 1), ok, T[ok]) - origin
             r = _crossing_ends(v, crossing_reconstruction(v, q), q)
-            real = np.isfinite(T[ok[0]:ok[-1] + 1])
-            r = (_turn_tops(v, r, q, real) if tops else r) + origin
+            seen = np.isfinite(T[ok[0]:ok[-1] + 1])
+            if real is not None:
+                seen &= np.asarray(real, dtype=bool)[ok[0]:ok[-1] + 1]
+            r = (_turn_tops(v, r, q, seen) if tops else r) + origin
             out[ok] = r[ok - ok[0]]
         return out
     out = T.copy()
@@ -105,7 +110,8 @@ def channel_grids(grids: Sequence[tuple[float, float] | None] | None, k: int
             for g in (list(grids) if grids is not None else [None] * k)]
 
 
-def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None] | None = None
+def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None] | None = None,
+                     holes: Mapping[int, Sequence[tuple[int, int]]] | None = None
                      ) -> NDArray[np.float64]:
     """The temperature channels (M, k) the thermal regression reads, each on its own grid
     (``grids``, per column; ``channel_grids``): as logged on the 12-bit step, the crossing
@@ -116,15 +122,27 @@ def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None]
     ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
     amplitude. The rounding floors (``rounding_floor_tau``) stay the raw readings': the
     sawtooth they model is the readings', and on the smooth reconstruction a slower slope
-    made the floor of a 0.5 K log infinite (no τ left to the regression)."""
+    made the floor of a 0.5 K log infinite (no τ left to the regression). ``holes``: per
+    column, the blocks (first, last sample) its log says nothing about (``Holes``): the slow
+    view bridged them, and ``derounded`` reads them as gaps (``real``)."""
     temps = np.asarray(temps, dtype=float)
     T = temps.reshape(len(temps), -1)
     gs = channel_grids(grids, T.shape[1])
     if not any(is_coarse(g[0]) for g in gs):
         return temps
-    out = np.column_stack([derounded(T[:, j], g) if is_coarse(g[0]) else T[:, j]
-                           for j, g in enumerate(gs)])
+    out = np.column_stack([derounded(T[:, j], g, real=_readings(len(T), (holes or {}).get(j)))
+                           if is_coarse(g[0]) else T[:, j] for j, g in enumerate(gs)])
     return out.reshape(temps.shape)
+
+
+def _readings(n: int, holes: Sequence[tuple[int, int]] | None) -> NDArray[np.bool_] | None:
+    """The samples of ``n`` outside ``holes`` (first, last sample of each); None: no hole."""
+    if not holes:
+        return None
+    keep = np.ones(n, dtype=bool)
+    for a, b in holes:
+        keep[max(0, a):max(0, min(n, b + 1))] = False
+    return keep
 
 
 #: Samples beyond the first (last) crossing whose slope the reconstruction carries back
