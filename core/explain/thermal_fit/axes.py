@@ -127,7 +127,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                   floors, columns, {j: g[0] for j, g in enumerate(gs)})
             for a in range(Y.shape[1])]
     fits = [coarse_gain_se(replace(ft, grid=gs[ft.channel_index]), raw, temps) for ft in fits]
-    return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
+    # the readings as logged: the path choice reconstructs them on each channel's grid itself
+    return with_paths(fits, Y, raw, holes, floors, warmups) if paths else fits
 
 
 def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,
