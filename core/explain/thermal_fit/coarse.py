@@ -35,7 +35,7 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
     crossing and after the last (``_crossing_ends``) the spline's slope goes on within the
     reading's cell: held at the first knot's mid-level, the record's first dwell sat up to
     half a coarse step off for minutes, a start the lag filter carries into the τ of the
-    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K). A gap (NaN)
+    lag, where the coupling is read. A gap (NaN)
     is bridged on the samples' own times, as the straight lines are: the spline is built on
     the whole index with the gap's values a straight line between its neighbours (not on
     the finite samples squeezed together, which ran it across the gap as if no time had
@@ -117,9 +117,9 @@ def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None]
     (``grids``, per column; ``channel_grids``): as logged on the 12-bit step, the crossing
     reconstruction (``derounded``) on a coarser one, column by column (a coarse log leaves a
     finer one as logged). A
-    coarse quantiser's gain at the drive is not 1 (its describing function: 1.037 for a
-    ±0.5 K cycle on a 0.25 K step), an error in the variable no τ floor removes, which put
-    ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
+    coarse quantiser's gain at the drive is not 1 (its describing function: above 1 where
+    the drive swings a few steps), an error in the variable no τ floor removes, which put
+    ĉ low by that gain, more the coarser the step; the reconstruction follows the drive's
     amplitude. The rounding floors (``rounding_floor_tau``) stay the raw readings': the
     sawtooth they model is the readings', and on the smooth reconstruction a slower slope
     made the floor of a 0.5 K log infinite (no τ left to the regression). ``holes``: per
@@ -181,8 +181,9 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
     bound the turn, D apart, the natural spline bulges as a cubic with its crossing slopes
     s, about s·D/4 above θ, which is exact for a parabola; a cycle of period P turns as a
     cosine, whose top above θ is 2(1 − cos α)/(α sin α) times that, α = πD/P (1 for a short
-    dwell, 1.10 for a dwell of a third of the cycle: a ±0.5 K cycle on a 0.5 K step, whose
-    tops the spline left 5–7 % of the swing low, ĉ as much high). P is the time between the
+    dwell, more the longer the dwell is beside the cycle: where the swing spans a step or
+    two the tops carry much of it, and the spline's left the swing low and ĉ as much
+    high). P is the time between the
     turn's neighbouring turns of the same sense, two turns away (twice the nearest turn's
     distance at the record's ends); α is held below π/2 (a dwell of half the cycle: the
     threshold at the cycle's middle, where a cosine's slope is largest). The top stays
