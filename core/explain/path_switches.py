@@ -178,8 +178,9 @@ def locked_to_path(cands: Sequence[cz.Candidate], e: NDArray, rate_hz: float,
     coupling) more often than chance at ``alpha``; None where they do not (or ``e`` does not
     switch). ``n_grid``: the θ (lags, widths) the path's fit chose among: its switches sit
     where the best of them put them, so the count's chance at one θ is multiplied by that
-    many (Bonferroni; giving away one coincidence per fitted θ let 5–7× the level through
-    where the lag and width were fitted to the transients)."""
+    many (Bonferroni; giving away one coincidence per fitted θ let several times the level
+    through where the lag and width were fitted to the transients: the fit's best θ lines
+    up more than one switch with an edge)."""
     return lock_of(cands, switches(e, rate_hz), len(e) / rate_hz, n_grid, alpha)
 
 

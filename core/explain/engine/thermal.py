@@ -214,7 +214,7 @@ def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: 
         # with nothing but the warm-up beside it
         sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands)
         if not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
-                                            given=sig), th.mechanism):
+                                    given=sig), th.mechanism):
             out[a] = b0
 
 
