@@ -52,7 +52,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from statistics import NormalDist
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,7 +98,8 @@ HALVES_LEVEL = 0.01
 #: found no white N, or the means' covariance under its N and B did not factor. A
 #: fallback interval is wider on drift records (the drift lowers the fit's B, cov27),
 #: so it is recorded rather than passed off as the refit's.
-INTERVAL_NOISE = {
+IntervalNoise = Literal["refit_less_line", "fit", "fit_refit_failed", "fit_not_factored"]
+INTERVAL_NOISE: dict[IntervalNoise, str] = {
     "refit_less_line": "the noise refitted on the AVAR less the fitted line",
     "fit": "the AVAR fit's N and B",
     "fit_refit_failed": "the AVAR fit's N and B: the refit less the line failed or found "
@@ -350,7 +351,7 @@ class DriftLikelihood:
     slope_sd: float = math.nan
     #: the noise ``slope_lo``/``slope_hi`` and ``slope_sd`` were computed under: a key of
     #: ``INTERVAL_NOISE``
-    interval_noise: str = "fit"
+    interval_noise: IntervalNoise = "fit"
 
     @property
     def slope_se(self) -> float:
@@ -435,7 +436,7 @@ def drift_likelihood(yb: NDArray, t: NDArray, block_s: float, n_white: float, b_
     # (its null is b = 0, whose noise is the record itself).
     noise_at = beside(slope) if beside is not None else None
     iprof = prof
-    used = "fit"
+    used: IntervalNoise = "fit"
     if beside is not None:
         # (a refit asked for and not usable falls back to the test's N and B, and says so)
         used = "refit_less_line"

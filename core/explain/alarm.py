@@ -20,8 +20,13 @@ the sum of the shares), and each search splits its share again over its own tria
   Bonferroni-split over every grid point of every extension (``bonferroni_t``: a
   delete-a-part jackknife over G parts makes the ratio Student's t with G − 1 degrees of
   freedom, not a normal; the normal quantile let ~10× the share through);
+- ``PATH_SWITCHES``: the count that gives a path's own switches the transients the
+  compound search reads on them (``path_switches.locked_to_path``; a false lock leaves
+  genuine transients out of the test a path must pass beside them), Bonferroni-split over
+  the θ of the path's grid, each of which places the switches elsewhere;
 - ``GAUSS_MARKOV``: Davies' bound on the maximum of the T scan
-  (``gauss_markov.Z_GAUSS_MARKOV``).
+  (``gauss_markov.Z_GAUSS_MARKOV``; the bound at its z is below this share at every rate
+  and length, so ``PATH_SWITCHES`` was split from it with no threshold moved).
 
 Bonferroni over correlated trials (adjacent step times, nearby T) is conservative: the
 benchmark's null axes measure what the level really is (``python -m benchmarks
@@ -35,16 +40,17 @@ from statistics import NormalDist
 
 from avard.core.allan.beta import t_two_sided
 
-__all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "TEMPERATURE", "THERMAL_PATHS",
-           "TRANSIENTS", "bonferroni_t", "bonferroni_z"]
+__all__ = ["ALPHA_AXIS", "DRIFT", "GAUSS_MARKOV", "PATH_SWITCHES", "TEMPERATURE",
+           "THERMAL_PATHS", "TRANSIENTS", "bonferroni_t", "bonferroni_z"]
 
 TEMPERATURE = 2.5e-4
 TRANSIENTS = 5e-4
 DRIFT = 2.5e-4
-GAUSS_MARKOV = 5e-3
+GAUSS_MARKOV = 4.75e-3
 THERMAL_PATHS = 2.5e-4
+PATH_SWITCHES = 2.5e-4
 #: The chance of any false claim on an axis with nothing to find (at most the shares' sum).
-ALPHA_AXIS = TEMPERATURE + TRANSIENTS + DRIFT + GAUSS_MARKOV + THERMAL_PATHS
+ALPHA_AXIS = TEMPERATURE + TRANSIENTS + DRIFT + GAUSS_MARKOV + THERMAL_PATHS + PATH_SWITCHES
 
 
 def bonferroni_z(alpha: float, trials: int) -> float:

@@ -19,8 +19,9 @@ tests/core/test_gauss_markov_coverage.py on the independent generator (docs/expl
 Claim. The component must be present, z = √Δ(−2 ln L), its gain over the same fit without
 it (Birge-scaled), must reach ``Z_GAUSS_MARKOV`` (3.5), and T must be located (its interval
 closed inside the scanned range). The fit's own presence test asks 2.33, but the scan over
-T is a search: 3.5 is Davies' bound on the scan's maximum at ``GM_FALSE_CLAIM_RATE`` (0.5 %)
-per axis (the constant's comment). The Wald z σ²/se(σ²) is not used: where the component
+T is a search: 3.5 is Davies' bound on the scan's maximum at ``GM_FALSE_CLAIM_RATE`` (its
+share of the axis's level, ``alarm.GAUSS_MARKOV``) per axis (the constant's comment). The
+Wald z σ²/se(σ²) is not used: where the component
 takes over a noise term at its bound, its se shrinks with it.
 
 Stated minimum (:func:`min_detectable_gauss_markov`). The Fisher information of the AVAR GLS
@@ -45,6 +46,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import FitError
+from avard.core.explain import alarm
 from avard.core.explain.causes import Finding
 from avard.core.model import terms as mdl
 from avard.core.model.bounded import minimize_bounded
@@ -63,7 +65,7 @@ __all__ = ["GM_FALSE_CLAIM_RATE", "GM_GRID", "Z_GAUSS_MARKOV", "gm_fisher",
 #: Gauss–Markov correlation times tried (log grid inside the fitted τ range).
 GM_GRID = 10
 #: False claims of a Gauss–Markov component per axis the test allows (the T scan included).
-GM_FALSE_CLAIM_RATE = 0.005
+GM_FALSE_CLAIM_RATE = alarm.GAUSS_MARKOV
 #: z a Gauss–Markov component must reach (z = √Δ(−2 ln L) against the fit without it,
 #: Birge-scaled). Without a component, z(s) at s = ln T is, to the Gaussian order the fit
 #: works in, the positive part of a unit-variance Gaussian process over the scanned range
@@ -73,7 +75,7 @@ GM_FALSE_CLAIM_RATE = 0.005
 #: V·e^(−u²/2)/(2π), V the arc length of z's correlation structure over the range
 #: (:func:`scan_arc_length`; V/π is about the number of independent T trials). At 10 Hz V is
 #: 4.2 (1 h) to 6.6 (60 h), at 4 kHz for 60 h 9.3; the bound reaches ``GM_FALSE_CLAIM_RATE``
-#: at u = 3.18, 3.30 and 3.40: 3.5 holds it below 0.5 % on all of them
+#: (then 0.5 %) at u = 3.18, 3.30 and 3.40: 3.5 holds it below the share on all of them
 #: (tests/core/test_gauss_markov.py). The null study and the benchmark check it on the
 #: independent generator (docs/log/explain.md, "Stated detection power (Gauss–Markov)").
 Z_GAUSS_MARKOV = 3.5

@@ -4,8 +4,8 @@ A path beyond one lag whose extension switches (a relay flips at each of the tem
 turns, a dT/dt term's sign does, a quadratic or a second path rises and falls twice a
 cycle) leaves in the axis as recorded a level that jumps at times the drive sets. The
 compound search (``transients.find_compound``), run on that axis, reads those jumps as bias
-steps and excursions: on a 4 h record with a relay at c < 0 it found five to eight
-excursions, one per cycle, each edge within a minute or so of a relay switch.
+steps and excursions: on a record with a relay at c < 0 it found an excursion per
+cycle, each edge within a minute or so of a relay switch.
 ``engine._beside_transients`` tests a path whose extension is the whole claim beside the
 transients found on the axis, and a relay tested beside its own switches predicts no better
 than they do: the relay was lost, and the switches claimed as excursions.
@@ -14,12 +14,12 @@ A record's genuine transients fall where they fall: an edge lands near one of th
 switches of the same sign and size only by chance, at the share of the record such
 switches cover (``chance``). So the edges are counted against that chance
 (``locked_to_path``): where more of them sit on the path's switches than chance would place
-there (a Poisson-binomial tail at ``LOCK_ALPHA``, after giving away as many coincidences as
-the extension has fitted θ, each of which can move its switches onto one edge), the
-transients whose every edge sits on a switch are the path's own and are not held beside it
-as nuisance; the others still are. With few edges (the 1 h record a relay's two or three
-switches fitted onto a warm-up's and a step's place) no count can pass, and every transient
-stays beside the path as before.
+there (a Poisson-binomial tail, Bonferroni-split at ``LOCK_ALPHA`` over the θ of the
+path's grid: the fit chose its lag and width among them, each of which places the switches
+elsewhere, so the count is the best of that many), the transients whose every edge sits on
+a switch are the path's own and are not held beside it as nuisance; the others still are.
+With few edges (the 1 h record a relay's two or three switches fitted onto a warm-up's and
+a step's place) no count can pass, and every transient stays beside the path as before.
 """
 
 from __future__ import annotations
@@ -34,14 +34,14 @@ import numpy as np
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
 from avard.core.explain.thermal_fit import ThermalFit
-from avard.core.explain.thermal_paths.columns import path_columns
-from avard.core.explain.thermal_paths.scores import s_terms
+from avard.core.explain.thermal_paths.columns import quadratic_leads, trials
+from avard.core.explain.thermal_paths.settings import LAG_GRID_S
 from numpy.typing import NDArray
 
-#: the level at which edges on the path's switches are more than chance: the thermal paths'
-#: own share (``alarm.THERMAL_PATHS``), so that on an axis whose transients are real their
-#: being given away to a path happens no more often than a path is claimed falsely
-LOCK_ALPHA = alarm.THERMAL_PATHS
+#: the level at which edges on the path's switches are more than chance: the count's own
+#: share of the axis's level (``alarm.PATH_SWITCHES``): a false lock leaves genuine
+#: transients out of the test the path must pass beside them
+LOCK_ALPHA = alarm.PATH_SWITCHES
 #: an edge and a switch are of one size when their jumps are within this factor of each
 #: other (the relay's h and the search's excursion sizes differ by what each fit absorbs)
 SIZE_FACTOR = 3.0
@@ -145,19 +145,13 @@ class Lock(NamedTuple):
     own: tuple[int, ...]  # the transients whose every edge is on a switch
     on: int  # edges on a switch
     of: int  # edges
-    p: float  # the chance of so many, the fitted θ given away
+    p: float  # the chance of so many, times the θ grid's size (Bonferroni)
     window_s: float
 
 
-def locked_to_path(cands: Sequence[cz.Candidate], e: NDArray, rate_hz: float,
-                   n_theta: int, alpha: float = LOCK_ALPHA) -> Lock | None:
-    """The transients of ``cands`` that are the path's own switches, where their edges sit
-    on the switches of ``e`` (the extension's own signal, the path's less its linear
-    coupling) more often than chance at ``alpha``; None where they do not (or ``e`` does not
-    switch). ``n_theta``: the extension's fitted θ (a lag, a width), each of which can place
-    a switch on an edge: that many coincidences, those least surprising, are given away."""
-    record_s = len(e) / rate_hz
-    sws = switches(e, rate_hz)
+def lock_of(cands: Sequence[cz.Candidate], sws: Sequence[Switch], record_s: float,
+            n_grid: int, alpha: float = LOCK_ALPHA) -> Lock | None:
+    """``locked_to_path`` on the switches ``sws`` of a record ``record_s`` long."""
     eds = edges(cands)
     if len(sws) < 2 or not eds:
         return None
@@ -167,18 +161,34 @@ def locked_to_path(cands: Sequence[cz.Candidate], e: NDArray, rate_hz: float,
     for ed in eds:
         on.append(any(abs(ed.time_s - s.time_s) <= window and _matches(ed, s) for s in sws))
         ps.append(chance(ed, sws, window, record_s))
-    # the θ's coincidences given away are those least likely by chance (the fit bought
-    # them): the rest is then tested at the chances least in its favour
-    hit = sorted((p for p, o in zip(ps, on, strict=True) if o))
-    miss = [p for p, o in zip(ps, on, strict=True) if not o]
-    rest = hit[n_theta:]
-    p = _tail(rest + miss, len(rest)) if rest else 1.0
+    k = sum(on)
+    p = min(1.0, max(1, n_grid) * _tail(ps, k)) if k else 1.0
     if p > alpha:
         return None
-    own = tuple(k for k in range(len(cands))
-                if any(ed.which == k for ed in eds)
-                and all(o for ed, o in zip(eds, on, strict=True) if ed.which == k))
-    return Lock(own, sum(on), len(eds), p, window)
+    own = tuple(j for j in range(len(cands))
+                if any(ed.which == j for ed in eds)
+                and all(o for ed, o in zip(eds, on, strict=True) if ed.which == j))
+    return Lock(own, k, len(eds), p, window)
+
+
+def locked_to_path(cands: Sequence[cz.Candidate], e: NDArray, rate_hz: float,
+                   *, n_grid: int, alpha: float = LOCK_ALPHA) -> Lock | None:
+    """The transients of ``cands`` that are the path's own switches, where their edges sit
+    on the switches of ``e`` (the extension's own signal, the path's less its linear
+    coupling) more often than chance at ``alpha``; None where they do not (or ``e`` does not
+    switch). ``n_grid``: the θ (lags, widths) the path's fit chose among: its switches sit
+    where the best of them put them, so the count's chance at one θ is multiplied by that
+    many (Bonferroni; giving away one coincidence per fitted θ let several times the level
+    through where the lag and width were fitted to the transients: the fit's best θ lines
+    up more than one switch with an edge)."""
+    return lock_of(cands, switches(e, rate_hz), len(e) / rate_hz, n_grid, alpha)
+
+
+def grid_size(kind: str, record_s: float, rate_hz: float) -> int:
+    """The θ grid points of extension ``kind`` on a record ``record_s`` long (``trials``
+    over the extensions' lags the choice tries, one more for the one-lag fit's own)."""
+    lags = [float(x) for x in LAG_GRID_S if x <= record_s / 8] + [1e9]
+    return len(trials(kind, lags, quadratic_leads(record_s, rate_hz)))
 
 
 def apart_from_path(th: ThermalFit, cands: Sequence[cz.Candidate], temps: NDArray
@@ -190,17 +200,18 @@ def apart_from_path(th: ThermalFit, cands: Sequence[cz.Candidate], temps: NDArra
     if pf is None or pf.kind == "one_lag" or not cands:
         return th, list(cands)
     s = pf.chosen
-    n = s_terms(s)
-    X = path_columns(temps[:, th.channel_index], list(s.cols[:n]), pf.rate_hz)
-    e = X[:, 1:n] @ np.asarray(s.beta_fitted[1:n], dtype=float)
-    lock = locked_to_path(cands, e, pf.rate_hz, len(s.theta))
+    # on the log's own grid, as the path was fitted (a coarse log's 12-bit reconstruction
+    # put the switches elsewhere)
+    e = pf.extension_signal(temps[:, th.channel_index])
+    g = grid_size(s.kind, len(e) / pf.rate_hz, pf.rate_hz)
+    lock = locked_to_path(cands, e, pf.rate_hz, n_grid=g)
     if lock is None or not lock.own:
         return th, list(cands)
     names = ", ".join(sorted({cands[k].cause.replace("_", " ") for k in lock.own}))
     note = (f"{len(lock.own)} transient(s) the compound search reads on the axis as recorded "
             f"({names}) are this path's own switches: {lock.on} of their {lock.of} edges lie "
             f"within {lock.window_s:.0f} s of a switch of the path's signal of the same sign "
-            f"and size, chance {lock.p:.2g} with {len(s.theta)} fitted θ given away; the path "
+            f"and size, chance {lock.p:.2g} over the {g} θ of the path's grid; the path "
             "is tested beside the others only")
     pf2 = replace(pf, notes=[*pf.notes, note])
     return replace(th, path=pf2), [c for k, c in enumerate(cands) if k not in lock.own]

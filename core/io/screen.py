@@ -1491,9 +1491,10 @@ def log_step(values: NDArray, times: NDArray | None = None) -> tuple[float, floa
     A log too stable to show its step in its distinct values (two or three levels: a
     12-bit log dwelling on levels 0.125 apart has the same set) is judged in time where the
     readings' ``times`` (s) are given (``_step_in_time``): every change between readings at
-    most ``LOG_STEP_JUMP_S`` apart one coarse step, at least ``LOG_STEP_NEIGHBOURS`` times,
-    is that step. Failing that, a log on the 12-bit grid keeps the DS18B20's 0.0625 K; None
-    when the log is on no grid (a logger's fine or unrounded values)."""
+    most ``LOG_STEP_JUMP_S`` apart whole coarse steps, most of them one, at least
+    ``LOG_STEP_NEIGHBOURS`` times, is that step. Failing that, a log on the 12-bit grid
+    keeps the DS18B20's 0.0625 K; None when the log is on no grid (a logger's fine or
+    unrounded values)."""
     v = np.asarray(values, dtype=float)
     ok = np.isfinite(v) & (v != DS18B20_ERROR_C) & (v != POWER_ON_C)
     v = v[ok]
@@ -1520,9 +1521,12 @@ def log_step(values: NDArray, times: NDArray | None = None) -> tuple[float, floa
 def _step_in_time(v: NDArray[np.float64], t: NDArray[np.float64], u: NDArray[np.float64]
                   ) -> tuple[float, float] | None:
     """(q, origin) of readings ``v`` at times ``t`` (s), distinct values ``u``, where every
-    change between readings at most ``LOG_STEP_JUMP_S`` apart is one coarse candidate step q
-    (within the print), at least ``LOG_STEP_NEIGHBOURS`` of them, and the values hold q's
-    grid (``_on_step`` without its neighbour pairs); None otherwise."""
+    change between readings at most ``LOG_STEP_JUMP_S`` apart is a whole number of one
+    coarse candidate step q (within the print) and most of them one q, at least
+    ``LOG_STEP_NEIGHBOURS`` of them, and the values hold q's grid (``_on_step`` without its
+    neighbour pairs); None otherwise. (A genuine fast move, a door or a touch, jumps more
+    than one step between neighbouring readings now and then; a finer log's room never
+    jumps a coarse step at all.)"""
     if len(v) < 2:
         return None
     d = np.abs(np.diff(v))[np.diff(t) <= LOG_STEP_JUMP_S]
@@ -1532,7 +1536,10 @@ def _step_in_time(v: NDArray[np.float64], t: NDArray[np.float64], u: NDArray[np.
     for q in LOG_STEPS_K:
         if not is_coarse(q):
             continue
-        if np.all(np.abs(d - q) <= 2 * min(PRINT_TOL, q / 10.0)):
+        k = np.round(d / q)
+        tol = 2 * min(PRINT_TOL, q / 10.0)
+        if (np.all((k >= 1) & (np.abs(d - k * q) <= k * tol))
+                and np.count_nonzero(k == 1) > len(d) / 2):
             return _on_step(u, q, neighbours=0)
     return None
 

@@ -121,3 +121,15 @@ def test_analyze_says_which_noise_the_resolved_ramps_interval_used(monkeypatch) 
     said = _analyze(flat).to_dict()["drift"]
     reported = said["rate_ramp_from"] == "time_domain" or said["floor"] > 0
     assert (said["interval_noise"] is not None) == reported
+
+
+def test_the_interval_noise_is_typed_by_its_keys() -> None:
+    """``DriftLikelihood.interval_noise`` is one of ``INTERVAL_NOISE``'s keys, as a type
+    (``IntervalNoise``): a misspelt key is a type error, not a blank in the JSON."""
+    import dataclasses
+    import typing
+
+    assert set(typing.get_args(dr.IntervalNoise)) == set(dr.INTERVAL_NOISE)
+    hints = typing.get_type_hints(dr.DriftLikelihood)
+    assert hints["interval_noise"] == dr.IntervalNoise
+    assert {f.name for f in dataclasses.fields(dr.DriftLikelihood)} >= {"interval_noise"}

@@ -110,6 +110,15 @@ def test_a_stable_coarse_log_shows_its_step_in_time(q):
     assert log_step(fine, t) == (0.0625, 0.0)
     # readings far apart (a log every minute) say nothing in time: a room can move a step
     assert log_step(T[::80], t[::80]) == log_step(T)
+    # a genuine fast move (a touch) of three steps out and back between neighbouring
+    # readings: three values, one neighbour pair, but the changes are whole steps, most one
+    J = T.copy()
+    i = int(np.flatnonzero(T == T.min())[100])
+    J[i] = T.min() + 3 * q
+    assert log_step(J, t) == (q, 0.0)
+    # a change of no whole step between neighbouring readings is no coarse log
+    J[i] = T.min() + 1.5 * q
+    assert log_step(J, t) != (q, 0.0)
 
 
 def test_the_text_names_the_step_and_what_it_may_be():

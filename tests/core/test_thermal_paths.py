@@ -1614,3 +1614,21 @@ def test_two_paths_the_held_out_test_cannot_check_are_named_beside_the_reading_c
     assert "two_path" in (th.mechanism, *th.alternatives)
     if th.mechanism != "two_path":
         assert not th.intervals
+
+
+def test_paths_of_a_coarse_log_are_chosen_on_its_readings_as_logged():
+    """``fit_thermal_axes(paths=True)`` hands ``with_paths`` the readings as logged, as the
+    engine does: the path choice reconstructs them on the log's grid itself (handed the
+    reconstruction, it reconstructed it again)."""
+    from avard.core.explain.thermal_fit import with_paths
+
+    y, T = _slow(BASE, 5)
+    q = 0.25
+    Tq = np.round(T / q) * q
+    g = [(q, 0.0)]
+    one = fit_thermal_axes(y[:, None], Tq[:, None], ["plate"], 1.0, paths=True, grids=g)[0]
+    two = with_paths(fit_thermal_axes(y[:, None], Tq[:, None], ["plate"], 1.0, grids=g),
+                     y[:, None], Tq[:, None])[0]
+    assert one.path is not None and two.path is not None
+    assert one.path.chosen.heldout == two.path.chosen.heldout
+    assert one.coefficient == two.coefficient

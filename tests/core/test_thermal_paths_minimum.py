@@ -249,3 +249,20 @@ def test_the_adversarys_fit_minima_are_these():
                                     g_c2tc) == pytest.approx(
                 min_detectable_hysteresis_fit(*nx, REC, drive["hvac_period"], U, c, width,
                                               floor, c2tc), rel=0.01)
+
+
+def test_the_analytic_rounding_floor_takes_a_coarse_logs_step():
+    """A coarse log's floor is its own step's (``step``): the one ``rounding_floor_tau``
+    finds on the record rounded to that step, not the 12-bit one's."""
+    from avard.core.explain.thermal_fit.rounding import rounding_floor_tau
+    from avard.core.explain.thermal_paths import rounding_floor
+
+    rate, rec = 10.0, 4 * 3600.0
+    t = np.arange(int(rate * rec)) / rate
+    rng = np.random.default_rng(3)
+    for q, amp, period in ((0.25, 0.6, 2400.0), (0.125, 0.214, 1800.0)):
+        u = 21.3 + amp * np.sin(2 * math.pi * t / period) + 0.003 * rng.standard_normal(t.size)
+        T = np.round(u / q) * q
+        got = rounding_floor(((amp, period),), rate, rec, step=q)
+        assert got == pytest.approx(rounding_floor_tau(T, rate, step=q), rel=1e-9)
+        assert got > rounding_floor(((amp, period),), rate, rec)

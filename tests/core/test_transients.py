@@ -40,7 +40,7 @@ def _noise_of(y: np.ndarray, rate: float):
 
 def test_the_axis_false_alarm_budget_adds_up():
     assert alarm.TEMPERATURE + alarm.TRANSIENTS + alarm.DRIFT + alarm.GAUSS_MARKOV \
-        + alarm.THERMAL_PATHS \
+        + alarm.THERMAL_PATHS + alarm.PATH_SWITCHES \
         == pytest.approx(alarm.ALPHA_AXIS)
     # the thermal regression's z over its ~50 lag and channel trials sits inside its share
     from avard.core.explain.thermal_fit import Z_TEMPERATURE

@@ -210,9 +210,11 @@ def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: 
         # less those the path's own switches make: a relay's at every turn of the drive
         # read as excursions, one a cycle, took the relay (``path_switches``)
         out[a], cands = apart_from_path(th, [c for c in cands if c.cause != "drift"], temps)
+        # beside those that remain, also where none does: the path must still be chosen
+        # with nothing but the warm-up beside it
         sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands)
-        if sig and not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
-                                            given=sig), th.mechanism):
+        if not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
+                                    given=sig), th.mechanism):
             out[a] = b0
 
 

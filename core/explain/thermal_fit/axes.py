@@ -87,7 +87,7 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
     Y = np.asarray(Y, dtype=float)
     gs = channel_grids(grids, np.asarray(temps).reshape(len(Y), -1).shape[1])
     # the rounding floors stay the readings' own (``coarse_regressor``)
-    raw, temps = temps, coarse_regressor(temps, gs)
+    raw, temps = temps, coarse_regressor(temps, gs, holes)
     record_s = len(Y) / rate_hz
     # the lag scan runs on at most SCAN_POINTS block means (a 60 h record: 8 s blocks; the
     # lags sought are minutes); the chosen lag is then fitted on the whole slow view
@@ -127,7 +127,8 @@ def fit_thermal_axes(Y: NDArray, temps: NDArray, names: list[str], rate_hz: floa
                   floors, columns, {j: g[0] for j, g in enumerate(gs)})
             for a in range(Y.shape[1])]
     fits = [coarse_gain_se(replace(ft, grid=gs[ft.channel_index]), raw, temps) for ft in fits]
-    return with_paths(fits, Y, temps, holes, floors, warmups) if paths else fits
+    # the readings as logged: the path choice reconstructs them on each channel's grid itself
+    return with_paths(fits, Y, raw, holes, floors, warmups) if paths else fits
 
 
 def with_paths(fits: list[ThermalFit], Y: NDArray, temps: NDArray, holes: Holes | None = None,

@@ -4,7 +4,7 @@ crossings at 12 bits, the crossing spline on a coarser step) and each channel's 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,7 +17,8 @@ from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 
 
 def derounded(T: NDArray, grid: tuple[float, float] | None = None,
-              tops: bool = True) -> NDArray[np.float64]:
+              tops: bool = True, real: NDArray[np.bool_] | None = None
+              ) -> NDArray[np.float64]:
     """The logged channel ``T`` (slow view, readings interpolated between their times) with
     its readings' rounding smoothed out: where the readings dwell on one 0.0625 K step (a
     run of equal values), the temperature passed the threshold between two neighbouring
@@ -34,13 +35,15 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
     crossing and after the last (``_crossing_ends``) the spline's slope goes on within the
     reading's cell: held at the first knot's mid-level, the record's first dwell sat up to
     half a coarse step off for minutes, a start the lag filter carries into the τ of the
-    lag (through a 300 s lag, 3.5× the error ADEV at τ 100–800 s at 0.125 K). A gap (NaN)
+    lag, where the coupling is read. A gap (NaN)
     is bridged on the samples' own times, as the straight lines are: the spline is built on
     the whole index with the gap's values a straight line between its neighbours (not on
     the finite samples squeezed together, which ran it across the gap as if no time had
-    passed), and the gap stays NaN. On a coarse step the turns' tops are a cycle's
-    (``_turn_tops``) unless ``tops`` is False (the spline's own, a parabola's: the other
-    reading ``coarse_gain_se`` weighs it against)."""
+    passed), and the gap stays NaN. ``real``: the samples that are readings, where ``T``
+    holds a gap already bridged (the slow view interpolates its holes: ``SlowView.finish``),
+    the gap then as a NaN's (None: every finite sample). On a coarse step the turns' tops
+    are a cycle's (``_turn_tops``) unless ``tops`` is False (the spline's own, a
+    parabola's: the other reading ``coarse_gain_se`` weighs it against)."""
     T = np.asarray(T, dtype=float)
     q, origin = (DS18B20_STEP_K, 0.0) if grid is None else grid
     if is_coarse(q):
@@ -53,8 +56,10 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
             # are off the grid, so the reconstruction does not clip them to a cell)
             v = np.interp(np.arange(ok[0], ok[-1] + 1), ok, T[ok]) - origin
             r = _crossing_ends(v, crossing_reconstruction(v, q), q)
-            real = np.isfinite(T[ok[0]:ok[-1] + 1])
-            r = (_turn_tops(v, r, q, real) if tops else r) + origin
+            seen = np.isfinite(T[ok[0]:ok[-1] + 1])
+            if real is not None:
+                seen &= np.asarray(real, dtype=bool)[ok[0]:ok[-1] + 1]
+            r = (_turn_tops(v, r, q, seen) if tops else r) + origin
             out[ok] = r[ok - ok[0]]
         return out
     out = T.copy()
@@ -105,26 +110,39 @@ def channel_grids(grids: Sequence[tuple[float, float] | None] | None, k: int
             for g in (list(grids) if grids is not None else [None] * k)]
 
 
-def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None] | None = None
+def coarse_regressor(temps: NDArray, grids: Sequence[tuple[float, float] | None] | None = None,
+                     holes: Mapping[int, Sequence[tuple[int, int]]] | None = None
                      ) -> NDArray[np.float64]:
     """The temperature channels (M, k) the thermal regression reads, each on its own grid
     (``grids``, per column; ``channel_grids``): as logged on the 12-bit step, the crossing
     reconstruction (``derounded``) on a coarser one, column by column (a coarse log leaves a
     finer one as logged). A
-    coarse quantiser's gain at the drive is not 1 (its describing function: 1.037 for a
-    ±0.5 K cycle on a 0.25 K step), an error in the variable no τ floor removes, which put
-    ĉ ≈ 3 % low at 0.25 K and 9 % at 0.5 K; the reconstruction follows the drive's
+    coarse quantiser's gain at the drive is not 1 (its describing function: above 1 where
+    the drive swings a few steps), an error in the variable no τ floor removes, which put
+    ĉ low by that gain, more the coarser the step; the reconstruction follows the drive's
     amplitude. The rounding floors (``rounding_floor_tau``) stay the raw readings': the
     sawtooth they model is the readings', and on the smooth reconstruction a slower slope
-    made the floor of a 0.5 K log infinite (no τ left to the regression)."""
+    made the floor of a 0.5 K log infinite (no τ left to the regression). ``holes``: per
+    column, the blocks (first, last sample) its log says nothing about (``Holes``): the slow
+    view bridged them, and ``derounded`` reads them as gaps (``real``)."""
     temps = np.asarray(temps, dtype=float)
     T = temps.reshape(len(temps), -1)
     gs = channel_grids(grids, T.shape[1])
     if not any(is_coarse(g[0]) for g in gs):
         return temps
-    out = np.column_stack([derounded(T[:, j], g) if is_coarse(g[0]) else T[:, j]
-                           for j, g in enumerate(gs)])
+    out = np.column_stack([derounded(T[:, j], g, real=_readings(len(T), (holes or {}).get(j)))
+                           if is_coarse(g[0]) else T[:, j] for j, g in enumerate(gs)])
     return out.reshape(temps.shape)
+
+
+def _readings(n: int, holes: Sequence[tuple[int, int]] | None) -> NDArray[np.bool_] | None:
+    """The samples of ``n`` outside ``holes`` (first, last sample of each); None: no hole."""
+    if not holes:
+        return None
+    keep = np.ones(n, dtype=bool)
+    for a, b in holes:
+        keep[max(0, a):max(0, min(n, b + 1))] = False
+    return keep
 
 
 #: Samples beyond the first (last) crossing whose slope the reconstruction carries back
@@ -163,8 +181,9 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
     bound the turn, D apart, the natural spline bulges as a cubic with its crossing slopes
     s, about s·D/4 above θ, which is exact for a parabola; a cycle of period P turns as a
     cosine, whose top above θ is 2(1 − cos α)/(α sin α) times that, α = πD/P (1 for a short
-    dwell, 1.10 for a dwell of a third of the cycle: a ±0.5 K cycle on a 0.5 K step, whose
-    tops the spline left 5–7 % of the swing low, ĉ as much high). P is the time between the
+    dwell, more the longer the dwell is beside the cycle: where the swing spans a step or
+    two the tops carry much of it, and the spline's left the swing low and ĉ as much
+    high). P is the time between the
     turn's neighbouring turns of the same sense, two turns away (twice the nearest turn's
     distance at the record's ends); α is held below π/2 (a dwell of half the cycle: the
     threshold at the cycle's middle, where a cosine's slope is largest). The top stays
@@ -184,9 +203,15 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
     if len(turn) < 2:
         return out
     mid = 0.5 * (starts[turn] + ends[turn])
+    # which runs are turns, and the gap samples before each index, built once: a flickering
+    # log has a turn at almost every run, and a lookup rebuilt per turn was quadratic
+    is_turn = np.zeros(len(lv), dtype=bool)
+    is_turn[turn] = True
+    if real is not None:
+        holes = np.concatenate([[0], np.cumsum(~np.asarray(real, dtype=bool))])
     for i, r in enumerate(turn.tolist()):
         a, b = int(starts[r]), int(ends[r])
-        if real is not None and not np.all(real[int(starts[r - 1]):int(ends[r + 1]) + 1]):
+        if real is not None and holes[int(ends[r + 1]) + 1] > holes[int(starts[r - 1])]:
             continue
         if i >= 1 and i + 1 < len(turn):
             period = mid[i + 1] - mid[i - 1]
@@ -201,7 +226,7 @@ def _turn_tops(v: NDArray, R: NDArray, q: float,
         # the cosine's top: through θ at ±D/2 and through θ − q at the outer crossings,
         # D' apart, where the neighbouring runs are plain steps down (not turns, not ends)
         a0, b1 = int(starts[r - 1]), int(ends[r + 1])
-        outer = (r - 1 not in set(turn.tolist()) and r + 1 not in set(turn.tolist())
+        outer = (not is_turn[r - 1] and not is_turn[r + 1]
                  and r - 1 > 0 and r + 1 < len(lv) - 1)
         alpha2 = math.pi * (b1 - a0 + 1) / period
         if outer and alpha < alpha2 < math.pi:

@@ -25,14 +25,15 @@ def coarse_gain_se(fit: ThermalFit, raw: NDArray, recon: NDArray) -> ThermalFit:
     the channels as logged and as reconstructed, slow view). Between two crossings of one
     threshold the readings do not say how far the temperature went: the reconstruction
     takes each turn's top as a cycle's (a cosine's, ``coarse._turn_tops``); the spline
-    alone takes it as a parabola's, lower (its ĉ 5–7 % high on a ±0.5 K cycle at 0.5 K, the
-    cosine's within about 1 %). A drive whose turns are sharper or flatter than a cosine's
-    lies beyond either, so half the two readings' difference, |√(AVAR_spline/AVAR_recon) − 1|/2
-    at the τ of the reconstruction's largest AVAR (the drive), is added to the se in
-    quadrature. It scales with what the tops carry: a fraction of a percent where the swing
-    spans many steps, a few percent where it spans one or two. (The raw readings' ĉ, the
-    quantiser's describing function, bracketed the truth too, but from 2–9 % away whatever
-    the tops: half that bracket held the truth at 0.25 K on every record, more than 68 %.)
+    alone takes it as a parabola's, lower (its ĉ high by as much, where the swing spans a
+    step or two; a sinusoidal drive's tops are the cosine's). A drive whose turns are
+    sharper or flatter than a cosine's lies beyond either, so half the two readings'
+    difference, |√(AVAR_spline/AVAR_recon) − 1|/2 at the τ of the reconstruction's largest
+    AVAR (the drive), is added to the se in quadrature. It scales with what the tops carry:
+    little where the swing spans many steps, more where it spans one or two. (The raw
+    readings' ĉ, the quantiser's describing function, bracketed the truth too, but from
+    further away whatever the tops (its gain errs in the variable itself), so its half
+    bracket over-covered.)
     The detection's z is the regression's (the gain's error scales a coupling that is
     there; it makes none). The relative widening is kept on the fit (``gain_rel``) for a
     path's coefficient beyond one lag (``_with_path``)."""

@@ -184,8 +184,8 @@ def min_detectable_rate(n_white: float, b_inst: float, k_rrw: float, record_s: f
 # runs it: the Allan covariance at the octave τ from the channel's rounding floor up
 # (docs/log/2026-11-28-cand26b.md, the derivation)
 
-#: The DS18B20's step (K), repeated here so the derivation reads whole (and the adversary's
-#: generator can copy it).
+#: The DS18B20's 12-bit step (K), repeated here so the derivation reads whole (and the
+#: adversary's generator can copy it): the default of the log's own ``step`` below.
 _Q_STEP = 0.0625
 
 
@@ -195,25 +195,25 @@ def _g(x: NDArray) -> NDArray[np.float64]:
     return np.asarray(np.sin(px) ** 4 / px**2, dtype=float)
 
 
-def rounding_time(lines: tuple[tuple[float, float], ...]) -> float:
+def rounding_time(lines: tuple[tuple[float, float], ...], step: float = _Q_STEP) -> float:
     """How long (s) one rounding error of the logged channel lasts (``thermal_fit.
-    rounding_correlation_s``): the step over the rms slope of the ``lines`` ((amplitude K,
-    period s) of the logged channel), never under 1 s."""
+    rounding_correlation_s``): the log's ``step`` (K) over the rms slope of the ``lines``
+    ((amplitude K, period s) of the logged channel), never under 1 s."""
     slope = math.sqrt(sum((2 * math.pi / p * a) ** 2 / 2 for a, p in lines))
-    return max(_Q_STEP / slope, 1.0) if slope > 0 else math.inf
+    return max(step / slope, 1.0) if slope > 0 else math.inf
 
 
 def rounding_floor(lines: tuple[tuple[float, float], ...], rate_hz: float, record_s: float,
-                   snr: float = 10.0) -> float:
+                   snr: float = 10.0, step: float = _Q_STEP) -> float:
     """The channel's rounding floor (s) on a drive of ``lines`` ((amplitude K, period s) of the
     logged channel), as ``thermal_fit.rounding_floor_tau`` finds it on the record: the first
     octave τ (2ʲ/``rate_hz``) where the drive's AVAR Σ a²·sin⁴(πfτ)/(πfτ)² reaches ``snr``
-    times the rounding's (q²/12)·t_c/τ."""
-    tc = rounding_time(lines)
+    times the rounding's (q²/12)·t_c/τ, q the log's ``step`` (K; a coarse log's own)."""
+    tc = rounding_time(lines, step)
     tau = 1.0 / rate_hz
     while 2 * tau <= record_s:
         v = sum(a * a * float(_g(np.array(tau / p))) for a, p in lines)
-        if v >= snr * _Q_STEP**2 / 12 * tc / tau:
+        if v >= snr * step**2 / 12 * tc / tau:
             return tau
         tau *= 2
     return math.inf

@@ -243,11 +243,19 @@ class PathFit:
                        "which can look like a bump")
         return floor, why
 
-    def _score_signal(self, s: PathScore, T: NDArray) -> NDArray[np.float64]:
-        """Candidate ``s``'s coupling signal on the slow view (no start state)."""
+    def _score_signal(self, s: PathScore, T: NDArray, first: int = 0) -> NDArray[np.float64]:
+        """Candidate ``s``'s coupling signal on the slow view (no start state), from its
+        ``first`` coupling term on, its columns on the path's ``grid`` (the temperature
+        behind the readings it was fitted on)."""
         X = path_columns(T, list(s.cols), self.rate_hz, grid=self.grid)
         n = s_terms(s)
-        return np.asarray(X[:, :n] @ s.beta_fitted[:n], dtype=float)
+        return np.asarray(X[:, first:n] @ s.beta_fitted[first:n], dtype=float)
+
+    def extension_signal(self, T: NDArray) -> NDArray[np.float64]:
+        """The chosen extension's own signal on the slow view: its coupling signal less the
+        linear coupling's term (a relay's switches, a second path, a quadratic), on the
+        path's ``grid`` as ``_score_signal``."""
+        return self._score_signal(self.chosen, T, first=1)
 
     def summary(self) -> str:
         s = self.chosen
