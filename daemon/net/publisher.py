@@ -52,6 +52,11 @@ DEFAULT_REQUEST_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_HWM = 10000
 #: Shutdown never waits longer than this for queued messages (ms).
 LINGER_MS = 200
+#: How long, at most, the guard is given at close to relay what the PUB socket flushed into
+#: it: it returns as soon as every connection has ended, so this bound is reached only on a
+#: starved machine, where a LINGER-sized window lost the last records (the guard's thread
+#: not scheduled in time); well inside systemd's TimeoutStopSec.
+GUARD_DRAIN_S = 2.0
 #: Kernel send buffer per subscriber (SO_SNDBUF; Linux books twice this), instead of TCP
 #: autotuning's up to 4 MB: far above the stream's rate × any sane round trip.
 PUB_SNDBUF = 128 << 10
@@ -384,7 +389,7 @@ class Publisher:
         front = getattr(self, "_front", None)
         if front is not None:
             # then the guard: what it holds for a subscriber goes out first
-            front.stop(drain_s=LINGER_MS / 1000)
+            front.stop(drain_s=GUARD_DRAIN_S)
             self._front = None
 
     def __enter__(self) -> Publisher:
