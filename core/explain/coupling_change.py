@@ -318,6 +318,16 @@ class _Split:
     after: Part
 
 
+def _stacked(segs: list[OctaveSums]) -> tuple[int, NDArray, NDArray, NDArray]:
+    """The segments' sums stacked on the longest one's octaves: (K, its m, n (G, K),
+    s2 (G, K, C, C)), a segment short of an octave counting no difference there."""
+    K = max(len(x.ms) for x in segs)
+    ms = next(x.ms for x in segs if len(x.ms) == K)
+    padded = [x._padded(K) for x in segs]
+    return (K, ms, np.array([p[0] for p in padded], dtype=float),
+            np.array([p[1] for p in padded], dtype=float))
+
+
 def _splits(segs: list[OctaveSums], rate: float, edf_ref: NDArray, n_ref: NDArray,
             mt: float, trials: int, grid: tuple[float, ...] = GRID) -> _Split | None:
     """z at every grid split from the segments' sums (``SEGMENTS``, each difference in the
@@ -327,11 +337,7 @@ def _splits(segs: list[OctaveSums], rate: float, edf_ref: NDArray, n_ref: NDArra
     ``trials``, Satterthwaite's dof)."""
     if not segs:
         return None
-    K = max(len(x.ms) for x in segs)
-    ms = next(x.ms for x in segs if len(x.ms) == K)
-    padded = [x._padded(K) for x in segs]
-    n = np.array([p[0] for p in padded], dtype=float)
-    s2 = np.array([p[1] for p in padded], dtype=float)
+    K, ms, n, s2 = _stacked(segs)
     G = len(segs)
     Pn = np.concatenate([np.zeros((1, K)), np.cumsum(n, axis=0)])
     Ps = np.concatenate([np.zeros((1, K, 2, 2)), np.cumsum(s2, axis=0)])
@@ -572,11 +578,7 @@ def _part_jackknife(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
         return math.nan
     edf_ref = np.asarray(ref.edf, dtype=float)
     edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
-    K = max(len(x.ms) for x in segs)
-    ms = next(x.ms for x in segs if len(x.ms) == K)
-    padded = [x._padded(K) for x in segs]
-    nn = np.array([q[0] for q in padded], dtype=float)
-    s2 = np.array([q[1] for q in padded], dtype=float)
+    _K, ms, nn, s2 = _stacked(segs)
     wn, ws = nn.sum(axis=0), s2.sum(axis=0)
     c, _ = _coefficients(wn[None] - nn, ws[None] - s2, ms, rate, edf_ref,
                          np.asarray(ref.n, dtype=float), mt)
@@ -797,11 +799,7 @@ def _cross(segs: list[OctaveSums], frac: float, rate: float, edf_ref: NDArray,
     one and the jackknife over both parts' segments (the fit's replicates and the test's),
     z = |κ|/se against the scan's threshold (t at ``ALPHA`` over ``trials``, Satterthwaite's
     dof). (the smaller z over its threshold of the two directions, the parts' κ, dof)."""
-    K = max(len(x.ms) for x in segs)
-    ms = next(x.ms for x in segs if len(x.ms) == K)
-    padded = [x._padded(K) for x in segs]
-    n = np.array([q[0] for q in padded], dtype=float)
-    s2 = np.array([q[1] for q in padded], dtype=float)
+    _K, ms, n, s2 = _stacked(segs)
     G = len(segs)
     k = round(frac * G)
     rows = {}
