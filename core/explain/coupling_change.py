@@ -280,6 +280,19 @@ def _lag(p: Part, whole: float) -> str:
     return f"{(p.lag_s if math.isfinite(p.lag_s) else whole):.3g} s"
 
 
+def _octave_view(n: NDArray, s2: NDArray, ms: NDArray, edf_ref: NDArray, n_ref: NDArray
+                 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Rows of difference sums as Allan covariances on the octaves the axis's EDF covers:
+    (n, cov (S, K, C, C), each row's EDF ``edf_ref`` of ``n_ref`` differences scaled to its
+    count (``thermal_fit.cov_view``), the octaves' m as floats)."""
+    K = min(n.shape[1], len(edf_ref))
+    n, s2, msf = n[:, :K], s2[:, :K], ms[:K].astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cov = s2 / (NORM[2] * msf**2 * np.maximum(n, 1))[..., None, None]
+        nu = np.asarray(edf_ref[:K], float) * n / np.asarray(n_ref[:K], float)
+    return n, cov, nu, msf
+
+
 def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
                   n_ref: NDArray, mt: float) -> tuple[NDArray, NDArray]:
     """``thermal_fit.tempco_from_cov`` of many difference sums at once: (ĉ, analytic se)
@@ -287,12 +300,10 @@ def _coefficients(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: ND
     lagged temperature) at octaves ``ms``; the axis's EDF ``edf_ref`` of ``n_ref``
     differences scaled to each row's count (``thermal_fit.cov_view``); octaves τ ≥ ``mt``
     with an EDF of at least 3 (``thermal_fit._kept``). se ∞ where no octave is left."""
-    K = min(n.shape[1], len(edf_ref))
-    n, s2, msf = n[:, :K], s2[:, :K], ms[:K].astype(float)
+    n, cov, nu, msf = _octave_view(n, s2, ms, edf_ref, n_ref)
+    K = len(msf)
     with np.errstate(invalid="ignore", divide="ignore"):
-        cov = s2 / (NORM[2] * msf**2 * np.maximum(n, 1))[..., None, None]
         vy, vu, cyu = cov[..., 0, 0], cov[..., 1, 1], cov[..., 0, 1]
-        nu = np.asarray(edf_ref[:K], float) * n / np.asarray(n_ref[:K], float)
         ok = ((n > 0) & np.isfinite(vy) & np.isfinite(vu) & (vu > 0) & (msf / rate >= mt)
               & np.isfinite(nu) & (nu >= 3))
         ck = np.where(ok, cyu / vu, 0.0)
@@ -733,13 +744,10 @@ def _multi(n: NDArray, s2: NDArray, ms: NDArray, rate: float, edf_ref: NDArray,
     ``n`` (S, K) and ``s2`` (S, K, 1 + p, 1 + p): β (S, p) and its analytic covariance
     (S, p, p), each octave weighted by its EDF over the axis's residual of the first
     regressor alone (``_coefficients``' weights), octaves τ ≥ ``mt`` with an EDF ≥ 3."""
-    K = min(n.shape[1], len(edf_ref))
-    n, s2, msf = n[:, :K], s2[:, :K], ms[:K].astype(float)
-    p = s2.shape[-1] - 1
+    n, cov, nu, msf = _octave_view(n, s2, ms, edf_ref, n_ref)
+    p = cov.shape[-1] - 1
     with np.errstate(invalid="ignore", divide="ignore"):
-        cov = s2 / (NORM[2] * msf**2 * np.maximum(n, 1))[..., None, None]
         vy, vu, cyu = cov[..., 0, 0], cov[..., 1, 1], cov[..., 0, 1]
-        nu = np.asarray(edf_ref[:K], float) * n / np.asarray(n_ref[:K], float)
         diag = np.all(np.diagonal(cov[..., 1:, 1:], axis1=-2, axis2=-1) > 0, axis=-1)
         ok = ((n > 0) & np.all(np.isfinite(cov.reshape(*cov.shape[:2], -1)), axis=-1) & diag
               & (msf / rate >= mt) & np.isfinite(nu) & (nu >= 3))

@@ -6,7 +6,7 @@ cycle) leaves in the axis as recorded a level that jumps at times the drive sets
 compound search (``transients.find_compound``), run on that axis, reads those jumps as bias
 steps and excursions: on a record with a relay at c < 0 it found an excursion per
 cycle, each edge within a minute or so of a relay switch.
-``engine._beside_transients`` tests a path whose extension is the whole claim beside the
+``engine.thermal._beside_transients`` tests a path whose extension is the whole claim beside the
 transients found on the axis, and a relay tested beside its own switches predicts no better
 than they do: the relay was lost, and the switches claimed as excursions.
 
