@@ -19,7 +19,7 @@ that stays for installs without a compiler (and for counts and covariances):
 * ``power_sum(spec, k, out)``: the Welch spectrum's Σ |X|² over segments
   (``report.WelchAccumulator``).
 * ``local_residual(y, half, out)``: the input screen's |sample − its neighbours' mean|
-  (``core/io/screen.py``; general path ``screen._local_residual``): one pass where numpy
+  (``core/io/screen/accel.py``; general path ``accel._local_residual``): one pass where numpy
   pads, sums cumulatively and subtracts.
 * ``first_order(x, b0, b1, a1, z, out)``: a first-order IIR filter, scipy.signal.lfilter's
   operations in its order (explain's thermal lag, ``thermal_fit.lag_filter``; general path

@@ -44,7 +44,7 @@ from avard.core.analysis.spectrum import (
 )
 from avard.core.blas import one_blas_thread
 from avard.core.errors import DataError, FitError
-from avard.core.io.screen import ScreenedSource
+from avard.core.io.screen.stream import ScreenedSource
 from avard.core.io.source import RecordFormat, RecordInfo, RecordSource
 from numpy.typing import NDArray
 
@@ -178,7 +178,7 @@ def analyze(source: RecordSource, options: AnalyzeOptions = DEFAULT_OPTIONS, *,
     """
     check_noise_id(options.noise_id)
     if options.screen and not isinstance(source, ScreenedSource):
-        # the input screen (core/io/screen.py): glitches and shocks cut out as gaps, said in
+        # the input screen (core/io/screen/): glitches and shocks cut out as gaps, said in
         # the results; explain screens once itself and hands analyze the screened blocks
         screened = ScreenedSource(source, options.temperature_units)
         an = analyze(screened, options, progress=progress, tap=tap)

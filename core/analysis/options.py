@@ -28,7 +28,7 @@ class AnalyzeOptions:
     ``quantiles``, ``noise_id``: "stable32" reproduces Stable32's χ² quantiles and B1 rule.
     ``ci``: the confidence level of the fit's intervals (0.683: 68 %).
     ``block``: samples per block read (memory is a few blocks).
-    ``screen``: read the record through the input screen (``core/io/screen.py``: start-up
+    ``screen``: read the record through the input screen (``core/io/screen/``: start-up
     glitches and shocks cut out as gaps, bad temperature readings masked, all said).
     ``temperature_units``: the temperature logs' units for the screen (``--temperature-units``):
     "auto" (judged from the readings: a DS18B20 log in °F refused), "C" or "F" (converted).

@@ -380,7 +380,8 @@ def _screen(a: NDArray[np.float64]) -> NDArray[np.intp] | None:
     block, since chunks start on a block boundary): the rows it cuts, None for none. Any cut
     is a gap the plan does not know: the analysis is then read on one worker
     (``ScreenCut``)."""
-    from avard.core.io.screen import held_suspect, screen_accel
+    from avard.core.io.screen import screen_accel
+    from avard.core.io.screen.held_accel import held_suspect
 
     if held_suspect(a):
         # a held acceleration is judged over the whole record (its axis's runs), which a

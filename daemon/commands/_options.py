@@ -10,7 +10,7 @@ import math
 
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import ConfigError, DataError
-from avard.core.io.screen import temperature_units
+from avard.core.io.screen.units import temperature_units
 
 CHANNELS_HELP = ("channels to use, by name or number: 'x z' or 'x,z' (default: all)")
 

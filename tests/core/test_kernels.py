@@ -343,7 +343,8 @@ def test_local_residual_equals_numpy(compiled: None, n: int) -> None:
     numpy's reflected pad and cumulative sum: equal to rounding at every length the screen
     uses, ends included, and the screen's verdicts on a record with shocks and a start-up
     glitch the same on both paths."""
-    from avard.core.io.screen import _local_residual, screen_accel
+    from avard.core.io.screen import screen_accel
+    from avard.core.io.screen.accel import _local_residual
 
     rng = np.random.default_rng(n)
     a = rng.normal(0, 1e-3, (n, 3)) + np.array([0.0, 0.0, 9.81])

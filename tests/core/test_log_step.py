@@ -24,14 +24,9 @@ from avard.core.explain.thermal_fit import fit as fit_mod
 from avard.core.explain.thermal_fit.fit import ThermalFit
 from avard.core.explain.thermal_paths.rounding import sawtooth_avar
 from avard.core.explain.verdict import judge
-from avard.core.io import screen as screen_mod
-from avard.core.io.screen import (
-    ScreenLog,
-    coarse_cause,
-    coarse_text,
-    log_step,
-    screen_blocks,
-)
+from avard.core.io.screen import ScreenLog, screen_blocks
+from avard.core.io.screen import stream as screen_mod
+from avard.core.io.screen.log_step import coarse_cause, coarse_text, is_coarse, log_step
 from avard.core.io.source import open_record
 from avard.daemon.cli import main
 
@@ -330,7 +325,7 @@ def test_the_12_bit_step_leaves_the_regressor_and_the_derounding_as_they_were():
     assert np.sqrt(np.mean((both[:, 1] - room) ** 2)) < 0.5 * np.sqrt(np.mean((T4 - room) ** 2))
     # no step in force: without a grid, the 12-bit one
     assert np.array_equal(coarse.derounded(T4), coarse.derounded(T4, (0.0625, 0.0)))
-    assert screen_mod.is_coarse(0.125) and not screen_mod.is_coarse(0.0625)
+    assert is_coarse(0.125) and not is_coarse(0.0625)
 
 
 def test_the_coarse_reconstruction_runs_on_the_samples_times_across_a_gap():

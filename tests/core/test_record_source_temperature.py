@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from avard.core.io import frames
 from avard.core.io.recording import frame
-from avard.core.io.screen import ScreenedSource
+from avard.core.io.screen.stream import ScreenedSource
 from avard.core.io.source import open_record
 
 from tests.support.adversary_gen import make_record as adversary_record

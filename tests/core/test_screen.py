@@ -14,13 +14,13 @@ from avard.core.analysis.options import AnalyzeOptions
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.io.screen import (
-    STUCK_MIN_S,
     ScreenLog,
     screen_accel,
     screen_blocks,
     screen_temperature,
     stuck_runs,
 )
+from avard.core.io.screen.temperature import STUCK_MIN_S
 from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
@@ -151,8 +151,8 @@ def test_a_chip_filters_correlated_samples_are_not_shocks():
 def test_a_second_read_cuts_the_same_rows_without_judging_again(tmp_path, monkeypatch):
     """Every pass over a record (one per channel group) cuts the same rows: the first read's
     verdicts are reused, the axes are not judged again."""
-    import avard.core.io.screen as screen_mod
-    from avard.core.io.screen import ScreenedSource
+    import avard.core.io.screen.stream as screen_mod
+    from avard.core.io.screen.stream import ScreenedSource
 
     rng = np.random.default_rng(2)
     y = rng.normal(0, 1e-3, (50_000, 3))
@@ -179,7 +179,7 @@ def test_the_median_floor_skips_only_blocks_the_exact_scale_also_passes(monkeypa
     heavy enough that samples sit at the threshold, quantised to a few LSB (ties), a dead
     axis (median 0) and a non-finite value, the verdicts are those of the exact median on
     every block, and the floor is never above the median it stands for."""
-    import avard.core.io.screen as screen_mod
+    import avard.core.io.screen.accel as screen_mod
 
     rng = np.random.default_rng(2024)
     blocks = []
@@ -232,7 +232,7 @@ def test_every_fault_of_a_generator_written_apart_is_screened_and_said_in_words(
     every 1 or 2 s, its own faults): every 85.0 °C, −127 °C, spike, dropout and 30-min+ stuck
     run it injects is masked at its time, and the text counts them in plain words (it read
     "2 read error (-127 °C or out of range)s" and "(1 readings)")."""
-    from avard.core.io.screen import ScreenedSource
+    from avard.core.io.screen.stream import ScreenedSource
 
     from tests.support.adversary_gen import make_record as adversary_record
 

@@ -15,15 +15,9 @@ from avard.core.analysis.engine import analyze
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
-from avard.core.io.screen import (
-    HELD_MIN_RUN,
-    HeldAccel,
-    ScreenedSource,
-    ScreenLog,
-    held_suspect,
-    held_threshold,
-    screen_blocks,
-)
+from avard.core.io.screen import ScreenLog, screen_blocks
+from avard.core.io.screen.held_accel import HELD_MIN_RUN, HeldAccel, held_suspect, held_threshold
+from avard.core.io.screen.stream import ScreenedSource
 from avard.core.io.source import open_record
 
 LSB = 3.9e-6 * 9.80665  # an ADXL355's step (m/s²)

@@ -12,7 +12,8 @@ import json
 
 import numpy as np
 import pytest
-from avard.core.io.screen import HELD_RING, ScreenLog, screen_blocks
+from avard.core.io.screen import ScreenLog, screen_blocks
+from avard.core.io.screen.held_log import HELD_RING
 
 from tests.core.test_screen_temperature_logs import _held, _readings, _screened
 
@@ -203,7 +204,7 @@ def test_the_watch_keeps_bounded_memory():
     a = np.zeros((n, 3))
     blocks = ((a[o:o + 4096], col[o:o + 4096, None], o + 4096 >= n) for o in range(0, n, 4096))
     log = ScreenLog(rate)
-    from avard.core.io import screen
+    from avard.core.io.screen import stream as screen
 
     made: list[screen._Dehold] = []
     real = screen._Dehold

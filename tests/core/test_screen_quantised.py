@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from avard.core.allan import kernels
-from avard.core.io.screen import GRID_SHARE, grid_scale, grid_step, screen_accel
+from avard.core.io.screen import screen_accel
+from avard.core.io.screen.accel import GRID_SHARE, grid_scale, grid_step
 
 LSB = 3.9e-6 * 9.80665  # the ADXL355's step at ±2 g
 

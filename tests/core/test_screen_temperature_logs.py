@@ -13,7 +13,9 @@ import pytest
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary
-from avard.core.io.screen import ScreenLog, held_cadence, screen_blocks, units_note
+from avard.core.io.screen import ScreenLog, screen_blocks
+from avard.core.io.screen.held_log import held_cadence
+from avard.core.io.screen.units import units_note
 from avard.core.io.source import open_record
 
 from tests.support.hidden import Truth, make_record, save
@@ -316,7 +318,7 @@ def test_a_held_log_whose_cadence_cannot_be_tried_is_said():
     """Review: a held log at 125 Hz (a reading every 0.75 s) in a room that changes seldom
     has its first changes so far apart that more cadences than ``HELD_MAX_CANDIDATES`` were
     to be tried: main took it as readings with no note. Now it says it cannot tell."""
-    from avard.core.io.screen import HELD_WAIT_SAMPLES
+    from avard.core.io.screen.held_log import HELD_WAIT_SAMPLES
 
     rate, n = 125.0, HELD_WAIT_SAMPLES
     t = np.arange(n) / rate

@@ -14,7 +14,8 @@ from avard.core.errors import ConfigError
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.explain.report import summary
-from avard.core.io.screen import ScreenLog, screen_blocks, temperature_units
+from avard.core.io.screen import ScreenLog, screen_blocks
+from avard.core.io.screen.units import temperature_units
 from avard.core.io.source import open_record
 from avard.daemon.cli import main
 

@@ -163,7 +163,7 @@ class Explanation:
     block_s: float = 0.0
     #: the held-out measure (None only when explain was asked not to make it)
     holdout: Holdout | None = None
-    #: what the input screen masked (core/io/screen.py), None for blocks that bypassed it
+    #: what the input screen masked (core/io/screen/), None for blocks that bypassed it
     screen: ScreenLog | None = None
     #: the record's temperature channels the thermal model could not use, with why (a log
     #: without two readings, or one value throughout): said, never dropped in silence

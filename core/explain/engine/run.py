@@ -28,7 +28,8 @@ from avard.core.explain.options import DEFAULT_EXPLAIN, ExplainOptions
 from avard.core.explain.thermal_fit import (
     ThermalFit,
 )
-from avard.core.io.screen import ScreenedSource, ScreenLog
+from avard.core.io.screen import ScreenLog
+from avard.core.io.screen.stream import ScreenedSource
 from avard.core.io.source import RecordSource, StreamSource
 from numpy.typing import NDArray
 

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
-from avard.core.io.screen import ScreenedSource
+from avard.core.io.screen.stream import ScreenedSource
 from numpy.typing import NDArray
 
 #: Target length of one slow-view block (s); the block is the next power of two in samples.

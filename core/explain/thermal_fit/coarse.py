@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-from avard.core.io.screen import is_coarse
+from avard.core.io.screen.log_step import is_coarse
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
