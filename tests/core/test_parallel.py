@@ -734,7 +734,7 @@ def test_a_chunk_reading_longer_blocks_judges_each_screen_block_alone(monkeypatc
     worker's screen gives that block; and on a clean record the chunks' parts, read in long
     blocks, add up to one pass in one-worker blocks."""
     from avard.core.analysis import parallel
-    from avard.core.io.screen import stream as screen
+    from avard.core.io import screen
 
     rng = np.random.default_rng(29)
     n, sb = 1 << 16, 1 << 11
