@@ -179,7 +179,7 @@ def rows_events() -> list[Event]:
         min_detectable_warmup,
     )
     from avard.core.explain.thermal_fit import min_detectable_tempco
-    from avard.core.explain.transients import min_detectable_drift, min_detectable_excursion
+    from avard.core.explain.transients.minima import min_detectable_drift, min_detectable_excursion
 
     from tests.support.weekend import Weekend
 

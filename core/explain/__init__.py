@@ -8,7 +8,7 @@
 - ``gauss_markov.py`` a Gauss–Markov bump in the GLS fit, and its stated minimum;
 - ``thermal_fit/``   which temperature drives an axis, through what lag; compensated AVAR;
 - ``thermal_paths/`` thermal paths beyond one lag, chosen by held-out likelihood;
-- ``transients.py``  steps, excursions and a warm-up found one after another;
+- ``transients/``    steps, excursions and a warm-up found one after another;
 - ``coupling_change.py`` whether one thermal coupling describes the record;
 - ``path_switches.py`` transients that are a thermal path's own switches;
 - ``holdout.py``     the gain of the extended model measured on held-out data;

@@ -13,11 +13,8 @@ from avard.core.explain.causes import (
 )
 from avard.core.explain.gauss_markov import min_detectable_gauss_markov
 from avard.core.explain.thermal_fit import min_detectable_tempco
-from avard.core.explain.transients import (
-    min_detectable_drift,
-    min_detectable_excursion,
-    min_detectable_warmup_in_fit,
-)
+from avard.core.explain.transients import min_detectable_warmup_in_fit
+from avard.core.explain.transients.minima import min_detectable_drift, min_detectable_excursion
 
 B, K, RATE = 2e-5, 2e-6, 10.0
 RECORDS_H = (1, 4, 24, 60)

@@ -8,7 +8,7 @@ import pytest
 from avard.core.explain.causes import min_detectable_step, min_detectable_warmup
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
-from avard.core.explain.transients import min_detectable_excursion
+from avard.core.explain.transients.minima import min_detectable_excursion
 from avard.core.io.source import open_record
 
 from tests.support.weekend import Weekend, save

@@ -20,6 +20,10 @@ from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
+from avard.core.explain.transients import minima as tr_minima
+from avard.core.explain.transients import pairing as tr_pairing
+from avard.core.explain.transients import scan as tr_scan
+from avard.core.explain.transients import search as tr_search
 from avard.core.io.source import open_record
 
 from tests.support.weekend import Weekend, save
@@ -56,7 +60,7 @@ def test_two_steps_an_excursion_and_a_warmup_on_one_axis(tmp_path):
     0; here the truth is K = 2e-6)."""
     warm = 3 * cz.min_detectable_warmup(N, B, K, 900.0)
     step = 3 * cz.min_detectable_step(N, B, K, REC_S)
-    exc = 3 * tr.min_detectable_excursion(N, B, K, REC_S, 1000.0)
+    exc = 3 * tr_minima.min_detectable_excursion(N, B, K, REC_S, 1000.0)
     w = Weekend(hours=4.0, N=N, B=B, K=K, warmups=[(warm, 900.0)],
                 steps=[(3000.0, step), (11000.0, step)], excursions=[(6000.0, 7000.0, exc)])
     ex = _explain(tmp_path, 7, w)
@@ -139,7 +143,7 @@ def test_a_drift_is_told_from_a_random_walk_in_the_time_domain():
     lo, hi = d.intervals["rate"]
     assert d.params["rate"] == pytest.approx(5e-8, rel=0.2) and lo < 5e-8 < hi + (hi - lo)
     # a drift at 3× its stated minimum beside a real random walk
-    m = tr.min_detectable_drift(N, 0.0, K, REC_S)
+    m = tr_minima.min_detectable_drift(N, 0.0, K, REC_S)
     d = tr.test_drift(_walk(2, drift=3 * m), 1.0, {"N": N, "B": 0.0, "K": K}, [])
     assert d.passed and d.params["rate"] == pytest.approx(3 * m, rel=0.3), d.evidence
 
@@ -155,7 +159,7 @@ def test_a_drifts_interval_is_drawn_on_the_noise_with_the_drift_removed(tmp_path
     x = _explain(tmp_path, 26500, r.weekend).channels["x"]
     (d,) = [f for f in x.claimed if f.cause == "drift"]
     lo, hi = d.intervals["rate"]
-    sigma = tr.min_detectable_drift(N, B, K, REC_S) / 5.0  # the slope's σ on the true noise
+    sigma = tr_minima.min_detectable_drift(N, B, K, REC_S) / 5.0  # the slope's σ on the true noise
     assert 0.5 * sigma <= 0.5 * (hi - lo) <= 2.0 * sigma, (lo, hi, sigma)
     assert lo <= r.weekend.drift <= hi
 
@@ -325,16 +329,16 @@ def test_an_excursions_edge_left_as_a_step_is_tested_as_a_step():
     up, down = sorted(found, key=lambda c: c.params["time_s"])
     assert up.params["time_s"] == pytest.approx(4984, abs=60)
     assert down.params["time_s"] == pytest.approx(6500, abs=60)
-    share = alarm.TRANSIENTS / len(tr.TRANSIENT_CAUSES)
-    excursion = alarm.bonferroni_z(share, tr.GRID * (tr.GRID - 1) // 2)
+    share = alarm.TRANSIENTS / len(tr_scan.TRANSIENT_CAUSES)
+    excursion = alarm.bonferroni_z(share, tr_scan.GRID * (tr_scan.GRID - 1) // 2)
     for c in (up, down):
-        assert c.threshold < alarm.bonferroni_z(share, tr.GRID) + 1e-9
+        assert c.threshold < alarm.bonferroni_z(share, tr_scan.GRID) + 1e-9
         assert c.threshold < excursion - 0.5
     assert up.threshold <= up.statistic < excursion
     # the split itself: an excursion's edges take the threshold they are handed
     box = cz.Candidate("excursion", True, {"start_s": 100.0, "end_s": 900.0, "size": 1e-3},
                        6.0, excursion, "")
-    edges = tr._normalise([box], 10.0, 4.9)
+    edges = tr_pairing._normalise([box], 10.0, 4.9)
     assert [(c.cause, c.threshold) for c in edges] == [("bias_step", 4.9)] * 2
 
 
@@ -372,7 +376,7 @@ def test_an_edge_inside_an_odd_block_of_a_long_record_is_found():
     permanent steps down. Each edge here sits just after an odd block boundary."""
     rate, hours, n_w, k_w = 0.5, 60.0, 1.4e-4, 1.5e-6
     n = int(hours * 3600 * rate)
-    g = tr._gls(np.zeros(n), rate, {"N": n_w, "B": 0.0, "K": k_w})
+    g = tr_scan._gls(np.zeros(n), rate, {"N": n_w, "B": 0.0, "K": k_w})
     assert g is not None
     rng = np.random.default_rng(309)
     y = n_w * math.sqrt(rate) * rng.standard_normal(n)
@@ -418,7 +422,7 @@ def test_a_warmup_as_long_as_the_trend_is_claimed_on_its_likelihood():
     # below its stated minimum in the fit, a warm-up not claimed says so
     weak = cz.Candidate("warmup", False, {"time_constant_s": T, "size": 0.5 * in_fit}, 3.0,
                         5.0, "")
-    note = tr._trend_note(weak, {"N": N, "B": 0.0, "K": K}, rec)
+    note = tr_search._trend_note(weak, {"N": N, "B": 0.0, "K": K}, rec)
     assert f"{in_fit:.3g} m/s²" in note and "told from the record's trend" in note
-    assert tr._trend_note(replace(weak, params={"time_constant_s": T, "size": 2 * in_fit}),
+    assert tr_search._trend_note(replace(weak, params={"time_constant_s": T, "size": 2 * in_fit}),
                           {"N": N, "B": 0.0, "K": K}, rec) == ""

@@ -11,6 +11,9 @@ import numpy as np
 import pytest
 from avard.core.explain import causes as cz
 from avard.core.explain import transients as tr
+from avard.core.explain.transients import minima as tr_minima
+from avard.core.explain.transients import refine as tr_refine
+from avard.core.explain.transients import scan as tr_scan
 
 N, B, K = 1.6e-4, 2e-5, 2e-6
 
@@ -36,7 +39,7 @@ def test_a_step_times_and_sizes_intervals_on_24_h_hold_the_truth_about_68_percen
     its likelihood is ±5 s wide: the interval was the grid's spacing, the time half a grid
     step early, and they held the truth in 42 % and 51 %."""
     rec = 24 * 3600.0
-    m = tr.MAX_BLOCKS
+    m = tr_scan.MAX_BLOCKS
     dt = rec / m
     t = (np.arange(m) + 0.5) * dt
     chol = np.linalg.cholesky(cz._noise_cov(t, dt, N, B, K))
@@ -67,13 +70,13 @@ def test_an_excursions_size_interval_holds_what_either_edge_leaves_open():
     edge's uncertainty is left out. Before, the envelope over the up edge alone was taken
     (its interval held the truth in 61 % of model-exact draws on 60 h)."""
     rec = 60 * 3600.0
-    m = tr.MAX_BLOCKS
+    m = tr_scan.MAX_BLOCKS
     dt = rec / m
     t = (np.arange(m) + 0.5) * dt
     noise = {"N": N, "B": B, "K": K}
     chol = np.linalg.cholesky(cz._noise_cov(t, dt, N, B, K))
     a0, b0 = 0.3569 * rec, 0.5069 * rec
-    size = 3 * tr.min_detectable_excursion(N, B, K, rec, b0 - a0)
+    size = 3 * tr_minima.min_detectable_excursion(N, B, K, rec, b0 - a0)
     rng = np.random.default_rng(11)
     wider_end = 0
     for _ in range(12):
@@ -87,11 +90,11 @@ def test_an_excursions_size_interval_holds_what_either_edge_leaves_open():
         g = cz._Gls(y, 1 / dt, noise, m)
         halves = {}
         for key in ("start_s", "end_s"):
-            grid = tr._grid_for(out, key, g)
-            shapes = np.column_stack([tr._column("excursion", {**out.params, key: float(v)},
+            grid = tr_refine._grid_for(out, key, g)
+            shapes = np.column_stack([tr_scan._column("excursion", {**out.params, key: float(v)},
                                                  g.t, g.dt) for v in grid])
             chi, sz, var = g.profile(g.white(shapes), [])
-            grid, (chi, sz, var) = tr._time_profile(g, out, key, [], grid, chi)
+            grid, (chi, sz, var) = tr_refine._time_profile(g, out, key, [], grid, chi)
             e_lo, e_hi = cz._size_interval(chi, sz, var, 1.0)
             halves[key] = 0.5 * (e_hi - e_lo)
         # (the fit's Birge ratio is ≥ 1: the interval may only be wider than at s² = 1)

@@ -10,7 +10,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from avard.core.explain import causes as cz
-from avard.core.explain import transients as tr
+from avard.core.explain.transients import pairing as tr_pairing
+from avard.core.explain.transients import scan as tr_scan
 
 #: a 60 h slow view at 0.5 Hz, the noise the adversary's 60 h records have
 RATE, HOURS, N_W, K_W = 0.5, 60.0, 1.4e-4, 1.5e-6
@@ -26,7 +27,7 @@ def _record(seed: int, steps: list[tuple[float, float]]) -> tuple[np.ndarray, cz
     t = (np.arange(n) + 0.5) / RATE
     for ts, a in steps:
         y += np.where(t >= ts, a, 0.0)
-    g = tr._gls(y, RATE, {"N": N_W, "B": 0.0, "K": K_W})
+    g = tr_scan._gls(y, RATE, {"N": N_W, "B": 0.0, "K": K_W})
     assert g is not None
     return y, g
 
@@ -55,11 +56,11 @@ def test_two_excursions_one_after_the_other_are_not_read_as_one_inside_the_other
     edges = [(70000.0, 4.3e-4), (110000.0, -5e-4), (130000.0, 5e-4), (145000.0, -4.3e-4)]
     _y, g = _record(7, edges)
     cands = [_step(ts, a, th) for ts, a in edges]
-    paired, chi = tr._pairing(g, cands, th, 1e-3)
+    paired, chi = tr_pairing._pairing(g, cands, th, 1e-3)
     assert _edges(paired) == [("excursion", (70000, 110000)), ("excursion", (130000, 145000))]
     # the nested reading's own fit: its χ² is lower here, so the likelihood alone would
     # have chosen it
-    nested = tr._columns(g, [], sorted(cands, key=lambda c: c.params["time_s"]),
+    nested = tr_pairing._columns(g, [], sorted(cands, key=lambda c: c.params["time_s"]),
                          [(0, 3), (1, 2)])
     assert g.chi2(nested)[0] < chi
     # the sizes are the pair's own, refitted together
@@ -74,7 +75,7 @@ def test_an_edge_alone_inside_an_excursion_is_not_paired_across():
     th = 5.1
     edges = [(40000.0, 6e-4), (80000.0, -1.2e-3), (160000.0, -6e-4)]
     _y, g = _record(11, edges)
-    paired, _chi = tr._pairing(g, [_step(ts, a, th) for ts, a in edges], th, 1e-3)
+    paired, _chi = tr_pairing._pairing(g, [_step(ts, a, th) for ts, a in edges], th, 1e-3)
     assert [c.cause for c in paired] == ["bias_step"] * 3
 
 
@@ -94,7 +95,7 @@ def test_a_walks_level_shift_that_took_an_excursions_edge_is_tested_as_a_step(se
     box = cz.Candidate("excursion", True, {"start_s": tm, "end_s": t2, "size": shift}, 10.0,
                        6.07, intervals={"size": [shift - 4e-5, shift + 4e-5]})
     lone = replace(_step(t1, a, th), intervals={"size": [a - 6e-5, a + 6e-5]})
-    found = tr._weakest_edge(g, [box, lone], th, 1e-3)
+    found = tr_pairing._weakest_edge(g, [box, lone], th, 1e-3)
     assert found is not None
     margin, dropped, rest = found
     assert dropped.params["time_s"] == tm and margin < 1.0
@@ -102,7 +103,7 @@ def test_a_walks_level_shift_that_took_an_excursions_edge_is_tested_as_a_step(se
     # a true excursion's edge is not tested so: with its other edge alone, no edge takes
     # its place and the fit keeps fewer excursions
     true_box = replace(box, params={**box.params, "start_s": t1, "size": a})
-    assert tr._weakest_edge(g, [true_box], th, 1e-3) is None
+    assert tr_pairing._weakest_edge(g, [true_box], th, 1e-3) is None
 
 
 @pytest.mark.slow
