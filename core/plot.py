@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.errors import AvardError
-from avard.core.model.fit import ROUNDING
+from avard.core.model.fit.results import ROUNDING
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 
 _COLOURS = {"quantization": "#9467bd", "velocity_random_walk": "#1f77b4",

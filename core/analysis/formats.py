@@ -10,7 +10,7 @@ import numpy as np
 from avard.core.analysis.results import ESTIMATORS, Analysis, ChannelAnalysis
 from avard.core.analysis.spectrum import line_groups
 from avard.core.errors import FitError
-from avard.core.model.fit import RAMP_OR_WALK
+from avard.core.model.fit.results import RAMP_OR_WALK
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
 
 if TYPE_CHECKING:

@@ -148,7 +148,7 @@ def decimation_guard(fit: NoiseFit, allan: AllanResult, *, fit_kw: Mapping[str, 
         return fit
     # the long end is read by K and R together (``fit.with_long_tau_refuted`` flags both):
     # one of them in doubt leaves the other's reading of that end in doubt too
-    from avard.core.model.fit import LONG_TAU_TERMS
+    from avard.core.model.fit.results import LONG_TAU_TERMS
 
     doubt = [notes[t] for t in LONG_TAU_TERMS if t in notes]
     if doubt:

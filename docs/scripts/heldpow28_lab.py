@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from avard.core.explain import holdout as ho
 from avard.core.explain.verdict import _chi2_sf
 from avard.core.model import fit as F
+from avard.core.model.fit import problem as fit_problem
 
 N, B, K = 1.6e-4, 2e-5, 2e-6
 RATE, BLOCK = 10.0, 16
@@ -66,7 +67,7 @@ def axis(seed: int, hours: float, drive: float) -> tuple[np.ndarray, float]:
 
 
 def _focus_q(model, result, rng, extra_cov):  # type: ignore[no-untyped-def]
-    idx = F._usable(result, 3.0, 8.0, rng)
+    idx = fit_problem._usable(result, 3.0, 8.0, rng)
     cols = [k for k, c in enumerate(model.components) if c.label in LONG]
     if len(idx) < 3 or not cols:
         return math.nan, 0
@@ -76,7 +77,8 @@ def _focus_q(model, result, rng, extra_cov):  # type: ignore[no-untyped-def]
     th = np.asarray(model.theta, float)
     stride = np.asarray(getattr(result, "stride", np.ones_like(result.m)))[idx]
     C = F.avar_estimate_covariance(comps, th, np.asarray(result.m)[idx],
-                                   F._n_samples(result)[idx], float(result.rate_hz), stride)
+                                   fit_problem._n_samples(result)[idx], float(result.rate_hz),
+                                   stride)
     cov = np.array(model.theta_cov, float)
     for k, c in enumerate(comps):
         te = model.terms.get(c.label)

@@ -10,7 +10,8 @@ import pytest
 from avard.core.allan.deviations import allan_variance
 from avard.core.errors import FitError
 from avard.core.model import terms as M
-from avard.core.model.fit import NOT_RESOLVED, fit_noise, slope_method
+from avard.core.model.fit import fit_noise, slope_method
+from avard.core.model.fit.results import NOT_RESOLVED
 from avard.core.model.terms import TERMS
 from scipy import signal
 
@@ -336,7 +337,7 @@ def test_a_true_ramp_is_not_refuted_by_the_tau_beyond_the_fit(monkeypatch) -> No
     snapshot's fit of x and z over four seeds claims R resolved exactly as often with the
     check as without it (measured: 6 of 8)."""
     from avard.core.allan.streaming import StreamingAllan
-    from avard.core.model import fit as fit_mod
+    from avard.core.model.fit import noise as fit_mod
     from avard.core.sim.presets import make_config
     from avard.core.sim.simulate import SensorSimulator
 
@@ -408,7 +409,7 @@ _HIDDEN_K = [
 def test_a_random_walk_the_common_covariance_hid_is_found_where_the_fit_misfits(
         ratio, monkeypatch) -> None:
     from avard.core.allan.chi2 import chi2_sf
-    from avard.core.model import fit as fmod
+    from avard.core.model.fit import select as fmod
 
     rate, n = 10.0, 4 * 3600 * 10
     ms = 2 ** np.arange(16)

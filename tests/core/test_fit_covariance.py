@@ -97,6 +97,7 @@ def test_covariance_kernels_cached_scale_equals_the_direct_loop_to_the_bit() -> 
     import math
 
     from avard.core.model import fit as F
+    from avard.core.model.fit import components as fit_components
 
     rate = 124.9
     m = np.array([2, 4, 8, 16, 32, 64, 128, 256, 1024, 4096], dtype=np.int64)
@@ -124,5 +125,5 @@ def test_covariance_kernels_cached_scale_equals_the_direct_loop_to_the_bit() -> 
         comps = F.model_components(mdl.TERMS, [{"cause": "gauss_markov", "params": {"T": T}}],
                                    filter_corner_hz=rate / 4, rate_hz=rate)
         for stride in (np.ones(len(m), dtype=np.int64), np.maximum(m // 8, 1).astype(float)):
-            got = F._covariance_kernels(comps, m, stride, M, rate)
+            got = fit_components._covariance_kernels(comps, m, stride, M, rate)
             assert got.tobytes() == direct(comps, stride).tobytes()

@@ -5,7 +5,7 @@ itself otherwise), at the boundary, at zero and with infinities and NaN."""
 from __future__ import annotations
 
 import numpy as np
-from avard.core.model.fit import _settled
+from avard.core.model.fit.problem import _settled
 
 
 def test_equals_allclose() -> None:
@@ -29,7 +29,7 @@ def test_the_fits_inner_steps_equal_numpys_general_forms_to_the_bit() -> None:
     """The iteration's inner steps skip numpy's wrappers (norm, outer, diag_indices): the
     column norms, the whitener and the floored covariance equal the general forms bit for
     bit on random well- and badly-scaled problems."""
-    from avard.core.model import fit as F
+    from avard.core.model.fit import problem as F
     from avard.core.model.nnls import nnls
 
     rng = np.random.default_rng(21)

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 from avard.core.allan.deviations import allan_variance
-from avard.core.model.fit import NOT_RESOLVED, fit_noise
+from avard.core.model.fit import fit_noise
+from avard.core.model.fit.results import NOT_RESOLVED
 
 
 def test_only_the_upper_limits_go() -> None:

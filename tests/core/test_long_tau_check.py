@@ -12,13 +12,8 @@ from avard.core.analysis import long_tau_check as ltc
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.io.source import open_record
-from avard.core.model.fit import (
-    NOT_RESOLVED,
-    LongTauCurve,
-    fit_noise,
-    refuted_by,
-    with_long_tau_refuted,
-)
+from avard.core.model.fit import LongTauCurve, fit_noise, refuted_by, with_long_tau_refuted
+from avard.core.model.fit.results import NOT_RESOLVED
 from avard.core.sim.presets import make_config
 from avard.core.sim.simulate import SensorSimulator
 

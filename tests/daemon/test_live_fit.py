@@ -16,7 +16,7 @@ from avard.core.analysis.live_fit import is_not_resolved
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.analysis.signal_edf import with_signal_edf
 from avard.core.io.source import open_record
-from avard.core.model.fit import LONG_TAU_TERMS
+from avard.core.model.fit.results import LONG_TAU_TERMS
 from avard.core.sim.presets import make_config
 from avard.core.sim.sim_io import write_npz
 from avard.daemon.commands.watch import WatchView

@@ -14,7 +14,7 @@ from avard.core.analysis.engine import analyze
 from avard.core.analysis.formats import format_table
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.io.source import open_record
-from avard.core.model.fit import NOT_RESOLVED
+from avard.core.model.fit.results import NOT_RESOLVED
 from avard.core.sim.presets import make_config
 from avard.core.sim.simulate import SensorSimulator
 from avard.daemon.commands.watch import WatchView
