@@ -17,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from tests.support import adversary_gen4 as g  # noqa: E402
 
 AVARD = str(Path(sys.executable).with_name("avard"))
 
@@ -36,7 +35,10 @@ def cases(d: Path) -> dict[str, list[str]]:
     def add(name, path, *extra, cmd="analyze"):
         out[name] = [cmd, str(path), *extra]
 
-    add("inf", npz(d / "inf.npz", accel=np.where(np.arange(n)[:, None] == 500, np.inf, acc), rate_hz=10.0))
+    add(
+        "inf",
+        npz(d / "inf.npz", accel=np.where(np.arange(n)[:, None] == 500, np.inf, acc), rate_hz=10.0),
+    )
     add("huge", npz(d / "huge.npz", accel=acc * 1e200, rate_hz=10.0))
     add("huge_offset", npz(d / "huge_offset.npz", accel=acc + 1e12, rate_hz=10.0))
     add("tiny_offset_noise", npz(d / "tiny.npz", accel=acc * 1e-200, rate_hz=10.0))
@@ -54,24 +56,62 @@ def cases(d: Path) -> dict[str, list[str]]:
     add("str_rate", npz(d / "str_rate.npz", accel=acc, rate_hz=np.array("10")))
     add("arr_rate", npz(d / "arr_rate.npz", accel=acc, rate_hz=np.array([10.0, 20.0])))
     add("bool_accel", npz(d / "bool.npz", accel=acc > 0, rate_hz=10.0))
-    add("object", npz(d / "object.npz", accel=np.array([[1, "a"]] * 10, dtype=object), rate_hz=10.0))
+    add(
+        "object", npz(d / "object.npz", accel=np.array([[1, "a"]] * 10, dtype=object), rate_hz=10.0)
+    )
     temp = np.full(n, np.nan)
     temp[::10] = 22.0 + np.round(rng.standard_normal(n // 10) * 0.1 / 0.0625) * 0.0625
-    add("temp_short", npz(d / "temp_short.npz", accel=acc, rate_hz=10.0,
-                          temperature_c=temp[: n // 2]), cmd="explain")
-    add("temp_names_mismatch", npz(d / "temp_names.npz", accel=acc, rate_hz=10.0,
-                                   temperature_c=temp, temperature_names=np.array(["a", "b"])),
-        cmd="explain")
-    add("temp_dup_names", npz(d / "temp_dup.npz", accel=acc, rate_hz=10.0,
-                              temperature_c=np.column_stack([temp, temp]),
-                              temperature_names=np.array(["a", "a"])), cmd="explain")
-    add("temp_allnan", npz(d / "temp_nan.npz", accel=acc, rate_hz=10.0,
-                           temperature_c=np.full(n, np.nan)), cmd="explain")
-    add("temp_inf", npz(d / "temp_inf.npz", accel=acc, rate_hz=10.0,
-                        temperature_c=np.where(np.arange(n) == 1000, np.inf, temp)), cmd="explain")
-    add("temp_kelvin", npz(d / "temp_k.npz", accel=acc, rate_hz=10.0, temperature_c=temp + 273.15),
-        cmd="explain")
-    add("axes_mismatch", npz(d / "axes.npz", accel=acc, rate_hz=10.0, axes=np.array(["x", "y", "z"])))
+    add(
+        "temp_short",
+        npz(d / "temp_short.npz", accel=acc, rate_hz=10.0, temperature_c=temp[: n // 2]),
+        cmd="explain",
+    )
+    add(
+        "temp_names_mismatch",
+        npz(
+            d / "temp_names.npz",
+            accel=acc,
+            rate_hz=10.0,
+            temperature_c=temp,
+            temperature_names=np.array(["a", "b"]),
+        ),
+        cmd="explain",
+    )
+    add(
+        "temp_dup_names",
+        npz(
+            d / "temp_dup.npz",
+            accel=acc,
+            rate_hz=10.0,
+            temperature_c=np.column_stack([temp, temp]),
+            temperature_names=np.array(["a", "a"]),
+        ),
+        cmd="explain",
+    )
+    add(
+        "temp_allnan",
+        npz(d / "temp_nan.npz", accel=acc, rate_hz=10.0, temperature_c=np.full(n, np.nan)),
+        cmd="explain",
+    )
+    add(
+        "temp_inf",
+        npz(
+            d / "temp_inf.npz",
+            accel=acc,
+            rate_hz=10.0,
+            temperature_c=np.where(np.arange(n) == 1000, np.inf, temp),
+        ),
+        cmd="explain",
+    )
+    add(
+        "temp_kelvin",
+        npz(d / "temp_k.npz", accel=acc, rate_hz=10.0, temperature_c=temp + 273.15),
+        cmd="explain",
+    )
+    add(
+        "axes_mismatch",
+        npz(d / "axes.npz", accel=acc, rate_hz=10.0, axes=np.array(["x", "y", "z"])),
+    )
     add("axes_dup", npz(d / "axes_dup.npz", accel=acc, rate_hz=10.0, axes=np.array(["x", "x"])))
     # CSVs
     t = np.arange(n) / 10.0
@@ -83,25 +123,73 @@ def cases(d: Path) -> dict[str, list[str]]:
             np.savetxt(f, rows, fmt=fmt, delimiter=sep)
         return p
 
+    def body(bad_row=None, bad="", sep=","):
+        out_rows = []
+        for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1], strict=True)):
+            out_rows.append(f"{a},{b}{bad}" if i == bad_row else f"{a},{b},{c}")
+        return "\n".join(out_rows)
+
     add("csv_ok", csv("ok.csv", "t,x,y", np.column_stack([t, acc])))
     add("csv_dup_header", csv("dup.csv", "t,x,x", np.column_stack([t, acc])))
     add("csv_empty_name", csv("empty.csv", "t,,y", np.column_stack([t, acc])))
     add("csv_only_t", csv("only_t.csv", "t", t[:, None]))
     add("csv_only_temp", csv("only_temp.csv", "t,temp_plate", np.column_stack([t, t * 0 + 22])))
     tr = t.copy()
-    tr[n // 2:] = tr[n // 2:] - 0.05  # a 0.5 spacing clock step back... makes t repeat-ish
-    add("csv_rate_change", csv("rate_change.csv", "t,x,y",
-                               np.column_stack([np.concatenate([t[: n // 2], t[n // 2 - 1] + 0.05 * np.arange(1, n - n // 2 + 1)]), acc])))
+    tr[n // 2 :] = tr[n // 2 :] - 0.05  # a 0.5 spacing clock step back... makes t repeat-ish
+    add(
+        "csv_rate_change",
+        csv(
+            "rate_change.csv",
+            "t,x,y",
+            np.column_stack(
+                [
+                    np.concatenate(
+                        [t[: n // 2], t[n // 2 - 1] + 0.05 * np.arange(1, n - n // 2 + 1)]
+                    ),
+                    acc,
+                ]
+            ),
+        ),
+    )
     add("csv_bom", Path(d / "bom.csv"))
-    (d / "bom.csv").write_text("\ufefft,x,y\n" + "\n".join(f"{a},{b},{c}" for a, b, c in zip(t, acc[:, 0], acc[:, 1])), encoding="utf-8")
+    (d / "bom.csv").write_text(
+        "\ufefft,x,y\n"
+        + body(),
+        encoding="utf-8",
+    )
     add("csv_quoted", Path(d / "quoted.csv"))
-    (d / "quoted.csv").write_text('"t","x","y"\n' + "\n".join(f"{a},{b},{c}" for a, b, c in zip(t, acc[:, 0], acc[:, 1])), encoding="utf-8")
+    (d / "quoted.csv").write_text(
+        '"t","x","y"\n'
+        + body(),
+        encoding="utf-8",
+    )
     add("csv_ragged", Path(d / "ragged.csv"))
-    (d / "ragged.csv").write_text("t,x,y\n" + "\n".join(f"{a},{b},{c}" if i != 100 else f"{a},{b}" for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1]))), encoding="utf-8")
+    (d / "ragged.csv").write_text(
+        "t,x,y\n"
+        + "\n".join(
+            f"{a},{b},{c}" if i != 100 else f"{a},{b}"
+            for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1], strict=False))
+        ),
+        encoding="utf-8",
+    )
     add("csv_text_cell", Path(d / "text.csv"))
-    (d / "text.csv").write_text("t,x,y\n" + "\n".join(f"{a},{b},{c}" if i != 100 else f"{a},{b},abc" for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1]))), encoding="utf-8")
+    (d / "text.csv").write_text(
+        "t,x,y\n"
+        + "\n".join(
+            f"{a},{b},{c}" if i != 100 else f"{a},{b},abc"
+            for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1], strict=False))
+        ),
+        encoding="utf-8",
+    )
     add("csv_empty_cell", Path(d / "emptycell.csv"))
-    (d / "emptycell.csv").write_text("t,x,y\n" + "\n".join(f"{a},{b},{c}" if i != 100 else f"{a},{b}," for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1]))), encoding="utf-8")
+    (d / "emptycell.csv").write_text(
+        "t,x,y\n"
+        + "\n".join(
+            f"{a},{b},{c}" if i != 100 else f"{a},{b},"
+            for i, (a, b, c) in enumerate(zip(t, acc[:, 0], acc[:, 1], strict=False))
+        ),
+        encoding="utf-8",
+    )
     add("csv_header_only", Path(d / "hdr.csv"))
     (d / "hdr.csv").write_text("t,x,y\n", encoding="utf-8")
     add("csv_empty", Path(d / "empty0.csv"))

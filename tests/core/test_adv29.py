@@ -9,13 +9,13 @@ import warnings
 
 import numpy as np
 import pytest
-
 from avard.core.analysis.engine import analyze
 from avard.core.analysis.options import AnalyzeOptions
 from avard.core.errors import DataError, FitError
 from avard.core.explain.engine import explain_file
 from avard.core.explain.options import ExplainOptions
 from avard.core.io.source import open_record
+
 from tests.support import adversary_gen4 as gen
 
 

@@ -47,19 +47,27 @@ def lag(x: np.ndarray, rate_hz: float, tau_s: float) -> np.ndarray:
     return y
 
 
-def ds18b20(temp: np.ndarray, rate_hz: float, period_s: float = 1.0, step_k: float = 0.0625,
-            phase: int = 0) -> np.ndarray:
+def ds18b20(
+    temp: np.ndarray, rate_hz: float, period_s: float = 1.0, step_k: float = 0.0625, phase: int = 0
+) -> np.ndarray:
     """A DS18B20 log on the sample grid: a reading every period_s, rounded to step_k, NaN
     between readings (the shape docs/explain.md says avard's own records hold)."""
     out = np.full(temp.shape, np.nan)
-    every = max(1, int(round(period_s * rate_hz)))
+    every = max(1, round(period_s * rate_hz))
     idx = np.arange(phase, temp.size, every)
     out[idx] = np.round(temp[idx] / step_k) * step_k
     return out
 
 
-def room(n: int, rate_hz: float, mean_c: float, amp_k: float, period_s: float,
-         rng: np.random.Generator, wander_k: float = 0.0) -> np.ndarray:
+def room(
+    n: int,
+    rate_hz: float,
+    mean_c: float,
+    amp_k: float,
+    period_s: float,
+    rng: np.random.Generator,
+    wander_k: float = 0.0,
+) -> np.ndarray:
     t = np.arange(n) / rate_hz
     r = mean_c + amp_k * np.sin(2 * np.pi * t / period_s + rng.uniform(0, 2 * np.pi))
     if wander_k:
@@ -69,10 +77,16 @@ def room(n: int, rate_hz: float, mean_c: float, amp_k: float, period_s: float,
     return r
 
 
-def base(hours: float, rate_hz: float, channels: int, seed: int,
-         n_density: float = G_NOISE_N, k: float = 0.0) -> tuple[np.ndarray, np.random.Generator]:
+def base(
+    hours: float,
+    rate_hz: float,
+    channels: int,
+    seed: int,
+    n_density: float = G_NOISE_N,
+    k: float = 0.0,
+) -> tuple[np.ndarray, np.random.Generator]:
     rng = np.random.default_rng(seed)
-    n = int(round(hours * 3600 * rate_hz))
+    n = round(hours * 3600 * rate_hz)
     acc = np.empty((n, channels))
     for c in range(channels):
         acc[:, c] = white(n, rate_hz, n_density, rng)
@@ -99,30 +113,51 @@ def save(path: str | Path, arrays: dict, truth: dict) -> Path:
 
 # ---- the cases ------------------------------------------------------------------------
 
-def coupled(hours: float = 2.0, rate_hz: float = 10.0, seed: int = 0, c: float = 2e-3,
-            lag_s: float = 300.0, room_amp: float = 1.0, room_period: float = 1800.0,
-            period_s: float = 1.0, step_k: float = 0.0625, channels: int = 2) -> tuple[dict, dict, np.ndarray]:
+
+def coupled(
+    hours: float = 2.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    c: float = 2e-3,
+    lag_s: float = 300.0,
+    room_amp: float = 1.0,
+    room_period: float = 1800.0,
+    period_s: float = 1.0,
+    step_k: float = 0.0625,
+    channels: int = 2,
+) -> tuple[dict, dict, np.ndarray]:
     """Axis x coupled to the plate through a lag, y not; the plate is logged. Returns also the
     true plate temperature (for faulty-log variants)."""
     acc, rng = base(hours, rate_hz, channels, seed)
     n = acc.shape[0]
     plate = room(n, rate_hz, 22.0, room_amp, room_period, rng)
     acc[:, 0] += c * (lag(plate, rate_hz, lag_s) - 22.0)
-    truth = {"rate_hz": rate_hz, "hours": hours, "N": G_NOISE_N,
-             "x": {"coupling": c, "lag_s": lag_s, "channel": "plate"}, "y": {"coupling": 0.0}}
+    truth = {
+        "rate_hz": rate_hz,
+        "hours": hours,
+        "N": G_NOISE_N,
+        "x": {"coupling": c, "lag_s": lag_s, "channel": "plate"},
+        "y": {"coupling": 0.0},
+    }
     return pack(acc, rate_hz, {"plate": ds18b20(plate, rate_hz, period_s, step_k)}), truth, plate
 
 
-def step_record(hours: float = 2.0, rate_hz: float = 10.0, seed: int = 0, size: float = 3e-4,
-                at_frac: float = 0.5) -> tuple[dict, dict]:
-    acc, rng = base(hours, rate_hz, 2, seed)
+def step_record(
+    hours: float = 2.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    size: float = 3e-4,
+    at_frac: float = 0.5,
+) -> tuple[dict, dict]:
+    acc, _rng = base(hours, rate_hz, 2, seed)
     i = int(at_frac * acc.shape[0])
     acc[i:, 0] += size
     return pack(acc, rate_hz), {"x": {"bias_step": size, "t_s": i / rate_hz}, "N": G_NOISE_N}
 
 
-def gauss_markov(n: int, rate_hz: float, sigma: float, t_s: float,
-                 rng: np.random.Generator) -> np.ndarray:
+def gauss_markov(
+    n: int, rate_hz: float, sigma: float, t_s: float, rng: np.random.Generator
+) -> np.ndarray:
     """First-order Gauss–Markov (OU) process of stationary SD sigma and correlation time t_s."""
     a = np.exp(-1.0 / (rate_hz * t_s))
     w = rng.standard_normal(n) * sigma * np.sqrt(1 - a * a)
@@ -134,9 +169,15 @@ def gauss_markov(n: int, rate_hz: float, sigma: float, t_s: float,
     return y
 
 
-def gm_plus_slow_sine(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
-                      sigma: float = 1.5e-4, t_s: float = 120.0, amp: float = 1e-4,
-                      period_s: float = 5400.0) -> tuple[dict, dict]:
+def gm_plus_slow_sine(
+    hours: float = 4.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    sigma: float = 1.5e-4,
+    t_s: float = 120.0,
+    amp: float = 1e-4,
+    period_s: float = 5400.0,
+) -> tuple[dict, dict]:
     """Axis x: a Gauss–Markov process and a slow sinusoid (below a line finder's band);
     axis y: a null axis. No temperature."""
     acc, rng = base(hours, rate_hz, 2, seed)
@@ -145,15 +186,28 @@ def gm_plus_slow_sine(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
     acc[:, 0] += gauss_markov(n, rate_hz, sigma, t_s, rng)
     ph = rng.uniform(0, 2 * np.pi)
     acc[:, 0] += amp * np.sin(2 * np.pi * t / period_s + ph)
-    truth = {"x": {"gauss_markov": {"sigma": sigma, "T_s": t_s},
-                   "sine": {"amp": amp, "f_hz": 1 / period_s}}, "y": {}, "N": G_NOISE_N}
+    truth = {
+        "x": {
+            "gauss_markov": {"sigma": sigma, "T_s": t_s},
+            "sine": {"amp": amp, "f_hz": 1 / period_s},
+        },
+        "y": {},
+        "N": G_NOISE_N,
+    }
     return pack(acc, rate_hz), truth
 
 
-def negative_lag_coarse(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
-                        c: float = 2e-3, die_lag_s: float = 30.0, log_lag_s: float = 300.0,
-                        room_amp: float = 2.0, room_period: float = 2400.0,
-                        step_k: float = 0.5) -> tuple[dict, dict]:
+def negative_lag_coarse(
+    hours: float = 4.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    c: float = 2e-3,
+    die_lag_s: float = 30.0,
+    log_lag_s: float = 300.0,
+    room_amp: float = 2.0,
+    room_period: float = 2400.0,
+    step_k: float = 0.5,
+) -> tuple[dict, dict]:
     """The die follows the plate in die_lag_s; the logged DS18B20 follows the die in
     log_lag_s (slower than the die: a negative lag) and reads at step_k (a 9-bit 0.5 K)."""
     acc, rng = base(hours, rate_hz, 2, seed)
@@ -162,16 +216,31 @@ def negative_lag_coarse(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0
     die = lag(plate, rate_hz, die_lag_s)
     logged = lag(die, rate_hz, log_lag_s)
     acc[:, 0] += c * (die - 22.0)
-    truth = {"x": {"coupling": c, "lag_s": -log_lag_s, "channel": "plate",
-                   "note": "the log lags the die by log_lag_s: lag relative to the log is negative"},
-             "y": {"coupling": 0.0}, "step_k": step_k, "N": G_NOISE_N}
+    truth = {
+        "x": {
+            "coupling": c,
+            "lag_s": -log_lag_s,
+            "channel": "plate",
+            "note": "the log lags the die by log_lag_s: lag relative to the log is negative",
+        },
+        "y": {"coupling": 0.0},
+        "step_k": step_k,
+        "N": G_NOISE_N,
+    }
     return pack(acc, rate_hz, {"plate": ds18b20(logged, rate_hz, 1.0, step_k)}), truth
 
 
-def relay_step_at_switch(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
-                         c: float = 1e-3, h: float = 2e-4, width_k: float = 0.4,
-                         step: float = 4e-4, room_amp: float = 1.5,
-                         room_period: float = 1800.0) -> tuple[dict, dict]:
+def relay_step_at_switch(
+    hours: float = 4.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    c: float = 1e-3,
+    h: float = 2e-4,
+    width_k: float = 0.4,
+    step: float = 4e-4,
+    room_amp: float = 1.5,
+    room_period: float = 1800.0,
+) -> tuple[dict, dict]:
     """Axis x: a linear coupling (no lag) plus a relay (hysteresis, ±h switching at the
     plate's mean ± width_k), and a bias step placed exactly at the relay's switch nearest
     mid-record."""
@@ -190,16 +259,32 @@ def relay_step_at_switch(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 
     at = int(switches[np.argmin(np.abs(switches - n // 2))])
     acc[:, 0] += c * (plate - 22.0) + h * state
     acc[at:, 0] += step
-    truth = {"x": {"coupling": c, "relay_h": h, "relay_width_k": width_k,
-                   "bias_step": step, "step_t_s": at / rate_hz},
-             "y": {"coupling": 0.0}, "N": G_NOISE_N}
+    truth = {
+        "x": {
+            "coupling": c,
+            "relay_h": h,
+            "relay_width_k": width_k,
+            "bias_step": step,
+            "step_t_s": at / rate_hz,
+        },
+        "y": {"coupling": 0.0},
+        "N": G_NOISE_N,
+    }
     return pack(acc, rate_hz, {"plate": ds18b20(plate, rate_hz)}), truth
 
 
-def remount_warmup(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
-                   c1: float = 2e-3, c2: float = -2e-3, lag_s: float = 120.0,
-                   warm: float = 5e-4, warm_t: float = 900.0, room_amp: float = 1.0,
-                   room_period: float = 1500.0) -> tuple[dict, dict]:
+def remount_warmup(
+    hours: float = 4.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    c1: float = 2e-3,
+    c2: float = -2e-3,
+    lag_s: float = 120.0,
+    warm: float = 5e-4,
+    warm_t: float = 900.0,
+    room_amp: float = 1.0,
+    room_period: float = 1500.0,
+) -> tuple[dict, dict]:
     """Axis x: a coupling that flips sign at mid-record (the sensor re-mounted) and a warm-up
     A·exp(-t/T) at the start."""
     acc, rng = base(hours, rate_hz, 2, seed)
@@ -209,15 +294,32 @@ def remount_warmup(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0,
     lp = lag(plate, rate_hz, lag_s) - 22.0
     cc = np.where(np.arange(n) < n // 2, c1, c2)
     acc[:, 0] += cc * lp + warm * np.exp(-t / warm_t)
-    truth = {"x": {"coupling_before": c1, "coupling_after": c2, "change_t_s": (n // 2) / rate_hz,
-                   "lag_s": lag_s, "warmup": warm, "warmup_T_s": warm_t},
-             "y": {"coupling": 0.0}, "N": G_NOISE_N}
+    truth = {
+        "x": {
+            "coupling_before": c1,
+            "coupling_after": c2,
+            "change_t_s": (n // 2) / rate_hz,
+            "lag_s": lag_s,
+            "warmup": warm,
+            "warmup_T_s": warm_t,
+        },
+        "y": {"coupling": 0.0},
+        "N": G_NOISE_N,
+    }
     return pack(acc, rate_hz, {"plate": ds18b20(plate, rate_hz)}), truth
 
 
-def coupling_step(hours: float = 2.0, rate_hz: float = 10.0, seed: int = 0, c: float = 1e-3,
-                  lag_s: float = 0.0, step: float = 4e-4, at_frac: float = 0.3,
-                  room_amp: float = 1.5, room_period: float = 1800.0) -> tuple[dict, dict]:
+def coupling_step(
+    hours: float = 2.0,
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    c: float = 1e-3,
+    lag_s: float = 0.0,
+    step: float = 4e-4,
+    at_frac: float = 0.3,
+    room_amp: float = 1.5,
+    room_period: float = 1800.0,
+) -> tuple[dict, dict]:
     """Axis x: a temperature coupling c through lag_s on the logged plate, and one bias step
     of `step` at at_frac of the record (a bump to the bench during a cycling room); y null.
     The whole truth is inside explain's candidate set (one lag + a step)."""
@@ -227,6 +329,15 @@ def coupling_step(hours: float = 2.0, rate_hz: float = 10.0, seed: int = 0, c: f
     acc[:, 0] += c * (lag(plate, rate_hz, lag_s) - 22.0)
     i = int(at_frac * n)
     acc[i:, 0] += step
-    truth = {"x": {"coupling": c, "lag_s": lag_s, "channel": "plate", "bias_step": step,
-                   "step_t_s": i / rate_hz}, "y": {"coupling": 0.0}, "N": G_NOISE_N}
+    truth = {
+        "x": {
+            "coupling": c,
+            "lag_s": lag_s,
+            "channel": "plate",
+            "bias_step": step,
+            "step_t_s": i / rate_hz,
+        },
+        "y": {"coupling": 0.0},
+        "N": G_NOISE_N,
+    }
     return pack(acc, rate_hz, {"plate": ds18b20(plate, rate_hz)}), truth
