@@ -341,3 +341,47 @@ def coupling_step(
         "N": G_NOISE_N,
     }
     return pack(acc, rate_hz, {"plate": ds18b20(plate, rate_hz)}), truth
+
+
+def faulty_log(kind: str, hours: float = 2.0, rate_hz: float = 10.0, seed: int = 0,
+               c: float = 2e-3, lag_s: float = 120.0) -> tuple[dict, dict]:
+    """A coupled record (x through lag_s on the plate, y null) whose plate log has a fault the
+    docs do not list:
+
+    - ``interleaved``: a second DS18B20 (ambient, 2 K warmer, its own cycle) answers on every
+      other reading of the same column (two sensors on one 1-Wire name);
+    - ``units``: the logger switches from °C to °F at mid-record;
+    - ``clockstep``: the log's clock steps back 600 s at mid-record (readings after it sit
+      600 s late on the sample grid: they show the temperature of 10 minutes before);
+    - ``late_start_warm``: the log starts 1 h after the acceleration, and the axis has a
+      warm-up in that first hour.
+    """
+    arrays, truth, plate = coupled(hours, rate_hz, seed, c, lag_s, room_amp=1.0,
+                                   room_period=1500.0)
+    n = plate.size
+    t_log = arrays["temperature_c"][:, 0].copy()
+    rng = np.random.default_rng(seed + 1000)
+    idx = np.flatnonzero(np.isfinite(t_log))
+    if kind == "interleaved":
+        amb = room(n, rate_hz, 24.0, 2.0, 2700.0, rng)
+        odd = idx[1::2]
+        t_log[odd] = np.round(amb[odd] / 0.0625) * 0.0625
+    elif kind == "units":
+        later = idx[idx >= n // 2]
+        t_log[later] = np.round((t_log[later] * 1.8 + 32) / 0.1125) * 0.1125
+    elif kind == "clockstep":
+        shift = int(600 * rate_hz)
+        later = idx[idx >= n // 2]
+        src = later - shift
+        t_log[later] = np.round(plate[src] / 0.0625) * 0.0625
+    elif kind == "late_start_warm":
+        t_log[: int(3600 * rate_hz)] = np.nan
+        t = np.arange(n) / rate_hz
+        arrays["accel"][:, 0] += 5e-4 * np.exp(-t / 900.0)
+        truth["x"]["warmup"] = 5e-4
+        truth["x"]["warmup_T_s"] = 900.0
+    else:
+        raise ValueError(kind)
+    arrays["temperature_c"] = t_log[:, None]
+    truth["fault"] = kind
+    return arrays, truth
