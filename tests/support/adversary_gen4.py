@@ -385,3 +385,14 @@ def faulty_log(kind: str, hours: float = 2.0, rate_hz: float = 10.0, seed: int =
     arrays["temperature_c"] = t_log[:, None]
     truth["fault"] = kind
     return arrays, truth
+
+
+def gm_step(hours: float = 4.0, rate_hz: float = 10.0, seed: int = 0, sigma: float = 1.7e-4,
+            t_s: float = 30.0, step: float = 4e-4, at_frac: float = 0.3) -> tuple[dict, dict]:
+    """Axis x: a Gauss–Markov process and one bias step; y null; no temperature."""
+    arrays, truth = gm_plus_slow_sine(hours, rate_hz, seed, sigma=sigma, t_s=t_s, amp=0.0)
+    i = int(at_frac * arrays["accel"].shape[0])
+    arrays["accel"][i:, 0] += step
+    truth["x"]["bias_step"] = step
+    truth["x"]["step_t_s"] = i / rate_hz
+    return arrays, truth
