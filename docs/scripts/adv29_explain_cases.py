@@ -14,6 +14,8 @@ fit's K, and the truth. Cases (seeds as run for docs/log/2026-11-29-adv29.md):
   remount_warm    coupling flipping sign at mid-record + a warm-up, 4 h, seeds 1, 2
   neg05           negative lag (log 300 s behind the die) on a 0.5 K log, 4 h, seeds 1, 2
   faulty_*        interleaved / units / clockstep / late_start_warm logs (2–3 h), seed 1
+  gm_step         Gauss–Markov (1.7e-4, 30 s) + a step 4e-4 / 8e-4 / 1.6e-3 at 30 %, 4 h;
+                  white_step the control: white noise of the same long-τ level (N 1.32e-3)
 """
 
 from __future__ import annotations
@@ -28,6 +30,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from tests.support import adversary_gen4 as g
 
 AVARD = str(Path(sys.executable).with_name("avard"))
+
+
+def _white_step(size: float, seed: int = 8):
+    acc, _rng = g.base(4.0, 10.0, 2, seed, n_density=1.32e-3)
+    i = int(0.3 * acc.shape[0])
+    acc[i:, 0] += size
+    return g.pack(acc, 10.0), {"x": {"bias_step": size, "step_t_s": i / 10.0}, "N": 1.32e-3}
 
 
 def builders():
@@ -51,6 +60,11 @@ def builders():
         b[f"neg05_{s}"] = lambda s=s: g.negative_lag_coarse(seed=s)
     for k in ("interleaved", "units", "clockstep"):
         b[f"faulty_{k}_1"] = lambda k=k: g.faulty_log(k, seed=1)
+    for s in (7, 8, 9, 10):
+        b[f"gm_step4_{s}"] = lambda s=s: g.gm_step(seed=s)
+    for size in (8e-4, 1.6e-3):
+        b[f"gm_step_{size:g}_8"] = lambda size=size: g.gm_step(seed=8, step=size)
+        b[f"white_step_{size:g}_8"] = lambda size=size: _white_step(size)
     b["faulty_late_start_warm_1"] = lambda: g.faulty_log("late_start_warm", hours=3.0, seed=1)
     return b
 
