@@ -13,6 +13,7 @@ fit's K, and the truth. Cases (seeds as run for docs/log/2026-11-29-adv29.md):
   relay           linear coupling + relay (c > 0), 4 h, seeds 1–6; relay_step: + a step at a switch
   remount_warm    coupling flipping sign at mid-record + a warm-up, 4 h, seeds 1, 2
   neg05           negative lag (log 300 s behind the die) on a 0.5 K log, 4 h, seeds 1, 2
+  step_in_gap     one lag + a step inside a 25-min dropout of the log, 4 h, seeds 41, 42
   faulty_*        interleaved / units / clockstep / late_start_warm logs (2–3 h), seed 1
   gm_step         Gauss–Markov (1.7e-4, 30 s) + a step 4e-4 / 8e-4 / 1.6e-3 at 30 %, 4 h;
                   white_step the control: white noise of the same long-τ level (N 1.32e-3)
@@ -37,6 +38,15 @@ def _white_step(size: float, seed: int = 8):
     i = int(0.3 * acc.shape[0])
     acc[i:, 0] += size
     return g.pack(acc, 10.0), {"x": {"bias_step": size, "step_t_s": i / 10.0}, "N": 1.32e-3}
+
+
+def _step_in_gap(seed: int):
+    arrays, truth = g.coupling_step(hours=4.0, seed=seed, lag_s=120.0, at_frac=0.5)
+    t = arrays["temperature_c"]
+    n = t.shape[0]
+    t[n // 2 - 7500: n // 2 + 7500] = float("nan")   # a 25-minute dropout around the step
+    truth["dropout_s"] = [(n // 2 - 7500) / 10.0, (n // 2 + 7500) / 10.0]
+    return arrays, truth
 
 
 def builders():
@@ -65,6 +75,8 @@ def builders():
     for size in (8e-4, 1.6e-3):
         b[f"gm_step_{size:g}_8"] = lambda size=size: g.gm_step(seed=8, step=size)
         b[f"white_step_{size:g}_8"] = lambda size=size: _white_step(size)
+    for s in (41, 42):
+        b[f"step_in_gap_{s}"] = lambda s=s: _step_in_gap(s)
     b["faulty_late_start_warm_1"] = lambda: g.faulty_log("late_start_warm", hours=3.0, seed=1)
     return b
 

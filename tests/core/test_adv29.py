@@ -123,7 +123,7 @@ def test_values_whose_squares_overflow_are_not_called_constant(tmp_path):
     with warnings.catch_warnings(), pytest.raises((DataError, FitError)) as err:
         warnings.simplefilter("ignore", RuntimeWarning)   # the overflow itself, inside numpy
         analyze(open_record(path), AnalyzeOptions())
-    assert "constant" not in str(err.value), str(err.value)
+    assert "constant" not in str(err.value).replace(str(path), ""), str(err.value)
 
 
 @pytest.mark.xfail(strict=True, reason=(
@@ -191,4 +191,26 @@ def test_a_csv_with_empty_temperature_cells_is_read_or_told_to_write_nan(tmp_pat
         for _ in src.blocks():
             pass
     except DataError as err:
-        assert "nan" in str(err).lower(), str(err)
+        assert "nan" in str(err).replace(str(path), "").lower(), str(err)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "adv29 D10: a 4e-4 m/s² bias step inside a 25-minute dropout of the driving temperature "
+    "log is dropped by design (a hole in a log is not a cause) but the text summary never "
+    "says so (only --json's evidence does), and the axis is said to fit with a rate random "
+    "walk K 3.2e-7 [2.0e-7, 4.1e-7] (truth 0) (core/explain/report.py summary, "
+    "engine/compound.py _not_in_hole)"))
+def test_a_step_in_a_log_hole_is_said_in_the_text(tmp_path):
+    from avard.core.explain.report import summary
+
+    arrays, truth = gen.coupling_step(hours=4.0, seed=41, lag_s=120.0, at_frac=0.5)
+    t = arrays["temperature_c"]
+    n = t.shape[0]
+    t[n // 2 - 7500: n // 2 + 7500] = np.nan
+    path = gen.save(tmp_path / "stepgap.npz", arrays, truth)
+    ex = explain_file(open_record(path), ExplainOptions(channels=("ch0",)))
+    text = summary(ex).replace(str(path), "RECORD")   # tmp_path's name holds "step" and "hole"
+    ch = ex.to_dict()["channels"]["ch0"]
+    claimed = [f["cause"] for f in ch["findings"] if f["claimed"]]
+    said = "hole" in text and ("step" in text or "transient" in text)
+    assert "bias_step" in claimed or said or not ch["verdict"]["explained"], text[-1500:]
