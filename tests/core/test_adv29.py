@@ -70,11 +70,6 @@ def _rate_change_csv(path):
     return path, float(t[-1] - t[0] + 1 / 8.0)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D3: a CSV whose t column changes from 10 Hz to 8 Hz midway (spacing ×1.25, under "
-    "the 1.5-spacing hole rule) is read at 10 Hz end to end with no word: 1 h said for 1.1 h, "
-    "N 1.497e-4 [1.491e-4, 1.502e-4] against the true 1.56e-4 (core/io/readers.py "
-    "_rate_from_t takes the first chunk's median, _check_times looks only for holes)"))
 def test_a_csv_whose_rate_changes_midway_is_refused_or_read_at_its_times(tmp_path):
     path, span = _rate_change_csv(tmp_path / "rate.csv")
     try:
@@ -84,10 +79,6 @@ def test_a_csv_whose_rate_changes_midway_is_refused_or_read_at_its_times(tmp_pat
     assert abs(an.n_samples / an.rate_hz - span) / span < 0.01, (an.n_samples, an.rate_hz, span)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D4: temperature_names with 2 names for a 1-column temperature_c is silently ignored "
-    "(the log becomes 'temp0'); the same mismatch in 'axes' is refused with exit status 2 "
-    "(core/io/readers.py)"))
 def test_temperature_names_that_do_not_match_the_columns_are_refused(tmp_path):
     arrays, truth, _ = gen.coupled(hours=0.5, seed=1)
     arrays["temperature_names"] = np.array(["plate", "ambient"])
@@ -98,10 +89,6 @@ def test_temperature_names_that_do_not_match_the_columns_are_refused(tmp_path):
             pass
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D5: an inf in a DS18B20 log is dropped without being counted: the screen says "
-    "'nothing masked (no … read error …)' although −55…125 °C is the read-error rule "
-    "(core/io/screen)"))
 def test_an_infinite_temperature_reading_is_screened_and_counted(tmp_path):
     arrays, truth, _ = gen.coupled(hours=1.0, seed=1, c=5e-3, lag_s=120.0, room_period=1200.0)
     t = arrays["temperature_c"].copy()
@@ -113,9 +100,6 @@ def test_an_infinite_temperature_reading_is_screened_and_counted(tmp_path):
     assert ex.screen.counts().get("read_error", 0) == 1, ex.screen.counts()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D6: acceleration ×1e200 (its squares overflow) is refused as 'the channel is "
-    "constant (no noise to fit)', which is false; the message should name the overflow"))
 def test_values_whose_squares_overflow_are_not_called_constant(tmp_path):
     rng = np.random.default_rng(29)
     path = tmp_path / "huge.npz"
@@ -173,11 +157,6 @@ def test_the_same_step_in_white_noise_of_that_level_is_found(tmp_path):
     assert steps and abs(steps[0]["params"]["size"] / 8e-4 - 1) < 0.2
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D9: a CSV whose temp_* column is empty between DS18B20 readings (what pandas' "
-    "to_csv writes for NaN) is refused with \"could not convert string '' to float64 … every "
-    "field must be a number\"; the docs ask for NaN between readings and the message never "
-    "says so (core/io/readers.py _csv_chunks)"))
 def test_a_csv_with_empty_temperature_cells_is_read_or_told_to_write_nan(tmp_path):
     arrays, _truth, _ = gen.coupled(hours=0.25, seed=21)
     acc, temp = arrays["accel"], arrays["temperature_c"][:, 0]
@@ -188,10 +167,13 @@ def test_a_csv_with_empty_temperature_cells_is_read_or_told_to_write_nan(tmp_pat
     path.write_text("t,x,y,temp_plate\n" + "\n".join(rows) + "\n", encoding="utf-8")
     try:
         src = open_record(path)
-        for _ in src.blocks():
-            pass
+        got = np.concatenate([tb[:, 0] for _a, tb, *_ in src.blocks()])
     except DataError as err:
         assert "nan" in str(err).replace(str(path), "").lower(), str(err)
+        return
+    # read: an empty cell is no reading, every reading its value
+    assert np.array_equal(np.isnan(got), np.isnan(temp))
+    np.testing.assert_allclose(got[~np.isnan(temp)], temp[~np.isnan(temp)], rtol=1e-12)
 
 
 @pytest.mark.xfail(strict=True, reason=(
@@ -214,3 +196,40 @@ def test_a_step_in_a_log_hole_is_said_in_the_text(tmp_path):
     claimed = [f["cause"] for f in ch["findings"] if f["claimed"]]
     said = "hole" in text and ("step" in text or "transient" in text)
     assert "bias_step" in claimed or said or not ch["verdict"]["explained"], text[-1500:]
+
+
+@pytest.mark.parametrize("rate, jitter, ppm, digits", [(10.0, 0.3, 200.0, 4), (3.0, 0.0, 0.0, 1),
+                                                       (124.9, 0.2, -150.0, 3)])
+def test_a_csv_of_one_rate_with_jitter_rounding_and_a_clock_offset_is_read_whole(
+        tmp_path, rate, jitter, ppm, digits):
+    """The rate-change rule's other side: one rate with timestamp jitter (a fraction of a
+    spacing), a clock some ppm off and times printed coarsely (3 Hz to 0.1 s: spacings 0.3
+    and 0.4) is read end to end, at its mean rate."""
+    rng = np.random.default_rng(7)
+    n = 120_000 if rate > 5 else 20_000
+    true = rate * (1 + ppm * 1e-6)
+    t = np.arange(n) / true + rng.uniform(-jitter, jitter, n) / true * 0.5
+    acc = rng.normal(0, 1e-3, (n, 2))
+    path = tmp_path / "one_rate.csv"
+    lines = [f"{t[i]:.{digits}f},{acc[i, 0]:.6g},{acc[i, 1]:.6g}" for i in range(n)]
+    path.write_text("t,x,y\n" + "\n".join(lines) + "\n", encoding="utf-8")
+    src = open_record(path)
+    total = sum(len(a) for a, *_ in src.blocks())
+    assert total == n
+    assert abs(src.info.rate_hz / true - 1) < 2e-3, src.info.rate_hz
+
+
+def test_a_csv_that_speeds_up_midway_is_refused_in_one_line(tmp_path):
+    """A faster part (a spacing 0.8 of the first rows') is a rate change too, said with the
+    time it shows and the spacing there."""
+    rng = np.random.default_rng(8)
+    t = np.concatenate([np.arange(20_000) * 0.1, 2000.0 + np.arange(20_000) * 0.08])
+    acc = rng.normal(0, 1e-3, (len(t), 1))
+    path = tmp_path / "faster.csv"
+    rows = (f"{a:.3f},{b:.6g}" for a, b in zip(t, acc[:, 0], strict=True))
+    path.write_text("t,x\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    with pytest.raises(DataError) as err:
+        for _ in open_record(path).blocks():
+            pass
+    msg = str(err.value)
+    assert "\n" not in msg and "leaves the rate" in msg and "0.08" in msg, msg

@@ -33,10 +33,10 @@ at ``HELD_ALARM`` per record (``held_threshold``, ``HeldAccel``: judged over the
 bounded memory, a run across blocks one stretch). It is cut out as a gap on every axis, like a
 shock, and its rows are left out of the shock rule's scale.
 
-**Temperature** (each DS18B20 channel, readings where the column is finite):
+**Temperature** (each DS18B20 channel, readings where the column is not NaN):
 
-- ``read_error``: −127 °C (the driver's value for a failed CRC or a missing device) or any
-  reading outside the DS18B20's range (−55…125 °C);
+- ``read_error``: −127 °C (the driver's value for a failed CRC or a missing device), ±inf,
+  or any reading outside the DS18B20's range (−55…125 °C);
 - ``power_on_85``: exactly 85.0 °C (the power-on-reset register) more than ``JUMP_C`` from the
   nearest good readings on either side (a room at 85 °C would have neighbours near 85);
 - ``spike``: a single reading more than ``JUMP_C`` from both neighbours, which agree with each

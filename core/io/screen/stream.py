@@ -161,7 +161,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
 
     observed = 0  # the waiting blocks already watched
     for blk in blocks:
-        blk = to_celsius(blk, to_c)
+        blk = _infinite_readings(offset, to_celsius(blk, to_c), tnames, log, rate_hz)
         if detector is not None:
             detector.feed(offset, np.asarray(blk[0], dtype=float))
         waiting.append((offset, blk))
@@ -244,6 +244,25 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.refused.setdefault(name, dead.text)
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
+
+
+def _infinite_readings(off: int, blk: Block, tnames: list[str], log: ScreenLog,
+                       rate_hz: float) -> Block:
+    """The block with each infinite temperature value a read error: masked (NaN) and counted
+    like −127 °C. Every reader takes a finite value for a reading and NaN for none, so an
+    inf (a driver's overflow, a log's "inf" text) had been neither: dropped uncounted."""
+    a, t, end = blk
+    if t is None or not tnames:
+        return blk
+    tt = np.asarray(t, dtype=float)
+    inf = np.isinf(tt.reshape(len(a), -1))
+    if not inf.any():
+        return blk
+    for i, j in zip(*np.nonzero(inf), strict=True):
+        k = off + int(i)
+        log.stretches.append(Screened(tnames[int(j)], "read_error", k, k, k / rate_hz,
+                                      k / rate_hz, 1))
+    return a, np.where(np.isinf(tt), np.nan, tt), end
 
 
 def _mask_readings(off: int, t: NDArray[np.float64], tracks: list[_TempTrack],

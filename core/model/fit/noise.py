@@ -138,6 +138,11 @@ def fit_noise(
     comps = _components(terms, extra, filter_corner_hz, rate)
     fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
     fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
+    if np.any(np.isinf(var)):
+        # squares beyond float64: the data's scale, not its noise (a constant channel's AVAR
+        # is zero, not infinite)
+        raise FitError("the Allan variance overflows (infinite at some τ): the values are too "
+                       "large for float64 sums; check the data's scale and units (m/s²)")
     if not np.any(np.isfinite(var) & (var > 0)):
         # zero Allan variance at every τ: a longer record would not help
         raise FitError("the Allan variance is zero at every τ: the channel is constant (no "
