@@ -72,6 +72,13 @@ RECORDER_BATCH_S = 1.0
 PUBLISH_BATCH_S = 0.25
 
 
+def disk_words(state: object) -> str:
+    """The recorder's state as STATUS= and the log say it: "disk writing", "disk full",
+    "disk write error", "disk off" (the state itself, ``disk_full``, is the status map's)."""
+    words = str(state).replace("_", " ")
+    return words if words.startswith("disk") else f"disk {words}"
+
+
 @dataclass(frozen=True)
 class ServiceHooks:
     """Replacements for the parts the service makes itself (tests and benchmarks inject faulty
@@ -442,10 +449,9 @@ class Service(Supervised):
 
     def status_line(self) -> str:
         st = self.status()
-        disk = st.get("disk", {})
         return (f"{st['rate_hz']:.3f} Hz, {st['samples']} samples, {st['gaps']} gaps, "
-                f"{st.get('subscribers', 0)} subscribers, disk "
-                f"{disk.get('state', 'off')}")
+                f"{st.get('subscribers', 0)} subscribers, "
+                f"{disk_words(st.get('disk', {}).get('state', 'off'))}")
 
     def save_state(self, rec: dict[str, Any]) -> None:
         """The state file for a checkpoint (only with a recording: it lives beside it)."""

@@ -243,3 +243,12 @@ def test_service_feeds_the_watchdog_only_while_samples_advance(tmp_path, path_so
     assert any(t > 15 for t in pings)
     events = [r["name"] for r in rig.kinds("event")]
     assert "stalled" in events and "resumed" in events
+
+
+@pytest.mark.parametrize("state, words", [("writing", "disk writing"), ("disk_full", "disk full"),
+                                          ("write_error", "disk write error"), ("off", "disk off")])
+def test_the_status_line_says_the_recorders_state_in_words(state, words):
+    """STATUS= reads "disk full", not the status map's "disk disk_full"."""
+    from avard.daemon.service.supervisor import disk_words
+
+    assert disk_words(state) == words
