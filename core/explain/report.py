@@ -17,6 +17,7 @@ import numpy as np
 from avard.core.explain.alarm import ALPHA_AXIS
 from avard.core.explain.coupling_change import change_line
 from avard.core.explain.engine import ChannelExplanation, Explanation
+from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS
 from avard.core.explain.thermal_fit.settings import DS18B20_CONVERSION_S
 from avard.core.model.fit import NoiseFit, TermEstimate
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
@@ -111,6 +112,69 @@ def near_miss_lines(findings: list[Any]) -> list[str]:
     return out
 
 
+#: The transient causes whose detections can be withheld for a stated reason
+WITHHELD_CAUSES = ("bias_step", "excursion", "warmup")
+
+
+def withheld_lines(findings: list[Any]) -> list[str]:
+    """One line per transient that passed its test and was then withheld for a stated reason
+    (in a hole of the driving temperature log, below the readings' rounding floor, the lag
+    filter's start state): what was found and why it is not claimed. The JSON's evidence had
+    said it and the text had not, so a step inside a log's dropout vanished from the text."""
+    out = []
+    for f in findings:
+        if f.cause not in WITHHELD_CAUSES or f.claimed or "; not claimed: " not in f.evidence:
+            continue
+        if not (math.isfinite(f.statistic) and math.isfinite(f.threshold)
+                and f.statistic >= f.threshold):
+            continue
+        why = f.evidence.rsplit("; not claimed: ", 1)[1]
+        params = ", ".join(f"{k} {v:.4g}" for k, v in f.params.items())
+        out.append(f"  {f.cause.replace('_', ' ')} found at z {f.statistic:.3g} ({params}; SI "
+                   f"units), not claimed: {why}")
+    return out
+
+
+def _span(f: Any) -> tuple[float, float] | None:
+    """The time (s) a transient acts over, as ``engine.compound._not_in_hole`` reads it."""
+    p = f.params
+    if f.cause == "bias_step" and "time_s" in p:
+        return float(p["time_s"]), float(p["time_s"])
+    if f.cause == "excursion" and "start_s" in p and "end_s" in p:
+        return float(p["start_s"]), float(p["end_s"])
+    if f.cause == "warmup":
+        return 0.0, 3.0 * float(p.get("time_constant_s", 0.0))
+    return None
+
+
+def hole_lines(ex: Explanation, findings: list[Any]) -> list[str]:
+    """One line per hole of a claimed coupling's temperature log where transients were
+    proposed and none claimed: the thermal signal removed there is interpolated, so what the
+    axis did in the hole (a step inside a 25-minute dropout) cannot be told from the hole. The
+    search's evidence said each candidate's own reason; the text had said nothing."""
+    if ex.screen is None:
+        return []
+    out = []
+    for f in findings:
+        if f.cause != "temperature" or not f.claimed or not f.channel:
+            continue
+        lag = abs(float(f.params.get("lag_s", 0.0)))
+        for h0, h1 in ex.screen.holes(f.channel):
+            if h1 - h0 < 1.0:
+                continue
+            end = h1 + HOLE_SETTLE_LAGS * lag + 1.0
+            inside = [g for g in findings if g.cause in WITHHELD_CAUSES and not g.claimed
+                      and (sp := _span(g)) is not None and sp[0] <= end and sp[1] >= h0 - 1.0]
+            if inside:
+                kinds = ", ".join(sorted({g.cause.replace("_", " ") for g in inside}))
+                out.append(f"  in the hole of temperature log {f.channel!r} at {h0:.6g}–"
+                           f"{h1:.6g} s (and the {HOLE_SETTLE_LAGS:g} lags after it) "
+                           f"{len(inside)} transient candidate(s) ({kinds}) were proposed and "
+                           "none claimed: the thermal signal removed there is interpolated, "
+                           "and what the axis did there cannot be told from the hole")
+    return out
+
+
 #: A recording's runs shorter than this (s) each restart on a warm-up the thermal model's one
 #: start state (at the record's start) does not take.
 SHORT_RUN_S = 3600.0
@@ -177,6 +241,8 @@ def summary(ex: Explanation) -> str:
         if not claimed:
             lines.append("  findings: none (no cause passed its test)")
         lines += near_miss_lines(ch.findings)
+        lines += withheld_lines(ch.findings)
+        lines += hole_lines(ex, ch.findings)
         for f in claimed:
             params = ", ".join(
                 f"{k} {v:.4g}" + (f" [{f.intervals[k][0]:.4g}, {f.intervals[k][1]:.4g}]"

@@ -176,12 +176,6 @@ def test_a_csv_with_empty_temperature_cells_is_read_or_told_to_write_nan(tmp_pat
     np.testing.assert_allclose(got[~np.isnan(temp)], temp[~np.isnan(temp)], rtol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D10: a 4e-4 m/s² bias step inside a 25-minute dropout of the driving temperature "
-    "log is dropped by design (a hole in a log is not a cause) but the text summary never "
-    "says so (only --json's evidence does), and the axis is said to fit with a rate random "
-    "walk K 3.2e-7 [2.0e-7, 4.1e-7] (truth 0) (core/explain/report.py summary, "
-    "engine/compound.py _not_in_hole)"))
 def test_a_step_in_a_log_hole_is_said_in_the_text(tmp_path):
     from avard.core.explain.report import summary
 
@@ -233,3 +227,25 @@ def test_a_csv_that_speeds_up_midway_is_refused_in_one_line(tmp_path):
             pass
     msg = str(err.value)
     assert "\n" not in msg and "leaves the rate" in msg and "0.08" in msg, msg
+
+
+def test_a_transient_withheld_for_a_stated_reason_is_said_in_the_text():
+    """A transient that passed its test and was then withheld (a hole of the driving log, the
+    readings' floor, the lag filter's start) gets a text line with what was found and why;
+    one that failed its test, a claimed one and a temperature finding get none."""
+    from avard.core.explain.causes import Finding
+    from avard.core.explain.report import withheld_lines
+
+    held = Finding("bias_step", False, {"time_s": 7000.0, "size": 4e-4}, {}, 12.0, 5.0,
+                   "a step of 4e-4 …; not claimed: it falls in a hole of the temperature log "
+                   "'plate' (6449–7950 s, or the 3 lags after it)")
+    weak = Finding("bias_step", False, {"time_s": 9000.0, "size": 1e-4}, {}, 2.0, 5.0,
+                   "…; not claimed: in the joint fit … it is 2 σ (test: ≥ 5)")
+    claimed = Finding("excursion", True, {"start_s": 1.0, "end_s": 2.0, "size": 1e-3}, {},
+                      9.0, 6.0, "an excursion")
+    temp = Finding("temperature", False, {"coefficient": 1e-3}, {}, 9.0, 6.0,
+                   "…; not claimed: the log was refused")
+    lines = withheld_lines([held, weak, claimed, temp])
+    assert len(lines) == 1
+    assert "bias step found at z 12" in lines[0] and "hole of the temperature log" in lines[0]
+    assert "size 0.0004" in lines[0] and "SI units" in lines[0]
