@@ -249,3 +249,33 @@ def test_a_transient_withheld_for_a_stated_reason_is_said_in_the_text():
     assert len(lines) == 1
     assert "bias step found at z 12" in lines[0] and "hole of the temperature log" in lines[0]
     assert "size 0.0004" in lines[0] and "SI units" in lines[0]
+
+
+@pytest.mark.parametrize("interleaved", [True, False])
+def test_two_sensors_answering_on_one_log_column_are_refused_with_why(interleaved):
+    """Two DS18B20s read into one column (22 and 24 °C alternating) make most readings
+    spikes: the log is refused for the thermal model with the count and the reason, not
+    masked reading by reading into one sensor's log in the other's gaps. One sensor's log
+    with a few spikes is kept."""
+    from avard.core.io.screen import ScreenLog, screen_blocks
+
+    rate, n = 10.0, 72_000
+    temp = np.full(n, np.nan)
+    k = np.arange(0, n, 10)                      # a reading a second
+    room = 22.0 + 0.3 * np.sin(2 * np.pi * k / rate / 1800.0)
+    vals = np.round((room + (2.0 * (np.arange(len(k)) % 2) if interleaved else 0.0)) / 0.0625)
+    vals = vals * 0.0625
+    if not interleaved:
+        vals[[100, 2000, 5000]] += 3.0           # three genuine spikes
+    temp[k] = vals
+    a = np.random.default_rng(3).normal(0, 1e-3, (n, 1))
+    blocks = ((a[o:o + 8192], temp[o:o + 8192, None], o + 8192 >= n) for o in range(0, n, 8192))
+    log = ScreenLog(rate)
+    for _ in screen_blocks(blocks, rate, ["x"], ["plate"], log):
+        pass
+    if interleaved:
+        assert "plate" in log.refused and "spikes" in log.refused["plate"], log.refused
+        assert "two sensors" in log.notes["plate"].text
+    else:
+        assert "plate" not in log.refused, log.refused
+        assert log.counts().get("spike", 0) == 3

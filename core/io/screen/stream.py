@@ -237,6 +237,11 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = unit if note is None else note.joined(unit)
         if refused is not None:
             log.refused[name] = refused
+        spiky = _spiky(log, name, len(tr))
+        if spiky is not None:
+            log.notes[name] = (spiky if name not in log.notes
+                               else log.notes[name].joined(spiky))
+            log.refused.setdefault(name, spiky.text)
         dead = _never_converted(tr.arrays()[1])
         if dead is not None and name not in NOT_DS18B20:
             log.notes[name] = (dead if name not in log.notes
@@ -244,6 +249,25 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.refused.setdefault(name, dead.text)
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
+
+
+#: A log more than this share of whose readings are spikes is not one sensor's readings of
+#: one place: a real DS18B20 log has a spike in thousands of readings at most
+SPIKY_SHARE = 0.05
+
+
+def _spiky(log: ScreenLog, name: str, readings: int) -> LogNote | None:
+    """A note refusing a log whose readings are spikes more than ``SPIKY_SHARE`` of the time
+    (two sensors answering on one column, a noisy line): masking each spike had left a log
+    of one sensor's readings in the other's gaps, and the axis unexplained without a word of
+    why."""
+    spikes = sum(1 for st in log.stretches if st.channel == name and st.kind == "spike")
+    if readings < 20 or spikes <= SPIKY_SHARE * readings:
+        return None
+    return LogNote("spiky", f"{spikes} of its {readings} readings are spikes (a reading more "
+                   "than 0.5 K from both neighbours): more than "
+                   f"{SPIKY_SHARE:.0%} is not one sensor reading one place (two sensors "
+                   "answering on one column, or a noisy line); not used for the thermal model")
 
 
 def _infinite_readings(off: int, blk: Block, tnames: list[str], log: ScreenLog,
