@@ -279,3 +279,35 @@ def test_two_sensors_answering_on_one_log_column_are_refused_with_why(interleave
     else:
         assert "plate" not in log.refused, log.refused
         assert log.counts().get("spike", 0) == 3
+
+
+@pytest.mark.parametrize("case", ["units_switch", "fast_room", "change_across_a_dropout"])
+def test_a_log_that_jumps_between_close_readings_is_refused_with_why(case):
+    """A log that switches from °C to °F midway (+40 K between readings a second apart) is
+    refused for the thermal model with where and why; a room that warms 10 K in an hour, and
+    a 6 K change across a 25-minute dropout, are kept."""
+    from avard.core.io.screen import ScreenLog, screen_blocks
+
+    rate, n = 10.0, 72_000
+    temp = np.full(n, np.nan)
+    k = np.arange(0, n, 10)
+    room = 22.0 + 0.3 * np.sin(2 * np.pi * k / rate / 1800.0)
+    if case == "units_switch":
+        room = np.where(k >= n // 2, room * 1.8 + 32.0, room)
+    elif case == "fast_room":
+        room = room + 10.0 * k / n
+    else:
+        room = np.where(k >= n // 2, room + 6.0, room)
+        k_gap = (k > n // 2 - 7500) & (k < n // 2 + 7500)
+        k, room = k[~k_gap], room[~k_gap]
+    temp[k] = np.round(room / 0.0625) * 0.0625
+    a = np.random.default_rng(4).normal(0, 1e-3, (n, 1))
+    blocks = ((a[o:o + 8192], temp[o:o + 8192, None], o + 8192 >= n) for o in range(0, n, 8192))
+    log = ScreenLog(rate)
+    for _ in screen_blocks(blocks, rate, ["x"], ["plate"], log):
+        pass
+    if case == "units_switch":
+        assert "plate" in log.refused and "jump" in log.refused["plate"], log.refused
+        assert "3600" in log.refused["plate"], log.refused["plate"]
+    else:
+        assert "plate" not in log.refused, log.refused

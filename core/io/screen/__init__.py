@@ -50,7 +50,8 @@ shock, and its rows are left out of the shock rule's scale.
   dropout by the same rule: a hole like a dropout (the gaps between readings are all the
   dropout rule sees; a log that stops midway and never comes back had none);
 - a log more than 5 % of whose readings are spikes is not one sensor reading one place (two
-  sensors answering on one column): noted and refused for the thermal model;
+  sensors answering on one column): noted and refused for the thermal model; so is a log
+  that jumps more than 5 K between readings at most 10 s apart (units or sensors changed);
 - a log whose every reading is 85.0 °C is a DS18B20 that never converted (its power-on
   value, forever): noted and refused for the thermal model (the per-reading rule has no good
   neighbour to judge it by);

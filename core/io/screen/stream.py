@@ -237,7 +237,7 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = unit if note is None else note.joined(unit)
         if refused is not None:
             log.refused[name] = refused
-        spiky = _spiky(log, name, len(tr))
+        spiky = _spiky(log, name, len(tr)) or _level_jump(log, name, tr, rate_hz)
         if spiky is not None:
             log.notes[name] = (spiky if name not in log.notes
                                else log.notes[name].joined(spiky))
@@ -268,6 +268,37 @@ def _spiky(log: ScreenLog, name: str, readings: int) -> LogNote | None:
                    "than 0.5 K from both neighbours): more than "
                    f"{SPIKY_SHARE:.0%} is not one sensor reading one place (two sensors "
                    "answering on one column, or a noisy line); not used for the thermal model")
+
+
+#: A change between two readings this close (s) larger than this (K), that stays: no room or
+#: plate makes it (a DS18B20 in air needs minutes for a few K); a log that switched units
+#: (°C to °F: +40 K at a room's values) or sensors midway
+LEVEL_JUMP_K, LEVEL_JUMP_S = 5.0, 10.0
+
+
+def _level_jump(log: ScreenLog, name: str, tr: _TempTrack, rate_hz: float) -> LogNote | None:
+    """A note refusing a log that jumps by more than ``LEVEL_JUMP_K`` between readings at most
+    ``LEVEL_JUMP_S`` apart (the readings the per-reading rules masked left out): its two
+    sides are not one sensor reading one place in one unit, and a coupling fitted across
+    the jump is the jump's."""
+    idx, val = tr.arrays()
+    if len(idx) < 3:
+        return None
+    masked = {st.first for st in log.stretches if st.channel == name and st.first == st.last}
+    keep = np.array([int(i) not in masked for i in idx], dtype=bool) if masked else None
+    i, v = (idx, val) if keep is None else (idx[keep], val[keep])
+    if len(i) < 3:
+        return None
+    dv, dt = np.diff(v), np.diff(i) / rate_hz
+    far = np.flatnonzero((np.abs(dv) > LEVEL_JUMP_K) & (dt <= LEVEL_JUMP_S))
+    if not len(far):
+        return None
+    k = int(far[0])
+    return LogNote("level_jump", f"its readings jump by {dv[k]:+.3g} K in {dt[k]:.3g} s at "
+                   f"t = {i[k + 1] / rate_hz:.6g} s ({len(far)} such jump(s)): no room or plate "
+                   "moves so fast; a log that changed units (°C to °F) or sensors midway is "
+                   "not one sensor reading one place; not used for the thermal model (split "
+                   "the record there, or fix the log's units)")
 
 
 def _infinite_readings(off: int, blk: Block, tnames: list[str], log: ScreenLog,
