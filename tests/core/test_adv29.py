@@ -311,3 +311,16 @@ def test_a_log_that_jumps_between_close_readings_is_refused_with_why(case):
         assert "3600" in log.refused["plate"], log.refused["plate"]
     else:
         assert "plate" not in log.refused, log.refused
+
+
+def test_a_record_too_short_for_the_time_domain_causes_says_its_logs_are_not_tested(tmp_path):
+    """A 100 s record with a strong coupling: the slow view is too short for the
+    time-domain causes, and explain says so of every temperature log (it had said "fits" and
+    nothing of temperature)."""
+    arrays, truth, _ = gen.coupled(hours=100 / 3600, seed=1, c=3e-3, lag_s=20.0,
+                                   room_period=60.0)
+    ex = explain_file(open_record(gen.save(tmp_path / "short.npz", arrays, truth)),
+                      ExplainOptions())
+    assert ex.temperature_unused, "a log of a too-short record went unmentioned"
+    for why in ex.temperature_unused.values():
+        assert "not tested on a record this short" in why

@@ -185,6 +185,13 @@ def _explained(an: Analysis, slow: SlowView, screen: ScreenLog | None, meta: dic
     why = {j: _why_unused(None if t_slow is None else t_slow[:, j],
                           None if screen is None else screen.refused.get(tnames[j]))
            for j in range(len(tnames)) if temperature in (None, tnames[j])}
+    if len(y_slow) < MIN_SLOW_POINTS:
+        # too short for the time-domain causes: every log said unused, with why (a 100 s
+        # record with a strong coupling had said "fits" with no word of temperature)
+        short = (f"the record's slow view holds {len(y_slow)} blocks of {b / rate:.3g} s, "
+                 f"fewer than the {MIN_SLOW_POINTS} the time-domain causes (temperature, "
+                 "transients, drift, Gauss–Markov) need: not tested on a record this short")
+        why = {j: w if w is not None else short for j, w in why.items()}
     t_ok = [j for j, w in why.items() if w is None]
     unused = {tnames[j]: w for j, w in why.items() if w is not None}
     t_allan: dict[str, Any] = {}
