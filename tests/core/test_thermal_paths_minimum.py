@@ -13,6 +13,7 @@ from avard.core.explain.thermal_paths import (
     min_detectable_rate,
     rate_lag_separation,
 )
+from numpy.typing import NDArray
 
 N, B, K, REC = 1.4e-4, 1.6e-5, 1.5e-6, 4 * 3600.0
 
@@ -266,3 +267,56 @@ def test_the_analytic_rounding_floor_takes_a_coarse_logs_step():
         got = rounding_floor(((amp, period),), rate, rec, step=q)
         assert got == pytest.approx(rounding_floor_tau(T, rate, step=q), rel=1e-9)
         assert got > rounding_floor(((amp, period),), rate, rec)
+
+
+def test_the_relays_minimum_counts_the_readings_rounding_through_the_coupling_as_noise():
+    """hyst29: the one-lag column is built on the rounded readings, so c·lag(rounding) is in
+    the residual the relay is told from: white noise of N² = c²(q²/12)t_c to the estimate as
+    well as to its weights. So the minimum with that rounding equals the minimum of an
+    accelerometer whose white noise is N² + c²(q²/12)t_c and no rounding, and a brute-force
+    sandwich (every one-lag reading on a lag grid, c' by W-weighted least squares, σ² with
+    the rounding's PSD) puts it at z = 5. Before hyst29 σ² held the accelerometer's alone:
+    the minimum was optimistic by 1.15–1.57× on the adversary's records."""
+    from avard.core.explain.causes import noise_psd
+    from avard.core.explain.thermal_paths import (
+        fit_weights,
+        min_detectable_hysteresis_fit,
+        relay_harmonics,
+    )
+
+    P, c, wk, fl = 1800.0, 1.1e-3, 0.05, 327.68
+    U = np.zeros(39, complex)
+    for k in range(1, 40, 2):  # a triangle through a 1100 s plate
+        U[k - 1] = (8 * 0.7 / (math.pi * k) ** 2 * (-1) ** ((k - 1) // 2) * -1j
+                    / complex(1, 2 * math.pi * k / P * 1100.0))
+    tc = 120.0
+    c2tc = c * c * 0.0625**2 / 12 * tc
+    assert c2tc > N * N  # the adversary's range: the rounding outweighs the white noise
+    h = min_detectable_hysteresis_fit(N, B, K, REC, P, U, c, wk, fl, c2tc)
+    assert h == pytest.approx(min_detectable_hysteresis_fit(
+        math.sqrt(N * N + c2tc), B, K, REC, P, U, c, wk, fl, 0.0), rel=1e-6)
+    # brute force, written apart from one_lag_separation_fit
+    per = P / np.arange(1, 40)
+    w = 2 * np.pi / per
+    W = fit_weights(N, B, K, REC, per, fl, c2tc)
+    s2 = np.array([2 * (noise_psd(1 / p, N, B, K) + 2 * c2tc) / REC for p in per])
+    R = relay_harmonics(U, wk)
+
+    def lam(hh: float, s2: NDArray = s2) -> float:
+        Y = c * U + hh * R
+        best = (math.inf, 0.0)
+        for L in np.concatenate([-np.geomspace(0.5, 1e6, 4000), [0.0],
+                                 np.geomspace(0.5, 1e6, 4000)]):
+            H = (1 / (1 + 1j * w * L) if L >= 0 else
+                 (1 - 2j * w * L) / (1 - 1j * w * L)) * U
+            cp = np.sum(W * np.real(Y * H.conj())) / np.sum(W * np.abs(H) ** 2)
+            d2 = np.abs(Y - cp * H) ** 2
+            if np.sum(W * d2) < best[0]:
+                best = (float(np.sum(W * d2)), float(np.sum(W * d2) ** 2
+                                                    / np.sum(W * W * s2 * d2)))
+        return best[1]
+
+    assert lam(h) == pytest.approx(25.0, rel=0.02)
+    # with the accelerometer's noise alone (the minimum before) the same h claimed far more
+    s2_accel = np.array([2 * noise_psd(1 / p, N, B, K) / REC for p in per])
+    assert lam(h, s2_accel) > 1.5 * 25.0

@@ -374,7 +374,9 @@ def min_detectable_hysteresis_fit(n_white: float, b_inst: float, k_rrw: float,
     """The stated minimum of a relay (h, m/s²) against one lag as explain's fit sees it: the
     smallest h whose residual over the closest one-lag reading of c·T + h·relay the fit picks
     (lines weighed by ``fit_weights``, τ from ``floor_s`` up) the fit estimates at z
-    (``one_lag_separation_fit`` with σ²). The drive is periodic,
+    (``one_lag_separation_fit`` with σ², the accelerometer's noise and the readings'
+    rounding through the coupling, ``rounding_c2tc`` = c²(q²/12)t_c, as white noise: the
+    one-lag column carries it into the residual). The drive is periodic,
     ``drive`` its complex harmonics at the die (k = 1, 2, …; K), ``width_k`` how far it moves
     back from an extreme before the relay switches (``relay_harmonics``). The relay's
     fundamental counts where it puts the response beyond one lag's reach (a coupling of the
@@ -386,7 +388,11 @@ def min_detectable_hysteresis_fit(n_white: float, b_inst: float, k_rrw: float,
     R = relay_harmonics(U, width_k, k_max)
     per = period_s / np.arange(1, k_max + 1)
     W = fit_weights(n_white, b_inst, k_rrw, record_s, per, floor_s, rounding_c2tc)
-    s2 = _sig2(n_white, b_inst, k_rrw, record_s, per)
+    # the noise the estimate faces: the accelerometer's and the readings' rounding through
+    # the coupling (the one-lag column is built on the rounded readings, so c·lag(rounding)
+    # is in the residual, white above t_c), the same N² + c²(q²/12)t_c the weights use
+    # (docs/log/2026-11-29-hyst29.md)
+    s2 = _sig2(math.sqrt(n_white**2 + rounding_c2tc), b_inst, k_rrw, record_s, per)
     if not np.any(W > 0):
         return math.inf
     start = z / math.sqrt(float(np.sum(np.abs(R) ** 2 / s2)))  # against zero, in W
