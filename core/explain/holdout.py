@@ -62,11 +62,12 @@ model gains nothing by its own uncertainty).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from avard.core.allan.deviations import AllanResult
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.spectrum import line_components
 from avard.core.errors import DataError, FitError
@@ -76,7 +77,8 @@ from avard.core.explain.thermal_fit.coarse import derounded
 from avard.core.explain.thermal_fit.holes import feed, hole_mask
 from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.io.rates import format_rate, require_compatible
-from avard.core.model.fit import avar_estimate_covariance, fit_noise, model_chi2
+from avard.core.model.fit import NoiseFit, avar_estimate_covariance, fit_noise, model_chi2
+from avard.core.model.terms import TERMS
 from numpy.typing import NDArray
 
 __all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible",
@@ -478,9 +480,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext_extra = [*extra, *gm]
         fit_ext = av(fit.y - d_fit, rate_b)
-        ext = fit_noise(fit_ext, extra=ext_extra)
+        ext = fit_noise(fit_ext, extra=[*extra, *gm])
         held_var = av(held.y[skip:], held.rate(rate_b), ks)
         held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
         pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
@@ -489,10 +490,10 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
         pred_cov = None
-        ext_extra, fit_ext = extra, fit_base
+        fit_ext = fit_base
     # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``),
     # read from the fit part's short τ (``_scatter_model``)
-    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext, ext_extra), held_ext)
+    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext), held_ext)
     pred_cov = noise_cov if pred_cov is None else pred_cov + noise_cov
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -512,10 +513,44 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
 SCATTER_TAU_FACTOR = 4.0
 
 
-def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
+@dataclass(frozen=True)
+class NoiseOptions:
+    """The ``fit_noise`` options a fitted model was made with, as far as the model itself
+    says them (``of``): its IEEE terms, its extra components (lines, a Gauss–Markov, a fixed
+    rounding white: each with its fixed parameters, the fitted amplitude left to the fit),
+    the filter corner it kept, its presence level and interval level. ``fit`` redoes that
+    fit on another Allan variance or τ range, so a refit cannot drift from its model when
+    ``_fold``'s own fits gain an option."""
+
+    terms: tuple[str, ...]
+    extra: tuple[Mapping[str, object], ...]
+    filter_corner_hz: float | None
+    ci: float
+    z_present: float
+
+    @classmethod
+    def of(cls, model: NoiseFit) -> NoiseOptions:
+        terms = tuple(c.label for c in model.components if c.label in TERMS)
+        extra = tuple(
+            {"cause": c.cause, "label": c.label,
+             "params": {**c.params, **({} if c.fixed_value is None
+                                       else {c.value_key: c.fixed_value})}}
+            for c in model.components if c.label not in TERMS)
+        return cls(terms, extra, model.filter_corner_hz, model.ci, model.z_present)
+
+    def fit(self, result: AllanResult, tau_range: tuple[float, float] | None = None
+            ) -> NoiseFit:
+        # the model kept its filter (or had none): not checked again on a part of its τ
+        return fit_noise(result, terms=self.terms, extra=self.extra,
+                         filter_corner_hz=self.filter_corner_hz, check_filter=False,
+                         ci=self.ci, z_present=self.z_present, tau_range=tau_range)
+
+
+def _scatter_model(fit_avar: AllanResult, model: NoiseFit) -> NoiseFit:
     """The noise fit whose terms' uncertainty ``_noise_scatter`` carries: ``model``'s own
-    fit redone on the fit part's Allan variance ``fit_avar`` over τ up to
-    ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself when that fit fails).
+    fit (its options, ``NoiseOptions.of``) redone on the fit part's Allan variance
+    ``fit_avar`` over τ up to ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself
+    when that fit fails).
 
     Why not ``model``'s: a drive slower than the fit part that no candidate describes sits
     on its longest τ, where the terms are known to a few EDF; there it widens the upper
@@ -527,12 +562,15 @@ def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
     half without such a drive the short fit knows the long-τ terms less well than the whole
     range does, so its scatter is often the larger: the held-out test stays calibrated on
     described sensors (``tests/core/test_heldout_calibration.py``); the branch's log
-    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power."""
+    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power. The refit is
+    ``model``'s with its own options (terms, lines, filter corner, presence level): a
+    scatter read from another model (another z, no filter) would carry another model's
+    uncertainty."""
     hi = model.tau_max_s / SCATTER_TAU_FACTOR
     if not hi > model.tau_min_s:
         return model
     try:
-        return fit_noise(fit_avar, extra=list(extra), tau_range=(0.0, hi))
+        return NoiseOptions.of(model).fit(fit_avar, (0.0, hi))
     except (FitError, DataError, ValueError, np.linalg.LinAlgError):
         return model
 
