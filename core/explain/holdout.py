@@ -62,11 +62,12 @@ model gains nothing by its own uncertainty).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+from avard.core.allan.deviations import AllanResult
 from avard.core.allan.streaming import StreamingAllan
 from avard.core.analysis.spectrum import line_components
 from avard.core.errors import DataError, FitError
@@ -76,8 +77,14 @@ from avard.core.explain.thermal_fit.coarse import derounded
 from avard.core.explain.thermal_fit.holes import feed, hole_mask
 from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.io.rates import format_rate, require_compatible
-from avard.core.model.fit import avar_estimate_covariance, fit_noise, model_chi2
+from avard.core.model.fit import NoiseFit, avar_estimate_covariance, fit_noise, model_chi2
+from avard.core.model.terms import TERMS
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:  # types only: channel_heldout imports the first two where it runs
+    from avard.core.explain.thermal_fit.sums import OctaveSums
+    from avard.core.explain.thermal_paths.columns import Column
+    from avard.core.io.screen import ScreenLog
 
 __all__ = ["DEFINITION", "ChannelHoldout", "Fold", "Holdout", "check_compatible",
            "holdout_file", "holdout_split"]
@@ -98,12 +105,35 @@ DEFINITION = ("gain = 1 − χ²_ext/χ²_base: generalised χ² (covariance mod
               "< 0 = worse. χ² ≈ n (the number of held-out τ) when a model predicts the data.")
 
 
-#: (series, blocks per second[, rows kept]) -> its Allan variance; the rows kept only where
-#: some are left out as gaps
-AvarOf = Callable[..., Any]
+class AvarOf(Protocol):
+    """(series, blocks per second[, rows kept]) -> its Allan variance; the rows kept only
+    where some are left out as gaps (``_avar``, or ``_channel``'s kept by content)."""
+
+    def __call__(self, y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None, /
+                 ) -> AllanResult: ...
 
 
-def _avar(y: NDArray, rate_hz: float, keep: NDArray[np.bool_] | None = None) -> Any:
+class _Lined(Protocol):
+    @property
+    def lines(self) -> list[dict[str, float]]: ...
+
+
+class Explained(Protocol):
+    """What the held-out measure reads of one axis's explanation
+    (``engine.ChannelExplanation``, which imports this module): analyze's lines of the axis
+    (``base.lines``), the claimed findings and the whole record's thermal fit."""
+
+    @property
+    def base(self) -> _Lined: ...
+
+    @property
+    def claimed(self) -> list[cz.Finding]: ...
+
+    @property
+    def thermal(self) -> ThermalFit | None: ...
+
+
+def _avar(y: NDArray, rate_hz: float, keep: NDArray[np.bool_] | None = None) -> AllanResult:
     """Analyze's streaming estimator on one slow-view series; the rows ``keep`` leaves out
     are gaps (no Allan difference spans them)."""
     sa = StreamingAllan(1, rate_hz)
@@ -200,7 +230,7 @@ class Holdout:
     reason: str | None = None
     #: what the input screen masked in the held-out record (``--holdout FILE``; a
     #: ``core.io.screen.ScreenLog``), None for the record's own halves
-    screen: Any = None
+    screen: ScreenLog | None = None
 
     @property
     def gain(self) -> float | None:
@@ -450,7 +480,7 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     Allan variance of a series (``_avar`` by default; ``_channel`` keeps it by content)."""
     of = _avar if avar is None else avar
 
-    def av(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> Any:
+    def av(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> AllanResult:
         return of(y, rate) if keep is None else of(y, rate, keep)
     nyq = rate_b / 4.0  # lines well below the slow view's Nyquist (block means attenuate)
     # the frequency (and a drifting line's band) fixed, the amplitude fitted on each half
@@ -478,9 +508,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
-        ext_extra = [*extra, *gm]
         fit_ext = av(fit.y - d_fit, rate_b)
-        ext = fit_noise(fit_ext, extra=ext_extra)
+        ext = fit_noise(fit_ext, extra=[*extra, *gm])
         held_var = av(held.y[skip:], held.rate(rate_b), ks)
         held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
         pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
@@ -489,10 +518,10 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         held_var = av(held.y, held.rate(rate_b))
         ext, held_ext = base, held_var
         pred_cov = None
-        ext_extra, fit_ext = extra, fit_base
+        fit_ext = fit_base
     # the noise terms' own uncertainty in the held-out AVAR's scatter (``_noise_scatter``),
     # read from the fit part's short τ (``_scatter_model``)
-    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext, ext_extra), held_ext)
+    noise_cov = _noise_scatter(_scatter_model(fit_ext, ext), held_ext)
     pred_cov = noise_cov if pred_cov is None else pred_cov + noise_cov
     rng = (max(base.tau_min_s, ext.tau_min_s), min(base.tau_max_s, ext.tau_max_s))
     # the same block counts on the held-out side, whose τ are in seconds of its own rate
@@ -512,10 +541,44 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
 SCATTER_TAU_FACTOR = 4.0
 
 
-def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
+@dataclass(frozen=True)
+class NoiseOptions:
+    """The ``fit_noise`` options a fitted model was made with, as far as the model itself
+    says them (``of``): its IEEE terms, its extra components (lines, a Gauss–Markov, a fixed
+    rounding white: each with its fixed parameters, the fitted amplitude left to the fit),
+    the filter corner it kept, its presence level and interval level. ``fit`` redoes that
+    fit on another Allan variance or τ range, so a refit cannot drift from its model when
+    ``_fold``'s own fits gain an option."""
+
+    terms: tuple[str, ...]
+    extra: tuple[Mapping[str, object], ...]
+    filter_corner_hz: float | None
+    ci: float
+    z_present: float
+
+    @classmethod
+    def of(cls, model: NoiseFit) -> NoiseOptions:
+        terms = tuple(c.label for c in model.components if c.label in TERMS)
+        extra = tuple(
+            {"cause": c.cause, "label": c.label,
+             "params": {**c.params, **({} if c.fixed_value is None
+                                       else {c.value_key: c.fixed_value})}}
+            for c in model.components if c.label not in TERMS)
+        return cls(terms, extra, model.filter_corner_hz, model.ci, model.z_present)
+
+    def fit(self, result: AllanResult, tau_range: tuple[float, float] | None = None
+            ) -> NoiseFit:
+        # the model kept its filter (or had none): not checked again on a part of its τ
+        return fit_noise(result, terms=self.terms, extra=self.extra,
+                         filter_corner_hz=self.filter_corner_hz, check_filter=False,
+                         ci=self.ci, z_present=self.z_present, tau_range=tau_range)
+
+
+def _scatter_model(fit_avar: AllanResult, model: NoiseFit) -> NoiseFit:
     """The noise fit whose terms' uncertainty ``_noise_scatter`` carries: ``model``'s own
-    fit redone on the fit part's Allan variance ``fit_avar`` over τ up to
-    ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself when that fit fails).
+    fit (its options, ``NoiseOptions.of``) redone on the fit part's Allan variance
+    ``fit_avar`` over τ up to ``model.tau_max_s / SCATTER_TAU_FACTOR`` (``model`` itself
+    when that fit fails).
 
     Why not ``model``'s: a drive slower than the fit part that no candidate describes sits
     on its longest τ, where the terms are known to a few EDF; there it widens the upper
@@ -527,17 +590,20 @@ def _scatter_model(fit_avar: Any, model: Any, extra: Sequence[Any]) -> Any:
     half without such a drive the short fit knows the long-τ terms less well than the whole
     range does, so its scatter is often the larger: the held-out test stays calibrated on
     described sensors (``tests/core/test_heldout_calibration.py``); the branch's log
-    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power."""
+    (docs/log/2026-11-29-heldpow28.md) has the measured nulls and power. The refit is
+    ``model``'s with its own options (terms, lines, filter corner, presence level): a
+    scatter read from another model (another z, no filter) would carry another model's
+    uncertainty."""
     hi = model.tau_max_s / SCATTER_TAU_FACTOR
     if not hi > model.tau_min_s:
         return model
     try:
-        return fit_noise(fit_avar, extra=list(extra), tau_range=(0.0, hi))
+        return NoiseOptions.of(model).fit(fit_avar, (0.0, hi))
     except (FitError, DataError, ValueError, np.linalg.LinAlgError):
         return model
 
 
-def _noise_scatter(model: Any, result: Any) -> NDArray[np.float64]:
+def _noise_scatter(model: NoiseFit, result: AllanResult) -> NDArray[np.float64]:
     """What the noise terms' uncertainty adds to the held-out AVAR's *scatter*: the
     expectation, over the fitted θ's distribution (θ̂, Cov θ), of the estimator covariance
     C(θ) less C(θ̂), on all of ``result``'s τ.
@@ -577,7 +643,8 @@ def _noise_scatter(model: Any, result: Any) -> NDArray[np.float64]:
 
 
 def _prediction_cov(y_ext: NDArray, skip: int, rate: float, spread: list[Spread],
-                    avar: AvarOf) -> NDArray[np.float64] | None:
+                    avar: Callable[[NDArray, float], AllanResult]
+                    ) -> NDArray[np.float64] | None:
     """The covariance, over the held-out AVAR's τ, that the claimed mechanism's parameters'
     uncertainty adds to the extended model's prediction (the delta method): the held-out
     AVAR with the predicted signal removed, ``y_ext``, changes by g·δp when a parameter p
@@ -603,7 +670,7 @@ def _prediction_cov(y_ext: NDArray, skip: int, rate: float, spread: list[Spread]
 # the two modes
 
 
-def claims_of(ch: Any, temp_names: Sequence[str]) -> Claims:
+def claims_of(ch: Explained, temp_names: Sequence[str]) -> Claims:
     """The claimed causes of one ``explain.ChannelExplanation``."""
     c = Claims(lines=list(ch.base.lines))
     for f in ch.claimed:
@@ -622,14 +689,14 @@ def claims_of(ch: Any, temp_names: Sequence[str]) -> Claims:
 
 
 def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float,
-             refit: bool, temps_of: Any) -> ChannelHoldout:
+             refit: bool, temps_of: Callable[[Part], Temps]) -> ChannelHoldout:
     out = ChannelHoldout(name, c.names)
     # a part is the fit part of one fold and the held-out part of the other (split, when
     # nothing is left out at its start, or nothing is claimed): its Allan variance, a pure
     # function of its values and rate, is computed once
-    seen: dict[tuple[bytes, float, bytes], Any] = {}
+    seen: dict[tuple[bytes, float, bytes], AllanResult] = {}
 
-    def avar(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> Any:
+    def avar(y: NDArray, rate: float, keep: NDArray[np.bool_] | None = None) -> AllanResult:
         key = (np.ascontiguousarray(y, dtype=float).tobytes(), float(rate),
                b"" if keep is None else np.ascontiguousarray(keep).tobytes())
         if key not in seen:
@@ -646,7 +713,7 @@ def _channel(name: str, c: Claims, folds: list[tuple[Part, Part]], rate_b: float
     return out
 
 
-def holdout_split(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
+def holdout_split(explanations: Mapping[str, Explained], y_slow: NDArray, t_slow: NDArray | None,
                   t_names: Sequence[str], names: Sequence[str], rate_b: float,
                   source: str, holes: dict[int, list[tuple[int, int]]] | None = None
                   ) -> Holdout:
@@ -709,38 +776,62 @@ def _part_thermals(claims: dict[str, Claims], y_slow: NDArray, t_slow: NDArray |
     return out
 
 
-def check_compatible(meta: dict[str, Any], other: dict[str, Any], path: str) -> None:
+@dataclass(frozen=True)
+class SetUp:
+    """What makes two records the same sensor set-up (``check_compatible``), read from a
+    record's meta: its fitted rate (Hz) and that rate's standard uncertainty (0 where the
+    record carries none: the rule's 100 ppm slack alone), its accelerometer and temperature
+    channels."""
+
+    rate_hz: float
+    rate_u_hz: float
+    names: tuple[str, ...]
+    temperature_names: tuple[str, ...]
+
+    @classmethod
+    def of(cls, meta: Mapping[str, object]) -> SetUp:
+        # ``RecordInfo.as_meta``'s key (an older spelling accepted: reading only it had
+        # taken every record's uncertainty as 0, the rule's 100 ppm alone)
+        r = meta.get("rate_hz")
+        u = meta.get("rate_u_hz", meta.get("rate_uncertainty_hz"))
+        if not isinstance(r, int | float):
+            raise DataError(f"the record's meta has no sample rate (rate_hz {r!r})")
+        return cls(float(r),
+                   float(u) if isinstance(u, int | float) and math.isfinite(u) and u > 0
+                   else 0.0,
+                   _strings(meta.get("names")), _strings(meta.get("temperature_names")))
+
+    def describe(self) -> str:
+        return (f"{format_rate(self.rate_hz, self.rate_u_hz)}, channels "
+                f"{','.join(self.names) or 'none'}, temperatures "
+                f"{','.join(self.temperature_names) or 'none'}")
+
+
+def _strings(v: object) -> tuple[str, ...]:
+    return tuple(str(x) for x in v) if isinstance(v, list | tuple) else ()
+
+
+def check_compatible(meta: Mapping[str, object], other: Mapping[str, object], path: str
+                     ) -> None:
     """One line (DataError, exit 2) when ``other`` is not a record of the same sensor set-up
     as ``meta``: rates that agree by the one rule of ``core.io.rates`` (every run fits its own
     rate, so two records of one sensor never carry the very same one) and the same
     accelerometer and temperature channels."""
-    r0, r1 = float(meta["rate_hz"]), float(other["rate_hz"])
-    u0, u1 = _rate_u(meta), _rate_u(other)
-    n0, n1 = list(meta["names"]), list(other["names"])
-    t0 = list(meta.get("temperature_names") or [])
-    t1 = list(other.get("temperature_names") or [])
-    require_compatible("the data", r0, f"--holdout {path}", r1, u0, u1)
-    if n0 != n1 or t0 != t1:
-        raise DataError(
-            f"--holdout {path}: {format_rate(r1, u1)}, channels {','.join(n1) or 'none'}, "
-            f"temperatures {','.join(t1) or 'none'}; the data has {format_rate(r0, u0)}, "
-            f"channels {','.join(n0) or 'none'}, temperatures {','.join(t0) or 'none'}: give "
-            "a record of the same sensor with the same channels")
+    a, b = SetUp.of(meta), SetUp.of(other)
+    require_compatible("the data", a.rate_hz, f"--holdout {path}", b.rate_hz, a.rate_u_hz,
+                       b.rate_u_hz)
+    if (a.names, a.temperature_names) != (b.names, b.temperature_names):
+        raise DataError(f"--holdout {path}: {b.describe()}; the data has {a.describe()}: give "
+                        "a record of the same sensor with the same channels")
 
 
-def _rate_u(meta: dict[str, Any]) -> float:
-    """The fitted rate's standard uncertainty (Hz) when the record carries one, else 0 (the
-    rule's 100 ppm slack alone)."""
-    u = meta.get("rate_uncertainty_hz")
-    return float(u) if isinstance(u, int | float) and math.isfinite(u) and u > 0 else 0.0
-
-
-def holdout_file(explanations: dict[str, Any], y_slow: NDArray, t_slow: NDArray | None,
+def holdout_file(explanations: Mapping[str, Explained], y_slow: NDArray, t_slow: NDArray | None,
                  y_held: NDArray, t_held: NDArray | None, t_names: Sequence[str],
                  names: Sequence[str], rate_b: float, source: str,
                  held_rate_b: float | None = None,
                  held_holes: dict[int, list[tuple[int, int]]] | None = None,
-                 held_refused: dict[int, str] | None = None, screen: Any = None) -> Holdout:
+                 held_refused: dict[int, str] | None = None,
+                 screen: ScreenLog | None = None) -> Holdout:
     """Models fitted on the whole record (its slow view ``y_slow``) predict a second record
     of the same sensor (its slow view ``y_held``, the same block in samples; ``held_rate_b``
     its blocks per second by its own fitted rate, default ``rate_b``). The held-out record
@@ -822,7 +913,7 @@ class ChannelPath:
 def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz: float,
                     floors: dict[int, float] | None = None,
                     holes: dict[int, list[tuple[int, int]]] | None = None,
-                    columns: dict[int, dict[Any, NDArray[np.float64]]] | None = None,
+                    columns: dict[int, dict[Column, NDArray[np.float64]]] | None = None,
                     steps: dict[int, float] | None = None) -> dict[int, ChannelPath]:
     """Each channel ``j`` of ``lags0`` as the driver of axis ``y`` (slow view at
     ``rate_hz``) through its own lag ``lags0[j]`` (s, the lag scan's on the whole record),
@@ -913,8 +1004,8 @@ def channel_heldout(y: NDArray, temps: NDArray, lags0: dict[int, float], rate_hz
     return out
 
 
-def _part_devs(half: Any, parts: list[Any], idx: list[int], beta: NDArray, edf: NDArray,
-               n_ref: NDArray, ok_tau: NDArray, s_ref: NDArray) -> list[float]:
+def _part_devs(half: OctaveSums, parts: list[OctaveSums], idx: list[int], beta: NDArray,
+               edf: NDArray, n_ref: NDArray, ok_tau: NDArray, s_ref: NDArray) -> list[float]:
     """The held-out deviance of one half (``thermal_paths._held_dev`` of a model whose
     couplings ``beta`` on columns ``idx[:len(beta)]`` were fitted on the other half, its
     nuisance columns refitted on this one) split over the half's ``parts``: with β and the

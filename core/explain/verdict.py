@@ -55,13 +55,14 @@ thermal paths through one lag made the ADEV 1.4× worse at τ 2–5 min).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ALPHA", "HELDOUT_RATIO", "Verdict", "compensation_worse_at", "judge"]
+__all__ = ["ALPHA", "HELDOUT_RATIO", "MisfitRange", "Verdict", "compensation_worse_at", "judge"]
 
 #: The level of the χ² tests that say "unexplained".
 ALPHA = 0.01
@@ -70,6 +71,17 @@ ALPHA = 0.01
 #: halves, a mechanism the held-out data reject lies far beyond (two thermal paths through one
 #: lag: 15·n). It no longer decides "unexplained" (the held-out test at ``ALPHA`` does).
 HELDOUT_RATIO = 5.0
+
+
+class MisfitRange(TypedDict):
+    """One contiguous τ range where a model misses the measured AVAR by ≥ 3 σ
+    (``engine.misfit_ranges``): its ends (s), the largest z there, the measured ADEV over the
+    model's at that τ (NaN where either is not positive), "above" or "below"."""
+
+    tau_range_s: list[float]
+    max_sigma: float
+    adev_ratio: float
+    direction: str
 
 
 def _chi2_sf(x: float, k: float) -> float:
@@ -94,7 +106,7 @@ class Verdict:
     heldout_chi2: float | None = None
     heldout_n: int = 0
     heldout_p: float | None = None
-    misfit: list[dict[str, Any]] = field(default_factory=list)
+    misfit: list[MisfitRange] = field(default_factory=list)
     #: False when the extended fit's χ² could not be tested (no dof, χ² not finite): then
     #: ``explained`` is False too (nothing said it fits)
     tested: bool = True
@@ -162,7 +174,7 @@ class Verdict:
                 "alpha": ALPHA, "misfit": self.misfit, "line": self.line()}
 
 
-def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
+def judge(chi2_dof: float, dof: int, misfit: Sequence[MisfitRange],
           heldout_chi2: float | None = None, heldout_n: int = 0,
           heldout_missing: str | None = None, changed: str | None = None) -> Verdict:
     """The verdict from the extended fit's χ²/dof and dof, its misfit ranges, and (when
@@ -179,11 +191,11 @@ def judge(chi2_dof: float, dof: int, misfit: list[dict[str, Any]],
     missing = heldout_missing if hp is None else None
     bad = not tested or p < ALPHA or held_bad or missing is not None
     return Verdict(not bad, chi2_dof, dof, p, heldout_chi2 if hp is not None else None,
-                   heldout_n if hp is not None else 0, hp, misfit if bad else [], tested,
+                   heldout_n if hp is not None else 0, hp, list(misfit) if bad else [], tested,
                    missing, changed=changed)
 
 
-def _misfit_text(r: dict[str, Any]) -> str:
+def _misfit_text(r: MisfitRange) -> str:
     """One misfit range: where, which way, how far in σ and, when known, in ADEV."""
     size = f"up to {r['max_sigma']:+.3g} σ"
     ratio = r.get("adev_ratio")

@@ -107,7 +107,7 @@ def p_values(y: np.ndarray, rb: float) -> dict[str, float]:
 
     try:
         for name in ("none", "whole", "short"):
-            ho._scatter_model = real_sm if name == "short" else (lambda a, m, e: m)
+            ho._scatter_model = real_sm if name == "short" else (lambda a, m: m)
             ho._noise_scatter = real_ns if name != "none" else (
                 lambda m, r: np.zeros((len(r.m), len(r.m))))
             ho.model_chi2 = mc if name == "short" else real_mc

@@ -153,7 +153,7 @@ def test_the_scatter_model_is_read_below_the_longest_octaves():
         h = len(y) // 2
         fit_avar = _avar(y[:h], rb)
         model = fit_noise(fit_avar)
-        short = ho._scatter_model(fit_avar, model, [])
+        short = ho._scatter_model(fit_avar, model)
         assert short is not model
         assert short.tau_max_s <= model.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
         assert [c.label for c in short.components] == [c.label for c in model.components]
@@ -164,5 +164,37 @@ def test_the_scatter_model_is_read_below_the_longest_octaves():
     y, rb = _slow_axis(40)
     tiny = _avar(y[:600], rb)
     m = fit_noise(tiny)
-    assert ho._scatter_model(tiny, m, []) is m or \
-        ho._scatter_model(tiny, m, []).tau_max_s <= m.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
+    assert ho._scatter_model(tiny, m) is m or \
+        ho._scatter_model(tiny, m).tau_max_s <= m.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
+
+
+def test_the_scatter_model_is_refitted_with_the_models_own_options():
+    """The scatter's terms are the held-out model's own fit redone below its longest
+    octaves, with that fit's options: here a model made with a filter corner (kept, as
+    analyze keeps an ADXL355's), a fixed rounding white, a line, a stricter presence level
+    and no quantization term. The short refit has the same components (each its cause, its
+    fixed parameters, its fixed value), the same corner and the same z (whose U²/z the
+    scatter carries); before score29 it was refitted with fit_noise's defaults (no filter,
+    z 2.33, the five terms, no rounding) whatever the model was."""
+    rng = np.random.default_rng(2029)
+    n = int(1.0 * 3600 * RATE)
+    t = np.arange(n) / RATE
+    a = (N * math.sqrt(RATE) * rng.standard_normal(n) + B * _flicker(n, rng)
+         + K * math.sqrt(1 / RATE) * np.cumsum(rng.standard_normal(n))
+         + 3e-4 * np.sin(2 * np.pi * 0.7 * t))
+    fit_avar = _avar(a, RATE)
+    terms = ("velocity_random_walk", "bias_instability", "rate_random_walk", "rate_ramp")
+    model = fit_noise(fit_avar, terms=terms, filter_corner_hz=2.5, check_filter=False,
+                      rounding_lsb=3.9e-5, z_present=3.0,
+                      extra=[{"cause": "sinusoid", "params": {"frequency_hz": 0.7}}])
+    short = ho._scatter_model(fit_avar, model)
+    assert short is not model
+    assert short.tau_max_s <= model.tau_max_s / ho.SCATTER_TAU_FACTOR + 1e-9
+
+    def shape(f):  # type: ignore[no-untyped-def]
+        return [(c.label, c.cause, c.params, c.fixed_value) for c in f.components]
+
+    assert shape(short) == shape(model)
+    assert short.filter_corner_hz == model.filter_corner_hz == 2.5
+    assert short.z_present == model.z_present == 3.0
+    assert short.ci == model.ci

@@ -228,3 +228,28 @@ def test_a_negative_lags_held_out_prediction_fits_as_a_positive_lags_does(tmp_pa
     lo, hi = f_n.intervals["lag_s"]
     assert lo <= -60.0 <= hi or abs(f_n.params["lag_s"] + 60.0) < 0.2 * 60.0
     assert "coefficient" in f_n.intervals
+
+
+def test_holdout_reads_each_records_rate_uncertainty_from_its_meta():
+    """``check_compatible`` reads the meta ``RecordInfo.as_meta`` gives (what explain passes):
+    each fitted rate's standard uncertainty ``rate_u_hz`` widens the rule's tolerance
+    (3 combined uncertainties plus 100 ppm). Two 125 Hz runs 300 ppm apart whose rates are
+    each known to 0.02 Hz are one sensor; the same rates with no uncertainty are not, and the
+    message names both. Before score29 the key read was one as_meta does not write
+    (``rate_uncertainty_hz``), so every uncertainty was taken as 0."""
+    from avard.core.explain.holdout import check_compatible
+    from avard.core.io.record_info import RecordInfo
+    from avard.core.io.source import RecordFormat
+
+    def meta(rate, u):  # type: ignore[no-untyped-def]
+        return RecordInfo("r.npz", RecordFormat.NPZ, rate, ("x", "y", "z"), ("ambient",),
+                          rate_u_hz=u).as_meta()
+
+    r1 = 125.0 * (1 + 300e-6)
+    check_compatible(meta(125.0, 0.02), meta(r1, 0.02), "other.npz")
+    with pytest.raises(DataError, match=r"125 Hz and --holdout other.npz at 125\.0375 Hz"):
+        check_compatible(meta(125.0, 0.0), meta(r1, 0.0), "other.npz")
+    # a different set of channels is another set-up whatever the rates
+    other = RecordInfo("o.npz", RecordFormat.NPZ, 125.0, ("x", "y"), ("ambient",)).as_meta()
+    with pytest.raises(DataError, match="same channels"):
+        check_compatible(meta(125.0, 0.02), other, "o.npz")

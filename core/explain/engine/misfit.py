@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from avard.core.explain.engine.slow import MISFIT_SIGMA
+from avard.core.explain.verdict import MisfitRange
 from avard.core.model.fit import NoiseFit
 from numpy.typing import NDArray
 
@@ -15,14 +15,14 @@ from numpy.typing import NDArray
 
 
 def misfit_ranges(tau: NDArray, var: NDArray, model_var: NDArray, edf: NDArray,
-                  sigma: float = MISFIT_SIGMA) -> list[dict[str, Any]]:
+                  sigma: float = MISFIT_SIGMA) -> list[MisfitRange]:
     """Contiguous τ ranges where |z| ≥ sigma, z = (σ̂² − σ²)/(σ²√(2/ν)) (var(σ̂²) = 2σ⁴/ν,
     NIST SP 1065 §5.3), with the largest |z|, its direction and the measured ADEV over the
     model's there (σ̂/σ, the misfit's size in the curve's own terms)."""
     with np.errstate(invalid="ignore", divide="ignore"):
         z = (var - model_var) / (model_var * np.sqrt(2.0 / edf))
     z = np.where(np.isfinite(z), z, 0.0)
-    out: list[dict[str, Any]] = []
+    out: list[MisfitRange] = []
     i = 0
     while i < len(z):
         if abs(z[i]) >= sigma:

@@ -18,7 +18,7 @@ from avard.core.explain.holdout import (
 from avard.core.explain.thermal_fit import (
     ThermalFit,
 )
-from avard.core.explain.verdict import Verdict, compensation_worse_at, judge
+from avard.core.explain.verdict import MisfitRange, Verdict, compensation_worse_at, judge
 from avard.core.io.screen import ScreenLog
 from avard.core.model.fit import NoiseFit
 from numpy.typing import NDArray
@@ -36,14 +36,14 @@ class ChannelExplanation:
     base: ChannelAnalysis
     extended: NoiseFit
     findings: list[Finding]
-    misfit: list[dict[str, Any]]
+    misfit: list[MisfitRange]
     thermal: ThermalFit | None = None
     compensated_var: NDArray[np.float64] | None = None
     contributions: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     #: AVAR with only the temperature part removed (the thermal fit's compensated curve)
     thermal_compensated_var: NDArray[np.float64] | None = None
     #: the extended model's own misfit ranges (τ beyond 3 σ)
-    ext_misfit: list[dict[str, Any]] = field(default_factory=list)
+    ext_misfit: list[MisfitRange] = field(default_factory=list)
     #: whether the extended model describes the axis (``verdict.judge``), set by explain
     verdict: Verdict | None = None
     #: τ (fitted or not) where the compensation makes the ADEV worse beyond its interval
