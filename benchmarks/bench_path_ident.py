@@ -263,7 +263,15 @@ def record_resolves(weekend: Any, seed: int, truth: dict[str, float],
     u = {L: blocks(lag_filter(T, float(L), rate)) for L in RATE_LAGS}
     dT = blocks(path_columns(T, [Column("rate", 0.0)], rate)[:, 0])
     one = np.ones(nb)
-    lam = min(resid(np.column_stack([u[L], dT, one] + ([np.exp(-t / L)] if L else [])))
+    # a warm-up the record holds (``weekend.warmups``) is a nuisance of free size beside the
+    # rival, as the start state is and as explain fits it beside every candidate: its size
+    # is no evidence between the two readings (beside the two-path model the warm-up's
+    # e^(−t/900 s) is its own second start state, the ``exp(-t / L2)`` of ``J`` below;
+    # left out of the rival, a dT/dt term through a short lag could not fit it and the
+    # warm-up's own size was read as a separation of 20–105 on records whose rival with it
+    # beside sits at 0.5–6)
+    wu = [np.exp(-t / T_w) for _size, T_w in weekend.warmups]
+    lam = min(resid(np.column_stack([u[L], dT, one, *wu] + ([np.exp(-t / L)] if L else [])))
               for L in RATE_LAGS)
     c1, c2, L2 = truth["coefficient"], truth["coefficient_2"], truth["lag_2_s"]
     u2 = {d: blocks(lag_filter(T, L2 + d, rate)) for d in (-1.0, 1.0)}

@@ -213,8 +213,13 @@ def _beside_transients(out: list[ThermalFit | None], base: list[ThermalFit], Y: 
         # beside those that remain, also where none does: the path must still be chosen
         # with nothing but the warm-up beside it
         sig = tuple(cz.cause_signal(c, len(y), rate_b) for c in cands)
-        if not holds_beside(path_of(b0, y, temps, holes, warmups=found.get(a, ()),
-                                    given=sig), th.mechanism):
+        # the claim is every reading it names (two paths or a dT/dt term, which one drive
+        # line does not tell apart: no interval on either): it holds where one of them does
+        # (two paths beside a warm-up lost their claim where the dT/dt term named beside
+        # them held beside the transients and two paths' lag there left no half to test)
+        pf = path_of(b0, y, temps, holes, warmups=found.get(a, ()), given=sig)
+        named = (th.mechanism, *(th.path.alternatives if th.path is not None else ()))
+        if not any(holds_beside(pf, k) for k in named):
             out[a] = b0
 
 
