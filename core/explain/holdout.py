@@ -77,6 +77,7 @@ from avard.core.explain.thermal_fit.coarse import derounded
 from avard.core.explain.thermal_fit.holes import feed, hole_mask
 from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
 from avard.core.io.rates import format_rate, require_compatible
+from avard.core.io.screen.log_step import is_coarse
 from avard.core.model.fit import NoiseFit, avar_estimate_covariance, fit_noise, model_chi2
 from avard.core.model.terms import TERMS
 from numpy.typing import NDArray
@@ -417,15 +418,21 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         # the de-rounded log, as ``ThermalFit.signal`` removes it on the whole record: the
         # readings' rounding is not in the axis, and a negative lag's lead-lag (gain 2 at
         # high frequencies) would put it into the prediction as a misfit of the right model
-        uh = lag_filter(derounded(u_held[0], held.grid or th.grid), lag,
-                        held.rate(rate_b))[u_held[1]]
+        g_held = held.grid or th.grid
+        t_held = derounded(u_held[0], g_held)
+        uh = lag_filter(t_held, lag, held.rate(rate_b))[u_held[1]]
         d_held += coef * (uh - uh.mean())
         if math.isfinite(th.coef_se) and th.coef_se > 0:
             spread.append((-th.coef_se * (uh - uh.mean()), th.coef_se * (uh - uh.mean())))
         ends = []
+        # the lag's ends read a coarse held-out log as the prediction does (its own step):
+        # on the readings, the ends' difference from the prediction was the coarse rounding
+        # through the lag, a spread that widened the prediction by what no lag moves (the
+        # 12-bit log's ends stay on its readings, as they were)
+        t_ends = t_held if is_coarse(g_held[0]) else u_held[0]
         for lg in (th.lag_lo, th.lag_hi):
             if math.isfinite(lg) and lg != lag:
-                ul = lag_filter(u_held[0], lg, held.rate(rate_b))[u_held[1]]
+                ul = lag_filter(t_ends, lg, held.rate(rate_b))[u_held[1]]
                 ends.append(coef * ((ul - ul.mean()) - (uh - uh.mean())))
             else:
                 ends.append(np.zeros(len(held.y)))

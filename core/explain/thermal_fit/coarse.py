@@ -102,6 +102,31 @@ def derounded(T: NDArray, grid: tuple[float, float] | None = None,
     return out
 
 
+def behind_readings(T: NDArray, grid: tuple[float, float] | None = None,
+                    real: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+    """The temperature behind the readings ``T`` (slow view, °C) on their ``grid`` (step K,
+    origin; None: the 12-bit (0.0625, 0)), as every reading of the log takes it: the thermal
+    path candidates' columns that are not linear in the readings (the quadratic's square, the
+    relay, the dT/dt term's reference slope: ``thermal_paths.columns.path_columns``) and the
+    relay's switch-time floor (``PathFit.relay_floor``). On a coarse step it is ``derounded``,
+    the one-lag fit's own reading (the crossing spline, its ends carried on its slope, each
+    turn's top a cycle's, ``_turn_tops``): the bare spline bulges at a turn as a parabola
+    where a cycle turns as a cosine, the swing it gives is low by as much as the tops carry
+    of it, and a square or a relay's switches read on it inherit that error while the one
+    lag beside them does not. On the 12-bit step it is the crossing spline
+    (``crossing_reconstruction``), the candidates' reading there, which the straight lines of
+    ``derounded`` (the one-lag signal's) are not: a turn within one 0.0625 K step is a small
+    part of any swing a coupling is read on. ``real``: the samples that are readings where
+    ``T`` bridges a gap (``derounded``)."""
+    from avard.core.explain.thermal_paths.columns import crossing_reconstruction
+
+    q, o = (DS18B20_STEP_K, 0.0) if grid is None else grid
+    if is_coarse(q):
+        return derounded(T, (q, o), real=real)
+    T = np.asarray(T, dtype=float)
+    return np.asarray(crossing_reconstruction(T - o, q) + o, dtype=float)
+
+
 def channel_grids(grids: Sequence[tuple[float, float] | None] | None, k: int
                   ) -> list[tuple[float, float]]:
     """Each of ``k`` temperature channels' (step K, origin): ``grids``' (None, or a None

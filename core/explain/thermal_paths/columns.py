@@ -148,10 +148,11 @@ def path_columns(T: NDArray, cols: list[Column], rate_hz: float,
     def behind() -> NDArray:
         nonlocal smooth
         if smooth is None:
-            # on the driving channel's own step and origin: the 12-bit default would put a
-            # coarse log's knots between its levels
-            q, o = grid
-            smooth = crossing_reconstruction(T - o, q) + o
+            # on the driving channel's own step and origin (the 12-bit default would put a
+            # coarse log's knots between its levels), read as the one-lag fit reads it
+            from avard.core.explain.thermal_fit.coarse import behind_readings
+
+            smooth = behind_readings(T, grid)
         return smooth
 
     out = np.empty((M, len(cols)))

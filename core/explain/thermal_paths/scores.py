@@ -8,13 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from avard.core.explain.thermal_fit import lag_filter
+from avard.core.explain.thermal_fit.coarse import behind_readings
 from avard.core.explain.thermal_fit.rounding import DS18B20_STEP_K
-from avard.core.explain.thermal_paths.columns import (
-    Column,
-    _relay,
-    crossing_reconstruction,
-    path_columns,
-)
+from avard.core.explain.thermal_paths.columns import Column, _relay, path_columns
 from avard.core.explain.thermal_paths.settings import (
     HELDOUT_MARGIN,
     NUISANCE,
@@ -200,10 +196,10 @@ class PathFit:
             return 0.0, ""
         T = np.asarray(T, dtype=float)
         # the temperature behind the readings on the log's own step and origin, as the relay
-        # column was built (``path_columns``): on the 12-bit default a coarse log's knots sat
-        # between its levels, and its switch times' error was taken on 0.0625 K
-        q, o = self.grid
-        behind = crossing_reconstruction(T - o, q) + o
+        # column was built (``path_columns``, ``behind_readings``): on the 12-bit default a
+        # coarse log's knots sat between its levels, and its switch times' error was taken on
+        # 0.0625 K
+        behind = behind_readings(T, self.grid)
         v = lag_filter(behind, relay.lag, self.rate_hz)
         r = _relay(v, relay.width)
         sw = np.flatnonzero(np.diff(r) != 0) + 1
