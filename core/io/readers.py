@@ -437,6 +437,11 @@ def _csv_open(p: Path) -> tuple[IO[str], list[str], str]:
 
 
 def _csv_layout(p: Path, cols: list[str]) -> dict[str, Any]:
+    blank = [i for i, c in enumerate(cols) if not c]
+    if blank:
+        # a trailing delimiter made a nameless column, read as acceleration of NaN
+        raise DataError(f"{p}: column {blank[0] + 1} of the header has no name (a trailing or "
+                        "doubled delimiter?); name every column (t, x, y, z, temp_NAME …)")
     low = [c.lower() for c in cols]
     tcol = next((i for i, c in enumerate(low) if c in _TIME_COLUMNS), None)
     temp = [i for i, c in enumerate(low) if c.startswith("temp")]
@@ -463,14 +468,14 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
         try:
             a = np.loadtxt(io.StringIO(text), delimiter=delim, ndmin=2, dtype=np.float64)
         except ValueError as exc:
-            filled = _with_empty_fields(text, delim)
+            filled, why = _with_empty_fields(text, delim)
             if filled is None:
                 hint = ("; the numbers use decimal commas: write them with decimal points "
                         "(e.g. 9.81; export with a point as the decimal separator)"
                         if delim != "," and re.search(r"(^|\D)\d+,\d+", text) else "")
                 raise DataError(f"{p}: unreadable number in lines {line0}–"
-                                f"{line0 + len(lines) - 1} ({exc}); every field must be a "
-                                f"number (NaN, or an empty field, where a temperature has no "
+                                f"{line0 + len(lines) - 1} ({why or exc}); every field must be "
+                                "a number (NaN, or an empty field, where a temperature has no "
                                 f"reading){hint}") from exc
             a = filled
         if a.shape[1] != ncols:
@@ -480,20 +485,22 @@ def _csv_chunks(fh: IO[str], delim: str, ncols: int, block: int, p: Path
         line0 += len(lines)
 
 
-def _with_empty_fields(text: str, delim: str) -> NDArray[np.float64] | None:
+def _with_empty_fields(text: str, delim: str
+                       ) -> tuple[NDArray[np.float64] | None, ValueError | None]:
     """The chunk read with its empty fields as NaN (what pandas' ``to_csv`` writes for a
-    missing value: a temperature column between readings), or None where something else is
-    unreadable. Only a chunk the fast read refused pays for this."""
+    missing value: a temperature column between readings), or None and the error of what
+    else is unreadable (None where no field was empty). Only a chunk the fast read refused
+    pays for this."""
     d = re.escape(delim)
     # after a delimiter with nothing before the next one or the line's end, or a line that
     # starts with the delimiter
     filled = re.sub(rf"(?m)(?<={d})(?=[ \t]*(?:{d}|\r?\n|\Z))|^(?=[ \t]*{d})", "nan", text)
     if filled == text:
-        return None
+        return None, None
     try:
-        return np.loadtxt(io.StringIO(filled), delimiter=delim, ndmin=2, dtype=np.float64)
-    except ValueError:
-        return None
+        return np.loadtxt(io.StringIO(filled), delimiter=delim, ndmin=2, dtype=np.float64), None
+    except ValueError as exc:
+        return None, exc
 
 
 #: A CSV's times may leave the rate of its first rows by this share of the time elapsed,
@@ -503,8 +510,7 @@ def _with_empty_fields(text: str, delim: str) -> NDArray[np.float64] | None:
 RATE_DRIFT_SHARE, RATE_DRIFT_Z = 0.01, 6.0
 
 
-def _check_times(t: NDArray, last_t: float, rate: float, done: int, p: Path,
-                 t0: float | None = None, jitter_s: float = 0.0) -> None:
+def _check_times(t: NDArray, last_t: float, rate: float, done: int, p: Path) -> None:
     """A chunk's t column (``last_t``: the chunk before's last time, −inf for the first)
     strictly increasing, and without a jump past 1.5 sample spacings: that is missing
     samples, and read end to end the hole would become a step or a shift in time that
@@ -531,52 +537,98 @@ def _check_times(t: NDArray, last_t: float, rate: float, done: int, p: Path,
                         f"{round(gap * rate) - 1} samples are missing; a CSV cannot carry "
                         "the gap, so split the file at the hole (or give --rate HZ to read "
                         "the samples end to end, the hole included)")
-    if t0 is None:
-        return
-    # the times against the first rows' rate: a spacing that changes by less than the hole
-    # rule's 1.5 (a logger switched from 10 to 8 Hz, or sped up) had been read at one rate
-    # end to end, every τ and the record's length wrong, without a word
-    idx = done + np.arange(len(t))
-    off = t - (t0 + idx / rate)
-    far = np.abs(off) > (RATE_DRIFT_SHARE * (t - t0) + 2.0 / rate
-                         + RATE_DRIFT_Z * jitter_s * np.sqrt(idx + 1.0))
-    if far.any():
-        k = int(np.flatnonzero(far)[0])
-        near = np.diff(t[max(0, k - 256):k + 1])
-        here = float(np.median(near)) if len(near) else float("nan")
-        raise DataError(f"{p}: the t column leaves the rate of its first rows ({rate:.6g} Hz, "
-                        f"spacing {1 / rate:.4g} s): by t = {t[k]:.6g} s (sample {idx[k] + 1})"
-                        f" its times are {off[k]:+.4g} s from it and its spacing is "
-                        f"{here:.4g} s; a CSV holds one rate, so split the file where the "
-                        "rate changes (or give --rate HZ to read the samples end to end at "
-                        "one rate)")
 
 
-#: The rows whose mean spacing gives a CSV's rate (the first ones: the rest is checked
-#: against it, a rate that changes later is refused, not averaged in)
+#: The rows whose times give a CSV's rate and time base (the first ones: the rest is checked
+#: against them, a rate that changes later is refused, not averaged in)
 RATE_ROWS = 4096
 
 
-def _rate_from_t(t: NDArray, p: Path) -> float:
-    t = t[:RATE_ROWS]
-    bad = np.flatnonzero(~np.isfinite(t))
-    if len(bad):
-        raise DataError(f"{p}: the t column is empty or not a number at sample "
-                        f"{int(bad[0]) + 1}; every row needs its time in seconds (or drop t "
-                        "and give --rate HZ)")
-    dt = np.diff(t)
-    if len(dt) == 0:
-        raise DataError(f"{p}: one sample cannot give a sample rate; give --rate HZ")
-    if np.any(dt <= 0):
-        i = int(np.flatnonzero(dt <= 0)[0])
-        raise DataError(f"{p}: the t column does not increase at sample {i + 1}; times must be "
-                        "strictly increasing seconds (or drop t and give --rate)")
-    med = float(np.median(dt))
-    if float(dt.max()) <= 1.5 * med:
-        # no hole: the mean spacing, which the times' rounding and jitter do not bias (3 Hz
-        # printed to 0.1 s has a median spacing of 0.3 s, 11 % off)
-        med = float(t[-1] - t[0]) / len(dt)
-    return check_rate(1.0 / med, f"{p} (from the t column)")
+@dataclass(frozen=True)
+class _TimeBase:
+    """A CSV's rate and the line its first rows' times follow, t ≈ ``t_ref`` + i/``rate``
+    (least squares over the first ``RATE_ROWS`` rows, or their median spacing where a hole
+    lies among them: the hole is refused when it is read), with the largest residual of
+    those rows (``offset_s``: a start-up burst or a clock step early on is no rate change)
+    and their spacing's scatter (``jitter_s``)."""
+
+    rate: float
+    t_ref: float
+    offset_s: float
+    jitter_s: float
+
+    @classmethod
+    def of(cls, t: NDArray, p: Path) -> _TimeBase:
+        t = t[:RATE_ROWS]
+        bad = np.flatnonzero(~np.isfinite(t))
+        if len(bad):
+            raise DataError(f"{p}: the t column is empty or not a number at sample "
+                            f"{int(bad[0]) + 1}; every row needs its time in seconds (or drop "
+                            "t and give --rate HZ)")
+        dt = np.diff(t)
+        if len(dt) == 0:
+            raise DataError(f"{p}: one sample cannot give a sample rate; give --rate HZ")
+        if np.any(dt <= 0):
+            i = int(np.flatnonzero(dt <= 0)[0])
+            raise DataError(f"{p}: the t column does not increase at sample {i + 1}; times "
+                            "must be strictly increasing seconds (or drop t and give --rate)")
+        med = float(np.median(dt))
+        if float(dt.max()) > 1.5 * med or len(dt) < 2:
+            return cls(check_rate(1.0 / med, f"{p} (from the t column)"), float(t[0]), 0.0,
+                       0.0)
+        # no hole: the least-squares spacing, which the times' rounding and jitter do not
+        # bias (3 Hz printed to 0.1 s has a median spacing of 0.3 s, 11 % off)
+        rows = np.arange(len(t), dtype=float)
+        slope, ref = np.polyfit(rows, t - t[0], 1)
+        resid = t - t[0] - (ref + slope * rows)
+        return cls(check_rate(1.0 / float(slope), f"{p} (from the t column)"),
+                   float(t[0] + ref), float(np.max(np.abs(resid))), float(np.std(dt)))
+
+
+#: A CSV's times may leave its first rows' line (``_TimeBase``) by that line's own largest
+#: residual, two sample spacings, this share of the time elapsed and ``RATE_DRIFT_Z`` times
+#: the spacing's scatter grown as a random walk (a PC-stamped log whose every spacing
+#: wanders): a clock's ppm and a logger's jitter stay inside, a rate that changes midway
+#: leaves it within minutes.
+RATE_DRIFT_SHARE, RATE_DRIFT_Z = 0.01, 6.0
+
+
+class _RateWatch:
+    """The times of every chunk against the first rows' rate: a spacing that changes by less
+    than the hole rule's 1.5 (a logger switched from 10 to 8 Hz, or sped up) had been read at
+    one rate end to end, every τ and the record's length wrong, without a word. Refused in
+    one line naming where the times last followed the rate (the change's place, to split the
+    file there) and the spacing after it."""
+
+    def __init__(self, base: _TimeBase, p: Path) -> None:
+        self.base, self.p = base, p
+        self.on_rate = (0, base.t_ref)   # the last (row, time) still on the first rows' line
+
+    def check(self, t: NDArray, done: int) -> None:
+        b = self.base
+        idx = done + np.arange(len(t))
+        off = t - (b.t_ref + idx / b.rate)
+        base = b.offset_s + 2.0 / b.rate
+        on = np.flatnonzero(np.abs(off) <= base)
+        far = np.abs(off) > (base + RATE_DRIFT_SHARE * (t - b.t_ref)
+                             + RATE_DRIFT_Z * b.jitter_s * np.sqrt(idx + 1.0))
+        if not far.any():
+            if len(on):
+                self.on_rate = (int(idx[on[-1]]), float(t[on[-1]]))
+            return
+        k = int(np.flatnonzero(far)[0])
+        before = on[on < k]
+        if len(before):
+            self.on_rate = (int(idx[before[-1]]), float(t[before[-1]]))
+        near = np.diff(t[max(0, k - 256):k + 1])
+        here = float(np.median(near)) if len(near) else float("nan")
+        row, at = self.on_rate
+        raise DataError(f"{self.p}: the t column leaves the rate of its first rows "
+                        f"({b.rate:.6g} Hz, spacing {1 / b.rate:.4g} s) after about t = "
+                        f"{at:.6g} s (sample {row + 1}): by t = {t[k]:.6g} s its times are "
+                        f"{off[k]:+.4g} s from that rate's and its spacing is {here:.4g} s; a "
+                        "CSV holds one rate, so split the file there (or give --rate HZ to "
+                        "read the samples end to end at one rate)")
 
 
 def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
@@ -592,10 +644,12 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
     except Exception:
         fh.close()
         raise
+    times: _TimeBase | None = None
     if rate_hz is not None:
         rate = check_rate(rate_hz, str(p))
     elif lay["t"] is not None:
-        rate = _rate_from_t(first[1][:, lay["t"]], p)
+        times = _TimeBase.of(first[1][:, lay["t"]], p)
+        rate = times.rate
     else:
         fh.close()
         raise DataError(f"{p}: no time column ({', '.join(_TIME_COLUMNS)}) and no rate; give "
@@ -611,16 +665,14 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
     def gen() -> Iterator[tuple[NDArray, NDArray | None]]:
         last_t = -math.inf
         done = 0
-        t0: float | None = None
-        jitter = 0.0
+        watch = _RateWatch(times, p) if times is not None else None
         try:
             for _, a in itertools.chain([first], chunks):
                 if lay["t"] is not None and rate_hz is None:
                     t = a[:, lay["t"]]
-                    if t0 is None:
-                        t0 = float(t[0])
-                        jitter = float(np.std(np.diff(t[:RATE_ROWS]))) if len(t) > 2 else 0.0
-                    _check_times(t, last_t, rate, done, p, t0, jitter)
+                    _check_times(t, last_t, rate, done, p)
+                    if watch is not None:
+                        watch.check(t, done)
                     last_t = float(t[-1])
                 acc = a[:, lay["accel"]]
                 _check_finite(acc, done, str(p))

@@ -270,34 +270,47 @@ def _spiky(log: ScreenLog, name: str, readings: int) -> LogNote | None:
                    "answering on one column, or a noisy line); not used for the thermal model")
 
 
-#: A change between two readings this close (s) larger than this (K), that stays: no room or
-#: plate makes it (a DS18B20 in air needs minutes for a few K); a log that switched units
-#: (°C to °F: +40 K at a room's values) or sensors midway
-LEVEL_JUMP_K, LEVEL_JUMP_S = 5.0, 10.0
+#: A change of a log's level larger than ``LEVEL_JUMP_K`` plus ``LEVEL_JUMP_K_PER_S`` times the
+#: time between the two readings (K), that stays (the median of the readings within
+#: ``LEVEL_JUMP_WINDOW_S`` after against before): no room or plate makes it (a DS18B20 in air
+#: needs minutes for a few K); a log that switched units (°C to °F: +40 K at a room's values)
+#: or sensors midway, also across a logger's restart
+LEVEL_JUMP_K, LEVEL_JUMP_K_PER_S, LEVEL_JUMP_WINDOW_S = 5.0, 20.0 / 3600.0, 60.0
 
 
 def _level_jump(log: ScreenLog, name: str, tr: _TempTrack, rate_hz: float) -> LogNote | None:
-    """A note refusing a log that jumps by more than ``LEVEL_JUMP_K`` between readings at most
-    ``LEVEL_JUMP_S`` apart (the readings the per-reading rules masked left out): its two
-    sides are not one sensor reading one place in one unit, and a coupling fitted across
-    the jump is the jump's."""
+    """A note refusing a log whose level jumps and stays (``LEVEL_JUMP_K``…): its two sides
+    are not one sensor reading one place in one unit, and a coupling fitted across the jump
+    is the jump's. Readings inside any stretch the screen masked or cut on this channel
+    (single bad readings, stuck runs) are left out, so the span across them is a gap; a
+    glitch of a few readings that returns is no jump (the medians around it agree)."""
     idx, val = tr.arrays()
     if len(idx) < 3:
         return None
-    masked = {st.first for st in log.stretches if st.channel == name and st.first == st.last}
-    keep = np.array([int(i) not in masked for i in idx], dtype=bool) if masked else None
-    i, v = (idx, val) if keep is None else (idx[keep], val[keep])
-    if len(i) < 3:
+    keep = np.ones(len(idx), dtype=bool)
+    for st in log.stretches:
+        if st.channel == name:
+            keep[int(np.searchsorted(idx, st.first)):
+                 int(np.searchsorted(idx, st.last, side="right"))] = False
+    t, v = idx[keep] / rate_hz, val[keep]
+    if len(t) < 3:
         return None
-    dv, dt = np.diff(v), np.diff(i) / rate_hz
-    far = np.flatnonzero((np.abs(dv) > LEVEL_JUMP_K) & (dt <= LEVEL_JUMP_S))
-    if not len(far):
+    dv, dt = np.diff(v), np.diff(t)
+    allow = LEVEL_JUMP_K + LEVEL_JUMP_K_PER_S * dt
+    jumps: list[tuple[int, float]] = []
+    for k in np.flatnonzero(np.abs(dv) > allow):
+        b0 = int(np.searchsorted(t, t[k] - LEVEL_JUMP_WINDOW_S))
+        a1 = int(np.searchsorted(t, t[k + 1] + LEVEL_JUMP_WINDOW_S, side="right"))
+        step = float(np.median(v[k + 1:a1]) - np.median(v[b0:k + 1]))
+        if abs(step) > allow[k]:
+            jumps.append((int(k), step))
+    if not jumps:
         return None
-    k = int(far[0])
-    return LogNote("level_jump", f"its readings jump by {dv[k]:+.3g} K in {dt[k]:.3g} s at "
-                   f"t = {i[k + 1] / rate_hz:.6g} s ({len(far)} such jump(s)): no room or plate "
-                   "moves so fast; a log that changed units (°C to °F) or sensors midway is "
-                   "not one sensor reading one place; not used for the thermal model (split "
+    j, step = jumps[0]
+    return LogNote("level_jump", f"its level jumps by {step:+.3g} K in {dt[j]:.3g} s at "
+                   f"t = {t[j + 1]:.6g} s and stays ({len(jumps)} such jump(s)): no room or "
+                   "plate moves so fast; a log that changed units (°C to °F) or sensors midway "
+                   "is not one sensor reading one place; not used for the thermal model (split "
                    "the record there, or fix the log's units)")
 
 

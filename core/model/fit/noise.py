@@ -66,6 +66,11 @@ def _short_tau_cut(p: _Problem, comps: list[Component], fitted: list[int], rate_
     return start
 
 
+#: The Allan variances (any unit squared) the fit's arithmetic holds: its covariance takes
+#: products of four of them
+VAR_SCALE_MAX = 1e60
+
+
 def fit_noise(
     result: Any,
     *,
@@ -138,11 +143,17 @@ def fit_noise(
     comps = _components(terms, extra, filter_corner_hz, rate)
     fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
     fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
-    if np.any(np.isinf(var)):
-        # squares beyond float64: the data's scale, not its noise (a constant channel's AVAR
-        # is zero, not infinite)
-        raise FitError("the Allan variance overflows (infinite at some τ): the values are too "
-                       "large for float64 sums; check the data's scale and units (m/s²)")
+    pos = var[np.isfinite(var) & (var > 0)]
+    if np.any(np.isinf(var)) or (len(pos) and (pos.max() > VAR_SCALE_MAX
+                                               or pos.min() < 1.0 / VAR_SCALE_MAX)):
+        # the data's scale, not its noise (a constant channel's AVAR is zero, not infinite):
+        # squares beyond float64, or a covariance whose products over- or underflow in the
+        # fit's linear algebra (a LinAlgError from an eigen-solve had escaped)
+        raise FitError("the Allan variance is "
+                       + ("infinite at some τ" if np.any(np.isinf(var)) else
+                          f"{pos.min():.3g} to {pos.max():.3g}")
+                       + ": values this large or small are beyond the fit's float64 "
+                       "arithmetic; check the data's scale and units (m/s²)")
     if not np.any(np.isfinite(var) & (var > 0)):
         # zero Allan variance at every τ: a longer record would not help
         raise FitError("the Allan variance is zero at every τ: the channel is constant (no "
