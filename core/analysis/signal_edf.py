@@ -69,9 +69,9 @@ if TYPE_CHECKING:
     from avard.core.allan.deviations import AllanResult
     from avard.core.model.fit import NoiseFit
 
-__all__ = ["floor_bounds", "model_edf", "noise_part_edf", "noise_psd", "parts_edf", "signal_parts",
-           "signal_share", "unresolved_noise_edf", "with_parts_edf", "with_share_edf",
-           "with_signal_edf"]
+__all__ = ["floor_bounds", "model_edf", "noise_part_edf", "noise_psd", "parts_edf",
+           "resolved_ramp_bounds", "signal_parts", "signal_share", "unresolved_noise_edf",
+           "with_parts_edf", "with_share_edf", "with_signal_edf"]
 
 #: The share of the AVAR above which a deterministic part's cross term is computed exactly.
 _EXACT_SHARE = 1e-3
@@ -291,6 +291,59 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
     return with_parts_edf(allan, parts, total, noise_part,
                           noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart), noise,
                           within_support=not fit.resolved_apart)
+
+
+def resolved_ramp_bounds(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
+                         noise_avar: NDArray[np.float64],
+                         psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                         noise_nu: NDArray[np.float64]
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The bounds of an estimate σ̂² beside a ramp resolved apart from the AVAR (and any
+    resolved sinusoid, ``parts``), made of the estimate's error, not of a χ² about it:
+
+        σ̂² − T = (the noise's own scatter about N) + Σ_j (part j's cross term with the
+        noise, and a sinusoid's spread over its phase),
+
+    the first a χ² on the noise's EDF ``noise_nu`` scaled by the model's noise N
+    (``noise_avar``), the others of variance V = Σ S_j·c_j + S_j²·p_j (``parts_edf``'s
+    terms), taken as Gaussian (a deterministic part's cross term is a linear form in the
+    noise) and combined with the first in quadrature:
+
+        lo = σ̂² − √((N·(χ²_hi/ν − 1))² + z²V),  hi = σ̂² + √((N·(1 − χ²_lo/ν))² + z²V).
+
+    Why not the χ² of ``parts_edf``'s EDF about σ̂²: that EDF, 2T²/Var, holds the ramp's
+    AVAR at the estimated slope, whose error is the estimate's own (a record whose slope
+    came out high has a high estimate), so the EDF rose with the estimate and the interval
+    was narrow exactly where the estimate was high; and a scale family about σ̂² reaches far
+    above a low estimate. Here the widths do not scale with σ̂² (V with the part's AVAR,
+    which is the slope's square, and N the fitted noise). NaN where a bound is not a
+    positive number, or where the ramp holds under ``_EXACT_SHARE`` of the estimate (the
+    caller keeps its own).
+
+    Not yet what analyze prints (docs/log/2026-11-29-cov28b.md): with the fitted noise's
+    spectrum the widths still follow the estimate through the cross term, whose walk the
+    fit reads from the same long τ, and on the independent generator one cell left the
+    band while the one it was for came in."""
+    tau = np.asarray(allan.tau, dtype=float)
+    var = np.asarray(allan.var, dtype=float)
+    z = NormalDist().inv_cdf(0.5 + float(allan.ci) / 2.0)
+    u_lo, u_hi = chi2_interval(np.ones(len(tau)), noise_nu, allan.ci, allan.quantiles)
+    noise = np.maximum(np.asarray(noise_avar, dtype=float), 0.0)
+    v = np.zeros(len(tau))
+    for s, f0 in parts:
+        c = np.array([cross_term_variance(psd, int(m), int(n), f0) if sk > 0 else 0.0
+                      for m, n, sk in zip(allan.m, allan.n, s, strict=True)])
+        v += s * np.where(np.isfinite(c), c, 4.0 * noise / noise_nu) + \
+            s**2 * phase_spread(allan.n, f0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lo = var - np.hypot(noise * (1.0 / u_lo - 1.0), z * np.sqrt(v))
+        hi = var + np.hypot(noise * (1.0 - 1.0 / u_hi), z * np.sqrt(v))
+    # (where the ramp holds under 0.1 % of the estimate it changes nothing worth it: the
+    # caller's χ² about the estimate, which needs no model of the noise's level, stands)
+    ramp = np.sum([s for s, f0 in parts if f0 <= 0], axis=0) if parts else np.zeros(len(tau))
+    ok = np.isfinite(lo) & np.isfinite(hi) & (lo > 0) & (hi > lo) & \
+        (ramp >= _EXACT_SHARE * var)
+    return np.where(ok, lo, np.nan), np.where(ok, hi, np.nan)
 
 
 def _with_floor_edf(allan: AllanResult, fit: NoiseFit, noise_edf: NDArray[np.float64]
