@@ -288,15 +288,50 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
         # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR
         # leaves beside the deterministic terms at their lower 1σ, the larger
         noise_part = np.fmax(noise_upper(fit, allan), total - low)
-    return with_parts_edf(allan, parts, total, noise_part,
-                          noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart), noise,
-                          within_support=not fit.resolved_apart)
+    psd = noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart)
+    out = with_parts_edf(allan, parts, total, noise_part, psd, noise,
+                         within_support=not fit.resolved_apart)
+    scale = _ramp_cross_scale(fit)
+    if "rate_ramp" not in fit.resolved_apart or not math.isfinite(scale):
+        return out
+    # beside a ramp the time domain resolved, the bounds are made of the estimate's error
+    # (``resolved_ramp_bounds``), the ramp's cross term at the slope's measured variance
+    # times the model's ratio (``drift.model_slope_var``), not the χ² of an EDF that holds
+    # the estimate's own error in the ramp's S and the fitted walk's cross term
+    lo, hi = resolved_ramp_bounds(allan, parts, _noise_fitted(fit, allan), psd,
+                                  noise_part_edf(allan, noise), scale)
+    keep = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(np.asarray(out.lo, dtype=float))
+    return replace(out, lo=np.where(keep, lo, out.lo), hi=np.where(keep, hi, out.hi))
+
+
+def _ramp_cross_scale(fit: NoiseFit) -> float:
+    """The resolved ramp's cross-term scale (``drift.CROSS_SCALE``: the slope's measured
+    variance over the GLS slope's under the fitted noise), NaN where the fit carries none
+    (no ramp resolved from the time domain, or a fit not made by ``drift.resolve_drift``)."""
+    from avard.core.analysis.drift import CROSS_SCALE
+
+    for comp in fit.components:
+        if comp.label == "rate_ramp":
+            return float(comp.params.get(CROSS_SCALE, math.nan))
+    return math.nan
+
+
+def _noise_fitted(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
+    """The fitted noise's AVAR at each τ of ``allan``, every noise component at its point
+    value (not ``_noise_expected``'s √(N̂² + Var N̂), which holds the ramp's own uncertainty
+    once more: the bounds carry it in the cross term)."""
+    tau = np.asarray(allan.tau, dtype=float)
+    out = np.zeros(len(tau))
+    for j, comp in enumerate(fit.components[:len(fit.theta)]):
+        if comp.psd(fit.rate_hz) is not None:
+            out += float(fit.theta[j]) * comp.basis(tau, fit.rate_hz)
+    return out
 
 
 def resolved_ramp_bounds(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
                          noise_avar: NDArray[np.float64],
                          psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-                         noise_nu: NDArray[np.float64]
+                         noise_nu: NDArray[np.float64], ramp_scale: float = 1.0
                          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The bounds of an estimate σ̂² beside a ramp resolved apart from the AVAR (and any
     resolved sinusoid, ``parts``), made of the estimate's error, not of a χ² about it:
@@ -320,10 +355,12 @@ def resolved_ramp_bounds(allan: AllanResult, parts: list[tuple[NDArray[np.float6
     positive number, or where the ramp holds under ``_EXACT_SHARE`` of the estimate (the
     caller keeps its own).
 
-    Not yet what analyze prints (docs/log/2026-11-29-cov28b.md): with the fitted noise's
-    spectrum the widths still follow the estimate through the cross term, whose walk the
-    fit reads from the same long τ, and on the independent generator one cell left the
-    band while the one it was for came in."""
+    ``ramp_scale`` multiplies a ramp's c (``with_signal_edf`` passes the slope's measured
+    variance over the GLS slope's under the fitted noise, ``drift.model_slope_var``): with
+    c under the fitted spectrum alone the widths still followed the estimate, since the
+    walk that sets c is read from the same long τ (docs/log/2026-11-29-cov28b.md); the
+    ratio of c to the GLS slope's variance under one spectrum moves far less with that
+    walk than either."""
     tau = np.asarray(allan.tau, dtype=float)
     var = np.asarray(allan.var, dtype=float)
     z = NormalDist().inv_cdf(0.5 + float(allan.ci) / 2.0)
@@ -333,6 +370,8 @@ def resolved_ramp_bounds(allan: AllanResult, parts: list[tuple[NDArray[np.float6
     for s, f0 in parts:
         c = np.array([cross_term_variance(psd, int(m), int(n), f0) if sk > 0 else 0.0
                       for m, n, sk in zip(allan.m, allan.n, s, strict=True)])
+        if f0 <= 0:
+            c = c * ramp_scale
         v += s * np.where(np.isfinite(c), c, 4.0 * noise / noise_nu) + \
             s**2 * phase_spread(allan.n, f0)
     with np.errstate(invalid="ignore", divide="ignore"):
