@@ -79,3 +79,67 @@ def test_a_bound_that_is_not_a_positive_number_is_left_to_the_caller() -> None:
     lo, hi = resolved_ramp_bounds(replace(a, var=a.var * 0.01), [(np.array([1.0]), 0.0)],
                                   np.array([1.0 / M]), _white, nu)
     assert np.isnan(lo[0]) and np.isnan(hi[0])
+
+
+def test_the_bounds_beside_a_resolved_ramp_do_not_follow_the_fitted_walk() -> None:
+    """Beside a ramp analyze resolved from the time domain the printed bounds at the τ the
+    ramp holds are ``resolved_ramp_bounds`` with the ramp's cross term at the slope's
+    measured variance times the model's ratio (``drift.model_slope_var``). The walk the
+    fit puts beside the ramp is read from the same long τ as the estimate, so a rule whose
+    width follows it follows the estimate (cov28b: the cross term under the fitted
+    spectrum varied by 73 % between records and over-covered the high estimates). With the
+    walk halved or doubled and the slope's measured variance kept, the cross term under
+    the fitted spectrum moves by a factor of 1.5 or more; the printed width by under half
+    the log-distance the χ² about the estimate (the rule before) moves."""
+    from avard.core.analysis import drift as dr
+    from avard.core.analysis import signal_edf as se
+    from avard.core.analysis.cross_term import cross_term_variance
+    from avard.core.analysis.engine import analyze
+    from avard.core.io.source import RecordFormat, RecordInfo, StreamSource
+
+    from tests.support.coverage_gen import Mix, record
+
+    rate, n = 10.0, 36000
+    y = record(Mix(1.0, 0.02, 2e-5, drift=3e-4), n, np.random.default_rng(5))[0]
+    info = RecordInfo(source="test", format=RecordFormat.STREAM, rate_hz=rate, names=("x",),
+                      n_samples=n)
+    ch = analyze(StreamSource(info, iter([(y[:, None], None, False)]))).channels["x"]
+    fit = ch.fit
+    assert fit.resolved_apart == ("rate_ramp",)
+    k = len(ch.allan.tau)
+    est = replace(ch.allan, edf=allan_variance(y, rate).edf[:k])
+    again = se.with_signal_edf(est, fit)
+    np.testing.assert_allclose(again.lo, ch.allan.lo, rtol=1e-12)   # what analyze printed
+    block = dr.drift_block(n)
+    means, block_s = np.zeros(n // block), block / rate
+    j = next(i for i, c in enumerate(fit.components) if c.cause == "rate_random_walk")
+    r = next(i for i, c in enumerate(fit.components) if c.label == "rate_ramp")
+    assert fit.theta[j] > 0
+    last = k - 1
+    m, nd = int(ch.allan.m[last]), int(ch.allan.n[last])
+
+    def with_walk(f: float, scaled: bool):  # type: ignore[no-untyped-def]
+        theta = np.array(fit.theta, dtype=float)
+        theta[j] *= f * f
+        new = replace(fit, theta=theta)
+        params = dict(fit.components[r].params)
+        if scaled:  # the slope's measured variance kept, the model's ratio recomputed
+            params[dr.CROSS_SCALE] *= dr.model_slope_var(fit, means, block_s) / \
+                dr.model_slope_var(new, means, block_s)
+        else:  # no scale: the χ² of the EDF about the estimate (the rule before)
+            params.pop(dr.CROSS_SCALE)
+        comps = list(fit.components)
+        comps[r] = replace(comps[r], params=params)
+        return replace(new, components=comps)
+
+    def width(f: float, scaled: bool) -> float:
+        a = se.with_signal_edf(est, with_walk(f, scaled))
+        return float(a.hi[last] - a.lo[last])
+
+    c0 = cross_term_variance(se.noise_psd(fit, upper=False), m, nd)
+    for f in (0.5, 2.0):
+        c = cross_term_variance(se.noise_psd(with_walk(f, True), upper=False), m, nd)
+        assert abs(np.log(c / c0)) > np.log(1.5), (f, c / c0)
+        new = np.log(width(f, True) / width(1.0, True))
+        old = np.log(width(f, False) / width(1.0, False))
+        assert abs(new) < 0.5 * abs(old), (f, new, old)
