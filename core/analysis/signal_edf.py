@@ -28,9 +28,15 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
   uncertainty, and the noise part is its root mean square over it, √(N̂² + Var N̂)
   (``_noise_expected``): the estimate's variance 2N²/ν is an expectation over that split,
   and its value at the split's worst 1σ point counted the uncertainty into a 68 % interval
-  twice. Not resolved (the test short of its level) but with the slope's 68 % interval
-  clear of zero (``fit.drift_floor``), the ramp at that interval's near end is a part that
-  does not scatter, the noise part what the AVAR leaves beside it, within the support
+  twice. Its bounds are not that EDF's χ² about the estimate, whose EDF holds the ramp at
+  the estimated slope and so rose with the estimate: they are the estimate's error under
+  the model (``resolved_ramp_bounds``), the ramp's cross term at the slope's variance the
+  time domain measured times the model's ratio of the cross term to the GLS slope's
+  variance (``drift.model_slope_var``), so the fitted walk, read from the same long τ as
+  the estimate, does not set the width. Not resolved (the test short of its level) but
+  with the slope's 68 % interval clear of zero (``fit.drift_floor``), the ramp at that
+  interval's near end is a part that does not scatter, the noise part what the AVAR leaves
+  beside it, within the support
   (``_with_floor_edf``): no claim is made, the terms and the model stay the AVAR fit's.
   Its bounds are not that EDF's χ² about the estimate: the ramp's cross term, the slope's
   own error times Rτ², dominates the estimate's scatter at the longest τ and the verdict is
