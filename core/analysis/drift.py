@@ -903,15 +903,12 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     except FitError:
         return fit, lik
     noise = _walk_from_time_domain(noise, lik, walk_beside_slope(fit, means, block_s, noise))
-    # the slope's measured variance over the GLS slope's under the fitted noise: the scale
-    # the ramp's cross term is taken at beside it (``signal_edf.resolved_ramp_bounds``).
-    # The slope's scatter is the profile's Δ ≤ 1 curvature times the rise the interval is
-    # calibrated at (``end_rises``, the null's own ratio at each end, ``interval_rise``):
-    # where the walk holds few of the means' directions (12 h) the slope takes what K's
-    # profile left and the curvature alone is narrower than its scatter; not the
-    # interval's half-width, which at 1 h spans the gaps between accepted slopes (a hull)
-    rise = 0.5 * (lik.end_rises[0] + lik.end_rises[1])
-    ratio = se**2 * rise / model_slope_var(noise, means, block_s)
+    # the slope's measured variance (the profile's Δ ≤ 1 curvature, what the ramp's θ
+    # covariance holds) over the GLS slope's under the fitted noise: the scale the ramp's
+    # cross term is taken at by ``signal_edf.resolved_ramp_interval`` (measured, not what
+    # analyze prints: at 12 h the curvature is narrower than the slope's scatter, and the
+    # 68 % interval's half-width is wider than it at 1 h; docs/log/2026-11-29-cov29.md)
+    ratio = se**2 / model_slope_var(noise, means, block_s)
     params = {CROSS_SCALE: ratio} if math.isfinite(ratio) and ratio > 0 else {}
     ramp = Component("rate_ramp", "rate_ramp", params, "value", UNITS["rate_ramp"])
     k = len(noise.theta)

@@ -28,15 +28,9 @@ intervals over-cover, up to 90 %, where a sinusoid or a drift dominates):
   uncertainty, and the noise part is its root mean square over it, √(N̂² + Var N̂)
   (``_noise_expected``): the estimate's variance 2N²/ν is an expectation over that split,
   and its value at the split's worst 1σ point counted the uncertainty into a 68 % interval
-  twice. Its bounds are not that EDF's χ² about the estimate, whose EDF holds the ramp at
-  the estimated slope and so rose with the estimate: they are the estimate's error under
-  the model (``resolved_ramp_bounds``), the ramp's cross term at the slope's variance the
-  time domain measured times the model's ratio of the cross term to the GLS slope's
-  variance (``drift.model_slope_var``), so the fitted walk, read from the same long τ as
-  the estimate, does not set the width. Not resolved (the test short of its level) but
-  with the slope's 68 % interval clear of zero (``fit.drift_floor``), the ramp at that
-  interval's near end is a part that does not scatter, the noise part what the AVAR leaves
-  beside it, within the support
+  twice. Not resolved (the test short of its level) but with the slope's 68 % interval
+  clear of zero (``fit.drift_floor``), the ramp at that interval's near end is a part that
+  does not scatter, the noise part what the AVAR leaves beside it, within the support
   (``_with_floor_edf``): no claim is made, the terms and the model stay the AVAR fit's.
   Its bounds are not that EDF's χ² about the estimate: the ramp's cross term, the slope's
   own error times Rτ², dominates the estimate's scatter at the longest τ and the verdict is
@@ -76,8 +70,8 @@ if TYPE_CHECKING:
     from avard.core.model.fit import NoiseFit
 
 __all__ = ["floor_bounds", "model_edf", "noise_part_edf", "noise_psd", "parts_edf",
-           "resolved_ramp_bounds", "signal_parts", "signal_share", "unresolved_noise_edf",
-           "with_parts_edf", "with_share_edf", "with_signal_edf"]
+           "resolved_ramp_bounds", "resolved_ramp_interval", "signal_parts", "signal_share",
+           "unresolved_noise_edf", "with_parts_edf", "with_share_edf", "with_signal_edf"]
 
 #: The share of the AVAR above which a deterministic part's cross term is computed exactly.
 _EXACT_SHARE = 1e-3
@@ -294,18 +288,35 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
         # the noise part: the fitted noise at its upper 1σ, or what the measured AVAR
         # leaves beside the deterministic terms at their lower 1σ, the larger
         noise_part = np.fmax(noise_upper(fit, allan), total - low)
-    psd = noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart)
-    out = with_parts_edf(allan, parts, total, noise_part, psd, noise,
-                         within_support=not fit.resolved_apart)
+    return with_parts_edf(allan, parts, total, noise_part,
+                          noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart), noise,
+                          within_support=not fit.resolved_apart)
+
+
+def resolved_ramp_interval(allan: AllanResult, fit: NoiseFit) -> AllanResult:
+    """``with_signal_edf``'s result with, beside a ramp the time domain resolved (a fit of
+    ``drift.resolve_drift``, which carries ``drift.CROSS_SCALE``), the bounds made of the
+    estimate's error (``resolved_ramp_bounds``): the ramp's cross term at the slope's
+    measured variance times the model's ratio (``drift.model_slope_var``), not the χ² of
+    an EDF that holds the estimate's own error in the ramp's S and the fitted walk's
+    cross term. Elsewhere, and where a bound is not a number, ``with_signal_edf``'s.
+
+    Measured, not what analyze prints (docs/log/2026-11-29-cov29.md): it brings the 60 h
+    ramp cells in and holds 1 h, but under-covers 12 h drift at its longest τ, where the
+    slope's Δ ≤ 1 curvature is narrower than its scatter."""
+    out = with_signal_edf(allan, fit)
     scale = _ramp_cross_scale(fit)
-    if "rate_ramp" not in fit.resolved_apart or not math.isfinite(scale):
+    if "rate_ramp" not in fit.resolved_apart or not math.isfinite(scale) or \
+            allan.kind not in _ALLAN_KINDS or np.asarray(allan.var).ndim != 1 or \
+            allan.noise_id == "stable32":
         return out
-    # beside a ramp the time domain resolved, the bounds are made of the estimate's error
-    # (``resolved_ramp_bounds``), the ramp's cross term at the slope's measured variance
-    # times the model's ratio (``drift.model_slope_var``), not the χ² of an EDF that holds
-    # the estimate's own error in the ramp's S and the fitted walk's cross term
-    lo, hi = resolved_ramp_bounds(allan, parts, _noise_fitted(fit, allan), psd,
-                                  noise_part_edf(allan, noise), scale)
+    parts = signal_parts(fit, allan, lower=False)
+    if not parts:
+        return out
+    lo, hi = resolved_ramp_bounds(allan, parts, _noise_fitted(fit, allan),
+                                  noise_psd(fit, upper=False),
+                                  noise_part_edf(allan, unresolved_noise_edf(fit, allan)),
+                                  scale)
     keep = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(np.asarray(out.lo, dtype=float))
     return replace(out, lo=np.where(keep, lo, out.lo), hi=np.where(keep, hi, out.hi))
 

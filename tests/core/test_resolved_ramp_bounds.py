@@ -82,9 +82,10 @@ def test_a_bound_that_is_not_a_positive_number_is_left_to_the_caller() -> None:
 
 
 def test_the_bounds_beside_a_resolved_ramp_do_not_follow_the_fitted_walk() -> None:
-    """Beside a ramp analyze resolved from the time domain the printed bounds at the τ the
-    ramp holds are ``resolved_ramp_bounds`` with the ramp's cross term at the slope's
-    measured variance times the model's ratio (``drift.model_slope_var``). The walk the
+    """Beside a ramp analyze resolved from the time domain, ``resolved_ramp_interval``'s
+    bounds at the τ the ramp holds are ``resolved_ramp_bounds`` with the ramp's cross term
+    at the slope's measured variance times the model's ratio (``drift.model_slope_var``,
+    carried on the ramp's component; measured, not what analyze prints). The walk the
     fit puts beside the ramp is read from the same long τ as the estimate, so a rule whose
     width follows it follows the estimate (cov28b: the cross term under the fitted
     spectrum varied by 73 % between records and over-covered the high estimates). With the
@@ -108,8 +109,11 @@ def test_the_bounds_beside_a_resolved_ramp_do_not_follow_the_fitted_walk() -> No
     assert fit.resolved_apart == ("rate_ramp",)
     k = len(ch.allan.tau)
     est = replace(ch.allan, edf=allan_variance(y, rate).edf[:k])
-    again = se.with_signal_edf(est, fit)
-    np.testing.assert_allclose(again.lo, ch.allan.lo, rtol=1e-12)   # what analyze printed
+    printed = se.with_signal_edf(est, fit)
+    np.testing.assert_allclose(printed.lo, ch.allan.lo, rtol=1e-12)   # what analyze printed
+    new = se.resolved_ramp_interval(est, fit)
+    assert new.lo[-1] != printed.lo[-1] and new.lo[-1] < new.var[-1] < new.hi[-1]
+    np.testing.assert_allclose(new.lo[:4], printed.lo[:4], rtol=1e-12)  # no ramp there
     block = dr.drift_block(n)
     means, block_s = np.zeros(n // block), block / rate
     j = next(i for i, c in enumerate(fit.components) if c.cause == "rate_random_walk")
@@ -133,7 +137,7 @@ def test_the_bounds_beside_a_resolved_ramp_do_not_follow_the_fitted_walk() -> No
         return replace(new, components=comps)
 
     def width(f: float, scaled: bool) -> float:
-        a = se.with_signal_edf(est, with_walk(f, scaled))
+        a = se.resolved_ramp_interval(est, with_walk(f, scaled))
         return float(a.hi[last] - a.lo[last])
 
     c0 = cross_term_variance(se.noise_psd(fit, upper=False), m, nd)

@@ -165,21 +165,9 @@ def test_a_resolved_ramp_raises_the_edf_where_it_holds_the_avar() -> None:
             np.testing.assert_allclose(new, ch.allan.edf, rtol=1e-12)
         assert np.all(new >= noise * (1 - 1e-12))        # never below the noise's
         np.testing.assert_allclose(new[:4], noise[:4], rtol=1e-12)
-    # the bounds: where the ramp holds the AVAR, the estimate's error under the model
-    # (``resolved_ramp_bounds``, the ramp's cross term at the slope's measured variance
-    # over the model's, carried on the ramp's component), not the χ² of that EDF about the
-    # estimate; where it holds nothing, the χ²
-    from avard.core.analysis.drift import CROSS_SCALE
-
-    scale = next(c.params[CROSS_SCALE] for c in ch.fit.components if c.label == "rate_ramp")
-    assert 0.1 < scale < 10.0
     lo, hi = chi2_interval(ch.allan.var, ch.allan.edf, ch.allan.ci)
-    ramp = share * r.var[:k] > 1e-3 * ch.allan.var
-    assert ramp[-1] and not ramp[0]
-    np.testing.assert_allclose(ch.allan.lo[:4], lo[:4], rtol=1e-12)
-    np.testing.assert_allclose(ch.allan.hi[:4], hi[:4], rtol=1e-12)
-    assert not np.allclose(ch.allan.lo[-1], lo[-1], rtol=1e-3)
-    assert ch.allan.lo[-1] < ch.allan.var[-1] < ch.allan.hi[-1]
+    np.testing.assert_allclose(ch.allan.lo, lo, rtol=1e-12)
+    np.testing.assert_allclose(ch.allan.hi, hi, rtol=1e-12)
 
 
 @pytest.mark.parametrize("noise", ["white", "flicker", "walk"])
