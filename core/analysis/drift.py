@@ -62,6 +62,7 @@ if TYPE_CHECKING:
     from avard.core.model.fit import NoiseFit
 
 __all__ = [
+    "CROSS_SCALE",
     "DRIFT_BLOCKS",
     "LEVEL",
     "MIN_BLOCKS",
@@ -75,6 +76,7 @@ __all__ = [
     "drift_likelihood",
     "interval_rise",
     "mean_difference",
+    "model_slope_var",
     "resolve_drift",
     "two_sided_z",
 ]
@@ -901,7 +903,14 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     except FitError:
         return fit, lik
     noise = _walk_from_time_domain(noise, lik, walk_beside_slope(fit, means, block_s, noise))
-    ramp = Component("rate_ramp", "rate_ramp", {}, "value", UNITS["rate_ramp"])
+    # the slope's measured variance (the profile's Δ ≤ 1 curvature, what the ramp's θ
+    # covariance holds) over the GLS slope's under the fitted noise: the scale the ramp's
+    # cross term is taken at by ``signal_edf.resolved_ramp_interval`` (measured, not what
+    # analyze prints: at 12 h the curvature is narrower than the slope's scatter, and the
+    # 68 % interval's half-width is wider than it at 1 h; docs/log/2026-11-29-cov29.md)
+    ratio = se**2 / model_slope_var(noise, means, block_s)
+    params = {CROSS_SCALE: ratio} if math.isfinite(ratio) and ratio > 0 else {}
+    ramp = Component("rate_ramp", "rate_ramp", params, "value", UNITS["rate_ramp"])
     k = len(noise.theta)
     cov = np.zeros((k + 1, k + 1))
     cov[:k, :k] = noise.theta_cov
@@ -914,6 +923,44 @@ def resolve_drift(fit: NoiseFit, allan: AllanResult, means: NDArray, block_s: fl
     return replace(noise, terms=terms, components=[*noise.components, ramp],
                    theta=np.append(noise.theta, r * r), theta_cov=cov,
                    resolved_apart=("rate_ramp",), drift_interval_noise=lik.interval_noise), lik
+
+
+#: The key, in a resolved ramp's ``Component.params``, of the slope's measured variance over
+#: the GLS slope's under the fitted noise (``resolve_drift``, ``model_slope_var``).
+CROSS_SCALE = "cross_scale"
+
+
+def model_slope_var(noise: NoiseFit, means: NDArray, block_s: float) -> float:
+    """The GLS slope's variance on the block ``means`` (an offset beside it) under the
+    noise ``noise`` holds at its point values (white N, flicker B, walk K: the covariance
+    ``block_noise_cov`` of the drift test), NaN where it has no white N or does not factor.
+
+    Why: beside a resolved ramp the estimate's error holds the ramp's cross term with the
+    noise, R·τ·D_noise (D_noise the noise's mean Allan difference), of variance S·c under
+    the fitted spectrum (``cross_term.cross_term_variance``). c read alone follows the
+    estimate: its walk is read from the same long τ, and a record whose noise rose at the
+    ends has a high estimate, a high fitted walk and a wide interval (docs/log/
+    2026-11-29-cov28b.md). D_noise/τ is a linear slope estimator on the same noise, so c is
+    the GLS slope's variance times a ratio that both share the walk of: the ratio is taken
+    from the model, the slope's variance from the time domain's own profile, where the
+    drift test measured it."""
+    yb = np.asarray(means, dtype=float).reshape(-1)
+    n_w = float(noise.terms["velocity_random_walk"].value or 0.0)
+    if len(yb) < 3 or not n_w > 0:
+        return math.nan
+    b_i = float(noise.terms["bias_instability"].value or 0.0)
+    j = next((i for i, c in enumerate(noise.components) if c.cause == "rate_random_walk"),
+             None)
+    k2 = float(noise.theta[j]) if j is not None and j < len(noise.theta) else 0.0
+    t = (np.arange(len(yb)) + 0.5) * block_s
+    c = block_noise_cov(t, block_s, n_w, b_i, math.sqrt(max(k2, 0.0)))
+    x = np.column_stack([np.ones_like(t), t - t.mean()])
+    try:
+        L = np.linalg.cholesky(c)
+        w = np.linalg.solve(L, x)
+        return float(np.linalg.inv(w.T @ w)[1, 1])
+    except np.linalg.LinAlgError:
+        return math.nan
 
 
 def mean_difference(means: NDArray, block_s: float, tau: NDArray) -> NDArray[np.float64]:

@@ -69,9 +69,9 @@ if TYPE_CHECKING:
     from avard.core.allan.deviations import AllanResult
     from avard.core.model.fit import NoiseFit
 
-__all__ = ["floor_bounds", "model_edf", "noise_part_edf", "noise_psd", "parts_edf", "signal_parts",
-           "signal_share", "unresolved_noise_edf", "with_parts_edf", "with_share_edf",
-           "with_signal_edf"]
+__all__ = ["floor_bounds", "model_edf", "noise_part_edf", "noise_psd", "parts_edf",
+           "resolved_ramp_bounds", "resolved_ramp_interval", "signal_parts", "signal_share",
+           "unresolved_noise_edf", "with_parts_edf", "with_share_edf", "with_signal_edf"]
 
 #: The share of the AVAR above which a deterministic part's cross term is computed exactly.
 _EXACT_SHARE = 1e-3
@@ -291,6 +291,115 @@ def with_signal_edf(allan: AllanResult, fit: NoiseFit) -> AllanResult:
     return with_parts_edf(allan, parts, total, noise_part,
                           noise_psd(fit, upper="rate_ramp" not in fit.resolved_apart), noise,
                           within_support=not fit.resolved_apart)
+
+
+def resolved_ramp_interval(allan: AllanResult, fit: NoiseFit) -> AllanResult:
+    """``with_signal_edf``'s result with, beside a ramp the time domain resolved (a fit of
+    ``drift.resolve_drift``, which carries ``drift.CROSS_SCALE``), the bounds made of the
+    estimate's error (``resolved_ramp_bounds``): the ramp's cross term at the slope's
+    measured variance times the model's ratio (``drift.model_slope_var``), not the χ² of
+    an EDF that holds the estimate's own error in the ramp's S and the fitted walk's
+    cross term. Elsewhere, and where a bound is not a number, ``with_signal_edf``'s.
+
+    Measured, not what analyze prints (docs/log/2026-11-29-cov29.md): it brings the 60 h
+    ramp cells in and holds 1 h, but under-covers 12 h drift at its longest τ, where the
+    slope's Δ ≤ 1 curvature is narrower than its scatter."""
+    out = with_signal_edf(allan, fit)
+    scale = _ramp_cross_scale(fit)
+    if "rate_ramp" not in fit.resolved_apart or not math.isfinite(scale) or \
+            allan.kind not in _ALLAN_KINDS or np.asarray(allan.var).ndim != 1 or \
+            allan.noise_id == "stable32":
+        return out
+    parts = signal_parts(fit, allan, lower=False)
+    if not parts:
+        return out
+    lo, hi = resolved_ramp_bounds(allan, parts, _noise_fitted(fit, allan),
+                                  noise_psd(fit, upper=False),
+                                  noise_part_edf(allan, unresolved_noise_edf(fit, allan)),
+                                  scale)
+    keep = np.isfinite(lo) & np.isfinite(hi) & np.isfinite(np.asarray(out.lo, dtype=float))
+    return replace(out, lo=np.where(keep, lo, out.lo), hi=np.where(keep, hi, out.hi))
+
+
+def _ramp_cross_scale(fit: NoiseFit) -> float:
+    """The resolved ramp's cross-term scale (``drift.CROSS_SCALE``: the slope's measured
+    variance over the GLS slope's under the fitted noise), NaN where the fit carries none
+    (no ramp resolved from the time domain, or a fit not made by ``drift.resolve_drift``)."""
+    from avard.core.analysis.drift import CROSS_SCALE
+
+    for comp in fit.components:
+        if comp.label == "rate_ramp":
+            return float(comp.params.get(CROSS_SCALE, math.nan))
+    return math.nan
+
+
+def _noise_fitted(fit: NoiseFit, allan: AllanResult) -> NDArray[np.float64]:
+    """The fitted noise's AVAR at each τ of ``allan``, every noise component at its point
+    value (not ``_noise_expected``'s √(N̂² + Var N̂), which holds the ramp's own uncertainty
+    once more: the bounds carry it in the cross term)."""
+    tau = np.asarray(allan.tau, dtype=float)
+    out = np.zeros(len(tau))
+    for j, comp in enumerate(fit.components[:len(fit.theta)]):
+        if comp.psd(fit.rate_hz) is not None:
+            out += float(fit.theta[j]) * comp.basis(tau, fit.rate_hz)
+    return out
+
+
+def resolved_ramp_bounds(allan: AllanResult, parts: list[tuple[NDArray[np.float64], float]],
+                         noise_avar: NDArray[np.float64],
+                         psd: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                         noise_nu: NDArray[np.float64], ramp_scale: float = 1.0
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The bounds of an estimate σ̂² beside a ramp resolved apart from the AVAR (and any
+    resolved sinusoid, ``parts``), made of the estimate's error, not of a χ² about it:
+
+        σ̂² − T = (the noise's own scatter about N) + Σ_j (part j's cross term with the
+        noise, and a sinusoid's spread over its phase),
+
+    the first a χ² on the noise's EDF ``noise_nu`` scaled by the model's noise N
+    (``noise_avar``), the others of variance V = Σ S_j·c_j + S_j²·p_j (``parts_edf``'s
+    terms), taken as Gaussian (a deterministic part's cross term is a linear form in the
+    noise) and combined with the first in quadrature:
+
+        lo = σ̂² − √((N·(χ²_hi/ν − 1))² + z²V),  hi = σ̂² + √((N·(1 − χ²_lo/ν))² + z²V).
+
+    Why not the χ² of ``parts_edf``'s EDF about σ̂²: that EDF, 2T²/Var, holds the ramp's
+    AVAR at the estimated slope, whose error is the estimate's own (a record whose slope
+    came out high has a high estimate), so the EDF rose with the estimate and the interval
+    was narrow exactly where the estimate was high; and a scale family about σ̂² reaches far
+    above a low estimate. Here the widths do not scale with σ̂² (V with the part's AVAR,
+    which is the slope's square, and N the fitted noise). NaN where a bound is not a
+    positive number, or where the ramp holds under ``_EXACT_SHARE`` of the estimate (the
+    caller keeps its own).
+
+    ``ramp_scale`` multiplies a ramp's c (``with_signal_edf`` passes the slope's measured
+    variance over the GLS slope's under the fitted noise, ``drift.model_slope_var``): with
+    c under the fitted spectrum alone the widths still followed the estimate, since the
+    walk that sets c is read from the same long τ (docs/log/2026-11-29-cov28b.md); the
+    ratio of c to the GLS slope's variance under one spectrum moves far less with that
+    walk than either."""
+    tau = np.asarray(allan.tau, dtype=float)
+    var = np.asarray(allan.var, dtype=float)
+    z = NormalDist().inv_cdf(0.5 + float(allan.ci) / 2.0)
+    u_lo, u_hi = chi2_interval(np.ones(len(tau)), noise_nu, allan.ci, allan.quantiles)
+    noise = np.maximum(np.asarray(noise_avar, dtype=float), 0.0)
+    v = np.zeros(len(tau))
+    for s, f0 in parts:
+        c = np.array([cross_term_variance(psd, int(m), int(n), f0) if sk > 0 else 0.0
+                      for m, n, sk in zip(allan.m, allan.n, s, strict=True)])
+        if f0 <= 0:
+            c = c * ramp_scale
+        v += s * np.where(np.isfinite(c), c, 4.0 * noise / noise_nu) + \
+            s**2 * phase_spread(allan.n, f0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lo = var - np.hypot(noise * (1.0 / u_lo - 1.0), z * np.sqrt(v))
+        hi = var + np.hypot(noise * (1.0 - 1.0 / u_hi), z * np.sqrt(v))
+    # (where the ramp holds under 0.1 % of the estimate it changes nothing worth it: the
+    # caller's χ² about the estimate, which needs no model of the noise's level, stands)
+    ramp = np.sum([s for s, f0 in parts if f0 <= 0], axis=0) if parts else np.zeros(len(tau))
+    ok = np.isfinite(lo) & np.isfinite(hi) & (lo > 0) & (hi > lo) & \
+        (ramp >= _EXACT_SHARE * var)
+    return np.where(ok, lo, np.nan), np.where(ok, hi, np.nan)
 
 
 def _with_floor_edf(allan: AllanResult, fit: NoiseFit, noise_edf: NDArray[np.float64]

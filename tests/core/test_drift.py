@@ -449,3 +449,41 @@ def test_the_false_rate_on_plain_12h_records_is_within_a_1_percent_tests_range()
     thr, n = dr.two_sided_z(dr.LEVEL), 200
     passed = sum(_lik(record(mix, N_12H, rng)[0]).passes(thr) for _ in range(n))
     assert passed <= _binomial_99(n, dr.LEVEL)[1], passed
+
+
+def test_the_model_slope_variance_is_the_gls_slopes_under_the_fitted_noise():
+    """``model_slope_var``: the variance of the GLS slope of the block means (offset beside
+    it) under the fit's N, B and K. White alone: N²/block over Σ(t − t̄)², in closed form;
+    white, flicker and walk: the spread of the GLS slope over means drawn from that
+    covariance; a larger walk, a larger variance. A fit without white N: NaN."""
+    from avard.core.model.fit import Component, NoiseFit, TermEstimate  # noqa: F401
+
+    blocks, block_s, n_w, b_i, k = 96, 40.0, 2e-3, 3e-4, 2e-6
+    means = np.zeros(blocks)
+    t = (np.arange(blocks) + 0.5) * block_s
+
+    def fit_with(n: float, b: float, kk: float):
+        y = np.random.default_rng(1).standard_normal(20000) * 1e-3
+        fit = fit_noise(allan_variance(y, 1.0))
+        terms = dict(fit.terms)
+        for name, v in (("velocity_random_walk", n), ("bias_instability", b),
+                        ("rate_random_walk", kk)):
+            terms[name] = replace(terms[name], value=v or None, present=v > 0)
+        j = next(i for i, c in enumerate(fit.components) if c.cause == "rate_random_walk")
+        theta = np.array(fit.theta, dtype=float)
+        theta[j] = kk * kk
+        return replace(fit, terms=terms, theta=theta)
+
+    white = dr.model_slope_var(fit_with(n_w, 0.0, 0.0), means, block_s)
+    np.testing.assert_allclose(white, n_w**2 / block_s / np.sum((t - t.mean()) ** 2),
+                               rtol=1e-9)
+    full = dr.model_slope_var(fit_with(n_w, b_i, k), means, block_s)
+    chol = np.linalg.cholesky(dr.block_noise_cov(t, block_s, n_w, b_i, k))
+    rng = np.random.default_rng(11)
+    ci = np.linalg.inv(dr.block_noise_cov(t, block_s, n_w, b_i, k))
+    x = np.column_stack([np.ones(blocks), t - t.mean()])
+    gls = np.linalg.solve(x.T @ ci @ x, x.T @ ci)[1]
+    slopes = gls @ (chol @ rng.standard_normal((blocks, 4000)))
+    assert abs(np.var(slopes) / full - 1.0) < 4 * math.sqrt(2 / 4000)
+    assert full > dr.model_slope_var(fit_with(n_w, b_i, k / 4), means, block_s) > white
+    assert math.isnan(dr.model_slope_var(fit_with(0.0, b_i, k), means, block_s))
