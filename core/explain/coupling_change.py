@@ -554,7 +554,77 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
     se_jk = _part_jackknife(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
                             fit.lag_s, rate_b, None if holes is None else holes.get(i))
     se = max(fit.coef_se, se_jk) if math.isfinite(se_jk) else fit.coef_se
+    # and the one lag's own model error: the logged sensor is not the die (its own lag puts
+    # a lead in the path from the log to the die), and one lag reads such a path with its
+    # lag short and its gain low by more than its se on a long record; the part's coupling
+    # as the steady gain of a lag with a lead differs from the one-lag coefficient by about
+    # that error (module doc, "The parts' intervals")
+    gain = _lead_gain(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
+                      fit.lag_s, rate_b, None if holes is None else holes.get(i))
+    if math.isfinite(gain):
+        se = math.hypot(se, fit.coefficient - gain)
     return Part(fit.coefficient, se, fallback.dof, fit.lag_s, fit.channel)
+
+
+#: The trial lags of the lead-lag refit (``_lead_gain``), as multiples of the one-lag fit's
+#: lag: one lag reads a lag with a lead with its lag short, never long by much.
+LEAD_LAGS = (0.8, 0.9, 1.0, 1.05, 1.1, 1.15, 1.2, 1.3, 1.45, 1.6)
+
+
+def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
+               holes: list[tuple[int, int]] | None) -> float:
+    """The steady (zero-frequency) gain of one part's coupling through a first-order lag
+    with a lead, (a + s·jω)/(1 + L·jω): the axis regressed on u_L and du_L/dt at once
+    (``_multi``) at each lag of ``LEAD_LAGS`` × ``lag_s``, a at the lag of least deviance
+    Σ ν ln r over the octaves. NaN where it cannot be made (a lag ≤ 0: the lead-lag filter
+    of a negative lag is already a lead)."""
+    n = len(y)
+    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
+    m = (n // f) * f
+    if m // f < 2 * 256 or not (math.isfinite(lag_s) and lag_s > 0):
+        return math.nan
+    rate = rate_b / f
+    ys = y[:m].reshape(-1, f).mean(axis=1)
+    Ts = T[:m].reshape(-1, f).mean(axis=1)
+    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
+        return math.nan
+    mt = min_tau_for(0.0, rounding_floor_tau(Ts, rate))
+    if not math.isfinite(mt):
+        return math.nan
+    M = len(ys)
+    keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s * LEAD_LAGS[-1],
+                     rate)
+    try:
+        ref = allan2(ys, ys, rate)
+    except (DataError, FitError, ValueError):
+        return math.nan
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
+    best = (math.inf, math.nan)
+    for x in LEAD_LAGS:
+        L = lag_s * x
+        u = lag_filter(Ts, L, rate)
+        try:
+            X = without_start(np.column_stack([ys, u, np.gradient(u) * rate]), L, rate)
+            segs = octave_sums_by_part(X, np.array([0, M]), keep)
+        except (DataError, FitError, ValueError):
+            continue
+        _K, ms, nn, s2 = _stacked(segs)
+        beta, _ = _multi(nn, s2, ms, rate, edf_ref, n_ref, mt)
+        if not np.all(np.isfinite(beta)):
+            continue
+        _n, cov, nu, msf = _octave_view(nn, s2, ms, edf_ref, n_ref)
+        b, C = beta[0], cov[0]
+        r = (C[:, 0, 0] - 2.0 * C[:, 0, 1:] @ b
+             + np.einsum("i,kij,j->k", b, C[:, 1:, 1:], b))
+        ok = (msf / rate >= mt) & np.isfinite(nu[0]) & (nu[0] >= 3) & (r > 0)
+        if not np.any(ok):
+            continue
+        dev = float(np.sum(nu[0][ok] * np.log(r[ok])))
+        if dev < best[0]:
+            best = (dev, float(b[0]))
+    return best[1]
 
 
 #: Segments of a part for its coefficient's jackknife (``_part_jackknife``).
