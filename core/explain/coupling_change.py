@@ -99,6 +99,18 @@ part), and:
   one lag's reading of a path that is not one lag, is model-dependent and its interval
   withheld likewise.
 
+The parts' intervals. A part's refit is explain's one lag, and the logged sensor is not the
+die: its own lag puts a lead in the path from the log to the die, c·(1 + s·jω)/(1 + l·jω),
+which one lag reads with its lag short by about s and its gain low, by 1–3 % on a plate
+sensor 15 s behind the plate, against se's of a few 0.1 % on a 12 h part (with the sensor's
+lag taken out of the generator the parts sat within 1.5 se of the truth). So each part's se
+carries the one lag's model error as well (``_lead_gain``): the one-lag coefficient less the
+steady gain of a lag with a lead fitted on the same part (u_L and du_L/dt at once, L scanned
+about the one-lag fit's), with that difference's own jackknife noise taken out, the two
+parts' shares pooled (``_shared_model``: one sensor before and after). The coefficient
+printed stays the one-lag fit's (the line names its lag); the lead fit's own steady gain is
+no better a point (the ridge between a and s makes it noisier than the bias it removes).
+
 A change of the lag alone (the coefficient kept) is not a hypothesis of its own: where it
 is large (60 s → 600 s on a synthetic 4 h record) the scan fires through the one-lag
 projection's difference and the refitted parts give both lags; a smaller one (60 → 240 s)
@@ -167,6 +179,9 @@ class Part:
     lag_s: float = math.nan
     #: the channel the part's coupling was refitted on ("": the test's)
     channel: str = ""
+    #: the one lag's model error as a share of the coefficient (``_lead_gain``; 0: not
+    #: made), already in ``se``
+    model: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -508,6 +523,7 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         g = 0 if timed else round(GUARD * n)
         p, q = (_refit(yc[a:b], temps[a:b], names, rate_b, screen, a, fb)
                 for (a, b), fb in (((0, max(1, k - g)), p), ((min(n - 1, k + g), n), q)))
+        p, q = _shared_model(p, q)
     # a change inside a hole of the log (adv15: a re-mount at 5 576 s in a dropout at
     # 4 996–6 501 s was placed at 6 468 and 7 200 s) is seen only across the hole
     t_s, win = frac * record_s, (GRID[1] - GRID[0]) * record_s
@@ -558,12 +574,29 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
     # a lead in the path from the log to the die), and one lag reads such a path with its
     # lag short and its gain low by more than its se on a long record; the part's coupling
     # as the steady gain of a lag with a lead differs from the one-lag coefficient by about
-    # that error (module doc, "The parts' intervals")
-    gain = _lead_gain(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
-                      fit.lag_s, rate_b, None if holes is None else holes.get(i))
-    if math.isfinite(gain):
-        se = math.hypot(se, fit.coefficient - gain)
-    return Part(fit.coefficient, se, fallback.dof, fit.lag_s, fit.channel)
+    # that error (module doc, "The parts' intervals"; pooled over both parts by the caller)
+    share = _lead_gain(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
+                       fit.lag_s, rate_b, None if holes is None else holes.get(i))
+    model = share if math.isfinite(share) else 0.0
+    return Part(fit.coefficient, math.hypot(se, model * fit.coefficient), fallback.dof,
+                fit.lag_s, fit.channel, model)
+
+
+def _shared_model(p: Part, q: Part) -> tuple[Part, Part]:
+    """Both parts with their one-lag model errors (shares of each coefficient) pooled, the
+    root mean square of the two: the error is the path's from the log to the die (the
+    logged sensor's own lag, the same sensor before and after), each part's estimate of it
+    a noisy one (the larger of the two over-covered the short records, each part's own
+    under-covered the long ones)."""
+    if p.channel != q.channel or not (p.model > 0 or q.model > 0):
+        return p, q
+    share = math.sqrt((p.model**2 + q.model**2) / 2)
+
+    def widened(x: Part) -> Part:
+        stat = math.sqrt(max(x.se**2 - (x.model * x.c) ** 2, 0.0))
+        return replace(x, se=math.hypot(stat, share * x.c), model=share)
+
+    return widened(p), widened(q)
 
 
 #: The trial lags of the lead-lag refit (``_lead_gain``), as multiples of the one-lag fit's
@@ -573,11 +606,15 @@ LEAD_LAGS = (0.8, 0.9, 1.0, 1.05, 1.1, 1.15, 1.2, 1.3, 1.45, 1.6)
 
 def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
                holes: list[tuple[int, int]] | None) -> float:
-    """The steady (zero-frequency) gain of one part's coupling through a first-order lag
-    with a lead, (a + s·jω)/(1 + L·jω): the axis regressed on u_L and du_L/dt at once
-    (``_multi``) at each lag of ``LEAD_LAGS`` × ``lag_s``, a at the lag of least deviance
-    Σ ν ln r over the octaves. NaN where it cannot be made (a lag ≤ 0: the lead-lag filter
-    of a negative lag is already a lead)."""
+    """The one lag's model error on one part, as a share of its coefficient: the one-lag
+    coefficient through ``lag_s`` less the steady (zero-frequency) gain of a first-order
+    lag with a lead, (a + s·jω)/(1 + L·jω) (the axis regressed on u_L and du_L/dt at once,
+    ``_multi``, at each lag of ``LEAD_LAGS`` × ``lag_s``; a at the lag of least deviance
+    Σ ν ln r over the octaves), with the difference's own noise taken out: d² less its
+    delete-a-segment jackknife variance (``PART_SEGMENTS``), never below 0. A difference
+    within its noise is no model error (the lead fit's ridge between a and s is noisy on a
+    short part, and that noise already sits in the part's se). NaN where it cannot be made
+    (a lag ≤ 0: the lead-lag filter of a negative lag is already a lead)."""
     n = len(y)
     f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
     m = (n // f) * f
@@ -594,6 +631,7 @@ def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
     M = len(ys)
     keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s * LEAD_LAGS[-1],
                      rate)
+    edges = np.linspace(0, M, PART_SEGMENTS + 1).astype(int)
     try:
         ref = allan2(ys, ys, rate)
     except (DataError, FitError, ValueError):
@@ -601,20 +639,27 @@ def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
     edf_ref = np.asarray(ref.edf, dtype=float)
     edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
     n_ref = np.asarray(ref.n, dtype=float)
-    best = (math.inf, math.nan)
+    best: tuple[float, NDArray] | None = None
+    one: NDArray | None = None
     for x in LEAD_LAGS:
         L = lag_s * x
         u = lag_filter(Ts, L, rate)
         try:
             X = without_start(np.column_stack([ys, u, np.gradient(u) * rate]), L, rate)
-            segs = octave_sums_by_part(X, np.array([0, M]), keep)
+            segs = octave_sums_by_part(X, edges, keep)
         except (DataError, FitError, ValueError):
             continue
         _K, ms, nn, s2 = _stacked(segs)
-        beta, _ = _multi(nn, s2, ms, rate, edf_ref, n_ref, mt)
+        # the whole part, then each of its segments left out in turn
+        wn, ws = nn.sum(axis=0), s2.sum(axis=0)
+        rn = np.concatenate([wn[None], wn[None] - nn])
+        rs = np.concatenate([ws[None], ws[None] - s2])
+        if x == 1.0:
+            one, _ = _coefficients(rn, rs[..., :2, :2], ms, rate, edf_ref, n_ref, mt)
+        beta, _ = _multi(rn, rs, ms, rate, edf_ref, n_ref, mt)
         if not np.all(np.isfinite(beta)):
             continue
-        _n, cov, nu, msf = _octave_view(nn, s2, ms, edf_ref, n_ref)
+        _n, cov, nu, msf = _octave_view(rn[:1], rs[:1], ms, edf_ref, n_ref)
         b, C = beta[0], cov[0]
         r = (C[:, 0, 0] - 2.0 * C[:, 0, 1:] @ b
              + np.einsum("i,kij,j->k", b, C[:, 1:, 1:], b))
@@ -622,9 +667,14 @@ def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
         if not np.any(ok):
             continue
         dev = float(np.sum(nu[0][ok] * np.log(r[ok])))
-        if dev < best[0]:
-            best = (dev, float(b[0]))
-    return best[1]
+        if best is None or dev < best[0]:
+            best = (dev, beta[:, 0])
+    if best is None or one is None or not np.all(np.isfinite(one)) or one[0] == 0:
+        return math.nan
+    d = one - best[1]
+    g = len(d) - 1
+    var = (g - 1) / g * float(np.sum((d[1:] - d[1:].mean()) ** 2))
+    return math.sqrt(max(float(d[0]) ** 2 - var, 0.0)) / abs(float(one[0]))
 
 
 #: Segments of a part for its coefficient's jackknife (``_part_jackknife``).

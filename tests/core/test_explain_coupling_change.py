@@ -334,3 +334,18 @@ def test_a_parts_interval_holds_a_coupling_read_through_a_lagging_sensor(seed):
     assert abs(p.c - 1.5e-3) <= p.se
     # and the interval stays an interval: not wider than the coupling's own 10 %
     assert p.se <= 0.1 * 1.5e-3
+
+
+def test_the_parts_model_error_is_pooled_over_one_channel_only():
+    """Both parts of one channel carry the root mean square of their model-error shares on
+    top of their own statistical se; parts refitted on different channels keep their own."""
+    from avard.core.explain.coupling_change import Part, _shared_model
+
+    p = Part(1e-3, math.hypot(1e-5, 0.03 * 1e-3), 9.0, 200.0, "plate", 0.03)
+    q = Part(-2e-3, 2e-5, 9.0, 200.0, "plate", 0.0)
+    a, b = _shared_model(p, q)
+    share = math.sqrt(0.03**2 / 2)
+    assert a.se == pytest.approx(math.hypot(1e-5, share * 1e-3))
+    assert b.se == pytest.approx(math.hypot(2e-5, share * 2e-3))
+    assert _shared_model(p, Part(-2e-3, 2e-5, 9.0, 200.0, "ambient", 0.0)) == (
+        p, Part(-2e-3, 2e-5, 9.0, 200.0, "ambient", 0.0))
