@@ -349,3 +349,30 @@ def test_the_parts_model_error_is_pooled_over_one_channel_only():
     assert b.se == pytest.approx(math.hypot(2e-5, share * 2e-3))
     assert _shared_model(p, Part(-2e-3, 2e-5, 9.0, 200.0, "ambient", 0.0)) == (
         p, Part(-2e-3, 2e-5, 9.0, 200.0, "ambient", 0.0))
+
+
+def test_the_fixed_paths_lags_reach_beyond_the_scans_neighbours():
+    """A scan whose lag is at the foot of ``LAGS`` (0 s) leaves its neighbours 0 and 40 s:
+    the candidate sets reach every pair of longer lags too, three lags each."""
+    from avard.core.explain.coupling_change import path_sets
+
+    sets = path_sets(0.0, 12 * 3600.0)
+    assert sets[0] == [0.0, 40.0]
+    assert [0.0, 300.0, 750.0] in sets and [0.0, 750.0, 1800.0] in sets
+    assert all(len(c) == 3 and c[0] == 0.0 for c in sets[1:])
+
+
+def test_a_steady_lag_and_rate_path_read_at_a_lag_of_zero_is_not_said_changed(tmp_path):
+    """The adversary's steady lag + dT/dt coupling (τ_r −524 s, die 138 s behind a plate
+    468 s behind the room) under a room cycle that changes midway, 12 h: the one-lag scan
+    fires on the ambient channel through a lag of 0 s, where a fixed path through that
+    lag's neighbours (0, 40 s) could not hold a path of several hundred seconds and the
+    change was said on x and y; one fixed path through lags that reach it predicts both
+    parts."""
+    truth = make_record("specrate", 106, 12.0, tmp_path / "specrate.npz")
+    ex = explain_file(open_record(str(tmp_path / "specrate.npz")), ExplainOptions())
+    for ax in "xy":
+        assert truth["axes"][ax]["cause"] == "steady_lag_rate"
+        ch = ex.channels[ax]
+        assert change_line(ch.findings) is None and ch.verdict.changed is None
+    assert "CHANGED" not in summary(ex)
