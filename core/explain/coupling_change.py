@@ -54,9 +54,12 @@ The fixed-path test (``cross_split``), made where the scan fires, on every chann
 own scan fires (each at its best lag and grid time; the smallest decides: the room's
 channel, three lags from a coupling through the plate's two, is read by three lags too
 coarsely on a 12 h record, where the plate's is not). One fixed path of the richer form
-(the channel through three first-order lags, the scan's and the next of ``LAGS`` below and
-above it, ``path_lags``: a sum of lags holds two lags in series, a lag with a lead and a
-lag + dT/dt over the band a record drives) is
+(the channel through three first-order lags and the rate of the first: a sum of lags holds
+two lags in series, a lag with a lead and a lag + dT/dt over the band a record drives; the
+lags the scan's and the next of ``LAGS`` below and above it, ``path_lags``, or the scan's
+beside two other neighbouring lags of ``LAGS`` where those describe the whole record better
+by more than a χ²₁ at ``ALPHA``, ``path_sets``: the scan's lag is the one-lag projection's,
+0 s on a room channel several hundred seconds from the die) is
 fitted on one part (the Allan-covariance regression on the three at once, ``_multi``) and
 taken from the other part's axis; what is left there is regressed on the one-lag regressor
 (κ, ``_coefficients``), with the larger of its analytic se and the jackknife over both
