@@ -54,9 +54,12 @@ The fixed-path test (``cross_split``), made where the scan fires, on every chann
 own scan fires (each at its best lag and grid time; the smallest decides: the room's
 channel, three lags from a coupling through the plate's two, is read by three lags too
 coarsely on a 12 h record, where the plate's is not). One fixed path of the richer form
-(the channel through three first-order lags, the scan's and the next of ``LAGS`` below and
-above it, ``path_lags``: a sum of lags holds two lags in series, a lag with a lead and a
-lag + dT/dt over the band a record drives) is
+(the channel through three first-order lags and the rate of the first: a sum of lags holds
+two lags in series, a lag with a lead and a lag + dT/dt over the band a record drives; the
+lags the scan's and the next of ``LAGS`` below and above it, ``path_lags``, or the scan's
+beside two other neighbouring lags of ``LAGS`` where those describe the whole record better
+by more than a χ²₁ at ``ALPHA``, ``path_sets``: the scan's lag is the one-lag projection's,
+0 s on a room channel several hundred seconds from the die) is
 fitted on one part (the Allan-covariance regression on the three at once, ``_multi``) and
 taken from the other part's axis; what is left there is regressed on the one-lag regressor
 (κ, ``_coefficients``), with the larger of its analytic se and the jackknife over both
@@ -99,6 +102,18 @@ part), and:
   one lag's reading of a path that is not one lag, is model-dependent and its interval
   withheld likewise.
 
+The parts' intervals. A part's refit is explain's one lag, and the logged sensor is not the
+die: its own lag puts a lead in the path from the log to the die, c·(1 + s·jω)/(1 + l·jω),
+which one lag reads with its lag short by about s and its gain low, by 1–3 % on a plate
+sensor 15 s behind the plate, against se's of a few 0.1 % on a 12 h part (with the sensor's
+lag taken out of the generator the parts sat within 1.5 se of the truth). So each part's se
+carries the one lag's model error as well (``_lead_gain``): the one-lag coefficient less the
+steady gain of a lag with a lead fitted on the same part (u_L and du_L/dt at once, L scanned
+about the one-lag fit's), with that difference's own jackknife noise taken out, the two
+parts' shares pooled (``_shared_model``: one sensor before and after). The coefficient
+printed stays the one-lag fit's (the line names its lag); the lead fit's own steady gain is
+no better a point (the ridge between a and s makes it noisier than the bias it removes).
+
 A change of the lag alone (the coefficient kept) is not a hypothesis of its own: where it
 is large (60 s → 600 s on a synthetic 4 h record) the scan fires through the one-lag
 projection's difference and the refitted parts give both lags; a smaller one (60 → 240 s)
@@ -132,7 +147,7 @@ from avard.core.io.screen import ScreenLog
 from numpy.typing import NDArray
 
 __all__ = ["ALPHA", "GRID", "LAGS", "SEGMENTS", "CouplingChange", "change_line", "check",
-           "cross_split", "find_change", "hedged_line", "mark", "path_lags"]
+           "cross_split", "find_change", "hedged_line", "mark", "path_lags", "path_sets"]
 
 #: The test's share of the axis's false-alarm level (the size of each of ``alarm``'s shares).
 ALPHA = 2.5e-4
@@ -167,6 +182,9 @@ class Part:
     lag_s: float = math.nan
     #: the channel the part's coupling was refitted on ("": the test's)
     channel: str = ""
+    #: the one lag's model error as a share of the coefficient (``_lead_gain``; 0: not
+    #: made), already in ``se``
+    model: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -477,14 +495,14 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         for jj, (spj, Lj) in sorted(by_channel.items()):
             if spj.z < spj.threshold:
                 continue
-            lj = tuple(path_lags(Lj, record_s))
+            lj = sorted({x for c in path_sets(Lj, record_s) for x in c})
             keep = (None if screen is None else
                     hole_mask(M, screen.hole_blocks(names[jj], rate),
                               max(abs(x) for x in lj), rate))
             cross = cross_split(ys, chans[jj], Lj, spj.frac, edges, keep, rate, edf_ref,
                                 n_ref, min_tau_for(Lj, floors[jj]), trials, record_s)
             if cross is not None and math.isfinite(cross[0]):
-                made.append((cross[0], lj, names[jj]))
+                made.append((cross[0], cross[4], names[jj]))
         if made:  # none made: NaN, the line hedged
             ratio, plags, pch = min(made, key=lambda x: x[0])
         # the time estimated after the test (the decision is the grid's), and each part's
@@ -508,6 +526,7 @@ def find_change(y: NDArray, temps: NDArray | None, thermal: ThermalFit | None,
         g = 0 if timed else round(GUARD * n)
         p, q = (_refit(yc[a:b], temps[a:b], names, rate_b, screen, a, fb)
                 for (a, b), fb in (((0, max(1, k - g)), p), ((min(n - 1, k + g), n), q)))
+        p, q = _shared_model(p, q)
     # a change inside a hole of the log (adv15: a re-mount at 5 576 s in a dropout at
     # 4 996–6 501 s was placed at 6 468 and 7 200 s) is seen only across the hole
     t_s, win = frac * record_s, (GRID[1] - GRID[0]) * record_s
@@ -554,7 +573,111 @@ def _refit(y: NDArray, temps: NDArray, names: list[str], rate_b: float,
     se_jk = _part_jackknife(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
                             fit.lag_s, rate_b, None if holes is None else holes.get(i))
     se = max(fit.coef_se, se_jk) if math.isfinite(se_jk) else fit.coef_se
-    return Part(fit.coefficient, se, fallback.dof, fit.lag_s, fit.channel)
+    # and the one lag's own model error: the logged sensor is not the die (its own lag puts
+    # a lead in the path from the log to the die), and one lag reads such a path with its
+    # lag short and its gain low by more than its se on a long record; the part's coupling
+    # as the steady gain of a lag with a lead differs from the one-lag coefficient by about
+    # that error (module doc, "The parts' intervals"; pooled over both parts by the caller)
+    share = _lead_gain(np.asarray(y, dtype=float), np.asarray(temps[:, i], dtype=float),
+                       fit.lag_s, rate_b, None if holes is None else holes.get(i))
+    model = share if math.isfinite(share) else 0.0
+    return Part(fit.coefficient, math.hypot(se, model * fit.coefficient), fallback.dof,
+                fit.lag_s, fit.channel, model)
+
+
+def _shared_model(p: Part, q: Part) -> tuple[Part, Part]:
+    """Both parts with their one-lag model errors (shares of each coefficient) pooled, the
+    root mean square of the two: the error is the path's from the log to the die (the
+    logged sensor's own lag, the same sensor before and after), each part's estimate of it
+    a noisy one (the larger of the two over-covered the short records, each part's own
+    under-covered the long ones)."""
+    if p.channel != q.channel or not (p.model > 0 or q.model > 0):
+        return p, q
+    share = math.sqrt((p.model**2 + q.model**2) / 2)
+
+    def widened(x: Part) -> Part:
+        stat = math.sqrt(max(x.se**2 - (x.model * x.c) ** 2, 0.0))
+        return replace(x, se=math.hypot(stat, share * x.c), model=share)
+
+    return widened(p), widened(q)
+
+
+#: The trial lags of the lead-lag refit (``_lead_gain``), as multiples of the one-lag fit's
+#: lag: one lag reads a lag with a lead with its lag short, never long by much.
+LEAD_LAGS = (0.8, 0.9, 1.0, 1.05, 1.1, 1.15, 1.2, 1.3, 1.45, 1.6)
+
+
+def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
+               holes: list[tuple[int, int]] | None) -> float:
+    """The one lag's model error on one part, as a share of its coefficient: the one-lag
+    coefficient through ``lag_s`` less the steady (zero-frequency) gain of a first-order
+    lag with a lead, (a + s·jω)/(1 + L·jω) (the axis regressed on u_L and du_L/dt at once,
+    ``_multi``, at each lag of ``LEAD_LAGS`` × ``lag_s``; a at the lag of least deviance
+    Σ ν ln r over the octaves), with the difference's own noise taken out: d² less its
+    delete-a-segment jackknife variance (``PART_SEGMENTS``), never below 0. A difference
+    within its noise is no model error (the lead fit's ridge between a and s is noisy on a
+    short part, and that noise already sits in the part's se). NaN where it cannot be made
+    (a lag ≤ 0: the lead-lag filter of a negative lag is already a lead)."""
+    n = len(y)
+    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
+    m = (n // f) * f
+    if m // f < 2 * 256 or not (math.isfinite(lag_s) and lag_s > 0):
+        return math.nan
+    rate = rate_b / f
+    ys = y[:m].reshape(-1, f).mean(axis=1)
+    Ts = T[:m].reshape(-1, f).mean(axis=1)
+    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
+        return math.nan
+    mt = min_tau_for(0.0, rounding_floor_tau(Ts, rate))
+    if not math.isfinite(mt):
+        return math.nan
+    M = len(ys)
+    keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s * LEAD_LAGS[-1],
+                     rate)
+    edges = np.linspace(0, M, PART_SEGMENTS + 1).astype(int)
+    try:
+        ref = allan2(ys, ys, rate)
+    except (DataError, FitError, ValueError):
+        return math.nan
+    edf_ref = np.asarray(ref.edf, dtype=float)
+    edf_ref = edf_ref[:, 0] if edf_ref.ndim == 2 else edf_ref
+    n_ref = np.asarray(ref.n, dtype=float)
+    best: tuple[float, NDArray] | None = None
+    one: NDArray | None = None
+    for x in LEAD_LAGS:
+        L = lag_s * x
+        u = lag_filter(Ts, L, rate)
+        try:
+            X = without_start(np.column_stack([ys, u, np.gradient(u) * rate]), L, rate)
+            segs = octave_sums_by_part(X, edges, keep)
+        except (DataError, FitError, ValueError):
+            continue
+        _K, ms, nn, s2 = _stacked(segs)
+        # the whole part, then each of its segments left out in turn
+        wn, ws = nn.sum(axis=0), s2.sum(axis=0)
+        rn = np.concatenate([wn[None], wn[None] - nn])
+        rs = np.concatenate([ws[None], ws[None] - s2])
+        if x == 1.0:
+            one, _ = _coefficients(rn, rs[..., :2, :2], ms, rate, edf_ref, n_ref, mt)
+        beta, _ = _multi(rn, rs, ms, rate, edf_ref, n_ref, mt)
+        if not np.all(np.isfinite(beta)):
+            continue
+        _n, cov, nu, msf = _octave_view(rn[:1], rs[:1], ms, edf_ref, n_ref)
+        b, C = beta[0], cov[0]
+        r = (C[:, 0, 0] - 2.0 * C[:, 0, 1:] @ b
+             + np.einsum("i,kij,j->k", b, C[:, 1:, 1:], b))
+        ok = (msf / rate >= mt) & np.isfinite(nu[0]) & (nu[0] >= 3) & (r > 0)
+        if not np.any(ok):
+            continue
+        dev = float(np.sum(nu[0][ok] * np.log(r[ok])))
+        if best is None or dev < best[0]:
+            best = (dev, beta[:, 0])
+    if best is None or one is None or not np.all(np.isfinite(one)) or one[0] == 0:
+        return math.nan
+    d = one - best[1]
+    g = len(d) - 1
+    var = (g - 1) / g * float(np.sum((d[1:] - d[1:].mean()) ** 2))
+    return math.sqrt(max(float(d[0]) ** 2 - var, 0.0)) / abs(float(one[0]))
 
 
 #: Segments of a part for its coefficient's jackknife (``_part_jackknife``).
@@ -808,7 +931,14 @@ def _cross(segs: list[OctaveSums], frac: float, rate: float, edf_ref: NDArray,
     z = |κ|/se against the scan's threshold (t at ``ALPHA`` over ``trials``, Satterthwaite's
     dof). (the smaller z over its threshold of the two directions, the parts' κ, dof)."""
     _K, ms, n, s2 = _stacked(segs)
-    G = len(segs)
+    return _cross_sums(ms, n, s2, frac, rate, edf_ref, n_ref, mt)
+
+
+def _cross_sums(ms: NDArray, n: NDArray, s2: NDArray, frac: float, rate: float,
+                edf_ref: NDArray, n_ref: NDArray, mt: float
+                ) -> tuple[float, Part, Part, float]:
+    """``_cross`` on the segments' stacked sums (n (G, K), s2 (G, K, C, C))."""
+    G = len(n)
     k = round(frac * G)
     rows = {}
     for lo, hi in ((0, k), (k, G)):
@@ -843,16 +973,69 @@ def _cross(segs: list[OctaveSums], frac: float, rate: float, edf_ref: NDArray,
     return min(ra, rb), pb, pa, min(da, db)
 
 
+def path_sets(L: float, record_s: float) -> list[list[float]]:
+    """The candidate lag sets of the richer fixed path, ``L`` first in each: ``path_lags``
+    (``L`` and its neighbours in ``LAGS``) and ``L`` beside every two neighbouring lags of
+    ``LAGS`` (up to an eighth of the record, ``L`` left out): three lags each, as many as
+    ``path_lags`` gives. The scan's lag is the one-lag projection's, not
+    where the path lives: a room channel two lags and a rate term (τ_r < 0) from the die
+    was read through a lag of 0 s, and lags of 0 and 40 s (its neighbours) could not hold
+    a path of several hundred seconds (a false "changed" at z/threshold 2.5–2.7)."""
+    grid = [float(x) for x in LAGS if x <= record_s / 8 and x != L]
+    out = [path_lags(L, record_s)]
+    for i in range(len(grid) - 1):
+        c = [float(L), *grid[i:i + 2]]
+        if all(sorted(c) != sorted(o) for o in out):
+            out.append(c)
+    return out
+
+
 def cross_split(ys: NDArray, T: NDArray, L: float, frac: float, edges: NDArray,
                 keep: NDArray[np.bool_] | None, rate: float, edf_ref: NDArray,
                 n_ref: NDArray, mt: float, trials: int, record_s: float
-                ) -> tuple[float, Part, Part, float] | None:
-    """``_cross`` with the richer path's regressors of channel ``T`` (``_path_regressors``)."""
-    R = _path_regressors(T, L, rate, record_s)
-    X = without_start(np.column_stack([ys, *R]), max(abs(x) for x in path_lags(L, record_s)),
-                      rate)
-    try:
-        segs = octave_sums_by_part(X, edges, keep)
-    except (DataError, FitError, ValueError):
+                ) -> tuple[float, Part, Part, float, tuple[float, ...]] | None:
+    """``_cross`` with the richer path's regressors of channel ``T``: the lag set of
+    ``path_sets`` that describes the whole record best (least deviance Σ ν ln r over the
+    octaves of its Allan-covariance regression, ``_multi``; ``path_lags`` unless another set
+    is better by more than a χ²₁ at ``ALPHA`` over the sets), its lags and the rate of u_L
+    (``_path_regressors``), each set with its own start-up settling taken out
+    (``without_start`` at its longest lag: at the longest of all sets, 1800 s on a 4 h
+    record, the settling shape took part of a re-mount's change with it). The set is chosen
+    on the whole record, so neither part's prediction is fitted to the part it is tested
+    on. (``_cross``'s outcome, the lags)."""
+    cands = path_sets(L, record_s)
+    cols = {x: lag_filter(T, x, rate) for x in {x for c in cands for x in c}}
+    rate_col = np.gradient(cols[float(L)]) * rate
+    fits: list[tuple[float, list[float], tuple[NDArray, NDArray, NDArray]]] = []
+    for c in cands:
+        X = without_start(np.column_stack([ys, *[cols[x] for x in c], rate_col]),
+                          max(abs(x) for x in c), rate)
+        try:
+            segs = octave_sums_by_part(X, edges, keep)
+        except (DataError, FitError, ValueError):
+            continue
+        _K, ms, n, s2 = _stacked(segs)
+        wn, ws = n.sum(axis=0)[None], s2.sum(axis=0)[None]
+        beta, _ = _multi(wn, ws, ms, rate, edf_ref, n_ref, mt)
+        if not np.all(np.isfinite(beta)):
+            continue
+        _n, cov, nu, msf = _octave_view(wn, ws, ms, edf_ref, n_ref)
+        b, C = beta[0], cov[0]
+        r = (C[:, 0, 0] - 2.0 * C[:, 0, 1:] @ b
+             + np.einsum("i,kij,j->k", b, C[:, 1:, 1:], b))
+        ok = (msf / rate >= mt) & np.isfinite(nu[0]) & (nu[0] >= 3) & (r > 0)
+        if np.any(ok):
+            fits.append((float(np.sum(nu[0][ok] * np.log(r[ok]))), c, (ms, n, s2)))
+    if not fits:
         return None
-    return _cross(segs, frac, rate, edf_ref, n_ref, mt, trials)
+    best = min(fits, key=lambda x: x[0])
+    # the scan's own neighbourhood unless another set describes the whole record better by
+    # more than a χ²₁ at the test's level over the sets (a re-mount's whole record is two
+    # couplings, which some set reads a few units better by chance; a path the
+    # neighbourhood cannot hold is hundreds or thousands of units worse)
+    margin = t_two_sided(ALPHA / len(cands), 1e6) ** 2
+    if fits[0][1] is cands[0] and fits[0][0] - best[0] <= margin:
+        best = fits[0]
+    _d, c, (ms, n, s2) = best
+    out = _cross_sums(ms, n, s2, frac, rate, edf_ref, n_ref, mt)
+    return (*out, tuple(c))
