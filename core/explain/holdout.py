@@ -15,14 +15,17 @@ of another (the *held-out part*):
 On the fit part, the *base* model is ``fit.fit_noise`` of its AVAR (analyze's terms and its
 lines); the *extended* model is the same fit of its AVAR with the claimed causes' signals
 removed, their parameters fitted on the fit part alone: the temperature coefficient and lag
-(``thermal_fit.fit_thermal`` on the claimed channel), the warm-up and the step (least squares,
-``causes``) where the fit part holds them, the Gauss–Markov σ as a GLS component (at the
-correlation time found on the whole record). On the held-out part, the base model predicts
-the measured AVAR; the extended model predicts the AVAR with the *predicted* signals removed:
-the temperature through the fitted lag and coefficient from the held-out part's own logged
-temperature, a warm-up's tail where the held-out part follows it. A warm-up or a step is an
-event of one record, not a property of the sensor: it predicts nothing in another record, and
-a step nothing in the other half (its continuation is constant).
+(``thermal_fit.fit_thermal`` on the claimed channel), the warm-up, the steps, excursions and
+drift (least squares, ``causes``, ``_fit_events``) where the fit part holds them, the
+Gauss–Markov σ as a GLS component (at the correlation time found on the whole record). On the
+held-out part, the base model predicts the measured AVAR; the extended model predicts the AVAR
+with the *predicted* signals removed: the temperature through the fitted lag and coefficient
+from the held-out part's own logged temperature, a warm-up's tail where the held-out part
+follows it, a drift's ramp at the fit part's rate. A warm-up, a step or an excursion is an
+event of one record, not a property of the sensor: it predicts nothing in another record or
+the other half, so where the held-out half holds one it is taken out of *both* models'
+held-out AVAR alike (``_held_events``: a step's or excursion's edges cut as gaps, a warm-up
+refitted there as a nuisance).
 
 Misfit: the generalised χ² of the held-out AVAR against each model's prediction, with the
 covariance ``fit_noise`` models (each power law's variance at each τ Greenhall and Riley's
