@@ -15,14 +15,17 @@ of another (the *held-out part*):
 On the fit part, the *base* model is ``fit.fit_noise`` of its AVAR (analyze's terms and its
 lines); the *extended* model is the same fit of its AVAR with the claimed causes' signals
 removed, their parameters fitted on the fit part alone: the temperature coefficient and lag
-(``thermal_fit.fit_thermal`` on the claimed channel), the warm-up and the step (least squares,
-``causes``) where the fit part holds them, the Gauss–Markov σ as a GLS component (at the
-correlation time found on the whole record). On the held-out part, the base model predicts
-the measured AVAR; the extended model predicts the AVAR with the *predicted* signals removed:
-the temperature through the fitted lag and coefficient from the held-out part's own logged
-temperature, a warm-up's tail where the held-out part follows it. A warm-up or a step is an
-event of one record, not a property of the sensor: it predicts nothing in another record, and
-a step nothing in the other half (its continuation is constant).
+(``thermal_fit.fit_thermal`` on the claimed channel), the warm-up, the steps, excursions and
+drift (least squares, ``causes``, ``_fit_events``) where the fit part holds them, the
+Gauss–Markov σ as a GLS component (at the correlation time found on the whole record). On the
+held-out part, the base model predicts the measured AVAR; the extended model predicts the AVAR
+with the *predicted* signals removed: the temperature through the fitted lag and coefficient
+from the held-out part's own logged temperature, a warm-up's tail where the held-out part
+follows it, a drift's ramp at the fit part's rate. A warm-up, a step or an excursion is an
+event of one record, not a property of the sensor: it predicts nothing in another record or
+the other half, so where the held-out half holds one it is taken out of *both* models'
+held-out AVAR alike (``_held_events``: a step's or excursion's edges cut as gaps, a warm-up
+refitted there as a nuisance).
 
 Misfit: the generalised χ² of the held-out AVAR against each model's prediction, with the
 covariance ``fit_noise`` models (each power law's variance at each τ Greenhall and Riley's
@@ -338,6 +341,11 @@ class Claims:
     whole_thermal: ThermalFit | None = None  # the whole record's, for "file"
     whole_warmup: tuple[float, float] | None = None  # (T, size) for "file"
     whole_step: tuple[float, float] | None = None  # (time, size) for "file"
+    #: every claimed step, excursion and drift of the whole record, in its order: (cause,
+    #: params, 68 % intervals); their times locate them in a part, their sizes (a drift's
+    #: rate) are the whole record's, used only in "file" (``_signals``)
+    events: list[tuple[str, dict[str, float], dict[str, list[float]]]] = field(
+        default_factory=list)
 
     @property
     def names(self) -> list[str]:
@@ -348,6 +356,9 @@ class Claims:
             out.append("warmup")
         if self.step_time_s is not None:
             out.append("bias_step")
+        for cause in ("excursion", "drift"):
+            if any(e[0] == cause for e in self.events):
+                out.append(cause)
         if self.gauss_markov_T is not None:
             out.append("gauss_markov")
         return out
@@ -361,11 +372,14 @@ Spread = tuple[NDArray[np.float64], NDArray[np.float64]]
 
 def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
              u_fit: Temps, u_held: Temps
-             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float, list[Spread]]:
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], int, float, list[Spread],
+                        NDArray[np.float64], NDArray[np.bool_] | None]:
     """(signal on the fit part, its prediction on the held-out part, blocks to leave out at
     the held-out part's start, the longest lag of the temperature prediction (s), the
-    prediction's changes at the ends of its parameters' 68 % intervals: ``Spread``) of the
-    claimed causes. ``u_fit``/``u_held``: (the claimed
+    prediction's changes at the ends of its parameters' 68 % intervals: ``Spread``, the
+    claimed events' nuisance signal on the held-out part and the held-out blocks their edges
+    leave out, both for *both* models: ``_held_events``) of the claimed causes.
+    ``u_fit``/``u_held``: (the claimed
     temperature channel of the part's record (°C), the part's slice of it), for the lag
     filter; ``refit``: fit the parameters on the fit part (split) or use the whole record's
     (file: the fit part is the whole record).
@@ -450,15 +464,114 @@ def _signals(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         if held.t0_s > fit.t0_s:  # the same record, later: the warm-up's tail
             d_held += cz.warmup_signal(len(held.y), held.rate(rate_b), T, size,
                                        t0_s=held.t0_s)
-    if c.step_time_s is not None:
-        end = fit.t0_s + len(fit.y) / rate_b
-        if refit and fit.t0_s < c.step_time_s < end:
-            cand = cz.detect_bias_step(fit.y - d_fit, rate_b)
-            d_fit += cz.step_signal(len(fit.y), rate_b, cand.params["time_s"] + fit.t0_s,
-                                    cand.params["size"], t0_s=fit.t0_s)
-        elif not refit and c.whole_step is not None:
-            d_fit += cz.step_signal(len(fit.y), rate_b, *c.whole_step)
-    return d_fit, d_held, skip, longest, spread
+    rate = _fit_events(fit, c, rate_b, refit, d_fit)
+    if rate is not None:
+        # a drift is a constant rate (the sensor's ageing), not an event: the fit part's rate
+        # predicts the held-out part's ramp, known to the whole record's interval widened to
+        # the fit part's length (a walk-dominated slope's error ∝ 1/√length)
+        th_ = np.arange(len(held.y)) / held.rate(rate_b)
+        ramp = th_ - th_.mean()
+        d_held += rate * ramp
+        iv = next((e[2].get("rate") for e in c.events if e[0] == "drift"), None)
+        if iv is not None and len(iv) == 2 and all(map(math.isfinite, iv)):
+            n_all = len(fit.y) + (len(held.y) if refit else 0)
+            se = 0.5 * abs(iv[1] - iv[0]) * math.sqrt(n_all / len(fit.y))
+            if se > 0:
+                spread.append((-se * ramp, se * ramp))
+    w_held, gaps = _held_events(fit, held, c, rate_b, refit, d_held)
+    return d_fit, d_held, skip, longest, spread, w_held, gaps
+
+
+def _event_column(cause: str, p: dict[str, float], n: int, rate: float, t0_s: float
+                  ) -> NDArray[np.float64] | None:
+    """A claimed step's or excursion's shape (unit size) on ``n`` blocks from ``t0_s``, None
+    where it is constant there (its edges outside: an offset, nothing to the AVAR)."""
+    if cause == "bias_step":
+        col = cz.step_signal(n, rate, p["time_s"], 1.0, t0_s=t0_s)
+    elif cause == "excursion":
+        col = (cz.step_signal(n, rate, p["start_s"], 1.0, t0_s=t0_s)
+               - cz.step_signal(n, rate, p["end_s"], 1.0, t0_s=t0_s))
+    else:
+        return None
+    return col if np.ptp(col) > 0 else None
+
+
+def _fit_events(fit: Part, c: Claims, rate_b: float, refit: bool,
+                d_fit: NDArray[np.float64]) -> float | None:
+    """Remove the claimed steps, excursions and drift from the fit part (``d_fit``, in place)
+    and return the drift's rate (m/s³; None: none claimed). Split: their times from the
+    whole record (where the search placed them), their sizes and the rate by one least
+    squares on this part alone, with the other claimed signals already out; file: the whole
+    record's, the fit part being the whole record. Every event whose edge the part holds is
+    removed, not one step re-detected on the part (that found the larger edge of whatever
+    the part held: one of two steps, or an excursion's edge read as a step)."""
+    if not c.events:
+        return None
+    n = len(fit.y)
+    if not refit:
+        rate = None
+        for cause, p, _iv in c.events:
+            if cause == "drift":
+                rate = float(p["rate"])
+                t = np.arange(n) / rate_b
+                d_fit += rate * (t - t.mean())
+            else:
+                col = _event_column(cause, p, n, rate_b, fit.t0_s)
+                if col is not None:
+                    d_fit += p["size"] * col
+        return rate
+    cols = [col for cause, p, _iv in c.events
+            if (col := _event_column(cause, p, n, rate_b, fit.t0_s)) is not None]
+    drift = any(e[0] == "drift" for e in c.events)
+    t = np.arange(n) / rate_b
+    if drift:
+        cols.append(t - t.mean())
+    if not cols:
+        return None
+    X = np.column_stack([np.ones(n), *cols])
+    beta = np.linalg.lstsq(X, fit.y - d_fit, rcond=None)[0]
+    d_fit += X[:, 1:] @ beta[1:]
+    return float(beta[-1]) if drift else None
+
+
+def _held_events(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
+                 d_held: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.bool_] | None]:
+    """The claimed events that lie in the held-out part (split only: a second record holds
+    none of this one's): (a signal to remove from the held-out series of *both* models, the
+    blocks both models' held-out Allan variance leaves out as gaps; None: none).
+
+    An event predicts nothing in data it was not fitted on (its size in the held-out part
+    is not known from the fit part), so it must neither count against the extended model
+    (which, fitted where the event is absent or removed, carries no noise that absorbs it)
+    nor for it: it is taken out of the held-out comparison the same way for both. A step's
+    or an excursion's edge is *cut*: the blocks around it (its time's 68 % interval, three
+    times over, and a block each side) are gaps, and no Allan difference spans them; an
+    offset is invisible to every difference that does not, so nothing is fitted on the
+    held-out data and only the edge's time, not its size, comes from the whole record. A
+    warm-up in a held-out part that starts the record has no edge to cut: its time constant
+    and size are refitted there as a nuisance (least squares, ``causes.transient_fits``,
+    with the predicted signals out) and removed from both models' series. (A warm-up in the
+    fit part predicts its own tail in the later held-out part: ``_signals``.)"""
+    n = len(held.y)
+    w = np.zeros(n)
+    if not refit:
+        return w, None
+    rh = held.rate(rate_b)
+    t = held.t0_s + np.arange(n) / rh
+    keep = np.ones(n, dtype=bool)
+    for cause, p, iv in c.events:
+        keys = {"bias_step": ("time_s",), "excursion": ("start_s", "end_s")}.get(cause, ())
+        for k in keys:
+            e = float(p[k])
+            lo, hi = (iv.get(k) or [e, e])[:2]
+            a = e - 3.0 * max(0.0, e - lo) - 1.0 / rh
+            b = e + 3.0 * max(0.0, hi - e) + 1.0 / rh
+            keep &= ~((t >= a) & (t <= b))
+    if c.warmup and held.first and not fit.first:
+        _sse, T, size = cz.transient_fits(held.y - d_held, rh)["warmup"]
+        w += cz.warmup_signal(n, rh, T, size)
+    return w, None if keep.all() else keep
 
 
 def _kept(p: Part, channel: int | None, lag_s: float, rate_b: float
@@ -498,7 +611,8 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
     fit_base = av(fit.y, rate_b)
     base = fit_noise(fit_base, extra=extra)
     if c.names:
-        d_fit, d_held, skip, lag, spread = _signals(fit, held, c, rate_b, refit, u_fit, u_held)
+        d_fit, d_held, skip, lag, spread, w_held, gaps = _signals(fit, held, c, rate_b, refit,
+                                                                  u_fit, u_held)
         # the held-out part's log holes (the screen's dropouts, masked readings and stuck
         # runs; a half of the record as a second record): the prediction there runs on an
         # interpolated temperature, so they and the lag's settling after them are gaps of
@@ -507,19 +621,22 @@ def _fold(fit: Part, held: Part, c: Claims, rate_b: float, refit: bool,
         # the thermal fit leaves them out of its regression; its Allan variance stays whole
         # (a gapped one fits the noise model worse than the interpolation's residual costs)
         keep = _kept(held, c.thermal_channel, lag, rate_b)
+        if gaps is not None:  # the claimed events' edges (``_held_events``)
+            keep = gaps if keep is None else keep & gaps
         kept = len(held.y) - skip if keep is None else int(np.count_nonzero(keep[skip:]))
         if kept < MIN_PART_POINTS:
             raise FitError(f"the held-out part is too short once its first {skip} blocks "
-                           "(the thermal lag's unknown start state) and its log's holes "
-                           "are left out")
+                           "(the thermal lag's unknown start state), its log's holes "
+                           "and its claimed events' edges are left out")
         ks = None if keep is None else keep[skip:]
         gm = ([] if c.gauss_markov_T is None else
               [{"cause": "gauss_markov", "params": {"T": c.gauss_markov_T}}])
         fit_ext = av(fit.y - d_fit, rate_b)
         ext = fit_noise(fit_ext, extra=[*extra, *gm])
-        held_var = av(held.y[skip:], held.rate(rate_b), ks)
-        held_ext = av((held.y - d_held)[skip:], held.rate(rate_b), ks)
-        pred_cov = _prediction_cov(held.y - d_held, skip, held.rate(rate_b), spread,
+        y_held = held.y - w_held  # a held-out warm-up, out for both models
+        held_var = av(y_held[skip:], held.rate(rate_b), ks)
+        held_ext = av((y_held - d_held)[skip:], held.rate(rate_b), ks)
+        pred_cov = _prediction_cov(y_held - d_held, skip, held.rate(rate_b), spread,
                                    lambda y, r: av(y, r, ks))
     else:
         held_var = av(held.y, held.rate(rate_b))
@@ -690,6 +807,10 @@ def claims_of(ch: Explained, temp_names: Sequence[str]) -> Claims:
         elif f.cause == "bias_step":
             c.step_time_s = f.params["time_s"]
             c.whole_step = (f.params["time_s"], f.params["size"])
+        if f.cause in ("bias_step", "excursion", "drift"):
+            # every one of them, each located (a second step, an excursion's edges, a
+            # drift's ramp) on both parts (``_signals``)
+            c.events.append((f.cause, dict(f.params), dict(f.intervals or {})))
         elif f.cause == "gauss_markov":
             c.gauss_markov_T = f.params["time_constant_s"]
     return c

@@ -23,11 +23,9 @@ def _explain(path, **kw):
     return explain_file(open_record(path), ExplainOptions(channels=("ch0",), **kw)).to_dict()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D1: a temperature coupling and one bias step (both in explain's candidate set, both "
-    "found with the right sizes) are called UNEXPLAINED and stripped of their intervals: the "
-    "held-out half that holds the step is predicted without it (core/explain/holdout.py), "
-    "held-out χ² 573–2604 on 11–14 τ, gain −1.6 to −17"))
+# adv29 D1 (fixed by held29): the held-out half that held the step was predicted with it left
+# in, by a model fitted where it was removed (core/explain/holdout.py ``_held_events``);
+# UNEXPLAINED, intervals withheld, held-out χ² 573–2604 on 11–14 τ, gain −1.6 to −17
 def test_a_step_beside_a_coupling_is_not_rejected_by_the_held_out_test(tmp_path):
     arrays, truth = gen.coupling_step(hours=2.0, seed=3, lag_s=120.0, at_frac=0.3)
     d = _explain(gen.save(tmp_path / "cs.npz", arrays, truth))
