@@ -36,7 +36,7 @@ def test_a_lag_interval_of_no_width_spreads_no_prediction(q: float) -> None:
     fit = Part(rng.standard_normal(len(T_fit)) * 1e-4, 0.0, "data", True)
     held = Part(rng.standard_normal(n) * 1e-4, 0.0, "holdout", True, grid=(q, 0.0))
     claims = Claims(thermal_channel=0, whole_thermal=th)
-    _d_fit, d_held, _skip, _longest, spread = _signals(
+    _d_fit, d_held, _skip, _longest, spread, _w_held, _gaps = _signals(
         fit, held, claims, RATE, False, (T_fit, slice(None)), (T_held, slice(None)))
     assert len(spread) == 1
     lo, hi = spread[0]
