@@ -418,13 +418,19 @@ def size_z(cand: Candidate) -> float:
     return abs(size) / se
 
 
-def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw: float
-               ) -> NDArray:
+def _noise_cov(t: NDArray, block_s: float, n_white: float, b_inst: float, k_rrw: float,
+               gm_sigma: float = 0.0, gm_T: float = 0.0) -> NDArray:
     """Covariance of block means of white, flicker and random-walk rate noise: analyze's
-    drift test's (``analysis.drift.block_noise_cov``), one model for both."""
-    from avard.core.analysis.drift import block_noise_cov
+    drift test's (``analysis.drift.block_noise_cov``), one model for both; plus, where the
+    axis has one (``gm_sigma`` > 0), a Gauss–Markov process of σ ``gm_sigma`` and time
+    constant ``gm_T`` block-averaged the same way: without it the transients' GLS reads the
+    process's AVAR bump as random walk, under whose covariance a step is one increment."""
+    from avard.core.analysis.drift import _gm_block_cov, block_noise_cov
 
-    return block_noise_cov(t, block_s, n_white, b_inst, k_rrw)
+    c = block_noise_cov(t, block_s, n_white, b_inst, k_rrw)
+    if gm_sigma > 0 and gm_T > 0:
+        c = c + gm_sigma**2 * _gm_block_cov(np.abs(np.subtract.outer(t, t)), block_s, gm_T)
+    return c
 
 
 # --------------------------------------------------------------------------------------------
@@ -484,7 +490,8 @@ def _profile_interval(x: NDArray, chi: NDArray, rise: float) -> tuple[float, flo
 
 
 @lru_cache(maxsize=8)
-def _noise_whitener(n: int, dt: float, n_white: float, b_inst: float, k_rrw: float
+def _noise_whitener(n: int, dt: float, n_white: float, b_inst: float, k_rrw: float,
+                    gm_sigma: float = 0.0, gm_T: float = 0.0
                     ) -> tuple[NDArray[np.float64] | None, LowerSolver | None]:
     """(σ per block, None) for white noise alone, else (None, the Cholesky factor's solver)
     of the noise covariance (``_noise_cov``) of ``n`` block means ``dt`` s long. A pure
@@ -493,7 +500,7 @@ def _noise_whitener(n: int, dt: float, n_white: float, b_inst: float, k_rrw: flo
     each factorisation of the covariance costs as much as the search's fits, so it is kept
     (the same numbers; the solver is read-only)."""
     t = (np.arange(n) + 0.5) * dt
-    c = _noise_cov(t, dt, n_white, b_inst, k_rrw)
+    c = _noise_cov(t, dt, n_white, b_inst, k_rrw, gm_sigma, gm_T)
     diag = np.diag(c)
     # fast path: white noise alone (B = K = 0) has a diagonal covariance, whitened by
     # dividing by its σ (the Cholesky factor is that diagonal; tests hold them equal)
@@ -506,7 +513,8 @@ def _noise_whitener(n: int, dt: float, n_white: float, b_inst: float, k_rrw: flo
 
 class _Gls:
     """GLS of block means (≤ ``max_blocks``) on [1, t] plus the transients' columns, with the
-    noise covariance of analyze's fitted N, B, K (``_noise_cov``): the data and every column
+    noise covariance of analyze's fitted N, B, K (and ``GM_sigma``, ``GM_T`` where the noise
+    has a Gauss–Markov process: ``_noise_cov``): the data and every column
     are whitened by the covariance's Cholesky factor, so each χ² is a plain least squares.
     Ordinary least squares weighs every block alike, and the random walk's slow wander then
     pulls the warm-up's T (15 % scatter at 3× the minimum) and the step's size."""
@@ -519,7 +527,8 @@ class _Gls:
         self.t = (np.arange(len(self.yb)) + 0.5) * self.dt
         # LinAlgError: the caller keeps the detector's values
         self._sd, white = _noise_whitener(len(self.yb), self.dt, noise.get("N", 0.0),
-                                          noise.get("B", 0.0), noise.get("K", 0.0))
+                                          noise.get("B", 0.0), noise.get("K", 0.0),
+                                          noise.get("GM_sigma", 0.0), noise.get("GM_T", 0.0))
         if white is not None:
             self._white = white
         self.wy = self.white(self.yb)

@@ -128,12 +128,6 @@ def test_a_relay_is_not_claimed_as_an_excursion_on_an_axis_said_to_fit(tmp_path)
     assert not (explained and k["present"]), (k, ch["verdict"]["line"])
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D8: a bias step of 8e-4 m/s² beside a Gauss–Markov process (σ 1.7e-4, T 30 s, 4 h) "
-    "is not claimed and the axis is said to fit (p 0.93): the transient search's noise has no "
-    "Gauss–Markov component, so the bump is read as a random walk that swallows the step; the "
-    "same step in white noise of the same long-τ level (N 1.32e-3) is found "
-    "(core/explain/engine/channel.py order, core/explain/transients)"))
 def test_a_gauss_markov_process_does_not_hide_a_step(tmp_path):
     arrays, truth = gen.gm_step(hours=4.0, seed=8, step=8e-4)
     d = _explain(gen.save(tmp_path / "gmstep.npz", arrays, truth))

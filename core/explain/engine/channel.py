@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -52,7 +52,6 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     with_start = False
     comp_var: NDArray[np.float64] | None = None
     thermal_only: NDArray[np.float64] | None = None
-    trans: list[cz.Candidate] = []
     work = y_slow
     if len(y_slow) >= MIN_SLOW_POINTS:
         if thermal is not None and temps is not None:
@@ -77,40 +76,39 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     # the transients' search asks for the same removed signal more than once (nothing
     # found: the search's first noise and the drift test's are both "nothing removed"); each
     # answer costs an Allan pass over the slow view and a GLS fit, so it is kept by content
-    noise_seen: dict[bytes, dict[str, float]] = {}
+    # (and by the Gauss–Markov time constant the noise carries, ``gm_T``)
+    noise_seen: dict[tuple[float, bytes], dict[str, float]] = {}
+    gm_T = 0.0
 
     def noise_without(d: NDArray[np.float64]) -> dict[str, float]:
         """N, B, K of analyze's model fitted to the axis with the thermal signal and ``d``
-        removed: each transient is tested against noise with the others (and itself) out."""
-        key = np.ascontiguousarray(d, dtype=float).tobytes()
+        removed: each transient is tested against noise with the others (and itself) out.
+        Where a Gauss–Markov process was claimed on the axis (``gm_T`` > 0), its σ at that
+        T is fitted beside them and carried (``GM_sigma``, ``GM_T``): left out, its bump is
+        read as random walk, and a step under a walk is one increment (the rounds below)."""
+        key = (gm_T, np.ascontiguousarray(d, dtype=float).tobytes())
         if key not in noise_seen:
             noise_seen[key] = _noise_of_removed(d)
         return dict(noise_seen[key])
 
     def _noise_of_removed(d: NDArray[np.float64]) -> dict[str, float]:
-        if not np.any(d) and not np.any(signal):
+        if not np.any(d) and not np.any(signal) and not gm_T:
             return _noise_levels(base)
         cv = removed_avar(allan.var, tau, y_slow, signal + d, rate_b)
         ratio = cv / np.where(allan.var > 0, allan.var, 1.0)
+        comp = ([{"cause": "gauss_markov", "params": {"T": gm_T}}] if gm_T else [])
         try:
             fit = fit_noise(replace(allan, var=cv, lo=allan.lo * ratio, hi=allan.hi * ratio),
-                            filter_corner_hz=corner, extra=extra, **kw)
+                            filter_corner_hz=corner, extra=[*extra, *comp], **kw)
         except FitError:
             return _noise_levels(base)
-        return _noise_levels(fit)
-
-    missed: list[cz.Candidate] = []
-    change = None  # coupling_change: whether one coupling describes the record
-    if len(y_slow) >= MIN_SLOW_POINTS:
-        start = 0.0
-        if with_start and thermal is not None:
-            # what the lag filter's fitted start state can leave: the removed signal's swing
-            # over its first three lags
-            head = signal[:max(2, math.ceil(3 * abs(thermal.lag_s) * rate_b))]
-            start = float(np.ptp(head))
-        trans, missed = _compound(work, rate_b, noise_without, thermal, holes, start)
-        change, trans, missed = cchange.check(y_slow, temps, thermal, trans, missed, work,
-                                              rate_b, noise_without, holes)
+        out = _noise_levels(fit)
+        if gm_T:
+            gm_e = next(e for e in fit.extra if e["cause"] == "gauss_markov")
+            sigma = gm_e["params"].get("sigma")
+            out["GM_sigma"] = float(sigma) if gm_e["present"] and sigma else 0.0
+            out["GM_T"] = gm_T
+        return out
 
     # the covariance of the compensated points that the removed signal's parameters carry
     # (``removal_covariance``): set by each ``extend``, given to every fit of those points
@@ -146,17 +144,106 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 from exc
         return cv, fit, comp
 
-    ext = base
-    current: Any = allan
-    if curves or trans:
-        comp_var, ext, current = extend(trans)
-    trans = trans + missed
+    start = 0.0
+    if with_start and thermal is not None:
+        # what the lag filter's fitted start state can leave: the removed signal's swing
+        # over its first three lags
+        head = signal[:max(2, math.ceil(3 * abs(thermal.lag_s) * rate_b))]
+        start = float(np.ptp(head))
+    thermal_curve = {k: v for k, v in curves.items() if k == "temperature"}
+
+    def one_round() -> _Round:
+        """The transients (with the noise ``noise_without`` gives at the current ``gm_T``),
+        the model extended by them, and the Gauss–Markov scan of what is left."""
+        nonlocal added
+        curves.clear()
+        curves.update(thermal_curve)
+        added = None
+        trans: list[cz.Candidate] = []
+        missed: list[cz.Candidate] = []
+        change = None  # coupling_change: whether one coupling describes the record
+        if len(y_slow) >= MIN_SLOW_POINTS:
+            trans, missed = _compound(work, rate_b, noise_without, thermal, holes, start)
+            change, trans, missed = cchange.check(y_slow, temps, thermal, trans, missed, work,
+                                                  rate_b, noise_without, holes)
+        cv: NDArray[np.float64] | None = None
+        ext: NoiseFit = base
+        current: Any = allan
+        if curves or trans:
+            cv, ext, current = extend(trans)
+        gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
+                                       kw if added is None else {**kw, "added_cov": added})
+        gm, gm_fit = _gm_floors(gm, gm_fit, thermal, temps)
+        return _Round(trans, missed, change, cv, ext, current, gm, gm_fit, dict(curves))
+
+    rnd = one_round()
+    # an effect must not raise the floor that hides another (issue 23, item 3), across the
+    # cause families: the transients are searched before the Gauss–Markov scan, on a noise
+    # of N, B, K alone, where a Gauss–Markov bump reads as random walk and hides a step many
+    # σ tall. Once a process is claimed the search runs again with it in the noise (its T
+    # from the scan, its σ refitted with each removed signal), and the scan again on what
+    # that search leaves, until the process's T stays inside its interval (``GM_ROUNDS``).
+    for _ in range(GM_ROUNDS):
+        if not rnd.gm.claimed or len(y_slow) < MIN_SLOW_POINTS:
+            break
+        T = float(rnd.gm.params["time_constant_s"])
+        if gm_T:
+            t_lo, t_hi = rnd.gm.intervals.get("time_constant_s", [T, T])
+            if t_lo <= gm_T <= t_hi:
+                break
+        gm_T = T
+        rnd = one_round()
+    curves.clear()
+    curves.update(rnd.curves)
+    comp_var, ext, current, gm, gm_fit = rnd.comp_var, rnd.ext, rnd.current, rnd.gm, rnd.gm_fit
+    trans = rnd.trans + rnd.missed
     for cand in trans:
         findings.append(Finding(cand.cause, cand.passed, dict(cand.params),
                                 dict(cand.intervals) if cand.passed else {},
                                 cand.statistic, cand.threshold, cand.evidence))
-    gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
-                                   kw if added is None else {**kw, "added_cov": added})
+    findings.append(gm)
+    if gm_fit is not None:
+        ext = gm_fit
+    change = rnd.change
+    findings += [_periodic_finding(g) for g in line_groups(ch.lines)]
+    findings = cchange.mark(change, findings)
+    out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
+                             thermal_only)
+    if ext is not base:
+        ext_var = np.asarray(current.var, dtype=float)
+        eu = _used(ext, tau)
+        out.ext_misfit = misfit_ranges(tau[eu], ext_var[eu], ext.model_avar(tau)[eu],
+                                       allan.edf[eu])
+    else:
+        out.ext_misfit = misfit
+    if comp_var is not None:
+        out.compensation_worse_s = out._worse(comp_var)
+    return out
+
+
+#: Most extra rounds of the transient search with a claimed Gauss–Markov process in its noise.
+GM_ROUNDS = 2
+
+
+@dataclass
+class _Round:
+    """One round of ``_explain_channel``'s transient search, extension and Gauss–Markov scan."""
+
+    trans: list[cz.Candidate]
+    missed: list[cz.Candidate]
+    change: Any
+    comp_var: NDArray[np.float64] | None
+    ext: NoiseFit
+    current: Any
+    gm: Finding
+    gm_fit: NoiseFit | None
+    curves: dict[str, NDArray[np.float64]]
+
+
+def _gm_floors(gm: Finding, gm_fit: NoiseFit | None, thermal: ThermalFit | None,
+               temps: NDArray | None) -> tuple[Finding, NoiseFit | None]:
+    """The Gauss–Markov finding with the floors of an axis with a claimed coupling: the
+    logged temperature's rounding through it, and a relay's (``PathFit.relay_floor``)."""
     # a bump that passed the scan's statistic, claimed or not for another reason (T not
     # located): the rounding floor is said too, it is the reason that holds for the bump's σ
     if ((gm.claimed or gm.statistic >= gm.threshold) and thermal is not None
@@ -178,23 +265,7 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             gm = replace(gm, claimed=False, intervals={} if gm.claimed else gm.intervals,
                          evidence=gm.evidence + f"; not claimed: σ is below {rwhy}")
             gm_fit = None
-    findings.append(gm)
-    if gm_fit is not None:
-        ext = gm_fit
-    findings += [_periodic_finding(g) for g in line_groups(ch.lines)]
-    findings = cchange.mark(change, findings)
-    out = ChannelExplanation(ch.name, ch, ext, findings, misfit, thermal, comp_var, curves,
-                             thermal_only)
-    if ext is not base:
-        ext_var = np.asarray(current.var, dtype=float)
-        eu = _used(ext, tau)
-        out.ext_misfit = misfit_ranges(tau[eu], ext_var[eu], ext.model_avar(tau)[eu],
-                                       allan.edf[eu])
-    else:
-        out.ext_misfit = misfit
-    if comp_var is not None:
-        out.compensation_worse_s = out._worse(comp_var)
-    return out
+    return gm, gm_fit
 
 
 def _periodic_finding(g: LineGroup) -> Finding:

@@ -5,7 +5,11 @@ Everything acts on the slow view's block means (at most ``MAX_BLOCKS`` of them),
 generalised least squares with the noise covariance of white, flicker and random-walk noise
 N, B, K (``causes._Gls``): the data and every column are whitened, so a column's z is
 c'·r/√(c'·c') with c' the whitened column and r the whitened residual, both with the offset,
-the slope and the effects already found projected out (Frisch–Waugh–Lovell).
+the slope and the effects already found projected out (Frisch–Waugh–Lovell). Where the
+caller's noise carries a Gauss–Markov process (``GM_sigma``, ``GM_T``: ``engine.channel``
+runs the search again once one is claimed on the axis) its block-averaged covariance is part
+of that noise, and ``robust_noise`` fits its σ at that T: read as random walk, its bump would
+make a step one increment of the walk.
 
 **The search** (``find_compound``), one effect per stage, up to ``MAX_EFFECTS``:
 

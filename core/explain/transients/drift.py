@@ -22,7 +22,8 @@ def _slope_fit(yb: NDArray, t: NDArray, dt: float, noise: dict[str, float],
     """(slope, its standard error) of block means ``yb`` on ``cols`` + the centred time by
     GLS with the noise N, B, K of ``noise``, the error scaled by √(Birge ratio) when the
     whitened residual's χ²/dof exceeds 1 (a noise model the data do not follow widens it)."""
-    c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0))
+    c = cz._noise_cov(t, dt, noise.get("N", 0.0), noise.get("B", 0.0), noise.get("K", 0.0),
+                      noise.get("GM_sigma", 0.0), noise.get("GM_T", 0.0))
     L = LowerSolver(np.linalg.cholesky(c))
     a = L.solve(np.column_stack([*cols, t - t.mean()]))
     wy = L.solve(yb)

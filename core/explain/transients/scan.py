@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from avard.core.explain import alarm
 from avard.core.explain import causes as cz
+from avard.core.model import terms as mdl
 from numpy.typing import NDArray
 
 #: Noise levels ("N", "B", "K") of the axis with the given slow-view signal removed.
@@ -220,14 +221,18 @@ def _joint_sizes(g: cz._Gls, cands: list[cz.Candidate]) -> list[cz.Candidate]:
             for i, c in enumerate(cands)]
 
 
-def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]:
+def robust_noise(y: NDArray, rate_hz: float, n_white: float, gm_T: float = 0.0
+                 ) -> dict[str, float]:
     """N, B, K for the forward search, from a robust Allan variance of ``y`` (block means at
     ``rate_hz`` per second): at each octave τ, (1.4826·MAD of the differences of adjacent
     τ-means)²/2, which equals the AVAR for Gaussian noise (NIST SP 1065 eq. 6 with a robust
     spread) and is moved little by the few differences a step or an excursion not yet
     removed makes, where the plain AVAR reads them as random walk. N is the caller's (the
     short τ, where transients show nothing); B² and K² ≥ 0 are fitted by least squares
-    relative to the robust AVAR, each τ weighted by its number of differences."""
+    relative to the robust AVAR, each τ weighted by its number of differences. With
+    ``gm_T`` > 0 (a Gauss–Markov process found on the axis) its σ² at that time constant is
+    fitted beside them (``GM_sigma``, ``GM_T``): its AVAR bump is no random walk, and read as
+    one it would raise the floor of every step (a step under a walk is one increment)."""
     from avard.core.model.nnls import nnls  # the noise fit's: not scipy.optimize's import
 
     taus, v, w = [], [], []
@@ -241,17 +246,23 @@ def robust_noise(y: NDArray, rate_hz: float, n_white: float) -> dict[str, float]
         m *= 2
     tau, var, wt = np.array(taus), np.array(v), np.array(w)
     ok = var > 0
+    gm = {"GM_sigma": 0.0, "GM_T": gm_T} if gm_T > 0 else {}
     if np.count_nonzero(ok) < 3:
-        return {"N": n_white, "B": 0.0, "K": 0.0}
+        return {"N": n_white, "B": 0.0, "K": 0.0, **gm}
     tau, var, wt = tau[ok], var[ok], wt[ok]
     rest = var - n_white**2 / tau
-    a = np.column_stack([np.full_like(tau, 0.6643**2), tau / 3.0]) * (wt / var)[:, None]
+    cols = [np.full_like(tau, 0.6643**2), tau / 3.0]
+    if gm:
+        cols.append(mdl.gauss_markov_avar(tau, 1.0, gm_T))
+    a = np.column_stack(cols) * (wt / var)[:, None]
     # columns to unit norm first, as the noise fit does (B² and K² differ by decades)
     scale = np.linalg.norm(a, axis=0)
     scale[scale == 0] = 1.0
     coef, _ = nnls(a / scale, rest * wt / var)
     coef = coef / scale
-    return {"N": n_white, "B": math.sqrt(coef[0]), "K": math.sqrt(coef[1])}
+    if gm:
+        gm["GM_sigma"] = math.sqrt(coef[2])
+    return {"N": n_white, "B": math.sqrt(coef[0]), "K": math.sqrt(coef[1]), **gm}
 
 
 def _on_grid(c: cz.Candidate, g: cz._Gls) -> list[dict[str, float]]:

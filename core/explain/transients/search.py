@@ -52,9 +52,16 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
     n = len(y)
     tent: list[cz.Candidate] = []
     first: list[cz.Candidate] = []
-    n_white = noise_of(np.zeros(n)).get("N", 0.0)
+    noise0 = noise_of(np.zeros(n))
+    n_white = noise0.get("N", 0.0)
+    # a Gauss–Markov process the caller's noise carries (its T; its σ refitted each stage)
+    gm_T = noise0.get("GM_T", 0.0)
+
+    def robust(r: NDArray) -> dict[str, float]:
+        return robust_noise(r, rate_hz, n_white, gm_T)
+
     for _stage in range(MAX_EFFECTS):
-        noise = robust_noise(y - signal_of(tent, n, rate_hz), rate_hz, n_white)
+        noise = robust(y - signal_of(tent, n, rate_hz))
         g = _gls(y, rate_hz, noise)
         if g is None:
             break
@@ -74,14 +81,13 @@ def find_compound(y: NDArray, rate_hz: float, noise_of: NoiseOf,
         # and what a misplaced shape leaves behind reads as noise in the test below)
         tol = 4 * len(y) / rate_hz / MAX_BLOCKS
         tent = _normalise(tent, tol, step_threshold)
-        tent = refine_compound(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz),
-                                                        rate_hz, n_white), tent)
+        tent = refine_compound(y, rate_hz, robust(y - signal_of(tent, n, rate_hz)), tent)
         # edges the refinement drew to one time are one step: two steps a sample apart are
         # collinear, their sizes huge and opposite, and read as an excursion they would hide
         # the step they stand for
         tent = _normalise(tent, tol, step_threshold)
         # two steps that return to the level before them are tested as one excursion
-        g = _gls(y, rate_hz, robust_noise(y - signal_of(tent, n, rate_hz), rate_hz, n_white))
+        g = _gls(y, rate_hz, robust(y - signal_of(tent, n, rate_hz)))
         tent = (_pairing(g, tent, step_threshold, alpha)[0] if g is not None
                 else _pair_excursions(tent, alpha))
     dropped: list[cz.Candidate] = []
