@@ -396,3 +396,22 @@ def test_a_candidate_the_joint_fit_dropped_is_not_said_withheld():
                       7.0, 6.0, "…; not claimed: in the joint fit, against the noise with "
                       "every effect proposed removed, it is 4.9 σ (test: ≥ 6.07)")
     assert withheld_lines([dropped]) == []
+
+
+@pytest.mark.parametrize("factor", [1.0, 1000.0 / 9.80665, 1.0 / 9.80665])
+def test_a_holdout_record_in_another_unit_is_refused_before_any_work(tmp_path, factor):
+    """adv29: a --holdout record in mg was accepted and a gain of −1.37e6 printed. Its
+    sample-to-sample noise against the record's tells the unit (mg: 102×, g: 1/9.81) before
+    any work; a record of the same sensor in m/s² is taken."""
+    a1, t1, _ = gen.coupled(hours=0.5, seed=1)
+    a2, t2, _ = gen.coupled(hours=0.5, seed=2)
+    a2["accel"] = a2["accel"] * factor
+    p1, p2 = gen.save(tmp_path / "r1.npz", a1, t1), gen.save(tmp_path / "r2.npz", a2, t2)
+    from avard.core.explain.engine.run import _check_scale
+
+    if factor == 1.0:
+        _check_scale(open_record(p1), open_record(p2))
+        return
+    with pytest.raises(DataError, match="not the same unit"):
+        explain_file(open_record(p1), ExplainOptions(channels=("ch0",)),
+                     holdout=open_record(p2))

@@ -51,6 +51,7 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
     meta = source.info.as_meta()
     if holdout is not None:
         check_compatible(meta, holdout.info.as_meta(), holdout.info.source)
+        _check_scale(source, holdout)
     temperature = options.temperature
     if temperature is not None and temperature not in (meta.get("temperature_names") or []):
         _unknown_temperature(temperature, meta)
@@ -81,6 +82,44 @@ def explain_file(source: RecordSource, options: ExplainOptions = DEFAULT_EXPLAIN
                               base=an)
     return _explained(an, tap.slow, screened.log, meta, options, _held(holdout, options, meta),
                       stage)
+
+
+#: Two records of one sensor whose sample-to-sample noise differs by more than this factor on
+#: an axis are not in one unit (a record in g reads 9.81× smaller, in mg 102× larger) or not
+#: of one sensor: the held-out test would measure the unit (a gain of −1.4e6 had been printed)
+SCALE_RATIO = 8.0
+
+
+def _noise_scale(source: RecordSource) -> NDArray[np.float64] | None:
+    """Each axis's sample-to-sample noise on the record's first block: the robust scale of
+    its first differences / √2 (the white and quantisation noise, which no slow drift or
+    thermal signal moves); None where the block is too short or the source reads once."""
+    if not source.rereadable:
+        return None
+    for blk in source.blocks(1 << 15):
+        a = np.asarray(blk[0], dtype=float).reshape(len(blk[0]), -1)
+        d = np.diff(a, axis=0)
+        d = d[np.all(np.isfinite(d), axis=1)]
+        if len(d) < 64:
+            return None
+        return np.asarray(1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+                          / np.sqrt(2.0), dtype=float)
+    return None
+
+
+def _check_scale(source: RecordSource, holdout: RecordSource) -> None:
+    """One line (DataError, exit 2) before any work where the held-out record's noise on an
+    axis is more than ``SCALE_RATIO`` times the record's either way."""
+    s0, s1 = _noise_scale(source), _noise_scale(holdout)
+    if s0 is None or s1 is None or len(s0) != len(s1):
+        return
+    for name, a, b in zip(source.info.names, s0, s1, strict=True):
+        if a > 0 and b > 0 and max(a / b, b / a) > SCALE_RATIO:
+            raise DataError(f"--holdout {holdout.info.source}: its sample-to-sample noise on "
+                            f"{name} is {b / a:.3g}× the record's ({b:.3g} against {a:.3g} "
+                            "m/s²): not the same unit (a record in g reads 9.81× smaller, in "
+                            "mg 102× larger) or not the same sensor; give a record of the same "
+                            "sensor in m/s²")
 
 
 def _held(holdout: RecordSource | None, options: ExplainOptions, meta: dict[str, Any]
