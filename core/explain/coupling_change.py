@@ -607,6 +607,26 @@ def _shared_model(p: Part, q: Part) -> tuple[Part, Part]:
 LEAD_LAGS = (0.8, 0.9, 1.0, 1.05, 1.1, 1.15, 1.2, 1.3, 1.45, 1.6)
 
 
+def _part_view(y: NDArray, T: NDArray, rate_b: float, floor_lag_s: float
+               ) -> tuple[NDArray, NDArray, float, int, float] | None:
+    """One part averaged to at most ``MAX_POINTS`` block means: (the axis's, the
+    temperature's, their rate, the averaging factor, the shortest τ the regression may use
+    above the readings' rounding floor for a lag of ``floor_lag_s``); None where the part is
+    under two 256-point halves, its temperature flat or not finite, or no τ is usable."""
+    n = len(y)
+    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
+    m = (n // f) * f
+    if m // f < 2 * 256:
+        return None
+    rate = rate_b / f
+    ys = y[:m].reshape(-1, f).mean(axis=1)
+    Ts = T[:m].reshape(-1, f).mean(axis=1)
+    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
+        return None
+    mt = min_tau_for(floor_lag_s, rounding_floor_tau(Ts, rate))
+    return (ys, Ts, rate, f, mt) if math.isfinite(mt) else None
+
+
 def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
                holes: list[tuple[int, int]] | None) -> float:
     """The one lag's model error on one part, as a share of its coefficient: the one-lag
@@ -618,19 +638,10 @@ def _lead_gain(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
     within its noise is no model error (the lead fit's ridge between a and s is noisy on a
     short part, and that noise already sits in the part's se). NaN where it cannot be made
     (a lag ≤ 0: the lead-lag filter of a negative lag is already a lead)."""
-    n = len(y)
-    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
-    m = (n // f) * f
-    if m // f < 2 * 256 or not (math.isfinite(lag_s) and lag_s > 0):
+    view = (_part_view(y, T, rate_b, 0.0) if math.isfinite(lag_s) and lag_s > 0 else None)
+    if view is None:
         return math.nan
-    rate = rate_b / f
-    ys = y[:m].reshape(-1, f).mean(axis=1)
-    Ts = T[:m].reshape(-1, f).mean(axis=1)
-    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
-        return math.nan
-    mt = min_tau_for(0.0, rounding_floor_tau(Ts, rate))
-    if not math.isfinite(mt):
-        return math.nan
+    ys, Ts, rate, f, mt = view
     M = len(ys)
     keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s * LEAD_LAGS[-1],
                      rate)
@@ -689,19 +700,10 @@ def _part_jackknife(y: NDArray, T: NDArray, lag_s: float, rate_b: float,
     """The delete-a-segment jackknife se of one part's one-lag coefficient through
     ``lag_s`` (``PART_SEGMENTS`` segments, the part's own Allan-covariance regression as
     the scan makes it); NaN where it cannot be made."""
-    n = len(y)
-    f = 1 << max(0, math.ceil(math.log2(max(1, n) / MAX_POINTS)))
-    m = (n // f) * f
-    if m // f < 2 * 256 or not np.all(np.isfinite(lag_s)):
+    view = _part_view(y, T, rate_b, lag_s) if np.all(np.isfinite(lag_s)) else None
+    if view is None:
         return math.nan
-    rate = rate_b / f
-    ys = y[:m].reshape(-1, f).mean(axis=1)
-    Ts = T[:m].reshape(-1, f).mean(axis=1)
-    if not (np.all(np.isfinite(Ts)) and np.ptp(Ts) > 0):
-        return math.nan
-    mt = min_tau_for(lag_s, rounding_floor_tau(Ts, rate))
-    if not math.isfinite(mt):
-        return math.nan
+    ys, Ts, rate, f, mt = view
     M = len(ys)
     keep = hole_mask(M, [(a // f, b // f) for a, b in holes or []], lag_s, rate)
     try:

@@ -510,17 +510,22 @@ def _with_empty_fields(text: str, delim: str
 RATE_DRIFT_SHARE, RATE_DRIFT_Z = 0.01, 6.0
 
 
+def _finite_times(t: NDArray, done: int, p: Path) -> None:
+    """One line where a time (rows from ``done``) is empty or not a number."""
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise DataError(f"{p}: the t column is empty or not a number at sample "
+                        f"{done + int(bad[0]) + 1}; every row needs its time in seconds (or "
+                        "drop t and give --rate HZ)")
+
+
 def _check_times(t: NDArray, last_t: float, rate: float, done: int, p: Path) -> None:
     """A chunk's t column (``last_t``: the chunk before's last time, −inf for the first)
     strictly increasing, and without a jump past 1.5 sample spacings: that is missing
     samples, and read end to end the hole would become a step or a shift in time that
     nothing records. A CSV carries no gap records, so it is refused in one line (a
     recording carries its gaps)."""
-    bad = np.flatnonzero(~np.isfinite(t))
-    if len(bad):
-        raise DataError(f"{p}: the t column is empty or not a number at sample "
-                        f"{done + int(bad[0]) + 1}; every row needs its time in seconds (or "
-                        "drop t and give --rate HZ)")
+    _finite_times(t, done, p)
     first = math.isfinite(last_t)
     tt = np.concatenate([[last_t], t]) if first else t
     dt = np.diff(tt)
@@ -560,11 +565,7 @@ class _TimeBase:
     @classmethod
     def of(cls, t: NDArray, p: Path) -> _TimeBase:
         t = t[:RATE_ROWS]
-        bad = np.flatnonzero(~np.isfinite(t))
-        if len(bad):
-            raise DataError(f"{p}: the t column is empty or not a number at sample "
-                            f"{int(bad[0]) + 1}; every row needs its time in seconds (or drop "
-                            "t and give --rate HZ)")
+        _finite_times(t, 0, p)
         dt = np.diff(t)
         if len(dt) == 0:
             raise DataError(f"{p}: one sample cannot give a sample rate; give --rate HZ")
