@@ -197,12 +197,18 @@ class _Profile:
     """The block means and columns whitened once for every K (module docstring)."""
 
     def __init__(self, yb: NDArray, t: NDArray, block_s: float, n_white: float,
-                 b_inst: float) -> None:
+                 b_inst: float, gm: tuple[float, float] | None = None) -> None:
         # numpy and the project's triangular solver, not scipy.linalg: analyze imports no
         # scipy (its import would cost more than every solve here)
         from avard.core.model.triangular import LowerSolver
 
         c0 = block_noise_cov(t, block_s, n_white, b_inst, 0.0)
+        if gm is not None and gm[0] > 0 and gm[1] > 0:
+            # a Gauss–Markov process (σ, T) claimed beside the noise (explain): its block
+            # means' covariance in the fixed part, so that its variance is not taken by the
+            # profiled walk, whose red spectrum would then hide a slow sinusoid
+            lag = np.abs(np.subtract.outer(t, t))
+            c0 = c0 + float(gm[0]) ** 2 * _gm_block_cov(lag, block_s, float(gm[1]))
         L = np.linalg.cholesky(c0)  # LinAlgError: the caller says "would not factor"
         low = LowerSolver(L)
         walk = _walk_cov(t, block_s)

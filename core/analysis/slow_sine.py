@@ -168,13 +168,14 @@ class _Scan:
     """Λ(f) with K profiled, on block means whitened once (``drift._Profile``)."""
 
     def __init__(self, yb: NDArray, block_s: float, n_white: float, b_inst: float,
-                 k_scale: float) -> None:
+                 k_scale: float, gm: tuple[float, float] | None = None) -> None:
         from avard.core.analysis.drift import K_DECADES, K_SPAN, _Profile
 
         j = len(yb)
         self.t = (np.arange(j) + 0.5) * block_s
         self.record_s = j * block_s
-        self.prof = _Profile(yb, self.t, block_s, n_white, b_inst)
+        self.gm = gm
+        self.prof = _Profile(yb, self.t, block_s, n_white, b_inst, gm)
         top = K_SPAN * max(float(k_scale), n_white / self.record_s)
         ks = np.concatenate([[0.0], np.geomspace(top * 10.0**-K_DECADES, top, K_POINTS)])
         s = 1.0 + np.outer(ks * ks, self.prof.lam)  # (K, J): each K's covariance, rotated
@@ -231,11 +232,16 @@ class _Scan:
 
 
 def search_slow_sine(means: NDArray, block_s: float, n_white: float, b_inst: float,
-                     k_scale: float, top_hz: float, *, level: float = LEVEL) -> SlowSearch:
+                     k_scale: float, top_hz: float, *, level: float = LEVEL,
+                     gm: tuple[float, float] | None = None) -> SlowSearch:
     """A slow sinusoid in one channel's block means (``means``, each over ``block_s``
     seconds, consecutive) from ``FROM_CYCLES`` cycles per record to ``top_hz`` (at most
     ``TOP_SHARE`` of the means' count), against white N, flicker B (the fit's values) and a
-    random walk profiled up to ``drift.K_SPAN``·max(``k_scale``, N/T) (module docstring)."""
+    random walk profiled up to ``drift.K_SPAN``·max(``k_scale``, N/T) (module docstring).
+    ``gm``: a Gauss–Markov process (σ, T) known beside the noise (explain, once one is
+    claimed), held in the fixed covariance: left out, its variance goes to the profiled
+    walk, whose red spectrum hides a slow sinusoid. The threshold is unchanged: Λ(f) is
+    χ²₂ at one f under whatever noise the covariance holds."""
     yb = np.asarray(means, dtype=float).reshape(-1)
     j = len(yb)
     if j < MIN_MEANS or not np.all(np.isfinite(yb)) or not n_white > 0:
@@ -247,7 +253,7 @@ def search_slow_sine(means: NDArray, block_s: float, n_white: float, b_inst: flo
     band = (FROM_CYCLES, top)
     thr = threshold(top - FROM_CYCLES, level)
     try:
-        scan = _Scan(yb, block_s, n_white, b_inst, k_scale)
+        scan = _Scan(yb, block_s, n_white, b_inst, k_scale, gm)
     except np.linalg.LinAlgError:
         return SlowSearch(None, "not searched: the noise covariance would not factor", band)
     grid = np.arange(FROM_CYCLES, top + 1e-9, COARSE_STEP)
@@ -326,7 +332,7 @@ def _with_flicker_profiled(scan: _Scan, stat: NDArray, yb: NDArray, block_s: flo
     if b_inst > 0:
         for factor in B_FACTORS:
             try:
-                other = _Scan(yb, block_s, n_white, b_inst * factor, k_scale)
+                other = _Scan(yb, block_s, n_white, b_inst * factor, k_scale, scan.gm)
             except np.linalg.LinAlgError:
                 continue
             n0 = float(np.min(other.nll0))

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 from avard.core.analysis.results import Analysis, ChannelAnalysis
+from avard.core.analysis.slow_sine import SlowSine, avar_cov
 from avard.core.analysis.spectrum import LineGroup, line_components, line_groups
 from avard.core.errors import FitError
 from avard.core.explain import causes as cz
@@ -113,6 +114,9 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     # the covariance of the compensated points that the removed signal's parameters carry
     # (``removal_covariance``): set by each ``extend``, given to every fit of those points
     added: NDArray[np.float64] | None = None
+    # the covariance of the AVAR points that a slow sinusoid's estimated amplitude and
+    # frequency carry, once one is resolved beside a Gauss–Markov process (below)
+    sine_added: NDArray[np.float64] | None = None
 
     def extend(cands: list[cz.Candidate]) -> tuple[NDArray[np.float64], NoiseFit, Any]:
         """(compensated AVAR, extended fit, its Allan result) with the thermal signal and the
@@ -136,6 +140,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
             _signal_variations(thermal if "temperature" in curves else None, temps,
                                y_slow if settled is None else y_slow - settled,
                                with_start, cands, rate_b), keep)
+        if sine_added is not None:
+            added = added + sine_added
         try:
             fit = fit_noise(comp, filter_corner_hz=corner, extra=extra, added_cov=added,
                             **kw)
@@ -171,8 +177,9 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
         current: Any = allan
         if curves or trans:
             cv, ext, current = extend(trans)
+        acov = added if added is not None else sine_added
         gm, gm_fit = scan_gauss_markov(current, ext, corner, extra,
-                                       kw if added is None else {**kw, "added_cov": added})
+                                       kw if acov is None else {**kw, "added_cov": acov})
         gm, gm_fit = _gm_floors(gm, gm_fit, thermal, temps)
         return _Round(trans, missed, change, cv, ext, current, gm, gm_fit, dict(curves))
 
@@ -193,6 +200,27 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                 break
         gm_T = T
         rnd = one_round()
+    # the same rule for a slow sinusoid: analyze's search (``slow_sine.py``) holds no
+    # Gauss–Markov process in its noise, so the process's variance went to the walk it
+    # profiles and hid the sinusoid, which the extended fit then read as random walk. Once a
+    # process is claimed, the search runs again on the slow view less the claimed signals,
+    # with the process in its covariance; a sinusoid resolved there joins the fit's
+    # sinusoids and the round is run once more beside it.
+    slow_found: Finding | None = None
+    if rnd.gm.claimed and len(y_slow) >= MIN_SLOW_POINTS:
+        slow_found, comp_sine, sine = _slow_sine_beside_gm(ch, an, work, rnd, rate_b)
+        if comp_sine is not None and sine is not None:
+            extra.append(comp_sine)
+            sine_added = avar_cov(sine, tau)
+            noise_seen.clear()
+            again = one_round()
+            if again.gm.claimed:
+                rnd = again
+            else:  # the process went with the sinusoid: neither is kept from this search
+                extra.pop()
+                sine_added = None
+                noise_seen.clear()
+                slow_found = None
     curves.clear()
     curves.update(rnd.curves)
     comp_var, ext, current, gm, gm_fit = rnd.comp_var, rnd.ext, rnd.current, rnd.gm, rnd.gm_fit
@@ -202,6 +230,8 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
                                 dict(cand.intervals) if cand.passed else {},
                                 cand.statistic, cand.threshold, cand.evidence))
     findings.append(gm)
+    if slow_found is not None:
+        findings.append(slow_found)
     if gm_fit is not None:
         ext = gm_fit
     change = rnd.change
@@ -219,6 +249,65 @@ def _explain_channel(ch: ChannelAnalysis, y_slow: NDArray, rate_b: float,
     if comp_var is not None:
         out.compensation_worse_s = out._worse(comp_var)
     return out
+
+
+def _slow_sine_beside_gm(ch: ChannelAnalysis, an: Analysis, work: NDArray, rnd: _Round,
+                         rate_b: float
+                         ) -> tuple[Finding | None, dict[str, Any] | None, SlowSine | None]:
+    """analyze's slow-sinusoid search (``slow_sine.search_slow_sine``) on the block means of
+    ``work`` (the slow view less the thermal signal) less the round's claimed transients,
+    with the round's claimed Gauss–Markov process (σ, T) in its noise and N, B of the fit
+    beside it: (the finding, the sinusoid as a fit component with the search's amplitude
+    fixed, the sinusoid) where one is resolved and neither analyze's search nor its line
+    finder has it already; else Nones. The amplitude is the search's, not refitted on the
+    AVAR: there a sinusoid of a few cycles per record and the walk share the long τ, and
+    the fit may give either all of it (as analyze's ``resolve_slow_sine``, which removes
+    the sinusoid's AVAR and carries its uncertainty, ``slow_sine.avar_cov``)."""
+    from avard.core.analysis.drift import DRIFT_BLOCKS, _k_upper
+    from avard.core.analysis.slow_sine import LINE_BINS, search_slow_sine, welch_top_hz
+    from avard.core.analysis.spectrum import LINE_LOBE
+
+    if ch.slow is not None and ch.slow.sine is not None:
+        return None, None, None
+    sigma = float(rnd.gm.params.get("sigma", 0.0))
+    T = float(rnd.gm.params.get("time_constant_s", 0.0))
+    fit = rnd.gm_fit if rnd.gm_fit is not None else rnd.ext
+    if not (sigma > 0 and T > 0):
+        return None, None, None
+    r = np.asarray(work, dtype=float).copy()
+    for c in rnd.trans:
+        r -= cz.cause_signal(c, len(r), rate_b)
+    j = min(DRIFT_BLOCKS, len(r))
+    per = len(r) // j
+    if per < 1:
+        return None, None, None
+    means = r[:j * per].reshape(j, per).mean(axis=1)
+    if not np.all(np.isfinite(means)):
+        return None, None, None
+    n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
+    b_i = float(fit.terms["bias_instability"].value or 0.0)
+    top_hz = welch_top_hz(int(an.n_samples), float(an.rate_hz))
+    search = search_slow_sine(means, per / rate_b, n_w, b_i, _k_upper(fit), top_hz,
+                              gm=(sigma, T))
+    s = search.sine
+    if s is None:
+        return None, None, None
+    bin_hz = top_hz / (LINE_LOBE + 5)
+    lines = [float(e["params"]["frequency_hz"]) for e in line_components(ch.lines)]
+    if any(abs(f - s.frequency_hz) <= LINE_BINS * bin_hz for f in lines):
+        return None, None, None
+    params = {"frequency_hz": s.frequency_hz, "amplitude": s.amplitude}
+    finding = Finding(
+        "sinusoid", True, dict(params),
+        {"frequency_hz": [s.frequency_lo_hz, s.frequency_hi_hz],
+         "amplitude": [s.amplitude_lo, s.amplitude_hi]},
+        search.statistic, search.threshold,
+        f"a slow sinusoid of {s.cycles:.3g} cycles per record (period {1.0 / s.frequency_hz:.4g} "
+        f"s), below the line finder's band: analyze's slow-sinusoid search on the block "
+        f"means less the claimed signals, with the claimed Gauss–Markov process (σ "
+        f"{sigma:.3g} m/s², T {T:.3g} s) in its noise (Λ {search.statistic:.3g} against "
+        f"{search.threshold:.3g}); modelled in the extended fit beside it")
+    return finding, {"cause": "sinusoid", "params": params}, s
 
 
 #: Most extra rounds of the transient search with a claimed Gauss–Markov process in its noise.
