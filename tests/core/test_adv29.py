@@ -42,11 +42,10 @@ def test_a_step_beside_a_coupling_is_not_rejected_by_the_held_out_test(tmp_path)
     assert claimed["temperature"]["intervals"], "a correct mechanism lost its intervals"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "adv29 D2: a slow sinusoid (1.5e-4 m/s², 90 min period, 4 h) beside a Gauss–Markov process "
-    "(found right) is left in the extended fit as a rate random walk K 4.3e-6 [3.1e-6, 5.2e-6] "
-    "(truth 0) and the axis is said to fit (p 0.25); neither analyze nor explain names the "
-    "sinusoid (core/explain/engine: the extended refit; core/analysis slow-sinusoid search)"))
+# adv29 D2 (fixed by sine30): analyze's slow-sinusoid search held no Gauss–Markov process in
+# its noise, the process's variance went to its profiled walk and hid the sinusoid, and the
+# extended fit read the sinusoid as K 4.3e-6 [3.1e-6, 5.2e-6] (truth 0), "fits"
+# (core/explain/engine/channel.py ``_slow_sine_beside_gm``)
 def test_a_slow_sinusoid_beside_a_gauss_markov_process_is_no_rate_random_walk(tmp_path):
     arrays, truth = gen.gm_plus_slow_sine(hours=4.0, seed=1, sigma=1.7e-4, t_s=30.0, amp=1.5e-4)
     d = _explain(gen.save(tmp_path / "gs.npz", arrays, truth))
