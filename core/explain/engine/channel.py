@@ -285,7 +285,12 @@ def _slow_sine_beside_gm(ch: ChannelAnalysis, an: Analysis, work: NDArray, rnd: 
     if not np.all(np.isfinite(means)):
         return None, None, None
     n_w = float(fit.terms["velocity_random_walk"].value or 0.0)
-    b_i = float(fit.terms["bias_instability"].value or 0.0)
+    # B where the fit beside the process has it, else the most it allows (its upper limit):
+    # the process takes some of the flicker's AVAR, and a flicker left out of the search's
+    # noise is an excess at the means' long scales that it reads as a slow sinusoid (its
+    # confirmation profiles B about this value, none about zero)
+    bt = fit.terms["bias_instability"]
+    b_i = float((bt.value if bt.present else bt.upper) or 0.0)
     top_hz = welch_top_hz(int(an.n_samples), float(an.rate_hz))
     search = search_slow_sine(means, per / rate_b, n_w, b_i, _k_upper(fit), top_hz,
                               gm=(sigma, T))
