@@ -111,6 +111,10 @@ def _wait_for_fed_sample(path: Path, before: int, timeout_s: float = 60.0) -> bo
             if r["kind"] == "header" and r["run"] not in names:
                 runs.append(r["run"])
                 names[r["run"]] = list(r["temperature_channels"])
+                # the newest run's own readings and samples only: an earlier run's had
+                # passed the test as soon as the new run's header was on disk, before it
+                # recorded any sample (the kill then left a run with none; flaky under load)
+                first, last_raw = {}, -1
             if not runs or r.get("run") != runs[-1]:
                 continue
             if r["kind"] == "temp":
