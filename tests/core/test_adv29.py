@@ -414,3 +414,20 @@ def test_a_holdout_record_in_another_unit_is_refused_before_any_work(tmp_path, f
     with pytest.raises(DataError, match="not the same unit"):
         explain_file(open_record(p1), ExplainOptions(channels=("ch0",)),
                      holdout=open_record(p2))
+
+
+def test_a_glitch_of_two_or_three_readings_is_masked_like_a_spike():
+    """A DS18B20 glitch of two or three readings in a row (0 °C, then back) is masked and
+    counted like a one-reading spike (review29: two 0 °C readings had fed the thermal model);
+    four readings away are left to the other rules (a plate may move for that long), and a
+    slope through the neighbours is no glitch."""
+    from avard.core.io.screen import screen_temperature
+
+    v = np.full(60, 21.0)
+    v[10:12] = 0.0
+    v[20:23] = 0.0
+    v[30:34] = 25.0
+    got = screen_temperature(v)
+    assert got == [(10, "spike"), (11, "spike"), (20, "spike"), (21, "spike"), (22, "spike")]
+    ramp = 21.0 + 0.2 * np.arange(60)                       # 0.2 K a reading: no glitch
+    assert screen_temperature(ramp) == []

@@ -39,9 +39,10 @@ shock, and its rows are left out of the shock rule's scale.
   or any reading outside the DS18B20's range (−55…125 °C);
 - ``power_on_85``: exactly 85.0 °C (the power-on-reset register) more than ``JUMP_C`` from the
   nearest good readings on either side (a room at 85 °C would have neighbours near 85);
-- ``spike``: a single reading more than ``JUMP_C`` from both neighbours, which agree with each
-  other to within ``JUMP_C``/2 (a room or a plate does not move 0.5 K and back in two
-  readings; that is 8 steps of the 0.0625 K resolution);
+- ``spike``: one to ``GLITCH_READINGS`` (3) readings in a row each more than ``JUMP_C`` from
+  both neighbours, which agree with each other to within ``JUMP_C``/2 (a room or a plate does
+  not move 0.5 K and back within a few readings; that is 8 steps of the 0.0625 K
+  resolution);
 - ``dropout``: no reading for longer than ``DROPOUT_S`` (and ``DROPOUT_READINGS`` reading
   intervals); nothing to mask, but listed: explain never names a cause on another channel
   in such a hole (a hole in a log is not a cause);

@@ -14,6 +14,9 @@ POWER_ON_C = 85.0
 JUMP_C = 0.5
 #: A hole in a temperature log longer than this (s) and this many reading intervals.
 DROPOUT_S, DROPOUT_READINGS = 10.0, 8.0
+#: A glitch: up to this many readings in a row away from neighbours that agree (a spike is
+#: one; a room or a plate does not move 0.5 K and back within a few readings)
+GLITCH_READINGS = 3
 #: The stuck rule: longer than this (s) and this factor times the channel's 95th-percentile run.
 STUCK_MIN_S, STUCK_FACTOR = 1800.0, 10.0
 #: The DS18B20's resolution (K): its readings (9–12 bits) are multiples of this.
@@ -47,13 +50,24 @@ def screen_temperature(values: NDArray[np.float64]) -> list[tuple[int, str]]:
             out.append((int(i), "power_on_85"))
             good[i] = False
     g = np.flatnonzero(good)
-    if len(g) >= 3:
-        x = v[g]
-        left, mid, right = x[:-2], x[1:-1], x[2:]
-        spike = ((np.abs(mid - left) > JUMP_C) & (np.abs(mid - right) > JUMP_C)
-                 & (np.abs(left - right) < 0.5 * JUMP_C))
-        for i in g[1:-1][spike]:
-            out.append((int(i), "spike"))
+    x = v[g]
+    seen: set[int] = set()
+    for width in range(1, GLITCH_READINGS + 1):
+        if len(g) < width + 2:
+            break
+        # ``width`` readings in a row, each more than JUMP_C from both the reading before
+        # them and the one after, which agree (a glitch of two readings had been kept,
+        # and refused a whole log once a rule judged its level)
+        left, right = x[:-width - 1], x[width + 1:]
+        far = np.ones(len(left), dtype=bool)
+        for j in range(1, width + 1):
+            mid = x[j:len(x) - width - 1 + j]
+            far &= (np.abs(mid - left) > JUMP_C) & (np.abs(mid - right) > JUMP_C)
+        for s0 in np.flatnonzero(far & (np.abs(left - right) < 0.5 * JUMP_C)):
+            for i in g[s0 + 1:s0 + 1 + width]:
+                if int(i) not in seen:
+                    seen.add(int(i))
+                    out.append((int(i), "spike"))
     return sorted(out)
 
 
