@@ -62,6 +62,19 @@ UNITS = {"coefficient": "m/s²/K", "lag_s": "s", "time_constant_s": "s", "size":
 
 Z_STEP = 6.0
 
+
+def transient_span(cause: str, params: dict[str, float]) -> tuple[float, float] | None:
+    """The time (s) a transient acts over: a step's time, an excursion's two edges, a
+    warm-up's first three time constants; None for any other cause (or a transient without
+    its times)."""
+    if cause == "bias_step" and "time_s" in params:
+        return float(params["time_s"]), float(params["time_s"])
+    if cause == "excursion" and "start_s" in params and "end_s" in params:
+        return float(params["start_s"]), float(params["end_s"])
+    if cause == "warmup":
+        return 0.0, 3.0 * float(params.get("time_constant_s", 0.0))
+    return None
+
 @dataclass
 class Candidate:
     """The outcome of one cause's test on one channel."""

@@ -15,9 +15,10 @@ from typing import Any
 
 import numpy as np
 from avard.core.explain.alarm import ALPHA_AXIS
+from avard.core.explain.causes import transient_span
 from avard.core.explain.coupling_change import change_line
 from avard.core.explain.engine import ChannelExplanation, Explanation
-from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS
+from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS, near_hole
 from avard.core.explain.thermal_fit.settings import DS18B20_CONVERSION_S
 from avard.core.model.fit import NoiseFit, TermEstimate
 from avard.core.model.terms import SYMBOLS, TERMS, UNITS
@@ -141,18 +142,6 @@ def withheld_lines(findings: list[Any]) -> list[str]:
     return out
 
 
-def _span(f: Any) -> tuple[float, float] | None:
-    """The time (s) a transient acts over, as ``engine.compound._not_in_hole`` reads it."""
-    p = f.params
-    if f.cause == "bias_step" and "time_s" in p:
-        return float(p["time_s"]), float(p["time_s"])
-    if f.cause == "excursion" and "start_s" in p and "end_s" in p:
-        return float(p["start_s"]), float(p["end_s"])
-    if f.cause == "warmup":
-        return 0.0, 3.0 * float(p.get("time_constant_s", 0.0))
-    return None
-
-
 def hole_lines(ex: Explanation, findings: list[Any]) -> list[str]:
     """One line per hole of a claimed coupling's temperature log where transients were
     proposed and none claimed: the thermal signal removed there is interpolated, so what the
@@ -164,17 +153,15 @@ def hole_lines(ex: Explanation, findings: list[Any]) -> list[str]:
     for f in findings:
         if f.cause != "temperature" or not f.claimed or not f.channel:
             continue
-        lag = abs(float(f.params.get("lag_s", 0.0)))
-        for h0, h1 in ex.screen.holes(f.channel):
-            if h1 - h0 < 1.0:
-                continue
-            end = h1 + HOLE_SETTLE_LAGS * lag + 1.0
-            inside = [g for g in findings if g.cause in WITHHELD_CAUSES and not g.claimed
-                      and (sp := _span(g)) is not None and sp[0] <= end and sp[1] >= h0 - 1.0]
+        lag = float(f.params.get("lag_s", 0.0))
+        for hole in ex.screen.holes(f.channel):
+            inside = [g for g in findings if not g.claimed
+                      and (sp := transient_span(g.cause, g.params)) is not None
+                      and near_hole(sp, hole, lag)]
             if inside:
                 kinds = ", ".join(sorted({g.cause.replace("_", " ") for g in inside}))
-                out.append(f"  in the hole of temperature log {f.channel!r} at {h0:.6g}–"
-                           f"{h1:.6g} s (and the {HOLE_SETTLE_LAGS:g} lags after it) "
+                out.append(f"  in the hole of temperature log {f.channel!r} at {hole[0]:.6g}–"
+                           f"{hole[1]:.6g} s (and the {HOLE_SETTLE_LAGS:g} lags after it) "
                            f"{len(inside)} transient candidate(s) ({kinds}) were proposed and "
                            "none claimed: the thermal signal removed there is interpolated, "
                            "and what the axis did there cannot be told from the hole")

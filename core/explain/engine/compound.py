@@ -10,7 +10,7 @@ from avard.core.explain import transients as tr
 from avard.core.explain.thermal_fit import (
     ThermalFit,
 )
-from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS
+from avard.core.explain.thermal_fit.holes import HOLE_SETTLE_LAGS, near_hole
 from avard.core.io.screen import ScreenLog
 from numpy.typing import NDArray
 
@@ -84,22 +84,11 @@ def _not_in_hole(c: cz.Candidate, screen: ScreenLog, thermal: ThermalFit,
     there the removed thermal signal is made of interpolated temperature, and what it leaves
     in the axis is the hole, not a cause of the axis (a 25-minute dropout read as a bias step
     of 4–5e-4 m/s²). Such a transient is not claimed, and says why."""
-    if not c.passed:
+    span = cz.transient_span(c.cause, c.params) if c.passed else None
+    if span is None:
         return c
-    lag = abs(thermal.lag_s)
-    if c.cause == "bias_step":
-        t_c = float(c.params.get("time_s", math.nan))
-        span = (t_c, t_c)
-    elif c.cause == "excursion":  # either edge
-        span = (float(c.params["start_s"]), float(c.params["end_s"]))
-    elif c.cause != "warmup":
-        return c
-    else:  # a warm-up acts over its first three time constants
-        span = (0.0, 3.0 * float(c.params.get("time_constant_s", 0.0)))
     for h0, h1 in screen.holes(thermal.channel):
-        if h1 - h0 < 1.0:
-            continue  # a single masked reading: the interpolation across it is exact enough
-        if span[0] <= h1 + HOLE_SETTLE_LAGS * lag + 1.0 and span[1] >= h0 - 1.0:
+        if near_hole(span, (h0, h1), thermal.lag_s):
             return replace(c, passed=False, intervals={}, evidence=c.evidence + (
                 f"; not claimed: it falls in a hole of the temperature log {thermal.channel!r}"
                 f" ({h0:.6g}–{h1:.6g} s, or the {HOLE_SETTLE_LAGS:g} lags after it), where "

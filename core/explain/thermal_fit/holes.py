@@ -21,6 +21,16 @@ HOLE_SETTLE_LAGS = 3.0
 Holes = dict[int, list[tuple[int, int]]]
 
 
+def near_hole(span: tuple[float, float], hole: tuple[float, float], lag_s: float) -> bool:
+    """Whether ``span`` (s) lies in ``hole`` (s, a second or more: across a shorter one the
+    interpolation is exact enough) or within ``HOLE_SETTLE_LAGS`` lags after it, with a
+    second's slack either side: where the removed thermal signal is made of interpolated
+    temperature."""
+    h0, h1 = hole
+    return (h1 - h0 >= 1.0 and span[0] <= h1 + HOLE_SETTLE_LAGS * abs(lag_s) + 1.0
+            and span[1] >= h0 - 1.0)
+
+
 def hole_mask(n: int, holes: list[tuple[int, int]], lag_s: float, rate_hz: float
               ) -> NDArray[np.bool_] | None:
     """Blocks kept by the regression (None: all): each hole and ``HOLE_SETTLE_LAGS`` lags
