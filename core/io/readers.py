@@ -503,13 +503,6 @@ def _with_empty_fields(text: str, delim: str
         return None, exc
 
 
-#: A CSV's times may leave the rate of its first rows by this share of the time elapsed,
-#: two sample spacings, and ``RATE_DRIFT_Z`` times the first rows' spacing scatter grown as
-#: a random walk (a PC-stamped log whose every spacing wanders): a clock's ppm and a
-#: logger's jitter stay inside, a rate that changes midway leaves it within minutes.
-RATE_DRIFT_SHARE, RATE_DRIFT_Z = 0.01, 6.0
-
-
 def _finite_times(t: NDArray, done: int, p: Path) -> None:
     """One line where a time (rows from ``done``) is empty or not a number."""
     bad = np.flatnonzero(~np.isfinite(t))
@@ -669,11 +662,10 @@ def _csv_meta_and_blocks(p: Path, rate_hz: float | None, block: int
         watch = _RateWatch(times, p) if times is not None else None
         try:
             for _, a in itertools.chain([first], chunks):
-                if lay["t"] is not None and rate_hz is None:
+                if watch is not None:  # times read from the t column (no --rate given)
                     t = a[:, lay["t"]]
                     _check_times(t, last_t, rate, done, p)
-                    if watch is not None:
-                        watch.check(t, done)
+                    watch.check(t, done)
                     last_t = float(t[-1])
                 acc = a[:, lay["accel"]]
                 _check_finite(acc, done, str(p))

@@ -237,18 +237,20 @@ def screen_blocks(blocks: Iterator[Block], rate_hz: float, names: Sequence[str],
             log.notes[name] = unit if note is None else note.joined(unit)
         if refused is not None:
             log.refused[name] = refused
-        spiky = _spiky(log, name, len(tr)) or _level_jump(log, name, tr, rate_hz)
-        if spiky is not None:
-            log.notes[name] = (spiky if name not in log.notes
-                               else log.notes[name].joined(spiky))
-            log.refused.setdefault(name, spiky.text)
-        dead = _never_converted(tr.arrays()[1])
-        if dead is not None and name not in NOT_DS18B20:
-            log.notes[name] = (dead if name not in log.notes
-                               else log.notes[name].joined(dead))
-            log.refused.setdefault(name, dead.text)
+        _refuse(log, name, _spiky(log, name, len(tr)) or _level_jump(log, name, tr, rate_hz))
+        if name not in NOT_DS18B20:
+            _refuse(log, name, _never_converted(tr.arrays()[1]))
     log.stretches.sort(key=lambda s: (s.start_s, s.channel))
     log.done = True
+
+
+def _refuse(log: ScreenLog, name: str, note: LogNote | None) -> None:
+    """A whole-log rule's verdict: its note beside the log's others, and the log refused for
+    the thermal model with it (the first reason kept); nothing where the rule found nothing."""
+    if note is None:
+        return
+    log.notes[name] = note if name not in log.notes else log.notes[name].joined(note)
+    log.refused.setdefault(name, note.text)
 
 
 #: A log more than this share of whose readings are spikes is not one sensor's readings of
@@ -264,8 +266,8 @@ def _spiky(log: ScreenLog, name: str, readings: int) -> LogNote | None:
     spikes = sum(1 for st in log.stretches if st.channel == name and st.kind == "spike")
     if readings < 20 or spikes <= SPIKY_SHARE * readings:
         return None
-    return LogNote("spiky", f"{spikes} of its {readings} readings are spikes (a reading more "
-                   "than 0.5 K from both neighbours): more than "
+    return LogNote("spiky", f"{spikes} of its {readings} readings are spikes (a reading, or "
+                   "up to three in a row, more than 0.5 K from both neighbours): more than "
                    f"{SPIKY_SHARE:.0%} is not one sensor reading one place (two sensors "
                    "answering on one column, or a noisy line); not used for the thermal model")
 
@@ -323,14 +325,14 @@ def _infinite_readings(off: int, blk: Block, tnames: list[str], log: ScreenLog,
     if t is None or not tnames:
         return blk
     tt = np.asarray(t, dtype=float)
-    inf = np.isinf(tt.reshape(len(a), -1))
+    inf = np.isinf(tt)
     if not inf.any():
         return blk
-    for i, j in zip(*np.nonzero(inf), strict=True):
+    for i, j in zip(*np.nonzero(inf.reshape(len(a), -1)), strict=True):
         k = off + int(i)
         log.stretches.append(Screened(tnames[int(j)], "read_error", k, k, k / rate_hz,
                                       k / rate_hz, 1))
-    return a, np.where(np.isinf(tt), np.nan, tt), end
+    return a, np.where(inf, np.nan, tt), end
 
 
 def _mask_readings(off: int, t: NDArray[np.float64], tracks: list[_TempTrack],

@@ -144,17 +144,17 @@ def fit_noise(
     fitted = [i for i, c in enumerate(comps) if c.fixed_value is None]
     fixed = [i for i, c in enumerate(comps) if c.fixed_value is not None]
     pos = var[np.isfinite(var) & (var > 0)]
-    if np.any(np.isinf(var)) or (len(pos) and (pos.max() > VAR_SCALE_MAX
-                                               or pos.min() < 1.0 / VAR_SCALE_MAX)):
+    infinite = bool(np.any(np.isinf(var)))
+    if infinite or (len(pos) and (pos.max() > VAR_SCALE_MAX or pos.min() < 1.0 / VAR_SCALE_MAX)):
         # the data's scale, not its noise (a constant channel's AVAR is zero, not infinite):
         # squares beyond float64, or a covariance whose products over- or underflow in the
         # fit's linear algebra (a LinAlgError from an eigen-solve had escaped)
         raise FitError("the Allan variance is "
-                       + ("infinite at some τ" if np.any(np.isinf(var)) else
+                       + ("infinite at some τ" if infinite else
                           f"{pos.min():.3g} to {pos.max():.3g}")
                        + ": values this large or small are beyond the fit's float64 "
                        "arithmetic; check the data's scale and units (m/s²)")
-    if not np.any(np.isfinite(var) & (var > 0)):
+    if not len(pos):
         # zero Allan variance at every τ: a longer record would not help
         raise FitError("the Allan variance is zero at every τ: the channel is constant (no "
                        "noise to fit); check the sensor, or leave the channel out (--channels)")
